@@ -1,0 +1,124 @@
+//! The I/O database of paper 000: address → comment.
+//!
+//! Read from CSV `address,comment` (a header row `address,comment` is
+//! optional; quote comments that contain commas). A comment ending in `(B)`
+//! marks a normally-closed contact. This module parses text it is given; it
+//! opens no file.
+
+use std::collections::HashMap;
+
+use crate::signal::Signal;
+use crate::source::{Location, SourceError};
+
+/// Comments by signal.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct CommentDb {
+    comments: HashMap<Signal, String>,
+}
+
+impl CommentDb {
+    /// Parses `address,comment` rows; `resolve` canonicalises addresses in
+    /// the program's dialect.
+    ///
+    /// # Errors
+    /// The first malformed row, as `ORIGIN:LINE:COL: message`.
+    pub fn parse(
+        origin: &str,
+        text: &str,
+        resolve: impl Fn(&str) -> Result<Signal, String>,
+    ) -> Result<CommentDb, SourceError> {
+        let mut reader = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .flexible(true)
+            .trim(csv::Trim::All)
+            .comment(Some(b'#'))
+            .from_reader(text.as_bytes());
+        let mut comments = HashMap::new();
+        let mut first = true;
+        for record in reader.records() {
+            let record = record.map_err(|e| {
+                let line = e.position().map_or(1, |p| p.line() as usize);
+                SourceError::new(
+                    origin,
+                    Location::line_start(line),
+                    format!("unreadable CSV: {e}"),
+                )
+            })?;
+            let line = record.position().map_or(1, |p| p.line() as usize);
+            let at = Location::line_start(line);
+            let header = first
+                && record
+                    .get(0)
+                    .is_some_and(|a| a.eq_ignore_ascii_case("address"));
+            first = false;
+            if header || record.iter().all(str::is_empty) {
+                continue;
+            }
+            if record.len() != 2 {
+                let row = record.iter().collect::<Vec<_>>().join(",");
+                return Err(SourceError::new(
+                    origin,
+                    at,
+                    format!("expected 'address,comment', found {} fields in '{row}' (quote comments that contain commas)", record.len()),
+                ));
+            }
+            let signal = resolve(&record[0]).map_err(|m| SourceError::new(origin, at, m))?;
+            comments.insert(signal, record[1].to_string());
+        }
+        Ok(CommentDb { comments })
+    }
+
+    /// The comment of `signal`, if the database has one.
+    pub fn get(&self, signal: &Signal) -> Option<&str> {
+        self.comments.get(signal).map(String::as_str)
+    }
+
+    /// How many addresses have a comment.
+    pub fn len(&self) -> usize {
+        self.comments.len()
+    }
+
+    /// Whether the database is empty.
+    pub fn is_empty(&self) -> bool {
+        self.comments.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::signal::pmc_address;
+
+    #[test]
+    fn reads_table_rows() {
+        let db = CommentDb::parse(
+            "c.csv",
+            "address,comment\nX0.06,Y Over Travel Limit SW (B)\nx0.a,\"Z2 Over Travel, Limit SW (B)\"\n\n# note\n",
+            pmc_address,
+        )
+        .unwrap();
+        assert_eq!(
+            db.get(&Signal::new("X0.06")),
+            Some("Y Over Travel Limit SW (B)")
+        );
+        assert_eq!(
+            db.get(&Signal::new("X0.0A")),
+            Some("Z2 Over Travel, Limit SW (B)")
+        );
+        assert_eq!(db.len(), 2);
+    }
+
+    #[test]
+    fn bad_rows_are_pinned() {
+        let e = CommentDb::parse("c.csv", "X0.06,a\nX0.0G,b\n", pmc_address).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "c.csv:2:1: malformed address 'X0.0G': the bit after '.' must be a hex digit 0..F (as in X0.07 or X0.0A)"
+        );
+        let e = CommentDb::parse("c.csv", "X0.06,a,b\n", pmc_address).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "c.csv:1:1: expected 'address,comment', found 3 fields in 'X0.06,a,b' (quote comments that contain commas)"
+        );
+    }
+}

@@ -1,0 +1,231 @@
+//! Plain expression trees and the paper's notation.
+//!
+//! [`Expr`] is the naive form of a switching function: a tree evaluated by
+//! recursion. It is the reference the compiled evaluator is tested against,
+//! and the form the paper's equations are read into ([`Expr::parse`]:
+//! `(X4) * (-Y2) * (((X1)*(-X2)) + (-X3))`, with `·` accepted for AND).
+
+use std::collections::BTreeSet;
+
+use crate::signal::Signal;
+
+/// A boolean expression tree.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Expr {
+    /// `TRUE` / `FALSE`.
+    Const(bool),
+    /// A signal, negated when the flag is set.
+    Lit(Signal, bool),
+    /// Negation of a sub-expression.
+    Not(Box<Expr>),
+    /// Conjunction.
+    And(Vec<Expr>),
+    /// Disjunction.
+    Or(Vec<Expr>),
+}
+
+impl Expr {
+    /// Evaluates the tree.
+    pub fn eval(&self, value: &impl Fn(&Signal) -> bool) -> bool {
+        match self {
+            Expr::Const(v) => *v,
+            Expr::Lit(s, negated) => value(s) != *negated,
+            Expr::Not(e) => !e.eval(value),
+            Expr::And(es) => es.iter().all(|e| e.eval(value)),
+            Expr::Or(es) => es.iter().any(|e| e.eval(value)),
+        }
+    }
+
+    /// Every signal the tree reads.
+    pub fn signals(&self) -> BTreeSet<Signal> {
+        let mut out = BTreeSet::new();
+        self.collect(&mut out);
+        out
+    }
+
+    fn collect(&self, out: &mut BTreeSet<Signal>) {
+        match self {
+            Expr::Const(_) => {}
+            Expr::Lit(s, _) => {
+                out.insert(s.clone());
+            }
+            Expr::Not(e) => e.collect(out),
+            Expr::And(es) | Expr::Or(es) => es.iter().for_each(|e| e.collect(out)),
+        }
+    }
+
+    /// The same tree with nested same-operator nodes merged and children
+    /// sorted: two expressions that differ only in grouping and order of
+    /// AND/OR terms compare equal after this.
+    #[must_use]
+    pub fn canonical(&self) -> Expr {
+        match self {
+            Expr::Not(e) => match e.canonical() {
+                Expr::Lit(s, n) => Expr::Lit(s, !n),
+                Expr::Const(v) => Expr::Const(!v),
+                other => Expr::Not(Box::new(other)),
+            },
+            Expr::And(es) | Expr::Or(es) => {
+                let is_and = matches!(self, Expr::And(_));
+                let mut flat = Vec::new();
+                for e in es.iter().map(Expr::canonical) {
+                    match e {
+                        Expr::And(inner) if is_and => flat.extend(inner),
+                        Expr::Or(inner) if !is_and => flat.extend(inner),
+                        other => flat.push(other),
+                    }
+                }
+                flat.sort();
+                if flat.len() == 1 {
+                    return flat.remove(0);
+                }
+                if is_and {
+                    Expr::And(flat)
+                } else {
+                    Expr::Or(flat)
+                }
+            }
+            other => other.clone(),
+        }
+    }
+
+    /// Reads the paper's notation: `+` OR, `*` or `·` AND, `-` NOT,
+    /// parentheses, and signal names (any run of letters, digits, `.`, `_`,
+    /// `%`).
+    ///
+    /// # Errors
+    /// A message with the character offset of the problem.
+    pub fn parse(text: &str) -> Result<Expr, String> {
+        let tokens: Vec<(usize, char)> = text.chars().enumerate().collect();
+        let mut p = Parser { tokens, at: 0 };
+        let e = p.or()?;
+        match p.peek() {
+            None => Ok(e),
+            Some((i, c)) => Err(format!("unexpected '{c}' at character {}", i + 1)),
+        }
+    }
+}
+
+struct Parser {
+    tokens: Vec<(usize, char)>,
+    at: usize,
+}
+
+impl Parser {
+    /// The next character that is not white space.
+    fn peek(&mut self) -> Option<(usize, char)> {
+        while self
+            .tokens
+            .get(self.at)
+            .is_some_and(|(_, c)| c.is_whitespace())
+        {
+            self.at += 1;
+        }
+        self.tokens.get(self.at).copied()
+    }
+
+    fn or(&mut self) -> Result<Expr, String> {
+        let mut terms = vec![self.and()?];
+        while let Some((_, '+')) = self.peek() {
+            self.at += 1;
+            terms.push(self.and()?);
+        }
+        Ok(if terms.len() == 1 {
+            terms.remove(0)
+        } else {
+            Expr::Or(terms)
+        })
+    }
+
+    fn and(&mut self) -> Result<Expr, String> {
+        let mut terms = vec![self.unary()?];
+        while let Some((_, '*' | '·')) = self.peek() {
+            self.at += 1;
+            terms.push(self.unary()?);
+        }
+        Ok(if terms.len() == 1 {
+            terms.remove(0)
+        } else {
+            Expr::And(terms)
+        })
+    }
+
+    fn unary(&mut self) -> Result<Expr, String> {
+        match self.peek() {
+            Some((_, '-')) => {
+                self.at += 1;
+                Ok(match self.unary()? {
+                    Expr::Lit(s, n) => Expr::Lit(s, !n),
+                    other => Expr::Not(Box::new(other)),
+                })
+            }
+            Some((_, '(')) => {
+                self.at += 1;
+                let e = self.or()?;
+                match self.peek() {
+                    Some((_, ')')) => {
+                        self.at += 1;
+                        Ok(e)
+                    }
+                    Some((i, c)) => {
+                        Err(format!("expected ')' at character {}, found '{c}'", i + 1))
+                    }
+                    None => Err("expected ')' at the end".into()),
+                }
+            }
+            Some((_, c)) if is_name(c) => {
+                let mut name = String::new();
+                while let Some(&(_, c)) = self.tokens.get(self.at).filter(|(_, c)| is_name(*c)) {
+                    name.push(c);
+                    self.at += 1;
+                }
+                Ok(match name.to_ascii_uppercase().as_str() {
+                    "TRUE" => Expr::Const(true),
+                    "FALSE" => Expr::Const(false),
+                    _ => Expr::Lit(Signal::new(&name), false),
+                })
+            }
+            Some((i, c)) => Err(format!("unexpected '{c}' at character {}", i + 1)),
+            None => Err("unexpected end of expression".into()),
+        }
+    }
+}
+
+fn is_name(c: char) -> bool {
+    c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '%')
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_the_papers_notation() {
+        let e = Expr::parse("(X4) * (-Y2) * (((X1)*(-X2)) + (-X3)) · (-Y1)").unwrap();
+        let v = |s: &Signal| matches!(s.name(), "X4" | "X1");
+        assert!(e.eval(&v));
+        assert_eq!(e.signals().len(), 6);
+        assert_eq!(
+            Expr::parse("-(a + b)").unwrap(),
+            Expr::Not(Box::new(Expr::Or(vec![
+                Expr::Lit(Signal::new("a"), false),
+                Expr::Lit(Signal::new("b"), false)
+            ])))
+        );
+        assert_eq!(
+            Expr::parse("a + (b").unwrap_err(),
+            "expected ')' at the end"
+        );
+        assert_eq!(
+            Expr::parse("a b").unwrap_err(),
+            "unexpected 'b' at character 3"
+        );
+    }
+
+    #[test]
+    fn canonical_ignores_grouping_and_order() {
+        let a = Expr::parse("(a * b) * (c + d)").unwrap().canonical();
+        let b = Expr::parse("(d + c) * b * a").unwrap().canonical();
+        assert_eq!(a, b);
+    }
+}

@@ -1,0 +1,294 @@
+//! Instruction lists: the two dialects cellwatch reads, parsed into one
+//! instruction set.
+//!
+//! [`parse`] turns program text into [`Instruction`]s, each with the line and
+//! column it came from. The dialects differ only in spelling (`pmc`: the
+//! FANUC PMC mnemonics of paper 000; `iec`: IEC 61131-3 IL), so both lexers
+//! produce the same [`Operation`]s. What the instructions compute is the
+//! job of [`crate::program`]; this module only reads text.
+
+pub(crate) mod iec;
+mod pmc;
+
+use std::fmt;
+use std::str::FromStr;
+
+use crate::signal::Signal;
+use crate::source::{Location, SourceError, SourceErrors};
+
+/// The spelling of an instruction list.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Dialect {
+    /// FANUC PMC mnemonics (`RD`, `AND.NOT`, `WRT`, ...) and addresses (`X0.07`).
+    Pmc,
+    /// IEC 61131-3 instruction list (`LD`, `ANDN`, `ST`, ...).
+    Iec,
+}
+
+impl fmt::Display for Dialect {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Dialect::Pmc => "pmc",
+            Dialect::Iec => "iec",
+        })
+    }
+}
+
+impl FromStr for Dialect {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "pmc" => Ok(Dialect::Pmc),
+            "iec" => Ok(Dialect::Iec),
+            other => Err(format!("unknown dialect '{other}': use pmc or iec")),
+        }
+    }
+}
+
+impl Dialect {
+    /// The canonical signal for an address or symbol written in this dialect.
+    ///
+    /// # Errors
+    /// A message quoting a malformed address.
+    pub fn signal(self, text: &str) -> Result<Signal, String> {
+        match self {
+            Dialect::Pmc => crate::signal::pmc_address(text),
+            Dialect::Iec => iec::operand_signal(text),
+        }
+    }
+
+    /// Guesses the dialect from the mnemonics a program uses.
+    ///
+    /// Mnemonics both dialects share (`AND`, `OR`, ...) do not count; the
+    /// first one that belongs to only one dialect decides.
+    pub fn detect(source: &str) -> Option<Dialect> {
+        for line in source.lines() {
+            let line = line.trim();
+            if line.starts_with("(*") {
+                return Some(Dialect::Iec);
+            }
+            let line = line.split(';').next().unwrap_or("");
+            let mut words = line.split_whitespace();
+            let Some(mut word) = words.next() else {
+                continue;
+            };
+            if word.ends_with(':') {
+                match words.next() {
+                    Some(w) => word = w,
+                    None => continue,
+                }
+            }
+            let upper = word.to_ascii_uppercase();
+            if pmc::is_pmc_only(&upper) {
+                return Some(Dialect::Pmc);
+            }
+            if iec::is_iec_only(&upper) || line.contains('%') {
+                return Some(Dialect::Iec);
+            }
+        }
+        None
+    }
+}
+
+/// A binary logic operator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Op {
+    /// Conjunction (`*` in the paper's notation).
+    And,
+    /// Disjunction (`+`).
+    Or,
+}
+
+/// What an operand names.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Operand {
+    /// A boolean signal.
+    Signal(Signal),
+    /// `TRUE` or `FALSE`.
+    Const(bool),
+    /// Anything that is not a boolean (a number, a timer number, a label).
+    Other(String),
+}
+
+/// Why an instruction leaves boolean logic.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outside {
+    /// A jump or conditional region: what follows may not run every scan.
+    Jump,
+    /// Arithmetic, comparison, timers, counters: the result is not a
+    /// function of boolean signals.
+    Arithmetic,
+    /// A call of a function block or subroutine.
+    Call,
+}
+
+/// One instruction, in either dialect.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Operation {
+    /// Start a new result from the operand (`RD`, `LD`); `push` saves the
+    /// current result on the stack first (`RD.STK`).
+    Load {
+        /// Load the operand's negation.
+        negated: bool,
+        /// Save the current result on the stack first.
+        push: bool,
+    },
+    /// Combine the current result with the operand (`AND`, `ORN`, ...).
+    Logic {
+        /// The operator.
+        op: Op,
+        /// Use the operand's negation.
+        negated: bool,
+    },
+    /// Exclusive or with the operand (IEC `XOR`, `XORN`).
+    Xor {
+        /// Use the operand's negation.
+        negated: bool,
+    },
+    /// Pop the stack and combine it with the current result (`AND.STK`).
+    Combine(Op),
+    /// IEC deferred operation `AND(`, `ORN(`, `XOR(` ...: the operator waits
+    /// for the matching `)`. An operand on the same line starts the inner
+    /// result.
+    Open {
+        /// The deferred operator; `None` is exclusive or.
+        op: Option<Op>,
+        /// Negate the inner result before combining.
+        negated: bool,
+    },
+    /// IEC `)`.
+    Close,
+    /// Negate the current result (IEC `NOT`).
+    Not,
+    /// Write the current result to a coil (`WRT`, `ST`); `negated` writes
+    /// its negation (`WRT.NOT`, `STN`).
+    Write {
+        /// Write the negation.
+        negated: bool,
+    },
+    /// Latch a coil on when the result is true (`SET`, `S`).
+    Set,
+    /// Latch a coil off when the result is true (`RST`, `R`).
+    Reset,
+    /// A jump target (IEC `label:`, PMC `LBL`).
+    Label(String),
+    /// An instruction outside boolean logic.
+    Outside(Outside),
+    /// An instruction with no effect on logic (PMC `END1`).
+    Nothing,
+}
+
+/// One parsed instruction and where it stands.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Instruction {
+    /// Where the mnemonic starts.
+    pub at: Location,
+    /// The instruction as written, for messages (`AND.NOT X0.06`).
+    pub text: String,
+    /// The mnemonic as written.
+    pub mnemonic: String,
+    /// What it does.
+    pub operation: Operation,
+    /// Its operand, if it has one.
+    pub operand: Option<Operand>,
+    /// Where the operand starts.
+    pub operand_at: Location,
+}
+
+/// Parses a program in `dialect`, or in the detected dialect when `None`.
+///
+/// `origin` names the text in messages (usually the file name).
+///
+/// # Errors
+/// Every line that cannot be read, each as `ORIGIN:LINE:COL: message`; an
+/// empty program; a dialect that cannot be told.
+pub fn parse(
+    origin: &str,
+    source: &str,
+    dialect: Option<Dialect>,
+) -> Result<(Dialect, Vec<Instruction>), SourceErrors> {
+    let dialect = match dialect {
+        Some(d) => d,
+        None => Dialect::detect(source).ok_or_else(|| {
+            SourceError::new(
+                origin,
+                Location::line_start(1),
+                if source.trim().is_empty() {
+                    "the program is empty: no instructions".to_string()
+                } else {
+                    "cannot tell the dialect: no PMC (RD, WRT) or IEC (LD, ST) instruction found; pass --dialect pmc or --dialect iec".to_string()
+                },
+            )
+        })?,
+    };
+    let instructions = match dialect {
+        Dialect::Pmc => pmc::lex(origin, source)?,
+        Dialect::Iec => iec::lex(origin, source)?,
+    };
+    if instructions.is_empty() {
+        return Err(SourceError::new(
+            origin,
+            Location::line_start(1),
+            "the program is empty: no instructions",
+        )
+        .into());
+    }
+    Ok((dialect, instructions))
+}
+
+/// Splits a line into whitespace-separated words with their byte offsets.
+pub(crate) fn words(line: &str) -> Vec<(usize, &str)> {
+    let mut out = Vec::new();
+    let mut start = None;
+    for (i, c) in line.char_indices() {
+        match (c.is_whitespace(), start) {
+            (true, Some(s)) => {
+                out.push((s, &line[s..i]));
+                start = None;
+            }
+            (false, None) => start = Some(i),
+            _ => {}
+        }
+    }
+    if let Some(s) = start {
+        out.push((s, &line[s..]));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn detects_dialects() {
+        assert_eq!(
+            Dialect::detect("; fig 6\nRD X1\nANDN X2\n"),
+            Some(Dialect::Pmc)
+        );
+        assert_eq!(Dialect::detect("AND X1\nWRT Y1"), Some(Dialect::Pmc));
+        assert_eq!(Dialect::detect("(* a *)\nLD a\nST b"), Some(Dialect::Iec));
+        assert_eq!(
+            Dialect::detect("start: LD %IX0.0\nST %QX0.0"),
+            Some(Dialect::Iec)
+        );
+        assert_eq!(Dialect::detect("AND X1\nOR X2"), None);
+    }
+
+    #[test]
+    fn empty_program_is_an_error() {
+        let err = parse("e.il", "  \n; nothing\n", Some(Dialect::Pmc)).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "e.il:1:1: the program is empty: no instructions"
+        );
+        let err = parse("e.il", "", None).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "e.il:1:1: the program is empty: no instructions"
+        );
+    }
+}

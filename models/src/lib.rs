@@ -1,0 +1,29 @@
+//! Pure models of cellwatch: everything that compiles, learns, evaluates or
+//! explains, with no I/O and no clock (time, where needed, is passed in).
+//!
+//! # Layout
+//! - [`source`]: locations in input text and the `FILE:LINE:COL` error.
+//! - [`signal`]: PLC addresses in both dialects, and observability.
+//! - [`il`]: instruction-list lexers for the `pmc` and `iec` dialects.
+//! - [`logic`]: step blocks (n-ary AND/OR nodes) and their terms.
+//! - [`program`]: the compiler from instructions to each coil's logic.
+//! - [`switching`]: a coil's switching function in observable signals,
+//!   its step blocks, and printing in the paper's notation.
+//! - [`explain`]: the fault step and the culprit contacts at fault time.
+//! - [`comments`]: the address → comment database.
+//! - [`values`]: snapshots of signal values.
+//! - [`compiled`]: many switching functions over one bitset, re-evaluated
+//!   incrementally.
+//! - [`expr`]: naive expression trees, the reference for tests.
+
+pub mod comments;
+pub mod compiled;
+pub mod explain;
+pub mod expr;
+pub mod il;
+pub mod logic;
+pub mod program;
+pub mod signal;
+pub mod source;
+pub mod switching;
+pub mod values;

@@ -1,0 +1,706 @@
+//! The compiler from instructions to the logic of every coil.
+//!
+//! [`Program::compile`] runs the instruction list as a PLC would, but on
+//! expressions instead of values: the result register holds a [`Term`], the
+//! stack holds saved terms, and every write defines a coil. Step blocks are
+//! built the way the paper draws them: consecutive instructions with the
+//! same operator extend a block; an operator change, a stack operation or a
+//! write starts a new one.
+//!
+//! Semantics worth knowing:
+//! - several writes to one coil: the last in scan order wins;
+//! - `SET c` makes `c = result + c`, `RST c` makes `c = -result * c`, where
+//!   `c` on the right is the coil's value so far in the scan (its own last
+//!   value if nothing wrote it before);
+//! - instructions outside boolean logic make the coils they affect *not
+//!   derivable*: arithmetic, timers and calls poison the result until the
+//!   next load; after a jump or conditional region, every later write is
+//!   not derivable, since it may not run every scan.
+//!
+//! Expanding a coil into observable signals is [`crate::switching`]'s job.
+
+use std::collections::HashMap;
+use std::fmt;
+
+use crate::il::{self, Dialect, Instruction, Op, Operand, Operation, Outside};
+use crate::logic::{Block, BlockId, Term};
+use crate::signal::Signal;
+use crate::source::{Location, SourceError, SourceErrors};
+
+/// How deep `AND(` ... `)` may nest.
+const MAX_NESTING: usize = 256;
+
+/// Why a coil's logic cannot be derived from the program.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NotDerivable {
+    /// The instruction responsible.
+    pub at: Location,
+    /// That instruction as written.
+    pub instruction: String,
+    /// Why it breaks the derivation.
+    pub reason: String,
+}
+
+impl fmt::Display for NotDerivable {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{} ('{}' at line {})",
+            self.reason, self.instruction, self.at.line
+        )
+    }
+}
+
+/// A coil the program writes, with its logic as the program states it
+/// (internal relays not yet expanded).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Coil {
+    /// The coil.
+    pub signal: Signal,
+    /// Its logic, or why there is none.
+    pub definition: Result<Term, NotDerivable>,
+    /// Every write, in scan order; the last one defines the coil.
+    pub writes: Vec<Location>,
+}
+
+/// A warning about an instruction that does not stop compilation.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Warning {
+    /// Where.
+    pub at: Location,
+    /// What, quoting the instruction.
+    pub message: String,
+}
+
+/// A compiled instruction list: every coil's logic over one block arena.
+#[derive(Debug, Clone)]
+pub struct Program {
+    origin: String,
+    dialect: Dialect,
+    blocks: Vec<Block>,
+    coils: Vec<Coil>,
+    index: HashMap<Signal, usize>,
+    warnings: Vec<Warning>,
+}
+
+impl Program {
+    /// Parses and compiles a program. `origin` names it in messages.
+    ///
+    /// # Errors
+    /// Every unreadable line (see [`il::parse`]), then the first structural
+    /// error: an operation with no result to work on, an unbalanced stack or
+    /// parenthesis.
+    pub fn compile(
+        origin: &str,
+        source: &str,
+        dialect: Option<Dialect>,
+    ) -> Result<Program, SourceErrors> {
+        let (dialect, instructions) = il::parse(origin, source, dialect)?;
+        let mut machine = Machine::new(origin);
+        for ins in &instructions {
+            machine.step(ins)?;
+        }
+        machine.finish(dialect, instructions.last().map(|i| i.at))
+    }
+
+    /// The name the program was compiled under.
+    pub fn origin(&self) -> &str {
+        &self.origin
+    }
+
+    /// The dialect it is written in.
+    pub fn dialect(&self) -> Dialect {
+        self.dialect
+    }
+
+    /// Every coil written, in order of first write.
+    pub fn coils(&self) -> &[Coil] {
+        &self.coils
+    }
+
+    /// The coil `signal`, if the program writes it.
+    pub fn coil(&self, signal: &Signal) -> Option<&Coil> {
+        self.index.get(signal).map(|&i| &self.coils[i])
+    }
+
+    /// The block arena the coils' terms refer to.
+    pub fn blocks(&self) -> &[Block] {
+        &self.blocks
+    }
+
+    /// Warnings about instructions outside boolean logic.
+    pub fn warnings(&self) -> &[Warning] {
+        &self.warnings
+    }
+
+    /// The canonical signal for a name as a user types it: the dialect's
+    /// address form, and for IEC symbols the program's own spelling.
+    ///
+    /// # Errors
+    /// A message quoting a malformed address.
+    pub fn resolve(&self, text: &str) -> Result<Signal, String> {
+        let signal = self.dialect.signal(text.trim())?;
+        if self.dialect == Dialect::Iec {
+            if let Some(s) = self.spelled(&signal) {
+                return Ok(s);
+            }
+        }
+        Ok(signal)
+    }
+
+    fn spelled(&self, signal: &Signal) -> Option<Signal> {
+        let mut seen = self
+            .coils
+            .iter()
+            .map(|c| &c.signal)
+            .chain(self.blocks.iter().flat_map(|b| {
+                b.terms.iter().filter_map(|t| match t {
+                    Term::Signal { signal, .. } => Some(signal),
+                    _ => None,
+                })
+            }));
+        seen.find(|s| s.name().eq_ignore_ascii_case(signal.name()))
+            .cloned()
+    }
+}
+
+/// The result register.
+#[derive(Debug, Clone)]
+enum Acc {
+    /// Nothing loaded yet.
+    Empty,
+    Value(Term),
+    /// The result of something that is not boolean logic.
+    Poisoned(NotDerivable),
+}
+
+#[derive(Debug)]
+enum Frame {
+    /// Saved by `RD.STK`.
+    Pushed {
+        acc: Acc,
+        at: Location,
+        text: String,
+    },
+    /// Opened by `AND(` and the like; `op` None is XOR, `opaque` an
+    /// arithmetic parenthesis.
+    Paren {
+        op: Option<Op>,
+        negated: bool,
+        opaque: Option<NotDerivable>,
+        acc: Acc,
+        at: Location,
+        text: String,
+    },
+}
+
+struct Machine<'a> {
+    origin: &'a str,
+    blocks: Vec<Block>,
+    acc: Acc,
+    /// The block the next same-operator instruction may extend.
+    open: Option<BlockId>,
+    stack: Vec<Frame>,
+    coils: Vec<Coil>,
+    index: HashMap<Signal, usize>,
+    warnings: Vec<Warning>,
+    /// Jumps and conditional regions: their location and target label.
+    jumps: Vec<(Location, String, Option<String>)>,
+    labels: HashMap<String, Location>,
+}
+
+impl<'a> Machine<'a> {
+    fn new(origin: &'a str) -> Self {
+        Machine {
+            origin,
+            blocks: Vec::new(),
+            acc: Acc::Empty,
+            open: None,
+            stack: Vec::new(),
+            coils: Vec::new(),
+            index: HashMap::new(),
+            warnings: Vec::new(),
+            jumps: Vec::new(),
+            labels: HashMap::new(),
+        }
+    }
+
+    fn error(&self, at: Location, message: String) -> SourceErrors {
+        SourceError::new(self.origin, at, message).into()
+    }
+
+    fn block(&mut self, op: Op, terms: Vec<Term>) -> Term {
+        self.blocks.push(Block { op, terms });
+        let id = self.blocks.len() - 1;
+        self.open = Some(id);
+        Term::Block { id, negated: false }
+    }
+
+    /// `a op b`, extending the open block when it has the same operator.
+    fn extend(&mut self, op: Op, a: Term, b: Term) -> Term {
+        if let Term::Block { id, negated: false } = a {
+            if self.open == Some(id) && self.blocks[id].op == op {
+                self.blocks[id].terms.push(b);
+                return a;
+            }
+        }
+        self.block(op, vec![a, b])
+    }
+
+    fn xor(&mut self, a: Term, b: Term) -> Term {
+        let left = self.block(Op::And, vec![a.clone(), b.clone().negate()]);
+        let right = self.block(Op::And, vec![a.negate(), b]);
+        let t = self.block(Op::Or, vec![left, right]);
+        self.open = None;
+        t
+    }
+
+    /// Combines two results with a binary operator (None: XOR), keeping
+    /// poison.
+    fn combine(&mut self, op: Option<Op>, a: Acc, b: Acc, fresh: bool) -> Acc {
+        match (a, b) {
+            (Acc::Poisoned(p), _) | (_, Acc::Poisoned(p)) => Acc::Poisoned(p),
+            (Acc::Value(a), Acc::Value(b)) => Acc::Value(match op {
+                Some(op) if fresh => self.block(op, vec![a, b]),
+                Some(op) => self.extend(op, a, b),
+                None => self.xor(a, b),
+            }),
+            (Acc::Empty, _) | (_, Acc::Empty) => Acc::Empty,
+        }
+    }
+
+    fn operand(&self, ins: &Instruction) -> Acc {
+        match &ins.operand {
+            Some(Operand::Signal(s)) => Acc::Value(Term::signal(s.clone(), false)),
+            Some(Operand::Const(v)) => Acc::Value(Term::Const(*v)),
+            Some(Operand::Other(text)) => Acc::Poisoned(NotDerivable {
+                at: ins.at,
+                instruction: ins.text.clone(),
+                reason: format!("'{text}' is not a boolean"),
+            }),
+            None => Acc::Empty,
+        }
+    }
+
+    fn no_result(&self, ins: &Instruction, what: &str) -> SourceErrors {
+        self.error(
+            ins.at,
+            format!(
+                "'{}' with no result {what}: no load (RD/LD) before it",
+                ins.text
+            ),
+        )
+    }
+
+    fn step(&mut self, ins: &Instruction) -> Result<(), SourceErrors> {
+        match &ins.operation {
+            Operation::Load { negated, push } => {
+                if *push {
+                    if matches!(self.acc, Acc::Empty) {
+                        return Err(self.no_result(ins, "to push"));
+                    }
+                    let acc = std::mem::replace(&mut self.acc, Acc::Empty);
+                    self.stack.push(Frame::Pushed {
+                        acc,
+                        at: ins.at,
+                        text: ins.text.clone(),
+                    });
+                }
+                self.acc = negate_acc(self.operand(ins), *negated);
+                self.open = None;
+            }
+            Operation::Logic { op, negated } => {
+                if matches!(self.acc, Acc::Empty) {
+                    return Err(self.no_result(ins, "to combine"));
+                }
+                let a = std::mem::replace(&mut self.acc, Acc::Empty);
+                let b = negate_acc(self.operand(ins), *negated);
+                self.acc = self.combine(Some(*op), a, b, false);
+            }
+            Operation::Xor { negated } => {
+                if matches!(self.acc, Acc::Empty) {
+                    return Err(self.no_result(ins, "to combine"));
+                }
+                let a = std::mem::replace(&mut self.acc, Acc::Empty);
+                let b = negate_acc(self.operand(ins), *negated);
+                self.acc = self.combine(None, a, b, true);
+            }
+            Operation::Combine(op) => {
+                let saved =
+                    match self.stack.pop() {
+                        Some(Frame::Pushed { acc, .. }) => acc,
+                        Some(Frame::Paren { at, text, .. }) => return Err(self.error(
+                            ins.at,
+                            format!(
+                                "'{}' inside '{text}' opened at line {}: close it with ')' first",
+                                ins.text, at.line
+                            ),
+                        )),
+                        None => {
+                            return Err(self.error(
+                                ins.at,
+                                format!(
+                                    "'{}' with nothing on the stack: no RD.STK before it",
+                                    ins.text
+                                ),
+                            ))
+                        }
+                    };
+                let current = std::mem::replace(&mut self.acc, Acc::Empty);
+                self.acc = self.combine(Some(*op), saved, current, true);
+            }
+            Operation::Open { op, negated } => {
+                if matches!(self.acc, Acc::Empty) {
+                    return Err(self.no_result(ins, "to combine"));
+                }
+                self.open_paren(ins, *op, *negated, None)?;
+            }
+            Operation::Close => self.close_paren(ins)?,
+            Operation::Not => match std::mem::replace(&mut self.acc, Acc::Empty) {
+                Acc::Empty => return Err(self.no_result(ins, "to negate")),
+                acc => {
+                    self.acc = negate_acc(acc, true);
+                    self.open = None;
+                }
+            },
+            Operation::Write { negated } => {
+                let value = self.result_for_write(ins)?;
+                let value = negate_acc(value, *negated);
+                self.define(ins, |_, _| value);
+            }
+            Operation::Set | Operation::Reset => {
+                let value = self.result_for_write(ins)?;
+                let set = matches!(ins.operation, Operation::Set);
+                self.define(ins, |m, previous| {
+                    if set {
+                        m.combine(Some(Op::Or), value, previous, true)
+                    } else {
+                        m.combine(Some(Op::And), negate_acc(value, true), previous, true)
+                    }
+                });
+            }
+            Operation::Label(name) => {
+                self.labels.entry(name.clone()).or_insert(ins.at);
+            }
+            Operation::Outside(kind) => self.outside(ins, *kind)?,
+            Operation::Nothing => {}
+        }
+        Ok(())
+    }
+
+    fn open_paren(
+        &mut self,
+        ins: &Instruction,
+        op: Option<Op>,
+        negated: bool,
+        opaque: Option<NotDerivable>,
+    ) -> Result<(), SourceErrors> {
+        if self.stack.len() >= MAX_NESTING {
+            return Err(self.error(
+                ins.at,
+                format!("'{}' nests deeper than {MAX_NESTING} parentheses", ins.text),
+            ));
+        }
+        let acc = std::mem::replace(&mut self.acc, Acc::Empty);
+        self.stack.push(Frame::Paren {
+            op,
+            negated,
+            opaque,
+            acc,
+            at: ins.at,
+            text: ins.text.clone(),
+        });
+        self.acc = self.operand(ins);
+        self.open = None;
+        Ok(())
+    }
+
+    fn close_paren(&mut self, ins: &Instruction) -> Result<(), SourceErrors> {
+        match self.stack.pop() {
+            Some(Frame::Paren { op, negated, opaque, acc, .. }) => {
+                let inner = std::mem::replace(&mut self.acc, Acc::Empty);
+                if matches!(inner, Acc::Empty) {
+                    return Err(self.error(ins.at, "')' closes a parenthesis with no result inside: no LD after the '('".into()));
+                }
+                self.acc = match opaque {
+                    Some(p) => Acc::Poisoned(p),
+                    None => self.combine(op, acc, negate_acc(inner, negated), true),
+                };
+                Ok(())
+            }
+            Some(Frame::Pushed { at, text, .. }) => Err(self.error(
+                ins.at,
+                format!("')' while '{text}' from line {} is still on the stack: combine it first (AND.STK/OR.STK)", at.line),
+            )),
+            None => Err(self.error(ins.at, "')' closes no '('".into())),
+        }
+    }
+
+    /// The result a write stores, after checking the stack is balanced.
+    fn result_for_write(&self, ins: &Instruction) -> Result<Acc, SourceErrors> {
+        if let Some(frame) = self.stack.last() {
+            let msg = match frame {
+                Frame::Pushed { at, text, .. } => format!(
+                    "unbalanced stack at '{}': '{text}' at line {} pushed a result that is never combined (AND.STK/OR.STK)",
+                    ins.text, at.line
+                ),
+                Frame::Paren { at, text, .. } => format!(
+                    "unbalanced parentheses at '{}': '{text}' at line {} is never closed with ')'",
+                    ins.text, at.line
+                ),
+            };
+            return Err(self.error(ins.at, msg));
+        }
+        match &self.acc {
+            Acc::Empty => Err(self.no_result(ins, "to write")),
+            acc => Ok(acc.clone()),
+        }
+    }
+
+    /// Writes the coil named by `ins`, its new logic computed from the
+    /// logic it had so far in the scan.
+    fn define(&mut self, ins: &Instruction, value: impl FnOnce(&mut Self, Acc) -> Acc) {
+        let Some(Operand::Signal(signal)) = &ins.operand else {
+            return;
+        };
+        let previous = match self.index.get(signal) {
+            Some(&i) => match &self.coils[i].definition {
+                Ok(t) => Acc::Value(t.clone()),
+                Err(p) => Acc::Poisoned(p.clone()),
+            },
+            None => Acc::Value(Term::signal(signal.clone(), false)),
+        };
+        let definition = match value(self, previous) {
+            Acc::Value(t) => Ok(t),
+            Acc::Poisoned(p) => Err(p),
+            Acc::Empty => unreachable_empty(ins),
+        };
+        self.open = None;
+        match self.index.get(signal) {
+            Some(&i) => {
+                self.coils[i].definition = definition;
+                self.coils[i].writes.push(ins.at);
+            }
+            None => {
+                self.index.insert(signal.clone(), self.coils.len());
+                self.coils.push(Coil {
+                    signal: signal.clone(),
+                    definition,
+                    writes: vec![ins.at],
+                });
+            }
+        }
+    }
+
+    fn outside(&mut self, ins: &Instruction, kind: Outside) -> Result<(), SourceErrors> {
+        let (reason, warning) = match kind {
+            Outside::Jump => (
+                "written after a jump or conditional region, so the write may not run every scan",
+                "jump or conditional region: coils written after it are not derivable",
+            ),
+            Outside::Arithmetic => (
+                "computed by an instruction outside boolean logic (arithmetic, comparison, timer or counter)",
+                "instruction outside boolean logic: the coils it feeds are not derivable",
+            ),
+            Outside::Call => (
+                "computed after a call, whose result is not boolean logic",
+                "call: the coils it feeds are not derivable",
+            ),
+        };
+        self.warnings.push(Warning {
+            at: ins.at,
+            message: format!("'{}': {warning}", ins.text),
+        });
+        let poison = NotDerivable {
+            at: ins.at,
+            instruction: ins.text.clone(),
+            reason: reason.to_string(),
+        };
+        match kind {
+            Outside::Jump => {
+                let target = match &ins.operand {
+                    Some(Operand::Other(t)) => Some(t.to_ascii_uppercase()),
+                    _ => None,
+                };
+                self.jumps.push((ins.at, ins.text.clone(), target));
+            }
+            Outside::Arithmetic if ins.mnemonic.ends_with('(') => {
+                if matches!(self.acc, Acc::Empty) {
+                    return Err(self.no_result(ins, "to combine"));
+                }
+                self.open_paren(ins, None, false, Some(poison))?;
+                self.acc = Acc::Empty;
+            }
+            Outside::Arithmetic | Outside::Call => {
+                self.acc = Acc::Poisoned(poison);
+                self.open = None;
+            }
+        }
+        Ok(())
+    }
+
+    fn finish(mut self, dialect: Dialect, last: Option<Location>) -> Result<Program, SourceErrors> {
+        if let Some(frame) = self.stack.last() {
+            let (at, msg) = match frame {
+                Frame::Pushed { at, text, .. } => (*at, format!("unbalanced stack: '{text}' pushes a result that is never combined (AND.STK/OR.STK)")),
+                Frame::Paren { at, text, .. } => (*at, format!("unbalanced parentheses: '{text}' is never closed with ')'")),
+            };
+            let _ = last;
+            return Err(self.error(at, msg));
+        }
+        // After the first jump (or its target, if that comes earlier), no
+        // write is known to run every scan.
+        let first = self
+            .jumps
+            .iter()
+            .map(|(at, text, target)| {
+                let label = target.as_ref().and_then(|t| self.labels.get(t)).copied();
+                (label.map_or(*at, |l| l.min(*at)), at, text)
+            })
+            .min_by_key(|(start, _, _)| *start);
+        if let Some((start, at, text)) = first {
+            for coil in &mut self.coils {
+                if coil.writes.iter().any(|w| *w >= start) {
+                    coil.definition = Err(NotDerivable {
+                        at: *at,
+                        instruction: text.clone(),
+                        reason: "written after a jump or conditional region, so the write may not run every scan".into(),
+                    });
+                }
+            }
+        }
+        Ok(Program {
+            origin: self.origin.to_string(),
+            dialect,
+            blocks: self.blocks,
+            coils: self.coils,
+            index: self.index,
+            warnings: self.warnings,
+        })
+    }
+}
+
+fn negate_acc(acc: Acc, negate: bool) -> Acc {
+    match acc {
+        Acc::Value(t) => Acc::Value(t.negate_if(negate)),
+        other => other,
+    }
+}
+
+/// Writes are checked for a result before their value is computed, and
+/// combining two results never empties them.
+fn unreachable_empty(ins: &Instruction) -> ! {
+    panic!(
+        "internal error: write '{}' computed no result after the check",
+        ins.text
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn compile(src: &str) -> Program {
+        Program::compile("t.il", src, None).unwrap()
+    }
+
+    fn err(src: &str) -> String {
+        Program::compile("p.il", src, None).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn same_operator_extends_a_block() {
+        let p = compile("RD X1\nAND X2\nAND.NOT X3\nWRT Y1");
+        assert_eq!(p.blocks().len(), 1);
+        assert_eq!(p.blocks()[0].terms.len(), 3);
+    }
+
+    #[test]
+    fn operator_change_and_stack_start_new_blocks() {
+        let p = compile("RD X1\nAND X2\nOR X3\nRD.STK X4\nOR X5\nAND.STK\nAND X6\nWRT Y1");
+        // AND(X1,X2); OR(b0,X3); OR(X4,X5); AND(b1,b2,X6)
+        assert_eq!(p.blocks().len(), 4);
+        assert_eq!(p.blocks()[3].terms.len(), 3);
+    }
+
+    #[test]
+    fn last_write_wins() {
+        let p = compile("RD X1\nWRT Y1\nRD X2\nWRT Y1");
+        let c = p.coil(&Signal::new("Y1")).unwrap();
+        assert_eq!(c.definition, Ok(Term::signal(Signal::new("X2"), false)));
+        assert_eq!(c.writes.len(), 2);
+    }
+
+    #[test]
+    fn set_and_reset_latch_on_the_coils_own_value() {
+        let p = compile("RD X1\nSET R1\nRD X2\nRST R1");
+        let c = p.coil(&Signal::new("R1")).unwrap();
+        // R1 = -X2 * (X1 + R1)
+        let Ok(Term::Block { id, negated: false }) = c.definition.clone() else {
+            panic!()
+        };
+        assert_eq!(p.blocks()[id].op, Op::And);
+        assert_eq!(
+            p.blocks()[id].terms[0],
+            Term::signal(Signal::new("X2"), true)
+        );
+    }
+
+    #[test]
+    fn structural_errors_are_pinned() {
+        assert_eq!(
+            err("AND.STK\n"),
+            "p.il:1:1: 'AND.STK' with nothing on the stack: no RD.STK before it"
+        );
+        assert_eq!(
+            err("WRT Y1\n"),
+            "p.il:1:1: 'WRT Y1' with no result to write: no load (RD/LD) before it"
+        );
+        assert_eq!(
+            err("AND X1\nWRT Y1"),
+            "p.il:1:1: 'AND X1' with no result to combine: no load (RD/LD) before it"
+        );
+        assert_eq!(
+            err("RD X1\nRD.STK X2\nWRT Y1"),
+            "p.il:3:1: unbalanced stack at 'WRT Y1': 'RD.STK X2' at line 2 pushed a result that is never combined (AND.STK/OR.STK)"
+        );
+        assert_eq!(
+            err("RD X1\nRD.STK X2\n"),
+            "p.il:2:1: unbalanced stack: 'RD.STK X2' pushes a result that is never combined (AND.STK/OR.STK)"
+        );
+        assert_eq!(err("LD a\n)\nST b"), "p.il:2:1: ')' closes no '('");
+        assert_eq!(
+            err("LD a\nAND( b\nST c"),
+            "p.il:3:1: unbalanced parentheses at 'ST c': 'AND( b' at line 2 is never closed with ')'"
+        );
+        assert_eq!(
+            err("LD a\nAND( b\n"),
+            "p.il:2:1: unbalanced parentheses: 'AND( b' is never closed with ')'"
+        );
+    }
+
+    #[test]
+    fn outside_boolean_logic_is_not_derivable() {
+        let p = compile("LD a\nST b\nLD %MW1\nGT 5\nST c\nLD x\nST d\nJMPC skip\nLD y\nST e\nskip: LD z\nST b\n");
+        let d = |n: &str| p.coil(&Signal::new(n)).unwrap().definition.clone();
+        assert!(d("d").is_ok());
+        let c = d("c").unwrap_err();
+        assert_eq!(c.instruction, "GT 5");
+        assert_eq!(d("e").unwrap_err().instruction, "JMPC skip");
+        // b is written again after the jump.
+        assert!(d("b").is_err());
+        assert_eq!(p.warnings().len(), 2);
+        assert_eq!(
+            p.warnings()[0].message,
+            "'GT 5': instruction outside boolean logic: the coils it feeds are not derivable"
+        );
+    }
+
+    #[test]
+    fn iec_parentheses_and_xor() {
+        let p = compile("LD a\nANDN( b\nOR c\n)\nXOR d\nST q");
+        assert!(p.coil(&Signal::new("q")).unwrap().definition.is_ok());
+        // AND(a, -OR(b,c)) then XOR expansion: 3 blocks more.
+        assert_eq!(p.blocks().len(), 5);
+    }
+}
