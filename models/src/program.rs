@@ -326,26 +326,27 @@ impl<'a> Machine<'a> {
                 self.acc = self.combine(None, a, b, true);
             }
             Operation::Combine(op) => {
-                let saved =
-                    match self.stack.pop() {
-                        Some(Frame::Pushed { acc, .. }) => acc,
-                        Some(Frame::Paren { at, text, .. }) => return Err(self.error(
+                let saved = match self.stack.pop() {
+                    Some(Frame::Pushed { acc, .. }) => acc,
+                    Some(Frame::Paren { at, text, .. }) => {
+                        return Err(self.error(
                             ins.at,
                             format!(
                                 "'{}' inside '{text}' opened at line {}: close it with ')' first",
                                 ins.text, at.line
                             ),
-                        )),
-                        None => {
-                            return Err(self.error(
-                                ins.at,
-                                format!(
-                                    "'{}' with nothing on the stack: no RD.STK before it",
-                                    ins.text
-                                ),
-                            ))
-                        }
-                    };
+                        ))
+                    }
+                    None => {
+                        return Err(self.error(
+                            ins.at,
+                            format!(
+                                "'{}' with nothing on the stack: no RD.STK before it",
+                                ins.text
+                            ),
+                        ))
+                    }
+                };
                 let current = std::mem::replace(&mut self.acc, Acc::Empty);
                 self.acc = self.combine(Some(*op), saved, current, true);
             }

@@ -1,0 +1,226 @@
+//! Paper 000's worked examples, reproduced: Fig. 6, ESE (eqs. 6, 8-13) and
+//! CSD (eqs. 7, 14-23), from the programs shipped in `config/cnc/`.
+
+use cellwatch_models::comments::CommentDb;
+use cellwatch_models::explain::{explain, Polarity};
+use cellwatch_models::expr::Expr;
+use cellwatch_models::logic::Term;
+use cellwatch_models::program::Program;
+use cellwatch_models::signal::{pmc_address, Observability, Signal};
+use cellwatch_models::switching::SwitchingFunction;
+use cellwatch_models::values::Values;
+
+const FIG6: &str =
+    "RD X1\nANDN X2\nRDNS X3\nORS\nANDN Y1\nWR R1\nRD X4\nANDN Y2\nAND R1\nWR G0.00\n";
+const ESE: &str = include_str!("../../config/cnc/ese.il");
+const CSD: &str = include_str!("../../config/cnc/csd.il");
+const ESE_COMMENTS: &str = include_str!("../../config/cnc/ese-comments.csv");
+const CSD_COMMENTS: &str = include_str!("../../config/cnc/csd-comments.csv");
+const ESE_NORMAL: &str = include_str!("../../config/cnc/ese-normal.values");
+
+fn sf(origin: &str, src: &str, coil: &str) -> SwitchingFunction {
+    let p = Program::compile(origin, src, None).unwrap();
+    SwitchingFunction::expand(
+        &p,
+        &Signal::new(coil),
+        &Observability::default_for(p.dialect()),
+    )
+    .unwrap()
+}
+
+/// Whether two expressions agree on every assignment of their signals.
+fn equal_by_truth_table(a: &Expr, b: &Expr) -> bool {
+    let mut signals = a.signals();
+    signals.extend(b.signals());
+    let signals: Vec<Signal> = signals.into_iter().collect();
+    assert!(signals.len() <= 22, "truth table too large");
+    (0u64..1 << signals.len()).all(|bits| {
+        let v = |s: &Signal| {
+            let i = signals.iter().position(|x| x == s).unwrap();
+            bits >> i & 1 == 1
+        };
+        a.eval(&v) == b.eval(&v)
+    })
+}
+
+/// Step `i` of `sf` as an expression whose earlier steps are the leaves
+/// `SSF1`, `SSF2`, ... as the paper writes them.
+fn step_expr(sf: &SwitchingFunction, i: usize) -> Expr {
+    let block = &sf.steps[i - 1];
+    let terms = block
+        .terms
+        .iter()
+        .map(|t| match t {
+            Term::Block { id, negated } => {
+                Expr::Lit(Signal::new(&format!("SSF{}", id + 1)), *negated)
+            }
+            Term::Signal { signal, negated } => Expr::Lit(signal.clone(), *negated),
+            Term::Const(v) => Expr::Const(*v),
+        })
+        .collect();
+    match block.op {
+        cellwatch_models::il::Op::And => Expr::And(terms),
+        cellwatch_models::il::Op::Or => Expr::Or(terms),
+    }
+}
+
+fn assert_steps(sf: &SwitchingFunction, paper: &[&str]) {
+    assert_eq!(sf.steps.len(), paper.len(), "number of step blocks");
+    for (i, eq) in paper.iter().enumerate() {
+        let expected = Expr::parse(eq).unwrap();
+        // Same terms, same operator; order within a block does not matter.
+        let sort = |e: Expr| match e {
+            Expr::And(mut t) => {
+                t.sort();
+                Expr::And(t)
+            }
+            Expr::Or(mut t) => {
+                t.sort();
+                Expr::Or(t)
+            }
+            other => other,
+        };
+        assert_eq!(
+            sort(step_expr(sf, i + 1)),
+            sort(expected),
+            "step {} differs from the paper's SSF{}",
+            i + 1,
+            i + 1
+        );
+    }
+}
+
+#[test]
+fn fig6_relay_and_fault_coil() {
+    let r1 = sf("fig6.il", FIG6, "R1");
+    assert_eq!(r1.notation(), "((X1 * -X2) + -X3) * -Y1");
+    let g = sf("fig6.il", FIG6, "G0.00");
+    assert_eq!(g.notation(), "X4 * -Y2 * ((X1 * -X2) + -X3) * -Y1");
+    // Eq. (5) as the paper prints it.
+    let eq5 = Expr::parse("(X4) * (-Y2) * (((X1)*(-X2)) + (-X3)) * (-Y1)").unwrap();
+    assert!(equal_by_truth_table(&g.to_expr(), &eq5));
+}
+
+#[test]
+fn ese_switching_function_is_eq_6() {
+    let g = sf("ese.il", ESE, "G8.02");
+    let eq6 = Expr::parse(
+        "((((-R1024.00)+(-G0.00)+(-F0.00)+(-X200.04)) · (-X200.00)) · ((-R1023.00)+(-R1023.01)) · (-F0.01))
+         + (-X0.07) + (-X0.05) + (-Y0.00) + (-F28.03) + (-F28.02) + (-F28.01) + (-F28.00)
+         + (X200.03) + (-X0.0F) + (-X0.0A) + (-X0.08) + (-X0.06) + (-X0.04)",
+    )
+    .unwrap();
+    assert_eq!(g.to_expr().canonical(), eq6.canonical());
+}
+
+#[test]
+fn ese_step_blocks_are_eqs_8_to_13() {
+    assert_steps(
+        &sf("ese.il", ESE, "G8.02"),
+        &[
+            "(-R1024.00)+(-G0.00)+(-F0.00)+(-X200.04)",
+            "SSF1 · (-X200.00)",
+            "(-R1023.00)+(-R1023.01)",
+            "SSF2 · SSF3 · (-F0.01)",
+            "SSF4 + (-X0.07)+(-X0.05)+(-Y0.00)+(-F28.03)+(-F28.02)+(-F28.01)+(-F28.00)",
+            "SSF5 + X200.03 + (-X0.0F)+(-X0.0A)+(-X0.08)+(-X0.06)+(-X0.04)",
+        ],
+    );
+}
+
+#[test]
+fn csd_switching_function_and_step_blocks_are_eqs_14_to_22() {
+    let g = sf("csd.il", CSD, "G9.00");
+    assert_steps(
+        &g,
+        &[
+            "(-F17.00)+(-F17.01)+(-F17.02)+(-F17.03)+(-F18.00)+(-F18.01)+(-F18.02)+(-F18.03)",
+            "SSF1 · R35.00",
+            "X200.01 · X201.06",
+            "SSF2 + SSF3",
+            "SSF4 · G0.00 · R0.00",
+            "SSF5 + (-X0.0E)+(-X0.0D)+(-X201.02)+(-F17.03)+(-F17.02)+(-F17.01)+(-F17.00)",
+            "SSF5 + (-X201.03)",
+            "SSF6 · SSF7",
+            "SSF8 + (-X200.01)",
+        ],
+    );
+}
+
+fn ese_comments() -> CommentDb {
+    CommentDb::parse("ese-comments.csv", ESE_COMMENTS, pmc_address).unwrap()
+}
+
+#[test]
+fn ese_with_y_over_travel_open_names_x0_06_at_step_6() {
+    let g = sf("ese.il", ESE, "G8.02");
+    let before = Values::parse_file("ese-normal.values", ESE_NORMAL, pmc_address).unwrap();
+    let mut now = before.clone();
+    now.set(Signal::new("X0.06"), false);
+    let b = |s: &Signal| before.get(s);
+    let e = explain(&g, |s| now.get(s), Some(&b), Polarity::On, &ese_comments()).unwrap();
+    assert!(e.value);
+    assert_eq!(e.fault_step, Some(6));
+    assert_eq!(e.culprits.len(), 1);
+    let c = &e.culprits[0];
+    assert_eq!(
+        c.to_string(),
+        "X0.06 = 0 (expected 1): Y Over Travel Limit SW (B)"
+    );
+    assert!(c.trigger);
+    // The machine as it runs normally is not in ESE.
+    let ok = explain(&g, |s| before.get(s), None, Polarity::On, &ese_comments()).unwrap();
+    assert!(!ok.is_fault());
+}
+
+#[test]
+fn csd_cycle_start_in_jog_mode_is_step_3() {
+    let g = sf("csd.il", CSD, "G9.00");
+    let comments = CommentDb::parse("csd-comments.csv", CSD_COMMENTS, pmc_address).unwrap();
+    let mut now = Values::new();
+    // Axes referenced, PLC running, both spindles in auto, JOG mode.
+    for s in [
+        "F17.00", "F17.01", "F17.02", "F17.03", "F18.00", "F18.01", "F18.02", "F18.03",
+    ] {
+        now.set(Signal::new(s), true);
+    }
+    for (s, v) in [
+        ("R35.00", true),
+        ("G0.00", true),
+        ("R0.00", true),
+        ("X0.0D", true),
+        ("X0.0E", true),
+        ("X201.02", false),
+        ("X201.03", false),
+        ("X201.06", true),
+        ("X200.01", false),
+    ] {
+        now.set(Signal::new(s), v);
+    }
+    let before = now.clone();
+    now.set(Signal::new("X200.01"), true); // cycle start pressed
+    let b = |s: &Signal| before.get(s);
+    let e = explain(&g, |s| now.get(s), Some(&b), Polarity::On, &comments).unwrap();
+    assert!(e.is_fault());
+    assert_eq!(e.fault_step, Some(3));
+    let names: Vec<&str> = e.culprits.iter().map(|c| c.address.name()).collect();
+    assert!(
+        names.contains(&"X200.01") && names.contains(&"X201.06"),
+        "{names:?}"
+    );
+    assert_eq!(
+        e.culprits[0].to_string(),
+        "X200.01 = 1 (expected 0): Cycle Start"
+    );
+    assert!(e.culprits[0].trigger);
+    let jog = e
+        .culprits
+        .iter()
+        .find(|c| c.address.name() == "X201.06")
+        .unwrap();
+    assert_eq!(jog.to_string(), "X201.06 = 1 (expected 0): JOG Mode");
+    // Reference-return contacts are all fine: none is blamed.
+    assert!(!names
+        .iter()
+        .any(|n| n.starts_with("F17") || n.starts_with("F18")));
+}

@@ -1,0 +1,273 @@
+//! Model-based property tests:
+//! - random PMC programs: every output's switching function, evaluated as a
+//!   re-assembled tree, step by step, and compiled, equals running the
+//!   instruction list directly;
+//! - random expression trees written as IEC IL (parentheses, NOT, XOR):
+//!   compiled evaluation equals naive tree evaluation;
+//! - incremental evaluation equals full re-evaluation after every change.
+
+use std::collections::HashMap;
+
+use cellwatch_models::compiled::CompiledCell;
+use cellwatch_models::expr::Expr;
+use cellwatch_models::program::Program;
+use cellwatch_models::signal::{Observability, Signal};
+use cellwatch_models::switching::SwitchingFunction;
+use proptest::prelude::*;
+
+const INPUTS: usize = 8;
+
+fn input(i: usize) -> Signal {
+    Signal::new(&format!("X{i}"))
+}
+
+/// A random tree over inputs `X0..X7` and relays `R0..R(relays-1)`.
+fn tree(relays: usize) -> impl Strategy<Value = Expr> {
+    let leaf = (0..INPUTS + relays, any::<bool>()).prop_map(move |(i, n)| {
+        let s = if i < INPUTS {
+            input(i)
+        } else {
+            Signal::new(&format!("R{}", i - INPUTS))
+        };
+        Expr::Lit(s, n)
+    });
+    leaf.prop_recursive(4, 24, 4, |inner| {
+        prop_oneof![
+            prop::collection::vec(inner.clone(), 2..4).prop_map(Expr::And),
+            prop::collection::vec(inner, 2..4).prop_map(Expr::Or),
+        ]
+    })
+}
+
+/// Writes `e` as PMC IL: same-operator literals extend, sub-trees go
+/// through the stack.
+fn pmc(e: &Expr, out: &mut Vec<String>) {
+    match e {
+        Expr::Lit(s, n) => out.push(format!("{} {s}", if *n { "RD.NOT" } else { "RD" })),
+        Expr::And(cs) | Expr::Or(cs) => {
+            let (word, stk) = if matches!(e, Expr::And(_)) {
+                ("AND", "AND.STK")
+            } else {
+                ("OR", "OR.STK")
+            };
+            pmc(&cs[0], out);
+            for c in &cs[1..] {
+                match c {
+                    Expr::Lit(s, n) => {
+                        out.push(format!("{word}{} {s}", if *n { ".NOT" } else { "" }))
+                    }
+                    _ => {
+                        let mut inner = Vec::new();
+                        pmc(c, &mut inner);
+                        inner[0] = inner[0]
+                            .replacen("RD.NOT", "RD.NOT.STK", 1)
+                            .replacen("RD ", "RD.STK ", 1);
+                        out.extend(inner);
+                        out.push(stk.to_string());
+                    }
+                }
+            }
+        }
+        Expr::Not(_) | Expr::Const(_) => unreachable!("not generated for pmc"),
+    }
+}
+
+/// Runs a PMC program once, as a PLC scan would, on boolean values.
+fn interpret(program: &str, inputs: &HashMap<Signal, bool>) -> HashMap<Signal, bool> {
+    let mut mem = inputs.clone();
+    let mut acc = false;
+    let mut stack = Vec::new();
+    for line in program.lines() {
+        let mut w = line.split_whitespace();
+        let (m, a) = (w.next().unwrap(), w.next().map(Signal::new));
+        let val = |a: &Option<Signal>, mem: &HashMap<Signal, bool>| {
+            mem.get(a.as_ref().unwrap()).copied().unwrap_or(false)
+        };
+        match m {
+            "RD" => acc = val(&a, &mem),
+            "RD.NOT" => acc = !val(&a, &mem),
+            "RD.STK" => {
+                stack.push(acc);
+                acc = val(&a, &mem);
+            }
+            "RD.NOT.STK" => {
+                stack.push(acc);
+                acc = !val(&a, &mem);
+            }
+            "AND" => acc &= val(&a, &mem),
+            "AND.NOT" => acc &= !val(&a, &mem),
+            "OR" => acc |= val(&a, &mem),
+            "OR.NOT" => acc |= !val(&a, &mem),
+            "AND.STK" => acc &= stack.pop().unwrap(),
+            "OR.STK" => acc |= stack.pop().unwrap(),
+            "WRT" => {
+                mem.insert(a.unwrap(), acc);
+            }
+            other => panic!("interpreter: {other}"),
+        }
+    }
+    mem
+}
+
+/// A program of rungs: relay `Rk` may read inputs and earlier relays; the
+/// outputs `Y0..` read anything written before them.
+fn programs() -> impl Strategy<Value = (String, usize)> {
+    (1usize..4, 1usize..4).prop_flat_map(|(relays, outputs)| {
+        let rungs: Vec<_> = (0..relays + outputs).map(|k| tree(k.min(relays))).collect();
+        rungs.prop_map(move |trees| {
+            let mut lines = Vec::new();
+            for (k, t) in trees.iter().enumerate() {
+                pmc(t, &mut lines);
+                let coil = if k < relays {
+                    format!("R{k}")
+                } else {
+                    format!("Y{}", k - relays)
+                };
+                lines.push(format!("WRT {coil}"));
+            }
+            (lines.join("\n"), outputs)
+        })
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    #[test]
+    fn switching_functions_equal_running_the_program((src, outputs) in programs(), bits in any::<u8>()) {
+        let program = Program::compile("random.il", &src, None).unwrap();
+        let observable = Observability::default_for(program.dialect());
+        let sfs: Vec<SwitchingFunction> = (0..outputs)
+            .map(|k| SwitchingFunction::expand(&program, &Signal::new(&format!("Y{k}")), &observable).unwrap())
+            .collect();
+        let inputs: HashMap<Signal, bool> = (0..INPUTS).map(|i| (input(i), bits >> i & 1 == 1)).collect();
+        let scan = interpret(&src, &inputs);
+        let mut cell = CompiledCell::new(&sfs);
+        let mut changed = Vec::new();
+        for (s, v) in &inputs {
+            if let Some(i) = cell.signal_index(s) {
+                cell.set(i, *v, &mut changed);
+            }
+        }
+        let value = |s: &Signal| inputs[s];
+        for (k, sf) in sfs.iter().enumerate() {
+            let expected = scan[&Signal::new(&format!("Y{k}"))];
+            prop_assert_eq!(sf.to_expr().eval(&value), expected, "re-assembled steps, {}", sf);
+            prop_assert_eq!(sf.evaluate(value).0, expected, "step evaluation, {}", sf);
+            prop_assert_eq!(cell.output(k), expected, "compiled, {}", sf);
+            // Relays are gone: only inputs remain.
+            prop_assert!(sf.leaves().iter().all(|s| s.name().starts_with('X')));
+        }
+    }
+}
+
+/// A random tree with NOT, XOR-free IEC spelling and constants.
+fn iec_tree() -> impl Strategy<Value = Expr> {
+    let leaf = prop_oneof![
+        8 => (0..INPUTS, any::<bool>()).prop_map(|(i, n)| Expr::Lit(Signal::new(&format!("%IX0.{i}")), n)),
+        1 => any::<bool>().prop_map(Expr::Const),
+    ];
+    leaf.prop_recursive(5, 40, 4, |inner| {
+        prop_oneof![
+            prop::collection::vec(inner.clone(), 2..5).prop_map(Expr::And),
+            prop::collection::vec(inner.clone(), 2..5).prop_map(Expr::Or),
+            inner.prop_map(|e| Expr::Not(Box::new(e))),
+        ]
+    })
+}
+
+fn iec(e: &Expr, out: &mut Vec<String>) {
+    let operand = |e: &Expr| match e {
+        Expr::Lit(s, n) => Some((s.to_string(), *n)),
+        Expr::Const(v) => Some(((if *v { "TRUE" } else { "FALSE" }).to_string(), false)),
+        _ => None,
+    };
+    match e {
+        Expr::Lit(..) | Expr::Const(_) => {
+            let (s, n) = operand(e).unwrap();
+            out.push(format!("{} {s}", if n { "LDN" } else { "LD" }));
+        }
+        Expr::Not(inner) => {
+            iec(inner, out);
+            out.push("NOT".into());
+        }
+        Expr::And(cs) | Expr::Or(cs) => {
+            let word = if matches!(e, Expr::And(_)) {
+                "AND"
+            } else {
+                "OR"
+            };
+            iec(&cs[0], out);
+            for c in &cs[1..] {
+                match operand(c) {
+                    Some((s, n)) => out.push(format!("{word}{} {s}", if n { "N" } else { "" })),
+                    None => {
+                        out.push(format!("{word}("));
+                        iec(c, out);
+                        out.push(")".into());
+                    }
+                }
+            }
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    #[test]
+    fn compiled_equals_naive_tree(e in iec_tree(), states in prop::collection::vec(any::<u8>(), 1..8)) {
+        let mut lines = Vec::new();
+        iec(&e, &mut lines);
+        lines.push("ST %QX0.0".into());
+        let src = lines.join("\n");
+        let program = Program::compile("random.il", &src, None).unwrap();
+        let sf = SwitchingFunction::expand(&program, &Signal::new("%QX0.0"), &Observability::default_for(program.dialect())).unwrap();
+        let mut cell = CompiledCell::new(std::slice::from_ref(&sf));
+        let mut changed = Vec::new();
+        for bits in states {
+            let value = |s: &Signal| {
+                let i: u32 = s.name().rsplit('.').next().unwrap().parse().unwrap();
+                bits >> i & 1 == 1
+            };
+            for s in cell.signals().to_vec() {
+                let i = cell.signal_index(&s).unwrap();
+                cell.set(i, value(&s), &mut changed);
+            }
+            prop_assert_eq!(cell.output(0), e.eval(&value), "{}", src);
+            prop_assert_eq!(sf.to_expr().eval(&value), e.eval(&value));
+        }
+    }
+
+    #[test]
+    fn incremental_equals_full_reevaluation(
+        trees in prop::collection::vec(tree(0), 1..12),
+        changes in prop::collection::vec((0..INPUTS, any::<bool>()), 1..64),
+    ) {
+        let mut lines = Vec::new();
+        for (k, t) in trees.iter().enumerate() {
+            pmc(t, &mut lines);
+            lines.push(format!("WRT Y{k}"));
+        }
+        let program = Program::compile("random.il", &lines.join("\n"), None).unwrap();
+        let observable = Observability::default_for(program.dialect());
+        let sfs: Vec<_> = (0..trees.len())
+            .map(|k| SwitchingFunction::expand(&program, &Signal::new(&format!("Y{k}")), &observable).unwrap())
+            .collect();
+        let mut cell = CompiledCell::new(&sfs);
+        let mut changed = Vec::new();
+        for (i, v) in changes {
+            let Some(s) = cell.signal_index(&input(i)) else { continue };
+            let before: Vec<bool> = (0..sfs.len()).map(|c| cell.output(c)).collect();
+            changed.clear();
+            cell.set(s, v, &mut changed);
+            let mut full = cell.clone();
+            let mut again = Vec::new();
+            full.evaluate_all(&mut again);
+            prop_assert!(again.is_empty(), "incremental missed checks {:?}", again);
+            for c in 0..sfs.len() {
+                prop_assert_eq!(changed.contains(&c), before[c] != cell.output(c));
+            }
+        }
+    }
+}
