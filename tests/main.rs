@@ -1,1 +1,12 @@
+//! Integration tests of the `cellwatch` binary, run as a user would: the
+//! built binary, real files in temporary directories, exit statuses and
+//! output compared exactly.
+//!
+//! One test binary with shared helpers in `util`.
 
+#![allow(clippy::unwrap_used)] // test helpers fail loudly by design
+
+mod bad_input;
+mod explain;
+mod sf;
+mod util;

@@ -129,6 +129,9 @@ pub struct MissingValues {
     pub missing: Vec<Signal>,
 }
 
+/// Looks up a signal's value in a snapshot; `None` if it has none.
+pub type Lookup<'a> = &'a dyn Fn(&Signal) -> Option<bool>;
+
 /// Explains `sf` at the values `now`, with the values `before` (if known)
 /// marking triggers.
 ///
@@ -137,7 +140,7 @@ pub struct MissingValues {
 pub fn explain(
     sf: &SwitchingFunction,
     now: impl Fn(&Signal) -> Option<bool>,
-    before: Option<&dyn Fn(&Signal) -> Option<bool>>,
+    before: Option<Lookup<'_>>,
     polarity: Polarity,
     comments: &CommentDb,
 ) -> Result<Explanation, MissingValues> {

@@ -156,6 +156,16 @@ impl Observability {
         }
     }
 
+    /// Every signal observable: a coil's logic exactly as the program
+    /// writes it, with no relay expanded.
+    pub fn everything(dialect: Dialect) -> Self {
+        Observability {
+            dialect,
+            classes: BTreeSet::from([String::from("*")]),
+            signals: BTreeSet::new(),
+        }
+    }
+
     /// Parses a comma-separated list of classes (`X,Y,F,G` or `%I,%Q`) and
     /// signals (`R1024.00`, `Motor`).
     ///
@@ -193,7 +203,8 @@ impl Observability {
 
     /// Whether `signal` stays a leaf of a switching function.
     pub fn is_observable(&self, signal: &Signal) -> bool {
-        self.signals.contains(signal)
+        self.classes.contains("*")
+            || self.signals.contains(signal)
             || class_of(self.dialect, signal).is_some_and(|c| self.classes.contains(c))
     }
 }

@@ -47,7 +47,7 @@ pub enum SfError {
         /// The relays from the coil down to the one that is not derivable.
         via: Vec<Signal>,
         /// What makes it so.
-        cause: NotDerivable,
+        cause: Box<NotDerivable>,
     },
     /// Relays nest deeper than [`MAX_DEPTH`].
     #[error("{origin}: {coil}: its logic nests deeper than {limit} blocks")]
@@ -120,7 +120,7 @@ impl SwitchingFunction {
             origin: origin.clone(),
             coil: coil.clone(),
             via: vec![coil.clone()],
-            cause,
+            cause: Box::new(cause),
         })?;
         let mut x = Expander {
             program,
@@ -136,7 +136,7 @@ impl SwitchingFunction {
                 origin: origin.clone(),
                 coil: coil.clone(),
                 via,
-                cause,
+                cause: Box::new(cause),
             },
             Failure::TooDeep => SfError::TooDeep {
                 origin: origin.clone(),

@@ -1,6 +1,8 @@
 //! Paper 000's worked examples, reproduced: Fig. 6, ESE (eqs. 6, 8-13) and
 //! CSD (eqs. 7, 14-23), from the programs shipped in `config/cnc/`.
 
+#![allow(clippy::unwrap_used)] // test helpers fail loudly by design
+
 use cellwatch_models::comments::CommentDb;
 use cellwatch_models::explain::{explain, Polarity};
 use cellwatch_models::expr::Expr;

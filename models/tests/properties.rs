@@ -6,6 +6,8 @@
 //!   compiled evaluation equals naive tree evaluation;
 //! - incremental evaluation equals full re-evaluation after every change.
 
+#![allow(clippy::unwrap_used)] // test helpers fail loudly by design
+
 use std::collections::HashMap;
 
 use cellwatch_models::compiled::CompiledCell;
@@ -265,8 +267,8 @@ proptest! {
             let mut again = Vec::new();
             full.evaluate_all(&mut again);
             prop_assert!(again.is_empty(), "incremental missed checks {:?}", again);
-            for c in 0..sfs.len() {
-                prop_assert_eq!(changed.contains(&c), before[c] != cell.output(c));
+            for (c, was) in before.iter().enumerate() {
+                prop_assert_eq!(changed.contains(&c), *was != cell.output(c));
             }
         }
     }

@@ -152,7 +152,7 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
         };
         out.push(Instruction {
             at,
-            text: code.trim().split_whitespace().collect::<Vec<_>>().join(" "),
+            text: code.split_whitespace().collect::<Vec<_>>().join(" "),
             mnemonic: mnemonic.to_string(),
             operation,
             operand,

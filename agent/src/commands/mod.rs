@@ -1,0 +1,5 @@
+//! One module per command; each takes its parsed arguments and the output
+//! streams, and returns [`crate::cli::Failure`] on error.
+
+pub(crate) mod explain;
+pub(crate) mod sf;

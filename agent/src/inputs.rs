@@ -1,0 +1,66 @@
+//! Reading the user's files: programs, comment databases and snapshots.
+//!
+//! Thin wrappers over the models' parsers: read the bytes, check they are
+//! UTF-8, and hand the text over with the file's name, so every error comes
+//! back as `FILE:LINE:COL: message`.
+
+use std::path::Path;
+
+use cellwatch_models::comments::CommentDb;
+use cellwatch_models::program::Program;
+use cellwatch_models::signal::Observability;
+use cellwatch_models::source;
+use cellwatch_models::values::Values;
+
+use crate::cli::{Failure, ProgramArgs};
+
+/// Reads a file as UTF-8 text; `what` names it in errors ("program").
+pub(crate) fn read_text(path: &Path, what: &str) -> Result<String, Failure> {
+    let name = path.display().to_string();
+    let bytes = std::fs::read(path)
+        .map_err(|e| Failure::Input(format!("cannot read {what} '{name}': {e}")))?;
+    Ok(source::text(&name, &bytes)?.to_string())
+}
+
+/// The compiled program, its comment database and observability, with
+/// compiler warnings written to `err`.
+pub(crate) fn load(
+    args: &ProgramArgs,
+    err: &mut dyn std::io::Write,
+) -> Result<(Program, CommentDb, Observability), Failure> {
+    let name = args.program.display().to_string();
+    let text = read_text(&args.program, "program")?;
+    let program = Program::compile(&name, &text, args.dialect)?;
+    for w in program.warnings() {
+        let _ = writeln!(err, "{name}:{}: warning: {}", w.at, w.message);
+    }
+    let comments = match &args.comments {
+        Some(path) => {
+            let text = read_text(path, "comment database")?;
+            CommentDb::parse(&path.display().to_string(), &text, |a| program.resolve(a))?
+        }
+        None => CommentDb::default(),
+    };
+    let observable = match &args.observable {
+        Some(list) => Observability::parse(program.dialect(), list)
+            .map_err(|m| Failure::Input(format!("--observable: {m}")))?,
+        None => Observability::default_for(program.dialect()),
+    };
+    Ok((program, comments, observable))
+}
+
+/// Signal values from `--snapshot`/`--before`: a file if one exists at that
+/// path, otherwise inline `A=1,B=0` pairs.
+pub(crate) fn values(option: &str, arg: &str, program: &Program) -> Result<Values, Failure> {
+    let path = Path::new(arg);
+    if path.is_file() {
+        let text = read_text(path, "snapshot")?;
+        return Ok(Values::parse_file(arg, &text, |a| program.resolve(a))?);
+    }
+    if !arg.contains('=') {
+        return Err(Failure::Input(format!(
+            "{option} '{arg}': no such file, and not inline ADDRESS=VALUE pairs"
+        )));
+    }
+    Ok(Values::parse_inline(option, arg, |a| program.resolve(a))?)
+}

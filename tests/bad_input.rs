@@ -1,0 +1,169 @@
+//! Every kind of bad input gives `FILE:LINE:COL: message` quoting the
+//! offending text, exit status 2, and never a panic.
+
+use crate::util::{cellwatch, Dir};
+
+fn sf_error(program: impl AsRef<[u8]>) -> String {
+    let d = Dir::new();
+    let p = d.file("p.il", program);
+    let r = cellwatch(&["sf", &p]);
+    assert_eq!(r.code, 2, "stdout: {}\nstderr: {}", r.stdout, r.stderr);
+    assert!(!r.stderr.contains("panicked"));
+    // Strip the temporary directory so the message can be pinned.
+    r.stderr.replace(&p, "p.il")
+}
+
+#[test]
+fn unknown_mnemonic() {
+    assert_eq!(
+        sf_error("RD X0.07\nRDX X0.05\n"),
+        "error: p.il:2:1: unknown instruction 'RDX'\n"
+    );
+}
+
+#[test]
+fn unbalanced_stack() {
+    assert_eq!(
+        sf_error("RD X1\nRD.STK X2\nWRT Y1\n"),
+        "error: p.il:3:1: unbalanced stack at 'WRT Y1': 'RD.STK X2' at line 2 pushed a result that is never combined (AND.STK/OR.STK)\n"
+    );
+    assert_eq!(
+        sf_error("RD X1\nOR.STK\nWRT Y1\n"),
+        "error: p.il:2:1: 'OR.STK' with nothing on the stack: no RD.STK before it\n"
+    );
+}
+
+#[test]
+fn unbalanced_parentheses() {
+    assert_eq!(
+        sf_error("LD a\nAND( b\nOR c\nST q\n"),
+        "error: p.il:4:1: unbalanced parentheses at 'ST q': 'AND( b' at line 2 is never closed with ')'\n"
+    );
+    assert_eq!(
+        sf_error("LD a\nAND b\n)\nST q\n"),
+        "error: p.il:3:1: ')' closes no '('\n"
+    );
+}
+
+#[test]
+fn write_with_no_result() {
+    assert_eq!(
+        sf_error("; rung 1\n  WRT Y0.00\n"),
+        "error: p.il:2:3: 'WRT Y0.00' with no result to write: no load (RD/LD) before it\n"
+    );
+}
+
+#[test]
+fn malformed_address() {
+    assert_eq!(
+        sf_error("RD X0.07\nAND.NOT X0.1G\nWRT Y0.00\n"),
+        "error: p.il:2:9: malformed address 'X0.1G': the bit after '.' must be a hex digit 0..F (as in X0.07 or X0.0A)\n"
+    );
+}
+
+#[test]
+fn empty_and_non_utf8_files() {
+    assert_eq!(
+        sf_error(""),
+        "error: p.il:1:1: the program is empty: no instructions\n"
+    );
+    assert_eq!(sf_error("; only comments\n"), "error: p.il:1:1: cannot tell the dialect: no PMC (RD, WRT) or IEC (LD, ST) instruction found; pass --dialect pmc or --dialect iec\n");
+    assert_eq!(
+        sf_error(b"RD X0.07\nWRT Y0.\xE900\n".as_slice()),
+        "error: p.il:2:8: not UTF-8 text (byte 0xE9); save the file as UTF-8 or ASCII\n"
+    );
+}
+
+#[test]
+fn unknown_coil() {
+    let r = cellwatch(&["sf", "config/cnc/ese.il", "--coil", "G8.03"]);
+    assert_eq!(r.code, 2);
+    assert_eq!(
+        r.stderr,
+        "error: config/cnc/ese.il: unknown coil 'G8.03': the program writes R900.00, G8.02\n"
+    );
+    let r = cellwatch(&[
+        "explain",
+        "config/cnc/ese.il",
+        "--coil",
+        "Y7",
+        "--snapshot",
+        "X0.06=0",
+    ]);
+    assert_eq!(
+        r.stderr,
+        "error: config/cnc/ese.il: unknown coil 'Y7': the program writes R900.00, G8.02\n"
+    );
+}
+
+#[test]
+fn malformed_snapshot_lines() {
+    let d = Dir::new();
+    let s = d.file("s.values", "X0.06=0\nX0.07 1\n");
+    let r = cellwatch(&[
+        "explain",
+        "config/cnc/ese.il",
+        "--coil",
+        "G8.02",
+        "--snapshot",
+        &s,
+    ]);
+    assert_eq!(r.code, 2);
+    assert_eq!(
+        r.stderr.replace(&s, "s.values"),
+        "error: s.values:2:1: malformed line 'X0.07 1': expected ADDRESS=VALUE or ADDRESS,VALUE\n"
+    );
+    let r = cellwatch(&[
+        "explain",
+        "config/cnc/ese.il",
+        "--coil",
+        "G8.02",
+        "--snapshot",
+        "X0.06=0,X0.07=maybe",
+    ]);
+    assert_eq!(r.code, 2);
+    assert_eq!(
+        r.stderr,
+        "error: --snapshot:1:15: value 'maybe' for X0.07 is not 0, 1, true, false, on or off\n"
+    );
+    let r = cellwatch(&[
+        "explain",
+        "config/cnc/ese.il",
+        "--coil",
+        "G8.02",
+        "--snapshot",
+        "no-such-file.values",
+    ]);
+    assert_eq!(r.stderr, "error: --snapshot 'no-such-file.values': no such file, and not inline ADDRESS=VALUE pairs\n");
+}
+
+#[test]
+fn bad_comment_database() {
+    let d = Dir::new();
+    let c = d.file("c.csv", "address,comment\nX0.06,ok\nX0.0Z,bad\n");
+    let r = cellwatch(&["sf", "config/cnc/ese.il", "--comments", &c]);
+    assert_eq!(r.code, 2);
+    assert_eq!(
+        r.stderr.replace(&c, "c.csv"),
+        "error: c.csv:3:1: malformed address 'X0.0Z': the bit after '.' must be a hex digit 0..F (as in X0.07 or X0.0A)\n"
+    );
+}
+
+#[test]
+fn missing_file_and_bad_options() {
+    let r = cellwatch(&["sf", "nowhere.il"]);
+    assert_eq!(r.code, 2);
+    assert!(
+        r.stderr
+            .starts_with("error: cannot read program 'nowhere.il': "),
+        "{}",
+        r.stderr
+    );
+    let r = cellwatch(&["sf", "config/cnc/ese.il", "--dialect", "st"]);
+    assert_eq!(r.code, 2);
+    assert!(
+        r.stderr.contains("unknown dialect 'st': use pmc or iec"),
+        "{}",
+        r.stderr
+    );
+}

@@ -1,0 +1,128 @@
+//! `cellwatch explain`: the paper's ESE and CSD faults from the command line.
+
+use crate::util::{cellwatch, Dir};
+
+/// The README's example, as written there.
+#[test]
+fn readme_example_names_the_y_over_travel_switch() {
+    let r = cellwatch(&[
+        "explain",
+        "config/cnc/ese.il",
+        "--coil",
+        "G8.02",
+        "--snapshot",
+        "config/cnc/ese-y-overtravel.values",
+        "--before",
+        "config/cnc/ese-normal.values",
+        "--comments",
+        "config/cnc/ese-comments.csv",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        r.stdout
+            .starts_with("G8.02 = 1: FAULT (fault when on), at step 6\n"),
+        "{}",
+        r.stdout
+    );
+    assert!(
+        r.stdout.ends_with(
+            "culprits:\n  X0.06 = 0 (expected 1): Y Over Travel Limit SW (B)   [trigger]\n"
+        ),
+        "{}",
+        r.stdout
+    );
+}
+
+#[test]
+fn csd_json_with_inline_values() {
+    let d = Dir::new();
+    let snapshot = d.file(
+        "jog.csv",
+        "address,value\nF17.00,1\nF17.01,1\nF17.02,1\nF17.03,1\nF18.00,1\nF18.01,1\nF18.02,1\nF18.03,1\n\
+         R35.00,1\nG0.00,1\nR0.00,1\nX0.0D,1\nX0.0E,1\nX201.02,0\nX201.03,0\nX201.06,1\nX200.01,1\n",
+    );
+    let r = cellwatch(&[
+        "explain",
+        "config/cnc/csd.il",
+        "--coil",
+        "G9.00",
+        "--snapshot",
+        &snapshot,
+        "--before",
+        "X200.01=0",
+        "--comments",
+        "config/cnc/csd-comments.csv",
+        "--json",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let v: serde_json::Value = serde_json::from_str(&r.stdout).unwrap();
+    assert_eq!(v["coil"], "G9.00");
+    assert_eq!(v["value"], true);
+    assert_eq!(v["fault_step"], 3);
+    assert_eq!(v["steps"].as_array().unwrap().len(), 9);
+    assert_eq!(
+        v["steps"][2],
+        serde_json::json!({"index": 3, "value": true, "expr": "X200.01 * X201.06"})
+    );
+    let first = &v["culprits"][0];
+    assert_eq!(
+        first,
+        &serde_json::json!({"address": "X200.01", "value": true, "expected": false, "comment": "Cycle Start", "trigger": true})
+    );
+    let addresses: Vec<&str> = v["culprits"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["address"].as_str().unwrap())
+        .collect();
+    assert!(addresses.contains(&"X201.06"), "{addresses:?}");
+}
+
+#[test]
+fn no_fault_is_said_plainly() {
+    let r = cellwatch(&[
+        "explain",
+        "config/cnc/ese.il",
+        "--coil",
+        "G8.02",
+        "--snapshot",
+        "config/cnc/ese-normal.values",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        r.stdout
+            .starts_with("G8.02 = 0: no fault (fault when on)\n"),
+        "{}",
+        r.stdout
+    );
+    assert!(!r.stdout.contains("culprits"));
+}
+
+#[test]
+fn enable_coil_faults_when_off() {
+    let d = Dir::new();
+    let p = d.file("enable.il", "RD X1\nAND X2\nAND.NOT X3\nWRT G9.00\n");
+    let r = cellwatch(&[
+        "explain",
+        &p,
+        "--coil",
+        "G9.00",
+        "--snapshot",
+        "X1=1,X2=0,X3=1",
+        "--fault-when",
+        "off",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        r.stdout
+            .contains("G9.00 = 0: FAULT (fault when off), at step 1\n"),
+        "{}",
+        r.stdout
+    );
+    assert!(
+        r.stdout
+            .ends_with("culprits:\n  X2 = 0 (expected 1)\n  X3 = 1 (expected 0)\n"),
+        "{}",
+        r.stdout
+    );
+}
