@@ -15,9 +15,13 @@
 //! - [`compiled`]: many switching functions over one bitset, re-evaluated
 //!   incrementally.
 //! - [`expr`]: naive expression trees, the reference for tests.
+//! - [`alarm`]: alarms and their ISA-18.2 lifecycle.
+//! - [`engine`]: the per-cell engine: tags, check sets, alarms, machine state.
 
+pub mod alarm;
 pub mod comments;
 pub mod compiled;
+pub mod engine;
 pub mod explain;
 pub mod expr;
 pub mod il;

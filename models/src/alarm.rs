@@ -1,0 +1,209 @@
+//! Alarms and their lifecycle, after ISA-18.2.
+//!
+//! An [`Alarm`] has a stable id (the check's id, `communication`,
+//! `tag-quality`) and two independent states: *active* (the condition holds)
+//! and *acknowledged* (an operator has seen it). Raising makes it active and
+//! unacknowledged; clearing ends the condition but it stays unacknowledged
+//! until an operator acknowledges it; a *latched* alarm stays active after
+//! its condition ends, until an operator resets it. This module owns the
+//! state machine; who may acknowledge is the agent's business.
+
+use std::fmt;
+use std::str::FromStr;
+
+use crate::explain::Culprit;
+
+/// How urgent an alarm is.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Severity {
+    /// Advisory.
+    Low,
+    /// Needs attention this shift.
+    Medium,
+    /// Stops or will stop production.
+    High,
+    /// Safety or machine damage.
+    Critical,
+}
+
+impl Severity {
+    /// All severities, lowest first.
+    pub const ALL: [Severity; 4] = [
+        Severity::Low,
+        Severity::Medium,
+        Severity::High,
+        Severity::Critical,
+    ];
+
+    /// The lower-case name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Severity::Low => "low",
+            Severity::Medium => "medium",
+            Severity::High => "high",
+            Severity::Critical => "critical",
+        }
+    }
+}
+
+impl fmt::Display for Severity {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for Severity {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        Severity::ALL
+            .into_iter()
+            .find(|v| v.as_str() == s)
+            .ok_or_else(|| format!("unknown severity '{s}': use low, medium, high or critical"))
+    }
+}
+
+/// What raised an alarm.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AlarmKind {
+    /// A switching-function check: a fault coil at its fault value.
+    Switching,
+    /// A transition timer: an event too early or too late.
+    Timer,
+    /// Tags with bad or uncertain quality.
+    TagQuality,
+    /// The connection to the PLC is lost.
+    Communication,
+}
+
+impl AlarmKind {
+    /// All kinds.
+    pub const ALL: [AlarmKind; 4] = [
+        AlarmKind::Switching,
+        AlarmKind::Timer,
+        AlarmKind::TagQuality,
+        AlarmKind::Communication,
+    ];
+
+    /// The snake-case name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            AlarmKind::Switching => "switching",
+            AlarmKind::Timer => "timer",
+            AlarmKind::TagQuality => "tag_quality",
+            AlarmKind::Communication => "communication",
+        }
+    }
+}
+
+/// The ISA-18.2 state of an alarm.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AlarmState {
+    /// Condition present, not yet acknowledged.
+    ActiveUnacknowledged,
+    /// Condition present, acknowledged.
+    ActiveAcknowledged,
+    /// Condition gone, not yet acknowledged.
+    ClearedUnacknowledged,
+    /// Condition gone and acknowledged: nothing to show.
+    Normal,
+}
+
+impl AlarmState {
+    /// The snake-case name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            AlarmState::ActiveUnacknowledged => "active_unacknowledged",
+            AlarmState::ActiveAcknowledged => "active_acknowledged",
+            AlarmState::ClearedUnacknowledged => "cleared_unacknowledged",
+            AlarmState::Normal => "normal",
+        }
+    }
+}
+
+/// What just happened to an alarm.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Transition {
+    /// The condition started.
+    Raised,
+    /// The condition ended (or a latched alarm was reset).
+    Cleared,
+    /// An operator acknowledged it.
+    Acknowledged,
+    /// The condition still holds but its details changed (more tags bad,
+    /// a new culprit).
+    Updated,
+}
+
+/// One alarm: its identity, state and the diagnosis that goes with it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Alarm {
+    /// Stable id: the check's id, `communication` or `tag-quality`.
+    pub id: String,
+    /// What raised it.
+    pub kind: AlarmKind,
+    /// How urgent.
+    pub severity: Severity,
+    /// The fault type for machine-state history (`ESE`, `CSD`, ...).
+    pub fault_type: String,
+    /// The condition holds (or the alarm is latched).
+    pub active: bool,
+    /// An operator has acknowledged the current occurrence.
+    pub acknowledged: bool,
+    /// Stays active until reset.
+    pub latched: bool,
+    /// When the current occurrence was raised, ms since the Unix epoch.
+    pub raised_at: u64,
+    /// When it cleared, if it has.
+    pub cleared_at: Option<u64>,
+    /// Who acknowledged it.
+    pub acked_by: Option<String>,
+    /// The step block at which the fault formed.
+    pub fault_step: Option<usize>,
+    /// The contacts that caused it, triggers first.
+    pub culprits: Vec<Culprit>,
+    /// A one-line description (which tags are bad, why the link dropped).
+    pub message: String,
+}
+
+impl Alarm {
+    /// The ISA-18.2 state.
+    pub fn state(&self) -> AlarmState {
+        match (self.active, self.acknowledged) {
+            (true, false) => AlarmState::ActiveUnacknowledged,
+            (true, true) => AlarmState::ActiveAcknowledged,
+            (false, false) => AlarmState::ClearedUnacknowledged,
+            (false, true) => AlarmState::Normal,
+        }
+    }
+
+    /// The element to name in machine-state history: the first culprit.
+    pub fn element(&self) -> Option<&str> {
+        self.culprits.first().map(|c| c.address.name())
+    }
+}
+
+/// Why an operator command was refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum CommandRefused {
+    /// No alarm with that id.
+    #[error("no alarm '{0}'")]
+    UnknownAlarm(String),
+    /// Reset of an alarm that is not latched, or whose condition still holds.
+    #[error("alarm '{id}' cannot be reset: {why}")]
+    CannotReset {
+        /// The alarm.
+        id: String,
+        /// Why.
+        why: String,
+    },
+    /// Acknowledging an alarm with nothing to acknowledge.
+    #[error("alarm '{0}' has nothing to acknowledge")]
+    NothingToAcknowledge(String),
+}
