@@ -14,4 +14,5 @@
 
 pub mod cli;
 mod commands;
+pub mod config;
 mod inputs;

@@ -1,0 +1,929 @@
+//! The cell configuration: one TOML file per cell.
+//!
+//! [`load`] reads the file and the files it names (programs, comment
+//! databases); [`parse`] does the rest from text, so tests feed literals.
+//! Parsing has two stages, as in Vector and zenoh: serde into the raw
+//! structs of [`raw`] (unknown keys rejected), then validation into
+//! [`CellConfig`], collecting *every* problem, each reported as
+//! `FILE:LINE:COL: key: message`. `cellwatch validate CONFIG` runs exactly
+//! this and connects to nothing.
+//!
+//! Relative paths are relative to the configuration file's directory.
+//! Secrets never live in the file: an OPC UA password comes from an
+//! environment variable or a file, and an inline `password` is an error.
+
+mod raw;
+
+use std::collections::{HashMap, HashSet};
+use std::fmt;
+use std::net::SocketAddr;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+use std::time::Duration;
+
+use cellwatch_models::alarm::Severity;
+use cellwatch_models::comments::CommentDb;
+use cellwatch_models::engine::{StateRules, SwitchingCheck, Tag};
+use cellwatch_models::explain::Polarity;
+use cellwatch_models::expr::Expr;
+use cellwatch_models::il::Dialect;
+use cellwatch_models::program::Program;
+use cellwatch_models::signal::{Observability, Signal};
+use cellwatch_models::switching::SwitchingFunction;
+use toml::Spanned;
+
+use raw::RawConfig;
+
+/// OPC UA message security policy.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SecurityPolicy {
+    /// No security: only when written explicitly, with a warning.
+    None,
+    /// RSA-SHA256 with AES-256-CBC (the default).
+    Basic256Sha256,
+    /// RSA-OAEP-SHA256 with AES-128-CBC.
+    Aes128Sha256RsaOaep,
+    /// RSA-PSS-SHA256 with AES-256-CBC.
+    Aes256Sha256RsaPss,
+}
+
+impl SecurityPolicy {
+    /// The name as OPC UA tools write it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SecurityPolicy::None => "None",
+            SecurityPolicy::Basic256Sha256 => "Basic256Sha256",
+            SecurityPolicy::Aes128Sha256RsaOaep => "Aes128_Sha256_RsaOaep",
+            SecurityPolicy::Aes256Sha256RsaPss => "Aes256_Sha256_RsaPss",
+        }
+    }
+}
+
+/// OPC UA message security mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SecurityMode {
+    /// Plain text.
+    None,
+    /// Signed.
+    Sign,
+    /// Signed and encrypted (the default).
+    SignAndEncrypt,
+}
+
+/// Where the OPC UA password comes from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum PasswordSource {
+    /// An environment variable.
+    Env(String),
+    /// A file (its first line).
+    File(PathBuf),
+}
+
+/// How the agent identifies itself to the server.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Identity {
+    /// No user.
+    Anonymous,
+    /// A user name and password.
+    User {
+        /// The user name.
+        user: String,
+        /// Where the password is.
+        password: PasswordSource,
+    },
+}
+
+/// The OPC UA connection.
+#[derive(Debug, Clone)]
+pub struct OpcUaConfig {
+    /// `opc.tcp://host:port/path`.
+    pub endpoint: String,
+    /// Message security policy.
+    pub policy: SecurityPolicy,
+    /// Message security mode.
+    pub mode: SecurityMode,
+    /// PKI directory: `own/`, `private/`, `trusted/`, `rejected/`.
+    pub pki_dir: PathBuf,
+    /// Who the agent is.
+    pub identity: Identity,
+    /// How often the server publishes changes.
+    pub publishing_interval: Duration,
+    /// How often the server samples each tag.
+    pub sampling_interval: Duration,
+}
+
+/// A tag: a node on the server and the PLC address the models use.
+#[derive(Debug, Clone)]
+pub struct TagConfig {
+    /// Plant name.
+    pub name: String,
+    /// OPC UA node id (`ns=2;s=X0.06`).
+    pub node_id: String,
+    /// PLC address (`X0.06`).
+    pub address: Signal,
+    /// Comment.
+    pub comment: Option<String>,
+}
+
+/// Zenoh session mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ZenohMode {
+    /// Peer (default; loopback).
+    Peer,
+    /// Client of a router.
+    Client,
+    /// Router.
+    Router,
+}
+
+impl ZenohMode {
+    /// The name zenoh's config uses.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ZenohMode::Peer => "peer",
+            ZenohMode::Client => "client",
+            ZenohMode::Router => "router",
+        }
+    }
+}
+
+/// The Zenoh session and keys.
+#[derive(Debug, Clone)]
+pub struct ZenohConfig {
+    /// Session mode.
+    pub mode: ZenohMode,
+    /// Endpoints to connect to.
+    pub connect: Vec<String>,
+    /// Endpoints to listen on.
+    pub listen: Vec<String>,
+    /// Key prefix, default `cellwatch/<cell>`.
+    pub prefix: String,
+    /// Multicast scouting (off by default: explicit endpoints on plant networks).
+    pub multicast_scouting: bool,
+}
+
+/// The SQLite journal.
+#[derive(Debug, Clone)]
+pub struct JournalConfig {
+    /// Database file.
+    pub path: PathBuf,
+    /// Rows older than this are deleted.
+    pub retention: Duration,
+}
+
+/// A validated cell configuration.
+#[derive(Clone)]
+pub struct CellConfig {
+    /// Cell id.
+    pub cell: String,
+    /// Free text.
+    pub description: String,
+    /// OPC UA connection.
+    pub opcua: OpcUaConfig,
+    /// Tags, in file order.
+    pub tags: Vec<TagConfig>,
+    /// Switching-function checks, compiled.
+    pub switching: Vec<SwitchingCheck>,
+    /// Machine-state rules.
+    pub state: StateRules,
+    /// How often the state is published even without change.
+    pub state_interval: Duration,
+    /// Zenoh.
+    pub zenoh: ZenohConfig,
+    /// Journal.
+    pub journal: JournalConfig,
+    /// Prometheus `/metrics` address; `None` disables it.
+    pub metrics: Option<SocketAddr>,
+    /// Operator keys for signed commands; `None`: every command refused.
+    pub secrets_file: Option<PathBuf>,
+    /// Things worth saying at start (security off, ...).
+    pub warnings: Vec<String>,
+}
+
+impl fmt::Debug for CellConfig {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("CellConfig")
+            .field("cell", &self.cell)
+            .field("tags", &self.tags.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl CellConfig {
+    /// The engine's view of the tags.
+    pub fn engine_tags(&self) -> Vec<Tag> {
+        self.tags
+            .iter()
+            .map(|t| Tag {
+                name: t.name.clone(),
+                address: t.address.clone(),
+            })
+            .collect()
+    }
+}
+
+/// Every problem found in a configuration, one per line.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ConfigErrors(pub Vec<String>);
+
+impl fmt::Display for ConfigErrors {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0.join("\n"))
+    }
+}
+
+impl std::error::Error for ConfigErrors {}
+
+/// Reads files a configuration names, relative to its directory.
+pub trait Files {
+    /// The bytes of `path`.
+    ///
+    /// # Errors
+    /// The file cannot be read.
+    fn read(&self, path: &Path) -> std::io::Result<Vec<u8>>;
+}
+
+/// [`Files`] on disk.
+pub struct Disk;
+
+impl Files for Disk {
+    fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
+        std::fs::read(path)
+    }
+}
+
+/// Loads and validates the configuration at `path`.
+///
+/// # Errors
+/// Every problem, each as `FILE:LINE:COL: key: message`.
+pub fn load(path: &Path) -> Result<CellConfig, ConfigErrors> {
+    let name = path.display().to_string();
+    let bytes =
+        std::fs::read(path).map_err(|e| ConfigErrors(vec![format!("{name}: cannot read: {e}")]))?;
+    let text = cellwatch_models::source::text(&name, &bytes)
+        .map_err(|e| ConfigErrors(vec![e.to_string()]))?;
+    let base = path
+        .parent()
+        .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
+    parse(&name, text, &base, &Disk)
+}
+
+/// Validates configuration `text` named `origin`; relative paths are
+/// resolved against `base` and read through `files`.
+///
+/// # Errors
+/// Every problem, each as `ORIGIN:LINE:COL: key: message`.
+pub fn parse(
+    origin: &str,
+    text: &str,
+    base: &Path,
+    files: &dyn Files,
+) -> Result<CellConfig, ConfigErrors> {
+    let raw: RawConfig = toml::from_str(text).map_err(|e| {
+        let at = e.span().map_or((1, 1), |s| line_col(text, s.start));
+        ConfigErrors(vec![format!(
+            "{origin}:{}:{}: {}",
+            at.0,
+            at.1,
+            e.message().trim_end()
+        )])
+    })?;
+    let mut v = Validator {
+        origin,
+        text,
+        base,
+        files,
+        problems: Vec::new(),
+        warnings: Vec::new(),
+    };
+    let config = v.config(raw);
+    if v.problems.is_empty() {
+        let mut config = config.expect("a configuration with no problems is complete");
+        config.warnings = v.warnings;
+        Ok(config)
+    } else {
+        Err(ConfigErrors(v.problems))
+    }
+}
+
+/// The 1-based line and column of byte `offset` in `text`.
+fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let before = &text[..offset.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, col)
+}
+
+struct Validator<'a> {
+    origin: &'a str,
+    text: &'a str,
+    base: &'a Path,
+    files: &'a dyn Files,
+    problems: Vec<String>,
+    warnings: Vec<String>,
+}
+
+impl Validator<'_> {
+    fn problem(&mut self, span: Range<usize>, key: &str, message: impl fmt::Display) {
+        let (line, col) = line_col(self.text, span.start);
+        self.problems
+            .push(format!("{}:{line}:{col}: {key}: {message}", self.origin));
+    }
+
+    fn path(&self, p: &str) -> PathBuf {
+        let p = Path::new(p);
+        if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            self.base.join(p)
+        }
+    }
+
+    fn duration(
+        &mut self,
+        value: Option<Spanned<String>>,
+        key: &str,
+        default: Duration,
+    ) -> Duration {
+        let Some(v) = value else { return default };
+        match humantime::parse_duration(v.get_ref()) {
+            Ok(d) if !d.is_zero() => d,
+            Ok(_) => {
+                self.problem(v.span(), key, "must be longer than zero");
+                default
+            }
+            Err(e) => {
+                self.problem(
+                    v.span(),
+                    key,
+                    format!(
+                        "'{}' is not a duration ({e}); write e.g. 100ms, 2s, 30d",
+                        v.get_ref()
+                    ),
+                );
+                default
+            }
+        }
+    }
+
+    fn parsed<T: FromStr<Err = String>>(
+        &mut self,
+        value: Option<Spanned<String>>,
+        key: &str,
+        default: T,
+    ) -> T {
+        let Some(v) = value else { return default };
+        match v.get_ref().parse() {
+            Ok(x) => x,
+            Err(e) => {
+                self.problem(v.span(), key, e);
+                default
+            }
+        }
+    }
+
+    fn config(&mut self, raw: RawConfig) -> Option<CellConfig> {
+        let cell = raw.cell.id.get_ref().clone();
+        if cell.is_empty()
+            || !cell
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+        {
+            self.problem(
+                raw.cell.id.span(),
+                "cell.id",
+                format!("'{cell}' must be letters, digits, '-' or '_' (it is part of Zenoh keys)"),
+            );
+        }
+        let opcua = self.opcua(raw.opcua);
+        let tags = self.tags(raw.tags);
+        let by_address: HashMap<Signal, usize> = tags
+            .iter()
+            .enumerate()
+            .map(|(i, t)| (t.address.clone(), i))
+            .collect();
+        let mut switching = Vec::new();
+        let mut ids = HashSet::new();
+        for (i, c) in raw.checks.switching.into_iter().enumerate() {
+            let key = format!("checks.switching[{i}]");
+            if !ids.insert(c.id.get_ref().clone())
+                || matches!(c.id.get_ref().as_str(), "communication" | "tag-quality")
+            {
+                self.problem(
+                    c.id.span(),
+                    &format!("{key}.id"),
+                    format!("'{}' is used twice or reserved", c.id.get_ref()),
+                );
+            }
+            if let Some(check) = self.switching(&key, c, &by_address) {
+                switching.push(check);
+            }
+        }
+        let state = self.state(&raw.state, &by_address);
+        let state_interval = self.duration(
+            raw.state.publish_interval,
+            "state.publish_interval",
+            Duration::from_secs(10),
+        );
+        let zenoh = self.zenoh(raw.zenoh, &cell);
+        let journal = JournalConfig {
+            path: self.path(
+                raw.journal
+                    .path
+                    .as_deref()
+                    .unwrap_or(&format!("cellwatch-{cell}.sqlite")),
+            ),
+            retention: self.duration(
+                raw.journal.retention,
+                "journal.retention",
+                Duration::from_secs(90 * 86_400),
+            ),
+        };
+        let metrics = match raw.metrics.listen {
+            None => Some(SocketAddr::from(([127, 0, 0, 1], 9464))),
+            Some(v) if v.get_ref() == "off" => None,
+            Some(v) => match v.get_ref().parse() {
+                Ok(a) => Some(a),
+                Err(_) => {
+                    self.problem(
+                        v.span(),
+                        "metrics.listen",
+                        format!(
+                            "'{}' is not an address like 127.0.0.1:9464 (or \"off\")",
+                            v.get_ref()
+                        ),
+                    );
+                    None
+                }
+            },
+        };
+        let secrets_file = raw.commands.secrets_file.map(|s| self.path(s.get_ref()));
+        if secrets_file.is_none() {
+            self.warnings.push(
+                "no commands.secrets_file: every acknowledge and reset will be refused".into(),
+            );
+        }
+        Some(CellConfig {
+            cell,
+            description: raw.cell.description,
+            opcua: opcua?,
+            tags,
+            switching,
+            state,
+            state_interval,
+            zenoh,
+            journal,
+            metrics,
+            secrets_file,
+            warnings: Vec::new(),
+        })
+    }
+
+    fn opcua(&mut self, raw: raw::RawOpcUa) -> Option<OpcUaConfig> {
+        let endpoint = raw.endpoint.get_ref().clone();
+        if !endpoint.starts_with("opc.tcp://") {
+            self.problem(
+                raw.endpoint.span(),
+                "opcua.endpoint",
+                format!("'{endpoint}' must start with opc.tcp://"),
+            );
+        }
+        let policy = match raw
+            .security_policy
+            .as_ref()
+            .map(|p| (p.get_ref().as_str(), p.span()))
+        {
+            None => SecurityPolicy::Basic256Sha256,
+            Some(("None", _)) => SecurityPolicy::None,
+            Some(("Basic256Sha256", _)) => SecurityPolicy::Basic256Sha256,
+            Some(("Aes128_Sha256_RsaOaep" | "Aes128Sha256RsaOaep", _)) => {
+                SecurityPolicy::Aes128Sha256RsaOaep
+            }
+            Some(("Aes256_Sha256_RsaPss" | "Aes256Sha256RsaPss", _)) => {
+                SecurityPolicy::Aes256Sha256RsaPss
+            }
+            Some((p @ ("Basic128Rsa15" | "Basic256"), span)) => {
+                self.problem(
+                    span,
+                    "opcua.security_policy",
+                    format!("'{p}' is deprecated and insecure; use Basic256Sha256"),
+                );
+                SecurityPolicy::Basic256Sha256
+            }
+            Some((p, span)) => {
+                self.problem(span, "opcua.security_policy", format!("unknown policy '{p}': use Basic256Sha256, Aes128_Sha256_RsaOaep, Aes256_Sha256_RsaPss or None"));
+                SecurityPolicy::Basic256Sha256
+            }
+        };
+        let mode = match raw
+            .security_mode
+            .as_ref()
+            .map(|m| (m.get_ref().as_str(), m.span()))
+        {
+            None if policy == SecurityPolicy::None => SecurityMode::None,
+            None => SecurityMode::SignAndEncrypt,
+            Some(("None", _)) => SecurityMode::None,
+            Some(("Sign", _)) => SecurityMode::Sign,
+            Some(("SignAndEncrypt", _)) => SecurityMode::SignAndEncrypt,
+            Some((m, span)) => {
+                self.problem(
+                    span,
+                    "opcua.security_mode",
+                    format!("unknown mode '{m}': use SignAndEncrypt, Sign or None"),
+                );
+                SecurityMode::SignAndEncrypt
+            }
+        };
+        if (policy == SecurityPolicy::None) != (mode == SecurityMode::None) {
+            let span = raw
+                .security_mode
+                .as_ref()
+                .or(raw.security_policy.as_ref())
+                .map_or(raw.endpoint.span(), Spanned::span);
+            self.problem(
+                span,
+                "opcua.security_mode",
+                "security_policy None goes with security_mode None, and only with it",
+            );
+        } else if policy == SecurityPolicy::None {
+            self.warnings.push(format!(
+                "OPC UA security is off for {endpoint}: traffic is neither signed nor encrypted"
+            ));
+        }
+        let pki_dir = self.path(raw.pki_dir.as_ref().map_or("pki", |p| p.get_ref().as_str()));
+        let identity = match raw.identity {
+            None => Identity::Anonymous,
+            Some(id) => self.identity(id.into_inner())?,
+        };
+        let publishing_interval = self.duration(
+            raw.publishing_interval,
+            "opcua.publishing_interval",
+            Duration::from_millis(100),
+        );
+        let sampling_interval = self.duration(
+            raw.sampling_interval,
+            "opcua.sampling_interval",
+            Duration::from_millis(50),
+        );
+        Some(OpcUaConfig {
+            endpoint,
+            policy,
+            mode,
+            pki_dir,
+            identity,
+            publishing_interval,
+            sampling_interval,
+        })
+    }
+
+    fn identity(&mut self, id: raw::RawIdentity) -> Option<Identity> {
+        if let Some(p) = &id.password {
+            self.problem(
+                p.span(),
+                "opcua.identity.password",
+                "passwords are never written in config files; use password_env (an environment variable) or password_file",
+            );
+            return None;
+        }
+        match id.kind.get_ref().as_str() {
+            "anonymous" => Some(Identity::Anonymous),
+            "user" => {
+                let user = id.user.unwrap_or_default();
+                if user.is_empty() {
+                    self.problem(
+                        id.kind.span(),
+                        "opcua.identity.user",
+                        "a user identity needs a user name",
+                    );
+                }
+                let password = match (id.password_env, id.password_file) {
+                    (Some(env), None) => PasswordSource::Env(env),
+                    (None, Some(file)) => PasswordSource::File(self.path(file.get_ref())),
+                    _ => {
+                        self.problem(
+                            id.kind.span(),
+                            "opcua.identity",
+                            "give exactly one of password_env and password_file",
+                        );
+                        return None;
+                    }
+                };
+                Some(Identity::User { user, password })
+            }
+            other => {
+                self.problem(
+                    id.kind.span(),
+                    "opcua.identity.kind",
+                    format!("unknown identity '{other}': use anonymous or user"),
+                );
+                None
+            }
+        }
+    }
+
+    fn tags(&mut self, raw: Vec<raw::RawTag>) -> Vec<TagConfig> {
+        let mut out = Vec::new();
+        let mut names = HashSet::new();
+        let mut addresses = HashSet::new();
+        for (i, t) in raw.into_iter().enumerate() {
+            let key = format!("tags[{i}]");
+            if !names.insert(t.name.get_ref().clone()) {
+                self.problem(
+                    t.name.span(),
+                    &format!("{key}.name"),
+                    format!("'{}' is used by another tag", t.name.get_ref()),
+                );
+            }
+            if opcua::types::NodeId::from_str(t.node_id.get_ref()).is_err() {
+                self.problem(
+                    t.node_id.span(),
+                    &format!("{key}.node_id"),
+                    format!(
+                        "'{}' is not a node id like ns=2;s=X0.06",
+                        t.node_id.get_ref()
+                    ),
+                );
+            }
+            let address = match tag_address(t.address.get_ref()) {
+                Ok(a) => a,
+                Err(e) => {
+                    self.problem(t.address.span(), &format!("{key}.address"), e);
+                    continue;
+                }
+            };
+            if !addresses.insert(address.clone()) {
+                self.problem(
+                    t.address.span(),
+                    &format!("{key}.address"),
+                    format!("{address} is used by another tag"),
+                );
+            }
+            out.push(TagConfig {
+                name: t.name.into_inner(),
+                node_id: t.node_id.into_inner(),
+                address,
+                comment: t.comment,
+            });
+        }
+        out
+    }
+
+    fn read_text(
+        &mut self,
+        span: Range<usize>,
+        key: &str,
+        path: &Path,
+        what: &str,
+    ) -> Option<String> {
+        match self.files.read(path) {
+            Ok(bytes) => {
+                match cellwatch_models::source::text(&path.display().to_string(), &bytes) {
+                    Ok(t) => Some(t.to_string()),
+                    Err(e) => {
+                        self.problems.push(e.to_string());
+                        None
+                    }
+                }
+            }
+            Err(e) => {
+                self.problem(
+                    span,
+                    key,
+                    format!("cannot read {what} '{}': {e}", path.display()),
+                );
+                None
+            }
+        }
+    }
+
+    fn switching(
+        &mut self,
+        key: &str,
+        c: raw::RawSwitching,
+        tags: &HashMap<Signal, usize>,
+    ) -> Option<SwitchingCheck> {
+        let dialect: Option<Dialect> = match &c.dialect {
+            None => None,
+            Some(d) => match d.get_ref().parse() {
+                Ok(d) => Some(d),
+                Err(e) => {
+                    self.problem(d.span(), &format!("{key}.dialect"), e);
+                    None
+                }
+            },
+        };
+        let polarity = self.parsed(
+            c.fault_when.clone(),
+            &format!("{key}.fault_when"),
+            Polarity::On,
+        );
+        let severity = self.parsed(
+            c.severity.clone(),
+            &format!("{key}.severity"),
+            Severity::High,
+        );
+        let path = self.path(c.program.get_ref());
+        let text = self.read_text(
+            c.program.span(),
+            &format!("{key}.program"),
+            &path,
+            "program",
+        )?;
+        let program = match Program::compile(&path.display().to_string(), &text, dialect) {
+            Ok(p) => p,
+            Err(e) => {
+                self.problems.extend(e.0.iter().map(ToString::to_string));
+                return None;
+            }
+        };
+        let observable = match &c.observable {
+            None => Observability::default_for(program.dialect()),
+            Some(o) => match Observability::parse(program.dialect(), o.get_ref()) {
+                Ok(o) => o,
+                Err(e) => {
+                    self.problem(o.span(), &format!("{key}.observable"), e);
+                    return None;
+                }
+            },
+        };
+        let coil = match program.resolve(c.coil.get_ref()) {
+            Ok(s) => s,
+            Err(e) => {
+                self.problem(c.coil.span(), &format!("{key}.coil"), e);
+                return None;
+            }
+        };
+        let sf = match SwitchingFunction::expand(&program, &coil, &observable) {
+            Ok(sf) => sf,
+            Err(e) => {
+                self.problem(c.coil.span(), &format!("{key}.coil"), e);
+                return None;
+            }
+        };
+        for leaf in sf.leaves() {
+            if !tags.contains_key(&leaf) {
+                self.problem(
+                    c.coil.span(),
+                    &format!("{key}.coil"),
+                    format!("{coil} reads {leaf}, but no tag has that address; add a [[tags]] entry for it"),
+                );
+            }
+        }
+        let comments = match &c.comments {
+            None => CommentDb::default(),
+            Some(p) => {
+                let path = self.path(p.get_ref());
+                let text = self.read_text(
+                    p.span(),
+                    &format!("{key}.comments"),
+                    &path,
+                    "comment database",
+                )?;
+                match CommentDb::parse(&path.display().to_string(), &text, |a| program.resolve(a)) {
+                    Ok(db) => db,
+                    Err(e) => {
+                        self.problems.push(e.to_string());
+                        return None;
+                    }
+                }
+            }
+        };
+        Some(SwitchingCheck {
+            id: c.id.into_inner(),
+            fault_type: c.fault_type.unwrap_or_else(|| coil.to_string()),
+            sf,
+            polarity,
+            severity,
+            comments,
+        })
+    }
+
+    fn state(&mut self, raw: &raw::RawState, tags: &HashMap<Signal, usize>) -> StateRules {
+        let fault_severity = self.parsed(
+            raw.fault_severity.clone(),
+            "state.fault_severity",
+            Severity::High,
+        );
+        let running = raw
+            .running
+            .as_ref()
+            .and_then(|r| match Expr::parse(r.get_ref()) {
+                Ok(e) => {
+                    let missing: Vec<String> = e
+                        .signals()
+                        .into_iter()
+                        .filter_map(|s| match tag_address(s.name()) {
+                            Ok(a) if tags.contains_key(&a) => None,
+                            _ => Some(s.to_string()),
+                        })
+                        .collect();
+                    if missing.is_empty() {
+                        Some(canonical_expr(e))
+                    } else {
+                        self.problem(
+                            r.span(),
+                            "state.running",
+                            format!("no tag has the address {}", missing.join(", ")),
+                        );
+                        None
+                    }
+                }
+                Err(m) => {
+                    self.problem(r.span(), "state.running", format!("'{}': {m}", r.get_ref()));
+                    None
+                }
+            });
+        StateRules {
+            running,
+            fault_severity,
+        }
+    }
+
+    fn zenoh(&mut self, raw: raw::RawZenoh, cell: &str) -> ZenohConfig {
+        let mode = match raw.mode.as_ref().map(|m| (m.get_ref().as_str(), m.span())) {
+            None | Some(("peer", _)) => ZenohMode::Peer,
+            Some(("client", _)) => ZenohMode::Client,
+            Some(("router", _)) => ZenohMode::Router,
+            Some((m, span)) => {
+                self.problem(
+                    span,
+                    "zenoh.mode",
+                    format!("unknown mode '{m}': use peer, client or router"),
+                );
+                ZenohMode::Peer
+            }
+        };
+        let mut endpoints = |list: Vec<Spanned<String>>, key: &str| -> Vec<String> {
+            let mut out = Vec::new();
+            for e in list {
+                if !e.get_ref().contains('/') {
+                    self.problem(
+                        e.span(),
+                        key,
+                        format!(
+                            "'{}' is not an endpoint like tcp/127.0.0.1:7447",
+                            e.get_ref()
+                        ),
+                    );
+                }
+                out.push(e.into_inner());
+            }
+            out
+        };
+        let connect = endpoints(raw.connect, "zenoh.connect");
+        let listen = endpoints(raw.listen, "zenoh.listen");
+        if mode == ZenohMode::Client && connect.is_empty() {
+            self.warnings.push("zenoh.mode is client but zenoh.connect is empty: the agent relies on scouting to find a router".into());
+        }
+        let prefix = match raw.key_prefix {
+            None => format!("cellwatch/{cell}"),
+            Some(p) => {
+                let s = p.get_ref().trim_end_matches('/').to_string();
+                if s.is_empty() || s.contains(['*', '$', '?', '#']) {
+                    self.problem(
+                        p.span(),
+                        "zenoh.key_prefix",
+                        format!(
+                            "'{}' must be a plain key expression without wildcards",
+                            p.get_ref()
+                        ),
+                    );
+                }
+                s
+            }
+        };
+        ZenohConfig {
+            mode,
+            connect,
+            listen,
+            prefix,
+            multicast_scouting: raw.multicast_scouting.unwrap_or(false),
+        }
+    }
+}
+
+/// A tag's PLC address: a PMC address (`X0.06`), an IEC direct address
+/// (`%IX0.0.3`) or an IEC symbol (`Start`).
+pub fn tag_address(text: &str) -> Result<Signal, String> {
+    if text.starts_with('%') {
+        return Dialect::Iec.signal(text);
+    }
+    Dialect::Pmc
+        .signal(text)
+        .or_else(|_| Dialect::Iec.signal(text))
+}
+
+/// The expression with its addresses in canonical form (`x0.6` → `X0.06`).
+fn canonical_expr(e: Expr) -> Expr {
+    match e {
+        Expr::Lit(s, n) => Expr::Lit(tag_address(s.name()).unwrap_or(s), n),
+        Expr::Not(inner) => Expr::Not(Box::new(canonical_expr(*inner))),
+        Expr::And(es) => Expr::And(es.into_iter().map(canonical_expr).collect()),
+        Expr::Or(es) => Expr::Or(es.into_iter().map(canonical_expr).collect()),
+        c @ Expr::Const(_) => c,
+    }
+}
+
+#[cfg(test)]
+mod tests;

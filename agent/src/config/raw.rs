@@ -1,0 +1,130 @@
+//! The configuration file as written: serde structs mirroring the TOML,
+//! every one rejecting unknown keys. Values whose problems are found only at
+//! validation keep their span, so the error can point at them.
+
+use serde::Deserialize;
+use toml::Spanned;
+
+/// The whole file.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawConfig {
+    pub(crate) cell: RawCell,
+    pub(crate) opcua: RawOpcUa,
+    #[serde(default)]
+    pub(crate) tags: Vec<RawTag>,
+    #[serde(default)]
+    pub(crate) checks: RawChecks,
+    #[serde(default)]
+    pub(crate) state: RawState,
+    #[serde(default)]
+    pub(crate) zenoh: RawZenoh,
+    #[serde(default)]
+    pub(crate) journal: RawJournal,
+    #[serde(default)]
+    pub(crate) metrics: RawMetrics,
+    #[serde(default)]
+    pub(crate) commands: RawCommands,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawCell {
+    pub(crate) id: Spanned<String>,
+    #[serde(default)]
+    pub(crate) description: String,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawOpcUa {
+    pub(crate) endpoint: Spanned<String>,
+    pub(crate) security_policy: Option<Spanned<String>>,
+    pub(crate) security_mode: Option<Spanned<String>>,
+    pub(crate) pki_dir: Option<Spanned<String>>,
+    #[serde(default)]
+    pub(crate) identity: Option<Spanned<RawIdentity>>,
+    pub(crate) publishing_interval: Option<Spanned<String>>,
+    pub(crate) sampling_interval: Option<Spanned<String>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawIdentity {
+    pub(crate) kind: Spanned<String>,
+    pub(crate) user: Option<String>,
+    pub(crate) password_env: Option<String>,
+    pub(crate) password_file: Option<Spanned<String>>,
+    /// Never allowed: present only to say so clearly.
+    pub(crate) password: Option<Spanned<toml::Value>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawTag {
+    pub(crate) name: Spanned<String>,
+    pub(crate) node_id: Spanned<String>,
+    pub(crate) address: Spanned<String>,
+    #[serde(default)]
+    pub(crate) comment: Option<String>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawChecks {
+    #[serde(default)]
+    pub(crate) switching: Vec<RawSwitching>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawSwitching {
+    pub(crate) id: Spanned<String>,
+    pub(crate) program: Spanned<String>,
+    pub(crate) dialect: Option<Spanned<String>>,
+    pub(crate) coil: Spanned<String>,
+    pub(crate) fault_when: Option<Spanned<String>>,
+    pub(crate) severity: Option<Spanned<String>>,
+    pub(crate) fault_type: Option<String>,
+    pub(crate) comments: Option<Spanned<String>>,
+    pub(crate) observable: Option<Spanned<String>>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawState {
+    pub(crate) running: Option<Spanned<String>>,
+    pub(crate) fault_severity: Option<Spanned<String>>,
+    pub(crate) publish_interval: Option<Spanned<String>>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawZenoh {
+    pub(crate) mode: Option<Spanned<String>>,
+    #[serde(default)]
+    pub(crate) connect: Vec<Spanned<String>>,
+    #[serde(default)]
+    pub(crate) listen: Vec<Spanned<String>>,
+    pub(crate) key_prefix: Option<Spanned<String>>,
+    pub(crate) multicast_scouting: Option<bool>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawJournal {
+    pub(crate) path: Option<String>,
+    pub(crate) retention: Option<Spanned<String>>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawMetrics {
+    pub(crate) listen: Option<Spanned<String>>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawCommands {
+    pub(crate) secrets_file: Option<Spanned<String>>,
+}

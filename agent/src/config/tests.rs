@@ -1,0 +1,177 @@
+//! Configuration tests: the shipped examples parse; bad configurations give
+//! pinned messages naming file, line and key.
+
+use std::collections::HashMap;
+use std::io;
+use std::path::{Path, PathBuf};
+
+use super::*;
+
+/// Files from a map, for literal configurations.
+struct Mem(HashMap<PathBuf, Vec<u8>>);
+
+impl Files for Mem {
+    fn read(&self, path: &Path) -> io::Result<Vec<u8>> {
+        self.0
+            .get(path)
+            .cloned()
+            .ok_or_else(|| io::Error::new(io::ErrorKind::NotFound, "No such file or directory"))
+    }
+}
+
+fn mem() -> Mem {
+    let mut m = HashMap::new();
+    m.insert(
+        PathBuf::from("base/fig6.il"),
+        b"RD X1\nANDN X2\nWRT G0.00\n".to_vec(),
+    );
+    Mem(m)
+}
+
+const GOOD: &str = r#"
+[cell]
+id = "c1"
+
+[opcua]
+endpoint = "opc.tcp://127.0.0.1:4840/"
+
+[[tags]]
+name = "x1"
+node_id = "ns=2;s=X1"
+address = "X1"
+
+[[tags]]
+name = "x2"
+node_id = "ns=2;s=X2"
+address = "X2"
+
+[[checks.switching]]
+id = "fig6"
+program = "fig6.il"
+coil = "G0.00"
+"#;
+
+fn errors(text: &str) -> String {
+    parse("cell.toml", text, Path::new("base"), &mem())
+        .unwrap_err()
+        .to_string()
+}
+
+#[test]
+fn defaults_are_secure_and_sane() {
+    let c = parse("cell.toml", GOOD, Path::new("base"), &mem()).unwrap();
+    assert_eq!(c.opcua.policy, SecurityPolicy::Basic256Sha256);
+    assert_eq!(c.opcua.mode, SecurityMode::SignAndEncrypt);
+    assert_eq!(c.opcua.identity, Identity::Anonymous);
+    assert_eq!(c.opcua.pki_dir, PathBuf::from("base/pki"));
+    assert_eq!(c.zenoh.prefix, "cellwatch/c1");
+    assert_eq!(c.zenoh.mode, ZenohMode::Peer);
+    assert_eq!(c.journal.path, PathBuf::from("base/cellwatch-c1.sqlite"));
+    assert_eq!(c.metrics, Some(SocketAddr::from(([127, 0, 0, 1], 9464))));
+    assert_eq!(c.switching[0].sf.notation(), "X1 * -X2");
+    assert_eq!(c.switching[0].severity, Severity::High);
+    assert_eq!(
+        c.warnings,
+        ["no commands.secrets_file: every acknowledge and reset will be refused"]
+    );
+}
+
+#[test]
+fn unknown_key() {
+    assert_eq!(
+        errors(&GOOD.replace(
+            "[cell]\nid = \"c1\"",
+            "[cell]\nid = \"c1\"\ncolour = \"red\""
+        )),
+        "cell.toml:4:1: unknown field `colour`, expected `id` or `description`"
+    );
+}
+
+#[test]
+fn missing_tag_for_a_checks_address() {
+    let text = GOOD.replace(
+        "[[tags]]\nname = \"x2\"\nnode_id = \"ns=2;s=X2\"\naddress = \"X2\"\n",
+        "",
+    );
+    assert_eq!(
+        errors(&text),
+        "cell.toml:17:8: checks.switching[0].coil: G0.00 reads X2, but no tag has that address; add a [[tags]] entry for it"
+    );
+}
+
+#[test]
+fn unreadable_program() {
+    assert_eq!(
+        errors(&GOOD.replace("fig6.il", "nowhere.il")),
+        "cell.toml:20:11: checks.switching[0].program: cannot read program 'base/nowhere.il': No such file or directory"
+    );
+}
+
+#[test]
+fn inline_password() {
+    let text = GOOD.replace(
+        "[[tags]]\nname = \"x1\"",
+        "[opcua.identity]\nkind = \"user\"\nuser = \"kim\"\npassword = \"hunter2\"\n\n[[tags]]\nname = \"x1\"",
+    );
+    assert_eq!(
+        errors(&text),
+        "cell.toml:11:12: opcua.identity.password: passwords are never written in config files; use password_env (an environment variable) or password_file"
+    );
+}
+
+#[test]
+fn every_problem_is_reported_at_once() {
+    let text = GOOD
+        .replace("id = \"c1\"", "id = \"cell 1\"")
+        .replace("opc.tcp://127.0.0.1:4840/", "http://plc")
+        .replace("ns=2;s=X1", "two;X1")
+        .replace(
+            "coil = \"G0.00\"",
+            "coil = \"G0.00\"\nseverity = \"urgent\"",
+        );
+    let e = errors(&text);
+    assert_eq!(
+        e.lines().collect::<Vec<_>>(),
+        [
+            "cell.toml:3:6: cell.id: 'cell 1' must be letters, digits, '-' or '_' (it is part of Zenoh keys)",
+            "cell.toml:6:12: opcua.endpoint: 'http://plc' must start with opc.tcp://",
+            "cell.toml:10:11: tags[0].node_id: 'two;X1' is not a node id like ns=2;s=X0.06",
+            "cell.toml:22:12: checks.switching[0].severity: unknown severity 'urgent': use low, medium, high or critical",
+        ]
+    );
+}
+
+#[test]
+fn security_none_only_when_explicit_and_with_a_warning() {
+    let text = GOOD.replace(
+        "endpoint = \"opc.tcp://127.0.0.1:4840/\"",
+        "endpoint = \"opc.tcp://127.0.0.1:4840/\"\nsecurity_policy = \"None\"",
+    );
+    let c = parse("cell.toml", &text, Path::new("base"), &mem()).unwrap();
+    assert_eq!(c.opcua.mode, SecurityMode::None);
+    assert!(c.warnings[0].starts_with("OPC UA security is off"));
+    let text = GOOD.replace(
+        "endpoint = \"opc.tcp://127.0.0.1:4840/\"",
+        "endpoint = \"opc.tcp://127.0.0.1:4840/\"\nsecurity_policy = \"Basic128Rsa15\"",
+    );
+    assert_eq!(
+        errors(&text),
+        "cell.toml:7:19: opcua.security_policy: 'Basic128Rsa15' is deprecated and insecure; use Basic256Sha256"
+    );
+}
+
+/// Every configuration shipped in `config/` is documentation: it must parse.
+#[test]
+fn shipped_configs_parse() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../config");
+    let mut seen = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            let c = load(&path).unwrap_or_else(|e| panic!("{}:\n{e}", path.display()));
+            assert!(!c.tags.is_empty());
+            seen += 1;
+        }
+    }
+    assert!(seen >= 1, "no config in {}", dir.display());
+}
