@@ -8,5 +8,6 @@
 
 mod bad_input;
 mod explain;
+mod opcua;
 mod sf;
 mod util;

@@ -11,8 +11,17 @@
 //! - `commands/`: one module per command (`sf`, `explain`).
 //! - `inputs`: reading programs, comment databases and snapshots from
 //!   files, with errors that name the file, line and column.
+//! - [`config`]: the cell configuration file, parsed and validated.
+//! - [`sources`]: the OPC UA client that feeds the engine, and PKI helpers.
+//! - [`sinks`]: the SQLite journal and Zenoh.
+//! - [`sim`]: simulated cells served over OPC UA.
+//! - [`clock`]: wall-clock time in the models' unit.
 
 pub mod cli;
+pub mod clock;
 mod commands;
 pub mod config;
 mod inputs;
+pub mod sim;
+pub mod sinks;
+pub mod sources;

@@ -1,0 +1,30 @@
+//! Wall-clock time for the agent: milliseconds since the Unix epoch, the
+//! unit the models take, and RFC 3339 text for payloads.
+
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+/// Now, in ms since the Unix epoch.
+pub fn now_ms() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
+}
+
+/// `ms` since the epoch as RFC 3339 UTC with milliseconds.
+pub fn rfc3339(ms: u64) -> String {
+    humantime::format_rfc3339_millis(UNIX_EPOCH + Duration::from_millis(ms)).to_string()
+}
+
+/// Parses RFC 3339 (`2026-11-21T10:00:00Z`) or a duration back from now
+/// (`1h`, `30m`) into ms since the epoch.
+///
+/// # Errors
+/// Neither form.
+pub fn parse_time(text: &str, now: u64) -> Result<u64, String> {
+    if let Ok(d) = humantime::parse_duration(text) {
+        return Ok(now.saturating_sub(d.as_millis() as u64));
+    }
+    humantime::parse_rfc3339_weak(text)
+        .map(|t| t.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as u64))
+        .map_err(|_| format!("'{text}' is neither a time (2026-11-21T10:00:00Z) nor a duration back from now (1h, 30m)"))
+}

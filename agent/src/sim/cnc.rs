@@ -1,0 +1,341 @@
+//! The simulated CNC: paper 000's engraving machine as an OPC UA server.
+//!
+//! Its "PLC" runs the shipped ESE and CSD programs: inputs (limit
+//! switches, push buttons, mode switches, NC signals) are variables in
+//! namespace 2 named by address (`ns=2;s=X0.06`), and the fault coils
+//! `G8.02` and `G9.00` are recomputed from the programs on every change.
+//! Faults are injected on a schedule ([`Scenario`]) or on command
+//! ([`SimulatedCnc::set`], [`SimulatedCnc::set_bad`]). The server uses real
+//! OPC UA security: its own key pair in its PKI directory, client
+//! certificates trusted only from `trusted/`.
+
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use cellwatch_models::program::Program;
+use cellwatch_models::signal::{Observability, Signal};
+use cellwatch_models::switching::SwitchingFunction;
+use cellwatch_models::values::Values;
+use opcua::crypto::SecurityPolicy;
+use opcua::server::address_space::Variable;
+use opcua::server::diagnostics::NamespaceMetadata;
+use opcua::server::node_manager::memory::{simple_node_manager, SimpleNodeManager};
+use opcua::server::{ServerBuilder, ServerHandle, SubscriptionCache, ANONYMOUS_USER_TOKEN_ID};
+use opcua::types::{DataValue, DateTime, MessageSecurityMode, NodeId, StatusCode};
+use tokio::net::TcpListener;
+
+/// The namespace the simulated tags live in (index 2 on this server).
+pub const NAMESPACE: &str = "urn:cellwatch:sim:cnc:plc";
+
+const ESE: &str = include_str!("../../../config/cnc/ese.il");
+const CSD: &str = include_str!("../../../config/cnc/csd.il");
+const ESE_NORMAL: &str = include_str!("../../../config/cnc/ese-normal.values");
+const CSD_NORMAL: &str = include_str!("../../../config/cnc/csd-normal.values");
+
+/// The machine's PLC: input image and the fault coils computed from it.
+struct Plc {
+    inputs: BTreeMap<Signal, bool>,
+    coils: Vec<(Signal, SwitchingFunction)>,
+}
+
+impl Plc {
+    fn new() -> Plc {
+        let mut inputs = BTreeMap::new();
+        for (name, text) in [
+            ("ese-normal.values", ESE_NORMAL),
+            ("csd-normal.values", CSD_NORMAL),
+        ] {
+            let v = Values::parse_file(name, text, cellwatch_models::signal::pmc_address)
+                .expect("shipped values parse");
+            for s in v_signals(text) {
+                inputs.insert(s.clone(), v.get(&s).unwrap_or(false));
+            }
+        }
+        let mut coils = Vec::new();
+        for (name, text, coil) in [("ese.il", ESE, "G8.02"), ("csd.il", CSD, "G9.00")] {
+            let p = Program::compile(name, text, None).expect("shipped programs compile");
+            let coil = Signal::new(coil);
+            let sf = SwitchingFunction::expand(&p, &coil, &Observability::default_for(p.dialect()))
+                .expect("derivable");
+            coils.push((coil, sf));
+        }
+        Plc { inputs, coils }
+    }
+
+    /// Every variable and its value: inputs, then coils.
+    fn image(&self) -> Vec<(Signal, bool)> {
+        let mut out: Vec<(Signal, bool)> =
+            self.inputs.iter().map(|(s, v)| (s.clone(), *v)).collect();
+        for (coil, sf) in &self.coils {
+            out.push((
+                coil.clone(),
+                sf.evaluate(|s| self.inputs.get(s).copied().unwrap_or(false))
+                    .0,
+            ));
+        }
+        out
+    }
+}
+
+fn v_signals(text: &str) -> Vec<Signal> {
+    text.lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with("address") && !l.trim().is_empty())
+        .filter_map(|l| l.split(',').next())
+        .filter_map(|a| cellwatch_models::signal::pmc_address(a).ok())
+        .collect()
+}
+
+/// A running simulated CNC.
+#[derive(Clone)]
+pub struct SimulatedCnc {
+    handle: ServerHandle,
+    manager: Arc<SimpleNodeManager>,
+    subscriptions: Arc<SubscriptionCache>,
+    ns: u16,
+    plc: Arc<Mutex<Plc>>,
+    addr: SocketAddr,
+}
+
+/// How to serve the simulator.
+#[derive(Debug, Clone)]
+pub struct SimOptions {
+    /// Address to listen on; port 0 picks one.
+    pub listen: SocketAddr,
+    /// The server's PKI directory.
+    pub pki_dir: std::path::PathBuf,
+    /// Also offer an endpoint without security.
+    pub insecure: bool,
+}
+
+impl SimulatedCnc {
+    /// Starts the server; it runs until [`SimulatedCnc::stop`].
+    ///
+    /// # Errors
+    /// The port cannot be bound or the server cannot be built.
+    pub async fn start(options: &SimOptions) -> Result<SimulatedCnc, String> {
+        let listener = TcpListener::bind(options.listen)
+            .await
+            .map_err(|e| format!("cannot listen on {}: {e}", options.listen))?;
+        let addr = listener.local_addr().map_err(|e| e.to_string())?;
+        let tokens: &[&str] = &[ANONYMOUS_USER_TOKEN_ID];
+        let mut builder = ServerBuilder::new()
+            .application_name("cellwatch simulated CNC")
+            .application_uri("urn:cellwatch:sim:cnc")
+            .product_uri("urn:cellwatch")
+            .create_sample_keypair(true)
+            .pki_dir(&options.pki_dir)
+            .certificate_path("own/cert.der")
+            .private_key_path("private/private.pem")
+            .trust_client_certs(false)
+            .host(addr.ip().to_string())
+            .port(addr.port())
+            .discovery_urls(vec!["/".to_owned()])
+            .add_endpoint(
+                "basic256sha256_sign_encrypt",
+                (
+                    "/",
+                    SecurityPolicy::Basic256Sha256,
+                    MessageSecurityMode::SignAndEncrypt,
+                    tokens,
+                ),
+            )
+            .with_node_manager(simple_node_manager(
+                NamespaceMetadata {
+                    namespace_uri: NAMESPACE.to_owned(),
+                    ..Default::default()
+                },
+                "cnc",
+            ));
+        if options.insecure {
+            builder = builder.add_endpoint(
+                "none",
+                ("/", SecurityPolicy::None, MessageSecurityMode::None, tokens),
+            );
+        }
+        let (server, handle) = builder.build()?;
+        let manager = handle
+            .node_managers()
+            .get_of_type::<SimpleNodeManager>()
+            .ok_or("the simulator's node manager is missing")?;
+        let ns = handle
+            .get_namespace_index(NAMESPACE)
+            .ok_or("the simulator's namespace is missing")?;
+        let plc = Plc::new();
+        {
+            let space = manager.address_space();
+            let mut space = space.write();
+            let folder = NodeId::new(ns, "cnc");
+            space.add_folder(&folder, "CNC", "CNC", &NodeId::objects_folder_id());
+            let vars = plc
+                .image()
+                .into_iter()
+                .map(|(s, v)| Variable::new(&NodeId::new(ns, s.name()), s.name(), s.name(), v))
+                .collect();
+            space.add_variables(vars, &folder);
+        }
+        tokio::spawn(async move {
+            if let Err(e) = server.run_with(listener).await {
+                tracing::error!(error = %e, "simulated CNC server stopped");
+            }
+        });
+        let subscriptions = handle.subscriptions().clone();
+        Ok(SimulatedCnc {
+            handle,
+            manager,
+            subscriptions,
+            ns,
+            plc: Arc::new(Mutex::new(plc)),
+            addr,
+        })
+    }
+
+    /// The endpoint URL clients connect to.
+    pub fn endpoint(&self) -> String {
+        format!("opc.tcp://{}/", self.addr)
+    }
+
+    /// The address the server listens on.
+    pub fn addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// The namespace index of the tags.
+    pub fn namespace(&self) -> u16 {
+        self.ns
+    }
+
+    /// Sets an input (by address, `X0.06`) and recomputes the coils.
+    ///
+    /// # Errors
+    /// The address is not an input of the machine.
+    pub fn set(&self, address: &str, value: bool) -> Result<(), String> {
+        let signal = cellwatch_models::signal::pmc_address(address)?;
+        let image = {
+            let mut plc = self.plc.lock().map_err(|_| "simulator state poisoned")?;
+            match plc.inputs.get_mut(&signal) {
+                Some(v) => *v = value,
+                None => return Err(format!("{signal} is not an input of the simulated CNC")),
+            }
+            plc.image()
+        };
+        let now = DateTime::now();
+        let values: Vec<(NodeId, DataValue)> = image
+            .into_iter()
+            .map(|(s, v)| (NodeId::new(self.ns, s.name()), DataValue::new_at(v, now)))
+            .collect();
+        self.manager
+            .set_values(
+                &self.subscriptions,
+                values.iter().map(|(n, v)| (n, None, v.clone())),
+            )
+            .map_err(|e| format!("cannot update {signal}: {e}"))
+    }
+
+    /// Marks an input's value as bad (a broken sensor wire).
+    ///
+    /// # Errors
+    /// The address is not an input of the machine.
+    pub fn set_bad(&self, address: &str) -> Result<(), String> {
+        let signal = cellwatch_models::signal::pmc_address(address)?;
+        let value = {
+            let plc = self.plc.lock().map_err(|_| "simulator state poisoned")?;
+            *plc.inputs
+                .get(&signal)
+                .ok_or_else(|| format!("{signal} is not an input of the simulated CNC"))?
+        };
+        let mut dv = DataValue::new_now(value);
+        dv.status = Some(StatusCode::BadSensorFailure);
+        let node = NodeId::new(self.ns, signal.name());
+        self.manager
+            .set_value(&self.subscriptions, &node, None, dv)
+            .map_err(|e| format!("cannot update {signal}: {e}"))
+    }
+
+    /// The certificate of the server, for a client to trust.
+    pub fn certificate(pki_dir: &Path) -> std::path::PathBuf {
+        crate::sources::pki::own_cert(pki_dir)
+    }
+
+    /// Stops the server; connected clients see the connection drop.
+    pub fn stop(&self) {
+        self.handle.cancel();
+    }
+}
+
+/// A fault to inject at a time.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Step {
+    /// Seconds from the start of the cycle.
+    pub at: Duration,
+    /// Input to change.
+    pub address: &'static str,
+    /// Its new value.
+    pub value: bool,
+    /// What it means on the shop floor.
+    pub note: &'static str,
+}
+
+/// A repeating schedule of injected faults.
+#[derive(Debug, Clone)]
+pub struct Scenario {
+    /// The steps of one cycle, in time order.
+    pub steps: Vec<Step>,
+    /// The cycle length.
+    pub period: Duration,
+}
+
+impl Scenario {
+    /// The demo's cycle: the Y over-travel switch opens (ESE), then an
+    /// operator presses cycle start in JOG mode (CSD).
+    pub fn demo() -> Scenario {
+        let step = |s: u64, address, value, note| Step {
+            at: Duration::from_secs(s),
+            address,
+            value,
+            note,
+        };
+        Scenario {
+            steps: vec![
+                step(
+                    3,
+                    "X0.06",
+                    false,
+                    "Y axis runs onto its over-travel limit switch",
+                ),
+                step(8, "X0.06", true, "Y axis moved back off the limit switch"),
+                step(12, "X201.02", false, "operator leaves AUTO mode"),
+                step(12, "X201.06", true, "operator selects JOG mode"),
+                step(
+                    14,
+                    "X200.01",
+                    true,
+                    "operator presses cycle start (in JOG mode)",
+                ),
+                step(15, "X200.01", false, "operator releases cycle start"),
+                step(18, "X201.06", false, "operator leaves JOG mode"),
+                step(18, "X201.02", true, "operator selects AUTO mode"),
+            ],
+            period: Duration::from_secs(24),
+        }
+    }
+
+    /// Plays the scenario on `sim` forever, calling `note` for each step.
+    pub async fn play(&self, sim: &SimulatedCnc, note: impl Fn(&Step)) {
+        let start = tokio::time::Instant::now();
+        let mut cycle = 0u32;
+        loop {
+            for step in &self.steps {
+                tokio::time::sleep_until(start + self.period * cycle + step.at).await;
+                note(step);
+                if let Err(e) = sim.set(step.address, step.value) {
+                    tracing::error!(error = %e, "scenario step failed");
+                }
+            }
+            cycle += 1;
+            tokio::time::sleep_until(start + self.period * cycle).await;
+        }
+    }
+}

@@ -1,0 +1,3 @@
+//! Simulated cells, served over real OPC UA, for the demo and the tests.
+
+pub mod cnc;

@@ -1,0 +1,1 @@
+//! Zenoh: alarms, state, history and snapshot services, commands, liveliness.

@@ -1,0 +1,32 @@
+//! OPC UA certificates on disk: creating an application's own key pair and
+//! trusting another application's certificate.
+//!
+//! The layout is async-opcua's: `own/cert.der`, `private/private.pem`,
+//! `trusted/`, `rejected/`. Trusting a peer means copying its certificate
+//! into `trusted/` under the name the certificate store looks for.
+
+use std::path::{Path, PathBuf};
+
+use opcua::crypto::{CertificateStore, X509};
+
+/// The application's own certificate in a PKI directory.
+pub fn own_cert(pki_dir: &Path) -> PathBuf {
+    pki_dir.join("own").join("cert.der")
+}
+
+/// Copies the certificate at `cert` into `pki_dir/trusted/`.
+///
+/// # Errors
+/// The certificate cannot be read or parsed, or the copy fails.
+pub fn trust(cert: &Path, pki_dir: &Path) -> Result<PathBuf, String> {
+    let bytes = std::fs::read(cert)
+        .map_err(|e| format!("cannot read certificate {}: {e}", cert.display()))?;
+    let x509 = X509::from_der(&bytes)
+        .map_err(|e| format!("{} is not a DER certificate: {e}", cert.display()))?;
+    let dir = pki_dir.join("trusted");
+    std::fs::create_dir_all(&dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    let target = dir.join(CertificateStore::cert_file_name(&x509));
+    std::fs::write(&target, &bytes)
+        .map_err(|e| format!("cannot write {}: {e}", target.display()))?;
+    Ok(target)
+}

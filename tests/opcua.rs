@@ -1,0 +1,214 @@
+//! The OPC UA source against the simulated CNC over real OPC UA with
+//! Basic256Sha256 + SignAndEncrypt and mutual certificate trust.
+
+use std::time::Duration;
+
+use cellwatch::config::{Identity, OpcUaConfig, SecurityMode, SecurityPolicy, TagConfig};
+use cellwatch::sim::cnc::{SimOptions, SimulatedCnc};
+use cellwatch::sources::{opcua, pki, SourceEvent};
+use cellwatch_models::engine::Reading;
+use cellwatch_models::signal::Signal;
+use tokio::sync::mpsc;
+
+pub(crate) fn tag(address: &str, ns: u16) -> TagConfig {
+    TagConfig {
+        name: address.to_lowercase(),
+        node_id: format!("ns={ns};s={address}"),
+        address: Signal::new(address),
+        comment: None,
+    }
+}
+
+pub(crate) fn opcua_config(endpoint: &str, pki_dir: &std::path::Path) -> OpcUaConfig {
+    OpcUaConfig {
+        endpoint: endpoint.to_string(),
+        policy: SecurityPolicy::Basic256Sha256,
+        mode: SecurityMode::SignAndEncrypt,
+        pki_dir: pki_dir.to_path_buf(),
+        identity: Identity::Anonymous,
+        publishing_interval: Duration::from_millis(50),
+        sampling_interval: Duration::from_millis(20),
+    }
+}
+
+async fn next(
+    rx: &mut mpsc::UnboundedReceiver<SourceEvent>,
+    what: &str,
+    f: impl Fn(&SourceEvent) -> bool,
+) -> SourceEvent {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    loop {
+        let ev = tokio::time::timeout_at(deadline, rx.recv())
+            .await
+            .unwrap_or_else(|_| panic!("timed out waiting for {what}"))
+            .expect("source stopped");
+        if f(&ev) {
+            return ev;
+        }
+    }
+}
+
+/// Waits until every condition has matched some event, in any order
+/// (changes in one publish arrive in no particular order).
+async fn all(
+    rx: &mut mpsc::UnboundedReceiver<SourceEvent>,
+    what: &str,
+    conditions: &[&dyn Fn(&SourceEvent) -> bool],
+) {
+    let mut seen = vec![false; conditions.len()];
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    while !seen.iter().all(|s| *s) {
+        let ev = tokio::time::timeout_at(deadline, rx.recv())
+            .await
+            .unwrap_or_else(|_| panic!("timed out waiting for {what}: matched {seen:?}"))
+            .expect("source stopped");
+        for (i, c) in conditions.iter().enumerate() {
+            seen[i] |= c(&ev);
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn source_reads_the_simulator_securely() {
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+        .with_test_writer()
+        .try_init();
+    let dir = tempfile::tempdir().unwrap();
+    let server_pki = dir.path().join("server-pki");
+    let agent_pki = dir.path().join("agent-pki");
+    let sim = SimulatedCnc::start(&SimOptions {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        pki_dir: server_pki.clone(),
+        insecure: false,
+    })
+    .await
+    .unwrap();
+    let config = opcua_config(&sim.endpoint(), &agent_pki);
+    // Each side trusts the other's certificate, and nothing else.
+    drop(opcua::client("test", &config).unwrap());
+    pki::trust(&pki::own_cert(&agent_pki), &server_pki).unwrap();
+    pki::trust(&pki::own_cert(&server_pki), &agent_pki).unwrap();
+    let tags = vec![
+        tag("X0.06", sim.namespace()),
+        tag("X0.04", sim.namespace()),
+        tag("G8.02", sim.namespace()),
+    ];
+    let (tx, mut rx) = mpsc::unbounded_channel();
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let task = tokio::spawn(async move {
+        opcua::run("test", &config, &tags, tx, async {
+            let _ = stop_rx.await;
+        })
+        .await
+    });
+    all(
+        &mut rx,
+        "connection and initial values",
+        &[&|e| *e == SourceEvent::Connected, &|e| {
+            matches!(
+                e,
+                SourceEvent::Reading {
+                    tag: 0,
+                    reading: Reading::Good(true),
+                    ..
+                }
+            )
+        }],
+    )
+    .await;
+    sim.set("X0.06", false).unwrap();
+    // The limit switch opens and the PLC's ESE coil follows.
+    all(
+        &mut rx,
+        "X0.06 = 0 and G8.02 = 1",
+        &[
+            &|e| {
+                matches!(
+                    e,
+                    SourceEvent::Reading {
+                        tag: 0,
+                        reading: Reading::Good(false),
+                        ..
+                    }
+                )
+            },
+            &|e| {
+                matches!(
+                    e,
+                    SourceEvent::Reading {
+                        tag: 2,
+                        reading: Reading::Good(true),
+                        ..
+                    }
+                )
+            },
+        ],
+    )
+    .await;
+    sim.set_bad("X0.04").unwrap();
+    next(&mut rx, "X0.04 bad", |e| {
+        matches!(
+            e,
+            SourceEvent::Reading {
+                tag: 1,
+                reading: Reading::Bad,
+                ..
+            }
+        )
+    })
+    .await;
+    let _ = stop_tx.send(());
+    task.await.unwrap().unwrap();
+    sim.stop();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn unknown_server_certificate_is_rejected() {
+    let dir = tempfile::tempdir().unwrap();
+    let server_pki = dir.path().join("server-pki");
+    let agent_pki = dir.path().join("agent-pki");
+    let sim = SimulatedCnc::start(&SimOptions {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        pki_dir: server_pki.clone(),
+        insecure: false,
+    })
+    .await
+    .unwrap();
+    let config = opcua_config(&sim.endpoint(), &agent_pki);
+    drop(opcua::client("test", &config).unwrap());
+    // The server trusts the agent, but the agent does not trust the server.
+    pki::trust(&pki::own_cert(&agent_pki), &server_pki).unwrap();
+    let tags = vec![tag("X0.06", sim.namespace())];
+    let (tx, mut rx) = mpsc::unbounded_channel();
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let task = tokio::spawn(async move {
+        opcua::run("test", &config, &tags, tx, async {
+            let _ = stop_rx.await;
+        })
+        .await
+    });
+    let ev = next(&mut rx, "refused", |e| {
+        matches!(e, SourceEvent::Disconnected(_))
+    })
+    .await;
+    assert!(matches!(ev, SourceEvent::Disconnected(_)));
+    // The refused certificate waits in rejected/ for an engineer to review.
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
+    loop {
+        let rejected = std::fs::read_dir(agent_pki.join("rejected"))
+            .map(|d| d.count())
+            .unwrap_or(0);
+        if rejected > 0 {
+            break;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "no certificate in rejected/"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let _ = stop_tx.send(());
+    task.await.unwrap().unwrap();
+    sim.stop();
+}
