@@ -41,6 +41,155 @@ enum Command {
     /// and come first. Each culprit shows its value, the value that would
     /// clear the fault, and its comment.
     Explain(ExplainArgs),
+    /// Run the agent for one cell: subscribe to the PLC over OPC UA, run the
+    /// checks, publish alarms and machine state on Zenoh, journal to SQLite,
+    /// serve Prometheus metrics.
+    Run(RunArgs),
+    /// Check a cell configuration (and the programs and I/O lists it names)
+    /// without connecting to anything.
+    Validate(ValidateArgs),
+    /// Run a simulated CNC (paper 000's ESE and CSD machine) served over OPC
+    /// UA and an agent watching it, in one process, printing alarms with
+    /// their explanation as they happen.
+    Demo(DemoArgs),
+    /// Serve a simulated cell over OPC UA.
+    #[command(subcommand)]
+    Simulate(SimulateCommand),
+    /// Show active alarms of running agents, or follow alarm events (Zenoh).
+    Alarms(AlarmsArgs),
+    /// Show a cell's machine-state, alarm and command history (Zenoh).
+    History(HistoryArgs),
+    /// Acknowledge an alarm: a signed command to the cell's agent (Zenoh).
+    Ack(CommandArgs),
+    /// Reset a latched alarm whose condition has ended: a signed command (Zenoh).
+    Reset(CommandArgs),
+}
+
+#[derive(Debug, Subcommand)]
+pub(crate) enum SimulateCommand {
+    /// The CNC of paper 000: ESE and CSD logic, faults on a schedule or on
+    /// command (standard input: `set X0.06 0`, `bad X0.04`, `quit`).
+    Cnc(SimulateArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct RunArgs {
+    /// The cell configuration (TOML).
+    pub(crate) config: PathBuf,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct ValidateArgs {
+    /// The cell configuration (TOML).
+    pub(crate) config: PathBuf,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct DemoArgs {
+    /// The cell configuration to run (its OPC UA endpoint is where the
+    /// simulator listens).
+    #[arg(long, default_value = "config/demo.toml")]
+    pub(crate) config: PathBuf,
+    /// Where the demo keeps certificates, the journal and operator keys.
+    #[arg(long, default_value = "cellwatch-demo")]
+    pub(crate) state_dir: PathBuf,
+    /// Stop after this long (e.g. 60s); default: until Ctrl-C.
+    #[arg(long, value_parser = crate::commands::agent::parse_duration)]
+    pub(crate) duration: Option<std::time::Duration>,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct SimulateArgs {
+    /// Address to serve OPC UA on.
+    #[arg(long, default_value = "127.0.0.1:48400")]
+    pub(crate) listen: std::net::SocketAddr,
+    /// The server's PKI directory (own certificate, trusted clients).
+    #[arg(long, default_value = "sim-pki")]
+    pub(crate) pki_dir: PathBuf,
+    /// A client certificate to trust (the agent's pki/own/cert.der); repeatable.
+    #[arg(long, value_name = "CERT")]
+    pub(crate) trust: Vec<PathBuf>,
+    /// Fault schedule: `demo` (ESE and CSD every 24 s) or `none`.
+    #[arg(long, default_value = "demo", value_parser = ["demo", "none"])]
+    pub(crate) scenario: String,
+    /// Also offer an endpoint without security (for tools that cannot do better).
+    #[arg(long)]
+    pub(crate) insecure: bool,
+}
+
+/// How the Zenoh clients reach agents.
+#[derive(Debug, clap::Args)]
+pub(crate) struct ZenohArgs {
+    /// Zenoh endpoint of an agent or router; repeatable.
+    #[arg(long, default_value = "tcp/127.0.0.1:7447")]
+    pub(crate) connect: Vec<String>,
+    /// Zenoh mode of this client: peer or client (of a router).
+    #[arg(long, default_value = "peer")]
+    pub(crate) mode: String,
+    /// Root of the agents' key prefixes (`<root>/<cell>/...`).
+    #[arg(long, default_value = "cellwatch")]
+    pub(crate) root: String,
+    /// Seconds to wait for answers.
+    #[arg(long = "timeout", default_value_t = 5)]
+    pub(crate) timeout_secs: u64,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct AlarmsArgs {
+    /// Only this cell (default: every cell).
+    #[arg(long)]
+    pub(crate) cell: Option<String>,
+    /// Follow alarm events as they happen (recovering any missed) until Ctrl-C.
+    #[arg(long)]
+    pub(crate) follow: bool,
+    /// One JSON alarm event per line.
+    #[arg(long)]
+    pub(crate) json: bool,
+    #[command(flatten)]
+    pub(crate) zenoh: ZenohArgs,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct HistoryArgs {
+    /// The cell.
+    #[arg(long)]
+    pub(crate) cell: String,
+    /// From: a duration back from now (1h, 30m) or an RFC 3339 time.
+    #[arg(long, default_value = "24h")]
+    pub(crate) since: String,
+    /// Until: same forms; default now.
+    #[arg(long)]
+    pub(crate) until: Option<String>,
+    /// Only `state`, `alarm` or `command` rows.
+    #[arg(long)]
+    pub(crate) kind: Option<String>,
+    /// At most this many rows (the newest).
+    #[arg(long, default_value_t = 1000)]
+    pub(crate) limit: usize,
+    /// The rows as the agent sends them (JSON array).
+    #[arg(long)]
+    pub(crate) json: bool,
+    #[command(flatten)]
+    pub(crate) zenoh: ZenohArgs,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct CommandArgs {
+    /// The cell.
+    #[arg(long)]
+    pub(crate) cell: String,
+    /// The alarm id.
+    #[arg(long)]
+    pub(crate) alarm: String,
+    /// Who you are.
+    #[arg(long)]
+    pub(crate) operator: String,
+    /// Secrets file with your key ([operators] NAME = "<hex>"); or set
+    /// CELLWATCH_OPERATOR_KEY to the hex key.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) key_file: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) zenoh: ZenohArgs,
 }
 
 /// Where the program comes from and how to read it.
@@ -110,7 +259,6 @@ pub(crate) enum Failure {
     /// The user's input is wrong: exit status 2.
     Input(String),
     /// Something failed while running: exit status 1.
-    #[allow(dead_code)]
     Runtime(String),
 }
 
@@ -118,6 +266,47 @@ impl<E: std::error::Error> From<E> for Failure {
     fn from(e: E) -> Self {
         Failure::Input(e.to_string())
     }
+}
+
+/// Runs a command that needs the tokio runtime.
+fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
+    let quiet = matches!(
+        command,
+        Command::Demo(_)
+            | Command::Alarms(_)
+            | Command::History(_)
+            | Command::Ack(_)
+            | Command::Reset(_)
+    );
+    let filter = std::env::var("RUST_LOG").unwrap_or_else(|_| {
+        if quiet {
+            "error".into()
+        } else {
+            "warn,cellwatch=info".into()
+        }
+    });
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::new(filter))
+        .with_writer(std::io::stderr)
+        .try_init();
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| Failure::Runtime(format!("cannot start the runtime: {e}")))?;
+    runtime.block_on(async {
+        match command {
+            Command::Run(args) => commands::agent::run(&args).await,
+            Command::Demo(args) => commands::agent::demo(&args, out).await,
+            Command::Simulate(SimulateCommand::Cnc(args)) => {
+                commands::simulate::cnc(&args, out).await
+            }
+            Command::Alarms(args) => commands::subscribers::alarms(&args, out).await,
+            Command::History(args) => commands::subscribers::history(&args, out).await,
+            Command::Ack(args) => commands::subscribers::command("ack", &args, out).await,
+            Command::Reset(args) => commands::subscribers::command("reset", &args, out).await,
+            Command::Sf(_) | Command::Explain(_) | Command::Validate(_) => Ok(()),
+        }
+    })
 }
 
 /// Runs the command line `args` (program name first), writing output to
@@ -143,6 +332,8 @@ pub fn run(
     let result = match cli.command {
         Command::Sf(args) => commands::sf::run(&args, out, err),
         Command::Explain(args) => commands::explain::run(&args, out, err),
+        Command::Validate(args) => commands::agent::validate(&args, out),
+        other => asynchronous(other, out),
     };
     match result {
         Ok(()) => 0,

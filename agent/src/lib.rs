@@ -17,11 +17,15 @@
 //! - [`sim`]: simulated cells served over OPC UA.
 //! - [`clock`]: wall-clock time in the models' unit.
 
+pub mod cell;
 pub mod cli;
 pub mod clock;
 mod commands;
 pub mod config;
 mod inputs;
+pub mod metrics;
+pub mod operator;
+pub mod payload;
 pub mod sim;
 pub mod sinks;
 pub mod sources;

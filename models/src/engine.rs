@@ -55,7 +55,7 @@ pub struct Finding {
 /// The engine tells it about every change of a signal it reads, with the
 /// value before; `None` means the value is unknown and every check reading it
 /// must hold its verdict.
-pub trait CheckSet: Send {
+pub trait CheckSet: Send + Sync {
     /// The signals it reads.
     fn inputs(&self) -> Vec<Signal>;
 
@@ -92,13 +92,23 @@ pub struct SwitchingCheck {
     pub fault_type: String,
     /// Comments for the culprits.
     pub comments: CommentDb,
+    /// The check is armed only while this holds (CSD: cycle start pressed);
+    /// `None`: always armed.
+    pub armed_when: Option<SwitchingFunction>,
 }
 
 /// Switching-function checks compiled over one bitset.
+///
+/// Entry `c` of the compiled cell is check `c`'s switching function; entry
+/// `n + k` is the arming condition of the `k`-th check that has one.
 pub struct SwitchingChecks {
     checks: Vec<SwitchingCheck>,
     cell: CompiledCell,
+    /// Per check: the compiled entry of its arming condition.
+    arm_entry: Vec<Option<usize>>,
     known: Vec<bool>,
+    /// Per signal: the checks that read it (function or arming condition).
+    readers: Vec<Vec<usize>>,
     /// Per check: how many of its inputs are unknown.
     unknown_inputs: Vec<u32>,
     /// Per check: the verdict last reported.
@@ -110,20 +120,46 @@ impl SwitchingChecks {
     /// Compiles the checks. Every signal starts unknown, so every check
     /// starts suspended.
     pub fn new(checks: Vec<SwitchingCheck>) -> Self {
-        let sfs: Vec<SwitchingFunction> = checks.iter().map(|c| c.sf.clone()).collect();
+        let mut sfs: Vec<SwitchingFunction> = checks.iter().map(|c| c.sf.clone()).collect();
+        let mut arm_entry = Vec::with_capacity(checks.len());
+        for c in &checks {
+            arm_entry.push(c.armed_when.as_ref().map(|a| {
+                sfs.push(a.clone());
+                sfs.len() - 1
+            }));
+        }
+        let owner: Vec<usize> = (0..checks.len())
+            .chain(
+                arm_entry
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(c, e)| e.map(|_| c)),
+            )
+            .collect();
         let cell = CompiledCell::new(&sfs);
         let n = cell.signals().len();
+        let mut readers = vec![Vec::new(); n];
         let mut unknown_inputs = vec![0u32; checks.len()];
-        for s in 0..n as u32 {
-            for &c in cell.readers(s) {
-                unknown_inputs[c as usize] += 1;
+        for (s, r) in readers.iter_mut().enumerate() {
+            let mut owners: Vec<usize> = cell
+                .readers(s as u32)
+                .iter()
+                .map(|&e| owner[e as usize])
+                .collect();
+            owners.sort_unstable();
+            owners.dedup();
+            for &c in &owners {
+                unknown_inputs[c] += 1;
             }
+            *r = owners;
         }
         SwitchingChecks {
             reported: vec![false; checks.len()],
             checks,
             cell,
+            arm_entry,
             known: vec![false; n],
+            readers,
             unknown_inputs,
             changed: Vec::new(),
         }
@@ -160,76 +196,80 @@ impl CheckSet for SwitchingChecks {
         let Some(v) = value else {
             if self.known[si] {
                 self.known[si] = false;
-                for &c in self.cell.readers(s) {
-                    self.unknown_inputs[c as usize] += 1;
+                for &c in &self.readers[si] {
+                    self.unknown_inputs[c] += 1;
                 }
             }
             return;
         };
         if !self.known[si] {
             self.known[si] = true;
-            for &c in self.cell.readers(s) {
-                self.unknown_inputs[c as usize] -= 1;
+            for &c in &self.readers[si] {
+                self.unknown_inputs[c] -= 1;
             }
         }
-        self.changed.clear();
         let mut changed = std::mem::take(&mut self.changed);
+        changed.clear();
         self.cell.set(s, v, &mut changed);
         self.changed = changed;
-        let readers: Vec<u32> = self.cell.readers(s).to_vec();
-        for c in readers {
-            let c = c as usize;
+        for k in 0..self.readers[si].len() {
+            let c = self.readers[si][k];
             if self.unknown_inputs[c] > 0 {
                 continue;
             }
             let check = &self.checks[c];
-            let fault = self.cell.output(c) == check.polarity.fault_value();
+            let armed = self.arm_entry[c].is_none_or(|e| self.cell.output(e));
+            let fault = armed && self.cell.output(c) == check.polarity.fault_value();
             if fault == self.reported[c] {
                 continue;
             }
             self.reported[c] = fault;
-            let mut finding = Finding {
-                id: check.id.clone(),
-                kind: AlarmKind::Switching,
-                severity: check.severity,
-                fault_type: check.fault_type.clone(),
-                latched: false,
-                active: fault,
-                fault_step: None,
-                culprits: Vec::new(),
-                message: String::new(),
-            };
-            if fault {
-                let cell = &self.cell;
-                let now_values = |x: &Signal| cell.signal_index(x).map(|i| cell.value(i));
-                let before_values = |x: &Signal| {
-                    if x == signal {
-                        before
-                    } else {
-                        cell.signal_index(x).map(|i| cell.value(i))
-                    }
-                };
-                if let Ok(e) = explain(
-                    &check.sf,
-                    now_values,
-                    Some(&before_values),
-                    check.polarity,
-                    &check.comments,
-                ) {
-                    finding.fault_step = e.fault_step;
-                    finding.culprits = e.culprits;
-                }
-                finding.message = match (finding.fault_step, finding.culprits.first()) {
-                    (Some(step), Some(c)) => format!("{} at step {step}: {c}", check.fault_type),
-                    (None, Some(c)) => format!("{}: {c}", check.fault_type),
-                    _ => check.fault_type.clone(),
-                };
-            } else {
-                finding.message = format!("{} cleared", check.fault_type);
-            }
-            out.push(finding);
+            out.push(finding(check, fault, &self.cell, signal, before));
         }
     }
+}
+
+/// The finding of `check` going to `fault`, explained from the values in
+/// `cell` (and `before` for the signal that just changed).
+fn finding(
+    check: &SwitchingCheck,
+    fault: bool,
+    cell: &CompiledCell,
+    changed: &Signal,
+    before: Option<bool>,
+) -> Finding {
+    let mut finding = Finding {
+        id: check.id.clone(),
+        kind: AlarmKind::Switching,
+        severity: check.severity,
+        fault_type: check.fault_type.clone(),
+        latched: false,
+        active: fault,
+        fault_step: None,
+        culprits: Vec::new(),
+        message: format!("{} cleared", check.fault_type),
+    };
+    if !fault {
+        return finding;
+    }
+    let now_values = |x: &Signal| cell.signal_index(x).map(|i| cell.value(i));
+    let before_values = |x: &Signal| if x == changed { before } else { now_values(x) };
+    if let Ok(e) = explain(
+        &check.sf,
+        now_values,
+        Some(&before_values),
+        check.polarity,
+        &check.comments,
+    ) {
+        finding.fault_step = e.fault_step;
+        finding.culprits = e.culprits;
+    }
+    finding.message = match (finding.fault_step, finding.culprits.first()) {
+        (Some(step), Some(c)) => format!("{} at step {step}: {c}", check.fault_type),
+        (None, Some(c)) => format!("{}: {c}", check.fault_type),
+        _ => check.fault_type.clone(),
+    };
+    finding
 }
 
 /// A PLC tag as the engine knows it.
@@ -391,7 +431,8 @@ pub struct CellEngine {
     /// Per alarm: whether its condition holds now (a latched alarm can be
     /// active with its condition gone).
     conditions: HashMap<String, bool>,
-    connected: bool,
+    /// `None` until the source first says.
+    connected: Option<bool>,
     rules: StateRules,
     state: MachineState,
     last_fault: Option<FaultValues>,
@@ -449,7 +490,7 @@ impl CellEngine {
             readers,
             alarms: BTreeMap::new(),
             conditions: HashMap::new(),
-            connected: false,
+            connected: None,
             rules,
             state: MachineState::Offline,
             last_fault: None,
@@ -494,7 +535,7 @@ impl CellEngine {
 
     /// Whether the PLC connection is up.
     pub fn connected(&self) -> bool {
-        self.connected
+        self.connected == Some(true)
     }
 
     /// The values at the last switching or timer fault.
@@ -510,10 +551,10 @@ impl CellEngine {
     /// The connection to the PLC came up or went down.
     pub fn on_connection(&mut self, up: bool, now: u64) -> Vec<EngineEvent> {
         let mut events = Vec::new();
-        if up == self.connected {
+        if Some(up) == self.connected {
             return events;
         }
-        self.connected = up;
+        self.connected = Some(up);
         let finding = Finding {
             id: "communication".into(),
             kind: AlarmKind::Communication,
@@ -768,7 +809,7 @@ impl CellEngine {
             .filter(|a| a.active && matches!(a.kind, AlarmKind::Switching | AlarmKind::Timer))
             .filter(|a| a.severity >= self.rules.fault_severity)
             .max_by_key(|a| a.raised_at);
-        let next = if !self.connected {
+        let next = if !self.connected() {
             MachineState::Offline
         } else if let Some(a) = fault {
             MachineState::Fault {
@@ -854,6 +895,7 @@ mod tests {
             severity: Severity::Critical,
             fault_type: "ESE".into(),
             comments: CommentDb::default(),
+            armed_when: None,
         };
         let rules = StateRules {
             running: Some(Expr::parse("G0.00 * F0.00").unwrap()),
@@ -985,6 +1027,17 @@ mod tests {
     }
 
     #[test]
+    fn unreachable_from_the_start_is_one_alarm() {
+        let mut e = engine();
+        let ev = e.on_connection(false, 1);
+        assert_eq!(
+            alarm_transitions(&ev),
+            [("communication".to_string(), Transition::Raised)]
+        );
+        assert!(e.on_connection(false, 2).is_empty());
+    }
+
+    #[test]
     fn bad_quality_suspends_and_is_reported() {
         let mut e = engine();
         e.on_connection(true, 1);
@@ -1015,6 +1068,96 @@ mod tests {
         assert!(
             t.contains(&("tag-quality".to_string(), Transition::Cleared)),
             "{t:?}"
+        );
+    }
+}
+
+#[cfg(test)]
+mod armed {
+    use super::*;
+    use crate::program::Program;
+    use crate::signal::Observability;
+
+    #[test]
+    fn csd_faults_only_while_cycle_start_is_pressed() {
+        let p = Program::compile("csd.il", include_str!("../../config/cnc/csd.il"), None).unwrap();
+        let sf = SwitchingFunction::expand(
+            &p,
+            &Signal::new("G9.00"),
+            &Observability::default_for(p.dialect()),
+        )
+        .unwrap();
+        let tags: Vec<Tag> = sf
+            .leaves()
+            .into_iter()
+            .map(|s| Tag {
+                name: s.name().into(),
+                address: s,
+            })
+            .collect();
+        let check = SwitchingCheck {
+            id: "csd".into(),
+            sf,
+            polarity: Polarity::On,
+            severity: Severity::High,
+            fault_type: "CSD".into(),
+            comments: CommentDb::default(),
+            armed_when: Some(SwitchingFunction::from_expr(
+                Signal::new("armed"),
+                &Expr::parse("X200.01").unwrap(),
+            )),
+        };
+        let mut e = CellEngine::new(
+            "m",
+            tags,
+            vec![Box::new(SwitchingChecks::new(vec![check]))],
+            StateRules::default(),
+        )
+        .unwrap();
+        e.on_connection(true, 0);
+        let mut raised = Vec::new();
+        for line in include_str!("../../config/cnc/csd-normal.values")
+            .lines()
+            .filter(|l| l.contains(',') && !l.starts_with("address") && !l.starts_with('#'))
+        {
+            let (a, v) = line.split_once(',').unwrap();
+            let t = e.tag_index(&Signal::new(a)).unwrap();
+            raised.extend(e.on_reading(t, Reading::Good(v == "1"), 1, 1));
+        }
+        // Cycle start released: the paper's SF is true (-X200.01) but nothing is wrong.
+        assert!(
+            !raised
+                .iter()
+                .any(|ev| matches!(ev, EngineEvent::Alarm { .. })),
+            "{raised:?}"
+        );
+        let set = |e: &mut CellEngine, a: &str, v: bool, t: u64| {
+            let i = e.tag_index(&Signal::new(a)).unwrap();
+            e.on_reading(i, Reading::Good(v), t, t)
+        };
+        set(&mut e, "X201.02", false, 2);
+        set(&mut e, "X201.06", true, 3);
+        let ev = set(&mut e, "X200.01", true, 4);
+        let EngineEvent::Alarm {
+            alarm,
+            transition: Transition::Raised,
+            ..
+        } = &ev[0]
+        else {
+            panic!("{ev:?}")
+        };
+        assert_eq!(alarm.fault_step, Some(3));
+        assert_eq!(alarm.culprits[0].address.name(), "X200.01");
+        let ev = set(&mut e, "X200.01", false, 5);
+        assert!(
+            matches!(
+                &ev[0],
+                EngineEvent::Alarm {
+                    transition: Transition::Cleared,
+                    ..
+                }
+            ),
+            "{ev:?}"
         );
     }
 }

@@ -152,6 +152,36 @@ impl SwitchingFunction {
         })
     }
 
+    /// A switching function for a plain expression (a condition written in
+    /// a configuration, say), with one block per AND/OR node.
+    pub fn from_expr(coil: Signal, expr: &Expr) -> SwitchingFunction {
+        fn build(e: &Expr, arena: &mut Vec<Block>) -> Term {
+            match e {
+                Expr::Const(v) => Term::Const(*v),
+                Expr::Lit(s, n) => Term::signal(s.clone(), *n),
+                Expr::Not(inner) => build(inner, arena).negate(),
+                Expr::And(es) | Expr::Or(es) if es.len() == 1 => build(&es[0], arena),
+                Expr::And(es) | Expr::Or(es) => {
+                    let op = if matches!(e, Expr::And(_)) {
+                        Op::And
+                    } else {
+                        Op::Or
+                    };
+                    let terms = es.iter().map(|c| build(c, arena)).collect();
+                    arena.push(Block { op, terms });
+                    Term::Block {
+                        id: arena.len() - 1,
+                        negated: false,
+                    }
+                }
+            }
+        }
+        let mut arena = Vec::new();
+        let root = build(expr, &mut arena);
+        let (root, steps) = number_bottom_up(root, arena);
+        SwitchingFunction { coil, root, steps }
+    }
+
     /// The distinct signals it reads, in order of first appearance from
     /// step 1 up.
     pub fn leaves(&self) -> Vec<Signal> {

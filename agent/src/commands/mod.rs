@@ -1,5 +1,8 @@
 //! One module per command; each takes its parsed arguments and the output
 //! streams, and returns [`crate::cli::Failure`] on error.
 
+pub(crate) mod agent;
 pub(crate) mod explain;
 pub(crate) mod sf;
+pub(crate) mod simulate;
+pub(crate) mod subscribers;

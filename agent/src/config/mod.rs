@@ -789,7 +789,18 @@ impl Validator<'_> {
                 }
             }
         };
+        let armed_when = match &c.armed_when {
+            None => None,
+            Some(a) => {
+                let expr = self.expression(a, &format!("{key}.armed_when"), tags)?;
+                Some(SwitchingFunction::from_expr(
+                    Signal::new(&format!("{}.armed", c.id.get_ref())),
+                    &expr,
+                ))
+            }
+        };
         Some(SwitchingCheck {
+            armed_when,
             id: c.id.into_inner(),
             fault_type: c.fault_type.unwrap_or_else(|| coil.to_string()),
             sf,
@@ -797,6 +808,41 @@ impl Validator<'_> {
             severity,
             comments,
         })
+    }
+
+    /// A condition over tag addresses in the paper's notation, every
+    /// address a tag's.
+    fn expression(
+        &mut self,
+        text: &Spanned<String>,
+        key: &str,
+        tags: &HashMap<Signal, usize>,
+    ) -> Option<Expr> {
+        match Expr::parse(text.get_ref()) {
+            Ok(e) => {
+                let e = canonical_expr(e);
+                let missing: Vec<String> = e
+                    .signals()
+                    .into_iter()
+                    .filter(|s| !tags.contains_key(s))
+                    .map(|s| s.to_string())
+                    .collect();
+                if missing.is_empty() {
+                    Some(e)
+                } else {
+                    self.problem(
+                        text.span(),
+                        key,
+                        format!("no tag has the address {}", missing.join(", ")),
+                    );
+                    None
+                }
+            }
+            Err(m) => {
+                self.problem(text.span(), key, format!("'{}': {m}", text.get_ref()));
+                None
+            }
+        }
     }
 
     fn state(&mut self, raw: &raw::RawState, tags: &HashMap<Signal, usize>) -> StateRules {
@@ -808,32 +854,7 @@ impl Validator<'_> {
         let running = raw
             .running
             .as_ref()
-            .and_then(|r| match Expr::parse(r.get_ref()) {
-                Ok(e) => {
-                    let missing: Vec<String> = e
-                        .signals()
-                        .into_iter()
-                        .filter_map(|s| match tag_address(s.name()) {
-                            Ok(a) if tags.contains_key(&a) => None,
-                            _ => Some(s.to_string()),
-                        })
-                        .collect();
-                    if missing.is_empty() {
-                        Some(canonical_expr(e))
-                    } else {
-                        self.problem(
-                            r.span(),
-                            "state.running",
-                            format!("no tag has the address {}", missing.join(", ")),
-                        );
-                        None
-                    }
-                }
-                Err(m) => {
-                    self.problem(r.span(), "state.running", format!("'{}': {m}", r.get_ref()));
-                    None
-                }
-            });
+            .and_then(|r| self.expression(r, "state.running", tags));
         StateRules {
             running,
             fault_severity,

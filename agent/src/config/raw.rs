@@ -88,6 +88,7 @@ pub(crate) struct RawSwitching {
     pub(crate) fault_type: Option<String>,
     pub(crate) comments: Option<Spanned<String>>,
     pub(crate) observable: Option<Spanned<String>>,
+    pub(crate) armed_when: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Default, Deserialize)]

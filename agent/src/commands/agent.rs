@@ -1,0 +1,261 @@
+//! `cellwatch run`, `validate` and `demo`: the agent itself.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use tokio::sync::mpsc;
+
+use crate::cell::{self, Notice};
+use crate::cli::{DemoArgs, Failure, RunArgs, ValidateArgs};
+use crate::config::{self, CellConfig};
+use crate::sim::cnc::{Scenario, SimOptions, SimulatedCnc};
+use crate::sources::{opcua, pki};
+
+fn load(path: &Path) -> Result<CellConfig, Failure> {
+    config::load(path).map_err(|e| Failure::Input(e.to_string()))
+}
+
+/// `cellwatch validate CONFIG`.
+pub(crate) fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    let c = load(&args.config)?;
+    let io = |e: std::io::Error| Failure::Runtime(e.to_string());
+    writeln!(
+        out,
+        "{}: cell {}, {} tags, {} switching-function checks, OPC UA {} ({} {:?}), Zenoh {} {}",
+        args.config.display(),
+        c.cell,
+        c.tags.len(),
+        c.switching.len(),
+        c.opcua.endpoint,
+        c.opcua.policy.as_str(),
+        c.opcua.mode,
+        c.zenoh.mode.as_str(),
+        c.zenoh.prefix
+    )
+    .map_err(io)?;
+    for w in &c.warnings {
+        writeln!(out, "warning: {w}").map_err(io)?;
+    }
+    writeln!(out, "ok").map_err(io)
+}
+
+/// `cellwatch run CONFIG`: runs until interrupted.
+pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
+    let c = load(&args.config)?;
+    let cell = c.cell.clone();
+    let mut agent = cell::start(c, None).await.map_err(Failure::Runtime)?;
+    tracing::info!(cell, metrics = ?agent.metrics_addr(), "agent running");
+    tokio::select! {
+        _ = tokio::signal::ctrl_c() => {}
+        _ = agent.wait() => return Err(Failure::Runtime("the agent stopped".into())),
+    }
+    agent.stop().await;
+    Ok(())
+}
+
+/// Writes an operator secrets file with one random key, readable by the
+/// owner only, unless it exists.
+fn demo_secrets(path: &Path) -> Result<(), Failure> {
+    if path.exists() {
+        return Ok(());
+    }
+    let key = hex::encode(rand::random::<[u8; 32]>());
+    std::fs::write(
+        path,
+        format!(
+            "# Operator keys for signed commands (HMAC-SHA256).\n[operators]\ndemo = \"{key}\"\n"
+        ),
+    )
+    .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", path.display())))?;
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let _ = std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o600));
+    }
+    Ok(())
+}
+
+/// The simulated cell's listen address, taken from the config's endpoint.
+fn endpoint_addr(endpoint: &str) -> Result<std::net::SocketAddr, Failure> {
+    let hostport = endpoint
+        .trim_start_matches("opc.tcp://")
+        .split('/')
+        .next()
+        .unwrap_or_default();
+    hostport.parse().map_err(|_| {
+        Failure::Input(format!(
+            "opcua.endpoint '{endpoint}': the demo needs an IP:port endpoint on this machine"
+        ))
+    })
+}
+
+/// `cellwatch demo`: a simulated CNC served over OPC UA and an agent
+/// watching it, in one process; alarms printed as they happen.
+pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    let mut c = load(&args.config)?;
+    let state: PathBuf = args.state_dir.clone();
+    std::fs::create_dir_all(&state)
+        .map_err(|e| Failure::Runtime(format!("cannot create {}: {e}", state.display())))?;
+    let sim_pki = state.join("sim-pki");
+    c.opcua.pki_dir = state.join("agent-pki");
+    c.journal.path = state.join(format!("{}.sqlite", c.cell));
+    let secrets = state.join("operators.toml");
+    demo_secrets(&secrets)?;
+    c.secrets_file = Some(secrets.clone());
+    c.warnings
+        .retain(|w| !w.starts_with("no commands.secrets_file"));
+    let listen = endpoint_addr(&c.opcua.endpoint)?;
+    let sim = SimulatedCnc::start(&SimOptions {
+        listen,
+        pki_dir: sim_pki.clone(),
+        insecure: false,
+    })
+    .await
+    .map_err(Failure::Runtime)?;
+    // Mutual trust between the simulated PLC and the agent, certificate by
+    // certificate, as on a real cell.
+    drop(opcua::client(&c.cell, &c.opcua).map_err(|e| Failure::Runtime(e.to_string()))?);
+    pki::trust(&pki::own_cert(&c.opcua.pki_dir), &sim_pki).map_err(Failure::Runtime)?;
+    pki::trust(&pki::own_cert(&sim_pki), &c.opcua.pki_dir).map_err(Failure::Runtime)?;
+    let io = |e: std::io::Error| Failure::Runtime(e.to_string());
+    writeln!(
+        out,
+        "cellwatch demo: cell {} — paper 000's engraving machine (ESE, CSD)",
+        c.cell
+    )
+    .map_err(io)?;
+    writeln!(
+        out,
+        "  simulated PLC   {} (Basic256Sha256, SignAndEncrypt, mutual certificate trust)",
+        sim.endpoint()
+    )
+    .map_err(io)?;
+    writeln!(
+        out,
+        "  Zenoh           {}/alarms/**, {}/state, {}/history, {}/snapshot (listening on {})",
+        c.zenoh.prefix,
+        c.zenoh.prefix,
+        c.zenoh.prefix,
+        c.zenoh.prefix,
+        c.zenoh.listen.join(", ")
+    )
+    .map_err(io)?;
+    if let Some(m) = c.metrics {
+        writeln!(out, "  metrics         http://{m}/metrics").map_err(io)?;
+    }
+    writeln!(out, "  journal         {}", c.journal.path.display()).map_err(io)?;
+    writeln!(
+        out,
+        "  operator keys   {} (operator \"demo\")",
+        secrets.display()
+    )
+    .map_err(io)?;
+    writeln!(out, "  faults injected every 24 s: Y over-travel limit switch (ESE), cycle start in JOG mode (CSD)\n").map_err(io)?;
+    out.flush().map_err(io)?;
+
+    let (tx, mut rx) = mpsc::unbounded_channel();
+    let agent = cell::start(c, Some(tx.clone()))
+        .await
+        .map_err(Failure::Runtime)?;
+    let scenario_sim = sim.clone();
+    let (note_tx, mut note_rx) = mpsc::unbounded_channel::<String>();
+    let player = tokio::spawn(async move {
+        Scenario::demo()
+            .play(&scenario_sim, |s| {
+                let _ = note_tx.send(format!(
+                    "{} ({} = {})",
+                    s.note,
+                    s.address,
+                    u8::from(s.value)
+                ));
+            })
+            .await;
+    });
+    let deadline = async {
+        match args.duration {
+            Some(d) => tokio::time::sleep(d).await,
+            None => std::future::pending().await,
+        }
+    };
+    tokio::pin!(deadline);
+    let mut last_state = String::new();
+    loop {
+        tokio::select! {
+            _ = &mut deadline => break,
+            _ = tokio::signal::ctrl_c() => break,
+            Some(note) = note_rx.recv() => writeln!(out, "{}  plc    {note}", clock()).map_err(io)?,
+            Some(n) = rx.recv() => print_notice(out, &n, &mut last_state).map_err(io)?,
+        }
+        out.flush().map_err(io)?;
+    }
+    player.abort();
+    agent.stop().await;
+    sim.stop();
+    Ok(())
+}
+
+fn clock() -> String {
+    let t = crate::clock::rfc3339(crate::clock::now_ms());
+    t.get(11..23).unwrap_or(&t).to_string()
+}
+
+fn print_notice(out: &mut dyn Write, n: &Notice, last_state: &mut String) -> std::io::Result<()> {
+    match n {
+        Notice::Connection(true, ep) => writeln!(out, "{}  opcua  connected to {ep}", clock()),
+        Notice::Connection(false, why) => writeln!(out, "{}  opcua  {why}", clock()),
+        Notice::State(s) => {
+            let text = match (&s.fault_type, &s.element) {
+                (Some(t), Some(e)) => format!("{} ({t}, element {e})", s.state),
+                (Some(t), None) => format!("{} ({t})", s.state),
+                _ => s.state.clone(),
+            };
+            if *last_state != text {
+                *last_state = text.clone();
+                writeln!(out, "{}  state  {text}", clock())?;
+            }
+            Ok(())
+        }
+        Notice::Alarm(a) => match a.transition.as_str() {
+            "raised" => {
+                let step = a
+                    .fault_step
+                    .map(|s| format!(" at step {s}"))
+                    .unwrap_or_default();
+                writeln!(
+                    out,
+                    "{}  ALARM  {} [{}] {}{step}",
+                    clock(),
+                    a.id,
+                    a.severity,
+                    a.fault_type
+                )?;
+                if a.culprits.is_empty() {
+                    writeln!(out, "                      {}", a.message)?;
+                }
+                for c in &a.culprits {
+                    let comment = c
+                        .comment
+                        .as_deref()
+                        .map(|c| format!(": {c}"))
+                        .unwrap_or_default();
+                    let trigger = if c.trigger { "   <- trigger" } else { "" };
+                    writeln!(
+                        out,
+                        "                      {} = {} (expected {}){comment}{trigger}",
+                        c.address,
+                        u8::from(c.value),
+                        u8::from(c.expected)
+                    )?;
+                }
+                Ok(())
+            }
+            other => writeln!(out, "{}  alarm  {} {other} ({})", clock(), a.id, a.state),
+        },
+    }
+}
+
+/// Used by `simulate cnc`: seconds as a duration.
+pub(crate) fn parse_duration(s: &str) -> Result<Duration, String> {
+    humantime::parse_duration(s).map_err(|e| format!("'{s}' is not a duration ({e})"))
+}

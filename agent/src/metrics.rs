@@ -1,0 +1,327 @@
+//! Prometheus metrics and the `/metrics` endpoint.
+//!
+//! Names follow Prometheus conventions (`_total` counters, base units,
+//! `cellwatch_` prefix). Labels are bounded: cell, check id, alarm kind,
+//! severity, machine state, command action and result; never a value or a
+//! timestamp. Federation across hundreds of cells is Prometheus's own job:
+//! every series carries `cell`.
+
+use std::future::Future;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+
+use axum::http::header::CONTENT_TYPE;
+use axum::routing::get;
+use axum::Router;
+use cellwatch_models::alarm::{AlarmKind, Severity};
+use cellwatch_models::engine::MachineState;
+use prometheus::{
+    Encoder, Gauge, GaugeVec, Histogram, HistogramOpts, HistogramVec, IntCounter, IntCounterVec,
+    IntGauge, IntGaugeVec, Opts, Registry, TextEncoder,
+};
+
+/// Every metric of one agent, bound to its cell.
+#[derive(Clone)]
+pub struct Metrics {
+    registry: Registry,
+    /// 1 while the OPC UA session is up.
+    pub opcua_connected: IntGauge,
+    /// Connections lost and re-established.
+    pub opcua_reconnects: IntCounter,
+    /// Tag values received.
+    pub tag_updates: IntCounter,
+    /// Deliveries ignored as duplicates.
+    pub duplicate_updates: IntCounter,
+    /// Tags whose value is unknown now.
+    pub tags_unknown: IntGauge,
+    /// Changes fed to checks.
+    pub check_evaluations: IntCounter,
+    active: IntGaugeVec,
+    raised: IntCounterVec,
+    state: IntGaugeVec,
+    state_seconds: prometheus::CounterVec,
+    /// Journal batch commit time.
+    pub journal_write_seconds: Histogram,
+    /// Rows committed to the journal.
+    pub journal_rows: IntCounter,
+    /// Journal batches that failed.
+    pub journal_errors: IntCounter,
+    /// Zenoh puts and replies that failed.
+    pub zenoh_publish_errors: IntCounter,
+    commands: IntCounterVec,
+    /// Seconds since the last tag update.
+    pub last_update_age: Gauge,
+    /// Transition durations, by timer check (filled by transition-timer checks).
+    pub transition_seconds: HistogramVec,
+    /// Learned transition windows, by timer check and bound.
+    pub transition_window_seconds: GaugeVec,
+}
+
+fn opts(name: &str, help: &str, cell: &str) -> Opts {
+    Opts::new(name, help).const_label("cell", cell)
+}
+
+impl Metrics {
+    /// Registers every metric for `cell`.
+    ///
+    /// # Panics
+    /// Never with the fixed names here (registration only fails on
+    /// duplicates or invalid names).
+    pub fn new(cell: &str) -> Metrics {
+        let registry = Registry::new();
+        macro_rules! reg {
+            ($m:expr) => {{
+                let m = $m.expect("valid metric");
+                registry
+                    .register(Box::new(m.clone()))
+                    .expect("unique metric");
+                m
+            }};
+        }
+        let info = reg!(IntGaugeVec::new(
+            opts(
+                "cellwatch_agent_info",
+                "Always 1; labels say which agent version runs the cell.",
+                cell
+            ),
+            &["version"]
+        ));
+        info.with_label_values(&[env!("CARGO_PKG_VERSION")]).set(1);
+        let active = reg!(IntGaugeVec::new(
+            opts(
+                "cellwatch_alarms_active",
+                "Alarms whose condition holds (or latched), by kind and severity.",
+                cell
+            ),
+            &["kind", "severity"]
+        ));
+        for k in AlarmKind::ALL {
+            for s in Severity::ALL {
+                active.with_label_values(&[k.as_str(), s.as_str()]).set(0);
+            }
+        }
+        let state = reg!(IntGaugeVec::new(
+            opts(
+                "cellwatch_machine_state",
+                "1 for the machine's current state, 0 for the others.",
+                cell
+            ),
+            &["state"]
+        ));
+        let state_seconds = reg!(prometheus::CounterVec::new(
+            opts(
+                "cellwatch_machine_state_seconds_total",
+                "Seconds spent in each machine state.",
+                cell
+            ),
+            &["state"]
+        ));
+        for s in MachineState::NAMES {
+            state.with_label_values(&[s]).set(0);
+            state_seconds.with_label_values(&[s]).inc_by(0.0);
+        }
+        let raised = reg!(IntCounterVec::new(
+            opts(
+                "cellwatch_alarms_raised_total",
+                "Alarms raised, by check, kind and severity.",
+                cell
+            ),
+            &["check", "kind", "severity"]
+        ));
+        let commands = reg!(IntCounterVec::new(
+            opts(
+                "cellwatch_commands_total",
+                "Operator commands, by action and result (accepted, refused).",
+                cell
+            ),
+            &["action", "result"]
+        ));
+        Metrics {
+            opcua_connected: reg!(IntGauge::with_opts(opts(
+                "cellwatch_opcua_connected",
+                "1 while the OPC UA session to the PLC is up.",
+                cell
+            ))),
+            opcua_reconnects: reg!(IntCounter::with_opts(opts(
+                "cellwatch_opcua_reconnects_total",
+                "OPC UA connections re-established after a loss.",
+                cell
+            ))),
+            tag_updates: reg!(IntCounter::with_opts(opts(
+                "cellwatch_tag_updates_total",
+                "Tag values received from the PLC.",
+                cell
+            ))),
+            duplicate_updates: reg!(IntCounter::with_opts(opts(
+                "cellwatch_tag_duplicate_updates_total",
+                "Tag values delivered again (after a subscription was recreated) and ignored.",
+                cell
+            ))),
+            tags_unknown: reg!(IntGauge::with_opts(opts(
+                "cellwatch_tags_unknown",
+                "Tags whose value is unknown (bad quality or no connection).",
+                cell
+            ))),
+            check_evaluations: reg!(IntCounter::with_opts(opts(
+                "cellwatch_check_evaluations_total",
+                "Signal changes fed to checks.",
+                cell
+            ))),
+            active,
+            raised,
+            state,
+            state_seconds,
+            journal_write_seconds: reg!(Histogram::with_opts(
+                HistogramOpts::new(
+                    "cellwatch_journal_write_seconds",
+                    "Time to commit one batch to the SQLite journal."
+                )
+                .const_label("cell", cell)
+                .buckets(vec![
+                    0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0
+                ])
+            )),
+            journal_rows: reg!(IntCounter::with_opts(opts(
+                "cellwatch_journal_rows_committed_total",
+                "Rows committed to the SQLite journal since start.",
+                cell
+            ))),
+            journal_errors: reg!(IntCounter::with_opts(opts(
+                "cellwatch_journal_write_errors_total",
+                "Journal batches that failed to commit.",
+                cell
+            ))),
+            zenoh_publish_errors: reg!(IntCounter::with_opts(opts(
+                "cellwatch_zenoh_publish_errors_total",
+                "Zenoh publications and replies that failed.",
+                cell
+            ))),
+            commands,
+            last_update_age: reg!(Gauge::with_opts(opts(
+                "cellwatch_tag_last_update_age_seconds",
+                "Seconds since the last tag value arrived.",
+                cell
+            ))),
+            transition_seconds: reg!(HistogramVec::new(
+                HistogramOpts::new(
+                    "cellwatch_transition_duration_seconds",
+                    "Observed transition durations of transition-timer checks."
+                )
+                .const_label("cell", cell)
+                .buckets(vec![
+                    0.5, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 15.0, 30.0
+                ]),
+                &["check"]
+            )),
+            transition_window_seconds: reg!(GaugeVec::new(
+                opts(
+                    "cellwatch_transition_window_seconds",
+                    "Learned window of each transition-timer check (bound: lo, hi).",
+                    cell
+                ),
+                &["check", "bound"]
+            )),
+            registry,
+        }
+    }
+
+    /// An alarm of `check` was raised.
+    pub fn raised(&self, check: &str, kind: AlarmKind, severity: Severity) {
+        self.raised
+            .with_label_values(&[check, kind.as_str(), severity.as_str()])
+            .inc();
+    }
+
+    /// Sets the active-alarm gauges from counts by kind and severity.
+    pub fn set_active(&self, counts: &[(AlarmKind, Severity, i64)]) {
+        for k in AlarmKind::ALL {
+            for s in Severity::ALL {
+                let n = counts
+                    .iter()
+                    .filter(|(ck, cs, _)| *ck == k && *cs == s)
+                    .map(|c| c.2)
+                    .sum();
+                self.active
+                    .with_label_values(&[k.as_str(), s.as_str()])
+                    .set(n);
+            }
+        }
+    }
+
+    /// The machine is now in `state`, having spent `seconds` in `previous`.
+    pub fn state(&self, state: &str, previous: &str, seconds: f64) {
+        for s in MachineState::NAMES {
+            self.state
+                .with_label_values(&[s])
+                .set(i64::from(s == state));
+        }
+        self.add_state_time(previous, seconds);
+    }
+
+    /// Adds time spent in the current state.
+    pub fn add_state_time(&self, state: &str, seconds: f64) {
+        if seconds > 0.0 {
+            self.state_seconds
+                .with_label_values(&[state])
+                .inc_by(seconds);
+        }
+    }
+
+    /// An operator command was `result` (`accepted`, `refused`).
+    pub fn command(&self, action: &str, result: &str) {
+        let action = if matches!(action, "ack" | "reset") {
+            action
+        } else {
+            "other"
+        };
+        self.commands.with_label_values(&[action, result]).inc();
+    }
+
+    /// The text exposition of every metric.
+    pub fn render(&self) -> String {
+        let mut buf = Vec::new();
+        let _ = TextEncoder::new().encode(&self.registry.gather(), &mut buf);
+        String::from_utf8(buf).unwrap_or_default()
+    }
+}
+
+impl crate::sinks::journal::CommitObserver for Metrics {
+    fn committed(&self, rows: usize, took: Duration) {
+        self.journal_rows.inc_by(rows as u64);
+        self.journal_write_seconds.observe(took.as_secs_f64());
+    }
+
+    fn failed(&self, _error: &str) {
+        self.journal_errors.inc();
+    }
+}
+
+/// Serves `GET /metrics` on `listener` until `shutdown` completes.
+///
+/// # Errors
+/// The server fails.
+pub async fn serve(
+    listener: tokio::net::TcpListener,
+    metrics: Arc<Metrics>,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> std::io::Result<()> {
+    let app = Router::new().route(
+        "/metrics",
+        get(move || {
+            let m = metrics.clone();
+            async move { ([(CONTENT_TYPE, "text/plain; version=0.0.4")], m.render()) }
+        }),
+    );
+    axum::serve(listener, app)
+        .with_graceful_shutdown(shutdown)
+        .await
+}
+
+/// Binds the metrics address.
+///
+/// # Errors
+/// The address is in use or not local.
+pub async fn bind(addr: SocketAddr) -> std::io::Result<tokio::net::TcpListener> {
+    tokio::net::TcpListener::bind(addr).await
+}

@@ -1,0 +1,266 @@
+//! Operator commands (acknowledge, reset) and their authorisation.
+//!
+//! A command names its operator and carries an HMAC-SHA256, keyed with that
+//! operator's secret, over a canonical text of the request (cell, action,
+//! alarm, operator, nonce, time). The agent refuses a command that is
+//! unsigned, signed with the wrong key, from an unknown operator, issued
+//! more than [`MAX_SKEW`] away from its clock, or whose nonce it has seen
+//! (a replay). Keys live in a secrets file (`[operators] name = "<hex>"`),
+//! never in the cell configuration. Every command, accepted or refused, is
+//! journaled by the caller.
+
+use std::collections::{HashMap, VecDeque};
+use std::path::Path;
+
+use hmac::{Hmac, Mac};
+use serde::{Deserialize, Serialize};
+use sha2::Sha256;
+
+/// How far a command's time may be from the agent's clock.
+pub const MAX_SKEW_MS: u64 = 60_000;
+/// Same, as a name for documentation.
+pub const MAX_SKEW: &str = "60 s";
+
+/// A signed operator command, as sent to `<prefix>/command`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Command {
+    /// `ack` or `reset`.
+    pub action: String,
+    /// The alarm id.
+    pub alarm: String,
+    /// Who sends it.
+    pub operator: String,
+    /// A value never used before (random hex).
+    pub nonce: String,
+    /// When it was issued, ms since the epoch.
+    pub issued_at: u64,
+    /// Hex HMAC-SHA256 of [`Command::canonical`] with the operator's key.
+    #[serde(default)]
+    pub signature: String,
+}
+
+impl Command {
+    /// The text that is signed.
+    pub fn canonical(&self, cell: &str) -> String {
+        format!(
+            "cellwatch-command-v1\n{cell}\n{}\n{}\n{}\n{}\n{}",
+            self.action, self.alarm, self.operator, self.nonce, self.issued_at
+        )
+    }
+
+    /// Signs the command for `cell` with `key`.
+    pub fn sign(&mut self, cell: &str, key: &[u8]) {
+        self.signature = hex::encode(mac(key, &self.canonical(cell)).finalize().into_bytes());
+    }
+}
+
+fn mac(key: &[u8], text: &str) -> Hmac<Sha256> {
+    let mut m = <Hmac<Sha256> as Mac>::new_from_slice(key).expect("HMAC takes keys of any length");
+    m.update(text.as_bytes());
+    m
+}
+
+/// Operators' keys, from the secrets file.
+#[derive(Default)]
+pub struct OperatorKeys {
+    keys: HashMap<String, Vec<u8>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SecretsFile {
+    operators: HashMap<String, String>,
+}
+
+impl OperatorKeys {
+    /// Parses a secrets file's text.
+    ///
+    /// # Errors
+    /// Malformed TOML or a key that is not hex of at least 16 bytes.
+    pub fn parse(origin: &str, text: &str) -> Result<OperatorKeys, String> {
+        let f: SecretsFile =
+            toml::from_str(text).map_err(|e| format!("{origin}: {}", e.message()))?;
+        let mut keys = HashMap::new();
+        for (name, hex_key) in f.operators {
+            let key = hex::decode(hex_key.trim())
+                .map_err(|_| format!("{origin}: operators.{name}: the key is not hex"))?;
+            if key.len() < 16 {
+                return Err(format!(
+                    "{origin}: operators.{name}: the key must be at least 16 bytes (32 hex digits)"
+                ));
+            }
+            keys.insert(name, key);
+        }
+        Ok(OperatorKeys { keys })
+    }
+
+    /// Loads the secrets file, warning when others may read it.
+    ///
+    /// # Errors
+    /// The file cannot be read or parsed.
+    pub fn load(path: &Path) -> Result<OperatorKeys, String> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            if let Ok(meta) = std::fs::metadata(path) {
+                if meta.permissions().mode() & 0o077 != 0 {
+                    tracing::warn!(path = %path.display(), "the operator secrets file is readable by others; chmod 600 it");
+                }
+            }
+        }
+        Self::parse(&path.display().to_string(), &text)
+    }
+
+    /// The key of `operator`.
+    pub fn key(&self, operator: &str) -> Option<Vec<u8>> {
+        self.keys.get(operator).cloned()
+    }
+
+    /// How many operators have keys.
+    pub fn len(&self) -> usize {
+        self.keys.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.keys.is_empty()
+    }
+}
+
+/// Checks signatures and remembers nonces.
+pub struct Gate {
+    cell: String,
+    keys: OperatorKeys,
+    /// Nonces seen within the skew window, oldest first.
+    seen: VecDeque<(u64, String)>,
+}
+
+impl Gate {
+    /// A gate for `cell` with `keys`.
+    pub fn new(cell: &str, keys: OperatorKeys) -> Gate {
+        Gate {
+            cell: cell.into(),
+            keys,
+            seen: VecDeque::new(),
+        }
+    }
+
+    /// Lets `cmd` through at `now`, or says why not.
+    ///
+    /// # Errors
+    /// Why the command is refused.
+    pub fn check(&mut self, cmd: &Command, now: u64) -> Result<(), String> {
+        while self
+            .seen
+            .front()
+            .is_some_and(|(t, _)| t + 2 * MAX_SKEW_MS < now)
+        {
+            self.seen.pop_front();
+        }
+        if !matches!(cmd.action.as_str(), "ack" | "reset") {
+            return Err(format!("unknown action '{}': use ack or reset", cmd.action));
+        }
+        if cmd.signature.is_empty() {
+            return Err("unsigned command".into());
+        }
+        let Some(key) = self.keys.keys.get(&cmd.operator) else {
+            return Err(format!("unknown operator '{}'", cmd.operator));
+        };
+        let Ok(sig) = hex::decode(&cmd.signature) else {
+            return Err("signature is not hex".into());
+        };
+        if mac(key, &cmd.canonical(&self.cell))
+            .verify_slice(&sig)
+            .is_err()
+        {
+            return Err("bad signature".into());
+        }
+        if cmd.issued_at.abs_diff(now) > MAX_SKEW_MS {
+            return Err(format!(
+                "issued {} ms away from the agent's clock (more than {MAX_SKEW})",
+                cmd.issued_at.abs_diff(now)
+            ));
+        }
+        if self.seen.iter().any(|(_, n)| *n == cmd.nonce) {
+            return Err("replayed command (nonce already used)".into());
+        }
+        self.seen.push_back((now, cmd.nonce.clone()));
+        Ok(())
+    }
+}
+
+/// A fresh random nonce.
+pub fn nonce() -> String {
+    hex::encode(rand::random::<[u8; 16]>())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const KEYS: &str = "[operators]\nkim = \"00112233445566778899aabbccddeeff\"\n";
+
+    fn cmd(now: u64) -> Command {
+        Command {
+            action: "ack".into(),
+            alarm: "ese".into(),
+            operator: "kim".into(),
+            nonce: nonce(),
+            issued_at: now,
+            signature: String::new(),
+        }
+    }
+
+    #[test]
+    fn signed_once_accepted_then_replay_refused() {
+        let mut gate = Gate::new("m01", OperatorKeys::parse("k", KEYS).unwrap());
+        let mut c = cmd(1_000_000);
+        assert_eq!(gate.check(&c, 1_000_000), Err("unsigned command".into()));
+        c.sign(
+            "m01",
+            &hex::decode("00112233445566778899aabbccddeeff").unwrap(),
+        );
+        assert_eq!(gate.check(&c, 1_000_500), Ok(()));
+        assert_eq!(
+            gate.check(&c, 1_000_600),
+            Err("replayed command (nonce already used)".into())
+        );
+        let mut wrong = cmd(1_000_000);
+        wrong.sign("m01", b"not the key of kim at all");
+        assert_eq!(gate.check(&wrong, 1_000_000), Err("bad signature".into()));
+        let mut other_cell = cmd(1_000_000);
+        other_cell.sign(
+            "m02",
+            &hex::decode("00112233445566778899aabbccddeeff").unwrap(),
+        );
+        assert_eq!(
+            gate.check(&other_cell, 1_000_000),
+            Err("bad signature".into())
+        );
+        let mut old = cmd(1_000_000);
+        old.sign(
+            "m01",
+            &hex::decode("00112233445566778899aabbccddeeff").unwrap(),
+        );
+        assert!(gate
+            .check(&old, 1_100_000)
+            .unwrap_err()
+            .starts_with("issued 100000 ms away"));
+    }
+
+    #[test]
+    fn bad_secrets_files() {
+        assert_eq!(
+            OperatorKeys::parse("k", "[operators]\nkim = \"zz\"")
+                .err()
+                .unwrap(),
+            "k: operators.kim: the key is not hex"
+        );
+        assert!(OperatorKeys::parse("k", "[operators]\nkim = \"00\"")
+            .err()
+            .unwrap()
+            .contains("at least 16 bytes"));
+    }
+}

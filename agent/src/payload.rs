@@ -1,0 +1,155 @@
+//! The JSON payloads cellwatch publishes on Zenoh and stores in its
+//! journal. Each carries a `schema` name so that subscribers can tell
+//! versions apart.
+
+use cellwatch_models::alarm::{Alarm, Transition};
+use cellwatch_models::engine::{HistoryKind, MachineState};
+use cellwatch_models::explain::Culprit;
+use serde::{Deserialize, Serialize};
+
+use crate::clock::rfc3339;
+
+/// Schema name of alarm events.
+pub const ALARM_SCHEMA: &str = "cellwatch.alarm.v1";
+/// Schema name of machine-state messages.
+pub const STATE_SCHEMA: &str = "cellwatch.state.v1";
+
+/// A culprit as published.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct CulpritPayload {
+    /// Address (`X0.06`).
+    pub address: String,
+    /// Value at the fault.
+    pub value: bool,
+    /// Value that would clear it.
+    pub expected: bool,
+    /// I/O-list comment.
+    pub comment: Option<String>,
+    /// Changed just before the fault.
+    pub trigger: bool,
+}
+
+impl From<&Culprit> for CulpritPayload {
+    fn from(c: &Culprit) -> Self {
+        CulpritPayload {
+            address: c.address.to_string(),
+            value: c.value,
+            expected: c.expected,
+            comment: c.comment.clone(),
+            trigger: c.trigger,
+        }
+    }
+}
+
+/// `<prefix>/alarms/<alarm-id>`: one alarm transition.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct AlarmPayload {
+    /// [`ALARM_SCHEMA`].
+    pub schema: String,
+    /// Cell id.
+    pub cell: String,
+    /// Stable alarm id.
+    pub id: String,
+    /// `switching`, `timer`, `tag_quality`, `communication`.
+    pub kind: String,
+    /// `low` .. `critical`.
+    pub severity: String,
+    /// ISA-18.2 state: `active_unacknowledged`, `active_acknowledged`,
+    /// `cleared_unacknowledged`, `normal`.
+    pub state: String,
+    /// What just happened: `raised`, `cleared`, `acknowledged`, `updated`.
+    pub transition: String,
+    /// When this transition happened (RFC 3339).
+    pub at: String,
+    /// When the current occurrence was raised.
+    pub raised_at: String,
+    /// When it cleared, if it has.
+    pub cleared_at: Option<String>,
+    /// Who acknowledged it.
+    pub acked_by: Option<String>,
+    /// Fault type (`ESE`).
+    pub fault_type: String,
+    /// Step block at which the fault formed.
+    pub fault_step: Option<usize>,
+    /// Contacts responsible, triggers first.
+    pub culprits: Vec<CulpritPayload>,
+    /// One line for people.
+    pub message: String,
+}
+
+impl AlarmPayload {
+    /// The payload of `alarm` after `transition` at `at` (ms).
+    pub fn new(cell: &str, alarm: &Alarm, transition: Transition, at: u64) -> Self {
+        AlarmPayload {
+            schema: ALARM_SCHEMA.into(),
+            cell: cell.into(),
+            id: alarm.id.clone(),
+            kind: alarm.kind.as_str().into(),
+            severity: alarm.severity.as_str().into(),
+            state: alarm.state().as_str().into(),
+            transition: transition_name(transition).into(),
+            at: rfc3339(at),
+            raised_at: rfc3339(alarm.raised_at),
+            cleared_at: alarm.cleared_at.map(rfc3339),
+            acked_by: alarm.acked_by.clone(),
+            fault_type: alarm.fault_type.clone(),
+            fault_step: alarm.fault_step,
+            culprits: alarm.culprits.iter().map(CulpritPayload::from).collect(),
+            message: alarm.message.clone(),
+        }
+    }
+}
+
+/// The name of a transition.
+pub fn transition_name(t: Transition) -> &'static str {
+    match t {
+        Transition::Raised => "raised",
+        Transition::Cleared => "cleared",
+        Transition::Acknowledged => "acknowledged",
+        Transition::Updated => "updated",
+    }
+}
+
+/// `<prefix>/state`: the machine state.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct StatePayload {
+    /// [`STATE_SCHEMA`].
+    pub schema: String,
+    /// Cell id.
+    pub cell: String,
+    /// `running`, `idle`, `fault`, `offline`.
+    pub state: String,
+    /// History row kind of the last change: `normal`, `fault`, `recovery`, `offline`.
+    pub kind: String,
+    /// Fault type, in `fault`.
+    pub fault_type: Option<String>,
+    /// Faulty element, in `fault` when known.
+    pub element: Option<String>,
+    /// Since when (RFC 3339).
+    pub since: String,
+    /// When this message was sent.
+    pub at: String,
+}
+
+impl StatePayload {
+    /// The payload for `state`, entered at `since` by a change of `kind`.
+    pub fn new(cell: &str, state: &MachineState, kind: HistoryKind, since: u64, at: u64) -> Self {
+        let (fault_type, element) = match state {
+            MachineState::Fault {
+                fault_type,
+                element,
+            } => (Some(fault_type.clone()), element.clone()),
+            _ => (None, None),
+        };
+        StatePayload {
+            schema: STATE_SCHEMA.into(),
+            cell: cell.into(),
+            state: state.name().into(),
+            kind: kind.as_str().into(),
+            fault_type,
+            element,
+            since: rfc3339(since),
+            at: rfc3339(at),
+        }
+    }
+}
