@@ -6,6 +6,7 @@
 
 #![allow(clippy::unwrap_used)] // test helpers fail loudly by design
 
+mod agent;
 mod bad_input;
 mod explain;
 mod opcua;

@@ -11,8 +11,8 @@
 //!   uncertain status, or a value that is not a boolean, is
 //!   [`Reading::Bad`].
 //! - Connection lost: one [`SourceEvent::Disconnected`]; async-opcua
-//!   reconnects with exponential backoff and recreates the subscription,
-//!   then [`SourceEvent::Connected`]. Values delivered again after the
+//!   reconnects with exponential backoff; on a new session the source
+//!   recreates its subscription, then [`SourceEvent::Connected`]. Values delivered again after the
 //!   re-creation are filtered by the engine (same value, same timestamp).
 
 use std::collections::HashMap;
@@ -22,7 +22,10 @@ use std::time::Duration;
 
 use cellwatch_models::engine::Reading;
 use futures_util::StreamExt;
-use opcua::client::{ClientBuilder, DataChangeCallback, IdentityToken, Session, SessionPollResult};
+use opcua::client::{
+    ClientBuilder, DataChangeCallback, IdentityToken, Session, SessionConnectMode,
+    SessionPollResult,
+};
 use opcua::crypto::SecurityPolicy as UaPolicy;
 use opcua::types::{
     DataChangeFilter, DataChangeTrigger, DataValue, ExtensionObject, MessageSecurityMode,
@@ -115,7 +118,10 @@ pub fn client(cell: &str, config: &OpcUaConfig) -> Result<opcua::client::Client,
         .max_failed_keep_alive_count(3)
         .request_timeout(Duration::from_secs(5))
         .session_timeout(30_000)
-        .recreate_subscriptions(true)
+        // The source recreates its subscription itself after a new session
+        // (see `run`); async-opcua 0.19's own re-creation leaves the new
+        // subscription without publish requests.
+        .recreate_subscriptions(false)
         .client()
         .map_err(|e| SourceError::Client(e.join("; ")))
 }
@@ -213,14 +219,13 @@ pub async fn run(
                         }
                     }
                     Some(Ok(SessionPollResult::Reconnected(mode))) => {
-                        tracing::info!(?mode, "OPC UA session reconnected");
+                        tracing::info!(?mode, "OPC UA session connected");
                         said_down = false;
-                        if subscribed {
-                            // async-opcua recreated the subscription.
-                            let _ = tx.send(SourceEvent::Connected);
-                        } else {
-                            // Subscribing needs this loop to keep polling
-                            // the session, so it runs beside it.
+                        let fresh = !subscribed || matches!(mode, SessionConnectMode::NewSession(_));
+                        if fresh {
+                            // A new session has no subscription on the server:
+                            // create it (and its items, in chunks) beside this
+                            // loop, which must keep polling the session.
                             subscribed = true;
                             let (session, config, by_node, tx) = (session.clone(), config.clone(), by_node.clone(), tx.clone());
                             tokio::spawn(async move {
@@ -228,6 +233,9 @@ pub async fn run(
                                     let _ = tx.send(SourceEvent::Connected);
                                 }
                             });
+                        } else {
+                            // The server kept the session and its subscription.
+                            let _ = tx.send(SourceEvent::Connected);
                         }
                     }
                     Some(Ok(other)) => tracing::debug!(event = ?other, "OPC UA session event"),

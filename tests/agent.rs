@@ -1,0 +1,456 @@
+//! The agent with real parts: the simulated CNC over OPC UA (Basic256Sha256,
+//! SignAndEncrypt), Zenoh on loopback, a SQLite file, an HTTP scrape.
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use cellwatch::cell::{self, Agent};
+use cellwatch::config::{self, CellConfig};
+use cellwatch::operator::Command;
+use cellwatch::payload::AlarmPayload;
+use cellwatch::sim::cnc::{SimOptions, SimulatedCnc};
+use cellwatch::sources::{opcua, pki};
+use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
+
+use crate::util::root;
+
+const KEY: &str = "00112233445566778899aabbccddeeff00112233445566778899aabbccddeeff";
+
+/// A free TCP port on loopback.
+pub(crate) fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// The demo configuration, pointed at `sim` and at fresh ports and files
+/// under `dir`.
+pub(crate) fn config(dir: &Path, sim_endpoint: &str, ns: u16, zenoh_port: u16) -> CellConfig {
+    let mut c = config::load(&root().join("config/demo.toml")).unwrap();
+    c.opcua.endpoint = sim_endpoint.to_string();
+    c.opcua.pki_dir = dir.join("agent-pki");
+    for t in &mut c.tags {
+        t.node_id = t.node_id.replace("ns=2;", &format!("ns={ns};"));
+    }
+    c.journal.path = dir.join("journal.sqlite");
+    c.zenoh.listen = vec![format!("tcp/127.0.0.1:{zenoh_port}")];
+    c.metrics = Some("127.0.0.1:0".parse().unwrap());
+    let secrets = dir.join("operators.toml");
+    std::fs::write(&secrets, format!("[operators]\nkim = \"{KEY}\"\n")).unwrap();
+    c.secrets_file = Some(secrets);
+    c
+}
+
+struct Fixture {
+    _dir: tempfile::TempDir,
+    dir: PathBuf,
+    sim: SimulatedCnc,
+    sim_addr: SocketAddr,
+    agent: Option<Agent>,
+    client: zenoh::Session,
+    config: CellConfig,
+}
+
+impl Fixture {
+    async fn start() -> Fixture {
+        let d = tempfile::tempdir().unwrap();
+        let dir = d.path().to_path_buf();
+        let sim_opts = SimOptions {
+            listen: "127.0.0.1:0".parse().unwrap(),
+            pki_dir: dir.join("sim-pki"),
+            insecure: false,
+        };
+        let sim = SimulatedCnc::start(&sim_opts).await.unwrap();
+        let zenoh_port = free_port();
+        let config = config(&dir, &sim.endpoint(), sim.namespace(), zenoh_port);
+        drop(opcua::client("test", &config.opcua).unwrap());
+        pki::trust(&pki::own_cert(&config.opcua.pki_dir), &dir.join("sim-pki")).unwrap();
+        pki::trust(&pki::own_cert(&dir.join("sim-pki")), &config.opcua.pki_dir).unwrap();
+        let agent = cell::start(config.clone(), None).await.unwrap();
+        let client = cellwatch::sinks::zenoh::open(&cellwatch::config::ZenohConfig {
+            mode: cellwatch::config::ZenohMode::Peer,
+            connect: vec![format!("tcp/127.0.0.1:{zenoh_port}")],
+            listen: vec![],
+            prefix: String::new(),
+            multicast_scouting: false,
+        })
+        .await
+        .unwrap();
+        let sim_addr = sim.addr();
+        Fixture {
+            _dir: d,
+            dir,
+            sim,
+            sim_addr,
+            agent: Some(agent),
+            client,
+            config,
+        }
+    }
+
+    fn agent(&self) -> &Agent {
+        self.agent.as_ref().unwrap()
+    }
+
+    async fn query(&self, selector: &str, payload: Option<String>) -> Result<String, String> {
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(20);
+        loop {
+            let mut get = self.client.get(selector).timeout(Duration::from_secs(3));
+            if let Some(p) = &payload {
+                get = get.payload(p.clone());
+            }
+            let replies = get.await.unwrap();
+            if let Ok(reply) = replies.recv_async().await {
+                return match reply.result() {
+                    Ok(s) => Ok(s.payload().try_to_string().unwrap().into_owned()),
+                    Err(e) => Err(e.payload().try_to_string().unwrap().into_owned()),
+                };
+            }
+            assert!(
+                tokio::time::Instant::now() < deadline,
+                "no reply to {selector}"
+            );
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
+    }
+
+    /// Waits until the agent has every tag and no alarm.
+    async fn settled(&self) {
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+        loop {
+            let snap: serde_json::Value = serde_json::from_str(
+                &self
+                    .query("cellwatch/m01ps0004/snapshot", None)
+                    .await
+                    .unwrap(),
+            )
+            .unwrap();
+            let known = snap["tags"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .all(|t| t["quality"] == "good");
+            if known && snap["connected"] == true && snap["state"] == "running" {
+                return;
+            }
+            assert!(
+                tokio::time::Instant::now() < deadline,
+                "agent never settled: {snap}"
+            );
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
+    }
+
+    async fn scrape(&self) -> String {
+        let addr = self.agent().metrics_addr().unwrap();
+        let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
+        use tokio::io::{AsyncReadExt, AsyncWriteExt};
+        s.write_all(b"GET /metrics HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n")
+            .await
+            .unwrap();
+        let mut body = String::new();
+        s.read_to_string(&mut body).await.unwrap();
+        assert!(body.starts_with("HTTP/1.1 200"), "{body}");
+        body
+    }
+}
+
+/// Receives alarm payloads until `f` accepts one.
+async fn alarm_until(
+    sub: &zenoh_ext::AdvancedSubscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+    what: &str,
+    seen: &mut Vec<AlarmPayload>,
+    f: impl Fn(&AlarmPayload) -> bool,
+) -> AlarmPayload {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    loop {
+        let sample = tokio::time::timeout_at(deadline, sub.recv_async())
+            .await
+            .unwrap_or_else(|_| panic!("timed out waiting for {what}; saw {seen:#?}"))
+            .unwrap();
+        let a: AlarmPayload =
+            serde_json::from_str(&sample.payload().try_to_string().unwrap()).unwrap();
+        seen.push(a.clone());
+        if f(&a) {
+            return a;
+        }
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn ese_alarm_with_culprit_then_cleared_and_in_history() {
+    let fx = Fixture::start().await;
+    let sub = fx
+        .client
+        .declare_subscriber("cellwatch/m01ps0004/alarms/**")
+        .history(HistoryConfig::default().detect_late_publishers())
+        .recovery(RecoveryConfig::default().heartbeat())
+        .await
+        .unwrap();
+    fx.settled().await;
+    fx.sim.set("X0.06", false).unwrap();
+    let mut seen = Vec::new();
+    let raised = alarm_until(&sub, "ESE raised", &mut seen, |a| {
+        a.id == "ese" && a.transition == "raised"
+    })
+    .await;
+    assert_eq!(raised.schema, "cellwatch.alarm.v1");
+    assert_eq!(raised.cell, "m01ps0004");
+    assert_eq!(raised.kind, "switching");
+    assert_eq!(raised.severity, "critical");
+    assert_eq!(raised.state, "active_unacknowledged");
+    assert_eq!(raised.fault_step, Some(6));
+    assert_eq!(raised.culprits.len(), 1);
+    let c = &raised.culprits[0];
+    assert_eq!(
+        (c.address.as_str(), c.value, c.expected, c.trigger),
+        ("X0.06", false, true, true)
+    );
+    assert_eq!(c.comment.as_deref(), Some("Y Over Travel Limit SW (B)"));
+    fx.sim.set("X0.06", true).unwrap();
+    let cleared = alarm_until(&sub, "ESE cleared", &mut seen, |a| {
+        a.id == "ese" && a.transition == "cleared"
+    })
+    .await;
+    assert_eq!(cleared.state, "cleared_unacknowledged");
+    assert!(cleared.cleared_at.is_some());
+    // History: the fault with its type and element, then the recovery.
+    let rows: Vec<serde_json::Value> = serde_json::from_str(
+        &fx.query("cellwatch/m01ps0004/history?since=1h;kind=state", None)
+            .await
+            .unwrap(),
+    )
+    .unwrap();
+    let kinds: Vec<(String, String, String)> = rows
+        .iter()
+        .map(|r| {
+            let f = &r["fields"];
+            (
+                f["kind"].as_str().unwrap().to_string(),
+                f["fault_type"].as_str().unwrap_or("").to_string(),
+                f["element"].as_str().unwrap_or("").to_string(),
+            )
+        })
+        .collect();
+    let fault = kinds
+        .iter()
+        .position(|k| *k == ("fault".to_string(), "ESE".to_string(), "X0.06".to_string()));
+    let recovery = kinds.iter().rposition(|k| k.0 == "recovery");
+    assert!(fault.is_some() && recovery > fault, "{kinds:?}");
+    // A bad query says why.
+    assert_eq!(
+        fx.query("cellwatch/m01ps0004/history?kind=weather", None)
+            .await
+            .unwrap_err(),
+        "unknown kind 'weather': use alarm, state or command"
+    );
+    // Metrics over HTTP: the alarm counter and the connection state.
+    let metrics = fx.scrape().await;
+    assert!(metrics.contains("cellwatch_alarms_raised_total{cell=\"m01ps0004\",check=\"ese\",kind=\"switching\",severity=\"critical\"} 1"), "{metrics}");
+    assert!(
+        metrics.contains("cellwatch_opcua_connected{cell=\"m01ps0004\"} 1"),
+        "{metrics}"
+    );
+    fx.agent.unwrap().stop().await;
+    fx.sim.stop();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn server_outage_is_one_communication_alarm_and_faults_resume() {
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+        .with_test_writer()
+        .try_init();
+    let mut fx = Fixture::start().await;
+    let sub = fx
+        .client
+        .declare_subscriber("cellwatch/m01ps0004/alarms/**")
+        .history(HistoryConfig::default().detect_late_publishers())
+        .recovery(RecoveryConfig::default().heartbeat())
+        .await
+        .unwrap();
+    fx.settled().await;
+    let mut seen = Vec::new();
+    fx.sim.stop();
+    alarm_until(&sub, "communication lost", &mut seen, |a| {
+        a.id == "communication" && a.transition == "raised"
+    })
+    .await;
+    // While the PLC is away, nothing else is raised.
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    // The same server comes back on the same address with the same certificate.
+    let opts = SimOptions {
+        listen: fx.sim_addr,
+        pki_dir: fx.dir.join("sim-pki"),
+        insecure: false,
+    };
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
+    fx.sim = loop {
+        match SimulatedCnc::start(&opts).await {
+            Ok(s) => break s,
+            Err(e) => {
+                assert!(tokio::time::Instant::now() < deadline, "{e}");
+                tokio::time::sleep(Duration::from_millis(200)).await;
+            }
+        }
+    };
+    alarm_until(&sub, "communication restored", &mut seen, |a| {
+        a.id == "communication" && a.transition == "cleared"
+    })
+    .await;
+    fx.settled().await;
+    fx.sim.set("X0.04", false).unwrap();
+    let raised = alarm_until(&sub, "ESE after the outage", &mut seen, |a| {
+        a.id == "ese" && a.transition == "raised"
+    })
+    .await;
+    assert_eq!(raised.culprits[0].address, "X0.04");
+    let comm: Vec<&AlarmPayload> = seen
+        .iter()
+        .filter(|a| a.id == "communication" && a.transition == "raised")
+        .collect();
+    assert_eq!(comm.len(), 1, "{seen:#?}");
+    let process_during_outage: Vec<&AlarmPayload> = seen
+        .iter()
+        .filter(|a| a.kind == "switching" && a.transition == "raised" && a.id != "ese")
+        .collect();
+    assert!(process_during_outage.is_empty(), "{seen:#?}");
+    assert_eq!(
+        seen.iter()
+            .filter(|a| a.id == "ese" && a.transition == "raised")
+            .count(),
+        1,
+        "{seen:#?}"
+    );
+    let metrics = fx.scrape().await;
+    assert!(
+        metrics.contains("cellwatch_opcua_reconnects_total{cell=\"m01ps0004\"} 1"),
+        "{metrics}"
+    );
+    fx.agent.take().unwrap().stop().await;
+    fx.sim.stop();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn only_correctly_signed_acks_are_carried_out_and_all_are_journaled() {
+    let fx = Fixture::start().await;
+    fx.settled().await;
+    fx.sim.set("X0.06", false).unwrap();
+    // Wait for the alarm to be active.
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(20);
+    loop {
+        let snap: serde_json::Value = serde_json::from_str(
+            &fx.query("cellwatch/m01ps0004/snapshot", None)
+                .await
+                .unwrap(),
+        )
+        .unwrap();
+        if snap["alarms"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|a| a["id"] == "ese")
+        {
+            assert_eq!(snap["last_fault"]["alarm"], "ese");
+            break;
+        }
+        assert!(tokio::time::Instant::now() < deadline);
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let now = cellwatch::clock::now_ms();
+    let cmd = |nonce: &str| Command {
+        action: "ack".into(),
+        alarm: "ese".into(),
+        operator: "kim".into(),
+        nonce: nonce.into(),
+        issued_at: now,
+        signature: String::new(),
+    };
+    let fxr = &fx;
+    let send = |c: Command| {
+        let json = serde_json::to_string(&c).unwrap();
+        async move {
+            let r: serde_json::Value = serde_json::from_str(
+                &fxr.query("cellwatch/m01ps0004/command", Some(json))
+                    .await
+                    .unwrap(),
+            )
+            .unwrap();
+            (
+                r["accepted"].as_bool().unwrap(),
+                r["detail"].as_str().unwrap().to_string(),
+            )
+        }
+    };
+    assert_eq!(
+        send(cmd("n1")).await,
+        (false, "unsigned command".to_string())
+    );
+    let mut wrong = cmd("n2");
+    wrong.sign("m01ps0004", b"someone else's key, not kim's at all");
+    assert_eq!(send(wrong).await, (false, "bad signature".to_string()));
+    let mut good = cmd("n3");
+    good.sign("m01ps0004", &hex::decode(KEY).unwrap());
+    assert_eq!(
+        send(good.clone()).await,
+        (true, "ack ese by kim".to_string())
+    );
+    assert_eq!(
+        send(good).await,
+        (false, "replayed command (nonce already used)".to_string())
+    );
+    let snap: serde_json::Value = serde_json::from_str(
+        &fx.query("cellwatch/m01ps0004/snapshot", None)
+            .await
+            .unwrap(),
+    )
+    .unwrap();
+    let ese = snap["alarms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|a| a["id"] == "ese")
+        .unwrap()
+        .clone();
+    assert_eq!(ese["state"], "active_acknowledged");
+    assert_eq!(ese["acked_by"], "kim");
+    // Every command, refused or not, is in the journal.
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
+    loop {
+        let rows: Vec<serde_json::Value> = serde_json::from_str(
+            &fx.query("cellwatch/m01ps0004/history?since=1h;kind=command", None)
+                .await
+                .unwrap(),
+        )
+        .unwrap();
+        let outcomes: Vec<(bool, String)> = rows
+            .iter()
+            .map(|r| {
+                (
+                    r["fields"]["accepted"].as_bool().unwrap(),
+                    r["fields"]["detail"].as_str().unwrap().to_string(),
+                )
+            })
+            .collect();
+        if outcomes.len() == 4 {
+            assert_eq!(
+                outcomes,
+                [
+                    (false, "unsigned command".to_string()),
+                    (false, "bad signature".to_string()),
+                    (true, "ack ese by kim".to_string()),
+                    (false, "replayed command (nonce already used)".to_string()),
+                ]
+            );
+            break;
+        }
+        assert!(tokio::time::Instant::now() < deadline, "{outcomes:?}");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let _ = &fx.config;
+    fx.agent.unwrap().stop().await;
+    fx.sim.stop();
+}
