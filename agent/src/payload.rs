@@ -41,6 +41,24 @@ impl From<&Culprit> for CulpritPayload {
     }
 }
 
+impl CulpritPayload {
+    /// One line for people: `X0.06 = 0 (expected 1): Y Over Travel Limit SW (B)   <- trigger`.
+    pub fn line(&self) -> String {
+        let comment = self
+            .comment
+            .as_deref()
+            .map(|c| format!(": {c}"))
+            .unwrap_or_default();
+        let trigger = if self.trigger { "   <- trigger" } else { "" };
+        format!(
+            "{} = {} (expected {}){comment}{trigger}",
+            self.address,
+            u8::from(self.value),
+            u8::from(self.expected)
+        )
+    }
+}
+
 /// `<prefix>/alarms/<alarm-id>`: one alarm transition.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct AlarmPayload {

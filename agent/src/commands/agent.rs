@@ -234,19 +234,7 @@ fn print_notice(out: &mut dyn Write, n: &Notice, last_state: &mut String) -> std
                     writeln!(out, "                      {}", a.message)?;
                 }
                 for c in &a.culprits {
-                    let comment = c
-                        .comment
-                        .as_deref()
-                        .map(|c| format!(": {c}"))
-                        .unwrap_or_default();
-                    let trigger = if c.trigger { "   <- trigger" } else { "" };
-                    writeln!(
-                        out,
-                        "                      {} = {} (expected {}){comment}{trigger}",
-                        c.address,
-                        u8::from(c.value),
-                        u8::from(c.expected)
-                    )?;
+                    writeln!(out, "                      {}", c.line())?;
                 }
                 Ok(())
             }

@@ -51,19 +51,7 @@ fn print_alarm(out: &mut dyn Write, a: &AlarmPayload, json: bool) -> std::io::Re
         a.at, a.cell, a.id, a.transition, a.state, a.severity, a.fault_type, a.message
     )?;
     for c in &a.culprits {
-        let comment = c
-            .comment
-            .as_deref()
-            .map(|c| format!(": {c}"))
-            .unwrap_or_default();
-        let trigger = if c.trigger { "   <- trigger" } else { "" };
-        writeln!(
-            out,
-            "    {} = {} (expected {}){comment}{trigger}",
-            c.address,
-            u8::from(c.value),
-            u8::from(c.expected)
-        )?;
+        writeln!(out, "    {}", c.line())?;
     }
     Ok(())
 }
