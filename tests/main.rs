@@ -11,5 +11,6 @@ mod bad_input;
 mod durability;
 mod explain;
 mod opcua;
+mod report;
 mod sf;
 mod util;

@@ -181,6 +181,7 @@ pub async fn start(
         last_update: None,
         ever_connected: false,
         counted_state: "offline",
+        culprits: std::collections::HashMap::new(),
     };
     let task = tokio::spawn(cell.run(source_rx, history_q, snapshot_q, command_q, stop_rx));
     Ok(Agent {
@@ -211,6 +212,8 @@ struct Cell {
     ever_connected: bool,
     /// The state whose time the metrics are counting.
     counted_state: &'static str,
+    /// Per fault alarm: the element its culprit gauge is set for.
+    culprits: std::collections::HashMap<String, Option<String>>,
 }
 
 impl Cell {
@@ -321,6 +324,28 @@ impl Cell {
                     self.sink.alarm(&alarm.id, json).await;
                     if transition == Transition::Raised {
                         self.metrics.raised(&alarm.id, alarm.kind, alarm.severity);
+                    }
+                    if matches!(
+                        alarm.kind,
+                        cellwatch_models::alarm::AlarmKind::Switching
+                            | cellwatch_models::alarm::AlarmKind::Timer
+                    ) {
+                        let element = alarm
+                            .active
+                            .then(|| alarm.element().map(str::to_string))
+                            .flatten();
+                        let previous = self
+                            .culprits
+                            .insert(alarm.id.clone(), element.clone())
+                            .flatten();
+                        self.metrics.culprit(
+                            &alarm.id,
+                            alarm.severity.as_str(),
+                            &alarm.fault_type,
+                            element.as_deref(),
+                            previous.as_deref(),
+                            transition == Transition::Raised,
+                        );
                     }
                     self.update_active();
                     self.notice(Notice::Alarm(payload));

@@ -63,6 +63,62 @@ enum Command {
     Ack(CommandArgs),
     /// Reset a latched alarm whose condition has ended: a signed command (Zenoh).
     Reset(CommandArgs),
+    /// Production reports from a journal: per-hour run/idle/fault minutes,
+    /// availability, stop causes and production (daily), or per day (monthly).
+    Report(ReportArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct ReportArgs {
+    #[command(subcommand)]
+    pub(crate) command: ReportCommand,
+    /// The agent's SQLite journal.
+    #[arg(long, global = true, default_value = "cellwatch.sqlite")]
+    pub(crate) db: PathBuf,
+    /// Stop-cause table (TOML, `[[cause]] code, name, fault_type | state`).
+    #[arg(long, global = true, default_value = "config/stop-causes.toml")]
+    pub(crate) causes: PathBuf,
+    /// The plant's offset from UTC, for day boundaries (+09:00).
+    #[arg(
+        long,
+        global = true,
+        default_value = "+00:00",
+        allow_hyphen_values = true
+    )]
+    pub(crate) utc_offset: String,
+    /// CSV instead of a table.
+    #[arg(long, global = true, conflicts_with = "json")]
+    pub(crate) csv: bool,
+    /// JSON instead of a table.
+    #[arg(long, global = true)]
+    pub(crate) json: bool,
+}
+
+impl ReportArgs {
+    pub(crate) fn format(&self) -> crate::commands::report::Format {
+        use crate::commands::report::Format;
+        match (self.csv, self.json) {
+            (true, _) => Format::Csv,
+            (_, true) => Format::Json,
+            _ => Format::Table,
+        }
+    }
+}
+
+#[derive(Debug, Subcommand)]
+pub(crate) enum ReportCommand {
+    /// One day: 24 hourly slots (paper 002, Table 3).
+    Daily {
+        /// The day, 2026-11-21.
+        #[arg(long)]
+        date: String,
+    },
+    /// One month, day by day (paper 002, Table 5).
+    Monthly {
+        /// The month, 2026-11.
+        #[arg(long)]
+        month: String,
+    },
 }
 
 #[derive(Debug, Subcommand)]
@@ -304,7 +360,9 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::History(args) => commands::subscribers::history(&args, out).await,
             Command::Ack(args) => commands::subscribers::command("ack", &args, out).await,
             Command::Reset(args) => commands::subscribers::command("reset", &args, out).await,
-            Command::Sf(_) | Command::Explain(_) | Command::Validate(_) => Ok(()),
+            Command::Sf(_) | Command::Explain(_) | Command::Validate(_) | Command::Report(_) => {
+                Ok(())
+            }
         }
     })
 }
@@ -333,6 +391,7 @@ pub fn run(
         Command::Sf(args) => commands::sf::run(&args, out, err),
         Command::Explain(args) => commands::explain::run(&args, out, err),
         Command::Validate(args) => commands::agent::validate(&args, out),
+        Command::Report(args) => commands::report::run(&args, out),
         other => asynchronous(other, out),
     };
     match result {

@@ -52,6 +52,10 @@ pub struct Metrics {
     commands: IntCounterVec,
     /// Seconds since the last tag update.
     pub last_update_age: Gauge,
+    /// Parts produced (rising edges of the part-done tag).
+    pub parts: IntCounter,
+    culprit: IntGaugeVec,
+    elements: IntCounterVec,
     /// Transition durations, by timer check (filled by transition-timer checks).
     pub transition_seconds: HistogramVec,
     /// Learned transition windows, by timer check and bound.
@@ -203,6 +207,27 @@ impl Metrics {
                 "Seconds since the last tag value arrived.",
                 cell
             ))),
+            parts: reg!(IntCounter::with_opts(opts(
+                "cellwatch_parts_produced_total",
+                "Parts produced: rising edges of the part-done tag.",
+                cell
+            ))),
+            culprit: reg!(IntGaugeVec::new(
+                opts(
+                    "cellwatch_alarm_culprit",
+                    "1 while a fault alarm is active with this first culprit (element).",
+                    cell
+                ),
+                &["check", "severity", "fault_type", "element"]
+            )),
+            elements: reg!(IntCounterVec::new(
+                opts(
+                    "cellwatch_fault_elements_total",
+                    "Fault alarms raised, by check and first culprit (element).",
+                    cell
+                ),
+                &["check", "fault_type", "element"]
+            )),
             transition_seconds: reg!(HistogramVec::new(
                 HistogramOpts::new(
                     "cellwatch_transition_duration_seconds",
@@ -265,6 +290,34 @@ impl Metrics {
             self.state_seconds
                 .with_label_values(&[state])
                 .inc_by(seconds);
+        }
+    }
+
+    /// A fault alarm of `check` is active with `element` first to blame
+    /// (`None`: cleared); `previous` is the element it had.
+    pub fn culprit(
+        &self,
+        check: &str,
+        severity: &str,
+        fault_type: &str,
+        element: Option<&str>,
+        previous: Option<&str>,
+        raised: bool,
+    ) {
+        if let Some(p) = previous {
+            self.culprit
+                .with_label_values(&[check, severity, fault_type, p])
+                .set(0);
+        }
+        if let Some(e) = element {
+            self.culprit
+                .with_label_values(&[check, severity, fault_type, e])
+                .set(1);
+            if raised {
+                self.elements
+                    .with_label_values(&[check, fault_type, e])
+                    .inc();
+            }
         }
     }
 

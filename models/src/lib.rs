@@ -17,6 +17,7 @@
 //! - [`expr`]: naive expression trees, the reference for tests.
 //! - [`alarm`]: alarms and their ISA-18.2 lifecycle.
 //! - [`engine`]: the per-cell engine: tags, check sets, alarms, machine state.
+//! - [`report`]: daily and monthly production reports from state history.
 
 pub mod alarm;
 pub mod comments;
@@ -27,6 +28,7 @@ pub mod expr;
 pub mod il;
 pub mod logic;
 pub mod program;
+pub mod report;
 pub mod signal;
 pub mod source;
 pub mod switching;

@@ -197,6 +197,8 @@ pub struct CellConfig {
     pub metrics: Option<SocketAddr>,
     /// Operator keys for signed commands; `None`: every command refused.
     pub secrets_file: Option<PathBuf>,
+    /// The tag whose rising edge is one part done (index into `tags`).
+    pub part_done: Option<usize>,
     /// Things worth saying at start (security off, ...).
     pub warnings: Vec<String>,
 }
@@ -459,6 +461,19 @@ impl Validator<'_> {
             },
         };
         let secrets_file = raw.commands.secrets_file.map(|s| self.path(s.get_ref()));
+        let part_done = raw.production.part_done.and_then(|p| {
+            let found = tag_address(p.get_ref())
+                .ok()
+                .and_then(|a| by_address.get(&a).copied());
+            if found.is_none() {
+                self.problem(
+                    p.span(),
+                    "production.part_done",
+                    format!("no tag has the address '{}'", p.get_ref()),
+                );
+            }
+            found
+        });
         if secrets_file.is_none() {
             self.warnings.push(
                 "no commands.secrets_file: every acknowledge and reset will be refused".into(),
@@ -476,6 +491,7 @@ impl Validator<'_> {
             journal,
             metrics,
             secrets_file,
+            part_done,
             warnings: Vec::new(),
         })
     }

@@ -25,6 +25,14 @@ pub(crate) struct RawConfig {
     pub(crate) metrics: RawMetrics,
     #[serde(default)]
     pub(crate) commands: RawCommands,
+    #[serde(default)]
+    pub(crate) production: RawProduction,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawProduction {
+    pub(crate) part_done: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

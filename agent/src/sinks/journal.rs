@@ -48,6 +48,11 @@ pub enum Entry {
         /// Faulty element (`X0.06`), when known.
         element: Option<String>,
     },
+    /// One part done (a rising edge of the part-done tag).
+    Part {
+        /// When.
+        at: u64,
+    },
     /// An operator command, accepted or refused.
     Command {
         /// When.
@@ -124,6 +129,11 @@ CREATE TABLE IF NOT EXISTS commands (
     detail TEXT NOT NULL
 );
 CREATE INDEX IF NOT EXISTS commands_at ON commands (at_ms);
+CREATE TABLE IF NOT EXISTS production (
+    seq INTEGER PRIMARY KEY AUTOINCREMENT,
+    at_ms INTEGER NOT NULL
+);
+CREATE INDEX IF NOT EXISTS production_at ON production (at_ms);
 ";
 
 /// Opens (creating if needed) the journal for writing.
@@ -194,7 +204,7 @@ impl Journal {
         observer: impl CommitObserver,
     ) -> Result<Journal, JournalError> {
         let conn = open(path)?;
-        let existing: u64 = ["alarm_events", "state_history", "commands"]
+        let existing: u64 = ["alarm_events", "state_history", "commands", "production"]
             .iter()
             .map(|t| {
                 conn.query_row(&format!("SELECT count(*) FROM {t}"), [], |r| {
@@ -307,6 +317,10 @@ fn write_batch(conn: &mut Connection, batch: &[Entry]) -> rusqlite::Result<()> {
                 )?
                 .execute(params![*at as i64, kind, state, fault_type, element])?;
             }
+            Entry::Part { at } => {
+                tx.prepare_cached("INSERT INTO production (at_ms) VALUES (?1)")?
+                    .execute(params![*at as i64])?;
+            }
             Entry::Command {
                 at,
                 operator,
@@ -328,7 +342,7 @@ fn write_batch(conn: &mut Connection, batch: &[Entry]) -> rusqlite::Result<()> {
 
 fn purge(conn: &Connection, retention: Duration, path: &Path) {
     let cutoff = crate::clock::now_ms().saturating_sub(retention.as_millis() as u64) as i64;
-    for table in ["alarm_events", "state_history", "commands"] {
+    for table in ["alarm_events", "state_history", "commands", "production"] {
         if let Err(e) = conn.execute(&format!("DELETE FROM {table} WHERE at_ms < ?1"), [cutoff]) {
             tracing::warn!(path = %path.display(), error = %e, "journal retention purge failed");
         }
@@ -425,6 +439,46 @@ pub fn history(conn: &Connection, q: &HistoryQuery) -> Result<Vec<HistoryRow>, S
         rows.drain(..rows.len() - limit);
     }
     Ok(rows)
+}
+
+/// Machine-state rows and part times between `since` and `until` (ms), plus
+/// the last state row before `since`, for reports.
+///
+/// # Errors
+/// SQLite failing.
+pub fn report_input(
+    conn: &Connection,
+    since: u64,
+    until: u64,
+) -> rusqlite::Result<(Vec<cellwatch_models::report::StateChange>, Vec<u64>)> {
+    let mut changes = Vec::new();
+    let row = |r: &rusqlite::Row<'_>| {
+        Ok(cellwatch_models::report::StateChange {
+            at: r.get::<_, i64>(0)? as u64,
+            state: r.get(1)?,
+            fault_type: r.get(2)?,
+        })
+    };
+    let before = conn
+        .query_row(
+            "SELECT at_ms, state, fault_type FROM state_history WHERE at_ms < ?1 ORDER BY at_ms DESC, seq DESC LIMIT 1",
+            [since as i64],
+            row,
+        )
+        .ok();
+    changes.extend(before);
+    let mut stmt = conn.prepare("SELECT at_ms, state, fault_type FROM state_history WHERE at_ms >= ?1 AND at_ms < ?2 ORDER BY at_ms, seq")?;
+    for c in stmt.query_map([since as i64, until as i64], row)? {
+        changes.push(c?);
+    }
+    let mut stmt = conn
+        .prepare("SELECT at_ms FROM production WHERE at_ms >= ?1 AND at_ms < ?2 ORDER BY at_ms")?;
+    let parts = stmt
+        .query_map([since as i64, until as i64], |r| {
+            Ok(r.get::<_, i64>(0)? as u64)
+        })?
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok((changes, parts))
 }
 
 #[cfg(test)]

@@ -1,0 +1,278 @@
+//! `cellwatch report daily|monthly`: production reports from a journal
+//! (paper 002, Tables 3-5), as a terminal table, CSV or JSON.
+
+use std::io::Write;
+use std::path::Path;
+
+use cellwatch_models::report::{self, CauseTotal, DailyReport, Minutes, MonthlyReport, StopCauses};
+use chrono::{Datelike, FixedOffset, NaiveDate, TimeZone};
+
+use crate::cli::{Failure, ReportArgs, ReportCommand};
+use crate::sinks::journal;
+
+fn causes(path: &Path) -> Result<StopCauses, Failure> {
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        Failure::Input(format!("cannot read stop causes '{}': {e}", path.display()))
+    })?;
+    toml::from_str(&text).map_err(|e| {
+        let at = e.span().map_or((1, 1), |s| {
+            let before = &text[..s.start];
+            (
+                before.matches('\n').count() + 1,
+                before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1,
+            )
+        });
+        Failure::Input(format!(
+            "{}:{}:{}: {}",
+            path.display(),
+            at.0,
+            at.1,
+            e.message().trim_end()
+        ))
+    })
+}
+
+fn offset(text: &str) -> Result<FixedOffset, Failure> {
+    let bad = || {
+        Failure::Input(format!(
+            "--utc-offset '{text}': write it as +09:00 or -05:30"
+        ))
+    };
+    let (sign, rest) = match text.as_bytes().first() {
+        Some(b'+') => (1, &text[1..]),
+        Some(b'-') => (-1, &text[1..]),
+        _ => return Err(bad()),
+    };
+    let (h, m) = rest.split_once(':').ok_or_else(bad)?;
+    let secs =
+        h.parse::<i32>().map_err(|_| bad())? * 3600 + m.parse::<i32>().map_err(|_| bad())? * 60;
+    FixedOffset::east_opt(sign * secs).ok_or_else(bad)
+}
+
+/// Milliseconds since the epoch at the start of `date` in `tz`.
+fn day_start(date: NaiveDate, tz: &FixedOffset) -> u64 {
+    let local = date.and_hms_opt(0, 0, 0).unwrap_or_default();
+    tz.from_local_datetime(&local)
+        .single()
+        .map_or(0, |t| t.timestamp_millis().max(0) as u64)
+}
+
+/// Runs a report command.
+pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    let tz = offset(&args.utc_offset)?;
+    let causes = causes(&args.causes)?;
+    if !args.db.is_file() {
+        return Err(Failure::Input(format!(
+            "--db '{}': no such journal",
+            args.db.display()
+        )));
+    }
+    let conn = journal::open_read(&args.db).map_err(|e| Failure::Runtime(e.to_string()))?;
+    let now = crate::clock::now_ms();
+    let io = |e: std::io::Error| Failure::Runtime(e.to_string());
+    match &args.command {
+        ReportCommand::Daily { date } => {
+            let d = NaiveDate::parse_from_str(date, "%Y-%m-%d")
+                .map_err(|_| Failure::Input(format!("--date '{date}': write it as 2026-11-21")))?;
+            let start = day_start(d, &tz);
+            let (changes, parts) = journal::report_input(&conn, start, start + 86_400_000)
+                .map_err(|e| Failure::Runtime(e.to_string()))?;
+            let r = report::daily(&changes, &parts, start, &causes, now);
+            match args.format() {
+                Format::Json => writeln!(
+                    out,
+                    "{}",
+                    serde_json::to_string_pretty(&r).unwrap_or_default()
+                )
+                .map_err(io),
+                Format::Csv => daily_csv(out, &r).map_err(io),
+                Format::Table => {
+                    daily_table(out, &args.db, &d.to_string(), &args.utc_offset, &r).map_err(io)
+                }
+            }
+        }
+        ReportCommand::Monthly { month } => {
+            let first = NaiveDate::parse_from_str(&format!("{month}-01"), "%Y-%m-%d")
+                .map_err(|_| Failure::Input(format!("--month '{month}': write it as 2026-11")))?;
+            let mut days = Vec::new();
+            let mut d = first;
+            while d.month() == first.month() {
+                days.push(d);
+                d = d.succ_opt().unwrap_or(d);
+                if days.len() > 31 {
+                    break;
+                }
+            }
+            let starts: Vec<u64> = days.iter().map(|d| day_start(*d, &tz)).collect();
+            let end = starts.last().copied().unwrap_or(0) + 86_400_000;
+            let (changes, parts) = journal::report_input(&conn, starts[0], end)
+                .map_err(|e| Failure::Runtime(e.to_string()))?;
+            let r = report::monthly(&changes, &parts, &starts, &causes, now);
+            match args.format() {
+                Format::Json => writeln!(
+                    out,
+                    "{}",
+                    serde_json::to_string_pretty(&r).unwrap_or_default()
+                )
+                .map_err(io),
+                Format::Csv => monthly_csv(out, &days, &r).map_err(io),
+                Format::Table => {
+                    monthly_table(out, &args.db, month, &args.utc_offset, &days, &r).map_err(io)
+                }
+            }
+        }
+    }
+}
+
+/// Output format.
+pub(crate) enum Format {
+    Table,
+    Csv,
+    Json,
+}
+
+fn pct(a: Option<f64>) -> String {
+    a.map_or_else(|| "-".into(), |a| format!("{a:.1}"))
+}
+
+fn row(m: &Minutes) -> String {
+    format!(
+        "{:>8.1} {:>8.1} {:>8.1} {:>8.1}",
+        m.running, m.idle, m.fault, m.offline
+    )
+}
+
+fn causes_table(out: &mut dyn Write, causes: &[CauseTotal]) -> std::io::Result<()> {
+    writeln!(out, "stop causes:")?;
+    if causes.is_empty() {
+        writeln!(out, "  none")?;
+    }
+    for c in causes {
+        writeln!(
+            out,
+            "  {:<3} {:<32} {:>4} stop{} {:>8.1} min",
+            c.code,
+            c.name,
+            c.count,
+            if c.count == 1 { " " } else { "s" },
+            c.minutes
+        )?;
+    }
+    Ok(())
+}
+
+fn daily_table(
+    out: &mut dyn Write,
+    db: &Path,
+    date: &str,
+    tz: &str,
+    r: &DailyReport,
+) -> std::io::Result<()> {
+    writeln!(out, "daily report {date} (UTC{tz}) from {}", db.display())?;
+    writeln!(out, "hour      run     idle    fault  offline   (minutes)")?;
+    for (h, m) in r.hours.iter().enumerate() {
+        writeln!(out, "{h:02}   {}", row(m))?;
+    }
+    writeln!(out, "day  {}", row(&r.total))?;
+    writeln!(out, "availability: {} %", pct(r.availability))?;
+    causes_table(out, &r.stop_causes)?;
+    writeln!(out, "production: {} parts", r.production)
+}
+
+const CSV_HEADER: &str = "section,key,name,running_min,idle_min,fault_min,offline_min,stops,stop_min,availability_pct,parts";
+
+fn csv_minutes(m: &Minutes) -> String {
+    format!(
+        "{:.1},{:.1},{:.1},{:.1}",
+        m.running, m.idle, m.fault, m.offline
+    )
+}
+
+fn csv_causes(out: &mut dyn Write, causes: &[CauseTotal]) -> std::io::Result<()> {
+    for c in causes {
+        writeln!(
+            out,
+            "cause,{},\"{}\",,,,,{},{:.1},,",
+            c.code,
+            c.name.replace('"', "\"\""),
+            c.count,
+            c.minutes
+        )?;
+    }
+    Ok(())
+}
+
+fn daily_csv(out: &mut dyn Write, r: &DailyReport) -> std::io::Result<()> {
+    writeln!(out, "{CSV_HEADER}")?;
+    for (h, m) in r.hours.iter().enumerate() {
+        writeln!(out, "hour,{h:02},,{},,,,", csv_minutes(m))?;
+    }
+    csv_causes(out, &r.stop_causes)?;
+    writeln!(
+        out,
+        "total,day,,{},,,{},{}",
+        csv_minutes(&r.total),
+        r.availability
+            .map_or_else(String::new, |a| format!("{a:.1}")),
+        r.production
+    )
+}
+
+fn monthly_table(
+    out: &mut dyn Write,
+    db: &Path,
+    month: &str,
+    tz: &str,
+    days: &[NaiveDate],
+    r: &MonthlyReport,
+) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "monthly report {month} (UTC{tz}) from {}",
+        db.display()
+    )?;
+    writeln!(
+        out,
+        "day             run     idle    fault  offline   avail%   parts"
+    )?;
+    for (d, day) in days.iter().zip(&r.days) {
+        writeln!(
+            out,
+            "{d}  {} {:>8} {:>7}",
+            row(&day.total),
+            pct(day.availability),
+            day.production
+        )?;
+    }
+    writeln!(
+        out,
+        "month       {} {:>8} {:>7}",
+        row(&r.total),
+        pct(r.availability),
+        r.production
+    )?;
+    causes_table(out, &r.stop_causes)
+}
+
+fn monthly_csv(out: &mut dyn Write, days: &[NaiveDate], r: &MonthlyReport) -> std::io::Result<()> {
+    writeln!(out, "{CSV_HEADER}")?;
+    for (d, day) in days.iter().zip(&r.days) {
+        writeln!(
+            out,
+            "day,{d},,{},,,{},{}",
+            csv_minutes(&day.total),
+            day.availability
+                .map_or_else(String::new, |a| format!("{a:.1}")),
+            day.production
+        )?;
+    }
+    csv_causes(out, &r.stop_causes)?;
+    writeln!(
+        out,
+        "total,month,,{},,,{},{}",
+        csv_minutes(&r.total),
+        r.availability
+            .map_or_else(String::new, |a| format!("{a:.1}")),
+        r.production
+    )
+}
