@@ -44,18 +44,18 @@ pub(crate) fn config(dir: &Path, sim_endpoint: &str, ns: u16, zenoh_port: u16) -
     c
 }
 
-struct Fixture {
+pub(crate) struct Fixture {
     _dir: tempfile::TempDir,
     dir: PathBuf,
-    sim: SimulatedCnc,
+    pub(crate) sim: SimulatedCnc,
     sim_addr: SocketAddr,
-    agent: Option<Agent>,
+    pub(crate) agent: Option<Agent>,
     client: zenoh::Session,
     config: CellConfig,
 }
 
 impl Fixture {
-    async fn start() -> Fixture {
+    pub(crate) async fn start() -> Fixture {
         let d = tempfile::tempdir().unwrap();
         let dir = d.path().to_path_buf();
         let sim_opts = SimOptions {
@@ -91,7 +91,7 @@ impl Fixture {
         }
     }
 
-    fn agent(&self) -> &Agent {
+    pub(crate) fn agent(&self) -> &Agent {
         self.agent.as_ref().unwrap()
     }
 
@@ -118,7 +118,7 @@ impl Fixture {
     }
 
     /// Waits until the agent has every tag and no alarm.
-    async fn settled(&self) {
+    pub(crate) async fn settled(&self) {
         let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
         loop {
             let snap: serde_json::Value = serde_json::from_str(
@@ -144,7 +144,7 @@ impl Fixture {
         }
     }
 
-    async fn scrape(&self) -> String {
+    pub(crate) async fn scrape(&self) -> String {
         let addr = self.agent().metrics_addr().unwrap();
         let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
         use tokio::io::{AsyncReadExt, AsyncWriteExt};

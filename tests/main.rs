@@ -8,6 +8,7 @@
 
 mod agent;
 mod bad_input;
+mod dashboards;
 mod durability;
 mod explain;
 mod opcua;

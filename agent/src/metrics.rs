@@ -141,6 +141,11 @@ impl Metrics {
             ),
             &["action", "result"]
         ));
+        for action in ["ack", "reset"] {
+            for result in ["accepted", "refused"] {
+                commands.with_label_values(&[action, result]).inc_by(0);
+            }
+        }
         Metrics {
             opcua_connected: reg!(IntGauge::with_opts(opts(
                 "cellwatch_opcua_connected",
