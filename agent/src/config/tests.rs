@@ -167,11 +167,19 @@ fn shipped_configs_parse() {
     let mut seen = 0;
     for entry in std::fs::read_dir(&dir).unwrap() {
         let path = entry.unwrap().path();
-        if path.extension().is_some_and(|e| e == "toml") {
+        if path.extension().is_none_or(|e| e != "toml") {
+            continue;
+        }
+        if path.file_name().is_some_and(|n| n == "stop-causes.toml") {
+            let text = std::fs::read_to_string(&path).unwrap();
+            let causes: cellwatch_models::report::StopCauses =
+                toml::from_str(&text).unwrap_or_else(|e| panic!("{}:\n{e}", path.display()));
+            assert!(causes.causes.len() >= 6, "paper 002's Table 4 has six causes");
+        } else {
             let c = load(&path).unwrap_or_else(|e| panic!("{}:\n{e}", path.display()));
             assert!(!c.tags.is_empty());
-            seen += 1;
         }
+        seen += 1;
     }
-    assert!(seen >= 1, "no config in {}", dir.display());
+    assert!(seen >= 2, "expected demo.toml and stop-causes.toml in {}", dir.display());
 }
