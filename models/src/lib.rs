@@ -18,6 +18,7 @@
 //! - [`alarm`]: alarms and their ISA-18.2 lifecycle.
 //! - [`engine`]: the per-cell engine: tags, check sets, alarms, machine state.
 //! - [`report`]: daily and monthly production reports from state history.
+//! - [`timer`]: transition timers: run logs, the learner, the runtime monitor.
 
 pub mod alarm;
 pub mod comments;
@@ -32,4 +33,5 @@ pub mod report;
 pub mod signal;
 pub mod source;
 pub mod switching;
+pub mod timer;
 pub mod values;

@@ -174,12 +174,19 @@ fn shipped_configs_parse() {
             let text = std::fs::read_to_string(&path).unwrap();
             let causes: cellwatch_models::report::StopCauses =
                 toml::from_str(&text).unwrap_or_else(|e| panic!("{}:\n{e}", path.display()));
-            assert!(causes.causes.len() >= 6, "paper 002's Table 4 has six causes");
+            assert!(
+                causes.causes.len() >= 6,
+                "paper 002's Table 4 has six causes"
+            );
         } else {
             let c = load(&path).unwrap_or_else(|e| panic!("{}:\n{e}", path.display()));
             assert!(!c.tags.is_empty());
         }
         seen += 1;
     }
-    assert!(seen >= 2, "expected demo.toml and stop-causes.toml in {}", dir.display());
+    assert!(
+        seen >= 2,
+        "expected demo.toml and stop-causes.toml in {}",
+        dir.display()
+    );
 }

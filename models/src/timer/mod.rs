@@ -1,0 +1,12 @@
+//! Transition timers (paper 001): learn `δ(A, E | Δt) = B` from the signal
+//! logs of normal runs, and check at run time that each event comes neither
+//! too early nor too late.
+//!
+//! - [`log`]: run logs (CSV and the paper's numeric form);
+//! - [`learn`]: the learner (the paper's full-state method) and the model
+//!   file it writes;
+//! - [`monitor`]: the runtime monitor, fed changes and the passing of time.
+
+pub mod learn;
+pub mod log;
+pub mod monitor;

@@ -1,0 +1,348 @@
+//! The runtime monitor of transition timers.
+//!
+//! Fed signal changes with their times and [`TimerMonitor::advance`] as
+//! time passes. A transition is *armed* when its start condition becomes
+//! true (its state is entered) and measures θ from then:
+//! - its event at θ ≤ Δt − τ: [`Outcome::Early`] (the paper's Case 1);
+//! - no event by θ = Δt + τ: [`Outcome::Late`], raised at exactly that time
+//!   (Case 2);
+//! - its event with Δt − τ < θ < Δt + τ: [`Outcome::Normal`] (Case 3).
+//!
+//! Any other change of a signal in the condition disarms it (the state was
+//! left another way). A signal whose value is unknown (bad quality, lost
+//! connection) disarms every transition that reads it and keeps it
+//! disarmed until the value is known again: no false alarm.
+
+use std::collections::HashMap;
+
+use serde::Serialize;
+
+use super::learn::{Edge, TimerModel};
+
+/// What the monitor found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(tag = "outcome", rename_all = "lowercase")]
+pub enum Outcome {
+    /// The event came at or before Δt − τ.
+    Early {
+        /// Transition id.
+        transition: u32,
+        /// When, ms.
+        at_ms: u64,
+        /// θ, ms.
+        observed_ms: u64,
+    },
+    /// The event had not come at Δt + τ.
+    Late {
+        /// Transition id.
+        transition: u32,
+        /// When (exactly Δt + τ after arming), ms.
+        at_ms: u64,
+    },
+    /// The event came inside the window.
+    Normal {
+        /// Transition id.
+        transition: u32,
+        /// When, ms.
+        at_ms: u64,
+        /// θ, ms.
+        observed_ms: u64,
+    },
+}
+
+struct Compiled {
+    id: u32,
+    condition: Vec<(usize, bool)>,
+    event: (usize, bool),
+    lo: u64,
+    hi: u64,
+}
+
+/// Why a model cannot be monitored.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ModelError {
+    /// Another file version.
+    #[error("timer model version {0} is not supported (expected 1)")]
+    Version(u32),
+    /// A literal names a signal not in the model's list.
+    #[error("transition {id}: unknown signal '{tag}'")]
+    UnknownSignal {
+        /// Transition.
+        id: u32,
+        /// Signal.
+        tag: String,
+    },
+}
+
+/// The monitor of one model.
+pub struct TimerMonitor {
+    signals: Vec<String>,
+    index: HashMap<String, usize>,
+    values: Vec<Option<bool>>,
+    transitions: Vec<Compiled>,
+    /// Per signal: transitions whose condition or event reads it.
+    readers: Vec<Vec<usize>>,
+    /// Per transition: when it was armed.
+    armed: Vec<Option<u64>>,
+}
+
+impl TimerMonitor {
+    /// Compiles `model`. Every signal starts unknown.
+    ///
+    /// # Errors
+    /// An unsupported version or an unknown signal.
+    pub fn new(model: &TimerModel) -> Result<TimerMonitor, ModelError> {
+        if model.version != super::learn::MODEL_VERSION {
+            return Err(ModelError::Version(model.version));
+        }
+        let index: HashMap<String, usize> = model
+            .signals
+            .iter()
+            .enumerate()
+            .map(|(i, s)| (s.clone(), i))
+            .collect();
+        let lookup = |id: u32, tag: &str| {
+            index
+                .get(tag)
+                .copied()
+                .ok_or_else(|| ModelError::UnknownSignal {
+                    id,
+                    tag: tag.into(),
+                })
+        };
+        let mut transitions = Vec::new();
+        let mut readers = vec![Vec::new(); model.signals.len()];
+        for t in &model.transitions {
+            let mut condition = Vec::new();
+            for lit in &t.from {
+                let (tag, v) = match lit.strip_prefix('-') {
+                    Some(tag) => (tag, false),
+                    None => (lit.as_str(), true),
+                };
+                condition.push((lookup(t.id, tag)?, v));
+            }
+            let event = (lookup(t.id, &t.event.tag)?, t.event.edge == Edge::Rise);
+            let k = transitions.len();
+            for &(s, _) in condition.iter().chain(std::iter::once(&event)) {
+                if !readers[s].contains(&k) {
+                    readers[s].push(k);
+                }
+            }
+            transitions.push(Compiled {
+                id: t.id,
+                condition,
+                event,
+                lo: t.window_ms[0],
+                hi: t.window_ms[1],
+            });
+        }
+        let n = transitions.len();
+        Ok(TimerMonitor {
+            values: vec![None; model.signals.len()],
+            signals: model.signals.clone(),
+            index,
+            transitions,
+            readers,
+            armed: vec![None; n],
+        })
+    }
+
+    /// The index of a signal.
+    pub fn signal(&self, name: &str) -> Option<usize> {
+        self.index.get(name).copied()
+    }
+
+    /// The signals, by index.
+    pub fn signals(&self) -> &[String] {
+        &self.signals
+    }
+
+    fn holds(&self, t: &Compiled) -> bool {
+        t.condition.iter().all(|&(s, v)| self.values[s] == Some(v))
+            && self.values[t.event.0].is_some()
+    }
+
+    /// Signal `s` became `value` (`None`: unknown) at `at`; late outcomes
+    /// due before `at` are reported first.
+    pub fn set(&mut self, s: usize, value: Option<bool>, at: u64) -> Vec<Outcome> {
+        let mut out = self.advance(at);
+        let old = self.values[s];
+        if old == value {
+            return out;
+        }
+        let readers = self.readers[s].clone();
+        // The event first: a transition armed before this change sees it.
+        for &k in &readers {
+            let t = &self.transitions[k];
+            let Some(since) = self.armed[k] else { continue };
+            if t.event.0 == s && value == Some(t.event.1) && old == Some(!t.event.1) {
+                let theta = at - since;
+                out.push(if theta <= t.lo {
+                    Outcome::Early {
+                        transition: t.id,
+                        at_ms: at,
+                        observed_ms: theta,
+                    }
+                } else if theta >= t.hi {
+                    Outcome::Late {
+                        transition: t.id,
+                        at_ms: since + t.hi,
+                    }
+                } else {
+                    Outcome::Normal {
+                        transition: t.id,
+                        at_ms: at,
+                        observed_ms: theta,
+                    }
+                });
+            }
+            self.armed[k] = None;
+        }
+        self.values[s] = value;
+        // Arm the transitions whose condition has just become true.
+        for &k in &readers {
+            if self.armed[k].is_none()
+                && self.holds(&self.transitions[k])
+                && self.transitions[k].condition.iter().any(|&(c, _)| c == s)
+            {
+                self.armed[k] = Some(at);
+            }
+        }
+        out
+    }
+
+    /// Time is now `now`: every armed transition past Δt + τ is late.
+    pub fn advance(&mut self, now: u64) -> Vec<Outcome> {
+        let mut out = Vec::new();
+        for (k, t) in self.transitions.iter().enumerate() {
+            if let Some(since) = self.armed[k] {
+                if now >= since + t.hi {
+                    out.push(Outcome::Late {
+                        transition: t.id,
+                        at_ms: since + t.hi,
+                    });
+                    self.armed[k] = None;
+                }
+            }
+        }
+        out.sort_by_key(|o| match o {
+            Outcome::Late { at_ms, .. }
+            | Outcome::Early { at_ms, .. }
+            | Outcome::Normal { at_ms, .. } => *at_ms,
+        });
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::timer::learn::{Event, Transition};
+
+    /// δ(2:-3, +3 | 130) = 2:3 with τ = 10.
+    fn monitor() -> TimerMonitor {
+        let model = TimerModel {
+            version: 1,
+            method: "full-state".into(),
+            signals: vec!["S1".into(), "S2".into(), "S3".into()],
+            transitions: vec![Transition {
+                id: 1,
+                from: vec!["S2".into(), "-S3".into()],
+                event: Event {
+                    tag: "S3".into(),
+                    edge: Edge::Rise,
+                },
+                to: vec!["S2".into(), "S3".into()],
+                delta_ms: 130,
+                min_ms: 130,
+                max_ms: 130,
+                support: 1,
+                window_ms: [120, 140],
+                from_numbered: None,
+            }],
+        };
+        let mut m = TimerMonitor::new(&model).unwrap();
+        m.set(0, Some(false), 0);
+        m.set(2, Some(false), 0);
+        m.set(1, Some(false), 0);
+        // Entering 2:-3 at t = 1000 arms the timer.
+        assert!(m.set(1, Some(true), 1000).is_empty());
+        m
+    }
+
+    #[test]
+    fn early_normal_late_in_virtual_time() {
+        let mut m = monitor();
+        assert_eq!(
+            m.set(2, Some(true), 1115),
+            [Outcome::Early {
+                transition: 1,
+                at_ms: 1115,
+                observed_ms: 115
+            }]
+        );
+        let mut m = monitor();
+        assert_eq!(
+            m.set(2, Some(true), 1125),
+            [Outcome::Normal {
+                transition: 1,
+                at_ms: 1125,
+                observed_ms: 125
+            }]
+        );
+        let mut m = monitor();
+        assert_eq!(
+            m.set(2, Some(true), 1135),
+            [Outcome::Normal {
+                transition: 1,
+                at_ms: 1135,
+                observed_ms: 135
+            }]
+        );
+        let mut m = monitor();
+        assert!(m.advance(1139).is_empty());
+        assert_eq!(
+            m.advance(1140),
+            [Outcome::Late {
+                transition: 1,
+                at_ms: 1140
+            }]
+        );
+        assert!(m.advance(5000).is_empty(), "reported once");
+        // Late is reported at exactly Δt + τ even when time jumps past it.
+        let mut m = monitor();
+        assert_eq!(
+            m.advance(9000),
+            [Outcome::Late {
+                transition: 1,
+                at_ms: 1140
+            }]
+        );
+    }
+
+    #[test]
+    fn unknown_signal_suspends_the_timer() {
+        let mut m = monitor();
+        m.set(2, None, 1050);
+        assert!(
+            m.advance(2000).is_empty(),
+            "no late alarm on an unknown signal"
+        );
+        // Known again and the state is re-entered: armed afresh.
+        m.set(2, Some(false), 3000);
+        assert_eq!(
+            m.advance(3140),
+            [Outcome::Late {
+                transition: 1,
+                at_ms: 3140
+            }]
+        );
+    }
+
+    #[test]
+    fn leaving_the_state_another_way_disarms() {
+        let mut m = monitor();
+        m.set(1, Some(false), 1050);
+        assert!(m.advance(2000).is_empty());
+    }
+}
