@@ -14,4 +14,5 @@ mod explain;
 mod opcua;
 mod report;
 mod sf;
+mod timers;
 mod util;

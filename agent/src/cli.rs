@@ -63,9 +63,57 @@ enum Command {
     Ack(CommandArgs),
     /// Reset a latched alarm whose condition has ended: a signed command (Zenoh).
     Reset(CommandArgs),
+    /// Learn transition timers δ(A, E | Δt) = B from logs of normal runs.
+    Learn(LearnArgs),
+    /// Run the transition-timer monitor over run logs in virtual time.
+    Replay(ReplayArgs),
     /// Production reports from a journal: per-hour run/idle/fault minutes,
     /// availability, stop causes and production (daily), or per day (monthly).
     Report(ReportArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct LearnArgs {
+    /// Run logs: CSV `time_ms,tag,value`, or the paper's `t,e` form with --map.
+    #[arg(required = true)]
+    pub(crate) runs: Vec<PathBuf>,
+    /// Signal map `number,tag` for logs in the paper's numeric form.
+    #[arg(long, value_name = "CSV")]
+    pub(crate) map: Option<PathBuf>,
+    /// Shortest Δt kept (shorter transitions are the program flipping its own signals).
+    #[arg(long, default_value = "2s")]
+    pub(crate) delta_min: String,
+    /// Fixed tolerance τ (default 100ms).
+    #[arg(long, conflicts_with = "tau_auto")]
+    pub(crate) tau: Option<String>,
+    /// τ per transition: max(2 × largest training deviation, 5 % of Δt, 100 ms).
+    #[arg(long)]
+    pub(crate) tau_auto: bool,
+    /// Runs a transition must be seen in (default: every run).
+    #[arg(long)]
+    pub(crate) min_support: Option<usize>,
+    /// Learning method: full-state (the paper's).
+    #[arg(long, default_value = "full-state")]
+    pub(crate) method: String,
+    /// Where to write the timer model (JSON).
+    #[arg(long, default_value = "timers.json")]
+    pub(crate) out: PathBuf,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct ReplayArgs {
+    /// The timer model (JSON, from `cellwatch learn`).
+    #[arg(long)]
+    pub(crate) timers: PathBuf,
+    /// Run logs to replay.
+    #[arg(required = true)]
+    pub(crate) runs: Vec<PathBuf>,
+    /// Signal map for logs in the paper's numeric form.
+    #[arg(long, value_name = "CSV")]
+    pub(crate) map: Option<PathBuf>,
+    /// One JSON outcome per line: {outcome, transition, at_ms, observed_ms}.
+    #[arg(long)]
+    pub(crate) json: bool,
 }
 
 #[derive(Debug, clap::Args)]
@@ -360,9 +408,13 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::History(args) => commands::subscribers::history(&args, out).await,
             Command::Ack(args) => commands::subscribers::command("ack", &args, out).await,
             Command::Reset(args) => commands::subscribers::command("reset", &args, out).await,
-            Command::Sf(_) | Command::Explain(_) | Command::Validate(_) | Command::Report(_) => {
-                Ok(())
-            }
+            // Dispatched synchronously by `run`; never sent here.
+            Command::Sf(_)
+            | Command::Explain(_)
+            | Command::Validate(_)
+            | Command::Report(_)
+            | Command::Learn(_)
+            | Command::Replay(_) => Ok(()),
         }
     })
 }
@@ -392,6 +444,8 @@ pub fn run(
         Command::Explain(args) => commands::explain::run(&args, out, err),
         Command::Validate(args) => commands::agent::validate(&args, out),
         Command::Report(args) => commands::report::run(&args, out),
+        Command::Learn(args) => commands::timers::learn(&args, out),
+        Command::Replay(args) => commands::timers::replay(&args, out),
         other => asynchronous(other, out),
     };
     match result {

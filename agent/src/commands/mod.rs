@@ -7,3 +7,4 @@ pub(crate) mod report;
 pub(crate) mod sf;
 pub(crate) mod simulate;
 pub(crate) mod subscribers;
+pub(crate) mod timers;

@@ -1,0 +1,151 @@
+//! `cellwatch learn` and `cellwatch replay`: transition timers from run logs.
+
+use std::io::Write;
+use std::path::Path;
+
+use cellwatch_models::timer::learn::{self, LearnOptions, Tau, TimerModel};
+use cellwatch_models::timer::log::{self, RunLog};
+use cellwatch_models::timer::monitor::{Outcome, TimerMonitor};
+
+use crate::cli::{Failure, LearnArgs, ReplayArgs};
+use crate::inputs::read_text;
+
+fn runs(paths: &[std::path::PathBuf], map: Option<&Path>) -> Result<Vec<RunLog>, Failure> {
+    let map_text = map.map(|m| read_text(m, "signal map")).transpose()?;
+    let mut out = Vec::new();
+    for p in paths {
+        let text = read_text(p, "run log")?;
+        let name = p.display().to_string();
+        let run = match (&map_text, map) {
+            (Some(m), Some(mp)) => log::parse_numeric(&mp.display().to_string(), m, &name, &text),
+            _ => log::parse_csv(&name, &text),
+        };
+        out.push(run.map_err(|e| Failure::Input(e.to_string()))?);
+    }
+    if out.is_empty() {
+        return Err(Failure::Input("give at least one run log".into()));
+    }
+    Ok(out)
+}
+
+fn millis(option: &str, text: &str) -> Result<u64, Failure> {
+    humantime::parse_duration(text)
+        .map(|d| d.as_millis() as u64)
+        .map_err(|e| {
+            Failure::Input(format!(
+                "{option} '{text}': not a duration ({e}); write e.g. 2s or 100ms"
+            ))
+        })
+}
+
+/// `cellwatch learn`.
+pub(crate) fn learn(args: &LearnArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    if args.method != "full-state" {
+        return Err(Failure::Input(format!(
+            "--method {}: only full-state is available in this build",
+            args.method
+        )));
+    }
+    let runs = runs(&args.runs, args.map.as_deref())?;
+    let tau = match (&args.tau, args.tau_auto) {
+        (_, true) => Tau::Auto,
+        (Some(t), false) => Tau::Fixed(millis("--tau", t)?),
+        (None, false) => Tau::Fixed(100),
+    };
+    let options = LearnOptions {
+        delta_min: millis("--delta-min", &args.delta_min)?,
+        tau,
+        min_support: args.min_support,
+    };
+    let learned = learn::full_state(&runs, &options);
+    let io = |e: std::io::Error| Failure::Runtime(e.to_string());
+    writeln!(
+        out,
+        "{} runs, {} signals; kept {} transitions:",
+        runs.len(),
+        learned.model.signals.len(),
+        learned.model.transitions.len()
+    )
+    .map_err(io)?;
+    for t in &learned.model.transitions {
+        let edge = if t.event.edge == learn::Edge::Rise {
+            "+"
+        } else {
+            "-"
+        };
+        writeln!(
+            out,
+            "  #{:03} δ({}, {edge}{} | {}) window [{}, {}] ms, support {}",
+            t.id,
+            t.from.join(":"),
+            t.event.tag,
+            t.delta_ms,
+            t.window_ms[0],
+            t.window_ms[1],
+            t.support
+        )
+        .map_err(io)?;
+    }
+    if !learned.dropped.is_empty() {
+        writeln!(out, "dropped {}:", learned.dropped.len()).map_err(io)?;
+        for d in &learned.dropped {
+            writeln!(out, "  {}: {}", d.transition, d.reason).map_err(io)?;
+        }
+    }
+    let json = serde_json::to_string_pretty(&learned.model)
+        .map_err(|e| Failure::Runtime(e.to_string()))?;
+    std::fs::write(&args.out, json + "\n")
+        .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", args.out.display())))?;
+    writeln!(out, "model written to {}", args.out.display()).map_err(io)
+}
+
+/// `cellwatch replay`.
+pub(crate) fn replay(args: &ReplayArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    let text = read_text(&args.timers, "timer model")?;
+    let model: TimerModel = serde_json::from_str(&text)
+        .map_err(|e| Failure::Input(format!("{}: {e}", args.timers.display())))?;
+    let io = |e: std::io::Error| Failure::Runtime(e.to_string());
+    for (path, run) in args.runs.iter().zip(runs(&args.runs, args.map.as_deref())?) {
+        let mut m = TimerMonitor::new(&model)
+            .map_err(|e| Failure::Input(format!("{}: {e}", args.timers.display())))?;
+        let index: Vec<Option<usize>> = run.signals.iter().map(|s| m.signal(s)).collect();
+        let mut outcomes = Vec::new();
+        for (i, &v) in run.initial.iter().enumerate() {
+            if let Some(s) = index[i] {
+                outcomes.extend(m.set(s, Some(v), 0));
+            }
+        }
+        let mut end = 0;
+        for c in &run.changes {
+            if let Some(s) = index[c.signal] {
+                outcomes.extend(m.set(s, Some(c.value), c.at));
+            }
+            end = c.at;
+        }
+        // The log ends here: a timer still armed has no outcome yet.
+        outcomes.extend(m.advance(end));
+        for o in outcomes {
+            if args.json {
+                writeln!(out, "{}", serde_json::to_string(&o).unwrap_or_default()).map_err(io)?;
+            } else {
+                let line = match o {
+                    Outcome::Early {
+                        transition,
+                        at_ms,
+                        observed_ms,
+                    } => format!("#{transition:03} early at {at_ms} ms (after {observed_ms} ms)"),
+                    Outcome::Late { transition, at_ms } => {
+                        format!("#{transition:03} LATE at {at_ms} ms")
+                    }
+                    Outcome::Normal {
+                        transition,
+                        at_ms,
+                        observed_ms,
+                    } => format!("#{transition:03} normal at {at_ms} ms (after {observed_ms} ms)"),
+                };
+                writeln!(out, "{}: {line}", path.display()).map_err(io)?;
+            }
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,82 @@
+//! `cellwatch learn` and `replay` on the paper's Table 1 log.
+
+use crate::util::{cellwatch, Dir};
+
+#[test]
+fn learn_and_replay_table1() {
+    let d = Dir::new();
+    let map = d.file("map.csv", "1,S1\n2,S2\n3,S3\n");
+    let run = d.file("table1.csv", "t,e\n10,+2\n140,+3\n150,-3\n");
+    let early = d.file("early.csv", "t,e\n10,+2\n125,+3\n");
+    let model = d.file("timers.json", "");
+    let r = cellwatch(&[
+        "learn",
+        &run,
+        "--map",
+        &map,
+        "--delta-min",
+        "100ms",
+        "--tau",
+        "10ms",
+        "--out",
+        &model,
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        r.stdout.contains(
+            "kept 1 transitions:\n  #001 δ(S2:-S3, +S3 | 130) window [120, 140] ms, support 1\n"
+        ),
+        "{}",
+        r.stdout
+    );
+    assert!(
+        r.stdout
+            .contains("  δ(-2:-3, +2 | 10) = 2:-3: Δt 10 ms < Δmin\n"),
+        "{}",
+        r.stdout
+    );
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&model).unwrap()).unwrap();
+    assert_eq!(v["version"], 1);
+    assert_eq!(
+        v["transitions"][0]["event"],
+        serde_json::json!({"tag": "S3", "edge": "rise"})
+    );
+    assert_eq!(
+        v["transitions"][0]["window_ms"],
+        serde_json::json!([120, 140])
+    );
+    let r = cellwatch(&["replay", "--timers", &model, &run, "--map", &map, "--json"]);
+    assert_eq!(
+        r.stdout, "{\"outcome\":\"normal\",\"transition\":1,\"at_ms\":140,\"observed_ms\":130}\n",
+        "{}",
+        r.stderr
+    );
+    let r = cellwatch(&[
+        "replay", "--timers", &model, &early, "--map", &map, "--json",
+    ]);
+    assert_eq!(
+        r.stdout,
+        "{\"outcome\":\"early\",\"transition\":1,\"at_ms\":125,\"observed_ms\":115}\n"
+    );
+}
+
+#[test]
+fn bad_logs_exit_2_with_file_and_line() {
+    let d = Dir::new();
+    let run = d.file("r.csv", "time_ms,tag,value\n0,a,0\n20,a,1\n10,a,0\n");
+    let r = cellwatch(&["learn", &run, "--out", &d.file("t.json", "")]);
+    assert_eq!(r.code, 2);
+    assert_eq!(
+        r.stderr.replace(&run, "r.csv"),
+        "error: r.csv:4: time 10 ms goes backwards (previous row at 20 ms)\n"
+    );
+    let map = d.file("map.csv", "1,S1\n");
+    let run = d.file("n.csv", "t,e\n10,+7\n");
+    let r = cellwatch(&["learn", &run, "--map", &map]);
+    assert_eq!(r.code, 2);
+    assert_eq!(
+        r.stderr.replace(&run, "n.csv").replace(&map, "map.csv"),
+        "error: n.csv:2: unknown signal number 7 in '+7' (not in map.csv)\n"
+    );
+}
