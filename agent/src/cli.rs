@@ -92,8 +92,10 @@ pub(crate) struct LearnArgs {
     /// Runs a transition must be seen in (default: every run).
     #[arg(long)]
     pub(crate) min_support: Option<usize>,
-    /// Learning method: full-state (the paper's).
-    #[arg(long, default_value = "full-state")]
+    /// Learning method: `common` (each event timed from its most consistent
+    /// trigger; copes with stations running in parallel) or `full-state`
+    /// (the paper's: timed from entering the full state).
+    #[arg(long, default_value = "common")]
     pub(crate) method: String,
     /// Where to write the timer model (JSON).
     #[arg(long, default_value = "timers.json")]

@@ -5,7 +5,7 @@ use std::path::Path;
 
 use cellwatch_models::timer::learn::{self, LearnOptions, Tau, TimerModel};
 use cellwatch_models::timer::log::{self, RunLog};
-use cellwatch_models::timer::monitor::{Outcome, TimerMonitor};
+use cellwatch_models::timer::monitor::{self, Outcome};
 
 use crate::cli::{Failure, LearnArgs, ReplayArgs};
 use crate::inputs::read_text;
@@ -40,12 +40,6 @@ fn millis(option: &str, text: &str) -> Result<u64, Failure> {
 
 /// `cellwatch learn`.
 pub(crate) fn learn(args: &LearnArgs, out: &mut dyn Write) -> Result<(), Failure> {
-    if args.method != "full-state" {
-        return Err(Failure::Input(format!(
-            "--method {}: only full-state is available in this build",
-            args.method
-        )));
-    }
     let runs = runs(&args.runs, args.map.as_deref())?;
     let tau = match (&args.tau, args.tau_auto) {
         (_, true) => Tau::Auto,
@@ -57,7 +51,15 @@ pub(crate) fn learn(args: &LearnArgs, out: &mut dyn Write) -> Result<(), Failure
         tau,
         min_support: args.min_support,
     };
-    let learned = learn::full_state(&runs, &options);
+    let learned = match args.method.as_str() {
+        "common" => learn::common(&runs, &options),
+        "full-state" => learn::full_state(&runs, &options),
+        other => {
+            return Err(Failure::Input(format!(
+                "--method '{other}': use common or full-state"
+            )))
+        }
+    };
     let io = |e: std::io::Error| Failure::Runtime(e.to_string());
     writeln!(
         out,
@@ -75,8 +77,17 @@ pub(crate) fn learn(args: &LearnArgs, out: &mut dyn Write) -> Result<(), Failure
         };
         writeln!(
             out,
-            "  #{:03} δ({}, {edge}{} | {}) window [{}, {}] ms, support {}",
+            "  #{:03} δ({}{}, {edge}{} | {}) window [{}, {}] ms, support {}",
             t.id,
+            t.trigger.as_ref().map_or(String::new(), |e| format!(
+                "after {}{} ",
+                if e.edge == learn::Edge::Rise {
+                    "+"
+                } else {
+                    "-"
+                },
+                e.tag
+            )),
             t.from.join(":"),
             t.event.tag,
             t.delta_ms,
@@ -106,24 +117,8 @@ pub(crate) fn replay(args: &ReplayArgs, out: &mut dyn Write) -> Result<(), Failu
         .map_err(|e| Failure::Input(format!("{}: {e}", args.timers.display())))?;
     let io = |e: std::io::Error| Failure::Runtime(e.to_string());
     for (path, run) in args.runs.iter().zip(runs(&args.runs, args.map.as_deref())?) {
-        let mut m = TimerMonitor::new(&model)
+        let outcomes = monitor::replay(&model, &run)
             .map_err(|e| Failure::Input(format!("{}: {e}", args.timers.display())))?;
-        let index: Vec<Option<usize>> = run.signals.iter().map(|s| m.signal(s)).collect();
-        let mut outcomes = Vec::new();
-        for (i, &v) in run.initial.iter().enumerate() {
-            if let Some(s) = index[i] {
-                outcomes.extend(m.set(s, Some(v), 0));
-            }
-        }
-        let mut end = 0;
-        for c in &run.changes {
-            if let Some(s) = index[c.signal] {
-                outcomes.extend(m.set(s, Some(c.value), c.at));
-            }
-            end = c.at;
-        }
-        // The log ends here: a timer still armed has no outcome yet.
-        outcomes.extend(m.advance(end));
         for o in outcomes {
             if args.json {
                 writeln!(out, "{}", serde_json::to_string(&o).unwrap_or_default()).map_err(io)?;

@@ -89,6 +89,10 @@ pub struct Transition {
     /// The paper's numbering of the states, `2:-3`, when signals are numbered.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub from_numbered: Option<String>,
+    /// The event that starts the timer (`common` method); `None`: the
+    /// timer starts when the `from` state is entered (`full-state`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trigger: Option<Event>,
 }
 
 /// The model file.
@@ -310,6 +314,7 @@ pub fn full_state(runs: &[RunLog], options: &LearnOptions) -> Learned {
             support: seen.len(),
             window_ms: window,
             from_numbered: Some(numbered(from)),
+            trigger: None,
         });
     }
     Learned {
@@ -317,6 +322,257 @@ pub fn full_state(runs: &[RunLog], options: &LearnOptions) -> Learned {
             version: MODEL_VERSION,
             method: "full-state".into(),
             signals: names,
+            transitions,
+        },
+        dropped,
+    }
+}
+
+/// Every run's changes on one numbering of signals.
+struct Aligned {
+    names: Vec<String>,
+    /// Per run: initial values, by global signal.
+    initial: Vec<Vec<bool>>,
+    /// Per run: (time, signal, value).
+    changes: Vec<Vec<(u64, usize, bool)>>,
+    /// Signals that change in some run.
+    changing: Vec<bool>,
+}
+
+fn align(runs: &[RunLog]) -> Aligned {
+    let mut names: Vec<String> = Vec::new();
+    let mut mapped = Vec::new();
+    for r in runs {
+        mapped.push(
+            r.signals
+                .iter()
+                .map(|s| match names.iter().position(|x| x == s) {
+                    Some(i) => i,
+                    None => {
+                        names.push(s.clone());
+                        names.len() - 1
+                    }
+                })
+                .collect::<Vec<usize>>(),
+        );
+    }
+    let mut changing = vec![false; names.len()];
+    let mut initial = Vec::new();
+    let mut changes = Vec::new();
+    for (r, run) in runs.iter().enumerate() {
+        let mut init = vec![false; names.len()];
+        for (l, &g) in mapped[r].iter().enumerate() {
+            init[g] = run.initial[l];
+        }
+        initial.push(init);
+        changes.push(
+            run.changes
+                .iter()
+                .map(|c| (c.at, mapped[r][c.signal], c.value))
+                .collect::<Vec<_>>(),
+        );
+        for c in &run.changes {
+            changing[mapped[r][c.signal]] = true;
+        }
+    }
+    Aligned {
+        names,
+        initial,
+        changes,
+        changing,
+    }
+}
+
+/// How far back a trigger may be, ms.
+const HORIZON_MS: u64 = 120_000;
+
+/// Learns transition timers with the `common` method.
+///
+/// The paper's full-state method breaks when stations run in parallel:
+/// another station's events change the state, so one physical motion shows
+/// up under many states with meaningless Δt. Here each event `E` (a signal
+/// edge) is one transition, timed from its *trigger*: among the events that
+/// precede every occurrence of `E` (after its previous occurrence, within
+/// two minutes) and are always followed by `E` before they happen again,
+/// the one whose delay to `E` varies least (ties: the nearest). The start
+/// condition keeps only the literals that are stable from the trigger to
+/// `E` in every occurrence and have the same value in all of them; signals
+/// that never change are left out. Δmin, support and the window-fit rule
+/// then apply as in [`full_state`].
+pub fn common(runs: &[RunLog], options: &LearnOptions) -> Learned {
+    let a = align(runs);
+    let n = a.names.len();
+    // Occurrences of each event type (signal, value) per run, in time order.
+    let mut occ: BTreeMap<(usize, bool), Vec<Vec<u64>>> = BTreeMap::new();
+    for (r, ch) in a.changes.iter().enumerate() {
+        for &(t, s, v) in ch {
+            occ.entry((s, v))
+                .or_insert_with(|| vec![Vec::new(); runs.len()])[r]
+                .push(t);
+        }
+    }
+    let required = options.min_support.unwrap_or(runs.len()).max(1);
+    let mut transitions = Vec::new();
+    let mut dropped = Vec::new();
+    let describe = |s: usize, v: bool| format!("{}{}", if v { "+" } else { "-" }, a.names[s]);
+    for (&(es, ev), e_runs) in &occ {
+        let seen = e_runs.iter().filter(|o| !o.is_empty()).count();
+        // Candidate triggers and the delays to every occurrence of E.
+        let mut best: Option<((usize, bool), Vec<(usize, u64, u64)>, u64, u64)> = None;
+        for (&(ts, tv), t_runs) in &occ {
+            if (ts, tv) == (es, ev) {
+                continue;
+            }
+            let mut delays: Vec<(usize, u64, u64)> = Vec::new(); // (run, t_trigger, t_event)
+            let mut ok = true;
+            'runs: for (r, e_times) in e_runs.iter().enumerate() {
+                let t_times = &t_runs[r];
+                let mut prev_e = 0;
+                for &te in e_times {
+                    let lo = prev_e.max(te.saturating_sub(HORIZON_MS));
+                    let last = t_times
+                        .iter()
+                        .rev()
+                        .find(|&&tt| tt < te && tt >= lo && tt > prev_e.saturating_sub(0));
+                    match last {
+                        Some(&tt) if tt > prev_e || prev_e == 0 => delays.push((r, tt, te)),
+                        _ => {
+                            ok = false;
+                            break 'runs;
+                        }
+                    }
+                    prev_e = te;
+                }
+                // Always followed by E: every trigger is followed by an E
+                // before the next trigger.
+                for (i, &tt) in t_times.iter().enumerate() {
+                    let next_t = t_times.get(i + 1).copied().unwrap_or(u64::MAX);
+                    let next_e = e_times.iter().find(|&&te| te > tt).copied();
+                    match next_e {
+                        Some(te) if te < next_t && te - tt <= HORIZON_MS => {}
+                        // A trigger at the very end of a run may have no E yet.
+                        None if i + 1 == t_times.len() => {}
+                        _ => {
+                            ok = false;
+                            break 'runs;
+                        }
+                    }
+                }
+            }
+            if !ok || delays.is_empty() {
+                continue;
+            }
+            let ds: Vec<u64> = delays.iter().map(|d| d.2 - d.1).collect();
+            let spread = ds.iter().max().unwrap_or(&0) - ds.iter().min().unwrap_or(&0);
+            let mean = ds.iter().sum::<u64>() / ds.len() as u64;
+            let better = match &best {
+                None => true,
+                Some((_, _, bs, bm)) => spread < *bs || (spread == *bs && mean < *bm),
+            };
+            if better {
+                best = Some(((ts, tv), delays, spread, mean));
+            }
+        }
+        let Some(((ts, tv), delays, _, mean)) = best else {
+            if seen >= required {
+                dropped.push(Dropped {
+                    transition: format!("{} (no consistent trigger)", describe(es, ev)),
+                    reason: DropReason::Support { seen: 0, required },
+                });
+            }
+            continue;
+        };
+        let ds: Vec<u64> = delays.iter().map(|d| d.2 - d.1).collect();
+        let min = *ds.iter().min().unwrap_or(&0);
+        let max = *ds.iter().max().unwrap_or(&0);
+        let text = format!("δ({} → {} | {mean})", describe(ts, tv), describe(es, ev));
+        let tau = match options.tau {
+            Tau::Fixed(t) => t,
+            Tau::Auto => auto_tau(&ds, mean),
+        };
+        let window = [mean.saturating_sub(tau), mean + tau];
+        let reason = if min < options.delta_min {
+            Some(DropReason::TooShort { min_ms: min })
+        } else if seen < required {
+            Some(DropReason::Support { seen, required })
+        } else if min < window[0] || max > window[1] {
+            Some(DropReason::NotInvariant {
+                min_ms: min,
+                max_ms: max,
+                window,
+            })
+        } else {
+            None
+        };
+        if let Some(reason) = reason {
+            dropped.push(Dropped {
+                transition: text,
+                reason,
+            });
+            continue;
+        }
+        // Stable literals: no change in [t_trigger, t_event) other than the
+        // trigger itself, and the same value in every occurrence.
+        let mut stable: Vec<Option<bool>> = vec![None; n];
+        let mut excluded = vec![false; n];
+        for &(r, tt, te) in &delays {
+            let mut value = a.initial[r].clone();
+            let mut changed = vec![false; n];
+            for &(t, s, v) in &a.changes[r] {
+                if t > te || (t == te && s == es) {
+                    break;
+                }
+                if t < tt || (t == tt && s == ts && v == tv) {
+                    value[s] = v;
+                } else if t < te || (t == tt) {
+                    changed[s] = true;
+                }
+            }
+            for s in 0..n {
+                if changed[s] || !a.changing[s] {
+                    excluded[s] = true;
+                } else {
+                    match stable[s] {
+                        None => stable[s] = Some(value[s]),
+                        Some(v) if v != value[s] => excluded[s] = true,
+                        _ => {}
+                    }
+                }
+            }
+        }
+        let from: Vec<(usize, bool)> = (0..n)
+            .filter(|&s| !excluded[s])
+            .filter_map(|s| stable[s].map(|v| (s, v)))
+            .collect();
+        let to: Vec<(usize, bool)> = from
+            .iter()
+            .map(|&(s, v)| if s == es { (s, ev) } else { (s, v) })
+            .collect();
+        transitions.push(Transition {
+            id: transitions.len() as u32 + 1,
+            from: literals(&from, &a.names),
+            event: Event {
+                tag: a.names[es].clone(),
+                edge: if ev { Edge::Rise } else { Edge::Fall },
+            },
+            to: literals(&to, &a.names),
+            delta_ms: mean,
+            min_ms: min,
+            max_ms: max,
+            support: seen,
+            window_ms: window,
+            from_numbered: None,
+            trigger: Some(Event {
+                tag: a.names[ts].clone(),
+                edge: if tv { Edge::Rise } else { Edge::Fall },
+            }),
+        });
+    }
+    Learned {
+        model: TimerModel {
+            version: MODEL_VERSION,
+            method: "common".into(),
+            signals: a.names,
             transitions,
         },
         dropped,

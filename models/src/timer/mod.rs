@@ -5,8 +5,10 @@
 //! - [`log`]: run logs (CSV and the paper's numeric form);
 //! - [`learn`]: the learner (the paper's full-state method) and the model
 //!   file it writes;
-//! - [`monitor`]: the runtime monitor, fed changes and the passing of time.
+//! - [`monitor`]: the runtime monitor, fed changes and the passing of time;
+//! - [`line`]: a simulated body-shop line that writes runs, normal or faulty.
 
 pub mod learn;
+pub mod line;
 pub mod log;
 pub mod monitor;

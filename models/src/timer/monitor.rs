@@ -54,6 +54,8 @@ struct Compiled {
     id: u32,
     condition: Vec<(usize, bool)>,
     event: (usize, bool),
+    /// `common` method: the event that starts the timer.
+    trigger: Option<(usize, bool)>,
     lo: u64,
     hi: u64,
 }
@@ -122,8 +124,16 @@ impl TimerMonitor {
                 condition.push((lookup(t.id, tag)?, v));
             }
             let event = (lookup(t.id, &t.event.tag)?, t.event.edge == Edge::Rise);
+            let trigger = match &t.trigger {
+                Some(e) => Some((lookup(t.id, &e.tag)?, e.edge == Edge::Rise)),
+                None => None,
+            };
             let k = transitions.len();
-            for &(s, _) in condition.iter().chain(std::iter::once(&event)) {
+            for &(s, _) in condition
+                .iter()
+                .chain(std::iter::once(&event))
+                .chain(trigger.iter())
+            {
                 if !readers[s].contains(&k) {
                     readers[s].push(k);
                 }
@@ -132,6 +142,7 @@ impl TimerMonitor {
                 id: t.id,
                 condition,
                 event,
+                trigger,
                 lo: t.window_ms[0],
                 hi: t.window_ms[1],
             });
@@ -175,7 +186,8 @@ impl TimerMonitor {
         for &k in &readers {
             let t = &self.transitions[k];
             let Some(since) = self.armed[k] else { continue };
-            if t.event.0 == s && value == Some(t.event.1) && old == Some(!t.event.1) {
+            let is_event = t.event.0 == s && value == Some(t.event.1) && old == Some(!t.event.1);
+            if is_event {
                 let theta = at - since;
                 out.push(if theta <= t.lo {
                     Outcome::Early {
@@ -195,17 +207,32 @@ impl TimerMonitor {
                         observed_ms: theta,
                     }
                 });
+                self.armed[k] = None;
+            } else if value.is_none() || t.trigger.is_none() {
+                // Unknown value, or (full-state) the state left another way.
+                self.armed[k] = None;
             }
-            self.armed[k] = None;
         }
         self.values[s] = value;
-        // Arm the transitions whose condition has just become true.
         for &k in &readers {
-            if self.armed[k].is_none()
-                && self.holds(&self.transitions[k])
-                && self.transitions[k].condition.iter().any(|&(c, _)| c == s)
-            {
-                self.armed[k] = Some(at);
+            let t = &self.transitions[k];
+            match t.trigger {
+                // `common`: the trigger starts (or restarts) the timer when
+                // the start condition holds.
+                Some((ts, tv)) => {
+                    if ts == s && value == Some(tv) && old == Some(!tv) && self.holds(t) {
+                        self.armed[k] = Some(at);
+                    }
+                }
+                // `full-state`: entering the state starts it.
+                None => {
+                    if self.armed[k].is_none()
+                        && self.holds(t)
+                        && t.condition.iter().any(|&(c, _)| c == s)
+                    {
+                        self.armed[k] = Some(at);
+                    }
+                }
             }
         }
         out
@@ -234,6 +261,32 @@ impl TimerMonitor {
     }
 }
 
+/// Runs `model`'s monitor over one run log in virtual time: initial values
+/// at 0, every change, then time advanced to the last change (the end of
+/// the log ends the observation).
+///
+/// # Errors
+/// The model cannot be monitored.
+pub fn replay(model: &TimerModel, run: &super::log::RunLog) -> Result<Vec<Outcome>, ModelError> {
+    let mut m = TimerMonitor::new(model)?;
+    let index: Vec<Option<usize>> = run.signals.iter().map(|s| m.signal(s)).collect();
+    let mut out = Vec::new();
+    for (i, &v) in run.initial.iter().enumerate() {
+        if let Some(s) = index[i] {
+            out.extend(m.set(s, Some(v), 0));
+        }
+    }
+    let mut end = 0;
+    for c in &run.changes {
+        if let Some(s) = index[c.signal] {
+            out.extend(m.set(s, Some(c.value), c.at));
+        }
+        end = c.at;
+    }
+    out.extend(m.advance(end));
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -259,6 +312,7 @@ mod tests {
                 support: 1,
                 window_ms: [120, 140],
                 from_numbered: None,
+                trigger: None,
             }],
         };
         let mut m = TimerMonitor::new(&model).unwrap();
