@@ -14,6 +14,8 @@ fn learn_and_replay_table1() {
         &run,
         "--map",
         &map,
+        "--method",
+        "full-state",
         "--delta-min",
         "100ms",
         "--tau",

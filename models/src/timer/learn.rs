@@ -124,6 +124,9 @@ pub enum DropReason {
         /// Runs required.
         required: usize,
     },
+    /// No preceding event is always followed by it at a consistent delay
+    /// (`common` method).
+    NoTrigger,
     /// Training Δt spread wider than the window.
     NotInvariant {
         /// Shortest.
@@ -140,6 +143,7 @@ impl fmt::Display for DropReason {
         match self {
             DropReason::TooShort { min_ms } => write!(f, "Δt {min_ms} ms < Δmin"),
             DropReason::Support { seen, required } => write!(f, "seen in {seen} of the {required} runs required"),
+            DropReason::NoTrigger => write!(f, "no preceding event is always followed by it"),
             DropReason::NotInvariant { min_ms, max_ms, window } => write!(
                 f,
                 "not a timing invariant: training Δt {min_ms}..{max_ms} ms do not fit the window [{}, {}] ms",
@@ -383,6 +387,15 @@ fn align(runs: &[RunLog]) -> Aligned {
     }
 }
 
+/// A candidate trigger of an event and its delays: (run, trigger time,
+/// event time) per occurrence.
+struct Candidate {
+    trigger: (usize, bool),
+    delays: Vec<(usize, u64, u64)>,
+    spread: u64,
+    mean: u64,
+}
+
 /// How far back a trigger may be, ms.
 const HORIZON_MS: u64 = 120_000;
 
@@ -418,7 +431,7 @@ pub fn common(runs: &[RunLog], options: &LearnOptions) -> Learned {
     for (&(es, ev), e_runs) in &occ {
         let seen = e_runs.iter().filter(|o| !o.is_empty()).count();
         // Candidate triggers and the delays to every occurrence of E.
-        let mut best: Option<((usize, bool), Vec<(usize, u64, u64)>, u64, u64)> = None;
+        let mut best: Option<Candidate> = None;
         for (&(ts, tv), t_runs) in &occ {
             if (ts, tv) == (es, ev) {
                 continue;
@@ -467,17 +480,28 @@ pub fn common(runs: &[RunLog], options: &LearnOptions) -> Learned {
             let mean = ds.iter().sum::<u64>() / ds.len() as u64;
             let better = match &best {
                 None => true,
-                Some((_, _, bs, bm)) => spread < *bs || (spread == *bs && mean < *bm),
+                Some(b) => spread < b.spread || (spread == b.spread && mean < b.mean),
             };
             if better {
-                best = Some(((ts, tv), delays, spread, mean));
+                best = Some(Candidate {
+                    trigger: (ts, tv),
+                    delays,
+                    spread,
+                    mean,
+                });
             }
         }
-        let Some(((ts, tv), delays, _, mean)) = best else {
+        let Some(Candidate {
+            trigger: (ts, tv),
+            delays,
+            mean,
+            ..
+        }) = best
+        else {
             if seen >= required {
                 dropped.push(Dropped {
-                    transition: format!("{} (no consistent trigger)", describe(es, ev)),
-                    reason: DropReason::Support { seen: 0, required },
+                    transition: describe(es, ev),
+                    reason: DropReason::NoTrigger,
                 });
             }
             continue;

@@ -215,13 +215,13 @@ pub fn run(seed: u64, cycles: usize, fault: Option<Fault>) -> (RunLog, Option<In
     // First pass: each station's timeline without faults, remembering each
     // motion's command time.
     let mut conveyor_t = rng.between(0, 3000);
-    for k in 0..4 {
+    for (k, station) in station_events.iter_mut().enumerate() {
         let motions = station_motions(k);
         let mut t = rng.between(0, 20_000);
         for cycle in 0..cycles {
             // The operator loads a part: a random wait.
             t += rng.between(500, 12_000);
-            station_events[k].push((t, idx(&format!("ST{k}_LOADED")), true));
+            station.push((t, idx(&format!("ST{k}_LOADED")), true));
             t += scan(&mut rng);
             for (mi, mo) in motions.iter().enumerate() {
                 if mi == 3 {
@@ -235,7 +235,7 @@ pub fn run(seed: u64, cycles: usize, fault: Option<Fault>) -> (RunLog, Option<In
                     motion: mi,
                     cycle,
                 });
-                station_events[k].push((t, idx(&mo.command), mo.command_value));
+                station.push((t, idx(&mo.command), mo.command_value));
                 let mut end = t + jitter(&mut rng, mo.ms);
                 if parallel {
                     let b = &motions[3];
@@ -245,68 +245,52 @@ pub fn run(seed: u64, cycles: usize, fault: Option<Fault>) -> (RunLog, Option<In
                         motion: 3,
                         cycle,
                     });
-                    station_events[k].push((t, idx(&b.command), b.command_value));
+                    station.push((t, idx(&b.command), b.command_value));
                     let end_b = t + jitter(&mut rng, b.ms);
-                    station_events[k].push((end_b, idx(&b.sensor), b.sensor_value));
+                    station.push((end_b, idx(&b.sensor), b.sensor_value));
                     let drop_b = end_b + scan(&mut rng);
-                    station_events[k].push((drop_b, idx(&b.command), !b.command_value));
-                    station_events[k].push((
-                        drop_b + scan(&mut rng),
-                        idx(&b.sensor),
-                        !b.sensor_value,
-                    ));
+                    station.push((drop_b, idx(&b.command), !b.command_value));
+                    station.push((drop_b + scan(&mut rng), idx(&b.sensor), !b.sensor_value));
                     end = end.max(end_b);
                     let end_a = t + jitter(&mut rng, mo.ms);
-                    station_events[k].push((end_a, idx(&mo.sensor), mo.sensor_value));
+                    station.push((end_a, idx(&mo.sensor), mo.sensor_value));
                     let drop_a = end_a + scan(&mut rng);
-                    station_events[k].push((drop_a, idx(&mo.command), !mo.command_value));
-                    station_events[k].push((
-                        drop_a + scan(&mut rng),
-                        idx(&mo.sensor),
-                        !mo.sensor_value,
-                    ));
+                    station.push((drop_a, idx(&mo.command), !mo.command_value));
+                    station.push((drop_a + scan(&mut rng), idx(&mo.sensor), !mo.sensor_value));
                     end = end.max(end_a);
                     t = end + scan(&mut rng);
                     continue;
                 }
-                station_events[k].push((end, idx(&mo.sensor), mo.sensor_value));
+                station.push((end, idx(&mo.sensor), mo.sensor_value));
                 if mo.command.ends_with("_IN") || mo.command.ends_with("_OUT") {
-                    station_events[k].push((end + scan(&mut rng), idx(&mo.command), false));
+                    station.push((end + scan(&mut rng), idx(&mo.command), false));
                 }
                 if mi == 0 {
-                    station_events[k].push((
+                    station.push((
                         end + scan(&mut rng),
                         idx(&format!("ST{k}_PART_PRESENT")),
                         true,
                     ));
-                    station_events[k].push((
+                    station.push((
                         end + 2 * scan(&mut rng),
                         idx(&format!("TR{k}_AT_STATION")),
                         false,
                     ));
                 }
                 if mi == 5 {
-                    station_events[k].push((
+                    station.push((
                         t + scan(&mut rng),
                         idx(&format!("ST{k}_PART_PRESENT")),
                         false,
                     ));
-                    station_events[k].push((
-                        t + scan(&mut rng),
-                        idx(&format!("TR{k}_HOME")),
-                        false,
-                    ));
-                    station_events[k].push((
-                        end + scan(&mut rng),
-                        idx(&format!("ST{k}_LOADED")),
-                        false,
-                    ));
-                    station_events[k].push((
+                    station.push((t + scan(&mut rng), idx(&format!("TR{k}_HOME")), false));
+                    station.push((end + scan(&mut rng), idx(&format!("ST{k}_LOADED")), false));
+                    station.push((
                         end + scan(&mut rng),
                         idx(&format!("ST{k}_CYCLE_DONE")),
                         true,
                     ));
-                    station_events[k].push((
+                    station.push((
                         end + 3 * scan(&mut rng),
                         idx(&format!("ST{k}_CYCLE_DONE")),
                         false,
@@ -379,9 +363,8 @@ pub fn run(seed: u64, cycles: usize, fault: Option<Fault>) -> (RunLog, Option<In
             let _ = p.cycle;
         }
     }
-    for k in 0..4 {
-        let evs = std::mem::take(&mut station_events[k]);
-        for (t, s, v) in evs {
+    for station in &mut station_events {
+        for (t, s, v) in std::mem::take(station) {
             push(&mut events, t, s, v);
         }
     }
