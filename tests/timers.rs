@@ -82,3 +82,116 @@ fn bad_logs_exit_2_with_file_and_line() {
         "error: n.csv:2: unknown signal number 7 in '+7' (not in map.csv)\n"
     );
 }
+
+/// The simulated line end to end through the CLI: simulate, learn, replay.
+#[test]
+fn simulate_learn_replay_the_line() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = |n: &str| d.path().join(n).to_str().unwrap().to_string();
+    let r = cellwatch(&[
+        "simulate",
+        "line",
+        "--runs",
+        "4",
+        "--seed",
+        "1",
+        "--out",
+        &dir("train"),
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let r = cellwatch(&[
+        "simulate",
+        "line",
+        "--runs",
+        "2",
+        "--seed",
+        "200",
+        "--out",
+        &dir("normal"),
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let r = cellwatch(&[
+        "simulate",
+        "line",
+        "--runs",
+        "1",
+        "--seed",
+        "300",
+        "--inject",
+        "slow@12",
+        "--out",
+        &dir("faulty"),
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let labels = std::fs::read_to_string(d.path().join("faulty/faults.csv")).unwrap();
+    let sensor = labels
+        .lines()
+        .nth(1)
+        .unwrap()
+        .split(',')
+        .nth(2)
+        .unwrap()
+        .to_string();
+    let runs: Vec<String> = (1..=4)
+        .map(|i| format!("{}/run-{i:03}.csv", dir("train")))
+        .collect();
+    let model = dir("timers.json");
+    let mut args = vec!["learn", "--delta-min", "2s", "--tau-auto", "--out", &model];
+    args.extend(runs.iter().map(String::as_str));
+    let r = cellwatch(&args);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(r.stdout.contains("kept 26 transitions"), "{}", r.stdout);
+    let normal = [
+        format!("{}/run-001.csv", dir("normal")),
+        format!("{}/run-002.csv", dir("normal")),
+    ];
+    let r = cellwatch(&[
+        "replay", "--timers", &model, &normal[0], &normal[1], "--json",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        r.stdout
+            .lines()
+            .all(|l| l.contains("\"outcome\":\"normal\"")),
+        "false alarm: {}",
+        r.stdout
+    );
+    let r = cellwatch(&[
+        "replay",
+        "--timers",
+        &model,
+        &format!("{}/run-001.csv", dir("faulty")),
+        "--json",
+    ]);
+    let model: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.path().join("timers.json")).unwrap())
+            .unwrap();
+    let late: Vec<u64> = r
+        .stdout
+        .lines()
+        .filter(|l| l.contains("\"outcome\":\"late\""))
+        .map(|l| {
+            serde_json::from_str::<serde_json::Value>(l).unwrap()["transition"]
+                .as_u64()
+                .unwrap()
+        })
+        .collect();
+    let named: Vec<&str> = late
+        .iter()
+        .map(|id| {
+            model["transitions"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|t| t["id"] == *id)
+                .unwrap()["event"]["tag"]
+                .as_str()
+                .unwrap()
+        })
+        .collect();
+    assert!(
+        named.contains(&sensor.as_str()),
+        "slow {sensor} not flagged: {named:?}\n{}",
+        r.stdout
+    );
+}

@@ -176,6 +176,29 @@ pub(crate) enum SimulateCommand {
     /// The CNC of paper 000: ESE and CSD logic, faults on a schedule or on
     /// command (standard input: `set X0.06 0`, `bad X0.04`, `quit`).
     Cnc(SimulateArgs),
+    /// Paper 001's body-shop line: writes run logs (CSV), normal or with an
+    /// injected fault, deterministic per seed.
+    Line(LineArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct LineArgs {
+    /// How many runs.
+    #[arg(long, default_value_t = 4)]
+    pub(crate) runs: u64,
+    /// Cycles per station per run.
+    #[arg(long, default_value_t = 6)]
+    pub(crate) cycles: usize,
+    /// Inject a fault in every run: KIND@STEP, KIND one of missing, fast,
+    /// slow, stuck; STEP the motion number (in command order).
+    #[arg(long, value_name = "KIND@STEP")]
+    pub(crate) inject: Option<String>,
+    /// Seed of the first run (run i uses seed + i).
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// Directory for run-NNN.csv (and faults.csv with the labels).
+    #[arg(long)]
+    pub(crate) out: PathBuf,
 }
 
 #[derive(Debug, clap::Args)]
@@ -403,6 +426,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
         match command {
             Command::Run(args) => commands::agent::run(&args).await,
             Command::Demo(args) => commands::agent::demo(&args, out).await,
+            Command::Simulate(SimulateCommand::Line(args)) => commands::simulate::line(&args, out),
             Command::Simulate(SimulateCommand::Cnc(args)) => {
                 commands::simulate::cnc(&args, out).await
             }

@@ -4,7 +4,7 @@ use std::io::Write;
 
 use tokio::io::{AsyncBufReadExt, BufReader};
 
-use crate::cli::{Failure, SimulateArgs};
+use crate::cli::{Failure, LineArgs, SimulateArgs};
 use crate::sim::cnc::{Scenario, SimOptions, SimulatedCnc};
 use crate::sources::pki;
 
@@ -78,5 +78,62 @@ pub(crate) async fn cnc(args: &SimulateArgs, out: &mut dyn Write) -> Result<(), 
         p.abort();
     }
     sim.stop();
+    Ok(())
+}
+
+/// `cellwatch simulate line`: writes run logs of the simulated body-shop line.
+pub(crate) fn line(args: &LineArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    use cellwatch_models::timer::line::{self, Fault};
+    let fault = match &args.inject {
+        None => None,
+        Some(spec) => {
+            let (kind, step) = spec.split_once('@').ok_or_else(|| {
+                Failure::Input(format!("--inject '{spec}': write KIND@STEP, as in slow@12"))
+            })?;
+            let kind = kind
+                .parse()
+                .map_err(|e: String| Failure::Input(format!("--inject '{spec}': {e}")))?;
+            let step = step
+                .parse()
+                .map_err(|_| Failure::Input(format!("--inject '{spec}': STEP must be a number")))?;
+            Some(Fault { kind, step })
+        }
+    };
+    std::fs::create_dir_all(&args.out)
+        .map_err(|e| Failure::Runtime(format!("cannot create {}: {e}", args.out.display())))?;
+    let io = |e: std::io::Error| Failure::Runtime(e.to_string());
+    let mut labels = String::from("run,kind,sensor,command_at_ms\n");
+    for i in 0..args.runs {
+        let (run, injected) = line::run(args.seed + i, args.cycles, fault);
+        let mut csv = String::from("time_ms,tag,value\n");
+        for (s, v) in run.signals.iter().zip(&run.initial) {
+            csv.push_str(&format!("0,{s},{}\n", u8::from(*v)));
+        }
+        for c in &run.changes {
+            csv.push_str(&format!(
+                "{},{},{}\n",
+                c.at,
+                run.signals[c.signal],
+                u8::from(c.value)
+            ));
+        }
+        let name = format!("run-{:03}.csv", i + 1);
+        let path = args.out.join(&name);
+        std::fs::write(&path, csv)
+            .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", path.display())))?;
+        if let Some(f) = injected {
+            labels.push_str(&format!(
+                "{name},{:?},{},{}\n",
+                f.kind, f.sensor, f.command_at
+            ));
+        }
+        writeln!(out, "{} ({} changes)", path.display(), run.changes.len()).map_err(io)?;
+    }
+    if fault.is_some() {
+        let path = args.out.join("faults.csv");
+        std::fs::write(&path, labels)
+            .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", path.display())))?;
+        writeln!(out, "{} (the injected faults)", path.display()).map_err(io)?;
+    }
     Ok(())
 }
