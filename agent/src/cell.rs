@@ -137,10 +137,31 @@ pub async fn start(
         Some(path) => OperatorKeys::load(path)?,
         None => OperatorKeys::default(),
     };
+    let mut sets: Vec<Box<dyn cellwatch_models::engine::CheckSet>> =
+        vec![Box::new(SwitchingChecks::new(config.switching.clone()))];
+    for t in &config.timers {
+        let checks =
+            cellwatch_models::timer::checks::TimerChecks::new(&t.id, &t.model, t.severity, |n| {
+                crate::config::timer_signal(&config.tags, n)
+            })
+            .map_err(|e| format!("checks.timers {}: {e}", t.id))?;
+        for tr in &t.model.transitions {
+            let labels = [format!("{}-{:03}", t.id, tr.id)];
+            metrics
+                .transition_window_seconds
+                .with_label_values(&[labels[0].as_str(), "lo"])
+                .set(tr.window_ms[0] as f64 / 1000.0);
+            metrics
+                .transition_window_seconds
+                .with_label_values(&[labels[0].as_str(), "hi"])
+                .set(tr.window_ms[1] as f64 / 1000.0);
+        }
+        sets.push(Box::new(checks));
+    }
     let engine = CellEngine::new(
         &config.cell,
         config.engine_tags(),
-        vec![Box::new(SwitchingChecks::new(config.switching.clone()))],
+        sets,
         config.state.clone(),
     )
     .map_err(|e| e.to_string())?;

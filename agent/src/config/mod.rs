@@ -172,6 +172,17 @@ pub struct JournalConfig {
     pub retention: Duration,
 }
 
+/// A transition-timer check: a learned model whose signals are tags.
+#[derive(Debug, Clone)]
+pub struct TimerCheck {
+    /// Alarm id prefix (`<id>-<nnn>`).
+    pub id: String,
+    /// The model, from `cellwatch learn`.
+    pub model: cellwatch_models::timer::learn::TimerModel,
+    /// Severity of its alarms.
+    pub severity: Severity,
+}
+
 /// A validated cell configuration.
 #[derive(Clone)]
 pub struct CellConfig {
@@ -185,6 +196,8 @@ pub struct CellConfig {
     pub tags: Vec<TagConfig>,
     /// Switching-function checks, compiled.
     pub switching: Vec<SwitchingCheck>,
+    /// Transition-timer checks: id, model, severity.
+    pub timers: Vec<TimerCheck>,
     /// Machine-state rules.
     pub state: StateRules,
     /// How often the state is published even without change.
@@ -422,6 +435,65 @@ impl Validator<'_> {
                 switching.push(check);
             }
         }
+        let mut timers = Vec::new();
+        for (i, t) in raw.checks.timers.into_iter().enumerate() {
+            let key = format!("checks.timers[{i}]");
+            if !ids.insert(t.id.get_ref().clone()) {
+                self.problem(
+                    t.id.span(),
+                    &format!("{key}.id"),
+                    format!("'{}' is used twice", t.id.get_ref()),
+                );
+            }
+            let severity = self.parsed(
+                t.severity.clone(),
+                &format!("{key}.severity"),
+                Severity::High,
+            );
+            let path = self.path(t.model.get_ref());
+            let Some(text) = self.read_text(
+                t.model.span(),
+                &format!("{key}.model"),
+                &path,
+                "timer model",
+            ) else {
+                continue;
+            };
+            let model: cellwatch_models::timer::learn::TimerModel =
+                match serde_json::from_str(&text) {
+                    Ok(m) => m,
+                    Err(e) => {
+                        self.problem(
+                            t.model.span(),
+                            &format!("{key}.model"),
+                            format!("{}: {e}", path.display()),
+                        );
+                        continue;
+                    }
+                };
+            let unknown: Vec<&String> = model
+                .signals
+                .iter()
+                .filter(|n| timer_signal(&tags, n).is_none())
+                .collect();
+            if !unknown.is_empty() {
+                let list: Vec<&str> = unknown.iter().map(|s| s.as_str()).collect();
+                self.problem(
+                    t.model.span(),
+                    &format!("{key}.model"),
+                    format!(
+                        "the model reads {}, which no tag has as name or address",
+                        list.join(", ")
+                    ),
+                );
+                continue;
+            }
+            timers.push(TimerCheck {
+                id: t.id.into_inner(),
+                model,
+                severity,
+            });
+        }
         let state = self.state(&raw.state, &by_address);
         let state_interval = self.duration(
             raw.state.publish_interval,
@@ -485,6 +557,7 @@ impl Validator<'_> {
             opcua: opcua?,
             tags,
             switching,
+            timers,
             state,
             state_interval,
             zenoh,
@@ -938,6 +1011,18 @@ impl Validator<'_> {
             multicast_scouting: raw.multicast_scouting.unwrap_or(false),
         }
     }
+}
+
+/// The tag a timer model's signal names: by tag name, else by address.
+pub fn timer_signal(tags: &[TagConfig], name: &str) -> Option<Signal> {
+    tags.iter()
+        .find(|t| t.name == name)
+        .or_else(|| {
+            tag_address(name)
+                .ok()
+                .and_then(|a| tags.iter().find(|t| t.address == a))
+        })
+        .map(|t| t.address.clone())
 }
 
 /// A tag's PLC address: a PMC address (`X0.06`), an IEC direct address

@@ -82,6 +82,16 @@ pub(crate) struct RawTag {
 pub(crate) struct RawChecks {
     #[serde(default)]
     pub(crate) switching: Vec<RawSwitching>,
+    #[serde(default)]
+    pub(crate) timers: Vec<RawTimers>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawTimers {
+    pub(crate) id: Spanned<String>,
+    pub(crate) model: Spanned<String>,
+    pub(crate) severity: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -25,6 +25,10 @@ fn mem() -> Mem {
         PathBuf::from("base/fig6.il"),
         b"RD X1\nANDN X2\nWRT G0.00\n".to_vec(),
     );
+    m.insert(
+        PathBuf::from("base/timers.json"),
+        br#"{"version": 1, "method": "common", "signals": ["x1", "X2", "belt"], "transitions": []}"#.to_vec(),
+    );
     Mem(m)
 }
 
@@ -189,4 +193,24 @@ fn shipped_configs_parse() {
         "expected demo.toml and stop-causes.toml in {}",
         dir.display()
     );
+}
+
+#[test]
+fn timer_model_signals_must_be_tags() {
+    let text = format!("{GOOD}\n[[checks.timers]]\nid = \"line\"\nmodel = \"timers.json\"\n");
+    assert_eq!(
+        errors(&text),
+        "cell.toml:25:9: checks.timers[0].model: the model reads belt, which no tag has as name or address"
+    );
+    let ok = text.clone();
+    let mut files = mem();
+    files.0.insert(
+        PathBuf::from("base/timers.json"),
+        br#"{"version": 1, "method": "common", "signals": ["x1", "X2"], "transitions": []}"#
+            .to_vec(),
+    );
+    let c = parse("cell.toml", &ok, Path::new("base"), &files).unwrap();
+    assert_eq!(c.timers[0].id, "line");
+    assert_eq!(timer_signal(&c.tags, "x1"), Some(Signal::new("X1")));
+    assert_eq!(timer_signal(&c.tags, "X2"), Some(Signal::new("X2")));
 }

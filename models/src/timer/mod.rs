@@ -6,8 +6,10 @@
 //! - [`learn`]: the learner (the paper's full-state method) and the model
 //!   file it writes;
 //! - [`monitor`]: the runtime monitor, fed changes and the passing of time;
-//! - [`line`]: a simulated body-shop line that writes runs, normal or faulty.
+//! - [`line`]: a simulated body-shop line that writes runs, normal or faulty;
+//! - [`checks`]: timers as engine checks, with latched alarms.
 
+pub mod checks;
 pub mod learn;
 pub mod line;
 pub mod log;
