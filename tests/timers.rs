@@ -195,3 +195,100 @@ fn simulate_learn_replay_the_line() {
         r.stdout
     );
 }
+
+/// The `blark` Structured Text parser (PyPI), installed on first use in a
+/// virtual environment under cargo's target directory.
+fn blark() -> std::path::PathBuf {
+    let venv = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("blark-venv");
+    let bin = venv.join("bin").join("blark");
+    if !bin.exists() {
+        let ok = std::process::Command::new("python3")
+            .args(["-m", "venv"])
+            .arg(&venv)
+            .status()
+            .unwrap()
+            .success()
+            && std::process::Command::new(venv.join("bin").join("pip"))
+                .args(["install", "--quiet", "blark==0.8.3"])
+                .status()
+                .unwrap()
+                .success();
+        assert!(
+            ok,
+            "cannot install blark (python3 -m venv, pip install blark==0.8.3)"
+        );
+    }
+    bin
+}
+
+fn blark_accepts(file: &str) -> bool {
+    let out = std::process::Command::new(blark())
+        .args(["parse", file])
+        .output()
+        .unwrap();
+    out.status.success()
+}
+
+#[test]
+fn exported_structured_text_is_accepted_by_an_independent_parser() {
+    let d = tempfile::tempdir().unwrap();
+    let path = |n: &str| d.path().join(n).to_str().unwrap().to_string();
+    // The paper's example (full-state) and the simulated line (common).
+    std::fs::write(path("map.csv"), "1,S1\n2,S2\n3,S3\n").unwrap();
+    std::fs::write(path("table1.csv"), "t,e\n10,+2\n140,+3\n150,-3\n").unwrap();
+    let r = cellwatch(&[
+        "learn",
+        &path("table1.csv"),
+        "--map",
+        &path("map.csv"),
+        "--method",
+        "full-state",
+        "--delta-min",
+        "0ms",
+        "--tau",
+        "10ms",
+        "--out",
+        &path("t1.json"),
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let r = cellwatch(&["simulate", "line", "--runs", "4", "--out", &path("train")]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let runs: Vec<String> = (1..=4)
+        .map(|i| format!("{}/run-{i:03}.csv", path("train")))
+        .collect();
+    let out = path("line.json");
+    let mut args = vec!["learn", "--out", out.as_str()];
+    args.extend(runs.iter().map(String::as_str));
+    assert_eq!(cellwatch(&args).code, 0);
+    for (model, st) in [("t1.json", "t1.st"), ("line.json", "line.st")] {
+        let r = cellwatch(&["export-st", "--timers", &path(model), "--out", &path(st)]);
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        let text = std::fs::read_to_string(path(st)).unwrap();
+        assert!(
+            text.contains("ERROR_ALARM_001")
+                && text.contains("ERROR_RESET_001")
+                && text.contains("MIN_WAIT_001")
+                && text.contains("MAX_WAIT_001")
+                && text.contains("COM :=")
+        );
+        assert!(blark_accepts(&path(st)), "blark refused {st}:\n{text}");
+    }
+    // The parser is a real check: it refuses broken text.
+    std::fs::write(path("broken.st"), "FUNCTION_BLOCK X\nVAR_INPUT a : BOOL; END_VAR\nIF a THEN b := ; END_IF;\nEND_FUNCTION_BLOCK\n").unwrap();
+    assert!(!blark_accepts(&path("broken.st")));
+    // Bad names are refused before any output.
+    let r = cellwatch(&[
+        "export-st",
+        "--timers",
+        &path("t1.json"),
+        "--name",
+        "9lives",
+    ]);
+    assert_eq!(
+        (r.code, r.stderr.as_str()),
+        (
+            2,
+            "error: --name '9lives' is not an IEC 61131-3 identifier\n"
+        )
+    );
+}

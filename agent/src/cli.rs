@@ -67,6 +67,9 @@ enum Command {
     Learn(LearnArgs),
     /// Run the transition-timer monitor over run logs in virtual time.
     Replay(ReplayArgs),
+    /// Write a timer model as IEC 61131-3 Structured Text: the paper's
+    /// diagnosis functions (ERROR_ALARM_nnn, ERROR_RESET_nnn) for the PLC.
+    ExportSt(ExportStArgs),
     /// Production reports from a journal: per-hour run/idle/fault minutes,
     /// availability, stop causes and production (daily), or per day (monthly).
     Report(ReportArgs),
@@ -100,6 +103,19 @@ pub(crate) struct LearnArgs {
     /// Where to write the timer model (JSON).
     #[arg(long, default_value = "timers.json")]
     pub(crate) out: PathBuf,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct ExportStArgs {
+    /// The timer model (JSON, from `cellwatch learn`).
+    #[arg(long)]
+    pub(crate) timers: PathBuf,
+    /// Name of the function block.
+    #[arg(long, default_value = "FB_CELLWATCH_TIMERS")]
+    pub(crate) name: String,
+    /// Write to this file instead of standard output.
+    #[arg(long)]
+    pub(crate) out: Option<PathBuf>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -440,7 +456,8 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             | Command::Validate(_)
             | Command::Report(_)
             | Command::Learn(_)
-            | Command::Replay(_) => Ok(()),
+            | Command::Replay(_)
+            | Command::ExportSt(_) => Ok(()),
         }
     })
 }
@@ -472,6 +489,7 @@ pub fn run(
         Command::Report(args) => commands::report::run(&args, out),
         Command::Learn(args) => commands::timers::learn(&args, out),
         Command::Replay(args) => commands::timers::replay(&args, out),
+        Command::ExportSt(args) => commands::timers::export_st(&args, out),
         other => asynchronous(other, out),
     };
     match result {

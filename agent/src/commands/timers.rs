@@ -7,7 +7,7 @@ use cellwatch_models::timer::learn::{self, LearnOptions, Tau, TimerModel};
 use cellwatch_models::timer::log::{self, RunLog};
 use cellwatch_models::timer::monitor::{self, Outcome};
 
-use crate::cli::{Failure, LearnArgs, ReplayArgs};
+use crate::cli::{ExportStArgs, Failure, LearnArgs, ReplayArgs};
 use crate::inputs::read_text;
 
 fn runs(paths: &[std::path::PathBuf], map: Option<&Path>) -> Result<Vec<RunLog>, Failure> {
@@ -110,11 +110,39 @@ pub(crate) fn learn(args: &LearnArgs, out: &mut dyn Write) -> Result<(), Failure
     writeln!(out, "model written to {}", args.out.display()).map_err(io)
 }
 
+fn model(path: &Path) -> Result<TimerModel, Failure> {
+    let text = read_text(path, "timer model")?;
+    serde_json::from_str(&text).map_err(|e| Failure::Input(format!("{}: {e}", path.display())))
+}
+
+/// `cellwatch export-st`.
+pub(crate) fn export_st(args: &ExportStArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    let model = model(&args.timers)?;
+    let valid = args
+        .name
+        .chars()
+        .all(|c| c.is_ascii_alphanumeric() || c == '_')
+        && args.name.starts_with(|c: char| c.is_ascii_alphabetic());
+    if !valid {
+        return Err(Failure::Input(format!(
+            "--name '{}' is not an IEC 61131-3 identifier",
+            args.name
+        )));
+    }
+    let st =
+        cellwatch_models::timer::st::export(&model, &args.name, &args.timers.display().to_string());
+    match &args.out {
+        Some(path) => std::fs::write(path, st)
+            .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", path.display()))),
+        None => out
+            .write_all(st.as_bytes())
+            .map_err(|e| Failure::Runtime(e.to_string())),
+    }
+}
+
 /// `cellwatch replay`.
 pub(crate) fn replay(args: &ReplayArgs, out: &mut dyn Write) -> Result<(), Failure> {
-    let text = read_text(&args.timers, "timer model")?;
-    let model: TimerModel = serde_json::from_str(&text)
-        .map_err(|e| Failure::Input(format!("{}: {e}", args.timers.display())))?;
+    let model = model(&args.timers)?;
     let io = |e: std::io::Error| Failure::Runtime(e.to_string());
     for (path, run) in args.runs.iter().zip(runs(&args.runs, args.map.as_deref())?) {
         let outcomes = monitor::replay(&model, &run)

@@ -7,10 +7,12 @@
 //!   file it writes;
 //! - [`monitor`]: the runtime monitor, fed changes and the passing of time;
 //! - [`line`]: a simulated body-shop line that writes runs, normal or faulty;
-//! - [`checks`]: timers as engine checks, with latched alarms.
+//! - [`checks`]: timers as engine checks, with latched alarms;
+//! - [`st`]: the diagnosis functions as IEC 61131-3 Structured Text.
 
 pub mod checks;
 pub mod learn;
 pub mod line;
 pub mod log;
 pub mod monitor;
+pub mod st;
