@@ -103,6 +103,10 @@ pub(crate) struct LearnArgs {
     /// Where to write the timer model (JSON).
     #[arg(long, default_value = "timers.json")]
     pub(crate) out: PathBuf,
+    /// Also print the paper's Fig. 12 view: transitions × signals (1, 0, or
+    /// . when the signal is not in the start condition; E marks the event).
+    #[arg(long)]
+    pub(crate) table: bool,
 }
 
 #[derive(Debug, clap::Args)]

@@ -103,6 +103,9 @@ pub(crate) fn learn(args: &LearnArgs, out: &mut dyn Write) -> Result<(), Failure
             writeln!(out, "  {}: {}", d.transition, d.reason).map_err(io)?;
         }
     }
+    if args.table {
+        table(out, &learned.model).map_err(io)?;
+    }
     let json = serde_json::to_string_pretty(&learned.model)
         .map_err(|e| Failure::Runtime(e.to_string()))?;
     std::fs::write(&args.out, json + "\n")
@@ -169,6 +172,57 @@ pub(crate) fn replay(args: &ReplayArgs, out: &mut dyn Write) -> Result<(), Failu
                 writeln!(out, "{}: {line}", path.display()).map_err(io)?;
             }
         }
+    }
+    Ok(())
+}
+
+/// The paper's Fig. 12: one row per transition, one column per signal in
+/// some start condition or event.
+fn table(out: &mut dyn Write, model: &TimerModel) -> std::io::Result<()> {
+    let used: Vec<&String> = model
+        .signals
+        .iter()
+        .filter(|s| {
+            model.transitions.iter().any(|t| {
+                t.event.tag == **s
+                    || t.from
+                        .iter()
+                        .any(|l| l.trim_start_matches('-') == s.as_str())
+            })
+        })
+        .collect();
+    writeln!(
+        out,
+        "transitions × signals (1/0: start condition, E: event, .: not read):"
+    )?;
+    let width = used.iter().map(|s| s.len()).max().unwrap_or(1);
+    for row in 0..width {
+        let header: String = used
+            .iter()
+            .map(|s| s.chars().nth(row).unwrap_or(' '))
+            .collect();
+        writeln!(out, "       {header}")?;
+    }
+    for t in &model.transitions {
+        let cells: String = used
+            .iter()
+            .map(|s| {
+                if t.event.tag == **s {
+                    'E'
+                } else if t.from.iter().any(|l| l == *s) {
+                    '1'
+                } else if t
+                    .from
+                    .iter()
+                    .any(|l| l.strip_prefix('-') == Some(s.as_str()))
+                {
+                    '0'
+                } else {
+                    '.'
+                }
+            })
+            .collect();
+        writeln!(out, "  #{:03} {cells}", t.id)?;
     }
     Ok(())
 }
