@@ -323,6 +323,12 @@ impl Cell {
     }
 
     async fn dispatch(&mut self, events: Vec<EngineEvent>) {
+        for o in self.engine.take_observations() {
+            self.metrics
+                .transition_seconds
+                .with_label_values(&[o.check.as_str()])
+                .observe(o.ms as f64 / 1000.0);
+        }
         for ev in events {
             match ev {
                 EngineEvent::Alarm {

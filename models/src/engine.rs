@@ -75,6 +75,18 @@ pub trait CheckSet: Send + Sync {
 
     /// An operator reset a latched alarm of this set.
     fn reset(&mut self, _id: &str) {}
+
+    /// Moves the measurements made since the last call into `out`.
+    fn take_observations(&mut self, _out: &mut Vec<Observation>) {}
+}
+
+/// A measurement a check made: a transition's observed duration.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Observation {
+    /// Which check or transition (`line-007`).
+    pub check: String,
+    /// The duration, ms.
+    pub ms: u64,
 }
 
 /// One switching-function check: a fault coil and its fault value.
@@ -616,6 +628,15 @@ impl CellEngine {
         }
         self.update_state(now, &mut events);
         events
+    }
+
+    /// The measurements the checks made since the last call.
+    pub fn take_observations(&mut self) -> Vec<Observation> {
+        let mut out = Vec::new();
+        for set in &mut self.sets {
+            set.take_observations(&mut out);
+        }
+        out
     }
 
     /// Time passed: timers fire.

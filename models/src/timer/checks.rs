@@ -12,7 +12,7 @@ use std::collections::HashMap;
 use super::learn::{Edge, TimerModel};
 use super::monitor::{ModelError, Outcome, TimerMonitor};
 use crate::alarm::{AlarmKind, Severity};
-use crate::engine::{CheckSet, Finding};
+use crate::engine::{CheckSet, Finding, Observation};
 use crate::explain::Culprit;
 use crate::signal::Signal;
 
@@ -26,6 +26,8 @@ pub struct TimerChecks {
     by_signal: HashMap<Signal, usize>,
     /// Per transition id: description, event signal and expected value.
     transitions: HashMap<u32, (String, usize, bool, [u64; 2])>,
+    /// Durations observed since the last `take_observations`.
+    observed: Vec<Observation>,
 }
 
 impl TimerChecks {
@@ -87,10 +89,11 @@ impl TimerChecks {
             signals,
             by_signal,
             transitions,
+            observed: Vec::new(),
         })
     }
 
-    fn findings(&self, outcomes: Vec<Outcome>, out: &mut Vec<Finding>) {
+    fn findings(&mut self, outcomes: Vec<Outcome>, out: &mut Vec<Finding>) {
         for o in outcomes {
             let (id, late, observed) = match o {
                 Outcome::Early {
@@ -99,8 +102,24 @@ impl TimerChecks {
                     ..
                 } => (transition, false, Some(observed_ms)),
                 Outcome::Late { transition, .. } => (transition, true, None),
-                Outcome::Normal { .. } => continue,
+                Outcome::Normal {
+                    transition,
+                    observed_ms,
+                    ..
+                } => {
+                    self.observed.push(Observation {
+                        check: format!("{}-{transition:03}", self.id),
+                        ms: observed_ms,
+                    });
+                    continue;
+                }
             };
+            if let Some(ms) = observed {
+                self.observed.push(Observation {
+                    check: format!("{}-{id:03}", self.id),
+                    ms,
+                });
+            }
             let Some((what, s, expected, window)) = self.transitions.get(&id) else {
                 continue;
             };
@@ -166,6 +185,10 @@ impl CheckSet for TimerChecks {
     fn advance(&mut self, now: u64, out: &mut Vec<Finding>) {
         let outcomes = self.monitor.advance(now);
         self.findings(outcomes, out);
+    }
+
+    fn take_observations(&mut self, out: &mut Vec<Observation>) {
+        out.append(&mut self.observed);
     }
 }
 
@@ -250,9 +273,20 @@ mod tests {
         );
         assert_eq!(alarm.culprits[0].to_string(), "X1.00 = 0 (expected 1)");
         assert!(alarm.active && alarm.latched);
+        // A normal cycle is measured.
+        e.on_reading(0, Reading::Good(false), 7400, 7400);
+        e.on_reading(0, Reading::Good(true), 7500, 7500);
         // The sensor arrives late: still latched.
         e.on_reading(1, Reading::Good(true), 8000, 8000);
         assert!(e.alarms().any(|a| a.id == "line-007" && a.active));
+        // Re-armed at 7500, the sensor at 8000 is early (500 ms): measured too.
+        assert_eq!(
+            e.take_observations(),
+            [crate::engine::Observation {
+                check: "line-007".into(),
+                ms: 500
+            }]
+        );
         let ev = e.reset("line-007", "kim", 9000).unwrap();
         assert!(matches!(
             &ev[0],
