@@ -454,3 +454,98 @@ async fn only_correctly_signed_acks_are_carried_out_and_all_are_journaled() {
     fx.agent.unwrap().stop().await;
     fx.sim.stop();
 }
+
+/// The body-shop line played live over OPC UA into the agent with the
+/// shipped timer model: a slowed motion raises the timer alarm of that
+/// motion's sensor, latched, over Zenoh.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn live_line_slow_motion_raises_its_timer_alarm() {
+    use cellwatch::sim::line::SimulatedLine;
+    use cellwatch_models::timer::line::{Fault, FaultKind};
+
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let sim = SimulatedLine::start(&SimOptions {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        pki_dir: dir.join("sim-pki"),
+        insecure: false,
+    })
+    .await
+    .unwrap();
+    let mut c = config::load(&root().join("config/line.toml")).unwrap();
+    c.opcua.endpoint = sim.endpoint();
+    c.opcua.pki_dir = dir.join("agent-pki");
+    for t in &mut c.tags {
+        t.node_id = t
+            .node_id
+            .replace("ns=2;", &format!("ns={};", sim.namespace()));
+    }
+    c.journal.path = dir.join("journal.sqlite");
+    let zenoh_port = free_port();
+    c.zenoh.listen = vec![format!("tcp/127.0.0.1:{zenoh_port}")];
+    c.metrics = Some("127.0.0.1:0".parse().unwrap());
+    drop(opcua::client("test", &c.opcua).unwrap());
+    pki::trust(&pki::own_cert(&c.opcua.pki_dir), &dir.join("sim-pki")).unwrap();
+    pki::trust(&pki::own_cert(&dir.join("sim-pki")), &c.opcua.pki_dir).unwrap();
+    let agent = cell::start(c, None).await.unwrap();
+    let client = cellwatch::sinks::zenoh::open(&cellwatch::config::ZenohConfig {
+        mode: cellwatch::config::ZenohMode::Peer,
+        connect: vec![format!("tcp/127.0.0.1:{zenoh_port}")],
+        listen: vec![],
+        prefix: String::new(),
+        multicast_scouting: false,
+    })
+    .await
+    .unwrap();
+    let sub = client
+        .declare_subscriber("cellwatch/line01/alarms/**")
+        .history(HistoryConfig::default().detect_late_publishers())
+        .recovery(RecoveryConfig::default().heartbeat())
+        .await
+        .unwrap();
+    // Give the agent its subscription before the line starts moving.
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let (note_tx, mut note_rx) = tokio::sync::mpsc::unbounded_channel();
+    let player_sim = sim.clone();
+    let player = tokio::spawn(async move {
+        player_sim
+            .play(
+                1006,
+                Some(Fault {
+                    kind: FaultKind::TooSlow,
+                    step: 0,
+                }),
+                move |n| {
+                    let _ = note_tx.send(n);
+                },
+            )
+            .await;
+    });
+    let note = tokio::time::timeout(Duration::from_secs(40), note_rx.recv())
+        .await
+        .unwrap()
+        .unwrap();
+    assert!(note.contains("TR0_AT_STATION"), "{note}");
+    let mut seen = Vec::new();
+    let raised = alarm_until(&sub, "the slowed motion's timer alarm", &mut seen, |a| {
+        a.kind == "timer" && a.transition == "raised"
+    })
+    .await;
+    assert_eq!(raised.culprits[0].address, "TR0_AT_STATION", "{seen:#?}");
+    assert_eq!(raised.state, "active_unacknowledged");
+    assert!(
+        raised
+            .message
+            .contains("+TR0_AT_STATION after +TR0_IN) too late"),
+        "{}",
+        raised.message
+    );
+    let timers: Vec<&AlarmPayload> = seen
+        .iter()
+        .filter(|a| a.kind == "timer" && a.transition == "raised")
+        .collect();
+    assert_eq!(timers.len(), 1, "only the slowed motion: {seen:#?}");
+    player.abort();
+    agent.stop().await;
+    sim.stop();
+}

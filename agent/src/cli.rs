@@ -239,6 +239,12 @@ pub(crate) struct DemoArgs {
     /// simulator listens).
     #[arg(long, default_value = "config/demo.toml")]
     pub(crate) config: PathBuf,
+    /// The body-shop line's cell configuration, run beside the CNC.
+    #[arg(long, default_value = "config/line.toml")]
+    pub(crate) line_config: PathBuf,
+    /// Run the CNC only.
+    #[arg(long)]
+    pub(crate) no_line: bool,
     /// Where the demo keeps certificates, the journal and operator keys.
     #[arg(long, default_value = "cellwatch-demo")]
     pub(crate) state_dir: PathBuf,

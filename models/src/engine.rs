@@ -619,7 +619,9 @@ impl CellEngine {
             Reading::Bad => self.bad.insert(tag),
         };
         let mut findings = Vec::new();
-        self.set_value(tag, value, now, &mut findings);
+        // Checks time events by when the PLC saw them, not when they
+        // arrived: delivery jitter is not motion time.
+        self.set_value(tag, value, source_time, &mut findings);
         if quality_changed {
             findings.push(self.quality_finding());
         }

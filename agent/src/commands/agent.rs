@@ -10,7 +10,9 @@ use crate::cell::{self, Notice};
 use crate::cli::{DemoArgs, Failure, RunArgs, ValidateArgs};
 use crate::config::{self, CellConfig};
 use crate::sim::cnc::{Scenario, SimOptions, SimulatedCnc};
+use crate::sim::line::SimulatedLine;
 use crate::sources::{opcua, pki};
+use cellwatch_models::timer::line::{Fault, FaultKind};
 
 fn load(path: &Path) -> Result<CellConfig, Failure> {
     config::load(path).map_err(|e| Failure::Input(e.to_string()))
@@ -151,15 +153,68 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         secrets.display()
     )
     .map_err(io)?;
-    writeln!(out, "  faults injected every 24 s: Y over-travel limit switch (ESE), cycle start in JOG mode (CSD)\n").map_err(io)?;
+    writeln!(out, "  faults injected every 24 s: Y over-travel limit switch (ESE), cycle start in JOG mode (CSD)").map_err(io)?;
+    let (tx, mut rx) = mpsc::unbounded_channel();
+    let (note_tx, mut note_rx) = mpsc::unbounded_channel::<String>();
+    let line = if args.no_line {
+        None
+    } else {
+        let mut l = load(&args.line_config)?;
+        l.opcua.pki_dir = state.join("line-agent-pki");
+        l.journal.path = state.join(format!("{}.sqlite", l.cell));
+        l.secrets_file = Some(secrets.clone());
+        l.warnings
+            .retain(|w| !w.starts_with("no commands.secrets_file"));
+        let line_pki = state.join("line-sim-pki");
+        let options = SimOptions {
+            listen: endpoint_addr(&l.opcua.endpoint)?,
+            pki_dir: line_pki.clone(),
+            insecure: false,
+        };
+        let line_sim = SimulatedLine::start(&options)
+            .await
+            .map_err(Failure::Runtime)?;
+        drop(opcua::client(&l.cell, &l.opcua).map_err(|e| Failure::Runtime(e.to_string()))?);
+        pki::trust(&pki::own_cert(&l.opcua.pki_dir), &line_pki).map_err(Failure::Runtime)?;
+        pki::trust(&pki::own_cert(&line_pki), &l.opcua.pki_dir).map_err(Failure::Runtime)?;
+        let timers: usize = l.timers.iter().map(|t| t.model.transitions.len()).sum();
+        writeln!(
+            out,
+            "  cell {}: body-shop line on {}, {timers} transition timers; one motion made slow early on (Zenoh {}, metrics {})",
+            l.cell,
+            line_sim.endpoint(),
+            l.zenoh.listen.join(", "),
+            l.metrics.map_or_else(|| "off".to_string(), |m| m.to_string())
+        )
+        .map_err(io)?;
+        let line_agent = cell::start(l, Some(tx.clone()))
+            .await
+            .map_err(Failure::Runtime)?;
+        let player_sim = line_sim.clone();
+        let notes = note_tx.clone();
+        let line_player = tokio::spawn(async move {
+            player_sim
+                .play(
+                    1000,
+                    Some(Fault {
+                        kind: FaultKind::TooSlow,
+                        step: 14,
+                    }),
+                    |n| {
+                        let _ = notes.send(format!("line: {n}"));
+                    },
+                )
+                .await;
+        });
+        Some((line_sim, line_agent, line_player))
+    };
+    writeln!(out).map_err(io)?;
     out.flush().map_err(io)?;
 
-    let (tx, mut rx) = mpsc::unbounded_channel();
     let agent = cell::start(c, Some(tx.clone()))
         .await
         .map_err(Failure::Runtime)?;
     let scenario_sim = sim.clone();
-    let (note_tx, mut note_rx) = mpsc::unbounded_channel::<String>();
     let player = tokio::spawn(async move {
         Scenario::demo()
             .play(&scenario_sim, |s| {
@@ -179,7 +234,8 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         }
     };
     tokio::pin!(deadline);
-    let mut last_state = String::new();
+    let mut last_state: std::collections::HashMap<String, String> =
+        std::collections::HashMap::new();
     loop {
         tokio::select! {
             _ = &mut deadline => break,
@@ -192,6 +248,11 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     player.abort();
     agent.stop().await;
     sim.stop();
+    if let Some((line_sim, line_agent, line_player)) = line {
+        line_player.abort();
+        line_agent.stop().await;
+        line_sim.stop();
+    }
     Ok(())
 }
 
@@ -200,7 +261,11 @@ fn clock() -> String {
     t.get(11..23).unwrap_or(&t).to_string()
 }
 
-fn print_notice(out: &mut dyn Write, n: &Notice, last_state: &mut String) -> std::io::Result<()> {
+fn print_notice(
+    out: &mut dyn Write,
+    n: &Notice,
+    last_state: &mut std::collections::HashMap<String, String>,
+) -> std::io::Result<()> {
     match n {
         Notice::Connection(true, ep) => writeln!(out, "{}  opcua  connected to {ep}", clock()),
         Notice::Connection(false, why) => writeln!(out, "{}  opcua  {why}", clock()),
@@ -210,9 +275,9 @@ fn print_notice(out: &mut dyn Write, n: &Notice, last_state: &mut String) -> std
                 (Some(t), None) => format!("{} ({t})", s.state),
                 _ => s.state.clone(),
             };
-            if *last_state != text {
-                *last_state = text.clone();
-                writeln!(out, "{}  state  {text}", clock())?;
+            if last_state.get(&s.cell) != Some(&text) {
+                writeln!(out, "{}  state  {} {text}", clock(), s.cell)?;
+                last_state.insert(s.cell.clone(), text);
             }
             Ok(())
         }
@@ -230,7 +295,7 @@ fn print_notice(out: &mut dyn Write, n: &Notice, last_state: &mut String) -> std
                     a.severity,
                     a.fault_type
                 )?;
-                if a.culprits.is_empty() {
+                if a.culprits.is_empty() || a.kind == "timer" {
                     writeln!(out, "                      {}", a.message)?;
                 }
                 for c in &a.culprits {

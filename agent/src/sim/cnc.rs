@@ -11,7 +11,6 @@
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
-use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -19,16 +18,12 @@ use cellwatch_models::program::Program;
 use cellwatch_models::signal::{Observability, Signal};
 use cellwatch_models::switching::SwitchingFunction;
 use cellwatch_models::values::Values;
-use opcua::crypto::SecurityPolicy;
-use opcua::server::address_space::Variable;
-use opcua::server::diagnostics::NamespaceMetadata;
-use opcua::server::node_manager::memory::{simple_node_manager, SimpleNodeManager};
-use opcua::server::{ServerBuilder, ServerHandle, SubscriptionCache, ANONYMOUS_USER_TOKEN_ID};
-use opcua::types::{DataValue, DateTime, MessageSecurityMode, NodeId, StatusCode};
-use tokio::net::TcpListener;
 
 /// The namespace the simulated tags live in (index 2 on this server).
 pub const NAMESPACE: &str = "urn:cellwatch:sim:cnc:plc";
+
+pub use super::server::SimOptions;
+use super::server::SimServer;
 
 const ESE: &str = include_str!("../../../config/cnc/ese.il");
 const CSD: &str = include_str!("../../../config/cnc/csd.il");
@@ -91,23 +86,8 @@ fn v_signals(text: &str) -> Vec<Signal> {
 /// A running simulated CNC.
 #[derive(Clone)]
 pub struct SimulatedCnc {
-    handle: ServerHandle,
-    manager: Arc<SimpleNodeManager>,
-    subscriptions: Arc<SubscriptionCache>,
-    ns: u16,
+    server: SimServer,
     plc: Arc<Mutex<Plc>>,
-    addr: SocketAddr,
-}
-
-/// How to serve the simulator.
-#[derive(Debug, Clone)]
-pub struct SimOptions {
-    /// Address to listen on; port 0 picks one.
-    pub listen: SocketAddr,
-    /// The server's PKI directory.
-    pub pki_dir: std::path::PathBuf,
-    /// Also offer an endpoint without security.
-    pub insecure: bool,
 }
 
 impl SimulatedCnc {
@@ -116,95 +96,32 @@ impl SimulatedCnc {
     /// # Errors
     /// The port cannot be bound or the server cannot be built.
     pub async fn start(options: &SimOptions) -> Result<SimulatedCnc, String> {
-        let listener = TcpListener::bind(options.listen)
-            .await
-            .map_err(|e| format!("cannot listen on {}: {e}", options.listen))?;
-        let addr = listener.local_addr().map_err(|e| e.to_string())?;
-        let tokens: &[&str] = &[ANONYMOUS_USER_TOKEN_ID];
-        let mut builder = ServerBuilder::new()
-            .application_name("cellwatch simulated CNC")
-            .application_uri("urn:cellwatch:sim:cnc")
-            .product_uri("urn:cellwatch")
-            .create_sample_keypair(true)
-            .pki_dir(&options.pki_dir)
-            .certificate_path("own/cert.der")
-            .private_key_path("private/private.pem")
-            .trust_client_certs(false)
-            .host(addr.ip().to_string())
-            .port(addr.port())
-            .discovery_urls(vec!["/".to_owned()])
-            .add_endpoint(
-                "basic256sha256_sign_encrypt",
-                (
-                    "/",
-                    SecurityPolicy::Basic256Sha256,
-                    MessageSecurityMode::SignAndEncrypt,
-                    tokens,
-                ),
-            )
-            .with_node_manager(simple_node_manager(
-                NamespaceMetadata {
-                    namespace_uri: NAMESPACE.to_owned(),
-                    ..Default::default()
-                },
-                "cnc",
-            ));
-        if options.insecure {
-            builder = builder.add_endpoint(
-                "none",
-                ("/", SecurityPolicy::None, MessageSecurityMode::None, tokens),
-            );
-        }
-        let (server, handle) = builder.build()?;
-        let manager = handle
-            .node_managers()
-            .get_of_type::<SimpleNodeManager>()
-            .ok_or("the simulator's node manager is missing")?;
-        let ns = handle
-            .get_namespace_index(NAMESPACE)
-            .ok_or("the simulator's namespace is missing")?;
         let plc = Plc::new();
-        {
-            let space = manager.address_space();
-            let mut space = space.write();
-            let folder = NodeId::new(ns, "cnc");
-            space.add_folder(&folder, "CNC", "CNC", &NodeId::objects_folder_id());
-            let vars = plc
-                .image()
-                .into_iter()
-                .map(|(s, v)| Variable::new(&NodeId::new(ns, s.name()), s.name(), s.name(), v))
-                .collect();
-            space.add_variables(vars, &folder);
-        }
-        tokio::spawn(async move {
-            if let Err(e) = server.run_with(listener).await {
-                tracing::error!(error = %e, "simulated CNC server stopped");
-            }
-        });
-        let subscriptions = handle.subscriptions().clone();
+        let image: Vec<(String, bool)> = plc
+            .image()
+            .into_iter()
+            .map(|(s, v)| (s.to_string(), v))
+            .collect();
+        let server = SimServer::start(options, "cnc", "cellwatch simulated CNC", &image).await?;
         Ok(SimulatedCnc {
-            handle,
-            manager,
-            subscriptions,
-            ns,
+            server,
             plc: Arc::new(Mutex::new(plc)),
-            addr,
         })
     }
 
     /// The endpoint URL clients connect to.
     pub fn endpoint(&self) -> String {
-        format!("opc.tcp://{}/", self.addr)
+        self.server.endpoint()
     }
 
     /// The address the server listens on.
     pub fn addr(&self) -> SocketAddr {
-        self.addr
+        self.server.addr()
     }
 
     /// The namespace index of the tags.
     pub fn namespace(&self) -> u16 {
-        self.ns
+        self.server.namespace()
     }
 
     /// Sets an input (by address, `X0.06`) and recomputes the coils.
@@ -221,17 +138,9 @@ impl SimulatedCnc {
             }
             plc.image()
         };
-        let now = DateTime::now();
-        let values: Vec<(NodeId, DataValue)> = image
-            .into_iter()
-            .map(|(s, v)| (NodeId::new(self.ns, s.name()), DataValue::new_at(v, now)))
-            .collect();
-        self.manager
-            .set_values(
-                &self.subscriptions,
-                values.iter().map(|(n, v)| (n, None, v.clone())),
-            )
-            .map_err(|e| format!("cannot update {signal}: {e}"))
+        let values: Vec<(String, bool)> =
+            image.into_iter().map(|(s, v)| (s.to_string(), v)).collect();
+        self.server.set(&values)
     }
 
     /// Marks an input's value as bad (a broken sensor wire).
@@ -246,22 +155,12 @@ impl SimulatedCnc {
                 .get(&signal)
                 .ok_or_else(|| format!("{signal} is not an input of the simulated CNC"))?
         };
-        let mut dv = DataValue::new_now(value);
-        dv.status = Some(StatusCode::BadSensorFailure);
-        let node = NodeId::new(self.ns, signal.name());
-        self.manager
-            .set_value(&self.subscriptions, &node, None, dv)
-            .map_err(|e| format!("cannot update {signal}: {e}"))
-    }
-
-    /// The certificate of the server, for a client to trust.
-    pub fn certificate(pki_dir: &Path) -> std::path::PathBuf {
-        crate::sources::pki::own_cert(pki_dir)
+        self.server.set_bad(signal.name(), value)
     }
 
     /// Stops the server; connected clients see the connection drop.
     pub fn stop(&self) {
-        self.handle.cancel();
+        self.server.stop();
     }
 }
 

@@ -409,8 +409,12 @@ const HORIZON_MS: u64 = 120_000;
 /// two minutes) and are always followed by `E` before they happen again,
 /// the one whose delay to `E` varies least (ties: the nearest). The start
 /// condition keeps only the literals that are stable from the trigger to
-/// `E` in every occurrence and have the same value in all of them; signals
-/// that never change are left out. Δmin, support and the window-fit rule
+/// `E` in every occurrence and have the same value in all of them, and
+/// that are not there by chance: a literal whose value holds a share `p`
+/// of the training time is kept only if `p^n < 0.001` over the `n`
+/// occurrences (another station's idle sensor is 0 nearly always, so it
+/// is 0 at every occurrence by chance). Signals that never change are left
+/// out. Δmin, support and the window-fit rule
 /// then apply as in [`full_state`].
 pub fn common(runs: &[RunLog], options: &LearnOptions) -> Learned {
     let a = align(runs);
@@ -424,6 +428,33 @@ pub fn common(runs: &[RunLog], options: &LearnOptions) -> Learned {
                 .push(t);
         }
     }
+    // Share of the training time each signal is 1.
+    let mut high = vec![0u64; n];
+    let mut total = 0u64;
+    for (r, ch) in a.changes.iter().enumerate() {
+        let mut value = a.initial[r].clone();
+        let mut t = 0;
+        for &(at, s, v) in ch {
+            for (sig, h) in high.iter_mut().enumerate() {
+                if value[sig] {
+                    *h += at - t;
+                }
+            }
+            total += at - t;
+            t = at;
+            value[s] = v;
+        }
+    }
+    let share: Vec<f64> = high
+        .iter()
+        .map(|&h| {
+            if total == 0 {
+                0.5
+            } else {
+                h as f64 / total as f64
+            }
+        })
+        .collect();
     let required = options.min_support.unwrap_or(runs.len()).max(1);
     let mut transitions = Vec::new();
     let mut dropped = Vec::new();
@@ -564,9 +595,17 @@ pub fn common(runs: &[RunLog], options: &LearnOptions) -> Learned {
                 }
             }
         }
+        // A literal that holds most of the time would hold in every
+        // occurrence by chance (another station's idle sensor): keep only
+        // those whose chance of that, p^n, is below 0.1 %.
+        let occurrences = i32::try_from(delays.len()).unwrap_or(i32::MAX);
         let from: Vec<(usize, bool)> = (0..n)
             .filter(|&s| !excluded[s])
             .filter_map(|s| stable[s].map(|v| (s, v)))
+            .filter(|&(s, v)| {
+                let p = if v { share[s] } else { 1.0 - share[s] };
+                p.powi(occurrences) < 1e-3
+            })
             .collect();
         let to: Vec<(usize, bool)> = from
             .iter()

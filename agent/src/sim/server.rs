@@ -1,0 +1,185 @@
+//! A simulated PLC as an OPC UA server: boolean variables in one namespace,
+//! named by PLC address (`ns=2;s=X0.06`), set by the simulation.
+//!
+//! Real OPC UA security: the server's own key pair in its PKI directory,
+//! a Basic256Sha256 + SignAndEncrypt endpoint, client certificates trusted
+//! only from `trusted/` (and an endpoint without security only on request).
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use opcua::crypto::SecurityPolicy;
+use opcua::server::address_space::Variable;
+use opcua::server::diagnostics::NamespaceMetadata;
+use opcua::server::node_manager::memory::{simple_node_manager, SimpleNodeManager};
+use opcua::server::{ServerBuilder, ServerHandle, SubscriptionCache, ANONYMOUS_USER_TOKEN_ID};
+use opcua::types::{DataValue, DateTime, MessageSecurityMode, NodeId, StatusCode};
+use tokio::net::TcpListener;
+
+/// How to serve a simulated PLC.
+#[derive(Debug, Clone)]
+pub struct SimOptions {
+    /// Address to listen on; port 0 picks one.
+    pub listen: SocketAddr,
+    /// The server's PKI directory.
+    pub pki_dir: PathBuf,
+    /// Also offer an endpoint without security.
+    pub insecure: bool,
+}
+
+/// A running simulated PLC.
+#[derive(Clone)]
+pub struct SimServer {
+    handle: ServerHandle,
+    manager: Arc<SimpleNodeManager>,
+    subscriptions: Arc<SubscriptionCache>,
+    ns: u16,
+    addr: SocketAddr,
+}
+
+impl SimServer {
+    /// Serves `variables` (name, initial value) as application `app`
+    /// (`urn:cellwatch:sim:<app>`), tags in namespace
+    /// `urn:cellwatch:sim:<app>:plc`.
+    ///
+    /// # Errors
+    /// The port cannot be bound or the server cannot be built.
+    pub async fn start(
+        options: &SimOptions,
+        app: &str,
+        title: &str,
+        variables: &[(String, bool)],
+    ) -> Result<SimServer, String> {
+        let listener = TcpListener::bind(options.listen)
+            .await
+            .map_err(|e| format!("cannot listen on {}: {e}", options.listen))?;
+        let addr = listener.local_addr().map_err(|e| e.to_string())?;
+        let namespace = format!("urn:cellwatch:sim:{app}:plc");
+        let tokens: &[&str] = &[ANONYMOUS_USER_TOKEN_ID];
+        let mut builder = ServerBuilder::new()
+            .application_name(title)
+            .application_uri(format!("urn:cellwatch:sim:{app}"))
+            .product_uri("urn:cellwatch")
+            .create_sample_keypair(true)
+            .pki_dir(&options.pki_dir)
+            .certificate_path("own/cert.der")
+            .private_key_path("private/private.pem")
+            .trust_client_certs(false)
+            .host(addr.ip().to_string())
+            .port(addr.port())
+            .discovery_urls(vec!["/".to_owned()])
+            .add_endpoint(
+                "basic256sha256_sign_encrypt",
+                (
+                    "/",
+                    SecurityPolicy::Basic256Sha256,
+                    MessageSecurityMode::SignAndEncrypt,
+                    tokens,
+                ),
+            )
+            .with_node_manager(simple_node_manager(
+                NamespaceMetadata {
+                    namespace_uri: namespace.clone(),
+                    ..Default::default()
+                },
+                app,
+            ));
+        if options.insecure {
+            builder = builder.add_endpoint(
+                "none",
+                ("/", SecurityPolicy::None, MessageSecurityMode::None, tokens),
+            );
+        }
+        let (server, handle) = builder.build()?;
+        let manager = handle
+            .node_managers()
+            .get_of_type::<SimpleNodeManager>()
+            .ok_or("the simulator's node manager is missing")?;
+        let ns = handle
+            .get_namespace_index(&namespace)
+            .ok_or("the simulator's namespace is missing")?;
+        {
+            let space = manager.address_space();
+            let mut space = space.write();
+            let folder = NodeId::new(ns, app);
+            space.add_folder(&folder, title, title, &NodeId::objects_folder_id());
+            let vars = variables
+                .iter()
+                .map(|(name, v)| {
+                    Variable::new(
+                        &NodeId::new(ns, name.as_str()),
+                        name.as_str(),
+                        name.as_str(),
+                        *v,
+                    )
+                })
+                .collect();
+            space.add_variables(vars, &folder);
+        }
+        tokio::spawn(async move {
+            if let Err(e) = server.run_with(listener).await {
+                tracing::error!(error = %e, "simulated PLC server stopped");
+            }
+        });
+        let subscriptions = handle.subscriptions().clone();
+        Ok(SimServer {
+            handle,
+            manager,
+            subscriptions,
+            ns,
+            addr,
+        })
+    }
+
+    /// Writes values, all with the same source timestamp (now).
+    ///
+    /// # Errors
+    /// A name that is not a variable of this server.
+    pub fn set(&self, values: &[(String, bool)]) -> Result<(), String> {
+        let now = DateTime::now();
+        let values: Vec<(NodeId, DataValue)> = values
+            .iter()
+            .map(|(s, v)| (NodeId::new(self.ns, s.as_str()), DataValue::new_at(*v, now)))
+            .collect();
+        self.manager
+            .set_values(
+                &self.subscriptions,
+                values.iter().map(|(n, v)| (n, None, v.clone())),
+            )
+            .map_err(|e| format!("cannot update the simulated PLC: {e}"))
+    }
+
+    /// Marks a variable's value as bad (a broken sensor wire).
+    ///
+    /// # Errors
+    /// The server refuses the update.
+    pub fn set_bad(&self, name: &str, value: bool) -> Result<(), String> {
+        let mut dv = DataValue::new_now(value);
+        dv.status = Some(StatusCode::BadSensorFailure);
+        let node = NodeId::new(self.ns, name);
+        self.manager
+            .set_value(&self.subscriptions, &node, None, dv)
+            .map_err(|e| format!("cannot update {name}: {e}"))
+    }
+
+    /// The endpoint URL clients connect to.
+    pub fn endpoint(&self) -> String {
+        format!("opc.tcp://{}/", self.addr)
+    }
+
+    /// The address the server listens on.
+    pub fn addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// The namespace index of the tags.
+    pub fn namespace(&self) -> u16 {
+        self.ns
+    }
+
+    /// Stops the server; connected clients see the connection drop.
+    pub fn stop(&self) {
+        self.handle.cancel();
+    }
+}
