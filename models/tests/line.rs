@@ -142,3 +142,26 @@ fn the_full_state_method_breaks_on_parallel_stations() {
         l.model.transitions.len()
     );
 }
+
+/// `config/line/timers.json` is what the commands in `config/line.toml`'s
+/// header produce: `simulate line --runs 4 --seed 1 --cycles 6`, then
+/// `learn --delta-min 2s --tau-auto`.
+#[test]
+fn the_shipped_line_model_is_reproducible() {
+    let shipped: TimerModel =
+        serde_json::from_str(include_str!("../../config/line/timers.json")).unwrap();
+    let training: Vec<_> = (1..=4).map(|s| line::run(s, 6, None).0).collect();
+    let fresh = learn::common(
+        &training,
+        &LearnOptions {
+            delta_min: 2000,
+            tau: Tau::Auto,
+            min_support: None,
+        },
+    )
+    .model;
+    assert_eq!(
+        shipped, fresh,
+        "re-learn config/line/timers.json with the commands in config/line.toml"
+    );
+}
