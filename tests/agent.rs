@@ -455,16 +455,10 @@ async fn only_correctly_signed_acks_are_carried_out_and_all_are_journaled() {
     fx.sim.stop();
 }
 
-/// The body-shop line played live over OPC UA into the agent with the
-/// shipped timer model: a slowed motion raises the timer alarm of that
-/// motion's sensor, latched, over Zenoh.
-#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
-async fn live_line_slow_motion_raises_its_timer_alarm() {
+/// A simulated line and an agent on `config/line.toml` watching it, with
+/// fresh ports and files under `dir`; returns them and the Zenoh port.
+pub(crate) async fn line_cell(dir: &Path) -> (cellwatch::sim::line::SimulatedLine, Agent, u16) {
     use cellwatch::sim::line::SimulatedLine;
-    use cellwatch_models::timer::line::{Fault, FaultKind};
-
-    let d = tempfile::tempdir().unwrap();
-    let dir = d.path();
     let sim = SimulatedLine::start(&SimOptions {
         listen: "127.0.0.1:0".parse().unwrap(),
         pki_dir: dir.join("sim-pki"),
@@ -488,6 +482,18 @@ async fn live_line_slow_motion_raises_its_timer_alarm() {
     pki::trust(&pki::own_cert(&c.opcua.pki_dir), &dir.join("sim-pki")).unwrap();
     pki::trust(&pki::own_cert(&dir.join("sim-pki")), &c.opcua.pki_dir).unwrap();
     let agent = cell::start(c, None).await.unwrap();
+    (sim, agent, zenoh_port)
+}
+
+/// The body-shop line played live over OPC UA into the agent with the
+/// shipped timer model: a slowed motion raises the timer alarm of that
+/// motion's sensor, latched, over Zenoh.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn live_line_slow_motion_raises_its_timer_alarm() {
+    use cellwatch_models::timer::line::{Fault, FaultKind};
+
+    let d = tempfile::tempdir().unwrap();
+    let (sim, agent, zenoh_port) = line_cell(d.path()).await;
     let client = cellwatch::sinks::zenoh::open(&cellwatch::config::ZenohConfig {
         mode: cellwatch::config::ZenohMode::Peer,
         connect: vec![format!("tcp/127.0.0.1:{zenoh_port}")],

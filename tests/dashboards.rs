@@ -200,6 +200,29 @@ async fn every_metric_named_is_exported_by_the_agent() {
         );
         tokio::time::sleep(Duration::from_millis(200)).await;
     };
+    // And an agent with transition timers (the line), once it has measured
+    // a transition.
+    let d = tempfile::tempdir().unwrap();
+    let (line_sim, line_agent, _) = crate::agent::line_cell(d.path()).await;
+    let player_sim = line_sim.clone();
+    let player = tokio::spawn(async move { player_sim.play(7, None, |_| {}).await });
+    let addr = line_agent.metrics_addr().unwrap();
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    let line_scrape = loop {
+        let s = scrape_addr(addr).await;
+        if s.contains("cellwatch_transition_duration_seconds_bucket{") {
+            break s;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "no transition measured:\n{s}"
+        );
+        tokio::time::sleep(Duration::from_millis(500)).await;
+    };
+    player.abort();
+    line_agent.stop().await;
+    line_sim.stop();
+    let scrape = format!("{scrape}\n{line_scrape}");
     let exported: BTreeSet<&str> = scrape
         .lines()
         .filter(|l| !l.starts_with('#') && l.starts_with("cellwatch_"))
@@ -215,4 +238,15 @@ async fn every_metric_named_is_exported_by_the_agent() {
     );
     fx.agent.unwrap().stop().await;
     fx.sim.stop();
+}
+
+async fn scrape_addr(addr: std::net::SocketAddr) -> String {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
+    s.write_all(b"GET /metrics HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n")
+        .await
+        .unwrap();
+    let mut body = String::new();
+    s.read_to_string(&mut body).await.unwrap();
+    body
 }

@@ -53,6 +53,12 @@ pub enum Outcome {
 struct Compiled {
     id: u32,
     condition: Vec<(usize, bool)>,
+    /// The start condition as bit masks over the signal bitset (the paper's
+    /// COM + literals): `bits & mask == want` and every masked signal known.
+    mask: Vec<u64>,
+    want: Vec<u64>,
+    /// Signals that must be known: the condition's and the event's.
+    need: Vec<u64>,
     event: (usize, bool),
     /// `common` method: the event that starts the timer.
     trigger: Option<(usize, bool)>,
@@ -81,6 +87,9 @@ pub struct TimerMonitor {
     signals: Vec<String>,
     index: HashMap<String, usize>,
     values: Vec<Option<bool>>,
+    /// One bit per signal: its value, and whether it is known.
+    bits: Vec<u64>,
+    known: Vec<u64>,
     transitions: Vec<Compiled>,
     /// Per signal: transitions whose condition or event reads it.
     readers: Vec<Vec<usize>>,
@@ -138,8 +147,21 @@ impl TimerMonitor {
                     readers[s].push(k);
                 }
             }
+            let words = model.signals.len().div_ceil(64);
+            let (mut mask, mut want) = (vec![0u64; words], vec![0u64; words]);
+            for &(s, v) in &condition {
+                mask[s / 64] |= 1 << (s % 64);
+                if v {
+                    want[s / 64] |= 1 << (s % 64);
+                }
+            }
+            let mut need = mask.clone();
+            need[event.0 / 64] |= 1 << (event.0 % 64);
             transitions.push(Compiled {
                 id: t.id,
+                mask,
+                want,
+                need,
                 condition,
                 event,
                 trigger,
@@ -149,6 +171,8 @@ impl TimerMonitor {
         }
         let n = transitions.len();
         Ok(TimerMonitor {
+            bits: vec![0; model.signals.len().div_ceil(64)],
+            known: vec![0; model.signals.len().div_ceil(64)],
             values: vec![None; model.signals.len()],
             signals: model.signals.clone(),
             index,
@@ -168,9 +192,12 @@ impl TimerMonitor {
         &self.signals
     }
 
+    /// The start condition holds: its signals as wanted, and they and the
+    /// event's signal known.
     fn holds(&self, t: &Compiled) -> bool {
-        t.condition.iter().all(|&(s, v)| self.values[s] == Some(v))
-            && self.values[t.event.0].is_some()
+        (0..t.mask.len()).all(|w| {
+            self.known[w] & t.need[w] == t.need[w] && self.bits[w] & t.mask[w] == t.want[w]
+        })
     }
 
     /// Signal `s` became `value` (`None`: unknown) at `at`; late outcomes
@@ -214,6 +241,18 @@ impl TimerMonitor {
             }
         }
         self.values[s] = value;
+        let (w, b) = (s / 64, 1u64 << (s % 64));
+        match value {
+            Some(v) => {
+                self.known[w] |= b;
+                if v {
+                    self.bits[w] |= b;
+                } else {
+                    self.bits[w] &= !b;
+                }
+            }
+            None => self.known[w] &= !b,
+        }
         for &k in &readers {
             let t = &self.transitions[k];
             match t.trigger {
