@@ -199,6 +199,49 @@ fn literals(state: &[(usize, bool)], names: &[String]) -> Vec<String> {
         .collect()
 }
 
+/// The Δt statistics of a candidate and its window, or why it is dropped:
+/// some Δt below Δmin, too few runs, or training Δt outside the window.
+struct Timing {
+    mean: u64,
+    min: u64,
+    max: u64,
+    window: [u64; 2],
+}
+
+fn timing(
+    dts: &[u64],
+    seen: usize,
+    required: usize,
+    options: &LearnOptions,
+) -> Result<Timing, DropReason> {
+    let min = *dts.iter().min().unwrap_or(&0);
+    let max = *dts.iter().max().unwrap_or(&0);
+    let mean = dts.iter().sum::<u64>() / dts.len().max(1) as u64;
+    let tau = match options.tau {
+        Tau::Fixed(t) => t,
+        Tau::Auto => auto_tau(dts, mean),
+    };
+    let window = [mean.saturating_sub(tau), mean + tau];
+    if min < options.delta_min {
+        Err(DropReason::TooShort { min_ms: min })
+    } else if seen < required {
+        Err(DropReason::Support { seen, required })
+    } else if min < window[0] || max > window[1] {
+        Err(DropReason::NotInvariant {
+            min_ms: min,
+            max_ms: max,
+            window,
+        })
+    } else {
+        Ok(Timing {
+            mean,
+            min,
+            max,
+            window,
+        })
+    }
+}
+
 /// Learns transition timers from `runs` with the paper's full-state method.
 pub fn full_state(runs: &[RunLog], options: &LearnOptions) -> Learned {
     // One numbering of signals across runs, in order of first appearance.
@@ -263,47 +306,32 @@ pub fn full_state(runs: &[RunLog], options: &LearnOptions) -> Learned {
         let occ = &groups[&key];
         let (from, signal, rise, to) = &key;
         let dts: Vec<u64> = occ.iter().map(|o| o.1).collect();
-        let min = *dts.iter().min().unwrap_or(&0);
-        let max = *dts.iter().max().unwrap_or(&0);
-        let mean = dts.iter().sum::<u64>() / dts.len().max(1) as u64;
         let mut seen: Vec<usize> = occ.iter().map(|o| o.0).collect();
         seen.sort_unstable();
         seen.dedup();
         let edge = if *rise { "+" } else { "-" };
+        let mean = dts.iter().sum::<u64>() / dts.len().max(1) as u64;
         let text = format!(
             "δ({}, {edge}{} | {mean}) = {}",
             numbered(from),
             signal + 1,
             numbered(to)
         );
-        let tau = match options.tau {
-            Tau::Fixed(t) => t,
-            Tau::Auto => auto_tau(&dts, mean),
+        let Timing {
+            mean,
+            min,
+            max,
+            window,
+        } = match timing(&dts, seen.len(), required, options) {
+            Ok(t) => t,
+            Err(reason) => {
+                dropped.push(Dropped {
+                    transition: text,
+                    reason,
+                });
+                continue;
+            }
         };
-        let window = [mean.saturating_sub(tau), mean + tau];
-        let reason = if min < options.delta_min {
-            Some(DropReason::TooShort { min_ms: min })
-        } else if seen.len() < required {
-            Some(DropReason::Support {
-                seen: seen.len(),
-                required,
-            })
-        } else if min < window[0] || max > window[1] {
-            Some(DropReason::NotInvariant {
-                min_ms: min,
-                max_ms: max,
-                window,
-            })
-        } else {
-            None
-        };
-        if let Some(reason) = reason {
-            dropped.push(Dropped {
-                transition: text,
-                reason,
-            });
-            continue;
-        }
         transitions.push(Transition {
             id: transitions.len() as u32 + 1,
             from: literals(from, &names),
@@ -538,34 +566,22 @@ pub fn common(runs: &[RunLog], options: &LearnOptions) -> Learned {
             continue;
         };
         let ds: Vec<u64> = delays.iter().map(|d| d.2 - d.1).collect();
-        let min = *ds.iter().min().unwrap_or(&0);
-        let max = *ds.iter().max().unwrap_or(&0);
         let text = format!("δ({} → {} | {mean})", describe(ts, tv), describe(es, ev));
-        let tau = match options.tau {
-            Tau::Fixed(t) => t,
-            Tau::Auto => auto_tau(&ds, mean),
+        let Timing {
+            mean,
+            min,
+            max,
+            window,
+        } = match timing(&ds, seen, required, options) {
+            Ok(t) => t,
+            Err(reason) => {
+                dropped.push(Dropped {
+                    transition: text,
+                    reason,
+                });
+                continue;
+            }
         };
-        let window = [mean.saturating_sub(tau), mean + tau];
-        let reason = if min < options.delta_min {
-            Some(DropReason::TooShort { min_ms: min })
-        } else if seen < required {
-            Some(DropReason::Support { seen, required })
-        } else if min < window[0] || max > window[1] {
-            Some(DropReason::NotInvariant {
-                min_ms: min,
-                max_ms: max,
-                window,
-            })
-        } else {
-            None
-        };
-        if let Some(reason) = reason {
-            dropped.push(Dropped {
-                transition: text,
-                reason,
-            });
-            continue;
-        }
         // Stable literals: no change in [t_trigger, t_event) other than the
         // trigger itself, and the same value in every occurrence.
         let mut stable: Vec<Option<bool>> = vec![None; n];
