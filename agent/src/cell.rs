@@ -454,21 +454,27 @@ impl Cell {
                     .transpose()?,
             })
         })();
+        // Answered from its own task: a long query must not hold up the
+        // engine.
         let path = self.journal.path().to_path_buf();
-        let result = match parsed {
-            Ok(query) => tokio::task::spawn_blocking(move || {
-                let conn = journal::open_read(&path).map_err(|e| e.to_string())?;
-                journal::history(&conn, &query)
-            })
-            .await
-            .unwrap_or_else(|e| Err(e.to_string())),
-            Err(e) => Err(e),
-        };
-        self.reply(
-            q,
-            result.map(|rows| serde_json::to_string(&rows).unwrap_or_default()),
-        )
-        .await;
+        let metrics = self.metrics.clone();
+        tokio::spawn(async move {
+            let result = match parsed {
+                Ok(query) => tokio::task::spawn_blocking(move || {
+                    let conn = journal::open_read(&path).map_err(|e| e.to_string())?;
+                    journal::history(&conn, &query)
+                })
+                .await
+                .unwrap_or_else(|e| Err(e.to_string())),
+                Err(e) => Err(e),
+            };
+            reply(
+                &metrics,
+                q,
+                result.map(|rows| serde_json::to_string(&rows).unwrap_or_default()),
+            )
+            .await;
+        });
     }
 
     async fn snapshot(&mut self, q: Query) {
@@ -612,15 +618,20 @@ impl Cell {
     }
 
     async fn reply(&self, q: Query, result: Result<String, String>) {
-        let key = q.key_expr().clone();
-        let sent = match result {
-            Ok(json) => q.reply(key, json).await,
-            Err(e) => q.reply_err(e).await,
-        };
-        if let Err(e) = sent {
-            tracing::warn!(error = %e, "reply failed");
-            self.metrics.zenoh_publish_errors.inc();
-        }
+        reply(&self.metrics, q, result).await;
+    }
+}
+
+/// Answers a query with JSON, or with an error text.
+async fn reply(metrics: &Metrics, q: Query, result: Result<String, String>) {
+    let key = q.key_expr().clone();
+    let sent = match result {
+        Ok(json) => q.reply(key, json).await,
+        Err(e) => q.reply_err(e).await,
+    };
+    if let Err(e) = sent {
+        tracing::warn!(error = %e, "reply failed");
+        metrics.zenoh_publish_errors.inc();
     }
 }
 
