@@ -216,6 +216,10 @@ pub async fn start(
 
 type Queryable = zenoh::query::Queryable<zenoh::handlers::FifoChannelHandler<Query>>;
 
+/// How long after a timer's deadline the agent waits for an event that may
+/// still be in transit before calling it late, ms.
+pub const DELIVERY_ALLOWANCE_MS: u64 = 1000;
+
 struct Cell {
     config: CellConfig,
     engine: CellEngine,
@@ -302,7 +306,13 @@ impl Cell {
 
     async fn tick(&mut self) {
         let now = now_ms();
-        let events = self.engine.advance(now);
+        // Timers judge "late" against the PLC's clock: an event that
+        // happened in time but is still on its way (publishing interval,
+        // network) must not be called late. Events carry their source
+        // timestamps; the deadline is checked with this allowance.
+        let events = self
+            .engine
+            .advance(now.saturating_sub(DELIVERY_ALLOWANCE_MS));
         self.dispatch(events).await;
         self.metrics.add_state_time(
             self.counted_state,

@@ -68,6 +68,7 @@ impl SimulatedLine {
         loop {
             let (run, injected) = line::run(seed, CYCLES, fault.take());
             let start = tokio::time::Instant::now();
+            let start_wall = chrono::Utc::now();
             let initial: Vec<(String, bool)> = run
                 .signals
                 .iter()
@@ -96,7 +97,10 @@ impl SimulatedLine {
                     batch.push((run.signals[c.signal].clone(), c.value));
                     i += 1;
                 }
-                if let Err(e) = self.server.set(&batch) {
+                // Stamped with when it happened, however late the scheduler
+                // wakes this task.
+                let happened = start_wall + chrono::Duration::milliseconds(at as i64);
+                if let Err(e) = self.server.set_at(&batch, happened.into()) {
                     tracing::error!(error = %e, "simulated line");
                 }
             }

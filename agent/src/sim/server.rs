@@ -137,7 +137,16 @@ impl SimServer {
     /// # Errors
     /// A name that is not a variable of this server.
     pub fn set(&self, values: &[(String, bool)]) -> Result<(), String> {
-        let now = DateTime::now();
+        self.set_at(values, DateTime::now())
+    }
+
+    /// Writes values that changed at `at` (their source timestamp), as a PLC
+    /// stamps a change when it happens, not when it is read.
+    ///
+    /// # Errors
+    /// A name that is not a variable of this server.
+    pub fn set_at(&self, values: &[(String, bool)], at: DateTime) -> Result<(), String> {
+        let now = at;
         let values: Vec<(NodeId, DataValue)> = values
             .iter()
             .map(|(s, v)| (NodeId::new(self.ns, s.as_str()), DataValue::new_at(*v, now)))

@@ -23,14 +23,14 @@ use std::time::Duration;
 use cellwatch_models::engine::Reading;
 use futures_util::StreamExt;
 use opcua::client::{
-    ClientBuilder, DataChangeCallback, IdentityToken, Session, SessionConnectMode,
-    SessionPollResult,
+    ClientBuilder, IdentityToken, MonitoredItem, MonitoredItemMap, OnSubscriptionNotification,
+    OnSubscriptionNotificationCore, Session, SessionConnectMode, SessionPollResult,
 };
 use opcua::crypto::SecurityPolicy as UaPolicy;
 use opcua::types::{
     DataChangeFilter, DataChangeTrigger, DataValue, ExtensionObject, MessageSecurityMode,
-    MonitoredItemCreateRequest, MonitoringMode, MonitoringParameters, NodeId, ReadValueId,
-    TimestampsToReturn, UserTokenPolicy, Variant,
+    MonitoredItemCreateRequest, MonitoringMode, MonitoringParameters, NodeId, NotificationMessage,
+    ReadValueId, TimestampsToReturn, UserTokenPolicy, Variant,
 };
 use tokio::sync::mpsc;
 
@@ -257,18 +257,10 @@ async fn subscribe(
     by_node: &Arc<HashMap<NodeId, usize>>,
     tx: &mpsc::UnboundedSender<SourceEvent>,
 ) -> bool {
-    let map = by_node.clone();
-    let sender = tx.clone();
-    let callback = DataChangeCallback::new(move |value: DataValue, item| {
-        let node = &item.item_to_monitor().node_id;
-        if let Some(&tag) = map.get(node) {
-            let _ = sender.send(SourceEvent::Reading {
-                tag,
-                reading: reading(&value),
-                source_time: source_time(&value),
-            });
-        }
-    });
+    let callback = InTimeOrder {
+        by_node: by_node.clone(),
+        tx: tx.clone(),
+    };
     let sub = match session
         .create_subscription(config.publishing_interval, 60, 10, 0, 0, true, callback)
         .await
@@ -337,6 +329,54 @@ async fn subscribe(
         }
     }
     true
+}
+
+/// Passes each publish's data changes to the engine in source-time order.
+///
+/// A server sends the changes of one publish in no particular order; a
+/// trigger processed before the change it depends on would leave a timer
+/// unarmed. The library's own dispatch collects them ([`Collector`]), then
+/// they are sorted by source timestamp (stable, so equal times keep the
+/// server's order).
+struct InTimeOrder {
+    by_node: Arc<HashMap<NodeId, usize>>,
+    tx: mpsc::UnboundedSender<SourceEvent>,
+}
+
+struct Collector<'a> {
+    by_node: &'a HashMap<NodeId, usize>,
+    readings: Vec<(usize, Reading, u64)>,
+}
+
+impl OnSubscriptionNotification for Collector<'_> {
+    fn on_data_value(&mut self, value: DataValue, item: &MonitoredItem) {
+        if let Some(&tag) = self.by_node.get(&item.item_to_monitor().node_id) {
+            self.readings
+                .push((tag, reading(&value), source_time(&value)));
+        }
+    }
+}
+
+impl OnSubscriptionNotificationCore for InTimeOrder {
+    fn on_subscription_notification(
+        &mut self,
+        notification: NotificationMessage,
+        items: MonitoredItemMap<'_>,
+    ) {
+        let mut c = Collector {
+            by_node: &self.by_node,
+            readings: Vec::new(),
+        };
+        c.on_subscription_notification(notification, items);
+        c.readings.sort_by_key(|r| r.2);
+        for (tag, reading, source_time) in c.readings {
+            let _ = self.tx.send(SourceEvent::Reading {
+                tag,
+                reading,
+                source_time,
+            });
+        }
+    }
 }
 
 /// The server's limit on monitored items per call, or [`DEFAULT_CHUNK`].
