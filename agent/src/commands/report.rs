@@ -202,20 +202,30 @@ fn csv_causes(out: &mut dyn Write, causes: &[CauseTotal]) -> std::io::Result<()>
     Ok(())
 }
 
+/// A CSV row of minutes, availability and parts for a day or a total.
+fn summary_row(
+    out: &mut dyn Write,
+    section: &str,
+    key: &str,
+    m: &Minutes,
+    availability: Option<f64>,
+    parts: u64,
+) -> std::io::Result<()> {
+    let availability = availability.map_or_else(String::new, |a| format!("{a:.1}"));
+    writeln!(
+        out,
+        "{section},{key},,{},,,{availability},{parts}",
+        csv_minutes(m)
+    )
+}
+
 fn daily_csv(out: &mut dyn Write, r: &DailyReport) -> std::io::Result<()> {
     writeln!(out, "{CSV_HEADER}")?;
     for (h, m) in r.hours.iter().enumerate() {
         writeln!(out, "hour,{h:02},,{},,,,", csv_minutes(m))?;
     }
     csv_causes(out, &r.stop_causes)?;
-    writeln!(
-        out,
-        "total,day,,{},,,{},{}",
-        csv_minutes(&r.total),
-        r.availability
-            .map_or_else(String::new, |a| format!("{a:.1}")),
-        r.production
-    )
+    summary_row(out, "total", "day", &r.total, r.availability, r.production)
 }
 
 fn monthly_table(
@@ -257,22 +267,22 @@ fn monthly_table(
 fn monthly_csv(out: &mut dyn Write, days: &[NaiveDate], r: &MonthlyReport) -> std::io::Result<()> {
     writeln!(out, "{CSV_HEADER}")?;
     for (d, day) in days.iter().zip(&r.days) {
-        writeln!(
+        summary_row(
             out,
-            "day,{d},,{},,,{},{}",
-            csv_minutes(&day.total),
-            day.availability
-                .map_or_else(String::new, |a| format!("{a:.1}")),
-            day.production
+            "day",
+            &d.to_string(),
+            &day.total,
+            day.availability,
+            day.production,
         )?;
     }
     csv_causes(out, &r.stop_causes)?;
-    writeln!(
+    summary_row(
         out,
-        "total,month,,{},,,{},{}",
-        csv_minutes(&r.total),
-        r.availability
-            .map_or_else(String::new, |a| format!("{a:.1}")),
-        r.production
+        "total",
+        "month",
+        &r.total,
+        r.availability,
+        r.production,
     )
 }
