@@ -194,14 +194,14 @@ async fn ese_alarm_with_culprit_then_cleared_and_in_history() {
     fx.sim.set("X0.06", false).unwrap();
     let mut seen = Vec::new();
     let raised = alarm_until(&sub, "ESE raised", &mut seen, |a| {
-        a.id == "ese" && a.transition == "raised"
+        a.id == "ese" && a.transition.as_str() == "raised"
     })
     .await;
     assert_eq!(raised.schema, "cellwatch.alarm.v1");
     assert_eq!(raised.cell, "m01ps0004");
-    assert_eq!(raised.kind, "switching");
-    assert_eq!(raised.severity, "critical");
-    assert_eq!(raised.state, "active_unacknowledged");
+    assert_eq!(raised.kind.as_str(), "switching");
+    assert_eq!(raised.severity.as_str(), "critical");
+    assert_eq!(raised.state.as_str(), "active_unacknowledged");
     assert_eq!(raised.fault_step, Some(6));
     assert_eq!(raised.culprits.len(), 1);
     let c = &raised.culprits[0];
@@ -212,10 +212,10 @@ async fn ese_alarm_with_culprit_then_cleared_and_in_history() {
     assert_eq!(c.comment.as_deref(), Some("Y Over Travel Limit SW (B)"));
     fx.sim.set("X0.06", true).unwrap();
     let cleared = alarm_until(&sub, "ESE cleared", &mut seen, |a| {
-        a.id == "ese" && a.transition == "cleared"
+        a.id == "ese" && a.transition.as_str() == "cleared"
     })
     .await;
-    assert_eq!(cleared.state, "cleared_unacknowledged");
+    assert_eq!(cleared.state.as_str(), "cleared_unacknowledged");
     assert!(cleared.cleared_at.is_some());
     // History: the fault with its type and element, then the recovery.
     let rows: Vec<serde_json::Value> = serde_json::from_str(
@@ -276,7 +276,7 @@ async fn server_outage_is_one_communication_alarm_and_faults_resume() {
     let mut seen = Vec::new();
     fx.sim.stop();
     alarm_until(&sub, "communication lost", &mut seen, |a| {
-        a.id == "communication" && a.transition == "raised"
+        a.id == "communication" && a.transition.as_str() == "raised"
     })
     .await;
     // While the PLC is away, nothing else is raised.
@@ -298,29 +298,31 @@ async fn server_outage_is_one_communication_alarm_and_faults_resume() {
         }
     };
     alarm_until(&sub, "communication restored", &mut seen, |a| {
-        a.id == "communication" && a.transition == "cleared"
+        a.id == "communication" && a.transition.as_str() == "cleared"
     })
     .await;
     fx.settled().await;
     fx.sim.set("X0.04", false).unwrap();
     let raised = alarm_until(&sub, "ESE after the outage", &mut seen, |a| {
-        a.id == "ese" && a.transition == "raised"
+        a.id == "ese" && a.transition.as_str() == "raised"
     })
     .await;
     assert_eq!(raised.culprits[0].address, "X0.04");
     let comm: Vec<&AlarmPayload> = seen
         .iter()
-        .filter(|a| a.id == "communication" && a.transition == "raised")
+        .filter(|a| a.id == "communication" && a.transition.as_str() == "raised")
         .collect();
     assert_eq!(comm.len(), 1, "{seen:#?}");
     let process_during_outage: Vec<&AlarmPayload> = seen
         .iter()
-        .filter(|a| a.kind == "switching" && a.transition == "raised" && a.id != "ese")
+        .filter(|a| {
+            a.kind.as_str() == "switching" && a.transition.as_str() == "raised" && a.id != "ese"
+        })
         .collect();
     assert!(process_during_outage.is_empty(), "{seen:#?}");
     assert_eq!(
         seen.iter()
-            .filter(|a| a.id == "ese" && a.transition == "raised")
+            .filter(|a| a.id == "ese" && a.transition.as_str() == "raised")
             .count(),
         1,
         "{seen:#?}"
@@ -362,7 +364,7 @@ async fn only_correctly_signed_acks_are_carried_out_and_all_are_journaled() {
     }
     let now = cellwatch::clock::now_ms();
     let cmd = |nonce: &str| Command {
-        action: "ack".into(),
+        action: cellwatch::operator::Action::Ack,
         alarm: "ese".into(),
         operator: "kim".into(),
         nonce: nonce.into(),
@@ -534,11 +536,11 @@ async fn live_line_slow_motion_raises_its_timer_alarm() {
     assert!(note.contains("TR0_AT_STATION"), "{note}");
     let mut seen = Vec::new();
     let raised = alarm_until(&sub, "the slowed motion's timer alarm", &mut seen, |a| {
-        a.kind == "timer" && a.transition == "raised"
+        a.kind.as_str() == "timer" && a.transition.as_str() == "raised"
     })
     .await;
     assert_eq!(raised.culprits[0].address, "TR0_AT_STATION", "{seen:#?}");
-    assert_eq!(raised.state, "active_unacknowledged");
+    assert_eq!(raised.state.as_str(), "active_unacknowledged");
     assert!(
         raised
             .message
@@ -548,7 +550,7 @@ async fn live_line_slow_motion_raises_its_timer_alarm() {
     );
     let timers: Vec<&AlarmPayload> = seen
         .iter()
-        .filter(|a| a.kind == "timer" && a.transition == "raised")
+        .filter(|a| a.kind.as_str() == "timer" && a.transition.as_str() == "raised")
         .collect();
     assert_eq!(timers.len(), 1, "only the slowed motion: {seen:#?}");
     player.abort();

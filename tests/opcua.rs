@@ -32,7 +32,7 @@ pub(crate) fn opcua_config(endpoint: &str, pki_dir: &std::path::Path) -> OpcUaCo
 }
 
 async fn next(
-    rx: &mut mpsc::UnboundedReceiver<SourceEvent>,
+    rx: &mut mpsc::Receiver<SourceEvent>,
     what: &str,
     f: impl Fn(&SourceEvent) -> bool,
 ) -> SourceEvent {
@@ -51,7 +51,7 @@ async fn next(
 /// Waits until every condition has matched some event, in any order
 /// (changes in one publish arrive in no particular order).
 async fn all(
-    rx: &mut mpsc::UnboundedReceiver<SourceEvent>,
+    rx: &mut mpsc::Receiver<SourceEvent>,
     what: &str,
     conditions: &[&dyn Fn(&SourceEvent) -> bool],
 ) {
@@ -66,6 +66,11 @@ async fn all(
             seen[i] |= c(&ev);
         }
     }
+}
+
+/// Whether `e` delivers `reading` for tag `tag`.
+fn has(e: &SourceEvent, tag: usize, reading: Reading) -> bool {
+    matches!(e, SourceEvent::Readings(rs) if rs.iter().any(|r| r.tag == tag && r.reading == reading))
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -94,7 +99,7 @@ async fn source_reads_the_simulator_securely() {
         tag("X0.04", sim.namespace()),
         tag("G8.02", sim.namespace()),
     ];
-    let (tx, mut rx) = mpsc::unbounded_channel();
+    let (tx, mut rx) = mpsc::channel(cellwatch::sources::QUEUE_CAPACITY);
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
     let task = tokio::spawn(async move {
         opcua::run("test", &config, &tags, tx, async {
@@ -105,15 +110,8 @@ async fn source_reads_the_simulator_securely() {
     all(
         &mut rx,
         "connection and initial values",
-        &[&|e| *e == SourceEvent::Connected, &|e| {
-            matches!(
-                e,
-                SourceEvent::Reading {
-                    tag: 0,
-                    reading: Reading::Good(true),
-                    ..
-                }
-            )
+        &[&|e| matches!(e, SourceEvent::Connected(_)), &|e| {
+            has(e, 0, Reading::Good(true))
         }],
     )
     .await;
@@ -122,42 +120,13 @@ async fn source_reads_the_simulator_securely() {
     all(
         &mut rx,
         "X0.06 = 0 and G8.02 = 1",
-        &[
-            &|e| {
-                matches!(
-                    e,
-                    SourceEvent::Reading {
-                        tag: 0,
-                        reading: Reading::Good(false),
-                        ..
-                    }
-                )
-            },
-            &|e| {
-                matches!(
-                    e,
-                    SourceEvent::Reading {
-                        tag: 2,
-                        reading: Reading::Good(true),
-                        ..
-                    }
-                )
-            },
-        ],
+        &[&|e| has(e, 0, Reading::Good(false)), &|e| {
+            has(e, 2, Reading::Good(true))
+        }],
     )
     .await;
     sim.set_bad("X0.04").unwrap();
-    next(&mut rx, "X0.04 bad", |e| {
-        matches!(
-            e,
-            SourceEvent::Reading {
-                tag: 1,
-                reading: Reading::Bad,
-                ..
-            }
-        )
-    })
-    .await;
+    next(&mut rx, "X0.04 bad", |e| has(e, 1, Reading::Bad)).await;
     let _ = stop_tx.send(());
     task.await.unwrap().unwrap();
     sim.stop();
@@ -180,7 +149,7 @@ async fn unknown_server_certificate_is_rejected() {
     // The server trusts the agent, but the agent does not trust the server.
     pki::trust(&pki::own_cert(&agent_pki), &server_pki).unwrap();
     let tags = vec![tag("X0.06", sim.namespace())];
-    let (tx, mut rx) = mpsc::unbounded_channel();
+    let (tx, mut rx) = mpsc::channel(cellwatch::sources::QUEUE_CAPACITY);
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
     let task = tokio::spawn(async move {
         opcua::run("test", &config, &tags, tx, async {

@@ -55,10 +55,10 @@ async fn scripted_journal(path: &std::path::Path) {
     let mut entries = Vec::new();
     let set = |e: &mut CellEngine, a: &str, v: bool, at: u64| {
         let t = e.tag_index(&Signal::new(a)).unwrap();
-        e.on_reading(t, Reading::Good(v), at, at)
+        e.on_reading(t, Reading::Good(v), at, at).events
     };
     // 00:00 connected, the normal image: running.
-    record(e.on_connection(true, DAY), &mut entries);
+    record(e.on_connection(true, DAY).events, &mut entries);
     for (file, text) in [
         ("ese", include_str!("../config/cnc/ese-normal.values")),
         ("csd", include_str!("../config/cnc/csd-normal.values")),
@@ -79,7 +79,10 @@ async fn scripted_journal(path: &std::path::Path) {
     record(set(&mut e, "X200.00", false, DAY + 180 * MIN), &mut entries);
     record(set(&mut e, "X200.00", true, DAY + 240 * MIN), &mut entries);
     // 23:00 the PLC connection drops for the rest of the day.
-    record(e.on_connection(false, DAY + 23 * 60 * MIN), &mut entries);
+    record(
+        e.on_connection(false, DAY + 23 * 60 * MIN).events,
+        &mut entries,
+    );
     // Ten parts in the morning.
     for k in 0..10 {
         entries.push(Entry::Part {
@@ -87,7 +90,7 @@ async fn scripted_journal(path: &std::path::Path) {
         });
     }
     for entry in entries {
-        j.write(entry).await;
+        j.write(entry).await.unwrap();
         rows += 1;
     }
     let mut committed = j.committed();

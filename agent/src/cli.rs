@@ -10,6 +10,7 @@ use cellwatch_models::il::Dialect;
 use clap::{Parser, Subcommand};
 
 use crate::commands;
+use crate::operator::Action;
 
 /// cellwatch — watches a PLC and names the step and the contact behind every fault.
 ///
@@ -408,7 +409,8 @@ fn parse_polarity(s: &str) -> Result<Polarity, String> {
     s.parse()
 }
 
-/// Why a command failed.
+/// Why a command failed. Each error is sorted into one of the two by the
+/// code that knows what failed; there is no blanket conversion.
 #[derive(Debug)]
 pub(crate) enum Failure {
     /// The user's input is wrong: exit status 2.
@@ -417,9 +419,20 @@ pub(crate) enum Failure {
     Runtime(String),
 }
 
-impl<E: std::error::Error> From<E> for Failure {
-    fn from(e: E) -> Self {
+impl Failure {
+    /// Bad input: a file, flag or value the user gave.
+    pub(crate) fn input(e: impl std::fmt::Display) -> Failure {
         Failure::Input(e.to_string())
+    }
+
+    /// A failure while running.
+    pub(crate) fn runtime(e: impl std::fmt::Display) -> Failure {
+        Failure::Runtime(e.to_string())
+    }
+
+    /// Writing the command's output failed (a closed pipe, a full disk).
+    pub(crate) fn output(e: std::io::Error) -> Failure {
+        Failure::Runtime(format!("cannot write output: {e}"))
     }
 }
 
@@ -458,8 +471,8 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             }
             Command::Alarms(args) => commands::subscribers::alarms(&args, out).await,
             Command::History(args) => commands::subscribers::history(&args, out).await,
-            Command::Ack(args) => commands::subscribers::command("ack", &args, out).await,
-            Command::Reset(args) => commands::subscribers::command("reset", &args, out).await,
+            Command::Ack(args) => commands::subscribers::command(Action::Ack, &args, out).await,
+            Command::Reset(args) => commands::subscribers::command(Action::Reset, &args, out).await,
             // Dispatched synchronously by `run`; never sent here.
             Command::Sf(_)
             | Command::Explain(_)

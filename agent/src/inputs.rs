@@ -19,7 +19,9 @@ pub(crate) fn read_text(path: &Path, what: &str) -> Result<String, Failure> {
     let name = path.display().to_string();
     let bytes = std::fs::read(path)
         .map_err(|e| Failure::Input(format!("cannot read {what} '{name}': {e}")))?;
-    Ok(source::text(&name, &bytes)?.to_string())
+    Ok(source::text(&name, &bytes)
+        .map_err(Failure::input)?
+        .to_string())
 }
 
 /// The compiled program, its comment database and observability, with
@@ -30,14 +32,15 @@ pub(crate) fn load(
 ) -> Result<(Program, CommentDb, Observability), Failure> {
     let name = args.program.display().to_string();
     let text = read_text(&args.program, "program")?;
-    let program = Program::compile(&name, &text, args.dialect)?;
+    let program = Program::compile(&name, &text, args.dialect).map_err(Failure::input)?;
     for w in program.warnings() {
         let _ = writeln!(err, "{name}:{}: warning: {}", w.at, w.message);
     }
     let comments = match &args.comments {
         Some(path) => {
             let text = read_text(path, "comment database")?;
-            CommentDb::parse(&path.display().to_string(), &text, |a| program.resolve(a))?
+            CommentDb::parse(&path.display().to_string(), &text, |a| program.resolve(a))
+                .map_err(Failure::input)?
         }
         None => CommentDb::default(),
     };
@@ -55,12 +58,12 @@ pub(crate) fn values(option: &str, arg: &str, program: &Program) -> Result<Value
     let path = Path::new(arg);
     if path.is_file() {
         let text = read_text(path, "snapshot")?;
-        return Ok(Values::parse_file(arg, &text, |a| program.resolve(a))?);
+        return Values::parse_file(arg, &text, |a| program.resolve(a)).map_err(Failure::input);
     }
     if !arg.contains('=') {
         return Err(Failure::Input(format!(
             "{option} '{arg}': no such file, and not inline ADDRESS=VALUE pairs"
         )));
     }
-    Ok(Values::parse_inline(option, arg, |a| program.resolve(a))?)
+    Values::parse_inline(option, arg, |a| program.resolve(a)).map_err(Failure::input)
 }

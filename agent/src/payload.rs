@@ -2,8 +2,8 @@
 //! journal. Each carries a `schema` name so that subscribers can tell
 //! versions apart.
 
-use cellwatch_models::alarm::{Alarm, Transition};
-use cellwatch_models::engine::{HistoryKind, MachineState};
+use cellwatch_models::alarm::{Alarm, AlarmKind, AlarmState, Severity, Transition};
+use cellwatch_models::engine::{HistoryKind, MachineState, StateName};
 use cellwatch_models::explain::Culprit;
 use serde::{Deserialize, Serialize};
 
@@ -69,14 +69,14 @@ pub struct AlarmPayload {
     /// Stable alarm id.
     pub id: String,
     /// `switching`, `timer`, `tag_quality`, `communication`.
-    pub kind: String,
+    pub kind: AlarmKind,
     /// `low` .. `critical`.
-    pub severity: String,
+    pub severity: Severity,
     /// ISA-18.2 state: `active_unacknowledged`, `active_acknowledged`,
     /// `cleared_unacknowledged`, `normal`.
-    pub state: String,
+    pub state: AlarmState,
     /// What just happened: `raised`, `cleared`, `acknowledged`, `updated`.
-    pub transition: String,
+    pub transition: Transition,
     /// When this transition happened (RFC 3339).
     pub at: String,
     /// When the current occurrence was raised.
@@ -102,10 +102,10 @@ impl AlarmPayload {
             schema: ALARM_SCHEMA.into(),
             cell: cell.into(),
             id: alarm.id.clone(),
-            kind: alarm.kind.as_str().into(),
-            severity: alarm.severity.as_str().into(),
-            state: alarm.state().as_str().into(),
-            transition: transition_name(transition).into(),
+            kind: alarm.kind,
+            severity: alarm.severity,
+            state: alarm.state(),
+            transition,
             at: rfc3339(at),
             raised_at: rfc3339(alarm.raised_at),
             cleared_at: alarm.cleared_at.map(rfc3339),
@@ -118,16 +118,6 @@ impl AlarmPayload {
     }
 }
 
-/// The name of a transition.
-pub fn transition_name(t: Transition) -> &'static str {
-    match t {
-        Transition::Raised => "raised",
-        Transition::Cleared => "cleared",
-        Transition::Acknowledged => "acknowledged",
-        Transition::Updated => "updated",
-    }
-}
-
 /// `<prefix>/state`: the machine state.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct StatePayload {
@@ -136,9 +126,9 @@ pub struct StatePayload {
     /// Cell id.
     pub cell: String,
     /// `running`, `idle`, `fault`, `offline`.
-    pub state: String,
+    pub state: StateName,
     /// History row kind of the last change: `normal`, `fault`, `recovery`, `offline`.
-    pub kind: String,
+    pub kind: HistoryKind,
     /// Fault type, in `fault`.
     pub fault_type: Option<String>,
     /// Faulty element, in `fault` when known.
@@ -162,12 +152,72 @@ impl StatePayload {
         StatePayload {
             schema: STATE_SCHEMA.into(),
             cell: cell.into(),
-            state: state.name().into(),
-            kind: kind.as_str().into(),
+            state: state.state_name(),
+            kind,
             fault_type,
             element,
             since: rfc3339(since),
             at: rfc3339(at),
         }
     }
+}
+
+/// Schema name of snapshots.
+pub const SNAPSHOT_SCHEMA: &str = "cellwatch.snapshot.v1";
+
+/// Quality of a tag's value in a snapshot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Quality {
+    /// A good value.
+    Good,
+    /// The server says the value is bad or uncertain.
+    Bad,
+    /// No value (not yet received, or the connection is down).
+    Unknown,
+}
+
+/// A tag's value in a snapshot.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TagValue {
+    /// Plant name.
+    pub name: String,
+    /// PLC address.
+    pub address: String,
+    /// The value, if known.
+    pub value: Option<bool>,
+    /// Its quality.
+    pub quality: Quality,
+}
+
+/// The values at the last fault.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct LastFault {
+    /// The alarm raised.
+    pub alarm: String,
+    /// When (RFC 3339).
+    pub at: String,
+    /// Every tag's value then.
+    pub values: Vec<TagValue>,
+}
+
+/// `<prefix>/snapshot`: the cell as the engine sees it now.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SnapshotPayload {
+    /// [`SNAPSHOT_SCHEMA`].
+    pub schema: String,
+    /// Cell id.
+    pub cell: String,
+    /// When (RFC 3339).
+    pub at: String,
+    /// Whether the PLC connection is up.
+    pub connected: bool,
+    /// The machine state.
+    pub state: StateName,
+    /// Every tag with its value and quality.
+    pub tags: Vec<TagValue>,
+    /// Alarms active or not yet acknowledged.
+    pub alarms: Vec<AlarmPayload>,
+    /// The values at the last fault.
+    pub last_fault: Option<LastFault>,
 }

@@ -67,7 +67,7 @@ impl FromStr for Severity {
 }
 
 /// What raised an alarm.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum AlarmKind {
     /// A switching-function check: a fault coil at its fault value.
@@ -101,7 +101,7 @@ impl AlarmKind {
 }
 
 /// The ISA-18.2 state of an alarm.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum AlarmState {
     /// Condition present, not yet acknowledged.
@@ -127,7 +127,7 @@ impl AlarmState {
 }
 
 /// What just happened to an alarm.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Transition {
     /// The condition started.
@@ -139,6 +139,36 @@ pub enum Transition {
     /// The condition still holds but its details changed (more tags bad,
     /// a new culprit).
     Updated,
+}
+
+impl Transition {
+    /// The snake-case name.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Transition::Raised => "raised",
+            Transition::Cleared => "cleared",
+            Transition::Acknowledged => "acknowledged",
+            Transition::Updated => "updated",
+        }
+    }
+}
+
+impl fmt::Display for Transition {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl fmt::Display for AlarmKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl fmt::Display for AlarmState {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
 }
 
 /// One alarm: its identity, state and the diagnosis that goes with it.

@@ -6,22 +6,39 @@ use std::time::Duration;
 
 use tokio::sync::mpsc;
 
-use crate::cell::{self, Notice};
+use crate::cell;
 use crate::cli::{DemoArgs, Failure, RunArgs, ValidateArgs};
 use crate::config::{self, CellConfig};
 use crate::sim::cnc::{Scenario, SimOptions, SimulatedCnc};
 use crate::sim::line::SimulatedLine;
+use crate::sinks::console::Notice;
 use crate::sources::{opcua, pki};
+use cellwatch_models::alarm::{AlarmKind, Transition};
 use cellwatch_models::timer::line::{Fault, FaultKind};
 
 fn load(path: &Path) -> Result<CellConfig, Failure> {
     config::load(path).map_err(|e| Failure::Input(e.to_string()))
 }
 
-/// `cellwatch validate CONFIG`.
+/// A start failure: bad input if the configuration is at fault.
+fn start_failure(e: cell::StartError) -> Failure {
+    if e.is_input() {
+        Failure::input(e)
+    } else {
+        Failure::runtime(e)
+    }
+}
+
+/// `cellwatch validate CONFIG`: everything `run` compiles, nothing it
+/// connects to.
 pub(crate) fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<(), Failure> {
     let c = load(&args.config)?;
-    let io = |e: std::io::Error| Failure::Runtime(e.to_string());
+    cell::compile::engine(&c)
+        .map_err(|e| Failure::Input(format!("{}: {e}", args.config.display())))?;
+    if let Some(path) = &c.secrets_file {
+        crate::operator::OperatorKeys::load(path).map_err(Failure::input)?;
+    }
+    let io = Failure::output;
     writeln!(
         out,
         "{}: cell {}, {} tags, {} switching-function checks, OPC UA {} ({} {:?}), Zenoh {} {}",
@@ -46,14 +63,18 @@ pub(crate) fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<(), F
 pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
     let c = load(&args.config)?;
     let cell = c.cell.clone();
-    let mut agent = cell::start(c, None).await.map_err(Failure::Runtime)?;
+    let mut agent = cell::start(c, None).await.map_err(start_failure)?;
     tracing::info!(cell, metrics = ?agent.metrics_addr(), "agent running");
-    tokio::select! {
-        _ = tokio::signal::ctrl_c() => {}
-        _ = agent.wait() => return Err(Failure::Runtime("the agent stopped".into())),
-    }
+    let failed = tokio::select! {
+        _ = tokio::signal::ctrl_c() => None,
+        e = agent.wait() => Some(e),
+    };
     agent.stop().await;
-    Ok(())
+    match failed {
+        None => Ok(()),
+        Some(Some(e)) => Err(Failure::runtime(format!("the source cannot run: {e}"))),
+        Some(None) => Err(Failure::Runtime("the source stopped".into())),
+    }
 }
 
 /// Writes an operator secrets file with one random key, readable by the
@@ -114,13 +135,13 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         insecure: false,
     })
     .await
-    .map_err(Failure::Runtime)?;
+    .map_err(Failure::runtime)?;
     // Mutual trust between the simulated PLC and the agent, certificate by
     // certificate, as on a real cell.
     drop(opcua::client(&c.cell, &c.opcua).map_err(|e| Failure::Runtime(e.to_string()))?);
-    pki::trust(&pki::own_cert(&c.opcua.pki_dir), &sim_pki).map_err(Failure::Runtime)?;
-    pki::trust(&pki::own_cert(&sim_pki), &c.opcua.pki_dir).map_err(Failure::Runtime)?;
-    let io = |e: std::io::Error| Failure::Runtime(e.to_string());
+    pki::trust(&pki::own_cert(&c.opcua.pki_dir), &sim_pki).map_err(Failure::runtime)?;
+    pki::trust(&pki::own_cert(&sim_pki), &c.opcua.pki_dir).map_err(Failure::runtime)?;
+    let io = Failure::output;
     writeln!(
         out,
         "cellwatch demo: cell {} — paper 000's engraving machine (ESE, CSD)",
@@ -173,10 +194,10 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         };
         let line_sim = SimulatedLine::start(&options)
             .await
-            .map_err(Failure::Runtime)?;
+            .map_err(Failure::runtime)?;
         drop(opcua::client(&l.cell, &l.opcua).map_err(|e| Failure::Runtime(e.to_string()))?);
-        pki::trust(&pki::own_cert(&l.opcua.pki_dir), &line_pki).map_err(Failure::Runtime)?;
-        pki::trust(&pki::own_cert(&line_pki), &l.opcua.pki_dir).map_err(Failure::Runtime)?;
+        pki::trust(&pki::own_cert(&l.opcua.pki_dir), &line_pki).map_err(Failure::runtime)?;
+        pki::trust(&pki::own_cert(&line_pki), &l.opcua.pki_dir).map_err(Failure::runtime)?;
         let timers: usize = l.timers.iter().map(|t| t.model.transitions.len()).sum();
         writeln!(
             out,
@@ -189,7 +210,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         .map_err(io)?;
         let line_agent = cell::start(l, Some(tx.clone()))
             .await
-            .map_err(Failure::Runtime)?;
+            .map_err(start_failure)?;
         let player_sim = line_sim.clone();
         let notes = note_tx.clone();
         let line_player = tokio::spawn(async move {
@@ -213,7 +234,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
 
     let agent = cell::start(c, Some(tx.clone()))
         .await
-        .map_err(Failure::Runtime)?;
+        .map_err(start_failure)?;
     let scenario_sim = sim.clone();
     let player = tokio::spawn(async move {
         Scenario::demo()
@@ -273,7 +294,7 @@ fn print_notice(
             let text = match (&s.fault_type, &s.element) {
                 (Some(t), Some(e)) => format!("{} ({t}, element {e})", s.state),
                 (Some(t), None) => format!("{} ({t})", s.state),
-                _ => s.state.clone(),
+                _ => s.state.to_string(),
             };
             if last_state.get(&s.cell) != Some(&text) {
                 writeln!(out, "{}  state  {} {text}", clock(), s.cell)?;
@@ -281,8 +302,8 @@ fn print_notice(
             }
             Ok(())
         }
-        Notice::Alarm(a) => match a.transition.as_str() {
-            "raised" => {
+        Notice::Alarm(a) => match a.transition {
+            Transition::Raised => {
                 let step = a
                     .fault_step
                     .map(|s| format!(" at step {s}"))
@@ -295,7 +316,7 @@ fn print_notice(
                     a.severity,
                     a.fault_type
                 )?;
-                if a.culprits.is_empty() || a.kind == "timer" {
+                if a.culprits.is_empty() || a.kind == AlarmKind::Timer {
                     writeln!(out, "                      {}", a.message)?;
                 }
                 for c in &a.culprits {

@@ -39,7 +39,7 @@ pub(crate) fn run(
     let coil = program
         .resolve(&args.coil)
         .map_err(|m| Failure::Input(format!("--coil: {m}")))?;
-    let sf = SwitchingFunction::expand(&program, &coil, &observable)?;
+    let sf = SwitchingFunction::expand(&program, &coil, &observable).map_err(Failure::input)?;
     let now = inputs::values("--snapshot", &args.snapshot, &program)?;
     let before = args
         .before

@@ -57,7 +57,7 @@ pub(crate) fn run(args: &SfArgs, out: &mut dyn Write, err: &mut dyn Write) -> Re
                 .map_err(|m| Failure::Input(format!("--coil: {m}")))?;
             if program.coil(&coil).is_none() {
                 // Reported with the program's list of coils.
-                SwitchingFunction::expand(&program, &coil, &observable)?;
+                SwitchingFunction::expand(&program, &coil, &observable).map_err(Failure::input)?;
             }
             coils.push(coil);
         }

@@ -8,7 +8,7 @@ use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
 use crate::cli::{AlarmsArgs, CommandArgs, Failure, HistoryArgs, ZenohArgs};
 use crate::config::{ZenohConfig, ZenohMode};
-use crate::operator::{Command, OperatorKeys};
+use crate::operator::{Action, Command, OperatorKeys};
 use crate::payload::AlarmPayload;
 
 async fn session(z: &ZenohArgs) -> Result<zenoh::Session, Failure> {
@@ -30,11 +30,11 @@ async fn session(z: &ZenohArgs) -> Result<zenoh::Session, Failure> {
     };
     crate::sinks::zenoh::open(&cfg)
         .await
-        .map_err(Failure::Runtime)
+        .map_err(Failure::runtime)
 }
 
 fn io(e: std::io::Error) -> Failure {
-    Failure::Runtime(e.to_string())
+    Failure::output(e)
 }
 
 fn print_alarm(out: &mut dyn Write, a: &AlarmPayload, json: bool) -> std::io::Result<()> {
@@ -202,7 +202,7 @@ pub(crate) async fn history(args: &HistoryArgs, out: &mut dyn Write) -> Result<(
 
 /// `cellwatch ack` and `cellwatch reset`.
 pub(crate) async fn command(
-    action: &str,
+    action: Action,
     args: &CommandArgs,
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
@@ -211,7 +211,7 @@ pub(crate) async fn command(
             let text = std::fs::read_to_string(path)
                 .map_err(|e| Failure::Input(format!("cannot read {}: {e}", path.display())))?;
             OperatorKeys::parse(&path.display().to_string(), &text)
-                .map_err(Failure::Input)?
+                .map_err(Failure::input)?
                 .key(&args.operator)
                 .ok_or_else(|| {
                     Failure::Input(format!(
@@ -230,7 +230,7 @@ pub(crate) async fn command(
         }
     };
     let mut cmd = Command {
-        action: action.into(),
+        action,
         alarm: args.alarm.clone(),
         operator: args.operator.clone(),
         nonce: crate::operator::nonce(),

@@ -1,4 +1,67 @@
-//! Where the engine's events go: the SQLite journal, Zenoh, Prometheus.
+//! Where the cell's steps go.
+//!
+//! The cell loop hands every [`CellStep`] to its sinks, in order: the
+//! journal first (an alarm is on disk before anyone hears of it), then
+//! Zenoh, the metrics and, in the demo, the console. A sink sees each step
+//! once and never reads the engine.
+//!
+//! - [`journal`]: the SQLite journal (rows, history queries, reports).
+//! - [`zenoh`]: publication on the bus, and the query services.
+//! - [`console`]: the demo's printed view.
+//! - the metrics ([`crate::metrics::MetricsSink`]): Prometheus.
+//! - [`RecordingSink`]: keeps every step, for tests; the smallest example
+//!   of a sink.
+//!
+//! To add a sink: implement [`Sink`] and push it in [`crate::cell::start`].
 
+pub mod console;
 pub mod journal;
 pub mod zenoh;
+
+use futures_util::future::BoxFuture;
+use futures_util::FutureExt;
+use tokio::sync::mpsc;
+
+use crate::cell::CellStep;
+
+/// A consumer of the cell's steps.
+pub trait Sink: Send {
+    /// The sink's name, for logs.
+    fn name(&self) -> &'static str;
+
+    /// Takes one step. A sink that fails logs and counts its failure; it
+    /// never stops the loop.
+    fn handle<'a>(&'a mut self, step: &'a CellStep) -> BoxFuture<'a, ()>;
+
+    /// The loop is stopping: release what the sink holds (declarations,
+    /// files). Called once, after the last step.
+    fn close(self: Box<Self>) -> BoxFuture<'static, ()> {
+        async {}.boxed()
+    }
+}
+
+/// Sends a copy of every step on a channel: tests read it to see exactly
+/// what the loop did.
+pub struct RecordingSink {
+    /// Where the copies go; unbounded because a test reads them all.
+    tx: mpsc::UnboundedSender<CellStep>,
+}
+
+impl RecordingSink {
+    /// A recording sink and the receiver of its copies.
+    pub fn new() -> (RecordingSink, mpsc::UnboundedReceiver<CellStep>) {
+        let (tx, rx) = mpsc::unbounded_channel();
+        (RecordingSink { tx }, rx)
+    }
+}
+
+impl Sink for RecordingSink {
+    fn name(&self) -> &'static str {
+        "recording"
+    }
+
+    fn handle<'a>(&'a mut self, step: &'a CellStep) -> BoxFuture<'a, ()> {
+        let _ = self.tx.send(step.clone());
+        async {}.boxed()
+    }
+}

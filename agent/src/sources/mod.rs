@@ -1,25 +1,79 @@
-//! Where tag values come from. The OPC UA client is the production source;
-//! each source sends [`SourceEvent`]s to the engine task.
+//! Where tag values come from.
+//!
+//! A [`Source`] runs until its shutdown future completes and sends
+//! [`SourceEvent`]s on a bounded channel: when the cell loop falls behind,
+//! the channel fills and the source waits (for OPC UA, the server's queues
+//! then hold the changes), so overload never becomes memory.
+//!
+//! - [`opcua`]: the production source, an OPC UA client.
+//! - [`scripted::ScriptedSource`]: events handed in by a test or a replay,
+//!   the smallest example of a source.
+//! - [`pki`]: certificate-trust helpers for OPC UA.
+//!
+//! To add a source: a folder here with a type implementing [`Source`], and
+//! one arm in [`for_config`].
 
 pub mod opcua;
 pub mod pki;
+pub mod scripted;
 
-use cellwatch_models::engine::Reading;
+use cellwatch_models::engine::TagReading;
+use futures_util::future::BoxFuture;
+use tokio::sync::mpsc;
 
-/// What a source tells the engine.
+use crate::config::CellConfig;
+
+/// How many events may wait between a source and the cell loop.
+pub const QUEUE_CAPACITY: usize = 1024;
+
+/// What a source tells the cell loop.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum SourceEvent {
-    /// The connection is up and the subscription is in place.
-    Connected,
+    /// The connection is up and the subscription is in place; to what.
+    Connected(String),
     /// The connection is lost; why.
     Disconnected(String),
-    /// A value (or bad quality) for tag `tag`, with its source timestamp.
-    Reading {
-        /// Index into the configured tags.
-        tag: usize,
-        /// The value, or bad quality.
-        reading: Reading,
-        /// Source timestamp, ms since the epoch.
-        source_time: u64,
-    },
+    /// Values delivered together (one publish), in source-time order.
+    Readings(Vec<TagReading>),
+}
+
+/// The sending half a source writes to: bounded, so a slow cell loop makes
+/// the source wait.
+pub type SourceSender = mpsc::Sender<SourceEvent>;
+
+/// Why a source cannot run. Connection trouble is never an error: it is
+/// reported as [`SourceEvent::Disconnected`] and retried.
+#[derive(Debug, thiserror::Error)]
+pub enum SourceError {
+    /// The client could not be configured (bad PKI directory, ...).
+    #[error("OPC UA client: {0}")]
+    Client(String),
+    /// The password could not be read.
+    #[error("OPC UA identity: {0}")]
+    Identity(String),
+}
+
+/// A producer of tag values for one cell.
+pub trait Source: Send + 'static {
+    /// What it is, for logs (`opcua opc.tcp://...`).
+    fn describe(&self) -> String;
+
+    /// Runs until `shutdown` completes, sending events on `tx`.
+    ///
+    /// # Errors
+    /// The source cannot be set up at all (its configuration is unusable).
+    fn run(
+        self: Box<Self>,
+        tx: SourceSender,
+        shutdown: BoxFuture<'static, ()>,
+    ) -> BoxFuture<'static, Result<(), SourceError>>;
+}
+
+/// The source a cell configuration asks for.
+pub fn for_config(config: &CellConfig) -> Box<dyn Source> {
+    Box::new(opcua::OpcUaSource::new(
+        &config.cell,
+        config.opcua.clone(),
+        config.tags.clone(),
+    ))
 }

@@ -16,6 +16,17 @@ use crate::engine::{CheckSet, Finding, Observation};
 use crate::explain::Culprit;
 use crate::signal::Signal;
 
+/// Why a timer model cannot run on a cell.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum TimerCheckError {
+    /// The model itself is invalid.
+    #[error(transparent)]
+    Model(#[from] ModelError),
+    /// The model reads a signal the cell has no tag for.
+    #[error("the timer model reads '{0}', which is no tag of this cell")]
+    UnknownSignal(String),
+}
+
 /// A timer model bound to a cell's signals.
 pub struct TimerChecks {
     id: String,
@@ -41,13 +52,12 @@ impl TimerChecks {
         model: &TimerModel,
         severity: Severity,
         signal_of: impl Fn(&str) -> Option<Signal>,
-    ) -> Result<TimerChecks, String> {
-        let monitor = TimerMonitor::new(model).map_err(|e: ModelError| e.to_string())?;
+    ) -> Result<TimerChecks, TimerCheckError> {
+        let monitor = TimerMonitor::new(model)?;
         let mut signals = Vec::new();
         for name in &model.signals {
-            signals.push(signal_of(name).ok_or_else(|| {
-                format!("the timer model reads '{name}', which is no tag of this cell")
-            })?);
+            signals
+                .push(signal_of(name).ok_or_else(|| TimerCheckError::UnknownSignal(name.clone()))?);
         }
         let by_signal = signals
             .iter()
@@ -255,9 +265,10 @@ mod tests {
         e.on_reading(0, Reading::Good(true), 1000, 1000);
         assert!(e
             .advance(7299)
+            .events
             .iter()
             .all(|ev| !matches!(ev, EngineEvent::Alarm { .. })));
-        let ev = e.advance(7300);
+        let ev = e.advance(7300).events;
         let EngineEvent::Alarm {
             alarm,
             transition: AlarmTransition::Raised,
@@ -277,17 +288,17 @@ mod tests {
         e.on_reading(0, Reading::Good(false), 7400, 7400);
         e.on_reading(0, Reading::Good(true), 7500, 7500);
         // The sensor arrives late: still latched.
-        e.on_reading(1, Reading::Good(true), 8000, 8000);
+        let observed = e.on_reading(1, Reading::Good(true), 8000, 8000);
         assert!(e.alarms().any(|a| a.id == "line-007" && a.active));
         // Re-armed at 7500, the sensor at 8000 is early (500 ms): measured too.
         assert_eq!(
-            e.take_observations(),
+            observed.observations,
             [crate::engine::Observation {
                 check: "line-007".into(),
                 ms: 500
             }]
         );
-        let ev = e.reset("line-007", "kim", 9000).unwrap();
+        let ev = e.reset("line-007", "kim", 9000).unwrap().events;
         assert!(matches!(
             &ev[0],
             EngineEvent::Alarm {
@@ -303,7 +314,7 @@ mod tests {
             .err()
             .unwrap();
         assert_eq!(
-            err,
+            err.to_string(),
             "the timer model reads 'move', which is no tag of this cell"
         );
     }

@@ -1,11 +1,17 @@
 //! The per-cell engine: tag state, checks, alarms and machine state.
 //!
 //! [`CellEngine`] is fed tag values (with their quality), connection changes,
-//! the passing of time and operator commands, and answers with
-//! [`EngineEvent`]s: alarm transitions and machine-state changes. Checks
-//! plug in through [`CheckSet`]: the switching-function checks
-//! ([`SwitchingChecks`], compiled and incremental) are the first; transition
-//! timers and SFC step supervision implement the same trait.
+//! the passing of time and operator commands. Each input returns one
+//! [`Step`]: the alarm transitions and machine-state changes it caused, the
+//! measurements the checks made, duplicates ignored, the change in the
+//! number of unknown tags and the parts produced. The agent never reads the
+//! engine back to learn what changed.
+//!
+//! # Layout
+//! - [`checks`]: the [`CheckSet`] trait every check kind implements.
+//! - [`switching`]: switching-function checks (paper 000).
+//! - `alarms`: the alarm book (findings → ISA-18.2 transitions).
+//! - [`state`]: machine state and history-row kinds.
 //!
 //! Rules that keep alarms honest:
 //! - a tag whose value is unknown (bad or uncertain quality, or the
@@ -15,274 +21,27 @@
 //! - a value delivered twice (the same value with the same or an older
 //!   source timestamp, as after a subscription is recreated) is ignored.
 //!
+//! Every counter the agent reports (unknown tags, duplicates, active fault
+//! alarms) is kept incrementally: the cost of a reading does not grow with
+//! the number of tags or alarms.
+//!
 //! Time is a count of milliseconds since the Unix epoch, passed in.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+mod alarms;
+pub mod checks;
+pub mod state;
+pub mod switching;
+
+use std::collections::{BTreeSet, HashMap};
+
+pub use checks::{CheckSet, Finding, Observation};
+pub use state::{HistoryKind, MachineState, StateName, StateRules};
+pub use switching::{SwitchingCheck, SwitchingChecks};
 
 use crate::alarm::{Alarm, AlarmKind, CommandRefused, Severity, Transition};
-use crate::comments::CommentDb;
-use crate::compiled::CompiledCell;
-use crate::explain::{explain, Culprit, Polarity};
 use crate::expr::Expr;
 use crate::signal::Signal;
-use crate::switching::SwitchingFunction;
-
-/// What a check found: its condition started or ended.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Finding {
-    /// The alarm id (the check's id).
-    pub id: String,
-    /// The kind of check.
-    pub kind: AlarmKind,
-    /// How urgent.
-    pub severity: Severity,
-    /// The fault type for machine-state history.
-    pub fault_type: String,
-    /// Whether the alarm stays active until reset.
-    pub latched: bool,
-    /// The condition holds.
-    pub active: bool,
-    /// The step at which the fault formed.
-    pub fault_step: Option<usize>,
-    /// The contacts responsible.
-    pub culprits: Vec<Culprit>,
-    /// One line for people.
-    pub message: String,
-}
-
-/// A family of checks sharing one view of the signals.
-///
-/// The engine tells it about every change of a signal it reads, with the
-/// value before; `None` means the value is unknown and every check reading it
-/// must hold its verdict.
-pub trait CheckSet: Send + Sync {
-    /// The signals it reads.
-    fn inputs(&self) -> Vec<Signal>;
-
-    /// A signal changed value or became unknown (`value` None); `before` is
-    /// its last known value.
-    fn on_change(
-        &mut self,
-        signal: &Signal,
-        value: Option<bool>,
-        before: Option<bool>,
-        now: u64,
-        out: &mut Vec<Finding>,
-    );
-
-    /// Time passed; timers fire here.
-    fn advance(&mut self, _now: u64, _out: &mut Vec<Finding>) {}
-
-    /// An operator reset a latched alarm of this set.
-    fn reset(&mut self, _id: &str) {}
-
-    /// Moves the measurements made since the last call into `out`.
-    fn take_observations(&mut self, _out: &mut Vec<Observation>) {}
-}
-
-/// A measurement a check made: a transition's observed duration.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Observation {
-    /// Which check or transition (`line-007`).
-    pub check: String,
-    /// The duration, ms.
-    pub ms: u64,
-}
-
-/// One switching-function check: a fault coil and its fault value.
-#[derive(Debug, Clone)]
-pub struct SwitchingCheck {
-    /// Alarm id.
-    pub id: String,
-    /// The coil's switching function.
-    pub sf: SwitchingFunction,
-    /// Which coil value is the fault.
-    pub polarity: Polarity,
-    /// How urgent.
-    pub severity: Severity,
-    /// Fault type for history (`ESE`).
-    pub fault_type: String,
-    /// Comments for the culprits.
-    pub comments: CommentDb,
-    /// The check is armed only while this holds (CSD: cycle start pressed);
-    /// `None`: always armed.
-    pub armed_when: Option<SwitchingFunction>,
-}
-
-/// Switching-function checks compiled over one bitset.
-///
-/// Entry `c` of the compiled cell is check `c`'s switching function; entry
-/// `n + k` is the arming condition of the `k`-th check that has one.
-pub struct SwitchingChecks {
-    checks: Vec<SwitchingCheck>,
-    cell: CompiledCell,
-    /// Per check: the compiled entry of its arming condition.
-    arm_entry: Vec<Option<usize>>,
-    known: Vec<bool>,
-    /// Per signal: the checks that read it (function or arming condition).
-    readers: Vec<Vec<usize>>,
-    /// Per check: how many of its inputs are unknown.
-    unknown_inputs: Vec<u32>,
-    /// Per check: the verdict last reported.
-    reported: Vec<bool>,
-    changed: Vec<usize>,
-}
-
-impl SwitchingChecks {
-    /// Compiles the checks. Every signal starts unknown, so every check
-    /// starts suspended.
-    pub fn new(checks: Vec<SwitchingCheck>) -> Self {
-        let mut sfs: Vec<SwitchingFunction> = checks.iter().map(|c| c.sf.clone()).collect();
-        let mut arm_entry = Vec::with_capacity(checks.len());
-        for c in &checks {
-            arm_entry.push(c.armed_when.as_ref().map(|a| {
-                sfs.push(a.clone());
-                sfs.len() - 1
-            }));
-        }
-        let owner: Vec<usize> = (0..checks.len())
-            .chain(
-                arm_entry
-                    .iter()
-                    .enumerate()
-                    .filter_map(|(c, e)| e.map(|_| c)),
-            )
-            .collect();
-        let cell = CompiledCell::new(&sfs);
-        let n = cell.signals().len();
-        let mut readers = vec![Vec::new(); n];
-        let mut unknown_inputs = vec![0u32; checks.len()];
-        for (s, r) in readers.iter_mut().enumerate() {
-            let mut owners: Vec<usize> = cell
-                .readers(s as u32)
-                .iter()
-                .map(|&e| owner[e as usize])
-                .collect();
-            owners.sort_unstable();
-            owners.dedup();
-            for &c in &owners {
-                unknown_inputs[c] += 1;
-            }
-            *r = owners;
-        }
-        SwitchingChecks {
-            reported: vec![false; checks.len()],
-            checks,
-            cell,
-            arm_entry,
-            known: vec![false; n],
-            readers,
-            unknown_inputs,
-            changed: Vec::new(),
-        }
-    }
-
-    /// How many checks.
-    pub fn len(&self) -> usize {
-        self.checks.len()
-    }
-
-    /// Whether there are none.
-    pub fn is_empty(&self) -> bool {
-        self.checks.is_empty()
-    }
-}
-
-impl CheckSet for SwitchingChecks {
-    fn inputs(&self) -> Vec<Signal> {
-        self.cell.signals().to_vec()
-    }
-
-    fn on_change(
-        &mut self,
-        signal: &Signal,
-        value: Option<bool>,
-        before: Option<bool>,
-        _now: u64,
-        out: &mut Vec<Finding>,
-    ) {
-        let Some(s) = self.cell.signal_index(signal) else {
-            return;
-        };
-        let si = s as usize;
-        let Some(v) = value else {
-            if self.known[si] {
-                self.known[si] = false;
-                for &c in &self.readers[si] {
-                    self.unknown_inputs[c] += 1;
-                }
-            }
-            return;
-        };
-        if !self.known[si] {
-            self.known[si] = true;
-            for &c in &self.readers[si] {
-                self.unknown_inputs[c] -= 1;
-            }
-        }
-        let mut changed = std::mem::take(&mut self.changed);
-        changed.clear();
-        self.cell.set(s, v, &mut changed);
-        self.changed = changed;
-        for k in 0..self.readers[si].len() {
-            let c = self.readers[si][k];
-            if self.unknown_inputs[c] > 0 {
-                continue;
-            }
-            let check = &self.checks[c];
-            let armed = self.arm_entry[c].is_none_or(|e| self.cell.output(e));
-            let fault = armed && self.cell.output(c) == check.polarity.fault_value();
-            if fault == self.reported[c] {
-                continue;
-            }
-            self.reported[c] = fault;
-            out.push(finding(check, fault, &self.cell, signal, before));
-        }
-    }
-}
-
-/// The finding of `check` going to `fault`, explained from the values in
-/// `cell` (and `before` for the signal that just changed).
-fn finding(
-    check: &SwitchingCheck,
-    fault: bool,
-    cell: &CompiledCell,
-    changed: &Signal,
-    before: Option<bool>,
-) -> Finding {
-    let mut finding = Finding {
-        id: check.id.clone(),
-        kind: AlarmKind::Switching,
-        severity: check.severity,
-        fault_type: check.fault_type.clone(),
-        latched: false,
-        active: fault,
-        fault_step: None,
-        culprits: Vec::new(),
-        message: format!("{} cleared", check.fault_type),
-    };
-    if !fault {
-        return finding;
-    }
-    let now_values = |x: &Signal| cell.signal_index(x).map(|i| cell.value(i));
-    let before_values = |x: &Signal| if x == changed { before } else { now_values(x) };
-    if let Ok(e) = explain(
-        &check.sf,
-        now_values,
-        Some(&before_values),
-        check.polarity,
-        &check.comments,
-    ) {
-        finding.fault_step = e.fault_step;
-        finding.culprits = e.culprits;
-    }
-    finding.message = match (finding.fault_step, finding.culprits.first()) {
-        (Some(step), Some(c)) => format!("{} at step {step}: {c}", check.fault_type),
-        (None, Some(c)) => format!("{}: {c}", check.fault_type),
-        _ => check.fault_type.clone(),
-    };
-    finding
-}
+use alarms::AlarmBook;
 
 /// A PLC tag as the engine knows it.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -302,67 +61,18 @@ pub enum Reading {
     Bad,
 }
 
-/// The state of the machine, as paper 000's remote service reports it.
-#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
-#[serde(tag = "state", rename_all = "lowercase")]
-pub enum MachineState {
-    /// Producing: the running rule holds.
-    Running,
-    /// Connected, no fault, not running.
-    Idle,
-    /// A fault alarm is active.
-    Fault {
-        /// Its fault type (`ESE`).
-        fault_type: String,
-        /// The faulty element, if known (`X0.06`).
-        element: Option<String>,
-    },
-    /// No connection to the PLC.
-    Offline,
+/// One delivered value: which tag, what, and when the PLC saw it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TagReading {
+    /// Index into the engine's tags.
+    pub tag: usize,
+    /// The value, or bad quality.
+    pub reading: Reading,
+    /// Source timestamp, ms since the epoch.
+    pub source_time: u64,
 }
 
-impl MachineState {
-    /// The state's name: `running`, `idle`, `fault`, `offline`.
-    pub fn name(&self) -> &'static str {
-        match self {
-            MachineState::Running => "running",
-            MachineState::Idle => "idle",
-            MachineState::Fault { .. } => "fault",
-            MachineState::Offline => "offline",
-        }
-    }
-
-    /// All state names.
-    pub const NAMES: [&'static str; 4] = ["running", "idle", "fault", "offline"];
-}
-
-/// The kind of a machine-state history row (paper 000, Fig. 13).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum HistoryKind {
-    /// Running or idle, coming from running or idle.
-    Normal,
-    /// A fault, with its type and element.
-    Fault,
-    /// Back to running or idle after a fault or an outage.
-    Recovery,
-    /// The connection to the PLC is lost.
-    Offline,
-}
-
-impl HistoryKind {
-    /// The lower-case name.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            HistoryKind::Normal => "normal",
-            HistoryKind::Fault => "fault",
-            HistoryKind::Recovery => "recovery",
-            HistoryKind::Offline => "offline",
-        }
-    }
-}
-
-/// What the engine tells the sinks.
+/// What one change tells the sinks.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum EngineEvent {
     /// An alarm changed.
@@ -385,22 +95,54 @@ pub enum EngineEvent {
     },
 }
 
-/// How the machine state is derived.
-#[derive(Debug, Clone)]
-pub struct StateRules {
-    /// The machine is running when this holds (over tag addresses); idle
-    /// otherwise. `None`: never running, only idle or fault.
-    pub running: Option<Expr>,
-    /// Alarms at or above this severity put the machine in `fault`.
-    pub fault_severity: Severity,
+/// Everything one input to the engine did.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Step {
+    /// Alarm transitions and state changes, in order.
+    pub events: Vec<EngineEvent>,
+    /// Measurements the checks made (transition durations).
+    pub observations: Vec<Observation>,
+    /// Values received (including duplicates).
+    pub readings: u64,
+    /// Values ignored as duplicates.
+    pub duplicates: u64,
+    /// Changes of value (or to unknown) fed to the checks.
+    pub evaluations: u64,
+    /// Change in the number of tags whose value is unknown.
+    pub unknown_delta: i64,
+    /// Parts produced: rising edges of the part-done tag, at their source
+    /// time.
+    pub parts: Vec<u64>,
 }
 
-impl Default for StateRules {
-    fn default() -> Self {
-        StateRules {
-            running: None,
-            fault_severity: Severity::High,
-        }
+impl Step {
+    /// Whether nothing the sinks care about happened.
+    pub fn is_empty(&self) -> bool {
+        self.events.is_empty()
+            && self.observations.is_empty()
+            && self.readings == 0
+            && self.unknown_delta == 0
+            && self.parts.is_empty()
+    }
+
+    /// The alarm transitions.
+    pub fn alarms(&self) -> impl Iterator<Item = (&Alarm, Transition, u64)> {
+        self.events.iter().filter_map(|e| match e {
+            EngineEvent::Alarm {
+                alarm,
+                transition,
+                at,
+            } => Some((alarm, *transition, *at)),
+            EngineEvent::State { .. } => None,
+        })
+    }
+
+    /// The machine-state changes.
+    pub fn states(&self) -> impl Iterator<Item = (&MachineState, HistoryKind, u64)> {
+        self.events.iter().filter_map(|e| match e {
+            EngineEvent::State { state, kind, at } => Some((state, *kind, *at)),
+            EngineEvent::Alarm { .. } => None,
+        })
     }
 }
 
@@ -436,19 +178,21 @@ pub struct CellEngine {
     values: Vec<Option<bool>>,
     timestamps: Vec<Option<u64>>,
     bad: BTreeSet<usize>,
+    /// How many tags are unknown now.
+    unknown: usize,
     sets: Vec<Box<dyn CheckSet>>,
     /// Per tag: the check sets that read it.
     readers: Vec<Vec<usize>>,
-    alarms: BTreeMap<String, Alarm>,
-    /// Per alarm: whether its condition holds now (a latched alarm can be
-    /// active with its condition gone).
-    conditions: HashMap<String, bool>,
+    /// Per tag: whether the running rule reads it.
+    running_reads: Vec<bool>,
+    alarms: AlarmBook,
     /// `None` until the source first says.
     connected: Option<bool>,
     rules: StateRules,
     state: MachineState,
     last_fault: Option<FaultValues>,
-    duplicates: u64,
+    /// The tag whose rising edges are parts produced.
+    part_done: Option<usize>,
 }
 
 impl CellEngine {
@@ -480,14 +224,16 @@ impl CellEngine {
                 readers[t].push(k);
             }
         }
+        let mut running_reads = vec![false; tags.len()];
         if let Some(expr) = &rules.running {
             for s in expr.signals() {
-                if !by_address.contains_key(&s) {
+                let Some(&t) = by_address.get(&s) else {
                     return Err(EngineError::MissingTag {
                         reader: "the running rule".into(),
                         address: s,
                     });
-                }
+                };
+                running_reads[t] = true;
             }
         }
         let n = tags.len();
@@ -498,16 +244,25 @@ impl CellEngine {
             values: vec![None; n],
             timestamps: vec![None; n],
             bad: BTreeSet::new(),
+            unknown: n,
             sets,
             readers,
-            alarms: BTreeMap::new(),
-            conditions: HashMap::new(),
+            running_reads,
+            alarms: AlarmBook::default(),
             connected: None,
             rules,
             state: MachineState::Offline,
             last_fault: None,
-            duplicates: 0,
+            part_done: None,
         })
+    }
+
+    /// Counts rising edges of tag `tag` as parts produced
+    /// ([`Step::parts`]).
+    #[must_use]
+    pub fn counting_parts(mut self, tag: Option<usize>) -> Self {
+        self.part_done = tag.filter(|&t| t < self.tags.len());
+        self
     }
 
     /// The cell's id.
@@ -530,6 +285,11 @@ impl CellEngine {
         &self.values
     }
 
+    /// How many tags are unknown now.
+    pub fn unknown_tags(&self) -> usize {
+        self.unknown
+    }
+
     /// Tags whose quality is bad.
     pub fn bad_tags(&self) -> impl Iterator<Item = usize> + '_ {
         self.bad.iter().copied()
@@ -537,7 +297,7 @@ impl CellEngine {
 
     /// Every alarm the engine knows, by id.
     pub fn alarms(&self) -> impl Iterator<Item = &Alarm> {
-        self.alarms.values()
+        self.alarms.iter()
     }
 
     /// The machine state.
@@ -555,16 +315,11 @@ impl CellEngine {
         self.last_fault.as_ref()
     }
 
-    /// How many duplicate deliveries were ignored.
-    pub fn duplicates(&self) -> u64 {
-        self.duplicates
-    }
-
     /// The connection to the PLC came up or went down.
-    pub fn on_connection(&mut self, up: bool, now: u64) -> Vec<EngineEvent> {
-        let mut events = Vec::new();
+    pub fn on_connection(&mut self, up: bool, now: u64) -> Step {
+        let mut step = Step::default();
         if Some(up) == self.connected {
-            return events;
+            return step;
         }
         self.connected = Some(up);
         let finding = Finding {
@@ -584,75 +339,103 @@ impl CellEngine {
         };
         if !up {
             // Every value is now unknown; checks hold their verdicts.
+            let mut ignored = Vec::new();
             for t in 0..self.tags.len() {
-                self.set_value(t, None, now, &mut Vec::new());
+                self.set_value(t, None, now, &mut ignored, &mut step);
             }
             self.timestamps.iter_mut().for_each(|t| *t = None);
         }
-        self.apply(finding, now, &mut events);
-        self.update_state(now, &mut events);
-        events
+        self.apply(finding, now, &mut step);
+        self.update_state(now, &mut step);
+        self.collect_observations(&mut step);
+        step
     }
 
     /// A value (or bad quality) for tag `tag`, with its source timestamp.
-    pub fn on_reading(
+    pub fn on_reading(&mut self, tag: usize, reading: Reading, source_time: u64, now: u64) -> Step {
+        self.on_readings(
+            &[TagReading {
+                tag,
+                reading,
+                source_time,
+            }],
+            now,
+        )
+    }
+
+    /// Values delivered together (one publish), in source-time order: one
+    /// step for all.
+    pub fn on_readings(&mut self, readings: &[TagReading], now: u64) -> Step {
+        let mut step = Step::default();
+        let mut findings = Vec::new();
+        for r in readings {
+            if r.tag >= self.tags.len() {
+                continue;
+            }
+            step.readings += 1;
+            let events = step.events.len();
+            // The state follows each reading, so that a fault raised and
+            // cleared within one publish still leaves its history rows.
+            if self.reading(r, now, &mut findings, &mut step) || step.events.len() > events {
+                self.update_state(now, &mut step);
+            }
+        }
+        self.collect_observations(&mut step);
+        step
+    }
+
+    /// One reading; true if the machine state may have changed.
+    fn reading(
         &mut self,
-        tag: usize,
-        reading: Reading,
-        source_time: u64,
+        r: &TagReading,
         now: u64,
-    ) -> Vec<EngineEvent> {
-        let mut events = Vec::new();
-        let value = match reading {
+        findings: &mut Vec<Finding>,
+        step: &mut Step,
+    ) -> bool {
+        let tag = r.tag;
+        let value = match r.reading {
             Reading::Good(v) => Some(v),
             Reading::Bad => None,
         };
         if let (Some(last), Some(v)) = (self.timestamps[tag], value) {
-            if source_time <= last && self.values[tag] == Some(v) {
-                self.duplicates += 1;
-                return events;
+            if r.source_time <= last && self.values[tag] == Some(v) {
+                step.duplicates += 1;
+                return false;
             }
         }
-        self.timestamps[tag] = Some(source_time);
-        let quality_changed = match reading {
+        self.timestamps[tag] = Some(r.source_time);
+        let quality_changed = match r.reading {
             Reading::Good(_) => self.bad.remove(&tag),
             Reading::Bad => self.bad.insert(tag),
         };
-        let mut findings = Vec::new();
+        findings.clear();
         // Checks time events by when the PLC saw them, not when they
         // arrived: delivery jitter is not motion time.
-        self.set_value(tag, value, source_time, &mut findings);
+        let changed = self.set_value(tag, value, r.source_time, findings, step);
         if quality_changed {
             findings.push(self.quality_finding());
         }
-        for f in findings {
-            self.apply(f, now, &mut events);
+        for f in findings.drain(..) {
+            self.apply(f, now, step);
         }
-        self.update_state(now, &mut events);
-        events
-    }
-
-    /// The measurements the checks made since the last call.
-    pub fn take_observations(&mut self) -> Vec<Observation> {
-        let mut out = Vec::new();
-        for set in &mut self.sets {
-            set.take_observations(&mut out);
-        }
-        out
+        changed && self.running_reads[tag]
     }
 
     /// Time passed: timers fire.
-    pub fn advance(&mut self, now: u64) -> Vec<EngineEvent> {
+    pub fn advance(&mut self, now: u64) -> Step {
         let mut findings = Vec::new();
         for set in &mut self.sets {
             set.advance(now, &mut findings);
         }
-        let mut events = Vec::new();
+        let mut step = Step::default();
         for f in findings {
-            self.apply(f, now, &mut events);
+            self.apply(f, now, &mut step);
         }
-        self.update_state(now, &mut events);
-        events
+        if !step.events.is_empty() {
+            self.update_state(now, &mut step);
+        }
+        self.collect_observations(&mut step);
+        step
     }
 
     /// An operator acknowledges an alarm.
@@ -664,85 +447,79 @@ impl CellEngine {
         id: &str,
         operator: &str,
         now: u64,
-    ) -> Result<Vec<EngineEvent>, CommandRefused> {
-        let alarm = self
-            .alarms
-            .get_mut(id)
-            .ok_or_else(|| CommandRefused::UnknownAlarm(id.into()))?;
-        if alarm.acknowledged {
-            return Err(CommandRefused::NothingToAcknowledge(id.into()));
-        }
-        alarm.acknowledged = true;
-        alarm.acked_by = Some(operator.to_string());
-        Ok(vec![EngineEvent::Alarm {
-            alarm: alarm.clone(),
-            transition: Transition::Acknowledged,
-            at: now,
-        }])
+    ) -> Result<Step, CommandRefused> {
+        let alarm = self.alarms.acknowledge(id, operator)?.clone();
+        Ok(Step {
+            events: vec![EngineEvent::Alarm {
+                alarm,
+                transition: Transition::Acknowledged,
+                at: now,
+            }],
+            ..Step::default()
+        })
     }
 
     /// An operator resets a latched alarm whose condition is gone.
     ///
     /// # Errors
     /// No such alarm, not latched, not active, or its condition still holds.
-    pub fn reset(
-        &mut self,
-        id: &str,
-        operator: &str,
-        now: u64,
-    ) -> Result<Vec<EngineEvent>, CommandRefused> {
-        let alarm = self
-            .alarms
-            .get_mut(id)
-            .ok_or_else(|| CommandRefused::UnknownAlarm(id.into()))?;
-        let refuse = |why: &str| CommandRefused::CannotReset {
-            id: id.into(),
-            why: why.into(),
-        };
-        if !alarm.latched {
-            return Err(refuse("it is not latched; it clears by itself"));
-        }
-        if !alarm.active {
-            return Err(refuse("it is not active"));
-        }
-        if self.conditions.get(id).copied().unwrap_or(false) {
-            return Err(refuse("its condition still holds"));
-        }
-        alarm.active = false;
-        alarm.cleared_at = Some(now);
-        if alarm.acked_by.is_none() {
-            alarm.acked_by = Some(operator.to_string());
-        }
-        alarm.acknowledged = true;
-        let alarm = alarm.clone();
+    pub fn reset(&mut self, id: &str, operator: &str, now: u64) -> Result<Step, CommandRefused> {
+        let alarm = self.alarms.reset(id, operator, now)?.clone();
         for set in &mut self.sets {
             set.reset(id);
         }
-        let mut events = vec![EngineEvent::Alarm {
-            alarm,
-            transition: Transition::Cleared,
-            at: now,
-        }];
-        self.update_state(now, &mut events);
-        Ok(events)
+        let mut step = Step {
+            events: vec![EngineEvent::Alarm {
+                alarm,
+                transition: Transition::Cleared,
+                at: now,
+            }],
+            ..Step::default()
+        };
+        self.update_state(now, &mut step);
+        Ok(step)
     }
 
+    fn collect_observations(&mut self, step: &mut Step) {
+        for set in &mut self.sets {
+            set.take_observations(&mut step.observations);
+        }
+    }
+
+    /// Sets tag `tag`'s value; true if it changed.
     fn set_value(
         &mut self,
         tag: usize,
         value: Option<bool>,
         now: u64,
         findings: &mut Vec<Finding>,
-    ) {
+        step: &mut Step,
+    ) -> bool {
         let before = self.values[tag];
         if before == value {
-            return;
+            return false;
+        }
+        match (before, value) {
+            (Some(_), None) => {
+                self.unknown += 1;
+                step.unknown_delta += 1;
+            }
+            (None, Some(_)) => {
+                self.unknown -= 1;
+                step.unknown_delta -= 1;
+            }
+            _ => {}
+        }
+        if self.part_done == Some(tag) && before == Some(false) && value == Some(true) {
+            step.parts.push(now);
         }
         self.values[tag] = value;
-        let address = self.tags[tag].address.clone();
+        step.evaluations += 1;
+        let address = &self.tags[tag].address;
         for &k in &self.readers[tag] {
-            self.sets[k].on_change(&address, value, before, now, findings);
+            self.sets[k].on_change(address, value, before, now, findings);
         }
+        true
     }
 
     fn quality_finding(&self) -> Finding {
@@ -771,67 +548,36 @@ impl CellEngine {
         }
     }
 
-    fn apply(&mut self, f: Finding, now: u64, events: &mut Vec<EngineEvent>) {
-        self.conditions.insert(f.id.clone(), f.active);
-        let existing = self.alarms.get_mut(&f.id);
-        let transition = match (existing, f.active) {
-            (Some(a), true) if a.active => {
-                a.culprits = f.culprits;
-                a.fault_step = f.fault_step;
-                a.message = f.message;
-                Some(Transition::Updated)
-            }
-            (Some(a), false) if a.active && !a.latched => {
-                a.active = false;
-                a.cleared_at = Some(now);
-                a.message = f.message;
-                Some(Transition::Cleared)
-            }
-            (Some(_), false) | (None, false) => None,
-            (_, true) => {
-                let alarm = Alarm {
-                    id: f.id.clone(),
-                    kind: f.kind,
-                    severity: f.severity,
-                    fault_type: f.fault_type,
-                    active: true,
-                    acknowledged: false,
-                    latched: f.latched,
-                    raised_at: now,
-                    cleared_at: None,
-                    acked_by: None,
-                    fault_step: f.fault_step,
-                    culprits: f.culprits,
-                    message: f.message,
-                };
-                if matches!(alarm.kind, AlarmKind::Switching | AlarmKind::Timer) {
-                    self.last_fault = Some(FaultValues {
-                        alarm: alarm.id.clone(),
-                        at: now,
-                        values: self.values.clone(),
-                    });
-                }
-                self.alarms.insert(f.id.clone(), alarm);
-                Some(Transition::Raised)
-            }
+    fn apply(&mut self, f: Finding, now: u64, step: &mut Step) {
+        let id = f.id.clone();
+        let applied = self.alarms.apply(f, now);
+        let Some(transition) = applied.transition else {
+            return;
         };
-        if let Some(transition) = transition {
-            let alarm = self.alarms[&f.id].clone();
-            events.push(EngineEvent::Alarm {
-                alarm,
-                transition,
+        let Some(alarm) = self.alarms.get(&id) else {
+            return;
+        };
+        if transition == Transition::Raised
+            && matches!(alarm.kind, AlarmKind::Switching | AlarmKind::Timer)
+        {
+            self.last_fault = Some(FaultValues {
+                alarm: id,
                 at: now,
+                values: self.values.clone(),
             });
         }
+        step.events.push(EngineEvent::Alarm {
+            alarm: alarm.clone(),
+            transition,
+            at: now,
+        });
     }
 
-    fn update_state(&mut self, now: u64, events: &mut Vec<EngineEvent>) {
+    fn update_state(&mut self, now: u64, step: &mut Step) {
         let fault = self
             .alarms
-            .values()
-            .filter(|a| a.active && matches!(a.kind, AlarmKind::Switching | AlarmKind::Timer))
-            .filter(|a| a.severity >= self.rules.fault_severity)
-            .max_by_key(|a| a.raised_at);
+            .active_faults()
+            .find(|a| a.severity >= self.rules.fault_severity);
         let next = if !self.connected() {
             MachineState::Offline
         } else if let Some(a) = fault {
@@ -847,14 +593,9 @@ impl CellEngine {
         if next == self.state {
             return;
         }
-        let kind = match (&self.state, &next) {
-            (_, MachineState::Offline) => HistoryKind::Offline,
-            (_, MachineState::Fault { .. }) => HistoryKind::Fault,
-            (MachineState::Fault { .. } | MachineState::Offline, _) => HistoryKind::Recovery,
-            _ => HistoryKind::Normal,
-        };
+        let kind = HistoryKind::between(&self.state, &next);
         self.state = next.clone();
-        events.push(EngineEvent::State {
+        step.events.push(EngineEvent::State {
             state: next,
             kind,
             at: now,
@@ -889,11 +630,14 @@ fn known_all(expr: &Expr, by_address: &HashMap<Signal, usize>, values: &[Option<
 mod tests {
     use super::*;
     use crate::alarm::AlarmState;
+    use crate::comments::CommentDb;
+    use crate::explain::Polarity;
     use crate::program::Program;
     use crate::signal::Observability;
+    use crate::switching::SwitchingFunction;
 
-    const ESE: &str = include_str!("../../config/cnc/ese.il");
-    const NORMAL: &str = include_str!("../../config/cnc/ese-normal.values");
+    const ESE: &str = include_str!("../../../config/cnc/ese.il");
+    const NORMAL: &str = include_str!("../../../config/cnc/ese-normal.values");
 
     fn engine() -> CellEngine {
         let p = Program::compile("ese.il", ESE, None).unwrap();
@@ -941,7 +685,7 @@ mod tests {
         {
             let (a, v) = line.split_once(',').unwrap();
             let t = e.tag_index(&Signal::new(a)).unwrap();
-            out.extend(e.on_reading(t, Reading::Good(v == "1"), at, at));
+            out.extend(e.on_reading(t, Reading::Good(v == "1"), at, at).events);
         }
         out
     }
@@ -961,13 +705,13 @@ mod tests {
     #[test]
     fn fault_raises_with_culprit_and_clears() {
         let mut e = engine();
-        let ev = e.on_connection(true, 1);
+        let ev = e.on_connection(true, 1).events;
         assert_eq!(alarm_transitions(&ev), []);
         let ev = load_normal(&mut e, 2);
         assert!(alarm_transitions(&ev).is_empty());
         assert_eq!(e.state(), &MachineState::Running);
         let x006 = e.tag_index(&Signal::new("X0.06")).unwrap();
-        let ev = e.on_reading(x006, Reading::Good(false), 10, 10);
+        let ev = e.on_reading(x006, Reading::Good(false), 10, 10).events;
         assert_eq!(
             alarm_transitions(&ev),
             [("ese".to_string(), Transition::Raised)]
@@ -993,9 +737,10 @@ mod tests {
             })
         ));
         // Delivered again after a subscription is recreated: ignored.
-        assert!(e.on_reading(x006, Reading::Good(false), 10, 11).is_empty());
-        assert_eq!(e.duplicates(), 1);
-        let ev = e.on_reading(x006, Reading::Good(true), 20, 20);
+        let dup = e.on_reading(x006, Reading::Good(false), 10, 11);
+        assert!(dup.events.is_empty());
+        assert_eq!(dup.duplicates, 1);
+        let ev = e.on_reading(x006, Reading::Good(true), 20, 20).events;
         assert_eq!(
             alarm_transitions(&ev),
             [("ese".to_string(), Transition::Cleared)]
@@ -1010,7 +755,7 @@ mod tests {
         ));
         let a = e.alarms().next().unwrap();
         assert_eq!(a.state(), AlarmState::ClearedUnacknowledged);
-        let ev = e.acknowledge("ese", "kim", 30).unwrap();
+        let ev = e.acknowledge("ese", "kim", 30).unwrap().events;
         assert_eq!(
             alarm_transitions(&ev),
             [("ese".to_string(), Transition::Acknowledged)]
@@ -1028,7 +773,7 @@ mod tests {
         let mut e = engine();
         e.on_connection(true, 1);
         load_normal(&mut e, 2);
-        let ev = e.on_connection(false, 5);
+        let ev = e.on_connection(false, 5).events;
         assert_eq!(
             alarm_transitions(&ev),
             [("communication".to_string(), Transition::Raised)]
@@ -1037,13 +782,15 @@ mod tests {
         assert!(e.values().iter().all(Option::is_none));
         // Reconnected: values come back one by one; the check stays suspended
         // until every input is known, so a half-loaded image raises nothing.
-        let ev = e.on_connection(true, 6);
+        let ev = e.on_connection(true, 6).events;
         assert_eq!(
             alarm_transitions(&ev),
             [("communication".to_string(), Transition::Cleared)]
         );
         let x006 = e.tag_index(&Signal::new("X0.06")).unwrap();
-        assert!(alarm_transitions(&e.on_reading(x006, Reading::Good(false), 7, 7)).is_empty());
+        assert!(
+            alarm_transitions(&e.on_reading(x006, Reading::Good(false), 7, 7).events).is_empty()
+        );
         let ev = load_normal(&mut e, 8);
         // X0.06 is back to 1 in the normal image: no ESE was ever raised.
         assert!(alarm_transitions(&ev).is_empty(), "{ev:?}");
@@ -1052,12 +799,12 @@ mod tests {
     #[test]
     fn unreachable_from_the_start_is_one_alarm() {
         let mut e = engine();
-        let ev = e.on_connection(false, 1);
+        let ev = e.on_connection(false, 1).events;
         assert_eq!(
             alarm_transitions(&ev),
             [("communication".to_string(), Transition::Raised)]
         );
-        assert!(e.on_connection(false, 2).is_empty());
+        assert!(e.on_connection(false, 2).events.is_empty());
     }
 
     #[test]
@@ -1066,7 +813,7 @@ mod tests {
         e.on_connection(true, 1);
         load_normal(&mut e, 2);
         let x006 = e.tag_index(&Signal::new("X0.06")).unwrap();
-        let ev = e.on_reading(x006, Reading::Bad, 3, 3);
+        let ev = e.on_reading(x006, Reading::Bad, 3, 3).events;
         assert_eq!(
             alarm_transitions(&ev),
             [("tag-quality".to_string(), Transition::Raised)]
@@ -1080,9 +827,11 @@ mod tests {
         );
         // Another contact opens while X0.06 is unknown: the check is suspended.
         let x004 = e.tag_index(&Signal::new("X0.04")).unwrap();
-        assert!(alarm_transitions(&e.on_reading(x004, Reading::Good(false), 4, 4)).is_empty());
+        assert!(
+            alarm_transitions(&e.on_reading(x004, Reading::Good(false), 4, 4).events).is_empty()
+        );
         // X0.06 good again: the check resumes and sees X0.04 open.
-        let ev = e.on_reading(x006, Reading::Good(true), 5, 5);
+        let ev = e.on_reading(x006, Reading::Good(true), 5, 5).events;
         let t = alarm_transitions(&ev);
         assert!(
             t.contains(&("ese".to_string(), Transition::Raised)),
@@ -1096,14 +845,102 @@ mod tests {
 }
 
 #[cfg(test)]
+mod counters {
+    use super::*;
+
+    fn engine(n: usize) -> CellEngine {
+        let tags = (0..n)
+            .map(|i| Tag {
+                name: format!("t{i}"),
+                address: Signal::new(&format!("X{i}.00")),
+            })
+            .collect();
+        CellEngine::new("c", tags, Vec::new(), StateRules::default())
+            .unwrap()
+            .counting_parts(Some(1))
+    }
+
+    #[test]
+    fn unknown_count_is_kept_incrementally_and_matches_a_scan() {
+        let mut e = engine(5);
+        let mut unknown = 5i64;
+        assert_eq!(e.unknown_tags(), 5);
+        unknown += e.on_connection(true, 0).unknown_delta;
+        let script = [
+            (0, Reading::Good(true)),
+            (1, Reading::Good(false)),
+            (0, Reading::Bad),
+            (2, Reading::Good(true)),
+            (0, Reading::Good(false)),
+            (4, Reading::Bad),
+            (2, Reading::Bad),
+        ];
+        for (k, (tag, r)) in script.into_iter().enumerate() {
+            unknown += e
+                .on_reading(tag, r, k as u64 + 1, k as u64 + 1)
+                .unknown_delta;
+            let scanned = e.values().iter().filter(|v| v.is_none()).count();
+            assert_eq!(e.unknown_tags(), scanned);
+            assert_eq!(unknown, scanned as i64);
+        }
+        unknown += e.on_connection(false, 100).unknown_delta;
+        assert_eq!(unknown, 5);
+        assert_eq!(e.unknown_tags(), 5);
+    }
+
+    #[test]
+    fn rising_edges_of_the_part_done_tag_are_parts() {
+        let mut e = engine(2);
+        e.on_connection(true, 0);
+        // The first value is no edge: the part may have been counted before.
+        assert!(e.on_reading(1, Reading::Good(true), 1, 1).parts.is_empty());
+        assert!(e.on_reading(1, Reading::Good(false), 2, 2).parts.is_empty());
+        assert_eq!(e.on_reading(1, Reading::Good(true), 3, 3).parts, [3]);
+        // Unknown, then true again: not a counted edge.
+        e.on_reading(1, Reading::Bad, 4, 4);
+        assert!(e.on_reading(1, Reading::Good(true), 5, 5).parts.is_empty());
+        let batch = [
+            TagReading {
+                tag: 1,
+                reading: Reading::Good(false),
+                source_time: 6,
+            },
+            TagReading {
+                tag: 1,
+                reading: Reading::Good(true),
+                source_time: 7,
+            },
+            TagReading {
+                tag: 0,
+                reading: Reading::Good(true),
+                source_time: 7,
+            },
+            TagReading {
+                tag: 1,
+                reading: Reading::Good(true),
+                source_time: 7,
+            },
+        ];
+        let step = e.on_readings(&batch, 8);
+        assert_eq!(step.parts, [7]);
+        assert_eq!(step.readings, 4);
+        assert_eq!(step.duplicates, 1);
+    }
+}
+
+#[cfg(test)]
 mod armed {
     use super::*;
+    use crate::comments::CommentDb;
+    use crate::explain::Polarity;
     use crate::program::Program;
     use crate::signal::Observability;
+    use crate::switching::SwitchingFunction;
 
     #[test]
     fn csd_faults_only_while_cycle_start_is_pressed() {
-        let p = Program::compile("csd.il", include_str!("../../config/cnc/csd.il"), None).unwrap();
+        let p =
+            Program::compile("csd.il", include_str!("../../../config/cnc/csd.il"), None).unwrap();
         let sf = SwitchingFunction::expand(
             &p,
             &Signal::new("G9.00"),
@@ -1139,13 +976,13 @@ mod armed {
         .unwrap();
         e.on_connection(true, 0);
         let mut raised = Vec::new();
-        for line in include_str!("../../config/cnc/csd-normal.values")
+        for line in include_str!("../../../config/cnc/csd-normal.values")
             .lines()
             .filter(|l| l.contains(',') && !l.starts_with("address") && !l.starts_with('#'))
         {
             let (a, v) = line.split_once(',').unwrap();
             let t = e.tag_index(&Signal::new(a)).unwrap();
-            raised.extend(e.on_reading(t, Reading::Good(v == "1"), 1, 1));
+            raised.extend(e.on_reading(t, Reading::Good(v == "1"), 1, 1).events);
         }
         // Cycle start released: the paper's SF is true (-X200.01) but nothing is wrong.
         assert!(
@@ -1156,7 +993,7 @@ mod armed {
         );
         let set = |e: &mut CellEngine, a: &str, v: bool, t: u64| {
             let i = e.tag_index(&Signal::new(a)).unwrap();
-            e.on_reading(i, Reading::Good(v), t, t)
+            e.on_reading(i, Reading::Good(v), t, t).events
         };
         set(&mut e, "X201.02", false, 2);
         set(&mut e, "X201.06", true, 3);

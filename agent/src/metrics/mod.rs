@@ -1,16 +1,24 @@
 //! Prometheus metrics and the `/metrics` endpoint.
 //!
+//! [`MetricsSink`] is the cell loop's side: it updates the metrics from
+//! each step, incrementally (no metric is recomputed by a scan).
+//!
 //! Names follow Prometheus conventions (`_total` counters, base units,
 //! `cellwatch_` prefix). Labels are bounded: cell, check id, alarm kind,
 //! severity, machine state, command action and result; never a value or a
 //! timestamp. Federation across hundreds of cells is Prometheus's own job:
 //! every series carries `cell`.
 
+mod sink;
+
+pub use sink::MetricsSink;
+
 use std::future::Future;
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
 
+use crate::operator::Action;
 use axum::http::header::CONTENT_TYPE;
 use axum::routing::get;
 use axum::Router;
@@ -37,6 +45,8 @@ pub struct Metrics {
     pub tags_unknown: IntGauge,
     /// Changes fed to checks.
     pub check_evaluations: IntCounter,
+    /// Source events waiting for the cell loop.
+    pub source_queue_depth: IntGauge,
     active: IntGaugeVec,
     raised: IntCounterVec,
     state: IntGaugeVec,
@@ -141,7 +151,7 @@ impl Metrics {
             ),
             &["action", "result"]
         ));
-        for action in ["ack", "reset"] {
+        for action in Action::ALL.map(Action::as_str) {
             for result in ["accepted", "refused"] {
                 commands.with_label_values(&[action, result]).inc_by(0);
             }
@@ -175,6 +185,11 @@ impl Metrics {
             check_evaluations: reg!(IntCounter::with_opts(opts(
                 "cellwatch_check_evaluations_total",
                 "Signal changes fed to checks.",
+                cell
+            ))),
+            source_queue_depth: reg!(IntGauge::with_opts(opts(
+                "cellwatch_source_queue_depth",
+                "Source events (publishes) waiting for the cell loop; at capacity the source waits.",
                 cell
             ))),
             active,
@@ -263,20 +278,12 @@ impl Metrics {
             .inc();
     }
 
-    /// Sets the active-alarm gauges from counts by kind and severity.
-    pub fn set_active(&self, counts: &[(AlarmKind, Severity, i64)]) {
-        for k in AlarmKind::ALL {
-            for s in Severity::ALL {
-                let n = counts
-                    .iter()
-                    .filter(|(ck, cs, _)| *ck == k && *cs == s)
-                    .map(|c| c.2)
-                    .sum();
-                self.active
-                    .with_label_values(&[k.as_str(), s.as_str()])
-                    .set(n);
-            }
-        }
+    /// One more (`delta` 1) or one fewer (-1) active alarm of `kind` and
+    /// `severity`.
+    pub fn active_delta(&self, kind: AlarmKind, severity: Severity, delta: i64) {
+        self.active
+            .with_label_values(&[kind.as_str(), severity.as_str()])
+            .add(delta);
     }
 
     /// The machine is now in `state`, having spent `seconds` in `previous`.
@@ -326,13 +333,10 @@ impl Metrics {
         }
     }
 
-    /// An operator command was `result` (`accepted`, `refused`).
-    pub fn command(&self, action: &str, result: &str) {
-        let action = if matches!(action, "ack" | "reset") {
-            action
-        } else {
-            "other"
-        };
+    /// An operator command was `result` (`accepted`, `refused`); `None`:
+    /// the request was no command.
+    pub fn command(&self, action: Option<Action>, result: &str) {
+        let action = action.map_or("other", Action::as_str);
         self.commands.with_label_values(&[action, result]).inc();
     }
 

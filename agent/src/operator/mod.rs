@@ -21,11 +21,42 @@ pub const MAX_SKEW_MS: u64 = 60_000;
 /// Same, as a name for documentation.
 pub const MAX_SKEW: &str = "60 s";
 
-/// A signed operator command, as sent to `<prefix>/command`.
+/// What an operator asks for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Action {
+    /// Acknowledge an alarm.
+    Ack,
+    /// Reset a latched alarm whose condition has ended.
+    Reset,
+}
+
+impl Action {
+    /// Every action.
+    pub const ALL: [Action; 2] = [Action::Ack, Action::Reset];
+
+    /// The name on the wire and in the journal.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Action::Ack => "ack",
+            Action::Reset => "reset",
+        }
+    }
+}
+
+impl std::fmt::Display for Action {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// A signed operator command, as sent to `<prefix>/command`. An unknown
+/// action does not parse: it is refused, never taken for another.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Command {
-    /// `ack` or `reset`.
-    pub action: String,
+    /// What to do.
+    pub action: Action,
     /// The alarm id.
     pub alarm: String,
     /// Who sends it.
@@ -60,6 +91,66 @@ fn mac(key: &[u8], text: &str) -> Hmac<Sha256> {
     m
 }
 
+/// Why the operator keys cannot be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum KeysError {
+    /// The secrets file cannot be read.
+    #[error("cannot read {path}: {source}")]
+    Read {
+        /// The file.
+        path: std::path::PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The file is not valid TOML of the expected shape.
+    #[error("{origin}: {message}")]
+    Syntax {
+        /// The file.
+        origin: String,
+        /// TOML's message.
+        message: String,
+    },
+    /// A key is not hex.
+    #[error("{origin}: operators.{operator}: the key is not hex")]
+    NotHex {
+        /// The file.
+        origin: String,
+        /// Whose key.
+        operator: String,
+    },
+    /// A key is too short to be safe.
+    #[error("{origin}: operators.{operator}: the key must be at least 16 bytes (32 hex digits)")]
+    TooShort {
+        /// The file.
+        origin: String,
+        /// Whose key.
+        operator: String,
+    },
+}
+
+/// Why a command is refused at the gate.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum Refusal {
+    /// No signature.
+    #[error("unsigned command")]
+    Unsigned,
+    /// No key for this operator.
+    #[error("unknown operator '{0}'")]
+    UnknownOperator(String),
+    /// The signature is not hex.
+    #[error("signature is not hex")]
+    SignatureNotHex,
+    /// The signature does not match.
+    #[error("bad signature")]
+    BadSignature,
+    /// Issued too far from the agent's clock.
+    #[error("issued {0} ms away from the agent's clock (more than {MAX_SKEW})")]
+    Skew(u64),
+    /// The nonce was used before.
+    #[error("replayed command (nonce already used)")]
+    Replay,
+}
+
 /// Operators' keys, from the secrets file.
 #[derive(Default)]
 pub struct OperatorKeys {
@@ -77,17 +168,24 @@ impl OperatorKeys {
     ///
     /// # Errors
     /// Malformed TOML or a key that is not hex of at least 16 bytes.
-    pub fn parse(origin: &str, text: &str) -> Result<OperatorKeys, String> {
-        let f: SecretsFile =
-            toml::from_str(text).map_err(|e| format!("{origin}: {}", e.message()))?;
+    pub fn parse(origin: &str, text: &str) -> Result<OperatorKeys, KeysError> {
+        let f: SecretsFile = toml::from_str(text).map_err(|e| KeysError::Syntax {
+            origin: origin.into(),
+            message: e.message().into(),
+        })?;
         let mut keys = HashMap::new();
         for (name, hex_key) in f.operators {
-            let key = hex::decode(hex_key.trim())
-                .map_err(|_| format!("{origin}: operators.{name}: the key is not hex"))?;
+            let Ok(key) = hex::decode(hex_key.trim()) else {
+                return Err(KeysError::NotHex {
+                    origin: origin.into(),
+                    operator: name,
+                });
+            };
             if key.len() < 16 {
-                return Err(format!(
-                    "{origin}: operators.{name}: the key must be at least 16 bytes (32 hex digits)"
-                ));
+                return Err(KeysError::TooShort {
+                    origin: origin.into(),
+                    operator: name,
+                });
             }
             keys.insert(name, key);
         }
@@ -98,9 +196,11 @@ impl OperatorKeys {
     ///
     /// # Errors
     /// The file cannot be read or parsed.
-    pub fn load(path: &Path) -> Result<OperatorKeys, String> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    pub fn load(path: &Path) -> Result<OperatorKeys, KeysError> {
+        let text = std::fs::read_to_string(path).map_err(|source| KeysError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
         #[cfg(unix)]
         {
             use std::os::unix::fs::PermissionsExt;
@@ -151,7 +251,7 @@ impl Gate {
     ///
     /// # Errors
     /// Why the command is refused.
-    pub fn check(&mut self, cmd: &Command, now: u64) -> Result<(), String> {
+    pub fn check(&mut self, cmd: &Command, now: u64) -> Result<(), Refusal> {
         while self
             .seen
             .front()
@@ -159,32 +259,26 @@ impl Gate {
         {
             self.seen.pop_front();
         }
-        if !matches!(cmd.action.as_str(), "ack" | "reset") {
-            return Err(format!("unknown action '{}': use ack or reset", cmd.action));
-        }
         if cmd.signature.is_empty() {
-            return Err("unsigned command".into());
+            return Err(Refusal::Unsigned);
         }
         let Some(key) = self.keys.keys.get(&cmd.operator) else {
-            return Err(format!("unknown operator '{}'", cmd.operator));
+            return Err(Refusal::UnknownOperator(cmd.operator.clone()));
         };
         let Ok(sig) = hex::decode(&cmd.signature) else {
-            return Err("signature is not hex".into());
+            return Err(Refusal::SignatureNotHex);
         };
         if mac(key, &cmd.canonical(&self.cell))
             .verify_slice(&sig)
             .is_err()
         {
-            return Err("bad signature".into());
+            return Err(Refusal::BadSignature);
         }
         if cmd.issued_at.abs_diff(now) > MAX_SKEW_MS {
-            return Err(format!(
-                "issued {} ms away from the agent's clock (more than {MAX_SKEW})",
-                cmd.issued_at.abs_diff(now)
-            ));
+            return Err(Refusal::Skew(cmd.issued_at.abs_diff(now)));
         }
         if self.seen.iter().any(|(_, n)| *n == cmd.nonce) {
-            return Err("replayed command (nonce already used)".into());
+            return Err(Refusal::Replay);
         }
         self.seen.push_back((now, cmd.nonce.clone()));
         Ok(())
@@ -204,7 +298,7 @@ mod tests {
 
     fn cmd(now: u64) -> Command {
         Command {
-            action: "ack".into(),
+            action: Action::Ack,
             alarm: "ese".into(),
             operator: "kim".into(),
             nonce: nonce(),
@@ -217,19 +311,16 @@ mod tests {
     fn signed_once_accepted_then_replay_refused() {
         let mut gate = Gate::new("m01", OperatorKeys::parse("k", KEYS).unwrap());
         let mut c = cmd(1_000_000);
-        assert_eq!(gate.check(&c, 1_000_000), Err("unsigned command".into()));
+        assert_eq!(gate.check(&c, 1_000_000), Err(Refusal::Unsigned));
         c.sign(
             "m01",
             &hex::decode("00112233445566778899aabbccddeeff").unwrap(),
         );
         assert_eq!(gate.check(&c, 1_000_500), Ok(()));
-        assert_eq!(
-            gate.check(&c, 1_000_600),
-            Err("replayed command (nonce already used)".into())
-        );
+        assert_eq!(gate.check(&c, 1_000_600), Err(Refusal::Replay));
         let mut wrong = cmd(1_000_000);
         wrong.sign("m01", b"not the key of kim at all");
-        assert_eq!(gate.check(&wrong, 1_000_000), Err("bad signature".into()));
+        assert_eq!(gate.check(&wrong, 1_000_000), Err(Refusal::BadSignature));
         let mut other_cell = cmd(1_000_000);
         other_cell.sign(
             "m02",
@@ -237,7 +328,7 @@ mod tests {
         );
         assert_eq!(
             gate.check(&other_cell, 1_000_000),
-            Err("bad signature".into())
+            Err(Refusal::BadSignature)
         );
         let mut old = cmd(1_000_000);
         old.sign(
@@ -247,6 +338,7 @@ mod tests {
         assert!(gate
             .check(&old, 1_100_000)
             .unwrap_err()
+            .to_string()
             .starts_with("issued 100000 ms away"));
     }
 
@@ -255,12 +347,36 @@ mod tests {
         assert_eq!(
             OperatorKeys::parse("k", "[operators]\nkim = \"zz\"")
                 .err()
-                .unwrap(),
+                .unwrap()
+                .to_string(),
             "k: operators.kim: the key is not hex"
         );
         assert!(OperatorKeys::parse("k", "[operators]\nkim = \"00\"")
             .err()
             .unwrap()
+            .to_string()
             .contains("at least 16 bytes"));
+    }
+}
+
+#[cfg(test)]
+mod actions {
+    use super::*;
+
+    #[test]
+    fn an_unknown_action_does_not_parse() {
+        let text = r#"{"action":"force","alarm":"ese","operator":"kim","nonce":"n","issued_at":1,"signature":"00"}"#;
+        let err = serde_json::from_str::<Command>(text)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.starts_with("unknown variant `force`, expected `ack` or `reset`"),
+            "{err}"
+        );
+        let ok = text.replace("force", "reset");
+        assert_eq!(
+            serde_json::from_str::<Command>(&ok).unwrap().action,
+            Action::Reset
+        );
     }
 }

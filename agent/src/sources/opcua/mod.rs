@@ -7,9 +7,12 @@
 //!   in `rejected/`, where an engineer can review and move it).
 //! - Monitored items are created in chunks no larger than the server's
 //!   `MaxMonitoredItemsPerCall`.
-//! - Every data change becomes a [`SourceEvent::Reading`]; a bad or
-//!   uncertain status, or a value that is not a boolean, is
-//!   [`Reading::Bad`].
+//! - Every publish becomes one [`SourceEvent::Readings`], in source-time
+//!   order ([`subscription`]); a bad or uncertain status, or a value that
+//!   is not a boolean, is [`Reading::Bad`](cellwatch_models::engine::Reading::Bad).
+//! - The channel to the cell loop is bounded: when the loop falls behind,
+//!   the session's event loop waits, and the server's queues hold the
+//!   changes.
 //! - Connection lost: one [`SourceEvent::Disconnected`]; async-opcua
 //!   reconnects with exponential backoff; on a new session the source
 //!   recreates its subscription, then [`SourceEvent::Connected`]. Values delivered again after the
@@ -20,39 +23,51 @@ use std::future::Future;
 use std::sync::Arc;
 use std::time::Duration;
 
-use cellwatch_models::engine::Reading;
-use futures_util::StreamExt;
-use opcua::client::{
-    ClientBuilder, IdentityToken, MonitoredItem, MonitoredItemMap, OnSubscriptionNotification,
-    OnSubscriptionNotificationCore, Session, SessionConnectMode, SessionPollResult,
-};
-use opcua::crypto::SecurityPolicy as UaPolicy;
-use opcua::types::{
-    DataChangeFilter, DataChangeTrigger, DataValue, ExtensionObject, MessageSecurityMode,
-    MonitoredItemCreateRequest, MonitoringMode, MonitoringParameters, NodeId, NotificationMessage,
-    ReadValueId, TimestampsToReturn, UserTokenPolicy, Variant,
-};
-use tokio::sync::mpsc;
+mod subscription;
 
-use super::SourceEvent;
+pub use subscription::reading;
+
+use futures_util::future::BoxFuture;
+use futures_util::{FutureExt, StreamExt};
+use opcua::client::{ClientBuilder, IdentityToken, SessionConnectMode, SessionPollResult};
+use opcua::crypto::SecurityPolicy as UaPolicy;
+use opcua::types::{MessageSecurityMode, NodeId, UserTokenPolicy};
+
+use super::{Source, SourceError, SourceEvent, SourceSender};
 use crate::config::{
     Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy, TagConfig,
 };
 
-/// `Server_ServerCapabilities_OperationLimits_MaxMonitoredItemsPerCall`.
-const MAX_MONITORED_ITEMS_PER_CALL: u32 = 11714;
-/// Used when the server states no limit.
-const DEFAULT_CHUNK: usize = 1000;
+/// The OPC UA client of one cell.
+pub struct OpcUaSource {
+    cell: String,
+    config: OpcUaConfig,
+    tags: Vec<TagConfig>,
+}
 
-/// Why the source cannot start.
-#[derive(Debug, thiserror::Error)]
-pub enum SourceError {
-    /// The client could not be configured (bad PKI directory, ...).
-    #[error("OPC UA client: {0}")]
-    Client(String),
-    /// The password could not be read.
-    #[error("OPC UA identity: {0}")]
-    Identity(String),
+impl OpcUaSource {
+    /// A source for `cell` reading `tags` from the server in `config`.
+    pub fn new(cell: &str, config: OpcUaConfig, tags: Vec<TagConfig>) -> OpcUaSource {
+        OpcUaSource {
+            cell: cell.into(),
+            config,
+            tags,
+        }
+    }
+}
+
+impl Source for OpcUaSource {
+    fn describe(&self) -> String {
+        format!("opcua {}", self.config.endpoint)
+    }
+
+    fn run(
+        self: Box<Self>,
+        tx: SourceSender,
+        shutdown: BoxFuture<'static, ()>,
+    ) -> BoxFuture<'static, Result<(), SourceError>> {
+        async move { run(&self.cell, &self.config, &self.tags, tx, shutdown).await }.boxed()
+    }
 }
 
 fn ua_policy(p: SecurityPolicy) -> UaPolicy {
@@ -137,7 +152,7 @@ pub async fn run(
     cell: &str,
     config: &OpcUaConfig,
     tags: &[TagConfig],
-    tx: mpsc::UnboundedSender<SourceEvent>,
+    tx: SourceSender,
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), SourceError> {
     let mut client = client(cell, config)?;
@@ -157,6 +172,9 @@ pub async fn run(
             .collect(),
     );
     tokio::pin!(shutdown);
+    // Subscriptions being created beside the session's event loop; owned
+    // here so that none outlives the source.
+    let mut subscribing = tokio::task::JoinSet::new();
     let mut backoff = Duration::from_millis(250);
     let mut said_down = false;
     loop {
@@ -167,7 +185,7 @@ pub async fn run(
                 Ok(pair) => pair,
                 Err(e) => {
                     if !said_down {
-                        let _ = tx.send(SourceEvent::Disconnected(format!("cannot connect to {}: {e}", config.endpoint)));
+                        let _ = tx.send(SourceEvent::Disconnected(format!("cannot connect to {}: {e}", config.endpoint))).await;
                         said_down = true;
                     }
                     tracing::warn!(endpoint = %config.endpoint, error = %e, retry_in = ?backoff, "OPC UA connect failed");
@@ -204,17 +222,17 @@ pub async fn run(
                 item = events.next() => match item {
                     None => break,
                     Some(Err(status)) => {
-                        let _ = tx.send(SourceEvent::Disconnected(format!("session ended: {status}")));
+                        let _ = tx.send(SourceEvent::Disconnected(format!("session ended: {status}"))).await;
                         said_down = true;
                         break;
                     }
                     Some(Ok(SessionPollResult::ConnectionLost(status))) => {
-                        let _ = tx.send(SourceEvent::Disconnected(format!("connection lost: {status}")));
+                        let _ = tx.send(SourceEvent::Disconnected(format!("connection lost: {status}"))).await;
                         said_down = true;
                     }
                     Some(Ok(SessionPollResult::ReconnectFailed(status))) => {
                         if !said_down {
-                            let _ = tx.send(SourceEvent::Disconnected(format!("cannot connect to {}: {status}", config.endpoint)));
+                            let _ = tx.send(SourceEvent::Disconnected(format!("cannot connect to {}: {status}", config.endpoint))).await;
                             said_down = true;
                         }
                     }
@@ -228,14 +246,14 @@ pub async fn run(
                             // loop, which must keep polling the session.
                             subscribed = true;
                             let (session, config, by_node, tx) = (session.clone(), config.clone(), by_node.clone(), tx.clone());
-                            tokio::spawn(async move {
-                                if subscribe(&session, &config, &by_node, &tx).await {
-                                    let _ = tx.send(SourceEvent::Connected);
+                            subscribing.spawn(async move {
+                                if subscription::subscribe(&session, &config, &by_node, &tx).await {
+                                    let _ = tx.send(SourceEvent::Connected(config.endpoint.clone())).await;
                                 }
                             });
                         } else {
                             // The server kept the session and its subscription.
-                            let _ = tx.send(SourceEvent::Connected);
+                            let _ = tx.send(SourceEvent::Connected(config.endpoint.clone())).await;
                         }
                     }
                     Some(Ok(other)) => tracing::debug!(event = ?other, "OPC UA session event"),
@@ -248,166 +266,4 @@ pub async fn run(
             _ = tokio::time::sleep(backoff) => {}
         }
     }
-}
-
-/// Creates the subscription and its monitored items in chunks.
-async fn subscribe(
-    session: &Arc<Session>,
-    config: &OpcUaConfig,
-    by_node: &Arc<HashMap<NodeId, usize>>,
-    tx: &mpsc::UnboundedSender<SourceEvent>,
-) -> bool {
-    let callback = InTimeOrder {
-        by_node: by_node.clone(),
-        tx: tx.clone(),
-    };
-    let sub = match session
-        .create_subscription(config.publishing_interval, 60, 10, 0, 0, true, callback)
-        .await
-    {
-        Ok(id) => id,
-        Err(e) => {
-            tracing::error!(error = %e, "cannot create the OPC UA subscription");
-            let _ = tx.send(SourceEvent::Disconnected(format!(
-                "cannot create subscription: {e}"
-            )));
-            return false;
-        }
-    };
-    let chunk = max_items_per_call(session).await;
-    let sampling = config.sampling_interval.as_secs_f64() * 1000.0;
-    let requests: Vec<MonitoredItemCreateRequest> = by_node
-        .keys()
-        .map(|n| {
-            // Without a filter a server reports value changes only; quality
-            // changes (a broken sensor wire) must be reported too.
-            let filter = DataChangeFilter {
-                trigger: DataChangeTrigger::StatusValue,
-                deadband_type: 0,
-                deadband_value: 0.0,
-            };
-            let params = MonitoringParameters {
-                sampling_interval: sampling,
-                queue_size: 10,
-                discard_oldest: true,
-                filter: ExtensionObject::from_message(filter),
-                ..Default::default()
-            };
-            MonitoredItemCreateRequest::new(
-                ReadValueId::from(n.clone()),
-                MonitoringMode::Reporting,
-                params,
-            )
-        })
-        .collect();
-    tracing::debug!(
-        subscription = sub,
-        items = requests.len(),
-        chunk,
-        "creating monitored items"
-    );
-    for part in requests.chunks(chunk) {
-        match session
-            .create_monitored_items(sub, TimestampsToReturn::Both, part.to_vec())
-            .await
-        {
-            Ok(results) => {
-                for (r, req) in results.iter().zip(part) {
-                    if !r.result.status_code.is_good() {
-                        tracing::error!(node = %req.item_to_monitor.node_id, status = %r.result.status_code, "monitored item refused");
-                        if let Some(&tag) = by_node.get(&req.item_to_monitor.node_id) {
-                            let _ = tx.send(SourceEvent::Reading {
-                                tag,
-                                reading: Reading::Bad,
-                                source_time: crate::clock::now_ms(),
-                            });
-                        }
-                    }
-                }
-            }
-            Err(e) => tracing::error!(error = %e, "cannot create monitored items"),
-        }
-    }
-    true
-}
-
-/// Passes each publish's data changes to the engine in source-time order.
-///
-/// A server sends the changes of one publish in no particular order; a
-/// trigger processed before the change it depends on would leave a timer
-/// unarmed. The library's own dispatch collects them ([`Collector`]), then
-/// they are sorted by source timestamp (stable, so equal times keep the
-/// server's order).
-struct InTimeOrder {
-    by_node: Arc<HashMap<NodeId, usize>>,
-    tx: mpsc::UnboundedSender<SourceEvent>,
-}
-
-struct Collector<'a> {
-    by_node: &'a HashMap<NodeId, usize>,
-    readings: Vec<(usize, Reading, u64)>,
-}
-
-impl OnSubscriptionNotification for Collector<'_> {
-    fn on_data_value(&mut self, value: DataValue, item: &MonitoredItem) {
-        if let Some(&tag) = self.by_node.get(&item.item_to_monitor().node_id) {
-            self.readings
-                .push((tag, reading(&value), source_time(&value)));
-        }
-    }
-}
-
-impl OnSubscriptionNotificationCore for InTimeOrder {
-    fn on_subscription_notification(
-        &mut self,
-        notification: NotificationMessage,
-        items: MonitoredItemMap<'_>,
-    ) {
-        let mut c = Collector {
-            by_node: &self.by_node,
-            readings: Vec::new(),
-        };
-        c.on_subscription_notification(notification, items);
-        c.readings.sort_by_key(|r| r.2);
-        for (tag, reading, source_time) in c.readings {
-            let _ = self.tx.send(SourceEvent::Reading {
-                tag,
-                reading,
-                source_time,
-            });
-        }
-    }
-}
-
-/// The server's limit on monitored items per call, or [`DEFAULT_CHUNK`].
-async fn max_items_per_call(session: &Session) -> usize {
-    let node = NodeId::new(0, MAX_MONITORED_ITEMS_PER_CALL);
-    match session
-        .read(&[ReadValueId::from(node)], TimestampsToReturn::Neither, 0.0)
-        .await
-    {
-        Ok(values) => match values.first().and_then(|v| v.value.as_ref()) {
-            Some(Variant::UInt32(n)) if *n > 0 => *n as usize,
-            _ => DEFAULT_CHUNK,
-        },
-        Err(_) => DEFAULT_CHUNK,
-    }
-}
-
-/// A data value as the engine reads it.
-pub fn reading(value: &DataValue) -> Reading {
-    let good = value.status.is_none_or(|s| s.is_good());
-    match (&value.value, good) {
-        (Some(Variant::Boolean(b)), true) => Reading::Good(*b),
-        _ => Reading::Bad,
-    }
-}
-
-fn source_time(value: &DataValue) -> u64 {
-    value
-        .source_timestamp
-        .or(value.server_timestamp)
-        .map_or_else(crate::clock::now_ms, |t| {
-            t.as_chrono().timestamp_millis().max(0) as u64
-        })
 }

@@ -1,88 +1,37 @@
-//! Zenoh: where alarms and machine state go, and where services answer.
-//!
-//! Keys under the cell's prefix (default `cellwatch/<cell>`):
-//! - `alarms/<alarm-id>`: alarm events ([`crate::payload::AlarmPayload`]),
-//!   published with zenoh-ext's advanced publisher: a cache and sample-miss
-//!   detection, so a subscriber that was away recovers what it missed, and
-//!   a late joiner gets recent history;
-//! - `state`: the machine state ([`crate::payload::StatePayload`]) on every
-//!   change and periodically, cached so a late joiner sees the current one;
-//! - `history`, `snapshot`, `command`: queryables (see [`crate::cell`]);
-//! - `agent`: a liveliness token, gone when the agent dies.
-//!
-//! Scaling to a plant is Zenoh's job: agents run in client mode against
-//! `zenohd` routers; nothing here changes.
+//! Publication on the bus: alarm events and machine state, and the agent's
+//! liveliness token. This is the Zenoh sink of the cell loop.
 
 use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
 
-use tokio::sync::Mutex;
+use futures_util::future::BoxFuture;
+use futures_util::FutureExt;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::Session;
 use zenoh_ext::{AdvancedPublisher, AdvancedPublisherBuilderExt, CacheConfig, MissDetectionConfig};
 
-use crate::config::{ZenohConfig, ZenohMode};
+use super::ZenohError;
+use crate::cell::CellStep;
 use crate::metrics::Metrics;
+use crate::sinks::Sink;
 
 /// How many alarm events of each alarm a publisher keeps for recovery.
 const ALARM_CACHE: usize = 256;
 
-/// Builds the zenoh session configuration.
-///
-/// # Errors
-/// An endpoint zenoh does not accept.
-pub fn session_config(c: &ZenohConfig) -> Result<zenoh::Config, String> {
-    let mut cfg = zenoh::Config::default();
-    let set = |cfg: &mut zenoh::Config, key: &str, value: String| {
-        cfg.insert_json5(key, &value)
-            .map_err(|e| format!("zenoh {key} = {value}: {e}"))
-    };
-    set(&mut cfg, "mode", format!("\"{}\"", c.mode.as_str()))?;
-    set(
-        &mut cfg,
-        "connect/endpoints",
-        serde_json::to_string(&c.connect).unwrap_or_default(),
-    )?;
-    if !c.listen.is_empty() || c.mode != ZenohMode::Client {
-        set(
-            &mut cfg,
-            "listen/endpoints",
-            serde_json::to_string(&c.listen).unwrap_or_default(),
-        )?;
-    }
-    set(
-        &mut cfg,
-        "scouting/multicast/enabled",
-        c.multicast_scouting.to_string(),
-    )?;
-    set(&mut cfg, "timestamping/enabled", "true".into())?;
-    Ok(cfg)
-}
-
-/// Opens a zenoh session.
-///
-/// # Errors
-/// The configuration is refused or the endpoints cannot be bound.
-pub async fn open(c: &ZenohConfig) -> Result<Session, String> {
-    let cfg = session_config(c)?;
-    zenoh::open(cfg)
-        .await
-        .map_err(|e| format!("cannot open the zenoh session: {e}"))
-}
-
 /// The publishing side of one agent.
-pub struct ZenohSink {
+pub struct ZenohPublisher {
     session: Session,
     prefix: String,
     /// One advanced publisher per alarm id, declared on first use.
-    alarms: Mutex<HashMap<String, Arc<AdvancedPublisher<'static>>>>,
+    alarms: HashMap<String, Arc<AdvancedPublisher<'static>>>,
     state: AdvancedPublisher<'static>,
-    _agent: LivelinessToken,
+    /// Present while the agent runs; undeclared by [`Sink::close`].
+    agent: LivelinessToken,
     metrics: Arc<Metrics>,
 }
 
-impl ZenohSink {
+impl ZenohPublisher {
     /// Declares the state publisher and the liveliness token.
     ///
     /// # Errors
@@ -91,24 +40,30 @@ impl ZenohSink {
         session: Session,
         prefix: &str,
         metrics: Arc<Metrics>,
-    ) -> Result<ZenohSink, String> {
+    ) -> Result<ZenohPublisher, ZenohError> {
+        let declare_error = |key: String| {
+            move |e: zenoh::Error| ZenohError::Declare {
+                key,
+                reason: e.to_string(),
+            }
+        };
         let state = session
             .declare_publisher(format!("{prefix}/state"))
             .cache(CacheConfig::default().max_samples(1))
             .publisher_detection()
             .await
-            .map_err(|e| format!("cannot declare {prefix}/state: {e}"))?;
+            .map_err(declare_error(format!("{prefix}/state")))?;
         let agent = session
             .liveliness()
             .declare_token(format!("{prefix}/agent"))
             .await
-            .map_err(|e| format!("cannot declare {prefix}/agent: {e}"))?;
-        Ok(ZenohSink {
+            .map_err(declare_error(format!("{prefix}/agent")))?;
+        Ok(ZenohPublisher {
             session,
             prefix: prefix.into(),
-            alarms: Mutex::new(HashMap::new()),
+            alarms: HashMap::new(),
             state,
-            _agent: agent,
+            agent,
             metrics,
         })
     }
@@ -124,9 +79,9 @@ impl ZenohSink {
     }
 
     /// Publishes an alarm event on `alarms/<id>`.
-    pub async fn alarm(&self, id: &str, json: String) {
+    pub async fn alarm(&mut self, id: &str, json: String) {
         let publisher = {
-            let mut map = self.alarms.lock().await;
+            let map = &mut self.alarms;
             match map.get(id) {
                 Some(p) => p.clone(),
                 None => {
@@ -166,5 +121,41 @@ impl ZenohSink {
             tracing::error!(error = %e, "state publication failed");
             self.metrics.zenoh_publish_errors.inc();
         }
+    }
+}
+
+impl Sink for ZenohPublisher {
+    fn name(&self) -> &'static str {
+        "zenoh"
+    }
+
+    fn handle<'a>(&'a mut self, step: &'a CellStep) -> BoxFuture<'a, ()> {
+        async move {
+            for a in &step.alarms {
+                self.alarm(&a.payload.id, a.json.clone()).await;
+            }
+            if let Some(s) = &step.state {
+                self.state(serde_json::to_string(s).unwrap_or_default())
+                    .await;
+            }
+        }
+        .boxed()
+    }
+
+    fn close(self: Box<Self>) -> BoxFuture<'static, ()> {
+        async move {
+            let ZenohPublisher {
+                agent,
+                alarms,
+                state,
+                ..
+            } = *self;
+            if let Err(e) = agent.undeclare().await {
+                tracing::warn!(error = %e, "cannot undeclare the liveliness token");
+            }
+            drop(alarms);
+            drop(state);
+        }
+        .boxed()
     }
 }

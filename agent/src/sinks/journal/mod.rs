@@ -4,8 +4,13 @@
 //! One writer thread owns the write connection and commits in batches (one
 //! transaction for whatever has queued up), in WAL mode with
 //! `synchronous=FULL`, so a committed row survives a killed process and a
-//! power cut. After each commit it publishes the number of rows committed
-//! so far ([`Journal::committed`]): an event counted there is on disk.
+//! power cut. [`Journal::commit`] returns once its rows are on disk: the
+//! cell loop publishes an alarm only after that, so whoever sees an alarm on
+//! the bus finds it in `history`. After each commit the writer also
+//! publishes the number of rows committed so far ([`Journal::committed`]).
+//!
+//! [`sink::JournalSink`] is the cell loop's side: it turns each step into
+//! rows.
 //! Readers (history queries, reports) open their own connections; WAL lets
 //! them read while the writer writes. Rows older than the retention are
 //! deleted at start and every hour.
@@ -13,9 +18,11 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+pub mod sink;
+
 use rusqlite::{params, Connection, OpenFlags};
 use serde::Serialize;
-use tokio::sync::{mpsc, watch};
+use tokio::sync::{mpsc, oneshot, watch};
 
 /// One row to write.
 #[derive(Debug, Clone, PartialEq)]
@@ -96,6 +103,49 @@ pub enum JournalError {
         /// The error.
         source: rusqlite::Error,
     },
+    /// The writer thread could not be started.
+    #[error("journal {path}: cannot start the writer thread: {source}")]
+    Thread {
+        /// The file.
+        path: PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// A batch could not be committed; its rows are lost.
+    #[error("journal {path}: commit failed: {message}")]
+    Commit {
+        /// The file.
+        path: PathBuf,
+        /// SQLite's message.
+        message: String,
+    },
+    /// The writer thread has stopped.
+    #[error("journal {path}: the writer has stopped")]
+    Stopped {
+        /// The file.
+        path: PathBuf,
+    },
+}
+
+/// Why a history query failed.
+#[derive(Debug, thiserror::Error)]
+pub enum HistoryError {
+    /// The query asks for a kind of row there is none of.
+    #[error("unknown kind '{0}': use alarm, state or command")]
+    UnknownKind(String),
+    /// The journal cannot be read.
+    #[error(transparent)]
+    Journal(#[from] JournalError),
+    /// SQLite failed while reading.
+    #[error("journal: {0}")]
+    Sqlite(#[from] rusqlite::Error),
+}
+
+/// Rows for the writer, and who waits for their commit.
+struct Batch {
+    entries: Vec<Entry>,
+    /// Told the outcome once the rows are committed (or not).
+    done: Option<oneshot::Sender<Result<(), String>>>,
 }
 
 const SCHEMA: &str = "
@@ -176,12 +226,14 @@ pub fn open_read(path: &Path) -> Result<Connection, JournalError> {
 /// The handle the engine writes through.
 #[derive(Clone)]
 pub struct Journal {
-    /// Entries for the writer thread; bounded so that a stuck disk slows
+    /// Batches for the writer thread; bounded so that a stuck disk slows
     /// the engine instead of eating memory.
-    tx: mpsc::Sender<Entry>,
+    tx: mpsc::Sender<Batch>,
     /// Rows committed so far (including those found at start).
     committed: watch::Receiver<u64>,
     path: PathBuf,
+    /// The writer thread, joined by [`Journal::close`].
+    thread: std::sync::Arc<std::sync::Mutex<Option<std::thread::JoinHandle<()>>>>,
 }
 
 /// What the writer thread reports after each batch.
@@ -213,27 +265,75 @@ impl Journal {
                 .unwrap_or(0) as u64
             })
             .sum();
-        let (tx, rx) = mpsc::channel(4096);
+        let (tx, rx) = mpsc::channel(1024);
         let (committed_tx, committed) = watch::channel(existing);
         let p = path.to_path_buf();
-        std::thread::Builder::new()
+        let thread = std::thread::Builder::new()
             .name("journal-writer".into())
             .spawn(move || writer(conn, rx, committed_tx, existing, retention, observer, p))
-            .map_err(|e| JournalError::Sqlite {
+            .map_err(|source| JournalError::Thread {
                 path: path.to_path_buf(),
-                source: rusqlite::Error::ToSqlConversionFailure(Box::new(e)),
+                source,
             })?;
         Ok(Journal {
             tx,
             committed,
             path: path.to_path_buf(),
+            thread: std::sync::Arc::new(std::sync::Mutex::new(Some(thread))),
         })
     }
 
-    /// Queues an entry. Waits if the writer is far behind.
-    pub async fn write(&self, entry: Entry) {
-        if self.tx.send(entry).await.is_err() {
-            tracing::error!(path = %self.path.display(), "journal writer has stopped; entry lost");
+    /// Queues an entry without waiting for its commit. Waits if the writer
+    /// is far behind.
+    ///
+    /// # Errors
+    /// The writer has stopped.
+    pub async fn write(&self, entry: Entry) -> Result<(), JournalError> {
+        self.send(vec![entry], None).await
+    }
+
+    /// Writes `entries` and returns once they are committed.
+    ///
+    /// # Errors
+    /// The commit failed or the writer has stopped.
+    pub async fn commit(&self, entries: Vec<Entry>) -> Result<(), JournalError> {
+        let (done, committed) = oneshot::channel();
+        self.send(entries, Some(done)).await?;
+        match committed.await {
+            Ok(Ok(())) => Ok(()),
+            Ok(Err(message)) => Err(JournalError::Commit {
+                path: self.path.clone(),
+                message,
+            }),
+            Err(_) => Err(self.stopped()),
+        }
+    }
+
+    async fn send(
+        &self,
+        entries: Vec<Entry>,
+        done: Option<oneshot::Sender<Result<(), String>>>,
+    ) -> Result<(), JournalError> {
+        self.tx
+            .send(Batch { entries, done })
+            .await
+            .map_err(|_| self.stopped())
+    }
+
+    fn stopped(&self) -> JournalError {
+        JournalError::Stopped {
+            path: self.path.clone(),
+        }
+    }
+
+    /// Closes the journal: every queued row is committed, then the writer
+    /// thread ends. Other clones of this handle keep it open until they
+    /// are closed or dropped too.
+    pub async fn close(self) {
+        let thread = self.thread.lock().ok().and_then(|mut t| t.take());
+        drop(self.tx);
+        if let Some(thread) = thread {
+            let _ = tokio::task::spawn_blocking(move || thread.join()).await;
         }
     }
 
@@ -250,7 +350,7 @@ impl Journal {
 
 fn writer(
     mut conn: Connection,
-    mut rx: mpsc::Receiver<Entry>,
+    mut rx: mpsc::Receiver<Batch>,
     committed: watch::Sender<u64>,
     mut total: u64,
     retention: Duration,
@@ -260,25 +360,35 @@ fn writer(
     let mut last_purge = Instant::now();
     purge(&conn, retention, &path);
     let mut batch = Vec::with_capacity(256);
+    let mut waiting = Vec::new();
     while let Some(first) = rx.blocking_recv() {
-        batch.push(first);
+        let mut take = |b: Batch, batch: &mut Vec<Entry>| {
+            batch.extend(b.entries);
+            waiting.extend(b.done);
+        };
+        take(first, &mut batch);
         while batch.len() < 1024 {
             match rx.try_recv() {
-                Ok(e) => batch.push(e),
+                Ok(b) => take(b, &mut batch),
                 Err(_) => break,
             }
         }
         let started = Instant::now();
-        match write_batch(&mut conn, &batch) {
+        let outcome = match write_batch(&mut conn, &batch) {
             Ok(()) => {
                 total += batch.len() as u64;
                 observer.committed(batch.len(), started.elapsed());
                 let _ = committed.send(total);
+                Ok(())
             }
             Err(e) => {
                 tracing::error!(path = %path.display(), error = %e, rows = batch.len(), "journal write failed");
                 observer.failed(&e.to_string());
+                Err(e.to_string())
             }
+        };
+        for done in waiting.drain(..) {
+            let _ = done.send(outcome.clone());
         }
         batch.clear();
         if last_purge.elapsed() > Duration::from_secs(3600) {
@@ -366,17 +476,13 @@ pub struct HistoryQuery {
 ///
 /// # Errors
 /// An unknown `kind`, or SQLite failing.
-pub fn history(conn: &Connection, q: &HistoryQuery) -> Result<Vec<HistoryRow>, String> {
+pub fn history(conn: &Connection, q: &HistoryQuery) -> Result<Vec<HistoryRow>, HistoryError> {
     let tables: &[&str] = match q.kind.as_deref() {
         None => &["alarm", "state", "command"],
         Some("alarm") => &["alarm"],
         Some("state") => &["state"],
         Some("command") => &["command"],
-        Some(other) => {
-            return Err(format!(
-                "unknown kind '{other}': use alarm, state or command"
-            ))
-        }
+        Some(other) => return Err(HistoryError::UnknownKind(other.to_string())),
     };
     let since = q.since.unwrap_or(0) as i64;
     let until = q.until.map_or(i64::MAX, |u| u as i64);
@@ -397,41 +503,39 @@ pub fn history(conn: &Connection, q: &HistoryQuery) -> Result<Vec<HistoryRow>, S
                 &["operator", "action", "alarm", "nonce", "accepted", "detail"],
             ),
         };
-        let mut stmt = conn.prepare_cached(sql).map_err(|e| e.to_string())?;
+        let mut stmt = conn.prepare_cached(sql)?;
         let table = match t {
             "alarm" => "alarm",
             "state" => "state",
             _ => "command",
         };
-        let mapped = stmt
-            .query_map(params![since, until, limit as i64], |r| {
-                let mut fields = serde_json::Map::new();
-                for (i, c) in cols.iter().enumerate() {
-                    let v: rusqlite::types::Value = r.get(i + 2)?;
-                    let json = match v {
-                        rusqlite::types::Value::Null => serde_json::Value::Null,
-                        rusqlite::types::Value::Integer(n) if *c == "accepted" => {
-                            serde_json::Value::Bool(n != 0)
-                        }
-                        rusqlite::types::Value::Integer(n) => n.into(),
-                        rusqlite::types::Value::Text(s) if *c == "payload" => {
-                            serde_json::from_str(&s).unwrap_or(serde_json::Value::String(s))
-                        }
-                        rusqlite::types::Value::Text(s) => s.into(),
-                        other => format!("{other:?}").into(),
-                    };
-                    fields.insert((*c).to_string(), json);
-                }
-                Ok(HistoryRow {
-                    seq: r.get(0)?,
-                    table,
-                    at: r.get::<_, i64>(1)? as u64,
-                    fields,
-                })
+        let mapped = stmt.query_map(params![since, until, limit as i64], |r| {
+            let mut fields = serde_json::Map::new();
+            for (i, c) in cols.iter().enumerate() {
+                let v: rusqlite::types::Value = r.get(i + 2)?;
+                let json = match v {
+                    rusqlite::types::Value::Null => serde_json::Value::Null,
+                    rusqlite::types::Value::Integer(n) if *c == "accepted" => {
+                        serde_json::Value::Bool(n != 0)
+                    }
+                    rusqlite::types::Value::Integer(n) => n.into(),
+                    rusqlite::types::Value::Text(s) if *c == "payload" => {
+                        serde_json::from_str(&s).unwrap_or(serde_json::Value::String(s))
+                    }
+                    rusqlite::types::Value::Text(s) => s.into(),
+                    other => format!("{other:?}").into(),
+                };
+                fields.insert((*c).to_string(), json);
+            }
+            Ok(HistoryRow {
+                seq: r.get(0)?,
+                table,
+                at: r.get::<_, i64>(1)? as u64,
+                fields,
             })
-            .map_err(|e| e.to_string())?;
+        })?;
         for row in mapped {
-            rows.push(row.map_err(|e| e.to_string())?);
+            rows.push(row?);
         }
     }
     rows.sort_by_key(|r| (r.at, r.table, r.seq));
@@ -504,7 +608,8 @@ mod tests {
             fault_type: Some("ESE".into()),
             element: Some("X0.06".into()),
         })
-        .await;
+        .await
+        .unwrap();
         j.write(Entry::Command {
             at: now + 1,
             operator: "kim".into(),
@@ -514,7 +619,8 @@ mod tests {
             accepted: false,
             detail: "bad signature".into(),
         })
-        .await;
+        .await
+        .unwrap();
         let mut c = j.committed();
         c.wait_for(|n| *n >= 2).await.unwrap();
         let conn = open_read(&path).unwrap();
@@ -539,7 +645,8 @@ mod tests {
                     ..Default::default()
                 }
             )
-            .unwrap_err(),
+            .unwrap_err()
+            .to_string(),
             "unknown kind 'x': use alarm, state or command"
         );
         // Old rows go at the next start.
@@ -559,7 +666,8 @@ mod tests {
             transition: "raised".into(),
             payload: "{}".into(),
         })
-        .await;
+        .await
+        .unwrap();
         let mut c = j.committed();
         c.wait_for(|n| *n >= 3).await.unwrap();
         let rows = history(

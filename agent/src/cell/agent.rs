@@ -1,0 +1,251 @@
+//! A running agent: the parts of one cell wired together, and stopped
+//! together.
+//!
+//! [`start`] compiles the checks, opens the journal and the Zenoh session,
+//! declares the services, binds the metrics port, and spawns four owned
+//! tasks: the source, the cell loop, the services and the metrics server.
+//! [`Agent::stop`] ends them all, joins them, and closes the Zenoh session,
+//! so its liveliness token disappears and its ports are free again.
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+
+use futures_util::FutureExt;
+use tokio::sync::{mpsc, watch};
+use tokio::task::JoinHandle;
+
+use super::compile::{self, CompileError};
+use super::CellLoop;
+use crate::config::CellConfig;
+use crate::metrics::{Metrics, MetricsSink};
+use crate::operator::{Gate, KeysError, OperatorKeys};
+use crate::sinks::console::{ConsoleSink, Notice};
+use crate::sinks::journal::sink::JournalSink;
+use crate::sinks::journal::{Journal, JournalError};
+use crate::sinks::zenoh::publish::ZenohPublisher;
+use crate::sinks::zenoh::services::Services;
+use crate::sinks::zenoh::ZenohError;
+use crate::sinks::Sink;
+use crate::sources::{self, Source, SourceError, QUEUE_CAPACITY};
+
+/// How many service requests may wait for the cell loop.
+const REQUEST_CAPACITY: usize = 64;
+
+/// Why an agent cannot start.
+#[derive(Debug, thiserror::Error)]
+pub enum StartError {
+    /// The checks do not fit the cell.
+    #[error(transparent)]
+    Compile(#[from] CompileError),
+    /// The operator secrets file is unusable.
+    #[error(transparent)]
+    Keys(#[from] KeysError),
+    /// The journal cannot be opened.
+    #[error(transparent)]
+    Journal(#[from] JournalError),
+    /// Zenoh refused the session or a declaration.
+    #[error(transparent)]
+    Zenoh(#[from] ZenohError),
+    /// The metrics port cannot be bound.
+    #[error("cannot serve metrics on {addr}: {source}")]
+    Metrics {
+        /// The address.
+        addr: SocketAddr,
+        /// Why.
+        source: std::io::Error,
+    },
+}
+
+impl StartError {
+    /// Whether the configuration (or a file it names) is at fault, rather
+    /// than the machine.
+    pub fn is_input(&self) -> bool {
+        matches!(self, StartError::Compile(_) | StartError::Keys(_))
+    }
+}
+
+/// What a caller may add to an agent.
+#[derive(Default)]
+pub struct Options {
+    /// Hears every alarm, state change and connection change (the demo's
+    /// console).
+    pub observer: Option<mpsc::UnboundedSender<Notice>>,
+    /// Replaces the source the configuration names (tests, replays).
+    pub source: Option<Box<dyn Source>>,
+}
+
+/// A running agent.
+pub struct Agent {
+    /// Tells every task to stop.
+    stop: watch::Sender<bool>,
+    /// The cell loop; it closes the sinks when it ends.
+    cell_loop: Option<JoinHandle<()>>,
+    /// The source; its error, if it could not run.
+    source: Option<JoinHandle<Result<(), SourceError>>>,
+    /// The Zenoh services (history, snapshot, command).
+    services: Option<JoinHandle<()>>,
+    /// The `/metrics` server.
+    metrics_server: Option<JoinHandle<()>>,
+    session: zenoh::Session,
+    metrics: Arc<Metrics>,
+    metrics_addr: Option<SocketAddr>,
+    committed: watch::Receiver<u64>,
+}
+
+impl Agent {
+    /// Where `/metrics` is served, if it is.
+    pub fn metrics_addr(&self) -> Option<SocketAddr> {
+        self.metrics_addr
+    }
+
+    /// The metrics.
+    pub fn metrics(&self) -> &Arc<Metrics> {
+        &self.metrics
+    }
+
+    /// Rows committed to the journal so far.
+    pub fn committed(&self) -> watch::Receiver<u64> {
+        self.committed.clone()
+    }
+
+    /// Stops every task, waits for each, and closes the Zenoh session.
+    pub async fn stop(mut self) {
+        let _ = self.stop.send(true);
+        for task in [
+            self.cell_loop.take(),
+            self.services.take(),
+            self.metrics_server.take(),
+        ]
+        .into_iter()
+        .flatten()
+        {
+            let _ = task.await;
+        }
+        if let Some(source) = self.source.take() {
+            let _ = source.await;
+        }
+        if let Err(e) = self.session.close().await {
+            tracing::warn!(error = %e, "closing the zenoh session failed");
+        }
+    }
+
+    /// Waits until the agent cannot go on by itself: its source could not
+    /// run (the error), or it ended.
+    pub async fn wait(&mut self) -> Option<SourceError> {
+        let source = self.source.as_mut()?;
+        let result = source.await;
+        self.source = None;
+        match result {
+            Ok(Err(e)) => Some(e),
+            _ => None,
+        }
+    }
+}
+
+/// Starts an agent for `config`; `observer`, if given, hears every alarm
+/// and state change.
+///
+/// # Errors
+/// See [`StartError`].
+pub async fn start(
+    config: CellConfig,
+    observer: Option<mpsc::UnboundedSender<Notice>>,
+) -> Result<Agent, StartError> {
+    start_with(
+        config,
+        Options {
+            observer,
+            source: None,
+        },
+    )
+    .await
+}
+
+/// Starts an agent for `config` with `options`.
+///
+/// # Errors
+/// See [`StartError`].
+pub async fn start_with(config: CellConfig, options: Options) -> Result<Agent, StartError> {
+    for w in &config.warnings {
+        tracing::warn!("{w}");
+    }
+    let engine = compile::engine(&config)?;
+    let keys = match &config.secrets_file {
+        Some(path) => OperatorKeys::load(path)?,
+        None => OperatorKeys::default(),
+    };
+    let metrics = Arc::new(Metrics::new(&config.cell));
+    let journal = Journal::start(
+        &config.journal.path,
+        config.journal.retention,
+        (*metrics).clone(),
+    )?;
+    let committed = journal.committed();
+    let session = crate::sinks::zenoh::open(&config.zenoh).await?;
+    let prefix = config.zenoh.prefix.clone();
+    let (requests_tx, requests_rx) = mpsc::channel(REQUEST_CAPACITY);
+    let services = Services::declare(
+        &session,
+        &prefix,
+        journal.path(),
+        requests_tx,
+        metrics.clone(),
+    )
+    .await?;
+    let publisher = ZenohPublisher::start(session.clone(), &prefix, metrics.clone()).await?;
+    let (stop, stop_rx) = watch::channel(false);
+    let stopped = |mut rx: watch::Receiver<bool>| async move {
+        let _ = rx.wait_for(|s| *s).await;
+    };
+    let (metrics_server, metrics_addr) = match config.metrics {
+        Some(addr) => {
+            let listener = crate::metrics::bind(addr)
+                .await
+                .map_err(|source| StartError::Metrics { addr, source })?;
+            let bound = listener.local_addr().ok();
+            let m = metrics.clone();
+            let shutdown = stopped(stop_rx.clone());
+            let task = tokio::spawn(async move {
+                if let Err(e) = crate::metrics::serve(listener, m, shutdown).await {
+                    tracing::error!(error = %e, "metrics server stopped");
+                }
+            });
+            (Some(task), bound)
+        }
+        None => (None, None),
+    };
+    let mut sinks: Vec<Box<dyn Sink>> = vec![
+        Box::new(JournalSink::new(journal)),
+        Box::new(publisher),
+        Box::new(MetricsSink::new(metrics.clone(), &config)),
+    ];
+    if let Some(observer) = options.observer {
+        sinks.push(Box::new(ConsoleSink::new(observer)));
+    }
+    let source = options
+        .source
+        .unwrap_or_else(|| sources::for_config(&config));
+    tracing::info!(cell = %config.cell, source = %source.describe(), "starting");
+    let (source_tx, source_rx) = mpsc::channel(QUEUE_CAPACITY);
+    let source = tokio::spawn(source.run(source_tx, stopped(stop_rx.clone()).boxed()));
+    let cell_loop = CellLoop::new(
+        &config.cell,
+        engine,
+        Gate::new(&config.cell, keys),
+        sinks,
+        config.state_interval,
+    );
+    let cell_loop = tokio::spawn(cell_loop.run(source_rx, requests_rx, stopped(stop_rx.clone())));
+    let services = tokio::spawn(services.run(stopped(stop_rx)));
+    Ok(Agent {
+        stop,
+        cell_loop: Some(cell_loop),
+        source: Some(source),
+        services: Some(services),
+        metrics_server,
+        session,
+        metrics,
+        metrics_addr,
+        committed,
+    })
+}

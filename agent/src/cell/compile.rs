@@ -1,0 +1,51 @@
+//! From a validated configuration to a running engine: the check sets
+//! (switching functions, transition timers) bound to the cell's tags.
+//! `cellwatch validate` calls exactly this, so a configuration that
+//! validates starts.
+
+use cellwatch_models::engine::{CellEngine, CheckSet, EngineError, SwitchingChecks};
+use cellwatch_models::timer::checks::{TimerCheckError, TimerChecks};
+
+use crate::config::CellConfig;
+
+/// Why a configuration cannot be turned into an engine.
+#[derive(Debug, thiserror::Error)]
+pub enum CompileError {
+    /// A timer model does not fit the cell.
+    #[error("checks.timers {id}: {source}")]
+    Timer {
+        /// The check's id.
+        id: String,
+        /// Why.
+        source: TimerCheckError,
+    },
+    /// The engine refuses the checks.
+    #[error(transparent)]
+    Engine(#[from] EngineError),
+}
+
+/// Builds the engine for `config`.
+///
+/// # Errors
+/// A timer model or a check reads something the cell does not have.
+pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
+    let mut sets: Vec<Box<dyn CheckSet>> =
+        vec![Box::new(SwitchingChecks::new(config.switching.clone()))];
+    for t in &config.timers {
+        let checks = TimerChecks::new(&t.id, &t.model, t.severity, |n| {
+            crate::config::timer_signal(&config.tags, n)
+        })
+        .map_err(|source| CompileError::Timer {
+            id: t.id.clone(),
+            source,
+        })?;
+        sets.push(Box::new(checks));
+    }
+    Ok(CellEngine::new(
+        &config.cell,
+        config.engine_tags(),
+        sets,
+        config.state.clone(),
+    )?
+    .counting_parts(config.part_done))
+}

@@ -1,0 +1,414 @@
+//! The cell loop: one per agent, owning the engine.
+//!
+//! [`CellLoop::run`] takes three inputs — source events, requests from the
+//! services (snapshot, operator commands) and the passing of time — and
+//! turns each into one [`CellStep`]: what came in, the engine's
+//! [`Step`](cellwatch_models::engine::Step), and the payloads to publish.
+//! The step goes to every sink in order (journal, Zenoh, metrics, console);
+//! nothing in the loop knows about Zenoh, SQLite or Prometheus.
+//!
+//! - [`compile`]: builds the engine from a configuration (used by `run`
+//!   and by `validate`, so a configuration that validates starts).
+//! - [`agent`]: wires the parts of a running agent and stops them.
+
+pub mod agent;
+pub mod compile;
+
+use std::future::Future;
+use std::time::Duration;
+
+use cellwatch_models::alarm::Transition;
+use cellwatch_models::engine::{CellEngine, HistoryKind, Step};
+use tokio::sync::{mpsc, oneshot};
+
+pub use agent::{start, start_with, Agent, Options, StartError};
+
+use crate::clock::{now_ms, rfc3339};
+use crate::operator::{Action, Command, Gate};
+use crate::payload::{
+    AlarmPayload, LastFault, Quality, SnapshotPayload, StatePayload, TagValue, SNAPSHOT_SCHEMA,
+};
+use crate::sinks::Sink;
+use crate::sources::SourceEvent;
+
+/// How long after a timer's deadline the agent waits for an event that may
+/// still be in transit before calling it late, ms.
+pub const DELIVERY_ALLOWANCE_MS: u64 = 1000;
+
+/// How often timers are advanced.
+pub const TICK: Duration = Duration::from_millis(250);
+
+/// What came into the loop.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Input {
+    /// The PLC connection came up (`up`) or went down; to what, or why.
+    Connection {
+        /// Up or down.
+        up: bool,
+        /// The endpoint, or why it went down.
+        detail: String,
+    },
+    /// Values from the PLC (the engine step says how many).
+    Readings,
+    /// Time passed: timers were advanced.
+    Tick,
+    /// The periodic state publication (no change).
+    StateBeat,
+    /// An operator command, carried out or refused.
+    Command(CommandRecord),
+}
+
+/// An operator command as journaled.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CommandRecord {
+    /// Who signed it (as claimed, for refused ones).
+    pub operator: String,
+    /// What was asked; `None` if the request did not parse.
+    pub action: Option<Action>,
+    /// The alarm it names.
+    pub alarm: String,
+    /// The request's nonce.
+    pub nonce: String,
+    /// Whether it was carried out.
+    pub accepted: bool,
+    /// What it did, or why it was refused.
+    pub detail: String,
+}
+
+/// An alarm transition ready to publish: the payload and its JSON.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PublishedAlarm {
+    /// The payload.
+    pub payload: AlarmPayload,
+    /// The same, as JSON (journaled and published byte for byte).
+    pub json: String,
+}
+
+/// One input and everything it caused: what every sink is given.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CellStep {
+    /// When the loop handled it, ms since the epoch.
+    pub at: u64,
+    /// What came in.
+    pub input: Input,
+    /// What the engine did.
+    pub engine: Step,
+    /// The engine's alarm transitions as payloads, in the same order.
+    pub alarms: Vec<PublishedAlarm>,
+    /// The machine state to publish, when it changed (or on a beat).
+    pub state: Option<StatePayload>,
+    /// Source events waiting in the queue after this one.
+    pub queue_depth: usize,
+}
+
+impl CellStep {
+    /// Whether the step carries something worth a journal row.
+    pub fn has_rows(&self) -> bool {
+        !self.alarms.is_empty()
+            || self.engine.states().next().is_some()
+            || !self.engine.parts.is_empty()
+            || matches!(self.input, Input::Command(_))
+    }
+}
+
+/// What an operator's command came to.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct CommandOutcome {
+    /// Whether it was carried out.
+    pub accepted: bool,
+    /// What it did, or why not.
+    pub detail: String,
+}
+
+/// A request from the services to the loop, answered on its channel.
+#[derive(Debug)]
+pub enum Request {
+    /// The cell as the engine sees it now.
+    Snapshot(oneshot::Sender<SnapshotPayload>),
+    /// An operator command (or why the request is not one).
+    Command {
+        /// The parsed command, or why it did not parse.
+        command: Result<Command, String>,
+        /// Where the outcome goes.
+        reply: oneshot::Sender<CommandOutcome>,
+    },
+}
+
+/// The loop's state: the engine, the operator gate and the sinks.
+pub struct CellLoop {
+    cell: String,
+    engine: CellEngine,
+    gate: Gate,
+    /// Every step goes to each, in order.
+    sinks: Vec<Box<dyn Sink>>,
+    state_interval: Duration,
+    /// When the current machine state was entered, and by which change.
+    state_since: u64,
+    state_kind: HistoryKind,
+}
+
+impl CellLoop {
+    /// A loop for `cell` over `engine`, letting commands through `gate` and
+    /// handing steps to `sinks`.
+    pub fn new(
+        cell: &str,
+        engine: CellEngine,
+        gate: Gate,
+        sinks: Vec<Box<dyn Sink>>,
+        state_interval: Duration,
+    ) -> CellLoop {
+        CellLoop {
+            cell: cell.into(),
+            engine,
+            gate,
+            sinks,
+            state_interval,
+            state_since: now_ms(),
+            state_kind: HistoryKind::Offline,
+        }
+    }
+
+    /// Runs until `shutdown` completes (or every input is closed), then
+    /// closes the sinks.
+    pub async fn run(
+        mut self,
+        mut source: mpsc::Receiver<SourceEvent>,
+        mut requests: mpsc::Receiver<Request>,
+        shutdown: impl Future<Output = ()>,
+    ) {
+        tokio::pin!(shutdown);
+        let mut tick = tokio::time::interval(TICK);
+        tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        let mut beat = tokio::time::interval(self.state_interval);
+        beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        let mut source_open = true;
+        let mut requests_open = true;
+        loop {
+            tokio::select! {
+                biased;
+                _ = &mut shutdown => break,
+                ev = source.recv(), if source_open => match ev {
+                    Some(ev) => {
+                        let depth = source.len();
+                        self.source(ev, depth).await;
+                    }
+                    None => source_open = false,
+                },
+                r = requests.recv(), if requests_open => match r {
+                    Some(r) => self.request(r).await,
+                    None => requests_open = false,
+                },
+                _ = tick.tick() => self.tick().await,
+                _ = beat.tick() => self.beat().await,
+            }
+        }
+        for sink in self.sinks {
+            sink.close().await;
+        }
+    }
+
+    async fn source(&mut self, ev: SourceEvent, queue_depth: usize) {
+        let now = now_ms();
+        let (input, step) = match ev {
+            SourceEvent::Connected(endpoint) => (
+                Input::Connection {
+                    up: true,
+                    detail: endpoint,
+                },
+                self.engine.on_connection(true, now),
+            ),
+            SourceEvent::Disconnected(why) => (
+                Input::Connection {
+                    up: false,
+                    detail: why,
+                },
+                self.engine.on_connection(false, now),
+            ),
+            SourceEvent::Readings(readings) => {
+                (Input::Readings, self.engine.on_readings(&readings, now))
+            }
+        };
+        self.dispatch(now, input, step, queue_depth).await;
+    }
+
+    async fn tick(&mut self) {
+        let now = now_ms();
+        // Timers judge "late" against the PLC's clock: an event that
+        // happened in time but is still on its way (publishing interval,
+        // network) must not be called late.
+        let step = self
+            .engine
+            .advance(now.saturating_sub(DELIVERY_ALLOWANCE_MS));
+        self.dispatch(now, Input::Tick, step, 0).await;
+    }
+
+    async fn beat(&mut self) {
+        let now = now_ms();
+        let state = Some(self.state_payload(now));
+        self.deliver(CellStep {
+            at: now,
+            input: Input::StateBeat,
+            engine: Step::default(),
+            alarms: Vec::new(),
+            state,
+            queue_depth: 0,
+        })
+        .await;
+    }
+
+    async fn request(&mut self, r: Request) {
+        match r {
+            Request::Snapshot(reply) => {
+                let _ = reply.send(self.snapshot());
+            }
+            Request::Command { command, reply } => {
+                let outcome = self.command(command).await;
+                let _ = reply.send(outcome);
+            }
+        }
+    }
+
+    async fn command(&mut self, command: Result<Command, String>) -> CommandOutcome {
+        let now = now_ms();
+        let (record, step) = match command {
+            Err(why) => (
+                CommandRecord {
+                    operator: String::new(),
+                    action: None,
+                    alarm: String::new(),
+                    nonce: String::new(),
+                    accepted: false,
+                    detail: format!("not a command: {why}"),
+                },
+                Step::default(),
+            ),
+            Ok(cmd) => {
+                let done = match self.gate.check(&cmd, now) {
+                    Err(refusal) => Err(refusal.to_string()),
+                    Ok(()) => match cmd.action {
+                        Action::Ack => self.engine.acknowledge(&cmd.alarm, &cmd.operator, now),
+                        Action::Reset => self.engine.reset(&cmd.alarm, &cmd.operator, now),
+                    }
+                    .map_err(|e| e.to_string()),
+                };
+                let (accepted, detail, step) = match done {
+                    Ok(step) => (
+                        true,
+                        format!("{} {} by {}", cmd.action, cmd.alarm, cmd.operator),
+                        step,
+                    ),
+                    Err(why) => (false, why, Step::default()),
+                };
+                (
+                    CommandRecord {
+                        operator: cmd.operator,
+                        action: Some(cmd.action),
+                        alarm: cmd.alarm,
+                        nonce: cmd.nonce,
+                        accepted,
+                        detail,
+                    },
+                    step,
+                )
+            }
+        };
+        if !record.accepted {
+            tracing::warn!(detail = %record.detail, "operator command refused");
+        }
+        let outcome = CommandOutcome {
+            accepted: record.accepted,
+            detail: record.detail.clone(),
+        };
+        self.dispatch(now, Input::Command(record), step, 0).await;
+        outcome
+    }
+
+    /// Builds the payloads for `step` and hands it to the sinks.
+    async fn dispatch(&mut self, now: u64, input: Input, step: Step, queue_depth: usize) {
+        let alarms = step
+            .alarms()
+            .map(|(alarm, transition, at)| {
+                let payload = AlarmPayload::new(&self.cell, alarm, transition, at);
+                let json = serde_json::to_string(&payload).unwrap_or_default();
+                PublishedAlarm { payload, json }
+            })
+            .collect();
+        let mut state = None;
+        if let Some((_, kind, at)) = step.states().last() {
+            self.state_since = at;
+            self.state_kind = kind;
+            state = Some(self.state_payload(at));
+        }
+        self.deliver(CellStep {
+            at: now,
+            input,
+            engine: step,
+            alarms,
+            state,
+            queue_depth,
+        })
+        .await;
+    }
+
+    async fn deliver(&mut self, step: CellStep) {
+        for sink in &mut self.sinks {
+            sink.handle(&step).await;
+        }
+    }
+
+    fn state_payload(&self, at: u64) -> StatePayload {
+        StatePayload::new(
+            &self.cell,
+            self.engine.state(),
+            self.state_kind,
+            self.state_since,
+            at,
+        )
+    }
+
+    fn snapshot(&self) -> SnapshotPayload {
+        let tags = self.engine.tags();
+        let bad: std::collections::HashSet<usize> = self.engine.bad_tags().collect();
+        let value = |i: usize, v: Option<bool>, current: bool| TagValue {
+            name: tags[i].name.clone(),
+            address: tags[i].address.name().to_string(),
+            value: v,
+            quality: match (v, current && bad.contains(&i)) {
+                (_, true) => Quality::Bad,
+                (Some(_), false) => Quality::Good,
+                (None, false) => Quality::Unknown,
+            },
+        };
+        let now = now_ms();
+        SnapshotPayload {
+            schema: SNAPSHOT_SCHEMA.into(),
+            cell: self.cell.clone(),
+            at: rfc3339(now),
+            connected: self.engine.connected(),
+            state: self.engine.state().state_name(),
+            tags: self
+                .engine
+                .values()
+                .iter()
+                .enumerate()
+                .map(|(i, v)| value(i, *v, true))
+                .collect(),
+            alarms: self
+                .engine
+                .alarms()
+                .filter(|a| a.active || !a.acknowledged)
+                .map(|a| AlarmPayload::new(&self.cell, a, Transition::Updated, now))
+                .collect(),
+            last_fault: self.engine.last_fault().map(|f| LastFault {
+                alarm: f.alarm.clone(),
+                at: rfc3339(f.at),
+                values: f
+                    .values
+                    .iter()
+                    .enumerate()
+                    .map(|(i, v)| value(i, *v, false))
+                    .collect(),
+            }),
+        }
+    }
+}

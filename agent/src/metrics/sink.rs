@@ -1,0 +1,155 @@
+//! The metrics as a sink: each step updates the counters and gauges it
+//! touches, and nothing else.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use cellwatch_models::alarm::{AlarmKind, Severity, Transition};
+use futures_util::future::BoxFuture;
+use futures_util::FutureExt;
+
+use super::Metrics;
+use crate::cell::{CellStep, Input};
+use crate::config::CellConfig;
+use crate::sinks::Sink;
+
+/// Metrics bookkeeping of one cell.
+pub struct MetricsSink {
+    metrics: Arc<Metrics>,
+    /// Per alarm: kind, severity and whether it is counted as active.
+    active: HashMap<String, (AlarmKind, Severity, bool)>,
+    /// Per fault alarm: the element its culprit gauge is set for.
+    culprits: HashMap<String, Option<String>>,
+    /// The state whose time is being counted, and up to when it is.
+    counted_state: &'static str,
+    accounted_until: u64,
+    /// When the last tag value arrived.
+    last_update: Option<u64>,
+    ever_connected: bool,
+}
+
+impl MetricsSink {
+    /// A sink for `config`'s cell: sets the gauges known from the
+    /// configuration (tags unknown at start, learned timer windows).
+    pub fn new(metrics: Arc<Metrics>, config: &CellConfig) -> MetricsSink {
+        metrics.tags_unknown.set(config.tags.len() as i64);
+        for t in &config.timers {
+            for tr in &t.model.transitions {
+                let check = format!("{}-{:03}", t.id, tr.id);
+                for (bound, ms) in [("lo", tr.window_ms[0]), ("hi", tr.window_ms[1])] {
+                    metrics
+                        .transition_window_seconds
+                        .with_label_values(&[check.as_str(), bound])
+                        .set(ms as f64 / 1000.0);
+                }
+            }
+        }
+        MetricsSink {
+            metrics,
+            active: HashMap::new(),
+            culprits: HashMap::new(),
+            counted_state: "offline",
+            accounted_until: crate::clock::now_ms(),
+            last_update: None,
+            ever_connected: false,
+        }
+    }
+
+    fn step(&mut self, step: &CellStep) {
+        let m = &self.metrics;
+        m.source_queue_depth.set(step.queue_depth as i64);
+        match &step.input {
+            Input::Connection { up: true, .. } => {
+                if self.ever_connected {
+                    m.opcua_reconnects.inc();
+                }
+                self.ever_connected = true;
+                m.opcua_connected.set(1);
+            }
+            Input::Connection { up: false, .. } => m.opcua_connected.set(0),
+            Input::Command(c) => {
+                m.command(c.action, if c.accepted { "accepted" } else { "refused" });
+            }
+            Input::Tick => {
+                m.add_state_time(
+                    self.counted_state,
+                    step.at.saturating_sub(self.accounted_until) as f64 / 1000.0,
+                );
+                self.accounted_until = self.accounted_until.max(step.at);
+                if let Some(t) = self.last_update {
+                    m.last_update_age
+                        .set(step.at.saturating_sub(t) as f64 / 1000.0);
+                }
+            }
+            Input::Readings | Input::StateBeat => {}
+        }
+        let e = &step.engine;
+        if e.readings > 0 {
+            m.tag_updates.inc_by(e.readings);
+            self.last_update = Some(step.at);
+        }
+        m.duplicate_updates.inc_by(e.duplicates);
+        m.check_evaluations.inc_by(e.evaluations);
+        if e.unknown_delta != 0 {
+            m.tags_unknown.add(e.unknown_delta);
+        }
+        m.parts.inc_by(e.parts.len() as u64);
+        for o in &e.observations {
+            m.transition_seconds
+                .with_label_values(&[o.check.as_str()])
+                .observe(o.ms as f64 / 1000.0);
+        }
+        for (alarm, transition, _) in e.alarms() {
+            if transition == Transition::Raised {
+                m.raised(&alarm.id, alarm.kind, alarm.severity);
+            }
+            let counted = self
+                .active
+                .insert(alarm.id.clone(), (alarm.kind, alarm.severity, alarm.active));
+            if let Some((kind, severity, true)) = counted {
+                m.active_delta(kind, severity, -1);
+            }
+            if alarm.active {
+                m.active_delta(alarm.kind, alarm.severity, 1);
+            }
+            if matches!(alarm.kind, AlarmKind::Switching | AlarmKind::Timer) {
+                let element = alarm
+                    .active
+                    .then(|| alarm.element().map(str::to_string))
+                    .flatten();
+                let previous = self
+                    .culprits
+                    .insert(alarm.id.clone(), element.clone())
+                    .flatten();
+                m.culprit(
+                    &alarm.id,
+                    alarm.severity.as_str(),
+                    &alarm.fault_type,
+                    element.as_deref(),
+                    previous.as_deref(),
+                    transition == Transition::Raised,
+                );
+            }
+        }
+        for (state, _, at) in e.states() {
+            let previous = std::mem::replace(&mut self.counted_state, state.name());
+            m.state(
+                state.name(),
+                previous,
+                at.saturating_sub(self.accounted_until) as f64 / 1000.0,
+            );
+            self.accounted_until = self.accounted_until.max(at);
+        }
+    }
+}
+
+impl Sink for MetricsSink {
+    fn name(&self) -> &'static str {
+        "metrics"
+    }
+
+    fn handle<'a>(&'a mut self, step: &'a CellStep) -> BoxFuture<'a, ()> {
+        self.step(step);
+        async {}.boxed()
+    }
+}

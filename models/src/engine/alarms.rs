@@ -1,0 +1,164 @@
+//! The alarm book: every alarm of a cell, turned from check findings into
+//! ISA-18.2 transitions, and the operator's acknowledge and reset.
+//!
+//! It keeps, incrementally, what the machine state needs (the active fault
+//! alarms, newest last) so that no step scans every alarm.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+
+use super::checks::Finding;
+use crate::alarm::{Alarm, AlarmKind, CommandRefused, Transition};
+
+/// Alarms by id, with the conditions behind them.
+#[derive(Debug, Default)]
+pub(crate) struct AlarmBook {
+    alarms: BTreeMap<String, Alarm>,
+    /// Per alarm: whether its condition holds now (a latched alarm can be
+    /// active with its condition gone).
+    conditions: HashMap<String, bool>,
+    /// Active switching and timer alarms, by (raised_at, id): the newest is
+    /// the machine's fault.
+    faults: BTreeSet<(u64, String)>,
+}
+
+/// What applying a finding did.
+pub(crate) struct Applied {
+    /// The transition, if the alarm changed.
+    pub(crate) transition: Option<Transition>,
+}
+
+fn is_fault(kind: AlarmKind) -> bool {
+    matches!(kind, AlarmKind::Switching | AlarmKind::Timer)
+}
+
+impl AlarmBook {
+    pub(crate) fn get(&self, id: &str) -> Option<&Alarm> {
+        self.alarms.get(id)
+    }
+
+    pub(crate) fn iter(&self) -> impl Iterator<Item = &Alarm> {
+        self.alarms.values()
+    }
+
+    /// Active fault alarms, newest first.
+    pub(crate) fn active_faults(&self) -> impl Iterator<Item = &Alarm> {
+        self.faults
+            .iter()
+            .rev()
+            .filter_map(|(_, id)| self.alarms.get(id))
+    }
+
+    fn set_active(&mut self, id: &str, active: bool) {
+        let Some(a) = self.alarms.get_mut(id) else {
+            return;
+        };
+        if !is_fault(a.kind) {
+            a.active = active;
+            return;
+        }
+        let key = (a.raised_at, a.id.clone());
+        a.active = active;
+        if active {
+            self.faults.insert(key);
+        } else {
+            self.faults.remove(&key);
+        }
+    }
+
+    /// Applies a check's finding at `now`.
+    pub(crate) fn apply(&mut self, f: Finding, now: u64) -> Applied {
+        self.conditions.insert(f.id.clone(), f.active);
+        let existing = self.alarms.get_mut(&f.id);
+        let transition = match (existing, f.active) {
+            (Some(a), true) if a.active => {
+                a.culprits = f.culprits;
+                a.fault_step = f.fault_step;
+                a.message = f.message;
+                Some(Transition::Updated)
+            }
+            (Some(a), false) if a.active && !a.latched => {
+                a.cleared_at = Some(now);
+                a.message = f.message;
+                self.set_active(&f.id, false);
+                Some(Transition::Cleared)
+            }
+            (Some(_), false) | (None, false) => None,
+            (_, true) => {
+                let alarm = Alarm {
+                    id: f.id.clone(),
+                    kind: f.kind,
+                    severity: f.severity,
+                    fault_type: f.fault_type,
+                    active: false,
+                    acknowledged: false,
+                    latched: f.latched,
+                    raised_at: now,
+                    cleared_at: None,
+                    acked_by: None,
+                    fault_step: f.fault_step,
+                    culprits: f.culprits,
+                    message: f.message,
+                };
+                self.alarms.insert(f.id.clone(), alarm);
+                self.set_active(&f.id, true);
+                Some(Transition::Raised)
+            }
+        };
+        Applied { transition }
+    }
+
+    /// An operator acknowledges alarm `id`.
+    pub(crate) fn acknowledge(
+        &mut self,
+        id: &str,
+        operator: &str,
+    ) -> Result<&Alarm, CommandRefused> {
+        let alarm = self
+            .alarms
+            .get_mut(id)
+            .ok_or_else(|| CommandRefused::UnknownAlarm(id.into()))?;
+        if alarm.acknowledged {
+            return Err(CommandRefused::NothingToAcknowledge(id.into()));
+        }
+        alarm.acknowledged = true;
+        alarm.acked_by = Some(operator.to_string());
+        Ok(alarm)
+    }
+
+    /// An operator resets latched alarm `id`, whose condition must be gone.
+    pub(crate) fn reset(
+        &mut self,
+        id: &str,
+        operator: &str,
+        now: u64,
+    ) -> Result<&Alarm, CommandRefused> {
+        let alarm = self
+            .alarms
+            .get(id)
+            .ok_or_else(|| CommandRefused::UnknownAlarm(id.into()))?;
+        let refuse = |why: &str| CommandRefused::CannotReset {
+            id: id.into(),
+            why: why.into(),
+        };
+        if !alarm.latched {
+            return Err(refuse("it is not latched; it clears by itself"));
+        }
+        if !alarm.active {
+            return Err(refuse("it is not active"));
+        }
+        if self.conditions.get(id).copied().unwrap_or(false) {
+            return Err(refuse("its condition still holds"));
+        }
+        self.set_active(id, false);
+        let alarm = self
+            .alarms
+            .get_mut(id)
+            .ok_or_else(|| CommandRefused::UnknownAlarm(id.into()))?;
+        alarm.cleared_at = Some(now);
+        if alarm.acked_by.is_none() {
+            alarm.acked_by = Some(operator.to_string());
+        }
+        alarm.acknowledged = true;
+        Ok(alarm)
+    }
+}

@@ -1,0 +1,74 @@
+//! The check interface: what a family of checks reads, and what it finds.
+//!
+//! A [`CheckSet`] is told about every change of a signal it reads and about
+//! the passing of time; it answers with [`Finding`]s (a condition started
+//! or ended) and [`Observation`]s (measurements). The engine turns findings
+//! into alarm transitions. To add a check kind, implement [`CheckSet`] in
+//! its own module (see [`super::switching`] and [`crate::timer::checks`])
+//! and hand it to [`super::CellEngine::new`].
+
+use crate::alarm::{AlarmKind, Severity};
+use crate::explain::Culprit;
+use crate::signal::Signal;
+
+/// What a check found: its condition started or ended.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Finding {
+    /// The alarm id (the check's id).
+    pub id: String,
+    /// The kind of check.
+    pub kind: AlarmKind,
+    /// How urgent.
+    pub severity: Severity,
+    /// The fault type for machine-state history.
+    pub fault_type: String,
+    /// Whether the alarm stays active until reset.
+    pub latched: bool,
+    /// The condition holds.
+    pub active: bool,
+    /// The step at which the fault formed.
+    pub fault_step: Option<usize>,
+    /// The contacts responsible.
+    pub culprits: Vec<Culprit>,
+    /// One line for people.
+    pub message: String,
+}
+
+/// A family of checks sharing one view of the signals.
+///
+/// The engine tells it about every change of a signal it reads, with the
+/// value before; `None` means the value is unknown and every check reading it
+/// must hold its verdict.
+pub trait CheckSet: Send + Sync {
+    /// The signals it reads.
+    fn inputs(&self) -> Vec<Signal>;
+
+    /// A signal changed value or became unknown (`value` None); `before` is
+    /// its last known value.
+    fn on_change(
+        &mut self,
+        signal: &Signal,
+        value: Option<bool>,
+        before: Option<bool>,
+        now: u64,
+        out: &mut Vec<Finding>,
+    );
+
+    /// Time passed; timers fire here.
+    fn advance(&mut self, _now: u64, _out: &mut Vec<Finding>) {}
+
+    /// An operator reset a latched alarm of this set.
+    fn reset(&mut self, _id: &str) {}
+
+    /// Moves the measurements made since the last call into `out`.
+    fn take_observations(&mut self, _out: &mut Vec<Observation>) {}
+}
+
+/// A measurement a check made: a transition's observed duration.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Observation {
+    /// Which check or transition (`line-007`).
+    pub check: String,
+    /// The duration, ms.
+    pub ms: u64,
+}
