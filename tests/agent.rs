@@ -144,6 +144,32 @@ impl Fixture {
         }
     }
 
+    /// Waits until the agent's snapshot shows tag `address` at `value`.
+    pub(crate) async fn tag_is(&self, address: &str, value: bool) {
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+        loop {
+            let snap: serde_json::Value = serde_json::from_str(
+                &self
+                    .query("cellwatch/m01ps0004/snapshot", None)
+                    .await
+                    .unwrap(),
+            )
+            .unwrap();
+            let tags = snap["tags"].as_array().unwrap();
+            if tags
+                .iter()
+                .any(|t| t["address"] == address && t["value"] == value)
+            {
+                return;
+            }
+            assert!(
+                tokio::time::Instant::now() < deadline,
+                "{address} never became {value}: {snap}"
+            );
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    }
+
     pub(crate) async fn scrape(&self) -> String {
         let addr = self.agent().metrics_addr().unwrap();
         let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
@@ -556,4 +582,102 @@ async fn live_line_slow_motion_raises_its_timer_alarm() {
     player.abort();
     agent.stop().await;
     sim.stop();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_published_alarm_is_already_in_history() {
+    let fx = Fixture::start().await;
+    let sub = fx
+        .client
+        .declare_subscriber("cellwatch/m01ps0004/alarms/ese")
+        .history(HistoryConfig::default().detect_late_publishers())
+        .recovery(RecoveryConfig::default().heartbeat())
+        .await
+        .unwrap();
+    fx.settled().await;
+    fx.sim.set("X0.06", false).unwrap();
+    let mut seen = Vec::new();
+    let raised = alarm_until(&sub, "ESE raised", &mut seen, |a| {
+        a.id == "ese" && a.transition.as_str() == "raised"
+    })
+    .await;
+    // Asked once, at once: the row was committed before the publication.
+    let rows: Vec<serde_json::Value> = serde_json::from_str(
+        &fx.query("cellwatch/m01ps0004/history?kind=alarm;since=1h", None)
+            .await
+            .unwrap(),
+    )
+    .unwrap();
+    assert!(
+        rows.iter().any(|r| r["fields"]["alarm"] == "ese"
+            && r["fields"]["transition"] == "raised"
+            && r["fields"]["payload"]["raised_at"] == raised.raised_at.as_str()),
+        "{rows:#?}"
+    );
+    fx.agent.unwrap().stop().await;
+    fx.sim.stop();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_stopped_agent_frees_its_port_and_its_liveliness_token() {
+    let mut fx = Fixture::start().await;
+    fx.settled().await;
+    let token = "cellwatch/m01ps0004/agent";
+    let alive = |client: zenoh::Session| async move {
+        let replies = client
+            .liveliness()
+            .get(token)
+            .timeout(Duration::from_secs(3))
+            .await
+            .unwrap();
+        let mut n = 0;
+        while replies.recv_async().await.is_ok() {
+            n += 1;
+        }
+        n
+    };
+    assert_eq!(alive(fx.client.clone()).await, 1);
+    let agent = fx.agent.take().unwrap();
+    let addr = agent.metrics_addr().unwrap();
+    agent.stop().await;
+    // Stop has returned: the port is free and the token is gone.
+    std::net::TcpListener::bind(addr).unwrap();
+    assert_eq!(alive(fx.client.clone()).await, 0);
+    fx.sim.stop();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn part_done_edges_are_counted_and_reported() {
+    let fx = Fixture::start().await;
+    fx.settled().await;
+    let mut committed = fx.agent().committed();
+    let before = *committed.borrow();
+    for k in 1..=3 {
+        // Each rising edge is one `part` row, committed before the next.
+        fx.sim.set("X12.03", true).unwrap();
+        committed.wait_for(|n| *n >= before + k).await.unwrap();
+        fx.sim.set("X12.03", false).unwrap();
+        fx.tag_is("X12.03", false).await;
+    }
+    let metrics = fx.scrape().await;
+    assert!(
+        metrics.contains("cellwatch_parts_produced_total{cell=\"m01ps0004\"} 3"),
+        "{metrics}"
+    );
+    let journal = fx.config.journal.path.clone();
+    fx.agent.unwrap().stop().await;
+    fx.sim.stop();
+    let today = cellwatch::clock::rfc3339(cellwatch::clock::now_ms())[..10].to_string();
+    let run = crate::util::cellwatch(&[
+        "report",
+        "daily",
+        "--date",
+        &today,
+        "--db",
+        journal.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    let report: serde_json::Value = serde_json::from_str(&run.stdout).unwrap();
+    assert_eq!(report["production"], 3, "{report:#}");
 }

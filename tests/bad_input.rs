@@ -167,3 +167,24 @@ fn missing_file_and_bad_options() {
         r.stderr
     );
 }
+
+/// Output that cannot be written is a runtime failure (1), not bad input.
+#[test]
+fn a_closed_stdout_exits_1_with_a_message() {
+    let (reader, writer) = std::io::pipe().unwrap();
+    // Nobody will ever read: every write fails with a broken pipe.
+    drop(reader);
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_cellwatch"))
+        .args(["sf", "config/cnc/ese.il"])
+        .current_dir(crate::util::root())
+        .stdout(writer)
+        .stderr(std::process::Stdio::piped())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.starts_with("error: cannot write output: Broken pipe"),
+        "{stderr}"
+    );
+}

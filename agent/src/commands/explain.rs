@@ -51,7 +51,7 @@ pub(crate) fn run(
         before_fn.as_ref().map(|f| f as _);
     let e = explain(&sf, |s| now.get(s), before_ref, args.fault_when, &comments)
         .map_err(|e| Failure::Input(format!("--snapshot: {e}")))?;
-    let io = |e: std::io::Error| Failure::Runtime(e.to_string());
+    let io = Failure::output;
     if args.program.json {
         let json = ExplanationJson {
             coil: &e.coil,

@@ -69,7 +69,7 @@ pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure>
     }
     let conn = journal::open_read(&args.db).map_err(|e| Failure::Runtime(e.to_string()))?;
     let now = crate::clock::now_ms();
-    let io = |e: std::io::Error| Failure::Runtime(e.to_string());
+    let io = Failure::output;
     match &args.command {
         ReportCommand::Daily { date } => {
             let d = NaiveDate::parse_from_str(date, "%Y-%m-%d")

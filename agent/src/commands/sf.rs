@@ -77,14 +77,13 @@ pub(crate) fn run(args: &SfArgs, out: &mut dyn Write, err: &mut dyn Write) -> Re
         if args.program.json {
             json.push(coil_json(coil, sf, written, &comments));
         } else {
-            print_coil(out, &program, coil, sf, written, &comments)
-                .map_err(|e| Failure::Runtime(e.to_string()))?;
+            print_coil(out, &program, coil, sf, written, &comments).map_err(Failure::output)?;
         }
     }
     if args.program.json {
         serde_json::to_writer_pretty(&mut *out, &json)
-            .map_err(|e| Failure::Runtime(e.to_string()))?;
-        writeln!(out).map_err(|e| Failure::Runtime(e.to_string()))?;
+            .map_err(|e| Failure::Runtime(format!("cannot write output: {e}")))?;
+        writeln!(out).map_err(Failure::output)?;
     }
     Ok(())
 }

@@ -21,7 +21,7 @@ pub(crate) async fn cnc(args: &SimulateArgs, out: &mut dyn Write) -> Result<(), 
     for cert in &args.trust {
         pki::trust(cert, &args.pki_dir).map_err(Failure::Input)?;
     }
-    let io = |e: std::io::Error| Failure::Runtime(e.to_string());
+    let io = Failure::output;
     writeln!(
         out,
         "simulated CNC on {} (tags in namespace {} as ns={};s=<address>)",
@@ -101,7 +101,7 @@ pub(crate) fn line(args: &LineArgs, out: &mut dyn Write) -> Result<(), Failure> 
     };
     std::fs::create_dir_all(&args.out)
         .map_err(|e| Failure::Runtime(format!("cannot create {}: {e}", args.out.display())))?;
-    let io = |e: std::io::Error| Failure::Runtime(e.to_string());
+    let io = Failure::output;
     let mut labels = String::from("run,kind,sensor,command_at_ms\n");
     for i in 0..args.runs {
         let (run, injected) = line::run(args.seed + i, args.cycles, fault);

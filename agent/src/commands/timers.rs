@@ -60,7 +60,7 @@ pub(crate) fn learn(args: &LearnArgs, out: &mut dyn Write) -> Result<(), Failure
             )))
         }
     };
-    let io = |e: std::io::Error| Failure::Runtime(e.to_string());
+    let io = Failure::output;
     writeln!(
         out,
         "{} runs, {} signals; kept {} transitions:",
@@ -146,7 +146,7 @@ pub(crate) fn export_st(args: &ExportStArgs, out: &mut dyn Write) -> Result<(), 
 /// `cellwatch replay`.
 pub(crate) fn replay(args: &ReplayArgs, out: &mut dyn Write) -> Result<(), Failure> {
     let model = model(&args.timers)?;
-    let io = |e: std::io::Error| Failure::Runtime(e.to_string());
+    let io = Failure::output;
     for (path, run) in args.runs.iter().zip(runs(&args.runs, args.map.as_deref())?) {
         let outcomes = monitor::replay(&model, &run)
             .map_err(|e| Failure::Input(format!("{}: {e}", args.timers.display())))?;

@@ -30,6 +30,9 @@ const CSD: &str = include_str!("../../../config/cnc/csd.il");
 const ESE_NORMAL: &str = include_str!("../../../config/cnc/ese-normal.values");
 const CSD_NORMAL: &str = include_str!("../../../config/cnc/csd-normal.values");
 
+/// The part-done signal: one pulse per part.
+pub const PART_DONE: &str = "X12.03";
+
 /// The machine's PLC: input image and the fault coils computed from it.
 struct Plc {
     inputs: BTreeMap<Signal, bool>,
@@ -49,6 +52,8 @@ impl Plc {
                 inputs.insert(s.clone(), v.get(&s).unwrap_or(false));
             }
         }
+        // The part-done pulse at the end of each engraving cycle.
+        inputs.insert(Signal::new(PART_DONE), false);
         let mut coils = Vec::new();
         for (name, text, coil) in [("ese.il", ESE, "G8.02"), ("csd.il", CSD, "G9.00")] {
             let p = Program::compile(name, text, None).expect("shipped programs compile");
@@ -198,6 +203,8 @@ impl Scenario {
         };
         Scenario {
             steps: vec![
+                step(1, PART_DONE, true, "part done"),
+                step(2, PART_DONE, false, "next part loaded"),
                 step(
                     3,
                     "X0.06",
@@ -216,6 +223,8 @@ impl Scenario {
                 step(15, "X200.01", false, "operator releases cycle start"),
                 step(18, "X201.06", false, "operator leaves JOG mode"),
                 step(18, "X201.02", true, "operator selects AUTO mode"),
+                step(21, PART_DONE, true, "part done"),
+                step(22, PART_DONE, false, "next part loaded"),
             ],
             period: Duration::from_secs(24),
         }

@@ -1,0 +1,197 @@
+//! The cell loop with no network and no disk: a scripted source feeds it,
+//! a recording sink shows every step it hands to its sinks.
+
+use std::time::Duration;
+
+use cellwatch::cell::{compile, CellLoop, CellStep, Input, Request};
+use cellwatch::config;
+use cellwatch::operator::{Action, Command, Gate, OperatorKeys};
+use cellwatch::sinks::RecordingSink;
+use cellwatch::sources::scripted::ScriptedSource;
+use cellwatch::sources::{Source, SourceEvent, QUEUE_CAPACITY};
+use cellwatch_models::alarm::Transition;
+use cellwatch_models::engine::{MachineState, Reading, TagReading};
+use cellwatch_models::signal::pmc_address;
+use cellwatch_models::values::Values;
+use futures_util::FutureExt;
+use tokio::sync::{mpsc, oneshot};
+
+use crate::util::root;
+
+/// Receives steps until `f` accepts one.
+async fn step_until(
+    steps: &mut mpsc::UnboundedReceiver<CellStep>,
+    what: &str,
+    f: impl Fn(&CellStep) -> bool,
+) -> CellStep {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(20);
+    loop {
+        let step = tokio::time::timeout_at(deadline, steps.recv())
+            .await
+            .unwrap_or_else(|_| panic!("timed out waiting for {what}"))
+            .expect("the loop stopped");
+        if f(&step) {
+            return step;
+        }
+    }
+}
+
+fn raised(step: &CellStep, id: &str) -> bool {
+    step.engine
+        .alarms()
+        .any(|(a, t, _)| a.id == id && t == Transition::Raised)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn scripted_source_drives_the_loop_into_the_recording_sink() {
+    let config = config::load(&root().join("config/demo.toml")).unwrap();
+    let engine = compile::engine(&config).unwrap();
+    let (recording, mut steps) = RecordingSink::new();
+    let (source, script) = ScriptedSource::new();
+    let (source_tx, source_rx) = mpsc::channel(QUEUE_CAPACITY);
+    let source = tokio::spawn(Box::new(source).run(source_tx, std::future::pending().boxed()));
+    let (requests, requests_rx) = mpsc::channel(4);
+    let (stop, stopped) = oneshot::channel::<()>();
+    let cell_loop = CellLoop::new(
+        &config.cell,
+        engine,
+        Gate::new(&config.cell, OperatorKeys::default()),
+        vec![Box::new(recording)],
+        Duration::from_secs(3600),
+    );
+    let cell_loop = tokio::spawn(cell_loop.run(source_rx, requests_rx, async {
+        let _ = stopped.await;
+    }));
+
+    // The machine's normal image, then the Y over-travel switch opens.
+    let mut normal = Vec::new();
+    for (name, text) in [
+        (
+            "ese-normal.values",
+            include_str!("../config/cnc/ese-normal.values"),
+        ),
+        (
+            "csd-normal.values",
+            include_str!("../config/cnc/csd-normal.values"),
+        ),
+    ] {
+        normal.push(Values::parse_file(name, text, pmc_address).unwrap());
+    }
+    let image: Vec<TagReading> = config
+        .tags
+        .iter()
+        .enumerate()
+        .map(|(tag, t)| TagReading {
+            tag,
+            reading: Reading::Good(
+                normal
+                    .iter()
+                    .find_map(|v| v.get(&t.address))
+                    .unwrap_or(false),
+            ),
+            source_time: 1_000,
+        })
+        .collect();
+    let x006 = config
+        .tags
+        .iter()
+        .position(|t| t.address.name() == "X0.06")
+        .unwrap();
+    let at = |tag, v, t| {
+        SourceEvent::Readings(vec![TagReading {
+            tag,
+            reading: Reading::Good(v),
+            source_time: t,
+        }])
+    };
+    script
+        .send(SourceEvent::Connected("scripted".into()))
+        .await
+        .unwrap();
+    let up = step_until(&mut steps, "connection", |s| {
+        matches!(s.input, Input::Connection { up: true, .. })
+    })
+    .await;
+    assert!(up.alarms.is_empty());
+    script.send(SourceEvent::Readings(image)).await.unwrap();
+    let loaded = step_until(&mut steps, "the image", |s| s.input == Input::Readings).await;
+    assert_eq!(loaded.engine.readings, config.tags.len() as u64);
+    assert_eq!(loaded.engine.unknown_delta, -(config.tags.len() as i64));
+    assert!(loaded.alarms.is_empty(), "{:?}", loaded.alarms);
+    script.send(at(x006, false, 2_000)).await.unwrap();
+    let fault = step_until(&mut steps, "ESE raised", |s| raised(s, "ese")).await;
+    // The payload is built once, for every sink, in the engine's order.
+    assert_eq!(fault.alarms.len(), 1);
+    let ese = &fault.alarms[0].payload;
+    assert_eq!(ese.transition, Transition::Raised);
+    assert_eq!(ese.culprits[0].address, "X0.06");
+    assert!(ese.culprits[0].trigger);
+    assert!(fault.alarms[0].json.contains("\"transition\":\"raised\""));
+    let (state, _, _) = fault.engine.states().last().unwrap();
+    assert!(matches!(state, MachineState::Fault { .. }), "{state:?}");
+    assert_eq!(
+        fault.state.as_ref().unwrap().element.as_deref(),
+        Some("X0.06")
+    );
+    // A delivery repeated after a subscription is recreated is one duplicate.
+    script.send(at(x006, false, 2_000)).await.unwrap();
+    let dup = step_until(&mut steps, "duplicate", |s| s.input == Input::Readings).await;
+    assert_eq!((dup.engine.duplicates, dup.alarms.len()), (1, 0));
+
+    // An unsigned command is refused, and the refusal is a step of its own.
+    let (reply, outcome) = oneshot::channel();
+    requests
+        .send(Request::Command {
+            command: Ok(Command {
+                action: Action::Ack,
+                alarm: "ese".into(),
+                operator: "kim".into(),
+                nonce: "n1".into(),
+                issued_at: cellwatch::clock::now_ms(),
+                signature: String::new(),
+            }),
+            reply,
+        })
+        .await
+        .unwrap();
+    let outcome = outcome.await.unwrap();
+    assert_eq!(
+        (outcome.accepted, outcome.detail.as_str()),
+        (false, "unsigned command")
+    );
+    let refused = step_until(&mut steps, "the command", |s| {
+        matches!(s.input, Input::Command(_))
+    })
+    .await;
+    let Input::Command(record) = &refused.input else {
+        unreachable!()
+    };
+    assert_eq!(record.action, Some(Action::Ack));
+    assert!(!record.accepted);
+
+    // A snapshot is answered by the loop from the engine.
+    let (reply, snap) = oneshot::channel();
+    requests.send(Request::Snapshot(reply)).await.unwrap();
+    let snap = snap.await.unwrap();
+    assert!(snap.alarms.iter().any(|a| a.id == "ese"));
+    assert_eq!(snap.last_fault.unwrap().alarm, "ese");
+
+    script.send(at(x006, true, 3_000)).await.unwrap();
+    let cleared = step_until(&mut steps, "ESE cleared", |s| {
+        s.engine
+            .alarms()
+            .any(|(a, t, _)| a.id == "ese" && t == Transition::Cleared)
+    })
+    .await;
+    assert_eq!(
+        cleared.alarms[0].payload.state.as_str(),
+        "cleared_unacknowledged"
+    );
+    // Time passes in ticks, each a step the metrics count state time on.
+    step_until(&mut steps, "a tick", |s| s.input == Input::Tick).await;
+
+    drop(script);
+    source.await.unwrap().unwrap();
+    let _ = stop.send(());
+    cell_loop.await.unwrap();
+}
