@@ -1,19 +1,27 @@
 //! cellwatch: a monitoring agent, one per manufacturing cell, that names the
 //! step and the contact behind every fault of its PLC.
 //!
-//! This crate is the glue: command line, files, and (as they land) the OPC UA
-//! source, the engine task and the Zenoh, SQLite and Prometheus sinks.
-//! Everything that compiles, learns or explains lives in
+//! This crate is the glue: command line, files, sockets and tasks. A source
+//! feeds the cell loop, which runs the engine and hands each step to its
+//! sinks (journal, Zenoh, metrics, console); `ARCHITECTURE.md` has the
+//! picture. Everything that compiles, learns or explains lives in
 //! [`cellwatch_models`], which does no I/O.
 //!
 //! # Layout
 //! - [`cli`]: the command line (clap) and exit statuses.
-//! - `commands/`: one module per command (`sf`, `explain`).
+//! - `commands/`: one module per command.
 //! - `inputs`: reading programs, comment databases and snapshots from
 //!   files, with errors that name the file, line and column.
 //! - [`config`]: the cell configuration file, parsed and validated.
-//! - [`sources`]: the OPC UA client that feeds the engine, and PKI helpers.
-//! - [`sinks`]: the SQLite journal and Zenoh.
+//! - [`cell`]: the cell loop, the engine built from a configuration, and a
+//!   running agent's wiring.
+//! - [`sources`]: the [`sources::Source`] trait, the OPC UA client, a
+//!   scripted source, PKI helpers.
+//! - [`sinks`]: the [`sinks::Sink`] trait, the SQLite journal, Zenoh
+//!   (publication and services), the demo console.
+//! - [`metrics`]: Prometheus metrics, their sink and `/metrics`.
+//! - [`operator`]: signed operator commands and their gate.
+//! - [`payload`]: the JSON payloads on the bus.
 //! - [`sim`]: simulated cells served over OPC UA.
 //! - [`clock`]: wall-clock time in the models' unit.
 
