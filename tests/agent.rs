@@ -206,12 +206,15 @@ async fn alarm_until(
     }
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
-async fn ese_alarm_with_culprit_then_cleared_and_in_history() {
-    let fx = Fixture::start().await;
+type AlarmSubscriber =
+    zenoh_ext::AdvancedSubscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
+
+/// Subscribes to `key`, waits for the agent to settle, opens the Y
+/// over-travel switch and waits for ESE to be raised.
+async fn ese_raised(fx: &Fixture, key: &str) -> (AlarmSubscriber, AlarmPayload, Vec<AlarmPayload>) {
     let sub = fx
         .client
-        .declare_subscriber("cellwatch/m01ps0004/alarms/**")
+        .declare_subscriber(key.to_string())
         .history(HistoryConfig::default().detect_late_publishers())
         .recovery(RecoveryConfig::default().heartbeat())
         .await
@@ -223,6 +226,13 @@ async fn ese_alarm_with_culprit_then_cleared_and_in_history() {
         a.id == "ese" && a.transition.as_str() == "raised"
     })
     .await;
+    (sub, raised, seen)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn ese_alarm_with_culprit_then_cleared_and_in_history() {
+    let fx = Fixture::start().await;
+    let (sub, raised, mut seen) = ese_raised(&fx, "cellwatch/m01ps0004/alarms/**").await;
     assert_eq!(raised.schema, "cellwatch.alarm.v1");
     assert_eq!(raised.cell, "m01ps0004");
     assert_eq!(raised.kind.as_str(), "switching");
@@ -587,20 +597,7 @@ async fn live_line_slow_motion_raises_its_timer_alarm() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn a_published_alarm_is_already_in_history() {
     let fx = Fixture::start().await;
-    let sub = fx
-        .client
-        .declare_subscriber("cellwatch/m01ps0004/alarms/ese")
-        .history(HistoryConfig::default().detect_late_publishers())
-        .recovery(RecoveryConfig::default().heartbeat())
-        .await
-        .unwrap();
-    fx.settled().await;
-    fx.sim.set("X0.06", false).unwrap();
-    let mut seen = Vec::new();
-    let raised = alarm_until(&sub, "ESE raised", &mut seen, |a| {
-        a.id == "ese" && a.transition.as_str() == "raised"
-    })
-    .await;
+    let (_sub, raised, _) = ese_raised(&fx, "cellwatch/m01ps0004/alarms/ese").await;
     // Asked once, at once: the row was committed before the publication.
     let rows: Vec<serde_json::Value> = serde_json::from_str(
         &fx.query("cellwatch/m01ps0004/history?kind=alarm;since=1h", None)

@@ -446,116 +446,20 @@ const HORIZON_MS: u64 = 120_000;
 /// then apply as in [`full_state`].
 pub fn common(runs: &[RunLog], options: &LearnOptions) -> Learned {
     let a = align(runs);
-    let n = a.names.len();
-    // Occurrences of each event type (signal, value) per run, in time order.
-    let mut occ: BTreeMap<(usize, bool), Vec<Vec<u64>>> = BTreeMap::new();
-    for (r, ch) in a.changes.iter().enumerate() {
-        for &(t, s, v) in ch {
-            occ.entry((s, v))
-                .or_insert_with(|| vec![Vec::new(); runs.len()])[r]
-                .push(t);
-        }
-    }
-    // Share of the training time each signal is 1.
-    let mut high = vec![0u64; n];
-    let mut total = 0u64;
-    for (r, ch) in a.changes.iter().enumerate() {
-        let mut value = a.initial[r].clone();
-        let mut t = 0;
-        for &(at, s, v) in ch {
-            for (sig, h) in high.iter_mut().enumerate() {
-                if value[sig] {
-                    *h += at - t;
-                }
-            }
-            total += at - t;
-            t = at;
-            value[s] = v;
-        }
-    }
-    let share: Vec<f64> = high
-        .iter()
-        .map(|&h| {
-            if total == 0 {
-                0.5
-            } else {
-                h as f64 / total as f64
-            }
-        })
-        .collect();
+    let occ = occurrences(&a, runs.len());
+    let share = time_shares(&a);
     let required = options.min_support.unwrap_or(runs.len()).max(1);
     let mut transitions = Vec::new();
     let mut dropped = Vec::new();
     let describe = |s: usize, v: bool| format!("{}{}", if v { "+" } else { "-" }, a.names[s]);
     for (&(es, ev), e_runs) in &occ {
         let seen = e_runs.iter().filter(|o| !o.is_empty()).count();
-        // Candidate triggers and the delays to every occurrence of E.
-        let mut best: Option<Candidate> = None;
-        for (&(ts, tv), t_runs) in &occ {
-            if (ts, tv) == (es, ev) {
-                continue;
-            }
-            let mut delays: Vec<(usize, u64, u64)> = Vec::new(); // (run, t_trigger, t_event)
-            let mut ok = true;
-            'runs: for (r, e_times) in e_runs.iter().enumerate() {
-                let t_times = &t_runs[r];
-                let mut prev_e = 0;
-                for &te in e_times {
-                    let lo = prev_e.max(te.saturating_sub(HORIZON_MS));
-                    let last = t_times
-                        .iter()
-                        .rev()
-                        .find(|&&tt| tt < te && tt >= lo && tt > prev_e.saturating_sub(0));
-                    match last {
-                        Some(&tt) if tt > prev_e || prev_e == 0 => delays.push((r, tt, te)),
-                        _ => {
-                            ok = false;
-                            break 'runs;
-                        }
-                    }
-                    prev_e = te;
-                }
-                // Always followed by E: every trigger is followed by an E
-                // before the next trigger.
-                for (i, &tt) in t_times.iter().enumerate() {
-                    let next_t = t_times.get(i + 1).copied().unwrap_or(u64::MAX);
-                    let next_e = e_times.iter().find(|&&te| te > tt).copied();
-                    match next_e {
-                        Some(te) if te < next_t && te - tt <= HORIZON_MS => {}
-                        // A trigger at the very end of a run may have no E yet.
-                        None if i + 1 == t_times.len() => {}
-                        _ => {
-                            ok = false;
-                            break 'runs;
-                        }
-                    }
-                }
-            }
-            if !ok || delays.is_empty() {
-                continue;
-            }
-            let ds: Vec<u64> = delays.iter().map(|d| d.2 - d.1).collect();
-            let spread = ds.iter().max().unwrap_or(&0) - ds.iter().min().unwrap_or(&0);
-            let mean = ds.iter().sum::<u64>() / ds.len() as u64;
-            let better = match &best {
-                None => true,
-                Some(b) => spread < b.spread || (spread == b.spread && mean < b.mean),
-            };
-            if better {
-                best = Some(Candidate {
-                    trigger: (ts, tv),
-                    delays,
-                    spread,
-                    mean,
-                });
-            }
-        }
         let Some(Candidate {
             trigger: (ts, tv),
             delays,
             mean,
             ..
-        }) = best
+        }) = best_trigger(&occ, (es, ev), e_runs)
         else {
             if seen >= required {
                 dropped.push(Dropped {
@@ -582,47 +486,7 @@ pub fn common(runs: &[RunLog], options: &LearnOptions) -> Learned {
                 continue;
             }
         };
-        // Stable literals: no change in [t_trigger, t_event) other than the
-        // trigger itself, and the same value in every occurrence.
-        let mut stable: Vec<Option<bool>> = vec![None; n];
-        let mut excluded = vec![false; n];
-        for &(r, tt, te) in &delays {
-            let mut value = a.initial[r].clone();
-            let mut changed = vec![false; n];
-            for &(t, s, v) in &a.changes[r] {
-                if t > te || (t == te && s == es) {
-                    break;
-                }
-                if t < tt || (t == tt && s == ts && v == tv) {
-                    value[s] = v;
-                } else if t < te || (t == tt) {
-                    changed[s] = true;
-                }
-            }
-            for s in 0..n {
-                if changed[s] || !a.changing[s] {
-                    excluded[s] = true;
-                } else {
-                    match stable[s] {
-                        None => stable[s] = Some(value[s]),
-                        Some(v) if v != value[s] => excluded[s] = true,
-                        _ => {}
-                    }
-                }
-            }
-        }
-        // A literal that holds most of the time would hold in every
-        // occurrence by chance (another station's idle sensor): keep only
-        // those whose chance of that, p^n, is below 0.1 %.
-        let occurrences = i32::try_from(delays.len()).unwrap_or(i32::MAX);
-        let from: Vec<(usize, bool)> = (0..n)
-            .filter(|&s| !excluded[s])
-            .filter_map(|s| stable[s].map(|v| (s, v)))
-            .filter(|&(s, v)| {
-                let p = if v { share[s] } else { 1.0 - share[s] };
-                p.powi(occurrences) < 1e-3
-            })
-            .collect();
+        let from = start_condition(&a, &share, &delays, (es, ev), (ts, tv));
         let to: Vec<(usize, bool)> = from
             .iter()
             .map(|&(s, v)| if s == es { (s, ev) } else { (s, v) })
@@ -656,6 +520,170 @@ pub fn common(runs: &[RunLog], options: &LearnOptions) -> Learned {
         },
         dropped,
     }
+}
+
+/// Occurrence times of each event type (signal, value), per run, in time
+/// order.
+type Occurrences = BTreeMap<(usize, bool), Vec<Vec<u64>>>;
+
+/// Stage 1: when each event type happens in each run.
+fn occurrences(a: &Aligned, runs: usize) -> Occurrences {
+    let mut occ: Occurrences = BTreeMap::new();
+    for (r, ch) in a.changes.iter().enumerate() {
+        for &(t, s, v) in ch {
+            occ.entry((s, v)).or_insert_with(|| vec![Vec::new(); runs])[r].push(t);
+        }
+    }
+    occ
+}
+
+/// Stage 2: the share of the training time each signal is 1.
+fn time_shares(a: &Aligned) -> Vec<f64> {
+    let n = a.names.len();
+    let mut high = vec![0u64; n];
+    let mut total = 0u64;
+    for (r, ch) in a.changes.iter().enumerate() {
+        let mut value = a.initial[r].clone();
+        let mut t = 0;
+        for &(at, s, v) in ch {
+            for (sig, h) in high.iter_mut().enumerate() {
+                if value[sig] {
+                    *h += at - t;
+                }
+            }
+            total += at - t;
+            t = at;
+            value[s] = v;
+        }
+    }
+    high.iter()
+        .map(|&h| {
+            if total == 0 {
+                0.5
+            } else {
+                h as f64 / total as f64
+            }
+        })
+        .collect()
+}
+
+/// Stage 3: the trigger of event `e` whose delay to it varies least (ties:
+/// the nearest), among the events that precede every occurrence of `e` and
+/// are always followed by it.
+fn best_trigger(occ: &Occurrences, e: (usize, bool), e_runs: &[Vec<u64>]) -> Option<Candidate> {
+    let mut best: Option<Candidate> = None;
+    for (&trigger, t_runs) in occ {
+        if trigger == e {
+            continue;
+        }
+        let Some(delays) = trigger_delays(e_runs, t_runs) else {
+            continue;
+        };
+        let ds: Vec<u64> = delays.iter().map(|d| d.2 - d.1).collect();
+        let spread = ds.iter().max().unwrap_or(&0) - ds.iter().min().unwrap_or(&0);
+        let mean = ds.iter().sum::<u64>() / ds.len() as u64;
+        let better = match &best {
+            None => true,
+            Some(b) => spread < b.spread || (spread == b.spread && mean < b.mean),
+        };
+        if better {
+            best = Some(Candidate {
+                trigger,
+                delays,
+                spread,
+                mean,
+            });
+        }
+    }
+    best
+}
+
+/// The delays `(run, t_trigger, t_event)` from a candidate trigger to every
+/// occurrence of the event, or `None` if it is no trigger: some occurrence
+/// has no trigger before it (within the horizon, after the previous
+/// occurrence), or some trigger is not followed by the event before the
+/// next trigger.
+fn trigger_delays(e_runs: &[Vec<u64>], t_runs: &[Vec<u64>]) -> Option<Vec<(usize, u64, u64)>> {
+    let mut delays = Vec::new();
+    for (r, e_times) in e_runs.iter().enumerate() {
+        let t_times = &t_runs[r];
+        let mut prev_e = 0;
+        for &te in e_times {
+            let lo = prev_e.max(te.saturating_sub(HORIZON_MS));
+            let last = t_times
+                .iter()
+                .rev()
+                .find(|&&tt| tt < te && tt >= lo && tt > prev_e);
+            match last {
+                Some(&tt) if tt > prev_e || prev_e == 0 => delays.push((r, tt, te)),
+                _ => return None,
+            }
+            prev_e = te;
+        }
+        for (i, &tt) in t_times.iter().enumerate() {
+            let next_t = t_times.get(i + 1).copied().unwrap_or(u64::MAX);
+            let next_e = e_times.iter().find(|&&te| te > tt).copied();
+            match next_e {
+                Some(te) if te < next_t && te - tt <= HORIZON_MS => {}
+                // A trigger at the very end of a run may have no E yet.
+                None if i + 1 == t_times.len() => {}
+                _ => return None,
+            }
+        }
+    }
+    (!delays.is_empty()).then_some(delays)
+}
+
+/// Stage 4: the start condition: literals stable from the trigger to the
+/// event in every occurrence, with the same value in all, and not there by
+/// chance (`p^n < 0.001`, `p` the share of training time the literal holds).
+fn start_condition(
+    a: &Aligned,
+    share: &[f64],
+    delays: &[(usize, u64, u64)],
+    (es, _ev): (usize, bool),
+    (ts, tv): (usize, bool),
+) -> Vec<(usize, bool)> {
+    let n = a.names.len();
+    let mut stable: Vec<Option<bool>> = vec![None; n];
+    let mut excluded = vec![false; n];
+    for &(r, tt, te) in delays {
+        let mut value = a.initial[r].clone();
+        let mut changed = vec![false; n];
+        for &(t, s, v) in &a.changes[r] {
+            if t > te || (t == te && s == es) {
+                break;
+            }
+            if t < tt || (t == tt && s == ts && v == tv) {
+                value[s] = v;
+            } else if t < te || (t == tt) {
+                changed[s] = true;
+            }
+        }
+        for s in 0..n {
+            if changed[s] || !a.changing[s] {
+                excluded[s] = true;
+            } else {
+                match stable[s] {
+                    None => stable[s] = Some(value[s]),
+                    Some(v) if v != value[s] => excluded[s] = true,
+                    _ => {}
+                }
+            }
+        }
+    }
+    // A literal that holds most of the time would hold in every occurrence
+    // by chance (another station's idle sensor): keep only those whose
+    // chance of that, p^n, is below 0.1 %.
+    let occurrences = i32::try_from(delays.len()).unwrap_or(i32::MAX);
+    (0..n)
+        .filter(|&s| !excluded[s])
+        .filter_map(|s| stable[s].map(|v| (s, v)))
+        .filter(|&(s, v)| {
+            let p = if v { share[s] } else { 1.0 - share[s] };
+            p.powi(occurrences) < 1e-3
+        })
+        .collect()
 }
 
 /// The documented τ rule of [`Tau::Auto`].
