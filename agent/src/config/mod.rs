@@ -3,7 +3,7 @@
 //! [`load`] reads the file and the files it names (programs, comment
 //! databases); [`parse`] does the rest from text, so tests feed literals.
 //! Parsing has two stages, as in Vector and zenoh: serde into the raw
-//! structs of [`raw`] (unknown keys rejected), then validation into
+//! structs of `raw` (unknown keys rejected), then validation into
 //! [`CellConfig`], collecting *every* problem, each reported as
 //! `FILE:LINE:COL: key: message`. `cellwatch validate CONFIG` runs exactly
 //! this and connects to nothing.

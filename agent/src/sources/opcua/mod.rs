@@ -8,7 +8,7 @@
 //! - Monitored items are created in chunks no larger than the server's
 //!   `MaxMonitoredItemsPerCall`.
 //! - Every publish becomes one [`SourceEvent::Readings`], in source-time
-//!   order ([`subscription`]); a bad or uncertain status, or a value that
+//!   order (`subscription`); a bad or uncertain status, or a value that
 //!   is not a boolean, is [`Reading::Bad`](cellwatch_models::engine::Reading::Bad).
 //! - The channel to the cell loop is bounded: when the loop falls behind,
 //!   the session's event loop waits, and the server's queues hold the
