@@ -3,7 +3,7 @@
 //! [`CellLoop::run`] takes three inputs — source events, requests from the
 //! services (snapshot, operator commands) and the passing of time — and
 //! turns each into one [`CellStep`]: what came in, the engine's
-//! [`Step`](cellwatch_models::engine::Step), and the payloads to publish.
+//! [`Step`], and the payloads to publish.
 //! The step goes to every sink in order (journal, Zenoh, metrics, console);
 //! nothing in the loop knows about Zenoh, SQLite or Prometheus.
 //!
