@@ -117,8 +117,8 @@ impl Fixture {
         }
     }
 
-    /// Waits until the agent has every tag and no alarm.
-    pub(crate) async fn settled(&self) {
+    /// Waits until the agent's snapshot satisfies `ready`; `what` names it.
+    async fn snapshot_until(&self, what: &str, ready: impl Fn(&serde_json::Value) -> bool) {
         let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
         loop {
             let snap: serde_json::Value = serde_json::from_str(
@@ -128,46 +128,37 @@ impl Fixture {
                     .unwrap(),
             )
             .unwrap();
+            if ready(&snap) {
+                return;
+            }
+            assert!(tokio::time::Instant::now() < deadline, "{what}: {snap}");
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+    }
+
+    /// Waits until the agent has every tag and no alarm.
+    pub(crate) async fn settled(&self) {
+        self.snapshot_until("agent never settled", |snap| {
             let known = snap["tags"]
                 .as_array()
                 .unwrap()
                 .iter()
                 .all(|t| t["quality"] == "good");
-            if known && snap["connected"] == true && snap["state"] == "running" {
-                return;
-            }
-            assert!(
-                tokio::time::Instant::now() < deadline,
-                "agent never settled: {snap}"
-            );
-            tokio::time::sleep(Duration::from_millis(200)).await;
-        }
+            known && snap["connected"] == true && snap["state"] == "running"
+        })
+        .await;
     }
 
     /// Waits until the agent's snapshot shows tag `address` at `value`.
     pub(crate) async fn tag_is(&self, address: &str, value: bool) {
-        let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
-        loop {
-            let snap: serde_json::Value = serde_json::from_str(
-                &self
-                    .query("cellwatch/m01ps0004/snapshot", None)
-                    .await
-                    .unwrap(),
-            )
-            .unwrap();
-            let tags = snap["tags"].as_array().unwrap();
-            if tags
+        self.snapshot_until(&format!("{address} never became {value}"), |snap| {
+            snap["tags"]
+                .as_array()
+                .unwrap()
                 .iter()
                 .any(|t| t["address"] == address && t["value"] == value)
-            {
-                return;
-            }
-            assert!(
-                tokio::time::Instant::now() < deadline,
-                "{address} never became {value}: {snap}"
-            );
-            tokio::time::sleep(Duration::from_millis(50)).await;
-        }
+        })
+        .await;
     }
 
     pub(crate) async fn scrape(&self) -> String {
