@@ -155,29 +155,83 @@ pub fn explain(
             missing,
         });
     }
-    let value_of = |s: &Signal| now(s).unwrap_or(false);
-    let (value, steps) = sf.evaluate(value_of);
-    let mut out = Explanation {
+    let (value, steps, fault_step, culprits) = walk(sf, &now, before, polarity, comments);
+    let known = |v: Option<bool>| v.unwrap_or(false);
+    Ok(Explanation {
         coil: sf.coil.clone(),
-        value,
+        value: known(value),
         polarity,
-        steps,
-        fault_step: None,
-        culprits: Vec::new(),
-    };
-    if !out.is_fault() {
-        return Ok(out);
+        steps: steps.into_iter().map(known).collect(),
+        fault_step,
+        culprits,
+    })
+}
+
+/// A verdict reached with some contacts unknown ([`explain_partial`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PartialExplanation {
+    /// Whether the coil is at its fault value, whatever the unknown
+    /// contacts hold; `None` when they could change it.
+    pub fault: Option<bool>,
+    /// The lowest step on the fault's paths, for a certain fault.
+    pub fault_step: Option<usize>,
+    /// Contacts responsible for a certain fault, all of known value,
+    /// triggers first.
+    pub culprits: Vec<Culprit>,
+    /// The contacts whose value is unknown.
+    pub unknown: Vec<Signal>,
+}
+
+/// Explains `sf` with some values unknown, in three-valued (Kleene) logic:
+/// a fault is certain when every completion of the unknown contacts gives
+/// it, and its culprits are then contacts of known value only (the walk
+/// follows only the terms that decide a block).
+pub fn explain_partial(
+    sf: &SwitchingFunction,
+    now: impl Fn(&Signal) -> Option<bool>,
+    before: Option<Lookup<'_>>,
+    polarity: Polarity,
+    comments: &CommentDb,
+) -> PartialExplanation {
+    let unknown = sf
+        .leaves()
+        .into_iter()
+        .filter(|s| now(s).is_none())
+        .collect();
+    let (value, _, fault_step, culprits) = walk(sf, &now, before, polarity, comments);
+    PartialExplanation {
+        fault: value.map(|v| v == polarity.fault_value()),
+        fault_step,
+        culprits,
+        unknown,
+    }
+}
+
+type Walked = (Option<bool>, Vec<Option<bool>>, Option<usize>, Vec<Culprit>);
+
+/// Evaluates in Kleene logic and, for a certain fault, walks to the
+/// culprits.
+fn walk(
+    sf: &SwitchingFunction,
+    now: &impl Fn(&Signal) -> Option<bool>,
+    before: Option<Lookup<'_>>,
+    polarity: Polarity,
+    comments: &CommentDb,
+) -> Walked {
+    let (value, steps) = sf.evaluate3(now);
+    if value != Some(polarity.fault_value()) {
+        return (value, steps, None, Vec::new());
     }
     let mut walk = Walk {
         sf,
-        steps: &out.steps,
-        value_of: &value_of,
+        steps: &steps,
+        value_of: now,
         seen_blocks: HashSet::new(),
         seen: HashSet::new(),
         found: Vec::new(),
     };
     walk.term(&sf.root);
-    out.fault_step = walk.seen_blocks.iter().min().map(|b| b + 1);
+    let fault_step = walk.seen_blocks.iter().min().map(|b| b + 1);
     let found = walk.found;
     let mut culprits: Vec<Culprit> = found
         .into_iter()
@@ -194,27 +248,28 @@ pub fn explain(
         .collect();
     // Stable: triggers first, otherwise in order of the walk.
     culprits.sort_by_key(|c| !c.trigger);
-    out.culprits = culprits;
-    Ok(out)
+    (value, steps, fault_step, culprits)
 }
 
-struct Walk<'a, F: Fn(&Signal) -> bool> {
+struct Walk<'a, F: Fn(&Signal) -> Option<bool>> {
     sf: &'a SwitchingFunction,
-    steps: &'a [bool],
+    steps: &'a [Option<bool>],
     value_of: &'a F,
     seen_blocks: HashSet<usize>,
     seen: HashSet<Signal>,
     found: Vec<(Signal, bool)>,
 }
 
-impl<F: Fn(&Signal) -> bool> Walk<'_, F> {
-    /// Visits a term that carries the fault.
+impl<F: Fn(&Signal) -> Option<bool>> Walk<'_, F> {
+    /// Visits a term that carries the fault; its value is known.
     fn term(&mut self, term: &Term) {
         match term {
             Term::Const(_) => {}
             Term::Signal { signal, .. } => {
-                if self.seen.insert(signal.clone()) {
-                    self.found.push((signal.clone(), (self.value_of)(signal)));
+                if let Some(v) = (self.value_of)(signal) {
+                    if self.seen.insert(signal.clone()) {
+                        self.found.push((signal.clone(), v));
+                    }
                 }
             }
             Term::Block { id, .. } => {
@@ -222,10 +277,15 @@ impl<F: Fn(&Signal) -> bool> Walk<'_, F> {
                     return;
                 }
                 let block = &self.sf.steps[*id];
-                let v = self.steps[*id];
+                let Some(v) = self.steps[*id] else {
+                    return;
+                };
                 let forcing = matches!((block.op, v), (Op::Or, true) | (Op::And, false));
+                // A forcing block is decided by its terms of that value
+                // (all known); a non-forcing one by all its terms, which
+                // are then all known.
                 for t in &block.terms {
-                    if !forcing || t.value(self.value_of, self.steps) == v {
+                    if !forcing || t.value3(self.value_of, self.steps) == Some(v) {
                         self.term(t);
                     }
                 }

@@ -74,6 +74,19 @@ impl Term {
             Term::Block { id, negated } => blocks[*id] != *negated,
         }
     }
+
+    /// The term's value in three-valued (Kleene) logic: `None` is unknown.
+    pub fn value3(
+        &self,
+        signal: impl Fn(&Signal) -> Option<bool>,
+        blocks: &[Option<bool>],
+    ) -> Option<bool> {
+        match self {
+            Term::Const(v) => Some(*v),
+            Term::Signal { signal: s, negated } => signal(s).map(|v| v != *negated),
+            Term::Block { id, negated } => blocks[*id].map(|v| v != *negated),
+        }
+    }
 }
 
 /// One AND or OR node: a step block.
@@ -92,5 +105,26 @@ impl Block {
             Op::And => self.terms.iter().all(|t| t.value(&signal, blocks)),
             Op::Or => self.terms.iter().any(|t| t.value(&signal, blocks)),
         }
+    }
+
+    /// The block's value in Kleene logic: an AND with a false term is
+    /// false and an OR with a true term is true whatever the unknown terms
+    /// hold; otherwise any unknown term makes it unknown.
+    pub fn value3(
+        &self,
+        signal: impl Fn(&Signal) -> Option<bool>,
+        blocks: &[Option<bool>],
+    ) -> Option<bool> {
+        // The value that decides the block on its own.
+        let deciding = self.op == Op::Or;
+        let mut unknown = false;
+        for t in &self.terms {
+            match t.value3(&signal, blocks) {
+                Some(v) if v == deciding => return Some(deciding),
+                Some(_) => {}
+                None => unknown = true,
+            }
+        }
+        (!unknown).then_some(!deciding)
     }
 }

@@ -81,6 +81,10 @@ fn via_text(via: &[Signal]) -> String {
     }
 }
 
+/// Up to this many unknown signals, [`SwitchingFunction::certain`] tries
+/// every completion (256 evaluations at most).
+pub const EXACT_UNKNOWNS: usize = 8;
+
 /// One coil's switching function over observable signals, as step blocks.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SwitchingFunction {
@@ -210,6 +214,57 @@ impl SwitchingFunction {
             steps.push(v);
         }
         (self.root.value(&value, &steps), steps)
+    }
+
+    /// The coil's value and every step's value in three-valued (Kleene)
+    /// logic, `None` being unknown: a value is known when every completion
+    /// of the unknown signals gives it.
+    pub fn evaluate3(
+        &self,
+        value: impl Fn(&Signal) -> Option<bool>,
+    ) -> (Option<bool>, Vec<Option<bool>>) {
+        let mut steps = Vec::with_capacity(self.steps.len());
+        for b in &self.steps {
+            let v = b.value3(&value, &steps);
+            steps.push(v);
+        }
+        (self.root.value3(&value, &steps), steps)
+    }
+
+    /// The coil's value if every completion of the unknown signals gives
+    /// the same one, `None` if they disagree. Kleene logic decides most
+    /// cases at once; when it cannot (a contact read twice, `X + -X`) and
+    /// at most [`EXACT_UNKNOWNS`] signals are unknown, every completion is
+    /// tried. Beyond that it stays with Kleene's answer, which is never
+    /// wrong but may be unknown where an exhaustive check would decide.
+    pub fn certain(&self, value: impl Fn(&Signal) -> Option<bool>) -> Option<bool> {
+        if let Some(v) = self.evaluate3(&value).0 {
+            return Some(v);
+        }
+        let unknown: Vec<Signal> = self
+            .leaves()
+            .into_iter()
+            .filter(|s| value(s).is_none())
+            .collect();
+        if unknown.is_empty() || unknown.len() > EXACT_UNKNOWNS {
+            return None;
+        }
+        let mut seen = [false; 2];
+        for bits in 0u32..1 << unknown.len() {
+            let completed = |s: &Signal| {
+                value(s).unwrap_or_else(|| {
+                    unknown
+                        .iter()
+                        .position(|u| u == s)
+                        .is_some_and(|i| bits >> i & 1 == 1)
+                })
+            };
+            seen[usize::from(self.evaluate(completed).0)] = true;
+            if seen[0] && seen[1] {
+                return None;
+            }
+        }
+        Some(seen[1])
     }
 
     /// The step blocks re-assembled into one expression tree.

@@ -4,7 +4,10 @@
 //!   instruction list directly;
 //! - random expression trees written as IEC IL (parentheses, NOT, XOR):
 //!   compiled evaluation equals naive tree evaluation;
-//! - incremental evaluation equals full re-evaluation after every change.
+//! - incremental evaluation equals full re-evaluation after every change;
+//! - three-valued evaluation with unknown contacts: Kleene logic is never
+//!   wrong, and [`SwitchingFunction::certain`] equals "all completions of
+//!   the unknowns agree".
 
 #![allow(clippy::unwrap_used)] // test helpers fail loudly by design
 
@@ -270,6 +273,52 @@ proptest! {
             for (c, was) in before.iter().enumerate() {
                 prop_assert_eq!(changed.contains(&c), *was != cell.output(c));
             }
+        }
+    }
+}
+
+/// Every completion of the unknown inputs (`None` in `values`) of `sf`.
+fn completions(sf: &SwitchingFunction, values: &[Option<bool>]) -> Vec<bool> {
+    let unknown: Vec<usize> = (0..INPUTS).filter(|&i| values[i].is_none()).collect();
+    (0u32..1 << unknown.len())
+        .map(|bits| {
+            let value = |s: &Signal| {
+                let i: usize = s.name()[1..].parse().unwrap();
+                values[i].unwrap_or_else(|| {
+                    let k = unknown.iter().position(|&u| u == i).unwrap();
+                    bits >> k & 1 == 1
+                })
+            };
+            sf.evaluate(value).0
+        })
+        .collect()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(512))]
+
+    #[test]
+    fn three_valued_evaluation_is_all_completions_agreeing(
+        e in tree(0),
+        values in prop::collection::vec(prop::option::of(any::<bool>()), INPUTS),
+    ) {
+        let sf = SwitchingFunction::from_expr(Signal::new("Y0"), &e);
+        let lookup = |s: &Signal| {
+            let i: usize = s.name()[1..].parse().unwrap();
+            values[i]
+        };
+        let all = completions(&sf, &values);
+        let agreed = if all.iter().all(|&v| v) {
+            Some(true)
+        } else if all.iter().all(|&v| !v) {
+            Some(false)
+        } else {
+            None
+        };
+        prop_assert_eq!(sf.certain(lookup), agreed, "{}", sf);
+        // Kleene alone may say less, never something else.
+        if let Some(v) = sf.evaluate3(lookup).0 {
+            prop_assert_eq!(Some(v), agreed, "kleene, {}", sf);
         }
     }
 }

@@ -780,8 +780,9 @@ mod tests {
         );
         assert_eq!(e.state(), &MachineState::Offline);
         assert!(e.values().iter().all(Option::is_none));
-        // Reconnected: values come back one by one; the check stays suspended
-        // until every input is known, so a half-loaded image raises nothing.
+        // Reconnected: values come back one by one; while the unknown ones
+        // could still decide, the check holds, so a half-loaded normal
+        // image raises nothing.
         let ev = e.on_connection(true, 6).events;
         assert_eq!(
             alarm_transitions(&ev),
@@ -789,10 +790,9 @@ mod tests {
         );
         let x006 = e.tag_index(&Signal::new("X0.06")).unwrap();
         assert!(
-            alarm_transitions(&e.on_reading(x006, Reading::Good(false), 7, 7).events).is_empty()
+            alarm_transitions(&e.on_reading(x006, Reading::Good(true), 7, 7).events).is_empty()
         );
         let ev = load_normal(&mut e, 8);
-        // X0.06 is back to 1 in the normal image: no ESE was ever raised.
         assert!(alarm_transitions(&ev).is_empty(), "{ev:?}");
     }
 
@@ -825,20 +825,60 @@ mod tests {
             alarm.message,
             "bad or uncertain quality, checks reading them suspended: X0.06 (x0.06)"
         );
-        // Another contact opens while X0.06 is unknown: the check is suspended.
+        // Another contact of the same OR opens while X0.06 is unknown: the
+        // fault is certain whatever X0.06 holds, so ESE is raised, naming
+        // the unknown contact and blaming only known ones.
         let x004 = e.tag_index(&Signal::new("X0.04")).unwrap();
-        assert!(
-            alarm_transitions(&e.on_reading(x004, Reading::Good(false), 4, 4).events).is_empty()
+        let ev = e.on_reading(x004, Reading::Good(false), 4, 4).events;
+        assert_eq!(
+            alarm_transitions(&ev),
+            [("ese".to_string(), Transition::Raised)]
         );
-        // X0.06 good again: the check resumes and sees X0.04 open.
-        let ev = e.on_reading(x006, Reading::Good(true), 5, 5).events;
+        let EngineEvent::Alarm { alarm, .. } = &ev[0] else {
+            panic!()
+        };
+        assert_eq!(alarm.culprits.len(), 1, "{:?}", alarm.culprits);
+        assert_eq!(alarm.culprits[0].address.name(), "X0.04");
+        assert!(
+            alarm.message.ends_with("(unknown: X0.06)"),
+            "{}",
+            alarm.message
+        );
+        // X0.04 closes again: X0.06 could still hold the fault, so nothing
+        // is cleared on an unknown value.
+        let ev = e.on_reading(x004, Reading::Good(true), 5, 5).events;
+        assert_eq!(alarm_transitions(&ev), []);
+        // X0.06 good again and closed: the check clears on known values.
+        let ev = e.on_reading(x006, Reading::Good(true), 6, 6).events;
         let t = alarm_transitions(&ev);
         assert!(
-            t.contains(&("ese".to_string(), Transition::Raised)),
+            t.contains(&("ese".to_string(), Transition::Cleared)),
             "{t:?}"
         );
         assert!(
             t.contains(&("tag-quality".to_string(), Transition::Cleared)),
+            "{t:?}"
+        );
+    }
+
+    #[test]
+    fn an_unknown_contact_that_could_decide_suspends() {
+        let mut e = engine();
+        e.on_connection(true, 1);
+        load_normal(&mut e, 2);
+        // Step 5's OR: X0.07 unknown, every other term normal: the fault
+        // depends on X0.07, nothing is raised.
+        let x007 = e.tag_index(&Signal::new("X0.07")).unwrap();
+        let ev = e.on_reading(x007, Reading::Bad, 3, 3).events;
+        assert_eq!(
+            alarm_transitions(&ev),
+            [("tag-quality".to_string(), Transition::Raised)]
+        );
+        // And it is raised once X0.07 is known open.
+        let ev = e.on_reading(x007, Reading::Good(false), 4, 4).events;
+        let t = alarm_transitions(&ev);
+        assert!(
+            t.contains(&("ese".to_string(), Transition::Raised)),
             "{t:?}"
         );
     }

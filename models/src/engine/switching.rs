@@ -5,7 +5,7 @@ use super::checks::{CheckSet, Finding};
 use crate::alarm::{AlarmKind, Severity};
 use crate::comments::CommentDb;
 use crate::compiled::CompiledCell;
-use crate::explain::{explain, Polarity};
+use crate::explain::{explain_partial, Polarity};
 use crate::signal::Signal;
 use crate::switching::SwitchingFunction;
 
@@ -43,14 +43,21 @@ pub struct SwitchingChecks {
     readers: Vec<Vec<usize>>,
     /// Per check: how many of its inputs are unknown.
     unknown_inputs: Vec<u32>,
-    /// Per check: the verdict last reported.
-    reported: Vec<bool>,
+    /// Per check: the verdict last reported (`None`: none yet, so the
+    /// first verdict is always reported, which lets an alarm restored from
+    /// the journal clear).
+    reported: Vec<Option<bool>>,
     changed: Vec<usize>,
 }
 
 impl SwitchingChecks {
     /// Compiles the checks. Every signal starts unknown, so every check
     /// starts suspended.
+    ///
+    /// A check with unknown inputs is evaluated in three-valued (Kleene)
+    /// logic: a fault that is certain whatever the unknown contacts hold is
+    /// reported (naming them); anything else holds the last verdict, so a
+    /// clear is only ever called on known values.
     pub fn new(checks: Vec<SwitchingCheck>) -> Self {
         let mut sfs: Vec<SwitchingFunction> = checks.iter().map(|c| c.sf.clone()).collect();
         let mut arm_entry = Vec::with_capacity(checks.len());
@@ -86,7 +93,7 @@ impl SwitchingChecks {
             *r = owners;
         }
         SwitchingChecks {
-            reported: vec![false; checks.len()],
+            reported: vec![None; checks.len()],
             checks,
             cell,
             arm_entry,
@@ -146,27 +153,57 @@ impl CheckSet for SwitchingChecks {
         self.changed = changed;
         for k in 0..self.readers[si].len() {
             let c = self.readers[si][k];
-            if self.unknown_inputs[c] > 0 {
-                continue;
-            }
             let check = &self.checks[c];
-            let armed = self.arm_entry[c].is_none_or(|e| self.cell.output(e));
-            let fault = armed && self.cell.output(c) == check.polarity.fault_value();
-            if fault == self.reported[c] {
+            let verdict = if self.unknown_inputs[c] == 0 {
+                let armed = self.arm_entry[c].is_none_or(|e| self.cell.output(e));
+                Some(armed && self.cell.output(c) == check.polarity.fault_value())
+            } else {
+                self.certain_fault(c).then_some(true)
+            };
+            let Some(fault) = verdict else {
+                continue;
+            };
+            if Some(fault) == self.reported[c] {
                 continue;
             }
-            self.reported[c] = fault;
-            out.push(finding(check, fault, &self.cell, signal, before));
+            self.reported[c] = Some(fault);
+            let known = |x: &Signal| {
+                self.cell
+                    .signal_index(x)
+                    .filter(|&i| self.known[i as usize])
+                    .map(|i| self.cell.value(i))
+            };
+            out.push(finding(check, fault, &known, signal, before));
         }
     }
 }
 
-/// The finding of `check` going to `fault`, explained from the values in
-/// `cell` (and `before` for the signal that just changed).
+impl SwitchingChecks {
+    /// Whether check `c`, some of whose inputs are unknown, is at fault
+    /// whatever they hold.
+    fn certain_fault(&self, c: usize) -> bool {
+        let known = |x: &Signal| {
+            self.cell
+                .signal_index(x)
+                .filter(|&i| self.known[i as usize])
+                .map(|i| self.cell.value(i))
+        };
+        let check = &self.checks[c];
+        let armed = check
+            .armed_when
+            .as_ref()
+            .is_none_or(|a| a.certain(known) == Some(true));
+        armed && check.sf.certain(known) == Some(check.polarity.fault_value())
+    }
+}
+
+/// The finding of `check` going to `fault`, explained from the `known`
+/// values (and `before` for the signal that just changed). Contacts whose
+/// value is unknown are named in the message.
 fn finding(
     check: &SwitchingCheck,
     fault: bool,
-    cell: &CompiledCell,
+    known: &dyn Fn(&Signal) -> Option<bool>,
     changed: &Signal,
     before: Option<bool>,
 ) -> Finding {
@@ -184,22 +221,25 @@ fn finding(
     if !fault {
         return finding;
     }
-    let now_values = |x: &Signal| cell.signal_index(x).map(|i| cell.value(i));
-    let before_values = |x: &Signal| if x == changed { before } else { now_values(x) };
-    if let Ok(e) = explain(
+    let before_values = |x: &Signal| if x == changed { before } else { known(x) };
+    let e = explain_partial(
         &check.sf,
-        now_values,
+        known,
         Some(&before_values),
         check.polarity,
         &check.comments,
-    ) {
-        finding.fault_step = e.fault_step;
-        finding.culprits = e.culprits;
-    }
-    finding.message = match (finding.fault_step, finding.culprits.first()) {
+    );
+    finding.fault_step = e.fault_step;
+    finding.culprits = e.culprits;
+    let mut message = match (finding.fault_step, finding.culprits.first()) {
         (Some(step), Some(c)) => format!("{} at step {step}: {c}", check.fault_type),
         (None, Some(c)) => format!("{}: {c}", check.fault_type),
         _ => check.fault_type.clone(),
     };
+    if !e.unknown.is_empty() {
+        let names: Vec<&str> = e.unknown.iter().map(Signal::name).collect();
+        message.push_str(&format!(" (unknown: {})", names.join(", ")));
+    }
+    finding.message = message;
     finding
 }
