@@ -15,8 +15,10 @@
 //!
 //! Rules that keep alarms honest:
 //! - a tag whose value is unknown (bad or uncertain quality, or the
-//!   connection is down) suspends every check that reads it: no alarm is
-//!   raised or cleared on a value nobody knows;
+//!   connection is down) is a third value: a switching check raises only a
+//!   fault that is certain whatever the unknown contacts hold (naming
+//!   them), clears only on known values, and otherwise holds its verdict;
+//!   timers suspend on unknown signals they read;
 //! - a lost connection is one `communication` alarm, not one per tag;
 //! - a value delivered twice (the same value with the same or an older
 //!   source timestamp, as after a subscription is recreated) is ignored.
