@@ -117,6 +117,14 @@ impl Fixture {
         }
     }
 
+    /// The rows of one history page.
+    async fn history_rows(&self, selector: &str) -> Vec<serde_json::Value> {
+        let page: serde_json::Value =
+            serde_json::from_str(&self.query(selector, None).await.unwrap()).unwrap();
+        assert_eq!(page["schema"], "cellwatch.history.v1", "{page}");
+        page["rows"].as_array().unwrap().clone()
+    }
+
     /// Waits until the agent's snapshot satisfies `ready`; `what` names it.
     async fn snapshot_until(&self, what: &str, ready: impl Fn(&serde_json::Value) -> bool) {
         let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
@@ -245,12 +253,9 @@ async fn ese_alarm_with_culprit_then_cleared_and_in_history() {
     assert_eq!(cleared.state.as_str(), "cleared_unacknowledged");
     assert!(cleared.cleared_at.is_some());
     // History: the fault with its type and element, then the recovery.
-    let rows: Vec<serde_json::Value> = serde_json::from_str(
-        &fx.query("cellwatch/m01ps0004/history?since=1h;kind=state", None)
-            .await
-            .unwrap(),
-    )
-    .unwrap();
+    let rows = fx
+        .history_rows("cellwatch/m01ps0004/history?since=1h;kind=state")
+        .await;
     let kinds: Vec<(String, String, String)> = rows
         .iter()
         .map(|r| {
@@ -449,12 +454,9 @@ async fn only_correctly_signed_acks_are_carried_out_and_all_are_journaled() {
     // Every command, refused or not, is in the journal.
     let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
     loop {
-        let rows: Vec<serde_json::Value> = serde_json::from_str(
-            &fx.query("cellwatch/m01ps0004/history?since=1h;kind=command", None)
-                .await
-                .unwrap(),
-        )
-        .unwrap();
+        let rows = fx
+            .history_rows("cellwatch/m01ps0004/history?since=1h;kind=command")
+            .await;
         let outcomes: Vec<(bool, String)> = rows
             .iter()
             .map(|r| {
@@ -590,12 +592,9 @@ async fn a_published_alarm_is_already_in_history() {
     let fx = Fixture::start().await;
     let (_sub, raised, _) = ese_raised(&fx, "cellwatch/m01ps0004/alarms/ese").await;
     // Asked once, at once: the row was committed before the publication.
-    let rows: Vec<serde_json::Value> = serde_json::from_str(
-        &fx.query("cellwatch/m01ps0004/history?kind=alarm;since=1h", None)
-            .await
-            .unwrap(),
-    )
-    .unwrap();
+    let rows = fx
+        .history_rows("cellwatch/m01ps0004/history?kind=alarm;since=1h")
+        .await;
     assert!(
         rows.iter().any(|r| r["fields"]["alarm"] == "ese"
             && r["fields"]["transition"] == "raised"

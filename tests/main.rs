@@ -14,6 +14,7 @@ mod durability;
 mod explain;
 mod opcua;
 mod report;
+mod restart;
 mod sf;
 mod timers;
 mod util;

@@ -298,6 +298,11 @@ pub(crate) struct AlarmsArgs {
     /// Follow alarm events as they happen (recovering any missed) until Ctrl-C.
     #[arg(long)]
     pub(crate) follow: bool,
+    /// With --follow: first the cell's alarm events since then, from its
+    /// journal (a duration back from now such as 1h, or an RFC 3339 time),
+    /// even those from before the agent last restarted. Needs --cell.
+    #[arg(long, requires = "follow")]
+    pub(crate) since: Option<String>,
     /// One JSON alarm event per line.
     #[arg(long)]
     pub(crate) json: bool,
@@ -319,10 +324,16 @@ pub(crate) struct HistoryArgs {
     /// Only `state`, `alarm` or `command` rows.
     #[arg(long)]
     pub(crate) kind: Option<String>,
-    /// At most this many rows (the newest).
+    /// At most this many rows (the newest); one reply also holds at most
+    /// 1 MiB of rows.
     #[arg(long, default_value_t = 1000)]
     pub(crate) limit: usize,
-    /// The rows as the agent sends them (JSON array).
+    /// Every row of the range, oldest first, fetched in pages of `--limit`
+    /// rows.
+    #[arg(long)]
+    pub(crate) all: bool,
+    /// The pages as the agent sends them (one JSON object per line:
+    /// `rows`, `more`, `next`).
     #[arg(long)]
     pub(crate) json: bool,
     #[command(flatten)]

@@ -85,6 +85,9 @@ pub struct AlarmPayload {
     pub cleared_at: Option<String>,
     /// Who acknowledged it.
     pub acked_by: Option<String>,
+    /// Stays active until an operator resets it.
+    #[serde(default)]
+    pub latched: bool,
     /// Fault type (`ESE`).
     pub fault_type: String,
     /// Step block at which the fault formed.
@@ -110,11 +113,60 @@ impl AlarmPayload {
             raised_at: rfc3339(alarm.raised_at),
             cleared_at: alarm.cleared_at.map(rfc3339),
             acked_by: alarm.acked_by.clone(),
+            latched: alarm.latched,
             fault_type: alarm.fault_type.clone(),
             fault_step: alarm.fault_step,
             culprits: alarm.culprits.iter().map(CulpritPayload::from).collect(),
             message: alarm.message.clone(),
         }
+    }
+}
+
+impl AlarmPayload {
+    /// The alarm this payload describes, as the engine keeps it: how a
+    /// journaled alarm is restored. `None` if a time does not parse.
+    pub fn to_alarm(&self) -> Option<Alarm> {
+        let ms = |t: &str| {
+            humantime::parse_rfc3339_weak(t)
+                .ok()
+                .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+                .map(|d| d.as_millis() as u64)
+        };
+        let cleared_at = match &self.cleared_at {
+            Some(t) => Some(ms(t)?),
+            None => None,
+        };
+        Some(Alarm {
+            id: self.id.clone(),
+            kind: self.kind,
+            severity: self.severity,
+            fault_type: self.fault_type.clone(),
+            active: matches!(
+                self.state,
+                AlarmState::ActiveUnacknowledged | AlarmState::ActiveAcknowledged
+            ),
+            acknowledged: matches!(
+                self.state,
+                AlarmState::ActiveAcknowledged | AlarmState::Normal
+            ),
+            latched: self.latched,
+            raised_at: ms(&self.raised_at)?,
+            cleared_at,
+            acked_by: self.acked_by.clone(),
+            fault_step: self.fault_step,
+            culprits: self
+                .culprits
+                .iter()
+                .map(|c| Culprit {
+                    address: cellwatch_models::signal::Signal::new(&c.address),
+                    value: c.value,
+                    expected: c.expected,
+                    comment: c.comment.clone(),
+                    trigger: c.trigger,
+                })
+                .collect(),
+            message: self.message.clone(),
+        })
     }
 }
 

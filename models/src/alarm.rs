@@ -78,15 +78,18 @@ pub enum AlarmKind {
     TagQuality,
     /// The connection to the PLC is lost.
     Communication,
+    /// The agent itself is in trouble (its journal cannot write).
+    System,
 }
 
 impl AlarmKind {
     /// All kinds.
-    pub const ALL: [AlarmKind; 4] = [
+    pub const ALL: [AlarmKind; 5] = [
         AlarmKind::Switching,
         AlarmKind::Timer,
         AlarmKind::TagQuality,
         AlarmKind::Communication,
+        AlarmKind::System,
     ];
 
     /// The snake-case name.
@@ -96,6 +99,7 @@ impl AlarmKind {
             AlarmKind::Timer => "timer",
             AlarmKind::TagQuality => "tag_quality",
             AlarmKind::Communication => "communication",
+            AlarmKind::System => "system",
         }
     }
 }
@@ -139,6 +143,9 @@ pub enum Transition {
     /// The condition still holds but its details changed (more tags bad,
     /// a new culprit).
     Updated,
+    /// Taken back from the journal at the agent's start, as it was when the
+    /// agent stopped (not a new occurrence).
+    Restored,
 }
 
 impl Transition {
@@ -149,6 +156,7 @@ impl Transition {
             Transition::Cleared => "cleared",
             Transition::Acknowledged => "acknowledged",
             Transition::Updated => "updated",
+            Transition::Restored => "restored",
         }
     }
 }

@@ -169,7 +169,7 @@ pub async fn start_with(config: CellConfig, options: Options) -> Result<Agent, S
     for w in &config.warnings {
         tracing::warn!("{w}");
     }
-    let engine = compile::engine(&config)?;
+    let mut engine = compile::engine(&config)?;
     let keys = match &config.secrets_file {
         Some(path) => OperatorKeys::load(path)?,
         None => OperatorKeys::default(),
@@ -181,7 +181,9 @@ pub async fn start_with(config: CellConfig, options: Options) -> Result<Agent, S
         (*metrics).clone(),
     )?;
     let committed = journal.committed();
-    let session = crate::sinks::zenoh::open(&config.zenoh).await?;
+    let journal_health = journal.health();
+    let restored = super::restore::load(&config, crate::clock::now_ms())?;
+    let session = crate::sinks::zenoh::open_agent(&config.zenoh).await?;
     let prefix = config.zenoh.prefix.clone();
     let (requests_tx, requests_rx) = mpsc::channel(REQUEST_CAPACITY);
     let services = Services::declare(
@@ -228,13 +230,19 @@ pub async fn start_with(config: CellConfig, options: Options) -> Result<Agent, S
     tracing::info!(cell = %config.cell, source = %source.describe(), "starting");
     let (source_tx, source_rx) = mpsc::channel(QUEUE_CAPACITY);
     let source = tokio::spawn(source.run(source_tx, stopped(stop_rx.clone()).boxed()));
-    let cell_loop = CellLoop::new(
-        &config.cell,
-        engine,
-        Gate::new(&config.cell, keys),
-        sinks,
-        config.state_interval,
+    let mut gate = Gate::new(&config.cell, keys);
+    for (at, nonce) in restored.nonces {
+        gate.remember(at, nonce);
+    }
+    let state = restored.state.as_ref().map(|(_, at, kind)| (*at, *kind));
+    let step = engine.restore(
+        restored.alarms,
+        restored.state.map(|(s, _, _)| s),
+        crate::clock::now_ms(),
     );
+    let cell_loop = CellLoop::new(&config.cell, engine, gate, sinks, config.state_interval)
+        .restored(step, state)
+        .watching_journal(journal_health);
     let cell_loop = tokio::spawn(cell_loop.run(source_rx, requests_rx, stopped(stop_rx.clone())));
     let services = tokio::spawn(services.run(stopped(stop_rx)));
     Ok(Agent {

@@ -10,21 +10,23 @@
 //! - [`compile`]: builds the engine from a configuration (used by `run`
 //!   and by `validate`, so a configuration that validates starts).
 //! - [`agent`]: wires the parts of a running agent and stops them.
+//! - [`restore`]: what a restarted agent takes back from its journal.
 
 pub mod agent;
 pub mod compile;
+pub mod restore;
 
 use std::future::Future;
 use std::time::Duration;
 
 use cellwatch_models::alarm::Transition;
 use cellwatch_models::engine::{CellEngine, HistoryKind, Step};
-use tokio::sync::{mpsc, oneshot};
+use tokio::sync::{mpsc, oneshot, watch};
 
 pub use agent::{start, start_with, Agent, Options, StartError};
 
 use crate::clock::{now_ms, rfc3339};
-use crate::operator::{Action, Command, Gate};
+use crate::operator::{clip, Action, Command, Gate, NotACommand};
 use crate::payload::{
     AlarmPayload, LastFault, Quality, SnapshotPayload, StatePayload, TagValue, SNAPSHOT_SCHEMA,
 };
@@ -54,6 +56,10 @@ pub enum Input {
     Tick,
     /// The periodic state publication (no change).
     StateBeat,
+    /// The alarms and machine state taken back from the journal at start.
+    Restored,
+    /// A condition of the agent itself changed (the journal's health).
+    System,
     /// An operator command, carried out or refused.
     Command(CommandRecord),
 }
@@ -71,9 +77,14 @@ pub struct CommandRecord {
     pub nonce: String,
     /// Whether it was carried out.
     pub accepted: bool,
+    /// Whether its signature was verified (its nonce is used up).
+    pub verified: bool,
     /// What it did, or why it was refused.
     pub detail: String,
 }
+
+/// What of a sender's fields is journaled and logged, at most.
+pub const RECORD_FIELD_BYTES: usize = 128;
 
 /// An alarm transition ready to publish: the payload and its JSON.
 #[derive(Debug, Clone, PartialEq)]
@@ -127,8 +138,8 @@ pub enum Request {
     Snapshot(oneshot::Sender<SnapshotPayload>),
     /// An operator command (or why the request is not one).
     Command {
-        /// The parsed command, or why it did not parse.
-        command: Result<Command, String>,
+        /// The parsed command, or why the request is not one.
+        command: Result<Command, NotACommand>,
         /// Where the outcome goes.
         reply: oneshot::Sender<CommandOutcome>,
     },
@@ -145,6 +156,10 @@ pub struct CellLoop {
     /// When the current machine state was entered, and by which change.
     state_since: u64,
     state_kind: HistoryKind,
+    /// What was restored from the journal, dispatched first by `run`.
+    restored: Option<Step>,
+    /// `Some(why)` while the journal cannot write: the `journal` alarm.
+    journal_health: Option<watch::Receiver<Option<String>>>,
 }
 
 impl CellLoop {
@@ -165,7 +180,30 @@ impl CellLoop {
             state_interval,
             state_since: now_ms(),
             state_kind: HistoryKind::Offline,
+            restored: None,
+            journal_health: None,
         }
+    }
+
+    /// Raises the `journal` alarm while `health` says the journal cannot
+    /// write, and clears it when it can.
+    #[must_use]
+    pub fn watching_journal(mut self, health: watch::Receiver<Option<String>>) -> CellLoop {
+        self.journal_health = Some(health);
+        self
+    }
+
+    /// Starts from what the journal kept: the engine's restore `step`
+    /// (republished once, each alarm as `restored`) and the machine state
+    /// entered at `since` by a change of `kind`.
+    #[must_use]
+    pub fn restored(mut self, step: Step, state: Option<(u64, HistoryKind)>) -> CellLoop {
+        if let Some((since, kind)) = state {
+            self.state_since = since;
+            self.state_kind = kind;
+        }
+        self.restored = Some(step);
+        self
     }
 
     /// Runs until `shutdown` completes (or every input is closed), then
@@ -181,6 +219,10 @@ impl CellLoop {
         tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         let mut beat = tokio::time::interval(self.state_interval);
         beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        if let Some(step) = self.restored.take() {
+            let now = now_ms();
+            self.dispatch(now, Input::Restored, step, 0).await;
+        }
         let mut source_open = true;
         let mut requests_open = true;
         loop {
@@ -198,6 +240,7 @@ impl CellLoop {
                     Some(r) => self.request(r).await,
                     None => requests_open = false,
                 },
+                problem = journal_changed(&mut self.journal_health) => self.system("journal", problem).await,
                 _ = tick.tick() => self.tick().await,
                 _ = beat.tick() => self.beat().await,
             }
@@ -229,6 +272,12 @@ impl CellLoop {
             }
         };
         self.dispatch(now, input, step, queue_depth).await;
+    }
+
+    async fn system(&mut self, id: &str, problem: Option<String>) {
+        let now = now_ms();
+        let step = self.engine.on_system(id, problem.as_deref(), now);
+        self.dispatch(now, Input::System, step, 0).await;
     }
 
     async fn tick(&mut self) {
@@ -268,22 +317,25 @@ impl CellLoop {
         }
     }
 
-    async fn command(&mut self, command: Result<Command, String>) -> CommandOutcome {
+    async fn command(&mut self, command: Result<Command, NotACommand>) -> CommandOutcome {
         let now = now_ms();
         let (record, step) = match command {
-            Err(why) => (
+            Err(not) => (
                 CommandRecord {
                     operator: String::new(),
                     action: None,
                     alarm: String::new(),
                     nonce: String::new(),
                     accepted: false,
-                    detail: format!("not a command: {why}"),
+                    verified: false,
+                    detail: format!("not a command: {}", not.reason),
                 },
                 Step::default(),
             ),
             Ok(cmd) => {
-                let done = match self.gate.check(&cmd, now) {
+                let checked = self.gate.check(&cmd, now);
+                let verified = checked.is_ok();
+                let done = match checked {
                     Err(refusal) => Err(refusal.to_string()),
                     Ok(()) => match cmd.action {
                         Action::Ack => self.engine.acknowledge(&cmd.alarm, &cmd.operator, now),
@@ -299,14 +351,18 @@ impl CellLoop {
                     ),
                     Err(why) => (false, why, Step::default()),
                 };
+                // The sender chooses these fields: what is kept of them is
+                // bounded.
+                let field = |s: &str| clip(s, RECORD_FIELD_BYTES);
                 (
                     CommandRecord {
-                        operator: cmd.operator,
+                        operator: field(&cmd.operator),
                         action: Some(cmd.action),
-                        alarm: cmd.alarm,
-                        nonce: cmd.nonce,
+                        alarm: field(&cmd.alarm),
+                        nonce: field(&cmd.nonce),
                         accepted,
-                        detail,
+                        verified,
+                        detail: clip(&detail, 4 * RECORD_FIELD_BYTES),
                     },
                     step,
                 )
@@ -411,4 +467,18 @@ impl CellLoop {
             }),
         }
     }
+}
+
+/// The journal's next health change; pending forever once there is no
+/// journal to watch.
+async fn journal_changed(health: &mut Option<watch::Receiver<Option<String>>>) -> Option<String> {
+    let Some(rx) = health else {
+        return std::future::pending().await;
+    };
+    if rx.changed().await.is_err() {
+        *health = None;
+        return std::future::pending().await;
+    }
+    let problem = rx.borrow_and_update().clone();
+    problem
 }

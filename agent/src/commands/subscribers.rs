@@ -69,6 +69,37 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
             .subscriber_detection()
             .await
             .map_err(|e| Failure::Runtime(format!("cannot subscribe: {e}")))?;
+        // The journal's recent events first (a subscriber joining after the
+        // agent restarted gets them too); what the subscription then
+        // delivers again is not printed twice.
+        let mut printed = std::collections::HashSet::new();
+        if let Some(since) = &args.since {
+            let Some(cell) = &args.cell else {
+                return Err(Failure::Input(
+                    "--since needs --cell: the journal is read from one agent".into(),
+                ));
+            };
+            let base = format!("{root}/{cell}/history?kind=alarm;since={since};limit=1000");
+            let timeout = Duration::from_secs(args.zenoh.timeout_secs);
+            let mut after = 0;
+            loop {
+                let text = history_page(&s, &format!("{base};after={after}"), timeout).await?;
+                let page: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
+                for r in page["rows"].as_array().into_iter().flatten() {
+                    if let Ok(a) =
+                        serde_json::from_value::<AlarmPayload>(r["fields"]["payload"].clone())
+                    {
+                        printed.insert((a.id.clone(), a.at.clone(), a.transition));
+                        print_alarm(out, &a, args.json).map_err(io)?;
+                    }
+                }
+                match page["next"].as_i64() {
+                    Some(next) => after = next,
+                    None => break,
+                }
+            }
+            out.flush().map_err(io)?;
+        }
         loop {
             tokio::select! {
                 _ = tokio::signal::ctrl_c() => break,
@@ -76,6 +107,7 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
                     let Ok(sample) = sample else { break };
                     let text = sample.payload().try_to_string().map(|s| s.into_owned()).unwrap_or_default();
                     match serde_json::from_str::<AlarmPayload>(&text) {
+                        Ok(a) if printed.remove(&(a.id.clone(), a.at.clone(), a.transition)) => {}
                         Ok(a) => print_alarm(out, &a, args.json).map_err(io)?,
                         Err(e) => tracing::warn!(key = %sample.key_expr(), error = %e, "not an alarm payload"),
                     }
@@ -114,7 +146,39 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
     Ok(())
 }
 
-/// `cellwatch history`.
+/// Asks `selector` for one history page.
+async fn history_page(
+    s: &zenoh::Session,
+    selector: &str,
+    timeout: Duration,
+) -> Result<String, Failure> {
+    let replies = s
+        .get(selector)
+        .timeout(timeout)
+        .await
+        .map_err(|e| Failure::Runtime(format!("query failed: {e}")))?;
+    let Ok(reply) = replies.recv_async().await else {
+        return Err(Failure::Runtime(format!("no agent answered {selector}")));
+    };
+    match reply.result() {
+        Ok(sample) => Ok(sample
+            .payload()
+            .try_to_string()
+            .map(|s| s.into_owned())
+            .unwrap_or_default()),
+        Err(e) => {
+            let why = e
+                .payload()
+                .try_to_string()
+                .map(|s| s.into_owned())
+                .unwrap_or_default();
+            Err(Failure::Input(format!("{selector}: {why}")))
+        }
+    }
+}
+
+/// `cellwatch history`: the newest rows, or with `--all` every row of the
+/// range, fetched in bounded pages.
 pub(crate) async fn history(args: &HistoryArgs, out: &mut dyn Write) -> Result<(), Failure> {
     let s = session(&args.zenoh).await?;
     let mut params = vec![format!("since={}", args.since)];
@@ -125,77 +189,72 @@ pub(crate) async fn history(args: &HistoryArgs, out: &mut dyn Write) -> Result<(
         params.push(format!("kind={k}"));
     }
     params.push(format!("limit={}", args.limit));
-    let selector = format!(
+    let base = format!(
         "{}/{}/history?{}",
         args.zenoh.root,
         args.cell,
         params.join(";")
     );
-    let replies = s
-        .get(selector.as_str())
-        .timeout(Duration::from_secs(args.zenoh.timeout_secs))
-        .await
-        .map_err(|e| Failure::Runtime(format!("query failed: {e}")))?;
-    let mut answered = false;
-    while let Ok(reply) = replies.recv_async().await {
-        answered = true;
-        let sample = match reply.result() {
-            Ok(s) => s,
-            Err(e) => {
-                let why = e
-                    .payload()
-                    .try_to_string()
-                    .map(|s| s.into_owned())
-                    .unwrap_or_default();
-                return Err(Failure::Input(format!("{selector}: {why}")));
-            }
+    let timeout = Duration::from_secs(args.zenoh.timeout_secs);
+    let mut after = args.all.then_some(0);
+    loop {
+        let selector = match after {
+            Some(a) => format!("{base};after={a}"),
+            None => base.clone(),
         };
-        let text = sample
-            .payload()
-            .try_to_string()
-            .map(|s| s.into_owned())
-            .unwrap_or_default();
+        let text = history_page(&s, &selector, timeout).await?;
         if args.json {
             writeln!(out, "{text}").map_err(io)?;
-            continue;
         }
-        let rows: Vec<serde_json::Value> = serde_json::from_str(&text).unwrap_or_default();
-        for r in rows {
-            let at = crate::clock::rfc3339(r["at"].as_u64().unwrap_or(0));
-            let f = &r["fields"];
-            let line = match r["table"].as_str() {
-                Some("state") => format!(
-                    "{:<9} state={} type={} element={}",
-                    f["kind"].as_str().unwrap_or(""),
-                    f["state"].as_str().unwrap_or(""),
-                    f["fault_type"].as_str().unwrap_or("None"),
-                    f["element"].as_str().unwrap_or("None")
-                ),
-                Some("alarm") => format!(
-                    "alarm     {} {} [{}] {}",
-                    f["alarm"].as_str().unwrap_or(""),
-                    f["transition"].as_str().unwrap_or(""),
-                    f["severity"].as_str().unwrap_or(""),
-                    f["payload"]["message"].as_str().unwrap_or("")
-                ),
-                _ => format!(
-                    "command   {} {} by {}: {} ({})",
-                    f["action"].as_str().unwrap_or(""),
-                    f["alarm"].as_str().unwrap_or(""),
-                    f["operator"].as_str().unwrap_or(""),
-                    if f["accepted"].as_bool() == Some(true) {
-                        "accepted"
-                    } else {
-                        "refused"
-                    },
-                    f["detail"].as_str().unwrap_or("")
-                ),
-            };
-            writeln!(out, "{at}  {line}").map_err(io)?;
+        let page: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
+        if !args.json {
+            print_rows(out, &page["rows"])?;
+        }
+        match (after, page["next"].as_i64()) {
+            (Some(_), Some(next)) => after = Some(next),
+            (None, _) if page["more"] == true => {
+                eprintln!("(older rows not shown: raise --limit, narrow --since, or use --all)");
+                break;
+            }
+            _ => break,
         }
     }
-    if !answered {
-        return Err(Failure::Runtime(format!("no agent answered {selector}")));
+    Ok(())
+}
+
+fn print_rows(out: &mut dyn Write, rows: &serde_json::Value) -> Result<(), Failure> {
+    for r in rows.as_array().into_iter().flatten() {
+        let at = crate::clock::rfc3339(r["at"].as_u64().unwrap_or(0));
+        let f = &r["fields"];
+        let line = match r["table"].as_str() {
+            Some("state") => format!(
+                "{:<9} state={} type={} element={}",
+                f["kind"].as_str().unwrap_or(""),
+                f["state"].as_str().unwrap_or(""),
+                f["fault_type"].as_str().unwrap_or("None"),
+                f["element"].as_str().unwrap_or("None")
+            ),
+            Some("alarm") => format!(
+                "alarm     {} {} [{}] {}",
+                f["alarm"].as_str().unwrap_or(""),
+                f["transition"].as_str().unwrap_or(""),
+                f["severity"].as_str().unwrap_or(""),
+                f["payload"]["message"].as_str().unwrap_or("")
+            ),
+            _ => format!(
+                "command   {} {} by {}: {} ({})",
+                f["action"].as_str().unwrap_or(""),
+                f["alarm"].as_str().unwrap_or(""),
+                f["operator"].as_str().unwrap_or(""),
+                if f["accepted"].as_bool() == Some(true) {
+                    "accepted"
+                } else {
+                    "refused"
+                },
+                f["detail"].as_str().unwrap_or("")
+            ),
+        };
+        writeln!(out, "{at}  {line}").map_err(io)?;
     }
     Ok(())
 }

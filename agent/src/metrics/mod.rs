@@ -57,8 +57,14 @@ pub struct Metrics {
     pub journal_rows: IntCounter,
     /// Journal batches that failed.
     pub journal_errors: IntCounter,
+    /// Journal rows waiting to be written (the journal cannot write).
+    pub journal_pending: IntGauge,
+    /// Journal rows dropped because the queue of unwritten rows was full.
+    pub journal_dropped: IntCounter,
     /// Zenoh puts and replies that failed.
     pub zenoh_publish_errors: IntCounter,
+    /// Queries refused, by service and reason.
+    refused: IntCounterVec,
     commands: IntCounterVec,
     /// Seconds since the last tag update.
     pub last_update_age: Gauge,
@@ -216,6 +222,24 @@ impl Metrics {
                 "Journal batches that failed to commit.",
                 cell
             ))),
+            journal_pending: reg!(IntGauge::with_opts(opts(
+                "cellwatch_journal_pending_rows",
+                "Journal rows waiting to be written while the journal cannot write.",
+                cell
+            ))),
+            journal_dropped: reg!(IntCounter::with_opts(opts(
+                "cellwatch_journal_rows_dropped_total",
+                "Journal rows dropped because the queue of unwritten rows was full.",
+                cell
+            ))),
+            refused: reg!(IntCounterVec::new(
+                opts(
+                    "cellwatch_requests_refused_total",
+                    "Queries refused: busy (too many at once), too_large (payload over the limit), invalid (not a request).",
+                    cell
+                ),
+                &["service", "reason"]
+            )),
             zenoh_publish_errors: reg!(IntCounter::with_opts(opts(
                 "cellwatch_zenoh_publish_errors_total",
                 "Zenoh publications and replies that failed.",
@@ -356,6 +380,22 @@ impl crate::sinks::journal::CommitObserver for Metrics {
 
     fn failed(&self, _error: &str) {
         self.journal_errors.inc();
+    }
+
+    fn pending(&self, rows: usize) {
+        self.journal_pending.set(rows as i64);
+    }
+
+    fn dropped(&self, rows: usize) {
+        self.journal_dropped.inc_by(rows as u64);
+    }
+}
+
+impl Metrics {
+    /// A query to `service` refused for `reason` (`busy`, `too_large`,
+    /// `invalid`).
+    pub fn refused(&self, service: &str, reason: &str) {
+        self.refused.with_label_values(&[service, reason]).inc();
     }
 }
 

@@ -81,7 +81,7 @@ impl MetricsSink {
                         .set(step.at.saturating_sub(t) as f64 / 1000.0);
                 }
             }
-            Input::Readings | Input::StateBeat => {}
+            Input::Readings | Input::StateBeat | Input::Restored | Input::System => {}
         }
         let e = &step.engine;
         if e.readings > 0 {

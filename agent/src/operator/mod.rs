@@ -247,6 +247,17 @@ impl Gate {
         }
     }
 
+    /// Marks `nonce`, used at `at`, as seen (nonces of verified commands
+    /// read back from the journal at start, so a replay is refused across
+    /// a restart).
+    pub fn remember(&mut self, at: u64, nonce: String) {
+        self.seen.push_back((at, nonce));
+    }
+
+    /// How far back nonces must be remembered, ms: a command older than
+    /// this is refused for its skew anyway.
+    pub const NONCE_WINDOW_MS: u64 = 2 * MAX_SKEW_MS;
+
     /// Lets `cmd` through at `now`, or says why not.
     ///
     /// # Errors
@@ -255,7 +266,7 @@ impl Gate {
         while self
             .seen
             .front()
-            .is_some_and(|(t, _)| t + 2 * MAX_SKEW_MS < now)
+            .is_some_and(|(t, _)| t + Self::NONCE_WINDOW_MS < now)
         {
             self.seen.pop_front();
         }
@@ -283,6 +294,69 @@ impl Gate {
         self.seen.push_back((now, cmd.nonce.clone()));
         Ok(())
     }
+}
+
+/// A request that is not a command, described without repeating it: its
+/// size, a hash and a short, escaped prefix.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NotACommand {
+    /// Why, in a bounded text that never contains the request.
+    pub reason: String,
+}
+
+/// How many bytes of a refused payload are journaled.
+pub const PREFIX_BYTES: usize = 32;
+
+impl NotACommand {
+    /// A payload refused for `reason`, identified by its size, hash and
+    /// first [`PREFIX_BYTES`] bytes. The payload may come in pieces.
+    pub fn payload<'a>(reason: &str, pieces: impl IntoIterator<Item = &'a [u8]>) -> NotACommand {
+        use sha2::Digest;
+        let mut hash = Sha256::new();
+        let mut size = 0;
+        let mut head = Vec::with_capacity(PREFIX_BYTES);
+        for piece in pieces {
+            hash.update(piece);
+            size += piece.len();
+            let room = PREFIX_BYTES - head.len();
+            head.extend_from_slice(&piece[..piece.len().min(room)]);
+        }
+        let prefix = String::from_utf8_lossy(&head).escape_debug().to_string();
+        NotACommand {
+            reason: format!(
+                "{reason} ({size} bytes, sha256 {}, starts \"{prefix}\")",
+                hex::encode(hash.finalize()),
+            ),
+        }
+    }
+
+    /// JSON that does not parse as a command: where and what kind of error,
+    /// never the offending text.
+    pub fn json(error: &serde_json::Error, bytes: &[u8]) -> NotACommand {
+        let kind = match error.classify() {
+            serde_json::error::Category::Io => "an I/O error",
+            serde_json::error::Category::Syntax => "invalid JSON",
+            serde_json::error::Category::Data => "not a command's fields",
+            serde_json::error::Category::Eof => "truncated JSON",
+        };
+        Self::payload(
+            &format!("{kind} at line {} column {}", error.line(), error.column()),
+            [bytes],
+        )
+    }
+}
+
+/// `text` cut to at most `max` bytes (on a character boundary), with `…`
+/// when cut: what is journaled of fields a sender chooses.
+pub fn clip(text: &str, max: usize) -> String {
+    if text.len() <= max {
+        return text.to_string();
+    }
+    let mut end = max;
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    format!("{}…", &text[..end])
 }
 
 /// A fresh random nonce.

@@ -107,6 +107,21 @@ impl AlarmBook {
         Applied { transition }
     }
 
+    /// Puts back an alarm as it was before a restart. Its condition is
+    /// unknown until the checks say.
+    pub(crate) fn restore(&mut self, alarm: Alarm) {
+        let id = alarm.id.clone();
+        let active = alarm.active;
+        self.alarms.insert(
+            id.clone(),
+            Alarm {
+                active: false,
+                ..alarm
+            },
+        );
+        self.set_active(&id, active);
+    }
+
     /// An operator acknowledges alarm `id`.
     pub(crate) fn acknowledge(
         &mut self,

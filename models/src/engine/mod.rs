@@ -317,6 +317,53 @@ impl CellEngine {
         self.last_fault.as_ref()
     }
 
+    /// Puts back the alarms that were not back to normal when the agent
+    /// stopped, and the machine state, before any input. Each alarm comes
+    /// back with its `raised_at`, acknowledgement and culprits, and is
+    /// reported once as [`Transition::Restored`] (not a new raise). Fresh
+    /// values then decide: a non-latched alarm clears or stays as its check
+    /// says; a latched one waits for a reset as before.
+    pub fn restore(&mut self, alarms: Vec<Alarm>, state: Option<MachineState>, now: u64) -> Step {
+        let mut step = Step::default();
+        for alarm in alarms {
+            let id = alarm.id.clone();
+            self.alarms.restore(alarm);
+            if let Some(alarm) = self.alarms.get(&id) {
+                step.events.push(EngineEvent::Alarm {
+                    alarm: alarm.clone(),
+                    transition: Transition::Restored,
+                    at: now,
+                });
+            }
+        }
+        if let Some(state) = state {
+            self.state = state;
+        }
+        step
+    }
+
+    /// A condition of the agent itself (`journal`: it cannot write) began
+    /// (`problem` is why) or ended.
+    pub fn on_system(&mut self, id: &str, problem: Option<&str>, now: u64) -> Step {
+        let mut step = Step::default();
+        let finding = Finding {
+            id: id.into(),
+            kind: AlarmKind::System,
+            severity: Severity::High,
+            fault_type: id.to_uppercase(),
+            latched: false,
+            active: problem.is_some(),
+            fault_step: None,
+            culprits: Vec::new(),
+            message: match problem {
+                Some(why) => format!("{id}: {why}"),
+                None => format!("{id}: back to normal"),
+            },
+        };
+        self.apply(finding, now, &mut step);
+        step
+    }
+
     /// The connection to the PLC came up or went down.
     pub fn on_connection(&mut self, up: bool, now: u64) -> Step {
         let mut step = Step::default();
@@ -348,6 +395,12 @@ impl CellEngine {
             self.timestamps.iter_mut().for_each(|t| *t = None);
         }
         self.apply(finding, now, &mut step);
+        if up && self.bad.is_empty() {
+            // A `tag-quality` alarm restored from the journal clears once
+            // the PLC is back and no tag is bad.
+            let quality = self.quality_finding();
+            self.apply(quality, now, &mut step);
+        }
         self.update_state(now, &mut step);
         self.collect_observations(&mut step);
         step
@@ -860,6 +913,78 @@ mod tests {
         assert!(
             t.contains(&("tag-quality".to_string(), Transition::Cleared)),
             "{t:?}"
+        );
+    }
+
+    fn restored(id: &str, latched: bool) -> Alarm {
+        Alarm {
+            id: id.into(),
+            kind: if latched {
+                AlarmKind::Timer
+            } else {
+                AlarmKind::Switching
+            },
+            severity: Severity::Critical,
+            fault_type: "ESE".into(),
+            active: true,
+            acknowledged: !latched,
+            latched,
+            raised_at: 1_000,
+            cleared_at: None,
+            acked_by: (!latched).then(|| "kim".to_string()),
+            fault_step: Some(6),
+            culprits: Vec::new(),
+            message: "ESE".into(),
+        }
+    }
+
+    #[test]
+    fn restored_alarms_come_back_as_they_were_and_follow_fresh_values() {
+        let mut e = engine();
+        let fault = MachineState::Fault {
+            fault_type: "ESE".into(),
+            element: Some("X0.06".into()),
+        };
+        let step = e.restore(
+            vec![restored("ese", false), restored("tmr-001", true)],
+            Some(fault.clone()),
+            5_000,
+        );
+        assert_eq!(
+            alarm_transitions(&step.events),
+            [
+                ("ese".to_string(), Transition::Restored),
+                ("tmr-001".to_string(), Transition::Restored)
+            ]
+        );
+        assert_eq!(e.state(), &fault);
+        let ese = e.alarms().find(|a| a.id == "ese").unwrap();
+        assert_eq!(
+            (ese.state(), ese.raised_at, ese.acked_by.as_deref()),
+            (AlarmState::ActiveAcknowledged, 1_000, Some("kim"))
+        );
+        e.on_connection(true, 5_001);
+        // ESE still there: its check confirms it, no new raise.
+        let x006 = e.tag_index(&Signal::new("X0.06")).unwrap();
+        let ev = e
+            .on_reading(x006, Reading::Good(false), 5_002, 5_002)
+            .events;
+        assert_eq!(
+            alarm_transitions(&ev),
+            [("ese".to_string(), Transition::Updated)]
+        );
+        // The normal image: ESE clears by the values, already acknowledged.
+        let ev = load_normal(&mut e, 5_004);
+        assert!(alarm_transitions(&ev).contains(&("ese".to_string(), Transition::Cleared)));
+        let ese = e.alarms().find(|a| a.id == "ese").unwrap();
+        assert_eq!(ese.state(), AlarmState::Normal);
+        // The latched timer alarm waits for its reset, which works.
+        let tmr = e.alarms().find(|a| a.id == "tmr-001").unwrap();
+        assert!(tmr.active);
+        let ev = e.reset("tmr-001", "kim", 5_006).unwrap().events;
+        assert_eq!(
+            alarm_transitions(&ev),
+            [("tmr-001".to_string(), Transition::Cleared)]
         );
     }
 

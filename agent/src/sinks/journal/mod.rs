@@ -41,6 +41,10 @@ pub enum Entry {
         transition: String,
         /// The payload as published on Zenoh.
         payload: String,
+        /// The alarm is not back to normal (active, latched or not yet
+        /// acknowledged): it is kept in `alarm_current` to be restored at
+        /// the next start.
+        open: bool,
     },
     /// A machine-state history row (paper 000, Fig. 13).
     State {
@@ -74,6 +78,9 @@ pub enum Entry {
         nonce: String,
         /// Whether it was carried out.
         accepted: bool,
+        /// Whether its signature was verified (its nonce is then used up,
+        /// across restarts).
+        verified: bool,
         /// Why it was refused, or what it did.
         detail: String,
     },
@@ -184,7 +191,32 @@ CREATE TABLE IF NOT EXISTS production (
     at_ms INTEGER NOT NULL
 );
 CREATE INDEX IF NOT EXISTS production_at ON production (at_ms);
+CREATE TABLE IF NOT EXISTS alarm_current (
+    alarm TEXT PRIMARY KEY,
+    at_ms INTEGER NOT NULL,
+    payload TEXT NOT NULL
+);
 ";
+
+/// How long the writer waits for a lock held by another connection.
+const WRITE_BUSY_TIMEOUT: Duration = Duration::from_secs(1);
+
+/// Columns added after the first release, added to older journals at open.
+const MIGRATIONS: &[(&str, &str, &str)] = &[("commands", "verified", "INTEGER NOT NULL DEFAULT 0")];
+
+fn migrate(conn: &Connection) -> rusqlite::Result<()> {
+    for (table, column, decl) in MIGRATIONS {
+        let exists: bool = conn.query_row(
+            &format!("SELECT count(*) FROM pragma_table_info('{table}') WHERE name = ?1"),
+            [column],
+            |r| r.get::<_, i64>(0).map(|n| n > 0),
+        )?;
+        if !exists {
+            conn.execute_batch(&format!("ALTER TABLE {table} ADD COLUMN {column} {decl}"))?;
+        }
+    }
+    Ok(())
+}
 
 /// Opens (creating if needed) the journal for writing.
 ///
@@ -200,8 +232,11 @@ pub fn open(path: &Path) -> Result<Connection, JournalError> {
         .map_err(err)?;
     conn.pragma_update(None, "synchronous", "FULL")
         .map_err(err)?;
-    conn.busy_timeout(Duration::from_secs(5)).map_err(err)?;
+    // Short: a journal locked by someone else is reported (and its rows
+    // queued) within a second rather than stalling the cell loop.
+    conn.busy_timeout(WRITE_BUSY_TIMEOUT).map_err(err)?;
     conn.execute_batch(SCHEMA).map_err(err)?;
+    migrate(&conn).map_err(err)?;
     Ok(conn)
 }
 
@@ -231,6 +266,8 @@ pub struct Journal {
     tx: mpsc::Sender<Batch>,
     /// Rows committed so far (including those found at start).
     committed: watch::Receiver<u64>,
+    /// `Some(why)` while the journal cannot write.
+    health: watch::Receiver<Option<String>>,
     path: PathBuf,
     /// The writer thread, joined by [`Journal::close`].
     thread: std::sync::Arc<std::sync::Mutex<Option<std::thread::JoinHandle<()>>>>,
@@ -240,8 +277,12 @@ pub struct Journal {
 pub trait CommitObserver: Send + 'static {
     /// A batch of `rows` rows was committed in `took`.
     fn committed(&self, rows: usize, took: Duration);
-    /// A batch failed; its rows are lost.
+    /// A write failed; its rows are kept and retried.
     fn failed(&self, error: &str);
+    /// `rows` rows wait to be written.
+    fn pending(&self, _rows: usize) {}
+    /// The queue of unwritten rows was full: the `rows` oldest were dropped.
+    fn dropped(&self, _rows: usize) {}
 }
 
 impl Journal {
@@ -267,10 +308,18 @@ impl Journal {
             .sum();
         let (tx, rx) = mpsc::channel(1024);
         let (committed_tx, committed) = watch::channel(existing);
+        let (health_tx, health) = watch::channel(None);
         let p = path.to_path_buf();
         let thread = std::thread::Builder::new()
             .name("journal-writer".into())
-            .spawn(move || writer(conn, rx, committed_tx, existing, retention, observer, p))
+            .spawn(move || {
+                let reports = Reports {
+                    committed: committed_tx,
+                    health: health_tx,
+                    observer,
+                };
+                writer(conn, rx, reports, existing, retention, p)
+            })
             .map_err(|source| JournalError::Thread {
                 path: path.to_path_buf(),
                 source,
@@ -278,6 +327,7 @@ impl Journal {
         Ok(Journal {
             tx,
             committed,
+            health,
             path: path.to_path_buf(),
             thread: std::sync::Arc::new(std::sync::Mutex::new(Some(thread))),
         })
@@ -342,65 +392,170 @@ impl Journal {
         self.committed.clone()
     }
 
+    /// `Some(why)` while the journal cannot write (its rows wait in a
+    /// bounded queue and are retried), `None` when it writes.
+    pub fn health(&self) -> watch::Receiver<Option<String>> {
+        self.health.clone()
+    }
+
     /// The database file.
     pub fn path(&self) -> &Path {
         &self.path
     }
 }
 
+/// Rows kept in memory while the journal cannot write; beyond that the
+/// oldest are dropped (and counted), so memory stays bounded.
+pub const MAX_PENDING_ROWS: usize = 100_000;
+/// How often a failing journal is retried when nothing new arrives.
+pub const RETRY: Duration = Duration::from_secs(1);
+
+/// What the writer thread reports on.
+struct Reports<O> {
+    /// Rows committed so far.
+    committed: watch::Sender<u64>,
+    /// `Some(why)` while nothing can be written.
+    health: watch::Sender<Option<String>>,
+    observer: O,
+}
+
 fn writer(
     mut conn: Connection,
     mut rx: mpsc::Receiver<Batch>,
-    committed: watch::Sender<u64>,
+    reports: Reports<impl CommitObserver>,
     mut total: u64,
     retention: Duration,
-    observer: impl CommitObserver,
     path: PathBuf,
 ) {
+    let Reports {
+        committed,
+        health,
+        observer,
+    } = reports;
     let mut last_purge = Instant::now();
     purge(&conn, retention, &path);
-    let mut batch = Vec::with_capacity(256);
+    let mut seq = last_seq(&conn);
+    let mut last_attempt = Instant::now();
+    // Rows not yet committed, oldest first: a batch, or everything since
+    // the journal stopped being writable.
+    let mut pending: std::collections::VecDeque<Entry> = std::collections::VecDeque::new();
     let mut waiting = Vec::new();
-    while let Some(first) = rx.blocking_recv() {
-        let mut take = |b: Batch, batch: &mut Vec<Entry>| {
-            batch.extend(b.entries);
+    loop {
+        // Failing: retry at least every RETRY; otherwise wait for rows.
+        let first = if pending.is_empty() {
+            match rx.blocking_recv() {
+                Some(b) => Some(b),
+                None => break,
+            }
+        } else {
+            let deadline = Instant::now() + RETRY;
+            loop {
+                match rx.try_recv() {
+                    Ok(b) => break Some(b),
+                    Err(mpsc::error::TryRecvError::Disconnected) => break None,
+                    Err(mpsc::error::TryRecvError::Empty) if Instant::now() >= deadline => {
+                        break None
+                    }
+                    Err(mpsc::error::TryRecvError::Empty) => {
+                        std::thread::sleep(Duration::from_millis(20));
+                    }
+                }
+            }
+        };
+        let mut take = |b: Batch, pending: &mut std::collections::VecDeque<Entry>| {
+            pending.extend(b.entries);
             waiting.extend(b.done);
         };
-        take(first, &mut batch);
-        while batch.len() < 1024 {
+        let closed = first.is_none() && rx.is_closed() && rx.is_empty();
+        if let Some(b) = first {
+            take(b, &mut pending);
+        }
+        while pending.len() < 1024 {
             match rx.try_recv() {
-                Ok(b) => take(b, &mut batch),
+                Ok(b) => take(b, &mut pending),
                 Err(_) => break,
             }
         }
-        let started = Instant::now();
-        let outcome = match write_batch(&mut conn, &batch) {
-            Ok(()) => {
-                total += batch.len() as u64;
-                observer.committed(batch.len(), started.elapsed());
-                let _ = committed.send(total);
-                Ok(())
-            }
-            Err(e) => {
-                tracing::error!(path = %path.display(), error = %e, rows = batch.len(), "journal write failed");
-                observer.failed(&e.to_string());
-                Err(e.to_string())
-            }
-        };
-        for done in waiting.drain(..) {
-            let _ = done.send(outcome.clone());
+        if pending.len() > MAX_PENDING_ROWS {
+            let lost = pending.len() - MAX_PENDING_ROWS;
+            pending.drain(..lost);
+            tracing::error!(path = %path.display(), rows = lost, "journal unwritable and its queue full: oldest rows dropped");
+            observer.dropped(lost);
         }
-        batch.clear();
+        let failing = health.borrow().is_some();
+        if failing && last_attempt.elapsed() < RETRY {
+            // Retried at its pace, not at every step's.
+            let why = health.borrow().clone().unwrap_or_default();
+            observer.pending(pending.len());
+            for done in waiting.drain(..) {
+                let _ = done.send(Err(format!("{why} (rows queued)")));
+            }
+        } else if !pending.is_empty() {
+            last_attempt = Instant::now();
+            let started = Instant::now();
+            let rows = pending.make_contiguous();
+            let outcome = match write_batch(&mut conn, rows, &mut seq) {
+                Ok(()) => {
+                    total += rows.len() as u64;
+                    observer.committed(rows.len(), started.elapsed());
+                    let _ = committed.send(total);
+                    pending.clear();
+                    if health.borrow().is_some() {
+                        tracing::info!(path = %path.display(), "journal writable again");
+                        let _ = health.send(None);
+                    }
+                    Ok(())
+                }
+                Err(e) => {
+                    let why = e.to_string();
+                    if health.borrow().as_deref() != Some(why.as_str()) {
+                        tracing::error!(path = %path.display(), error = %why, rows = rows.len(), "journal write failed; rows kept and retried");
+                        let _ = health.send(Some(why.clone()));
+                    }
+                    observer.failed(&why);
+                    Err(why)
+                }
+            };
+            observer.pending(pending.len());
+            for done in waiting.drain(..) {
+                let _ = done.send(outcome.clone());
+            }
+        }
+        if closed {
+            break;
+        }
         if last_purge.elapsed() > Duration::from_secs(3600) {
             purge(&conn, retention, &path);
             last_purge = Instant::now();
         }
     }
+    if !pending.is_empty() {
+        tracing::error!(path = %path.display(), rows = pending.len(), "journal closed with rows it could not write");
+    }
 }
 
-fn write_batch(conn: &mut Connection, batch: &[Entry]) -> rusqlite::Result<()> {
+/// The last sequence number used by any table: rows share one sequence,
+/// so that history pages in journal order across tables.
+fn last_seq(conn: &Connection) -> i64 {
+    ["alarm_events", "state_history", "commands", "production"]
+        .iter()
+        .map(|t| {
+            conn.query_row(&format!("SELECT coalesce(max(seq), 0) FROM {t}"), [], |r| {
+                r.get::<_, i64>(0)
+            })
+            .unwrap_or(0)
+        })
+        .max()
+        .unwrap_or(0)
+}
+
+/// Writes `batch` in one transaction, numbering rows from `*seq + 1`;
+/// `*seq` moves only if the transaction commits.
+fn write_batch(conn: &mut Connection, batch: &[Entry], seq: &mut i64) -> rusqlite::Result<()> {
     let tx = conn.transaction()?;
+    let mut next = *seq;
     for e in batch {
+        next += 1;
         match e {
             Entry::Alarm {
                 at,
@@ -409,11 +564,21 @@ fn write_batch(conn: &mut Connection, batch: &[Entry]) -> rusqlite::Result<()> {
                 severity,
                 transition,
                 payload,
+                open,
             } => {
                 tx.prepare_cached(
-                    "INSERT INTO alarm_events (at_ms, alarm, kind, severity, transition, payload) VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
+                    "INSERT INTO alarm_events (seq, at_ms, alarm, kind, severity, transition, payload) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
                 )?
-                .execute(params![*at as i64, alarm, kind, severity, transition, payload])?;
+                .execute(params![next, *at as i64, alarm, kind, severity, transition, payload])?;
+                if *open {
+                    tx.prepare_cached(
+                        "INSERT OR REPLACE INTO alarm_current (alarm, at_ms, payload) VALUES (?1, ?2, ?3)",
+                    )?
+                    .execute(params![alarm, *at as i64, payload])?;
+                } else {
+                    tx.prepare_cached("DELETE FROM alarm_current WHERE alarm = ?1")?
+                        .execute(params![alarm])?;
+                }
             }
             Entry::State {
                 at,
@@ -423,13 +588,13 @@ fn write_batch(conn: &mut Connection, batch: &[Entry]) -> rusqlite::Result<()> {
                 element,
             } => {
                 tx.prepare_cached(
-                    "INSERT INTO state_history (at_ms, kind, state, fault_type, element) VALUES (?1, ?2, ?3, ?4, ?5)",
+                    "INSERT INTO state_history (seq, at_ms, kind, state, fault_type, element) VALUES (?1, ?2, ?3, ?4, ?5, ?6)",
                 )?
-                .execute(params![*at as i64, kind, state, fault_type, element])?;
+                .execute(params![next, *at as i64, kind, state, fault_type, element])?;
             }
             Entry::Part { at } => {
-                tx.prepare_cached("INSERT INTO production (at_ms) VALUES (?1)")?
-                    .execute(params![*at as i64])?;
+                tx.prepare_cached("INSERT INTO production (seq, at_ms) VALUES (?1, ?2)")?
+                    .execute(params![next, *at as i64])?;
             }
             Entry::Command {
                 at,
@@ -438,16 +603,19 @@ fn write_batch(conn: &mut Connection, batch: &[Entry]) -> rusqlite::Result<()> {
                 alarm,
                 nonce,
                 accepted,
+                verified,
                 detail,
             } => {
                 tx.prepare_cached(
-                    "INSERT INTO commands (at_ms, operator, action, alarm, nonce, accepted, detail) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7)",
+                    "INSERT INTO commands (seq, at_ms, operator, action, alarm, nonce, accepted, verified, detail) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)",
                 )?
-                .execute(params![*at as i64, operator, action, alarm, nonce, *accepted as i64, detail])?;
+                .execute(params![next, *at as i64, operator, action, alarm, nonce, *accepted as i64, *verified as i64, detail])?;
             }
         }
     }
-    tx.commit()
+    tx.commit()?;
+    *seq = next;
+    Ok(())
 }
 
 fn purge(conn: &Connection, retention: Duration, path: &Path) {
@@ -459,6 +627,76 @@ fn purge(conn: &Connection, retention: Duration, path: &Path) {
     }
 }
 
+/// What the journal keeps for the next start: the alarms not back to
+/// normal, the last machine-state row, and recent verified nonces.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Saved {
+    /// Payloads (JSON, as published) of the alarms not back to normal.
+    pub alarms: Vec<String>,
+    /// The last machine-state row: when, kind, state, fault type, element.
+    pub state: Option<SavedState>,
+    /// Nonces of verified commands since the given time, with their times.
+    pub nonces: Vec<(u64, String)>,
+}
+
+/// The last machine-state row.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SavedState {
+    /// When it was entered, ms.
+    pub at: u64,
+    /// History kind (`fault`, `recovery`, ...).
+    pub kind: String,
+    /// State name.
+    pub state: String,
+    /// Fault type, in `fault`.
+    pub fault_type: Option<String>,
+    /// Faulty element, in `fault` when known.
+    pub element: Option<String>,
+}
+
+/// Reads what was saved for a restart; nonces from `nonces_since` (ms).
+///
+/// # Errors
+/// SQLite failing.
+pub fn saved(conn: &Connection, nonces_since: u64) -> rusqlite::Result<Saved> {
+    let mut stmt = conn.prepare("SELECT payload FROM alarm_current ORDER BY at_ms, alarm")?;
+    let alarms = stmt
+        .query_map([], |r| r.get(0))?
+        .collect::<Result<Vec<String>, _>>()?;
+    let state = conn
+        .query_row(
+            "SELECT at_ms, kind, state, fault_type, element FROM state_history ORDER BY seq DESC LIMIT 1",
+            [],
+            |r| {
+                Ok(SavedState {
+                    at: r.get::<_, i64>(0)? as u64,
+                    kind: r.get(1)?,
+                    state: r.get(2)?,
+                    fault_type: r.get(3)?,
+                    element: r.get(4)?,
+                })
+            },
+        )
+        .map(Some)
+        .or_else(|e| match e {
+            rusqlite::Error::QueryReturnedNoRows => Ok(None),
+            e => Err(e),
+        })?;
+    let mut stmt = conn.prepare(
+        "SELECT at_ms, nonce FROM commands WHERE verified != 0 AND at_ms >= ?1 ORDER BY at_ms",
+    )?;
+    let nonces = stmt
+        .query_map([nonces_since as i64], |r| {
+            Ok((r.get::<_, i64>(0)? as u64, r.get(1)?))
+        })?
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(Saved {
+        alarms,
+        state,
+        nonces,
+    })
+}
+
 /// What a history query asks for.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct HistoryQuery {
@@ -468,15 +706,76 @@ pub struct HistoryQuery {
     pub until: Option<u64>,
     /// Only `alarm`, `state` or `command` rows.
     pub kind: Option<String>,
-    /// At most this many rows (newest kept), default 1000.
+    /// At most this many rows, default [`DEFAULT_ROWS`], at most
+    /// [`MAX_ROWS`].
     pub limit: Option<usize>,
+    /// Page forward: only rows after this sequence number, oldest first.
+    /// Without it, the newest rows are returned.
+    pub after: Option<i64>,
 }
 
-/// Runs a history query; rows oldest first.
+/// Rows returned when a query gives no limit.
+pub const DEFAULT_ROWS: usize = 1000;
+/// The most rows one reply carries.
+pub const MAX_ROWS: usize = 10_000;
+/// The most bytes of rows one reply carries (JSON); more rows come with
+/// `after` paging.
+pub const MAX_REPLY_BYTES: usize = 1 << 20;
+/// A text field longer than this, read from the journal, is cut (with `…`):
+/// one row never fills a reply.
+pub const MAX_FIELD_BYTES: usize = 16 * 1024;
+
+/// One bounded piece of history.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct HistoryPage {
+    /// [`HISTORY_SCHEMA`].
+    pub schema: &'static str,
+    /// The rows, oldest first.
+    pub rows: Vec<HistoryRow>,
+    /// More rows match than were returned: newer ones when paging with
+    /// `after`, older ones otherwise.
+    pub more: bool,
+    /// With `after` paging: the `after` of the next page (the last row's
+    /// sequence number) when there is more.
+    pub next: Option<i64>,
+}
+
+/// Schema name of history replies.
+pub const HISTORY_SCHEMA: &str = "cellwatch.history.v1";
+
+/// The SQL and columns of one table.
+fn table_query(table: &str, forward: bool) -> (String, &'static [&'static str], &'static str) {
+    let (name, cols, label): (&str, &[&str], &str) = match table {
+        "alarm" => (
+            "alarm_events",
+            &["alarm", "kind", "severity", "transition", "payload"],
+            "alarm",
+        ),
+        "state" => (
+            "state_history",
+            &["kind", "state", "fault_type", "element"],
+            "state",
+        ),
+        _ => (
+            "commands",
+            &["operator", "action", "alarm", "nonce", "accepted", "detail"],
+            "command",
+        ),
+    };
+    let order = if forward { "seq ASC" } else { "seq DESC" };
+    let sql = format!(
+        "SELECT seq, at_ms, {} FROM {name} WHERE at_ms >= ?1 AND at_ms < ?2 AND seq > ?3 ORDER BY {order} LIMIT ?4",
+        cols.join(", ")
+    );
+    (sql, cols, label)
+}
+
+/// Runs a history query: at most `limit` rows and [`MAX_REPLY_BYTES`] of
+/// them, oldest first. Memory stays bounded whatever the journal holds.
 ///
 /// # Errors
 /// An unknown `kind`, or SQLite failing.
-pub fn history(conn: &Connection, q: &HistoryQuery) -> Result<Vec<HistoryRow>, HistoryError> {
+pub fn history(conn: &Connection, q: &HistoryQuery) -> Result<HistoryPage, HistoryError> {
     let tables: &[&str] = match q.kind.as_deref() {
         None => &["alarm", "state", "command"],
         Some("alarm") => &["alarm"],
@@ -486,63 +785,88 @@ pub fn history(conn: &Connection, q: &HistoryQuery) -> Result<Vec<HistoryRow>, H
     };
     let since = q.since.unwrap_or(0) as i64;
     let until = q.until.map_or(i64::MAX, |u| u as i64);
-    let limit = q.limit.unwrap_or(1000).min(100_000);
-    let mut rows = Vec::new();
+    let limit = q.limit.unwrap_or(DEFAULT_ROWS).clamp(1, MAX_ROWS);
+    let forward = q.after.is_some();
+    let after = q.after.unwrap_or(-1);
+    // Each table gives at most `limit + 1` rows and the reply's byte budget:
+    // enough to fill the reply and to know whether there is more.
+    let mut rows: Vec<(HistoryRow, usize)> = Vec::new();
     for &t in tables {
-        let (sql, cols): (&str, &[&str]) = match t {
-            "alarm" => (
-                "SELECT seq, at_ms, alarm, kind, severity, transition, payload FROM alarm_events WHERE at_ms >= ?1 AND at_ms < ?2 ORDER BY at_ms DESC, seq DESC LIMIT ?3",
-                &["alarm", "kind", "severity", "transition", "payload"],
-            ),
-            "state" => (
-                "SELECT seq, at_ms, kind, state, fault_type, element FROM state_history WHERE at_ms >= ?1 AND at_ms < ?2 ORDER BY at_ms DESC, seq DESC LIMIT ?3",
-                &["kind", "state", "fault_type", "element"],
-            ),
-            _ => (
-                "SELECT seq, at_ms, operator, action, alarm, nonce, accepted, detail FROM commands WHERE at_ms >= ?1 AND at_ms < ?2 ORDER BY at_ms DESC, seq DESC LIMIT ?3",
-                &["operator", "action", "alarm", "nonce", "accepted", "detail"],
-            ),
-        };
-        let mut stmt = conn.prepare_cached(sql)?;
-        let table = match t {
-            "alarm" => "alarm",
-            "state" => "state",
-            _ => "command",
-        };
-        let mapped = stmt.query_map(params![since, until, limit as i64], |r| {
-            let mut fields = serde_json::Map::new();
-            for (i, c) in cols.iter().enumerate() {
-                let v: rusqlite::types::Value = r.get(i + 2)?;
-                let json = match v {
-                    rusqlite::types::Value::Null => serde_json::Value::Null,
-                    rusqlite::types::Value::Integer(n) if *c == "accepted" => {
-                        serde_json::Value::Bool(n != 0)
-                    }
-                    rusqlite::types::Value::Integer(n) => n.into(),
-                    rusqlite::types::Value::Text(s) if *c == "payload" => {
-                        serde_json::from_str(&s).unwrap_or(serde_json::Value::String(s))
-                    }
-                    rusqlite::types::Value::Text(s) => s.into(),
-                    other => format!("{other:?}").into(),
-                };
-                fields.insert((*c).to_string(), json);
+        let (sql, cols, table) = table_query(t, forward);
+        let mut stmt = conn.prepare_cached(&sql)?;
+        let mut found = stmt.query(params![since, until, after, (limit + 1) as i64])?;
+        let mut bytes = 0;
+        while let Some(r) = found.next()? {
+            let row = history_row(r, cols, table)?;
+            let size = serde_json::to_string(&row).map_or(0, |s| s.len()) + 1;
+            bytes += size;
+            rows.push((row, size));
+            if bytes > MAX_REPLY_BYTES {
+                break;
             }
-            Ok(HistoryRow {
-                seq: r.get(0)?,
-                table,
-                at: r.get::<_, i64>(1)? as u64,
-                fields,
-            })
-        })?;
-        for row in mapped {
-            rows.push(row?);
         }
     }
-    rows.sort_by_key(|r| (r.at, r.table, r.seq));
-    if rows.len() > limit {
-        rows.drain(..rows.len() - limit);
+    // Merge in journal order (the sequence is shared by the tables), keep
+    // the first rows when paging forward, the newest otherwise.
+    rows.sort_by_key(|(r, _)| (r.seq, r.table));
+    if !forward {
+        rows.reverse();
     }
-    Ok(rows)
+    let mut kept = Vec::new();
+    let mut bytes = 0;
+    let mut more = false;
+    for (row, size) in rows {
+        if kept.len() == limit || bytes + size > MAX_REPLY_BYTES {
+            more = true;
+            break;
+        }
+        bytes += size;
+        kept.push(row);
+    }
+    if !forward {
+        kept.reverse();
+    }
+    let next = (forward && more).then(|| kept.last().map_or(after, |r| r.seq));
+    Ok(HistoryPage {
+        schema: HISTORY_SCHEMA,
+        rows: kept,
+        more,
+        next,
+    })
+}
+
+fn history_row(
+    r: &rusqlite::Row<'_>,
+    cols: &[&str],
+    table: &'static str,
+) -> rusqlite::Result<HistoryRow> {
+    let mut fields = serde_json::Map::new();
+    for (i, c) in cols.iter().enumerate() {
+        let v: rusqlite::types::Value = r.get(i + 2)?;
+        let json = match v {
+            rusqlite::types::Value::Null => serde_json::Value::Null,
+            rusqlite::types::Value::Integer(n) if *c == "accepted" => {
+                serde_json::Value::Bool(n != 0)
+            }
+            rusqlite::types::Value::Integer(n) => n.into(),
+            rusqlite::types::Value::Text(s) if s.len() > MAX_FIELD_BYTES => {
+                crate::operator::clip(&s, MAX_FIELD_BYTES).into()
+            }
+            rusqlite::types::Value::Text(s) if *c == "payload" => {
+                serde_json::from_str(&s).unwrap_or(serde_json::Value::String(s))
+            }
+            rusqlite::types::Value::Text(s) => s.into(),
+            rusqlite::types::Value::Real(x) => x.into(),
+            rusqlite::types::Value::Blob(b) => format!("<{} bytes>", b.len()).into(),
+        };
+        fields.insert((*c).to_string(), json);
+    }
+    Ok(HistoryRow {
+        seq: r.get(0)?,
+        table,
+        at: r.get::<_, i64>(1)? as u64,
+        fields,
+    })
 }
 
 /// Machine-state rows and part times between `since` and `until` (ms), plus
@@ -617,6 +941,7 @@ mod tests {
             alarm: "ese".into(),
             nonce: "n1".into(),
             accepted: false,
+            verified: false,
             detail: "bad signature".into(),
         })
         .await
@@ -624,7 +949,7 @@ mod tests {
         let mut c = j.committed();
         c.wait_for(|n| *n >= 2).await.unwrap();
         let conn = open_read(&path).unwrap();
-        let rows = history(&conn, &HistoryQuery::default()).unwrap();
+        let rows = history(&conn, &HistoryQuery::default()).unwrap().rows;
         assert_eq!(rows.len(), 2);
         assert_eq!(rows[0].fields["element"], "X0.06");
         assert_eq!(rows[1].fields["accepted"], false);
@@ -635,7 +960,8 @@ mod tests {
                 ..Default::default()
             },
         )
-        .unwrap();
+        .unwrap()
+        .rows;
         assert_eq!(only.len(), 1);
         assert_eq!(
             history(
@@ -665,6 +991,7 @@ mod tests {
             severity: "critical".into(),
             transition: "raised".into(),
             payload: "{}".into(),
+            open: true,
         })
         .await
         .unwrap();
@@ -677,7 +1004,111 @@ mod tests {
                 ..Default::default()
             },
         )
-        .unwrap();
+        .unwrap()
+        .rows;
         assert!(rows.is_empty());
+    }
+
+    fn state(at: u64, n: usize) -> Entry {
+        Entry::State {
+            at,
+            kind: "normal".into(),
+            state: "running".into(),
+            fault_type: None,
+            element: Some(format!("row {n} {}", "x".repeat(200))),
+        }
+    }
+
+    #[tokio::test]
+    async fn history_comes_in_bounded_pages_in_journal_order() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("j.sqlite");
+        let now = crate::clock::now_ms();
+        let j = Journal::start(&path, Duration::from_secs(3600), Quiet).unwrap();
+        // Rows of two tables, interleaved: one sequence for all.
+        let mut rows = Vec::new();
+        for n in 0..12_000 {
+            rows.push(state(now, n));
+            if n % 1000 == 0 {
+                rows.push(Entry::Part { at: now });
+            }
+        }
+        j.commit(rows).await.unwrap();
+        let conn = open_read(&path).unwrap();
+        // The newest, bounded in bytes before rows.
+        let q = HistoryQuery {
+            limit: Some(MAX_ROWS),
+            ..Default::default()
+        };
+        let page = history(&conn, &q).unwrap();
+        let bytes = serde_json::to_string(&page).unwrap().len();
+        assert!(bytes <= MAX_REPLY_BYTES + 1024, "{bytes}");
+        assert!(page.more && page.next.is_none());
+        assert_eq!(
+            page.rows.last().unwrap().fields["element"]
+                .as_str()
+                .unwrap()[..9]
+                .to_string(),
+            "row 11999"
+        );
+        // Forward pages: every row once, in order.
+        let mut after = 0;
+        let mut seen = Vec::new();
+        loop {
+            let page = history(
+                &conn,
+                &HistoryQuery {
+                    limit: Some(MAX_ROWS),
+                    after: Some(after),
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            assert!(serde_json::to_string(&page).unwrap().len() <= MAX_REPLY_BYTES + 1024);
+            seen.extend(page.rows.iter().map(|r| r.seq));
+            match page.next {
+                Some(n) => after = n,
+                None => break,
+            }
+        }
+        // Parts are not history rows; the 12,000 states are, in order.
+        assert_eq!(seen.len(), 12_000);
+        assert!(seen.windows(2).all(|w| w[0] < w[1]));
+    }
+
+    struct Watch(std::sync::Arc<std::sync::Mutex<Vec<String>>>);
+    impl CommitObserver for Watch {
+        fn committed(&self, _: usize, _: Duration) {}
+        fn failed(&self, e: &str) {
+            self.0.lock().unwrap().push(e.to_string());
+        }
+    }
+
+    #[tokio::test]
+    async fn an_unwritable_journal_keeps_its_rows_and_writes_them_later() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("j.sqlite");
+        let now = crate::clock::now_ms();
+        let errors = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let j = Journal::start(&path, Duration::from_secs(3600), Watch(errors.clone())).unwrap();
+        j.commit(vec![state(now, 0)]).await.unwrap();
+        // Another process holds the journal's write lock: nothing can be
+        // written.
+        let admin = Connection::open(&path).unwrap();
+        admin.execute_batch("BEGIN IMMEDIATE").unwrap();
+        let mut health = j.health();
+        let big: Vec<Entry> = (1..400).map(|n| state(now, n)).collect();
+        assert!(j.commit(big).await.is_err());
+        health.wait_for(Option::is_some).await.unwrap();
+        assert!(!errors.lock().unwrap().is_empty());
+        // Released: the queued rows are written at the next retry, none
+        // lost.
+        admin.execute_batch("COMMIT").unwrap();
+        health.wait_for(Option::is_none).await.unwrap();
+        let conn = open_read(&path).unwrap();
+        let n: i64 = conn
+            .query_row("SELECT count(*) FROM state_history", [], |r| r.get(0))
+            .unwrap();
+        assert_eq!(n, 400);
     }
 }

@@ -32,6 +32,7 @@ pub fn entries(step: &CellStep) -> Vec<Entry> {
             severity: alarm.severity.as_str().into(),
             transition: transition.as_str().into(),
             payload: published.json.clone(),
+            open: alarm.state() != cellwatch_models::alarm::AlarmState::Normal,
         });
     }
     for (state, kind, at) in step.engine.states() {
@@ -61,6 +62,7 @@ pub fn entries(step: &CellStep) -> Vec<Entry> {
             alarm: c.alarm.clone(),
             nonce: c.nonce.clone(),
             accepted: c.accepted,
+            verified: c.verified,
             detail: c.detail.clone(),
         });
     }
@@ -79,10 +81,12 @@ impl Sink for JournalSink {
                 return;
             }
             // Committed before Zenoh publishes: a client who saw the alarm
-            // finds it in `history`. A failed commit is logged and counted
-            // by the writer; the alarm is still published.
+            // finds it in `history`. A journal that cannot write keeps the
+            // rows in its bounded queue and retries (the writer logs it
+            // once, and the cell loop raises the `journal` alarm); the
+            // alarm is still published.
             if let Err(e) = self.journal.commit(rows).await {
-                tracing::error!(error = %e, "journal rows lost");
+                tracing::debug!(error = %e, "journal rows queued, not yet written");
             }
         }
         .boxed()

@@ -93,3 +93,25 @@ pub async fn open(c: &ZenohConfig) -> Result<Session, ZenohError> {
         .await
         .map_err(|e| ZenohError::Open(e.to_string()))
 }
+
+/// Opens the agent's session: as [`open`], and no message larger than
+/// [`services::MAX_MESSAGE_BYTES`] is accepted from the network (Zenoh
+/// drops it while reassembling), so whatever arrives, the agent's memory
+/// stays bounded.
+///
+/// # Errors
+/// As [`open`].
+pub async fn open_agent(c: &ZenohConfig) -> Result<Session, ZenohError> {
+    let mut cfg = session_config(c)?;
+    let key = "transport/link/rx/max_message_size";
+    let value = services::MAX_MESSAGE_BYTES.to_string();
+    cfg.insert_json5(key, &value)
+        .map_err(|e| ZenohError::Config {
+            key: key.into(),
+            value,
+            reason: e.to_string(),
+        })?;
+    zenoh::open(cfg)
+        .await
+        .map_err(|e| ZenohError::Open(e.to_string()))
+}

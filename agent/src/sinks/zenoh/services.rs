@@ -1,7 +1,10 @@
 //! The agent's query services on Zenoh:
-//! - `<prefix>/history?since=1h;until=...;kind=state|alarm|command;limit=N`:
-//!   journal rows as a JSON array, oldest first, read from the journal file
-//!   on a blocking thread, never holding up the cell loop;
+//! - `<prefix>/history?since=1h;until=...;kind=state|alarm|command;limit=N;after=SEQ`:
+//!   one bounded page of journal rows ([`journal::HistoryPage`]: at most
+//!   [`journal::MAX_ROWS`] rows and [`journal::MAX_REPLY_BYTES`] bytes,
+//!   oldest first; the newest rows, or with `after` the rows after that
+//!   sequence number and the `next` one to ask for), read from the journal
+//!   file on a blocking thread, never holding up the cell loop;
 //! - `<prefix>/snapshot`: tag values with quality, active alarms, and the
 //!   values at the last fault ([`crate::payload::SnapshotPayload`]), asked
 //!   of the cell loop;
@@ -9,9 +12,13 @@
 //!   (or refused) by the cell loop; the reply is a
 //!   [`crate::cell::CommandOutcome`].
 //!
-//! Queries are answered concurrently, at most [`MAX_CONCURRENT`] at a time;
-//! more are told the agent is busy. A command payload larger than
-//! [`MAX_COMMAND_BYTES`] is refused before it is read.
+//! Queries are answered concurrently, at most [`MAX_CONCURRENT`] at a time
+//! and [`MAX_CONCURRENT_HISTORY`] history queries among them; more are told
+//! the agent is busy. Each queryable queues at most [`QUEUE`] queries. A
+//! command payload larger than [`MAX_COMMAND_BYTES`] is refused before it
+//! is parsed, and journaled by size, hash and a short prefix; no reply
+//! repeats the request. Refusals are counted
+//! (`cellwatch_requests_refused_total`).
 
 use std::collections::HashMap;
 use std::future::Future;
@@ -27,11 +34,19 @@ use super::ZenohError;
 use crate::cell::{CommandOutcome, Request};
 use crate::clock::{now_ms, parse_time};
 use crate::metrics::Metrics;
-use crate::operator::Command;
+use crate::operator::{Command, NotACommand};
 use crate::sinks::journal::{self, HistoryQuery};
 
 /// Queries answered at the same time; more are refused as busy.
 pub const MAX_CONCURRENT: usize = 16;
+/// History queries answered at the same time (each holds up to
+/// [`journal::MAX_REPLY_BYTES`]); more are refused as busy.
+pub const MAX_CONCURRENT_HISTORY: usize = 4;
+/// Queries waiting in each queryable's queue before Zenoh drops more.
+pub const QUEUE: usize = 32;
+/// The largest message the agent's Zenoh session accepts; a larger one is
+/// dropped by Zenoh before it reaches the agent.
+pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 /// The largest command payload read.
 pub const MAX_COMMAND_BYTES: usize = 4096;
 
@@ -48,6 +63,8 @@ pub struct Services {
     requests: mpsc::Sender<Request>,
     /// Bounds the queries being answered at once.
     permits: Arc<Semaphore>,
+    /// Bounds the history queries among them.
+    history_permits: Arc<Semaphore>,
     metrics: Arc<Metrics>,
 }
 
@@ -68,6 +85,7 @@ impl Services {
             async move {
                 session
                     .declare_queryable(key.clone())
+                    .with(zenoh::handlers::FifoChannel::new(QUEUE))
                     .await
                     .map_err(|e| ZenohError::Declare {
                         key,
@@ -82,6 +100,7 @@ impl Services {
             journal: journal.to_path_buf(),
             requests,
             permits: Arc::new(Semaphore::new(MAX_CONCURRENT)),
+            history_permits: Arc::new(Semaphore::new(MAX_CONCURRENT_HISTORY)),
             metrics,
         })
     }
@@ -99,22 +118,31 @@ impl Services {
                 Ok(q) = self.command.recv_async() => (Kind::Command, q),
                 Some(_) = answering.join_next(), if !answering.is_empty() => continue,
             };
-            let Ok(permit) = self.permits.clone().try_acquire_owned() else {
+            let history_permit = match kind {
+                Kind::History => self.history_permits.clone().try_acquire_owned().ok(),
+                _ => None,
+            };
+            let permit = self.permits.clone().try_acquire_owned().ok();
+            if permit.is_none() || (matches!(kind, Kind::History) && history_permit.is_none()) {
+                self.metrics.refused(kind.name(), "busy");
                 reply(&self.metrics, q, Err("the agent is busy: try again".into())).await;
                 continue;
-            };
+            }
             let (journal, requests, metrics) = (
                 self.journal.clone(),
                 self.requests.clone(),
                 self.metrics.clone(),
             );
             answering.spawn(async move {
-                let _permit = permit;
+                let _permits = (permit, history_permit);
                 let result = match kind {
                     Kind::History => history(&journal, q.parameters().as_str()).await,
                     Kind::Snapshot => snapshot(&requests).await,
-                    Kind::Command => command(&requests, &q).await,
+                    Kind::Command => command(&requests, &q, &metrics).await,
                 };
+                if matches!(kind, Kind::History) && result.is_err() {
+                    metrics.refused(kind.name(), "invalid");
+                }
                 reply(&metrics, q, result).await;
             });
         }
@@ -127,6 +155,16 @@ enum Kind {
     History,
     Snapshot,
     Command,
+}
+
+impl Kind {
+    fn name(self) -> &'static str {
+        match self {
+            Kind::History => "history",
+            Kind::Snapshot => "snapshot",
+            Kind::Command => "command",
+        }
+    }
 }
 
 async fn history(journal: &Path, parameters: &str) -> Result<String, String> {
@@ -158,6 +196,13 @@ pub fn history_query(parameters: &str, now: u64) -> Result<HistoryQuery, String>
             .map(|s| parse_time(s, now))
             .transpose()?,
         kind: params.get("kind").cloned(),
+        after: params
+            .get("after")
+            .map(|a| {
+                a.parse()
+                    .map_err(|_| format!("after '{a}' is not a sequence number"))
+            })
+            .transpose()?,
         limit: params
             .get("limit")
             .map(|l| {
@@ -178,17 +223,30 @@ async fn snapshot(requests: &mpsc::Sender<Request>) -> Result<String, String> {
     Ok(serde_json::to_string(&snap).unwrap_or_default())
 }
 
-async fn command(requests: &mpsc::Sender<Request>, q: &Query) -> Result<String, String> {
+async fn command(
+    requests: &mpsc::Sender<Request>,
+    q: &Query,
+    metrics: &Metrics,
+) -> Result<String, String> {
     let parsed = match q.payload() {
-        None => Err("no payload".to_string()),
-        Some(p) if p.len() > MAX_COMMAND_BYTES => Err(format!(
-            "payload of {} bytes; a command is at most {MAX_COMMAND_BYTES}",
-            p.len()
-        )),
-        Some(p) => match p.try_to_string() {
-            Err(_) => Err("payload is not UTF-8".to_string()),
-            Ok(text) => serde_json::from_str::<Command>(&text).map_err(|e| e.to_string()),
-        },
+        None => Err(NotACommand {
+            reason: "no payload".into(),
+        }),
+        // Never parsed; identified in the journal by size, hash and prefix.
+        Some(p) if p.len() > MAX_COMMAND_BYTES => {
+            metrics.refused("command", "too_large");
+            Err(NotACommand::payload(
+                &format!("larger than {MAX_COMMAND_BYTES} bytes"),
+                p.slices(),
+            ))
+        }
+        Some(p) => {
+            let bytes = p.to_bytes();
+            serde_json::from_slice::<Command>(&bytes).map_err(|e| {
+                metrics.refused("command", "invalid");
+                NotACommand::json(&e, &bytes)
+            })
+        }
     };
     let (tx, rx) = oneshot::channel();
     requests

@@ -1,0 +1,331 @@
+//! The real binary killed with SIGKILL and started again: alarms that were
+//! not back to normal come back as they were (state, `acked_by`,
+//! `raised_at`), are not counted as raised again, latched ones can be
+//! reset, and a command accepted before the kill is a replay after it.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use cellwatch::operator::{Action, Command as OperatorCommand};
+use cellwatch::sim::cnc::{SimOptions, SimulatedCnc};
+use cellwatch::sources::{opcua, pki};
+
+use crate::agent::free_port;
+use crate::util::root;
+
+const KEY: &str = "00112233445566778899aabbccddeeff00112233445566778899aabbccddeeff";
+
+/// Two transitions the simulated CNC can be made to take far too early:
+/// F17.00 off (all are on normally), then F17.01 off at once (expected 60 s
+/// later); same for F18.
+const TIMERS: &str = r#"{
+  "version": 1,
+  "method": "full-state",
+  "signals": ["F17.00", "F17.01", "F18.00", "F18.01"],
+  "transitions": [
+    {"id": 1, "from": ["-F17.00", "F17.01"], "event": {"tag": "F17.01", "edge": "fall"},
+     "to": ["-F17.00", "-F17.01"], "delta_ms": 65000, "min_ms": 64000, "max_ms": 66000,
+     "support": 4, "window_ms": [60000, 70000]},
+    {"id": 2, "from": ["-F18.00", "F18.01"], "event": {"tag": "F18.01", "edge": "fall"},
+     "to": ["-F18.00", "-F18.01"], "delta_ms": 65000, "min_ms": 64000, "max_ms": 66000,
+     "support": 4, "window_ms": [60000, 70000]}
+  ]
+}"#;
+
+struct Cell {
+    dir: PathBuf,
+    config: PathBuf,
+    zenoh_port: u16,
+    metrics_port: u16,
+}
+
+impl Cell {
+    fn spawn(&self, log: &str) -> Child {
+        Command::new(env!("CARGO_BIN_EXE_cellwatch"))
+            .args(["run", self.config.to_str().unwrap()])
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(self.dir.join(log)).unwrap())
+            .spawn()
+            .unwrap()
+    }
+
+    async fn client(&self) -> zenoh::Session {
+        cellwatch::sinks::zenoh::open(&cellwatch::config::ZenohConfig {
+            mode: cellwatch::config::ZenohMode::Peer,
+            connect: vec![format!("tcp/127.0.0.1:{}", self.zenoh_port)],
+            listen: vec![],
+            prefix: String::new(),
+            multicast_scouting: false,
+        })
+        .await
+        .unwrap()
+    }
+
+    fn log(&self, name: &str) -> String {
+        std::fs::read_to_string(self.dir.join(name)).unwrap_or_default()
+    }
+}
+
+/// The demo cell plus the two timers, with fresh ports and files in `dir`.
+fn cell(dir: &Path, sim: &SimulatedCnc) -> Cell {
+    let zenoh_port = free_port();
+    let metrics_port = free_port();
+    std::fs::write(dir.join("timers.json"), TIMERS).unwrap();
+    std::fs::write(
+        dir.join("operators.toml"),
+        format!("[operators]\nkim = \"{KEY}\"\n"),
+    )
+    .unwrap();
+    let demo = std::fs::read_to_string(root().join("config/demo.toml")).unwrap();
+    let config = demo
+        .replace("opc.tcp://127.0.0.1:48400/", &sim.endpoint())
+        .replace("ns=2;", &format!("ns={};", sim.namespace()))
+        .replace("tcp/127.0.0.1:7447", &format!("tcp/127.0.0.1:{zenoh_port}"))
+        .replace(
+            "# listen = \"127.0.0.1:9464\"",
+            &format!("listen = \"127.0.0.1:{metrics_port}\""),
+        )
+        .replace(
+            "# path = \"cellwatch-m01ps0004.sqlite\"",
+            "path = \"journal.sqlite\"",
+        )
+        .replace(
+            "# secrets_file = \"/etc/cellwatch/operators.toml\"",
+            "secrets_file = \"operators.toml\"",
+        )
+        .replace(
+            "program = \"cnc/",
+            &format!("program = \"{}/config/cnc/", root().display()),
+        )
+        .replace(
+            "comments = \"cnc/",
+            &format!("comments = \"{}/config/cnc/", root().display()),
+        )
+        + "\n[[checks.timers]]\nid = \"tmr\"\nmodel = \"timers.json\"\nseverity = \"high\"\n";
+    let path = dir.join("cell.toml");
+    std::fs::write(&path, config).unwrap();
+    Cell {
+        dir: dir.to_path_buf(),
+        config: path,
+        zenoh_port,
+        metrics_port,
+    }
+}
+
+/// One reply to `selector` (retried until the agent answers).
+pub(crate) async fn query(
+    session: &zenoh::Session,
+    selector: &str,
+    payload: Option<String>,
+) -> Result<String, String> {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    loop {
+        let mut get = session.get(selector).timeout(Duration::from_secs(3));
+        if let Some(p) = &payload {
+            get = get.payload(p.clone());
+        }
+        let replies = get.await.unwrap();
+        if let Ok(reply) = replies.recv_async().await {
+            return match reply.result() {
+                Ok(s) => Ok(s.payload().try_to_string().unwrap().into_owned()),
+                Err(e) => Err(e.payload().try_to_string().unwrap().into_owned()),
+            };
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "no reply to {selector}"
+        );
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+}
+
+/// Polls the snapshot until `ready` holds; returns it.
+async fn snapshot_until(
+    session: &zenoh::Session,
+    what: &str,
+    ready: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    loop {
+        let snap: serde_json::Value = serde_json::from_str(
+            &query(session, "cellwatch/m01ps0004/snapshot", None)
+                .await
+                .unwrap(),
+        )
+        .unwrap();
+        if ready(&snap) {
+            return snap;
+        }
+        assert!(tokio::time::Instant::now() < deadline, "{what}: {snap:#}");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+fn alarm<'a>(snap: &'a serde_json::Value, id: &str) -> Option<&'a serde_json::Value> {
+    snap["alarms"].as_array()?.iter().find(|a| a["id"] == id)
+}
+
+fn signed(action: Action, alarm: &str) -> String {
+    let mut c = OperatorCommand {
+        action,
+        alarm: alarm.into(),
+        operator: "kim".into(),
+        nonce: cellwatch::operator::nonce(),
+        issued_at: cellwatch::clock::now_ms(),
+        signature: String::new(),
+    };
+    c.sign("m01ps0004", &hex::decode(KEY).unwrap());
+    serde_json::to_string(&c).unwrap()
+}
+
+async fn send(session: &zenoh::Session, json: &str) -> (bool, String) {
+    let r: serde_json::Value = serde_json::from_str(
+        &query(
+            session,
+            "cellwatch/m01ps0004/command",
+            Some(json.to_string()),
+        )
+        .await
+        .unwrap(),
+    )
+    .unwrap();
+    (
+        r["accepted"].as_bool().unwrap(),
+        r["detail"].as_str().unwrap().to_string(),
+    )
+}
+
+fn scrape(port: u16) -> String {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
+    s.write_all(b"GET /metrics HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n")
+        .unwrap();
+    let mut body = String::new();
+    s.read_to_string(&mut body).unwrap();
+    body
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn killed_agent_restores_its_alarms_and_refuses_replays() {
+    let d = tempfile::tempdir().unwrap();
+    let sim = SimulatedCnc::start(&SimOptions {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        pki_dir: d.path().join("sim-pki"),
+        insecure: false,
+    })
+    .await
+    .unwrap();
+    let cell = cell(d.path(), &sim);
+    let parsed = cellwatch::config::load(&cell.config).unwrap();
+    drop(opcua::client(&parsed.cell, &parsed.opcua).unwrap());
+    pki::trust(
+        &pki::own_cert(&parsed.opcua.pki_dir),
+        &d.path().join("sim-pki"),
+    )
+    .unwrap();
+    pki::trust(
+        &pki::own_cert(&d.path().join("sim-pki")),
+        &parsed.opcua.pki_dir,
+    )
+    .unwrap();
+
+    let mut child = cell.spawn("agent-1.log");
+    let client = cell.client().await;
+    snapshot_until(&client, "the agent never settled", |s| {
+        s["state"] == "running"
+    })
+    .await;
+    // ESE active, acknowledged by kim; two latched timer alarms.
+    sim.set("X0.06", false).unwrap();
+    snapshot_until(&client, "ESE never raised", |s| alarm(s, "ese").is_some()).await;
+    let ack = signed(Action::Ack, "ese");
+    assert_eq!(send(&client, &ack).await, (true, "ack ese by kim".into()));
+    for (a, b) in [("F17.00", "F17.01"), ("F18.00", "F18.01")] {
+        sim.set(a, false).unwrap();
+        // The transition arms on the state PLC reports; wait for it.
+        snapshot_until(&client, "the timer's start state", |s| {
+            s["tags"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|t| t["address"] == a && t["value"] == false)
+        })
+        .await;
+        sim.set(b, false).unwrap();
+    }
+    let before = snapshot_until(&client, "two timer alarms and ESE acknowledged", |s| {
+        alarm(s, "tmr-001").is_some()
+            && alarm(s, "tmr-002").is_some()
+            && alarm(s, "ese").is_some_and(|a| a["state"] == "active_acknowledged")
+    })
+    .await;
+    child.kill().unwrap();
+    child.wait().unwrap();
+    drop(client);
+
+    let mut child = cell.spawn("agent-2.log");
+    let client = cell.client().await;
+    let after = snapshot_until(&client, "the restarted agent's alarms", |s| {
+        ["ese", "tmr-001", "tmr-002"]
+            .iter()
+            .all(|id| alarm(s, id).is_some())
+    })
+    .await;
+    for id in ["ese", "tmr-001", "tmr-002"] {
+        let (b, a) = (alarm(&before, id).unwrap(), alarm(&after, id).unwrap());
+        for field in ["state", "raised_at", "acked_by", "latched", "fault_type"] {
+            assert_eq!(
+                b[field],
+                a[field],
+                "{id}.{field}\n{}",
+                cell.log("agent-2.log")
+            );
+        }
+    }
+    assert_eq!(alarm(&after, "ese").unwrap()["acked_by"], "kim");
+    assert_eq!(alarm(&after, "tmr-001").unwrap()["latched"], true);
+    // Restored, not raised again.
+    let metrics = scrape(cell.metrics_port);
+    assert!(
+        !metrics
+            .lines()
+            .any(|l| l.starts_with("cellwatch_alarms_raised_total") && !l.ends_with(" 0")),
+        "{metrics}"
+    );
+    // The journal says what happened at the restart.
+    let history: serde_json::Value = serde_json::from_str(
+        &query(
+            &client,
+            "cellwatch/m01ps0004/history?since=1h;kind=alarm",
+            None,
+        )
+        .await
+        .unwrap(),
+    )
+    .unwrap();
+    let restored = history["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["fields"]["transition"] == "restored")
+        .count();
+    assert!(restored >= 3, "{history:#}");
+    // The ack accepted before the kill is a replay after it.
+    let (accepted, detail) = send(&client, &ack).await;
+    assert!(!accepted && detail.contains("replayed"), "{detail}");
+    // A latched one resets, its condition being gone.
+    assert_eq!(
+        send(&client, &signed(Action::Reset, "tmr-001")).await,
+        (true, "reset tmr-001 by kim".into())
+    );
+    // ESE follows the fresh values: the switch closes, it clears.
+    sim.set("X0.06", true).unwrap();
+    snapshot_until(&client, "ESE cleared by fresh values", |s| {
+        alarm(s, "ese").is_none()
+    })
+    .await;
+    child.kill().unwrap();
+    child.wait().unwrap();
+    sim.stop();
+}
