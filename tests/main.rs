@@ -8,6 +8,7 @@
 
 mod agent;
 mod bad_input;
+mod bounded;
 mod cell_loop;
 mod dashboards;
 mod durability;

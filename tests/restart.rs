@@ -33,15 +33,15 @@ const TIMERS: &str = r#"{
   ]
 }"#;
 
-struct Cell {
-    dir: PathBuf,
-    config: PathBuf,
+pub(crate) struct Cell {
+    pub(crate) dir: PathBuf,
+    pub(crate) config: PathBuf,
     zenoh_port: u16,
-    metrics_port: u16,
+    pub(crate) metrics_port: u16,
 }
 
 impl Cell {
-    fn spawn(&self, log: &str) -> Child {
+    pub(crate) fn spawn(&self, log: &str) -> Child {
         Command::new(env!("CARGO_BIN_EXE_cellwatch"))
             .args(["run", self.config.to_str().unwrap()])
             .stdout(Stdio::null())
@@ -50,7 +50,7 @@ impl Cell {
             .unwrap()
     }
 
-    async fn client(&self) -> zenoh::Session {
+    pub(crate) async fn client(&self) -> zenoh::Session {
         cellwatch::sinks::zenoh::open(&cellwatch::config::ZenohConfig {
             mode: cellwatch::config::ZenohMode::Peer,
             connect: vec![format!("tcp/127.0.0.1:{}", self.zenoh_port)],
@@ -62,13 +62,13 @@ impl Cell {
         .unwrap()
     }
 
-    fn log(&self, name: &str) -> String {
+    pub(crate) fn log(&self, name: &str) -> String {
         std::fs::read_to_string(self.dir.join(name)).unwrap_or_default()
     }
 }
 
 /// The demo cell plus the two timers, with fresh ports and files in `dir`.
-fn cell(dir: &Path, sim: &SimulatedCnc) -> Cell {
+pub(crate) fn cell(dir: &Path, sim: &SimulatedCnc) -> Cell {
     let zenoh_port = free_port();
     let metrics_port = free_port();
     std::fs::write(dir.join("timers.json"), TIMERS).unwrap();
@@ -105,6 +105,11 @@ fn cell(dir: &Path, sim: &SimulatedCnc) -> Cell {
         + "\n[[checks.timers]]\nid = \"tmr\"\nmodel = \"timers.json\"\nseverity = \"high\"\n";
     let path = dir.join("cell.toml");
     std::fs::write(&path, config).unwrap();
+    // The agent and the simulator trust each other's certificates.
+    let parsed = cellwatch::config::load(&path).unwrap();
+    drop(opcua::client(&parsed.cell, &parsed.opcua).unwrap());
+    pki::trust(&pki::own_cert(&parsed.opcua.pki_dir), &dir.join("sim-pki")).unwrap();
+    pki::trust(&pki::own_cert(&dir.join("sim-pki")), &parsed.opcua.pki_dir).unwrap();
     Cell {
         dir: dir.to_path_buf(),
         config: path,
@@ -141,7 +146,7 @@ pub(crate) async fn query(
 }
 
 /// Polls the snapshot until `ready` holds; returns it.
-async fn snapshot_until(
+pub(crate) async fn snapshot_until(
     session: &zenoh::Session,
     what: &str,
     ready: impl Fn(&serde_json::Value) -> bool,
@@ -166,7 +171,7 @@ fn alarm<'a>(snap: &'a serde_json::Value, id: &str) -> Option<&'a serde_json::Va
     snap["alarms"].as_array()?.iter().find(|a| a["id"] == id)
 }
 
-fn signed(action: Action, alarm: &str) -> String {
+pub(crate) fn signed(action: Action, alarm: &str) -> String {
     let mut c = OperatorCommand {
         action,
         alarm: alarm.into(),
@@ -179,7 +184,7 @@ fn signed(action: Action, alarm: &str) -> String {
     serde_json::to_string(&c).unwrap()
 }
 
-async fn send(session: &zenoh::Session, json: &str) -> (bool, String) {
+pub(crate) async fn send(session: &zenoh::Session, json: &str) -> (bool, String) {
     let r: serde_json::Value = serde_json::from_str(
         &query(
             session,
@@ -196,7 +201,7 @@ async fn send(session: &zenoh::Session, json: &str) -> (bool, String) {
     )
 }
 
-fn scrape(port: u16) -> String {
+pub(crate) fn scrape(port: u16) -> String {
     use std::io::{Read, Write};
     let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
     s.write_all(b"GET /metrics HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n")
@@ -217,18 +222,6 @@ async fn killed_agent_restores_its_alarms_and_refuses_replays() {
     .await
     .unwrap();
     let cell = cell(d.path(), &sim);
-    let parsed = cellwatch::config::load(&cell.config).unwrap();
-    drop(opcua::client(&parsed.cell, &parsed.opcua).unwrap());
-    pki::trust(
-        &pki::own_cert(&parsed.opcua.pki_dir),
-        &d.path().join("sim-pki"),
-    )
-    .unwrap();
-    pki::trust(
-        &pki::own_cert(&d.path().join("sim-pki")),
-        &parsed.opcua.pki_dir,
-    )
-    .unwrap();
 
     let mut child = cell.spawn("agent-1.log");
     let client = cell.client().await;
