@@ -96,25 +96,7 @@ impl Fixture {
     }
 
     async fn query(&self, selector: &str, payload: Option<String>) -> Result<String, String> {
-        let deadline = tokio::time::Instant::now() + Duration::from_secs(20);
-        loop {
-            let mut get = self.client.get(selector).timeout(Duration::from_secs(3));
-            if let Some(p) = &payload {
-                get = get.payload(p.clone());
-            }
-            let replies = get.await.unwrap();
-            if let Ok(reply) = replies.recv_async().await {
-                return match reply.result() {
-                    Ok(s) => Ok(s.payload().try_to_string().unwrap().into_owned()),
-                    Err(e) => Err(e.payload().try_to_string().unwrap().into_owned()),
-                };
-            }
-            assert!(
-                tokio::time::Instant::now() < deadline,
-                "no reply to {selector}"
-            );
-            tokio::time::sleep(Duration::from_millis(200)).await;
-        }
+        crate::spawned::query(&self.client, selector, payload).await
     }
 
     /// The rows of one history page.

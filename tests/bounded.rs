@@ -6,9 +6,7 @@
 
 use std::time::Duration;
 
-use cellwatch::sim::cnc::{SimOptions, SimulatedCnc};
-
-use crate::restart::{cell, snapshot_until};
+use crate::spawned::{snapshot_until, start};
 
 /// The resident set of process `pid`, bytes.
 fn rss(pid: u32) -> u64 {
@@ -36,14 +34,7 @@ fn command_bytes(journal: &std::path::Path) -> (i64, i64) {
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn oversized_commands_and_history_floods_stay_bounded() {
     let d = tempfile::tempdir().unwrap();
-    let sim = SimulatedCnc::start(&SimOptions {
-        listen: "127.0.0.1:0".parse().unwrap(),
-        pki_dir: d.path().join("sim-pki"),
-        insecure: false,
-    })
-    .await
-    .unwrap();
-    let cell = cell(d.path(), &sim);
+    let (sim, cell) = start(d.path()).await;
     let mut child = cell.spawn("agent.log");
     let client = cell.client().await;
     snapshot_until(&client, "the agent never settled", |s| {
@@ -146,7 +137,7 @@ async fn oversized_commands_and_history_floods_stay_bounded() {
         bytes_after - bytes_before
     );
     // The refusals are counted.
-    let metrics = crate::restart::scrape(cell.metrics_port);
+    let metrics = crate::spawned::scrape(cell.metrics_port);
     assert!(
         metrics.contains("cellwatch_requests_refused_total{cell=\"m01ps0004\",reason=\"too_large\",service=\"command\"} "),
         "{metrics}"

@@ -5,10 +5,6 @@
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use cellwatch::sim::cnc::{SimOptions, SimulatedCnc};
-use cellwatch::sources::{opcua, pki};
-
-use crate::agent::free_port;
 use crate::util::root;
 
 fn scrape(addr: &str) -> Option<String> {
@@ -31,58 +27,9 @@ fn metric(body: &str, name: &str) -> Option<f64> {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn killed_agent_keeps_every_committed_row() {
     let dir = tempfile::tempdir().unwrap();
-    let sim = SimulatedCnc::start(&SimOptions {
-        listen: "127.0.0.1:0".parse().unwrap(),
-        pki_dir: dir.path().join("sim-pki"),
-        insecure: false,
-    })
-    .await
-    .unwrap();
-    // A cell configuration file for the child process.
-    let metrics_port = free_port();
-    let zenoh_port = free_port();
-    let demo = std::fs::read_to_string(root().join("config/demo.toml")).unwrap();
-    let config = demo
-        .replace("opc.tcp://127.0.0.1:48400/", &sim.endpoint())
-        .replace("ns=2;", &format!("ns={};", sim.namespace()))
-        .replace("tcp/127.0.0.1:7447", &format!("tcp/127.0.0.1:{zenoh_port}"))
-        .replace(
-            "# listen = \"127.0.0.1:9464\"",
-            &format!("listen = \"127.0.0.1:{metrics_port}\""),
-        )
-        .replace(
-            "# path = \"cellwatch-m01ps0004.sqlite\"",
-            "path = \"journal.sqlite\"",
-        )
-        .replace(
-            "program = \"cnc/",
-            &format!("program = \"{}/config/cnc/", root().display()),
-        )
-        .replace(
-            "comments = \"cnc/",
-            &format!("comments = \"{}/config/cnc/", root().display()),
-        );
-    let config_path = dir.path().join("cell.toml");
-    std::fs::write(&config_path, config).unwrap();
-    let parsed = cellwatch::config::load(&config_path).unwrap();
-    drop(opcua::client(&parsed.cell, &parsed.opcua).unwrap());
-    pki::trust(
-        &pki::own_cert(&parsed.opcua.pki_dir),
-        &dir.path().join("sim-pki"),
-    )
-    .unwrap();
-    pki::trust(
-        &pki::own_cert(&dir.path().join("sim-pki")),
-        &parsed.opcua.pki_dir,
-    )
-    .unwrap();
-
-    let mut child = Command::new(env!("CARGO_BIN_EXE_cellwatch"))
-        .args(["run", config_path.to_str().unwrap()])
-        .stdout(Stdio::null())
-        .stderr(std::fs::File::create(dir.path().join("agent.log")).unwrap())
-        .spawn()
-        .unwrap();
+    let (sim, cell) = crate::spawned::start(dir.path()).await;
+    let mut child = cell.spawn("agent.log");
+    let metrics_port = cell.metrics_port;
     let addr = format!("127.0.0.1:{metrics_port}");
     // Faults come and go while the agent journals them.
     let start = Instant::now();

@@ -17,5 +17,6 @@ mod opcua;
 mod report;
 mod restart;
 mod sf;
+mod spawned;
 mod timers;
 mod util;

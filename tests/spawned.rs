@@ -1,0 +1,224 @@
+//! The real `cellwatch` binary as a child process on the demo cell (plus two
+//! transition timers and an operator key), beside a simulated CNC: what the
+//! tests that kill it, measure it or flood it share.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use cellwatch::operator::{Action, Command as OperatorCommand};
+use cellwatch::sim::cnc::{SimOptions, SimulatedCnc};
+use cellwatch::sources::{opcua, pki};
+
+use crate::agent::free_port;
+use crate::util::root;
+
+pub(crate) const KEY: &str = "00112233445566778899aabbccddeeff00112233445566778899aabbccddeeff";
+
+/// Two transitions the simulated CNC can be made to take far too early:
+/// F17.00 off (all are on normally), then F17.01 off at once (expected 60 s
+/// later); same for F18.
+const TIMERS: &str = r#"{
+  "version": 1,
+  "method": "full-state",
+  "signals": ["F17.00", "F17.01", "F18.00", "F18.01"],
+  "transitions": [
+    {"id": 1, "from": ["-F17.00", "F17.01"], "event": {"tag": "F17.01", "edge": "fall"},
+     "to": ["-F17.00", "-F17.01"], "delta_ms": 65000, "min_ms": 64000, "max_ms": 66000,
+     "support": 4, "window_ms": [60000, 70000]},
+    {"id": 2, "from": ["-F18.00", "F18.01"], "event": {"tag": "F18.01", "edge": "fall"},
+     "to": ["-F18.00", "-F18.01"], "delta_ms": 65000, "min_ms": 64000, "max_ms": 66000,
+     "support": 4, "window_ms": [60000, 70000]}
+  ]
+}"#;
+
+pub(crate) struct Cell {
+    pub(crate) dir: PathBuf,
+    pub(crate) config: PathBuf,
+    zenoh_port: u16,
+    pub(crate) metrics_port: u16,
+}
+
+impl Cell {
+    pub(crate) fn spawn(&self, log: &str) -> Child {
+        Command::new(env!("CARGO_BIN_EXE_cellwatch"))
+            .args(["run", self.config.to_str().unwrap()])
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(self.dir.join(log)).unwrap())
+            .spawn()
+            .unwrap()
+    }
+
+    pub(crate) async fn client(&self) -> zenoh::Session {
+        cellwatch::sinks::zenoh::open(&cellwatch::config::ZenohConfig {
+            mode: cellwatch::config::ZenohMode::Peer,
+            connect: vec![format!("tcp/127.0.0.1:{}", self.zenoh_port)],
+            listen: vec![],
+            prefix: String::new(),
+            multicast_scouting: false,
+        })
+        .await
+        .unwrap()
+    }
+
+    pub(crate) fn log(&self, name: &str) -> String {
+        std::fs::read_to_string(self.dir.join(name)).unwrap_or_default()
+    }
+}
+
+/// A simulated CNC and, in `dir`, the configuration of an agent watching it.
+pub(crate) async fn start(dir: &Path) -> (SimulatedCnc, Cell) {
+    let sim = SimulatedCnc::start(&SimOptions {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        pki_dir: dir.join("sim-pki"),
+        insecure: false,
+    })
+    .await
+    .unwrap();
+    let cell = cell(dir, &sim);
+    (sim, cell)
+}
+
+/// The demo cell plus the two timers, with fresh ports and files in `dir`.
+pub(crate) fn cell(dir: &Path, sim: &SimulatedCnc) -> Cell {
+    let zenoh_port = free_port();
+    let metrics_port = free_port();
+    std::fs::write(dir.join("timers.json"), TIMERS).unwrap();
+    std::fs::write(
+        dir.join("operators.toml"),
+        format!("[operators]\nkim = \"{KEY}\"\n"),
+    )
+    .unwrap();
+    let demo = std::fs::read_to_string(root().join("config/demo.toml")).unwrap();
+    let config = demo
+        .replace("opc.tcp://127.0.0.1:48400/", &sim.endpoint())
+        .replace("ns=2;", &format!("ns={};", sim.namespace()))
+        .replace("tcp/127.0.0.1:7447", &format!("tcp/127.0.0.1:{zenoh_port}"))
+        .replace(
+            "# listen = \"127.0.0.1:9464\"",
+            &format!("listen = \"127.0.0.1:{metrics_port}\""),
+        )
+        .replace(
+            "# path = \"cellwatch-m01ps0004.sqlite\"",
+            "path = \"journal.sqlite\"",
+        )
+        .replace(
+            "# secrets_file = \"/etc/cellwatch/operators.toml\"",
+            "secrets_file = \"operators.toml\"",
+        )
+        .replace(
+            "program = \"cnc/",
+            &format!("program = \"{}/config/cnc/", root().display()),
+        )
+        .replace(
+            "comments = \"cnc/",
+            &format!("comments = \"{}/config/cnc/", root().display()),
+        )
+        + "\n[[checks.timers]]\nid = \"tmr\"\nmodel = \"timers.json\"\nseverity = \"high\"\n";
+    let path = dir.join("cell.toml");
+    std::fs::write(&path, config).unwrap();
+    // The agent and the simulator trust each other's certificates.
+    let parsed = cellwatch::config::load(&path).unwrap();
+    drop(opcua::client(&parsed.cell, &parsed.opcua).unwrap());
+    pki::trust(&pki::own_cert(&parsed.opcua.pki_dir), &dir.join("sim-pki")).unwrap();
+    pki::trust(&pki::own_cert(&dir.join("sim-pki")), &parsed.opcua.pki_dir).unwrap();
+    Cell {
+        dir: dir.to_path_buf(),
+        config: path,
+        zenoh_port,
+        metrics_port,
+    }
+}
+
+/// One reply to `selector` (retried until the agent answers).
+pub(crate) async fn query(
+    session: &zenoh::Session,
+    selector: &str,
+    payload: Option<String>,
+) -> Result<String, String> {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    loop {
+        let mut get = session.get(selector).timeout(Duration::from_secs(3));
+        if let Some(p) = &payload {
+            get = get.payload(p.clone());
+        }
+        let replies = get.await.unwrap();
+        if let Ok(reply) = replies.recv_async().await {
+            return match reply.result() {
+                Ok(s) => Ok(s.payload().try_to_string().unwrap().into_owned()),
+                Err(e) => Err(e.payload().try_to_string().unwrap().into_owned()),
+            };
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "no reply to {selector}"
+        );
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+}
+
+/// Polls the snapshot until `ready` holds; returns it.
+pub(crate) async fn snapshot_until(
+    session: &zenoh::Session,
+    what: &str,
+    ready: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    loop {
+        let snap: serde_json::Value = serde_json::from_str(
+            &query(session, "cellwatch/m01ps0004/snapshot", None)
+                .await
+                .unwrap(),
+        )
+        .unwrap();
+        if ready(&snap) {
+            return snap;
+        }
+        assert!(tokio::time::Instant::now() < deadline, "{what}: {snap:#}");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+pub(crate) fn alarm<'a>(snap: &'a serde_json::Value, id: &str) -> Option<&'a serde_json::Value> {
+    snap["alarms"].as_array()?.iter().find(|a| a["id"] == id)
+}
+
+pub(crate) fn signed(action: Action, alarm: &str) -> String {
+    let mut c = OperatorCommand {
+        action,
+        alarm: alarm.into(),
+        operator: "kim".into(),
+        nonce: cellwatch::operator::nonce(),
+        issued_at: cellwatch::clock::now_ms(),
+        signature: String::new(),
+    };
+    c.sign("m01ps0004", &hex::decode(KEY).unwrap());
+    serde_json::to_string(&c).unwrap()
+}
+
+pub(crate) async fn send(session: &zenoh::Session, json: &str) -> (bool, String) {
+    let r: serde_json::Value = serde_json::from_str(
+        &query(
+            session,
+            "cellwatch/m01ps0004/command",
+            Some(json.to_string()),
+        )
+        .await
+        .unwrap(),
+    )
+    .unwrap();
+    (
+        r["accepted"].as_bool().unwrap(),
+        r["detail"].as_str().unwrap().to_string(),
+    )
+}
+
+pub(crate) fn scrape(port: u16) -> String {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
+    s.write_all(b"GET /metrics HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n")
+        .unwrap();
+    let mut body = String::new();
+    s.read_to_string(&mut body).unwrap();
+    body
+}
