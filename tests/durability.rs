@@ -2,7 +2,7 @@
 //! committed (its `cellwatch_journal_rows_committed_total`) is in the SQLite
 //! file afterwards, and the file is intact. And the README's main command.
 
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use crate::util::root;

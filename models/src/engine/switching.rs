@@ -167,27 +167,30 @@ impl CheckSet for SwitchingChecks {
                 continue;
             }
             self.reported[c] = Some(fault);
-            let known = |x: &Signal| {
-                self.cell
-                    .signal_index(x)
-                    .filter(|&i| self.known[i as usize])
-                    .map(|i| self.cell.value(i))
-            };
-            out.push(finding(check, fault, &known, signal, before));
+            out.push(finding(
+                check,
+                fault,
+                &|x| self.known_value(x),
+                signal,
+                before,
+            ));
         }
     }
 }
 
 impl SwitchingChecks {
+    /// Signal `x`'s value, `None` while unknown.
+    fn known_value(&self, x: &Signal) -> Option<bool> {
+        self.cell
+            .signal_index(x)
+            .filter(|&i| self.known[i as usize])
+            .map(|i| self.cell.value(i))
+    }
+
     /// Whether check `c`, some of whose inputs are unknown, is at fault
     /// whatever they hold.
     fn certain_fault(&self, c: usize) -> bool {
-        let known = |x: &Signal| {
-            self.cell
-                .signal_index(x)
-                .filter(|&i| self.known[i as usize])
-                .map(|i| self.cell.value(i))
-        };
+        let known = |x: &Signal| self.known_value(x);
         let check = &self.checks[c];
         let armed = check
             .armed_when

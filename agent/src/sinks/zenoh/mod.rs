@@ -88,7 +88,10 @@ pub fn session_config(c: &ZenohConfig) -> Result<zenoh::Config, ZenohError> {
 /// # Errors
 /// The configuration is refused or the endpoints cannot be bound.
 pub async fn open(c: &ZenohConfig) -> Result<Session, ZenohError> {
-    let cfg = session_config(c)?;
+    open_config(session_config(c)?).await
+}
+
+async fn open_config(cfg: zenoh::Config) -> Result<Session, ZenohError> {
     zenoh::open(cfg)
         .await
         .map_err(|e| ZenohError::Open(e.to_string()))
@@ -111,7 +114,5 @@ pub async fn open_agent(c: &ZenohConfig) -> Result<Session, ZenohError> {
             value,
             reason: e.to_string(),
         })?;
-    zenoh::open(cfg)
-        .await
-        .map_err(|e| ZenohError::Open(e.to_string()))
+    open_config(cfg).await
 }
