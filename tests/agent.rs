@@ -28,13 +28,10 @@ pub(crate) fn free_port() -> u16 {
 
 /// The demo configuration, pointed at `sim` and at fresh ports and files
 /// under `dir`.
-pub(crate) fn config(dir: &Path, sim_endpoint: &str, ns: u16, zenoh_port: u16) -> CellConfig {
+pub(crate) fn config(dir: &Path, sim_endpoint: &str, zenoh_port: u16) -> CellConfig {
     let mut c = config::load(&root().join("config/demo.toml")).unwrap();
     c.opcua.endpoint = sim_endpoint.to_string();
     c.opcua.pki_dir = dir.join("agent-pki");
-    for t in &mut c.tags {
-        t.node_id = t.node_id.replace("ns=2;", &format!("ns={ns};"));
-    }
     c.journal.path = dir.join("journal.sqlite");
     c.zenoh.listen = vec![format!("tcp/127.0.0.1:{zenoh_port}")];
     c.metrics = Some("127.0.0.1:0".parse().unwrap());
@@ -62,10 +59,11 @@ impl Fixture {
             listen: "127.0.0.1:0".parse().unwrap(),
             pki_dir: dir.join("sim-pki"),
             insecure: false,
+            decoy: None,
         };
         let sim = SimulatedCnc::start(&sim_opts).await.unwrap();
         let zenoh_port = free_port();
-        let config = config(&dir, &sim.endpoint(), sim.namespace(), zenoh_port);
+        let config = config(&dir, &sim.endpoint(), zenoh_port);
         drop(opcua::client("test", &config.opcua).unwrap());
         pki::trust(&pki::own_cert(&config.opcua.pki_dir), &dir.join("sim-pki")).unwrap();
         pki::trust(&pki::own_cert(&dir.join("sim-pki")), &config.opcua.pki_dir).unwrap();
@@ -300,6 +298,7 @@ async fn server_outage_is_one_communication_alarm_and_faults_resume() {
         listen: fx.sim_addr,
         pki_dir: fx.dir.join("sim-pki"),
         insecure: false,
+        decoy: None,
     };
     let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
     fx.sim = loop {
@@ -476,17 +475,13 @@ pub(crate) async fn line_cell(dir: &Path) -> (cellwatch::sim::line::SimulatedLin
         listen: "127.0.0.1:0".parse().unwrap(),
         pki_dir: dir.join("sim-pki"),
         insecure: false,
+        decoy: None,
     })
     .await
     .unwrap();
     let mut c = config::load(&root().join("config/line.toml")).unwrap();
     c.opcua.endpoint = sim.endpoint();
     c.opcua.pki_dir = dir.join("agent-pki");
-    for t in &mut c.tags {
-        t.node_id = t
-            .node_id
-            .replace("ns=2;", &format!("ns={};", sim.namespace()));
-    }
     c.journal.path = dir.join("journal.sqlite");
     let zenoh_port = free_port();
     c.zenoh.listen = vec![format!("tcp/127.0.0.1:{zenoh_port}")];

@@ -28,10 +28,11 @@ pub(crate) fn opcua_config(endpoint: &str, pki_dir: &std::path::Path) -> OpcUaCo
         identity: Identity::Anonymous,
         publishing_interval: Duration::from_millis(50),
         sampling_interval: Duration::from_millis(20),
+        namespace_uri: None,
     }
 }
 
-async fn next(
+pub(crate) async fn next(
     rx: &mut mpsc::Receiver<SourceEvent>,
     what: &str,
     f: impl Fn(&SourceEvent) -> bool,
@@ -50,7 +51,7 @@ async fn next(
 
 /// Waits until every condition has matched some event, in any order
 /// (changes in one publish arrive in no particular order).
-async fn all(
+pub(crate) async fn all(
     rx: &mut mpsc::Receiver<SourceEvent>,
     what: &str,
     conditions: &[&dyn Fn(&SourceEvent) -> bool],
@@ -69,7 +70,7 @@ async fn all(
 }
 
 /// Whether `e` delivers `reading` for tag `tag`.
-fn has(e: &SourceEvent, tag: usize, reading: Reading) -> bool {
+pub(crate) fn has(e: &SourceEvent, tag: usize, reading: Reading) -> bool {
     matches!(e, SourceEvent::Readings(rs) if rs.iter().any(|r| r.tag == tag && r.reading == reading))
 }
 
@@ -86,6 +87,7 @@ async fn source_reads_the_simulator_securely() {
         listen: "127.0.0.1:0".parse().unwrap(),
         pki_dir: server_pki.clone(),
         insecure: false,
+        decoy: None,
     })
     .await
     .unwrap();
@@ -141,6 +143,7 @@ async fn unknown_server_certificate_is_rejected() {
         listen: "127.0.0.1:0".parse().unwrap(),
         pki_dir: server_pki.clone(),
         insecure: false,
+        decoy: None,
     })
     .await
     .unwrap();

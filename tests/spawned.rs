@@ -72,6 +72,7 @@ pub(crate) async fn start(dir: &Path) -> (SimulatedCnc, Cell) {
         listen: "127.0.0.1:0".parse().unwrap(),
         pki_dir: dir.join("sim-pki"),
         insecure: false,
+        decoy: None,
     })
     .await
     .unwrap();
@@ -92,7 +93,6 @@ pub(crate) fn cell(dir: &Path, sim: &SimulatedCnc) -> Cell {
     let demo = std::fs::read_to_string(root().join("config/demo.toml")).unwrap();
     let config = demo
         .replace("opc.tcp://127.0.0.1:48400/", &sim.endpoint())
-        .replace("ns=2;", &format!("ns={};", sim.namespace()))
         .replace("tcp/127.0.0.1:7447", &format!("tcp/127.0.0.1:{zenoh_port}"))
         .replace(
             "# listen = \"127.0.0.1:9464\"",

@@ -270,6 +270,10 @@ impl CellLoop {
             SourceEvent::Readings(readings) => {
                 (Input::Readings, self.engine.on_readings(&readings, now))
             }
+            SourceEvent::Problem { id, problem } => (
+                Input::System,
+                self.engine.on_system(&id, problem.as_deref(), now),
+            ),
         };
         self.dispatch(now, input, step, queue_depth).await;
     }

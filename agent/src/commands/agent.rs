@@ -133,6 +133,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         listen,
         pki_dir: sim_pki.clone(),
         insecure: false,
+        decoy: None,
     })
     .await
     .map_err(Failure::runtime)?;
@@ -191,6 +192,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
             listen: endpoint_addr(&l.opcua.endpoint)?,
             pki_dir: line_pki.clone(),
             insecure: false,
+            decoy: None,
         };
         let line_sim = SimulatedLine::start(&options)
             .await

@@ -15,6 +15,7 @@ pub(crate) async fn cnc(args: &SimulateArgs, out: &mut dyn Write) -> Result<(), 
         listen: args.listen,
         pki_dir: args.pki_dir.clone(),
         insecure: args.insecure,
+        decoy: None,
     })
     .await
     .map_err(Failure::Runtime)?;

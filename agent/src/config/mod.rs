@@ -14,7 +14,7 @@
 
 mod raw;
 
-use std::collections::{HashMap, HashSet};
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::fmt;
 use std::net::SocketAddr;
 use std::ops::Range;
@@ -32,6 +32,8 @@ use cellwatch_models::program::Program;
 use cellwatch_models::signal::{Observability, Signal};
 use cellwatch_models::switching::SwitchingFunction;
 use toml::Spanned;
+
+use crate::sources::opcua::TagNode;
 
 use raw::RawConfig;
 
@@ -111,6 +113,9 @@ pub struct OpcUaConfig {
     pub publishing_interval: Duration,
     /// How often the server samples each tag.
     pub sampling_interval: Duration,
+    /// What `ns=<index>` (index 1 and up) in the tags' node ids means: the
+    /// namespace with this URI, looked up on the server at every connect.
+    pub namespace_uri: Option<String>,
 }
 
 /// A tag: a node on the server and the PLC address the models use.
@@ -118,7 +123,7 @@ pub struct OpcUaConfig {
 pub struct TagConfig {
     /// Plant name.
     pub name: String,
-    /// OPC UA node id (`ns=2;s=X0.06`).
+    /// OPC UA node id (`nsu=urn:plc;s=X0.06` or `ns=2;s=X0.06`), as written.
     pub node_id: String,
     /// PLC address (`X0.06`).
     pub address: Signal,
@@ -311,6 +316,7 @@ pub fn parse(
         files,
         problems: Vec::new(),
         warnings: Vec::new(),
+        namespace_uri: None,
     };
     let config = v.config(raw);
     if v.problems.is_empty() {
@@ -330,6 +336,18 @@ fn line_col(text: &str, offset: usize) -> (usize, usize) {
     (line, col)
 }
 
+/// The namespace index a node id is written with, when it is not 0 and not
+/// given by URI.
+fn written_index(node_id: &str) -> Option<u16> {
+    if node_id.starts_with("nsu=") {
+        return None;
+    }
+    opcua::types::NodeId::from_str(node_id)
+        .ok()
+        .map(|n| n.namespace)
+        .filter(|&n| n > 0)
+}
+
 struct Validator<'a> {
     origin: &'a str,
     text: &'a str,
@@ -337,6 +355,8 @@ struct Validator<'a> {
     files: &'a dyn Files,
     problems: Vec<String>,
     warnings: Vec<String>,
+    /// `opcua.namespace_uri` and where it is written, for the tags.
+    namespace_uri: Option<(Range<usize>, String)>,
 }
 
 impl Validator<'_> {
@@ -655,6 +675,14 @@ impl Validator<'_> {
             "opcua.sampling_interval",
             Duration::from_millis(50),
         );
+        let namespace_uri = match raw.namespace_uri {
+            Some(uri) if uri.get_ref().trim().is_empty() => {
+                self.problem(uri.span(), "opcua.namespace_uri", "is empty");
+                None
+            }
+            other => other.map(|u| (u.span(), u.into_inner())),
+        };
+        self.namespace_uri = namespace_uri.clone();
         Some(OpcUaConfig {
             endpoint,
             policy,
@@ -663,6 +691,7 @@ impl Validator<'_> {
             identity,
             publishing_interval,
             sampling_interval,
+            namespace_uri: namespace_uri.map(|(_, u)| u),
         })
     }
 
@@ -712,6 +741,10 @@ impl Validator<'_> {
     }
 
     fn tags(&mut self, raw: Vec<raw::RawTag>) -> Vec<TagConfig> {
+        // Indices written with `opcua.namespace_uri` (each with its first
+        // tag), and a tag whose index is trusted blindly.
+        let mut indices: BTreeMap<u16, usize> = BTreeMap::new();
+        let mut blind: Option<(u16, String)> = None;
         let mut out = Vec::new();
         let mut names = HashSet::new();
         let mut addresses = HashSet::new();
@@ -724,15 +757,17 @@ impl Validator<'_> {
                     format!("'{}' is used by another tag", t.name.get_ref()),
                 );
             }
-            if opcua::types::NodeId::from_str(t.node_id.get_ref()).is_err() {
-                self.problem(
-                    t.node_id.span(),
-                    &format!("{key}.node_id"),
-                    format!(
-                        "'{}' is not a node id like ns=2;s=X0.06",
-                        t.node_id.get_ref()
-                    ),
-                );
+            let uri = self.namespace_uri.as_ref().map(|(_, u)| u.as_str());
+            match TagNode::parse(t.node_id.get_ref(), uri) {
+                Ok(node) => {
+                    if let Some(index) = written_index(t.node_id.get_ref()) {
+                        indices.entry(index).or_insert(i);
+                    }
+                    if let Some(index) = node.bare_index().filter(|&i| i > 0) {
+                        blind.get_or_insert((index, t.name.get_ref().clone()));
+                    }
+                }
+                Err(e) => self.problem(t.node_id.span(), &format!("{key}.node_id"), e),
             }
             let address = match tag_address(t.address.get_ref()) {
                 Ok(a) => a,
@@ -754,6 +789,28 @@ impl Validator<'_> {
                 address,
                 comment: t.comment,
             });
+        }
+        if let Some((span, uri)) = self.namespace_uri.clone() {
+            if indices.len() > 1 {
+                let list: Vec<String> = indices.keys().map(|i| format!("ns={i}")).collect();
+                self.problem(
+                    span,
+                    "opcua.namespace_uri",
+                    format!(
+                        "names one namespace ('{uri}') but the tags use {}: write their node ids as nsu=<namespace uri>;...",
+                        list.join(" and ")
+                    ),
+                );
+            } else if indices.is_empty() {
+                self.warnings.push(format!(
+                    "opcua.namespace_uri '{uri}' is not used: no tag is written ns=<index>;..."
+                ));
+            }
+        }
+        if let Some((index, name)) = blind {
+            self.warnings.push(format!(
+                "tag '{name}' (and maybe others) is written ns={index};... without opcua.namespace_uri: the index is trusted as is, and a server that renumbers its namespaces would be misread; write nsu=<namespace uri>;... or set opcua.namespace_uri"
+            ));
         }
         out
     }

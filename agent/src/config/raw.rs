@@ -54,6 +54,7 @@ pub(crate) struct RawOpcUa {
     pub(crate) identity: Option<Spanned<RawIdentity>>,
     pub(crate) publishing_interval: Option<Spanned<String>>,
     pub(crate) sampling_interval: Option<Spanned<String>>,
+    pub(crate) namespace_uri: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

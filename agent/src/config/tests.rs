@@ -41,12 +41,12 @@ endpoint = "opc.tcp://127.0.0.1:4840/"
 
 [[tags]]
 name = "x1"
-node_id = "ns=2;s=X1"
+node_id = "nsu=urn:plc;s=X1"
 address = "X1"
 
 [[tags]]
 name = "x2"
-node_id = "ns=2;s=X2"
+node_id = "nsu=urn:plc;s=X2"
 address = "X2"
 
 [[checks.switching]]
@@ -94,7 +94,7 @@ fn unknown_key() {
 #[test]
 fn missing_tag_for_a_checks_address() {
     let text = GOOD.replace(
-        "[[tags]]\nname = \"x2\"\nnode_id = \"ns=2;s=X2\"\naddress = \"X2\"\n",
+        "[[tags]]\nname = \"x2\"\nnode_id = \"nsu=urn:plc;s=X2\"\naddress = \"X2\"\n",
         "",
     );
     assert_eq!(
@@ -128,7 +128,7 @@ fn every_problem_is_reported_at_once() {
     let text = GOOD
         .replace("id = \"c1\"", "id = \"cell 1\"")
         .replace("opc.tcp://127.0.0.1:4840/", "http://plc")
-        .replace("ns=2;s=X1", "two;X1")
+        .replace("nsu=urn:plc;s=X1", "two;X1")
         .replace(
             "coil = \"G0.00\"",
             "coil = \"G0.00\"\nseverity = \"urgent\"",
@@ -139,9 +139,53 @@ fn every_problem_is_reported_at_once() {
         [
             "cell.toml:3:6: cell.id: 'cell 1' must be letters, digits, '-' or '_' (it is part of Zenoh keys)",
             "cell.toml:6:12: opcua.endpoint: 'http://plc' must start with opc.tcp://",
-            "cell.toml:10:11: tags[0].node_id: 'two;X1' is not a node id like ns=2;s=X0.06",
+            "cell.toml:10:11: tags[0].node_id: 'two;X1' is not a node id like nsu=<namespace uri>;s=X0.06 or ns=2;s=X0.06",
             "cell.toml:22:12: checks.switching[0].severity: unknown severity 'urgent': use low, medium, high or critical",
         ]
+    );
+}
+
+#[test]
+fn namespaces_are_named_by_uri() {
+    // By URI in the node id itself: nothing to warn about.
+    let c = parse("cell.toml", GOOD, Path::new("base"), &mem()).unwrap();
+    assert!(
+        !c.warnings.iter().any(|w| w.contains("namespace")),
+        "{:?}",
+        c.warnings
+    );
+    // `ns=2` with the URI it stands for: no warning about blind indices.
+    let by_index = GOOD.replace("nsu=urn:plc;", "ns=2;");
+    let text = by_index.replace(
+        "endpoint = \"opc.tcp://127.0.0.1:4840/\"",
+        "endpoint = \"opc.tcp://127.0.0.1:4840/\"\nnamespace_uri = \"urn:plc\"",
+    );
+    let c = parse("cell.toml", &text, Path::new("base"), &mem()).unwrap();
+    assert_eq!(c.opcua.namespace_uri.as_deref(), Some("urn:plc"));
+    assert!(
+        !c.warnings.iter().any(|w| w.contains("namespace")),
+        "{:?}",
+        c.warnings
+    );
+    // A bare index without it is read, with a warning.
+    let c = parse("cell.toml", &by_index, Path::new("base"), &mem()).unwrap();
+    assert!(
+        c.warnings
+            .iter()
+            .any(|w| w.contains("ns=2;... without opcua.namespace_uri")),
+        "{:?}",
+        c.warnings
+    );
+    // One URI cannot stand for two indices.
+    let text = text.replace("ns=2;s=X2", "ns=3;s=X2");
+    assert_eq!(
+        errors(&text),
+        "cell.toml:7:17: opcua.namespace_uri: names one namespace ('urn:plc') but the tags use ns=2 and ns=3: write their node ids as nsu=<namespace uri>;..."
+    );
+    let text = GOOD.replace("nsu=urn:plc;s=X1", "nsu=;s=X1");
+    assert_eq!(
+        errors(&text),
+        "cell.toml:10:11: tags[0].node_id: 'nsu=;s=X1' names an empty namespace uri"
     );
 }
 

@@ -163,6 +163,22 @@ impl SimulatedCnc {
         self.server.set_bad(signal.name(), value)
     }
 
+    /// Sets a variable of the decoy namespace ([`SimOptions::decoy`]).
+    ///
+    /// # Errors
+    /// There is no decoy namespace or no such variable in it.
+    pub fn set_decoy(&self, address: &str, value: bool) -> Result<(), String> {
+        self.server.set_decoy(&[(address.to_string(), value)])
+    }
+
+    /// Deletes a variable from the server (a changed PLC configuration).
+    ///
+    /// # Errors
+    /// No such variable.
+    pub fn delete(&self, address: &str) -> Result<(), String> {
+        self.server.delete(address)
+    }
+
     /// Stops the server; connected clients see the connection drop.
     pub fn stop(&self) {
         self.server.stop();

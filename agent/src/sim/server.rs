@@ -5,17 +5,49 @@
 //! a Basic256Sha256 + SignAndEncrypt endpoint, client certificates trusted
 //! only from `trusted/` (and an endpoint without security only on request).
 
+use std::collections::HashSet;
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use opcua::crypto::SecurityPolicy;
 use opcua::server::address_space::Variable;
 use opcua::server::diagnostics::NamespaceMetadata;
 use opcua::server::node_manager::memory::{simple_node_manager, SimpleNodeManager};
 use opcua::server::{ServerBuilder, ServerHandle, SubscriptionCache, ANONYMOUS_USER_TOKEN_ID};
-use opcua::types::{DataValue, DateTime, MessageSecurityMode, NodeId, StatusCode};
+use opcua::types::{AttributeId, DataValue, DateTime, MessageSecurityMode, NodeId, StatusCode};
 use tokio::net::TcpListener;
+
+/// The name of the decoy namespace's node manager.
+const DECOY: &str = "decoy";
+
+/// Adds a folder `app` with `variables` (their opposite values when
+/// `invert`) to `manager`'s namespace `ns`.
+fn add_variables(
+    manager: &SimpleNodeManager,
+    ns: u16,
+    app: &str,
+    title: &str,
+    variables: &[(String, bool)],
+    invert: bool,
+) {
+    let space = manager.address_space();
+    let mut space = space.write();
+    let folder = NodeId::new(ns, app);
+    space.add_folder(&folder, title, title, &NodeId::objects_folder_id());
+    let vars = variables
+        .iter()
+        .map(|(name, v)| {
+            Variable::new(
+                &NodeId::new(ns, name.as_str()),
+                name.as_str(),
+                name.as_str(),
+                *v != invert,
+            )
+        })
+        .collect();
+    space.add_variables(vars, &folder);
+}
 
 /// How to serve a simulated PLC.
 #[derive(Debug, Clone)]
@@ -26,6 +58,10 @@ pub struct SimOptions {
     pub pki_dir: PathBuf,
     /// Also offer an endpoint without security.
     pub insecure: bool,
+    /// A decoy namespace with this URI, registered before the PLC's: the
+    /// same variable names with the opposite values, as a server that
+    /// renumbered its namespaces could hold at the index the PLC had.
+    pub decoy: Option<String>,
 }
 
 /// A running simulated PLC.
@@ -33,6 +69,9 @@ pub struct SimOptions {
 pub struct SimServer {
     handle: ServerHandle,
     manager: Arc<SimpleNodeManager>,
+    decoy: Option<(Arc<SimpleNodeManager>, u16)>,
+    /// Variables deleted ([`SimServer::delete`]): no longer written.
+    deleted: Arc<Mutex<HashSet<String>>>,
     subscriptions: Arc<SubscriptionCache>,
     ns: u16,
     addr: SocketAddr,
@@ -68,7 +107,17 @@ impl SimServer {
             .trust_client_certs(false)
             .host(addr.ip().to_string())
             .port(addr.port())
-            .discovery_urls(vec!["/".to_owned()])
+            .discovery_urls(vec!["/".to_owned()]);
+        if let Some(uri) = &options.decoy {
+            builder = builder.with_node_manager(simple_node_manager(
+                NamespaceMetadata {
+                    namespace_uri: uri.clone(),
+                    ..Default::default()
+                },
+                DECOY,
+            ));
+        }
+        builder = builder
             .add_endpoint(
                 "basic256sha256_sign_encrypt",
                 (
@@ -94,29 +143,26 @@ impl SimServer {
         let (server, handle) = builder.build()?;
         let manager = handle
             .node_managers()
-            .get_of_type::<SimpleNodeManager>()
+            .get_by_name::<SimpleNodeManager>(app)
             .ok_or("the simulator's node manager is missing")?;
         let ns = handle
             .get_namespace_index(&namespace)
             .ok_or("the simulator's namespace is missing")?;
-        {
-            let space = manager.address_space();
-            let mut space = space.write();
-            let folder = NodeId::new(ns, app);
-            space.add_folder(&folder, title, title, &NodeId::objects_folder_id());
-            let vars = variables
-                .iter()
-                .map(|(name, v)| {
-                    Variable::new(
-                        &NodeId::new(ns, name.as_str()),
-                        name.as_str(),
-                        name.as_str(),
-                        *v,
-                    )
-                })
-                .collect();
-            space.add_variables(vars, &folder);
-        }
+        add_variables(&manager, ns, app, title, variables, false);
+        let decoy = match &options.decoy {
+            None => None,
+            Some(uri) => {
+                let decoy = handle
+                    .node_managers()
+                    .get_by_name::<SimpleNodeManager>(DECOY)
+                    .ok_or("the decoy node manager is missing")?;
+                let index = handle
+                    .get_namespace_index(uri)
+                    .ok_or("the decoy namespace is missing")?;
+                add_variables(&decoy, index, DECOY, "Decoy", variables, true);
+                Some((decoy, index))
+            }
+        };
         tokio::spawn(async move {
             if let Err(e) = server.run_with(listener).await {
                 tracing::error!(error = %e, "simulated PLC server stopped");
@@ -126,6 +172,8 @@ impl SimServer {
         Ok(SimServer {
             handle,
             manager,
+            decoy,
+            deleted: Arc::default(),
             subscriptions,
             ns,
             addr,
@@ -147,8 +195,13 @@ impl SimServer {
     /// A name that is not a variable of this server.
     pub fn set_at(&self, values: &[(String, bool)], at: DateTime) -> Result<(), String> {
         let now = at;
+        let deleted = self
+            .deleted
+            .lock()
+            .map_err(|_| "simulator state poisoned")?;
         let values: Vec<(NodeId, DataValue)> = values
             .iter()
+            .filter(|(s, _)| !deleted.contains(s))
             .map(|(s, v)| (NodeId::new(self.ns, s.as_str()), DataValue::new_at(*v, now)))
             .collect();
         self.manager
@@ -157,6 +210,52 @@ impl SimServer {
                 values.iter().map(|(n, v)| (n, None, v.clone())),
             )
             .map_err(|e| format!("cannot update the simulated PLC: {e}"))
+    }
+
+    /// Writes values in the decoy namespace.
+    ///
+    /// # Errors
+    /// There is no decoy, or a name is not a variable of it.
+    pub fn set_decoy(&self, values: &[(String, bool)]) -> Result<(), String> {
+        let (decoy, ns) = self
+            .decoy
+            .as_ref()
+            .ok_or("this server has no decoy namespace")?;
+        let values: Vec<(NodeId, DataValue)> = values
+            .iter()
+            .map(|(s, v)| (NodeId::new(*ns, s.as_str()), DataValue::new_now(*v)))
+            .collect();
+        decoy
+            .set_values(
+                &self.subscriptions,
+                values.iter().map(|(n, v)| (n, None, v.clone())),
+            )
+            .map_err(|e| format!("cannot update the decoy: {e}"))
+    }
+
+    /// Deletes a variable, as a server whose configuration changed does;
+    /// its monitored items get `BadNodeIdUnknown`, as from a server that
+    /// samples its nodes.
+    ///
+    /// # Errors
+    /// No such variable.
+    pub fn delete(&self, name: &str) -> Result<(), String> {
+        let node = NodeId::new(self.ns, name);
+        self.manager
+            .address_space()
+            .write()
+            .delete(&node, true)
+            .ok_or_else(|| format!("no variable {name}"))?;
+        self.deleted
+            .lock()
+            .map_err(|_| "simulator state poisoned")?
+            .insert(name.to_string());
+        let mut gone = DataValue::null();
+        gone.status = Some(StatusCode::BadNodeIdUnknown);
+        gone.server_timestamp = Some(DateTime::now());
+        self.subscriptions
+            .notify_data_change([(gone, &node, AttributeId::Value)].into_iter());
+        Ok(())
     }
 
     /// Marks a variable's value as bad (a broken sensor wire).

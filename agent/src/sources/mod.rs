@@ -35,6 +35,15 @@ pub enum SourceEvent {
     Disconnected(String),
     /// Values delivered together (one publish), in source-time order.
     Readings(Vec<TagReading>),
+    /// Something about the source that is not the connection (a namespace
+    /// missing on the server): raises the `system` alarm `id` with the
+    /// problem, or clears it with `None`.
+    Problem {
+        /// The alarm's id (`opcua-namespace`).
+        id: String,
+        /// What is wrong, or `None` when nothing is.
+        problem: Option<String>,
+    },
 }
 
 /// The sending half a source writes to: bounded, so a slow cell loop makes

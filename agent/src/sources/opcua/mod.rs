@@ -18,20 +18,26 @@
 //!   recreates its subscription, then [`SourceEvent::Connected`]. Values delivered again after the
 //!   re-creation are filtered by the engine (same value, same timestamp).
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::future::Future;
 use std::sync::Arc;
 use std::time::Duration;
 
+mod address;
 mod subscription;
+
+pub use address::{Namespace, TagNode};
 
 pub use subscription::reading;
 
+use cellwatch_models::engine::{Reading, TagReading};
 use futures_util::future::BoxFuture;
 use futures_util::{FutureExt, StreamExt};
-use opcua::client::{ClientBuilder, IdentityToken, SessionConnectMode, SessionPollResult};
+use opcua::client::{ClientBuilder, IdentityToken, Session, SessionConnectMode, SessionPollResult};
 use opcua::crypto::SecurityPolicy as UaPolicy;
-use opcua::types::{MessageSecurityMode, NodeId, UserTokenPolicy};
+use opcua::types::{
+    MessageSecurityMode, NodeId, ReadValueId, TimestampsToReturn, UserTokenPolicy, Variant,
+};
 
 use super::{Source, SourceError, SourceEvent, SourceSender};
 use crate::config::{
@@ -157,28 +163,23 @@ pub async fn run(
 ) -> Result<(), SourceError> {
     let mut client = client(cell, config)?;
     let (token, token_policy) = identity(config)?;
-    let policy = ua_policy(config.policy);
-    let endpoint: opcua::types::EndpointDescription = (
-        config.endpoint.as_str(),
-        policy.to_uri(),
-        ua_mode(config.mode),
-        token_policy,
-    )
-        .into();
-    let by_node: Arc<HashMap<NodeId, usize>> = Arc::new(
-        tags.iter()
-            .enumerate()
-            .filter_map(|(i, t)| t.node_id.parse::<NodeId>().ok().map(|n| (n, i)))
-            .collect(),
-    );
+    // Anonymous or user name: the server's endpoint says which policies
+    // it accepts; ours is only needed to pick one.
+    let _ = token_policy;
+    let ctx = Arc::new(Context::new(config, tags, tx.clone()));
+    // The subscription of the current session, kept across reactivations.
+    let current = Arc::new(tokio::sync::Mutex::new(None));
     tokio::pin!(shutdown);
-    // Subscriptions being created beside the session's event loop; owned
-    // here so that none outlives the source.
-    let mut subscribing = tokio::task::JoinSet::new();
+    // The session's supervisor (namespaces, subscription, liveness) beside
+    // the session's event loop; owned here so that none outlives the source.
+    let mut supervisor = tokio::task::JoinSet::new();
     let mut backoff = Duration::from_millis(250);
     let mut said_down = false;
     loop {
-        let attempt = client.connect_to_matching_endpoint(endpoint.clone(), token.clone());
+        let attempt = async {
+            let endpoint = server_endpoint(&client, config).await?;
+            client.connect_to_endpoint_directly(endpoint, token.clone())
+        };
         let (session, event_loop) = tokio::select! {
             _ = &mut shutdown => return Ok(()),
             r = attempt => match r {
@@ -222,11 +223,13 @@ pub async fn run(
                 item = events.next() => match item {
                     None => break,
                     Some(Err(status)) => {
+                        supervisor.abort_all();
                         let _ = tx.send(SourceEvent::Disconnected(format!("session ended: {status}"))).await;
                         said_down = true;
                         break;
                     }
                     Some(Ok(SessionPollResult::ConnectionLost(status))) => {
+                        supervisor.abort_all();
                         let _ = tx.send(SourceEvent::Disconnected(format!("connection lost: {status}"))).await;
                         said_down = true;
                     }
@@ -239,31 +242,291 @@ pub async fn run(
                     Some(Ok(SessionPollResult::Reconnected(mode))) => {
                         tracing::info!(?mode, "OPC UA session connected");
                         said_down = false;
-                        let fresh = !subscribed || matches!(mode, SessionConnectMode::NewSession(_));
-                        if fresh {
-                            // A new session has no subscription on the server:
-                            // create it (and its items, in chunks) beside this
-                            // loop, which must keep polling the session.
-                            subscribed = true;
-                            let (session, config, by_node, tx) = (session.clone(), config.clone(), by_node.clone(), tx.clone());
-                            subscribing.spawn(async move {
-                                if subscription::subscribe(&session, &config, &by_node, &tx).await {
-                                    let _ = tx.send(SourceEvent::Connected(config.endpoint.clone())).await;
-                                }
-                            });
-                        } else {
-                            // The server kept the session and its subscription.
-                            let _ = tx.send(SourceEvent::Connected(config.endpoint.clone())).await;
-                        }
+                        // A new session has no subscription on the server; a
+                        // reactivated one keeps it, unless the namespaces moved.
+                        let new_session = !subscribed || matches!(mode, SessionConnectMode::NewSession(_));
+                        subscribed = true;
+                        supervisor.abort_all();
+                        supervisor.spawn(supervise(session.clone(), ctx.clone(), current.clone(), new_session));
                     }
                     Some(Ok(other)) => tracing::debug!(event = ?other, "OPC UA session event"),
                 },
             }
         }
         // The event loop ended (retry limit or fatal status): start over.
+        supervisor.abort_all();
         tokio::select! {
             _ = &mut shutdown => return Ok(()),
             _ = tokio::time::sleep(backoff) => {}
         }
     }
 }
+
+/// The server's endpoint with the configured policy and mode, at the
+/// configured address. The server's own endpoint URL is not used: a server
+/// behind NAT or port forwarding advertises an address the agent may not
+/// reach.
+async fn server_endpoint(
+    client: &opcua::client::Client,
+    config: &OpcUaConfig,
+) -> Result<opcua::types::EndpointDescription, opcua::types::Error> {
+    let policy = ua_policy(config.policy);
+    let mode = ua_mode(config.mode);
+    let endpoints = client
+        .get_server_endpoints_from_url(config.endpoint.as_str())
+        .await?;
+    let mut endpoint = endpoints
+        .into_iter()
+        .find(|e| {
+            e.security_mode == mode && UaPolicy::from_uri(e.security_policy_uri.as_ref()) == policy
+        })
+        .ok_or_else(|| {
+            opcua::types::Error::new(
+                opcua::types::StatusCode::BadSecurityPolicyRejected,
+                format!(
+                    "the server offers no endpoint with security policy {} and mode {mode}",
+                    policy.to_str()
+                ),
+            )
+        })?;
+    endpoint.endpoint_url = config.endpoint.as_str().into();
+    Ok(endpoint)
+}
+
+/// What every supervisor of this source needs.
+struct Context {
+    endpoint: String,
+    config: OpcUaConfig,
+    /// Each tag's node, `None` when its node id cannot be read.
+    nodes: Vec<Option<TagNode>>,
+    names: Vec<String>,
+    tx: SourceSender,
+}
+
+impl Context {
+    fn new(config: &OpcUaConfig, tags: &[TagConfig], tx: SourceSender) -> Context {
+        let nodes = tags
+            .iter()
+            .map(
+                |t| match TagNode::parse(&t.node_id, config.namespace_uri.as_deref()) {
+                    Ok(n) => Some(n),
+                    Err(e) => {
+                        tracing::error!(tag = %t.name, error = %e, "tag not read");
+                        None
+                    }
+                },
+            )
+            .collect();
+        Context {
+            endpoint: config.endpoint.clone(),
+            config: config.clone(),
+            nodes,
+            names: tags.iter().map(|t| t.name.clone()).collect(),
+            tx,
+        }
+    }
+}
+
+/// A subscription in place on the server.
+struct Live {
+    subscription: subscription::Subscribed,
+    /// The namespace array its node ids were resolved against.
+    namespaces: Vec<String>,
+    heard: Arc<subscription::Heard>,
+}
+
+/// The alarm a missing namespace raises (kind `system`).
+pub const NAMESPACE_ALARM: &str = "opcua-namespace";
+
+/// Keep-alive periods without any publish before a subscription is called
+/// silent and recreated.
+pub const SILENT_KEEP_ALIVES: u32 = 3;
+
+/// Supervises one session, beside its event loop: resolves the tags'
+/// namespaces against the server's `NamespaceArray`, (re)creates the
+/// subscription when there is none or the namespaces moved, says
+/// [`SourceEvent::Connected`], then watches that the subscription keeps
+/// publishing (data or keep-alives). A silent one is reported as
+/// [`SourceEvent::Disconnected`], deleted and created again.
+async fn supervise(
+    session: Arc<Session>,
+    ctx: Arc<Context>,
+    current: Arc<tokio::sync::Mutex<Option<Live>>>,
+    new_session: bool,
+) {
+    let mut live = current.lock_owned().await;
+    if new_session {
+        // The old subscription went with the old session.
+        *live = None;
+    }
+    let mut retry = Duration::from_millis(500);
+    loop {
+        let namespaces = match namespace_array(&session).await {
+            Ok(n) => n,
+            Err(e) => {
+                let _ = ctx
+                    .tx
+                    .send(SourceEvent::Disconnected(format!(
+                        "cannot read the namespace array of {}: {e}",
+                        ctx.endpoint
+                    )))
+                    .await;
+                tokio::time::sleep(retry).await;
+                retry = (retry * 2).min(Duration::from_secs(10));
+                continue;
+            }
+        };
+        if live.as_ref().is_none_or(|l| l.namespaces != namespaces) {
+            if let Some(old) = live.take() {
+                tracing::info!(
+                    subscription = old.subscription.id,
+                    "the server's namespaces changed: subscribing again"
+                );
+                let _ = session.delete_subscription(old.subscription.id).await;
+            }
+            match subscribe(&session, &ctx, namespaces).await {
+                Some(l) => *live = Some(l),
+                None => {
+                    tokio::time::sleep(retry).await;
+                    retry = (retry * 2).min(Duration::from_secs(10));
+                    continue;
+                }
+            }
+        }
+        retry = Duration::from_millis(500);
+        let _ = ctx
+            .tx
+            .send(SourceEvent::Connected(ctx.endpoint.clone()))
+            .await;
+        let l = live.as_ref().expect("subscribed above");
+        let limit = l.subscription.keep_alive * SILENT_KEEP_ALIVES;
+        let period = (l.subscription.keep_alive / 2).max(Duration::from_millis(50));
+        let silent = loop {
+            tokio::time::sleep(period).await;
+            let silent = l.heard.silent_for();
+            if silent > limit {
+                break silent;
+            }
+        };
+        let l = live.take().expect("subscribed above");
+        tracing::warn!(
+            subscription = l.subscription.id,
+            silent = ?silent,
+            "OPC UA subscription silent: subscribing again"
+        );
+        let _ = ctx
+            .tx
+            .send(SourceEvent::Disconnected(format!(
+                "subscription silent for {:.1} s (no data, no keep-alive) while the session lives",
+                silent.as_secs_f64()
+            )))
+            .await;
+        let _ = session.delete_subscription(l.subscription.id).await;
+    }
+}
+
+/// Resolves every tag against `namespaces` and subscribes to those found.
+/// Tags whose namespace the server does not have are reported bad, and
+/// the [`NAMESPACE_ALARM`] problem names the URIs (or is cleared).
+async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String>) -> Option<Live> {
+    let mut by_node = HashMap::new();
+    let mut unread = Vec::new();
+    let mut missing: BTreeMap<&str, Vec<usize>> = BTreeMap::new();
+    for (tag, node) in ctx.nodes.iter().enumerate() {
+        let Some(node) = node else {
+            unread.push(tag);
+            continue;
+        };
+        match (node.resolve(&namespaces), &node.namespace) {
+            (Some(id), _) => {
+                by_node.insert(id, tag);
+            }
+            (None, Namespace::Uri(uri)) => missing.entry(uri).or_default().push(tag),
+            (None, Namespace::Index(_)) => unread.push(tag),
+        }
+    }
+    let problem = (!missing.is_empty()).then(|| {
+        let each: Vec<String> = missing
+            .iter()
+            .map(|(uri, tags)| {
+                let mut names: Vec<&str> = tags
+                    .iter()
+                    .take(5)
+                    .map(|&t| ctx.names[t].as_str())
+                    .collect();
+                if tags.len() > names.len() {
+                    names.push("...");
+                }
+                format!(
+                    "namespace '{uri}' is not on the server ({} tag{} unknown: {})",
+                    tags.len(),
+                    if tags.len() == 1 { "" } else { "s" },
+                    names.join(", ")
+                )
+            })
+            .collect();
+        each.join("; ")
+    });
+    if let Some(p) = &problem {
+        tracing::error!(endpoint = %ctx.endpoint, problem = %p, "OPC UA namespaces missing");
+    }
+    let _ = ctx
+        .tx
+        .send(SourceEvent::Problem {
+            id: NAMESPACE_ALARM.into(),
+            problem,
+        })
+        .await;
+    unread.extend(missing.into_values().flatten());
+    if !unread.is_empty() {
+        let now = crate::clock::now_ms();
+        let _ = ctx
+            .tx
+            .send(SourceEvent::Readings(
+                unread
+                    .into_iter()
+                    .map(|tag| TagReading {
+                        tag,
+                        reading: Reading::Bad,
+                        source_time: now,
+                    })
+                    .collect(),
+            ))
+            .await;
+    }
+    let heard = Arc::new(subscription::Heard::new());
+    let subscription =
+        subscription::subscribe(session, &ctx.config, &Arc::new(by_node), &ctx.tx, &heard).await?;
+    Some(Live {
+        subscription,
+        namespaces,
+        heard,
+    })
+}
+
+/// The server's `NamespaceArray` (index → URI).
+async fn namespace_array(session: &Session) -> Result<Vec<String>, String> {
+    let node = NodeId::new(0, NAMESPACE_ARRAY);
+    let values = session
+        .read(&[ReadValueId::from(node)], TimestampsToReturn::Neither, 0.0)
+        .await
+        .map_err(|e| e.to_string())?;
+    let value = values.into_iter().next().ok_or("empty read result")?;
+    if let Some(status) = value.status.filter(|s| !s.is_good()) {
+        return Err(status.to_string());
+    }
+    match value.value {
+        Some(Variant::Array(a)) => Ok(a
+            .values
+            .into_iter()
+            .map(|v| match v {
+                Variant::String(s) => s.as_ref().to_string(),
+                _ => String::new(),
+            })
+            .collect()),
+        other => Err(format!("not an array of strings: {other:?}")),
+    }
+}
+
+/// `Server_NamespaceArray`.
+const NAMESPACE_ARRAY: u32 = 2255;

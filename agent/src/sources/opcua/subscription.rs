@@ -2,7 +2,9 @@
 //! and each publish's changes passed on in source-time order.
 
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use cellwatch_models::engine::{Reading, TagReading};
 use opcua::client::{
@@ -23,20 +25,81 @@ use crate::sources::{SourceEvent, SourceSender};
 const MAX_MONITORED_ITEMS_PER_CALL: u32 = 11714;
 /// Used when the server states no limit.
 const DEFAULT_CHUNK: usize = 1000;
+/// Publishing intervals without a publish request before the server drops
+/// the subscription.
+const LIFETIME_COUNT: u32 = 60;
+/// Publishing intervals without data before the server sends a keep-alive.
+const KEEP_ALIVE_COUNT: u32 = 10;
 
-/// Creates the subscription and its monitored items in chunks.
+/// When the subscription was last heard from: any publish, data or
+/// keep-alive.
+pub(super) struct Heard {
+    start: Instant,
+    /// Milliseconds after `start`.
+    last: AtomicU64,
+    /// A publish is being handed to the cell loop (which may be behind):
+    /// not silence.
+    busy: AtomicBool,
+}
+
+impl Heard {
+    pub(super) fn new() -> Heard {
+        Heard {
+            start: Instant::now(),
+            last: AtomicU64::new(0),
+            busy: AtomicBool::new(false),
+        }
+    }
+
+    fn beat(&self) {
+        let ms = self.start.elapsed().as_millis() as u64;
+        self.last.store(ms, Ordering::Relaxed);
+    }
+
+    /// How long nothing has arrived, or zero while a publish is being
+    /// handed on.
+    pub(super) fn silent_for(&self) -> Duration {
+        if self.busy.load(Ordering::Relaxed) {
+            return Duration::ZERO;
+        }
+        let now = self.start.elapsed().as_millis() as u64;
+        Duration::from_millis(now.saturating_sub(self.last.load(Ordering::Relaxed)))
+    }
+}
+
+/// A subscription in place: its id and how often the server promised to
+/// publish or send a keep-alive.
+pub(super) struct Subscribed {
+    pub(super) id: u32,
+    pub(super) keep_alive: Duration,
+}
+
+/// Creates the subscription and its monitored items in chunks; `None` if the
+/// server refused the subscription (reported as
+/// [`SourceEvent::Disconnected`]).
 pub(super) async fn subscribe(
     session: &Arc<Session>,
     config: &OpcUaConfig,
     by_node: &Arc<HashMap<NodeId, usize>>,
     tx: &SourceSender,
-) -> bool {
+    heard: &Arc<Heard>,
+) -> Option<Subscribed> {
+    heard.beat();
     let callback = InTimeOrder {
         by_node: by_node.clone(),
         tx: tx.clone(),
+        heard: heard.clone(),
     };
     let sub = match session
-        .create_subscription(config.publishing_interval, 60, 10, 0, 0, true, callback)
+        .create_subscription(
+            config.publishing_interval,
+            LIFETIME_COUNT,
+            KEEP_ALIVE_COUNT,
+            0,
+            0,
+            true,
+            callback,
+        )
         .await
     {
         Ok(id) => id,
@@ -47,8 +110,17 @@ pub(super) async fn subscribe(
                     "cannot create subscription: {e}"
                 )))
                 .await;
-            return false;
+            return None;
         }
+    };
+    // The server may revise the interval and the keep-alive count.
+    let keep_alive = {
+        let state = session.subscription_state().lock();
+        state
+            .get(sub)
+            .map_or(config.publishing_interval * KEEP_ALIVE_COUNT, |s| {
+                s.publishing_interval() * s.max_keep_alive_count().max(1)
+            })
     };
     let chunk = max_items_per_call(session).await;
     let sampling = config.sampling_interval.as_secs_f64() * 1000.0;
@@ -106,7 +178,10 @@ pub(super) async fn subscribe(
             Err(e) => tracing::error!(error = %e, "cannot create monitored items"),
         }
     }
-    true
+    Some(Subscribed {
+        id: sub,
+        keep_alive,
+    })
 }
 
 /// Passes each publish's data changes to the engine in source-time order.
@@ -119,6 +194,7 @@ pub(super) async fn subscribe(
 struct InTimeOrder {
     by_node: Arc<HashMap<NodeId, usize>>,
     tx: SourceSender,
+    heard: Arc<Heard>,
 }
 
 struct Collector<'a> {
@@ -144,6 +220,8 @@ impl OnSubscriptionNotificationCore for InTimeOrder {
         notification: NotificationMessage,
         items: MonitoredItemMap<'_>,
     ) {
+        // Keep-alives (no data) come here too: the subscription is alive.
+        self.heard.beat();
         let mut c = Collector {
             by_node: &self.by_node,
             readings: Vec::new(),
@@ -153,7 +231,10 @@ impl OnSubscriptionNotificationCore for InTimeOrder {
             return;
         }
         c.readings.sort_by_key(|r| r.source_time);
+        self.heard.busy.store(true, Ordering::Relaxed);
         send_blocking(&self.tx, SourceEvent::Readings(c.readings));
+        self.heard.beat();
+        self.heard.busy.store(false, Ordering::Relaxed);
     }
 }
 

@@ -1,0 +1,383 @@
+//! The OPC UA source when the server changes under it: namespaces that
+//! move or vanish, a decoy at the old index, deleted nodes, and a
+//! subscription that goes silent while the session lives.
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use cellwatch::config::{OpcUaConfig, SecurityMode, SecurityPolicy, TagConfig};
+use cellwatch::sim::cnc::{SimOptions, SimulatedCnc, NAMESPACE};
+use cellwatch::sources::{opcua, pki, SourceEvent};
+use cellwatch_models::engine::Reading;
+use cellwatch_models::signal::Signal;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::{TcpListener, TcpStream};
+use tokio::sync::mpsc;
+
+use crate::opcua::{all, has, next, opcua_config};
+
+/// A tag read from `node_id`.
+fn tag(address: &str, node_id: &str) -> TagConfig {
+    TagConfig {
+        name: address.to_lowercase(),
+        node_id: node_id.into(),
+        address: Signal::new(address),
+        comment: None,
+    }
+}
+
+/// A source running in the background.
+struct Running {
+    rx: mpsc::Receiver<SourceEvent>,
+    stop: Option<tokio::sync::oneshot::Sender<()>>,
+    task: tokio::task::JoinHandle<Result<(), cellwatch::sources::SourceError>>,
+}
+
+impl Running {
+    fn start(config: OpcUaConfig, tags: Vec<TagConfig>) -> Running {
+        let (tx, rx) = mpsc::channel(cellwatch::sources::QUEUE_CAPACITY);
+        let (stop, stop_rx) = tokio::sync::oneshot::channel::<()>();
+        let task = tokio::spawn(async move {
+            opcua::run("test", &config, &tags, tx, async {
+                let _ = stop_rx.await;
+            })
+            .await
+        });
+        Running {
+            rx,
+            stop: Some(stop),
+            task,
+        }
+    }
+
+    async fn stop(mut self) {
+        let _ = self.stop.take().unwrap().send(());
+        self.task.await.unwrap().unwrap();
+    }
+}
+
+async fn cnc(
+    listen: SocketAddr,
+    pki_dir: &Path,
+    insecure: bool,
+    decoy: Option<&str>,
+) -> SimulatedCnc {
+    let options = SimOptions {
+        listen,
+        pki_dir: pki_dir.to_path_buf(),
+        insecure,
+        decoy: decoy.map(str::to_string),
+    };
+    // A restarted server may find its port still closing.
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
+    loop {
+        match SimulatedCnc::start(&options).await {
+            Ok(s) => return s,
+            Err(e) => {
+                assert!(tokio::time::Instant::now() < deadline, "{e}");
+                tokio::time::sleep(Duration::from_millis(200)).await;
+            }
+        }
+    }
+}
+
+/// A simulated CNC and an agent configuration that trust each other.
+async fn trusted_cnc(dir: &Path) -> (SimulatedCnc, OpcUaConfig, PathBuf) {
+    let server_pki = dir.join("server-pki");
+    let sim = cnc("127.0.0.1:0".parse().unwrap(), &server_pki, false, None).await;
+    let config = opcua_config(&sim.endpoint(), &dir.join("agent-pki"));
+    drop(opcua::client("test", &config).unwrap());
+    pki::trust(&pki::own_cert(&config.pki_dir), &server_pki).unwrap();
+    pki::trust(&pki::own_cert(&server_pki), &config.pki_dir).unwrap();
+    (sim, config, server_pki)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_moved_namespace_is_followed_and_the_decoy_at_the_old_index_never_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let (sim, mut config, server_pki) = trusted_cnc(dir.path()).await;
+    let old = sim.namespace();
+    // One tag by index with the URI it means, one by URI.
+    config.namespace_uri = Some(NAMESPACE.into());
+    let tags = vec![
+        tag("X0.06", &format!("ns={old};s=X0.06")),
+        tag("X0.04", &format!("nsu={NAMESPACE};s=X0.04")),
+    ];
+    let mut source = Running::start(config, tags);
+    all(
+        &mut source.rx,
+        "connection and initial values",
+        &[
+            &|e| matches!(e, SourceEvent::Connected(_)),
+            &|e| has(e, 0, Reading::Good(true)),
+            &|e| has(e, 1, Reading::Good(true)),
+        ],
+    )
+    .await;
+    // The server restarts with another namespace registered first: the
+    // PLC's moves up one, and the decoy, holding the same names with the
+    // opposite values, takes its old index.
+    let addr = sim.addr();
+    sim.stop();
+    next(&mut source.rx, "connection lost", |e| {
+        matches!(e, SourceEvent::Disconnected(_))
+    })
+    .await;
+    let sim = cnc(addr, &server_pki, false, Some("urn:cellwatch:test:decoy")).await;
+    assert_eq!(sim.namespace(), old + 1, "the namespace must have moved");
+    // Everything the source delivers until the PLC's own change arrives:
+    // initial values, then decoy changes, then the change.
+    let mut seen = Vec::new();
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    let mut connected = false;
+    let mut initial = [false, false];
+    while !(connected && initial.iter().all(|i| *i)) {
+        let ev = tokio::time::timeout_at(deadline, source.rx.recv())
+            .await
+            .expect("reconnection and values")
+            .unwrap();
+        connected |= matches!(ev, SourceEvent::Connected(_));
+        for (t, i) in initial.iter_mut().enumerate() {
+            *i |= has(&ev, t, Reading::Good(true));
+        }
+        seen.push(ev);
+    }
+    sim.set_decoy("X0.06", true).unwrap();
+    sim.set_decoy("X0.06", false).unwrap();
+    sim.set_decoy("X0.04", true).unwrap();
+    sim.set("X0.06", false).unwrap();
+    loop {
+        let ev = tokio::time::timeout_at(deadline, source.rx.recv())
+            .await
+            .expect("the PLC's change")
+            .unwrap();
+        let done = has(&ev, 0, Reading::Good(false));
+        seen.push(ev);
+        if done {
+            break;
+        }
+    }
+    // Before the PLC's own change, nothing but the PLC's values.
+    let before = &seen[..seen.len() - 1];
+    assert!(
+        !before
+            .iter()
+            .any(|e| has(e, 0, Reading::Good(false)) || has(e, 1, Reading::Good(false))),
+        "decoy values were read: {seen:?}"
+    );
+    assert!(
+        !before.iter().any(|e| matches!(
+            e,
+            SourceEvent::Problem {
+                problem: Some(_),
+                ..
+            }
+        )),
+        "{seen:?}"
+    );
+    source.stop().await;
+    sim.stop();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_missing_namespace_makes_its_tags_unknown_with_an_alarm_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let (sim, config, _) = trusted_cnc(dir.path()).await;
+    let tags = vec![
+        tag("X0.06", "nsu=urn:cellwatch:sim:elsewhere:plc;s=X0.06"),
+        tag("X0.04", &format!("nsu={NAMESPACE};s=X0.04")),
+    ];
+    let mut source = Running::start(config, tags);
+    let mut problem = None;
+    let mut connected = false;
+    let (mut bad, mut good) = (false, false);
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    while !(connected && bad && good && problem.is_some()) {
+        let ev = tokio::time::timeout_at(deadline, source.rx.recv())
+            .await
+            .expect("connection, values and the problem")
+            .unwrap();
+        connected |= matches!(ev, SourceEvent::Connected(_));
+        bad |= has(&ev, 0, Reading::Bad);
+        good |= has(&ev, 1, Reading::Good(true));
+        assert!(!has(&ev, 0, Reading::Good(true)) && !has(&ev, 0, Reading::Good(false)));
+        if let SourceEvent::Problem { id, problem: p } = ev {
+            assert_eq!(id, opcua::NAMESPACE_ALARM);
+            problem = p;
+        }
+    }
+    assert_eq!(
+        problem.unwrap(),
+        "namespace 'urn:cellwatch:sim:elsewhere:plc' is not on the server (1 tag unknown: x0.06)"
+    );
+    source.stop().await;
+    sim.stop();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_deleted_node_makes_its_tag_unknown() {
+    let dir = tempfile::tempdir().unwrap();
+    let (sim, config, _) = trusted_cnc(dir.path()).await;
+    let tags = vec![
+        tag("X0.06", &format!("nsu={NAMESPACE};s=X0.06")),
+        tag("X0.04", &format!("nsu={NAMESPACE};s=X0.04")),
+    ];
+    let mut source = Running::start(config, tags);
+    all(
+        &mut source.rx,
+        "connection and initial values",
+        &[
+            &|e| matches!(e, SourceEvent::Connected(_)),
+            &|e| has(e, 0, Reading::Good(true)),
+            &|e| has(e, 1, Reading::Good(true)),
+        ],
+    )
+    .await;
+    sim.delete("X0.04").unwrap();
+    next(&mut source.rx, "X0.04 unknown", |e| has(e, 1, Reading::Bad)).await;
+    // The other tag is still read.
+    sim.set("X0.06", false).unwrap();
+    next(&mut source.rx, "X0.06 = 0", |e| {
+        has(e, 0, Reading::Good(false))
+    })
+    .await;
+    source.stop().await;
+    sim.stop();
+}
+
+/// `PublishResponse_Encoding_DefaultBinary` as a four-byte node id.
+const PUBLISH_RESPONSE: [u8; 4] = [0x01, 0x00, 0x3D, 0x03];
+
+/// Where a secure-channel chunk (security None) holds its sequence number.
+fn sequence_number_at(chunk: &[u8]) -> Option<usize> {
+    match &chunk[..3] {
+        // Header, channel id, token id.
+        b"MSG" | b"CLO" => Some(16),
+        // Header, channel id, then the asymmetric security header: policy
+        // URI, certificate and thumbprint, each length-prefixed.
+        b"OPN" => {
+            let mut at = 12;
+            for _ in 0..3 {
+                let len = i32::from_le_bytes(chunk.get(at..at + 4)?.try_into().ok()?);
+                at += 4 + usize::try_from(len).unwrap_or(0);
+            }
+            Some(at)
+        }
+        _ => None,
+    }
+    .filter(|&at| chunk.len() >= at + 4)
+}
+
+/// A TCP relay between an OPC UA client and server (security None) that
+/// can swallow every publish response while passing everything else: a
+/// subscription silent while the session lives.
+async fn relay(server: SocketAddr, mute: Arc<AtomicBool>) -> SocketAddr {
+    let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    tokio::spawn(async move {
+        while let Ok((client, _)) = listener.accept().await {
+            let Ok(upstream) = TcpStream::connect(server).await else {
+                continue;
+            };
+            let (mut cr, mut cw) = client.into_split();
+            let (mut ur, mut uw) = upstream.into_split();
+            tokio::spawn(async move { tokio::io::copy(&mut cr, &mut uw).await });
+            let mute = mute.clone();
+            tokio::spawn(async move {
+                let mut muted_requests = std::collections::HashSet::new();
+                let mut dropped = 0u32;
+                loop {
+                    let mut header = [0u8; 8];
+                    if ur.read_exact(&mut header).await.is_err() {
+                        break;
+                    }
+                    let size = u32::from_le_bytes(header[4..8].try_into().unwrap()) as usize;
+                    let mut chunk = header.to_vec();
+                    chunk.resize(size.max(8), 0);
+                    if ur.read_exact(&mut chunk[8..]).await.is_err() {
+                        break;
+                    }
+                    // MSG: header, channel id, token id, sequence number,
+                    // request id, then the body's type id.
+                    if &chunk[..3] == b"MSG" && chunk.len() >= 28 {
+                        let request = u32::from_le_bytes(chunk[20..24].try_into().unwrap());
+                        if chunk[24..28] == PUBLISH_RESPONSE && mute.load(Ordering::SeqCst) {
+                            muted_requests.insert(request);
+                        }
+                        if muted_requests.contains(&request) {
+                            if chunk[3] != b'C' {
+                                muted_requests.remove(&request);
+                            }
+                            dropped += 1;
+                            continue;
+                        }
+                    }
+                    // The client checks that sequence numbers follow each
+                    // other: renumber past the dropped chunks.
+                    if let Some(at) = sequence_number_at(&chunk) {
+                        let n = u32::from_le_bytes(chunk[at..at + 4].try_into().unwrap());
+                        chunk[at..at + 4].copy_from_slice(&n.wrapping_sub(dropped).to_le_bytes());
+                    }
+                    if cw.write_all(&chunk).await.is_err() {
+                        break;
+                    }
+                }
+            });
+        }
+    });
+    addr
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_silent_subscription_is_reported_and_recreated() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = cnc(
+        "127.0.0.1:0".parse().unwrap(),
+        &dir.path().join("server-pki"),
+        true,
+        None,
+    )
+    .await;
+    let mute = Arc::new(AtomicBool::new(false));
+    let via = relay(sim.addr(), mute.clone()).await;
+    let mut config = opcua_config(&format!("opc.tcp://{via}/"), &dir.path().join("agent-pki"));
+    config.policy = SecurityPolicy::None;
+    config.mode = SecurityMode::None;
+    let tags = vec![tag("X0.06", &format!("nsu={NAMESPACE};s=X0.06"))];
+    let mut source = Running::start(config, tags);
+    all(
+        &mut source.rx,
+        "connection and initial value",
+        &[&|e| matches!(e, SourceEvent::Connected(_)), &|e| {
+            has(e, 0, Reading::Good(true))
+        }],
+    )
+    .await;
+    mute.store(true, Ordering::SeqCst);
+    let ev = next(&mut source.rx, "the subscription called silent", |e| {
+        matches!(e, SourceEvent::Disconnected(_))
+    })
+    .await;
+    let SourceEvent::Disconnected(why) = ev else {
+        unreachable!()
+    };
+    assert!(why.starts_with("subscription silent for "), "{why}");
+    mute.store(false, Ordering::SeqCst);
+    next(&mut source.rx, "subscribed again", |e| {
+        matches!(e, SourceEvent::Connected(_))
+    })
+    .await;
+    sim.set("X0.06", false).unwrap();
+    let ev = next(
+        &mut source.rx,
+        "X0.06 = 0 through the new subscription",
+        |e| has(e, 0, Reading::Good(false)) || matches!(e, SourceEvent::Disconnected(_)),
+    )
+    .await;
+    assert!(has(&ev, 0, Reading::Good(false)), "{ev:?}");
+    source.stop().await;
+    sim.stop();
+}
