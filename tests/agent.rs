@@ -645,3 +645,58 @@ async fn part_done_edges_are_counted_and_reported() {
     let report: serde_json::Value = serde_json::from_str(&run.stdout).unwrap();
     assert_eq!(report["production"], 3, "{report:#}");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn an_unwritable_journal_raises_its_alarm_and_alarms_still_reach_zenoh() {
+    let fx = Fixture::start().await;
+    fx.settled().await;
+    let sub = fx
+        .client
+        .declare_subscriber("cellwatch/m01ps0004/alarms/**")
+        .history(HistoryConfig::default().detect_late_publishers())
+        .recovery(RecoveryConfig::default().heartbeat())
+        .await
+        .unwrap();
+    // Another connection holds the journal's write lock: the agent cannot
+    // write (as with a full disk), only queue.
+    let lock = rusqlite::Connection::open(&fx.config.journal.path).unwrap();
+    lock.execute_batch("BEGIN EXCLUSIVE").unwrap();
+    fx.sim.set("X0.06", false).unwrap();
+    let mut seen = Vec::new();
+    alarm_until(&sub, "ESE while the journal is held", &mut seen, |a| {
+        a.id == "ese" && a.transition.as_str() == "raised"
+    })
+    .await;
+    let journal_raised = |a: &AlarmPayload| a.id == "journal" && a.transition.as_str() == "raised";
+    if !seen.iter().any(journal_raised) {
+        alarm_until(&sub, "the journal alarm", &mut seen, journal_raised).await;
+    }
+    let journal = seen.iter().find(|a| journal_raised(a)).unwrap();
+    assert_eq!(journal.kind.as_str(), "system");
+    assert!(journal.message.starts_with("journal: "), "{journal:?}");
+    let metrics = fx.scrape().await;
+    let pending = metrics
+        .lines()
+        .find(|l| l.starts_with("cellwatch_journal_pending_rows{"))
+        .and_then(|l| l.rsplit(' ').next())
+        .and_then(|v| v.parse::<f64>().ok())
+        .unwrap();
+    assert!(pending >= 1.0, "{metrics}");
+    // Writable again: the alarm clears and the queued rows are written.
+    lock.execute_batch("ROLLBACK").unwrap();
+    drop(lock);
+    alarm_until(&sub, "the journal alarm cleared", &mut seen, |a| {
+        a.id == "journal" && a.transition.as_str() == "cleared"
+    })
+    .await;
+    let rows = fx
+        .history_rows("cellwatch/m01ps0004/history?kind=alarm;since=1h")
+        .await;
+    assert!(
+        rows.iter()
+            .any(|r| r["fields"]["alarm"] == "ese" && r["fields"]["transition"] == "raised"),
+        "{rows:#?}"
+    );
+    fx.agent.unwrap().stop().await;
+    fx.sim.stop();
+}
