@@ -101,6 +101,41 @@ async fn killed_agent_restores_its_alarms_and_refuses_replays() {
         send(&client, &signed(Action::Reset, "tmr-001")).await,
         (true, "reset tmr-001 by kim".into())
     );
+    // A subscriber joining now still gets what happened before the restart.
+    let mut follow = cell.follow_since("1h");
+    let (lines_tx, lines) = std::sync::mpsc::channel();
+    let out = follow.stdout.take().unwrap();
+    std::thread::spawn(move || {
+        use std::io::BufRead;
+        for line in std::io::BufReader::new(out).lines().map_while(Result::ok) {
+            if lines_tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let raised_at = alarm(&before, "ese").unwrap()["raised_at"].clone();
+    let mut events = Vec::new();
+    let wanted = |events: &[serde_json::Value]| {
+        let has = |t: &str| {
+            events
+                .iter()
+                .any(|e| e["id"] == "ese" && e["transition"] == t && e["raised_at"] == raised_at)
+        };
+        has("raised") && has("acknowledged") && has("restored")
+    };
+    while !wanted(&events) {
+        let line = lines
+            .recv_timeout(std::time::Duration::from_secs(30))
+            .unwrap_or_else(|_| {
+                panic!(
+                    "alarms --follow --since 1h printed only {events:#?}\n{}",
+                    cell.log("follow.log")
+                )
+            });
+        events.push(serde_json::from_str(&line).unwrap());
+    }
+    follow.kill().unwrap();
+    follow.wait().unwrap();
     // ESE follows the fresh values: the switch closes, it clears.
     sim.set("X0.06", true).unwrap();
     snapshot_until(&client, "ESE cleared by fresh values", |s| {

@@ -49,6 +49,26 @@ impl Cell {
             .unwrap()
     }
 
+    /// `cellwatch alarms --follow --since SINCE --json` for this cell, its
+    /// output piped.
+    pub(crate) fn follow_since(&self, since: &str) -> Child {
+        Command::new(env!("CARGO_BIN_EXE_cellwatch"))
+            .args([
+                "alarms",
+                "--cell",
+                "m01ps0004",
+                "--follow",
+                "--json",
+                "--since",
+                since,
+            ])
+            .args(["--connect", &format!("tcp/127.0.0.1:{}", self.zenoh_port)])
+            .stdout(Stdio::piped())
+            .stderr(std::fs::File::create(self.dir.join("follow.log")).unwrap())
+            .spawn()
+            .unwrap()
+    }
+
     pub(crate) async fn client(&self) -> zenoh::Session {
         cellwatch::sinks::zenoh::open(&cellwatch::config::ZenohConfig {
             mode: cellwatch::config::ZenohMode::Peer,
