@@ -25,7 +25,7 @@ pub(crate) async fn cnc(args: &SimulateArgs, out: &mut dyn Write) -> Result<(), 
     let io = Failure::output;
     writeln!(
         out,
-        "simulated CNC on {} (tags in namespace {} as ns={};s=<address>)",
+        "simulated CNC on {} (tags as nsu={};s=<address>, now ns={})",
         sim.endpoint(),
         crate::sim::cnc::NAMESPACE,
         sim.namespace()

@@ -2,7 +2,7 @@
 //!
 //! Its "PLC" runs the shipped ESE and CSD programs: inputs (limit
 //! switches, push buttons, mode switches, NC signals) are variables in
-//! namespace 2 named by address (`ns=2;s=X0.06`), and the fault coils
+//! namespace [`NAMESPACE`] named by address (`nsu=urn:cellwatch:sim:cnc:plc;s=X0.06`), and the fault coils
 //! `G8.02` and `G9.00` are recomputed from the programs on every change.
 //! Faults are injected on a schedule ([`Scenario`]) or on command
 //! ([`SimulatedCnc::set`], [`SimulatedCnc::set_bad`]). The server uses real
@@ -19,7 +19,8 @@ use cellwatch_models::signal::{Observability, Signal};
 use cellwatch_models::switching::SwitchingFunction;
 use cellwatch_models::values::Values;
 
-/// The namespace the simulated tags live in (index 2 on this server).
+/// The namespace the simulated tags live in (index 2 on this server, 3
+/// with a decoy namespace).
 pub const NAMESPACE: &str = "urn:cellwatch:sim:cnc:plc";
 
 pub use super::server::SimOptions;
