@@ -15,8 +15,6 @@ use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
 use crate::util::root;
 
-const KEY: &str = "00112233445566778899aabbccddeeff00112233445566778899aabbccddeeff";
-
 /// A free TCP port on loopback.
 pub(crate) fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0")
@@ -36,8 +34,12 @@ pub(crate) fn config(dir: &Path, sim_endpoint: &str, zenoh_port: u16) -> CellCon
     c.zenoh.listen = vec![format!("tcp/127.0.0.1:{zenoh_port}")];
     c.metrics = Some("127.0.0.1:0".parse().unwrap());
     let secrets = dir.join("operators.toml");
-    std::fs::write(&secrets, format!("[operators]\nkim = \"{KEY}\"\n")).unwrap();
-    c.secrets_file = Some(secrets);
+    std::fs::write(
+        &secrets,
+        crate::spawned::operators_file(&cellwatch::operator::Action::ALL),
+    )
+    .unwrap();
+    c.operators_file = Some(secrets);
     c
 }
 
@@ -405,10 +407,13 @@ async fn only_correctly_signed_acks_are_carried_out_and_all_are_journaled() {
         (false, "unsigned command".to_string())
     );
     let mut wrong = cmd("n2");
-    wrong.sign("m01ps0004", b"someone else's key, not kim's at all");
+    wrong.sign(
+        "m01ps0004",
+        &cellwatch::operator::OperatorKey::generate("kim"),
+    );
     assert_eq!(send(wrong).await, (false, "bad signature".to_string()));
     let mut good = cmd("n3");
-    good.sign("m01ps0004", &hex::decode(KEY).unwrap());
+    good.sign("m01ps0004", &crate::spawned::kim());
     assert_eq!(
         send(good.clone()).await,
         (true, "ack ese by kim".to_string())

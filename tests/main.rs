@@ -15,6 +15,7 @@ mod durability;
 mod explain;
 mod liveness;
 mod opcua;
+mod operators;
 mod report;
 mod restart;
 mod sf;

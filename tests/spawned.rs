@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-use cellwatch::operator::{Action, Command as OperatorCommand};
+use cellwatch::operator::{Action, Command as OperatorCommand, OperatorKey};
 use cellwatch::sim::cnc::{SimOptions, SimulatedCnc};
 use cellwatch::sources::{opcua, pki};
 
@@ -14,6 +14,16 @@ use crate::agent::free_port;
 use crate::util::root;
 
 pub(crate) const KEY: &str = "00112233445566778899aabbccddeeff00112233445566778899aabbccddeeff";
+
+/// Operator kim's private key (the operator's side).
+pub(crate) fn kim() -> OperatorKey {
+    OperatorKey::from_hex("kim", KEY).unwrap()
+}
+
+/// An agent's operators file: kim's public key, allowed `allow`.
+pub(crate) fn operators_file(allow: &[Action]) -> String {
+    kim().operators_entry(allow)
+}
 
 /// Two transitions the simulated CNC can be made to take far too early:
 /// F17.00 off (all are on normally), then F17.01 off at once (expected 60 s
@@ -35,7 +45,7 @@ const TIMERS: &str = r#"{
 pub(crate) struct Cell {
     pub(crate) dir: PathBuf,
     pub(crate) config: PathBuf,
-    zenoh_port: u16,
+    pub(crate) zenoh_port: u16,
     pub(crate) metrics_port: u16,
 }
 
@@ -105,11 +115,7 @@ pub(crate) fn cell(dir: &Path, sim: &SimulatedCnc) -> Cell {
     let zenoh_port = free_port();
     let metrics_port = free_port();
     std::fs::write(dir.join("timers.json"), TIMERS).unwrap();
-    std::fs::write(
-        dir.join("operators.toml"),
-        format!("[operators]\nkim = \"{KEY}\"\n"),
-    )
-    .unwrap();
+    std::fs::write(dir.join("operators.toml"), operators_file(&Action::ALL)).unwrap();
     let demo = std::fs::read_to_string(root().join("config/demo.toml")).unwrap();
     let config = demo
         .replace("opc.tcp://127.0.0.1:48400/", &sim.endpoint())
@@ -123,8 +129,8 @@ pub(crate) fn cell(dir: &Path, sim: &SimulatedCnc) -> Cell {
             "path = \"journal.sqlite\"",
         )
         .replace(
-            "# secrets_file = \"/etc/cellwatch/operators.toml\"",
-            "secrets_file = \"operators.toml\"",
+            "# operators_file = \"/etc/cellwatch/operators.toml\"",
+            "operators_file = \"operators.toml\"",
         )
         .replace(
             "program = \"cnc/",
@@ -212,7 +218,7 @@ pub(crate) fn signed(action: Action, alarm: &str) -> String {
         issued_at: cellwatch::clock::now_ms(),
         signature: String::new(),
     };
-    c.sign("m01ps0004", &hex::decode(KEY).unwrap());
+    c.sign("m01ps0004", &kim());
     serde_json::to_string(&c).unwrap()
 }
 

@@ -64,6 +64,13 @@ enum Command {
     Ack(CommandArgs),
     /// Reset a latched alarm whose condition has ended: a signed command (Zenoh).
     Reset(CommandArgs),
+    /// Make an operator's key pair for signing commands (Ed25519).
+    ///
+    /// Writes the private key file, which stays with the operator (give it
+    /// to `ack` and `reset` with --key-file), and prints the entry for the
+    /// agents' operators file: the public key and the actions allowed. An
+    /// agent holds public keys only.
+    Keygen(KeygenArgs),
     /// Learn transition timers δ(A, E | Δt) = B from logs of normal runs.
     Learn(LearnArgs),
     /// Run the transition-timer monitor over run logs in virtual time.
@@ -74,6 +81,19 @@ enum Command {
     /// Production reports from a journal: per-hour run/idle/fault minutes,
     /// availability, stop causes and production (daily), or per day (monthly).
     Report(ReportArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct KeygenArgs {
+    /// The operator's name, as agents' operators files will know it.
+    #[arg(long)]
+    pub(crate) operator: String,
+    /// Where to write the private key (never overwritten).
+    #[arg(long, value_name = "FILE")]
+    pub(crate) out: PathBuf,
+    /// Actions to allow in the printed entry, comma-separated (ack, reset).
+    #[arg(long, default_value = "ack", value_name = "LIST")]
+    pub(crate) allow: String,
 }
 
 #[derive(Debug, clap::Args)]
@@ -348,11 +368,12 @@ pub(crate) struct CommandArgs {
     /// The alarm id.
     #[arg(long)]
     pub(crate) alarm: String,
-    /// Who you are.
+    /// Who you are (default: the operator the key file names).
     #[arg(long)]
-    pub(crate) operator: String,
-    /// Secrets file with your key ([operators] NAME = "<hex>"); or set
-    /// CELLWATCH_OPERATOR_KEY to the hex key.
+    pub(crate) operator: Option<String>,
+    /// Your private key file, made by `cellwatch keygen --operator NAME`;
+    /// or set CELLWATCH_OPERATOR_KEY to the key's 64 hex digits (then give
+    /// --operator).
     #[arg(long, value_name = "FILE")]
     pub(crate) key_file: Option<PathBuf>,
     #[command(flatten)]
@@ -490,6 +511,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             | Command::Validate(_)
             | Command::Report(_)
             | Command::Learn(_)
+            | Command::Keygen(_)
             | Command::Replay(_)
             | Command::ExportSt(_) => Ok(()),
         }
@@ -522,6 +544,7 @@ pub fn run(
         Command::Validate(args) => commands::agent::validate(&args, out),
         Command::Report(args) => commands::report::run(&args, out),
         Command::Learn(args) => commands::timers::learn(&args, out),
+        Command::Keygen(args) => commands::keygen::run(&args, out),
         Command::Replay(args) => commands::timers::replay(&args, out),
         Command::ExportSt(args) => commands::timers::export_st(&args, out),
         other => asynchronous(other, out),

@@ -170,7 +170,7 @@ pub async fn start_with(config: CellConfig, options: Options) -> Result<Agent, S
         tracing::warn!("{w}");
     }
     let mut engine = compile::engine(&config)?;
-    let keys = match &config.secrets_file {
+    let keys = match &config.operators_file {
         Some(path) => OperatorKeys::load(path)?,
         None => OperatorKeys::default(),
     };

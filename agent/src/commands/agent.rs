@@ -35,7 +35,7 @@ pub(crate) fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<(), F
     let c = load(&args.config)?;
     cell::compile::engine(&c)
         .map_err(|e| Failure::Input(format!("{}: {e}", args.config.display())))?;
-    if let Some(path) = &c.secrets_file {
+    if let Some(path) = &c.operators_file {
         crate::operator::OperatorKeys::load(path).map_err(Failure::input)?;
     }
     let io = Failure::output;
@@ -77,26 +77,24 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
     }
 }
 
-/// Writes an operator secrets file with one random key, readable by the
-/// owner only, unless it exists.
-fn demo_secrets(path: &Path) -> Result<(), Failure> {
-    if path.exists() {
-        return Ok(());
+/// The demo's operator: a private key file (the operator's side, given to
+/// `ack`/`reset` with --key-file) and the agents' operators file with only
+/// its public key. Made once; kept across runs.
+fn demo_operator(state: &Path) -> Result<(PathBuf, PathBuf), Failure> {
+    let key_file = state.join("operator-demo.key");
+    let operators = state.join("operators.toml");
+    if !key_file.exists() || !operators.exists() {
+        let key = crate::operator::OperatorKey::generate("demo");
+        let _ = std::fs::remove_file(&key_file);
+        super::keygen::write_private(&key_file, &key.to_file())?;
+        let entry = key.operators_entry(&crate::operator::Action::ALL);
+        std::fs::write(
+            &operators,
+            format!("# Operators' public keys and permissions (cellwatch keygen prints entries).\n{entry}"),
+        )
+        .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", operators.display())))?;
     }
-    let key = hex::encode(rand::random::<[u8; 32]>());
-    std::fs::write(
-        path,
-        format!(
-            "# Operator keys for signed commands (HMAC-SHA256).\n[operators]\ndemo = \"{key}\"\n"
-        ),
-    )
-    .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", path.display())))?;
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        let _ = std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o600));
-    }
-    Ok(())
+    Ok((key_file, operators))
 }
 
 /// The simulated cell's listen address, taken from the config's endpoint.
@@ -123,11 +121,10 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     let sim_pki = state.join("sim-pki");
     c.opcua.pki_dir = state.join("agent-pki");
     c.journal.path = state.join(format!("{}.sqlite", c.cell));
-    let secrets = state.join("operators.toml");
-    demo_secrets(&secrets)?;
-    c.secrets_file = Some(secrets.clone());
+    let (operator_key, secrets) = demo_operator(&state)?;
+    c.operators_file = Some(secrets.clone());
     c.warnings
-        .retain(|w| !w.starts_with("no commands.secrets_file"));
+        .retain(|w| !w.starts_with("no commands.operators_file"));
     let listen = endpoint_addr(&c.opcua.endpoint)?;
     let sim = SimulatedCnc::start(&SimOptions {
         listen,
@@ -171,7 +168,8 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     writeln!(out, "  journal         {}", c.journal.path.display()).map_err(io)?;
     writeln!(
         out,
-        "  operator keys   {} (operator \"demo\")",
+        "  operator        demo, private key {} (public key in {})",
+        operator_key.display(),
         secrets.display()
     )
     .map_err(io)?;
@@ -184,9 +182,9 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         let mut l = load(&args.line_config)?;
         l.opcua.pki_dir = state.join("line-agent-pki");
         l.journal.path = state.join(format!("{}.sqlite", l.cell));
-        l.secrets_file = Some(secrets.clone());
+        l.operators_file = Some(secrets.clone());
         l.warnings
-            .retain(|w| !w.starts_with("no commands.secrets_file"));
+            .retain(|w| !w.starts_with("no commands.operators_file"));
         let line_pki = state.join("line-sim-pki");
         let options = SimOptions {
             listen: endpoint_addr(&l.opcua.endpoint)?,

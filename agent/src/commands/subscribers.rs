@@ -8,7 +8,7 @@ use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
 use crate::cli::{AlarmsArgs, CommandArgs, Failure, HistoryArgs, ZenohArgs};
 use crate::config::{ZenohConfig, ZenohMode};
-use crate::operator::{Action, Command, OperatorKeys};
+use crate::operator::{Action, Command, OperatorKey};
 use crate::payload::AlarmPayload;
 
 async fn session(z: &ZenohArgs) -> Result<zenoh::Session, Failure> {
@@ -269,29 +269,31 @@ pub(crate) async fn command(
         (Some(path), _) => {
             let text = std::fs::read_to_string(path)
                 .map_err(|e| Failure::Input(format!("cannot read {}: {e}", path.display())))?;
-            OperatorKeys::parse(&path.display().to_string(), &text)
-                .map_err(Failure::input)?
-                .key(&args.operator)
-                .ok_or_else(|| {
-                    Failure::Input(format!(
-                        "{}: no key for operator '{}'",
-                        path.display(),
-                        args.operator
-                    ))
-                })?
+            OperatorKey::parse(&path.display().to_string(), &text).map_err(Failure::Input)?
         }
-        (None, Ok(hex_key)) => hex::decode(hex_key.trim())
-            .map_err(|_| Failure::Input("CELLWATCH_OPERATOR_KEY is not hex".into()))?,
+        (None, Ok(hex_key)) => {
+            let operator = args.operator.as_deref().ok_or_else(|| {
+                Failure::Input("with CELLWATCH_OPERATOR_KEY, give --operator".into())
+            })?;
+            OperatorKey::from_hex(operator, &hex_key)
+                .map_err(|e| Failure::Input(format!("CELLWATCH_OPERATOR_KEY: {e}")))?
+        }
         (None, Err(_)) => {
             return Err(Failure::Input(
-                "give --key-file or set CELLWATCH_OPERATOR_KEY".into(),
+                "give --key-file (made by `cellwatch keygen`) or set CELLWATCH_OPERATOR_KEY".into(),
             ))
         }
     };
+    if let Some(op) = args.operator.as_deref().filter(|op| *op != key.operator) {
+        return Err(Failure::Input(format!(
+            "--operator {op}, but the key is {}'s",
+            key.operator
+        )));
+    }
     let mut cmd = Command {
         action,
         alarm: args.alarm.clone(),
-        operator: args.operator.clone(),
+        operator: key.operator.clone(),
         nonce: crate::operator::nonce(),
         issued_at: crate::clock::now_ms(),
         signature: String::new(),

@@ -213,8 +213,8 @@ pub struct CellConfig {
     pub journal: JournalConfig,
     /// Prometheus `/metrics` address; `None` disables it.
     pub metrics: Option<SocketAddr>,
-    /// Operator keys for signed commands; `None`: every command refused.
-    pub secrets_file: Option<PathBuf>,
+    /// The operators' public keys and permissions (`commands.operators_file`).
+    pub operators_file: Option<PathBuf>,
     /// The tag whose rising edge is one part done (index into `tags`).
     pub part_done: Option<usize>,
     /// Things worth saying at start (security off, ...).
@@ -552,7 +552,14 @@ impl Validator<'_> {
                 }
             },
         };
-        let secrets_file = raw.commands.secrets_file.map(|s| self.path(s.get_ref()));
+        if let Some(old) = &raw.commands.secrets_file {
+            self.problem(
+                old.span(),
+                "commands.secrets_file",
+                "shared operator secrets are no longer accepted: operators sign with their own keys (cellwatch keygen --operator NAME); name the file of their public keys with commands.operators_file",
+            );
+        }
+        let operators_file = raw.commands.operators_file.map(|s| self.path(s.get_ref()));
         let part_done = raw.production.part_done.and_then(|p| {
             let found = tag_address(p.get_ref())
                 .ok()
@@ -566,9 +573,9 @@ impl Validator<'_> {
             }
             found
         });
-        if secrets_file.is_none() {
+        if operators_file.is_none() {
             self.warnings.push(
-                "no commands.secrets_file: every acknowledge and reset will be refused".into(),
+                "no commands.operators_file: every acknowledge and reset will be refused".into(),
             );
         }
         Some(CellConfig {
@@ -583,7 +590,7 @@ impl Validator<'_> {
             zenoh,
             journal,
             metrics,
-            secrets_file,
+            operators_file,
             part_done,
             warnings: Vec::new(),
         })

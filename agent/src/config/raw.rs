@@ -146,5 +146,7 @@ pub(crate) struct RawMetrics {
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawCommands {
-    pub(crate) secrets_file: Option<Spanned<String>>,
+    pub(crate) operators_file: Option<Spanned<String>>,
+    /// The shared-secret file of earlier versions: refused with a message.
+    pub(crate) secrets_file: Option<Spanned<toml::Value>>,
 }

@@ -76,7 +76,7 @@ fn defaults_are_secure_and_sane() {
     assert_eq!(c.switching[0].severity, Severity::High);
     assert_eq!(
         c.warnings,
-        ["no commands.secrets_file: every acknowledge and reset will be refused"]
+        ["no commands.operators_file: every acknowledge and reset will be refused"]
     );
 }
 
@@ -142,6 +142,15 @@ fn every_problem_is_reported_at_once() {
             "cell.toml:10:11: tags[0].node_id: 'two;X1' is not a node id like nsu=<namespace uri>;s=X0.06 or ns=2;s=X0.06",
             "cell.toml:22:12: checks.switching[0].severity: unknown severity 'urgent': use low, medium, high or critical",
         ]
+    );
+}
+
+#[test]
+fn shared_operator_secrets_are_refused() {
+    let text = format!("{GOOD}\n[commands]\nsecrets_file = \"ops.toml\"\n");
+    assert_eq!(
+        errors(&text),
+        "cell.toml:24:16: commands.secrets_file: shared operator secrets are no longer accepted: operators sign with their own keys (cellwatch keygen --operator NAME); name the file of their public keys with commands.operators_file"
     );
 }
 

@@ -1,18 +1,20 @@
 //! Operator commands (acknowledge, reset) and their authorisation.
 //!
-//! A command names its operator and carries an HMAC-SHA256, keyed with that
-//! operator's secret, over a canonical text of the request (cell, action,
-//! alarm, operator, nonce, time). The agent refuses a command that is
-//! unsigned, signed with the wrong key, from an unknown operator, issued
+//! Every operator has an Ed25519 key pair of their own (`cellwatch keygen
+//! --operator NAME`): the private key stays with the operator, the agent's
+//! operators file holds only public keys and, per operator, the actions
+//! allowed. A command names its operator and carries a signature over a
+//! canonical text of the request (cell, action, alarm, operator, nonce,
+//! time). The agent refuses a command that is unsigned, badly signed, from
+//! an unknown operator, for an action the operator may not take, issued
 //! more than [`MAX_SKEW`] away from its clock, or whose nonce it has seen
-//! (a replay). Keys live in a secrets file (`[operators] name = "<hex>"`),
-//! never in the cell configuration. Every command, accepted or refused, is
-//! journaled by the caller.
+//! (a replay). A stolen agent disk signs nothing. Every command, accepted or
+//! refused, is journaled by the caller.
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::{BTreeSet, HashMap, VecDeque};
 use std::path::Path;
 
-use hmac::{Hmac, Mac};
+use ed25519_dalek::{Signature, Signer, SigningKey, VerifyingKey};
 use serde::{Deserialize, Serialize};
 use sha2::Sha256;
 
@@ -22,7 +24,7 @@ pub const MAX_SKEW_MS: u64 = 60_000;
 pub const MAX_SKEW: &str = "60 s";
 
 /// What an operator asks for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Action {
     /// Acknowledge an alarm.
@@ -35,12 +37,17 @@ impl Action {
     /// Every action.
     pub const ALL: [Action; 2] = [Action::Ack, Action::Reset];
 
-    /// The name on the wire and in the journal.
+    /// The name on the wire, in the journal and in operators files.
     pub fn as_str(self) -> &'static str {
         match self {
             Action::Ack => "ack",
             Action::Reset => "reset",
         }
+    }
+
+    /// The action named `name`.
+    pub fn parse(name: &str) -> Option<Action> {
+        Action::ALL.into_iter().find(|a| a.as_str() == name)
     }
 }
 
@@ -65,7 +72,8 @@ pub struct Command {
     pub nonce: String,
     /// When it was issued, ms since the epoch.
     pub issued_at: u64,
-    /// Hex HMAC-SHA256 of [`Command::canonical`] with the operator's key.
+    /// Hex Ed25519 signature of [`Command::canonical`] with the operator's
+    /// private key.
     #[serde(default)]
     pub signature: String,
 }
@@ -74,27 +82,99 @@ impl Command {
     /// The text that is signed.
     pub fn canonical(&self, cell: &str) -> String {
         format!(
-            "cellwatch-command-v1\n{cell}\n{}\n{}\n{}\n{}\n{}",
+            "cellwatch-command-v2\n{cell}\n{}\n{}\n{}\n{}\n{}",
             self.action, self.alarm, self.operator, self.nonce, self.issued_at
         )
     }
 
-    /// Signs the command for `cell` with `key`.
-    pub fn sign(&mut self, cell: &str, key: &[u8]) {
-        self.signature = hex::encode(mac(key, &self.canonical(cell)).finalize().into_bytes());
+    /// Signs the command for `cell` with the operator's private key.
+    pub fn sign(&mut self, cell: &str, key: &OperatorKey) {
+        self.signature = hex::encode(key.key.sign(self.canonical(cell).as_bytes()).to_bytes());
     }
 }
 
-fn mac(key: &[u8], text: &str) -> Hmac<Sha256> {
-    let mut m = <Hmac<Sha256> as Mac>::new_from_slice(key).expect("HMAC takes keys of any length");
-    m.update(text.as_bytes());
-    m
+/// An operator's private key, as `cellwatch keygen` writes it. Kept by the
+/// operator, never on an agent.
+pub struct OperatorKey {
+    /// Whose key.
+    pub operator: String,
+    key: SigningKey,
 }
 
-/// Why the operator keys cannot be loaded.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct KeyFile {
+    operator: String,
+    private_key: String,
+}
+
+impl OperatorKey {
+    /// A new random key for `operator`.
+    pub fn generate(operator: &str) -> OperatorKey {
+        OperatorKey {
+            operator: operator.into(),
+            key: SigningKey::from_bytes(&rand::random::<[u8; 32]>()),
+        }
+    }
+
+    /// The key from its 32-byte hex seed.
+    ///
+    /// # Errors
+    /// Not 64 hex digits.
+    pub fn from_hex(operator: &str, hex_key: &str) -> Result<OperatorKey, String> {
+        let bytes: [u8; 32] = hex::decode(hex_key.trim())
+            .ok()
+            .and_then(|b| b.try_into().ok())
+            .ok_or("a private key is 64 hex digits")?;
+        Ok(OperatorKey {
+            operator: operator.into(),
+            key: SigningKey::from_bytes(&bytes),
+        })
+    }
+
+    /// Reads a key file (`operator = "…"`, `private_key = "<hex>"`).
+    ///
+    /// # Errors
+    /// The file is not a key file; the message names it.
+    pub fn parse(origin: &str, text: &str) -> Result<OperatorKey, String> {
+        let f: KeyFile = toml::from_str(text).map_err(|e| format!("{origin}: {}", e.message()))?;
+        Self::from_hex(&f.operator, &f.private_key)
+            .map_err(|e| format!("{origin}: private_key: {e}"))
+    }
+
+    /// The key file's text.
+    pub fn to_file(&self) -> String {
+        format!(
+            "# cellwatch operator key of '{}'. PRIVATE: keep it on the operator's machine\n\
+             # (chmod 600), never on an agent. Agents hold only the public key.\n\
+             operator = \"{}\"\nprivate_key = \"{}\"\n",
+            self.operator,
+            self.operator,
+            hex::encode(self.key.to_bytes())
+        )
+    }
+
+    /// The public key, hex.
+    pub fn public_hex(&self) -> String {
+        hex::encode(self.key.verifying_key().to_bytes())
+    }
+
+    /// The entry an agent's operators file needs for this operator.
+    pub fn operators_entry(&self, allow: &[Action]) -> String {
+        let allow: Vec<String> = allow.iter().map(|a| format!("\"{a}\"")).collect();
+        format!(
+            "[operators.{}]\npublic_key = \"{}\"\nallow = [{}]\n",
+            self.operator,
+            self.public_hex(),
+            allow.join(", ")
+        )
+    }
+}
+
+/// Why the operators file cannot be loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum KeysError {
-    /// The secrets file cannot be read.
+    /// The file cannot be read.
     #[error("cannot read {path}: {source}")]
     Read {
         /// The file.
@@ -110,21 +190,15 @@ pub enum KeysError {
         /// TOML's message.
         message: String,
     },
-    /// A key is not hex.
-    #[error("{origin}: operators.{operator}: the key is not hex")]
-    NotHex {
+    /// An entry is wrong; the message says how.
+    #[error("{origin}: operators.{operator}: {message}")]
+    Entry {
         /// The file.
         origin: String,
-        /// Whose key.
+        /// Whose entry.
         operator: String,
-    },
-    /// A key is too short to be safe.
-    #[error("{origin}: operators.{operator}: the key must be at least 16 bytes (32 hex digits)")]
-    TooShort {
-        /// The file.
-        origin: String,
-        /// Whose key.
-        operator: String,
+        /// What is wrong.
+        message: String,
     },
 }
 
@@ -143,6 +217,14 @@ pub enum Refusal {
     /// The signature does not match.
     #[error("bad signature")]
     BadSignature,
+    /// The operator may not take this action.
+    #[error("operator '{operator}' may not {action}")]
+    NotAllowed {
+        /// Who.
+        operator: String,
+        /// What.
+        action: Action,
+    },
     /// Issued too far from the agent's clock.
     #[error("issued {0} ms away from the agent's clock (more than {MAX_SKEW})")]
     Skew(u64),
@@ -151,48 +233,86 @@ pub enum Refusal {
     Replay,
 }
 
-/// Operators' keys, from the secrets file.
+/// One operator as an agent knows them: a public key and what they may do.
+#[derive(Debug, Clone)]
+struct Operator {
+    key: VerifyingKey,
+    allow: BTreeSet<Action>,
+}
+
+/// The operators an agent accepts commands from (public keys only).
 #[derive(Default)]
 pub struct OperatorKeys {
-    keys: HashMap<String, Vec<u8>>,
+    operators: HashMap<String, Operator>,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct SecretsFile {
-    operators: HashMap<String, String>,
+struct OperatorsFile {
+    operators: HashMap<String, toml::Value>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct OperatorEntry {
+    public_key: String,
+    allow: Vec<String>,
 }
 
 impl OperatorKeys {
-    /// Parses a secrets file's text.
+    /// Parses an operators file's text.
     ///
     /// # Errors
-    /// Malformed TOML or a key that is not hex of at least 16 bytes.
+    /// Malformed TOML, a key that is not an Ed25519 public key, an unknown
+    /// action, or a shared secret of the old format.
     pub fn parse(origin: &str, text: &str) -> Result<OperatorKeys, KeysError> {
-        let f: SecretsFile = toml::from_str(text).map_err(|e| KeysError::Syntax {
+        let f: OperatorsFile = toml::from_str(text).map_err(|e| KeysError::Syntax {
             origin: origin.into(),
             message: e.message().into(),
         })?;
-        let mut keys = HashMap::new();
-        for (name, hex_key) in f.operators {
-            let Ok(key) = hex::decode(hex_key.trim()) else {
-                return Err(KeysError::NotHex {
-                    origin: origin.into(),
-                    operator: name,
-                });
-            };
-            if key.len() < 16 {
-                return Err(KeysError::TooShort {
-                    origin: origin.into(),
-                    operator: name,
-                });
+        let entry_error = |operator: &str, message: String| KeysError::Entry {
+            origin: origin.into(),
+            operator: operator.into(),
+            message,
+        };
+        let mut operators = HashMap::new();
+        for (name, value) in f.operators {
+            if value.is_str() {
+                return Err(entry_error(
+                    &name,
+                    format!("a shared secret is no longer accepted: operators sign with their own key; run `cellwatch keygen --operator {name}` and put the public_key and allow it prints here"),
+                ));
             }
-            keys.insert(name, key);
+            let e: OperatorEntry = value
+                .try_into()
+                .map_err(|e: toml::de::Error| entry_error(&name, e.message().to_string()))?;
+            let key = hex::decode(e.public_key.trim())
+                .ok()
+                .and_then(|b| <[u8; 32]>::try_from(b).ok())
+                .and_then(|b| VerifyingKey::from_bytes(&b).ok())
+                .ok_or_else(|| {
+                    entry_error(
+                        &name,
+                        "public_key: not an Ed25519 public key (64 hex digits)".into(),
+                    )
+                })?;
+            let mut allow = BTreeSet::new();
+            for a in &e.allow {
+                let action = Action::parse(a).ok_or_else(|| {
+                    let known: Vec<&str> = Action::ALL.iter().map(|a| a.as_str()).collect();
+                    entry_error(
+                        &name,
+                        format!("allow: unknown action '{a}': use {}", known.join(", ")),
+                    )
+                })?;
+                allow.insert(action);
+            }
+            operators.insert(name, Operator { key, allow });
         }
-        Ok(OperatorKeys { keys })
+        Ok(OperatorKeys { operators })
     }
 
-    /// Loads the secrets file, warning when others may read it.
+    /// Loads the operators file.
     ///
     /// # Errors
     /// The file cannot be read or parsed.
@@ -201,35 +321,21 @@ impl OperatorKeys {
             path: path.to_path_buf(),
             source,
         })?;
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::PermissionsExt;
-            if let Ok(meta) = std::fs::metadata(path) {
-                if meta.permissions().mode() & 0o077 != 0 {
-                    tracing::warn!(path = %path.display(), "the operator secrets file is readable by others; chmod 600 it");
-                }
-            }
-        }
         Self::parse(&path.display().to_string(), &text)
     }
 
-    /// The key of `operator`.
-    pub fn key(&self, operator: &str) -> Option<Vec<u8>> {
-        self.keys.get(operator).cloned()
-    }
-
-    /// How many operators have keys.
+    /// How many operators are known.
     pub fn len(&self) -> usize {
-        self.keys.len()
+        self.operators.len()
     }
 
     /// Whether there are none.
     pub fn is_empty(&self) -> bool {
-        self.keys.is_empty()
+        self.operators.is_empty()
     }
 }
 
-/// Checks signatures and remembers nonces.
+/// Checks signatures and permissions, and remembers nonces.
 pub struct Gate {
     cell: String,
     keys: OperatorKeys,
@@ -273,17 +379,30 @@ impl Gate {
         if cmd.signature.is_empty() {
             return Err(Refusal::Unsigned);
         }
-        let Some(key) = self.keys.keys.get(&cmd.operator) else {
+        let Some(operator) = self.keys.operators.get(&cmd.operator) else {
             return Err(Refusal::UnknownOperator(cmd.operator.clone()));
         };
-        let Ok(sig) = hex::decode(&cmd.signature) else {
+        let Some(sig) = hex::decode(&cmd.signature)
+            .ok()
+            .and_then(|b| <[u8; 64]>::try_from(b).ok())
+        else {
             return Err(Refusal::SignatureNotHex);
         };
-        if mac(key, &cmd.canonical(&self.cell))
-            .verify_slice(&sig)
+        if operator
+            .key
+            .verify_strict(
+                cmd.canonical(&self.cell).as_bytes(),
+                &Signature::from_bytes(&sig),
+            )
             .is_err()
         {
             return Err(Refusal::BadSignature);
+        }
+        if !operator.allow.contains(&cmd.action) {
+            return Err(Refusal::NotAllowed {
+                operator: cmd.operator.clone(),
+                action: cmd.action,
+            });
         }
         if cmd.issued_at.abs_diff(now) > MAX_SKEW_MS {
             return Err(Refusal::Skew(cmd.issued_at.abs_diff(now)));
@@ -368,11 +487,9 @@ pub fn nonce() -> String {
 mod tests {
     use super::*;
 
-    const KEYS: &str = "[operators]\nkim = \"00112233445566778899aabbccddeeff\"\n";
-
-    fn cmd(now: u64) -> Command {
+    fn cmd(now: u64, action: Action) -> Command {
         Command {
-            action: Action::Ack,
+            action,
             alarm: "ese".into(),
             operator: "kim".into(),
             nonce: nonce(),
@@ -381,34 +498,40 @@ mod tests {
         }
     }
 
+    fn gate(kim: &OperatorKey, allow: &[Action]) -> Gate {
+        Gate::new(
+            "m01",
+            OperatorKeys::parse("k", &kim.operators_entry(allow)).unwrap(),
+        )
+    }
+
     #[test]
     fn signed_once_accepted_then_replay_refused() {
-        let mut gate = Gate::new("m01", OperatorKeys::parse("k", KEYS).unwrap());
-        let mut c = cmd(1_000_000);
+        let kim = OperatorKey::generate("kim");
+        let mut gate = gate(&kim, &[Action::Ack]);
+        let mut c = cmd(1_000_000, Action::Ack);
         assert_eq!(gate.check(&c, 1_000_000), Err(Refusal::Unsigned));
-        c.sign(
-            "m01",
-            &hex::decode("00112233445566778899aabbccddeeff").unwrap(),
-        );
+        c.sign("m01", &kim);
         assert_eq!(gate.check(&c, 1_000_500), Ok(()));
         assert_eq!(gate.check(&c, 1_000_600), Err(Refusal::Replay));
-        let mut wrong = cmd(1_000_000);
-        wrong.sign("m01", b"not the key of kim at all");
-        assert_eq!(gate.check(&wrong, 1_000_000), Err(Refusal::BadSignature));
-        let mut other_cell = cmd(1_000_000);
-        other_cell.sign(
-            "m02",
-            &hex::decode("00112233445566778899aabbccddeeff").unwrap(),
-        );
+        // Another key under kim's name.
+        let mut forged = cmd(1_000_000, Action::Ack);
+        forged.sign("m01", &OperatorKey::generate("kim"));
+        assert_eq!(gate.check(&forged, 1_000_000), Err(Refusal::BadSignature));
+        // Signed for another cell.
+        let mut other_cell = cmd(1_000_000, Action::Ack);
+        other_cell.sign("m02", &kim);
         assert_eq!(
             gate.check(&other_cell, 1_000_000),
             Err(Refusal::BadSignature)
         );
-        let mut old = cmd(1_000_000);
-        old.sign(
-            "m01",
-            &hex::decode("00112233445566778899aabbccddeeff").unwrap(),
-        );
+        // Altered after signing.
+        let mut altered = cmd(1_000_000, Action::Ack);
+        altered.sign("m01", &kim);
+        altered.alarm = "csd".into();
+        assert_eq!(gate.check(&altered, 1_000_000), Err(Refusal::BadSignature));
+        let mut old = cmd(1_000_000, Action::Ack);
+        old.sign("m01", &kim);
         assert!(gate
             .check(&old, 1_100_000)
             .unwrap_err()
@@ -417,19 +540,62 @@ mod tests {
     }
 
     #[test]
-    fn bad_secrets_files() {
+    fn actions_need_permission() {
+        let kim = OperatorKey::generate("kim");
+        let mut gate = gate(&kim, &[Action::Ack]);
+        let mut reset = cmd(1_000_000, Action::Reset);
+        reset.sign("m01", &kim);
+        let refusal = gate.check(&reset, 1_000_000).unwrap_err();
+        assert_eq!(refusal.to_string(), "operator 'kim' may not reset");
+        let mut unknown = cmd(1_000_000, Action::Ack);
+        unknown.operator = "lee".into();
+        unknown.sign("m01", &OperatorKey::generate("lee"));
         assert_eq!(
-            OperatorKeys::parse("k", "[operators]\nkim = \"zz\"")
+            gate.check(&unknown, 1_000_000),
+            Err(Refusal::UnknownOperator("lee".into()))
+        );
+    }
+
+    #[test]
+    fn key_files_round_trip_and_hold_the_private_key_only_there() {
+        let kim = OperatorKey::generate("kim");
+        let file = kim.to_file();
+        let back = OperatorKey::parse("kim.key", &file).unwrap();
+        assert_eq!(back.public_hex(), kim.public_hex());
+        let entry = kim.operators_entry(&[Action::Ack, Action::Reset]);
+        assert!(!entry.contains(&hex::encode(kim.key.to_bytes())));
+        assert!(entry.contains("allow = [\"ack\", \"reset\"]"), "{entry}");
+    }
+
+    #[test]
+    fn bad_operators_files() {
+        let err = |text: &str| {
+            OperatorKeys::parse("ops.toml", text)
                 .err()
                 .unwrap()
-                .to_string(),
-            "k: operators.kim: the key is not hex"
+                .to_string()
+        };
+        assert_eq!(
+            err("[operators]\nkim = \"00112233445566778899aabbccddeeff\""),
+            "ops.toml: operators.kim: a shared secret is no longer accepted: operators sign with their own key; run `cellwatch keygen --operator kim` and put the public_key and allow it prints here"
         );
-        assert!(OperatorKeys::parse("k", "[operators]\nkim = \"00\"")
-            .err()
-            .unwrap()
-            .to_string()
-            .contains("at least 16 bytes"));
+        assert_eq!(
+            err("[operators.kim]\npublic_key = \"zz\"\nallow = []"),
+            "ops.toml: operators.kim: public_key: not an Ed25519 public key (64 hex digits)"
+        );
+        let kim = OperatorKey::generate("kim");
+        assert_eq!(
+            err(&format!(
+                "[operators.kim]\npublic_key = \"{}\"\nallow = [\"fly\"]",
+                kim.public_hex()
+            )),
+            "ops.toml: operators.kim: allow: unknown action 'fly': use ack, reset"
+        );
+        assert!(err(&format!(
+            "[operators.kim]\npublic_key = \"{}\"",
+            kim.public_hex()
+        ))
+        .contains("missing field `allow`"));
     }
 }
 

@@ -1,0 +1,73 @@
+//! `cellwatch keygen`: an operator's Ed25519 key pair.
+
+use std::io::Write;
+use std::path::Path;
+
+use crate::cli::{Failure, KeygenArgs};
+use crate::operator::{Action, OperatorKey};
+
+/// Writes the private key file and prints the operators-file entry.
+pub(crate) fn run(args: &KeygenArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    if args.operator.is_empty()
+        || !args
+            .operator
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_' || c == '.')
+    {
+        return Err(Failure::Input(format!(
+            "--operator '{}': use letters, digits, '-', '_' or '.'",
+            args.operator
+        )));
+    }
+    let mut allow = Vec::new();
+    for name in args
+        .allow
+        .split(',')
+        .map(str::trim)
+        .filter(|n| !n.is_empty())
+    {
+        let action = Action::parse(name).ok_or_else(|| {
+            let known: Vec<&str> = Action::ALL.iter().map(|a| a.as_str()).collect();
+            Failure::Input(format!(
+                "--allow: unknown action '{name}': use {}",
+                known.join(", ")
+            ))
+        })?;
+        if !allow.contains(&action) {
+            allow.push(action);
+        }
+    }
+    let key = OperatorKey::generate(&args.operator);
+    write_private(&args.out, &key.to_file())?;
+    let io = Failure::output;
+    writeln!(
+        out,
+        "# private key of '{}' written to {} (keep it; agents never need it)",
+        args.operator,
+        args.out.display()
+    )
+    .map_err(io)?;
+    writeln!(out, "# add to each agent's operators file:").map_err(io)?;
+    write!(out, "{}", key.operators_entry(&allow)).map_err(io)?;
+    Ok(())
+}
+
+/// Creates `path` readable by its owner only; an existing file is kept.
+pub(crate) fn write_private(path: &Path, text: &str) -> Result<(), Failure> {
+    let mut options = std::fs::OpenOptions::new();
+    options.write(true).create_new(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.mode(0o600);
+    }
+    let mut file = options.open(path).map_err(|e| {
+        if e.kind() == std::io::ErrorKind::AlreadyExists {
+            Failure::Input(format!("{} exists; not overwritten", path.display()))
+        } else {
+            Failure::Runtime(format!("cannot create {}: {e}", path.display()))
+        }
+    })?;
+    file.write_all(text.as_bytes())
+        .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", path.display())))
+}

@@ -1,0 +1,126 @@
+//! Operators sign with their own Ed25519 keys (`cellwatch keygen`); the
+//! agent holds public keys and permissions only. Real binary, real Zenoh.
+
+use crate::spawned::{alarm, snapshot_until, start, KEY};
+use crate::util::cellwatch;
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn operators_act_within_their_permissions_and_agents_hold_no_private_key() {
+    let d = tempfile::tempdir().unwrap();
+    let (sim, cell) = start(d.path()).await;
+    // lee may acknowledge, not reset; a stranger's key is in no file.
+    let lee_key = d.path().join("lee.key");
+    let made = cellwatch(&[
+        "keygen",
+        "--operator",
+        "lee",
+        "--out",
+        lee_key.to_str().unwrap(),
+        "--allow",
+        "ack",
+    ]);
+    assert_eq!(made.code, 0, "{}", made.stderr);
+    let entry: String = made
+        .stdout
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    assert!(entry.contains("allow = [\"ack\"]"), "{entry}");
+    let operators = d.path().join("operators.toml");
+    let all = format!("{}\n{entry}", std::fs::read_to_string(&operators).unwrap());
+    std::fs::write(&operators, all).unwrap();
+    let stranger_key = d.path().join("stranger.key");
+    assert_eq!(
+        cellwatch(&[
+            "keygen",
+            "--operator",
+            "lee",
+            "--out",
+            stranger_key.to_str().unwrap()
+        ])
+        .code,
+        0
+    );
+    // The key file is never overwritten.
+    let again = cellwatch(&[
+        "keygen",
+        "--operator",
+        "lee",
+        "--out",
+        lee_key.to_str().unwrap(),
+    ]);
+    assert_eq!(again.code, 2);
+    assert!(
+        again.stderr.contains("exists; not overwritten"),
+        "{}",
+        again.stderr
+    );
+
+    let mut child = cell.spawn("agent.log");
+    let client = cell.client().await;
+    sim.set("X0.06", false).unwrap();
+    snapshot_until(&client, "ESE raised", |s| alarm(s, "ese").is_some()).await;
+    let connect = format!("tcp/127.0.0.1:{}", cell.zenoh_port);
+    let send = |action: &str, key: &std::path::Path| {
+        cellwatch(&[
+            action,
+            "--cell",
+            "m01ps0004",
+            "--alarm",
+            "ese",
+            "--key-file",
+            key.to_str().unwrap(),
+            "--connect",
+            &connect,
+        ])
+    };
+    let reset = send("reset", &lee_key);
+    assert_eq!(
+        (reset.code, reset.stderr.as_str()),
+        (1, "error: refused: operator 'lee' may not reset\n")
+    );
+    let forged = send("ack", &stranger_key);
+    assert_eq!(
+        (forged.code, forged.stderr.as_str()),
+        (1, "error: refused: bad signature\n")
+    );
+    let ack = send("ack", &lee_key);
+    assert_eq!(
+        (ack.code, ack.stdout.as_str()),
+        (0, "accepted: ack ese by lee\n"),
+        "{}",
+        ack.stderr
+    );
+    snapshot_until(&client, "ESE acknowledged by lee", |s| {
+        alarm(s, "ese").is_some_and(|a| a["acked_by"] == "lee")
+    })
+    .await;
+    child.kill().unwrap();
+    child.wait().unwrap();
+    // Nothing the agent has (configuration, operators file, journal)
+    // holds a private key.
+    let lee_private = std::fs::read_to_string(&lee_key).unwrap();
+    let lee_private = lee_private
+        .lines()
+        .find_map(|l| l.strip_prefix("private_key = \""))
+        .unwrap()
+        .trim_end_matches('"')
+        .to_string();
+    for file in [
+        "cell.toml",
+        "operators.toml",
+        "journal.sqlite",
+        "journal.sqlite-wal",
+    ] {
+        let Ok(bytes) = std::fs::read(d.path().join(file)) else {
+            assert!(file.ends_with("-wal"), "{file} missing");
+            continue;
+        };
+        let text = String::from_utf8_lossy(&bytes);
+        for secret in [lee_private.as_str(), KEY] {
+            assert!(!text.contains(secret), "{file} holds a private key");
+        }
+    }
+    sim.stop();
+}
