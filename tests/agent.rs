@@ -31,7 +31,9 @@ pub(crate) fn config(dir: &Path, sim_endpoint: &str, zenoh_port: u16) -> CellCon
     c.opcua.endpoint = sim_endpoint.to_string();
     c.opcua.pki_dir = dir.join("agent-pki");
     c.journal.path = dir.join("journal.sqlite");
-    c.zenoh.listen = vec![format!("tcp/127.0.0.1:{zenoh_port}")];
+    c.zenoh.listen = vec![format!("tls/127.0.0.1:{zenoh_port}")];
+    crate::util::bus_pki(dir, &["agent-m01ps0004"]);
+    c.zenoh.tls = Some(crate::util::bus_tls(dir, "agent-m01ps0004"));
     c.metrics = Some("127.0.0.1:0".parse().unwrap());
     let secrets = dir.join("operators.toml");
     std::fs::write(
@@ -70,15 +72,7 @@ impl Fixture {
         pki::trust(&pki::own_cert(&config.opcua.pki_dir), &dir.join("sim-pki")).unwrap();
         pki::trust(&pki::own_cert(&dir.join("sim-pki")), &config.opcua.pki_dir).unwrap();
         let agent = cell::start(config.clone(), None).await.unwrap();
-        let client = cellwatch::sinks::zenoh::open(&cellwatch::config::ZenohConfig {
-            mode: cellwatch::config::ZenohMode::Peer,
-            connect: vec![format!("tcp/127.0.0.1:{zenoh_port}")],
-            listen: vec![],
-            prefix: String::new(),
-            multicast_scouting: false,
-        })
-        .await
-        .unwrap();
+        let client = crate::util::operator_session(&dir, "operator-kim", zenoh_port).await;
         let sim_addr = sim.addr();
         Fixture {
             _dir: d,
@@ -489,7 +483,9 @@ pub(crate) async fn line_cell(dir: &Path) -> (cellwatch::sim::line::SimulatedLin
     c.opcua.pki_dir = dir.join("agent-pki");
     c.journal.path = dir.join("journal.sqlite");
     let zenoh_port = free_port();
-    c.zenoh.listen = vec![format!("tcp/127.0.0.1:{zenoh_port}")];
+    c.zenoh.listen = vec![format!("tls/127.0.0.1:{zenoh_port}")];
+    crate::util::bus_pki(dir, &["agent-line01"]);
+    c.zenoh.tls = Some(crate::util::bus_tls(dir, "agent-line01"));
     c.metrics = Some("127.0.0.1:0".parse().unwrap());
     drop(opcua::client("test", &c.opcua).unwrap());
     pki::trust(&pki::own_cert(&c.opcua.pki_dir), &dir.join("sim-pki")).unwrap();
@@ -507,15 +503,7 @@ async fn live_line_slow_motion_raises_its_timer_alarm() {
 
     let d = tempfile::tempdir().unwrap();
     let (sim, agent, zenoh_port) = line_cell(d.path()).await;
-    let client = cellwatch::sinks::zenoh::open(&cellwatch::config::ZenohConfig {
-        mode: cellwatch::config::ZenohMode::Peer,
-        connect: vec![format!("tcp/127.0.0.1:{zenoh_port}")],
-        listen: vec![],
-        prefix: String::new(),
-        multicast_scouting: false,
-    })
-    .await
-    .unwrap();
+    let client = crate::util::operator_session(d.path(), "operator-kim", zenoh_port).await;
     let sub = client
         .declare_subscriber("cellwatch/line01/alarms/**")
         .history(HistoryConfig::default().detect_late_publishers())

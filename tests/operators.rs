@@ -61,9 +61,9 @@ async fn operators_act_within_their_permissions_and_agents_hold_no_private_key()
     let client = cell.client().await;
     sim.set("X0.06", false).unwrap();
     snapshot_until(&client, "ESE raised", |s| alarm(s, "ese").is_some()).await;
-    let connect = format!("tcp/127.0.0.1:{}", cell.zenoh_port);
+    let bus = cell.bus_args();
     let send = |action: &str, key: &std::path::Path| {
-        cellwatch(&[
+        let mut args = vec![
             action,
             "--cell",
             "m01ps0004",
@@ -71,9 +71,9 @@ async fn operators_act_within_their_permissions_and_agents_hold_no_private_key()
             "ese",
             "--key-file",
             key.to_str().unwrap(),
-            "--connect",
-            &connect,
-        ])
+        ];
+        args.extend(bus.iter().map(String::as_str));
+        cellwatch(&args)
     };
     let reset = send("reset", &lee_key);
     assert_eq!(

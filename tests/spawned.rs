@@ -72,23 +72,21 @@ impl Cell {
                 "--since",
                 since,
             ])
-            .args(["--connect", &format!("tcp/127.0.0.1:{}", self.zenoh_port)])
+            .args(self.bus_args())
             .stdout(Stdio::piped())
             .stderr(std::fs::File::create(self.dir.join("follow.log")).unwrap())
             .spawn()
             .unwrap()
     }
 
+    /// A session of operator kim's certificate to the agent.
     pub(crate) async fn client(&self) -> zenoh::Session {
-        cellwatch::sinks::zenoh::open(&cellwatch::config::ZenohConfig {
-            mode: cellwatch::config::ZenohMode::Peer,
-            connect: vec![format!("tcp/127.0.0.1:{}", self.zenoh_port)],
-            listen: vec![],
-            prefix: String::new(),
-            multicast_scouting: false,
-        })
-        .await
-        .unwrap()
+        crate::util::operator_session(&self.dir, "operator-kim", self.zenoh_port).await
+    }
+
+    /// The CLI flags that reach the agent as operator kim.
+    pub(crate) fn bus_args(&self) -> Vec<String> {
+        crate::util::bus_args(&self.dir, "operator-kim", self.zenoh_port)
     }
 
     pub(crate) fn log(&self, name: &str) -> String {
@@ -115,11 +113,12 @@ pub(crate) fn cell(dir: &Path, sim: &SimulatedCnc) -> Cell {
     let zenoh_port = free_port();
     let metrics_port = free_port();
     std::fs::write(dir.join("timers.json"), TIMERS).unwrap();
+    crate::util::bus_pki(dir, &["agent-m01ps0004", "operator-kim"]);
     std::fs::write(dir.join("operators.toml"), operators_file(&Action::ALL)).unwrap();
     let demo = std::fs::read_to_string(root().join("config/demo.toml")).unwrap();
     let config = demo
         .replace("opc.tcp://127.0.0.1:48400/", &sim.endpoint())
-        .replace("tcp/127.0.0.1:7447", &format!("tcp/127.0.0.1:{zenoh_port}"))
+        .replace("tls/127.0.0.1:7447", &format!("tls/127.0.0.1:{zenoh_port}"))
         .replace(
             "# listen = \"127.0.0.1:9464\"",
             &format!("listen = \"127.0.0.1:{metrics_port}\""),

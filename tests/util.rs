@@ -47,3 +47,63 @@ impl Dir {
         p.to_str().unwrap().to_string()
     }
 }
+
+/// A plant CA and certificates for `names` in `dir/pki-bus`, where the
+/// shipped configurations look for them; existing ones are kept.
+pub(crate) fn bus_pki(dir: &Path, names: &[&str]) {
+    use cellwatch::sinks::zenoh::certs;
+    let pki = dir.join("pki-bus");
+    certs::make_ca(&pki, "test plant CA").unwrap();
+    for name in names {
+        if !certs::cert_files(&pki, name).0.exists() {
+            certs::issue(&pki, name, &["localhost".into(), "127.0.0.1".into()]).unwrap();
+        }
+    }
+}
+
+/// The TLS files of `name` in `dir/pki-bus`.
+pub(crate) fn bus_tls(dir: &Path, name: &str) -> cellwatch::config::ZenohTls {
+    let pki = dir.join("pki-bus");
+    let (cert, key) = cellwatch::sinks::zenoh::certs::cert_files(&pki, name);
+    cellwatch::config::ZenohTls {
+        ca: pki.join("ca.pem"),
+        cert,
+        key,
+    }
+}
+
+/// A client session (peer) of operator `name`'s certificate to `port`.
+pub(crate) async fn operator_session(dir: &Path, name: &str, port: u16) -> zenoh::Session {
+    bus_pki(dir, &[name]);
+    cellwatch::sinks::zenoh::open(&client_config(dir, name, port))
+        .await
+        .unwrap()
+}
+
+/// A client configuration with `name`'s certificate, to `port`.
+pub(crate) fn client_config(dir: &Path, name: &str, port: u16) -> cellwatch::config::ZenohConfig {
+    cellwatch::config::ZenohConfig {
+        mode: cellwatch::config::ZenohMode::Peer,
+        connect: vec![format!("tls/127.0.0.1:{port}")],
+        listen: vec![],
+        prefix: String::new(),
+        multicast_scouting: false,
+        tls: Some(bus_tls(dir, name)),
+        config_file: None,
+    }
+}
+
+/// The CLI flags that reach `port` as operator `name`.
+pub(crate) fn bus_args(dir: &Path, name: &str, port: u16) -> Vec<String> {
+    let tls = bus_tls(dir, name);
+    vec![
+        "--connect".into(),
+        format!("tls/127.0.0.1:{port}"),
+        "--tls-ca".into(),
+        tls.ca.display().to_string(),
+        "--tls-cert".into(),
+        tls.cert.display().to_string(),
+        "--tls-key".into(),
+        tls.key.display().to_string(),
+    ]
+}

@@ -71,6 +71,11 @@ enum Command {
     /// agents' operators file: the public key and the actions allowed. An
     /// agent holds public keys only.
     Keygen(KeygenArgs),
+    /// Certificates for the Zenoh bus: a plant CA, and certificates issued
+    /// from it for agents, routers and operators (mutual TLS; the access
+    /// control matches their common names).
+    #[command(subcommand)]
+    Pki(PkiCommand),
     /// Learn transition timers δ(A, E | Δt) = B from logs of normal runs.
     Learn(LearnArgs),
     /// Run the transition-timer monitor over run logs in virtual time.
@@ -81,6 +86,40 @@ enum Command {
     /// Production reports from a journal: per-hour run/idle/fault minutes,
     /// availability, stop causes and production (daily), or per day (monthly).
     Report(ReportArgs),
+}
+
+#[derive(Debug, Subcommand)]
+pub(crate) enum PkiCommand {
+    /// Create the plant CA: DIR/ca.pem (public) and DIR/ca.key (private).
+    Ca(PkiCaArgs),
+    /// Issue a certificate from the CA in DIR: DIR/NAME.pem and DIR/NAME.key.
+    /// NAME is its common name: `agent-<cell>` for an agent, `router-…` for
+    /// a router, `operator-<name>` for an operator (as config/zenoh/ expects).
+    Issue(PkiIssueArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct PkiCaArgs {
+    /// Where the CA's files go.
+    #[arg(long, default_value = "pki-bus")]
+    pub(crate) dir: PathBuf,
+    /// The CA's common name.
+    #[arg(long, default_value = "cellwatch plant CA")]
+    pub(crate) name: String,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct PkiIssueArgs {
+    /// Where the CA is, and where the certificate goes.
+    #[arg(long, default_value = "pki-bus")]
+    pub(crate) dir: PathBuf,
+    /// The common name.
+    #[arg(long)]
+    pub(crate) name: String,
+    /// Host name or IP address the holder listens on (repeatable; default
+    /// localhost and 127.0.0.1). Clients check it when they connect.
+    #[arg(long)]
+    pub(crate) host: Vec<String>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -296,9 +335,24 @@ pub(crate) struct SimulateArgs {
 /// How the Zenoh clients reach agents.
 #[derive(Debug, clap::Args)]
 pub(crate) struct ZenohArgs {
-    /// Zenoh endpoint of an agent or router; repeatable.
-    #[arg(long, default_value = "tcp/127.0.0.1:7447")]
+    /// Zenoh endpoint of an agent or router; repeatable (default
+    /// tls/127.0.0.1:7447 with --tls-ca, tcp/127.0.0.1:7447 without).
+    #[arg(long)]
     pub(crate) connect: Vec<String>,
+    /// The plant CA's certificate (PEM): only agents and routers with a
+    /// certificate it issued are accepted. Needs --tls-cert and --tls-key.
+    #[arg(long, value_name = "PEM", requires_all = ["tls_cert", "tls_key"])]
+    pub(crate) tls_ca: Option<PathBuf>,
+    /// Your certificate from the plant CA (`cellwatch pki issue`).
+    #[arg(long, value_name = "PEM", requires = "tls_ca")]
+    pub(crate) tls_cert: Option<PathBuf>,
+    /// Your certificate's private key.
+    #[arg(long, value_name = "PEM", requires = "tls_ca")]
+    pub(crate) tls_key: Option<PathBuf>,
+    /// A Zenoh configuration file (JSON5) for anything else Zenoh offers;
+    /// the flags above are laid over it.
+    #[arg(long, value_name = "JSON5")]
+    pub(crate) zenoh_config: Option<PathBuf>,
     /// Zenoh mode of this client: peer or client (of a router).
     #[arg(long, default_value = "peer")]
     pub(crate) mode: String,
@@ -512,6 +566,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             | Command::Report(_)
             | Command::Learn(_)
             | Command::Keygen(_)
+            | Command::Pki(_)
             | Command::Replay(_)
             | Command::ExportSt(_) => Ok(()),
         }
@@ -545,6 +600,8 @@ pub fn run(
         Command::Report(args) => commands::report::run(&args, out),
         Command::Learn(args) => commands::timers::learn(&args, out),
         Command::Keygen(args) => commands::keygen::run(&args, out),
+        Command::Pki(PkiCommand::Ca(args)) => commands::pki::ca(&args, out),
+        Command::Pki(PkiCommand::Issue(args)) => commands::pki::issue_command(&args, out),
         Command::Replay(args) => commands::timers::replay(&args, out),
         Command::ExportSt(args) => commands::timers::export_st(&args, out),
         other => asynchronous(other, out),

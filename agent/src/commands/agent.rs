@@ -97,6 +97,50 @@ fn demo_operator(state: &Path) -> Result<(PathBuf, PathBuf), Failure> {
     Ok((key_file, operators))
 }
 
+/// The demo's bus: a plant CA in `state/pki-bus`, certificates for the
+/// agent of `c` (set in its configuration) and for operator `demo`, and a
+/// client configuration file for the CLI (`--zenoh-config`), returned.
+fn demo_bus(state: &Path, c: &mut CellConfig) -> Result<PathBuf, Failure> {
+    c.zenoh.tls = Some(bus_tls(state, &format!("agent-{}", c.cell))?);
+    let operator = bus_tls(state, "operator-demo")?;
+    let endpoints: Vec<String> = c
+        .zenoh
+        .listen
+        .iter()
+        .map(|e| e.replace("0.0.0.0", "127.0.0.1"))
+        .collect();
+    let quote = |p: &Path| serde_json::to_string(&p.display().to_string()).unwrap_or_default();
+    let text = format!(
+        "// Zenoh client configuration for the demo's bus (cellwatch alarms|history|ack --zenoh-config THIS).\n\
+         {{\n  connect: {{ endpoints: {} }},\n  transport: {{ link: {{ tls: {{\n    root_ca_certificate: {},\n    connect_certificate: {},\n    connect_private_key: {},\n    enable_mtls: true,\n  }} }} }},\n}}\n",
+        serde_json::to_string(&endpoints).unwrap_or_default(),
+        quote(&operator.ca),
+        quote(&operator.cert),
+        quote(&operator.key),
+    );
+    let path = state.join("client.json5");
+    std::fs::write(&path, text)
+        .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", path.display())))?;
+    Ok(path)
+}
+
+/// `name`'s certificate from the demo's CA, made on first use.
+fn bus_tls(state: &Path, name: &str) -> Result<crate::config::ZenohTls, Failure> {
+    use crate::sinks::zenoh::certs;
+    let pki = state.join("pki-bus");
+    certs::make_ca(&pki, "cellwatch demo CA").map_err(Failure::Runtime)?;
+    let (cert, key) = certs::cert_files(&pki, name);
+    if !cert.exists() {
+        certs::issue(&pki, name, &["localhost".into(), "127.0.0.1".into()])
+            .map_err(Failure::Runtime)?;
+    }
+    Ok(crate::config::ZenohTls {
+        ca: certs::ca_files(&pki).0,
+        cert,
+        key,
+    })
+}
+
 /// The simulated cell's listen address, taken from the config's endpoint.
 fn endpoint_addr(endpoint: &str) -> Result<std::net::SocketAddr, Failure> {
     let hostport = endpoint
@@ -122,6 +166,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     c.opcua.pki_dir = state.join("agent-pki");
     c.journal.path = state.join(format!("{}.sqlite", c.cell));
     let (operator_key, secrets) = demo_operator(&state)?;
+    let client_config = demo_bus(&state, &mut c)?;
     c.operators_file = Some(secrets.clone());
     c.warnings
         .retain(|w| !w.starts_with("no commands.operators_file"));
@@ -168,6 +213,13 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     writeln!(out, "  journal         {}", c.journal.path.display()).map_err(io)?;
     writeln!(
         out,
+        "  bus             mutual TLS, certificates from the CA in {}; clients: --zenoh-config {}",
+        state.join("pki-bus").display(),
+        client_config.display()
+    )
+    .map_err(io)?;
+    writeln!(
+        out,
         "  operator        demo, private key {} (public key in {})",
         operator_key.display(),
         secrets.display()
@@ -183,6 +235,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         l.opcua.pki_dir = state.join("line-agent-pki");
         l.journal.path = state.join(format!("{}.sqlite", l.cell));
         l.operators_file = Some(secrets.clone());
+        l.zenoh.tls = Some(bus_tls(&state, &format!("agent-{}", l.cell))?);
         l.warnings
             .retain(|w| !w.starts_with("no commands.operators_file"));
         let line_pki = state.join("line-sim-pki");

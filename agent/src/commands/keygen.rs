@@ -54,20 +54,11 @@ pub(crate) fn run(args: &KeygenArgs, out: &mut dyn Write) -> Result<(), Failure>
 
 /// Creates `path` readable by its owner only; an existing file is kept.
 pub(crate) fn write_private(path: &Path, text: &str) -> Result<(), Failure> {
-    let mut options = std::fs::OpenOptions::new();
-    options.write(true).create_new(true);
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::OpenOptionsExt;
-        options.mode(0o600);
-    }
-    let mut file = options.open(path).map_err(|e| {
-        if e.kind() == std::io::ErrorKind::AlreadyExists {
-            Failure::Input(format!("{} exists; not overwritten", path.display()))
+    crate::sinks::zenoh::certs::write_private(path, text).map_err(|e| {
+        if e.ends_with("not overwritten") {
+            Failure::Input(e)
         } else {
-            Failure::Runtime(format!("cannot create {}: {e}", path.display()))
+            Failure::Runtime(e)
         }
-    })?;
-    file.write_all(text.as_bytes())
-        .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", path.display())))
+    })
 }

@@ -4,6 +4,7 @@
 pub(crate) mod agent;
 pub(crate) mod explain;
 pub(crate) mod keygen;
+pub(crate) mod pki;
 pub(crate) mod report;
 pub(crate) mod sf;
 pub(crate) mod simulate;

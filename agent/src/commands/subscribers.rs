@@ -21,12 +21,28 @@ async fn session(z: &ZenohArgs) -> Result<zenoh::Session, Failure> {
             )))
         }
     };
+    let tls = z.tls_ca.as_ref().map(|ca| crate::config::ZenohTls {
+        ca: ca.clone(),
+        cert: z.tls_cert.clone().unwrap_or_default(),
+        key: z.tls_key.clone().unwrap_or_default(),
+    });
+    let connect = if !z.connect.is_empty() {
+        z.connect.clone()
+    } else if z.zenoh_config.is_some() {
+        Vec::new()
+    } else if tls.is_some() {
+        vec!["tls/127.0.0.1:7447".into()]
+    } else {
+        vec!["tcp/127.0.0.1:7447".into()]
+    };
     let cfg = ZenohConfig {
         mode,
-        connect: z.connect.clone(),
+        connect,
         listen: Vec::new(),
         prefix: String::new(),
         multicast_scouting: false,
+        tls,
+        config_file: z.zenoh_config.clone(),
     };
     crate::sinks::zenoh::open(&cfg)
         .await

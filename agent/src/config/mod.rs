@@ -166,6 +166,24 @@ pub struct ZenohConfig {
     pub prefix: String,
     /// Multicast scouting (off by default: explicit endpoints on plant networks).
     pub multicast_scouting: bool,
+    /// Mutual TLS with certificates from the plant CA; `None` only with
+    /// plain TCP written explicitly (`plain = true`).
+    pub tls: Option<ZenohTls>,
+    /// A Zenoh configuration file (JSON5) for anything Zenoh offers;
+    /// cellwatch's own settings are laid over it.
+    pub config_file: Option<PathBuf>,
+}
+
+/// The files of mutual TLS on the bus (PEM): made by `cellwatch pki`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ZenohTls {
+    /// The plant CA's certificate: peers are accepted only with a
+    /// certificate it issued.
+    pub ca: PathBuf,
+    /// This node's certificate (listening and connecting).
+    pub cert: PathBuf,
+    /// Its private key.
+    pub key: PathBuf,
 }
 
 /// The SQLite journal.
@@ -1028,17 +1046,48 @@ impl Validator<'_> {
                 ZenohMode::Peer
             }
         };
+        let plain = raw.plain.as_ref().is_some_and(|p| *p.get_ref());
+        let tls = raw.tls.map(|t| {
+            let t = t.into_inner();
+            ZenohTls {
+                ca: self.path(t.ca.get_ref()),
+                cert: self.path(t.cert.get_ref()),
+                key: self.path(t.key.get_ref()),
+            }
+        });
+        let config_file = raw.config_file.map(|f| {
+            let path = self.path(f.get_ref());
+            if let Err(e) = zenoh::Config::from_file(&path) {
+                self.problem(
+                    f.span(),
+                    "zenoh.config_file",
+                    format!("{}: {e}", path.display()),
+                );
+            }
+            path
+        });
+        // Where the [zenoh] table is, for problems of the table as a whole.
+        let table = raw
+            .listen
+            .first()
+            .or(raw.connect.first())
+            .map_or(0..0, Spanned::span);
+        let with_tls = tls.is_some();
         let mut endpoints = |list: Vec<Spanned<String>>, key: &str| -> Vec<String> {
             let mut out = Vec::new();
             for e in list {
-                if !e.get_ref().contains('/') {
+                let text = e.get_ref();
+                if !text.contains('/') {
                     self.problem(
                         e.span(),
                         key,
-                        format!(
-                            "'{}' is not an endpoint like tcp/127.0.0.1:7447",
-                            e.get_ref()
-                        ),
+                        format!("'{text}' is not an endpoint like tls/127.0.0.1:7447"),
+                    );
+                } else if with_tls && !(text.starts_with("tls/") || text.starts_with("quic/")) {
+                    self.problem(
+                        e.span(),
+                        key,
+                        format!("'{text}' is not a TLS endpoint: with [zenoh.tls] use tls/host:port (or quic/)"),
                     );
                 }
                 out.push(e.into_inner());
@@ -1047,6 +1096,22 @@ impl Validator<'_> {
         };
         let connect = endpoints(raw.connect, "zenoh.connect");
         let listen = endpoints(raw.listen, "zenoh.listen");
+        match (&tls, plain) {
+            (Some(_), true) => self.problem(
+                raw.plain.as_ref().map_or(table, Spanned::span),
+                "zenoh.plain",
+                "plain = true and [zenoh.tls] contradict each other: remove one",
+            ),
+            (None, true) => self.warnings.push(
+                "zenoh.plain = true: the bus is neither encrypted nor authenticated; anyone on the network can publish alarms and answer queries as this agent".into(),
+            ),
+            (None, false) if config_file.is_none() => self.problem(
+                table,
+                "zenoh",
+                "no [zenoh.tls]: the bus would be neither encrypted nor authenticated; give tls = { ca, cert, key } (made by `cellwatch pki`), or write plain = true to accept that",
+            ),
+            _ => {}
+        }
         if mode == ZenohMode::Client && connect.is_empty() {
             self.warnings.push("zenoh.mode is client but zenoh.connect is empty: the agent relies on scouting to find a router".into());
         }
@@ -1073,6 +1138,8 @@ impl Validator<'_> {
             listen,
             prefix,
             multicast_scouting: raw.multicast_scouting.unwrap_or(false),
+            tls,
+            config_file,
         }
     }
 }

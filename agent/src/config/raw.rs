@@ -128,6 +128,17 @@ pub(crate) struct RawZenoh {
     pub(crate) listen: Vec<Spanned<String>>,
     pub(crate) key_prefix: Option<Spanned<String>>,
     pub(crate) multicast_scouting: Option<bool>,
+    pub(crate) tls: Option<Spanned<RawTls>>,
+    pub(crate) plain: Option<Spanned<bool>>,
+    pub(crate) config_file: Option<Spanned<String>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawTls {
+    pub(crate) ca: Spanned<String>,
+    pub(crate) cert: Spanned<String>,
+    pub(crate) key: Spanned<String>,
 }
 
 #[derive(Debug, Default, Deserialize)]

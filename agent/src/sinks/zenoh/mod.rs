@@ -14,6 +14,7 @@
 //! queries. Scaling to a plant is Zenoh's job: agents run in client mode
 //! against `zenohd` routers; nothing here changes.
 
+pub mod certs;
 pub mod publish;
 pub mod services;
 
@@ -47,27 +48,29 @@ pub enum ZenohError {
     },
 }
 
-/// Builds the zenoh session configuration.
+/// Builds the zenoh session configuration: the configuration file if one
+/// is named, with cellwatch's settings laid over it.
 ///
 /// # Errors
-/// An endpoint zenoh does not accept.
+/// The file cannot be read, or a value zenoh does not accept.
 pub fn session_config(c: &ZenohConfig) -> Result<zenoh::Config, ZenohError> {
-    let mut cfg = zenoh::Config::default();
-    let set = |cfg: &mut zenoh::Config, key: &str, value: String| {
-        cfg.insert_json5(key, &value)
-            .map_err(|e| ZenohError::Config {
-                key: key.into(),
-                value: value.clone(),
-                reason: e.to_string(),
-            })
+    let mut cfg = match &c.config_file {
+        Some(path) => zenoh::Config::from_file(path).map_err(|e| ZenohError::Config {
+            key: "config_file".into(),
+            value: path.display().to_string(),
+            reason: e.to_string(),
+        })?,
+        None => zenoh::Config::default(),
     };
     set(&mut cfg, "mode", format!("\"{}\"", c.mode.as_str()))?;
-    set(
-        &mut cfg,
-        "connect/endpoints",
-        serde_json::to_string(&c.connect).unwrap_or_default(),
-    )?;
-    if !c.listen.is_empty() || c.mode != ZenohMode::Client {
+    if !c.connect.is_empty() || c.config_file.is_none() {
+        set(
+            &mut cfg,
+            "connect/endpoints",
+            serde_json::to_string(&c.connect).unwrap_or_default(),
+        )?;
+    }
+    if !c.listen.is_empty() || (c.mode != ZenohMode::Client && c.config_file.is_none()) {
         set(
             &mut cfg,
             "listen/endpoints",
@@ -79,17 +82,89 @@ pub fn session_config(c: &ZenohConfig) -> Result<zenoh::Config, ZenohError> {
         "scouting/multicast/enabled",
         c.multicast_scouting.to_string(),
     )?;
+    if !c.multicast_scouting && c.config_file.is_none() {
+        // Links only to the endpoints configured: a node met through
+        // another is not connected to directly, so every path to this one
+        // goes through the nodes it chose (and their access control).
+        set(&mut cfg, "scouting/gossip/enabled", "false".into())?;
+    }
     set(&mut cfg, "timestamping/enabled", "true".into())?;
+    if let Some(tls) = &c.tls {
+        let path = |p: &std::path::Path| {
+            serde_json::to_string(&p.display().to_string()).unwrap_or_default()
+        };
+        for (key, value) in [
+            ("root_ca_certificate", path(&tls.ca)),
+            ("listen_certificate", path(&tls.cert)),
+            ("listen_private_key", path(&tls.key)),
+            ("connect_certificate", path(&tls.cert)),
+            ("connect_private_key", path(&tls.key)),
+            ("enable_mtls", "true".into()),
+            ("verify_name_on_connect", "true".into()),
+        ] {
+            set(&mut cfg, &format!("transport/link/tls/{key}"), value)?;
+        }
+    }
     Ok(cfg)
 }
 
-/// Opens a zenoh session.
+fn set(cfg: &mut zenoh::Config, key: &str, value: String) -> Result<(), ZenohError> {
+    cfg.insert_json5(key, &value)
+        .map_err(|e| ZenohError::Config {
+            key: key.into(),
+            value: value.clone(),
+            reason: e.to_string(),
+        })
+}
+
+/// The access control of an agent's own session: nobody else may publish,
+/// delete, declare a queryable, answer or hold a liveliness token under the
+/// agent's prefix through it. Everything else (subscribing, querying) is
+/// allowed; who may reach the agent at all is TLS's business.
+pub fn agent_access_control(prefix: &str) -> String {
+    let keys =
+        serde_json::to_string(&[prefix.to_string(), format!("{prefix}/**")]).unwrap_or_default();
+    format!(
+        r#"{{
+  enabled: true,
+  default_permission: "allow",
+  rules: [
+    {{
+      id: "only-this-agent-speaks-for-its-cell",
+      messages: ["put", "delete", "declare_queryable", "reply", "liveliness_token"],
+      flows: ["ingress"],
+      permission: "deny",
+      key_exprs: {keys},
+    }},
+  ],
+  subjects: [{{ id: "anyone" }}],
+  policies: [{{ rules: ["only-this-agent-speaks-for-its-cell"], subjects: ["anyone"] }}],
+}}"#
+    )
+}
+
+/// Opens a client's session (CLI, tests): it fails when no endpoint it
+/// connects to can be reached within [`CLIENT_CONNECT_TIMEOUT_MS`] (for TLS:
+/// also when the other side refuses its certificate), rather than waiting
+/// silently.
 ///
 /// # Errors
-/// The configuration is refused or the endpoints cannot be bound.
+/// The configuration is refused, or nothing can be reached.
 pub async fn open(c: &ZenohConfig) -> Result<Session, ZenohError> {
-    open_config(session_config(c)?).await
+    let mut cfg = session_config(c)?;
+    if !c.connect.is_empty() {
+        set(
+            &mut cfg,
+            "connect/timeout_ms",
+            CLIENT_CONNECT_TIMEOUT_MS.to_string(),
+        )?;
+        set(&mut cfg, "connect/exit_on_failure", "true".into())?;
+    }
+    open_config(cfg).await
 }
+
+/// How long a client tries its endpoints before giving up, ms.
+pub const CLIENT_CONNECT_TIMEOUT_MS: u64 = 10_000;
 
 async fn open_config(cfg: zenoh::Config) -> Result<Session, ZenohError> {
     zenoh::open(cfg)
@@ -97,22 +172,21 @@ async fn open_config(cfg: zenoh::Config) -> Result<Session, ZenohError> {
         .map_err(|e| ZenohError::Open(e.to_string()))
 }
 
-/// Opens the agent's session: as [`open`], and no message larger than
+/// Opens the agent's session: as [`open`], no message larger than
 /// [`services::MAX_MESSAGE_BYTES`] is accepted from the network (Zenoh
 /// drops it while reassembling), so whatever arrives, the agent's memory
-/// stays bounded.
+/// stays bounded; and its access control ([`agent_access_control`]) lets
+/// nobody else publish or answer under its prefix through it.
 ///
 /// # Errors
 /// As [`open`].
 pub async fn open_agent(c: &ZenohConfig) -> Result<Session, ZenohError> {
     let mut cfg = session_config(c)?;
-    let key = "transport/link/rx/max_message_size";
-    let value = services::MAX_MESSAGE_BYTES.to_string();
-    cfg.insert_json5(key, &value)
-        .map_err(|e| ZenohError::Config {
-            key: key.into(),
-            value,
-            reason: e.to_string(),
-        })?;
+    set(
+        &mut cfg,
+        "transport/link/rx/max_message_size",
+        services::MAX_MESSAGE_BYTES.to_string(),
+    )?;
+    set(&mut cfg, "access_control", agent_access_control(&c.prefix))?;
     open_config(cfg).await
 }
