@@ -693,3 +693,177 @@ async fn an_unwritable_journal_raises_its_alarm_and_alarms_still_reach_zenoh() {
     fx.agent.unwrap().stop().await;
     fx.sim.stop();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn only_clients_with_a_plant_certificate_get_in() {
+    let fx = Fixture::start().await;
+    let port = fx.config.zenoh.listen[0]
+        .rsplit(':')
+        .next()
+        .unwrap()
+        .parse::<u16>()
+        .unwrap();
+    // Plain TCP to a TLS endpoint, and TLS without a client certificate
+    // from the plant CA: nothing to talk to.
+    let mut plain = crate::util::client_config(&fx.dir, "operator-kim", port);
+    plain.connect = vec![format!("tcp/127.0.0.1:{port}")];
+    plain.tls = None;
+    assert!(cellwatch::sinks::zenoh::open(&plain).await.is_err());
+    let elsewhere = fx.dir.join("elsewhere");
+    crate::util::bus_pki(&elsewhere, &["operator-kim"]);
+    let mut foreign = crate::util::client_config(&elsewhere, "operator-kim", port);
+    // Trusting the plant CA is not enough: the certificate must be from it.
+    foreign.tls.as_mut().unwrap().ca = fx.dir.join("pki-bus/ca.pem");
+    assert!(cellwatch::sinks::zenoh::open(&foreign).await.is_err());
+    // A certificate from the plant CA: queries and subscriptions work.
+    fx.settled().await;
+    fx.agent.unwrap().stop().await;
+    fx.sim.stop();
+}
+
+/// The shipped router configuration (`config/zenoh/router.json5`), its
+/// certificates and port replaced, as a real router in this process.
+async fn router(dir: &Path) -> (zenoh::Session, u16) {
+    crate::util::bus_pki(dir, &["router-1"]);
+    let port = free_port();
+    let mut cfg = zenoh::Config::from_file(root().join("config/zenoh/router.json5")).unwrap();
+    let pki = dir.join("pki-bus");
+    let file = |name: &str| serde_json::to_string(&pki.join(name).display().to_string()).unwrap();
+    for (key, value) in [
+        ("listen/endpoints", format!("[\"tls/127.0.0.1:{port}\"]")),
+        ("transport/link/tls/root_ca_certificate", file("ca.pem")),
+        (
+            "transport/link/tls/listen_certificate",
+            file("router-1.pem"),
+        ),
+        (
+            "transport/link/tls/listen_private_key",
+            file("router-1.key"),
+        ),
+        (
+            "transport/link/tls/connect_certificate",
+            file("router-1.pem"),
+        ),
+        (
+            "transport/link/tls/connect_private_key",
+            file("router-1.key"),
+        ),
+    ] {
+        cfg.insert_json5(key, &value).unwrap();
+    }
+    (zenoh::open(cfg).await.unwrap(), port)
+}
+
+/// Through the shipped router, an intruder with a valid plant certificate
+/// (an operator's) can neither publish an alarm for a cell nor answer for
+/// it; the operator sees the agent's alarms and answers only.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn through_the_router_nobody_else_publishes_or_answers_for_the_cell() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let (_router, port) = router(dir).await;
+    let sim = SimulatedCnc::start(&SimOptions {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        pki_dir: dir.join("sim-pki"),
+        insecure: false,
+        decoy: None,
+    })
+    .await
+    .unwrap();
+    let mut c = config(dir, &sim.endpoint(), port);
+    c.zenoh.mode = cellwatch::config::ZenohMode::Client;
+    c.zenoh.listen = Vec::new();
+    c.zenoh.connect = vec![format!("tls/127.0.0.1:{port}")];
+    drop(opcua::client("test", &c.opcua).unwrap());
+    pki::trust(&pki::own_cert(&c.opcua.pki_dir), &dir.join("sim-pki")).unwrap();
+    pki::trust(&pki::own_cert(&dir.join("sim-pki")), &c.opcua.pki_dir).unwrap();
+    let agent = cell::start(c, None).await.unwrap();
+    let client = |name: &'static str| {
+        crate::util::bus_pki(dir, &[name]);
+        let mut c = crate::util::client_config(dir, name, port);
+        c.mode = cellwatch::config::ZenohMode::Client;
+        async move { cellwatch::sinks::zenoh::open(&c).await.unwrap() }
+    };
+    let kim = client("operator-kim").await;
+    let mallory = client("operator-mallory").await;
+    let snapshot = |s: zenoh::Session| async move {
+        let replies = s
+            .get("cellwatch/m01ps0004/snapshot")
+            .consolidation(zenoh::query::ConsolidationMode::None)
+            .await
+            .unwrap();
+        let mut answers = Vec::new();
+        while let Ok(r) = replies.recv_async().await {
+            if let Ok(sample) = r.result() {
+                answers.push(sample.payload().try_to_string().unwrap().into_owned());
+            }
+        }
+        answers
+    };
+    // The agent is reachable through the router, for kim and for mallory.
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    while snapshot(kim.clone()).await.is_empty() {
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "the agent never answered through the router"
+        );
+    }
+    // Mallory declares an impostor queryable, then queries: her query
+    // follows the declaration on the same link, so when it is answered the
+    // router has judged the declaration too.
+    let impostor = mallory
+        .declare_queryable("cellwatch/m01ps0004/snapshot")
+        .await
+        .unwrap();
+    let impostor_task = tokio::spawn(async move {
+        while let Ok(q) = impostor.recv_async().await {
+            let _ = q.reply(q.key_expr().clone(), r#"{"forged":true}"#).await;
+        }
+    });
+    assert!(!snapshot(mallory.clone()).await.is_empty());
+    let answers = snapshot(kim.clone()).await;
+    assert_eq!(answers.len(), 1, "{answers:?}");
+    assert!(answers[0].contains("\"cell\":\"m01ps0004\""), "{answers:?}");
+    // Mallory publishes forged alarms all along, before and after a real fault.
+    let sub = kim
+        .declare_subscriber("cellwatch/m01ps0004/alarms/**")
+        .await
+        .unwrap();
+    let forging = {
+        let mallory = mallory.clone();
+        tokio::spawn(async move {
+            loop {
+                let _ = mallory
+                    .put(
+                        "cellwatch/m01ps0004/alarms/ese",
+                        r#"{"cell":"m01ps0004","id":"ese","forged":true}"#,
+                    )
+                    .await;
+                tokio::time::sleep(Duration::from_millis(20)).await;
+            }
+        })
+    };
+    sim.set("X0.06", false).unwrap();
+    let mut transitions = Vec::new();
+    while !transitions.iter().any(|t: &String| t == "cleared") {
+        let sample = tokio::time::timeout_at(deadline, sub.recv_async())
+            .await
+            .unwrap_or_else(|_| panic!("ESE raised and cleared; saw {transitions:?}"))
+            .unwrap();
+        let text = sample.payload().try_to_string().unwrap().into_owned();
+        assert!(
+            !text.contains("forged"),
+            "a forged event got through: {text}"
+        );
+        let a: AlarmPayload = serde_json::from_str(&text).unwrap();
+        if a.id == "ese" && a.transition.as_str() == "raised" {
+            sim.set("X0.06", true).unwrap();
+        }
+        transitions.push(a.transition.as_str().to_string());
+    }
+    assert!(transitions.iter().any(|t| t == "raised"), "{transitions:?}");
+    forging.abort();
+    impostor_task.abort();
+    agent.stop().await;
+    sim.stop();
+}
