@@ -579,7 +579,7 @@ async fn a_published_alarm_is_already_in_history() {
 async fn a_stopped_agent_frees_its_port_and_its_liveliness_token() {
     let mut fx = Fixture::start().await;
     fx.settled().await;
-    let token = "cellwatch/m01ps0004/agent";
+    let token = "cellwatch/m01ps0004/agent/*";
     let alive = |client: zenoh::Session| async move {
         let replies = client
             .liveliness()
@@ -723,7 +723,7 @@ async fn only_clients_with_a_plant_certificate_get_in() {
 
 /// The shipped router configuration (`config/zenoh/router.json5`), its
 /// certificates and port replaced, as a real router in this process.
-async fn router(dir: &Path) -> (zenoh::Session, u16) {
+async fn router(dir: &Path, access_control: bool) -> (zenoh::Session, u16) {
     crate::util::bus_pki(dir, &["router-1"]);
     let port = free_port();
     let mut cfg = zenoh::Config::from_file(root().join("config/zenoh/router.json5")).unwrap();
@@ -748,6 +748,7 @@ async fn router(dir: &Path) -> (zenoh::Session, u16) {
             "transport/link/tls/connect_private_key",
             file("router-1.key"),
         ),
+        ("access_control/enabled", access_control.to_string()),
     ] {
         cfg.insert_json5(key, &value).unwrap();
     }
@@ -761,7 +762,7 @@ async fn router(dir: &Path) -> (zenoh::Session, u16) {
 async fn through_the_router_nobody_else_publishes_or_answers_for_the_cell() {
     let d = tempfile::tempdir().unwrap();
     let dir = d.path();
-    let (_router, port) = router(dir).await;
+    let (_router, port) = router(dir, true).await;
     let sim = SimulatedCnc::start(&SimOptions {
         listen: "127.0.0.1:0".parse().unwrap(),
         pki_dir: dir.join("sim-pki"),
@@ -863,6 +864,87 @@ async fn through_the_router_nobody_else_publishes_or_answers_for_the_cell() {
     }
     assert!(transitions.iter().any(|t| t == "raised"), "{transitions:?}");
     forging.abort();
+    impostor_task.abort();
+    agent.stop().await;
+    sim.stop();
+}
+
+/// With a router whose access control is off, an impostor can answer the
+/// `command` queryable: the CLI believes the agent's answer only.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn the_cli_believes_only_the_agent() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let (_router, port) = router(dir, false).await;
+    let sim = SimulatedCnc::start(&SimOptions {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        pki_dir: dir.join("sim-pki"),
+        insecure: false,
+        decoy: None,
+    })
+    .await
+    .unwrap();
+    let mut c = config(dir, &sim.endpoint(), port);
+    c.zenoh.mode = cellwatch::config::ZenohMode::Client;
+    c.zenoh.listen = Vec::new();
+    c.zenoh.connect = vec![format!("tls/127.0.0.1:{port}")];
+    drop(opcua::client("test", &c.opcua).unwrap());
+    pki::trust(&pki::own_cert(&c.opcua.pki_dir), &dir.join("sim-pki")).unwrap();
+    pki::trust(&pki::own_cert(&dir.join("sim-pki")), &c.opcua.pki_dir).unwrap();
+    let agent = cell::start(c, None).await.unwrap();
+    crate::util::bus_pki(dir, &["operator-kim", "operator-mallory"]);
+    let mut m = crate::util::client_config(dir, "operator-mallory", port);
+    m.mode = cellwatch::config::ZenohMode::Client;
+    let mallory = cellwatch::sinks::zenoh::open(&m).await.unwrap();
+    let impostor = mallory
+        .declare_queryable("cellwatch/m01ps0004/command")
+        .await
+        .unwrap();
+    let answered = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let impostor_task = {
+        let answered = answered.clone();
+        tokio::spawn(async move {
+            while let Ok(q) = impostor.recv_async().await {
+                let _ = q
+                    .reply(
+                        q.key_expr().clone(),
+                        r#"{"accepted":true,"detail":"ack no-such-alarm by kim"}"#,
+                    )
+                    .await;
+                answered.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+            }
+        })
+    };
+    let key_file = dir.join("kim.key");
+    std::fs::write(&key_file, crate::spawned::kim().to_file()).unwrap();
+    let mut args: Vec<String> = [
+        "ack",
+        "--cell",
+        "m01ps0004",
+        "--alarm",
+        "no-such-alarm",
+        "--mode",
+        "client",
+        "--key-file",
+    ]
+    .map(String::from)
+    .to_vec();
+    args.push(key_file.display().to_string());
+    args.extend(crate::util::bus_args(dir, "operator-kim", port));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    for _ in 0..3 {
+        let run = tokio::task::spawn_blocking({
+            let args: Vec<String> = args.iter().map(|s| s.to_string()).collect();
+            move || crate::util::cellwatch(&args.iter().map(String::as_str).collect::<Vec<_>>())
+        })
+        .await
+        .unwrap();
+        assert_eq!(run.code, 1, "{}{}", run.stdout, run.stderr);
+        assert!(run.stdout.is_empty(), "{}", run.stdout);
+        assert!(run.stderr.starts_with("error: refused: "), "{}", run.stderr);
+    }
+    // The impostor did answer, and was not believed.
+    assert!(answered.load(std::sync::atomic::Ordering::SeqCst) >= 1);
     impostor_task.abort();
     agent.stop().await;
     sim.stop();

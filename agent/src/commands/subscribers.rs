@@ -49,6 +49,111 @@ async fn session(z: &ZenohArgs) -> Result<zenoh::Session, Failure> {
         .map_err(Failure::runtime)
 }
 
+/// The Zenoh id of each cell's agent matching `cell` (a name or `*`), from
+/// their liveliness tokens (`<root>/<cell>/agent/<zid>`). A cell claimed by
+/// two sessions is an error: neither is trusted.
+async fn agents(
+    s: &zenoh::Session,
+    root: &str,
+    cell: &str,
+    timeout: Duration,
+) -> Result<std::collections::BTreeMap<String, String>, Failure> {
+    let key = format!("{root}/{cell}/agent/*");
+    let replies = s
+        .liveliness()
+        .get(key.as_str())
+        .timeout(timeout)
+        .await
+        .map_err(|e| Failure::Runtime(format!("liveliness query failed: {e}")))?;
+    let mut claims: std::collections::BTreeMap<String, Vec<String>> = Default::default();
+    while let Ok(reply) = replies.recv_async().await {
+        let Ok(sample) = reply.result() else { continue };
+        let chunks: Vec<&str> = sample.key_expr().as_str().rsplitn(3, '/').collect();
+        if let [zid, "agent", rest] = chunks[..] {
+            let cell = rest.rsplit('/').next().unwrap_or_default().to_string();
+            claims.entry(cell).or_default().push(zid.to_string());
+        }
+    }
+    let mut out = std::collections::BTreeMap::new();
+    for (c, mut zids) in claims {
+        zids.sort();
+        zids.dedup();
+        if zids.len() > 1 {
+            return Err(Failure::Runtime(format!(
+                "{} Zenoh sessions claim to be the agent of cell {c} ({}): trusting none",
+                zids.len(),
+                zids.join(", ")
+            )));
+        }
+        out.insert(c, zids.remove(0));
+    }
+    if out.is_empty() {
+        return Err(Failure::Runtime(format!(
+            "no agent is alive on {key} (is one running, and is --connect right?)"
+        )));
+    }
+    Ok(out)
+}
+
+/// The agent of one cell.
+async fn agent(
+    s: &zenoh::Session,
+    root: &str,
+    cell: &str,
+    timeout: Duration,
+) -> Result<String, Failure> {
+    let found = agents(s, root, cell, timeout).await?;
+    found
+        .get(cell)
+        .cloned()
+        .ok_or_else(|| Failure::Runtime(format!("no agent of cell {cell} is alive on the bus")))
+}
+
+/// Who answered `reply`.
+fn replier(reply: &zenoh::query::Reply) -> String {
+    reply
+        .replier_id()
+        .map_or_else(|| "an unknown node".into(), |id| id.zid().to_string())
+}
+
+/// The text of the agent's answer among `replies`; answers from any other
+/// session are not believed (and named in the error when the agent said
+/// nothing). An error answer from the agent is [`Failure::Input`].
+async fn answer_of(
+    replies: zenoh::handlers::FifoChannelHandler<zenoh::query::Reply>,
+    agent: &str,
+    what: &str,
+) -> Result<String, Failure> {
+    let mut others = Vec::new();
+    while let Ok(reply) = replies.recv_async().await {
+        let from = replier(&reply);
+        if from != agent {
+            tracing::error!(from = %from, agent, what, "an answer from a session that is not the agent: ignored");
+            others.push(from);
+            continue;
+        }
+        return match reply.result() {
+            Ok(sample) => Ok(text(sample.payload())),
+            Err(e) => Err(Failure::Input(format!("{what}: {}", text(e.payload())))),
+        };
+    }
+    Err(Failure::Runtime(if others.is_empty() {
+        format!("the agent ({agent}) did not answer {what}")
+    } else {
+        format!(
+            "the agent ({agent}) did not answer {what}; answers from {} are not the agent's and were ignored",
+            others.join(", ")
+        )
+    }))
+}
+
+fn text(payload: &zenoh::bytes::ZBytes) -> String {
+    payload
+        .try_to_string()
+        .map(|s| s.into_owned())
+        .unwrap_or_default()
+}
+
 fn io(e: std::io::Error) -> Failure {
     Failure::output(e)
 }
@@ -97,9 +202,11 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
             };
             let base = format!("{root}/{cell}/history?kind=alarm;since={since};limit=1000");
             let timeout = Duration::from_secs(args.zenoh.timeout_secs);
+            let the_agent = agent(&s, root, cell, timeout).await?;
             let mut after = 0;
             loop {
-                let text = history_page(&s, &format!("{base};after={after}"), timeout).await?;
+                let text =
+                    history_page(&s, &format!("{base};after={after}"), timeout, &the_agent).await?;
                 let page: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
                 for r in page["rows"].as_array().into_iter().flatten() {
                     if let Ok(a) =
@@ -133,20 +240,30 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
         }
         return Ok(());
     }
+    let timeout = Duration::from_secs(args.zenoh.timeout_secs);
+    let trusted = agents(&s, root, cell, timeout).await?;
     let replies = s
         .get(format!("{root}/{cell}/snapshot"))
-        .timeout(Duration::from_secs(args.zenoh.timeout_secs))
+        .consolidation(zenoh::query::ConsolidationMode::None)
+        .timeout(timeout)
         .await
         .map_err(|e| Failure::Runtime(format!("query failed: {e}")))?;
-    let mut agents = 0;
+    let mut answered = 0;
     while let Ok(reply) = replies.recv_async().await {
+        let from = replier(&reply);
         let Ok(sample) = reply.result() else { continue };
-        agents += 1;
-        let text = sample
-            .payload()
-            .try_to_string()
-            .map(|s| s.into_owned())
+        let of_cell = sample
+            .key_expr()
+            .as_str()
+            .strip_prefix(&format!("{root}/"))
+            .and_then(|k| k.strip_suffix("/snapshot"))
             .unwrap_or_default();
+        if trusted.get(of_cell) != Some(&from) {
+            tracing::error!(cell = of_cell, from = %from, "a snapshot from a session that is not the cell's agent: ignored");
+            continue;
+        }
+        answered += 1;
+        let text = text(sample.payload());
         let v: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
         for a in v["alarms"].as_array().into_iter().flatten() {
             if let Ok(a) = serde_json::from_value::<AlarmPayload>(a.clone()) {
@@ -154,7 +271,7 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
             }
         }
     }
-    if agents == 0 {
+    if answered == 0 {
         return Err(Failure::Runtime(format!(
             "no agent answered on {root}/{cell}/snapshot (is one running, and is --connect right?)"
         )));
@@ -162,35 +279,20 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
     Ok(())
 }
 
-/// Asks `selector` for one history page.
+/// Asks `selector` for one history page, believing `agent` only.
 async fn history_page(
     s: &zenoh::Session,
     selector: &str,
     timeout: Duration,
+    agent: &str,
 ) -> Result<String, Failure> {
     let replies = s
         .get(selector)
+        .consolidation(zenoh::query::ConsolidationMode::None)
         .timeout(timeout)
         .await
         .map_err(|e| Failure::Runtime(format!("query failed: {e}")))?;
-    let Ok(reply) = replies.recv_async().await else {
-        return Err(Failure::Runtime(format!("no agent answered {selector}")));
-    };
-    match reply.result() {
-        Ok(sample) => Ok(sample
-            .payload()
-            .try_to_string()
-            .map(|s| s.into_owned())
-            .unwrap_or_default()),
-        Err(e) => {
-            let why = e
-                .payload()
-                .try_to_string()
-                .map(|s| s.into_owned())
-                .unwrap_or_default();
-            Err(Failure::Input(format!("{selector}: {why}")))
-        }
-    }
+    answer_of(replies, agent, selector).await
 }
 
 /// `cellwatch history`: the newest rows, or with `--all` every row of the
@@ -212,13 +314,14 @@ pub(crate) async fn history(args: &HistoryArgs, out: &mut dyn Write) -> Result<(
         params.join(";")
     );
     let timeout = Duration::from_secs(args.zenoh.timeout_secs);
+    let the_agent = agent(&s, &args.zenoh.root, &args.cell, timeout).await?;
     let mut after = args.all.then_some(0);
     loop {
         let selector = match after {
             Some(a) => format!("{base};after={a}"),
             None => base.clone(),
         };
-        let text = history_page(&s, &selector, timeout).await?;
+        let text = history_page(&s, &selector, timeout, &the_agent).await?;
         if args.json {
             writeln!(out, "{text}").map_err(io)?;
         }
@@ -316,33 +419,28 @@ pub(crate) async fn command(
     };
     cmd.sign(&args.cell, &key);
     let s = session(&args.zenoh).await?;
+    let timeout = Duration::from_secs(args.zenoh.timeout_secs);
+    let the_agent = agent(&s, &args.zenoh.root, &args.cell, timeout).await?;
     let selector = format!("{}/{}/command", args.zenoh.root, args.cell);
     let replies = s
         .get(selector.as_str())
         .payload(serde_json::to_string(&cmd).unwrap_or_default())
-        .timeout(Duration::from_secs(args.zenoh.timeout_secs))
+        .consolidation(zenoh::query::ConsolidationMode::None)
+        .timeout(timeout)
         .await
         .map_err(|e| Failure::Runtime(format!("query failed: {e}")))?;
-    match replies.recv_async().await {
-        Ok(reply) => {
-            let text = reply
-                .result()
-                .map(|s| {
-                    s.payload()
-                        .try_to_string()
-                        .map(|s| s.into_owned())
-                        .unwrap_or_default()
-                })
-                .unwrap_or_default();
-            let v: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
-            let detail = v["detail"].as_str().unwrap_or("");
-            if v["accepted"].as_bool() == Some(true) {
-                writeln!(out, "accepted: {detail}").map_err(io)?;
-                Ok(())
-            } else {
-                Err(Failure::Runtime(format!("refused: {detail}")))
-            }
-        }
-        Err(_) => Err(Failure::Runtime(format!("no agent answered {selector}"))),
+    let text = answer_of(replies, &the_agent, &selector)
+        .await
+        .map_err(|e| match e {
+            Failure::Input(why) => Failure::Runtime(why),
+            other => other,
+        })?;
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
+    let detail = v["detail"].as_str().unwrap_or("");
+    if v["accepted"].as_bool() == Some(true) {
+        writeln!(out, "accepted: {detail}").map_err(io)?;
+        Ok(())
+    } else {
+        Err(Failure::Runtime(format!("refused: {detail}")))
     }
 }

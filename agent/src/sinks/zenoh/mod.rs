@@ -8,7 +8,9 @@
 //! - `state`: the machine state ([`crate::payload::StatePayload`]) on every
 //!   change and periodically, cached so a late joiner sees the current one;
 //! - `history`, `snapshot`, `command`: queryables ([`services`]);
-//! - `agent`: a liveliness token, gone when the agent stops or dies.
+//! - `agent/<zenoh id>`: a liveliness token naming the agent's session,
+//!   gone when the agent stops or dies; clients accept answers for the cell
+//!   from that session only.
 //!
 //! [`publish::ZenohPublisher`] is the sink; [`services::Services`] answers
 //! queries. Scaling to a plant is Zenoh's job: agents run in client mode

@@ -53,11 +53,14 @@ impl ZenohPublisher {
             .publisher_detection()
             .await
             .map_err(declare_error(format!("{prefix}/state")))?;
+        // The token names the session: clients accept answers for the cell
+        // from this Zenoh id only.
+        let token = format!("{prefix}/agent/{}", session.zid());
         let agent = session
             .liveliness()
-            .declare_token(format!("{prefix}/agent"))
+            .declare_token(token.clone())
             .await
-            .map_err(declare_error(format!("{prefix}/agent")))?;
+            .map_err(declare_error(token))?;
         Ok(ZenohPublisher {
             session,
             prefix: prefix.into(),
