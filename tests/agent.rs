@@ -944,7 +944,8 @@ async fn the_cli_believes_only_the_agent() {
         // The agent's refusal is what counts; the impostor's "accepted" is
         // named as ignored when it arrived first.
         assert!(
-            run.stderr.ends_with("error: refused: no alarm 'no-such-alarm'\n"),
+            run.stderr
+                .ends_with("error: refused: no alarm 'no-such-alarm'\n"),
             "{}",
             run.stderr
         );

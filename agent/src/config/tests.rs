@@ -53,6 +53,11 @@ address = "X2"
 id = "fig6"
 program = "fig6.il"
 coil = "G0.00"
+
+[zenoh.tls]
+ca = "pki-bus/ca.pem"
+cert = "pki-bus/agent-c1.pem"
+key = "pki-bus/agent-c1.key"
 "#;
 
 fn errors(text: &str) -> String {
@@ -146,11 +151,45 @@ fn every_problem_is_reported_at_once() {
 }
 
 #[test]
+fn the_bus_is_tls_unless_plain_is_written() {
+    let c = parse("cell.toml", GOOD, Path::new("base"), &mem()).unwrap();
+    let tls = c.zenoh.tls.unwrap();
+    assert_eq!(tls.ca, Path::new("base/pki-bus/ca.pem"));
+    let no_tls = GOOD.split("[zenoh.tls]").next().unwrap().to_string();
+    assert_eq!(
+        errors(&format!("{no_tls}[zenoh]\nlisten = [\"tcp/0.0.0.0:7447\"]\n")),
+        "cell.toml:24:11: zenoh: no [zenoh.tls]: the bus would be neither encrypted nor authenticated; give tls = { ca, cert, key } (made by `cellwatch pki`), or write plain = true to accept that"
+    );
+    let c = parse(
+        "cell.toml",
+        &format!("{no_tls}[zenoh]\nplain = true\nlisten = [\"tcp/0.0.0.0:7447\"]\n"),
+        Path::new("base"),
+        &mem(),
+    )
+    .unwrap();
+    assert!(
+        c.warnings
+            .iter()
+            .any(|w| w.starts_with("zenoh.plain = true")),
+        "{:?}",
+        c.warnings
+    );
+    let text = GOOD.replace(
+        "[zenoh.tls]",
+        "[zenoh]\nlisten = [\"tcp/0.0.0.0:7447\"]\n\n[zenoh.tls]",
+    );
+    assert_eq!(
+        errors(&text),
+        "cell.toml:24:11: zenoh.listen: 'tcp/0.0.0.0:7447' is not a TLS endpoint: with [zenoh.tls] use tls/host:port (or quic/)"
+    );
+}
+
+#[test]
 fn shared_operator_secrets_are_refused() {
     let text = format!("{GOOD}\n[commands]\nsecrets_file = \"ops.toml\"\n");
     assert_eq!(
         errors(&text),
-        "cell.toml:24:16: commands.secrets_file: shared operator secrets are no longer accepted: operators sign with their own keys (cellwatch keygen --operator NAME); name the file of their public keys with commands.operators_file"
+        "cell.toml:29:16: commands.secrets_file: shared operator secrets are no longer accepted: operators sign with their own keys (cellwatch keygen --operator NAME); name the file of their public keys with commands.operators_file"
     );
 }
 
@@ -253,7 +292,7 @@ fn timer_model_signals_must_be_tags() {
     let text = format!("{GOOD}\n[[checks.timers]]\nid = \"line\"\nmodel = \"timers.json\"\n");
     assert_eq!(
         errors(&text),
-        "cell.toml:25:9: checks.timers[0].model: the model reads belt, which no tag has as name or address"
+        "cell.toml:30:9: checks.timers[0].model: the model reads belt, which no tag has as name or address"
     );
     let ok = text.clone();
     let mut files = mem();
