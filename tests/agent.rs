@@ -755,14 +755,13 @@ async fn router(dir: &Path, access_control: bool) -> (zenoh::Session, u16) {
     (zenoh::open(cfg).await.unwrap(), port)
 }
 
-/// Through the shipped router, an intruder with a valid plant certificate
-/// (an operator's) can neither publish an alarm for a cell nor answer for
-/// it; the operator sees the agent's alarms and answers only.
-#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
-async fn through_the_router_nobody_else_publishes_or_answers_for_the_cell() {
-    let d = tempfile::tempdir().unwrap();
-    let dir = d.path();
-    let (_router, port) = router(dir, true).await;
+/// A router (its access control on or off), the simulated CNC, and its
+/// agent in client mode behind the router.
+async fn behind_a_router(
+    dir: &Path,
+    access_control: bool,
+) -> (zenoh::Session, u16, SimulatedCnc, Agent) {
+    let (router, port) = router(dir, access_control).await;
     let sim = SimulatedCnc::start(&SimOptions {
         listen: "127.0.0.1:0".parse().unwrap(),
         pki_dir: dir.join("sim-pki"),
@@ -779,14 +778,27 @@ async fn through_the_router_nobody_else_publishes_or_answers_for_the_cell() {
     pki::trust(&pki::own_cert(&c.opcua.pki_dir), &dir.join("sim-pki")).unwrap();
     pki::trust(&pki::own_cert(&dir.join("sim-pki")), &c.opcua.pki_dir).unwrap();
     let agent = cell::start(c, None).await.unwrap();
-    let client = |name: &'static str| {
-        crate::util::bus_pki(dir, &[name]);
-        let mut c = crate::util::client_config(dir, name, port);
-        c.mode = cellwatch::config::ZenohMode::Client;
-        async move { cellwatch::sinks::zenoh::open(&c).await.unwrap() }
-    };
-    let kim = client("operator-kim").await;
-    let mallory = client("operator-mallory").await;
+    (router, port, sim, agent)
+}
+
+/// A client-mode session of `name`'s certificate to the router on `port`.
+async fn router_client(dir: &Path, name: &str, port: u16) -> zenoh::Session {
+    crate::util::bus_pki(dir, &[name]);
+    let mut c = crate::util::client_config(dir, name, port);
+    c.mode = cellwatch::config::ZenohMode::Client;
+    cellwatch::sinks::zenoh::open(&c).await.unwrap()
+}
+
+/// Through the shipped router, an intruder with a valid plant certificate
+/// (an operator's) can neither publish an alarm for a cell nor answer for
+/// it; the operator sees the agent's alarms and answers only.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn through_the_router_nobody_else_publishes_or_answers_for_the_cell() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let (_router, port, sim, agent) = behind_a_router(dir, true).await;
+    let kim = router_client(dir, "operator-kim", port).await;
+    let mallory = router_client(dir, "operator-mallory", port).await;
     let snapshot = |s: zenoh::Session| async move {
         let replies = s
             .get("cellwatch/m01ps0004/snapshot")
@@ -875,27 +887,9 @@ async fn through_the_router_nobody_else_publishes_or_answers_for_the_cell() {
 async fn the_cli_believes_only_the_agent() {
     let d = tempfile::tempdir().unwrap();
     let dir = d.path();
-    let (_router, port) = router(dir, false).await;
-    let sim = SimulatedCnc::start(&SimOptions {
-        listen: "127.0.0.1:0".parse().unwrap(),
-        pki_dir: dir.join("sim-pki"),
-        insecure: false,
-        decoy: None,
-    })
-    .await
-    .unwrap();
-    let mut c = config(dir, &sim.endpoint(), port);
-    c.zenoh.mode = cellwatch::config::ZenohMode::Client;
-    c.zenoh.listen = Vec::new();
-    c.zenoh.connect = vec![format!("tls/127.0.0.1:{port}")];
-    drop(opcua::client("test", &c.opcua).unwrap());
-    pki::trust(&pki::own_cert(&c.opcua.pki_dir), &dir.join("sim-pki")).unwrap();
-    pki::trust(&pki::own_cert(&dir.join("sim-pki")), &c.opcua.pki_dir).unwrap();
-    let agent = cell::start(c, None).await.unwrap();
-    crate::util::bus_pki(dir, &["operator-kim", "operator-mallory"]);
-    let mut m = crate::util::client_config(dir, "operator-mallory", port);
-    m.mode = cellwatch::config::ZenohMode::Client;
-    let mallory = cellwatch::sinks::zenoh::open(&m).await.unwrap();
+    let (_router, port, sim, agent) = behind_a_router(dir, false).await;
+    crate::util::bus_pki(dir, &["operator-kim"]);
+    let mallory = router_client(dir, "operator-mallory", port).await;
     let impostor = mallory
         .declare_queryable("cellwatch/m01ps0004/command")
         .await
