@@ -252,19 +252,15 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
     while let Ok(reply) = replies.recv_async().await {
         let from = replier(&reply);
         let Ok(sample) = reply.result() else { continue };
-        let of_cell = sample
-            .key_expr()
-            .as_str()
-            .strip_prefix(&format!("{root}/"))
-            .and_then(|k| k.strip_suffix("/snapshot"))
-            .unwrap_or_default();
+        let text = text(sample.payload());
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
+        // The cell it speaks for, believed only from that cell's agent.
+        let of_cell = v["cell"].as_str().unwrap_or_default();
         if trusted.get(of_cell) != Some(&from) {
             tracing::error!(cell = of_cell, from = %from, "a snapshot from a session that is not the cell's agent: ignored");
             continue;
         }
         answered += 1;
-        let text = text(sample.payload());
-        let v: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
         for a in v["alarms"].as_array().into_iter().flatten() {
             if let Ok(a) = serde_json::from_value::<AlarmPayload>(a.clone()) {
                 print_alarm(out, &a, args.json).map_err(io)?;
