@@ -946,6 +946,101 @@ async fn the_cli_believes_only_the_agent() {
     }
     // The impostor did answer, and was not believed.
     assert!(answered.load(std::sync::atomic::Ordering::SeqCst) >= 1);
+    // Mallory replays every real alarm event, altered: `alarms --follow`
+    // prints the agent's events only.
+    let mut follow: Vec<String> = [
+        "alarms",
+        "--cell",
+        "m01ps0004",
+        "--follow",
+        "--json",
+        "--mode",
+        "client",
+    ]
+    .map(String::from)
+    .to_vec();
+    follow.extend(crate::util::bus_args(dir, "operator-kim", port));
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_cellwatch"))
+        .args(&follow)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let (tx, lines) = std::sync::mpsc::channel();
+    let stdout = child.stdout.take().unwrap();
+    std::thread::spawn(move || {
+        use std::io::BufRead;
+        for line in std::io::BufReader::new(stdout)
+            .lines()
+            .map_while(Result::ok)
+        {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let copier = mallory
+        .declare_subscriber("cellwatch/m01ps0004/alarms/**")
+        .await
+        .unwrap();
+    let replayed = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let replaying = {
+        let (mallory, replayed) = (mallory.clone(), replayed.clone());
+        tokio::spawn(async move {
+            while let Ok(sample) = copier.recv_async().await {
+                let text = sample.payload().try_to_string().unwrap().into_owned();
+                if text.contains("FORGED") {
+                    continue;
+                }
+                let forged = text.replace("\"message\":\"", "\"message\":\"FORGED ");
+                let _ = mallory.put(sample.key_expr().clone(), forged).await;
+                replayed.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+            }
+        })
+    };
+    // Two faults, raised and cleared: the second comes after mallory has
+    // replayed the first's events, so her copies travel while the follower
+    // prints the second's.
+    let mut printed: Vec<String> = Vec::new();
+    let count = |printed: &[String], t: &str| {
+        printed
+            .iter()
+            .filter(|l| l.contains(&format!("\"transition\":\"{t}\"")) && !l.contains("FORGED"))
+            .count()
+    };
+    for round in 1..=2 {
+        for (value, transition) in [(false, "raised"), (true, "cleared")] {
+            sim.set("X0.06", value).unwrap();
+            while count(&printed, transition) < round {
+                printed.push(
+                    lines
+                        .recv_timeout(Duration::from_secs(30))
+                        .unwrap_or_else(|_| {
+                            panic!("no ESE {transition} from alarms --follow: {printed:#?}")
+                        }),
+                );
+            }
+        }
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+        while round == 1 && replayed.load(std::sync::atomic::Ordering::SeqCst) < 2 {
+            assert!(
+                tokio::time::Instant::now() < deadline,
+                "mallory never replayed"
+            );
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    }
+    assert!(replayed.load(std::sync::atomic::Ordering::SeqCst) >= 1);
+    child.kill().unwrap();
+    child.wait().unwrap();
+    while let Ok(line) = lines.try_recv() {
+        printed.push(line);
+    }
+    assert!(
+        !printed.iter().any(|l| l.contains("FORGED")),
+        "{printed:#?}"
+    );
+    replaying.abort();
     impostor_task.abort();
     agent.stop().await;
     sim.stop();

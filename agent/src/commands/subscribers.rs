@@ -223,16 +223,38 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
             }
             out.flush().map_err(io)?;
         }
+        // Each cell's agent, as its liveliness token names it; looked up
+        // again when an event comes from another session (an agent that
+        // restarted has a new one).
+        let timeout = Duration::from_secs(args.zenoh.timeout_secs);
+        let mut known = agents(&s, root, cell, timeout).await.unwrap_or_default();
         loop {
             tokio::select! {
                 _ = tokio::signal::ctrl_c() => break,
                 sample = sub.recv_async() => {
                     let Ok(sample) = sample else { break };
-                    let text = sample.payload().try_to_string().map(|s| s.into_owned()).unwrap_or_default();
-                    match serde_json::from_str::<AlarmPayload>(&text) {
-                        Ok(a) if printed.remove(&(a.id.clone(), a.at.clone(), a.transition)) => {}
-                        Ok(a) => print_alarm(out, &a, args.json).map_err(io)?,
-                        Err(e) => tracing::warn!(key = %sample.key_expr(), error = %e, "not an alarm payload"),
+                    let text = text(sample.payload());
+                    let a = match serde_json::from_str::<AlarmPayload>(&text) {
+                        Ok(a) => a,
+                        Err(e) => {
+                            tracing::warn!(key = %sample.key_expr(), error = %e, "not an alarm payload");
+                            continue;
+                        }
+                    };
+                    let from = sample
+                        .source_info()
+                        .map(|i| i.source_id().zid().to_string());
+                    if from.is_none() || known.get(&a.cell) != from.as_ref() {
+                        if let Ok(found) = agents(&s, root, &a.cell, timeout).await {
+                            known.extend(found);
+                        }
+                    }
+                    if from.is_none() || known.get(&a.cell) != from.as_ref() {
+                        tracing::error!(cell = %a.cell, from = ?from, "an alarm event from a session that is not the cell's agent: ignored");
+                        continue;
+                    }
+                    if !printed.remove(&(a.id.clone(), a.at.clone(), a.transition)) {
+                        print_alarm(out, &a, args.json).map_err(io)?;
                     }
                     out.flush().map_err(io)?;
                 }
