@@ -38,6 +38,8 @@ pub(crate) fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<(), F
     if let Some(path) = &c.operators_file {
         crate::operator::OperatorKeys::load(path).map_err(Failure::input)?;
     }
+    crate::sinks::zenoh::session_config(&c.zenoh)
+        .map_err(|e| Failure::Input(format!("{}: {e}", args.config.display())))?;
     let io = Failure::output;
     writeln!(
         out,

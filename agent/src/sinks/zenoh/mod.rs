@@ -92,6 +92,19 @@ pub fn session_config(c: &ZenohConfig) -> Result<zenoh::Config, ZenohError> {
     }
     set(&mut cfg, "timestamping/enabled", "true".into())?;
     if let Some(tls) = &c.tls {
+        for (key, file) in [
+            ("tls.ca", &tls.ca),
+            ("tls.cert", &tls.cert),
+            ("tls.key", &tls.key),
+        ] {
+            if let Err(e) = std::fs::metadata(file) {
+                return Err(ZenohError::Config {
+                    key: key.into(),
+                    value: file.display().to_string(),
+                    reason: format!("{e} (certificates are made by `cellwatch pki`)"),
+                });
+            }
+        }
         let path = |p: &std::path::Path| {
             serde_json::to_string(&p.display().to_string()).unwrap_or_default()
         };
