@@ -162,6 +162,26 @@ impl Metrics {
                 commands.with_label_values(&[action, result]).inc_by(0);
             }
         }
+        let refused = reg!(IntCounterVec::new(
+            opts(
+                "cellwatch_requests_refused_total",
+                "Queries refused: busy (too many at once), too_large (payload over the limit), invalid (not a request).",
+                cell
+            ),
+            &["service", "reason"]
+        ));
+        // Every series exists from the start, at 0, so that rates and
+        // dashboards see the first refusal.
+        for (service, reason) in [
+            ("history", "busy"),
+            ("history", "invalid"),
+            ("snapshot", "busy"),
+            ("command", "busy"),
+            ("command", "too_large"),
+            ("command", "invalid"),
+        ] {
+            refused.with_label_values(&[service, reason]).inc_by(0);
+        }
         Metrics {
             opcua_connected: reg!(IntGauge::with_opts(opts(
                 "cellwatch_opcua_connected",
@@ -232,14 +252,7 @@ impl Metrics {
                 "Journal rows dropped because the queue of unwritten rows was full.",
                 cell
             ))),
-            refused: reg!(IntCounterVec::new(
-                opts(
-                    "cellwatch_requests_refused_total",
-                    "Queries refused: busy (too many at once), too_large (payload over the limit), invalid (not a request).",
-                    cell
-                ),
-                &["service", "reason"]
-            )),
+            refused,
             zenoh_publish_errors: reg!(IntCounter::with_opts(opts(
                 "cellwatch_zenoh_publish_errors_total",
                 "Zenoh publications and replies that failed.",
