@@ -381,3 +381,111 @@ async fn a_silent_subscription_is_reported_and_recreated() {
     source.stop().await;
     sim.stop();
 }
+
+/// Toggles X0.06 `n` times as fast as the simulator takes it, ending at
+/// its normal value (true).
+fn toggle(sim: &SimulatedCnc, n: usize) {
+    for i in 0..n {
+        sim.set("X0.06", i % 2 == 1).unwrap();
+    }
+}
+
+/// Readings of tag 0 until `n` changes after the initial value have
+/// arrived, or a 5 s quiet spell; with the other events seen.
+async fn changes(source: &mut Running, n: usize) -> (Vec<Reading>, Vec<SourceEvent>) {
+    let mut values = Vec::new();
+    let mut others = Vec::new();
+    while values.len() < n {
+        let Ok(Some(ev)) = tokio::time::timeout(Duration::from_secs(5), source.rx.recv()).await
+        else {
+            break;
+        };
+        match &ev {
+            SourceEvent::Readings(rs) => {
+                values.extend(rs.iter().filter(|r| r.tag == 0).map(|r| r.reading));
+            }
+            _ => others.push(ev),
+        }
+    }
+    (values, others)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_change_within_one_publishing_interval_arrives_with_sampling_zero() {
+    let dir = tempfile::tempdir().unwrap();
+    let (sim, mut config, _) = trusted_cnc(dir.path()).await;
+    config.publishing_interval = Duration::from_millis(500);
+    config.sampling_interval = Duration::ZERO;
+    config.queue_size =
+        OpcUaConfig::default_queue_size(config.publishing_interval, config.sampling_interval);
+    let tags = vec![tag("X0.06", &format!("nsu={NAMESPACE};s=X0.06"))];
+    let mut source = Running::start(config, tags);
+    all(
+        &mut source.rx,
+        "connection and initial value",
+        &[&|e| matches!(e, SourceEvent::Connected(_)), &|e| {
+            has(e, 0, Reading::Good(true))
+        }],
+    )
+    .await;
+    toggle(&sim, 20);
+    let (values, others) = changes(&mut source, 20).await;
+    let expected: Vec<Reading> = (0..20).map(|i| Reading::Good(i % 2 == 1)).collect();
+    assert_eq!(values, expected, "{others:?}");
+    assert!(
+        !others.iter().any(|e| matches!(
+            e,
+            SourceEvent::Problem {
+                problem: Some(_),
+                ..
+            }
+        )),
+        "{others:?}"
+    );
+    source.stop().await;
+    sim.stop();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn changes_lost_in_a_full_server_queue_raise_the_overflow_alarm() {
+    let dir = tempfile::tempdir().unwrap();
+    let (sim, mut config, _) = trusted_cnc(dir.path()).await;
+    config.publishing_interval = Duration::from_millis(500);
+    config.sampling_interval = Duration::ZERO;
+    config.queue_size = 4;
+    let tags = vec![tag("X0.06", &format!("nsu={NAMESPACE};s=X0.06"))];
+    let mut source = Running::start(config, tags);
+    all(
+        &mut source.rx,
+        "connection and initial value",
+        &[&|e| matches!(e, SourceEvent::Connected(_)), &|e| {
+            has(e, 0, Reading::Good(true))
+        }],
+    )
+    .await;
+    toggle(&sim, 20);
+    let ev = next(&mut source.rx, "the overflow alarm", |e| {
+        matches!(e, SourceEvent::Problem { id, problem: Some(_) } if id == opcua::OVERFLOW_ALARM)
+    })
+    .await;
+    let SourceEvent::Problem {
+        problem: Some(why), ..
+    } = ev
+    else {
+        unreachable!()
+    };
+    assert_eq!(
+        why,
+        "changes lost in the server's queue (queue size 4) for x0.06: raise opcua.queue_size or sample less often"
+    );
+    // The next change arrives whole: the alarm clears.
+    sim.set("X0.06", false).unwrap();
+    next(
+        &mut source.rx,
+        "the overflow alarm cleared",
+        |e| matches!(e, SourceEvent::Problem { id, problem: None } if id == opcua::OVERFLOW_ALARM),
+    )
+    .await;
+    source.stop().await;
+    sim.stop();
+}

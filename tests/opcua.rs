@@ -29,6 +29,8 @@ pub(crate) fn opcua_config(endpoint: &str, pki_dir: &std::path::Path) -> OpcUaCo
         publishing_interval: Duration::from_millis(50),
         sampling_interval: Duration::from_millis(20),
         namespace_uri: None,
+        queue_size: 10,
+        max_notifications_per_publish: 10_000,
     }
 }
 

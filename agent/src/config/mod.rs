@@ -116,6 +116,24 @@ pub struct OpcUaConfig {
     /// What `ns=<index>` (index 1 and up) in the tags' node ids means: the
     /// namespace with this URI, looked up on the server at every connect.
     pub namespace_uri: Option<String>,
+    /// Changes the server queues per tag between publishes.
+    pub queue_size: u32,
+    /// The most notifications the server may put in one publish; the
+    /// client's decoding limits are sized from it.
+    pub max_notifications_per_publish: u32,
+}
+
+impl OpcUaConfig {
+    /// The default queue size: room for every sample of four publishing
+    /// intervals (sampling 0, exception-based, counts as 1 ms), at least 10
+    /// and at most 1000.
+    pub fn default_queue_size(publishing: Duration, sampling: Duration) -> u32 {
+        let sampling = sampling.max(Duration::from_millis(1));
+        let per_publish = publishing.as_micros().div_ceil(sampling.as_micros());
+        u32::try_from(per_publish.saturating_mul(4))
+            .unwrap_or(u32::MAX)
+            .clamp(10, 1000)
+    }
 }
 
 /// A tag: a node on the server and the PLC address the models use.
@@ -695,11 +713,45 @@ impl Validator<'_> {
             "opcua.publishing_interval",
             Duration::from_millis(100),
         );
-        let sampling_interval = self.duration(
-            raw.sampling_interval,
-            "opcua.sampling_interval",
-            Duration::from_millis(50),
-        );
+        // 0 is the OPC UA convention for exception-based reporting: every
+        // change, as the server sees it.
+        let sampling_interval = match raw.sampling_interval {
+            Some(v)
+                if v.get_ref().trim() == "0"
+                    || humantime::parse_duration(v.get_ref()).is_ok_and(|d| d.is_zero()) =>
+            {
+                Duration::ZERO
+            }
+            other => self.duration(other, "opcua.sampling_interval", Duration::from_millis(50)),
+        };
+        let queue_size = match raw.queue_size {
+            None => OpcUaConfig::default_queue_size(publishing_interval, sampling_interval),
+            Some(q) => match u32::try_from(*q.get_ref()) {
+                Ok(n @ 1..=10_000) => n,
+                _ => {
+                    self.problem(
+                        q.span(),
+                        "opcua.queue_size",
+                        format!("{} is not between 1 and 10000", q.get_ref()),
+                    );
+                    10
+                }
+            },
+        };
+        let max_notifications_per_publish = match raw.max_notifications_per_publish {
+            None => 10_000,
+            Some(q) => match u32::try_from(*q.get_ref()) {
+                Ok(n @ 100..=1_000_000) => n,
+                _ => {
+                    self.problem(
+                        q.span(),
+                        "opcua.max_notifications_per_publish",
+                        format!("{} is not between 100 and 1000000", q.get_ref()),
+                    );
+                    10_000
+                }
+            },
+        };
         let namespace_uri = match raw.namespace_uri {
             Some(uri) if uri.get_ref().trim().is_empty() => {
                 self.problem(uri.span(), "opcua.namespace_uri", "is empty");
@@ -717,6 +769,8 @@ impl Validator<'_> {
             publishing_interval,
             sampling_interval,
             namespace_uri: namespace_uri.map(|(_, u)| u),
+            queue_size,
+            max_notifications_per_publish,
         })
     }
 

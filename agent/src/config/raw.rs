@@ -55,6 +55,8 @@ pub(crate) struct RawOpcUa {
     pub(crate) publishing_interval: Option<Spanned<String>>,
     pub(crate) sampling_interval: Option<Spanned<String>>,
     pub(crate) namespace_uri: Option<Spanned<String>>,
+    pub(crate) queue_size: Option<Spanned<i64>>,
+    pub(crate) max_notifications_per_publish: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -151,6 +151,35 @@ fn every_problem_is_reported_at_once() {
 }
 
 #[test]
+fn sampling_zero_is_exception_based_and_queues_fit_it() {
+    let with = |extra: &str| {
+        GOOD.replace(
+            "endpoint = \"opc.tcp://127.0.0.1:4840/\"",
+            &format!("endpoint = \"opc.tcp://127.0.0.1:4840/\"\n{extra}"),
+        )
+    };
+    let c = parse(
+        "cell.toml",
+        &with("sampling_interval = \"0\""),
+        Path::new("base"),
+        &mem(),
+    )
+    .unwrap();
+    assert_eq!(c.opcua.sampling_interval, Duration::ZERO);
+    // 100 ms publishing, every change: room for four intervals of 1 ms samples.
+    assert_eq!(c.opcua.queue_size, 400);
+    let c = parse("cell.toml", GOOD, Path::new("base"), &mem()).unwrap();
+    assert_eq!(
+        (c.opcua.queue_size, c.opcua.max_notifications_per_publish),
+        (10, 10_000)
+    );
+    assert_eq!(
+        errors(&with("queue_size = 0")),
+        "cell.toml:7:14: opcua.queue_size: 0 is not between 1 and 10000"
+    );
+}
+
+#[test]
 fn the_bus_is_tls_unless_plain_is_written() {
     let c = parse("cell.toml", GOOD, Path::new("base"), &mem()).unwrap();
     let tls = c.zenoh.tls.unwrap();

@@ -140,6 +140,13 @@ impl SimServer {
                 ("/", SecurityPolicy::None, MessageSecurityMode::None, tokens),
             );
         }
+        // Sampling interval 0 means every change, as the PLC makes it
+        // (exception-based), as OPC UA servers of discrete signals do.
+        builder.limits_mut().subscriptions.min_sampling_interval_ms = 0.0;
+        builder
+            .limits_mut()
+            .subscriptions
+            .max_monitored_item_queue_size = 1000;
         let (server, handle) = builder.build()?;
         let manager = handle
             .node_managers()

@@ -28,7 +28,7 @@ mod subscription;
 
 pub use address::{Namespace, TagNode};
 
-pub use subscription::reading;
+pub use subscription::{reading, OVERFLOW_ALARM};
 
 use cellwatch_models::engine::{Reading, TagReading};
 use futures_util::future::BoxFuture;
@@ -118,6 +118,14 @@ fn identity(config: &OpcUaConfig) -> Result<(IdentityToken, UserTokenPolicy), So
     }
 }
 
+/// The largest message the client sends or accepts.
+const MAX_MESSAGE_BYTES: usize = 64 << 20;
+
+/// The longest array the client decodes.
+fn array_limit(config: &OpcUaConfig) -> usize {
+    2 * (config.max_notifications_per_publish as usize).max(subscription::MAX_ITEMS_PER_CALL)
+}
+
 /// Builds the client, creating the agent's key pair in the PKI directory if
 /// it has none.
 ///
@@ -139,6 +147,15 @@ pub fn client(cell: &str, config: &OpcUaConfig) -> Result<opcua::client::Client,
         .max_failed_keep_alive_count(3)
         .request_timeout(Duration::from_secs(5))
         .session_timeout(30_000)
+        // Decoding limits sized from what the subscription can produce: a
+        // publish holds at most `max_notifications_per_publish` values (asked
+        // of the server), a monitored-item call at most
+        // `subscription::MAX_ITEMS_PER_CALL` results. A server that sends
+        // more closes the connection: an error in the log and the
+        // communication alarm, never a silent stall.
+        .max_array_length(array_limit(config))
+        .max_message_size(MAX_MESSAGE_BYTES)
+        .max_chunk_count(0)
         // The source recreates its subscription itself after a new session
         // (see `run`); async-opcua 0.19's own re-creation leaves the new
         // subscription without publish requests.
@@ -299,7 +316,7 @@ struct Context {
     config: OpcUaConfig,
     /// Each tag's node, `None` when its node id cannot be read.
     nodes: Vec<Option<TagNode>>,
-    names: Vec<String>,
+    names: Arc<Vec<String>>,
     tx: SourceSender,
 }
 
@@ -321,7 +338,7 @@ impl Context {
             endpoint: config.endpoint.clone(),
             config: config.clone(),
             nodes,
-            names: tags.iter().map(|t| t.name.clone()).collect(),
+            names: Arc::new(tags.iter().map(|t| t.name.clone()).collect()),
             tx,
         }
     }
@@ -495,8 +512,15 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
             .await;
     }
     let heard = Arc::new(subscription::Heard::new());
-    let subscription =
-        subscription::subscribe(session, &ctx.config, &Arc::new(by_node), &ctx.tx, &heard).await?;
+    let subscription = subscription::subscribe(
+        session,
+        &ctx.config,
+        &Arc::new(by_node),
+        &ctx.names,
+        &ctx.tx,
+        &heard,
+    )
+    .await?;
     Some(Live {
         subscription,
         namespaces,

@@ -1,8 +1,8 @@
 //! The subscription: monitored items created in chunks the server accepts,
 //! and each publish's changes passed on in source-time order.
 
-use std::collections::HashMap;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::collections::{BTreeSet, HashMap};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -25,6 +25,9 @@ use crate::sources::{SourceEvent, SourceSender};
 const MAX_MONITORED_ITEMS_PER_CALL: u32 = 11714;
 /// Used when the server states no limit.
 const DEFAULT_CHUNK: usize = 1000;
+/// The most monitored items created in one call, whatever the server
+/// allows (the client's decoding limits are sized from it).
+pub(super) const MAX_ITEMS_PER_CALL: usize = 10_000;
 /// Publishing intervals without a publish request before the server drops
 /// the subscription.
 const LIFETIME_COUNT: u32 = 60;
@@ -81,21 +84,27 @@ pub(super) async fn subscribe(
     session: &Arc<Session>,
     config: &OpcUaConfig,
     by_node: &Arc<HashMap<NodeId, usize>>,
+    names: &Arc<Vec<String>>,
     tx: &SourceSender,
     heard: &Arc<Heard>,
 ) -> Option<Subscribed> {
     heard.beat();
+    // What the server granted, which may be less than asked.
+    let queue_size = Arc::new(AtomicU32::new(config.queue_size));
     let callback = InTimeOrder {
         by_node: by_node.clone(),
         tx: tx.clone(),
         heard: heard.clone(),
+        names: names.clone(),
+        queue_size: queue_size.clone(),
+        overflowing: BTreeSet::new(),
     };
     let sub = match session
         .create_subscription(
             config.publishing_interval,
             LIFETIME_COUNT,
             KEEP_ALIVE_COUNT,
-            0,
+            config.max_notifications_per_publish,
             0,
             true,
             callback,
@@ -122,7 +131,7 @@ pub(super) async fn subscribe(
                 s.publishing_interval() * s.max_keep_alive_count().max(1)
             })
     };
-    let chunk = max_items_per_call(session).await;
+    let chunk = max_items_per_call(session).await.min(MAX_ITEMS_PER_CALL);
     let sampling = config.sampling_interval.as_secs_f64() * 1000.0;
     let requests: Vec<MonitoredItemCreateRequest> = by_node
         .keys()
@@ -134,9 +143,11 @@ pub(super) async fn subscribe(
                 deadband_type: 0,
                 deadband_value: 0.0,
             };
+            // When the queue is full the server drops the oldest change and
+            // flags the next one it delivers with the overflow bit.
             let params = MonitoringParameters {
                 sampling_interval: sampling,
-                queue_size: 10,
+                queue_size: config.queue_size,
                 discard_oldest: true,
                 filter: ExtensionObject::from_message(filter),
                 ..Default::default()
@@ -160,6 +171,21 @@ pub(super) async fn subscribe(
             .await
         {
             Ok(results) => {
+                if let Some(granted) = results
+                    .iter()
+                    .filter(|r| r.result.status_code.is_good())
+                    .map(|r| r.result.revised_queue_size)
+                    .min()
+                {
+                    if granted < queue_size.load(Ordering::Relaxed) {
+                        tracing::warn!(
+                            asked = config.queue_size,
+                            granted,
+                            "the server granted a smaller queue per tag"
+                        );
+                        queue_size.store(granted, Ordering::Relaxed);
+                    }
+                }
                 for (r, req) in results.iter().zip(part) {
                     if !r.result.status_code.is_good() {
                         tracing::error!(node = %req.item_to_monitor.node_id, status = %r.result.status_code, "monitored item refused");
@@ -195,16 +221,30 @@ struct InTimeOrder {
     by_node: Arc<HashMap<NodeId, usize>>,
     tx: SourceSender,
     heard: Arc<Heard>,
+    names: Arc<Vec<String>>,
+    /// The queue size the server granted.
+    queue_size: Arc<AtomicU32>,
+    /// Tags whose last delivery said the server's queue overflowed
+    /// (changes were lost), until one arrives without.
+    overflowing: BTreeSet<usize>,
 }
+
+/// The alarm of changes lost in the server's queues (kind `system`).
+pub const OVERFLOW_ALARM: &str = "opcua-overflow";
 
 struct Collector<'a> {
     by_node: &'a HashMap<NodeId, usize>,
     readings: Vec<TagReading>,
+    /// Tags with a value flagged `Overflow` in this publish.
+    overflowed: BTreeSet<usize>,
 }
 
 impl OnSubscriptionNotification for Collector<'_> {
     fn on_data_value(&mut self, value: DataValue, item: &MonitoredItem) {
         if let Some(&tag) = self.by_node.get(&item.item_to_monitor().node_id) {
+            if value.status.is_some_and(|s| s.overflow()) {
+                self.overflowed.insert(tag);
+            }
             self.readings.push(TagReading {
                 tag,
                 reading: reading(&value),
@@ -225,16 +265,57 @@ impl OnSubscriptionNotificationCore for InTimeOrder {
         let mut c = Collector {
             by_node: &self.by_node,
             readings: Vec::new(),
+            overflowed: BTreeSet::new(),
         };
         c.on_subscription_notification(notification, items);
         if c.readings.is_empty() {
             return;
         }
         c.readings.sort_by_key(|r| r.source_time);
+        let before = self.overflowing.clone();
+        for r in &c.readings {
+            if !c.overflowed.contains(&r.tag) {
+                self.overflowing.remove(&r.tag);
+            }
+        }
+        self.overflowing.extend(&c.overflowed);
         self.heard.busy.store(true, Ordering::Relaxed);
         send_blocking(&self.tx, SourceEvent::Readings(c.readings));
+        if !c.overflowed.is_empty() || before != self.overflowing {
+            send_blocking(&self.tx, self.overflow_problem(&c.overflowed));
+        }
         self.heard.beat();
         self.heard.busy.store(false, Ordering::Relaxed);
+    }
+}
+
+impl InTimeOrder {
+    /// The overflow alarm as it stands: the tags whose changes were lost.
+    fn overflow_problem(&self, now: &BTreeSet<usize>) -> SourceEvent {
+        if !now.is_empty() {
+            let names: Vec<&str> = now.iter().map(|&t| self.names[t].as_str()).collect();
+            tracing::error!(tags = ?names, queue_size = self.queue_size.load(Ordering::Relaxed), "changes lost in the server's queues");
+        }
+        let problem = (!self.overflowing.is_empty()).then(|| {
+            let mut names: Vec<&str> = self
+                .overflowing
+                .iter()
+                .take(5)
+                .map(|&t| self.names[t].as_str())
+                .collect();
+            if self.overflowing.len() > names.len() {
+                names.push("...");
+            }
+            format!(
+                "changes lost in the server's queue (queue size {}) for {}: raise opcua.queue_size or sample less often",
+                self.queue_size.load(Ordering::Relaxed),
+                names.join(", ")
+            )
+        });
+        SourceEvent::Problem {
+            id: OVERFLOW_ALARM.into(),
+            problem,
+        }
     }
 }
 
