@@ -833,10 +833,47 @@ async fn through_the_router_nobody_else_publishes_or_answers_for_the_cell() {
             let _ = q.reply(q.key_expr().clone(), r#"{"forged":true}"#).await;
         }
     });
+    let command_impostor = mallory
+        .declare_queryable("cellwatch/m01ps0004/command")
+        .await
+        .unwrap();
+    let command_task = tokio::spawn(async move {
+        while let Ok(q) = command_impostor.recv_async().await {
+            let _ = q.reply(q.key_expr().clone(), r#"{"accepted":true}"#).await;
+        }
+    });
     assert!(!snapshot(mallory.clone()).await.is_empty());
     let answers = snapshot(kim.clone()).await;
     assert_eq!(answers.len(), 1, "{answers:?}");
     assert!(answers[0].contains("\"cell\":\"m01ps0004\""), "{answers:?}");
+    // History and commands: the agent's answers only.
+    let ask = |selector: &'static str, payload: Option<&'static str>| {
+        let kim = kim.clone();
+        async move {
+            let mut get = kim
+                .get(selector)
+                .consolidation(zenoh::query::ConsolidationMode::None);
+            if let Some(p) = payload {
+                get = get.payload(p);
+            }
+            let replies = get.await.unwrap();
+            let mut answers = Vec::new();
+            while let Ok(r) = replies.recv_async().await {
+                answers.push(match r.result() {
+                    Ok(s) => s.payload().try_to_string().unwrap().into_owned(),
+                    Err(e) => e.payload().try_to_string().unwrap().into_owned(),
+                });
+            }
+            answers
+        }
+    };
+    let history = ask("cellwatch/m01ps0004/history?since=1h", None).await;
+    assert_eq!(history.len(), 1, "{history:?}");
+    assert!(history[0].contains("cellwatch.history.v1"), "{history:?}");
+    let command = ask("cellwatch/m01ps0004/command", Some("{}")).await;
+    assert_eq!(command.len(), 1, "{command:?}");
+    assert!(command[0].contains("\"accepted\":false"), "{command:?}");
+    command_task.abort();
     // Mallory publishes forged alarms all along, before and after a real fault.
     let sub = kim
         .declare_subscriber("cellwatch/m01ps0004/alarms/**")
