@@ -30,14 +30,14 @@ fn tag(address: &str, node_id: &str) -> TagConfig {
 }
 
 /// A source running in the background.
-struct Running {
-    rx: mpsc::Receiver<SourceEvent>,
+pub(crate) struct Running {
+    pub(crate) rx: mpsc::Receiver<SourceEvent>,
     stop: Option<tokio::sync::oneshot::Sender<()>>,
     task: tokio::task::JoinHandle<Result<(), cellwatch::sources::SourceError>>,
 }
 
 impl Running {
-    fn start(config: OpcUaConfig, tags: Vec<TagConfig>) -> Running {
+    pub(crate) fn start(config: OpcUaConfig, tags: Vec<TagConfig>) -> Running {
         let (tx, rx) = mpsc::channel(cellwatch::sources::QUEUE_CAPACITY);
         let (stop, stop_rx) = tokio::sync::oneshot::channel::<()>();
         let task = tokio::spawn(async move {
@@ -53,7 +53,7 @@ impl Running {
         }
     }
 
-    async fn stop(mut self) {
+    pub(crate) async fn stop(mut self) {
         let _ = self.stop.take().unwrap().send(());
         self.task.await.unwrap().unwrap();
     }

@@ -13,6 +13,7 @@ mod cell_loop;
 mod dashboards;
 mod durability;
 mod explain;
+mod interop;
 mod liveness;
 mod opcua;
 mod operators;

@@ -186,6 +186,16 @@ pub(super) async fn subscribe(
                         queue_size.store(granted, Ordering::Relaxed);
                     }
                 }
+                if let Some(slowest) = results
+                    .iter()
+                    .filter(|r| r.result.status_code.is_good())
+                    .map(|r| r.result.revised_sampling_interval)
+                    .max_by(f64::total_cmp)
+                {
+                    if slowest > sampling {
+                        tracing::warn!(asked_ms = sampling, granted_ms = slowest, "the server samples less often than asked: changes shorter than its interval are not seen");
+                    }
+                }
                 for (r, req) in results.iter().zip(part) {
                     if !r.result.status_code.is_good() {
                         tracing::error!(node = %req.item_to_monitor.node_id, status = %r.result.status_code, "monitored item refused");

@@ -1,0 +1,248 @@
+//! The OPC UA source against a server nobody here wrote: node-opcua
+//! (`tests/interop/server.js`, installed with `npm ci` from the committed
+//! lock file on first use), Basic256Sha256 + SignAndEncrypt with mutual
+//! certificate trust.
+
+use std::io::{BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStdin, Command, Stdio};
+use std::sync::mpsc as std_mpsc;
+use std::sync::Once;
+use std::time::Duration;
+
+use cellwatch::config::TagConfig;
+use cellwatch::sources::{opcua, pki, SourceEvent};
+use cellwatch_models::engine::Reading;
+use cellwatch_models::signal::Signal;
+
+use crate::liveness::Running;
+use crate::opcua::{next, opcua_config};
+use crate::util::root;
+
+const URI: &str = "urn:cellwatch:test:node-opcua:plc";
+
+/// `npm ci` in tests/interop, once per test run, unless already installed.
+fn installed() -> PathBuf {
+    static ONCE: Once = Once::new();
+    let dir = root().join("tests/interop");
+    ONCE.call_once(|| {
+        if dir.join("node_modules/node-opcua-server").exists() {
+            return;
+        }
+        let out = Command::new("npm")
+            .args(["ci", "--no-audit", "--no-fund"])
+            .current_dir(&dir)
+            .output()
+            .expect("npm (Node.js) is needed for the interoperability tests");
+        assert!(
+            out.status.success(),
+            "npm ci failed:\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    });
+    dir
+}
+
+/// A running node-opcua server.
+struct NodeServer {
+    child: Child,
+    stdin: ChildStdin,
+    lines: std_mpsc::Receiver<String>,
+    /// Its own certificate (DER).
+    cert: PathBuf,
+}
+
+impl NodeServer {
+    fn start(port: u16, pki_dir: &Path, tags: usize) -> NodeServer {
+        let dir = installed();
+        let mut child = Command::new("node")
+            .arg(dir.join("server.js"))
+            .args([
+                &port.to_string(),
+                pki_dir.to_str().unwrap(),
+                &tags.to_string(),
+                URI,
+            ])
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let stdin = child.stdin.take().unwrap();
+        let stdout = child.stdout.take().unwrap();
+        let (tx, lines) = std_mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        let mut server = NodeServer {
+            child,
+            stdin,
+            lines,
+            cert: PathBuf::new(),
+        };
+        let ready = server.wait_for("ready ");
+        server.cert = PathBuf::from(ready.trim_start_matches("ready "));
+        server
+    }
+
+    fn wait_for(&mut self, prefix: &str) -> String {
+        loop {
+            match self.lines.recv_timeout(Duration::from_secs(120)) {
+                Ok(line) if line.starts_with(prefix) => return line,
+                Ok(_) => {}
+                Err(_) => panic!("node-opcua server: no '{prefix}' line"),
+            }
+        }
+    }
+
+    /// Sends a command and waits until the server has carried it out.
+    fn send(&mut self, command: &str) {
+        writeln!(self.stdin, "{command}").unwrap();
+        self.wait_for(&format!("done {command}"));
+    }
+
+    fn stop(mut self) {
+        let _ = writeln!(self.stdin, "quit");
+        let _ = self.child.wait();
+    }
+}
+
+fn tag(i: usize) -> TagConfig {
+    TagConfig {
+        name: format!("t{i}"),
+        node_id: format!("nsu={URI};s=T{i}"),
+        address: Signal::new(&format!("T{i}")),
+        comment: None,
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn node_opcua_server_five_thousand_items_bursts_and_a_restart() {
+    const TAGS: usize = 5000;
+    let dir = tempfile::tempdir().unwrap();
+    let server_pki = dir.path().join("server-pki");
+    let port = {
+        let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        l.local_addr().unwrap().port()
+    };
+    let mut server = tokio::task::spawn_blocking({
+        let server_pki = server_pki.clone();
+        move || NodeServer::start(port, &server_pki, TAGS)
+    })
+    .await
+    .unwrap();
+    let mut config = opcua_config(
+        &format!("opc.tcp://127.0.0.1:{port}/"),
+        &dir.path().join("agent-pki"),
+    );
+    config.publishing_interval = Duration::from_millis(200);
+    config.sampling_interval = Duration::ZERO;
+    config.queue_size = 100;
+    // Mutual trust, certificate by certificate.
+    drop(opcua::client("test", &config).unwrap());
+    let trusted = server_pki.join("trusted/certs");
+    std::fs::create_dir_all(&trusted).unwrap();
+    std::fs::copy(
+        pki::own_cert(&config.pki_dir),
+        trusted.join("cellwatch.der"),
+    )
+    .unwrap();
+    pki::trust(&server.cert, &config.pki_dir).unwrap();
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+        .with_test_writer()
+        .try_init();
+    let started = std::time::Instant::now();
+    let mut source = Running::start(config, (0..TAGS).map(tag).collect());
+    // Every tag gets its value (one publish holds thousands of them).
+    let mut seen = vec![false; TAGS];
+    let mut connected = false;
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(120);
+    while !(connected && seen.iter().all(|s| *s)) {
+        let ev = tokio::time::timeout_at(deadline, source.rx.recv())
+            .await
+            .unwrap_or_else(|_| {
+                panic!(
+                    "{} of {TAGS} tags seen, connected {connected}",
+                    seen.iter().filter(|s| **s).count()
+                )
+            })
+            .unwrap();
+        match ev {
+            SourceEvent::Connected(_) => connected = true,
+            SourceEvent::Readings(rs) => {
+                for r in rs {
+                    assert_eq!(r.reading, Reading::Good(true), "tag {}", r.tag);
+                    seen[r.tag] = true;
+                }
+            }
+            SourceEvent::Disconnected(why) => panic!("disconnected: {why}"),
+            SourceEvent::Problem {
+                problem: Some(p), ..
+            } => panic!("{p}"),
+            SourceEvent::Problem { .. } => {}
+        }
+    }
+    eprintln!("all {TAGS} tags in {:?}", started.elapsed());
+    // A contact toggled 20 times within one publishing interval: all 20.
+    let server = tokio::task::spawn_blocking(move || {
+        server.send("toggle T7 20");
+        server
+    })
+    .await
+    .unwrap();
+    let mut changes = Vec::new();
+    while changes.len() < 20 {
+        let ev = tokio::time::timeout_at(deadline, source.rx.recv())
+            .await
+            .unwrap_or_else(|_| panic!("T7 changes: {changes:?}"))
+            .unwrap();
+        match ev {
+            SourceEvent::Readings(rs) => {
+                changes.extend(rs.iter().filter(|r| r.tag == 7).map(|r| r.reading))
+            }
+            SourceEvent::Problem {
+                problem: Some(p), ..
+            } => panic!("{p}"),
+            _ => {}
+        }
+    }
+    let expected: Vec<Reading> = (0..20).map(|i| Reading::Good(i % 2 == 1)).collect();
+    assert_eq!(changes, expected);
+    // The server restarts on the same port with the same certificates.
+    tokio::task::spawn_blocking(move || server.stop())
+        .await
+        .unwrap();
+    next(&mut source.rx, "connection lost", |e| {
+        matches!(e, SourceEvent::Disconnected(_))
+    })
+    .await;
+    let mut server = tokio::task::spawn_blocking({
+        let server_pki = server_pki.clone();
+        move || NodeServer::start(port, &server_pki, TAGS)
+    })
+    .await
+    .unwrap();
+    next(&mut source.rx, "connected again", |e| {
+        matches!(e, SourceEvent::Connected(_))
+    })
+    .await;
+    server = tokio::task::spawn_blocking(move || {
+        server.send("set T42 0");
+        server
+    })
+    .await
+    .unwrap();
+    next(&mut source.rx, "T42 = 0 after the restart", |e| {
+        matches!(e, SourceEvent::Readings(rs) if rs.iter().any(|r| r.tag == 42 && r.reading == Reading::Good(false)))
+    })
+    .await;
+    source.stop().await;
+    tokio::task::spawn_blocking(move || server.stop())
+        .await
+        .unwrap();
+}

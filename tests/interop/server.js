@@ -1,0 +1,129 @@
+// An independent OPC UA server (node-opcua) for cellwatch's interoperability
+// tests: Basic256Sha256 + SignAndEncrypt only, client certificates trusted
+// only from PKI/trusted/certs, N Boolean tags T0..T(N-1) in namespace URI.
+//
+//   node server.js PORT PKI_DIR N URI
+//
+// Prints "ready <own certificate, DER>" once listening. Standard input:
+//   set NAME 0|1        write a tag
+//   toggle NAME K       write it K times, alternating, as fast as possible
+//   quit
+"use strict";
+const fs = require("fs");
+const path = require("path");
+const readline = require("readline");
+const { OPCUAServer } = require("node-opcua-server");
+const { SecurityPolicy, MessageSecurityMode } = require("node-opcua-secure-channel");
+const { DataType, Variant } = require("node-opcua-variant");
+const { OPCUACertificateManager } = require("node-opcua-certificate-manager");
+
+// The server's own certificate, made here rather than by node-opcua: OPC UA
+// wants the application URI among the subject alternative names, and some
+// clients (async-opcua) want it first, before the host names, which
+// node-opcua's own certificates put first.
+async function ownCertificate(pkiDir) {
+  const certFile = path.join(pkiDir, "own/certs/certificate.pem");
+  const keyFile = path.join(pkiDir, "own/private/private_key.pem");
+  if (fs.existsSync(certFile)) {
+    return { certFile, keyFile };
+  }
+  const x509 = require("@peculiar/x509");
+  const { webcrypto } = require("crypto");
+  x509.cryptoProvider.set(webcrypto);
+  const alg = { name: "RSASSA-PKCS1-v1_5", hash: "SHA-256", publicExponent: new Uint8Array([1, 0, 1]), modulusLength: 2048 };
+  const keys = await webcrypto.subtle.generateKey(alg, true, ["sign", "verify"]);
+  const cert = await x509.X509CertificateGenerator.createSelfSigned({
+    name: "CN=cellwatch interop node-opcua, O=cellwatch",
+    notBefore: new Date(Date.now() - 3600e3),
+    notAfter: new Date(Date.now() + 365 * 24 * 3600e3),
+    keys,
+    signingAlgorithm: alg,
+    extensions: [
+      new x509.BasicConstraintsExtension(false, undefined, true),
+      new x509.KeyUsagesExtension(
+        x509.KeyUsageFlags.digitalSignature | x509.KeyUsageFlags.nonRepudiation |
+          x509.KeyUsageFlags.keyEncipherment | x509.KeyUsageFlags.dataEncipherment, true),
+      new x509.ExtendedKeyUsageExtension(["1.3.6.1.5.5.7.3.1", "1.3.6.1.5.5.7.3.2"]),
+      new x509.SubjectAlternativeNameExtension([
+        { type: "url", value: APPLICATION_URI },
+        { type: "dns", value: "localhost" },
+        { type: "ip", value: "127.0.0.1" },
+      ]),
+      await x509.SubjectKeyIdentifierExtension.create(keys.publicKey),
+    ],
+  });
+  const pkcs8 = Buffer.from(await webcrypto.subtle.exportKey("pkcs8", keys.privateKey)).toString("base64");
+  fs.mkdirSync(path.dirname(certFile), { recursive: true });
+  fs.mkdirSync(path.dirname(keyFile), { recursive: true });
+  fs.writeFileSync(certFile, cert.toString("pem") + "\n");
+  fs.writeFileSync(keyFile, `-----BEGIN PRIVATE KEY-----\n${pkcs8.match(/.{1,64}/g).join("\n")}\n-----END PRIVATE KEY-----\n`);
+  return { certFile, keyFile };
+}
+
+const APPLICATION_URI = "urn:cellwatch:test:node-opcua";
+
+async function main() {
+  const [port, pkiDir, n, uri] = process.argv.slice(2);
+  const { certFile, keyFile } = await ownCertificate(pkiDir);
+  const serverCertificateManager = new OPCUACertificateManager({
+    rootFolder: pkiDir,
+    automaticallyAcceptUnknownCertificate: false,
+  });
+  await serverCertificateManager.initialize();
+  const server = new OPCUAServer({
+    port: Number(port),
+    hostname: "127.0.0.1",
+    // Names in the certificate it makes for itself, checked by clients.
+    alternateHostname: ["127.0.0.1", "localhost"],
+    serverInfo: { applicationUri: APPLICATION_URI, productUri: "urn:cellwatch:test" },
+    serverCertificateManager,
+    certificateFile: certFile,
+    privateKeyFile: keyFile,
+    securityPolicies: [SecurityPolicy.Basic256Sha256],
+    securityModes: [MessageSecurityMode.SignAndEncrypt],
+    allowAnonymous: true,
+    serverCapabilities: {
+      // Sampling 0 is served exception-based: every change, uncoalesced.
+      minSupportedSampleRate: 0,
+      maxMonitoredItemsPerCall: 10000,
+      operationLimits: { maxMonitoredItemsPerCall: 10000, maxNodesPerRead: 10000 },
+    },
+  });
+  await server.initialize();
+  const ns = server.engine.addressSpace.registerNamespace(uri);
+  const folder = ns.addFolder(server.engine.addressSpace.rootFolder.objects, { browseName: "Plc" });
+  const tags = new Map();
+  for (let i = 0; i < Number(n); i++) {
+    const name = `T${i}`;
+    const v = ns.addVariable({
+      componentOf: folder, browseName: name, nodeId: `s=${name}`, dataType: "Boolean",
+      minimumSamplingInterval: 0,
+    });
+    v.setValueFromSource(new Variant({ dataType: DataType.Boolean, value: true }));
+    tags.set(name, v);
+  }
+  await server.start();
+  const pem = fs.readFileSync(server.certificateFile, "utf8");
+  const der = Buffer.from(pem.replace(/-----[^-]+-----/g, "").replace(/\s+/g, ""), "base64");
+  const derFile = path.join(pkiDir, "server.der");
+  fs.writeFileSync(derFile, der);
+  console.log(`ready ${derFile}`);
+  const rl = readline.createInterface({ input: process.stdin });
+  for await (const line of rl) {
+    const [cmd, name, arg] = line.trim().split(/\s+/);
+    const v = tags.get(name);
+    if (cmd === "set" && v) {
+      v.setValueFromSource(new Variant({ dataType: DataType.Boolean, value: arg === "1" }));
+    } else if (cmd === "toggle" && v) {
+      for (let i = 0; i < Number(arg); i++) {
+        v.setValueFromSource(new Variant({ dataType: DataType.Boolean, value: i % 2 === 1 }));
+      }
+    } else if (cmd === "quit") {
+      break;
+    }
+    console.log(`done ${line.trim()}`);
+  }
+  await server.shutdown(0);
+  process.exit(0);
+}
+main().catch((e) => { console.error(e); process.exit(1); });
