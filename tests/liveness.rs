@@ -275,18 +275,45 @@ fn sequence_number_at(chunk: &[u8]) -> Option<usize> {
 /// can swallow every publish response while passing everything else: a
 /// subscription silent while the session lives.
 async fn relay(server: SocketAddr, mute: Arc<AtomicBool>) -> SocketAddr {
+    relay_with_cut(server, mute, Cut::default()).await
+}
+
+/// Cuts a relay's connections: while set, every connection is closed and
+/// new ones are refused.
+#[derive(Clone, Default)]
+struct Cut {
+    on: Arc<AtomicBool>,
+    links: Arc<std::sync::Mutex<Vec<tokio::task::AbortHandle>>>,
+}
+
+impl Cut {
+    fn set(&self, on: bool) {
+        self.on.store(on, Ordering::SeqCst);
+        if on {
+            for link in self.links.lock().unwrap().drain(..) {
+                link.abort();
+            }
+        }
+    }
+}
+
+async fn relay_with_cut(server: SocketAddr, mute: Arc<AtomicBool>, cut: Cut) -> SocketAddr {
     let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap();
     tokio::spawn(async move {
         while let Ok((client, _)) = listener.accept().await {
+            if cut.on.load(Ordering::SeqCst) {
+                continue;
+            }
             let Ok(upstream) = TcpStream::connect(server).await else {
                 continue;
             };
             let (mut cr, mut cw) = client.into_split();
             let (mut ur, mut uw) = upstream.into_split();
-            tokio::spawn(async move { tokio::io::copy(&mut cr, &mut uw).await });
+            let up = tokio::spawn(async move { tokio::io::copy(&mut cr, &mut uw).await });
+            cut.links.lock().unwrap().push(up.abort_handle());
             let mute = mute.clone();
-            tokio::spawn(async move {
+            let down = tokio::spawn(async move {
                 let mut muted_requests = std::collections::HashSet::new();
                 let mut dropped = 0u32;
                 loop {
@@ -326,6 +353,7 @@ async fn relay(server: SocketAddr, mute: Arc<AtomicBool>) -> SocketAddr {
                     }
                 }
             });
+            cut.links.lock().unwrap().push(down.abort_handle());
         }
     });
     addr
@@ -485,6 +513,48 @@ async fn changes_lost_in_a_full_server_queue_raise_the_overflow_alarm() {
         "the overflow alarm cleared",
         |e| matches!(e, SourceEvent::Problem { id, problem: None } if id == opcua::OVERFLOW_ALARM),
     )
+    .await;
+    source.stop().await;
+    sim.stop();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_change_made_while_the_connection_was_down_arrives_after_the_reactivation() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = cnc(
+        "127.0.0.1:0".parse().unwrap(),
+        &dir.path().join("server-pki"),
+        true,
+        None,
+    )
+    .await;
+    let cut = Cut::default();
+    let via = relay_with_cut(sim.addr(), Arc::new(AtomicBool::new(false)), cut.clone()).await;
+    let mut config = opcua_config(&format!("opc.tcp://{via}/"), &dir.path().join("agent-pki"));
+    config.policy = SecurityPolicy::None;
+    config.mode = SecurityMode::None;
+    let tags = vec![tag("X0.06", &format!("nsu={NAMESPACE};s=X0.06"))];
+    let mut source = Running::start(config, tags);
+    all(
+        &mut source.rx,
+        "connection and initial value",
+        &[&|e| matches!(e, SourceEvent::Connected(_)), &|e| {
+            has(e, 0, Reading::Good(true))
+        }],
+    )
+    .await;
+    // The network goes down; the server keeps the session (30 s) and the
+    // subscription; the PLC changes meanwhile; the network comes back.
+    cut.set(true);
+    next(&mut source.rx, "connection lost", |e| {
+        matches!(e, SourceEvent::Disconnected(_))
+    })
+    .await;
+    sim.set("X0.06", false).unwrap();
+    cut.set(false);
+    next(&mut source.rx, "X0.06 = 0 after the reactivation", |e| {
+        has(e, 0, Reading::Good(false))
+    })
     .await;
     source.stop().await;
     sim.stop();

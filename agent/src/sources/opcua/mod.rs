@@ -347,6 +347,8 @@ impl Context {
 /// A subscription in place on the server.
 struct Live {
     subscription: subscription::Subscribed,
+    /// The monitored nodes and their tags.
+    nodes: Vec<(NodeId, usize)>,
     /// The namespace array its node ids were resolved against.
     namespaces: Vec<String>,
     heard: Arc<subscription::Heard>,
@@ -393,6 +395,32 @@ async fn supervise(
                 continue;
             }
         };
+        // A reactivated session keeps its subscription only if the server
+        // did (it drops one that went without publish requests for its
+        // lifetime): ask, and start over if it is gone.
+        if let Some(l) = live.as_ref().filter(|l| l.namespaces == namespaces) {
+            let id = l.subscription.id;
+            let kept = session
+                .set_publishing_mode(&[id], true)
+                .await
+                .ok()
+                .and_then(|r| r.first().copied())
+                .is_some_and(|s| s.is_good());
+            if !kept {
+                tracing::warn!(
+                    subscription = id,
+                    "the server no longer has the subscription: subscribing again"
+                );
+                let _ = ctx
+                    .tx
+                    .send(SourceEvent::Disconnected(format!(
+                        "the server dropped subscription {id} while the connection was down"
+                    )))
+                    .await;
+                let _ = session.delete_subscription(id).await;
+                *live = None;
+            }
+        }
         if live.as_ref().is_none_or(|l| l.namespaces != namespaces) {
             if let Some(old) = live.take() {
                 tracing::info!(
@@ -411,6 +439,15 @@ async fn supervise(
             }
         }
         retry = Duration::from_millis(500);
+        if !new_session {
+            // Publishes sent while the connection was down are lost with
+            // it: read every tag's current value, so that nothing that
+            // changed meanwhile is missed (the engine ignores what it
+            // already has).
+            if let Some(l) = live.as_ref() {
+                read_current(&session, &ctx, &l.nodes).await;
+            }
+        }
         let _ = ctx
             .tx
             .send(SourceEvent::Connected(ctx.endpoint.clone()))
@@ -512,6 +549,7 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
             .await;
     }
     let heard = Arc::new(subscription::Heard::new());
+    let nodes: Vec<(NodeId, usize)> = by_node.iter().map(|(n, t)| (n.clone(), *t)).collect();
     let subscription = subscription::subscribe(
         session,
         &ctx.config,
@@ -523,10 +561,45 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
     .await?;
     Some(Live {
         subscription,
+        nodes,
         namespaces,
         heard,
     })
 }
+
+/// Reads the current value of every node and sends them as readings, in
+/// chunks of [`READ_CHUNK`]. A failed read is logged; the subscription's
+/// liveness check covers what follows.
+async fn read_current(session: &Session, ctx: &Context, nodes: &[(NodeId, usize)]) {
+    for part in nodes.chunks(READ_CHUNK) {
+        let ids: Vec<ReadValueId> = part
+            .iter()
+            .map(|(n, _)| ReadValueId::from(n.clone()))
+            .collect();
+        match session.read(&ids, TimestampsToReturn::Both, 0.0).await {
+            Ok(values) => {
+                let mut readings: Vec<TagReading> = values
+                    .iter()
+                    .zip(part)
+                    .map(|(v, (_, tag))| TagReading {
+                        tag: *tag,
+                        reading: reading(v),
+                        source_time: subscription::source_time(v),
+                    })
+                    .collect();
+                readings.sort_by_key(|r| r.source_time);
+                let _ = ctx.tx.send(SourceEvent::Readings(readings)).await;
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "cannot read the tags' current values after reconnecting");
+                return;
+            }
+        }
+    }
+}
+
+/// Nodes read per call when catching up after a reactivation.
+const READ_CHUNK: usize = 1000;
 
 /// The server's `NamespaceArray` (index → URI).
 async fn namespace_array(session: &Session) -> Result<Vec<String>, String> {

@@ -379,7 +379,7 @@ pub fn reading(value: &DataValue) -> Reading {
     }
 }
 
-fn source_time(value: &DataValue) -> u64 {
+pub(super) fn source_time(value: &DataValue) -> u64 {
     value
         .source_timestamp
         .or(value.server_timestamp)
