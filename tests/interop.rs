@@ -246,3 +246,92 @@ async fn node_opcua_server_five_thousand_items_bursts_and_a_restart() {
         .await
         .unwrap();
 }
+
+/// The network is down longer than the subscription's lifetime (the server
+/// says when it dropped it) but not the session's: the communication alarm
+/// covers the gap, the agent subscribes again (node-opcua hands it a new
+/// session), and the change made meanwhile arrives.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn node_opcua_network_cut_longer_than_the_subscription_lifetime() {
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+        .with_test_writer()
+        .try_init();
+    let dir = tempfile::tempdir().unwrap();
+    let server_pki = dir.path().join("server-pki");
+    let port = {
+        let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        l.local_addr().unwrap().port()
+    };
+    let server = tokio::task::spawn_blocking({
+        let server_pki = server_pki.clone();
+        move || NodeServer::start(port, &server_pki, 10)
+    })
+    .await
+    .unwrap();
+    let cut = crate::liveness::Cut::default();
+    let via = crate::liveness::relay_with_cut(
+        format!("127.0.0.1:{port}").parse().unwrap(),
+        std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false)),
+        cut.clone(),
+    )
+    .await;
+    let mut config = opcua_config(&format!("opc.tcp://{via}/"), &dir.path().join("agent-pki"));
+    config.publishing_interval = Duration::from_millis(100);
+    drop(opcua::client("test", &config).unwrap());
+    let trusted = server_pki.join("trusted/certs");
+    std::fs::create_dir_all(&trusted).unwrap();
+    std::fs::copy(
+        pki::own_cert(&config.pki_dir),
+        trusted.join("cellwatch.der"),
+    )
+    .unwrap();
+    pki::trust(&server.cert, &config.pki_dir).unwrap();
+    let mut source = Running::start(config, (0..10).map(tag).collect());
+    next(&mut source.rx, "connected", |e| {
+        matches!(e, SourceEvent::Connected(_))
+    })
+    .await;
+    next(
+        &mut source.rx,
+        "T3's value",
+        |e| matches!(e, SourceEvent::Readings(rs) if rs.iter().any(|r| r.tag == 3)),
+    )
+    .await;
+    cut.set(true);
+    next(&mut source.rx, "connection lost", |e| {
+        matches!(e, SourceEvent::Disconnected(_))
+    })
+    .await;
+    let server = tokio::task::spawn_blocking(move || {
+        let mut server = server;
+        server.send("set T3 0");
+        server.wait_for("expired subscription");
+        server
+    })
+    .await
+    .unwrap();
+    cut.set(false);
+    let mut connected = false;
+    let mut changed = false;
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    while !(changed && connected) {
+        let ev = tokio::time::timeout_at(deadline, source.rx.recv())
+            .await
+            .unwrap_or_else(|_| panic!("connected again {connected}, change seen {changed}"))
+            .unwrap();
+        match ev {
+            SourceEvent::Connected(_) => connected = true,
+            SourceEvent::Readings(rs) => {
+                changed |= rs
+                    .iter()
+                    .any(|r| r.tag == 3 && r.reading == Reading::Good(false));
+            }
+            _ => {}
+        }
+    }
+    source.stop().await;
+    tokio::task::spawn_blocking(move || server.stop())
+        .await
+        .unwrap();
+}

@@ -281,13 +281,13 @@ async fn relay(server: SocketAddr, mute: Arc<AtomicBool>) -> SocketAddr {
 /// Cuts a relay's connections: while set, every connection is closed and
 /// new ones are refused.
 #[derive(Clone, Default)]
-struct Cut {
+pub(crate) struct Cut {
     on: Arc<AtomicBool>,
     links: Arc<std::sync::Mutex<Vec<tokio::task::AbortHandle>>>,
 }
 
 impl Cut {
-    fn set(&self, on: bool) {
+    pub(crate) fn set(&self, on: bool) {
         self.on.store(on, Ordering::SeqCst);
         if on {
             for link in self.links.lock().unwrap().drain(..) {
@@ -297,7 +297,11 @@ impl Cut {
     }
 }
 
-async fn relay_with_cut(server: SocketAddr, mute: Arc<AtomicBool>, cut: Cut) -> SocketAddr {
+pub(crate) async fn relay_with_cut(
+    server: SocketAddr,
+    mute: Arc<AtomicBool>,
+    cut: Cut,
+) -> SocketAddr {
     let listener = TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap();
     tokio::spawn(async move {

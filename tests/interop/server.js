@@ -4,7 +4,8 @@
 //
 //   node server.js PORT PKI_DIR N URI
 //
-// Prints "ready <own certificate, DER>" once listening. Standard input:
+// Prints "ready <own certificate, DER>" once listening, "expired
+// subscription ID" when one outlives its lifetime. Standard input:
 //   set NAME 0|1        write a tag
 //   toggle NAME K       write it K times, alternating, as fast as possible
 //   quit
@@ -102,6 +103,13 @@ async function main() {
     v.setValueFromSource(new Variant({ dataType: DataType.Boolean, value: true }));
     tags.set(name, v);
   }
+  // Say when a subscription outlives its lifetime without publish
+  // requests (a client cut off): the server drops it.
+  server.on("create_session", (session) => {
+    session.on("new_subscription", (subscription) => {
+      subscription.on("expired", () => console.log(`expired subscription ${subscription.id}`));
+    });
+  });
   await server.start();
   const pem = fs.readFileSync(server.certificateFile, "utf8");
   const der = Buffer.from(pem.replace(/-----[^-]+-----/g, "").replace(/\s+/g, ""), "base64");
