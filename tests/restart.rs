@@ -128,8 +128,9 @@ async fn killed_agent_restores_its_alarms_and_refuses_replays() {
             .recv_timeout(std::time::Duration::from_secs(30))
             .unwrap_or_else(|_| {
                 panic!(
-                    "alarms --follow --since 1h printed only {events:#?}\n{}",
-                    cell.log("follow.log")
+                    "alarms --follow --since 1h printed only {events:#?}\n{}\nagent:\n{}",
+                    cell.log("follow.log"),
+                    cell.log("agent-2.log")
                 )
             });
         events.push(serde_json::from_str(&line).unwrap());

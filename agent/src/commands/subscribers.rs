@@ -304,12 +304,47 @@ async fn history_page(
     timeout: Duration,
     agent: &str,
 ) -> Result<String, Failure> {
-    let replies = s
-        .get(selector)
+    ask_agent(s, selector, None, timeout, agent).await
+}
+
+/// Asks `selector` (`key?parameters`) with `payload` and returns the
+/// agent's answer ([`answer_of`]). A session just opened may not yet know
+/// the agent's queryables (only its liveliness token): the query waits, up
+/// to `timeout`, until a queryable for the key is known.
+async fn ask_agent(
+    s: &zenoh::Session,
+    selector: &str,
+    payload: Option<String>,
+    timeout: Duration,
+    agent: &str,
+) -> Result<String, Failure> {
+    let (key, parameters) = selector.split_once('?').unwrap_or((selector, ""));
+    let failed = |e: zenoh::Error| Failure::Runtime(format!("query failed: {e}"));
+    let querier = s
+        .declare_querier(key.to_string())
         .consolidation(zenoh::query::ConsolidationMode::None)
         .timeout(timeout)
         .await
-        .map_err(|e| Failure::Runtime(format!("query failed: {e}")))?;
+        .map_err(failed)?;
+    let listener = querier.matching_listener().await.map_err(failed)?;
+    let known = querier
+        .matching_status()
+        .await
+        .map(|m| m.matching())
+        .unwrap_or(false);
+    if !known {
+        let deadline = tokio::time::Instant::now() + timeout;
+        while let Ok(Ok(status)) = tokio::time::timeout_at(deadline, listener.recv_async()).await {
+            if status.matching() {
+                break;
+            }
+        }
+    }
+    let mut get = querier.get().parameters(parameters);
+    if let Some(p) = payload {
+        get = get.payload(p);
+    }
+    let replies = get.await.map_err(failed)?;
     answer_of(replies, agent, selector).await
 }
 
@@ -440,19 +475,18 @@ pub(crate) async fn command(
     let timeout = Duration::from_secs(args.zenoh.timeout_secs);
     let the_agent = agent(&s, &args.zenoh.root, &args.cell, timeout).await?;
     let selector = format!("{}/{}/command", args.zenoh.root, args.cell);
-    let replies = s
-        .get(selector.as_str())
-        .payload(serde_json::to_string(&cmd).unwrap_or_default())
-        .consolidation(zenoh::query::ConsolidationMode::None)
-        .timeout(timeout)
-        .await
-        .map_err(|e| Failure::Runtime(format!("query failed: {e}")))?;
-    let text = answer_of(replies, &the_agent, &selector)
-        .await
-        .map_err(|e| match e {
-            Failure::Input(why) => Failure::Runtime(why),
-            other => other,
-        })?;
+    let text = ask_agent(
+        &s,
+        &selector,
+        Some(serde_json::to_string(&cmd).unwrap_or_default()),
+        timeout,
+        &the_agent,
+    )
+    .await
+    .map_err(|e| match e {
+        Failure::Input(why) => Failure::Runtime(why),
+        other => other,
+    })?;
     let v: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
     let detail = v["detail"].as_str().unwrap_or("");
     if v["accepted"].as_bool() == Some(true) {
