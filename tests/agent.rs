@@ -1003,19 +1003,7 @@ async fn the_cli_believes_only_the_agent() {
         .stderr(std::process::Stdio::null())
         .spawn()
         .unwrap();
-    let (tx, lines) = std::sync::mpsc::channel();
-    let stdout = child.stdout.take().unwrap();
-    std::thread::spawn(move || {
-        use std::io::BufRead;
-        for line in std::io::BufReader::new(stdout)
-            .lines()
-            .map_while(Result::ok)
-        {
-            if tx.send(line).is_err() {
-                break;
-            }
-        }
-    });
+    let lines = crate::util::lines_of(&mut child);
     let copier = mallory
         .declare_subscriber("cellwatch/m01ps0004/alarms/**")
         .await

@@ -82,7 +82,6 @@ async fn killed_agent_keeps_every_committed_row() {
 /// README's client commands work against it as written.
 #[test]
 fn demo_prints_a_diagnosed_alarm_and_serves_the_readme_commands_over_tls() {
-    use std::io::BufRead;
     let state = tempfile::tempdir().unwrap();
     let start = Instant::now();
     let mut demo = Command::new(env!("CARGO_BIN_EXE_cellwatch"))
@@ -98,18 +97,7 @@ fn demo_prints_a_diagnosed_alarm_and_serves_the_readme_commands_over_tls() {
         .stderr(std::process::Stdio::null())
         .spawn()
         .unwrap();
-    let (tx, lines) = std::sync::mpsc::channel();
-    let stdout = demo.stdout.take().unwrap();
-    std::thread::spawn(move || {
-        for line in std::io::BufReader::new(stdout)
-            .lines()
-            .map_while(Result::ok)
-        {
-            if tx.send(line).is_err() {
-                break;
-            }
-        }
-    });
+    let lines = crate::util::lines_of(&mut demo);
     let mut seen = Vec::new();
     let wanted = [
         "ALARM  ese [critical] ESE at step 6",

@@ -3,7 +3,7 @@
 //! lock file on first use), Basic256Sha256 + SignAndEncrypt with mutual
 //! certificate trust.
 
-use std::io::{BufRead, BufReader, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, Stdio};
 use std::sync::mpsc as std_mpsc;
@@ -69,15 +69,7 @@ impl NodeServer {
             .spawn()
             .unwrap();
         let stdin = child.stdin.take().unwrap();
-        let stdout = child.stdout.take().unwrap();
-        let (tx, lines) = std_mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-                if tx.send(line).is_err() {
-                    break;
-                }
-            }
-        });
+        let lines = crate::util::lines_of(&mut child);
         let mut server = NodeServer {
             child,
             stdin,
@@ -109,6 +101,24 @@ impl NodeServer {
         let _ = writeln!(self.stdin, "quit");
         let _ = self.child.wait();
     }
+}
+
+/// The agent's key pair made, and each side's certificate trusted by the
+/// other, certificate by certificate.
+fn trust_each_other(
+    config: &cellwatch::config::OpcUaConfig,
+    server_pki: &Path,
+    server: &NodeServer,
+) {
+    drop(opcua::client("test", config).unwrap());
+    let trusted = server_pki.join("trusted/certs");
+    std::fs::create_dir_all(&trusted).unwrap();
+    std::fs::copy(
+        pki::own_cert(&config.pki_dir),
+        trusted.join("cellwatch.der"),
+    )
+    .unwrap();
+    pki::trust(&server.cert, &config.pki_dir).unwrap();
 }
 
 fn tag(i: usize) -> TagConfig {
@@ -143,15 +153,7 @@ async fn node_opcua_server_five_thousand_items_bursts_and_a_restart() {
     config.sampling_interval = Duration::ZERO;
     config.queue_size = 100;
     // Mutual trust, certificate by certificate.
-    drop(opcua::client("test", &config).unwrap());
-    let trusted = server_pki.join("trusted/certs");
-    std::fs::create_dir_all(&trusted).unwrap();
-    std::fs::copy(
-        pki::own_cert(&config.pki_dir),
-        trusted.join("cellwatch.der"),
-    )
-    .unwrap();
-    pki::trust(&server.cert, &config.pki_dir).unwrap();
+    trust_each_other(&config, &server_pki, &server);
     let _ = tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
         .with_test_writer()
@@ -278,15 +280,7 @@ async fn node_opcua_network_cut_longer_than_the_subscription_lifetime() {
     .await;
     let mut config = opcua_config(&format!("opc.tcp://{via}/"), &dir.path().join("agent-pki"));
     config.publishing_interval = Duration::from_millis(100);
-    drop(opcua::client("test", &config).unwrap());
-    let trusted = server_pki.join("trusted/certs");
-    std::fs::create_dir_all(&trusted).unwrap();
-    std::fs::copy(
-        pki::own_cert(&config.pki_dir),
-        trusted.join("cellwatch.der"),
-    )
-    .unwrap();
-    pki::trust(&server.cert, &config.pki_dir).unwrap();
+    trust_each_other(&config, &server_pki, &server);
     let mut source = Running::start(config, (0..10).map(tag).collect());
     next(&mut source.rx, "connected", |e| {
         matches!(e, SourceEvent::Connected(_))

@@ -53,6 +53,18 @@ impl Running {
         }
     }
 
+    /// Waits for the connection and tag 0's initial value (true).
+    async fn connected(&mut self) {
+        all(
+            &mut self.rx,
+            "connection and initial value",
+            &[&|e| matches!(e, SourceEvent::Connected(_)), &|e| {
+                has(e, 0, Reading::Good(true))
+            }],
+        )
+        .await;
+    }
+
     pub(crate) async fn stop(mut self) {
         let _ = self.stop.take().unwrap().send(());
         self.task.await.unwrap().unwrap();
@@ -251,6 +263,29 @@ async fn a_deleted_node_makes_its_tag_unknown() {
 /// `PublishResponse_Encoding_DefaultBinary` as a four-byte node id.
 const PUBLISH_RESPONSE: [u8; 4] = [0x01, 0x00, 0x3D, 0x03];
 
+/// A simulated CNC with an endpoint without security, and a configuration
+/// reaching it through the relay `relay` makes for the server's address.
+async fn insecure_behind<F>(
+    dir: &Path,
+    relay: impl FnOnce(SocketAddr) -> F,
+) -> (SimulatedCnc, OpcUaConfig)
+where
+    F: std::future::Future<Output = SocketAddr>,
+{
+    let sim = cnc(
+        "127.0.0.1:0".parse().unwrap(),
+        &dir.join("server-pki"),
+        true,
+        None,
+    )
+    .await;
+    let via = relay(sim.addr()).await;
+    let mut config = opcua_config(&format!("opc.tcp://{via}/"), &dir.join("agent-pki"));
+    config.policy = SecurityPolicy::None;
+    config.mode = SecurityMode::None;
+    (sim, config)
+}
+
 /// Where a secure-channel chunk (security None) holds its sequence number.
 fn sequence_number_at(chunk: &[u8]) -> Option<usize> {
     match &chunk[..3] {
@@ -366,28 +401,11 @@ pub(crate) async fn relay_with_cut(
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_silent_subscription_is_reported_and_recreated() {
     let dir = tempfile::tempdir().unwrap();
-    let sim = cnc(
-        "127.0.0.1:0".parse().unwrap(),
-        &dir.path().join("server-pki"),
-        true,
-        None,
-    )
-    .await;
     let mute = Arc::new(AtomicBool::new(false));
-    let via = relay(sim.addr(), mute.clone()).await;
-    let mut config = opcua_config(&format!("opc.tcp://{via}/"), &dir.path().join("agent-pki"));
-    config.policy = SecurityPolicy::None;
-    config.mode = SecurityMode::None;
+    let (sim, config) = insecure_behind(dir.path(), |addr| relay(addr, mute.clone())).await;
     let tags = vec![tag("X0.06", &format!("nsu={NAMESPACE};s=X0.06"))];
     let mut source = Running::start(config, tags);
-    all(
-        &mut source.rx,
-        "connection and initial value",
-        &[&|e| matches!(e, SourceEvent::Connected(_)), &|e| {
-            has(e, 0, Reading::Good(true))
-        }],
-    )
-    .await;
+    source.connected().await;
     mute.store(true, Ordering::SeqCst);
     let ev = next(&mut source.rx, "the subscription called silent", |e| {
         matches!(e, SourceEvent::Disconnected(_))
@@ -452,14 +470,7 @@ async fn every_change_within_one_publishing_interval_arrives_with_sampling_zero(
         OpcUaConfig::default_queue_size(config.publishing_interval, config.sampling_interval);
     let tags = vec![tag("X0.06", &format!("nsu={NAMESPACE};s=X0.06"))];
     let mut source = Running::start(config, tags);
-    all(
-        &mut source.rx,
-        "connection and initial value",
-        &[&|e| matches!(e, SourceEvent::Connected(_)), &|e| {
-            has(e, 0, Reading::Good(true))
-        }],
-    )
-    .await;
+    source.connected().await;
     toggle(&sim, 20);
     let (values, others) = changes(&mut source, 20).await;
     let expected: Vec<Reading> = (0..20).map(|i| Reading::Good(i % 2 == 1)).collect();
@@ -487,14 +498,7 @@ async fn changes_lost_in_a_full_server_queue_raise_the_overflow_alarm() {
     config.queue_size = 4;
     let tags = vec![tag("X0.06", &format!("nsu={NAMESPACE};s=X0.06"))];
     let mut source = Running::start(config, tags);
-    all(
-        &mut source.rx,
-        "connection and initial value",
-        &[&|e| matches!(e, SourceEvent::Connected(_)), &|e| {
-            has(e, 0, Reading::Good(true))
-        }],
-    )
-    .await;
+    source.connected().await;
     toggle(&sim, 20);
     let ev = next(&mut source.rx, "the overflow alarm", |e| {
         matches!(e, SourceEvent::Problem { id, problem: Some(_) } if id == opcua::OVERFLOW_ALARM)
@@ -525,28 +529,14 @@ async fn changes_lost_in_a_full_server_queue_raise_the_overflow_alarm() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_change_made_while_the_connection_was_down_arrives_after_the_reactivation() {
     let dir = tempfile::tempdir().unwrap();
-    let sim = cnc(
-        "127.0.0.1:0".parse().unwrap(),
-        &dir.path().join("server-pki"),
-        true,
-        None,
-    )
-    .await;
     let cut = Cut::default();
-    let via = relay_with_cut(sim.addr(), Arc::new(AtomicBool::new(false)), cut.clone()).await;
-    let mut config = opcua_config(&format!("opc.tcp://{via}/"), &dir.path().join("agent-pki"));
-    config.policy = SecurityPolicy::None;
-    config.mode = SecurityMode::None;
+    let (sim, config) = insecure_behind(dir.path(), |addr| {
+        relay_with_cut(addr, Arc::new(AtomicBool::new(false)), cut.clone())
+    })
+    .await;
     let tags = vec![tag("X0.06", &format!("nsu={NAMESPACE};s=X0.06"))];
     let mut source = Running::start(config, tags);
-    all(
-        &mut source.rx,
-        "connection and initial value",
-        &[&|e| matches!(e, SourceEvent::Connected(_)), &|e| {
-            has(e, 0, Reading::Good(true))
-        }],
-    )
-    .await;
+    source.connected().await;
     // The network goes down; the server keeps the session (30 s) and the
     // subscription; the PLC changes meanwhile; the network comes back.
     cut.set(true);

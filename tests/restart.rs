@@ -103,16 +103,7 @@ async fn killed_agent_restores_its_alarms_and_refuses_replays() {
     );
     // A subscriber joining now still gets what happened before the restart.
     let mut follow = cell.follow_since("1h");
-    let (lines_tx, lines) = std::sync::mpsc::channel();
-    let out = follow.stdout.take().unwrap();
-    std::thread::spawn(move || {
-        use std::io::BufRead;
-        for line in std::io::BufReader::new(out).lines().map_while(Result::ok) {
-            if lines_tx.send(line).is_err() {
-                break;
-            }
-        }
-    });
+    let lines = crate::util::lines_of(&mut follow);
     let raised_at = alarm(&before, "ese").unwrap()["raised_at"].clone();
     let mut events = Vec::new();
     let wanted = |events: &[serde_json::Value]| {

@@ -107,3 +107,21 @@ pub(crate) fn bus_args(dir: &Path, name: &str, port: u16) -> Vec<String> {
         tls.key.display().to_string(),
     ]
 }
+
+/// The lines a child writes on its piped standard output, as they come.
+pub(crate) fn lines_of(child: &mut std::process::Child) -> std::sync::mpsc::Receiver<String> {
+    use std::io::BufRead;
+    let (tx, lines) = std::sync::mpsc::channel();
+    let stdout = child.stdout.take().expect("stdout piped");
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stdout)
+            .lines()
+            .map_while(Result::ok)
+        {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    lines
+}
