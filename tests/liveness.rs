@@ -19,6 +19,19 @@ use tokio::sync::mpsc;
 
 use crate::opcua::{all, has, next, opcua_config};
 
+/// Whether any of `events` raises a source problem (an alarm).
+fn any_problem(events: &[SourceEvent]) -> bool {
+    events.iter().any(|e| {
+        matches!(
+            e,
+            SourceEvent::Problem {
+                problem: Some(_),
+                ..
+            }
+        )
+    })
+}
+
 /// A tag read from `node_id`.
 fn tag(address: &str, node_id: &str) -> TagConfig {
     TagConfig {
@@ -180,16 +193,7 @@ async fn a_moved_namespace_is_followed_and_the_decoy_at_the_old_index_never_read
             .any(|e| has(e, 0, Reading::Good(false)) || has(e, 1, Reading::Good(false))),
         "decoy values were read: {seen:?}"
     );
-    assert!(
-        !before.iter().any(|e| matches!(
-            e,
-            SourceEvent::Problem {
-                problem: Some(_),
-                ..
-            }
-        )),
-        "{seen:?}"
-    );
+    assert!(!any_problem(before), "{seen:?}");
     source.stop().await;
     sim.stop();
 }
@@ -475,16 +479,7 @@ async fn every_change_within_one_publishing_interval_arrives_with_sampling_zero(
     let (values, others) = changes(&mut source, 20).await;
     let expected: Vec<Reading> = (0..20).map(|i| Reading::Good(i % 2 == 1)).collect();
     assert_eq!(values, expected, "{others:?}");
-    assert!(
-        !others.iter().any(|e| matches!(
-            e,
-            SourceEvent::Problem {
-                problem: Some(_),
-                ..
-            }
-        )),
-        "{others:?}"
-    );
+    assert!(!any_problem(&others), "{others:?}");
     source.stop().await;
     sim.stop();
 }
