@@ -980,6 +980,8 @@ async fn the_cli_believes_only_the_agent() {
             "{}",
             run.stderr
         );
+        // Plain text on a pipe: no terminal colour codes.
+        assert!(!run.stderr.contains('\u{1b}'), "{}", run.stderr);
     }
     // The impostor did answer, and was not believed.
     assert!(answered.load(std::sync::atomic::Ordering::SeqCst) >= 1);
