@@ -16,7 +16,7 @@ use cellwatch_models::engine::Reading;
 use cellwatch_models::signal::Signal;
 
 use crate::liveness::Running;
-use crate::opcua::{next, opcua_config};
+use crate::opcua::{all, next, opcua_config};
 use crate::util::root;
 
 const URI: &str = "urn:cellwatch:test:node-opcua:plc";
@@ -282,14 +282,14 @@ async fn node_opcua_network_cut_longer_than_the_subscription_lifetime() {
     config.publishing_interval = Duration::from_millis(100);
     trust_each_other(&config, &server_pki, &server);
     let mut source = Running::start(config, (0..10).map(tag).collect());
-    next(&mut source.rx, "connected", |e| {
-        matches!(e, SourceEvent::Connected(_))
-    })
-    .await;
-    next(
+    // The first values may come before the connection is reported.
+    all(
         &mut source.rx,
-        "T3's value",
-        |e| matches!(e, SourceEvent::Readings(rs) if rs.iter().any(|r| r.tag == 3)),
+        "connected, and T3's value",
+        &[
+            &|e| matches!(e, SourceEvent::Connected(_)),
+            &|e| matches!(e, SourceEvent::Readings(rs) if rs.iter().any(|r| r.tag == 3)),
+        ],
     )
     .await;
     cut.set(true);
