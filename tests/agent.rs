@@ -571,6 +571,19 @@ async fn a_published_alarm_is_already_in_history() {
             && r["fields"]["payload"]["raised_at"] == raised.raised_at.as_str()),
         "{rows:#?}"
     );
+    // A query that does not parse is refused, answered with why, and counted.
+    let bad = fx
+        .query("cellwatch/m01ps0004/history?since=yesterday-ish", None)
+        .await
+        .unwrap_err();
+    assert!(bad.contains("yesterday-ish"), "{bad}");
+    let metrics = fx.scrape().await;
+    assert!(
+        metrics.contains(
+            "cellwatch_requests_refused_total{cell=\"m01ps0004\",reason=\"invalid\",service=\"history\"} 1"
+        ),
+        "{metrics}"
+    );
     fx.agent.unwrap().stop().await;
     fx.sim.stop();
 }

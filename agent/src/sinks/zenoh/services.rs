@@ -136,13 +136,16 @@ impl Services {
             answering.spawn(async move {
                 let _permits = (permit, history_permit);
                 let result = match kind {
-                    Kind::History => history(&journal, q.parameters().as_str()).await,
+                    Kind::History => match history_query(q.parameters().as_str(), now_ms()) {
+                        Ok(query) => history(&journal, query).await,
+                        Err(e) => {
+                            metrics.refused(kind.name(), "invalid");
+                            Err(e)
+                        }
+                    },
                     Kind::Snapshot => snapshot(&requests).await,
                     Kind::Command => command(&requests, &q, &metrics).await,
                 };
-                if matches!(kind, Kind::History) && result.is_err() {
-                    metrics.refused(kind.name(), "invalid");
-                }
                 reply(&metrics, q, result).await;
             });
         }
@@ -167,8 +170,9 @@ impl Kind {
     }
 }
 
-async fn history(journal: &Path, parameters: &str) -> Result<String, String> {
-    let query = history_query(parameters, now_ms())?;
+/// One page of `query` from the journal. A read that fails is logged and
+/// answered with the reason; it is not a refusal of the request.
+async fn history(journal: &Path, query: HistoryQuery) -> Result<String, String> {
     let path = journal.to_path_buf();
     let rows = tokio::task::spawn_blocking(move || {
         let conn = journal::open_read(&path)?;
@@ -176,7 +180,10 @@ async fn history(journal: &Path, parameters: &str) -> Result<String, String> {
     })
     .await
     .map_err(|e| format!("history query failed: {e}"))?
-    .map_err(|e| e.to_string())?;
+    .map_err(|e| {
+        tracing::error!(journal = %journal.display(), error = %e, "cannot read the journal for a history query");
+        e.to_string()
+    })?;
     Ok(serde_json::to_string(&rows).unwrap_or_default())
 }
 
