@@ -111,14 +111,19 @@ fn demo_bus(state: &Path, c: &mut CellConfig) -> Result<PathBuf, Failure> {
         .iter()
         .map(|e| e.replace("0.0.0.0", "127.0.0.1"))
         .collect();
-    let quote = |p: &Path| serde_json::to_string(&p.display().to_string()).unwrap_or_default();
+    let file = |p: &Path| p.display().to_string();
+    let config = serde_json::json!({
+        "connect": { "endpoints": endpoints },
+        "transport": { "link": { "tls": {
+            "root_ca_certificate": file(&operator.ca),
+            "connect_certificate": file(&operator.cert),
+            "connect_private_key": file(&operator.key),
+            "enable_mtls": true,
+        } } },
+    });
     let text = format!(
-        "// Zenoh client configuration for the demo's bus (cellwatch alarms|history|ack --zenoh-config THIS).\n\
-         {{\n  connect: {{ endpoints: {} }},\n  transport: {{ link: {{ tls: {{\n    root_ca_certificate: {},\n    connect_certificate: {},\n    connect_private_key: {},\n    enable_mtls: true,\n  }} }} }},\n}}\n",
-        serde_json::to_string(&endpoints).unwrap_or_default(),
-        quote(&operator.ca),
-        quote(&operator.cert),
-        quote(&operator.key),
+        "// Zenoh client configuration for the demo's bus (cellwatch alarms|history|ack --zenoh-config THIS).\n{}\n",
+        serde_json::to_string_pretty(&config).unwrap_or_default()
     );
     let path = state.join("client.json5");
     std::fs::write(&path, text)

@@ -411,6 +411,32 @@ impl Validator<'_> {
         }
     }
 
+    /// A whole number in `range`, or a problem and `default`.
+    fn count(
+        &mut self,
+        value: Spanned<i64>,
+        key: &str,
+        range: std::ops::RangeInclusive<u32>,
+        default: u32,
+    ) -> u32 {
+        match u32::try_from(*value.get_ref()) {
+            Ok(n) if range.contains(&n) => n,
+            _ => {
+                self.problem(
+                    value.span(),
+                    key,
+                    format!(
+                        "{} is not between {} and {}",
+                        value.get_ref(),
+                        range.start(),
+                        range.end()
+                    ),
+                );
+                default
+            }
+        }
+    }
+
     fn duration(
         &mut self,
         value: Option<Spanned<String>>,
@@ -726,32 +752,16 @@ impl Validator<'_> {
         };
         let queue_size = match raw.queue_size {
             None => OpcUaConfig::default_queue_size(publishing_interval, sampling_interval),
-            Some(q) => match u32::try_from(*q.get_ref()) {
-                Ok(n @ 1..=10_000) => n,
-                _ => {
-                    self.problem(
-                        q.span(),
-                        "opcua.queue_size",
-                        format!("{} is not between 1 and 10000", q.get_ref()),
-                    );
-                    10
-                }
-            },
+            Some(q) => self.count(q, "opcua.queue_size", 1..=10_000, 10),
         };
-        let max_notifications_per_publish = match raw.max_notifications_per_publish {
-            None => 10_000,
-            Some(q) => match u32::try_from(*q.get_ref()) {
-                Ok(n @ 100..=1_000_000) => n,
-                _ => {
-                    self.problem(
-                        q.span(),
-                        "opcua.max_notifications_per_publish",
-                        format!("{} is not between 100 and 1000000", q.get_ref()),
-                    );
-                    10_000
-                }
-            },
-        };
+        let max_notifications_per_publish = raw.max_notifications_per_publish.map_or(10_000, |q| {
+            self.count(
+                q,
+                "opcua.max_notifications_per_publish",
+                100..=1_000_000,
+                10_000,
+            )
+        });
         let namespace_uri = match raw.namespace_uri {
             Some(uri) if uri.get_ref().trim().is_empty() => {
                 self.problem(uri.span(), "opcua.namespace_uri", "is empty");

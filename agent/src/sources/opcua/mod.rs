@@ -35,9 +35,7 @@ use futures_util::future::BoxFuture;
 use futures_util::{FutureExt, StreamExt};
 use opcua::client::{ClientBuilder, IdentityToken, Session, SessionConnectMode, SessionPollResult};
 use opcua::crypto::SecurityPolicy as UaPolicy;
-use opcua::types::{
-    MessageSecurityMode, NodeId, ReadValueId, TimestampsToReturn, UserTokenPolicy, Variant,
-};
+use opcua::types::{MessageSecurityMode, NodeId, ReadValueId, TimestampsToReturn, Variant};
 
 use super::{Source, SourceError, SourceEvent, SourceSender};
 use crate::config::{
@@ -93,9 +91,9 @@ fn ua_mode(m: SecurityMode) -> MessageSecurityMode {
     }
 }
 
-fn identity(config: &OpcUaConfig) -> Result<(IdentityToken, UserTokenPolicy), SourceError> {
+fn identity(config: &OpcUaConfig) -> Result<IdentityToken, SourceError> {
     match &config.identity {
-        Identity::Anonymous => Ok((IdentityToken::Anonymous, UserTokenPolicy::anonymous())),
+        Identity::Anonymous => Ok(IdentityToken::Anonymous),
         Identity::User { user, password } => {
             let secret = match password {
                 PasswordSource::Env(var) => std::env::var(var).map_err(|_| {
@@ -110,10 +108,7 @@ fn identity(config: &OpcUaConfig) -> Result<(IdentityToken, UserTokenPolicy), So
                     .unwrap_or_default()
                     .to_string(),
             };
-            Ok((
-                IdentityToken::new_user_name(user.clone(), secret),
-                UserTokenPolicy::default(),
-            ))
+            Ok(IdentityToken::new_user_name(user.clone(), secret))
         }
     }
 }
@@ -179,10 +174,9 @@ pub async fn run(
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), SourceError> {
     let mut client = client(cell, config)?;
-    let (token, token_policy) = identity(config)?;
-    // Anonymous or user name: the server's endpoint says which policies
-    // it accepts; ours is only needed to pick one.
-    let _ = token_policy;
+    // Anonymous or user name: the server's endpoint says which token
+    // policies it accepts.
+    let token = identity(config)?;
     let ctx = Arc::new(Context::new(config, tags, tx.clone()));
     // The subscription of the current session, kept across reactivations.
     let current = Arc::new(tokio::sync::Mutex::new(None));

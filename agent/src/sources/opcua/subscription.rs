@@ -282,16 +282,20 @@ impl OnSubscriptionNotificationCore for InTimeOrder {
             return;
         }
         c.readings.sort_by_key(|r| r.source_time);
-        let before = self.overflowing.clone();
-        for r in &c.readings {
-            if !c.overflowed.contains(&r.tag) {
-                self.overflowing.remove(&r.tag);
+        // Overflow bookkeeping only while some tag has lost changes: the
+        // usual publish costs nothing here.
+        let mut changed = !c.overflowed.is_empty();
+        if !self.overflowing.is_empty() {
+            for r in &c.readings {
+                if !c.overflowed.contains(&r.tag) {
+                    changed |= self.overflowing.remove(&r.tag);
+                }
             }
         }
         self.overflowing.extend(&c.overflowed);
         self.heard.busy.store(true, Ordering::Relaxed);
         send_blocking(&self.tx, SourceEvent::Readings(c.readings));
-        if !c.overflowed.is_empty() || before != self.overflowing {
+        if changed {
             send_blocking(&self.tx, self.overflow_problem(&c.overflowed));
         }
         self.heard.beat();
