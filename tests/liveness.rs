@@ -548,3 +548,65 @@ async fn a_change_made_while_the_connection_was_down_arrives_after_the_reactivat
     source.stop().await;
     sim.stop();
 }
+
+/// The network is down longer than the subscription's lifetime but not the
+/// session's: the server drops the subscription and keeps the session. The
+/// reactivated session gets a communication alarm for the gap and a new
+/// subscription that delivers again.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_subscription_the_server_dropped_during_a_cut_is_replaced_after_the_reactivation() {
+    let dir = tempfile::tempdir().unwrap();
+    let cut = Cut::default();
+    let (sim, config) = insecure_behind(dir.path(), |addr| {
+        relay_with_cut(addr, Arc::new(AtomicBool::new(false)), cut.clone())
+    })
+    .await;
+    let tags = vec![tag("X0.06", &format!("nsu={NAMESPACE};s=X0.06"))];
+    let mut source = Running::start(config, tags);
+    source.connected().await;
+    assert_eq!(sim.subscriptions(), 1);
+    cut.set(true);
+    next(&mut source.rx, "connection lost", |e| {
+        matches!(e, SourceEvent::Disconnected(_))
+    })
+    .await;
+    // No publish requests reach the server: after the subscription's
+    // lifetime (60 publishing intervals) it closes it; the session (30 s)
+    // stays. (This server then says so in the next publish, with a
+    // `BadTimeout` status change; others forget the subscription at once.)
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    while sim.subscriptions() > 0 {
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "the server never dropped the subscription"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    sim.set("X0.06", false).unwrap();
+    cut.set(false);
+    next(
+        &mut source.rx,
+        "the gap reported",
+        |e| matches!(e, SourceEvent::Disconnected(why) if why.contains("dropped subscription")),
+    )
+    .await;
+    all(
+        &mut source.rx,
+        "connected again, and X0.06 = 0",
+        &[&|e| matches!(e, SourceEvent::Connected(_)), &|e| {
+            has(e, 0, Reading::Good(false))
+        }],
+    )
+    .await;
+    assert_eq!(sim.subscriptions(), 1, "one new subscription, no leftovers");
+    // The new subscription delivers (not only the read after the gap).
+    sim.set("X0.06", true).unwrap();
+    next(
+        &mut source.rx,
+        "X0.06 = 1 through the new subscription",
+        |e| has(e, 0, Reading::Good(true)),
+    )
+    .await;
+    source.stop().await;
+    sim.stop();
+}

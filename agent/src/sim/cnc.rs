@@ -180,6 +180,12 @@ impl SimulatedCnc {
         self.server.delete(address)
     }
 
+    /// How many subscriptions the server holds (see
+    /// [`SimServer::subscriptions`]).
+    pub fn subscriptions(&self) -> usize {
+        self.server.subscriptions()
+    }
+
     /// Stops the server; connected clients see the connection drop.
     pub fn stop(&self) {
         self.server.stop();

@@ -14,9 +14,14 @@ use opcua::crypto::SecurityPolicy;
 use opcua::server::address_space::Variable;
 use opcua::server::diagnostics::NamespaceMetadata;
 use opcua::server::node_manager::memory::{simple_node_manager, SimpleNodeManager};
-use opcua::server::{ServerBuilder, ServerHandle, SubscriptionCache, ANONYMOUS_USER_TOKEN_ID};
+use opcua::server::{
+    ServerBuilder, ServerHandle, SubscriptionCache, SubscriptionState, ANONYMOUS_USER_TOKEN_ID,
+};
 use opcua::types::{AttributeId, DataValue, DateTime, MessageSecurityMode, NodeId, StatusCode};
 use tokio::net::TcpListener;
+
+/// Session numbers [`SimServer::subscriptions`] looks up.
+pub const SESSIONS_SCANNED: u32 = 100_000;
 
 /// The name of the decoy namespace's node manager.
 const DECOY: &str = "decoy";
@@ -263,6 +268,30 @@ impl SimServer {
         self.subscriptions
             .notify_data_change([(gone, &node, AttributeId::Value)].into_iter());
         Ok(())
+    }
+
+    /// How many live subscriptions the server holds for all its sessions; a
+    /// subscription that went without publish requests for its lifetime is
+    /// closed and not counted (the server keeps it until a publish request
+    /// takes its `BadTimeout` status change).
+    ///
+    /// The server numbers sessions process-wide from 1 and keeps no list of
+    /// them that can be read; the first [`SESSIONS_SCANNED`] numbers are
+    /// looked up.
+    pub fn subscriptions(&self) -> usize {
+        (1..=SESSIONS_SCANNED)
+            .filter_map(|id| self.subscriptions.get_session_subscriptions(id))
+            .map(|s| {
+                let s = s.lock();
+                s.subscription_ids()
+                    .into_iter()
+                    .filter(|&id| {
+                        s.get(id)
+                            .is_some_and(|s| s.state() != SubscriptionState::Closed)
+                    })
+                    .count()
+            })
+            .sum()
     }
 
     /// Marks a variable's value as bad (a broken sensor wire).

@@ -449,26 +449,25 @@ async fn supervise(
         let l = live.as_ref().expect("subscribed above");
         let limit = l.subscription.keep_alive * SILENT_KEEP_ALIVES;
         let period = (l.subscription.keep_alive / 2).max(Duration::from_millis(50));
-        let silent = loop {
+        let why = loop {
             tokio::time::sleep(period).await;
+            if let Some(status) = l.heard.closed() {
+                break format!(
+                    "the server dropped subscription {} ({status}): subscribing again",
+                    l.subscription.id
+                );
+            }
             let silent = l.heard.silent_for();
             if silent > limit {
-                break silent;
+                break format!(
+                    "subscription silent for {:.1} s (no data, no keep-alive) while the session lives",
+                    silent.as_secs_f64()
+                );
             }
         };
         let l = live.take().expect("subscribed above");
-        tracing::warn!(
-            subscription = l.subscription.id,
-            silent = ?silent,
-            "OPC UA subscription silent: subscribing again"
-        );
-        let _ = ctx
-            .tx
-            .send(SourceEvent::Disconnected(format!(
-                "subscription silent for {:.1} s (no data, no keep-alive) while the session lives",
-                silent.as_secs_f64()
-            )))
-            .await;
+        tracing::warn!(subscription = l.subscription.id, "{why}");
+        let _ = ctx.tx.send(SourceEvent::Disconnected(why)).await;
         let _ = session.delete_subscription(l.subscription.id).await;
     }
 }

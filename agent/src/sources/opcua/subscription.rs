@@ -14,7 +14,7 @@ use opcua::client::{
 use opcua::types::{
     DataChangeFilter, DataChangeTrigger, DataValue, ExtensionObject, MonitoredItemCreateRequest,
     MonitoringMode, MonitoringParameters, NodeId, NotificationMessage, ReadValueId,
-    TimestampsToReturn, Variant,
+    StatusChangeNotification, StatusCode, TimestampsToReturn, Variant,
 };
 use tokio::sync::mpsc::error::TrySendError;
 
@@ -43,6 +43,9 @@ pub(super) struct Heard {
     /// A publish is being handed to the cell loop (which may be behind):
     /// not silence.
     busy: AtomicBool,
+    /// The bad status the server closed the subscription with (its
+    /// `StatusChangeNotification`, `BadTimeout` when it expired), or 0.
+    closed: AtomicU32,
 }
 
 impl Heard {
@@ -51,6 +54,15 @@ impl Heard {
             start: Instant::now(),
             last: AtomicU64::new(0),
             busy: AtomicBool::new(false),
+            closed: AtomicU32::new(0),
+        }
+    }
+
+    /// The status the server closed the subscription with, if it did.
+    pub(super) fn closed(&self) -> Option<StatusCode> {
+        match self.closed.load(Ordering::Relaxed) {
+            0 => None,
+            bits => Some(StatusCode::from(bits)),
         }
     }
 
@@ -247,9 +259,17 @@ struct Collector<'a> {
     readings: Vec<TagReading>,
     /// Tags with a value flagged `Overflow` in this publish.
     overflowed: BTreeSet<usize>,
+    /// A bad status change: the server closed the subscription.
+    closed: Option<StatusCode>,
 }
 
 impl OnSubscriptionNotification for Collector<'_> {
+    fn on_subscription_status_change(&mut self, notification: StatusChangeNotification) {
+        if notification.status.is_bad() {
+            self.closed = Some(notification.status);
+        }
+    }
+
     fn on_data_value(&mut self, value: DataValue, item: &MonitoredItem) {
         if let Some(&tag) = self.by_node.get(&item.item_to_monitor().node_id) {
             if value.status.is_some_and(|s| s.overflow()) {
@@ -276,8 +296,14 @@ impl OnSubscriptionNotificationCore for InTimeOrder {
             by_node: &self.by_node,
             readings: Vec::new(),
             overflowed: BTreeSet::new(),
+            closed: None,
         };
         c.on_subscription_notification(notification, items);
+        if let Some(status) = c.closed {
+            // The supervisor sees it and subscribes again.
+            tracing::warn!(%status, "the server closed the subscription");
+            self.heard.closed.store(status.bits(), Ordering::Relaxed);
+        }
         if c.readings.is_empty() {
             return;
         }
