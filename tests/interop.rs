@@ -122,12 +122,11 @@ fn trust_each_other(
 }
 
 fn tag(i: usize) -> TagConfig {
-    TagConfig {
-        name: format!("t{i}"),
-        node_id: format!("nsu={URI};s=T{i}"),
-        address: Signal::new(&format!("T{i}")),
-        comment: None,
-    }
+    TagConfig::boolean(
+        &format!("t{i}"),
+        &format!("nsu={URI};s=T{i}"),
+        Signal::new(&format!("T{i}")),
+    )
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -205,7 +204,7 @@ async fn node_opcua_server_five_thousand_items_bursts_and_a_restart() {
             .unwrap();
         match ev {
             SourceEvent::Readings(rs) => {
-                changes.extend(rs.iter().filter(|r| r.tag == 7).map(|r| r.reading))
+                changes.extend(rs.iter().filter(|r| r.tag == 7).map(|r| r.reading.clone()))
             }
             SourceEvent::Problem {
                 problem: Some(p), ..

@@ -34,12 +34,7 @@ fn any_problem(events: &[SourceEvent]) -> bool {
 
 /// A tag read from `node_id`.
 fn tag(address: &str, node_id: &str) -> TagConfig {
-    TagConfig {
-        name: address.to_lowercase(),
-        node_id: node_id.into(),
-        address: Signal::new(address),
-        comment: None,
-    }
+    TagConfig::boolean(&address.to_lowercase(), node_id, Signal::new(address))
 }
 
 /// A source running in the background.
@@ -456,7 +451,7 @@ async fn changes(source: &mut Running, n: usize) -> (Vec<Reading>, Vec<SourceEve
         };
         match &ev {
             SourceEvent::Readings(rs) => {
-                values.extend(rs.iter().filter(|r| r.tag == 0).map(|r| r.reading));
+                values.extend(rs.iter().filter(|r| r.tag == 0).map(|r| r.reading.clone()));
             }
             _ => others.push(ev),
         }

@@ -11,12 +11,11 @@ use cellwatch_models::signal::Signal;
 use tokio::sync::mpsc;
 
 pub(crate) fn tag(address: &str, ns: u16) -> TagConfig {
-    TagConfig {
-        name: address.to_lowercase(),
-        node_id: format!("ns={ns};s={address}"),
-        address: Signal::new(address),
-        comment: None,
-    }
+    TagConfig::boolean(
+        &address.to_lowercase(),
+        &format!("ns={ns};s={address}"),
+        Signal::new(address),
+    )
 }
 
 pub(crate) fn opcua_config(endpoint: &str, pki_dir: &std::path::Path) -> OpcUaConfig {

@@ -87,6 +87,7 @@ async fn scripted_journal(path: &std::path::Path) {
     for k in 0..10 {
         entries.push(Entry::Part {
             at: DAY + (300 + 10 * k) * MIN,
+            count: 1,
         });
     }
     for entry in entries {

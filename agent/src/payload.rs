@@ -236,8 +236,9 @@ pub struct TagValue {
     pub name: String,
     /// PLC address.
     pub address: String,
-    /// The value, if known.
-    pub value: Option<bool>,
+    /// The value, if known: `true`/`false` for contacts, a number, or a
+    /// string.
+    pub value: Option<serde_json::Value>,
     /// Its quality.
     pub quality: Quality,
 }

@@ -74,6 +74,8 @@ pub enum AlarmKind {
     Switching,
     /// A transition timer: an event too early or too late.
     Timer,
+    /// A number past one of its limits (HH, H, L, LL).
+    Limit,
     /// Tags with bad or uncertain quality.
     TagQuality,
     /// The connection to the PLC is lost.
@@ -84,9 +86,10 @@ pub enum AlarmKind {
 
 impl AlarmKind {
     /// All kinds.
-    pub const ALL: [AlarmKind; 5] = [
+    pub const ALL: [AlarmKind; 6] = [
         AlarmKind::Switching,
         AlarmKind::Timer,
+        AlarmKind::Limit,
         AlarmKind::TagQuality,
         AlarmKind::Communication,
         AlarmKind::System,
@@ -97,6 +100,7 @@ impl AlarmKind {
         match self {
             AlarmKind::Switching => "switching",
             AlarmKind::Timer => "timer",
+            AlarmKind::Limit => "limit",
             AlarmKind::TagQuality => "tag_quality",
             AlarmKind::Communication => "communication",
             AlarmKind::System => "system",

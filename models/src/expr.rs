@@ -91,7 +91,9 @@ impl Expr {
 
     /// Reads the paper's notation: `+` OR, `*` or `·` AND, `-` NOT,
     /// parentheses, and signal names (any run of letters, digits, `.`, `_`,
-    /// `%`).
+    /// `%`). A name followed by a comparison (`TEMP > 80.5`, `MODE == 3`,
+    /// `P1 >= P2`) is one contact, named `LHS OP RHS` (see
+    /// [`crate::value::Comparison`]).
     ///
     /// # Errors
     /// A message with the character offset of the problem.
@@ -179,6 +181,10 @@ impl Parser {
                     name.push(c);
                     self.at += 1;
                 }
+                if let Some(op) = self.comparison_operator() {
+                    let rhs = self.operand(op)?;
+                    return Ok(Expr::Lit(Signal::new(&format!("{name} {op} {rhs}")), false));
+                }
                 Ok(match name.to_ascii_uppercase().as_str() {
                     "TRUE" => Expr::Const(true),
                     "FALSE" => Expr::Const(false),
@@ -188,6 +194,53 @@ impl Parser {
             Some((i, c)) => Err(format!("unexpected '{c}' at character {}", i + 1)),
             None => Err("unexpected end of expression".into()),
         }
+    }
+}
+
+impl Parser {
+    /// A comparison operator after a name (`>`, `>=`, `<`, `<=`, `==`,
+    /// `!=`), consumed.
+    fn comparison_operator(&mut self) -> Option<&'static str> {
+        let (_, first) = self.peek()?;
+        let second = self.tokens.get(self.at + 1).map(|&(_, c)| c);
+        let (op, len) = match (first, second) {
+            ('>', Some('=')) => (">=", 2),
+            ('<', Some('=')) => ("<=", 2),
+            ('=', Some('=')) => ("==", 2),
+            ('!', Some('=')) => ("!=", 2),
+            ('>', _) => (">", 1),
+            ('<', _) => ("<", 1),
+            _ => return None,
+        };
+        self.at += len;
+        Some(op)
+    }
+
+    /// The right-hand side of a comparison: a number (optionally negative)
+    /// or a name.
+    fn operand(&mut self, op: &str) -> Result<String, String> {
+        let mut text = String::new();
+        if let Some((_, '-')) = self.peek() {
+            self.at += 1;
+            text.push('-');
+        }
+        while let Some(&(_, c)) = self.tokens.get(self.at).filter(|(_, c)| is_name(*c)) {
+            text.push(c);
+            self.at += 1;
+        }
+        if text.is_empty() || text == "-" {
+            return Err(match self.peek() {
+                Some((i, c)) => format!(
+                    "expected a number or a tag after '{op}' at character {}, found '{c}'",
+                    i + 1
+                ),
+                None => format!("expected a number or a tag after '{op}'"),
+            });
+        }
+        if text.starts_with('-') && text[1..].parse::<f64>().is_err() {
+            return Err(format!("'{text}' after '{op}' is not a number"));
+        }
+        Ok(text)
     }
 }
 
@@ -219,6 +272,24 @@ mod tests {
         assert_eq!(
             Expr::parse("a b").unwrap_err(),
             "unexpected 'b' at character 3"
+        );
+    }
+
+    #[test]
+    fn comparisons_are_contacts() {
+        let e = Expr::parse("TEMP>80.5 * (MODE == 3 + P1>=P2) * -(LEVEL < -2)").unwrap();
+        let names: Vec<String> = e.signals().iter().map(|s| s.to_string()).collect();
+        assert_eq!(
+            names,
+            ["LEVEL < -2", "MODE == 3", "P1 >= P2", "TEMP > 80.5"]
+        );
+        assert_eq!(
+            Expr::parse("TEMP > ").unwrap_err(),
+            "expected a number or a tag after '>'"
+        );
+        assert_eq!(
+            Expr::parse("TEMP > -x").unwrap_err(),
+            "'-x' after '>' is not a number"
         );
     }
 

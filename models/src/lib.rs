@@ -11,12 +11,14 @@
 //!   its step blocks, and printing in the paper's notation.
 //! - [`explain`]: the fault step and the culprit contacts at fault time.
 //! - [`comments`]: the address → comment database.
+//! - [`value`]: typed tag values, comparisons used as contacts, counters.
 //! - [`values`]: snapshots of signal values.
 //! - [`compiled`]: many switching functions over one bitset, re-evaluated
 //!   incrementally.
 //! - [`expr`]: naive expression trees, the reference for tests.
 //! - [`alarm`]: alarms and their ISA-18.2 lifecycle.
 //! - [`engine`]: the per-cell engine: tags, check sets, alarms, machine state.
+//! - [`limit`]: limit alarms (HH/H/L/LL) on numbers, with deadband and delays.
 //! - [`report`]: daily and monthly production reports from state history.
 //! - [`timer`]: transition timers: run logs, the learner, the runtime monitor.
 
@@ -27,6 +29,7 @@ pub mod engine;
 pub mod explain;
 pub mod expr;
 pub mod il;
+pub mod limit;
 pub mod logic;
 pub mod program;
 pub mod report;
@@ -34,4 +37,5 @@ pub mod signal;
 pub mod source;
 pub mod switching;
 pub mod timer;
+pub mod value;
 pub mod values;

@@ -193,10 +193,11 @@ fn intervals(
 
 /// The report of the day `[day_start, day_start + 24 h)`.
 ///
-/// `changes` must be sorted by time; `parts` are the times parts were done.
+/// `changes` must be sorted by time; `parts` are the parts made, `(time,
+/// how many)`.
 pub fn daily(
     changes: &[StateChange],
-    parts: &[u64],
+    parts: &[(u64, u64)],
     day_start: u64,
     causes: &StopCauses,
     now: u64,
@@ -218,8 +219,9 @@ pub fn daily(
     let stop_causes = stops(changes, day_start, day_end, now, causes);
     let production = parts
         .iter()
-        .filter(|&&p| p >= day_start && p < day_end)
-        .count() as u64;
+        .filter(|&&(p, _)| p >= day_start && p < day_end)
+        .map(|&(_, n)| n)
+        .sum();
     DailyReport {
         day_start,
         availability: total.availability(),
@@ -278,7 +280,7 @@ fn stops(
 /// The report of the days starting at `day_starts` (a month, usually).
 pub fn monthly(
     changes: &[StateChange],
-    parts: &[u64],
+    parts: &[(u64, u64)],
     day_starts: &[u64],
     causes: &StopCauses,
     now: u64,
@@ -359,7 +361,12 @@ mod tests {
             change(150, "running", None),
             change(180, "offline", None),
         ];
-        let parts = [5 * MIN, 30 * MIN, 75 * MIN, 25 * 60 * MIN];
+        let parts = [
+            (5 * MIN, 1),
+            (30 * MIN, 1),
+            (75 * MIN, 1),
+            (25 * 60 * MIN, 1),
+        ];
         let r = daily(&h, &parts, 0, &causes(), 48 * 60 * MIN);
         assert_eq!(
             r.hours[0],

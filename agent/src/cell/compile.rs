@@ -1,9 +1,10 @@
 //! From a validated configuration to a running engine: the check sets
-//! (switching functions, transition timers) bound to the cell's tags.
+//! (switching functions, transition timers, limit checks) bound to the cell's tags.
 //! `cellwatch validate` calls exactly this, so a configuration that
 //! validates starts.
 
 use cellwatch_models::engine::{CellEngine, CheckSet, EngineError, SwitchingChecks};
+use cellwatch_models::limit::LimitChecks;
 use cellwatch_models::timer::checks::{TimerCheckError, TimerChecks};
 
 use crate::config::CellConfig;
@@ -41,11 +42,22 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
         })?;
         sets.push(Box::new(checks));
     }
+    if !config.limits.is_empty() {
+        sets.push(Box::new(LimitChecks::new(config.limits.clone())));
+    }
     Ok(CellEngine::new(
         &config.cell,
         config.engine_tags(),
         sets,
         config.state.clone(),
     )?
-    .counting_parts(config.part_done))
+    .counting(config.part_counting())
+    .exporting(
+        config
+            .tags
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.export)
+            .map(|(i, _)| i),
+    ))
 }

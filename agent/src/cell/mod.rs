@@ -20,7 +20,8 @@ use std::future::Future;
 use std::time::Duration;
 
 use cellwatch_models::alarm::Transition;
-use cellwatch_models::engine::{CellEngine, HistoryKind, Step};
+use cellwatch_models::engine::{CellEngine, HistoryKind, Step, Value};
+use cellwatch_models::value::Num;
 use tokio::sync::{mpsc, oneshot, watch};
 
 pub use agent::{start, start_with, Agent, Options, StartError};
@@ -429,15 +430,15 @@ impl CellLoop {
     fn snapshot(&self) -> SnapshotPayload {
         let tags = self.engine.tags();
         let bad: std::collections::HashSet<usize> = self.engine.bad_tags().collect();
-        let value = |i: usize, v: Option<bool>, current: bool| TagValue {
+        let value = |i: usize, v: Option<Value>, current: bool| TagValue {
             name: tags[i].name.clone(),
             address: tags[i].address.name().to_string(),
-            value: v,
-            quality: match (v, current && bad.contains(&i)) {
+            quality: match (&v, current && bad.contains(&i)) {
                 (_, true) => Quality::Bad,
                 (Some(_), false) => Quality::Good,
                 (None, false) => Quality::Unknown,
             },
+            value: v.map(|v| json_value(&v)),
         };
         let now = now_ms();
         SnapshotPayload {
@@ -448,10 +449,10 @@ impl CellLoop {
             state: self.engine.state().state_name(),
             tags: self
                 .engine
-                .values()
-                .iter()
+                .all_values()
+                .into_iter()
                 .enumerate()
-                .map(|(i, v)| value(i, *v, true))
+                .map(|(i, v)| value(i, v, true))
                 .collect(),
             alarms: self
                 .engine
@@ -466,10 +467,22 @@ impl CellLoop {
                     .values
                     .iter()
                     .enumerate()
-                    .map(|(i, v)| value(i, *v, false))
+                    .map(|(i, v)| value(i, v.clone(), false))
                     .collect(),
             }),
         }
+    }
+}
+
+/// A tag value as JSON: a boolean, a number (integers exact) or a string.
+fn json_value(v: &Value) -> serde_json::Value {
+    match v {
+        Value::Bool(b) => (*b).into(),
+        Value::Num(Num::Int(n)) => (*n).into(),
+        Value::Num(Num::UInt(n)) => (*n).into(),
+        Value::Num(Num::Float(n)) => serde_json::Number::from_f64(*n)
+            .map_or(serde_json::Value::Null, serde_json::Value::Number),
+        Value::Text(t) => t.to_string().into(),
     }
 }
 

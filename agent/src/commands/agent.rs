@@ -299,12 +299,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     let player = tokio::spawn(async move {
         Scenario::demo()
             .play(&scenario_sim, |s| {
-                let _ = note_tx.send(format!(
-                    "{} ({} = {})",
-                    s.note,
-                    s.address,
-                    u8::from(s.value)
-                ));
+                let _ = note_tx.send(format!("{} ({} = {})", s.note, s.address, s.value));
             })
             .await;
     });

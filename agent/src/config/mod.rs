@@ -24,13 +24,15 @@ use std::time::Duration;
 
 use cellwatch_models::alarm::Severity;
 use cellwatch_models::comments::CommentDb;
-use cellwatch_models::engine::{StateRules, SwitchingCheck, Tag};
+use cellwatch_models::engine::{PartCounting, StateRules, SwitchingCheck, Tag};
 use cellwatch_models::explain::Polarity;
 use cellwatch_models::expr::Expr;
 use cellwatch_models::il::Dialect;
+use cellwatch_models::limit::{Level, LimitCheck, LimitLevel};
 use cellwatch_models::program::Program;
 use cellwatch_models::signal::{Observability, Signal};
 use cellwatch_models::switching::SwitchingFunction;
+use cellwatch_models::value::{Comparison, Counter, Operand, ValueType};
 use toml::Spanned;
 
 use crate::sources::opcua::TagNode;
@@ -147,6 +149,56 @@ pub struct TagConfig {
     pub address: Signal,
     /// Comment.
     pub comment: Option<String>,
+    /// The node's data type (`type`, default Boolean).
+    pub value_type: ValueType,
+    /// One bit of an integer word (`bit = 7`): the tag is that contact.
+    pub bit: Option<u8>,
+    /// Sampling interval for this tag, instead of `opcua.sampling_interval`.
+    pub sampling_interval: Option<Duration>,
+    /// Data-change filter deadband for this tag.
+    pub deadband: Option<Deadband>,
+    /// Export the value as the `cellwatch_tag_value` gauge.
+    pub export: bool,
+}
+
+impl TagConfig {
+    /// A Boolean tag with defaults for everything else.
+    pub fn boolean(name: &str, node_id: &str, address: Signal) -> TagConfig {
+        TagConfig {
+            name: name.into(),
+            node_id: node_id.into(),
+            address,
+            comment: None,
+            value_type: ValueType::Boolean,
+            bit: None,
+            sampling_interval: None,
+            deadband: None,
+            export: false,
+        }
+    }
+
+    /// Whether the tag is a contact (a Boolean, or one bit of a word).
+    pub fn is_contact(&self) -> bool {
+        self.value_type == ValueType::Boolean || self.bit.is_some()
+    }
+
+    /// How the tag is used, for messages: `Boolean`, `bit 7 of a UInt16`.
+    pub fn usage(&self) -> String {
+        match self.bit {
+            Some(b) => format!("bit {b} of a {}", self.value_type),
+            None => self.value_type.to_string(),
+        }
+    }
+}
+
+/// The OPC UA data-change filter's deadband: a change smaller than this is
+/// not reported.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Deadband {
+    /// In the tag's unit.
+    Absolute(f64),
+    /// In percent of the node's `EURange`.
+    Percent(f64),
 }
 
 /// Zenoh session mode.
@@ -253,6 +305,10 @@ pub struct CellConfig {
     pub operators_file: Option<PathBuf>,
     /// The tag whose rising edge is one part done (index into `tags`).
     pub part_done: Option<usize>,
+    /// The integer tag counting parts (index into `tags`).
+    pub part_counter: Option<usize>,
+    /// Limit checks on numeric tags.
+    pub limits: Vec<LimitCheck>,
     /// Things worth saying at start (security off, ...).
     pub warnings: Vec<String>,
 }
@@ -276,6 +332,18 @@ impl CellConfig {
                 address: t.address.clone(),
             })
             .collect()
+    }
+
+    /// How the engine counts parts.
+    pub fn part_counting(&self) -> PartCounting {
+        match (self.part_done, self.part_counter) {
+            (Some(t), _) => PartCounting::Edge(t),
+            (None, Some(t)) => PartCounting::Counter(
+                t,
+                Counter::new(self.tags[t].value_type.max().unwrap_or(u64::MAX)),
+            ),
+            (None, None) => PartCounting::None,
+        }
     }
 }
 
@@ -353,6 +421,7 @@ pub fn parse(
         problems: Vec::new(),
         warnings: Vec::new(),
         namespace_uri: None,
+        kinds: HashMap::new(),
     };
     let config = v.config(raw);
     if v.problems.is_empty() {
@@ -393,6 +462,8 @@ struct Validator<'a> {
     warnings: Vec<String>,
     /// `opcua.namespace_uri` and where it is written, for the tags.
     namespace_uri: Option<(Range<usize>, String)>,
+    /// Every tag's type and whether it is a contact, by address.
+    kinds: HashMap<Signal, (ValueType, bool)>,
 }
 
 impl Validator<'_> {
@@ -464,6 +535,34 @@ impl Validator<'_> {
         }
     }
 
+    fn deadband(
+        &mut self,
+        value: Spanned<f64>,
+        key: &str,
+        value_type: ValueType,
+        range: std::ops::RangeInclusive<f64>,
+    ) -> Option<f64> {
+        if !value_type.is_numeric() {
+            self.problem(
+                value.span(),
+                key,
+                format!("a deadband needs a numeric type; this tag is {value_type}"),
+            );
+            return None;
+        }
+        let v = *value.get_ref();
+        if range.contains(&v) {
+            Some(v)
+        } else {
+            self.problem(
+                value.span(),
+                key,
+                format!("{v} is not between {} and {}", range.start(), range.end()),
+            );
+            None
+        }
+    }
+
     fn parsed<T: FromStr<Err = String>>(
         &mut self,
         value: Option<Spanned<String>>,
@@ -499,6 +598,10 @@ impl Validator<'_> {
             .iter()
             .enumerate()
             .map(|(i, t)| (t.address.clone(), i))
+            .collect();
+        self.kinds = tags
+            .iter()
+            .map(|t| (t.address.clone(), (t.value_type, t.is_contact())))
             .collect();
         let mut switching = Vec::new();
         let mut ids = HashSet::new();
@@ -576,6 +679,12 @@ impl Validator<'_> {
                 severity,
             });
         }
+        let mut limits = self.limits(raw.checks.limit, &mut ids);
+        for l in &mut limits {
+            if let Some(t) = by_address.get(&l.tag) {
+                l.label = tags[*t].name.clone();
+            }
+        }
         let state = self.state(&raw.state, &by_address);
         let state_interval = self.duration(
             raw.state.publish_interval,
@@ -622,19 +731,61 @@ impl Validator<'_> {
             );
         }
         let operators_file = raw.commands.operators_file.map(|s| self.path(s.get_ref()));
-        let part_done = raw.production.part_done.and_then(|p| {
+        let mut production = |p: Spanned<String>, key: &str, contact: bool| {
             let found = tag_address(p.get_ref())
                 .ok()
                 .and_then(|a| by_address.get(&a).copied());
-            if found.is_none() {
+            let Some(t) = found else {
                 self.problem(
                     p.span(),
-                    "production.part_done",
+                    key,
                     format!("no tag has the address '{}'", p.get_ref()),
                 );
+                return None;
+            };
+            let tag = &tags[t];
+            if contact && !tag.is_contact() {
+                self.problem(
+                    p.span(),
+                    key,
+                    format!(
+                        "{} is a {}: a part-done tag must be a contact (Boolean, or a bit)",
+                        tag.address,
+                        tag.usage()
+                    ),
+                );
+                return None;
             }
-            found
-        });
+            if !contact && (tag.bit.is_some() || !tag.value_type.is_integer()) {
+                self.problem(
+                    p.span(),
+                    key,
+                    format!(
+                        "{} is a {}: a counter must be an integer tag without a bit",
+                        tag.address,
+                        tag.usage()
+                    ),
+                );
+                return None;
+            }
+            Some(t)
+        };
+        let part_done = raw
+            .production
+            .part_done
+            .and_then(|p| production(p, "production.part_done", true));
+        let part_counter = match raw.production.counter {
+            Some(c) if part_done.is_some() => {
+                self.problem(
+                    c.span(),
+                    "production.counter",
+                    "give part_done or counter, not both",
+                );
+                None
+            }
+            Some(c) => production(c, "production.counter", false),
+            None => None,
+        };
         if operators_file.is_none() {
             self.warnings.push(
                 "no commands.operators_file: every acknowledge and reset will be refused".into(),
@@ -654,6 +805,8 @@ impl Validator<'_> {
             metrics,
             operators_file,
             part_done,
+            part_counter,
+            limits,
             warnings: Vec::new(),
         })
     }
@@ -872,11 +1025,78 @@ impl Validator<'_> {
                     format!("{address} is used by another tag"),
                 );
             }
+            let value_type = self.parsed(
+                t.value_type.clone(),
+                &format!("{key}.type"),
+                ValueType::Boolean,
+            );
+            let bit = t.bit.as_ref().and_then(|b| {
+                let Some(width) = value_type.bits() else {
+                    self.problem(
+                        b.span(),
+                        &format!("{key}.bit"),
+                        format!("a bit needs an integer type; this tag is {value_type}: add type = \"Byte\" (or another integer type)"),
+                    );
+                    return None;
+                };
+                match u8::try_from(*b.get_ref()) {
+                    Ok(n) if u32::from(n) < width => Some(n),
+                    _ => {
+                        self.problem(
+                            b.span(),
+                            &format!("{key}.bit"),
+                            format!("{} is not a bit of a {value_type} (0..{})", b.get_ref(), width - 1),
+                        );
+                        None
+                    }
+                }
+            });
+            let sampling_interval = t.sampling_interval.map(|v| {
+                if v.get_ref().trim() == "0" {
+                    Duration::ZERO
+                } else {
+                    self.duration(Some(v), &format!("{key}.sampling_interval"), Duration::ZERO)
+                }
+            });
+            let deadband = match (t.deadband, t.deadband_percent) {
+                (Some(a), Some(_)) => {
+                    self.problem(
+                        a.span(),
+                        &format!("{key}.deadband"),
+                        "give deadband or deadband_percent, not both",
+                    );
+                    None
+                }
+                (Some(a), None) => self
+                    .deadband(a, &format!("{key}.deadband"), value_type, 0.0..=f64::MAX)
+                    .map(Deadband::Absolute),
+                (None, Some(p)) => self
+                    .deadband(
+                        p,
+                        &format!("{key}.deadband_percent"),
+                        value_type,
+                        0.0..=100.0,
+                    )
+                    .map(Deadband::Percent),
+                (None, None) => None,
+            };
+            if t.export && !value_type.is_numeric() && value_type != ValueType::Boolean {
+                self.problem(
+                    t.name.span(),
+                    &format!("{key}.export"),
+                    format!("a {value_type} cannot be a gauge: export numbers and booleans only"),
+                );
+            }
             out.push(TagConfig {
                 name: t.name.into_inner(),
                 node_id: t.node_id.into_inner(),
                 address,
                 comment: t.comment,
+                value_type,
+                bit,
+                sampling_interval,
+                deadband,
+                export: t.export,
             });
         }
         if let Some((span, uri)) = self.namespace_uri.clone() {
@@ -1003,6 +1223,12 @@ impl Validator<'_> {
                     &format!("{key}.coil"),
                     format!("{coil} reads {leaf}, but no tag has that address; add a [[tags]] entry for it"),
                 );
+            } else if let Some((t, false)) = self.kinds.get(&leaf) {
+                self.problem(
+                    c.coil.span(),
+                    &format!("{key}.coil"),
+                    format!("{coil} reads {leaf} as a contact, but its tag is a {t}: make it Boolean or give it a bit"),
+                );
             }
         }
         let comments = match &c.comments {
@@ -1046,38 +1272,176 @@ impl Validator<'_> {
     }
 
     /// A condition over tag addresses in the paper's notation, every
-    /// address a tag's.
+    /// address a contact tag's; comparisons (`TEMP > 80.5`) read numeric
+    /// tags.
     fn expression(
         &mut self,
         text: &Spanned<String>,
         key: &str,
         tags: &HashMap<Signal, usize>,
     ) -> Option<Expr> {
-        match Expr::parse(text.get_ref()) {
-            Ok(e) => {
-                let e = canonical_expr(e);
-                let missing: Vec<String> = e
-                    .signals()
-                    .into_iter()
-                    .filter(|s| !tags.contains_key(s))
-                    .map(|s| s.to_string())
-                    .collect();
-                if missing.is_empty() {
-                    Some(e)
-                } else {
-                    self.problem(
-                        text.span(),
-                        key,
-                        format!("no tag has the address {}", missing.join(", ")),
-                    );
-                    None
-                }
-            }
+        let e = match Expr::parse(text.get_ref()) {
+            Ok(e) => canonical_expr(e),
             Err(m) => {
                 self.problem(text.span(), key, format!("'{}': {m}", text.get_ref()));
-                None
+                return None;
+            }
+        };
+        let mut problems = Vec::new();
+        for s in e.signals() {
+            match Comparison::of_signal(&s) {
+                Some(c) => {
+                    let operands = std::iter::once(&c.lhs).chain(match &c.rhs {
+                        Operand::Tag(t) => Some(t),
+                        Operand::Const(_) => None,
+                    });
+                    for a in operands {
+                        match self.kinds.get(a) {
+                            None => problems.push(format!("no tag has the address {a} (in '{s}')")),
+                            Some((t, _)) if !t.is_numeric() && *t != ValueType::Boolean => problems
+                                .push(format!(
+                                    "{a} is a {t} and cannot be compared as a number (in '{s}')"
+                                )),
+                            Some(_) => {}
+                        }
+                    }
+                }
+                None if !tags.contains_key(&s) => {
+                    problems.push(format!("no tag has the address {s}"));
+                }
+                None => {
+                    if let Some((t, false)) = self.kinds.get(&s) {
+                        problems.push(format!(
+                            "{s} is a {t}, not a contact: compare it (`{s} > 0`) or give the tag a bit"
+                        ));
+                    }
+                }
             }
         }
+        if problems.is_empty() {
+            Some(e)
+        } else {
+            self.problem(text.span(), key, problems.join("; "));
+            None
+        }
+    }
+
+    /// The limit checks.
+    fn limits(&mut self, raw: Vec<raw::RawLimit>, ids: &mut HashSet<String>) -> Vec<LimitCheck> {
+        let mut out = Vec::new();
+        for (i, c) in raw.into_iter().enumerate() {
+            let key = format!("checks.limit[{i}]");
+            if !ids.insert(c.id.get_ref().clone()) {
+                self.problem(
+                    c.id.span(),
+                    &format!("{key}.id"),
+                    format!("'{}' is used twice", c.id.get_ref()),
+                );
+            }
+            let tag = match tag_address(c.tag.get_ref()) {
+                Ok(a) => a,
+                Err(e) => {
+                    self.problem(c.tag.span(), &format!("{key}.tag"), e);
+                    continue;
+                }
+            };
+            match self.kinds.get(&tag) {
+                None => {
+                    self.problem(
+                        c.tag.span(),
+                        &format!("{key}.tag"),
+                        format!("no tag has the address {tag}"),
+                    );
+                    continue;
+                }
+                Some((t, _)) if !t.is_numeric() => {
+                    self.problem(
+                        c.tag.span(),
+                        &format!("{key}.tag"),
+                        format!("{tag} is a {t}: a limit check needs a numeric tag (type = \"Double\", \"Int16\", ...)"),
+                    );
+                    continue;
+                }
+                Some(_) => {}
+            }
+            let deadband = match c.deadband {
+                None => 0.0,
+                Some(d) if *d.get_ref() >= 0.0 && d.get_ref().is_finite() => *d.get_ref(),
+                Some(d) => {
+                    self.problem(
+                        d.span(),
+                        &format!("{key}.deadband"),
+                        format!("{} must be zero or more", d.get_ref()),
+                    );
+                    0.0
+                }
+            };
+            let mut delay = |v: Option<Spanned<String>>, name: &str| match v {
+                Some(v) if v.get_ref().trim() == "0" => 0,
+                other => self
+                    .duration(other, &format!("{key}.{name}"), Duration::ZERO)
+                    .as_millis() as u64,
+            };
+            let on_delay = delay(c.on_delay, "on_delay");
+            let off_delay = delay(c.off_delay, "off_delay");
+            let mut levels = Vec::new();
+            for (level, raw, default) in [
+                (Level::HH, c.hh, Severity::Critical),
+                (Level::H, c.h, Severity::High),
+                (Level::L, c.l, Severity::High),
+                (Level::LL, c.ll, Severity::Critical),
+            ] {
+                let Some(raw) = raw else { continue };
+                let span = raw.span();
+                let raw = raw.into_inner();
+                let lkey = format!("{key}.{}", level.as_str().to_ascii_lowercase());
+                if !raw.limit.is_finite() {
+                    self.problem(
+                        span.clone(),
+                        &format!("{lkey}.limit"),
+                        "must be a finite number",
+                    );
+                }
+                let severity = self.parsed(raw.severity, &format!("{lkey}.severity"), default);
+                levels.push(LimitLevel {
+                    level,
+                    limit: raw.limit,
+                    severity,
+                });
+            }
+            if levels.is_empty() {
+                self.problem(
+                    c.id.span(),
+                    &key,
+                    "give at least one level: hh, h, l or ll = { limit = ..., severity = ... }",
+                );
+            }
+            let limit = |l: Level| levels.iter().find(|x| x.level == l).map(|x| x.limit);
+            let ordered = [Level::HH, Level::H, Level::L, Level::LL]
+                .iter()
+                .filter_map(|&l| limit(l))
+                .collect::<Vec<_>>()
+                .windows(2)
+                .all(|w| w[0] > w[1]);
+            if !ordered {
+                self.problem(
+                    c.id.span(),
+                    &key,
+                    "the limits must fall in the order hh > h > l > ll",
+                );
+            }
+            out.push(LimitCheck {
+                id: c.id.into_inner(),
+                label: String::new(),
+                tag,
+                unit: c.unit,
+                deadband,
+                on_delay,
+                off_delay,
+                levels,
+            });
+        }
+        out
     }
 
     fn state(&mut self, raw: &raw::RawState, tags: &HashMap<Signal, usize>) -> StateRules {
@@ -1233,8 +1597,18 @@ pub fn tag_address(text: &str) -> Result<Signal, String> {
 
 /// The expression with its addresses in canonical form (`x0.6` → `X0.06`).
 fn canonical_expr(e: Expr) -> Expr {
+    let canonical = |s: &Signal| tag_address(s.name()).unwrap_or_else(|_| s.clone());
     match e {
-        Expr::Lit(s, n) => Expr::Lit(tag_address(s.name()).unwrap_or(s), n),
+        Expr::Lit(s, n) => match Comparison::of_signal(&s) {
+            Some(mut c) => {
+                c.lhs = canonical(&c.lhs);
+                if let Operand::Tag(t) = &c.rhs {
+                    c.rhs = Operand::Tag(canonical(t));
+                }
+                Expr::Lit(c.signal(), n)
+            }
+            None => Expr::Lit(canonical(&s), n),
+        },
         Expr::Not(inner) => Expr::Not(Box::new(canonical_expr(*inner))),
         Expr::And(es) => Expr::And(es.into_iter().map(canonical_expr).collect()),
         Expr::Or(es) => Expr::Or(es.into_iter().map(canonical_expr).collect()),

@@ -33,6 +33,7 @@ pub(crate) struct RawConfig {
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawProduction {
     pub(crate) part_done: Option<Spanned<String>>,
+    pub(crate) counter: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -78,6 +79,14 @@ pub(crate) struct RawTag {
     pub(crate) address: Spanned<String>,
     #[serde(default)]
     pub(crate) comment: Option<String>,
+    #[serde(rename = "type")]
+    pub(crate) value_type: Option<Spanned<String>>,
+    pub(crate) bit: Option<Spanned<i64>>,
+    pub(crate) sampling_interval: Option<Spanned<String>>,
+    pub(crate) deadband: Option<Spanned<f64>>,
+    pub(crate) deadband_percent: Option<Spanned<f64>>,
+    #[serde(default)]
+    pub(crate) export: bool,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -87,6 +96,31 @@ pub(crate) struct RawChecks {
     pub(crate) switching: Vec<RawSwitching>,
     #[serde(default)]
     pub(crate) timers: Vec<RawTimers>,
+    #[serde(default)]
+    pub(crate) limit: Vec<RawLimit>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawLimit {
+    pub(crate) id: Spanned<String>,
+    pub(crate) tag: Spanned<String>,
+    #[serde(default)]
+    pub(crate) unit: String,
+    pub(crate) deadband: Option<Spanned<f64>>,
+    pub(crate) on_delay: Option<Spanned<String>>,
+    pub(crate) off_delay: Option<Spanned<String>>,
+    pub(crate) hh: Option<Spanned<RawLevel>>,
+    pub(crate) h: Option<Spanned<RawLevel>>,
+    pub(crate) l: Option<Spanned<RawLevel>>,
+    pub(crate) ll: Option<Spanned<RawLevel>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawLevel {
+    pub(crate) limit: f64,
+    pub(crate) severity: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -76,6 +76,8 @@ pub struct Metrics {
     pub transition_seconds: HistogramVec,
     /// Learned transition windows, by timer check and bound.
     pub transition_window_seconds: GaugeVec,
+    /// Values of the tags configured with `export = true`, by tag name.
+    pub tag_value: GaugeVec,
 }
 
 fn opts(name: &str, help: &str, cell: &str) -> Opts {
@@ -303,6 +305,14 @@ impl Metrics {
                     cell
                 ),
                 &["check", "bound"]
+            )),
+            tag_value: reg!(GaugeVec::new(
+                opts(
+                    "cellwatch_tag_value",
+                    "Current value of each tag configured with export = true (booleans as 0/1); absent while unknown.",
+                    cell
+                ),
+                &["tag"]
             )),
             registry,
         }

@@ -26,6 +26,9 @@ pub struct MetricsSink {
     /// When the last tag value arrived.
     last_update: Option<u64>,
     ever_connected: bool,
+    /// Per tag, if exported: its name and its `cellwatch_tag_value` gauge
+    /// (absent while the value is unknown).
+    exported: Vec<Option<(String, Option<prometheus::Gauge>)>>,
 }
 
 impl MetricsSink {
@@ -44,7 +47,13 @@ impl MetricsSink {
                 }
             }
         }
+        let exported = config
+            .tags
+            .iter()
+            .map(|t| t.export.then(|| (t.name.clone(), None)))
+            .collect();
         MetricsSink {
+            exported,
             metrics,
             active: HashMap::new(),
             culprits: HashMap::new(),
@@ -93,7 +102,23 @@ impl MetricsSink {
         if e.unknown_delta != 0 {
             m.tags_unknown.add(e.unknown_delta);
         }
-        m.parts.inc_by(e.parts.len() as u64);
+        m.parts.inc_by(e.parts.iter().map(|&(_, n)| n).sum());
+        for &(tag, value) in &e.exported {
+            let Some(Some((name, gauge))) = self.exported.get_mut(tag) else {
+                continue;
+            };
+            match value {
+                Some(v) => gauge
+                    .get_or_insert_with(|| m.tag_value.with_label_values(&[name.as_str()]))
+                    .set(v),
+                // Unknown: no sample rather than a stale one.
+                None => {
+                    if gauge.take().is_some() {
+                        let _ = m.tag_value.remove_label_values(&[name.as_str()]);
+                    }
+                }
+            }
+        }
         for o in &e.observations {
             m.transition_seconds
                 .with_label_values(&[o.check.as_str()])

@@ -18,6 +18,7 @@ use cellwatch_models::program::Program;
 use cellwatch_models::signal::{Observability, Signal};
 use cellwatch_models::switching::SwitchingFunction;
 use cellwatch_models::values::Values;
+use opcua::types::Variant;
 
 /// The namespace the simulated tags live in (index 2 on this server, 3
 /// with a decoy namespace).
@@ -33,11 +34,23 @@ const CSD_NORMAL: &str = include_str!("../../../config/cnc/csd-normal.values");
 
 /// The part-done signal: one pulse per part.
 pub const PART_DONE: &str = "X12.03";
+/// Spindle temperature, °C (`Double`).
+pub const SPINDLE_TEMPERATURE: &str = "D100";
+/// Mode word (`Int16`): 1 AUTO, 2 JOG, 0 neither.
+pub const MODE_WORD: &str = "D104";
+/// Parts counter (`UInt16`), one up per part done, wrapping after 65535.
+pub const PART_COUNTER: &str = "D108";
+/// AUTO mode selected.
+const AUTO: &str = "X201.02";
+/// JOG mode selected.
+const JOG: &str = "X201.06";
 
 /// The machine's PLC: input image and the fault coils computed from it.
 struct Plc {
     inputs: BTreeMap<Signal, bool>,
     coils: Vec<(Signal, SwitchingFunction)>,
+    parts: u16,
+    temperature: f64,
 }
 
 impl Plc {
@@ -63,7 +76,30 @@ impl Plc {
                 .expect("derivable");
             coils.push((coil, sf));
         }
-        Plc { inputs, coils }
+        Plc {
+            inputs,
+            coils,
+            parts: 0,
+            temperature: 35.0,
+        }
+    }
+
+    /// The data registers and their values.
+    fn registers(&self) -> Vec<(String, Variant)> {
+        let on = |a: &str| self.inputs.get(&Signal::new(a)).copied().unwrap_or(false);
+        let mode: i16 = match (on(AUTO), on(JOG)) {
+            (true, false) => 1,
+            (false, true) => 2,
+            _ => 0,
+        };
+        vec![
+            (
+                SPINDLE_TEMPERATURE.into(),
+                Variant::Double(self.temperature),
+            ),
+            (MODE_WORD.into(), Variant::Int16(mode)),
+            (PART_COUNTER.into(), Variant::UInt16(self.parts)),
+        ]
     }
 
     /// Every variable and its value: inputs, then coils.
@@ -109,6 +145,13 @@ impl SimulatedCnc {
             .map(|(s, v)| (s.to_string(), v))
             .collect();
         let server = SimServer::start(options, "cnc", "cellwatch simulated CNC", &image).await?;
+        for ((name, value), description) in plc.registers().into_iter().zip([
+            "Spindle temperature, degrees C",
+            "Mode word: 1 AUTO, 2 JOG, 0 neither",
+            "Parts counter, one up per part done",
+        ]) {
+            server.add_register(&name, value, description)?;
+        }
         Ok(SimulatedCnc {
             server,
             plc: Arc::new(Mutex::new(plc)),
@@ -136,17 +179,63 @@ impl SimulatedCnc {
     /// The address is not an input of the machine.
     pub fn set(&self, address: &str, value: bool) -> Result<(), String> {
         let signal = cellwatch_models::signal::pmc_address(address)?;
-        let image = {
+        let (image, registers) = {
             let mut plc = self.plc.lock().map_err(|_| "simulator state poisoned")?;
-            match plc.inputs.get_mut(&signal) {
-                Some(v) => *v = value,
+            let before = match plc.inputs.get_mut(&signal) {
+                Some(v) => std::mem::replace(v, value),
                 None => return Err(format!("{signal} is not an input of the simulated CNC")),
+            };
+            if signal.name() == PART_DONE && value && !before {
+                plc.parts = plc.parts.wrapping_add(1);
             }
-            plc.image()
+            (plc.image(), plc.registers())
         };
         let values: Vec<(String, bool)> =
             image.into_iter().map(|(s, v)| (s.to_string(), v)).collect();
-        self.server.set(&values)
+        self.server.set(&values)?;
+        self.server.set_registers(&registers)
+    }
+
+    /// Sets the spindle temperature (°C).
+    ///
+    /// # Errors
+    /// The server refuses the update.
+    pub fn set_temperature(&self, celsius: f64) -> Result<(), String> {
+        let registers = {
+            let mut plc = self.plc.lock().map_err(|_| "simulator state poisoned")?;
+            plc.temperature = celsius;
+            plc.registers()
+        };
+        self.server.set_registers(&registers)
+    }
+
+    /// Sets the parts counter (as an operator resetting it does).
+    ///
+    /// # Errors
+    /// The server refuses the update.
+    pub fn set_part_counter(&self, parts: u16) -> Result<(), String> {
+        let registers = {
+            let mut plc = self.plc.lock().map_err(|_| "simulator state poisoned")?;
+            plc.parts = parts;
+            plc.registers()
+        };
+        self.server.set_registers(&registers)
+    }
+
+    /// Adds a data register of any type (see [`SimServer::add_register`]).
+    ///
+    /// # Errors
+    /// A variable of that name exists.
+    pub fn add_register(&self, name: &str, value: Variant) -> Result<(), String> {
+        self.server.add_register(name, value, "")
+    }
+
+    /// Writes data registers added with [`SimulatedCnc::add_register`].
+    ///
+    /// # Errors
+    /// No such register.
+    pub fn set_registers(&self, values: &[(String, Variant)]) -> Result<(), String> {
+        self.server.set_registers(values)
     }
 
     /// Marks an input's value as bad (a broken sensor wire).
@@ -192,15 +281,33 @@ impl SimulatedCnc {
     }
 }
 
+/// A value a scenario step writes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Set {
+    /// An input contact.
+    Contact(bool),
+    /// The spindle temperature, °C.
+    Temperature(f64),
+}
+
+impl std::fmt::Display for Set {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Set::Contact(b) => write!(f, "{}", u8::from(*b)),
+            Set::Temperature(t) => write!(f, "{t} °C"),
+        }
+    }
+}
+
 /// A fault to inject at a time.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Step {
     /// Seconds from the start of the cycle.
     pub at: Duration,
     /// Input to change.
     pub address: &'static str,
     /// Its new value.
-    pub value: bool,
+    pub value: Set,
     /// What it means on the shop floor.
     pub note: &'static str,
 }
@@ -221,7 +328,13 @@ impl Scenario {
         let step = |s: u64, address, value, note| Step {
             at: Duration::from_secs(s),
             address,
-            value,
+            value: Set::Contact(value),
+            note,
+        };
+        let heat = |s: u64, celsius, note| Step {
+            at: Duration::from_secs(s),
+            address: SPINDLE_TEMPERATURE,
+            value: Set::Temperature(celsius),
             note,
         };
         Scenario {
@@ -234,7 +347,9 @@ impl Scenario {
                     false,
                     "Y axis runs onto its over-travel limit switch",
                 ),
+                heat(4, 88.5, "spindle bearing runs hot"),
                 step(8, "X0.06", true, "Y axis moved back off the limit switch"),
+                heat(9, 41.0, "spindle cooled down"),
                 step(12, "X201.02", false, "operator leaves AUTO mode"),
                 step(12, "X201.06", true, "operator selects JOG mode"),
                 step(
@@ -261,7 +376,11 @@ impl Scenario {
             for step in &self.steps {
                 tokio::time::sleep_until(start + self.period * cycle + step.at).await;
                 note(step);
-                if let Err(e) = sim.set(step.address, step.value) {
+                let done = match step.value {
+                    Set::Contact(v) => sim.set(step.address, v),
+                    Set::Temperature(t) => sim.set_temperature(t),
+                };
+                if let Err(e) = done {
                     tracing::error!(error = %e, "scenario step failed");
                 }
             }

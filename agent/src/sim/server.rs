@@ -11,13 +11,15 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
 use opcua::crypto::SecurityPolicy;
-use opcua::server::address_space::Variable;
+use opcua::server::address_space::{NodeBase, Variable};
 use opcua::server::diagnostics::NamespaceMetadata;
 use opcua::server::node_manager::memory::{simple_node_manager, SimpleNodeManager};
 use opcua::server::{
     ServerBuilder, ServerHandle, SubscriptionCache, SubscriptionState, ANONYMOUS_USER_TOKEN_ID,
 };
-use opcua::types::{AttributeId, DataValue, DateTime, MessageSecurityMode, NodeId, StatusCode};
+use opcua::types::{
+    AttributeId, DataValue, DateTime, MessageSecurityMode, NodeId, StatusCode, Variant,
+};
 use tokio::net::TcpListener;
 
 /// Session numbers [`SimServer::subscriptions`] looks up.
@@ -80,6 +82,8 @@ pub struct SimServer {
     subscriptions: Arc<SubscriptionCache>,
     ns: u16,
     addr: SocketAddr,
+    /// The folder the variables are in.
+    app: String,
 }
 
 impl SimServer {
@@ -189,6 +193,7 @@ impl SimServer {
             subscriptions,
             ns,
             addr,
+            app: app.to_string(),
         })
     }
 
@@ -292,6 +297,55 @@ impl SimServer {
                     .count()
             })
             .sum()
+    }
+
+    /// Adds a variable of any scalar type (a data register) beside the
+    /// contacts, with an optional description (what `cellwatch discover`
+    /// prints as the comment).
+    ///
+    /// # Errors
+    /// A variable of that name exists.
+    pub fn add_register(
+        &self,
+        name: &str,
+        value: Variant,
+        description: &str,
+    ) -> Result<(), String> {
+        let node = NodeId::new(self.ns, name);
+        let space = self.manager.address_space();
+        let mut space = space.write();
+        if space.find(&node).is_some() {
+            return Err(format!("{name} exists already"));
+        }
+        let mut var = Variable::new(&node, name, name, value);
+        if !description.is_empty() {
+            var.set_description(description.into());
+        }
+        space.add_variables(vec![var], &NodeId::new(self.ns, self.app.as_str()));
+        Ok(())
+    }
+
+    /// Writes registers' values (source timestamp now).
+    ///
+    /// # Errors
+    /// A name that is not a variable of this server.
+    pub fn set_registers(&self, values: &[(String, Variant)]) -> Result<(), String> {
+        let now = DateTime::now();
+        let values: Vec<(NodeId, DataValue)> = values
+            .iter()
+            .map(|(s, v)| {
+                (
+                    NodeId::new(self.ns, s.as_str()),
+                    DataValue::new_at(v.clone(), now),
+                )
+            })
+            .collect();
+        self.manager
+            .set_values(
+                &self.subscriptions,
+                values.iter().map(|(n, v)| (n, None, v.clone())),
+            )
+            .map_err(|e| format!("cannot update the simulated PLC: {e}"))
     }
 
     /// Marks a variable's value as bad (a broken sensor wire).

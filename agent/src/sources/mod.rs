@@ -27,7 +27,7 @@ use crate::config::CellConfig;
 pub const QUEUE_CAPACITY: usize = 1024;
 
 /// What a source tells the cell loop.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum SourceEvent {
     /// The connection is up and the subscription is in place; to what.
     Connected(String),

@@ -10,6 +10,7 @@
 use crate::alarm::{AlarmKind, Severity};
 use crate::explain::Culprit;
 use crate::signal::Signal;
+use crate::value::Num;
 
 /// What a check found: its condition started or ended.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -53,6 +54,21 @@ pub trait CheckSet: Send + Sync {
         now: u64,
         out: &mut Vec<Finding>,
     );
+
+    /// The signals it reads as numbers (limit checks).
+    fn number_inputs(&self) -> Vec<Signal> {
+        Vec::new()
+    }
+
+    /// A number it reads changed or became unknown (`None`).
+    fn on_number(
+        &mut self,
+        _signal: &Signal,
+        _value: Option<Num>,
+        _now: u64,
+        _out: &mut Vec<Finding>,
+    ) {
+    }
 
     /// Time passed; timers fire here.
     fn advance(&mut self, _now: u64, _out: &mut Vec<Finding>) {}

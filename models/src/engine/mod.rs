@@ -34,7 +34,8 @@ pub mod checks;
 pub mod state;
 pub mod switching;
 
-use std::collections::{BTreeSet, HashMap};
+use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
 
 pub use checks::{CheckSet, Finding, Observation};
 pub use state::{HistoryKind, MachineState, StateName, StateRules};
@@ -43,6 +44,7 @@ pub use switching::{SwitchingCheck, SwitchingChecks};
 use crate::alarm::{Alarm, AlarmKind, CommandRefused, Severity, Transition};
 use crate::expr::Expr;
 use crate::signal::Signal;
+use crate::value::{Comparison, Counter, Num, Operand, ValueType};
 use alarms::AlarmBook;
 
 /// A PLC tag as the engine knows it.
@@ -55,16 +57,50 @@ pub struct Tag {
 }
 
 /// A tag's value as delivered by the source.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum Reading {
-    /// A good value.
+    /// A good boolean (a contact, or one bit of an integer word).
     Good(bool),
+    /// A good number.
+    Number(Num),
+    /// A good string.
+    Text(Arc<str>),
     /// Bad or uncertain quality: the value is not to be trusted.
     Bad,
+    /// A value of another type than the tag is used as: bad quality, and
+    /// the `tag-quality` alarm says what came.
+    WrongType {
+        /// The type the tag is configured with.
+        expected: ValueType,
+        /// The type the server sent (`None`: one cellwatch does not read,
+        /// such as an array).
+        received: Option<ValueType>,
+    },
+}
+
+/// A tag's value as the engine holds it.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Value {
+    /// A contact.
+    Bool(bool),
+    /// A number.
+    Num(Num),
+    /// A string.
+    Text(Arc<str>),
+}
+
+impl std::fmt::Display for Value {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Value::Bool(b) => write!(f, "{}", u8::from(*b)),
+            Value::Num(n) => write!(f, "{n}"),
+            Value::Text(t) => write!(f, "{t:?}"),
+        }
+    }
 }
 
 /// One delivered value: which tag, what, and when the PLC saw it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct TagReading {
     /// Index into the engine's tags.
     pub tag: usize,
@@ -98,7 +134,7 @@ pub enum EngineEvent {
 }
 
 /// Everything one input to the engine did.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct Step {
     /// Alarm transitions and state changes, in order.
     pub events: Vec<EngineEvent>,
@@ -112,9 +148,11 @@ pub struct Step {
     pub evaluations: u64,
     /// Change in the number of tags whose value is unknown.
     pub unknown_delta: i64,
-    /// Parts produced: rising edges of the part-done tag, at their source
-    /// time.
-    pub parts: Vec<u64>,
+    /// Parts produced, `(source time, how many)`: rising edges of the
+    /// part-done tag (one each), or a counter tag's increments.
+    pub parts: Vec<(u64, u64)>,
+    /// New values of the tags exported as gauges (`None`: unknown).
+    pub exported: Vec<(usize, Option<f64>)>,
 }
 
 impl Step {
@@ -125,6 +163,7 @@ impl Step {
             && self.readings == 0
             && self.unknown_delta == 0
             && self.parts.is_empty()
+            && self.exported.is_empty()
     }
 
     /// The alarm transitions.
@@ -162,29 +201,70 @@ pub enum EngineError {
 }
 
 /// The values at the last fault, for the snapshot service.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct FaultValues {
     /// The alarm raised.
     pub alarm: String,
     /// When.
     pub at: u64,
     /// Every tag's value then (`None`: unknown).
-    pub values: Vec<Option<bool>>,
+    pub values: Vec<Option<Value>>,
+}
+
+/// How the engine counts parts.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub enum PartCounting {
+    /// It does not.
+    #[default]
+    None,
+    /// Each rising edge of this boolean tag is one part.
+    Edge(usize),
+    /// This integer tag counts parts; wrap-around and resets recognised.
+    Counter(usize, Counter),
+}
+
+/// A comparison contact computed from numeric tags.
+#[derive(Debug, Clone)]
+struct Derived {
+    /// Its own (boolean) tag index.
+    tag: usize,
+    lhs: usize,
+    op: crate::value::CmpOp,
+    rhs: Rhs,
+}
+
+#[derive(Debug, Clone)]
+enum Rhs {
+    Const(Num),
+    Tag(usize),
 }
 
 /// One cell's engine.
 pub struct CellEngine {
     cell: String,
+    /// The configured tags, then one per comparison contact.
     tags: Vec<Tag>,
+    /// How many tags are configured (the rest are comparisons).
+    configured: usize,
     by_address: HashMap<Signal, usize>,
+    /// Booleans: the fast path.
     values: Vec<Option<bool>>,
+    /// Numbers and strings (`None` for boolean tags).
+    others: Vec<Option<Value>>,
     timestamps: Vec<Option<u64>>,
-    bad: BTreeSet<usize>,
+    /// Tags of bad quality; with what came, if it was of the wrong type.
+    bad: BTreeMap<usize, Option<(ValueType, Option<ValueType>)>>,
     /// How many tags are unknown now.
     unknown: usize,
     sets: Vec<Box<dyn CheckSet>>,
     /// Per tag: the check sets that read it.
     readers: Vec<Vec<usize>>,
+    /// Per tag: the check sets that read it as a number.
+    number_readers: Vec<Vec<usize>>,
+    /// Comparison contacts.
+    derived: Vec<Derived>,
+    /// Per tag: the comparisons that read it.
+    compared_in: Vec<Vec<usize>>,
     /// Per tag: whether the running rule reads it.
     running_reads: Vec<bool>,
     alarms: AlarmBook,
@@ -193,8 +273,9 @@ pub struct CellEngine {
     rules: StateRules,
     state: MachineState,
     last_fault: Option<FaultValues>,
-    /// The tag whose rising edges are parts produced.
-    part_done: Option<usize>,
+    parts: PartCounting,
+    /// Per configured tag: whether its changes go to [`Step::exported`].
+    exported: Vec<bool>,
 }
 
 impl CellEngine {
@@ -209,61 +290,142 @@ impl CellEngine {
         sets: Vec<Box<dyn CheckSet>>,
         rules: StateRules,
     ) -> Result<Self, EngineError> {
-        let by_address: HashMap<Signal, usize> = tags
+        let configured = tags.len();
+        let mut tags = tags;
+        let mut by_address: HashMap<Signal, usize> = tags
             .iter()
             .enumerate()
             .map(|(i, t)| (t.address.clone(), i))
             .collect();
-        let mut readers = vec![Vec::new(); tags.len()];
+        // Comparison contacts become tags of their own, computed here.
+        let mut derived = Vec::new();
+        let mut wanted: Vec<(String, Signal)> = Vec::new();
         for (k, set) in sets.iter().enumerate() {
-            for s in set.inputs() {
-                let Some(&t) = by_address.get(&s) else {
-                    return Err(EngineError::MissingTag {
-                        reader: format!("check set {}", k + 1),
-                        address: s,
-                    });
-                };
-                readers[t].push(k);
+            for s in set.inputs().into_iter().chain(set.number_inputs()) {
+                wanted.push((format!("check set {}", k + 1), s));
             }
         }
-        let mut running_reads = vec![false; tags.len()];
         if let Some(expr) = &rules.running {
             for s in expr.signals() {
-                let Some(&t) = by_address.get(&s) else {
-                    return Err(EngineError::MissingTag {
-                        reader: "the running rule".into(),
-                        address: s,
-                    });
-                };
-                running_reads[t] = true;
+                wanted.push(("the running rule".into(), s));
             }
         }
+        for (reader, s) in &wanted {
+            if by_address.contains_key(s) {
+                continue;
+            }
+            let Some(c) = Comparison::of_signal(s) else {
+                return Err(EngineError::MissingTag {
+                    reader: reader.clone(),
+                    address: s.clone(),
+                });
+            };
+            let find = |a: &Signal| {
+                by_address
+                    .get(a)
+                    .copied()
+                    .filter(|&t| t < configured)
+                    .ok_or_else(|| EngineError::MissingTag {
+                        reader: reader.clone(),
+                        address: a.clone(),
+                    })
+            };
+            let lhs = find(&c.lhs)?;
+            let rhs = match &c.rhs {
+                Operand::Const(n) => Rhs::Const(*n),
+                Operand::Tag(a) => Rhs::Tag(find(a)?),
+            };
+            let tag = tags.len();
+            tags.push(Tag {
+                name: s.to_string(),
+                address: s.clone(),
+            });
+            by_address.insert(s.clone(), tag);
+            derived.push(Derived {
+                tag,
+                lhs,
+                op: c.op,
+                rhs,
+            });
+        }
         let n = tags.len();
+        let mut compared_in = vec![Vec::new(); n];
+        for (i, d) in derived.iter().enumerate() {
+            compared_in[d.lhs].push(i);
+            if let Rhs::Tag(t) = d.rhs {
+                if t != d.lhs {
+                    compared_in[t].push(i);
+                }
+            }
+        }
+        let mut readers = vec![Vec::new(); n];
+        let mut number_readers = vec![Vec::new(); n];
+        for (k, set) in sets.iter().enumerate() {
+            for s in set.inputs() {
+                readers[by_address[&s]].push(k);
+            }
+            for s in set.number_inputs() {
+                number_readers[by_address[&s]].push(k);
+            }
+        }
+        let mut running_reads = vec![false; n];
+        if let Some(expr) = &rules.running {
+            for s in expr.signals() {
+                running_reads[by_address[&s]] = true;
+            }
+        }
         Ok(CellEngine {
             cell: cell.to_string(),
             tags,
+            configured,
             by_address,
             values: vec![None; n],
+            others: vec![None; n],
             timestamps: vec![None; n],
-            bad: BTreeSet::new(),
-            unknown: n,
+            bad: BTreeMap::new(),
+            unknown: configured,
             sets,
             readers,
+            number_readers,
+            derived,
+            compared_in,
             running_reads,
             alarms: AlarmBook::default(),
             connected: None,
             rules,
             state: MachineState::Offline,
             last_fault: None,
-            part_done: None,
+            parts: PartCounting::None,
+            exported: vec![false; configured],
         })
     }
 
     /// Counts rising edges of tag `tag` as parts produced
     /// ([`Step::parts`]).
     #[must_use]
-    pub fn counting_parts(mut self, tag: Option<usize>) -> Self {
-        self.part_done = tag.filter(|&t| t < self.tags.len());
+    pub fn counting_parts(self, tag: Option<usize>) -> Self {
+        self.counting(tag.map_or(PartCounting::None, PartCounting::Edge))
+    }
+
+    /// Reports the changes of these tags in [`Step::exported`].
+    #[must_use]
+    pub fn exporting(mut self, tags: impl IntoIterator<Item = usize>) -> Self {
+        for t in tags {
+            if let Some(e) = self.exported.get_mut(t) {
+                *e = true;
+            }
+        }
+        self
+    }
+
+    /// Counts parts as `how` says ([`Step::parts`]).
+    #[must_use]
+    pub fn counting(mut self, how: PartCounting) -> Self {
+        let valid = match &how {
+            PartCounting::None => true,
+            PartCounting::Edge(t) | PartCounting::Counter(t, _) => *t < self.configured,
+        };
+        self.parts = if valid { how } else { PartCounting::None };
         self
     }
 
@@ -272,9 +434,9 @@ impl CellEngine {
         &self.cell
     }
 
-    /// The tags, in configuration order.
+    /// The configured tags, in configuration order.
     pub fn tags(&self) -> &[Tag] {
-        &self.tags
+        &self.tags[..self.configured]
     }
 
     /// The tag with this address.
@@ -282,9 +444,23 @@ impl CellEngine {
         self.by_address.get(address).copied()
     }
 
-    /// Current values, `None` where unknown.
+    /// Current boolean values of the configured tags, `None` where unknown
+    /// or not a boolean.
     pub fn values(&self) -> &[Option<bool>] {
-        &self.values
+        &self.values[..self.configured]
+    }
+
+    /// Tag `tag`'s current value, whatever its type.
+    pub fn value(&self, tag: usize) -> Option<Value> {
+        match self.values.get(tag).copied().flatten() {
+            Some(b) => Some(Value::Bool(b)),
+            None => self.others.get(tag).cloned().flatten(),
+        }
+    }
+
+    /// Every configured tag's current value.
+    pub fn all_values(&self) -> Vec<Option<Value>> {
+        (0..self.configured).map(|t| self.value(t)).collect()
     }
 
     /// How many tags are unknown now.
@@ -294,7 +470,7 @@ impl CellEngine {
 
     /// Tags whose quality is bad.
     pub fn bad_tags(&self) -> impl Iterator<Item = usize> + '_ {
-        self.bad.iter().copied()
+        self.bad.keys().copied()
     }
 
     /// Every alarm the engine knows, by id.
@@ -389,8 +565,8 @@ impl CellEngine {
         if !up {
             // Every value is now unknown; checks hold their verdicts.
             let mut ignored = Vec::new();
-            for t in 0..self.tags.len() {
-                self.set_value(t, None, now, &mut ignored, &mut step);
+            for t in 0..self.configured {
+                self.set_unknown(t, now, &mut ignored, &mut step);
             }
             self.timestamps.iter_mut().for_each(|t| *t = None);
         }
@@ -424,7 +600,7 @@ impl CellEngine {
         let mut step = Step::default();
         let mut findings = Vec::new();
         for r in readings {
-            if r.tag >= self.tags.len() {
+            if r.tag >= self.configured {
                 continue;
             }
             step.readings += 1;
@@ -448,32 +624,53 @@ impl CellEngine {
         step: &mut Step,
     ) -> bool {
         let tag = r.tag;
-        let value = match r.reading {
-            Reading::Good(v) => Some(v),
-            Reading::Bad => None,
-        };
-        if let (Some(last), Some(v)) = (self.timestamps[tag], value) {
-            if r.source_time <= last && self.values[tag] == Some(v) {
+        if tag >= self.configured {
+            return false;
+        }
+        if let Some(last) = self.timestamps[tag] {
+            let same = match &r.reading {
+                Reading::Good(v) => self.values[tag] == Some(*v),
+                Reading::Number(n) => {
+                    matches!(&self.others[tag], Some(Value::Num(m)) if m == n)
+                }
+                Reading::Text(t) => {
+                    matches!(&self.others[tag], Some(Value::Text(u)) if u == t)
+                }
+                Reading::Bad | Reading::WrongType { .. } => false,
+            };
+            if same && r.source_time <= last {
                 step.duplicates += 1;
                 return false;
             }
         }
         self.timestamps[tag] = Some(r.source_time);
-        let quality_changed = match r.reading {
-            Reading::Good(_) => self.bad.remove(&tag),
-            Reading::Bad => self.bad.insert(tag),
+        let quality_changed = match &r.reading {
+            Reading::Bad => self.bad.insert(tag, None) != Some(None),
+            Reading::WrongType { expected, received } => {
+                let why = Some((*expected, *received));
+                self.bad.insert(tag, why) != Some(why)
+            }
+            _ => self.bad.remove(&tag).is_some(),
         };
         findings.clear();
         // Checks time events by when the PLC saw them, not when they
         // arrived: delivery jitter is not motion time.
-        let changed = self.set_value(tag, value, r.source_time, findings, step);
+        let at = r.source_time;
+        let changed = match &r.reading {
+            Reading::Good(v) => self.set_value(tag, Some(*v), at, findings, step),
+            Reading::Number(n) => self.set_other(tag, Some(Value::Num(*n)), at, findings, step),
+            Reading::Text(t) => {
+                self.set_other(tag, Some(Value::Text(t.clone())), at, findings, step)
+            }
+            Reading::Bad | Reading::WrongType { .. } => self.set_unknown(tag, at, findings, step),
+        };
         if quality_changed {
             findings.push(self.quality_finding());
         }
         for f in findings.drain(..) {
             self.apply(f, now, step);
         }
-        changed && self.running_reads[tag]
+        changed
     }
 
     /// Time passed: timers fire.
@@ -541,7 +738,38 @@ impl CellEngine {
         }
     }
 
-    /// Sets tag `tag`'s value; true if it changed.
+    /// Counts tag `tag` known or unknown.
+    fn known_changed(&mut self, tag: usize, was: bool, is: bool, step: &mut Step) {
+        if tag >= self.configured || was == is {
+            return;
+        }
+        if is {
+            self.unknown -= 1;
+            step.unknown_delta -= 1;
+        } else {
+            self.unknown += 1;
+            step.unknown_delta += 1;
+        }
+    }
+
+    /// Makes tag `tag` unknown, whatever its type; true if the machine
+    /// state may have changed.
+    fn set_unknown(
+        &mut self,
+        tag: usize,
+        now: u64,
+        findings: &mut Vec<Finding>,
+        step: &mut Step,
+    ) -> bool {
+        if self.others[tag].is_some() {
+            self.set_other(tag, None, now, findings, step)
+        } else {
+            self.set_value(tag, None, now, findings, step)
+        }
+    }
+
+    /// Sets boolean tag `tag`'s value; true if the machine state may have
+    /// changed.
     fn set_value(
         &mut self,
         tag: usize,
@@ -554,34 +782,128 @@ impl CellEngine {
         if before == value {
             return false;
         }
-        match (before, value) {
-            (Some(_), None) => {
-                self.unknown += 1;
-                step.unknown_delta += 1;
-            }
-            (None, Some(_)) => {
-                self.unknown -= 1;
-                step.unknown_delta -= 1;
-            }
-            _ => {}
-        }
-        if self.part_done == Some(tag) && before == Some(false) && value == Some(true) {
-            step.parts.push(now);
+        self.known_changed(tag, before.is_some(), value.is_some(), step);
+        if self.parts == PartCounting::Edge(tag) && before == Some(false) && value == Some(true) {
+            step.parts.push((now, 1));
         }
         self.values[tag] = value;
         step.evaluations += 1;
+        if self.exported.get(tag) == Some(&true) {
+            step.exported
+                .push((tag, value.map(|b| f64::from(u8::from(b)))));
+        }
         let address = &self.tags[tag].address;
         for &k in &self.readers[tag] {
             self.sets[k].on_change(address, value, before, now, findings);
         }
-        true
+        self.running_reads[tag]
+    }
+
+    /// Sets number or string tag `tag`'s value; true if the machine state
+    /// may have changed.
+    fn set_other(
+        &mut self,
+        tag: usize,
+        value: Option<Value>,
+        now: u64,
+        findings: &mut Vec<Finding>,
+        step: &mut Step,
+    ) -> bool {
+        if self.values[tag].is_some() {
+            // A boolean tag now sends numbers (or the reverse): forget
+            // the boolean first.
+            self.set_value(tag, None, now, findings, step);
+        }
+        let before = std::mem::replace(&mut self.others[tag], value);
+        if before == self.others[tag] {
+            return false;
+        }
+        self.known_changed(tag, before.is_some(), self.others[tag].is_some(), step);
+        step.evaluations += 1;
+        let number = |v: &Option<Value>| match v {
+            Some(Value::Num(n)) => Some(*n),
+            _ => None,
+        };
+        let (was, is) = (number(&before), number(&self.others[tag]));
+        if self.exported.get(tag) == Some(&true) {
+            step.exported.push((tag, is.map(Num::as_f64)));
+        }
+        if let PartCounting::Counter(t, counter) = &mut self.parts {
+            if *t == tag {
+                if let Some(n) = is.and_then(Num::as_count) {
+                    let made = counter.next(n);
+                    if made > 0 {
+                        step.parts.push((now, made));
+                    }
+                }
+            }
+        }
+        if was != is {
+            let address = &self.tags[tag].address;
+            for &k in &self.number_readers[tag] {
+                self.sets[k].on_number(address, is, now, findings);
+            }
+        }
+        let mut state = self.running_reads[tag];
+        for i in 0..self.compared_in[tag].len() {
+            let d = &self.derived[self.compared_in[tag][i]];
+            let value = self.compare(d);
+            let t = d.tag;
+            state |= self.set_value(t, value, now, findings, step);
+        }
+        state
+    }
+
+    /// A comparison's value now: unknown while an operand is.
+    fn compare(&self, d: &Derived) -> Option<bool> {
+        let num = |t: usize| match (&self.others[t], self.values[t]) {
+            (Some(Value::Num(n)), _) => Some(*n),
+            (_, Some(b)) => Some(Num::UInt(u64::from(b))),
+            _ => None,
+        };
+        let lhs = num(d.lhs)?;
+        let rhs = match d.rhs {
+            Rhs::Const(n) => n,
+            Rhs::Tag(t) => num(t)?,
+        };
+        Some(d.op.holds(lhs, rhs))
+    }
+
+    /// A comparison contact shown with its operands' values:
+    /// `TEMP = 85.2 (> 80.5)`.
+    pub fn describe_comparison(&self, address: &Signal) -> Option<String> {
+        let &t = self.by_address.get(address)?;
+        let d = self.derived.iter().find(|d| d.tag == t)?;
+        let show = |t: usize| {
+            self.value(t)
+                .map_or_else(|| "unknown".to_string(), |v| v.to_string())
+        };
+        let rhs = match d.rhs {
+            Rhs::Const(n) => n.to_string(),
+            Rhs::Tag(r) => format!("{} = {}", self.tags[r].address, show(r)),
+        };
+        Some(format!(
+            "{} = {} ({} {rhs})",
+            self.tags[d.lhs].address,
+            show(d.lhs),
+            d.op.as_str()
+        ))
     }
 
     fn quality_finding(&self) -> Finding {
         let names: Vec<String> = self
             .bad
             .iter()
-            .map(|&t| format!("{} ({})", self.tags[t].address, self.tags[t].name))
+            .map(|(&t, why)| {
+                let tag = format!("{} ({})", self.tags[t].address, self.tags[t].name);
+                match why {
+                    None => tag,
+                    Some((expected, received)) => format!(
+                        "{tag}: {} received where {expected} is expected",
+                        received.map_or("a value cellwatch does not read", |r| r.as_str())
+                    ),
+                }
+            })
             .collect();
         Finding {
             id: "tag-quality".into(),
@@ -603,7 +925,14 @@ impl CellEngine {
         }
     }
 
-    fn apply(&mut self, f: Finding, now: u64, step: &mut Step) {
+    fn apply(&mut self, mut f: Finding, now: u64, step: &mut Step) {
+        if !self.derived.is_empty() {
+            for c in &mut f.culprits {
+                if c.comment.is_none() {
+                    c.comment = self.describe_comparison(&c.address);
+                }
+            }
+        }
         let id = f.id.clone();
         let applied = self.alarms.apply(f, now);
         let Some(transition) = applied.transition else {
@@ -613,12 +942,15 @@ impl CellEngine {
             return;
         };
         if transition == Transition::Raised
-            && matches!(alarm.kind, AlarmKind::Switching | AlarmKind::Timer)
+            && matches!(
+                alarm.kind,
+                AlarmKind::Switching | AlarmKind::Timer | AlarmKind::Limit
+            )
         {
             self.last_fault = Some(FaultValues {
                 alarm: id,
                 at: now,
-                values: self.values.clone(),
+                values: self.all_values(),
             });
         }
         step.events.push(EngineEvent::Alarm {
@@ -1062,7 +1394,7 @@ mod counters {
         // The first value is no edge: the part may have been counted before.
         assert!(e.on_reading(1, Reading::Good(true), 1, 1).parts.is_empty());
         assert!(e.on_reading(1, Reading::Good(false), 2, 2).parts.is_empty());
-        assert_eq!(e.on_reading(1, Reading::Good(true), 3, 3).parts, [3]);
+        assert_eq!(e.on_reading(1, Reading::Good(true), 3, 3).parts, [(3, 1)]);
         // Unknown, then true again: not a counted edge.
         e.on_reading(1, Reading::Bad, 4, 4);
         assert!(e.on_reading(1, Reading::Good(true), 5, 5).parts.is_empty());
@@ -1089,7 +1421,7 @@ mod counters {
             },
         ];
         let step = e.on_readings(&batch, 8);
-        assert_eq!(step.parts, [7]);
+        assert_eq!(step.parts, [(7, 1)]);
         assert_eq!(step.readings, 4);
         assert_eq!(step.duplicates, 1);
     }

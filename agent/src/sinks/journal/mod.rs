@@ -59,10 +59,13 @@ pub enum Entry {
         /// Faulty element (`X0.06`), when known.
         element: Option<String>,
     },
-    /// One part done (a rising edge of the part-done tag).
+    /// Parts done: a rising edge of the part-done tag (one), or a
+    /// counter's increment.
     Part {
         /// When.
         at: u64,
+        /// How many.
+        count: u64,
     },
     /// An operator command, accepted or refused.
     Command {
@@ -188,7 +191,8 @@ CREATE TABLE IF NOT EXISTS commands (
 CREATE INDEX IF NOT EXISTS commands_at ON commands (at_ms);
 CREATE TABLE IF NOT EXISTS production (
     seq INTEGER PRIMARY KEY AUTOINCREMENT,
-    at_ms INTEGER NOT NULL
+    at_ms INTEGER NOT NULL,
+    parts INTEGER NOT NULL DEFAULT 1
 );
 CREATE INDEX IF NOT EXISTS production_at ON production (at_ms);
 CREATE TABLE IF NOT EXISTS alarm_current (
@@ -202,7 +206,10 @@ CREATE TABLE IF NOT EXISTS alarm_current (
 const WRITE_BUSY_TIMEOUT: Duration = Duration::from_secs(1);
 
 /// Columns added after the first release, added to older journals at open.
-const MIGRATIONS: &[(&str, &str, &str)] = &[("commands", "verified", "INTEGER NOT NULL DEFAULT 0")];
+const MIGRATIONS: &[(&str, &str, &str)] = &[
+    ("commands", "verified", "INTEGER NOT NULL DEFAULT 0"),
+    ("production", "parts", "INTEGER NOT NULL DEFAULT 1"),
+];
 
 fn migrate(conn: &Connection) -> rusqlite::Result<()> {
     for (table, column, decl) in MIGRATIONS {
@@ -592,9 +599,15 @@ fn write_batch(conn: &mut Connection, batch: &[Entry], seq: &mut i64) -> rusqlit
                 )?
                 .execute(params![next, *at as i64, kind, state, fault_type, element])?;
             }
-            Entry::Part { at } => {
-                tx.prepare_cached("INSERT INTO production (seq, at_ms) VALUES (?1, ?2)")?
-                    .execute(params![next, *at as i64])?;
+            Entry::Part { at, count } => {
+                tx.prepare_cached(
+                    "INSERT INTO production (seq, at_ms, parts) VALUES (?1, ?2, ?3)",
+                )?
+                .execute(params![
+                    next,
+                    *at as i64,
+                    i64::try_from(*count).unwrap_or(i64::MAX)
+                ])?;
             }
             Entry::Command {
                 at,
@@ -869,8 +882,11 @@ fn history_row(
     })
 }
 
-/// Machine-state rows and part times between `since` and `until` (ms), plus
-/// the last state row before `since`, for reports.
+/// What reports read: machine-state changes and parts made `(time, count)`.
+pub type ReportInput = (Vec<cellwatch_models::report::StateChange>, Vec<(u64, u64)>);
+
+/// Machine-state rows and parts made `(time, count)` between `since` and
+/// `until` (ms), plus the last state row before `since`, for reports.
 ///
 /// # Errors
 /// SQLite failing.
@@ -878,7 +894,7 @@ pub fn report_input(
     conn: &Connection,
     since: u64,
     until: u64,
-) -> rusqlite::Result<(Vec<cellwatch_models::report::StateChange>, Vec<u64>)> {
+) -> rusqlite::Result<ReportInput> {
     let mut changes = Vec::new();
     let row = |r: &rusqlite::Row<'_>| {
         Ok(cellwatch_models::report::StateChange {
@@ -899,11 +915,15 @@ pub fn report_input(
     for c in stmt.query_map([since as i64, until as i64], row)? {
         changes.push(c?);
     }
-    let mut stmt = conn
-        .prepare("SELECT at_ms FROM production WHERE at_ms >= ?1 AND at_ms < ?2 ORDER BY at_ms")?;
+    let mut stmt = conn.prepare(
+        "SELECT at_ms, parts FROM production WHERE at_ms >= ?1 AND at_ms < ?2 ORDER BY at_ms",
+    )?;
     let parts = stmt
         .query_map([since as i64, until as i64], |r| {
-            Ok(r.get::<_, i64>(0)? as u64)
+            Ok((
+                r.get::<_, i64>(0)? as u64,
+                r.get::<_, i64>(1)?.max(0) as u64,
+            ))
         })?
         .collect::<Result<Vec<_>, _>>()?;
     Ok((changes, parts))
@@ -1030,7 +1050,7 @@ mod tests {
         for n in 0..12_000 {
             rows.push(state(now, n));
             if n % 1000 == 0 {
-                rows.push(Entry::Part { at: now });
+                rows.push(Entry::Part { at: now, count: 1 });
             }
         }
         j.commit(rows).await.unwrap();

@@ -51,8 +51,8 @@ pub fn entries(step: &CellStep) -> Vec<Entry> {
             element,
         });
     }
-    for &at in &step.engine.parts {
-        rows.push(Entry::Part { at });
+    for &(at, count) in &step.engine.parts {
+        rows.push(Entry::Part { at, count });
     }
     if let Input::Command(c) = &step.input {
         rows.push(Entry::Command {

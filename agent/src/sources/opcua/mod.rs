@@ -310,6 +310,7 @@ struct Context {
     config: OpcUaConfig,
     /// Each tag's node, `None` when its node id cannot be read.
     nodes: Vec<Option<TagNode>>,
+    uses: Arc<Vec<subscription::TagUse>>,
     names: Arc<Vec<String>>,
     tx: SourceSender,
 }
@@ -332,6 +333,7 @@ impl Context {
             endpoint: config.endpoint.clone(),
             config: config.clone(),
             nodes,
+            uses: Arc::new(tags.iter().map(subscription::TagUse::of).collect()),
             names: Arc::new(tags.iter().map(|t| t.name.clone()).collect()),
             tx,
         }
@@ -342,7 +344,7 @@ impl Context {
 struct Live {
     subscription: subscription::Subscribed,
     /// The monitored nodes and their tags.
-    nodes: Vec<(NodeId, usize)>,
+    nodes: Vec<(NodeId, Vec<usize>)>,
     /// The namespace array its node ids were resolved against.
     namespaces: Vec<String>,
     heard: Arc<subscription::Heard>,
@@ -486,7 +488,7 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
         };
         match (node.resolve(&namespaces), &node.namespace) {
             (Some(id), _) => {
-                by_node.insert(id, tag);
+                by_node.entry(id).or_insert_with(Vec::new).push(tag);
             }
             (None, Namespace::Uri(uri)) => missing.entry(uri).or_default().push(tag),
             (None, Namespace::Index(_)) => unread.push(tag),
@@ -542,11 +544,15 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
             .await;
     }
     let heard = Arc::new(subscription::Heard::new());
-    let nodes: Vec<(NodeId, usize)> = by_node.iter().map(|(n, t)| (n.clone(), *t)).collect();
+    let nodes: Vec<(NodeId, Vec<usize>)> = by_node
+        .iter()
+        .map(|(n, t)| (n.clone(), t.clone()))
+        .collect();
     let subscription = subscription::subscribe(
         session,
         &ctx.config,
         &Arc::new(by_node),
+        &ctx.uses,
         &ctx.names,
         &ctx.tx,
         &heard,
@@ -563,7 +569,7 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
 /// Reads the current value of every node and sends them as readings, in
 /// chunks of [`READ_CHUNK`]. A failed read is logged; the subscription's
 /// liveness check covers what follows.
-async fn read_current(session: &Session, ctx: &Context, nodes: &[(NodeId, usize)]) {
+async fn read_current(session: &Session, ctx: &Context, nodes: &[(NodeId, Vec<usize>)]) {
     for part in nodes.chunks(READ_CHUNK) {
         let ids: Vec<ReadValueId> = part
             .iter()
@@ -574,10 +580,12 @@ async fn read_current(session: &Session, ctx: &Context, nodes: &[(NodeId, usize)
                 let mut readings: Vec<TagReading> = values
                     .iter()
                     .zip(part)
-                    .map(|(v, (_, tag))| TagReading {
-                        tag: *tag,
-                        reading: reading(v),
-                        source_time: subscription::source_time(v),
+                    .flat_map(|(v, (_, tags))| {
+                        tags.iter().map(|&tag| TagReading {
+                            tag,
+                            reading: reading(v, &ctx.uses[tag]),
+                            source_time: subscription::source_time(v),
+                        })
                     })
                     .collect();
                 readings.sort_by_key(|r| r.source_time);

@@ -18,8 +18,9 @@ use opcua::types::{
 };
 use tokio::sync::mpsc::error::TrySendError;
 
-use crate::config::OpcUaConfig;
+use crate::config::{Deadband, OpcUaConfig, TagConfig};
 use crate::sources::{SourceEvent, SourceSender};
+use cellwatch_models::value::{Num, ValueType};
 
 /// `Server_ServerCapabilities_OperationLimits_MaxMonitoredItemsPerCall`.
 const MAX_MONITORED_ITEMS_PER_CALL: u32 = 11714;
@@ -95,7 +96,8 @@ pub(super) struct Subscribed {
 pub(super) async fn subscribe(
     session: &Arc<Session>,
     config: &OpcUaConfig,
-    by_node: &Arc<HashMap<NodeId, usize>>,
+    by_node: &Arc<ByNode>,
+    uses: &Arc<Vec<TagUse>>,
     names: &Arc<Vec<String>>,
     tx: &SourceSender,
     heard: &Arc<Heard>,
@@ -105,6 +107,7 @@ pub(super) async fn subscribe(
     let queue_size = Arc::new(AtomicU32::new(config.queue_size));
     let callback = InTimeOrder {
         by_node: by_node.clone(),
+        uses: uses.clone(),
         tx: tx.clone(),
         heard: heard.clone(),
         names: names.clone(),
@@ -144,16 +147,28 @@ pub(super) async fn subscribe(
             })
     };
     let chunk = max_items_per_call(session).await.min(MAX_ITEMS_PER_CALL);
-    let sampling = config.sampling_interval.as_secs_f64() * 1000.0;
     let requests: Vec<MonitoredItemCreateRequest> = by_node
-        .keys()
-        .map(|n| {
+        .iter()
+        .map(|(n, tags)| {
+            // Several tags on one node are bits of one word: the first
+            // says how it is sampled.
+            let tag = &uses[tags[0]];
+            let sampling = tag
+                .sampling
+                .unwrap_or(config.sampling_interval)
+                .as_secs_f64()
+                * 1000.0;
             // Without a filter a server reports value changes only; quality
             // changes (a broken sensor wire) must be reported too.
+            let (deadband_type, deadband_value) = match tag.deadband {
+                None => (0, 0.0),
+                Some(Deadband::Absolute(v)) => (1, v),
+                Some(Deadband::Percent(v)) => (2, v),
+            };
             let filter = DataChangeFilter {
                 trigger: DataChangeTrigger::StatusValue,
-                deadband_type: 0,
-                deadband_value: 0.0,
+                deadband_type,
+                deadband_value,
             };
             // When the queue is full the server drops the oldest change and
             // flags the next one it delivers with the overflow bit.
@@ -204,6 +219,7 @@ pub(super) async fn subscribe(
                     .map(|r| r.result.revised_sampling_interval)
                     .max_by(f64::total_cmp)
                 {
+                    let sampling = config.sampling_interval.as_secs_f64() * 1000.0;
                     if slowest > sampling {
                         tracing::warn!(asked_ms = sampling, granted_ms = slowest, "the server samples less often than asked: changes shorter than its interval are not seen");
                     }
@@ -211,14 +227,17 @@ pub(super) async fn subscribe(
                 for (r, req) in results.iter().zip(part) {
                     if !r.result.status_code.is_good() {
                         tracing::error!(node = %req.item_to_monitor.node_id, status = %r.result.status_code, "monitored item refused");
-                        if let Some(&tag) = by_node.get(&req.item_to_monitor.node_id) {
-                            let _ = tx
-                                .send(SourceEvent::Readings(vec![TagReading {
+                        if let Some(tags) = by_node.get(&req.item_to_monitor.node_id) {
+                            let now = crate::clock::now_ms();
+                            let readings = tags
+                                .iter()
+                                .map(|&tag| TagReading {
                                     tag,
                                     reading: Reading::Bad,
-                                    source_time: crate::clock::now_ms(),
-                                }]))
-                                .await;
+                                    source_time: now,
+                                })
+                                .collect();
+                            let _ = tx.send(SourceEvent::Readings(readings)).await;
                         }
                     }
                 }
@@ -240,7 +259,8 @@ pub(super) async fn subscribe(
 /// they are sorted by source timestamp (stable, so equal times keep the
 /// server's order).
 struct InTimeOrder {
-    by_node: Arc<HashMap<NodeId, usize>>,
+    by_node: Arc<ByNode>,
+    uses: Arc<Vec<TagUse>>,
     tx: SourceSender,
     heard: Arc<Heard>,
     names: Arc<Vec<String>>,
@@ -255,7 +275,8 @@ struct InTimeOrder {
 pub const OVERFLOW_ALARM: &str = "opcua-overflow";
 
 struct Collector<'a> {
-    by_node: &'a HashMap<NodeId, usize>,
+    by_node: &'a ByNode,
+    uses: &'a [TagUse],
     readings: Vec<TagReading>,
     /// Tags with a value flagged `Overflow` in this publish.
     overflowed: BTreeSet<usize>,
@@ -271,15 +292,18 @@ impl OnSubscriptionNotification for Collector<'_> {
     }
 
     fn on_data_value(&mut self, value: DataValue, item: &MonitoredItem) {
-        if let Some(&tag) = self.by_node.get(&item.item_to_monitor().node_id) {
-            if value.status.is_some_and(|s| s.overflow()) {
-                self.overflowed.insert(tag);
+        if let Some(tags) = self.by_node.get(&item.item_to_monitor().node_id) {
+            let at = source_time(&value);
+            for &tag in tags {
+                if value.status.is_some_and(|s| s.overflow()) {
+                    self.overflowed.insert(tag);
+                }
+                self.readings.push(TagReading {
+                    tag,
+                    reading: reading(&value, &self.uses[tag]),
+                    source_time: at,
+                });
             }
-            self.readings.push(TagReading {
-                tag,
-                reading: reading(&value),
-                source_time: source_time(&value),
-            });
         }
     }
 }
@@ -294,6 +318,7 @@ impl OnSubscriptionNotificationCore for InTimeOrder {
         self.heard.beat();
         let mut c = Collector {
             by_node: &self.by_node,
+            uses: &self.uses,
             readings: Vec::new(),
             overflowed: BTreeSet::new(),
             closed: None,
@@ -401,12 +426,112 @@ async fn max_items_per_call(session: &Session) -> usize {
 }
 
 /// A data value as the engine reads it.
-pub fn reading(value: &DataValue) -> Reading {
-    let good = value.status.is_none_or(|s| s.is_good());
-    match (&value.value, good) {
-        (Some(Variant::Boolean(b)), true) => Reading::Good(*b),
-        _ => Reading::Bad,
+pub fn reading(value: &DataValue, tag: &TagUse) -> Reading {
+    if !value.status.is_none_or(|s| s.is_good()) {
+        return Reading::Bad;
     }
+    let Some(v) = &value.value else {
+        return Reading::Bad;
+    };
+    let wrong = || Reading::WrongType {
+        expected: tag.value_type,
+        received: type_of(v),
+    };
+    if let Some(bit) = tag.bit {
+        return match word(v) {
+            Some(w) => Reading::Good((w >> bit) & 1 == 1),
+            None => wrong(),
+        };
+    }
+    match (tag.value_type, v) {
+        (ValueType::Boolean, Variant::Boolean(b)) => Reading::Good(*b),
+        (ValueType::String, Variant::String(s)) => Reading::Text(Arc::from(s.as_ref())),
+        (ValueType::DateTime, Variant::DateTime(t)) => {
+            Reading::Number(Num::Int(t.as_chrono().timestamp_millis()))
+        }
+        (t, v) if t.is_numeric() => number(v).map_or_else(wrong, Reading::Number),
+        _ => wrong(),
+    }
+}
+
+/// How the source reads one tag's node.
+#[derive(Debug, Clone)]
+pub struct TagUse {
+    /// The configured type.
+    pub value_type: ValueType,
+    /// The bit of an integer word the tag is.
+    pub bit: Option<u8>,
+    /// Its own sampling interval.
+    pub sampling: Option<Duration>,
+    /// Its data-change filter deadband.
+    pub deadband: Option<Deadband>,
+}
+
+impl TagUse {
+    /// How `tag` is read.
+    pub fn of(tag: &TagConfig) -> TagUse {
+        TagUse {
+            value_type: tag.value_type,
+            bit: tag.bit,
+            sampling: tag.sampling_interval,
+            deadband: tag.deadband,
+        }
+    }
+}
+
+/// The tags read from each node (several when they are bits of one word).
+pub(super) type ByNode = HashMap<NodeId, Vec<usize>>;
+
+/// The scalar type of a value, if it is one cellwatch reads.
+fn type_of(v: &Variant) -> Option<ValueType> {
+    Some(match v {
+        Variant::Boolean(_) => ValueType::Boolean,
+        Variant::SByte(_) => ValueType::SByte,
+        Variant::Byte(_) => ValueType::Byte,
+        Variant::Int16(_) => ValueType::Int16,
+        Variant::UInt16(_) => ValueType::UInt16,
+        Variant::Int32(_) => ValueType::Int32,
+        Variant::UInt32(_) => ValueType::UInt32,
+        Variant::Int64(_) => ValueType::Int64,
+        Variant::UInt64(_) => ValueType::UInt64,
+        Variant::Float(_) => ValueType::Float,
+        Variant::Double(_) => ValueType::Double,
+        Variant::String(_) => ValueType::String,
+        Variant::DateTime(_) => ValueType::DateTime,
+        _ => return None,
+    })
+}
+
+/// An integer's bits (two's complement for signed ones).
+fn word(v: &Variant) -> Option<u64> {
+    Some(match v {
+        Variant::SByte(x) => *x as u8 as u64,
+        Variant::Byte(x) => u64::from(*x),
+        Variant::Int16(x) => *x as u16 as u64,
+        Variant::UInt16(x) => u64::from(*x),
+        Variant::Int32(x) => *x as u32 as u64,
+        Variant::UInt32(x) => u64::from(*x),
+        Variant::Int64(x) => *x as u64,
+        Variant::UInt64(x) => *x,
+        _ => return None,
+    })
+}
+
+/// A number, whatever its width.
+fn number(v: &Variant) -> Option<Num> {
+    Some(match v {
+        Variant::SByte(x) => Num::Int(i64::from(*x)),
+        Variant::Byte(x) => Num::UInt(u64::from(*x)),
+        Variant::Int16(x) => Num::Int(i64::from(*x)),
+        Variant::UInt16(x) => Num::UInt(u64::from(*x)),
+        Variant::Int32(x) => Num::Int(i64::from(*x)),
+        Variant::UInt32(x) => Num::UInt(u64::from(*x)),
+        Variant::Int64(x) => Num::Int(*x),
+        Variant::UInt64(x) => Num::UInt(*x),
+        Variant::Float(x) => Num::Float(f64::from(*x)),
+        Variant::Double(x) => Num::Float(*x),
+        _ => return None,
+    })
 }
 
 pub(super) fn source_time(value: &DataValue) -> u64 {

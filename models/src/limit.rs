@@ -1,0 +1,383 @@
+//! Limit alarms on analog values, after ISA-18.2 and OPC UA Part 9: HH, H,
+//! L and LL levels, each its own alarm with its own severity; a deadband
+//! (hysteresis) so that a value hovering at a limit does not chatter; an
+//! on-delay (the excursion must last that long to raise) and an off-delay
+//! (the return must last that long to clear).
+//!
+//! A level raises when the value passes its limit (`>` for HH and H, `<`
+//! for L and LL) and clears when it is back by more than the deadband
+//! (below `limit - deadband`, above `limit + deadband`). An unknown value
+//! holds every level's verdict and cancels pending delays.
+
+use std::collections::HashMap;
+use std::fmt;
+
+use crate::alarm::{AlarmKind, Severity};
+use crate::engine::{CheckSet, Finding};
+use crate::signal::Signal;
+use crate::value::Num;
+
+/// A limit level.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Level {
+    /// High-high.
+    HH,
+    /// High.
+    H,
+    /// Low.
+    L,
+    /// Low-low.
+    LL,
+}
+
+impl Level {
+    /// Upper levels raise above their limit.
+    pub fn is_high(self) -> bool {
+        matches!(self, Level::HH | Level::H)
+    }
+
+    /// The name, `HH`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Level::HH => "HH",
+            Level::H => "H",
+            Level::L => "L",
+            Level::LL => "LL",
+        }
+    }
+}
+
+impl fmt::Display for Level {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// One level of a limit check.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LimitLevel {
+    /// Which.
+    pub level: Level,
+    /// The limit, in the tag's unit.
+    pub limit: f64,
+    /// The alarm's severity.
+    pub severity: Severity,
+}
+
+/// A limit check on one numeric tag (`[[checks.limit]]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LimitCheck {
+    /// The check's id; each level's alarm is `<id>-hh`, `<id>-h`, ...
+    pub id: String,
+    /// The tag's address.
+    pub tag: Signal,
+    /// What the value is, for messages (`spindle temperature`).
+    pub label: String,
+    /// The unit, for messages (`°C`); may be empty.
+    pub unit: String,
+    /// Hysteresis, in the tag's unit (≥ 0).
+    pub deadband: f64,
+    /// How long an excursion must last to raise, ms.
+    pub on_delay: u64,
+    /// How long the return must last to clear, ms.
+    pub off_delay: u64,
+    /// The levels configured.
+    pub levels: Vec<LimitLevel>,
+}
+
+impl LimitCheck {
+    /// The alarm id of one level.
+    pub fn alarm_id(&self, level: Level) -> String {
+        format!("{}-{}", self.id, level.as_str().to_ascii_lowercase())
+    }
+}
+
+#[derive(Debug, Clone, Default)]
+struct LevelState {
+    active: bool,
+    /// The condition has wanted the other verdict since then (source
+    /// time); waiting out the delay.
+    pending_since: Option<u64>,
+    /// When the current excursion began (for "for how long").
+    excursion_since: Option<u64>,
+}
+
+/// Every limit check of a cell.
+pub struct LimitChecks {
+    checks: Vec<LimitCheck>,
+    /// Per check, per level.
+    states: Vec<Vec<LevelState>>,
+    /// Per check: the last known value.
+    values: Vec<Option<f64>>,
+    by_tag: HashMap<Signal, Vec<usize>>,
+}
+
+impl LimitChecks {
+    /// The checks, all levels normal.
+    pub fn new(checks: Vec<LimitCheck>) -> LimitChecks {
+        let mut by_tag: HashMap<Signal, Vec<usize>> = HashMap::new();
+        for (i, c) in checks.iter().enumerate() {
+            by_tag.entry(c.tag.clone()).or_default().push(i);
+        }
+        LimitChecks {
+            states: checks
+                .iter()
+                .map(|c| vec![LevelState::default(); c.levels.len()])
+                .collect(),
+            values: vec![None; checks.len()],
+            checks,
+            by_tag,
+        }
+    }
+
+    /// Moves check `i`'s levels on, at `now`.
+    fn evaluate(&mut self, i: usize, now: u64, out: &mut Vec<Finding>) {
+        let Some(value) = self.values[i] else {
+            for s in &mut self.states[i] {
+                s.pending_since = None;
+            }
+            return;
+        };
+        let check = &self.checks[i];
+        for (l, level) in check.levels.iter().enumerate() {
+            let s = &mut self.states[i][l];
+            let beyond = if level.level.is_high() {
+                value > level.limit
+            } else {
+                value < level.limit
+            };
+            let back = if level.level.is_high() {
+                value < level.limit - check.deadband
+            } else {
+                value > level.limit + check.deadband
+            };
+            if beyond && s.excursion_since.is_none() {
+                s.excursion_since = Some(now);
+            }
+            let wants = if s.active { !back } else { beyond };
+            if wants == s.active {
+                s.pending_since = None;
+                if !s.active && !beyond {
+                    s.excursion_since = None;
+                }
+                continue;
+            }
+            let since = *s.pending_since.get_or_insert(now);
+            let delay = if wants {
+                check.on_delay
+            } else {
+                check.off_delay
+            };
+            if now.saturating_sub(since) < delay {
+                continue;
+            }
+            s.active = wants;
+            s.pending_since = None;
+            let lasted = now.saturating_sub(s.excursion_since.unwrap_or(now));
+            if !wants {
+                s.excursion_since = None;
+            }
+            out.push(finding(check, level, value, wants, lasted));
+        }
+    }
+}
+
+fn finding(
+    check: &LimitCheck,
+    level: &LimitLevel,
+    value: f64,
+    active: bool,
+    lasted: u64,
+) -> Finding {
+    let unit = if check.unit.is_empty() {
+        String::new()
+    } else {
+        format!(" {}", check.unit)
+    };
+    let what = if check.label.is_empty() {
+        check.tag.to_string()
+    } else {
+        format!("{} ({})", check.tag, check.label)
+    };
+    let message = if active {
+        format!(
+            "{what} = {value}{unit}, {} the {} limit {}{unit} for {:.1} s",
+            if level.level.is_high() {
+                "above"
+            } else {
+                "below"
+            },
+            level.level,
+            level.limit,
+            lasted as f64 / 1000.0
+        )
+    } else {
+        format!(
+            "{what} = {value}{unit}, back within the {} limit {}{unit} (deadband {}) after {:.1} s",
+            level.level,
+            level.limit,
+            check.deadband,
+            lasted as f64 / 1000.0
+        )
+    };
+    Finding {
+        id: check.alarm_id(level.level),
+        kind: AlarmKind::Limit,
+        severity: level.severity,
+        fault_type: format!("{} {}", check.tag, level.level),
+        latched: false,
+        active,
+        fault_step: None,
+        culprits: Vec::new(),
+        message,
+    }
+}
+
+impl CheckSet for LimitChecks {
+    fn inputs(&self) -> Vec<Signal> {
+        Vec::new()
+    }
+
+    fn number_inputs(&self) -> Vec<Signal> {
+        self.by_tag.keys().cloned().collect()
+    }
+
+    fn on_change(
+        &mut self,
+        _signal: &Signal,
+        _value: Option<bool>,
+        _before: Option<bool>,
+        _now: u64,
+        _out: &mut Vec<Finding>,
+    ) {
+    }
+
+    fn on_number(&mut self, signal: &Signal, value: Option<Num>, now: u64, out: &mut Vec<Finding>) {
+        let Some(checks) = self.by_tag.get(signal).cloned() else {
+            return;
+        };
+        for i in checks {
+            self.values[i] = value.map(Num::as_f64);
+            self.evaluate(i, now, out);
+        }
+    }
+
+    fn advance(&mut self, now: u64, out: &mut Vec<Finding>) {
+        for i in 0..self.checks.len() {
+            if self.states[i].iter().any(|s| s.pending_since.is_some()) {
+                self.evaluate(i, now, out);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn check(deadband: f64, on_delay: u64) -> LimitChecks {
+        LimitChecks::new(vec![LimitCheck {
+            id: "temp".into(),
+            tag: Signal::new("TEMP"),
+            label: "spindle temperature".into(),
+            unit: "°C".into(),
+            deadband,
+            on_delay,
+            off_delay: 0,
+            levels: vec![
+                LimitLevel {
+                    level: Level::HH,
+                    limit: 95.0,
+                    severity: Severity::Critical,
+                },
+                LimitLevel {
+                    level: Level::H,
+                    limit: 80.0,
+                    severity: Severity::High,
+                },
+                LimitLevel {
+                    level: Level::L,
+                    limit: 10.0,
+                    severity: Severity::Low,
+                },
+                LimitLevel {
+                    level: Level::LL,
+                    limit: 5.0,
+                    severity: Severity::Medium,
+                },
+            ],
+        }])
+    }
+
+    fn feed(c: &mut LimitChecks, values: &[(u64, f64)]) -> Vec<(String, bool)> {
+        let mut out = Vec::new();
+        for &(at, v) in values {
+            c.on_number(&Signal::new("TEMP"), Some(Num::Float(v)), at, &mut out);
+        }
+        out.into_iter().map(|f| (f.id, f.active)).collect()
+    }
+
+    #[test]
+    fn a_value_hovering_inside_the_deadband_raises_once() {
+        let mut c = check(2.0, 0);
+        let seen = feed(
+            &mut c,
+            &[
+                (0, 79.0),
+                (1, 80.5),
+                (2, 79.5),
+                (3, 80.2),
+                (4, 78.5),
+                (5, 81.0),
+                (6, 77.9),
+            ],
+        );
+        assert_eq!(seen, [("temp-h".into(), true), ("temp-h".into(), false)]);
+    }
+
+    #[test]
+    fn every_level_raises_in_turn_with_its_own_alarm() {
+        let mut c = check(0.0, 0);
+        let seen = feed(&mut c, &[(0, 50.0), (1, 96.0), (2, 50.0), (3, 4.0)]);
+        assert_eq!(
+            seen,
+            [
+                ("temp-hh".into(), true),
+                ("temp-h".into(), true),
+                ("temp-hh".into(), false),
+                ("temp-h".into(), false),
+                ("temp-l".into(), true),
+                ("temp-ll".into(), true),
+            ]
+        );
+    }
+
+    #[test]
+    fn the_on_delay_ignores_a_short_excursion_and_raises_a_long_one() {
+        let mut c = check(0.0, 2000);
+        assert!(feed(&mut c, &[(0, 50.0), (1000, 85.0), (2000, 70.0)]).is_empty());
+        let mut out = Vec::new();
+        c.advance(10_000, &mut out);
+        assert!(out.is_empty(), "a 1 s excursion raises nothing");
+        assert!(feed(&mut c, &[(20_000, 85.0)]).is_empty());
+        c.advance(21_999, &mut out);
+        assert!(out.is_empty());
+        c.advance(22_000, &mut out);
+        assert_eq!(out.len(), 1);
+        assert_eq!(out[0].id, "temp-h");
+        assert_eq!(
+            out[0].message,
+            "TEMP (spindle temperature) = 85 °C, above the H limit 80 °C for 2.0 s"
+        );
+    }
+
+    #[test]
+    fn an_unknown_value_holds_the_verdict() {
+        let mut c = check(0.0, 0);
+        assert_eq!(feed(&mut c, &[(0, 85.0)]), [("temp-h".into(), true)]);
+        let mut out = Vec::new();
+        c.on_number(&Signal::new("TEMP"), None, 1, &mut out);
+        assert!(out.is_empty());
+        assert!(feed(&mut c, &[(2, 85.0)]).is_empty());
+    }
+}
