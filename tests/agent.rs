@@ -85,6 +85,35 @@ impl Fixture {
         }
     }
 
+    pub(crate) fn client(&self) -> &zenoh::Session {
+        &self.client
+    }
+
+    /// The agent's journal file.
+    pub(crate) fn journal_path(&self) -> PathBuf {
+        self.config.journal.path.clone()
+    }
+
+    /// Stops the agent (its journal drains and closes).
+    pub(crate) async fn stop(&mut self) {
+        if let Some(a) = self.agent.take() {
+            a.stop().await;
+        }
+    }
+
+    /// Waits until the agent's snapshot shows tag `address` at `value`
+    /// (any JSON value: a number, a string).
+    pub(crate) async fn tag_value_is(&self, address: &str, value: serde_json::Value) {
+        self.snapshot_until(&format!("{address} never became {value}"), |snap| {
+            snap["tags"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|t| t["address"] == address && t["value"] == value)
+        })
+        .await;
+    }
+
     pub(crate) fn agent(&self) -> &Agent {
         self.agent.as_ref().unwrap()
     }
@@ -160,7 +189,7 @@ impl Fixture {
 }
 
 /// Receives alarm payloads until `f` accepts one.
-async fn alarm_until(
+pub(crate) async fn alarm_until(
     sub: &zenoh_ext::AdvancedSubscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
     what: &str,
     seen: &mut Vec<AlarmPayload>,

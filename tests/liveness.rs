@@ -264,7 +264,7 @@ const PUBLISH_RESPONSE: [u8; 4] = [0x01, 0x00, 0x3D, 0x03];
 
 /// A simulated CNC with an endpoint without security, and a configuration
 /// reaching it through the relay `relay` makes for the server's address.
-async fn insecure_behind<F>(
+pub(crate) async fn insecure_behind<F>(
     dir: &Path,
     relay: impl FnOnce(SocketAddr) -> F,
 ) -> (SimulatedCnc, OpcUaConfig)

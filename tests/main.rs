@@ -22,4 +22,5 @@ mod restart;
 mod sf;
 mod spawned;
 mod timers;
+mod typed;
 mod util;

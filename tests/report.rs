@@ -8,6 +8,7 @@ use cellwatch::config;
 use cellwatch::sinks::journal::{CommitObserver, Entry, Journal};
 use cellwatch_models::engine::{CellEngine, EngineEvent, Reading, SwitchingChecks};
 use cellwatch_models::signal::Signal;
+use cellwatch_models::value::Num;
 
 use crate::util::{cellwatch, root};
 
@@ -72,6 +73,13 @@ async fn scripted_journal(path: &std::path::Path) {
             record(set(&mut e, a, v == "1", DAY), &mut entries);
         }
     }
+    // The mode word says AUTO (the running rule reads `D104 == 1`).
+    let mode = e.tag_index(&Signal::new("D104")).unwrap();
+    record(
+        e.on_reading(mode, Reading::Number(Num::Int(1)), DAY, DAY)
+            .events,
+        &mut entries,
+    );
     // 01:00-01:30 the Y over-travel switch is open: ESE.
     record(set(&mut e, "X0.06", false, DAY + 60 * MIN), &mut entries);
     record(set(&mut e, "X0.06", true, DAY + 90 * MIN), &mut entries);

@@ -890,11 +890,7 @@ pub type ReportInput = (Vec<cellwatch_models::report::StateChange>, Vec<(u64, u6
 ///
 /// # Errors
 /// SQLite failing.
-pub fn report_input(
-    conn: &Connection,
-    since: u64,
-    until: u64,
-) -> rusqlite::Result<ReportInput> {
+pub fn report_input(conn: &Connection, since: u64, until: u64) -> rusqlite::Result<ReportInput> {
     let mut changes = Vec::new();
     let row = |r: &rusqlite::Row<'_>| {
         Ok(cellwatch_models::report::StateChange {

@@ -1,0 +1,249 @@
+//! Numbers in the engine: comparisons used as contacts (in the running rule
+//! and in `armed_when`), a value of the wrong type, a parts counter that
+//! wraps and resets, limit checks with delays in virtual time, exported
+//! values.
+
+#![allow(clippy::unwrap_used)] // test helpers fail loudly by design
+
+use cellwatch_models::alarm::{AlarmKind, Severity, Transition};
+use cellwatch_models::comments::CommentDb;
+use cellwatch_models::engine::{
+    CellEngine, CheckSet, MachineState, PartCounting, Reading, StateRules, SwitchingCheck,
+    SwitchingChecks, Tag,
+};
+use cellwatch_models::explain::Polarity;
+use cellwatch_models::expr::Expr;
+use cellwatch_models::limit::{Level, LimitCheck, LimitChecks, LimitLevel};
+use cellwatch_models::program::Program;
+use cellwatch_models::signal::{Observability, Signal};
+use cellwatch_models::switching::SwitchingFunction;
+use cellwatch_models::value::{Counter, Num, ValueType};
+
+const ESE: &str = include_str!("../../config/cnc/ese.il");
+const NORMAL: &str = include_str!("../../config/cnc/ese-normal.values");
+
+/// The ESE machine's contacts, then `MODE` (the mode word), `TEMP` and
+/// `COUNT`; ESE armed only in AUTO (`MODE == 1`); running while
+/// `G0.00 * TEMP < 90`.
+fn engine(limits: Vec<LimitCheck>) -> CellEngine {
+    let p = Program::compile("ese.il", ESE, None).unwrap();
+    let sf = SwitchingFunction::expand(
+        &p,
+        &Signal::new("G8.02"),
+        &Observability::default_for(p.dialect()),
+    )
+    .unwrap();
+    let mut tags: Vec<Tag> = sf
+        .leaves()
+        .into_iter()
+        .map(|s| Tag {
+            name: s.name().to_lowercase(),
+            address: s,
+        })
+        .collect();
+    for n in ["MODE", "TEMP", "COUNT"] {
+        tags.push(Tag {
+            name: n.to_lowercase(),
+            address: Signal::new(n),
+        });
+    }
+    let check = SwitchingCheck {
+        id: "ese".into(),
+        sf,
+        polarity: Polarity::On,
+        severity: Severity::Critical,
+        fault_type: "ESE".into(),
+        comments: CommentDb::default(),
+        armed_when: Some(SwitchingFunction::from_expr(
+            Signal::new("ese.armed"),
+            &Expr::parse("MODE == 1").unwrap(),
+        )),
+    };
+    let rules = StateRules {
+        running: Some(Expr::parse("G0.00 * TEMP < 90").unwrap()),
+        fault_severity: Severity::High,
+    };
+    let mut sets: Vec<Box<dyn CheckSet>> = vec![Box::new(SwitchingChecks::new(vec![check]))];
+    if !limits.is_empty() {
+        sets.push(Box::new(LimitChecks::new(limits)));
+    }
+    let count = tags.len() - 1;
+    CellEngine::new("m01", tags, sets, rules)
+        .unwrap()
+        .counting(PartCounting::Counter(
+            count,
+            Counter::new(ValueType::UInt16.max().unwrap()),
+        ))
+        .exporting([count - 1])
+}
+
+fn tag(e: &CellEngine, a: &str) -> usize {
+    e.tag_index(&Signal::new(a)).unwrap()
+}
+
+fn number(e: &mut CellEngine, a: &str, v: Num, at: u64) -> cellwatch_models::engine::Step {
+    let t = tag(e, a);
+    e.on_reading(t, Reading::Number(v), at, at)
+}
+
+fn contact(e: &mut CellEngine, a: &str, v: bool, at: u64) -> cellwatch_models::engine::Step {
+    let t = tag(e, a);
+    e.on_reading(t, Reading::Good(v), at, at)
+}
+
+fn load_normal(e: &mut CellEngine, at: u64) {
+    e.on_connection(true, at);
+    for line in NORMAL
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with("address"))
+    {
+        let (a, v) = line.split_once(',').unwrap();
+        if e.tag_index(&Signal::new(a)).is_some() {
+            contact(e, a, v == "1", at);
+        }
+    }
+}
+
+fn raised(step: &cellwatch_models::engine::Step) -> Vec<String> {
+    step.alarms()
+        .filter(|(_, t, _)| *t == Transition::Raised)
+        .map(|(a, _, _)| a.id.clone())
+        .collect()
+}
+
+#[test]
+fn a_comparison_in_the_running_rule_decides_the_state() {
+    let mut e = engine(Vec::new());
+    load_normal(&mut e, 1);
+    assert_eq!(*e.state(), MachineState::Idle, "TEMP unknown: not running");
+    number(&mut e, "TEMP", Num::Float(40.0), 2);
+    assert_eq!(*e.state(), MachineState::Running);
+    let step = number(&mut e, "TEMP", Num::Float(90.5), 3);
+    assert_eq!(*e.state(), MachineState::Idle, "TEMP < 90 no longer holds");
+    assert_eq!(step.states().count(), 1);
+    number(&mut e, "TEMP", Num::Float(89.9), 4);
+    assert_eq!(*e.state(), MachineState::Running);
+}
+
+#[test]
+fn a_comparison_in_armed_when_arms_the_check() {
+    let mut e = engine(Vec::new());
+    load_normal(&mut e, 1);
+    number(&mut e, "MODE", Num::Int(2), 2);
+    // JOG: the over-travel switch opens, the check is not armed.
+    assert!(raised(&contact(&mut e, "X0.06", false, 3)).is_empty());
+    contact(&mut e, "X0.06", true, 4);
+    number(&mut e, "MODE", Num::Int(1), 5);
+    // AUTO: the same fault raises.
+    assert_eq!(raised(&contact(&mut e, "X0.06", false, 6)), ["ese"]);
+}
+
+#[test]
+fn a_value_of_the_wrong_type_is_bad_quality_naming_what_came() {
+    let mut e = engine(Vec::new());
+    load_normal(&mut e, 1);
+    let t = tag(&e, "X0.06");
+    let step = e.on_reading(
+        t,
+        Reading::WrongType {
+            expected: ValueType::Boolean,
+            received: Some(ValueType::Double),
+        },
+        2,
+        2,
+    );
+    let (alarm, transition, _) = step.alarms().next().unwrap();
+    assert_eq!(transition, Transition::Raised);
+    assert_eq!(alarm.kind, AlarmKind::TagQuality);
+    assert_eq!(
+        alarm.message,
+        "bad or uncertain quality, checks reading them suspended: X0.06 (x0.06): Double received where Boolean is expected"
+    );
+    assert_eq!(e.values()[t], None, "the contact is unknown");
+}
+
+#[test]
+fn a_counter_counts_exactly_its_increments_through_wrap_and_reset() {
+    let mut e = engine(Vec::new());
+    load_normal(&mut e, 1);
+    let mut parts = 0;
+    let mut at = 10;
+    for v in (0..=65535u64).chain([0]).chain(1..=120).chain([0, 1, 2]) {
+        at += 1;
+        parts += number(&mut e, "COUNT", Num::UInt(v), at)
+            .parts
+            .iter()
+            .map(|&(_, n)| n)
+            .sum::<u64>();
+    }
+    assert_eq!(parts, 65535 + 1 + 120 + 2);
+    // Unknown while the connection is down; the value after it counts
+    // against the last one seen.
+    e.on_connection(false, at + 1);
+    e.on_connection(true, at + 2);
+    let step = number(&mut e, "COUNT", Num::UInt(7), at + 3);
+    assert_eq!(step.parts, [(at + 3, 5)]);
+}
+
+#[test]
+fn limit_levels_through_the_engine_with_an_on_delay_in_virtual_time() {
+    let limit = LimitCheck {
+        id: "temp".into(),
+        tag: Signal::new("TEMP"),
+        label: "temp".into(),
+        unit: "°C".into(),
+        deadband: 2.0,
+        on_delay: 2000,
+        off_delay: 0,
+        levels: vec![LimitLevel {
+            level: Level::H,
+            limit: 85.0,
+            severity: Severity::High,
+        }],
+    };
+    let mut e = engine(vec![limit]);
+    load_normal(&mut e, 0);
+    number(&mut e, "TEMP", Num::Float(40.0), 1_000);
+    // A 1 s excursion: nothing.
+    assert!(raised(&number(&mut e, "TEMP", Num::Float(86.0), 10_000)).is_empty());
+    assert!(raised(&e.advance(10_900)).is_empty());
+    number(&mut e, "TEMP", Num::Float(60.0), 11_000);
+    assert!(raised(&e.advance(20_000)).is_empty());
+    // Above 85 for 2 s: raised once; then hovering around 85 within the
+    // deadband: no clear, no second raise.
+    let mut seen = Vec::new();
+    let values = [86.0, 85.5, 86.5, 85.2, 86.5, 84.0, 86.0, 83.5, 85.5, 84.5];
+    for (i, v) in values.into_iter().enumerate() {
+        let at = 30_000 + i as u64 * 500;
+        let step = number(&mut e, "TEMP", Num::Float(v), at);
+        seen.extend(raised(&step));
+        assert!(step.alarms().all(|(_, t, _)| t != Transition::Cleared));
+        seen.extend(raised(&e.advance(at + 250)));
+        if i == 3 {
+            assert!(seen.is_empty(), "not before 2 s");
+        }
+    }
+    assert_eq!(seen, ["temp-h"]);
+    let a = e.alarms().find(|a| a.id == "temp-h").unwrap();
+    assert!(a.active);
+    assert_eq!(
+        a.message, "TEMP (temp) = 86.5 °C, above the H limit 85 °C for 2.0 s",
+        "value, limit, unit and how long"
+    );
+    let step = number(&mut e, "TEMP", Num::Float(82.9), 40_000);
+    assert!(step
+        .alarms()
+        .any(|(a, t, _)| a.id == "temp-h" && t == Transition::Cleared));
+}
+
+#[test]
+fn exported_tags_report_their_changes() {
+    let mut e = engine(Vec::new());
+    load_normal(&mut e, 1);
+    let temp = tag(&e, "TEMP");
+    let step = number(&mut e, "TEMP", Num::Float(41.5), 2);
+    assert_eq!(step.exported, [(temp, Some(41.5))]);
+    assert!(number(&mut e, "MODE", Num::Int(1), 3).exported.is_empty());
+    let step = e.on_connection(false, 4);
+    assert_eq!(step.exported, [(temp, None)]);
+}
