@@ -210,3 +210,132 @@ async fn the_agent_raises_a_limit_alarm_and_counts_parts_through_wrap_and_reset(
     let v: serde_json::Value = serde_json::from_str(&r.stdout).unwrap();
     assert_eq!(v["production"], expected, "{v}");
 }
+
+/// The per-tag deadband goes to the server as the data-change filter: a
+/// change smaller than it is never sent.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_tags_deadband_filters_small_changes_at_the_server() {
+    let dir = tempfile::tempdir().unwrap();
+    let (sim, config) = insecure_behind(dir.path(), |addr| async move { addr }).await;
+    sim.add_register("D300", Variant::Double(10.0)).unwrap();
+    let mut tag = typed("D300", ValueType::Double, None);
+    tag.deadband = Some(cellwatch::config::Deadband::Absolute(5.0));
+    tag.sampling_interval = Some(std::time::Duration::ZERO);
+    let mut source = Running::start(config, vec![tag]);
+    assert_eq!(
+        readings(&mut source, 1).await,
+        [Reading::Number(Num::Float(10.0))]
+    );
+    for v in [12.0, 14.5, 20.0] {
+        sim.set_registers(&[("D300".into(), Variant::Double(v))])
+            .unwrap();
+    }
+    // 12 and 14.5 are within 5 of 10: the only value sent is 20.
+    let mut sent = Vec::new();
+    while sent.last() != Some(&Reading::Number(Num::Float(20.0))) {
+        if let SourceEvent::Readings(rs) = next(&mut source.rx, "20", |e| {
+            matches!(e, SourceEvent::Readings(_))
+        })
+        .await
+        {
+            sent.extend(rs.into_iter().map(|r| r.reading));
+        }
+    }
+    assert_eq!(sent, [Reading::Number(Num::Float(20.0))]);
+    source.stop().await;
+    sim.stop();
+}
+
+/// `cellwatch discover` against the simulated CNC prints a configuration
+/// that validates and reads the same nodes, with the same types, as
+/// `config/demo.toml`; `--check` names what a configuration gets wrong.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn discover_prints_a_configuration_of_the_demos_tags_and_checks_one() {
+    use cellwatch::sim::cnc::{SimOptions, SimulatedCnc};
+    use cellwatch::sources::{opcua, pki};
+    let dir = tempfile::tempdir().unwrap();
+    let sim = SimulatedCnc::start(&SimOptions {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        pki_dir: dir.path().join("sim-pki"),
+        insecure: false,
+        decoy: None,
+    })
+    .await
+    .unwrap();
+    let pki_dir = dir.path().join("pki");
+    let mut ours = crate::opcua::opcua_config(&sim.endpoint(), &pki_dir);
+    ours.pki_dir = pki_dir.clone();
+    drop(opcua::client("discover", &ours).unwrap());
+    pki::trust(&pki::own_cert(&pki_dir), &dir.path().join("sim-pki")).unwrap();
+    pki::trust(&pki::own_cert(&dir.path().join("sim-pki")), &pki_dir).unwrap();
+
+    let endpoint = sim.endpoint();
+    let pki = pki_dir.to_str().unwrap().to_string();
+    let r =
+        tokio::task::spawn_blocking(move || cellwatch(&["discover", &endpoint, "--pki-dir", &pki]))
+            .await
+            .unwrap();
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let found = dir.path().join("found.toml");
+    std::fs::write(&found, &r.stdout).unwrap();
+    let v = cellwatch(&["validate", found.to_str().unwrap()]);
+    assert_eq!(v.code, 0, "{}\n{}", v.stderr, r.stdout);
+
+    let discovered = cellwatch::config::load(&found).unwrap();
+    let demo = cellwatch::config::load(&root().join("config/demo.toml")).unwrap();
+    let node = |t: &TagConfig, uri: Option<&str>| opcua::TagNode::parse(&t.node_id, uri).unwrap();
+    let by_address: std::collections::HashMap<_, _> = discovered
+        .tags
+        .iter()
+        .map(|t| (t.address.clone(), t))
+        .collect();
+    for t in &demo.tags {
+        let d = by_address
+            .get(&t.address)
+            .unwrap_or_else(|| panic!("{} not discovered:\n{}", t.address, r.stdout));
+        assert_eq!(
+            node(d, None),
+            node(t, demo.opcua.namespace_uri.as_deref()),
+            "{}",
+            t.address
+        );
+        assert_eq!(d.value_type, t.value_type, "{}", t.address);
+    }
+    // Besides the demo's tags, the server has only the fault coils.
+    let mut extra: Vec<String> = discovered
+        .tags
+        .iter()
+        .filter(|d| !demo.tags.iter().any(|t| t.address == d.address))
+        .map(|d| d.address.to_string())
+        .collect();
+    extra.sort();
+    assert_eq!(extra, ["G8.02", "G9.00"]);
+    let temp = by_address[&Signal::new("D100")];
+    assert_eq!(
+        temp.comment.as_deref(),
+        Some("Spindle temperature, degrees C")
+    );
+
+    // A configuration with a wrong type and a tag the server lacks.
+    let (tags, _) = r.stdout.split_once("\n[zenoh]").unwrap();
+    let wrong = tags.replace("type = \"UInt16\"", "type = \"Int32\"")
+        + "\n[[tags]]\nname = \"ghost\"\nnode_id = \"nsu=urn:cellwatch:sim:cnc:plc;s=X99.00\"\naddress = \"X99.00\"\n\n[zenoh]\nplain = true\n";
+    let checked = dir.path().join("wrong.toml");
+    std::fs::write(&checked, wrong).unwrap();
+    let checked = checked.to_str().unwrap().to_string();
+    let c = tokio::task::spawn_blocking(move || cellwatch(&["discover", "--check", &checked]))
+        .await
+        .unwrap();
+    assert_eq!(c.code, 1, "{}\n{}", c.stdout, c.stderr);
+    assert_eq!(
+        c.stdout,
+        "d108 (D108): typed differently: the configuration says Int32, the server has UInt16\n\
+         ghost (X99.00): missing: nsu=urn:cellwatch:sim:cnc:plc;s=X99.00 (no such node)\n"
+    );
+    assert!(
+        c.stderr.contains("2 of 44 tags do not match the server"),
+        "{}",
+        c.stderr
+    );
+    sim.stop();
+}

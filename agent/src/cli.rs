@@ -86,6 +86,14 @@ enum Command {
     /// Production reports from a journal: per-hour run/idle/fault minutes,
     /// availability, stop causes and production (daily), or per day (monthly).
     Report(ReportArgs),
+    /// Browse an OPC UA server and print its variables as a cell
+    /// configuration (`[[tags]]` with node ids by namespace URI, address,
+    /// data type and comment), or check a configuration's tags against it.
+    ///
+    /// Connects as `run` does: the security policy and mode given, the PKI
+    /// directory's key pair, a server certificate trusted only from its
+    /// `trusted/` folder.
+    Discover(DiscoverArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -285,6 +293,84 @@ pub(crate) struct LineArgs {
 pub(crate) struct RunArgs {
     /// The cell configuration (TOML).
     pub(crate) config: PathBuf,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct DiscoverArgs {
+    /// The server's endpoint (opc.tcp://host:port/path); with --check, the
+    /// configuration's endpoint unless given.
+    #[arg(required_unless_present = "check")]
+    pub(crate) endpoint: Option<String>,
+    /// Where to start browsing (a node id: nsu=<uri>;s=Machine or
+    /// ns=2;i=1000); the Objects folder by default.
+    #[arg(long)]
+    pub(crate) root: Option<String>,
+    /// How many levels of folders and objects to descend.
+    #[arg(long, default_value_t = 10)]
+    pub(crate) depth: u32,
+    /// Only variables whose browse name matches this glob (`X0.*`, `D1??`).
+    #[arg(long)]
+    pub(crate) filter: Option<String>,
+    /// Check this cell configuration instead: report the tags the server
+    /// lacks or types differently (exit status 1 if any); connects with
+    /// the configuration's [opcua] settings.
+    #[arg(long)]
+    pub(crate) check: Option<PathBuf>,
+    /// PKI directory (own key pair, trusted/ and rejected/ certificates).
+    #[arg(long, default_value = "pki")]
+    pub(crate) pki_dir: PathBuf,
+    /// Basic256Sha256 | Aes128_Sha256_RsaOaep | Aes256_Sha256_RsaPss | None.
+    #[arg(long, default_value = "Basic256Sha256")]
+    pub(crate) security_policy: crate::config::SecurityPolicy,
+    /// SignAndEncrypt | Sign | None.
+    #[arg(long, default_value = "SignAndEncrypt")]
+    pub(crate) security_mode: crate::config::SecurityMode,
+    /// Log in as this user (the password from --password-env).
+    #[arg(long, requires = "password_env")]
+    pub(crate) user: Option<String>,
+    /// The environment variable holding the user's password.
+    #[arg(long)]
+    pub(crate) password_env: Option<String>,
+}
+
+impl DiscoverArgs {
+    /// The connection the flags describe.
+    pub(crate) fn opcua(&self) -> Result<crate::config::OpcUaConfig, Failure> {
+        use crate::config::{Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy};
+        let endpoint = self.endpoint.clone().unwrap_or_default();
+        if !endpoint.starts_with("opc.tcp://") {
+            return Err(Failure::input(format!(
+                "'{endpoint}' must start with opc.tcp://"
+            )));
+        }
+        if (self.security_policy == SecurityPolicy::None)
+            != (self.security_mode == SecurityMode::None)
+        {
+            return Err(Failure::input(
+                "--security-policy None goes with --security-mode None, and only with it",
+            ));
+        }
+        let publishing = std::time::Duration::from_millis(100);
+        let sampling = std::time::Duration::from_millis(50);
+        Ok(OpcUaConfig {
+            endpoint,
+            policy: self.security_policy,
+            mode: self.security_mode,
+            pki_dir: self.pki_dir.clone(),
+            identity: match (&self.user, &self.password_env) {
+                (Some(user), Some(var)) => Identity::User {
+                    user: user.clone(),
+                    password: PasswordSource::Env(var.clone()),
+                },
+                _ => Identity::Anonymous,
+            },
+            publishing_interval: publishing,
+            sampling_interval: sampling,
+            namespace_uri: None,
+            queue_size: OpcUaConfig::default_queue_size(publishing, sampling),
+            max_notifications_per_publish: 10_000,
+        })
+    }
 }
 
 #[derive(Debug, clap::Args)]
@@ -531,6 +617,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             | Command::History(_)
             | Command::Ack(_)
             | Command::Reset(_)
+            | Command::Discover(_)
     );
     let filter = std::env::var("RUST_LOG").unwrap_or_else(|_| {
         if quiet {
@@ -561,6 +648,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::History(args) => commands::subscribers::history(&args, out).await,
             Command::Ack(args) => commands::subscribers::command(Action::Ack, &args, out).await,
             Command::Reset(args) => commands::subscribers::command(Action::Reset, &args, out).await,
+            Command::Discover(args) => commands::discover::run(&args, out).await,
             // Dispatched synchronously by `run`; never sent here.
             Command::Sf(_)
             | Command::Explain(_)

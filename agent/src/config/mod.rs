@@ -75,6 +75,50 @@ pub enum SecurityMode {
     SignAndEncrypt,
 }
 
+impl SecurityMode {
+    /// The name as OPC UA tools write it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SecurityMode::None => "None",
+            SecurityMode::Sign => "Sign",
+            SecurityMode::SignAndEncrypt => "SignAndEncrypt",
+        }
+    }
+}
+
+impl FromStr for SecurityMode {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        [
+            SecurityMode::None,
+            SecurityMode::Sign,
+            SecurityMode::SignAndEncrypt,
+        ]
+        .into_iter()
+        .find(|m| m.as_str() == s)
+        .ok_or_else(|| format!("unknown mode '{s}': use SignAndEncrypt, Sign or None"))
+    }
+}
+
+impl FromStr for SecurityPolicy {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        [
+            SecurityPolicy::None,
+            SecurityPolicy::Basic256Sha256,
+            SecurityPolicy::Aes128Sha256RsaOaep,
+            SecurityPolicy::Aes256Sha256RsaPss,
+        ]
+        .into_iter()
+        .find(|p| p.as_str() == s)
+        .ok_or_else(|| {
+            format!("unknown policy '{s}': use Basic256Sha256, Aes128_Sha256_RsaOaep, Aes256_Sha256_RsaPss or None")
+        })
+    }
+}
+
 /// Where the OPC UA password comes from.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum PasswordSource {

@@ -60,6 +60,9 @@ pub enum SourceError {
     /// The password could not be read.
     #[error("OPC UA identity: {0}")]
     Identity(String),
+    /// A one-off connection failed (sources retry instead).
+    #[error("OPC UA connection: {0}")]
+    Connect(String),
 }
 
 /// A producer of tag values for one cell.

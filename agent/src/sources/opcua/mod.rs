@@ -273,6 +273,52 @@ pub async fn run(
     }
 }
 
+/// A session for a one-off job (`cellwatch discover`): connected with the
+/// same security, PKI and identity as the source, its event loop running
+/// on its own task (stop it by disconnecting the session and aborting
+/// the task).
+///
+/// # Errors
+/// The client cannot be configured or the server cannot be reached.
+pub async fn connect_once(
+    name: &str,
+    config: &OpcUaConfig,
+) -> Result<
+    (
+        Arc<Session>,
+        tokio::task::JoinHandle<opcua::types::StatusCode>,
+    ),
+    SourceError,
+> {
+    let mut client = client(name, config)?;
+    let token = identity(config)?;
+    let endpoint = server_endpoint(&client, config)
+        .await
+        .map_err(|e| SourceError::Connect(format!("{}: {e}", config.endpoint)))?;
+    let (session, event_loop) = client
+        .connect_to_endpoint_directly(endpoint, token)
+        .map_err(|e| SourceError::Connect(format!("{}: {e}", config.endpoint)))?;
+    let task = event_loop.spawn();
+    let up = tokio::time::timeout(Duration::from_secs(15), session.wait_for_connection()).await;
+    if up != Ok(true) {
+        task.abort();
+        return Err(SourceError::Connect(format!(
+            "{}: no session (is the server's certificate in {}/trusted, and ours trusted by the server?)",
+            config.endpoint,
+            config.pki_dir.display()
+        )));
+    }
+    Ok((session, task))
+}
+
+/// The server's `NamespaceArray` (index → URI).
+///
+/// # Errors
+/// The read fails or the value is not an array of strings.
+pub async fn namespaces(session: &Session) -> Result<Vec<String>, String> {
+    namespace_array(session).await
+}
+
 /// The server's endpoint with the configured policy and mode, at the
 /// configured address. The server's own endpoint URL is not used: a server
 /// behind NAT or port forwarding advertises an address the agent may not

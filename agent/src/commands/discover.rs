@@ -1,0 +1,406 @@
+//! `cellwatch discover`: browse an OPC UA server and print its variables as
+//! a cell configuration, or check a configuration's tags against it.
+
+use std::collections::{BTreeMap, HashSet, VecDeque};
+use std::io::Write;
+
+use ::opcua::client::Session;
+use ::opcua::types::{
+    AttributeId, BrowseDescription, BrowseDirection, BrowseResultMask, DataValue, NodeClass,
+    NodeId, ReadValueId, ReferenceTypeId, StatusCode, TimestampsToReturn, Variant,
+};
+use cellwatch_models::value::ValueType;
+
+use crate::cli::{DiscoverArgs, Failure};
+use crate::config::{self, OpcUaConfig, TagConfig};
+use crate::sources::opcua::{self, TagNode};
+
+/// The most variables one discovery collects (memory stays bounded on a
+/// server with millions of nodes; narrow with --root and --filter).
+const MAX_VARIABLES: usize = 100_000;
+/// Nodes per Browse and Read call.
+const CHUNK: usize = 500;
+
+/// A variable found on the server.
+struct Found {
+    node: NodeId,
+    browse_name: String,
+    data_type: Result<ValueType, String>,
+    description: Option<String>,
+}
+
+pub(crate) async fn run(args: &DiscoverArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    let (opcua, check) = match &args.check {
+        Some(path) => {
+            let c = config::load(path).map_err(Failure::input)?;
+            let mut o = c.opcua.clone();
+            if let Some(e) = &args.endpoint {
+                o.endpoint = e.clone();
+            }
+            (o, Some(c))
+        }
+        None => (args.opcua()?, None),
+    };
+    let (session, task) = opcua::connect_once("discover", &opcua)
+        .await
+        .map_err(Failure::runtime)?;
+    let result = async {
+        let namespaces = opcua::namespaces(&session)
+            .await
+            .map_err(|e| Failure::runtime(format!("cannot read the namespace array: {e}")))?;
+        match &check {
+            Some(c) => check_tags(&session, &namespaces, &c.tags, out).await,
+            None => {
+                let root = match &args.root {
+                    None => NodeId::objects_folder_id(),
+                    Some(text) => TagNode::parse(text, None)
+                        .map_err(Failure::input)?
+                        .resolve(&namespaces)
+                        .ok_or_else(|| {
+                            Failure::input(format!(
+                                "--root {text}: the server has no such namespace"
+                            ))
+                        })?,
+                };
+                let filter = match &args.filter {
+                    None => None,
+                    Some(g) => Some(
+                        glob::Pattern::new(g)
+                            .map_err(|e| Failure::input(format!("--filter '{g}': {e}")))?,
+                    ),
+                };
+                let found = browse(&session, root, args.depth, filter.as_ref()).await?;
+                print_config(&opcua, &namespaces, &found, out).map_err(Failure::output)
+            }
+        }
+    }
+    .await;
+    let _ = session.disconnect().await;
+    task.abort();
+    result
+}
+
+/// Every variable under `root`, `depth` levels of hierarchical references
+/// deep, whose browse name matches `filter`, with type and description.
+/// Nodes of namespace 0 (the OPC UA standard's own: the Server object) are
+/// left out.
+async fn browse(
+    session: &Session,
+    root: NodeId,
+    depth: u32,
+    filter: Option<&glob::Pattern>,
+) -> Result<Vec<Found>, Failure> {
+    let mut seen: HashSet<NodeId> = HashSet::from([root.clone()]);
+    let mut queue: VecDeque<(NodeId, u32)> = VecDeque::from([(root, 0)]);
+    let mut variables: Vec<(NodeId, String)> = Vec::new();
+    while !queue.is_empty() {
+        let batch: Vec<(NodeId, u32)> = queue.drain(..queue.len().min(CHUNK)).collect();
+        let request: Vec<BrowseDescription> = batch
+            .iter()
+            .map(|(n, _)| BrowseDescription {
+                node_id: n.clone(),
+                browse_direction: BrowseDirection::Forward,
+                reference_type_id: ReferenceTypeId::HierarchicalReferences.into(),
+                include_subtypes: true,
+                node_class_mask: NodeClass::Object as u32 | NodeClass::Variable as u32,
+                result_mask: BrowseResultMask::All as u32,
+            })
+            .collect();
+        let mut results = session
+            .browse(&request, 1000, None)
+            .await
+            .map_err(|e| Failure::runtime(format!("browse failed: {e}")))?;
+        let mut levels: Vec<u32> = batch.iter().map(|(_, d)| *d).collect();
+        loop {
+            let mut more = Vec::new();
+            let mut more_levels = Vec::new();
+            for (r, level) in results.iter().zip(&levels) {
+                for rd in r.references.iter().flatten() {
+                    if rd.node_id.server_index != 0 || rd.node_id.node_id.is_null() {
+                        continue;
+                    }
+                    let node = rd.node_id.node_id.clone();
+                    // The OPC UA namespace itself (the Server object, its
+                    // capabilities and diagnostics) is no PLC data.
+                    if node.namespace == 0 || !seen.insert(node.clone()) {
+                        continue;
+                    }
+                    let name = rd.browse_name.name.as_ref().to_string();
+                    if rd.node_class == NodeClass::Variable
+                        && filter.is_none_or(|f| f.matches(&name))
+                    {
+                        if variables.len() >= MAX_VARIABLES {
+                            return Err(Failure::runtime(format!(
+                                "more than {MAX_VARIABLES} variables: narrow the search with --root, --depth or --filter"
+                            )));
+                        }
+                        variables.push((node.clone(), name));
+                    }
+                    if rd.node_class == NodeClass::Object && level + 1 < depth {
+                        queue.push_back((node, level + 1));
+                    }
+                }
+                if !r.continuation_point.is_null() {
+                    more.push(r.continuation_point.clone());
+                    more_levels.push(*level);
+                }
+            }
+            if more.is_empty() {
+                break;
+            }
+            results = session
+                .browse_next(false, &more)
+                .await
+                .map_err(|e| Failure::runtime(format!("browse failed: {e}")))?;
+            levels = more_levels;
+        }
+    }
+    let nodes: Vec<NodeId> = variables.iter().map(|(n, _)| n.clone()).collect();
+    let types = read_attribute(session, &nodes, AttributeId::DataType).await?;
+    let descriptions = read_attribute(session, &nodes, AttributeId::Description).await?;
+    Ok(variables
+        .into_iter()
+        .zip(types.iter().zip(&descriptions))
+        .map(|((node, browse_name), (t, d))| Found {
+            node,
+            browse_name,
+            data_type: value_type(t),
+            description: match &d.value {
+                Some(Variant::LocalizedText(t)) if !t.text.is_empty() => {
+                    Some(t.text.as_ref().to_string())
+                }
+                _ => None,
+            },
+        })
+        .collect())
+}
+
+async fn read_attribute(
+    session: &Session,
+    nodes: &[NodeId],
+    attribute: AttributeId,
+) -> Result<Vec<DataValue>, Failure> {
+    let mut out = Vec::with_capacity(nodes.len());
+    for part in nodes.chunks(CHUNK) {
+        let ids: Vec<ReadValueId> = part
+            .iter()
+            .map(|n| ReadValueId {
+                node_id: n.clone(),
+                attribute_id: attribute as u32,
+                ..Default::default()
+            })
+            .collect();
+        out.extend(
+            session
+                .read(&ids, TimestampsToReturn::Neither, 0.0)
+                .await
+                .map_err(|e| Failure::runtime(format!("read failed: {e}")))?,
+        );
+    }
+    Ok(out)
+}
+
+/// The scalar type a `DataType` attribute names, or why it is not one.
+fn value_type(v: &DataValue) -> Result<ValueType, String> {
+    if let Some(s) = v.status.filter(|s| !s.is_good()) {
+        return Err(if s == StatusCode::BadNodeIdUnknown {
+            "no such node".into()
+        } else {
+            s.to_string()
+        });
+    }
+    let Some(Variant::NodeId(id)) = &v.value else {
+        return Err("no data type".into());
+    };
+    if id.namespace == 0 {
+        if let ::opcua::types::Identifier::Numeric(n) = id.identifier {
+            if (1..=13).contains(&n) {
+                return Ok(ValueType::ALL[n as usize - 1]);
+            }
+        }
+    }
+    Err(format!(
+        "data type {id} is not a scalar type cellwatch reads"
+    ))
+}
+
+/// A node id written with its namespace URI where the server has one.
+fn node_text(node: &NodeId, namespaces: &[String]) -> String {
+    match namespaces.get(node.namespace as usize) {
+        Some(uri) if node.namespace > 0 => format!("nsu={uri};{}", node.identifier),
+        _ => format!("ns={};{}", node.namespace, node.identifier),
+    }
+}
+
+fn quoted(s: &str) -> String {
+    toml::Value::String(s.to_string()).to_string()
+}
+
+fn print_config(
+    opcua: &OpcUaConfig,
+    namespaces: &[String],
+    found: &[Found],
+    out: &mut dyn Write,
+) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "# Discovered by `cellwatch discover` on {}.",
+        opcua.endpoint
+    )?;
+    writeln!(
+        out,
+        "# Keep the tags your checks read; set [cell] id, and the bus ([zenoh.tls])."
+    )?;
+    writeln!(out, "\n[cell]\nid = \"new-cell\"\n")?;
+    writeln!(out, "[opcua]\nendpoint = {}", quoted(&opcua.endpoint))?;
+    writeln!(out, "security_policy = {}", quoted(opcua.policy.as_str()))?;
+    writeln!(out, "security_mode = {}", quoted(opcua.mode.as_str()))?;
+    writeln!(
+        out,
+        "pki_dir = {}",
+        quoted(&opcua.pki_dir.display().to_string())
+    )?;
+    let mut names = HashSet::new();
+    let mut addresses = HashSet::new();
+    let mut skipped = BTreeMap::new();
+    for f in found {
+        let t = match &f.data_type {
+            Ok(t) => *t,
+            Err(why) => {
+                skipped.insert(node_text(&f.node, namespaces), why.clone());
+                continue;
+            }
+        };
+        let Some(address) = address_of(&f.browse_name).filter(|a| addresses.insert(a.clone()))
+        else {
+            skipped.insert(
+                node_text(&f.node, namespaces),
+                format!(
+                    "'{}' is no usable address (or is used twice)",
+                    f.browse_name
+                ),
+            );
+            continue;
+        };
+        let mut name = tag_name(&f.browse_name);
+        let base = name.clone();
+        let mut k = 2;
+        while !names.insert(name.clone()) {
+            name = format!("{base}_{k}");
+            k += 1;
+        }
+        writeln!(out, "\n[[tags]]")?;
+        writeln!(out, "name = {}", quoted(&name))?;
+        writeln!(out, "node_id = {}", quoted(&node_text(&f.node, namespaces)))?;
+        writeln!(out, "address = {}", quoted(&address))?;
+        if t != ValueType::Boolean {
+            writeln!(out, "type = {}", quoted(t.as_str()))?;
+        }
+        if let Some(d) = &f.description {
+            writeln!(out, "comment = {}", quoted(d))?;
+        }
+    }
+    for (node, why) in &skipped {
+        writeln!(out, "# skipped {node}: {why}")?;
+    }
+    writeln!(
+        out,
+        "\n[zenoh]\n# Give the bus its certificates (cellwatch pki) and remove `plain`:\n# [zenoh.tls]\n# ca = \"pki-bus/ca.pem\"\n# cert = \"pki-bus/agent-new-cell.pem\"\n# key = \"pki-bus/agent-new-cell.key\"\nplain = true"
+    )
+}
+
+/// The PLC address a browse name stands for: the name itself when it is
+/// one (`X0.06`, `D100`, `%IX0.0.3`, `Start`), else its letters, digits,
+/// `_` and `.`.
+fn address_of(browse_name: &str) -> Option<String> {
+    config::tag_address(browse_name)
+        .or_else(|_| {
+            let clean: String = browse_name
+                .chars()
+                .map(|c| {
+                    if c.is_ascii_alphanumeric() || c == '.' {
+                        c
+                    } else {
+                        '_'
+                    }
+                })
+                .collect();
+            config::tag_address(&clean)
+        })
+        .ok()
+        .map(|s| s.to_string())
+}
+
+fn tag_name(browse_name: &str) -> String {
+    let name: String = browse_name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() {
+                c.to_ascii_lowercase()
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    if name.is_empty() {
+        "tag".into()
+    } else {
+        name
+    }
+}
+
+/// Reports the configured tags the server lacks or types differently.
+async fn check_tags(
+    session: &Session,
+    namespaces: &[String],
+    tags: &[TagConfig],
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    let mut nodes = Vec::new();
+    let mut problems = Vec::new();
+    for t in tags {
+        let node = TagNode::parse(&t.node_id, None)
+            .ok()
+            .and_then(|n| n.resolve(namespaces));
+        match node {
+            Some(n) => nodes.push((t, n)),
+            None => problems.push(format!(
+                "{} ({}): missing: the server has no namespace for {}",
+                t.name, t.address, t.node_id
+            )),
+        }
+    }
+    let ids: Vec<NodeId> = nodes.iter().map(|(_, n)| n.clone()).collect();
+    let types = read_attribute(session, &ids, AttributeId::DataType).await?;
+    for ((t, _), v) in nodes.iter().zip(&types) {
+        match value_type(v) {
+            Err(why) => problems.push(format!(
+                "{} ({}): missing: {} ({why})",
+                t.name, t.address, t.node_id
+            )),
+            Ok(server) if server != t.value_type => problems.push(format!(
+                "{} ({}): typed differently: the configuration says {}, the server has {server}",
+                t.name, t.address, t.value_type
+            )),
+            Ok(_) => {}
+        }
+    }
+    for p in &problems {
+        writeln!(out, "{p}").map_err(Failure::output)?;
+    }
+    if problems.is_empty() {
+        writeln!(
+            out,
+            "all {} tags are on the server with their types",
+            tags.len()
+        )
+        .map_err(Failure::output)?;
+        Ok(())
+    } else {
+        Err(Failure::runtime(format!(
+            "{} of {} tags do not match the server",
+            problems.len(),
+            tags.len()
+        )))
+    }
+}
