@@ -10,8 +10,8 @@
 //! - Every publish becomes one [`SourceEvent::Readings`], in source-time
 //!   order (`subscription`); each value is read as its tag is configured
 //!   (a Boolean, a bit of an integer word, a number, a string); a bad or
-//!   uncertain status is [`Reading::Bad`](cellwatch_models::engine::Reading::Bad),
-//!   a value of another type [`Reading::WrongType`](cellwatch_models::engine::Reading::WrongType).
+//!   uncertain status is [`Reading::Bad`],
+//!   a value of another type [`Reading::WrongType`].
 //! - The channel to the cell loop is bounded: when the loop falls behind,
 //!   the session's event loop waits, and the server's queues hold the
 //!   changes.
