@@ -335,3 +335,69 @@ fn timer_model_signals_must_be_tags() {
     assert_eq!(timer_signal(&c.tags, "x1"), Some(Signal::new("X1")));
     assert_eq!(timer_signal(&c.tags, "X2"), Some(Signal::new("X2")));
 }
+
+/// GOOD with numeric tags `D1` (Double) and `D2` (UInt16) and `S1`
+/// (String) added before the checks, and `extra` appended.
+fn typed(extra: &str) -> String {
+    GOOD.replace(
+        "[[checks.switching]]",
+        "[[tags]]\nname = \"temp\"\nnode_id = \"nsu=urn:plc;s=D1\"\naddress = \"D1\"\ntype = \"Double\"\n\n\
+         [[tags]]\nname = \"count\"\nnode_id = \"nsu=urn:plc;s=D2\"\naddress = \"D2\"\ntype = \"UInt16\"\n\n\
+         [[tags]]\nname = \"text\"\nnode_id = \"nsu=urn:plc;s=S1\"\naddress = \"S1\"\ntype = \"String\"\n\n\
+         [[checks.switching]]",
+    )
+    .replace("[zenoh.tls]", &format!("{extra}\n[zenoh.tls]"))
+}
+
+#[test]
+fn typed_tags_limits_counters_and_comparisons() {
+    let text = typed(
+        "[[checks.limit]]\nid = \"t\"\ntag = \"D1\"\nunit = \"°C\"\ndeadband = 1.5\non_delay = \"2s\"\nh = { limit = 80.0 }\nll = { limit = 0.0, severity = \"low\" }\n\n\
+         [state]\nrunning = \"X1 * d1 > 20.5 * D2 != D1\"\n\n[production]\ncounter = \"D2\"\n",
+    );
+    let c = parse("cell.toml", &text, Path::new("base"), &mem()).unwrap();
+    assert_eq!(c.tags[2].value_type, ValueType::Double);
+    assert_eq!(c.limits[0].alarm_id(Level::H), "t-h");
+    assert_eq!(c.limits[0].label, "temp");
+    assert_eq!(c.limits[0].on_delay, 2000);
+    assert_eq!(c.limits[0].levels[0].severity, Severity::High);
+    assert_eq!(c.limits[0].levels[1].severity, Severity::Low);
+    let running: Vec<String> = c
+        .state
+        .running
+        .as_ref()
+        .unwrap()
+        .signals()
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    assert_eq!(
+        running,
+        ["D1 > 20.5", "D2 != D1", "X1"],
+        "canonical addresses"
+    );
+    assert_eq!(c.part_counter, Some(3));
+    assert!(matches!(
+        c.part_counting(),
+        PartCounting::Counter(3, ref k) if k.max == 65535
+    ));
+    crate::cell::compile::engine(&c).unwrap();
+}
+
+#[test]
+fn types_are_checked_where_tags_are_used() {
+    let bad = typed(
+        "[[checks.limit]]\nid = \"t\"\ntag = \"X1\"\nh = { limit = 80.0 }\n\n\
+         [[checks.limit]]\nid = \"u\"\ntag = \"D1\"\nh = { limit = 1.0 }\nhh = { limit = 0.5 }\n\n\
+         [state]\nrunning = \"D1 * S1 > 3\"\n\n[production]\ncounter = \"D1\"\n",
+    )
+    .replace("address = \"X2\"", "address = \"X2\"\nbit = 3");
+    assert_eq!(
+        errors(&bad),
+        "cell.toml:17:7: tags[1].bit: a bit needs an integer type; this tag is Boolean: add type = \"Byte\" (or another integer type)\n\
+         cell.toml:44:7: checks.limit[0].tag: X1 is a Boolean: a limit check needs a numeric tag (type = \"Double\", \"Int16\", ...)\n\
+         cell.toml:48:6: checks.limit[1]: the limits must fall in the order hh > h > l > ll\n\
+         cell.toml:54:11: state.running: D1 is a Double, not a contact: compare it (`D1 > 0`) or give the tag a bit; S1 is a String and cannot be compared as a number (in 'S1 > 3')\n\
+         cell.toml:57:11: production.counter: D1 is a Double: a counter must be an integer tag without a bit"
+    );
+}
