@@ -14,6 +14,7 @@ mod dashboards;
 mod durability;
 mod explain;
 mod interop;
+mod legacy;
 mod liveness;
 mod opcua;
 mod operators;

@@ -18,6 +18,7 @@
 //! - [`expr`]: naive expression trees, the reference for tests.
 //! - [`alarm`]: alarms and their ISA-18.2 lifecycle.
 //! - [`engine`]: the per-cell engine: tags, check sets, alarms, machine state.
+//! - [`legacy`]: the `@`-framed serial protocol of paper 002 (frames, FCS, end codes).
 //! - [`limit`]: limit alarms (HH/H/L/LL) on numbers, with deadband and delays.
 //! - [`report`]: daily and monthly production reports from state history.
 //! - [`timer`]: transition timers: run logs, the learner, the runtime monitor.
@@ -29,6 +30,7 @@ pub mod engine;
 pub mod explain;
 pub mod expr;
 pub mod il;
+pub mod legacy;
 pub mod limit;
 pub mod logic;
 pub mod program;

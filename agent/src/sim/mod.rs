@@ -1,5 +1,7 @@
-//! Simulated cells, served over real OPC UA, for the demo and the tests.
+//! Simulated cells for the demo and the tests: served over real OPC UA
+//! (the CNC, the line), or polled over the `@` protocol (moulding units).
 
 pub mod cnc;
 pub mod line;
+pub mod moulding;
 pub mod server;

@@ -6,6 +6,8 @@
 //! then hold the changes), so overload never becomes memory.
 //!
 //! - [`opcua`]: the production source, an OPC UA client.
+//! - [`legacy`]: the `@` bus poller of paper 002's moulding units (serial
+//!   port or a serial device server's TCP socket).
 //! - [`scripted::ScriptedSource`]: events handed in by a test or a replay,
 //!   the smallest example of a source.
 //! - [`pki`]: certificate-trust helpers for OPC UA.
@@ -13,6 +15,7 @@
 //! To add a source: a folder here with a type implementing [`Source`], and
 //! one arm in [`for_config`].
 
+pub mod legacy;
 pub mod opcua;
 pub mod pki;
 pub mod scripted;

@@ -67,6 +67,10 @@ pub enum Reading {
     Text(Arc<str>),
     /// Bad or uncertain quality: the value is not to be trusted.
     Bad,
+    /// Out of reach (a unit on a serial bus that stopped answering): the
+    /// value is unknown, and the source's own communication alarm says
+    /// why, so it is not a quality problem of the tag.
+    Unreachable,
     /// A value of another type than the tag is used as: bad quality, and
     /// the `tag-quality` alarm says what came.
     WrongType {
@@ -636,7 +640,7 @@ impl CellEngine {
                 Reading::Text(t) => {
                     matches!(&self.others[tag], Some(Value::Text(u)) if u == t)
                 }
-                Reading::Bad | Reading::WrongType { .. } => false,
+                Reading::Bad | Reading::WrongType { .. } | Reading::Unreachable => false,
             };
             if same && r.source_time <= last {
                 step.duplicates += 1;
@@ -662,7 +666,9 @@ impl CellEngine {
             Reading::Text(t) => {
                 self.set_other(tag, Some(Value::Text(t.clone())), at, findings, step)
             }
-            Reading::Bad | Reading::WrongType { .. } => self.set_unknown(tag, at, findings, step),
+            Reading::Bad | Reading::WrongType { .. } | Reading::Unreachable => {
+                self.set_unknown(tag, at, findings, step)
+            }
         };
         if quality_changed {
             findings.push(self.quality_finding());

@@ -1,0 +1,533 @@
+//! The `@` bus source (paper 002): the control computer's side of an
+//! RS-485 multidrop line of injection-moulding units, over a serial port or
+//! a serial device server's raw TCP socket.
+//!
+//! Every poll cycle, each unit is asked what its tags need (`R?` for the
+//! status bits and production, `RT`, `RJ`, ...), one request at a time: a
+//! unit answers within the response timeout or not at all. An answer with
+//! a bad FCS or format, or `NC14`/`NC15`, or none at all, is asked again,
+//! at most `retries` times; then the unit is out of reach: its tags become
+//! unknown (not bad quality) and the source raises one problem for it
+//! (`legacy-unit-<nn>`), cleared when it answers again. Nothing else is
+//! raised meanwhile: checks hold their verdicts on unknown contacts.
+//! A value is sent to the cell loop when it changes (and all of them
+//! after a reconnection).
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::future::Future;
+use std::sync::Arc;
+use std::time::Duration;
+
+use cellwatch_models::engine::{Reading, TagReading};
+use cellwatch_models::legacy::{Decoded, Decoder, Frame, Header, Status};
+use cellwatch_models::value::{Num, ValueType};
+use futures_util::future::BoxFuture;
+use futures_util::FutureExt;
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
+
+use super::{Source, SourceError, SourceEvent, SourceSender};
+use crate::config::TagConfig;
+
+/// How the bus is reached.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Transport {
+    /// A serial device server's raw socket, `host:port`.
+    Tcp(String),
+    /// A serial port.
+    Serial(SerialLine),
+}
+
+/// Serial line settings (paper 002: 9600 bit/s, 7 data bits, even parity,
+/// 2 stop bits).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SerialLine {
+    /// The device (`/dev/ttyUSB0`).
+    pub path: String,
+    /// Bits per second.
+    pub baud: u32,
+    /// 5 to 8.
+    pub data_bits: u8,
+    /// `none`, `even`, `odd`.
+    pub parity: Parity,
+    /// 1 or 2.
+    pub stop_bits: u8,
+}
+
+/// Serial parity.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Parity {
+    /// No parity bit.
+    None,
+    /// Even.
+    Even,
+    /// Odd.
+    Odd,
+}
+
+/// The `[legacy]` section: the bus and how it is polled.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LegacyConfig {
+    /// Where the bus is.
+    pub transport: Transport,
+    /// How often every unit is polled.
+    pub poll_interval: Duration,
+    /// How long a unit has to answer one request.
+    pub response_timeout: Duration,
+    /// Requests asked again after a bad or missing answer, per request.
+    pub retries: u32,
+}
+
+impl LegacyConfig {
+    /// What it connects to, for logs.
+    pub fn describe(&self) -> String {
+        match &self.transport {
+            Transport::Tcp(a) => format!("@ bus tcp://{a}"),
+            Transport::Serial(s) => format!(
+                "@ bus {} {} {}{}{}",
+                s.path,
+                s.baud,
+                s.data_bits,
+                match s.parity {
+                    Parity::None => 'N',
+                    Parity::Even => 'E',
+                    Parity::Odd => 'O',
+                },
+                s.stop_bits
+            ),
+        }
+    }
+}
+
+/// What of a unit a tag reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Item {
+    /// The `R?` status bits (a `UInt16`; tags take one `bit` each).
+    Status,
+    /// The production count of the `R?` answer (`UInt32`, wraps after
+    /// 999,999).
+    Production,
+    /// `RT` target quantity.
+    Target,
+    /// `RJ` item code (`String`).
+    ItemCode,
+    /// `RI` stock-in quantity.
+    StockIn,
+    /// `RC` cycle increment.
+    CycleIncrement,
+    /// `RO` output bits (`UInt16`).
+    Outputs,
+}
+
+impl Item {
+    const NAMES: [(&'static str, Item); 7] = [
+        ("status", Item::Status),
+        ("production", Item::Production),
+        ("target", Item::Target),
+        ("item", Item::ItemCode),
+        ("stock_in", Item::StockIn),
+        ("cycle_increment", Item::CycleIncrement),
+        ("outputs", Item::Outputs),
+    ];
+
+    /// The request that reads it.
+    fn request(self) -> Header {
+        match self {
+            Item::Status | Item::Production => Header::ReadStatus,
+            Item::Target => Header::ReadTarget,
+            Item::ItemCode => Header::ReadItem,
+            Item::StockIn => Header::ReadStockIn,
+            Item::CycleIncrement => Header::ReadCycleIncrement,
+            Item::Outputs => Header::ReadOutputs,
+        }
+    }
+
+    /// The type its values have.
+    pub fn value_type(self) -> ValueType {
+        match self {
+            Item::Status | Item::Outputs => ValueType::UInt16,
+            Item::Production | Item::Target | Item::StockIn => ValueType::UInt32,
+            Item::CycleIncrement => ValueType::Byte,
+            Item::ItemCode => ValueType::String,
+        }
+    }
+}
+
+/// A tag's place on the bus: `@<unit>/<item>`, unit in hex (`@02/status`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct BusNode {
+    /// The unit number.
+    pub unit: u8,
+    /// What of it.
+    pub item: Item,
+}
+
+impl BusNode {
+    /// Reads `@02/status`, `@1F/production`, ...
+    ///
+    /// # Errors
+    /// A message naming what is wrong.
+    pub fn parse(text: &str) -> Result<BusNode, String> {
+        let items: Vec<&str> = Item::NAMES.iter().map(|(n, _)| *n).collect();
+        let expected = || {
+            format!(
+                "'{text}' is not a bus node like @02/status (unit number in hex, then one of {})",
+                items.join(", ")
+            )
+        };
+        let rest = text.strip_prefix('@').ok_or_else(expected)?;
+        let (unit, item) = rest.split_once('/').ok_or_else(expected)?;
+        if unit.len() != 2 {
+            return Err(expected());
+        }
+        let unit = u8::from_str_radix(unit, 16).map_err(|_| expected())?;
+        let item = Item::NAMES
+            .iter()
+            .find(|(n, _)| *n == item)
+            .map(|(_, i)| *i)
+            .ok_or_else(expected)?;
+        Ok(BusNode { unit, item })
+    }
+}
+
+/// A value read from a unit.
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum Value {
+    Word(u64),
+    Text(Arc<str>),
+}
+
+/// A tag's reading from its item's value, as the tag is configured.
+fn reading(value: &Value, item: Item, tag: &TagConfig) -> Reading {
+    let wrong = || Reading::WrongType {
+        expected: tag.value_type,
+        received: Some(item.value_type()),
+    };
+    match value {
+        Value::Word(w) => match tag.bit {
+            Some(bit) => Reading::Good((w >> bit) & 1 == 1),
+            None if tag.value_type.is_numeric() => Reading::Number(Num::UInt(*w)),
+            None => wrong(),
+        },
+        Value::Text(t) if tag.value_type == ValueType::String && tag.bit.is_none() => {
+            Reading::Text(t.clone())
+        }
+        Value::Text(_) => wrong(),
+    }
+}
+
+/// The poller of one bus.
+pub struct LegacySource {
+    config: LegacyConfig,
+    tags: Vec<TagConfig>,
+}
+
+impl LegacySource {
+    /// A source reading `tags` (node ids `@<unit>/<item>`) from the bus.
+    pub fn new(config: LegacyConfig, tags: Vec<TagConfig>) -> LegacySource {
+        LegacySource { config, tags }
+    }
+}
+
+impl Source for LegacySource {
+    fn describe(&self) -> String {
+        self.config.describe()
+    }
+
+    fn run(
+        self: Box<Self>,
+        tx: SourceSender,
+        shutdown: BoxFuture<'static, ()>,
+    ) -> BoxFuture<'static, Result<(), SourceError>> {
+        async move { run(&self.config, &self.tags, tx, shutdown).await }.boxed()
+    }
+}
+
+/// The bytes to and from the bus.
+trait Line: AsyncRead + AsyncWrite + Unpin + Send {}
+impl<T: AsyncRead + AsyncWrite + Unpin + Send> Line for T {}
+
+async fn open(config: &LegacyConfig) -> Result<Box<dyn Line>, String> {
+    match &config.transport {
+        Transport::Tcp(addr) => {
+            let s =
+                tokio::time::timeout(Duration::from_secs(5), tokio::net::TcpStream::connect(addr))
+                    .await
+                    .map_err(|_| format!("no answer from {addr} within 5 s"))?
+                    .map_err(|e| format!("{addr}: {e}"))?;
+            let _ = s.set_nodelay(true);
+            Ok(Box::new(s))
+        }
+        Transport::Serial(line) => {
+            use tokio_serial::SerialPortBuilderExt;
+            let port = tokio_serial::new(&line.path, line.baud)
+                .data_bits(match line.data_bits {
+                    5 => tokio_serial::DataBits::Five,
+                    6 => tokio_serial::DataBits::Six,
+                    7 => tokio_serial::DataBits::Seven,
+                    _ => tokio_serial::DataBits::Eight,
+                })
+                .parity(match line.parity {
+                    Parity::None => tokio_serial::Parity::None,
+                    Parity::Even => tokio_serial::Parity::Even,
+                    Parity::Odd => tokio_serial::Parity::Odd,
+                })
+                .stop_bits(if line.stop_bits == 2 {
+                    tokio_serial::StopBits::Two
+                } else {
+                    tokio_serial::StopBits::One
+                })
+                .open_native_async()
+                .map_err(|e| format!("{}: {e}", line.path))?;
+            Ok(Box::new(port))
+        }
+    }
+}
+
+/// Why one request got no usable answer.
+enum Failed {
+    /// The unit did not answer well within the retries: why, last time.
+    Unit(String),
+    /// The line itself failed (the connection closed).
+    Line(String),
+}
+
+/// Sends `request` and waits for its answer, asking again on a bad,
+/// refused or missing answer.
+async fn exchange(
+    line: &mut Box<dyn Line>,
+    decoder: &mut Decoder,
+    request: &Frame,
+    config: &LegacyConfig,
+) -> Result<Frame, Failed> {
+    let mut why = String::new();
+    let mut buf = [0u8; 256];
+    let mut decoded = Vec::new();
+    for _attempt in 0..=config.retries {
+        decoder.request_sent();
+        line.write_all(&request.encode())
+            .await
+            .map_err(|e| Failed::Line(format!("cannot write: {e}")))?;
+        let deadline = tokio::time::Instant::now() + config.response_timeout;
+        why = "no answer".into();
+        'wait: loop {
+            let n = match tokio::time::timeout_at(deadline, line.read(&mut buf)).await {
+                Err(_) => break 'wait,
+                Ok(Ok(0)) => return Err(Failed::Line("the line closed".into())),
+                Ok(Ok(n)) => n,
+                Ok(Err(e)) => return Err(Failed::Line(format!("cannot read: {e}"))),
+            };
+            decoded.clear();
+            decoder.push(&buf[..n], &mut decoded);
+            for d in decoded.drain(..) {
+                match d {
+                    Decoded::Frame(f) if f.unit == request.unit => {
+                        let fits = if request.header.is_write() {
+                            f.header == Header::Ack
+                        } else {
+                            f.header == request.header
+                        };
+                        if fits {
+                            return Ok(f);
+                        }
+                        why = format!("answered {}{}", f.header, f.text);
+                        break 'wait;
+                    }
+                    // Another unit's late answer, or a copy: not ours.
+                    Decoded::Frame(_) | Decoded::Duplicate(_) => {}
+                    Decoded::Error { end, why: w, .. } => {
+                        why = format!("a bad answer (end code {end}): {w}");
+                        break 'wait;
+                    }
+                }
+            }
+        }
+    }
+    Err(Failed::Unit(format!(
+        "{why} (after {} attempts)",
+        config.retries + 1
+    )))
+}
+
+/// The problem id of a unit out of reach.
+pub fn unit_problem(unit: u8) -> String {
+    format!("legacy-unit-{unit:02X}")
+}
+
+/// Runs the poller until `shutdown` completes.
+///
+/// # Errors
+/// None yet: trouble on the line is reported as events and retried.
+pub async fn run(
+    config: &LegacyConfig,
+    tags: &[TagConfig],
+    tx: SourceSender,
+    shutdown: impl Future<Output = ()>,
+) -> Result<(), SourceError> {
+    // Per unit, the requests its tags need and, per item, the tags.
+    let mut plan: BTreeMap<u8, BTreeSet<Header>> = BTreeMap::new();
+    let mut readers: HashMap<(u8, Item), Vec<usize>> = HashMap::new();
+    for (i, t) in tags.iter().enumerate() {
+        match BusNode::parse(&t.node_id) {
+            Ok(n) => {
+                plan.entry(n.unit).or_default().insert(n.item.request());
+                readers.entry((n.unit, n.item)).or_default().push(i);
+            }
+            Err(e) => tracing::error!(tag = %t.name, error = %e, "tag not read"),
+        }
+    }
+    tokio::pin!(shutdown);
+    let mut backoff = Duration::from_millis(250);
+    let mut said_down = false;
+    loop {
+        let opened = tokio::select! {
+            _ = &mut shutdown => return Ok(()),
+            l = open(config) => l,
+        };
+        let mut line = match opened {
+            Ok(l) => l,
+            Err(e) => {
+                if !said_down {
+                    let _ = tx
+                        .send(SourceEvent::Disconnected(format!(
+                            "cannot open the bus: {e}"
+                        )))
+                        .await;
+                    said_down = true;
+                }
+                tokio::select! {
+                    _ = &mut shutdown => return Ok(()),
+                    _ = tokio::time::sleep(backoff) => {}
+                }
+                backoff = (backoff * 2).min(Duration::from_secs(10));
+                continue;
+            }
+        };
+        backoff = Duration::from_millis(250);
+        let _ = tx.send(SourceEvent::Connected(config.describe())).await;
+        let mut decoder = Decoder::answers();
+        // What was last sent per tag; units out of reach.
+        let mut sent: Vec<Option<Reading>> = vec![None; tags.len()];
+        let mut away: BTreeSet<u8> = BTreeSet::new();
+        let mut next = tokio::time::Instant::now();
+        let lost = loop {
+            tokio::select! {
+                _ = &mut shutdown => return Ok(()),
+                _ = tokio::time::sleep_until(next) => {}
+            }
+            next += config.poll_interval;
+            let mut readings = Vec::new();
+            let mut problems = Vec::new();
+            let mut line_lost = None;
+            'units: for (&unit, requests) in &plan {
+                let mut values: Vec<(Item, Value)> = Vec::new();
+                let mut failed = None;
+                for &h in requests {
+                    match exchange(&mut line, &mut decoder, &Frame::read(unit, h), config).await {
+                        Ok(answer) => values.extend(decode(&answer)),
+                        Err(Failed::Unit(why)) => {
+                            failed = Some(format!("{} {why}", h));
+                            break;
+                        }
+                        Err(Failed::Line(why)) => {
+                            line_lost = Some(why);
+                            break 'units;
+                        }
+                    }
+                }
+                let now = crate::clock::now_ms();
+                match failed {
+                    Some(why) => {
+                        if away.insert(unit) {
+                            tracing::warn!(unit, %why, "unit does not answer");
+                            problems.push(SourceEvent::Problem {
+                                id: unit_problem(unit),
+                                problem: Some(format!("unit {unit:02X} does not answer: {why}")),
+                            });
+                            for ts in readers
+                                .iter()
+                                .filter(|((u, _), _)| *u == unit)
+                                .map(|(_, t)| t)
+                            {
+                                for &t in ts {
+                                    sent[t] = Some(Reading::Unreachable);
+                                    readings.push(TagReading {
+                                        tag: t,
+                                        reading: Reading::Unreachable,
+                                        source_time: now,
+                                    });
+                                }
+                            }
+                        }
+                    }
+                    None => {
+                        if away.remove(&unit) {
+                            problems.push(SourceEvent::Problem {
+                                id: unit_problem(unit),
+                                problem: None,
+                            });
+                        }
+                        for (item, value) in values {
+                            for &t in readers.get(&(unit, item)).into_iter().flatten() {
+                                let r = reading(&value, item, &tags[t]);
+                                if sent[t].as_ref() != Some(&r) {
+                                    sent[t] = Some(r.clone());
+                                    readings.push(TagReading {
+                                        tag: t,
+                                        reading: r,
+                                        source_time: now,
+                                    });
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            // The unit's problem first: its alarm explains the unknown
+            // values that follow.
+            for p in problems {
+                let _ = tx.send(p).await;
+            }
+            if !readings.is_empty() && tx.send(SourceEvent::Readings(readings)).await.is_err() {
+                return Ok(());
+            }
+            if let Some(why) = line_lost {
+                break why;
+            }
+        };
+        tracing::warn!(bus = %config.describe(), why = %lost, "bus connection lost");
+        let _ = tx
+            .send(SourceEvent::Disconnected(format!("the bus: {lost}")))
+            .await;
+        said_down = true;
+    }
+}
+
+/// The values an answer carries.
+fn decode(answer: &Frame) -> Vec<(Item, Value)> {
+    let t = answer.text.as_str();
+    let word = |radix| u64::from_str_radix(t.trim(), radix).ok().map(Value::Word);
+    match answer.header {
+        Header::ReadStatus => Status::parse(t.as_bytes())
+            .map(|s| {
+                vec![
+                    (Item::Status, Value::Word(u64::from(s.bits))),
+                    (Item::Production, Value::Word(u64::from(s.production))),
+                ]
+            })
+            .unwrap_or_default(),
+        Header::ReadTarget => word(10)
+            .map(|v| vec![(Item::Target, v)])
+            .unwrap_or_default(),
+        Header::ReadStockIn => word(10)
+            .map(|v| vec![(Item::StockIn, v)])
+            .unwrap_or_default(),
+        Header::ReadCycleIncrement => word(10)
+            .map(|v| vec![(Item::CycleIncrement, v)])
+            .unwrap_or_default(),
+        Header::ReadOutputs => word(16)
+            .map(|v| vec![(Item::Outputs, v)])
+            .unwrap_or_default(),
+        Header::ReadItem => vec![(Item::ItemCode, Value::Text(Arc::from(t.trim_end())))],
+        _ => Vec::new(),
+    }
+}
