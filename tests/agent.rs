@@ -28,8 +28,8 @@ pub(crate) fn free_port() -> u16 {
 /// under `dir`.
 pub(crate) fn config(dir: &Path, sim_endpoint: &str, zenoh_port: u16) -> CellConfig {
     let mut c = config::load(&root().join("config/demo.toml")).unwrap();
-    c.opcua.endpoint = sim_endpoint.to_string();
-    c.opcua.pki_dir = dir.join("agent-pki");
+    c.opcua.as_mut().unwrap().endpoint = sim_endpoint.to_string();
+    c.opcua.as_mut().unwrap().pki_dir = dir.join("agent-pki");
     c.journal.path = dir.join("journal.sqlite");
     c.zenoh.listen = vec![format!("tls/127.0.0.1:{zenoh_port}")];
     crate::util::bus_pki(dir, &["agent-m01ps0004"]);
@@ -68,9 +68,17 @@ impl Fixture {
         let sim = SimulatedCnc::start(&sim_opts).await.unwrap();
         let zenoh_port = free_port();
         let config = config(&dir, &sim.endpoint(), zenoh_port);
-        drop(opcua::client("test", &config.opcua).unwrap());
-        pki::trust(&pki::own_cert(&config.opcua.pki_dir), &dir.join("sim-pki")).unwrap();
-        pki::trust(&pki::own_cert(&dir.join("sim-pki")), &config.opcua.pki_dir).unwrap();
+        drop(opcua::client("test", config.opcua.as_ref().unwrap()).unwrap());
+        pki::trust(
+            &pki::own_cert(&config.opcua.as_ref().unwrap().pki_dir),
+            &dir.join("sim-pki"),
+        )
+        .unwrap();
+        pki::trust(
+            &pki::own_cert(&dir.join("sim-pki")),
+            &config.opcua.as_ref().unwrap().pki_dir,
+        )
+        .unwrap();
         let agent = cell::start(config.clone(), None).await.unwrap();
         let client = crate::util::operator_session(&dir, "operator-kim", zenoh_port).await;
         let sim_addr = sim.addr();
@@ -508,17 +516,25 @@ pub(crate) async fn line_cell(dir: &Path) -> (cellwatch::sim::line::SimulatedLin
     .await
     .unwrap();
     let mut c = config::load(&root().join("config/line.toml")).unwrap();
-    c.opcua.endpoint = sim.endpoint();
-    c.opcua.pki_dir = dir.join("agent-pki");
+    c.opcua.as_mut().unwrap().endpoint = sim.endpoint();
+    c.opcua.as_mut().unwrap().pki_dir = dir.join("agent-pki");
     c.journal.path = dir.join("journal.sqlite");
     let zenoh_port = free_port();
     c.zenoh.listen = vec![format!("tls/127.0.0.1:{zenoh_port}")];
     crate::util::bus_pki(dir, &["agent-line01"]);
     c.zenoh.tls = Some(crate::util::bus_tls(dir, "agent-line01"));
     c.metrics = Some("127.0.0.1:0".parse().unwrap());
-    drop(opcua::client("test", &c.opcua).unwrap());
-    pki::trust(&pki::own_cert(&c.opcua.pki_dir), &dir.join("sim-pki")).unwrap();
-    pki::trust(&pki::own_cert(&dir.join("sim-pki")), &c.opcua.pki_dir).unwrap();
+    drop(opcua::client("test", c.opcua.as_ref().unwrap()).unwrap());
+    pki::trust(
+        &pki::own_cert(&c.opcua.as_ref().unwrap().pki_dir),
+        &dir.join("sim-pki"),
+    )
+    .unwrap();
+    pki::trust(
+        &pki::own_cert(&dir.join("sim-pki")),
+        &c.opcua.as_ref().unwrap().pki_dir,
+    )
+    .unwrap();
     let agent = cell::start(c, None).await.unwrap();
     (sim, agent, zenoh_port)
 }
@@ -816,9 +832,17 @@ async fn behind_a_router(
     c.zenoh.mode = cellwatch::config::ZenohMode::Client;
     c.zenoh.listen = Vec::new();
     c.zenoh.connect = vec![format!("tls/127.0.0.1:{port}")];
-    drop(opcua::client("test", &c.opcua).unwrap());
-    pki::trust(&pki::own_cert(&c.opcua.pki_dir), &dir.join("sim-pki")).unwrap();
-    pki::trust(&pki::own_cert(&dir.join("sim-pki")), &c.opcua.pki_dir).unwrap();
+    drop(opcua::client("test", c.opcua.as_ref().unwrap()).unwrap());
+    pki::trust(
+        &pki::own_cert(&c.opcua.as_ref().unwrap().pki_dir),
+        &dir.join("sim-pki"),
+    )
+    .unwrap();
+    pki::trust(
+        &pki::own_cert(&dir.join("sim-pki")),
+        &c.opcua.as_ref().unwrap().pki_dir,
+    )
+    .unwrap();
     let agent = cell::start(c, None).await.unwrap();
     (router, port, sim, agent)
 }

@@ -280,3 +280,191 @@ int main(int argc, char **argv) {
         String::from_utf8_lossy(&ours)
     );
 }
+
+/// The shipped `config/moulding.toml` run as an agent against the simulated
+/// bus: a door-open stop on unit 2 is an alarm naming the unit's contact
+/// and a fault state with stop cause 01; production is the units' parts;
+/// line noise is retried and counts nothing twice; a silent unit is one
+/// alarm and nothing else; the daily report says what the simulator did.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_legacy_bus_runs_as_a_cell_with_alarms_stop_causes_and_production() {
+    use cellwatch::payload::AlarmPayload;
+    use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
+
+    let dir = tempfile::tempdir().unwrap();
+    let bus = MouldingBus::new(3);
+    let (addr, server) = bus
+        .listen_tcp("127.0.0.1:0".parse().unwrap())
+        .await
+        .unwrap();
+    let mut c = cellwatch::config::load(&crate::util::root().join("config/moulding.toml")).unwrap();
+    let l = c.legacy.as_mut().unwrap();
+    l.transport = Transport::Tcp(addr.to_string());
+    l.poll_interval = Duration::from_millis(100);
+    let port = crate::agent::free_port();
+    c.zenoh.listen = vec![format!("tls/127.0.0.1:{port}")];
+    crate::util::bus_pki(dir.path(), &["agent-moulding-bus1"]);
+    c.zenoh.tls = Some(crate::util::bus_tls(dir.path(), "agent-moulding-bus1"));
+    c.journal.path = dir.path().join("journal.sqlite");
+    c.metrics = Some("127.0.0.1:0".parse().unwrap());
+    let agent = cellwatch::cell::start(c, None).await.unwrap();
+    let client = crate::util::operator_session(dir.path(), "operator-kim", port).await;
+    let sub = client
+        .declare_subscriber("cellwatch/moulding-bus1/alarms/**")
+        .history(HistoryConfig::default().detect_late_publishers())
+        .recovery(RecoveryConfig::default().heartbeat())
+        .await
+        .unwrap();
+    let snapshot_until = |what: &'static str, ready: fn(&serde_json::Value) -> bool| {
+        let client = client.clone();
+        async move {
+            let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+            loop {
+                let snap: serde_json::Value = serde_json::from_str(
+                    &crate::spawned::query(&client, "cellwatch/moulding-bus1/snapshot", None)
+                        .await
+                        .unwrap(),
+                )
+                .unwrap();
+                if ready(&snap) {
+                    return snap;
+                }
+                assert!(tokio::time::Instant::now() < deadline, "{what}: {snap}");
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
+        }
+    };
+    let value = |snap: &serde_json::Value, address: &str| {
+        snap["tags"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|t| t["address"] == address)
+            .map(|t| t["value"].clone())
+            .unwrap()
+    };
+    snapshot_until("running", |s| s["state"] == "running").await;
+
+    // Five cycles on every unit, two answers corrupted on the way.
+    bus.corrupt_next(2);
+    for _ in 0..5 {
+        bus.cycle();
+    }
+    let snap = snapshot_until("15 parts", |s| {
+        ["P1", "P2", "P3"].iter().all(|a| {
+            s["tags"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|t| t["address"] == *a && t["value"] == 5)
+        })
+    })
+    .await;
+    assert_eq!(value(&snap, "J2"), "ITEM-01");
+    assert_eq!(value(&snap, "T2"), 1000);
+
+    // Unit 2's front door opens.
+    bus.stop(2, Some(Status::FRONT_DOOR_OPEN));
+    let mut seen: Vec<AlarmPayload> = Vec::new();
+    let door = crate::agent::alarm_until(&sub, "front-door raised", &mut seen, |a| {
+        a.id == "front-door"
+    })
+    .await;
+    assert_eq!(door.fault_type, "DOOR_FRONT");
+    assert_eq!(door.culprits[0].address, "U2.01");
+    assert_eq!(
+        door.culprits[0].comment.as_deref(),
+        Some("Unit 2: Front door open (stop cause 01)")
+    );
+    snapshot_until("fault", |s| s["state"] == "fault").await;
+    bus.stop(2, None);
+    crate::agent::alarm_until(&sub, "front-door cleared", &mut seen, |a| {
+        a.id == "front-door" && a.transition == cellwatch_models::alarm::Transition::Cleared
+    })
+    .await;
+
+    // Unit 3 goes silent: one alarm, nothing else.
+    bus.set_silent(3, true);
+    let silent = crate::agent::alarm_until(&sub, "unit 3 out of reach", &mut seen, |a| {
+        a.id == "legacy-unit-03"
+    })
+    .await;
+    assert!(
+        silent.message.contains("unit 03 does not answer"),
+        "{}",
+        silent.message
+    );
+    bus.cycle();
+    snapshot_until("unit 1 at 6 parts", |s| {
+        s["tags"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|t| t["address"] == "P1" && t["value"] == 6)
+    })
+    .await;
+    bus.set_silent(3, false);
+    crate::agent::alarm_until(&sub, "unit 3 back", &mut seen, |a| {
+        a.id == "legacy-unit-03" && a.transition == cellwatch_models::alarm::Transition::Cleared
+    })
+    .await;
+    let raised: Vec<&str> = seen
+        .iter()
+        .filter(|a| a.transition == cellwatch_models::alarm::Transition::Raised)
+        .map(|a| a.id.as_str())
+        .collect();
+    assert_eq!(raised, ["front-door", "legacy-unit-03"], "no other alarm");
+
+    // Unit 3 made its sixth part while silent: counted once it answers.
+    snapshot_until("unit 3 at 6 parts", |s| {
+        s["tags"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|t| t["address"] == "P3" && t["value"] == 6)
+    })
+    .await;
+    // Six cycles on every unit (unit 2 ran again before the sixth).
+    let made: u64 = 6 + 6 + 6;
+    let addr = agent.metrics_addr().unwrap();
+    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    s.write_all(b"GET /metrics HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n")
+        .await
+        .unwrap();
+    let mut body = String::new();
+    s.read_to_string(&mut body).await.unwrap();
+    assert!(
+        body.contains(&format!(
+            "cellwatch_parts_produced_total{{cell=\"moulding-bus1\"}} {made}"
+        )),
+        "{body}"
+    );
+    agent.stop().await;
+    server.abort();
+
+    let day = chrono::Utc::now().format("%Y-%m-%d").to_string();
+    let journal = dir.path().join("journal.sqlite");
+    let r = crate::util::cellwatch(&[
+        "report",
+        "daily",
+        "--date",
+        &day,
+        "--db",
+        journal.to_str().unwrap(),
+        "--causes",
+        crate::util::root()
+            .join("config/stop-causes.toml")
+            .to_str()
+            .unwrap(),
+        "--json",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let v: serde_json::Value = serde_json::from_str(&r.stdout).unwrap();
+    assert_eq!(v["production"], made, "{v}");
+    let causes = v["stop_causes"].as_array().unwrap();
+    assert!(
+        causes.iter().any(|c| c["code"] == "01" && c["count"] == 1),
+        "{v}"
+    );
+}

@@ -144,9 +144,17 @@ pub(crate) fn cell(dir: &Path, sim: &SimulatedCnc) -> Cell {
     std::fs::write(&path, config).unwrap();
     // The agent and the simulator trust each other's certificates.
     let parsed = cellwatch::config::load(&path).unwrap();
-    drop(opcua::client(&parsed.cell, &parsed.opcua).unwrap());
-    pki::trust(&pki::own_cert(&parsed.opcua.pki_dir), &dir.join("sim-pki")).unwrap();
-    pki::trust(&pki::own_cert(&dir.join("sim-pki")), &parsed.opcua.pki_dir).unwrap();
+    drop(opcua::client(&parsed.cell, parsed.opcua.as_ref().unwrap()).unwrap());
+    pki::trust(
+        &pki::own_cert(&parsed.opcua.as_ref().unwrap().pki_dir),
+        &dir.join("sim-pki"),
+    )
+    .unwrap();
+    pki::trust(
+        &pki::own_cert(&dir.join("sim-pki")),
+        &parsed.opcua.as_ref().unwrap().pki_dir,
+    )
+    .unwrap();
     Cell {
         dir: dir.to_path_buf(),
         config: path,

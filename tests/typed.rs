@@ -295,7 +295,7 @@ async fn discover_prints_a_configuration_of_the_demos_tags_and_checks_one() {
             .unwrap_or_else(|| panic!("{} not discovered:\n{}", t.address, r.stdout));
         assert_eq!(
             node(d, None),
-            node(t, demo.opcua.namespace_uri.as_deref()),
+            node(t, demo.opcua.as_ref().unwrap().namespace_uri.as_deref()),
             "{}",
             t.address
         );

@@ -16,6 +16,14 @@ pub struct CommentDb {
     comments: HashMap<Signal, String>,
 }
 
+impl FromIterator<(Signal, String)> for CommentDb {
+    fn from_iter<I: IntoIterator<Item = (Signal, String)>>(pairs: I) -> Self {
+        CommentDb {
+            comments: pairs.into_iter().collect(),
+        }
+    }
+}
+
 impl CommentDb {
     /// Parses `address,comment` rows; `resolve` canonicalises addresses in
     /// the program's dialect.

@@ -70,10 +70,10 @@ fn engine(limits: Vec<LimitCheck>) -> CellEngine {
     let count = tags.len() - 1;
     CellEngine::new("m01", tags, sets, rules)
         .unwrap()
-        .counting(PartCounting::Counter(
+        .counting(PartCounting::Counters(vec![(
             count,
             Counter::new(ValueType::UInt16.max().unwrap()),
-        ))
+        )]))
         .exporting([count - 1])
 }
 

@@ -8,7 +8,7 @@ use tokio::sync::mpsc;
 
 use crate::cell;
 use crate::cli::{DemoArgs, Failure, RunArgs, ValidateArgs};
-use crate::config::{self, CellConfig};
+use crate::config::{self, CellConfig, OpcUaConfig};
 use crate::sim::cnc::{Scenario, SimOptions, SimulatedCnc};
 use crate::sim::line::SimulatedLine;
 use crate::sinks::console::Notice;
@@ -43,14 +43,16 @@ pub(crate) fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<(), F
     let io = Failure::output;
     writeln!(
         out,
-        "{}: cell {}, {} tags, {} switching-function checks, OPC UA {} ({} {:?}), Zenoh {} {}",
+        "{}: cell {}, {} tags, {} switching-function checks, {}, Zenoh {} {}",
         args.config.display(),
         c.cell,
         c.tags.len(),
         c.switching.len(),
-        c.opcua.endpoint,
-        c.opcua.policy.as_str(),
-        c.opcua.mode,
+        match (&c.opcua, &c.legacy) {
+            (Some(o), _) => format!("OPC UA {} ({} {:?})", o.endpoint, o.policy.as_str(), o.mode),
+            (None, Some(l)) => l.describe(),
+            (None, None) => "no source".into(),
+        },
         c.zenoh.mode.as_str(),
         c.zenoh.prefix
     )
@@ -148,6 +150,17 @@ fn bus_tls(state: &Path, name: &str) -> Result<crate::config::ZenohTls, Failure>
     })
 }
 
+/// The OPC UA connection of a demo cell (its simulator is an OPC UA
+/// server).
+fn opcua_of<'a>(c: &'a mut CellConfig, file: &Path) -> Result<&'a mut OpcUaConfig, Failure> {
+    c.opcua.as_mut().ok_or_else(|| {
+        Failure::Input(format!(
+            "{}: the demo serves this cell over OPC UA; its configuration needs an [opcua] section",
+            file.display()
+        ))
+    })
+}
+
 /// The simulated cell's listen address, taken from the config's endpoint.
 fn endpoint_addr(endpoint: &str) -> Result<std::net::SocketAddr, Failure> {
     let hostport = endpoint
@@ -170,14 +183,15 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     std::fs::create_dir_all(&state)
         .map_err(|e| Failure::Runtime(format!("cannot create {}: {e}", state.display())))?;
     let sim_pki = state.join("sim-pki");
-    c.opcua.pki_dir = state.join("agent-pki");
+    opcua_of(&mut c, &args.config)?.pki_dir = state.join("agent-pki");
     c.journal.path = state.join(format!("{}.sqlite", c.cell));
     let (operator_key, secrets) = demo_operator(&state)?;
     let client_config = demo_bus(&state, &mut c)?;
     c.operators_file = Some(secrets.clone());
     c.warnings
         .retain(|w| !w.starts_with("no commands.operators_file"));
-    let listen = endpoint_addr(&c.opcua.endpoint)?;
+    let ua = opcua_of(&mut c, &args.config)?.clone();
+    let listen = endpoint_addr(&ua.endpoint)?;
     let sim = SimulatedCnc::start(&SimOptions {
         listen,
         pki_dir: sim_pki.clone(),
@@ -188,9 +202,9 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     .map_err(Failure::runtime)?;
     // Mutual trust between the simulated PLC and the agent, certificate by
     // certificate, as on a real cell.
-    drop(opcua::client(&c.cell, &c.opcua).map_err(|e| Failure::Runtime(e.to_string()))?);
-    pki::trust(&pki::own_cert(&c.opcua.pki_dir), &sim_pki).map_err(Failure::runtime)?;
-    pki::trust(&pki::own_cert(&sim_pki), &c.opcua.pki_dir).map_err(Failure::runtime)?;
+    drop(opcua::client(&c.cell, &ua).map_err(|e| Failure::Runtime(e.to_string()))?);
+    pki::trust(&pki::own_cert(&ua.pki_dir), &sim_pki).map_err(Failure::runtime)?;
+    pki::trust(&pki::own_cert(&sim_pki), &ua.pki_dir).map_err(Failure::runtime)?;
     let io = Failure::output;
     writeln!(
         out,
@@ -239,7 +253,8 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         None
     } else {
         let mut l = load(&args.line_config)?;
-        l.opcua.pki_dir = state.join("line-agent-pki");
+        opcua_of(&mut l, &args.line_config)?.pki_dir = state.join("line-agent-pki");
+        let lua = opcua_of(&mut l, &args.line_config)?.clone();
         l.journal.path = state.join(format!("{}.sqlite", l.cell));
         l.operators_file = Some(secrets.clone());
         l.zenoh.tls = Some(bus_tls(&state, &format!("agent-{}", l.cell))?);
@@ -247,7 +262,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
             .retain(|w| !w.starts_with("no commands.operators_file"));
         let line_pki = state.join("line-sim-pki");
         let options = SimOptions {
-            listen: endpoint_addr(&l.opcua.endpoint)?,
+            listen: endpoint_addr(&lua.endpoint)?,
             pki_dir: line_pki.clone(),
             insecure: false,
             decoy: None,
@@ -255,9 +270,9 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         let line_sim = SimulatedLine::start(&options)
             .await
             .map_err(Failure::runtime)?;
-        drop(opcua::client(&l.cell, &l.opcua).map_err(|e| Failure::Runtime(e.to_string()))?);
-        pki::trust(&pki::own_cert(&l.opcua.pki_dir), &line_pki).map_err(Failure::runtime)?;
-        pki::trust(&pki::own_cert(&line_pki), &l.opcua.pki_dir).map_err(Failure::runtime)?;
+        drop(opcua::client(&l.cell, &lua).map_err(|e| Failure::Runtime(e.to_string()))?);
+        pki::trust(&pki::own_cert(&lua.pki_dir), &line_pki).map_err(Failure::runtime)?;
+        pki::trust(&pki::own_cert(&line_pki), &lua.pki_dir).map_err(Failure::runtime)?;
         let timers: usize = l.timers.iter().map(|t| t.model.transitions.len()).sum();
         writeln!(
             out,

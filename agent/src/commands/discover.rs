@@ -33,7 +33,12 @@ pub(crate) async fn run(args: &DiscoverArgs, out: &mut dyn Write) -> Result<(), 
     let (opcua, check) = match &args.check {
         Some(path) => {
             let c = config::load(path).map_err(Failure::input)?;
-            let mut o = c.opcua.clone();
+            let mut o = c.opcua.clone().ok_or_else(|| {
+                Failure::input(format!(
+                    "{}: --check needs an OPC UA cell (this one reads a [legacy] bus)",
+                    path.display()
+                ))
+            })?;
             if let Some(e) = &args.endpoint {
                 o.endpoint = e.clone();
             }

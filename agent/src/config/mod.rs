@@ -35,6 +35,7 @@ use cellwatch_models::switching::SwitchingFunction;
 use cellwatch_models::value::{Comparison, Counter, Operand, ValueType};
 use toml::Spanned;
 
+use crate::sources::legacy::{BusNode, LegacyConfig, Parity, SerialLine, Transport};
 use crate::sources::opcua::TagNode;
 
 use raw::RawConfig;
@@ -203,6 +204,9 @@ pub struct TagConfig {
     pub deadband: Option<Deadband>,
     /// Export the value as the `cellwatch_tag_value` gauge.
     pub export: bool,
+    /// The largest value of a counter before it wraps to 0 (default: the
+    /// type's maximum).
+    pub max: Option<u64>,
 }
 
 impl TagConfig {
@@ -218,6 +222,7 @@ impl TagConfig {
             sampling_interval: None,
             deadband: None,
             export: false,
+            max: None,
         }
     }
 
@@ -328,7 +333,10 @@ pub struct CellConfig {
     /// Free text.
     pub description: String,
     /// OPC UA connection.
-    pub opcua: OpcUaConfig,
+    pub opcua: Option<OpcUaConfig>,
+    /// The `@` bus of legacy units (paper 002), when the cell is read from
+    /// one instead of an OPC UA server.
+    pub legacy: Option<LegacyConfig>,
     /// Tags, in file order.
     pub tags: Vec<TagConfig>,
     /// Switching-function checks, compiled.
@@ -349,8 +357,8 @@ pub struct CellConfig {
     pub operators_file: Option<PathBuf>,
     /// The tag whose rising edge is one part done (index into `tags`).
     pub part_done: Option<usize>,
-    /// The integer tag counting parts (index into `tags`).
-    pub part_counter: Option<usize>,
+    /// The integer tags counting parts (indices into `tags`).
+    pub part_counters: Vec<usize>,
     /// Limit checks on numeric tags.
     pub limits: Vec<LimitCheck>,
     /// Things worth saying at start (security off, ...).
@@ -380,13 +388,18 @@ impl CellConfig {
 
     /// How the engine counts parts.
     pub fn part_counting(&self) -> PartCounting {
-        match (self.part_done, self.part_counter) {
-            (Some(t), _) => PartCounting::Edge(t),
-            (None, Some(t)) => PartCounting::Counter(
-                t,
-                Counter::new(self.tags[t].value_type.max().unwrap_or(u64::MAX)),
+        match self.part_done {
+            Some(t) => PartCounting::Edge(t),
+            None if self.part_counters.is_empty() => PartCounting::None,
+            None => PartCounting::Counters(
+                self.part_counters
+                    .iter()
+                    .map(|&t| {
+                        let max = self.tags[t].max.or(self.tags[t].value_type.max());
+                        (t, Counter::new(max.unwrap_or(u64::MAX)))
+                    })
+                    .collect(),
             ),
-            (None, None) => PartCounting::None,
         }
     }
 }
@@ -466,6 +479,8 @@ pub fn parse(
         warnings: Vec::new(),
         namespace_uri: None,
         kinds: HashMap::new(),
+        bus: false,
+        tag_comments: HashMap::new(),
     };
     let config = v.config(raw);
     if v.problems.is_empty() {
@@ -508,6 +523,10 @@ struct Validator<'a> {
     namespace_uri: Option<(Range<usize>, String)>,
     /// Every tag's type and whether it is a contact, by address.
     kinds: HashMap<Signal, (ValueType, bool)>,
+    /// The tags' node ids are `@` bus nodes.
+    bus: bool,
+    /// The tags' comments, by address.
+    tag_comments: HashMap<Signal, String>,
 }
 
 impl Validator<'_> {
@@ -636,7 +655,26 @@ impl Validator<'_> {
                 format!("'{cell}' must be letters, digits, '-' or '_' (it is part of Zenoh keys)"),
             );
         }
-        let opcua = self.opcua(raw.opcua);
+        let (opcua, legacy) = match (raw.opcua, raw.legacy) {
+            (Some(o), None) => (self.opcua(o.into_inner()).map(Some), None),
+            (None, Some(l)) => (Some(None), self.legacy(l.into_inner())),
+            (Some(_), Some(l)) => {
+                self.problem(
+                    l.span(),
+                    "legacy",
+                    "a cell reads one source: [opcua] or [legacy], not both",
+                );
+                (None, None)
+            }
+            (None, None) => {
+                self.problem(
+                    0..0,
+                    "opcua",
+                    "a cell needs a source: an [opcua] server or a [legacy] bus",
+                );
+                (None, None)
+            }
+        };
         let tags = self.tags(raw.tags);
         let by_address: HashMap<Signal, usize> = tags
             .iter()
@@ -646,6 +684,10 @@ impl Validator<'_> {
         self.kinds = tags
             .iter()
             .map(|t| (t.address.clone(), (t.value_type, t.is_contact())))
+            .collect();
+        self.tag_comments = tags
+            .iter()
+            .filter_map(|t| Some((t.address.clone(), t.comment.clone()?)))
             .collect();
         let mut switching = Vec::new();
         let mut ids = HashSet::new();
@@ -818,17 +860,32 @@ impl Validator<'_> {
             .production
             .part_done
             .and_then(|p| production(p, "production.part_done", true));
-        let part_counter = match raw.production.counter {
+        let part_counters = match raw.production.counter {
             Some(c) if part_done.is_some() => {
                 self.problem(
                     c.span(),
                     "production.counter",
                     "give part_done or counter, not both",
                 );
-                None
+                Vec::new()
             }
-            Some(c) => production(c, "production.counter", false),
-            None => None,
+            Some(c) => {
+                let span = c.span();
+                match c.into_inner() {
+                    raw::OneOrMany::One(a) => {
+                        production(Spanned::new(span, a), "production.counter", false)
+                            .into_iter()
+                            .collect()
+                    }
+                    raw::OneOrMany::Many(list) => list
+                        .into_iter()
+                        .filter_map(|a| {
+                            production(Spanned::new(span.clone(), a), "production.counter", false)
+                        })
+                        .collect(),
+                }
+            }
+            None => Vec::new(),
         };
         if operators_file.is_none() {
             self.warnings.push(
@@ -839,6 +896,7 @@ impl Validator<'_> {
             cell,
             description: raw.cell.description,
             opcua: opcua?,
+            legacy,
             tags,
             switching,
             timers,
@@ -849,7 +907,7 @@ impl Validator<'_> {
             metrics,
             operators_file,
             part_done,
-            part_counter,
+            part_counters,
             limits,
             warnings: Vec::new(),
         })
@@ -981,6 +1039,99 @@ impl Validator<'_> {
         })
     }
 
+    fn legacy(&mut self, raw: raw::RawLegacy) -> Option<LegacyConfig> {
+        self.bus = true;
+        let transport = match (raw.tcp, raw.serial) {
+            (Some(t), None) => {
+                if t.get_ref()
+                    .rsplit_once(':')
+                    .and_then(|(_, p)| p.parse::<u16>().ok())
+                    .is_none()
+                {
+                    self.problem(
+                        t.span(),
+                        "legacy.tcp",
+                        format!(
+                            "'{}' is not host:port (the serial device server's raw socket)",
+                            t.get_ref()
+                        ),
+                    );
+                }
+                Transport::Tcp(t.into_inner())
+            }
+            (None, Some(path)) => {
+                let baud = match raw.baud {
+                    None => 9600,
+                    Some(b) => self.count(b, "legacy.baud", 50..=4_000_000, 9600),
+                };
+                let data_bits = match raw.data_bits {
+                    None => 7,
+                    Some(b) => self.count(b, "legacy.data_bits", 5..=8, 7) as u8,
+                };
+                let stop_bits = match raw.stop_bits {
+                    None => 2,
+                    Some(b) => self.count(b, "legacy.stop_bits", 1..=2, 2) as u8,
+                };
+                let parity = match raw
+                    .parity
+                    .as_ref()
+                    .map(|p| (p.get_ref().as_str(), p.span()))
+                {
+                    None | Some(("even", _)) => Parity::Even,
+                    Some(("odd", _)) => Parity::Odd,
+                    Some(("none", _)) => Parity::None,
+                    Some((p, span)) => {
+                        self.problem(
+                            span,
+                            "legacy.parity",
+                            format!("unknown parity '{p}': use even, odd or none"),
+                        );
+                        Parity::Even
+                    }
+                };
+                Transport::Serial(SerialLine {
+                    path: path.into_inner(),
+                    baud,
+                    data_bits,
+                    parity,
+                    stop_bits,
+                })
+            }
+            (Some(t), Some(_)) => {
+                self.problem(t.span(), "legacy.tcp", "give tcp or serial, not both");
+                return None;
+            }
+            (None, None) => {
+                self.problem(
+                    0..0,
+                    "legacy",
+                    "give the bus: tcp = \"host:port\" or serial = \"/dev/ttyUSB0\"",
+                );
+                return None;
+            }
+        };
+        let poll_interval = self.duration(
+            raw.poll_interval,
+            "legacy.poll_interval",
+            Duration::from_secs(1),
+        );
+        let response_timeout = self.duration(
+            raw.response_timeout,
+            "legacy.response_timeout",
+            Duration::from_millis(300),
+        );
+        let retries = match raw.retries {
+            None => 2,
+            Some(r) => self.count(r, "legacy.retries", 0..=10, 2),
+        };
+        Some(LegacyConfig {
+            transport,
+            poll_interval,
+            response_timeout,
+            retries,
+        })
+    }
+
     fn identity(&mut self, id: raw::RawIdentity) -> Option<Identity> {
         if let Some(p) = &id.password {
             self.problem(
@@ -1044,16 +1195,22 @@ impl Validator<'_> {
                 );
             }
             let uri = self.namespace_uri.as_ref().map(|(_, u)| u.as_str());
-            match TagNode::parse(t.node_id.get_ref(), uri) {
-                Ok(node) => {
-                    if let Some(index) = written_index(t.node_id.get_ref()) {
-                        indices.entry(index).or_insert(i);
-                    }
-                    if let Some(index) = node.bare_index().filter(|&i| i > 0) {
-                        blind.get_or_insert((index, t.name.get_ref().clone()));
-                    }
+            if self.bus {
+                if let Err(e) = BusNode::parse(t.node_id.get_ref()) {
+                    self.problem(t.node_id.span(), &format!("{key}.node_id"), e);
                 }
-                Err(e) => self.problem(t.node_id.span(), &format!("{key}.node_id"), e),
+            } else {
+                match TagNode::parse(t.node_id.get_ref(), uri) {
+                    Ok(node) => {
+                        if let Some(index) = written_index(t.node_id.get_ref()) {
+                            indices.entry(index).or_insert(i);
+                        }
+                        if let Some(index) = node.bare_index().filter(|&i| i > 0) {
+                            blind.get_or_insert((index, t.name.get_ref().clone()));
+                        }
+                    }
+                    Err(e) => self.problem(t.node_id.span(), &format!("{key}.node_id"), e),
+                }
             }
             let address = match tag_address(t.address.get_ref()) {
                 Ok(a) => a,
@@ -1131,6 +1288,30 @@ impl Validator<'_> {
                     format!("a {value_type} cannot be a gauge: export numbers and booleans only"),
                 );
             }
+            let max = t.max.and_then(|m| match value_type.max() {
+                Some(top) if *m.get_ref() >= 1 && *m.get_ref() <= top => Some(*m.get_ref()),
+                Some(top) => {
+                    self.problem(
+                        m.span(),
+                        &format!("{key}.max"),
+                        format!(
+                            "{} is not between 1 and {top}, the largest {value_type}",
+                            m.get_ref()
+                        ),
+                    );
+                    None
+                }
+                None => {
+                    self.problem(
+                        m.span(),
+                        &format!("{key}.max"),
+                        format!(
+                            "a counter's maximum needs an integer type; this tag is {value_type}"
+                        ),
+                    );
+                    None
+                }
+            });
             out.push(TagConfig {
                 name: t.name.into_inner(),
                 node_id: t.node_id.into_inner(),
@@ -1141,6 +1322,7 @@ impl Validator<'_> {
                 sampling_interval,
                 deadband,
                 export: t.export,
+                max,
             });
         }
         if let Some((span, uri)) = self.namespace_uri.clone() {
@@ -1276,7 +1458,12 @@ impl Validator<'_> {
             }
         }
         let comments = match &c.comments {
-            None => CommentDb::default(),
+            // Without an I/O list, the tags' own comments.
+            None => sf
+                .leaves()
+                .into_iter()
+                .filter_map(|s| Some((s.clone(), self.tag_comments.get(&s)?.clone())))
+                .collect(),
             Some(p) => {
                 let path = self.path(p.get_ref());
                 let text = self.read_text(

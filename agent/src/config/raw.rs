@@ -10,7 +10,8 @@ use toml::Spanned;
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawConfig {
     pub(crate) cell: RawCell,
-    pub(crate) opcua: RawOpcUa,
+    pub(crate) opcua: Option<Spanned<RawOpcUa>>,
+    pub(crate) legacy: Option<Spanned<RawLegacy>>,
     #[serde(default)]
     pub(crate) tags: Vec<RawTag>,
     #[serde(default)]
@@ -33,7 +34,15 @@ pub(crate) struct RawConfig {
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawProduction {
     pub(crate) part_done: Option<Spanned<String>>,
-    pub(crate) counter: Option<Spanned<String>>,
+    pub(crate) counter: Option<Spanned<OneOrMany>>,
+}
+
+/// One address, or a list of them.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+pub(crate) enum OneOrMany {
+    One(String),
+    Many(Vec<String>),
 }
 
 #[derive(Debug, Deserialize)]
@@ -58,6 +67,20 @@ pub(crate) struct RawOpcUa {
     pub(crate) namespace_uri: Option<Spanned<String>>,
     pub(crate) queue_size: Option<Spanned<i64>>,
     pub(crate) max_notifications_per_publish: Option<Spanned<i64>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawLegacy {
+    pub(crate) tcp: Option<Spanned<String>>,
+    pub(crate) serial: Option<Spanned<String>>,
+    pub(crate) baud: Option<Spanned<i64>>,
+    pub(crate) data_bits: Option<Spanned<i64>>,
+    pub(crate) parity: Option<Spanned<String>>,
+    pub(crate) stop_bits: Option<Spanned<i64>>,
+    pub(crate) poll_interval: Option<Spanned<String>>,
+    pub(crate) response_timeout: Option<Spanned<String>>,
+    pub(crate) retries: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -87,6 +110,7 @@ pub(crate) struct RawTag {
     pub(crate) deadband_percent: Option<Spanned<f64>>,
     #[serde(default)]
     pub(crate) export: bool,
+    pub(crate) max: Option<Spanned<u64>>,
 }
 
 #[derive(Debug, Default, Deserialize)]

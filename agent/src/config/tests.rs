@@ -69,10 +69,13 @@ fn errors(text: &str) -> String {
 #[test]
 fn defaults_are_secure_and_sane() {
     let c = parse("cell.toml", GOOD, Path::new("base"), &mem()).unwrap();
-    assert_eq!(c.opcua.policy, SecurityPolicy::Basic256Sha256);
-    assert_eq!(c.opcua.mode, SecurityMode::SignAndEncrypt);
-    assert_eq!(c.opcua.identity, Identity::Anonymous);
-    assert_eq!(c.opcua.pki_dir, PathBuf::from("base/pki"));
+    assert_eq!(
+        c.opcua.as_ref().unwrap().policy,
+        SecurityPolicy::Basic256Sha256
+    );
+    assert_eq!(c.opcua.as_ref().unwrap().mode, SecurityMode::SignAndEncrypt);
+    assert_eq!(c.opcua.as_ref().unwrap().identity, Identity::Anonymous);
+    assert_eq!(c.opcua.as_ref().unwrap().pki_dir, PathBuf::from("base/pki"));
     assert_eq!(c.zenoh.prefix, "cellwatch/c1");
     assert_eq!(c.zenoh.mode, ZenohMode::Peer);
     assert_eq!(c.journal.path, PathBuf::from("base/cellwatch-c1.sqlite"));
@@ -165,12 +168,15 @@ fn sampling_zero_is_exception_based_and_queues_fit_it() {
         &mem(),
     )
     .unwrap();
-    assert_eq!(c.opcua.sampling_interval, Duration::ZERO);
+    assert_eq!(c.opcua.as_ref().unwrap().sampling_interval, Duration::ZERO);
     // 100 ms publishing, every change: room for four intervals of 1 ms samples.
-    assert_eq!(c.opcua.queue_size, 400);
+    assert_eq!(c.opcua.as_ref().unwrap().queue_size, 400);
     let c = parse("cell.toml", GOOD, Path::new("base"), &mem()).unwrap();
     assert_eq!(
-        (c.opcua.queue_size, c.opcua.max_notifications_per_publish),
+        (
+            c.opcua.as_ref().unwrap().queue_size,
+            c.opcua.as_ref().unwrap().max_notifications_per_publish
+        ),
         (10, 10_000)
     );
     assert_eq!(
@@ -238,7 +244,10 @@ fn namespaces_are_named_by_uri() {
         "endpoint = \"opc.tcp://127.0.0.1:4840/\"\nnamespace_uri = \"urn:plc\"",
     );
     let c = parse("cell.toml", &text, Path::new("base"), &mem()).unwrap();
-    assert_eq!(c.opcua.namespace_uri.as_deref(), Some("urn:plc"));
+    assert_eq!(
+        c.opcua.as_ref().unwrap().namespace_uri.as_deref(),
+        Some("urn:plc")
+    );
     assert!(
         !c.warnings.iter().any(|w| w.contains("namespace")),
         "{:?}",
@@ -273,7 +282,7 @@ fn security_none_only_when_explicit_and_with_a_warning() {
         "endpoint = \"opc.tcp://127.0.0.1:4840/\"\nsecurity_policy = \"None\"",
     );
     let c = parse("cell.toml", &text, Path::new("base"), &mem()).unwrap();
-    assert_eq!(c.opcua.mode, SecurityMode::None);
+    assert_eq!(c.opcua.as_ref().unwrap().mode, SecurityMode::None);
     assert!(c.warnings[0].starts_with("OPC UA security is off"));
     let text = GOOD.replace(
         "endpoint = \"opc.tcp://127.0.0.1:4840/\"",
@@ -376,10 +385,10 @@ fn typed_tags_limits_counters_and_comparisons() {
         ["D1 > 20.5", "D2 != D1", "X1"],
         "canonical addresses"
     );
-    assert_eq!(c.part_counter, Some(3));
+    assert_eq!(c.part_counters, [3]);
     assert!(matches!(
         c.part_counting(),
-        PartCounting::Counter(3, ref k) if k.max == 65535
+        PartCounting::Counters(ref cs) if cs.len() == 1 && cs[0].0 == 3 && cs[0].1.max == 65535
     ));
     crate::cell::compile::engine(&c).unwrap();
 }

@@ -268,7 +268,7 @@ impl Metrics {
             ))),
             parts: reg!(IntCounter::with_opts(opts(
                 "cellwatch_parts_produced_total",
-                "Parts produced: rising edges of the part-done tag.",
+                "Parts produced: rising edges of the part-done tag, or the increments of the counter tags.",
                 cell
             ))),
             culprit: reg!(IntGaugeVec::new(

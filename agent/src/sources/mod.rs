@@ -86,9 +86,15 @@ pub trait Source: Send + 'static {
 
 /// The source a cell configuration asks for.
 pub fn for_config(config: &CellConfig) -> Box<dyn Source> {
-    Box::new(opcua::OpcUaSource::new(
-        &config.cell,
-        config.opcua.clone(),
-        config.tags.clone(),
-    ))
+    match (&config.opcua, &config.legacy) {
+        (_, Some(bus)) => Box::new(legacy::LegacySource::new(bus.clone(), config.tags.clone())),
+        (Some(ua), None) => Box::new(opcua::OpcUaSource::new(
+            &config.cell,
+            ua.clone(),
+            config.tags.clone(),
+        )),
+        // A validated configuration has one; one built by hand without
+        // either reads nothing.
+        (None, None) => Box::new(scripted::ScriptedSource::new().0),
+    }
 }

@@ -223,8 +223,10 @@ pub enum PartCounting {
     None,
     /// Each rising edge of this boolean tag is one part.
     Edge(usize),
-    /// This integer tag counts parts; wrap-around and resets recognised.
-    Counter(usize, Counter),
+    /// These integer tags count parts (one per machine of the cell); the
+    /// parts are the sum of their increments, wrap-around and resets
+    /// recognised.
+    Counters(Vec<(usize, Counter)>),
 }
 
 /// A comparison contact computed from numeric tags.
@@ -427,7 +429,8 @@ impl CellEngine {
     pub fn counting(mut self, how: PartCounting) -> Self {
         let valid = match &how {
             PartCounting::None => true,
-            PartCounting::Edge(t) | PartCounting::Counter(t, _) => *t < self.configured,
+            PartCounting::Edge(t) => *t < self.configured,
+            PartCounting::Counters(cs) => cs.iter().all(|(t, _)| *t < self.configured),
         };
         self.parts = if valid { how } else { PartCounting::None };
         self
@@ -834,8 +837,8 @@ impl CellEngine {
         if self.exported.get(tag) == Some(&true) {
             step.exported.push((tag, is.map(Num::as_f64)));
         }
-        if let PartCounting::Counter(t, counter) = &mut self.parts {
-            if *t == tag {
+        if let PartCounting::Counters(counters) = &mut self.parts {
+            for (_, counter) in counters.iter_mut().filter(|(t, _)| *t == tag) {
                 if let Some(n) = is.and_then(Num::as_count) {
                     let made = counter.next(n);
                     if made > 0 {
