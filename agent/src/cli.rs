@@ -267,6 +267,32 @@ pub(crate) enum SimulateCommand {
     /// Paper 001's body-shop line: writes run logs (CSV), normal or with an
     /// injected fault, deterministic per seed.
     Line(LineArgs),
+    /// Paper 002's injection-moulding units on one `@` bus, answering the
+    /// control computer by unit number over TCP (a serial device server's
+    /// raw socket) or a pseudo-terminal (a serial port). Standard input:
+    /// `stop UNIT CAUSE` (01-06), `run UNIT`, `silent UNIT`, `answer UNIT`,
+    /// `noise N`, `cycle`, `quit`.
+    Moulding(MouldingArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct MouldingArgs {
+    /// How many units (numbered from 1).
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=255))]
+    pub(crate) units: u8,
+    /// Serve on this TCP address.
+    #[arg(long, conflicts_with = "pty", required_unless_present = "pty")]
+    pub(crate) tcp: Option<std::net::SocketAddr>,
+    /// Serve on a new pseudo-terminal (its path is printed).
+    #[arg(long)]
+    pub(crate) pty: bool,
+    /// A machine cycle (production up) every this long; 0 for none.
+    #[arg(long, default_value = "2s", value_parser = humantime::parse_duration)]
+    pub(crate) cycle: std::time::Duration,
+    /// Stop schedule: `demo` (unit 2's front door, unit 3's mould change,
+    /// unit 1 silent, line noise, every 40 s) or `none`.
+    #[arg(long, default_value = "demo", value_parser = ["demo", "none"])]
+    pub(crate) scenario: String,
 }
 
 #[derive(Debug, clap::Args)]
@@ -388,9 +414,16 @@ pub(crate) struct DemoArgs {
     /// The body-shop line's cell configuration, run beside the CNC.
     #[arg(long, default_value = "config/line.toml")]
     pub(crate) line_config: PathBuf,
-    /// Run the CNC only.
+    /// Run the CNC only (no line).
     #[arg(long)]
     pub(crate) no_line: bool,
+    /// The moulding units' cell configuration (paper 002), run beside the
+    /// CNC: three units on one simulated `@` bus.
+    #[arg(long, default_value = "config/moulding.toml")]
+    pub(crate) moulding_config: PathBuf,
+    /// No moulding units.
+    #[arg(long)]
+    pub(crate) no_moulding: bool,
     /// Where the demo keeps certificates, the journal and operator keys.
     #[arg(long, default_value = "cellwatch-demo")]
     pub(crate) state_dir: PathBuf,
@@ -643,6 +676,9 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::Simulate(SimulateCommand::Line(args)) => commands::simulate::line(&args, out),
             Command::Simulate(SimulateCommand::Cnc(args)) => {
                 commands::simulate::cnc(&args, out).await
+            }
+            Command::Simulate(SimulateCommand::Moulding(args)) => {
+                commands::simulate::moulding(&args, out).await
             }
             Command::Alarms(args) => commands::subscribers::alarms(&args, out).await,
             Command::History(args) => commands::subscribers::history(&args, out).await,

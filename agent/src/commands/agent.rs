@@ -304,6 +304,55 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         });
         Some((line_sim, line_agent, line_player))
     };
+    let moulding = if args.no_moulding {
+        None
+    } else {
+        let mut m = load(&args.moulding_config)?;
+        let addr = match m.legacy.as_ref().map(|l| &l.transport) {
+            Some(crate::sources::legacy::Transport::Tcp(a)) => a.parse::<std::net::SocketAddr>().map_err(|_| {
+                Failure::Input(format!(
+                    "{}: legacy.tcp '{a}': the demo needs an IP:port on this machine",
+                    args.moulding_config.display()
+                ))
+            })?,
+            _ => {
+                return Err(Failure::Input(format!(
+                    "{}: the demo serves the moulding units on TCP; its configuration needs [legacy] tcp = \"IP:port\"",
+                    args.moulding_config.display()
+                )))
+            }
+        };
+        m.journal.path = state.join(format!("{}.sqlite", m.cell));
+        m.operators_file = Some(secrets.clone());
+        m.zenoh.tls = Some(bus_tls(&state, &format!("agent-{}", m.cell))?);
+        m.warnings
+            .retain(|w| !w.starts_with("no commands.operators_file"));
+        let bus = crate::sim::moulding::MouldingBus::new(3);
+        let (local, server) = bus.listen_tcp(addr).await.map_err(|e| {
+            Failure::Runtime(format!("cannot serve the moulding bus on {addr}: {e}"))
+        })?;
+        writeln!(
+            out,
+            "  cell {}: injection-moulding units 1-3 on an @ bus at tcp {local}; a door, a mould change, a silent gateway every 40 s (Zenoh {}, metrics {})",
+            m.cell,
+            m.zenoh.listen.join(", "),
+            m.metrics.map_or_else(|| "off".to_string(), |a| a.to_string())
+        )
+        .map_err(io)?;
+        let agent = cell::start(m, Some(tx.clone()))
+            .await
+            .map_err(start_failure)?;
+        let notes = note_tx.clone();
+        let player_bus = bus.clone();
+        let player = tokio::spawn(async move {
+            player_bus
+                .play(Duration::from_secs(2), true, |n| {
+                    let _ = notes.send(format!("moulding: {n}"));
+                })
+                .await;
+        });
+        Some((agent, server, player))
+    };
     writeln!(out).map_err(io)?;
     out.flush().map_err(io)?;
 
@@ -339,6 +388,11 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     player.abort();
     agent.stop().await;
     sim.stop();
+    if let Some((agent, server, player)) = moulding {
+        player.abort();
+        agent.stop().await;
+        server.abort();
+    }
     if let Some((line_sim, line_agent, line_player)) = line {
         line_player.abort();
         line_agent.stop().await;

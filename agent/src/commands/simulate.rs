@@ -4,9 +4,119 @@ use std::io::Write;
 
 use tokio::io::{AsyncBufReadExt, BufReader};
 
-use crate::cli::{Failure, LineArgs, SimulateArgs};
+use crate::cli::{Failure, LineArgs, MouldingArgs, SimulateArgs};
 use crate::sim::cnc::{Scenario, SimOptions, SimulatedCnc};
+use crate::sim::moulding::{Event, MouldingBus};
 use crate::sources::pki;
+
+/// Serves a simulated moulding bus until interrupted or `quit`.
+pub(crate) async fn moulding(args: &MouldingArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    let bus = MouldingBus::new(args.units);
+    let io = Failure::output;
+    let _server = match args.tcp {
+        Some(addr) => {
+            let (local, task) = bus
+                .listen_tcp(addr)
+                .await
+                .map_err(|e| Failure::Runtime(format!("cannot listen on {addr}: {e}")))?;
+            writeln!(
+                out,
+                "simulated moulding bus, units 1-{}, on tcp {local}",
+                args.units
+            )
+            .map_err(io)?;
+            Some(task)
+        }
+        None => {
+            let path = bus
+                .pty()
+                .map_err(|e| Failure::Runtime(format!("no pseudo-terminal: {e}")))?;
+            writeln!(
+                out,
+                "simulated moulding bus, units 1-{}, on serial line {}",
+                args.units,
+                path.display()
+            )
+            .map_err(io)?;
+            None
+        }
+    };
+    writeln!(
+        out,
+        "commands: stop UNIT CAUSE (01-06), run UNIT, silent UNIT, answer UNIT, noise N, cycle, quit"
+    )
+    .map_err(io)?;
+    out.flush().map_err(io)?;
+    let player = {
+        let bus = bus.clone();
+        let (cycle, schedule) = (args.cycle, args.scenario == "demo");
+        tokio::spawn(async move { bus.play(cycle, schedule, |n| tracing::info!("{n}")).await })
+    };
+    let mut lines = BufReader::new(tokio::io::stdin()).lines();
+    loop {
+        let line = tokio::select! {
+            _ = tokio::signal::ctrl_c() => break,
+            line = lines.next_line() => line,
+        };
+        let Ok(Some(line)) = line else {
+            tokio::signal::ctrl_c().await.ok();
+            break;
+        };
+        let words: Vec<&str> = line.split_whitespace().collect();
+        let unit = |w: Option<&&str>| w.and_then(|u| u.parse::<u8>().ok());
+        let done = match (words.first().copied(), unit(words.get(1))) {
+            (Some("quit"), _) => break,
+            (Some("cycle"), _) => {
+                bus.cycle();
+                true
+            }
+            (Some("noise"), _) => match words.get(1).and_then(|n| n.parse().ok()) {
+                Some(n) => {
+                    bus.apply(Event::Noise(n));
+                    true
+                }
+                None => false,
+            },
+            (Some("run"), Some(u)) => {
+                bus.apply(Event::Run(u));
+                true
+            }
+            (Some("silent"), Some(u)) => {
+                bus.apply(Event::Silent(u));
+                true
+            }
+            (Some("answer"), Some(u)) => {
+                bus.apply(Event::Answer(u));
+                true
+            }
+            (Some("stop"), Some(u)) => {
+                let bit = words.get(2).and_then(|c| {
+                    cellwatch_models::legacy::Status::NAMED
+                        .iter()
+                        .find(|(_, _, code)| code == &Some(*c))
+                        .map(|(_, b, _)| *b)
+                });
+                match bit {
+                    Some(b) => {
+                        bus.apply(Event::Stop(u, b));
+                        true
+                    }
+                    None => false,
+                }
+            }
+            _ => false,
+        };
+        let reply = if done {
+            format!("done {line}")
+        } else {
+            format!("? {line}: stop UNIT CAUSE (01-06), run UNIT, silent UNIT, answer UNIT, noise N, cycle, quit")
+        };
+        writeln!(out, "{reply}").map_err(io)?;
+        out.flush().map_err(io)?;
+    }
+    player.abort();
+    Ok(())
+}
 
 /// Runs the simulator until interrupted. Commands on standard input:
 /// `set ADDRESS 0|1`, `bad ADDRESS`, `quit`.

@@ -358,6 +358,98 @@ impl MouldingBus {
     }
 }
 
+/// A scripted event of the demo's moulding bus.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Event {
+    /// A unit stops with a Table 4 cause bit.
+    Stop(u8, u16),
+    /// A unit runs again.
+    Run(u8),
+    /// A unit stops answering.
+    Silent(u8),
+    /// A unit answers again.
+    Answer(u8),
+    /// The next answers are corrupted.
+    Noise(u32),
+}
+
+/// The demo's schedule, repeated every 40 s: (seconds into the period,
+/// event, what it means).
+pub const DEMO: [(u64, Event, &str); 8] = [
+    (
+        5,
+        Event::Stop(2, Status::FRONT_DOOR_OPEN),
+        "unit 2: operator opens the front door",
+    ),
+    (10, Event::Run(2), "unit 2: door closed, running again"),
+    (14, Event::Noise(2), "line noise corrupts two answers"),
+    (
+        18,
+        Event::Stop(3, Status::MOULD_CHANGE),
+        "unit 3: mould change",
+    ),
+    (26, Event::Run(3), "unit 3: new mould in, running"),
+    (30, Event::Silent(1), "unit 1: gateway switched off"),
+    (35, Event::Answer(1), "unit 1: gateway back"),
+    (
+        38,
+        Event::Stop(1, Status::STOPPED),
+        "unit 1: stopped by the operator",
+    ),
+];
+
+/// The length of the demo's schedule.
+pub const DEMO_PERIOD: std::time::Duration = std::time::Duration::from_secs(40);
+
+impl MouldingBus {
+    /// Applies one scripted event.
+    pub fn apply(&self, event: Event) {
+        match event {
+            Event::Stop(u, bit) => self.stop(u, Some(bit)),
+            Event::Run(u) => self.stop(u, None),
+            Event::Silent(u) => self.set_silent(u, true),
+            Event::Answer(u) => self.set_silent(u, false),
+            Event::Noise(k) => self.corrupt_next(k),
+        }
+    }
+
+    /// Runs machine cycles every `cycle` and, with `schedule`, the demo's
+    /// events, forever; `note` is told each event.
+    pub async fn play(&self, cycle: std::time::Duration, schedule: bool, note: impl Fn(&str)) {
+        let start = tokio::time::Instant::now();
+        let mut events = DEMO.iter().cycle().enumerate();
+        let mut next_cycle = start + cycle;
+        let (mut k, mut event) = events.next().map(|(k, e)| (k, *e)).unwrap_or((0, DEMO[0]));
+        let at = |k: usize, s: u64| {
+            start
+                + DEMO_PERIOD * u32::try_from(k / DEMO.len()).unwrap_or(u32::MAX)
+                + std::time::Duration::from_secs(s)
+        };
+        loop {
+            let event_at = at(k, event.0);
+            let wake = match (cycle.is_zero(), schedule) {
+                (true, false) => return,
+                (true, true) => event_at,
+                (false, false) => next_cycle,
+                (false, true) => event_at.min(next_cycle),
+            };
+            tokio::time::sleep_until(wake).await;
+            if !cycle.is_zero() && tokio::time::Instant::now() >= next_cycle {
+                self.cycle();
+                next_cycle += cycle;
+            }
+            if schedule && tokio::time::Instant::now() >= event_at {
+                note(event.2);
+                self.apply(event.1);
+                if let Some((n, e)) = events.next() {
+                    k = n;
+                    event = *e;
+                }
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
