@@ -183,16 +183,7 @@ impl Fixture {
     }
 
     pub(crate) async fn scrape(&self) -> String {
-        let addr = self.agent().metrics_addr().unwrap();
-        let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
-        use tokio::io::{AsyncReadExt, AsyncWriteExt};
-        s.write_all(b"GET /metrics HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n")
-            .await
-            .unwrap();
-        let mut body = String::new();
-        s.read_to_string(&mut body).await.unwrap();
-        assert!(body.starts_with("HTTP/1.1 200"), "{body}");
-        body
+        crate::util::scrape(self.agent().metrics_addr().unwrap()).await
     }
 }
 

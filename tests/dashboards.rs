@@ -209,7 +209,7 @@ async fn every_metric_named_is_exported_by_the_agent() {
     let addr = line_agent.metrics_addr().unwrap();
     let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
     let line_scrape = loop {
-        let s = scrape_addr(addr).await;
+        let s = crate::util::scrape(addr).await;
         if s.contains("cellwatch_transition_duration_seconds_bucket{") {
             break s;
         }
@@ -238,15 +238,4 @@ async fn every_metric_named_is_exported_by_the_agent() {
     );
     fx.agent.unwrap().stop().await;
     fx.sim.stop();
-}
-
-async fn scrape_addr(addr: std::net::SocketAddr) -> String {
-    use tokio::io::{AsyncReadExt, AsyncWriteExt};
-    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
-    s.write_all(b"GET /metrics HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n")
-        .await
-        .unwrap();
-    let mut body = String::new();
-    s.read_to_string(&mut body).await.unwrap();
-    body
 }

@@ -426,14 +426,7 @@ async fn a_legacy_bus_runs_as_a_cell_with_alarms_stop_causes_and_production() {
     .await;
     // Six cycles on every unit (unit 2 ran again before the sixth).
     let made: u64 = 6 + 6 + 6;
-    let addr = agent.metrics_addr().unwrap();
-    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
-    use tokio::io::{AsyncReadExt, AsyncWriteExt};
-    s.write_all(b"GET /metrics HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n")
-        .await
-        .unwrap();
-    let mut body = String::new();
-    s.read_to_string(&mut body).await.unwrap();
+    let body = crate::util::scrape(agent.metrics_addr().unwrap()).await;
     assert!(
         body.contains(&format!(
             "cellwatch_parts_produced_total{{cell=\"moulding-bus1\"}} {made}"
@@ -443,24 +436,7 @@ async fn a_legacy_bus_runs_as_a_cell_with_alarms_stop_causes_and_production() {
     agent.stop().await;
     server.abort();
 
-    let day = chrono::Utc::now().format("%Y-%m-%d").to_string();
-    let journal = dir.path().join("journal.sqlite");
-    let r = crate::util::cellwatch(&[
-        "report",
-        "daily",
-        "--date",
-        &day,
-        "--db",
-        journal.to_str().unwrap(),
-        "--causes",
-        crate::util::root()
-            .join("config/stop-causes.toml")
-            .to_str()
-            .unwrap(),
-        "--json",
-    ]);
-    assert_eq!(r.code, 0, "{}", r.stderr);
-    let v: serde_json::Value = serde_json::from_str(&r.stdout).unwrap();
+    let v = crate::util::todays_report(&dir.path().join("journal.sqlite"));
     assert_eq!(v["production"], made, "{v}");
     let causes = v["stop_causes"].as_array().unwrap();
     assert!(

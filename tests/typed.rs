@@ -194,20 +194,7 @@ async fn the_agent_raises_a_limit_alarm_and_counts_parts_through_wrap_and_reset(
     );
     let journal = fx.journal_path();
     fx.stop().await;
-    let day = chrono::Utc::now().format("%Y-%m-%d").to_string();
-    let r = cellwatch(&[
-        "report",
-        "daily",
-        "--date",
-        &day,
-        "--db",
-        journal.to_str().unwrap(),
-        "--causes",
-        root().join("config/stop-causes.toml").to_str().unwrap(),
-        "--json",
-    ]);
-    assert_eq!(r.code, 0, "{}", r.stderr);
-    let v: serde_json::Value = serde_json::from_str(&r.stdout).unwrap();
+    let v = crate::util::todays_report(&journal);
     assert_eq!(v["production"], expected, "{v}");
 }
 

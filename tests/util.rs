@@ -125,3 +125,36 @@ pub(crate) fn lines_of(child: &mut std::process::Child) -> std::sync::mpsc::Rece
     });
     lines
 }
+
+/// A `/metrics` scrape over HTTP.
+pub(crate) async fn scrape(addr: std::net::SocketAddr) -> String {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
+    s.write_all(b"GET /metrics HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n")
+        .await
+        .unwrap();
+    let mut body = String::new();
+    s.read_to_string(&mut body).await.unwrap();
+    assert!(body.starts_with("HTTP/1.1 200"), "{body}");
+    body
+}
+
+/// `cellwatch report daily --json` for today (UTC) over `journal`, with
+/// the shipped stop causes.
+pub(crate) fn todays_report(journal: &Path) -> serde_json::Value {
+    let day = chrono::Utc::now().format("%Y-%m-%d").to_string();
+    let causes = root().join("config/stop-causes.toml");
+    let r = cellwatch(&[
+        "report",
+        "daily",
+        "--date",
+        &day,
+        "--db",
+        journal.to_str().unwrap(),
+        "--causes",
+        causes.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    serde_json::from_str(&r.stdout).unwrap()
+}

@@ -221,6 +221,11 @@ impl SimServer {
             .filter(|(s, _)| !deleted.contains(s))
             .map(|(s, v)| (NodeId::new(self.ns, s.as_str()), DataValue::new_at(*v, now)))
             .collect();
+        self.write(&values)
+    }
+
+    /// Writes values to their nodes, notifying subscribers.
+    fn write(&self, values: &[(NodeId, DataValue)]) -> Result<(), String> {
         self.manager
             .set_values(
                 &self.subscriptions,
@@ -340,12 +345,7 @@ impl SimServer {
                 )
             })
             .collect();
-        self.manager
-            .set_values(
-                &self.subscriptions,
-                values.iter().map(|(n, v)| (n, None, v.clone())),
-            )
-            .map_err(|e| format!("cannot update the simulated PLC: {e}"))
+        self.write(&values)
     }
 
     /// Marks a variable's value as bad (a broken sensor wire).
