@@ -247,3 +247,49 @@ fn exported_tags_report_their_changes() {
     let step = e.on_connection(false, 4);
     assert_eq!(step.exported, [(temp, None)]);
 }
+
+/// ISA-18.2 delays on a switching check, in virtual time: with a 5 s
+/// on-delay a 3 s fault raises nothing and a 6 s one raises once; with a
+/// 5 s off-delay a 3 s return clears nothing and a 6 s one clears once.
+#[test]
+fn on_and_off_delays_announce_only_conditions_that_last() {
+    let mut e = engine(Vec::new()).delaying("ese", 5000, 5000);
+    load_normal(&mut e, 0);
+    number(&mut e, "MODE", Num::Int(1), 0);
+    number(&mut e, "TEMP", Num::Float(40.0), 0);
+    let mut transitions = Vec::new();
+    let mut at = |e: &mut CellEngine, t: u64, open: Option<bool>| {
+        let step = match open {
+            Some(v) => contact(e, "X0.06", !v, t),
+            None => e.advance(t),
+        };
+        transitions.extend(step.alarms().map(|(a, tr, at)| (a.id.clone(), tr, at)));
+    };
+    // A 3 s fault: nothing.
+    at(&mut e, 10_000, Some(true));
+    at(&mut e, 12_000, None);
+    at(&mut e, 13_000, Some(false));
+    at(&mut e, 20_000, None);
+    // A 6 s fault: raised once, 5 s after it began.
+    at(&mut e, 30_000, Some(true));
+    at(&mut e, 34_999, None);
+    at(&mut e, 35_000, None);
+    at(&mut e, 36_000, None);
+    // A 3 s return: still active (the fault's return updates its
+    // explanation).
+    at(&mut e, 40_000, Some(false));
+    at(&mut e, 43_000, Some(true));
+    at(&mut e, 50_000, None);
+    // A 6 s return: cleared once, 5 s after it began.
+    at(&mut e, 60_000, Some(false));
+    at(&mut e, 65_000, None);
+    at(&mut e, 66_000, None);
+    assert_eq!(
+        transitions,
+        [
+            ("ese".to_string(), Transition::Raised, 35_000),
+            ("ese".to_string(), Transition::Updated, 43_000),
+            ("ese".to_string(), Transition::Cleared, 65_000),
+        ]
+    );
+}

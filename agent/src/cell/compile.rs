@@ -45,14 +45,16 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
     if !config.limits.is_empty() {
         sets.push(Box::new(LimitChecks::new(config.limits.clone())));
     }
-    Ok(CellEngine::new(
-        &config.cell,
-        config.engine_tags(),
-        sets,
-        config.state.clone(),
-    )?
-    .counting(config.part_counting())
-    .exporting(
+    let engine = config.delays.iter().fold(
+        CellEngine::new(
+            &config.cell,
+            config.engine_tags(),
+            sets,
+            config.state.clone(),
+        )?,
+        |e, (id, on, off)| e.delaying(id, *on, *off),
+    );
+    Ok(engine.counting(config.part_counting()).exporting(
         config
             .tags
             .iter()

@@ -361,6 +361,8 @@ pub struct CellConfig {
     pub part_counters: Vec<usize>,
     /// Limit checks on numeric tags.
     pub limits: Vec<LimitCheck>,
+    /// Alarm delays: alarm id, on-delay and off-delay, ms.
+    pub delays: Vec<(String, u64, u64)>,
     /// Things worth saying at start (security off, ...).
     pub warnings: Vec<String>,
 }
@@ -598,6 +600,14 @@ impl Validator<'_> {
         }
     }
 
+    /// A delay in ms: `0` or a duration.
+    fn delay(&mut self, value: Option<Spanned<String>>, key: &str) -> u64 {
+        match value {
+            Some(v) if v.get_ref().trim() == "0" => 0,
+            other => self.duration(other, key, Duration::ZERO).as_millis() as u64,
+        }
+    }
+
     fn deadband(
         &mut self,
         value: Spanned<f64>,
@@ -691,8 +701,14 @@ impl Validator<'_> {
             .collect();
         let mut switching = Vec::new();
         let mut ids = HashSet::new();
+        let mut delays = Vec::new();
         for (i, c) in raw.checks.switching.into_iter().enumerate() {
             let key = format!("checks.switching[{i}]");
+            let on = self.delay(c.on_delay.clone(), &format!("{key}.on_delay"));
+            let off = self.delay(c.off_delay.clone(), &format!("{key}.off_delay"));
+            if on > 0 || off > 0 {
+                delays.push((c.id.get_ref().clone(), on, off));
+            }
             if !ids.insert(c.id.get_ref().clone())
                 || matches!(c.id.get_ref().as_str(), "communication" | "tag-quality")
             {
@@ -909,6 +925,7 @@ impl Validator<'_> {
             part_done,
             part_counters,
             limits,
+            delays,
             warnings: Vec::new(),
         })
     }
@@ -1607,14 +1624,8 @@ impl Validator<'_> {
                     0.0
                 }
             };
-            let mut delay = |v: Option<Spanned<String>>, name: &str| match v {
-                Some(v) if v.get_ref().trim() == "0" => 0,
-                other => self
-                    .duration(other, &format!("{key}.{name}"), Duration::ZERO)
-                    .as_millis() as u64,
-            };
-            let on_delay = delay(c.on_delay, "on_delay");
-            let off_delay = delay(c.off_delay, "off_delay");
+            let on_delay = self.delay(c.on_delay, &format!("{key}.on_delay"));
+            let off_delay = self.delay(c.off_delay, &format!("{key}.off_delay"));
             let mut levels = Vec::new();
             for (level, raw, default) in [
                 (Level::HH, c.hh, Severity::Critical),

@@ -168,6 +168,8 @@ pub(crate) struct RawSwitching {
     pub(crate) comments: Option<Spanned<String>>,
     pub(crate) observable: Option<Spanned<String>>,
     pub(crate) armed_when: Option<Spanned<String>>,
+    pub(crate) on_delay: Option<Spanned<String>>,
+    pub(crate) off_delay: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Default, Deserialize)]

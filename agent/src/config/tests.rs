@@ -386,6 +386,18 @@ fn typed_tags_limits_counters_and_comparisons() {
         "canonical addresses"
     );
     assert_eq!(c.part_counters, [3]);
+    assert!(c.delays.is_empty());
+    let delayed = parse(
+        "cell.toml",
+        &GOOD.replace(
+            "coil = \"G0.00\"",
+            "coil = \"G0.00\"\non_delay = \"5s\"\noff_delay = \"1500ms\"",
+        ),
+        Path::new("base"),
+        &mem(),
+    )
+    .unwrap();
+    assert_eq!(delayed.delays, [("fig6".to_string(), 5000, 1500)]);
     assert!(matches!(
         c.part_counting(),
         PartCounting::Counters(ref cs) if cs.len() == 1 && cs[0].0 == 3 && cs[0].1.max == 65535

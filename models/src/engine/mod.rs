@@ -282,6 +282,11 @@ pub struct CellEngine {
     parts: PartCounting,
     /// Per configured tag: whether its changes go to [`Step::exported`].
     exported: Vec<bool>,
+    /// Per alarm id: how long its condition must hold to raise and be gone
+    /// to clear, ms.
+    delays: HashMap<String, (u64, u64)>,
+    /// Findings waiting out their delay, by alarm id, with since when.
+    pending: BTreeMap<String, (u64, Finding)>,
 }
 
 impl CellEngine {
@@ -403,6 +408,8 @@ impl CellEngine {
             last_fault: None,
             parts: PartCounting::None,
             exported: vec![false; configured],
+            delays: HashMap::new(),
+            pending: BTreeMap::new(),
         })
     }
 
@@ -420,6 +427,17 @@ impl CellEngine {
             if let Some(e) = self.exported.get_mut(t) {
                 *e = true;
             }
+        }
+        self
+    }
+
+    /// Delays alarm `id`: its condition must hold `on_delay` ms before it
+    /// is raised, and be gone `off_delay` ms before it clears (ISA-18.2);
+    /// a condition that does not last is never announced.
+    #[must_use]
+    pub fn delaying(mut self, id: &str, on_delay: u64, off_delay: u64) -> Self {
+        if on_delay > 0 || off_delay > 0 {
+            self.delays.insert(id.to_string(), (on_delay, off_delay));
         }
         self
     }
@@ -554,6 +572,10 @@ impl CellEngine {
             return step;
         }
         self.connected = Some(up);
+        if !up {
+            // A condition waiting out its delay is no longer seen to hold.
+            self.pending.clear();
+        }
         let finding = Finding {
             id: "communication".into(),
             kind: AlarmKind::Communication,
@@ -691,6 +713,21 @@ impl CellEngine {
         let mut step = Step::default();
         for f in findings {
             self.apply(f, now, &mut step);
+        }
+        // Delayed findings whose condition lasted.
+        let due: Vec<String> = self
+            .pending
+            .iter()
+            .filter(|(id, (since, f))| {
+                let (on, off) = self.delays.get(*id).copied().unwrap_or_default();
+                now.saturating_sub(*since) >= if f.active { on } else { off }
+            })
+            .map(|(id, _)| id.clone())
+            .collect();
+        for id in due {
+            if let Some((_, f)) = self.pending.remove(&id) {
+                self.announce(f, now, &mut step);
+            }
         }
         if !step.events.is_empty() {
             self.update_state(now, &mut step);
@@ -934,7 +971,26 @@ impl CellEngine {
         }
     }
 
-    fn apply(&mut self, mut f: Finding, now: u64, step: &mut Step) {
+    fn apply(&mut self, f: Finding, now: u64, step: &mut Step) {
+        if let Some(&(on, off)) = self.delays.get(&f.id) {
+            let active = self.alarms.get(&f.id).is_some_and(|a| a.active);
+            if f.active == active {
+                // Back to what is announced before the delay ran out.
+                self.pending.remove(&f.id);
+            } else if (if f.active { on } else { off }) > 0 {
+                let since = match self.pending.get(&f.id) {
+                    Some((since, p)) if p.active == f.active => *since,
+                    _ => now,
+                };
+                self.pending.insert(f.id.clone(), (since, f));
+                return;
+            }
+        }
+        self.announce(f, now, step);
+    }
+
+    /// Applies a finding to the alarm book and reports the transition.
+    fn announce(&mut self, mut f: Finding, now: u64, step: &mut Step) {
         if !self.derived.is_empty() {
             for c in &mut f.culprits {
                 if c.comment.is_none() {
