@@ -403,6 +403,8 @@ async fn only_correctly_signed_acks_are_carried_out_and_all_are_journaled() {
     let cmd = |nonce: &str| Command {
         action: cellwatch::operator::Action::Ack,
         alarm: "ese".into(),
+        tag: None,
+        value: None,
         operator: "kim".into(),
         nonce: nonce.into(),
         issued_at: now,

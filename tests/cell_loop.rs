@@ -145,6 +145,8 @@ async fn scripted_source_drives_the_loop_into_the_recording_sink() {
             command: Ok(Command {
                 action: Action::Ack,
                 alarm: "ese".into(),
+                tag: None,
+                value: None,
                 operator: "kim".into(),
                 nonce: "n1".into(),
                 issued_at: cellwatch::clock::now_ms(),

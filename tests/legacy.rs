@@ -66,7 +66,7 @@ impl Polling {
         let (tx, rx) = mpsc::channel(cellwatch::sources::QUEUE_CAPACITY);
         let (stop, stop_rx) = tokio::sync::oneshot::channel::<()>();
         let task = tokio::spawn(async move {
-            legacy::run(&config, &tags(), tx, async {
+            legacy::run(&config, &tags(), tx, None, async {
                 let _ = stop_rx.await;
             })
             .await
@@ -292,23 +292,11 @@ async fn a_legacy_bus_runs_as_a_cell_with_alarms_stop_causes_and_production() {
     use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
     let dir = tempfile::tempdir().unwrap();
-    let bus = MouldingBus::new(3);
-    let (addr, server) = bus
-        .listen_tcp("127.0.0.1:0".parse().unwrap())
-        .await
-        .unwrap();
-    let mut c = cellwatch::config::load(&crate::util::root().join("config/moulding.toml")).unwrap();
-    let l = c.legacy.as_mut().unwrap();
-    l.transport = Transport::Tcp(addr.to_string());
-    l.poll_interval = Duration::from_millis(100);
-    let port = crate::agent::free_port();
-    c.zenoh.listen = vec![format!("tls/127.0.0.1:{port}")];
-    crate::util::bus_pki(dir.path(), &["agent-moulding-bus1"]);
-    c.zenoh.tls = Some(crate::util::bus_tls(dir.path(), "agent-moulding-bus1"));
-    c.journal.path = dir.path().join("journal.sqlite");
-    c.metrics = Some("127.0.0.1:0".parse().unwrap());
-    let agent = cellwatch::cell::start(c, None).await.unwrap();
-    let client = crate::util::operator_session(dir.path(), "operator-kim", port).await;
+    let (bus, server, agent, client, _) = moulding_agent(
+        dir.path(),
+        &crate::spawned::operators_file(&cellwatch::operator::Action::ALL),
+    )
+    .await;
     let sub = client
         .declare_subscriber("cellwatch/moulding-bus1/alarms/**")
         .history(HistoryConfig::default().detect_late_publishers())
@@ -443,4 +431,218 @@ async fn a_legacy_bus_runs_as_a_cell_with_alarms_stop_causes_and_production() {
         causes.iter().any(|c| c["code"] == "01" && c["count"] == 1),
         "{v}"
     );
+}
+
+/// The shipped `config/moulding.toml` as an agent polling a simulated bus
+/// of three units over TCP (every 100 ms), Zenoh with TLS, the given
+/// operators file; an operator's Zenoh session, and the agent's Zenoh port.
+async fn moulding_agent(
+    dir: &std::path::Path,
+    operators: &str,
+) -> (
+    MouldingBus,
+    tokio::task::JoinHandle<()>,
+    cellwatch::cell::Agent,
+    zenoh::Session,
+    u16,
+) {
+    let bus = MouldingBus::new(3);
+    let (addr, server) = bus
+        .listen_tcp("127.0.0.1:0".parse().unwrap())
+        .await
+        .unwrap();
+    let mut c = cellwatch::config::load(&crate::util::root().join("config/moulding.toml")).unwrap();
+    let l = c.legacy.as_mut().unwrap();
+    l.transport = Transport::Tcp(addr.to_string());
+    l.poll_interval = Duration::from_millis(100);
+    let port = crate::agent::free_port();
+    c.zenoh.listen = vec![format!("tls/127.0.0.1:{port}")];
+    crate::util::bus_pki(dir, &["agent-moulding-bus1"]);
+    c.zenoh.tls = Some(crate::util::bus_tls(dir, "agent-moulding-bus1"));
+    c.journal.path = dir.join("journal.sqlite");
+    c.metrics = Some("127.0.0.1:0".parse().unwrap());
+    let operators_file = dir.join("operators.toml");
+    std::fs::write(&operators_file, operators).unwrap();
+    c.operators_file = Some(operators_file);
+    let agent = cellwatch::cell::start(c, None).await.unwrap();
+    let client = crate::util::operator_session(dir, "operator-kim", port).await;
+    (bus, server, agent, client, port)
+}
+
+/// Writes to a unit: a target sent by an operator allowed `write` is
+/// acknowledged by the unit (`AC10`), read back and journaled; one from an
+/// operator without that permission, one unsigned, one with a bad
+/// signature and one with a value that does not fit are refused,
+/// journaled, and never sent on the bus.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_target_is_written_only_for_an_operator_allowed_to_write() {
+    use cellwatch::operator::{Action, Command, OperatorKey};
+    let dir = tempfile::tempdir().unwrap();
+    let lee = OperatorKey::generate("lee");
+    let operators = format!(
+        "{}\n{}",
+        crate::spawned::operators_file(&[Action::Ack, Action::Write]),
+        lee.operators_entry(&[Action::Ack, Action::Reset])
+    );
+    let (bus, server, agent, client, port) = moulding_agent(dir.path(), &operators).await;
+    let query = |selector: String, payload: Option<String>| {
+        let client = client.clone();
+        async move {
+            crate::spawned::query(&client, &selector, payload)
+                .await
+                .unwrap()
+        }
+    };
+    let target_is = |v: u64| {
+        let query = &query;
+        async move {
+            let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+            loop {
+                let snap: serde_json::Value = serde_json::from_str(
+                    &query("cellwatch/moulding-bus1/snapshot".into(), None).await,
+                )
+                .unwrap();
+                let t2 = snap["tags"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .find(|t| t["address"] == "T2")
+                    .map(|t| t["value"].clone());
+                if t2 == Some(serde_json::json!(v)) {
+                    return;
+                }
+                assert!(
+                    tokio::time::Instant::now() < deadline,
+                    "T2 never {v}: {snap}"
+                );
+                tokio::time::sleep(Duration::from_millis(100)).await;
+            }
+        }
+    };
+    target_is(1000).await;
+    let write = |operator: &str, value: &str, nonce: &str| Command {
+        action: Action::Write,
+        alarm: String::new(),
+        tag: Some("T2".into()),
+        value: Some(value.into()),
+        operator: operator.into(),
+        nonce: nonce.into(),
+        issued_at: cellwatch::clock::now_ms(),
+        signature: String::new(),
+    };
+    let send = |c: Command| {
+        let json = serde_json::to_string(&c).unwrap();
+        let query = &query;
+        async move {
+            let r: serde_json::Value = serde_json::from_str(
+                &query("cellwatch/moulding-bus1/command".into(), Some(json)).await,
+            )
+            .unwrap();
+            (
+                r["accepted"].as_bool().unwrap(),
+                r["detail"].as_str().unwrap().to_string(),
+            )
+        }
+    };
+    let mut by_lee = write("lee", "1500", "n1");
+    by_lee.sign("moulding-bus1", &lee);
+    let (ok, why) = send(by_lee).await;
+    assert_eq!((ok, why.as_str()), (false, "operator 'lee' may not write"));
+    assert_eq!(
+        send(write("kim", "1500", "n2")).await,
+        (false, "unsigned command".to_string())
+    );
+    let mut forged = write("kim", "1500", "n3");
+    forged.sign("moulding-bus1", &OperatorKey::generate("kim"));
+    assert_eq!(send(forged).await, (false, "bad signature".to_string()));
+    let mut too_big = write("kim", "1234567", "n4");
+    too_big.sign("moulding-bus1", &crate::spawned::kim());
+    let (ok, why) = send(too_big).await;
+    assert!(!ok && why.contains("is not a quantity"), "{why}");
+    assert!(
+        bus.log().iter().all(|e| !e.what.starts_with("write")),
+        "nothing refused reached the bus: {:?}",
+        bus.log()
+    );
+
+    let mut good = write("kim", "1500", "n5");
+    good.sign("moulding-bus1", &crate::spawned::kim());
+    assert_eq!(
+        send(good).await,
+        (true, "WT001500 to unit 02: AC10".to_string())
+    );
+    assert_eq!(bus.unit(2).unwrap().target, 1500);
+    let writes: Vec<String> = bus
+        .log()
+        .into_iter()
+        .filter(|e| e.what.starts_with("write"))
+        .map(|e| format!("{} {}", e.unit, e.what))
+        .collect();
+    assert_eq!(writes, ["2 write WT001500"]);
+    target_is(1500).await;
+
+    // The same from the command line: `cellwatch write`.
+    let key = dir.path().join("kim.key");
+    std::fs::write(&key, crate::spawned::kim().to_file()).unwrap();
+    let mut args: Vec<String> = [
+        "write",
+        "--cell",
+        "moulding-bus1",
+        "--tag",
+        "J2",
+        "--value",
+        "MOULD-7",
+        "--key-file",
+        key.to_str().unwrap(),
+    ]
+    .map(String::from)
+    .to_vec();
+    args.extend(crate::util::bus_args(dir.path(), "operator-kim", port));
+    let r = tokio::task::spawn_blocking(move || {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        crate::util::cellwatch(&args)
+    })
+    .await
+    .unwrap();
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert_eq!(r.stdout, "accepted: WJMOULD-7 to unit 02: AC10\n");
+    assert_eq!(bus.unit(2).unwrap().item, "MOULD-7");
+
+    // Every command is in the journal with its outcome.
+    let page: serde_json::Value = serde_json::from_str(
+        &query(
+            "cellwatch/moulding-bus1/history?kind=command;since=1h".into(),
+            None,
+        )
+        .await,
+    )
+    .unwrap();
+    let rows: Vec<(String, String, bool)> = page["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| {
+            (
+                r["fields"]["operator"].as_str().unwrap().to_string(),
+                r["fields"]["alarm"].as_str().unwrap().to_string(),
+                r["fields"]["accepted"]
+                    .as_bool()
+                    .unwrap_or(r["fields"]["accepted"] == 1),
+            )
+        })
+        .collect();
+    assert_eq!(
+        rows,
+        [
+            ("lee".into(), "T2".into(), false),
+            ("kim".into(), "T2".into(), false),
+            ("kim".into(), "T2".into(), false),
+            ("kim".into(), "T2".into(), false),
+            ("kim".into(), "T2".into(), true),
+            ("kim".into(), "J2".into(), true),
+        ],
+        "{page}"
+    );
+    agent.stop().await;
+    server.abort();
 }

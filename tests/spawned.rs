@@ -220,6 +220,8 @@ pub(crate) fn signed(action: Action, alarm: &str) -> String {
     let mut c = OperatorCommand {
         action,
         alarm: alarm.into(),
+        tag: None,
+        value: None,
         operator: "kim".into(),
         nonce: cellwatch::operator::nonce(),
         issued_at: cellwatch::clock::now_ms(),

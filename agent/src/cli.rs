@@ -64,6 +64,11 @@ enum Command {
     Ack(CommandArgs),
     /// Reset a latched alarm whose condition has ended: a signed command (Zenoh).
     Reset(CommandArgs),
+    /// Write a value to the PLC: a signed command (Zenoh) that the agent
+    /// carries out only for an operator allowed `write`, and journals with
+    /// the PLC's answer (a legacy unit's item code, target quantity or
+    /// production correction).
+    Write(WriteArgs),
     /// Make an operator's key pair for signing commands (Ed25519).
     ///
     /// Writes the private key file, which stays with the operator (give it
@@ -138,7 +143,8 @@ pub(crate) struct KeygenArgs {
     /// Where to write the private key (never overwritten).
     #[arg(long, value_name = "FILE")]
     pub(crate) out: PathBuf,
-    /// Actions to allow in the printed entry, comma-separated (ack, reset).
+    /// Actions to allow in the printed entry, comma-separated (ack, reset,
+    /// write: writes to the PLC, only for those who may).
     #[arg(long, default_value = "ack", value_name = "LIST")]
     pub(crate) allow: String,
 }
@@ -541,6 +547,30 @@ pub(crate) struct CommandArgs {
     /// The alarm id.
     #[arg(long)]
     pub(crate) alarm: String,
+    #[command(flatten)]
+    pub(crate) signer: SignerArgs,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct WriteArgs {
+    /// The cell.
+    #[arg(long)]
+    pub(crate) cell: String,
+    /// The tag written, by address (a legacy unit's item code `J2`, target
+    /// `T2` or production `P2`, as the cell's configuration names them).
+    #[arg(long)]
+    pub(crate) tag: String,
+    /// The value: a quantity (0-999999) or an item code (up to 8 of A-Z,
+    /// 0-9, -).
+    #[arg(long, allow_hyphen_values = true)]
+    pub(crate) value: String,
+    #[command(flatten)]
+    pub(crate) signer: SignerArgs,
+}
+
+/// Who signs a command, and how it reaches the agent.
+#[derive(Debug, clap::Args)]
+pub(crate) struct SignerArgs {
     /// Who you are (default: the operator the key file names).
     #[arg(long)]
     pub(crate) operator: Option<String>,
@@ -650,6 +680,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             | Command::History(_)
             | Command::Ack(_)
             | Command::Reset(_)
+            | Command::Write(_)
             | Command::Discover(_)
     );
     let filter = std::env::var("RUST_LOG").unwrap_or_else(|_| {
@@ -684,6 +715,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::History(args) => commands::subscribers::history(&args, out).await,
             Command::Ack(args) => commands::subscribers::command(Action::Ack, &args, out).await,
             Command::Reset(args) => commands::subscribers::command(Action::Reset, &args, out).await,
+            Command::Write(args) => commands::subscribers::write(&args, out).await,
             Command::Discover(args) => commands::discover::run(&args, out).await,
             // Dispatched synchronously by `run`; never sent here.
             Command::Sf(_)

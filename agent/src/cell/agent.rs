@@ -224,9 +224,10 @@ pub async fn start_with(config: CellConfig, options: Options) -> Result<Agent, S
     if let Some(observer) = options.observer {
         sinks.push(Box::new(ConsoleSink::new(observer)));
     }
-    let source = options
+    let mut source = options
         .source
         .unwrap_or_else(|| sources::for_config(&config));
+    let writer = source.writer();
     tracing::info!(cell = %config.cell, source = %source.describe(), "starting");
     let (source_tx, source_rx) = mpsc::channel(QUEUE_CAPACITY);
     let source = tokio::spawn(source.run(source_tx, stopped(stop_rx.clone()).boxed()));
@@ -242,7 +243,8 @@ pub async fn start_with(config: CellConfig, options: Options) -> Result<Agent, S
     );
     let cell_loop = CellLoop::new(&config.cell, engine, gate, sinks, config.state_interval)
         .restored(step, state)
-        .watching_journal(journal_health);
+        .watching_journal(journal_health)
+        .writing_to(writer);
     let cell_loop = tokio::spawn(cell_loop.run(source_rx, requests_rx, stopped(stop_rx.clone())));
     let services = tokio::spawn(services.run(stopped(stop_rx)));
     Ok(Agent {

@@ -32,7 +32,7 @@ use crate::payload::{
     AlarmPayload, LastFault, Quality, SnapshotPayload, StatePayload, TagValue, SNAPSHOT_SCHEMA,
 };
 use crate::sinks::Sink;
-use crate::sources::SourceEvent;
+use crate::sources::{SourceEvent, WriteRequest, WriteSender};
 
 /// How long after a timer's deadline the agent waits for an event that may
 /// still be in transit before calling it late, ms.
@@ -161,7 +161,23 @@ pub struct CellLoop {
     restored: Option<Step>,
     /// `Some(why)` while the journal cannot write: the `journal` alarm.
     journal_health: Option<watch::Receiver<Option<String>>>,
+    /// Where writes to the PLC go, if the source can write.
+    writer: Option<WriteSender>,
+    /// Writes carried out (or not) by the source, back to be journaled
+    /// and answered.
+    written_tx: mpsc::Sender<Written>,
+    written_rx: mpsc::Receiver<Written>,
 }
+
+/// A write's outcome on its way back into the loop.
+struct Written {
+    record: CommandRecord,
+    reply: oneshot::Sender<CommandOutcome>,
+}
+
+/// How long a write may take on the PLC's side before the operator is
+/// told it failed.
+pub const WRITE_TIMEOUT: Duration = Duration::from_secs(30);
 
 impl CellLoop {
     /// A loop for `cell` over `engine`, letting commands through `gate` and
@@ -173,6 +189,7 @@ impl CellLoop {
         sinks: Vec<Box<dyn Sink>>,
         state_interval: Duration,
     ) -> CellLoop {
+        let (written_tx, written_rx) = mpsc::channel(2 * crate::sources::WRITE_CAPACITY);
         CellLoop {
             cell: cell.into(),
             engine,
@@ -183,7 +200,18 @@ impl CellLoop {
             state_kind: HistoryKind::Offline,
             restored: None,
             journal_health: None,
+            writer: None,
+            written_tx,
+            written_rx,
         }
+    }
+
+    /// Operators' writes (signed, permission `write`) go to `writer`, the
+    /// source's; without one, every write is refused.
+    #[must_use]
+    pub fn writing_to(mut self, writer: Option<WriteSender>) -> CellLoop {
+        self.writer = writer;
+        self
     }
 
     /// Raises the `journal` alarm while `health` says the journal cannot
@@ -241,6 +269,17 @@ impl CellLoop {
                     Some(r) => self.request(r).await,
                     None => requests_open = false,
                 },
+                Some(w) = self.written_rx.recv() => {
+                    let outcome = CommandOutcome {
+                        accepted: w.record.accepted,
+                        detail: w.record.detail.clone(),
+                    };
+                    if !outcome.accepted {
+                        tracing::warn!(detail = %outcome.detail, "write not done");
+                    }
+                    self.dispatch(now_ms(), Input::Command(w.record), Step::default(), 0).await;
+                    let _ = w.reply.send(outcome);
+                }
                 problem = journal_changed(&mut self.journal_health) => self.system("journal", problem).await,
                 _ = tick.tick() => self.tick().await,
                 _ = beat.tick() => self.beat().await,
@@ -315,14 +354,15 @@ impl CellLoop {
             Request::Snapshot(reply) => {
                 let _ = reply.send(self.snapshot());
             }
-            Request::Command { command, reply } => {
-                let outcome = self.command(command).await;
-                let _ = reply.send(outcome);
-            }
+            Request::Command { command, reply } => self.command(command, reply).await,
         }
     }
 
-    async fn command(&mut self, command: Result<Command, NotACommand>) -> CommandOutcome {
+    async fn command(
+        &mut self,
+        command: Result<Command, NotACommand>,
+        reply: oneshot::Sender<CommandOutcome>,
+    ) {
         let now = now_ms();
         let (record, step) = match command {
             Err(not) => (
@@ -340,13 +380,66 @@ impl CellLoop {
             Ok(cmd) => {
                 let checked = self.gate.check(&cmd, now);
                 let verified = checked.is_ok();
+                let field = |s: &str| clip(s, RECORD_FIELD_BYTES);
                 let done = match checked {
                     Err(refusal) => Err(refusal.to_string()),
-                    Ok(()) => match cmd.action {
-                        Action::Ack => self.engine.acknowledge(&cmd.alarm, &cmd.operator, now),
-                        Action::Reset => self.engine.reset(&cmd.alarm, &cmd.operator, now),
+                    Ok(())
+                        if cmd.action != Action::Write
+                            && (cmd.tag.is_some() || cmd.value.is_some()) =>
+                    {
+                        Err(format!("{} names an alarm, not a tag or value", cmd.action))
                     }
-                    .map_err(|e| e.to_string()),
+                    Ok(()) => match cmd.action {
+                        Action::Ack => self
+                            .engine
+                            .acknowledge(&cmd.alarm, &cmd.operator, now)
+                            .map_err(|e| e.to_string()),
+                        Action::Reset => self
+                            .engine
+                            .reset(&cmd.alarm, &cmd.operator, now)
+                            .map_err(|e| e.to_string()),
+                        Action::Write => match self.write(&cmd) {
+                            Err(why) => Err(why),
+                            Ok(pending) => {
+                                // Journaled and answered when the PLC has
+                                // answered (the loop goes on meanwhile).
+                                let record = CommandRecord {
+                                    operator: field(&cmd.operator),
+                                    action: Some(cmd.action),
+                                    alarm: field(cmd.tag.as_deref().unwrap_or("")),
+                                    nonce: field(&cmd.nonce),
+                                    accepted: false,
+                                    verified: true,
+                                    detail: String::new(),
+                                };
+                                let back = self.written_tx.clone();
+                                tokio::spawn(async move {
+                                    let result =
+                                        match tokio::time::timeout(WRITE_TIMEOUT, pending).await {
+                                            Ok(Ok(r)) => r,
+                                            Ok(Err(_)) => {
+                                                Err("the source stopped before writing".into())
+                                            }
+                                            Err(_) => Err(format!(
+                                                "no answer from the PLC within {} s",
+                                                WRITE_TIMEOUT.as_secs()
+                                            )),
+                                        };
+                                    let (accepted, detail) = match result {
+                                        Ok(d) => (true, d),
+                                        Err(d) => (false, d),
+                                    };
+                                    let record = CommandRecord {
+                                        accepted,
+                                        detail: clip(&detail, 4 * RECORD_FIELD_BYTES),
+                                        ..record
+                                    };
+                                    let _ = back.send(Written { record, reply }).await;
+                                });
+                                return;
+                            }
+                        },
+                    },
                 };
                 let (accepted, detail, step) = match done {
                     Ok(step) => (
@@ -358,12 +451,15 @@ impl CellLoop {
                 };
                 // The sender chooses these fields: what is kept of them is
                 // bounded.
-                let field = |s: &str| clip(s, RECORD_FIELD_BYTES);
                 (
                     CommandRecord {
                         operator: field(&cmd.operator),
                         action: Some(cmd.action),
-                        alarm: field(&cmd.alarm),
+                        alarm: field(if cmd.action == Action::Write {
+                            cmd.tag.as_deref().unwrap_or("")
+                        } else {
+                            &cmd.alarm
+                        }),
                         nonce: field(&cmd.nonce),
                         accepted,
                         verified,
@@ -381,7 +477,40 @@ impl CellLoop {
             detail: record.detail.clone(),
         };
         self.dispatch(now, Input::Command(record), step, 0).await;
-        outcome
+        let _ = reply.send(outcome);
+    }
+
+    /// Hands an authorised write to the source; what the PLC answers comes
+    /// on the returned channel. Refused here (never sent) when the tag is
+    /// unknown, the command carries no value, or the source cannot write.
+    fn write(
+        &mut self,
+        cmd: &Command,
+    ) -> Result<oneshot::Receiver<Result<String, String>>, String> {
+        if !cmd.alarm.is_empty() {
+            return Err("a write names a tag, not an alarm".into());
+        }
+        let (Some(tag), Some(value)) = (&cmd.tag, &cmd.value) else {
+            return Err("a write needs a tag and a value".into());
+        };
+        let Some(index) = self
+            .engine
+            .tag_index(&cellwatch_models::signal::Signal::new(tag))
+        else {
+            return Err(format!("no tag {}", clip(tag, RECORD_FIELD_BYTES)));
+        };
+        let Some(writer) = &self.writer else {
+            return Err("this cell's source takes no writes".into());
+        };
+        let (reply, pending) = oneshot::channel();
+        writer
+            .try_send(WriteRequest {
+                tag: index,
+                value: value.clone(),
+                reply,
+            })
+            .map_err(|_| "busy: other writes are waiting for the PLC".to_string())?;
+        Ok(pending)
     }
 
     /// Builds the payloads for `step` and hands it to the sinks.

@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
-use crate::cli::{AlarmsArgs, CommandArgs, Failure, HistoryArgs, ZenohArgs};
+use crate::cli::{AlarmsArgs, CommandArgs, Failure, HistoryArgs, SignerArgs, WriteArgs, ZenohArgs};
 use crate::config::{ZenohConfig, ZenohMode};
 use crate::operator::{Action, Command, OperatorKey};
 use crate::payload::AlarmPayload;
@@ -437,6 +437,48 @@ pub(crate) async fn command(
     args: &CommandArgs,
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
+    signed(
+        Target {
+            action,
+            cell: &args.cell,
+            alarm: &args.alarm,
+            tag: None,
+            value: None,
+        },
+        &args.signer,
+        out,
+    )
+    .await
+}
+
+/// `cellwatch write`: a signed write of a tag's value to the PLC.
+pub(crate) async fn write(args: &WriteArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    signed(
+        Target {
+            action: Action::Write,
+            cell: &args.cell,
+            alarm: "",
+            tag: Some(&args.tag),
+            value: Some(&args.value),
+        },
+        &args.signer,
+        out,
+    )
+    .await
+}
+
+/// What a command acts on.
+struct Target<'a> {
+    action: Action,
+    cell: &'a str,
+    alarm: &'a str,
+    tag: Option<&'a str>,
+    value: Option<&'a str>,
+}
+
+/// Signs a command with the operator's key, sends it to the cell's agent
+/// and prints its answer.
+async fn signed(t: Target<'_>, args: &SignerArgs, out: &mut dyn Write) -> Result<(), Failure> {
     let key = match (&args.key_file, std::env::var("CELLWATCH_OPERATOR_KEY")) {
         (Some(path), _) => {
             let text = std::fs::read_to_string(path)
@@ -463,18 +505,20 @@ pub(crate) async fn command(
         )));
     }
     let mut cmd = Command {
-        action,
-        alarm: args.alarm.clone(),
+        action: t.action,
+        alarm: t.alarm.to_string(),
+        tag: t.tag.map(str::to_string),
+        value: t.value.map(str::to_string),
         operator: key.operator.clone(),
         nonce: crate::operator::nonce(),
         issued_at: crate::clock::now_ms(),
         signature: String::new(),
     };
-    cmd.sign(&args.cell, &key);
+    cmd.sign(t.cell, &key);
     let s = session(&args.zenoh).await?;
     let timeout = Duration::from_secs(args.zenoh.timeout_secs);
-    let the_agent = agent(&s, &args.zenoh.root, &args.cell, timeout).await?;
-    let selector = format!("{}/{}/command", args.zenoh.root, args.cell);
+    let the_agent = agent(&s, &args.zenoh.root, t.cell, timeout).await?;
+    let selector = format!("{}/{}/command", args.zenoh.root, t.cell);
     let text = ask_agent(
         &s,
         &selector,

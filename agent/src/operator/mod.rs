@@ -31,17 +31,21 @@ pub enum Action {
     Ack,
     /// Reset a latched alarm whose condition has ended.
     Reset,
+    /// Write a value to the PLC (a legacy unit's item code, target or
+    /// production correction).
+    Write,
 }
 
 impl Action {
     /// Every action.
-    pub const ALL: [Action; 2] = [Action::Ack, Action::Reset];
+    pub const ALL: [Action; 3] = [Action::Ack, Action::Reset, Action::Write];
 
     /// The name on the wire, in the journal and in operators files.
     pub fn as_str(self) -> &'static str {
         match self {
             Action::Ack => "ack",
             Action::Reset => "reset",
+            Action::Write => "write",
         }
     }
 
@@ -64,8 +68,15 @@ impl std::fmt::Display for Action {
 pub struct Command {
     /// What to do.
     pub action: Action,
-    /// The alarm id.
+    /// The alarm id (`ack`, `reset`); empty for `write`.
+    #[serde(default)]
     pub alarm: String,
+    /// The tag written, by address (`write` only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tag: Option<String>,
+    /// The value written (`write` only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub value: Option<String>,
     /// Who sends it.
     pub operator: String,
     /// A value never used before (random hex).
@@ -82,8 +93,14 @@ impl Command {
     /// The text that is signed.
     pub fn canonical(&self, cell: &str) -> String {
         format!(
-            "cellwatch-command-v2\n{cell}\n{}\n{}\n{}\n{}\n{}",
-            self.action, self.alarm, self.operator, self.nonce, self.issued_at
+            "cellwatch-command-v3\n{cell}\n{}\n{}\n{}\n{}\n{}\n{}\n{}",
+            self.action,
+            self.alarm,
+            self.operator,
+            self.nonce,
+            self.issued_at,
+            self.tag.as_deref().unwrap_or(""),
+            self.value.as_deref().unwrap_or("")
         )
     }
 
@@ -491,6 +508,8 @@ mod tests {
         Command {
             action,
             alarm: "ese".into(),
+            tag: None,
+            value: None,
             operator: "kim".into(),
             nonce: nonce(),
             issued_at: now,
@@ -589,7 +608,7 @@ mod tests {
                 "[operators.kim]\npublic_key = \"{}\"\nallow = [\"fly\"]",
                 kim.public_hex()
             )),
-            "ops.toml: operators.kim: allow: unknown action 'fly': use ack, reset"
+            "ops.toml: operators.kim: allow: unknown action 'fly': use ack, reset, write"
         );
         assert!(err(&format!(
             "[operators.kim]\npublic_key = \"{}\"",
@@ -610,7 +629,7 @@ mod actions {
             .unwrap_err()
             .to_string();
         assert!(
-            err.starts_with("unknown variant `force`, expected `ack` or `reset`"),
+            err.starts_with("unknown variant `force`, expected one of `ack`, `reset`, `write`"),
             "{err}"
         );
         let ok = text.replace("force", "reset");

@@ -53,6 +53,25 @@ pub enum SourceEvent {
 /// the source wait.
 pub type SourceSender = mpsc::Sender<SourceEvent>;
 
+/// A write to the PLC an operator asked for, already verified and
+/// authorised by the cell loop.
+#[derive(Debug)]
+pub struct WriteRequest {
+    /// The tag written (index into the cell's tags).
+    pub tag: usize,
+    /// The value as the operator gave it; the source checks and encodes
+    /// it, and sends nothing if it does not fit.
+    pub value: String,
+    /// What the PLC answered (`Ok`: done), or why it was not done.
+    pub reply: tokio::sync::oneshot::Sender<Result<String, String>>,
+}
+
+/// Where the cell loop hands writes to its source.
+pub type WriteSender = mpsc::Sender<WriteRequest>;
+
+/// Writes waiting for a source, at most.
+pub const WRITE_CAPACITY: usize = 8;
+
 /// Why a source cannot run. Connection trouble is never an error: it is
 /// reported as [`SourceEvent::Disconnected`] and retried.
 #[derive(Debug, thiserror::Error)]
@@ -72,6 +91,12 @@ pub enum SourceError {
 pub trait Source: Send + 'static {
     /// What it is, for logs (`opcua opc.tcp://...`).
     fn describe(&self) -> String;
+
+    /// Where to send operators' writes, if this source can write to its
+    /// PLC (called once, before `run`).
+    fn writer(&mut self) -> Option<WriteSender> {
+        None
+    }
 
     /// Runs until `shutdown` completes, sending events on `tx`.
     ///

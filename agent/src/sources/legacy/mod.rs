@@ -19,13 +19,16 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use cellwatch_models::engine::{Reading, TagReading};
-use cellwatch_models::legacy::{Decoded, Decoder, Frame, Header, Status};
+use cellwatch_models::legacy::{Decoded, Decoder, Field, Frame, Header, Status};
 use cellwatch_models::value::{Num, ValueType};
 use futures_util::future::BoxFuture;
 use futures_util::FutureExt;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
+use tokio::sync::mpsc;
 
-use super::{Source, SourceError, SourceEvent, SourceSender};
+use super::{
+    Source, SourceError, SourceEvent, SourceSender, WriteRequest, WriteSender, WRITE_CAPACITY,
+};
 use crate::config::TagConfig;
 
 /// How the bus is reached.
@@ -219,12 +222,17 @@ fn reading(value: &Value, item: Item, tag: &TagConfig) -> Reading {
 pub struct LegacySource {
     config: LegacyConfig,
     tags: Vec<TagConfig>,
+    writes: Option<mpsc::Receiver<WriteRequest>>,
 }
 
 impl LegacySource {
     /// A source reading `tags` (node ids `@<unit>/<item>`) from the bus.
     pub fn new(config: LegacyConfig, tags: Vec<TagConfig>) -> LegacySource {
-        LegacySource { config, tags }
+        LegacySource {
+            config,
+            tags,
+            writes: None,
+        }
     }
 }
 
@@ -233,13 +241,58 @@ impl Source for LegacySource {
         self.config.describe()
     }
 
+    fn writer(&mut self) -> Option<WriteSender> {
+        let (tx, rx) = mpsc::channel(WRITE_CAPACITY);
+        self.writes = Some(rx);
+        Some(tx)
+    }
+
     fn run(
         self: Box<Self>,
         tx: SourceSender,
         shutdown: BoxFuture<'static, ()>,
     ) -> BoxFuture<'static, Result<(), SourceError>> {
-        async move { run(&self.config, &self.tags, tx, shutdown).await }.boxed()
+        async move {
+            let LegacySource {
+                config,
+                tags,
+                writes,
+            } = *self;
+            run(&config, &tags, tx, writes, shutdown).await
+        }
+        .boxed()
     }
+}
+
+/// The frame that writes `value` to the unit item `node` names: the item
+/// code (`WJ`), the target (`WT`) or a production correction (`WP`).
+///
+/// # Errors
+/// The item is not written this way, or the value does not fit its field.
+pub fn write_frame(node: BusNode, value: &str) -> Result<Frame, String> {
+    let quantity = |v: &str| {
+        v.trim()
+            .parse::<u64>()
+            .ok()
+            .and_then(|n| Field::Quantity.number(n))
+            .ok_or_else(|| format!("'{v}' is not a quantity (0 to 999999)"))
+    };
+    let (header, text) = match node.item {
+        Item::Target => (Header::WriteTarget, quantity(value)?),
+        Item::Production => (Header::WriteProduction, quantity(value)?),
+        Item::ItemCode => (
+            Header::WriteItem,
+            Field::Item.item(value).ok_or_else(|| {
+                format!("'{value}' is not an item code (1 to 8 of A-Z, 0-9 and -)")
+            })?,
+        ),
+        other => {
+            return Err(format!(
+                "{other:?} of a unit is not written: item code, target and production are"
+            ))
+        }
+    };
+    Ok(Frame::new(node.unit, header, text))
 }
 
 /// The bytes to and from the bus.
@@ -361,6 +414,7 @@ pub async fn run(
     config: &LegacyConfig,
     tags: &[TagConfig],
     tx: SourceSender,
+    mut writes: Option<mpsc::Receiver<WriteRequest>>,
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), SourceError> {
     // Per unit, the requests its tags need and, per item, the tags.
@@ -409,10 +463,24 @@ pub async fn run(
         let mut sent: Vec<Option<Reading>> = vec![None; tags.len()];
         let mut away: BTreeSet<u8> = BTreeSet::new();
         let mut next = tokio::time::Instant::now();
-        let lost = loop {
-            tokio::select! {
-                _ = &mut shutdown => return Ok(()),
-                _ = tokio::time::sleep_until(next) => {}
+        let lost = 'polls: loop {
+            // Between polls: operators' writes, one at a time.
+            loop {
+                let write = async {
+                    match writes.as_mut() {
+                        Some(rx) => rx.recv().await,
+                        None => std::future::pending().await,
+                    }
+                };
+                tokio::select! {
+                    _ = &mut shutdown => return Ok(()),
+                    _ = tokio::time::sleep_until(next) => break,
+                    Some(w) = write => {
+                        if let Err(why) = write_one(&mut line, &mut decoder, config, tags, w).await {
+                            break 'polls why;
+                        }
+                    }
+                }
             }
             next += config.poll_interval;
             let mut readings = Vec::new();
@@ -499,6 +567,49 @@ pub async fn run(
             .send(SourceEvent::Disconnected(format!("the bus: {lost}")))
             .await;
         said_down = true;
+    }
+}
+
+/// Carries out one write and replies; `Err` if the line itself failed.
+async fn write_one(
+    line: &mut Box<dyn Line>,
+    decoder: &mut Decoder,
+    config: &LegacyConfig,
+    tags: &[TagConfig],
+    w: WriteRequest,
+) -> Result<(), String> {
+    let frame = tags
+        .get(w.tag)
+        .ok_or_else(|| "no such tag".to_string())
+        .and_then(|t| BusNode::parse(&t.node_id))
+        .and_then(|node| write_frame(node, &w.value));
+    let frame = match frame {
+        Ok(f) => f,
+        Err(why) => {
+            let _ = w.reply.send(Err(why));
+            return Ok(());
+        }
+    };
+    let what = format!(
+        "{}{} to unit {:02X}",
+        frame.header,
+        frame.text.trim_end(),
+        frame.unit
+    );
+    match exchange(line, decoder, &frame, config).await {
+        Ok(answer) => {
+            tracing::info!(write = %what, answer = %answer.text, "written");
+            let _ = w.reply.send(Ok(format!("{what}: AC{}", answer.text)));
+            Ok(())
+        }
+        Err(Failed::Unit(why)) => {
+            let _ = w.reply.send(Err(format!("{what}: not taken: {why}")));
+            Ok(())
+        }
+        Err(Failed::Line(why)) => {
+            let _ = w.reply.send(Err(format!("{what}: the bus failed: {why}")));
+            Err(why)
+        }
     }
 }
 
