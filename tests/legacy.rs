@@ -287,7 +287,17 @@ int main(int argc, char **argv) {
 /// line noise is retried and counts nothing twice; a silent unit is one
 /// alarm and nothing else; the daily report says what the simulator did.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_legacy_bus_runs_as_a_cell_with_alarms_stop_causes_and_production() {
+async fn a_legacy_bus_runs_as_a_cell_over_tcp() {
+    bus_cell(false).await;
+}
+
+/// The same over a serial line (a pseudo-terminal at 9600 7E2).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_legacy_bus_runs_as_a_cell_over_a_serial_line() {
+    bus_cell(true).await;
+}
+
+async fn bus_cell(serial: bool) {
     use cellwatch::payload::AlarmPayload;
     use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
@@ -295,6 +305,7 @@ async fn a_legacy_bus_runs_as_a_cell_with_alarms_stop_causes_and_production() {
     let (bus, server, agent, client, _) = moulding_agent(
         dir.path(),
         &crate::spawned::operators_file(&cellwatch::operator::Action::ALL),
+        serial,
     )
     .await;
     let sub = client
@@ -422,7 +433,9 @@ async fn a_legacy_bus_runs_as_a_cell_with_alarms_stop_causes_and_production() {
         "{body}"
     );
     agent.stop().await;
-    server.abort();
+    if let Some(server) = server {
+        server.abort();
+    }
 
     let v = crate::util::todays_report(&dir.path().join("journal.sqlite"));
     assert_eq!(v["production"], made, "{v}");
@@ -434,26 +447,41 @@ async fn a_legacy_bus_runs_as_a_cell_with_alarms_stop_causes_and_production() {
 }
 
 /// The shipped `config/moulding.toml` as an agent polling a simulated bus
-/// of three units over TCP (every 100 ms), Zenoh with TLS, the given
-/// operators file; an operator's Zenoh session, and the agent's Zenoh port.
+/// of three units over TCP or a serial line (every 100 ms), Zenoh with
+/// TLS, the given operators file; an operator's Zenoh session, and the
+/// agent's Zenoh port.
 async fn moulding_agent(
     dir: &std::path::Path,
     operators: &str,
+    serial: bool,
 ) -> (
     MouldingBus,
-    tokio::task::JoinHandle<()>,
+    Option<tokio::task::JoinHandle<()>>,
     cellwatch::cell::Agent,
     zenoh::Session,
     u16,
 ) {
     let bus = MouldingBus::new(3);
-    let (addr, server) = bus
-        .listen_tcp("127.0.0.1:0".parse().unwrap())
-        .await
-        .unwrap();
+    let (transport, server) = if serial {
+        let path = bus.pty().unwrap();
+        let line = SerialLine {
+            path: path.to_string_lossy().into_owned(),
+            baud: 9600,
+            data_bits: 7,
+            parity: Parity::Even,
+            stop_bits: 2,
+        };
+        (Transport::Serial(line), None)
+    } else {
+        let (addr, server) = bus
+            .listen_tcp("127.0.0.1:0".parse().unwrap())
+            .await
+            .unwrap();
+        (Transport::Tcp(addr.to_string()), Some(server))
+    };
     let mut c = cellwatch::config::load(&crate::util::root().join("config/moulding.toml")).unwrap();
     let l = c.legacy.as_mut().unwrap();
-    l.transport = Transport::Tcp(addr.to_string());
+    l.transport = transport;
     l.poll_interval = Duration::from_millis(100);
     let port = crate::agent::free_port();
     c.zenoh.listen = vec![format!("tls/127.0.0.1:{port}")];
@@ -484,7 +512,7 @@ async fn a_target_is_written_only_for_an_operator_allowed_to_write() {
         crate::spawned::operators_file(&[Action::Ack, Action::Write]),
         lee.operators_entry(&[Action::Ack, Action::Reset])
     );
-    let (bus, server, agent, client, port) = moulding_agent(dir.path(), &operators).await;
+    let (bus, server, agent, client, port) = moulding_agent(dir.path(), &operators, false).await;
     let query = |selector: String, payload: Option<String>| {
         let client = client.clone();
         async move {
@@ -644,5 +672,7 @@ async fn a_target_is_written_only_for_an_operator_allowed_to_write() {
         "{page}"
     );
     agent.stop().await;
-    server.abort();
+    if let Some(server) = server {
+        server.abort();
+    }
 }
