@@ -416,37 +416,31 @@ impl MouldingBus {
     /// Runs machine cycles every `cycle` and, with `schedule`, the demo's
     /// events, forever; `note` is told each event.
     pub async fn play(&self, cycle: std::time::Duration, schedule: bool, note: impl Fn(&str)) {
-        let start = tokio::time::Instant::now();
-        let mut events = DEMO.iter().cycle().enumerate();
-        let mut next_cycle = start + cycle;
-        let (mut k, mut event) = events.next().map(|(k, e)| (k, *e)).unwrap_or((0, DEMO[0]));
-        let at = |k: usize, s: u64| {
-            start
-                + DEMO_PERIOD * u32::try_from(k / DEMO.len()).unwrap_or(u32::MAX)
-                + std::time::Duration::from_secs(s)
-        };
-        loop {
-            let event_at = at(k, event.0);
-            let wake = match (cycle.is_zero(), schedule) {
-                (true, false) => return,
-                (true, true) => event_at,
-                (false, false) => next_cycle,
-                (false, true) => event_at.min(next_cycle),
-            };
-            tokio::time::sleep_until(wake).await;
-            if !cycle.is_zero() && tokio::time::Instant::now() >= next_cycle {
-                self.cycle();
-                next_cycle += cycle;
+        let cycles = async {
+            if cycle.is_zero() {
+                return;
             }
-            if schedule && tokio::time::Instant::now() >= event_at {
-                note(event.2);
-                self.apply(event.1);
-                if let Some((n, e)) = events.next() {
-                    k = n;
-                    event = *e;
+            let mut tick = tokio::time::interval_at(tokio::time::Instant::now() + cycle, cycle);
+            loop {
+                tick.tick().await;
+                self.cycle();
+            }
+        };
+        let events = async {
+            if !schedule {
+                return;
+            }
+            let start = tokio::time::Instant::now();
+            for period in 0u32.. {
+                for (at, event, what) in DEMO {
+                    let when = start + DEMO_PERIOD * period + std::time::Duration::from_secs(at);
+                    tokio::time::sleep_until(when).await;
+                    note(what);
+                    self.apply(event);
                 }
             }
-        }
+        };
+        tokio::join!(cycles, events);
     }
 }
 

@@ -482,7 +482,9 @@ pub async fn run(
                     }
                 }
             }
-            next += config.poll_interval;
+            // A cycle longer than the interval (units timing out) starts
+            // the next one at once, not a burst to catch up.
+            next = (next + config.poll_interval).max(tokio::time::Instant::now());
             let mut readings = Vec::new();
             let mut problems = Vec::new();
             let mut line_lost = None;
