@@ -323,8 +323,12 @@ pub(crate) struct LineArgs {
 
 #[derive(Debug, clap::Args)]
 pub(crate) struct RunArgs {
-    /// The cell configuration (TOML).
-    pub(crate) config: PathBuf,
+    /// The cell configurations (TOML), one agent each in this process.
+    /// Cells whose `[legacy]` sections name the same bus (serial port or
+    /// TCP address) share one poller on it: each injection-moulding unit a
+    /// cell of its own, one line. Their poll settings must agree.
+    #[arg(required = true, num_args = 1..)]
+    pub(crate) config: Vec<PathBuf>,
 }
 
 #[derive(Debug, clap::Args)]

@@ -28,3 +28,36 @@ pub fn parse_time(text: &str, now: u64) -> Result<u64, String> {
         .map(|t| t.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as u64))
         .map_err(|_| format!("'{text}' is neither a time (2026-11-21T10:00:00Z) nor a duration back from now (1h, 30m)"))
 }
+
+/// Where an agent's parts read the time: the system clock, or a clock a
+/// test sets (virtual time: a simulated day in seconds).
+#[derive(Debug, Clone, Default)]
+pub struct Clock(Option<std::sync::Arc<std::sync::atomic::AtomicU64>>);
+
+impl Clock {
+    /// The system clock.
+    pub fn system() -> Clock {
+        Clock(None)
+    }
+
+    /// A clock standing at `ms` until [`Clock::set`] moves it.
+    pub fn manual(ms: u64) -> Clock {
+        Clock(Some(std::sync::Arc::new(ms.into())))
+    }
+
+    /// Moves a manual clock to `ms` (never backwards); the system clock
+    /// ignores it.
+    pub fn set(&self, ms: u64) {
+        if let Some(t) = &self.0 {
+            t.fetch_max(ms, std::sync::atomic::Ordering::SeqCst);
+        }
+    }
+
+    /// Now, in ms since the Unix epoch.
+    pub fn now_ms(&self) -> u64 {
+        match &self.0 {
+            None => now_ms(),
+            Some(t) => t.load(std::sync::atomic::Ordering::SeqCst),
+        }
+    }
+}

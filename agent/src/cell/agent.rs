@@ -16,6 +16,7 @@ use tokio::task::JoinHandle;
 
 use super::compile::{self, CompileError};
 use super::CellLoop;
+use crate::clock::Clock;
 use crate::config::CellConfig;
 use crate::metrics::{Metrics, MetricsSink};
 use crate::operator::{Gate, KeysError, OperatorKeys};
@@ -70,8 +71,11 @@ pub struct Options {
     /// Hears every alarm, state change and connection change (the demo's
     /// console).
     pub observer: Option<mpsc::UnboundedSender<Notice>>,
-    /// Replaces the source the configuration names (tests, replays).
+    /// Replaces the source the configuration names (tests, replays, the
+    /// cells sharing one `@` bus).
     pub source: Option<Box<dyn Source>>,
+    /// Where the time comes from (the system's unless a test sets one).
+    pub clock: Clock,
 }
 
 /// A running agent.
@@ -155,7 +159,7 @@ pub async fn start(
         config,
         Options {
             observer,
-            source: None,
+            ..Options::default()
         },
     )
     .await
@@ -182,7 +186,8 @@ pub async fn start_with(config: CellConfig, options: Options) -> Result<Agent, S
     )?;
     let committed = journal.committed();
     let journal_health = journal.health();
-    let restored = super::restore::load(&config, crate::clock::now_ms())?;
+    let clock = options.clock.clone();
+    let restored = super::restore::load(&config, clock.now_ms())?;
     let session = crate::sinks::zenoh::open_agent(&config.zenoh).await?;
     let prefix = config.zenoh.prefix.clone();
     let (requests_tx, requests_rx) = mpsc::channel(REQUEST_CAPACITY);
@@ -219,7 +224,7 @@ pub async fn start_with(config: CellConfig, options: Options) -> Result<Agent, S
     let mut sinks: Vec<Box<dyn Sink>> = vec![
         Box::new(JournalSink::new(journal)),
         Box::new(publisher),
-        Box::new(MetricsSink::new(metrics.clone(), &config)),
+        Box::new(MetricsSink::new(metrics.clone(), &config, clock.now_ms())),
     ];
     if let Some(observer) = options.observer {
         sinks.push(Box::new(ConsoleSink::new(observer)));
@@ -239,9 +244,10 @@ pub async fn start_with(config: CellConfig, options: Options) -> Result<Agent, S
     let step = engine.restore(
         restored.alarms,
         restored.state.map(|(s, _, _)| s),
-        crate::clock::now_ms(),
+        clock.now_ms(),
     );
     let cell_loop = CellLoop::new(&config.cell, engine, gate, sinks, config.state_interval)
+        .timed_by(clock)
         .restored(step, state)
         .watching_journal(journal_health)
         .writing_to(writer);

@@ -26,7 +26,7 @@ use tokio::sync::{mpsc, oneshot, watch};
 
 pub use agent::{start, start_with, Agent, Options, StartError};
 
-use crate::clock::{now_ms, rfc3339};
+use crate::clock::{rfc3339, Clock};
 use crate::operator::{clip, Action, Command, Gate, NotACommand};
 use crate::payload::{
     AlarmPayload, LastFault, Quality, SnapshotPayload, StatePayload, TagValue, SNAPSHOT_SCHEMA,
@@ -167,6 +167,7 @@ pub struct CellLoop {
     /// and answered.
     written_tx: mpsc::Sender<Written>,
     written_rx: mpsc::Receiver<Written>,
+    clock: Clock,
 }
 
 /// A write's outcome on its way back into the loop.
@@ -196,7 +197,8 @@ impl CellLoop {
             gate,
             sinks,
             state_interval,
-            state_since: now_ms(),
+            state_since: crate::clock::now_ms(),
+            clock: Clock::system(),
             state_kind: HistoryKind::Offline,
             restored: None,
             journal_health: None,
@@ -204,6 +206,15 @@ impl CellLoop {
             written_tx,
             written_rx,
         }
+    }
+
+    /// Reads the time from `clock` (a test's virtual time) instead of the
+    /// system's.
+    #[must_use]
+    pub fn timed_by(mut self, clock: Clock) -> CellLoop {
+        self.state_since = clock.now_ms();
+        self.clock = clock;
+        self
     }
 
     /// Operators' writes (signed, permission `write`) go to `writer`, the
@@ -249,7 +260,7 @@ impl CellLoop {
         let mut beat = tokio::time::interval(self.state_interval);
         beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         if let Some(step) = self.restored.take() {
-            let now = now_ms();
+            let now = self.clock.now_ms();
             self.dispatch(now, Input::Restored, step, 0).await;
         }
         let mut source_open = true;
@@ -277,7 +288,7 @@ impl CellLoop {
                     if !outcome.accepted {
                         tracing::warn!(detail = %outcome.detail, "write not done");
                     }
-                    self.dispatch(now_ms(), Input::Command(w.record), Step::default(), 0).await;
+                    self.dispatch(self.clock.now_ms(), Input::Command(w.record), Step::default(), 0).await;
                     let _ = w.reply.send(outcome);
                 }
                 problem = journal_changed(&mut self.journal_health) => self.system("journal", problem).await,
@@ -291,7 +302,7 @@ impl CellLoop {
     }
 
     async fn source(&mut self, ev: SourceEvent, queue_depth: usize) {
-        let now = now_ms();
+        let now = self.clock.now_ms();
         let (input, step) = match ev {
             SourceEvent::Connected(endpoint) => (
                 Input::Connection {
@@ -319,13 +330,13 @@ impl CellLoop {
     }
 
     async fn system(&mut self, id: &str, problem: Option<String>) {
-        let now = now_ms();
+        let now = self.clock.now_ms();
         let step = self.engine.on_system(id, problem.as_deref(), now);
         self.dispatch(now, Input::System, step, 0).await;
     }
 
     async fn tick(&mut self) {
-        let now = now_ms();
+        let now = self.clock.now_ms();
         // Timers judge "late" against the PLC's clock: an event that
         // happened in time but is still on its way (publishing interval,
         // network) must not be called late.
@@ -336,7 +347,7 @@ impl CellLoop {
     }
 
     async fn beat(&mut self) {
-        let now = now_ms();
+        let now = self.clock.now_ms();
         let state = Some(self.state_payload(now));
         self.deliver(CellStep {
             at: now,
@@ -363,7 +374,7 @@ impl CellLoop {
         command: Result<Command, NotACommand>,
         reply: oneshot::Sender<CommandOutcome>,
     ) {
-        let now = now_ms();
+        let now = self.clock.now_ms();
         let (record, step) = match command {
             Err(not) => (
                 CommandRecord {
@@ -569,7 +580,7 @@ impl CellLoop {
             },
             value: v.map(|v| json_value(&v)),
         };
-        let now = now_ms();
+        let now = self.clock.now_ms();
         SnapshotPayload {
             schema: SNAPSHOT_SCHEMA.into(),
             cell: self.cell.clone(),

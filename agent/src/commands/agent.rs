@@ -63,22 +63,103 @@ pub(crate) fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<(), F
     writeln!(out, "ok").map_err(io)
 }
 
-/// `cellwatch run CONFIG`: runs until interrupted.
+/// `cellwatch run CONFIG...`: one agent per configuration, in this
+/// process, until interrupted or one cannot go on. Cells reading the same
+/// `@` bus share one poller on it.
 pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
-    let c = load(&args.config)?;
-    let cell = c.cell.clone();
-    let mut agent = cell::start(c, None).await.map_err(start_failure)?;
-    tracing::info!(cell, metrics = ?agent.metrics_addr(), "agent running");
+    let mut configs = Vec::new();
+    for path in &args.config {
+        configs.push((path.clone(), load(path)?));
+    }
+    distinct(&configs)?;
+    let cells: Vec<_> = configs
+        .iter()
+        .map(|(p, c)| (p.display().to_string(), c.legacy.clone(), c.tags.clone()))
+        .collect();
+    let (shares, buses) = crate::sources::legacy::share_buses(&cells).map_err(Failure::Input)?;
+    let mut agents = Vec::new();
+    let mut started = Vec::new();
+    for ((path, c), share) in configs.into_iter().zip(shares) {
+        let cell = c.cell.clone();
+        let options = cell::Options {
+            source: share.map(|s| Box::new(s) as Box<dyn crate::sources::Source>),
+            ..cell::Options::default()
+        };
+        match cell::start_with(c, options).await {
+            Ok(agent) => {
+                tracing::info!(cell, metrics = ?agent.metrics_addr(), "agent running");
+                agents.push(agent);
+                started.push(cell);
+            }
+            Err(e) => {
+                for agent in agents {
+                    agent.stop().await;
+                }
+                let e = start_failure(e);
+                return Err(match e {
+                    Failure::Input(m) => Failure::Input(format!("{}: {m}", path.display())),
+                    Failure::Runtime(m) => Failure::Runtime(format!("{}: {m}", path.display())),
+                });
+            }
+        }
+    }
+    let (stop_buses, stopped) = tokio::sync::watch::channel(false);
+    let mut pollers = Vec::new();
+    for bus in buses {
+        let mut stopped = stopped.clone();
+        pollers.push(tokio::spawn(bus.run(async move {
+            let _ = stopped.wait_for(|s| *s).await;
+        })));
+    }
+    let waits = agents.iter_mut().map(|a| Box::pin(a.wait()));
     let failed = tokio::select! {
         _ = tokio::signal::ctrl_c() => None,
-        e = agent.wait() => Some(e),
+        (e, i, _) = futures_util::future::select_all(waits) => Some((i, e)),
     };
-    agent.stop().await;
+    let _ = stop_buses.send(true);
+    for agent in agents {
+        agent.stop().await;
+    }
+    for p in pollers {
+        let _ = p.await;
+    }
     match failed {
         None => Ok(()),
-        Some(Some(e)) => Err(Failure::runtime(format!("the source cannot run: {e}"))),
-        Some(None) => Err(Failure::Runtime("the source stopped".into())),
+        Some((i, Some(e))) => Err(Failure::runtime(format!(
+            "cell {}: the source cannot run: {e}",
+            started[i]
+        ))),
+        Some((i, None)) => Err(Failure::Runtime(format!(
+            "cell {}: the source stopped",
+            started[i]
+        ))),
     }
+}
+
+/// Cells run together must not write to the same journal or answer under
+/// the same Zenoh prefix.
+fn distinct(configs: &[(PathBuf, CellConfig)]) -> Result<(), Failure> {
+    for (i, (a, ca)) in configs.iter().enumerate() {
+        for (b, cb) in &configs[..i] {
+            let clash = if ca.cell == cb.cell {
+                Some(format!("the same cell id '{}'", ca.cell))
+            } else if ca.journal.path == cb.journal.path {
+                Some(format!("the same journal {}", ca.journal.path.display()))
+            } else if ca.zenoh.prefix == cb.zenoh.prefix {
+                Some(format!("the same Zenoh prefix '{}'", ca.zenoh.prefix))
+            } else {
+                None
+            };
+            if let Some(clash) = clash {
+                return Err(Failure::Input(format!(
+                    "{} and {} have {clash}",
+                    b.display(),
+                    a.display()
+                )));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The demo's operator: a private key file (the operator's side, given to

@@ -33,8 +33,9 @@ pub struct MetricsSink {
 
 impl MetricsSink {
     /// A sink for `config`'s cell: sets the gauges known from the
-    /// configuration (tags unknown at start, learned timer windows).
-    pub fn new(metrics: Arc<Metrics>, config: &CellConfig) -> MetricsSink {
+    /// configuration (tags unknown at start, learned timer windows); time
+    /// in each state is counted from `now`.
+    pub fn new(metrics: Arc<Metrics>, config: &CellConfig, now: u64) -> MetricsSink {
         metrics.tags_unknown.set(config.tags.len() as i64);
         for t in &config.timers {
             for tr in &t.model.transitions {
@@ -58,7 +59,7 @@ impl MetricsSink {
             active: HashMap::new(),
             culprits: HashMap::new(),
             counted_state: "offline",
-            accounted_until: crate::clock::now_ms(),
+            accounted_until: now,
             last_update: None,
             ever_connected: false,
         }

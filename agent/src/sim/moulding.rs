@@ -131,6 +131,8 @@ pub struct MouldingBus {
     log: Arc<Mutex<Vec<LogEntry>>>,
     /// Requests answered, for tests.
     answered: Arc<AtomicU32>,
+    /// The time the log is written in.
+    clock: crate::clock::Clock,
 }
 
 impl MouldingBus {
@@ -145,10 +147,18 @@ impl MouldingBus {
         bus
     }
 
+    /// Logs in `clock`'s time (a test's virtual day) instead of the
+    /// system's.
+    #[must_use]
+    pub fn timed_by(mut self, clock: crate::clock::Clock) -> MouldingBus {
+        self.clock = clock;
+        self
+    }
+
     fn note(&self, unit: u8, what: String) {
         if let Ok(mut log) = self.log.lock() {
             log.push(LogEntry {
-                at: crate::clock::now_ms(),
+                at: self.clock.now_ms(),
                 unit,
                 what,
             });

@@ -24,11 +24,12 @@ use cellwatch_models::value::{Num, ValueType};
 use futures_util::future::BoxFuture;
 use futures_util::FutureExt;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
-use tokio::sync::mpsc;
+use tokio::sync::{mpsc, oneshot};
 
 use super::{
     Source, SourceError, SourceEvent, SourceSender, WriteRequest, WriteSender, WRITE_CAPACITY,
 };
+use crate::clock::Clock;
 use crate::config::TagConfig;
 
 /// How the bus is reached.
@@ -38,6 +39,16 @@ pub enum Transport {
     Tcp(String),
     /// A serial port.
     Serial(SerialLine),
+}
+
+impl Transport {
+    /// The address or the device: what two cells on one bus have alike.
+    pub fn place(&self) -> &str {
+        match self {
+            Transport::Tcp(a) => a,
+            Transport::Serial(s) => &s.path,
+        }
+    }
 }
 
 /// Serial line settings (paper 002: 9600 bit/s, 7 data bits, even parity,
@@ -98,6 +109,17 @@ impl LegacyConfig {
                 s.stop_bits
             ),
         }
+    }
+
+    /// The bus and every polling setting, to tell two apart.
+    pub fn settings(&self) -> String {
+        format!(
+            "{}, poll every {:?}, response timeout {:?}, {} retries",
+            self.describe(),
+            self.poll_interval,
+            self.response_timeout,
+            self.retries
+        )
     }
 }
 
@@ -406,7 +428,7 @@ pub fn unit_problem(unit: u8) -> String {
     format!("legacy-unit-{unit:02X}")
 }
 
-/// Runs the poller until `shutdown` completes.
+/// Runs the poller for one cell until `shutdown` completes.
 ///
 /// # Errors
 /// None yet: trouble on the line is reported as events and retried.
@@ -414,20 +436,100 @@ pub async fn run(
     config: &LegacyConfig,
     tags: &[TagConfig],
     tx: SourceSender,
-    mut writes: Option<mpsc::Receiver<WriteRequest>>,
+    writes: Option<mpsc::Receiver<WriteRequest>>,
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), SourceError> {
-    // Per unit, the requests its tags need and, per item, the tags.
-    let mut plan: BTreeMap<u8, BTreeSet<Header>> = BTreeMap::new();
-    let mut readers: HashMap<(u8, Item), Vec<usize>> = HashMap::new();
-    for (i, t) in tags.iter().enumerate() {
-        match BusNode::parse(&t.node_id) {
-            Ok(n) => {
-                plan.entry(n.unit).or_default().insert(n.item.request());
-                readers.entry((n.unit, n.item)).or_default().push(i);
+    let member = Member {
+        tags: tags.to_vec(),
+        tx,
+        writes,
+    };
+    poll(config, vec![member], &Clock::system(), shutdown).await
+}
+
+/// One cell's share of a bus: its tags (node ids `@<unit>/<item>`), where
+/// its events go, and its operators' writes.
+pub struct Member {
+    /// The cell's tags.
+    pub tags: Vec<TagConfig>,
+    /// The cell loop's channel.
+    pub tx: SourceSender,
+    /// Writes to the cell's tags.
+    pub writes: Option<mpsc::Receiver<WriteRequest>>,
+}
+
+/// Where a member's tag sits among all the members' tags.
+#[derive(Clone, Copy)]
+struct Owner {
+    member: usize,
+    tag: usize,
+}
+
+/// The next write any member asks for, with the member's index; members
+/// whose writers are gone are dropped.
+async fn next_write(members: &mut [Member]) -> (usize, WriteRequest) {
+    std::future::poll_fn(|cx| {
+        for (m, member) in members.iter_mut().enumerate() {
+            let Some(rx) = member.writes.as_mut() else {
+                continue;
+            };
+            match rx.poll_recv(cx) {
+                std::task::Poll::Ready(Some(w)) => return std::task::Poll::Ready((m, w)),
+                std::task::Poll::Ready(None) => member.writes = None,
+                std::task::Poll::Pending => {}
             }
-            Err(e) => tracing::error!(tag = %t.name, error = %e, "tag not read"),
         }
+        std::task::Poll::Pending
+    })
+    .await
+}
+
+/// Polls the bus for `members` (one cell, or each unit a cell of its own)
+/// until `shutdown` completes or no member listens any more; readings are
+/// stamped with `clock`.
+///
+/// # Errors
+/// None yet: trouble on the line is reported as events and retried.
+pub async fn poll(
+    config: &LegacyConfig,
+    mut members: Vec<Member>,
+    clock: &Clock,
+    shutdown: impl Future<Output = ()>,
+) -> Result<(), SourceError> {
+    // Per unit, the requests its tags need and, per item, the tags; per
+    // unit, the members reading it.
+    let mut plan: BTreeMap<u8, BTreeSet<Header>> = BTreeMap::new();
+    let mut readers: HashMap<(u8, Item), Vec<Owner>> = HashMap::new();
+    let mut unit_members: BTreeMap<u8, BTreeSet<usize>> = BTreeMap::new();
+    for (m, member) in members.iter().enumerate() {
+        for (i, t) in member.tags.iter().enumerate() {
+            match BusNode::parse(&t.node_id) {
+                Ok(n) => {
+                    plan.entry(n.unit).or_default().insert(n.item.request());
+                    readers
+                        .entry((n.unit, n.item))
+                        .or_default()
+                        .push(Owner { member: m, tag: i });
+                    unit_members.entry(n.unit).or_default().insert(m);
+                }
+                Err(e) => tracing::error!(tag = %t.name, error = %e, "tag not read"),
+            }
+        }
+    }
+    // Whether a member's cell loop still listens.
+    let mut listening = vec![true; members.len()];
+    // Sends `ev` to member `m`; false once no member listens.
+    async fn tell(members: &[Member], listening: &mut [bool], m: usize, ev: SourceEvent) -> bool {
+        if listening[m] && members[m].tx.send(ev).await.is_err() {
+            listening[m] = false;
+        }
+        listening.iter().any(|l| *l)
+    }
+    async fn tell_all(members: &[Member], listening: &mut [bool], ev: &SourceEvent) -> bool {
+        for m in 0..members.len() {
+            tell(members, listening, m, ev.clone()).await;
+        }
+        listening.iter().any(|l| *l)
     }
     tokio::pin!(shutdown);
     let mut backoff = Duration::from_millis(250);
@@ -441,11 +543,10 @@ pub async fn run(
             Ok(l) => l,
             Err(e) => {
                 if !said_down {
-                    let _ = tx
-                        .send(SourceEvent::Disconnected(format!(
-                            "cannot open the bus: {e}"
-                        )))
-                        .await;
+                    let down = SourceEvent::Disconnected(format!("cannot open the bus: {e}"));
+                    if !tell_all(&members, &mut listening, &down).await {
+                        return Ok(());
+                    }
                     said_down = true;
                 }
                 tokio::select! {
@@ -457,25 +558,29 @@ pub async fn run(
             }
         };
         backoff = Duration::from_millis(250);
-        let _ = tx.send(SourceEvent::Connected(config.describe())).await;
+        if !tell_all(
+            &members,
+            &mut listening,
+            &SourceEvent::Connected(config.describe()),
+        )
+        .await
+        {
+            return Ok(());
+        }
         let mut decoder = Decoder::answers();
-        // What was last sent per tag; units out of reach.
-        let mut sent: Vec<Option<Reading>> = vec![None; tags.len()];
+        // What was last sent per member and tag; units out of reach.
+        let mut sent: Vec<Vec<Option<Reading>>> =
+            members.iter().map(|m| vec![None; m.tags.len()]).collect();
         let mut away: BTreeSet<u8> = BTreeSet::new();
         let mut next = tokio::time::Instant::now();
         let lost = 'polls: loop {
             // Between polls: operators' writes, one at a time.
             loop {
-                let write = async {
-                    match writes.as_mut() {
-                        Some(rx) => rx.recv().await,
-                        None => std::future::pending().await,
-                    }
-                };
                 tokio::select! {
                     _ = &mut shutdown => return Ok(()),
                     _ = tokio::time::sleep_until(next) => break,
-                    Some(w) = write => {
+                    (m, w) = next_write(&mut members) => {
+                        let tags = &members[m].tags;
                         if let Err(why) = write_one(&mut line, &mut decoder, config, tags, w).await {
                             break 'polls why;
                         }
@@ -485,8 +590,8 @@ pub async fn run(
             // A cycle longer than the interval (units timing out) starts
             // the next one at once, not a burst to catch up.
             next = (next + config.poll_interval).max(tokio::time::Instant::now());
-            let mut readings = Vec::new();
-            let mut problems = Vec::new();
+            let mut readings: Vec<Vec<TagReading>> = vec![Vec::new(); members.len()];
+            let mut problems: Vec<(usize, SourceEvent)> = Vec::new();
             let mut line_lost = None;
             'units: for (&unit, requests) in &plan {
                 let mut values: Vec<(Item, Value)> = Vec::new();
@@ -504,45 +609,56 @@ pub async fn run(
                         }
                     }
                 }
-                let now = crate::clock::now_ms();
+                let now = clock.now_ms();
+                let owners = unit_members.get(&unit).into_iter().flatten();
                 match failed {
                     Some(why) => {
                         if away.insert(unit) {
                             tracing::warn!(unit, %why, "unit does not answer");
-                            problems.push(SourceEvent::Problem {
-                                id: unit_problem(unit),
-                                problem: Some(format!("unit {unit:02X} does not answer: {why}")),
-                            });
-                            for ts in readers
+                            for &m in owners {
+                                problems.push((
+                                    m,
+                                    SourceEvent::Problem {
+                                        id: unit_problem(unit),
+                                        problem: Some(format!(
+                                            "unit {unit:02X} does not answer: {why}"
+                                        )),
+                                    },
+                                ));
+                            }
+                            for o in readers
                                 .iter()
                                 .filter(|((u, _), _)| *u == unit)
-                                .map(|(_, t)| t)
+                                .flat_map(|(_, o)| o)
                             {
-                                for &t in ts {
-                                    sent[t] = Some(Reading::Unreachable);
-                                    readings.push(TagReading {
-                                        tag: t,
-                                        reading: Reading::Unreachable,
-                                        source_time: now,
-                                    });
-                                }
+                                sent[o.member][o.tag] = Some(Reading::Unreachable);
+                                readings[o.member].push(TagReading {
+                                    tag: o.tag,
+                                    reading: Reading::Unreachable,
+                                    source_time: now,
+                                });
                             }
                         }
                     }
                     None => {
                         if away.remove(&unit) {
-                            problems.push(SourceEvent::Problem {
-                                id: unit_problem(unit),
-                                problem: None,
-                            });
+                            for &m in owners {
+                                problems.push((
+                                    m,
+                                    SourceEvent::Problem {
+                                        id: unit_problem(unit),
+                                        problem: None,
+                                    },
+                                ));
+                            }
                         }
                         for (item, value) in values {
-                            for &t in readers.get(&(unit, item)).into_iter().flatten() {
-                                let r = reading(&value, item, &tags[t]);
-                                if sent[t].as_ref() != Some(&r) {
-                                    sent[t] = Some(r.clone());
-                                    readings.push(TagReading {
-                                        tag: t,
+                            for o in readers.get(&(unit, item)).into_iter().flatten() {
+                                let r = reading(&value, item, &members[o.member].tags[o.tag]);
+                                if sent[o.member][o.tag].as_ref() != Some(&r) {
+                                    sent[o.member][o.tag] = Some(r.clone());
+                                    readings[o.member].push(TagReading {
+                                        tag: o.tag,
                                         reading: r,
                                         source_time: now,
                                     });
@@ -554,10 +670,17 @@ pub async fn run(
             }
             // The unit's problem first: its alarm explains the unknown
             // values that follow.
-            for p in problems {
-                let _ = tx.send(p).await;
+            for (m, p) in problems {
+                tell(&members, &mut listening, m, p).await;
             }
-            if !readings.is_empty() && tx.send(SourceEvent::Readings(readings)).await.is_err() {
+            for (m, r) in readings.into_iter().enumerate() {
+                if !r.is_empty()
+                    && !tell(&members, &mut listening, m, SourceEvent::Readings(r)).await
+                {
+                    return Ok(());
+                }
+            }
+            if !listening.iter().any(|l| *l) {
                 return Ok(());
             }
             if let Some(why) = line_lost {
@@ -565,10 +688,164 @@ pub async fn run(
             }
         };
         tracing::warn!(bus = %config.describe(), why = %lost, "bus connection lost");
-        let _ = tx
-            .send(SourceEvent::Disconnected(format!("the bus: {lost}")))
-            .await;
+        let down = SourceEvent::Disconnected(format!("the bus: {lost}"));
+        if !tell_all(&members, &mut listening, &down).await {
+            return Ok(());
+        }
         said_down = true;
+    }
+}
+
+/// One bus shared by several cells (each unit a cell of its own, the
+/// default for a bus): the poller runs once, and each cell's agent gets a
+/// [`BusShare`] as its source.
+pub struct SharedBus {
+    config: LegacyConfig,
+    joins: Vec<oneshot::Receiver<Member>>,
+    clock: Clock,
+}
+
+impl SharedBus {
+    /// A bus polled for cells reading `cells` (each cell's tags); one
+    /// share per cell, in the same order.
+    pub fn new(config: LegacyConfig, cells: Vec<Vec<TagConfig>>) -> (SharedBus, Vec<BusShare>) {
+        let mut joins = Vec::new();
+        let mut shares = Vec::new();
+        for tags in cells {
+            let (join, joined) = oneshot::channel();
+            joins.push(joined);
+            shares.push(BusShare {
+                describe: config.describe(),
+                tags,
+                join,
+                writes: None,
+            });
+        }
+        let bus = SharedBus {
+            config,
+            joins,
+            clock: Clock::system(),
+        };
+        (bus, shares)
+    }
+
+    /// Stamps readings with `clock` (a test's virtual time).
+    #[must_use]
+    pub fn timed_by(mut self, clock: Clock) -> SharedBus {
+        self.clock = clock;
+        self
+    }
+
+    /// Waits for the cells' agents to start their shares (one that never
+    /// starts is left out), then polls until `shutdown` completes or no
+    /// cell listens.
+    ///
+    /// # Errors
+    /// See [`poll`].
+    pub async fn run(self, shutdown: impl Future<Output = ()>) -> Result<(), SourceError> {
+        tokio::pin!(shutdown);
+        let mut members = Vec::new();
+        for joined in self.joins {
+            tokio::select! {
+                _ = &mut shutdown => return Ok(()),
+                m = joined => if let Ok(m) = m { members.push(m) },
+            }
+        }
+        if members.is_empty() {
+            return Ok(());
+        }
+        poll(&self.config, members, &self.clock, shutdown).await
+    }
+}
+
+/// The buses several cells share: for each cell whose `[legacy]` bus
+/// (port or address) another cell also reads, a [`BusShare`] (in the
+/// cells' order; `None` for a cell that has the source its configuration
+/// names alone), and the buses to run.
+///
+/// # Errors
+/// Two cells on one bus poll it differently (interval, timeout, retries,
+/// line settings): which two, and what differs.
+pub fn share_buses(
+    cells: &[(String, Option<LegacyConfig>, Vec<TagConfig>)],
+) -> Result<(Vec<Option<BusShare>>, Vec<SharedBus>), String> {
+    let mut sources: Vec<Option<BusShare>> = cells.iter().map(|_| None).collect();
+    let mut buses = Vec::new();
+    let mut done = vec![false; cells.len()];
+    for (i, (name, bus, _)) in cells.iter().enumerate() {
+        let Some(bus) = bus else { continue };
+        if done[i] {
+            continue;
+        }
+        let same: Vec<usize> = (i..cells.len())
+            .filter(|&j| {
+                cells[j]
+                    .1
+                    .as_ref()
+                    .is_some_and(|b| b.transport.place() == bus.transport.place())
+            })
+            .collect();
+        if same.len() < 2 {
+            continue;
+        }
+        for &j in &same {
+            done[j] = true;
+            if cells[j].1.as_ref() != Some(bus) {
+                return Err(format!(
+                    "{name} and {} share {} but poll it differently ({} / {}): give both the same [legacy] settings",
+                    cells[j].0,
+                    bus.transport.place(),
+                    bus.settings(),
+                    cells[j].1.as_ref().map(LegacyConfig::settings).unwrap_or_default()
+                ));
+            }
+        }
+        let (shared, shares) = SharedBus::new(
+            bus.clone(),
+            same.iter().map(|&j| cells[j].2.clone()).collect(),
+        );
+        for (&j, share) in same.iter().zip(shares) {
+            sources[j] = Some(share);
+        }
+        buses.push(shared);
+    }
+    Ok((sources, buses))
+}
+
+/// One cell's source on a [`SharedBus`]: it hands the cell's channel and
+/// writes to the bus's poller.
+pub struct BusShare {
+    describe: String,
+    tags: Vec<TagConfig>,
+    join: oneshot::Sender<Member>,
+    writes: Option<mpsc::Receiver<WriteRequest>>,
+}
+
+impl Source for BusShare {
+    fn describe(&self) -> String {
+        format!("{} (shared)", self.describe)
+    }
+
+    fn writer(&mut self) -> Option<WriteSender> {
+        let (tx, rx) = mpsc::channel(WRITE_CAPACITY);
+        self.writes = Some(rx);
+        Some(tx)
+    }
+
+    fn run(
+        self: Box<Self>,
+        tx: SourceSender,
+        shutdown: BoxFuture<'static, ()>,
+    ) -> BoxFuture<'static, Result<(), SourceError>> {
+        async move {
+            let BusShare {
+                tags, join, writes, ..
+            } = *self;
+            let _ = join.send(Member { tags, tx, writes });
+            shutdown.await;
+            Ok(())
+        }
+        .boxed()
     }
 }
 
