@@ -167,16 +167,16 @@ async fn daily_and_monthly_reports_in_three_formats() {
     ]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     let lines: Vec<&str> = r.stdout.lines().collect();
-    assert_eq!(lines[0], "section,key,name,running_min,idle_min,fault_min,offline_min,stops,stop_min,availability_pct,parts");
-    assert_eq!(lines[2], "hour,01,,30.0,0.0,30.0,0.0,,,,");
+    assert_eq!(lines[0], "section,key,name,running_min,idle_min,fault_min,offline_min,stops,stop_min,availability_pct,parts,target");
+    assert_eq!(lines[2], "hour,01,,30.0,0.0,30.0,0.0,,,,,");
     assert!(
-        lines.contains(&"cause,07,\"emergency stop (ESE)\",,,,,1,30.0,,"),
+        lines.contains(&"cause,07,\"emergency stop (ESE)\",,,,,1,30.0,,,"),
         "{}",
         r.stdout
     );
     assert_eq!(
         *lines.last().unwrap(),
-        "total,day,,1290.0,60.0,30.0,60.0,,,93.5,10"
+        "total,day,,1290.0,60.0,30.0,60.0,,,93.5,10,"
     );
 
     let r = cellwatch(&[

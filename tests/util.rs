@@ -142,13 +142,18 @@ pub(crate) async fn scrape(addr: std::net::SocketAddr) -> String {
 /// `cellwatch report daily --json` for today (UTC) over `journal`, with
 /// the shipped stop causes.
 pub(crate) fn todays_report(journal: &Path) -> serde_json::Value {
-    let day = chrono::Utc::now().format("%Y-%m-%d").to_string();
+    daily_report(journal, &chrono::Utc::now().format("%Y-%m-%d").to_string())
+}
+
+/// `cellwatch report daily --json` for `day` (UTC) over `journal`, with
+/// the shipped stop causes.
+pub(crate) fn daily_report(journal: &Path, day: &str) -> serde_json::Value {
     let causes = root().join("config/stop-causes.toml");
     let r = cellwatch(&[
         "report",
         "daily",
         "--date",
-        &day,
+        day,
         "--db",
         journal.to_str().unwrap(),
         "--causes",

@@ -3,7 +3,7 @@
 //! versions apart.
 
 use cellwatch_models::alarm::{Alarm, AlarmKind, AlarmState, Severity, Transition};
-use cellwatch_models::engine::{HistoryKind, MachineState, StateName};
+use cellwatch_models::engine::{HistoryKind, MachineState, Order, StateName};
 use cellwatch_models::explain::Culprit;
 use serde::{Deserialize, Serialize};
 
@@ -189,11 +189,25 @@ pub struct StatePayload {
     pub since: String,
     /// When this message was sent.
     pub at: String,
+    /// The item (mould, product) code being made, when the cell has one
+    /// (`production.item`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub item: Option<String>,
+    /// The target quantity, when the cell has one (`production.target`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target: Option<u64>,
 }
 
 impl StatePayload {
-    /// The payload for `state`, entered at `since` by a change of `kind`.
-    pub fn new(cell: &str, state: &MachineState, kind: HistoryKind, since: u64, at: u64) -> Self {
+    /// The payload for `state`, entered at `since` by a change of `kind`,
+    /// while making `order`.
+    pub fn new(
+        cell: &str,
+        state: &MachineState,
+        kind: HistoryKind,
+        (since, at): (u64, u64),
+        order: &Order,
+    ) -> Self {
         let (fault_type, element) = match state {
             MachineState::Fault {
                 fault_type,
@@ -210,6 +224,8 @@ impl StatePayload {
             element,
             since: rfc3339(since),
             at: rfc3339(at),
+            item: order.item.clone(),
+            target: order.target,
         }
     }
 }

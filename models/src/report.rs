@@ -34,6 +34,32 @@ pub struct StateChange {
     pub fault_type: Option<String>,
 }
 
+/// A change of the work order (paper 002's item code / mould and target).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct OrderChange {
+    /// When, ms since the epoch.
+    pub at: u64,
+    /// The item (mould, product) code.
+    pub item: Option<String>,
+    /// The target quantity.
+    pub target: Option<u64>,
+}
+
+/// One work order within a report's period: what was made, when, how many.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct OrderSpan {
+    /// The item (mould, product) code.
+    pub item: Option<String>,
+    /// The target quantity.
+    pub target: Option<u64>,
+    /// From, ms since the epoch (clipped to the period).
+    pub from: u64,
+    /// Until, ms since the epoch (clipped to the period and to now).
+    pub to: u64,
+    /// Parts made in that time.
+    pub parts: u64,
+}
+
 /// One configured stop cause (paper 002, Table 4).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -139,6 +165,9 @@ pub struct DailyReport {
     pub stop_causes: Vec<CauseTotal>,
     /// Parts produced.
     pub production: u64,
+    /// The work orders of the day (item or mould, target), with the parts
+    /// made under each.
+    pub orders: Vec<OrderSpan>,
 }
 
 /// One month, day by day.
@@ -194,10 +223,12 @@ fn intervals(
 /// The report of the day `[day_start, day_start + 24 h)`.
 ///
 /// `changes` must be sorted by time; `parts` are the parts made, `(time,
-/// how many)`.
+/// how many)`; `orders` the work-order changes, sorted, including the last
+/// one before the day.
 pub fn daily(
     changes: &[StateChange],
     parts: &[(u64, u64)],
+    orders: &[OrderChange],
     day_start: u64,
     causes: &StopCauses,
     now: u64,
@@ -229,7 +260,40 @@ pub fn daily(
         total,
         stop_causes,
         production,
+        orders: spans(orders, parts, day_start, day_end.min(now.max(day_start))),
     }
+}
+
+/// The orders in force within `[start, end)`, clipped to it, with the parts
+/// made under each; the same order repeated (a restart) is one span.
+fn spans(orders: &[OrderChange], parts: &[(u64, u64)], start: u64, end: u64) -> Vec<OrderSpan> {
+    let mut out: Vec<OrderSpan> = Vec::new();
+    for (i, o) in orders.iter().enumerate() {
+        let next = orders.get(i + 1).map_or(u64::MAX, |n| n.at);
+        let (from, to) = (o.at.max(start), next.min(end));
+        if from >= to {
+            continue;
+        }
+        let made: u64 = parts
+            .iter()
+            .filter(|&&(at, _)| at >= from && at < to)
+            .map(|&(_, n)| n)
+            .sum();
+        match out.last_mut() {
+            Some(last) if last.item == o.item && last.target == o.target && last.to == from => {
+                last.to = to;
+                last.parts += made;
+            }
+            _ => out.push(OrderSpan {
+                item: o.item.clone(),
+                target: o.target,
+                from,
+                to,
+                parts: made,
+            }),
+        }
+    }
+    out
 }
 
 /// Stops within `[start, end)`: counted when they start in it, minutes
@@ -281,13 +345,14 @@ fn stops(
 pub fn monthly(
     changes: &[StateChange],
     parts: &[(u64, u64)],
+    orders: &[OrderChange],
     day_starts: &[u64],
     causes: &StopCauses,
     now: u64,
 ) -> MonthlyReport {
     let days: Vec<DailyReport> = day_starts
         .iter()
-        .map(|&d| daily(changes, parts, d, causes, now))
+        .map(|&d| daily(changes, parts, orders, d, causes, now))
         .collect();
     let mut total = Minutes::default();
     let mut merged: BTreeMap<String, CauseTotal> = BTreeMap::new();
@@ -367,7 +432,7 @@ mod tests {
             (75 * MIN, 1),
             (25 * 60 * MIN, 1),
         ];
-        let r = daily(&h, &parts, 0, &causes(), 48 * 60 * MIN);
+        let r = daily(&h, &parts, &[], 0, &causes(), 48 * 60 * MIN);
         assert_eq!(
             r.hours[0],
             Minutes {
@@ -435,7 +500,7 @@ mod tests {
             change(day - 10, "fault", Some("ESE")),
             change(day + 20, "running", None),
         ];
-        let m = monthly(&h, &[], &[0, day * MIN], &causes(), 3 * day * MIN);
+        let m = monthly(&h, &[], &[], &[0, day * MIN], &causes(), 3 * day * MIN);
         assert_eq!(
             m.days[0].stop_causes,
             vec![CauseTotal {
@@ -462,7 +527,7 @@ mod tests {
     #[test]
     fn the_future_and_the_past_before_history_are_offline() {
         let h = vec![change(60, "running", None)];
-        let r = daily(&h, &[], 0, &causes(), 120 * MIN);
+        let r = daily(&h, &[], &[], 0, &causes(), 120 * MIN);
         assert_eq!(
             r.total,
             Minutes {
@@ -473,5 +538,54 @@ mod tests {
             }
         );
         assert_eq!(r.availability, Some(100.0));
+    }
+
+    #[test]
+    fn a_days_orders_are_clipped_to_it_with_the_parts_of_each_and_restarts_merged() {
+        let order = |min: u64, item: &str, target: u64| OrderChange {
+            at: min * MIN,
+            item: Some(item.into()),
+            target: Some(target),
+        };
+        let day = 24 * 60;
+        // From yesterday, repeated by a restart at 02:00, a mould change at
+        // 10:00, target raised at 12:00.
+        let orders = [
+            order(day - 60, "A-1", 500),
+            order(day + 120, "A-1", 500),
+            order(day + 600, "B-2", 300),
+            order(day + 720, "B-2", 400),
+        ];
+        let parts = [
+            ((day - 30) * MIN, 9),
+            ((day + 60) * MIN, 5),
+            ((day + 300) * MIN, 7),
+            ((day + 650) * MIN, 4),
+            ((day + 800) * MIN, 6),
+        ];
+        let r = daily(
+            &[],
+            &parts,
+            &orders,
+            day * MIN,
+            &causes(),
+            (day + 900) * MIN,
+        );
+        let span = |item: &str, target, from: u64, to: u64, parts| OrderSpan {
+            item: Some(item.into()),
+            target: Some(target),
+            from: from * MIN,
+            to: to * MIN,
+            parts,
+        };
+        assert_eq!(
+            r.orders,
+            [
+                span("A-1", 500, day, day + 600, 12),
+                span("B-2", 300, day + 600, day + 720, 4),
+                span("B-2", 400, day + 720, day + 900, 6),
+            ]
+        );
+        assert_eq!(r.production, 22);
     }
 }

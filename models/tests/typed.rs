@@ -8,7 +8,7 @@
 use cellwatch_models::alarm::{AlarmKind, Severity, Transition};
 use cellwatch_models::comments::CommentDb;
 use cellwatch_models::engine::{
-    CellEngine, CheckSet, MachineState, PartCounting, Reading, StateRules, SwitchingCheck,
+    CellEngine, CheckSet, MachineState, Order, PartCounting, Reading, StateRules, SwitchingCheck,
     SwitchingChecks, Tag,
 };
 use cellwatch_models::explain::Polarity;
@@ -41,7 +41,7 @@ fn engine(limits: Vec<LimitCheck>) -> CellEngine {
             address: s,
         })
         .collect();
-    for n in ["MODE", "TEMP", "COUNT"] {
+    for n in ["ITEM", "TARGET", "MODE", "TEMP", "COUNT"] {
         tags.push(Tag {
             name: n.to_lowercase(),
             address: Signal::new(n),
@@ -75,6 +75,7 @@ fn engine(limits: Vec<LimitCheck>) -> CellEngine {
             Counter::new(ValueType::UInt16.max().unwrap()),
         )]))
         .exporting([count - 1])
+        .ordering(Some(count - 4), Some(count - 3))
 }
 
 fn tag(e: &CellEngine, a: &str) -> usize {
@@ -183,6 +184,33 @@ fn a_counter_counts_exactly_its_increments_through_wrap_and_reset() {
     e.on_connection(true, at + 2);
     let step = number(&mut e, "COUNT", Num::UInt(7), at + 3);
     assert_eq!(step.parts, [(at + 3, 5)]);
+}
+
+#[test]
+fn the_work_order_follows_the_item_and_target_tags_and_survives_an_outage() {
+    let mut e = engine(Vec::new());
+    load_normal(&mut e, 1);
+    let item = tag(&e, "ITEM");
+    let order = |item: &str, target: Option<u64>| Order {
+        item: Some(item.into()),
+        target,
+    };
+    let step = e.on_reading(item, Reading::Text("ITEM-07 ".into()), 2, 2);
+    assert_eq!(step.order, Some(order("ITEM-07", None)));
+    let step = number(&mut e, "TARGET", Num::UInt(1500), 3);
+    assert_eq!(step.order, Some(order("ITEM-07", Some(1500))));
+    // The same again, or the unit out of reach and back: no new order.
+    assert_eq!(number(&mut e, "TARGET", Num::UInt(1500), 4).order, None);
+    e.on_connection(false, 5);
+    e.on_connection(true, 6);
+    assert_eq!(
+        e.on_reading(item, Reading::Text("ITEM-07".into()), 7, 7)
+            .order,
+        None
+    );
+    assert_eq!(e.order(), &order("ITEM-07", Some(1500)));
+    let step = e.on_reading(item, Reading::Text("ITEM-08".into()), 8, 8);
+    assert_eq!(step.order, Some(order("ITEM-08", Some(1500))));
 }
 
 #[test]

@@ -54,12 +54,15 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
         )?,
         |e, (id, on, off)| e.delaying(id, *on, *off),
     );
-    Ok(engine.counting(config.part_counting()).exporting(
-        config
-            .tags
-            .iter()
-            .enumerate()
-            .filter(|(_, t)| t.export)
-            .map(|(i, _)| i),
-    ))
+    Ok(engine
+        .counting(config.part_counting())
+        .ordering(config.order_item, config.order_target)
+        .exporting(
+            config
+                .tags
+                .iter()
+                .enumerate()
+                .filter(|(_, t)| t.export)
+                .map(|(i, _)| i),
+        ))
 }

@@ -539,6 +539,8 @@ impl CellLoop {
             self.state_since = at;
             self.state_kind = kind;
             state = Some(self.state_payload(at));
+        } else if step.order.is_some() {
+            state = Some(self.state_payload(now));
         }
         self.deliver(CellStep {
             at: now,
@@ -562,8 +564,8 @@ impl CellLoop {
             &self.cell,
             self.engine.state(),
             self.state_kind,
-            self.state_since,
-            at,
+            (self.state_since, at),
+            self.engine.order(),
         )
     }
 

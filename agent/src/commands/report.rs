@@ -4,7 +4,9 @@
 use std::io::Write;
 use std::path::Path;
 
-use cellwatch_models::report::{self, CauseTotal, DailyReport, Minutes, MonthlyReport, StopCauses};
+use cellwatch_models::report::{
+    self, CauseTotal, DailyReport, Minutes, MonthlyReport, OrderSpan, StopCauses,
+};
 use chrono::{Datelike, FixedOffset, NaiveDate, TimeZone};
 
 use crate::cli::{Failure, ReportArgs, ReportCommand};
@@ -75,9 +77,9 @@ pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure>
             let d = NaiveDate::parse_from_str(date, "%Y-%m-%d")
                 .map_err(|_| Failure::Input(format!("--date '{date}': write it as 2026-11-21")))?;
             let start = day_start(d, &tz);
-            let (changes, parts) = journal::report_input(&conn, start, start + 86_400_000)
+            let i = journal::report_input(&conn, start, start + 86_400_000)
                 .map_err(|e| Failure::Runtime(e.to_string()))?;
-            let r = report::daily(&changes, &parts, start, &causes, now);
+            let r = report::daily(&i.changes, &i.parts, &i.orders, start, &causes, now);
             match args.format() {
                 Format::Json => writeln!(
                     out,
@@ -105,9 +107,9 @@ pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure>
             }
             let starts: Vec<u64> = days.iter().map(|d| day_start(*d, &tz)).collect();
             let end = starts.last().copied().unwrap_or(0) + 86_400_000;
-            let (changes, parts) = journal::report_input(&conn, starts[0], end)
+            let i = journal::report_input(&conn, starts[0], end)
                 .map_err(|e| Failure::Runtime(e.to_string()))?;
-            let r = report::monthly(&changes, &parts, &starts, &causes, now);
+            let r = report::monthly(&i.changes, &i.parts, &i.orders, &starts, &causes, now);
             match args.format() {
                 Format::Json => writeln!(
                     out,
@@ -176,10 +178,34 @@ fn daily_table(
     writeln!(out, "day  {}", row(&r.total))?;
     writeln!(out, "availability: {} %", pct(r.availability))?;
     causes_table(out, &r.stop_causes)?;
-    writeln!(out, "production: {} parts", r.production)
+    writeln!(out, "production: {} parts", r.production)?;
+    writeln!(out, "orders (item / mould, target, made):")?;
+    if r.orders.is_empty() {
+        writeln!(out, "  none known")?;
+    }
+    for o in &r.orders {
+        writeln!(
+            out,
+            "  {}  {:<12} target {:>7}  made {:>7}",
+            span(r.day_start, o),
+            o.item.as_deref().unwrap_or("-"),
+            o.target.map_or_else(|| "-".into(), |t| t.to_string()),
+            o.parts
+        )?;
+    }
+    Ok(())
 }
 
-const CSV_HEADER: &str = "section,key,name,running_min,idle_min,fault_min,offline_min,stops,stop_min,availability_pct,parts";
+/// An order's time within its day, `HH:MM-HH:MM`.
+fn span(day_start: u64, o: &OrderSpan) -> String {
+    let hm = |ms: u64| {
+        let min = ms.saturating_sub(day_start) / 60_000;
+        format!("{:02}:{:02}", min / 60, min % 60)
+    };
+    format!("{}-{}", hm(o.from), hm(o.to))
+}
+
+const CSV_HEADER: &str = "section,key,name,running_min,idle_min,fault_min,offline_min,stops,stop_min,availability_pct,parts,target";
 
 fn csv_minutes(m: &Minutes) -> String {
     format!(
@@ -192,7 +218,7 @@ fn csv_causes(out: &mut dyn Write, causes: &[CauseTotal]) -> std::io::Result<()>
     for c in causes {
         writeln!(
             out,
-            "cause,{},\"{}\",,,,,{},{:.1},,",
+            "cause,{},\"{}\",,,,,{},{:.1},,,",
             c.code,
             c.name.replace('"', "\"\""),
             c.count,
@@ -214,7 +240,7 @@ fn summary_row(
     let availability = availability.map_or_else(String::new, |a| format!("{a:.1}"));
     writeln!(
         out,
-        "{section},{key},,{},,,{availability},{parts}",
+        "{section},{key},,{},,,{availability},{parts},",
         csv_minutes(m)
     )
 }
@@ -222,9 +248,19 @@ fn summary_row(
 fn daily_csv(out: &mut dyn Write, r: &DailyReport) -> std::io::Result<()> {
     writeln!(out, "{CSV_HEADER}")?;
     for (h, m) in r.hours.iter().enumerate() {
-        writeln!(out, "hour,{h:02},,{},,,,", csv_minutes(m))?;
+        writeln!(out, "hour,{h:02},,{},,,,,", csv_minutes(m))?;
     }
     csv_causes(out, &r.stop_causes)?;
+    for o in &r.orders {
+        writeln!(
+            out,
+            "order,{},\"{}\",,,,,,,,{},{}",
+            span(r.day_start, o),
+            o.item.as_deref().unwrap_or("").replace('"', "\"\""),
+            o.parts,
+            o.target.map_or_else(String::new, |t| t.to_string())
+        )?;
+    }
     summary_row(out, "total", "day", &r.total, r.availability, r.production)
 }
 
@@ -243,15 +279,23 @@ fn monthly_table(
     )?;
     writeln!(
         out,
-        "day             run     idle    fault  offline   avail%   parts"
+        "day             run     idle    fault  offline   avail%   parts  items"
     )?;
     for (d, day) in days.iter().zip(&r.days) {
+        let mut items: Vec<&str> = Vec::new();
+        for o in &day.orders {
+            let item = o.item.as_deref().unwrap_or("-");
+            if !items.contains(&item) {
+                items.push(item);
+            }
+        }
         writeln!(
             out,
-            "{d}  {} {:>8} {:>7}",
+            "{d}  {} {:>8} {:>7}  {}",
             row(&day.total),
             pct(day.availability),
-            day.production
+            day.production,
+            items.join(" ")
         )?;
     }
     writeln!(

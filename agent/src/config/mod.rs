@@ -359,6 +359,10 @@ pub struct CellConfig {
     pub part_done: Option<usize>,
     /// The integer tags counting parts (indices into `tags`).
     pub part_counters: Vec<usize>,
+    /// The tag giving the item (mould, product) code being made.
+    pub order_item: Option<usize>,
+    /// The tag giving the target quantity.
+    pub order_target: Option<usize>,
     /// Limit checks on numeric tags.
     pub limits: Vec<LimitCheck>,
     /// Alarm delays: alarm id, on-delay and off-delay, ms.
@@ -833,7 +837,13 @@ impl Validator<'_> {
             );
         }
         let operators_file = raw.commands.operators_file.map(|s| self.path(s.get_ref()));
-        let mut production = |p: Spanned<String>, key: &str, contact: bool| {
+        #[derive(PartialEq)]
+        enum Use {
+            Contact,
+            Counter,
+            Item,
+        }
+        let mut production = |p: Spanned<String>, key: &str, usage: Use| {
             let found = tag_address(p.get_ref())
                 .ok()
                 .and_then(|a| by_address.get(&a).copied());
@@ -846,7 +856,7 @@ impl Validator<'_> {
                 return None;
             };
             let tag = &tags[t];
-            if contact && !tag.is_contact() {
+            if usage == Use::Contact && !tag.is_contact() {
                 self.problem(
                     p.span(),
                     key,
@@ -858,12 +868,25 @@ impl Validator<'_> {
                 );
                 return None;
             }
-            if !contact && (tag.bit.is_some() || !tag.value_type.is_integer()) {
+            let what = match usage {
+                Use::Contact => None,
+                Use::Counter => Some("a counter"),
+                Use::Item => Some("an item code"),
+            };
+            let fits = tag.bit.is_none()
+                && (tag.value_type.is_integer()
+                    || (usage == Use::Item && tag.value_type == ValueType::String));
+            if let (Some(what), false) = (what, fits) {
+                let kind = if usage == Use::Item {
+                    "a string or integer tag"
+                } else {
+                    "an integer tag"
+                };
                 self.problem(
                     p.span(),
                     key,
                     format!(
-                        "{} is a {}: a counter must be an integer tag without a bit",
+                        "{} is a {}: {what} must be {kind} without a bit",
                         tag.address,
                         tag.usage()
                     ),
@@ -875,34 +898,48 @@ impl Validator<'_> {
         let part_done = raw
             .production
             .part_done
-            .and_then(|p| production(p, "production.part_done", true));
+            .and_then(|p| production(p, "production.part_done", Use::Contact));
+        let order_item = raw
+            .production
+            .item
+            .and_then(|p| production(p, "production.item", Use::Item));
+        let order_target = raw
+            .production
+            .target
+            .and_then(|p| production(p, "production.target", Use::Counter));
+        let both = raw
+            .production
+            .counter
+            .as_ref()
+            .filter(|_| part_done.is_some())
+            .map(Spanned::span);
         let part_counters = match raw.production.counter {
-            Some(c) if part_done.is_some() => {
-                self.problem(
-                    c.span(),
-                    "production.counter",
-                    "give part_done or counter, not both",
-                );
-                Vec::new()
-            }
+            Some(_) if both.is_some() => Vec::new(),
             Some(c) => {
                 let span = c.span();
-                match c.into_inner() {
-                    raw::OneOrMany::One(a) => {
-                        production(Spanned::new(span, a), "production.counter", false)
-                            .into_iter()
-                            .collect()
-                    }
-                    raw::OneOrMany::Many(list) => list
-                        .into_iter()
-                        .filter_map(|a| {
-                            production(Spanned::new(span.clone(), a), "production.counter", false)
-                        })
-                        .collect(),
-                }
+                let list = match c.into_inner() {
+                    raw::OneOrMany::One(a) => vec![a],
+                    raw::OneOrMany::Many(list) => list,
+                };
+                list.into_iter()
+                    .filter_map(|a| {
+                        production(
+                            Spanned::new(span.clone(), a),
+                            "production.counter",
+                            Use::Counter,
+                        )
+                    })
+                    .collect()
             }
             None => Vec::new(),
         };
+        if let Some(span) = both {
+            self.problem(
+                span,
+                "production.counter",
+                "give part_done or counter, not both",
+            );
+        }
         if operators_file.is_none() {
             self.warnings.push(
                 "no commands.operators_file: every acknowledge and reset will be refused".into(),
@@ -924,6 +961,8 @@ impl Validator<'_> {
             operators_file,
             part_done,
             part_counters,
+            order_item,
+            order_target,
             limits,
             delays,
             warnings: Vec::new(),

@@ -35,6 +35,8 @@ pub(crate) struct RawConfig {
 pub(crate) struct RawProduction {
     pub(crate) part_done: Option<Spanned<String>>,
     pub(crate) counter: Option<Spanned<OneOrMany>>,
+    pub(crate) item: Option<Spanned<String>>,
+    pub(crate) target: Option<Spanned<String>>,
 }
 
 /// One address, or a list of them.

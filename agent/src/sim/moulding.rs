@@ -212,6 +212,20 @@ impl MouldingBus {
         }
     }
 
+    /// Unit `n` is set to make `item` up to `target` (a mould change at
+    /// its panel).
+    pub fn set_order(&self, n: u8, item: &str, target: u32) {
+        if self
+            .with_unit(n, |u| {
+                u.item = item.to_string();
+                u.target = target;
+            })
+            .is_some()
+        {
+            self.note(n, format!("order {item} target {target}"));
+        }
+    }
+
     /// Unit `n` stops answering (or answers again).
     pub fn set_silent(&self, n: u8, silent: bool) {
         if self.with_unit(n, |u| u.silent = silent).is_some() {

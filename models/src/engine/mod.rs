@@ -157,6 +157,18 @@ pub struct Step {
     pub parts: Vec<(u64, u64)>,
     /// New values of the tags exported as gauges (`None`: unknown).
     pub exported: Vec<(usize, Option<f64>)>,
+    /// The work order changed (item code or target quantity): the new one.
+    pub order: Option<Order>,
+}
+
+/// What the cell is making: the item (mould, product) code and the target
+/// quantity, as the machine says (paper 002's `RJ` / `RT`).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Order {
+    /// The item code, if known.
+    pub item: Option<String>,
+    /// The target quantity, if known.
+    pub target: Option<u64>,
 }
 
 impl Step {
@@ -168,6 +180,7 @@ impl Step {
             && self.unknown_delta == 0
             && self.parts.is_empty()
             && self.exported.is_empty()
+            && self.order.is_none()
     }
 
     /// The alarm transitions.
@@ -287,6 +300,10 @@ pub struct CellEngine {
     delays: HashMap<String, (u64, u64)>,
     /// Findings waiting out their delay, by alarm id, with since when.
     pending: BTreeMap<String, (u64, Finding)>,
+    /// The tags of the item code and the target quantity.
+    order_tags: (Option<usize>, Option<usize>),
+    /// The work order now.
+    order: Order,
 }
 
 impl CellEngine {
@@ -410,6 +427,8 @@ impl CellEngine {
             exported: vec![false; configured],
             delays: HashMap::new(),
             pending: BTreeMap::new(),
+            order_tags: (None, None),
+            order: Order::default(),
         })
     }
 
@@ -440,6 +459,21 @@ impl CellEngine {
             self.delays.insert(id.to_string(), (on_delay, off_delay));
         }
         self
+    }
+
+    /// Follows the work order: tag `item` gives the item code (a string or
+    /// a number), tag `target` the target quantity; their changes are
+    /// [`Step::order`].
+    #[must_use]
+    pub fn ordering(mut self, item: Option<usize>, target: Option<usize>) -> Self {
+        let fits = |t: Option<usize>| t.filter(|&t| t < self.configured);
+        self.order_tags = (fits(item), fits(target));
+        self
+    }
+
+    /// The work order now (item code, target quantity).
+    pub fn order(&self) -> &Order {
+        &self.order
     }
 
     /// Counts parts as `how` says ([`Step::parts`]).
@@ -884,6 +918,9 @@ impl CellEngine {
                 }
             }
         }
+        if Some(tag) == self.order_tags.0 || Some(tag) == self.order_tags.1 {
+            self.order_changed(step);
+        }
         if was != is {
             let address = &self.tags[tag].address;
             for &k in &self.number_readers[tag] {
@@ -898,6 +935,25 @@ impl CellEngine {
             state |= self.set_value(t, value, now, findings, step);
         }
         state
+    }
+
+    /// Recomputes the work order from its tags; a change goes to `step`.
+    /// An unknown value (unit out of reach) keeps the last known one.
+    fn order_changed(&mut self, step: &mut Step) {
+        let (item, target) = self.order_tags;
+        let mut order = self.order.clone();
+        match item.and_then(|t| self.others[t].as_ref()) {
+            Some(Value::Text(s)) => order.item = Some(s.trim().to_string()),
+            Some(v) => order.item = Some(v.to_string()),
+            None => {}
+        }
+        if let Some(Value::Num(n)) = target.and_then(|t| self.others[t].as_ref()) {
+            order.target = n.as_count();
+        }
+        if order != self.order {
+            self.order = order.clone();
+            step.order = Some(order);
+        }
     }
 
     /// A comparison's value now: unknown while an operand is.

@@ -67,6 +67,15 @@ pub enum Entry {
         /// How many.
         count: u64,
     },
+    /// The work order changed: item (mould) code, target quantity.
+    Order {
+        /// When.
+        at: u64,
+        /// The item code.
+        item: Option<String>,
+        /// The target quantity.
+        target: Option<u64>,
+    },
     /// An operator command, accepted or refused.
     Command {
         /// When.
@@ -158,6 +167,15 @@ struct Batch {
     done: Option<oneshot::Sender<Result<(), String>>>,
 }
 
+/// The tables of journal rows (one sequence across them).
+const TABLES: [&str; 5] = [
+    "alarm_events",
+    "state_history",
+    "commands",
+    "production",
+    "orders",
+];
+
 const SCHEMA: &str = "
 CREATE TABLE IF NOT EXISTS alarm_events (
     seq INTEGER PRIMARY KEY AUTOINCREMENT,
@@ -195,6 +213,13 @@ CREATE TABLE IF NOT EXISTS production (
     parts INTEGER NOT NULL DEFAULT 1
 );
 CREATE INDEX IF NOT EXISTS production_at ON production (at_ms);
+CREATE TABLE IF NOT EXISTS orders (
+    seq INTEGER PRIMARY KEY AUTOINCREMENT,
+    at_ms INTEGER NOT NULL,
+    item TEXT,
+    target INTEGER
+);
+CREATE INDEX IF NOT EXISTS orders_at ON orders (at_ms);
 CREATE TABLE IF NOT EXISTS alarm_current (
     alarm TEXT PRIMARY KEY,
     at_ms INTEGER NOT NULL,
@@ -304,7 +329,7 @@ impl Journal {
         observer: impl CommitObserver,
     ) -> Result<Journal, JournalError> {
         let conn = open(path)?;
-        let existing: u64 = ["alarm_events", "state_history", "commands", "production"]
+        let existing: u64 = TABLES
             .iter()
             .map(|t| {
                 conn.query_row(&format!("SELECT count(*) FROM {t}"), [], |r| {
@@ -544,7 +569,7 @@ fn writer(
 /// The last sequence number used by any table: rows share one sequence,
 /// so that history pages in journal order across tables.
 fn last_seq(conn: &Connection) -> i64 {
-    ["alarm_events", "state_history", "commands", "production"]
+    TABLES
         .iter()
         .map(|t| {
             conn.query_row(&format!("SELECT coalesce(max(seq), 0) FROM {t}"), [], |r| {
@@ -609,6 +634,17 @@ fn write_batch(conn: &mut Connection, batch: &[Entry], seq: &mut i64) -> rusqlit
                     i64::try_from(*count).unwrap_or(i64::MAX)
                 ])?;
             }
+            Entry::Order { at, item, target } => {
+                tx.prepare_cached(
+                    "INSERT INTO orders (seq, at_ms, item, target) VALUES (?1, ?2, ?3, ?4)",
+                )?
+                .execute(params![
+                    next,
+                    *at as i64,
+                    item,
+                    target.map(|t| i64::try_from(t).unwrap_or(i64::MAX))
+                ])?;
+            }
             Entry::Command {
                 at,
                 operator,
@@ -633,7 +669,7 @@ fn write_batch(conn: &mut Connection, batch: &[Entry], seq: &mut i64) -> rusqlit
 
 fn purge(conn: &Connection, retention: Duration, path: &Path) {
     let cutoff = crate::clock::now_ms().saturating_sub(retention.as_millis() as u64) as i64;
-    for table in ["alarm_events", "state_history", "commands", "production"] {
+    for table in TABLES {
         if let Err(e) = conn.execute(&format!("DELETE FROM {table} WHERE at_ms < ?1"), [cutoff]) {
             tracing::warn!(path = %path.display(), error = %e, "journal retention purge failed");
         }
@@ -882,16 +918,25 @@ fn history_row(
     })
 }
 
-/// What reports read: machine-state changes and parts made `(time, count)`.
-pub type ReportInput = (Vec<cellwatch_models::report::StateChange>, Vec<(u64, u64)>);
+/// What reports read.
+#[derive(Debug, Default)]
+pub struct ReportInput {
+    /// Machine-state rows, the last one before the period first.
+    pub changes: Vec<cellwatch_models::report::StateChange>,
+    /// Parts made `(time, count)`.
+    pub parts: Vec<(u64, u64)>,
+    /// Work-order changes, the last one before the period first.
+    pub orders: Vec<cellwatch_models::report::OrderChange>,
+}
 
-/// Machine-state rows and parts made `(time, count)` between `since` and
-/// `until` (ms), plus the last state row before `since`, for reports.
+/// Machine-state rows, parts made and work orders between `since` and
+/// `until` (ms), plus the last state and order before `since`, for
+/// reports.
 ///
 /// # Errors
 /// SQLite failing.
 pub fn report_input(conn: &Connection, since: u64, until: u64) -> rusqlite::Result<ReportInput> {
-    let mut changes = Vec::new();
+    let mut input = ReportInput::default();
     let row = |r: &rusqlite::Row<'_>| {
         Ok(cellwatch_models::report::StateChange {
             at: r.get::<_, i64>(0)? as u64,
@@ -906,15 +951,15 @@ pub fn report_input(conn: &Connection, since: u64, until: u64) -> rusqlite::Resu
             row,
         )
         .ok();
-    changes.extend(before);
+    input.changes.extend(before);
     let mut stmt = conn.prepare("SELECT at_ms, state, fault_type FROM state_history WHERE at_ms >= ?1 AND at_ms < ?2 ORDER BY at_ms, seq")?;
     for c in stmt.query_map([since as i64, until as i64], row)? {
-        changes.push(c?);
+        input.changes.push(c?);
     }
     let mut stmt = conn.prepare(
         "SELECT at_ms, parts FROM production WHERE at_ms >= ?1 AND at_ms < ?2 ORDER BY at_ms",
     )?;
-    let parts = stmt
+    input.parts = stmt
         .query_map([since as i64, until as i64], |r| {
             Ok((
                 r.get::<_, i64>(0)? as u64,
@@ -922,7 +967,28 @@ pub fn report_input(conn: &Connection, since: u64, until: u64) -> rusqlite::Resu
             ))
         })?
         .collect::<Result<Vec<_>, _>>()?;
-    Ok((changes, parts))
+    let order = |r: &rusqlite::Row<'_>| {
+        Ok(cellwatch_models::report::OrderChange {
+            at: r.get::<_, i64>(0)? as u64,
+            item: r.get(1)?,
+            target: r.get::<_, Option<i64>>(2)?.map(|t| t.max(0) as u64),
+        })
+    };
+    let before = conn
+        .query_row(
+            "SELECT at_ms, item, target FROM orders WHERE at_ms < ?1 ORDER BY at_ms DESC, seq DESC LIMIT 1",
+            [since as i64],
+            order,
+        )
+        .ok();
+    input.orders.extend(before);
+    let mut stmt = conn.prepare(
+        "SELECT at_ms, item, target FROM orders WHERE at_ms >= ?1 AND at_ms < ?2 ORDER BY at_ms, seq",
+    )?;
+    for o in stmt.query_map([since as i64, until as i64], order)? {
+        input.orders.push(o?);
+    }
+    Ok(input)
 }
 
 #[cfg(test)]

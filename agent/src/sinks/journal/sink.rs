@@ -54,6 +54,13 @@ pub fn entries(step: &CellStep) -> Vec<Entry> {
     for &(at, count) in &step.engine.parts {
         rows.push(Entry::Part { at, count });
     }
+    if let Some(o) = &step.engine.order {
+        rows.push(Entry::Order {
+            at: step.at,
+            item: o.item.clone(),
+            target: o.target,
+        });
+    }
     if let Input::Command(c) = &step.input {
         rows.push(Entry::Command {
             at: step.at,
