@@ -405,6 +405,7 @@ async fn only_correctly_signed_acks_are_carried_out_and_all_are_journaled() {
         alarm: "ese".into(),
         tag: None,
         value: None,
+        reason: None,
         operator: "kim".into(),
         nonce: nonce.into(),
         issued_at: now,

@@ -147,6 +147,7 @@ async fn scripted_source_drives_the_loop_into_the_recording_sink() {
                 alarm: "ese".into(),
                 tag: None,
                 value: None,
+                reason: None,
                 operator: "kim".into(),
                 nonce: "n1".into(),
                 issued_at: cellwatch::clock::now_ms(),

@@ -553,6 +553,7 @@ async fn a_target_is_written_only_for_an_operator_allowed_to_write() {
         alarm: String::new(),
         tag: Some("T2".into()),
         value: Some(value.into()),
+        reason: None,
         operator: operator.into(),
         nonce: nonce.into(),
         issued_at: cellwatch::clock::now_ms(),

@@ -222,6 +222,7 @@ pub(crate) fn signed(action: Action, alarm: &str) -> String {
         alarm: alarm.into(),
         tag: None,
         value: None,
+        reason: None,
         operator: "kim".into(),
         nonce: cellwatch::operator::nonce(),
         issued_at: cellwatch::clock::now_ms(),

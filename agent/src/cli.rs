@@ -64,6 +64,13 @@ enum Command {
     Ack(CommandArgs),
     /// Reset a latched alarm whose condition has ended: a signed command (Zenoh).
     Reset(CommandArgs),
+    /// Shelve an alarm (ISA-18.2): still evaluated and journaled, but not
+    /// announced as active until the shelf ends — after --for (at most the
+    /// cell's commands.max_shelve) or, with --once, when the alarm clears.
+    /// A signed command; the operator needs permission `shelve`.
+    Shelve(ShelveArgs),
+    /// End an alarm's shelf now: a signed command (permission `unshelve`).
+    Unshelve(CommandArgs),
     /// Write a value to the PLC: a signed command (Zenoh) that the agent
     /// carries out only for an operator allowed `write`, and journals with
     /// the PLC's answer (a legacy unit's item code, target quantity or
@@ -556,6 +563,27 @@ pub(crate) struct CommandArgs {
 }
 
 #[derive(Debug, clap::Args)]
+pub(crate) struct ShelveArgs {
+    /// The cell.
+    #[arg(long)]
+    pub(crate) cell: String,
+    /// The alarm id.
+    #[arg(long)]
+    pub(crate) alarm: String,
+    /// How long (`30m`, `2h`).
+    #[arg(long = "for", conflicts_with = "once")]
+    pub(crate) duration: Option<String>,
+    /// One-shot: until the alarm clears.
+    #[arg(long)]
+    pub(crate) once: bool,
+    /// Why (journaled and published with the shelf).
+    #[arg(long)]
+    pub(crate) reason: String,
+    #[command(flatten)]
+    pub(crate) signer: SignerArgs,
+}
+
+#[derive(Debug, clap::Args)]
 pub(crate) struct WriteArgs {
     /// The cell.
     #[arg(long)]
@@ -685,6 +713,8 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             | Command::Ack(_)
             | Command::Reset(_)
             | Command::Write(_)
+            | Command::Shelve(_)
+            | Command::Unshelve(_)
             | Command::Discover(_)
     );
     let filter = std::env::var("RUST_LOG").unwrap_or_else(|_| {
@@ -720,6 +750,10 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::Ack(args) => commands::subscribers::command(Action::Ack, &args, out).await,
             Command::Reset(args) => commands::subscribers::command(Action::Reset, &args, out).await,
             Command::Write(args) => commands::subscribers::write(&args, out).await,
+            Command::Shelve(args) => commands::subscribers::shelve(&args, out).await,
+            Command::Unshelve(args) => {
+                commands::subscribers::command(Action::Unshelve, &args, out).await
+            }
             Command::Discover(args) => commands::discover::run(&args, out).await,
             // Dispatched synchronously by `run`; never sent here.
             Command::Sf(_)

@@ -2,7 +2,7 @@
 //! journal. Each carries a `schema` name so that subscribers can tell
 //! versions apart.
 
-use cellwatch_models::alarm::{Alarm, AlarmKind, AlarmState, Severity, Transition};
+use cellwatch_models::alarm::{Alarm, AlarmKind, AlarmState, Severity, Shelf, Transition};
 use cellwatch_models::engine::{HistoryKind, MachineState, Order, StateName};
 use cellwatch_models::explain::Culprit;
 use serde::{Deserialize, Serialize};
@@ -96,12 +96,23 @@ pub struct AlarmPayload {
     pub culprits: Vec<CulpritPayload>,
     /// One line for people.
     pub message: String,
+    /// Shelved by an operator: by whom, why, until when. A shelved alarm
+    /// is not to be shown to operators as active.
+    #[serde(default)]
+    pub shelved: Option<ShelfPayload>,
 }
 
 impl AlarmPayload {
     /// The payload of `alarm` after `transition` at `at` (ms).
     pub fn new(cell: &str, alarm: &Alarm, transition: Transition, at: u64) -> Self {
+        let shelved = alarm.shelved.as_ref().map(|s| ShelfPayload {
+            by: s.by.clone(),
+            reason: s.reason.clone(),
+            at: rfc3339(s.at),
+            until: s.until.map(rfc3339),
+        });
         AlarmPayload {
+            shelved,
             schema: ALARM_SCHEMA.into(),
             cell: cell.into(),
             id: alarm.id.clone(),
@@ -166,8 +177,33 @@ impl AlarmPayload {
                 })
                 .collect(),
             message: self.message.clone(),
+            shelved: match &self.shelved {
+                Some(s) => Some(Shelf {
+                    by: s.by.clone(),
+                    reason: s.reason.clone(),
+                    at: ms(&s.at)?,
+                    until: match &s.until {
+                        Some(t) => Some(ms(t)?),
+                        None => None,
+                    },
+                }),
+                None => None,
+            },
         })
     }
+}
+
+/// An alarm's shelf in its payload.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ShelfPayload {
+    /// The operator who shelved it.
+    pub by: String,
+    /// Why.
+    pub reason: String,
+    /// When (RFC 3339).
+    pub at: String,
+    /// Until when (RFC 3339); `null`: one-shot, until the alarm clears.
+    pub until: Option<String>,
 }
 
 /// `<prefix>/state`: the machine state.

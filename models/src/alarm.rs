@@ -150,6 +150,12 @@ pub enum Transition {
     /// Taken back from the journal at the agent's start, as it was when the
     /// agent stopped (not a new occurrence).
     Restored,
+    /// An operator shelved it: still evaluated and journaled, not
+    /// announced as active.
+    Shelved,
+    /// Its shelf ended (expiry, an operator, or a one-shot shelf's alarm
+    /// cleared): announced again as it is.
+    Unshelved,
 }
 
 impl Transition {
@@ -161,6 +167,8 @@ impl Transition {
             Transition::Acknowledged => "acknowledged",
             Transition::Updated => "updated",
             Transition::Restored => "restored",
+            Transition::Shelved => "shelved",
+            Transition::Unshelved => "unshelved",
         }
     }
 }
@@ -212,6 +220,21 @@ pub struct Alarm {
     pub culprits: Vec<Culprit>,
     /// A one-line description (which tags are bad, why the link dropped).
     pub message: String,
+    /// Shelved by an operator (ISA-18.2 / OPC UA Part 9), if it is.
+    pub shelved: Option<Shelf>,
+}
+
+/// An operator's shelf on an alarm.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Shelf {
+    /// Who shelved it.
+    pub by: String,
+    /// Why.
+    pub reason: String,
+    /// When, ms since the epoch.
+    pub at: u64,
+    /// Until when (ms); `None`: one-shot, until the alarm clears.
+    pub until: Option<u64>,
 }
 
 impl Alarm {
@@ -248,4 +271,14 @@ pub enum CommandRefused {
     /// Acknowledging an alarm with nothing to acknowledge.
     #[error("alarm '{0}' has nothing to acknowledge")]
     NothingToAcknowledge(String),
+    /// Shelving refused, or unshelving an alarm that is not shelved.
+    #[error("alarm '{id}' cannot be {what}: {why}")]
+    Shelving {
+        /// The alarm.
+        id: String,
+        /// `shelved` or `unshelved`.
+        what: &'static str,
+        /// Why.
+        why: String,
+    },
 }

@@ -248,6 +248,7 @@ pub async fn start_with(config: CellConfig, options: Options) -> Result<Agent, S
     );
     let cell_loop = CellLoop::new(&config.cell, engine, gate, sinks, config.state_interval)
         .timed_by(clock)
+        .shelving_at_most(config.max_shelve)
         .restored(step, state)
         .watching_journal(journal_health)
         .writing_to(writer);

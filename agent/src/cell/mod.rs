@@ -168,6 +168,8 @@ pub struct CellLoop {
     written_tx: mpsc::Sender<Written>,
     written_rx: mpsc::Receiver<Written>,
     clock: Clock,
+    /// The longest shelf.
+    max_shelve: Duration,
 }
 
 /// A write's outcome on its way back into the loop.
@@ -175,6 +177,9 @@ struct Written {
     record: CommandRecord,
     reply: oneshot::Sender<CommandOutcome>,
 }
+
+/// The longest shelf unless the configuration says (`commands.max_shelve`).
+pub const DEFAULT_MAX_SHELVE: Duration = Duration::from_secs(8 * 3600);
 
 /// How long a write may take on the PLC's side before the operator is
 /// told it failed.
@@ -199,6 +204,7 @@ impl CellLoop {
             state_interval,
             state_since: crate::clock::now_ms(),
             clock: Clock::system(),
+            max_shelve: DEFAULT_MAX_SHELVE,
             state_kind: HistoryKind::Offline,
             restored: None,
             journal_health: None,
@@ -215,6 +221,37 @@ impl CellLoop {
         self.state_since = clock.now_ms();
         self.clock = clock;
         self
+    }
+
+    /// Shelves last at most `max` (ISA-18.2: a shelf is for a while).
+    #[must_use]
+    pub fn shelving_at_most(mut self, max: Duration) -> CellLoop {
+        self.max_shelve = max;
+        self
+    }
+
+    /// Until when a `shelve` command shelves (`None`: one-shot), or why
+    /// it may not.
+    fn shelf(&self, cmd: &Command, now: u64) -> Result<Option<u64>, String> {
+        if cmd.reason.as_deref().unwrap_or("").trim().is_empty() {
+            return Err("a shelf needs a reason".into());
+        }
+        match cmd.value.as_deref() {
+            Some("once") => Ok(None),
+            Some(text) => {
+                let d = humantime::parse_duration(text).map_err(|_| {
+                    format!("shelve for '{text}': give a duration (30m, 2h) or once")
+                })?;
+                if d.is_zero() || d > self.max_shelve {
+                    return Err(format!(
+                        "shelve for {text}: at most {} on this cell",
+                        humantime::format_duration(self.max_shelve)
+                    ));
+                }
+                Ok(Some(now + d.as_millis() as u64))
+            }
+            None => Err("shelve needs a duration (30m, 2h) or once".into()),
+        }
     }
 
     /// Operators' writes (signed, permission `write`) go to `writer`, the
@@ -395,10 +432,15 @@ impl CellLoop {
                 let done = match checked {
                     Err(refusal) => Err(refusal.to_string()),
                     Ok(())
-                        if cmd.action != Action::Write
-                            && (cmd.tag.is_some() || cmd.value.is_some()) =>
+                        if (cmd.action != Action::Write && cmd.tag.is_some())
+                            || (!matches!(cmd.action, Action::Write | Action::Shelve)
+                                && cmd.value.is_some())
+                            || (cmd.action != Action::Shelve && cmd.reason.is_some()) =>
                     {
-                        Err(format!("{} names an alarm, not a tag or value", cmd.action))
+                        Err(format!(
+                            "{} takes an alarm only, no tag, value or reason",
+                            cmd.action
+                        ))
                     }
                     Ok(()) => match cmd.action {
                         Action::Ack => self
@@ -408,6 +450,21 @@ impl CellLoop {
                         Action::Reset => self
                             .engine
                             .reset(&cmd.alarm, &cmd.operator, now)
+                            .map_err(|e| e.to_string()),
+                        Action::Shelve => self.shelf(&cmd, now).and_then(|until| {
+                            self.engine
+                                .shelve(
+                                    &cmd.alarm,
+                                    &cmd.operator,
+                                    &clip(cmd.reason.as_deref().unwrap_or(""), RECORD_FIELD_BYTES),
+                                    until,
+                                    now,
+                                )
+                                .map_err(|e| e.to_string())
+                        }),
+                        Action::Unshelve => self
+                            .engine
+                            .unshelve(&cmd.alarm, now)
                             .map_err(|e| e.to_string()),
                         Action::Write => match self.write(&cmd) {
                             Err(why) => Err(why),

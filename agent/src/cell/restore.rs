@@ -65,6 +65,10 @@ pub fn load(config: &CellConfig, now: u64) -> Result<Restored, JournalError> {
 fn configured(config: &CellConfig, id: &str) -> bool {
     matches!(id, "communication" | "tag-quality")
         || config.switching.iter().any(|c| c.id == id)
+        || config
+            .limits
+            .iter()
+            .any(|l| l.levels.iter().any(|v| l.alarm_id(v.level) == id))
         || config.timers.iter().any(|t| {
             id.strip_prefix(t.id.as_str())
                 .is_some_and(|rest| rest.starts_with('-'))

@@ -6,7 +6,9 @@ use std::time::Duration;
 
 use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
-use crate::cli::{AlarmsArgs, CommandArgs, Failure, HistoryArgs, SignerArgs, WriteArgs, ZenohArgs};
+use crate::cli::{
+    AlarmsArgs, CommandArgs, Failure, HistoryArgs, ShelveArgs, SignerArgs, WriteArgs, ZenohArgs,
+};
 use crate::config::{ZenohConfig, ZenohMode};
 use crate::operator::{Action, Command, OperatorKey};
 use crate::payload::AlarmPayload;
@@ -444,6 +446,7 @@ pub(crate) async fn command(
             alarm: &args.alarm,
             tag: None,
             value: None,
+            reason: None,
         },
         &args.signer,
         out,
@@ -460,6 +463,30 @@ pub(crate) async fn write(args: &WriteArgs, out: &mut dyn Write) -> Result<(), F
             alarm: "",
             tag: Some(&args.tag),
             value: Some(&args.value),
+            reason: None,
+        },
+        &args.signer,
+        out,
+    )
+    .await
+}
+
+/// `cellwatch shelve`: a signed shelf on an alarm, for a while or until
+/// it clears.
+pub(crate) async fn shelve(args: &ShelveArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    let how = match (&args.duration, args.once) {
+        (Some(d), false) => d.as_str(),
+        (None, true) => "once",
+        _ => return Err(Failure::Input("give --for DURATION or --once".into())),
+    };
+    signed(
+        Target {
+            action: Action::Shelve,
+            cell: &args.cell,
+            alarm: &args.alarm,
+            tag: None,
+            value: Some(how),
+            reason: Some(&args.reason),
         },
         &args.signer,
         out,
@@ -474,6 +501,7 @@ struct Target<'a> {
     alarm: &'a str,
     tag: Option<&'a str>,
     value: Option<&'a str>,
+    reason: Option<&'a str>,
 }
 
 /// Signs a command with the operator's key, sends it to the cell's agent
@@ -509,6 +537,7 @@ async fn signed(t: Target<'_>, args: &SignerArgs, out: &mut dyn Write) -> Result
         alarm: t.alarm.to_string(),
         tag: t.tag.map(str::to_string),
         value: t.value.map(str::to_string),
+        reason: t.reason.map(str::to_string),
         operator: key.operator.clone(),
         nonce: crate::operator::nonce(),
         issued_at: crate::clock::now_ms(),

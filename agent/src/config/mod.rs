@@ -355,6 +355,8 @@ pub struct CellConfig {
     pub metrics: Option<SocketAddr>,
     /// The operators' public keys and permissions (`commands.operators_file`).
     pub operators_file: Option<PathBuf>,
+    /// The longest an operator may shelve an alarm (`commands.max_shelve`).
+    pub max_shelve: Duration,
     /// The tag whose rising edge is one part done (index into `tags`).
     pub part_done: Option<usize>,
     /// The integer tags counting parts (indices into `tags`).
@@ -837,6 +839,11 @@ impl Validator<'_> {
             );
         }
         let operators_file = raw.commands.operators_file.map(|s| self.path(s.get_ref()));
+        let max_shelve = self.duration(
+            raw.commands.max_shelve,
+            "commands.max_shelve",
+            crate::cell::DEFAULT_MAX_SHELVE,
+        );
         #[derive(PartialEq)]
         enum Use {
             Contact,
@@ -959,6 +966,7 @@ impl Validator<'_> {
             journal,
             metrics,
             operators_file,
+            max_shelve,
             part_done,
             part_counters,
             order_item,

@@ -34,11 +34,21 @@ pub enum Action {
     /// Write a value to the PLC (a legacy unit's item code, target or
     /// production correction).
     Write,
+    /// Shelve an alarm for a while, or until it clears (one-shot).
+    Shelve,
+    /// End an alarm's shelf.
+    Unshelve,
 }
 
 impl Action {
     /// Every action.
-    pub const ALL: [Action; 3] = [Action::Ack, Action::Reset, Action::Write];
+    pub const ALL: [Action; 5] = [
+        Action::Ack,
+        Action::Reset,
+        Action::Write,
+        Action::Shelve,
+        Action::Unshelve,
+    ];
 
     /// The name on the wire, in the journal and in operators files.
     pub fn as_str(self) -> &'static str {
@@ -46,6 +56,8 @@ impl Action {
             Action::Ack => "ack",
             Action::Reset => "reset",
             Action::Write => "write",
+            Action::Shelve => "shelve",
+            Action::Unshelve => "unshelve",
         }
     }
 
@@ -74,9 +86,13 @@ pub struct Command {
     /// The tag written, by address (`write` only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tag: Option<String>,
-    /// The value written (`write` only).
+    /// The value written (`write`), or how long to shelve (`shelve`: a
+    /// duration such as `30m`, or `once` for one-shot).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub value: Option<String>,
+    /// Why (`shelve`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
     /// Who sends it.
     pub operator: String,
     /// A value never used before (random hex).
@@ -93,14 +109,15 @@ impl Command {
     /// The text that is signed.
     pub fn canonical(&self, cell: &str) -> String {
         format!(
-            "cellwatch-command-v3\n{cell}\n{}\n{}\n{}\n{}\n{}\n{}\n{}",
+            "cellwatch-command-v4\n{cell}\n{}\n{}\n{}\n{}\n{}\n{}\n{}\n{}",
             self.action,
             self.alarm,
             self.operator,
             self.nonce,
             self.issued_at,
             self.tag.as_deref().unwrap_or(""),
-            self.value.as_deref().unwrap_or("")
+            self.value.as_deref().unwrap_or(""),
+            self.reason.as_deref().unwrap_or("")
         )
     }
 
@@ -510,6 +527,7 @@ mod tests {
             alarm: "ese".into(),
             tag: None,
             value: None,
+            reason: None,
             operator: "kim".into(),
             nonce: nonce(),
             issued_at: now,

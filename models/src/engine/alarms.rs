@@ -7,7 +7,7 @@
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use super::checks::Finding;
-use crate::alarm::{Alarm, AlarmKind, CommandRefused, Transition};
+use crate::alarm::{Alarm, AlarmKind, CommandRefused, Shelf, Transition};
 
 /// Alarms by id, with the conditions behind them.
 #[derive(Debug, Default)]
@@ -19,6 +19,8 @@ pub(crate) struct AlarmBook {
     /// Active switching and timer alarms, by (raised_at, id): the newest is
     /// the machine's fault.
     faults: BTreeSet<(u64, String)>,
+    /// Timed shelves by (until, id), so that expiry is no scan.
+    expiries: BTreeSet<(u64, String)>,
 }
 
 /// What applying a finding did.
@@ -79,6 +81,10 @@ impl AlarmBook {
             (Some(a), false) if a.active && !a.latched => {
                 a.cleared_at = Some(now);
                 a.message = f.message;
+                // A one-shot shelf ends with the occurrence it was for.
+                if a.shelved.as_ref().is_some_and(|s| s.until.is_none()) {
+                    a.shelved = None;
+                }
                 self.set_active(&f.id, false);
                 Some(Transition::Cleared)
             }
@@ -98,6 +104,8 @@ impl AlarmBook {
                     fault_step: f.fault_step,
                     culprits: f.culprits,
                     message: f.message,
+                    // A shelf outlives occurrences until it expires.
+                    shelved: self.alarms.get(&f.id).and_then(|a| a.shelved.clone()),
                 };
                 self.alarms.insert(f.id.clone(), alarm);
                 self.set_active(&f.id, true);
@@ -112,6 +120,9 @@ impl AlarmBook {
     pub(crate) fn restore(&mut self, alarm: Alarm) {
         let id = alarm.id.clone();
         let active = alarm.active;
+        if let Some(until) = alarm.shelved.as_ref().and_then(|s| s.until) {
+            self.expiries.insert((until, id.clone()));
+        }
         self.alarms.insert(
             id.clone(),
             Alarm {
@@ -120,6 +131,65 @@ impl AlarmBook {
             },
         );
         self.set_active(&id, active);
+    }
+
+    /// An operator shelves alarm `id` until `until` (`None`: one-shot,
+    /// until it clears).
+    pub(crate) fn shelve(&mut self, id: &str, shelf: Shelf) -> Result<&Alarm, CommandRefused> {
+        let alarm = self
+            .alarms
+            .get_mut(id)
+            .ok_or_else(|| CommandRefused::UnknownAlarm(id.into()))?;
+        if shelf.until.is_none() && !alarm.active {
+            return Err(CommandRefused::Shelving {
+                id: id.into(),
+                what: "shelved",
+                why: "a one-shot shelf is for an active alarm".into(),
+            });
+        }
+        if let Some(until) = alarm.shelved.as_ref().and_then(|s| s.until) {
+            self.expiries.remove(&(until, id.to_string()));
+        }
+        if let Some(until) = shelf.until {
+            self.expiries.insert((until, id.to_string()));
+        }
+        alarm.shelved = Some(shelf);
+        Ok(alarm)
+    }
+
+    /// Ends the shelf on alarm `id`.
+    pub(crate) fn unshelve(&mut self, id: &str) -> Result<&Alarm, CommandRefused> {
+        let alarm = self
+            .alarms
+            .get_mut(id)
+            .ok_or_else(|| CommandRefused::UnknownAlarm(id.into()))?;
+        let Some(shelf) = alarm.shelved.take() else {
+            return Err(CommandRefused::Shelving {
+                id: id.into(),
+                what: "unshelved",
+                why: "it is not shelved".into(),
+            });
+        };
+        if let Some(until) = shelf.until {
+            self.expiries.remove(&(until, id.to_string()));
+        }
+        Ok(alarm)
+    }
+
+    /// Ends the shelves that expire by `now`; the alarms unshelved.
+    pub(crate) fn expire(&mut self, now: u64) -> Vec<Alarm> {
+        let mut out = Vec::new();
+        while let Some((until, id)) = self.expiries.first().cloned() {
+            if until > now {
+                break;
+            }
+            self.expiries.pop_first();
+            if let Some(a) = self.alarms.get_mut(&id) {
+                a.shelved = None;
+                out.push(a.clone());
+            }
+        }
+        out
     }
 
     /// An operator acknowledges alarm `id`.

@@ -763,6 +763,14 @@ impl CellEngine {
                 self.announce(f, now, &mut step);
             }
         }
+        // Shelves that expired: the alarms are announced again as they are.
+        for alarm in self.alarms.expire(now) {
+            step.events.push(EngineEvent::Alarm {
+                alarm,
+                transition: Transition::Unshelved,
+                at: now,
+            });
+        }
         if !step.events.is_empty() {
             self.update_state(now, &mut step);
         }
@@ -785,6 +793,53 @@ impl CellEngine {
             events: vec![EngineEvent::Alarm {
                 alarm,
                 transition: Transition::Acknowledged,
+                at: now,
+            }],
+            ..Step::default()
+        })
+    }
+
+    /// An operator shelves alarm `id`: until `until` (ms), or with `None`
+    /// one-shot, until the alarm clears. It is still evaluated and
+    /// journaled; its payloads say it is shelved.
+    ///
+    /// # Errors
+    /// No such alarm, or a one-shot shelf on an alarm not active.
+    pub fn shelve(
+        &mut self,
+        id: &str,
+        operator: &str,
+        reason: &str,
+        until: Option<u64>,
+        now: u64,
+    ) -> Result<Step, CommandRefused> {
+        let shelf = crate::alarm::Shelf {
+            by: operator.to_string(),
+            reason: reason.to_string(),
+            at: now,
+            until,
+        };
+        let alarm = self.alarms.shelve(id, shelf)?.clone();
+        Ok(Step {
+            events: vec![EngineEvent::Alarm {
+                alarm,
+                transition: Transition::Shelved,
+                at: now,
+            }],
+            ..Step::default()
+        })
+    }
+
+    /// An operator ends the shelf on alarm `id`.
+    ///
+    /// # Errors
+    /// No such alarm, or it is not shelved.
+    pub fn unshelve(&mut self, id: &str, now: u64) -> Result<Step, CommandRefused> {
+        let alarm = self.alarms.unshelve(id)?.clone();
+        Ok(Step {
+            events: vec![EngineEvent::Alarm {
+                alarm,
+                transition: Transition::Unshelved,
                 at: now,
             }],
             ..Step::default()
@@ -1388,6 +1443,7 @@ mod tests {
             fault_step: Some(6),
             culprits: Vec::new(),
             message: "ESE".into(),
+            shelved: None,
         }
     }
 
@@ -1439,6 +1495,92 @@ mod tests {
             alarm_transitions(&ev),
             [("tmr-001".to_string(), Transition::Cleared)]
         );
+    }
+
+    fn shelf_of(e: &CellEngine, id: &str) -> Option<crate::alarm::Shelf> {
+        e.alarms()
+            .find(|a| a.id == id)
+            .and_then(|a| a.shelved.clone())
+    }
+
+    #[test]
+    fn a_shelf_lasts_its_time_in_virtual_time_and_survives_a_restart() {
+        const MIN: u64 = 60_000;
+        let mut e = engine();
+        e.on_connection(true, 1);
+        load_normal(&mut e, 2);
+        let x006 = e.tag_index(&Signal::new("X0.06")).unwrap();
+        e.on_reading(x006, Reading::Good(false), 10, 10);
+        // Shelved for 30 minutes: its updates say so.
+        let ev = e
+            .shelve("ese", "kim", "sensor cable", Some(10 + 30 * MIN), 10)
+            .unwrap()
+            .events;
+        assert_eq!(
+            alarm_transitions(&ev),
+            [("ese".to_string(), Transition::Shelved)]
+        );
+        assert_eq!(shelf_of(&e, "ese").unwrap().until, Some(10 + 30 * MIN));
+        assert!(alarm_transitions(&e.advance(10 + 30 * MIN - 1).events).is_empty());
+        // A restart in the meantime keeps the shelf and its expiry.
+        let saved: Vec<Alarm> = e.alarms().cloned().collect();
+        let mut e = engine();
+        e.restore(saved, None, 20 * MIN);
+        assert_eq!(shelf_of(&e, "ese").unwrap().reason, "sensor cable");
+        assert!(alarm_transitions(&e.advance(10 + 30 * MIN - 1).events).is_empty());
+        // At expiry, announced again as it is: still active.
+        let ev = e.advance(10 + 30 * MIN).events;
+        assert_eq!(
+            alarm_transitions(&ev),
+            [("ese".to_string(), Transition::Unshelved)]
+        );
+        let EngineEvent::Alarm { alarm, .. } = &ev[0] else {
+            panic!()
+        };
+        assert!(alarm.active && alarm.shelved.is_none());
+        assert!(alarm_transitions(&e.advance(40 * MIN).events).is_empty());
+        // Unshelving what is not shelved is refused.
+        assert!(e.unshelve("ese", 40 * MIN).is_err());
+    }
+
+    #[test]
+    fn a_one_shot_shelf_ends_when_the_alarm_clears() {
+        let mut e = engine();
+        e.on_connection(true, 1);
+        load_normal(&mut e, 2);
+        let x006 = e.tag_index(&Signal::new("X0.06")).unwrap();
+        // Not for an alarm that is not active, nor an unknown one.
+        assert!(e.shelve("ese", "kim", "noise", None, 3).is_err());
+        e.on_reading(x006, Reading::Good(false), 10, 10);
+        e.shelve("ese", "kim", "known trouble", None, 11).unwrap();
+        let ev = e.on_reading(x006, Reading::Good(true), 20, 20).events;
+        assert_eq!(
+            alarm_transitions(&ev),
+            [("ese".to_string(), Transition::Cleared)]
+        );
+        assert_eq!(shelf_of(&e, "ese"), None);
+        // The next occurrence is announced.
+        let ev = e.on_reading(x006, Reading::Good(false), 30, 30).events;
+        let EngineEvent::Alarm {
+            alarm, transition, ..
+        } = &ev[0]
+        else {
+            panic!()
+        };
+        assert_eq!(
+            (*transition, alarm.shelved.is_none()),
+            (Transition::Raised, true)
+        );
+        // A timed shelf does outlive an occurrence.
+        e.shelve("ese", "kim", "known trouble", Some(1_000), 31)
+            .unwrap();
+        e.on_reading(x006, Reading::Good(true), 40, 40);
+        let ev = e.on_reading(x006, Reading::Good(false), 50, 50).events;
+        let EngineEvent::Alarm { alarm, .. } = &ev[0] else {
+            panic!()
+        };
+        assert_eq!(alarm.shelved.as_ref().and_then(|s| s.until), Some(1_000));
+        assert!(e.shelve("nope", "kim", "x", None, 60).is_err());
     }
 
     #[test]

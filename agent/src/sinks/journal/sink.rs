@@ -32,7 +32,8 @@ pub fn entries(step: &CellStep) -> Vec<Entry> {
             severity: alarm.severity.as_str().into(),
             transition: transition.as_str().into(),
             payload: published.json.clone(),
-            open: alarm.state() != cellwatch_models::alarm::AlarmState::Normal,
+            open: alarm.state() != cellwatch_models::alarm::AlarmState::Normal
+                || alarm.shelved.is_some(),
         });
     }
     for (state, kind, at) in step.engine.states() {
