@@ -209,7 +209,13 @@ async fn daily_and_monthly_reports_in_three_formats() {
         "{}",
         r.stdout
     );
-    assert!(r.stdout.ends_with("production: 10 parts\n"), "{}", r.stdout);
+    assert!(
+        r.stdout.ends_with(
+            "production: 10 parts\norders (item / mould, target, made):\n  none known\n"
+        ),
+        "{}",
+        r.stdout
+    );
 
     let r = cellwatch(&[
         "report", "monthly", "--month", "2026-11", "--db", db, "--causes", causes, "--csv",
@@ -217,13 +223,13 @@ async fn daily_and_monthly_reports_in_three_formats() {
     assert_eq!(r.code, 0, "{}", r.stderr);
     assert!(
         r.stdout
-            .contains("\nday,2026-11-20,,1290.0,60.0,30.0,60.0,,,93.5,10\n"),
+            .contains("\nday,2026-11-20,,1290.0,60.0,30.0,60.0,,,93.5,10,\n"),
         "{}",
         r.stdout
     );
     assert!(
         r.stdout
-            .contains("\nday,2026-11-19,,0.0,0.0,0.0,1440.0,,,,0\n"),
+            .contains("\nday,2026-11-19,,0.0,0.0,0.0,1440.0,,,,0,\n"),
         "{}",
         r.stdout
     );

@@ -626,7 +626,7 @@ mod tests {
                 "[operators.kim]\npublic_key = \"{}\"\nallow = [\"fly\"]",
                 kim.public_hex()
             )),
-            "ops.toml: operators.kim: allow: unknown action 'fly': use ack, reset, write"
+            "ops.toml: operators.kim: allow: unknown action 'fly': use ack, reset, write, shelve, unshelve"
         );
         assert!(err(&format!(
             "[operators.kim]\npublic_key = \"{}\"",
