@@ -264,9 +264,7 @@ impl Source for LegacySource {
     }
 
     fn writer(&mut self) -> Option<WriteSender> {
-        let (tx, rx) = mpsc::channel(WRITE_CAPACITY);
-        self.writes = Some(rx);
-        Some(tx)
+        Some(write_queue(&mut self.writes))
     }
 
     fn run(
@@ -445,6 +443,13 @@ pub async fn run(
         writes,
     };
     poll(config, vec![member], &Clock::system(), shutdown).await
+}
+
+/// A new queue for operators' writes: its receiving end kept in `slot`.
+fn write_queue(slot: &mut Option<mpsc::Receiver<WriteRequest>>) -> WriteSender {
+    let (tx, rx) = mpsc::channel(WRITE_CAPACITY);
+    *slot = Some(rx);
+    tx
 }
 
 /// One cell's share of a bus: its tags (node ids `@<unit>/<item>`), where
@@ -827,9 +832,7 @@ impl Source for BusShare {
     }
 
     fn writer(&mut self) -> Option<WriteSender> {
-        let (tx, rx) = mpsc::channel(WRITE_CAPACITY);
-        self.writes = Some(rx);
-        Some(tx)
+        Some(write_queue(&mut self.writes))
     }
 
     fn run(
