@@ -71,6 +71,9 @@ impl Cell {
                 "--json",
                 "--since",
                 since,
+                // A loaded machine may take more than the default 5 s.
+                "--timeout",
+                "30",
             ])
             .args(self.bus_args())
             .stdout(Stdio::piped())

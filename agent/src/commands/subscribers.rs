@@ -118,14 +118,23 @@ fn replier(reply: &zenoh::query::Reply) -> String {
         .map_or_else(|| "an unknown node".into(), |id| id.zid().to_string())
 }
 
-/// The text of the agent's answer among `replies`; answers from any other
-/// session are not believed (and named in the error when the agent said
-/// nothing). An error answer from the agent is [`Failure::Input`].
+/// What came back to one query.
+enum Answer {
+    /// The agent's answer: its text, or its error (an error answer from
+    /// the agent is [`Failure::Input`]).
+    Agent(Result<String, Failure>),
+    /// Nothing from the agent; answers from these other sessions were not
+    /// believed.
+    Nothing(Vec<String>),
+}
+
+/// The agent's answer among `replies`; answers from any other session are
+/// not believed (and named in the error when the agent said nothing).
 async fn answer_of(
     replies: zenoh::handlers::FifoChannelHandler<zenoh::query::Reply>,
     agent: &str,
     what: &str,
-) -> Result<String, Failure> {
+) -> Answer {
     let mut others = Vec::new();
     while let Ok(reply) = replies.recv_async().await {
         let from = replier(&reply);
@@ -134,19 +143,27 @@ async fn answer_of(
             others.push(from);
             continue;
         }
-        return match reply.result() {
+        return Answer::Agent(match reply.result() {
             Ok(sample) => Ok(text(sample.payload())),
             Err(e) => Err(Failure::Input(format!("{what}: {}", text(e.payload())))),
-        };
+        });
     }
-    Err(Failure::Runtime(if others.is_empty() {
-        format!("the agent ({agent}) did not answer {what}")
-    } else {
-        format!(
-            "the agent ({agent}) did not answer {what}; answers from {} are not the agent's and were ignored",
-            others.join(", ")
-        )
-    }))
+    Answer::Nothing(others)
+}
+
+impl Answer {
+    fn into_result(self, agent: &str, what: &str) -> Result<String, Failure> {
+        match self {
+            Answer::Agent(answer) => answer,
+            Answer::Nothing(others) if others.is_empty() => Err(Failure::Runtime(format!(
+                "the agent ({agent}) did not answer {what}"
+            ))),
+            Answer::Nothing(others) => Err(Failure::Runtime(format!(
+                "the agent ({agent}) did not answer {what}; answers from {} are not the agent's and were ignored",
+                others.join(", ")
+            ))),
+        }
+    }
 }
 
 fn text(payload: &zenoh::bytes::ZBytes) -> String {
@@ -342,13 +359,32 @@ async fn ask_agent(
             }
         }
     }
-    let mut get = querier.get().parameters(parameters);
-    if let Some(p) = payload {
-        get = get.payload(p);
+    // A read that ends with no answer at all before its time is up (the
+    // routes to the agent's queryable still being set up) is asked again;
+    // a command is sent once (the agent would refuse its replay).
+    let deadline = tokio::time::Instant::now() + timeout;
+    let read_only = payload.is_none();
+    loop {
+        let mut get = querier.get().parameters(parameters);
+        if let Some(p) = &payload {
+            get = get.payload(p.clone());
+        }
+        let replies = get.await.map_err(failed)?;
+        let answer = answer_of(replies, agent, selector).await;
+        if read_only
+            && matches!(&answer, Answer::Nothing(others) if others.is_empty())
+            && tokio::time::Instant::now() + RETRY_AFTER < deadline
+        {
+            tracing::debug!(selector, "no answer yet: asking again");
+            tokio::time::sleep(RETRY_AFTER).await;
+            continue;
+        }
+        return answer.into_result(agent, selector);
     }
-    let replies = get.await.map_err(failed)?;
-    answer_of(replies, agent, selector).await
 }
+
+/// The pause before a read that got no answer is asked again.
+const RETRY_AFTER: Duration = Duration::from_millis(250);
 
 /// `cellwatch history`: the newest rows, or with `--all` every row of the
 /// range, fetched in bounded pages.
