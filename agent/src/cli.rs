@@ -71,6 +71,15 @@ enum Command {
     Shelve(ShelveArgs),
     /// End an alarm's shelf now: a signed command (permission `unshelve`).
     Unshelve(CommandArgs),
+    /// Take an alarm out of service (ISA-18.2: a broken instrument, a check
+    /// under repair): not raised whatever its condition until it is back in
+    /// service; an active occurrence ends now. Any alarm of the cell's
+    /// checks, raised before or not. A signed command (permission
+    /// `out-of-service`).
+    OutOfService(ReasonArgs),
+    /// Put an alarm back in service: raised at once if its condition holds.
+    /// A signed command (permission `in-service`).
+    InService(CommandArgs),
     /// Write a value to the PLC: a signed command (Zenoh) that the agent
     /// carries out only for an operator allowed `write`, and journals with
     /// the PLC's answer (a legacy unit's item code, target quantity or
@@ -584,6 +593,21 @@ pub(crate) struct ShelveArgs {
 }
 
 #[derive(Debug, clap::Args)]
+pub(crate) struct ReasonArgs {
+    /// The cell.
+    #[arg(long)]
+    pub(crate) cell: String,
+    /// The alarm id.
+    #[arg(long)]
+    pub(crate) alarm: String,
+    /// Why (journaled and published with the alarm).
+    #[arg(long)]
+    pub(crate) reason: String,
+    #[command(flatten)]
+    pub(crate) signer: SignerArgs,
+}
+
+#[derive(Debug, clap::Args)]
 pub(crate) struct WriteArgs {
     /// The cell.
     #[arg(long)]
@@ -715,6 +739,8 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             | Command::Write(_)
             | Command::Shelve(_)
             | Command::Unshelve(_)
+            | Command::OutOfService(_)
+            | Command::InService(_)
             | Command::Discover(_)
     );
     let filter = std::env::var("RUST_LOG").unwrap_or_else(|_| {
@@ -753,6 +779,10 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::Shelve(args) => commands::subscribers::shelve(&args, out).await,
             Command::Unshelve(args) => {
                 commands::subscribers::command(Action::Unshelve, &args, out).await
+            }
+            Command::OutOfService(args) => commands::subscribers::out_of_service(&args, out).await,
+            Command::InService(args) => {
+                commands::subscribers::command(Action::InService, &args, out).await
             }
             Command::Discover(args) => commands::discover::run(&args, out).await,
             // Dispatched synchronously by `run`; never sent here.

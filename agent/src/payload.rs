@@ -2,7 +2,7 @@
 //! journal. Each carries a `schema` name so that subscribers can tell
 //! versions apart.
 
-use cellwatch_models::alarm::{Alarm, AlarmKind, AlarmState, Severity, Shelf, Transition};
+use cellwatch_models::alarm::{Alarm, AlarmKind, AlarmState, Removal, Severity, Shelf, Transition};
 use cellwatch_models::engine::{HistoryKind, MachineState, Order, StateName};
 use cellwatch_models::explain::Culprit;
 use serde::{Deserialize, Serialize};
@@ -100,6 +100,10 @@ pub struct AlarmPayload {
     /// is not to be shown to operators as active.
     #[serde(default)]
     pub shelved: Option<ShelfPayload>,
+    /// Out of service: by whom, why, since when. An alarm out of service
+    /// is not raised whatever its condition.
+    #[serde(default)]
+    pub out_of_service: Option<RemovalPayload>,
 }
 
 impl AlarmPayload {
@@ -111,8 +115,14 @@ impl AlarmPayload {
             at: rfc3339(s.at),
             until: s.until.map(rfc3339),
         });
+        let out_of_service = alarm.out_of_service.as_ref().map(|r| RemovalPayload {
+            by: r.by.clone(),
+            reason: r.reason.clone(),
+            at: rfc3339(r.at),
+        });
         AlarmPayload {
             shelved,
+            out_of_service,
             schema: ALARM_SCHEMA.into(),
             cell: cell.into(),
             id: alarm.id.clone(),
@@ -189,8 +199,27 @@ impl AlarmPayload {
                 }),
                 None => None,
             },
+            out_of_service: match &self.out_of_service {
+                Some(r) => Some(Removal {
+                    by: r.by.clone(),
+                    reason: r.reason.clone(),
+                    at: ms(&r.at)?,
+                }),
+                None => None,
+            },
         })
     }
+}
+
+/// Who took an alarm out of service, in its payload.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RemovalPayload {
+    /// The operator.
+    pub by: String,
+    /// Why.
+    pub reason: String,
+    /// Since when (RFC 3339).
+    pub at: String,
 }
 
 /// An alarm's shelf in its payload.

@@ -156,6 +156,11 @@ pub enum Transition {
     /// Its shelf ended (expiry, an operator, or a one-shot shelf's alarm
     /// cleared): announced again as it is.
     Unshelved,
+    /// An operator took it out of service: not raised whatever its
+    /// condition (an active occurrence ends with this).
+    OutOfService,
+    /// Back in service: raised again if its condition holds.
+    InService,
 }
 
 impl Transition {
@@ -169,6 +174,8 @@ impl Transition {
             Transition::Restored => "restored",
             Transition::Shelved => "shelved",
             Transition::Unshelved => "unshelved",
+            Transition::OutOfService => "out_of_service",
+            Transition::InService => "in_service",
         }
     }
 }
@@ -222,6 +229,20 @@ pub struct Alarm {
     pub message: String,
     /// Shelved by an operator (ISA-18.2 / OPC UA Part 9), if it is.
     pub shelved: Option<Shelf>,
+    /// Out of service (ISA-18.2: removed from service, e.g. a broken
+    /// instrument), if it is.
+    pub out_of_service: Option<Removal>,
+}
+
+/// Who took an alarm out of service, when and why.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Removal {
+    /// Who.
+    pub by: String,
+    /// Why.
+    pub reason: String,
+    /// When, ms since the epoch.
+    pub at: u64,
 }
 
 /// An operator's shelf on an alarm.
@@ -271,6 +292,14 @@ pub enum CommandRefused {
     /// Acknowledging an alarm with nothing to acknowledge.
     #[error("alarm '{0}' has nothing to acknowledge")]
     NothingToAcknowledge(String),
+    /// Out of service refused (already out, or not out when put back).
+    #[error("alarm '{id}' {why}")]
+    Service {
+        /// The alarm.
+        id: String,
+        /// Why.
+        why: &'static str,
+    },
     /// Shelving refused, or unshelving an alarm that is not shelved.
     #[error("alarm '{id}' cannot be {what}: {why}")]
     Shelving {

@@ -13,7 +13,7 @@ use std::collections::HashMap;
 use std::fmt;
 
 use crate::alarm::{AlarmKind, Severity};
-use crate::engine::{CheckSet, Finding};
+use crate::engine::{CheckSet, Declared, Finding};
 use crate::signal::Signal;
 use crate::value::Num;
 
@@ -236,6 +236,21 @@ fn finding(
 impl CheckSet for LimitChecks {
     fn inputs(&self) -> Vec<Signal> {
         Vec::new()
+    }
+
+    fn alarms(&self) -> Vec<Declared> {
+        self.checks
+            .iter()
+            .flat_map(|c| {
+                c.levels.iter().map(|level| Declared {
+                    id: c.alarm_id(level.level),
+                    kind: AlarmKind::Limit,
+                    severity: level.severity,
+                    fault_type: format!("{} {}", c.tag, level.level),
+                    latched: false,
+                })
+            })
+            .collect()
     }
 
     fn number_inputs(&self) -> Vec<Signal> {

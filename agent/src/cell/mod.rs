@@ -435,7 +435,8 @@ impl CellLoop {
                         if (cmd.action != Action::Write && cmd.tag.is_some())
                             || (!matches!(cmd.action, Action::Write | Action::Shelve)
                                 && cmd.value.is_some())
-                            || (cmd.action != Action::Shelve && cmd.reason.is_some()) =>
+                            || (!matches!(cmd.action, Action::Shelve | Action::OutOfService)
+                                && cmd.reason.is_some()) =>
                     {
                         Err(format!(
                             "{} takes an alarm only, no tag, value or reason",
@@ -465,6 +466,24 @@ impl CellLoop {
                         Action::Unshelve => self
                             .engine
                             .unshelve(&cmd.alarm, now)
+                            .map_err(|e| e.to_string()),
+                        Action::OutOfService => match cmd.reason.as_deref().map(str::trim) {
+                            None | Some("") => {
+                                Err("out-of-service needs a reason (--reason)".into())
+                            }
+                            Some(reason) => self
+                                .engine
+                                .take_out_of_service(
+                                    &cmd.alarm,
+                                    &cmd.operator,
+                                    &clip(reason, RECORD_FIELD_BYTES),
+                                    now,
+                                )
+                                .map_err(|e| e.to_string()),
+                        },
+                        Action::InService => self
+                            .engine
+                            .return_to_service(&cmd.alarm, now)
                             .map_err(|e| e.to_string()),
                         Action::Write => match self.write(&cmd) {
                             Err(why) => Err(why),
@@ -656,7 +675,10 @@ impl CellLoop {
             alarms: self
                 .engine
                 .alarms()
-                .filter(|a| a.active || !a.acknowledged)
+                // What needs an operator, and what is kept from them.
+                .filter(|a| {
+                    a.active || !a.acknowledged || a.shelved.is_some() || a.out_of_service.is_some()
+                })
                 .map(|a| AlarmPayload::new(&self.cell, a, Transition::Updated, now))
                 .collect(),
             last_fault: self.engine.last_fault().map(|f| LastFault {

@@ -7,7 +7,8 @@ use std::time::Duration;
 use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
 use crate::cli::{
-    AlarmsArgs, CommandArgs, Failure, HistoryArgs, ShelveArgs, SignerArgs, WriteArgs, ZenohArgs,
+    AlarmsArgs, CommandArgs, Failure, HistoryArgs, ReasonArgs, ShelveArgs, SignerArgs, WriteArgs,
+    ZenohArgs,
 };
 use crate::config::{ZenohConfig, ZenohMode};
 use crate::operator::{Action, Command, OperatorKey};
@@ -185,9 +186,19 @@ fn print_alarm(out: &mut dyn Write, a: &AlarmPayload, json: bool) -> std::io::Re
         .fault_step
         .map(|s| format!(" step {s}"))
         .unwrap_or_default();
+    // Kept from operators: said first, so that no one takes it for an
+    // alarm to act on.
+    let mut kept = String::new();
+    if let Some(s) = &a.shelved {
+        let until = s.until.as_deref().unwrap_or("it clears");
+        kept += &format!("SHELVED until {until} by {} ({})  ", s.by, s.reason);
+    }
+    if let Some(r) = &a.out_of_service {
+        kept += &format!("OUT OF SERVICE since {} by {} ({})  ", r.at, r.by, r.reason);
+    }
     writeln!(
         out,
-        "{}  {}/{}  {} {} [{}] {}{step}: {}",
+        "{}  {}/{}  {kept}{} {} [{}] {}{step}: {}",
         a.at, a.cell, a.id, a.transition, a.state, a.severity, a.fault_type, a.message
     )?;
     for c in &a.culprits {
@@ -522,6 +533,23 @@ pub(crate) async fn shelve(args: &ShelveArgs, out: &mut dyn Write) -> Result<(),
             alarm: &args.alarm,
             tag: None,
             value: Some(how),
+            reason: Some(&args.reason),
+        },
+        &args.signer,
+        out,
+    )
+    .await
+}
+
+/// `cellwatch out-of-service`: a signed removal of an alarm from service.
+pub(crate) async fn out_of_service(args: &ReasonArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    signed(
+        Target {
+            action: Action::OutOfService,
+            cell: &args.cell,
+            alarm: &args.alarm,
+            tag: None,
+            value: None,
             reason: Some(&args.reason),
         },
         &args.signer,

@@ -38,16 +38,24 @@ pub enum Action {
     Shelve,
     /// End an alarm's shelf.
     Unshelve,
+    /// Take an alarm out of service (not raised whatever its condition).
+    #[serde(rename = "out-of-service")]
+    OutOfService,
+    /// Put an alarm back in service.
+    #[serde(rename = "in-service")]
+    InService,
 }
 
 impl Action {
     /// Every action.
-    pub const ALL: [Action; 5] = [
+    pub const ALL: [Action; 7] = [
         Action::Ack,
         Action::Reset,
         Action::Write,
         Action::Shelve,
         Action::Unshelve,
+        Action::OutOfService,
+        Action::InService,
     ];
 
     /// The name on the wire, in the journal and in operators files.
@@ -58,6 +66,8 @@ impl Action {
             Action::Write => "write",
             Action::Shelve => "shelve",
             Action::Unshelve => "unshelve",
+            Action::OutOfService => "out-of-service",
+            Action::InService => "in-service",
         }
     }
 
@@ -90,7 +100,7 @@ pub struct Command {
     /// duration such as `30m`, or `once` for one-shot).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub value: Option<String>,
-    /// Why (`shelve`).
+    /// Why (`shelve`, `out-of-service`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
     /// Who sends it.
@@ -626,7 +636,7 @@ mod tests {
                 "[operators.kim]\npublic_key = \"{}\"\nallow = [\"fly\"]",
                 kim.public_hex()
             )),
-            "ops.toml: operators.kim: allow: unknown action 'fly': use ack, reset, write, shelve, unshelve"
+            "ops.toml: operators.kim: allow: unknown action 'fly': use ack, reset, write, shelve, unshelve, out-of-service, in-service"
         );
         assert!(err(&format!(
             "[operators.kim]\npublic_key = \"{}\"",

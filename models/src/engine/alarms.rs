@@ -6,8 +6,8 @@
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
-use super::checks::Finding;
-use crate::alarm::{Alarm, AlarmKind, CommandRefused, Shelf, Transition};
+use super::checks::{Declared, Finding};
+use crate::alarm::{Alarm, AlarmKind, CommandRefused, Removal, Shelf, Transition};
 
 /// Alarms by id, with the conditions behind them.
 #[derive(Debug, Default)]
@@ -21,6 +21,11 @@ pub(crate) struct AlarmBook {
     faults: BTreeSet<(u64, String)>,
     /// Timed shelves by (until, id), so that expiry is no scan.
     expiries: BTreeSet<(u64, String)>,
+    /// The alarms the checks can raise, by id: known before they ever are.
+    declared: HashMap<String, Declared>,
+    /// Per alarm out of service: the last finding while it was, so that
+    /// back in service it is raised if its condition still holds.
+    held: HashMap<String, Finding>,
 }
 
 /// What applying a finding did.
@@ -34,6 +39,14 @@ fn is_fault(kind: AlarmKind) -> bool {
 }
 
 impl AlarmBook {
+    /// A book for alarms the checks `declared`.
+    pub(crate) fn declaring(declared: impl IntoIterator<Item = Declared>) -> AlarmBook {
+        AlarmBook {
+            declared: declared.into_iter().map(|d| (d.id.clone(), d)).collect(),
+            ..AlarmBook::default()
+        }
+    }
+
     pub(crate) fn get(&self, id: &str) -> Option<&Alarm> {
         self.alarms.get(id)
     }
@@ -70,6 +83,14 @@ impl AlarmBook {
     /// Applies a check's finding at `now`.
     pub(crate) fn apply(&mut self, f: Finding, now: u64) -> Applied {
         self.conditions.insert(f.id.clone(), f.active);
+        if self
+            .alarms
+            .get(&f.id)
+            .is_some_and(|a| a.out_of_service.is_some())
+        {
+            self.held.insert(f.id.clone(), f);
+            return Applied { transition: None };
+        }
         let existing = self.alarms.get_mut(&f.id);
         let transition = match (existing, f.active) {
             (Some(a), true) if a.active => {
@@ -106,6 +127,7 @@ impl AlarmBook {
                     message: f.message,
                     // A shelf outlives occurrences until it expires.
                     shelved: self.alarms.get(&f.id).and_then(|a| a.shelved.clone()),
+                    out_of_service: None,
                 };
                 self.alarms.insert(f.id.clone(), alarm);
                 self.set_active(&f.id, true);
@@ -174,6 +196,107 @@ impl AlarmBook {
             self.expiries.remove(&(until, id.to_string()));
         }
         Ok(alarm)
+    }
+
+    /// An operator takes alarm `id` out of service: an active occurrence
+    /// ends (no longer annunciated, nothing left to acknowledge), a shelf
+    /// on it ends, and it is not raised until it is back in service. An
+    /// alarm never raised yet (one the checks declared) gets a record of
+    /// its own, normal, `raised_at` the time it was taken out.
+    pub(crate) fn take_out_of_service(
+        &mut self,
+        id: &str,
+        removal: Removal,
+        now: u64,
+    ) -> Result<&Alarm, CommandRefused> {
+        if !self.alarms.contains_key(id) {
+            let d = self
+                .declared
+                .get(id)
+                .ok_or_else(|| CommandRefused::UnknownAlarm(id.into()))?;
+            self.alarms.insert(
+                id.to_string(),
+                Alarm {
+                    id: id.to_string(),
+                    kind: d.kind,
+                    severity: d.severity,
+                    fault_type: d.fault_type.clone(),
+                    active: false,
+                    acknowledged: true,
+                    latched: d.latched,
+                    raised_at: now,
+                    cleared_at: None,
+                    acked_by: None,
+                    fault_step: None,
+                    culprits: Vec::new(),
+                    message: String::new(),
+                    shelved: None,
+                    out_of_service: None,
+                },
+            );
+        }
+        let alarm = &self.alarms[id];
+        if alarm.out_of_service.is_some() {
+            return Err(CommandRefused::Service {
+                id: id.into(),
+                why: "is already out of service",
+            });
+        }
+        if let Some(until) = alarm.shelved.as_ref().and_then(|s| s.until) {
+            self.expiries.remove(&(until, id.to_string()));
+        }
+        let was_active = alarm.active;
+        if was_active {
+            // What it was raised for, should its condition still hold when
+            // it is back.
+            if self.conditions.get(id).copied().unwrap_or(false) {
+                self.held.insert(
+                    id.to_string(),
+                    Finding {
+                        id: alarm.id.clone(),
+                        kind: alarm.kind,
+                        severity: alarm.severity,
+                        fault_type: alarm.fault_type.clone(),
+                        latched: alarm.latched,
+                        active: true,
+                        fault_step: alarm.fault_step,
+                        culprits: alarm.culprits.clone(),
+                        message: alarm.message.clone(),
+                    },
+                );
+            }
+            self.set_active(id, false);
+        }
+        let alarm = self
+            .alarms
+            .get_mut(id)
+            .ok_or_else(|| CommandRefused::UnknownAlarm(id.into()))?;
+        if was_active {
+            alarm.cleared_at = Some(now);
+        }
+        alarm.acknowledged = true;
+        alarm.shelved = None;
+        alarm.out_of_service = Some(removal);
+        Ok(alarm)
+    }
+
+    /// Puts alarm `id` back in service; the last finding while it was out,
+    /// to apply (it raises the alarm if its condition holds).
+    pub(crate) fn return_to_service(
+        &mut self,
+        id: &str,
+    ) -> Result<(Alarm, Option<Finding>), CommandRefused> {
+        let alarm = self
+            .alarms
+            .get_mut(id)
+            .ok_or_else(|| CommandRefused::UnknownAlarm(id.into()))?;
+        if alarm.out_of_service.take().is_none() {
+            return Err(CommandRefused::Service {
+                id: id.into(),
+                why: "is not out of service",
+            });
+        }
+        Ok((alarm.clone(), self.held.remove(id)))
     }
 
     /// Ends the shelves that expire by `now`; the alarms unshelved.

@@ -12,6 +12,22 @@ use crate::explain::Culprit;
 use crate::signal::Signal;
 use crate::value::Num;
 
+/// An alarm a check set can raise, known before it ever is (so that it
+/// can be taken out of service before its first occurrence).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Declared {
+    /// The alarm id.
+    pub id: String,
+    /// The kind of check.
+    pub kind: AlarmKind,
+    /// How urgent.
+    pub severity: Severity,
+    /// The fault type for machine-state history.
+    pub fault_type: String,
+    /// Whether it stays active until reset.
+    pub latched: bool,
+}
+
 /// What a check found: its condition started or ended.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Finding {
@@ -43,6 +59,9 @@ pub struct Finding {
 pub trait CheckSet: Send + Sync {
     /// The signals it reads.
     fn inputs(&self) -> Vec<Signal>;
+
+    /// Every alarm it can raise.
+    fn alarms(&self) -> Vec<Declared>;
 
     /// A signal changed value or became unknown (`value` None); `before` is
     /// its last known value.

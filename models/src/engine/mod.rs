@@ -37,7 +37,7 @@ pub mod switching;
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
-pub use checks::{CheckSet, Finding, Observation};
+pub use checks::{CheckSet, Declared, Finding, Observation};
 pub use state::{HistoryKind, MachineState, StateName, StateRules};
 pub use switching::{SwitchingCheck, SwitchingChecks};
 
@@ -402,6 +402,7 @@ impl CellEngine {
                 running_reads[by_address[&s]] = true;
             }
         }
+        let alarms = AlarmBook::declaring(sets.iter().flat_map(|s| s.alarms()));
         Ok(CellEngine {
             cell: cell.to_string(),
             tags,
@@ -418,7 +419,7 @@ impl CellEngine {
             derived,
             compared_in,
             running_reads,
-            alarms: AlarmBook::default(),
+            alarms,
             connected: None,
             rules,
             state: MachineState::Offline,
@@ -844,6 +845,64 @@ impl CellEngine {
             }],
             ..Step::default()
         })
+    }
+
+    /// An operator takes alarm `id` out of service (ISA-18.2): whatever its
+    /// condition it is not raised until it is back in service; an active
+    /// occurrence ends now. Any alarm the checks can raise may be taken out,
+    /// raised before or not.
+    ///
+    /// # Errors
+    /// No such alarm, or it is out of service already.
+    pub fn take_out_of_service(
+        &mut self,
+        id: &str,
+        operator: &str,
+        reason: &str,
+        now: u64,
+    ) -> Result<Step, CommandRefused> {
+        let removal = crate::alarm::Removal {
+            by: operator.to_string(),
+            reason: reason.to_string(),
+            at: now,
+        };
+        let alarm = self.alarms.take_out_of_service(id, removal, now)?.clone();
+        self.pending.remove(id);
+        for set in &mut self.sets {
+            set.reset(id);
+        }
+        let mut step = Step {
+            events: vec![EngineEvent::Alarm {
+                alarm,
+                transition: Transition::OutOfService,
+                at: now,
+            }],
+            ..Step::default()
+        };
+        self.update_state(now, &mut step);
+        Ok(step)
+    }
+
+    /// An operator puts alarm `id` back in service: raised at once if its
+    /// condition holds (after its on-delay, if it has one).
+    ///
+    /// # Errors
+    /// No such alarm, or it is not out of service.
+    pub fn return_to_service(&mut self, id: &str, now: u64) -> Result<Step, CommandRefused> {
+        let (alarm, held) = self.alarms.return_to_service(id)?;
+        let mut step = Step {
+            events: vec![EngineEvent::Alarm {
+                alarm,
+                transition: Transition::InService,
+                at: now,
+            }],
+            ..Step::default()
+        };
+        if let Some(f) = held {
+            self.apply(f, now, &mut step);
+        }
+        self.update_state(now, &mut step);
+        Ok(step)
     }
 
     /// An operator resets a latched alarm whose condition is gone.
@@ -1444,6 +1503,7 @@ mod tests {
             culprits: Vec::new(),
             message: "ESE".into(),
             shelved: None,
+            out_of_service: None,
         }
     }
 
@@ -1581,6 +1641,77 @@ mod tests {
         };
         assert_eq!(alarm.shelved.as_ref().and_then(|s| s.until), Some(1_000));
         assert!(e.shelve("nope", "kim", "x", None, 60).is_err());
+    }
+
+    #[test]
+    fn out_of_service_raises_nothing_and_back_in_service_raises_what_holds() {
+        let mut e = engine();
+        e.on_connection(true, 1);
+        load_normal(&mut e, 2);
+        let x006 = e.tag_index(&Signal::new("X0.06")).unwrap();
+        // Never raised yet, but the check declares it: it can be taken out.
+        let ev = e
+            .take_out_of_service("ese", "kim", "switch replaced", 5)
+            .unwrap()
+            .events;
+        assert_eq!(
+            alarm_transitions(&ev),
+            [("ese".to_string(), Transition::OutOfService)]
+        );
+        let EngineEvent::Alarm { alarm, .. } = &ev[0] else {
+            panic!()
+        };
+        assert_eq!(alarm.state(), AlarmState::Normal);
+        assert_eq!(alarm.out_of_service.as_ref().unwrap().by, "kim");
+        assert!(e.take_out_of_service("ese", "kim", "again", 6).is_err());
+        assert!(e.take_out_of_service("nope", "kim", "x", 6).is_err());
+        // The condition becomes true: nothing raised, the machine not at
+        // fault.
+        let ev = e.on_reading(x006, Reading::Good(false), 10, 10).events;
+        assert_eq!(alarm_transitions(&ev), []);
+        assert_eq!(e.state(), &MachineState::Running);
+        // A restart keeps it out of service.
+        let saved: Vec<Alarm> = e.alarms().cloned().collect();
+        let mut e = engine();
+        e.on_connection(true, 11);
+        e.restore(saved, None, 11);
+        load_normal(&mut e, 12);
+        let ev = e.on_reading(x006, Reading::Good(false), 13, 13).events;
+        assert_eq!(alarm_transitions(&ev), []);
+        // Back in service while the condition holds: raised, with its
+        // culprit.
+        let ev = e.return_to_service("ese", 20).unwrap().events;
+        assert_eq!(
+            alarm_transitions(&ev),
+            [
+                ("ese".to_string(), Transition::InService),
+                ("ese".to_string(), Transition::Raised)
+            ]
+        );
+        let EngineEvent::Alarm { alarm, .. } = &ev[1] else {
+            panic!()
+        };
+        assert_eq!(alarm.culprits[0].address.name(), "X0.06");
+        assert_eq!(alarm.raised_at, 20);
+        assert!(matches!(e.state(), MachineState::Fault { .. }));
+        assert!(e.return_to_service("ese", 21).is_err());
+        // Taken out while active: the occurrence ends, the fault with it;
+        // back in service after the condition went, nothing is raised.
+        let ev = e.take_out_of_service("ese", "kim", "again", 30).unwrap();
+        let EngineEvent::Alarm { alarm, .. } = &ev.events[0] else {
+            panic!()
+        };
+        assert_eq!(
+            (alarm.state(), alarm.cleared_at),
+            (AlarmState::Normal, Some(30))
+        );
+        assert_eq!(e.state(), &MachineState::Running);
+        e.on_reading(x006, Reading::Good(true), 40, 40);
+        let ev = e.return_to_service("ese", 50).unwrap().events;
+        assert_eq!(
+            alarm_transitions(&ev),
+            [("ese".to_string(), Transition::InService)]
+        );
     }
 
     #[test]

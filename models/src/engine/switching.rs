@@ -1,7 +1,7 @@
 //! Switching-function checks: fault coils compiled over one bitset and
 //! evaluated incrementally, explained with paper 000's step blocks.
 
-use super::checks::{CheckSet, Finding};
+use super::checks::{CheckSet, Declared, Finding};
 use crate::alarm::{AlarmKind, Severity};
 use crate::comments::CommentDb;
 use crate::compiled::CompiledCell;
@@ -118,6 +118,19 @@ impl SwitchingChecks {
 impl CheckSet for SwitchingChecks {
     fn inputs(&self) -> Vec<Signal> {
         self.cell.signals().to_vec()
+    }
+
+    fn alarms(&self) -> Vec<Declared> {
+        self.checks
+            .iter()
+            .map(|c| Declared {
+                id: c.id.clone(),
+                kind: AlarmKind::Switching,
+                severity: c.severity,
+                fault_type: c.fault_type.clone(),
+                latched: false,
+            })
+            .collect()
     }
 
     fn on_change(

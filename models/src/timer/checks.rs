@@ -12,7 +12,7 @@ use std::collections::HashMap;
 use super::learn::{Edge, TimerModel};
 use super::monitor::{ModelError, Outcome, TimerMonitor};
 use crate::alarm::{AlarmKind, Severity};
-use crate::engine::{CheckSet, Finding, Observation};
+use crate::engine::{CheckSet, Declared, Finding, Observation};
 use crate::explain::Culprit;
 use crate::signal::Signal;
 
@@ -175,6 +175,20 @@ impl TimerChecks {
 impl CheckSet for TimerChecks {
     fn inputs(&self) -> Vec<Signal> {
         self.signals.clone()
+    }
+
+    fn alarms(&self) -> Vec<Declared> {
+        let mut ids: Vec<u32> = self.transitions.keys().copied().collect();
+        ids.sort_unstable();
+        ids.into_iter()
+            .map(|t| Declared {
+                id: format!("{}-{t:03}", self.id),
+                kind: AlarmKind::Timer,
+                severity: self.severity,
+                fault_type: "TIMER".into(),
+                latched: true,
+            })
+            .collect()
     }
 
     fn on_change(

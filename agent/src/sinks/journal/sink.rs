@@ -33,7 +33,8 @@ pub fn entries(step: &CellStep) -> Vec<Entry> {
             transition: transition.as_str().into(),
             payload: published.json.clone(),
             open: alarm.state() != cellwatch_models::alarm::AlarmState::Normal
-                || alarm.shelved.is_some(),
+                || alarm.shelved.is_some()
+                || alarm.out_of_service.is_some(),
         });
     }
     for (state, kind, at) in step.engine.states() {
