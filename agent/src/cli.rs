@@ -104,8 +104,9 @@ enum Command {
     /// Write a timer model as IEC 61131-3 Structured Text: the paper's
     /// diagnosis functions (ERROR_ALARM_nnn, ERROR_RESET_nnn) for the PLC.
     ExportSt(ExportStArgs),
-    /// Production reports from a journal: per-hour run/idle/fault minutes,
-    /// availability, stop causes and production (daily), or per day (monthly).
+    /// Reports from a journal: production (per-hour run/idle/fault minutes,
+    /// availability, stop causes and production, daily or per day monthly)
+    /// and the alarm system's ISA-18.2 performance (alarms).
     Report(ReportArgs),
     /// Browse an OPC UA server and print its variables as a cell
     /// configuration (`[[tags]]` with node ids by namespace URI, address,
@@ -278,6 +279,21 @@ pub(crate) enum ReportCommand {
         /// The month, 2026-11.
         #[arg(long)]
         month: String,
+    },
+    /// The alarm system's performance (ISA-18.2 / IEC 62682) over a day or
+    /// a month, each figure against its target: average and peak alarm
+    /// rate per 10 minutes, 10-minute intervals in flood, the 10 most
+    /// frequent alarms and their share, chattering and stale alarms,
+    /// priority distribution, shelving and out-of-service use,
+    /// acknowledgement times.
+    #[command(group(clap::ArgGroup::new("period").required(true).args(["date", "month"])))]
+    Alarms {
+        /// One day, 2026-11-21.
+        #[arg(long)]
+        date: Option<String>,
+        /// One month, 2026-11.
+        #[arg(long)]
+        month: Option<String>,
     },
 }
 

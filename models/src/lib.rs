@@ -30,6 +30,7 @@ pub mod engine;
 pub mod explain;
 pub mod expr;
 pub mod il;
+pub mod kpi;
 pub mod legacy;
 pub mod limit;
 pub mod logic;

@@ -1,9 +1,11 @@
 //! `cellwatch report daily|monthly`: production reports from a journal
-//! (paper 002, Tables 3-5), as a terminal table, CSV or JSON.
+//! (paper 002, Tables 3-5); `cellwatch report alarms`: the alarm system's
+//! ISA-18.2 benchmark table. As a terminal table, CSV or JSON.
 
 use std::io::Write;
 use std::path::Path;
 
+use cellwatch_models::kpi::{self, AlarmReport};
 use cellwatch_models::report::{
     self, CauseTotal, DailyReport, Minutes, MonthlyReport, OrderSpan, StopCauses,
 };
@@ -62,7 +64,6 @@ fn day_start(date: NaiveDate, tz: &FixedOffset) -> u64 {
 /// Runs a report command.
 pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure> {
     let tz = offset(&args.utc_offset)?;
-    let causes = causes(&args.causes)?;
     if !args.db.is_file() {
         return Err(Failure::Input(format!(
             "--db '{}': no such journal",
@@ -76,6 +77,7 @@ pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure>
         ReportCommand::Daily { date } => {
             let d = NaiveDate::parse_from_str(date, "%Y-%m-%d")
                 .map_err(|_| Failure::Input(format!("--date '{date}': write it as 2026-11-21")))?;
+            let causes = causes(&args.causes)?;
             let start = day_start(d, &tz);
             let i = journal::report_input(&conn, start, start + 86_400_000)
                 .map_err(|e| Failure::Runtime(e.to_string()))?;
@@ -94,17 +96,8 @@ pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure>
             }
         }
         ReportCommand::Monthly { month } => {
-            let first = NaiveDate::parse_from_str(&format!("{month}-01"), "%Y-%m-%d")
-                .map_err(|_| Failure::Input(format!("--month '{month}': write it as 2026-11")))?;
-            let mut days = Vec::new();
-            let mut d = first;
-            while d.month() == first.month() {
-                days.push(d);
-                d = d.succ_opt().unwrap_or(d);
-                if days.len() > 31 {
-                    break;
-                }
-            }
+            let days = month_days(month)?;
+            let causes = causes(&args.causes)?;
             let starts: Vec<u64> = days.iter().map(|d| day_start(*d, &tz)).collect();
             let end = starts.last().copied().unwrap_or(0) + 86_400_000;
             let i = journal::report_input(&conn, starts[0], end)
@@ -123,7 +116,156 @@ pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure>
                 }
             }
         }
+        ReportCommand::Alarms { date, month } => {
+            alarms(args, &conn, &tz, date.as_deref(), month.as_deref(), out)
+        }
     }
+}
+
+/// The days of `month` (`2026-11`).
+fn month_days(month: &str) -> Result<Vec<NaiveDate>, Failure> {
+    let first = NaiveDate::parse_from_str(&format!("{month}-01"), "%Y-%m-%d")
+        .map_err(|_| Failure::Input(format!("--month '{month}': write it as 2026-11")))?;
+    let mut days = Vec::new();
+    let mut d = first;
+    while d.month() == first.month() && days.len() < 31 {
+        days.push(d);
+        match d.succ_opt() {
+            Some(next) => d = next,
+            None => break,
+        }
+    }
+    Ok(days)
+}
+
+/// `cellwatch report alarms`: the ISA-18.2 benchmark table of a day or a
+/// month.
+fn alarms(
+    args: &ReportArgs,
+    conn: &rusqlite::Connection,
+    tz: &FixedOffset,
+    date: Option<&str>,
+    month: Option<&str>,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    let (title, from, to) = match (date, month) {
+        (Some(date), None) => {
+            let d = NaiveDate::parse_from_str(date, "%Y-%m-%d")
+                .map_err(|_| Failure::Input(format!("--date '{date}': write it as 2026-11-21")))?;
+            let start = day_start(d, tz);
+            (date.to_string(), start, start + 86_400_000)
+        }
+        (None, Some(month)) => {
+            let days = month_days(month)?;
+            let start = day_start(days[0], tz);
+            (
+                month.to_string(),
+                start,
+                start + 86_400_000 * days.len() as u64,
+            )
+        }
+        _ => return Err(Failure::Input("give --date or --month".into())),
+    };
+    let read =
+        journal::alarm_events(conn, from, to).map_err(|e| Failure::Runtime(e.to_string()))?;
+    if read.unreadable > 0 {
+        eprintln!(
+            "warning: {} alarm rows of {} could not be read and are not counted",
+            read.unreadable,
+            args.db.display()
+        );
+    }
+    let r = kpi::alarm_report(&read.events, &read.before, from, to, crate::clock::now_ms());
+    let io = Failure::output;
+    match args.format() {
+        Format::Json => {
+            let mut v = serde_json::to_value(&r).unwrap_or_default();
+            v["benchmarks"] = serde_json::to_value(r.benchmarks()).unwrap_or_default();
+            writeln!(
+                out,
+                "{}",
+                serde_json::to_string_pretty(&v).unwrap_or_default()
+            )
+            .map_err(io)
+        }
+        Format::Csv => alarms_csv(out, &r).map_err(io),
+        Format::Table => alarms_table(out, &args.db, &title, &args.utc_offset, &r).map_err(io),
+    }
+}
+
+fn alarms_csv(out: &mut dyn Write, r: &AlarmReport) -> std::io::Result<()> {
+    let quote = |s: &str| format!("\"{}\"", s.replace('"', "\"\""));
+    writeln!(out, "metric,value,target,met")?;
+    for b in r.benchmarks() {
+        writeln!(
+            out,
+            "{},{},{},{}",
+            quote(b.metric),
+            quote(&b.value),
+            quote(b.target),
+            b.met.map_or("", |m| if m { "yes" } else { "no" })
+        )?;
+    }
+    Ok(())
+}
+
+fn alarms_table(
+    out: &mut dyn Write,
+    db: &Path,
+    period: &str,
+    tz: &str,
+    r: &AlarmReport,
+) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "alarm performance {period} (UTC{tz}) from {}: {} alarms in {} intervals of 10 min",
+        db.display(),
+        r.raised,
+        r.intervals
+    )?;
+    writeln!(
+        out,
+        "{:<44} {:>26}  {:<22} met",
+        "ISA-18.2", "value", "target"
+    )?;
+    for b in r.benchmarks() {
+        writeln!(
+            out,
+            "{:<44} {:>26}  {:<22} {}",
+            b.metric,
+            b.value,
+            b.target,
+            b.met.map_or("", |m| if m { "yes" } else { "NO" })
+        )?;
+    }
+    writeln!(out, "most frequent alarms:")?;
+    if r.top.is_empty() {
+        writeln!(out, "  none")?;
+    }
+    for f in &r.top {
+        writeln!(out, "  {:<32} {:>6} {:>6.1} %", f.id, f.raised, f.share)?;
+    }
+    writeln!(out, "chattering alarms (most raises within 60 s):")?;
+    if r.chattering.is_empty() {
+        writeln!(out, "  none")?;
+    }
+    for c in &r.chattering {
+        writeln!(out, "  {:<32} {:>6}", c.id, c.raises_in_60s)?;
+    }
+    writeln!(out, "stale alarms (active > 24 h):")?;
+    if r.stale.is_empty() {
+        writeln!(out, "  none")?;
+    }
+    for s in &r.stale {
+        writeln!(
+            out,
+            "  {:<32} raised {}  {:.1} h",
+            s.id,
+            crate::clock::rfc3339(s.raised_at),
+            s.hours
+        )?;
+    }
+    Ok(())
 }
 
 /// Output format.

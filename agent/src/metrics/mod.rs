@@ -78,6 +78,22 @@ pub struct Metrics {
     pub transition_window_seconds: GaugeVec,
     /// Values of the tags configured with `export = true`, by tag name.
     pub tag_value: GaugeVec,
+    /// ISA-18.2: alarms raised in the last 10 minutes.
+    pub alarm_rate_10m: IntGauge,
+    /// 1 while that is a flood (more than 10).
+    pub alarm_flood: IntGauge,
+    /// Time spent in flood.
+    pub alarm_flood_seconds: prometheus::Counter,
+    /// Alarms chattering now (3+ raises within 60 s).
+    pub alarms_chattering: IntGauge,
+    /// Active occurrences older than 24 h.
+    pub alarms_stale: IntGauge,
+    /// Alarms shelved now.
+    pub alarms_shelved: IntGauge,
+    /// Alarms out of service now.
+    pub alarms_out_of_service: IntGauge,
+    /// Time from raise to acknowledgement.
+    pub alarm_ack_seconds: Histogram,
 }
 
 fn opts(name: &str, help: &str, cell: &str) -> Opts {
@@ -313,6 +329,51 @@ impl Metrics {
                     cell
                 ),
                 &["tag"]
+            )),
+            alarm_rate_10m: reg!(IntGauge::with_opts(opts(
+                "cellwatch_alarm_rate_10m",
+                "ISA-18.2 alarm rate: alarms raised in the last 10 minutes (target about 1; more than 10 is a flood).",
+                cell
+            ))),
+            alarm_flood: reg!(IntGauge::with_opts(opts(
+                "cellwatch_alarm_flood",
+                "1 while more than 10 alarms were raised in the last 10 minutes (ISA-18.2 flood).",
+                cell
+            ))),
+            alarm_flood_seconds: reg!(prometheus::Counter::with_opts(opts(
+                "cellwatch_alarm_flood_seconds_total",
+                "Time spent in alarm flood (target: under 1 % of the time).",
+                cell
+            ))),
+            alarms_chattering: reg!(IntGauge::with_opts(opts(
+                "cellwatch_alarms_chattering",
+                "Alarms chattering now: raised 3 or more times within 60 s (target 0).",
+                cell
+            ))),
+            alarms_stale: reg!(IntGauge::with_opts(opts(
+                "cellwatch_alarms_stale",
+                "Alarms active for more than 24 hours (target: fewer than 5).",
+                cell
+            ))),
+            alarms_shelved: reg!(IntGauge::with_opts(opts(
+                "cellwatch_alarms_shelved",
+                "Alarms shelved by an operator now.",
+                cell
+            ))),
+            alarms_out_of_service: reg!(IntGauge::with_opts(opts(
+                "cellwatch_alarms_out_of_service",
+                "Alarms out of service now.",
+                cell
+            ))),
+            alarm_ack_seconds: reg!(Histogram::with_opts(
+                HistogramOpts::new(
+                    "cellwatch_alarm_ack_seconds",
+                    "Time from an alarm's raise to its acknowledgement."
+                )
+                .const_label("cell", cell)
+                .buckets(vec![
+                    1.0, 5.0, 10.0, 30.0, 60.0, 120.0, 300.0, 600.0, 1800.0, 3600.0, 14400.0
+                ])
             )),
             registry,
         }

@@ -8,6 +8,8 @@ use cellwatch_models::alarm::{AlarmKind, Severity, Transition};
 use futures_util::future::BoxFuture;
 use futures_util::FutureExt;
 
+use cellwatch_models::kpi::LiveKpis;
+
 use super::Metrics;
 use crate::cell::{CellStep, Input};
 use crate::config::CellConfig;
@@ -29,6 +31,12 @@ pub struct MetricsSink {
     /// Per tag, if exported: its name and its `cellwatch_tag_value` gauge
     /// (absent while the value is unknown).
     exported: Vec<Option<(String, Option<prometheus::Gauge>)>>,
+    /// The ISA-18.2 figures.
+    kpis: LiveKpis,
+    /// Per alarm: whether it is counted shelved, out of service.
+    kept: HashMap<String, (bool, bool)>,
+    /// Flood time already added to its counter, ms.
+    flood_counted: u64,
 }
 
 impl MetricsSink {
@@ -62,7 +70,42 @@ impl MetricsSink {
             accounted_until: now,
             last_update: None,
             ever_connected: false,
+            kpis: LiveKpis::new(),
+            kept: HashMap::new(),
+            flood_counted: 0,
         }
+    }
+
+    /// The ISA-18.2 figures after `step`.
+    fn kpis(&mut self, step: &CellStep) {
+        let m = &self.metrics;
+        let mut any = false;
+        for (alarm, transition, at) in step.engine.alarms() {
+            any = true;
+            self.kpis
+                .on_transition(&alarm.id, transition, alarm.raised_at, alarm.active, at);
+            if transition == Transition::Acknowledged {
+                m.alarm_ack_seconds
+                    .observe(at.saturating_sub(alarm.raised_at) as f64 / 1000.0);
+            }
+            let now = (alarm.shelved.is_some(), alarm.out_of_service.is_some());
+            let was = self.kept.insert(alarm.id.clone(), now).unwrap_or_default();
+            m.alarms_shelved.add(i64::from(now.0) - i64::from(was.0));
+            m.alarms_out_of_service
+                .add(i64::from(now.1) - i64::from(was.1));
+        }
+        if !any && step.input != Input::Tick {
+            return;
+        }
+        self.kpis.advance(step.at);
+        let k = self.kpis.snapshot(step.at);
+        m.alarm_rate_10m.set(k.raised_last_10m as i64);
+        m.alarm_flood.set(i64::from(k.in_flood));
+        m.alarm_flood_seconds
+            .inc_by(k.flood_ms.saturating_sub(self.flood_counted) as f64 / 1000.0);
+        self.flood_counted = self.flood_counted.max(k.flood_ms);
+        m.alarms_chattering.set(k.chattering as i64);
+        m.alarms_stale.set(k.stale as i64);
     }
 
     fn step(&mut self, step: &CellStep) {
@@ -166,6 +209,7 @@ impl MetricsSink {
             );
             self.accounted_until = self.accounted_until.max(at);
         }
+        self.kpis(step);
     }
 }
 

@@ -1,0 +1,587 @@
+//! Alarm-system performance after ISA-18.2 / IEC 62682 (and EEMUA 191):
+//! the figures the standard's benchmark table is written in, live
+//! ([`LiveKpis`], for the metrics) and for a period ([`alarm_report`], for
+//! `cellwatch report alarms`). One cell is one operator position.
+//!
+//! Definitions (the same on both sides):
+//! - the *alarm rate* counts raises (new occurrences) per 10 minutes;
+//! - a *flood* is more than [`FLOOD_RAISES`] raises within 10 minutes: live,
+//!   over the sliding last 10 minutes; in a report, per fixed 10-minute
+//!   interval from the period's start;
+//! - an alarm *chatters* when it is raised [`CHATTER_RAISES`] times or more
+//!   within [`CHATTER_WINDOW_MS`];
+//! - an occurrence is *stale* once active longer than [`STALE_MS`];
+//! - the *acknowledgement time* runs from the raise to the acknowledgement.
+//!
+//! Everything here is bounded: the live side keeps one counter per second
+//! of the window and, per alarm, its last three raise times.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
+
+use crate::alarm::{Severity, Transition};
+
+/// The rate window and report interval: 10 minutes, ms.
+pub const INTERVAL_MS: u64 = 600_000;
+/// More raises than this within [`INTERVAL_MS`] is a flood.
+pub const FLOOD_RAISES: u64 = 10;
+/// Raises of one alarm within [`CHATTER_WINDOW_MS`] that make it chatter.
+pub const CHATTER_RAISES: usize = 3;
+/// See [`CHATTER_RAISES`]: 60 s.
+pub const CHATTER_WINDOW_MS: u64 = 60_000;
+/// Active longer than this is stale: 24 h.
+pub const STALE_MS: u64 = 24 * 3_600_000;
+
+const SECONDS: usize = (INTERVAL_MS / 1000) as usize;
+
+/// The live figures, updated from alarm transitions and the passing of
+/// time (ms since the epoch, passed in).
+#[derive(Debug)]
+pub struct LiveKpis {
+    /// Raises per second of the last 10 minutes, by second mod 600.
+    per_second: Box<[u32; SECONDS]>,
+    /// The second last counted into `per_second`.
+    second: Option<u64>,
+    /// Raises in the last 10 minutes.
+    in_window: u64,
+    /// Time spent in flood, ms, and up to when it is counted.
+    flood_ms: u64,
+    counted_to: Option<u64>,
+    /// Per alarm: its last raise times (at most [`CHATTER_RAISES`]).
+    raises: HashMap<String, VecDeque<u64>>,
+    /// Chattering alarms by (until when, id).
+    chattering: BTreeSet<(u64, String)>,
+    chatter_until: HashMap<String, u64>,
+    /// Active occurrences by (raised_at, id).
+    active: BTreeSet<(u64, String)>,
+    active_since: HashMap<String, u64>,
+}
+
+impl Default for LiveKpis {
+    fn default() -> Self {
+        LiveKpis {
+            per_second: Box::new([0; SECONDS]),
+            second: None,
+            in_window: 0,
+            flood_ms: 0,
+            counted_to: None,
+            raises: HashMap::new(),
+            chattering: BTreeSet::new(),
+            chatter_until: HashMap::new(),
+            active: BTreeSet::new(),
+            active_since: HashMap::new(),
+        }
+    }
+}
+
+/// The live figures at one moment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct KpiSnapshot {
+    /// Raises in the last 10 minutes.
+    pub raised_last_10m: u64,
+    /// Whether that is a flood.
+    pub in_flood: bool,
+    /// Time spent in flood so far, ms.
+    pub flood_ms: u64,
+    /// Alarms chattering now.
+    pub chattering: u64,
+    /// Active occurrences older than 24 h.
+    pub stale: u64,
+}
+
+impl LiveKpis {
+    /// Figures from no alarm at all.
+    pub fn new() -> LiveKpis {
+        LiveKpis::default()
+    }
+
+    /// Time passed up to `now`.
+    pub fn advance(&mut self, now: u64) {
+        if let Some(from) = self.counted_to {
+            if now > from && self.in_window > FLOOD_RAISES {
+                self.flood_ms += now - from;
+            }
+        }
+        self.counted_to = Some(self.counted_to.map_or(now, |t| t.max(now)));
+        let s = now / 1000;
+        match self.second {
+            None => self.second = Some(s),
+            Some(last) if s > last => {
+                // Seconds that fell out of the window are forgotten.
+                for gone in (last + 1)..=s.min(last + SECONDS as u64) {
+                    let slot = &mut self.per_second[(gone % SECONDS as u64) as usize];
+                    self.in_window -= u64::from(*slot);
+                    *slot = 0;
+                }
+                self.second = Some(s);
+            }
+            Some(_) => {}
+        }
+        while let Some((until, id)) = self.chattering.first().cloned() {
+            if until > now {
+                break;
+            }
+            self.chattering.pop_first();
+            self.chatter_until.remove(&id);
+        }
+    }
+
+    /// Alarm `id` went through `transition` at `at`; `raised_at` is its
+    /// occurrence's, `active` whether it is active after it.
+    pub fn on_transition(
+        &mut self,
+        id: &str,
+        transition: Transition,
+        raised_at: u64,
+        active: bool,
+        at: u64,
+    ) {
+        self.advance(at);
+        if transition == Transition::Raised {
+            // A raise at a time before the window's newest second counts
+            // there (the loop's steps are in time order, to the ms).
+            let s = self.second.unwrap_or(at / 1000);
+            self.per_second[(s % SECONDS as u64) as usize] += 1;
+            self.in_window += 1;
+            let times = self.raises.entry(id.to_string()).or_default();
+            times.push_back(at);
+            if times.len() > CHATTER_RAISES {
+                times.pop_front();
+            }
+            if times.len() == CHATTER_RAISES {
+                let until = times[0] + CHATTER_WINDOW_MS;
+                if until > at {
+                    if let Some(old) = self.chatter_until.insert(id.to_string(), until) {
+                        self.chattering.remove(&(old, id.to_string()));
+                    }
+                    self.chattering.insert((until, id.to_string()));
+                }
+            }
+        }
+        if let Some(since) = self.active_since.remove(id) {
+            self.active.remove(&(since, id.to_string()));
+        }
+        if active {
+            self.active_since.insert(id.to_string(), raised_at);
+            self.active.insert((raised_at, id.to_string()));
+        }
+    }
+
+    /// The figures at `now` (after [`LiveKpis::advance`] to it).
+    pub fn snapshot(&self, now: u64) -> KpiSnapshot {
+        KpiSnapshot {
+            raised_last_10m: self.in_window,
+            in_flood: self.in_window > FLOOD_RAISES,
+            flood_ms: self.flood_ms,
+            chattering: self.chattering.len() as u64,
+            stale: now.checked_sub(STALE_MS).map_or(0, |raised_before| {
+                self.active.range(..(raised_before, String::new())).count() as u64
+            }),
+        }
+    }
+}
+
+/// One alarm transition, as the journal keeps it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct AlarmEvent {
+    /// When, ms.
+    pub at: u64,
+    /// The alarm.
+    pub id: String,
+    /// What happened.
+    pub transition: Transition,
+    /// How urgent.
+    pub severity: Severity,
+    /// When its occurrence was raised, ms.
+    pub raised_at: u64,
+    /// Active after the transition.
+    pub active: bool,
+}
+
+/// One of the most frequent alarms.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Frequent {
+    /// The alarm.
+    pub id: String,
+    /// Raises in the period.
+    pub raised: u64,
+    /// Its share of all raises, %.
+    pub share: f64,
+}
+
+/// A chattering alarm: its most raises within [`CHATTER_WINDOW_MS`].
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct Chattering {
+    /// The alarm.
+    pub id: String,
+    /// Raises in its busiest minute.
+    pub raises_in_60s: u64,
+}
+
+/// An occurrence active longer than 24 h in the period.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Stale {
+    /// The alarm.
+    pub id: String,
+    /// When it was raised, ms.
+    pub raised_at: u64,
+    /// How long it had been active at its end or the period's, hours.
+    pub hours: f64,
+}
+
+/// Acknowledgement times in a period, seconds.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct AckTimes {
+    /// Acknowledgements counted.
+    pub count: u64,
+    /// Mean, median and longest; `None` with none.
+    pub mean: Option<f64>,
+    /// The median.
+    pub median: Option<f64>,
+    /// The longest.
+    pub max: Option<f64>,
+}
+
+/// The ISA-18.2 benchmark figures of a period.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct AlarmReport {
+    /// The period, ms: from, to (the end counted: the period's, or now).
+    pub from: u64,
+    /// See `from`.
+    pub to: u64,
+    /// 10-minute intervals in it.
+    pub intervals: u64,
+    /// Raises in it.
+    pub raised: u64,
+    /// Raises per 10 minutes, on average.
+    pub average_rate: f64,
+    /// The most raises in one 10-minute interval.
+    pub peak_rate: u64,
+    /// Intervals with more than [`FLOOD_RAISES`] raises.
+    pub flood_intervals: u64,
+    /// Those, % of all intervals.
+    pub flood_percent: f64,
+    /// The 10 most frequent alarms, most first.
+    pub top: Vec<Frequent>,
+    /// Their share of all raises, %.
+    pub top_share: f64,
+    /// Raises by severity (`low`, `medium`, `high`, `critical`), %.
+    pub priorities: BTreeMap<String, f64>,
+    /// Alarms that chattered.
+    pub chattering: Vec<Chattering>,
+    /// Occurrences that were stale.
+    pub stale: Vec<Stale>,
+    /// Shelves put on, and distinct alarms shelved.
+    pub shelved: u64,
+    /// See `shelved`.
+    pub alarms_shelved: u64,
+    /// Alarms taken out of service.
+    pub out_of_service: u64,
+    /// Acknowledgement times.
+    pub ack: AckTimes,
+}
+
+/// The figures of `[from, to)` from `events` (time order); `before` holds
+/// each alarm's last event before `from` (what was active then). A period
+/// still running ends at `now`.
+pub fn alarm_report(
+    events: &[AlarmEvent],
+    before: &[AlarmEvent],
+    from: u64,
+    to: u64,
+    now: u64,
+) -> AlarmReport {
+    let end = to.min(now).max(from);
+    let intervals = (end - from).div_ceil(INTERVAL_MS).max(1);
+    let in_period: Vec<&AlarmEvent> = events
+        .iter()
+        .filter(|e| e.at >= from && e.at < end)
+        .collect();
+    let raises: Vec<&AlarmEvent> = in_period
+        .iter()
+        .copied()
+        .filter(|e| e.transition == Transition::Raised)
+        .collect();
+    let raised = raises.len() as u64;
+    let mut per_interval = vec![0u64; intervals as usize];
+    for e in &raises {
+        per_interval[((e.at - from) / INTERVAL_MS) as usize] += 1;
+    }
+    let flood_intervals = per_interval.iter().filter(|&&n| n > FLOOD_RAISES).count() as u64;
+    let share = |n: u64| {
+        if raised == 0 {
+            0.0
+        } else {
+            100.0 * n as f64 / raised as f64
+        }
+    };
+    // Most frequent, and chattering, per alarm.
+    let mut by_id: BTreeMap<&str, Vec<u64>> = BTreeMap::new();
+    let mut by_severity: BTreeMap<String, u64> = Severity::ALL
+        .iter()
+        .map(|s| (s.as_str().to_string(), 0))
+        .collect();
+    for e in &raises {
+        by_id.entry(&e.id).or_default().push(e.at);
+        *by_severity.entry(e.severity.as_str().into()).or_default() += 1;
+    }
+    let mut top: Vec<Frequent> = by_id
+        .iter()
+        .map(|(id, times)| Frequent {
+            id: id.to_string(),
+            raised: times.len() as u64,
+            share: share(times.len() as u64),
+        })
+        .collect();
+    top.sort_by(|a, b| b.raised.cmp(&a.raised).then(a.id.cmp(&b.id)));
+    top.truncate(10);
+    let top_share = share(top.iter().map(|f| f.raised).sum());
+    let chattering = by_id
+        .iter()
+        .filter_map(|(id, times)| {
+            // The most raises in any window of 60 s (two pointers).
+            let (mut most, mut first) = (0usize, 0usize);
+            for (last, &t) in times.iter().enumerate() {
+                while t - times[first] >= CHATTER_WINDOW_MS {
+                    first += 1;
+                }
+                most = most.max(last - first + 1);
+            }
+            (most >= CHATTER_RAISES).then(|| Chattering {
+                id: id.to_string(),
+                raises_in_60s: most as u64,
+            })
+        })
+        .collect();
+    // Stale: occurrences active at some moment of the period for more than
+    // 24 h; those active at its start come from `before`.
+    let mut open: BTreeMap<&str, u64> = before
+        .iter()
+        .filter(|e| e.active)
+        .map(|e| (e.id.as_str(), e.raised_at))
+        .collect();
+    let mut stale = Vec::new();
+    let mut note = |id: &str, raised_at: u64, until: u64| {
+        let lasted = until.saturating_sub(raised_at);
+        if lasted > STALE_MS {
+            stale.push(Stale {
+                id: id.to_string(),
+                raised_at,
+                hours: lasted as f64 / 3_600_000.0,
+            });
+        }
+    };
+    for e in &in_period {
+        if e.active {
+            open.insert(&e.id, e.raised_at);
+        } else if let Some(raised_at) = open.remove(e.id.as_str()) {
+            note(&e.id, raised_at, e.at);
+        }
+    }
+    for (id, raised_at) in open {
+        note(id, raised_at, end);
+    }
+    stale.sort_by(|a, b| a.raised_at.cmp(&b.raised_at).then(a.id.cmp(&b.id)));
+    let of = |t: Transition| in_period.iter().filter(move |e| e.transition == t);
+    let alarms_shelved = of(Transition::Shelved)
+        .map(|e| e.id.as_str())
+        .collect::<BTreeSet<_>>()
+        .len() as u64;
+    let mut acks: Vec<f64> = of(Transition::Acknowledged)
+        .map(|e| e.at.saturating_sub(e.raised_at) as f64 / 1000.0)
+        .collect();
+    acks.sort_by(f64::total_cmp);
+    let ack = AckTimes {
+        count: acks.len() as u64,
+        mean: (!acks.is_empty()).then(|| acks.iter().sum::<f64>() / acks.len() as f64),
+        median: (!acks.is_empty()).then(|| {
+            let n = acks.len();
+            if n % 2 == 1 {
+                acks[n / 2]
+            } else {
+                (acks[n / 2 - 1] + acks[n / 2]) / 2.0
+            }
+        }),
+        max: acks.last().copied(),
+    };
+    AlarmReport {
+        from,
+        to: end,
+        intervals,
+        raised,
+        average_rate: raised as f64 / intervals as f64,
+        peak_rate: per_interval.iter().copied().max().unwrap_or(0),
+        flood_intervals,
+        flood_percent: 100.0 * flood_intervals as f64 / intervals as f64,
+        top,
+        top_share,
+        priorities: by_severity
+            .into_iter()
+            .map(|(s, n)| (s, share(n)))
+            .collect(),
+        chattering,
+        stale,
+        shelved: of(Transition::Shelved).count() as u64,
+        alarms_shelved,
+        out_of_service: of(Transition::OutOfService).count() as u64,
+        ack,
+    }
+}
+
+/// One line of the benchmark table: the figure and the ISA-18.2 target.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Benchmark {
+    /// What is measured.
+    pub metric: &'static str,
+    /// The figure, as text.
+    pub value: String,
+    /// The target (ISA-18.2 / EEMUA 191), or `-` where the standard sets
+    /// none.
+    pub target: &'static str,
+    /// Whether the target is met; `None` without a target.
+    pub met: Option<bool>,
+}
+
+impl AlarmReport {
+    /// The benchmark table: each figure against its target.
+    pub fn benchmarks(&self) -> Vec<Benchmark> {
+        let secs = |s: Option<f64>| s.map_or("-".into(), |s| format!("{s:.1} s"));
+        let p = |s: &str| self.priorities.get(s).copied().unwrap_or(0.0);
+        vec![
+            Benchmark {
+                metric: "average alarm rate (per 10 min)",
+                value: format!("{:.2}", self.average_rate),
+                target: "<= 1 (2 at most)",
+                met: Some(self.average_rate <= 1.0),
+            },
+            Benchmark {
+                metric: "peak alarm rate (per 10 min)",
+                value: self.peak_rate.to_string(),
+                target: "<= 10",
+                met: Some(self.peak_rate <= FLOOD_RAISES),
+            },
+            Benchmark {
+                metric: "10-min intervals in flood (> 10 alarms)",
+                value: format!("{:.2} %", self.flood_percent),
+                target: "< 1 %",
+                met: Some(self.flood_percent < 1.0),
+            },
+            Benchmark {
+                metric: "top 10 alarms' share of all alarms",
+                value: format!("{:.1} %", self.top_share),
+                target: "< 5 %",
+                met: Some(self.top_share < 5.0),
+            },
+            Benchmark {
+                metric: "chattering alarms (3+ raises in 60 s)",
+                value: self.chattering.len().to_string(),
+                target: "0",
+                met: Some(self.chattering.is_empty()),
+            },
+            Benchmark {
+                metric: "stale alarms (active > 24 h)",
+                value: self.stale.len().to_string(),
+                target: "< 5",
+                met: Some(self.stale.len() < 5),
+            },
+            Benchmark {
+                metric: "priority: low / medium / high / critical",
+                value: format!(
+                    "{:.0} / {:.0} / {:.0} / {:.0} %",
+                    p("low"),
+                    p("medium"),
+                    p("high"),
+                    p("critical")
+                ),
+                target: "~80 / 15 / 5 / < 1 %",
+                met: None,
+            },
+            Benchmark {
+                metric: "shelves (alarms shelved)",
+                value: format!("{} ({})", self.shelved, self.alarms_shelved),
+                target: "-",
+                met: None,
+            },
+            Benchmark {
+                metric: "taken out of service",
+                value: self.out_of_service.to_string(),
+                target: "-",
+                met: None,
+            },
+            Benchmark {
+                metric: "acknowledgement time: mean / median / max",
+                value: format!(
+                    "{} / {} / {} ({} acks)",
+                    secs(self.ack.mean),
+                    secs(self.ack.median),
+                    secs(self.ack.max),
+                    self.ack.count
+                ),
+                target: "-",
+                met: None,
+            },
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MIN: u64 = 60_000;
+
+    #[test]
+    fn the_live_window_forgets_what_is_older_than_10_minutes() {
+        let mut k = LiveKpis::new();
+        for i in 0..11 {
+            k.on_transition(
+                &format!("a{i}"),
+                Transition::Raised,
+                i * 1000,
+                false,
+                i * 1000,
+            );
+        }
+        assert_eq!(k.snapshot(10_000).raised_last_10m, 11);
+        assert!(k.snapshot(10_000).in_flood);
+        k.advance(10 * MIN - 1);
+        assert_eq!(k.snapshot(10 * MIN - 1).raised_last_10m, 11);
+        // The first raise (second 0) leaves the window at 600 s.
+        k.advance(10 * MIN);
+        let s = k.snapshot(10 * MIN);
+        assert_eq!((s.raised_last_10m, s.in_flood), (10, false));
+        assert_eq!(s.flood_ms, 10 * MIN - 10_000);
+        // A long gap empties it.
+        k.advance(60 * MIN);
+        assert_eq!(k.snapshot(60 * MIN).raised_last_10m, 0);
+    }
+
+    #[test]
+    fn three_raises_within_a_minute_chatter_until_the_minute_is_over() {
+        let mut k = LiveKpis::new();
+        for at in [0, 20_000, 50_000] {
+            k.on_transition("x", Transition::Raised, at, true, at);
+            k.on_transition("x", Transition::Cleared, at, false, at + 1);
+        }
+        assert_eq!(k.snapshot(50_001).chattering, 1);
+        k.advance(59_999);
+        assert_eq!(k.snapshot(59_999).chattering, 1);
+        k.advance(60_000);
+        assert_eq!(k.snapshot(60_000).chattering, 0);
+        // Three raises spread over more than a minute: no chatter.
+        for at in [100_000, 140_000, 170_000] {
+            k.on_transition("y", Transition::Raised, at, false, at);
+        }
+        assert_eq!(k.snapshot(170_000).chattering, 0);
+    }
+
+    #[test]
+    fn an_occurrence_is_stale_after_24_hours() {
+        let mut k = LiveKpis::new();
+        k.on_transition("x", Transition::Raised, 0, true, 0);
+        k.on_transition("x", Transition::Acknowledged, 0, true, 5);
+        assert_eq!(k.snapshot(STALE_MS).stale, 0);
+        assert_eq!(k.snapshot(STALE_MS + 1).stale, 1);
+        k.on_transition("x", Transition::Cleared, 0, false, STALE_MS + 2);
+        assert_eq!(k.snapshot(STALE_MS + 3).stale, 0);
+    }
+}
