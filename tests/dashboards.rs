@@ -26,8 +26,8 @@ fn dashboards() -> Vec<(PathBuf, serde_json::Value)> {
         }
     }
     assert!(
-        out.len() >= 3,
-        "expected the cell, plant and agent dashboards"
+        out.len() >= 4,
+        "expected the cell, plant, agent and alarm performance dashboards"
     );
     out
 }
@@ -35,6 +35,7 @@ fn dashboards() -> Vec<(PathBuf, serde_json::Value)> {
 /// Grafana variables replaced by values PromQL accepts.
 fn substitute(expr: &str) -> String {
     expr.replace("$__rate_interval", "1m")
+        .replace("$__range_s", "3600")
         .replace("$__range", "1h")
         .replace("$__interval", "1m")
         .replace("$cell", ".+")
