@@ -188,7 +188,7 @@ impl AlarmPayload {
                 .collect(),
             message: self.message.clone(),
             shelved: match &self.shelved {
-                Some(s) => Some(Shelf {
+                Some(s) => Some(Box::new(Shelf {
                     by: s.by.clone(),
                     reason: s.reason.clone(),
                     at: ms(&s.at)?,
@@ -196,15 +196,15 @@ impl AlarmPayload {
                         Some(t) => Some(ms(t)?),
                         None => None,
                     },
-                }),
+                })),
                 None => None,
             },
             out_of_service: match &self.out_of_service {
-                Some(r) => Some(Removal {
+                Some(r) => Some(Box::new(Removal {
                     by: r.by.clone(),
                     reason: r.reason.clone(),
                     at: ms(&r.at)?,
-                }),
+                })),
                 None => None,
             },
         })

@@ -228,10 +228,11 @@ pub struct Alarm {
     /// A one-line description (which tags are bad, why the link dropped).
     pub message: String,
     /// Shelved by an operator (ISA-18.2 / OPC UA Part 9), if it is.
-    pub shelved: Option<Shelf>,
+    /// (Boxed, as `out_of_service`: rare, and alarms travel in events.)
+    pub shelved: Option<Box<Shelf>>,
     /// Out of service (ISA-18.2: removed from service, e.g. a broken
     /// instrument), if it is.
-    pub out_of_service: Option<Removal>,
+    pub out_of_service: Option<Box<Removal>>,
 }
 
 /// Who took an alarm out of service, when and why.

@@ -13,7 +13,7 @@ use crate::payload::{AlarmPayload, StatePayload};
 #[derive(Debug, Clone)]
 pub enum Notice {
     /// An alarm transition, as published.
-    Alarm(AlarmPayload),
+    Alarm(Box<AlarmPayload>),
     /// A machine-state change (or the periodic state), as published.
     State(StatePayload),
     /// The PLC connection came up (true) or went down, and why.
@@ -43,7 +43,7 @@ impl Sink for ConsoleSink {
             let _ = self.tx.send(Notice::Connection(*up, detail.clone()));
         }
         for a in &step.alarms {
-            let _ = self.tx.send(Notice::Alarm(a.payload.clone()));
+            let _ = self.tx.send(Notice::Alarm(Box::new(a.payload.clone())));
         }
         if let Some(s) = &step.state {
             let _ = self.tx.send(Notice::State(s.clone()));

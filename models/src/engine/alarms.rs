@@ -175,7 +175,7 @@ impl AlarmBook {
         if let Some(until) = shelf.until {
             self.expiries.insert((until, id.to_string()));
         }
-        alarm.shelved = Some(shelf);
+        alarm.shelved = Some(Box::new(shelf));
         Ok(alarm)
     }
 
@@ -276,7 +276,7 @@ impl AlarmBook {
         }
         alarm.acknowledged = true;
         alarm.shelved = None;
-        alarm.out_of_service = Some(removal);
+        alarm.out_of_service = Some(Box::new(removal));
         Ok(alarm)
     }
 

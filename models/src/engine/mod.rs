@@ -1560,7 +1560,7 @@ mod tests {
     fn shelf_of(e: &CellEngine, id: &str) -> Option<crate::alarm::Shelf> {
         e.alarms()
             .find(|a| a.id == id)
-            .and_then(|a| a.shelved.clone())
+            .and_then(|a| a.shelved.as_deref().cloned())
     }
 
     #[test]
