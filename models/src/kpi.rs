@@ -94,27 +94,37 @@ impl LiveKpis {
         LiveKpis::default()
     }
 
-    /// Time passed up to `now`.
+    /// Time passed up to `now`. Time in flood is counted exactly: the
+    /// window's count changes only when a second falls out of it.
     pub fn advance(&mut self, now: u64) {
-        if let Some(from) = self.counted_to {
-            if now > from && self.in_window > FLOOD_RAISES {
-                self.flood_ms += now - from;
-            }
-        }
-        self.counted_to = Some(self.counted_to.map_or(now, |t| t.max(now)));
-        let s = now / 1000;
-        match self.second {
-            None => self.second = Some(s),
-            Some(last) if s > last => {
-                // Seconds that fell out of the window are forgotten.
-                for gone in (last + 1)..=s.min(last + SECONDS as u64) {
-                    let slot = &mut self.per_second[(gone % SECONDS as u64) as usize];
-                    self.in_window -= u64::from(*slot);
-                    *slot = 0;
+        let (Some(mut t), Some(last)) = (self.counted_to, self.second) else {
+            self.counted_to = Some(now);
+            self.second = Some(now / 1000);
+            return;
+        };
+        if now > t {
+            let s = now / 1000;
+            for gone in (last + 1)..=s {
+                // At the start of second `gone`, the raises of second
+                // `gone - 600` fall out of the window.
+                let at = gone * 1000;
+                if self.in_window > FLOOD_RAISES {
+                    self.flood_ms += at.saturating_sub(t);
                 }
-                self.second = Some(s);
+                t = t.max(at);
+                let slot = &mut self.per_second[(gone % SECONDS as u64) as usize];
+                self.in_window -= u64::from(*slot);
+                *slot = 0;
+                if self.in_window == 0 {
+                    // Every slot is empty: nothing more falls out.
+                    break;
+                }
             }
-            Some(_) => {}
+            if self.in_window > FLOOD_RAISES {
+                self.flood_ms += now - t;
+            }
+            self.counted_to = Some(now);
+            self.second = Some(s);
         }
         while let Some((until, id)) = self.chattering.first().cloned() {
             if until > now {
@@ -583,5 +593,47 @@ mod tests {
         assert_eq!(k.snapshot(STALE_MS + 1).stale, 1);
         k.on_transition("x", Transition::Cleared, 0, false, STALE_MS + 2);
         assert_eq!(k.snapshot(STALE_MS + 3).stale, 0);
+    }
+
+    fn ev(at: u64, id: &str, transition: Transition, raised_at: u64, active: bool) -> AlarmEvent {
+        AlarmEvent {
+            at,
+            id: id.into(),
+            transition,
+            severity: Severity::High,
+            raised_at,
+            active,
+        }
+    }
+
+    #[test]
+    fn a_report_counts_acknowledgements_shelves_and_what_was_active_before() {
+        use Transition::*;
+        let day = 86_400_000;
+        let events = [
+            ev(day + 1_000, "a", Raised, day + 1_000, true),
+            ev(day + 11_000, "a", Acknowledged, day + 1_000, true),
+            ev(day + 20_000, "a", Cleared, day + 1_000, false),
+            ev(day + 31_000, "a", Raised, day + 31_000, true),
+            ev(day + 40_000, "a", Shelved, day + 31_000, true),
+            ev(day + 91_000, "a", Acknowledged, day + 31_000, true),
+            ev(day + 95_000, "b", OutOfService, day + 95_000, false),
+        ];
+        // "old" was raised the day before, at 06:00, and never cleared.
+        let before = [ev(6 * 3_600_000, "old", Raised, 6 * 3_600_000, true)];
+        let r = alarm_report(&events, &before, day, 2 * day, 3 * day);
+        assert_eq!((r.raised, r.intervals, r.peak_rate), (2, 144, 2));
+        assert_eq!(r.ack.count, 2);
+        assert_eq!(r.ack.mean, Some(35.0));
+        assert_eq!(r.ack.median, Some(35.0));
+        assert_eq!(r.ack.max, Some(60.0));
+        assert_eq!((r.shelved, r.alarms_shelved, r.out_of_service), (1, 1, 1));
+        assert_eq!(r.stale.len(), 1);
+        assert_eq!(r.stale[0].id, "old");
+        assert!((r.stale[0].hours - 42.0).abs() < 1e-9);
+        // "a" is still active at the end, for less than 24 h: not stale.
+        // A day still running ends now.
+        let r = alarm_report(&events, &before, day, 2 * day, day + 600_001);
+        assert_eq!((r.intervals, r.to), (2, day + 600_001));
     }
 }
