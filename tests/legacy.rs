@@ -678,48 +678,6 @@ async fn a_target_is_written_only_for_an_operator_allowed_to_write() {
     }
 }
 
-/// Waits until the journal at `db` has a row of `table` stamped `at`
-/// (each scripted change of a simulated day leaves one).
-async fn row_at(
-    committed: &mut tokio::sync::watch::Receiver<u64>,
-    db: &std::path::Path,
-    table: &str,
-    at: u64,
-) {
-    loop {
-        let n: i64 = rusqlite::Connection::open(db)
-            .unwrap()
-            .query_row(
-                &format!("SELECT count(*) FROM {table} WHERE at_ms = ?1"),
-                [at as i64],
-                |r| r.get(0),
-            )
-            .unwrap();
-        if n > 0 {
-            return;
-        }
-        tokio::time::timeout(Duration::from_secs(60), committed.changed())
-            .await
-            .unwrap_or_else(|_| {
-                let c = rusqlite::Connection::open(db).unwrap();
-                let mut st = c.prepare(&format!("SELECT * FROM {table}")).unwrap();
-                let n = st.column_count();
-                let rows: Vec<String> = st
-                    .query_map([], |r| {
-                        Ok((0..n)
-                            .map(|i| format!("{:?}", r.get_ref(i).unwrap()))
-                            .collect::<Vec<_>>()
-                            .join(","))
-                    })
-                    .unwrap()
-                    .map(|r| r.unwrap())
-                    .collect();
-                panic!("no {table} row at {at} in {}: {rows:?}", db.display())
-            })
-            .unwrap();
-    }
-}
-
 /// What the simulator's log says of one unit's day, computed here from
 /// the log alone: minutes running / idle / fault per hour, stops per
 /// cause code, parts, and parts per order.
@@ -852,8 +810,8 @@ async fn each_unit_a_cell_of_its_own_reports_its_day_as_the_simulator_logged_it(
     let db = |u: usize| dir.path().join(format!("{}.sqlite", names[u]));
     let mut committed: Vec<_> = agents.iter().map(|a| a.committed()).collect();
     for (u, c) in committed.iter_mut().enumerate() {
-        row_at(c, &db(u), "orders", start).await;
-        row_at(c, &db(u), "state_history", start).await;
+        crate::util::row_at(c, &db(u), "orders", start).await;
+        crate::util::row_at(c, &db(u), "state_history", start).await;
     }
     // The day's script, minutes after midnight: (unit, what).
     enum Do {
@@ -896,7 +854,7 @@ async fn each_unit_a_cell_of_its_own_reports_its_day_as_the_simulator_logged_it(
             } else {
                 "state_history"
             };
-            row_at(&mut committed[u], &db(u), table, min(m)).await;
+            crate::util::row_at(&mut committed[u], &db(u), table, min(m)).await;
         } else {
             clock.set(min(cycle_at));
             let running: Vec<usize> = (1..=3u8)
@@ -905,7 +863,7 @@ async fn each_unit_a_cell_of_its_own_reports_its_day_as_the_simulator_logged_it(
                 .collect();
             bus.cycle();
             for u in running {
-                row_at(&mut committed[u], &db(u), "production", min(cycle_at)).await;
+                crate::util::row_at(&mut committed[u], &db(u), "production", min(cycle_at)).await;
             }
             cycle_at += 37;
         }

@@ -7,6 +7,7 @@
 #![allow(clippy::unwrap_used)] // test helpers fail loudly by design
 
 mod agent;
+mod alarm_day;
 mod alarm_management;
 mod bad_input;
 mod bounded;

@@ -163,3 +163,45 @@ pub(crate) fn daily_report(journal: &Path, day: &str) -> serde_json::Value {
     assert_eq!(r.code, 0, "{}", r.stderr);
     serde_json::from_str(&r.stdout).unwrap()
 }
+
+/// Waits until the journal at `db` has a row of `table` stamped `at`
+/// (each scripted change of a simulated day leaves one).
+pub(crate) async fn row_at(
+    committed: &mut tokio::sync::watch::Receiver<u64>,
+    db: &std::path::Path,
+    table: &str,
+    at: u64,
+) {
+    loop {
+        let n: i64 = rusqlite::Connection::open(db)
+            .unwrap()
+            .query_row(
+                &format!("SELECT count(*) FROM {table} WHERE at_ms = ?1"),
+                [at as i64],
+                |r| r.get(0),
+            )
+            .unwrap();
+        if n > 0 {
+            return;
+        }
+        tokio::time::timeout(std::time::Duration::from_secs(60), committed.changed())
+            .await
+            .unwrap_or_else(|_| {
+                let c = rusqlite::Connection::open(db).unwrap();
+                let mut st = c.prepare(&format!("SELECT * FROM {table}")).unwrap();
+                let n = st.column_count();
+                let rows: Vec<String> = st
+                    .query_map([], |r| {
+                        Ok((0..n)
+                            .map(|i| format!("{:?}", r.get_ref(i).unwrap()))
+                            .collect::<Vec<_>>()
+                            .join(","))
+                    })
+                    .unwrap()
+                    .map(|r| r.unwrap())
+                    .collect();
+                panic!("no {table} row at {at} in {}: {rows:?}", db.display())
+            })
+            .unwrap();
+    }
+}
