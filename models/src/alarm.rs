@@ -76,6 +76,9 @@ pub enum AlarmKind {
     Timer,
     /// A number past one of its limits (HH, H, L, LL).
     Limit,
+    /// A step of a sequential function chart active longer than its
+    /// supervision time (stuck).
+    Step,
     /// Tags with bad or uncertain quality.
     TagQuality,
     /// The connection to the PLC is lost.
@@ -86,10 +89,11 @@ pub enum AlarmKind {
 
 impl AlarmKind {
     /// All kinds.
-    pub const ALL: [AlarmKind; 6] = [
+    pub const ALL: [AlarmKind; 7] = [
         AlarmKind::Switching,
         AlarmKind::Timer,
         AlarmKind::Limit,
+        AlarmKind::Step,
         AlarmKind::TagQuality,
         AlarmKind::Communication,
         AlarmKind::System,
@@ -101,6 +105,7 @@ impl AlarmKind {
             AlarmKind::Switching => "switching",
             AlarmKind::Timer => "timer",
             AlarmKind::Limit => "limit",
+            AlarmKind::Step => "step",
             AlarmKind::TagQuality => "tag_quality",
             AlarmKind::Communication => "communication",
             AlarmKind::System => "system",

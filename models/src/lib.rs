@@ -36,6 +36,7 @@ pub mod limit;
 pub mod logic;
 pub mod program;
 pub mod report;
+pub mod sfc;
 pub mod signal;
 pub mod source;
 pub mod switching;

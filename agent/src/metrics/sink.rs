@@ -181,7 +181,10 @@ impl MetricsSink {
             if alarm.active {
                 m.active_delta(alarm.kind, alarm.severity, 1);
             }
-            if matches!(alarm.kind, AlarmKind::Switching | AlarmKind::Timer) {
+            if matches!(
+                alarm.kind,
+                AlarmKind::Switching | AlarmKind::Timer | AlarmKind::Step
+            ) {
                 let element = alarm
                     .active
                     .then(|| alarm.element().map(str::to_string))

@@ -35,7 +35,10 @@ pub(crate) struct Applied {
 }
 
 fn is_fault(kind: AlarmKind) -> bool {
-    matches!(kind, AlarmKind::Switching | AlarmKind::Timer)
+    matches!(
+        kind,
+        AlarmKind::Switching | AlarmKind::Timer | AlarmKind::Step
+    )
 }
 
 impl AlarmBook {

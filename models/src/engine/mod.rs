@@ -1179,7 +1179,7 @@ impl CellEngine {
         if transition == Transition::Raised
             && matches!(
                 alarm.kind,
-                AlarmKind::Switching | AlarmKind::Timer | AlarmKind::Limit
+                AlarmKind::Switching | AlarmKind::Timer | AlarmKind::Limit | AlarmKind::Step
             )
         {
             self.last_fault = Some(FaultValues {

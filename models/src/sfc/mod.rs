@@ -1,0 +1,369 @@
+//! Sequential function charts (IEC 61131-3 SFC) and their supervision,
+//! after paper 004.
+//!
+//! A [`Sfc`] is one or more charts (the paper's F1 and F2): steps, and
+//! transitions from one or more steps to one or more steps under a
+//! condition. Single, select and parallel sequences are all this graph:
+//! several transitions leaving one step are a *selection divergence*,
+//! several arriving at one a *selection convergence*; a transition to
+//! several steps is a *simultaneous divergence* ("sync"), one from several
+//! steps a *simultaneous convergence* ("resync"). A transition to a step of
+//! another chart is a *jump*.
+//!
+//! Which steps are active comes from the PLC: each step has a flag (a
+//! boolean tag such as the step's `S2.X`, or a comparison `D300 == 2` on a
+//! step-number word). [`SfcChecks`] supervises them: a step active longer
+//! than its supervision time is *stuck*, and its alarm carries the
+//! criteria analysis of every transition leaving it — the operands that
+//! keep it from firing, with values, expected values and comments.
+//!
+//! Charts are read from a TOML text form ([`text::parse`]).
+
+pub mod supervise;
+pub mod text;
+
+pub use supervise::SfcChecks;
+
+use crate::expr::Expr;
+use crate::signal::Signal;
+
+/// Charts of one cell.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sfc {
+    /// The charts, in the order written.
+    pub charts: Vec<Chart>,
+}
+
+/// One chart.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Chart {
+    /// Its name (`F1`).
+    pub name: String,
+    /// Its initial step, if it has one (a chart may be entered by jumps
+    /// only).
+    pub initial: Option<usize>,
+    /// Its steps.
+    pub steps: Vec<Step>,
+    /// Its transitions (those whose source steps are its own).
+    pub transitions: Vec<Transition>,
+}
+
+/// One step.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Step {
+    /// Its name (`S2`).
+    pub name: String,
+    /// The signal true while it is active.
+    pub flag: Signal,
+    /// Stuck when active longer than this, ms.
+    pub supervision_ms: Option<u64>,
+    /// What it does, for people.
+    pub comment: Option<String>,
+}
+
+/// A step of some chart.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct StepRef {
+    /// The chart's index.
+    pub chart: usize,
+    /// The step's index in it.
+    pub step: usize,
+}
+
+/// One transition.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Transition {
+    /// Its id in its chart (`t3`).
+    pub id: String,
+    /// The steps it leaves (all must be active: more than one is a
+    /// simultaneous convergence).
+    pub from: Vec<StepRef>,
+    /// The steps it activates (more than one: a simultaneous divergence;
+    /// in another chart: a jump).
+    pub to: Vec<StepRef>,
+    /// Its condition, over tag addresses.
+    pub condition: Expr,
+    /// What it waits for, for people.
+    pub comment: Option<String>,
+}
+
+impl Sfc {
+    /// The chart named `name`.
+    pub fn chart(&self, name: &str) -> Option<usize> {
+        self.charts.iter().position(|c| c.name == name)
+    }
+
+    /// The step `r`.
+    pub fn step(&self, r: StepRef) -> &Step {
+        &self.charts[r.chart].steps[r.step]
+    }
+
+    /// `F1.S2`.
+    pub fn step_name(&self, r: StepRef) -> String {
+        format!("{}.{}", self.charts[r.chart].name, self.step(r).name)
+    }
+
+    /// The transition `id` of chart `chart`, if there is one.
+    pub fn transition(&self, chart: &str, id: &str) -> Option<(usize, &Transition)> {
+        let c = self.chart(chart)?;
+        self.charts[c]
+            .transitions
+            .iter()
+            .find(|t| t.id == id)
+            .map(|t| (c, t))
+    }
+
+    /// Every transition leaving step `r`.
+    pub fn leaving(&self, r: StepRef) -> impl Iterator<Item = &Transition> {
+        self.charts[r.chart]
+            .transitions
+            .iter()
+            .filter(move |t| t.from.contains(&r))
+    }
+
+    /// Every step, with its reference.
+    pub fn steps(&self) -> impl Iterator<Item = (StepRef, &Step)> {
+        self.charts.iter().enumerate().flat_map(|(c, chart)| {
+            chart
+                .steps
+                .iter()
+                .enumerate()
+                .map(move |(s, step)| (StepRef { chart: c, step: s }, step))
+        })
+    }
+
+    /// Whether transition `t` may fire at these values (eq. (1)/(2) of
+    /// paper 004: every source step active and the condition true);
+    /// `None` while a value it needs is unknown.
+    pub fn enabled(
+        &self,
+        t: &Transition,
+        value: &impl Fn(&Signal) -> Option<bool>,
+    ) -> Option<bool> {
+        let mut terms: Vec<Expr> = t
+            .from
+            .iter()
+            .map(|&r| Expr::Lit(self.step(r).flag.clone(), false))
+            .collect();
+        terms.push(t.condition.clone());
+        crate::switching::SwitchingFunction::from_expr(Signal::new("enabled"), &Expr::And(terms))
+            .certain(value)
+    }
+
+    /// Whether transition `t`'s condition holds (what a forced transition
+    /// needs, eq. (3)/(4): the force switch stands in for the source
+    /// steps, never for the condition); `None` while unknown.
+    pub fn condition_holds(
+        &self,
+        t: &Transition,
+        value: &impl Fn(&Signal) -> Option<bool>,
+    ) -> Option<bool> {
+        crate::switching::SwitchingFunction::from_expr(Signal::new("condition"), &t.condition)
+            .certain(value)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::alarm::{AlarmKind, Severity};
+    use crate::comments::CommentDb;
+    use crate::engine::{CheckSet, Finding};
+
+    const ROBOT: &str = include_str!("../../../config/robot/robot.sfc.toml");
+
+    fn robot() -> Sfc {
+        text::parse("robot.sfc.toml", ROBOT, &|_| true).unwrap()
+    }
+
+    fn r(sfc: &Sfc, name: &str) -> StepRef {
+        let (c, s) = name.split_once('.').unwrap();
+        let chart = sfc.chart(c).unwrap();
+        StepRef {
+            chart,
+            step: sfc.charts[chart]
+                .steps
+                .iter()
+                .position(|x| x.name == s)
+                .unwrap(),
+        }
+    }
+
+    #[test]
+    fn the_robot_charts_parse_into_sequences_and_jumps() {
+        let sfc = robot();
+        assert_eq!(
+            sfc.charts
+                .iter()
+                .map(|c| c.name.as_str())
+                .collect::<Vec<_>>(),
+            ["F1", "F2"]
+        );
+        // Selection divergence at S1: automatic or manual.
+        let leaving: Vec<&str> = sfc
+            .leaving(r(&sfc, "F1.S1"))
+            .map(|t| t.id.as_str())
+            .collect();
+        assert_eq!(leaving, ["t2", "t20"]);
+        // t3 jumps to the other chart.
+        let (_, t3) = sfc.transition("F1", "t3").unwrap();
+        assert_eq!(t3.to, [r(&sfc, "F2.S4")]);
+        // Sync and resync.
+        let (_, t4) = sfc.transition("F2", "t4").unwrap();
+        assert_eq!(t4.to.len(), 3);
+        let (_, t12) = sfc.transition("F2", "t12").unwrap();
+        assert_eq!(
+            t12.from,
+            [r(&sfc, "F2.S6"), r(&sfc, "F2.S9"), r(&sfc, "F2.S12")]
+        );
+        assert_eq!(sfc.charts[1].initial, None);
+        assert_eq!(sfc.step(r(&sfc, "F1.S2")).supervision_ms, Some(8000));
+        assert_eq!(sfc.step(r(&sfc, "F1.S2")).flag, Signal::new("S2.X"));
+    }
+
+    #[test]
+    fn bad_charts_are_refused_at_their_place() {
+        let bad = r#"[[chart]]
+name = "F1"
+initial = "S0"
+
+[[chart.step]]
+name = "S0"
+flag = "S0.X"
+
+[[chart.step]]
+name = "S1"
+flag = "S1.X"
+
+[[chart.step]]
+name = "S7"
+flag = "S7.X"
+
+[[chart.transition]]
+id = "t1"
+from = []
+to = "S1"
+condition = "X1"
+
+[[chart.transition]]
+id = "t2"
+from = "S1"
+to = "F9.S5"
+condition = "X2 * Y9"
+"#;
+        let known = |s: &Signal| s.name() != "Y9";
+        let errors = text::parse("bad.sfc.toml", bad, &known).unwrap_err();
+        assert_eq!(
+            errors,
+            [
+                "bad.sfc.toml:19:8: transition t1 has no source step",
+                "bad.sfc.toml:26:6: transition t2 jumps to 'F9.S5': no chart 'F9'",
+                "bad.sfc.toml:27:13: transition t2: unknown contact 'Y9': no tag has this address",
+                "bad.sfc.toml:14:8: step F1.S7 is unreachable: it is not the initial step and no transition leads to it",
+            ]
+        );
+        let errors = text::parse(
+            "x.sfc.toml",
+            "[[chart]]\nname = \"F1\"\n[[chart.step]]\nname = \"S0\"\nflag = \"S0.X\"\nsupervision = \"8 parsecs\"\n",
+            &|_| true,
+        )
+        .unwrap_err();
+        assert_eq!(
+            errors,
+            [
+                "x.sfc.toml:6:15: supervision: '8 parsecs': write a duration such as 500ms, 8s, 2m or 1h",
+                "x.sfc.toml:4:8: step F1.S0 is unreachable: it is not the initial step and no transition leads to it",
+            ]
+        );
+        let errors = text::parse("y.sfc.toml", "[[chart]]\nnam = 1\n", &|_| true).unwrap_err();
+        assert!(
+            errors[0].starts_with("y.sfc.toml:2:1: unknown field `nam`"),
+            "{errors:?}"
+        );
+    }
+
+    fn checks() -> SfcChecks {
+        let comments: CommentDb = [(
+            Signal::new("%IX0.0.3"),
+            "Shuttle waiting-position sensor".to_string(),
+        )]
+        .into_iter()
+        .collect();
+        SfcChecks::new("sfc", robot(), Severity::High, comments)
+    }
+
+    fn set(c: &mut SfcChecks, s: &str, v: bool, before: Option<bool>, now: u64) -> Vec<Finding> {
+        let mut out = Vec::new();
+        c.on_change(&Signal::new(s), Some(v), before, now, &mut out);
+        out
+    }
+
+    #[test]
+    fn a_stuck_step_names_what_its_transitions_wait_for() {
+        let mut c = checks();
+        assert!(c
+            .alarms()
+            .iter()
+            .any(|d| d.id == "sfc-F1-S2" && d.kind == AlarmKind::Step));
+        set(&mut c, "%IX0.0.3", false, None, 0);
+        set(&mut c, "S2.X", true, None, 1_000);
+        let mut out = Vec::new();
+        c.advance(8_999, &mut out);
+        assert!(out.is_empty());
+        c.advance(9_000, &mut out);
+        assert_eq!(out.len(), 1);
+        let f = &out[0];
+        assert_eq!((f.id.as_str(), f.active), ("sfc-F1-S2", true));
+        assert_eq!(f.fault_type, "STUCK F1.S2");
+        assert_eq!(
+            f.message,
+            "F1.S2 (Shuttle to waiting position) stuck for 8.0 s (supervision 8.0 s): \
+             t3 (Shuttle at waiting position) waits for %IX0.0.3 = 0 (expected 1): \
+             Shuttle waiting-position sensor"
+        );
+        assert_eq!(f.culprits[0].address, Signal::new("%IX0.0.3"));
+        assert!(!f.culprits[0].value && f.culprits[0].expected);
+        // Raised once.
+        out.clear();
+        c.advance(20_000, &mut out);
+        assert!(out.is_empty());
+        // The sensor comes: the analysis follows.
+        let out = set(&mut c, "%IX0.0.3", true, Some(false), 21_000);
+        assert!(
+            out[0].active
+                && out[0]
+                    .message
+                    .ends_with("t3 (Shuttle at waiting position) can fire")
+        );
+        // The step is left: cleared.
+        let out = set(&mut c, "S2.X", false, Some(true), 21_100);
+        assert_eq!((out[0].id.as_str(), out[0].active), ("sfc-F1-S2", false));
+        // Active again, left in time: nothing.
+        set(&mut c, "S2.X", true, Some(false), 30_000);
+        set(&mut c, "S2.X", false, Some(true), 37_999);
+        let mut out = Vec::new();
+        c.advance(60_000, &mut out);
+        assert!(out.is_empty());
+    }
+
+    #[test]
+    fn a_convergence_waits_for_every_source_step() {
+        let mut c = checks();
+        for (s, v) in [
+            ("S6.X", true),
+            ("S9.X", false),
+            ("S12.X", true),
+            ("%IX0.1.3", true),
+        ] {
+            set(&mut c, s, v, None, 0);
+        }
+        let (chart, _) = c.sfc().transition("F2", "t12").unwrap();
+        let i = c.sfc().charts[chart]
+            .transitions
+            .iter()
+            .position(|t| t.id == "t12")
+            .unwrap();
+        let waits: Vec<String> = c.criteria(chart, i).iter().map(|k| k.to_string()).collect();
+        assert_eq!(waits, ["S9.X = 0 (expected 1)"]);
+    }
+}

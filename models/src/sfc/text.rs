@@ -1,0 +1,444 @@
+//! The text form of charts: TOML, written by hand or generated.
+//!
+//! ```toml
+//! [[chart]]
+//! name = "F1"
+//! initial = "S0"
+//! # step_word = "D300"        # steps by number in this word instead of flags
+//!
+//! [[chart.step]]
+//! name = "S2"
+//! flag = "M0.02"              # the PLC's step flag (S2.X); or number = 2
+//! supervision = "8s"          # stuck when active longer (ms, s, m, h)
+//! comment = "Shuttle to waiting position"
+//!
+//! [[chart.transition]]
+//! id = "t3"
+//! from = "S2"                 # or ["S6", "S9"]: simultaneous convergence
+//! to = "F2.S5"                # or ["S5", "S8"]: simultaneous divergence;
+//!                             # CHART.STEP jumps to another chart
+//! condition = "X0.03"         # paper notation over tag addresses
+//! comment = "Shuttle at waiting position"
+//! ```
+//!
+//! Every problem is reported as `FILE:LINE:COL: what`, all of them (up to
+//! [`MAX_ERRORS`]), not just the first.
+
+use std::collections::{HashMap, HashSet};
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use super::{Chart, Sfc, Step, StepRef, Transition};
+use crate::expr::Expr;
+use crate::signal::Signal;
+
+/// At most this many problems are listed.
+pub const MAX_ERRORS: usize = 20;
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFile {
+    #[serde(default)]
+    chart: Vec<RawChart>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawChart {
+    name: Spanned<String>,
+    initial: Option<Spanned<String>>,
+    step_word: Option<Spanned<String>>,
+    #[serde(default)]
+    step: Vec<RawStep>,
+    #[serde(default)]
+    transition: Vec<RawTransition>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawStep {
+    name: Spanned<String>,
+    flag: Option<Spanned<String>>,
+    number: Option<Spanned<i64>>,
+    supervision: Option<Spanned<String>>,
+    comment: Option<String>,
+}
+
+#[derive(Deserialize)]
+#[serde(untagged)]
+enum OneOrMany {
+    One(String),
+    Many(Vec<String>),
+}
+
+impl OneOrMany {
+    fn items(&self) -> Vec<&str> {
+        match self {
+            OneOrMany::One(s) => vec![s.as_str()],
+            OneOrMany::Many(v) => v.iter().map(String::as_str).collect(),
+        }
+    }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTransition {
+    id: Spanned<String>,
+    from: Spanned<OneOrMany>,
+    to: Spanned<OneOrMany>,
+    condition: Spanned<String>,
+    comment: Option<String>,
+}
+
+/// Parses the charts of `text` (the file `file`); `known` says whether a
+/// signal is one of the cell's tags (comparisons included), so that an
+/// unknown contact is an error at its place.
+///
+/// # Errors
+/// Every problem found, each `FILE:LINE:COL: what`.
+pub fn parse(file: &str, text: &str, known: &dyn Fn(&Signal) -> bool) -> Result<Sfc, Vec<String>> {
+    let mut errors = Errors {
+        file,
+        text,
+        list: Vec::new(),
+        more: 0,
+    };
+    let raw: RawFile = match toml::from_str(text) {
+        Ok(r) => r,
+        Err(e) => {
+            let at = e.span().map_or(0, |s| s.start);
+            errors.at(at, e.message().trim_end().to_string());
+            return Err(errors.finish());
+        }
+    };
+    if raw.chart.is_empty() {
+        errors.at(0, "no chart: write at least one [[chart]]".into());
+    }
+    // Charts and steps by name first, so that jumps can point forward.
+    let mut charts: Vec<Chart> = Vec::new();
+    let mut names: HashMap<String, usize> = HashMap::new();
+    for c in &raw.chart {
+        if names
+            .insert(c.name.get_ref().clone(), charts.len())
+            .is_some()
+        {
+            errors.at(
+                c.name.span().start,
+                format!("chart '{}' is defined twice", c.name.get_ref()),
+            );
+        }
+        let mut steps = Vec::new();
+        let mut seen = HashSet::new();
+        for s in &c.step {
+            let name = s.name.get_ref();
+            if !seen.insert(name.clone()) {
+                errors.at(
+                    s.name.span().start,
+                    format!(
+                        "step '{name}' is defined twice in chart {}",
+                        c.name.get_ref()
+                    ),
+                );
+            }
+            let flag = step_flag(c, s, known, &mut errors);
+            let supervision_ms = s.supervision.as_ref().and_then(|d| {
+                duration_ms(d.get_ref())
+                    .map_err(|why| errors.at(d.span().start, format!("supervision: {why}")))
+                    .ok()
+            });
+            steps.push(Step {
+                name: name.clone(),
+                flag: flag.unwrap_or_else(|| Signal::new(name)),
+                supervision_ms,
+                comment: s.comment.clone(),
+            });
+        }
+        let initial = c.initial.as_ref().and_then(|i| {
+            let found = steps.iter().position(|s| &s.name == i.get_ref());
+            if found.is_none() {
+                errors.at(
+                    i.span().start,
+                    format!(
+                        "initial step '{}' is no step of chart {}",
+                        i.get_ref(),
+                        c.name.get_ref()
+                    ),
+                );
+            }
+            found
+        });
+        charts.push(Chart {
+            name: c.name.get_ref().clone(),
+            initial,
+            steps,
+            transitions: Vec::new(),
+        });
+    }
+    let find = |chart: usize, text: &str| -> Result<StepRef, String> {
+        let (c, step) = match text.split_once('.') {
+            Some((c, step)) => match names.get(c) {
+                Some(&c) => (c, step),
+                None => return Err(format!("no chart '{c}'")),
+            },
+            None => (chart, text),
+        };
+        charts[c]
+            .steps
+            .iter()
+            .position(|s| s.name == step)
+            .map(|step| StepRef { chart: c, step })
+            .ok_or_else(|| format!("no step '{step}' in chart {}", charts[c].name))
+    };
+    let mut transitions: Vec<Vec<Transition>> = vec![Vec::new(); charts.len()];
+    for (ci, c) in raw.chart.iter().enumerate() {
+        let mut ids = HashSet::new();
+        for t in &c.transition {
+            let id = t.id.get_ref();
+            if !ids.insert(id.clone()) {
+                errors.at(
+                    t.id.span().start,
+                    format!(
+                        "transition '{id}' is defined twice in chart {}",
+                        c.name.get_ref()
+                    ),
+                );
+            }
+            let mut from = Vec::new();
+            let sources = t.from.get_ref().items();
+            if sources.is_empty() {
+                errors.at(
+                    t.from.span().start,
+                    format!("transition {id} has no source step"),
+                );
+            }
+            for s in sources {
+                match find(ci, s) {
+                    Ok(r) if r.chart == ci => from.push(r),
+                    Ok(_) => errors.at(
+                        t.from.span().start,
+                        format!(
+                            "transition {id}: '{s}' is a step of another chart; a transition leaves steps of its own chart ({})",
+                            c.name.get_ref()
+                        ),
+                    ),
+                    Err(why) => errors.at(t.from.span().start, format!("transition {id} leaves '{s}': {why}")),
+                }
+            }
+            let mut to = Vec::new();
+            let targets = t.to.get_ref().items();
+            if targets.is_empty() {
+                errors.at(
+                    t.to.span().start,
+                    format!("transition {id} has no target step"),
+                );
+            }
+            for s in targets {
+                match find(ci, s) {
+                    Ok(r) => to.push(r),
+                    Err(why) if s.contains('.') => errors.at(
+                        t.to.span().start,
+                        format!("transition {id} jumps to '{s}': {why}"),
+                    ),
+                    Err(why) => errors.at(
+                        t.to.span().start,
+                        format!("transition {id} goes to '{s}': {why}"),
+                    ),
+                }
+            }
+            let condition = match Expr::parse(t.condition.get_ref()) {
+                Ok(e) => {
+                    for s in e.signals() {
+                        if !known(&s) {
+                            errors.at(
+                                t.condition.span().start,
+                                format!("transition {id}: unknown contact '{s}': no tag has this address"),
+                            );
+                        }
+                    }
+                    e
+                }
+                Err(why) => {
+                    errors.at(
+                        t.condition.span().start,
+                        format!("transition {id}: condition: {why}"),
+                    );
+                    Expr::Const(false)
+                }
+            };
+            transitions[ci].push(Transition {
+                id: id.clone(),
+                from,
+                to,
+                condition,
+                comment: t.comment.clone(),
+            });
+        }
+    }
+    for (c, ts) in charts.iter_mut().zip(transitions) {
+        c.transitions = ts;
+    }
+    // Every step is the initial step of its chart or the target of some
+    // transition.
+    let mut reached: HashSet<StepRef> = charts
+        .iter()
+        .enumerate()
+        .filter_map(|(c, chart)| chart.initial.map(|step| StepRef { chart: c, step }))
+        .collect();
+    for chart in &charts {
+        for t in &chart.transitions {
+            reached.extend(t.to.iter().copied());
+        }
+    }
+    for (ci, c) in raw.chart.iter().enumerate() {
+        for (si, s) in c.step.iter().enumerate() {
+            if !reached.contains(&StepRef {
+                chart: ci,
+                step: si,
+            }) {
+                errors.at(
+                    s.name.span().start,
+                    format!(
+                        "step {}.{} is unreachable: it is not the initial step and no transition leads to it",
+                        c.name.get_ref(),
+                        s.name.get_ref()
+                    ),
+                );
+            }
+        }
+    }
+    if errors.list.is_empty() {
+        Ok(Sfc { charts })
+    } else {
+        Err(errors.finish())
+    }
+}
+
+/// The flag of step `s`: its `flag`, or `step_word == number`.
+fn step_flag(
+    c: &RawChart,
+    s: &RawStep,
+    known: &dyn Fn(&Signal) -> bool,
+    errors: &mut Errors<'_>,
+) -> Option<Signal> {
+    let at = s.name.span().start;
+    let (text, at) = match (&s.flag, &s.number, &c.step_word) {
+        (Some(f), None, _) => (f.get_ref().clone(), f.span().start),
+        (None, Some(n), Some(w)) => (
+            format!("{} == {}", w.get_ref(), n.get_ref()),
+            n.span().start,
+        ),
+        (None, Some(n), None) => {
+            errors.at(
+                n.span().start,
+                format!(
+                    "step {}: number needs the chart's step_word",
+                    s.name.get_ref()
+                ),
+            );
+            return None;
+        }
+        (Some(f), Some(_), _) => {
+            errors.at(
+                f.span().start,
+                format!("step {}: give flag or number, not both", s.name.get_ref()),
+            );
+            return None;
+        }
+        (None, None, _) => {
+            errors.at(
+                at,
+                format!(
+                    "step {}: give its flag (the PLC's step flag) or its number in step_word",
+                    s.name.get_ref()
+                ),
+            );
+            return None;
+        }
+    };
+    match Expr::parse(&text) {
+        Ok(Expr::Lit(signal, false)) => {
+            if !known(&signal) {
+                errors.at(
+                    at,
+                    format!(
+                        "step {}: unknown contact '{signal}': no tag has this address",
+                        s.name.get_ref()
+                    ),
+                );
+            }
+            Some(signal)
+        }
+        Ok(_) => {
+            errors.at(
+                at,
+                format!(
+                    "step {}: the flag is one contact, not '{text}'",
+                    s.name.get_ref()
+                ),
+            );
+            None
+        }
+        Err(why) => {
+            errors.at(at, format!("step {}: flag: {why}", s.name.get_ref()));
+            None
+        }
+    }
+}
+
+/// `500ms`, `8s`, `1.5s`, `2m`, `1h` in ms.
+pub fn duration_ms(text: &str) -> Result<u64, String> {
+    let t = text.trim();
+    let split = t
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .unwrap_or(t.len());
+    let (number, unit) = t.split_at(split);
+    let n: f64 = number
+        .parse()
+        .map_err(|_| format!("'{text}': write a duration such as 500ms, 8s, 2m or 1h"))?;
+    let scale = match unit.trim() {
+        "ms" => 1.0,
+        "s" => 1000.0,
+        "m" | "min" => 60_000.0,
+        "h" => 3_600_000.0,
+        _ => {
+            return Err(format!(
+                "'{text}': write a duration such as 500ms, 8s, 2m or 1h"
+            ))
+        }
+    };
+    let ms = n * scale;
+    if !(1.0..=1e12).contains(&ms) {
+        return Err(format!("'{text}': between 1 ms and about 30 years"));
+    }
+    Ok(ms.round() as u64)
+}
+
+struct Errors<'a> {
+    file: &'a str,
+    text: &'a str,
+    list: Vec<String>,
+    more: usize,
+}
+
+impl Errors<'_> {
+    fn at(&mut self, offset: usize, what: String) {
+        if self.list.len() >= MAX_ERRORS {
+            self.more += 1;
+            return;
+        }
+        let before = self.text.get(..offset).unwrap_or(self.text);
+        let line = before.matches('\n').count() + 1;
+        let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+        self.list
+            .push(format!("{}:{line}:{col}: {what}", self.file));
+    }
+
+    fn finish(mut self) -> Vec<String> {
+        if self.more > 0 {
+            self.list
+                .push(format!("{}: and {} more problems", self.file, self.more));
+        }
+        self.list
+    }
+}
