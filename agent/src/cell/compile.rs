@@ -1,10 +1,13 @@
 //! From a validated configuration to a running engine: the check sets
-//! (switching functions, transition timers, limit checks) bound to the cell's tags.
+//! (switching functions, transition timers, limit checks, chart supervision)
+//! bound to the cell's tags.
 //! `cellwatch validate` calls exactly this, so a configuration that
 //! validates starts.
 
+use cellwatch_models::comments::CommentDb;
 use cellwatch_models::engine::{CellEngine, CheckSet, EngineError, SwitchingChecks};
 use cellwatch_models::limit::LimitChecks;
+use cellwatch_models::sfc::SfcChecks;
 use cellwatch_models::timer::checks::{TimerCheckError, TimerChecks};
 
 use crate::config::CellConfig;
@@ -44,6 +47,21 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
     }
     if !config.limits.is_empty() {
         sets.push(Box::new(LimitChecks::new(config.limits.clone())));
+    }
+    if !config.sfc.is_empty() {
+        let comments: CommentDb = config
+            .tags
+            .iter()
+            .filter_map(|t| Some((t.address.clone(), t.comment.clone()?)))
+            .collect();
+        for s in &config.sfc {
+            sets.push(Box::new(SfcChecks::new(
+                &s.id,
+                s.sfc.clone(),
+                s.severity,
+                comments.clone(),
+            )));
+        }
     }
     let engine = config.delays.iter().fold(
         CellEngine::new(

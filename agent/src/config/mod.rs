@@ -325,6 +325,17 @@ pub struct TimerCheck {
     pub severity: Severity,
 }
 
+/// Step supervision of sequential function charts (paper 004).
+#[derive(Debug, Clone)]
+pub struct SfcCheck {
+    /// Alarm id prefix (`<id>-<chart>-<step>`).
+    pub id: String,
+    /// The charts, their signals the cell's tag addresses.
+    pub sfc: cellwatch_models::sfc::Sfc,
+    /// Severity of its stuck-step alarms.
+    pub severity: Severity,
+}
+
 /// A validated cell configuration.
 #[derive(Clone)]
 pub struct CellConfig {
@@ -367,6 +378,8 @@ pub struct CellConfig {
     pub order_target: Option<usize>,
     /// Limit checks on numeric tags.
     pub limits: Vec<LimitCheck>,
+    /// Step supervision of charts.
+    pub sfc: Vec<SfcCheck>,
     /// Alarm delays: alarm id, on-delay and off-delay, ms.
     pub delays: Vec<(String, u64, u64)>,
     /// Things worth saying at start (security off, ...).
@@ -787,6 +800,7 @@ impl Validator<'_> {
                 severity,
             });
         }
+        let sfc = self.sfc(raw.checks.sfc, &mut ids, &by_address);
         let mut limits = self.limits(raw.checks.limit, &mut ids);
         for l in &mut limits {
             if let Some(t) = by_address.get(&l.tag) {
@@ -972,6 +986,7 @@ impl Validator<'_> {
             order_item,
             order_target,
             limits,
+            sfc,
             delays,
             warnings: Vec::new(),
         })
@@ -1619,6 +1634,79 @@ impl Validator<'_> {
             self.problem(text.span(), key, problems.join("; "));
             None
         }
+    }
+
+    /// The charts under supervision (`[[checks.sfc]]`).
+    fn sfc(
+        &mut self,
+        raw: Vec<raw::RawSfc>,
+        ids: &mut HashSet<String>,
+        tags: &HashMap<Signal, usize>,
+    ) -> Vec<SfcCheck> {
+        let mut out = Vec::new();
+        for (i, c) in raw.into_iter().enumerate() {
+            let key = format!("checks.sfc[{i}]");
+            if !ids.insert(c.id.get_ref().clone()) {
+                self.problem(
+                    c.id.span(),
+                    &format!("{key}.id"),
+                    format!("'{}' is used twice", c.id.get_ref()),
+                );
+            }
+            let severity = self.parsed(
+                c.severity.clone(),
+                &format!("{key}.severity"),
+                Severity::High,
+            );
+            let path = self.path(c.charts.get_ref());
+            let Some(text) =
+                self.read_text(c.charts.span(), &format!("{key}.charts"), &path, "charts")
+            else {
+                continue;
+            };
+            // A contact is known when it is a tag's bit or a comparison of
+            // numeric tags, as in any other condition.
+            let kinds = &self.kinds;
+            let known = |s: &Signal| {
+                let canonical = canonical_expr(Expr::Lit(s.clone(), false));
+                canonical
+                    .signals()
+                    .iter()
+                    .all(|s| match Comparison::of_signal(s) {
+                        Some(cmp) => std::iter::once(&cmp.lhs)
+                            .chain(match &cmp.rhs {
+                                Operand::Tag(t) => Some(t),
+                                Operand::Const(_) => None,
+                            })
+                            .all(|a| kinds.get(a).is_some_and(|(t, _)| t.is_numeric())),
+                        None => tags.contains_key(s) && !matches!(kinds.get(s), Some((_, false))),
+                    })
+            };
+            match cellwatch_models::sfc::text::parse(&path.display().to_string(), &text, &known) {
+                Ok(mut sfc) => {
+                    for chart in &mut sfc.charts {
+                        for step in &mut chart.steps {
+                            if let Expr::Lit(s, _) =
+                                canonical_expr(Expr::Lit(step.flag.clone(), false))
+                            {
+                                step.flag = s;
+                            }
+                        }
+                        for t in &mut chart.transitions {
+                            t.condition = canonical_expr(t.condition.clone());
+                        }
+                    }
+                    out.push(SfcCheck {
+                        id: c.id.into_inner(),
+                        sfc,
+                        severity,
+                    });
+                }
+                // The chart file's own positions.
+                Err(errors) => self.problems.extend(errors),
+            }
+        }
+        out
     }
 
     /// The limit checks.

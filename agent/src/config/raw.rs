@@ -124,6 +124,16 @@ pub(crate) struct RawChecks {
     pub(crate) timers: Vec<RawTimers>,
     #[serde(default)]
     pub(crate) limit: Vec<RawLimit>,
+    #[serde(default)]
+    pub(crate) sfc: Vec<RawSfc>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawSfc {
+    pub(crate) id: Spanned<String>,
+    pub(crate) charts: Spanned<String>,
+    pub(crate) severity: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -422,3 +422,54 @@ fn types_are_checked_where_tags_are_used() {
          cell.toml:57:11: production.counter: D1 is a Double: a counter must be an integer tag without a bit"
     );
 }
+
+/// The cell of the robot charts (`config/robot/robot.sfc.toml`): a tag for
+/// every step flag and input the charts read, `drop` of them left out.
+fn robot_cell(drop: &str) -> (String, Mem) {
+    let charts = include_str!("../../../config/robot/robot.sfc.toml");
+    let sfc = cellwatch_models::sfc::text::parse("robot.sfc.toml", charts, &|_| true).unwrap();
+    let mut signals = std::collections::BTreeSet::new();
+    for chart in &sfc.charts {
+        signals.extend(chart.steps.iter().map(|s| s.flag.clone()));
+        for t in &chart.transitions {
+            signals.extend(t.condition.signals());
+        }
+    }
+    let mut text = "[cell]\nid = \"robot\"\n\n[opcua]\nendpoint = \"opc.tcp://127.0.0.1:4840/\"\n\n[zenoh.tls]\nca = \"ca.pem\"\ncert = \"a.pem\"\nkey = \"a.key\"\n".to_string();
+    for s in signals.iter().filter(|s| s.name() != drop) {
+        text += &format!(
+            "\n[[tags]]\nname = \"{0}\"\nnode_id = \"nsu=urn:plc;s={0}\"\naddress = \"{0}\"\n",
+            s.name()
+        );
+    }
+    text +=
+        "\n[[checks.sfc]]\nid = \"sfc\"\ncharts = \"robot.sfc.toml\"\nseverity = \"critical\"\n";
+    let mut files = mem();
+    files.0.insert(
+        PathBuf::from("base/robot.sfc.toml"),
+        charts.as_bytes().to_vec(),
+    );
+    (text, files)
+}
+
+#[test]
+fn charts_under_supervision_bind_to_the_tags() {
+    let (text, files) = robot_cell("");
+    let c = parse("cell.toml", &text, Path::new("base"), &files).unwrap();
+    assert_eq!(c.sfc.len(), 1);
+    assert_eq!(c.sfc[0].severity, Severity::Critical);
+    assert_eq!(c.sfc[0].sfc.charts.len(), 2);
+    // And the engine takes them: every supervised step can be raised.
+    let engine = crate::cell::compile::engine(&c).unwrap();
+    drop(engine);
+    // A chart reading a contact no tag has is refused at the chart's line.
+    let (text, files) = robot_cell("%IX0.0.3");
+    let e = parse("cell.toml", &text, Path::new("base"), &files)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("base/robot.sfc.toml:")
+            && e.contains("transition t3: unknown contact '%IX0.0.3': no tag has this address"),
+        "{e}"
+    );
+}
