@@ -366,4 +366,59 @@ condition = "X2 * Y9"
         let waits: Vec<String> = c.criteria(chart, i).iter().map(|k| k.to_string()).collect();
         assert_eq!(waits, ["S9.X = 0 (expected 1)"]);
     }
+
+    #[test]
+    fn through_the_engine_a_stuck_step_is_a_fault_with_its_values_captured() {
+        use crate::engine::{CellEngine, EngineEvent, MachineState, Reading, StateRules, Tag};
+        let sfc = robot();
+        let mut signals = std::collections::BTreeSet::new();
+        for (_, s) in sfc.steps() {
+            signals.insert(s.flag.clone());
+        }
+        for c in &sfc.charts {
+            for t in &c.transitions {
+                signals.extend(t.condition.signals());
+            }
+        }
+        let tags: Vec<Tag> = signals
+            .iter()
+            .map(|s| Tag {
+                name: s.name().to_string(),
+                address: s.clone(),
+            })
+            .collect();
+        let index = |name: &str| tags.iter().position(|t| t.address.name() == name).unwrap();
+        let (s2, t3) = (index("S2.X"), index("%IX0.0.3"));
+        let mut e = CellEngine::new(
+            "robot",
+            tags.clone(),
+            vec![Box::new(checks())],
+            StateRules::default(),
+        )
+        .unwrap();
+        e.on_connection(true, 0);
+        for i in 0..tags.len() {
+            e.on_reading(i, Reading::Good(i == s2), 1_000, 1_000);
+        }
+        assert!(e.advance(8_999).events.is_empty());
+        let step = e.advance(9_000);
+        let raised = step.events.iter().any(|ev| {
+            matches!(ev, EngineEvent::Alarm { alarm, .. } if alarm.id == "sfc-F1-S2" && alarm.active)
+        });
+        assert!(raised, "{:?}", step.events);
+        assert_eq!(
+            e.state(),
+            &MachineState::Fault {
+                fault_type: "STUCK F1.S2".into(),
+                element: Some("%IX0.0.3".into())
+            }
+        );
+        let captured = e.last_fault().unwrap();
+        assert_eq!(captured.alarm, "sfc-F1-S2");
+        assert_eq!(captured.values[s2], Some(crate::engine::Value::Bool(true)));
+        // The shuttle arrives and the PLC moves on: cleared.
+        e.on_reading(t3, Reading::Good(true), 9_500, 9_500);
+        let ev = e.on_reading(s2, Reading::Good(false), 9_600, 9_600).events;
+        assert!(ev.iter().any(|ev| matches!(ev, EngineEvent::Alarm { alarm, .. } if alarm.id == "sfc-F1-S2" && !alarm.active)));
+    }
 }
