@@ -199,15 +199,13 @@ async fn a_scripted_alarm_day_gives_the_kpis_and_the_report_computed_by_hand() {
     drop(script);
     agent.stop().await;
 
-    let run = crate::util::cellwatch(&[
-        "report",
-        "alarms",
-        "--date",
-        "2026-03-02",
-        "--db",
-        db.to_str().unwrap(),
-        "--json",
-    ]);
+    let report = |format: Option<&str>| {
+        let mut args = vec!["report", "alarms", "--date", "2026-03-02", "--db"];
+        args.push(db.to_str().unwrap());
+        args.extend(format);
+        crate::util::cellwatch(&args)
+    };
+    let run = report(Some("--json"));
     assert_eq!(run.code, 0, "{}", run.stderr);
     let r: serde_json::Value = serde_json::from_str(&run.stdout).unwrap();
     let close = |v: &serde_json::Value, x: f64| (v.as_f64().unwrap() - x).abs() < 1e-9;
@@ -257,14 +255,7 @@ async fn a_scripted_alarm_day_gives_the_kpis_and_the_report_computed_by_hand() {
     assert_eq!(verdicts[1].1, Some(false), "peak 12 > 10");
     assert_eq!(verdicts[2].1, Some(false), "1.4 % of intervals in flood");
     // The same as a table and as CSV.
-    let table = crate::util::cellwatch(&[
-        "report",
-        "alarms",
-        "--date",
-        "2026-03-02",
-        "--db",
-        db.to_str().unwrap(),
-    ]);
+    let table = report(None);
     assert_eq!(table.code, 0, "{}", table.stderr);
     assert!(
         table.stdout.contains("28 alarms in 144 intervals")
@@ -273,15 +264,7 @@ async fn a_scripted_alarm_day_gives_the_kpis_and_the_report_computed_by_hand() {
         "{}",
         table.stdout
     );
-    let csv = crate::util::cellwatch(&[
-        "report",
-        "alarms",
-        "--date",
-        "2026-03-02",
-        "--db",
-        db.to_str().unwrap(),
-        "--csv",
-    ]);
+    let csv = report(Some("--csv"));
     assert!(
         csv.stdout
             .lines()

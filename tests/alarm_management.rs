@@ -3,26 +3,9 @@
 //! count, the shelf and the removal survive a restart, an alarm out of
 //! service is not raised, and back in service it is if its condition holds.
 
-use cellwatch::operator::{Action, Command as OperatorCommand};
+use cellwatch::operator::Action;
 
-use crate::spawned::{alarm, kim, operators_file, scrape, send, snapshot_until, start};
-
-/// Kim's signed command with a value and a reason.
-fn signed_with(action: Action, alarm: &str, value: Option<&str>, reason: Option<&str>) -> String {
-    let mut c = OperatorCommand {
-        action,
-        alarm: alarm.into(),
-        tag: None,
-        value: value.map(str::to_string),
-        reason: reason.map(str::to_string),
-        operator: "kim".into(),
-        nonce: cellwatch::operator::nonce(),
-        issued_at: cellwatch::clock::now_ms(),
-        signature: String::new(),
-    };
-    c.sign("m01ps0004", &kim());
-    serde_json::to_string(&c).unwrap()
-}
+use crate::spawned::{alarm, operators_file, scrape, send, signed_with, snapshot_until, start};
 
 /// The value of `metric` (no labels besides the cell) in `scrape`.
 fn gauge(scrape: &str, metric: &str) -> f64 {

@@ -220,12 +220,22 @@ pub(crate) fn alarm<'a>(snap: &'a serde_json::Value, id: &str) -> Option<&'a ser
 }
 
 pub(crate) fn signed(action: Action, alarm: &str) -> String {
+    signed_with(action, alarm, None, None)
+}
+
+/// Kim's signed command with a value and a reason.
+pub(crate) fn signed_with(
+    action: Action,
+    alarm: &str,
+    value: Option<&str>,
+    reason: Option<&str>,
+) -> String {
     let mut c = OperatorCommand {
         action,
         alarm: alarm.into(),
         tag: None,
-        value: None,
-        reason: None,
+        value: value.map(str::to_string),
+        reason: reason.map(str::to_string),
         operator: "kim".into(),
         nonce: cellwatch::operator::nonce(),
         issued_at: cellwatch::clock::now_ms(),
