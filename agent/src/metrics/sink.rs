@@ -5,10 +5,9 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use cellwatch_models::alarm::{AlarmKind, Severity, Transition};
+use cellwatch_models::kpi::LiveKpis;
 use futures_util::future::BoxFuture;
 use futures_util::FutureExt;
-
-use cellwatch_models::kpi::LiveKpis;
 
 use super::Metrics;
 use crate::cell::{CellStep, Input};
