@@ -17,8 +17,11 @@
 //! criteria analysis of every transition leaving it — the operands that
 //! keep it from firing, with values, expected values and comments.
 //!
-//! Charts are read from a TOML text form ([`text::parse`]).
+//! Charts are read from a TOML text form ([`text::parse`]). [`run::Runner`]
+//! runs them as a PLC does, force switch included (eq. (1)-(4) of paper
+//! 004), for the simulated cell.
 
+pub mod run;
 pub mod supervise;
 pub mod text;
 
