@@ -23,6 +23,7 @@ mod operators;
 mod report;
 mod restart;
 mod sf;
+mod sfc;
 mod spawned;
 mod timers;
 mod typed;

@@ -35,6 +35,11 @@ enum Command {
     /// paper's notation (`*` AND, `+` OR, `-` NOT) and in words, followed by
     /// its step blocks SSF1..SSFn, bottom-up.
     Sf(SfArgs),
+    /// Sequential function charts (paper 004) in their TOML form: check a
+    /// chart file and list its charts, steps and transitions, or print what
+    /// the PLC program needs for forcing transitions.
+    #[command(subcommand)]
+    Sfc(SfcCommand),
     /// Explain a fault: the coil's value, every step's value, the fault step
     /// and the contacts that caused it.
     ///
@@ -678,6 +683,32 @@ pub(crate) struct ProgramArgs {
     pub(crate) json: bool,
 }
 
+#[derive(Debug, Subcommand)]
+pub(crate) enum SfcCommand {
+    /// Check a chart file (every problem with file, line and column) and
+    /// list its charts: steps with flag, supervision and comment, and
+    /// transitions with source, target and condition.
+    Check {
+        /// The chart file (TOML).
+        charts: PathBuf,
+    },
+    /// For each transition named, the term paper 004's eq. (3)/(4) adds so
+    /// that the force switch can fire it while its condition holds —
+    /// `(S14 · t15) + (ForceSW · t15)` — as IEC 61131-3 ST and IL, for the
+    /// engineer to add to the PLC program.
+    Patch {
+        /// The chart file (TOML).
+        charts: PathBuf,
+        /// The force switch's address in the PLC (`%IX0.3.1`).
+        #[arg(long, value_name = "ADDRESS")]
+        force_switch: String,
+        /// A transition to make forcible, `CHART.ID` (`F1.t3`); repeat for
+        /// several.
+        #[arg(long = "transition", value_name = "CHART.ID", required = true)]
+        transitions: Vec<String>,
+    },
+}
+
 #[derive(Debug, clap::Args)]
 pub(crate) struct SfArgs {
     #[command(flatten)]
@@ -803,6 +834,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::Discover(args) => commands::discover::run(&args, out).await,
             // Dispatched synchronously by `run`; never sent here.
             Command::Sf(_)
+            | Command::Sfc(_)
             | Command::Explain(_)
             | Command::Validate(_)
             | Command::Report(_)
@@ -837,6 +869,7 @@ pub fn run(
     };
     let result = match cli.command {
         Command::Sf(args) => commands::sf::run(&args, out, err),
+        Command::Sfc(command) => commands::sfc::run(&command, out),
         Command::Explain(args) => commands::explain::run(&args, out, err),
         Command::Validate(args) => commands::agent::validate(&args, out),
         Command::Report(args) => commands::report::run(&args, out),

@@ -8,6 +8,7 @@ pub(crate) mod keygen;
 pub(crate) mod pki;
 pub(crate) mod report;
 pub(crate) mod sf;
+pub(crate) mod sfc;
 pub(crate) mod simulate;
 pub(crate) mod subscribers;
 pub(crate) mod timers;

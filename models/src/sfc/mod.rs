@@ -21,6 +21,7 @@
 //! runs them as a PLC does, force switch included (eq. (1)-(4) of paper
 //! 004), for the simulated cell.
 
+pub mod patch;
 pub mod run;
 pub mod supervise;
 pub mod text;
