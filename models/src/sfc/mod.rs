@@ -136,35 +136,29 @@ impl Sfc {
         })
     }
 
-    /// Whether transition `t` may fire at these values (eq. (1)/(2) of
-    /// paper 004: every source step active and the condition true);
-    /// `None` while a value it needs is unknown.
-    pub fn enabled(
-        &self,
-        t: &Transition,
-        value: &impl Fn(&Signal) -> Option<bool>,
-    ) -> Option<bool> {
-        let mut terms: Vec<Expr> = t
+    /// What transition `t` needs to fire (eq. (1)/(2) of paper 004): every
+    /// source step's flag and its condition, one conjunction in the order
+    /// the equations are written (`S2.X * t3`).
+    pub fn needs(&self, t: &Transition) -> Expr {
+        and(t
             .from
             .iter()
             .map(|&r| Expr::Lit(self.step(r).flag.clone(), false))
-            .collect();
-        terms.push(t.condition.clone());
-        crate::switching::SwitchingFunction::from_expr(Signal::new("enabled"), &Expr::And(terms))
-            .certain(value)
+            .chain(std::iter::once(t.condition.clone())))
     }
+}
 
-    /// Whether transition `t`'s condition holds (what a forced transition
-    /// needs, eq. (3)/(4): the force switch stands in for the source
-    /// steps, never for the condition); `None` while unknown.
-    pub fn condition_holds(
-        &self,
-        t: &Transition,
-        value: &impl Fn(&Signal) -> Option<bool>,
-    ) -> Option<bool> {
-        crate::switching::SwitchingFunction::from_expr(Signal::new("condition"), &t.condition)
-            .certain(value)
+/// The conjunction of `terms`, a conjunction among them merged in, in
+/// order.
+pub(crate) fn and(terms: impl IntoIterator<Item = Expr>) -> Expr {
+    let mut out = Vec::new();
+    for t in terms {
+        match t {
+            Expr::And(inner) => out.extend(inner),
+            other => out.push(other),
+        }
     }
+    Expr::And(out)
 }
 
 #[cfg(test)]

@@ -6,7 +6,7 @@
 
 use std::fmt::Write;
 
-use super::{Sfc, Transition};
+use super::{and, Sfc, Transition};
 use crate::expr::Expr;
 use crate::signal::Signal;
 use crate::value::{CmpOp, Comparison, Operand};
@@ -49,19 +49,6 @@ pub fn patch(sfc: &Sfc, chart: usize, t: &Transition, force: &Signal) -> String 
         let _ = writeln!(out, "{l}");
     }
     out
-}
-
-/// The conjunction of `terms`, a conjunction among them merged in (in
-/// order: the program reads as the equations are written).
-fn and(terms: impl IntoIterator<Item = Expr>) -> Expr {
-    let mut out = Vec::new();
-    for t in terms {
-        match t {
-            Expr::And(inner) => out.extend(inner),
-            other => out.push(other),
-        }
-    }
-    Expr::And(out)
 }
 
 fn cmp_st(op: CmpOp) -> &'static str {

@@ -16,7 +16,6 @@ use crate::alarm::{AlarmKind, Severity};
 use crate::comments::CommentDb;
 use crate::engine::{CheckSet, Declared, Finding};
 use crate::explain::{explain_partial, Culprit, Polarity};
-use crate::expr::Expr;
 use crate::signal::Signal;
 use crate::switching::SwitchingFunction;
 
@@ -162,7 +161,7 @@ impl SfcChecks {
                         .collect::<Vec<_>>()
                         .join(", ")
                 )
-            } else if self.sfc.enabled(t, &value) == Some(true) {
+            } else if self.needs[&(r.chart, i)].certain(value) == Some(true) {
                 format!("{}{about} can fire", t.id)
             } else {
                 format!("{}{about}: operands unknown", t.id)
@@ -192,19 +191,12 @@ fn alarm_id(id: &str, sfc: &Sfc, r: StepRef) -> String {
     format!("{id}-{}-{}", sfc.charts[r.chart].name, sfc.step(r).name)
 }
 
-/// What transition `i` of chart `c` needs to fire: its source steps
-/// active and its condition.
+/// What transition `i` of chart `c` needs to fire, compiled.
 fn needs_of(sfc: &Sfc, c: usize, i: usize) -> SwitchingFunction {
     let t = &sfc.charts[c].transitions[i];
-    let mut terms: Vec<Expr> = t
-        .from
-        .iter()
-        .map(|&r| Expr::Lit(sfc.step(r).flag.clone(), false))
-        .collect();
-    terms.push(t.condition.clone());
     SwitchingFunction::from_expr(
         Signal::new(&format!("{}.{}", sfc.charts[c].name, t.id)),
-        &Expr::And(terms),
+        &sfc.needs(t),
     )
 }
 
