@@ -15,7 +15,7 @@ fn check_lists_the_robot_charts_and_refuses_a_bad_one_with_its_place() {
     );
     assert!(
         r.stdout
-            .contains("transition t4    F2.S4 -> F2.S5 + F2.S8 + F2.S11  when %IX0.0.4"),
+            .contains("transition t3    F1.S2 -> F2.S5 + F2.S8 + F2.S11  when %IX0.0.3"),
         "{}",
         r.stdout
     );

@@ -21,6 +21,7 @@
 //! runs them as a PLC does, force switch included (eq. (1)-(4) of paper
 //! 004), for the simulated cell.
 
+pub mod force;
 pub mod patch;
 pub mod run;
 pub mod supervise;
@@ -203,12 +204,13 @@ mod tests {
             .map(|t| t.id.as_str())
             .collect();
         assert_eq!(leaving, ["t2", "t20"]);
-        // t3 jumps to the other chart.
+        // t3 jumps to the other chart, starting three steps at once (sync).
         let (_, t3) = sfc.transition("F1", "t3").unwrap();
-        assert_eq!(t3.to, [r(&sfc, "F2.S4")]);
-        // Sync and resync.
-        let (_, t4) = sfc.transition("F2", "t4").unwrap();
-        assert_eq!(t4.to.len(), 3);
+        assert_eq!(
+            t3.to,
+            [r(&sfc, "F2.S5"), r(&sfc, "F2.S8"), r(&sfc, "F2.S11")]
+        );
+        // Resync.
         let (_, t12) = sfc.transition("F2", "t12").unwrap();
         assert_eq!(
             t12.from,
