@@ -251,7 +251,8 @@ pub async fn start_with(config: CellConfig, options: Options) -> Result<Agent, S
         .shelving_at_most(config.max_shelve)
         .restored(step, state)
         .watching_journal(journal_health)
-        .writing_to(writer);
+        .writing_to(writer)
+        .forcing(super::force::Forcing::of(&config));
     let cell_loop = tokio::spawn(cell_loop.run(source_rx, requests_rx, stopped(stop_rx.clone())));
     let services = tokio::spawn(services.run(stopped(stop_rx)));
     Ok(Agent {

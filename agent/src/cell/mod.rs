@@ -14,6 +14,7 @@
 
 pub mod agent;
 pub mod compile;
+pub mod force;
 pub mod restore;
 
 use std::future::Future;
@@ -32,7 +33,7 @@ use crate::payload::{
     AlarmPayload, LastFault, Quality, SnapshotPayload, StatePayload, TagValue, SNAPSHOT_SCHEMA,
 };
 use crate::sinks::Sink;
-use crate::sources::{SourceEvent, WriteRequest, WriteSender};
+use crate::sources::{SourceEvent, Write, WriteRequest, WriteSender};
 
 /// How long after a timer's deadline the agent waits for an event that may
 /// still be in transit before calling it late, ms.
@@ -82,6 +83,43 @@ pub struct CommandRecord {
     pub verified: bool,
     /// What it did, or why it was refused.
     pub detail: String,
+    /// Which part of the command this row records.
+    pub stage: Stage,
+}
+
+/// A row of a command in the journal: a plain command is one row; a
+/// forced transition or a stop is its request, each check, the write and
+/// the result, in that order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stage {
+    /// A command in one row (ack, reset, shelve, write, …).
+    Command,
+    /// What was asked.
+    Request,
+    /// One check and its outcome.
+    Check,
+    /// The write to the PLC and what it answered.
+    Write,
+    /// How it ended.
+    Result,
+}
+
+impl Stage {
+    /// Its name in the journal.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Stage::Command => "command",
+            Stage::Request => "request",
+            Stage::Check => "check",
+            Stage::Write => "write",
+            Stage::Result => "result",
+        }
+    }
+
+    /// Whether the row ends its command (counted once in the metrics).
+    pub fn is_final(self) -> bool {
+        matches!(self, Stage::Command | Stage::Result)
+    }
 }
 
 /// What of a sender's fields is journaled and logged, at most.
@@ -170,12 +208,27 @@ pub struct CellLoop {
     clock: Clock,
     /// The longest shelf.
     max_shelve: Duration,
+    /// The charts' switches and the force under way.
+    forcing: force::Forcing,
 }
 
 /// A write's outcome on its way back into the loop.
 struct Written {
     record: CommandRecord,
     reply: oneshot::Sender<CommandOutcome>,
+    /// What follows the write.
+    then: Then,
+}
+
+/// What the loop does once a write is done.
+enum Then {
+    /// Answer the operator (a value written).
+    Answer,
+    /// Wait for the forced transition's target steps (if the pulse went
+    /// through).
+    Force(force::Pending),
+    /// Record the stop's result and answer.
+    Stop,
 }
 
 /// The longest shelf unless the configuration says (`commands.max_shelve`).
@@ -211,7 +264,15 @@ impl CellLoop {
             writer: None,
             written_tx,
             written_rx,
+            forcing: force::Forcing::default(),
         }
+    }
+
+    /// Forces transitions and presses stop switches of these charts.
+    #[must_use]
+    pub fn forcing(mut self, forcing: force::Forcing) -> CellLoop {
+        self.forcing = forcing;
+        self
     }
 
     /// Reads the time from `clock` (a test's virtual time) instead of the
@@ -317,17 +378,7 @@ impl CellLoop {
                     Some(r) => self.request(r).await,
                     None => requests_open = false,
                 },
-                Some(w) = self.written_rx.recv() => {
-                    let outcome = CommandOutcome {
-                        accepted: w.record.accepted,
-                        detail: w.record.detail.clone(),
-                    };
-                    if !outcome.accepted {
-                        tracing::warn!(detail = %outcome.detail, "write not done");
-                    }
-                    self.dispatch(self.clock.now_ms(), Input::Command(w.record), Step::default(), 0).await;
-                    let _ = w.reply.send(outcome);
-                }
+                Some(w) = self.written_rx.recv() => self.written(w).await,
                 problem = journal_changed(&mut self.journal_health) => self.system("journal", problem).await,
                 _ = tick.tick() => self.tick().await,
                 _ = beat.tick() => self.beat().await,
@@ -356,7 +407,10 @@ impl CellLoop {
                 self.engine.on_connection(false, now),
             ),
             SourceEvent::Readings(readings) => {
-                (Input::Readings, self.engine.on_readings(&readings, now))
+                let step = self.engine.on_readings(&readings, now);
+                self.dispatch(now, Input::Readings, step, queue_depth).await;
+                self.follow_force(now).await;
+                return;
             }
             SourceEvent::Problem { id, problem } => (
                 Input::System,
@@ -381,6 +435,7 @@ impl CellLoop {
             .engine
             .advance(now.saturating_sub(DELIVERY_ALLOWANCE_MS));
         self.dispatch(now, Input::Tick, step, 0).await;
+        self.force_overdue(now).await;
     }
 
     async fn beat(&mut self) {
@@ -422,9 +477,14 @@ impl CellLoop {
                     accepted: false,
                     verified: false,
                     detail: format!("not a command: {}", not.reason),
+                    stage: Stage::Command,
                 },
                 Step::default(),
             ),
+            Ok(cmd) if matches!(cmd.action, Action::Force | Action::Stop) => {
+                let checked = self.gate.check(&cmd, now).map_err(|r| r.to_string());
+                return self.switch_command(cmd, checked, reply, now).await;
+            }
             Ok(cmd) => {
                 let checked = self.gate.check(&cmd, now);
                 let verified = checked.is_ok();
@@ -485,6 +545,10 @@ impl CellLoop {
                             .engine
                             .return_to_service(&cmd.alarm, now)
                             .map_err(|e| e.to_string()),
+                        // Taken by `switch_command` before the gate.
+                        Action::Force | Action::Stop => {
+                            Err(format!("{} is not handled here", cmd.action))
+                        }
                         Action::Write => match self.write(&cmd) {
                             Err(why) => Err(why),
                             Ok(pending) => {
@@ -498,6 +562,7 @@ impl CellLoop {
                                     accepted: false,
                                     verified: true,
                                     detail: String::new(),
+                                    stage: Stage::Command,
                                 };
                                 let back = self.written_tx.clone();
                                 tokio::spawn(async move {
@@ -521,7 +586,13 @@ impl CellLoop {
                                         detail: clip(&detail, 4 * RECORD_FIELD_BYTES),
                                         ..record
                                     };
-                                    let _ = back.send(Written { record, reply }).await;
+                                    let _ = back
+                                        .send(Written {
+                                            record,
+                                            reply,
+                                            then: Then::Answer,
+                                        })
+                                        .await;
                                 });
                                 return;
                             }
@@ -551,6 +622,7 @@ impl CellLoop {
                         accepted,
                         verified,
                         detail: clip(&detail, 4 * RECORD_FIELD_BYTES),
+                        stage: Stage::Command,
                     },
                     step,
                 )
@@ -593,7 +665,7 @@ impl CellLoop {
         writer
             .try_send(WriteRequest {
                 tag: index,
-                value: value.clone(),
+                what: Write::Value(value.clone()),
                 reply,
             })
             .map_err(|_| "busy: other writes are waiting for the PLC".to_string())?;

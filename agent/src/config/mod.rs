@@ -334,7 +334,25 @@ pub struct SfcCheck {
     pub sfc: cellwatch_models::sfc::Sfc,
     /// Severity of its stuck-step alarms.
     pub severity: Severity,
+    /// The remote module's force switch (a boolean tag the agent may
+    /// pulse, index into the tags), if the charts may be forced.
+    pub force_switch: Option<usize>,
+    /// The remote module's stop switch (index into the tags).
+    pub stop_switch: Option<usize>,
+    /// The transitions the PLC program lets the force switch fire
+    /// (chart, transition).
+    pub forcible: Vec<(String, String)>,
+    /// How long the force (and stop) switch is held on.
+    pub force_pulse: Duration,
+    /// How long the steps a forced transition leads to may take to become
+    /// active before the force is called failed (an alarm).
+    pub force_timeout: Duration,
 }
+
+/// How long the force switch is held on unless configured.
+pub const DEFAULT_FORCE_PULSE: Duration = Duration::from_millis(500);
+/// How long a forced transition may take unless configured.
+pub const DEFAULT_FORCE_TIMEOUT: Duration = Duration::from_secs(10);
 
 /// A validated cell configuration.
 #[derive(Clone)]
@@ -1644,6 +1662,7 @@ impl Validator<'_> {
         tags: &HashMap<Signal, usize>,
     ) -> Vec<SfcCheck> {
         let mut out = Vec::new();
+        let mut charts = HashSet::new();
         for (i, c) in raw.into_iter().enumerate() {
             let key = format!("checks.sfc[{i}]");
             if !ids.insert(c.id.get_ref().clone()) {
@@ -1684,6 +1703,18 @@ impl Validator<'_> {
             };
             match cellwatch_models::sfc::text::parse(&path.display().to_string(), &text, &known) {
                 Ok(mut sfc) => {
+                    for chart in &sfc.charts {
+                        if !charts.insert(chart.name.clone()) {
+                            self.problem(
+                                c.charts.span(),
+                                &format!("{key}.charts"),
+                                format!(
+                                    "chart {} is supervised twice in this cell (a force or stop names a chart)",
+                                    chart.name
+                                ),
+                            );
+                        }
+                    }
                     for chart in &mut sfc.charts {
                         for step in &mut chart.steps {
                             if let Expr::Lit(s, _) =
@@ -1696,10 +1727,91 @@ impl Validator<'_> {
                             t.condition = canonical_expr(t.condition.clone());
                         }
                     }
+                    let mut switch = |v: Option<Spanned<String>>, name: &str| {
+                        let v = v?;
+                        let key = format!("{key}.{name}");
+                        let found = tag_address(v.get_ref())
+                            .ok()
+                            .and_then(|a| Some((tags.get(&a).copied()?, self.kinds.get(&a)?.0)));
+                        match found {
+                            _ if self.bus => {
+                                self.problem(
+                                    v.span(),
+                                    &key,
+                                    "the switches are written over OPC UA; this cell reads an @ bus",
+                                );
+                                None
+                            }
+                            Some((i, ValueType::Boolean)) => Some(i),
+                            Some((_, t)) => {
+                                self.problem(
+                                    v.span(),
+                                    &key,
+                                    format!("'{}' is {t}; a switch is a Boolean tag", v.get_ref()),
+                                );
+                                None
+                            }
+                            None => {
+                                self.problem(
+                                    v.span(),
+                                    &key,
+                                    format!("'{}' is not a tag of this cell", v.get_ref()),
+                                );
+                                None
+                            }
+                        }
+                    };
+                    let force_switch = switch(c.force_switch.clone(), "force_switch");
+                    let stop_switch = switch(c.stop_switch, "stop_switch");
+                    let mut forcible = Vec::new();
+                    for (j, f) in c.forcible.into_iter().enumerate() {
+                        let fkey = format!("{key}.forcible[{j}]");
+                        let Some((chart, t)) = f.get_ref().split_once('.') else {
+                            self.problem(
+                                f.span(),
+                                &fkey,
+                                format!("'{}' is not CHART.TRANSITION (F1.t3)", f.get_ref()),
+                            );
+                            continue;
+                        };
+                        if sfc.transition(chart, t).is_none() {
+                            self.problem(
+                                f.span(),
+                                &fkey,
+                                format!(
+                                    "no transition {t} in a chart {chart} of {}",
+                                    path.display()
+                                ),
+                            );
+                        } else if c.force_switch.is_none() {
+                            self.problem(
+                                f.span(),
+                                &fkey,
+                                "forcing needs the force switch (force_switch)",
+                            );
+                        } else {
+                            forcible.push((chart.to_string(), t.to_string()));
+                        }
+                    }
+                    let force_pulse = self.duration(
+                        c.force_pulse,
+                        &format!("{key}.force_pulse"),
+                        DEFAULT_FORCE_PULSE,
+                    );
+                    let force_timeout = self.duration(
+                        c.force_timeout,
+                        &format!("{key}.force_timeout"),
+                        DEFAULT_FORCE_TIMEOUT,
+                    );
                     out.push(SfcCheck {
                         id: c.id.into_inner(),
                         sfc,
                         severity,
+                        force_switch,
+                        stop_switch,
+                        forcible,
+                        force_pulse,
+                        force_timeout,
                     });
                 }
                 // The chart file's own positions.

@@ -134,6 +134,12 @@ pub(crate) struct RawSfc {
     pub(crate) id: Spanned<String>,
     pub(crate) charts: Spanned<String>,
     pub(crate) severity: Option<Spanned<String>>,
+    pub(crate) force_switch: Option<Spanned<String>>,
+    pub(crate) stop_switch: Option<Spanned<String>>,
+    #[serde(default)]
+    pub(crate) forcible: Vec<Spanned<String>>,
+    pub(crate) force_pulse: Option<Spanned<String>>,
+    pub(crate) force_timeout: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -473,3 +473,49 @@ fn charts_under_supervision_bind_to_the_tags() {
         "{e}"
     );
 }
+
+#[test]
+fn forcing_keys_name_boolean_tags_and_declared_transitions() {
+    let (base, files) = robot_cell("");
+    let switches = "\n[[tags]]\nname = \"Force\"\nnode_id = \"nsu=urn:plc;s=%IX0.3.1\"\naddress = \"%IX0.3.1\"\n\n[[tags]]\nname = \"Speed\"\nnode_id = \"nsu=urn:plc;s=D1\"\naddress = \"D1\"\ntype = \"Double\"\n";
+    // The tags go before the checks.
+    let (head, checks) = base.split_at(base.find("\n[[checks.sfc]]").unwrap());
+    let text = format!(
+        "{head}{switches}{checks}force_switch = \"%IX0.3.1\"\nforcible = [\"F1.t3\", \"F2.t18\"]\nforce_pulse = \"300ms\"\n"
+    );
+    let c = parse("cell.toml", &text, Path::new("base"), &files).unwrap();
+    let s = &c.sfc[0];
+    assert_eq!(c.tags[s.force_switch.unwrap()].name, "Force");
+    assert_eq!(s.stop_switch, None);
+    assert_eq!(
+        s.forcible,
+        [("F1".into(), "t3".into()), ("F2".into(), "t18".into())]
+    );
+    assert_eq!(s.force_pulse, Duration::from_millis(300));
+    assert_eq!(s.force_timeout, crate::config::DEFAULT_FORCE_TIMEOUT);
+    // Each bad key at its place.
+    let text = format!(
+        "{head}{switches}{checks}force_switch = \"D1\"\nstop_switch = \"%IX9.9.9\"\nforcible = [\"F1.t9\", \"t3\"]\nforce_timeout = \"soon\"\n"
+    );
+    let e = parse("cell.toml", &text, Path::new("base"), &files)
+        .unwrap_err()
+        .to_string();
+    for want in [
+        "checks.sfc[0].force_switch: 'D1' is Double; a switch is a Boolean tag",
+        "checks.sfc[0].stop_switch: '%IX9.9.9' is not a tag of this cell",
+        "checks.sfc[0].forcible[0]: no transition t9 in a chart F1 of base/robot.sfc.toml",
+        "checks.sfc[0].forcible[1]: 't3' is not CHART.TRANSITION (F1.t3)",
+        "checks.sfc[0].force_timeout: 'soon' is not a duration",
+    ] {
+        assert!(e.contains(want), "{want} not in {e}");
+    }
+    // Forcing without a force switch.
+    let text = format!("{head}{switches}{checks}forcible = [\"F1.t3\"]\n");
+    let e = parse("cell.toml", &text, Path::new("base"), &files)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("checks.sfc[0].forcible[0]: forcing needs the force switch (force_switch)"),
+        "{e}"
+    );
+}

@@ -119,9 +119,11 @@ impl MetricsSink {
                 m.opcua_connected.set(1);
             }
             Input::Connection { up: false, .. } => m.opcua_connected.set(0),
-            Input::Command(c) => {
+            // A force or stop is journaled in several rows: counted once.
+            Input::Command(c) if c.stage.is_final() => {
                 m.command(c.action, if c.accepted { "accepted" } else { "refused" });
             }
+            Input::Command(_) => {}
             Input::Tick => {
                 m.add_state_time(
                     self.counted_state,

@@ -44,11 +44,16 @@ pub enum Action {
     /// Put an alarm back in service.
     #[serde(rename = "in-service")]
     InService,
+    /// Fire a stuck step's transition by the force switch (paper 004),
+    /// only while its condition holds.
+    Force,
+    /// Press the remote stop switch.
+    Stop,
 }
 
 impl Action {
     /// Every action.
-    pub const ALL: [Action; 7] = [
+    pub const ALL: [Action; 9] = [
         Action::Ack,
         Action::Reset,
         Action::Write,
@@ -56,6 +61,8 @@ impl Action {
         Action::Unshelve,
         Action::OutOfService,
         Action::InService,
+        Action::Force,
+        Action::Stop,
     ];
 
     /// The name on the wire, in the journal and in operators files.
@@ -68,6 +75,8 @@ impl Action {
             Action::Unshelve => "unshelve",
             Action::OutOfService => "out-of-service",
             Action::InService => "in-service",
+            Action::Force => "force",
+            Action::Stop => "stop",
         }
     }
 
@@ -96,8 +105,9 @@ pub struct Command {
     /// The tag written, by address (`write` only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tag: Option<String>,
-    /// The value written (`write`), or how long to shelve (`shelve`: a
-    /// duration such as `30m`, or `once` for one-shot).
+    /// The value written (`write`), how long to shelve (`shelve`: a
+    /// duration such as `30m`, or `once` for one-shot), the transition
+    /// forced (`force`: `CHART.TRANSITION`) or the chart stopped (`stop`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub value: Option<String>,
     /// Why (`shelve`, `out-of-service`).

@@ -59,11 +59,21 @@ pub type SourceSender = mpsc::Sender<SourceEvent>;
 pub struct WriteRequest {
     /// The tag written (index into the cell's tags).
     pub tag: usize,
-    /// The value as the operator gave it; the source checks and encodes
-    /// it, and sends nothing if it does not fit.
-    pub value: String,
+    /// What to write.
+    pub what: Write,
     /// What the PLC answered (`Ok`: done), or why it was not done.
     pub reply: tokio::sync::oneshot::Sender<Result<String, String>>,
+}
+
+/// What a write puts into the PLC.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Write {
+    /// A value as the operator gave it (an `@` unit's item); the source
+    /// checks and encodes it, and sends nothing if it does not fit.
+    Value(String),
+    /// A push button: the Boolean tag on for this long, then off, each
+    /// read back (the force and stop switches of paper 004, over OPC UA).
+    Pulse(std::time::Duration),
 }
 
 /// Where the cell loop hands writes to its source.
@@ -113,11 +123,14 @@ pub trait Source: Send + 'static {
 pub fn for_config(config: &CellConfig) -> Box<dyn Source> {
     match (&config.opcua, &config.legacy) {
         (_, Some(bus)) => Box::new(legacy::LegacySource::new(bus.clone(), config.tags.clone())),
-        (Some(ua), None) => Box::new(opcua::OpcUaSource::new(
-            &config.cell,
-            ua.clone(),
-            config.tags.clone(),
-        )),
+        (Some(ua), None) => Box::new(
+            opcua::OpcUaSource::new(&config.cell, ua.clone(), config.tags.clone()).pulsing(
+                config
+                    .sfc
+                    .iter()
+                    .flat_map(|s| s.force_switch.into_iter().chain(s.stop_switch)),
+            ),
+        ),
         // A validated configuration has one; one built by hand without
         // either reads nothing.
         (None, None) => Box::new(scripted::ScriptedSource::new().0),

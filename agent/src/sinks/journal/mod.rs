@@ -95,6 +95,9 @@ pub enum Entry {
         verified: bool,
         /// Why it was refused, or what it did.
         detail: String,
+        /// Which row of its command (`command`, or `request`, `check`,
+        /// `write`, `result` of a force or stop).
+        stage: String,
     },
 }
 
@@ -234,6 +237,7 @@ const WRITE_BUSY_TIMEOUT: Duration = Duration::from_secs(1);
 const MIGRATIONS: &[(&str, &str, &str)] = &[
     ("commands", "verified", "INTEGER NOT NULL DEFAULT 0"),
     ("production", "parts", "INTEGER NOT NULL DEFAULT 1"),
+    ("commands", "stage", "TEXT NOT NULL DEFAULT 'command'"),
 ];
 
 fn migrate(conn: &Connection) -> rusqlite::Result<()> {
@@ -654,11 +658,12 @@ fn write_batch(conn: &mut Connection, batch: &[Entry], seq: &mut i64) -> rusqlit
                 accepted,
                 verified,
                 detail,
+                stage,
             } => {
                 tx.prepare_cached(
-                    "INSERT INTO commands (seq, at_ms, operator, action, alarm, nonce, accepted, verified, detail) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9)",
+                    "INSERT INTO commands (seq, at_ms, operator, action, alarm, nonce, accepted, verified, detail, stage) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10)",
                 )?
-                .execute(params![next, *at as i64, operator, action, alarm, nonce, *accepted as i64, *verified as i64, detail])?;
+                .execute(params![next, *at as i64, operator, action, alarm, nonce, *accepted as i64, *verified as i64, detail, stage])?;
             }
         }
     }
@@ -807,7 +812,9 @@ fn table_query(table: &str, forward: bool) -> (String, &'static [&'static str], 
         ),
         _ => (
             "commands",
-            &["operator", "action", "alarm", "nonce", "accepted", "detail"],
+            &[
+                "operator", "action", "alarm", "nonce", "accepted", "detail", "stage",
+            ],
             "command",
         ),
     };
@@ -1090,6 +1097,7 @@ mod tests {
             accepted: false,
             verified: false,
             detail: "bad signature".into(),
+            stage: "command".into(),
         })
         .await
         .unwrap();

@@ -73,6 +73,7 @@ pub fn entries(step: &CellStep) -> Vec<Entry> {
             accepted: c.accepted,
             verified: c.verified,
             detail: c.detail.clone(),
+            stage: c.stage.as_str().into(),
         });
     }
     rows

@@ -27,7 +27,8 @@ use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::sync::{mpsc, oneshot};
 
 use super::{
-    Source, SourceError, SourceEvent, SourceSender, WriteRequest, WriteSender, WRITE_CAPACITY,
+    Source, SourceError, SourceEvent, SourceSender, Write, WriteRequest, WriteSender,
+    WRITE_CAPACITY,
 };
 use crate::clock::Clock;
 use crate::config::TagConfig;
@@ -860,11 +861,14 @@ async fn write_one(
     tags: &[TagConfig],
     w: WriteRequest,
 ) -> Result<(), String> {
-    let frame = tags
-        .get(w.tag)
-        .ok_or_else(|| "no such tag".to_string())
-        .and_then(|t| BusNode::parse(&t.node_id))
-        .and_then(|node| write_frame(node, &w.value));
+    let frame = match &w.what {
+        Write::Value(value) => tags
+            .get(w.tag)
+            .ok_or_else(|| "no such tag".to_string())
+            .and_then(|t| BusNode::parse(&t.node_id))
+            .and_then(|node| write_frame(node, value)),
+        Write::Pulse(_) => Err("an @ unit takes item writes, not switch pulses".to_string()),
+    };
     let frame = match frame {
         Ok(f) => f,
         Err(why) => {

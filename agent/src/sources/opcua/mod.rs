@@ -39,7 +39,12 @@ use opcua::client::{ClientBuilder, IdentityToken, Session, SessionConnectMode, S
 use opcua::crypto::SecurityPolicy as UaPolicy;
 use opcua::types::{MessageSecurityMode, NodeId, ReadValueId, TimestampsToReturn, Variant};
 
-use super::{Source, SourceError, SourceEvent, SourceSender};
+use tokio::sync::mpsc;
+
+use super::{
+    Source, SourceError, SourceEvent, SourceSender, Write, WriteRequest, WriteSender,
+    WRITE_CAPACITY,
+};
 use crate::config::{
     Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy, TagConfig,
 };
@@ -49,6 +54,9 @@ pub struct OpcUaSource {
     cell: String,
     config: OpcUaConfig,
     tags: Vec<TagConfig>,
+    /// The tags it may write: the charts' force and stop switches.
+    switches: Vec<usize>,
+    writes: Option<mpsc::Receiver<WriteRequest>>,
 }
 
 impl OpcUaSource {
@@ -58,7 +66,17 @@ impl OpcUaSource {
             cell: cell.into(),
             config,
             tags,
+            switches: Vec::new(),
+            writes: None,
         }
+    }
+
+    /// Lets the source pulse these tags (the force and stop switches), and
+    /// nothing else.
+    #[must_use]
+    pub fn pulsing(mut self, switches: impl IntoIterator<Item = usize>) -> OpcUaSource {
+        self.switches = switches.into_iter().collect();
+        self
     }
 }
 
@@ -67,12 +85,128 @@ impl Source for OpcUaSource {
         format!("opcua {}", self.config.endpoint)
     }
 
+    fn writer(&mut self) -> Option<WriteSender> {
+        if self.switches.is_empty() {
+            return None;
+        }
+        let (tx, rx) = mpsc::channel(WRITE_CAPACITY);
+        self.writes = Some(rx);
+        Some(tx)
+    }
+
     fn run(
         self: Box<Self>,
         tx: SourceSender,
         shutdown: BoxFuture<'static, ()>,
     ) -> BoxFuture<'static, Result<(), SourceError>> {
-        async move { run(&self.cell, &self.config, &self.tags, tx, shutdown).await }.boxed()
+        async move {
+            let writes = Writes {
+                rx: self.writes,
+                switches: self.switches,
+            };
+            run_writing(&self.cell, &self.config, &self.tags, tx, writes, shutdown).await
+        }
+        .boxed()
+    }
+}
+
+/// The writes a source takes: pulses of its switches only.
+struct Writes {
+    rx: Option<mpsc::Receiver<WriteRequest>>,
+    switches: Vec<usize>,
+}
+
+impl Writes {
+    async fn next(&mut self) -> Option<WriteRequest> {
+        match self.rx.as_mut() {
+            Some(rx) => match rx.recv().await {
+                Some(w) => Some(w),
+                None => {
+                    self.rx = None;
+                    std::future::pending().await
+                }
+            },
+            None => std::future::pending().await,
+        }
+    }
+}
+
+/// Pulses a switch on the PLC: on, read back, held, off, read back. Once
+/// it was written on, it is always written off again, whatever failed.
+async fn pulse(
+    session: Arc<Session>,
+    node: TagNode,
+    name: String,
+    held: Duration,
+) -> Result<String, String> {
+    let namespaces = namespace_array(&session)
+        .await
+        .map_err(|e| format!("{name}: cannot read the namespace array: {e}"))?;
+    let id = node
+        .resolve(&namespaces)
+        .ok_or_else(|| format!("{name}: its namespace is not on the server"))?;
+    set_switch(&session, &id, &name, true).await?;
+    let on = read_back(&session, &id, &name, true).await;
+    if on.is_ok() {
+        tokio::time::sleep(held).await;
+    }
+    let off = set_switch(&session, &id, &name, false).await;
+    let off = match off {
+        Ok(()) => read_back(&session, &id, &name, false).await,
+        Err(e) => Err(e),
+    };
+    on?;
+    off?;
+    Ok(format!(
+        "{name} on for {} ms, read back on, then off",
+        held.as_millis()
+    ))
+}
+
+async fn set_switch(session: &Session, id: &NodeId, name: &str, on: bool) -> Result<(), String> {
+    let value = opcua::types::WriteValue {
+        node_id: id.clone(),
+        attribute_id: opcua::types::AttributeId::Value as u32,
+        index_range: opcua::types::NumericRange::None,
+        value: opcua::types::DataValue::value_only(on),
+    };
+    let status = session
+        .write(&[value])
+        .await
+        .map_err(|e| format!("{name}: write {} failed: {e}", u8::from(on)))?;
+    match status.first() {
+        Some(s) if s.is_good() => Ok(()),
+        Some(s) => Err(format!("{name}: the server refused {}: {s}", u8::from(on))),
+        None => Err(format!("{name}: the server answered nothing")),
+    }
+}
+
+/// How long a written switch may take to read back as written.
+const READ_BACK: Duration = Duration::from_secs(2);
+
+async fn read_back(session: &Session, id: &NodeId, name: &str, on: bool) -> Result<(), String> {
+    let until = tokio::time::Instant::now() + READ_BACK;
+    loop {
+        let read = session
+            .read(
+                &[ReadValueId::from(id.clone())],
+                TimestampsToReturn::Neither,
+                0.0,
+            )
+            .await
+            .map_err(|e| format!("{name}: read back failed: {e}"))?;
+        let last = match read.first().and_then(|v| v.value.clone()) {
+            Some(Variant::Boolean(b)) if b == on => return Ok(()),
+            other => format!("{other:?}"),
+        };
+        if tokio::time::Instant::now() >= until {
+            return Err(format!(
+                "{name}: written {} but read back {last} for {} s",
+                u8::from(on),
+                READ_BACK.as_secs()
+            ));
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
     }
 }
 
@@ -175,6 +309,23 @@ pub async fn run(
     tx: SourceSender,
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), SourceError> {
+    let writes = Writes {
+        rx: None,
+        switches: Vec::new(),
+    };
+    run_writing(cell, config, tags, tx, writes, shutdown).await
+}
+
+async fn run_writing(
+    cell: &str,
+    config: &OpcUaConfig,
+    tags: &[TagConfig],
+    tx: SourceSender,
+    mut writes: Writes,
+    shutdown: impl Future<Output = ()>,
+) -> Result<(), SourceError> {
+    // Pulses under way; each writes its switch off before it ends.
+    let mut pulses = tokio::task::JoinSet::new();
     let mut client = client(cell, config)?;
     // Anonymous or user name: the server's endpoint says which token
     // policies it accepts.
@@ -219,6 +370,17 @@ pub async fn run(
         loop {
             tokio::select! {
                 _ = &mut shutdown => {
+                    // A pulse under way ends (its switch written off)
+                    // first, with the event loop polled.
+                    let limit = tokio::time::sleep(Duration::from_secs(5));
+                    tokio::pin!(limit);
+                    while !pulses.is_empty() {
+                        tokio::select! {
+                            _ = &mut limit => break,
+                            _ = pulses.join_next() => {}
+                            item = events.next() => if item.is_none() { break },
+                        }
+                    }
                     // Closing the session needs the event loop polled too.
                     let disconnect = session.disconnect();
                     tokio::pin!(disconnect);
@@ -233,6 +395,28 @@ pub async fn run(
                     }
                     return Ok(());
                 }
+                Some(w) = writes.next() => {
+                    let checked = match (&w.what, tags.get(w.tag), ctx.nodes.get(w.tag).cloned().flatten()) {
+                        (Write::Pulse(held), Some(tag), Some(node)) if writes.switches.contains(&w.tag) => Ok((*held, tag.name.clone(), node)),
+                        (Write::Value(_), _, _) => Err("this OPC UA source writes only the charts' force and stop switches".to_string()),
+                        _ => Err("not a switch of this cell".to_string()),
+                    };
+                    match checked {
+                        Err(why) => { let _ = w.reply.send(Err(why)); }
+                        Ok((held, name, node)) => {
+                            let session = session.clone();
+                            pulses.spawn(async move {
+                                let done = pulse(session, node, name, held).await;
+                                match &done {
+                                    Ok(d) => tracing::info!(write = %d, "switch pulsed"),
+                                    Err(e) => tracing::warn!(error = %e, "switch pulse failed"),
+                                }
+                                let _ = w.reply.send(done);
+                            });
+                        }
+                    }
+                }
+                Some(_) = pulses.join_next(), if !pulses.is_empty() => {}
                 item = events.next() => match item {
                     None => break,
                     Some(Err(status)) => {
