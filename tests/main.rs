@@ -15,6 +15,7 @@ mod cell_loop;
 mod dashboards;
 mod durability;
 mod explain;
+mod force;
 mod interop;
 mod legacy;
 mod liveness;

@@ -90,6 +90,16 @@ enum Command {
     /// the PLC's answer (a legacy unit's item code, target quantity or
     /// production correction).
     Write(WriteArgs),
+    /// Force a stuck step's transition (paper 004): the agent pulses the
+    /// chart's force switch only if you may `force`, the transition is
+    /// declared forcible, a step it leaves has its stuck alarm active and
+    /// its condition holds now; each check, the write and the result are
+    /// journaled. Answers when the chart has arrived (or not, after the
+    /// cell's force_timeout).
+    Force(ForceArgs),
+    /// Press a chart's remote stop switch (permission `stop`): a signed
+    /// command, journaled with the PLC's answer.
+    Stop(StopArgs),
     /// Make an operator's key pair for signing commands (Ed25519).
     ///
     /// Writes the private key file, which stays with the operator (give it
@@ -645,6 +655,33 @@ pub(crate) struct WriteArgs {
     pub(crate) signer: SignerArgs,
 }
 
+#[derive(Debug, clap::Args)]
+pub(crate) struct ForceArgs {
+    /// The cell.
+    #[arg(long)]
+    pub(crate) cell: String,
+    /// The chart (`F1`).
+    #[arg(long)]
+    pub(crate) chart: String,
+    /// The transition of that chart to fire (`t3`).
+    #[arg(long)]
+    pub(crate) transition: String,
+    #[command(flatten)]
+    pub(crate) signer: SignerArgs,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct StopArgs {
+    /// The cell.
+    #[arg(long)]
+    pub(crate) cell: String,
+    /// The chart whose stop switch is pressed (`F1`).
+    #[arg(long)]
+    pub(crate) chart: String,
+    #[command(flatten)]
+    pub(crate) signer: SignerArgs,
+}
+
 /// Who signs a command, and how it reaches the agent.
 #[derive(Debug, clap::Args)]
 pub(crate) struct SignerArgs {
@@ -784,6 +821,8 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             | Command::Ack(_)
             | Command::Reset(_)
             | Command::Write(_)
+            | Command::Force(_)
+            | Command::Stop(_)
             | Command::Shelve(_)
             | Command::Unshelve(_)
             | Command::OutOfService(_)
@@ -823,6 +862,8 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::Ack(args) => commands::subscribers::command(Action::Ack, &args, out).await,
             Command::Reset(args) => commands::subscribers::command(Action::Reset, &args, out).await,
             Command::Write(args) => commands::subscribers::write(&args, out).await,
+            Command::Force(args) => commands::subscribers::force(&args, out).await,
+            Command::Stop(args) => commands::subscribers::stop(&args, out).await,
             Command::Shelve(args) => commands::subscribers::shelve(&args, out).await,
             Command::Unshelve(args) => {
                 commands::subscribers::command(Action::Unshelve, &args, out).await

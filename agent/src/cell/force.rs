@@ -90,8 +90,14 @@ pub(crate) struct Pending {
     pub since: u64,
     /// Until when the targets may take, ms.
     pub deadline: u64,
-    /// The operator waiting for the outcome (`None` once answered).
+    /// The operator waiting for the outcome (`None` while the switch is
+    /// written, and once answered).
     pub reply: Option<tokio::sync::oneshot::Sender<CommandOutcome>>,
+    /// The switch is being pulsed.
+    pub writing: bool,
+    /// Which targets have been seen active since the pulse began (a step
+    /// may be left again before the pulse ends).
+    pub seen: Vec<bool>,
     /// The overdue alarm is raised.
     pub overdue: bool,
 }
@@ -210,7 +216,12 @@ impl CellLoop {
                 .await;
             return Err(why);
         };
-        if let Some(p) = self.forcing.pending.as_ref().filter(|p| p.reply.is_some()) {
+        if let Some(p) = self
+            .forcing
+            .pending
+            .as_ref()
+            .filter(|p| p.writing || p.reply.is_some())
+        {
             let why = format!(
                 "{} forced by {} is still under way",
                 p.transition, p.operator
@@ -293,11 +304,13 @@ impl CellLoop {
             operator: String::new(),
             nonce: String::new(),
             transition: target.to_string(),
+            seen: vec![false; targets.len()],
             targets,
             sources,
             since: now,
             deadline: now + timeout,
             reply: None,
+            writing: true,
             overdue: false,
         });
         Ok(())
@@ -340,11 +353,11 @@ impl CellLoop {
             .set_of(chart)
             .map(|s| (s.force_switch, s.stop_switch, s.pulse))
             .expect("checked");
-        let (switch, then) = match (cmd.action, self.forcing.pending.take()) {
-            (Action::Force, Some(mut pending)) => {
+        let (switch, then) = match (cmd.action, self.forcing.pending.as_mut()) {
+            (Action::Force, Some(pending)) => {
                 pending.operator = base.operator.clone();
                 pending.nonce = base.nonce.clone();
-                (force_switch, Then::Force(pending))
+                (force_switch, Then::Force)
             }
             _ => (stop_switch, Then::Stop),
         };
@@ -437,7 +450,10 @@ impl CellLoop {
             Then::Answer => {
                 let _ = reply.send(outcome);
             }
-            Then::Stop | Then::Force(_) if !ok => {
+            Then::Stop | Then::Force if !ok => {
+                if matches!(then, Then::Force) {
+                    self.forcing.pending = None;
+                }
                 self.record(failed).await;
                 let _ = reply.send(outcome);
             }
@@ -445,13 +461,15 @@ impl CellLoop {
                 self.record(stopped).await;
                 let _ = reply.send(outcome);
             }
-            Then::Force(mut pending) => {
-                // The target steps' time starts with the pulse done.
-                let timeout = pending.deadline - pending.since;
-                pending.reply = Some(reply);
-                pending.since = now;
-                pending.deadline = now + timeout;
-                self.forcing.pending = Some(pending);
+            Then::Force => {
+                if let Some(pending) = self.forcing.pending.as_mut() {
+                    // The target steps' time starts with the pulse done.
+                    let timeout = pending.deadline - pending.since;
+                    pending.writing = false;
+                    pending.reply = Some(reply);
+                    pending.since = now;
+                    pending.deadline = now + timeout;
+                }
                 self.follow_force(now).await;
             }
         }
@@ -460,12 +478,20 @@ impl CellLoop {
     /// After readings: has the forced transition arrived (or the chart
     /// left its source steps another way)?
     pub(super) async fn follow_force(&mut self, now: u64) {
-        let Some(p) = self.forcing.pending.as_ref() else {
+        let engine = &self.engine;
+        let on = |tag: usize| engine.value(tag) == Some(Value::Bool(true));
+        let Some(p) = self.forcing.pending.as_mut() else {
             return;
         };
-        let on = |tag: usize| self.engine.value(tag) == Some(Value::Bool(true));
-        let arrived = !p.targets.is_empty() && p.targets.iter().all(|&(_, t)| on(t));
-        let left = p.reply.is_none() && !p.sources.iter().any(|&t| on(t));
+        for (seen, &(_, t)) in p.seen.iter_mut().zip(&p.targets) {
+            *seen |= on(t);
+        }
+        // The write is journaled before the result.
+        if p.writing {
+            return;
+        }
+        let arrived = !p.targets.is_empty() && p.seen.iter().all(|&s| s);
+        let left = p.overdue && !p.sources.iter().any(|&t| on(t));
         if !arrived && !left {
             return;
         }
@@ -500,8 +526,9 @@ impl CellLoop {
         let missing: Vec<&str> = p
             .targets
             .iter()
-            .filter(|&&(_, t)| self.engine.value(t) != Some(Value::Bool(true)))
-            .map(|(n, _)| n.as_str())
+            .zip(&p.seen)
+            .filter(|(_, &seen)| !seen)
+            .map(|((n, _), _)| n.as_str())
             .collect();
         let why = format!(
             "{} forced by {}: {} not active {waited:.1} s after the force",
@@ -575,5 +602,23 @@ impl ForceSet {
             self.sfc.charts[r.chart].name,
             self.sfc.step(r).name
         )
+    }
+}
+
+impl Forcing {
+    /// Marks the forced transition's targets that `readings` show active,
+    /// even if a later reading of the same batch shows them left.
+    pub(crate) fn seen_in(&mut self, readings: &[cellwatch_models::engine::TagReading]) {
+        let Some(p) = self.pending.as_mut() else {
+            return;
+        };
+        for r in readings {
+            if r.reading != cellwatch_models::engine::Reading::Good(true) {
+                continue;
+            }
+            for (seen, &(_, t)) in p.seen.iter_mut().zip(&p.targets) {
+                *seen |= t == r.tag;
+            }
+        }
     }
 }

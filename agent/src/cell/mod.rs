@@ -226,7 +226,7 @@ enum Then {
     Answer,
     /// Wait for the forced transition's target steps (if the pulse went
     /// through).
-    Force(force::Pending),
+    Force,
     /// Record the stop's result and answer.
     Stop,
 }
@@ -407,6 +407,7 @@ impl CellLoop {
                 self.engine.on_connection(false, now),
             ),
             SourceEvent::Readings(readings) => {
+                self.forcing.seen_in(&readings);
                 let step = self.engine.on_readings(&readings, now);
                 self.dispatch(now, Input::Readings, step, queue_depth).await;
                 self.follow_force(now).await;

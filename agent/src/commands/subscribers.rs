@@ -7,8 +7,8 @@ use std::time::Duration;
 use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
 use crate::cli::{
-    AlarmsArgs, CommandArgs, Failure, HistoryArgs, ReasonArgs, ShelveArgs, SignerArgs, WriteArgs,
-    ZenohArgs,
+    AlarmsArgs, CommandArgs, Failure, ForceArgs, HistoryArgs, ReasonArgs, ShelveArgs, SignerArgs,
+    StopArgs, WriteArgs, ZenohArgs,
 };
 use crate::config::{ZenohConfig, ZenohMode};
 use crate::operator::{Action, Command, OperatorKey};
@@ -558,6 +558,46 @@ pub(crate) async fn out_of_service(args: &ReasonArgs, out: &mut dyn Write) -> Re
     .await
 }
 
+/// How long `cellwatch force` waits for the agent's answer at least: the
+/// agent answers when the chart has arrived or its `force_timeout` (at
+/// most a minute) has passed.
+pub(crate) const FORCE_ANSWER: Duration = Duration::from_secs(75);
+
+/// `cellwatch force`: a signed forced transition.
+pub(crate) async fn force(args: &ForceArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    let transition = format!("{}.{}", args.chart, args.transition);
+    signed(
+        Target {
+            action: Action::Force,
+            cell: &args.cell,
+            alarm: "",
+            tag: None,
+            value: Some(&transition),
+            reason: None,
+        },
+        &args.signer,
+        out,
+    )
+    .await
+}
+
+/// `cellwatch stop`: a signed press of a chart's stop switch.
+pub(crate) async fn stop(args: &StopArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    signed(
+        Target {
+            action: Action::Stop,
+            cell: &args.cell,
+            alarm: "",
+            tag: None,
+            value: Some(&args.chart),
+            reason: None,
+        },
+        &args.signer,
+        out,
+    )
+    .await
+}
+
 /// What a command acts on.
 struct Target<'a> {
     action: Action,
@@ -611,6 +651,11 @@ async fn signed(t: Target<'_>, args: &SignerArgs, out: &mut dyn Write) -> Result
     let s = session(&args.zenoh).await?;
     let timeout = Duration::from_secs(args.zenoh.timeout_secs);
     let the_agent = agent(&s, &args.zenoh.root, t.cell, timeout).await?;
+    let timeout = if t.action == Action::Force {
+        timeout.max(FORCE_ANSWER)
+    } else {
+        timeout
+    };
     let selector = format!("{}/{}/command", args.zenoh.root, t.cell);
     let text = ask_agent(
         &s,

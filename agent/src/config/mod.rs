@@ -353,6 +353,8 @@ pub struct SfcCheck {
 pub const DEFAULT_FORCE_PULSE: Duration = Duration::from_millis(500);
 /// How long a forced transition may take unless configured.
 pub const DEFAULT_FORCE_TIMEOUT: Duration = Duration::from_secs(10);
+/// How long a forced transition may take at most.
+pub const MAX_FORCE_TIMEOUT: Duration = Duration::from_secs(60);
 
 /// A validated cell configuration.
 #[derive(Clone)]
@@ -1798,11 +1800,20 @@ impl Validator<'_> {
                         &format!("{key}.force_pulse"),
                         DEFAULT_FORCE_PULSE,
                     );
-                    let force_timeout = self.duration(
+                    let timeout_span = c.force_timeout.as_ref().map(Spanned::span);
+                    let mut force_timeout = self.duration(
                         c.force_timeout,
                         &format!("{key}.force_timeout"),
                         DEFAULT_FORCE_TIMEOUT,
                     );
+                    if force_timeout > MAX_FORCE_TIMEOUT {
+                        self.problem(
+                            timeout_span.unwrap_or_default(),
+                            &format!("{key}.force_timeout"),
+                            "at most 1 minute (the operator waits for the answer)",
+                        );
+                        force_timeout = DEFAULT_FORCE_TIMEOUT;
+                    }
                     out.push(SfcCheck {
                         id: c.id.into_inner(),
                         sfc,

@@ -56,6 +56,34 @@ fn add_variables(
     space.add_variables(vars, &folder);
 }
 
+/// The writes clients made to a simulated PLC's writable variables.
+#[derive(Clone, Default)]
+pub struct WriteLog {
+    inner: Arc<Mutex<Written>>,
+}
+
+/// Every write in order, and each variable's last value.
+type Written = (Vec<(String, bool)>, std::collections::HashMap<String, bool>);
+
+impl WriteLog {
+    fn push(&self, name: &str, on: bool) {
+        if let Ok(mut g) = self.inner.lock() {
+            g.0.push((name.to_string(), on));
+            g.1.insert(name.to_string(), on);
+        }
+    }
+
+    /// Every write so far, in order: variable and value.
+    pub fn writes(&self) -> Vec<(String, bool)> {
+        self.inner.lock().map(|g| g.0.clone()).unwrap_or_default()
+    }
+
+    /// The last value written to `name`, if any.
+    pub fn value(&self, name: &str) -> Option<bool> {
+        self.inner.lock().ok()?.1.get(name).copied()
+    }
+}
+
 /// How to serve a simulated PLC.
 #[derive(Debug, Clone)]
 pub struct SimOptions {
@@ -374,6 +402,69 @@ impl SimServer {
     /// The namespace index of the tags.
     pub fn namespace(&self) -> u16 {
         self.ns
+    }
+
+    /// Lets clients write these Boolean variables (a remote module's push
+    /// buttons). Every write a client makes is logged, in order, whatever
+    /// the simulation does with it; the value is readable at once and
+    /// published to subscribers.
+    ///
+    /// # Errors
+    /// A name that is not a variable of this server.
+    pub fn writable(&self, names: &[&str]) -> Result<WriteLog, String> {
+        let log = WriteLog::default();
+        for &name in names {
+            let node = NodeId::new(self.ns, name);
+            {
+                let space = self.manager.address_space();
+                let mut space = space.write();
+                let var = space
+                    .find_mut(&node)
+                    .and_then(|n| match n {
+                        opcua::server::address_space::NodeType::Variable(v) => Some(v),
+                        _ => None,
+                    })
+                    .ok_or_else(|| format!("no variable {name}"))?;
+                var.set_writable(true);
+                var.set_user_access_level(
+                    opcua::server::address_space::AccessLevel::CURRENT_READ
+                        | opcua::server::address_space::AccessLevel::CURRENT_WRITE,
+                );
+            }
+            let (log_w, log_r) = (log.clone(), log.clone());
+            let name_w = name.to_string();
+            let name_r = name.to_string();
+            let manager = self.manager.clone();
+            let subscriptions = self.subscriptions.clone();
+            let target = node.clone();
+            // The server holds its address space while it calls this: the
+            // node's own value (what subscribers get) is set just after.
+            self.manager
+                .inner()
+                .add_write_callback(node.clone(), move |value, _| {
+                    let Some(Variant::Boolean(on)) = value.value else {
+                        return StatusCode::BadTypeMismatch;
+                    };
+                    log_w.push(&name_w, on);
+                    let (manager, subscriptions, target) =
+                        (manager.clone(), subscriptions.clone(), target.clone());
+                    tokio::spawn(async move {
+                        let _ = manager.set_value(
+                            &subscriptions,
+                            &target,
+                            None,
+                            DataValue::new_now(on),
+                        );
+                    });
+                    StatusCode::Good
+                });
+            self.manager
+                .inner()
+                .add_read_callback(node, move |_, _, _| {
+                    Ok(DataValue::new_now(log_r.value(&name_r).unwrap_or(false)))
+                });
+        }
+        Ok(log)
     }
 
     /// Stops the server; connected clients see the connection drop.

@@ -397,7 +397,7 @@ async fn run_writing(
                 }
                 Some(w) = writes.next() => {
                     let checked = match (&w.what, tags.get(w.tag), ctx.nodes.get(w.tag).cloned().flatten()) {
-                        (Write::Pulse(held), Some(tag), Some(node)) if writes.switches.contains(&w.tag) => Ok((*held, tag.name.clone(), node)),
+                        (Write::Pulse(held), Some(tag), Some(node)) if writes.switches.contains(&w.tag) => Ok((*held, format!("{} ({})", tag.name, tag.address), node)),
                         (Write::Value(_), _, _) => Err("this OPC UA source writes only the charts' force and stop switches".to_string()),
                         _ => Err("not a switch of this cell".to_string()),
                     };

@@ -1,0 +1,293 @@
+//! The LCD-glass carrying robot of paper 004, served over OPC UA.
+//!
+//! The PLC side runs the charts of `config/robot/robot.sfc.toml` with
+//! [`Runner`], one scan every [`SCAN`]: eq. (1)/(2) for every transition,
+//! and for the forcible ones (t3, t18) the force switch term of eq.
+//! (3)/(4). The plant around it is simple: a step that has been active
+//! for the dwell time makes the inputs of its first outgoing transition
+//! true (the shuttle arrives, the arm finishes); every other input is off.
+//! A test or the demo puts a step in error ([`SimulatedRobot::stick`]) —
+//! active, never done — and holds inputs ([`SimulatedRobot::pin`]).
+//!
+//! The remote module's force switch `%IX0.3.1` and stop switch `%IX0.3.0`
+//! are the only variables a client may write; every write is in the
+//! server's [`WriteLog`]. The stop switch stops the charts (no transition
+//! fires) and lights `%QX0.3.0` until [`SimulatedRobot::restart`].
+
+use std::collections::{HashMap, HashSet};
+use std::net::SocketAddr;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use cellwatch_models::expr::Expr;
+use cellwatch_models::sfc::run::Runner;
+use cellwatch_models::sfc::{text, Sfc, StepRef};
+use cellwatch_models::signal::Signal;
+
+use super::server::{SimOptions, SimServer, WriteLog};
+
+/// The charts the simulated PLC runs.
+pub const CHARTS: &str = include_str!("../../../config/robot/robot.sfc.toml");
+
+/// The force switch of the remote module (paper 004: `%IX0.3.1`).
+pub const FORCE_SWITCH: &str = "%IX0.3.1";
+/// The stop switch of the remote module.
+pub const STOP_SWITCH: &str = "%IX0.3.0";
+/// The lamp that says the system is stopped.
+pub const STOPPED: &str = "%QX0.3.0";
+
+/// The transitions the PLC program lets the force switch fire (its
+/// eq. (3)/(4) terms, as `cellwatch sfc patch` prints them).
+pub const FORCIBLE: [(&str, &str); 2] = [("F1", "t3"), ("F2", "t18")];
+
+/// How often the simulated PLC scans.
+pub const SCAN: Duration = Duration::from_millis(20);
+
+struct Plant {
+    runner: Runner,
+    /// Since when each active step is active.
+    since: HashMap<StepRef, tokio::time::Instant>,
+    pinned: HashMap<Signal, bool>,
+    stopped: bool,
+    /// What the server shows, to write only changes.
+    shown: HashMap<String, bool>,
+}
+
+/// A running simulated robot cell.
+#[derive(Clone)]
+pub struct SimulatedRobot {
+    server: SimServer,
+    sfc: Arc<Sfc>,
+    plant: Arc<Mutex<Plant>>,
+    log: WriteLog,
+    dwell: Duration,
+}
+
+impl SimulatedRobot {
+    /// Serves the robot's step flags, inputs and switches; each step done
+    /// after `dwell`. Call [`SimulatedRobot::run`] to scan.
+    ///
+    /// # Errors
+    /// The port cannot be bound or the server cannot be built.
+    pub async fn start(options: &SimOptions, dwell: Duration) -> Result<SimulatedRobot, String> {
+        let sfc = text::parse("robot.sfc.toml", CHARTS, &|_| true).map_err(|e| e.join("\n"))?;
+        let runner = Runner::new(&sfc);
+        let mut names: Vec<String> = signals(&sfc).iter().map(|s| s.name().to_string()).collect();
+        names.extend([FORCE_SWITCH, STOP_SWITCH, STOPPED].map(String::from));
+        let variables: Vec<(String, bool)> = names.iter().map(|n| (n.clone(), false)).collect();
+        let server = SimServer::start(
+            options,
+            "robot",
+            "cellwatch simulated LCD-glass robot",
+            &variables,
+        )
+        .await?;
+        let log = server.writable(&[FORCE_SWITCH, STOP_SWITCH])?;
+        let robot = SimulatedRobot {
+            server,
+            sfc: Arc::new(sfc),
+            plant: Arc::new(Mutex::new(Plant {
+                runner,
+                since: HashMap::new(),
+                pinned: HashMap::new(),
+                stopped: false,
+                shown: variables.into_iter().collect(),
+            })),
+            log,
+            dwell,
+        };
+        robot.scan();
+        Ok(robot)
+    }
+
+    /// Scans forever, every [`SCAN`].
+    pub async fn run(&self) {
+        let mut every = tokio::time::interval(SCAN);
+        every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        loop {
+            every.tick().await;
+            self.scan();
+        }
+    }
+
+    /// One PLC scan: inputs from the plant, the charts, outputs to the
+    /// server.
+    fn scan(&self) {
+        let Ok(mut p) = self.plant.lock() else {
+            return;
+        };
+        let now = tokio::time::Instant::now();
+        let force = self.log.value(FORCE_SWITCH).unwrap_or(false);
+        if self.log.value(STOP_SWITCH).unwrap_or(false) {
+            p.stopped = true;
+        }
+        // The plant: a step active for its dwell makes its first
+        // transition's condition true.
+        let mut inputs: HashMap<Signal, bool> = HashMap::new();
+        for r in p.runner.active().collect::<Vec<_>>() {
+            let since = *p.since.entry(r).or_insert(now);
+            if now.duration_since(since) < self.dwell {
+                continue;
+            }
+            if let Some(t) = self.sfc.leaving(r).next() {
+                satisfy(&t.condition, false, &mut inputs);
+            }
+        }
+        for (s, v) in &p.pinned {
+            inputs.insert(s.clone(), *v);
+        }
+        if !p.stopped {
+            let value = |s: &Signal| inputs.get(s).copied().unwrap_or(false);
+            let sfc = &self.sfc;
+            let forcible = |c: usize, id: &str| {
+                FORCIBLE
+                    .iter()
+                    .any(|&(fc, ft)| sfc.charts[c].name == fc && ft == id)
+            };
+            p.runner.scan(sfc, &value, force, &forcible);
+        }
+        let active: HashSet<StepRef> = p.runner.active().collect();
+        p.since.retain(|r, _| active.contains(r));
+        let mut out: Vec<(String, bool)> = signals(&self.sfc)
+            .into_iter()
+            .map(|s| {
+                let v = inputs.get(&s).copied().unwrap_or(false);
+                (s.name().to_string(), v)
+            })
+            .collect();
+        for (r, step) in self.sfc.steps() {
+            out.retain(|(n, _)| n != step.flag.name());
+            out.push((step.flag.name().to_string(), active.contains(&r)));
+        }
+        out.push((STOPPED.to_string(), p.stopped));
+        let changed: Vec<(String, bool)> = out
+            .into_iter()
+            .filter(|(n, v)| p.shown.get(n) != Some(v))
+            .collect();
+        if changed.is_empty() {
+            return;
+        }
+        for (n, v) in &changed {
+            p.shown.insert(n.clone(), *v);
+        }
+        if let Err(e) = self.server.set(&changed) {
+            tracing::error!(error = %e, "simulated robot");
+        }
+    }
+
+    /// Puts step `name` (`F1.S2`) in error (`true`: active but never done)
+    /// or out of it.
+    ///
+    /// # Errors
+    /// No such step.
+    pub fn stick(&self, name: &str, stuck: bool) -> Result<(), String> {
+        let r = self.step(name)?;
+        let mut p = self.plant.lock().map_err(|_| "poisoned")?;
+        p.runner.set_faulty(r, stuck);
+        Ok(())
+    }
+
+    /// Holds input `name` at `value` (`None`: the plant drives it again).
+    pub fn pin(&self, name: &str, value: Option<bool>) {
+        if let Ok(mut p) = self.plant.lock() {
+            match value {
+                Some(v) => p.pinned.insert(Signal::new(name), v),
+                None => p.pinned.remove(&Signal::new(name)),
+            };
+        }
+    }
+
+    /// The active steps (`F1.S2`), sorted.
+    pub fn active(&self) -> Vec<String> {
+        let Ok(p) = self.plant.lock() else {
+            return Vec::new();
+        };
+        let mut names: Vec<String> = p.runner.active().map(|r| self.sfc.step_name(r)).collect();
+        names.sort();
+        names
+    }
+
+    /// Whether the stop switch has stopped the charts.
+    pub fn stopped(&self) -> bool {
+        self.plant.lock().is_ok_and(|p| p.stopped)
+    }
+
+    /// Clears a stop (the local restart at the machine).
+    pub fn restart(&self) {
+        if let Ok(mut p) = self.plant.lock() {
+            p.stopped = false;
+        }
+    }
+
+    /// Every write clients made to the switches, in order.
+    pub fn writes(&self) -> Vec<(String, bool)> {
+        self.log.writes()
+    }
+
+    fn step(&self, name: &str) -> Result<StepRef, String> {
+        let (chart, step) = name
+            .split_once('.')
+            .ok_or_else(|| format!("'{name}' is not CHART.STEP"))?;
+        let c = self
+            .sfc
+            .chart(chart)
+            .ok_or_else(|| format!("no chart {chart}"))?;
+        let s = self.sfc.charts[c]
+            .steps
+            .iter()
+            .position(|s| s.name == step)
+            .ok_or_else(|| format!("no step {name}"))?;
+        Ok(StepRef { chart: c, step: s })
+    }
+
+    /// The endpoint URL clients connect to.
+    pub fn endpoint(&self) -> String {
+        self.server.endpoint()
+    }
+
+    /// The address the server listens on.
+    pub fn addr(&self) -> SocketAddr {
+        self.server.addr()
+    }
+
+    /// Stops the server.
+    pub fn stop(&self) {
+        self.server.stop();
+    }
+}
+
+/// Every step flag and input the charts read.
+fn signals(sfc: &Sfc) -> Vec<Signal> {
+    let mut out = std::collections::BTreeSet::new();
+    for (_, step) in sfc.steps() {
+        out.insert(step.flag.clone());
+    }
+    for chart in &sfc.charts {
+        for t in &chart.transitions {
+            out.extend(t.condition.signals());
+        }
+    }
+    out.into_iter().collect()
+}
+
+/// Sets `inputs` so that `e` (negated when `negate`) holds: every literal of
+/// a conjunction, the first branch of a disjunction.
+fn satisfy(e: &Expr, negate: bool, inputs: &mut HashMap<Signal, bool>) {
+    match (e, negate) {
+        (Expr::Const(_), _) => {}
+        (Expr::Lit(s, n), _) => {
+            inputs.insert(s.clone(), !(*n ^ negate));
+        }
+        (Expr::Not(inner), _) => satisfy(inner, !negate, inputs),
+        (Expr::And(es), false) | (Expr::Or(es), true) => {
+            for e in es {
+                satisfy(e, negate, inputs);
+            }
+        }
+        (Expr::And(es), true) | (Expr::Or(es), false) => {
+            if let Some(e) = es.first() {
+                satisfy(e, negate, inputs);
+            }
+        }
+    }
+}
