@@ -58,7 +58,7 @@ pub(crate) async fn all(
     conditions: &[&dyn Fn(&SourceEvent) -> bool],
 ) {
     let mut seen = vec![false; conditions.len()];
-    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(90);
     while !seen.iter().all(|s| *s) {
         let ev = tokio::time::timeout_at(deadline, rx.recv())
             .await

@@ -646,7 +646,7 @@ mod tests {
                 "[operators.kim]\npublic_key = \"{}\"\nallow = [\"fly\"]",
                 kim.public_hex()
             )),
-            "ops.toml: operators.kim: allow: unknown action 'fly': use ack, reset, write, shelve, unshelve, out-of-service, in-service"
+            "ops.toml: operators.kim: allow: unknown action 'fly': use ack, reset, write, shelve, unshelve, out-of-service, in-service, force, stop"
         );
         assert!(err(&format!(
             "[operators.kim]\npublic_key = \"{}\"",
@@ -662,15 +662,15 @@ mod actions {
 
     #[test]
     fn an_unknown_action_does_not_parse() {
-        let text = r#"{"action":"force","alarm":"ese","operator":"kim","nonce":"n","issued_at":1,"signature":"00"}"#;
+        let text = r#"{"action":"launch","alarm":"ese","operator":"kim","nonce":"n","issued_at":1,"signature":"00"}"#;
         let err = serde_json::from_str::<Command>(text)
             .unwrap_err()
             .to_string();
         assert!(
-            err.starts_with("unknown variant `force`, expected one of `ack`, `reset`, `write`"),
+            err.starts_with("unknown variant `launch`, expected one of `ack`, `reset`, `write`"),
             "{err}"
         );
-        let ok = text.replace("force", "reset");
+        let ok = text.replace("launch", "reset");
         assert_eq!(
             serde_json::from_str::<Command>(&ok).unwrap().action,
             Action::Reset
