@@ -18,7 +18,7 @@
 
 use super::{Sfc, StepRef};
 use crate::comments::CommentDb;
-use crate::explain::{explain_partial, Culprit, Polarity};
+use crate::explain::{explain_partial, Polarity};
 use crate::signal::Signal;
 use crate::switching::SwitchingFunction;
 
@@ -156,11 +156,7 @@ pub fn check(
     if !stuck {
         return done(checks);
     }
-    let about = t
-        .comment
-        .as_deref()
-        .map(|c| format!(" ({c})"))
-        .unwrap_or_default();
+    let about = super::about(t.comment.as_deref());
     match condition.certain(&value) {
         Some(true) => verdict(
             "condition",
@@ -176,11 +172,7 @@ pub fn check(
                 format!(
                     "{}{about} does not hold: {}",
                     t.id,
-                    culprits
-                        .iter()
-                        .map(Culprit::to_string)
-                        .collect::<Vec<_>>()
-                        .join(", ")
+                    super::culprit_list(&culprits)
                 ),
             )
         }
@@ -211,14 +203,7 @@ mod tests {
 
     use super::*;
 
-    fn robot() -> Sfc {
-        super::super::text::parse(
-            "robot.sfc.toml",
-            include_str!("../../../config/robot/robot.sfc.toml"),
-            &|_| true,
-        )
-        .unwrap()
-    }
+    use super::super::robot;
 
     fn run(
         sfc: &Sfc,

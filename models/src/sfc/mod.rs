@@ -162,6 +162,33 @@ pub(crate) fn and(terms: impl IntoIterator<Item = Expr>) -> Expr {
     Expr::And(out)
 }
 
+/// ` (comment)`, or nothing: how a step or transition is named with its
+/// comment in messages.
+pub(crate) fn about(comment: Option<&str>) -> String {
+    comment.map(|c| format!(" ({c})")).unwrap_or_default()
+}
+
+/// Culprits as one line: `%IX0.0.3 = 0 (expected 1): comment, …`.
+pub(crate) fn culprit_list(culprits: &[crate::explain::Culprit]) -> String {
+    culprits
+        .iter()
+        .map(ToString::to_string)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The robot charts of paper 004 (`config/robot/robot.sfc.toml`), for
+/// the tests.
+#[cfg(test)]
+pub(crate) fn robot() -> Sfc {
+    text::parse(
+        "robot.sfc.toml",
+        include_str!("../../../config/robot/robot.sfc.toml"),
+        &|_| true,
+    )
+    .unwrap()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -169,11 +196,7 @@ mod tests {
     use crate::comments::CommentDb;
     use crate::engine::{CheckSet, Finding};
 
-    const ROBOT: &str = include_str!("../../../config/robot/robot.sfc.toml");
-
-    fn robot() -> Sfc {
-        text::parse("robot.sfc.toml", ROBOT, &|_| true).unwrap()
-    }
+    use super::robot;
 
     fn r(sfc: &Sfc, name: &str) -> StepRef {
         let (c, s) = name.split_once('.').unwrap();

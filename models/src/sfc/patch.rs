@@ -18,11 +18,7 @@ pub fn patch(sfc: &Sfc, chart: usize, t: &Transition, force: &Signal) -> String 
     let name = format!("{}_{}_FIRE", sfc.charts[chart].name, t.id);
     let from: Vec<String> = t.from.iter().map(|&r| sfc.step_name(r)).collect();
     let to: Vec<String> = t.to.iter().map(|&r| sfc.step_name(r)).collect();
-    let about = t
-        .comment
-        .as_deref()
-        .map(|c| format!(" ({c})"))
-        .unwrap_or_default();
+    let about = super::about(t.comment.as_deref());
     let done = and(t
         .from
         .iter()
@@ -205,14 +201,7 @@ fn il(e: &Expr, op: &str, out: &mut Vec<String>) {
 mod tests {
     use super::*;
 
-    fn robot() -> Sfc {
-        super::super::text::parse(
-            "robot.sfc.toml",
-            include_str!("../../../config/robot/robot.sfc.toml"),
-            &|_| true,
-        )
-        .unwrap()
-    }
+    use super::super::robot;
 
     #[test]
     fn the_paper_term_for_t3_in_st_and_il() {

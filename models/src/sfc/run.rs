@@ -231,12 +231,7 @@ condition = "T5"
 
     #[test]
     fn the_robot_syncs_resyncs_and_jumps() {
-        let sfc = super::super::text::parse(
-            "robot.sfc.toml",
-            include_str!("../../../config/robot/robot.sfc.toml"),
-            &|_| true,
-        )
-        .unwrap();
+        let sfc = super::super::robot();
         let none = |_: usize, _: &str| false;
         let mut r = Runner::new(&sfc);
         assert_eq!(names(&sfc, &r), ["F1.S0"]);

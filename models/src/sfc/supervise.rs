@@ -115,11 +115,7 @@ impl SfcChecks {
     fn finding(&self, r: StepRef, active: bool, now: u64) -> Finding {
         let name = self.sfc.step_name(r);
         let step = self.sfc.step(r);
-        let what = step
-            .comment
-            .as_deref()
-            .map(|c| format!(" ({c})"))
-            .unwrap_or_default();
+        let what = super::about(step.comment.as_deref());
         let lasted = self
             .since
             .get(&r)
@@ -145,21 +141,13 @@ impl SfcChecks {
                 continue;
             }
             let culprits = self.criteria(r.chart, i);
-            let about = t
-                .comment
-                .as_deref()
-                .map(|c| format!(" ({c})"))
-                .unwrap_or_default();
+            let about = super::about(t.comment.as_deref());
             let value = |s: &Signal| self.values.get(s).copied();
             waits.push(if !culprits.is_empty() {
                 format!(
                     "{}{about} waits for {}",
                     t.id,
-                    culprits
-                        .iter()
-                        .map(Culprit::to_string)
-                        .collect::<Vec<_>>()
-                        .join(", ")
+                    super::culprit_list(&culprits)
                 )
             } else if self.needs[&(r.chart, i)].certain(value) == Some(true) {
                 format!("{}{about} can fire", t.id)
