@@ -199,7 +199,7 @@ impl CellLoop {
                     detail: why,
                 });
             }
-            None => self.send_pulse(&cmd, &target, base, reply),
+            None => self.send_pulse(&cmd, &target, base, reply).await,
         }
     }
 
@@ -339,8 +339,8 @@ impl CellLoop {
     }
 
     /// Hands the switch's pulse to the source; the outcome comes back as
-    /// a [`Written`].
-    fn send_pulse(
+    /// a [`Written`] (at once when nothing could be sent).
+    async fn send_pulse(
         &mut self,
         cmd: &Command,
         target: &str,
@@ -378,27 +378,19 @@ impl CellLoop {
                 then,
             }
         };
-        let (Some(switch), Some(writer)) = (switch, self.writer.as_ref()) else {
-            let w = done("this cell's source takes no writes".into());
-            tokio::spawn(async move {
-                let _ = back.send(w).await;
-            });
-            return;
-        };
         let (tx, pending) = oneshot::channel();
-        if writer
-            .try_send(WriteRequest {
-                tag: switch,
-                what: Write::Pulse(pulse),
-                reply: tx,
-            })
-            .is_err()
-        {
-            let w = done("busy: other writes are waiting for the PLC".into());
-            tokio::spawn(async move {
-                let _ = back.send(w).await;
-            });
-            return;
+        let sent = match (switch, self.writer.as_ref()) {
+            (Some(switch), Some(writer)) => writer
+                .try_send(WriteRequest {
+                    tag: switch,
+                    what: Write::Pulse(pulse),
+                    reply: tx,
+                })
+                .map_err(|_| "busy: other writes are waiting for the PLC"),
+            _ => Err("this cell's source takes no writes"),
+        };
+        if let Err(why) = sent {
+            return self.written(done(why.into())).await;
         }
         tokio::spawn(async move {
             let result = match tokio::time::timeout(WRITE_TIMEOUT + pulse, pending).await {
