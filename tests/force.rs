@@ -176,6 +176,12 @@ async fn a_stuck_step_is_explained_and_forced_on_only_as_paper_004_allows() {
     assert_eq!(stuck.culprits.len(), 1);
     assert_eq!(stuck.culprits[0].address, "%IX0.0.3");
 
+    // The agent's queryables are known to this session (a query that
+    // finds no queryable ends without a reply; a command is sent once).
+    crate::spawned::query(&bus, &format!("cellwatch/{CELL}/snapshot"), None)
+        .await
+        .unwrap();
+
     // Refused while t3 is false: the condition.
     let first = signed(&kim(), Action::Force, "F1.t3");
     let (ok, detail) = send(&bus, &first).await;
