@@ -70,3 +70,81 @@ fn patch_prints_the_force_term_in_st_and_il() {
     assert_eq!(r.code, 2);
     assert!(r.stderr.contains("--transition 'F1.t9'"), "{}", r.stderr);
 }
+
+/// Step supervision learned through the CLI: the robot's normal runs,
+/// `learn --sfc`, and the file taken by a cell's `steps` key.
+#[test]
+fn learn_sfc_writes_step_supervision_a_cell_takes() {
+    let d = Dir::new();
+    let train = d.path().join("train");
+    let r = cellwatch(&[
+        "simulate",
+        "robot-runs",
+        "--runs",
+        "4",
+        "--length",
+        "40s",
+        "--out",
+        train.to_str().unwrap(),
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let robot = root().join("config/robot/robot.sfc.toml");
+    let steps = d.path().join("robot-steps.json");
+    let mut args = vec![
+        "learn".to_string(),
+        "--sfc".into(),
+        robot.to_str().unwrap().into(),
+        "--out".into(),
+        steps.to_str().unwrap().into(),
+    ];
+    args.extend((1..=4).map(|i| format!("{}/run-{i:03}.csv", train.display())));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let r = cellwatch(&args);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        r.stdout.starts_with("4 runs; learned 12 of 13 steps:"),
+        "{}",
+        r.stdout
+    );
+    assert!(
+        r.stdout
+            .contains("F1.S3: never active and left in the runs"),
+        "{}",
+        r.stdout
+    );
+    let model: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&steps).unwrap()).unwrap();
+    let s2 = &model["steps"][2];
+    assert_eq!(s2["step"], "F1.S2");
+    // Each step takes 1.0-1.4 s: the longest plus at least 1 s.
+    let sup = s2["supervision_ms"].as_u64().unwrap();
+    assert!((2_000..=2_500).contains(&sup), "{sup}");
+
+    // Options of the timer learner do not apply.
+    let r = cellwatch(&[
+        "learn",
+        "--sfc",
+        robot.to_str().unwrap(),
+        "--tau",
+        "1s",
+        "x.csv",
+    ]);
+    assert_eq!(r.code, 2);
+    assert!(r.stderr.contains("cannot be used with"), "{}", r.stderr);
+    // A step that is not in the robot's charts.
+    let r = cellwatch(&[
+        "simulate",
+        "robot-runs",
+        "--stuck",
+        "F1.S9@1s",
+        "--out",
+        train.to_str().unwrap(),
+    ]);
+    assert_eq!(r.code, 2);
+    assert!(
+        r.stderr
+            .contains("--stuck 'F1.S9@1s': no such step in the robot's charts"),
+        "{}",
+        r.stderr
+    );
+}

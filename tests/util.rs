@@ -40,6 +40,11 @@ impl Dir {
         Dir(tempfile::tempdir().unwrap())
     }
 
+    /// The directory.
+    pub(crate) fn path(&self) -> &Path {
+        self.0.path()
+    }
+
     /// Writes `name` with `bytes` and returns its path as a string.
     pub(crate) fn file(&self, name: &str, bytes: impl AsRef<[u8]>) -> String {
         let p = self.0.path().join(name);

@@ -112,7 +112,8 @@ enum Command {
     /// control matches their common names).
     #[command(subcommand)]
     Pki(PkiCommand),
-    /// Learn transition timers δ(A, E | Δt) = B from logs of normal runs.
+    /// Learn transition timers δ(A, E | Δt) = B from logs of normal runs;
+    /// with --sfc, the supervision time of every step of the charts instead.
     Learn(LearnArgs),
     /// Run the transition-timer monitor over run logs in virtual time.
     Replay(ReplayArgs),
@@ -206,9 +207,20 @@ pub(crate) struct LearnArgs {
     /// (the paper's: timed from entering the full state).
     #[arg(long, default_value = "common")]
     pub(crate) method: String,
-    /// Where to write the timer model (JSON).
-    #[arg(long, default_value = "timers.json")]
-    pub(crate) out: PathBuf,
+    /// Learn step supervision times for these charts (`.sfc.toml`) instead
+    /// of transition timers: each step's longest duration in the runs plus
+    /// max(half of it, twice the spread, 1 s). The file goes to a
+    /// `[[checks.sfc]]` `steps` key; a supervision declared in the charts wins.
+    #[arg(
+        long,
+        value_name = "CHARTS",
+        conflicts_with_all = ["tau", "tau_auto", "table", "method", "delta_min"]
+    )]
+    pub(crate) sfc: Option<PathBuf>,
+    /// Where to write the model (JSON; default timers.json, with --sfc
+    /// steps.json).
+    #[arg(long)]
+    pub(crate) out: Option<PathBuf>,
     /// Also print the paper's Fig. 12 view: transitions × signals (1, 0, or
     /// . when the signal is not in the start condition; E marks the event).
     #[arg(long)]
@@ -326,6 +338,36 @@ pub(crate) enum SimulateCommand {
     /// `stop UNIT CAUSE` (01-06), `run UNIT`, `silent UNIT`, `answer UNIT`,
     /// `noise N`, `cycle`, `quit`.
     Moulding(MouldingArgs),
+    /// Paper 004's LCD-glass robot, in virtual time: writes run logs (CSV)
+    /// of its step flags and inputs, normal or with a step stuck, as
+    /// `cellwatch learn --sfc` reads them; deterministic per seed.
+    RobotRuns(RobotRunsArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct RobotRunsArgs {
+    /// How many runs.
+    #[arg(long, default_value_t = 4)]
+    pub(crate) runs: u64,
+    /// Length of each run.
+    #[arg(long, default_value = "60s")]
+    pub(crate) length: String,
+    /// Shortest time a step takes.
+    #[arg(long, default_value = "1s")]
+    pub(crate) dwell_min: String,
+    /// Longest time a step takes (each activation draws between the two).
+    #[arg(long, default_value = "1400ms")]
+    pub(crate) dwell_max: String,
+    /// Put a step in error in every run: STEP@TIME, the step stuck at its
+    /// first activation after TIME (F1.S2@10s).
+    #[arg(long, value_name = "STEP@TIME")]
+    pub(crate) stuck: Option<String>,
+    /// Seed of the first run (run i uses seed + i).
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// Directory for run-NNN.csv (and stuck.csv with when each step stuck).
+    #[arg(long)]
+    pub(crate) out: PathBuf,
 }
 
 #[derive(Debug, clap::Args)]
@@ -851,6 +893,9 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::Run(args) => commands::agent::run(&args).await,
             Command::Demo(args) => commands::agent::demo(&args, out).await,
             Command::Simulate(SimulateCommand::Line(args)) => commands::simulate::line(&args, out),
+            Command::Simulate(SimulateCommand::RobotRuns(args)) => {
+                commands::simulate::robot_runs(&args, out)
+            }
             Command::Simulate(SimulateCommand::Cnc(args)) => {
                 commands::simulate::cnc(&args, out).await
             }

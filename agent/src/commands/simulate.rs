@@ -4,7 +4,7 @@ use std::io::Write;
 
 use tokio::io::{AsyncBufReadExt, BufReader};
 
-use crate::cli::{Failure, LineArgs, MouldingArgs, SimulateArgs};
+use crate::cli::{Failure, LineArgs, MouldingArgs, RobotRunsArgs, SimulateArgs};
 use crate::sim::cnc::{Scenario, SimOptions, SimulatedCnc};
 use crate::sim::moulding::{Event, MouldingBus};
 use crate::sources::pki;
@@ -192,6 +192,92 @@ pub(crate) async fn cnc(args: &SimulateArgs, out: &mut dyn Write) -> Result<(), 
     Ok(())
 }
 
+/// Writes `run` as a CSV run log (`time_ms,tag,value`, initial values at 0).
+fn write_run(
+    path: &std::path::Path,
+    run: &cellwatch_models::timer::log::RunLog,
+) -> Result<(), Failure> {
+    let mut csv = String::from("time_ms,tag,value\n");
+    for (s, v) in run.signals.iter().zip(&run.initial) {
+        csv.push_str(&format!("0,{s},{}\n", u8::from(*v)));
+    }
+    for c in &run.changes {
+        csv.push_str(&format!(
+            "{},{},{}\n",
+            c.at,
+            run.signals[c.signal],
+            u8::from(c.value)
+        ));
+    }
+    std::fs::write(path, csv)
+        .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", path.display())))
+}
+
+/// `cellwatch simulate robot-runs`.
+pub(crate) fn robot_runs(args: &RobotRunsArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    use cellwatch_models::sfc::plant::{record, Stuck};
+    use cellwatch_models::sfc::StepRef;
+    let sfc =
+        cellwatch_models::sfc::text::parse("robot.sfc.toml", crate::sim::robot::CHARTS, &|_| true)
+            .map_err(|e| Failure::Runtime(e.join("\n")))?;
+    let ms = |option: &str, text: &str| {
+        humantime::parse_duration(text)
+            .map(|d| d.as_millis() as u64)
+            .map_err(|e| Failure::Input(format!("{option} '{text}': not a duration ({e})")))
+    };
+    let length = ms("--length", &args.length)?;
+    let dwell = [
+        ms("--dwell-min", &args.dwell_min)?,
+        ms("--dwell-max", &args.dwell_max)?,
+    ];
+    if dwell[0] == 0 || dwell[0] > dwell[1] {
+        return Err(Failure::Input(format!(
+            "--dwell-min {} must be above 0 and at most --dwell-max {}",
+            args.dwell_min, args.dwell_max
+        )));
+    }
+    let stuck = match &args.stuck {
+        None => None,
+        Some(spec) => {
+            let bad = |why: &str| Failure::Input(format!("--stuck '{spec}': {why}"));
+            let (step, at) = spec
+                .split_once('@')
+                .ok_or_else(|| bad("write STEP@TIME, as in F1.S2@10s"))?;
+            let r = sfc
+                .steps()
+                .map(|(r, _)| r)
+                .find(|&r: &StepRef| sfc.step_name(r) == step)
+                .ok_or_else(|| bad("no such step in the robot's charts"))?;
+            Some(Stuck {
+                step: r,
+                after_ms: ms("--stuck", at)?,
+            })
+        }
+    };
+    std::fs::create_dir_all(&args.out)
+        .map_err(|e| Failure::Runtime(format!("cannot create {}: {e}", args.out.display())))?;
+    let io = Failure::output;
+    let mut labels = String::from("run,step,stuck_at_ms\n");
+    let scan = crate::sim::robot::SCAN.as_millis() as u64;
+    for i in 0..args.runs {
+        let (run, at) = record(&sfc, dwell, args.seed + i, scan, length, stuck);
+        let name = format!("run-{:03}.csv", i + 1);
+        let path = args.out.join(&name);
+        write_run(&path, &run)?;
+        if let (Some(s), Some(at)) = (stuck, at) {
+            labels.push_str(&format!("{name},{},{at}\n", sfc.step_name(s.step)));
+        }
+        writeln!(out, "{} ({} changes)", path.display(), run.changes.len()).map_err(io)?;
+    }
+    if stuck.is_some() {
+        let path = args.out.join("stuck.csv");
+        std::fs::write(&path, labels)
+            .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", path.display())))?;
+        writeln!(out, "{} (when each step stuck)", path.display()).map_err(io)?;
+    }
+    Ok(())
+}
+
 /// `cellwatch simulate line`: writes run logs of the simulated body-shop line.
 pub(crate) fn line(args: &LineArgs, out: &mut dyn Write) -> Result<(), Failure> {
     use cellwatch_models::timer::line::{self, Fault};
@@ -216,22 +302,9 @@ pub(crate) fn line(args: &LineArgs, out: &mut dyn Write) -> Result<(), Failure> 
     let mut labels = String::from("run,kind,sensor,command_at_ms\n");
     for i in 0..args.runs {
         let (run, injected) = line::run(args.seed + i, args.cycles, fault);
-        let mut csv = String::from("time_ms,tag,value\n");
-        for (s, v) in run.signals.iter().zip(&run.initial) {
-            csv.push_str(&format!("0,{s},{}\n", u8::from(*v)));
-        }
-        for c in &run.changes {
-            csv.push_str(&format!(
-                "{},{},{}\n",
-                c.at,
-                run.signals[c.signal],
-                u8::from(c.value)
-            ));
-        }
         let name = format!("run-{:03}.csv", i + 1);
         let path = args.out.join(&name);
-        std::fs::write(&path, csv)
-            .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", path.display())))?;
+        write_run(&path, &run)?;
         if let Some(f) = injected {
             labels.push_str(&format!(
                 "{name},{:?},{},{}\n",

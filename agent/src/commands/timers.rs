@@ -41,6 +41,9 @@ fn millis(option: &str, text: &str) -> Result<u64, Failure> {
 /// `cellwatch learn`.
 pub(crate) fn learn(args: &LearnArgs, out: &mut dyn Write) -> Result<(), Failure> {
     let runs = runs(&args.runs, args.map.as_deref())?;
+    if let Some(charts) = &args.sfc {
+        return learn_steps(args, charts, &runs, out);
+    }
     let tau = match (&args.tau, args.tau_auto) {
         (_, true) => Tau::Auto,
         (Some(t), false) => Tau::Fixed(millis("--tau", t)?),
@@ -106,11 +109,62 @@ pub(crate) fn learn(args: &LearnArgs, out: &mut dyn Write) -> Result<(), Failure
     if args.table {
         table(out, &learned.model).map_err(io)?;
     }
-    let json = serde_json::to_string_pretty(&learned.model)
-        .map_err(|e| Failure::Runtime(e.to_string()))?;
-    std::fs::write(&args.out, json + "\n")
-        .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", args.out.display())))?;
-    writeln!(out, "model written to {}", args.out.display()).map_err(io)
+    save(
+        &learned.model,
+        args.out.as_deref().unwrap_or(Path::new("timers.json")),
+        out,
+    )
+}
+
+/// Writes `model` as JSON to `path` and says so.
+fn save(model: &impl serde::Serialize, path: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+    let json = serde_json::to_string_pretty(model).map_err(|e| Failure::Runtime(e.to_string()))?;
+    std::fs::write(path, json + "\n")
+        .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", path.display())))?;
+    writeln!(out, "model written to {}", path.display()).map_err(Failure::output)
+}
+
+/// `cellwatch learn --sfc`: step supervision times.
+fn learn_steps(
+    args: &LearnArgs,
+    charts: &Path,
+    runs: &[RunLog],
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    let text = read_text(charts, "charts")?;
+    // Contacts are checked against the cell's tags in its configuration;
+    // here only the charts' shape matters.
+    let sfc = cellwatch_models::sfc::text::parse(&charts.display().to_string(), &text, &|_| true)
+        .map_err(|e| Failure::Input(e.join("\n")))?;
+    let learned = cellwatch_models::sfc::learn::learn(&sfc, runs, args.min_support);
+    let io = Failure::output;
+    writeln!(
+        out,
+        "{} runs; learned {} of {} steps:",
+        runs.len(),
+        learned.model.steps.len(),
+        sfc.steps().count()
+    )
+    .map_err(io)?;
+    for s in &learned.model.steps {
+        writeln!(
+            out,
+            "  {} supervision {} ms (durations {}..{} ms, mean {} ms, {} activations in {} runs)",
+            s.step, s.supervision_ms, s.min_ms, s.max_ms, s.mean_ms, s.count, s.support
+        )
+        .map_err(io)?;
+    }
+    if !learned.not_learned.is_empty() {
+        writeln!(out, "not learned {}:", learned.not_learned.len()).map_err(io)?;
+        for n in &learned.not_learned {
+            writeln!(out, "  {}: {}", n.step, n.reason).map_err(io)?;
+        }
+    }
+    save(
+        &learned.model,
+        args.out.as_deref().unwrap_or(Path::new("steps.json")),
+        out,
+    )
 }
 
 fn model(path: &Path) -> Result<TimerModel, Failure> {

@@ -30,6 +30,8 @@ use cellwatch_models::expr::Expr;
 use cellwatch_models::il::Dialect;
 use cellwatch_models::limit::{Level, LimitCheck, LimitLevel};
 use cellwatch_models::program::Program;
+use cellwatch_models::sfc::learn::StepModel;
+use cellwatch_models::sfc::Sfc;
 use cellwatch_models::signal::{Observability, Signal};
 use cellwatch_models::switching::SwitchingFunction;
 use cellwatch_models::value::{Comparison, Counter, Operand, ValueType};
@@ -1656,6 +1658,31 @@ impl Validator<'_> {
         }
     }
 
+    /// Step supervision times learned by `cellwatch learn --sfc`, given to
+    /// the steps of `sfc` that declare none.
+    fn learned_steps(&mut self, file: &Spanned<String>, key: &str, sfc: &mut Sfc) {
+        let path = self.path(file.get_ref());
+        let Some(text) = self.read_text(file.span(), key, &path, "step supervision") else {
+            return;
+        };
+        let model: StepModel = match serde_json::from_str(&text) {
+            Ok(m) => m,
+            Err(e) => {
+                self.problem(
+                    file.span(),
+                    key,
+                    format!("{}:{}:{}: {e}", path.display(), e.line(), e.column()),
+                );
+                return;
+            }
+        };
+        if let Err(errors) = model.apply(sfc) {
+            for e in errors {
+                self.problem(file.span(), key, format!("{}: {e}", path.display()));
+            }
+        }
+    }
+
     /// The charts under supervision (`[[checks.sfc]]`).
     fn sfc(
         &mut self,
@@ -1705,6 +1732,9 @@ impl Validator<'_> {
             };
             match cellwatch_models::sfc::text::parse(&path.display().to_string(), &text, &known) {
                 Ok(mut sfc) => {
+                    if let Some(steps) = &c.steps {
+                        self.learned_steps(steps, &format!("{key}.steps"), &mut sfc);
+                    }
                     for chart in &sfc.charts {
                         if !charts.insert(chart.name.clone()) {
                             self.problem(

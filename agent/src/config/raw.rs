@@ -133,6 +133,7 @@ pub(crate) struct RawChecks {
 pub(crate) struct RawSfc {
     pub(crate) id: Spanned<String>,
     pub(crate) charts: Spanned<String>,
+    pub(crate) steps: Option<Spanned<String>>,
     pub(crate) severity: Option<Spanned<String>>,
     pub(crate) force_switch: Option<Spanned<String>>,
     pub(crate) stop_switch: Option<Spanned<String>>,

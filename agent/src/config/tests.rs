@@ -519,3 +519,75 @@ fn forcing_keys_name_boolean_tags_and_declared_transitions() {
         "{e}"
     );
 }
+
+#[test]
+fn learned_step_supervision_fills_the_steps_that_declare_none() {
+    let (text, mut files) = robot_cell("");
+    let text = format!("{text}steps = \"robot-steps.json\"\n");
+    let learned = |step: &str| {
+        format!(
+            "{{\"step\": \"{step}\", \"supervision_ms\": 2400, \"min_ms\": 1000, \"max_ms\": 1400, \
+             \"mean_ms\": 1200, \"count\": 20, \"support\": 4}}"
+        )
+    };
+    let model = format!(
+        "{{\"version\": 1, \"runs\": 4, \"steps\": [{}, {}]}}",
+        learned("F1.S2"),
+        learned("F2.S6")
+    );
+    files
+        .0
+        .insert(PathBuf::from("base/robot-steps.json"), model.into_bytes());
+    let c = parse("cell.toml", &text, Path::new("base"), &files).unwrap();
+    let sfc = &c.sfc[0].sfc;
+    let step = |chart: usize, name: &str| {
+        sfc.charts[chart]
+            .steps
+            .iter()
+            .find(|s| s.name == name)
+            .unwrap()
+            .supervision_ms
+    };
+    // F1.S2 declares 8 s: it keeps it; F2.S6 declares none: learned.
+    assert_eq!(step(0, "S2"), Some(8_000));
+    assert_eq!(step(1, "S6"), Some(2_400));
+    assert_eq!(step(1, "S9"), None);
+
+    // A step the charts lack, a file that is no model, a missing file.
+    let model = format!(
+        "{{\"version\": 1, \"runs\": 4, \"steps\": [{}]}}",
+        learned("F1.S9")
+    );
+    files
+        .0
+        .insert(PathBuf::from("base/robot-steps.json"), model.into_bytes());
+    let e = parse("cell.toml", &text, Path::new("base"), &files)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains(
+            "checks.sfc[0].steps: base/robot-steps.json: step F1.S9: no such step in the charts"
+        ),
+        "{e}"
+    );
+    files.0.insert(
+        PathBuf::from("base/robot-steps.json"),
+        b"{\"version\": 1,\n \"runs\": 4, \"stepz\": []}".to_vec(),
+    );
+    let e = parse("cell.toml", &text, Path::new("base"), &files)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("checks.sfc[0].steps: base/robot-steps.json:2:")
+            && e.contains("unknown field `stepz`"),
+        "{e}"
+    );
+    files.0.remove(&PathBuf::from("base/robot-steps.json"));
+    let e = parse("cell.toml", &text, Path::new("base"), &files)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("checks.sfc[0].steps: cannot read step supervision 'base/robot-steps.json'"),
+        "{e}"
+    );
+}

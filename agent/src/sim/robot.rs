@@ -1,7 +1,7 @@
 //! The LCD-glass carrying robot of paper 004, served over OPC UA.
 //!
 //! The PLC side runs the charts of `config/robot/robot.sfc.toml` with
-//! [`Runner`], one scan every [`SCAN`]: eq. (1)/(2) for every transition,
+//! [`Plant`] (its runner and plant), one scan every [`SCAN`]: eq. (1)/(2) for every transition,
 //! and for the forcible ones (t3, t18) the force switch term of eq.
 //! (3)/(4). The plant around it is simple: a step that has been active
 //! for the dwell time makes the inputs of its first outgoing transition
@@ -14,13 +14,12 @@
 //! server's [`WriteLog`]. The stop switch stops the charts (no transition
 //! fires) and lights `%QX0.3.0` until [`SimulatedRobot::restart`].
 
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use cellwatch_models::expr::Expr;
-use cellwatch_models::sfc::run::Runner;
+use cellwatch_models::sfc::plant::{self, Plant};
 use cellwatch_models::sfc::{text, Sfc, StepRef};
 use cellwatch_models::signal::Signal;
 
@@ -43,11 +42,9 @@ pub const FORCIBLE: [(&str, &str); 2] = [("F1", "t3"), ("F2", "t18")];
 /// How often the simulated PLC scans.
 pub const SCAN: Duration = Duration::from_millis(20);
 
-struct Plant {
-    runner: Runner,
-    /// Since when each active step is active.
-    since: HashMap<StepRef, tokio::time::Instant>,
-    pinned: HashMap<Signal, bool>,
+struct State {
+    plant: Plant,
+    started: tokio::time::Instant,
     stopped: bool,
     /// What the server shows, to write only changes.
     shown: HashMap<String, bool>,
@@ -58,9 +55,8 @@ struct Plant {
 pub struct SimulatedRobot {
     server: SimServer,
     sfc: Arc<Sfc>,
-    plant: Arc<Mutex<Plant>>,
+    plant: Arc<Mutex<State>>,
     log: WriteLog,
-    dwell: Duration,
 }
 
 impl SimulatedRobot {
@@ -71,8 +67,11 @@ impl SimulatedRobot {
     /// The port cannot be bound or the server cannot be built.
     pub async fn start(options: &SimOptions, dwell: Duration) -> Result<SimulatedRobot, String> {
         let sfc = text::parse("robot.sfc.toml", CHARTS, &|_| true).map_err(|e| e.join("\n"))?;
-        let runner = Runner::new(&sfc);
-        let mut names: Vec<String> = signals(&sfc).iter().map(|s| s.name().to_string()).collect();
+        let dwell = dwell.as_millis() as u64;
+        let mut names: Vec<String> = plant::signals(&sfc)
+            .iter()
+            .map(|s| s.name().to_string())
+            .collect();
         names.extend([FORCE_SWITCH, STOP_SWITCH, STOPPED].map(String::from));
         let variables: Vec<(String, bool)> = names.iter().map(|n| (n.clone(), false)).collect();
         let server = SimServer::start(
@@ -85,16 +84,14 @@ impl SimulatedRobot {
         let log = server.writable(&[FORCE_SWITCH, STOP_SWITCH])?;
         let robot = SimulatedRobot {
             server,
-            sfc: Arc::new(sfc),
-            plant: Arc::new(Mutex::new(Plant {
-                runner,
-                since: HashMap::new(),
-                pinned: HashMap::new(),
+            plant: Arc::new(Mutex::new(State {
+                plant: Plant::new(&sfc, [dwell, dwell], 1),
+                started: tokio::time::Instant::now(),
                 stopped: false,
                 shown: variables.into_iter().collect(),
             })),
+            sfc: Arc::new(sfc),
             log,
-            dwell,
         };
         robot.scan();
         Ok(robot)
@@ -116,49 +113,23 @@ impl SimulatedRobot {
         let Ok(mut p) = self.plant.lock() else {
             return;
         };
-        let now = tokio::time::Instant::now();
+        let now = p.started.elapsed().as_millis() as u64;
         let force = self.log.value(FORCE_SWITCH).unwrap_or(false);
         if self.log.value(STOP_SWITCH).unwrap_or(false) {
             p.stopped = true;
         }
-        // The plant: a step active for its dwell makes its first
-        // transition's condition true.
-        let mut inputs: HashMap<Signal, bool> = HashMap::new();
-        for r in p.runner.active().collect::<Vec<_>>() {
-            let since = *p.since.entry(r).or_insert(now);
-            if now.duration_since(since) < self.dwell {
-                continue;
-            }
-            if let Some(t) = self.sfc.leaving(r).next() {
-                satisfy(&t.condition, false, &mut inputs);
-            }
-        }
-        for (s, v) in &p.pinned {
-            inputs.insert(s.clone(), *v);
-        }
-        if !p.stopped {
-            let value = |s: &Signal| inputs.get(s).copied().unwrap_or(false);
-            let sfc = &self.sfc;
-            let forcible = |c: usize, id: &str| {
-                FORCIBLE
-                    .iter()
-                    .any(|&(fc, ft)| sfc.charts[c].name == fc && ft == id)
-            };
-            p.runner.scan(sfc, &value, force, &forcible);
-        }
-        let active: HashSet<StepRef> = p.runner.active().collect();
-        p.since.retain(|r, _| active.contains(r));
-        let mut out: Vec<(String, bool)> = signals(&self.sfc)
+        let sfc = &self.sfc;
+        let forcible = |c: usize, id: &str| {
+            FORCIBLE
+                .iter()
+                .any(|&(fc, ft)| sfc.charts[c].name == fc && ft == id)
+        };
+        let stopped = p.stopped;
+        let scanned = p.plant.scan(sfc, now, force, stopped, &forcible);
+        let mut out: Vec<(String, bool)> = plant::shown(sfc, &p.plant, &scanned)
             .into_iter()
-            .map(|s| {
-                let v = inputs.get(&s).copied().unwrap_or(false);
-                (s.name().to_string(), v)
-            })
+            .map(|(s, v)| (s.name().to_string(), v))
             .collect();
-        for (r, step) in self.sfc.steps() {
-            out.retain(|(n, _)| n != step.flag.name());
-            out.push((step.flag.name().to_string(), active.contains(&r)));
-        }
         out.push((STOPPED.to_string(), p.stopped));
         let changed: Vec<(String, bool)> = out
             .into_iter()
@@ -183,17 +154,14 @@ impl SimulatedRobot {
     pub fn stick(&self, name: &str, stuck: bool) -> Result<(), String> {
         let r = self.step(name)?;
         let mut p = self.plant.lock().map_err(|_| "poisoned")?;
-        p.runner.set_faulty(r, stuck);
+        p.plant.runner_mut().set_faulty(r, stuck);
         Ok(())
     }
 
     /// Holds input `name` at `value` (`None`: the plant drives it again).
     pub fn pin(&self, name: &str, value: Option<bool>) {
         if let Ok(mut p) = self.plant.lock() {
-            match value {
-                Some(v) => p.pinned.insert(Signal::new(name), v),
-                None => p.pinned.remove(&Signal::new(name)),
-            };
+            p.plant.pin(Signal::new(name), value);
         }
     }
 
@@ -202,7 +170,12 @@ impl SimulatedRobot {
         let Ok(p) = self.plant.lock() else {
             return Vec::new();
         };
-        let mut names: Vec<String> = p.runner.active().map(|r| self.sfc.step_name(r)).collect();
+        let mut names: Vec<String> = p
+            .plant
+            .runner()
+            .active()
+            .map(|r| self.sfc.step_name(r))
+            .collect();
         names.sort();
         names
     }
@@ -253,41 +226,5 @@ impl SimulatedRobot {
     /// Stops the server.
     pub fn stop(&self) {
         self.server.stop();
-    }
-}
-
-/// Every step flag and input the charts read.
-fn signals(sfc: &Sfc) -> Vec<Signal> {
-    let mut out = std::collections::BTreeSet::new();
-    for (_, step) in sfc.steps() {
-        out.insert(step.flag.clone());
-    }
-    for chart in &sfc.charts {
-        for t in &chart.transitions {
-            out.extend(t.condition.signals());
-        }
-    }
-    out.into_iter().collect()
-}
-
-/// Sets `inputs` so that `e` (negated when `negate`) holds: every literal of
-/// a conjunction, the first branch of a disjunction.
-fn satisfy(e: &Expr, negate: bool, inputs: &mut HashMap<Signal, bool>) {
-    match (e, negate) {
-        (Expr::Const(_), _) => {}
-        (Expr::Lit(s, n), _) => {
-            inputs.insert(s.clone(), !(*n ^ negate));
-        }
-        (Expr::Not(inner), _) => satisfy(inner, !negate, inputs),
-        (Expr::And(es), false) | (Expr::Or(es), true) => {
-            for e in es {
-                satisfy(e, negate, inputs);
-            }
-        }
-        (Expr::And(es), true) | (Expr::Or(es), false) => {
-            if let Some(e) = es.first() {
-                satisfy(e, negate, inputs);
-            }
-        }
     }
 }

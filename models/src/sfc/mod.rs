@@ -22,7 +22,9 @@
 //! 004), for the simulated cell.
 
 pub mod force;
+pub mod learn;
 pub mod patch;
+pub mod plant;
 pub mod run;
 pub mod supervise;
 pub mod text;
