@@ -19,6 +19,25 @@ fn check_lists_the_robot_charts_and_refuses_a_bad_one_with_its_place() {
         "{}",
         r.stdout
     );
+    // The same charts as PLCopen XML: the same listing, but for the
+    // supervision times XML has no place for.
+    let xml = root().join("config/robot/robot.sfc.xml");
+    let x = cellwatch(&["sfc", "check", xml.to_str().unwrap()]);
+    assert_eq!(x.code, 0, "{}", x.stderr);
+    let unsupervised = |s: &str| {
+        s.lines()
+            .map(|l| match l.find("supervision ") {
+                Some(i) => format!(
+                    "{} {}",
+                    &l[..i],
+                    l[i..].splitn(3, "  ").last().unwrap_or("").trim()
+                ),
+                None => l.to_string(),
+            })
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(unsupervised(&x.stdout), unsupervised(&r.stdout));
+    assert!(x.stdout.contains("supervision -"), "{}", x.stdout);
     let d = Dir::new();
     let bad = d.file(
         "bad.sfc.toml",

@@ -3,25 +3,17 @@
 use std::io::Write;
 use std::path::Path;
 
-use cellwatch_models::sfc::{patch, text, Sfc};
+use cellwatch_models::sfc::{patch, Sfc};
 use cellwatch_models::signal::Signal;
 
 use crate::cli::{Failure, SfcCommand};
 
-/// Reads and checks the chart file at `path` (any contact accepted: no
+/// Reads and checks the chart file at `path`, TOML or PLCopen XML (any contact accepted: no
 /// cell is named here; `cellwatch validate` checks them against a cell's
 /// tags).
 fn charts(path: &Path) -> Result<Sfc, Failure> {
-    let bytes = std::fs::read(path)
-        .map_err(|e| Failure::Input(format!("cannot read charts '{}': {e}", path.display())))?;
-    let text = String::from_utf8(bytes).map_err(|e| {
-        Failure::Input(format!(
-            "{}: not UTF-8 text (byte {})",
-            path.display(),
-            e.utf8_error().valid_up_to()
-        ))
-    })?;
-    text::parse(&path.display().to_string(), &text, &|_| true)
+    let text = crate::inputs::read_text(path, "charts")?;
+    cellwatch_models::sfc::read(&path.display().to_string(), &text, &|_| true)
         .map_err(|errors| Failure::Input(errors.join("\n")))
 }
 

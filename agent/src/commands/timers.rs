@@ -134,7 +134,7 @@ fn learn_steps(
     let text = read_text(charts, "charts")?;
     // Contacts are checked against the cell's tags in its configuration;
     // here only the charts' shape matters.
-    let sfc = cellwatch_models::sfc::text::parse(&charts.display().to_string(), &text, &|_| true)
+    let sfc = cellwatch_models::sfc::read(&charts.display().to_string(), &text, &|_| true)
         .map_err(|e| Failure::Input(e.join("\n")))?;
     let learned = cellwatch_models::sfc::learn::learn(&sfc, runs, args.min_support);
     let io = Failure::output;

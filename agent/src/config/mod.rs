@@ -1730,8 +1730,29 @@ impl Validator<'_> {
                         None => tags.contains_key(s) && !matches!(kinds.get(s), Some((_, false))),
                     })
             };
-            match cellwatch_models::sfc::text::parse(&path.display().to_string(), &text, &known) {
+            match cellwatch_models::sfc::read(&path.display().to_string(), &text, &known) {
                 Ok(mut sfc) => {
+                    // The cell's own times first, then learned ones for
+                    // the steps still without.
+                    for (step, time) in &c.supervision {
+                        let skey = format!("{key}.supervision.\"{step}\"");
+                        let found = sfc
+                            .steps()
+                            .map(|(r, _)| r)
+                            .find(|&r| sfc.step_name(r) == *step);
+                        let ms = cellwatch_models::sfc::text::duration_ms(time.get_ref());
+                        match (found, ms) {
+                            (Some(r), Ok(ms)) => {
+                                sfc.charts[r.chart].steps[r.step].supervision_ms = Some(ms)
+                            }
+                            (None, _) => self.problem(
+                                time.span(),
+                                &skey,
+                                format!("no step {step} in {} (write CHART.STEP)", path.display()),
+                            ),
+                            (_, Err(why)) => self.problem(time.span(), &skey, why),
+                        }
+                    }
                     if let Some(steps) = &c.steps {
                         self.learned_steps(steps, &format!("{key}.steps"), &mut sfc);
                     }

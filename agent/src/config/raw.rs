@@ -134,6 +134,8 @@ pub(crate) struct RawSfc {
     pub(crate) id: Spanned<String>,
     pub(crate) charts: Spanned<String>,
     pub(crate) steps: Option<Spanned<String>>,
+    #[serde(default)]
+    pub(crate) supervision: std::collections::BTreeMap<String, Spanned<String>>,
     pub(crate) severity: Option<Spanned<String>>,
     pub(crate) force_switch: Option<Spanned<String>>,
     pub(crate) stop_switch: Option<Spanned<String>>,

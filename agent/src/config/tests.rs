@@ -591,3 +591,34 @@ fn learned_step_supervision_fills_the_steps_that_declare_none() {
         "{e}"
     );
 }
+
+#[test]
+fn charts_from_plcopen_xml_take_their_supervision_from_the_cell() {
+    let (text, mut files) = robot_cell("");
+    files.0.insert(
+        PathBuf::from("base/robot.sfc.xml"),
+        include_bytes!("../../../config/robot/robot.sfc.xml").to_vec(),
+    );
+    let text = text.replace("robot.sfc.toml", "robot.sfc.xml");
+    let good = format!("{text}supervision = {{ \"F1.S2\" = \"8s\", \"F2.S15\" = \"5s\" }}\n");
+    let c = parse("cell.toml", &good, Path::new("base"), &files).unwrap();
+    let supervised: Vec<(String, u64)> = c.sfc[0]
+        .sfc
+        .steps()
+        .filter_map(|(r, s)| Some((c.sfc[0].sfc.step_name(r), s.supervision_ms?)))
+        .collect();
+    assert_eq!(
+        supervised,
+        [("F1.S2".to_string(), 8_000), ("F2.S15".to_string(), 5_000)]
+    );
+    let bad = format!("{text}supervision = {{ \"F1.S9\" = \"8s\", \"F2.S15\" = \"soon\" }}\n");
+    let e = parse("cell.toml", &bad, Path::new("base"), &files)
+        .unwrap_err()
+        .to_string();
+    for want in [
+        "checks.sfc[0].supervision.\"F1.S9\": no step F1.S9 in base/robot.sfc.xml (write CHART.STEP)",
+        "checks.sfc[0].supervision.\"F2.S15\": 'soon': write a duration such as 500ms, 8s, 2m or 1h",
+    ] {
+        assert!(e.contains(want), "{want} not in {e}");
+    }
+}

@@ -17,7 +17,8 @@
 //! criteria analysis of every transition leaving it — the operands that
 //! keep it from firing, with values, expected values and comments.
 //!
-//! Charts are read from a TOML text form ([`text::parse`]). [`run::Runner`]
+//! Charts are read from a TOML text form ([`text::parse`]) or from the SFC
+//! bodies of a PLCopen XML project ([`plcopen::parse`]); [`read`] picks. [`run::Runner`]
 //! runs them as a PLC does, force switch included (eq. (1)-(4) of paper
 //! 004), for the simulated cell.
 
@@ -25,6 +26,7 @@ pub mod force;
 pub mod learn;
 pub mod patch;
 pub mod plant;
+pub mod plcopen;
 pub mod run;
 pub mod supervise;
 pub mod text;
@@ -151,6 +153,24 @@ impl Sfc {
     }
 }
 
+/// Reads a chart file: PLCopen XML when it is XML (it begins with `<`),
+/// the TOML form otherwise; `known` says whether a signal is one of the
+/// cell's tags.
+///
+/// # Errors
+/// Every problem found, each `FILE:LINE:COL: what`.
+pub fn read(file: &str, text: &str, known: &dyn Fn(&Signal) -> bool) -> Result<Sfc, Vec<String>> {
+    if text
+        .trim_start_matches('\u{feff}')
+        .trim_start()
+        .starts_with('<')
+    {
+        plcopen::parse(file, text, known)
+    } else {
+        text::parse(file, text, known)
+    }
+}
+
 /// The conjunction of `terms`, a conjunction among them merged in, in
 /// order.
 pub(crate) fn and(terms: impl IntoIterator<Item = Expr>) -> Expr {
@@ -244,6 +264,76 @@ mod tests {
         assert_eq!(sfc.charts[1].initial, None);
         assert_eq!(sfc.step(r(&sfc, "F1.S2")).supervision_ms, Some(8000));
         assert_eq!(sfc.step(r(&sfc, "F1.S2")).flag, Signal::new("S2.X"));
+    }
+
+    /// The robot as PLCopen XML: the model of its TOML form, but for the
+    /// supervision times XML has no place for.
+    #[test]
+    fn the_robot_in_plcopen_xml_is_the_robot_of_the_text_form() {
+        let xml = read(
+            "robot.sfc.xml",
+            include_str!("../../../config/robot/robot.sfc.xml"),
+            &|_| true,
+        )
+        .unwrap();
+        let mut text = robot();
+        for c in &mut text.charts {
+            for s in &mut c.steps {
+                s.supervision_ms = None;
+            }
+        }
+        assert_eq!(xml, text);
+    }
+
+    #[test]
+    fn bad_xml_charts_are_refused_at_their_element() {
+        let head = "<project xmlns=\"http://www.plcopen.org/xml/tc6_0201\" xmlns:xhtml=\"http://www.w3.org/1999/xhtml\">\n<types><pous>\n<pou name=\"F1\" pouType=\"program\"><body><SFC>\n";
+        let tail = "</SFC></body></pou>\n</pous></types></project>\n";
+        let st = |c: &str| {
+            format!(
+                "<condition><inline name=\"\"><ST><xhtml:p>{c}</xhtml:p></ST></inline></condition>"
+            )
+        };
+        let body = format!(
+            "<step localId=\"1\" name=\"S0\" initialStep=\"true\"/>\n\
+             <transition localId=\"2\" name=\"t1\">{}</transition>\n\
+             <step localId=\"3\" name=\"S1\"><connectionPointIn><connection refLocalId=\"2\"/></connectionPointIn></step>\n\
+             <transition localId=\"4\" name=\"t2\"><connectionPointIn><connection refLocalId=\"3\"/></connectionPointIn>{}</transition>\n\
+             <jumpStep localId=\"5\" targetName=\"F9.S5\"><connectionPointIn><connection refLocalId=\"4\"/></connectionPointIn></jumpStep>\n\
+             <step localId=\"6\" name=\"S7\"/>\n",
+            st("X1"),
+            st("X2 AND Y9")
+        );
+        let known = |s: &Signal| s.name() != "Y9";
+        let errors = read("bad.xml", &format!("{head}{body}{tail}"), &known).unwrap_err();
+        assert_eq!(
+            errors,
+            [
+                "bad.xml:5:1: transition t1 has no source step",
+                "bad.xml:7:1: transition t2 jumps to 'F9.S5': no chart 'F9'",
+                "bad.xml:7:129: transition t2: unknown contact 'Y9': no tag has this address",
+                "bad.xml:9:1: step F1.S7 is unreachable: it is not the initial step and no transition leads to it",
+            ]
+        );
+        // Not XML at all, and a condition in a language not read.
+        let errors = read("x.xml", "<project>\n<pou></project>", &|_| true).unwrap_err();
+        assert!(
+            errors[0].starts_with("x.xml:2:6: not well-formed XML: expected 'pou' tag"),
+            "{errors:?}"
+        );
+        let il = format!(
+            "{head}<step localId=\"1\" name=\"S0\" initialStep=\"true\"/>\n<transition localId=\"2\" name=\"t1\"><connectionPointIn><connection refLocalId=\"1\"/></connectionPointIn><condition><inline name=\"\"><IL>LD X1</IL></inline></condition></transition>\n<jumpStep localId=\"3\" targetName=\"S0\"><connectionPointIn><connection refLocalId=\"2\"/></connectionPointIn></jumpStep>\n{tail}"
+        );
+        let errors = read("il.xml", &il, &|_| true).unwrap_err();
+        assert_eq!(
+            errors,
+            ["il.xml:5:129: a transition condition in IL is not read; write it as an ST expression"]
+        );
+        // ST operators map to the paper's.
+        assert_eq!(
+            plcopen::st_condition("(A AND NOT B) OR C & D300 = 2 OR P <> 3").unwrap(),
+            Expr::parse("(A * -B) + C * D300 == 2 + P != 3").unwrap()
+        );
     }
 
     #[test]

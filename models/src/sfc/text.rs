@@ -36,38 +36,42 @@ use crate::signal::Signal;
 /// At most this many problems are listed.
 pub const MAX_ERRORS: usize = 20;
 
+// The charts as written, with the places of their parts: the TOML form
+// deserialises into these, the PLCopen XML reader builds them, and one
+// builder checks them and makes the model.
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawFile {
+pub(super) struct RawFile {
     #[serde(default)]
-    chart: Vec<RawChart>,
+    pub(super) chart: Vec<RawChart>,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawChart {
-    name: Spanned<String>,
-    initial: Option<Spanned<String>>,
-    step_word: Option<Spanned<String>>,
+pub(super) struct RawChart {
+    pub(super) name: Spanned<String>,
+    pub(super) initial: Option<Spanned<String>>,
+    pub(super) step_word: Option<Spanned<String>>,
     #[serde(default)]
-    step: Vec<RawStep>,
+    pub(super) step: Vec<RawStep>,
     #[serde(default)]
-    transition: Vec<RawTransition>,
+    pub(super) transition: Vec<RawTransition>,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawStep {
-    name: Spanned<String>,
-    flag: Option<Spanned<String>>,
-    number: Option<Spanned<i64>>,
-    supervision: Option<Spanned<String>>,
-    comment: Option<String>,
+pub(super) struct RawStep {
+    pub(super) name: Spanned<String>,
+    pub(super) flag: Option<Spanned<String>>,
+    pub(super) number: Option<Spanned<i64>>,
+    pub(super) supervision: Option<Spanned<String>>,
+    pub(super) comment: Option<String>,
 }
 
 #[derive(Deserialize)]
 #[serde(untagged)]
-enum OneOrMany {
+pub(super) enum OneOrMany {
     One(String),
     Many(Vec<String>),
 }
@@ -83,12 +87,12 @@ impl OneOrMany {
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawTransition {
-    id: Spanned<String>,
-    from: Spanned<OneOrMany>,
-    to: Spanned<OneOrMany>,
-    condition: Spanned<String>,
-    comment: Option<String>,
+pub(super) struct RawTransition {
+    pub(super) id: Spanned<String>,
+    pub(super) from: Spanned<OneOrMany>,
+    pub(super) to: Spanned<OneOrMany>,
+    pub(super) condition: Spanned<String>,
+    pub(super) comment: Option<String>,
 }
 
 /// Parses the charts of `text` (the file `file`); `known` says whether a
@@ -98,12 +102,7 @@ struct RawTransition {
 /// # Errors
 /// Every problem found, each `FILE:LINE:COL: what`.
 pub fn parse(file: &str, text: &str, known: &dyn Fn(&Signal) -> bool) -> Result<Sfc, Vec<String>> {
-    let mut errors = Errors {
-        file,
-        text,
-        list: Vec::new(),
-        more: 0,
-    };
+    let mut errors = Errors::new(file, text);
     let raw: RawFile = match toml::from_str(text) {
         Ok(r) => r,
         Err(e) => {
@@ -112,6 +111,17 @@ pub fn parse(file: &str, text: &str, known: &dyn Fn(&Signal) -> bool) -> Result<
             return Err(errors.finish());
         }
     };
+    build(errors, &raw, known, &Expr::parse)
+}
+
+/// Checks charts as written and makes the model; `condition` reads a
+/// transition's condition (the paper's notation, or ST from PLCopen XML).
+pub(super) fn build(
+    mut errors: Errors<'_>,
+    raw: &RawFile,
+    known: &dyn Fn(&Signal) -> bool,
+    condition: &dyn Fn(&str) -> Result<Expr, String>,
+) -> Result<Sfc, Vec<String>> {
     if raw.chart.is_empty() {
         errors.at(0, "no chart: write at least one [[chart]]".into());
     }
@@ -246,7 +256,7 @@ pub fn parse(file: &str, text: &str, known: &dyn Fn(&Signal) -> bool) -> Result<
                     ),
                 }
             }
-            let condition = match Expr::parse(t.condition.get_ref()) {
+            let condition = match condition(t.condition.get_ref()) {
                 Ok(e) => {
                     for s in e.signals() {
                         if !known(&s) {
@@ -414,15 +424,26 @@ pub fn duration_ms(text: &str) -> Result<u64, String> {
     Ok(ms.round() as u64)
 }
 
-struct Errors<'a> {
+pub(super) struct Errors<'a> {
     file: &'a str,
     text: &'a str,
     list: Vec<String>,
     more: usize,
 }
 
-impl Errors<'_> {
-    fn at(&mut self, offset: usize, what: String) {
+impl<'a> Errors<'a> {
+    /// Problems of the file `file`, whose text is `text`.
+    pub(super) fn new(file: &'a str, text: &'a str) -> Errors<'a> {
+        Errors {
+            file,
+            text,
+            list: Vec::new(),
+            more: 0,
+        }
+    }
+
+    /// A problem at byte `offset` of the text.
+    pub(super) fn at(&mut self, offset: usize, what: String) {
         if self.list.len() >= MAX_ERRORS {
             self.more += 1;
             return;
@@ -434,7 +455,8 @@ impl Errors<'_> {
             .push(format!("{}:{line}:{col}: {what}", self.file));
     }
 
-    fn finish(mut self) -> Vec<String> {
+    /// Every problem, `FILE:LINE:COL: what`, and how many more.
+    pub(super) fn finish(mut self) -> Vec<String> {
         if self.more > 0 {
             self.list
                 .push(format!("{}: and {} more problems", self.file, self.more));

@@ -1,0 +1,386 @@
+//! Charts from PLCopen XML (IEC 61131-3 TC6 XML 2.01): every POU whose
+//! body is SFC is one chart, named after the POU.
+//!
+//! A TC6 SFC body is a graph of elements joined by `connectionPointIn`
+//! / `connection refLocalId` (each element names what comes before it):
+//! `step` (`initialStep="true"`), `transition`, `selectionDivergence` and
+//! `selectionConvergence`, `simultaneousDivergence` and
+//! `simultaneousConvergence`, `jumpStep` (`targetName`, a step of the same
+//! POU; `CHART.STEP` jumps to another POU's chart). A transition leaves the
+//! steps found walking back from it (through a selection divergence to its
+//! step, through a simultaneous convergence to each of its steps) and goes
+//! to the steps found walking on (through a simultaneous divergence to each
+//! branch, through a selection convergence to the step after it, through a
+//! jump to its target). Actions are not read: supervision needs the steps
+//! and transitions only.
+//!
+//! A transition's id is its `name` attribute, else the name of the
+//! transition it references (`<condition><reference name="…"/>`), else
+//! `t` and its `localId`. Its condition is an ST expression, inline
+//! (`<condition><inline><ST>`) or in the referenced named transition of
+//! the POU (`<transitions><transition name="…"><body><ST>`): `AND`, `&`,
+//! `OR`, `NOT`, parentheses, `TRUE`/`FALSE` and comparisons (`=`, `<>`,
+//! `<`, `<=`, `>`, `>=`). A step's flag is the IEC step flag `NAME.X`;
+//! `documentation` becomes the comment of a step or transition.
+//!
+//! The result goes through the same checks as the TOML form: every
+//! problem is `FILE:LINE:COL: what`, at the XML element concerned.
+
+use std::collections::HashMap;
+
+use roxmltree::{Document, Node};
+use toml::Spanned;
+
+use super::text::{build, Errors, OneOrMany, RawChart, RawFile, RawStep, RawTransition};
+use super::Sfc;
+use crate::expr::Expr;
+use crate::signal::Signal;
+
+/// Parses the SFC bodies of the PLCopen XML project `text` (the file
+/// `file`); `known` says whether a signal is one of the cell's tags.
+///
+/// # Errors
+/// Every problem found, each `FILE:LINE:COL: what`.
+pub fn parse(file: &str, text: &str, known: &dyn Fn(&Signal) -> bool) -> Result<Sfc, Vec<String>> {
+    let mut errors = Errors::new(file, text);
+    // No DTD (so no entity expansion); a bounded number of nodes.
+    let options = roxmltree::ParsingOptions {
+        allow_dtd: false,
+        nodes_limit: 1_000_000,
+        ..roxmltree::ParsingOptions::default()
+    };
+    let doc = match Document::parse_with_options(text, options) {
+        Ok(d) => d,
+        Err(e) => {
+            let pos = e.pos();
+            let line_start: usize = text
+                .split_inclusive('\n')
+                .take(pos.row.saturating_sub(1) as usize)
+                .map(str::len)
+                .sum();
+            let col: usize = text[line_start..]
+                .char_indices()
+                .nth(pos.col.saturating_sub(1) as usize)
+                .map_or(0, |(i, _)| i);
+            errors.at(line_start + col, format!("not well-formed XML: {e}"));
+            return Err(errors.finish());
+        }
+    };
+    let mut raw = RawFile { chart: Vec::new() };
+    for pou in doc.descendants().filter(|n| n.has_tag_name("pou")) {
+        let Some(body) = child(pou, "body") else {
+            continue;
+        };
+        let Some(sfc) = child(body, "SFC") else {
+            continue;
+        };
+        let name = pou.attribute("name").unwrap_or_default();
+        raw.chart.push(chart(pou, sfc, name, &mut errors));
+    }
+    if raw.chart.is_empty() && doc.root_element().has_tag_name("project") {
+        errors.at(
+            doc.root_element().range().start,
+            "no POU with an SFC body in this PLCopen XML project".into(),
+        );
+        return Err(errors.finish());
+    }
+    build(errors, &raw, known, &st_condition)
+}
+
+fn child<'a, 'i>(node: Node<'a, 'i>, name: &str) -> Option<Node<'a, 'i>> {
+    node.children().find(|n| n.has_tag_name(name))
+}
+
+fn spanned<T>(node: Node<'_, '_>, value: T) -> Spanned<T> {
+    let start = node.range().start;
+    Spanned::new(start..start, value)
+}
+
+/// The text of a `documentation` (or any formatted text) child, trimmed.
+fn documentation(node: Node<'_, '_>) -> Option<String> {
+    let doc = child(node, "documentation")?;
+    let text: String = doc
+        .descendants()
+        .filter(|n| n.is_text())
+        .filter_map(|n| n.text())
+        .collect::<Vec<_>>()
+        .join(" ");
+    let text = text.split_whitespace().collect::<Vec<_>>().join(" ");
+    (!text.is_empty()).then_some(text)
+}
+
+/// The `refLocalId`s of every connection into `node`.
+fn inputs(node: Node<'_, '_>) -> Vec<String> {
+    node.children()
+        .filter(|n| n.has_tag_name("connectionPointIn"))
+        .flat_map(|c| c.children().filter(|n| n.has_tag_name("connection")))
+        .filter_map(|c| c.attribute("refLocalId").map(str::to_string))
+        .collect()
+}
+
+/// An ST body's text: `<ST><xhtml:p>…</xhtml:p></ST>` or `<ST>…</ST>`.
+fn st_text(st: Node<'_, '_>) -> String {
+    st.descendants()
+        .filter(|n| n.is_text())
+        .filter_map(|n| n.text())
+        .collect::<String>()
+        .trim()
+        .trim_end_matches(';')
+        .trim()
+        .to_string()
+}
+
+fn chart(pou: Node<'_, '_>, sfc: Node<'_, '_>, name: &str, errors: &mut Errors<'_>) -> RawChart {
+    let by_id: HashMap<&str, Node<'_, '_>> = sfc
+        .children()
+        .filter(|n| n.is_element())
+        .filter_map(|n| n.attribute("localId").map(|id| (id, n)))
+        .collect();
+    // What follows each element.
+    let mut next: HashMap<&str, Vec<Node<'_, '_>>> = HashMap::new();
+    for n in sfc.children().filter(|n| n.is_element()) {
+        for c in n
+            .children()
+            .filter(|c| c.has_tag_name("connectionPointIn"))
+            .flat_map(|c| c.children().filter(|n| n.has_tag_name("connection")))
+        {
+            if let Some(id) = c.attribute("refLocalId") {
+                next.entry(id).or_default().push(n);
+            }
+        }
+    }
+    let named_conditions: HashMap<&str, Node<'_, '_>> = child(pou, "transitions")
+        .into_iter()
+        .flat_map(|ts| ts.children().filter(|n| n.has_tag_name("transition")))
+        .filter_map(|t| t.attribute("name").map(|n| (n, t)))
+        .collect();
+    let mut out = RawChart {
+        name: spanned(pou, name.to_string()),
+        initial: None,
+        step_word: None,
+        step: Vec::new(),
+        transition: Vec::new(),
+    };
+    for n in sfc.children().filter(|n| n.is_element()) {
+        match n.tag_name().name() {
+            "step" => {
+                let step = n.attribute("name").unwrap_or_default().to_string();
+                if n.attribute("initialStep") == Some("true") {
+                    if let Some(first) = &out.initial {
+                        errors.at(
+                            n.range().start,
+                            format!(
+                                "chart {name}: a second initial step '{step}' (the first is '{}')",
+                                first.get_ref()
+                            ),
+                        );
+                    } else {
+                        out.initial = Some(spanned(n, step.clone()));
+                    }
+                }
+                out.step.push(RawStep {
+                    name: spanned(n, step.clone()),
+                    flag: Some(spanned(n, format!("{step}.X"))),
+                    number: None,
+                    supervision: None,
+                    comment: documentation(n),
+                });
+            }
+            "transition" => {
+                let mut from = Vec::new();
+                for i in inputs(n) {
+                    back(&by_id, &i, &mut from, errors, n, 0);
+                }
+                let mut to = Vec::new();
+                if let Some(id) = n.attribute("localId") {
+                    on(&next, id, &mut to, errors, n, 0);
+                }
+                let reference = n
+                    .descendants()
+                    .find(|c| c.has_tag_name("reference"))
+                    .and_then(|r| r.attribute("name"));
+                let id = n
+                    .attribute("name")
+                    .or(reference)
+                    .map(str::to_string)
+                    .unwrap_or_else(|| format!("t{}", n.attribute("localId").unwrap_or("?")));
+                let (condition, at) = condition(n, reference, &named_conditions, errors);
+                out.transition.push(RawTransition {
+                    id: spanned(n, id),
+                    from: spanned(n, OneOrMany::Many(from)),
+                    to: spanned(n, OneOrMany::Many(to)),
+                    condition: spanned(at, condition),
+                    comment: documentation(n),
+                });
+            }
+            "macroStep" => errors.at(
+                n.range().start,
+                format!("chart {name}: macro steps are not read; expand the macro into its steps"),
+            ),
+            _ => {}
+        }
+    }
+    out
+}
+
+/// The condition of transition `t` as ST text, and the node it is in.
+fn condition<'a, 'i>(
+    t: Node<'a, 'i>,
+    reference: Option<&str>,
+    named: &HashMap<&str, Node<'a, 'i>>,
+    errors: &mut Errors<'_>,
+) -> (String, Node<'a, 'i>) {
+    let Some(cond) = child(t, "condition") else {
+        errors.at(t.range().start, "transition without a condition".into());
+        return ("FALSE".into(), t);
+    };
+    let body = match reference {
+        Some(r) => match named.get(r) {
+            Some(n) => child(*n, "body").unwrap_or(*n),
+            None => {
+                errors.at(
+                    cond.range().start,
+                    format!("the condition names transition '{r}', which this POU does not define"),
+                );
+                return ("FALSE".into(), cond);
+            }
+        },
+        None => cond,
+    };
+    if let Some(st) = body.descendants().find(|n| n.has_tag_name("ST")) {
+        return (st_text(st), st);
+    }
+    let found = body.descendants().find(|n| {
+        ["IL", "LD", "FBD", "connectionPointIn"]
+            .iter()
+            .any(|l| n.has_tag_name(*l))
+    });
+    let language = found.map_or("this form", |n| n.tag_name().name());
+    errors.at(
+        found.unwrap_or(body).range().start,
+        format!("a transition condition in {language} is not read; write it as an ST expression"),
+    );
+    ("FALSE".into(), body)
+}
+
+/// Walks back from element `id` to the steps a transition leaves.
+fn back(
+    by_id: &HashMap<&str, Node<'_, '_>>,
+    id: &str,
+    out: &mut Vec<String>,
+    errors: &mut Errors<'_>,
+    t: Node<'_, '_>,
+    depth: usize,
+) {
+    let Some(n) = by_id.get(id) else {
+        errors.at(
+            t.range().start,
+            format!("connection to localId {id}, which is not in this SFC"),
+        );
+        return;
+    };
+    if depth > 64 {
+        errors.at(n.range().start, "connections loop without a step".into());
+        return;
+    }
+    match n.tag_name().name() {
+        "step" => out.push(n.attribute("name").unwrap_or_default().to_string()),
+        "selectionDivergence" | "simultaneousConvergence" => {
+            for i in inputs(*n) {
+                back(by_id, &i, out, errors, t, depth + 1);
+            }
+        }
+        other => errors.at(
+            t.range().start,
+            format!("a transition follows a {other} (localId {id}); it must follow a step, a selection divergence or a simultaneous convergence"),
+        ),
+    }
+}
+
+/// Walks on from element `id` to the steps a transition activates.
+fn on(
+    next: &HashMap<&str, Vec<Node<'_, '_>>>,
+    id: &str,
+    out: &mut Vec<String>,
+    errors: &mut Errors<'_>,
+    t: Node<'_, '_>,
+    depth: usize,
+) {
+    if depth > 64 {
+        errors.at(t.range().start, "connections loop without a step".into());
+        return;
+    }
+    for n in next.get(id).into_iter().flatten() {
+        match n.tag_name().name() {
+            "step" => out.push(n.attribute("name").unwrap_or_default().to_string()),
+            "jumpStep" => out.push(n.attribute("targetName").unwrap_or_default().to_string()),
+            "simultaneousDivergence" | "selectionConvergence" => {
+                if let Some(nid) = n.attribute("localId") {
+                    on(next, nid, out, errors, t, depth + 1);
+                }
+            }
+            "actionBlock" | "comment" => {}
+            other => errors.at(
+                n.range().start,
+                format!(
+                    "a {other} follows transition (localId {id}); it must be followed by a step, a jump, a simultaneous divergence or a selection convergence"
+                ),
+            ),
+        }
+    }
+}
+
+/// An ST boolean expression in the paper's notation, then read as the
+/// TOML form's conditions are.
+pub fn st_condition(text: &str) -> Result<Expr, String> {
+    let mut paper = String::new();
+    let chars: Vec<char> = text.chars().collect();
+    let mut i = 0;
+    while i < chars.len() {
+        let c = chars[i];
+        if c.is_ascii_alphanumeric() || matches!(c, '.' | '_' | '%') {
+            let start = i;
+            while i < chars.len()
+                && (chars[i].is_ascii_alphanumeric() || matches!(chars[i], '.' | '_' | '%'))
+            {
+                i += 1;
+            }
+            let word: String = chars[start..i].iter().collect();
+            match word.to_ascii_uppercase().as_str() {
+                "AND" => paper.push_str(" * "),
+                "OR" => paper.push_str(" + "),
+                "NOT" => paper.push_str(" -"),
+                "XOR" => {
+                    return Err(
+                        "XOR is not read in a condition: write (a AND NOT b) OR (NOT a AND b)"
+                            .into(),
+                    )
+                }
+                _ => paper.push_str(&word),
+            }
+            continue;
+        }
+        match (c, chars.get(i + 1)) {
+            ('&', _) => paper.push_str(" * "),
+            ('<', Some('>')) => {
+                paper.push_str(" != ");
+                i += 1;
+            }
+            ('<' | '>', Some('=')) => {
+                paper.push(c);
+                paper.push_str("= ");
+                i += 1;
+            }
+            ('=', _) => paper.push_str(" == "),
+            ('(' | ')' | '<' | '>' | '-', _) => paper.push(c),
+            (c, _) if c.is_whitespace() => paper.push(' '),
+            (c, _) => {
+                return Err(format!(
+                    "'{c}' is not read in a condition (ST: AND, OR, NOT, parentheses, comparisons)"
+                ))
+            }
+        }
+        i += 1;
+    }
+    Expr::parse(&paper).map_err(|why| format!("'{text}': {why}"))
+}
