@@ -81,6 +81,7 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
                 .iter()
                 .enumerate()
                 .filter(|(_, t)| t.export)
-                .map(|(i, _)| i),
+                .map(|(i, _)| i)
+                .chain(config.step_flags().into_keys()),
         ))
 }

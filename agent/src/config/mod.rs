@@ -418,6 +418,26 @@ impl fmt::Debug for CellConfig {
 }
 
 impl CellConfig {
+    /// The tags that are the flags of supervised steps: per tag index,
+    /// (check, chart, step) of each step it flags. A step told by a
+    /// step-number comparison (`D300 == 2`) has no flag tag and is not here.
+    pub fn step_flags(&self) -> HashMap<usize, Vec<[String; 3]>> {
+        let mut out: HashMap<usize, Vec<[String; 3]>> = HashMap::new();
+        for check in &self.sfc {
+            for (r, step) in check.sfc.steps() {
+                let Some(tag) = self.tags.iter().position(|t| t.address == step.flag) else {
+                    continue;
+                };
+                out.entry(tag).or_default().push([
+                    check.id.clone(),
+                    check.sfc.charts[r.chart].name.clone(),
+                    step.name.clone(),
+                ]);
+            }
+        }
+        out
+    }
+
     /// The engine's view of the tags.
     pub fn engine_tags(&self) -> Vec<Tag> {
         self.tags

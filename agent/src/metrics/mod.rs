@@ -78,6 +78,8 @@ pub struct Metrics {
     pub transition_window_seconds: GaugeVec,
     /// Values of the tags configured with `export = true`, by tag name.
     pub tag_value: GaugeVec,
+    /// 1 while a supervised chart's step is active, by check, chart, step.
+    pub sfc_step_active: IntGaugeVec,
     /// ISA-18.2: alarms raised in the last 10 minutes.
     pub alarm_rate_10m: IntGauge,
     /// 1 while that is a flood (more than 10).
@@ -329,6 +331,14 @@ impl Metrics {
                     cell
                 ),
                 &["tag"]
+            )),
+            sfc_step_active: reg!(IntGaugeVec::new(
+                opts(
+                    "cellwatch_sfc_step_active",
+                    "1 while the step of a supervised chart is active (its flag tag is on), 0 while not; absent while unknown.",
+                    cell
+                ),
+                &["check", "chart", "step"]
             )),
             alarm_rate_10m: reg!(IntGauge::with_opts(opts(
                 "cellwatch_alarm_rate_10m",

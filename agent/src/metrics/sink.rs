@@ -30,6 +30,9 @@ pub struct MetricsSink {
     /// Per tag, if exported: its name and its `cellwatch_tag_value` gauge
     /// (absent while the value is unknown).
     exported: Vec<Option<(String, Option<prometheus::Gauge>)>>,
+    /// Per tag that is a supervised step's flag: (check, chart, step) of
+    /// each step it flags, for `cellwatch_sfc_step_active`.
+    steps: HashMap<usize, Vec<[String; 3]>>,
     /// The ISA-18.2 figures.
     kpis: LiveKpis,
     /// Per alarm: whether it is counted shelved, out of service.
@@ -62,6 +65,7 @@ impl MetricsSink {
             .collect();
         MetricsSink {
             exported,
+            steps: config.step_flags(),
             metrics,
             active: HashMap::new(),
             culprits: HashMap::new(),
@@ -149,6 +153,18 @@ impl MetricsSink {
         }
         m.parts.inc_by(e.parts.iter().map(|&(_, n)| n).sum());
         for &(tag, value) in &e.exported {
+            for [check, chart, step] in self.steps.get(&tag).into_iter().flatten() {
+                let labels = [check.as_str(), chart.as_str(), step.as_str()];
+                match value {
+                    Some(v) => m
+                        .sfc_step_active
+                        .with_label_values(&labels)
+                        .set(i64::from(v != 0.0)),
+                    None => {
+                        let _ = m.sfc_step_active.remove_label_values(&labels);
+                    }
+                }
+            }
             let Some(Some((name, gauge))) = self.exported.get_mut(tag) else {
                 continue;
             };
