@@ -223,7 +223,30 @@ async fn every_metric_named_is_exported_by_the_agent() {
     player.abort();
     line_agent.stop().await;
     line_sim.stop();
-    let scrape = format!("{scrape}\n{line_scrape}");
+    // And the robot of paper 004, once a step of its charts is seen.
+    let d = tempfile::tempdir().unwrap();
+    let robot = crate::force::RobotCell::start(
+        d.path(),
+        Duration::from_millis(200),
+        |_| {},
+        |c| c.metrics = Some("127.0.0.1:0".parse().unwrap()),
+    )
+    .await;
+    let addr = robot.agent.metrics_addr().unwrap();
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    let robot_scrape = loop {
+        let s = crate::util::scrape(addr).await;
+        if s.contains("cellwatch_sfc_step_active{") {
+            break s;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "no step in the metrics:\n{s}"
+        );
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    };
+    robot.stop().await;
+    let scrape = format!("{scrape}\n{line_scrape}\n{robot_scrape}");
     let exported: BTreeSet<&str> = scrape
         .lines()
         .filter(|l| !l.starts_with('#') && l.starts_with("cellwatch_"))
