@@ -88,7 +88,7 @@ fn demo_prints_a_diagnosed_alarm_and_serves_the_readme_commands_over_tls() {
         .args([
             "demo",
             "--duration",
-            "60s",
+            "120s",
             "--state-dir",
             state.path().to_str().unwrap(),
         ])
@@ -154,6 +154,34 @@ fn demo_prints_a_diagnosed_alarm_and_serves_the_readme_commands_over_tls() {
         plain.stderr.contains("cannot open the zenoh session"),
         "{}",
         plain.stderr
+    );
+    // The robot of paper 004: S2 stuck with its criteria analysis, a force
+    // refused while t3 is false, carried out once it holds.
+    let wanted = [
+        "ALARM  sfc-F1-S2 [high] STUCK F1.S2",
+        "robot: force F1.t3: refused: condition: t3 (Shuttle at waiting position) does not hold: %IX0.0.3 = 0 (expected 1)",
+        "robot: force F1.t3: carried out: F1.t3 forced: F2.S5 + F2.S8 + F2.S11 active",
+    ];
+    let deadline = Instant::now() + Duration::from_secs(90);
+    while !wanted
+        .iter()
+        .all(|w| seen.iter().any(|l: &String| l.contains(w)))
+    {
+        match lines.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+            Ok(line) => seen.push(line),
+            Err(_) => {
+                let _ = demo.kill();
+                panic!("the robot's scenario did not play:\n{}", seen.join("\n"));
+            }
+        }
+    }
+    let stuck = seen.iter().position(|l| l.contains(wanted[0])).unwrap();
+    assert!(
+        seen[stuck + 1].contains("F1.S2 (Shuttle to waiting position) stuck for ")
+            && seen[stuck + 1]
+                .contains("(supervision 8.0 s): t3 (Shuttle at waiting position) waits for %IX0.0.3 = 0 (expected 1)"),
+        "{}",
+        seen[stuck + 1]
     );
     let _ = demo.kill();
     demo.wait().unwrap();

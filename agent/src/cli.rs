@@ -523,6 +523,13 @@ pub(crate) struct DemoArgs {
     /// No moulding units.
     #[arg(long)]
     pub(crate) no_moulding: bool,
+    /// The robot's cell configuration (paper 004), run beside the CNC: the
+    /// LCD-glass robot's charts supervised, stuck steps forced on.
+    #[arg(long, default_value = "config/robot.toml")]
+    pub(crate) robot_config: PathBuf,
+    /// No robot.
+    #[arg(long)]
+    pub(crate) no_robot: bool,
     /// Where the demo keeps certificates, the journal and operator keys.
     #[arg(long, default_value = "cellwatch-demo")]
     pub(crate) state_dir: PathBuf,

@@ -13,7 +13,7 @@ use crate::sim::cnc::{Scenario, SimOptions, SimulatedCnc};
 use crate::sim::line::SimulatedLine;
 use crate::sinks::console::Notice;
 use crate::sources::{opcua, pki};
-use cellwatch_models::alarm::{AlarmKind, Transition};
+use cellwatch_models::alarm::{AlarmKind, AlarmState, Transition};
 use cellwatch_models::timer::line::{Fault, FaultKind};
 
 fn load(path: &Path) -> Result<CellConfig, Failure> {
@@ -330,6 +330,8 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     writeln!(out, "  faults injected every 24 s: Y over-travel limit switch (ESE), cycle start in JOG mode (CSD)").map_err(io)?;
     let (tx, mut rx) = mpsc::unbounded_channel();
     let (note_tx, mut note_rx) = mpsc::unbounded_channel::<String>();
+    // The active alarms of every cell, for the robot's scenario to wait on.
+    let (active_tx, active_rx) = tokio::sync::watch::channel(std::collections::HashSet::new());
     let line = if args.no_line {
         None
     } else {
@@ -434,6 +436,22 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         });
         Some((agent, server, player))
     };
+    let robot = if args.no_robot {
+        None
+    } else {
+        Some(
+            demo_robot(
+                args,
+                &state,
+                (&operator_key, &secrets),
+                tx.clone(),
+                note_tx.clone(),
+                active_rx,
+                out,
+            )
+            .await?,
+        )
+    };
     writeln!(out).map_err(io)?;
     out.flush().map_err(io)?;
 
@@ -462,13 +480,34 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
             _ = &mut deadline => break,
             _ = tokio::signal::ctrl_c() => break,
             Some(note) = note_rx.recv() => writeln!(out, "{}  plc    {note}", clock()).map_err(io)?,
-            Some(n) = rx.recv() => print_notice(out, &n, &mut last_state).map_err(io)?,
+            Some(n) = rx.recv() => {
+                if let Notice::Alarm(a) = &n {
+                    let active = matches!(
+                        a.state,
+                        AlarmState::ActiveUnacknowledged | AlarmState::ActiveAcknowledged
+                    );
+                    active_tx.send_modify(|ids| {
+                        if active {
+                            ids.insert(a.id.clone());
+                        } else {
+                            ids.remove(&a.id);
+                        }
+                    });
+                }
+                print_notice(out, &n, &mut last_state).map_err(io)?
+            }
         }
         out.flush().map_err(io)?;
     }
     player.abort();
     agent.stop().await;
     sim.stop();
+    if let Some((robot, agent, scanning, player)) = robot {
+        player.abort();
+        agent.stop().await;
+        scanning.abort();
+        robot.stop();
+    }
     if let Some((agent, server, player)) = moulding {
         player.abort();
         agent.stop().await;
@@ -480,6 +519,154 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         line_sim.stop();
     }
     Ok(())
+}
+
+/// The demo's robot cell (paper 004): the simulated robot on OPC UA, its
+/// agent, the PLC's scan task and the scenario, which asks the agent to
+/// force stuck steps on as operator `demo` (its key file and the agents'
+/// operators file), over the bus, signed; it waits on `active`, the
+/// alarms active in the demo, for a step to be stuck.
+async fn demo_robot(
+    args: &DemoArgs,
+    state: &Path,
+    (operator_key, secrets): (&Path, &Path),
+    tx: mpsc::UnboundedSender<Notice>,
+    notes: mpsc::UnboundedSender<String>,
+    active: tokio::sync::watch::Receiver<std::collections::HashSet<String>>,
+    out: &mut dyn Write,
+) -> Result<
+    (
+        crate::sim::robot::SimulatedRobot,
+        cell::Agent,
+        tokio::task::JoinHandle<()>,
+        tokio::task::JoinHandle<()>,
+    ),
+    Failure,
+> {
+    use crate::sim::robot::SimulatedRobot;
+    let mut r = load(&args.robot_config)?;
+    opcua_of(&mut r, &args.robot_config)?.pki_dir = state.join("robot-agent-pki");
+    let rua = opcua_of(&mut r, &args.robot_config)?.clone();
+    r.journal.path = state.join(format!("{}.sqlite", r.cell));
+    r.operators_file = Some(secrets.to_path_buf());
+    r.zenoh.tls = Some(bus_tls(state, &format!("agent-{}", r.cell))?);
+    r.warnings
+        .retain(|w| !w.starts_with("no commands.operators_file"));
+    let robot_pki = state.join("robot-sim-pki");
+    let robot = SimulatedRobot::start(
+        &SimOptions {
+            listen: endpoint_addr(&rua.endpoint)?,
+            pki_dir: robot_pki.clone(),
+            insecure: false,
+            decoy: None,
+        },
+        Duration::from_secs(1),
+    )
+    .await
+    .map_err(Failure::runtime)?;
+    drop(opcua::client(&r.cell, &rua).map_err(|e| Failure::Runtime(e.to_string()))?);
+    pki::trust(&pki::own_cert(&rua.pki_dir), &robot_pki).map_err(Failure::runtime)?;
+    pki::trust(&pki::own_cert(&robot_pki), &rua.pki_dir).map_err(Failure::runtime)?;
+    let scanning = tokio::spawn({
+        let robot = robot.clone();
+        async move { robot.run().await }
+    });
+    writeln!(
+        out,
+        "  cell {}: paper 004's LCD-glass robot on {}, charts F1 and F2 supervised; S2 then S15 stuck, forced on by operator demo (Zenoh {}, metrics {})",
+        r.cell,
+        robot.endpoint(),
+        r.zenoh.listen.join(", "),
+        r.metrics.map_or_else(|| "off".to_string(), |m| m.to_string())
+    )
+    .map_err(Failure::output)?;
+    // The stuck alarm of each step, by CHART.STEP.
+    let alarm_of: std::collections::HashMap<String, String> = r
+        .sfc
+        .iter()
+        .flat_map(|c| {
+            c.sfc
+                .steps()
+                .map(|(s, _)| {
+                    (
+                        c.sfc.step_name(s),
+                        format!("{}-{}", c.id, c.sfc.step_name(s).replace('.', "-")),
+                    )
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    // The operator's side: its own key and certificate, a session to the
+    // robot agent's endpoint.
+    let key_text = std::fs::read_to_string(operator_key)
+        .map_err(|e| Failure::Runtime(format!("cannot read {}: {e}", operator_key.display())))?;
+    let key = crate::operator::OperatorKey::parse(&operator_key.display().to_string(), &key_text)
+        .map_err(Failure::Runtime)?;
+    let connect: Vec<String> = r
+        .zenoh
+        .listen
+        .iter()
+        .map(|e| e.replace("0.0.0.0", "127.0.0.1"))
+        .collect();
+    let cell_id = r.cell.clone();
+    let agent = cell::start(r, Some(tx)).await.map_err(start_failure)?;
+    // Connected once the agent listens.
+    let bus = crate::sinks::zenoh::open(&crate::config::ZenohConfig {
+        mode: crate::config::ZenohMode::Peer,
+        connect,
+        listen: Vec::new(),
+        prefix: String::new(),
+        multicast_scouting: false,
+        tls: Some(bus_tls(state, "operator-demo")?),
+        config_file: None,
+    })
+    .await
+    .map_err(Failure::runtime)?;
+    let player_robot = robot.clone();
+    let player = tokio::spawn(async move {
+        let force = |transition: &'static str| {
+            let mut cmd = crate::operator::Command {
+                action: crate::operator::Action::Force,
+                alarm: String::new(),
+                tag: None,
+                value: Some(transition.to_string()),
+                reason: None,
+                operator: key.operator.clone(),
+                nonce: crate::operator::nonce(),
+                issued_at: crate::clock::now_ms(),
+                signature: String::new(),
+            };
+            cmd.sign(&cell_id, &key);
+            let bus = &bus;
+            let cell_id = &cell_id;
+            async move {
+                super::subscribers::send_signed(
+                    bus,
+                    "cellwatch",
+                    cell_id,
+                    &cmd,
+                    Duration::from_secs(10),
+                )
+                .await
+                .map_err(|e| match e {
+                    Failure::Input(why) | Failure::Runtime(why) => why,
+                })
+            }
+        };
+        let stuck = |step: &'static str| {
+            let mut active = active.clone();
+            let alarm = alarm_of.get(step).cloned().unwrap_or_default();
+            async move {
+                let _ = active.wait_for(|ids| ids.contains(&alarm)).await;
+            }
+        };
+        player_robot
+            .play_demo(stuck, force, |n| {
+                let _ = notes.send(format!("robot: {n}"));
+            })
+            .await;
+    });
+    Ok((robot, agent, scanning, player))
 }
 
 fn clock() -> String {
@@ -521,7 +708,7 @@ fn print_notice(
                     a.severity,
                     a.fault_type
                 )?;
-                if a.culprits.is_empty() || a.kind == AlarmKind::Timer {
+                if a.culprits.is_empty() || matches!(a.kind, AlarmKind::Timer | AlarmKind::Step) {
                     writeln!(out, "                      {}", a.message)?;
                 }
                 for c in &a.culprits {

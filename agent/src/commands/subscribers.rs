@@ -650,17 +650,36 @@ async fn signed(t: Target<'_>, args: &SignerArgs, out: &mut dyn Write) -> Result
     cmd.sign(t.cell, &key);
     let s = session(&args.zenoh).await?;
     let timeout = Duration::from_secs(args.zenoh.timeout_secs);
-    let the_agent = agent(&s, &args.zenoh.root, t.cell, timeout).await?;
-    let timeout = if t.action == Action::Force {
+    let (accepted, detail) = send_signed(&s, &args.zenoh.root, t.cell, &cmd, timeout).await?;
+    if accepted {
+        writeln!(out, "accepted: {detail}").map_err(io)?;
+        Ok(())
+    } else {
+        Err(Failure::Runtime(format!("refused: {detail}")))
+    }
+}
+
+/// Sends the signed command `cmd` to the agent of `cell` (found by its
+/// liveliness token within `timeout`; a force waits at least
+/// [`FORCE_ANSWER`] for its answer) and returns (accepted, detail).
+pub(crate) async fn send_signed(
+    s: &zenoh::Session,
+    root: &str,
+    cell: &str,
+    cmd: &Command,
+    timeout: Duration,
+) -> Result<(bool, String), Failure> {
+    let the_agent = agent(s, root, cell, timeout).await?;
+    let timeout = if cmd.action == Action::Force {
         timeout.max(FORCE_ANSWER)
     } else {
         timeout
     };
-    let selector = format!("{}/{}/command", args.zenoh.root, t.cell);
+    let selector = format!("{root}/{cell}/command");
     let text = ask_agent(
-        &s,
+        s,
         &selector,
-        Some(serde_json::to_string(&cmd).unwrap_or_default()),
+        Some(serde_json::to_string(cmd).unwrap_or_default()),
         timeout,
         &the_agent,
     )
@@ -670,11 +689,8 @@ async fn signed(t: Target<'_>, args: &SignerArgs, out: &mut dyn Write) -> Result
         other => other,
     })?;
     let v: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
-    let detail = v["detail"].as_str().unwrap_or("");
-    if v["accepted"].as_bool() == Some(true) {
-        writeln!(out, "accepted: {detail}").map_err(io)?;
-        Ok(())
-    } else {
-        Err(Failure::Runtime(format!("refused: {detail}")))
-    }
+    Ok((
+        v["accepted"].as_bool() == Some(true),
+        v["detail"].as_str().unwrap_or("").to_string(),
+    ))
 }

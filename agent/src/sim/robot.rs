@@ -192,6 +192,69 @@ impl SimulatedRobot {
         }
     }
 
+    /// The demo's scenario, forever: normal cycles; then F1.S2 in error
+    /// with the shuttle not at its waiting position, so that its stuck
+    /// alarm comes with the criteria analysis; a force on F1.t3 asked
+    /// through `force` while t3 is false (the agent refuses it), then again
+    /// once the shuttle has arrived (carried out: F2's sub-jobs start);
+    /// then the same for F2.S15 (data save) and F2.t18 back to F1's S0.
+    /// `stuck` waits until the agent has the stuck alarm of a step
+    /// (`CHART.STEP`) up; `note` says what happens.
+    pub async fn play_demo<F, Fut, S, SFut>(&self, stuck: S, force: F, note: impl Fn(String))
+    where
+        F: Fn(&'static str) -> Fut,
+        Fut: std::future::Future<Output = Result<(bool, String), String>>,
+        S: Fn(&'static str) -> SFut,
+        SFut: std::future::Future<Output = ()>,
+    {
+        // (stuck step, the input its transition waits for, the transition)
+        const SCENES: [(&str, &str, &str, &str); 2] = [
+            (
+                "F1.S2",
+                "%IX0.0.3",
+                "F1.t3",
+                "the shuttle does not reach its waiting position",
+            ),
+            (
+                "F2.S15",
+                "%IX0.2.2",
+                "F2.t18",
+                "the data save does not finish",
+            ),
+        ];
+        let ask = |t: &'static str| {
+            let f = force(t);
+            async move {
+                match f.await {
+                    Ok((true, detail)) => format!("force {t}: carried out: {detail}"),
+                    Ok((false, detail)) => format!("force {t}: refused: {detail}"),
+                    Err(e) => format!("force {t}: not sent: {e}"),
+                }
+            }
+        };
+        loop {
+            for (step, input, transition, why) in SCENES {
+                note("normal cycles".into());
+                tokio::time::sleep(Duration::from_secs(10)).await;
+                note(format!("{step} in error: {why} ({input} held off)"));
+                let _ = self.stick(step, true);
+                self.pin(input, Some(false));
+                stuck(step).await;
+                note(format!(
+                    "operator demo asks to force {transition} while its condition is false"
+                ));
+                note(ask(transition).await);
+                note(format!("{input} on: the condition of {transition} holds"));
+                self.pin(input, Some(true));
+                tokio::time::sleep(Duration::from_millis(1_500)).await;
+                note(format!("operator demo asks to force {transition} again"));
+                note(ask(transition).await);
+                let _ = self.stick(step, false);
+                self.pin(input, None);
+            }
+        }
+    }
+
     /// Every write clients made to the switches, in order.
     pub fn writes(&self) -> Vec<(String, bool)> {
         self.log.writes()
