@@ -10,7 +10,6 @@ use cellwatch::config::{self, CellConfig};
 use cellwatch::operator::Command;
 use cellwatch::payload::AlarmPayload;
 use cellwatch::sim::cnc::{SimOptions, SimulatedCnc};
-use cellwatch::sources::{opcua, pki};
 use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
 use crate::util::root;
@@ -68,17 +67,7 @@ impl Fixture {
         let sim = SimulatedCnc::start(&sim_opts).await.unwrap();
         let zenoh_port = free_port();
         let config = config(&dir, &sim.endpoint(), zenoh_port);
-        drop(opcua::client("test", config.opcua.as_ref().unwrap()).unwrap());
-        pki::trust(
-            &pki::own_cert(&config.opcua.as_ref().unwrap().pki_dir),
-            &dir.join("sim-pki"),
-        )
-        .unwrap();
-        pki::trust(
-            &pki::own_cert(&dir.join("sim-pki")),
-            &config.opcua.as_ref().unwrap().pki_dir,
-        )
-        .unwrap();
+        crate::util::trust_sim(&config, &dir.join("sim-pki"));
         let agent = cell::start(config.clone(), None).await.unwrap();
         let client = crate::util::operator_session(&dir, "operator-kim", zenoh_port).await;
         let sim_addr = sim.addr();
@@ -518,17 +507,7 @@ pub(crate) async fn line_cell(dir: &Path) -> (cellwatch::sim::line::SimulatedLin
     crate::util::bus_pki(dir, &["agent-line01"]);
     c.zenoh.tls = Some(crate::util::bus_tls(dir, "agent-line01"));
     c.metrics = Some("127.0.0.1:0".parse().unwrap());
-    drop(opcua::client("test", c.opcua.as_ref().unwrap()).unwrap());
-    pki::trust(
-        &pki::own_cert(&c.opcua.as_ref().unwrap().pki_dir),
-        &dir.join("sim-pki"),
-    )
-    .unwrap();
-    pki::trust(
-        &pki::own_cert(&dir.join("sim-pki")),
-        &c.opcua.as_ref().unwrap().pki_dir,
-    )
-    .unwrap();
+    crate::util::trust_sim(&c, &dir.join("sim-pki"));
     let agent = cell::start(c, None).await.unwrap();
     (sim, agent, zenoh_port)
 }
@@ -826,17 +805,7 @@ async fn behind_a_router(
     c.zenoh.mode = cellwatch::config::ZenohMode::Client;
     c.zenoh.listen = Vec::new();
     c.zenoh.connect = vec![format!("tls/127.0.0.1:{port}")];
-    drop(opcua::client("test", c.opcua.as_ref().unwrap()).unwrap());
-    pki::trust(
-        &pki::own_cert(&c.opcua.as_ref().unwrap().pki_dir),
-        &dir.join("sim-pki"),
-    )
-    .unwrap();
-    pki::trust(
-        &pki::own_cert(&dir.join("sim-pki")),
-        &c.opcua.as_ref().unwrap().pki_dir,
-    )
-    .unwrap();
+    crate::util::trust_sim(&c, &dir.join("sim-pki"));
     let agent = cell::start(c, None).await.unwrap();
     (router, port, sim, agent)
 }

@@ -11,7 +11,6 @@ use cellwatch::operator::{Action, Command, OperatorKey};
 use cellwatch::payload::AlarmPayload;
 use cellwatch::sim::cnc::SimOptions;
 use cellwatch::sim::robot::{SimulatedRobot, FORCE_SWITCH, STOP_SWITCH};
-use cellwatch::sources::{opcua, pki};
 use cellwatch_models::alarm::Transition;
 use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
@@ -135,17 +134,7 @@ impl RobotCell {
         .unwrap();
         c.operators_file = Some(operators);
         configure(&mut c);
-        drop(opcua::client("test", c.opcua.as_ref().unwrap()).unwrap());
-        pki::trust(
-            &pki::own_cert(&c.opcua.as_ref().unwrap().pki_dir),
-            &dir.join("sim-pki"),
-        )
-        .unwrap();
-        pki::trust(
-            &pki::own_cert(&dir.join("sim-pki")),
-            &c.opcua.as_ref().unwrap().pki_dir,
-        )
-        .unwrap();
+        crate::util::trust_sim(&c, &dir.join("sim-pki"));
         let journal = c.journal.path.clone();
         let agent = cell::start(c, None).await.unwrap();
         let bus = crate::util::operator_session(dir, "operator-kim", zenoh_port).await;

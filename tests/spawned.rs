@@ -8,7 +8,6 @@ use std::time::Duration;
 
 use cellwatch::operator::{Action, Command as OperatorCommand, OperatorKey};
 use cellwatch::sim::cnc::{SimOptions, SimulatedCnc};
-use cellwatch::sources::{opcua, pki};
 
 use crate::agent::free_port;
 use crate::util::root;
@@ -147,17 +146,7 @@ pub(crate) fn cell(dir: &Path, sim: &SimulatedCnc) -> Cell {
     std::fs::write(&path, config).unwrap();
     // The agent and the simulator trust each other's certificates.
     let parsed = cellwatch::config::load(&path).unwrap();
-    drop(opcua::client(&parsed.cell, parsed.opcua.as_ref().unwrap()).unwrap());
-    pki::trust(
-        &pki::own_cert(&parsed.opcua.as_ref().unwrap().pki_dir),
-        &dir.join("sim-pki"),
-    )
-    .unwrap();
-    pki::trust(
-        &pki::own_cert(&dir.join("sim-pki")),
-        &parsed.opcua.as_ref().unwrap().pki_dir,
-    )
-    .unwrap();
+    crate::util::trust_sim(&parsed, &dir.join("sim-pki"));
     Cell {
         dir: dir.to_path_buf(),
         config: path,

@@ -210,3 +210,13 @@ pub(crate) async fn row_at(
             .unwrap();
     }
 }
+
+/// The agent of `config` (its key pair made now) and the simulated PLC
+/// whose PKI is `sim_pki` trust each other, certificate by certificate.
+pub(crate) fn trust_sim(config: &cellwatch::config::CellConfig, sim_pki: &Path) {
+    use cellwatch::sources::{opcua, pki};
+    let ua = config.opcua.as_ref().unwrap();
+    drop(opcua::client(&config.cell, ua).unwrap());
+    pki::trust(&pki::own_cert(&ua.pki_dir), sim_pki).unwrap();
+    pki::trust(&pki::own_cert(sim_pki), &ua.pki_dir).unwrap();
+}

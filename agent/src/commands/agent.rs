@@ -231,6 +231,16 @@ fn bus_tls(state: &Path, name: &str) -> Result<crate::config::ZenohTls, Failure>
     })
 }
 
+/// The agent of `cell` (its key pair made now) and the simulated PLC whose
+/// PKI is `sim_pki` trust each other, certificate by certificate, as on a
+/// real cell.
+fn trust_each_other(cell: &str, ua: &OpcUaConfig, sim_pki: &Path) -> Result<(), Failure> {
+    drop(opcua::client(cell, ua).map_err(|e| Failure::Runtime(e.to_string()))?);
+    pki::trust(&pki::own_cert(&ua.pki_dir), sim_pki).map_err(Failure::runtime)?;
+    pki::trust(&pki::own_cert(sim_pki), &ua.pki_dir).map_err(Failure::runtime)?;
+    Ok(())
+}
+
 /// The OPC UA connection of a demo cell (its simulator is an OPC UA
 /// server).
 fn opcua_of<'a>(c: &'a mut CellConfig, file: &Path) -> Result<&'a mut OpcUaConfig, Failure> {
@@ -281,11 +291,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     })
     .await
     .map_err(Failure::runtime)?;
-    // Mutual trust between the simulated PLC and the agent, certificate by
-    // certificate, as on a real cell.
-    drop(opcua::client(&c.cell, &ua).map_err(|e| Failure::Runtime(e.to_string()))?);
-    pki::trust(&pki::own_cert(&ua.pki_dir), &sim_pki).map_err(Failure::runtime)?;
-    pki::trust(&pki::own_cert(&sim_pki), &ua.pki_dir).map_err(Failure::runtime)?;
+    trust_each_other(&c.cell, &ua, &sim_pki)?;
     let io = Failure::output;
     writeln!(
         out,
@@ -353,9 +359,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         let line_sim = SimulatedLine::start(&options)
             .await
             .map_err(Failure::runtime)?;
-        drop(opcua::client(&l.cell, &lua).map_err(|e| Failure::Runtime(e.to_string()))?);
-        pki::trust(&pki::own_cert(&lua.pki_dir), &line_pki).map_err(Failure::runtime)?;
-        pki::trust(&pki::own_cert(&line_pki), &lua.pki_dir).map_err(Failure::runtime)?;
+        trust_each_other(&l.cell, &lua, &line_pki)?;
         let timers: usize = l.timers.iter().map(|t| t.model.transitions.len()).sum();
         writeln!(
             out,
@@ -564,9 +568,7 @@ async fn demo_robot(
     )
     .await
     .map_err(Failure::runtime)?;
-    drop(opcua::client(&r.cell, &rua).map_err(|e| Failure::Runtime(e.to_string()))?);
-    pki::trust(&pki::own_cert(&rua.pki_dir), &robot_pki).map_err(Failure::runtime)?;
-    pki::trust(&pki::own_cert(&robot_pki), &rua.pki_dir).map_err(Failure::runtime)?;
+    trust_each_other(&r.cell, &rua, &robot_pki)?;
     let scanning = tokio::spawn({
         let robot = robot.clone();
         async move { robot.run().await }
