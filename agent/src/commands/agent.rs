@@ -592,7 +592,7 @@ async fn demo_robot(
                 .map(|(s, _)| {
                     (
                         c.sfc.step_name(s),
-                        format!("{}-{}", c.id, c.sfc.step_name(s).replace('.', "-")),
+                        cellwatch_models::sfc::supervise::alarm_id(&c.id, &c.sfc, s),
                     )
                 })
                 .collect::<Vec<_>>()

@@ -213,6 +213,19 @@ fn write_run(
         .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", path.display())))
 }
 
+/// Writes the labels of the runs (what was injected, when) to `path` and
+/// says so.
+fn write_labels(
+    path: &std::path::Path,
+    labels: &str,
+    what: &str,
+    out: &mut dyn Write,
+) -> Result<(), Failure> {
+    std::fs::write(path, labels)
+        .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", path.display())))?;
+    writeln!(out, "{} ({what})", path.display()).map_err(Failure::output)
+}
+
 /// `cellwatch simulate robot-runs`.
 pub(crate) fn robot_runs(args: &RobotRunsArgs, out: &mut dyn Write) -> Result<(), Failure> {
     use cellwatch_models::sfc::plant::{record, Stuck};
@@ -220,11 +233,7 @@ pub(crate) fn robot_runs(args: &RobotRunsArgs, out: &mut dyn Write) -> Result<()
     let sfc =
         cellwatch_models::sfc::text::parse("robot.sfc.toml", crate::sim::robot::CHARTS, &|_| true)
             .map_err(|e| Failure::Runtime(e.join("\n")))?;
-    let ms = |option: &str, text: &str| {
-        humantime::parse_duration(text)
-            .map(|d| d.as_millis() as u64)
-            .map_err(|e| Failure::Input(format!("{option} '{text}': not a duration ({e})")))
-    };
+    let ms = super::timers::millis;
     let length = ms("--length", &args.length)?;
     let dwell = [
         ms("--dwell-min", &args.dwell_min)?,
@@ -270,10 +279,12 @@ pub(crate) fn robot_runs(args: &RobotRunsArgs, out: &mut dyn Write) -> Result<()
         writeln!(out, "{} ({} changes)", path.display(), run.changes.len()).map_err(io)?;
     }
     if stuck.is_some() {
-        let path = args.out.join("stuck.csv");
-        std::fs::write(&path, labels)
-            .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", path.display())))?;
-        writeln!(out, "{} (when each step stuck)", path.display()).map_err(io)?;
+        write_labels(
+            &args.out.join("stuck.csv"),
+            &labels,
+            "when each step stuck",
+            out,
+        )?;
     }
     Ok(())
 }
@@ -314,10 +325,12 @@ pub(crate) fn line(args: &LineArgs, out: &mut dyn Write) -> Result<(), Failure> 
         writeln!(out, "{} ({} changes)", path.display(), run.changes.len()).map_err(io)?;
     }
     if fault.is_some() {
-        let path = args.out.join("faults.csv");
-        std::fs::write(&path, labels)
-            .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", path.display())))?;
-        writeln!(out, "{} (the injected faults)", path.display()).map_err(io)?;
+        write_labels(
+            &args.out.join("faults.csv"),
+            &labels,
+            "the injected faults",
+            out,
+        )?;
     }
     Ok(())
 }

@@ -28,7 +28,8 @@ fn runs(paths: &[std::path::PathBuf], map: Option<&Path>) -> Result<Vec<RunLog>,
     Ok(out)
 }
 
-fn millis(option: &str, text: &str) -> Result<u64, Failure> {
+/// The duration `text` given to `option`, in ms.
+pub(crate) fn millis(option: &str, text: &str) -> Result<u64, Failure> {
     humantime::parse_duration(text)
         .map(|d| d.as_millis() as u64)
         .map_err(|e| {

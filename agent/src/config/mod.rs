@@ -422,10 +422,16 @@ impl CellConfig {
     /// (check, chart, step) of each step it flags. A step told by a
     /// step-number comparison (`D300 == 2`) has no flag tag and is not here.
     pub fn step_flags(&self) -> HashMap<usize, Vec<[String; 3]>> {
+        let by_address: HashMap<&Signal, usize> = self
+            .tags
+            .iter()
+            .enumerate()
+            .map(|(i, t)| (&t.address, i))
+            .collect();
         let mut out: HashMap<usize, Vec<[String; 3]>> = HashMap::new();
         for check in &self.sfc {
             for (r, step) in check.sfc.steps() {
-                let Some(tag) = self.tags.iter().position(|t| t.address == step.flag) else {
+                let Some(&tag) = by_address.get(&step.flag) else {
                     continue;
                 };
                 out.entry(tag).or_default().push([

@@ -137,16 +137,10 @@ fn chart(pou: Node<'_, '_>, sfc: Node<'_, '_>, name: &str, errors: &mut Errors<'
         .filter_map(|n| n.attribute("localId").map(|id| (id, n)))
         .collect();
     // What follows each element.
-    let mut next: HashMap<&str, Vec<Node<'_, '_>>> = HashMap::new();
+    let mut next: HashMap<String, Vec<Node<'_, '_>>> = HashMap::new();
     for n in sfc.children().filter(|n| n.is_element()) {
-        for c in n
-            .children()
-            .filter(|c| c.has_tag_name("connectionPointIn"))
-            .flat_map(|c| c.children().filter(|n| n.has_tag_name("connection")))
-        {
-            if let Some(id) = c.attribute("refLocalId") {
-                next.entry(id).or_default().push(n);
-            }
+        for id in inputs(n) {
+            next.entry(id).or_default().push(n);
         }
     }
     let named_conditions: HashMap<&str, Node<'_, '_>> = child(pou, "transitions")
@@ -299,7 +293,7 @@ fn back(
 
 /// Walks on from element `id` to the steps a transition activates.
 fn on(
-    next: &HashMap<&str, Vec<Node<'_, '_>>>,
+    next: &HashMap<String, Vec<Node<'_, '_>>>,
     id: &str,
     out: &mut Vec<String>,
     errors: &mut Errors<'_>,

@@ -175,7 +175,9 @@ impl SfcChecks {
     }
 }
 
-fn alarm_id(id: &str, sfc: &Sfc, r: StepRef) -> String {
+/// The stuck alarm of step `r` in the supervision `id` of `sfc`:
+/// `<id>-<chart>-<step>`.
+pub fn alarm_id(id: &str, sfc: &Sfc, r: StepRef) -> String {
     format!("{id}-{}-{}", sfc.charts[r.chart].name, sfc.step(r).name)
 }
 
