@@ -9,7 +9,7 @@
 //! (below `limit - deadband`, above `limit + deadband`). An unknown value
 //! holds every level's verdict and cancels pending delays.
 
-use std::collections::HashMap;
+use std::collections::{BTreeSet, HashMap};
 use std::fmt;
 
 use crate::alarm::{AlarmKind, Severity};
@@ -110,6 +110,10 @@ pub struct LimitChecks {
     /// Per check: the last known value.
     values: Vec<Option<f64>>,
     by_tag: HashMap<Signal, Vec<usize>>,
+    /// (when a delay runs out, check): checks to evaluate again as time
+    /// passes. An entry may outlive its delay (the value went back); it
+    /// then costs one evaluation that changes nothing.
+    due: BTreeSet<(u64, usize)>,
 }
 
 impl LimitChecks {
@@ -127,6 +131,7 @@ impl LimitChecks {
             values: vec![None; checks.len()],
             checks,
             by_tag,
+            due: BTreeSet::new(),
         }
     }
 
@@ -169,6 +174,7 @@ impl LimitChecks {
                 check.off_delay
             };
             if now.saturating_sub(since) < delay {
+                self.due.insert((since + delay, i));
                 continue;
             }
             s.active = wants;
@@ -278,11 +284,17 @@ impl CheckSet for LimitChecks {
     }
 
     fn advance(&mut self, now: u64, out: &mut Vec<Finding>) {
-        for i in 0..self.checks.len() {
-            if self.states[i].iter().any(|s| s.pending_since.is_some()) {
-                self.evaluate(i, now, out);
+        while let Some(&(at, i)) = self.due.first() {
+            if at > now {
+                break;
             }
+            self.due.pop_first();
+            self.evaluate(i, now, out);
         }
+    }
+
+    fn next_deadline(&self) -> Option<u64> {
+        self.due.first().map(|&(at, _)| at)
     }
 }
 
@@ -374,7 +386,9 @@ mod tests {
         let mut out = Vec::new();
         c.advance(10_000, &mut out);
         assert!(out.is_empty(), "a 1 s excursion raises nothing");
+        assert_eq!(c.next_deadline(), None);
         assert!(feed(&mut c, &[(20_000, 85.0)]).is_empty());
+        assert_eq!(c.next_deadline(), Some(22_000));
         c.advance(21_999, &mut out);
         assert!(out.is_empty());
         c.advance(22_000, &mut out);
@@ -384,6 +398,7 @@ mod tests {
             out[0].message,
             "TEMP (spindle temperature) = 85 °C, above the H limit 80 °C for 2.0 s"
         );
+        assert_eq!(c.next_deadline(), None);
     }
 
     #[test]

@@ -233,6 +233,7 @@ pub async fn start_with(config: CellConfig, options: Options) -> Result<Agent, S
         .source
         .unwrap_or_else(|| sources::for_config(&config));
     let writer = source.writer();
+    let allowance = source.delivery_allowance();
     tracing::info!(cell = %config.cell, source = %source.describe(), "starting");
     let (source_tx, source_rx) = mpsc::channel(QUEUE_CAPACITY);
     let source = tokio::spawn(source.run(source_tx, stopped(stop_rx.clone()).boxed()));
@@ -248,6 +249,7 @@ pub async fn start_with(config: CellConfig, options: Options) -> Result<Agent, S
     );
     let cell_loop = CellLoop::new(&config.cell, engine, gate, sinks, config.state_interval)
         .timed_by(clock)
+        .allowing(allowance)
         .shelving_at_most(config.max_shelve)
         .restored(step, state)
         .watching_journal(journal_health)

@@ -69,6 +69,15 @@ impl Forcing {
         }
     }
 
+    /// Until when the force under way waits for its target steps, while an
+    /// operator waits for its outcome.
+    pub(crate) fn deadline(&self) -> Option<u64> {
+        self.pending
+            .as_ref()
+            .filter(|p| p.reply.is_some())
+            .map(|p| p.deadline)
+    }
+
     /// The set supervising chart `chart`.
     pub(crate) fn set_of(&self, chart: &str) -> Option<&ForceSet> {
         self.sets.iter().find(|s| s.sfc.chart(chart).is_some())

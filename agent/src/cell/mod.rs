@@ -35,11 +35,9 @@ use crate::payload::{
 use crate::sinks::Sink;
 use crate::sources::{SourceEvent, Write, WriteRequest, WriteSender};
 
-/// How long after a timer's deadline the agent waits for an event that may
-/// still be in transit before calling it late, ms.
-pub const DELIVERY_ALLOWANCE_MS: u64 = 1000;
-
-/// How often timers are advanced.
+/// The longest the loop sleeps without looking at the time: deadlines wake
+/// it when they fall due, this only bounds how far a clock set by a test
+/// (or stepped by the system) can run ahead unseen.
 pub const TICK: Duration = Duration::from_millis(250);
 
 /// What came into the loop.
@@ -210,6 +208,10 @@ pub struct CellLoop {
     max_shelve: Duration,
     /// The charts' switches and the force under way.
     forcing: force::Forcing,
+    /// How long after a deadline the loop waits for a change that happened
+    /// in time at the PLC but is still on its way (the source's publishing
+    /// interval), ms.
+    allowance: u64,
 }
 
 /// A write's outcome on its way back into the loop.
@@ -265,6 +267,7 @@ impl CellLoop {
             written_tx,
             written_rx,
             forcing: force::Forcing::default(),
+            allowance: 0,
         }
     }
 
@@ -272,6 +275,15 @@ impl CellLoop {
     #[must_use]
     pub fn forcing(mut self, forcing: force::Forcing) -> CellLoop {
         self.forcing = forcing;
+        self
+    }
+
+    /// Judges deadlines `allowance` after they fall due: a change the PLC
+    /// saw in time may take that long to arrive (the source's publishing
+    /// interval).
+    #[must_use]
+    pub fn allowing(mut self, allowance: Duration) -> CellLoop {
+        self.allowance = allowance.as_millis() as u64;
         self
     }
 
@@ -353,8 +365,8 @@ impl CellLoop {
         shutdown: impl Future<Output = ()>,
     ) {
         tokio::pin!(shutdown);
-        let mut tick = tokio::time::interval(TICK);
-        tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        let wake = tokio::time::sleep(TICK);
+        tokio::pin!(wake);
         let mut beat = tokio::time::interval(self.state_interval);
         beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         if let Some(step) = self.restored.take() {
@@ -364,6 +376,8 @@ impl CellLoop {
         let mut source_open = true;
         let mut requests_open = true;
         loop {
+            // Wake when the next deadline (plus the allowance) falls due.
+            wake.as_mut().reset(self.next_wake());
             tokio::select! {
                 biased;
                 _ = &mut shutdown => break,
@@ -380,13 +394,30 @@ impl CellLoop {
                 },
                 Some(w) = self.written_rx.recv() => self.written(w).await,
                 problem = journal_changed(&mut self.journal_health) => self.system("journal", problem).await,
-                _ = tick.tick() => self.tick().await,
+                () = &mut wake => self.tick().await,
                 _ = beat.tick() => self.beat().await,
             }
         }
         for sink in self.sinks {
             sink.close().await;
         }
+    }
+
+    /// When the loop must next look at the time: the engine's next
+    /// deadline judged `allowance` later, a forced transition's deadline,
+    /// and at the latest one [`TICK`] from now.
+    fn next_wake(&self) -> tokio::time::Instant {
+        let now = self.clock.now_ms();
+        let engine = self.engine.next_deadline().map(|d| d + self.allowance);
+        let force = self.forcing.deadline();
+        let after = [engine, force]
+            .into_iter()
+            .flatten()
+            .min()
+            .map_or(TICK, |at| {
+                Duration::from_millis(at.saturating_sub(now)).min(TICK)
+            });
+        tokio::time::Instant::now() + after
     }
 
     async fn source(&mut self, ev: SourceEvent, queue_depth: usize) {
@@ -430,11 +461,9 @@ impl CellLoop {
     async fn tick(&mut self) {
         let now = self.clock.now_ms();
         // Timers judge "late" against the PLC's clock: an event that
-        // happened in time but is still on its way (publishing interval,
-        // network) must not be called late.
-        let step = self
-            .engine
-            .advance(now.saturating_sub(DELIVERY_ALLOWANCE_MS));
+        // happened in time but is still on its way (publishing interval)
+        // must not be called late.
+        let step = self.engine.advance(now.saturating_sub(self.allowance));
         self.dispatch(now, Input::Tick, step, 0).await;
         self.force_overdue(now).await;
     }

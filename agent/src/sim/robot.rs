@@ -48,6 +48,9 @@ struct State {
     stopped: bool,
     /// What the server shows, to write only changes.
     shown: HashMap<String, bool>,
+    /// When each variable last became true, ms since the epoch (its
+    /// source timestamp).
+    rose: HashMap<String, u64>,
 }
 
 /// A running simulated robot cell.
@@ -89,6 +92,7 @@ impl SimulatedRobot {
                 started: tokio::time::Instant::now(),
                 stopped: false,
                 shown: variables.into_iter().collect(),
+                rose: HashMap::new(),
             })),
             sfc: Arc::new(sfc),
             log,
@@ -138,10 +142,16 @@ impl SimulatedRobot {
         if changed.is_empty() {
             return;
         }
+        let at = crate::clock::now_ms();
         for (n, v) in &changed {
             p.shown.insert(n.clone(), *v);
+            if *v {
+                p.rose.insert(n.clone(), at);
+            }
         }
-        if let Err(e) = self.server.set(&changed) {
+        let stamp = chrono::DateTime::from_timestamp_millis(at as i64)
+            .map_or_else(opcua::types::DateTime::now, opcua::types::DateTime::from);
+        if let Err(e) = self.server.set_at(&changed, stamp) {
             tracing::error!(error = %e, "simulated robot");
         }
     }
@@ -178,6 +188,12 @@ impl SimulatedRobot {
             .collect();
         names.sort();
         names
+    }
+
+    /// When variable `name` (a step flag `S2.X`, an input) last became
+    /// true, as stamped on the server, ms since the epoch.
+    pub fn rose_at(&self, name: &str) -> Option<u64> {
+        self.plant.lock().ok()?.rose.get(name).copied()
     }
 
     /// Whether the stop switch has stopped the charts.

@@ -21,6 +21,8 @@ pub mod pki;
 pub mod scripted;
 
 use cellwatch_models::engine::TagReading;
+use std::time::Duration;
+
 use futures_util::future::BoxFuture;
 use tokio::sync::mpsc;
 
@@ -106,6 +108,13 @@ pub trait Source: Send + 'static {
     /// PLC (called once, before `run`).
     fn writer(&mut self) -> Option<WriteSender> {
         None
+    }
+
+    /// How long a change the PLC saw may take to reach the agent, beyond
+    /// the moment its source timestamp names: the publishing interval of a
+    /// subscription. Zero for a source that stamps readings on arrival.
+    fn delivery_allowance(&self) -> Duration {
+        Duration::ZERO
     }
 
     /// Runs until `shutdown` completes, sending events on `tx`.

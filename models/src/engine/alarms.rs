@@ -302,6 +302,11 @@ impl AlarmBook {
         Ok((alarm.clone(), self.held.remove(id)))
     }
 
+    /// When the next shelf expires.
+    pub(crate) fn next_expiry(&self) -> Option<u64> {
+        self.expiries.first().map(|(until, _)| *until)
+    }
+
     /// Ends the shelves that expire by `now`; the alarms unshelved.
     pub(crate) fn expire(&mut self, now: u64) -> Vec<Alarm> {
         let mut out = Vec::new();

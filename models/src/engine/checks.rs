@@ -92,6 +92,12 @@ pub trait CheckSet: Send + Sync {
     /// Time passed; timers fire here.
     fn advance(&mut self, _now: u64, _out: &mut Vec<Finding>) {}
 
+    /// The earliest time at which [`CheckSet::advance`] has something to
+    /// do, if any: the agent wakes then rather than on a fixed tick.
+    fn next_deadline(&self) -> Option<u64> {
+        None
+    }
+
     /// An operator reset a latched alarm of this set.
     fn reset(&mut self, _id: &str) {}
 

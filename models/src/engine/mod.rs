@@ -739,6 +739,19 @@ impl CellEngine {
         changed
     }
 
+    /// The earliest time at which [`CellEngine::advance`] has something to
+    /// do — a timer or a step supervision running out, a delayed alarm
+    /// whose delay ends, a shelf that expires — if any. Costs one look per
+    /// check kind, and one per alarm waiting out its delay.
+    pub fn next_deadline(&self) -> Option<u64> {
+        let sets = self.sets.iter().filter_map(|s| s.next_deadline());
+        let delayed = self.pending.iter().map(|(id, (since, f))| {
+            let (on, off) = self.delays.get(id).copied().unwrap_or_default();
+            since + if f.active { on } else { off }
+        });
+        sets.chain(delayed).chain(self.alarms.next_expiry()).min()
+    }
+
     /// Time passed: timers fire.
     pub fn advance(&mut self, now: u64) -> Step {
         let mut findings = Vec::new();

@@ -515,6 +515,7 @@ condition = "X2 * Y9"
         for i in 0..tags.len() {
             e.on_reading(i, Reading::Good(i == s2), 1_000, 1_000);
         }
+        assert_eq!(e.next_deadline(), Some(9_000), "S2's supervision runs out");
         assert!(e.advance(8_999).events.is_empty());
         let step = e.advance(9_000);
         let raised = step.events.iter().any(|ev| {

@@ -267,4 +267,8 @@ impl CheckSet for SfcChecks {
             }
         }
     }
+
+    fn next_deadline(&self) -> Option<u64> {
+        self.deadlines.first().map(|&(at, _)| at)
+    }
 }

@@ -211,6 +211,10 @@ impl CheckSet for TimerChecks {
         self.findings(outcomes, out);
     }
 
+    fn next_deadline(&self) -> Option<u64> {
+        self.monitor.next_deadline()
+    }
+
     fn take_observations(&mut self, out: &mut Vec<Observation>) {
         out.append(&mut self.observed);
     }
@@ -276,7 +280,10 @@ mod tests {
         e.on_connection(true, 0);
         e.on_reading(0, Reading::Good(false), 0, 0);
         e.on_reading(1, Reading::Good(false), 0, 0);
+        assert_eq!(e.next_deadline(), None);
         e.on_reading(0, Reading::Good(true), 1000, 1000);
+        // The agent wakes exactly when the window closes.
+        assert_eq!(e.next_deadline(), Some(7300));
         assert!(e
             .advance(7299)
             .events
@@ -298,6 +305,7 @@ mod tests {
         );
         assert_eq!(alarm.culprits[0].to_string(), "X1.00 = 0 (expected 1)");
         assert!(alarm.active && alarm.latched);
+        assert_eq!(e.next_deadline(), None);
         // A normal cycle is measured.
         e.on_reading(0, Reading::Good(false), 7400, 7400);
         e.on_reading(0, Reading::Good(true), 7500, 7500);

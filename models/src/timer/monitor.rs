@@ -13,7 +13,7 @@
 //! connection) disarms every transition that reads it and keeps it
 //! disarmed until the value is known again: no false alarm.
 
-use std::collections::HashMap;
+use std::collections::{BTreeSet, HashMap};
 
 use serde::Serialize;
 
@@ -95,6 +95,9 @@ pub struct TimerMonitor {
     readers: Vec<Vec<usize>>,
     /// Per transition: when it was armed.
     armed: Vec<Option<u64>>,
+    /// The armed transitions by deadline (armed + Δt + τ): time passing
+    /// costs only the transitions that fall due.
+    due: BTreeSet<(u64, usize)>,
 }
 
 impl TimerMonitor {
@@ -179,7 +182,26 @@ impl TimerMonitor {
             transitions,
             readers,
             armed: vec![None; n],
+            due: BTreeSet::new(),
         })
+    }
+
+    /// Arms transition `k` at `at` (re-arms it if it was).
+    fn arm(&mut self, k: usize, at: u64) {
+        self.disarm(k);
+        self.armed[k] = Some(at);
+        self.due.insert((at + self.transitions[k].hi, k));
+    }
+
+    fn disarm(&mut self, k: usize) {
+        if let Some(since) = self.armed[k].take() {
+            self.due.remove(&(since + self.transitions[k].hi, k));
+        }
+    }
+
+    /// The earliest time an armed transition becomes late, if one is armed.
+    pub fn next_deadline(&self) -> Option<u64> {
+        self.due.first().map(|&(d, _)| d)
     }
 
     /// The index of a signal.
@@ -208,11 +230,12 @@ impl TimerMonitor {
         if old == value {
             return out;
         }
-        let readers = self.readers[s].clone();
+        // Taken, not copied, while the transitions are updated.
+        let readers = std::mem::take(&mut self.readers[s]);
         // The event first: a transition armed before this change sees it.
         for &k in &readers {
-            let t = &self.transitions[k];
             let Some(since) = self.armed[k] else { continue };
+            let t = &self.transitions[k];
             let is_event = t.event.0 == s && value == Some(t.event.1) && old == Some(!t.event.1);
             if is_event {
                 let theta = at - since;
@@ -234,10 +257,10 @@ impl TimerMonitor {
                         observed_ms: theta,
                     }
                 });
-                self.armed[k] = None;
+                self.disarm(k);
             } else if value.is_none() || t.trigger.is_none() {
                 // Unknown value, or (full-state) the state left another way.
-                self.armed[k] = None;
+                self.disarm(k);
             }
         }
         self.values[s] = value;
@@ -255,47 +278,40 @@ impl TimerMonitor {
         }
         for &k in &readers {
             let t = &self.transitions[k];
-            match t.trigger {
+            let start = match t.trigger {
                 // `common`: the trigger starts (or restarts) the timer when
                 // the start condition holds.
-                Some((ts, tv)) => {
-                    if ts == s && value == Some(tv) && old == Some(!tv) && self.holds(t) {
-                        self.armed[k] = Some(at);
-                    }
-                }
+                Some((ts, tv)) => ts == s && value == Some(tv) && old == Some(!tv) && self.holds(t),
                 // `full-state`: entering the state starts it.
                 None => {
-                    if self.armed[k].is_none()
+                    self.armed[k].is_none()
                         && self.holds(t)
                         && t.condition.iter().any(|&(c, _)| c == s)
-                    {
-                        self.armed[k] = Some(at);
-                    }
                 }
+            };
+            if start {
+                self.arm(k, at);
             }
         }
+        self.readers[s] = readers;
         out
     }
 
     /// Time is now `now`: every armed transition past Δt + τ is late.
     pub fn advance(&mut self, now: u64) -> Vec<Outcome> {
         let mut out = Vec::new();
-        for (k, t) in self.transitions.iter().enumerate() {
-            if let Some(since) = self.armed[k] {
-                if now >= since + t.hi {
-                    out.push(Outcome::Late {
-                        transition: t.id,
-                        at_ms: since + t.hi,
-                    });
-                    self.armed[k] = None;
-                }
+        // In deadline order, which is the order of the outcomes' times.
+        while let Some(&(deadline, k)) = self.due.first() {
+            if deadline > now {
+                break;
             }
+            self.due.pop_first();
+            self.armed[k] = None;
+            out.push(Outcome::Late {
+                transition: self.transitions[k].id,
+                at_ms: deadline,
+            });
         }
-        out.sort_by_key(|o| match o {
-            Outcome::Late { at_ms, .. }
-            | Outcome::Early { at_ms, .. }
-            | Outcome::Normal { at_ms, .. } => *at_ms,
-        });
         out
     }
 }

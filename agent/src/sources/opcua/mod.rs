@@ -85,6 +85,10 @@ impl Source for OpcUaSource {
         format!("opcua {}", self.config.endpoint)
     }
 
+    fn delivery_allowance(&self) -> std::time::Duration {
+        self.config.publishing_interval
+    }
+
     fn writer(&mut self) -> Option<WriteSender> {
         if self.switches.is_empty() {
             return None;
