@@ -4,9 +4,15 @@
 use crate::util::{cellwatch, Dir};
 
 fn sf_error(program: impl AsRef<[u8]>) -> String {
+    sf_error_with(program, &[])
+}
+
+fn sf_error_with(program: impl AsRef<[u8]>, options: &[&str]) -> String {
     let d = Dir::new();
     let p = d.file("p.il", program);
-    let r = cellwatch(&["sf", &p]);
+    let mut args = vec!["sf", p.as_str()];
+    args.extend(options);
+    let r = cellwatch(&args);
     assert_eq!(r.code, 2, "stdout: {}\nstderr: {}", r.stdout, r.stderr);
     assert!(!r.stderr.contains("panicked"));
     // Strip the temporary directory so the message can be pinned.
@@ -68,9 +74,14 @@ fn empty_and_non_utf8_files() {
         "error: p.il:1:1: the program is empty: no instructions\n"
     );
     assert_eq!(sf_error("; only comments\n"), "error: p.il:1:1: cannot tell the dialect: no PMC (RD, WRT) or IEC (LD, ST) instruction found; pass --dialect pmc or --dialect iec\n");
+    // Not UTF-8: read as Latin-1, where 0xE9 is 'é'.
     assert_eq!(
         sf_error(b"RD X0.07\nWRT Y0.\xE900\n".as_slice()),
-        "error: p.il:2:8: not UTF-8 text (byte 0xE9); save the file as UTF-8 or ASCII\n"
+        "error: p.il:2:5: malformed address 'Y0.é00': the bit after '.' must be a hex digit 0..F (as in X0.07 or X0.0A)\n"
+    );
+    assert_eq!(
+        sf_error_with(b"RD X0.07\nWRT Y0.\xE900\n".as_slice(), &["--encoding", "utf-8"]),
+        "error: p.il:2:8: not UTF-8 text (byte 0xE9); pass --encoding latin1 (or the file's encoding), or save it as UTF-8\n"
     );
 }
 
@@ -162,7 +173,8 @@ fn missing_file_and_bad_options() {
     let r = cellwatch(&["sf", "config/cnc/ese.il", "--dialect", "st"]);
     assert_eq!(r.code, 2);
     assert!(
-        r.stderr.contains("unknown dialect 'st': use pmc or iec"),
+        r.stderr
+            .contains("unknown dialect 'st': use pmc, iec or stl"),
         "{}",
         r.stderr
     );
@@ -186,5 +198,83 @@ fn a_closed_stdout_exits_1_with_a_message() {
     assert!(
         stderr.starts_with("error: cannot write output: Broken pipe"),
         "{stderr}"
+    );
+}
+
+#[test]
+fn a_file_in_another_format_gets_one_line_saying_what_it_is() {
+    let xml = "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<project xmlns=\"http://www.plcopen.org/xml/tc6_0201\">\n".to_string()
+        + &"  <pou name=\"p\"/>\n".repeat(1200)
+        + "</project>\n";
+    for options in [&[][..], &["--dialect", "iec"][..]] {
+        let e = sf_error_with(&xml, options);
+        assert_eq!(e.lines().count(), 1, "{e}");
+        assert!(
+            e.starts_with(
+                "error: p.il:1:1: this is an XML file (PLCopen XML?), not an instruction list"
+            ),
+            "{e}"
+        );
+    }
+    assert_eq!(
+        sf_error_with("U E 0.0\nUN E 0.1\n= A 4.0\n", &["--dialect", "iec"]),
+        "error: p.il:1:1: this looks like Siemens STL (U, UN, =), not iec: pass --dialect stl, or leave --dialect out\n"
+    );
+}
+
+#[test]
+fn at_most_twenty_errors_then_a_count() {
+    let program = "RD X0.07\n".to_string() + &"FROB X1\n".repeat(500);
+    let e = sf_error(program);
+    assert_eq!(e.lines().count(), 21, "{e}");
+    assert!(
+        e.starts_with("error: p.il:2:1: unknown instruction 'FROB'\np.il:3:1: "),
+        "{e}"
+    );
+    assert!(
+        e.ends_with("\n... and 480 more errors (500 in all)\n"),
+        "{e}"
+    );
+}
+
+#[test]
+fn latin1_and_utf16_programs_are_read() {
+    let d = Dir::new();
+    // An old German STL source: Latin-1 comments.
+    let latin1 = d.file(
+        "foerder.awl",
+        b"NETWORK\nTITLE = F\xF6rderband\n      U     E      0.0   // St\xF6rung quittiert\n      UN    E      0.1\n      =     A      4.0\n",
+    );
+    let r = cellwatch(&["sf", &latin1, "--coil", "A4.0"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        r.stdout.contains("SF:         A4.0 = E0.0 * -E0.1"),
+        "{}",
+        r.stdout
+    );
+    // A UTF-16 export with its byte-order mark.
+    let utf16: Vec<u8> = [0xFF, 0xFE]
+        .into_iter()
+        .chain(
+            "(* Förderband *)\nLD %IX0.0\nANDN %IX0.1\nST %QX4.0\n"
+                .encode_utf16()
+                .flat_map(u16::to_le_bytes),
+        )
+        .collect();
+    let utf16 = d.file("export.il", utf16);
+    let r = cellwatch(&["sf", &utf16, "--coil", "%QX4.0"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        r.stdout.contains("SF:         %QX4.0 = %IX0.0 * -%IX0.1"),
+        "{}",
+        r.stdout
+    );
+    // Told the wrong encoding: the first bad byte, located.
+    let r = cellwatch(&["sf", &latin1, "--encoding", "utf-8"]);
+    assert_eq!(r.code, 2);
+    assert!(
+        r.stderr.contains(":2:10: not UTF-8 text (byte 0xF6)"),
+        "{}",
+        r.stderr
     );
 }

@@ -1,7 +1,7 @@
 //! Reading the user's files: programs, comment databases and snapshots.
 //!
-//! Thin wrappers over the models' parsers: read the bytes, check they are
-//! UTF-8, and hand the text over with the file's name, so every error comes
+//! Thin wrappers over the models' parsers: read the bytes, decode them
+//! (UTF-8, UTF-16, Latin-1), and hand the text over with the file's name, so every error comes
 //! back as `FILE:LINE:COL: message`.
 
 use std::path::Path;
@@ -14,14 +14,25 @@ use cellwatch_models::values::Values;
 
 use crate::cli::{Failure, ProgramArgs};
 
-/// Reads a file as UTF-8 text; `what` names it in errors ("program").
+/// Reads a text file, its encoding told by a byte-order mark or by its
+/// bytes (see [`source::text`]); `what` names it in errors ("program").
 pub(crate) fn read_text(path: &Path, what: &str) -> Result<String, Failure> {
+    read_encoded(path, what, None)
+}
+
+/// Reads a text file in `encoding` (a byte-order mark still wins), or as
+/// [`read_text`] does when `None`.
+pub(crate) fn read_encoded(
+    path: &Path,
+    what: &str,
+    encoding: Option<&'static source::Encoding>,
+) -> Result<String, Failure> {
     let name = path.display().to_string();
     let bytes = std::fs::read(path)
         .map_err(|e| Failure::Input(format!("cannot read {what} '{name}': {e}")))?;
-    Ok(source::text(&name, &bytes)
+    Ok(source::text(&name, &bytes, encoding)
         .map_err(Failure::input)?
-        .to_string())
+        .into_owned())
 }
 
 /// The compiled program, its comment database and observability, with
@@ -31,7 +42,7 @@ pub(crate) fn load(
     err: &mut dyn std::io::Write,
 ) -> Result<(Program, CommentDb, Observability), Failure> {
     let name = args.program.display().to_string();
-    let text = read_text(&args.program, "program")?;
+    let text = read_encoded(&args.program, "program", args.encoding)?;
     let program = Program::compile(&name, &text, args.dialect).map_err(Failure::input)?;
     for w in program.warnings() {
         let _ = writeln!(err, "{name}:{}: warning: {}", w.at, w.message);

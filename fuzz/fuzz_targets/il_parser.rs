@@ -12,9 +12,9 @@ use cellwatch_models::switching::SwitchingFunction;
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let Ok(text) = source::text("fuzz.il", data) else { return };
-    for dialect in [None, Some(Dialect::Pmc), Some(Dialect::Iec)] {
-        let Ok(program) = Program::compile("fuzz.il", text, dialect) else { continue };
+    let Ok(text) = source::text("fuzz.il", data, None) else { return };
+    for dialect in [None, Some(Dialect::Pmc), Some(Dialect::Iec), Some(Dialect::Stl)] {
+        let Ok(program) = Program::compile("fuzz.il", &text, dialect) else { continue };
         let observable = Observability::default_for(program.dialect());
         for coil in program.coils().iter().take(64) {
             if let Ok(sf) = SwitchingFunction::expand(&program, &coil.signal, &observable) {

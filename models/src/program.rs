@@ -96,7 +96,7 @@ impl Program {
         dialect: Option<Dialect>,
     ) -> Result<Program, SourceErrors> {
         let (dialect, instructions) = il::parse(origin, source, dialect)?;
-        let mut machine = Machine::new(origin);
+        let mut machine = Machine::new(origin, dialect);
         for ins in &instructions {
             machine.step(ins)?;
         }
@@ -182,6 +182,9 @@ enum Frame {
         at: Location,
         text: String,
     },
+    /// STL `O` alone: the AND groups so far, ORed with the result when the
+    /// expression ends.
+    OrGroups { acc: Acc },
     /// Opened by `AND(` and the like; `op` None is XOR, `opaque` an
     /// arithmetic parenthesis.
     Paren {
@@ -207,11 +210,18 @@ struct Machine<'a> {
     /// Jumps and conditional regions: their location and target label.
     jumps: Vec<(Location, String, Option<String>)>,
     labels: HashMap<String, Location>,
+    /// STL: the next check starts a new result ("first check"), as after
+    /// an assignment or at the start of a network.
+    first_check: bool,
+    /// The dialect has first checks (STL) rather than loads.
+    checks_first: bool,
 }
 
 impl<'a> Machine<'a> {
-    fn new(origin: &'a str) -> Self {
+    fn new(origin: &'a str, dialect: Dialect) -> Self {
         Machine {
+            first_check: dialect == Dialect::Stl,
+            checks_first: dialect == Dialect::Stl,
             origin,
             blocks: Vec::new(),
             acc: Acc::Empty,
@@ -293,6 +303,108 @@ impl<'a> Machine<'a> {
     }
 
     fn step(&mut self, ins: &Instruction) -> Result<(), SourceErrors> {
+        if self.checks_first {
+            return self.stl_step(ins);
+        }
+        self.iec_step(ins)
+    }
+
+    /// STL: a check after an assignment starts a new result; `O` alone
+    /// ORs AND groups; `U(` as a first check opens on nothing.
+    fn stl_step(&mut self, ins: &Instruction) -> Result<(), SourceErrors> {
+        let first = std::mem::replace(&mut self.first_check, false);
+        match &ins.operation {
+            // After `O` alone, the groups so far stay: this check starts
+            // the next group.
+            Operation::Logic { negated, .. } | Operation::Xor { negated } if first => {
+                self.acc = negate_acc(self.operand(ins), *negated);
+                self.open = None;
+            }
+            Operation::Logic {
+                op: Op::Or,
+                negated,
+            } => {
+                // `O x` ends the AND groups: (groups + result) OR x.
+                self.fold_or_groups();
+                let a = std::mem::replace(&mut self.acc, Acc::Empty);
+                let b = negate_acc(self.operand(ins), *negated);
+                self.acc = self.combine(Some(Op::Or), a, b, false);
+            }
+            Operation::Open { op, negated } => {
+                if first {
+                    self.acc = Acc::Empty;
+                } else if matches!(op, Some(Op::Or)) {
+                    self.fold_or_groups();
+                }
+                self.open_paren(ins, *op, *negated, None)?;
+                self.first_check = true;
+            }
+            Operation::Close => {
+                self.fold_or_groups();
+                self.close_paren(ins)?;
+            }
+            Operation::OrGroups => {
+                if matches!(self.acc, Acc::Empty) {
+                    return Err(self.no_result(ins, "to OR"));
+                }
+                self.fold_or_groups();
+                let acc = std::mem::replace(&mut self.acc, Acc::Empty);
+                self.stack.push(Frame::OrGroups { acc });
+                self.first_check = true;
+            }
+            Operation::Constant(v) => {
+                self.drop_or_groups();
+                self.acc = Acc::Value(Term::Const(*v));
+                self.open = None;
+                self.first_check = true;
+            }
+            Operation::Not => {
+                self.fold_or_groups();
+                self.iec_step(ins)?;
+            }
+            Operation::Write { .. } | Operation::Set | Operation::Reset => {
+                self.fold_or_groups();
+                self.iec_step(ins)?;
+                self.first_check = true;
+            }
+            Operation::Outside(Outside::Word) => {
+                self.first_check = first;
+                self.iec_step(ins)?;
+            }
+            Operation::Outside(Outside::Call | Outside::Jump) => {
+                self.drop_or_groups();
+                self.iec_step(ins)?;
+                self.first_check = true;
+            }
+            _ => self.iec_step(ins)?,
+        }
+        Ok(())
+    }
+
+    /// Ends the AND groups of an STL expression: the result becomes their
+    /// OR with it.
+    fn fold_or_groups(&mut self) {
+        while let Some(Frame::OrGroups { .. }) = self.stack.last() {
+            let Some(Frame::OrGroups { acc }) = self.stack.pop() else {
+                break;
+            };
+            let current = std::mem::replace(&mut self.acc, Acc::Empty);
+            self.acc = match current {
+                Acc::Empty => acc,
+                current => self.combine(Some(Op::Or), acc, current, true),
+            };
+        }
+    }
+
+    /// A new expression starts: AND groups left open are dropped (the
+    /// PLC forgets them too).
+    fn drop_or_groups(&mut self) {
+        while let Some(Frame::OrGroups { .. }) = self.stack.last() {
+            self.stack.pop();
+        }
+    }
+
+    fn iec_step(&mut self, ins: &Instruction) -> Result<(), SourceErrors> {
         match &ins.operation {
             Operation::Load { negated, push } => {
                 if *push {
@@ -328,6 +440,12 @@ impl<'a> Machine<'a> {
             Operation::Combine(op) => {
                 let saved = match self.stack.pop() {
                     Some(Frame::Pushed { acc, .. }) => acc,
+                    Some(Frame::OrGroups { .. }) => {
+                        return Err(self.error(
+                            ins.at,
+                            format!("'{}' inside an OR of AND groups ('O' alone)", ins.text),
+                        ))
+                    }
                     Some(Frame::Paren { at, text, .. }) => {
                         return Err(self.error(
                             ins.at,
@@ -384,6 +502,11 @@ impl<'a> Machine<'a> {
                 self.labels.entry(name.clone()).or_insert(ins.at);
             }
             Operation::Outside(kind) => self.outside(ins, *kind)?,
+            Operation::Constant(v) => {
+                self.acc = Acc::Value(Term::Const(*v));
+                self.open = None;
+            }
+            Operation::OrGroups => return Err(self.no_result(ins, "to OR")),
             Operation::Nothing => {}
         }
         Ok(())
@@ -423,12 +546,18 @@ impl<'a> Machine<'a> {
                 if matches!(inner, Acc::Empty) {
                     return Err(self.error(ins.at, "')' closes a parenthesis with no result inside: no LD after the '('".into()));
                 }
-                self.acc = match opaque {
-                    Some(p) => Acc::Poisoned(p),
-                    None => self.combine(op, acc, negate_acc(inner, negated), true),
+                self.acc = match (opaque, acc) {
+                    (Some(p), _) => Acc::Poisoned(p),
+                    // STL: a parenthesis as the first check.
+                    (None, Acc::Empty) => negate_acc(inner, negated),
+                    (None, acc) => self.combine(op, acc, negate_acc(inner, negated), true),
                 };
                 Ok(())
             }
+            Some(Frame::OrGroups { .. }) => Err(self.error(
+                ins.at,
+                "')' inside an OR of AND groups ('O' alone) opened after its '('".into(),
+            )),
             Some(Frame::Pushed { at, text, .. }) => Err(self.error(
                 ins.at,
                 format!("')' while '{text}' from line {} is still on the stack: combine it first (AND.STK/OR.STK)", at.line),
@@ -448,6 +577,10 @@ impl<'a> Machine<'a> {
                 Frame::Paren { at, text, .. } => format!(
                     "unbalanced parentheses at '{}': '{text}' at line {} is never closed with ')'",
                     ins.text, at.line
+                ),
+                Frame::OrGroups { .. } => format!(
+                    "'{}' inside an OR of AND groups ('O' alone) that is not ended",
+                    ins.text
                 ),
             };
             return Err(self.error(ins.at, msg));
@@ -507,6 +640,10 @@ impl<'a> Machine<'a> {
                 "computed after a call, whose result is not boolean logic",
                 "call: the coils it feeds are not derivable",
             ),
+            Outside::Word => (
+                "",
+                "word instruction, not boolean logic: the boolean result is left as it is",
+            ),
         };
         self.warnings.push(Warning {
             at: ins.at,
@@ -536,13 +673,17 @@ impl<'a> Machine<'a> {
                 self.acc = Acc::Poisoned(poison);
                 self.open = None;
             }
+            Outside::Word => {}
         }
         Ok(())
     }
 
     fn finish(mut self, dialect: Dialect, last: Option<Location>) -> Result<Program, SourceErrors> {
+        // STL: AND groups nothing was assigned from end with the block.
+        self.drop_or_groups();
         if let Some(frame) = self.stack.last() {
             let (at, msg) = match frame {
+                Frame::OrGroups { .. } => (last.unwrap_or(Location::line_start(1)), "an OR of AND groups ('O' alone) is never ended".to_string()),
                 Frame::Pushed { at, text, .. } => (*at, format!("unbalanced stack: '{text}' pushes a result that is never combined (AND.STK/OR.STK)")),
                 Frame::Paren { at, text, .. } => (*at, format!("unbalanced parentheses: '{text}' is never closed with ')'")),
             };

@@ -127,6 +127,11 @@ pub fn class_of(dialect: Dialect, signal: &Signal) -> Option<&str> {
             (n > 0).then(|| &name[..n])
         }
         Dialect::Iec => (name.starts_with('%') && name.len() >= 2).then(|| &name[..2]),
+        // `E0.0` → `E`, `DB1.DBX2.3` → `DB`; symbols and locals have none.
+        Dialect::Stl => {
+            let n = name.chars().take_while(|c| c.is_ascii_alphabetic()).count();
+            (n > 0 && name[n..].starts_with(|c: char| c.is_ascii_digit())).then(|| &name[..n])
+        }
     }
 }
 
@@ -148,6 +153,7 @@ impl Observability {
         let classes: &[&str] = match dialect {
             Dialect::Pmc => &["X", "Y", "F", "G"],
             Dialect::Iec => &["%I", "%Q"],
+            Dialect::Stl => &["E", "A", "I", "Q"],
         };
         Observability {
             dialect,
@@ -191,6 +197,14 @@ impl Observability {
                 }
                 Dialect::Iec => {
                     signals.insert(crate::il::iec::operand_signal(item)?);
+                }
+                Dialect::Stl
+                    if item.len() <= 3 && item.chars().all(|c| c.is_ascii_alphabetic()) =>
+                {
+                    classes.insert(item.to_ascii_uppercase());
+                }
+                Dialect::Stl => {
+                    signals.insert(crate::il::stl::operand_signal(item)?);
                 }
             }
         }

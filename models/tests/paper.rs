@@ -19,6 +19,64 @@ const CSD: &str = include_str!("../../config/cnc/csd.il");
 const ESE_COMMENTS: &str = include_str!("../../config/cnc/ese-comments.csv");
 const CSD_COMMENTS: &str = include_str!("../../config/cnc/csd-comments.csv");
 const ESE_NORMAL: &str = include_str!("../../config/cnc/ese-normal.values");
+const ESE_STL: &str = include_str!("../../tests/data/paper000/ese.awl");
+const FIG6_STL: &str = include_str!("../../tests/data/paper000/fig6.awl");
+
+/// The S7 addresses the STL versions use for the paper's PMC addresses.
+const STL_ADDRESSES: &[(&str, &str)] = &[
+    ("E20.4", "X200.04"),
+    ("E20.0", "X200.00"),
+    ("E20.3", "X200.03"),
+    ("E0.4", "X0.04"),
+    ("E0.5", "X0.05"),
+    ("E0.6", "X0.06"),
+    ("E0.7", "X0.07"),
+    ("E1.0", "X0.08"),
+    ("E1.2", "X0.0A"),
+    ("E1.7", "X0.0F"),
+    ("E30.0", "F0.00"),
+    ("E30.1", "F0.01"),
+    ("E31.0", "F28.00"),
+    ("E31.1", "F28.01"),
+    ("E31.2", "F28.02"),
+    ("E31.3", "F28.03"),
+    ("A0.0", "Y0.00"),
+    ("A10.0", "G0.00"),
+    ("A8.2", "G8.02"),
+    ("M102.0", "R1024.00"),
+    ("M101.0", "R1023.00"),
+    ("M101.1", "R1023.01"),
+    ("M90.0", "R900.00"),
+    ("I0.1", "X1"),
+    ("I0.2", "X2"),
+    ("I0.3", "X3"),
+    ("I0.4", "X4"),
+    ("Q0.1", "Y1"),
+    ("Q0.2", "Y2"),
+    ("M1.0", "R1"),
+    ("Q10.0", "G0.00"),
+];
+
+/// `e` with its STL addresses renamed to the paper's.
+fn to_paper(e: &Expr) -> Expr {
+    let name = |s: &Signal| {
+        if s.name().starts_with("SSF") {
+            return s.clone();
+        }
+        let (_, paper) = STL_ADDRESSES
+            .iter()
+            .find(|(stl, _)| *stl == s.name())
+            .unwrap_or_else(|| panic!("no paper address for {s}"));
+        Signal::new(paper)
+    };
+    match e {
+        Expr::Const(v) => Expr::Const(*v),
+        Expr::Lit(s, n) => Expr::Lit(name(s), *n),
+        Expr::Not(inner) => Expr::Not(Box::new(to_paper(inner))),
+        Expr::And(t) => Expr::And(t.iter().map(to_paper).collect()),
+        Expr::Or(t) => Expr::Or(t.iter().map(to_paper).collect()),
+    }
+}
 
 fn sf(origin: &str, src: &str, coil: &str) -> SwitchingFunction {
     let p = Program::compile(origin, src, None).unwrap();
@@ -101,6 +159,78 @@ fn fig6_relay_and_fault_coil() {
     // Eq. (5) as the paper prints it.
     let eq5 = Expr::parse("(X4) * (-Y2) * (((X1)*(-X2)) + (-X3)) * (-Y1)").unwrap();
     assert!(equal_by_truth_table(&g.to_expr(), &eq5));
+}
+
+#[test]
+fn fig6_and_ese_in_stl_give_the_paper_s_functions_and_step_blocks() {
+    // Fig. 6, English mnemonics.
+    let p = Program::compile("fig6.awl", FIG6_STL, None).unwrap();
+    assert_eq!(p.dialect(), cellwatch_models::il::Dialect::Stl);
+    let g = sf("fig6.awl", FIG6_STL, "Q10.0");
+    let il = sf("fig6.il", FIG6, "G0.00");
+    assert!(equal_by_truth_table(&to_paper(&g.to_expr()), &il.to_expr()));
+    assert_eq!(g.steps.len(), il.steps.len());
+    for i in 1..=il.steps.len() {
+        assert_eq!(
+            to_paper(&step_expr(&g, i)),
+            step_expr(&il, i),
+            "Fig. 6 step {i}"
+        );
+    }
+    // ESE, German mnemonics, blocks and networks: eq. (6) and the six step
+    // blocks of eqs. (8)-(13).
+    let ese = sf("ese.awl", ESE_STL, "A8.2");
+    let il = sf("ese.il", ESE, "G8.02");
+    assert!(equal_by_truth_table(
+        &to_paper(&ese.to_expr()),
+        &il.to_expr()
+    ));
+    assert_eq!(ese.steps.len(), 6);
+    for i in 1..=6 {
+        assert_eq!(
+            to_paper(&step_expr(&ese, i)),
+            step_expr(&il, i),
+            "ESE step {i}"
+        );
+    }
+}
+
+#[test]
+fn stl_ors_and_groups_as_s7_does() {
+    // `O` alone ORs AND groups; `O x` ORs into the result so far, and a
+    // later `U` ANDs with all of it (no precedence), as an S7 CPU computes.
+    let q = |src: &str| sf("t.awl", src, "A4.0").to_expr();
+    let e = |text: &str| Expr::parse(text).unwrap();
+    assert!(equal_by_truth_table(
+        &q("U E 0.0\nU E 0.1\nO\nU E 0.2\nU E 0.3\n= A 4.0\n"),
+        &e("(E0.0 * E0.1) + (E0.2 * E0.3)")
+    ));
+    assert!(equal_by_truth_table(
+        &q("U E 0.0\nO E 0.1\nU E 0.2\n= A 4.0\n"),
+        &e("(E0.0 + E0.1) * E0.2")
+    ));
+    assert!(equal_by_truth_table(
+        &q("UN( \nO E 0.0\nO E 0.1\n)\nX E 0.2\n= A 4.0\n"),
+        &e("(-E0.0 * -E0.1 * -E0.2) + ((E0.0 + E0.1) * E0.2)")
+    ));
+    // SET / CLR, and a first check after an assignment starts afresh.
+    assert!(equal_by_truth_table(
+        &q("U E 1.0\n= M 0.0\nSET\n= M 0.1\nU E 0.0\nUN E 0.1\n= A 4.0\n"),
+        &e("E0.0 * -E0.1")
+    ));
+    // A timer's bit is a leaf; loading its preset is a warning, not an error.
+    let p = Program::compile("t.awl", "U E 0.0\nL S5T#5S\nSE T 1\nU T 1\n= A 4.0\n", None).unwrap();
+    assert_eq!(
+        p.warnings().iter().map(|w| w.at.line).collect::<Vec<_>>(),
+        [2, 3]
+    );
+    let t = SwitchingFunction::expand(
+        &p,
+        &Signal::new("A4.0"),
+        &Observability::default_for(p.dialect()),
+    )
+    .unwrap();
+    assert_eq!(t.notation(), "T1");
 }
 
 #[test]

@@ -511,12 +511,13 @@ pub fn load(path: &Path) -> Result<CellConfig, ConfigErrors> {
     let name = path.display().to_string();
     let bytes =
         std::fs::read(path).map_err(|e| ConfigErrors(vec![format!("{name}: cannot read: {e}")]))?;
-    let text = cellwatch_models::source::text(&name, &bytes)
+    // TOML is UTF-8 by definition.
+    let text = cellwatch_models::source::text(&name, &bytes, Some(cellwatch_models::source::UTF_8))
         .map_err(|e| ConfigErrors(vec![e.to_string()]))?;
     let base = path
         .parent()
         .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
-    parse(&name, text, &base, &Disk)
+    parse(&name, &text, &base, &Disk)
 }
 
 /// Validates configuration `text` named `origin`; relative paths are
@@ -1486,7 +1487,7 @@ impl Validator<'_> {
     ) -> Option<String> {
         match self.files.read(path) {
             Ok(bytes) => {
-                match cellwatch_models::source::text(&path.display().to_string(), &bytes) {
+                match cellwatch_models::source::text(&path.display().to_string(), &bytes, None) {
                     Ok(t) => Some(t.to_string()),
                     Err(e) => {
                         self.problems.push(e.to_string());
@@ -1541,7 +1542,7 @@ impl Validator<'_> {
         let program = match Program::compile(&path.display().to_string(), &text, dialect) {
             Ok(p) => p,
             Err(e) => {
-                self.problems.extend(e.0.iter().map(ToString::to_string));
+                self.problems.extend(e.lines());
                 return None;
             }
         };

@@ -1,14 +1,16 @@
-//! Instruction lists: the two dialects cellwatch reads, parsed into one
+//! Instruction lists: the three dialects cellwatch reads, parsed into one
 //! instruction set.
 //!
 //! [`parse`] turns program text into [`Instruction`]s, each with the line and
-//! column it came from. The dialects differ only in spelling (`pmc`: the
-//! FANUC PMC mnemonics of paper 000; `iec`: IEC 61131-3 IL), so both lexers
-//! produce the same [`Operation`]s. What the instructions compute is the
+//! column it came from. The dialects differ mostly in spelling (`pmc`: the
+//! FANUC PMC mnemonics of paper 000; `iec`: IEC 61131-3 IL; `stl`: Siemens
+//! STL/AWL, German or English), so the lexers produce the same
+//! [`Operation`]s; STL's "first check" is the compiler's business. What the instructions compute is the
 //! job of [`crate::program`]; this module only reads text.
 
 pub(crate) mod iec;
 mod pmc;
+pub(crate) mod stl;
 
 use std::fmt;
 use std::str::FromStr;
@@ -24,6 +26,8 @@ pub enum Dialect {
     Pmc,
     /// IEC 61131-3 instruction list (`LD`, `ANDN`, `ST`, ...).
     Iec,
+    /// Siemens STL/AWL (`U`, `UN`, `=`; `E 0.0`, or `A`, `AN`; `I 0.0`).
+    Stl,
 }
 
 impl fmt::Display for Dialect {
@@ -31,6 +35,7 @@ impl fmt::Display for Dialect {
         f.write_str(match self {
             Dialect::Pmc => "pmc",
             Dialect::Iec => "iec",
+            Dialect::Stl => "stl",
         })
     }
 }
@@ -42,7 +47,8 @@ impl FromStr for Dialect {
         match s.to_ascii_lowercase().as_str() {
             "pmc" => Ok(Dialect::Pmc),
             "iec" => Ok(Dialect::Iec),
-            other => Err(format!("unknown dialect '{other}': use pmc or iec")),
+            "stl" | "awl" => Ok(Dialect::Stl),
+            other => Err(format!("unknown dialect '{other}': use pmc, iec or stl")),
         }
     }
 }
@@ -56,6 +62,7 @@ impl Dialect {
         match self {
             Dialect::Pmc => crate::signal::pmc_address(text),
             Dialect::Iec => iec::operand_signal(text),
+            Dialect::Stl => stl::operand_signal(text),
         }
     }
 
@@ -68,6 +75,9 @@ impl Dialect {
             let line = line.trim();
             if line.starts_with("(*") {
                 return Some(Dialect::Iec);
+            }
+            if line.starts_with("//") {
+                continue;
             }
             let line = line.split(';').next().unwrap_or("");
             let mut words = line.split_whitespace();
@@ -83,6 +93,9 @@ impl Dialect {
             let upper = word.to_ascii_uppercase();
             if pmc::is_pmc_only(&upper) {
                 return Some(Dialect::Pmc);
+            }
+            if stl::is_stl_only(&upper) {
+                return Some(Dialect::Stl);
             }
             if iec::is_iec_only(&upper) || line.contains('%') {
                 return Some(Dialect::Iec);
@@ -123,6 +136,9 @@ pub enum Outside {
     Arithmetic,
     /// A call of a function block or subroutine.
     Call,
+    /// A word or accumulator instruction (STL `L`, `T`, `+I`): not
+    /// boolean, but it leaves the boolean result alone.
+    Word,
 }
 
 /// One instruction, in either dialect.
@@ -163,6 +179,11 @@ pub enum Operation {
     Close,
     /// Negate the current result (IEC `NOT`).
     Not,
+    /// Set the result to a constant (STL `SET`, `CLR`).
+    Constant(bool),
+    /// STL `O` alone: the result so far is one AND group of an OR; the
+    /// next check starts the next group.
+    OrGroups,
     /// Write the current result to a coil (`WRT`, `ST`); `negated` writes
     /// its negation (`WRT.NOT`, `STN`).
     Write {
@@ -210,6 +231,9 @@ pub fn parse(
     source: &str,
     dialect: Option<Dialect>,
 ) -> Result<(Dialect, Vec<Instruction>), SourceErrors> {
+    if let Some(hint) = xml(source) {
+        return Err(SourceError::new(origin, Location::line_start(1), hint).into());
+    }
     let dialect = match dialect {
         Some(d) => d,
         None => Dialect::detect(source).ok_or_else(|| {
@@ -224,9 +248,13 @@ pub fn parse(
             )
         })?,
     };
+    if let Some(hint) = wrong_format(source, dialect) {
+        return Err(SourceError::new(origin, Location::line_start(1), hint).into());
+    }
     let instructions = match dialect {
         Dialect::Pmc => pmc::lex(origin, source)?,
         Dialect::Iec => iec::lex(origin, source)?,
+        Dialect::Stl => stl::lex(origin, source)?,
     };
     if instructions.is_empty() {
         return Err(SourceError::new(
@@ -237,6 +265,28 @@ pub fn parse(
         .into());
     }
     Ok((dialect, instructions))
+}
+
+/// An XML file given as an instruction list.
+fn xml(source: &str) -> Option<String> {
+    let head = source.trim_start_matches('\u{FEFF}').trim_start();
+    (head.starts_with("<?xml") || head.starts_with("<project")).then(|| {
+        "this is an XML file (PLCopen XML?), not an instruction list: charts (SFC) in PLCopen XML are read by [[checks.sfc]] and `cellwatch sfc check`; ladder and IL bodies in PLCopen XML are not read yet".into()
+    })
+}
+
+/// What a file given as an instruction list in `dialect` really is, when
+/// it is plainly something else: one line instead of an error per line.
+fn wrong_format(source: &str, dialect: Dialect) -> Option<String> {
+    let guessed = Dialect::detect(source)?;
+    (guessed != dialect && (guessed == Dialect::Stl || dialect == Dialect::Stl)).then(|| {
+        let looks = match guessed {
+            Dialect::Stl => "Siemens STL (U, UN, =)",
+            Dialect::Iec => "IEC IL (LD, ST)",
+            Dialect::Pmc => "PMC (RD, WRT)",
+        };
+        format!("this looks like {looks}, not {dialect}: pass --dialect {guessed}, or leave --dialect out")
+    })
 }
 
 /// Splits a line into whitespace-separated words with their byte offsets.
