@@ -164,6 +164,50 @@ impl Program {
     }
 }
 
+/// A variable name or a direct word address (`TEMP`, `%MW10`, `T1.ET`):
+/// what a comparison contact may compare.
+fn is_variable(text: &str) -> bool {
+    let ident = |p: &str| {
+        p.starts_with(|c: char| c.is_ascii_alphabetic() || c == '_')
+            && p.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+    };
+    (text.starts_with('%') && text.len() > 2 && !text.contains(' ')) || text.split('.').all(ident)
+}
+
+/// `GT 80` (or `EQ LIMIT`) right after loading the number `lhs`: the
+/// comparison contact `lhs > 80`, as the numeric tags define them.
+fn comparison(lhs: Option<&str>, ins: &Instruction) -> Option<Signal> {
+    use crate::value::{CmpOp, Comparison};
+    let lhs = lhs?;
+    if !matches!(ins.operation, Operation::Outside(Outside::Arithmetic)) {
+        return None;
+    }
+    let op = match ins.mnemonic.to_ascii_uppercase().as_str() {
+        "GT" => CmpOp::Gt,
+        "GE" => CmpOp::Ge,
+        "LT" => CmpOp::Lt,
+        "LE" => CmpOp::Le,
+        "EQ" => CmpOp::Eq,
+        "NE" => CmpOp::Ne,
+        _ => return None,
+    };
+    let Some(Operand::Other(rhs)) = &ins.operand else {
+        return None;
+    };
+    let constant = rhs.parse::<f64>().is_ok();
+    if !constant && !is_variable(rhs) {
+        return None;
+    }
+    Some(
+        Comparison {
+            lhs: Signal::new(lhs),
+            op,
+            rhs: crate::value::operand(rhs),
+        }
+        .signal(),
+    )
+}
+
 /// The result register.
 #[derive(Debug, Clone)]
 enum Acc {
@@ -215,6 +259,9 @@ struct Machine<'a> {
     first_check: bool,
     /// The dialect has first checks (STL) rather than loads.
     checks_first: bool,
+    /// The variable the last instruction loaded, when it was a number: a
+    /// comparison right after it is a comparison contact.
+    numeric: Option<String>,
 }
 
 impl<'a> Machine<'a> {
@@ -222,6 +269,7 @@ impl<'a> Machine<'a> {
         Machine {
             first_check: dialect == Dialect::Stl,
             checks_first: dialect == Dialect::Stl,
+            numeric: None,
             origin,
             blocks: Vec::new(),
             acc: Acc::Empty,
@@ -405,6 +453,19 @@ impl<'a> Machine<'a> {
     }
 
     fn iec_step(&mut self, ins: &Instruction) -> Result<(), SourceErrors> {
+        let numeric = self.numeric.take();
+        if let Some(contact) = comparison(numeric.as_deref(), ins) {
+            self.acc = Acc::Value(Term::signal(contact, false));
+            self.open = None;
+            return Ok(());
+        }
+        if let (Operation::Load { negated: false, .. }, Some(Operand::Other(text))) =
+            (&ins.operation, &ins.operand)
+        {
+            if is_variable(text) {
+                self.numeric = Some(text.clone());
+            }
+        }
         match &ins.operation {
             Operation::Load { negated, push } => {
                 if *push {
@@ -663,11 +724,20 @@ impl<'a> Machine<'a> {
                 self.jumps.push((ins.at, ins.text.clone(), target));
             }
             Outside::Arithmetic if ins.mnemonic.ends_with('(') => {
-                if matches!(self.acc, Acc::Empty) {
+                // Inside an arithmetic parenthesis the result is a number
+                // already: `ADD( b` ... `MUL( c` ... `)` ... `)`.
+                let nested = matches!(
+                    self.stack.last(),
+                    Some(Frame::Paren {
+                        opaque: Some(_),
+                        ..
+                    })
+                );
+                if matches!(self.acc, Acc::Empty) && !nested {
                     return Err(self.no_result(ins, "to combine"));
                 }
-                self.open_paren(ins, None, false, Some(poison))?;
-                self.acc = Acc::Empty;
+                self.open_paren(ins, None, false, Some(poison.clone()))?;
+                self.acc = Acc::Poisoned(poison);
             }
             Outside::Arithmetic | Outside::Call => {
                 self.acc = Acc::Poisoned(poison);

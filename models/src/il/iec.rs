@@ -1,10 +1,18 @@
 //! The IEC 61131-3 instruction-list dialect: `LD`, `ANDN`, `AND(` ... `)`,
 //! `ST`, `S`, `R`, labels, `(* comments *)`, direct addresses (`%IX0.0.3`)
-//! and symbols. `PROGRAM` headers and `VAR` ... `END_VAR` declarations are
-//! skipped. Symbols keep the spelling of their first use and match without
-//! regard to case, as IEC 61131-3 identifiers do.
+//! and symbols. Symbols keep the spelling of their first use and match
+//! without regard to case, as IEC 61131-3 identifiers do.
+//!
+//! The `VAR` ... `END_VAR` declarations give types: a variable that is not
+//! `BOOL` is not a contact and not a coil, and a function-block instance
+//! (`TON`, `SR`, ... or a `FUNCTION_BLOCK` of the file) takes `S`, `R`,
+//! `ST inst.PT` as its inputs, never as latches or coils. Standard and
+//! declared functions used as operators (`MAX 5`, `BCD_TO_INT`), calls
+//! without `CAL` (`T1(IN := x)`), formal calls over several lines, array
+//! operands and string literals are read; where they are not boolean they
+//! are warnings, never errors.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 use super::{words, Instruction, Op, Operand, Operation, Outside};
 use crate::signal::{iec_direct_address, Signal};
@@ -187,7 +195,23 @@ fn blank_comments(origin: &str, source: &str) -> Result<String, SourceError> {
 /// `AND(x`, `AND (x` and `AND( x` all give `["AND(", "x"]`.
 fn tokens(line: &str) -> Vec<(usize, String)> {
     let mut out: Vec<(usize, String)> = Vec::new();
+    let mut quoted: Option<(usize, String)> = None;
     for (off, w) in words(line) {
+        // A string literal with spaces is one token.
+        if let Some((start, mut text)) = quoted.take() {
+            text.push(' ');
+            text.push_str(w);
+            if w.ends_with('\'') {
+                out.push((start, text));
+            } else {
+                quoted = Some((start, text));
+            }
+            continue;
+        }
+        if w.starts_with('\'') && (w.len() == 1 || !w.ends_with('\'')) {
+            quoted = Some((off, w.to_string()));
+            continue;
+        }
         if w == "(" {
             if let Some(last) = out.last_mut() {
                 last.1.push('(');
@@ -213,7 +237,213 @@ fn tokens(line: &str) -> Vec<(usize, String)> {
             _ => out.push((off, w.to_string())),
         }
     }
+    if let Some(q) = quoted {
+        out.push(q);
+    }
     out
+}
+
+/// The standard function blocks, with their outputs (the rest of their
+/// members are inputs).
+const STANDARD_FBS: &[(&str, &[&str])] = &[
+    ("TON", &["Q", "ET"]),
+    ("TOF", &["Q", "ET"]),
+    ("TP", &["Q", "ET"]),
+    ("CTU", &["Q", "CV"]),
+    ("CTD", &["Q", "CV"]),
+    ("CTUD", &["QU", "QD", "CV"]),
+    ("SR", &["Q1"]),
+    ("RS", &["Q1"]),
+    ("R_TRIG", &["Q"]),
+    ("F_TRIG", &["Q"]),
+    ("RTC", &["Q", "CDT"]),
+];
+
+/// Non-boolean outputs of the standard function blocks.
+const NUMERIC_OUTPUTS: &[&str] = &["ET", "CV", "CDT"];
+
+/// Standard functions usable as IL operators (IEC 61131-3, 2.5.1.5).
+fn is_standard_function(upper: &str) -> bool {
+    upper.contains("_TO_")
+        || upper.starts_with("TRUNC")
+        || matches!(
+            upper,
+            "ABS"
+                | "SQRT"
+                | "LN"
+                | "LOG"
+                | "EXP"
+                | "SIN"
+                | "COS"
+                | "TAN"
+                | "ASIN"
+                | "ACOS"
+                | "ATAN"
+                | "EXPT"
+                | "MOVE"
+                | "SHL"
+                | "SHR"
+                | "ROL"
+                | "ROR"
+                | "SEL"
+                | "MAX"
+                | "MIN"
+                | "LIMIT"
+                | "MUX"
+                | "LEN"
+                | "LEFT"
+                | "RIGHT"
+                | "MID"
+                | "CONCAT"
+                | "INSERT"
+                | "DELETE"
+                | "REPLACE"
+                | "FIND"
+                | "BCD_TO_INT"
+                | "INT_TO_BCD"
+                | "NEG"
+                | "ADD_TIME"
+                | "SUB_TIME"
+                | "MUL_TIME"
+                | "DIV_TIME"
+                | "CONCAT_DATE_TOD"
+        )
+}
+
+/// What the file declares: variables' types, its function blocks and
+/// functions (upper case).
+#[derive(Debug, Default)]
+pub(crate) struct Declarations {
+    vars: HashMap<String, String>,
+    blocks: HashSet<String>,
+    functions: HashSet<String>,
+}
+
+impl Declarations {
+    /// Reads every `VAR...END_VAR` line `a, b : TYPE := init;` and every
+    /// `FUNCTION_BLOCK name` and `FUNCTION name : type` of `clean` (the
+    /// source with comments blanked).
+    pub(crate) fn read(clean: &str) -> Declarations {
+        let mut d = Declarations::default();
+        let mut in_var = false;
+        for line in clean.lines() {
+            let mut w = line.split_whitespace();
+            let Some(first) = w.next() else { continue };
+            let upper = first.to_ascii_uppercase();
+            if in_var {
+                if upper.starts_with("END_VAR") {
+                    in_var = false;
+                    continue;
+                }
+                d.declare(line);
+                continue;
+            }
+            if SKIPPED_BLOCKS.contains(&upper.as_str()) {
+                in_var = true;
+                continue;
+            }
+            let name = w.next().map(|n| {
+                n.trim_end_matches(':')
+                    .trim_end_matches(';')
+                    .to_ascii_uppercase()
+            });
+            match (upper.as_str(), name) {
+                ("FUNCTION_BLOCK", Some(n)) => {
+                    d.blocks.insert(n);
+                }
+                ("FUNCTION", Some(n)) => {
+                    d.functions.insert(n);
+                }
+                _ => {}
+            }
+        }
+        d
+    }
+
+    fn declare(&mut self, line: &str) {
+        let Some((names, ty)) = line.split_once(':') else {
+            return;
+        };
+        if ty.starts_with('=') {
+            return;
+        }
+        let ty = ty
+            .split(":=")
+            .next()
+            .unwrap_or("")
+            .trim()
+            .trim_end_matches(';');
+        let ty = ty.trim().to_ascii_uppercase();
+        let ty = if ty.starts_with("ARRAY") {
+            "ARRAY".to_string()
+        } else {
+            ty
+        };
+        // `name AT %IX0.0`
+        for name in names.split(',') {
+            let Some(name) = name.split_whitespace().next() else {
+                continue;
+            };
+            self.vars.insert(name.to_ascii_uppercase(), ty.clone());
+        }
+    }
+
+    /// The declared type of `name`, upper case.
+    fn type_of(&self, name: &str) -> Option<&str> {
+        self.vars
+            .get(&name.to_ascii_uppercase())
+            .map(String::as_str)
+    }
+
+    /// Whether `ty` is a function block's type.
+    fn is_block_type(&self, ty: &str) -> bool {
+        STANDARD_FBS.iter().any(|(n, _)| *n == ty) || self.blocks.contains(ty)
+    }
+
+    /// Whether `name` is a function-block instance.
+    fn is_instance(&self, name: &str) -> bool {
+        self.type_of(name).is_some_and(|t| self.is_block_type(t))
+    }
+
+    /// Whether an operand is known not to be a boolean: a variable of
+    /// another type, an instance itself, a numeric output of a standard
+    /// block, an array element.
+    fn not_boolean(&self, operand: &str) -> bool {
+        if operand.contains('[') {
+            return true;
+        }
+        match operand.split_once('.') {
+            None => self.type_of(operand).is_some_and(|t| t != "BOOL"),
+            Some((base, member)) => {
+                let member = member.to_ascii_uppercase();
+                self.type_of(base).is_some_and(|t| {
+                    STANDARD_FBS.iter().any(|(n, _)| *n == t)
+                        && NUMERIC_OUTPUTS.contains(&member.as_str())
+                })
+            }
+        }
+    }
+
+    /// Whether a write target is a function block's input (`T1.PT`,
+    /// `FF.S1`) rather than a coil.
+    fn is_block_input(&self, target: &str) -> bool {
+        let Some((base, member)) = target.split_once('.') else {
+            return false;
+        };
+        let Some(ty) = self.type_of(base) else {
+            return false;
+        };
+        let member = member.to_ascii_uppercase();
+        match STANDARD_FBS.iter().find(|(n, _)| *n == ty) {
+            Some((_, outputs)) => !outputs.contains(&member.as_str()),
+            // A user block's member: an input unless we know better.
+            None => self.blocks.contains(ty),
+        }
+    }
+
+    fn is_function(&self, upper: &str) -> bool {
+        is_standard_function(upper) || self.functions.contains(upper)
+    }
 }
 
 const SKIPPED_BLOCKS: &[&str] = &[
@@ -237,9 +467,12 @@ const SKIPPED_LINES: &[&str] = &[
 /// Reads an IEC program, reporting every bad line.
 pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, SourceErrors> {
     let clean = blank_comments(origin, source)?;
+    let decls = Declarations::read(&clean);
     let mut out = Vec::new();
     let mut errors = Vec::new();
     let mut in_var = false;
+    // Open parentheses of a formal call whose parameters run on.
+    let mut in_call = 0i64;
     let mut spellings: HashMap<String, Signal> = HashMap::new();
     for (n, raw) in clean.lines().enumerate() {
         let line_no = n + 1;
@@ -247,7 +480,11 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
         let Some(first) = toks.first() else { continue };
         let first_upper = first.1.to_ascii_uppercase();
         if in_var {
-            in_var = first_upper != "END_VAR";
+            in_var = !first_upper.starts_with("END_VAR");
+            continue;
+        }
+        if in_call > 0 {
+            in_call += parens(raw);
             continue;
         }
         if SKIPPED_BLOCKS.contains(&first_upper.as_str()) {
@@ -267,8 +504,14 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
                 msg,
             )
         };
-        if let Some(label) = first.1.strip_suffix(':') {
-            let (off, label) = (first.0, label.to_string());
+        // A label, alone or glued to its instruction (`next:LD a`).
+        let glued = first
+            .1
+            .find(':')
+            .filter(|&c| c + 1 < first.1.len() && !first.1[c..].starts_with(":="));
+        if first.1.ends_with(':') || glued.is_some() {
+            let colon = glued.unwrap_or(first.1.len() - 1);
+            let (off, label) = (first.0, first.1[..colon].to_string());
             if operand_signal(&label).is_err() || label.contains('.') {
                 errors.push(err(off, format!("malformed label '{label}:'")));
                 continue;
@@ -287,7 +530,11 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
                     col: column(raw, off),
                 },
             });
-            toks.remove(0);
+            let (off, word) = toks.remove(0);
+            if glued.is_some() {
+                let rest = word[colon + 1..].to_string();
+                toks.insert(0, (off + colon + 1, rest));
+            }
         }
         let Some((m_off, mnemonic)) = toks.first().cloned() else {
             continue;
@@ -297,15 +544,30 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
             col: column(raw, m_off),
         };
         let upper = mnemonic.to_ascii_uppercase();
-        let Some((operation, kind)) = operation(&upper) else {
-            errors.push(err(m_off, format!("unknown instruction '{mnemonic}'")));
-            continue;
+        let base = upper.trim_end_matches('(');
+        let (operation, kind) = match operation(&upper) {
+            Some(found) => found,
+            // A function as an operator: `MAX 5`, `BCD_TO_INT`, `LIMIT(`.
+            None if decls.is_function(base) => {
+                (Operation::Outside(Outside::Arithmetic), OperandKind::Text)
+            }
+            // A call without CAL: `T1(IN := x, PT := T#5s)`.
+            None if upper.ends_with('(') && (decls.is_instance(base) || raw.contains(":=")) => {
+                (Operation::Outside(Outside::Call), OperandKind::Text)
+            }
+            None => {
+                errors.push(err(m_off, format!("unknown instruction '{mnemonic}'")));
+                continue;
+            }
         };
         let text = toks
             .iter()
             .map(|t| t.1.as_str())
             .collect::<Vec<_>>()
             .join(" ");
+        if matches!(operation, Operation::Outside(Outside::Call)) {
+            in_call = parens(raw).max(0);
+        }
         let operand_tok = toks.get(1).cloned();
         if kind != OperandKind::Text {
             if let Some((off, extra)) = toks.get(2) {
@@ -328,6 +590,28 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
                     .clone()
             })
         };
+        // A write to what is not a coil: an instance's input operator
+        // (`R FF1`), a block input (`ST T1.PT`), a variable of another type.
+        if kind == OperandKind::Coil {
+            if let Some((_, w)) = &operand_tok {
+                let to_block = decls.is_instance(w) || decls.is_block_input(w);
+                if to_block || decls.not_boolean(w) {
+                    out.push(Instruction {
+                        at,
+                        text,
+                        mnemonic,
+                        operation: Operation::Outside(if to_block {
+                            Outside::Call
+                        } else {
+                            Outside::Word
+                        }),
+                        operand: Some(Operand::Other(w.clone())),
+                        operand_at,
+                    });
+                    continue;
+                }
+            }
+        }
         let operand = match (kind, operand_tok) {
             (OperandKind::Nothing, None) => None,
             (OperandKind::Nothing, Some((off, w))) => {
@@ -348,8 +632,10 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
             (OperandKind::Value, Some((off, w))) => match w.to_ascii_uppercase().as_str() {
                 "TRUE" => Some(Operand::Const(true)),
                 "FALSE" => Some(Operand::Const(false)),
-                _ if w.starts_with(|c: char| c.is_ascii_digit() || c == '-' || c == '+')
-                    || w.contains('#') =>
+                _ if w.starts_with(|c: char| {
+                    c.is_ascii_digit() || c == '-' || c == '+' || c == '\''
+                }) || w.contains('#')
+                    || decls.not_boolean(&w) =>
                 {
                     Some(Operand::Other(w))
                 }
@@ -397,6 +683,21 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
     } else {
         Err(SourceErrors(errors))
     }
+}
+
+/// Opening minus closing parentheses on a line, outside string literals.
+fn parens(line: &str) -> i64 {
+    let mut quoted = false;
+    let mut depth = 0;
+    for c in line.chars() {
+        match c {
+            '\'' => quoted = !quoted,
+            '(' if !quoted => depth += 1,
+            ')' if !quoted => depth -= 1,
+            _ => {}
+        }
+    }
+    depth
 }
 
 #[cfg(test)]
