@@ -688,7 +688,15 @@ impl<'a> Machine<'a> {
     }
 
     fn outside(&mut self, ins: &Instruction, kind: Outside) -> Result<(), SourceErrors> {
+        if kind == Outside::Unread {
+            self.warnings.push(Warning {
+                at: ins.at,
+                message: ins.text.clone(),
+            });
+            return Ok(());
+        }
         let (reason, warning) = match kind {
+            Outside::Unread => ("", ""),
             Outside::Jump => (
                 "written after a jump or conditional region, so the write may not run every scan",
                 "jump or conditional region: coils written after it are not derivable",
@@ -743,7 +751,7 @@ impl<'a> Machine<'a> {
                 self.acc = Acc::Poisoned(poison);
                 self.open = None;
             }
-            Outside::Word => {}
+            Outside::Word | Outside::Unread => {}
         }
         Ok(())
     }

@@ -21,6 +21,38 @@ const CSD_COMMENTS: &str = include_str!("../../config/cnc/csd-comments.csv");
 const ESE_NORMAL: &str = include_str!("../../config/cnc/ese-normal.values");
 const ESE_STL: &str = include_str!("../../tests/data/paper000/ese.awl");
 const FIG6_STL: &str = include_str!("../../tests/data/paper000/fig6.awl");
+const ESE_LD: &str = include_str!("../../tests/data/paper000/ese.xml");
+const FIG6_LD: &str = include_str!("../../tests/data/paper000/fig6.xml");
+
+/// `e` with the IEC direct addresses of the ladders renamed to the STL
+/// addresses of the same map (`%IX20.4` → `E20.4`, or `I20.4` for the
+/// English Fig. 6), then to the paper's.
+fn ladder_to_paper(e: &Expr, english: bool) -> Expr {
+    let stl = |s: &Signal| {
+        let name = s.name();
+        let (input, output) = if english { ("I", "Q") } else { ("E", "A") };
+        let renamed = if let Some(a) = name.strip_prefix("%IX") {
+            format!("{input}{a}")
+        } else if let Some(a) = name.strip_prefix("%QX") {
+            format!("{output}{a}")
+        } else if let Some(a) = name.strip_prefix("%MX") {
+            format!("M{a}")
+        } else {
+            name.to_string()
+        };
+        Signal::new(&renamed)
+    };
+    fn rename(e: &Expr, f: &dyn Fn(&Signal) -> Signal) -> Expr {
+        match e {
+            Expr::Const(v) => Expr::Const(*v),
+            Expr::Lit(s, n) => Expr::Lit(f(s), *n),
+            Expr::Not(inner) => Expr::Not(Box::new(rename(inner, f))),
+            Expr::And(t) => Expr::And(t.iter().map(|x| rename(x, f)).collect()),
+            Expr::Or(t) => Expr::Or(t.iter().map(|x| rename(x, f)).collect()),
+        }
+    }
+    to_paper(&rename(e, &stl))
+}
 
 /// The S7 addresses the STL versions use for the paper's PMC addresses.
 const STL_ADDRESSES: &[(&str, &str)] = &[
@@ -189,6 +221,38 @@ fn fig6_and_ese_in_stl_give_the_paper_s_functions_and_step_blocks() {
     for i in 1..=6 {
         assert_eq!(
             to_paper(&step_expr(&ese, i)),
+            step_expr(&il, i),
+            "ESE step {i}"
+        );
+    }
+}
+
+#[test]
+fn fig6_and_ese_drawn_as_plcopen_ladders_give_the_paper_s_functions_and_step_blocks() {
+    let g = sf("fig6.xml", FIG6_LD, "%QX10.0");
+    let il = sf("fig6.il", FIG6, "G0.00");
+    assert!(equal_by_truth_table(
+        &ladder_to_paper(&g.to_expr(), true),
+        &il.to_expr()
+    ));
+    assert_eq!(g.steps.len(), il.steps.len());
+    for i in 1..=il.steps.len() {
+        assert_eq!(
+            ladder_to_paper(&step_expr(&g, i), true),
+            step_expr(&il, i),
+            "Fig. 6 step {i}"
+        );
+    }
+    let ese = sf("ese.xml", ESE_LD, "%QX8.2");
+    let il = sf("ese.il", ESE, "G8.02");
+    assert!(equal_by_truth_table(
+        &ladder_to_paper(&ese.to_expr(), false),
+        &il.to_expr()
+    ));
+    assert_eq!(ese.steps.len(), 6);
+    for i in 1..=6 {
+        assert_eq!(
+            ladder_to_paper(&step_expr(&ese, i), false),
             step_expr(&il, i),
             "ESE step {i}"
         );

@@ -9,6 +9,7 @@
 //! job of [`crate::program`]; this module only reads text.
 
 pub(crate) mod iec;
+mod plcopen;
 mod pmc;
 pub(crate) mod stl;
 
@@ -139,6 +140,9 @@ pub enum Outside {
     /// A word or accumulator instruction (STL `L`, `T`, `+I`): not
     /// boolean, but it leaves the boolean result alone.
     Word,
+    /// A part of the program not read (an ST or FBD body); the
+    /// instruction's text says which.
+    Unread,
 }
 
 /// One instruction, in either dialect.
@@ -231,8 +235,25 @@ pub fn parse(
     source: &str,
     dialect: Option<Dialect>,
 ) -> Result<(Dialect, Vec<Instruction>), SourceErrors> {
-    if let Some(hint) = xml(source) {
-        return Err(SourceError::new(origin, Location::line_start(1), hint).into());
+    if is_xml(source) {
+        if dialect.is_some() {
+            return Err(SourceError::new(
+                origin,
+                Location::line_start(1),
+                "this is an XML file (PLCopen XML?), not an instruction list: leave --dialect out, and its ladder and IL bodies are read",
+            )
+            .into());
+        }
+        let instructions = plcopen::lex(origin, source)?;
+        if instructions.is_empty() {
+            return Err(SourceError::new(
+                origin,
+                Location::line_start(1),
+                "no ladder (LD) or IL body in this XML file",
+            )
+            .into());
+        }
+        return Ok((Dialect::Iec, instructions));
     }
     let dialect = match dialect {
         Some(d) => d,
@@ -267,12 +288,10 @@ pub fn parse(
     Ok((dialect, instructions))
 }
 
-/// An XML file given as an instruction list.
-fn xml(source: &str) -> Option<String> {
+/// Whether a program is XML (a PLCopen XML project).
+fn is_xml(source: &str) -> bool {
     let head = source.trim_start_matches('\u{FEFF}').trim_start();
-    (head.starts_with("<?xml") || head.starts_with("<project")).then(|| {
-        "this is an XML file (PLCopen XML?), not an instruction list: charts (SFC) in PLCopen XML are read by [[checks.sfc]] and `cellwatch sfc check`; ladder and IL bodies in PLCopen XML are not read yet".into()
-    })
+    head.starts_with("<?xml") || head.starts_with("<project")
 }
 
 /// What a file given as an instruction list in `dialect` really is, when

@@ -1,0 +1,597 @@
+//! Programs from PLCopen XML (IEC 61131-3 TC6 XML 2.01): the ladder (LD)
+//! and instruction-list (IL) bodies of every POU, as IEC instructions.
+//!
+//! A TC6 ladder is a graph: each element names the elements before it
+//! (`connectionPointIn` / `connection refLocalId`). The power flowing out
+//! of an element is the OR of what flows into it (parallel branches
+//! joining), ANDed with the element's own contact: series is AND,
+//! parallel is OR. Where parallel branches join, the part they share from
+//! the left is factored out, so `a · (b + c)` stays as drawn rather than
+//! `a·b + a·c`. Coils pass their power on (`S`/`R` coils latch).
+//! Function-block outputs (`T1.Q`) are leaves; edge contacts, functions,
+//! jumps and returns are warnings whose coils are not derivable.
+//!
+//! The flow of each coil becomes instructions (`LD`, `AND`, `OR(` … `)`,
+//! `ST`) located at the XML elements, so that the compiler builds the step
+//! blocks the rung's structure gives — the same as the instruction list
+//! the paper derives from its ladders. Flow is directed, as a PLC
+//! evaluates it, so a network that is not series-parallel still gets the
+//! function the PLC computes. IL bodies are read by the IEC lexer at their
+//! own lines; ST, FBD and SFC bodies are warnings (charts are read by the
+//! chart reader).
+
+use std::collections::HashMap;
+
+use roxmltree::{Document, Node};
+
+use super::{iec, Instruction, Op, Operand, Operation, Outside};
+use crate::signal::Signal;
+use crate::source::{Location, SourceError, SourceErrors};
+
+/// How deep a rung's connections may chain.
+const MAX_DEPTH: usize = 512;
+
+/// What flows out of an element.
+#[derive(Debug, Clone, PartialEq)]
+enum Flow {
+    True,
+    /// A contact: its variable, negated, the element (for identity).
+    Lit(Signal, bool, u64),
+    And(Vec<Flow>),
+    Or(Vec<Flow>),
+    /// Not boolean logic: why, and where.
+    Opaque(String, Location),
+}
+
+impl Flow {
+    /// The flow as a series of parts (an AND's children, or itself).
+    fn series(self) -> Vec<Flow> {
+        match self {
+            Flow::True => Vec::new(),
+            Flow::And(parts) => parts,
+            other => vec![other],
+        }
+    }
+
+    fn and(parts: Vec<Flow>) -> Flow {
+        let mut out = Vec::new();
+        for p in parts {
+            out.extend(p.series());
+        }
+        match out.len() {
+            0 => Flow::True,
+            1 => out.pop().unwrap_or(Flow::True),
+            _ => Flow::And(out),
+        }
+    }
+
+    /// Parallel branches joining: their common start factored out.
+    fn or(branches: Vec<Flow>) -> Flow {
+        if branches.len() == 1 {
+            return branches.into_iter().next().unwrap_or(Flow::True);
+        }
+        let series: Vec<Vec<Flow>> = branches.into_iter().map(Flow::series).collect();
+        let mut common = 0;
+        while series
+            .iter()
+            .all(|s| s.len() > common && s[common] == series[0][common])
+        {
+            common += 1;
+        }
+        let prefix: Vec<Flow> = series[0][..common].to_vec();
+        let mut rest = Vec::new();
+        for s in &series {
+            let tail = Flow::and(s[common..].to_vec());
+            if tail == Flow::True {
+                // A branch that bypasses the rest: the OR is true.
+                return Flow::and(prefix);
+            }
+            match tail {
+                Flow::Or(inner) => rest.extend(inner),
+                t => rest.push(t),
+            }
+        }
+        let mut all = prefix;
+        all.push(Flow::Or(rest));
+        Flow::and(all)
+    }
+}
+
+struct Reader<'a, 'i> {
+    origin: &'a str,
+    doc: &'a Document<'i>,
+    /// The elements of the body being read, by local id.
+    elements: HashMap<u64, Node<'a, 'i>>,
+    /// Named connectors (`connector` / `continuation`).
+    connectors: HashMap<String, Node<'a, 'i>>,
+    memo: HashMap<(u64, String), Flow>,
+    errors: Vec<SourceError>,
+}
+
+impl<'a, 'i> Reader<'a, 'i> {
+    fn at(&self, node: Node<'_, '_>) -> Location {
+        let pos = self.doc.text_pos_at(node.range().start);
+        Location {
+            line: pos.row as usize,
+            col: pos.col as usize,
+        }
+    }
+
+    fn error(&mut self, node: Node<'_, '_>, message: String) {
+        let at = self.at(node);
+        self.errors.push(SourceError::new(self.origin, at, message));
+    }
+
+    /// What flows into `node`: the OR of its connections.
+    fn input(&mut self, node: Node<'a, 'i>, depth: usize) -> Flow {
+        let Some(point) = node
+            .children()
+            .find(|c| c.has_tag_name("connectionPointIn"))
+        else {
+            return Flow::Opaque("nothing connected to its input".into(), self.at(node));
+        };
+        let branches: Vec<Flow> = point
+            .children()
+            .filter(|c| c.has_tag_name("connection"))
+            .map(|c| {
+                let id = c.attribute("refLocalId").and_then(|v| v.parse().ok());
+                let param = c.attribute("formalParameter").unwrap_or("").to_string();
+                match id {
+                    Some(id) => self.output(id, &param, c, depth + 1),
+                    None => {
+                        self.error(c, "connection without a refLocalId".into());
+                        Flow::True
+                    }
+                }
+            })
+            .collect();
+        if branches.is_empty() {
+            return Flow::Opaque("nothing connected to its input".into(), self.at(node));
+        }
+        Flow::or(branches)
+    }
+
+    /// What flows out of element `id` (output `param` of a block).
+    fn output(&mut self, id: u64, param: &str, from: Node<'_, '_>, depth: usize) -> Flow {
+        let key = (id, param.to_string());
+        if let Some(f) = self.memo.get(&key) {
+            return f.clone();
+        }
+        let Some(&node) = self.elements.get(&id) else {
+            self.error(
+                from,
+                format!("connection to element {id}, which this body does not have"),
+            );
+            return Flow::True;
+        };
+        if depth > MAX_DEPTH {
+            self.error(
+                node,
+                format!("the rung chains deeper than {MAX_DEPTH} elements, or loops"),
+            );
+            return Flow::True;
+        }
+        // Guards a loop in the graph while this element is being read.
+        self.memo.insert(
+            key.clone(),
+            Flow::Opaque("the rung loops back".into(), self.at(node)),
+        );
+        let flow = self.element(node, param, depth);
+        self.memo.insert(key, flow.clone());
+        flow
+    }
+
+    fn element(&mut self, node: Node<'a, 'i>, param: &str, depth: usize) -> Flow {
+        match node.tag_name().name() {
+            "leftPowerRail" => Flow::True,
+            "contact" => {
+                let input = self.input(node, depth);
+                let Some(var) = variable(node) else {
+                    self.error(node, "contact without a variable".into());
+                    return input;
+                };
+                if node.attribute("edge").is_some_and(|e| e != "none") {
+                    let why =
+                        format!("edge contact on '{var}' (a pulse, not a function of the signals)");
+                    return Flow::and(vec![input, Flow::Opaque(why, self.at(node))]);
+                }
+                match iec::operand_signal(&var) {
+                    Ok(s) => {
+                        let id = local_id(node).unwrap_or(0);
+                        let negated = node.attribute("negated") == Some("true");
+                        Flow::and(vec![input, Flow::Lit(s, negated, id)])
+                    }
+                    Err(m) => {
+                        self.error(node, m);
+                        input
+                    }
+                }
+            }
+            // Power passes through a coil.
+            "coil" => self.input(node, depth),
+            "block" => {
+                let instance = node.attribute("instanceName");
+                let ty = node.attribute("typeName").unwrap_or("?");
+                match instance {
+                    Some(i) if !param.is_empty() => {
+                        match iec::operand_signal(&format!("{i}.{param}")) {
+                            Ok(s) => Flow::Lit(s, false, local_id(node).unwrap_or(0)),
+                            Err(m) => Flow::Opaque(m, self.at(node)),
+                        }
+                    }
+                    _ => Flow::Opaque(format!("output of function '{ty}'"), self.at(node)),
+                }
+            }
+            "inVariable" | "inOutVariable" => {
+                let expr = child_text(node, "expression").unwrap_or_default();
+                match iec::operand_signal(expr.trim()) {
+                    Ok(s) => Flow::Lit(
+                        s,
+                        node.attribute("negated") == Some("true"),
+                        local_id(node).unwrap_or(0),
+                    ),
+                    Err(_) => Flow::Opaque(format!("variable '{}'", expr.trim()), self.at(node)),
+                }
+            }
+            "continuation" => {
+                let name = node.attribute("name").unwrap_or_default().to_string();
+                match self.connectors.get(&name).copied() {
+                    Some(c) => self.input(c, depth),
+                    None => {
+                        self.error(
+                            node,
+                            format!("continuation '{name}' has no connector of that name"),
+                        );
+                        Flow::True
+                    }
+                }
+            }
+            other => Flow::Opaque(format!("element '{other}'"), self.at(node)),
+        }
+    }
+}
+
+fn local_id(node: Node<'_, '_>) -> Option<u64> {
+    node.attribute("localId").and_then(|v| v.parse().ok())
+}
+
+fn child_text(node: Node<'_, '_>, name: &str) -> Option<String> {
+    node.children()
+        .find(|c| c.has_tag_name(name))
+        .map(|c| c.text().unwrap_or_default().to_string())
+}
+
+fn variable(node: Node<'_, '_>) -> Option<String> {
+    child_text(node, "variable").map(|v| v.trim().to_string())
+}
+
+/// Emits the instructions that compute `flow`, starting a new result.
+fn emit(flow: &Flow, at: Location, out: &mut Vec<Instruction>) {
+    let ins = |operation: Operation, operand: Option<Operand>, text: String| Instruction {
+        at,
+        text: text.clone(),
+        mnemonic: text.split(' ').next().unwrap_or("").to_string(),
+        operation,
+        operand,
+        operand_at: at,
+    };
+    match flow {
+        Flow::True => out.push(ins(
+            Operation::Load {
+                negated: false,
+                push: false,
+            },
+            Some(Operand::Const(true)),
+            "LD TRUE".into(),
+        )),
+        Flow::Lit(s, negated, _) => out.push(ins(
+            Operation::Load {
+                negated: *negated,
+                push: false,
+            },
+            Some(Operand::Signal(s.clone())),
+            format!("{} {s}", if *negated { "LDN" } else { "LD" }),
+        )),
+        Flow::Opaque(why, where_) => out.push(Instruction {
+            at: *where_,
+            text: why.clone(),
+            mnemonic: why.clone(),
+            operation: Operation::Outside(Outside::Call),
+            operand: None,
+            operand_at: *where_,
+        }),
+        Flow::And(parts) | Flow::Or(parts) => {
+            let op = if matches!(flow, Flow::And(_)) {
+                Op::And
+            } else {
+                Op::Or
+            };
+            let name = if op == Op::And { "AND" } else { "OR" };
+            let Some((first, rest)) = parts.split_first() else {
+                return;
+            };
+            emit(first, at, out);
+            for p in rest {
+                match p {
+                    Flow::Lit(s, negated, _) => out.push(ins(
+                        Operation::Logic {
+                            op,
+                            negated: *negated,
+                        },
+                        Some(Operand::Signal(s.clone())),
+                        format!("{name}{} {s}", if *negated { "N" } else { "" }),
+                    )),
+                    other => {
+                        out.push(ins(
+                            Operation::Open {
+                                op: Some(op),
+                                negated: false,
+                            },
+                            None,
+                            format!("{name}("),
+                        ));
+                        emit(other, at, out);
+                        out.push(ins(Operation::Close, None, ")".into()));
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Reads every LD and IL body of the project `text` as instructions.
+///
+/// # Errors
+/// XML that is not well-formed, or elements that cannot be read, each at
+/// its line.
+pub(crate) fn lex(origin: &str, text: &str) -> Result<Vec<Instruction>, SourceErrors> {
+    let options = roxmltree::ParsingOptions {
+        allow_dtd: false,
+        nodes_limit: 1_000_000,
+        ..roxmltree::ParsingOptions::default()
+    };
+    let doc = Document::parse_with_options(text, options).map_err(|e| {
+        let pos = e.pos();
+        SourceError::new(
+            origin,
+            Location {
+                line: pos.row as usize,
+                col: pos.col as usize,
+            },
+            format!("not well-formed XML: {e}"),
+        )
+    })?;
+    let mut out = Vec::new();
+    let mut errors = Vec::new();
+    for pou in doc.descendants().filter(|n| n.has_tag_name("pou")) {
+        let Some(body) = pou.children().find(|c| c.has_tag_name("body")) else {
+            continue;
+        };
+        let pou_name = pou.attribute("name").unwrap_or("?");
+        for kind in body.children().filter(Node::is_element) {
+            match kind.tag_name().name() {
+                "LD" => {
+                    let (ins, errs) = ladder(origin, &doc, kind);
+                    out.extend(ins);
+                    errors.extend(errs);
+                }
+                "IL" => {
+                    let text = kind
+                        .descendants()
+                        .filter(Node::is_text)
+                        .map(|t| t.text().unwrap_or(""))
+                        .collect::<String>();
+                    let first = kind.descendants().find(Node::is_text).unwrap_or(kind);
+                    let line0 = doc.text_pos_at(first.range().start).row as usize - 1;
+                    match iec::lex(origin, &text) {
+                        Ok(ins) => out.extend(ins.into_iter().map(|mut i| {
+                            i.at.line += line0;
+                            i.operand_at.line += line0;
+                            i
+                        })),
+                        Err(e) => errors.extend(e.0.into_iter().map(|mut e| {
+                            e.at.line += line0;
+                            e
+                        })),
+                    }
+                }
+                other => {
+                    let pos = doc.text_pos_at(kind.range().start);
+                    let at = Location {
+                        line: pos.row as usize,
+                        col: pos.col as usize,
+                    };
+                    let why = match other {
+                        "SFC" => format!("POU '{pou_name}': SFC body, read as a chart by [[checks.sfc]], not here"),
+                        _ => format!("POU '{pou_name}': {other} body not read (ladder and IL bodies are)"),
+                    };
+                    out.push(Instruction {
+                        at,
+                        text: why.clone(),
+                        mnemonic: other.to_string(),
+                        operation: Operation::Outside(Outside::Unread),
+                        operand: None,
+                        operand_at: at,
+                    });
+                }
+            }
+        }
+    }
+    if errors.is_empty() {
+        Ok(out)
+    } else {
+        Err(SourceErrors(errors))
+    }
+}
+
+/// One LD body: each coil, in document order, as the instructions that
+/// compute and write it.
+fn ladder<'a, 'i>(
+    origin: &'a str,
+    doc: &'a Document<'i>,
+    body: Node<'a, 'i>,
+) -> (Vec<Instruction>, Vec<SourceError>) {
+    let mut r = Reader {
+        origin,
+        doc,
+        elements: HashMap::new(),
+        connectors: HashMap::new(),
+        memo: HashMap::new(),
+        errors: Vec::new(),
+    };
+    for e in body.children().filter(Node::is_element) {
+        if let Some(id) = local_id(e) {
+            r.elements.insert(id, e);
+        }
+        if e.has_tag_name("connector") {
+            if let Some(n) = e.attribute("name") {
+                r.connectors.insert(n.to_string(), e);
+            }
+        }
+    }
+    let mut out = Vec::new();
+    for coil in body.children().filter(|c| c.has_tag_name("coil")) {
+        let at = r.at(coil);
+        let Some(var) = variable(coil) else {
+            r.error(coil, "coil without a variable".into());
+            continue;
+        };
+        let signal = match iec::operand_signal(&var) {
+            Ok(s) => s,
+            Err(m) => {
+                r.error(coil, m);
+                continue;
+            }
+        };
+        let flow = r.input(coil, 0);
+        emit(&flow, at, &mut out);
+        let negated = coil.attribute("negated") == Some("true");
+        let (operation, mnemonic) = match coil.attribute("storage") {
+            Some("set") => (Operation::Set, "S"),
+            Some("reset") => (Operation::Reset, "R"),
+            _ if negated => (Operation::Write { negated: true }, "STN"),
+            _ => (Operation::Write { negated: false }, "ST"),
+        };
+        out.push(Instruction {
+            at,
+            text: format!("{mnemonic} {signal}"),
+            mnemonic: mnemonic.into(),
+            operation,
+            operand: Some(Operand::Signal(signal)),
+            operand_at: at,
+        });
+    }
+    (out, r.errors)
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::program::Program;
+    use crate::signal::{Observability, Signal};
+    use crate::switching::SwitchingFunction;
+
+    fn project(body: &str) -> String {
+        format!(
+            "<?xml version=\"1.0\"?>\n<project xmlns=\"http://www.plcopen.org/xml/tc6_0201\">\n<types><pous>\n\
+             <pou name=\"p\" pouType=\"program\"><body><LD>\n{body}</LD></body></pou>\n\
+             <pou name=\"q\" pouType=\"program\"><body><ST><xhtml:p xmlns:xhtml=\"http://www.w3.org/1999/xhtml\">x := 1;</xhtml:p></ST></body></pou>\n\
+             </pous></types>\n</project>\n"
+        )
+    }
+
+    fn el(tag: &str, id: u32, extra: &str, from: &[u32], var: &str) -> String {
+        let conns: String = from
+            .iter()
+            .map(|f| format!("<connection refLocalId=\"{f}\"/>"))
+            .collect();
+        format!(
+            "<{tag} localId=\"{id}\" {extra}><connectionPointIn>{conns}</connectionPointIn><variable>{var}</variable></{tag}>\n"
+        )
+    }
+
+    fn sf(p: &Program, coil: &str) -> String {
+        SwitchingFunction::expand(
+            p,
+            &Signal::new(coil),
+            &Observability::everything(p.dialect()),
+        )
+        .unwrap_or_else(|e| panic!("{e}"))
+        .notation()
+    }
+
+    #[test]
+    fn latches_blocks_edges_and_a_network_that_is_not_series_parallel() {
+        let rail = "<leftPowerRail localId=\"1\"><connectionPointOut/></leftPowerRail>\n";
+        let body = rail.to_string()
+            // Set and reset coils: a latch.
+            + &el("contact", 2, "", &[1], "Start")
+            + &el("coil", 3, "storage=\"set\"", &[2], "Run")
+            + &el("contact", 4, "negated=\"true\"", &[1], "Stop")
+            + &el("coil", 5, "storage=\"reset\"", &[4], "Run")
+            // A timer's output is a leaf.
+            + "<block localId=\"6\" typeName=\"TON\" instanceName=\"T1\"><inputVariables/><outputVariables/></block>\n"
+            + "<contact localId=\"7\"><connectionPointIn><connection refLocalId=\"6\" formalParameter=\"Q\"/></connectionPointIn><variable>Run</variable></contact>\n"
+            + &el("coil", 8, "", &[7], "Done")
+            // An edge contact: not derivable, a warning.
+            + &el("contact", 9, "edge=\"rising\"", &[1], "Push")
+            + &el("coil", 10, "", &[9], "Pulse")
+            // a feeds two branches that join in different places:
+            // X = a·b + c, Y = (a·b + c)·d + a·e — not series-parallel.
+            + &el("contact", 11, "", &[1], "a")
+            + &el("contact", 12, "", &[11], "b")
+            + &el("contact", 13, "", &[1], "c")
+            + &el("coil", 14, "", &[12, 13], "X")
+            + &el("contact", 15, "", &[14], "d")
+            + &el("contact", 16, "", &[11], "e")
+            + &el("coil", 17, "", &[15, 16], "Y");
+        let p = Program::compile("p.xml", &project(&body), None).unwrap_or_else(|e| panic!("{e}"));
+        let names: Vec<&str> = p.coils().iter().map(|c| c.signal.name()).collect();
+        assert_eq!(names, ["Run", "Done", "Pulse", "X", "Y"]);
+        assert_eq!(sf(&p, "Run"), "Stop * (Start + Run)");
+        assert_eq!(sf(&p, "Done"), "T1.Q * Run");
+        assert_eq!(sf(&p, "X"), "(a * b) + c");
+        assert_eq!(sf(&p, "Y"), "(((a * b) + c) * d) + (a * e)");
+        let pulse = p.coil(&Signal::new("Pulse")).unwrap();
+        assert!(pulse.definition.is_err());
+        let warnings: Vec<String> = p
+            .warnings()
+            .iter()
+            .map(|w| format!("{}: {}", w.at, w.message))
+            .collect();
+        assert_eq!(warnings.len(), 2, "{warnings:?}");
+        assert!(
+            warnings[0].contains("edge contact on 'Push'"),
+            "{warnings:?}"
+        );
+        assert!(
+            warnings[1].ends_with("POU 'q': ST body not read (ladder and IL bodies are)"),
+            "{warnings:?}"
+        );
+    }
+
+    #[test]
+    fn bad_ladders_are_refused_at_their_element() {
+        let body = "<leftPowerRail localId=\"1\"><connectionPointOut/></leftPowerRail>\n"
+            .to_string()
+            + &el("contact", 2, "", &[1], "%ZX1")
+            + &el("coil", 3, "", &[2, 9], "Out");
+        let e = Program::compile("p.xml", &project(&body), None).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "p.xml:6:1: malformed address '%ZX1': a direct address starts with %I, %Q or %M\n\
+             p.xml:7:67: connection to element 9, which this body does not have"
+        );
+        let e = Program::compile(
+            "p.xml",
+            "<?xml version=\"1.0\"?>\n<project>\n<pou>\n</project>\n",
+            None,
+        )
+        .unwrap_err();
+        assert!(
+            e.to_string().starts_with("p.xml:4:1: not well-formed XML"),
+            "{e}"
+        );
+        let e = Program::compile("p.xml", &project(""), Some(crate::il::Dialect::Iec)).unwrap_err();
+        assert!(e.to_string().contains("leave --dialect out"), "{e}");
+    }
+}
