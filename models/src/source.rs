@@ -61,6 +61,18 @@ impl SourceError {
 pub struct SourceErrors(pub Vec<SourceError>);
 
 impl SourceErrors {
+    /// `value` if no error was found, else the errors.
+    ///
+    /// # Errors
+    /// `errors`, when there are any.
+    pub fn or_ok<T>(value: T, errors: Vec<SourceError>) -> Result<T, SourceErrors> {
+        if errors.is_empty() {
+            Ok(value)
+        } else {
+            Err(SourceErrors(errors))
+        }
+    }
+
     /// How many errors are printed; a file in the wrong format would
     /// otherwise print one per line.
     pub const SHOWN: usize = 20;

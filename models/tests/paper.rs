@@ -42,15 +42,6 @@ fn ladder_to_paper(e: &Expr, english: bool) -> Expr {
         };
         Signal::new(&renamed)
     };
-    fn rename(e: &Expr, f: &dyn Fn(&Signal) -> Signal) -> Expr {
-        match e {
-            Expr::Const(v) => Expr::Const(*v),
-            Expr::Lit(s, n) => Expr::Lit(f(s), *n),
-            Expr::Not(inner) => Expr::Not(Box::new(rename(inner, f))),
-            Expr::And(t) => Expr::And(t.iter().map(|x| rename(x, f)).collect()),
-            Expr::Or(t) => Expr::Or(t.iter().map(|x| rename(x, f)).collect()),
-        }
-    }
     to_paper(&rename(e, &stl))
 }
 
@@ -101,12 +92,17 @@ fn to_paper(e: &Expr) -> Expr {
             .unwrap_or_else(|| panic!("no paper address for {s}"));
         Signal::new(paper)
     };
+    rename(e, &name)
+}
+
+/// `e` with every signal renamed by `f`.
+fn rename(e: &Expr, f: &dyn Fn(&Signal) -> Signal) -> Expr {
     match e {
         Expr::Const(v) => Expr::Const(*v),
-        Expr::Lit(s, n) => Expr::Lit(name(s), *n),
-        Expr::Not(inner) => Expr::Not(Box::new(to_paper(inner))),
-        Expr::And(t) => Expr::And(t.iter().map(to_paper).collect()),
-        Expr::Or(t) => Expr::Or(t.iter().map(to_paper).collect()),
+        Expr::Lit(s, n) => Expr::Lit(f(s), *n),
+        Expr::Not(inner) => Expr::Not(Box::new(rename(inner, f))),
+        Expr::And(t) => Expr::And(t.iter().map(|x| rename(x, f)).collect()),
+        Expr::Or(t) => Expr::Or(t.iter().map(|x| rename(x, f)).collect()),
     }
 }
 

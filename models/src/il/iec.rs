@@ -678,11 +678,7 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
             operand_at,
         });
     }
-    if errors.is_empty() {
-        Ok(out)
-    } else {
-        Err(SourceErrors(errors))
-    }
+    SourceErrors::or_ok(out, errors)
 }
 
 /// Opening minus closing parentheses on a line, outside string literals.

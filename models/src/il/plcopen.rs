@@ -417,11 +417,7 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Vec<Instruction>, SourceEr
             }
         }
     }
-    if errors.is_empty() {
-        Ok(out)
-    } else {
-        Err(SourceErrors(errors))
-    }
+    SourceErrors::or_ok(out, errors)
 }
 
 /// One LD body: each coil, in document order, as the instructions that

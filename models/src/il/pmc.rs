@@ -159,11 +159,7 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
             operand_at,
         });
     }
-    if errors.is_empty() {
-        Ok(out)
-    } else {
-        Err(SourceErrors(errors))
-    }
+    SourceErrors::or_ok(out, errors)
 }
 
 #[cfg(test)]

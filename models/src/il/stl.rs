@@ -430,11 +430,7 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
             operand_at,
         });
     }
-    if errors.is_empty() {
-        Ok(out)
-    } else {
-        Err(SourceErrors(errors))
-    }
+    SourceErrors::or_ok(out, errors)
 }
 
 fn is_timer_or_counter(s: &Signal) -> bool {
