@@ -209,7 +209,7 @@ fn a_file_in_another_format_gets_one_line_saying_what_it_is() {
     // Read as PLCopen XML: this one has no body to read.
     assert_eq!(
         sf_error(&xml),
-        "error: p.il:1:1: no ladder (LD) or IL body in this XML file\n"
+        "error: p.il:1:1: no ladder (LD), IL, ST, FBD or SFC body with anything in it in this XML file\n"
     );
     let e = sf_error_with(&xml, &["--dialect", "iec"]);
     assert_eq!(

@@ -47,13 +47,16 @@ pub(crate) fn load(
     for w in program.warnings() {
         let _ = writeln!(err, "{name}:{}: warning: {}", w.at, w.message);
     }
+    // The program's declarations comment its signals; a CSV adds to them
+    // and wins where both say something.
     let comments = match &args.comments {
         Some(path) => {
             let text = read_text(path, "comment database")?;
-            CommentDb::parse(&path.display().to_string(), &text, |a| program.resolve(a))
-                .map_err(Failure::input)?
+            let csv = CommentDb::parse(&path.display().to_string(), &text, |a| program.resolve(a))
+                .map_err(Failure::input)?;
+            program.documentation().clone().overridden_by(csv)
         }
-        None => CommentDb::default(),
+        None => program.documentation().clone(),
     };
     let observable = match &args.observable {
         Some(list) => Observability::parse(program.dialect(), list)

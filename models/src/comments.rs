@@ -76,6 +76,14 @@ impl CommentDb {
         Ok(CommentDb { comments })
     }
 
+    /// This database with `over`'s comments added, replacing any for the
+    /// same signal (a CSV file over the program's own declarations).
+    #[must_use]
+    pub fn overridden_by(mut self, over: CommentDb) -> CommentDb {
+        self.comments.extend(over.comments);
+        self
+    }
+
     /// The comment of `signal`, if the database has one.
     pub fn get(&self, signal: &Signal) -> Option<&str> {
         self.comments.get(signal).map(String::as_str)

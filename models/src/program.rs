@@ -20,7 +20,9 @@
 //! Expanding a coil into observable signals is [`crate::switching`]'s job.
 
 use std::collections::HashMap;
+use crate::comments::CommentDb;
 use std::fmt;
+
 
 use crate::il::{self, Dialect, Instruction, Op, Operand, Operation, Outside};
 use crate::logic::{Block, BlockId, Term};
@@ -81,6 +83,7 @@ pub struct Program {
     coils: Vec<Coil>,
     index: HashMap<Signal, usize>,
     warnings: Vec<Warning>,
+    documentation: CommentDb,
 }
 
 impl Program {
@@ -95,12 +98,27 @@ impl Program {
         source: &str,
         dialect: Option<Dialect>,
     ) -> Result<Program, SourceErrors> {
-        let (dialect, instructions) = il::parse(origin, source, dialect)?;
+        let parsed = il::parse(origin, source, dialect)?;
+        let (dialect, instructions) = (parsed.dialect, parsed.instructions);
         let mut machine = Machine::new(origin, dialect);
         for ins in &instructions {
             machine.step(ins)?;
         }
-        machine.finish(dialect, instructions.last().map(|i| i.at))
+        let mut program = machine.finish(dialect, instructions.last().map(|i| i.at))?;
+        let documentation = parsed
+            .documentation
+            .iter()
+            .filter_map(|(name, comment)| Some((program.resolve(name).ok()?, comment.clone())))
+            .collect();
+        program.documentation = documentation;
+        Ok(program)
+    }
+
+    /// The comments the program's own declarations carry (`Start : BOOL;
+    /// (* Start button *)`, PLCopen XML variables' documentation): an I/O
+    /// database a CSV file may add to and override.
+    pub fn documentation(&self) -> &CommentDb {
+        &self.documentation
     }
 
     /// The name the program was compiled under.
@@ -241,6 +259,14 @@ enum Frame {
     },
 }
 
+/// A jump or conditional region, in the block it stands in.
+struct Jump {
+    at: Location,
+    text: String,
+    target: Option<String>,
+    block: usize,
+}
+
 struct Machine<'a> {
     origin: &'a str,
     blocks: Vec<Block>,
@@ -252,8 +278,11 @@ struct Machine<'a> {
     index: HashMap<Signal, usize>,
     warnings: Vec<Warning>,
     /// Jumps and conditional regions: their location and target label.
-    jumps: Vec<(Location, String, Option<String>)>,
-    labels: HashMap<String, Location>,
+    jumps: Vec<Jump>,
+    /// Labels by block (the count of blocks ended before) and name.
+    labels: HashMap<(usize, String), Location>,
+    /// Where each block ended (`END_FUNCTION_BLOCK`...), in order.
+    block_ends: Vec<Location>,
     /// STL: the next check starts a new result ("first check"), as after
     /// an assignment or at the start of a network.
     first_check: bool,
@@ -280,6 +309,7 @@ impl<'a> Machine<'a> {
             warnings: Vec::new(),
             jumps: Vec::new(),
             labels: HashMap::new(),
+            block_ends: Vec::new(),
         }
     }
 
@@ -410,12 +440,15 @@ impl<'a> Machine<'a> {
                 self.fold_or_groups();
                 self.iec_step(ins)?;
             }
-            Operation::Write { .. } | Operation::Set | Operation::Reset => {
+            Operation::Write { .. }
+            | Operation::Set
+            | Operation::Reset
+            | Operation::Outside(Outside::Indirect) => {
                 self.fold_or_groups();
                 self.iec_step(ins)?;
                 self.first_check = true;
             }
-            Operation::Outside(Outside::Word) => {
+            Operation::Outside(Outside::Word | Outside::BlockInput) => {
                 self.first_check = first;
                 self.iec_step(ins)?;
             }
@@ -560,7 +593,18 @@ impl<'a> Machine<'a> {
                 });
             }
             Operation::Label(name) => {
-                self.labels.entry(name.clone()).or_insert(ins.at);
+                self.labels
+                    .entry((self.block_ends.len(), name.clone()))
+                    .or_insert(ins.at);
+            }
+            Operation::EndBlock => {
+                self.drop_or_groups();
+                self.check_balanced(Some(ins.at))?;
+                self.block_ends.push(ins.at);
+                self.acc = Acc::Empty;
+                self.open = None;
+                self.numeric = None;
+                self.first_check = self.checks_first;
             }
             Operation::Outside(kind) => self.outside(ins, *kind)?,
             Operation::Constant(v) => {
@@ -629,7 +673,11 @@ impl<'a> Machine<'a> {
 
     /// The result a write stores, after checking the stack is balanced.
     fn result_for_write(&self, ins: &Instruction) -> Result<Acc, SourceErrors> {
-        if let Some(frame) = self.stack.last() {
+        // STL writes inside a nesting expression: Step 7 exports set and
+        // reset boxes so (`U( U( ... ) S #m U( ... ) R #m U #m )`); the
+        // next check after the write starts a new result.
+        let open_paren_ok = self.checks_first && matches!(self.stack.last(), Some(Frame::Paren { .. }));
+        if let Some(frame) = self.stack.last().filter(|_| !open_paren_ok) {
             let msg = match frame {
                 Frame::Pushed { at, text, .. } => format!(
                     "unbalanced stack at '{}': '{text}' at line {} pushed a result that is never combined (AND.STK/OR.STK)",
@@ -706,12 +754,20 @@ impl<'a> Machine<'a> {
                 "instruction outside boolean logic: the coils it feeds are not derivable",
             ),
             Outside::Call => (
-                "computed after a call, whose result is not boolean logic",
-                "call: the coils it feeds are not derivable",
+                "computed after a call, timer, counter, edge or function, whose result is not boolean logic",
+                "a call, timer, counter, edge or function, not boolean logic: the coils it feeds are not derivable",
+            ),
+            Outside::BlockInput => (
+                "",
+                "an input of a function block instance, not a coil: the boolean result is left as it is",
             ),
             Outside::Word => (
                 "",
                 "word instruction, not boolean logic: the boolean result is left as it is",
+            ),
+            Outside::Indirect => (
+                "",
+                "indirect address: the bit it writes is known only at run time, so no coil is derived for it",
             ),
         };
         self.warnings.push(Warning {
@@ -729,7 +785,12 @@ impl<'a> Machine<'a> {
                     Some(Operand::Other(t)) => Some(t.to_ascii_uppercase()),
                     _ => None,
                 };
-                self.jumps.push((ins.at, ins.text.clone(), target));
+                self.jumps.push(Jump {
+                    at: ins.at,
+                    text: ins.text.clone(),
+                    target,
+                    block: self.block_ends.len(),
+                });
             }
             Outside::Arithmetic if ins.mnemonic.ends_with('(') => {
                 // Inside an arithmetic parenthesis the result is a number
@@ -751,42 +812,60 @@ impl<'a> Machine<'a> {
                 self.acc = Acc::Poisoned(poison);
                 self.open = None;
             }
-            Outside::Word | Outside::Unread => {}
+            Outside::Word | Outside::Unread | Outside::Indirect | Outside::BlockInput => {}
         }
         Ok(())
+    }
+
+    /// An error if a parenthesis, stack entry or OR of groups is left
+    /// open (at the end of a block or of the program).
+    fn check_balanced(&self, last: Option<Location>) -> Result<(), SourceErrors> {
+        let Some(frame) = self.stack.last() else {
+            return Ok(());
+        };
+        let (at, msg) = match frame {
+            Frame::OrGroups { .. } => (last.unwrap_or(Location::line_start(1)), "an OR of AND groups ('O' alone) is never ended".to_string()),
+            Frame::Pushed { at, text, .. } => (*at, format!("unbalanced stack: '{text}' pushes a result that is never combined (AND.STK/OR.STK)")),
+            Frame::Paren { at, text, .. } => (*at, format!("unbalanced parentheses: '{text}' is never closed with ')'")),
+        };
+        Err(self.error(at, msg))
     }
 
     fn finish(mut self, dialect: Dialect, last: Option<Location>) -> Result<Program, SourceErrors> {
         // STL: AND groups nothing was assigned from end with the block.
         self.drop_or_groups();
-        if let Some(frame) = self.stack.last() {
-            let (at, msg) = match frame {
-                Frame::OrGroups { .. } => (last.unwrap_or(Location::line_start(1)), "an OR of AND groups ('O' alone) is never ended".to_string()),
-                Frame::Pushed { at, text, .. } => (*at, format!("unbalanced stack: '{text}' pushes a result that is never combined (AND.STK/OR.STK)")),
-                Frame::Paren { at, text, .. } => (*at, format!("unbalanced parentheses: '{text}' is never closed with ')'")),
-            };
-            let _ = last;
-            return Err(self.error(at, msg));
-        }
-        // After the first jump (or its target, if that comes earlier), no
-        // write is known to run every scan.
-        let first = self
+        self.check_balanced(last)?;
+        // From a jump (or its target, if that comes earlier) to the end of
+        // its block, no write is known to run every scan. The earliest
+        // such region a coil is written in explains it.
+        let mut regions: Vec<(Location, Location, &Jump)> = self
             .jumps
             .iter()
-            .map(|(at, text, target)| {
-                let label = target.as_ref().and_then(|t| self.labels.get(t)).copied();
-                (label.map_or(*at, |l| l.min(*at)), at, text)
+            .map(|j| {
+                let label = j
+                    .target
+                    .as_ref()
+                    .and_then(|t| self.labels.get(&(j.block, t.clone())))
+                    .copied();
+                let start = label.map_or(j.at, |l| l.min(j.at));
+                let end = self.block_ends.get(j.block).copied().unwrap_or(Location {
+                    line: usize::MAX,
+                    col: usize::MAX,
+                });
+                (start, end, j)
             })
-            .min_by_key(|(start, _, _)| *start);
-        if let Some((start, at, text)) = first {
-            for coil in &mut self.coils {
-                if coil.writes.iter().any(|w| *w >= start) {
-                    coil.definition = Err(NotDerivable {
-                        at: *at,
-                        instruction: text.clone(),
-                        reason: "written after a jump or conditional region, so the write may not run every scan".into(),
-                    });
-                }
+            .collect();
+        regions.sort_by_key(|(start, _, _)| *start);
+        for coil in &mut self.coils {
+            let hit = regions
+                .iter()
+                .find(|(start, end, _)| coil.writes.iter().any(|w| w >= start && w < end));
+            if let Some((_, _, j)) = hit {
+                coil.definition = Err(NotDerivable {
+                    at: j.at,
+                    instruction: j.text.clone(),
+                    reason: "written after a jump or conditional region, so the write may not run every scan".into(),
+                });
             }
         }
         Ok(Program {
@@ -796,6 +875,7 @@ impl<'a> Machine<'a> {
             coils: self.coils,
             index: self.index,
             warnings: self.warnings,
+            documentation: CommentDb::default(),
         })
     }
 }

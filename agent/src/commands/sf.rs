@@ -63,6 +63,14 @@ pub(crate) fn run(args: &SfArgs, out: &mut dyn Write, err: &mut dyn Write) -> Re
         }
         coils
     };
+    if coils.is_empty() && !args.program.json {
+        writeln!(
+            out,
+            "{}: no coil is written by boolean logic (see the warnings for what was not read)",
+            program.origin()
+        )
+        .map_err(Failure::output)?;
+    }
     let everything = Observability::everything(program.dialect());
     let mut json = Vec::new();
     for coil in &coils {

@@ -1585,13 +1585,16 @@ impl Validator<'_> {
                 );
             }
         }
+        // The program's own declarations, then the tags' comments, then the
+        // I/O list: each overrides the one before.
+        let tag_comments: CommentDb = sf
+            .leaves()
+            .into_iter()
+            .filter_map(|s| Some((s.clone(), self.tag_comments.get(&s)?.clone())))
+            .collect();
+        let declared = program.documentation().clone().overridden_by(tag_comments);
         let comments = match &c.comments {
-            // Without an I/O list, the tags' own comments.
-            None => sf
-                .leaves()
-                .into_iter()
-                .filter_map(|s| Some((s.clone(), self.tag_comments.get(&s)?.clone())))
-                .collect(),
+            None => declared,
             Some(p) => {
                 let path = self.path(p.get_ref());
                 let text = self.read_text(
@@ -1601,7 +1604,7 @@ impl Validator<'_> {
                     "comment database",
                 )?;
                 match CommentDb::parse(&path.display().to_string(), &text, |a| program.resolve(a)) {
-                    Ok(db) => db,
+                    Ok(db) => declared.overridden_by(db),
                     Err(e) => {
                         self.problems.push(e.to_string());
                         return None;

@@ -191,6 +191,48 @@ fn blank_comments(origin: &str, source: &str) -> Result<String, SourceError> {
     Ok(out)
 }
 
+/// The comments written beside declarations (`Start : BOOL; (* Start
+/// button *)`), as `(name, comment)`: the program's own I/O database.
+pub(crate) fn documentation(source: &str) -> Vec<(String, String)> {
+    let Ok(clean) = blank_comments("", source) else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    let mut in_var = false;
+    for (raw, line) in source.lines().zip(clean.lines()) {
+        let Some(first) = line.split_whitespace().next() else {
+            continue;
+        };
+        let upper = first.to_ascii_uppercase();
+        let mut line = line;
+        if !in_var {
+            in_var = SKIPPED_BLOCKS.contains(&upper.as_str());
+            if !in_var {
+                continue;
+            }
+            // `VAR_INPUT AUTO_CMD : BOOL; (* ... *)` on the keyword's line.
+            line = &line[line.find(first).unwrap_or(0) + first.len()..];
+        } else if upper.starts_with("END_VAR") {
+            in_var = false;
+            continue;
+        }
+        let (Some((names, _)), Some(open)) = (line.split_once(':'), raw.find("(*")) else {
+            continue;
+        };
+        let text = &raw[open + 2..];
+        let comment = text.split("*)").next().unwrap_or(text).trim();
+        if comment.is_empty() {
+            continue;
+        }
+        for name in names.split(',') {
+            if let Some(name) = name.split_whitespace().next() {
+                out.push((name.to_string(), comment.to_string()));
+            }
+        }
+    }
+    out
+}
+
 /// Splits a line's words so that `AND(` and `(` forms read alike:
 /// `AND(x`, `AND (x` and `AND( x` all give `["AND(", "x"]`.
 fn tokens(line: &str) -> Vec<(usize, String)> {
@@ -312,7 +354,7 @@ fn is_standard_function(upper: &str) -> bool {
 
 /// What the file declares: variables' types, its function blocks and
 /// functions (upper case).
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Clone)]
 pub(crate) struct Declarations {
     vars: HashMap<String, String>,
     blocks: HashSet<String>,
@@ -340,6 +382,11 @@ impl Declarations {
             }
             if SKIPPED_BLOCKS.contains(&upper.as_str()) {
                 in_var = true;
+                // `VAR_INPUT AUTO_CMD : BOOL;` on the keyword's line.
+                let rest = line.trim_start()[first.len()..].trim_start();
+                if rest.contains(':') && !rest.to_ascii_uppercase().starts_with("END_VAR") {
+                    d.declare(rest);
+                }
                 continue;
             }
             let name = w.next().map(|n| {
@@ -358,6 +405,22 @@ impl Declarations {
             }
         }
         d
+    }
+
+    /// Declares `name` of type `ty` (any case).
+    pub(super) fn variable(&mut self, name: &str, ty: &str) {
+        self.vars
+            .insert(name.to_ascii_uppercase(), ty.to_ascii_uppercase());
+    }
+
+    /// Declares a function block type or a function of the project.
+    pub(super) fn unit(&mut self, name: &str, function: bool) {
+        let name = name.to_ascii_uppercase();
+        if function {
+            self.functions.insert(name);
+        } else {
+            self.blocks.insert(name);
+        }
     }
 
     fn declare(&mut self, line: &str) {
@@ -466,8 +529,21 @@ const SKIPPED_LINES: &[&str] = &[
 
 /// Reads an IEC program, reporting every bad line.
 pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, SourceErrors> {
+    lex_declared(origin, source, Declarations::default())
+}
+
+/// Reads an IEC program body whose declarations stand elsewhere (a PLCopen
+/// XML POU's interface), reporting every bad line.
+pub(super) fn lex_declared(
+    origin: &str,
+    source: &str,
+    declared: Declarations,
+) -> Result<Vec<Instruction>, SourceErrors> {
     let clean = blank_comments(origin, source)?;
-    let decls = Declarations::read(&clean);
+    let mut decls = Declarations::read(&clean);
+    decls.vars.extend(declared.vars);
+    decls.blocks.extend(declared.blocks);
+    decls.functions.extend(declared.functions);
     let mut out = Vec::new();
     let mut errors = Vec::new();
     let mut in_var = false;
@@ -492,6 +568,20 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
             continue;
         }
         if SKIPPED_LINES.contains(&first_upper.as_str()) {
+            if first_upper.starts_with("END_") {
+                let at = Location {
+                    line: line_no,
+                    col: column(raw, first.0),
+                };
+                out.push(Instruction {
+                    at,
+                    text: first_upper.clone(),
+                    mnemonic: first.1.to_string(),
+                    operation: Operation::EndBlock,
+                    operand: None,
+                    operand_at: at,
+                });
+            }
             continue;
         }
         let err = |off: usize, msg: String| {
@@ -601,7 +691,7 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
                         text,
                         mnemonic,
                         operation: Operation::Outside(if to_block {
-                            Outside::Call
+                            Outside::BlockInput
                         } else {
                             Outside::Word
                         }),
@@ -737,11 +827,13 @@ mod tests {
     fn comments_labels_and_declarations() {
         let src = "PROGRAM p\nVAR\n  a : BOOL; (* in *)\nEND_VAR\n(* one\n two *) LD %ix0.0.3 (* x *)\nnext: ST Motor\nEND_PROGRAM\n";
         let i = lex("t.il", src).unwrap();
-        assert_eq!(i.len(), 3);
+        assert_eq!(i.len(), 4);
         assert_eq!(i[0].at, Location { line: 6, col: 9 });
         assert_eq!(i[0].operand, Some(Operand::Signal(Signal::new("%IX0.0.3"))));
         assert_eq!(i[1].operation, Operation::Label("NEXT".into()));
         assert_eq!(i[2].operand, Some(Operand::Signal(Signal::new("Motor"))));
+        assert_eq!(i[3].operation, Operation::EndBlock);
+        assert_eq!(i[3].at, Location { line: 8, col: 1 });
     }
 
     #[test]

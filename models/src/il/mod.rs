@@ -92,6 +92,16 @@ impl Dialect {
                 }
             }
             let upper = word.to_ascii_uppercase();
+            // `FUNCTION_BLOCK FB 1`, `FUNCTION "Pump" : VOID`: a Step 7
+            // block, named by its number or a quoted symbol.
+            if matches!(upper.as_str(), "FUNCTION_BLOCK" | "FUNCTION")
+                && words.next().is_some_and(|name| {
+                    name.starts_with('"')
+                        || matches!(name.to_ascii_uppercase().as_str(), "FB" | "FC" | "SFB" | "SFC")
+                })
+            {
+                return Some(Dialect::Stl);
+            }
             if pmc::is_pmc_only(&upper) {
                 return Some(Dialect::Pmc);
             }
@@ -143,6 +153,13 @@ pub enum Outside {
     /// A part of the program not read (an ST or FBD body); the
     /// instruction's text says which.
     Unread,
+    /// A write to a function block instance's input (`ST T1.PT`, `S1 FF`,
+    /// `R FF`): not a coil; the result is left as it is.
+    BlockInput,
+    /// A write through an indirect address (STL `= [AR1,P#6.0]`): some
+    /// bit is written, which one is known only at run time. The result
+    /// is left as it is.
+    Indirect,
 }
 
 /// One instruction, in either dialect.
@@ -204,6 +221,10 @@ pub enum Operation {
     Outside(Outside),
     /// An instruction with no effect on logic (PMC `END1`).
     Nothing,
+    /// The end of a program organisation unit or Step 7 block
+    /// (`END_FUNCTION_BLOCK`): jumps and labels stay inside it, and the
+    /// next block starts with nothing loaded.
+    EndBlock,
 }
 
 /// One parsed instruction and where it stands.
@@ -230,11 +251,7 @@ pub struct Instruction {
 /// # Errors
 /// Every line that cannot be read, each as `ORIGIN:LINE:COL: message`; an
 /// empty program; a dialect that cannot be told.
-pub fn parse(
-    origin: &str,
-    source: &str,
-    dialect: Option<Dialect>,
-) -> Result<(Dialect, Vec<Instruction>), SourceErrors> {
+pub fn parse(origin: &str, source: &str, dialect: Option<Dialect>) -> Result<Parsed, SourceErrors> {
     if is_xml(source) {
         if dialect.is_some() {
             return Err(SourceError::new(
@@ -244,16 +261,24 @@ pub fn parse(
             )
             .into());
         }
-        let instructions = plcopen::lex(origin, source)?;
-        if instructions.is_empty() {
+        let project = plcopen::lex(origin, source)?;
+        if project
+            .instructions
+            .iter()
+            .all(|i| i.operation == Operation::EndBlock)
+        {
             return Err(SourceError::new(
                 origin,
                 Location::line_start(1),
-                "no ladder (LD) or IL body in this XML file",
+                "no ladder (LD), IL, ST, FBD or SFC body with anything in it in this XML file",
             )
             .into());
         }
-        return Ok((Dialect::Iec, instructions));
+        return Ok(Parsed {
+            dialect: Dialect::Iec,
+            instructions: project.instructions,
+            documentation: project.documentation,
+        });
     }
     let dialect = match dialect {
         Some(d) => d,
@@ -272,10 +297,10 @@ pub fn parse(
     if let Some(hint) = wrong_format(source, dialect) {
         return Err(SourceError::new(origin, Location::line_start(1), hint).into());
     }
-    let instructions = match dialect {
-        Dialect::Pmc => pmc::lex(origin, source)?,
-        Dialect::Iec => iec::lex(origin, source)?,
-        Dialect::Stl => stl::lex(origin, source)?,
+    let (instructions, documentation) = match dialect {
+        Dialect::Pmc => (pmc::lex(origin, source)?, Vec::new()),
+        Dialect::Iec => (iec::lex(origin, source)?, iec::documentation(source)),
+        Dialect::Stl => (stl::lex(origin, source)?, stl::documentation(source)),
     };
     if instructions.is_empty() {
         return Err(SourceError::new(
@@ -285,7 +310,25 @@ pub fn parse(
         )
         .into());
     }
-    Ok((dialect, instructions))
+    Ok(Parsed {
+        dialect,
+        instructions,
+        documentation,
+    })
+}
+
+/// A program read: its dialect, instructions, and the comments its
+/// declarations carry.
+#[derive(Debug, Clone)]
+pub struct Parsed {
+    /// The dialect it was read in (PLCopen XML bodies read as IEC).
+    pub dialect: Dialect,
+    /// Every instruction, in order.
+    pub instructions: Vec<Instruction>,
+    /// `(name or address, comment)` from the program's declarations: the
+    /// comment beside `Start : BOOL; (* ... *)`, a PLCopen XML variable's
+    /// documentation. Names as written; resolve them in the dialect.
+    pub documentation: Vec<(String, String)>,
 }
 
 /// Whether a program is XML (a PLCopen XML project).

@@ -344,7 +344,7 @@ fn emit(flow: &Flow, at: Location, out: &mut Vec<Instruction>) {
 /// # Errors
 /// XML that is not well-formed, or elements that cannot be read, each at
 /// its line.
-pub(crate) fn lex(origin: &str, text: &str) -> Result<Vec<Instruction>, SourceErrors> {
+pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
     let options = roxmltree::ParsingOptions {
         allow_dtd: false,
         nodes_limit: 1_000_000,
@@ -363,11 +363,57 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Vec<Instruction>, SourceEr
     })?;
     let mut out = Vec::new();
     let mut errors = Vec::new();
+    // The project's function blocks and functions, for every IL body.
+    let mut units = iec::Declarations::default();
+    for pou in doc.descendants().filter(|n| n.has_tag_name("pou")) {
+        match (pou.attribute("name"), pou.attribute("pouType")) {
+            (Some(name), Some("functionBlock")) => units.unit(name, false),
+            (Some(name), Some("function")) => units.unit(name, true),
+            _ => {}
+        }
+    }
+    let documentation = doc
+        .descendants()
+        .filter(|n| n.has_tag_name("variable"))
+        .flat_map(|v| {
+            let doc = v
+                .children()
+                .find(|c| c.has_tag_name("documentation"))
+                .map(|d| {
+                    d.descendants()
+                        .filter(Node::is_text)
+                        .filter_map(|t| t.text())
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                        .split_whitespace()
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                })
+                .filter(|d| !d.is_empty());
+            let names = [v.attribute("name"), v.attribute("address")];
+            names
+                .into_iter()
+                .flatten()
+                .filter_map(move |n| doc.clone().map(|d| (n.to_string(), d)))
+                .collect::<Vec<_>>()
+        })
+        .collect();
     for pou in doc.descendants().filter(|n| n.has_tag_name("pou")) {
         let Some(body) = pou.children().find(|c| c.has_tag_name("body")) else {
             continue;
         };
         let pou_name = pou.attribute("name").unwrap_or("?");
+        let mut declared = units.clone();
+        for v in pou
+            .children()
+            .filter(|c| c.has_tag_name("interface"))
+            .flat_map(|i| i.descendants())
+            .filter(|n| n.has_tag_name("variable"))
+        {
+            if let (Some(name), Some(ty)) = (v.attribute("name"), type_name(v)) {
+                declared.variable(name, &ty);
+            }
+        }
         for kind in body.children().filter(Node::is_element) {
             match kind.tag_name().name() {
                 "LD" => {
@@ -383,7 +429,7 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Vec<Instruction>, SourceEr
                         .collect::<String>();
                     let first = kind.descendants().find(Node::is_text).unwrap_or(kind);
                     let line0 = doc.text_pos_at(first.range().start).row as usize - 1;
-                    match iec::lex(origin, &text) {
+                    match iec::lex_declared(origin, &text, declared.clone()) {
                         Ok(ins) => out.extend(ins.into_iter().map(|mut i| {
                             i.at.line += line0;
                             i.operand_at.line += line0;
@@ -416,8 +462,49 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Vec<Instruction>, SourceEr
                 }
             }
         }
+        // Jumps and labels stay inside their POU.
+        let pos = doc.text_pos_at(body.range().end);
+        let at = Location {
+            line: pos.row as usize,
+            col: pos.col as usize,
+        };
+        out.push(Instruction {
+            at,
+            text: format!("end of POU '{pou_name}'"),
+            mnemonic: String::new(),
+            operation: Operation::EndBlock,
+            operand: None,
+            operand_at: at,
+        });
     }
-    SourceErrors::or_ok(out, errors)
+    SourceErrors::or_ok(
+        Parsed {
+            instructions: out,
+            documentation,
+        },
+        errors,
+    )
+}
+
+/// A project's instructions and its variables' documentation.
+pub(crate) struct Parsed {
+    pub(crate) instructions: Vec<Instruction>,
+    /// `(name or address, documentation)` of every declared variable that
+    /// has some.
+    pub(crate) documentation: Vec<(String, String)>,
+}
+
+/// A declared variable's type: `BOOL`, a derived type's name (`TON`),
+/// `ARRAY`, `STRING`.
+fn type_name(variable: Node<'_, '_>) -> Option<String> {
+    let ty = variable.children().find(|c| c.has_tag_name("type"))?;
+    let inner = ty.children().find(Node::is_element)?;
+    Some(match inner.tag_name().name() {
+        "derived" => inner.attribute("name")?.to_string(),
+        "array" => "ARRAY".to_string(),
+        "string" | "wstring" => "STRING".to_string(),
+        other => other.to_string(),
+    })
 }
 
 /// One LD body: each coil, in document order, as the instructions that

@@ -128,7 +128,7 @@ fn operation(upper: &str, lang: Language) -> Option<(Operation, Kind)> {
         "CALL" | "UC" | "CC" | "FP" | "FN" | "SI" | "SV" | "SE" | "SS" | "SA" | "SP" | "SD"
         | "SF" | "FR" | "ZV" | "ZR" | "CU" | "CD" | "LC" => (O::Outside(Outside::Call), Text),
         // Comparisons set the result from the accumulators.
-        c if c.len() >= 3 && c.starts_with(['=', '<', '>']) && c.ends_with(['I', 'D', 'R']) => {
+        c if c.len() >= 2 && c.starts_with(['=', '<', '>']) && c.ends_with(['I', 'D', 'R']) => {
             (O::Outside(Outside::Arithmetic), No)
         }
         // Accumulator and word instructions: they leave the result alone.
@@ -139,7 +139,9 @@ fn operation(upper: &str, lang: Language) -> Option<(Operation, Kind)> {
         | "ACOS" | "ATAN" | "BTI" | "ITB" | "BTD" | "DTB" | "ITD" | "DTR" | "RND" | "RND+"
         | "RND-" | "TRUNC" | "CAW" | "CAD" | "SLW" | "SRW" | "SLD" | "SRD" | "RLD" | "RRD"
         | "RLDA" | "RRDA" | "SSI" | "SSD" | "AUF" | "OPN" | "TDB" | "LAR1" | "LAR2" | "TAR1"
-        | "TAR2" | "CAR" | "+AR1" | "+AR2" => (O::Outside(Outside::Word), Text),
+        | "TAR2" | "CAR" | "+AR1" | "+AR2" | "TAD" | "TAW" | "TAR" | "CDB" | "INVR" => {
+            (O::Outside(Outside::Word), Text)
+        }
         _ => return None,
     })
 }
@@ -240,6 +242,36 @@ pub(crate) fn operand_signal(text: &str) -> Result<Signal, String> {
         .ok_or_else(|| format!("'{text}' is not a bit address (E 0.0, A 4.0, M 10.1)"))
 }
 
+/// The comments written beside declarations of locals (`RESET : BOOL ;
+/// // Reset the chain`), as `(#name, comment)`.
+pub(crate) fn documentation(source: &str) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    let mut section: Option<&str> = None;
+    for raw in source.lines() {
+        let line = code(raw);
+        let Some(first) = line.split_whitespace().next() else {
+            continue;
+        };
+        let upper = first.to_ascii_uppercase();
+        match section {
+            None => {
+                section = SECTIONS
+                    .iter()
+                    .find(|(s, _)| *s == upper && s.starts_with("VAR"))
+                    .map(|(_, end)| *end);
+            }
+            Some(end) if upper.trim_end_matches(';') == end => section = None,
+            Some(_) => {
+                let comment = raw[line.len()..].trim_start_matches('/').trim();
+                if let (Some((name, _)), false) = (line.split_once(':'), comment.is_empty()) {
+                    out.push((format!("#{}", name.trim()), comment.to_string()));
+                }
+            }
+        }
+    }
+    out
+}
+
 /// Splits off a `//` comment, outside a quoted symbol.
 fn code(line: &str) -> &str {
     let mut quoted = false;
@@ -278,6 +310,7 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
     let mut out = Vec::new();
     let mut errors = Vec::new();
     let mut section: Option<&str> = None;
+    let mut in_call = false;
     for (n, raw) in source.lines().enumerate() {
         let line_no = n + 1;
         let line = code(raw);
@@ -296,7 +329,29 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
             section = Some(end);
             continue;
         }
+        if in_call {
+            // A call's parameter list: `CALL FB 1, DB 1 (` ... `)`.
+            in_call = !line.trim_end().trim_end_matches(';').trim_end().ends_with(')');
+            continue;
+        }
         if HEADERS.contains(&first_upper.as_str()) || first_upper.starts_with("TITLE") {
+            if matches!(
+                first_upper.as_str(),
+                "END_ORGANIZATION_BLOCK" | "END_FUNCTION_BLOCK" | "END_FUNCTION"
+            ) {
+                let at = Location {
+                    line: line_no,
+                    col: column(raw, toks[0].0),
+                };
+                out.push(Instruction {
+                    at,
+                    text: first_upper.clone(),
+                    mnemonic: first.to_string(),
+                    operation: Operation::EndBlock,
+                    operand: None,
+                    operand_at: at,
+                });
+            }
             continue;
         }
         // A call's parameter lines (`IN1 := E 0.0`) belong to the CALL.
@@ -341,6 +396,11 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
         if toks.get(1).is_some_and(|&(_, w)| w == "(") && !upper.ends_with('(') {
             upper.push('(');
             operand_from = 2;
+        }
+        if matches!(upper.as_str(), "CALL" | "UC" | "CC")
+            && line.trim_end().trim_end_matches(';').trim_end().ends_with('(')
+        {
+            in_call = true;
         }
         let Some((operation, kind)) = operation(&upper, lang) else {
             errors.push(err(m_off, format!("unknown instruction '{mnemonic}'")));
@@ -412,6 +472,19 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
                     continue;
                 }
                 Ok(Some(s)) => Some(Operand::Signal(s)),
+                // `= [AR1,P#6.0]`, `= M [MD 10]`: the bit is chosen at run
+                // time.
+                Ok(None) | Err(_) if operand_text.contains('[') => {
+                    out.push(Instruction {
+                        at,
+                        text,
+                        mnemonic: mnemonic.to_string(),
+                        operation: Operation::Outside(Outside::Indirect),
+                        operand: Some(Operand::Other(operand_text)),
+                        operand_at,
+                    });
+                    continue;
+                }
                 Ok(None) | Err(_) => {
                     errors.push(err(
                         operand_words[0].0,
