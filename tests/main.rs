@@ -21,6 +21,7 @@ mod legacy;
 mod liveness;
 mod opcua;
 mod operators;
+mod real_programs;
 mod report;
 mod restart;
 mod sf;

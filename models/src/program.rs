@@ -19,10 +19,9 @@
 //!
 //! Expanding a coil into observable signals is [`crate::switching`]'s job.
 
-use std::collections::HashMap;
 use crate::comments::CommentDb;
+use std::collections::HashMap;
 use std::fmt;
-
 
 use crate::il::{self, Dialect, Instruction, Op, Operand, Operation, Outside};
 use crate::logic::{Block, BlockId, Term};
@@ -676,7 +675,8 @@ impl<'a> Machine<'a> {
         // STL writes inside a nesting expression: Step 7 exports set and
         // reset boxes so (`U( U( ... ) S #m U( ... ) R #m U #m )`); the
         // next check after the write starts a new result.
-        let open_paren_ok = self.checks_first && matches!(self.stack.last(), Some(Frame::Paren { .. }));
+        let open_paren_ok =
+            self.checks_first && matches!(self.stack.last(), Some(Frame::Paren { .. }));
         if let Some(frame) = self.stack.last().filter(|_| !open_paren_ok) {
             let msg = match frame {
                 Frame::Pushed { at, text, .. } => format!(

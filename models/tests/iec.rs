@@ -41,7 +41,9 @@ fn an_sr_instance_takes_set_and_reset_as_its_inputs_not_as_a_latch() {
     assert_eq!(sf(&p, "Lamp"), "ALRM_FF.Q1");
     assert_eq!(warned_lines(&p), [7, 9]);
     assert!(
-        p.warnings()[1].message.starts_with("'R ALRM_FF': an input of a function block instance"),
+        p.warnings()[1]
+            .message
+            .starts_with("'R ALRM_FF': an input of a function block instance"),
         "{:?}",
         p.warnings()
     );

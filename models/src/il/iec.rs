@@ -401,6 +401,16 @@ impl Declarations {
                 ("FUNCTION", Some(n)) => {
                     d.functions.insert(n);
                 }
+                // `CAL FWD_MON` on a variable of a type declared elsewhere:
+                // that type is a function block.
+                ("CAL" | "CALC" | "CALCN", Some(n)) => {
+                    let instance = n.split('(').next().unwrap_or("");
+                    if let Some(ty) = d.vars.get(instance) {
+                        if ty != "BOOL" {
+                            d.blocks.insert(ty.clone());
+                        }
+                    }
+                }
                 _ => {}
             }
         }
@@ -471,7 +481,7 @@ impl Declarations {
     /// Whether an operand is known not to be a boolean: a variable of
     /// another type, an instance itself, a numeric output of a standard
     /// block, an array element.
-    fn not_boolean(&self, operand: &str) -> bool {
+    pub(super) fn not_boolean(&self, operand: &str) -> bool {
         if operand.contains('[') {
             return true;
         }

@@ -97,7 +97,10 @@ impl Dialect {
             if matches!(upper.as_str(), "FUNCTION_BLOCK" | "FUNCTION")
                 && words.next().is_some_and(|name| {
                     name.starts_with('"')
-                        || matches!(name.to_ascii_uppercase().as_str(), "FB" | "FC" | "SFB" | "SFC")
+                        || matches!(
+                            name.to_ascii_uppercase().as_str(),
+                            "FB" | "FC" | "SFB" | "SFC"
+                        )
                 })
             {
                 return Some(Dialect::Stl);

@@ -399,10 +399,25 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
         })
         .collect();
     for pou in doc.descendants().filter(|n| n.has_tag_name("pou")) {
-        let Some(body) = pou.children().find(|c| c.has_tag_name("body")) else {
+        // The POU's body, and its SFC actions' and transitions' bodies.
+        let bodies: Vec<(Node, String)> = pou
+            .descendants()
+            .filter(|n| n.has_tag_name("body"))
+            .filter_map(|b| {
+                let parent = b.parent()?;
+                let pou_name = pou.attribute("name").unwrap_or("?");
+                let name = parent.attribute("name").unwrap_or("?");
+                match parent.tag_name().name() {
+                    "pou" => Some((b, pou_name.to_string())),
+                    "action" => Some((b, format!("{pou_name}, action {name}"))),
+                    "transition" => Some((b, format!("{pou_name}, transition {name}"))),
+                    _ => None,
+                }
+            })
+            .collect();
+        if bodies.is_empty() {
             continue;
-        };
-        let pou_name = pou.attribute("name").unwrap_or("?");
+        }
         let mut declared = units.clone();
         for v in pou
             .children()
@@ -414,68 +429,71 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
                 declared.variable(name, &ty);
             }
         }
-        for kind in body.children().filter(Node::is_element) {
-            match kind.tag_name().name() {
-                "LD" => {
-                    let (ins, errs) = ladder(origin, &doc, kind);
-                    out.extend(ins);
-                    errors.extend(errs);
-                }
-                "IL" => {
-                    let text = kind
-                        .descendants()
-                        .filter(Node::is_text)
-                        .map(|t| t.text().unwrap_or(""))
-                        .collect::<String>();
-                    let first = kind.descendants().find(Node::is_text).unwrap_or(kind);
-                    let line0 = doc.text_pos_at(first.range().start).row as usize - 1;
-                    match iec::lex_declared(origin, &text, declared.clone()) {
-                        Ok(ins) => out.extend(ins.into_iter().map(|mut i| {
-                            i.at.line += line0;
-                            i.operand_at.line += line0;
-                            i
-                        })),
-                        Err(e) => errors.extend(e.0.into_iter().map(|mut e| {
-                            e.at.line += line0;
-                            e
-                        })),
+        for (body, pou_name) in &bodies {
+            let body = *body;
+            for kind in body.children().filter(Node::is_element) {
+                match kind.tag_name().name() {
+                    "LD" => {
+                        let (ins, errs) = ladder(origin, &doc, kind, &declared);
+                        out.extend(ins);
+                        errors.extend(errs);
+                    }
+                    "IL" => {
+                        let text = kind
+                            .descendants()
+                            .filter(Node::is_text)
+                            .map(|t| t.text().unwrap_or(""))
+                            .collect::<String>();
+                        let first = kind.descendants().find(Node::is_text).unwrap_or(kind);
+                        let line0 = doc.text_pos_at(first.range().start).row as usize - 1;
+                        match iec::lex_declared(origin, &text, declared.clone()) {
+                            Ok(ins) => out.extend(ins.into_iter().map(|mut i| {
+                                i.at.line += line0;
+                                i.operand_at.line += line0;
+                                i
+                            })),
+                            Err(e) => errors.extend(e.0.into_iter().map(|mut e| {
+                                e.at.line += line0;
+                                e
+                            })),
+                        }
+                    }
+                    other => {
+                        let pos = doc.text_pos_at(kind.range().start);
+                        let at = Location {
+                            line: pos.row as usize,
+                            col: pos.col as usize,
+                        };
+                        let why = match other {
+                            "SFC" => format!("POU '{pou_name}': SFC body, read as a chart by [[checks.sfc]], not here"),
+                            _ => format!("POU '{pou_name}': {other} body not read (ladder and IL bodies are)"),
+                        };
+                        out.push(Instruction {
+                            at,
+                            text: why.clone(),
+                            mnemonic: other.to_string(),
+                            operation: Operation::Outside(Outside::Unread),
+                            operand: None,
+                            operand_at: at,
+                        });
                     }
                 }
-                other => {
-                    let pos = doc.text_pos_at(kind.range().start);
-                    let at = Location {
-                        line: pos.row as usize,
-                        col: pos.col as usize,
-                    };
-                    let why = match other {
-                        "SFC" => format!("POU '{pou_name}': SFC body, read as a chart by [[checks.sfc]], not here"),
-                        _ => format!("POU '{pou_name}': {other} body not read (ladder and IL bodies are)"),
-                    };
-                    out.push(Instruction {
-                        at,
-                        text: why.clone(),
-                        mnemonic: other.to_string(),
-                        operation: Operation::Outside(Outside::Unread),
-                        operand: None,
-                        operand_at: at,
-                    });
-                }
             }
+            // Jumps and labels stay inside their POU.
+            let pos = doc.text_pos_at(body.range().end);
+            let at = Location {
+                line: pos.row as usize,
+                col: pos.col as usize,
+            };
+            out.push(Instruction {
+                at,
+                text: format!("end of POU '{pou_name}'"),
+                mnemonic: String::new(),
+                operation: Operation::EndBlock,
+                operand: None,
+                operand_at: at,
+            });
         }
-        // Jumps and labels stay inside their POU.
-        let pos = doc.text_pos_at(body.range().end);
-        let at = Location {
-            line: pos.row as usize,
-            col: pos.col as usize,
-        };
-        out.push(Instruction {
-            at,
-            text: format!("end of POU '{pou_name}'"),
-            mnemonic: String::new(),
-            operation: Operation::EndBlock,
-            operand: None,
-            operand_at: at,
-        });
     }
     SourceErrors::or_ok(
         Parsed {
@@ -513,6 +531,7 @@ fn ladder<'a, 'i>(
     origin: &'a str,
     doc: &'a Document<'i>,
     body: Node<'a, 'i>,
+    declared: &iec::Declarations,
 ) -> (Vec<Instruction>, Vec<SourceError>) {
     let mut r = Reader {
         origin,
@@ -533,12 +552,29 @@ fn ladder<'a, 'i>(
         }
     }
     let mut out = Vec::new();
-    for coil in body.children().filter(|c| c.has_tag_name("coil")) {
+    // Coils, and output variables a rung may end in instead (what writes
+    // them is read the same way: a block's output is not derivable).
+    for coil in body
+        .children()
+        .filter(|c| c.has_tag_name("coil") || c.has_tag_name("outVariable"))
+    {
         let at = r.at(coil);
-        let Some(var) = variable(coil) else {
-            r.error(coil, "coil without a variable".into());
+        let var = if coil.has_tag_name("coil") {
+            variable(coil)
+        } else {
+            child_text(coil, "expression").map(|v| v.trim().to_string())
+        };
+        let Some(var) = var else {
+            r.error(
+                coil,
+                format!("{} without a variable", coil.tag_name().name()),
+            );
             continue;
         };
+        // An output variable of another type (`Out : INT`) is data flow.
+        if coil.has_tag_name("outVariable") && declared.not_boolean(&var) {
+            continue;
+        }
         let signal = match iec::operand_signal(&var) {
             Ok(s) => s,
             Err(m) => {

@@ -331,7 +331,11 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
         }
         if in_call {
             // A call's parameter list: `CALL FB 1, DB 1 (` ... `)`.
-            in_call = !line.trim_end().trim_end_matches(';').trim_end().ends_with(')');
+            in_call = !line
+                .trim_end()
+                .trim_end_matches(';')
+                .trim_end()
+                .ends_with(')');
             continue;
         }
         if HEADERS.contains(&first_upper.as_str()) || first_upper.starts_with("TITLE") {
@@ -398,7 +402,11 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
             operand_from = 2;
         }
         if matches!(upper.as_str(), "CALL" | "UC" | "CC")
-            && line.trim_end().trim_end_matches(';').trim_end().ends_with('(')
+            && line
+                .trim_end()
+                .trim_end_matches(';')
+                .trim_end()
+                .ends_with('(')
         {
             in_call = true;
         }

@@ -15,8 +15,9 @@
 //! and transitions only.
 //!
 //! A transition's id is its `name` attribute, else the name of the
-//! transition it references (`<condition><reference name="…"/>`), else
-//! `t` and its `localId`. Its condition is an ST expression, inline
+//! transition it references (`<condition><reference name="…"/>`; with its
+//! `localId` appended, `STOP_t12`, when several transitions reference the
+//! same one), else `t` and its `localId`. Its condition is an ST expression, inline
 //! (`<condition><inline><ST>`) or in the referenced named transition of
 //! the POU (`<transitions><transition name="…"><body><ST>`): `AND`, `&`,
 //! `OR`, `NOT`, parentheses, `TRUE`/`FALSE` and comparisons (`=`, `<>`,
@@ -155,6 +156,16 @@ fn chart(pou: Node<'_, '_>, sfc: Node<'_, '_>, name: &str, errors: &mut Errors<'
         step: Vec::new(),
         transition: Vec::new(),
     };
+    // A named transition may be the condition of several transitions.
+    let mut uses: HashMap<&str, usize> = HashMap::new();
+    for r in sfc
+        .children()
+        .filter(|n| n.has_tag_name("transition"))
+        .filter_map(|n| n.descendants().find(|c| c.has_tag_name("reference")))
+        .filter_map(|r| r.attribute("name"))
+    {
+        *uses.entry(r).or_default() += 1;
+    }
     for n in sfc.children().filter(|n| n.is_element()) {
         match n.tag_name().name() {
             "step" => {
@@ -193,11 +204,16 @@ fn chart(pou: Node<'_, '_>, sfc: Node<'_, '_>, name: &str, errors: &mut Errors<'
                     .descendants()
                     .find(|c| c.has_tag_name("reference"))
                     .and_then(|r| r.attribute("name"));
-                let id = n
-                    .attribute("name")
-                    .or(reference)
-                    .map(str::to_string)
-                    .unwrap_or_else(|| format!("t{}", n.attribute("localId").unwrap_or("?")));
+                let local = n.attribute("localId").unwrap_or("?");
+                let id = match (n.attribute("name"), reference) {
+                    (Some(own), _) => own.to_string(),
+                    // `STOP` used at two places: `STOP_t12`, `STOP_t20`.
+                    (None, Some(r)) if uses.get(r).copied().unwrap_or(0) > 1 => {
+                        format!("{r}_t{local}")
+                    }
+                    (None, Some(r)) => r.to_string(),
+                    (None, None) => format!("t{local}"),
+                };
                 let (condition, at) = condition(n, reference, &named_conditions, errors);
                 out.transition.push(RawTransition {
                     id: spanned(n, id),

@@ -1,0 +1,430 @@
+//! Programs from public projects (`tests/data/real/`, sources and licences
+//! in its README): each file's outcome is pinned — which coils, which
+//! switching functions, how many warnings, which errors — and on four of
+//! them a fault is explained and checked against values worked out by hand.
+
+#![allow(clippy::unwrap_used)] // test helpers fail loudly by design
+
+use std::path::PathBuf;
+
+use cellwatch_models::explain::{explain, Explanation, Polarity};
+use cellwatch_models::program::Program;
+use cellwatch_models::signal::{Observability, Signal};
+use cellwatch_models::source;
+use cellwatch_models::switching::SwitchingFunction;
+use cellwatch_models::values::Values;
+
+fn path(file: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../tests/data/real")
+        .join(file)
+}
+
+fn compile(file: &str) -> Result<Program, String> {
+    let bytes = std::fs::read(path(file)).unwrap();
+    let text = source::text(file, &bytes, None).map_err(|e| e.to_string())?;
+    Program::compile(file, &text, None).map_err(|e| e.to_string())
+}
+
+fn program(file: &str) -> Program {
+    compile(file).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Every coil with its SF (internal relays replaced by their logic, as
+/// `cellwatch sf` prints it), or `!` and the line the reason points at.
+fn outcome(p: &Program) -> Vec<(String, String)> {
+    p.coils()
+        .iter()
+        .map(|c| {
+            let sf =
+                SwitchingFunction::expand(p, &c.signal, &Observability::default_for(p.dialect()));
+            let shown = match sf {
+                Ok(sf) => sf.notation(),
+                Err(e) => {
+                    let e = e.to_string();
+                    let line = e.split(':').nth(1).unwrap_or("?").to_string();
+                    format!("! line {line}")
+                }
+            };
+            (c.signal.name().to_string(), shown)
+        })
+        .collect()
+}
+
+fn pinned(p: &Program, expected: &[(&str, &str)]) {
+    let got = outcome(p);
+    let want: Vec<(String, String)> = expected
+        .iter()
+        .map(|(c, s)| ((*c).to_string(), (*s).to_string()))
+        .collect();
+    assert_eq!(got, want, "{}", p.origin());
+}
+
+fn sf(p: &Program, coil: &str) -> SwitchingFunction {
+    SwitchingFunction::expand(
+        p,
+        &Signal::new(coil),
+        &Observability::default_for(p.dialect()),
+    )
+    .unwrap()
+}
+
+fn values(pairs: &[(&str, bool)]) -> Values {
+    let mut v = Values::new();
+    for (s, b) in pairs {
+        v.set(Signal::new(s), *b);
+    }
+    v
+}
+
+fn explained(
+    p: &Program,
+    coil: &str,
+    before: &Values,
+    now: &Values,
+    polarity: Polarity,
+) -> Explanation {
+    let b = |s: &Signal| before.get(s);
+    explain(
+        &sf(p, coil),
+        |s| now.get(s),
+        Some(&b),
+        polarity,
+        p.documentation(),
+    )
+    .unwrap()
+}
+
+fn culprits(e: &Explanation) -> Vec<String> {
+    e.culprits.iter().map(ToString::to_string).collect()
+}
+
+// --- matiec: IEC 61131-3 Annex F ----------------------------------------
+
+#[test]
+fn annex_f_cmd_monitor() {
+    let p = program("matiec-annexf-cmd_monitor.il");
+    // CMD_TMR is a TON and ALRM_FF an SR: their inputs are not coils.
+    pinned(
+        &p,
+        &[
+            (
+                "CMD",
+                "(AUTO_CMD * AUTO_MODE) + (MAN_CMD * -AUTO_MODE * -MAN_CMD_CHK)",
+            ),
+            ("ALRM", "ALRM_FF.Q1"),
+        ],
+    );
+    let warned: Vec<usize> = p.warnings().iter().map(|w| w.at.line).collect();
+    assert_eq!(warned, [20, 28, 31, 33]);
+    // The declarations' comments are the comment database.
+    assert_eq!(
+        p.documentation().get(&Signal::new("AUTO_CMD")),
+        Some("Automated command")
+    );
+    assert_eq!(
+        p.documentation().get(&Signal::new("MAN_CMD_CHK")),
+        Some("Negated MAN_CMD to debounce")
+    );
+
+    // By hand: in automatic mode the automated command drops. SSF1 =
+    // AUTO_CMD·AUTO_MODE = 0·1 = 0; SSF2 = MAN_CMD·¬AUTO_MODE·¬MAN_CMD_CHK =
+    // 0·0·1 = 0; CMD = SSF3 = SSF1 + SSF2 = 0. The command is missing
+    // (fault when off); the lowest step on the fault's paths is SSF1, where
+    // AUTO_CMD is the contact that changed; AUTO_MODE = 1 is what keeps
+    // the manual path (SSF2) from carrying the command.
+    let before = values(&[
+        ("AUTO_CMD", true),
+        ("AUTO_MODE", true),
+        ("MAN_CMD", false),
+        ("MAN_CMD_CHK", false),
+    ]);
+    let mut now = before.clone();
+    now.set(Signal::new("AUTO_CMD"), false);
+    let e = explained(&p, "CMD", &before, &now, Polarity::Off);
+    assert!(e.is_fault());
+    assert_eq!(e.steps, [false, false, false]);
+    assert_eq!(e.fault_step, Some(1));
+    assert_eq!(
+        culprits(&e)[0],
+        "AUTO_CMD = 0 (expected 1): Automated command"
+    );
+    assert!(e.culprits[0].trigger);
+}
+
+#[test]
+fn annex_f_fwd_rev_mon() {
+    let p = program("matiec-annexf-fwd_rev_mon.il");
+    // FWD_MON and REV_MON are instances of CMD_MONITOR (declared in
+    // another file, known as a block because they are CALled): their
+    // inputs are not coils.
+    pinned(
+        &p,
+        &[
+            ("FWD_REV_ALRM", "FWD_REV_FF.Q"),
+            ("FWD_CMD", "FWD_MON.CMD * -FWD_REV_FF.Q"),
+            ("FWD_ALRM", "FWD_MON.ALRM"),
+            ("REV_CMD", "REV_MON.CMD * -FWD_REV_FF.Q"),
+            ("REV_ALRM", "REV_MON.ALRM"),
+            ("KLAXON", "REV_MON.ALRM + FWD_MON.ALRM + FWD_REV_FF.Q"),
+        ],
+    );
+    assert_eq!(p.warnings().len(), 18);
+    assert_eq!(
+        p.documentation().get(&Signal::new("KLAXON")),
+        Some("Any alarm active")
+    );
+
+    // By hand: KLAXON = REV_MON.ALRM + FWD_MON.ALRM + FWD_REV_FF.Q, one
+    // OR block. The forward monitor's alarm comes on: KLAXON = 0 + 1 + 0;
+    // the fault (on) is at step 1 and FWD_MON.ALRM alone is to blame.
+    let before = values(&[
+        ("REV_MON.ALRM", false),
+        ("FWD_MON.ALRM", false),
+        ("FWD_REV_FF.Q", false),
+    ]);
+    let mut now = before.clone();
+    now.set(Signal::new("FWD_MON.ALRM"), true);
+    let e = explained(&p, "KLAXON", &before, &now, Polarity::On);
+    assert_eq!(e.fault_step, Some(1));
+    assert_eq!(culprits(&e), ["FWD_MON.ALRM = 1 (expected 0)"]);
+}
+
+#[test]
+fn annex_f_stack_and_weigh_are_jumps_and_arithmetic() {
+    let p = program("matiec-annexf-stack_int.il");
+    pinned(&p, &[("OFLO", "! line 17"), ("EMPTY", "! line 17")]);
+    assert_eq!(p.warnings().len(), 20);
+    let p = program("matiec-annexf-weigh.il");
+    pinned(&p, &[("ENO", "! line 9"), ("WEIGH", "! line 9")]);
+    assert_eq!(p.warnings().len(), 5);
+    assert!(p
+        .warnings()
+        .iter()
+        .any(|w| w.message.starts_with("'BCD_TO_INT'")));
+}
+
+#[test]
+fn matiec_xml_tests() {
+    // An SFC body is the chart reader's; nothing here writes a coil.
+    let p = program("matiec-SFC_TEST.xml");
+    pinned(&p, &[]);
+    let warned: Vec<&str> = p.warnings().iter().map(|w| w.message.as_str()).collect();
+    assert_eq!(
+        warned,
+        [
+            "POU 'MAIN_TEST, action ONSTEP1': ST body not read (ladder and IL bodies are)",
+            "POU 'MAIN_TEST': SFC body, read as a chart by [[checks.sfc]], not here",
+        ]
+    );
+    // An empty ladder body is an error that says so.
+    assert_eq!(
+        compile("matiec-LD_TEST.xml").unwrap_err(),
+        "matiec-LD_TEST.xml:1:1: no ladder (LD), IL, ST, FBD or SFC body with anything in it in this XML file"
+    );
+}
+
+// --- Beremiz -------------------------------------------------------------
+
+#[test]
+fn beremiz_first_steps() {
+    // Counters in five languages: the IL and LD ones count in INT
+    // (declared in the XML interface), so nothing is a boolean coil; the
+    // ST, FBD and SFC bodies are named in warnings.
+    let p = program("beremiz-first_steps.xml");
+    pinned(&p, &[]);
+    let lines: Vec<usize> = p.warnings().iter().map(|w| w.at.line).collect();
+    assert_eq!(lines, [67, 142, 483, 526, 690, 944, 948, 949, 957, 958]);
+    assert!(p.warnings()[8]
+        .message
+        .starts_with("'ST Cnt': word instruction"));
+}
+
+#[test]
+fn beremiz_traffic_light_action_ladder() {
+    let p = program("beremiz-svghmi_traffic_light.xml");
+    // The LD action BLINK_ORANGE_LIGHT: reset coil first, then set coil.
+    pinned(
+        &p,
+        &[("ORANGE_LIGHT", "R_TRIG1.Q + (-R_TRIG0.Q * ORANGE_LIGHT)")],
+    );
+    assert_eq!(p.warnings().len(), 3);
+
+    // By hand: SSF1 = ¬R_TRIG0.Q·ORANGE_LIGHT, SSF2 = R_TRIG1.Q + SSF1.
+    // The light is on and stays on although the reset edge came: with
+    // R_TRIG0.Q = 1, SSF1 = 0, so the light is on only because the set
+    // edge R_TRIG1.Q is 1 in the same scan — step 2, R_TRIG1.Q to blame.
+    let before = values(&[
+        ("R_TRIG0.Q", false),
+        ("R_TRIG1.Q", false),
+        ("ORANGE_LIGHT", true),
+    ]);
+    let now = values(&[
+        ("R_TRIG0.Q", true),
+        ("R_TRIG1.Q", true),
+        ("ORANGE_LIGHT", true),
+    ]);
+    let e = explained(&p, "ORANGE_LIGHT", &before, &now, Polarity::On);
+    assert_eq!(e.steps, [false, true]);
+    assert_eq!(e.fault_step, Some(2));
+    assert_eq!(culprits(&e), ["R_TRIG1.Q = 1 (expected 0)"]);
+}
+
+// --- awlsim: Siemens STL -------------------------------------------------
+
+#[test]
+fn awlsim_garage_counter() {
+    let p = program("awlsim-garagecounter.awl");
+    pinned(
+        &p,
+        &[
+            ("M4.0", "-((-E0.1 * -E0.2) + (-((-E0.1 * -E0.2) + M4.0) * ((-E0.1 * E0.2) + M4.1))) * ((E0.1 * -E0.2) + M4.0)"),
+            ("A0.0", "-((-E0.1 * -E0.2) + (-((-E0.1 * -E0.2) + M4.0) * ((-E0.1 * E0.2) + M4.1))) * ((E0.1 * -E0.2) + M4.0) * -E0.1 * E0.2"),
+            ("M4.1", "-((-E0.1 * -E0.2) + (-((-E0.1 * -E0.2) + M4.1) * ((E0.1 * -E0.2) + M4.0))) * ((-E0.1 * E0.2) + M4.1)"),
+            ("A0.1", "-((-E0.1 * -E0.2) + (-((-E0.1 * -E0.2) + M4.1) * ((E0.1 * -E0.2) + M4.0))) * ((-E0.1 * E0.2) + M4.1) * E0.1 * -E0.2"),
+            ("A0.2", "Z0"),
+        ],
+    );
+    assert_eq!(p.warnings().len(), 17);
+}
+
+#[test]
+fn awlsim_binary_divider() {
+    let p = program("awlsim-binaeruntersetzer.awl");
+    let got = outcome(&p);
+    // b1_imp comes from an edge (FP); everything reading it is not
+    // derivable, the set/reset latch MRUECK and the toggle M16.1 are.
+    assert_eq!(got[0], ("b1_imp".into(), "! line 10".into()));
+    assert_eq!(
+        got[1],
+        (
+            "MRUECK".into(),
+            "-(-A0 * -A1 * -A2) * ((A0 * A1 * A2) + MRUECK)".into()
+        )
+    );
+    assert_eq!(
+        got[9],
+        ("M16.1".into(), "(T1 * -M16.1) + (-T1 * M16.1)".into())
+    );
+    assert_eq!(got.len(), 11);
+    assert_eq!(got.iter().filter(|(_, s)| s.starts_with('!')).count(), 7);
+
+    // By hand: S when A0·A1·A2, R when ¬A0·¬A1·¬A2, reset written last:
+    // SSF1 = ¬A0·¬A1·¬A2, SSF2 = A0·A1·A2, SSF3 = SSF2 + MRUECK,
+    // SSF4 = ¬SSF1·SSF3. All three outputs drop to 0 while MRUECK was on:
+    // SSF1 = 1, so SSF4 = 0 — MRUECK is off (fault when off), the lowest
+    // step on the fault's path is the reset condition SSF1, and each of A0,
+    // A1, A2 at 0 (expected 1) is a cause.
+    let before = values(&[("A0", true), ("A1", false), ("A2", false), ("MRUECK", true)]);
+    let now = values(&[
+        ("A0", false),
+        ("A1", false),
+        ("A2", false),
+        ("MRUECK", true),
+    ]);
+    let e = explained(&p, "MRUECK", &before, &now, Polarity::Off);
+    assert_eq!(e.steps, [true, false, true, false]);
+    assert_eq!(e.fault_step, Some(1));
+    assert_eq!(
+        culprits(&e),
+        [
+            "A0 = 0 (expected 1)",
+            "A1 = 0 (expected 1)",
+            "A2 = 0 (expected 1)"
+        ]
+    );
+    assert!(e.culprits[0].trigger && !e.culprits[1].trigger);
+}
+
+#[test]
+fn awlsim_traffic_lights_and_step_chain() {
+    let p = program("awlsim-trafficlights_1.awl");
+    let got = outcome(&p);
+    assert_eq!(
+        got[1],
+        (
+            "M0.0".into(),
+            "-(-T0 * M0.0) * ((-T0 * -M0.0 * E0.1) + M0.0)".into()
+        )
+    );
+    // Outputs behind the jump list (SPL) at line 20 may not run every scan.
+    assert!(got[2..].iter().all(|(_, s)| s == "! line 20"), "{got:?}");
+    assert_eq!(got.len(), 7);
+    assert_eq!(p.warnings().len(), 32);
+    // The step chain counts in words: no boolean coil; its CALL parameter
+    // list is skipped, not read as instructions.
+    let p = program("awlsim-stepchain.awl");
+    pinned(&p, &[]);
+    assert_eq!(p.warnings().len(), 21);
+    assert_eq!(
+        p.documentation().get(&Signal::new("#SM")),
+        Some("Schrittmerker")
+    );
+}
+
+#[test]
+fn awlsim_training_plant_export() {
+    // A whole Step 7 export: several blocks, set/reset inside nesting
+    // expressions, comparisons, indirect addressing.
+    let p = program("awlsim-bnt_modell.awl");
+    let got = outcome(&p);
+    assert_eq!(got.len(), 131);
+    assert_eq!(got.iter().filter(|(_, s)| !s.starts_with('!')).count(), 38);
+    let find = |c: &str| got.iter().find(|(n, _)| n == c).map(|(_, s)| s.as_str());
+    assert_eq!(
+        find("#T14_15"),
+        Some("(#Farbe_Rot * 4B4) + (-#Farbe_Rot * 4B5)")
+    );
+    assert_eq!(
+        find("#STEU_EIN"),
+        Some("-(-#STG_AUS + -#NOT_AUS) * (#STG_EIN + #STEU_EIN)")
+    );
+    assert_eq!(
+        find("#TEMP_Aktor_vor"),
+        Some("Handbetrieb * -AktorRück_Hand * AktorVor_Hand")
+    );
+    assert_eq!(p.warnings().len(), 567);
+}
+
+// --- OpenPLC Editor ladders ----------------------------------------------
+
+#[test]
+fn openplc_ladders_give_what_the_openplc_compiler_gives() {
+    // Each as the project's own generated ST says (build/plc.st there).
+    pinned(
+        &program("openplc-tutorials-02_no_nc.xml"),
+        &[("Coil_1", "NO_Contact"), ("Coil_2", "-NC_Contact")],
+    );
+    pinned(
+        &program("openplc-tutorials-03_not_or_nor.xml"),
+        &[
+            ("Output_0", "-Input_0"),
+            ("Output_1", "Input_1 + Input_2"),
+            ("Output_2", "-Input_3 * -Input_4"),
+        ],
+    );
+    let p = program("openplc-tutorials-05_xor_xnor.xml");
+    pinned(
+        &p,
+        &[
+            ("OUTPUT_0", "(INPUT_0 * -INPUT_1) + (INPUT_1 * -INPUT_0)"),
+            ("OUTPUT_1", "(INPUT_2 * INPUT_3) + (-INPUT_2 * -INPUT_3)"),
+        ],
+    );
+    assert!(p.warnings().is_empty());
+
+    // By hand: XOR with both inputs on. SSF1 = INPUT_0·¬INPUT_1 = 1·0 = 0,
+    // SSF2 = INPUT_1·¬INPUT_0 = 1·0 = 0, OUTPUT_0 = SSF3 = 0 (fault when
+    // off); the lowest step on its paths is SSF1. INPUT_1 switching on
+    // killed branch 1 (trigger); INPUT_0 = 1 blocks branch 2.
+    let before = values(&[("INPUT_0", true), ("INPUT_1", false)]);
+    let now = values(&[("INPUT_0", true), ("INPUT_1", true)]);
+    let e = explained(&p, "OUTPUT_0", &before, &now, Polarity::Off);
+    assert_eq!(e.steps, [false, false, false]);
+    assert_eq!(e.fault_step, Some(1));
+    assert_eq!(
+        culprits(&e),
+        ["INPUT_1 = 1 (expected 0)", "INPUT_0 = 1 (expected 0)"]
+    );
+    assert!(e.culprits[0].trigger && !e.culprits[1].trigger);
+}
