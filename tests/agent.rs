@@ -279,6 +279,13 @@ async fn ese_alarm_with_culprit_then_cleared_and_in_history() {
         metrics.contains("cellwatch_opcua_connected{cell=\"m01ps0004\"} 1"),
         "{metrics}"
     );
+    // The agent's own latency: values received → alarm published, once
+    // for the raise and once for the clear (both came from readings).
+    let latencies = metrics
+        .lines()
+        .find_map(|l| l.strip_prefix("cellwatch_alarm_latency_seconds_count{cell=\"m01ps0004\"} "))
+        .and_then(|n| n.parse::<u64>().ok());
+    assert!(latencies.is_some_and(|n| n >= 2), "{metrics}");
     fx.agent.unwrap().stop().await;
     fx.sim.stop();
 }

@@ -109,7 +109,8 @@ async fn a_scripted_alarm_day_gives_the_kpis_and_the_report_computed_by_hand() {
             tag,
             reading: Reading::Number(Num::Float(v)),
             source_time: t,
-        }])
+        }]
+        .into())
     };
     script
         .send(SourceEvent::Connected("scripted".into()))
@@ -123,7 +124,8 @@ async fn a_scripted_alarm_day_gives_the_kpis_and_the_report_computed_by_hand() {
                     reading: Reading::Number(Num::Float(0.0)),
                     source_time: day - 14 * H,
                 })
-                .collect(),
+                .collect::<Vec<_>>()
+                .into(),
         ))
         .await
         .unwrap();

@@ -102,7 +102,8 @@ async fn scripted_source_drives_the_loop_into_the_recording_sink() {
             tag,
             reading: Reading::Good(v),
             source_time: t,
-        }])
+        }]
+        .into())
     };
     script
         .send(SourceEvent::Connected("scripted".into()))
@@ -113,7 +114,7 @@ async fn scripted_source_drives_the_loop_into_the_recording_sink() {
     })
     .await;
     assert!(up.alarms.is_empty());
-    script.send(SourceEvent::Readings(image)).await.unwrap();
+    script.send(SourceEvent::Readings(image.into())).await.unwrap();
     let loaded = step_until(&mut steps, "the image", |s| s.input == Input::Readings).await;
     assert_eq!(loaded.engine.readings, config.tags.len() as u64);
     assert_eq!(loaded.engine.unknown_delta, -(config.tags.len() as i64));

@@ -147,6 +147,9 @@ pub struct CellStep {
     pub state: Option<StatePayload>,
     /// Source events waiting in the queue after this one.
     pub queue_depth: usize,
+    /// When the source received the values this step handles: the start
+    /// of the agent's own latency (`cellwatch_alarm_latency_seconds`).
+    pub received: Option<std::time::Instant>,
 }
 
 impl CellStep {
@@ -195,6 +198,8 @@ pub struct CellLoop {
     state_kind: HistoryKind,
     /// What was restored from the journal, dispatched first by `run`.
     restored: Option<Step>,
+    /// When the values being handled were received (see [`CellStep`]).
+    received: Option<std::time::Instant>,
     /// `Some(why)` while the journal cannot write: the `journal` alarm.
     journal_health: Option<watch::Receiver<Option<String>>>,
     /// Where writes to the PLC go, if the source can write.
@@ -262,6 +267,7 @@ impl CellLoop {
             max_shelve: DEFAULT_MAX_SHELVE,
             state_kind: HistoryKind::Offline,
             restored: None,
+            received: None,
             journal_health: None,
             writer: None,
             written_tx,
@@ -440,6 +446,7 @@ impl CellLoop {
             SourceEvent::Readings(readings) => {
                 self.forcing.seen_in(&readings);
                 let step = self.engine.on_readings(&readings, now);
+                self.received = Some(readings.received);
                 self.dispatch(now, Input::Readings, step, queue_depth).await;
                 self.follow_force(now).await;
                 return;
@@ -478,6 +485,7 @@ impl CellLoop {
             alarms: Vec::new(),
             state,
             queue_depth: 0,
+            received: None,
         })
         .await;
     }
@@ -720,6 +728,7 @@ impl CellLoop {
         } else if step.order.is_some() {
             state = Some(self.state_payload(now));
         }
+        let received = self.received.take();
         self.deliver(CellStep {
             at: now,
             input,
@@ -727,6 +736,7 @@ impl CellLoop {
             alarms,
             state,
             queue_depth,
+            received,
         })
         .await;
     }

@@ -96,6 +96,9 @@ pub struct Metrics {
     pub alarms_out_of_service: IntGauge,
     /// Time from raise to acknowledgement.
     pub alarm_ack_seconds: Histogram,
+    /// Time the agent adds: values received from the PLC → their alarm
+    /// journaled and published.
+    pub alarm_latency_seconds: Histogram,
 }
 
 fn opts(name: &str, help: &str, cell: &str) -> Opts {
@@ -383,6 +386,17 @@ impl Metrics {
                 .const_label("cell", cell)
                 .buckets(vec![
                     1.0, 5.0, 10.0, 30.0, 60.0, 120.0, 300.0, 600.0, 1800.0, 3600.0, 14400.0
+                ])
+            )),
+            alarm_latency_seconds: reg!(Histogram::with_opts(
+                HistogramOpts::new(
+                    "cellwatch_alarm_latency_seconds",
+                    "Time the agent adds to an alarm: from the source receiving the values that raise or clear it to the alarm journaled and published."
+                )
+                .const_label("cell", cell)
+                .buckets(vec![
+                    0.000_05, 0.000_1, 0.000_25, 0.000_5, 0.001, 0.002_5, 0.005, 0.01, 0.025,
+                    0.05, 0.1, 0.25, 1.0
                 ])
             )),
             registry,

@@ -114,6 +114,13 @@ impl MetricsSink {
     fn step(&mut self, step: &CellStep) {
         let m = &self.metrics;
         m.source_queue_depth.set(step.queue_depth as i64);
+        // The journal and the bus have had this step (they come first).
+        if let Some(received) = step.received.filter(|_| !step.alarms.is_empty()) {
+            let seconds = received.elapsed().as_secs_f64();
+            for _ in &step.alarms {
+                m.alarm_latency_seconds.observe(seconds);
+            }
+        }
         match &step.input {
             Input::Connection { up: true, .. } => {
                 if self.ever_connected {

@@ -31,6 +31,52 @@ use crate::config::CellConfig;
 /// How many events may wait between a source and the cell loop.
 pub const QUEUE_CAPACITY: usize = 1024;
 
+/// One publish's values and when the agent received them: the start of
+/// the latency `cellwatch_alarm_latency_seconds` measures.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Batch {
+    /// The values, in source-time order.
+    pub readings: Vec<TagReading>,
+    /// When the source had them from the PLC.
+    pub received: std::time::Instant,
+}
+
+impl From<Vec<TagReading>> for Batch {
+    /// Values received now.
+    fn from(readings: Vec<TagReading>) -> Batch {
+        Batch {
+            readings,
+            received: std::time::Instant::now(),
+        }
+    }
+}
+
+impl IntoIterator for Batch {
+    type Item = TagReading;
+    type IntoIter = std::vec::IntoIter<TagReading>;
+
+    fn into_iter(self) -> Self::IntoIter {
+        self.readings.into_iter()
+    }
+}
+
+impl<'a> IntoIterator for &'a Batch {
+    type Item = &'a TagReading;
+    type IntoIter = std::slice::Iter<'a, TagReading>;
+
+    fn into_iter(self) -> Self::IntoIter {
+        self.readings.iter()
+    }
+}
+
+impl std::ops::Deref for Batch {
+    type Target = [TagReading];
+
+    fn deref(&self) -> &[TagReading] {
+        &self.readings
+    }
+}
+
 /// What a source tells the cell loop.
 #[derive(Debug, Clone, PartialEq)]
 pub enum SourceEvent {
@@ -39,7 +85,7 @@ pub enum SourceEvent {
     /// The connection is lost; why.
     Disconnected(String),
     /// Values delivered together (one publish), in source-time order.
-    Readings(Vec<TagReading>),
+    Readings(Batch),
     /// Something about the source that is not the connection (a namespace
     /// missing on the server): raises the `system` alarm `id` with the
     /// problem, or clears it with `None`.

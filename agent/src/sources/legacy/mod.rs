@@ -681,7 +681,7 @@ pub async fn poll(
             }
             for (m, r) in readings.into_iter().enumerate() {
                 if !r.is_empty()
-                    && !tell(&members, &mut listening, m, SourceEvent::Readings(r)).await
+                    && !tell(&members, &mut listening, m, SourceEvent::Readings(r.into())).await
                 {
                     return Ok(());
                 }

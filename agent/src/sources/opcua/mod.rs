@@ -775,7 +775,8 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
                         reading: Reading::Bad,
                         source_time: now,
                     })
-                    .collect(),
+                    .collect::<Vec<_>>()
+                    .into(),
             ))
             .await;
     }
@@ -825,7 +826,7 @@ async fn read_current(session: &Session, ctx: &Context, nodes: &[(NodeId, Vec<us
                     })
                     .collect();
                 readings.sort_by_key(|r| r.source_time);
-                let _ = ctx.tx.send(SourceEvent::Readings(readings)).await;
+                let _ = ctx.tx.send(SourceEvent::Readings(readings.into())).await;
             }
             Err(e) => {
                 tracing::warn!(error = %e, "cannot read the tags' current values after reconnecting");

@@ -229,7 +229,7 @@ pub(super) async fn subscribe(
                         tracing::error!(node = %req.item_to_monitor.node_id, status = %r.result.status_code, "monitored item refused");
                         if let Some(tags) = by_node.get(&req.item_to_monitor.node_id) {
                             let now = crate::clock::now_ms();
-                            let readings = tags
+                            let readings: Vec<TagReading> = tags
                                 .iter()
                                 .map(|&tag| TagReading {
                                     tag,
@@ -237,7 +237,7 @@ pub(super) async fn subscribe(
                                     source_time: now,
                                 })
                                 .collect();
-                            let _ = tx.send(SourceEvent::Readings(readings)).await;
+                            let _ = tx.send(SourceEvent::Readings(readings.into())).await;
                         }
                     }
                 }
@@ -345,7 +345,7 @@ impl OnSubscriptionNotificationCore for InTimeOrder {
         }
         self.overflowing.extend(&c.overflowed);
         self.heard.busy.store(true, Ordering::Relaxed);
-        send_blocking(&self.tx, SourceEvent::Readings(c.readings));
+        send_blocking(&self.tx, SourceEvent::Readings(c.readings.into()));
         if changed {
             send_blocking(&self.tx, self.overflow_problem(&c.overflowed));
         }
