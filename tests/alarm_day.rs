@@ -105,12 +105,14 @@ async fn a_scripted_alarm_day_gives_the_kpis_and_the_report_computed_by_hand() {
     let metrics = agent.metrics_addr().unwrap();
     let mut committed = agent.committed();
     let value = |tag: usize, v: f64, t: u64| {
-        SourceEvent::Readings(vec![TagReading {
-            tag,
-            reading: Reading::Number(Num::Float(v)),
-            source_time: t,
-        }]
-        .into())
+        SourceEvent::Readings(
+            vec![TagReading {
+                tag,
+                reading: Reading::Number(Num::Float(v)),
+                source_time: t,
+            }]
+            .into(),
+        )
     };
     script
         .send(SourceEvent::Connected("scripted".into()))

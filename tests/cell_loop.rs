@@ -98,12 +98,14 @@ async fn scripted_source_drives_the_loop_into_the_recording_sink() {
         .position(|t| t.address.name() == "X0.06")
         .unwrap();
     let at = |tag, v, t| {
-        SourceEvent::Readings(vec![TagReading {
-            tag,
-            reading: Reading::Good(v),
-            source_time: t,
-        }]
-        .into())
+        SourceEvent::Readings(
+            vec![TagReading {
+                tag,
+                reading: Reading::Good(v),
+                source_time: t,
+            }]
+            .into(),
+        )
     };
     script
         .send(SourceEvent::Connected("scripted".into()))
@@ -114,7 +116,10 @@ async fn scripted_source_drives_the_loop_into_the_recording_sink() {
     })
     .await;
     assert!(up.alarms.is_empty());
-    script.send(SourceEvent::Readings(image.into())).await.unwrap();
+    script
+        .send(SourceEvent::Readings(image.into()))
+        .await
+        .unwrap();
     let loaded = step_until(&mut steps, "the image", |s| s.input == Input::Readings).await;
     assert_eq!(loaded.engine.readings, config.tags.len() as u64);
     assert_eq!(loaded.engine.unknown_delta, -(config.tags.len() as i64));

@@ -9,7 +9,7 @@
 
 use std::hint::black_box;
 
-use cellwatch_models::timer::learn::{self, LearnOptions, Tau};
+use cellwatch_models::timer::learn::{self, LearnOptions, Tau, TimerModel};
 use cellwatch_models::timer::line;
 use cellwatch_models::timer::log::RunLog;
 use cellwatch_models::timer::monitor::TimerMonitor;
@@ -114,5 +114,122 @@ fn monitoring(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, learning, monitoring);
+/// `k` copies of `model`, each on its own signals (`name@i`): a cell
+/// with `k` times the stations.
+fn replicated(model: &TimerModel, k: usize) -> TimerModel {
+    let rename = |s: &str, i: usize| match s.strip_prefix('-') {
+        Some(r) => format!("-{r}@{i}"),
+        None => format!("{s}@{i}"),
+    };
+    let mut out = model.clone();
+    out.signals = (0..k)
+        .flat_map(|i| model.signals.iter().map(move |s| format!("{s}@{i}")))
+        .collect();
+    out.transitions = (0..k)
+        .flat_map(|i| {
+            model.transitions.iter().map(move |t| {
+                let mut t = t.clone();
+                t.id += (i * model.transitions.len()) as u32;
+                t.from = t.from.iter().map(|l| rename(l, i)).collect();
+                t.to = t.to.iter().map(|l| rename(l, i)).collect();
+                t.event.tag = rename(&t.event.tag, i);
+                if let Some(e) = &mut t.trigger {
+                    e.tag = rename(&e.tag, i);
+                }
+                t.from_numbered = None;
+                t
+            })
+        })
+        .collect();
+    out
+}
+
+/// The monitor with about 1,000 transitions armed at once: the line
+/// replicated until that many wait for their events together, each run
+/// played on every copy in step. The baseline pass applies the same
+/// events to value vectors.
+fn monitoring_many_armed(c: &mut Criterion) {
+    let training: Vec<RunLog> = (1..=4).map(|s| line::run(s, 6, None).0).collect();
+    let one = learn::common(
+        &training,
+        &LearnOptions {
+            delta_min: 2000,
+            tau: Tau::Auto,
+            min_support: None,
+        },
+    )
+    .model;
+    let data = runs(20_000);
+    // How many are armed on one copy, on average over a run's changes.
+    let mut probe = TimerMonitor::new(&one).expect("model compiles");
+    let (mut armed, mut samples) = (0usize, 0usize);
+    for r in &data {
+        let index: Vec<Option<usize>> = r.signals.iter().map(|s| probe.signal(s)).collect();
+        for ch in &r.changes {
+            if let Some(s) = index[ch.signal] {
+                probe.set(s, Some(ch.value), ch.at);
+                armed += probe.armed();
+                samples += 1;
+            }
+        }
+    }
+    let per_copy = (armed as f64 / samples.max(1) as f64).max(0.1);
+    let copies = (1000.0 / per_copy).ceil() as usize;
+    let model = replicated(&one, copies);
+    let events: usize = data.iter().map(|r| r.changes.len()).sum::<usize>() * copies;
+    let mut g = c.benchmark_group("timers_monitor_1000_armed");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements(events as u64));
+    g.bench_function("baseline_pass", |b| {
+        b.iter(|| {
+            let mut n = 0;
+            for _ in 0..copies {
+                n += baseline(black_box(&data));
+            }
+            black_box(n)
+        })
+    });
+    g.bench_function("monitor", |b| {
+        b.iter_batched(
+            || TimerMonitor::new(&model).expect("model compiles"),
+            |mut m| {
+                let mut n = 0;
+                for r in &data {
+                    let index: Vec<Vec<Option<usize>>> = (0..copies)
+                        .map(|i| {
+                            r.signals
+                                .iter()
+                                .map(|s| m.signal(&format!("{s}@{i}")))
+                                .collect()
+                        })
+                        .collect();
+                    for (k, &v) in r.initial.iter().enumerate() {
+                        for copy in &index {
+                            if let Some(s) = copy[k] {
+                                n += m.set(s, Some(v), 0).len();
+                            }
+                        }
+                    }
+                    for ch in &r.changes {
+                        for copy in &index {
+                            if let Some(s) = copy[ch.signal] {
+                                n += m.set(s, Some(ch.value), ch.at).len();
+                            }
+                        }
+                    }
+                }
+                black_box(n)
+            },
+            BatchSize::LargeInput,
+        )
+    });
+    g.finish();
+    println!(
+        "timers_monitor_1000_armed: {copies} copies of the line, {} transitions, {events} events, {per_copy:.1} armed per copy on average ({:.0} in all)",
+        model.transitions.len(),
+        per_copy * copies as f64
+    );
+}
+
+criterion_group!(benches, learning, monitoring, monitoring_many_armed);
 criterion_main!(benches);

@@ -170,7 +170,10 @@ impl CompiledCell {
         let mut step_places: Vec<(u32, u32)> = Vec::new();
         for (c, check) in checks.iter().enumerate() {
             let base = u32::try_from(step_and.len()).expect("fewer than 2^30 steps");
-            assert!(base + (check.steps.len() as u32) < ROOT, "too many steps to compile");
+            assert!(
+                base + (check.steps.len() as u32) < ROOT,
+                "too many steps to compile"
+            );
             step_base.push(base);
             let mut place = |o: u32, at: u32| {
                 let at = at | (o & NEGATED);
@@ -258,7 +261,8 @@ impl CompiledCell {
         );
         for k in start..end {
             let at = self.places[k];
-            self.work.push((at & !NEGATED, value != (at & NEGATED != 0)));
+            self.work
+                .push((at & !NEGATED, value != (at & NEGATED != 0)));
         }
         while let Some((place, operand)) = self.work.pop() {
             if place & ROOT != 0 {
@@ -288,7 +292,8 @@ impl CompiledCell {
                 self.step_value[g] = value;
                 for k in self.up_start[g] as usize..self.up_start[g + 1] as usize {
                     let at = self.up[k];
-                    self.work.push((at & !NEGATED, value != (at & NEGATED != 0)));
+                    self.work
+                        .push((at & !NEGATED, value != (at & NEGATED != 0)));
                 }
             }
         }

@@ -53,12 +53,12 @@ pub enum Outcome {
 struct Compiled {
     id: u32,
     condition: Vec<(usize, bool)>,
-    /// The start condition as bit masks over the signal bitset (the paper's
-    /// COM + literals): `bits & mask == want` and every masked signal known.
-    mask: Vec<u64>,
-    want: Vec<u64>,
-    /// Signals that must be known: the condition's and the event's.
-    need: Vec<u64>,
+    /// The start condition as bit masks over the words of the signal
+    /// bitset it touches (the paper's COM + literals): per word `(index,
+    /// mask, want, need)`, `bits & mask == want` and the `need` signals (the
+    /// condition's and the event's) known. Only those words: checking costs
+    /// the condition's size, not the cell's.
+    words: Vec<(usize, u64, u64, u64)>,
     event: (usize, bool),
     /// `common` method: the event that starts the timer.
     trigger: Option<(usize, bool)>,
@@ -150,21 +150,36 @@ impl TimerMonitor {
                     readers[s].push(k);
                 }
             }
-            let words = model.signals.len().div_ceil(64);
-            let (mut mask, mut want) = (vec![0u64; words], vec![0u64; words]);
+            let mut words: Vec<(usize, u64, u64, u64)> = Vec::new();
+            let mut word = |s: usize| -> usize {
+                match words.iter().position(|w| w.0 == s / 64) {
+                    Some(i) => i,
+                    None => {
+                        words.push((s / 64, 0, 0, 0));
+                        words.len() - 1
+                    }
+                }
+            };
+            let mut bits = Vec::new();
             for &(s, v) in &condition {
-                mask[s / 64] |= 1 << (s % 64);
-                if v {
-                    want[s / 64] |= 1 << (s % 64);
+                bits.push((word(s), s, Some(v)));
+            }
+            bits.push((word(event.0), event.0, None));
+            for (i, s, v) in bits {
+                let b = 1u64 << (s % 64);
+                let w = &mut words[i];
+                w.3 |= b;
+                if let Some(v) = v {
+                    w.1 |= b;
+                    if v {
+                        w.2 |= b;
+                    }
                 }
             }
-            let mut need = mask.clone();
-            need[event.0 / 64] |= 1 << (event.0 % 64);
+            words.sort_unstable();
             transitions.push(Compiled {
                 id: t.id,
-                mask,
-                want,
-                need,
+                words,
                 condition,
                 event,
                 trigger,
@@ -199,6 +214,11 @@ impl TimerMonitor {
         }
     }
 
+    /// How many transitions are armed now (waiting for their event).
+    pub fn armed(&self) -> usize {
+        self.due.len()
+    }
+
     /// The earliest time an armed transition becomes late, if one is armed.
     pub fn next_deadline(&self) -> Option<u64> {
         self.due.first().map(|&(d, _)| d)
@@ -217,8 +237,8 @@ impl TimerMonitor {
     /// The start condition holds: its signals as wanted, and they and the
     /// event's signal known.
     fn holds(&self, t: &Compiled) -> bool {
-        (0..t.mask.len()).all(|w| {
-            self.known[w] & t.need[w] == t.need[w] && self.bits[w] & t.mask[w] == t.want[w]
+        t.words.iter().all(|&(w, mask, want, need)| {
+            self.known[w] & need == need && self.bits[w] & mask == want
         })
     }
 
