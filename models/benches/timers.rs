@@ -69,9 +69,10 @@ fn learning(c: &mut Criterion) {
     g.finish();
 }
 
-fn monitoring(c: &mut Criterion) {
+/// The line's timer model, learned from four short runs.
+fn line_model() -> TimerModel {
     let training: Vec<RunLog> = (1..=4).map(|s| line::run(s, 6, None).0).collect();
-    let model = learn::common(
+    learn::common(
         &training,
         &LearnOptions {
             delta_min: 2000,
@@ -79,7 +80,11 @@ fn monitoring(c: &mut Criterion) {
             min_support: None,
         },
     )
-    .model;
+    .model
+}
+
+fn monitoring(c: &mut Criterion) {
+    let model = line_model();
     let data = runs(200_000);
     let events: usize = data.iter().map(|r| r.changes.len()).sum();
     let mut g = c.benchmark_group("timers_monitor");
@@ -149,16 +154,7 @@ fn replicated(model: &TimerModel, k: usize) -> TimerModel {
 /// played on every copy in step. The baseline pass applies the same
 /// events to value vectors.
 fn monitoring_many_armed(c: &mut Criterion) {
-    let training: Vec<RunLog> = (1..=4).map(|s| line::run(s, 6, None).0).collect();
-    let one = learn::common(
-        &training,
-        &LearnOptions {
-            delta_min: 2000,
-            tau: Tau::Auto,
-            min_support: None,
-        },
-    )
-    .model;
+    let one = line_model();
     let data = runs(20_000);
     // How many are armed on one copy, on average over a run's changes.
     let mut probe = TimerMonitor::new(&one).expect("model compiles");
