@@ -83,6 +83,30 @@ fn line_model() -> TimerModel {
     .model
 }
 
+/// Plays every run on `m`, each signal of a run on the monitor's signals
+/// `names` gives for it (one, or one per copy); the outcomes counted.
+fn play(m: &mut TimerMonitor, data: &[RunLog], names: &dyn Fn(&str) -> Vec<String>) -> usize {
+    let mut n = 0;
+    for r in data {
+        let index: Vec<Vec<usize>> = r
+            .signals
+            .iter()
+            .map(|s| names(s).iter().filter_map(|x| m.signal(x)).collect())
+            .collect();
+        for (k, &v) in r.initial.iter().enumerate() {
+            for &s in &index[k] {
+                n += m.set(s, Some(v), 0).len();
+            }
+        }
+        for ch in &r.changes {
+            for &s in &index[ch.signal] {
+                n += m.set(s, Some(ch.value), ch.at).len();
+            }
+        }
+    }
+    n
+}
+
 fn monitoring(c: &mut Criterion) {
     let model = line_model();
     let data = runs(200_000);
@@ -96,23 +120,7 @@ fn monitoring(c: &mut Criterion) {
     g.bench_function("monitor", |b| {
         b.iter_batched(
             || TimerMonitor::new(&model).expect("model compiles"),
-            |mut m| {
-                let mut n = 0;
-                for r in &data {
-                    let index: Vec<Option<usize>> = r.signals.iter().map(|s| m.signal(s)).collect();
-                    for (i, &v) in r.initial.iter().enumerate() {
-                        if let Some(s) = index[i] {
-                            n += m.set(s, Some(v), 0).len();
-                        }
-                    }
-                    for ch in &r.changes {
-                        if let Some(s) = index[ch.signal] {
-                            n += m.set(s, Some(ch.value), ch.at).len();
-                        }
-                    }
-                }
-                black_box(n)
-            },
+            |mut m| black_box(play(&mut m, &data, &|s| vec![s.to_string()])),
             BatchSize::LargeInput,
         )
     });
@@ -189,32 +197,8 @@ fn monitoring_many_armed(c: &mut Criterion) {
         b.iter_batched(
             || TimerMonitor::new(&model).expect("model compiles"),
             |mut m| {
-                let mut n = 0;
-                for r in &data {
-                    let index: Vec<Vec<Option<usize>>> = (0..copies)
-                        .map(|i| {
-                            r.signals
-                                .iter()
-                                .map(|s| m.signal(&format!("{s}@{i}")))
-                                .collect()
-                        })
-                        .collect();
-                    for (k, &v) in r.initial.iter().enumerate() {
-                        for copy in &index {
-                            if let Some(s) = copy[k] {
-                                n += m.set(s, Some(v), 0).len();
-                            }
-                        }
-                    }
-                    for ch in &r.changes {
-                        for copy in &index {
-                            if let Some(s) = copy[ch.signal] {
-                                n += m.set(s, Some(ch.value), ch.at).len();
-                            }
-                        }
-                    }
-                }
-                black_box(n)
+                let copy = |s: &str| (0..copies).map(|i| format!("{s}@{i}")).collect();
+                black_box(play(&mut m, &data, &copy))
             },
             BatchSize::LargeInput,
         )
