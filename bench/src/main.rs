@@ -1,0 +1,190 @@
+//! `cellwatch-bench`: the agent measured against a peer, end to end.
+//!
+//! Run through `bench/run` (README, BENCHMARKS.md), which builds the
+//! release binaries and the Python baseline's virtual environment first.
+
+// A binary: `pub` marks what its modules offer each other.
+#![allow(unreachable_pub)]
+
+mod fanout;
+mod load;
+mod measure;
+mod peer;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use clap::{Parser, Subcommand};
+
+/// The agent under load, measured against a peer.
+#[derive(Parser)]
+#[command(name = "cellwatch-bench", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// The peer benchmark: a load OPC UA server (async-opcua, this build)
+    /// toggling Boolean tags and opening limit switches; the agent
+    /// (`cellwatch run`, its own process) and the Python asyncua baseline
+    /// each subscribe alone to a fresh server and must report every
+    /// opened switch as the fault's cause. Prints a Markdown table:
+    /// changes handled per second, CPU, peak RSS, fault → alarm latency,
+    /// faults reported, notifications lost, and the ratios.
+    Peer {
+        /// A load as TAGS:CHANGES_PER_SECOND; repeat for several rows.
+        #[arg(long = "load", required = true, value_name = "TAGS:RATE")]
+        loads: Vec<peer::Load>,
+        /// OPC UA security of the agent's rows; repeat for several.
+        #[arg(long = "security", value_enum, default_values_t = [peer::Security::None])]
+        security: Vec<peer::Security>,
+        /// How long each load runs.
+        #[arg(long, default_value = "20s", value_parser = humantime::parse_duration)]
+        seconds: Duration,
+        /// Subscription publishing interval (agent and baseline).
+        #[arg(long, default_value = "100ms", value_parser = humantime::parse_duration)]
+        publishing: Duration,
+        /// The `cellwatch` binary under test.
+        #[arg(long, default_value = "target/release/cellwatch")]
+        agent: PathBuf,
+        /// A Python with asyncua: run the baseline (security None) for each
+        /// load. Without it, only the agent runs.
+        #[arg(long)]
+        python: Option<PathBuf>,
+        /// The baseline script.
+        #[arg(long, default_value = "bench/baseline.py")]
+        script: PathBuf,
+        /// Where configurations, PKI directories, journals and logs go.
+        #[arg(long, default_value = "target/bench-peer")]
+        workdir: PathBuf,
+        /// How long the baseline may take to catch up after the load stops.
+        #[arg(long, default_value = "30s", value_parser = humantime::parse_duration)]
+        drain: Duration,
+    },
+    /// The scale-out recipe: `--agents` agents in client mode, each with
+    /// its own simulated cell, through one Zenoh router (a router-mode
+    /// session, the engine of zenohd, in its own process), and one agent in
+    /// peer mode reached directly as the baseline; one subscriber for
+    /// `cellwatch/*/alarms/**`. Prints the fault → alarm latency of both
+    /// paths and the router's CPU and memory.
+    Fanout {
+        /// Agents through the router.
+        #[arg(long, default_value_t = 20)]
+        agents: usize,
+        /// Each cell's load as TAGS:CHANGES_PER_SECOND.
+        #[arg(long, default_value = "100:1000")]
+        load: peer::Load,
+        /// How long the load runs.
+        #[arg(long, default_value = "30s", value_parser = humantime::parse_duration)]
+        seconds: Duration,
+        /// A limit switch opens this often in each cell.
+        #[arg(long, default_value = "1s", value_parser = humantime::parse_duration)]
+        fault_every: Duration,
+        /// The `cellwatch` binary.
+        #[arg(long, default_value = "target/release/cellwatch")]
+        agent: PathBuf,
+        /// Where the agents' directories go.
+        #[arg(long, default_value = "target/bench-fanout")]
+        workdir: PathBuf,
+    },
+    /// Serves as a Zenoh router on LISTEN until killed (used by `fanout`);
+    /// prints `ready` once listening.
+    Router {
+        /// The endpoint, e.g. tcp/127.0.0.1:7447.
+        #[arg(long)]
+        listen: String,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let runtime = match tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+    {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("cellwatch-bench: cannot start the runtime: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    match runtime.block_on(run(cli)) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("cellwatch-bench: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+async fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Cmd::Peer {
+            loads,
+            security,
+            seconds,
+            publishing,
+            agent,
+            python,
+            script,
+            workdir,
+            drain,
+        } => {
+            let setup = peer::Setup {
+                agent,
+                python,
+                script,
+                workdir,
+                seconds,
+                publishing,
+                fault_every: Duration::from_millis(500),
+                fault_hold: Duration::from_millis(250),
+                drain,
+            };
+            let mut rows = Vec::new();
+            for &load in &loads {
+                for &s in &security {
+                    eprintln!(
+                        "cellwatch-bench: agent, {} tags, {}/s, {s:?}",
+                        load.tags, load.rate
+                    );
+                    rows.push(peer::agent(&setup, load, s).await?);
+                }
+                if let Some(python) = &setup.python {
+                    eprintln!(
+                        "cellwatch-bench: baseline, {} tags, {}/s",
+                        load.tags, load.rate
+                    );
+                    rows.push(peer::baseline(&setup, python, load).await?);
+                }
+            }
+            print!("{}", peer::table(&rows));
+            Ok(())
+        }
+        Cmd::Fanout {
+            agents,
+            load,
+            seconds,
+            fault_every,
+            agent,
+            workdir,
+        } => {
+            let setup = fanout::Setup {
+                agent,
+                bench: fanout::own_path()?,
+                workdir,
+                agents,
+                load,
+                seconds,
+                fault_every,
+            };
+            print!("{}", fanout::run(&setup).await?);
+            Ok(())
+        }
+        Cmd::Router { listen } => fanout::router(&listen).await,
+    }
+}

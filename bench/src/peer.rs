@@ -1,0 +1,761 @@
+//! The peer benchmark: for each load, the agent under test (the release
+//! `cellwatch` binary, its own process) and the Python asyncua baseline
+//! (its own process), each alone against a fresh load server, measured the
+//! same way.
+
+use std::collections::HashMap;
+use std::io::{BufRead, BufReader, Write};
+use std::net::{SocketAddr, TcpListener};
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStdin, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime};
+
+use anyhow::{anyhow, bail, Context};
+
+use crate::load::{self, Fault, LoadServer, SWITCHES};
+use crate::measure::{self, Scrape};
+
+/// One load: how many noise tags, how many changes per second.
+#[derive(Debug, Clone, Copy)]
+pub struct Load {
+    /// Noise tags (the ten limit switches come on top).
+    pub tags: usize,
+    /// Noise changes per second.
+    pub rate: u64,
+}
+
+impl std::str::FromStr for Load {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Load, String> {
+        let (t, r) = s
+            .split_once(':')
+            .ok_or_else(|| format!("{s:?}: write TAGS:CHANGES_PER_SECOND, e.g. 100000:500000"))?;
+        let num = |x: &str| {
+            x.replace('_', "")
+                .parse::<u64>()
+                .map_err(|e| format!("{s:?}: {x:?}: {e}"))
+        };
+        Ok(Load {
+            tags: num(t)? as usize,
+            rate: num(r)?,
+        })
+    }
+}
+
+/// The OPC UA security the agent connects with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Security {
+    /// No security (as the baseline).
+    None,
+    /// Basic256Sha256 with SignAndEncrypt (the agent's default).
+    SignEncrypt,
+}
+
+impl Security {
+    fn label(self) -> &'static str {
+        match self {
+            Security::None => "None",
+            Security::SignEncrypt => "Basic256Sha256+SignAndEncrypt",
+        }
+    }
+}
+
+/// How a run is set up.
+#[derive(Debug, Clone)]
+pub struct Setup {
+    /// The `cellwatch` binary under test.
+    pub agent: PathBuf,
+    /// The Python interpreter with asyncua, when the baseline runs.
+    pub python: Option<PathBuf>,
+    /// The baseline script.
+    pub script: PathBuf,
+    /// Where configurations, PKI and journals go.
+    pub workdir: PathBuf,
+    /// How long the load runs.
+    pub seconds: Duration,
+    /// The subscription's publishing interval.
+    pub publishing: Duration,
+    /// How often a limit switch opens, and for how long.
+    pub fault_every: Duration,
+    /// How long it stays open.
+    pub fault_hold: Duration,
+    /// How long the baseline may take to drain after the load stops.
+    pub drain: Duration,
+}
+
+/// What one subscriber did under one load.
+#[derive(Debug, Clone)]
+pub struct Row {
+    /// Agent or baseline, and security.
+    pub subject: String,
+    /// The load.
+    pub load: Load,
+    /// Changes the server made.
+    pub produced: u64,
+    /// Changes the subscriber was given.
+    pub received: u64,
+    /// Seconds of load.
+    pub seconds: f64,
+    /// Seconds from the end of the load until the last change arrived.
+    pub drain: f64,
+    /// CPU seconds used from the start of the load to the end of the drain.
+    pub cpu: f64,
+    /// Peak resident memory, bytes.
+    pub rss_peak: u64,
+    /// Fault → alarm seen, seconds, per fault reported with the right switch.
+    pub latencies: Vec<f64>,
+    /// Faults injected, and reported with the right switch.
+    pub faults: (usize, usize),
+    /// The agent's own latency (received → published), p50 and p99 bucket
+    /// bounds from `cellwatch_alarm_latency_seconds`.
+    pub internal: Option<(f64, f64)>,
+    /// The most the load generator fell behind its schedule, seconds.
+    pub generator_lag: f64,
+}
+
+impl Row {
+    /// Changes handled per second of load.
+    pub fn rate(&self) -> f64 {
+        self.received as f64 / self.seconds
+    }
+
+    /// CPU time per change handled, µs.
+    pub fn cpu_per_change_us(&self) -> f64 {
+        self.cpu * 1e6 / self.received.max(1) as f64
+    }
+
+    /// Share of one core over the load and the drain.
+    pub fn cpu_share(&self) -> f64 {
+        self.cpu / (self.seconds + self.drain)
+    }
+
+    /// Changes made but never given to the subscriber.
+    pub fn lost(&self) -> u64 {
+        self.produced.saturating_sub(self.received)
+    }
+}
+
+/// A free loopback port (bound, then released for the agent to take).
+pub fn free_port() -> anyhow::Result<u16> {
+    Ok(TcpListener::bind("127.0.0.1:0")?.local_addr()?.port())
+}
+
+/// The fault check's program: the coil is on while any limit switch is
+/// open (ESE's shape: an OR of negated contacts).
+fn program() -> String {
+    let mut s = String::from("(* cellwatch-bench: FAULT while any limit switch is open *)\n");
+    for k in 0..SWITCHES {
+        let op = if k == 0 { "LDN" } else { "ORN" };
+        s.push_str(&format!("{op} LS_{k}\n"));
+    }
+    s.push_str("ST FAULT\n");
+    s
+}
+
+/// The agent's configuration for `load` against `endpoint`.
+pub fn agent_config(
+    cell: &str,
+    endpoint: &str,
+    load: Load,
+    security: Security,
+    publishing: Duration,
+    zenoh: &str,
+    metrics_port: u16,
+) -> String {
+    let (policy, mode) = match security {
+        Security::None => ("None", "None"),
+        Security::SignEncrypt => ("Basic256Sha256", "SignAndEncrypt"),
+    };
+    let mut s = format!(
+        "# Generated by cellwatch-bench peer.\n\
+         [cell]\nid = \"{cell}\"\n\n\
+         [opcua]\nendpoint = \"{endpoint}\"\nsecurity_policy = \"{policy}\"\n\
+         security_mode = \"{mode}\"\npki_dir = \"pki\"\n\
+         publishing_interval = \"{}ms\"\nsampling_interval = \"0\"\n\
+         namespace_uri = \"{}\"\n\n\
+         [[checks.switching]]\nid = \"fault\"\nprogram = \"fault.il\"\ndialect = \"iec\"\n\
+         coil = \"FAULT\"\nfault_when = \"on\"\nseverity = \"high\"\n\n\
+         [zenoh]\n{zenoh}\nplain = true\n\n\
+         [journal]\npath = \"journal.sqlite\"\n\n\
+         [metrics]\nlisten = \"127.0.0.1:{metrics_port}\"\n",
+        publishing.as_millis(),
+        load::NAMESPACE
+    );
+    for k in 0..SWITCHES {
+        s.push_str(&format!(
+            "\n[[tags]]\nname = \"ls_{k}\"\nnode_id = \"ns=1;i={}\"\naddress = \"LS_{k}\"\n",
+            load::switch_id(k)
+        ));
+    }
+    for i in 1..=load.tags {
+        s.push_str(&format!(
+            "\n[[tags]]\nname = \"n_{i}\"\nnode_id = \"ns=1;i={i}\"\naddress = \"N_{i}\"\n"
+        ));
+    }
+    s
+}
+
+/// Runs the agent under `load`: one row.
+pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Result<Row> {
+    let dir = setup
+        .workdir
+        .join(format!("agent-{}-{}-{:?}", load.tags, load.rate, security));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir)?;
+    let server = LoadServer::start(
+        "127.0.0.1:0".parse()?,
+        &dir.join("server-pki"),
+        load.tags,
+        1,
+    )
+    .await?;
+    let (zenoh_port, metrics_port) = (free_port()?, free_port()?);
+    let config = dir.join("cell.toml");
+    std::fs::write(
+        &config,
+        agent_config(
+            "bench",
+            &server.endpoint(),
+            load,
+            security,
+            setup.publishing,
+            &format!("mode = \"peer\"\nlisten = [\"tcp/127.0.0.1:{zenoh_port}\"]"),
+            metrics_port,
+        ),
+    )?;
+    if security == Security::SignEncrypt {
+        trust(&config, &dir.join("server-pki"))?;
+    }
+    let mut child = spawn_agent(&setup.agent, &dir)?;
+    let pid = child.id();
+    let result = async {
+        let alarms = subscribe_alarms(&[format!("tcp/127.0.0.1:{zenoh_port}")], "bench").await?;
+        let metrics: SocketAddr = format!("127.0.0.1:{metrics_port}").parse()?;
+        wait_ready(&mut child, metrics, &dir).await?;
+        let before = Scrape::get(metrics)?;
+        let c0 = handled(&before);
+        let cpu0 = measure::cpu_seconds(pid)?;
+        let run = Generator::start(&server, load.rate, setup.fault_every, setup.fault_hold, 2);
+        tokio::time::sleep(setup.seconds).await;
+        let (produced, faults, lag, seconds) = run.stop();
+        // Drain: until every change arrived, or none came for 3 s.
+        let stopped = Instant::now();
+        let mut last = (c0, Instant::now());
+        let after = loop {
+            let s = Scrape::get(metrics)?;
+            let n = handled(&s);
+            if n != last.0 {
+                last = (n, Instant::now());
+            }
+            if n - c0 >= produced || last.1.elapsed() > Duration::from_secs(3) {
+                break s;
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        };
+        let drain = last.1.saturating_duration_since(stopped).as_secs_f64();
+        let cpu = measure::cpu_seconds(pid)? - cpu0;
+        let (_, rss_peak) = measure::rss(pid)?;
+        let h = "cellwatch_alarm_latency_seconds";
+        let internal = measure::bucket_quantile(&before.buckets(h), &after.buckets(h), 0.5).zip(
+            measure::bucket_quantile(&before.buckets(h), &after.buckets(h), 0.99),
+        );
+        let seen = alarms
+            .lock()
+            .ok()
+            .and_then(|a| a.get("bench").cloned())
+            .unwrap_or_default();
+        let latencies = match_faults(&faults, &seen);
+        Ok(Row {
+            subject: format!("cellwatch ({})", security.label()),
+            load,
+            produced,
+            received: handled(&after) - c0,
+            seconds,
+            drain,
+            cpu,
+            rss_peak,
+            faults: (faults.len(), latencies.len()),
+            latencies,
+            internal,
+            generator_lag: lag,
+        })
+    }
+    .await;
+    stop_agent(child);
+    server.stop();
+    result
+}
+
+/// How many changes the agent behind a scrape has been given.
+pub fn handled(s: &Scrape) -> u64 {
+    (s.value("cellwatch_tag_updates_total") + s.value("cellwatch_tag_duplicate_updates_total"))
+        as u64
+}
+
+/// Waits until the agent is connected, knows every tag and nothing more
+/// arrives (the initial values are in).
+pub async fn wait_ready(child: &mut Child, metrics: SocketAddr, dir: &Path) -> anyhow::Result<()> {
+    let deadline = Instant::now() + Duration::from_secs(300);
+    let mut last = u64::MAX;
+    loop {
+        tokio::time::sleep(Duration::from_millis(500)).await;
+        if let Ok(Some(status)) = child.try_wait() {
+            bail!(
+                "the agent exited ({status}); see {}",
+                dir.join("agent.log").display()
+            );
+        }
+        if Instant::now() > deadline {
+            bail!(
+                "the agent in {} did not subscribe every tag within 300 s",
+                dir.display()
+            );
+        }
+        let Ok(s) = Scrape::get(metrics) else {
+            continue;
+        };
+        let n = handled(&s);
+        if s.value("cellwatch_opcua_connected") == 1.0
+            && s.value("cellwatch_tags_unknown") == 0.0
+            && n == last
+        {
+            return Ok(());
+        }
+        last = n;
+    }
+}
+
+/// Starts `agent run cell.toml` in `dir` (with the fault check's program
+/// beside it), its output in `agent.log` there.
+pub fn spawn_agent(agent: &Path, dir: &Path) -> anyhow::Result<Child> {
+    std::fs::write(dir.join("fault.il"), program())?;
+    let log = std::fs::File::create(dir.join("agent.log"))?;
+    Command::new(agent)
+        .arg("run")
+        .arg(dir.join("cell.toml"))
+        .env("RUST_LOG", "warn")
+        .stdout(log.try_clone()?)
+        .stderr(log)
+        .spawn()
+        .with_context(|| format!("cannot start {}", agent.display()))
+}
+
+/// Stops an agent as its service manager would (SIGTERM), and waits.
+pub fn stop_agent(mut child: Child) {
+    let _ = Command::new("kill")
+        .arg("-TERM")
+        .arg(child.id().to_string())
+        .status();
+    let _ = child.wait();
+}
+
+/// The agent's key pair made and trusted by the load server, and the
+/// server's certificate trusted by the agent.
+fn trust(config: &Path, server_pki: &Path) -> anyhow::Result<()> {
+    use cellwatch::sources::{opcua, pki};
+    let config = cellwatch::config::load(config).map_err(|e| anyhow!("{e}"))?;
+    let ua = config
+        .opcua
+        .as_ref()
+        .ok_or_else(|| anyhow!("no [opcua] in the generated configuration"))?;
+    drop(opcua::client(&config.cell, ua).map_err(|e| anyhow!("{e}"))?);
+    pki::trust(&pki::own_cert(&ua.pki_dir), server_pki).map_err(|e| anyhow!(e))?;
+    pki::trust(&pki::own_cert(server_pki), &ua.pki_dir).map_err(|e| anyhow!(e))?;
+    Ok(())
+}
+
+/// Alarms seen on the bus, per cell: (when received, the switch named as
+/// the changed contact) for every `raised` transition of `fault`.
+pub type Seen = Arc<Mutex<HashMap<String, Vec<(SystemTime, Option<usize>)>>>>;
+
+/// Subscribes to the alarms of `cells` (a key expression chunk: `bench`,
+/// `*`) through a peer session connected to `endpoints`.
+pub async fn subscribe_alarms(endpoints: &[String], cells: &str) -> anyhow::Result<Seen> {
+    let mut config = zenoh::Config::default();
+    let set = |c: &mut zenoh::Config, k: &str, v: &str| {
+        c.insert_json5(k, v)
+            .map_err(|e| anyhow!("zenoh configuration {k}: {e}"))
+    };
+    set(&mut config, "mode", "\"peer\"")?;
+    set(
+        &mut config,
+        "connect/endpoints",
+        &serde_json::to_string(endpoints)?,
+    )?;
+    set(&mut config, "listen/endpoints", "[]")?;
+    set(&mut config, "scouting/multicast/enabled", "false")?;
+    let session = zenoh::open(config).await.map_err(|e| anyhow!("{e}"))?;
+    let seen: Seen = Arc::default();
+    let out = seen.clone();
+    let subscriber = session
+        .declare_subscriber(format!("cellwatch/{cells}/alarms/**"))
+        .callback(move |sample| {
+            let now = SystemTime::now();
+            let Ok(v) = serde_json::from_slice::<serde_json::Value>(&sample.payload().to_bytes())
+            else {
+                return;
+            };
+            if v["id"] != "fault" || v["transition"] != "raised" {
+                return;
+            }
+            let switch = v["culprits"].as_array().and_then(|cs| {
+                cs.iter()
+                    .find(|c| c["trigger"] == true)
+                    .and_then(|c| c["address"].as_str())
+                    .and_then(|a| a.strip_prefix("LS_"))
+                    .and_then(|k| k.parse().ok())
+            });
+            let cell = v["cell"].as_str().unwrap_or_default().to_string();
+            if let Ok(mut s) = out.lock() {
+                s.entry(cell).or_default().push((now, switch));
+            }
+        })
+        .await
+        .map_err(|e| anyhow!("{e}"))?;
+    // Session and subscriber live as long as the process.
+    std::mem::forget(subscriber);
+    std::mem::forget(session);
+    Ok(seen)
+}
+
+/// For each fault, in order, the first alarm after it naming its switch
+/// not already taken by an earlier fault: the latency of each fault so
+/// reported, seconds.
+pub fn match_faults(faults: &[Fault], seen: &[(SystemTime, Option<usize>)]) -> Vec<f64> {
+    let mut used = vec![false; seen.len()];
+    let mut out = Vec::new();
+    for f in faults {
+        let found = seen
+            .iter()
+            .enumerate()
+            .find(|(i, (at, switch))| !used[*i] && *switch == Some(f.switch) && *at >= f.at);
+        if let Some((i, (at, _))) = found {
+            used[i] = true;
+            out.push(at.duration_since(f.at).unwrap_or_default().as_secs_f64());
+        }
+    }
+    out
+}
+
+/// The load generator of one run.
+pub struct Generator {
+    stop: Arc<AtomicBool>,
+    produced: Arc<load::Produced>,
+    thread: std::thread::JoinHandle<()>,
+    started: Instant,
+}
+
+impl Generator {
+    /// Starts `rate` noise changes per second and a fault every
+    /// `fault_every`, held `fault_hold`.
+    pub fn start(
+        server: &LoadServer,
+        rate: u64,
+        fault_every: Duration,
+        fault_hold: Duration,
+        seed: u64,
+    ) -> Generator {
+        let stop = Arc::new(AtomicBool::new(false));
+        let (produced, thread) = server.generate(rate, fault_every, fault_hold, seed, stop.clone());
+        Generator {
+            stop,
+            produced,
+            thread,
+            started: Instant::now(),
+        }
+    }
+
+    /// Stops it: changes made, faults injected, its worst lag (s), and how
+    /// long it ran (s).
+    pub fn stop(self) -> (u64, Vec<Fault>, f64, f64) {
+        self.stop.store(true, Ordering::Relaxed);
+        let _ = self.thread.join();
+        let seconds = self.started.elapsed().as_secs_f64();
+        let faults = self
+            .produced
+            .faults
+            .lock()
+            .map(|f| f.clone())
+            .unwrap_or_default();
+        (
+            self.produced.changes.load(Ordering::Relaxed),
+            faults,
+            self.produced.max_lag_us.load(Ordering::Relaxed) as f64 / 1e6,
+            seconds,
+        )
+    }
+}
+
+/// The baseline's process and its answers.
+struct Baseline {
+    child: Child,
+    stdin: ChildStdin,
+    lines: mpsc::Receiver<serde_json::Value>,
+}
+
+impl Baseline {
+    fn ask(&mut self) -> anyhow::Result<serde_json::Value> {
+        writeln!(self.stdin, "count")?;
+        self.stdin.flush()?;
+        self.lines
+            .recv_timeout(Duration::from_secs(120))
+            .map_err(|_| anyhow!("the baseline did not answer within 120 s"))
+    }
+}
+
+/// Runs the Python baseline under `load` (security None): one row.
+pub async fn baseline(setup: &Setup, python: &Path, load: Load) -> anyhow::Result<Row> {
+    let dir = setup
+        .workdir
+        .join(format!("baseline-{}-{}", load.tags, load.rate));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir)?;
+    let server = LoadServer::start(
+        "127.0.0.1:0".parse()?,
+        &dir.join("server-pki"),
+        load.tags,
+        1,
+    )
+    .await?;
+    let mut child = Command::new(python)
+        .arg(&setup.script)
+        .arg("--endpoint")
+        .arg(server.endpoint())
+        .arg("--noise")
+        .arg(load.tags.to_string())
+        .arg("--publishing-ms")
+        .arg(setup.publishing.as_millis().to_string())
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(std::fs::File::create(dir.join("baseline.log"))?)
+        .spawn()
+        .with_context(|| format!("cannot start {}", python.display()))?;
+    let pid = child.id();
+    let stdout = child.stdout.take().ok_or_else(|| anyhow!("no stdout"))?;
+    let stdin = child.stdin.take().ok_or_else(|| anyhow!("no stdin"))?;
+    let (tx, lines) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            if let Ok(v) = serde_json::from_str(&line) {
+                if tx.send(v).is_err() {
+                    break;
+                }
+            }
+        }
+    });
+    let mut b = Baseline {
+        child,
+        stdin,
+        lines,
+    };
+    let result = async {
+        let ready = b
+            .lines
+            .recv_timeout(Duration::from_secs(900))
+            .map_err(|_| anyhow!("the baseline did not subscribe within 900 s"))?;
+        if ready["ready"] != true {
+            bail!("the baseline said {ready}");
+        }
+        // Settled: the initial values all in.
+        let mut last = u64::MAX;
+        let c0 = loop {
+            tokio::time::sleep(Duration::from_millis(500)).await;
+            let n = b.ask()?["received"].as_u64().unwrap_or(0);
+            if n == last && n >= (load.tags + SWITCHES) as u64 {
+                break n;
+            }
+            last = n;
+        };
+        let cpu0 = measure::cpu_seconds(pid)?;
+        let run = Generator::start(&server, load.rate, setup.fault_every, setup.fault_hold, 2);
+        tokio::time::sleep(setup.seconds).await;
+        let (produced, faults, lag, seconds) = run.stop();
+        let stopped = Instant::now();
+        let mut last = (c0, Instant::now());
+        let answer = loop {
+            let a = b.ask()?;
+            let n = a["received"].as_u64().unwrap_or(0);
+            if n != last.0 {
+                last = (n, Instant::now());
+            }
+            if n - c0 >= produced
+                || last.1.elapsed() > Duration::from_secs(3)
+                || stopped.elapsed() > setup.drain
+            {
+                break a;
+            }
+            tokio::time::sleep(Duration::from_millis(250)).await;
+        };
+        let drain = last.1.saturating_duration_since(stopped).as_secs_f64();
+        let cpu = measure::cpu_seconds(pid)? - cpu0;
+        let (_, rss_peak) = measure::rss(pid)?;
+        let seen: Vec<(SystemTime, Option<usize>)> = answer["alarms"]
+            .as_array()
+            .map(|a| {
+                a.iter()
+                    .filter_map(|x| {
+                        let k = x[0].as_u64()? as usize;
+                        let detected = x[2].as_f64()?;
+                        Some((
+                            SystemTime::UNIX_EPOCH + Duration::from_secs_f64(detected),
+                            Some(k),
+                        ))
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
+        let latencies = match_faults(&faults, &seen);
+        Ok(Row {
+            subject: "Python asyncua (None)".into(),
+            load,
+            produced,
+            received: answer["received"].as_u64().unwrap_or(0) - c0,
+            seconds,
+            drain,
+            cpu,
+            rss_peak,
+            faults: (faults.len(), latencies.len()),
+            latencies,
+            internal: None,
+            generator_lag: lag,
+        })
+    }
+    .await;
+    let _ = writeln!(b.stdin, "quit");
+    let _ = b.child.kill();
+    let _ = b.child.wait();
+    server.stop();
+    result
+}
+
+/// The table of rows, and the agent's ratios to the baseline.
+pub fn table(rows: &[Row]) -> String {
+    let ms = |v: Option<f64>| v.map_or("-".into(), |s| format!("{:.1}", s * 1e3));
+    let bound = |v: f64| {
+        if v.is_infinite() {
+            "> 1 s".into()
+        } else {
+            format!("≤ {}", fmt_seconds(v))
+        }
+    };
+    let mut out = String::from(
+        "| subscriber | tags | offered/s | handled/s | CPU (core) | CPU µs/change | RSS peak | alarm latency p50 / p99 (ms) | agent's own p50 / p99 | faults reported | lost | drain |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in rows {
+        out.push_str(&format!(
+            "| {} | {} | {} | {:.0} | {:.0} % | {:.2} | {:.1} MB | {} / {} | {} | {}/{} | {} | {:.1} s |\n",
+            r.subject,
+            r.load.tags,
+            r.load.rate,
+            r.rate(),
+            r.cpu_share() * 100.0,
+            r.cpu_per_change_us(),
+            r.rss_peak as f64 / 1048576.0,
+            ms(measure::quantile(&r.latencies, 0.5)),
+            ms(measure::quantile(&r.latencies, 0.99)),
+            r.internal
+                .map_or("-".into(), |(a, b)| format!("{} / {}", bound(a), bound(b))),
+            r.faults.1,
+            r.faults.0,
+            r.lost(),
+            r.drain,
+        ));
+    }
+    let mut ratios = String::new();
+    for b in rows.iter().filter(|r| r.internal.is_none()) {
+        for a in rows.iter().filter(|r| {
+            r.internal.is_some() && r.load.tags == b.load.tags && r.load.rate == b.load.rate
+        }) {
+            ratios.push_str(&format!(
+                "- {} tags, {}/s, {} vs the baseline: {:.1}× the changes handled per second, {:.1}× less CPU per change, p99 latency {:.1}× lower\n",
+                a.load.tags,
+                a.load.rate,
+                a.subject,
+                a.rate() / b.rate().max(1.0),
+                b.cpu_per_change_us() / a.cpu_per_change_us().max(1e-9),
+                measure::quantile(&b.latencies, 0.99).unwrap_or(f64::NAN)
+                    / measure::quantile(&a.latencies, 0.99).unwrap_or(f64::NAN),
+            ));
+        }
+    }
+    let agents: Vec<&Row> = rows.iter().filter(|r| r.internal.is_some()).collect();
+    if let (Some(small), Some(big)) = (
+        agents.iter().min_by_key(|r| r.load.tags),
+        agents.iter().max_by_key(|r| r.load.tags),
+    ) {
+        if small.load.tags != big.load.tags {
+            ratios.push_str(&format!(
+                "- the agent's CPU per change at {} tags is {:.2}× that at {} tags\n",
+                big.load.tags,
+                big.cpu_per_change_us() / small.cpu_per_change_us().max(1e-9),
+                small.load.tags
+            ));
+        }
+    }
+    let lag = rows.iter().map(|r| r.generator_lag).fold(0.0, f64::max);
+    out.push('\n');
+    out.push_str(&ratios);
+    out.push_str(&format!(
+        "- the load generator fell at most {:.0} ms behind its schedule\n",
+        lag * 1e3
+    ));
+    out
+}
+
+fn fmt_seconds(s: f64) -> String {
+    if s < 1e-3 {
+        format!("{:.0} µs", s * 1e6)
+    } else {
+        format!("{} ms", s * 1e3)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn faults_match_the_first_alarm_naming_their_switch() {
+        let t0 = SystemTime::UNIX_EPOCH + Duration::from_secs(100);
+        let s = |ms: u64| t0 + Duration::from_millis(ms);
+        let faults = [
+            Fault {
+                switch: 0,
+                at: s(0),
+            },
+            Fault {
+                switch: 1,
+                at: s(500),
+            },
+            Fault {
+                switch: 2,
+                at: s(1000),
+            },
+        ];
+        // Switch 1's alarm names switch 3: not counted; switch 2's is.
+        let seen = [(s(120), Some(0)), (s(610), Some(3)), (s(1090), Some(2))];
+        let l = match_faults(&faults, &seen);
+        assert_eq!(l.len(), 2);
+        assert!((l[0] - 0.12).abs() < 1e-9 && (l[1] - 0.09).abs() < 1e-9);
+    }
+
+    #[test]
+    fn loads_parse_and_bad_ones_say_why() {
+        let l: Load = "100_000:500000".parse().unwrap();
+        assert_eq!((l.tags, l.rate), (100_000, 500_000));
+        assert!("100000"
+            .parse::<Load>()
+            .unwrap_err()
+            .contains("TAGS:CHANGES"));
+    }
+
+    #[test]
+    fn the_program_opens_the_coil_on_any_switch() {
+        let p = program();
+        assert!(p.starts_with("(*") && p.contains("LDN LS_0\nORN LS_1\n"));
+        assert!(p.ends_with("ORN LS_9\nST FAULT\n"));
+    }
+}
