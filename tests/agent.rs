@@ -586,7 +586,7 @@ async fn live_line_slow_motion_raises_its_timer_alarm() {
 async fn a_published_alarm_is_already_in_history() {
     let fx = Fixture::start().await;
     let (_sub, raised, _) = ese_raised(&fx, "cellwatch/m01ps0004/alarms/ese").await;
-    // Asked once, at once: the row was committed before the publication.
+    // Asked once, at once: the query waits for the rows queued before it.
     let rows = fx
         .history_rows("cellwatch/m01ps0004/history?kind=alarm;since=1h")
         .await;

@@ -119,6 +119,10 @@ impl LoadServer {
                 "load",
             ));
         let limits = builder.limits_mut();
+        // Requests of 10,000 monitored items, publishes of 10,000 changes.
+        limits.max_array_length = 100_000;
+        limits.max_message_size = 64 << 20;
+        limits.max_chunk_count = 1024;
         limits.subscriptions.min_sampling_interval_ms = 0.0;
         limits.subscriptions.max_monitored_item_queue_size = 1000;
         limits.subscriptions.max_monitored_items_per_sub = noise + SWITCHES + 1000;
@@ -211,6 +215,9 @@ impl LoadServer {
             let mut order: Vec<usize> = (0..noise.len()).collect();
             order.shuffle(&mut rng);
             let mut next = 0;
+            // The batch each variable was last toggled in.
+            let mut in_tick = vec![0u64; noise.len()];
+            let mut tick = 0u64;
             let start = Instant::now();
             let mut made: u64 = 0;
             let mut next_fault = start + fault_every;
@@ -226,13 +233,25 @@ impl LoadServer {
                 let wall = SystemTime::now();
                 let stamp = DateTime::from(chrono::DateTime::<chrono::Utc>::from(wall));
                 batch.clear();
-                while (made as f64) < due && !noise.is_empty() {
+                tick += 1;
+                // At most every variable once per batch: a rate above
+                // noise / TICK falls behind (and says so in the lag).
+                let mut in_batch = 0;
+                while (made as f64) < due && in_batch < noise.len() {
                     if next == order.len() {
                         order.shuffle(&mut rng);
                         next = 0;
                     }
                     let i = order[next];
                     next += 1;
+                    // Never twice in one batch: the server keeps only a
+                    // node's last value of a batch, and a variable toggled
+                    // back within it would not change at all.
+                    if in_tick[i] == tick {
+                        continue;
+                    }
+                    in_tick[i] = tick;
+                    in_batch += 1;
                     values[i] = !values[i];
                     batch.push((&noise[i], None, DataValue::new_at(values[i], stamp)));
                     made += 1;

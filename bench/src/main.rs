@@ -43,7 +43,7 @@ enum Cmd {
         security: Vec<peer::Security>,
         /// How long each load runs.
         #[arg(long, default_value = "20s", value_parser = humantime::parse_duration)]
-        seconds: Duration,
+        duration: Duration,
         /// Subscription publishing interval (agent and baseline).
         #[arg(long, default_value = "100ms", value_parser = humantime::parse_duration)]
         publishing: Duration,
@@ -79,7 +79,7 @@ enum Cmd {
         load: peer::Load,
         /// How long the load runs.
         #[arg(long, default_value = "30s", value_parser = humantime::parse_duration)]
-        seconds: Duration,
+        duration: Duration,
         /// A limit switch opens this often in each cell.
         #[arg(long, default_value = "1s", value_parser = humantime::parse_duration)]
         fault_every: Duration,
@@ -101,6 +101,15 @@ enum Cmd {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // The load server's and the router's own warnings (dropped
+    // notifications, refused sessions) go to stderr.
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
     let runtime = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -126,7 +135,7 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
         Cmd::Peer {
             loads,
             security,
-            seconds,
+            duration: seconds,
             publishing,
             agent,
             python,
@@ -168,7 +177,7 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
         Cmd::Fanout {
             agents,
             load,
-            seconds,
+            duration: seconds,
             fault_every,
             agent,
             workdir,

@@ -102,8 +102,15 @@ pub struct Row {
     pub drain: f64,
     /// CPU seconds used from the start of the load to the end of the drain.
     pub cpu: f64,
-    /// Peak resident memory, bytes.
+    /// Resident memory once subscribed (before the load), bytes.
+    pub rss_ready: u64,
+    /// Resident memory after the drain, bytes.
+    pub rss_end: u64,
+    /// Peak resident memory since the process started, bytes.
     pub rss_peak: u64,
+    /// CPU share of the benchmark's own process (the load server) over the
+    /// load.
+    pub server_cpu: f64,
     /// Fault → alarm seen, seconds, per fault reported with the right switch.
     pub latencies: Vec<f64>,
     /// Faults injected, and reported with the right switch.
@@ -237,6 +244,9 @@ pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Res
         let before = Scrape::get(metrics)?;
         let c0 = handled(&before);
         let cpu0 = measure::cpu_seconds(pid)?;
+        let (rss_ready, _) = measure::rss(pid)?;
+        let own = std::process::id();
+        let server0 = measure::cpu_seconds(own)?;
         let run = Generator::start(&server, load.rate, setup.fault_every, setup.fault_hold, 2);
         tokio::time::sleep(setup.seconds).await;
         let (produced, faults, lag, seconds) = run.stop();
@@ -256,7 +266,8 @@ pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Res
         };
         let drain = last.1.saturating_duration_since(stopped).as_secs_f64();
         let cpu = measure::cpu_seconds(pid)? - cpu0;
-        let (_, rss_peak) = measure::rss(pid)?;
+        let server_cpu = (measure::cpu_seconds(own)? - server0) / (seconds + drain);
+        let (rss_end, rss_peak) = measure::rss(pid)?;
         let h = "cellwatch_alarm_latency_seconds";
         let internal = measure::bucket_quantile(&before.buckets(h), &after.buckets(h), 0.5).zip(
             measure::bucket_quantile(&before.buckets(h), &after.buckets(h), 0.99),
@@ -275,7 +286,10 @@ pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Res
             seconds,
             drain,
             cpu,
+            rss_ready,
+            rss_end,
             rss_peak,
+            server_cpu,
             faults: (faults.len(), latencies.len()),
             latencies,
             internal,
@@ -569,6 +583,9 @@ pub async fn baseline(setup: &Setup, python: &Path, load: Load) -> anyhow::Resul
             last = n;
         };
         let cpu0 = measure::cpu_seconds(pid)?;
+        let (rss_ready, _) = measure::rss(pid)?;
+        let own = std::process::id();
+        let server0 = measure::cpu_seconds(own)?;
         let run = Generator::start(&server, load.rate, setup.fault_every, setup.fault_hold, 2);
         tokio::time::sleep(setup.seconds).await;
         let (produced, faults, lag, seconds) = run.stop();
@@ -590,7 +607,8 @@ pub async fn baseline(setup: &Setup, python: &Path, load: Load) -> anyhow::Resul
         };
         let drain = last.1.saturating_duration_since(stopped).as_secs_f64();
         let cpu = measure::cpu_seconds(pid)? - cpu0;
-        let (_, rss_peak) = measure::rss(pid)?;
+        let server_cpu = (measure::cpu_seconds(own)? - server0) / (seconds + drain);
+        let (rss_end, rss_peak) = measure::rss(pid)?;
         let seen: Vec<(SystemTime, Option<usize>)> = answer["alarms"]
             .as_array()
             .map(|a| {
@@ -615,7 +633,10 @@ pub async fn baseline(setup: &Setup, python: &Path, load: Load) -> anyhow::Resul
             seconds,
             drain,
             cpu,
+            rss_ready,
+            rss_end,
             rss_peak,
+            server_cpu,
             faults: (faults.len(), latencies.len()),
             latencies,
             internal: None,
@@ -641,18 +662,20 @@ pub fn table(rows: &[Row]) -> String {
         }
     };
     let mut out = String::from(
-        "| subscriber | tags | offered/s | handled/s | CPU (core) | CPU µs/change | RSS peak | alarm latency p50 / p99 (ms) | agent's own p50 / p99 | faults reported | lost | drain |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| subscriber | tags | offered/s | handled/s | CPU (core) | CPU µs/change | RSS ready / end / peak (MB) | alarm latency p50 / p99 (ms) | agent's own p50 / p99 | faults reported | lost | drain | load server CPU |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         out.push_str(&format!(
-            "| {} | {} | {} | {:.0} | {:.0} % | {:.2} | {:.1} MB | {} / {} | {} | {}/{} | {} | {:.1} s |\n",
+            "| {} | {} | {} | {:.0} | {:.0} % | {:.2} | {:.0} / {:.0} / {:.0} | {} / {} | {} | {}/{} | {} | {:.1} s | {:.0} % |\n",
             r.subject,
             r.load.tags,
             r.load.rate,
             r.rate(),
             r.cpu_share() * 100.0,
             r.cpu_per_change_us(),
+            r.rss_ready as f64 / 1048576.0,
+            r.rss_end as f64 / 1048576.0,
             r.rss_peak as f64 / 1048576.0,
             ms(measure::quantile(&r.latencies, 0.5)),
             ms(measure::quantile(&r.latencies, 0.99)),
@@ -662,6 +685,7 @@ pub fn table(rows: &[Row]) -> String {
             r.faults.0,
             r.lost(),
             r.drain,
+            r.server_cpu * 100.0,
         ));
     }
     let mut ratios = String::new();

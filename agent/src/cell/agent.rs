@@ -191,14 +191,8 @@ pub async fn start_with(config: CellConfig, options: Options) -> Result<Agent, S
     let session = crate::sinks::zenoh::open_agent(&config.zenoh).await?;
     let prefix = config.zenoh.prefix.clone();
     let (requests_tx, requests_rx) = mpsc::channel(REQUEST_CAPACITY);
-    let services = Services::declare(
-        &session,
-        &prefix,
-        journal.path(),
-        requests_tx,
-        metrics.clone(),
-    )
-    .await?;
+    let services =
+        Services::declare(&session, &prefix, &journal, requests_tx, metrics.clone()).await?;
     let publisher = ZenohPublisher::start(session.clone(), &prefix, metrics.clone()).await?;
     let (stop, stop_rx) = watch::channel(false);
     let stopped = |mut rx: watch::Receiver<bool>| async move {

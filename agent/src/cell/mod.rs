@@ -32,7 +32,7 @@ use crate::operator::{clip, Action, Command, Gate, NotACommand};
 use crate::payload::{
     AlarmPayload, LastFault, Quality, SnapshotPayload, StatePayload, TagValue, SNAPSHOT_SCHEMA,
 };
-use crate::sinks::Sink;
+use crate::sinks::{Settled, Sink};
 use crate::sources::{SourceEvent, Write, WriteRequest, WriteSender};
 
 /// The longest the loop sleeps without looking at the time: deadlines wake
@@ -493,9 +493,44 @@ impl CellLoop {
     async fn request(&mut self, r: Request) {
         match r {
             Request::Snapshot(reply) => {
-                let _ = reply.send(self.snapshot());
+                let snapshot = self.snapshot();
+                let settled = self.settled();
+                tokio::spawn(async move {
+                    settled.await;
+                    let _ = reply.send(snapshot);
+                });
             }
-            Request::Command { command, reply } => self.command(command, reply).await,
+            Request::Command { command, reply } => {
+                // The outcome may come later (a forced transition's pulse
+                // and read-back); it is sent once its rows are durable.
+                let (outcome_tx, outcome) = oneshot::channel();
+                self.command(command, outcome_tx).await;
+                let sinks: Vec<Settled> = self.sinks.iter().filter_map(|s| s.settled()).collect();
+                tokio::spawn(async move {
+                    if let Ok(outcome) = outcome.await {
+                        for s in &sinks {
+                            s().await;
+                        }
+                        let _ = reply.send(outcome);
+                    }
+                });
+            }
+        }
+    }
+
+    /// A future that completes once every step dispatched so far is
+    /// durable in every sink that keeps steps.
+    fn settled(&self) -> impl Future<Output = ()> + Send + 'static {
+        let waits: Vec<_> = self
+            .sinks
+            .iter()
+            .filter_map(|s| s.settled())
+            .map(|s| s())
+            .collect();
+        async move {
+            for w in waits {
+                w.await;
+            }
         }
     }
 

@@ -1,8 +1,10 @@
 //! Where the cell's steps go.
 //!
 //! The cell loop hands every [`CellStep`] to its sinks, in order: the
-//! journal first (an alarm is on disk before anyone hears of it), then
-//! Zenoh, the metrics and, in the demo, the console. A sink sees each step
+//! journal first (its rows queued for the writer thread), then Zenoh, the
+//! metrics and, in the demo, the console. Answers to clients (snapshots,
+//! command outcomes, history) wait for every sink to be [`Sink::settled`]:
+//! nothing is shown that a crash would forget. A sink sees each step
 //! once and never reads the engine.
 //!
 //! - [`journal`]: the SQLite journal (rows, history queries, reports).
@@ -24,6 +26,9 @@ use tokio::sync::mpsc;
 
 use crate::cell::CellStep;
 
+/// Waits for a sink's steps so far to be durable (see [`Sink::settled`]).
+pub type Settled = std::sync::Arc<dyn Fn() -> BoxFuture<'static, ()> + Send + Sync>;
+
 /// A consumer of the cell's steps.
 pub trait Sink: Send {
     /// The sink's name, for logs.
@@ -32,6 +37,13 @@ pub trait Sink: Send {
     /// Takes one step. A sink that fails logs and counts its failure; it
     /// never stops the loop.
     fn handle<'a>(&'a mut self, step: &'a CellStep) -> BoxFuture<'a, ()>;
+
+    /// For a durable sink: a function whose future completes once every
+    /// step handed to the sink before the call is durable. The loop sends
+    /// its answers to clients after it.
+    fn settled(&self) -> Option<Settled> {
+        None
+    }
 
     /// The loop is stopping: release what the sink holds (declarations,
     /// files). Called once, after the last step.

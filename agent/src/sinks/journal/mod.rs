@@ -309,6 +309,36 @@ pub struct Journal {
     thread: std::sync::Arc<std::sync::Mutex<Option<std::thread::JoinHandle<()>>>>,
 }
 
+/// Waits until every row queued before the call is committed, or known
+/// unwritable (the journal is failing and keeps them for its retries):
+/// answers that follow it (history, snapshots, command outcomes) never
+/// show what a crash would forget.
+#[derive(Clone)]
+pub struct Barrier {
+    tx: mpsc::WeakSender<Batch>,
+}
+
+impl Barrier {
+    /// Returns once the rows queued so far are committed (at once when the
+    /// journal is closed).
+    pub async fn settled(&self) {
+        let Some(tx) = self.tx.upgrade() else {
+            return;
+        };
+        let (done, committed) = oneshot::channel();
+        let sent = tx
+            .send(Batch {
+                entries: Vec::new(),
+                done: Some(done),
+            })
+            .await;
+        drop(tx);
+        if sent.is_ok() {
+            let _ = committed.await;
+        }
+    }
+}
+
 /// What the writer thread reports after each batch.
 pub trait CommitObserver: Send + 'static {
     /// A batch of `rows` rows was committed in `took`.
@@ -378,6 +408,15 @@ impl Journal {
         self.send(vec![entry], None).await
     }
 
+    /// Queues entries, in order, without waiting for their commit (see
+    /// [`Journal::barrier`]). Waits only if the writer is far behind.
+    ///
+    /// # Errors
+    /// The writer has stopped.
+    pub async fn queue(&self, entries: Vec<Entry>) -> Result<(), JournalError> {
+        self.send(entries, None).await
+    }
+
     /// Writes `entries` and returns once they are committed.
     ///
     /// # Errors
@@ -420,6 +459,14 @@ impl Journal {
         drop(self.tx);
         if let Some(thread) = thread {
             let _ = tokio::task::spawn_blocking(move || thread.join()).await;
+        }
+    }
+
+    /// A handle that waits for the rows queued so far to be committed; it
+    /// does not keep the journal open.
+    pub fn barrier(&self) -> Barrier {
+        Barrier {
+            tx: self.tx.downgrade(),
         }
     }
 
@@ -555,6 +602,11 @@ fn writer(
             observer.pending(pending.len());
             for done in waiting.drain(..) {
                 let _ = done.send(outcome.clone());
+            }
+        } else {
+            // Nothing pending: every row queued before these is committed.
+            for done in waiting.drain(..) {
+                let _ = done.send(Ok(()));
             }
         }
         if closed {

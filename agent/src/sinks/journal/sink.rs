@@ -1,13 +1,15 @@
 //! The journal as a sink: alarm transitions, state changes, parts and
-//! operator commands become rows, committed before the next sink (Zenoh)
-//! sees the step.
+//! operator commands become rows, queued in order for the writer thread
+//! before the next sink (Zenoh) sees the step; answers to clients wait for
+//! them to be committed ([`Sink::settled`]).
 
 use futures_util::future::BoxFuture;
 use futures_util::FutureExt;
 
 use super::{Entry, Journal};
 use crate::cell::{CellStep, Input};
-use crate::sinks::Sink;
+use crate::sinks::{Settled, Sink};
+use std::sync::Arc;
 
 /// Writes each step's rows and waits for their commit.
 pub struct JournalSink {
@@ -90,16 +92,26 @@ impl Sink for JournalSink {
             if rows.is_empty() {
                 return;
             }
-            // Committed before Zenoh publishes: a client who saw the alarm
-            // finds it in `history`. A journal that cannot write keeps the
-            // rows in its bounded queue and retries (the writer logs it
-            // once, and the cell loop raises the `journal` alarm); the
-            // alarm is still published.
-            if let Err(e) = self.journal.commit(rows).await {
-                tracing::debug!(error = %e, "journal rows queued, not yet written");
+            // Queued in order, not waited for: the alarm goes out now and
+            // is committed by the writer thread within its batch. Whatever
+            // answers a client later (history, snapshot, a command's
+            // outcome) waits for the journal first (`settled`), so no one
+            // is shown what a crash would forget. A journal that cannot
+            // write keeps the rows in its bounded queue and retries (the
+            // cell loop raises the `journal` alarm).
+            if let Err(e) = self.journal.queue(rows).await {
+                tracing::debug!(error = %e, "journal rows not queued");
             }
         }
         .boxed()
+    }
+
+    fn settled(&self) -> Option<Settled> {
+        let barrier = self.journal.barrier();
+        Some(Arc::new(move || {
+            let b = barrier.clone();
+            async move { b.settled().await }.boxed()
+        }))
     }
 
     fn close(self: Box<Self>) -> BoxFuture<'static, ()> {

@@ -35,7 +35,7 @@ use crate::cell::{CommandOutcome, Request};
 use crate::clock::{now_ms, parse_time};
 use crate::metrics::Metrics;
 use crate::operator::{Command, NotACommand};
-use crate::sinks::journal::{self, HistoryQuery};
+use crate::sinks::journal::{self, Barrier, HistoryQuery, Journal};
 
 /// Queries answered at the same time; more are refused as busy.
 pub const MAX_CONCURRENT: usize = 16;
@@ -58,6 +58,9 @@ pub struct Services {
     snapshot: Queryable,
     command: Queryable,
     journal: PathBuf,
+    /// Waits for the journal's queued rows: a history page shows every
+    /// alarm already published.
+    journal_settled: Barrier,
     /// Requests to the cell loop (snapshot, command), answered on a
     /// one-shot channel each.
     requests: mpsc::Sender<Request>,
@@ -76,7 +79,7 @@ impl Services {
     pub async fn declare(
         session: &Session,
         prefix: &str,
-        journal: &Path,
+        journal: &Journal,
         requests: mpsc::Sender<Request>,
         metrics: Arc<Metrics>,
     ) -> Result<Services, ZenohError> {
@@ -97,7 +100,8 @@ impl Services {
             history: declare("history").await?,
             snapshot: declare("snapshot").await?,
             command: declare("command").await?,
-            journal: journal.to_path_buf(),
+            journal: journal.path().to_path_buf(),
+            journal_settled: journal.barrier(),
             requests,
             permits: Arc::new(Semaphore::new(MAX_CONCURRENT)),
             history_permits: Arc::new(Semaphore::new(MAX_CONCURRENT_HISTORY)),
@@ -128,8 +132,9 @@ impl Services {
                 reply(&self.metrics, q, Err("the agent is busy: try again".into())).await;
                 continue;
             }
-            let (journal, requests, metrics) = (
+            let (journal, settled, requests, metrics) = (
                 self.journal.clone(),
+                self.journal_settled.clone(),
                 self.requests.clone(),
                 self.metrics.clone(),
             );
@@ -137,7 +142,10 @@ impl Services {
                 let _permits = (permit, history_permit);
                 let result = match kind {
                     Kind::History => match history_query(q.parameters().as_str(), now_ms()) {
-                        Ok(query) => history(&journal, query).await,
+                        Ok(query) => {
+                            settled.settled().await;
+                            history(&journal, query).await
+                        }
                         Err(e) => {
                             metrics.refused(kind.name(), "invalid");
                             Err(e)
