@@ -233,6 +233,7 @@ pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Res
         ),
     )?;
     if security == Security::SignEncrypt {
+        std::fs::write(dir.join("fault.il"), program())?;
         trust(&config, &dir.join("server-pki"))?;
     }
     let mut child = spawn_agent(&setup.agent, &dir)?;

@@ -7,14 +7,11 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use cellwatch_models::engine::{Reading, TagReading};
-use opcua::client::{
-    MonitoredItem, MonitoredItemMap, OnSubscriptionNotification, OnSubscriptionNotificationCore,
-    Session,
-};
+use opcua::client::{MonitoredItemMap, OnSubscriptionNotificationCore, Session};
 use opcua::types::{
-    DataChangeFilter, DataChangeTrigger, DataValue, ExtensionObject, MonitoredItemCreateRequest,
-    MonitoringMode, MonitoringParameters, NodeId, NotificationMessage, ReadValueId,
-    StatusChangeNotification, StatusCode, TimestampsToReturn, Variant,
+    DataChangeFilter, DataChangeNotification, DataChangeTrigger, DataValue, ExtensionObject,
+    MonitoredItemCreateRequest, MonitoringMode, MonitoringParameters, NodeId, NotificationMessage,
+    ReadValueId, StatusChangeNotification, StatusCode, TimestampsToReturn, Variant,
 };
 use tokio::sync::mpsc::error::TrySendError;
 
@@ -105,8 +102,14 @@ pub(super) async fn subscribe(
     heard.beat();
     // What the server granted, which may be less than asked.
     let queue_size = Arc::new(AtomicU32::new(config.queue_size));
+    // Each node's monitored item gets client handle i + 1 (0 would let the
+    // library choose): a notification finds its tags by index, without a
+    // lookup in the library's item maps or a hash of the node id.
+    let items: Vec<(&NodeId, &Vec<usize>)> = by_node.iter().collect();
+    let by_handle: Arc<Vec<Vec<usize>>> =
+        Arc::new(items.iter().map(|(_, t)| (*t).clone()).collect());
     let callback = InTimeOrder {
-        by_node: by_node.clone(),
+        by_handle,
         uses: uses.clone(),
         tx: tx.clone(),
         heard: heard.clone(),
@@ -147,9 +150,10 @@ pub(super) async fn subscribe(
             })
     };
     let chunk = max_items_per_call(session).await.min(MAX_ITEMS_PER_CALL);
-    let requests: Vec<MonitoredItemCreateRequest> = by_node
+    let requests: Vec<MonitoredItemCreateRequest> = items
         .iter()
-        .map(|(n, tags)| {
+        .enumerate()
+        .map(|(i, (n, tags))| {
             // Several tags on one node are bits of one word: the first
             // says how it is sampled.
             let tag = &uses[tags[0]];
@@ -173,6 +177,7 @@ pub(super) async fn subscribe(
             // When the queue is full the server drops the oldest change and
             // flags the next one it delivers with the overflow bit.
             let params = MonitoringParameters {
+                client_handle: i as u32 + 1,
                 sampling_interval: sampling,
                 queue_size: config.queue_size,
                 discard_oldest: true,
@@ -180,7 +185,7 @@ pub(super) async fn subscribe(
                 ..Default::default()
             };
             MonitoredItemCreateRequest::new(
-                ReadValueId::from(n.clone()),
+                ReadValueId::from((*n).clone()),
                 MonitoringMode::Reporting,
                 params,
             )
@@ -259,7 +264,8 @@ pub(super) async fn subscribe(
 /// they are sorted by source timestamp (stable, so equal times keep the
 /// server's order).
 struct InTimeOrder {
-    by_node: Arc<ByNode>,
+    /// The tags of client handle `i + 1`.
+    by_handle: Arc<Vec<Vec<usize>>>,
     uses: Arc<Vec<TagUse>>,
     tx: SourceSender,
     heard: Arc<Heard>,
@@ -274,8 +280,9 @@ struct InTimeOrder {
 /// The alarm of changes lost in the server's queues (kind `system`).
 pub const OVERFLOW_ALARM: &str = "opcua-overflow";
 
+/// One publish's readings, in the server's order.
 struct Collector<'a> {
-    by_node: &'a ByNode,
+    by_handle: &'a [Vec<usize>],
     uses: &'a [TagUse],
     readings: Vec<TagReading>,
     /// Tags with a value flagged `Overflow` in this publish.
@@ -284,26 +291,50 @@ struct Collector<'a> {
     closed: Option<StatusCode>,
 }
 
-impl OnSubscriptionNotification for Collector<'_> {
-    fn on_subscription_status_change(&mut self, notification: StatusChangeNotification) {
-        if notification.status.is_bad() {
-            self.closed = Some(notification.status);
+impl Collector<'_> {
+    fn notification(&mut self, notification: NotificationMessage) {
+        for obj in notification.notification_data.into_iter().flatten() {
+            if obj.inner_is::<DataChangeNotification>() {
+                let Some(change) = obj.into_inner_as::<DataChangeNotification>() else {
+                    continue;
+                };
+                let items = change.monitored_items.unwrap_or_default();
+                self.readings.reserve(items.len());
+                for n in items {
+                    self.data_value(n.client_handle, n.value);
+                }
+            } else if obj.inner_is::<StatusChangeNotification>() {
+                if let Some(status) = obj.into_inner_as::<StatusChangeNotification>() {
+                    if status.status.is_bad() {
+                        self.closed = Some(status.status);
+                    }
+                }
+            }
         }
     }
 
-    fn on_data_value(&mut self, value: DataValue, item: &MonitoredItem) {
-        if let Some(tags) = self.by_node.get(&item.item_to_monitor().node_id) {
-            let at = source_time(&value);
-            for &tag in tags {
-                if value.status.is_some_and(|s| s.overflow()) {
-                    self.overflowed.insert(tag);
-                }
-                self.readings.push(TagReading {
-                    tag,
-                    reading: reading(&value, &self.uses[tag]),
-                    source_time: at,
-                });
+    fn data_value(&mut self, handle: u32, value: DataValue) {
+        let Some(tags) = (handle as usize)
+            .checked_sub(1)
+            .and_then(|i| self.by_handle.get(i))
+        else {
+            tracing::warn!(
+                handle,
+                "a notification for a monitored item this agent did not create"
+            );
+            return;
+        };
+        let at = source_time(&value);
+        let overflow = value.status.is_some_and(|s| s.overflow());
+        for &tag in tags {
+            if overflow {
+                self.overflowed.insert(tag);
             }
+            self.readings.push(TagReading {
+                tag,
+                reading: reading(&value, &self.uses[tag]),
+                source_time: at,
+            });
         }
     }
 }
@@ -312,18 +343,18 @@ impl OnSubscriptionNotificationCore for InTimeOrder {
     fn on_subscription_notification(
         &mut self,
         notification: NotificationMessage,
-        items: MonitoredItemMap<'_>,
+        _items: MonitoredItemMap<'_>,
     ) {
         // Keep-alives (no data) come here too: the subscription is alive.
         self.heard.beat();
         let mut c = Collector {
-            by_node: &self.by_node,
+            by_handle: &self.by_handle,
             uses: &self.uses,
             readings: Vec::new(),
             overflowed: BTreeSet::new(),
             closed: None,
         };
-        c.on_subscription_notification(notification, items);
+        c.notification(notification);
         if let Some(status) = c.closed {
             // The supervisor sees it and subscribes again.
             tracing::warn!(%status, "the server closed the subscription");
