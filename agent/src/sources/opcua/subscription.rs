@@ -182,7 +182,6 @@ pub(super) async fn subscribe(
                 queue_size: config.queue_size,
                 discard_oldest: true,
                 filter: ExtensionObject::from_message(filter),
-                ..Default::default()
             };
             MonitoredItemCreateRequest::new(
                 ReadValueId::from((*n).clone()),
