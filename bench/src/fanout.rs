@@ -38,18 +38,7 @@ pub struct Setup {
 
 /// Serves as a Zenoh router on `listen` until killed.
 pub async fn router(listen: &str) -> anyhow::Result<()> {
-    let mut config = zenoh::Config::default();
-    let set = |c: &mut zenoh::Config, k: &str, v: &str| {
-        c.insert_json5(k, v)
-            .map_err(|e| anyhow!("zenoh configuration {k}: {e}"))
-    };
-    set(&mut config, "mode", "\"router\"")?;
-    set(
-        &mut config,
-        "listen/endpoints",
-        &serde_json::to_string(&[listen])?,
-    )?;
-    set(&mut config, "scouting/multicast/enabled", "false")?;
+    let config = peer::zenoh_config("router", &[listen.to_string()], &[])?;
     let _session = zenoh::open(config).await.map_err(|e| anyhow!("{e}"))?;
     println!("ready");
     std::future::pending::<()>().await;

@@ -144,6 +144,68 @@ impl Row {
     }
 }
 
+/// A subscriber's process measured from the start of the load.
+struct Window {
+    pid: u32,
+    cpu0: f64,
+    rss_ready: u64,
+    /// This process's CPU (the load server's) at the start.
+    server0: f64,
+}
+
+/// What a [`Window`] measured.
+struct Measured {
+    cpu: f64,
+    server_cpu: f64,
+    rss_ready: u64,
+    rss_end: u64,
+    rss_peak: u64,
+}
+
+impl Window {
+    fn open(pid: u32) -> anyhow::Result<Window> {
+        Ok(Window {
+            pid,
+            cpu0: measure::cpu_seconds(pid)?,
+            rss_ready: measure::rss(pid)?.0,
+            server0: measure::cpu_seconds(std::process::id())?,
+        })
+    }
+
+    /// The figures after `seconds` of load and drain.
+    fn close(self, seconds: f64) -> anyhow::Result<Measured> {
+        let (rss_end, rss_peak) = measure::rss(self.pid)?;
+        Ok(Measured {
+            cpu: measure::cpu_seconds(self.pid)? - self.cpu0,
+            server_cpu: (measure::cpu_seconds(std::process::id())? - self.server0) / seconds,
+            rss_ready: self.rss_ready,
+            rss_end,
+            rss_peak,
+        })
+    }
+}
+
+/// A Zenoh configuration: `mode`, the `listen` and `connect` endpoints,
+/// no multicast scouting.
+pub fn zenoh_config(
+    mode: &str,
+    listen: &[String],
+    connect: &[String],
+) -> anyhow::Result<zenoh::Config> {
+    let mut config = zenoh::Config::default();
+    for (key, value) in [
+        ("mode", serde_json::to_string(mode)?),
+        ("listen/endpoints", serde_json::to_string(listen)?),
+        ("connect/endpoints", serde_json::to_string(connect)?),
+        ("scouting/multicast/enabled", "false".to_string()),
+    ] {
+        config
+            .insert_json5(key, &value)
+            .map_err(|e| anyhow!("zenoh configuration {key}: {e}"))?;
+    }
+    Ok(config)
+}
+
 /// A free loopback port (bound, then released for the agent to take).
 pub fn free_port() -> anyhow::Result<u16> {
     Ok(TcpListener::bind("127.0.0.1:0")?.local_addr()?.port())
@@ -244,10 +306,7 @@ pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Res
         wait_ready(&mut child, metrics, &dir).await?;
         let before = Scrape::get(metrics)?;
         let c0 = handled(&before);
-        let cpu0 = measure::cpu_seconds(pid)?;
-        let (rss_ready, _) = measure::rss(pid)?;
-        let own = std::process::id();
-        let server0 = measure::cpu_seconds(own)?;
+        let window = Window::open(pid)?;
         let run = Generator::start(&server, load.rate, setup.fault_every, setup.fault_hold, 2);
         tokio::time::sleep(setup.seconds).await;
         let (produced, faults, lag, seconds) = run.stop();
@@ -266,9 +325,7 @@ pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Res
             tokio::time::sleep(Duration::from_millis(50)).await;
         };
         let drain = last.1.saturating_duration_since(stopped).as_secs_f64();
-        let cpu = measure::cpu_seconds(pid)? - cpu0;
-        let server_cpu = (measure::cpu_seconds(own)? - server0) / (seconds + drain);
-        let (rss_end, rss_peak) = measure::rss(pid)?;
+        let m = window.close(seconds + drain)?;
         let h = "cellwatch_alarm_latency_seconds";
         let internal = measure::bucket_quantile(&before.buckets(h), &after.buckets(h), 0.5).zip(
             measure::bucket_quantile(&before.buckets(h), &after.buckets(h), 0.99),
@@ -286,11 +343,11 @@ pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Res
             received: handled(&after) - c0,
             seconds,
             drain,
-            cpu,
-            rss_ready,
-            rss_end,
-            rss_peak,
-            server_cpu,
+            cpu: m.cpu,
+            rss_ready: m.rss_ready,
+            rss_end: m.rss_end,
+            rss_peak: m.rss_peak,
+            server_cpu: m.server_cpu,
             faults: (faults.len(), latencies.len()),
             latencies,
             internal,
@@ -388,19 +445,7 @@ pub type Seen = Arc<Mutex<HashMap<String, Vec<(SystemTime, Option<usize>)>>>>;
 /// Subscribes to the alarms of `cells` (a key expression chunk: `bench`,
 /// `*`) through a peer session connected to `endpoints`.
 pub async fn subscribe_alarms(endpoints: &[String], cells: &str) -> anyhow::Result<Seen> {
-    let mut config = zenoh::Config::default();
-    let set = |c: &mut zenoh::Config, k: &str, v: &str| {
-        c.insert_json5(k, v)
-            .map_err(|e| anyhow!("zenoh configuration {k}: {e}"))
-    };
-    set(&mut config, "mode", "\"peer\"")?;
-    set(
-        &mut config,
-        "connect/endpoints",
-        &serde_json::to_string(endpoints)?,
-    )?;
-    set(&mut config, "listen/endpoints", "[]")?;
-    set(&mut config, "scouting/multicast/enabled", "false")?;
+    let config = zenoh_config("peer", &[], endpoints)?;
     let session = zenoh::open(config).await.map_err(|e| anyhow!("{e}"))?;
     let seen: Seen = Arc::default();
     let out = seen.clone();
@@ -583,10 +628,7 @@ pub async fn baseline(setup: &Setup, python: &Path, load: Load) -> anyhow::Resul
             }
             last = n;
         };
-        let cpu0 = measure::cpu_seconds(pid)?;
-        let (rss_ready, _) = measure::rss(pid)?;
-        let own = std::process::id();
-        let server0 = measure::cpu_seconds(own)?;
+        let window = Window::open(pid)?;
         let run = Generator::start(&server, load.rate, setup.fault_every, setup.fault_hold, 2);
         tokio::time::sleep(setup.seconds).await;
         let (produced, faults, lag, seconds) = run.stop();
@@ -607,9 +649,7 @@ pub async fn baseline(setup: &Setup, python: &Path, load: Load) -> anyhow::Resul
             tokio::time::sleep(Duration::from_millis(250)).await;
         };
         let drain = last.1.saturating_duration_since(stopped).as_secs_f64();
-        let cpu = measure::cpu_seconds(pid)? - cpu0;
-        let server_cpu = (measure::cpu_seconds(own)? - server0) / (seconds + drain);
-        let (rss_end, rss_peak) = measure::rss(pid)?;
+        let m = window.close(seconds + drain)?;
         let seen: Vec<(SystemTime, Option<usize>)> = answer["alarms"]
             .as_array()
             .map(|a| {
@@ -633,11 +673,11 @@ pub async fn baseline(setup: &Setup, python: &Path, load: Load) -> anyhow::Resul
             received: answer["received"].as_u64().unwrap_or(0) - c0,
             seconds,
             drain,
-            cpu,
-            rss_ready,
-            rss_end,
-            rss_peak,
-            server_cpu,
+            cpu: m.cpu,
+            rss_ready: m.rss_ready,
+            rss_end: m.rss_end,
+            rss_peak: m.rss_peak,
+            server_cpu: m.server_cpu,
             faults: (faults.len(), latencies.len()),
             latencies,
             internal: None,
