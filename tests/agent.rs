@@ -14,23 +14,14 @@ use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
 use crate::util::root;
 
-/// A free TCP port on loopback.
-pub(crate) fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-/// The demo configuration, pointed at `sim` and at fresh ports and files
-/// under `dir`.
-pub(crate) fn config(dir: &Path, sim_endpoint: &str, zenoh_port: u16) -> CellConfig {
+/// The demo configuration, pointed at `sim`, at files under `dir`, and at
+/// ports the system chooses (its Zenoh listener on port 0: ask the agent).
+pub(crate) fn config(dir: &Path, sim_endpoint: &str) -> CellConfig {
     let mut c = config::load(&root().join("config/demo.toml")).unwrap();
     c.opcua.as_mut().unwrap().endpoint = sim_endpoint.to_string();
     c.opcua.as_mut().unwrap().pki_dir = dir.join("agent-pki");
     c.journal.path = dir.join("journal.sqlite");
-    c.zenoh.listen = vec![format!("tls/127.0.0.1:{zenoh_port}")];
+    c.zenoh.listen = vec!["tls/127.0.0.1:0".into()];
     crate::util::bus_pki(dir, &["agent-m01ps0004"]);
     c.zenoh.tls = Some(crate::util::bus_tls(dir, "agent-m01ps0004"));
     c.metrics = Some("127.0.0.1:0".parse().unwrap());
@@ -52,6 +43,8 @@ pub(crate) struct Fixture {
     pub(crate) agent: Option<Agent>,
     client: zenoh::Session,
     config: CellConfig,
+    /// Where the agent's Zenoh session listens.
+    zenoh_port: u16,
 }
 
 impl Fixture {
@@ -65,10 +58,10 @@ impl Fixture {
             decoy: None,
         };
         let sim = SimulatedCnc::start(&sim_opts).await.unwrap();
-        let zenoh_port = free_port();
-        let config = config(&dir, &sim.endpoint(), zenoh_port);
+        let config = config(&dir, &sim.endpoint());
         crate::util::trust_sim(&config, &dir.join("sim-pki"));
         let agent = cell::start(config.clone(), None).await.unwrap();
+        let zenoh_port = crate::util::agent_port(&agent).await;
         let client = crate::util::operator_session(&dir, "operator-kim", zenoh_port).await;
         let sim_addr = sim.addr();
         Fixture {
@@ -79,6 +72,7 @@ impl Fixture {
             agent: Some(agent),
             client,
             config,
+            zenoh_port,
         }
     }
 
@@ -509,13 +503,13 @@ pub(crate) async fn line_cell(dir: &Path) -> (cellwatch::sim::line::SimulatedLin
     c.opcua.as_mut().unwrap().endpoint = sim.endpoint();
     c.opcua.as_mut().unwrap().pki_dir = dir.join("agent-pki");
     c.journal.path = dir.join("journal.sqlite");
-    let zenoh_port = free_port();
-    c.zenoh.listen = vec![format!("tls/127.0.0.1:{zenoh_port}")];
+    c.zenoh.listen = vec!["tls/127.0.0.1:0".into()];
     crate::util::bus_pki(dir, &["agent-line01"]);
     c.zenoh.tls = Some(crate::util::bus_tls(dir, "agent-line01"));
     c.metrics = Some("127.0.0.1:0".parse().unwrap());
     crate::util::trust_sim(&c, &dir.join("sim-pki"));
     let agent = cell::start(c, None).await.unwrap();
+    let zenoh_port = crate::util::agent_port(&agent).await;
     (sim, agent, zenoh_port)
 }
 
@@ -735,12 +729,7 @@ async fn an_unwritable_journal_raises_its_alarm_and_alarms_still_reach_zenoh() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn only_clients_with_a_plant_certificate_get_in() {
     let fx = Fixture::start().await;
-    let port = fx.config.zenoh.listen[0]
-        .rsplit(':')
-        .next()
-        .unwrap()
-        .parse::<u16>()
-        .unwrap();
+    let port = fx.zenoh_port;
     // Plain TCP to a TLS endpoint, and TLS without a client certificate
     // from the plant CA: nothing to talk to.
     let mut plain = crate::util::client_config(&fx.dir, "operator-kim", port);
@@ -763,12 +752,11 @@ async fn only_clients_with_a_plant_certificate_get_in() {
 /// certificates and port replaced, as a real router in this process.
 async fn router(dir: &Path, access_control: bool) -> (zenoh::Session, u16) {
     crate::util::bus_pki(dir, &["router-1"]);
-    let port = free_port();
     let mut cfg = zenoh::Config::from_file(root().join("config/zenoh/router.json5")).unwrap();
     let pki = dir.join("pki-bus");
     let file = |name: &str| serde_json::to_string(&pki.join(name).display().to_string()).unwrap();
     for (key, value) in [
-        ("listen/endpoints", format!("[\"tls/127.0.0.1:{port}\"]")),
+        ("listen/endpoints", "[\"tls/127.0.0.1:0\"]".to_string()),
         ("transport/link/tls/root_ca_certificate", file("ca.pem")),
         (
             "transport/link/tls/listen_certificate",
@@ -790,7 +778,9 @@ async fn router(dir: &Path, access_control: bool) -> (zenoh::Session, u16) {
     ] {
         cfg.insert_json5(key, &value).unwrap();
     }
-    (zenoh::open(cfg).await.unwrap(), port)
+    let router = zenoh::open(cfg).await.unwrap();
+    let port = crate::util::session_port(&router).await;
+    (router, port)
 }
 
 /// A router (its access control on or off), the simulated CNC, and its
@@ -808,7 +798,7 @@ async fn behind_a_router(
     })
     .await
     .unwrap();
-    let mut c = config(dir, &sim.endpoint(), port);
+    let mut c = config(dir, &sim.endpoint());
     c.zenoh.mode = cellwatch::config::ZenohMode::Client;
     c.zenoh.listen = Vec::new();
     c.zenoh.connect = vec![format!("tls/127.0.0.1:{port}")];

@@ -46,7 +46,7 @@ pki_dir = "pki"
 namespace_uri = "urn:cellwatch:test"
 
 [zenoh]
-listen = ["tls/127.0.0.1:{port}"]
+listen = ["tls/127.0.0.1:0"]
 
 [zenoh.tls]
 ca = "pki-bus/ca.pem"
@@ -59,7 +59,6 @@ path = "{journal}"
 [metrics]
 listen = "127.0.0.1:0"
 "#,
-        port = crate::agent::free_port(),
         journal = dir.join("journal.sqlite").display()
     );
     for n in 1..=13 {

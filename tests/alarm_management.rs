@@ -28,14 +28,14 @@ fn tag_is(s: &serde_json::Value, address: &str, value: bool) -> bool {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn shelves_and_removals_are_signed_permitted_and_survive_a_restart() {
     let d = tempfile::tempdir().unwrap();
-    let (sim, cell) = start(d.path()).await;
+    let (sim, mut cell) = start(d.path()).await;
     // Kim may acknowledge and reset, nothing else.
     std::fs::write(
         d.path().join("operators.toml"),
         operators_file(&[Action::Ack, Action::Reset]),
     )
     .unwrap();
-    let mut child = cell.spawn("agent-1.log");
+    let mut child = cell.spawn("agent-1.log").await;
     let client = cell.client().await;
     snapshot_until(&client, "the agent never settled", |s| {
         s["state"] == "running"
@@ -72,7 +72,7 @@ async fn shelves_and_removals_are_signed_permitted_and_survive_a_restart() {
         operators_file(&Action::ALL),
     )
     .unwrap();
-    let mut child = cell.spawn("agent-2.log");
+    let mut child = cell.spawn("agent-2.log").await;
     let client = cell.client().await;
     snapshot_until(&client, "ESE restored", |s| alarm(s, "ese").is_some()).await;
     assert_eq!(
@@ -109,7 +109,7 @@ async fn shelves_and_removals_are_signed_permitted_and_survive_a_restart() {
     drop(client);
 
     // A restart keeps the shelf, its expiry and the removal.
-    let mut child = cell.spawn("agent-3.log");
+    let mut child = cell.spawn("agent-3.log").await;
     let client = cell.client().await;
     let after = snapshot_until(&client, "the restarted agent's alarms", |s| {
         alarm(s, "ese").is_some() && alarm(s, "csd").is_some()

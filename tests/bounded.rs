@@ -34,8 +34,8 @@ fn command_bytes(journal: &std::path::Path) -> (i64, i64) {
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn oversized_commands_and_history_floods_stay_bounded() {
     let d = tempfile::tempdir().unwrap();
-    let (sim, cell) = start(d.path()).await;
-    let mut child = cell.spawn("agent.log");
+    let (sim, mut cell) = start(d.path()).await;
+    let mut child = cell.spawn("agent.log").await;
     let client = cell.client().await;
     snapshot_until(&client, "the agent never settled", |s| {
         s["state"] == "running"

@@ -27,8 +27,8 @@ fn metric(body: &str, name: &str) -> Option<f64> {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn killed_agent_keeps_every_committed_row() {
     let dir = tempfile::tempdir().unwrap();
-    let (sim, cell) = crate::spawned::start(dir.path()).await;
-    let mut child = cell.spawn("agent.log");
+    let (sim, mut cell) = crate::spawned::start(dir.path()).await;
+    let mut child = cell.spawn("agent.log").await;
     let metrics_port = cell.metrics_port;
     let addr = format!("127.0.0.1:{metrics_port}");
     // Faults come and go while the agent journals them.

@@ -14,7 +14,7 @@ use cellwatch::sim::robot::{SimulatedRobot, FORCE_SWITCH, STOP_SWITCH};
 use cellwatch_models::alarm::Transition;
 use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
-use crate::agent::{alarm_until, free_port};
+use crate::agent::alarm_until;
 use crate::spawned::kim;
 use crate::util::root;
 
@@ -115,8 +115,7 @@ impl RobotCell {
         ua.endpoint = robot.endpoint();
         ua.pki_dir = dir.join("agent-pki");
         c.journal.path = dir.join("journal.sqlite");
-        let zenoh_port = free_port();
-        c.zenoh.listen = vec![format!("tls/127.0.0.1:{zenoh_port}")];
+        c.zenoh.listen = vec!["tls/127.0.0.1:0".into()];
         crate::util::bus_pki(dir, &["agent-robot01"]);
         c.zenoh.tls = Some(crate::util::bus_tls(dir, "agent-robot01"));
         c.metrics = None;
@@ -137,6 +136,7 @@ impl RobotCell {
         crate::util::trust_sim(&c, &dir.join("sim-pki"));
         let journal = c.journal.path.clone();
         let agent = cell::start(c, None).await.unwrap();
+        let zenoh_port = crate::util::agent_port(&agent).await;
         let bus = crate::util::operator_session(dir, "operator-kim", zenoh_port).await;
         RobotCell {
             robot,

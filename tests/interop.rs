@@ -129,10 +129,7 @@ async fn node_opcua_server_five_thousand_items_bursts_and_a_restart() {
     const TAGS: usize = 5000;
     let dir = tempfile::tempdir().unwrap();
     let server_pki = dir.path().join("server-pki");
-    let port = {
-        let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-        l.local_addr().unwrap().port()
-    };
+    let port = crate::util::restartable_port();
     // Mutual trust, certificate by certificate.
     trusted_by_server(&dir.path().join("agent-pki"), &server_pki);
     let mut server = tokio::task::spawn_blocking({
@@ -256,10 +253,7 @@ async fn node_opcua_network_cut_longer_than_the_subscription_lifetime() {
         .try_init();
     let dir = tempfile::tempdir().unwrap();
     let server_pki = dir.path().join("server-pki");
-    let port = {
-        let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-        l.local_addr().unwrap().port()
-    };
+    let port = crate::util::restartable_port();
     trusted_by_server(&dir.path().join("agent-pki"), &server_pki);
     let server = tokio::task::spawn_blocking({
         let server_pki = server_pki.clone();

@@ -483,8 +483,7 @@ async fn moulding_agent(
     let l = c.legacy.as_mut().unwrap();
     l.transport = transport;
     l.poll_interval = Duration::from_millis(100);
-    let port = crate::agent::free_port();
-    c.zenoh.listen = vec![format!("tls/127.0.0.1:{port}")];
+    c.zenoh.listen = vec!["tls/127.0.0.1:0".into()];
     crate::util::bus_pki(dir, &["agent-moulding-bus1"]);
     c.zenoh.tls = Some(crate::util::bus_tls(dir, "agent-moulding-bus1"));
     c.journal.path = dir.join("journal.sqlite");
@@ -493,6 +492,7 @@ async fn moulding_agent(
     std::fs::write(&operators_file, operators).unwrap();
     c.operators_file = Some(operators_file);
     let agent = cellwatch::cell::start(c, None).await.unwrap();
+    let port = crate::util::agent_port(&agent).await;
     let client = crate::util::operator_session(dir, "operator-kim", port).await;
     (bus, server, agent, client, port)
 }
@@ -777,7 +777,7 @@ async fn each_unit_a_cell_of_its_own_reports_its_day_as_the_simulator_logged_it(
         let l = c.legacy.as_mut().unwrap();
         l.transport = Transport::Tcp(addr.to_string());
         l.poll_interval = Duration::from_millis(20);
-        c.zenoh.listen = vec![format!("tls/127.0.0.1:{}", crate::agent::free_port())];
+        c.zenoh.listen = vec!["tls/127.0.0.1:0".into()];
         c.zenoh.tls = Some(crate::util::bus_tls(dir.path(), &format!("agent-{name}")));
         c.journal.path = dir.path().join(format!("{name}.sqlite"));
         c.metrics = None;

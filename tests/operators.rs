@@ -7,7 +7,7 @@ use crate::util::cellwatch;
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn operators_act_within_their_permissions_and_agents_hold_no_private_key() {
     let d = tempfile::tempdir().unwrap();
-    let (sim, cell) = start(d.path()).await;
+    let (sim, mut cell) = start(d.path()).await;
     // lee may acknowledge, not reset; a stranger's key is in no file.
     let lee_key = d.path().join("lee.key");
     let made = cellwatch(&[
@@ -57,7 +57,7 @@ async fn operators_act_within_their_permissions_and_agents_hold_no_private_key()
         again.stderr
     );
 
-    let mut child = cell.spawn("agent.log");
+    let mut child = cell.spawn("agent.log").await;
     let client = cell.client().await;
     sim.set("X0.06", false).unwrap();
     snapshot_until(&client, "ESE raised", |s| alarm(s, "ese").is_some()).await;

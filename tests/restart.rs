@@ -10,9 +10,9 @@ use crate::spawned::{alarm, query, scrape, send, signed, snapshot_until, start};
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn killed_agent_restores_its_alarms_and_refuses_replays() {
     let d = tempfile::tempdir().unwrap();
-    let (sim, cell) = start(d.path()).await;
+    let (sim, mut cell) = start(d.path()).await;
 
-    let mut child = cell.spawn("agent-1.log");
+    let mut child = cell.spawn("agent-1.log").await;
     let client = cell.client().await;
     snapshot_until(&client, "the agent never settled", |s| {
         s["state"] == "running"
@@ -46,7 +46,7 @@ async fn killed_agent_restores_its_alarms_and_refuses_replays() {
     child.wait().unwrap();
     drop(client);
 
-    let mut child = cell.spawn("agent-2.log");
+    let mut child = cell.spawn("agent-2.log").await;
     let client = cell.client().await;
     let after = snapshot_until(&client, "the restarted agent's alarms", |s| {
         ["ese", "tmr-001", "tmr-002"]

@@ -9,7 +9,6 @@ use std::time::Duration;
 use cellwatch::operator::{Action, Command as OperatorCommand, OperatorKey};
 use cellwatch::sim::cnc::{SimOptions, SimulatedCnc};
 
-use crate::agent::free_port;
 use crate::util::root;
 
 pub(crate) const KEY: &str = "00112233445566778899aabbccddeeff00112233445566778899aabbccddeeff";
@@ -44,18 +43,55 @@ const TIMERS: &str = r#"{
 pub(crate) struct Cell {
     pub(crate) dir: PathBuf,
     pub(crate) config: PathBuf,
+    /// Where the running agent's Zenoh session listens (it listens on
+    /// port 0: known once [`Cell::spawn`] has returned).
     pub(crate) zenoh_port: u16,
+    /// Where the running agent serves `/metrics` (the same).
     pub(crate) metrics_port: u16,
 }
 
 impl Cell {
-    pub(crate) fn spawn(&self, log: &str) -> Child {
-        Command::new(env!("CARGO_BIN_EXE_cellwatch"))
+    /// Starts `cellwatch run` on the cell, its standard error copied to
+    /// `log` in the cell's directory, and returns once the agent has said
+    /// where it listens (its "agent running" line), these ports recorded.
+    pub(crate) async fn spawn(&mut self, log: &str) -> Child {
+        use std::io::{BufRead, Write};
+        let mut child = Command::new(env!("CARGO_BIN_EXE_cellwatch"))
             .args(["run", self.config.to_str().unwrap()])
             .stdout(Stdio::null())
-            .stderr(std::fs::File::create(self.dir.join(log)).unwrap())
+            .stderr(Stdio::piped())
             .spawn()
-            .unwrap()
+            .unwrap();
+        let stderr = child.stderr.take().unwrap();
+        let mut file = std::fs::File::create(self.dir.join(log)).unwrap();
+        let (tx, running) = tokio::sync::oneshot::channel();
+        std::thread::spawn(move || {
+            let mut tx = Some(tx);
+            for line in std::io::BufReader::new(stderr)
+                .lines()
+                .map_while(Result::ok)
+            {
+                let _ = writeln!(file, "{line}");
+                if line.contains("agent running") {
+                    if let Some(tx) = tx.take() {
+                        let _ = tx.send(line);
+                    }
+                }
+            }
+        });
+        let line = match tokio::time::timeout(Duration::from_secs(60), running).await {
+            Ok(Ok(line)) => line,
+            _ => panic!("the agent never said it runs:\n{}", self.log(log)),
+        };
+        let field = |name: &str| -> u16 {
+            line.split_whitespace()
+                .find_map(|w| w.strip_prefix(name))
+                .and_then(|v| v.split(',').next()?.rsplit(':').next()?.parse().ok())
+                .unwrap_or_else(|| panic!("no {name} port in: {line}"))
+        };
+        self.zenoh_port = field("zenoh=");
+        self.metrics_port = field("metrics=");
+        child
     }
 
     /// `cellwatch alarms --follow --since SINCE --json` for this cell, its
@@ -110,21 +146,17 @@ pub(crate) async fn start(dir: &Path) -> (SimulatedCnc, Cell) {
     (sim, cell)
 }
 
-/// The demo cell plus the two timers, with fresh ports and files in `dir`.
+/// The demo cell plus the two timers, its files in `dir`, its ports chosen
+/// by the system.
 pub(crate) fn cell(dir: &Path, sim: &SimulatedCnc) -> Cell {
-    let zenoh_port = free_port();
-    let metrics_port = free_port();
     std::fs::write(dir.join("timers.json"), TIMERS).unwrap();
     crate::util::bus_pki(dir, &["agent-m01ps0004", "operator-kim"]);
     std::fs::write(dir.join("operators.toml"), operators_file(&Action::ALL)).unwrap();
     let demo = std::fs::read_to_string(root().join("config/demo.toml")).unwrap();
     let config = demo
-        .replace("opc.tcp://127.0.0.1:48400/", &sim.endpoint())
-        .replace("tls/127.0.0.1:7447", &format!("tls/127.0.0.1:{zenoh_port}"))
-        .replace(
-            "# listen = \"127.0.0.1:9464\"",
-            &format!("listen = \"127.0.0.1:{metrics_port}\""),
-        )
+        .replace("opc.tcp://127.0.0.1:4845/", &sim.endpoint())
+        .replace("tls/127.0.0.1:7447", "tls/127.0.0.1:0")
+        .replace("# listen = \"127.0.0.1:9464\"", "listen = \"127.0.0.1:0\"")
         .replace(
             "# path = \"cellwatch-m01ps0004.sqlite\"",
             "path = \"journal.sqlite\"",
@@ -150,8 +182,8 @@ pub(crate) fn cell(dir: &Path, sim: &SimulatedCnc) -> Cell {
     Cell {
         dir: dir.to_path_buf(),
         config: path,
-        zenoh_port,
-        metrics_port,
+        zenoh_port: 0,
+        metrics_port: 0,
     }
 }
 

@@ -113,6 +113,57 @@ pub(crate) fn bus_args(dir: &Path, name: &str, port: u16) -> Vec<String> {
     ]
 }
 
+/// A loopback port for a server given its port on its command line, which
+/// it keeps across a restart (the node-opcua server). It is taken below the
+/// system's ephemeral range, which port 0 and outgoing connections draw
+/// from, so nothing else in the suite can be handed it while the server is
+/// down; distinct within this process; free when chosen.
+pub(crate) fn restartable_port() -> u16 {
+    use std::sync::atomic::{AtomicU32, Ordering};
+    static NEXT: AtomicU32 = AtomicU32::new(0);
+    let ephemeral = std::fs::read_to_string("/proc/sys/net/ipv4/ip_local_port_range")
+        .ok()
+        .and_then(|r| r.split_whitespace().next()?.parse::<u32>().ok())
+        .unwrap_or(32768);
+    let (low, span) = (10_000, ephemeral.saturating_sub(10_000).max(1_000));
+    // Another process running this suite starts elsewhere in the range.
+    let start = std::process::id() * 7919 % span;
+    loop {
+        let n = NEXT.fetch_add(1, Ordering::Relaxed);
+        assert!(n < span, "no free port below {ephemeral}");
+        let port = (low + (start + n) % span) as u16;
+        if std::net::TcpListener::bind(("127.0.0.1", port)).is_ok() {
+            return port;
+        }
+    }
+}
+
+/// The port of the first `tls/` locator among `locators` (what a session
+/// told to listen on port 0 was given).
+pub(crate) fn tls_port(locators: &[String]) -> u16 {
+    locators
+        .iter()
+        .find_map(|l| l.strip_prefix("tls/")?.rsplit(':').next()?.parse().ok())
+        .unwrap_or_else(|| panic!("no tls/ locator among {locators:?}"))
+}
+
+/// The port `agent`'s Zenoh session listens on.
+pub(crate) async fn agent_port(agent: &cellwatch::cell::Agent) -> u16 {
+    tls_port(&agent.zenoh_locators().await)
+}
+
+/// The port a Zenoh `session` listens on (a router's).
+pub(crate) async fn session_port(session: &zenoh::Session) -> u16 {
+    let locators: Vec<String> = session
+        .info()
+        .locators()
+        .await
+        .iter()
+        .map(ToString::to_string)
+        .collect();
+    tls_port(&locators)
+}
+
 /// The lines a child writes on its piped standard output, as they come.
 pub(crate) fn lines_of(child: &mut std::process::Child) -> std::sync::mpsc::Receiver<String> {
     use std::io::BufRead;

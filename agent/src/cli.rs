@@ -541,7 +541,7 @@ pub(crate) struct DemoArgs {
 #[derive(Debug, clap::Args)]
 pub(crate) struct SimulateArgs {
     /// Address to serve OPC UA on.
-    #[arg(long, default_value = "127.0.0.1:48400")]
+    #[arg(long, default_value = "127.0.0.1:4845")]
     pub(crate) listen: std::net::SocketAddr,
     /// The server's PKI directory (own certificate, trusted clients).
     #[arg(long, default_value = "sim-pki")]

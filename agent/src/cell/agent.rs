@@ -102,6 +102,19 @@ impl Agent {
         self.metrics_addr
     }
 
+    /// Where the agent's Zenoh session listens, as locators
+    /// (`tls/127.0.0.1:7447`): with port 0 in `zenoh.listen`, the port the
+    /// system chose.
+    pub async fn zenoh_locators(&self) -> Vec<String> {
+        self.session
+            .info()
+            .locators()
+            .await
+            .iter()
+            .map(ToString::to_string)
+            .collect()
+    }
+
     /// The metrics.
     pub fn metrics(&self) -> &Arc<Metrics> {
         &self.metrics

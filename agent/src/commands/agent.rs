@@ -87,7 +87,13 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
         };
         match cell::start_with(c, options).await {
             Ok(agent) => {
-                tracing::info!(cell, metrics = ?agent.metrics_addr(), "agent running");
+                let zenoh = agent.zenoh_locators().await.join(",");
+                let metrics = agent
+                    .metrics_addr()
+                    .map_or_else(|| "off".to_string(), |a| a.to_string());
+                // Tests and scripts read the ports from this line (port 0
+                // in the configuration: the ones the system chose).
+                tracing::info!(cell, %zenoh, %metrics, "agent running");
                 agents.push(agent);
                 started.push(cell);
             }
