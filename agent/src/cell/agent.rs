@@ -182,7 +182,7 @@ pub async fn start(
 ///
 /// # Errors
 /// See [`StartError`].
-pub async fn start_with(config: CellConfig, options: Options) -> Result<Agent, StartError> {
+pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agent, StartError> {
     for w in &config.warnings {
         tracing::warn!("{w}");
     }
@@ -236,9 +236,14 @@ pub async fn start_with(config: CellConfig, options: Options) -> Result<Agent, S
     if let Some(observer) = options.observer {
         sinks.push(Box::new(ConsoleSink::new(observer)));
     }
-    let mut source = options
-        .source
-        .unwrap_or_else(|| sources::for_config(&config));
+    let forcing = super::force::Forcing::of(&config);
+    let mut source = match options.source {
+        Some(source) => source,
+        None => {
+            let tags = std::mem::take(&mut config.tags);
+            sources::for_config(&config, tags)
+        }
+    };
     let writer = source.writer();
     let allowance = source.delivery_allowance();
     tracing::info!(cell = %config.cell, source = %source.describe(), "starting");
@@ -261,7 +266,7 @@ pub async fn start_with(config: CellConfig, options: Options) -> Result<Agent, S
         .restored(step, state)
         .watching_journal(journal_health)
         .writing_to(writer)
-        .forcing(super::force::Forcing::of(&config));
+        .forcing(forcing);
     let cell_loop = tokio::spawn(cell_loop.run(source_rx, requests_rx, stopped(stop_rx.clone())));
     let services = tokio::spawn(services.run(stopped(stop_rx)));
     Ok(Agent {

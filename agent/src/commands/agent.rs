@@ -72,11 +72,21 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
         configs.push((path.clone(), load(path)?));
     }
     distinct(&configs)?;
+    // Only cells on an `@` bus need their tags here (a 100,000-tag OPC UA
+    // cell's would be a copy held for nothing).
     let cells: Vec<_> = configs
         .iter()
-        .map(|(p, c)| (p.display().to_string(), c.legacy.clone(), c.tags.clone()))
+        .map(|(p, c)| {
+            let tags = c
+                .legacy
+                .as_ref()
+                .map(|_| c.tags.clone())
+                .unwrap_or_default();
+            (p.display().to_string(), c.legacy.clone(), tags)
+        })
         .collect();
     let (shares, buses) = crate::sources::legacy::share_buses(&cells).map_err(Failure::Input)?;
+    drop(cells);
     let mut agents = Vec::new();
     let mut started = Vec::new();
     for ((path, c), share) in configs.into_iter().zip(shares) {

@@ -26,7 +26,7 @@ use std::time::Duration;
 use futures_util::future::BoxFuture;
 use tokio::sync::mpsc;
 
-use crate::config::CellConfig;
+use crate::config::{CellConfig, TagConfig};
 
 /// How many events may wait between a source and the cell loop.
 pub const QUEUE_CAPACITY: usize = 1024;
@@ -174,18 +174,21 @@ pub trait Source: Send + 'static {
     ) -> BoxFuture<'static, Result<(), SourceError>>;
 }
 
-/// The source a cell configuration asks for.
-pub fn for_config(config: &CellConfig) -> Box<dyn Source> {
+/// The source a cell configuration asks for; `tags` are the
+/// configuration's, handed over (the source keeps the one copy a running
+/// agent holds: 144 bytes and three strings a tag).
+pub fn for_config(config: &CellConfig, tags: Vec<TagConfig>) -> Box<dyn Source> {
     match (&config.opcua, &config.legacy) {
-        (_, Some(bus)) => Box::new(legacy::LegacySource::new(bus.clone(), config.tags.clone())),
-        (Some(ua), None) => Box::new(
-            opcua::OpcUaSource::new(&config.cell, ua.clone(), config.tags.clone()).pulsing(
-                config
-                    .sfc
-                    .iter()
-                    .flat_map(|s| s.force_switch.into_iter().chain(s.stop_switch)),
-            ),
-        ),
+        (_, Some(bus)) => Box::new(legacy::LegacySource::new(bus.clone(), tags)),
+        (Some(ua), None) => Box::new(opcua::OpcUaSource::new(
+            &config.cell,
+            ua.clone(),
+            tags,
+            config
+                .sfc
+                .iter()
+                .flat_map(|s| s.force_switch.into_iter().chain(s.stop_switch)),
+        )),
         // A validated configuration has one; one built by hand without
         // either reads nothing.
         (None, None) => Box::new(scripted::ScriptedSource::new().0),

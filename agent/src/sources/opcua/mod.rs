@@ -20,7 +20,7 @@
 //!   recreates its subscription, then [`SourceEvent::Connected`]. Values delivered again after the
 //!   re-creation are filtered by the engine (same value, same timestamp).
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::future::Future;
 use std::sync::Arc;
 use std::time::Duration;
@@ -53,30 +53,65 @@ use crate::config::{
 pub struct OpcUaSource {
     cell: String,
     config: OpcUaConfig,
-    tags: Vec<TagConfig>,
-    /// The tags it may write: the charts' force and stop switches.
-    switches: Vec<usize>,
+    tags: TagTable,
+    /// The tags it may write (the charts' force and stop switches), each
+    /// with its name and address.
+    switches: BTreeMap<usize, String>,
     writes: Option<mpsc::Receiver<WriteRequest>>,
 }
 
 impl OpcUaSource {
-    /// A source for `cell` reading `tags` from the server in `config`.
-    pub fn new(cell: &str, config: OpcUaConfig, tags: Vec<TagConfig>) -> OpcUaSource {
+    /// A source for `cell` reading `tags` from the server in `config`, and
+    /// pulsing `switches` (the force and stop switches; indices into
+    /// `tags`), nothing else. It keeps what it reads of the tags, not the
+    /// tags.
+    pub fn new(
+        cell: &str,
+        config: OpcUaConfig,
+        tags: Vec<TagConfig>,
+        switches: impl IntoIterator<Item = usize>,
+    ) -> OpcUaSource {
+        let switches = switches
+            .into_iter()
+            .filter_map(|i| Some((i, format!("{} ({})", tags.get(i)?.name, tags[i].address))))
+            .collect();
         OpcUaSource {
             cell: cell.into(),
+            tags: TagTable::new(&config, &tags),
             config,
-            tags,
-            switches: Vec::new(),
+            switches,
             writes: None,
         }
     }
+}
 
-    /// Lets the source pulse these tags (the force and stop switches), and
-    /// nothing else.
-    #[must_use]
-    pub fn pulsing(mut self, switches: impl IntoIterator<Item = usize>) -> OpcUaSource {
-        self.switches = switches.into_iter().collect();
-        self
+/// What the source reads of each tag: its node (`None` when its node id
+/// cannot be read), how it is read, its name for messages.
+struct TagTable {
+    nodes: Vec<Option<TagNode>>,
+    uses: Arc<Vec<subscription::TagUse>>,
+    names: Arc<Vec<String>>,
+}
+
+impl TagTable {
+    fn new(config: &OpcUaConfig, tags: &[TagConfig]) -> TagTable {
+        let nodes = tags
+            .iter()
+            .map(
+                |t| match TagNode::parse(&t.node_id, config.namespace_uri.as_deref()) {
+                    Ok(n) => Some(n),
+                    Err(e) => {
+                        tracing::error!(tag = %t.name, error = %e, "tag not read");
+                        None
+                    }
+                },
+            )
+            .collect();
+        TagTable {
+            nodes,
+            uses: Arc::new(tags.iter().map(subscription::TagUse::of).collect()),
+            names: Arc::new(tags.iter().map(|t| t.name.clone()).collect()),
+        }
     }
 }
 
@@ -108,7 +143,7 @@ impl Source for OpcUaSource {
                 rx: self.writes,
                 switches: self.switches,
             };
-            run_writing(&self.cell, &self.config, &self.tags, tx, writes, shutdown).await
+            run_writing(&self.cell, &self.config, self.tags, tx, writes, shutdown).await
         }
         .boxed()
     }
@@ -117,7 +152,8 @@ impl Source for OpcUaSource {
 /// The writes a source takes: pulses of its switches only.
 struct Writes {
     rx: Option<mpsc::Receiver<WriteRequest>>,
-    switches: Vec<usize>,
+    /// The switches, each with its name and address.
+    switches: BTreeMap<usize, String>,
 }
 
 impl Writes {
@@ -315,15 +351,16 @@ pub async fn run(
 ) -> Result<(), SourceError> {
     let writes = Writes {
         rx: None,
-        switches: Vec::new(),
+        switches: BTreeMap::new(),
     };
+    let tags = TagTable::new(config, tags);
     run_writing(cell, config, tags, tx, writes, shutdown).await
 }
 
 async fn run_writing(
     cell: &str,
     config: &OpcUaConfig,
-    tags: &[TagConfig],
+    tags: TagTable,
     tx: SourceSender,
     mut writes: Writes,
     shutdown: impl Future<Output = ()>,
@@ -400,8 +437,8 @@ async fn run_writing(
                     return Ok(());
                 }
                 Some(w) = writes.next() => {
-                    let checked = match (&w.what, tags.get(w.tag), ctx.nodes.get(w.tag).cloned().flatten()) {
-                        (Write::Pulse(held), Some(tag), Some(node)) if writes.switches.contains(&w.tag) => Ok((*held, format!("{} ({})", tag.name, tag.address), node)),
+                    let checked = match (&w.what, writes.switches.get(&w.tag), ctx.nodes.get(w.tag).cloned().flatten()) {
+                        (Write::Pulse(held), Some(name), Some(node)) => Ok((*held, name.clone(), node)),
                         (Write::Value(_), _, _) => Err("this OPC UA source writes only the charts' force and stop switches".to_string()),
                         _ => Err("not a switch of this cell".to_string()),
                     };
@@ -552,25 +589,13 @@ struct Context {
 }
 
 impl Context {
-    fn new(config: &OpcUaConfig, tags: &[TagConfig], tx: SourceSender) -> Context {
-        let nodes = tags
-            .iter()
-            .map(
-                |t| match TagNode::parse(&t.node_id, config.namespace_uri.as_deref()) {
-                    Ok(n) => Some(n),
-                    Err(e) => {
-                        tracing::error!(tag = %t.name, error = %e, "tag not read");
-                        None
-                    }
-                },
-            )
-            .collect();
+    fn new(config: &OpcUaConfig, tags: TagTable, tx: SourceSender) -> Context {
         Context {
             endpoint: config.endpoint.clone(),
             config: config.clone(),
-            nodes,
-            uses: Arc::new(tags.iter().map(subscription::TagUse::of).collect()),
-            names: Arc::new(tags.iter().map(|t| t.name.clone()).collect()),
+            nodes: tags.nodes,
+            uses: tags.uses,
+            names: tags.names,
             tx,
         }
     }
@@ -580,7 +605,7 @@ impl Context {
 struct Live {
     subscription: subscription::Subscribed,
     /// The monitored nodes and their tags.
-    nodes: Vec<(NodeId, Vec<usize>)>,
+    nodes: Arc<subscription::Monitored>,
     /// The namespace array its node ids were resolved against.
     namespaces: Vec<String>,
     heard: Arc<subscription::Heard>,
@@ -714,7 +739,7 @@ async fn supervise(
 /// Tags whose namespace the server does not have are reported bad, and
 /// the [`NAMESPACE_ALARM`] problem names the URIs (or is cleared).
 async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String>) -> Option<Live> {
-    let mut by_node = HashMap::new();
+    let mut found = Vec::new();
     let mut unread = Vec::new();
     let mut missing: BTreeMap<&str, Vec<usize>> = BTreeMap::new();
     for (tag, node) in ctx.nodes.iter().enumerate() {
@@ -723,9 +748,7 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
             continue;
         };
         match (node.resolve(&namespaces), &node.namespace) {
-            (Some(id), _) => {
-                by_node.entry(id).or_insert_with(Vec::new).push(tag);
-            }
+            (Some(id), _) => found.push((id, tag)),
             (None, Namespace::Uri(uri)) => missing.entry(uri).or_default().push(tag),
             (None, Namespace::Index(_)) => unread.push(tag),
         }
@@ -781,14 +804,11 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
             .await;
     }
     let heard = Arc::new(subscription::Heard::new());
-    let nodes: Vec<(NodeId, Vec<usize>)> = by_node
-        .iter()
-        .map(|(n, t)| (n.clone(), t.clone()))
-        .collect();
+    let nodes = Arc::new(subscription::Monitored::group(found));
     let subscription = subscription::subscribe(
         session,
         &ctx.config,
-        &Arc::new(by_node),
+        &nodes,
         &ctx.uses,
         &ctx.names,
         &ctx.tx,
@@ -806,21 +826,19 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
 /// Reads the current value of every node and sends them as readings, in
 /// chunks of [`READ_CHUNK`]. A failed read is logged; the subscription's
 /// liveness check covers what follows.
-async fn read_current(session: &Session, ctx: &Context, nodes: &[(NodeId, Vec<usize>)]) {
-    for part in nodes.chunks(READ_CHUNK) {
-        let ids: Vec<ReadValueId> = part
-            .iter()
-            .map(|(n, _)| ReadValueId::from(n.clone()))
-            .collect();
+async fn read_current(session: &Session, ctx: &Context, nodes: &subscription::Monitored) {
+    for from in (0..nodes.len()).step_by(READ_CHUNK) {
+        let part = || nodes.nodes(from..from + READ_CHUNK);
+        let ids: Vec<ReadValueId> = part().map(|(n, _)| ReadValueId::from(n.clone())).collect();
         match session.read(&ids, TimestampsToReturn::Both, 0.0).await {
             Ok(values) => {
                 let mut readings: Vec<TagReading> = values
                     .iter()
-                    .zip(part)
+                    .zip(part())
                     .flat_map(|(v, (_, tags))| {
                         tags.iter().map(|&tag| TagReading {
-                            tag,
-                            reading: reading(v, &ctx.uses[tag]),
+                            tag: tag as usize,
+                            reading: reading(v, &ctx.uses[tag as usize]),
                             source_time: subscription::source_time(v),
                         })
                     })

@@ -93,7 +93,7 @@ pub(super) struct Subscribed {
 pub(super) async fn subscribe(
     session: &Arc<Session>,
     config: &OpcUaConfig,
-    by_node: &Arc<ByNode>,
+    monitored: &Arc<Monitored>,
     uses: &Arc<Vec<TagUse>>,
     names: &Arc<Vec<String>>,
     tx: &SourceSender,
@@ -105,11 +105,8 @@ pub(super) async fn subscribe(
     // Each node's monitored item gets client handle i + 1 (0 would let the
     // library choose): a notification finds its tags by index, without a
     // lookup in the library's item maps or a hash of the node id.
-    let items: Vec<(&NodeId, &Vec<usize>)> = by_node.iter().collect();
-    let by_handle: Arc<Vec<Vec<usize>>> =
-        Arc::new(items.iter().map(|(_, t)| (*t).clone()).collect());
     let callback = InTimeOrder {
-        by_handle,
+        monitored: monitored.clone(),
         uses: uses.clone(),
         tx: tx.clone(),
         heard: heard.clone(),
@@ -150,55 +147,58 @@ pub(super) async fn subscribe(
             })
     };
     let chunk = max_items_per_call(session).await.min(MAX_ITEMS_PER_CALL);
-    let requests: Vec<MonitoredItemCreateRequest> = items
-        .iter()
-        .enumerate()
-        .map(|(i, (n, tags))| {
-            // Several tags on one node are bits of one word: the first
-            // says how it is sampled.
-            let tag = &uses[tags[0]];
-            let sampling = tag
-                .sampling
-                .unwrap_or(config.sampling_interval)
-                .as_secs_f64()
-                * 1000.0;
-            // Without a filter a server reports value changes only; quality
-            // changes (a broken sensor wire) must be reported too.
-            let (deadband_type, deadband_value) = match tag.deadband {
-                None => (0, 0.0),
-                Some(Deadband::Absolute(v)) => (1, v),
-                Some(Deadband::Percent(v)) => (2, v),
-            };
-            let filter = DataChangeFilter {
-                trigger: DataChangeTrigger::StatusValue,
-                deadband_type,
-                deadband_value,
-            };
-            // When the queue is full the server drops the oldest change and
-            // flags the next one it delivers with the overflow bit.
-            let params = MonitoringParameters {
-                client_handle: i as u32 + 1,
-                sampling_interval: sampling,
-                queue_size: config.queue_size,
-                discard_oldest: true,
-                filter: ExtensionObject::from_message(filter),
-            };
-            MonitoredItemCreateRequest::new(
-                ReadValueId::from((*n).clone()),
-                MonitoringMode::Reporting,
-                params,
-            )
-        })
-        .collect();
+    // Requests are made one call's worth at a time: 100,000 of them at
+    // once would be 15 MB held for the length of the creation.
+    let request = |i: usize, n: &NodeId, tags: &[u32]| {
+        // Several tags on one node are bits of one word: the first
+        // says how it is sampled.
+        let tag = &uses[tags[0] as usize];
+        let sampling = tag
+            .sampling
+            .unwrap_or(config.sampling_interval)
+            .as_secs_f64()
+            * 1000.0;
+        // Without a filter a server reports value changes only; quality
+        // changes (a broken sensor wire) must be reported too.
+        let (deadband_type, deadband_value) = match tag.deadband {
+            None => (0, 0.0),
+            Some(Deadband::Absolute(v)) => (1, v),
+            Some(Deadband::Percent(v)) => (2, v),
+        };
+        let filter = DataChangeFilter {
+            trigger: DataChangeTrigger::StatusValue,
+            deadband_type,
+            deadband_value,
+        };
+        // When the queue is full the server drops the oldest change and
+        // flags the next one it delivers with the overflow bit.
+        let params = MonitoringParameters {
+            client_handle: i as u32 + 1,
+            sampling_interval: sampling,
+            queue_size: config.queue_size,
+            discard_oldest: true,
+            filter: ExtensionObject::from_message(filter),
+        };
+        MonitoredItemCreateRequest::new(
+            ReadValueId::from(n.clone()),
+            MonitoringMode::Reporting,
+            params,
+        )
+    };
     tracing::debug!(
         subscription = sub,
-        items = requests.len(),
+        items = monitored.len(),
         chunk,
         "creating monitored items"
     );
-    for part in requests.chunks(chunk) {
+    for from in (0..monitored.len()).step_by(chunk.max(1)) {
+        let part = || monitored.nodes(from..from + chunk);
+        let requests = part()
+            .enumerate()
+            .map(|(k, (n, tags))| request(from + k, n, tags))
+            .collect();
         match session
-            .create_monitored_items(sub, TimestampsToReturn::Both, part.to_vec())
+            .create_monitored_items(sub, TimestampsToReturn::Both, requests)
             .await
         {
             Ok(results) => {
@@ -228,21 +228,19 @@ pub(super) async fn subscribe(
                         tracing::warn!(asked_ms = sampling, granted_ms = slowest, "the server samples less often than asked: changes shorter than its interval are not seen");
                     }
                 }
-                for (r, req) in results.iter().zip(part) {
+                for (r, (node, tags)) in results.iter().zip(part()) {
                     if !r.result.status_code.is_good() {
-                        tracing::error!(node = %req.item_to_monitor.node_id, status = %r.result.status_code, "monitored item refused");
-                        if let Some(tags) = by_node.get(&req.item_to_monitor.node_id) {
-                            let now = crate::clock::now_ms();
-                            let readings: Vec<TagReading> = tags
-                                .iter()
-                                .map(|&tag| TagReading {
-                                    tag,
-                                    reading: Reading::Bad,
-                                    source_time: now,
-                                })
-                                .collect();
-                            let _ = tx.send(SourceEvent::Readings(readings.into())).await;
-                        }
+                        tracing::error!(node = %node, status = %r.result.status_code, "monitored item refused");
+                        let now = crate::clock::now_ms();
+                        let readings: Vec<TagReading> = tags
+                            .iter()
+                            .map(|&tag| TagReading {
+                                tag: tag as usize,
+                                reading: Reading::Bad,
+                                source_time: now,
+                            })
+                            .collect();
+                        let _ = tx.send(SourceEvent::Readings(readings.into())).await;
                     }
                 }
             }
@@ -263,8 +261,8 @@ pub(super) async fn subscribe(
 /// they are sorted by source timestamp (stable, so equal times keep the
 /// server's order).
 struct InTimeOrder {
-    /// The tags of client handle `i + 1`.
-    by_handle: Arc<Vec<Vec<usize>>>,
+    /// The node of client handle `i + 1`, and its tags.
+    monitored: Arc<Monitored>,
     uses: Arc<Vec<TagUse>>,
     tx: SourceSender,
     heard: Arc<Heard>,
@@ -281,7 +279,7 @@ pub const OVERFLOW_ALARM: &str = "opcua-overflow";
 
 /// One publish's readings, in the server's order.
 struct Collector<'a> {
-    by_handle: &'a [Vec<usize>],
+    monitored: &'a Monitored,
     uses: &'a [TagUse],
     readings: Vec<TagReading>,
     /// Tags with a value flagged `Overflow` in this publish.
@@ -313,9 +311,9 @@ impl Collector<'_> {
     }
 
     fn data_value(&mut self, handle: u32, value: DataValue) {
-        let Some(tags) = (handle as usize)
+        let Some((_, tags)) = (handle as usize)
             .checked_sub(1)
-            .and_then(|i| self.by_handle.get(i))
+            .and_then(|i| self.monitored.node(i))
         else {
             tracing::warn!(
                 handle,
@@ -326,6 +324,7 @@ impl Collector<'_> {
         let at = source_time(&value);
         let overflow = value.status.is_some_and(|s| s.overflow());
         for &tag in tags {
+            let tag = tag as usize;
             if overflow {
                 self.overflowed.insert(tag);
             }
@@ -347,7 +346,7 @@ impl OnSubscriptionNotificationCore for InTimeOrder {
         // Keep-alives (no data) come here too: the subscription is alive.
         self.heard.beat();
         let mut c = Collector {
-            by_handle: &self.by_handle,
+            monitored: &self.monitored,
             uses: &self.uses,
             readings: Vec::new(),
             overflowed: BTreeSet::new(),
@@ -509,8 +508,67 @@ impl TagUse {
     }
 }
 
-/// The tags read from each node (several when they are bits of one word).
-pub(super) type ByNode = HashMap<NodeId, Vec<usize>>;
+/// The monitored nodes in client-handle order (handle `i + 1` is node
+/// `i`) and the tags read from each (several when they are bits of one
+/// word), kept flat: a node costs its id and two `u32`s, not a vector.
+#[derive(Debug, Default)]
+pub(super) struct Monitored {
+    ids: Vec<NodeId>,
+    /// Node `i`'s tags are `tags[starts[i]..starts[i + 1]]`.
+    starts: Vec<u32>,
+    tags: Vec<u32>,
+}
+
+impl Monitored {
+    /// Groups `(node, tag)` pairs by node, nodes in the order first seen,
+    /// each node's tags in the order given.
+    pub(super) fn group(pairs: impl IntoIterator<Item = (NodeId, usize)>) -> Monitored {
+        let mut index: HashMap<NodeId, u32> = HashMap::new();
+        let mut ids = Vec::new();
+        let mut of_node: Vec<(u32, u32)> = Vec::new();
+        for (id, tag) in pairs {
+            let n = *index.entry(id).or_insert_with_key(|id| {
+                ids.push(id.clone());
+                (ids.len() - 1) as u32
+            });
+            of_node.push((n, tag as u32));
+        }
+        drop(index);
+        // Stable: a node's tags keep their order.
+        of_node.sort_by_key(|&(n, _)| n);
+        let mut starts = Vec::with_capacity(ids.len() + 1);
+        starts.push(0);
+        let mut tags = Vec::with_capacity(of_node.len());
+        let mut pairs = of_node.into_iter().peekable();
+        for n in 0..ids.len() as u32 {
+            while let Some((_, tag)) = pairs.next_if(|&(m, _)| m == n) {
+                tags.push(tag);
+            }
+            starts.push(tags.len() as u32);
+        }
+        Monitored { ids, starts, tags }
+    }
+
+    /// How many nodes.
+    pub(super) fn len(&self) -> usize {
+        self.ids.len()
+    }
+
+    /// Node `i` and its tags.
+    pub(super) fn node(&self, i: usize) -> Option<(&NodeId, &[u32])> {
+        let id = self.ids.get(i)?;
+        let (from, to) = (self.starts[i] as usize, self.starts[i + 1] as usize);
+        Some((id, &self.tags[from..to]))
+    }
+
+    /// Nodes `range` (clamped), each with its tags.
+    pub(super) fn nodes(
+        &self,
+        range: std::ops::Range<usize>,
+    ) -> impl Iterator<Item = (&NodeId, &[u32])> + '_ {
+        (range.start..range.end.min(self.len())).filter_map(|i| self.node(i))
+    }
+}
 
 /// The scalar type of a value, if it is one cellwatch reads.
 fn type_of(v: &Variant) -> Option<ValueType> {
@@ -571,4 +629,29 @@ pub(super) fn source_time(value: &DataValue) -> u64 {
         .map_or_else(crate::clock::now_ms, |t| {
             t.as_chrono().timestamp_millis().max(0) as u64
         })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn monitored_nodes_group_bits_of_one_word_in_first_seen_order() {
+        let id = |s: &str| NodeId::new(2, s);
+        let m = Monitored::group([
+            (id("W1"), 0),
+            (id("X"), 1),
+            (id("W1"), 2),
+            (id("Y"), 3),
+            (id("W1"), 4),
+        ]);
+        assert_eq!(m.len(), 3);
+        assert_eq!(m.node(0), Some((&id("W1"), &[0, 2, 4][..])));
+        assert_eq!(m.node(1), Some((&id("X"), &[1][..])));
+        assert_eq!(m.node(2), Some((&id("Y"), &[3][..])));
+        assert_eq!(m.node(3), None);
+        let tail: Vec<_> = m.nodes(1..10).map(|(n, _)| n.clone()).collect();
+        assert_eq!(tail, [id("X"), id("Y")]);
+        assert_eq!(Monitored::group([]).len(), 0);
+    }
 }
