@@ -104,7 +104,10 @@ async fn start_cell(setup: &Setup, id: String, zenoh: &str) -> anyhow::Result<Ce
             &server.endpoint(),
             setup.load,
             Security::None,
-            Duration::from_millis(100),
+            peer::Subscription {
+                publishing: Duration::from_millis(100),
+                max_notifications: None,
+            },
             zenoh,
             metrics_port,
         ),

@@ -47,6 +47,10 @@ enum Cmd {
         /// Subscription publishing interval (agent and baseline).
         #[arg(long, default_value = "100ms", value_parser = humantime::parse_duration)]
         publishing: Duration,
+        /// The agent's `opcua.max_notifications_per_publish` (smaller:
+        /// smaller batches, more publishes); default: the agent's.
+        #[arg(long, value_name = "N")]
+        max_notifications: Option<u32>,
         /// The `cellwatch` binary under test.
         #[arg(long, default_value = "target/release/cellwatch")]
         agent: PathBuf,
@@ -137,6 +141,7 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
             security,
             duration: seconds,
             publishing,
+            max_notifications,
             agent,
             python,
             script,
@@ -150,6 +155,7 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
                 workdir,
                 seconds,
                 publishing,
+                max_notifications,
                 fault_every: Duration::from_millis(500),
                 fault_hold: Duration::from_millis(250),
                 drain,

@@ -77,6 +77,9 @@ pub struct Setup {
     pub seconds: Duration,
     /// The subscription's publishing interval.
     pub publishing: Duration,
+    /// The agent's `opcua.max_notifications_per_publish`, if not its
+    /// default.
+    pub max_notifications: Option<u32>,
     /// How often a limit switch opens, and for how long.
     pub fault_every: Duration,
     /// How long it stays open.
@@ -223,13 +226,22 @@ fn program() -> String {
     s
 }
 
+/// How the agent subscribes.
+#[derive(Debug, Clone, Copy)]
+pub struct Subscription {
+    /// The publishing interval.
+    pub publishing: Duration,
+    /// `opcua.max_notifications_per_publish`; `None`: the agent's default.
+    pub max_notifications: Option<u32>,
+}
+
 /// The agent's configuration for `load` against `endpoint`.
 pub fn agent_config(
     cell: &str,
     endpoint: &str,
     load: Load,
     security: Security,
-    publishing: Duration,
+    subscription: Subscription,
     zenoh: &str,
     metrics_port: u16,
 ) -> String {
@@ -242,14 +254,18 @@ pub fn agent_config(
          [cell]\nid = \"{cell}\"\n\n\
          [opcua]\nendpoint = \"{endpoint}\"\nsecurity_policy = \"{policy}\"\n\
          security_mode = \"{mode}\"\npki_dir = \"pki\"\n\
-         publishing_interval = \"{}ms\"\nsampling_interval = \"0\"\n\
+         publishing_interval = \"{}ms\"\nsampling_interval = \"0\"\n{}\
          namespace_uri = \"{}\"\n\n\
          [[checks.switching]]\nid = \"fault\"\nprogram = \"fault.il\"\ndialect = \"iec\"\n\
          coil = \"FAULT\"\nfault_when = \"on\"\nseverity = \"high\"\n\n\
          [zenoh]\n{zenoh}\nplain = true\n\n\
          [journal]\npath = \"journal.sqlite\"\n\n\
          [metrics]\nlisten = \"127.0.0.1:{metrics_port}\"\n",
-        publishing.as_millis(),
+        subscription.publishing.as_millis(),
+        subscription
+            .max_notifications
+            .map(|n| format!("max_notifications_per_publish = {n}\n"))
+            .unwrap_or_default(),
         load::NAMESPACE
     );
     for k in 0..SWITCHES {
@@ -289,7 +305,10 @@ pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Res
             &server.endpoint(),
             load,
             security,
-            setup.publishing,
+            Subscription {
+                publishing: setup.publishing,
+                max_notifications: setup.max_notifications,
+            },
             &format!("mode = \"peer\"\nlisten = [\"tcp/127.0.0.1:{zenoh_port}\"]"),
             metrics_port,
         ),
