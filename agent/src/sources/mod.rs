@@ -175,8 +175,9 @@ pub trait Source: Send + 'static {
 }
 
 /// The source a cell configuration asks for; `tags` are the
-/// configuration's, handed over (the source keeps the one copy a running
-/// agent holds: 144 bytes and three strings a tag).
+/// configuration's, handed over, not copied (on a 100,000-tag cell a copy
+/// is 14 MB plus three strings a tag): the `@` source keeps them, the OPC UA
+/// source only what it reads of them.
 pub fn for_config(config: &CellConfig, tags: Vec<TagConfig>) -> Box<dyn Source> {
     match (&config.opcua, &config.legacy) {
         (_, Some(bus)) => Box::new(legacy::LegacySource::new(bus.clone(), tags)),
