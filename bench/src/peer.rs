@@ -282,20 +282,26 @@ pub fn agent_config(
     s
 }
 
-/// Runs the agent under `load`: one row.
-pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Result<Row> {
-    let dir = setup
-        .workdir
-        .join(format!("agent-{}-{}-{:?}", load.tags, load.rate, security));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir)?;
-    let server = LoadServer::start(
+/// `dir` emptied, and a fresh load server for `load` with its PKI there:
+/// each subscriber meets a server that has served nobody before.
+async fn fresh_server(dir: &Path, load: Load) -> anyhow::Result<LoadServer> {
+    let _ = std::fs::remove_dir_all(dir);
+    std::fs::create_dir_all(dir)?;
+    LoadServer::start(
         "127.0.0.1:0".parse()?,
         &dir.join("server-pki"),
         load.tags,
         1,
     )
-    .await?;
+    .await
+}
+
+/// Runs the agent under `load`: one row.
+pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Result<Row> {
+    let dir = setup
+        .workdir
+        .join(format!("agent-{}-{}-{:?}", load.tags, load.rate, security));
+    let server = fresh_server(&dir, load).await?;
     let (zenoh_port, metrics_port) = (free_port()?, free_port()?);
     let config = dir.join("cell.toml");
     std::fs::write(
@@ -589,15 +595,7 @@ pub async fn baseline(setup: &Setup, python: &Path, load: Load) -> anyhow::Resul
     let dir = setup
         .workdir
         .join(format!("baseline-{}-{}", load.tags, load.rate));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir)?;
-    let server = LoadServer::start(
-        "127.0.0.1:0".parse()?,
-        &dir.join("server-pki"),
-        load.tags,
-        1,
-    )
-    .await?;
+    let server = fresh_server(&dir, load).await?;
     let mut child = Command::new(python)
         .arg(&setup.script)
         .arg("--endpoint")
