@@ -27,9 +27,10 @@ pub struct MetricsSink {
     /// When the last tag value arrived.
     last_update: Option<u64>,
     ever_connected: bool,
-    /// Per tag, if exported: its name and its `cellwatch_tag_value` gauge
-    /// (absent while the value is unknown).
-    exported: Vec<Option<(String, Option<prometheus::Gauge>)>>,
+    /// The exported tags: each one's name and its `cellwatch_tag_value`
+    /// gauge (absent while the value is unknown). Only those: a cell of
+    /// 100,000 tags exporting ten keeps ten.
+    exported: HashMap<usize, (String, Option<prometheus::Gauge>)>,
     /// Per tag that is a supervised step's flag: (check, chart, step) of
     /// each step it flags, for `cellwatch_sfc_step_active`.
     steps: HashMap<usize, Vec<[String; 3]>>,
@@ -61,7 +62,9 @@ impl MetricsSink {
         let exported = config
             .tags
             .iter()
-            .map(|t| t.export.then(|| (t.name.clone(), None)))
+            .enumerate()
+            .filter(|(_, t)| t.export)
+            .map(|(i, t)| (i, (t.name.clone(), None)))
             .collect();
         MetricsSink {
             exported,
@@ -172,7 +175,7 @@ impl MetricsSink {
                     }
                 }
             }
-            let Some(Some((name, gauge))) = self.exported.get_mut(tag) else {
+            let Some((name, gauge)) = self.exported.get_mut(&tag) else {
                 continue;
             };
             match value {

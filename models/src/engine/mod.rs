@@ -42,7 +42,6 @@ pub use state::{HistoryKind, MachineState, StateName, StateRules};
 pub use switching::{SwitchingCheck, SwitchingChecks};
 
 use crate::alarm::{Alarm, AlarmKind, CommandRefused, Severity, Transition};
-use crate::expr::Expr;
 use crate::signal::Signal;
 use crate::value::{Comparison, Counter, Num, Operand, ValueType};
 use alarms::AlarmBook;
@@ -258,6 +257,40 @@ enum Rhs {
     Tag(usize),
 }
 
+/// A list of indices per tag, kept flat: tag `t`'s are
+/// `items[starts[t]..starts[t + 1]]`. A tag costs one `u32`, not a vector.
+#[derive(Debug, Clone, Default)]
+struct PerTag {
+    starts: Vec<u32>,
+    items: Vec<u32>,
+}
+
+impl PerTag {
+    /// The lists of `n` tags from `(tag, item)` pairs; each tag's items in
+    /// the order given.
+    fn build(n: usize, pairs: &[(usize, usize)]) -> PerTag {
+        let mut starts = vec![0u32; n + 1];
+        for &(t, _) in pairs {
+            starts[t + 1] += 1;
+        }
+        for t in 0..n {
+            starts[t + 1] += starts[t];
+        }
+        let mut next = starts.clone();
+        let mut items = vec![0u32; pairs.len()];
+        for &(t, item) in pairs {
+            items[next[t] as usize] = item as u32;
+            next[t] += 1;
+        }
+        PerTag { starts, items }
+    }
+
+    /// Tag `t`'s items.
+    fn of(&self, t: usize) -> &[u32] {
+        &self.items[self.starts[t] as usize..self.starts[t + 1] as usize]
+    }
+}
+
 /// One cell's engine.
 pub struct CellEngine {
     cell: String,
@@ -265,7 +298,8 @@ pub struct CellEngine {
     tags: Vec<Tag>,
     /// How many tags are configured (the rest are comparisons).
     configured: usize,
-    by_address: HashMap<Signal, usize>,
+    /// Every tag's index, ordered by address (found by binary search).
+    by_address: Vec<u32>,
     /// Booleans: the fast path.
     values: Vec<Option<bool>>,
     /// Numbers and strings (`None` for boolean tags).
@@ -277,13 +311,13 @@ pub struct CellEngine {
     unknown: usize,
     sets: Vec<Box<dyn CheckSet>>,
     /// Per tag: the check sets that read it.
-    readers: Vec<Vec<usize>>,
+    readers: PerTag,
     /// Per tag: the check sets that read it as a number.
-    number_readers: Vec<Vec<usize>>,
+    number_readers: PerTag,
     /// Comparison contacts.
     derived: Vec<Derived>,
     /// Per tag: the comparisons that read it.
-    compared_in: Vec<Vec<usize>>,
+    compared_in: PerTag,
     /// Per tag: whether the running rule reads it.
     running_reads: Vec<bool>,
     alarms: AlarmBook,
@@ -377,31 +411,37 @@ impl CellEngine {
             });
         }
         let n = tags.len();
-        let mut compared_in = vec![Vec::new(); n];
+        let mut pairs = Vec::new();
         for (i, d) in derived.iter().enumerate() {
-            compared_in[d.lhs].push(i);
+            pairs.push((d.lhs, i));
             if let Rhs::Tag(t) = d.rhs {
                 if t != d.lhs {
-                    compared_in[t].push(i);
+                    pairs.push((t, i));
                 }
             }
         }
-        let mut readers = vec![Vec::new(); n];
-        let mut number_readers = vec![Vec::new(); n];
+        let compared_in = PerTag::build(n, &pairs);
+        let (mut read, mut read_as_number) = (Vec::new(), Vec::new());
         for (k, set) in sets.iter().enumerate() {
             for s in set.inputs() {
-                readers[by_address[&s]].push(k);
+                read.push((by_address[&s], k));
             }
             for s in set.number_inputs() {
-                number_readers[by_address[&s]].push(k);
+                read_as_number.push((by_address[&s], k));
             }
         }
+        let readers = PerTag::build(n, &read);
+        let number_readers = PerTag::build(n, &read_as_number);
         let mut running_reads = vec![false; n];
         if let Some(expr) = &rules.running {
             for s in expr.signals() {
                 running_reads[by_address[&s]] = true;
             }
         }
+        drop(by_address);
+        let mut by_address: Vec<u32> = (0..n as u32).collect();
+        by_address
+            .sort_unstable_by(|&a, &b| tags[a as usize].address.cmp(&tags[b as usize].address));
         let alarms = AlarmBook::declaring(sets.iter().flat_map(|s| s.alarms()));
         Ok(CellEngine {
             cell: cell.to_string(),
@@ -501,7 +541,10 @@ impl CellEngine {
 
     /// The tag with this address.
     pub fn tag_index(&self, address: &Signal) -> Option<usize> {
-        self.by_address.get(address).copied()
+        self.by_address
+            .binary_search_by(|&t| self.tags[t as usize].address.cmp(address))
+            .ok()
+            .map(|i| self.by_address[i] as usize)
     }
 
     /// Current boolean values of the configured tags, `None` where unknown
@@ -1000,8 +1043,8 @@ impl CellEngine {
                 .push((tag, value.map(|b| f64::from(u8::from(b)))));
         }
         let address = &self.tags[tag].address;
-        for &k in &self.readers[tag] {
-            self.sets[k].on_change(address, value, before, now, findings);
+        for &k in self.readers.of(tag) {
+            self.sets[k as usize].on_change(address, value, before, now, findings);
         }
         self.running_reads[tag]
     }
@@ -1050,13 +1093,13 @@ impl CellEngine {
         }
         if was != is {
             let address = &self.tags[tag].address;
-            for &k in &self.number_readers[tag] {
-                self.sets[k].on_number(address, is, now, findings);
+            for &k in self.number_readers.of(tag) {
+                self.sets[k as usize].on_number(address, is, now, findings);
             }
         }
         let mut state = self.running_reads[tag];
-        for i in 0..self.compared_in[tag].len() {
-            let d = &self.derived[self.compared_in[tag][i]];
+        for i in 0..self.compared_in.of(tag).len() {
+            let d = &self.derived[self.compared_in.of(tag)[i] as usize];
             let value = self.compare(d);
             let t = d.tag;
             state |= self.set_value(t, value, now, findings, step);
@@ -1101,7 +1144,7 @@ impl CellEngine {
     /// A comparison contact shown with its operands' values:
     /// `TEMP = 85.2 (> 80.5)`.
     pub fn describe_comparison(&self, address: &Signal) -> Option<String> {
-        let &t = self.by_address.get(address)?;
+        let t = self.tag_index(address)?;
         let d = self.derived.iter().find(|d| d.tag == t)?;
         let show = |t: usize| {
             self.value(t)
@@ -1243,22 +1286,12 @@ impl CellEngine {
         let Some(expr) = &self.rules.running else {
             return false;
         };
-        if !known_all(expr, &self.by_address, &self.values) {
+        let value = |s: &Signal| self.tag_index(s).and_then(|t| self.values[t]);
+        if !expr.signals().iter().all(|s| value(s).is_some()) {
             return false;
         }
-        expr.eval(&|s: &Signal| {
-            self.by_address
-                .get(s)
-                .and_then(|&t| self.values[t])
-                .unwrap_or(false)
-        })
+        expr.eval(&|s: &Signal| value(s).unwrap_or(false))
     }
-}
-
-fn known_all(expr: &Expr, by_address: &HashMap<Signal, usize>, values: &[Option<bool>]) -> bool {
-    expr.signals()
-        .iter()
-        .all(|s| by_address.get(s).is_some_and(|&t| values[t].is_some()))
 }
 
 #[cfg(test)]
@@ -1267,6 +1300,7 @@ mod tests {
     use crate::alarm::AlarmState;
     use crate::comments::CommentDb;
     use crate::explain::Polarity;
+    use crate::expr::Expr;
     use crate::program::Program;
     use crate::signal::Observability;
     use crate::switching::SwitchingFunction;
@@ -1839,6 +1873,7 @@ mod armed {
     use super::*;
     use crate::comments::CommentDb;
     use crate::explain::Polarity;
+    use crate::expr::Expr;
     use crate::program::Program;
     use crate::signal::Observability;
     use crate::switching::SwitchingFunction;

@@ -88,9 +88,9 @@ impl OpcUaSource {
 /// What the source reads of each tag: its node (`None` when its node id
 /// cannot be read), how it is read, its name for messages.
 struct TagTable {
-    nodes: Vec<Option<TagNode>>,
-    uses: Arc<Vec<subscription::TagUse>>,
-    names: Arc<Vec<String>>,
+    nodes: Arc<Vec<Option<TagNode>>>,
+    uses: Arc<subscription::Uses>,
+    names: Arc<Names>,
 }
 
 impl TagTable {
@@ -108,10 +108,43 @@ impl TagTable {
             )
             .collect();
         TagTable {
-            nodes,
-            uses: Arc::new(tags.iter().map(subscription::TagUse::of).collect()),
-            names: Arc::new(tags.iter().map(|t| t.name.clone()).collect()),
+            nodes: Arc::new(nodes),
+            uses: Arc::new(subscription::Uses::of_tags(tags)),
+            names: Arc::new(Names::of(tags)),
         }
+    }
+}
+
+/// The tags' names, for messages, in one string: a tag costs its name's
+/// bytes and one `u32`.
+#[derive(Debug, Default)]
+pub struct Names {
+    text: String,
+    /// Name `t` is `text[ends[t - 1]..ends[t]]` (from 0 for the first).
+    ends: Vec<u32>,
+}
+
+impl Names {
+    /// The names of `tags`.
+    fn of(tags: &[TagConfig]) -> Names {
+        let mut names = Names {
+            text: String::with_capacity(tags.iter().map(|t| t.name.len()).sum()),
+            ends: Vec::with_capacity(tags.len()),
+        };
+        for t in tags {
+            names.text.push_str(&t.name);
+            names.ends.push(names.text.len() as u32);
+        }
+        names
+    }
+}
+
+impl std::ops::Index<usize> for Names {
+    type Output = str;
+
+    fn index(&self, tag: usize) -> &str {
+        let from = tag.checked_sub(1).map_or(0, |p| self.ends[p] as usize);
+        &self.text[from..self.ends[tag] as usize]
     }
 }
 
@@ -582,9 +615,9 @@ struct Context {
     endpoint: String,
     config: OpcUaConfig,
     /// Each tag's node, `None` when its node id cannot be read.
-    nodes: Vec<Option<TagNode>>,
-    uses: Arc<Vec<subscription::TagUse>>,
-    names: Arc<Vec<String>>,
+    nodes: Arc<Vec<Option<TagNode>>>,
+    uses: Arc<subscription::Uses>,
+    names: Arc<Names>,
     tx: SourceSender,
 }
 
@@ -757,11 +790,7 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
         let each: Vec<String> = missing
             .iter()
             .map(|(uri, tags)| {
-                let mut names: Vec<&str> = tags
-                    .iter()
-                    .take(5)
-                    .map(|&t| ctx.names[t].as_str())
-                    .collect();
+                let mut names: Vec<&str> = tags.iter().take(5).map(|&t| &ctx.names[t]).collect();
                 if tags.len() > names.len() {
                     names.push("...");
                 }
@@ -804,7 +833,11 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
             .await;
     }
     let heard = Arc::new(subscription::Heard::new());
-    let nodes = Arc::new(subscription::Monitored::group(found));
+    let nodes = Arc::new(subscription::Monitored::group(
+        found,
+        ctx.nodes.clone(),
+        namespaces.clone(),
+    ));
     let subscription = subscription::subscribe(
         session,
         &ctx.config,
@@ -829,13 +862,13 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
 async fn read_current(session: &Session, ctx: &Context, nodes: &subscription::Monitored) {
     for from in (0..nodes.len()).step_by(READ_CHUNK) {
         let part = || nodes.nodes(from..from + READ_CHUNK);
-        let ids: Vec<ReadValueId> = part().map(|(n, _)| ReadValueId::from(n.clone())).collect();
+        let ids: Vec<ReadValueId> = part().map(|(_, n, _)| ReadValueId::from(n)).collect();
         match session.read(&ids, TimestampsToReturn::Both, 0.0).await {
             Ok(values) => {
                 let mut readings: Vec<TagReading> = values
                     .iter()
                     .zip(part())
-                    .flat_map(|(v, (_, tags))| {
+                    .flat_map(|(v, (_, _, tags))| {
                         tags.iter().map(|&tag| TagReading {
                             tag: tag as usize,
                             reading: reading(v, &ctx.uses[tag as usize]),

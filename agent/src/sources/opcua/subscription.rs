@@ -7,7 +7,8 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use cellwatch_models::engine::{Reading, TagReading};
-use opcua::client::{MonitoredItemMap, OnSubscriptionNotificationCore, Session};
+use opcua::client::services::CreateMonitoredItems;
+use opcua::client::{MonitoredItemMap, OnSubscriptionNotificationCore, Session, UARequest};
 use opcua::types::{
     DataChangeFilter, DataChangeNotification, DataChangeTrigger, DataValue, ExtensionObject,
     MonitoredItemCreateRequest, MonitoringMode, MonitoringParameters, NodeId, NotificationMessage,
@@ -15,6 +16,7 @@ use opcua::types::{
 };
 use tokio::sync::mpsc::error::TrySendError;
 
+use super::{Names, TagNode};
 use crate::config::{Deadband, OpcUaConfig, TagConfig};
 use crate::sources::{SourceEvent, SourceSender};
 use cellwatch_models::value::{Num, ValueType};
@@ -94,8 +96,8 @@ pub(super) async fn subscribe(
     session: &Arc<Session>,
     config: &OpcUaConfig,
     monitored: &Arc<Monitored>,
-    uses: &Arc<Vec<TagUse>>,
-    names: &Arc<Vec<String>>,
+    uses: &Arc<Uses>,
+    names: &Arc<Names>,
     tx: &SourceSender,
     heard: &Arc<Heard>,
 ) -> Option<Subscribed> {
@@ -149,7 +151,7 @@ pub(super) async fn subscribe(
     let chunk = max_items_per_call(session).await.min(MAX_ITEMS_PER_CALL);
     // Requests are made one call's worth at a time: 100,000 of them at
     // once would be 15 MB held for the length of the creation.
-    let request = |i: usize, n: &NodeId, tags: &[u32]| {
+    let request = |i: usize, n: NodeId, tags: &[u32]| {
         // Several tags on one node are bits of one word: the first
         // says how it is sampled.
         let tag = &uses[tags[0] as usize];
@@ -179,11 +181,7 @@ pub(super) async fn subscribe(
             discard_oldest: true,
             filter: ExtensionObject::from_message(filter),
         };
-        MonitoredItemCreateRequest::new(
-            ReadValueId::from(n.clone()),
-            MonitoringMode::Reporting,
-            params,
-        )
+        MonitoredItemCreateRequest::new(ReadValueId::from(n), MonitoringMode::Reporting, params)
     };
     tracing::debug!(
         subscription = sub,
@@ -193,15 +191,20 @@ pub(super) async fn subscribe(
     );
     for from in (0..monitored.len()).step_by(chunk.max(1)) {
         let part = || monitored.nodes(from..from + chunk);
-        let requests = part()
-            .enumerate()
-            .map(|(k, (n, tags))| request(from + k, n, tags))
-            .collect();
-        match session
-            .create_monitored_items(sub, TimestampsToReturn::Both, requests)
+        let requests = part().map(|(i, n, tags)| request(i, n, tags)).collect();
+        // The service itself, not `Session::create_monitored_items`: that
+        // also keeps every item in the library's subscription state (about
+        // 370 bytes an item, 37 MB for 100,000 tags), which this source
+        // never reads — notifications find their tags by client handle, and
+        // the source recreates the subscription itself after a reconnect.
+        match CreateMonitoredItems::new(sub, session)
+            .items_to_create(requests)
+            .timestamps_to_return(TimestampsToReturn::Both)
+            .send(session.channel())
             .await
         {
-            Ok(results) => {
+            Ok(created) => {
+                let results = created.results;
                 if let Some(granted) = results
                     .iter()
                     .filter(|r| r.result.status_code.is_good())
@@ -228,7 +231,7 @@ pub(super) async fn subscribe(
                         tracing::warn!(asked_ms = sampling, granted_ms = slowest, "the server samples less often than asked: changes shorter than its interval are not seen");
                     }
                 }
-                for (r, (node, tags)) in results.iter().zip(part()) {
+                for (r, (_, node, tags)) in results.iter().zip(part()) {
                     if !r.result.status_code.is_good() {
                         tracing::error!(node = %node, status = %r.result.status_code, "monitored item refused");
                         let now = crate::clock::now_ms();
@@ -263,10 +266,10 @@ pub(super) async fn subscribe(
 struct InTimeOrder {
     /// The node of client handle `i + 1`, and its tags.
     monitored: Arc<Monitored>,
-    uses: Arc<Vec<TagUse>>,
+    uses: Arc<Uses>,
     tx: SourceSender,
     heard: Arc<Heard>,
-    names: Arc<Vec<String>>,
+    names: Arc<Names>,
     /// The queue size the server granted.
     queue_size: Arc<AtomicU32>,
     /// Tags whose last delivery said the server's queue overflowed
@@ -280,7 +283,7 @@ pub const OVERFLOW_ALARM: &str = "opcua-overflow";
 /// One publish's readings, in the server's order.
 struct Collector<'a> {
     monitored: &'a Monitored,
-    uses: &'a [TagUse],
+    uses: &'a Uses,
     readings: Vec<TagReading>,
     /// Tags with a value flagged `Overflow` in this publish.
     overflowed: BTreeSet<usize>,
@@ -311,9 +314,9 @@ impl Collector<'_> {
     }
 
     fn data_value(&mut self, handle: u32, value: DataValue) {
-        let Some((_, tags)) = (handle as usize)
+        let Some(tags) = (handle as usize)
             .checked_sub(1)
-            .and_then(|i| self.monitored.node(i))
+            .and_then(|i| self.monitored.tags(i))
         else {
             tracing::warn!(
                 handle,
@@ -387,7 +390,7 @@ impl InTimeOrder {
     /// The overflow alarm as it stands: the tags whose changes were lost.
     fn overflow_problem(&self, now: &BTreeSet<usize>) -> SourceEvent {
         if !now.is_empty() {
-            let names: Vec<&str> = now.iter().map(|&t| self.names[t].as_str()).collect();
+            let names: Vec<&str> = now.iter().map(|&t| &self.names[t]).collect();
             tracing::error!(tags = ?names, queue_size = self.queue_size.load(Ordering::Relaxed), "changes lost in the server's queues");
         }
         let problem = (!self.overflowing.is_empty()).then(|| {
@@ -395,7 +398,7 @@ impl InTimeOrder {
                 .overflowing
                 .iter()
                 .take(5)
-                .map(|&t| self.names[t].as_str())
+                .map(|&t| &self.names[t])
                 .collect();
             if self.overflowing.len() > names.len() {
                 names.push("...");
@@ -510,10 +513,13 @@ impl TagUse {
 
 /// The monitored nodes in client-handle order (handle `i + 1` is node
 /// `i`) and the tags read from each (several when they are bits of one
-/// word), kept flat: a node costs its id and two `u32`s, not a vector.
-#[derive(Debug, Default)]
+/// word), kept flat: a node costs two `u32`s. Its id is not kept: it is
+/// its first tag's node, resolved against the namespaces the subscription
+/// was made with, when a request needs it.
+#[derive(Debug)]
 pub(super) struct Monitored {
-    ids: Vec<NodeId>,
+    tag_nodes: Arc<Vec<Option<TagNode>>>,
+    namespaces: Vec<String>,
     /// Node `i`'s tags are `tags[starts[i]..starts[i + 1]]`.
     starts: Vec<u32>,
     tags: Vec<u32>,
@@ -521,52 +527,108 @@ pub(super) struct Monitored {
 
 impl Monitored {
     /// Groups `(node, tag)` pairs by node, nodes in the order first seen,
-    /// each node's tags in the order given.
-    pub(super) fn group(pairs: impl IntoIterator<Item = (NodeId, usize)>) -> Monitored {
+    /// each node's tags in the order given; each `node` is
+    /// `tag_nodes[tag]` resolved against `namespaces`.
+    pub(super) fn group(
+        pairs: impl IntoIterator<Item = (NodeId, usize)>,
+        tag_nodes: Arc<Vec<Option<TagNode>>>,
+        namespaces: Vec<String>,
+    ) -> Monitored {
         let mut index: HashMap<NodeId, u32> = HashMap::new();
-        let mut ids = Vec::new();
         let mut of_node: Vec<(u32, u32)> = Vec::new();
         for (id, tag) in pairs {
-            let n = *index.entry(id).or_insert_with_key(|id| {
-                ids.push(id.clone());
-                (ids.len() - 1) as u32
-            });
+            let next = index.len() as u32;
+            let n = *index.entry(id).or_insert(next);
             of_node.push((n, tag as u32));
         }
+        let nodes = index.len() as u32;
         drop(index);
         // Stable: a node's tags keep their order.
         of_node.sort_by_key(|&(n, _)| n);
-        let mut starts = Vec::with_capacity(ids.len() + 1);
+        let mut starts = Vec::with_capacity(nodes as usize + 1);
         starts.push(0);
         let mut tags = Vec::with_capacity(of_node.len());
         let mut pairs = of_node.into_iter().peekable();
-        for n in 0..ids.len() as u32 {
+        for n in 0..nodes {
             while let Some((_, tag)) = pairs.next_if(|&(m, _)| m == n) {
                 tags.push(tag);
             }
             starts.push(tags.len() as u32);
         }
-        Monitored { ids, starts, tags }
+        Monitored {
+            tag_nodes,
+            namespaces,
+            starts,
+            tags,
+        }
     }
 
     /// How many nodes.
     pub(super) fn len(&self) -> usize {
-        self.ids.len()
+        self.starts.len().saturating_sub(1)
     }
 
-    /// Node `i` and its tags.
-    pub(super) fn node(&self, i: usize) -> Option<(&NodeId, &[u32])> {
-        let id = self.ids.get(i)?;
-        let (from, to) = (self.starts[i] as usize, self.starts[i + 1] as usize);
-        Some((id, &self.tags[from..to]))
+    /// Node `i`'s tags.
+    pub(super) fn tags(&self, i: usize) -> Option<&[u32]> {
+        let (from, to) = (*self.starts.get(i)?, *self.starts.get(i + 1)?);
+        Some(&self.tags[from as usize..to as usize])
     }
 
-    /// Nodes `range` (clamped), each with its tags.
+    /// Node `i`'s id and its tags.
+    pub(super) fn node(&self, i: usize) -> Option<(NodeId, &[u32])> {
+        let tags = self.tags(i)?;
+        let node = self.tag_nodes.get(tags[0] as usize)?.as_ref()?;
+        Some((node.resolve(&self.namespaces)?, tags))
+    }
+
+    /// Nodes `range` (clamped), each with its index, id and tags.
     pub(super) fn nodes(
         &self,
         range: std::ops::Range<usize>,
-    ) -> impl Iterator<Item = (&NodeId, &[u32])> + '_ {
-        (range.start..range.end.min(self.len())).filter_map(|i| self.node(i))
+    ) -> impl Iterator<Item = (usize, NodeId, &[u32])> + '_ {
+        (range.start..range.end.min(self.len()))
+            .filter_map(|i| self.node(i).map(|(id, tags)| (i, id, tags)))
+    }
+}
+
+/// How each tag is read, kept as an index into the few distinct ways a
+/// cell's tags are read (most share one): four bytes a tag, not a
+/// [`TagUse`].
+#[derive(Debug, Default)]
+pub(super) struct Uses {
+    kinds: Vec<TagUse>,
+    of: Vec<u32>,
+}
+
+impl Uses {
+    /// How each of `tags` is read.
+    pub(super) fn of_tags(tags: &[TagConfig]) -> Uses {
+        type Key = (ValueType, Option<u8>, Option<Duration>, Option<(bool, u64)>);
+        let mut index: HashMap<Key, u32> = HashMap::new();
+        let mut uses = Uses::default();
+        for t in tags {
+            let u = TagUse::of(t);
+            let deadband = u.deadband.map(|d| match d {
+                Deadband::Absolute(v) => (false, v.to_bits()),
+                Deadband::Percent(v) => (true, v.to_bits()),
+            });
+            let key = (u.value_type, u.bit, u.sampling, deadband);
+            let kinds = &mut uses.kinds;
+            let k = *index.entry(key).or_insert_with(|| {
+                kinds.push(u);
+                (kinds.len() - 1) as u32
+            });
+            uses.of.push(k);
+        }
+        uses
+    }
+}
+
+impl std::ops::Index<usize> for Uses {
+    type Output = TagUse;
+
+    fn index(&self, tag: usize) -> &TagUse {
+        &self.kinds[self.of[tag] as usize]
     }
 }
 
@@ -637,21 +699,71 @@ mod tests {
 
     #[test]
     fn monitored_nodes_group_bits_of_one_word_in_first_seen_order() {
-        let id = |s: &str| NodeId::new(2, s);
-        let m = Monitored::group([
-            (id("W1"), 0),
-            (id("X"), 1),
-            (id("W1"), 2),
-            (id("Y"), 3),
-            (id("W1"), 4),
+        let node = |s: &str| TagNode::parse(&format!("ns=2;s={s}"), None).ok();
+        let tag_nodes = Arc::new(vec![
+            node("W1"),
+            node("X"),
+            node("W1"),
+            node("Y"),
+            node("W1"),
         ]);
+        let id = |s: &str| NodeId::new(2, s);
+        let pairs = tag_nodes
+            .iter()
+            .enumerate()
+            .filter_map(|(t, n)| Some((n.as_ref()?.resolve(&[])?, t)));
+        let m = Monitored::group(pairs, tag_nodes.clone(), Vec::new());
         assert_eq!(m.len(), 3);
-        assert_eq!(m.node(0), Some((&id("W1"), &[0, 2, 4][..])));
-        assert_eq!(m.node(1), Some((&id("X"), &[1][..])));
-        assert_eq!(m.node(2), Some((&id("Y"), &[3][..])));
+        assert_eq!(m.node(0), Some((id("W1"), &[0, 2, 4][..])));
+        assert_eq!(m.node(1), Some((id("X"), &[1][..])));
+        assert_eq!(m.node(2), Some((id("Y"), &[3][..])));
         assert_eq!(m.node(3), None);
-        let tail: Vec<_> = m.nodes(1..10).map(|(n, _)| n.clone()).collect();
-        assert_eq!(tail, [id("X"), id("Y")]);
-        assert_eq!(Monitored::group([]).len(), 0);
+        assert_eq!(m.tags(0), Some(&[0, 2, 4][..]));
+        let tail: Vec<_> = m.nodes(1..10).map(|(i, n, _)| (i, n)).collect();
+        assert_eq!(tail, [(1, id("X")), (2, id("Y"))]);
+        assert_eq!(Monitored::group([], tag_nodes, Vec::new()).len(), 0);
+    }
+
+    #[test]
+    fn names_are_found_by_tag() {
+        use cellwatch_models::signal::Signal;
+        let tags: Vec<TagConfig> = ["ls_0", "", "Förderband 3"]
+            .iter()
+            .map(|n| TagConfig::boolean(n, "ns=2;s=T", Signal::new("X0.00")))
+            .collect();
+        let names = Names::of(&tags);
+        assert_eq!(
+            (&names[0], &names[1], &names[2]),
+            ("ls_0", "", "Förderband 3")
+        );
+    }
+
+    #[test]
+    fn uses_keep_each_distinct_way_of_reading_once() {
+        use cellwatch_models::signal::Signal;
+        let mut tags: Vec<TagConfig> = (0..5)
+            .map(|i| {
+                TagConfig::boolean(
+                    &format!("t{i}"),
+                    "ns=2;s=T",
+                    Signal::new(&format!("X0.0{i}")),
+                )
+            })
+            .collect();
+        tags[1].value_type = ValueType::Float;
+        tags[1].deadband = Some(Deadband::Absolute(0.5));
+        tags[3].value_type = ValueType::Float;
+        tags[3].deadband = Some(Deadband::Percent(0.5));
+        tags[4].sampling_interval = Some(Duration::from_millis(20));
+        let uses = Uses::of_tags(&tags);
+        assert_eq!(uses.kinds.len(), 4);
+        for (i, t) in tags.iter().enumerate() {
+            let u = &uses[i];
+            assert_eq!(
+                (u.value_type, u.bit, u.sampling, u.deadband),
+                (t.value_type, t.bit, t.sampling_interval, t.deadband),
+                "tag {i}"
+            );
+        }
     }
 }
