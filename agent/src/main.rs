@@ -3,9 +3,9 @@
 
 use std::process::ExitCode;
 
-/// mimalloc gives freed memory back to the system (a 100,000-tag
-/// configuration is parsed once, then dropped); glibc's allocator keeps
-/// most of it.
+/// jemalloc, configured in `.cargo/config.toml` to give freed pages back to
+/// the system at once: what reading a large configuration or a burst of
+/// changes took is returned, where glibc's allocator keeps most of it.
 #[global_allocator]
 static ALLOCATOR: tikv_jemallocator::Jemalloc = tikv_jemallocator::Jemalloc;
 

@@ -763,14 +763,18 @@ pub fn table(rows: &[Row]) -> String {
             ));
         }
     }
+    // Cell size alone: the same subject (security) at the same rate.
     let agents: Vec<&Row> = rows.iter().filter(|r| r.internal.is_some()).collect();
-    if let (Some(small), Some(big)) = (
-        agents.iter().min_by_key(|r| r.load.tags),
-        agents.iter().max_by_key(|r| r.load.tags),
-    ) {
-        if small.load.tags != big.load.tags {
+    for big in &agents {
+        let small = agents
+            .iter()
+            .filter(|r| r.subject == big.subject && r.load.rate == big.load.rate)
+            .min_by_key(|r| r.load.tags);
+        if let Some(small) = small.filter(|s| s.load.tags < big.load.tags) {
             ratios.push_str(&format!(
-                "- the agent's CPU per change at {} tags is {:.2}× that at {} tags\n",
+                "- {}, {}/s: the agent's CPU per change at {} tags is {:.2}× that at {} tags\n",
+                big.subject,
+                big.load.rate,
                 big.load.tags,
                 big.cpu_per_change_us() / small.cpu_per_change_us().max(1e-9),
                 small.load.tags
