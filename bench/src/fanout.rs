@@ -97,6 +97,7 @@ async fn start_cell(setup: &Setup, id: String, zenoh: &str) -> anyhow::Result<Ce
     )
     .await?;
     let metrics_port = peer::free_port()?;
+    std::fs::write(dir.join("tags.csv"), peer::tags_csv(setup.load))?;
     std::fs::write(
         dir.join("cell.toml"),
         peer::agent_config(

@@ -14,6 +14,8 @@ pub(crate) struct RawConfig {
     pub(crate) legacy: Option<Spanned<RawLegacy>>,
     #[serde(default)]
     pub(crate) tags: Vec<RawTag>,
+    /// The tags as a CSV file instead of `[[tags]]` tables.
+    pub(crate) tags_file: Option<Spanned<String>>,
     #[serde(default)]
     pub(crate) checks: RawChecks,
     #[serde(default)]
@@ -244,4 +246,154 @@ pub(crate) struct RawCommands {
     pub(crate) max_shelve: Option<Spanned<String>>,
     /// The shared-secret file of earlier versions: refused with a message.
     pub(crate) secrets_file: Option<Spanned<toml::Value>>,
+}
+
+/// The columns of a tags file, as the keys of a `[[tags]]` table.
+const TAG_COLUMNS: [&str; 11] = [
+    "name",
+    "node_id",
+    "address",
+    "type",
+    "comment",
+    "bit",
+    "sampling_interval",
+    "deadband",
+    "deadband_percent",
+    "export",
+    "max",
+];
+
+/// The tags of a CSV tags file (`tags_file`), each value spanned at the
+/// start of its row's line in `text`, and the problems found reading it
+/// (byte offset, key, message). A row with a problem is left out.
+pub(crate) fn csv_tags(text: &str) -> (Vec<RawTag>, Vec<(usize, String, String)>) {
+    let mut problems = Vec::new();
+    let mut reader = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .comment(Some(b'#'))
+        .from_reader(text.as_bytes());
+    let headers = match reader.headers() {
+        Ok(h) => h.clone(),
+        Err(e) => {
+            problems.push((
+                0,
+                "tags_file".into(),
+                format!("cannot read the header row: {e}"),
+            ));
+            return (Vec::new(), problems);
+        }
+    };
+    let mut column = [None; TAG_COLUMNS.len()];
+    for (i, h) in headers.iter().enumerate() {
+        match TAG_COLUMNS.iter().position(|&c| c == h) {
+            Some(k) if column[k].is_none() => column[k] = Some(i),
+            Some(_) => problems.push((
+                0,
+                "tags_file".into(),
+                format!("column '{h}' is given twice"),
+            )),
+            None => problems.push((
+                0,
+                "tags_file".into(),
+                format!(
+                    "unknown column '{h}': the columns are {}",
+                    TAG_COLUMNS.join(", ")
+                ),
+            )),
+        }
+    }
+    for (k, name) in TAG_COLUMNS.iter().enumerate().take(3) {
+        if column[k].is_none() {
+            problems.push((
+                0,
+                "tags_file".into(),
+                format!("the header row has no '{name}' column"),
+            ));
+        }
+    }
+    if !problems.is_empty() {
+        return (Vec::new(), problems);
+    }
+    let mut tags = Vec::new();
+    let mut record = csv::StringRecord::new();
+    loop {
+        match reader.read_record(&mut record) {
+            Ok(false) => break,
+            Ok(true) => {}
+            Err(e) => {
+                let at = e.position().map_or(0, |p| p.byte() as usize);
+                problems.push((at, "tags_file".into(), e.to_string()));
+                // A malformed row (a stray quote, a wrong number of cells)
+                // is reported and skipped; the rest is still read.
+                continue;
+            }
+        }
+        let at = row_start(text, record.position().map_or(0, |p| p.byte() as usize));
+        let row = tags.len() + problems.len();
+        match tag_of_row(&record, &column, at) {
+            Ok(t) => tags.push(t),
+            Err((key, message)) => problems.push((at, format!("tags[{row}].{key}"), message)),
+        }
+    }
+    (tags, problems)
+}
+
+/// Where the row the reader says starts at `at` really starts: past the
+/// blank and comment lines before it, which the reader skips.
+fn row_start(text: &str, mut at: usize) -> usize {
+    while let Some(rest) = text.get(at..) {
+        let line = rest.split_inclusive('\n').next().unwrap_or("");
+        let blank = line.trim().is_empty() || line.trim_start().starts_with('#');
+        if !blank || line.is_empty() {
+            break;
+        }
+        at += line.len();
+    }
+    at
+}
+
+/// One row as a `[[tags]]` table, or the key and the problem.
+fn tag_of_row(
+    record: &csv::StringRecord,
+    column: &[Option<usize>; TAG_COLUMNS.len()],
+    at: usize,
+) -> Result<RawTag, (&'static str, String)> {
+    let span = at..at + 1;
+    let cell = |k: usize| {
+        column[k]
+            .and_then(|i| record.get(i))
+            .filter(|v| !v.is_empty())
+    };
+    let text = |k: usize| cell(k).map(|v| Spanned::new(span.clone(), v.to_string()));
+    let required = |k: usize| text(k).ok_or((TAG_COLUMNS[k], "is empty".to_string()));
+    fn number<T: std::str::FromStr>(
+        v: Option<&str>,
+        key: &'static str,
+        span: &std::ops::Range<usize>,
+    ) -> Result<Option<Spanned<T>>, (&'static str, String)> {
+        v.map(|v| {
+            v.parse()
+                .map(|n| Spanned::new(span.clone(), n))
+                .map_err(|_| (key, format!("'{v}' is not a number")))
+        })
+        .transpose()
+    }
+    let export = match cell(9) {
+        None | Some("false") => false,
+        Some("true") => true,
+        Some(other) => return Err(("export", format!("'{other}' is neither true nor false"))),
+    };
+    Ok(RawTag {
+        name: required(0)?,
+        node_id: required(1)?,
+        address: required(2)?,
+        value_type: text(3),
+        comment: cell(4).map(str::to_string),
+        bit: number(cell(5), "bit", &span)?,
+        sampling_interval: text(6),
+        deadband: number(cell(7), "deadband", &span)?,
+        deadband_percent: number(cell(8), "deadband_percent", &span)?,
+        export,
+        max: number(cell(10), "max", &span)?,
+    })
 }

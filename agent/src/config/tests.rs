@@ -622,3 +622,120 @@ fn charts_from_plcopen_xml_take_their_supervision_from_the_cell() {
         assert!(e.contains(want), "{want} not in {e}");
     }
 }
+
+/// `GOOD` with its tags in a CSV file.
+fn with_tags_file(csv: &str) -> (String, Mem) {
+    let start = GOOD.find("[[tags]]").unwrap();
+    let end = GOOD.find("[[checks.switching]]").unwrap();
+    let text = format!(
+        "tags_file = \"tags.csv\"\n{}{}",
+        &GOOD[..start],
+        &GOOD[end..]
+    );
+    let mut files = mem();
+    files
+        .0
+        .insert(PathBuf::from("base/tags.csv"), csv.as_bytes().to_vec());
+    (text, files)
+}
+
+#[test]
+fn a_tags_file_gives_the_same_tags_as_tables() {
+    let tables = parse("cell.toml", GOOD, Path::new("base"), &mem()).unwrap();
+    let (text, files) = with_tags_file(
+        "# exported from the PLC's tag table\n\
+         name,node_id,address\n\
+         x1,nsu=urn:plc;s=X1,X1\n\
+         \n\
+         \"x2\",\"nsu=urn:plc;s=X2\", X2\n",
+    );
+    let file = parse("cell.toml", &text, Path::new("base"), &files).unwrap();
+    assert_eq!(file.tags, tables.tags);
+    assert_eq!(file.switching.len(), 1);
+
+    // Every column of a table, in any order.
+    let (text, files) = with_tags_file(
+        "address,name,node_id,type,comment,bit,sampling_interval,deadband,deadband_percent,export,max\n\
+         X1,x1,nsu=urn:plc;s=X1,,Belt running,,,,,,\n\
+         X2,x2,nsu=urn:plc;s=X2,,,,,,,,\n\
+         D100,temp,nsu=urn:plc;s=D100,Float,\"Oven, zone 1\",,50ms,0.5,,true,\n\
+         D101.3,d3,nsu=urn:plc;s=D101,UInt16,,3,,,,,\n\
+         C0,count,nsu=urn:plc;s=C0,UInt16,,,,,,,999\n",
+    );
+    let c = parse("cell.toml", &text, Path::new("base"), &files).unwrap();
+    assert_eq!(c.tags.len(), 5);
+    assert_eq!(c.tags[0].comment.as_deref(), Some("Belt running"));
+    let temp = &c.tags[2];
+    assert_eq!(temp.value_type, cellwatch_models::value::ValueType::Float);
+    assert_eq!(temp.comment.as_deref(), Some("Oven, zone 1"));
+    assert_eq!(temp.sampling_interval, Some(Duration::from_millis(50)));
+    assert_eq!(temp.deadband, Some(crate::config::Deadband::Absolute(0.5)));
+    assert!(temp.export);
+    assert_eq!(c.tags[3].bit, Some(3));
+    assert_eq!(c.tags[4].max, Some(999));
+}
+
+#[test]
+fn a_tags_file_problem_names_the_file_and_the_line() {
+    let check = |csv: &str, want: &[&str]| {
+        let (text, files) = with_tags_file(csv);
+        let e = parse("cell.toml", &text, Path::new("base"), &files)
+            .unwrap_err()
+            .to_string();
+        for w in want {
+            assert!(e.contains(w), "{w:?} not in:\n{e}");
+        }
+    };
+    check(
+        "name,node_id,address,colour\nx1,nsu=urn:plc;s=X1,X1\n",
+        &["base/tags.csv:1:1: tags_file: unknown column 'colour'"],
+    );
+    check(
+        "name,address\nx1,X1\n",
+        &["base/tags.csv:1:1: tags_file: the header row has no 'node_id' column"],
+    );
+    check(
+        "name,node_id,address,bit\nx1,nsu=urn:plc;s=X1,X1,\nx2,nsu=urn:plc;s=X2,X2,two\n",
+        &["base/tags.csv:3:1: tags[1].bit: 'two' is not a number"],
+    );
+    check(
+        "name,node_id,address\nx1,nsu=urn:plc;s=X1,X1\nx2,nsu=urn:plc;s=X2,X1\n",
+        &["base/tags.csv:3:1: tags[1].address: X1 is used by another tag"],
+    );
+    check(
+        "name,node_id,address\nx1,nsu=urn:plc;s=X1,X1\nx2,nsu=urn:plc;s=X2\n",
+        &["base/tags.csv:3:1: tags_file: "],
+    );
+    check(
+        "name,node_id,address\nx1,nsu=urn:plc;s=X1,X1\n\n# the second\n,nsu=urn:plc;s=X2,X2\n",
+        &["base/tags.csv:5:1: tags[1].name: is empty"],
+    );
+    // The configuration's own problems still point into it.
+    let (text, files) = with_tags_file("name,node_id,address\nx1,nsu=urn:plc;s=X1,X1\n");
+    let e = parse("cell.toml", &text, Path::new("base"), &files)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("cell.toml:") && e.contains("X2"), "{e}");
+    // Both at once, and a file that is not there.
+    let (text, files) =
+        with_tags_file("name,node_id,address\nx1,nsu=urn:plc;s=X1,X1\nx2,nsu=urn:plc;s=X2,X2\n");
+    let both = format!(
+        "{text}\n[[tags]]\nname = \"x3\"\nnode_id = \"nsu=urn:plc;s=X3\"\naddress = \"X3\"\n"
+    );
+    let e = parse("cell.toml", &both, Path::new("base"), &files)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains(
+            "cell.toml:1:13: tags_file: give the tags as [[tags]] tables or in tags_file, not both"
+        ),
+        "{e}"
+    );
+    let e = parse("cell.toml", &text, Path::new("base"), &mem())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("cell.toml:1:13: tags_file: cannot read the tags file 'base/tags.csv'"),
+        "{e}"
+    );
+}
