@@ -103,7 +103,6 @@ async fn start_cell(setup: &Setup, id: String, zenoh: &str) -> anyhow::Result<Ce
         peer::agent_config(
             &id,
             &server.endpoint(),
-            setup.load,
             Security::None,
             peer::Subscription {
                 publishing: Duration::from_millis(100),
