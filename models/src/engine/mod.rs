@@ -227,6 +227,43 @@ pub struct FaultValues {
     pub values: Vec<Option<Value>>,
 }
 
+/// The last fault, kept as what has changed since: raising a fault costs
+/// nothing per tag, and each tag's first change afterwards logs the value
+/// it had (at most one entry per tag). The values at the fault are the
+/// current ones with the log undone ([`CellEngine::last_fault`]).
+#[derive(Debug, Clone, Default)]
+struct FaultMark {
+    alarm: String,
+    at: u64,
+    /// Each changed tag's value at the fault, in order of first change.
+    undo: Vec<(u32, Option<Value>)>,
+    /// Per tag, one bit: whether `undo` has it.
+    logged: Vec<u64>,
+}
+
+impl FaultMark {
+    /// Starts over for a fault `alarm` raised at `at`, keeping the
+    /// allocations (clearing only the bits that were set).
+    fn restart(&mut self, alarm: String, at: u64, tags: usize) {
+        for &(tag, _) in &self.undo {
+            self.logged[tag as usize / 64] = 0;
+        }
+        self.undo.clear();
+        self.logged.resize(tags.div_ceil(64), 0);
+        self.alarm = alarm;
+        self.at = at;
+    }
+
+    /// Whether `tag` still needs its value at the fault logged (and marks
+    /// it logged).
+    fn first_change(&mut self, tag: usize) -> bool {
+        let (word, bit) = (tag / 64, 1u64 << (tag % 64));
+        let fresh = self.logged[word] & bit == 0;
+        self.logged[word] |= bit;
+        fresh
+    }
+}
+
 /// How the engine counts parts.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub enum PartCounting {
@@ -325,7 +362,7 @@ pub struct CellEngine {
     connected: Option<bool>,
     rules: StateRules,
     state: MachineState,
-    last_fault: Option<FaultValues>,
+    last_fault: Option<FaultMark>,
     parts: PartCounting,
     /// Per configured tag: whether its changes go to [`Step::exported`].
     exported: Vec<bool>,
@@ -591,9 +628,33 @@ impl CellEngine {
         self.connected == Some(true)
     }
 
-    /// The values at the last switching or timer fault.
-    pub fn last_fault(&self) -> Option<&FaultValues> {
-        self.last_fault.as_ref()
+    /// The values at the last switching, timer, limit or step fault
+    /// (costs one look per tag: for the snapshot service).
+    pub fn last_fault(&self) -> Option<FaultValues> {
+        let mark = self.last_fault.as_ref()?;
+        let mut values = self.all_values();
+        for (tag, value) in &mark.undo {
+            values[*tag as usize] = value.clone();
+        }
+        Some(FaultValues {
+            alarm: mark.alarm.clone(),
+            at: mark.at,
+            values,
+        })
+    }
+
+    /// Logs `tag`'s value before it changes, the first time it changes
+    /// after the last fault.
+    fn remember(&mut self, tag: usize) {
+        if let Some(mark) = &mut self.last_fault {
+            if mark.first_change(tag) {
+                let before = match self.values[tag] {
+                    Some(b) => Some(Value::Bool(b)),
+                    None => self.others[tag].clone(),
+                };
+                mark.undo.push((tag as u32, before));
+            }
+        }
     }
 
     /// Puts back the alarms that were not back to normal when the agent
@@ -1028,6 +1089,11 @@ impl CellEngine {
         findings: &mut Vec<Finding>,
         step: &mut Step,
     ) -> bool {
+        if value.is_some() && self.others[tag].is_some() {
+            // A number or string tag now sends booleans: forget the
+            // other value first.
+            self.set_other(tag, None, now, findings, step);
+        }
         let before = self.values[tag];
         if before == value {
             return false;
@@ -1036,6 +1102,7 @@ impl CellEngine {
         if self.parts == PartCounting::Edge(tag) && before == Some(false) && value == Some(true) {
             step.parts.push((now, 1));
         }
+        self.remember(tag);
         self.values[tag] = value;
         step.evaluations += 1;
         if self.exported.get(tag) == Some(&true) {
@@ -1064,10 +1131,11 @@ impl CellEngine {
             // the boolean first.
             self.set_value(tag, None, now, findings, step);
         }
-        let before = std::mem::replace(&mut self.others[tag], value);
-        if before == self.others[tag] {
+        if self.others[tag] == value {
             return false;
         }
+        self.remember(tag);
+        let before = std::mem::replace(&mut self.others[tag], value);
         self.known_changed(tag, before.is_some(), self.others[tag].is_some(), step);
         step.evaluations += 1;
         let number = |v: &Option<Value>| match v {
@@ -1238,11 +1306,9 @@ impl CellEngine {
                 AlarmKind::Switching | AlarmKind::Timer | AlarmKind::Limit | AlarmKind::Step
             )
         {
-            self.last_fault = Some(FaultValues {
-                alarm: id,
-                at: now,
-                values: self.all_values(),
-            });
+            self.last_fault
+                .get_or_insert_with(FaultMark::default)
+                .restart(id, now, self.configured);
         }
         step.events.push(EngineEvent::Alarm {
             alarm: alarm.clone(),
@@ -1435,6 +1501,49 @@ mod tests {
             Err(CommandRefused::NothingToAcknowledge("ese".into()))
         );
         assert!(e.reset("ese", "kim", 32).is_err());
+    }
+
+    #[test]
+    fn the_values_at_a_fault_stay_as_they_were_whatever_changes_after() {
+        let mut e = engine();
+        e.on_connection(true, 1);
+        load_normal(&mut e, 2);
+        assert_eq!(e.last_fault(), None);
+        let x006 = e.tag_index(&Signal::new("X0.06")).unwrap();
+        e.on_reading(x006, Reading::Good(false), 10, 10);
+        let at_fault = e.all_values();
+        let first = e.last_fault().unwrap();
+        assert_eq!((first.alarm.as_str(), first.at), ("ese", 10));
+        assert_eq!(first.values, at_fault);
+        // Every other tag changes, some twice, one becomes unknown, one
+        // sends a number: the values at the fault do not move.
+        let n = e.tags().len();
+        for t in (0..n).filter(|&t| t != x006) {
+            let v = at_fault[t] == Some(Value::Bool(true));
+            e.on_reading(t, Reading::Good(!v), 11, 11);
+            if t % 2 == 0 {
+                e.on_reading(t, Reading::Good(v), 12, 12);
+            }
+        }
+        e.on_reading(0, Reading::Bad, 13, 13);
+        e.on_reading(1, Reading::Number(Num::Int(7)), 14, 14);
+        assert_ne!(e.all_values(), at_fault);
+        assert_eq!(e.last_fault().unwrap(), first);
+        // The next fault starts over from the values then.
+        e.on_connection(true, 20);
+        load_normal(&mut e, 21);
+        e.on_reading(x006, Reading::Good(true), 22, 22);
+        assert!(
+            e.alarms().all(|a| !a.active),
+            "{:?}",
+            e.alarms().collect::<Vec<_>>()
+        );
+        e.on_reading(x006, Reading::Good(false), 30, 30);
+        let second = e.last_fault().unwrap();
+        assert_eq!(second.at, 30);
+        assert_eq!(second.values, e.all_values());
+        e.on_reading(x006, Reading::Good(true), 31, 31);
+        assert_eq!(e.last_fault().unwrap(), second);
     }
 
     #[test]
