@@ -493,7 +493,7 @@ impl DiscoverArgs {
             sampling_interval: sampling,
             namespace_uri: None,
             queue_size: OpcUaConfig::default_queue_size(publishing, sampling),
-            max_notifications_per_publish: 10_000,
+            max_notifications_per_publish: OpcUaConfig::DEFAULT_MAX_NOTIFICATIONS,
         })
     }
 }

@@ -445,9 +445,19 @@ impl CellLoop {
             ),
             SourceEvent::Readings(readings) => {
                 self.forcing.seen_in(&readings);
-                let step = self.engine.on_readings(&readings, now);
-                self.received = Some(readings.received);
-                self.dispatch(now, Input::Readings, step, queue_depth).await;
+                // One step for the publish, cut after each reading that
+                // changes an alarm: the alarm goes out before the changes
+                // behind it are looked at.
+                let mut rest = &readings.readings[..];
+                loop {
+                    let (step, used) = self.engine.on_readings_to_alarm(rest, now);
+                    rest = &rest[used..];
+                    self.received = Some(readings.received);
+                    self.dispatch(now, Input::Readings, step, queue_depth).await;
+                    if rest.is_empty() {
+                        break;
+                    }
+                }
                 self.follow_force(now).await;
                 return;
             }

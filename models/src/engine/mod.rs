@@ -765,9 +765,24 @@ impl CellEngine {
     /// Values delivered together (one publish), in source-time order: one
     /// step for all.
     pub fn on_readings(&mut self, readings: &[TagReading], now: u64) -> Step {
+        self.readings(readings, now, false).0
+    }
+
+    /// Values delivered together, in source-time order, up to and
+    /// including the first that changes an alarm: one step for those, and
+    /// how many readings it took (at least one, unless `readings` is
+    /// empty). The caller publishes the alarm at once and hands the rest
+    /// in again, so an alarm never waits for the changes behind it.
+    pub fn on_readings_to_alarm(&mut self, readings: &[TagReading], now: u64) -> (Step, usize) {
+        self.readings(readings, now, true)
+    }
+
+    fn readings(&mut self, readings: &[TagReading], now: u64, to_alarm: bool) -> (Step, usize) {
         let mut step = Step::default();
         let mut findings = Vec::new();
+        let mut used = 0;
         for r in readings {
+            used += 1;
             if r.tag >= self.configured {
                 continue;
             }
@@ -777,10 +792,13 @@ impl CellEngine {
             // cleared within one publish still leaves its history rows.
             if self.reading(r, now, &mut findings, &mut step) || step.events.len() > events {
                 self.update_state(now, &mut step);
+                if to_alarm && step.alarms().next().is_some() {
+                    break;
+                }
             }
         }
         self.collect_observations(&mut step);
-        step
+        (step, used)
     }
 
     /// One reading; true if the machine state may have changed.
@@ -1544,6 +1562,54 @@ mod tests {
         assert_eq!(second.values, e.all_values());
         e.on_reading(x006, Reading::Good(true), 31, 31);
         assert_eq!(e.last_fault().unwrap(), second);
+    }
+
+    #[test]
+    fn a_publish_is_cut_after_each_alarm_and_comes_to_the_same() {
+        let mut whole = engine();
+        let mut cut = engine();
+        for e in [&mut whole, &mut cut] {
+            e.on_connection(true, 1);
+            load_normal(e, 2);
+        }
+        let x006 = whole.tag_index(&Signal::new("X0.06")).unwrap();
+        let other = (0..whole.tags().len()).find(|&t| t != x006).unwrap();
+        let r = |tag, v, at| TagReading {
+            tag,
+            reading: Reading::Good(v),
+            source_time: at,
+        };
+        let publish = [
+            r(other, false, 10),
+            r(x006, false, 11),
+            r(other, true, 12),
+            r(x006, true, 13),
+            r(other, false, 14),
+        ];
+        let all = whole.on_readings(&publish, 20);
+        assert_eq!(alarm_transitions(&all.events).len(), 2);
+        let mut rest = &publish[..];
+        let mut parts = Vec::new();
+        while !rest.is_empty() {
+            let (step, used) = cut.on_readings_to_alarm(rest, 20);
+            rest = &rest[used..];
+            parts.push((used, step));
+        }
+        let used: Vec<usize> = parts.iter().map(|(n, _)| *n).collect();
+        assert_eq!(used, [2, 2, 1], "cut after the raise and after the clear");
+        let alarms = |p: &(usize, Step)| alarm_transitions(&p.1.events);
+        assert_eq!(alarms(&parts[0]), [("ese".to_string(), Transition::Raised)]);
+        assert_eq!(
+            alarms(&parts[1]),
+            [("ese".to_string(), Transition::Cleared)]
+        );
+        assert!(alarms(&parts[2]).is_empty());
+        let events: Vec<EngineEvent> = parts.iter().flat_map(|(_, s)| s.events.clone()).collect();
+        assert_eq!(events, all.events);
+        let readings: u64 = parts.iter().map(|(_, s)| s.readings).sum();
+        assert_eq!(readings, all.readings);
+        assert_eq!(cut.all_values(), whole.all_values());
+        assert_eq!(cut.on_readings_to_alarm(&[], 21).1, 0);
     }
 
     #[test]
