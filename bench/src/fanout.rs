@@ -136,7 +136,7 @@ async fn measure_cells(
         }
         let direct = format!("mode = \"peer\"\nlisten = [\"tcp/127.0.0.1:{direct_port}\"]");
         cells.push(start_cell(setup, "direct".into(), &direct).await?);
-        let seen = peer::subscribe_alarms(
+        let (seen, transits) = peer::subscribe_alarms(
             &[
                 router_endpoint.to_string(),
                 format!("tcp/127.0.0.1:{direct_port}"),
@@ -164,6 +164,7 @@ async fn measure_cells(
         }
         tokio::time::sleep(setup.seconds).await;
         let (mut routed, mut direct) = (Vec::new(), Vec::new());
+        let (mut routed_bus, mut direct_bus) = (Vec::new(), Vec::new());
         let (mut routed_faults, mut direct_faults) = (0, 0);
         for c in &mut cells {
             let Some(g) = c.generator.take() else { continue };
@@ -176,35 +177,51 @@ async fn measure_cells(
                 .and_then(|m| m.get(&c.id).cloned())
                 .unwrap_or_default();
             let l = peer::match_faults(&faults, &s);
+            let bus = transits
+                .lock()
+                .ok()
+                .and_then(|m| m.get(&c.id).cloned())
+                .unwrap_or_default();
             if c.id == "direct" {
                 direct_faults += faults.len();
                 direct.extend(l);
+                direct_bus.extend(bus);
             } else {
                 routed_faults += faults.len();
                 routed.extend(l);
+                routed_bus.extend(bus);
             }
         }
         let wall = started.elapsed().as_secs_f64();
         let cpu = measure::cpu_seconds(router_pid)? - cpu0;
         let (_, rss_peak) = measure::rss(router_pid)?;
         let ms = |v: &[f64], q| measure::quantile(v, q).map_or("-".into(), |s| format!("{:.1}", s * 1e3));
+        let us = |v: &[f64], q| measure::quantile(v, q).map_or("-".into(), |s| format!("{:.0}", s * 1e6));
         Ok(format!(
-            "| path | agents | alarms reported / faults | latency p50 (ms) | p99 (ms) | max (ms) |\n\
-             |---|---|---|---|---|---|\n\
-             | through the router (client mode) | {} | {} / {routed_faults} | {} | {} | {} |\n\
-             | direct (peer mode, baseline) | 1 | {} / {direct_faults} | {} | {} | {} |\n\n\
-             - router: {:.1} % of a core over {wall:.0} s, peak RSS {:.1} MB\n",
+            "| path | agents | alarms reported / faults | latency p50 (ms) | p99 (ms) | max (ms) | bus only p50 / p99 / max (µs) |\n\
+             |---|---|---|---|---|---|---|\n\
+             | through the router (client mode) | {} | {} / {routed_faults} | {} | {} | {} | {} / {} / {} |\n\
+             | direct (peer mode, baseline) | 1 | {} / {direct_faults} | {} | {} | {} | {} / {} / {} |\n\n\
+             - router: {:.1} % of a core over {wall:.0} s, peak RSS {:.1} MB\n\
+             - the router's share of the bus time, median routed minus median direct: {:.0} µs\n",
             setup.agents,
             routed.len(),
             ms(&routed, 0.5),
             ms(&routed, 0.99),
             ms(&routed, 1.0),
+            us(&routed_bus, 0.5),
+            us(&routed_bus, 0.99),
+            us(&routed_bus, 1.0),
             direct.len(),
             ms(&direct, 0.5),
             ms(&direct, 0.99),
             ms(&direct, 1.0),
+            us(&direct_bus, 0.5),
+            us(&direct_bus, 0.99),
+            us(&direct_bus, 1.0),
             cpu / wall * 100.0,
             rss_peak as f64 / 1048576.0,
+            share(&routed_bus, &direct_bus, 0.5) * 1e6,
         ))
     }
     .await;
@@ -216,6 +233,15 @@ async fn measure_cells(
         c.server.stop();
     }
     result
+}
+
+/// Quantile `q` of the routed path's bus time minus the direct path's
+/// (0 when either has none).
+fn share(routed: &[f64], direct: &[f64], q: f64) -> f64 {
+    match (measure::quantile(routed, q), measure::quantile(direct, q)) {
+        (Some(r), Some(d)) => r - d,
+        _ => 0.0,
+    }
 }
 
 /// This program's own path (to start it again as the router).

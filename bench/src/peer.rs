@@ -328,7 +328,8 @@ pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Res
     let mut child = spawn_agent(&setup.agent, &dir)?;
     let pid = child.id();
     let result = async {
-        let alarms = subscribe_alarms(&[format!("tcp/127.0.0.1:{zenoh_port}")], "bench").await?;
+        let (alarms, _) =
+            subscribe_alarms(&[format!("tcp/127.0.0.1:{zenoh_port}")], "bench").await?;
         let metrics: SocketAddr = format!("127.0.0.1:{metrics_port}").parse()?;
         wait_ready(&mut child, metrics, &dir).await?;
         let before = Scrape::get(metrics)?;
@@ -469,13 +470,23 @@ fn trust(config: &Path, server_pki: &Path) -> anyhow::Result<()> {
 /// the changed contact) for every `raised` transition of `fault`.
 pub type Seen = Arc<Mutex<HashMap<String, Vec<(SystemTime, Option<usize>)>>>>;
 
+/// Per cell, for every `raised` transition of `fault`: seconds from the
+/// agent's put (the sample's timestamp, stamped by the publishing session)
+/// to the subscriber's callback — the bus's own share of the latency (one
+/// machine, one clock).
+pub type Transits = Arc<Mutex<HashMap<String, Vec<f64>>>>;
+
 /// Subscribes to the alarms of `cells` (a key expression chunk: `bench`,
 /// `*`) through a peer session connected to `endpoints`.
-pub async fn subscribe_alarms(endpoints: &[String], cells: &str) -> anyhow::Result<Seen> {
+pub async fn subscribe_alarms(
+    endpoints: &[String],
+    cells: &str,
+) -> anyhow::Result<(Seen, Transits)> {
     let config = zenoh_config("peer", &[], endpoints)?;
     let session = zenoh::open(config).await.map_err(|e| anyhow!("{e}"))?;
     let seen: Seen = Arc::default();
-    let out = seen.clone();
+    let transits: Transits = Arc::default();
+    let (out, transit_out) = (seen.clone(), transits.clone());
     let subscriber = session
         .declare_subscriber(format!("cellwatch/{cells}/alarms/**"))
         .callback(move |sample| {
@@ -495,6 +506,14 @@ pub async fn subscribe_alarms(endpoints: &[String], cells: &str) -> anyhow::Resu
                     .and_then(|k| k.parse().ok())
             });
             let cell = v["cell"].as_str().unwrap_or_default().to_string();
+            let put = sample.timestamp().map(|t| t.get_time().to_system_time());
+            if let Some(transit) = put.and_then(|put| now.duration_since(put).ok()) {
+                if let Ok(mut t) = transit_out.lock() {
+                    t.entry(cell.clone())
+                        .or_default()
+                        .push(transit.as_secs_f64());
+                }
+            }
             if let Ok(mut s) = out.lock() {
                 s.entry(cell).or_default().push((now, switch));
             }
@@ -504,7 +523,7 @@ pub async fn subscribe_alarms(endpoints: &[String], cells: &str) -> anyhow::Resu
     // Session and subscriber live as long as the process.
     std::mem::forget(subscriber);
     std::mem::forget(session);
-    Ok(seen)
+    Ok((seen, transits))
 }
 
 /// For each fault, in order, the first alarm after it naming its switch
