@@ -770,7 +770,7 @@ impl Validator<'_> {
             }
         };
         let tags = match raw.tags_file {
-            None => self.tags(raw.tags),
+            None => self.tags(raw.tags.into_iter()),
             Some(file) => {
                 if !raw.tags.is_empty() {
                     self.problem(
@@ -1335,15 +1335,18 @@ impl Validator<'_> {
         }
     }
 
-    fn tags(&mut self, raw: Vec<raw::RawTag>) -> Vec<TagConfig> {
+    fn tags(&mut self, mut raw: impl raw::TagRows) -> Vec<TagConfig> {
         // Indices written with `opcua.namespace_uri` (each with its first
         // tag), and a tag whose index is trusted blindly.
         let mut indices: BTreeMap<u16, usize> = BTreeMap::new();
         let mut blind: Option<(u16, String)> = None;
-        let mut out = Vec::new();
+        // Room for every tag at once (a tags file's rows are counted by
+        // its lines), not grown by doubling.
+        let (least, most) = raw.size_hint();
+        let mut out = Vec::with_capacity(most.unwrap_or(least));
         let mut names = HashSet::new();
         let mut addresses = HashSet::new();
-        for (i, t) in raw.into_iter().enumerate() {
+        for (i, t) in raw.by_ref().enumerate() {
             let key = format!("tags[{i}]");
             if !names.insert(t.name.get_ref().clone()) {
                 self.problem(
@@ -1483,6 +1486,9 @@ impl Validator<'_> {
                 max,
             });
         }
+        for (offset, key, message) in raw.problems() {
+            self.problem(offset..offset, &key, message);
+        }
         // What follows is about the configuration file again.
         self.tags_file = None;
         if let Some((span, uri)) = self.namespace_uri.clone() {
@@ -1523,12 +1529,10 @@ impl Validator<'_> {
             return Vec::new();
         };
         let origin = path.display().to_string();
-        let (raw, problems) = raw::csv_tags(&text);
-        self.tags_file = Some((origin, text));
-        for (offset, key, message) in problems {
-            self.problem(offset..offset, &key, message);
-        }
-        self.tags(raw)
+        // The validator places problems in the file's text; the rows are
+        // read from a copy of it as they are validated.
+        self.tags_file = Some((origin, text.clone()));
+        self.tags(raw::CsvTags::new(&text))
     }
 
     fn read_text(

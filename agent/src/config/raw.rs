@@ -263,79 +263,126 @@ const TAG_COLUMNS: [&str; 11] = [
     "max",
 ];
 
-/// The tags of a CSV tags file (`tags_file`), each value spanned at the
-/// start of its row's line in `text`, and the problems found reading it
-/// (byte offset, key, message). A row with a problem is left out.
-pub(crate) fn csv_tags(text: &str) -> (Vec<RawTag>, Vec<(usize, String, String)>) {
-    let mut problems = Vec::new();
-    let mut reader = csv::ReaderBuilder::new()
-        .trim(csv::Trim::All)
-        .comment(Some(b'#'))
-        .from_reader(text.as_bytes());
-    let headers = match reader.headers() {
-        Ok(h) => h.clone(),
-        Err(e) => {
-            problems.push((
-                0,
-                "tags_file".into(),
-                format!("cannot read the header row: {e}"),
-            ));
-            return (Vec::new(), problems);
-        }
-    };
-    let mut column = [None; TAG_COLUMNS.len()];
-    for (i, h) in headers.iter().enumerate() {
-        match TAG_COLUMNS.iter().position(|&c| c == h) {
-            Some(k) if column[k].is_none() => column[k] = Some(i),
-            Some(_) => problems.push((
-                0,
-                "tags_file".into(),
-                format!("column '{h}' is given twice"),
-            )),
-            None => problems.push((
-                0,
-                "tags_file".into(),
-                format!(
+/// Tags as they are read, and the problems found reading them.
+pub(crate) trait TagRows: Iterator<Item = RawTag> {
+    /// The problems found while reading (byte offset, key, message).
+    fn problems(&mut self) -> Vec<(usize, String, String)> {
+        Vec::new()
+    }
+}
+
+/// `[[tags]]` tables, read with the configuration.
+impl TagRows for std::vec::IntoIter<RawTag> {}
+
+impl TagRows for CsvTags<'_> {
+    fn problems(&mut self) -> Vec<(usize, String, String)> {
+        std::mem::take(&mut self.problems)
+    }
+}
+
+/// The tags of a CSV tags file (`tags_file`), row by row, each value
+/// spanned at the start of its row's line in the text; a row with a
+/// problem is left out and its problem kept ([`TagRows::problems`]). Read
+/// as the validator goes, so a 100,000-row file is never held as raw rows.
+pub(crate) struct CsvTags<'a> {
+    text: &'a str,
+    /// `None` when the header row is wrong: no rows are read.
+    reader: Option<csv::Reader<&'a [u8]>>,
+    column: [Option<usize>; TAG_COLUMNS.len()],
+    record: csv::StringRecord,
+    /// Rows read so far, good or not.
+    rows: usize,
+    /// Lines in the file: at most as many rows.
+    lines: usize,
+    /// The problems found so far: byte offset, key, message.
+    problems: Vec<(usize, String, String)>,
+}
+
+impl<'a> CsvTags<'a> {
+    /// Reads the header row of `text`.
+    pub(crate) fn new(text: &'a str) -> CsvTags<'a> {
+        let mut tags = CsvTags {
+            text,
+            reader: None,
+            column: [None; TAG_COLUMNS.len()],
+            record: csv::StringRecord::new(),
+            rows: 0,
+            lines: text.lines().count(),
+            problems: Vec::new(),
+        };
+        let mut reader = csv::ReaderBuilder::new()
+            .trim(csv::Trim::All)
+            .comment(Some(b'#'))
+            .from_reader(text.as_bytes());
+        let headers = match reader.headers() {
+            Ok(h) => h.clone(),
+            Err(e) => {
+                tags.header_problem(format!("cannot read the header row: {e}"));
+                return tags;
+            }
+        };
+        for (i, h) in headers.iter().enumerate() {
+            match TAG_COLUMNS.iter().position(|&c| c == h) {
+                Some(k) if tags.column[k].is_none() => tags.column[k] = Some(i),
+                Some(_) => tags.header_problem(format!("column '{h}' is given twice")),
+                None => tags.header_problem(format!(
                     "unknown column '{h}': the columns are {}",
                     TAG_COLUMNS.join(", ")
-                ),
-            )),
-        }
-    }
-    for (k, name) in TAG_COLUMNS.iter().enumerate().take(3) {
-        if column[k].is_none() {
-            problems.push((
-                0,
-                "tags_file".into(),
-                format!("the header row has no '{name}' column"),
-            ));
-        }
-    }
-    if !problems.is_empty() {
-        return (Vec::new(), problems);
-    }
-    let mut tags = Vec::new();
-    let mut record = csv::StringRecord::new();
-    loop {
-        match reader.read_record(&mut record) {
-            Ok(false) => break,
-            Ok(true) => {}
-            Err(e) => {
-                let at = e.position().map_or(0, |p| p.byte() as usize);
-                problems.push((at, "tags_file".into(), e.to_string()));
-                // A malformed row (a stray quote, a wrong number of cells)
-                // is reported and skipped; the rest is still read.
-                continue;
+                )),
             }
         }
-        let at = row_start(text, record.position().map_or(0, |p| p.byte() as usize));
-        let row = tags.len() + problems.len();
-        match tag_of_row(&record, &column, at) {
-            Ok(t) => tags.push(t),
-            Err((key, message)) => problems.push((at, format!("tags[{row}].{key}"), message)),
+        for (k, name) in TAG_COLUMNS.iter().enumerate().take(3) {
+            if tags.column[k].is_none() {
+                tags.header_problem(format!("the header row has no '{name}' column"));
+            }
+        }
+        if tags.problems.is_empty() {
+            tags.reader = Some(reader);
+        }
+        tags
+    }
+
+    fn header_problem(&mut self, message: String) {
+        self.problems.push((0, "tags_file".into(), message));
+    }
+}
+
+impl Iterator for CsvTags<'_> {
+    type Item = RawTag;
+
+    fn next(&mut self) -> Option<RawTag> {
+        let reader = self.reader.as_mut()?;
+        loop {
+            match reader.read_record(&mut self.record) {
+                Ok(false) => return None,
+                Ok(true) => {}
+                Err(e) => {
+                    let at = e.position().map_or(0, |p| p.byte() as usize);
+                    self.problems.push((at, "tags_file".into(), e.to_string()));
+                    // A malformed row (a stray quote, a wrong number of
+                    // cells) is reported and skipped; the rest is still read.
+                    continue;
+                }
+            }
+            let at = row_start(
+                self.text,
+                self.record.position().map_or(0, |p| p.byte() as usize),
+            );
+            let row = self.rows;
+            self.rows += 1;
+            match tag_of_row(&self.record, &self.column, at) {
+                Ok(t) => return Some(t),
+                Err((key, message)) => {
+                    self.problems
+                        .push((at, format!("tags[{row}].{key}"), message))
+                }
+            }
         }
     }
-    (tags, problems)
+
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        (0, Some(self.lines))
+    }
 }
 
 /// Where the row the reader says starts at `at` really starts: past the
