@@ -534,8 +534,11 @@ impl Monitored {
         tag_nodes: Arc<Vec<Option<TagNode>>>,
         namespaces: Vec<String>,
     ) -> Monitored {
-        let mut index: HashMap<NodeId, u32> = HashMap::new();
-        let mut of_node: Vec<(u32, u32)> = Vec::new();
+        // Sized once for every tag (not grown by doubling: the start's peak).
+        let pairs = pairs.into_iter();
+        let most = pairs.size_hint().1.unwrap_or(0);
+        let mut index: HashMap<NodeId, u32> = HashMap::with_capacity(most);
+        let mut of_node: Vec<(u32, u32)> = Vec::with_capacity(most);
         for (id, tag) in pairs {
             let next = index.len() as u32;
             let n = *index.entry(id).or_insert(next);
