@@ -646,6 +646,11 @@ impl CellEngine {
     /// Logs `tag`'s value before it changes, the first time it changes
     /// after the last fault.
     fn remember(&mut self, tag: usize) {
+        // A comparison contact's tag is not in the snapshot: it follows
+        // the numbers it reads.
+        if tag >= self.configured {
+            return;
+        }
         if let Some(mark) = &mut self.last_fault {
             if mark.first_change(tag) {
                 let before = match self.values[tag] {
@@ -1562,6 +1567,57 @@ mod tests {
         assert_eq!(second.values, e.all_values());
         e.on_reading(x006, Reading::Good(true), 31, 31);
         assert_eq!(e.last_fault().unwrap(), second);
+    }
+
+    #[test]
+    fn a_comparison_changing_after_a_fault_leaves_the_values_at_it_alone() {
+        // The running rule reads a comparison: its contact is a tag of its
+        // own past the configured ones, set as TEMP crosses 80.
+        let base = engine();
+        let mut tags = base.tags().to_vec();
+        let temp = tags.len();
+        tags.push(Tag {
+            name: "temp".into(),
+            address: Signal::new("TEMP"),
+        });
+        let check = SwitchingCheck {
+            id: "ese".into(),
+            sf: SwitchingFunction::expand(
+                &Program::compile("ese.il", ESE, None).unwrap(),
+                &Signal::new("G8.02"),
+                &Observability::default_for(crate::il::Dialect::Pmc),
+            )
+            .unwrap(),
+            polarity: Polarity::On,
+            severity: Severity::Critical,
+            fault_type: "ESE".into(),
+            comments: CommentDb::default(),
+            armed_when: None,
+        };
+        let rules = StateRules {
+            running: Some(Expr::parse("G0.00 * F0.00 * TEMP > 80").unwrap()),
+            fault_severity: Severity::High,
+        };
+        let mut e = CellEngine::new(
+            "m01",
+            tags,
+            vec![Box::new(SwitchingChecks::new(vec![check]))],
+            rules,
+        )
+        .unwrap();
+        e.on_connection(true, 1);
+        load_normal(&mut e, 2);
+        let number = |n| Reading::Number(Num::Float(n));
+        e.on_reading(temp, number(70.0), 3, 3);
+        let x006 = e.tag_index(&Signal::new("X0.06")).unwrap();
+        e.on_reading(x006, Reading::Good(false), 10, 10);
+        let at_fault = e.last_fault().unwrap();
+        assert_eq!(at_fault.values.len(), temp + 1);
+        // The comparison's contact flips both ways; TEMP itself changes.
+        e.on_reading(temp, number(90.0), 11, 11);
+        e.on_reading(temp, number(60.0), 12, 12);
+        assert_eq!(e.last_fault().unwrap(), at_fault);
+        assert_eq!(at_fault.values[temp], Some(Value::Num(Num::Float(70.0))));
     }
 
     #[test]
