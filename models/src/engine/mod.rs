@@ -1398,6 +1398,12 @@ mod tests {
     const NORMAL: &str = include_str!("../../../config/cnc/ese-normal.values");
 
     fn engine() -> CellEngine {
+        engine_with(&[], "G0.00 * F0.00")
+    }
+
+    /// The ESE check over its contacts' tags, then `extra` tags, with
+    /// `running` as the running rule.
+    fn engine_with(extra: &[Tag], running: &str) -> CellEngine {
         let p = Program::compile("ese.il", ESE, None).unwrap();
         let sf = SwitchingFunction::expand(
             &p,
@@ -1405,7 +1411,7 @@ mod tests {
             &Observability::default_for(p.dialect()),
         )
         .unwrap();
-        let tags: Vec<Tag> = sf
+        let mut tags: Vec<Tag> = sf
             .leaves()
             .into_iter()
             .map(|s| Tag {
@@ -1413,6 +1419,7 @@ mod tests {
                 address: s,
             })
             .collect();
+        tags.extend_from_slice(extra);
         let check = SwitchingCheck {
             id: "ese".into(),
             sf,
@@ -1423,7 +1430,7 @@ mod tests {
             armed_when: None,
         };
         let rules = StateRules {
-            running: Some(Expr::parse("G0.00 * F0.00").unwrap()),
+            running: Some(Expr::parse(running).unwrap()),
             fault_severity: Severity::High,
         };
         CellEngine::new(
@@ -1573,38 +1580,12 @@ mod tests {
     fn a_comparison_changing_after_a_fault_leaves_the_values_at_it_alone() {
         // The running rule reads a comparison: its contact is a tag of its
         // own past the configured ones, set as TEMP crosses 80.
-        let base = engine();
-        let mut tags = base.tags().to_vec();
-        let temp = tags.len();
-        tags.push(Tag {
+        let temp_tag = Tag {
             name: "temp".into(),
             address: Signal::new("TEMP"),
-        });
-        let check = SwitchingCheck {
-            id: "ese".into(),
-            sf: SwitchingFunction::expand(
-                &Program::compile("ese.il", ESE, None).unwrap(),
-                &Signal::new("G8.02"),
-                &Observability::default_for(crate::il::Dialect::Pmc),
-            )
-            .unwrap(),
-            polarity: Polarity::On,
-            severity: Severity::Critical,
-            fault_type: "ESE".into(),
-            comments: CommentDb::default(),
-            armed_when: None,
         };
-        let rules = StateRules {
-            running: Some(Expr::parse("G0.00 * F0.00 * TEMP > 80").unwrap()),
-            fault_severity: Severity::High,
-        };
-        let mut e = CellEngine::new(
-            "m01",
-            tags,
-            vec![Box::new(SwitchingChecks::new(vec![check]))],
-            rules,
-        )
-        .unwrap();
+        let mut e = engine_with(&[temp_tag], "G0.00 * F0.00 * TEMP > 80");
+        let temp = e.tags().len() - 1;
         e.on_connection(true, 1);
         load_normal(&mut e, 2);
         let number = |n| Reading::Number(Num::Float(n));
