@@ -94,6 +94,7 @@ async fn start_cell(setup: &Setup, id: String, zenoh: &str) -> anyhow::Result<Ce
         &dir.join("server-pki"),
         setup.load.tags,
         1,
+        0,
     )
     .await?;
     let metrics_port = peer::free_port()?;

@@ -68,21 +68,58 @@ pub struct LoadServer {
     /// The noise variables' current values.
     values: Vec<bool>,
     addr: SocketAddr,
+    /// How much lower than the benchmark's the server's and the
+    /// generator's threads run (niceness added).
+    nice: i32,
+    /// The server's own runtime, its threads at `nice`; shut down on drop.
+    runtime: Option<tokio::runtime::Runtime>,
+}
+
+impl Drop for LoadServer {
+    fn drop(&mut self) {
+        self.handle.cancel();
+        if let Some(runtime) = self.runtime.take() {
+            runtime.shutdown_background();
+        }
+    }
+}
+
+/// Lowers the calling thread's priority by `nice` (on Linux niceness is
+/// per thread, and threads it starts inherit it).
+fn lower_priority(nice: i32) {
+    if nice != 0 {
+        if let Err(e) = rustix::process::nice(nice) {
+            eprintln!("load server: cannot lower a thread's priority by {nice}: {e}");
+        }
+    }
 }
 
 impl LoadServer {
     /// Serves `noise` variables (random initial values from `seed`) and the
     /// limit switches (closed) on `listen`, with endpoints None and
     /// Basic256Sha256 + SignAndEncrypt; client certificates are trusted
-    /// from `pki/trusted/` only.
+    /// from `pki/trusted/` only. The server runs on its own runtime, and
+    /// it and the generator at `nice` below the benchmark (0: the same
+    /// priority): with the server standing in for a PLC on its own
+    /// hardware, a positive `nice` keeps it from taking the agent's turn
+    /// on a machine they share.
     pub async fn start(
         listen: SocketAddr,
         pki: &Path,
         noise: usize,
         seed: u64,
+        nice: i32,
     ) -> anyhow::Result<LoadServer> {
-        let listener = tokio::net::TcpListener::bind(listen)
-            .await
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .thread_name("load-server")
+            .on_thread_start(move || lower_priority(nice))
+            .enable_all()
+            .build()
+            .context("cannot start the load server's runtime")?;
+        let listener = runtime
+            .spawn(tokio::net::TcpListener::bind(listen))
+            .await?
             .with_context(|| format!("cannot listen on {listen}"))?;
         let addr = listener.local_addr()?;
         let tokens: &[&str] = &[ANONYMOUS_USER_TOKEN_ID];
@@ -164,7 +201,7 @@ impl LoadServer {
             }));
             space.add_variables(vars, &folder);
         }
-        tokio::spawn(async move {
+        runtime.spawn(async move {
             if let Err(e) = server.run_with(listener).await {
                 eprintln!("load server stopped: {e}");
             }
@@ -178,6 +215,8 @@ impl LoadServer {
             switches,
             values,
             addr,
+            nice,
+            runtime: Some(runtime),
         })
     }
 
@@ -210,7 +249,9 @@ impl LoadServer {
         let noise = self.noise.clone();
         let switches = self.switches.clone();
         let mut values = self.values.clone();
+        let nice = self.nice;
         let thread = std::thread::spawn(move || {
+            lower_priority(nice);
             let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
             let mut order: Vec<usize> = (0..noise.len()).collect();
             order.shuffle(&mut rng);

@@ -51,6 +51,16 @@ enum Cmd {
         /// smaller batches, more publishes); default: the agent's.
         #[arg(long, value_name = "N")]
         max_notifications: Option<u32>,
+        /// A limit switch opens this often, held open for half of it
+        /// (more faults: more alarms for the latency's quantiles).
+        #[arg(long, default_value = "500ms", value_parser = humantime::parse_duration)]
+        fault_every: Duration,
+        /// Run the load server this much lower in priority than the agent
+        /// (niceness, 0–19): it stands in for a PLC on its own hardware,
+        /// and with a positive value it does not take the agent's turn on
+        /// the cores they share. 0: the same priority.
+        #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(i32).range(0..=19))]
+        server_nice: i32,
         /// The `cellwatch` binary under test.
         #[arg(long, default_value = "target/release/cellwatch")]
         agent: PathBuf,
@@ -142,6 +152,8 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
             duration: seconds,
             publishing,
             max_notifications,
+            fault_every,
+            server_nice,
             agent,
             python,
             script,
@@ -156,8 +168,9 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
                 seconds,
                 publishing,
                 max_notifications,
-                fault_every: Duration::from_millis(500),
-                fault_hold: Duration::from_millis(250),
+                fault_every,
+                fault_hold: fault_every / 2,
+                server_nice,
                 drain,
             };
             let mut rows = Vec::new();

@@ -84,6 +84,9 @@ pub struct Setup {
     pub fault_every: Duration,
     /// How long it stays open.
     pub fault_hold: Duration,
+    /// How much lower the load server's threads run than the agent's
+    /// (niceness; 0: the same).
+    pub server_nice: i32,
     /// How long the baseline may take to drain after the load stops.
     pub drain: Duration,
 }
@@ -286,7 +289,7 @@ pub fn tags_csv(load: Load) -> String {
 
 /// `dir` emptied, and a fresh load server for `load` with its PKI there:
 /// each subscriber meets a server that has served nobody before.
-async fn fresh_server(dir: &Path, load: Load) -> anyhow::Result<LoadServer> {
+async fn fresh_server(dir: &Path, load: Load, nice: i32) -> anyhow::Result<LoadServer> {
     let _ = std::fs::remove_dir_all(dir);
     std::fs::create_dir_all(dir)?;
     LoadServer::start(
@@ -294,6 +297,7 @@ async fn fresh_server(dir: &Path, load: Load) -> anyhow::Result<LoadServer> {
         &dir.join("server-pki"),
         load.tags,
         1,
+        nice,
     )
     .await
 }
@@ -303,7 +307,7 @@ pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Res
     let dir = setup
         .workdir
         .join(format!("agent-{}-{}-{:?}", load.tags, load.rate, security));
-    let server = fresh_server(&dir, load).await?;
+    let server = fresh_server(&dir, load, setup.server_nice).await?;
     let (zenoh_port, metrics_port) = (free_port()?, free_port()?);
     let config = dir.join("cell.toml");
     std::fs::write(dir.join("tags.csv"), tags_csv(load))?;
@@ -616,7 +620,7 @@ pub async fn baseline(setup: &Setup, python: &Path, load: Load) -> anyhow::Resul
     let dir = setup
         .workdir
         .join(format!("baseline-{}-{}", load.tags, load.rate));
-    let server = fresh_server(&dir, load).await?;
+    let server = fresh_server(&dir, load, setup.server_nice).await?;
     let mut child = Command::new(python)
         .arg(&setup.script)
         .arg("--endpoint")

@@ -3,7 +3,8 @@
 //!
 //! [`start`] compiles the checks, opens the journal and the Zenoh session,
 //! declares the services, binds the metrics port, and spawns four owned
-//! tasks: the source, the cell loop, the services and the metrics server.
+//! tasks: the source, the cell loop (on a thread of its own), the services
+//! and the metrics server.
 //! [`Agent::stop`] ends them all, joins them, and closes the Zenoh session,
 //! so its liveliness token disappears and its ports are free again.
 
@@ -55,6 +56,9 @@ pub enum StartError {
         /// Why.
         source: std::io::Error,
     },
+    /// The cell loop's thread cannot be started.
+    #[error("cannot start the cell loop's thread: {0}")]
+    Loop(std::io::Error),
 }
 
 impl StartError {
@@ -267,7 +271,9 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         .watching_journal(journal_health)
         .writing_to(writer)
         .forcing(forcing);
-    let cell_loop = tokio::spawn(cell_loop.run(source_rx, requests_rx, stopped(stop_rx.clone())));
+    let cell_loop = cell_loop
+        .spawn(source_rx, requests_rx, stopped(stop_rx.clone()))
+        .map_err(StartError::Loop)?;
     let services = tokio::spawn(services.run(stopped(stop_rx)));
     Ok(Agent {
         stop,

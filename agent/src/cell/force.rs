@@ -401,7 +401,7 @@ impl CellLoop {
         if let Err(why) = sent {
             return self.written(done(why.into())).await;
         }
-        tokio::spawn(async move {
+        self.start_task(async move {
             let result = match tokio::time::timeout(WRITE_TIMEOUT + pulse, pending).await {
                 Ok(Ok(r)) => r,
                 Ok(Err(_)) => Err("the source stopped before writing".into()),

@@ -4,7 +4,8 @@
 //! services (snapshot, operator commands) and the passing of time — and
 //! turns each into one [`CellStep`]: what came in, the engine's
 //! [`Step`], and the payloads to publish.
-//! The step goes to every sink in order (journal, Zenoh, metrics, console);
+//! The step goes to every sink in order (journal, Zenoh, metrics, console),
+//! then to each sink's `after` (the journal's rows queued for its writer);
 //! nothing in the loop knows about Zenoh, SQLite or Prometheus.
 //!
 //! - [`compile`]: builds the engine from a configuration (used by `run`
@@ -217,6 +218,11 @@ pub struct CellLoop {
     /// in time at the PLC but is still on its way (the source's publishing
     /// interval), ms.
     allowance: u64,
+    /// Where the tasks the loop starts (answers waiting for the journal,
+    /// writes waiting for the PLC) run: the runtime that started a loop on
+    /// its own thread ([`CellLoop::spawn`]), so they outlive the loop;
+    /// `None`: the loop's own.
+    tasks: Option<tokio::runtime::Handle>,
 }
 
 /// A write's outcome on its way back into the loop.
@@ -274,6 +280,45 @@ impl CellLoop {
             written_rx,
             forcing: force::Forcing::default(),
             allowance: 0,
+            tasks: None,
+        }
+    }
+
+    /// Runs the loop ([`CellLoop::run`]) on a thread of its own, with a
+    /// single-threaded runtime: a publish's values reach the engine as soon
+    /// as the source hands them over, never queued behind the source's or
+    /// the services' tasks on a shared worker. The tasks the loop starts
+    /// run on the calling runtime. The returned task ends with the loop.
+    ///
+    /// # Errors
+    /// The runtime or the thread cannot be started.
+    pub fn spawn(
+        mut self,
+        source: mpsc::Receiver<SourceEvent>,
+        requests: mpsc::Receiver<Request>,
+        shutdown: impl Future<Output = ()> + Send + 'static,
+    ) -> std::io::Result<tokio::task::JoinHandle<()>> {
+        self.tasks = Some(tokio::runtime::Handle::current());
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()?;
+        let (done, ended) = oneshot::channel::<()>();
+        std::thread::Builder::new()
+            .name("cell-loop".into())
+            .spawn(move || {
+                runtime.block_on(self.run(source, requests, shutdown));
+                let _ = done.send(());
+            })?;
+        Ok(tokio::spawn(async move {
+            let _ = ended.await;
+        }))
+    }
+
+    /// Starts `task` where the loop's tasks run (see `tasks`).
+    fn start_task(&self, task: impl Future<Output = ()> + Send + 'static) {
+        match &self.tasks {
+            Some(runtime) => drop(runtime.spawn(task)),
+            None => drop(tokio::spawn(task)),
         }
     }
 
@@ -505,7 +550,7 @@ impl CellLoop {
             Request::Snapshot(reply) => {
                 let snapshot = self.snapshot();
                 let settled = self.settled();
-                tokio::spawn(async move {
+                self.start_task(async move {
                     settled.await;
                     let _ = reply.send(snapshot);
                 });
@@ -516,7 +561,7 @@ impl CellLoop {
                 let (outcome_tx, outcome) = oneshot::channel();
                 self.command(command, outcome_tx).await;
                 let sinks: Vec<Settled> = self.sinks.iter().filter_map(|s| s.settled()).collect();
-                tokio::spawn(async move {
+                self.start_task(async move {
                     if let Ok(outcome) = outcome.await {
                         for s in &sinks {
                             s().await;
@@ -648,7 +693,7 @@ impl CellLoop {
                                     stage: Stage::Command,
                                 };
                                 let back = self.written_tx.clone();
-                                tokio::spawn(async move {
+                                self.start_task(async move {
                                     let result =
                                         match tokio::time::timeout(WRITE_TIMEOUT, pending).await {
                                             Ok(Ok(r)) => r,
@@ -789,6 +834,9 @@ impl CellLoop {
     async fn deliver(&mut self, step: CellStep) {
         for sink in &mut self.sinks {
             sink.handle(&step).await;
+        }
+        for sink in &mut self.sinks {
+            sink.after().await;
         }
     }
 

@@ -1,11 +1,12 @@
 //! Where the cell's steps go.
 //!
 //! The cell loop hands every [`CellStep`] to its sinks, in order: the
-//! journal first (its rows queued for the writer thread), then Zenoh, the
-//! metrics and, in the demo, the console. Answers to clients (snapshots,
-//! command outcomes, history) wait for every sink to be [`Sink::settled`]:
-//! nothing is shown that a crash would forget. A sink sees each step
-//! once and never reads the engine.
+//! journal first (its rows staged), then Zenoh, the metrics and, in the
+//! demo, the console; then each sink's [`Sink::after`] (the journal queues
+//! the staged rows for its writer thread there, off the alarm's path).
+//! Answers to clients (snapshots, command outcomes, history) wait for every
+//! sink to be [`Sink::settled`]: nothing is shown that a crash would
+//! forget. A sink sees each step once and never reads the engine.
 //!
 //! - [`journal`]: the SQLite journal (rows, history queries, reports).
 //! - [`zenoh`]: publication on the bus, and the query services.
@@ -37,6 +38,12 @@ pub trait Sink: Send {
     /// Takes one step. A sink that fails logs and counts its failure; it
     /// never stops the loop.
     fn handle<'a>(&'a mut self, step: &'a CellStep) -> BoxFuture<'a, ()>;
+
+    /// Work for the step just handled that need not delay its alarm:
+    /// called once every sink has handled the step, before the next one.
+    fn after(&mut self) -> BoxFuture<'_, ()> {
+        async {}.boxed()
+    }
 
     /// For a durable sink: a function whose future completes once every
     /// step handed to the sink before the call is durable. The loop sends

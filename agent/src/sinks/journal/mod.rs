@@ -4,18 +4,23 @@
 //! One writer thread owns the write connection and commits in batches (one
 //! transaction for whatever has queued up), in WAL mode with
 //! `synchronous=FULL`, so a committed row survives a killed process and a
-//! power cut. [`Journal::commit`] returns once its rows are on disk: the
-//! cell loop publishes an alarm only after that, so whoever sees an alarm on
-//! the bus finds it in `history`. After each commit the writer also
+//! power cut. [`Journal::commit`] returns once its rows are on disk;
+//! [`Journal::write`] and [`Journal::queue_staged`] do not wait. After each commit the writer also
 //! publishes the number of rows committed so far ([`Journal::committed`]).
 //!
 //! [`sink::JournalSink`] is the cell loop's side: it turns each step into
-//! rows.
+//! rows, [`Journal::stage`]s them before the step goes on the bus and
+//! queues them once the bus has it ([`Journal::queue_staged`]), so the
+//! writer thread is not woken on the alarm's path. A [`Barrier`] waits for
+//! staged rows to be queued, then for everything queued to be committed:
+//! whoever sees an alarm on the bus finds it in `history`.
 //! Readers (history queries, reports) open their own connections; WAL lets
 //! them read while the writer writes. Rows older than the retention are
 //! deleted at start and every hour.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Weak};
 use std::time::{Duration, Instant};
 
 pub mod sink;
@@ -305,8 +310,20 @@ pub struct Journal {
     /// `Some(why)` while the journal cannot write.
     health: watch::Receiver<Option<String>>,
     path: PathBuf,
+    /// Steps whose rows are promised but not yet queued.
+    staging: Arc<Staging>,
     /// The writer thread, joined by [`Journal::close`].
-    thread: std::sync::Arc<std::sync::Mutex<Option<std::thread::JoinHandle<()>>>>,
+    thread: Arc<std::sync::Mutex<Option<std::thread::JoinHandle<()>>>>,
+}
+
+/// Steps staged ([`Journal::stage`]) and queued so far: a barrier taken
+/// after a step was staged waits for its rows to be in the writer's
+/// channel before it goes there itself.
+struct Staging {
+    /// Steps staged so far.
+    staged: AtomicU64,
+    /// The number of staged steps whose rows are queued.
+    queued: watch::Sender<u64>,
 }
 
 /// Waits until every row queued before the call is committed, or known
@@ -316,12 +333,20 @@ pub struct Journal {
 #[derive(Clone)]
 pub struct Barrier {
     tx: mpsc::WeakSender<Batch>,
+    staging: Weak<Staging>,
 }
 
 impl Barrier {
-    /// Returns once the rows queued so far are committed (at once when the
-    /// journal is closed).
+    /// Returns once the rows staged or queued so far are committed (at
+    /// once when the journal is closed).
     pub async fn settled(&self) {
+        if let Some(staging) = self.staging.upgrade() {
+            let staged = staging.staged.load(Ordering::SeqCst);
+            let mut queued = staging.queued.subscribe();
+            drop(staging);
+            // Ends early only when the journal is gone (the sender with it).
+            let _ = queued.wait_for(|&q| q >= staged).await;
+        }
         let Some(tx) = self.tx.upgrade() else {
             return;
         };
@@ -395,8 +420,36 @@ impl Journal {
             committed,
             health,
             path: path.to_path_buf(),
-            thread: std::sync::Arc::new(std::sync::Mutex::new(Some(thread))),
+            staging: Arc::new(Staging {
+                staged: AtomicU64::new(0),
+                queued: watch::Sender::new(0),
+            }),
+            thread: Arc::new(std::sync::Mutex::new(Some(thread))),
         })
+    }
+
+    /// Promises rows to come with [`Journal::queue_staged`]: a barrier
+    /// taken from now on waits for them. Returns the step's number, to
+    /// hand to `queue_staged`. Wakes no one: the cell loop stages its rows
+    /// before the step goes on the bus and queues them after.
+    pub fn stage(&self) -> u64 {
+        self.staging.staged.fetch_add(1, Ordering::SeqCst) + 1
+    }
+
+    /// Queues the rows of the steps staged up to `step` (see
+    /// [`Journal::stage`]), in order, without waiting for their commit.
+    ///
+    /// # Errors
+    /// The writer has stopped (the staged steps count as queued: no
+    /// barrier waits for them).
+    pub async fn queue_staged(&self, entries: Vec<Entry>, step: u64) -> Result<(), JournalError> {
+        let sent = self.send(entries, None).await;
+        self.staging.queued.send_if_modified(|q| {
+            let later = step > *q;
+            *q = (*q).max(step);
+            later
+        });
+        sent
     }
 
     /// Queues an entry without waiting for its commit. Waits if the writer
@@ -406,15 +459,6 @@ impl Journal {
     /// The writer has stopped.
     pub async fn write(&self, entry: Entry) -> Result<(), JournalError> {
         self.send(vec![entry], None).await
-    }
-
-    /// Queues entries, in order, without waiting for their commit (see
-    /// [`Journal::barrier`]). Waits only if the writer is far behind.
-    ///
-    /// # Errors
-    /// The writer has stopped.
-    pub async fn queue(&self, entries: Vec<Entry>) -> Result<(), JournalError> {
-        self.send(entries, None).await
     }
 
     /// Writes `entries` and returns once they are committed.
@@ -467,6 +511,7 @@ impl Journal {
     pub fn barrier(&self) -> Barrier {
         Barrier {
             tx: self.tx.downgrade(),
+            staging: Arc::downgrade(&self.staging),
         }
     }
 
@@ -1224,6 +1269,41 @@ mod tests {
             fault_type: None,
             element: Some(format!("row {n} {}", "x".repeat(200))),
         }
+    }
+
+    #[tokio::test]
+    async fn a_barrier_waits_for_rows_staged_before_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("j.sqlite");
+        let j = Journal::start(&path, Duration::from_secs(3600), Quiet).unwrap();
+        // The cell loop stages a step's rows before the bus has the alarm;
+        // a client that saw it asks for history (a barrier) before the
+        // rows are queued.
+        let step = j.stage();
+        let barrier = j.barrier();
+        let mut settled = std::pin::pin!(barrier.settled());
+        // Everything queued after the barrier is committed, and the
+        // barrier still waits: it is not ahead of the staged rows.
+        tokio::select! {
+            biased;
+            () = &mut settled => panic!("the barrier passed rows staged before it"),
+            r = j.commit(Vec::new()) => r.unwrap(),
+        }
+        j.queue_staged(vec![state(1, 1)], step).await.unwrap();
+        settled.await;
+        let conn = open_read(&path).unwrap();
+        let rows: i64 = conn
+            .query_row("SELECT count(*) FROM state_history", [], |r| r.get(0))
+            .unwrap();
+        assert_eq!(
+            rows, 1,
+            "the staged row is committed once the barrier passes"
+        );
+        // A barrier with nothing staged passes once the queue is committed.
+        j.barrier().settled().await;
+        j.close().await;
+        // And at once when the journal is closed.
+        barrier.settled().await;
     }
 
     #[tokio::test]

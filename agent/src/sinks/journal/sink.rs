@@ -1,7 +1,8 @@
 //! The journal as a sink: alarm transitions, state changes, parts and
-//! operator commands become rows, queued in order for the writer thread
-//! before the next sink (Zenoh) sees the step; answers to clients wait for
-//! them to be committed ([`Sink::settled`]).
+//! operator commands become rows, staged before the next sink (Zenoh) sees
+//! the step and queued in order for the writer thread once every sink has
+//! it ([`Sink::after`]); answers to clients wait for them to be committed
+//! ([`Sink::settled`]).
 
 use futures_util::future::BoxFuture;
 use futures_util::FutureExt;
@@ -14,12 +15,27 @@ use std::sync::Arc;
 /// Writes each step's rows and waits for their commit.
 pub struct JournalSink {
     journal: Journal,
+    /// The last step's rows and its number ([`Journal::stage`]), queued
+    /// by `after`.
+    staged: Option<(Vec<Entry>, u64)>,
 }
 
 impl JournalSink {
     /// A sink writing to `journal`.
     pub fn new(journal: Journal) -> JournalSink {
-        JournalSink { journal }
+        JournalSink {
+            journal,
+            staged: None,
+        }
+    }
+
+    /// Queues the staged rows, if any.
+    async fn queue_staged(&mut self) {
+        if let Some((rows, step)) = self.staged.take() {
+            if let Err(e) = self.journal.queue_staged(rows, step).await {
+                tracing::debug!(error = %e, "journal rows not queued");
+            }
+        }
     }
 }
 
@@ -88,22 +104,28 @@ impl Sink for JournalSink {
 
     fn handle<'a>(&'a mut self, step: &'a CellStep) -> BoxFuture<'a, ()> {
         async move {
+            // A step not followed by `after` (never, in the loop) still
+            // has its rows queued first.
+            self.queue_staged().await;
             let rows = entries(step);
             if rows.is_empty() {
                 return;
             }
-            // Queued in order, not waited for: the alarm goes out now and
-            // is committed by the writer thread within its batch. Whatever
-            // answers a client later (history, snapshot, a command's
-            // outcome) waits for the journal first (`settled`), so no one
-            // is shown what a crash would forget. A journal that cannot
-            // write keeps the rows in its bounded queue and retries (the
-            // cell loop raises the `journal` alarm).
-            if let Err(e) = self.journal.queue(rows).await {
-                tracing::debug!(error = %e, "journal rows not queued");
-            }
+            // Staged now, queued once the bus has the step (`after`), not
+            // waited for: the writer thread is not woken on the alarm's
+            // path, and commits the rows within its batch. Whatever answers
+            // a client (history, snapshot, a command's outcome) waits for
+            // the journal first (`settled`, which waits for staged rows
+            // too), so no one is shown what a crash would forget. A journal
+            // that cannot write keeps the rows in its bounded queue and
+            // retries (the cell loop raises the `journal` alarm).
+            self.staged = Some((rows, self.journal.stage()));
         }
         .boxed()
+    }
+
+    fn after(&mut self) -> BoxFuture<'_, ()> {
+        self.queue_staged().boxed()
     }
 
     fn settled(&self) -> Option<Settled> {
@@ -114,7 +136,11 @@ impl Sink for JournalSink {
         }))
     }
 
-    fn close(self: Box<Self>) -> BoxFuture<'static, ()> {
-        self.journal.close().boxed()
+    fn close(mut self: Box<Self>) -> BoxFuture<'static, ()> {
+        async move {
+            self.queue_staged().await;
+            self.journal.close().await;
+        }
+        .boxed()
     }
 }
