@@ -5,8 +5,9 @@
 //! transaction for whatever has queued up), in WAL mode with
 //! `synchronous=FULL`, so a committed row survives a killed process and a
 //! power cut. [`Journal::commit`] returns once its rows are on disk;
-//! [`Journal::write`] and [`Journal::queue_staged`] do not wait. After each commit the writer also
-//! publishes the number of rows committed so far ([`Journal::committed`]).
+//! [`Journal::write`] and [`Journal::queue_staged`] do not wait. After each
+//! commit the writer also publishes the number of rows committed so far
+//! ([`Journal::committed`]).
 //!
 //! [`sink::JournalSink`] is the cell loop's side: it turns each step into
 //! rows, [`Journal::stage`]s them before the step goes on the bus and
