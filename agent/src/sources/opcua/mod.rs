@@ -835,6 +835,7 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
     let heard = Arc::new(subscription::Heard::new());
     let nodes = Arc::new(subscription::Monitored::group(
         found,
+        &ctx.uses,
         ctx.nodes.clone(),
         namespaces.clone(),
     ));

@@ -318,9 +318,9 @@ impl Collector<'_> {
     }
 
     fn data_value(&mut self, handle: u32, value: DataValue) {
-        let Some(tags) = (handle as usize)
+        let Some(item) = (handle as usize)
             .checked_sub(1)
-            .and_then(|i| self.monitored.tags(i))
+            .and_then(|i| self.monitored.items.get(i))
         else {
             tracing::warn!(
                 handle,
@@ -330,17 +330,29 @@ impl Collector<'_> {
         };
         let at = source_time(&value);
         let overflow = value.status.is_some_and(|s| s.overflow());
-        for &tag in tags {
-            let tag = tag as usize;
-            if overflow {
-                self.overflowed.insert(tag);
-            }
-            self.readings.push(TagReading {
-                tag,
-                reading: reading(&value, &self.uses[tag]),
-                source_time: at,
-            });
+        // The usual node, one tag: its item says the tag and how it is
+        // read, one look-up per change.
+        if let Some(how) = item.one() {
+            let reading = reading(&value, self.uses.kind(how));
+            self.push(item.at, reading, at, overflow);
+            return;
         }
+        for &tag in self.monitored.several(*item) {
+            let reading = reading(&value, &self.uses[tag as usize]);
+            self.push(tag, reading, at, overflow);
+        }
+    }
+
+    fn push(&mut self, tag: u32, reading: Reading, source_time: u64, overflow: bool) {
+        let tag = tag as usize;
+        if overflow {
+            self.overflowed.insert(tag);
+        }
+        self.readings.push(TagReading {
+            tag,
+            reading,
+            source_time,
+        });
     }
 }
 
@@ -526,24 +538,48 @@ impl TagUse {
 
 /// The monitored nodes in client-handle order (handle `i + 1` is node
 /// `i`) and the tags read from each (several when they are bits of one
-/// word), kept flat: a node costs two `u32`s. Its id is not kept: it is
-/// its first tag's node, resolved against the namespaces the subscription
-/// was made with, when a request needs it.
+/// word), kept flat: a node costs one [`Item`] of eight bytes, and a
+/// notification finds its tag and how it is read with one look-up. A node's
+/// id is not kept: it is its first tag's node, resolved against the
+/// namespaces the subscription was made with, when a request needs it.
 #[derive(Debug)]
 pub(super) struct Monitored {
     tag_nodes: Arc<Vec<Option<TagNode>>>,
     namespaces: Vec<String>,
-    /// Node `i`'s tags are `tags[starts[i]..starts[i + 1]]`.
-    starts: Vec<u32>,
-    tags: Vec<u32>,
+    items: Vec<Item>,
+    /// The tags of the nodes that have several, one run each.
+    several: Vec<u32>,
+}
+
+/// One monitored node as a notification finds it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Item {
+    /// Its tag; for a node with several, where they start in
+    /// [`Monitored::several`].
+    at: u32,
+    /// How its tag is read (an index into the [`Uses`]' kinds); for a node
+    /// with several, [`SEVERAL`] and how many.
+    how: u32,
+}
+
+/// The bit of [`Item::how`] that says the node has several tags.
+const SEVERAL: u32 = 1 << 31;
+
+impl Item {
+    /// How its one tag is read, if it has one.
+    fn one(self) -> Option<u32> {
+        (self.how & SEVERAL == 0).then_some(self.how)
+    }
 }
 
 impl Monitored {
     /// Groups `(node, tag)` pairs by node, nodes in the order first seen,
     /// each node's tags in the order given; each `node` is
-    /// `tag_nodes[tag]` resolved against `namespaces`.
+    /// `tag_nodes[tag]` resolved against `namespaces`, each tag read as
+    /// `uses` says.
     pub(super) fn group(
         pairs: impl IntoIterator<Item = (NodeId, usize)>,
+        uses: &Uses,
         tag_nodes: Arc<Vec<Option<TagNode>>>,
         namespaces: Vec<String>,
     ) -> Monitored {
@@ -557,37 +593,54 @@ impl Monitored {
             let n = *index.entry(id).or_insert(next);
             of_node.push((n, tag as u32));
         }
-        let nodes = index.len() as u32;
+        let nodes = index.len();
         drop(index);
         // Stable: a node's tags keep their order.
         of_node.sort_by_key(|&(n, _)| n);
-        let mut starts = Vec::with_capacity(nodes as usize + 1);
-        starts.push(0);
-        let mut tags = Vec::with_capacity(of_node.len());
-        let mut pairs = of_node.into_iter().peekable();
-        for n in 0..nodes {
-            while let Some((_, tag)) = pairs.next_if(|&(m, _)| m == n) {
-                tags.push(tag);
-            }
-            starts.push(tags.len() as u32);
+        let mut items = Vec::with_capacity(nodes);
+        let mut several = Vec::new();
+        for run in of_node.chunk_by(|a, b| a.0 == b.0) {
+            items.push(match run {
+                [(_, tag)] => Item {
+                    at: *tag,
+                    how: uses.of[*tag as usize],
+                },
+                _ => {
+                    let at = several.len() as u32;
+                    several.extend(run.iter().map(|&(_, tag)| tag));
+                    Item {
+                        at,
+                        how: SEVERAL | run.len() as u32,
+                    }
+                }
+            });
         }
         Monitored {
             tag_nodes,
             namespaces,
-            starts,
-            tags,
+            items,
+            several,
         }
     }
 
     /// How many nodes.
     pub(super) fn len(&self) -> usize {
-        self.starts.len().saturating_sub(1)
+        self.items.len()
+    }
+
+    /// The tags of a node with several.
+    fn several(&self, item: Item) -> &[u32] {
+        let (from, n) = (item.at as usize, (item.how & !SEVERAL) as usize);
+        &self.several[from..from + n]
     }
 
     /// Node `i`'s tags.
     pub(super) fn tags(&self, i: usize) -> Option<&[u32]> {
-        let (from, to) = (*self.starts.get(i)?, *self.starts.get(i + 1)?);
-        Some(&self.tags[from as usize..to as usize])
+        let item = self.items.get(i)?;
+        Some(match item.one() {
+            Some(_) => std::slice::from_ref(&item.at),
+            None => self.several(*item),
+        })
     }
 
     /// Node `i`'s id and its tags.
@@ -638,13 +691,18 @@ impl Uses {
         }
         uses
     }
+
+    /// Kind `k` of reading a tag.
+    fn kind(&self, k: u32) -> &TagUse {
+        &self.kinds[k as usize]
+    }
 }
 
 impl std::ops::Index<usize> for Uses {
     type Output = TagUse;
 
     fn index(&self, tag: usize) -> &TagUse {
-        &self.kinds[self.of[tag] as usize]
+        self.kind(self.of[tag])
     }
 }
 
@@ -715,6 +773,7 @@ mod tests {
 
     #[test]
     fn monitored_nodes_group_bits_of_one_word_in_first_seen_order() {
+        use cellwatch_models::signal::Signal;
         let node = |s: &str| TagNode::parse(&format!("ns=2;s={s}"), None).ok();
         let tag_nodes = Arc::new(vec![
             node("W1"),
@@ -723,21 +782,37 @@ mod tests {
             node("Y"),
             node("W1"),
         ]);
+        // Y is a number: its item says so.
+        let mut tags: Vec<TagConfig> = (0..5)
+            .map(|i| TagConfig::boolean(&format!("t{i}"), "ns=2;s=T", Signal::new("X0.00")))
+            .collect();
+        tags[3].value_type = ValueType::Float;
+        let uses = Uses::of_tags(&tags);
         let id = |s: &str| NodeId::new(2, s);
         let pairs = tag_nodes
             .iter()
             .enumerate()
             .filter_map(|(t, n)| Some((n.as_ref()?.resolve(&[])?, t)));
-        let m = Monitored::group(pairs, tag_nodes.clone(), Vec::new());
+        let m = Monitored::group(pairs, &uses, tag_nodes.clone(), Vec::new());
         assert_eq!(m.len(), 3);
         assert_eq!(m.node(0), Some((id("W1"), &[0, 2, 4][..])));
         assert_eq!(m.node(1), Some((id("X"), &[1][..])));
         assert_eq!(m.node(2), Some((id("Y"), &[3][..])));
         assert_eq!(m.node(3), None);
         assert_eq!(m.tags(0), Some(&[0, 2, 4][..]));
+        assert_eq!(m.items[0].one(), None);
+        assert_eq!(m.items[1].one(), Some(uses.of[1]));
+        assert_eq!(
+            uses.kind(m.items[2].one().unwrap()).value_type,
+            ValueType::Float
+        );
+        assert_eq!(
+            uses.kind(m.items[1].one().unwrap()).value_type,
+            ValueType::Boolean
+        );
         let tail: Vec<_> = m.nodes(1..10).map(|(i, n, _)| (i, n)).collect();
         assert_eq!(tail, [(1, id("X")), (2, id("Y"))]);
-        assert_eq!(Monitored::group([], tag_nodes, Vec::new()).len(), 0);
+        assert_eq!(Monitored::group([], &uses, tag_nodes, Vec::new()).len(), 0);
     }
 
     #[test]
