@@ -5,7 +5,9 @@ use std::time::Duration;
 
 use cellwatch::cell::{compile, CellLoop, CellStep, Input, Request};
 use cellwatch::config;
+use cellwatch::metrics::Metrics;
 use cellwatch::operator::{Action, Command, Gate, OperatorKeys};
+use cellwatch::sinks::zenoh::publish::ZenohPublisher;
 use cellwatch::sinks::RecordingSink;
 use cellwatch::sources::scripted::ScriptedSource;
 use cellwatch::sources::{Source, SourceEvent, QUEUE_CAPACITY};
@@ -42,6 +44,47 @@ fn raised(step: &CellStep, id: &str) -> bool {
         .any(|(a, t, _)| a.id == id && t == Transition::Raised)
 }
 
+/// Every tag of `config` as the CNC's normal image has it, at 1 s.
+fn normal_image(config: &config::CellConfig) -> Vec<TagReading> {
+    let mut normal = Vec::new();
+    for (name, text) in [
+        (
+            "ese-normal.values",
+            include_str!("../config/cnc/ese-normal.values"),
+        ),
+        (
+            "csd-normal.values",
+            include_str!("../config/cnc/csd-normal.values"),
+        ),
+    ] {
+        normal.push(Values::parse_file(name, text, pmc_address).unwrap());
+    }
+    config
+        .tags
+        .iter()
+        .enumerate()
+        .map(|(tag, t)| TagReading {
+            tag,
+            reading: Reading::Good(
+                normal
+                    .iter()
+                    .find_map(|v| v.get(&t.address))
+                    .unwrap_or(false),
+            ),
+            source_time: 1_000,
+        })
+        .collect()
+}
+
+/// The index of the tag at `address`.
+fn tag_of(config: &config::CellConfig, address: &str) -> usize {
+    config
+        .tags
+        .iter()
+        .position(|t| t.address.name() == address)
+        .unwrap()
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn scripted_source_drives_the_loop_into_the_recording_sink() {
     let config = config::load(&root().join("config/demo.toml")).unwrap();
@@ -64,39 +107,8 @@ async fn scripted_source_drives_the_loop_into_the_recording_sink() {
     }));
 
     // The machine's normal image, then the Y over-travel switch opens.
-    let mut normal = Vec::new();
-    for (name, text) in [
-        (
-            "ese-normal.values",
-            include_str!("../config/cnc/ese-normal.values"),
-        ),
-        (
-            "csd-normal.values",
-            include_str!("../config/cnc/csd-normal.values"),
-        ),
-    ] {
-        normal.push(Values::parse_file(name, text, pmc_address).unwrap());
-    }
-    let image: Vec<TagReading> = config
-        .tags
-        .iter()
-        .enumerate()
-        .map(|(tag, t)| TagReading {
-            tag,
-            reading: Reading::Good(
-                normal
-                    .iter()
-                    .find_map(|v| v.get(&t.address))
-                    .unwrap_or(false),
-            ),
-            source_time: 1_000,
-        })
-        .collect();
-    let x006 = config
-        .tags
-        .iter()
-        .position(|t| t.address.name() == "X0.06")
-        .unwrap();
+    let image = normal_image(&config);
+    let x006 = tag_of(&config, "X0.06");
     let at = |tag, v, t| {
         SourceEvent::Readings(
             vec![TagReading {
@@ -203,4 +215,78 @@ async fn scripted_source_drives_the_loop_into_the_recording_sink() {
     source.await.unwrap().unwrap();
     let _ = stop.send(());
     cell_loop.await.unwrap();
+}
+
+/// On its own thread ([`CellLoop::spawn`]), the loop publishes an alarm on
+/// the bus and, when stopped, closes the Zenoh sink: dropping an alarm
+/// publisher blocks in place, which a current-thread runtime would refuse
+/// with a panic that `Agent::stop` passes on.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_loop_on_its_own_thread_closes_the_bus_sink() {
+    let config = config::load(&root().join("config/demo.toml")).unwrap();
+    let engine = compile::engine(&config).unwrap();
+    let bus = zenoh::open(
+        zenoh::Config::from_json5(
+            r#"{mode: "peer", listen: {endpoints: []}, timestamping: {enabled: {peer: true}},
+                scouting: {multicast: {enabled: false}, gossip: {enabled: false}}}"#,
+        )
+        .unwrap(),
+    )
+    .await
+    .unwrap();
+    let prefix = format!("cellwatch/{}", config.cell);
+    let alarms = bus
+        .declare_subscriber(format!("{prefix}/alarms/**"))
+        .await
+        .unwrap();
+    let metrics = std::sync::Arc::new(Metrics::new(&config.cell));
+    let publisher = ZenohPublisher::start(bus.clone(), &prefix, metrics)
+        .await
+        .unwrap();
+    let (recording, mut steps) = RecordingSink::new();
+    let (source_tx, source_rx) = mpsc::channel(QUEUE_CAPACITY);
+    let (_requests, requests_rx) = mpsc::channel(4);
+    let (stop, stopped) = oneshot::channel::<()>();
+    let cell_loop = CellLoop::new(
+        &config.cell,
+        engine,
+        Gate::new(&config.cell, OperatorKeys::default()),
+        vec![Box::new(publisher), Box::new(recording)],
+        Duration::from_secs(3600),
+    )
+    .spawn(source_rx, requests_rx, async {
+        let _ = stopped.await;
+    })
+    .unwrap();
+    let image = normal_image(&config);
+    let x006 = tag_of(&config, "X0.06");
+    source_tx
+        .send(SourceEvent::Readings(image.into()))
+        .await
+        .unwrap();
+    let fault = TagReading {
+        tag: x006,
+        reading: Reading::Good(false),
+        source_time: 2_000,
+    };
+    source_tx
+        .send(SourceEvent::Readings(vec![fault].into()))
+        .await
+        .unwrap();
+    step_until(&mut steps, "ESE raised", |s| raised(s, "ese")).await;
+    let sample = tokio::time::timeout(Duration::from_secs(20), alarms.recv_async())
+        .await
+        .expect("no alarm on the bus")
+        .unwrap();
+    assert_eq!(sample.key_expr().as_str(), format!("{prefix}/alarms/ese"));
+    let _ = stop.send(());
+    if let Err(e) = cell_loop.await {
+        let panic = e.into_panic();
+        let text = panic
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| panic.downcast_ref::<&str>().copied());
+        panic!("the loop did not end cleanly: {text:?}");
+    }
+    bus.close().await.unwrap();
 }

@@ -130,8 +130,13 @@ impl Agent {
     }
 
     /// Stops every task, waits for each, and closes the Zenoh session.
+    ///
+    /// # Panics
+    /// A task panicked: its panic goes on once everything else has
+    /// stopped, so that a bug is never taken for a clean stop.
     pub async fn stop(mut self) {
         let _ = self.stop.send(true);
+        let mut panic = None;
         for task in [
             self.cell_loop.take(),
             self.services.take(),
@@ -140,13 +145,20 @@ impl Agent {
         .into_iter()
         .flatten()
         {
-            let _ = task.await;
+            if let Err(e) = task.await {
+                if e.is_panic() && panic.is_none() {
+                    panic = Some(e.into_panic());
+                }
+            }
         }
         if let Some(source) = self.source.take() {
             let _ = source.await;
         }
         if let Err(e) = self.session.close().await {
             tracing::warn!(error = %e, "closing the zenoh session failed");
+        }
+        if let Some(panic) = panic {
+            std::panic::resume_unwind(panic);
         }
     }
 

@@ -284,11 +284,17 @@ impl CellLoop {
         }
     }
 
-    /// Runs the loop ([`CellLoop::run`]) on a thread of its own, with a
-    /// single-threaded runtime: a publish's values reach the engine as soon
-    /// as the source hands them over, never queued behind the source's or
-    /// the services' tasks on a shared worker. The tasks the loop starts
-    /// run on the calling runtime. The returned task ends with the loop.
+    /// Runs the loop ([`CellLoop::run`]) on a thread of its own: a
+    /// publish's values reach the engine as soon as the source hands them
+    /// over, never queued behind the source's or the services' tasks on a
+    /// shared worker. The tasks the loop starts run on the calling runtime.
+    ///
+    /// The thread's runtime is a multi-threaded one with a single worker,
+    /// the loop itself running on the thread that blocks on it: Zenoh
+    /// blocks in place when a publisher or a token is dropped (at the
+    /// latest when the sinks close), which Tokio's current-thread runtime
+    /// refuses with a panic. The returned task ends with the loop and
+    /// carries its panic, if it had one.
     ///
     /// # Errors
     /// The runtime or the thread cannot be started.
@@ -299,18 +305,24 @@ impl CellLoop {
         shutdown: impl Future<Output = ()> + Send + 'static,
     ) -> std::io::Result<tokio::task::JoinHandle<()>> {
         self.tasks = Some(tokio::runtime::Handle::current());
-        let runtime = tokio::runtime::Builder::new_current_thread()
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(1)
+            .thread_name("cell-loop-io")
             .enable_all()
             .build()?;
-        let (done, ended) = oneshot::channel::<()>();
+        let (done, ended) = oneshot::channel();
         std::thread::Builder::new()
             .name("cell-loop".into())
             .spawn(move || {
-                runtime.block_on(self.run(source, requests, shutdown));
-                let _ = done.send(());
+                let run = std::panic::AssertUnwindSafe(|| {
+                    runtime.block_on(self.run(source, requests, shutdown));
+                });
+                let _ = done.send(std::panic::catch_unwind(run));
             })?;
         Ok(tokio::spawn(async move {
-            let _ = ended.await;
+            if let Ok(Err(panic)) = ended.await {
+                std::panic::resume_unwind(panic);
+            }
         }))
     }
 
