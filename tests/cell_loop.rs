@@ -290,3 +290,62 @@ async fn the_loop_on_its_own_thread_closes_the_bus_sink() {
     }
     bus.close().await.unwrap();
 }
+
+/// A `journal` alarm still active when the agent stopped follows the
+/// journal's health at the restart: a journal that writes again clears it
+/// at once, though its health never changes after the start.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_restored_journal_alarm_follows_the_journal_at_the_start() {
+    let config = config::load(&root().join("config/demo.toml")).unwrap();
+    let mut engine = compile::engine(&config).unwrap();
+    let alarm = cellwatch_models::alarm::Alarm {
+        id: "journal".into(),
+        kind: cellwatch_models::alarm::AlarmKind::System,
+        severity: cellwatch_models::alarm::Severity::High,
+        fault_type: "JOURNAL".into(),
+        active: true,
+        acknowledged: false,
+        latched: false,
+        raised_at: 1_000,
+        cleared_at: None,
+        acked_by: None,
+        fault_step: None,
+        culprits: Vec::new(),
+        message: "journal: database is locked".into(),
+        shelved: None,
+        out_of_service: None,
+    };
+    let restored = engine.restore(vec![alarm], None, 2_000);
+    let (recording, mut steps) = RecordingSink::new();
+    let (_health_tx, health) = tokio::sync::watch::channel(None::<String>);
+    let (_source_tx, source_rx) = mpsc::channel(QUEUE_CAPACITY);
+    let (_requests, requests_rx) = mpsc::channel(4);
+    let (stop, stopped) = oneshot::channel::<()>();
+    let cell_loop = CellLoop::new(
+        &config.cell,
+        engine,
+        Gate::new(&config.cell, OperatorKeys::default()),
+        vec![Box::new(recording)],
+        Duration::from_secs(3600),
+    )
+    .restored(restored, None)
+    .watching_journal(health);
+    let cell_loop = tokio::spawn(cell_loop.run(source_rx, requests_rx, async {
+        let _ = stopped.await;
+    }));
+    let first = step_until(&mut steps, "the restore", |_| true).await;
+    assert_eq!(first.input, Input::Restored);
+    let cleared = step_until(&mut steps, "the journal alarm cleared", |s| {
+        s.engine
+            .alarms()
+            .any(|(a, t, _)| a.id == "journal" && t == Transition::Cleared)
+    })
+    .await;
+    assert_eq!(cleared.input, Input::System);
+    assert_eq!(
+        cleared.alarms[0].payload.state.as_str(),
+        "cleared_unacknowledged"
+    );
+    let _ = stop.send(());
+    cell_loop.await.unwrap();
+}

@@ -1,7 +1,9 @@
 //! The real binary killed with SIGKILL and started again: alarms that were
 //! not back to normal come back as they were (state, `acked_by`,
 //! `raised_at`), are not counted as raised again, latched ones can be
-//! reset, and a command accepted before the kill is a replay after it.
+//! reset, one whose condition ended while the agent was down clears on
+//! the first fresh value, and a command accepted before the kill is a
+//! replay after it.
 
 use cellwatch::operator::Action;
 
@@ -36,20 +38,30 @@ async fn killed_agent_restores_its_alarms_and_refuses_replays() {
         .await;
         sim.set(b, false).unwrap();
     }
-    let before = snapshot_until(&client, "two timer alarms and ESE acknowledged", |s| {
-        alarm(s, "tmr-001").is_some()
-            && alarm(s, "tmr-002").is_some()
-            && alarm(s, "ese").is_some_and(|a| a["state"] == "active_acknowledged")
-    })
+    // The spindle too hot for longer than the limit's on-delay.
+    sim.set_temperature(90.0).unwrap();
+    let before = snapshot_until(
+        &client,
+        "two timer alarms, ESE acknowledged, the spindle hot",
+        |s| {
+            alarm(s, "tmr-001").is_some()
+                && alarm(s, "tmr-002").is_some()
+                && alarm(s, "ese").is_some_and(|a| a["state"] == "active_acknowledged")
+                && alarm(s, "spindle-temp-h").is_some()
+        },
+    )
     .await;
     child.kill().unwrap();
     child.wait().unwrap();
     drop(client);
+    // The spindle cools while the agent is down: the limit's check sees
+    // only a normal value after the restart, never a return.
+    sim.set_temperature(50.0).unwrap();
 
     let mut child = cell.spawn("agent-2.log").await;
     let client = cell.client().await;
     let after = snapshot_until(&client, "the restarted agent's alarms", |s| {
-        ["ese", "tmr-001", "tmr-002"]
+        ["ese", "tmr-001", "tmr-002", "spindle-temp-h"]
             .iter()
             .all(|id| alarm(s, id).is_some())
     })
@@ -92,7 +104,17 @@ async fn killed_agent_restores_its_alarms_and_refuses_replays() {
         .iter()
         .filter(|r| r["fields"]["transition"] == "restored")
         .count();
-    assert!(restored >= 3, "{history:#}");
+    assert!(restored >= 4, "{history:#}");
+    // The spindle's alarm came back raised when it was, and cleared on the
+    // first value: it waits for its acknowledgement only.
+    let spindle = snapshot_until(&client, "the spindle's alarm cleared", |s| {
+        alarm(s, "spindle-temp-h").is_some_and(|a| a["state"] == "cleared_unacknowledged")
+    })
+    .await;
+    assert_eq!(
+        alarm(&spindle, "spindle-temp-h").unwrap()["raised_at"],
+        alarm(&before, "spindle-temp-h").unwrap()["raised_at"]
+    );
     // The ack accepted before the kill is a replay after it.
     let (accepted, detail) = send(&client, &ack).await;
     assert!(!accepted && detail.contains("replayed"), "{detail}");

@@ -265,6 +265,29 @@ pub struct Shelf {
 }
 
 impl Alarm {
+    /// An active, unacknowledged alarm raised at `raised_at`, as the
+    /// journal gives it back after a restart (tests).
+    #[cfg(test)]
+    pub(crate) fn active_since(id: &str, kind: AlarmKind, raised_at: u64) -> Alarm {
+        Alarm {
+            id: id.into(),
+            kind,
+            severity: Severity::High,
+            fault_type: id.to_uppercase(),
+            active: true,
+            acknowledged: false,
+            latched: false,
+            raised_at,
+            cleared_at: None,
+            acked_by: None,
+            fault_step: None,
+            culprits: Vec::new(),
+            message: id.into(),
+            shelved: None,
+            out_of_service: None,
+        }
+    }
+
     /// The ISA-18.2 state.
     pub fn state(&self) -> AlarmState {
         match (self.active, self.acknowledged) {

@@ -12,7 +12,7 @@
 use std::collections::{BTreeSet, HashMap};
 use std::fmt;
 
-use crate::alarm::{AlarmKind, Severity};
+use crate::alarm::{Alarm, AlarmKind, Severity};
 use crate::engine::{CheckSet, Declared, Finding};
 use crate::signal::Signal;
 use crate::value::Num;
@@ -296,6 +296,20 @@ impl CheckSet for LimitChecks {
     fn next_deadline(&self) -> Option<u64> {
         self.due.first().map(|&(at, _)| at)
     }
+
+    /// The level is taken as passed since the alarm was raised: the first
+    /// value back inside its deadband clears it.
+    fn restored(&mut self, alarm: &Alarm) {
+        for (i, check) in self.checks.iter().enumerate() {
+            for (l, level) in check.levels.iter().enumerate() {
+                if check.alarm_id(level.level) == alarm.id {
+                    let s = &mut self.states[i][l];
+                    s.active = true;
+                    s.excursion_since = Some(alarm.raised_at);
+                }
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -342,6 +356,30 @@ mod tests {
             c.on_number(&Signal::new("TEMP"), Some(Num::Float(v)), at, &mut out);
         }
         out.into_iter().map(|f| (f.id, f.active)).collect()
+    }
+
+    #[test]
+    fn a_restored_level_clears_on_the_first_value_back_inside() {
+        let mut c = check(2.0, 0);
+        c.restored(&Alarm::active_since("temp-h", AlarmKind::Limit, 1_000));
+        // Still beyond: nothing new (the alarm is already active).
+        assert!(feed(&mut c, &[(5_000, 79.0)]).is_empty());
+        // Back past the deadband: cleared, the excursion counted from the
+        // raise before the restart.
+        let mut out = Vec::new();
+        c.on_number(
+            &Signal::new("TEMP"),
+            Some(Num::Float(70.0)),
+            9_000,
+            &mut out,
+        );
+        assert_eq!((out[0].id.as_str(), out[0].active), ("temp-h", false));
+        assert_eq!(out.len(), 1, "{out:?}");
+        assert!(out[0].message.contains("8.0 s"), "{}", out[0].message);
+        // Another check's alarm is none of this set's business.
+        let mut c = check(2.0, 0);
+        c.restored(&Alarm::active_since("pressure-h", AlarmKind::Limit, 1_000));
+        assert!(feed(&mut c, &[(5_000, 70.0)]).is_empty());
     }
 
     #[test]

@@ -16,7 +16,7 @@ use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 
 use super::compile::{self, CompileError};
-use super::CellLoop;
+use super::{CellLoop, JOURNAL_ALARM};
 use crate::clock::Clock;
 use crate::config::CellConfig;
 use crate::metrics::{Metrics, MetricsSink};
@@ -216,7 +216,9 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     let committed = journal.committed();
     let journal_health = journal.health();
     let clock = options.clock.clone();
-    let restored = super::restore::load(&config, clock.now_ms())?;
+    let restored = super::restore::load(&config, clock.now_ms(), |id| {
+        engine.can_raise(id) || id == JOURNAL_ALARM
+    })?;
     let session = crate::sinks::zenoh::open_agent(&config.zenoh).await?;
     let prefix = config.zenoh.prefix.clone();
     let (requests_tx, requests_rx) = mpsc::channel(REQUEST_CAPACITY);

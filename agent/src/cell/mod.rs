@@ -41,6 +41,9 @@ use crate::sources::{SourceEvent, Write, WriteRequest, WriteSender};
 /// (or stepped by the system) can run ahead unseen.
 pub const TICK: Duration = Duration::from_millis(250);
 
+/// The agent's own alarm for a journal that cannot write.
+pub const JOURNAL_ALARM: &str = "journal";
+
 /// What came into the loop.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Input {
@@ -435,6 +438,16 @@ impl CellLoop {
         if let Some(step) = self.restored.take() {
             let now = self.clock.now_ms();
             self.dispatch(now, Input::Restored, step, 0).await;
+            // A journal alarm from before the restart follows the
+            // journal's health now, which no change may report for long.
+            let restored_journal = self
+                .engine
+                .alarms()
+                .any(|a| a.id == JOURNAL_ALARM && a.active);
+            if let (true, Some(health)) = (restored_journal, &mut self.journal_health) {
+                let problem = health.borrow_and_update().clone();
+                self.system(JOURNAL_ALARM, problem).await;
+            }
         }
         let mut source_open = true;
         let mut requests_open = true;
@@ -456,7 +469,7 @@ impl CellLoop {
                     None => requests_open = false,
                 },
                 Some(w) = self.written_rx.recv() => self.written(w).await,
-                problem = journal_changed(&mut self.journal_health) => self.system("journal", problem).await,
+                problem = journal_changed(&mut self.journal_health) => self.system(JOURNAL_ALARM, problem).await,
                 () = &mut wake => self.tick().await,
                 _ = beat.tick() => self.beat().await,
             }

@@ -24,12 +24,16 @@ pub struct Restored {
     pub nonces: Vec<(u64, String)>,
 }
 
-/// Reads what `config`'s journal kept, at `now`. Alarms of checks no longer
-/// configured are left out, with a warning.
+/// Reads what `config`'s journal kept, at `now`. Alarms that `can_raise`
+/// refuses (of checks no longer configured) are left out, with a warning.
 ///
 /// # Errors
 /// The journal cannot be read.
-pub fn load(config: &CellConfig, now: u64) -> Result<Restored, JournalError> {
+pub fn load(
+    config: &CellConfig,
+    now: u64,
+    can_raise: impl Fn(&str) -> bool,
+) -> Result<Restored, JournalError> {
     let path: &Path = &config.journal.path;
     let err = |source| JournalError::Sqlite {
         path: path.to_path_buf(),
@@ -43,7 +47,7 @@ pub fn load(config: &CellConfig, now: u64) -> Result<Restored, JournalError> {
             .ok()
             .and_then(|p| p.to_alarm());
         match alarm {
-            Some(a) if configured(config, &a.id) => alarms.push(a),
+            Some(a) if can_raise(&a.id) => alarms.push(a),
             Some(a) => tracing::warn!(
                 alarm = %a.id,
                 "the journal holds an open alarm of a check no longer configured; not restored"
@@ -59,20 +63,6 @@ pub fn load(config: &CellConfig, now: u64) -> Result<Restored, JournalError> {
         state: saved.state.and_then(machine_state),
         nonces: saved.nonces,
     })
-}
-
-/// Whether `id` is an alarm this configuration can raise.
-fn configured(config: &CellConfig, id: &str) -> bool {
-    matches!(id, "communication" | "tag-quality")
-        || config.switching.iter().any(|c| c.id == id)
-        || config
-            .limits
-            .iter()
-            .any(|l| l.levels.iter().any(|v| l.alarm_id(v.level) == id))
-        || config.timers.iter().any(|t| {
-            id.strip_prefix(t.id.as_str())
-                .is_some_and(|rest| rest.starts_with('-'))
-        })
 }
 
 fn machine_state(row: SavedState) -> Option<(MachineState, u64, HistoryKind)> {

@@ -50,6 +50,11 @@ impl AlarmBook {
         }
     }
 
+    /// Whether a check set declared alarm `id`.
+    pub(crate) fn is_declared(&self, id: &str) -> bool {
+        self.declared.contains_key(id)
+    }
+
     pub(crate) fn get(&self, id: &str) -> Option<&Alarm> {
         self.alarms.get(id)
     }

@@ -7,7 +7,7 @@
 //! its own module (see [`super::switching`] and [`crate::timer::checks`])
 //! and hand it to [`super::CellEngine::new`].
 
-use crate::alarm::{AlarmKind, Severity};
+use crate::alarm::{Alarm, AlarmKind, Severity};
 use crate::explain::Culprit;
 use crate::signal::Signal;
 use crate::value::Num;
@@ -100,6 +100,13 @@ pub trait CheckSet: Send + Sync {
 
     /// An operator reset a latched alarm of this set.
     fn reset(&mut self, _id: &str) {}
+
+    /// `alarm`, one of this set's, was active when the agent stopped and
+    /// is back ([`super::CellEngine::restore`]). A set that reports only
+    /// changes of its own verdict takes the condition as holding, so that
+    /// fresh values saying otherwise clear the alarm; a set that reports
+    /// its first verdict anyway has nothing to do.
+    fn restored(&mut self, _alarm: &Alarm) {}
 
     /// Moves the measurements made since the last call into `out`.
     fn take_observations(&mut self, _out: &mut Vec<Observation>) {}

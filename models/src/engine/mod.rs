@@ -668,6 +668,13 @@ impl CellEngine {
         }
     }
 
+    /// Whether this engine can raise alarm `id`: one its checks declared,
+    /// or `communication` or `tag-quality`. (System alarms are the
+    /// agent's: [`CellEngine::on_system`] takes any id.)
+    pub fn can_raise(&self, id: &str) -> bool {
+        matches!(id, "communication" | "tag-quality") || self.alarms.is_declared(id)
+    }
+
     /// Puts back the alarms that were not back to normal when the agent
     /// stopped, and the machine state, before any input. Each alarm comes
     /// back with its `raised_at`, acknowledgement and culprits, and is
@@ -678,6 +685,11 @@ impl CellEngine {
         let mut step = Step::default();
         for alarm in alarms {
             let id = alarm.id.clone();
+            if alarm.active {
+                for set in &mut self.sets {
+                    set.restored(&alarm);
+                }
+            }
             self.alarms.restore(alarm);
             if let Some(alarm) = self.alarms.get(&id) {
                 step.events.push(EngineEvent::Alarm {
@@ -1769,6 +1781,17 @@ mod tests {
             message: "ESE".into(),
             shelved: None,
             out_of_service: None,
+        }
+    }
+
+    #[test]
+    fn an_engine_can_raise_its_checks_alarms_and_its_own_only() {
+        let e = engine();
+        for id in ["ese", "communication", "tag-quality"] {
+            assert!(e.can_raise(id), "{id}");
+        }
+        for id in ["ese2", "tmr-001", "journal", ""] {
+            assert!(!e.can_raise(id), "{id}");
         }
     }
 

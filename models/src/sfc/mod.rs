@@ -462,6 +462,34 @@ condition = "X2 * Y9"
     }
 
     #[test]
+    fn a_restored_stuck_step_clears_when_its_flag_is_seen_off() {
+        let mut c = checks();
+        c.restored(&crate::alarm::Alarm::active_since(
+            "sfc-F1-S2",
+            AlarmKind::Step,
+            1_000,
+        ));
+        // Still active after the restart: no second raise when its
+        // supervision runs out again.
+        set(&mut c, "S2.X", true, None, 20_000);
+        let mut out = Vec::new();
+        c.advance(40_000, &mut out);
+        assert!(out.is_empty(), "{out:?}");
+        // Left: cleared.
+        let out = set(&mut c, "S2.X", false, Some(true), 41_000);
+        assert_eq!((out[0].id.as_str(), out[0].active), ("sfc-F1-S2", false));
+        // Seen off at once after a restart: cleared too.
+        let mut c = checks();
+        c.restored(&crate::alarm::Alarm::active_since(
+            "sfc-F1-S2",
+            AlarmKind::Step,
+            1_000,
+        ));
+        let out = set(&mut c, "S2.X", false, None, 20_000);
+        assert_eq!((out[0].id.as_str(), out[0].active), ("sfc-F1-S2", false));
+    }
+
+    #[test]
     fn a_convergence_waits_for_every_source_step() {
         let mut c = checks();
         for (s, v) in [

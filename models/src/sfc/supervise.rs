@@ -12,7 +12,7 @@
 use std::collections::{BTreeSet, HashMap, HashSet};
 
 use super::{Sfc, StepRef};
-use crate::alarm::{AlarmKind, Severity};
+use crate::alarm::{Alarm, AlarmKind, Severity};
 use crate::comments::CommentDb;
 use crate::engine::{CheckSet, Declared, Finding};
 use crate::explain::{explain_partial, Culprit, Polarity};
@@ -270,5 +270,18 @@ impl CheckSet for SfcChecks {
 
     fn next_deadline(&self) -> Option<u64> {
         self.deadlines.first().map(|&(at, _)| at)
+    }
+
+    /// The step is taken as still stuck: its flag seen off clears the
+    /// alarm.
+    fn restored(&mut self, alarm: &Alarm) {
+        let found = self
+            .sfc
+            .steps()
+            .map(|(r, _)| r)
+            .find(|&r| self.alarm_id(r) == alarm.id);
+        if let Some(r) = found {
+            self.stuck.insert(r);
+        }
     }
 }
