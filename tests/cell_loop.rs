@@ -8,11 +8,11 @@ use cellwatch::config;
 use cellwatch::metrics::Metrics;
 use cellwatch::operator::{Action, Command, Gate, OperatorKeys};
 use cellwatch::sinks::zenoh::publish::ZenohPublisher;
-use cellwatch::sinks::RecordingSink;
+use cellwatch::sinks::{RecordingSink, Sink};
 use cellwatch::sources::scripted::ScriptedSource;
 use cellwatch::sources::{Source, SourceEvent, QUEUE_CAPACITY};
 use cellwatch_models::alarm::Transition;
-use cellwatch_models::engine::{MachineState, Reading, TagReading};
+use cellwatch_models::engine::{CellEngine, MachineState, Reading, TagReading};
 use cellwatch_models::signal::pmc_address;
 use cellwatch_models::values::Values;
 use futures_util::FutureExt;
@@ -85,6 +85,35 @@ fn tag_of(config: &config::CellConfig, address: &str) -> usize {
         .unwrap()
 }
 
+/// A loop of the demo cell over `engine`, handing its steps to `sinks`;
+/// its state beat once an hour (never, in these tests).
+fn demo_loop(
+    config: &config::CellConfig,
+    engine: CellEngine,
+    sinks: Vec<Box<dyn Sink>>,
+) -> CellLoop {
+    CellLoop::new(
+        &config.cell,
+        engine,
+        Gate::new(&config.cell, OperatorKeys::default()),
+        sinks,
+        Duration::from_secs(3600),
+    )
+}
+
+/// Runs `cell_loop` as a task until the returned sender is used.
+fn run_until_stopped(
+    cell_loop: CellLoop,
+    source: mpsc::Receiver<SourceEvent>,
+    requests: mpsc::Receiver<Request>,
+) -> (oneshot::Sender<()>, tokio::task::JoinHandle<()>) {
+    let (stop, stopped) = oneshot::channel::<()>();
+    let task = tokio::spawn(cell_loop.run(source, requests, async {
+        let _ = stopped.await;
+    }));
+    (stop, task)
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn scripted_source_drives_the_loop_into_the_recording_sink() {
     let config = config::load(&root().join("config/demo.toml")).unwrap();
@@ -94,17 +123,11 @@ async fn scripted_source_drives_the_loop_into_the_recording_sink() {
     let (source_tx, source_rx) = mpsc::channel(QUEUE_CAPACITY);
     let source = tokio::spawn(Box::new(source).run(source_tx, std::future::pending().boxed()));
     let (requests, requests_rx) = mpsc::channel(4);
-    let (stop, stopped) = oneshot::channel::<()>();
-    let cell_loop = CellLoop::new(
-        &config.cell,
-        engine,
-        Gate::new(&config.cell, OperatorKeys::default()),
-        vec![Box::new(recording)],
-        Duration::from_secs(3600),
+    let (stop, cell_loop) = run_until_stopped(
+        demo_loop(&config, engine, vec![Box::new(recording)]),
+        source_rx,
+        requests_rx,
     );
-    let cell_loop = tokio::spawn(cell_loop.run(source_rx, requests_rx, async {
-        let _ = stopped.await;
-    }));
 
     // The machine's normal image, then the Y over-travel switch opens.
     let image = normal_image(&config);
@@ -247,12 +270,10 @@ async fn the_loop_on_its_own_thread_closes_the_bus_sink() {
     let (source_tx, source_rx) = mpsc::channel(QUEUE_CAPACITY);
     let (_requests, requests_rx) = mpsc::channel(4);
     let (stop, stopped) = oneshot::channel::<()>();
-    let cell_loop = CellLoop::new(
-        &config.cell,
+    let cell_loop = demo_loop(
+        &config,
         engine,
-        Gate::new(&config.cell, OperatorKeys::default()),
         vec![Box::new(publisher), Box::new(recording)],
-        Duration::from_secs(3600),
     )
     .spawn(source_rx, requests_rx, async {
         let _ = stopped.await;
@@ -320,19 +341,13 @@ async fn a_restored_journal_alarm_follows_the_journal_at_the_start() {
     let (_health_tx, health) = tokio::sync::watch::channel(None::<String>);
     let (_source_tx, source_rx) = mpsc::channel(QUEUE_CAPACITY);
     let (_requests, requests_rx) = mpsc::channel(4);
-    let (stop, stopped) = oneshot::channel::<()>();
-    let cell_loop = CellLoop::new(
-        &config.cell,
-        engine,
-        Gate::new(&config.cell, OperatorKeys::default()),
-        vec![Box::new(recording)],
-        Duration::from_secs(3600),
-    )
-    .restored(restored, None)
-    .watching_journal(health);
-    let cell_loop = tokio::spawn(cell_loop.run(source_rx, requests_rx, async {
-        let _ = stopped.await;
-    }));
+    let (stop, cell_loop) = run_until_stopped(
+        demo_loop(&config, engine, vec![Box::new(recording)])
+            .restored(restored, None)
+            .watching_journal(health),
+        source_rx,
+        requests_rx,
+    );
     let first = step_until(&mut steps, "the restore", |_| true).await;
     assert_eq!(first.input, Input::Restored);
     let cleared = step_until(&mut steps, "the journal alarm cleared", |s| {
