@@ -357,7 +357,7 @@ fn awlsim_traffic_lights_and_step_chain() {
     pinned(&p, &[]);
     assert_eq!(p.warnings().len(), 21);
     assert_eq!(
-        p.documentation().get(&Signal::new("#SM")),
+        p.documentation().get(&Signal::new("FB1.#SM")),
         Some("Schrittmerker")
     );
 }
@@ -368,21 +368,30 @@ fn awlsim_training_plant_export() {
     // expressions, comparisons, indirect addressing.
     let p = program("awlsim-bnt_modell.awl");
     let got = outcome(&p);
-    assert_eq!(got.len(), 131);
-    assert_eq!(got.iter().filter(|(_, s)| !s.starts_with('!')).count(), 38);
+    assert_eq!(got.len(), 169);
+    assert_eq!(got.iter().filter(|(_, s)| !s.starts_with('!')).count(), 50);
     let find = |c: &str| got.iter().find(|(n, _)| n == c).map(|(_, s)| s.as_str());
     assert_eq!(
-        find("#T14_15"),
-        Some("(#Farbe_Rot * 4B4) + (-#Farbe_Rot * 4B5)")
+        find("Eingänge Schrittkette_3.#T14_15"),
+        Some("(Eingänge Schrittkette_3.#Farbe_Rot * 4B4) + (-Eingänge Schrittkette_3.#Farbe_Rot * 4B5)")
     );
     assert_eq!(
-        find("#STEU_EIN"),
-        Some("-(-#STG_AUS + -#NOT_AUS) * (#STG_EIN + #STEU_EIN)")
+        find("Betriebsarten.#STEU_EIN"),
+        Some("-(-Betriebsarten.#STG_AUS + -Betriebsarten.#NOT_AUS) * (Betriebsarten.#STG_EIN + Betriebsarten.#STEU_EIN)")
     );
     assert_eq!(
-        find("#TEMP_Aktor_vor"),
+        find("Programmzyklus.#TEMP_Aktor_vor"),
         Some("Handbetrieb * -AktorRück_Hand * AktorVor_Hand")
     );
+    // Three blocks write a local `#T1_2` of their own: three coils, each
+    // with its block's logic (read as one signal, the last block's write
+    // hid the others').
+    assert_eq!(
+        find("Eingaenge_Schrittkette_1.#T1_2"),
+        Some("1B3 * 1S2 * 1S2 * 2B5")
+    );
+    assert_eq!(find("Eingänge Schrittkette_3.#T1_2"), Some("4B6"));
+    assert_eq!(got.iter().filter(|(n, _)| n.ends_with(".#T1_2")).count(), 3);
     assert_eq!(p.warnings().len(), 567);
 }
 

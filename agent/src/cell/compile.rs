@@ -37,7 +37,7 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
         vec![Box::new(SwitchingChecks::new(config.switching.clone()))];
     for t in &config.timers {
         let checks = TimerChecks::new(&t.id, &t.model, t.severity, |n| {
-            crate::config::timer_signal(&config.tags, n)
+            crate::config::timer_signal(config.addressing, &config.tags, n)
         })
         .map_err(|source| CompileError::Timer {
             id: t.id.clone(),

@@ -373,6 +373,9 @@ pub struct CellConfig {
     pub cell: String,
     /// Free text.
     pub description: String,
+    /// How the tags' addresses and the conditions over them are written
+    /// (`cell.dialect`).
+    pub addressing: Addressing,
     /// OPC UA connection.
     pub opcua: Option<OpcUaConfig>,
     /// The `@` bus of legacy units (paper 002), when the cell is read from
@@ -560,6 +563,7 @@ pub fn parse(
         bus: false,
         tag_comments: HashMap::new(),
         tags_file: None,
+        addressing: Addressing::PmcOrIec,
     };
     let config = v.config(raw);
     if v.problems.is_empty() {
@@ -609,6 +613,8 @@ struct Validator<'a> {
     /// While the tags of a `tags_file` are checked: its name and text,
     /// which their spans point into.
     tags_file: Option<(String, String)>,
+    /// How the tags' addresses are written (`cell.dialect`).
+    addressing: Addressing,
 }
 
 impl Validator<'_> {
@@ -737,6 +743,12 @@ impl Validator<'_> {
     }
 
     fn config(&mut self, raw: RawConfig) -> Option<CellConfig> {
+        if let Some(d) = &raw.cell.dialect {
+            match d.get_ref().parse::<Dialect>() {
+                Ok(d) => self.addressing = Addressing::In(d),
+                Err(e) => self.problem(d.span(), "cell.dialect", e),
+            }
+        }
         let cell = raw.cell.id.get_ref().clone();
         if cell.is_empty()
             || !cell
@@ -857,7 +869,7 @@ impl Validator<'_> {
             let unknown: Vec<&String> = model
                 .signals
                 .iter()
-                .filter(|n| timer_signal(&tags, n).is_none())
+                .filter(|n| timer_signal(self.addressing, &tags, n).is_none())
                 .collect();
             if !unknown.is_empty() {
                 let list: Vec<&str> = unknown.iter().map(|s| s.as_str()).collect();
@@ -941,8 +953,10 @@ impl Validator<'_> {
             Counter,
             Item,
         }
+        let addressing = self.addressing;
         let mut production = |p: Spanned<String>, key: &str, usage: Use| {
-            let found = tag_address(p.get_ref())
+            let found = addressing
+                .signal(p.get_ref())
                 .ok()
                 .and_then(|a| by_address.get(&a).copied());
             let Some(t) = found else {
@@ -1046,6 +1060,7 @@ impl Validator<'_> {
         Some(CellConfig {
             cell,
             description: raw.cell.description,
+            addressing: self.addressing,
             opcua: opcua?,
             legacy,
             tags,
@@ -1373,7 +1388,7 @@ impl Validator<'_> {
                     Err(e) => self.problem(t.node_id.span(), &format!("{key}.node_id"), e),
                 }
             }
-            let address = match tag_address(t.address.get_ref()) {
+            let address = match self.addressing.signal(t.address.get_ref()) {
                 Ok(a) => a,
                 Err(e) => {
                     self.problem(t.address.span(), &format!("{key}.address"), e);
@@ -1627,12 +1642,23 @@ impl Validator<'_> {
                 return None;
             }
         };
+        // Tags read as another dialect's addresses than the program's
+        // cannot match its signals: say which key fixes it.
+        let hint = match self.addressing {
+            Addressing::In(d) if d == program.dialect() => String::new(),
+            Addressing::PmcOrIec if program.dialect() != Dialect::Stl => String::new(),
+            _ => format!(
+                " (the program is {}: set cell.dialect = \"{}\" to read the tags' addresses as it writes them)",
+                program.dialect(),
+                program.dialect()
+            ),
+        };
         for leaf in sf.leaves() {
             if !tags.contains_key(&leaf) {
                 self.problem(
                     c.coil.span(),
                     &format!("{key}.coil"),
-                    format!("{coil} reads {leaf}, but no tag has that address; add a [[tags]] entry for it"),
+                    format!("{coil} reads {leaf}, but no tag has that address; add a [[tags]] entry for it{hint}"),
                 );
             } else if let Some((t, false)) = self.kinds.get(&leaf) {
                 self.problem(
@@ -1700,7 +1726,7 @@ impl Validator<'_> {
         tags: &HashMap<Signal, usize>,
     ) -> Option<Expr> {
         let e = match Expr::parse(text.get_ref()) {
-            Ok(e) => canonical_expr(e),
+            Ok(e) => canonical_expr(self.addressing, e),
             Err(m) => {
                 self.problem(text.span(), key, format!("'{}': {m}", text.get_ref()));
                 return None;
@@ -1801,9 +1827,10 @@ impl Validator<'_> {
             };
             // A contact is known when it is a tag's bit or a comparison of
             // numeric tags, as in any other condition.
+            let addressing = self.addressing;
             let kinds = &self.kinds;
             let known = |s: &Signal| {
-                let canonical = canonical_expr(Expr::Lit(s.clone(), false));
+                let canonical = canonical_expr(addressing, Expr::Lit(s.clone(), false));
                 canonical
                     .signals()
                     .iter()
@@ -1858,19 +1885,20 @@ impl Validator<'_> {
                     for chart in &mut sfc.charts {
                         for step in &mut chart.steps {
                             if let Expr::Lit(s, _) =
-                                canonical_expr(Expr::Lit(step.flag.clone(), false))
+                                canonical_expr(addressing, Expr::Lit(step.flag.clone(), false))
                             {
                                 step.flag = s;
                             }
                         }
                         for t in &mut chart.transitions {
-                            t.condition = canonical_expr(t.condition.clone());
+                            t.condition = canonical_expr(addressing, t.condition.clone());
                         }
                     }
                     let mut switch = |v: Option<Spanned<String>>, name: &str| {
                         let v = v?;
                         let key = format!("{key}.{name}");
-                        let found = tag_address(v.get_ref())
+                        let found = addressing
+                            .signal(v.get_ref())
                             .ok()
                             .and_then(|a| Some((tags.get(&a).copied()?, self.kinds.get(&a)?.0)));
                         match found {
@@ -1982,7 +2010,7 @@ impl Validator<'_> {
                     format!("'{}' is used twice", c.id.get_ref()),
                 );
             }
-            let tag = match tag_address(c.tag.get_ref()) {
+            let tag = match self.addressing.signal(c.tag.get_ref()) {
                 Ok(a) => a,
                 Err(e) => {
                     self.problem(c.tag.span(), &format!("{key}.tag"), e);
@@ -2211,11 +2239,12 @@ impl Validator<'_> {
 }
 
 /// The tag a timer model's signal names: by tag name, else by address.
-pub fn timer_signal(tags: &[TagConfig], name: &str) -> Option<Signal> {
+pub fn timer_signal(addressing: Addressing, tags: &[TagConfig], name: &str) -> Option<Signal> {
     tags.iter()
         .find(|t| t.name == name)
         .or_else(|| {
-            tag_address(name)
+            addressing
+                .signal(name)
                 .ok()
                 .and_then(|a| tags.iter().find(|t| t.address == a))
         })
@@ -2233,9 +2262,42 @@ pub fn tag_address(text: &str) -> Result<Signal, String> {
         .or_else(|_| Dialect::Iec.signal(text))
 }
 
+/// How a cell's tag addresses, and the conditions over them, are written:
+/// in its PLC's dialect (`cell.dialect`), or by default a PMC address or an
+/// IEC address or name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Addressing {
+    /// A PMC address (`X0.07`, `D100`), else an IEC direct address or name.
+    PmcOrIec,
+    /// The PLC's own dialect only: `pmc` (or a plain name), `iec`, `stl`
+    /// (`E 0.0`, `MW 10`, `"Start"`, `Band.#Reset`, or a plain name).
+    In(Dialect),
+}
+
+impl Addressing {
+    /// The canonical signal for a tag address written in the cell's
+    /// configuration.
+    ///
+    /// # Errors
+    /// A message quoting the malformed address.
+    pub fn signal(self, text: &str) -> Result<Signal, String> {
+        match self {
+            Addressing::PmcOrIec => tag_address(text),
+            Addressing::In(Dialect::Iec) => Dialect::Iec.tag_signal(text),
+            // A plain name (`Temperatur`) is a symbol in any dialect.
+            Addressing::In(d) => d.tag_signal(text).or_else(|e| {
+                if text.starts_with('%') {
+                    return Err(e);
+                }
+                Dialect::Iec.tag_signal(text).map_err(|_| e)
+            }),
+        }
+    }
+}
+
 /// The expression with its addresses in canonical form (`x0.6` → `X0.06`).
-fn canonical_expr(e: Expr) -> Expr {
-    let canonical = |s: &Signal| tag_address(s.name()).unwrap_or_else(|_| s.clone());
+fn canonical_expr(addressing: Addressing, e: Expr) -> Expr {
+    let canonical = |s: &Signal| addressing.signal(s.name()).unwrap_or_else(|_| s.clone());
     match e {
         Expr::Lit(s, n) => match Comparison::of_signal(&s) {
             Some(mut c) => {
@@ -2247,9 +2309,17 @@ fn canonical_expr(e: Expr) -> Expr {
             }
             None => Expr::Lit(canonical(&s), n),
         },
-        Expr::Not(inner) => Expr::Not(Box::new(canonical_expr(*inner))),
-        Expr::And(es) => Expr::And(es.into_iter().map(canonical_expr).collect()),
-        Expr::Or(es) => Expr::Or(es.into_iter().map(canonical_expr).collect()),
+        Expr::Not(inner) => Expr::Not(Box::new(canonical_expr(addressing, *inner))),
+        Expr::And(es) => Expr::And(
+            es.into_iter()
+                .map(|e| canonical_expr(addressing, e))
+                .collect(),
+        ),
+        Expr::Or(es) => Expr::Or(
+            es.into_iter()
+                .map(|e| canonical_expr(addressing, e))
+                .collect(),
+        ),
         c @ Expr::Const(_) => c,
     }
 }

@@ -55,6 +55,7 @@ pub(crate) struct RawCell {
     pub(crate) id: Spanned<String>,
     #[serde(default)]
     pub(crate) description: String,
+    pub(crate) dialect: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

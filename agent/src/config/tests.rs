@@ -95,7 +95,7 @@ fn unknown_key() {
             "[cell]\nid = \"c1\"",
             "[cell]\nid = \"c1\"\ncolour = \"red\""
         )),
-        "cell.toml:4:1: unknown field `colour`, expected `id` or `description`"
+        "cell.toml:4:1: unknown field `colour`, expected one of `id`, `description`, `dialect`"
     );
 }
 
@@ -341,8 +341,14 @@ fn timer_model_signals_must_be_tags() {
     );
     let c = parse("cell.toml", &ok, Path::new("base"), &files).unwrap();
     assert_eq!(c.timers[0].id, "line");
-    assert_eq!(timer_signal(&c.tags, "x1"), Some(Signal::new("X1")));
-    assert_eq!(timer_signal(&c.tags, "X2"), Some(Signal::new("X2")));
+    assert_eq!(
+        timer_signal(c.addressing, &c.tags, "x1"),
+        Some(Signal::new("X1"))
+    );
+    assert_eq!(
+        timer_signal(c.addressing, &c.tags, "X2"),
+        Some(Signal::new("X2"))
+    );
 }
 
 /// GOOD with numeric tags `D1` (Double) and `D2` (UInt16) and `S1`
@@ -738,4 +744,116 @@ fn a_tags_file_problem_names_the_file_and_the_line() {
         e.contains("cell.toml:1:13: tags_file: cannot read the tags file 'base/tags.csv'"),
         "{e}"
     );
+}
+
+/// An S7 cell: an STL program with a block's own local, tags written as
+/// STL addresses.
+const STL_CELL: &str = r#"
+[cell]
+id = "s7"
+dialect = "stl"
+
+[opcua]
+endpoint = "opc.tcp://127.0.0.1:4840/"
+
+[[tags]]
+name = "start"
+node_id = "ns=3;s=\"Eingaenge\".Start"
+address = "E 0.0"
+
+[[tags]]
+name = "stop"
+node_id = "ns=3;s=\"Eingaenge\".Stop"
+address = "e0.1"
+
+[[tags]]
+name = "reset"
+node_id = "ns=3;s=\"DB_Band\".Reset"
+address = "\"Band\".#Reset"
+
+[[tags]]
+name = "level"
+node_id = "ns=3;s=\"Daten\".Fuellstand"
+address = "MW 10"
+type = "Int16"
+
+[[checks.switching]]
+id = "band"
+program = "band.awl"
+coil = "A 4.0"
+observable = "E,A,Band.#Reset"
+armed_when = "MW10 > 5"
+
+[zenoh.tls]
+ca = "pki-bus/ca.pem"
+cert = "pki-bus/agent-s7.pem"
+key = "pki-bus/agent-s7.key"
+"#;
+
+fn stl_files() -> Mem {
+    let mut m = mem();
+    m.0.insert(
+        PathBuf::from("base/band.awl"),
+        "FUNCTION_BLOCK \"Band\"\nVAR\n  Reset : BOOL ; // Band zurücksetzen\nEND_VAR\nBEGIN\n\
+         NETWORK\nU E 0.0\nUN E 0.1\n= #Reset\nEND_FUNCTION_BLOCK\n\
+         FUNCTION FC 1 : VOID\nVAR_TEMP\n  Reset : BOOL ;\nEND_VAR\nBEGIN\n\
+         NETWORK\nU \"Band\".#Reset\n= #Reset\nU #Reset\n= A 4.0\nEND_FUNCTION\n"
+            .as_bytes()
+            .to_vec(),
+    );
+    m
+}
+
+#[test]
+fn an_s7_cell_reads_its_tags_as_stl_addresses() {
+    let c = parse("cell.toml", STL_CELL, Path::new("base"), &stl_files()).unwrap();
+    assert_eq!(c.addressing, Addressing::In(Dialect::Stl));
+    let addresses: Vec<&str> = c.tags.iter().map(|t| t.address.name()).collect();
+    assert_eq!(addresses, ["E0.0", "E0.1", "Band.#Reset", "MW10"]);
+    let check = &c.switching[0];
+    // FC1's own `#Reset` is expanded; the block Band's is a leaf, a tag.
+    assert_eq!(check.sf.notation(), "Band.#Reset");
+    assert_eq!(
+        check.comments.get(&Signal::new("Band.#Reset")),
+        Some("Band zurücksetzen")
+    );
+    let armed = check.armed_when.as_ref().unwrap();
+    assert_eq!(
+        armed
+            .leaves()
+            .into_iter()
+            .map(|s| s.name().to_string())
+            .collect::<Vec<_>>(),
+        ["MW10 > 5"]
+    );
+}
+
+#[test]
+fn an_stl_program_over_pmc_addresses_says_which_key_fixes_it() {
+    let text = STL_CELL
+        .replace("dialect = \"stl\"\n", "")
+        .replace("address = \"E 0.0\"", "address = \"E0.0\"")
+        .replace("address = \"\\\"Band\\\".#Reset\"", "address = \"Reset\"")
+        .replace("address = \"MW 10\"", "address = \"MW10\"")
+        .replace("observable = \"E,A,Band.#Reset\"\n", "")
+        .replace("armed_when = \"MW10 > 5\"\n", "");
+    let e = parse("cell.toml", &text, Path::new("base"), &stl_files())
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        e,
+        "cell.toml:32:8: checks.switching[0].coil: A4.0 reads E0.0, but no tag has that address; \
+         add a [[tags]] entry for it (the program is stl: set cell.dialect = \"stl\" to read the \
+         tags' addresses as it writes them)\n\
+         cell.toml:32:8: checks.switching[0].coil: A4.0 reads E0.1, but no tag has that address; \
+         add a [[tags]] entry for it (the program is stl: set cell.dialect = \"stl\" to read the \
+         tags' addresses as it writes them)"
+    );
+    let bad = STL_CELL.replace("dialect = \"stl\"", "dialect = \"s7\"");
+    assert!(errors(&bad)
+        .starts_with("cell.toml:4:11: cell.dialect: unknown dialect 's7': use pmc, iec or stl"));
+    let bad = STL_CELL.replace("address = \"E 0.0\"", "address = \"E 0.9\"");
+    assert!(errors(&bad).contains(
+        "tags[0].address: malformed address 'E 0.9': expected byte.bit with a bit 0..7, as in E 0.0"
+    ));
 }

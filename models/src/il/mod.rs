@@ -67,6 +67,20 @@ impl Dialect {
         }
     }
 
+    /// The canonical signal for a tag's address in this dialect: a bit as
+    /// [`Dialect::signal`] reads it, or a word a numeric tag reads (`D100`,
+    /// `%MW10`, STL `MW 10` → `MW10`).
+    ///
+    /// # Errors
+    /// A message quoting a malformed address.
+    pub fn tag_signal(self, text: &str) -> Result<Signal, String> {
+        match self {
+            Dialect::Pmc => crate::signal::pmc_address(text),
+            Dialect::Iec => iec::operand_signal(text),
+            Dialect::Stl => stl::tag_signal(text),
+        }
+    }
+
     /// Guesses the dialect from the mnemonics a program uses.
     ///
     /// Mnemonics both dialects share (`AND`, `OR`, ...) do not count; the

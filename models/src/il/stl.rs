@@ -161,6 +161,19 @@ enum Kind {
 /// `Motor an`, `#flag`, `DB1.DBX 2.3` → `DB1.DBX2.3`, `T 1` → `T1`.
 /// `Ok(None)`: a well-formed operand that is not a bit (`MW 10`, `5`).
 fn bit_operand(text: &str) -> Result<Option<Signal>, String> {
+    // A block's local as named outside it: `Betriebsarten.#Reset`,
+    // `"Schrittkette 1".#T1_2`, `FB 10.#flag`.
+    if let Some((block, local)) = text.split_once(".#") {
+        let Some(block) = block_name(block) else {
+            return Err(format!(
+                "malformed block name in '{text}': expected \"name\".#local or FB 10.#local"
+            ));
+        };
+        return match bit_operand(&format!("#{local}"))? {
+            Some(local) => Ok(Some(in_block(Some(&block), local))),
+            None => Ok(None),
+        };
+    }
     if let Some(inner) = text.strip_prefix('"') {
         return match inner.strip_suffix('"') {
             Some(name) if !name.is_empty() && !name.contains('"') => Ok(Some(Signal::new(name))),
@@ -232,6 +245,73 @@ fn bit_operand(text: &str) -> Result<Option<Signal>, String> {
     ))
 }
 
+/// A block's name in canonical form: `"Betriebsarten"` → `Betriebsarten`,
+/// `FB 10` → `FB10`; `None` if empty or malformed.
+fn block_name(text: &str) -> Option<String> {
+    let text = text.trim();
+    if let Some(inner) = text.strip_prefix('"') {
+        let name = inner.strip_suffix('"')?;
+        return (!name.is_empty() && !name.contains('"')).then(|| name.to_string());
+    }
+    let compact: String = text.chars().filter(|c| !c.is_whitespace()).collect();
+    let ok = !compact.is_empty()
+        && compact
+            .chars()
+            .all(|c| c.is_alphanumeric() || c == '_' || c == '.');
+    ok.then(|| {
+        // `FB 10`, `fc3`, `OB 1`: a block number reads as written in Step 7.
+        let letters = compact
+            .chars()
+            .take_while(char::is_ascii_alphabetic)
+            .count();
+        let upper = compact[..letters].to_ascii_uppercase();
+        if matches!(upper.as_str(), "OB" | "FB" | "FC" | "SFB" | "SFC")
+            && letters < compact.len()
+            && compact[letters..].chars().all(|c| c.is_ascii_digit())
+        {
+            format!("{upper}{}", &compact[letters..])
+        } else {
+            compact
+        }
+    })
+}
+
+/// The name of the block a header line opens (`FUNCTION_BLOCK
+/// "Betriebsarten"`, `FUNCTION FC 3 : VOID`, `ORGANIZATION_BLOCK OB 1`).
+fn opened_block(line: &str) -> Option<String> {
+    let rest = line.trim_start();
+    let keyword_len = rest.find(char::is_whitespace)?;
+    let upper = rest[..keyword_len].to_ascii_uppercase();
+    if !matches!(
+        upper.as_str(),
+        "ORGANIZATION_BLOCK" | "FUNCTION_BLOCK" | "FUNCTION"
+    ) {
+        return None;
+    }
+    let name = rest[keyword_len..].trim().trim_end_matches(';');
+    // `FUNCTION "Name" : VOID`: the return type is not part of the name.
+    let name = if let Some(inner) = name.strip_prefix('"') {
+        match inner.find('"') {
+            Some(end) => &name[..end + 2],
+            None => name,
+        }
+    } else {
+        name.split(':').next().unwrap_or(name)
+    };
+    block_name(name)
+}
+
+/// A local (`#Reset`) is its block's own: `Betriebsarten.#Reset`. Outside
+/// any block (a bare network list) it stays `#Reset`.
+fn in_block(block: Option<&str>, signal: Signal) -> Signal {
+    match block {
+        Some(block) if signal.name().starts_with('#') => {
+            Signal::new(&format!("{block}.{}", signal.name()))
+        }
+        _ => signal,
+    }
+}
+
 /// The canonical signal for an STL address typed by a user (`E 0.0`,
 /// `"Start"`).
 ///
@@ -242,17 +322,59 @@ pub(crate) fn operand_signal(text: &str) -> Result<Signal, String> {
         .ok_or_else(|| format!("'{text}' is not a bit address (E 0.0, A 4.0, M 10.1)"))
 }
 
+/// The canonical signal for a tag's STL address: a bit (`E 0.0` →
+/// `E0.0`, `"Start"`, `Band.#Reset`) or a word or byte a numeric tag reads
+/// (`MW 10` → `MW10`, `DB1.DBW 4` → `DB1.DBW4`, `PEW 256`).
+///
+/// # Errors
+/// A malformed address, or a constant.
+pub(crate) fn tag_signal(text: &str) -> Result<Signal, String> {
+    let text = text.trim();
+    if let Some(bit) = bit_operand(text)? {
+        return Ok(bit);
+    }
+    let compact: String = text.chars().filter(|c| !c.is_whitespace()).collect();
+    let upper = compact.to_ascii_uppercase();
+    let (db, rest) = match upper.split_once('.') {
+        Some((db, rest)) if db.starts_with("DB") => (Some(db), rest),
+        _ => (None, upper.as_str()),
+    };
+    let letters = rest.chars().take_while(char::is_ascii_alphabetic).count();
+    let word = letters > 0
+        && letters < rest.len()
+        && rest[letters..].chars().all(|c| c.is_ascii_digit())
+        && db.is_none_or(|db| db.len() > 2 && db[2..].chars().all(|c| c.is_ascii_digit()));
+    if word {
+        Ok(Signal::new(&upper))
+    } else {
+        Err(format!(
+            "'{text}' is not an address (E 0.0, MW 10, DB1.DBW 4, \"symbol\")"
+        ))
+    }
+}
+
 /// The comments written beside declarations of locals (`RESET : BOOL ;
 /// // Reset the chain`), as `(#name, comment)`.
 pub(crate) fn documentation(source: &str) -> Vec<(String, String)> {
     let mut out = Vec::new();
     let mut section: Option<&str> = None;
+    let mut block: Option<String> = None;
     for raw in source.lines() {
         let line = code(raw);
         let Some(first) = line.split_whitespace().next() else {
             continue;
         };
         let upper = first.to_ascii_uppercase();
+        if section.is_none() {
+            if let Some(name) = opened_block(line) {
+                block = Some(name);
+                continue;
+            }
+            if upper.starts_with("END_") && HEADERS.contains(&upper.as_str()) {
+                block = None;
+                continue;
+            }
+        }
         match section {
             None => {
                 section = SECTIONS
@@ -264,7 +386,9 @@ pub(crate) fn documentation(source: &str) -> Vec<(String, String)> {
             Some(_) => {
                 let comment = raw[line.len()..].trim_start_matches('/').trim();
                 if let (Some((name, _)), false) = (line.split_once(':'), comment.is_empty()) {
-                    out.push((format!("#{}", name.trim()), comment.to_string()));
+                    let local = Signal::new(&format!("#{}", name.trim()));
+                    let local = in_block(block.as_deref(), local);
+                    out.push((local.name().to_string(), comment.to_string()));
                 }
             }
         }
@@ -311,6 +435,8 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
     let mut errors = Vec::new();
     let mut section: Option<&str> = None;
     let mut in_call = false;
+    // The block being read: its locals are its own.
+    let mut block: Option<String> = None;
     for (n, raw) in source.lines().enumerate() {
         let line_no = n + 1;
         let line = code(raw);
@@ -339,10 +465,14 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
             continue;
         }
         if HEADERS.contains(&first_upper.as_str()) || first_upper.starts_with("TITLE") {
+            if let Some(name) = opened_block(line) {
+                block = Some(name);
+            }
             if matches!(
                 first_upper.as_str(),
                 "END_ORGANIZATION_BLOCK" | "END_FUNCTION_BLOCK" | "END_FUNCTION"
             ) {
+                block = None;
                 let at = Location {
                     line: line_no,
                     col: column(raw, toks[0].0),
@@ -456,7 +586,7 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
                 continue;
             }
             Kind::Bit => match bit_operand(&operand_text) {
-                Ok(Some(s)) => Some(Operand::Signal(s)),
+                Ok(Some(s)) => Some(Operand::Signal(in_block(block.as_deref(), s))),
                 Ok(None) => Some(Operand::Other(operand_text)),
                 Err(msg) => {
                     errors.push(err(operand_words[0].0, msg));
@@ -479,7 +609,7 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
                     });
                     continue;
                 }
-                Ok(Some(s)) => Some(Operand::Signal(s)),
+                Ok(Some(s)) => Some(Operand::Signal(in_block(block.as_deref(), s))),
                 // `= [AR1,P#6.0]`, `= M [MD 10]`: the bit is chosen at run
                 // time.
                 Ok(None) | Err(_) if operand_text.contains('[') => {
@@ -539,6 +669,75 @@ mod tests {
         assert_eq!(
             bit_operand("E 0.8").unwrap_err(),
             "malformed address 'E 0.8': expected byte.bit with a bit 0..7, as in E 0.0"
+        );
+    }
+
+    #[test]
+    fn tag_addresses_take_words_too() {
+        let s = |t| tag_signal(t).unwrap().name().to_string();
+        assert_eq!(s("E 0.0"), "E0.0");
+        assert_eq!(s("MW 10"), "MW10");
+        assert_eq!(s("db1.dbw 4"), "DB1.DBW4");
+        assert_eq!(s("PEW256"), "PEW256");
+        assert_eq!(s("\"Temperatur\""), "Temperatur");
+        assert_eq!(s("Band.#Reset"), "Band.#Reset");
+        assert!(tag_signal("5").is_err());
+        assert!(tag_signal("S5T#5S").is_err());
+        assert!(tag_signal("E 0.9").is_err());
+    }
+
+    #[test]
+    fn locals_belong_to_their_block() {
+        let src =
+            "FUNCTION_BLOCK \"Band 1\"\nVAR\n  Reset : BOOL ; // Band 1 zurücksetzen\nEND_VAR\n\
+                   BEGIN\nU E 0.0\n= #Reset\nEND_FUNCTION_BLOCK\n\
+                   FUNCTION FC 3 : VOID\nVAR_TEMP\n  Reset : BOOL ; // FC3's own\nEND_VAR\n\
+                   BEGIN\nU #Reset\n= A 4.0\nEND_FUNCTION\n\
+                   U #Reset\n= A 4.1\n";
+        let signals: Vec<String> = lex("t.awl", src)
+            .unwrap()
+            .into_iter()
+            .filter_map(|i| match i.operand {
+                Some(Operand::Signal(s)) => Some(s.name().to_string()),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(
+            signals,
+            [
+                "E0.0",
+                "Band 1.#Reset",
+                "FC3.#Reset",
+                "A4.0",
+                "#Reset",
+                "A4.1"
+            ]
+        );
+        assert_eq!(
+            documentation(src),
+            [
+                (
+                    "Band 1.#Reset".to_string(),
+                    "Band 1 zurücksetzen".to_string()
+                ),
+                ("FC3.#Reset".to_string(), "FC3's own".to_string()),
+            ]
+        );
+        // Named from outside the block, as in an observability list.
+        assert_eq!(
+            operand_signal("\"Band 1\".#Reset").unwrap().name(),
+            "Band 1.#Reset"
+        );
+        assert_eq!(operand_signal("fc 3.#Reset").unwrap().name(), "FC3.#Reset");
+        assert_eq!(
+            operand_signal("Betriebsarten.#a.b").unwrap().name(),
+            "Betriebsarten.#a.b"
+        );
+        assert!(operand_signal("\"Band.#Reset").is_err());
+        assert_eq!(opened_block("ORGANIZATION_BLOCK OB 1"), Some("OB1".into()));
+        assert_eq!(
+            opened_block("FUNCTION \"Zähler : neu\" : VOID"),
+            Some("Zähler : neu".into())
         );
     }
 
