@@ -228,14 +228,14 @@ fn matiec_xml_tests() {
 
 #[test]
 fn beremiz_first_steps() {
-    // Counters in five languages: the IL and LD ones count in INT
+    // Counters in five languages: the IL, LD and FBD ones count in INT
     // (declared in the XML interface), so nothing is a boolean coil; the
-    // ST, FBD and SFC bodies are named in warnings.
+    // ST and SFC bodies are named in warnings.
     let p = program("beremiz-first_steps.xml");
     pinned(&p, &[]);
     let lines: Vec<usize> = p.warnings().iter().map(|w| w.at.line).collect();
-    assert_eq!(lines, [67, 142, 483, 526, 690, 944, 948, 949, 957, 958]);
-    assert!(p.warnings()[8]
+    assert_eq!(lines, [67, 483, 690, 944, 948, 949, 957, 958]);
+    assert!(p.warnings()[6]
         .message
         .starts_with("'ST Cnt': word instruction"));
 }
@@ -243,12 +243,21 @@ fn beremiz_first_steps() {
 #[test]
 fn beremiz_traffic_light_action_ladder() {
     let p = program("beremiz-svghmi_traffic_light.xml");
-    // The LD action BLINK_ORANGE_LIGHT: reset coil first, then set coil.
+    // The LD action BLINK_ORANGE_LIGHT: reset coil first, then set coil;
+    // the FBD transition STOP: a NOT box. (The FBD main program's outputs
+    // are of the HMI's own types, not BOOL: data flow, not coils.)
     pinned(
         &p,
-        &[("ORANGE_LIGHT", "R_TRIG1.Q + (-R_TRIG0.Q * ORANGE_LIGHT)")],
+        &[
+            ("ORANGE_LIGHT", "R_TRIG1.Q + (-R_TRIG0.Q * ORANGE_LIGHT)"),
+            ("STOP", "-SWITCH_BUTTON"),
+        ],
     );
-    assert_eq!(p.warnings().len(), 3);
+    let warnings: Vec<&str> = p.warnings().iter().map(|w| w.message.as_str()).collect();
+    assert_eq!(
+        warnings,
+        ["POU 'traffic_light_sequence': SFC body, read as a chart by [[checks.sfc]], not here"]
+    );
 
     // By hand: SSF1 = ¬R_TRIG0.Q·ORANGE_LIGHT, SSF2 = R_TRIG1.Q + SSF1.
     // The light is on and stays on although the reset edge came: with
@@ -268,6 +277,42 @@ fn beremiz_traffic_light_action_ladder() {
     assert_eq!(e.steps, [false, true]);
     assert_eq!(e.fault_step, Some(2));
     assert_eq!(culprits(&e), ["R_TRIG1.Q = 1 (expected 0)"]);
+}
+
+#[test]
+fn beremiz_traffic_light_chart_with_graphical_conditions() {
+    // Every transition's condition is drawn: an FBD named transition
+    // (STOP: a NOT box), contacts and an OR box wired to the transition in
+    // the chart itself.
+    let text = std::fs::read_to_string(path("beremiz-svghmi_traffic_light.xml")).unwrap();
+    let sfc = cellwatch_models::sfc::read("tl.xml", &text, &|_| true).unwrap();
+    let chart = &sfc.charts[0];
+    let got: Vec<(String, String)> = chart
+        .transitions
+        .iter()
+        .map(|t| {
+            let sf = SwitchingFunction::from_expr(Signal::new(&t.id), &t.condition);
+            (t.id.clone(), sf.notation())
+        })
+        .collect();
+    let want = [
+        ("t2", "SWITCH_BUTTON"),
+        ("t6", "STOP_CARS"),
+        ("t12", "ALLOW_PEDESTRIANS"),
+        ("STOP_t16", "-SWITCH_BUTTON"),
+        ("STOP_t4", "-SWITCH_BUTTON"),
+        ("t20", "-SWITCH_BUTTON"),
+        ("t23", "STOP_PEDESTRIANS"),
+        ("t26", "-SWITCH_BUTTON"),
+        ("t29", "ALLOW_CARS"),
+        ("t37", "TON3.Q + WARN_CARS"),
+        ("t39", "-SWITCH_BUTTON"),
+    ];
+    let want: Vec<(String, String)> = want
+        .iter()
+        .map(|(t, c)| ((*t).to_string(), (*c).to_string()))
+        .collect();
+    assert_eq!(got, want);
 }
 
 // --- awlsim: Siemens STL -------------------------------------------------

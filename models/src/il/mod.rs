@@ -9,7 +9,7 @@
 //! job of [`crate::program`]; this module only reads text.
 
 pub(crate) mod iec;
-mod plcopen;
+pub(crate) mod plcopen;
 mod pmc;
 pub(crate) mod stl;
 

@@ -1,5 +1,6 @@
-//! Programs from PLCopen XML (IEC 61131-3 TC6 XML 2.01): the ladder (LD)
-//! and instruction-list (IL) bodies of every POU, as IEC instructions.
+//! Programs from PLCopen XML (IEC 61131-3 TC6 XML 2.01): the ladder (LD),
+//! function block diagram (FBD) and instruction-list (IL) bodies of every
+//! POU, as IEC instructions.
 //!
 //! A TC6 ladder is a graph: each element names the elements before it
 //! (`connectionPointIn` / `connection refLocalId`). The power flowing out
@@ -16,9 +17,12 @@
 //! blocks the rung's structure gives — the same as the instruction list
 //! the paper derives from its ladders. Flow is directed, as a PLC
 //! evaluates it, so a network that is not series-parallel still gets the
-//! function the PLC computes. IL bodies are read by the IEC lexer at their
-//! own lines; ST, FBD and SFC bodies are warnings (charts are read by the
-//! chart reader).
+//! function the PLC computes. An FBD body is the same graph without
+//! rails: output variables are its coils, and the boxes AND, OR, XOR and
+//! NOT are logic (De Morgan gives a negated box its flow). IL bodies are
+//! read by the IEC lexer at their own lines; ST and SFC bodies are
+//! warnings (charts are read by the chart reader, which reads drawn
+//! transition conditions here).
 
 use std::collections::HashMap;
 
@@ -35,6 +39,7 @@ const MAX_DEPTH: usize = 512;
 #[derive(Debug, Clone, PartialEq)]
 enum Flow {
     True,
+    False,
     /// A contact: its variable, negated, the element (for identity).
     Lit(Signal, bool, u64),
     And(Vec<Flow>),
@@ -51,6 +56,27 @@ impl Flow {
             Flow::And(parts) => parts,
             other => vec![other],
         }
+    }
+
+    /// The flow negated: a contact's negation flips, AND and OR swap (De
+    /// Morgan); what is not boolean logic stays so.
+    fn not(self) -> Flow {
+        match self {
+            Flow::True => Flow::False,
+            Flow::False => Flow::True,
+            Flow::Lit(s, negated, id) => Flow::Lit(s, !negated, id),
+            Flow::And(parts) => Flow::or(parts.into_iter().map(Flow::not).collect()),
+            Flow::Or(parts) => Flow::and(parts.into_iter().map(Flow::not).collect()),
+            opaque @ Flow::Opaque(..) => opaque,
+        }
+    }
+
+    /// Exclusive OR of two flows: `a·¬b + ¬a·b`.
+    fn xor(a: Flow, b: Flow) -> Flow {
+        Flow::or(vec![
+            Flow::and(vec![a.clone(), b.clone().not()]),
+            Flow::and(vec![a.not(), b]),
+        ])
     }
 
     fn and(parts: Vec<Flow>) -> Flow {
@@ -219,11 +245,17 @@ impl<'a, 'i> Reader<'a, 'i> {
                             Err(m) => Flow::Opaque(m, self.at(node)),
                         }
                     }
-                    _ => Flow::Opaque(format!("output of function '{ty}'"), self.at(node)),
+                    _ => self.function(node, ty, param, depth),
                 }
             }
             "inVariable" | "inOutVariable" => {
                 let expr = child_text(node, "expression").unwrap_or_default();
+                let negated = node.attribute("negated") == Some("true");
+                match expr.trim().to_ascii_uppercase().as_str() {
+                    "TRUE" => return if negated { Flow::False } else { Flow::True },
+                    "FALSE" => return if negated { Flow::True } else { Flow::False },
+                    _ => {}
+                }
                 match iec::operand_signal(expr.trim()) {
                     Ok(s) => Flow::Lit(
                         s,
@@ -247,6 +279,68 @@ impl<'a, 'i> Reader<'a, 'i> {
                 }
             }
             other => Flow::Opaque(format!("element '{other}'"), self.at(node)),
+        }
+    }
+
+    /// The output `param` of a function box: the boolean functions AND,
+    /// OR, XOR and NOT (of any number of inputs, each perhaps negated, and
+    /// the output perhaps negated) are logic; any other function's output
+    /// is not derivable.
+    fn function(&mut self, node: Node<'a, 'i>, ty: &str, param: &str, depth: usize) -> Flow {
+        let kind = ty.to_ascii_uppercase();
+        let opaque = |r: &Self| Flow::Opaque(format!("output of function '{ty}'"), r.at(node));
+        if !matches!(kind.as_str(), "AND" | "OR" | "XOR" | "NOT") {
+            return opaque(self);
+        }
+        let variables = |list: &'static str| {
+            node.children()
+                .filter(move |c| c.has_tag_name(list))
+                .flat_map(|l| l.children().filter(|v| v.has_tag_name("variable")))
+        };
+        let outputs: Vec<Node> = variables("outputVariables").collect();
+        let output = outputs
+            .iter()
+            .find(|v| v.attribute("formalParameter") == Some(param))
+            .or_else(|| outputs.first().filter(|_| param.is_empty()));
+        let Some(output) = output.copied() else {
+            // ENO, or an output the box does not have.
+            return opaque(self);
+        };
+        let mut inputs = Vec::new();
+        for v in variables("inputVariables") {
+            let flow = self.input(v, depth);
+            if v.attribute("formalParameter")
+                .is_some_and(|p| p.eq_ignore_ascii_case("EN"))
+            {
+                // Enabled by the rail: always runs. Otherwise its output
+                // holds while disabled: not a function of the inputs.
+                if flow != Flow::True {
+                    return opaque(self);
+                }
+                continue;
+            }
+            inputs.push(if v.attribute("negated") == Some("true") {
+                flow.not()
+            } else {
+                flow
+            });
+        }
+        let flow = match (kind.as_str(), inputs.len()) {
+            (_, 0) => return opaque(self),
+            ("NOT", 1) => inputs.pop().unwrap_or(Flow::True).not(),
+            ("NOT", _) => return opaque(self),
+            ("AND", _) => Flow::and(inputs),
+            ("OR", _) => Flow::or(inputs),
+            _ => {
+                let mut it = inputs.into_iter();
+                let first = it.next().unwrap_or(Flow::False);
+                it.fold(first, Flow::xor)
+            }
+        };
+        if output.attribute("negated") == Some("true") {
+            flow.not()
+        } else {
+            flow
         }
     }
 }
@@ -283,6 +377,14 @@ fn emit(flow: &Flow, at: Location, out: &mut Vec<Instruction>) {
             },
             Some(Operand::Const(true)),
             "LD TRUE".into(),
+        )),
+        Flow::False => out.push(ins(
+            Operation::Load {
+                negated: false,
+                push: false,
+            },
+            Some(Operand::Const(false)),
+            "LD FALSE".into(),
         )),
         Flow::Lit(s, negated, _) => out.push(ins(
             Operation::Load {
@@ -433,7 +535,7 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
             let body = *body;
             for kind in body.children().filter(Node::is_element) {
                 match kind.tag_name().name() {
-                    "LD" => {
+                    "LD" | "FBD" => {
                         let (ins, errs) = ladder(origin, &doc, kind, &declared);
                         out.extend(ins);
                         errors.extend(errs);
@@ -523,6 +625,119 @@ fn type_name(variable: Node<'_, '_>) -> Option<String> {
         "string" | "wstring" => "STRING".to_string(),
         other => other.to_string(),
     })
+}
+
+/// The logic a graphical body (`LD` or `FBD`, as in an SFC's named
+/// transition) writes to `name`, as ST text (`(a AND NOT b) OR c`): the
+/// coil or output variable of that name, else the body's only one.
+///
+/// # Errors
+/// Where and why: no such output, or logic that is not boolean (a
+/// function, an edge), at the element's byte offset.
+pub(crate) fn graphical_condition(
+    doc: &Document<'_>,
+    body: Node<'_, '_>,
+    name: &str,
+) -> Result<String, (usize, String)> {
+    let outputs: Vec<(Node, String)> = body
+        .descendants()
+        .filter(|c| c.has_tag_name("coil") || c.has_tag_name("outVariable"))
+        .filter_map(|c| {
+            let var = if c.has_tag_name("coil") {
+                variable(c)
+            } else {
+                child_text(c, "expression").map(|v| v.trim().to_string())
+            };
+            Some((c, var?))
+        })
+        .collect();
+    let output = match outputs.iter().find(|(_, v)| v.eq_ignore_ascii_case(name)) {
+        Some(o) => o.0,
+        None if outputs.len() == 1 => outputs[0].0,
+        None => {
+            return Err((
+                body.range().start,
+                format!("no coil or output variable '{name}' gives the condition in this body"),
+            ))
+        }
+    };
+    connected_condition(doc, body, output)
+}
+
+/// The logic flowing into `sink` (a coil, an output variable, or an SFC
+/// transition's `condition` wired to contacts and boxes drawn in the
+/// chart), read over the elements of `scope`, as ST text.
+///
+/// # Errors
+/// Where and why: logic that is not boolean (a function, an edge), a
+/// dangling connection.
+pub(crate) fn connected_condition(
+    doc: &Document<'_>,
+    scope: Node<'_, '_>,
+    sink: Node<'_, '_>,
+) -> Result<String, (usize, String)> {
+    let mut r = Reader {
+        origin: "",
+        doc,
+        elements: HashMap::new(),
+        connectors: HashMap::new(),
+        memo: HashMap::new(),
+        errors: Vec::new(),
+    };
+    for e in scope.descendants().filter(Node::is_element) {
+        if let Some(id) = local_id(e) {
+            r.elements.entry(id).or_insert(e);
+        }
+        if e.has_tag_name("connector") {
+            if let Some(n) = e.attribute("name") {
+                r.connectors.insert(n.to_string(), e);
+            }
+        }
+    }
+    let flow = r.input(sink, 0);
+    if let Some(e) = r.errors.first() {
+        return Err((sink.range().start, e.message.clone()));
+    }
+    let flow = match sink.attribute("negated") {
+        Some("true") => flow.not(),
+        _ => flow,
+    };
+    let mut text = String::new();
+    st_text(&flow, &mut text).map_err(|why| (sink.range().start, why))?;
+    Ok(text)
+}
+
+/// Writes `flow` as an ST expression.
+fn st_text(flow: &Flow, out: &mut String) -> Result<(), String> {
+    match flow {
+        Flow::True => out.push_str("TRUE"),
+        Flow::False => out.push_str("FALSE"),
+        Flow::Lit(s, negated, _) => {
+            if *negated {
+                out.push_str("NOT ");
+            }
+            out.push_str(s.name());
+        }
+        Flow::And(parts) | Flow::Or(parts) => {
+            let op = if matches!(flow, Flow::And(_)) {
+                " AND "
+            } else {
+                " OR "
+            };
+            out.push('(');
+            for (i, p) in parts.iter().enumerate() {
+                if i > 0 {
+                    out.push_str(op);
+                }
+                st_text(p, out)?;
+            }
+            out.push(')');
+        }
+        Flow::Opaque(why, _) => {
+            return Err(format!("the condition is not boolean logic: {why}"));
+        }
+    }
+    Ok(())
 }
 
 /// One LD body: each coil, in document order, as the instructions that
@@ -712,5 +927,93 @@ mod tests {
         );
         let e = Program::compile("p.xml", &project(""), Some(crate::il::Dialect::Iec)).unwrap_err();
         assert!(e.to_string().contains("leave --dialect out"), "{e}");
+    }
+
+    /// A function box: `AND`, `OR`, `XOR`, `NOT`, inputs `from` by local id
+    /// (an id ending in `~` is a negated input), the output perhaps negated.
+    fn func(ty: &str, id: u32, from: &[&str], out_negated: bool, extra: &str) -> String {
+        let inputs: String = from
+            .iter()
+            .enumerate()
+            .map(|(n, f)| {
+                let (f, neg) = f.strip_suffix('~').map_or((*f, ""), |f| (f, " negated=\"true\""));
+                let param = if f.starts_with("EN:") { "EN".to_string() } else { format!("IN{}", n + 1) };
+                let f = f.trim_start_matches("EN:");
+                format!(
+                    "<variable formalParameter=\"{param}\"{neg}><connectionPointIn><connection refLocalId=\"{f}\"/></connectionPointIn></variable>"
+                )
+            })
+            .collect();
+        let neg = if out_negated { " negated=\"true\"" } else { "" };
+        format!(
+            "<block localId=\"{id}\" typeName=\"{ty}\" {extra}><inputVariables>{inputs}</inputVariables><inOutVariables/>\
+             <outputVariables><variable formalParameter=\"OUT\"{neg}><connectionPointOut/></variable></outputVariables></block>\n"
+        )
+    }
+
+    fn input(id: u32, expr: &str) -> String {
+        format!("<inVariable localId=\"{id}\"><connectionPointOut/><expression>{expr}</expression></inVariable>\n")
+    }
+
+    fn output(id: u32, from: u32, param: &str, expr: &str) -> String {
+        format!(
+            "<outVariable localId=\"{id}\"><connectionPointIn><connection refLocalId=\"{from}\" formalParameter=\"{param}\"/></connectionPointIn><expression>{expr}</expression></outVariable>\n"
+        )
+    }
+
+    #[test]
+    fn function_block_diagrams_are_read_as_logic() {
+        let body = input(1, "a")
+            + &input(2, "b")
+            + &input(3, "c")
+            + &input(4, "TRUE")
+            // Interlock = (a AND NOT b) OR c
+            + &func("AND", 10, &["1", "2~"], false, "")
+            + &func("OR", 11, &["10", "3"], false, "")
+            + &output(12, 11, "OUT", "Interlock")
+            // Fault = NOT (a OR b): De Morgan, ¬a·¬b
+            + &func("OR", 13, &["1", "2"], true, "")
+            + &output(14, 13, "OUT", "Fault")
+            // Odd = a XOR b XOR c
+            + &func("xor", 15, &["1", "2", "3"], false, "")
+            + &output(16, 15, "OUT", "Odd")
+            // NOT of a constant, enabled from the rail: Never = NOT TRUE.
+            + &func("NOT", 17, &["EN:4", "4"], false, "")
+            + &output(18, 17, "OUT", "Never")
+            // An arithmetic function and an enabled box: not derivable.
+            + &func("ADD", 19, &["1", "2"], false, "")
+            + &output(20, 19, "OUT", "Sum")
+            + &func("AND", 21, &["EN:3", "1", "2"], false, "")
+            + &output(22, 21, "OUT", "Gated")
+            // A function block's output is a leaf; a negated output variable.
+            + "<block localId=\"23\" typeName=\"SR\" instanceName=\"Latch\"><inputVariables/><outputVariables/></block>\n"
+            + "<outVariable localId=\"24\" negated=\"true\"><connectionPointIn><connection refLocalId=\"23\" formalParameter=\"Q1\"/></connectionPointIn><expression>Released</expression></outVariable>\n";
+        let text = project("").replace("<LD>\n</LD>", &format!("<FBD>\n{body}</FBD>"));
+        let p = Program::compile("p.xml", &text, None).unwrap_or_else(|e| panic!("{e}"));
+        let names: Vec<&str> = p.coils().iter().map(|c| c.signal.name()).collect();
+        assert_eq!(
+            names,
+            [
+                "Interlock",
+                "Fault",
+                "Odd",
+                "Never",
+                "Sum",
+                "Gated",
+                "Released"
+            ]
+        );
+        assert_eq!(sf(&p, "Interlock"), "(a * -b) + c");
+        assert_eq!(sf(&p, "Fault"), "-a * -b");
+        assert_eq!(
+            sf(&p, "Odd"),
+            "(((a * -b) + (-a * b)) * -c) + ((-a + b) * (a + -b) * c)"
+        );
+        for opaque in ["Sum", "Gated"] {
+            assert!(p.coil(&Signal::new(opaque)).unwrap().definition.is_err());
+        }
+        assert_eq!(sf(&p, "Released"), "-Latch.Q1");
+        let never = p.coil(&Signal::new("Never")).unwrap();
+        assert!(never.definition.is_ok(), "{:?}", never.definition);
     }
 }

@@ -327,7 +327,20 @@ mod tests {
         let errors = read("il.xml", &il, &|_| true).unwrap_err();
         assert_eq!(
             errors,
-            ["il.xml:5:129: a transition condition in IL is not read; write it as an ST expression"]
+            ["il.xml:5:129: a transition condition in IL is not read; write it as an ST, LD or FBD body"]
+        );
+        // A condition drawn in the chart that is not boolean logic: the
+        // output of an arithmetic box.
+        let add = format!(
+            "{head}<step localId=\"1\" name=\"S0\" initialStep=\"true\"/>\n\
+             <inVariable localId=\"7\"><expression>A</expression></inVariable><block localId=\"8\" typeName=\"ADD\"><inputVariables><variable formalParameter=\"IN1\"><connectionPointIn><connection refLocalId=\"7\"/></connectionPointIn></variable></inputVariables><outputVariables><variable formalParameter=\"OUT\"><connectionPointOut/></variable></outputVariables></block>\n\
+             <transition localId=\"2\" name=\"t1\"><connectionPointIn><connection refLocalId=\"1\"/></connectionPointIn><condition><connectionPointIn><connection refLocalId=\"8\" formalParameter=\"OUT\"/></connectionPointIn></condition></transition>\n\
+             <jumpStep localId=\"3\" targetName=\"S0\"><connectionPointIn><connection refLocalId=\"2\"/></connectionPointIn></jumpStep>\n{tail}"
+        );
+        let errors = read("add.xml", &add, &|_| true).unwrap_err();
+        assert_eq!(
+            errors,
+            ["add.xml:6:102: transition condition: the condition is not boolean logic: output of function 'ADD'"]
         );
         // ST operators map to the paper's.
         assert_eq!(

@@ -21,7 +21,10 @@
 //! (`<condition><inline><ST>`) or in the referenced named transition of
 //! the POU (`<transitions><transition name="…"><body><ST>`): `AND`, `&`,
 //! `OR`, `NOT`, parentheses, `TRUE`/`FALSE` and comparisons (`=`, `<>`,
-//! `<`, `<=`, `>`, `>=`). A step's flag is the IEC step flag `NAME.X`;
+//! `<`, `<=`, `>`, `>=`); or drawn: an LD or FBD named transition (the
+//! logic of its coil or output variable of the transition's name), or
+//! contacts and boxes in the chart wired to the transition's condition,
+//! read by the PLCopen ladder reader. A step's flag is the IEC step flag `NAME.X`;
 //! `documentation` becomes the comment of a step or transition.
 //!
 //! The result goes through the same checks as the TOML form: every
@@ -260,15 +263,41 @@ fn condition<'a, 'i>(
     if let Some(st) = body.descendants().find(|n| n.has_tag_name("ST")) {
         return (st_text(st), st);
     }
-    let found = body.descendants().find(|n| {
-        ["IL", "LD", "FBD", "connectionPointIn"]
-            .iter()
-            .any(|l| n.has_tag_name(*l))
-    });
+    // A ladder or function block diagram: the logic of the output named
+    // after the transition (or its only one).
+    if let Some(graphic) = body
+        .descendants()
+        .find(|n| n.has_tag_name("LD") || n.has_tag_name("FBD"))
+    {
+        let name = reference.or(t.attribute("name")).unwrap_or_default();
+        match crate::il::plcopen::graphical_condition(t.document(), graphic, name) {
+            Ok(text) => return (text, graphic),
+            Err((at, why)) => {
+                errors.at(at, format!("transition condition: {why}"));
+                return ("FALSE".into(), graphic);
+            }
+        }
+    }
+    // Contacts and boxes drawn in the chart itself, wired to the
+    // condition.
+    if body.children().any(|n| n.has_tag_name("connectionPointIn")) {
+        if let Some(chart) = t.parent() {
+            match crate::il::plcopen::connected_condition(t.document(), chart, body) {
+                Ok(text) => return (text, body),
+                Err((at, why)) => {
+                    errors.at(at, format!("transition condition: {why}"));
+                    return ("FALSE".into(), body);
+                }
+            }
+        }
+    }
+    let found = body.descendants().find(|n| n.has_tag_name("IL"));
     let language = found.map_or("this form", |n| n.tag_name().name());
     errors.at(
         found.unwrap_or(body).range().start,
-        format!("a transition condition in {language} is not read; write it as an ST expression"),
+        format!(
+            "a transition condition in {language} is not read; write it as an ST, LD or FBD body"
+        ),
     );
     ("FALSE".into(), body)
 }
