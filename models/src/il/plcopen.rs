@@ -135,6 +135,35 @@ struct Reader<'a, 'i> {
 }
 
 impl<'a, 'i> Reader<'a, 'i> {
+    /// A reader over `elements` (a body's, or a chart's with what is
+    /// drawn in it), indexed by local id and connector name; the first
+    /// element of an id wins.
+    fn new(
+        origin: &'a str,
+        doc: &'a Document<'i>,
+        elements: impl Iterator<Item = Node<'a, 'i>>,
+    ) -> Self {
+        let mut r = Reader {
+            origin,
+            doc,
+            elements: HashMap::new(),
+            connectors: HashMap::new(),
+            memo: HashMap::new(),
+            errors: Vec::new(),
+        };
+        for e in elements.filter(Node::is_element) {
+            if let Some(id) = local_id(e) {
+                r.elements.entry(id).or_insert(e);
+            }
+            if e.has_tag_name("connector") {
+                if let Some(n) = e.attribute("name") {
+                    r.connectors.insert(n.to_string(), e);
+                }
+            }
+        }
+        r
+    }
+
     fn at(&self, node: Node<'_, '_>) -> Location {
         let pos = self.doc.text_pos_at(node.range().start);
         Location {
@@ -676,24 +705,7 @@ pub(crate) fn connected_condition(
     scope: Node<'_, '_>,
     sink: Node<'_, '_>,
 ) -> Result<String, (usize, String)> {
-    let mut r = Reader {
-        origin: "",
-        doc,
-        elements: HashMap::new(),
-        connectors: HashMap::new(),
-        memo: HashMap::new(),
-        errors: Vec::new(),
-    };
-    for e in scope.descendants().filter(Node::is_element) {
-        if let Some(id) = local_id(e) {
-            r.elements.entry(id).or_insert(e);
-        }
-        if e.has_tag_name("connector") {
-            if let Some(n) = e.attribute("name") {
-                r.connectors.insert(n.to_string(), e);
-            }
-        }
-    }
+    let mut r = Reader::new("", doc, scope.descendants());
     let flow = r.input(sink, 0);
     if let Some(e) = r.errors.first() {
         return Err((sink.range().start, e.message.clone()));
@@ -748,24 +760,7 @@ fn ladder<'a, 'i>(
     body: Node<'a, 'i>,
     declared: &iec::Declarations,
 ) -> (Vec<Instruction>, Vec<SourceError>) {
-    let mut r = Reader {
-        origin,
-        doc,
-        elements: HashMap::new(),
-        connectors: HashMap::new(),
-        memo: HashMap::new(),
-        errors: Vec::new(),
-    };
-    for e in body.children().filter(Node::is_element) {
-        if let Some(id) = local_id(e) {
-            r.elements.insert(id, e);
-        }
-        if e.has_tag_name("connector") {
-            if let Some(n) = e.attribute("name") {
-                r.connectors.insert(n.to_string(), e);
-            }
-        }
-    }
+    let mut r = Reader::new(origin, doc, body.children());
     let mut out = Vec::new();
     // Coils, and output variables a rung may end in instead (what writes
     // them is read the same way: a block's output is not derivable).
