@@ -629,6 +629,9 @@ fn writer(
                     observer.committed(rows.len(), started.elapsed());
                     let _ = committed.send(total);
                     pending.clear();
+                    // The metrics before the health: whoever sees the
+                    // journal alarm clear sees no rows pending.
+                    observer.pending(0);
                     if health.borrow().is_some() {
                         tracing::info!(path = %path.display(), "journal writable again");
                         let _ = health.send(None);
@@ -637,15 +640,17 @@ fn writer(
                 }
                 Err(e) => {
                     let why = e.to_string();
+                    // The metrics before the health: whoever sees the
+                    // journal alarm sees the failure and the rows kept.
+                    observer.failed(&why);
+                    observer.pending(pending.len());
                     if health.borrow().as_deref() != Some(why.as_str()) {
-                        tracing::error!(path = %path.display(), error = %why, rows = rows.len(), "journal write failed; rows kept and retried");
+                        tracing::error!(path = %path.display(), error = %why, rows = pending.len(), "journal write failed; rows kept and retried");
                         let _ = health.send(Some(why.clone()));
                     }
-                    observer.failed(&why);
                     Err(why)
                 }
             };
-            observer.pending(pending.len());
             for done in waiting.drain(..) {
                 let _ = done.send(outcome.clone());
             }
@@ -1364,11 +1369,29 @@ mod tests {
         assert!(seen.windows(2).all(|w| w[0] < w[1]));
     }
 
-    struct Watch(std::sync::Arc<std::sync::Mutex<Vec<String>>>);
+    /// Records what the writer reports, and whether the journal's health
+    /// had already been announced (failing) when it did.
+    #[derive(Clone, Default)]
+    struct Watch {
+        log: std::sync::Arc<std::sync::Mutex<Vec<(String, bool)>>>,
+        health: std::sync::Arc<std::sync::OnceLock<watch::Receiver<Option<String>>>>,
+    }
+    impl Watch {
+        fn note(&self, what: String) {
+            let failing = self.health.get().is_some_and(|h| h.borrow().is_some());
+            self.log.lock().unwrap().push((what, failing));
+        }
+        fn log(&self) -> Vec<(String, bool)> {
+            self.log.lock().unwrap().clone()
+        }
+    }
     impl CommitObserver for Watch {
         fn committed(&self, _: usize, _: Duration) {}
-        fn failed(&self, e: &str) {
-            self.0.lock().unwrap().push(e.to_string());
+        fn failed(&self, _: &str) {
+            self.note("failed".into());
+        }
+        fn pending(&self, rows: usize) {
+            self.note(format!("pending {rows}"));
         }
     }
 
@@ -1377,8 +1400,9 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("j.sqlite");
         let now = crate::clock::now_ms();
-        let errors = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
-        let j = Journal::start(&path, Duration::from_secs(3600), Watch(errors.clone())).unwrap();
+        let watch = Watch::default();
+        let j = Journal::start(&path, Duration::from_secs(3600), watch.clone()).unwrap();
+        let _ = watch.health.set(j.health());
         j.commit(vec![state(now, 0)]).await.unwrap();
         // Another process holds the journal's write lock: nothing can be
         // written.
@@ -1388,11 +1412,25 @@ mod tests {
         let big: Vec<Entry> = (1..400).map(|n| state(now, n)).collect();
         assert!(j.commit(big).await.is_err());
         health.wait_for(Option::is_some).await.unwrap();
-        assert!(!errors.lock().unwrap().is_empty());
+        // The failure and the rows kept were counted before the journal
+        // said it was failing: whoever sees its alarm sees them.
+        let log = watch.log();
+        let failed = log.iter().position(|(w, _)| w == "failed").unwrap();
+        assert_eq!(
+            log[failed..failed + 2],
+            [
+                ("failed".to_string(), false),
+                ("pending 399".to_string(), false)
+            ]
+        );
         // Released: the queued rows are written at the next retry, none
         // lost.
         admin.execute_batch("COMMIT").unwrap();
         health.wait_for(Option::is_none).await.unwrap();
+        // No rows pending was said while it still counted as failing.
+        let log = watch.log();
+        let cleared = log.iter().rev().find(|(w, _)| w == "pending 0");
+        assert_eq!(cleared, Some(&("pending 0".to_string(), true)), "{log:?}");
         let conn = open_read(&path).unwrap();
         let n: i64 = conn
             .query_row("SELECT count(*) FROM state_history", [], |r| r.get(0))
