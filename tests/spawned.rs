@@ -55,9 +55,15 @@ impl Cell {
     /// `log` in the cell's directory, and returns once the agent has said
     /// where it listens (its "agent running" line), these ports recorded.
     pub(crate) async fn spawn(&mut self, log: &str) -> Child {
+        self.spawn_with(log, &[]).await
+    }
+
+    /// [`Cell::spawn`] with `args` after the configuration.
+    pub(crate) async fn spawn_with(&mut self, log: &str, args: &[&str]) -> Child {
         use std::io::{BufRead, Write};
         let mut child = Command::new(env!("CARGO_BIN_EXE_cellwatch"))
             .args(["run", self.config.to_str().unwrap()])
+            .args(args)
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
             .spawn()

@@ -418,6 +418,17 @@ pub(crate) struct RunArgs {
     /// cell of its own, one line. Their poll settings must agree.
     #[arg(required = true, num_args = 1..)]
     pub(crate) config: Vec<PathBuf>,
+    /// Run the agent's threads (the cell loops, the OPC UA and `@`
+    /// sources, the Zenoh session, the journal writer) under the real-time
+    /// policy SCHED_FIFO at this priority, 1–99, instead of sharing the
+    /// cores in turn with every other process: an alarm then waits for no
+    /// ordinary process on a busy machine (BENCHMARKS.md: the agent's own
+    /// latency). Needs root, CAP_SYS_NICE, or an RLIMIT_RTPRIO of at least
+    /// PRIORITY (systemd: LimitRTPRIO=); refused otherwise, before any
+    /// cell starts. Keep it below the kernel's own real-time threads
+    /// (50 on PREEMPT_RT kernels); 10 suits most machines.
+    #[arg(long, value_name = "PRIORITY", value_parser = clap::value_parser!(u8).range(1..=99))]
+    pub(crate) realtime_priority: Option<u8>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -870,6 +881,34 @@ impl Failure {
     }
 }
 
+/// Puts the calling thread under SCHED_FIFO at `priority`; on Linux every
+/// thread it starts afterwards inherits the policy.
+pub(crate) fn realtime(priority: u8) -> Result<(), Failure> {
+    use thread_priority::{
+        set_thread_priority_and_policy, thread_native_id, RealtimeThreadSchedulePolicy,
+        ThreadPriority, ThreadSchedulePolicy,
+    };
+    let refused = |why: String| {
+        Failure::Runtime(format!(
+            "--realtime-priority {priority}: the system refused SCHED_FIFO ({why}); run as root, or give the agent CAP_SYS_NICE or an RLIMIT_RTPRIO of at least {priority} (systemd: LimitRTPRIO={priority})"
+        ))
+    };
+    let value = priority
+        .try_into()
+        .map_err(|_| Failure::Input(format!("--realtime-priority {priority}: not in 1–99")))?;
+    set_thread_priority_and_policy(
+        thread_native_id(),
+        ThreadPriority::Crossplatform(value),
+        ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::Fifo),
+    )
+    .map_err(|e| match e {
+        thread_priority::Error::OS(code) => {
+            refused(std::io::Error::from_raw_os_error(code).to_string())
+        }
+        e => refused(e.to_string()),
+    })
+}
+
 /// Runs a command that needs the tokio runtime.
 fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
     let quiet = matches!(
@@ -901,6 +940,16 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
         // Colours only for a terminal: log files and pipes get plain text.
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .try_init();
+    if let Command::Run(RunArgs {
+        realtime_priority: Some(priority),
+        ..
+    }) = &command
+    {
+        // Before the runtime: its threads, and every thread they start,
+        // inherit the policy.
+        realtime(*priority)?;
+        tracing::info!(priority, "the agent's threads run under SCHED_FIFO");
+    }
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()

@@ -113,7 +113,7 @@ async fn start_cell(setup: &Setup, id: String, zenoh: &str) -> anyhow::Result<Ce
             metrics_port,
         ),
     )?;
-    let child = peer::spawn_agent(&setup.agent, &dir)?;
+    let child = peer::spawn_agent(&setup.agent, &dir, None)?;
     Ok(Cell {
         id,
         server,

@@ -61,6 +61,10 @@ enum Cmd {
         /// the cores they share. 0: the same priority.
         #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(i32).range(0..=19))]
         server_nice: i32,
+        /// Run the agent with `--realtime-priority N` (its threads under
+        /// SCHED_FIFO at N; needs root or CAP_SYS_NICE).
+        #[arg(long, value_name = "N", value_parser = clap::value_parser!(u8).range(1..=99))]
+        agent_priority: Option<u8>,
         /// The `cellwatch` binary under test.
         #[arg(long, default_value = "target/release/cellwatch")]
         agent: PathBuf,
@@ -154,6 +158,7 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
             max_notifications,
             fault_every,
             server_nice,
+            agent_priority,
             agent,
             python,
             script,
@@ -171,6 +176,7 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
                 fault_every,
                 fault_hold: fault_every / 2,
                 server_nice,
+                agent_priority,
                 drain,
             };
             let mut rows = Vec::new();

@@ -105,7 +105,21 @@ impl Scrape {
 /// The upper bound of the bucket holding quantile `q` of the difference
 /// between two scrapes of a histogram: "p99 ≤ this".
 pub fn bucket_quantile(before: &[(f64, f64)], after: &[(f64, f64)], q: f64) -> Option<f64> {
-    let counts: Vec<(f64, f64)> = after
+    let counts = bucket_counts(before, after);
+    let total = counts.last()?.1;
+    if total <= 0.0 {
+        return None;
+    }
+    counts
+        .iter()
+        .find(|&&(_, n)| n >= q * total)
+        .map(|&(le, _)| le)
+}
+
+/// The cumulative counts of a histogram between two scrapes: (upper
+/// bound, observations ≤ it).
+pub fn bucket_counts(before: &[(f64, f64)], after: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    after
         .iter()
         .map(|&(le, n)| {
             let was = before
@@ -115,15 +129,7 @@ pub fn bucket_quantile(before: &[(f64, f64)], after: &[(f64, f64)], q: f64) -> O
                 .unwrap_or(0.0);
             (le, n - was)
         })
-        .collect();
-    let total = counts.last()?.1;
-    if total <= 0.0 {
-        return None;
-    }
-    counts
-        .iter()
-        .find(|&&(_, n)| n >= q * total)
-        .map(|&(le, _)| le)
+        .collect()
 }
 
 /// Quantile `q` of `samples` (nearest rank), or `None` when empty.

@@ -87,6 +87,8 @@ pub struct Setup {
     /// How much lower the load server's threads run than the agent's
     /// (niceness; 0: the same).
     pub server_nice: i32,
+    /// The agent's `--realtime-priority`, if any.
+    pub agent_priority: Option<u8>,
     /// How long the baseline may take to drain after the load stops.
     pub drain: Duration,
 }
@@ -124,6 +126,9 @@ pub struct Row {
     /// The agent's own latency (received → published), p50 and p99 bucket
     /// bounds from `cellwatch_alarm_latency_seconds`.
     pub internal: Option<(f64, f64)>,
+    /// The agent's own latency between the two scrapes, cumulative per
+    /// bucket: (upper bound, alarms ≤ it).
+    pub internal_counts: Vec<(f64, f64)>,
     /// The most the load generator fell behind its schedule, seconds.
     pub generator_lag: f64,
 }
@@ -329,7 +334,7 @@ pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Res
         std::fs::write(dir.join("fault.il"), program())?;
         trust(&config, &dir.join("server-pki"))?;
     }
-    let mut child = spawn_agent(&setup.agent, &dir)?;
+    let mut child = spawn_agent(&setup.agent, &dir, setup.agent_priority)?;
     let pid = child.id();
     let result = async {
         let (alarms, _) =
@@ -362,6 +367,7 @@ pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Res
         let internal = measure::bucket_quantile(&before.buckets(h), &after.buckets(h), 0.5).zip(
             measure::bucket_quantile(&before.buckets(h), &after.buckets(h), 0.99),
         );
+        let internal_counts = measure::bucket_counts(&before.buckets(h), &after.buckets(h));
         let seen = alarms
             .lock()
             .ok()
@@ -369,7 +375,10 @@ pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Res
             .unwrap_or_default();
         let latencies = match_faults(&faults, &seen);
         Ok(Row {
-            subject: format!("cellwatch ({})", security.label()),
+            subject: match setup.agent_priority {
+                Some(p) => format!("cellwatch ({}, SCHED_FIFO {p})", security.label()),
+                None => format!("cellwatch ({})", security.label()),
+            },
             load,
             produced,
             received: handled(&after) - c0,
@@ -383,6 +392,7 @@ pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Res
             faults: (faults.len(), latencies.len()),
             latencies,
             internal,
+            internal_counts,
             generator_lag: lag,
         })
     }
@@ -432,13 +442,15 @@ pub async fn wait_ready(child: &mut Child, metrics: SocketAddr, dir: &Path) -> a
 }
 
 /// Starts `agent run cell.toml` in `dir` (with the fault check's program
-/// beside it), its output in `agent.log` there.
-pub fn spawn_agent(agent: &Path, dir: &Path) -> anyhow::Result<Child> {
+/// beside it; under SCHED_FIFO at `priority` if given), its output in
+/// `agent.log` there.
+pub fn spawn_agent(agent: &Path, dir: &Path, priority: Option<u8>) -> anyhow::Result<Child> {
     std::fs::write(dir.join("fault.il"), program())?;
     let log = std::fs::File::create(dir.join("agent.log"))?;
     Command::new(agent)
         .arg("run")
         .arg(dir.join("cell.toml"))
+        .args(priority.map(|p| format!("--realtime-priority={p}")))
         .env("RUST_LOG", "warn")
         .stdout(log.try_clone()?)
         .stderr(log)
@@ -723,6 +735,7 @@ pub async fn baseline(setup: &Setup, python: &Path, load: Load) -> anyhow::Resul
             faults: (faults.len(), latencies.len()),
             latencies,
             internal: None,
+            internal_counts: Vec::new(),
             generator_lag: lag,
         })
     }
@@ -803,6 +816,27 @@ pub fn table(rows: &[Row]) -> String {
                 big.load.tags,
                 big.cpu_per_change_us() / small.cpu_per_change_us().max(1e-9),
                 small.load.tags
+            ));
+        }
+    }
+    // Where the quantiles fall: alarms per bucket of the agent's own
+    // latency (the empty buckets left out).
+    for r in rows.iter().filter(|r| r.internal.is_some()) {
+        let mut last = 0.0;
+        let mut parts = Vec::new();
+        for &(le, n) in &r.internal_counts {
+            if n > last {
+                parts.push(format!("{} {}", bound(le), n - last));
+            }
+            last = n;
+        }
+        if !parts.is_empty() {
+            ratios.push_str(&format!(
+                "- {}, {} tags, {}/s, the agent's own latency, alarms per bucket: {}\n",
+                r.subject,
+                r.load.tags,
+                r.load.rate,
+                parts.join(", ")
             ));
         }
     }
