@@ -269,6 +269,48 @@ async fn discover_prints_a_configuration_of_the_demos_tags_and_checks_one() {
     assert_eq!(v.code, 0, "{}\n{}", v.stderr, r.stdout);
 
     let discovered = cellwatch::config::load(&found).unwrap();
+
+    // The same tags in a tags file (for servers of thousands of tags): the
+    // configuration printed reads it and gets the same tags.
+    let csv = dir.path().join("tags.csv");
+    std::fs::write(&csv, "stale").unwrap();
+    let (endpoint, pki, csv_arg) = (
+        sim.endpoint(),
+        pki_dir.to_str().unwrap().to_string(),
+        csv.to_str().unwrap().to_string(),
+    );
+    let f = tokio::task::spawn_blocking(move || {
+        cellwatch(&[
+            "discover",
+            &endpoint,
+            "--pki-dir",
+            &pki,
+            "--tags-file",
+            &csv_arg,
+        ])
+    })
+    .await
+    .unwrap();
+    assert_eq!(f.code, 0, "{}", f.stderr);
+    assert!(!f.stdout.contains("[[tags]]"), "{}", f.stdout);
+    assert!(
+        f.stdout
+            .contains(&format!("tags_file = \"{}\"", csv.display())),
+        "{}",
+        f.stdout
+    );
+    let with_file = dir.path().join("found-file.toml");
+    std::fs::write(&with_file, &f.stdout).unwrap();
+    let v = cellwatch(&["validate", with_file.to_str().unwrap()]);
+    assert_eq!(v.code, 0, "{}\n{}", v.stderr, f.stdout);
+    let read = cellwatch::config::load(&with_file).unwrap();
+    assert_eq!(read.tags, discovered.tags);
+    let rows = std::fs::read_to_string(&csv).unwrap();
+    assert!(
+        rows.starts_with("name,node_id,address,type,comment\n"),
+        "{rows}"
+    );
+    assert_eq!(rows.lines().count(), discovered.tags.len() + 1, "{rows}");
     let demo = cellwatch::config::load(&root().join("config/demo.toml")).unwrap();
     let node = |t: &TagConfig, uri: Option<&str>| opcua::TagNode::parse(&t.node_id, uri).unwrap();
     let by_address: std::collections::HashMap<_, _> = discovered

@@ -447,6 +447,12 @@ pub(crate) struct DiscoverArgs {
     /// Only variables whose browse name matches this glob (`X0.*`, `D1??`).
     #[arg(long)]
     pub(crate) filter: Option<String>,
+    /// Write the tags found to this CSV file (the `tags_file` format: one
+    /// row a tag, columns name, node_id, address, type, comment) instead
+    /// of `[[tags]]` tables, and print a configuration that reads it: for
+    /// servers of thousands of tags. Replaces the file if it exists.
+    #[arg(long, value_name = "PATH", conflicts_with = "check")]
+    pub(crate) tags_file: Option<PathBuf>,
     /// Check this cell configuration instead: report the tags the server
     /// lacks or types differently (exit status 1 if any); connects with
     /// the configuration's [opcua] settings.

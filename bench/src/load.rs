@@ -303,6 +303,11 @@ impl LoadServer {
                         batch.push((&switches[k], None, DataValue::new_at(true, stamp)));
                         open = None;
                         closed = true;
+                        // A generator behind its schedule keeps the gap
+                        // between a recovery and the next fault all the
+                        // same: a PLC does not run two faults together
+                        // because a benchmark was late.
+                        next_fault = next_fault.max(now + fault_every.saturating_sub(fault_hold));
                     }
                 }
                 // Never the next fault in the batch that ends the last (a

@@ -75,7 +75,14 @@ pub(crate) async fn run(args: &DiscoverArgs, out: &mut dyn Write) -> Result<(), 
                     ),
                 };
                 let found = browse(&session, root, args.depth, filter.as_ref()).await?;
-                print_config(&opcua, &namespaces, &found, out).map_err(Failure::output)
+                let (tags, skipped) = discovered_tags(&namespaces, &found);
+                if let Some(path) = &args.tags_file {
+                    write_tags_file(path, &tags).map_err(|e| {
+                        Failure::runtime(format!("--tags-file {}: {e}", path.display()))
+                    })?;
+                }
+                print_config(&opcua, &tags, &skipped, args.tags_file.as_deref(), out)
+                    .map_err(Failure::output)
             }
         }
     }
@@ -241,33 +248,25 @@ fn quoted(s: &str) -> String {
     toml::Value::String(s.to_string()).to_string()
 }
 
-fn print_config(
-    opcua: &OpcUaConfig,
+/// A tag as discovery found it.
+struct Discovered {
+    name: String,
+    node_id: String,
+    address: String,
+    value_type: ValueType,
+    comment: Option<String>,
+}
+
+/// The tags of the variables `found` (unique names and addresses), and the
+/// nodes left out with the reason.
+fn discovered_tags(
     namespaces: &[String],
     found: &[Found],
-    out: &mut dyn Write,
-) -> std::io::Result<()> {
-    writeln!(
-        out,
-        "# Discovered by `cellwatch discover` on {}.",
-        opcua.endpoint
-    )?;
-    writeln!(
-        out,
-        "# Keep the tags your checks read; set [cell] id, and the bus ([zenoh.tls])."
-    )?;
-    writeln!(out, "\n[cell]\nid = \"new-cell\"\n")?;
-    writeln!(out, "[opcua]\nendpoint = {}", quoted(&opcua.endpoint))?;
-    writeln!(out, "security_policy = {}", quoted(opcua.policy.as_str()))?;
-    writeln!(out, "security_mode = {}", quoted(opcua.mode.as_str()))?;
-    writeln!(
-        out,
-        "pki_dir = {}",
-        quoted(&opcua.pki_dir.display().to_string())
-    )?;
+) -> (Vec<Discovered>, BTreeMap<String, String>) {
     let mut names = HashSet::new();
     let mut addresses = HashSet::new();
     let mut skipped = BTreeMap::new();
+    let mut tags = Vec::new();
     for f in found {
         let t = match &f.data_type {
             Ok(t) => *t,
@@ -294,18 +293,89 @@ fn print_config(
             name = format!("{base}_{k}");
             k += 1;
         }
-        writeln!(out, "\n[[tags]]")?;
-        writeln!(out, "name = {}", quoted(&name))?;
-        writeln!(out, "node_id = {}", quoted(&node_text(&f.node, namespaces)))?;
-        writeln!(out, "address = {}", quoted(&address))?;
-        if t != ValueType::Boolean {
-            writeln!(out, "type = {}", quoted(t.as_str()))?;
-        }
-        if let Some(d) = &f.description {
-            writeln!(out, "comment = {}", quoted(d))?;
+        tags.push(Discovered {
+            name,
+            node_id: node_text(&f.node, namespaces),
+            address,
+            value_type: t,
+            comment: f.description.clone(),
+        });
+    }
+    (tags, skipped)
+}
+
+/// Writes `tags` as a `tags_file`: a header, one row a tag (`type` empty
+/// for Boolean, the default).
+fn write_tags_file(path: &std::path::Path, tags: &[Discovered]) -> Result<(), String> {
+    let mut w = csv::Writer::from_path(path).map_err(|e| e.to_string())?;
+    w.write_record(["name", "node_id", "address", "type", "comment"])
+        .map_err(|e| e.to_string())?;
+    for t in tags {
+        let ty = if t.value_type == ValueType::Boolean {
+            ""
+        } else {
+            t.value_type.as_str()
+        };
+        w.write_record([
+            t.name.as_str(),
+            &t.node_id,
+            &t.address,
+            ty,
+            t.comment.as_deref().unwrap_or(""),
+        ])
+        .map_err(|e| e.to_string())?;
+    }
+    w.flush().map_err(|e| e.to_string())
+}
+
+fn print_config(
+    opcua: &OpcUaConfig,
+    tags: &[Discovered],
+    skipped: &BTreeMap<String, String>,
+    tags_file: Option<&std::path::Path>,
+    out: &mut dyn Write,
+) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "# Discovered by `cellwatch discover` on {}.",
+        opcua.endpoint
+    )?;
+    writeln!(
+        out,
+        "# Keep the tags your checks read; set [cell] id, and the bus ([zenoh.tls])."
+    )?;
+    if let Some(path) = tags_file {
+        writeln!(
+            out,
+            "\n# {} tags in the tags file (relative paths: from this file's directory).",
+            tags.len()
+        )?;
+        writeln!(out, "tags_file = {}", quoted(&path.display().to_string()))?;
+    }
+    writeln!(out, "\n[cell]\nid = \"new-cell\"\n")?;
+    writeln!(out, "[opcua]\nendpoint = {}", quoted(&opcua.endpoint))?;
+    writeln!(out, "security_policy = {}", quoted(opcua.policy.as_str()))?;
+    writeln!(out, "security_mode = {}", quoted(opcua.mode.as_str()))?;
+    writeln!(
+        out,
+        "pki_dir = {}",
+        quoted(&opcua.pki_dir.display().to_string())
+    )?;
+    if tags_file.is_none() {
+        for t in tags {
+            writeln!(out, "\n[[tags]]")?;
+            writeln!(out, "name = {}", quoted(&t.name))?;
+            writeln!(out, "node_id = {}", quoted(&t.node_id))?;
+            writeln!(out, "address = {}", quoted(&t.address))?;
+            if t.value_type != ValueType::Boolean {
+                writeln!(out, "type = {}", quoted(t.value_type.as_str()))?;
+            }
+            if let Some(d) = &t.comment {
+                writeln!(out, "comment = {}", quoted(d))?;
+            }
         }
     }
-    for (node, why) in &skipped {
+    for (node, why) in skipped {
         writeln!(out, "# skipped {node}: {why}")?;
     }
     writeln!(
