@@ -24,7 +24,7 @@
 //! warnings (charts are read by the chart reader, which reads drawn
 //! transition conditions here).
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 use roxmltree::{Document, Node};
 
@@ -507,20 +507,7 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
         .descendants()
         .filter(|n| n.has_tag_name("variable"))
         .flat_map(|v| {
-            let doc = v
-                .children()
-                .find(|c| c.has_tag_name("documentation"))
-                .map(|d| {
-                    d.descendants()
-                        .filter(Node::is_text)
-                        .filter_map(|t| t.text())
-                        .collect::<Vec<_>>()
-                        .join(" ")
-                        .split_whitespace()
-                        .collect::<Vec<_>>()
-                        .join(" ")
-                })
-                .filter(|d| !d.is_empty());
+            let doc = variable_doc(v);
             let names = [v.attribute("name"), v.attribute("address")];
             names
                 .into_iter()
@@ -529,7 +516,26 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
                 .collect::<Vec<_>>()
         })
         .collect();
+    // A POU's own variable whose name is declared elsewhere too is that
+    // POU's: `POU.name` (two programs' `Reset` are two coils).
+    let shared = shared_names(&doc);
+    let mut documentation: Vec<(String, String)> = documentation;
     for pou in doc.descendants().filter(|n| n.has_tag_name("pou")) {
+        let pou_id = pou.attribute("name").unwrap_or("?");
+        // Upper case → as declared.
+        let locals: HashMap<String, String> = own_variables(pou)
+            .filter_map(|v| v.attribute("name"))
+            .map(|n| (n.to_ascii_uppercase(), n.to_string()))
+            .filter(|(upper, _)| shared.contains(upper))
+            .collect();
+        for v in own_variables(pou) {
+            if let (Some(name), Some(doc)) = (v.attribute("name"), variable_doc(v)) {
+                if locals.contains_key(&name.to_ascii_uppercase()) {
+                    documentation.push((format!("{pou_id}.{name}"), doc));
+                }
+            }
+        }
+        let first = out.len();
         // The POU's body, and its SFC actions' and transitions' bodies.
         let bodies: Vec<(Node, String)> = pou
             .descendants()
@@ -625,6 +631,9 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
                 operand_at: at,
             });
         }
+        for i in &mut out[first..] {
+            qualify(i, pou_id, &locals);
+        }
     }
     SourceErrors::or_ok(
         Parsed {
@@ -633,6 +642,96 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
         },
         errors,
     )
+}
+
+/// A variable's documentation, its whitespace collapsed; `None` when it
+/// has none.
+fn variable_doc(v: Node<'_, '_>) -> Option<String> {
+    v.children()
+        .find(|c| c.has_tag_name("documentation"))
+        .map(|d| {
+            d.descendants()
+                .filter(Node::is_text)
+                .filter_map(|t| t.text())
+                .collect::<Vec<_>>()
+                .join(" ")
+                .split_whitespace()
+                .collect::<Vec<_>>()
+                .join(" ")
+        })
+        .filter(|d| !d.is_empty())
+}
+
+/// A POU's own variables without a direct address: its inputs, outputs,
+/// in-outs, locals and temporaries (not the globals it refers to, which
+/// are the project's).
+fn own_variables<'a, 'input>(pou: Node<'a, 'input>) -> impl Iterator<Item = Node<'a, 'input>> {
+    pou.children()
+        .filter(|c| c.has_tag_name("interface"))
+        .flat_map(|i| i.children())
+        .filter(|section| {
+            matches!(
+                section.tag_name().name(),
+                "localVars" | "tempVars" | "inputVars" | "outputVars" | "inOutVars"
+            )
+        })
+        .flat_map(|section| section.children())
+        .filter(|v| v.has_tag_name("variable") && v.attribute("address").is_none())
+}
+
+/// The names (upper case: IEC names ignore case) declared in more than
+/// one place: in two POUs' own variables, or in one's and in the
+/// project's global variables.
+fn shared_names(doc: &Document<'_>) -> HashSet<String> {
+    let mut places: HashMap<String, usize> = HashMap::new();
+    for pou in doc.descendants().filter(|n| n.has_tag_name("pou")) {
+        let mine: HashSet<String> = own_variables(pou)
+            .filter_map(|v| v.attribute("name"))
+            .map(str::to_ascii_uppercase)
+            .collect();
+        for name in mine {
+            *places.entry(name).or_default() += 1;
+        }
+    }
+    let globals: HashSet<String> = doc
+        .descendants()
+        .filter(|n| n.has_tag_name("globalVars"))
+        .flat_map(|g| g.children())
+        .filter(|v| v.has_tag_name("variable"))
+        .filter_map(|v| v.attribute("name"))
+        .map(str::to_ascii_uppercase)
+        .collect();
+    for name in globals {
+        *places.entry(name).or_default() += 1;
+    }
+    places
+        .into_iter()
+        .filter(|&(_, n)| n > 1)
+        .map(|(name, _)| name)
+        .collect()
+}
+
+/// Names `i`'s operand as POU `pou`'s own when it is one of `locals`
+/// (upper case → as declared), or a member of one (`T1.Q` of a local
+/// timer `T1`): `pou.T1.Q`, spelt as declared.
+fn qualify(i: &mut Instruction, pou: &str, locals: &HashMap<String, String>) {
+    if locals.is_empty() {
+        return;
+    }
+    if let Some(Operand::Signal(s)) = &mut i.operand {
+        let name = s.name();
+        let (base, member) = match name.split_once('.') {
+            Some((b, m)) => (b, Some(m)),
+            None => (name, None),
+        };
+        if let Some(declared) = locals.get(&base.to_ascii_uppercase()) {
+            let qualified = match member {
+                Some(m) => format!("{pou}.{declared}.{m}"),
+                None => format!("{pou}.{declared}"),
+            };
+            *s = Signal::new(&qualified);
+        }
+    }
 }
 
 /// A project's instructions and its variables' documentation.
@@ -846,6 +945,57 @@ mod tests {
         )
         .unwrap_or_else(|e| panic!("{e}"))
         .notation()
+    }
+
+    #[test]
+    fn a_pous_own_variable_named_as_another_pous_is_its_own() {
+        let rail = "<leftPowerRail localId=\"1\"><connectionPointOut/></leftPowerRail>\n";
+        let p_body = rail.to_string()
+            + &el("contact", 2, "", &[1], "Start")
+            + &el("coil", 3, "", &[2], "Reset")
+            + &el("contact", 4, "", &[1], "RESET")
+            + &el("coil", 5, "", &[4], "Fault")
+            + "<block localId=\"6\" typeName=\"TON\" instanceName=\"T1\"><inputVariables/><outputVariables/></block>\n"
+            + "<contact localId=\"7\"><connectionPointIn><connection refLocalId=\"6\" formalParameter=\"Q\"/></connectionPointIn><variable>Start</variable></contact>\n"
+            + &el("coil", 8, "", &[7], "Done");
+        let q_body = rail.to_string()
+            + &el("contact", 2, "", &[1], "Stop")
+            + &el("coil", 3, "", &[2], "Reset")
+            + "<block localId=\"6\" typeName=\"TON\" instanceName=\"T1\"><inputVariables/><outputVariables/></block>\n"
+            + "<contact localId=\"7\"><connectionPointIn><connection refLocalId=\"6\" formalParameter=\"Q\"/></connectionPointIn><variable>Stop</variable></contact>\n"
+            + &el("coil", 8, "", &[7], "Late");
+        let var = |name: &str, doc: &str| {
+            format!(
+                "<variable name=\"{name}\"><type><BOOL/></type><documentation><xhtml:p xmlns:xhtml=\"http://www.w3.org/1999/xhtml\">{doc}</xhtml:p></documentation></variable>"
+            )
+        };
+        let xml = format!(
+            "<?xml version=\"1.0\"?>\n<project xmlns=\"http://www.plcopen.org/xml/tc6_0201\">\n<types><pous>\n\
+             <pou name=\"p\" pouType=\"program\"><interface><localVars>{}{}<variable name=\"T1\"><type><derived name=\"TON\"/></type></variable></localVars>\
+             <externalVars><variable name=\"Start\"><type><BOOL/></type></variable></externalVars></interface>\
+             <body><LD>\n{p_body}</LD></body></pou>\n\
+             <pou name=\"q\" pouType=\"program\"><interface><localVars>{}<variable name=\"T1\"><type><derived name=\"TON\"/></type></variable></localVars></interface>\
+             <body><LD>\n{q_body}</LD></body></pou>\n\
+             </pous></types>\n<instances><configurations><configuration name=\"c\"><globalVars>{}</globalVars></configuration></configurations></instances>\n</project>\n",
+            var("Reset", "conveyor reset"),
+            var("Fault", "conveyor fault"),
+            var("Reset", "lift reset"),
+            var("Start", "start button"),
+        );
+        let p = Program::compile("p.xml", &xml, None).unwrap_or_else(|e| panic!("{e}"));
+        let names: Vec<&str> = p.coils().iter().map(|c| c.signal.name()).collect();
+        // Each program's Reset and T1 its own; Fault, declared once, and
+        // the global Start keep their names.
+        assert_eq!(names, ["p.Reset", "Fault", "Done", "q.Reset", "Late"]);
+        assert_eq!(sf(&p, "Fault"), "p.Reset");
+        assert_eq!(sf(&p, "p.Reset"), "Start");
+        assert_eq!(sf(&p, "q.Reset"), "Stop");
+        assert_eq!(sf(&p, "Done"), "p.T1.Q * Start");
+        assert_eq!(sf(&p, "Late"), "q.T1.Q * Stop");
+        let docs = p.documentation();
+        assert_eq!(docs.get(&Signal::new("p.Reset")), Some("conveyor reset"));
+        assert_eq!(docs.get(&Signal::new("q.Reset")), Some("lift reset"));
+        assert_eq!(docs.get(&Signal::new("Start")), Some("start button"));
     }
 
     #[test]
