@@ -104,8 +104,14 @@ impl Scrape {
 
 /// The upper bound of the bucket holding quantile `q` of the difference
 /// between two scrapes of a histogram: "p99 ≤ this".
+#[cfg(test)]
 pub fn bucket_quantile(before: &[(f64, f64)], after: &[(f64, f64)], q: f64) -> Option<f64> {
-    let counts = bucket_counts(before, after);
+    counts_quantile(&bucket_counts(before, after), q)
+}
+
+/// The upper bound of the bucket holding quantile `q` of cumulative
+/// bucket `counts` (from [`bucket_counts`]).
+pub fn counts_quantile(counts: &[(f64, f64)], q: f64) -> Option<f64> {
     let total = counts.last()?.1;
     if total <= 0.0 {
         return None;

@@ -364,10 +364,9 @@ pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Res
         let drain = last.1.saturating_duration_since(stopped).as_secs_f64();
         let m = window.close(seconds + drain)?;
         let h = "cellwatch_alarm_latency_seconds";
-        let internal = measure::bucket_quantile(&before.buckets(h), &after.buckets(h), 0.5).zip(
-            measure::bucket_quantile(&before.buckets(h), &after.buckets(h), 0.99),
-        );
         let internal_counts = measure::bucket_counts(&before.buckets(h), &after.buckets(h));
+        let internal = measure::counts_quantile(&internal_counts, 0.5)
+            .zip(measure::counts_quantile(&internal_counts, 0.99));
         let seen = alarms
             .lock()
             .ok()

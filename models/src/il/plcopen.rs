@@ -503,7 +503,7 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
             _ => {}
         }
     }
-    let documentation = doc
+    let mut documentation: Vec<(String, String)> = doc
         .descendants()
         .filter(|n| n.has_tag_name("variable"))
         .flat_map(|v| {
@@ -519,7 +519,6 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
     // A POU's own variable whose name is declared elsewhere too is that
     // POU's: `POU.name` (two programs' `Reset` are two coils).
     let shared = shared_names(&doc);
-    let mut documentation: Vec<(String, String)> = documentation;
     for pou in doc.descendants().filter(|n| n.has_tag_name("pou")) {
         let pou_id = pou.attribute("name").unwrap_or("?");
         // Upper case → as declared.
