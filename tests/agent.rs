@@ -21,6 +21,7 @@ pub(crate) fn config(dir: &Path, sim_endpoint: &str) -> CellConfig {
     c.opcua.as_mut().unwrap().endpoint = sim_endpoint.to_string();
     c.opcua.as_mut().unwrap().pki_dir = dir.join("agent-pki");
     c.journal.path = dir.join("journal.sqlite");
+    c.zenoh.signing_key = Some(c.journal.path.with_extension("agent.key"));
     c.zenoh.listen = vec!["tls/127.0.0.1:0".into()];
     crate::util::bus_pki(dir, &["agent-m01ps0004"]);
     c.zenoh.tls = Some(crate::util::bus_tls(dir, "agent-m01ps0004"));
@@ -74,6 +75,16 @@ impl Fixture {
             config,
             zenoh_port,
         }
+    }
+
+    /// The fixture's directory (certificates, keys, journal).
+    pub(crate) fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Where the agent's Zenoh session listens.
+    pub(crate) fn zenoh_port(&self) -> u16 {
+        self.zenoh_port
     }
 
     pub(crate) fn client(&self) -> &zenoh::Session {
@@ -183,8 +194,7 @@ pub(crate) async fn alarm_until(
             .await
             .unwrap_or_else(|_| panic!("timed out waiting for {what}; saw {seen:#?}"))
             .unwrap();
-        let a: AlarmPayload =
-            serde_json::from_str(&sample.payload().try_to_string().unwrap()).unwrap();
+        let a: AlarmPayload = serde_json::from_str(&crate::util::opened(sample.payload())).unwrap();
         seen.push(a.clone());
         if f(&a) {
             return a;
@@ -503,6 +513,7 @@ pub(crate) async fn line_cell(dir: &Path) -> (cellwatch::sim::line::SimulatedLin
     c.opcua.as_mut().unwrap().endpoint = sim.endpoint();
     c.opcua.as_mut().unwrap().pki_dir = dir.join("agent-pki");
     c.journal.path = dir.join("journal.sqlite");
+    c.zenoh.signing_key = Some(c.journal.path.with_extension("agent.key"));
     c.zenoh.listen = vec!["tls/127.0.0.1:0".into()];
     crate::util::bus_pki(dir, &["agent-line01"]);
     c.zenoh.tls = Some(crate::util::bus_tls(dir, "agent-line01"));
@@ -785,7 +796,7 @@ async fn router(dir: &Path, access_control: bool) -> (zenoh::Session, u16) {
 
 /// A router (its access control on or off), the simulated CNC, and its
 /// agent in client mode behind the router.
-async fn behind_a_router(
+pub(crate) async fn behind_a_router(
     dir: &Path,
     access_control: bool,
 ) -> (zenoh::Session, u16, SimulatedCnc, Agent) {
@@ -834,7 +845,7 @@ async fn through_the_router_nobody_else_publishes_or_answers_for_the_cell() {
         let mut answers = Vec::new();
         while let Ok(r) = replies.recv_async().await {
             if let Ok(sample) = r.result() {
-                answers.push(sample.payload().try_to_string().unwrap().into_owned());
+                answers.push(crate::util::opened_or_raw(sample.payload()));
             }
         }
         answers
@@ -886,8 +897,8 @@ async fn through_the_router_nobody_else_publishes_or_answers_for_the_cell() {
             let mut answers = Vec::new();
             while let Ok(r) = replies.recv_async().await {
                 answers.push(match r.result() {
-                    Ok(s) => s.payload().try_to_string().unwrap().into_owned(),
-                    Err(e) => e.payload().try_to_string().unwrap().into_owned(),
+                    Ok(s) => crate::util::opened_or_raw(s.payload()),
+                    Err(e) => crate::util::opened_or_raw(e.payload()),
                 });
             }
             answers
@@ -926,7 +937,7 @@ async fn through_the_router_nobody_else_publishes_or_answers_for_the_cell() {
             .await
             .unwrap_or_else(|_| panic!("ESE raised and cleared; saw {transitions:?}"))
             .unwrap();
-        let text = sample.payload().try_to_string().unwrap().into_owned();
+        let text = crate::util::opened_or_raw(sample.payload());
         assert!(
             !text.contains("forged"),
             "a forged event got through: {text}"
@@ -1041,12 +1052,30 @@ async fn the_cli_believes_only_the_agent() {
         let (mallory, replayed) = (mallory.clone(), replayed.clone());
         tokio::spawn(async move {
             while let Ok(sample) = copier.recv_async().await {
-                let text = sample.payload().try_to_string().unwrap().into_owned();
-                if text.contains("FORGED") {
+                let Ok(mut envelope) =
+                    serde_json::from_slice::<serde_json::Value>(&sample.payload().to_bytes())
+                else {
+                    continue;
+                };
+                let body = envelope["body"].as_str().unwrap_or_default().to_string();
+                // Not what she put herself.
+                if body.contains("FORGED")
+                    || body.is_empty()
+                    || sample.key_expr().as_str().ends_with("/csd")
+                {
                     continue;
                 }
-                let forged = text.replace("\"message\":\"", "\"message\":\"FORGED ");
-                let _ = mallory.put(sample.key_expr().clone(), forged).await;
+                // The agent's envelope, its text edited; and the agent's
+                // envelope as it is, put on another alarm's key.
+                envelope["body"] = body
+                    .replace("\"message\":\"", "\"message\":\"FORGED ")
+                    .into();
+                let _ = mallory
+                    .put(sample.key_expr().clone(), envelope.to_string())
+                    .await;
+                let _ = mallory
+                    .put("cellwatch/m01ps0004/alarms/csd", sample.payload().clone())
+                    .await;
                 replayed.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
             }
         })
@@ -1090,7 +1119,9 @@ async fn the_cli_believes_only_the_agent() {
         printed.push(line);
     }
     assert!(
-        !printed.iter().any(|l| l.contains("FORGED")),
+        !printed
+            .iter()
+            .any(|l| l.contains("FORGED") || l.contains("\"id\":\"csd\"")),
         "{printed:#?}"
     );
     replaying.abort();

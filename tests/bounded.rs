@@ -70,8 +70,8 @@ async fn oversized_commands_and_history_floods_stay_bounded() {
         };
         if let Ok(reply) = replies.recv_async().await {
             let text = match reply.result() {
-                Ok(s) => s.payload().try_to_string().unwrap().into_owned(),
-                Err(e) => e.payload().try_to_string().unwrap().into_owned(),
+                Ok(s) => crate::util::opened(s.payload()),
+                Err(e) => crate::util::opened_or_raw(e.payload()),
             };
             if text == "Timeout" {
                 // Zenoh's own answer: the 10 MB query was dropped on the way.
@@ -96,14 +96,14 @@ async fn oversized_commands_and_history_floods_stay_bounded() {
                 .unwrap();
             match replies.recv_async().await.unwrap().result() {
                 Ok(s) => {
-                    let text = s.payload().try_to_string().unwrap().into_owned();
+                    let text = crate::util::opened(s.payload());
                     assert!(text.len() <= (1 << 20) + 4096, "{} bytes", text.len());
                     let page: serde_json::Value = serde_json::from_str(&text).unwrap();
                     assert!(page["rows"].as_array().unwrap().len() <= 10_000);
                     true
                 }
                 Err(e) => {
-                    let why = e.payload().try_to_string().unwrap().into_owned();
+                    let why = crate::util::opened(e.payload());
                     assert_eq!(why, "the agent is busy: try again");
                     false
                 }

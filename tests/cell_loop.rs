@@ -263,7 +263,10 @@ async fn the_loop_on_its_own_thread_closes_the_bus_sink() {
         .await
         .unwrap();
     let metrics = std::sync::Arc::new(Metrics::new(&config.cell));
-    let publisher = ZenohPublisher::start(bus.clone(), &prefix, metrics)
+    let key = std::sync::Arc::new(cellwatch::sinks::zenoh::envelope::AgentKey::generate(
+        &config.cell,
+    ));
+    let publisher = ZenohPublisher::start(bus.clone(), &prefix, key, metrics)
         .await
         .unwrap();
     let (recording, mut steps) = RecordingSink::new();

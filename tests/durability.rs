@@ -117,7 +117,13 @@ fn demo_prints_a_diagnosed_alarm_and_serves_the_readme_commands_over_tls() {
     }
     let client = state.path().join("client.json5");
     let key = state.path().join("operator-demo.key");
-    let z = ["--zenoh-config", client.to_str().unwrap()];
+    let trust = state.path().join("trust.toml");
+    let z = [
+        "--zenoh-config",
+        client.to_str().unwrap(),
+        "--trust",
+        trust.to_str().unwrap(),
+    ];
     let run = |args: &[&str]| {
         let mut all = args.to_vec();
         all.extend(z);
@@ -147,8 +153,13 @@ fn demo_prints_a_diagnosed_alarm_and_serves_the_readme_commands_over_tls() {
         "{}",
         ack.stderr
     );
-    // Without a certificate from the demo's CA: nothing.
-    let plain = crate::util::cellwatch(&["alarms", "--timeout", "2"]);
+    // Without a certificate from the demo's CA: refused before trying,
+    // and over plain TCP the agent does not answer at all.
+    let trust = trust.to_str().unwrap();
+    let bare = crate::util::cellwatch(&["alarms", "--timeout", "2", "--trust", trust]);
+    assert_eq!(bare.code, 2, "{}", bare.stdout);
+    assert!(bare.stderr.contains("no plant CA"), "{}", bare.stderr);
+    let plain = crate::util::cellwatch(&["alarms", "--timeout", "2", "--trust", trust, "--plain"]);
     assert_eq!(plain.code, 1, "{}", plain.stdout);
     assert!(
         plain.stderr.contains("cannot open the zenoh session"),

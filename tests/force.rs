@@ -49,8 +49,8 @@ async fn send(session: &zenoh::Session, c: &Command) -> (bool, String) {
     let reply = replies.recv_async().await.expect("the agent answers");
     let text = reply
         .result()
-        .map(|s| s.payload().try_to_string().unwrap().into_owned())
-        .unwrap_or_else(|e| e.payload().try_to_string().unwrap().into_owned());
+        .map(|s| crate::util::opened(s.payload()))
+        .unwrap_or_else(|e| crate::util::opened(e.payload()));
     let v: serde_json::Value = serde_json::from_str(&text).unwrap();
     (
         v["accepted"].as_bool().unwrap(),
@@ -115,6 +115,7 @@ impl RobotCell {
         ua.endpoint = robot.endpoint();
         ua.pki_dir = dir.join("agent-pki");
         c.journal.path = dir.join("journal.sqlite");
+        c.zenoh.signing_key = Some(c.journal.path.with_extension("agent.key"));
         c.zenoh.listen = vec!["tls/127.0.0.1:0".into()];
         crate::util::bus_pki(dir, &["agent-robot01"]);
         c.zenoh.tls = Some(crate::util::bus_tls(dir, "agent-robot01"));

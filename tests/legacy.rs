@@ -487,6 +487,7 @@ async fn moulding_agent(
     crate::util::bus_pki(dir, &["agent-moulding-bus1"]);
     c.zenoh.tls = Some(crate::util::bus_tls(dir, "agent-moulding-bus1"));
     c.journal.path = dir.join("journal.sqlite");
+    c.zenoh.signing_key = Some(c.journal.path.with_extension("agent.key"));
     c.metrics = Some("127.0.0.1:0".parse().unwrap());
     let operators_file = dir.join("operators.toml");
     std::fs::write(&operators_file, operators).unwrap();
@@ -780,6 +781,7 @@ async fn each_unit_a_cell_of_its_own_reports_its_day_as_the_simulator_logged_it(
         c.zenoh.listen = vec!["tls/127.0.0.1:0".into()];
         c.zenoh.tls = Some(crate::util::bus_tls(dir.path(), &format!("agent-{name}")));
         c.journal.path = dir.path().join(format!("{name}.sqlite"));
+        c.zenoh.signing_key = Some(c.journal.path.with_extension("agent.key"));
         c.metrics = None;
         assert!(c
             .tags

@@ -29,5 +29,6 @@ mod sf;
 mod sfc;
 mod spawned;
 mod timers;
+mod trust;
 mod typed;
 mod util;

@@ -208,8 +208,8 @@ pub(crate) async fn query(
         let replies = get.await.unwrap();
         if let Ok(reply) = replies.recv_async().await {
             return match reply.result() {
-                Ok(s) => Ok(s.payload().try_to_string().unwrap().into_owned()),
-                Err(e) => Err(e.payload().try_to_string().unwrap().into_owned()),
+                Ok(s) => Ok(crate::util::opened(s.payload())),
+                Err(e) => Err(crate::util::opened(e.payload())),
             };
         }
         assert!(

@@ -95,13 +95,18 @@ pub(crate) fn client_config(dir: &Path, name: &str, port: u16) -> cellwatch::con
         multicast_scouting: false,
         tls: Some(bus_tls(dir, name)),
         config_file: None,
+        plain: false,
+        signing_key: None,
     }
 }
 
-/// The CLI flags that reach `port` as operator `name`.
+/// The CLI flags that reach `port` as operator `name`, trusting the
+/// agents whose signing keys are in `dir` ([`trust_file`]).
 pub(crate) fn bus_args(dir: &Path, name: &str, port: u16) -> Vec<String> {
     let tls = bus_tls(dir, name);
     vec![
+        "--trust".into(),
+        trust_file(dir).display().to_string(),
         "--connect".into(),
         format!("tls/127.0.0.1:{port}"),
         "--tls-ca".into(),
@@ -111,6 +116,53 @@ pub(crate) fn bus_args(dir: &Path, name: &str, port: u16) -> Vec<String> {
         "--tls-key".into(),
         tls.key.display().to_string(),
     ]
+}
+
+/// Writes `dir/trust.toml`, the plant trust file of every agent whose
+/// signing key (`*.agent.key`, made by the agent at its first start next to
+/// its configuration) is in `dir` or a folder in it, and returns its path.
+pub(crate) fn trust_file(dir: &Path) -> PathBuf {
+    let mut entries = String::new();
+    let mut folders = vec![dir.to_path_buf()];
+    while let Some(folder) = folders.pop() {
+        for entry in std::fs::read_dir(&folder).unwrap().map_while(Result::ok) {
+            let path = entry.path();
+            if path.is_dir() {
+                folders.push(path);
+            } else if path.to_string_lossy().ends_with(".agent.key") {
+                let key = cellwatch::sinks::zenoh::envelope::AgentKey::load(&path).unwrap();
+                entries += &key.trust_entry();
+            }
+        }
+    }
+    let path = dir.join("trust.toml");
+    std::fs::write(&path, entries).unwrap();
+    path
+}
+
+/// The plant trust of the agents whose keys are in `dir` ([`trust_file`]).
+pub(crate) fn trust(dir: &Path) -> cellwatch::sinks::zenoh::envelope::Trust {
+    cellwatch::sinks::zenoh::envelope::Trust::load(&trust_file(dir)).unwrap()
+}
+
+/// The body of a signed envelope as it arrived (a test that checks the
+/// signature itself uses [`trust`]).
+pub(crate) fn opened(payload: &zenoh::bytes::ZBytes) -> String {
+    let env: serde_json::Value = serde_json::from_slice(&payload.to_bytes())
+        .unwrap_or_else(|e| panic!("not a signed envelope: {e}"));
+    assert_eq!(env["schema"], "cellwatch.signed.v1", "{env}");
+    env["body"].as_str().unwrap().to_string()
+}
+
+/// The body of a signed envelope, or the payload as text when it is not
+/// one (Zenoh's own error answers, an impostor's forgeries).
+pub(crate) fn opened_or_raw(payload: &zenoh::bytes::ZBytes) -> String {
+    let bytes = payload.to_bytes();
+    serde_json::from_slice::<serde_json::Value>(&bytes)
+        .ok()
+        .filter(|env| env["schema"] == "cellwatch.signed.v1")
+        .and_then(|env| Some(env["body"].as_str()?.to_string()))
+        .unwrap_or_else(|| String::from_utf8_lossy(&bytes).into_owned())
 }
 
 /// A loopback port for a server given its port on its command line, which

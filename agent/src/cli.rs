@@ -142,6 +142,21 @@ pub(crate) enum PkiCommand {
     /// NAME is its common name: `agent-<cell>` for an agent, `router-…` for
     /// a router, `operator-<name>` for an operator (as config/zenoh/ expects).
     Issue(PkiIssueArgs),
+    /// Make a cell agent's Ed25519 signing key (`zenoh.signing_key`), or
+    /// read an existing one, and print its entry for the plant trust file
+    /// that clients check every alarm and answer against.
+    AgentKey(PkiAgentKeyArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct PkiAgentKeyArgs {
+    /// The cell whose agent signs with it.
+    #[arg(long)]
+    pub(crate) cell: String,
+    /// The key file (owner-only); an existing one is read, never
+    /// overwritten.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) out: PathBuf,
 }
 
 #[derive(Debug, clap::Args)]
@@ -578,7 +593,7 @@ pub(crate) struct SimulateArgs {
 #[derive(Debug, clap::Args)]
 pub(crate) struct ZenohArgs {
     /// Zenoh endpoint of an agent or router; repeatable (default
-    /// tls/127.0.0.1:7447 with --tls-ca, tcp/127.0.0.1:7447 without).
+    /// tls/127.0.0.1:7447, or tcp/127.0.0.1:7447 with --plain).
     #[arg(long)]
     pub(crate) connect: Vec<String>,
     /// The plant CA's certificate (PEM): only agents and routers with a
@@ -592,9 +607,19 @@ pub(crate) struct ZenohArgs {
     #[arg(long, value_name = "PEM", requires = "tls_ca")]
     pub(crate) tls_key: Option<PathBuf>,
     /// A Zenoh configuration file (JSON5) for anything else Zenoh offers;
-    /// the flags above are laid over it.
+    /// the flags above are laid over it. This client listens on nothing
+    /// and scouts nothing, whatever the file says, and every endpoint must
+    /// be TLS with the plant CA unless --plain.
     #[arg(long, value_name = "JSON5")]
     pub(crate) zenoh_config: Option<PathBuf>,
+    /// The plant trust file: each cell's agent's public key. Every alarm
+    /// and answer is believed only if the cell's own agent signed it.
+    #[arg(long, value_name = "TOML", env = "CELLWATCH_TRUST")]
+    pub(crate) trust: Option<PathBuf>,
+    /// Accept a bus without TLS (plain TCP): neither encrypted nor
+    /// authenticated. Signatures are still checked.
+    #[arg(long)]
+    pub(crate) plain: bool,
     /// Zenoh mode of this client: peer or client (of a router).
     #[arg(long, default_value = "peer")]
     pub(crate) mode: String,
@@ -1035,6 +1060,7 @@ pub fn run(
         Command::Keygen(args) => commands::keygen::run(&args, out),
         Command::Pki(PkiCommand::Ca(args)) => commands::pki::ca(&args, out),
         Command::Pki(PkiCommand::Issue(args)) => commands::pki::issue_command(&args, out),
+        Command::Pki(PkiCommand::AgentKey(args)) => commands::pki::agent_key(&args, out),
         Command::Replay(args) => commands::timers::replay(&args, out),
         Command::ExportSt(args) => commands::timers::export_st(&args, out),
         other => asynchronous(other, out),

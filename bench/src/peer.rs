@@ -506,7 +506,12 @@ pub async fn subscribe_alarms(
         .declare_subscriber(format!("cellwatch/{cells}/alarms/**"))
         .callback(move |sample| {
             let now = SystemTime::now();
-            let Ok(v) = serde_json::from_slice::<serde_json::Value>(&sample.payload().to_bytes())
+            // The alarm is the body of the agent's signed envelope.
+            let Some(v) = serde_json::from_slice::<serde_json::Value>(&sample.payload().to_bytes())
+                .ok()
+                .and_then(|env| {
+                    serde_json::from_str::<serde_json::Value>(env["body"].as_str()?).ok()
+                })
             else {
                 return;
             };

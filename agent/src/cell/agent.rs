@@ -24,6 +24,7 @@ use crate::operator::{Gate, KeysError, OperatorKeys};
 use crate::sinks::console::{ConsoleSink, Notice};
 use crate::sinks::journal::sink::JournalSink;
 use crate::sinks::journal::{Journal, JournalError};
+use crate::sinks::zenoh::envelope::{check_private, AgentKey, KeyFileError};
 use crate::sinks::zenoh::publish::ZenohPublisher;
 use crate::sinks::zenoh::services::Services;
 use crate::sinks::zenoh::ZenohError;
@@ -48,6 +49,10 @@ pub enum StartError {
     /// Zenoh refused the session or a declaration.
     #[error(transparent)]
     Zenoh(#[from] ZenohError),
+    /// The agent's signing key, or a private key it uses, is unusable
+    /// (unreadable, not a key, or readable by others).
+    #[error(transparent)]
+    Key(#[from] KeyFileError),
     /// The metrics port cannot be bound.
     #[error("cannot serve metrics on {addr}: {source}")]
     Metrics {
@@ -65,7 +70,13 @@ impl StartError {
     /// Whether the configuration (or a file it names) is at fault, rather
     /// than the machine.
     pub fn is_input(&self) -> bool {
-        matches!(self, StartError::Compile(_) | StartError::Keys(_))
+        matches!(
+            self,
+            StartError::Compile(_)
+                | StartError::Keys(_)
+                | StartError::Key(_)
+                | StartError::Zenoh(ZenohError::Insecure { .. } | ZenohError::Key(_))
+        )
     }
 }
 
@@ -219,12 +230,21 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     let restored = super::restore::load(&config, clock.now_ms(), |id| {
         engine.can_raise(id) || id == JOURNAL_ALARM
     })?;
+    let signing = signing_key(&config)?;
     let session = crate::sinks::zenoh::open_agent(&config.zenoh).await?;
     let prefix = config.zenoh.prefix.clone();
     let (requests_tx, requests_rx) = mpsc::channel(REQUEST_CAPACITY);
-    let services =
-        Services::declare(&session, &prefix, &journal, requests_tx, metrics.clone()).await?;
-    let publisher = ZenohPublisher::start(session.clone(), &prefix, metrics.clone()).await?;
+    let services = Services::declare(
+        &session,
+        &prefix,
+        signing.clone(),
+        &journal,
+        requests_tx,
+        metrics.clone(),
+    )
+    .await?;
+    let publisher =
+        ZenohPublisher::start(session.clone(), &prefix, signing, metrics.clone()).await?;
     let (stop, stop_rx) = watch::channel(false);
     let stopped = |mut rx: watch::Receiver<bool>| async move {
         let _ = rx.wait_for(|s| *s).await;
@@ -300,4 +320,28 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         metrics_addr,
         committed,
     })
+}
+
+/// The agent's signing key (made now if its file does not exist), after
+/// refusing a bus TLS key that others may read.
+fn signing_key(config: &CellConfig) -> Result<Arc<AgentKey>, StartError> {
+    if let Some(tls) = &config.zenoh.tls {
+        check_private(&tls.key)?;
+    }
+    let path = config
+        .zenoh
+        .signing_key
+        .clone()
+        .unwrap_or_else(|| std::path::PathBuf::from(format!("{}.agent.key", config.cell)));
+    let (key, made) = AgentKey::load_or_create(&path, &config.cell)?;
+    if made {
+        tracing::warn!(
+            cell = %config.cell,
+            file = %path.display(),
+            "made this agent's signing key; add its public key to the plant trust file: {}",
+            key.trust_entry().trim_end().replace('\n', " ")
+        );
+    }
+    tracing::info!(cell = %config.cell, public_key = %key.public_hex(), "signing the bus with the agent's key");
+    Ok(Arc::new(key))
 }

@@ -198,36 +198,84 @@ fn demo_operator(state: &Path) -> Result<(PathBuf, PathBuf), Failure> {
     Ok((key_file, operators))
 }
 
-/// The demo's bus: a plant CA in `state/pki-bus`, certificates for the
-/// agent of `c` (set in its configuration) and for operator `demo`, and a
-/// client configuration file for the CLI (`--zenoh-config`), returned.
-fn demo_bus(state: &Path, c: &mut CellConfig) -> Result<PathBuf, Failure> {
-    c.zenoh.tls = Some(bus_tls(state, &format!("agent-{}", c.cell))?);
-    let operator = bus_tls(state, "operator-demo")?;
-    let endpoints: Vec<String> = c
-        .zenoh
-        .listen
-        .iter()
-        .map(|e| e.replace("0.0.0.0", "127.0.0.1"))
-        .collect();
-    let file = |p: &Path| p.display().to_string();
-    let config = serde_json::json!({
-        "connect": { "endpoints": endpoints },
-        "transport": { "link": { "tls": {
-            "root_ca_certificate": file(&operator.ca),
-            "connect_certificate": file(&operator.cert),
-            "connect_private_key": file(&operator.key),
-            "enable_mtls": true,
-        } } },
-    });
-    let text = format!(
-        "// Zenoh client configuration for the demo's bus (cellwatch alarms|history|ack --zenoh-config THIS).\n{}\n",
-        serde_json::to_string_pretty(&config).unwrap_or_default()
-    );
-    let path = state.join("client.json5");
-    std::fs::write(&path, text)
-        .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", path.display())))?;
-    Ok(path)
+/// The demo's bus as a client sees it: every agent's endpoints and its
+/// trust-file entry, gathered as the cells join ([`DemoBus::join`]) and
+/// written for the CLI ([`DemoBus::write`]).
+struct DemoBus {
+    /// The demo's state directory.
+    state: PathBuf,
+    endpoints: Vec<String>,
+    trust: crate::sinks::zenoh::envelope::Trust,
+    entries: String,
+}
+
+impl DemoBus {
+    fn new(state: &Path) -> DemoBus {
+        DemoBus {
+            state: state.to_path_buf(),
+            endpoints: Vec::new(),
+            trust: Default::default(),
+            entries: String::new(),
+        }
+    }
+
+    /// Puts `c` on the demo's bus: its certificate from the demo's CA (in
+    /// `state/pki-bus`, made on first use) and its signing key
+    /// (`state/<cell>.agent.key`), whose public key the trust file gets.
+    fn join(&mut self, c: &mut CellConfig) -> Result<(), Failure> {
+        use crate::sinks::zenoh::envelope::AgentKey;
+        let state = self.state.as_path();
+        c.zenoh.tls = Some(bus_tls(state, &format!("agent-{}", c.cell))?);
+        let key_path = state.join(format!("{}.agent.key", c.cell));
+        let (key, _) = AgentKey::load_or_create(&key_path, &c.cell)
+            .map_err(|e| Failure::Runtime(e.to_string()))?;
+        c.zenoh.signing_key = Some(key_path);
+        self.entries += &key.trust_entry();
+        self.trust = crate::sinks::zenoh::envelope::Trust::parse("the demo's trust", &self.entries)
+            .map_err(|e| Failure::Runtime(e.to_string()))?;
+        self.endpoints.extend(
+            c.zenoh
+                .listen
+                .iter()
+                .map(|e| e.replace("0.0.0.0", "127.0.0.1")),
+        );
+        Ok(())
+    }
+
+    /// Writes the CLI's files into `state`: `client.json5` (every agent's
+    /// endpoint, the CA, operator `demo`'s certificate) and `trust.toml`
+    /// (every agent's public key). Returns their paths.
+    fn write(&self) -> Result<(PathBuf, PathBuf), Failure> {
+        let state = self.state.as_path();
+        let operator = bus_tls(state, "operator-demo")?;
+        let file = |p: &Path| p.display().to_string();
+        let config = serde_json::json!({
+            "connect": { "endpoints": self.endpoints },
+            "transport": { "link": { "tls": {
+                "root_ca_certificate": file(&operator.ca),
+                "connect_certificate": file(&operator.cert),
+                "connect_private_key": file(&operator.key),
+                "enable_mtls": true,
+            } } },
+        });
+        let text = format!(
+            "// Zenoh client configuration for the demo's bus (cellwatch alarms|history|ack --zenoh-config THIS).\n{}\n",
+            serde_json::to_string_pretty(&config).unwrap_or_default()
+        );
+        let path = state.join("client.json5");
+        std::fs::write(&path, text)
+            .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", path.display())))?;
+        let trust = state.join("trust.toml");
+        std::fs::write(
+            &trust,
+            format!(
+                "# The demo's plant trust file: each cell's agent's public key (cellwatch --trust THIS).\n{}",
+                self.entries
+            ),
+        )
+        .map_err(|e| Failure::Runtime(format!("cannot write {}: {e}", trust.display())))?;
+        Ok((path, trust))
+    }
 }
 
 /// `name`'s certificate from the demo's CA, made on first use.
@@ -293,7 +341,9 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     opcua_of(&mut c, &args.config)?.pki_dir = state.join("agent-pki");
     c.journal.path = state.join(format!("{}.sqlite", c.cell));
     let (operator_key, secrets) = demo_operator(&state)?;
-    let client_config = demo_bus(&state, &mut c)?;
+    let mut demo_bus = DemoBus::new(&state);
+    demo_bus.join(&mut c)?;
+    let (client_config, trust_file) = (state.join("client.json5"), state.join("trust.toml"));
     c.operators_file = Some(secrets.clone());
     c.warnings
         .retain(|w| !w.starts_with("no commands.operators_file"));
@@ -337,9 +387,10 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     writeln!(out, "  journal         {}", c.journal.path.display()).map_err(io)?;
     writeln!(
         out,
-        "  bus             mutual TLS, certificates from the CA in {}; clients: --zenoh-config {}",
+        "  bus             mutual TLS, certificates from the CA in {}, everything signed by its cell's agent; clients: --zenoh-config {} --trust {}",
         state.join("pki-bus").display(),
-        client_config.display()
+        client_config.display(),
+        trust_file.display()
     )
     .map_err(io)?;
     writeln!(
@@ -362,7 +413,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         let lua = opcua_of(&mut l, &args.line_config)?.clone();
         l.journal.path = state.join(format!("{}.sqlite", l.cell));
         l.operators_file = Some(secrets.clone());
-        l.zenoh.tls = Some(bus_tls(&state, &format!("agent-{}", l.cell))?);
+        demo_bus.join(&mut l)?;
         l.warnings
             .retain(|w| !w.starts_with("no commands.operators_file"));
         let line_pki = state.join("line-sim-pki");
@@ -427,7 +478,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         };
         m.journal.path = state.join(format!("{}.sqlite", m.cell));
         m.operators_file = Some(secrets.clone());
-        m.zenoh.tls = Some(bus_tls(&state, &format!("agent-{}", m.cell))?);
+        demo_bus.join(&mut m)?;
         m.warnings
             .retain(|w| !w.starts_with("no commands.operators_file"));
         let bus = crate::sim::moulding::MouldingBus::new(3);
@@ -462,7 +513,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         Some(
             demo_robot(
                 args,
-                &state,
+                &mut demo_bus,
                 (&operator_key, &secrets),
                 tx.clone(),
                 note_tx.clone(),
@@ -472,6 +523,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
             .await?,
         )
     };
+    demo_bus.write()?;
     writeln!(out).map_err(io)?;
     out.flush().map_err(io)?;
 
@@ -548,7 +600,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
 /// alarms active in the demo, for a step to be stuck.
 async fn demo_robot(
     args: &DemoArgs,
-    state: &Path,
+    demo_bus: &mut DemoBus,
     (operator_key, secrets): (&Path, &Path),
     tx: mpsc::UnboundedSender<Notice>,
     notes: mpsc::UnboundedSender<String>,
@@ -564,12 +616,15 @@ async fn demo_robot(
     Failure,
 > {
     use crate::sim::robot::SimulatedRobot;
+    let state = demo_bus.state.clone();
+    let state = state.as_path();
     let mut r = load(&args.robot_config)?;
     opcua_of(&mut r, &args.robot_config)?.pki_dir = state.join("robot-agent-pki");
     let rua = opcua_of(&mut r, &args.robot_config)?.clone();
     r.journal.path = state.join(format!("{}.sqlite", r.cell));
     r.operators_file = Some(secrets.to_path_buf());
-    r.zenoh.tls = Some(bus_tls(state, &format!("agent-{}", r.cell))?);
+    demo_bus.join(&mut r)?;
+    let trust = demo_bus.trust.clone();
     r.warnings
         .retain(|w| !w.starts_with("no commands.operators_file"));
     let robot_pki = state.join("robot-sim-pki");
@@ -637,6 +692,8 @@ async fn demo_robot(
         multicast_scouting: false,
         tls: Some(bus_tls(state, "operator-demo")?),
         config_file: None,
+        plain: false,
+        signing_key: None,
     })
     .await
     .map_err(Failure::runtime)?;
@@ -656,10 +713,12 @@ async fn demo_robot(
             };
             cmd.sign(&cell_id, &key);
             let bus = &bus;
+            let trust = &trust;
             let cell_id = &cell_id;
             async move {
                 super::subscribers::send_signed(
                     bus,
+                    trust,
                     "cellwatch",
                     cell_id,
                     &cmd,

@@ -13,8 +13,20 @@ use crate::cli::{
 use crate::config::{ZenohConfig, ZenohMode};
 use crate::operator::{Action, Command, OperatorKey};
 use crate::payload::AlarmPayload;
+use crate::sinks::zenoh::envelope::{Distrust, Kind, Trust};
+use crate::sinks::zenoh::ZenohError;
 
-async fn session(z: &ZenohArgs) -> Result<zenoh::Session, Failure> {
+/// A client's view of the bus: its session, and the plant trust file that
+/// every payload is opened against.
+struct Bus {
+    session: zenoh::Session,
+    trust: Trust,
+}
+
+/// Opens the client's session: TLS only unless `--plain`, listening on
+/// nothing, linking only to the endpoints given; and reads the trust file.
+async fn session(z: &ZenohArgs) -> Result<Bus, Failure> {
+    let trust = trust(z)?;
     let mode = match z.mode.as_str() {
         "peer" => ZenohMode::Peer,
         "client" => ZenohMode::Client,
@@ -33,10 +45,10 @@ async fn session(z: &ZenohArgs) -> Result<zenoh::Session, Failure> {
         z.connect.clone()
     } else if z.zenoh_config.is_some() {
         Vec::new()
-    } else if tls.is_some() {
-        vec!["tls/127.0.0.1:7447".into()]
-    } else {
+    } else if z.plain {
         vec!["tcp/127.0.0.1:7447".into()]
+    } else {
+        vec!["tls/127.0.0.1:7447".into()]
     };
     let cfg = ZenohConfig {
         mode,
@@ -46,132 +58,140 @@ async fn session(z: &ZenohArgs) -> Result<zenoh::Session, Failure> {
         multicast_scouting: false,
         tls,
         config_file: z.zenoh_config.clone(),
+        plain: z.plain,
+        signing_key: None,
     };
-    crate::sinks::zenoh::open(&cfg)
-        .await
-        .map_err(Failure::runtime)
-}
-
-/// The Zenoh id of each cell's agent matching `cell` (a name or `*`), from
-/// their liveliness tokens (`<root>/<cell>/agent/<zid>`). A cell claimed by
-/// two sessions is an error: neither is trusted.
-async fn agents(
-    s: &zenoh::Session,
-    root: &str,
-    cell: &str,
-    timeout: Duration,
-) -> Result<std::collections::BTreeMap<String, String>, Failure> {
-    let key = format!("{root}/{cell}/agent/*");
-    let replies = s
-        .liveliness()
-        .get(key.as_str())
-        .timeout(timeout)
-        .await
-        .map_err(|e| Failure::Runtime(format!("liveliness query failed: {e}")))?;
-    let mut claims: std::collections::BTreeMap<String, Vec<String>> = Default::default();
-    while let Ok(reply) = replies.recv_async().await {
-        let Ok(sample) = reply.result() else { continue };
-        let chunks: Vec<&str> = sample.key_expr().as_str().rsplitn(3, '/').collect();
-        if let [zid, "agent", rest] = chunks[..] {
-            let cell = rest.rsplit('/').next().unwrap_or_default().to_string();
-            claims.entry(cell).or_default().push(zid.to_string());
+    let session = crate::sinks::zenoh::open(&cfg).await.map_err(|e| match e {
+        e @ (ZenohError::Insecure { .. } | ZenohError::Config { .. }) => {
+            Failure::Input(e.to_string())
         }
-    }
-    let mut out = std::collections::BTreeMap::new();
-    for (c, mut zids) in claims {
-        zids.sort();
-        zids.dedup();
-        if zids.len() > 1 {
-            return Err(Failure::Runtime(format!(
-                "{} Zenoh sessions claim to be the agent of cell {c} ({}): trusting none",
-                zids.len(),
-                zids.join(", ")
-            )));
-        }
-        out.insert(c, zids.remove(0));
-    }
-    if out.is_empty() {
-        return Err(Failure::Runtime(format!(
-            "no agent is alive on {key} (is one running, and is --connect right?)"
-        )));
-    }
-    Ok(out)
+        e => Failure::runtime(e),
+    })?;
+    Ok(Bus { session, trust })
 }
 
-/// The agent of one cell.
-async fn agent(
-    s: &zenoh::Session,
-    root: &str,
-    cell: &str,
-    timeout: Duration,
-) -> Result<String, Failure> {
-    let found = agents(s, root, cell, timeout).await?;
-    found
-        .get(cell)
-        .cloned()
-        .ok_or_else(|| Failure::Runtime(format!("no agent of cell {cell} is alive on the bus")))
+/// The plant trust file named by `--trust` (or `CELLWATCH_TRUST`).
+fn trust(z: &ZenohArgs) -> Result<Trust, Failure> {
+    let path = z.trust.as_ref().ok_or_else(|| {
+        Failure::Input(
+            "give --trust FILE (or set CELLWATCH_TRUST): the plant trust file with each cell's agent's public key, against which every answer and alarm is checked (the demo writes cellwatch-demo/trust.toml)".into(),
+        )
+    })?;
+    Trust::load(path).map_err(|e| Failure::Input(e.to_string()))
 }
 
-/// Who answered `reply`.
-fn replier(reply: &zenoh::query::Reply) -> String {
-    reply
-        .replier_id()
-        .map_or_else(|| "an unknown node".into(), |id| id.zid().to_string())
+/// A fresh query parameter: an answer is believed only if the agent sealed
+/// it for this very query.
+fn fresh() -> String {
+    format!("nonce={}", crate::operator::nonce())
 }
 
 /// What came back to one query.
 enum Answer {
-    /// The agent's answer: its text, or its error (an error answer from
-    /// the agent is [`Failure::Input`]).
-    Agent(Result<String, Failure>),
-    /// Nothing from the agent; answers from these other sessions were not
-    /// believed.
+    /// A cell's agent's answer (believed): the cell and its text, or its
+    /// error (an error answer from the agent is [`Failure::Input`]).
+    Agent(String, Result<String, Failure>),
+    /// Nothing believed; why each answer that came was not.
     Nothing(Vec<String>),
 }
 
-/// The agent's answer among `replies`; answers from any other session are
-/// not believed (and named in the error when the agent said nothing).
+/// Opens one reply to a query with `parameters` on `key`: believed only
+/// if a cell's agent in the trust file sealed it for this query.
+fn open_reply(
+    trust: &Trust,
+    reply: &zenoh::query::Reply,
+    key: &str,
+    parameters: &str,
+) -> Result<(String, Result<String, Failure>), String> {
+    let from = reply
+        .replier_id()
+        .map_or_else(|| "an unknown node".into(), |id| id.zid().to_string());
+    let distrust = |e: Distrust| format!("{e} (from Zenoh session {from})");
+    match reply.result() {
+        Ok(sample) => {
+            let opened = trust
+                .open(
+                    &sample.payload().to_bytes(),
+                    Kind::Reply,
+                    sample.key_expr().as_str(),
+                    parameters,
+                )
+                .map_err(distrust)?;
+            let body = match opened.kind {
+                Kind::Error => Err(Failure::Input(opened.body)),
+                _ => Ok(opened.body),
+            };
+            Ok((opened.cell, body))
+        }
+        Err(e) => {
+            // An error answer has no key of its own: the envelope's, if it
+            // is one the query could be answered on.
+            let bytes = e.payload().to_bytes();
+            let sealed_on = serde_json::from_slice::<serde_json::Value>(&bytes)
+                .ok()
+                .and_then(|v| v["key"].as_str().map(str::to_string))
+                .unwrap_or_default();
+            let fits = match (
+                zenoh::key_expr::KeyExpr::try_from(sealed_on.as_str()),
+                zenoh::key_expr::KeyExpr::try_from(key),
+            ) {
+                (Ok(a), Ok(b)) => a.intersects(&b),
+                _ => false,
+            };
+            if !fits {
+                return Err(distrust(Distrust::NotAnEnvelope(format!(
+                    "an error answer sealed for '{sealed_on}', not {key}"
+                ))));
+            }
+            let opened = trust
+                .open(&bytes, Kind::Reply, &sealed_on, parameters)
+                .map_err(distrust)?;
+            Ok((
+                opened.cell,
+                Err(Failure::Input(format!("{key}: {}", opened.body))),
+            ))
+        }
+    }
+}
+
+/// The first believed answer among `replies`; answers not believed are
+/// logged and named in the error when nothing was believed.
 async fn answer_of(
     replies: zenoh::handlers::FifoChannelHandler<zenoh::query::Reply>,
-    agent: &str,
-    what: &str,
+    trust: &Trust,
+    key: &str,
+    parameters: &str,
 ) -> Answer {
-    let mut others = Vec::new();
+    let mut refused = Vec::new();
     while let Ok(reply) = replies.recv_async().await {
-        let from = replier(&reply);
-        if from != agent {
-            tracing::error!(from = %from, agent, what, "an answer from a session that is not the agent: ignored");
-            others.push(from);
-            continue;
+        match open_reply(trust, &reply, key, parameters) {
+            Ok((cell, answer)) => return Answer::Agent(cell, answer),
+            Err(why) => {
+                tracing::error!(key, why = %why, "an answer not believed: ignored");
+                refused.push(why);
+            }
         }
-        return Answer::Agent(match reply.result() {
-            Ok(sample) => Ok(text(sample.payload())),
-            Err(e) => Err(Failure::Input(format!("{what}: {}", text(e.payload())))),
-        });
     }
-    Answer::Nothing(others)
+    Answer::Nothing(refused)
 }
 
 impl Answer {
-    fn into_result(self, agent: &str, what: &str) -> Result<String, Failure> {
+    fn into_result(self, cell: &str, what: &str) -> Result<String, Failure> {
         match self {
-            Answer::Agent(answer) => answer,
-            Answer::Nothing(others) if others.is_empty() => Err(Failure::Runtime(format!(
-                "the agent ({agent}) did not answer {what}"
+            Answer::Agent(from, _) if from != cell => Err(Failure::Runtime(format!(
+                "{what}: answered by cell {from}'s agent, not {cell}'s"
             ))),
-            Answer::Nothing(others) => Err(Failure::Runtime(format!(
-                "the agent ({agent}) did not answer {what}; answers from {} are not the agent's and were ignored",
-                others.join(", ")
+            Answer::Agent(_, answer) => answer,
+            Answer::Nothing(refused) if refused.is_empty() => Err(Failure::Runtime(format!(
+                "the agent of cell {cell} did not answer {what}"
+            ))),
+            Answer::Nothing(refused) => Err(Failure::Runtime(format!(
+                "the agent of cell {cell} did not answer {what}; {} answer(s) were not believed: {}",
+                refused.len(),
+                refused.join("; ")
             ))),
         }
     }
-}
-
-fn text(payload: &zenoh::bytes::ZBytes) -> String {
-    payload
-        .try_to_string()
-        .map(|s| s.into_owned())
-        .unwrap_or_default()
 }
 
 fn io(e: std::io::Error) -> Failure {
@@ -209,15 +229,16 @@ fn print_alarm(out: &mut dyn Write, a: &AlarmPayload, json: bool) -> std::io::Re
 
 /// `cellwatch alarms`.
 pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(), Failure> {
-    let s = session(&args.zenoh).await?;
+    let bus = session(&args.zenoh).await?;
+    let s = &bus.session;
     let cell = args.cell.as_deref().unwrap_or("*");
     let root = &args.zenoh.root;
+    let timeout = Duration::from_secs(args.zenoh.timeout_secs);
     if args.follow {
         let sub = s
             .declare_subscriber(format!("{root}/{cell}/alarms/**"))
             .history(HistoryConfig::default().detect_late_publishers())
             .recovery(RecoveryConfig::default().heartbeat())
-            .subscriber_detection()
             .await
             .map_err(|e| Failure::Runtime(format!("cannot subscribe: {e}")))?;
         // The journal's recent events first (a subscriber joining after the
@@ -231,12 +252,10 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
                 ));
             };
             let base = format!("{root}/{cell}/history?kind=alarm;since={since};limit=1000");
-            let timeout = Duration::from_secs(args.zenoh.timeout_secs);
-            let the_agent = agent(&s, root, cell, timeout).await?;
             let mut after = 0;
             loop {
                 let text =
-                    history_page(&s, &format!("{base};after={after}"), timeout, &the_agent).await?;
+                    history_page(&bus, cell, &format!("{base};after={after}"), timeout).await?;
                 let page: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
                 for r in page["rows"].as_array().into_iter().flatten() {
                     if let Ok(a) =
@@ -253,36 +272,32 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
             }
             out.flush().map_err(io)?;
         }
-        // Each cell's agent, as its liveliness token names it; looked up
-        // again when an event comes from another session (an agent that
-        // restarted has a new one).
-        let timeout = Duration::from_secs(args.zenoh.timeout_secs);
-        let mut known = agents(&s, root, cell, timeout).await.unwrap_or_default();
         loop {
             tokio::select! {
                 _ = tokio::signal::ctrl_c() => break,
                 sample = sub.recv_async() => {
                     let Ok(sample) = sample else { break };
-                    let text = text(sample.payload());
-                    let a = match serde_json::from_str::<AlarmPayload>(&text) {
-                        Ok(a) => a,
-                        Err(e) => {
-                            tracing::warn!(key = %sample.key_expr(), error = %e, "not an alarm payload");
+                    let key = sample.key_expr().as_str();
+                    // Believed only if the cell's own agent sealed it for
+                    // this key, whoever relayed it.
+                    let opened = match bus.trust.open(&sample.payload().to_bytes(), Kind::Put, key, "") {
+                        Ok(opened) => opened,
+                        Err(why) => {
+                            tracing::error!(key, why = %why, "an alarm event not believed: ignored");
                             continue;
                         }
                     };
-                    let from = sample
-                        .source_info()
-                        .map(|i| i.source_id().zid().to_string());
-                    if from.is_none() || known.get(&a.cell) != from.as_ref() {
-                        if let Ok(found) = agents(&s, root, &a.cell, timeout).await {
-                            known.extend(found);
+                    let a = match serde_json::from_str::<AlarmPayload>(&opened.body) {
+                        Ok(a) if a.cell == opened.cell => a,
+                        Ok(a) => {
+                            tracing::error!(key, cell = %a.cell, sealed_by = %opened.cell, "an alarm event for another cell than its sealer's: ignored");
+                            continue;
                         }
-                    }
-                    if from.is_none() || known.get(&a.cell) != from.as_ref() {
-                        tracing::error!(cell = %a.cell, from = ?from, "an alarm event from a session that is not the cell's agent: ignored");
-                        continue;
-                    }
+                        Err(e) => {
+                            tracing::warn!(key, error = %e, "not an alarm payload");
+                            continue;
+                        }
+                    };
                     if !printed.remove(&(a.id.clone(), a.at.clone(), a.transition)) {
                         print_alarm(out, &a, args.json).map_err(io)?;
                     }
@@ -292,24 +307,35 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
         }
         return Ok(());
     }
-    let timeout = Duration::from_secs(args.zenoh.timeout_secs);
-    let trusted = agents(&s, root, cell, timeout).await?;
-    let replies = s
-        .get(format!("{root}/{cell}/snapshot"))
-        .consolidation(zenoh::query::ConsolidationMode::None)
-        .timeout(timeout)
+    let key = format!("{root}/{cell}/snapshot");
+    let parameters = fresh();
+    let querier = querier(s, &key, timeout).await?;
+    wait_for_queryable(&querier, timeout).await;
+    let replies = querier
+        .get()
+        .parameters(parameters.as_str())
         .await
         .map_err(|e| Failure::Runtime(format!("query failed: {e}")))?;
     let mut answered = 0;
+    let mut refused = Vec::new();
     while let Ok(reply) = replies.recv_async().await {
-        let from = replier(&reply);
-        let Ok(sample) = reply.result() else { continue };
-        let text = text(sample.payload());
+        let (of_cell, text) = match open_reply(&bus.trust, &reply, &key, &parameters) {
+            Ok((of_cell, Ok(text))) => (of_cell, text),
+            Ok((of_cell, Err(Failure::Input(e) | Failure::Runtime(e)))) => {
+                tracing::warn!(cell = %of_cell, error = %e, "the agent could not answer");
+                refused.push(format!("cell {of_cell}: {e}"));
+                continue;
+            }
+            Err(why) => {
+                tracing::error!(key, why = %why, "an answer not believed: ignored");
+                refused.push(why);
+                continue;
+            }
+        };
         let v: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
         // The cell it speaks for, believed only from that cell's agent.
-        let of_cell = v["cell"].as_str().unwrap_or_default();
-        if trusted.get(of_cell) != Some(&from) {
-            tracing::error!(cell = of_cell, from = %from, "a snapshot from a session that is not the cell's agent: ignored");
+        if v["cell"].as_str() != Some(of_cell.as_str()) {
+            tracing::error!(cell = ?v["cell"].as_str(), sealed_by = %of_cell, "a snapshot for another cell than its sealer's: ignored");
             continue;
         }
         answered += 1;
@@ -320,43 +346,51 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
         }
     }
     if answered == 0 {
+        let why = if refused.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; {} answer(s) not believed or failed: {}",
+                refused.len(),
+                refused.join("; ")
+            )
+        };
         return Err(Failure::Runtime(format!(
-            "no agent answered on {root}/{cell}/snapshot (is one running, and is --connect right?)"
+            "no agent answered on {key} (is one running, is --connect right, and is the cell in the trust file?){why}"
         )));
     }
     Ok(())
 }
 
-/// Asks `selector` for one history page, believing `agent` only.
+/// Asks `selector` for one history page of `cell`.
 async fn history_page(
-    s: &zenoh::Session,
+    bus: &Bus,
+    cell: &str,
     selector: &str,
     timeout: Duration,
-    agent: &str,
 ) -> Result<String, Failure> {
-    ask_agent(s, selector, None, timeout, agent).await
+    ask_agent(bus, cell, selector, None, timeout).await
 }
 
-/// Asks `selector` (`key?parameters`) with `payload` and returns the
-/// agent's answer ([`answer_of`]). A session just opened may not yet know
-/// the agent's queryables (only its liveliness token): the query waits, up
-/// to `timeout`, until a queryable for the key is known.
-async fn ask_agent(
-    s: &zenoh::Session,
-    selector: &str,
-    payload: Option<String>,
+/// A querier on `key` that takes every answer (none consolidated away).
+async fn querier<'a>(
+    s: &'a zenoh::Session,
+    key: &str,
     timeout: Duration,
-    agent: &str,
-) -> Result<String, Failure> {
-    let (key, parameters) = selector.split_once('?').unwrap_or((selector, ""));
-    let failed = |e: zenoh::Error| Failure::Runtime(format!("query failed: {e}"));
-    let querier = s
-        .declare_querier(key.to_string())
+) -> Result<zenoh::query::Querier<'a>, Failure> {
+    s.declare_querier(key.to_string())
         .consolidation(zenoh::query::ConsolidationMode::None)
         .timeout(timeout)
         .await
-        .map_err(failed)?;
-    let listener = querier.matching_listener().await.map_err(failed)?;
+        .map_err(|e| Failure::Runtime(format!("query failed: {e}")))
+}
+
+/// Waits, up to `timeout`, until a queryable for the querier's key is
+/// known: a session just opened may not know the agents' queryables yet.
+async fn wait_for_queryable(querier: &zenoh::query::Querier<'_>, timeout: Duration) {
+    let Ok(listener) = querier.matching_listener().await else {
+        return;
+    };
     let known = querier
         .matching_status()
         .await
@@ -370,27 +404,48 @@ async fn ask_agent(
             }
         }
     }
+}
+
+/// Asks `selector` (`key?parameters`, a fresh nonce added) with `payload`
+/// and returns `cell`'s agent's answer ([`answer_of`]).
+async fn ask_agent(
+    bus: &Bus,
+    cell: &str,
+    selector: &str,
+    payload: Option<String>,
+    timeout: Duration,
+) -> Result<String, Failure> {
+    let (key, parameters) = selector.split_once('?').unwrap_or((selector, ""));
+    let querier = querier(&bus.session, key, timeout).await?;
+    wait_for_queryable(&querier, timeout).await;
     // A read that ends with no answer at all before its time is up (the
     // routes to the agent's queryable still being set up) is asked again;
     // a command is sent once (the agent would refuse its replay).
     let deadline = tokio::time::Instant::now() + timeout;
     let read_only = payload.is_none();
     loop {
-        let mut get = querier.get().parameters(parameters);
+        let parameters = if parameters.is_empty() {
+            fresh()
+        } else {
+            format!("{parameters};{}", fresh())
+        };
+        let mut get = querier.get().parameters(parameters.as_str());
         if let Some(p) = &payload {
             get = get.payload(p.clone());
         }
-        let replies = get.await.map_err(failed)?;
-        let answer = answer_of(replies, agent, selector).await;
+        let replies = get
+            .await
+            .map_err(|e| Failure::Runtime(format!("query failed: {e}")))?;
+        let answer = answer_of(replies, &bus.trust, key, &parameters).await;
         if read_only
-            && matches!(&answer, Answer::Nothing(others) if others.is_empty())
+            && matches!(&answer, Answer::Nothing(refused) if refused.is_empty())
             && tokio::time::Instant::now() + RETRY_AFTER < deadline
         {
             tracing::debug!(selector, "no answer yet: asking again");
             tokio::time::sleep(RETRY_AFTER).await;
             continue;
         }
-        return answer.into_result(agent, selector);
+        return answer.into_result(cell, selector);
     }
 }
 
@@ -400,7 +455,7 @@ const RETRY_AFTER: Duration = Duration::from_millis(250);
 /// `cellwatch history`: the newest rows, or with `--all` every row of the
 /// range, fetched in bounded pages.
 pub(crate) async fn history(args: &HistoryArgs, out: &mut dyn Write) -> Result<(), Failure> {
-    let s = session(&args.zenoh).await?;
+    let bus = session(&args.zenoh).await?;
     let mut params = vec![format!("since={}", args.since)];
     if let Some(u) = &args.until {
         params.push(format!("until={u}"));
@@ -416,14 +471,13 @@ pub(crate) async fn history(args: &HistoryArgs, out: &mut dyn Write) -> Result<(
         params.join(";")
     );
     let timeout = Duration::from_secs(args.zenoh.timeout_secs);
-    let the_agent = agent(&s, &args.zenoh.root, &args.cell, timeout).await?;
     let mut after = args.all.then_some(0);
     loop {
         let selector = match after {
             Some(a) => format!("{base};after={a}"),
             None => base.clone(),
         };
-        let text = history_page(&s, &selector, timeout, &the_agent).await?;
+        let text = history_page(&bus, &args.cell, &selector, timeout).await?;
         if args.json {
             writeln!(out, "{text}").map_err(io)?;
         }
@@ -648,9 +702,17 @@ async fn signed(t: Target<'_>, args: &SignerArgs, out: &mut dyn Write) -> Result
         signature: String::new(),
     };
     cmd.sign(t.cell, &key);
-    let s = session(&args.zenoh).await?;
+    let bus = session(&args.zenoh).await?;
     let timeout = Duration::from_secs(args.zenoh.timeout_secs);
-    let (accepted, detail) = send_signed(&s, &args.zenoh.root, t.cell, &cmd, timeout).await?;
+    let (accepted, detail) = send_signed(
+        &bus.session,
+        &bus.trust,
+        &args.zenoh.root,
+        t.cell,
+        &cmd,
+        timeout,
+    )
+    .await?;
     if accepted {
         writeln!(out, "accepted: {detail}").map_err(io)?;
         Ok(())
@@ -659,29 +721,33 @@ async fn signed(t: Target<'_>, args: &SignerArgs, out: &mut dyn Write) -> Result
     }
 }
 
-/// Sends the signed command `cmd` to the agent of `cell` (found by its
-/// liveliness token within `timeout`; a force waits at least
-/// [`FORCE_ANSWER`] for its answer) and returns (accepted, detail).
+/// Sends the signed command `cmd` to the agent of `cell` (a force waits at
+/// least [`FORCE_ANSWER`] for its answer) and returns (accepted, detail):
+/// the answer believed only if `cell`'s agent sealed it for this query.
 pub(crate) async fn send_signed(
     s: &zenoh::Session,
+    trust: &Trust,
     root: &str,
     cell: &str,
     cmd: &Command,
     timeout: Duration,
 ) -> Result<(bool, String), Failure> {
-    let the_agent = agent(s, root, cell, timeout).await?;
     let timeout = if cmd.action == Action::Force {
         timeout.max(FORCE_ANSWER)
     } else {
         timeout
     };
+    let bus = Bus {
+        session: s.clone(),
+        trust: trust.clone(),
+    };
     let selector = format!("{root}/{cell}/command");
     let text = ask_agent(
-        s,
+        &bus,
+        cell,
         &selector,
         Some(serde_json::to_string(cmd).unwrap_or_default()),
         timeout,
-        &the_agent,
     )
     .await
     .map_err(|e| match e {

@@ -301,6 +301,13 @@ pub struct ZenohConfig {
     /// A Zenoh configuration file (JSON5) for anything Zenoh offers;
     /// cellwatch's own settings are laid over it.
     pub config_file: Option<PathBuf>,
+    /// A bus without TLS accepted (`zenoh.plain = true`): otherwise every
+    /// endpoint must be TLS with the plant CA, whatever the Zenoh file says.
+    pub plain: bool,
+    /// The agent's Ed25519 signing key file (`zenoh.signing_key`): every
+    /// alarm, state and answer it puts on the bus is sealed with it; made
+    /// on first start if missing. `None` for clients.
+    pub signing_key: Option<PathBuf>,
 }
 
 /// The files of mutual TLS on the bus (PEM): made by `cellwatch pki`.
@@ -2226,6 +2233,13 @@ impl Validator<'_> {
                 s
             }
         };
+        let signing_key = Some(
+            self.path(
+                raw.signing_key
+                    .as_ref()
+                    .map_or(&format!("{cell}.agent.key"), |k| k.get_ref()),
+            ),
+        );
         ZenohConfig {
             mode,
             connect,
@@ -2234,6 +2248,8 @@ impl Validator<'_> {
             multicast_scouting: raw.multicast_scouting.unwrap_or(false),
             tls,
             config_file,
+            plain,
+            signing_key,
         }
     }
 }

@@ -217,6 +217,7 @@ pub(crate) struct RawZenoh {
     pub(crate) tls: Option<Spanned<RawTls>>,
     pub(crate) plain: Option<Spanned<bool>>,
     pub(crate) config_file: Option<Spanned<String>>,
+    pub(crate) signing_key: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

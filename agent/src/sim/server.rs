@@ -132,6 +132,7 @@ impl SimServer {
             .map_err(|e| format!("cannot listen on {}: {e}", options.listen))?;
         let addr = listener.local_addr().map_err(|e| e.to_string())?;
         let namespace = format!("urn:cellwatch:sim:{app}:plc");
+        let key_existed = crate::sources::pki::own_key(&options.pki_dir).exists();
         let tokens: &[&str] = &[ANONYMOUS_USER_TOKEN_ID];
         let mut builder = ServerBuilder::new()
             .application_name(title)
@@ -185,6 +186,7 @@ impl SimServer {
             .subscriptions
             .max_monitored_item_queue_size = 1000;
         let (server, handle) = builder.build()?;
+        crate::sources::pki::protect_own_key(&options.pki_dir, key_existed)?;
         let manager = handle
             .node_managers()
             .get_by_name::<SimpleNodeManager>(app)

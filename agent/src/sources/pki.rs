@@ -14,6 +14,36 @@ pub fn own_cert(pki_dir: &Path) -> PathBuf {
     pki_dir.join("own").join("cert.der")
 }
 
+/// The application's own private key in a PKI directory.
+pub fn own_key(pki_dir: &Path) -> PathBuf {
+    pki_dir.join("private").join("private.pem")
+}
+
+/// Makes the private key that the OPC UA stack has just created in
+/// `pki_dir` (it writes it with the process's umask, often readable by
+/// everyone) readable by its owner only, and refuses an existing one that
+/// others may read. `existed`: whether the key was there before the stack
+/// ran.
+///
+/// # Errors
+/// An existing key readable by others (the message names the file), or
+/// the permissions cannot be set.
+pub fn protect_own_key(pki_dir: &Path, existed: bool) -> Result<(), String> {
+    let key = own_key(pki_dir);
+    if existed {
+        return crate::sinks::zenoh::envelope::check_private(&key).map_err(|e| e.to_string());
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        if key.exists() {
+            std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o600))
+                .map_err(|e| format!("cannot make {} the owner's only: {e}", key.display()))?;
+        }
+    }
+    Ok(())
+}
+
 /// Copies the certificate at `cert` into `pki_dir/trusted/`.
 ///
 /// # Errors

@@ -17,12 +17,13 @@
 //! against `zenohd` routers; nothing here changes.
 
 pub mod certs;
+pub mod envelope;
 pub mod publish;
 pub mod services;
 
 use zenoh::Session;
 
-use crate::config::{ZenohConfig, ZenohMode};
+use crate::config::ZenohConfig;
 
 /// Why Zenoh refused.
 #[derive(Debug, thiserror::Error)]
@@ -40,6 +41,19 @@ pub enum ZenohError {
     /// The session cannot be opened (endpoints cannot be bound, ...).
     #[error("cannot open the zenoh session: {0}")]
     Open(String),
+    /// The session would not be TLS-only with the plant CA.
+    #[error("zenoh {key} = {value}: {reason}")]
+    Insecure {
+        /// The zenoh configuration key.
+        key: String,
+        /// Its value.
+        value: String,
+        /// Why that is refused, and what to do.
+        reason: String,
+    },
+    /// A signing key or trust file is unusable.
+    #[error(transparent)]
+    Key(#[from] envelope::KeyFileError),
     /// A publisher, queryable or token cannot be declared.
     #[error("cannot declare {key}: {reason}")]
     Declare {
@@ -51,10 +65,16 @@ pub enum ZenohError {
 }
 
 /// Builds the zenoh session configuration: the configuration file if one
-/// is named, with cellwatch's settings laid over it.
+/// is named, with cellwatch's settings laid over it. Whatever the file
+/// says, the session listens on `c.listen` only (a client: on nothing),
+/// connects to `c.connect` (the file's endpoints only when `c.connect` is
+/// empty), and scouts and gossips only with `multicast_scouting`; every
+/// endpoint must be TLS (or QUIC) with the plant CA and mutual
+/// authentication unless `c.plain` ([`secure`]).
 ///
 /// # Errors
-/// The file cannot be read, or a value zenoh does not accept.
+/// The file cannot be read, a value zenoh does not accept, or a session
+/// that would not be TLS-only.
 pub fn session_config(c: &ZenohConfig) -> Result<zenoh::Config, ZenohError> {
     let mut cfg = match &c.config_file {
         Some(path) => zenoh::Config::from_file(path).map_err(|e| ZenohError::Config {
@@ -72,23 +92,17 @@ pub fn session_config(c: &ZenohConfig) -> Result<zenoh::Config, ZenohError> {
             serde_json::to_string(&c.connect).unwrap_or_default(),
         )?;
     }
-    if !c.listen.is_empty() || (c.mode != ZenohMode::Client && c.config_file.is_none()) {
-        set(
-            &mut cfg,
-            "listen/endpoints",
-            serde_json::to_string(&c.listen).unwrap_or_default(),
-        )?;
-    }
+    // Zenoh's default is a plain TCP listener on every interface: never.
     set(
         &mut cfg,
-        "scouting/multicast/enabled",
-        c.multicast_scouting.to_string(),
+        "listen/endpoints",
+        serde_json::to_string(&c.listen).unwrap_or_default(),
     )?;
-    if !c.multicast_scouting && c.config_file.is_none() {
-        // Links only to the endpoints configured: a node met through
-        // another is not connected to directly, so every path to this one
-        // goes through the nodes it chose (and their access control).
-        set(&mut cfg, "scouting/gossip/enabled", "false".into())?;
+    // Links only to the endpoints configured: a node met through another
+    // is not connected to directly, so every path to this one goes through
+    // the nodes it chose (and their access control).
+    for key in ["scouting/multicast/enabled", "scouting/gossip/enabled"] {
+        set(&mut cfg, key, c.multicast_scouting.to_string())?;
     }
     set(&mut cfg, "timestamping/enabled", "true".into())?;
     if let Some(tls) = &c.tls {
@@ -120,7 +134,85 @@ pub fn session_config(c: &ZenohConfig) -> Result<zenoh::Config, ZenohError> {
             set(&mut cfg, &format!("transport/link/tls/{key}"), value)?;
         }
     }
+    secure(&cfg, c.plain)?;
     Ok(cfg)
+}
+
+/// Refuses a session that is not TLS-only (unless `plain`): every listen
+/// and connect endpoint `tls/` or `quic/`, the plant CA given, mutual
+/// authentication on, a certificate to show. `cfg` is the session's
+/// configuration as it will be opened, the Zenoh file included.
+///
+/// # Errors
+/// [`ZenohError::Insecure`], naming the Zenoh key and what to do.
+pub fn secure(cfg: &zenoh::Config, plain: bool) -> Result<(), ZenohError> {
+    if plain {
+        return Ok(());
+    }
+    let insecure = |key: &str, value: String, reason: &str| ZenohError::Insecure {
+        key: key.into(),
+        value,
+        reason: reason.into(),
+    };
+    let json = |key: &str| -> serde_json::Value {
+        cfg.get_json(key)
+            .ok()
+            .and_then(|j| serde_json::from_str(&j).ok())
+            .unwrap_or(serde_json::Value::Null)
+    };
+    let mut listening = false;
+    for key in ["listen/endpoints", "connect/endpoints"] {
+        // A list, or a list per mode ({router: [...], peer: [...]}).
+        let value = json(key);
+        let lists: Vec<&serde_json::Value> = match &value {
+            serde_json::Value::Object(per_mode) => per_mode.values().collect(),
+            other => vec![other],
+        };
+        for e in lists.into_iter().filter_map(|l| l.as_array()).flatten() {
+            let e = e.as_str().unwrap_or_default();
+            if key.starts_with("listen") {
+                listening = true;
+            }
+            if !(e.starts_with("tls/") || e.starts_with("quic/")) {
+                return Err(insecure(
+                    key,
+                    e.into(),
+                    "not a TLS endpoint: the bus takes tls/host:port (or quic/); write zenoh.plain = true (CLI: --plain) to accept a bus without encryption or authentication",
+                ));
+            }
+        }
+    }
+    let tls = |name: &str| json(&format!("transport/link/tls/{name}"));
+    let given = |v: serde_json::Value| v.as_str().is_some_and(|s| !s.is_empty());
+    if !given(tls("root_ca_certificate")) {
+        return Err(insecure(
+            "transport/link/tls/root_ca_certificate",
+            "none".into(),
+            "no plant CA: give [zenoh.tls] (CLI: --tls-ca, --tls-cert, --tls-key), made by `cellwatch pki`",
+        ));
+    }
+    if tls("enable_mtls") != serde_json::Value::Bool(true) {
+        return Err(insecure(
+            "transport/link/tls/enable_mtls",
+            tls("enable_mtls").to_string(),
+            "mutual TLS must be on: every node shows a certificate from the plant CA",
+        ));
+    }
+    let own = if listening {
+        ["listen_certificate", "listen_private_key"]
+    } else {
+        ["connect_certificate", "connect_private_key"]
+    };
+    for name in own {
+        if !given(tls(name)) {
+            return Err(insecure(
+                &format!("transport/link/tls/{name}"),
+                "none".into(),
+                "no certificate of this node's own from the plant CA (`cellwatch pki issue`)",
+            ));
+        }
+    }
+    Ok(())
 }
 
 fn set(cfg: &mut zenoh::Config, key: &str, value: String) -> Result<(), ZenohError> {
@@ -132,30 +224,31 @@ fn set(cfg: &mut zenoh::Config, key: &str, value: String) -> Result<(), ZenohErr
         })
 }
 
-/// The access control of an agent's own session: nobody else may publish,
-/// delete, declare a queryable, answer or hold a liveliness token under the
-/// agent's prefix through it. Everything else (subscribing, querying) is
-/// allowed; who may reach the agent at all is TLS's business.
-pub fn agent_access_control(prefix: &str) -> String {
-    let keys =
-        serde_json::to_string(&[prefix.to_string(), format!("{prefix}/**")]).unwrap_or_default();
-    format!(
-        r#"{{
+/// The access control of an agent's own session: an agent speaks for its
+/// own cell only and routes for nobody. No other session may publish,
+/// delete, declare a queryable, answer or hold a liveliness token through
+/// it, under any key (the advanced publishers' `@adv` keys included):
+/// whatever another session puts, it never reaches anyone by way of an
+/// agent, so in peer mode an agent is never a relay for an impostor.
+/// Subscribing and querying are allowed; who may reach the agent at all is
+/// TLS's business.
+pub fn agent_access_control() -> String {
+    r#"{
   enabled: true,
   default_permission: "allow",
   rules: [
-    {{
-      id: "only-this-agent-speaks-for-its-cell",
+    {
+      id: "an-agent-routes-for-nobody",
       messages: ["put", "delete", "declare_queryable", "reply", "liveliness_token"],
       flows: ["ingress"],
       permission: "deny",
-      key_exprs: {keys},
-    }},
+      key_exprs: ["**", "**/@adv/**"],
+    },
   ],
-  subjects: [{{ id: "anyone" }}],
-  policies: [{{ rules: ["only-this-agent-speaks-for-its-cell"], subjects: ["anyone"] }}],
-}}"#
-    )
+  subjects: [{ id: "anyone" }],
+  policies: [{ rules: ["an-agent-routes-for-nobody"], subjects: ["anyone"] }],
+}"#
+    .to_string()
 }
 
 /// Opens a client's session (CLI, tests): it fails when no endpoint it
@@ -191,7 +284,7 @@ async fn open_config(cfg: zenoh::Config) -> Result<Session, ZenohError> {
 /// [`services::MAX_MESSAGE_BYTES`] is accepted from the network (Zenoh
 /// drops it while reassembling), so whatever arrives, the agent's memory
 /// stays bounded; and its access control ([`agent_access_control`]) lets
-/// nobody else publish or answer under its prefix through it.
+/// nobody else publish or answer through it.
 ///
 /// # Errors
 /// As [`open`].
@@ -202,6 +295,6 @@ pub async fn open_agent(c: &ZenohConfig) -> Result<Session, ZenohError> {
         "transport/link/rx/max_message_size",
         services::MAX_MESSAGE_BYTES.to_string(),
     )?;
-    set(&mut cfg, "access_control", agent_access_control(&c.prefix))?;
+    set(&mut cfg, "access_control", agent_access_control())?;
     open_config(cfg).await
 }

@@ -1,5 +1,6 @@
-//! Publication on the bus: alarm events and machine state, and the agent's
-//! liveliness token. This is the Zenoh sink of the cell loop.
+//! Publication on the bus: alarm events and machine state, each sealed in
+//! a signed envelope ([`super::envelope`]), and the agent's liveliness
+//! token. This is the Zenoh sink of the cell loop.
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -11,6 +12,7 @@ use zenoh::liveliness::LivelinessToken;
 use zenoh::Session;
 use zenoh_ext::{AdvancedPublisher, AdvancedPublisherBuilderExt, CacheConfig, MissDetectionConfig};
 
+use super::envelope::{AgentKey, Kind};
 use super::ZenohError;
 use crate::cell::CellStep;
 use crate::metrics::Metrics;
@@ -28,6 +30,8 @@ pub struct ZenohPublisher {
     state: AdvancedPublisher<'static>,
     /// Present while the agent runs; undeclared by [`Sink::close`].
     agent: LivelinessToken,
+    /// Seals every payload put.
+    key: Arc<AgentKey>,
     metrics: Arc<Metrics>,
 }
 
@@ -39,6 +43,7 @@ impl ZenohPublisher {
     pub async fn start(
         session: Session,
         prefix: &str,
+        key: Arc<AgentKey>,
         metrics: Arc<Metrics>,
     ) -> Result<ZenohPublisher, ZenohError> {
         let declare_error = |key: String| {
@@ -67,6 +72,7 @@ impl ZenohPublisher {
             alarms: HashMap::new(),
             state,
             agent,
+            key,
             metrics,
         })
     }
@@ -112,7 +118,14 @@ impl ZenohPublisher {
                 }
             }
         };
-        if let Err(e) = publisher.put(json).await {
+        let sealed = self.key.seal(
+            Kind::Put,
+            &format!("{}/alarms/{id}", self.prefix),
+            "",
+            crate::clock::now_ms(),
+            json,
+        );
+        if let Err(e) = publisher.put(sealed).await {
             tracing::error!(alarm = id, error = %e, "alarm publication failed");
             self.metrics.zenoh_publish_errors.inc();
         }
@@ -120,7 +133,14 @@ impl ZenohPublisher {
 
     /// Publishes the machine state on `state`.
     pub async fn state(&self, json: String) {
-        if let Err(e) = self.state.put(json).await {
+        let sealed = self.key.seal(
+            Kind::Put,
+            &format!("{}/state", self.prefix),
+            "",
+            crate::clock::now_ms(),
+            json,
+        );
+        if let Err(e) = self.state.put(sealed).await {
             tracing::error!(error = %e, "state publication failed");
             self.metrics.zenoh_publish_errors.inc();
         }

@@ -30,6 +30,7 @@ use tokio::task::JoinSet;
 use zenoh::query::Query;
 use zenoh::Session;
 
+use super::envelope::{AgentKey, Kind as Sealed};
 use super::ZenohError;
 use crate::cell::{CommandOutcome, Request};
 use crate::clock::{now_ms, parse_time};
@@ -68,7 +69,16 @@ pub struct Services {
     permits: Arc<Semaphore>,
     /// Bounds the history queries among them.
     history_permits: Arc<Semaphore>,
+    /// Seals every answer, on the queryable's own key.
+    seal: Seal,
     metrics: Arc<Metrics>,
+}
+
+/// What sealing an answer needs: the agent's key and its prefix.
+#[derive(Clone)]
+struct Seal {
+    key: Arc<AgentKey>,
+    prefix: String,
 }
 
 impl Services {
@@ -79,6 +89,7 @@ impl Services {
     pub async fn declare(
         session: &Session,
         prefix: &str,
+        key: Arc<AgentKey>,
         journal: &Journal,
         requests: mpsc::Sender<Request>,
         metrics: Arc<Metrics>,
@@ -105,6 +116,10 @@ impl Services {
             requests,
             permits: Arc::new(Semaphore::new(MAX_CONCURRENT)),
             history_permits: Arc::new(Semaphore::new(MAX_CONCURRENT_HISTORY)),
+            seal: Seal {
+                key,
+                prefix: prefix.into(),
+            },
             metrics,
         })
     }
@@ -129,13 +144,21 @@ impl Services {
             let permit = self.permits.clone().try_acquire_owned().ok();
             if permit.is_none() || (matches!(kind, Kind::History) && history_permit.is_none()) {
                 self.metrics.refused(kind.name(), "busy");
-                reply(&self.metrics, q, Err("the agent is busy: try again".into())).await;
+                reply(
+                    &self.seal,
+                    kind,
+                    &self.metrics,
+                    q,
+                    Err("the agent is busy: try again".into()),
+                )
+                .await;
                 continue;
             }
-            let (journal, settled, requests, metrics) = (
+            let (journal, settled, requests, seal, metrics) = (
                 self.journal.clone(),
                 self.journal_settled.clone(),
                 self.requests.clone(),
+                self.seal.clone(),
                 self.metrics.clone(),
             );
             answering.spawn(async move {
@@ -154,7 +177,7 @@ impl Services {
                     Kind::Snapshot => snapshot(&requests).await,
                     Kind::Command => command(&requests, &q, &metrics).await,
                 };
-                reply(&metrics, q, result).await;
+                reply(&seal, kind, &metrics, q, result).await;
             });
         }
         answering.shutdown().await;
@@ -275,12 +298,29 @@ async fn command(
     Ok(serde_json::to_string(&outcome).unwrap_or_default())
 }
 
-/// Answers a query with JSON, or with an error text.
-async fn reply(metrics: &Metrics, q: Query, result: Result<String, String>) {
-    let key = q.key_expr().clone();
+/// Answers a query with JSON, or with an error text, sealed: on the
+/// queryable's own key (a query on `cellwatch/*/snapshot` is answered on
+/// `cellwatch/<cell>/snapshot`, which routers' access control can match to
+/// the cell's agent) and bound to the query's parameters.
+async fn reply(
+    seal: &Seal,
+    kind: Kind,
+    metrics: &Metrics,
+    q: Query,
+    result: Result<String, String>,
+) {
+    let key = format!("{}/{}", seal.prefix, kind.name());
+    let parameters = q.parameters().as_str().to_string();
+    let at = now_ms();
     let sent = match result {
-        Ok(json) => q.reply(key, json).await,
-        Err(e) => q.reply_err(e).await,
+        Ok(json) => {
+            let sealed = seal.key.seal(Sealed::Reply, &key, &parameters, at, json);
+            q.reply(key, sealed).await
+        }
+        Err(e) => {
+            let sealed = seal.key.seal(Sealed::Error, &key, &parameters, at, e);
+            q.reply_err(sealed).await
+        }
     };
     if let Err(e) = sent {
         tracing::warn!(error = %e, "reply failed");

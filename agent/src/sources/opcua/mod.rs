@@ -336,7 +336,8 @@ fn array_limit(config: &OpcUaConfig) -> usize {
 /// # Errors
 /// The client configuration is invalid.
 pub fn client(cell: &str, config: &OpcUaConfig) -> Result<opcua::client::Client, SourceError> {
-    ClientBuilder::new()
+    let key_existed = crate::sources::pki::own_key(&config.pki_dir).exists();
+    let client = ClientBuilder::new()
         .application_name(format!("cellwatch {cell}"))
         .application_uri(format!("urn:cellwatch:agent:{cell}"))
         .product_uri("urn:cellwatch")
@@ -365,7 +366,10 @@ pub fn client(cell: &str, config: &OpcUaConfig) -> Result<opcua::client::Client,
         // subscription without publish requests.
         .recreate_subscriptions(false)
         .client()
-        .map_err(|e| SourceError::Client(e.join("; ")))
+        .map_err(|e| SourceError::Client(e.join("; ")))?;
+    crate::sources::pki::protect_own_key(&config.pki_dir, key_existed)
+        .map_err(SourceError::Client)?;
+    Ok(client)
 }
 
 /// Runs the source until `shutdown` completes: connects (retrying with
