@@ -260,7 +260,7 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
         let mut known = agents(&s, root, cell, timeout).await.unwrap_or_default();
         loop {
             tokio::select! {
-                _ = tokio::signal::ctrl_c() => break,
+                _ = super::agent::stop_requested() => break,
                 sample = sub.recv_async() => {
                     let Ok(sample) = sample else { break };
                     let text = text(sample.payload());
