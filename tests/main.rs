@@ -24,6 +24,7 @@ mod operators;
 mod real_programs;
 mod report;
 mod restart;
+mod robust;
 mod scheduling;
 mod sf;
 mod sfc;

@@ -173,8 +173,11 @@ impl LimitChecks {
             } else {
                 check.off_delay
             };
-            if now.saturating_sub(since) < delay {
-                self.due.insert((since + delay, i));
+            // At most the end of time: a delay that runs past it has run
+            // out there.
+            let due = since.saturating_add(delay);
+            if now < due {
+                self.due.insert((due, i));
                 continue;
             }
             s.active = wants;

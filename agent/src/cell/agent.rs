@@ -7,6 +7,9 @@
 //! and the metrics server.
 //! [`Agent::stop`] ends them all, joins them, and closes the Zenoh session,
 //! so its liveliness token disappears and its ports are free again.
+//! [`Agent::wait`] returns when the agent cannot go on by itself (its source
+//! failed or its cell loop ended, a panic included), so that the process
+//! ends and its supervisor starts it again.
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -91,6 +94,28 @@ pub struct Options {
     pub source: Option<Box<dyn Source>>,
     /// Where the time comes from (the system's unless a test sets one).
     pub clock: Clock,
+    /// More sinks, after the agent's own (journal, bus, metrics, console):
+    /// each step goes to them last, inside the cell loop (tests that watch
+    /// the steps, or make the loop fail on purpose).
+    pub sinks: Vec<Box<dyn Sink>>,
+}
+
+/// Why an agent could not go on by itself ([`Agent::wait`]).
+#[derive(Debug, thiserror::Error)]
+pub enum Ended {
+    /// Its source could not run.
+    #[error("the source cannot run: {0}")]
+    Source(SourceError),
+    /// Its source ended.
+    #[error("the source stopped")]
+    SourceStopped,
+    /// Its cell loop panicked (the panic's message); the loop closed its
+    /// sinks first.
+    #[error("the cell loop panicked: {0}")]
+    LoopPanicked(String),
+    /// Its cell loop ended without being told to.
+    #[error("the cell loop stopped")]
+    LoopStopped,
 }
 
 /// A running agent.
@@ -174,15 +199,51 @@ impl Agent {
     }
 
     /// Waits until the agent cannot go on by itself: its source could not
-    /// run (the error), or it ended.
-    pub async fn wait(&mut self) -> Option<SourceError> {
-        let source = self.source.as_mut()?;
-        let result = source.await;
-        self.source = None;
-        match result {
-            Ok(Err(e)) => Some(e),
-            _ => None,
+    /// run or ended, or its cell loop ended (a panic: the loop has closed
+    /// its sinks, its rows are committed and its liveliness token is
+    /// gone). [`Agent::stop`] still stops the rest; a panic reported here
+    /// is not raised again there. Pending forever once it has said.
+    pub async fn wait(&mut self) -> Ended {
+        let Agent {
+            source, cell_loop, ..
+        } = self;
+        let from_source = async {
+            match source.as_mut() {
+                Some(task) => task.await,
+                None => std::future::pending().await,
+            }
+        };
+        let from_loop = async {
+            match cell_loop.as_mut() {
+                Some(task) => task.await,
+                None => std::future::pending().await,
+            }
+        };
+        tokio::select! {
+            result = from_source => {
+                *source = None;
+                match result {
+                    Ok(Err(e)) => Ended::Source(e),
+                    _ => Ended::SourceStopped,
+                }
+            }
+            result = from_loop => {
+                *cell_loop = None;
+                match result {
+                    Err(e) if e.is_panic() => Ended::LoopPanicked(panic_message(&*e.into_panic())),
+                    _ => Ended::LoopStopped,
+                }
+            }
         }
+    }
+}
+
+/// What a panic said, if it said it in text.
+fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
+    match (panic.downcast_ref::<&str>(), panic.downcast_ref::<String>()) {
+        (Some(s), _) => (*s).to_string(),
+        (_, Some(s)) => s.clone(),
+        _ => "a panic without a message".into(),
     }
 }
 
@@ -274,6 +335,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     if let Some(observer) = options.observer {
         sinks.push(Box::new(ConsoleSink::new(observer)));
     }
+    sinks.extend(options.sinks);
     let forcing = super::force::Forcing::of(&config);
     let mut source = match options.source {
         Some(source) => source,

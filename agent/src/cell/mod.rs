@@ -26,7 +26,7 @@ use cellwatch_models::engine::{CellEngine, HistoryKind, Step, Value};
 use cellwatch_models::value::Num;
 use tokio::sync::{mpsc, oneshot, watch};
 
-pub use agent::{start, start_with, Agent, Options, StartError};
+pub use agent::{start, start_with, Agent, Ended, Options, StartError};
 
 use crate::clock::{rfc3339, Clock};
 use crate::operator::{clip, Action, Command, Gate, NotACommand};
@@ -424,8 +424,32 @@ impl CellLoop {
 
     /// Runs until `shutdown` completes (or every input is closed), then
     /// closes the sinks.
+    ///
+    /// # Panics
+    /// A step panicked (in the engine or a sink): the sinks are closed
+    /// first (the journal commits what it was given, the liveliness token
+    /// is undeclared), then the panic goes on.
     pub async fn run(
         mut self,
+        source: mpsc::Receiver<SourceEvent>,
+        requests: mpsc::Receiver<Request>,
+        shutdown: impl Future<Output = ()>,
+    ) {
+        use futures_util::FutureExt;
+        let served = std::panic::AssertUnwindSafe(self.serve(source, requests, shutdown))
+            .catch_unwind()
+            .await;
+        for sink in self.sinks {
+            sink.close().await;
+        }
+        if let Err(panic) = served {
+            std::panic::resume_unwind(panic);
+        }
+    }
+
+    /// The loop itself: every input until `shutdown`.
+    async fn serve(
+        &mut self,
         mut source: mpsc::Receiver<SourceEvent>,
         mut requests: mpsc::Receiver<Request>,
         shutdown: impl Future<Output = ()>,
@@ -474,9 +498,6 @@ impl CellLoop {
                 _ = beat.tick() => self.beat().await,
             }
         }
-        for sink in self.sinks {
-            sink.close().await;
-        }
     }
 
     /// When the loop must next look at the time: the engine's next
@@ -484,7 +505,10 @@ impl CellLoop {
     /// and at the latest one [`TICK`] from now.
     fn next_wake(&self) -> tokio::time::Instant {
         let now = self.clock.now_ms();
-        let engine = self.engine.next_deadline().map(|d| d + self.allowance);
+        let engine = self
+            .engine
+            .next_deadline()
+            .map(|d| d.saturating_add(self.allowance));
         let force = self.forcing.deadline();
         let after = [engine, force]
             .into_iter()

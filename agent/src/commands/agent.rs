@@ -1,4 +1,12 @@
 //! `cellwatch run`, `validate` and `demo`: the agent itself.
+//!
+//! `run` and `demo` stop cleanly on Ctrl-C (SIGINT) and on SIGTERM, what
+//! systemd, Docker and Kubernetes send ([`StopSignals`]): every agent is
+//! stopped (its journal rows committed, its chart switches written off,
+//! its liveliness token undeclared) and the process exits 0. An agent that
+//! cannot go on by itself (its source failed, its cell loop panicked) stops
+//! the process with status 1 after the same, the log naming the cell and
+//! why, so that its supervisor starts it again.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -63,10 +71,58 @@ pub(crate) fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<(), F
     writeln!(out, "ok").map_err(io)
 }
 
+/// The signals that stop a command cleanly: Ctrl-C (SIGINT) and SIGTERM
+/// (what systemd, Docker and Kubernetes send). Listened to from the moment
+/// they are made, so that one sent while the agent starts is not lost.
+pub(crate) struct StopSignals {
+    interrupt: tokio::signal::unix::Signal,
+    terminate: tokio::signal::unix::Signal,
+}
+
+impl StopSignals {
+    /// Starts listening (the signals no longer end the process by
+    /// themselves).
+    ///
+    /// # Errors
+    /// The system refuses the handlers.
+    pub(crate) fn listen() -> Result<StopSignals, Failure> {
+        use tokio::signal::unix::{signal, SignalKind};
+        let listen = |kind| {
+            signal(kind)
+                .map_err(|e| Failure::Runtime(format!("cannot listen for stop signals: {e}")))
+        };
+        Ok(StopSignals {
+            interrupt: listen(SignalKind::interrupt())?,
+            terminate: listen(SignalKind::terminate())?,
+        })
+    }
+
+    /// The next stop signal, by name.
+    pub(crate) async fn recv(&mut self) -> &'static str {
+        tokio::select! {
+            _ = self.interrupt.recv() => "SIGINT",
+            _ = self.terminate.recv() => "SIGTERM",
+        }
+    }
+}
+
+/// The next Ctrl-C or SIGTERM, by name (Ctrl-C only where the handlers
+/// cannot be set).
+pub(crate) async fn stop_requested() -> &'static str {
+    match StopSignals::listen() {
+        Ok(mut signals) => signals.recv().await,
+        Err(_) => {
+            let _ = tokio::signal::ctrl_c().await;
+            "SIGINT"
+        }
+    }
+}
+
 /// `cellwatch run CONFIG...`: one agent per configuration, in this
-/// process, until interrupted or one cannot go on. Cells reading the same
-/// `@` bus share one poller on it.
+/// process, until a stop signal or one cannot go on. Cells reading the
+/// same `@` bus share one poller on it.
 pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
+    let mut signals = StopSignals::listen()?;
     let mut configs = Vec::new();
     for path in &args.config {
         configs.push((path.clone(), load(path)?));
@@ -129,8 +185,14 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
     }
     let waits = agents.iter_mut().map(|a| Box::pin(a.wait()));
     let failed = tokio::select! {
-        _ = tokio::signal::ctrl_c() => None,
-        (e, i, _) = futures_util::future::select_all(waits) => Some((i, e)),
+        signal = signals.recv() => {
+            tracing::info!(signal, "stopping");
+            None
+        }
+        (ended, i, _) = futures_util::future::select_all(waits) => {
+            tracing::error!(cell = %started[i], why = %ended, "the agent cannot go on; stopping every cell");
+            Some((i, ended))
+        }
     };
     let _ = stop_buses.send(true);
     for agent in agents {
@@ -141,14 +203,7 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
     }
     match failed {
         None => Ok(()),
-        Some((i, Some(e))) => Err(Failure::runtime(format!(
-            "cell {}: the source cannot run: {e}",
-            started[i]
-        ))),
-        Some((i, None)) => Err(Failure::Runtime(format!(
-            "cell {}: the source stopped",
-            started[i]
-        ))),
+        Some((i, ended)) => Err(Failure::Runtime(format!("cell {}: {ended}", started[i]))),
     }
 }
 
@@ -333,6 +388,7 @@ fn endpoint_addr(endpoint: &str) -> Result<std::net::SocketAddr, Failure> {
 /// `cellwatch demo`: a simulated CNC served over OPC UA and an agent
 /// watching it, in one process; alarms printed as they happen.
 pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    let mut signals = StopSignals::listen()?;
     let mut c = load(&args.config)?;
     let state: PathBuf = args.state_dir.clone();
     std::fs::create_dir_all(&state)
@@ -550,7 +606,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     loop {
         tokio::select! {
             _ = &mut deadline => break,
-            _ = tokio::signal::ctrl_c() => break,
+            _ = signals.recv() => break,
             Some(note) = note_rx.recv() => writeln!(out, "{}  plc    {note}", clock()).map_err(io)?,
             Some(n) = rx.recv() => {
                 if let Notice::Alarm(a) = &n {

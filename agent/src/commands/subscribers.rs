@@ -274,7 +274,7 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
         }
         loop {
             tokio::select! {
-                _ = tokio::signal::ctrl_c() => break,
+                _ = super::agent::stop_requested() => break,
                 sample = sub.recv_async() => {
                     let Ok(sample) = sample else { break };
                     let key = sample.key_expr().as_str();

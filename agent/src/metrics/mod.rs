@@ -41,6 +41,8 @@ pub struct Metrics {
     pub tag_updates: IntCounter,
     /// Deliveries ignored as duplicates.
     pub duplicate_updates: IntCounter,
+    /// Values whose source timestamp was earlier than one already seen.
+    pub out_of_order: IntCounter,
     /// Tags whose value is unknown now.
     pub tags_unknown: IntGauge,
     /// Changes fed to checks.
@@ -224,6 +226,11 @@ impl Metrics {
             duplicate_updates: reg!(IntCounter::with_opts(opts(
                 "cellwatch_tag_duplicate_updates_total",
                 "Tag values delivered again (after a subscription was recreated) and ignored.",
+                cell
+            ))),
+            out_of_order: reg!(IntCounter::with_opts(opts(
+                "cellwatch_out_of_order_readings_total",
+                "Tag values whose source timestamp was earlier than one already seen, taken at the latest time seen (no duration measured through them).",
                 cell
             ))),
             tags_unknown: reg!(IntGauge::with_opts(opts(

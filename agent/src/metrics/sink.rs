@@ -157,6 +157,7 @@ impl MetricsSink {
             self.last_update = Some(step.at);
         }
         m.duplicate_updates.inc_by(e.duplicates);
+        m.out_of_order.inc_by(e.out_of_order);
         m.check_evaluations.inc_by(e.evaluations);
         if e.unknown_delta != 0 {
             m.tags_unknown.add(e.unknown_delta);

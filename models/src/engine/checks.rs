@@ -74,6 +74,22 @@ pub trait CheckSet: Send + Sync {
         out: &mut Vec<Finding>,
     );
 
+    /// A change like [`CheckSet::on_change`] that came out of time order:
+    /// its source time was earlier than one the engine had already seen,
+    /// and `now` is that latest time instead. A set that measures the time
+    /// between changes measures nothing through this one (no verdict on a
+    /// time that is not known); others take it as any change.
+    fn on_change_out_of_order(
+        &mut self,
+        signal: &Signal,
+        value: Option<bool>,
+        before: Option<bool>,
+        now: u64,
+        out: &mut Vec<Finding>,
+    ) {
+        self.on_change(signal, value, before, now, out);
+    }
+
     /// The signals it reads as numbers (limit checks).
     fn number_inputs(&self) -> Vec<Signal> {
         Vec::new()

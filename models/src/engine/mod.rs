@@ -21,7 +21,12 @@
 //!   timers suspend on unknown signals they read;
 //! - a lost connection is one `communication` alarm, not one per tag;
 //! - a value delivered twice (the same value with the same or an older
-//!   source timestamp, as after a subscription is recreated) is ignored.
+//!   source timestamp, as after a subscription is recreated) is ignored;
+//! - a reading whose source timestamp is earlier than one already seen
+//!   (out of order: publishes crossing, a PLC clock set back) is taken at
+//!   the latest time seen, so that no check sees time go back, and counted
+//!   ([`Step::out_of_order`]); checks that measure time between changes
+//!   measure nothing through it ([`CheckSet::on_change_out_of_order`]).
 //!
 //! Every counter the agent reports (unknown tags, duplicates, active fault
 //! alarms) is kept incrementally: the cost of a reading does not grow with
@@ -147,6 +152,9 @@ pub struct Step {
     pub readings: u64,
     /// Values ignored as duplicates.
     pub duplicates: u64,
+    /// Values whose source timestamp was earlier than one already seen,
+    /// taken at the latest time seen.
+    pub out_of_order: u64,
     /// Changes of value (or to unknown) fed to the checks.
     pub evaluations: u64,
     /// Change in the number of tags whose value is unknown.
@@ -345,6 +353,11 @@ pub struct CellEngine {
     /// Numbers and strings (`None` for boolean tags).
     others: Vec<Option<Value>>,
     timestamps: Vec<Option<u64>>,
+    /// The latest source timestamp seen: the checks' time never goes
+    /// back from it.
+    latest: Option<u64>,
+    /// The reading being handled came out of time order.
+    untimed: bool,
     /// Tags of bad quality; with what came, if it was of the wrong type.
     bad: BTreeMap<usize, Option<(ValueType, Option<ValueType>)>>,
     /// How many tags are unknown now.
@@ -491,6 +504,8 @@ impl CellEngine {
             values: vec![None; n],
             others: vec![None; n],
             timestamps: vec![None; n],
+            latest: None,
+            untimed: false,
             bad: BTreeMap::new(),
             unknown: configured,
             sets,
@@ -863,8 +878,20 @@ impl CellEngine {
         };
         findings.clear();
         // Checks time events by when the PLC saw them, not when they
-        // arrived: delivery jitter is not motion time.
-        let at = r.source_time;
+        // arrived: delivery jitter is not motion time. One earlier than
+        // the latest seen is taken at the latest, and said to be out of
+        // order.
+        let at = match self.latest {
+            Some(latest) if r.source_time < latest => {
+                step.out_of_order += 1;
+                self.untimed = true;
+                latest
+            }
+            _ => {
+                self.latest = Some(r.source_time);
+                r.source_time
+            }
+        };
         let changed = match &r.reading {
             Reading::Good(v) => self.set_value(tag, Some(*v), at, findings, step),
             Reading::Number(n) => self.set_other(tag, Some(Value::Num(*n)), at, findings, step),
@@ -875,6 +902,7 @@ impl CellEngine {
                 self.set_unknown(tag, at, findings, step)
             }
         };
+        self.untimed = false;
         if quality_changed {
             findings.push(self.quality_finding());
         }
@@ -892,7 +920,7 @@ impl CellEngine {
         let sets = self.sets.iter().filter_map(|s| s.next_deadline());
         let delayed = self.pending.iter().map(|(id, (since, f))| {
             let (on, off) = self.delays.get(id).copied().unwrap_or_default();
-            since + if f.active { on } else { off }
+            since.saturating_add(if f.active { on } else { off })
         });
         sets.chain(delayed).chain(self.alarms.next_expiry()).min()
     }
@@ -913,7 +941,7 @@ impl CellEngine {
             .iter()
             .filter(|(id, (since, f))| {
                 let (on, off) = self.delays.get(*id).copied().unwrap_or_default();
-                now.saturating_sub(*since) >= if f.active { on } else { off }
+                now >= since.saturating_add(if f.active { on } else { off })
             })
             .map(|(id, _)| id.clone())
             .collect();
@@ -1152,7 +1180,12 @@ impl CellEngine {
         }
         let address = &self.tags[tag].address;
         for &k in self.readers.of(tag) {
-            self.sets[k as usize].on_change(address, value, before, now, findings);
+            let set = &mut self.sets[k as usize];
+            if self.untimed {
+                set.on_change_out_of_order(address, value, before, now, findings);
+            } else {
+                set.on_change(address, value, before, now, findings);
+            }
         }
         self.running_reads[tag]
     }

@@ -110,7 +110,7 @@ pub fn learn(sfc: &Sfc, runs: &[RunLog], min_support: Option<usize>) -> StepsLea
                 match (c.value, rose) {
                     (true, _) => rose = Some(c.at),
                     (false, Some(at)) => {
-                        durations.push(c.at - at);
+                        durations.push(c.at.saturating_sub(at));
                         rose = None;
                     }
                     (false, None) => {}

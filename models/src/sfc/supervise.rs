@@ -227,7 +227,7 @@ impl CheckSet for SfcChecks {
                     Some(true) if before != Some(true) => {
                         self.since.insert(r, now);
                         if let Some(sup) = self.sfc.step(r).supervision_ms {
-                            self.deadlines.insert((now + sup, r));
+                            self.deadlines.insert((now.saturating_add(sup), r));
                         }
                     }
                     Some(false) => {
@@ -236,7 +236,7 @@ impl CheckSet for SfcChecks {
                         }
                         if let Some(since) = self.since.remove(&r) {
                             if let Some(sup) = self.sfc.step(r).supervision_ms {
-                                self.deadlines.remove(&(since + sup, r));
+                                self.deadlines.remove(&(since.saturating_add(sup), r));
                             }
                         }
                     }

@@ -206,6 +206,21 @@ impl CheckSet for TimerChecks {
         self.findings(outcomes, out);
     }
 
+    fn on_change_out_of_order(
+        &mut self,
+        signal: &Signal,
+        value: Option<bool>,
+        _before: Option<bool>,
+        now: u64,
+        out: &mut Vec<Finding>,
+    ) {
+        let Some(&s) = self.by_signal.get(signal) else {
+            return;
+        };
+        let outcomes = self.monitor.set_untimed(s, value, now);
+        self.findings(outcomes, out);
+    }
+
     fn advance(&mut self, now: u64, out: &mut Vec<Finding>) {
         let outcomes = self.monitor.advance(now);
         self.findings(outcomes, out);
@@ -328,6 +343,52 @@ mod tests {
                 ..
             }
         ));
+    }
+
+    #[test]
+    fn an_event_out_of_time_order_is_counted_and_raises_nothing() {
+        let tags = vec![
+            Tag {
+                name: "move".into(),
+                address: Signal::new("Y1.00"),
+            },
+            Tag {
+                name: "arrived".into(),
+                address: Signal::new("X1.00"),
+            },
+        ];
+        let checks = TimerChecks::new("line", &model(), Severity::High, |n| {
+            tags.iter().find(|t| t.name == n).map(|t| t.address.clone())
+        })
+        .unwrap();
+        let mut e =
+            CellEngine::new("c", tags, vec![Box::new(checks)], StateRules::default()).unwrap();
+        e.on_connection(true, 0);
+        e.on_reading(0, Reading::Good(false), 0, 0);
+        e.on_reading(1, Reading::Good(false), 0, 0);
+        e.on_reading(0, Reading::Good(true), 10_000, 10_000);
+        // The sensor stamped 2 s before the motion started: no "early", no
+        // panic, counted.
+        let step = e.on_reading(1, Reading::Good(true), 8_000, 10_010);
+        assert_eq!(step.out_of_order, 1);
+        assert!(step.events.is_empty(), "{:?}", step.events);
+        assert!(step.observations.is_empty());
+        // Nothing armed is left to fall late.
+        assert_eq!(e.next_deadline(), None);
+        assert!(e.advance(20_000).events.is_empty());
+        // The next cycle in order is measured again.
+        e.on_reading(0, Reading::Good(false), 20_000, 20_000);
+        e.on_reading(1, Reading::Good(false), 20_000, 20_000);
+        e.on_reading(0, Reading::Good(true), 21_000, 21_000);
+        let step = e.on_reading(1, Reading::Good(true), 27_000, 27_000);
+        assert_eq!(step.out_of_order, 0);
+        assert_eq!(
+            step.observations,
+            [crate::engine::Observation {
+                check: "line-007".into(),
+                ms: 6000
+            }]
+        );
     }
 
     #[test]

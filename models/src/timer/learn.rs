@@ -291,7 +291,7 @@ pub fn full_state(runs: &[RunLog], options: &LearnOptions) -> Learned {
             value[g] = c.value;
             let to = state(&value);
             let key = (from, g, c.value, to);
-            let dt = c.at - entered;
+            let dt = c.at.saturating_sub(entered);
             entered = c.at;
             if !groups.contains_key(&key) {
                 order.push(key.clone());
@@ -548,10 +548,10 @@ fn time_shares(a: &Aligned) -> Vec<f64> {
         for &(at, s, v) in ch {
             for (sig, h) in high.iter_mut().enumerate() {
                 if value[sig] {
-                    *h += at - t;
+                    *h += at.saturating_sub(t);
                 }
             }
-            total += at - t;
+            total += at.saturating_sub(t);
             t = at;
             value[s] = v;
         }

@@ -12,6 +12,14 @@
 //! left another way). A signal whose value is unknown (bad quality, lost
 //! connection) disarms every transition that reads it and keeps it
 //! disarmed until the value is known again: no false alarm.
+//!
+//! Times are the PLC's (source timestamps), and they may come out of order
+//! (two publishes crossing, a PLC clock set back). A change earlier than
+//! the latest known value's time is a change whose place in time is not
+//! known: it disarms every transition that reads its signal and arms none,
+//! so no duration is measured through it ([`TimerMonitor::set_untimed`]).
+//! A time at the end of the range never overflows: a deadline beyond it
+//! is the end of the range.
 
 use std::collections::{BTreeSet, HashMap};
 
@@ -98,6 +106,9 @@ pub struct TimerMonitor {
     /// The armed transitions by deadline (armed + Δt + τ): time passing
     /// costs only the transitions that fall due.
     due: BTreeSet<(u64, usize)>,
+    /// The time of the latest known value: a change before it is out of
+    /// order.
+    latest: Option<u64>,
 }
 
 impl TimerMonitor {
@@ -198,6 +209,7 @@ impl TimerMonitor {
             readers,
             armed: vec![None; n],
             due: BTreeSet::new(),
+            latest: None,
         })
     }
 
@@ -205,13 +217,19 @@ impl TimerMonitor {
     fn arm(&mut self, k: usize, at: u64) {
         self.disarm(k);
         self.armed[k] = Some(at);
-        self.due.insert((at + self.transitions[k].hi, k));
+        self.due.insert((self.deadline(k, at), k));
     }
 
     fn disarm(&mut self, k: usize) {
         if let Some(since) = self.armed[k].take() {
-            self.due.remove(&(since + self.transitions[k].hi, k));
+            self.due.remove(&(self.deadline(k, since), k));
         }
+    }
+
+    /// When transition `k`, armed at `since`, is late (Δt + τ later, at
+    /// most the end of time).
+    fn deadline(&self, k: usize, since: u64) -> u64 {
+        since.saturating_add(self.transitions[k].hi)
     }
 
     /// How many transitions are armed now (waiting for their event).
@@ -243,8 +261,15 @@ impl TimerMonitor {
     }
 
     /// Signal `s` became `value` (`None`: unknown) at `at`; late outcomes
-    /// due before `at` are reported first.
+    /// due before `at` are reported first. A change earlier than the latest
+    /// known value is taken as [`TimerMonitor::set_untimed`].
     pub fn set(&mut self, s: usize, value: Option<bool>, at: u64) -> Vec<Outcome> {
+        if self.latest.is_some_and(|latest| at < latest) {
+            return self.set_untimed(s, value, at);
+        }
+        if value.is_some() {
+            self.latest = Some(at);
+        }
         let mut out = self.advance(at);
         let old = self.values[s];
         if old == value {
@@ -258,7 +283,8 @@ impl TimerMonitor {
             let t = &self.transitions[k];
             let is_event = t.event.0 == s && value == Some(t.event.1) && old == Some(!t.event.1);
             if is_event {
-                let theta = at - since;
+                // Armed by a change no later than this one (`latest`).
+                let theta = at.saturating_sub(since);
                 out.push(if theta <= t.lo {
                     Outcome::Early {
                         transition: t.id,
@@ -268,7 +294,7 @@ impl TimerMonitor {
                 } else if theta >= t.hi {
                     Outcome::Late {
                         transition: t.id,
-                        at_ms: since + t.hi,
+                        at_ms: since.saturating_add(t.hi),
                     }
                 } else {
                     Outcome::Normal {
@@ -283,19 +309,7 @@ impl TimerMonitor {
                 self.disarm(k);
             }
         }
-        self.values[s] = value;
-        let (w, b) = (s / 64, 1u64 << (s % 64));
-        match value {
-            Some(v) => {
-                self.known[w] |= b;
-                if v {
-                    self.bits[w] |= b;
-                } else {
-                    self.bits[w] &= !b;
-                }
-            }
-            None => self.known[w] &= !b,
-        }
+        self.store(s, value);
         for &k in &readers {
             let t = &self.transitions[k];
             let start = match t.trigger {
@@ -315,6 +329,41 @@ impl TimerMonitor {
         }
         self.readers[s] = readers;
         out
+    }
+
+    /// Signal `s` became `value` at a time not known to be in order with
+    /// the others (its source time `at` is earlier than one already seen):
+    /// its value is taken, and every transition reading it is disarmed
+    /// without a verdict and none is armed by it. Late outcomes due by
+    /// `at` are reported first.
+    pub fn set_untimed(&mut self, s: usize, value: Option<bool>, at: u64) -> Vec<Outcome> {
+        let out = self.advance(at);
+        if self.values[s] == value {
+            return out;
+        }
+        for i in 0..self.readers[s].len() {
+            let k = self.readers[s][i];
+            self.disarm(k);
+        }
+        self.store(s, value);
+        out
+    }
+
+    /// Keeps signal `s`'s value and its bits.
+    fn store(&mut self, s: usize, value: Option<bool>) {
+        self.values[s] = value;
+        let (w, b) = (s / 64, 1u64 << (s % 64));
+        match value {
+            Some(v) => {
+                self.known[w] |= b;
+                if v {
+                    self.bits[w] |= b;
+                } else {
+                    self.bits[w] &= !b;
+                }
+            }
+            None => self.known[w] &= !b,
+        }
     }
 
     /// Time is now `now`: every armed transition past Δt + τ is late.
@@ -464,6 +513,71 @@ mod tests {
             [Outcome::Late {
                 transition: 1,
                 at_ms: 3140
+            }]
+        );
+    }
+
+    #[test]
+    fn a_change_out_of_time_order_gives_no_verdict() {
+        // Armed at 1000; the event stamped 900, before the arming: whether
+        // it came before or after is not known, so no outcome, and the
+        // transition is disarmed.
+        let mut m = monitor();
+        assert!(m.set(2, Some(true), 900).is_empty());
+        assert_eq!(m.armed(), 0);
+        assert!(m.advance(5000).is_empty());
+        // The state entered again by a change stamped before the latest
+        // one: not armed.
+        m.set(2, Some(false), 5000);
+        m.set(1, Some(false), 5001);
+        assert!(m.set(1, Some(true), 4000).is_empty());
+        assert_eq!(m.armed(), 0);
+        assert!(m.advance(10_000).is_empty());
+        // In order again: armed and judged as before.
+        m.set(1, Some(false), 10_001);
+        m.set(1, Some(true), 10_002);
+        assert_eq!(
+            m.advance(10_142),
+            [Outcome::Late {
+                transition: 1,
+                at_ms: 10_142
+            }]
+        );
+        // Duplicate times are in order.
+        m.set(1, Some(false), 10_200);
+        m.set(1, Some(true), 10_200);
+        assert_eq!(
+            m.set(2, Some(true), 10_200),
+            [Outcome::Early {
+                transition: 1,
+                at_ms: 10_200,
+                observed_ms: 0
+            }]
+        );
+    }
+
+    #[test]
+    fn times_at_the_end_of_the_range_do_not_overflow() {
+        let mut m = monitor();
+        m.set(1, Some(false), u64::MAX - 5);
+        m.set(1, Some(true), u64::MAX - 5);
+        assert_eq!(m.next_deadline(), Some(u64::MAX));
+        assert_eq!(
+            m.advance(u64::MAX),
+            [Outcome::Late {
+                transition: 1,
+                at_ms: u64::MAX
+            }]
+        );
+        // Armed at the end of time: its deadline is there too, and falls
+        // due before the event at the same time is looked at.
+        m.set(1, Some(false), u64::MAX);
+        m.set(1, Some(true), u64::MAX);
+        assert_eq!(
+            m.set(2, Some(true), u64::MAX),
+            [Outcome::Late {
+                transition: 1,
+                at_ms: u64::MAX
             }]
         );
     }

@@ -7,7 +7,9 @@
 //! power cut. [`Journal::commit`] returns once its rows are on disk;
 //! [`Journal::write`] and [`Journal::queue_staged`] do not wait. After each
 //! commit the writer also publishes the number of rows committed so far
-//! ([`Journal::committed`]).
+//! ([`Journal::committed`]). Every row handed to the journal and not yet
+//! committed — staged, queued, or in the writer's batch — is counted, and
+//! the count reported ([`CommitObserver::pending`]) as it changes.
 //!
 //! [`sink::JournalSink`] is the cell loop's side: it turns each step into
 //! rows, [`Journal::stage`]s them before the step goes on the bus and
@@ -313,6 +315,8 @@ pub struct Journal {
     path: PathBuf,
     /// Steps whose rows are promised but not yet queued.
     staging: Arc<Staging>,
+    /// Rows handed over and not yet committed.
+    uncommitted: Arc<Uncommitted>,
     /// The writer thread, joined by [`Journal::close`].
     thread: Arc<std::sync::Mutex<Option<std::thread::JoinHandle<()>>>>,
 }
@@ -325,6 +329,33 @@ struct Staging {
     staged: AtomicU64,
     /// The number of staged steps whose rows are queued.
     queued: watch::Sender<u64>,
+}
+
+/// Rows handed to the journal and not yet committed (staged, queued, or
+/// in the writer's batch), reported at every change; the lock keeps the
+/// reports in the order of the changes, so the last one is the count.
+struct Uncommitted {
+    rows: std::sync::Mutex<u64>,
+    observer: Arc<dyn CommitObserver>,
+}
+
+impl Uncommitted {
+    fn add(&self, n: usize) {
+        self.change(|rows| rows.saturating_add(n as u64), n);
+    }
+
+    fn remove(&self, n: usize) {
+        self.change(|rows| rows.saturating_sub(n as u64), n);
+    }
+
+    fn change(&self, f: impl FnOnce(u64) -> u64, n: usize) {
+        if n == 0 {
+            return;
+        }
+        let mut rows = self.rows.lock().unwrap_or_else(|e| e.into_inner());
+        *rows = f(*rows);
+        self.observer.pending(*rows as usize);
+    }
 }
 
 /// Waits until every row queued before the call is committed, or known
@@ -365,13 +396,15 @@ impl Barrier {
     }
 }
 
-/// What the writer thread reports after each batch.
-pub trait CommitObserver: Send + 'static {
+/// What the writer thread reports after each batch, and the count of rows
+/// not yet committed as it changes (from the writer and the cell loop).
+pub trait CommitObserver: Send + Sync + 'static {
     /// A batch of `rows` rows was committed in `took`.
     fn committed(&self, rows: usize, took: Duration);
     /// A write failed; its rows are kept and retried.
     fn failed(&self, error: &str);
-    /// `rows` rows wait to be written.
+    /// `rows` rows are not yet committed (staged, queued, or in the
+    /// writer's batch).
     fn pending(&self, _rows: usize) {}
     /// The queue of unwritten rows was full: the `rows` oldest were dropped.
     fn dropped(&self, _rows: usize) {}
@@ -402,6 +435,12 @@ impl Journal {
         let (committed_tx, committed) = watch::channel(existing);
         let (health_tx, health) = watch::channel(None);
         let p = path.to_path_buf();
+        let observer: Arc<dyn CommitObserver> = Arc::new(observer);
+        let uncommitted = Arc::new(Uncommitted {
+            rows: std::sync::Mutex::new(0),
+            observer: observer.clone(),
+        });
+        let counted = uncommitted.clone();
         let thread = std::thread::Builder::new()
             .name("journal-writer".into())
             .spawn(move || {
@@ -409,6 +448,7 @@ impl Journal {
                     committed: committed_tx,
                     health: health_tx,
                     observer,
+                    uncommitted: counted,
                 };
                 writer(conn, rx, reports, existing, retention, p)
             })
@@ -425,15 +465,18 @@ impl Journal {
                 staged: AtomicU64::new(0),
                 queued: watch::Sender::new(0),
             }),
+            uncommitted,
             thread: Arc::new(std::sync::Mutex::new(Some(thread))),
         })
     }
 
-    /// Promises rows to come with [`Journal::queue_staged`]: a barrier
-    /// taken from now on waits for them. Returns the step's number, to
-    /// hand to `queue_staged`. Wakes no one: the cell loop stages its rows
-    /// before the step goes on the bus and queues them after.
-    pub fn stage(&self) -> u64 {
+    /// Promises `rows` rows to come with [`Journal::queue_staged`]: a
+    /// barrier taken from now on waits for them, and they count as not
+    /// yet committed. Returns the step's number, to hand to
+    /// `queue_staged`. Wakes no one: the cell loop stages its rows before
+    /// the step goes on the bus and queues them after.
+    pub fn stage(&self, rows: usize) -> u64 {
+        self.uncommitted.add(rows);
         self.staging.staged.fetch_add(1, Ordering::SeqCst) + 1
     }
 
@@ -444,7 +487,7 @@ impl Journal {
     /// The writer has stopped (the staged steps count as queued: no
     /// barrier waits for them).
     pub async fn queue_staged(&self, entries: Vec<Entry>, step: u64) -> Result<(), JournalError> {
-        let sent = self.send(entries, None).await;
+        let sent = self.send(entries, None, true).await;
         self.staging.queued.send_if_modified(|q| {
             let later = step > *q;
             *q = (*q).max(step);
@@ -459,7 +502,7 @@ impl Journal {
     /// # Errors
     /// The writer has stopped.
     pub async fn write(&self, entry: Entry) -> Result<(), JournalError> {
-        self.send(vec![entry], None).await
+        self.send(vec![entry], None, false).await
     }
 
     /// Writes `entries` and returns once they are committed.
@@ -468,7 +511,7 @@ impl Journal {
     /// The commit failed or the writer has stopped.
     pub async fn commit(&self, entries: Vec<Entry>) -> Result<(), JournalError> {
         let (done, committed) = oneshot::channel();
-        self.send(entries, Some(done)).await?;
+        self.send(entries, Some(done), false).await?;
         match committed.await {
             Ok(Ok(())) => Ok(()),
             Ok(Err(message)) => Err(JournalError::Commit {
@@ -479,15 +522,24 @@ impl Journal {
         }
     }
 
+    /// Hands `entries` to the writer; `staged`: they are counted already
+    /// ([`Journal::stage`]).
     async fn send(
         &self,
         entries: Vec<Entry>,
         done: Option<oneshot::Sender<Result<(), String>>>,
+        staged: bool,
     ) -> Result<(), JournalError> {
-        self.tx
-            .send(Batch { entries, done })
-            .await
-            .map_err(|_| self.stopped())
+        let rows = entries.len();
+        if !staged {
+            self.uncommitted.add(rows);
+        }
+        let sent = self.tx.send(Batch { entries, done }).await;
+        if sent.is_err() {
+            // Never to be committed: no longer waiting.
+            self.uncommitted.remove(rows);
+        }
+        sent.map_err(|_| self.stopped())
     }
 
     fn stopped(&self) -> JournalError {
@@ -538,6 +590,8 @@ impl Journal {
 pub const MAX_PENDING_ROWS: usize = 100_000;
 /// How often a failing journal is retried when nothing new arrives.
 pub const RETRY: Duration = Duration::from_secs(1);
+/// How long a closed journal keeps retrying rows it could not write yet.
+pub const CLOSE_GRACE: Duration = Duration::from_secs(5);
 
 /// What the writer thread reports on.
 struct Reports<O> {
@@ -546,12 +600,14 @@ struct Reports<O> {
     /// `Some(why)` while nothing can be written.
     health: watch::Sender<Option<String>>,
     observer: O,
+    /// Rows not yet committed, less those it commits or drops.
+    uncommitted: Arc<Uncommitted>,
 }
 
 fn writer(
     mut conn: Connection,
     mut rx: mpsc::Receiver<Batch>,
-    reports: Reports<impl CommitObserver>,
+    reports: Reports<Arc<dyn CommitObserver>>,
     mut total: u64,
     retention: Duration,
     path: PathBuf,
@@ -560,6 +616,7 @@ fn writer(
         committed,
         health,
         observer,
+        uncommitted,
     } = reports;
     let mut last_purge = Instant::now();
     purge(&conn, retention, &path);
@@ -569,6 +626,8 @@ fn writer(
     // the journal stopped being writable.
     let mut pending: std::collections::VecDeque<Entry> = std::collections::VecDeque::new();
     let mut waiting = Vec::new();
+    // When the journal was closed with rows still to write.
+    let mut closing: Option<Instant> = None;
     loop {
         // Failing: retry at least every RETRY; otherwise wait for rows.
         let first = if pending.is_empty() {
@@ -577,17 +636,13 @@ fn writer(
                 None => break,
             }
         } else {
+            // Closed or not, the next attempt waits for its time.
             let deadline = Instant::now() + RETRY;
             loop {
                 match rx.try_recv() {
                     Ok(b) => break Some(b),
-                    Err(mpsc::error::TryRecvError::Disconnected) => break None,
-                    Err(mpsc::error::TryRecvError::Empty) if Instant::now() >= deadline => {
-                        break None
-                    }
-                    Err(mpsc::error::TryRecvError::Empty) => {
-                        std::thread::sleep(Duration::from_millis(20));
-                    }
+                    Err(_) if Instant::now() >= deadline => break None,
+                    Err(_) => std::thread::sleep(Duration::from_millis(20)),
                 }
             }
         };
@@ -610,12 +665,12 @@ fn writer(
             pending.drain(..lost);
             tracing::error!(path = %path.display(), rows = lost, "journal unwritable and its queue full: oldest rows dropped");
             observer.dropped(lost);
+            uncommitted.remove(lost);
         }
         let failing = health.borrow().is_some();
         if failing && last_attempt.elapsed() < RETRY {
             // Retried at its pace, not at every step's.
             let why = health.borrow().clone().unwrap_or_default();
-            observer.pending(pending.len());
             for done in waiting.drain(..) {
                 let _ = done.send(Err(format!("{why} (rows queued)")));
             }
@@ -627,11 +682,12 @@ fn writer(
                 Ok(()) => {
                     total += rows.len() as u64;
                     observer.committed(rows.len(), started.elapsed());
+                    // The count before the commit and the health are
+                    // told: whoever sees either sees none of these rows
+                    // pending.
+                    uncommitted.remove(rows.len());
                     let _ = committed.send(total);
                     pending.clear();
-                    // The metrics before the health: whoever sees the
-                    // journal alarm clear sees no rows pending.
-                    observer.pending(0);
                     if health.borrow().is_some() {
                         tracing::info!(path = %path.display(), "journal writable again");
                         let _ = health.send(None);
@@ -641,9 +697,9 @@ fn writer(
                 Err(e) => {
                     let why = e.to_string();
                     // The metrics before the health: whoever sees the
-                    // journal alarm sees the failure and the rows kept.
+                    // journal alarm sees the failure (and the rows kept,
+                    // counted when they came).
                     observer.failed(&why);
-                    observer.pending(pending.len());
                     if health.borrow().as_deref() != Some(why.as_str()) {
                         tracing::error!(path = %path.display(), error = %why, rows = pending.len(), "journal write failed; rows kept and retried");
                         let _ = health.send(Some(why.clone()));
@@ -661,7 +717,13 @@ fn writer(
             }
         }
         if closed {
-            break;
+            // Closing: rows it could not write yet are retried for a
+            // while (a journal busy for a moment when the agent is told
+            // to stop).
+            let since = *closing.get_or_insert_with(Instant::now);
+            if pending.is_empty() || since.elapsed() >= CLOSE_GRACE {
+                break;
+            }
         }
         if last_purge.elapsed() > Duration::from_secs(3600) {
             purge(&conn, retention, &path);
@@ -1285,7 +1347,7 @@ mod tests {
         // The cell loop stages a step's rows before the bus has the alarm;
         // a client that saw it asks for history (a barrier) before the
         // rows are queued.
-        let step = j.stage();
+        let step = j.stage(1);
         let barrier = j.barrier();
         let mut settled = std::pin::pin!(barrier.settled());
         // Everything queued after the barrier is committed, and the
@@ -1395,6 +1457,48 @@ mod tests {
         }
     }
 
+    /// The last count of rows not yet committed the observer was told.
+    fn last_pending(watch: &Watch) -> Option<String> {
+        watch
+            .log()
+            .into_iter()
+            .rev()
+            .find(|(w, _)| w.starts_with("pending "))
+            .map(|(w, _)| w)
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn every_row_not_yet_committed_counts_as_pending() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("j.sqlite");
+        let now = crate::clock::now_ms();
+        let watch = Watch::default();
+        let j = Journal::start(&path, Duration::from_secs(3600), watch.clone()).unwrap();
+        // Busy for a moment: another connection holds the write lock.
+        let admin = Connection::open(&path).unwrap();
+        admin.execute_batch("BEGIN IMMEDIATE").unwrap();
+        // A step's rows staged (the bus has not seen it yet), five rows
+        // queued one by one behind the writer's first batch, which waits
+        // for the lock.
+        let step = j.stage(3);
+        assert_eq!(last_pending(&watch).as_deref(), Some("pending 3"));
+        for n in 0..5 {
+            j.write(state(now, n)).await.unwrap();
+        }
+        assert_eq!(last_pending(&watch).as_deref(), Some("pending 8"));
+        // Queued at last: still not committed, counted once.
+        j.queue_staged((5..8).map(|n| state(now, n)).collect(), step)
+            .await
+            .unwrap();
+        assert_eq!(last_pending(&watch).as_deref(), Some("pending 8"));
+        // Free again: all eight committed, none pending.
+        admin.execute_batch("COMMIT").unwrap();
+        let mut committed = j.committed();
+        committed.wait_for(|&n| n == 8).await.unwrap();
+        assert_eq!(last_pending(&watch).as_deref(), Some("pending 0"));
+        j.close().await;
+    }
+
     #[tokio::test]
     async fn an_unwritable_journal_keeps_its_rows_and_writes_them_later() {
         let dir = tempfile::tempdir().unwrap();
@@ -1412,16 +1516,15 @@ mod tests {
         let big: Vec<Entry> = (1..400).map(|n| state(now, n)).collect();
         assert!(j.commit(big).await.is_err());
         health.wait_for(Option::is_some).await.unwrap();
-        // The failure and the rows kept were counted before the journal
-        // said it was failing: whoever sees its alarm sees them.
+        // The rows kept were counted when they came, and the failure
+        // before the journal said it was failing: whoever sees its alarm
+        // sees both.
         let log = watch.log();
         let failed = log.iter().position(|(w, _)| w == "failed").unwrap();
+        assert_eq!(log[failed], ("failed".to_string(), false));
         assert_eq!(
-            log[failed..failed + 2],
-            [
-                ("failed".to_string(), false),
-                ("pending 399".to_string(), false)
-            ]
+            log[..failed].last(),
+            Some(&("pending 399".to_string(), false))
         );
         // Released: the queued rows are written at the next retry, none
         // lost.

@@ -119,7 +119,8 @@ impl Sink for JournalSink {
             // too), so no one is shown what a crash would forget. A journal
             // that cannot write keeps the rows in its bounded queue and
             // retries (the cell loop raises the `journal` alarm).
-            self.staged = Some((rows, self.journal.stage()));
+            let step = self.journal.stage(rows.len());
+            self.staged = Some((rows, step));
         }
         .boxed()
     }

@@ -19,6 +19,12 @@
 //!   reconnects with exponential backoff; on a new session the source
 //!   recreates its subscription, then [`SourceEvent::Connected`]. Values delivered again after the
 //!   re-creation are filtered by the engine (same value, same timestamp).
+//! - The charts' force and stop switches are the only writes, each a pulse
+//!   (on, held, off). None is left on by the agent: on every (re)connected
+//!   session every switch found on is written off first (an agent killed
+//!   during a pulse, or a session lost during one), and on shutdown a pulse
+//!   under way is cut short and every switch found on written off before
+//!   the session is closed.
 
 use std::collections::BTreeMap;
 use std::future::Future;
@@ -254,6 +260,61 @@ async fn set_switch(session: &Session, id: &NodeId, name: &str, on: bool) -> Res
     }
 }
 
+/// Writes off every switch that reads anything but off (their safe
+/// state), each read back; how many were written, or what failed.
+async fn switches_off(session: &Session, switches: &[(String, TagNode)]) -> Result<usize, String> {
+    if switches.is_empty() {
+        return Ok(0);
+    }
+    let namespaces = namespace_array(session)
+        .await
+        .map_err(|e| format!("cannot read the namespace array: {e}"))?;
+    let mut written = 0;
+    let mut failed = Vec::new();
+    for (name, node) in switches {
+        let Some(id) = node.resolve(&namespaces) else {
+            failed.push(format!("{name}: its namespace is not on the server"));
+            continue;
+        };
+        let read = session
+            .read(
+                &[ReadValueId::from(id.clone())],
+                TimestampsToReturn::Neither,
+                0.0,
+            )
+            .await;
+        if let Ok(values) = &read {
+            if matches!(
+                values.first().and_then(|v| v.value.as_ref()),
+                Some(Variant::Boolean(false))
+            ) {
+                continue;
+            }
+        }
+        match set_switch(session, &id, name, false).await {
+            Ok(()) => match read_back(session, &id, name, false).await {
+                Ok(()) => written += 1,
+                Err(e) => failed.push(e),
+            },
+            Err(e) => failed.push(e),
+        }
+    }
+    if failed.is_empty() {
+        Ok(written)
+    } else {
+        Err(failed.join("; "))
+    }
+}
+
+/// [`switches_off`], its outcome logged: `when` says why.
+async fn reset_switches(session: &Session, switches: &[(String, TagNode)], when: &str) {
+    match switches_off(session, switches).await {
+        Ok(0) => tracing::debug!(when, "chart switches all off"),
+        Ok(n) => tracing::warn!(switches = n, when, "chart switches found on, written off"),
+        Err(e) => tracing::error!(error = %e, when, "chart switches not written off"),
+    }
+}
+
 /// How long a written switch may take to read back as written.
 const READ_BACK: Duration = Duration::from_secs(2);
 
@@ -404,6 +465,21 @@ async fn run_writing(
 ) -> Result<(), SourceError> {
     // Pulses under way; each writes its switch off before it ends.
     let mut pulses = tokio::task::JoinSet::new();
+    // Every switch it may write, with its node: all written off on each
+    // (re)connected session and on shutdown.
+    let switch_nodes: Arc<Vec<(String, TagNode)>> = Arc::new(
+        writes
+            .switches
+            .iter()
+            .filter_map(|(&tag, name)| {
+                Some((name.clone(), tags.nodes.get(tag).cloned().flatten()?))
+            })
+            .collect(),
+    );
+    // Taken by a pulse for its whole length and by the writing-off on a
+    // (re)connected session, in the order they were started: a switch
+    // written off after a reconnection never cuts a later pulse short.
+    let switching = Arc::new(tokio::sync::Mutex::new(()));
     let mut client = client(cell, config)?;
     // Anonymous or user name: the server's endpoint says which token
     // policies it accepts.
@@ -448,14 +524,21 @@ async fn run_writing(
         loop {
             tokio::select! {
                 _ = &mut shutdown => {
-                    // A pulse under way ends (its switch written off)
-                    // first, with the event loop polled.
+                    // A pulse under way is cut short, and every switch is
+                    // written off, with the event loop polled.
+                    pulses.abort_all();
+                    supervisor.abort_all();
+                    let off = reset_switches(&session, &switch_nodes, "stopping");
+                    tokio::pin!(off);
                     let limit = tokio::time::sleep(Duration::from_secs(5));
                     tokio::pin!(limit);
-                    while !pulses.is_empty() {
+                    loop {
                         tokio::select! {
-                            _ = &mut limit => break,
-                            _ = pulses.join_next() => {}
+                            () = &mut off => break,
+                            _ = &mut limit => {
+                                tracing::error!("chart switches not written off within 5 s");
+                                break;
+                            }
                             item = events.next() => if item.is_none() { break },
                         }
                     }
@@ -483,7 +566,9 @@ async fn run_writing(
                         Err(why) => { let _ = w.reply.send(Err(why)); }
                         Ok((held, name, node)) => {
                             let session = session.clone();
+                            let switching = switching.clone();
                             pulses.spawn(async move {
+                                let _turn = switching.lock_owned().await;
                                 let done = pulse(session, node, name, held).await;
                                 match &done {
                                     Ok(d) => tracing::info!(write = %d, "switch pulsed"),
@@ -522,6 +607,19 @@ async fn run_writing(
                         let new_session = !subscribed || matches!(mode, SessionConnectMode::NewSession(_));
                         subscribed = true;
                         supervisor.abort_all();
+                        // Whatever a pulse cut short (this agent's or a
+                        // killed one's) left on is written off first.
+                        if !switch_nodes.is_empty() {
+                            let (session, switches, switching) = (session.clone(), switch_nodes.clone(), switching.clone());
+                            let turn = switching.clone().try_lock_owned();
+                            supervisor.spawn(async move {
+                                let _turn = match turn {
+                                    Ok(turn) => turn,
+                                    Err(_) => switching.lock_owned().await,
+                                };
+                                reset_switches(&session, &switches, "connected").await;
+                            });
+                        }
                         supervisor.spawn(supervise(session.clone(), ctx.clone(), current.clone(), new_session));
                     }
                     Some(Ok(other)) => tracing::debug!(event = ?other, "OPC UA session event"),
