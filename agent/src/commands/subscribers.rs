@@ -196,13 +196,15 @@ fn print_alarm(out: &mut dyn Write, a: &AlarmPayload, json: bool) -> std::io::Re
     if let Some(r) = &a.out_of_service {
         kept += &format!("OUT OF SERVICE since {} by {} ({})  ", r.at, r.by, r.reason);
     }
-    writeln!(
-        out,
+    // Operators' and the journal's text on one line each: a newline in a
+    // reason never prints a line of its own.
+    let line = format!(
         "{}  {}/{}  {kept}{} {} [{}] {}{step}: {}",
         a.at, a.cell, a.id, a.transition, a.state, a.severity, a.fault_type, a.message
-    )?;
+    );
+    writeln!(out, "{}", crate::operator::escaped(&line))?;
     for c in &a.culprits {
-        writeln!(out, "    {}", c.line())?;
+        writeln!(out, "    {}", crate::operator::escaped(&c.line()))?;
     }
     Ok(())
 }
@@ -475,7 +477,8 @@ fn print_rows(out: &mut dyn Write, rows: &serde_json::Value) -> Result<(), Failu
                 f["detail"].as_str().unwrap_or("")
             ),
         };
-        writeln!(out, "{at}  {line}").map_err(io)?;
+        // A newline in an operator's text never prints a line of its own.
+        writeln!(out, "{at}  {}", crate::operator::escaped(&line)).map_err(io)?;
     }
     Ok(())
 }
@@ -647,6 +650,7 @@ async fn signed(t: Target<'_>, args: &SignerArgs, out: &mut dyn Write) -> Result
         issued_at: crate::clock::now_ms(),
         signature: String::new(),
     };
+    cmd.check_text().map_err(Failure::input)?;
     cmd.sign(t.cell, &key);
     let s = session(&args.zenoh).await?;
     let timeout = Duration::from_secs(args.zenoh.timeout_secs);

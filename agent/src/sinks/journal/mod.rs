@@ -24,6 +24,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Weak};
 use std::time::{Duration, Instant};
 
+pub mod chain;
 pub mod sink;
 
 use rusqlite::{params, Connection, OpenFlags};
@@ -102,8 +103,13 @@ pub enum Entry {
         /// Why it was refused, or what it did.
         detail: String,
         /// Which row of its command (`command`, or `request`, `check`,
-        /// `write`, `result` of a force or stop).
+        /// `write`, `result` of a write, force or stop; `refused` before a
+        /// signature was verified).
         stage: String,
+        /// Where the query came from, as it said (refused rows), or empty.
+        source: String,
+        /// How many refusals the row stands for; 1 for other rows.
+        count: u64,
     },
 }
 
@@ -244,6 +250,12 @@ const MIGRATIONS: &[(&str, &str, &str)] = &[
     ("commands", "verified", "INTEGER NOT NULL DEFAULT 0"),
     ("production", "parts", "INTEGER NOT NULL DEFAULT 1"),
     ("commands", "stage", "TEXT NOT NULL DEFAULT 'command'"),
+    ("commands", "source", "TEXT NOT NULL DEFAULT ''"),
+    ("commands", "count", "INTEGER NOT NULL DEFAULT 1"),
+    // The hash chain (`chain`): empty in rows written before it.
+    ("commands", "chain_index", "INTEGER"),
+    ("commands", "prev_hash", "TEXT"),
+    ("commands", "hash", "TEXT"),
 ];
 
 fn migrate(conn: &Connection) -> rusqlite::Result<()> {
@@ -564,6 +576,10 @@ fn writer(
     let mut last_purge = Instant::now();
     purge(&conn, retention, &path);
     let mut seq = last_seq(&conn);
+    let mut chain = chain::Link::last(&conn).unwrap_or_else(|e| {
+        tracing::error!(path = %path.display(), error = %e, "cannot read the end of the command rows' hash chain; it starts again");
+        chain::Link::default()
+    });
     let mut last_attempt = Instant::now();
     // Rows not yet committed, oldest first: a batch, or everything since
     // the journal stopped being writable.
@@ -623,7 +639,7 @@ fn writer(
             last_attempt = Instant::now();
             let started = Instant::now();
             let rows = pending.make_contiguous();
-            let outcome = match write_batch(&mut conn, rows, &mut seq) {
+            let outcome = match write_batch(&mut conn, rows, &mut seq, &mut chain) {
                 Ok(()) => {
                     total += rows.len() as u64;
                     observer.committed(rows.len(), started.elapsed());
@@ -688,11 +704,18 @@ fn last_seq(conn: &Connection) -> i64 {
         .unwrap_or(0)
 }
 
-/// Writes `batch` in one transaction, numbering rows from `*seq + 1`;
-/// `*seq` moves only if the transaction commits.
-fn write_batch(conn: &mut Connection, batch: &[Entry], seq: &mut i64) -> rusqlite::Result<()> {
+/// Writes `batch` in one transaction, numbering rows from `*seq + 1` and
+/// chaining command rows after `*chain`; `*seq` and `*chain` move only if
+/// the transaction commits.
+fn write_batch(
+    conn: &mut Connection,
+    batch: &[Entry],
+    seq: &mut i64,
+    chain: &mut chain::Link,
+) -> rusqlite::Result<()> {
     let tx = conn.transaction()?;
     let mut next = *seq;
+    let mut link = chain.clone();
     for e in batch {
         next += 1;
         match e {
@@ -762,16 +785,30 @@ fn write_batch(conn: &mut Connection, batch: &[Entry], seq: &mut i64) -> rusqlit
                 verified,
                 detail,
                 stage,
+                source,
+                count,
             } => {
-                tx.prepare_cached(
-                    "INSERT INTO commands (seq, at_ms, operator, action, alarm, nonce, accepted, verified, detail, stage) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10)",
-                )?
-                .execute(params![next, *at as i64, operator, action, alarm, nonce, *accepted as i64, *verified as i64, detail, stage])?;
+                let row = chain::ChainedRow {
+                    seq: next,
+                    at_ms: *at as i64,
+                    operator,
+                    action,
+                    alarm,
+                    nonce,
+                    accepted: *accepted,
+                    verified: *verified,
+                    detail,
+                    stage,
+                    source,
+                    count: i64::try_from(*count).unwrap_or(i64::MAX),
+                };
+                link = chain::insert(&tx, &row, &link)?;
             }
         }
     }
     tx.commit()?;
     *seq = next;
+    *chain = link;
     Ok(())
 }
 
@@ -916,7 +953,8 @@ fn table_query(table: &str, forward: bool) -> (String, &'static [&'static str], 
         _ => (
             "commands",
             &[
-                "operator", "action", "alarm", "nonce", "accepted", "detail", "stage",
+                "operator", "action", "alarm", "nonce", "accepted", "detail", "stage", "source",
+                "count",
             ],
             "command",
         ),
@@ -1201,6 +1239,8 @@ mod tests {
             verified: false,
             detail: "bad signature".into(),
             stage: "command".into(),
+            source: String::new(),
+            count: 1,
         })
         .await
         .unwrap();
