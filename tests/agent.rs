@@ -400,14 +400,14 @@ async fn only_correctly_signed_acks_are_carried_out_and_all_are_journaled() {
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
     let now = cellwatch::clock::now_ms();
-    let cmd = |nonce: &str| Command {
+    let cmd = || Command {
         action: cellwatch::operator::Action::Ack,
         alarm: "ese".into(),
         tag: None,
         value: None,
         reason: None,
         operator: "kim".into(),
-        nonce: nonce.into(),
+        nonce: cellwatch::operator::nonce(),
         issued_at: now,
         signature: String::new(),
     };
@@ -427,17 +427,14 @@ async fn only_correctly_signed_acks_are_carried_out_and_all_are_journaled() {
             )
         }
     };
-    assert_eq!(
-        send(cmd("n1")).await,
-        (false, "unsigned command".to_string())
-    );
-    let mut wrong = cmd("n2");
+    assert_eq!(send(cmd()).await, (false, "unsigned command".to_string()));
+    let mut wrong = cmd();
     wrong.sign(
         "m01ps0004",
         &cellwatch::operator::OperatorKey::generate("kim"),
     );
     assert_eq!(send(wrong).await, (false, "bad signature".to_string()));
-    let mut good = cmd("n3");
+    let mut good = cmd();
     good.sign("m01ps0004", &crate::spawned::kim());
     assert_eq!(
         send(good.clone()).await,

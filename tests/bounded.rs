@@ -1,6 +1,6 @@
 //! Whatever arrives on the bus, the agent's memory and journal stay
 //! bounded: oversized commands are refused (or never reach it), refused
-//! ones are journaled in under 1 KiB each and never echoed, and concurrent
+//! ones are summarised in the journal (rows under 1 KiB) and never echoed, and concurrent
 //! maximal history queries are answered in bounded pages or refused as
 //! busy. The agent is the real binary; its memory is read from `/proc`.
 
@@ -124,11 +124,13 @@ async fn oversized_commands_and_history_floods_stay_bounded() {
         after >> 20,
         cell.log("agent.log")
     );
-    // The refusals are journaled, each in under 1 KiB.
+    // The refusals are journaled: the first of the minute from this
+    // source in a row of its own, the others counted into one row at the
+    // minute's end (not reached: the agent is killed); each under 1 KiB.
     let (rows_after, bytes_after) = command_bytes(&journal);
     let rows = rows_after - rows_before;
     assert!(
-        rows >= refused as i64,
+        (1..=2).contains(&rows),
         "{rows} command rows for {refused} refusals"
     );
     assert!(

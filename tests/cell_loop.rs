@@ -183,6 +183,7 @@ async fn scripted_source_drives_the_loop_into_the_recording_sink() {
     let (reply, outcome) = oneshot::channel();
     requests
         .send(Request::Command {
+            source: "unknown".into(),
             command: Ok(Command {
                 action: Action::Ack,
                 alarm: "ese".into(),
@@ -190,7 +191,7 @@ async fn scripted_source_drives_the_loop_into_the_recording_sink() {
                 value: None,
                 reason: None,
                 operator: "kim".into(),
-                nonce: "n1".into(),
+                nonce: cellwatch::operator::nonce(),
                 issued_at: cellwatch::clock::now_ms(),
                 signature: String::new(),
             }),

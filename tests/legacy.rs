@@ -450,7 +450,7 @@ async fn bus_cell(serial: bool) {
 /// of three units over TCP or a serial line (every 100 ms), Zenoh with
 /// TLS, the given operators file; an operator's Zenoh session, and the
 /// agent's Zenoh port.
-async fn moulding_agent(
+pub(crate) async fn moulding_agent(
     dir: &std::path::Path,
     operators: &str,
     serial: bool,
@@ -549,14 +549,14 @@ async fn a_target_is_written_only_for_an_operator_allowed_to_write() {
         }
     };
     target_is(1000).await;
-    let write = |operator: &str, value: &str, nonce: &str| Command {
+    let write = |operator: &str, value: &str| Command {
         action: Action::Write,
         alarm: String::new(),
         tag: Some("T2".into()),
         value: Some(value.into()),
         reason: None,
         operator: operator.into(),
-        nonce: nonce.into(),
+        nonce: cellwatch::operator::nonce(),
         issued_at: cellwatch::clock::now_ms(),
         signature: String::new(),
     };
@@ -574,18 +574,18 @@ async fn a_target_is_written_only_for_an_operator_allowed_to_write() {
             )
         }
     };
-    let mut by_lee = write("lee", "1500", "n1");
+    let mut by_lee = write("lee", "1500");
     by_lee.sign("moulding-bus1", &lee);
     let (ok, why) = send(by_lee).await;
     assert_eq!((ok, why.as_str()), (false, "operator 'lee' may not write"));
     assert_eq!(
-        send(write("kim", "1500", "n2")).await,
+        send(write("kim", "1500")).await,
         (false, "unsigned command".to_string())
     );
-    let mut forged = write("kim", "1500", "n3");
+    let mut forged = write("kim", "1500");
     forged.sign("moulding-bus1", &OperatorKey::generate("kim"));
     assert_eq!(send(forged).await, (false, "bad signature".to_string()));
-    let mut too_big = write("kim", "1234567", "n4");
+    let mut too_big = write("kim", "1234567");
     too_big.sign("moulding-bus1", &crate::spawned::kim());
     let (ok, why) = send(too_big).await;
     assert!(!ok && why.contains("is not a quantity"), "{why}");
@@ -595,7 +595,7 @@ async fn a_target_is_written_only_for_an_operator_allowed_to_write() {
         bus.log()
     );
 
-    let mut good = write("kim", "1500", "n5");
+    let mut good = write("kim", "1500");
     good.sign("moulding-bus1", &crate::spawned::kim());
     assert_eq!(
         send(good).await,
@@ -638,7 +638,10 @@ async fn a_target_is_written_only_for_an_operator_allowed_to_write() {
     assert_eq!(r.stdout, "accepted: WJMOULD-7 to unit 02: AC10\n");
     assert_eq!(bus.unit(2).unwrap().item, "MOULD-7");
 
-    // Every command is in the journal with its outcome.
+    // Every command is in the journal with its outcome: a write as its
+    // request (committed before the unit is written) and its result; a
+    // refusal before the signature was verified in a row of its own (the
+    // first of its kind this minute).
     let page: serde_json::Value = serde_json::from_str(
         &query(
             "cellwatch/moulding-bus1/history?kind=command;since=1h".into(),
@@ -647,7 +650,7 @@ async fn a_target_is_written_only_for_an_operator_allowed_to_write() {
         .await,
     )
     .unwrap();
-    let rows: Vec<(String, String, bool)> = page["rows"]
+    let rows: Vec<(String, String, String, bool)> = page["rows"]
         .as_array()
         .unwrap()
         .iter()
@@ -655,21 +658,26 @@ async fn a_target_is_written_only_for_an_operator_allowed_to_write() {
             (
                 r["fields"]["operator"].as_str().unwrap().to_string(),
                 r["fields"]["alarm"].as_str().unwrap().to_string(),
+                r["fields"]["stage"].as_str().unwrap().to_string(),
                 r["fields"]["accepted"]
                     .as_bool()
                     .unwrap_or(r["fields"]["accepted"] == 1),
             )
         })
         .collect();
+    let row = |who: &str, tag: &str, stage: &str, ok| (who.into(), tag.into(), stage.into(), ok);
     assert_eq!(
         rows,
         [
-            ("lee".into(), "T2".into(), false),
-            ("kim".into(), "T2".into(), false),
-            ("kim".into(), "T2".into(), false),
-            ("kim".into(), "T2".into(), false),
-            ("kim".into(), "T2".into(), true),
-            ("kim".into(), "J2".into(), true),
+            row("lee", "T2", "command", false),
+            row("kim", "T2", "refused", false),
+            row("kim", "T2", "refused", false),
+            row("kim", "T2", "request", true),
+            row("kim", "T2", "result", false),
+            row("kim", "T2", "request", true),
+            row("kim", "T2", "result", true),
+            row("kim", "J2", "request", true),
+            row("kim", "J2", "result", true),
         ],
         "{page}"
     );

@@ -12,6 +12,7 @@ mod alarm_management;
 mod bad_input;
 mod bounded;
 mod cell_loop;
+mod commands;
 mod dashboards;
 mod durability;
 mod explain;

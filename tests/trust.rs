@@ -436,3 +436,105 @@ async fn plant_wide_views_work_through_the_shipped_router() {
     agent.stop().await;
     sim.stop();
 }
+
+/// A client that sends the same signed command again (its answer lost,
+/// or the agent restarted meanwhile) gets the original outcome, not
+/// "replayed": the command is carried out once.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn the_same_signed_command_sent_again_gets_its_original_outcome() {
+    use cellwatch::operator::{Action, Command};
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let sim = SimulatedCnc::start(&SimOptions {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        pki_dir: dir.join("sim-pki"),
+        insecure: false,
+        decoy: None,
+    })
+    .await
+    .unwrap();
+    let c = config(dir, &sim.endpoint());
+    crate::util::trust_sim(&c, &dir.join("sim-pki"));
+    let agent = cell::start(c.clone(), None).await.unwrap();
+    let port = crate::util::agent_port(&agent).await;
+    let kim = crate::util::operator_session(dir, "operator-kim", port).await;
+    let alarms = kim
+        .declare_subscriber("cellwatch/m01ps0004/alarms/ese")
+        .await
+        .unwrap();
+    // The subscription is known to the agent once a query has crossed.
+    send_until_answered(&kim, "{}").await;
+    sim.set("X0.06", false).unwrap();
+    loop {
+        let sample = tokio::time::timeout(Duration::from_secs(30), alarms.recv_async())
+            .await
+            .unwrap()
+            .unwrap();
+        if crate::util::opened(sample.payload()).contains("\"transition\":\"raised\"") {
+            break;
+        }
+    }
+    let mut ack = Command {
+        action: Action::Ack,
+        alarm: "ese".into(),
+        tag: None,
+        value: None,
+        reason: None,
+        operator: "kim".into(),
+        nonce: cellwatch::operator::nonce(),
+        issued_at: cellwatch::clock::now_ms(),
+        signature: String::new(),
+    };
+    ack.sign("m01ps0004", &crate::spawned::kim());
+    let ack = serde_json::to_string(&ack).unwrap();
+    let first = send_until_answered(&kim, &ack).await;
+    assert_eq!(first, r#"{"accepted":true,"detail":"ack ese by kim"}"#);
+    assert_eq!(send_until_answered(&kim, &ack).await, first);
+    // After a restart: the outcome read back from the journal.
+    agent.stop().await;
+    let agent = cell::start(c, None).await.unwrap();
+    let port = crate::util::agent_port(&agent).await;
+    let kim = crate::util::operator_session(dir, "operator-kim", port).await;
+    assert_eq!(send_until_answered(&kim, &ack).await, first);
+    // Carried out once: one accepted row for its nonce in the journal.
+    let journal = rusqlite::Connection::open(dir.join("journal.sqlite")).unwrap();
+    let nonce = serde_json::from_str::<serde_json::Value>(&ack).unwrap()["nonce"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let rows: i64 = journal
+        .query_row(
+            "SELECT COUNT(*) FROM commands WHERE nonce = ?1",
+            [&nonce],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert_eq!(rows, 1);
+    agent.stop().await;
+    sim.stop();
+}
+
+/// Sends `payload` to the cell's `command` queryable until an answer comes
+/// (a session just opened may not know the queryable yet); its body.
+async fn send_until_answered(session: &zenoh::Session, payload: &str) -> String {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    loop {
+        let replies = session
+            .get("cellwatch/m01ps0004/command")
+            .payload(payload.to_string())
+            .await
+            .unwrap();
+        if let Ok(reply) = replies.recv_async().await {
+            return match reply.result() {
+                Ok(s) => crate::util::opened(s.payload()),
+                Err(e) => crate::util::opened_or_raw(e.payload()),
+            };
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "the agent never answered"
+        );
+        // Backoff only: the answer itself is the event waited for.
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}

@@ -132,6 +132,8 @@ enum Command {
     /// directory's key pair, a server certificate trusted only from its
     /// `trusted/` folder.
     Discover(DiscoverArgs),
+    /// Check a journal: its command rows' hash chain (audit verify).
+    Audit(commands::audit::Args),
 }
 
 #[derive(Debug, Subcommand)]
@@ -1025,7 +1027,8 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             | Command::Keygen(_)
             | Command::Pki(_)
             | Command::Replay(_)
-            | Command::ExportSt(_) => Ok(()),
+            | Command::ExportSt(_)
+            | Command::Audit(_) => Ok(()),
         }
     })
 }
@@ -1063,6 +1066,7 @@ pub fn run(
         Command::Pki(PkiCommand::AgentKey(args)) => commands::pki::agent_key(&args, out),
         Command::Replay(args) => commands::timers::replay(&args, out),
         Command::ExportSt(args) => commands::timers::export_st(&args, out),
+        Command::Audit(args) => commands::audit::run(&args, out),
         other => asynchronous(other, out),
     };
     match result {

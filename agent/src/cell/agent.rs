@@ -353,6 +353,17 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     for (at, nonce) in restored.nonces {
         gate.remember(at, nonce);
     }
+    let answers = super::answers::Answers::default();
+    for saved in restored.outcomes {
+        let outcome = match saved.outcome {
+            Some((accepted, detail)) => super::CommandOutcome::new(accepted, detail),
+            None => super::CommandOutcome::new(
+                false,
+                "the agent stopped before this command's outcome was known: see its history",
+            ),
+        };
+        answers.restore(saved.nonce, saved.at, outcome);
+    }
     let state = restored.state.as_ref().map(|(_, at, kind)| (*at, *kind));
     let step = engine.restore(
         restored.alarms,
@@ -366,6 +377,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         .restored(step, state)
         .watching_journal(journal_health)
         .writing_to(writer)
+        .answering_again(answers)
         .forcing(forcing);
     let cell_loop = cell_loop
         .spawn(source_rx, requests_rx, stopped(stop_rx.clone()))

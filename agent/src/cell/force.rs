@@ -127,7 +127,7 @@ use super::{
     CellLoop, CommandRecord, Input, Stage, Then, Written, RECORD_FIELD_BYTES, WRITE_TIMEOUT,
 };
 use crate::operator::{clip, Action, Command};
-use crate::sources::{Write, WriteRequest};
+use crate::sources::Write;
 
 impl CellLoop {
     /// Journals one row of a command (and hands it to every sink).
@@ -148,24 +148,17 @@ impl CellLoop {
     ) {
         let target = clip(cmd.value.as_deref().unwrap_or(""), RECORD_FIELD_BYTES);
         let base = CommandRecord {
-            operator: clip(&cmd.operator, RECORD_FIELD_BYTES),
-            action: Some(cmd.action),
-            alarm: target.clone(),
-            nonce: clip(&cmd.nonce, RECORD_FIELD_BYTES),
-            accepted: true,
             verified: gate.is_ok(),
-            detail: String::new(),
-            stage: Stage::Request,
+            ..CommandRecord::of(&cmd, &target, Stage::Request)
         };
         let row = |stage: Stage, accepted: bool, detail: String| CommandRecord {
-            accepted,
-            detail: clip(&detail, 4 * RECORD_FIELD_BYTES),
             stage,
-            ..base.clone()
+            ..base.clone().saying(accepted, &detail)
         };
+        // Taken up (its nonce used) only when its operator may ask for it.
         self.record(row(
             Stage::Request,
-            true,
+            gate.is_ok(),
             format!("{} {target} asked by {}", cmd.action, base.operator),
         ))
         .await;
@@ -203,10 +196,7 @@ impl CellLoop {
             Some((result, why)) => {
                 tracing::warn!(operator = %base.operator, action = %cmd.action, target = %target, "refused: {why}");
                 self.record(result).await;
-                let _ = reply.send(CommandOutcome {
-                    accepted: false,
-                    detail: why,
-                });
+                let _ = reply.send(CommandOutcome::new(false, why));
             }
             None => self.send_pulse(&cmd, &target, base, reply).await,
         }
@@ -375,49 +365,23 @@ impl CellLoop {
             ..base
         };
         let back = self.written_tx.clone();
-        let done = move |detail: String| {
-            let record = CommandRecord {
-                accepted: false,
-                detail,
-                ..record.clone()
-            };
-            Written {
-                record,
-                reply,
-                then,
-            }
+        let done = move |accepted: bool, detail: String| Written {
+            record: record.saying(accepted, &detail),
+            reply,
+            then,
         };
-        let (tx, pending) = oneshot::channel();
-        let sent = match (switch, self.writer.as_ref()) {
-            (Some(switch), Some(writer)) => writer
-                .try_send(WriteRequest {
-                    tag: switch,
-                    what: Write::Pulse(pulse),
-                    reply: tx,
-                })
-                .map_err(|_| "busy: other writes are waiting for the PLC"),
-            _ => Err("this cell's source takes no writes"),
+        let Some(switch) = switch else {
+            let w = done(false, "this cell's source takes no writes".into());
+            return self.written(w).await;
         };
-        if let Err(why) = sent {
-            return self.written(done(why.into())).await;
-        }
+        // The request row, with the nonce, is on disk before the switch
+        // is touched.
+        let written = self.write_when_journaled(switch, Write::Pulse(pulse), WRITE_TIMEOUT + pulse);
         self.start_task(async move {
-            let result = match tokio::time::timeout(WRITE_TIMEOUT + pulse, pending).await {
-                Ok(Ok(r)) => r,
-                Ok(Err(_)) => Err("the source stopped before writing".into()),
-                Err(_) => Err(format!(
-                    "no answer from the PLC within {} s",
-                    (WRITE_TIMEOUT + pulse).as_secs()
-                )),
+            let w = match written.await {
+                Ok(d) => done(true, d),
+                Err(d) => done(false, d),
             };
-            let mut w = done(String::new());
-            match result {
-                Ok(d) => {
-                    w.record.accepted = true;
-                    w.record.detail = clip(&d, 4 * RECORD_FIELD_BYTES);
-                }
-                Err(d) => w.record.detail = clip(&d, 4 * RECORD_FIELD_BYTES),
-            }
             let _ = back.send(w).await;
         });
     }
@@ -433,15 +397,10 @@ impl CellLoop {
             tracing::warn!(detail = %record.detail, "write not done");
         }
         let now = self.clock.now_ms();
-        let outcome = CommandOutcome {
-            accepted: record.accepted,
-            detail: record.detail.clone(),
-        };
+        let outcome = CommandOutcome::new(record.accepted, record.detail.clone());
         let result = |detail: String, accepted| CommandRecord {
             stage: Stage::Result,
-            accepted,
-            detail: clip(&detail, 4 * RECORD_FIELD_BYTES),
-            ..record.clone()
+            ..record.clone().saying(accepted, &detail)
         };
         let ok = record.accepted;
         let failed = result(format!("not done: {}", record.detail), false);
@@ -549,15 +508,14 @@ impl CellLoop {
             verified: true,
             detail: clip(&format!("failed: {why}"), 4 * RECORD_FIELD_BYTES),
             stage: Stage::Result,
+            source: String::new(),
+            count: 1,
         };
         self.record(record).await;
         let step = self.engine.on_system(&alarm, Some(&why), now);
         self.dispatch(now, Input::System, step, 0).await;
         if let Some(reply) = reply {
-            let _ = reply.send(CommandOutcome {
-                accepted: false,
-                detail: format!("failed: {why}"),
-            });
+            let _ = reply.send(CommandOutcome::new(false, format!("failed: {why}")));
         }
     }
 
@@ -579,6 +537,8 @@ impl CellLoop {
             } else {
                 Stage::Result
             },
+            source: String::new(),
+            count: 1,
         };
         self.record(record).await;
         if p.overdue {
@@ -586,10 +546,10 @@ impl CellLoop {
             self.dispatch(now, Input::System, step, 0).await;
         }
         if let Some(reply) = p.reply {
-            let _ = reply.send(CommandOutcome {
+            let _ = reply.send(CommandOutcome::new(
                 accepted,
-                detail: format!("{} forced: {detail}", p.transition),
-            });
+                format!("{} forced: {detail}", p.transition),
+            ));
         }
     }
 }

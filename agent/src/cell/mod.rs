@@ -14,6 +14,7 @@
 //! - [`restore`]: what a restarted agent takes back from its journal.
 
 pub mod agent;
+pub mod answers;
 pub mod compile;
 pub mod force;
 pub mod restore;
@@ -29,7 +30,8 @@ use tokio::sync::{mpsc, oneshot, watch};
 pub use agent::{start, start_with, Agent, Ended, Options, StartError};
 
 use crate::clock::{rfc3339, Clock};
-use crate::operator::{clip, Action, Command, Gate, NotACommand};
+use crate::operator::refusals::{self, Refusals};
+use crate::operator::{clip, Action, Command, Gate, NotACommand, Refusal};
 use crate::payload::{
     AlarmPayload, LastFault, Quality, SnapshotPayload, StatePayload, TagValue, SNAPSHOT_SCHEMA,
 };
@@ -87,6 +89,42 @@ pub struct CommandRecord {
     pub detail: String,
     /// Which part of the command this row records.
     pub stage: Stage,
+    /// Where the query came from, as it says ([`refusals::UNKNOWN_SOURCE`]
+    /// when it does not); kept for refusals before a signature is verified.
+    pub source: String,
+    /// How many refusals the row stands for ([`Stage::Refused`]); 1 for
+    /// every other row.
+    pub count: u64,
+}
+
+impl CommandRecord {
+    /// A row of `cmd` (its sender's fields cut to [`RECORD_FIELD_BYTES`]),
+    /// naming `target` (the alarm, tag, transition or chart).
+    fn of(cmd: &Command, target: &str, stage: Stage) -> CommandRecord {
+        let field = |s: &str| clip(s, RECORD_FIELD_BYTES);
+        CommandRecord {
+            operator: field(&cmd.operator),
+            action: Some(cmd.action),
+            alarm: field(target),
+            nonce: field(&cmd.nonce),
+            accepted: false,
+            verified: false,
+            detail: String::new(),
+            stage,
+            source: String::new(),
+            count: 1,
+        }
+    }
+
+    /// The same row saying `detail` (cut to four times
+    /// [`RECORD_FIELD_BYTES`]).
+    fn saying(self, accepted: bool, detail: &str) -> CommandRecord {
+        CommandRecord {
+            accepted,
+            detail: clip(detail, 4 * RECORD_FIELD_BYTES),
+            ..self
+        }
+    }
 }
 
 /// A row of a command in the journal: a plain command is one row; a
@@ -104,6 +142,10 @@ pub enum Stage {
     Write,
     /// How it ended.
     Result,
+    /// Refused before a known operator's signature was verified: the first
+    /// of its source and reason in a minute, or how many more came
+    /// ([`CommandRecord::count`], [`refusals`]).
+    Refused,
 }
 
 impl Stage {
@@ -115,10 +157,12 @@ impl Stage {
             Stage::Check => "check",
             Stage::Write => "write",
             Stage::Result => "result",
+            Stage::Refused => "refused",
         }
     }
 
-    /// Whether the row ends its command (counted once in the metrics).
+    /// Whether the row ends its command (counted once in the metrics;
+    /// refusals summarised are counted one by one as refused requests).
     pub fn is_final(self) -> bool {
         matches!(self, Stage::Command | Stage::Result)
     }
@@ -173,15 +217,35 @@ pub struct CommandOutcome {
     pub accepted: bool,
     /// What it did, or why not.
     pub detail: String,
+    /// Why it was refused before a known operator's signature was
+    /// verified (`cellwatch_requests_refused_total`'s reason); not sent.
+    #[serde(skip)]
+    pub refused: Option<&'static str>,
+}
+
+impl CommandOutcome {
+    /// The outcome `detail`, accepted or not.
+    pub fn new(accepted: bool, detail: impl Into<String>) -> CommandOutcome {
+        CommandOutcome {
+            accepted,
+            detail: detail.into(),
+            refused: None,
+        }
+    }
 }
 
 /// A request from the services to the loop, answered on its channel.
+// A command is the large one; one per query, moved once through a bounded
+// channel: not worth a box.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug)]
 pub enum Request {
     /// The cell as the engine sees it now.
     Snapshot(oneshot::Sender<SnapshotPayload>),
     /// An operator command (or why the request is not one).
     Command {
+        /// Who sent it, as the query says (see [`refusals`]).
+        source: String,
         /// The parsed command, or why the request is not one.
         command: Result<Command, NotACommand>,
         /// Where the outcome goes.
@@ -217,6 +281,12 @@ pub struct CellLoop {
     max_shelve: Duration,
     /// The charts' switches and the force under way.
     forcing: force::Forcing,
+    /// Refusals before a signature was verified, counted per source and
+    /// reason for the journal's summaries (bounded).
+    refusals: Refusals,
+    /// Recent verified commands' outcomes, for a client that sends one
+    /// again (its answer lost, the agent restarted).
+    answers: answers::Answers,
     /// How long after a deadline the loop waits for a change that happened
     /// in time at the PLC but is still on its way (the source's publishing
     /// interval), ms.
@@ -282,6 +352,8 @@ impl CellLoop {
             written_tx,
             written_rx,
             forcing: force::Forcing::default(),
+            refusals: Refusals::default(),
+            answers: answers::Answers::default(),
             allowance: 0,
             tasks: None,
         }
@@ -401,6 +473,14 @@ impl CellLoop {
         self
     }
 
+    /// Answers a command sent again with its original outcome, from
+    /// `answers` (restored from the journal) on.
+    #[must_use]
+    pub fn answering_again(mut self, answers: answers::Answers) -> CellLoop {
+        self.answers = answers;
+        self
+    }
+
     /// Raises the `journal` alarm while `health` says the journal cannot
     /// write, and clears it when it can.
     #[must_use]
@@ -498,6 +578,11 @@ impl CellLoop {
                 _ = beat.tick() => self.beat().await,
             }
         }
+        // The refusals counted this minute: journaled before the sinks
+        // close.
+        let rest = self.refusals.flush();
+        let now = self.clock.now_ms();
+        self.summaries(rest, now).await;
     }
 
     /// When the loop must next look at the time: the engine's next
@@ -577,6 +662,8 @@ impl CellLoop {
         let step = self.engine.advance(now.saturating_sub(self.allowance));
         self.dispatch(now, Input::Tick, step, 0).await;
         self.force_overdue(now).await;
+        let ended = self.refusals.ended(now);
+        self.summaries(ended, now).await;
     }
 
     async fn beat(&mut self) {
@@ -604,16 +691,27 @@ impl CellLoop {
                     let _ = reply.send(snapshot);
                 });
             }
-            Request::Command { command, reply } => {
+            Request::Command {
+                source,
+                command,
+                reply,
+            } => {
                 // The outcome may come later (a forced transition's pulse
                 // and read-back); it is sent once its rows are durable.
                 let (outcome_tx, outcome) = oneshot::channel();
-                self.command(command, outcome_tx).await;
+                let nonce = command.as_ref().ok().map(|c| c.nonce.clone());
+                self.command(source, command, outcome_tx).await;
                 let sinks: Vec<Settled> = self.sinks.iter().filter_map(|s| s.settled()).collect();
+                let answers = self.answers.clone();
                 self.start_task(async move {
                     if let Ok(outcome) = outcome.await {
                         for s in &sinks {
                             s().await;
+                        }
+                        // Kept for a retry of the same command (only a
+                        // verified one was begun).
+                        if let Some(nonce) = &nonce {
+                            answers.finish(nonce, &outcome);
                         }
                         let _ = reply.send(outcome);
                     }
@@ -638,15 +736,18 @@ impl CellLoop {
         }
     }
 
+    /// An operator's command: through the gate, then carried out (or
+    /// refused), journaled and answered on `reply`.
     async fn command(
         &mut self,
+        source: String,
         command: Result<Command, NotACommand>,
-        reply: oneshot::Sender<CommandOutcome>,
+        mut reply: oneshot::Sender<CommandOutcome>,
     ) {
         let now = self.clock.now_ms();
-        let (record, step) = match command {
-            Err(not) => (
-                CommandRecord {
+        let cmd = match command {
+            Err(not) => {
+                let record = CommandRecord {
                     operator: String::new(),
                     action: None,
                     alarm: String::new(),
@@ -654,175 +755,201 @@ impl CellLoop {
                     accepted: false,
                     verified: false,
                     detail: format!("not a command: {}", not.reason),
-                    stage: Stage::Command,
+                    stage: Stage::Refused,
+                    source: String::new(),
+                    count: 1,
+                };
+                // Counted by the services, which parse it.
+                let outcome = CommandOutcome::new(false, record.detail.clone());
+                return self
+                    .unauthenticated(&source, not.kind, record, outcome, reply, now)
+                    .await;
+            }
+            Ok(cmd) => cmd,
+        };
+        let target = match cmd.action {
+            Action::Write => cmd.tag.as_deref().unwrap_or(""),
+            Action::Force | Action::Stop => cmd.value.as_deref().unwrap_or(""),
+            _ => &cmd.alarm,
+        };
+        let base = CommandRecord::of(&cmd, target, Stage::Command);
+        let checked = self.gate.check(&cmd, now);
+        // The same signed command again (its answer lost, or the agent
+        // restarted): its original outcome, not a refusal as a replay.
+        if let Err(Refusal::Replay) = &checked {
+            match self.answers.retry(&cmd.nonce, reply) {
+                answers::Retry::Now(outcome) => {
+                    tracing::info!(operator = %cmd.operator, action = %cmd.action, accepted = outcome.accepted, "a command sent again: answered with its outcome");
+                    return;
+                }
+                answers::Retry::Later => return,
+                answers::Retry::Unknown(r) => reply = r,
+            }
+        }
+        if checked.is_ok() {
+            self.answers.begin(&cmd.nonce, now);
+        }
+        if let Err(refusal) = &checked {
+            if let Some(reason) = refusal.unauthenticated() {
+                let detail = refusal.to_string();
+                let record = CommandRecord {
+                    stage: Stage::Refused,
+                    ..base.saying(false, &detail)
+                };
+                let outcome = CommandOutcome {
+                    refused: Some(reason),
+                    ..CommandOutcome::new(false, detail)
+                };
+                return self
+                    .unauthenticated(&source, reason, record, outcome, reply, now)
+                    .await;
+            }
+        }
+        if matches!(cmd.action, Action::Force | Action::Stop) {
+            let checked = checked.map_err(|r| r.to_string());
+            return self.switch_command(cmd, checked, reply, now).await;
+        }
+        let verified = checked.is_ok();
+        let done = match checked {
+            Err(refusal) => Err(refusal.to_string()),
+            Ok(())
+                if (cmd.action != Action::Write && cmd.tag.is_some())
+                    || (!matches!(cmd.action, Action::Write | Action::Shelve)
+                        && cmd.value.is_some())
+                    || (!matches!(cmd.action, Action::Shelve | Action::OutOfService)
+                        && cmd.reason.is_some()) =>
+            {
+                Err(format!(
+                    "{} takes an alarm only, no tag, value or reason",
+                    cmd.action
+                ))
+            }
+            Ok(()) => match cmd.action {
+                Action::Ack => self
+                    .engine
+                    .acknowledge(&cmd.alarm, &cmd.operator, now)
+                    .map_err(|e| e.to_string()),
+                Action::Reset => self
+                    .engine
+                    .reset(&cmd.alarm, &cmd.operator, now)
+                    .map_err(|e| e.to_string()),
+                Action::Shelve => self.shelf(&cmd, now).and_then(|until| {
+                    self.engine
+                        .shelve(
+                            &cmd.alarm,
+                            &cmd.operator,
+                            &clip(cmd.reason.as_deref().unwrap_or(""), RECORD_FIELD_BYTES),
+                            until,
+                            now,
+                        )
+                        .map_err(|e| e.to_string())
+                }),
+                Action::Unshelve => self
+                    .engine
+                    .unshelve(&cmd.alarm, now)
+                    .map_err(|e| e.to_string()),
+                Action::OutOfService => match cmd.reason.as_deref().map(str::trim) {
+                    None | Some("") => Err("out-of-service needs a reason (--reason)".into()),
+                    Some(reason) => self
+                        .engine
+                        .take_out_of_service(
+                            &cmd.alarm,
+                            &cmd.operator,
+                            &clip(reason, RECORD_FIELD_BYTES),
+                            now,
+                        )
+                        .map_err(|e| e.to_string()),
                 },
-                Step::default(),
-            ),
-            Ok(cmd) if matches!(cmd.action, Action::Force | Action::Stop) => {
-                let checked = self.gate.check(&cmd, now).map_err(|r| r.to_string());
-                return self.switch_command(cmd, checked, reply, now).await;
-            }
-            Ok(cmd) => {
-                let checked = self.gate.check(&cmd, now);
-                let verified = checked.is_ok();
-                let field = |s: &str| clip(s, RECORD_FIELD_BYTES);
-                let done = match checked {
-                    Err(refusal) => Err(refusal.to_string()),
-                    Ok(())
-                        if (cmd.action != Action::Write && cmd.tag.is_some())
-                            || (!matches!(cmd.action, Action::Write | Action::Shelve)
-                                && cmd.value.is_some())
-                            || (!matches!(cmd.action, Action::Shelve | Action::OutOfService)
-                                && cmd.reason.is_some()) =>
-                    {
-                        Err(format!(
-                            "{} takes an alarm only, no tag, value or reason",
-                            cmd.action
-                        ))
+                Action::InService => self
+                    .engine
+                    .return_to_service(&cmd.alarm, now)
+                    .map_err(|e| e.to_string()),
+                // Taken by `switch_command` above.
+                Action::Force | Action::Stop => Err(format!("{} is not handled here", cmd.action)),
+                Action::Write => match self.write(&cmd) {
+                    Err(why) => Err(why),
+                    Ok((tag, value)) => {
+                        let record = CommandRecord {
+                            verified: true,
+                            ..base
+                        };
+                        return self.write_value(record, tag, value, reply).await;
                     }
-                    Ok(()) => match cmd.action {
-                        Action::Ack => self
-                            .engine
-                            .acknowledge(&cmd.alarm, &cmd.operator, now)
-                            .map_err(|e| e.to_string()),
-                        Action::Reset => self
-                            .engine
-                            .reset(&cmd.alarm, &cmd.operator, now)
-                            .map_err(|e| e.to_string()),
-                        Action::Shelve => self.shelf(&cmd, now).and_then(|until| {
-                            self.engine
-                                .shelve(
-                                    &cmd.alarm,
-                                    &cmd.operator,
-                                    &clip(cmd.reason.as_deref().unwrap_or(""), RECORD_FIELD_BYTES),
-                                    until,
-                                    now,
-                                )
-                                .map_err(|e| e.to_string())
-                        }),
-                        Action::Unshelve => self
-                            .engine
-                            .unshelve(&cmd.alarm, now)
-                            .map_err(|e| e.to_string()),
-                        Action::OutOfService => match cmd.reason.as_deref().map(str::trim) {
-                            None | Some("") => {
-                                Err("out-of-service needs a reason (--reason)".into())
-                            }
-                            Some(reason) => self
-                                .engine
-                                .take_out_of_service(
-                                    &cmd.alarm,
-                                    &cmd.operator,
-                                    &clip(reason, RECORD_FIELD_BYTES),
-                                    now,
-                                )
-                                .map_err(|e| e.to_string()),
-                        },
-                        Action::InService => self
-                            .engine
-                            .return_to_service(&cmd.alarm, now)
-                            .map_err(|e| e.to_string()),
-                        // Taken by `switch_command` before the gate.
-                        Action::Force | Action::Stop => {
-                            Err(format!("{} is not handled here", cmd.action))
-                        }
-                        Action::Write => match self.write(&cmd) {
-                            Err(why) => Err(why),
-                            Ok(pending) => {
-                                // Journaled and answered when the PLC has
-                                // answered (the loop goes on meanwhile).
-                                let record = CommandRecord {
-                                    operator: field(&cmd.operator),
-                                    action: Some(cmd.action),
-                                    alarm: field(cmd.tag.as_deref().unwrap_or("")),
-                                    nonce: field(&cmd.nonce),
-                                    accepted: false,
-                                    verified: true,
-                                    detail: String::new(),
-                                    stage: Stage::Command,
-                                };
-                                let back = self.written_tx.clone();
-                                self.start_task(async move {
-                                    let result =
-                                        match tokio::time::timeout(WRITE_TIMEOUT, pending).await {
-                                            Ok(Ok(r)) => r,
-                                            Ok(Err(_)) => {
-                                                Err("the source stopped before writing".into())
-                                            }
-                                            Err(_) => Err(format!(
-                                                "no answer from the PLC within {} s",
-                                                WRITE_TIMEOUT.as_secs()
-                                            )),
-                                        };
-                                    let (accepted, detail) = match result {
-                                        Ok(d) => (true, d),
-                                        Err(d) => (false, d),
-                                    };
-                                    let record = CommandRecord {
-                                        accepted,
-                                        detail: clip(&detail, 4 * RECORD_FIELD_BYTES),
-                                        ..record
-                                    };
-                                    let _ = back
-                                        .send(Written {
-                                            record,
-                                            reply,
-                                            then: Then::Answer,
-                                        })
-                                        .await;
-                                });
-                                return;
-                            }
-                        },
-                    },
-                };
-                let (accepted, detail, step) = match done {
-                    Ok(step) => (
-                        true,
-                        format!("{} {} by {}", cmd.action, cmd.alarm, cmd.operator),
-                        step,
-                    ),
-                    Err(why) => (false, why, Step::default()),
-                };
-                // The sender chooses these fields: what is kept of them is
-                // bounded.
-                (
-                    CommandRecord {
-                        operator: field(&cmd.operator),
-                        action: Some(cmd.action),
-                        alarm: field(if cmd.action == Action::Write {
-                            cmd.tag.as_deref().unwrap_or("")
-                        } else {
-                            &cmd.alarm
-                        }),
-                        nonce: field(&cmd.nonce),
-                        accepted,
-                        verified,
-                        detail: clip(&detail, 4 * RECORD_FIELD_BYTES),
-                        stage: Stage::Command,
-                    },
-                    step,
-                )
-            }
+                },
+            },
+        };
+        let (accepted, detail, step) = match done {
+            Ok(step) => (
+                true,
+                format!("{} {} by {}", cmd.action, cmd.alarm, cmd.operator),
+                step,
+            ),
+            Err(why) => (false, why, Step::default()),
+        };
+        let record = CommandRecord {
+            verified,
+            ..base.saying(accepted, &detail)
         };
         if !record.accepted {
             tracing::warn!(detail = %record.detail, "operator command refused");
         }
-        let outcome = CommandOutcome {
-            accepted: record.accepted,
-            detail: record.detail.clone(),
-        };
+        let outcome = CommandOutcome::new(record.accepted, record.detail.clone());
         self.dispatch(now, Input::Command(record), step, 0).await;
         let _ = reply.send(outcome);
     }
 
-    /// Hands an authorised write to the source; what the PLC answers comes
-    /// on the returned channel. Refused here (never sent) when the tag is
-    /// unknown, the command carries no value, or the source cannot write.
-    fn write(
+    /// A command refused before a known operator's signature was verified:
+    /// journaled as a row of its own only when it is the first of its
+    /// source and reason this minute, otherwise counted for the minute's
+    /// summary ([`refusals`]); the journal grows by at most two rows per
+    /// source, reason and minute whatever arrives.
+    async fn unauthenticated(
         &mut self,
-        cmd: &Command,
-    ) -> Result<oneshot::Receiver<Result<String, String>>, String> {
+        source: &str,
+        reason: &'static str,
+        record: CommandRecord,
+        outcome: CommandOutcome,
+        reply: oneshot::Sender<CommandOutcome>,
+        now: u64,
+    ) {
+        let noted = self.refusals.note(source, reason, now);
+        self.summaries(noted.ended, now).await;
+        if noted.first {
+            tracing::warn!(source = %noted.source, reason, detail = %record.detail, "command refused before its signature was verified (more from this source this minute are only counted)");
+            let record = CommandRecord {
+                source: noted.source,
+                ..record
+            };
+            self.dispatch(now, Input::Command(record), Step::default(), 0)
+                .await;
+        }
+        let _ = reply.send(outcome);
+    }
+
+    /// Journals the summaries of refusals of windows that have ended.
+    async fn summaries(&mut self, ended: Vec<refusals::Summary>, now: u64) {
+        for s in ended {
+            let record = CommandRecord {
+                operator: String::new(),
+                action: None,
+                alarm: String::new(),
+                nonce: String::new(),
+                accepted: false,
+                verified: false,
+                detail: s.detail(),
+                stage: Stage::Refused,
+                source: s.source,
+                count: s.count,
+            };
+            self.dispatch(now, Input::Command(record), Step::default(), 0)
+                .await;
+        }
+    }
+
+    /// What an authorised write writes: the tag's index and the value; or
+    /// why it is refused here (never sent) when the tag is unknown, the
+    /// command carries no value, or the source cannot write.
+    fn write(&mut self, cmd: &Command) -> Result<(usize, String), String> {
         if !cmd.alarm.is_empty() {
             return Err("a write names a tag, not an alarm".into());
         }
@@ -835,18 +962,96 @@ impl CellLoop {
         else {
             return Err(format!("no tag {}", clip(tag, RECORD_FIELD_BYTES)));
         };
-        let Some(writer) = &self.writer else {
+        if self.writer.is_none() {
             return Err("this cell's source takes no writes".into());
+        }
+        Ok((index, value.clone()))
+    }
+
+    /// Carries out an authorised write: its request row (with the nonce)
+    /// journaled and committed first, then the value handed to the source;
+    /// the PLC's answer comes back as a [`Written`] (the loop goes on
+    /// meanwhile), journaled as the result, and only then answered.
+    async fn write_value(
+        &mut self,
+        record: CommandRecord,
+        tag: usize,
+        value: String,
+        reply: oneshot::Sender<CommandOutcome>,
+    ) {
+        let now = self.clock.now_ms();
+        let request = CommandRecord {
+            stage: Stage::Request,
+            ..record.clone().saying(
+                true,
+                &format!(
+                    "write {} to {} asked by {}",
+                    clip(&value, RECORD_FIELD_BYTES),
+                    record.alarm,
+                    record.operator
+                ),
+            )
         };
-        let (reply, pending) = oneshot::channel();
-        writer
-            .try_send(WriteRequest {
-                tag: index,
-                what: Write::Value(value.clone()),
-                reply,
-            })
-            .map_err(|_| "busy: other writes are waiting for the PLC".to_string())?;
-        Ok(pending)
+        self.dispatch(now, Input::Command(request), Step::default(), 0)
+            .await;
+        let written = self.write_when_journaled(tag, Write::Value(value), WRITE_TIMEOUT);
+        let back = self.written_tx.clone();
+        self.start_task(async move {
+            let (accepted, detail) = match written.await {
+                Ok(d) => (true, d),
+                Err(d) => (false, d),
+            };
+            let record = CommandRecord {
+                stage: Stage::Result,
+                ..record.saying(accepted, &detail)
+            };
+            let _ = back
+                .send(Written {
+                    record,
+                    reply,
+                    then: Then::Answer,
+                })
+                .await;
+        });
+    }
+
+    /// Hands `what` for tag `tag` to the source once every row dispatched
+    /// so far (the command's nonce among them) is committed, so that a
+    /// crash between the write and its journal row cannot make the same
+    /// signed command new again; resolves to what the PLC answered, within
+    /// `limit`. Not written while the journal cannot write.
+    fn write_when_journaled(
+        &self,
+        tag: usize,
+        what: Write,
+        limit: Duration,
+    ) -> impl Future<Output = Result<String, String>> + Send + 'static {
+        let settled = self.settled();
+        let health = self.journal_health.clone();
+        let writer = self.writer.clone();
+        async move {
+            settled.await;
+            if let Some(why) = health.as_ref().and_then(|h| h.borrow().clone()) {
+                return Err(format!(
+                    "not written: the journal cannot write ({why}), and a write waits until its command is on disk"
+                ));
+            }
+            let Some(writer) = writer else {
+                return Err("this cell's source takes no writes".into());
+            };
+            let (reply, pending) = oneshot::channel();
+            writer
+                .try_send(WriteRequest { tag, what, reply })
+                .map_err(|_| "busy: other writes are waiting for the PLC".to_string())?;
+            match tokio::time::timeout(limit, pending).await {
+                Ok(Ok(r)) => r,
+                Ok(Err(_)) => Err("the source stopped before writing".into()),
+                Err(_) => Err(format!(
+                    "no answer from the PLC within {} s",
+                    limit.as_secs()
+                )),
+            }
+        }
     }
 
     /// Builds the payloads for `step` and hands it to the sinks.

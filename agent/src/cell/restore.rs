@@ -22,6 +22,8 @@ pub struct Restored {
     /// Nonces of verified commands recent enough to be replayed, with
     /// their times.
     pub nonces: Vec<(u64, String)>,
+    /// Those commands' outcomes, for a client that sends one again.
+    pub outcomes: Vec<journal::SavedOutcome>,
 }
 
 /// Reads what `config`'s journal kept, at `now`. Alarms that `can_raise`
@@ -62,6 +64,7 @@ pub fn load(
         alarms,
         state: saved.state.and_then(machine_state),
         nonces: saved.nonces,
+        outcomes: saved.outcomes,
     })
 }
 

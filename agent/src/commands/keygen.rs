@@ -4,18 +4,13 @@ use std::io::Write;
 use std::path::Path;
 
 use crate::cli::{Failure, KeygenArgs};
-use crate::operator::{Action, OperatorKey};
+use crate::operator::{valid_operator_name, Action, OperatorKey, OPERATOR_NAME};
 
 /// Writes the private key file and prints the operators-file entry.
 pub(crate) fn run(args: &KeygenArgs, out: &mut dyn Write) -> Result<(), Failure> {
-    if args.operator.is_empty()
-        || !args
-            .operator
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_' || c == '.')
-    {
+    if !valid_operator_name(&args.operator) {
         return Err(Failure::Input(format!(
-            "--operator '{}': use letters, digits, '-', '_' or '.'",
+            "--operator {:?}: an operator's name is {OPERATOR_NAME}",
             args.operator
         )));
     }

@@ -2,6 +2,7 @@
 //! streams, and returns [`crate::cli::Failure`] on error.
 
 pub(crate) mod agent;
+pub(crate) mod audit;
 pub(crate) mod discover;
 pub(crate) mod explain;
 pub(crate) mod keygen;

@@ -1,6 +1,8 @@
 //! `cellwatch report daily|monthly`: production reports from a journal
 //! (paper 002, Tables 3-5); `cellwatch report alarms`: the alarm system's
-//! ISA-18.2 benchmark table. As a terminal table, CSV or JSON.
+//! ISA-18.2 benchmark table. As a terminal table, CSV or JSON; text read
+//! from the journal (alarm ids, item codes) is printed escaped
+//! ([`crate::operator::escaped`]).
 
 use std::io::Write;
 use std::path::Path;
@@ -12,6 +14,7 @@ use cellwatch_models::report::{
 use chrono::{Datelike, FixedOffset, NaiveDate, TimeZone};
 
 use crate::cli::{Failure, ReportArgs, ReportCommand};
+use crate::operator::escaped;
 use crate::sinks::journal;
 
 fn causes(path: &Path) -> Result<StopCauses, Failure> {
@@ -243,14 +246,20 @@ fn alarms_table(
         writeln!(out, "  none")?;
     }
     for f in &r.top {
-        writeln!(out, "  {:<32} {:>6} {:>6.1} %", f.id, f.raised, f.share)?;
+        writeln!(
+            out,
+            "  {:<32} {:>6} {:>6.1} %",
+            escaped(&f.id),
+            f.raised,
+            f.share
+        )?;
     }
     writeln!(out, "chattering alarms (most raises within 60 s):")?;
     if r.chattering.is_empty() {
         writeln!(out, "  none")?;
     }
     for c in &r.chattering {
-        writeln!(out, "  {:<32} {:>6}", c.id, c.raises_in_60s)?;
+        writeln!(out, "  {:<32} {:>6}", escaped(&c.id), c.raises_in_60s)?;
     }
     writeln!(out, "stale alarms (active > 24 h):")?;
     if r.stale.is_empty() {
@@ -260,7 +269,7 @@ fn alarms_table(
         writeln!(
             out,
             "  {:<32} raised {}  {:.1} h",
-            s.id,
+            escaped(&s.id),
             crate::clock::rfc3339(s.raised_at),
             s.hours
         )?;
@@ -295,8 +304,8 @@ fn causes_table(out: &mut dyn Write, causes: &[CauseTotal]) -> std::io::Result<(
         writeln!(
             out,
             "  {:<3} {:<32} {:>4} stop{} {:>8.1} min",
-            c.code,
-            c.name,
+            escaped(&c.code),
+            escaped(&c.name),
             c.count,
             if c.count == 1 { " " } else { "s" },
             c.minutes
@@ -330,7 +339,7 @@ fn daily_table(
             out,
             "  {}  {:<12} target {:>7}  made {:>7}",
             span(r.day_start, o),
-            o.item.as_deref().unwrap_or("-"),
+            escaped(o.item.as_deref().unwrap_or("-")),
             o.target.map_or_else(|| "-".into(), |t| t.to_string()),
             o.parts
         )?;
@@ -361,8 +370,8 @@ fn csv_causes(out: &mut dyn Write, causes: &[CauseTotal]) -> std::io::Result<()>
         writeln!(
             out,
             "cause,{},\"{}\",,,,,{},{:.1},,,",
-            c.code,
-            c.name.replace('"', "\"\""),
+            escaped(&c.code),
+            escaped(&c.name).replace('"', "\"\""),
             c.count,
             c.minutes
         )?;
@@ -398,7 +407,7 @@ fn daily_csv(out: &mut dyn Write, r: &DailyReport) -> std::io::Result<()> {
             out,
             "order,{},\"{}\",,,,,,,,{},{}",
             span(r.day_start, o),
-            o.item.as_deref().unwrap_or("").replace('"', "\"\""),
+            escaped(o.item.as_deref().unwrap_or("")).replace('"', "\"\""),
             o.parts,
             o.target.map_or_else(String::new, |t| t.to_string())
         )?;
@@ -424,9 +433,9 @@ fn monthly_table(
         "day             run     idle    fault  offline   avail%   parts  items"
     )?;
     for (d, day) in days.iter().zip(&r.days) {
-        let mut items: Vec<&str> = Vec::new();
+        let mut items: Vec<std::borrow::Cow<'_, str>> = Vec::new();
         for o in &day.orders {
-            let item = o.item.as_deref().unwrap_or("-");
+            let item = escaped(o.item.as_deref().unwrap_or("-"));
             if !items.contains(&item) {
                 items.push(item);
             }

@@ -216,13 +216,15 @@ fn print_alarm(out: &mut dyn Write, a: &AlarmPayload, json: bool) -> std::io::Re
     if let Some(r) = &a.out_of_service {
         kept += &format!("OUT OF SERVICE since {} by {} ({})  ", r.at, r.by, r.reason);
     }
-    writeln!(
-        out,
+    // Operators' and the journal's text on one line each: a newline in a
+    // reason never prints a line of its own.
+    let line = format!(
         "{}  {}/{}  {kept}{} {} [{}] {}{step}: {}",
         a.at, a.cell, a.id, a.transition, a.state, a.severity, a.fault_type, a.message
-    )?;
+    );
+    writeln!(out, "{}", crate::operator::escaped(&line))?;
     for c in &a.culprits {
-        writeln!(out, "    {}", c.line())?;
+        writeln!(out, "    {}", crate::operator::escaped(&c.line()))?;
     }
     Ok(())
 }
@@ -418,11 +420,12 @@ async fn ask_agent(
     let (key, parameters) = selector.split_once('?').unwrap_or((selector, ""));
     let querier = querier(&bus.session, key, timeout).await?;
     wait_for_queryable(&querier, timeout).await;
-    // A read that ends with no answer at all before its time is up (the
-    // routes to the agent's queryable still being set up) is asked again;
-    // a command is sent once (the agent would refuse its replay).
+    // A query that ends with no answer at all before its time is up (the
+    // routes to the agent's queryable still being set up, the agent
+    // restarting) or with "busy" is asked again. A command too: the same
+    // signed command, which the agent answers with its original outcome
+    // if it already carried it out.
     let deadline = tokio::time::Instant::now() + timeout;
-    let read_only = payload.is_none();
     loop {
         let parameters = if parameters.is_empty() {
             fresh()
@@ -437,11 +440,13 @@ async fn ask_agent(
             .await
             .map_err(|e| Failure::Runtime(format!("query failed: {e}")))?;
         let answer = answer_of(replies, &bus.trust, key, &parameters).await;
-        if read_only
-            && matches!(&answer, Answer::Nothing(refused) if refused.is_empty())
-            && tokio::time::Instant::now() + RETRY_AFTER < deadline
-        {
-            tracing::debug!(selector, "no answer yet: asking again");
+        let again = match &answer {
+            Answer::Nothing(refused) => refused.is_empty(),
+            Answer::Agent(_, Err(Failure::Input(why))) => why.contains(BUSY),
+            Answer::Agent(..) => false,
+        };
+        if again && tokio::time::Instant::now() + RETRY_AFTER < deadline {
+            tracing::debug!(selector, "no answer yet, or busy: asking again");
             tokio::time::sleep(RETRY_AFTER).await;
             continue;
         }
@@ -449,7 +454,11 @@ async fn ask_agent(
     }
 }
 
-/// The pause before a read that got no answer is asked again.
+/// What an agent answers when it is answering as many queries as it may.
+const BUSY: &str = "the agent is busy";
+
+/// The pause before a query that got no answer, or "busy", is asked
+/// again.
 const RETRY_AFTER: Duration = Duration::from_millis(250);
 
 /// `cellwatch history`: the newest rows, or with `--all` every row of the
@@ -529,7 +538,8 @@ fn print_rows(out: &mut dyn Write, rows: &serde_json::Value) -> Result<(), Failu
                 f["detail"].as_str().unwrap_or("")
             ),
         };
-        writeln!(out, "{at}  {line}").map_err(io)?;
+        // A newline in an operator's text never prints a line of its own.
+        writeln!(out, "{at}  {}", crate::operator::escaped(&line)).map_err(io)?;
     }
     Ok(())
 }
@@ -701,6 +711,7 @@ async fn signed(t: Target<'_>, args: &SignerArgs, out: &mut dyn Write) -> Result
         issued_at: crate::clock::now_ms(),
         signature: String::new(),
     };
+    cmd.check_text().map_err(Failure::input)?;
     cmd.sign(t.cell, &key);
     let bus = session(&args.zenoh).await?;
     let timeout = Duration::from_secs(args.zenoh.timeout_secs);

@@ -635,6 +635,22 @@ impl Validator<'_> {
             .push(format!("{origin}:{line}:{col}: {key}: {message}"));
     }
 
+    /// A problem unless `id` can be a chunk of a Zenoh key and part of a
+    /// file name ([`key_chunk`]): a check's id, a chart's, step's or
+    /// transition's name, which alarm ids (`alarms/<id>`) are made of.
+    fn key_chunk(&mut self, span: Range<usize>, key: &str, what: &str, id: &str) {
+        if !key_chunk(id) {
+            self.problem(
+                span,
+                key,
+                format!(
+                    "{what}'{}' must be letters, digits, '-' or '_' (it is part of Zenoh keys)",
+                    id.escape_debug()
+                ),
+            );
+        }
+    }
+
     fn path(&self, p: &str) -> PathBuf {
         let p = Path::new(p);
         if p.is_absolute() {
@@ -824,6 +840,7 @@ impl Validator<'_> {
             if on > 0 || off > 0 {
                 delays.push((c.id.get_ref().clone(), on, off));
             }
+            self.key_chunk(c.id.span(), &format!("{key}.id"), "", c.id.get_ref());
             if !ids.insert(c.id.get_ref().clone())
                 || matches!(c.id.get_ref().as_str(), "communication" | "tag-quality")
             {
@@ -840,6 +857,7 @@ impl Validator<'_> {
         let mut timers = Vec::new();
         for (i, t) in raw.checks.timers.into_iter().enumerate() {
             let key = format!("checks.timers[{i}]");
+            self.key_chunk(t.id.span(), &format!("{key}.id"), "", t.id.get_ref());
             if !ids.insert(t.id.get_ref().clone()) {
                 self.problem(
                     t.id.span(),
@@ -1814,6 +1832,7 @@ impl Validator<'_> {
         let mut charts = HashSet::new();
         for (i, c) in raw.into_iter().enumerate() {
             let key = format!("checks.sfc[{i}]");
+            self.key_chunk(c.id.span(), &format!("{key}.id"), "", c.id.get_ref());
             if !ids.insert(c.id.get_ref().clone()) {
                 self.problem(
                     c.id.span(),
@@ -1876,6 +1895,21 @@ impl Validator<'_> {
                     }
                     if let Some(steps) = &c.steps {
                         self.learned_steps(steps, &format!("{key}.steps"), &mut sfc);
+                    }
+                    // Alarm ids are made of them: `<id>-<chart>-<step>`,
+                    // `force-<chart>-<transition>`.
+                    let ckey = format!("{key}.charts");
+                    for chart in &sfc.charts {
+                        let span = c.charts.span();
+                        self.key_chunk(span.clone(), &ckey, "chart ", &chart.name);
+                        for step in &chart.steps {
+                            let what = format!("chart {} step ", chart.name.escape_debug());
+                            self.key_chunk(span.clone(), &ckey, &what, &step.name);
+                        }
+                        for t in &chart.transitions {
+                            let what = format!("chart {} transition ", chart.name.escape_debug());
+                            self.key_chunk(span.clone(), &ckey, &what, &t.id);
+                        }
                     }
                     for chart in &sfc.charts {
                         if !charts.insert(chart.name.clone()) {
@@ -2010,6 +2044,7 @@ impl Validator<'_> {
         let mut out = Vec::new();
         for (i, c) in raw.into_iter().enumerate() {
             let key = format!("checks.limit[{i}]");
+            self.key_chunk(c.id.span(), &format!("{key}.id"), "", c.id.get_ref());
             if !ids.insert(c.id.get_ref().clone()) {
                 self.problem(
                     c.id.span(),
@@ -2265,6 +2300,17 @@ pub fn timer_signal(addressing: Addressing, tags: &[TagConfig], name: &str) -> O
                 .and_then(|a| tags.iter().find(|t| t.address == a))
         })
         .map(|t| t.address.clone())
+}
+
+/// Whether `id` can be a chunk of a Zenoh key and part of a file name as
+/// it is: not empty, letters and digits (of any script), `-` and `_` only
+/// (no `/`, no wildcard, no `.` that `CHART.STEP` would split, no space or
+/// control character).
+pub fn key_chunk(id: &str) -> bool {
+    !id.is_empty()
+        && id
+            .chars()
+            .all(|c| c.is_alphanumeric() || c == '-' || c == '_')
 }
 
 /// A tag's PLC address: a PMC address (`X0.06`), an IEC direct address

@@ -857,3 +857,24 @@ fn an_stl_program_over_pmc_addresses_says_which_key_fixes_it() {
         "tags[0].address: malformed address 'E 0.9': expected byte.bit with a bit 0..7, as in E 0.0"
     ));
 }
+
+#[test]
+fn ids_that_make_alarm_ids_are_zenoh_key_chunks() {
+    assert_eq!(
+        errors(&GOOD.replace("id = \"fig6\"", "id = \"fig/6\"")),
+        "cell.toml:19:6: checks.switching[0].id: 'fig/6' must be letters, digits, '-' or '_' (it is part of Zenoh keys)"
+    );
+    // A step's name is part of its stuck alarm's id (`sfc-F1-S1`).
+    let (text, mut files) = robot_cell("");
+    let charts =
+        include_str!("../../../config/robot/robot.sfc.toml").replace("\"S1\"", "\"S1\\n\"");
+    files
+        .0
+        .insert(PathBuf::from("base/robot.sfc.toml"), charts.into_bytes());
+    assert_eq!(
+        parse("cell.toml", &text, Path::new("base"), &files)
+            .unwrap_err()
+            .to_string(),
+        "cell.toml:139:10: checks.sfc[0].charts: chart F1 step 'S1\\n' must be letters, digits, '-' or '_' (it is part of Zenoh keys)"
+    );
+}

@@ -190,7 +190,7 @@ impl Metrics {
         let refused = reg!(IntCounterVec::new(
             opts(
                 "cellwatch_requests_refused_total",
-                "Queries refused: busy (too many at once), too_large (payload over the limit), invalid (not a request).",
+                "Queries refused: busy (too many at once), too_large (payload over the limit), invalid (not a request); commands refused before a known operator's signature was verified: unsigned, unknown_operator, bad_signature, malformed (a control character, a nonce out of format).",
                 cell
             ),
             &["service", "reason"]
@@ -204,6 +204,10 @@ impl Metrics {
             ("command", "busy"),
             ("command", "too_large"),
             ("command", "invalid"),
+            ("command", "unsigned"),
+            ("command", "unknown_operator"),
+            ("command", "bad_signature"),
+            ("command", "malformed"),
         ] {
             refused.with_label_values(&[service, reason]).inc_by(0);
         }

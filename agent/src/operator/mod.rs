@@ -1,15 +1,23 @@
-//! Operator commands (acknowledge, reset) and their authorisation.
+//! Operator commands and their authorisation.
 //!
 //! Every operator has an Ed25519 key pair of their own (`cellwatch keygen
 //! --operator NAME`): the private key stays with the operator, the agent's
 //! operators file holds only public keys and, per operator, the actions
 //! allowed. A command names its operator and carries a signature over a
-//! canonical text of the request (cell, action, alarm, operator, nonce,
-//! time). The agent refuses a command that is unsigned, badly signed, from
-//! an unknown operator, for an action the operator may not take, issued
-//! more than [`MAX_SKEW`] away from its clock, or whose nonce it has seen
-//! (a replay). A stolen agent disk signs nothing. Every command, accepted or
-//! refused, is journaled by the caller.
+//! canonical text of the request ([`Command::canonical`]: every field
+//! length-prefixed, so no two commands sign the same text). The agent
+//! refuses a command with a control character in a field or a nonce out of
+//! format, one that is unsigned, badly signed, from an unknown operator,
+//! for an action the operator may not take, issued more than [`MAX_SKEW`]
+//! away from its clock, or whose nonce it has seen (a replay). A stolen
+//! agent disk signs nothing. The caller journals what the gate says:
+//! refusals before a known operator's signature is verified are counted
+//! and summarised ([`refusals`]), everything after it in full.
+//!
+//! Also here: [`escaped`], how every printer shows text an operator or a
+//! journal supplies.
+
+pub mod refusals;
 
 use std::collections::{BTreeSet, HashMap, VecDeque};
 use std::path::Path;
@@ -126,25 +134,120 @@ pub struct Command {
 }
 
 impl Command {
-    /// The text that is signed.
-    pub fn canonical(&self, cell: &str) -> String {
-        format!(
-            "cellwatch-command-v4\n{cell}\n{}\n{}\n{}\n{}\n{}\n{}\n{}\n{}",
-            self.action,
-            self.alarm,
-            self.operator,
-            self.nonce,
-            self.issued_at,
-            self.tag.as_deref().unwrap_or(""),
-            self.value.as_deref().unwrap_or(""),
-            self.reason.as_deref().unwrap_or("")
-        )
+    /// The bytes that are signed ([`CANONICAL_VERSION`]): the version line,
+    /// then each field as `<byte length>:<bytes>\n` in a fixed order (cell,
+    /// action, alarm, operator, nonce, issued_at, tag, value, reason), a
+    /// field the command does not carry (`tag`, `value`, `reason` absent) as
+    /// `-\n`. No two commands have the same text, whatever their fields
+    /// hold.
+    pub fn canonical(&self, cell: &str) -> Vec<u8> {
+        let mut text = format!("{CANONICAL_VERSION}\n").into_bytes();
+        let mut field = |f: Option<&str>| match f {
+            Some(f) => {
+                text.extend_from_slice(format!("{}:", f.len()).as_bytes());
+                text.extend_from_slice(f.as_bytes());
+                text.push(b'\n');
+            }
+            None => text.extend_from_slice(b"-\n"),
+        };
+        field(Some(cell));
+        field(Some(self.action.as_str()));
+        field(Some(&self.alarm));
+        field(Some(&self.operator));
+        field(Some(&self.nonce));
+        field(Some(&self.issued_at.to_string()));
+        field(self.tag.as_deref());
+        field(self.value.as_deref());
+        field(self.reason.as_deref());
+        text
     }
 
     /// Signs the command for `cell` with the operator's private key.
     pub fn sign(&mut self, cell: &str, key: &OperatorKey) {
-        self.signature = hex::encode(key.key.sign(self.canonical(cell).as_bytes()).to_bytes());
+        self.signature = hex::encode(key.key.sign(&self.canonical(cell)).to_bytes());
     }
+
+    /// The fields an operator writes, by name (what the gate and the CLI
+    /// check for control characters).
+    pub fn texts(&self) -> [(&'static str, &str); 5] {
+        [
+            ("operator", &self.operator),
+            ("alarm", &self.alarm),
+            ("tag", self.tag.as_deref().unwrap_or("")),
+            ("value", self.value.as_deref().unwrap_or("")),
+            ("reason", self.reason.as_deref().unwrap_or("")),
+        ]
+    }
+
+    /// Checks what the operator wrote before it is signed or carried out:
+    /// no field holds a control character (a newline would write a line
+    /// of its own into the journal's and the CLI's output), and the nonce
+    /// has its format ([`valid_nonce`]).
+    ///
+    /// # Errors
+    /// The first field that does not pass, as a [`Refusal`].
+    pub fn check_text(&self) -> Result<(), Refusal> {
+        if let Some((field, _)) = self.texts().into_iter().find(|(_, t)| !printable_only(t)) {
+            return Err(Refusal::ControlCharacter(field));
+        }
+        if !valid_nonce(&self.nonce) {
+            return Err(Refusal::BadNonce);
+        }
+        Ok(())
+    }
+}
+
+/// The first line of the signed text of a command ([`Command::canonical`]).
+pub const CANONICAL_VERSION: &str = "cellwatch-command-v5";
+
+/// The shortest and longest nonce, in hex digits.
+pub const NONCE_DIGITS: std::ops::RangeInclusive<usize> = 16..=64;
+
+/// Whether `nonce` is 16 to 64 lowercase hex digits: short enough to be
+/// journaled whole (so that it is known again after a restart), long
+/// enough not to repeat.
+pub fn valid_nonce(nonce: &str) -> bool {
+    NONCE_DIGITS.contains(&nonce.len())
+        && nonce
+            .bytes()
+            .all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b))
+}
+
+/// Whether `c` may change what a printed line looks like: a control
+/// character (newline, carriage return, escape, …), a line or paragraph
+/// separator, or a bidirectional override.
+pub fn is_unprintable(c: char) -> bool {
+    c.is_control()
+        || matches!(
+            c,
+            '\u{2028}' | '\u{2029}' | '\u{200e}' | '\u{200f}' | '\u{061c}'
+        )
+        || ('\u{202a}'..='\u{202e}').contains(&c)
+        || ('\u{2066}'..='\u{2069}').contains(&c)
+}
+
+/// Whether `text` holds no [unprintable](is_unprintable) character.
+pub fn printable_only(text: &str) -> bool {
+    !text.chars().any(is_unprintable)
+}
+
+/// `text` ready to print on one line: each [unprintable](is_unprintable)
+/// character escaped as Rust writes it (`\n`, `\u{1b}`), a backslash
+/// doubled, everything else (letters of any script) kept. What every
+/// printer of operator or journal text uses.
+pub fn escaped(text: &str) -> std::borrow::Cow<'_, str> {
+    if printable_only(text) && !text.contains('\\') {
+        return std::borrow::Cow::Borrowed(text);
+    }
+    let mut out = String::with_capacity(text.len() + 8);
+    for c in text.chars() {
+        if c == '\\' || is_unprintable(c) {
+            out.extend(c.escape_debug());
+        } else {
+            out.push(c);
+        }
+    }
+    std::borrow::Cow::Owned(out)
 }
 
 /// An operator's private key, as `cellwatch keygen` writes it. Kept by the
@@ -225,6 +328,18 @@ impl OperatorKey {
     }
 }
 
+/// What an operator's name may hold, said in errors.
+pub const OPERATOR_NAME: &str = "letters, digits, '-' or '_' (a bare key in the operators file)";
+
+/// Whether `name` can name an operator: ASCII letters, digits, `-` and `_`,
+/// what TOML writes as a bare key (`[operators.NAME]`).
+pub fn valid_operator_name(name: &str) -> bool {
+    !name.is_empty()
+        && name
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_')
+}
+
 /// Why the operators file cannot be loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum KeysError {
@@ -285,6 +400,27 @@ pub enum Refusal {
     /// The nonce was used before.
     #[error("replayed command (nonce already used)")]
     Replay,
+    /// A field holds a control character (a newline, a tab, an escape…).
+    #[error("{0} holds a control character (a newline, tab or escape): write it on one line")]
+    ControlCharacter(&'static str),
+    /// The nonce is not 16 to 64 lowercase hex digits.
+    #[error("nonce is not 16 to 64 lowercase hex digits")]
+    BadNonce,
+}
+
+impl Refusal {
+    /// Why the command was refused before anyone was known to have sent
+    /// it (`cellwatch_requests_refused_total`'s reason), or `None` when the
+    /// signature of a known operator was verified.
+    pub fn unauthenticated(&self) -> Option<&'static str> {
+        match self {
+            Refusal::Unsigned => Some("unsigned"),
+            Refusal::UnknownOperator(_) => Some("unknown_operator"),
+            Refusal::SignatureNotHex | Refusal::BadSignature => Some("bad_signature"),
+            Refusal::ControlCharacter(_) | Refusal::BadNonce => Some("malformed"),
+            Refusal::NotAllowed { .. } | Refusal::Skew(_) | Refusal::Replay => None,
+        }
+    }
 }
 
 /// One operator as an agent knows them: a public key and what they may do.
@@ -331,6 +467,12 @@ impl OperatorKeys {
         };
         let mut operators = HashMap::new();
         for (name, value) in f.operators {
+            if !valid_operator_name(&name) {
+                return Err(entry_error(
+                    &format!("{name:?}"),
+                    format!("an operator's name is {OPERATOR_NAME}"),
+                ));
+            }
             if value.is_str() {
                 return Err(entry_error(
                     &name,
@@ -430,6 +572,7 @@ impl Gate {
         {
             self.seen.pop_front();
         }
+        cmd.check_text()?;
         if cmd.signature.is_empty() {
             return Err(Refusal::Unsigned);
         }
@@ -444,10 +587,7 @@ impl Gate {
         };
         if operator
             .key
-            .verify_strict(
-                cmd.canonical(&self.cell).as_bytes(),
-                &Signature::from_bytes(&sig),
-            )
+            .verify_strict(&cmd.canonical(&self.cell), &Signature::from_bytes(&sig))
             .is_err()
         {
             return Err(Refusal::BadSignature);
@@ -475,6 +615,9 @@ impl Gate {
 pub struct NotACommand {
     /// Why, in a bounded text that never contains the request.
     pub reason: String,
+    /// `too_large` or `invalid` (`cellwatch_requests_refused_total`'s
+    /// reason).
+    pub kind: &'static str,
 }
 
 /// How many bytes of a refused payload are journaled.
@@ -483,7 +626,11 @@ pub const PREFIX_BYTES: usize = 32;
 impl NotACommand {
     /// A payload refused for `reason`, identified by its size, hash and
     /// first [`PREFIX_BYTES`] bytes. The payload may come in pieces.
-    pub fn payload<'a>(reason: &str, pieces: impl IntoIterator<Item = &'a [u8]>) -> NotACommand {
+    pub fn payload<'a>(
+        kind: &'static str,
+        reason: &str,
+        pieces: impl IntoIterator<Item = &'a [u8]>,
+    ) -> NotACommand {
         use sha2::Digest;
         let mut hash = Sha256::new();
         let mut size = 0;
@@ -500,6 +647,7 @@ impl NotACommand {
                 "{reason} ({size} bytes, sha256 {}, starts \"{prefix}\")",
                 hex::encode(hash.finalize()),
             ),
+            kind,
         }
     }
 
@@ -513,6 +661,7 @@ impl NotACommand {
             serde_json::error::Category::Eof => "truncated JSON",
         };
         Self::payload(
+            "invalid",
             &format!("{kind} at line {} column {}", error.line(), error.column()),
             [bytes],
         )
@@ -653,6 +802,127 @@ mod tests {
             kim.public_hex()
         ))
         .contains("missing field `allow`"));
+        // A name that is no bare key would break the file's tables.
+        assert_eq!(
+            err(&format!(
+                "[operators.\"a.b\"]\npublic_key = \"{}\"\nallow = []",
+                kim.public_hex()
+            )),
+            "ops.toml: operators.\"a.b\": an operator's name is letters, digits, '-' or '_' (a bare key in the operators file)"
+        );
+    }
+}
+
+#[cfg(test)]
+mod text {
+    use super::*;
+
+    fn shelf(value: &str, reason: &str) -> Command {
+        Command {
+            action: Action::Shelve,
+            alarm: "ese".into(),
+            tag: None,
+            value: Some(value.into()),
+            reason: Some(reason.into()),
+            operator: "kim".into(),
+            nonce: nonce(),
+            issued_at: 1_000_000,
+            signature: String::new(),
+        }
+    }
+
+    #[test]
+    fn the_signed_text_is_injective() {
+        // Under v4 both were "…\n30m\n2h\nwaiting": one signature for a
+        // 30-minute and a 2-hour shelf.
+        let short = shelf("30m", "2h\nwaiting");
+        let long = Command {
+            nonce: short.nonce.clone(),
+            ..shelf("30m\n2h", "waiting")
+        };
+        assert_ne!(short.canonical("m01"), long.canonical("m01"));
+        let text = String::from_utf8(short.canonical("m01")).unwrap();
+        assert_eq!(
+            text,
+            format!(
+                "cellwatch-command-v5\n3:m01\n6:shelve\n3:ese\n3:kim\n32:{}\n7:1000000\n-\n3:30m\n10:2h\nwaiting\n",
+                short.nonce
+            )
+        );
+        // An absent field is not an empty one.
+        let mut empty = short.clone();
+        empty.tag = Some(String::new());
+        assert_ne!(empty.canonical("m01"), short.canonical("m01"));
+        // The signature of one does not verify the other.
+        let kim = OperatorKey::generate("kim");
+        let mut signed = shelf("30m", "2h waiting");
+        signed.sign("m01", &kim);
+        let mut bent = Command {
+            value: Some("30m 2h".into()),
+            reason: Some("waiting".into()),
+            ..signed.clone()
+        };
+        bent.signature = signed.signature.clone();
+        let mut gate = Gate::new(
+            "m01",
+            OperatorKeys::parse("k", &kim.operators_entry(&[Action::Shelve])).unwrap(),
+        );
+        assert_eq!(gate.check(&bent, 1_000_000), Err(Refusal::BadSignature));
+        assert_eq!(gate.check(&signed, 1_000_000), Ok(()));
+    }
+
+    #[test]
+    fn control_characters_and_bad_nonces_are_refused_before_the_signature() {
+        let kim = OperatorKey::generate("kim");
+        let mut gate = Gate::new(
+            "m01",
+            OperatorKeys::parse("k", &kim.operators_entry(&Action::ALL)).unwrap(),
+        );
+        let mut c = shelf("30m", "2h\nwaiting");
+        c.sign("m01", &kim);
+        let refusal = gate.check(&c, 1_000_000).unwrap_err();
+        assert_eq!(
+            refusal.to_string(),
+            "reason holds a control character (a newline, tab or escape): write it on one line"
+        );
+        assert_eq!(refusal.unauthenticated(), Some("malformed"));
+        for text in ["a\rb", "\u{1b}[2K", "x\u{202e}y", "tab\there"] {
+            let mut c = shelf("30m", "ok");
+            c.alarm = text.into();
+            assert_eq!(
+                c.check_text(),
+                Err(Refusal::ControlCharacter("alarm")),
+                "{text:?}"
+            );
+        }
+        // Letters of any script are text.
+        assert_eq!(
+            shelf("30m", "Förderband läuft / ベルト").check_text(),
+            Ok(())
+        );
+        // A nonce longer than the journal keeps, or not hex, is refused.
+        for bad in [
+            "n1",
+            &"a".repeat(200),
+            "ABCDEF0123456789",
+            "0123456789abcdeg",
+        ] {
+            let c = Command {
+                nonce: bad.to_string(),
+                ..shelf("30m", "ok")
+            };
+            assert_eq!(c.check_text(), Err(Refusal::BadNonce), "{bad}");
+        }
+        assert!(valid_nonce(&nonce()));
+    }
+
+    #[test]
+    fn printers_escape_control_characters_only() {
+        assert_eq!(escaped("Förderband läuft"), "Förderband läuft");
+        assert_eq!(
+            escaped("no\n2026-01-01 fake\u{1b}[2K\\"),
+            "no\\n2026-01-01 fake\\u{1b}[2K\\\\"
+        );
     }
 }
 

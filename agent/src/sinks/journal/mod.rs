@@ -26,6 +26,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Weak};
 use std::time::{Duration, Instant};
 
+pub mod chain;
 pub mod sink;
 
 use rusqlite::{params, Connection, OpenFlags};
@@ -104,8 +105,13 @@ pub enum Entry {
         /// Why it was refused, or what it did.
         detail: String,
         /// Which row of its command (`command`, or `request`, `check`,
-        /// `write`, `result` of a force or stop).
+        /// `write`, `result` of a write, force or stop; `refused` before a
+        /// signature was verified).
         stage: String,
+        /// Where the query came from, as it said (refused rows), or empty.
+        source: String,
+        /// How many refusals the row stands for; 1 for other rows.
+        count: u64,
     },
 }
 
@@ -246,6 +252,12 @@ const MIGRATIONS: &[(&str, &str, &str)] = &[
     ("commands", "verified", "INTEGER NOT NULL DEFAULT 0"),
     ("production", "parts", "INTEGER NOT NULL DEFAULT 1"),
     ("commands", "stage", "TEXT NOT NULL DEFAULT 'command'"),
+    ("commands", "source", "TEXT NOT NULL DEFAULT ''"),
+    ("commands", "count", "INTEGER NOT NULL DEFAULT 1"),
+    // The hash chain (`chain`): empty in rows written before it.
+    ("commands", "chain_index", "INTEGER"),
+    ("commands", "prev_hash", "TEXT"),
+    ("commands", "hash", "TEXT"),
 ];
 
 fn migrate(conn: &Connection) -> rusqlite::Result<()> {
@@ -621,6 +633,10 @@ fn writer(
     let mut last_purge = Instant::now();
     purge(&conn, retention, &path);
     let mut seq = last_seq(&conn);
+    let mut chain = chain::Link::last(&conn).unwrap_or_else(|e| {
+        tracing::error!(path = %path.display(), error = %e, "cannot read the end of the command rows' hash chain; it starts again");
+        chain::Link::default()
+    });
     let mut last_attempt = Instant::now();
     // Rows not yet committed, oldest first: a batch, or everything since
     // the journal stopped being writable.
@@ -678,7 +694,7 @@ fn writer(
             last_attempt = Instant::now();
             let started = Instant::now();
             let rows = pending.make_contiguous();
-            let outcome = match write_batch(&mut conn, rows, &mut seq) {
+            let outcome = match write_batch(&mut conn, rows, &mut seq, &mut chain) {
                 Ok(()) => {
                     total += rows.len() as u64;
                     observer.committed(rows.len(), started.elapsed());
@@ -750,11 +766,18 @@ fn last_seq(conn: &Connection) -> i64 {
         .unwrap_or(0)
 }
 
-/// Writes `batch` in one transaction, numbering rows from `*seq + 1`;
-/// `*seq` moves only if the transaction commits.
-fn write_batch(conn: &mut Connection, batch: &[Entry], seq: &mut i64) -> rusqlite::Result<()> {
+/// Writes `batch` in one transaction, numbering rows from `*seq + 1` and
+/// chaining command rows after `*chain`; `*seq` and `*chain` move only if
+/// the transaction commits.
+fn write_batch(
+    conn: &mut Connection,
+    batch: &[Entry],
+    seq: &mut i64,
+    chain: &mut chain::Link,
+) -> rusqlite::Result<()> {
     let tx = conn.transaction()?;
     let mut next = *seq;
+    let mut link = chain.clone();
     for e in batch {
         next += 1;
         match e {
@@ -824,16 +847,30 @@ fn write_batch(conn: &mut Connection, batch: &[Entry], seq: &mut i64) -> rusqlit
                 verified,
                 detail,
                 stage,
+                source,
+                count,
             } => {
-                tx.prepare_cached(
-                    "INSERT INTO commands (seq, at_ms, operator, action, alarm, nonce, accepted, verified, detail, stage) VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10)",
-                )?
-                .execute(params![next, *at as i64, operator, action, alarm, nonce, *accepted as i64, *verified as i64, detail, stage])?;
+                let row = chain::ChainedRow {
+                    seq: next,
+                    at_ms: *at as i64,
+                    operator,
+                    action,
+                    alarm,
+                    nonce,
+                    accepted: *accepted,
+                    verified: *verified,
+                    detail,
+                    stage,
+                    source,
+                    count: i64::try_from(*count).unwrap_or(i64::MAX),
+                };
+                link = chain::insert(&tx, &row, &link)?;
             }
         }
     }
     tx.commit()?;
     *seq = next;
+    *chain = link;
     Ok(())
 }
 
@@ -856,6 +893,20 @@ pub struct Saved {
     pub state: Option<SavedState>,
     /// Nonces of verified commands since the given time, with their times.
     pub nonces: Vec<(u64, String)>,
+    /// The outcome of each of those commands, as its final row says.
+    pub outcomes: Vec<SavedOutcome>,
+}
+
+/// A recent verified command's outcome, as journaled.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SavedOutcome {
+    /// Its nonce.
+    pub nonce: String,
+    /// When it was first journaled (ms).
+    pub at: u64,
+    /// Accepted and the detail, from its final row; `None` when only its
+    /// request was journaled (the agent stopped before the outcome).
+    pub outcome: Option<(bool, String)>,
 }
 
 /// The last machine-state row.
@@ -902,17 +953,43 @@ pub fn saved(conn: &Connection, nonces_since: u64) -> rusqlite::Result<Saved> {
             e => Err(e),
         })?;
     let mut stmt = conn.prepare(
-        "SELECT at_ms, nonce FROM commands WHERE verified != 0 AND at_ms >= ?1 ORDER BY at_ms",
+        "SELECT at_ms, nonce, accepted, detail, stage FROM commands \
+         WHERE verified != 0 AND at_ms >= ?1 ORDER BY seq",
     )?;
-    let nonces = stmt
+    let rows = stmt
         .query_map([nonces_since as i64], |r| {
-            Ok((r.get::<_, i64>(0)? as u64, r.get(1)?))
+            Ok((
+                r.get::<_, i64>(0)? as u64,
+                r.get::<_, String>(1)?,
+                r.get::<_, i64>(2)? != 0,
+                r.get::<_, String>(3)?,
+                r.get::<_, String>(4)?,
+            ))
         })?
         .collect::<Result<Vec<_>, _>>()?;
+    let mut nonces = Vec::new();
+    let mut outcomes: Vec<SavedOutcome> = Vec::new();
+    for (at, nonce, accepted, detail, stage) in rows {
+        if outcomes.last().is_none_or(|o| o.nonce != nonce) {
+            nonces.push((at, nonce.clone()));
+            outcomes.push(SavedOutcome {
+                nonce: nonce.clone(),
+                at,
+                outcome: None,
+            });
+        }
+        // A command's own row, or the result of one in several rows.
+        if matches!(stage.as_str(), "command" | "result") {
+            if let Some(o) = outcomes.iter_mut().rev().find(|o| o.nonce == nonce) {
+                o.outcome = Some((accepted, detail));
+            }
+        }
+    }
     Ok(Saved {
         alarms,
         state,
         nonces,
+        outcomes,
     })
 }
 
@@ -978,7 +1055,8 @@ fn table_query(table: &str, forward: bool) -> (String, &'static [&'static str], 
         _ => (
             "commands",
             &[
-                "operator", "action", "alarm", "nonce", "accepted", "detail", "stage",
+                "operator", "action", "alarm", "nonce", "accepted", "detail", "stage", "source",
+                "count",
             ],
             "command",
         ),
@@ -1263,6 +1341,8 @@ mod tests {
             verified: false,
             detail: "bad signature".into(),
             stage: "command".into(),
+            source: String::new(),
+            count: 1,
         })
         .await
         .unwrap();

@@ -92,6 +92,8 @@ pub fn entries(step: &CellStep) -> Vec<Entry> {
             verified: c.verified,
             detail: c.detail.clone(),
             stage: c.stage.as_str().into(),
+            source: c.source.clone(),
+            count: c.count,
         });
     }
     rows

@@ -105,6 +105,15 @@ pub fn session_config(c: &ZenohConfig) -> Result<zenoh::Config, ZenohError> {
         set(&mut cfg, key, c.multicast_scouting.to_string())?;
     }
     set(&mut cfg, "timestamping/enabled", "true".into())?;
+    // Never compressed (negotiated only when both ends ask): the LZ4
+    // decoder of this Zenoh release can leak memory on invalid input
+    // (RUSTSEC-2026-0041, deny.toml), and alarm traffic is small.
+    for key in [
+        "transport/unicast/compression/enabled",
+        "transport/multicast/compression/enabled",
+    ] {
+        set(&mut cfg, key, "false".into())?;
+    }
     if let Some(tls) = &c.tls {
         for (key, file) in [
             ("tls.ca", &tls.ca),

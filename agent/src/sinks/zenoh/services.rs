@@ -266,14 +266,25 @@ async fn command(
     q: &Query,
     metrics: &Metrics,
 ) -> Result<String, String> {
+    // As the querier says: anyone may claim any id, which only moves its
+    // refusals to another summary row (at most 16 sources a minute).
+    let source = q
+        .source_info()
+        .map(|s| s.source_id().zid().to_string())
+        .unwrap_or_else(|| crate::operator::refusals::UNKNOWN_SOURCE.into());
     let parsed = match q.payload() {
-        None => Err(NotACommand {
-            reason: "no payload".into(),
-        }),
+        None => {
+            metrics.refused("command", "invalid");
+            Err(NotACommand {
+                reason: "no payload".into(),
+                kind: "invalid",
+            })
+        }
         // Never parsed; identified in the journal by size, hash and prefix.
         Some(p) if p.len() > MAX_COMMAND_BYTES => {
             metrics.refused("command", "too_large");
             Err(NotACommand::payload(
+                "too_large",
                 &format!("larger than {MAX_COMMAND_BYTES} bytes"),
                 p.slices(),
             ))
@@ -289,12 +300,16 @@ async fn command(
     let (tx, rx) = oneshot::channel();
     requests
         .send(Request::Command {
+            source,
             command: parsed,
             reply: tx,
         })
         .await
         .map_err(|_| "the agent is stopping".to_string())?;
     let outcome: CommandOutcome = rx.await.map_err(|_| "the agent is stopping".to_string())?;
+    if let Some(reason) = outcome.refused {
+        metrics.refused("command", reason);
+    }
     Ok(serde_json::to_string(&outcome).unwrap_or_default())
 }
 
