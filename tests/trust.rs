@@ -12,6 +12,22 @@ use cellwatch::sinks::zenoh::envelope::{AgentKey, Kind};
 
 use crate::agent::{config, Fixture};
 
+/// The simulated CNC and the demo cell's configuration for it, their
+/// certificates trusted both ways, files under `dir`.
+async fn cnc(dir: &Path) -> (SimulatedCnc, cellwatch::config::CellConfig) {
+    let sim = SimulatedCnc::start(&SimOptions {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        pki_dir: dir.join("sim-pki"),
+        insecure: false,
+        decoy: None,
+    })
+    .await
+    .unwrap();
+    let c = config(dir, &sim.endpoint());
+    crate::util::trust_sim(&c, &dir.join("sim-pki"));
+    (sim, c)
+}
+
 /// The ports `pid` listens on (TCP, IPv4 and IPv6), from its socket
 /// descriptors and the kernel's socket tables.
 fn listening_ports(pid: u32) -> Vec<u16> {
@@ -173,16 +189,7 @@ async fn alarms_and_answers_are_sealed_by_the_cells_agent() {
 async fn a_zenoh_file_opens_no_plain_listener() {
     let d = tempfile::tempdir().unwrap();
     let dir = d.path();
-    let sim = SimulatedCnc::start(&SimOptions {
-        listen: "127.0.0.1:0".parse().unwrap(),
-        pki_dir: dir.join("sim-pki"),
-        insecure: false,
-        decoy: None,
-    })
-    .await
-    .unwrap();
-    let mut c = config(dir, &sim.endpoint());
-    crate::util::trust_sim(&c, &dir.join("sim-pki"));
+    let (sim, mut c) = cnc(dir).await;
     // Nothing about endpoints in the file: Zenoh's default would listen on
     // tcp/[::]:0.
     let file = dir.join("zenoh.json5");
@@ -445,16 +452,7 @@ async fn the_same_signed_command_sent_again_gets_its_original_outcome() {
     use cellwatch::operator::{Action, Command};
     let d = tempfile::tempdir().unwrap();
     let dir = d.path();
-    let sim = SimulatedCnc::start(&SimOptions {
-        listen: "127.0.0.1:0".parse().unwrap(),
-        pki_dir: dir.join("sim-pki"),
-        insecure: false,
-        decoy: None,
-    })
-    .await
-    .unwrap();
-    let c = config(dir, &sim.endpoint());
-    crate::util::trust_sim(&c, &dir.join("sim-pki"));
+    let (sim, c) = cnc(dir).await;
     let agent = cell::start(c.clone(), None).await.unwrap();
     let port = crate::util::agent_port(&agent).await;
     let kim = crate::util::operator_session(dir, "operator-kim", port).await;
@@ -537,4 +535,38 @@ async fn send_until_answered(session: &zenoh::Session, payload: &str) -> String 
         // Backoff only: the answer itself is the event waited for.
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
+}
+
+/// Every private key the agent writes is its owner's only, and it refuses
+/// to start on one that others may read, naming the file.
+#[cfg(unix)]
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn private_keys_are_the_owners_only() {
+    use std::os::unix::fs::PermissionsExt;
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let (sim, c) = cnc(dir).await;
+    let agent = cell::start(c.clone(), None).await.unwrap();
+    agent.stop().await;
+    let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+    let tls_key = c.zenoh.tls.as_ref().unwrap().key.clone();
+    for key in [
+        dir.join("agent-pki/private/private.pem"),
+        dir.join("sim-pki/private/private.pem"),
+        c.zenoh.signing_key.clone().unwrap(),
+        tls_key.clone(),
+    ] {
+        assert_eq!(mode(&key), 0o600, "{}", key.display());
+    }
+    std::fs::set_permissions(&tls_key, std::fs::Permissions::from_mode(0o644)).unwrap();
+    let err = cell::start(c, None).await.err().unwrap();
+    assert!(err.is_input());
+    assert_eq!(
+        err.to_string(),
+        format!(
+            "{0}: a private key readable by others (mode 644); make it the owner's only: chmod 600 {0}",
+            tls_key.display()
+        )
+    );
+    sim.stop();
 }
