@@ -98,6 +98,23 @@ pub struct CommandRecord {
 }
 
 impl CommandRecord {
+    /// A request refused before it names anyone (not a command, or a
+    /// minute's count of refusals from `source`): no operator, no nonce.
+    fn refused(detail: String, source: String, count: u64) -> CommandRecord {
+        CommandRecord {
+            operator: String::new(),
+            action: None,
+            alarm: String::new(),
+            nonce: String::new(),
+            accepted: false,
+            verified: false,
+            detail,
+            stage: Stage::Refused,
+            source,
+            count,
+        }
+    }
+
     /// A row of `cmd` (its sender's fields cut to [`RECORD_FIELD_BYTES`]),
     /// naming `target` (the alarm, tag, transition or chart).
     fn of(cmd: &Command, target: &str, stage: Stage) -> CommandRecord {
@@ -747,18 +764,11 @@ impl CellLoop {
         let now = self.clock.now_ms();
         let cmd = match command {
             Err(not) => {
-                let record = CommandRecord {
-                    operator: String::new(),
-                    action: None,
-                    alarm: String::new(),
-                    nonce: String::new(),
-                    accepted: false,
-                    verified: false,
-                    detail: format!("not a command: {}", not.reason),
-                    stage: Stage::Refused,
-                    source: String::new(),
-                    count: 1,
-                };
+                let record = CommandRecord::refused(
+                    format!("not a command: {}", not.reason),
+                    String::new(),
+                    1,
+                );
                 // Counted by the services, which parse it.
                 let outcome = CommandOutcome::new(false, record.detail.clone());
                 return self
@@ -929,18 +939,7 @@ impl CellLoop {
     /// Journals the summaries of refusals of windows that have ended.
     async fn summaries(&mut self, ended: Vec<refusals::Summary>, now: u64) {
         for s in ended {
-            let record = CommandRecord {
-                operator: String::new(),
-                action: None,
-                alarm: String::new(),
-                nonce: String::new(),
-                accepted: false,
-                verified: false,
-                detail: s.detail(),
-                stage: Stage::Refused,
-                source: s.source,
-                count: s.count,
-            };
+            let record = CommandRecord::refused(s.detail(), s.source, s.count);
             self.dispatch(now, Input::Command(record), Step::default(), 0)
                 .await;
         }
