@@ -22,7 +22,7 @@ pub(crate) fn config(dir: &Path, sim_endpoint: &str) -> CellConfig {
     c.opcua.as_mut().unwrap().pki_dir = dir.join("agent-pki");
     c.journal.path = dir.join("journal.sqlite");
     c.zenoh.signing_key = Some(c.journal.path.with_extension("agent.key"));
-    c.zenoh.listen = vec!["tls/127.0.0.1:0".into()];
+    c.zenoh.listen = vec!["quic/127.0.0.1:0".into()];
     crate::util::bus_pki(dir, &["agent-m01ps0004"]);
     c.zenoh.tls = Some(crate::util::bus_tls(dir, "agent-m01ps0004"));
     c.metrics = Some("127.0.0.1:0".parse().unwrap());
@@ -509,7 +509,7 @@ pub(crate) async fn line_cell(dir: &Path) -> (cellwatch::sim::line::SimulatedLin
     c.opcua.as_mut().unwrap().pki_dir = dir.join("agent-pki");
     c.journal.path = dir.join("journal.sqlite");
     c.zenoh.signing_key = Some(c.journal.path.with_extension("agent.key"));
-    c.zenoh.listen = vec!["tls/127.0.0.1:0".into()];
+    c.zenoh.listen = vec!["quic/127.0.0.1:0".into()];
     crate::util::bus_pki(dir, &["agent-line01"]);
     c.zenoh.tls = Some(crate::util::bus_tls(dir, "agent-line01"));
     c.metrics = Some("127.0.0.1:0".parse().unwrap());
@@ -762,7 +762,7 @@ async fn router(dir: &Path, access_control: bool) -> (zenoh::Session, u16) {
     let pki = dir.join("pki-bus");
     let file = |name: &str| serde_json::to_string(&pki.join(name).display().to_string()).unwrap();
     for (key, value) in [
-        ("listen/endpoints", "[\"tls/127.0.0.1:0\"]".to_string()),
+        ("listen/endpoints", "[\"quic/127.0.0.1:0\"]".to_string()),
         ("transport/link/tls/root_ca_certificate", file("ca.pem")),
         (
             "transport/link/tls/listen_certificate",
@@ -807,7 +807,7 @@ pub(crate) async fn behind_a_router(
     let mut c = config(dir, &sim.endpoint());
     c.zenoh.mode = cellwatch::config::ZenohMode::Client;
     c.zenoh.listen = Vec::new();
-    c.zenoh.connect = vec![format!("tls/127.0.0.1:{port}")];
+    c.zenoh.connect = vec![format!("quic/127.0.0.1:{port}")];
     crate::util::trust_sim(&c, &dir.join("sim-pki"));
     let agent = cell::start(c, None).await.unwrap();
     (router, port, sim, agent)
@@ -907,8 +907,13 @@ async fn through_the_router_nobody_else_publishes_or_answers_for_the_cell() {
     assert!(command[0].contains("\"accepted\":false"), "{command:?}");
     command_task.abort();
     // Mallory publishes forged alarms all along, before and after a real fault.
+    // Kim subscribes as `cellwatch alarms --follow` does: an alarm put
+    // before the router told the agent of the subscription is fetched from
+    // the agent's cache.
     let sub = kim
         .declare_subscriber("cellwatch/m01ps0004/alarms/**")
+        .history(HistoryConfig::default().detect_late_publishers())
+        .recovery(RecoveryConfig::default().heartbeat())
         .await
         .unwrap();
     let forging = {

@@ -46,7 +46,7 @@ pki_dir = "pki"
 namespace_uri = "urn:cellwatch:test"
 
 [zenoh]
-listen = ["tls/127.0.0.1:0"]
+listen = ["quic/127.0.0.1:0"]
 
 [zenoh.tls]
 ca = "pki-bus/ca.pem"

@@ -151,3 +151,73 @@ async fn oversized_commands_and_history_floods_stay_bounded() {
     child.wait().unwrap();
     sim.stop();
 }
+
+/// Every query gets an answer, even 200 at once from one session (8 tasks
+/// × 25 snapshot queries): the snapshot, or "busy" — never silence. (Over
+/// Zenoh's `tls/` link most of them used to end with no answer at all: the
+/// link broke under the load.)
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn every_query_from_one_session_is_answered() {
+    let d = tempfile::tempdir().unwrap();
+    let (sim, mut cell) = start(d.path()).await;
+    let mut child = cell.spawn("agent.log").await;
+    let client = cell.client().await;
+    snapshot_until(&client, "the agent never settled", |s| {
+        s["state"] == "running"
+    })
+    .await;
+    let mut tasks = Vec::new();
+    for t in 0..8 {
+        let c = client.clone();
+        tasks.push(tokio::spawn(async move {
+            // Answered, busy, silent.
+            let mut tally = [0usize; 3];
+            for i in 0..25 {
+                let replies = c
+                    .get(format!(
+                        "cellwatch/m01ps0004/snapshot?nonce={t:02x}{i:02x}{}",
+                        "0".repeat(28)
+                    ))
+                    .timeout(Duration::from_secs(60))
+                    .await
+                    .unwrap();
+                match replies.recv_async().await {
+                    Ok(r) => match r.result() {
+                        Ok(s) => {
+                            let v: serde_json::Value =
+                                serde_json::from_str(&crate::util::opened(s.payload())).unwrap();
+                            assert_eq!(v["cell"], "m01ps0004");
+                            tally[0] += 1;
+                        }
+                        Err(e) => {
+                            let why = crate::util::opened_or_raw(e.payload());
+                            assert_eq!(why, "the agent is busy: try again");
+                            tally[1] += 1;
+                        }
+                    },
+                    Err(_) => tally[2] += 1,
+                }
+            }
+            tally
+        }));
+    }
+    let mut tally = [0usize; 3];
+    for t in tasks {
+        for (sum, n) in tally.iter_mut().zip(t.await.unwrap()) {
+            *sum += n;
+        }
+    }
+    assert_eq!(
+        tally[2],
+        0,
+        "{} answered, {} busy, {} with no answer at all\n{}",
+        tally[0],
+        tally[1],
+        tally[2],
+        cell.log("agent.log")
+    );
+    assert!(tally[0] > 0, "none answered: {tally:?}");
+    child.kill().unwrap();
+    child.wait().unwrap();
+    sim.stop();
+}

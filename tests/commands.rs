@@ -345,7 +345,7 @@ async fn a_write_killed_before_the_plc_answered_is_a_replay_after_the_restart() 
             // The write waits long for its answer: long enough to be killed.
             &format!("tcp = \"{cable}\"\npoll_interval = \"100ms\"\nresponse_timeout = \"20s\"\nretries = 0"),
         )
-        .replace("tls/127.0.0.1:7449", "tls/127.0.0.1:0")
+        .replace("quic/127.0.0.1:7449", "quic/127.0.0.1:0")
         .replace("listen = \"127.0.0.1:9466\"", "listen = \"127.0.0.1:0\"")
         .replace(
             "\"moulding/",

@@ -116,7 +116,7 @@ impl RobotCell {
         ua.pki_dir = dir.join("agent-pki");
         c.journal.path = dir.join("journal.sqlite");
         c.zenoh.signing_key = Some(c.journal.path.with_extension("agent.key"));
-        c.zenoh.listen = vec!["tls/127.0.0.1:0".into()];
+        c.zenoh.listen = vec!["quic/127.0.0.1:0".into()];
         crate::util::bus_pki(dir, &["agent-robot01"]);
         c.zenoh.tls = Some(crate::util::bus_tls(dir, "agent-robot01"));
         c.metrics = None;

@@ -483,7 +483,7 @@ pub(crate) async fn moulding_agent(
     let l = c.legacy.as_mut().unwrap();
     l.transport = transport;
     l.poll_interval = Duration::from_millis(100);
-    c.zenoh.listen = vec!["tls/127.0.0.1:0".into()];
+    c.zenoh.listen = vec!["quic/127.0.0.1:0".into()];
     crate::util::bus_pki(dir, &["agent-moulding-bus1"]);
     c.zenoh.tls = Some(crate::util::bus_tls(dir, "agent-moulding-bus1"));
     c.journal.path = dir.join("journal.sqlite");
@@ -786,7 +786,7 @@ async fn each_unit_a_cell_of_its_own_reports_its_day_as_the_simulator_logged_it(
         let l = c.legacy.as_mut().unwrap();
         l.transport = Transport::Tcp(addr.to_string());
         l.poll_interval = Duration::from_millis(20);
-        c.zenoh.listen = vec!["tls/127.0.0.1:0".into()];
+        c.zenoh.listen = vec!["quic/127.0.0.1:0".into()];
         c.zenoh.tls = Some(crate::util::bus_tls(dir.path(), &format!("agent-{name}")));
         c.journal.path = dir.path().join(format!("{name}.sqlite"));
         c.zenoh.signing_key = Some(c.journal.path.with_extension("agent.key"));

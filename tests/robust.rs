@@ -207,7 +207,7 @@ model = {}
 severity = "high"
 
 [zenoh]
-listen = ["tls/127.0.0.1:0"]
+listen = ["quic/127.0.0.1:0"]
 
 [zenoh.tls]
 ca = {}
@@ -441,7 +441,7 @@ async fn robot_cell(dir: &std::path::Path) -> (SimulatedRobot, crate::spawned::C
             &format!("{:?}", path(&dir.join("robot.sfc.toml"))),
         )
         .replace("force_pulse = \"300ms\"", "force_pulse = \"60s\"")
-        .replace("tls/127.0.0.1:7450", "tls/127.0.0.1:0")
+        .replace("quic/127.0.0.1:7450", "quic/127.0.0.1:0")
         .replace("\"pki-bus/ca.pem\"", &format!("{:?}", path(&tls.ca)))
         .replace(
             "\"pki-bus/agent-robot01.pem\"",
@@ -608,4 +608,30 @@ async fn a_shelf_beyond_max_shelve_is_refused() {
         .unwrap();
     assert_eq!((accepted, refused), (0, 5));
     fx.sim.stop();
+}
+
+/// The simulators stop on SIGTERM too, with nothing on standard input
+/// (as a service or a container runs them): exit status 0.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_simulators_stop_on_sigterm() {
+    let d = tempfile::tempdir().unwrap();
+    let pki = d.path().join("pki").display().to_string();
+    for args in [
+        vec!["simulate", "cnc", "--listen", "127.0.0.1:0", "--pki-dir", &pki, "--scenario", "none"],
+        vec!["simulate", "moulding", "--units", "1", "--tcp", "127.0.0.1:0", "--scenario", "none"],
+    ] {
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_cellwatch"))
+            .args(&args)
+            .stdin(std::process::Stdio::null())
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        // Its first line says it serves: its stop signals are set by then.
+        let lines = crate::util::lines_of(&mut child);
+        let first = lines.recv_timeout(Duration::from_secs(60)).unwrap();
+        assert!(first.starts_with("simulated"), "{args:?}: {first}");
+        sigterm(&child);
+        assert_eq!(exit_code(child).await, Some(0), "{args:?}");
+    }
 }

@@ -161,7 +161,7 @@ pub(crate) fn cell(dir: &Path, sim: &SimulatedCnc) -> Cell {
     let demo = std::fs::read_to_string(root().join("config/demo.toml")).unwrap();
     let config = demo
         .replace("opc.tcp://127.0.0.1:4845/", &sim.endpoint())
-        .replace("tls/127.0.0.1:7447", "tls/127.0.0.1:0")
+        .replace("quic/127.0.0.1:7447", "quic/127.0.0.1:0")
         .replace("# listen = \"127.0.0.1:9464\"", "listen = \"127.0.0.1:0\"")
         .replace(
             "# path = \"cellwatch-m01ps0004.sqlite\"",

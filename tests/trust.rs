@@ -31,15 +31,7 @@ async fn cnc(dir: &Path) -> (SimulatedCnc, cellwatch::config::CellConfig) {
 /// The ports `pid` listens on (TCP, IPv4 and IPv6), from its socket
 /// descriptors and the kernel's socket tables.
 fn listening_ports(pid: u32) -> Vec<u16> {
-    let inodes: Vec<String> = std::fs::read_dir(format!("/proc/{pid}/fd"))
-        .unwrap()
-        .map_while(Result::ok)
-        .filter_map(|fd| std::fs::read_link(fd.path()).ok())
-        .filter_map(|l| {
-            let l = l.to_string_lossy().to_string();
-            Some(l.strip_prefix("socket:[")?.strip_suffix(']')?.to_string())
-        })
-        .collect();
+    let inodes = socket_inodes(pid);
     let mut ports = Vec::new();
     for table in ["/proc/net/tcp", "/proc/net/tcp6"] {
         for line in std::fs::read_to_string(table).unwrap().lines().skip(1) {
@@ -52,6 +44,35 @@ fn listening_ports(pid: u32) -> Vec<u16> {
         }
     }
     ports
+}
+
+/// The UDP ports process `pid` has sockets bound to.
+fn udp_ports(pid: u32) -> Vec<u16> {
+    let inodes = socket_inodes(pid);
+    let mut ports = Vec::new();
+    for table in ["/proc/net/udp", "/proc/net/udp6"] {
+        for line in std::fs::read_to_string(table).unwrap().lines().skip(1) {
+            let f: Vec<&str> = line.split_whitespace().collect();
+            if f.len() > 9 && inodes.iter().any(|i| i == f[9]) {
+                let port = f[1].rsplit(':').next().unwrap();
+                ports.push(u16::from_str_radix(port, 16).unwrap());
+            }
+        }
+    }
+    ports
+}
+
+/// The inodes of process `pid`'s sockets.
+fn socket_inodes(pid: u32) -> Vec<String> {
+    std::fs::read_dir(format!("/proc/{pid}/fd"))
+        .unwrap()
+        .map_while(Result::ok)
+        .filter_map(|fd| std::fs::read_link(fd.path()).ok())
+        .filter_map(|l| {
+            let l = l.to_string_lossy().to_string();
+            Some(l.strip_prefix("socket:[")?.strip_suffix(']')?.to_string())
+        })
+        .collect()
 }
 
 /// An operator's session to an agent in peer mode tries to speak for
@@ -198,7 +219,7 @@ async fn a_zenoh_file_opens_no_plain_listener() {
     let agent = cell::start(c.clone(), None).await.unwrap();
     let locators = agent.zenoh_locators().await;
     assert!(
-        !locators.is_empty() && locators.iter().all(|l| l.starts_with("tls/")),
+        !locators.is_empty() && locators.iter().all(|l| l.starts_with("quic/")),
         "{locators:?}"
     );
     agent.stop().await;
@@ -207,7 +228,7 @@ async fn a_zenoh_file_opens_no_plain_listener() {
     let agent = cell::start(c.clone(), None).await.unwrap();
     let locators = agent.zenoh_locators().await;
     assert!(
-        locators.iter().all(|l| l.starts_with("tls/")),
+        locators.iter().all(|l| l.starts_with("quic/")),
         "{locators:?}"
     );
     agent.stop().await;
@@ -218,7 +239,7 @@ async fn a_zenoh_file_opens_no_plain_listener() {
     assert!(err.is_input());
     assert_eq!(
         err.to_string(),
-        "zenoh listen/endpoints = tcp/127.0.0.1:0: not a TLS endpoint: the bus takes tls/host:port (or quic/); write zenoh.plain = true (CLI: --plain) to accept a bus without encryption or authentication"
+        "zenoh listen/endpoints = tcp/127.0.0.1:0: not an encrypted endpoint: the bus takes quic/host:port (mutual TLS over QUIC); write zenoh.plain = true (CLI: --plain) to accept a bus without encryption or authentication"
     );
     sim.stop();
 }
@@ -236,7 +257,7 @@ async fn the_cli_listens_on_nothing_and_refuses_plain_tcp() {
     std::fs::write(
         &file,
         format!(
-            "{{ connect: {{ endpoints: [\"tls/127.0.0.1:{}\"] }},\n  transport: {{ link: {{ tls: {{ root_ca_certificate: {}, connect_certificate: {}, connect_private_key: {}, enable_mtls: true }} }} }} }}\n",
+            "{{ connect: {{ endpoints: [\"quic/127.0.0.1:{}\"] }},\n  transport: {{ link: {{ tls: {{ root_ca_certificate: {}, connect_certificate: {}, connect_private_key: {}, enable_mtls: true }} }} }} }}\n",
             fx.zenoh_port(),
             path(&tls.ca),
             path(&tls.cert),
@@ -261,6 +282,29 @@ async fn the_cli_listens_on_nothing_and_refuses_plain_tcp() {
     let line = lines.recv_timeout(Duration::from_secs(60)).unwrap();
     assert!(line.contains("\"id\":\"ese\""), "{line}");
     assert_eq!(listening_ports(follow.id()), Vec::<u16>::new());
+    // Its QUIC socket (UDP) takes no connection: a session with a plant
+    // certificate cannot open one to it.
+    let udp = udp_ports(follow.id());
+    assert!(!udp.is_empty(), "the CLI has no QUIC socket");
+    crate::util::bus_pki(dir, &["operator-mallory"]);
+    for port in udp {
+        let mut cfg = cellwatch::sinks::zenoh::session_config(&crate::util::client_config(
+            dir,
+            "operator-mallory",
+            port,
+        ))
+        .unwrap();
+        cfg.insert_json5("connect/timeout_ms", "3000").unwrap();
+        // Opening connects to the configured endpoint before it returns.
+        if let Ok(s) = zenoh::open(cfg).await {
+            let peers: Vec<_> = s.info().peers_zid().await.collect();
+            assert!(
+                peers.is_empty(),
+                "{peers:?} took a connection on the CLI's UDP port {port}"
+            );
+            s.close().await.unwrap();
+        }
+    }
     follow.kill().unwrap();
     follow.wait().unwrap();
     // Plain TCP: refused unless asked for.
@@ -270,13 +314,13 @@ async fn the_cli_listens_on_nothing_and_refuses_plain_tcp() {
     assert_eq!(run.code, 2, "{}", run.stderr);
     assert_eq!(
         run.stderr.trim_end(),
-        "error: zenoh connect/endpoints = tcp/127.0.0.1:9: not a TLS endpoint: the bus takes tls/host:port (or quic/); write zenoh.plain = true (CLI: --plain) to accept a bus without encryption or authentication"
+        "error: zenoh connect/endpoints = tcp/127.0.0.1:9: not an encrypted endpoint: the bus takes quic/host:port (mutual TLS over QUIC); write zenoh.plain = true (CLI: --plain) to accept a bus without encryption or authentication"
     );
     // No trust file: nothing to believe anything with.
     let run = crate::util::cellwatch(&[
         "alarms",
         "--connect",
-        &format!("tls/127.0.0.1:{}", fx.zenoh_port()),
+        &format!("quic/127.0.0.1:{}", fx.zenoh_port()),
     ]);
     assert_eq!(run.code, 2, "{}", run.stderr);
     assert!(run.stderr.contains("give --trust FILE"), "{}", run.stderr);

@@ -89,7 +89,7 @@ pub(crate) async fn operator_session(dir: &Path, name: &str, port: u16) -> zenoh
 pub(crate) fn client_config(dir: &Path, name: &str, port: u16) -> cellwatch::config::ZenohConfig {
     cellwatch::config::ZenohConfig {
         mode: cellwatch::config::ZenohMode::Peer,
-        connect: vec![format!("tls/127.0.0.1:{port}")],
+        connect: vec![format!("quic/127.0.0.1:{port}")],
         listen: vec![],
         prefix: String::new(),
         multicast_scouting: false,
@@ -108,7 +108,7 @@ pub(crate) fn bus_args(dir: &Path, name: &str, port: u16) -> Vec<String> {
         "--trust".into(),
         trust_file(dir).display().to_string(),
         "--connect".into(),
-        format!("tls/127.0.0.1:{port}"),
+        format!("quic/127.0.0.1:{port}"),
         "--tls-ca".into(),
         tls.ca.display().to_string(),
         "--tls-cert".into(),
@@ -190,13 +190,13 @@ pub(crate) fn restartable_port() -> u16 {
     }
 }
 
-/// The port of the first `tls/` locator among `locators` (what a session
+/// The port of the first `quic/` locator among `locators` (what a session
 /// told to listen on port 0 was given).
 pub(crate) fn tls_port(locators: &[String]) -> u16 {
     locators
         .iter()
-        .find_map(|l| l.strip_prefix("tls/")?.rsplit(':').next()?.parse().ok())
-        .unwrap_or_else(|| panic!("no tls/ locator among {locators:?}"))
+        .find_map(|l| l.strip_prefix("quic/")?.rsplit(':').next()?.parse().ok())
+        .unwrap_or_else(|| panic!("no quic/ locator among {locators:?}"))
 }
 
 /// The port `agent`'s Zenoh session listens on.

@@ -595,7 +595,7 @@ pub(crate) struct SimulateArgs {
 #[derive(Debug, clap::Args)]
 pub(crate) struct ZenohArgs {
     /// Zenoh endpoint of an agent or router; repeatable (default
-    /// tls/127.0.0.1:7447, or tcp/127.0.0.1:7447 with --plain).
+    /// quic/127.0.0.1:7447, or tcp/127.0.0.1:7447 with --plain).
     #[arg(long)]
     pub(crate) connect: Vec<String>,
     /// The plant CA's certificate (PEM): only agents and routers with a

@@ -143,7 +143,7 @@ impl Agent {
     }
 
     /// Where the agent's Zenoh session listens, as locators
-    /// (`tls/127.0.0.1:7447`): with port 0 in `zenoh.listen`, the port the
+    /// (`quic/127.0.0.1:7447`): with port 0 in `zenoh.listen`, the port the
     /// system chose.
     pub async fn zenoh_locators(&self) -> Vec<String> {
         self.session

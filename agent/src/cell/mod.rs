@@ -476,7 +476,7 @@ impl CellLoop {
                         humantime::format_duration(self.max_shelve)
                     ));
                 }
-                Ok(Some(now + d.as_millis() as u64))
+                Ok(Some(now.saturating_add(d.as_millis().try_into().unwrap_or(u64::MAX))))
             }
             None => Err("shelve needs a duration (30m, 2h) or once".into()),
         }

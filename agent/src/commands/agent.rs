@@ -194,6 +194,13 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
             Some((i, ended))
         }
     };
+    // A second stop signal while the cells stop: asked twice, the process
+    // ends at once (what the journal committed is kept).
+    tokio::spawn(async move {
+        let signal = signals.recv().await;
+        tracing::warn!(signal, "stopped again while stopping: exiting now");
+        std::process::exit(1);
+    });
     let _ = stop_buses.send(true);
     for agent in agents {
         agent.stop().await;

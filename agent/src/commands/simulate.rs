@@ -4,6 +4,7 @@ use std::io::Write;
 
 use tokio::io::{AsyncBufReadExt, BufReader};
 
+use super::agent::StopSignals;
 use crate::cli::{Failure, LineArgs, MouldingArgs, RobotRunsArgs, SimulateArgs};
 use crate::sim::cnc::{Scenario, SimOptions, SimulatedCnc};
 use crate::sim::moulding::{Event, MouldingBus};
@@ -11,6 +12,7 @@ use crate::sources::pki;
 
 /// Serves a simulated moulding bus until interrupted or `quit`.
 pub(crate) async fn moulding(args: &MouldingArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    let mut signals = StopSignals::listen()?;
     let bus = MouldingBus::new(args.units);
     let io = Failure::output;
     let _server = match args.tcp {
@@ -55,11 +57,12 @@ pub(crate) async fn moulding(args: &MouldingArgs, out: &mut dyn Write) -> Result
     let mut lines = BufReader::new(tokio::io::stdin()).lines();
     loop {
         let line = tokio::select! {
-            _ = tokio::signal::ctrl_c() => break,
+            _ = signals.recv() => break,
             line = lines.next_line() => line,
         };
         let Ok(Some(line)) = line else {
-            tokio::signal::ctrl_c().await.ok();
+            // No (more) input: keep serving until interrupted.
+            signals.recv().await;
             break;
         };
         let words: Vec<&str> = line.split_whitespace().collect();
@@ -121,6 +124,7 @@ pub(crate) async fn moulding(args: &MouldingArgs, out: &mut dyn Write) -> Result
 /// Runs the simulator until interrupted. Commands on standard input:
 /// `set ADDRESS 0|1`, `bad ADDRESS`, `quit`.
 pub(crate) async fn cnc(args: &SimulateArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    let mut signals = StopSignals::listen()?;
     let sim = SimulatedCnc::start(&SimOptions {
         listen: args.listen,
         pki_dir: args.pki_dir.clone(),
@@ -162,11 +166,11 @@ pub(crate) async fn cnc(args: &SimulateArgs, out: &mut dyn Write) -> Result<(), 
     let mut lines = BufReader::new(tokio::io::stdin()).lines();
     loop {
         tokio::select! {
-            _ = tokio::signal::ctrl_c() => break,
+            _ = signals.recv() => break,
             line = lines.next_line() => {
                 let Ok(Some(line)) = line else {
                     // No (more) input: keep serving until interrupted.
-                    tokio::signal::ctrl_c().await.ok();
+                    signals.recv().await;
                     break;
                 };
                 let words: Vec<&str> = line.split_whitespace().collect();

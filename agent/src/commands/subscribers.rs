@@ -48,7 +48,7 @@ async fn session(z: &ZenohArgs) -> Result<Bus, Failure> {
     } else if z.plain {
         vec!["tcp/127.0.0.1:7447".into()]
     } else {
-        vec!["tls/127.0.0.1:7447".into()]
+        vec!["quic/127.0.0.1:7447".into()]
     };
     let cfg = ZenohConfig {
         mode,

@@ -282,6 +282,30 @@ impl ZenohMode {
     }
 }
 
+/// Why `endpoint` cannot carry a secure bus, if it cannot. The bus runs
+/// mutual TLS over QUIC (`quic/host:port`). Zenoh's TLS-over-TCP link
+/// (`tls/`) is refused: it reads and writes one TLS stream from two
+/// threads at once (eclipse-zenoh/zenoh#2557, open in Zenoh 1.10), which
+/// under load breaks the connection (queries then end with no answer) and
+/// is undefined behaviour.
+pub fn link_problem(endpoint: &str) -> Option<String> {
+    if endpoint.starts_with("quic/") {
+        None
+    } else if endpoint.starts_with("tls/") {
+        Some(format!(
+            "Zenoh's tls/ link breaks its connections under load (it reads and writes one TLS stream from two threads at once, eclipse-zenoh/zenoh#2557): write {} instead, with the same certificates (mutual TLS over QUIC, UDP)",
+            endpoint.replacen("tls/", "quic/", 1)
+        ))
+    } else {
+        Some(
+            "not an encrypted endpoint: the bus takes quic/host:port (mutual TLS over QUIC)".into(),
+        )
+    }
+}
+
+/// The longest `commands.max_shelve` accepted: one year.
+pub const MAX_SHELVE_LIMIT: Duration = Duration::from_secs(365 * 24 * 3600);
+
 /// The Zenoh session and keys.
 #[derive(Debug, Clone)]
 pub struct ZenohConfig {
@@ -967,11 +991,20 @@ impl Validator<'_> {
             );
         }
         let operators_file = raw.commands.operators_file.map(|s| self.path(s.get_ref()));
+        let max_shelve_span = raw.commands.max_shelve.as_ref().map(Spanned::span);
         let max_shelve = self.duration(
             raw.commands.max_shelve,
             "commands.max_shelve",
             crate::cell::DEFAULT_MAX_SHELVE,
         );
+        // A shelf is temporary (ISA-18.2): out of service is for longer.
+        if max_shelve > MAX_SHELVE_LIMIT {
+            self.problem(
+                max_shelve_span.unwrap_or(0..0),
+                "commands.max_shelve",
+                "at most 365d: an alarm to be kept quiet longer is taken out of service",
+            );
+        }
         #[derive(PartialEq)]
         enum Use {
             Contact,
@@ -2217,14 +2250,10 @@ impl Validator<'_> {
                     self.problem(
                         e.span(),
                         key,
-                        format!("'{text}' is not an endpoint like tls/127.0.0.1:7447"),
+                        format!("'{text}' is not an endpoint like quic/127.0.0.1:7447"),
                     );
-                } else if with_tls && !(text.starts_with("tls/") || text.starts_with("quic/")) {
-                    self.problem(
-                        e.span(),
-                        key,
-                        format!("'{text}' is not a TLS endpoint: with [zenoh.tls] use tls/host:port (or quic/)"),
-                    );
+                } else if let Some(why) = with_tls.then(|| link_problem(text)).flatten() {
+                    self.problem(e.span(), key, format!("'{text}': {why}"));
                 }
                 out.push(e.into_inner());
             }

@@ -215,7 +215,17 @@ fn the_bus_is_tls_unless_plain_is_written() {
     );
     assert_eq!(
         errors(&text),
-        "cell.toml:24:11: zenoh.listen: 'tcp/0.0.0.0:7447' is not a TLS endpoint: with [zenoh.tls] use tls/host:port (or quic/)"
+        "cell.toml:24:11: zenoh.listen: 'tcp/0.0.0.0:7447': not an encrypted endpoint: the bus takes quic/host:port (mutual TLS over QUIC)"
+    );
+    // Zenoh's TLS-over-TCP link breaks its connections under load: refused,
+    // with what to write instead.
+    let text = GOOD.replace(
+        "[zenoh.tls]",
+        "[zenoh]\nconnect = [\"tls/router-1.plant:7447\"]\n\n[zenoh.tls]",
+    );
+    assert_eq!(
+        errors(&text),
+        "cell.toml:24:12: zenoh.connect: 'tls/router-1.plant:7447': Zenoh's tls/ link breaks its connections under load (it reads and writes one TLS stream from two threads at once, eclipse-zenoh/zenoh#2557): write quic/router-1.plant:7447 instead, with the same certificates (mutual TLS over QUIC, UDP)"
     );
 }
 
@@ -877,4 +887,17 @@ fn ids_that_make_alarm_ids_are_zenoh_key_chunks() {
             .to_string(),
         "cell.toml:139:10: checks.sfc[0].charts: chart F1 step 'S1\\n' must be letters, digits, '-' or '_' (it is part of Zenoh keys)"
     );
+}
+
+#[test]
+fn a_shelf_limit_beyond_a_year_is_refused() {
+    let text = format!("{GOOD}\n[commands]\nmax_shelve = \"1000000000y\"\n");
+    let e = errors(&text);
+    assert!(
+        e.ends_with("commands.max_shelve: at most 365d: an alarm to be kept quiet longer is taken out of service"),
+        "{e}"
+    );
+    let text = format!("{GOOD}\n[commands]\nmax_shelve = \"365d\"\n");
+    let c = parse("cell.toml", &text, Path::new("base"), &mem()).unwrap();
+    assert_eq!(c.max_shelve, Duration::from_secs(365 * 24 * 3600));
 }

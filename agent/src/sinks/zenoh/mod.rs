@@ -148,7 +148,7 @@ pub fn session_config(c: &ZenohConfig) -> Result<zenoh::Config, ZenohError> {
 }
 
 /// Refuses a session that is not TLS-only (unless `plain`): every listen
-/// and connect endpoint `tls/` or `quic/`, the plant CA given, mutual
+/// and connect endpoint `quic/` or `quic/`, the plant CA given, mutual
 /// authentication on, a certificate to show. `cfg` is the session's
 /// configuration as it will be opened, the Zenoh file included.
 ///
@@ -182,12 +182,11 @@ pub fn secure(cfg: &zenoh::Config, plain: bool) -> Result<(), ZenohError> {
             if key.starts_with("listen") {
                 listening = true;
             }
-            if !(e.starts_with("tls/") || e.starts_with("quic/")) {
-                return Err(insecure(
-                    key,
-                    e.into(),
-                    "not a TLS endpoint: the bus takes tls/host:port (or quic/); write zenoh.plain = true (CLI: --plain) to accept a bus without encryption or authentication",
-                ));
+            if let Some(mut reason) = crate::config::link_problem(e) {
+                if !e.starts_with("tls/") {
+                    reason += "; write zenoh.plain = true (CLI: --plain) to accept a bus without encryption or authentication";
+                }
+                return Err(insecure(key, e.into(), &reason));
             }
         }
     }
