@@ -17,6 +17,7 @@ mod dashboards;
 mod durability;
 mod explain;
 mod force;
+mod house;
 mod interop;
 mod legacy;
 mod liveness;

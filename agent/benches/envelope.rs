@@ -40,9 +40,15 @@ fn history_page() -> Value {
 
 fn sealing(c: &mut Criterion) {
     let key = AgentKey::generate("m01ps0004");
-    let trust = Trust::parse("trust.toml", &key.trust_entry()).unwrap();
+    let trust = Trust::parse("trust.toml", &key.trust_entry()).expect("the key's own trust entry");
     for (name, body, kind, on, query) in [
-        ("alarm", alarm(), Kind::Put, "cellwatch/m01ps0004/alarms/ese", ""),
+        (
+            "alarm",
+            alarm(),
+            Kind::Put,
+            "cellwatch/m01ps0004/alarms/ese",
+            "",
+        ),
         (
             "history_page",
             history_page(),
@@ -54,11 +60,11 @@ fn sealing(c: &mut Criterion) {
         let mut group = c.benchmark_group(format!("envelope_{name}"));
         group.throughput(Throughput::Elements(1));
         group.bench_function("serialise (baseline)", |b| {
-            b.iter(|| black_box(serde_json::to_string(black_box(&body)).unwrap()))
+            b.iter(|| black_box(serde_json::to_string(black_box(&body)).expect("JSON")))
         });
         group.bench_function("serialise and seal", |b| {
             b.iter(|| {
-                let text = serde_json::to_string(black_box(&body)).unwrap();
+                let text = serde_json::to_string(black_box(&body)).expect("JSON");
                 black_box(key.seal(kind, on, query, 1_795_000_000_000, text))
             })
         });
@@ -67,15 +73,21 @@ fn sealing(c: &mut Criterion) {
             on,
             query,
             1_795_000_000_000,
-            serde_json::to_string(&body).unwrap(),
+            serde_json::to_string(&body).expect("JSON"),
         );
         group.bench_function("open (client)", |b| {
-            b.iter(|| black_box(trust.open(black_box(sealed.as_bytes()), kind, on, query).unwrap()))
+            b.iter(|| {
+                black_box(
+                    trust
+                        .open(black_box(sealed.as_bytes()), kind, on, query)
+                        .expect("believed"),
+                )
+            })
         });
         group.finish();
         println!(
             "{name}: body {} bytes, sealed {} bytes",
-            serde_json::to_string(&body).unwrap().len(),
+            serde_json::to_string(&body).expect("JSON").len(),
             sealed.len()
         );
     }

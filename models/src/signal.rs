@@ -6,11 +6,10 @@
 //! signals a switching function may stop at ([`Observability`]). It knows
 //! nothing of programs.
 
-use std::collections::BTreeSet;
 use std::fmt;
 use std::sync::Arc;
 
-use crate::il::Dialect;
+pub use crate::il::{class_of, Observability};
 
 /// One boolean PLC signal, by canonical name.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -117,112 +116,6 @@ pub fn iec_direct_address(text: &str) -> Result<Signal, String> {
     Ok(Signal::new(&upper))
 }
 
-/// The address class of a signal in a dialect: `X`, `R`, ... for PMC,
-/// `%I`, `%Q`, `%M` for IEC direct addresses; `None` for IEC symbols.
-pub fn class_of(dialect: Dialect, signal: &Signal) -> Option<&str> {
-    let name = signal.name();
-    match dialect {
-        Dialect::Pmc => {
-            let n = name.chars().take_while(|c| c.is_ascii_alphabetic()).count();
-            (n > 0).then(|| &name[..n])
-        }
-        Dialect::Iec => (name.starts_with('%') && name.len() >= 2).then(|| &name[..2]),
-        // `E0.0` → `E`, `DB1.DBX2.3` → `DB`; symbols and locals have none.
-        Dialect::Stl => {
-            let n = name.chars().take_while(|c| c.is_ascii_alphabetic()).count();
-            (n > 0 && name[n..].starts_with(|c: char| c.is_ascii_digit())).then(|| &name[..n])
-        }
-    }
-}
-
-/// Which signals a switching function is written in.
-///
-/// A signal is observable if its class is listed or the signal itself is.
-/// Coils that are not observable are expanded into the logic that writes
-/// them; observable ones stay as leaves.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Observability {
-    dialect: Dialect,
-    classes: BTreeSet<String>,
-    signals: BTreeSet<Signal>,
-}
-
-impl Observability {
-    /// The default: PMC classes X, Y, F and G; IEC inputs `%I` and outputs `%Q`.
-    pub fn default_for(dialect: Dialect) -> Self {
-        let classes: &[&str] = match dialect {
-            Dialect::Pmc => &["X", "Y", "F", "G"],
-            Dialect::Iec => &["%I", "%Q"],
-            Dialect::Stl => &["E", "A", "I", "Q"],
-        };
-        Observability {
-            dialect,
-            classes: classes.iter().map(|c| c.to_string()).collect(),
-            signals: BTreeSet::new(),
-        }
-    }
-
-    /// Every signal observable: a coil's logic exactly as the program
-    /// writes it, with no relay expanded.
-    pub fn everything(dialect: Dialect) -> Self {
-        Observability {
-            dialect,
-            classes: BTreeSet::from([String::from("*")]),
-            signals: BTreeSet::new(),
-        }
-    }
-
-    /// Parses a comma-separated list of classes (`X,Y,F,G` or `%I,%Q`) and
-    /// signals (`R1024.00`, `Motor`).
-    ///
-    /// # Errors
-    /// A message naming the malformed entry.
-    pub fn parse(dialect: Dialect, list: &str) -> Result<Self, String> {
-        let mut classes = BTreeSet::new();
-        let mut signals = BTreeSet::new();
-        for item in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
-            match dialect {
-                Dialect::Pmc if item.chars().all(|c| c.is_ascii_alphabetic()) => {
-                    classes.insert(item.to_ascii_uppercase());
-                }
-                Dialect::Pmc => {
-                    signals.insert(pmc_address(item)?);
-                }
-                Dialect::Iec if item.len() == 2 && item.starts_with('%') => {
-                    let class = item.to_ascii_uppercase();
-                    if !matches!(class.as_str(), "%I" | "%Q" | "%M") {
-                        return Err(format!("unknown address class '{item}': use %I, %Q or %M"));
-                    }
-                    classes.insert(class);
-                }
-                Dialect::Iec => {
-                    signals.insert(crate::il::iec::operand_signal(item)?);
-                }
-                Dialect::Stl
-                    if item.len() <= 3 && item.chars().all(|c| c.is_ascii_alphabetic()) =>
-                {
-                    classes.insert(item.to_ascii_uppercase());
-                }
-                Dialect::Stl => {
-                    signals.insert(crate::il::stl::operand_signal(item)?);
-                }
-            }
-        }
-        Ok(Observability {
-            dialect,
-            classes,
-            signals,
-        })
-    }
-
-    /// Whether `signal` stays a leaf of a switching function.
-    pub fn is_observable(&self, signal: &Signal) -> bool {
-        self.classes.contains("*")
-            || self.signals.contains(signal)
-            || class_of(self.dialect, signal).is_some_and(|c| self.classes.contains(c))
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -255,19 +148,5 @@ mod tests {
         assert!(iec_direct_address("%ZX1").is_err());
         assert!(iec_direct_address("%IX").is_err());
         assert!(iec_direct_address("%IX1..2").is_err());
-    }
-
-    #[test]
-    fn observability_by_class_and_signal() {
-        let o = Observability::default_for(Dialect::Pmc);
-        assert!(o.is_observable(&Signal::new("X0.07")));
-        assert!(!o.is_observable(&Signal::new("R1")));
-        let o = Observability::parse(Dialect::Pmc, "X, R1").unwrap();
-        assert!(o.is_observable(&Signal::new("R1")));
-        assert!(!o.is_observable(&Signal::new("Y1")));
-        let o = Observability::default_for(Dialect::Iec);
-        assert!(o.is_observable(&Signal::new("%IX0.0.3")));
-        assert!(!o.is_observable(&Signal::new("%MX1.0")));
-        assert!(!o.is_observable(&Signal::new("Motor")));
     }
 }

@@ -336,7 +336,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         sinks.push(Box::new(ConsoleSink::new(observer)));
     }
     sinks.extend(options.sinks);
-    let forcing = super::force::Forcing::of(&config);
+    let forcing = super::forcing::Forcing::of(&config);
     let mut source = match options.source {
         Some(source) => source,
         None => {

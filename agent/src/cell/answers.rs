@@ -11,8 +11,8 @@ use std::sync::{Arc, Mutex};
 
 use tokio::sync::oneshot;
 
-use super::CommandOutcome;
 use crate::operator::Gate;
+use crate::step::CommandOutcome;
 
 /// Shared between the loop (which begins and looks up) and the tasks that
 /// send outcomes once they are durable (which finish).

@@ -17,6 +17,7 @@ pub mod agent;
 pub mod answers;
 pub mod compile;
 pub mod force;
+pub mod forcing;
 pub mod restore;
 
 use std::future::Future;
@@ -27,6 +28,10 @@ use cellwatch_models::engine::{CellEngine, HistoryKind, Step, Value};
 use cellwatch_models::value::Num;
 use tokio::sync::{mpsc, oneshot, watch};
 
+pub use crate::step::{
+    CellStep, CommandOutcome, CommandRecord, Input, PublishedAlarm, Request, Stage,
+    RECORD_FIELD_BYTES,
+};
 pub use agent::{start, start_with, Agent, Ended, Options, StartError};
 
 use crate::clock::{rfc3339, Clock};
@@ -45,230 +50,6 @@ pub const TICK: Duration = Duration::from_millis(250);
 
 /// The agent's own alarm for a journal that cannot write.
 pub const JOURNAL_ALARM: &str = "journal";
-
-/// What came into the loop.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Input {
-    /// The PLC connection came up (`up`) or went down; to what, or why.
-    Connection {
-        /// Up or down.
-        up: bool,
-        /// The endpoint, or why it went down.
-        detail: String,
-    },
-    /// Values from the PLC (the engine step says how many).
-    Readings,
-    /// Time passed: timers were advanced.
-    Tick,
-    /// The periodic state publication (no change).
-    StateBeat,
-    /// The alarms and machine state taken back from the journal at start.
-    Restored,
-    /// A condition of the agent itself changed (the journal's health).
-    System,
-    /// An operator command, carried out or refused.
-    Command(CommandRecord),
-}
-
-/// An operator command as journaled.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct CommandRecord {
-    /// Who signed it (as claimed, for refused ones).
-    pub operator: String,
-    /// What was asked; `None` if the request did not parse.
-    pub action: Option<Action>,
-    /// The alarm it names.
-    pub alarm: String,
-    /// The request's nonce.
-    pub nonce: String,
-    /// Whether it was carried out.
-    pub accepted: bool,
-    /// Whether its signature was verified (its nonce is used up).
-    pub verified: bool,
-    /// What it did, or why it was refused.
-    pub detail: String,
-    /// Which part of the command this row records.
-    pub stage: Stage,
-    /// Where the query came from, as it says ([`refusals::UNKNOWN_SOURCE`]
-    /// when it does not); kept for refusals before a signature is verified.
-    pub source: String,
-    /// How many refusals the row stands for ([`Stage::Refused`]); 1 for
-    /// every other row.
-    pub count: u64,
-}
-
-impl CommandRecord {
-    /// A request refused before it names anyone (not a command, or a
-    /// minute's count of refusals from `source`): no operator, no nonce.
-    fn refused(detail: String, source: String, count: u64) -> CommandRecord {
-        CommandRecord {
-            operator: String::new(),
-            action: None,
-            alarm: String::new(),
-            nonce: String::new(),
-            accepted: false,
-            verified: false,
-            detail,
-            stage: Stage::Refused,
-            source,
-            count,
-        }
-    }
-
-    /// A row of `cmd` (its sender's fields cut to [`RECORD_FIELD_BYTES`]),
-    /// naming `target` (the alarm, tag, transition or chart).
-    fn of(cmd: &Command, target: &str, stage: Stage) -> CommandRecord {
-        let field = |s: &str| clip(s, RECORD_FIELD_BYTES);
-        CommandRecord {
-            operator: field(&cmd.operator),
-            action: Some(cmd.action),
-            alarm: field(target),
-            nonce: field(&cmd.nonce),
-            accepted: false,
-            verified: false,
-            detail: String::new(),
-            stage,
-            source: String::new(),
-            count: 1,
-        }
-    }
-
-    /// The same row saying `detail` (cut to four times
-    /// [`RECORD_FIELD_BYTES`]).
-    fn saying(self, accepted: bool, detail: &str) -> CommandRecord {
-        CommandRecord {
-            accepted,
-            detail: clip(detail, 4 * RECORD_FIELD_BYTES),
-            ..self
-        }
-    }
-}
-
-/// A row of a command in the journal: a plain command is one row; a
-/// forced transition or a stop is its request, each check, the write and
-/// the result, in that order.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Stage {
-    /// A command in one row (ack, reset, shelve, write, …).
-    Command,
-    /// What was asked.
-    Request,
-    /// One check and its outcome.
-    Check,
-    /// The write to the PLC and what it answered.
-    Write,
-    /// How it ended.
-    Result,
-    /// Refused before a known operator's signature was verified: the first
-    /// of its source and reason in a minute, or how many more came
-    /// ([`CommandRecord::count`], [`refusals`]).
-    Refused,
-}
-
-impl Stage {
-    /// Its name in the journal.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Stage::Command => "command",
-            Stage::Request => "request",
-            Stage::Check => "check",
-            Stage::Write => "write",
-            Stage::Result => "result",
-            Stage::Refused => "refused",
-        }
-    }
-
-    /// Whether the row ends its command (counted once in the metrics;
-    /// refusals summarised are counted one by one as refused requests).
-    pub fn is_final(self) -> bool {
-        matches!(self, Stage::Command | Stage::Result)
-    }
-}
-
-/// What of a sender's fields is journaled and logged, at most.
-pub const RECORD_FIELD_BYTES: usize = 128;
-
-/// An alarm transition ready to publish: the payload and its JSON.
-#[derive(Debug, Clone, PartialEq)]
-pub struct PublishedAlarm {
-    /// The payload.
-    pub payload: AlarmPayload,
-    /// The same, as JSON (journaled and published byte for byte).
-    pub json: String,
-}
-
-/// One input and everything it caused: what every sink is given.
-#[derive(Debug, Clone, PartialEq)]
-pub struct CellStep {
-    /// When the loop handled it, ms since the epoch.
-    pub at: u64,
-    /// What came in.
-    pub input: Input,
-    /// What the engine did.
-    pub engine: Step,
-    /// The engine's alarm transitions as payloads, in the same order.
-    pub alarms: Vec<PublishedAlarm>,
-    /// The machine state to publish, when it changed (or on a beat).
-    pub state: Option<StatePayload>,
-    /// Source events waiting in the queue after this one.
-    pub queue_depth: usize,
-    /// When the source received the values this step handles: the start
-    /// of the agent's own latency (`cellwatch_alarm_latency_seconds`).
-    pub received: Option<std::time::Instant>,
-}
-
-impl CellStep {
-    /// Whether the step carries something worth a journal row.
-    pub fn has_rows(&self) -> bool {
-        !self.alarms.is_empty()
-            || self.engine.states().next().is_some()
-            || !self.engine.parts.is_empty()
-            || matches!(self.input, Input::Command(_))
-    }
-}
-
-/// What an operator's command came to.
-#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub struct CommandOutcome {
-    /// Whether it was carried out.
-    pub accepted: bool,
-    /// What it did, or why not.
-    pub detail: String,
-    /// Why it was refused before a known operator's signature was
-    /// verified (`cellwatch_requests_refused_total`'s reason); not sent.
-    #[serde(skip)]
-    pub refused: Option<&'static str>,
-}
-
-impl CommandOutcome {
-    /// The outcome `detail`, accepted or not.
-    pub fn new(accepted: bool, detail: impl Into<String>) -> CommandOutcome {
-        CommandOutcome {
-            accepted,
-            detail: detail.into(),
-            refused: None,
-        }
-    }
-}
-
-/// A request from the services to the loop, answered on its channel.
-// A command is the large one; one per query, moved once through a bounded
-// channel: not worth a box.
-#[allow(clippy::large_enum_variant)]
-#[derive(Debug)]
-pub enum Request {
-    /// The cell as the engine sees it now.
-    Snapshot(oneshot::Sender<SnapshotPayload>),
-    /// An operator command (or why the request is not one).
-    Command {
-        /// Who sent it, as the query says (see [`refusals`]).
-        source: String,
-        /// The parsed command, or why the request is not one.
-        command: Result<Command, NotACommand>,
-        /// Where the outcome goes.
-        reply: oneshot::Sender<CommandOutcome>,
-    },
-}
 
 /// The loop's state: the engine, the operator gate and the sinks.
 pub struct CellLoop {
@@ -297,7 +78,7 @@ pub struct CellLoop {
     /// The longest shelf.
     max_shelve: Duration,
     /// The charts' switches and the force under way.
-    forcing: force::Forcing,
+    forcing: forcing::Forcing,
     /// Refusals before a signature was verified, counted per source and
     /// reason for the journal's summaries (bounded).
     refusals: Refusals,
@@ -334,8 +115,7 @@ enum Then {
     Stop,
 }
 
-/// The longest shelf unless the configuration says (`commands.max_shelve`).
-pub const DEFAULT_MAX_SHELVE: Duration = Duration::from_secs(8 * 3600);
+pub use crate::config::DEFAULT_MAX_SHELVE;
 
 /// How long a write may take on the PLC's side before the operator is
 /// told it failed.
@@ -368,7 +148,7 @@ impl CellLoop {
             writer: None,
             written_tx,
             written_rx,
-            forcing: force::Forcing::default(),
+            forcing: forcing::Forcing::default(),
             refusals: Refusals::default(),
             answers: answers::Answers::default(),
             allowance: 0,
@@ -428,7 +208,7 @@ impl CellLoop {
 
     /// Forces transitions and presses stop switches of these charts.
     #[must_use]
-    pub fn forcing(mut self, forcing: force::Forcing) -> CellLoop {
+    pub fn forcing(mut self, forcing: forcing::Forcing) -> CellLoop {
         self.forcing = forcing;
         self
     }
@@ -476,7 +256,9 @@ impl CellLoop {
                         humantime::format_duration(self.max_shelve)
                     ));
                 }
-                Ok(Some(now.saturating_add(d.as_millis().try_into().unwrap_or(u64::MAX))))
+                Ok(Some(now.saturating_add(
+                    d.as_millis().try_into().unwrap_or(u64::MAX),
+                )))
             }
             None => Err("shelve needs a duration (30m, 2h) or once".into()),
         }

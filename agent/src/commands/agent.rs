@@ -14,8 +14,9 @@ use std::time::Duration;
 
 use tokio::sync::mpsc;
 
+use super::signals::StopSignals;
+use super::Failure;
 use crate::cell;
-use crate::cli::{DemoArgs, Failure, RunArgs, ValidateArgs};
 use crate::config::{self, CellConfig, OpcUaConfig};
 use crate::sim::cnc::{Scenario, SimOptions, SimulatedCnc};
 use crate::sim::line::SimulatedLine;
@@ -69,53 +70,6 @@ pub(crate) fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<(), F
         writeln!(out, "warning: {w}").map_err(io)?;
     }
     writeln!(out, "ok").map_err(io)
-}
-
-/// The signals that stop a command cleanly: Ctrl-C (SIGINT) and SIGTERM
-/// (what systemd, Docker and Kubernetes send). Listened to from the moment
-/// they are made, so that one sent while the agent starts is not lost.
-pub(crate) struct StopSignals {
-    interrupt: tokio::signal::unix::Signal,
-    terminate: tokio::signal::unix::Signal,
-}
-
-impl StopSignals {
-    /// Starts listening (the signals no longer end the process by
-    /// themselves).
-    ///
-    /// # Errors
-    /// The system refuses the handlers.
-    pub(crate) fn listen() -> Result<StopSignals, Failure> {
-        use tokio::signal::unix::{signal, SignalKind};
-        let listen = |kind| {
-            signal(kind)
-                .map_err(|e| Failure::Runtime(format!("cannot listen for stop signals: {e}")))
-        };
-        Ok(StopSignals {
-            interrupt: listen(SignalKind::interrupt())?,
-            terminate: listen(SignalKind::terminate())?,
-        })
-    }
-
-    /// The next stop signal, by name.
-    pub(crate) async fn recv(&mut self) -> &'static str {
-        tokio::select! {
-            _ = self.interrupt.recv() => "SIGINT",
-            _ = self.terminate.recv() => "SIGTERM",
-        }
-    }
-}
-
-/// The next Ctrl-C or SIGTERM, by name (Ctrl-C only where the handlers
-/// cannot be set).
-pub(crate) async fn stop_requested() -> &'static str {
-    match StopSignals::listen() {
-        Ok(mut signals) => signals.recv().await,
-        Err(_) => {
-            let _ = tokio::signal::ctrl_c().await;
-            "SIGINT"
-        }
-    }
 }
 
 /// `cellwatch run CONFIG...`: one agent per configuration, in this
@@ -864,4 +818,65 @@ fn print_notice(
 /// Used by `simulate cnc`: seconds as a duration.
 pub(crate) fn parse_duration(s: &str) -> Result<Duration, String> {
     humantime::parse_duration(s).map_err(|e| format!("'{s}' is not a duration ({e})"))
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct RunArgs {
+    /// The cell configurations (TOML), one agent each in this process.
+    /// Cells whose `[legacy]` sections name the same bus (serial port or
+    /// TCP address) share one poller on it: each injection-moulding unit a
+    /// cell of its own, one line. Their poll settings must agree.
+    #[arg(required = true, num_args = 1..)]
+    pub(crate) config: Vec<PathBuf>,
+    /// Run the agent's threads (the cell loops, the OPC UA and `@`
+    /// sources, the Zenoh session, the journal writer) under the real-time
+    /// policy SCHED_FIFO at this priority, 1–99, instead of sharing the
+    /// cores in turn with every other process: an alarm then waits for no
+    /// ordinary process on a busy machine (BENCHMARKS.md: the agent's own
+    /// latency). Needs root, CAP_SYS_NICE, or an RLIMIT_RTPRIO of at least
+    /// PRIORITY (systemd: LimitRTPRIO=); refused otherwise, before any
+    /// cell starts. Keep it below the kernel's own real-time threads
+    /// (50 on PREEMPT_RT kernels); 10 suits most machines.
+    #[arg(long, value_name = "PRIORITY", value_parser = clap::value_parser!(u8).range(1..=99))]
+    pub(crate) realtime_priority: Option<u8>,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct ValidateArgs {
+    /// The cell configuration (TOML).
+    pub(crate) config: PathBuf,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct DemoArgs {
+    /// The cell configuration to run (its OPC UA endpoint is where the
+    /// simulator listens).
+    #[arg(long, default_value = "config/demo.toml")]
+    pub(crate) config: PathBuf,
+    /// The body-shop line's cell configuration, run beside the CNC.
+    #[arg(long, default_value = "config/line.toml")]
+    pub(crate) line_config: PathBuf,
+    /// Run the CNC only (no line).
+    #[arg(long)]
+    pub(crate) no_line: bool,
+    /// The moulding units' cell configuration (paper 002), run beside the
+    /// CNC: three units on one simulated `@` bus.
+    #[arg(long, default_value = "config/moulding.toml")]
+    pub(crate) moulding_config: PathBuf,
+    /// No moulding units.
+    #[arg(long)]
+    pub(crate) no_moulding: bool,
+    /// The robot's cell configuration (paper 004), run beside the CNC: the
+    /// LCD-glass robot's charts supervised, stuck steps forced on.
+    #[arg(long, default_value = "config/robot.toml")]
+    pub(crate) robot_config: PathBuf,
+    /// No robot.
+    #[arg(long)]
+    pub(crate) no_robot: bool,
+    /// Where the demo keeps certificates, the journal and operator keys.
+    #[arg(long, default_value = "cellwatch-demo")]
+    pub(crate) state_dir: PathBuf,
+    /// Stop after this long (e.g. 60s); default: until Ctrl-C.
+    #[arg(long, value_parser = crate::commands::agent::parse_duration)]
+    pub(crate) duration: Option<std::time::Duration>,
 }

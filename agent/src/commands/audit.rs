@@ -5,7 +5,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use crate::cli::Failure;
+use super::Failure;
 use crate::sinks::journal::{self, chain};
 
 /// `cellwatch audit`.

@@ -1,6 +1,8 @@
 //! `cellwatch discover`: browse an OPC UA server and print its variables as
 //! a cell configuration, or check a configuration's tags against it.
 
+use std::path::PathBuf;
+
 use std::collections::{BTreeMap, HashSet, VecDeque};
 use std::io::Write;
 
@@ -11,7 +13,7 @@ use ::opcua::types::{
 };
 use cellwatch_models::value::ValueType;
 
-use crate::cli::{DiscoverArgs, Failure};
+use super::Failure;
 use crate::config::{self, OpcUaConfig, TagConfig};
 use crate::sources::opcua::{self, TagNode};
 
@@ -477,5 +479,89 @@ async fn check_tags(
             problems.len(),
             tags.len()
         )))
+    }
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct DiscoverArgs {
+    /// The server's endpoint (opc.tcp://host:port/path); with --check, the
+    /// configuration's endpoint unless given.
+    #[arg(required_unless_present = "check")]
+    pub(crate) endpoint: Option<String>,
+    /// Where to start browsing (a node id: nsu=<uri>;s=Machine or
+    /// ns=2;i=1000); the Objects folder by default.
+    #[arg(long)]
+    pub(crate) root: Option<String>,
+    /// How many levels of folders and objects to descend.
+    #[arg(long, default_value_t = 10)]
+    pub(crate) depth: u32,
+    /// Only variables whose browse name matches this glob (`X0.*`, `D1??`).
+    #[arg(long)]
+    pub(crate) filter: Option<String>,
+    /// Write the tags found to this CSV file (the `tags_file` format: one
+    /// row a tag, columns name, node_id, address, type, comment) instead
+    /// of `[[tags]]` tables, and print a configuration that reads it: for
+    /// servers of thousands of tags. Replaces the file if it exists.
+    #[arg(long, value_name = "PATH", conflicts_with = "check")]
+    pub(crate) tags_file: Option<PathBuf>,
+    /// Check this cell configuration instead: report the tags the server
+    /// lacks or types differently (exit status 1 if any); connects with
+    /// the configuration's [opcua] settings.
+    #[arg(long)]
+    pub(crate) check: Option<PathBuf>,
+    /// PKI directory (own key pair, trusted/ and rejected/ certificates).
+    #[arg(long, default_value = "pki")]
+    pub(crate) pki_dir: PathBuf,
+    /// Basic256Sha256 | Aes128_Sha256_RsaOaep | Aes256_Sha256_RsaPss | None.
+    #[arg(long, default_value = "Basic256Sha256")]
+    pub(crate) security_policy: crate::config::SecurityPolicy,
+    /// SignAndEncrypt | Sign | None.
+    #[arg(long, default_value = "SignAndEncrypt")]
+    pub(crate) security_mode: crate::config::SecurityMode,
+    /// Log in as this user (the password from --password-env).
+    #[arg(long, requires = "password_env")]
+    pub(crate) user: Option<String>,
+    /// The environment variable holding the user's password.
+    #[arg(long)]
+    pub(crate) password_env: Option<String>,
+}
+
+impl DiscoverArgs {
+    /// The connection the flags describe.
+    pub(crate) fn opcua(&self) -> Result<crate::config::OpcUaConfig, Failure> {
+        use crate::config::{Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy};
+        let endpoint = self.endpoint.clone().unwrap_or_default();
+        if !endpoint.starts_with("opc.tcp://") {
+            return Err(Failure::input(format!(
+                "'{endpoint}' must start with opc.tcp://"
+            )));
+        }
+        if (self.security_policy == SecurityPolicy::None)
+            != (self.security_mode == SecurityMode::None)
+        {
+            return Err(Failure::input(
+                "--security-policy None goes with --security-mode None, and only with it",
+            ));
+        }
+        let publishing = std::time::Duration::from_millis(100);
+        let sampling = std::time::Duration::from_millis(50);
+        Ok(OpcUaConfig {
+            endpoint,
+            policy: self.security_policy,
+            mode: self.security_mode,
+            pki_dir: self.pki_dir.clone(),
+            identity: match (&self.user, &self.password_env) {
+                (Some(user), Some(var)) => Identity::User {
+                    user: user.clone(),
+                    password: PasswordSource::Env(var.clone()),
+                },
+                _ => Identity::Anonymous,
+            },
+            publishing_interval: publishing,
+            sampling_interval: sampling,
+            namespace_uri: None,
+            queue_size: OpcUaConfig::default_queue_size(publishing, sampling),
+            max_notifications_per_publish: OpcUaConfig::DEFAULT_MAX_NOTIFICATIONS,
+        })
     }
 }

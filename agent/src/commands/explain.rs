@@ -8,8 +8,8 @@ use cellwatch_models::signal::Signal;
 use cellwatch_models::switching::SwitchingFunction;
 use serde::Serialize;
 
-use crate::cli::{ExplainArgs, Failure};
-use crate::inputs;
+use super::inputs::{self, ProgramArgs};
+use super::Failure;
 
 /// `--json` output.
 #[derive(Serialize)]
@@ -115,4 +115,29 @@ fn print(out: &mut dyn Write, sf: &SwitchingFunction, e: &Explanation) -> std::i
         }
     }
     Ok(())
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct ExplainArgs {
+    #[command(flatten)]
+    pub(crate) program: ProgramArgs,
+    /// The fault coil to explain.
+    #[arg(long, value_name = "NAME")]
+    pub(crate) coil: String,
+    /// Signal values at the fault: inline `X0.06=0,X0.07=1`, or a file with
+    /// one `ADDRESS=VALUE` (or CSV `ADDRESS,VALUE`) a line. Values: 0/1,
+    /// true/false, on/off.
+    #[arg(long, value_name = "VALUES")]
+    pub(crate) snapshot: String,
+    /// Signal values just before the fault, same forms; contacts that changed
+    /// are marked as the trigger.
+    #[arg(long, value_name = "VALUES")]
+    pub(crate) before: Option<String>,
+    /// Which coil value is the fault: `on` (an alarm coil) or `off` (an enable coil).
+    #[arg(long, value_name = "on|off", default_value = "on", value_parser = parse_polarity)]
+    pub(crate) fault_when: Polarity,
+}
+
+fn parse_polarity(s: &str) -> Result<Polarity, String> {
+    s.parse()
 }

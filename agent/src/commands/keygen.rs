@@ -1,9 +1,9 @@
 //! `cellwatch keygen`: an operator's Ed25519 key pair.
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use crate::cli::{Failure, KeygenArgs};
+use super::Failure;
 use crate::operator::{valid_operator_name, Action, OperatorKey, OPERATOR_NAME};
 
 /// Writes the private key file and prints the operators-file entry.
@@ -56,4 +56,18 @@ pub(crate) fn write_private(path: &Path, text: &str) -> Result<(), Failure> {
             Failure::Runtime(e)
         }
     })
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct KeygenArgs {
+    /// The operator's name, as agents' operators files will know it.
+    #[arg(long)]
+    pub(crate) operator: String,
+    /// Where to write the private key (never overwritten).
+    #[arg(long, value_name = "FILE")]
+    pub(crate) out: PathBuf,
+    /// Actions to allow in the printed entry, comma-separated (ack, reset,
+    /// write: writes to the PLC, only for those who may).
+    #[arg(long, default_value = "ack", value_name = "LIST")]
+    pub(crate) allow: String,
 }

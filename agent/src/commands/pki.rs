@@ -2,9 +2,11 @@
 //! from it for agents, routers and operators (X.509, ECDSA P-256), so that
 //! mutual TLS needs no openssl recipe; and each agent's signing key.
 
+use std::path::PathBuf;
+
 use std::io::Write;
 
-use crate::cli::{Failure, PkiAgentKeyArgs, PkiCaArgs, PkiIssueArgs};
+use super::Failure;
 use crate::sinks::zenoh::certs::{ca_files, issue, make_ca};
 use crate::sinks::zenoh::envelope::AgentKey;
 
@@ -71,4 +73,53 @@ pub(crate) fn agent_key(args: &PkiAgentKeyArgs, out: &mut dyn Write) -> Result<(
     )
     .map_err(io)?;
     write!(out, "{}", key.trust_entry()).map_err(io)
+}
+
+#[derive(Debug, clap::Subcommand)]
+pub(crate) enum PkiCommand {
+    /// Create the plant CA: DIR/ca.pem (public) and DIR/ca.key (private).
+    Ca(PkiCaArgs),
+    /// Issue a certificate from the CA in DIR: DIR/NAME.pem and DIR/NAME.key.
+    /// NAME is its common name: `agent-<cell>` for an agent, `router-…` for
+    /// a router, `operator-<name>` for an operator (as config/zenoh/ expects).
+    Issue(PkiIssueArgs),
+    /// Make a cell agent's Ed25519 signing key (`zenoh.signing_key`), or
+    /// read an existing one, and print its entry for the plant trust file
+    /// that clients check every alarm and answer against.
+    AgentKey(PkiAgentKeyArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct PkiAgentKeyArgs {
+    /// The cell whose agent signs with it.
+    #[arg(long)]
+    pub(crate) cell: String,
+    /// The key file (owner-only); an existing one is read, never
+    /// overwritten.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) out: PathBuf,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct PkiCaArgs {
+    /// Where the CA's files go.
+    #[arg(long, default_value = "pki-bus")]
+    pub(crate) dir: PathBuf,
+    /// The CA's common name.
+    #[arg(long, default_value = "cellwatch plant CA")]
+    pub(crate) name: String,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct PkiIssueArgs {
+    /// Where the CA is, and where the certificate goes.
+    #[arg(long, default_value = "pki-bus")]
+    pub(crate) dir: PathBuf,
+    /// The common name.
+    #[arg(long)]
+    pub(crate) name: String,
+    /// Host name or IP address the holder listens on (repeatable; default
+    /// localhost and 127.0.0.1). Clients check it when they connect.
+    #[arg(long)]
+    pub(crate) host: Vec<String>,
 }

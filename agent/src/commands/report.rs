@@ -5,7 +5,7 @@
 //! ([`crate::operator::escaped`]).
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use cellwatch_models::kpi::{self, AlarmReport};
 use cellwatch_models::report::{
@@ -13,7 +13,7 @@ use cellwatch_models::report::{
 };
 use chrono::{Datelike, FixedOffset, NaiveDate, TimeZone};
 
-use crate::cli::{Failure, ReportArgs, ReportCommand};
+use super::Failure;
 use crate::operator::escaped;
 use crate::sinks::journal;
 
@@ -480,4 +480,72 @@ fn monthly_csv(out: &mut dyn Write, days: &[NaiveDate], r: &MonthlyReport) -> st
         r.availability,
         r.production,
     )
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct ReportArgs {
+    #[command(subcommand)]
+    pub(crate) command: ReportCommand,
+    /// The agent's SQLite journal.
+    #[arg(long, global = true, default_value = "cellwatch.sqlite")]
+    pub(crate) db: PathBuf,
+    /// Stop-cause table (TOML, `[[cause]] code, name, fault_type | state`).
+    #[arg(long, global = true, default_value = "config/stop-causes.toml")]
+    pub(crate) causes: PathBuf,
+    /// The plant's offset from UTC, for day boundaries (+09:00).
+    #[arg(
+        long,
+        global = true,
+        default_value = "+00:00",
+        allow_hyphen_values = true
+    )]
+    pub(crate) utc_offset: String,
+    /// CSV instead of a table.
+    #[arg(long, global = true, conflicts_with = "json")]
+    pub(crate) csv: bool,
+    /// JSON instead of a table.
+    #[arg(long, global = true)]
+    pub(crate) json: bool,
+}
+
+impl ReportArgs {
+    pub(crate) fn format(&self) -> crate::commands::report::Format {
+        use crate::commands::report::Format;
+        match (self.csv, self.json) {
+            (true, _) => Format::Csv,
+            (_, true) => Format::Json,
+            _ => Format::Table,
+        }
+    }
+}
+
+#[derive(Debug, clap::Subcommand)]
+pub(crate) enum ReportCommand {
+    /// One day: 24 hourly slots (paper 002, Table 3).
+    Daily {
+        /// The day, 2026-11-21.
+        #[arg(long)]
+        date: String,
+    },
+    /// One month, day by day (paper 002, Table 5).
+    Monthly {
+        /// The month, 2026-11.
+        #[arg(long)]
+        month: String,
+    },
+    /// The alarm system's performance (ISA-18.2 / IEC 62682) over a day or
+    /// a month, each figure against its target: average and peak alarm
+    /// rate per 10 minutes, 10-minute intervals in flood, the 10 most
+    /// frequent alarms and their share, chattering and stale alarms,
+    /// priority distribution, shelving and out-of-service use,
+    /// acknowledgement times.
+    #[command(group(clap::ArgGroup::new("period").required(true).args(["date", "month"])))]
+    Alarms {
+        /// One day, 2026-11-21.
+        #[arg(long)]
+        date: Option<String>,
+        /// One month, 2026-11.
+        #[arg(long)]
+        month: Option<String>,
+    },
 }

@@ -8,8 +8,8 @@ use cellwatch_models::signal::{Observability, Signal};
 use cellwatch_models::switching::{SfError, SwitchingFunction};
 use serde::Serialize;
 
-use crate::cli::{Failure, SfArgs};
-use crate::inputs;
+use super::inputs::{self, ProgramArgs};
+use super::Failure;
 
 /// One coil in `--json` output.
 #[derive(Serialize)]
@@ -184,4 +184,13 @@ fn print_coil(
         }
     }
     writeln!(out)
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct SfArgs {
+    #[command(flatten)]
+    pub(crate) program: ProgramArgs,
+    /// A coil to print; repeat for several. Default: every coil the program writes.
+    #[arg(long, value_name = "NAME")]
+    pub(crate) coil: Vec<String>,
 }

@@ -1,18 +1,18 @@
 //! `cellwatch sfc check|patch`: chart files on their own, no cell needed.
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use cellwatch_models::sfc::{patch, Sfc};
 use cellwatch_models::signal::Signal;
 
-use crate::cli::{Failure, SfcCommand};
+use super::Failure;
 
 /// Reads and checks the chart file at `path`, TOML or PLCopen XML (any contact accepted: no
 /// cell is named here; `cellwatch validate` checks them against a cell's
 /// tags).
 fn charts(path: &Path) -> Result<Sfc, Failure> {
-    let text = crate::inputs::read_text(path, "charts")?;
+    let text = super::inputs::read_text(path, "charts")?;
     cellwatch_models::sfc::read(&path.display().to_string(), &text, &|_| true)
         .map_err(|errors| Failure::Input(errors.join("\n")))
 }
@@ -105,4 +105,30 @@ pub(crate) fn run(command: &SfcCommand, out: &mut dyn Write) -> Result<(), Failu
             Ok(())
         }
     }
+}
+
+#[derive(Debug, clap::Subcommand)]
+pub(crate) enum SfcCommand {
+    /// Check a chart file (every problem with file, line and column) and
+    /// list its charts: steps with flag, supervision and comment, and
+    /// transitions with source, target and condition.
+    Check {
+        /// The chart file (TOML).
+        charts: PathBuf,
+    },
+    /// For each transition named, the term paper 004's eq. (3)/(4) adds so
+    /// that the force switch can fire it while its condition holds —
+    /// `(S14 · t15) + (ForceSW · t15)` — as IEC 61131-3 ST and IL, for the
+    /// engineer to add to the PLC program.
+    Patch {
+        /// The chart file (TOML).
+        charts: PathBuf,
+        /// The force switch's address in the PLC (`%IX0.3.1`).
+        #[arg(long, value_name = "ADDRESS")]
+        force_switch: String,
+        /// A transition to make forcible, `CHART.ID` (`F1.t3`); repeat for
+        /// several.
+        #[arg(long = "transition", value_name = "CHART.ID", required = true)]
+        transitions: Vec<String>,
+    },
 }

@@ -1,11 +1,13 @@
 //! `cellwatch simulate cnc`: the simulated CNC as a standalone OPC UA server.
 
+use std::path::PathBuf;
+
 use std::io::Write;
 
 use tokio::io::{AsyncBufReadExt, BufReader};
 
-use super::agent::StopSignals;
-use crate::cli::{Failure, LineArgs, MouldingArgs, RobotRunsArgs, SimulateArgs};
+use super::signals::StopSignals;
+use super::Failure;
 use crate::sim::cnc::{Scenario, SimOptions, SimulatedCnc};
 use crate::sim::moulding::{Event, MouldingBus};
 use crate::sources::pki;
@@ -337,4 +339,109 @@ pub(crate) fn line(args: &LineArgs, out: &mut dyn Write) -> Result<(), Failure> 
         )?;
     }
     Ok(())
+}
+
+#[derive(Debug, clap::Subcommand)]
+pub(crate) enum SimulateCommand {
+    /// The CNC of paper 000: ESE and CSD logic, faults on a schedule or on
+    /// command (standard input: `set X0.06 0`, `bad X0.04`, `quit`).
+    Cnc(SimulateArgs),
+    /// Paper 001's body-shop line: writes run logs (CSV), normal or with an
+    /// injected fault, deterministic per seed.
+    Line(LineArgs),
+    /// Paper 002's injection-moulding units on one `@` bus, answering the
+    /// control computer by unit number over TCP (a serial device server's
+    /// raw socket) or a pseudo-terminal (a serial port). Standard input:
+    /// `stop UNIT CAUSE` (01-06), `run UNIT`, `silent UNIT`, `answer UNIT`,
+    /// `noise N`, `cycle`, `quit`.
+    Moulding(MouldingArgs),
+    /// Paper 004's LCD-glass robot, in virtual time: writes run logs (CSV)
+    /// of its step flags and inputs, normal or with a step stuck, as
+    /// `cellwatch learn --sfc` reads them; deterministic per seed.
+    RobotRuns(RobotRunsArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct RobotRunsArgs {
+    /// How many runs.
+    #[arg(long, default_value_t = 4)]
+    pub(crate) runs: u64,
+    /// Length of each run.
+    #[arg(long, default_value = "60s")]
+    pub(crate) length: String,
+    /// Shortest time a step takes.
+    #[arg(long, default_value = "1s")]
+    pub(crate) dwell_min: String,
+    /// Longest time a step takes (each activation draws between the two).
+    #[arg(long, default_value = "1400ms")]
+    pub(crate) dwell_max: String,
+    /// Put a step in error in every run: STEP@TIME, the step stuck at its
+    /// first activation after TIME (F1.S2@10s).
+    #[arg(long, value_name = "STEP@TIME")]
+    pub(crate) stuck: Option<String>,
+    /// Seed of the first run (run i uses seed + i).
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// Directory for run-NNN.csv (and stuck.csv with when each step stuck).
+    #[arg(long)]
+    pub(crate) out: PathBuf,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct MouldingArgs {
+    /// How many units (numbered from 1).
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u8).range(1..=255))]
+    pub(crate) units: u8,
+    /// Serve on this TCP address.
+    #[arg(long, conflicts_with = "pty", required_unless_present = "pty")]
+    pub(crate) tcp: Option<std::net::SocketAddr>,
+    /// Serve on a new pseudo-terminal (its path is printed).
+    #[arg(long)]
+    pub(crate) pty: bool,
+    /// A machine cycle (production up) every this long; 0 for none.
+    #[arg(long, default_value = "2s", value_parser = humantime::parse_duration)]
+    pub(crate) cycle: std::time::Duration,
+    /// Stop schedule: `demo` (unit 2's front door, unit 3's mould change,
+    /// unit 1 silent, line noise, every 40 s) or `none`.
+    #[arg(long, default_value = "demo", value_parser = ["demo", "none"])]
+    pub(crate) scenario: String,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct LineArgs {
+    /// How many runs.
+    #[arg(long, default_value_t = 4)]
+    pub(crate) runs: u64,
+    /// Cycles per station per run.
+    #[arg(long, default_value_t = 6)]
+    pub(crate) cycles: usize,
+    /// Inject a fault in every run: KIND@STEP, KIND one of missing, fast,
+    /// slow, stuck; STEP the motion number (in command order).
+    #[arg(long, value_name = "KIND@STEP")]
+    pub(crate) inject: Option<String>,
+    /// Seed of the first run (run i uses seed + i).
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// Directory for run-NNN.csv (and faults.csv with the labels).
+    #[arg(long)]
+    pub(crate) out: PathBuf,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct SimulateArgs {
+    /// Address to serve OPC UA on.
+    #[arg(long, default_value = "127.0.0.1:4845")]
+    pub(crate) listen: std::net::SocketAddr,
+    /// The server's PKI directory (own certificate, trusted clients).
+    #[arg(long, default_value = "sim-pki")]
+    pub(crate) pki_dir: PathBuf,
+    /// A client certificate to trust (the agent's pki/own/cert.der); repeatable.
+    #[arg(long, value_name = "CERT")]
+    pub(crate) trust: Vec<PathBuf>,
+    /// Fault schedule: `demo` (ESE and CSD every 24 s) or `none`.
+    #[arg(long, default_value = "demo", value_parser = ["demo", "none"])]
+    pub(crate) scenario: String,
+    /// Also offer an endpoint without security (for tools that cannot do better).
+    #[arg(long)]
+    pub(crate) insecure: bool,
 }

@@ -1,14 +1,14 @@
 //! `cellwatch learn` and `cellwatch replay`: transition timers from run logs.
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use cellwatch_models::timer::learn::{self, LearnOptions, Tau, TimerModel};
 use cellwatch_models::timer::log::{self, RunLog};
 use cellwatch_models::timer::monitor::{self, Outcome};
 
-use crate::cli::{ExportStArgs, Failure, LearnArgs, ReplayArgs};
-use crate::inputs::read_text;
+use super::inputs::read_text;
+use super::Failure;
 
 fn runs(paths: &[std::path::PathBuf], map: Option<&Path>) -> Result<Vec<RunLog>, Failure> {
     let map_text = map.map(|m| read_text(m, "signal map")).transpose()?;
@@ -280,4 +280,78 @@ fn table(out: &mut dyn Write, model: &TimerModel) -> std::io::Result<()> {
         writeln!(out, "  #{:03} {cells}", t.id)?;
     }
     Ok(())
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct LearnArgs {
+    /// Run logs: CSV `time_ms,tag,value`, or the paper's `t,e` form with --map.
+    #[arg(required = true)]
+    pub(crate) runs: Vec<PathBuf>,
+    /// Signal map `number,tag` for logs in the paper's numeric form.
+    #[arg(long, value_name = "CSV")]
+    pub(crate) map: Option<PathBuf>,
+    /// Shortest Δt kept (shorter transitions are the program flipping its own signals).
+    #[arg(long, default_value = "2s")]
+    pub(crate) delta_min: String,
+    /// Fixed tolerance τ (default 100ms).
+    #[arg(long, conflicts_with = "tau_auto")]
+    pub(crate) tau: Option<String>,
+    /// τ per transition: max(2 × largest training deviation, 5 % of Δt, 100 ms).
+    #[arg(long)]
+    pub(crate) tau_auto: bool,
+    /// Runs a transition must be seen in (default: every run).
+    #[arg(long)]
+    pub(crate) min_support: Option<usize>,
+    /// Learning method: `common` (each event timed from its most consistent
+    /// trigger; copes with stations running in parallel) or `full-state`
+    /// (the paper's: timed from entering the full state).
+    #[arg(long, default_value = "common")]
+    pub(crate) method: String,
+    /// Learn step supervision times for these charts (`.sfc.toml`) instead
+    /// of transition timers: each step's longest duration in the runs plus
+    /// max(half of it, twice the spread, 1 s). The file goes to a
+    /// `[[checks.sfc]]` `steps` key; a supervision declared in the charts wins.
+    #[arg(
+        long,
+        value_name = "CHARTS",
+        conflicts_with_all = ["tau", "tau_auto", "table", "method", "delta_min"]
+    )]
+    pub(crate) sfc: Option<PathBuf>,
+    /// Where to write the model (JSON; default timers.json, with --sfc
+    /// steps.json).
+    #[arg(long)]
+    pub(crate) out: Option<PathBuf>,
+    /// Also print the paper's Fig. 12 view: transitions × signals (1, 0, or
+    /// . when the signal is not in the start condition; E marks the event).
+    #[arg(long)]
+    pub(crate) table: bool,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct ExportStArgs {
+    /// The timer model (JSON, from `cellwatch learn`).
+    #[arg(long)]
+    pub(crate) timers: PathBuf,
+    /// Name of the function block.
+    #[arg(long, default_value = "FB_CELLWATCH_TIMERS")]
+    pub(crate) name: String,
+    /// Write to this file instead of standard output.
+    #[arg(long)]
+    pub(crate) out: Option<PathBuf>,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct ReplayArgs {
+    /// The timer model (JSON, from `cellwatch learn`).
+    #[arg(long)]
+    pub(crate) timers: PathBuf,
+    /// Run logs to replay.
+    #[arg(required = true)]
+    pub(crate) runs: Vec<PathBuf>,
+    /// Signal map for logs in the paper's numeric form.
+    #[arg(long, value_name = "CSV")]
+    pub(crate) map: Option<PathBuf>,
+    /// One JSON outcome per line: {outcome, transition, at_ms, observed_ms}.
+    #[arg(long)]
+    pub(crate) json: bool,
 }

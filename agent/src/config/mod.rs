@@ -12,6 +12,8 @@
 //! Secrets never live in the file: an OPC UA password comes from an
 //! environment variable or a file, and an inline `password` is an error.
 
+pub mod legacy;
+pub mod node;
 mod raw;
 
 use std::collections::{BTreeMap, HashMap, HashSet};
@@ -37,8 +39,8 @@ use cellwatch_models::switching::SwitchingFunction;
 use cellwatch_models::value::{Comparison, Counter, Operand, ValueType};
 use toml::Spanned;
 
-use crate::sources::legacy::{BusNode, LegacyConfig, Parity, SerialLine, Transport};
-use crate::sources::opcua::TagNode;
+use legacy::{BusNode, LegacyConfig, Parity, SerialLine, Transport};
+use node::TagNode;
 
 use raw::RawConfig;
 
@@ -302,6 +304,9 @@ pub fn link_problem(endpoint: &str) -> Option<String> {
         )
     }
 }
+
+/// The longest shelf unless the configuration says (`commands.max_shelve`).
+pub const DEFAULT_MAX_SHELVE: Duration = Duration::from_secs(8 * 3600);
 
 /// The longest `commands.max_shelve` accepted: one year.
 pub const MAX_SHELVE_LIMIT: Duration = Duration::from_secs(365 * 24 * 3600);
@@ -995,7 +1000,7 @@ impl Validator<'_> {
         let max_shelve = self.duration(
             raw.commands.max_shelve,
             "commands.max_shelve",
-            crate::cell::DEFAULT_MAX_SHELVE,
+            DEFAULT_MAX_SHELVE,
         );
         // A shelf is temporary (ISA-18.2): out of service is for longer.
         if max_shelve > MAX_SHELVE_LIMIT {

@@ -10,9 +10,9 @@ use futures_util::future::BoxFuture;
 use futures_util::FutureExt;
 
 use super::Metrics;
-use crate::cell::{CellStep, Input};
 use crate::config::CellConfig;
 use crate::sinks::Sink;
+use crate::step::{CellStep, Input};
 
 /// Metrics bookkeeping of one cell.
 pub struct MetricsSink {

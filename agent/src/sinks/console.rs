@@ -6,8 +6,8 @@ use futures_util::FutureExt;
 use tokio::sync::mpsc;
 
 use super::Sink;
-use crate::cell::{CellStep, Input};
 use crate::payload::{AlarmPayload, StatePayload};
+use crate::step::{CellStep, Input};
 
 /// What the agent tells an observer (the demo's console).
 #[derive(Debug, Clone)]

@@ -25,7 +25,7 @@ use futures_util::future::BoxFuture;
 use futures_util::FutureExt;
 use tokio::sync::mpsc;
 
-use crate::cell::CellStep;
+use crate::step::CellStep;
 
 /// Waits for a sink's steps so far to be durable (see [`Sink::settled`]).
 pub type Settled = std::sync::Arc<dyn Fn() -> BoxFuture<'static, ()> + Send + Sync>;

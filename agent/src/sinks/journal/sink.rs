@@ -8,8 +8,8 @@ use futures_util::future::BoxFuture;
 use futures_util::FutureExt;
 
 use super::{Entry, Journal};
-use crate::cell::{CellStep, Input};
 use crate::sinks::{Settled, Sink};
+use crate::step::{CellStep, Input};
 use std::sync::Arc;
 
 /// Writes each step's rows and waits for their commit.

@@ -289,7 +289,7 @@ async fn open_config(cfg: zenoh::Config) -> Result<Session, ZenohError> {
 }
 
 /// Opens the agent's session: as [`open`], no message larger than
-/// [`services::MAX_MESSAGE_BYTES`] is accepted from the network (Zenoh
+/// [`MAX_MESSAGE_BYTES`] is accepted from the network (Zenoh
 /// drops it while reassembling), so whatever arrives, the agent's memory
 /// stays bounded; and its access control ([`agent_access_control`]) lets
 /// nobody else publish or answer through it.
@@ -301,8 +301,12 @@ pub async fn open_agent(c: &ZenohConfig) -> Result<Session, ZenohError> {
     set(
         &mut cfg,
         "transport/link/rx/max_message_size",
-        services::MAX_MESSAGE_BYTES.to_string(),
+        MAX_MESSAGE_BYTES.to_string(),
     )?;
     set(&mut cfg, "access_control", agent_access_control())?;
     open_config(cfg).await
 }
+
+/// The largest message the agent's Zenoh session accepts; a larger one is
+/// dropped by Zenoh before it reaches the agent.
+pub const MAX_MESSAGE_BYTES: usize = 1 << 20;

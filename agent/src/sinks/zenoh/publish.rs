@@ -14,9 +14,9 @@ use zenoh_ext::{AdvancedPublisher, AdvancedPublisherBuilderExt, CacheConfig, Mis
 
 use super::envelope::{AgentKey, Kind};
 use super::ZenohError;
-use crate::cell::CellStep;
 use crate::metrics::Metrics;
 use crate::sinks::Sink;
+use crate::step::CellStep;
 
 /// How many alarm events of each alarm a publisher keeps for recovery.
 const ALARM_CACHE: usize = 256;

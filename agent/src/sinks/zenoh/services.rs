@@ -32,11 +32,12 @@ use zenoh::Session;
 
 use super::envelope::{AgentKey, Kind as Sealed};
 use super::ZenohError;
-use crate::cell::{CommandOutcome, Request};
+pub use super::MAX_MESSAGE_BYTES;
 use crate::clock::{now_ms, parse_time};
 use crate::metrics::Metrics;
 use crate::operator::{Command, NotACommand};
 use crate::sinks::journal::{self, Barrier, HistoryQuery, Journal};
+use crate::step::{CommandOutcome, Request};
 
 /// Queries answered at the same time; more are refused as busy.
 pub const MAX_CONCURRENT: usize = 16;
@@ -45,9 +46,6 @@ pub const MAX_CONCURRENT: usize = 16;
 pub const MAX_CONCURRENT_HISTORY: usize = 4;
 /// Queries waiting in each queryable's queue before Zenoh drops more.
 pub const QUEUE: usize = 32;
-/// The largest message the agent's Zenoh session accepts; a larger one is
-/// dropped by Zenoh before it reaches the agent.
-pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
 /// The largest command payload read.
 pub const MAX_COMMAND_BYTES: usize = 4096;
 

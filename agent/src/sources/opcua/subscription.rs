@@ -16,7 +16,8 @@ use opcua::types::{
 };
 use tokio::sync::mpsc::error::TrySendError;
 
-use super::{Names, TagNode};
+use super::names::Names;
+use crate::config::node::TagNode;
 use crate::config::{Deadband, OpcUaConfig, TagConfig};
 use crate::sources::{SourceEvent, SourceSender};
 use cellwatch_models::value::{Num, ValueType};

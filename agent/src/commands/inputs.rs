@@ -4,15 +4,16 @@
 //! (UTF-8, UTF-16, Latin-1), and hand the text over with the file's name, so every error comes
 //! back as `FILE:LINE:COL: message`.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use cellwatch_models::comments::CommentDb;
+use cellwatch_models::il::Dialect;
 use cellwatch_models::program::Program;
 use cellwatch_models::signal::Observability;
 use cellwatch_models::source;
 use cellwatch_models::values::Values;
 
-use crate::cli::{Failure, ProgramArgs};
+use super::Failure;
 
 /// Reads a text file, its encoding told by a byte-order mark or by its
 /// bytes (see [`source::text`]); `what` names it in errors ("program").
@@ -80,4 +81,41 @@ pub(crate) fn values(option: &str, arg: &str, program: &Program) -> Result<Value
         )));
     }
     Values::parse_inline(option, arg, |a| program.resolve(a)).map_err(Failure::input)
+}
+
+/// Where the program comes from and how to read it.
+#[derive(Debug, clap::Args)]
+pub(crate) struct ProgramArgs {
+    /// The PLC program: an instruction list file.
+    #[arg(value_name = "PROGRAM")]
+    pub(crate) program: PathBuf,
+    /// The instruction-list dialect: `pmc` (RD, AND.NOT, WRT; X0.07),
+    /// `iec` (LD, ANDN, ST; %IX0.0.3) or `stl` (Siemens STL/AWL: U, UN, =;
+    /// E 0.0, or A, AN; I 0.0). Detected from the mnemonics if not given.
+    #[arg(long, value_name = "pmc|iec|stl", value_parser = parse_dialect)]
+    pub(crate) dialect: Option<Dialect>,
+    /// Signals the SF may stop at, comma-separated: classes (`X,Y,F,G`;
+    /// `%I,%Q`; `E,A`) or single signals (`R1024.00`). Default: X, Y, F, G
+    /// for pmc; %I, %Q for iec; E, A, I, Q for stl.
+    #[arg(long, value_name = "LIST")]
+    pub(crate) observable: Option<String>,
+    /// The I/O database: CSV `address,comment`, one row per address.
+    #[arg(long, value_name = "CSV")]
+    pub(crate) comments: Option<PathBuf>,
+    /// The program file's encoding: `utf-8`, `utf-16le`, `utf-16be`,
+    /// `latin1` (Windows-1252)... Default: a byte-order mark decides, then
+    /// UTF-8 if the bytes are UTF-8, else Latin-1 (Windows-1252).
+    #[arg(long, value_name = "NAME", value_parser = parse_encoding)]
+    pub(crate) encoding: Option<&'static cellwatch_models::source::Encoding>,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub(crate) json: bool,
+}
+
+fn parse_encoding(s: &str) -> Result<&'static cellwatch_models::source::Encoding, String> {
+    cellwatch_models::source::encoding(s)
+}
+
+fn parse_dialect(s: &str) -> Result<Dialect, String> {
+    s.parse()
 }

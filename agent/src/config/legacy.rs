@@ -1,0 +1,191 @@
+//! How a cell reaches its `@` bus (paper 002) and where each tag is on
+//! it, as the configuration says: the transport, the serial line, the
+//! poll timing, and a tag's `@<unit>/<item>`. Read by the `@` bus source
+//! (`sources/legacy`).
+
+use std::time::Duration;
+
+use cellwatch_models::legacy::Header;
+use cellwatch_models::value::ValueType;
+
+/// How the bus is reached.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Transport {
+    /// A serial device server's raw socket, `host:port`.
+    Tcp(String),
+    /// A serial port.
+    Serial(SerialLine),
+}
+
+impl Transport {
+    /// The address or the device: what two cells on one bus have alike.
+    pub fn place(&self) -> &str {
+        match self {
+            Transport::Tcp(a) => a,
+            Transport::Serial(s) => &s.path,
+        }
+    }
+}
+
+/// Serial line settings (paper 002: 9600 bit/s, 7 data bits, even parity,
+/// 2 stop bits).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SerialLine {
+    /// The device (`/dev/ttyUSB0`).
+    pub path: String,
+    /// Bits per second.
+    pub baud: u32,
+    /// 5 to 8.
+    pub data_bits: u8,
+    /// `none`, `even`, `odd`.
+    pub parity: Parity,
+    /// 1 or 2.
+    pub stop_bits: u8,
+}
+
+/// Serial parity.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Parity {
+    /// No parity bit.
+    None,
+    /// Even.
+    Even,
+    /// Odd.
+    Odd,
+}
+
+/// The `[legacy]` section: the bus and how it is polled.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LegacyConfig {
+    /// Where the bus is.
+    pub transport: Transport,
+    /// How often every unit is polled.
+    pub poll_interval: Duration,
+    /// How long a unit has to answer one request.
+    pub response_timeout: Duration,
+    /// Requests asked again after a bad or missing answer, per request.
+    pub retries: u32,
+}
+
+impl LegacyConfig {
+    /// What it connects to, for logs.
+    pub fn describe(&self) -> String {
+        match &self.transport {
+            Transport::Tcp(a) => format!("@ bus tcp://{a}"),
+            Transport::Serial(s) => format!(
+                "@ bus {} {} {}{}{}",
+                s.path,
+                s.baud,
+                s.data_bits,
+                match s.parity {
+                    Parity::None => 'N',
+                    Parity::Even => 'E',
+                    Parity::Odd => 'O',
+                },
+                s.stop_bits
+            ),
+        }
+    }
+
+    /// The bus and every polling setting, to tell two apart.
+    pub fn settings(&self) -> String {
+        format!(
+            "{}, poll every {:?}, response timeout {:?}, {} retries",
+            self.describe(),
+            self.poll_interval,
+            self.response_timeout,
+            self.retries
+        )
+    }
+}
+
+/// What of a unit a tag reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Item {
+    /// The `R?` status bits (a `UInt16`; tags take one `bit` each).
+    Status,
+    /// The production count of the `R?` answer (`UInt32`, wraps after
+    /// 999,999).
+    Production,
+    /// `RT` target quantity.
+    Target,
+    /// `RJ` item code (`String`).
+    ItemCode,
+    /// `RI` stock-in quantity.
+    StockIn,
+    /// `RC` cycle increment.
+    CycleIncrement,
+    /// `RO` output bits (`UInt16`).
+    Outputs,
+}
+
+impl Item {
+    const NAMES: [(&'static str, Item); 7] = [
+        ("status", Item::Status),
+        ("production", Item::Production),
+        ("target", Item::Target),
+        ("item", Item::ItemCode),
+        ("stock_in", Item::StockIn),
+        ("cycle_increment", Item::CycleIncrement),
+        ("outputs", Item::Outputs),
+    ];
+
+    /// The request that reads it.
+    pub(crate) fn request(self) -> Header {
+        match self {
+            Item::Status | Item::Production => Header::ReadStatus,
+            Item::Target => Header::ReadTarget,
+            Item::ItemCode => Header::ReadItem,
+            Item::StockIn => Header::ReadStockIn,
+            Item::CycleIncrement => Header::ReadCycleIncrement,
+            Item::Outputs => Header::ReadOutputs,
+        }
+    }
+
+    /// The type its values have.
+    pub fn value_type(self) -> ValueType {
+        match self {
+            Item::Status | Item::Outputs => ValueType::UInt16,
+            Item::Production | Item::Target | Item::StockIn => ValueType::UInt32,
+            Item::CycleIncrement => ValueType::Byte,
+            Item::ItemCode => ValueType::String,
+        }
+    }
+}
+
+/// A tag's place on the bus: `@<unit>/<item>`, unit in hex (`@02/status`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct BusNode {
+    /// The unit number.
+    pub unit: u8,
+    /// What of it.
+    pub item: Item,
+}
+
+impl BusNode {
+    /// Reads `@02/status`, `@1F/production`, ...
+    ///
+    /// # Errors
+    /// A message naming what is wrong.
+    pub fn parse(text: &str) -> Result<BusNode, String> {
+        let items: Vec<&str> = Item::NAMES.iter().map(|(n, _)| *n).collect();
+        let expected = || {
+            format!(
+                "'{text}' is not a bus node like @02/status (unit number in hex, then one of {})",
+                items.join(", ")
+            )
+        };
+        let rest = text.strip_prefix('@').ok_or_else(expected)?;
+        let (unit, item) = rest.split_once('/').ok_or_else(expected)?;
+        if unit.len() != 2 {
+            return Err(expected());
+        }
+        let unit = u8::from_str_radix(unit, 16).map_err(|_| expected())?;
+        let item = Item::NAMES
+            .iter()
+            .find(|(n, _)| *n == item)
+            .map(|(_, i)| *i)
+            .ok_or_else(expected)?;
+        Ok(BusNode { unit, item })
+    }
+}

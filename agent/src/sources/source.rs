@@ -1,0 +1,155 @@
+//! What a source is and what it sends: the [`Source`] trait, its events,
+//! and the operators' writes it carries to the PLC. Every source and the
+//! cell loop import this; it imports none of them.
+
+use cellwatch_models::engine::TagReading;
+use std::time::Duration;
+
+use futures_util::future::BoxFuture;
+use tokio::sync::mpsc;
+
+/// How many events may wait between a source and the cell loop.
+pub const QUEUE_CAPACITY: usize = 1024;
+
+/// One publish's values and when the agent received them: the start of
+/// the latency `cellwatch_alarm_latency_seconds` measures.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Batch {
+    /// The values, in source-time order.
+    pub readings: Vec<TagReading>,
+    /// When the source had them from the PLC.
+    pub received: std::time::Instant,
+}
+
+impl From<Vec<TagReading>> for Batch {
+    /// Values received now.
+    fn from(readings: Vec<TagReading>) -> Batch {
+        Batch {
+            readings,
+            received: std::time::Instant::now(),
+        }
+    }
+}
+
+impl IntoIterator for Batch {
+    type Item = TagReading;
+    type IntoIter = std::vec::IntoIter<TagReading>;
+
+    fn into_iter(self) -> Self::IntoIter {
+        self.readings.into_iter()
+    }
+}
+
+impl<'a> IntoIterator for &'a Batch {
+    type Item = &'a TagReading;
+    type IntoIter = std::slice::Iter<'a, TagReading>;
+
+    fn into_iter(self) -> Self::IntoIter {
+        self.readings.iter()
+    }
+}
+
+impl std::ops::Deref for Batch {
+    type Target = [TagReading];
+
+    fn deref(&self) -> &[TagReading] {
+        &self.readings
+    }
+}
+
+/// What a source tells the cell loop.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SourceEvent {
+    /// The connection is up and the subscription is in place; to what.
+    Connected(String),
+    /// The connection is lost; why.
+    Disconnected(String),
+    /// Values delivered together (one publish), in source-time order.
+    Readings(Batch),
+    /// Something about the source that is not the connection (a namespace
+    /// missing on the server): raises the `system` alarm `id` with the
+    /// problem, or clears it with `None`.
+    Problem {
+        /// The alarm's id (`opcua-namespace`).
+        id: String,
+        /// What is wrong, or `None` when nothing is.
+        problem: Option<String>,
+    },
+}
+
+/// The sending half a source writes to: bounded, so a slow cell loop makes
+/// the source wait.
+pub type SourceSender = mpsc::Sender<SourceEvent>;
+
+/// A write to the PLC an operator asked for, already verified and
+/// authorised by the cell loop.
+#[derive(Debug)]
+pub struct WriteRequest {
+    /// The tag written (index into the cell's tags).
+    pub tag: usize,
+    /// What to write.
+    pub what: Write,
+    /// What the PLC answered (`Ok`: done), or why it was not done.
+    pub reply: tokio::sync::oneshot::Sender<Result<String, String>>,
+}
+
+/// What a write puts into the PLC.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Write {
+    /// A value as the operator gave it (an `@` unit's item); the source
+    /// checks and encodes it, and sends nothing if it does not fit.
+    Value(String),
+    /// A push button: the Boolean tag on for this long, then off, each
+    /// read back (the force and stop switches of paper 004, over OPC UA).
+    Pulse(std::time::Duration),
+}
+
+/// Where the cell loop hands writes to its source.
+pub type WriteSender = mpsc::Sender<WriteRequest>;
+
+/// Writes waiting for a source, at most.
+pub const WRITE_CAPACITY: usize = 8;
+
+/// Why a source cannot run. Connection trouble is never an error: it is
+/// reported as [`SourceEvent::Disconnected`] and retried.
+#[derive(Debug, thiserror::Error)]
+pub enum SourceError {
+    /// The client could not be configured (bad PKI directory, ...).
+    #[error("OPC UA client: {0}")]
+    Client(String),
+    /// The password could not be read.
+    #[error("OPC UA identity: {0}")]
+    Identity(String),
+    /// A one-off connection failed (sources retry instead).
+    #[error("OPC UA connection: {0}")]
+    Connect(String),
+}
+
+/// A producer of tag values for one cell.
+pub trait Source: Send + 'static {
+    /// What it is, for logs (`opcua opc.tcp://...`).
+    fn describe(&self) -> String;
+
+    /// Where to send operators' writes, if this source can write to its
+    /// PLC (called once, before `run`).
+    fn writer(&mut self) -> Option<WriteSender> {
+        None
+    }
+
+    /// How long a change the PLC saw may take to reach the agent, beyond
+    /// the moment its source timestamp names: the publishing interval of a
+    /// subscription. Zero for a source that stamps readings on arrival.
+    fn delivery_allowance(&self) -> Duration {
+        Duration::ZERO
+    }
+
+    /// Runs until `shutdown` completes, sending events on `tx`.
+    ///
+    /// # Errors
+    /// The source cannot be set up at all (its configuration is unusable).
+    fn run(
+        self: Box<Self>,
+        tx: SourceSender,
+        shutdown: BoxFuture<'static, ()>,
+    ) -> BoxFuture<'static, Result<(), SourceError>>;
+}

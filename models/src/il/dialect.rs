@@ -1,0 +1,41 @@
+//! The three spellings of an instruction list, by name. What each means
+//! for an address or a program is in `il/mod.rs` and the dialects' own
+//! modules.
+
+use std::fmt;
+use std::str::FromStr;
+
+/// The spelling of an instruction list.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Dialect {
+    /// FANUC PMC mnemonics (`RD`, `AND.NOT`, `WRT`, ...) and addresses (`X0.07`).
+    Pmc,
+    /// IEC 61131-3 instruction list (`LD`, `ANDN`, `ST`, ...).
+    Iec,
+    /// Siemens STL/AWL (`U`, `UN`, `=`; `E 0.0`, or `A`, `AN`; `I 0.0`).
+    Stl,
+}
+
+impl fmt::Display for Dialect {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Dialect::Pmc => "pmc",
+            Dialect::Iec => "iec",
+            Dialect::Stl => "stl",
+        })
+    }
+}
+
+impl FromStr for Dialect {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "pmc" => Ok(Dialect::Pmc),
+            "iec" => Ok(Dialect::Iec),
+            "stl" | "awl" => Ok(Dialect::Stl),
+            other => Err(format!("unknown dialect '{other}': use pmc, iec or stl")),
+        }
+    }
+}
