@@ -90,7 +90,10 @@ fn use_paths(
             if name == "self" {
                 out.push((prefix.clone(), prefix.last().cloned()));
             } else {
-                out.push(([prefix.as_slice(), std::slice::from_ref(&name)].concat(), Some(name)));
+                out.push((
+                    [prefix.as_slice(), std::slice::from_ref(&name)].concat(),
+                    Some(name),
+                ));
             }
         }
         syn::UseTree::Rename(r) => {
