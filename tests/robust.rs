@@ -617,8 +617,26 @@ async fn the_simulators_stop_on_sigterm() {
     let d = tempfile::tempdir().unwrap();
     let pki = d.path().join("pki").display().to_string();
     for args in [
-        vec!["simulate", "cnc", "--listen", "127.0.0.1:0", "--pki-dir", &pki, "--scenario", "none"],
-        vec!["simulate", "moulding", "--units", "1", "--tcp", "127.0.0.1:0", "--scenario", "none"],
+        vec![
+            "simulate",
+            "cnc",
+            "--listen",
+            "127.0.0.1:0",
+            "--pki-dir",
+            &pki,
+            "--scenario",
+            "none",
+        ],
+        vec![
+            "simulate",
+            "moulding",
+            "--units",
+            "1",
+            "--tcp",
+            "127.0.0.1:0",
+            "--scenario",
+            "none",
+        ],
     ] {
         let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_cellwatch"))
             .args(&args)
