@@ -1,6 +1,7 @@
 //! The real binary, killed: every journal row the agent reported as
 //! committed (its `cellwatch_journal_rows_committed_total`) is in the SQLite
-//! file afterwards, and the file is intact. And the README's main command.
+//! file afterwards, and the file is intact. And the README's main command,
+//! with the client commands `docs/demo.md` shows against it.
 
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -77,9 +78,10 @@ async fn killed_agent_keeps_every_committed_row() {
     );
 }
 
-/// The README's main command prints a diagnosed alarm within 20 s of
-/// start, its bus is mutual TLS (a plain client gets nothing), and the
-/// README's client commands work against it as written.
+/// The README's main command (`cellwatch demo`) prints a diagnosed alarm
+/// within 20 s of start, its bus is mutual TLS (a plain client gets
+/// nothing), and the client commands of `docs/demo.md` work against it as
+/// written.
 #[test]
 fn demo_prints_a_diagnosed_alarm_and_serves_the_readme_commands_over_tls() {
     let state = tempfile::tempdir().unwrap();

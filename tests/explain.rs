@@ -2,7 +2,8 @@
 
 use crate::util::{cellwatch, Dir};
 
-/// The README's example, as written there.
+/// The example of `README.md` and `docs/reference/cli.md` (`cellwatch
+/// explain`), as written there.
 #[test]
 fn readme_example_names_the_y_over_travel_switch() {
     let r = cellwatch(&[

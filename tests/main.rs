@@ -14,6 +14,7 @@ mod bounded;
 mod cell_loop;
 mod commands;
 mod dashboards;
+mod docs;
 mod durability;
 mod explain;
 mod force;

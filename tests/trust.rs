@@ -326,13 +326,14 @@ async fn the_cli_listens_on_nothing_and_refuses_plain_tcp() {
     assert!(run.stderr.contains("give --trust FILE"), "{}", run.stderr);
 }
 
-/// The README's Python recipe opens a real envelope, and refuses one whose
-/// body was edited: a third party can verify in a few lines.
+/// The bus reference's Python recipe (`docs/reference/bus.md`) opens a
+/// real envelope, and refuses one whose body was edited: a third party can
+/// verify in a few lines.
 #[test]
 fn the_readme_python_recipe_verifies_an_envelope() {
-    let readme = std::fs::read_to_string(crate::util::root().join("README.md")).unwrap();
-    let start = readme.find("```python\n").expect("the Python recipe") + "```python\n".len();
-    let recipe = &readme[start..start + readme[start..].find("```").unwrap()];
+    let page = std::fs::read_to_string(crate::util::root().join("docs/reference/bus.md")).unwrap();
+    let start = page.find("```python\n").expect("the Python recipe") + "```python\n".len();
+    let recipe = &page[start..start + page[start..].find("```").unwrap()];
     let key = AgentKey::generate("m01ps0004");
     let sealed = key.seal(
         Kind::Put,

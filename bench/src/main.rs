@@ -1,6 +1,6 @@
 //! `cellwatch-bench`: the agent measured against a peer, end to end.
 //!
-//! Run through `bench/run` (README, BENCHMARKS.md), which builds the
+//! Run through `bench/run` (docs/README.md, BENCHMARKS.md), which builds the
 //! release binaries and the Python baseline's virtual environment first.
 
 // A binary: `pub` marks what its modules offer each other.
