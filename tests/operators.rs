@@ -124,3 +124,67 @@ async fn operators_act_within_their_permissions_and_agents_hold_no_private_key()
     }
     sim.stop();
 }
+
+/// A command sent right after the agent (re)started is answered: the CLI
+/// waits for the agent's queryable and asks again while there is no
+/// answer yet, instead of saying the agent did not answer. Three restarts,
+/// an acknowledgement sent the moment the agent says it runs.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_command_sent_as_the_agent_restarts_is_answered() {
+    let d = tempfile::tempdir().unwrap();
+    let (sim, mut cell) = start(d.path()).await;
+    let key = d.path().join("lee.key");
+    let made = cellwatch(&[
+        "keygen",
+        "--operator",
+        "lee",
+        "--out",
+        key.to_str().unwrap(),
+        "--allow",
+        "ack",
+    ]);
+    assert_eq!(made.code, 0, "{}", made.stderr);
+    let operators = d.path().join("operators.toml");
+    let all = format!("{}\n{}", std::fs::read_to_string(&operators).unwrap(), made.stdout);
+    std::fs::write(&operators, all).unwrap();
+    for round in 0..3 {
+        let mut child = cell.spawn(&format!("agent-{round}.log")).await;
+        let client = cell.client().await;
+        // A new occurrence to acknowledge.
+        sim.set("X0.06", true).unwrap();
+        snapshot_until(&client, "ESE cleared", |s| alarm(s, "ese").is_none()).await;
+        sim.set("X0.06", false).unwrap();
+        snapshot_until(&client, "ESE raised", |s| {
+            alarm(s, "ese").is_some_and(|a| a["state"] == "active_unacknowledged")
+        })
+        .await;
+        client.close().await.unwrap();
+        // The agent is killed and started again; the moment it says it
+        // runs, the acknowledgement goes out.
+        child.kill().unwrap();
+        child.wait().unwrap();
+        let mut child = cell.spawn(&format!("agent-{round}-again.log")).await;
+        let mut args = vec![
+            "ack",
+            "--cell",
+            "m01ps0004",
+            "--alarm",
+            "ese",
+            "--key-file",
+            key.to_str().unwrap(),
+        ];
+        let bus = cell.bus_args();
+        args.extend(bus.iter().map(String::as_str));
+        let ack = cellwatch(&args);
+        assert_eq!(
+            (ack.code, ack.stdout.as_str()),
+            (0, "accepted: ack ese by lee\n"),
+            "round {round}: {}\n{}",
+            ack.stderr,
+            cell.log(&format!("agent-{round}-again.log"))
+        );
+        child.kill().unwrap();
+        child.wait().unwrap();
+    }
+    sim.stop();
+}
