@@ -145,7 +145,11 @@ async fn a_command_sent_as_the_agent_restarts_is_answered() {
     ]);
     assert_eq!(made.code, 0, "{}", made.stderr);
     let operators = d.path().join("operators.toml");
-    let all = format!("{}\n{}", std::fs::read_to_string(&operators).unwrap(), made.stdout);
+    let all = format!(
+        "{}\n{}",
+        std::fs::read_to_string(&operators).unwrap(),
+        made.stdout
+    );
     std::fs::write(&operators, all).unwrap();
     for round in 0..3 {
         let mut child = cell.spawn(&format!("agent-{round}.log")).await;
