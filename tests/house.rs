@@ -414,8 +414,6 @@ const STILL_LONG: &[(&str, usize)] = &[
     ("agent/src/cell/mod.rs", 962),
     ("agent/src/commands/agent.rs", 882),
     ("agent/src/commands/subscribers.rs", 971),
-    ("agent/src/config/mod.rs", 2424),
-    ("agent/src/config/tests.rs", 903),
     ("agent/src/operator/mod.rs", 949),
     ("agent/src/sinks/journal/mod.rs", 1623),
     ("agent/src/sources/opcua/mod.rs", 989),

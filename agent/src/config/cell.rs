@@ -1,0 +1,148 @@
+//! A validated cell configuration: everything an agent needs to start.
+
+use std::collections::HashMap;
+use std::fmt;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::Duration;
+
+use cellwatch_models::engine::{PartCounting, StateRules, SwitchingCheck, Tag};
+use cellwatch_models::limit::LimitCheck;
+use cellwatch_models::signal::Signal;
+use cellwatch_models::value::Counter;
+
+use crate::config::legacy::LegacyConfig;
+use crate::config::{Addressing, OpcUaConfig, SfcCheck, TagConfig, TimerCheck, ZenohConfig};
+
+/// The longest shelf unless the configuration says (`commands.max_shelve`).
+pub const DEFAULT_MAX_SHELVE: Duration = Duration::from_secs(8 * 3600);
+
+/// The longest `commands.max_shelve` accepted: one year.
+pub const MAX_SHELVE_LIMIT: Duration = Duration::from_secs(365 * 24 * 3600);
+
+/// The SQLite journal.
+#[derive(Debug, Clone)]
+pub struct JournalConfig {
+    /// Database file.
+    pub path: PathBuf,
+    /// Rows older than this are deleted.
+    pub retention: Duration,
+}
+
+/// A validated cell configuration.
+#[derive(Clone)]
+pub struct CellConfig {
+    /// Cell id.
+    pub cell: String,
+    /// Free text.
+    pub description: String,
+    /// How the tags' addresses and the conditions over them are written
+    /// (`cell.dialect`).
+    pub addressing: Addressing,
+    /// OPC UA connection.
+    pub opcua: Option<OpcUaConfig>,
+    /// The `@` bus of legacy units (paper 002), when the cell is read from
+    /// one instead of an OPC UA server.
+    pub legacy: Option<LegacyConfig>,
+    /// Tags, in file order.
+    pub tags: Vec<TagConfig>,
+    /// Switching-function checks, compiled.
+    pub switching: Vec<SwitchingCheck>,
+    /// Transition-timer checks: id, model, severity.
+    pub timers: Vec<TimerCheck>,
+    /// Machine-state rules.
+    pub state: StateRules,
+    /// How often the state is published even without change.
+    pub state_interval: Duration,
+    /// Zenoh.
+    pub zenoh: ZenohConfig,
+    /// Journal.
+    pub journal: JournalConfig,
+    /// Prometheus `/metrics` address; `None` disables it.
+    pub metrics: Option<SocketAddr>,
+    /// The operators' public keys and permissions (`commands.operators_file`).
+    pub operators_file: Option<PathBuf>,
+    /// The longest an operator may shelve an alarm (`commands.max_shelve`).
+    pub max_shelve: Duration,
+    /// The tag whose rising edge is one part done (index into `tags`).
+    pub part_done: Option<usize>,
+    /// The integer tags counting parts (indices into `tags`).
+    pub part_counters: Vec<usize>,
+    /// The tag giving the item (mould, product) code being made.
+    pub order_item: Option<usize>,
+    /// The tag giving the target quantity.
+    pub order_target: Option<usize>,
+    /// Limit checks on numeric tags.
+    pub limits: Vec<LimitCheck>,
+    /// Step supervision of charts.
+    pub sfc: Vec<SfcCheck>,
+    /// Alarm delays: alarm id, on-delay and off-delay, ms.
+    pub delays: Vec<(String, u64, u64)>,
+    /// Things worth saying at start (security off, ...).
+    pub warnings: Vec<String>,
+}
+
+impl CellConfig {
+    /// The tags that are the flags of supervised steps: per tag index,
+    /// (check, chart, step) of each step it flags. A step told by a
+    /// step-number comparison (`D300 == 2`) has no flag tag and is not here.
+    pub fn step_flags(&self) -> HashMap<usize, Vec<[String; 3]>> {
+        let by_address: HashMap<&Signal, usize> = self
+            .tags
+            .iter()
+            .enumerate()
+            .map(|(i, t)| (&t.address, i))
+            .collect();
+        let mut out: HashMap<usize, Vec<[String; 3]>> = HashMap::new();
+        for check in &self.sfc {
+            for (r, step) in check.sfc.steps() {
+                let Some(&tag) = by_address.get(&step.flag) else {
+                    continue;
+                };
+                out.entry(tag).or_default().push([
+                    check.id.clone(),
+                    check.sfc.charts[r.chart].name.clone(),
+                    step.name.clone(),
+                ]);
+            }
+        }
+        out
+    }
+
+    /// The engine's view of the tags.
+    pub fn engine_tags(&self) -> Vec<Tag> {
+        self.tags
+            .iter()
+            .map(|t| Tag {
+                name: t.name.clone(),
+                address: t.address.clone(),
+            })
+            .collect()
+    }
+
+    /// How the engine counts parts.
+    pub fn part_counting(&self) -> PartCounting {
+        match self.part_done {
+            Some(t) => PartCounting::Edge(t),
+            None if self.part_counters.is_empty() => PartCounting::None,
+            None => PartCounting::Counters(
+                self.part_counters
+                    .iter()
+                    .map(|&t| {
+                        let max = self.tags[t].max.or(self.tags[t].value_type.max());
+                        (t, Counter::new(max.unwrap_or(u64::MAX)))
+                    })
+                    .collect(),
+            ),
+        }
+    }
+}
+
+impl fmt::Debug for CellConfig {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("CellConfig")
+            .field("cell", &self.cell)
+            .field("tags", &self.tags.len())
+            .finish_non_exhaustive()
+    }
+}

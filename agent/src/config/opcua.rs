@@ -1,0 +1,156 @@
+//! OPC UA: how the agent reaches its server, and as whom.
+
+use std::path::PathBuf;
+use std::str::FromStr;
+use std::time::Duration;
+
+/// OPC UA message security policy.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SecurityPolicy {
+    /// No security: only when written explicitly, with a warning.
+    None,
+    /// RSA-SHA256 with AES-256-CBC (the default).
+    Basic256Sha256,
+    /// RSA-OAEP-SHA256 with AES-128-CBC.
+    Aes128Sha256RsaOaep,
+    /// RSA-PSS-SHA256 with AES-256-CBC.
+    Aes256Sha256RsaPss,
+}
+
+impl SecurityPolicy {
+    /// The name as OPC UA tools write it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SecurityPolicy::None => "None",
+            SecurityPolicy::Basic256Sha256 => "Basic256Sha256",
+            SecurityPolicy::Aes128Sha256RsaOaep => "Aes128_Sha256_RsaOaep",
+            SecurityPolicy::Aes256Sha256RsaPss => "Aes256_Sha256_RsaPss",
+        }
+    }
+}
+
+/// OPC UA message security mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SecurityMode {
+    /// Plain text.
+    None,
+    /// Signed.
+    Sign,
+    /// Signed and encrypted (the default).
+    SignAndEncrypt,
+}
+
+impl SecurityMode {
+    /// The name as OPC UA tools write it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SecurityMode::None => "None",
+            SecurityMode::Sign => "Sign",
+            SecurityMode::SignAndEncrypt => "SignAndEncrypt",
+        }
+    }
+}
+
+impl FromStr for SecurityMode {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        [
+            SecurityMode::None,
+            SecurityMode::Sign,
+            SecurityMode::SignAndEncrypt,
+        ]
+        .into_iter()
+        .find(|m| m.as_str() == s)
+        .ok_or_else(|| format!("unknown mode '{s}': use SignAndEncrypt, Sign or None"))
+    }
+}
+
+impl FromStr for SecurityPolicy {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        [
+            SecurityPolicy::None,
+            SecurityPolicy::Basic256Sha256,
+            SecurityPolicy::Aes128Sha256RsaOaep,
+            SecurityPolicy::Aes256Sha256RsaPss,
+        ]
+        .into_iter()
+        .find(|p| p.as_str() == s)
+        .ok_or_else(|| {
+            format!("unknown policy '{s}': use Basic256Sha256, Aes128_Sha256_RsaOaep, Aes256_Sha256_RsaPss or None")
+        })
+    }
+}
+
+/// Where the OPC UA password comes from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum PasswordSource {
+    /// An environment variable.
+    Env(String),
+    /// A file (its first line).
+    File(PathBuf),
+}
+
+/// How the agent identifies itself to the server.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Identity {
+    /// No user.
+    Anonymous,
+    /// A user name and password.
+    User {
+        /// The user name.
+        user: String,
+        /// Where the password is.
+        password: PasswordSource,
+    },
+}
+
+/// The OPC UA connection.
+#[derive(Debug, Clone)]
+pub struct OpcUaConfig {
+    /// `opc.tcp://host:port/path`.
+    pub endpoint: String,
+    /// Message security policy.
+    pub policy: SecurityPolicy,
+    /// Message security mode.
+    pub mode: SecurityMode,
+    /// PKI directory: `own/`, `private/`, `trusted/`, `rejected/`.
+    pub pki_dir: PathBuf,
+    /// Who the agent is.
+    pub identity: Identity,
+    /// How often the server publishes changes.
+    pub publishing_interval: Duration,
+    /// How often the server samples each tag.
+    pub sampling_interval: Duration,
+    /// What `ns=<index>` (index 1 and up) in the tags' node ids means: the
+    /// namespace with this URI, looked up on the server at every connect.
+    pub namespace_uri: Option<String>,
+    /// Changes the server queues per tag between publishes.
+    pub queue_size: u32,
+    /// The most notifications the server may put in one publish; the
+    /// client's decoding limits are sized from it.
+    pub max_notifications_per_publish: u32,
+}
+
+impl OpcUaConfig {
+    /// The default of `opcua.max_notifications_per_publish`. A publish is
+    /// handled as one step, cut after each alarm; an alarm waits for the
+    /// changes ahead of it in its publish and for the publish being
+    /// handled when it arrives: about 0.2 ms each at 1,000 changes on a
+    /// 100,000-tag cell (BENCHMARKS.md), against 2 ms at 10,000. More
+    /// publishes cost the source a little more per change.
+    pub const DEFAULT_MAX_NOTIFICATIONS: u32 = 1_000;
+
+    /// The default queue size: room for every sample of four publishing
+    /// intervals (sampling 0, exception-based, counts as 1 ms), at least 10
+    /// and at most 1000.
+    pub fn default_queue_size(publishing: Duration, sampling: Duration) -> u32 {
+        let sampling = sampling.max(Duration::from_millis(1));
+        let per_publish = publishing.as_micros().div_ceil(sampling.as_micros());
+        u32::try_from(per_publish.saturating_mul(4))
+            .unwrap_or(u32::MAX)
+            .clamp(10, 1000)
+    }
+}

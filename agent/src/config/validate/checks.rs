@@ -1,0 +1,353 @@
+//! Validating the configuration: checks.
+
+use std::collections::{HashMap, HashSet};
+
+use cellwatch_models::alarm::Severity;
+use cellwatch_models::comments::CommentDb;
+use cellwatch_models::engine::{StateRules, SwitchingCheck};
+use cellwatch_models::explain::Polarity;
+use cellwatch_models::expr::Expr;
+use cellwatch_models::il::Dialect;
+use cellwatch_models::limit::{Level, LimitCheck, LimitLevel};
+use cellwatch_models::program::Program;
+use cellwatch_models::signal::{Observability, Signal};
+use cellwatch_models::switching::SwitchingFunction;
+use cellwatch_models::value::{Comparison, Operand, ValueType};
+use toml::Spanned;
+
+use super::Validator;
+use crate::config::raw;
+use crate::config::tags::canonical_expr;
+use crate::config::Addressing;
+
+impl Validator<'_> {
+    pub(super) fn switching(
+        &mut self,
+        key: &str,
+        c: raw::RawSwitching,
+        tags: &HashMap<Signal, usize>,
+    ) -> Option<SwitchingCheck> {
+        let dialect: Option<Dialect> = match &c.dialect {
+            None => None,
+            Some(d) => match d.get_ref().parse() {
+                Ok(d) => Some(d),
+                Err(e) => {
+                    self.problem(d.span(), &format!("{key}.dialect"), e);
+                    None
+                }
+            },
+        };
+        let polarity = self.parsed(
+            c.fault_when.clone(),
+            &format!("{key}.fault_when"),
+            Polarity::On,
+        );
+        let severity = self.parsed(
+            c.severity.clone(),
+            &format!("{key}.severity"),
+            Severity::High,
+        );
+        let path = self.path(c.program.get_ref());
+        let text = self.read_text(
+            c.program.span(),
+            &format!("{key}.program"),
+            &path,
+            "program",
+        )?;
+        let program = match Program::compile(&path.display().to_string(), &text, dialect) {
+            Ok(p) => p,
+            Err(e) => {
+                self.problems.extend(e.lines());
+                return None;
+            }
+        };
+        let observable = match &c.observable {
+            None => Observability::default_for(program.dialect()),
+            Some(o) => match Observability::parse(program.dialect(), o.get_ref()) {
+                Ok(o) => o,
+                Err(e) => {
+                    self.problem(o.span(), &format!("{key}.observable"), e);
+                    return None;
+                }
+            },
+        };
+        let coil = match program.resolve(c.coil.get_ref()) {
+            Ok(s) => s,
+            Err(e) => {
+                self.problem(c.coil.span(), &format!("{key}.coil"), e);
+                return None;
+            }
+        };
+        let sf = match SwitchingFunction::expand(&program, &coil, &observable) {
+            Ok(sf) => sf,
+            Err(e) => {
+                self.problem(c.coil.span(), &format!("{key}.coil"), e);
+                return None;
+            }
+        };
+        // Tags read as another dialect's addresses than the program's
+        // cannot match its signals: say which key fixes it.
+        let hint = match self.addressing {
+            Addressing::In(d) if d == program.dialect() => String::new(),
+            Addressing::PmcOrIec if program.dialect() != Dialect::Stl => String::new(),
+            _ => format!(
+                " (the program is {}: set cell.dialect = \"{}\" to read the tags' addresses as it writes them)",
+                program.dialect(),
+                program.dialect()
+            ),
+        };
+        for leaf in sf.leaves() {
+            if !tags.contains_key(&leaf) {
+                self.problem(
+                    c.coil.span(),
+                    &format!("{key}.coil"),
+                    format!("{coil} reads {leaf}, but no tag has that address; add a [[tags]] entry for it{hint}"),
+                );
+            } else if let Some((t, false)) = self.kinds.get(&leaf) {
+                self.problem(
+                    c.coil.span(),
+                    &format!("{key}.coil"),
+                    format!("{coil} reads {leaf} as a contact, but its tag is a {t}: make it Boolean or give it a bit"),
+                );
+            }
+        }
+        // The program's own declarations, then the tags' comments, then the
+        // I/O list: each overrides the one before.
+        let tag_comments: CommentDb = sf
+            .leaves()
+            .into_iter()
+            .filter_map(|s| Some((s.clone(), self.tag_comments.get(&s)?.clone())))
+            .collect();
+        let declared = program.documentation().clone().overridden_by(tag_comments);
+        let comments = match &c.comments {
+            None => declared,
+            Some(p) => {
+                let path = self.path(p.get_ref());
+                let text = self.read_text(
+                    p.span(),
+                    &format!("{key}.comments"),
+                    &path,
+                    "comment database",
+                )?;
+                match CommentDb::parse(&path.display().to_string(), &text, |a| program.resolve(a)) {
+                    Ok(db) => declared.overridden_by(db),
+                    Err(e) => {
+                        self.problems.push(e.to_string());
+                        return None;
+                    }
+                }
+            }
+        };
+        let armed_when = match &c.armed_when {
+            None => None,
+            Some(a) => {
+                let expr = self.expression(a, &format!("{key}.armed_when"), tags)?;
+                Some(SwitchingFunction::from_expr(
+                    Signal::new(&format!("{}.armed", c.id.get_ref())),
+                    &expr,
+                ))
+            }
+        };
+        Some(SwitchingCheck {
+            armed_when,
+            id: c.id.into_inner(),
+            fault_type: c.fault_type.unwrap_or_else(|| coil.to_string()),
+            sf,
+            polarity,
+            severity,
+            comments,
+        })
+    }
+
+    /// A condition over tag addresses in the paper's notation, every
+    /// address a contact tag's; comparisons (`TEMP > 80.5`) read numeric
+    /// tags.
+    pub(super) fn expression(
+        &mut self,
+        text: &Spanned<String>,
+        key: &str,
+        tags: &HashMap<Signal, usize>,
+    ) -> Option<Expr> {
+        let e = match Expr::parse(text.get_ref()) {
+            Ok(e) => canonical_expr(self.addressing, e),
+            Err(m) => {
+                self.problem(text.span(), key, format!("'{}': {m}", text.get_ref()));
+                return None;
+            }
+        };
+        let mut problems = Vec::new();
+        for s in e.signals() {
+            match Comparison::of_signal(&s) {
+                Some(c) => {
+                    let operands = std::iter::once(&c.lhs).chain(match &c.rhs {
+                        Operand::Tag(t) => Some(t),
+                        Operand::Const(_) => None,
+                    });
+                    for a in operands {
+                        match self.kinds.get(a) {
+                            None => problems.push(format!("no tag has the address {a} (in '{s}')")),
+                            Some((t, _)) if !t.is_numeric() && *t != ValueType::Boolean => problems
+                                .push(format!(
+                                    "{a} is a {t} and cannot be compared as a number (in '{s}')"
+                                )),
+                            Some(_) => {}
+                        }
+                    }
+                }
+                None if !tags.contains_key(&s) => {
+                    problems.push(format!("no tag has the address {s}"));
+                }
+                None => {
+                    if let Some((t, false)) = self.kinds.get(&s) {
+                        problems.push(format!(
+                            "{s} is a {t}, not a contact: compare it (`{s} > 0`) or give the tag a bit"
+                        ));
+                    }
+                }
+            }
+        }
+        if problems.is_empty() {
+            Some(e)
+        } else {
+            self.problem(text.span(), key, problems.join("; "));
+            None
+        }
+    }
+
+    /// The limit checks.
+    pub(super) fn limits(
+        &mut self,
+        raw: Vec<raw::RawLimit>,
+        ids: &mut HashSet<String>,
+    ) -> Vec<LimitCheck> {
+        let mut out = Vec::new();
+        for (i, c) in raw.into_iter().enumerate() {
+            let key = format!("checks.limit[{i}]");
+            self.key_chunk(c.id.span(), &format!("{key}.id"), "", c.id.get_ref());
+            if !ids.insert(c.id.get_ref().clone()) {
+                self.problem(
+                    c.id.span(),
+                    &format!("{key}.id"),
+                    format!("'{}' is used twice", c.id.get_ref()),
+                );
+            }
+            let tag = match self.addressing.signal(c.tag.get_ref()) {
+                Ok(a) => a,
+                Err(e) => {
+                    self.problem(c.tag.span(), &format!("{key}.tag"), e);
+                    continue;
+                }
+            };
+            match self.kinds.get(&tag) {
+                None => {
+                    self.problem(
+                        c.tag.span(),
+                        &format!("{key}.tag"),
+                        format!("no tag has the address {tag}"),
+                    );
+                    continue;
+                }
+                Some((t, _)) if !t.is_numeric() => {
+                    self.problem(
+                        c.tag.span(),
+                        &format!("{key}.tag"),
+                        format!("{tag} is a {t}: a limit check needs a numeric tag (type = \"Double\", \"Int16\", ...)"),
+                    );
+                    continue;
+                }
+                Some(_) => {}
+            }
+            let deadband = match c.deadband {
+                None => 0.0,
+                Some(d) if *d.get_ref() >= 0.0 && d.get_ref().is_finite() => *d.get_ref(),
+                Some(d) => {
+                    self.problem(
+                        d.span(),
+                        &format!("{key}.deadband"),
+                        format!("{} must be zero or more", d.get_ref()),
+                    );
+                    0.0
+                }
+            };
+            let on_delay = self.delay(c.on_delay, &format!("{key}.on_delay"));
+            let off_delay = self.delay(c.off_delay, &format!("{key}.off_delay"));
+            let mut levels = Vec::new();
+            for (level, raw, default) in [
+                (Level::HH, c.hh, Severity::Critical),
+                (Level::H, c.h, Severity::High),
+                (Level::L, c.l, Severity::High),
+                (Level::LL, c.ll, Severity::Critical),
+            ] {
+                let Some(raw) = raw else { continue };
+                let span = raw.span();
+                let raw = raw.into_inner();
+                let lkey = format!("{key}.{}", level.as_str().to_ascii_lowercase());
+                if !raw.limit.is_finite() {
+                    self.problem(
+                        span.clone(),
+                        &format!("{lkey}.limit"),
+                        "must be a finite number",
+                    );
+                }
+                let severity = self.parsed(raw.severity, &format!("{lkey}.severity"), default);
+                levels.push(LimitLevel {
+                    level,
+                    limit: raw.limit,
+                    severity,
+                });
+            }
+            if levels.is_empty() {
+                self.problem(
+                    c.id.span(),
+                    &key,
+                    "give at least one level: hh, h, l or ll = { limit = ..., severity = ... }",
+                );
+            }
+            let limit = |l: Level| levels.iter().find(|x| x.level == l).map(|x| x.limit);
+            let ordered = [Level::HH, Level::H, Level::L, Level::LL]
+                .iter()
+                .filter_map(|&l| limit(l))
+                .collect::<Vec<_>>()
+                .windows(2)
+                .all(|w| w[0] > w[1]);
+            if !ordered {
+                self.problem(
+                    c.id.span(),
+                    &key,
+                    "the limits must fall in the order hh > h > l > ll",
+                );
+            }
+            out.push(LimitCheck {
+                id: c.id.into_inner(),
+                label: String::new(),
+                tag,
+                unit: c.unit,
+                deadband,
+                on_delay,
+                off_delay,
+                levels,
+            });
+        }
+        out
+    }
+
+    pub(super) fn state(
+        &mut self,
+        raw: &raw::RawState,
+        tags: &HashMap<Signal, usize>,
+    ) -> StateRules {
+        let fault_severity = self.parsed(
+            raw.fault_severity.clone(),
+            "state.fault_severity",
+            Severity::High,
+        );
+        let running = raw
+            .running
+            .as_ref()
+            .and_then(|r| self.expression(r, "state.running", tags));
+        StateRules {
+            running,
+            fault_severity,
+        }
+    }
+}

@@ -1,0 +1,184 @@
+//! Validating the configuration: opcua.
+
+use std::time::Duration;
+
+use toml::Spanned;
+
+use super::Validator;
+use crate::config::raw;
+use crate::config::{Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy};
+
+impl Validator<'_> {
+    pub(super) fn opcua(&mut self, raw: raw::RawOpcUa) -> Option<OpcUaConfig> {
+        let endpoint = raw.endpoint.get_ref().clone();
+        if !endpoint.starts_with("opc.tcp://") {
+            self.problem(
+                raw.endpoint.span(),
+                "opcua.endpoint",
+                format!("'{endpoint}' must start with opc.tcp://"),
+            );
+        }
+        let policy = match raw
+            .security_policy
+            .as_ref()
+            .map(|p| (p.get_ref().as_str(), p.span()))
+        {
+            None => SecurityPolicy::Basic256Sha256,
+            Some(("None", _)) => SecurityPolicy::None,
+            Some(("Basic256Sha256", _)) => SecurityPolicy::Basic256Sha256,
+            Some(("Aes128_Sha256_RsaOaep" | "Aes128Sha256RsaOaep", _)) => {
+                SecurityPolicy::Aes128Sha256RsaOaep
+            }
+            Some(("Aes256_Sha256_RsaPss" | "Aes256Sha256RsaPss", _)) => {
+                SecurityPolicy::Aes256Sha256RsaPss
+            }
+            Some((p @ ("Basic128Rsa15" | "Basic256"), span)) => {
+                self.problem(
+                    span,
+                    "opcua.security_policy",
+                    format!("'{p}' is deprecated and insecure; use Basic256Sha256"),
+                );
+                SecurityPolicy::Basic256Sha256
+            }
+            Some((p, span)) => {
+                self.problem(span, "opcua.security_policy", format!("unknown policy '{p}': use Basic256Sha256, Aes128_Sha256_RsaOaep, Aes256_Sha256_RsaPss or None"));
+                SecurityPolicy::Basic256Sha256
+            }
+        };
+        let mode = match raw
+            .security_mode
+            .as_ref()
+            .map(|m| (m.get_ref().as_str(), m.span()))
+        {
+            None if policy == SecurityPolicy::None => SecurityMode::None,
+            None => SecurityMode::SignAndEncrypt,
+            Some(("None", _)) => SecurityMode::None,
+            Some(("Sign", _)) => SecurityMode::Sign,
+            Some(("SignAndEncrypt", _)) => SecurityMode::SignAndEncrypt,
+            Some((m, span)) => {
+                self.problem(
+                    span,
+                    "opcua.security_mode",
+                    format!("unknown mode '{m}': use SignAndEncrypt, Sign or None"),
+                );
+                SecurityMode::SignAndEncrypt
+            }
+        };
+        if (policy == SecurityPolicy::None) != (mode == SecurityMode::None) {
+            let span = raw
+                .security_mode
+                .as_ref()
+                .or(raw.security_policy.as_ref())
+                .map_or(raw.endpoint.span(), Spanned::span);
+            self.problem(
+                span,
+                "opcua.security_mode",
+                "security_policy None goes with security_mode None, and only with it",
+            );
+        } else if policy == SecurityPolicy::None {
+            self.warnings.push(format!(
+                "OPC UA security is off for {endpoint}: traffic is neither signed nor encrypted"
+            ));
+        }
+        let pki_dir = self.path(raw.pki_dir.as_ref().map_or("pki", |p| p.get_ref().as_str()));
+        let identity = match raw.identity {
+            None => Identity::Anonymous,
+            Some(id) => self.identity(id.into_inner())?,
+        };
+        let publishing_interval = self.duration(
+            raw.publishing_interval,
+            "opcua.publishing_interval",
+            Duration::from_millis(100),
+        );
+        // 0 is the OPC UA convention for exception-based reporting: every
+        // change, as the server sees it.
+        let sampling_interval = match raw.sampling_interval {
+            Some(v)
+                if v.get_ref().trim() == "0"
+                    || humantime::parse_duration(v.get_ref()).is_ok_and(|d| d.is_zero()) =>
+            {
+                Duration::ZERO
+            }
+            other => self.duration(other, "opcua.sampling_interval", Duration::from_millis(50)),
+        };
+        let queue_size = match raw.queue_size {
+            None => OpcUaConfig::default_queue_size(publishing_interval, sampling_interval),
+            Some(q) => self.count(q, "opcua.queue_size", 1..=10_000, 10),
+        };
+        let max_notifications_per_publish =
+            raw.max_notifications_per_publish
+                .map_or(OpcUaConfig::DEFAULT_MAX_NOTIFICATIONS, |q| {
+                    self.count(
+                        q,
+                        "opcua.max_notifications_per_publish",
+                        100..=1_000_000,
+                        OpcUaConfig::DEFAULT_MAX_NOTIFICATIONS,
+                    )
+                });
+        let namespace_uri = match raw.namespace_uri {
+            Some(uri) if uri.get_ref().trim().is_empty() => {
+                self.problem(uri.span(), "opcua.namespace_uri", "is empty");
+                None
+            }
+            other => other.map(|u| (u.span(), u.into_inner())),
+        };
+        self.namespace_uri = namespace_uri.clone();
+        Some(OpcUaConfig {
+            endpoint,
+            policy,
+            mode,
+            pki_dir,
+            identity,
+            publishing_interval,
+            sampling_interval,
+            namespace_uri: namespace_uri.map(|(_, u)| u),
+            queue_size,
+            max_notifications_per_publish,
+        })
+    }
+
+    pub(super) fn identity(&mut self, id: raw::RawIdentity) -> Option<Identity> {
+        if let Some(p) = &id.password {
+            self.problem(
+                p.span(),
+                "opcua.identity.password",
+                "passwords are never written in config files; use password_env (an environment variable) or password_file",
+            );
+            return None;
+        }
+        match id.kind.get_ref().as_str() {
+            "anonymous" => Some(Identity::Anonymous),
+            "user" => {
+                let user = id.user.unwrap_or_default();
+                if user.is_empty() {
+                    self.problem(
+                        id.kind.span(),
+                        "opcua.identity.user",
+                        "a user identity needs a user name",
+                    );
+                }
+                let password = match (id.password_env, id.password_file) {
+                    (Some(env), None) => PasswordSource::Env(env),
+                    (None, Some(file)) => PasswordSource::File(self.path(file.get_ref())),
+                    _ => {
+                        self.problem(
+                            id.kind.span(),
+                            "opcua.identity",
+                            "give exactly one of password_env and password_file",
+                        );
+                        return None;
+                    }
+                };
+                Some(Identity::User { user, password })
+            }
+            other => {
+                self.problem(
+                    id.kind.span(),
+                    "opcua.identity.kind",
+                    format!("unknown identity '{other}': use anonymous or user"),
+                );
+                None
+            }
+        }
+    }
+}
