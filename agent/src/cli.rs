@@ -7,6 +7,9 @@ use std::io::Write;
 use clap::{Parser, Subcommand};
 
 use crate::commands::agent::{DemoArgs, RunArgs, ValidateArgs};
+use crate::commands::bus::{
+    AlarmsArgs, CommandArgs, ForceArgs, HistoryArgs, ReasonArgs, ShelveArgs, StopArgs, WriteArgs,
+};
 use crate::commands::discover::DiscoverArgs;
 use crate::commands::explain::ExplainArgs;
 use crate::commands::keygen::KeygenArgs;
@@ -15,9 +18,6 @@ use crate::commands::report::ReportArgs;
 use crate::commands::sf::SfArgs;
 use crate::commands::sfc::SfcCommand;
 use crate::commands::simulate::SimulateCommand;
-use crate::commands::subscribers::{
-    AlarmsArgs, CommandArgs, ForceArgs, HistoryArgs, ReasonArgs, ShelveArgs, StopArgs, WriteArgs,
-};
 use crate::commands::timers::{ExportStArgs, LearnArgs, ReplayArgs};
 use crate::commands::{self, Failure};
 use crate::operator::Action;
@@ -233,21 +233,17 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::Simulate(SimulateCommand::Moulding(args)) => {
                 commands::simulate::moulding(&args, out).await
             }
-            Command::Alarms(args) => commands::subscribers::alarms(&args, out).await,
-            Command::History(args) => commands::subscribers::history(&args, out).await,
-            Command::Ack(args) => commands::subscribers::command(Action::Ack, &args, out).await,
-            Command::Reset(args) => commands::subscribers::command(Action::Reset, &args, out).await,
-            Command::Write(args) => commands::subscribers::write(&args, out).await,
-            Command::Force(args) => commands::subscribers::force(&args, out).await,
-            Command::Stop(args) => commands::subscribers::stop(&args, out).await,
-            Command::Shelve(args) => commands::subscribers::shelve(&args, out).await,
-            Command::Unshelve(args) => {
-                commands::subscribers::command(Action::Unshelve, &args, out).await
-            }
-            Command::OutOfService(args) => commands::subscribers::out_of_service(&args, out).await,
-            Command::InService(args) => {
-                commands::subscribers::command(Action::InService, &args, out).await
-            }
+            Command::Alarms(args) => commands::bus::alarms(&args, out).await,
+            Command::History(args) => commands::bus::history(&args, out).await,
+            Command::Ack(args) => commands::bus::command(Action::Ack, &args, out).await,
+            Command::Reset(args) => commands::bus::command(Action::Reset, &args, out).await,
+            Command::Write(args) => commands::bus::write(&args, out).await,
+            Command::Force(args) => commands::bus::force(&args, out).await,
+            Command::Stop(args) => commands::bus::stop(&args, out).await,
+            Command::Shelve(args) => commands::bus::shelve(&args, out).await,
+            Command::Unshelve(args) => commands::bus::command(Action::Unshelve, &args, out).await,
+            Command::OutOfService(args) => commands::bus::out_of_service(&args, out).await,
+            Command::InService(args) => commands::bus::command(Action::InService, &args, out).await,
             Command::Discover(args) => commands::discover::run(&args, out).await,
             // Dispatched synchronously by `run`; never sent here.
             Command::Sf(_)

@@ -733,7 +733,7 @@ async fn demo_robot(
             let trust = &trust;
             let cell_id = &cell_id;
             async move {
-                super::subscribers::send_signed(
+                super::bus::send_signed(
                     bus,
                     trust,
                     "cellwatch",

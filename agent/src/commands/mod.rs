@@ -1,8 +1,10 @@
 //! One module per command; each takes its parsed arguments and the output
-//! streams, and returns [`crate::commands::Failure`] on error.
+//! streams, and returns [`Failure`] on error. `bus/` is the bus client (every
+//! command that talks to agents over Zenoh).
 
 pub(crate) mod agent;
 pub(crate) mod audit;
+pub(crate) mod bus;
 pub(crate) mod discover;
 pub(crate) mod explain;
 pub(crate) mod inputs;
@@ -13,7 +15,6 @@ pub(crate) mod sf;
 pub(crate) mod sfc;
 pub(crate) mod signals;
 pub(crate) mod simulate;
-pub(crate) mod subscribers;
 pub(crate) mod timers;
 
 /// Why a command failed. Each error is sorted into one of the two by the
