@@ -6,10 +6,11 @@ use std::io::Write;
 
 use clap::{Parser, Subcommand};
 
-use crate::commands::agent::{DemoArgs, RunArgs, ValidateArgs};
+use crate::commands::agent::{RunArgs, ValidateArgs};
 use crate::commands::bus::{
     AlarmsArgs, CommandArgs, ForceArgs, HistoryArgs, ReasonArgs, ShelveArgs, StopArgs, WriteArgs,
 };
+use crate::commands::demo::DemoArgs;
 use crate::commands::discover::DiscoverArgs;
 use crate::commands::explain::ExplainArgs;
 use crate::commands::keygen::KeygenArgs;
@@ -222,7 +223,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
     runtime.block_on(async {
         match command {
             Command::Run(args) => commands::agent::run(&args).await,
-            Command::Demo(args) => commands::agent::demo(&args, out).await,
+            Command::Demo(args) => commands::demo::demo(&args, out).await,
             Command::Simulate(SimulateCommand::Line(args)) => commands::simulate::line(&args, out),
             Command::Simulate(SimulateCommand::RobotRuns(args)) => {
                 commands::simulate::robot_runs(&args, out)
