@@ -31,20 +31,25 @@ use std::future::Future;
 use std::sync::Arc;
 use std::time::Duration;
 
+mod client;
 mod names;
 mod subscription;
+mod switches;
 
 pub use crate::config::node::{Namespace, TagNode};
+pub use client::client;
+use client::{identity, namespace_array, ua_mode, ua_policy};
 pub use names::Names;
+use switches::{pulse, reset_switches, Writes};
 
 pub use subscription::{reading, OVERFLOW_ALARM};
 
 use cellwatch_models::engine::{Reading, TagReading};
 use futures_util::future::BoxFuture;
 use futures_util::{FutureExt, StreamExt};
-use opcua::client::{ClientBuilder, IdentityToken, Session, SessionConnectMode, SessionPollResult};
+use opcua::client::{Session, SessionConnectMode, SessionPollResult};
 use opcua::crypto::SecurityPolicy as UaPolicy;
-use opcua::types::{MessageSecurityMode, NodeId, ReadValueId, TimestampsToReturn, Variant};
+use opcua::types::{ReadValueId, TimestampsToReturn};
 
 use tokio::sync::mpsc;
 
@@ -52,9 +57,7 @@ use super::{
     Source, SourceError, SourceEvent, SourceSender, Write, WriteRequest, WriteSender,
     WRITE_CAPACITY,
 };
-use crate::config::{
-    Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy, TagConfig,
-};
+use crate::config::{OpcUaConfig, TagConfig};
 
 /// The OPC UA client of one cell.
 pub struct OpcUaSource {
@@ -154,251 +157,6 @@ impl Source for OpcUaSource {
         }
         .boxed()
     }
-}
-
-/// The writes a source takes: pulses of its switches only.
-struct Writes {
-    rx: Option<mpsc::Receiver<WriteRequest>>,
-    /// The switches, each with its name and address.
-    switches: BTreeMap<usize, String>,
-}
-
-impl Writes {
-    async fn next(&mut self) -> Option<WriteRequest> {
-        match self.rx.as_mut() {
-            Some(rx) => match rx.recv().await {
-                Some(w) => Some(w),
-                None => {
-                    self.rx = None;
-                    std::future::pending().await
-                }
-            },
-            None => std::future::pending().await,
-        }
-    }
-}
-
-/// Pulses a switch on the PLC: on, read back, held, off, read back. Once
-/// it was written on, it is always written off again, whatever failed.
-async fn pulse(
-    session: Arc<Session>,
-    node: TagNode,
-    name: String,
-    held: Duration,
-) -> Result<String, String> {
-    let namespaces = namespace_array(&session)
-        .await
-        .map_err(|e| format!("{name}: cannot read the namespace array: {e}"))?;
-    let id = node
-        .resolve(&namespaces)
-        .ok_or_else(|| format!("{name}: its namespace is not on the server"))?;
-    set_switch(&session, &id, &name, true).await?;
-    let on = read_back(&session, &id, &name, true).await;
-    if on.is_ok() {
-        tokio::time::sleep(held).await;
-    }
-    let off = set_switch(&session, &id, &name, false).await;
-    let off = match off {
-        Ok(()) => read_back(&session, &id, &name, false).await,
-        Err(e) => Err(e),
-    };
-    on?;
-    off?;
-    Ok(format!(
-        "{name} on for {} ms, read back on, then off",
-        held.as_millis()
-    ))
-}
-
-async fn set_switch(session: &Session, id: &NodeId, name: &str, on: bool) -> Result<(), String> {
-    let value = opcua::types::WriteValue {
-        node_id: id.clone(),
-        attribute_id: opcua::types::AttributeId::Value as u32,
-        index_range: opcua::types::NumericRange::None,
-        value: opcua::types::DataValue::value_only(on),
-    };
-    let status = session
-        .write(&[value])
-        .await
-        .map_err(|e| format!("{name}: write {} failed: {e}", u8::from(on)))?;
-    match status.first() {
-        Some(s) if s.is_good() => Ok(()),
-        Some(s) => Err(format!("{name}: the server refused {}: {s}", u8::from(on))),
-        None => Err(format!("{name}: the server answered nothing")),
-    }
-}
-
-/// Writes off every switch that reads anything but off (their safe
-/// state), each read back; how many were written, or what failed.
-async fn switches_off(session: &Session, switches: &[(String, TagNode)]) -> Result<usize, String> {
-    if switches.is_empty() {
-        return Ok(0);
-    }
-    let namespaces = namespace_array(session)
-        .await
-        .map_err(|e| format!("cannot read the namespace array: {e}"))?;
-    let mut written = 0;
-    let mut failed = Vec::new();
-    for (name, node) in switches {
-        let Some(id) = node.resolve(&namespaces) else {
-            failed.push(format!("{name}: its namespace is not on the server"));
-            continue;
-        };
-        let read = session
-            .read(
-                &[ReadValueId::from(id.clone())],
-                TimestampsToReturn::Neither,
-                0.0,
-            )
-            .await;
-        if let Ok(values) = &read {
-            if matches!(
-                values.first().and_then(|v| v.value.as_ref()),
-                Some(Variant::Boolean(false))
-            ) {
-                continue;
-            }
-        }
-        match set_switch(session, &id, name, false).await {
-            Ok(()) => match read_back(session, &id, name, false).await {
-                Ok(()) => written += 1,
-                Err(e) => failed.push(e),
-            },
-            Err(e) => failed.push(e),
-        }
-    }
-    if failed.is_empty() {
-        Ok(written)
-    } else {
-        Err(failed.join("; "))
-    }
-}
-
-/// [`switches_off`], its outcome logged: `when` says why.
-async fn reset_switches(session: &Session, switches: &[(String, TagNode)], when: &str) {
-    match switches_off(session, switches).await {
-        Ok(0) => tracing::debug!(when, "chart switches all off"),
-        Ok(n) => tracing::warn!(switches = n, when, "chart switches found on, written off"),
-        Err(e) => tracing::error!(error = %e, when, "chart switches not written off"),
-    }
-}
-
-/// How long a written switch may take to read back as written.
-const READ_BACK: Duration = Duration::from_secs(2);
-
-async fn read_back(session: &Session, id: &NodeId, name: &str, on: bool) -> Result<(), String> {
-    let until = tokio::time::Instant::now() + READ_BACK;
-    loop {
-        let read = session
-            .read(
-                &[ReadValueId::from(id.clone())],
-                TimestampsToReturn::Neither,
-                0.0,
-            )
-            .await
-            .map_err(|e| format!("{name}: read back failed: {e}"))?;
-        let last = match read.first().and_then(|v| v.value.clone()) {
-            Some(Variant::Boolean(b)) if b == on => return Ok(()),
-            other => format!("{other:?}"),
-        };
-        if tokio::time::Instant::now() >= until {
-            return Err(format!(
-                "{name}: written {} but read back {last} for {} s",
-                u8::from(on),
-                READ_BACK.as_secs()
-            ));
-        }
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
-}
-
-fn ua_policy(p: SecurityPolicy) -> UaPolicy {
-    match p {
-        SecurityPolicy::None => UaPolicy::None,
-        SecurityPolicy::Basic256Sha256 => UaPolicy::Basic256Sha256,
-        SecurityPolicy::Aes128Sha256RsaOaep => UaPolicy::Aes128Sha256RsaOaep,
-        SecurityPolicy::Aes256Sha256RsaPss => UaPolicy::Aes256Sha256RsaPss,
-    }
-}
-
-fn ua_mode(m: SecurityMode) -> MessageSecurityMode {
-    match m {
-        SecurityMode::None => MessageSecurityMode::None,
-        SecurityMode::Sign => MessageSecurityMode::Sign,
-        SecurityMode::SignAndEncrypt => MessageSecurityMode::SignAndEncrypt,
-    }
-}
-
-fn identity(config: &OpcUaConfig) -> Result<IdentityToken, SourceError> {
-    match &config.identity {
-        Identity::Anonymous => Ok(IdentityToken::Anonymous),
-        Identity::User { user, password } => {
-            let secret = match password {
-                PasswordSource::Env(var) => std::env::var(var).map_err(|_| {
-                    SourceError::Identity(format!("environment variable {var} is not set"))
-                })?,
-                PasswordSource::File(path) => std::fs::read_to_string(path)
-                    .map_err(|e| {
-                        SourceError::Identity(format!("cannot read {}: {e}", path.display()))
-                    })?
-                    .lines()
-                    .next()
-                    .unwrap_or_default()
-                    .to_string(),
-            };
-            Ok(IdentityToken::new_user_name(user.clone(), secret))
-        }
-    }
-}
-
-/// The largest message the client sends or accepts.
-const MAX_MESSAGE_BYTES: usize = 64 << 20;
-
-/// The longest array the client decodes.
-fn array_limit(config: &OpcUaConfig) -> usize {
-    2 * (config.max_notifications_per_publish as usize).max(subscription::MAX_ITEMS_PER_CALL)
-}
-
-/// Builds the client, creating the agent's key pair in the PKI directory if
-/// it has none.
-///
-/// # Errors
-/// The client configuration is invalid.
-pub fn client(cell: &str, config: &OpcUaConfig) -> Result<opcua::client::Client, SourceError> {
-    let key_existed = crate::sources::pki::own_key(&config.pki_dir).exists();
-    let client = ClientBuilder::new()
-        .application_name(format!("cellwatch {cell}"))
-        .application_uri(format!("urn:cellwatch:agent:{cell}"))
-        .product_uri("urn:cellwatch")
-        .pki_dir(&config.pki_dir)
-        .create_sample_keypair(true)
-        .trust_server_certs(false)
-        .verify_server_certs(true)
-        .session_retry_limit(-1)
-        .session_retry_initial(Duration::from_millis(500))
-        .session_retry_max(Duration::from_secs(10))
-        .keep_alive_interval(Duration::from_secs(1))
-        .max_failed_keep_alive_count(3)
-        .request_timeout(Duration::from_secs(5))
-        .session_timeout(30_000)
-        // Decoding limits sized from what the subscription can produce: a
-        // publish holds at most `max_notifications_per_publish` values (asked
-        // of the server), a monitored-item call at most
-        // `subscription::MAX_ITEMS_PER_CALL` results. A server that sends
-        // more closes the connection: an error in the log and the
-        // communication alarm, never a silent stall.
-        .max_array_length(array_limit(config))
-        .max_message_size(MAX_MESSAGE_BYTES)
-        .max_chunk_count(0)
-        // The source recreates its subscription itself after a new session
-        // (see `run`); async-opcua 0.19's own re-creation leaves the new
-        // subscription without publish requests.
-        .recreate_subscriptions(false)
-        .client()
-        .map_err(|e| SourceError::Client(e.join("; ")))?;
-    crate::sources::pki::protect_own_key(&config.pki_dir, key_existed)
-        .map_err(SourceError::Client)?;
-    Ok(client)
 }
 
 /// Runs the source until `shutdown` completes: connects (retrying with
@@ -960,30 +718,3 @@ async fn read_current(session: &Session, ctx: &Context, nodes: &subscription::Mo
 
 /// Nodes read per call when catching up after a reactivation.
 const READ_CHUNK: usize = 1000;
-
-/// The server's `NamespaceArray` (index → URI).
-async fn namespace_array(session: &Session) -> Result<Vec<String>, String> {
-    let node = NodeId::new(0, NAMESPACE_ARRAY);
-    let values = session
-        .read(&[ReadValueId::from(node)], TimestampsToReturn::Neither, 0.0)
-        .await
-        .map_err(|e| e.to_string())?;
-    let value = values.into_iter().next().ok_or("empty read result")?;
-    if let Some(status) = value.status.filter(|s| !s.is_good()) {
-        return Err(status.to_string());
-    }
-    match value.value {
-        Some(Variant::Array(a)) => Ok(a
-            .values
-            .into_iter()
-            .map(|v| match v {
-                Variant::String(s) => s.as_ref().to_string(),
-                _ => String::new(),
-            })
-            .collect()),
-        other => Err(format!("not an array of strings: {other:?}")),
-    }
-}
-
-/// `Server_NamespaceArray`.
-const NAMESPACE_ARRAY: u32 = 2255;

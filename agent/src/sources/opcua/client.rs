@@ -1,0 +1,128 @@
+//! The OPC UA client as the configuration asks for it: security, identity, limits.
+
+use std::time::Duration;
+
+use opcua::client::{ClientBuilder, IdentityToken, Session};
+use opcua::crypto::SecurityPolicy as UaPolicy;
+use opcua::types::{MessageSecurityMode, NodeId, ReadValueId, TimestampsToReturn, Variant};
+
+use super::subscription;
+
+use crate::config::{Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy};
+use crate::sources::SourceError;
+
+pub(super) fn ua_policy(p: SecurityPolicy) -> UaPolicy {
+    match p {
+        SecurityPolicy::None => UaPolicy::None,
+        SecurityPolicy::Basic256Sha256 => UaPolicy::Basic256Sha256,
+        SecurityPolicy::Aes128Sha256RsaOaep => UaPolicy::Aes128Sha256RsaOaep,
+        SecurityPolicy::Aes256Sha256RsaPss => UaPolicy::Aes256Sha256RsaPss,
+    }
+}
+
+pub(super) fn ua_mode(m: SecurityMode) -> MessageSecurityMode {
+    match m {
+        SecurityMode::None => MessageSecurityMode::None,
+        SecurityMode::Sign => MessageSecurityMode::Sign,
+        SecurityMode::SignAndEncrypt => MessageSecurityMode::SignAndEncrypt,
+    }
+}
+
+pub(super) fn identity(config: &OpcUaConfig) -> Result<IdentityToken, SourceError> {
+    match &config.identity {
+        Identity::Anonymous => Ok(IdentityToken::Anonymous),
+        Identity::User { user, password } => {
+            let secret = match password {
+                PasswordSource::Env(var) => std::env::var(var).map_err(|_| {
+                    SourceError::Identity(format!("environment variable {var} is not set"))
+                })?,
+                PasswordSource::File(path) => std::fs::read_to_string(path)
+                    .map_err(|e| {
+                        SourceError::Identity(format!("cannot read {}: {e}", path.display()))
+                    })?
+                    .lines()
+                    .next()
+                    .unwrap_or_default()
+                    .to_string(),
+            };
+            Ok(IdentityToken::new_user_name(user.clone(), secret))
+        }
+    }
+}
+
+/// The largest message the client sends or accepts.
+pub(super) const MAX_MESSAGE_BYTES: usize = 64 << 20;
+
+/// The longest array the client decodes.
+pub(super) fn array_limit(config: &OpcUaConfig) -> usize {
+    2 * (config.max_notifications_per_publish as usize).max(subscription::MAX_ITEMS_PER_CALL)
+}
+
+/// Builds the client, creating the agent's key pair in the PKI directory if
+/// it has none.
+///
+/// # Errors
+/// The client configuration is invalid.
+pub fn client(cell: &str, config: &OpcUaConfig) -> Result<opcua::client::Client, SourceError> {
+    let key_existed = crate::sources::pki::own_key(&config.pki_dir).exists();
+    let client = ClientBuilder::new()
+        .application_name(format!("cellwatch {cell}"))
+        .application_uri(format!("urn:cellwatch:agent:{cell}"))
+        .product_uri("urn:cellwatch")
+        .pki_dir(&config.pki_dir)
+        .create_sample_keypair(true)
+        .trust_server_certs(false)
+        .verify_server_certs(true)
+        .session_retry_limit(-1)
+        .session_retry_initial(Duration::from_millis(500))
+        .session_retry_max(Duration::from_secs(10))
+        .keep_alive_interval(Duration::from_secs(1))
+        .max_failed_keep_alive_count(3)
+        .request_timeout(Duration::from_secs(5))
+        .session_timeout(30_000)
+        // Decoding limits sized from what the subscription can produce: a
+        // publish holds at most `max_notifications_per_publish` values (asked
+        // of the server), a monitored-item call at most
+        // `subscription::MAX_ITEMS_PER_CALL` results. A server that sends
+        // more closes the connection: an error in the log and the
+        // communication alarm, never a silent stall.
+        .max_array_length(array_limit(config))
+        .max_message_size(MAX_MESSAGE_BYTES)
+        .max_chunk_count(0)
+        // The source recreates its subscription itself after a new session
+        // (see `run`); async-opcua 0.19's own re-creation leaves the new
+        // subscription without publish requests.
+        .recreate_subscriptions(false)
+        .client()
+        .map_err(|e| SourceError::Client(e.join("; ")))?;
+    crate::sources::pki::protect_own_key(&config.pki_dir, key_existed)
+        .map_err(SourceError::Client)?;
+    Ok(client)
+}
+
+/// The server's `NamespaceArray` (index → URI).
+pub(super) async fn namespace_array(session: &Session) -> Result<Vec<String>, String> {
+    let node = NodeId::new(0, NAMESPACE_ARRAY);
+    let values = session
+        .read(&[ReadValueId::from(node)], TimestampsToReturn::Neither, 0.0)
+        .await
+        .map_err(|e| e.to_string())?;
+    let value = values.into_iter().next().ok_or("empty read result")?;
+    if let Some(status) = value.status.filter(|s| !s.is_good()) {
+        return Err(status.to_string());
+    }
+    match value.value {
+        Some(Variant::Array(a)) => Ok(a
+            .values
+            .into_iter()
+            .map(|v| match v {
+                Variant::String(s) => s.as_ref().to_string(),
+                _ => String::new(),
+            })
+            .collect()),
+        other => Err(format!("not an array of strings: {other:?}")),
+    }
+}
+
+/// `Server_NamespaceArray`.
+pub(super) const NAMESPACE_ARRAY: u32 = 2255;
