@@ -631,12 +631,37 @@ async fn a_stopped_agent_frees_its_port_and_its_liveliness_token() {
         }
         n
     };
+    // The client hears the token come and go (its current tokens first).
+    let tokens = fx
+        .client
+        .liveliness()
+        .declare_subscriber(token)
+        .history(true)
+        .await
+        .unwrap();
+    let next = |kind: zenoh::sample::SampleKind| {
+        let tokens = &tokens;
+        async move {
+            loop {
+                let sample = tokio::time::timeout(Duration::from_secs(30), tokens.recv_async())
+                    .await
+                    .unwrap_or_else(|_| panic!("no {kind:?} of the agent's token"))
+                    .unwrap();
+                if sample.kind() == kind {
+                    break;
+                }
+            }
+        }
+    };
+    next(zenoh::sample::SampleKind::Put).await;
     assert_eq!(alive(fx.client.clone()).await, 1);
     let agent = fx.agent.take().unwrap();
     let addr = agent.metrics_addr().unwrap();
     agent.stop().await;
-    // Stop has returned: the port is free and the token is gone.
+    // Stop has returned: the port is free.
     std::net::TcpListener::bind(addr).unwrap();
+    // The token is gone, once the client has heard the agent leave.
+    next(zenoh::sample::SampleKind::Delete).await;
     assert_eq!(alive(fx.client.clone()).await, 0);
     fx.sim.stop();
 }
