@@ -4,18 +4,17 @@
 use crate::spawned::{alarm, snapshot_until, start, KEY};
 use crate::util::cellwatch;
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn operators_act_within_their_permissions_and_agents_hold_no_private_key() {
-    let d = tempfile::tempdir().unwrap();
-    let (sim, mut cell) = start(d.path()).await;
-    // lee may acknowledge, not reset; a stranger's key is in no file.
-    let lee_key = d.path().join("lee.key");
+/// Operator lee's key pair, made with `cellwatch keygen` in `dir`, allowed
+/// to acknowledge in the cell's operators file: the key file and the
+/// entry added.
+fn allowed_to_ack(dir: &std::path::Path) -> (std::path::PathBuf, String) {
+    let key = dir.join("lee.key");
     let made = cellwatch(&[
         "keygen",
         "--operator",
         "lee",
         "--out",
-        lee_key.to_str().unwrap(),
+        key.to_str().unwrap(),
         "--allow",
         "ack",
     ]);
@@ -26,10 +25,19 @@ async fn operators_act_within_their_permissions_and_agents_hold_no_private_key()
         .filter(|l| !l.starts_with('#'))
         .map(|l| format!("{l}\n"))
         .collect();
-    assert!(entry.contains("allow = [\"ack\"]"), "{entry}");
-    let operators = d.path().join("operators.toml");
+    let operators = dir.join("operators.toml");
     let all = format!("{}\n{entry}", std::fs::read_to_string(&operators).unwrap());
     std::fs::write(&operators, all).unwrap();
+    (key, entry)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn operators_act_within_their_permissions_and_agents_hold_no_private_key() {
+    let d = tempfile::tempdir().unwrap();
+    let (sim, mut cell) = start(d.path()).await;
+    // lee may acknowledge, not reset; a stranger's key is in no file.
+    let (lee_key, entry) = allowed_to_ack(d.path());
+    assert!(entry.contains("allow = [\"ack\"]"), "{entry}");
     let stranger_key = d.path().join("stranger.key");
     assert_eq!(
         cellwatch(&[
@@ -133,24 +141,7 @@ async fn operators_act_within_their_permissions_and_agents_hold_no_private_key()
 async fn a_command_sent_as_the_agent_restarts_is_answered() {
     let d = tempfile::tempdir().unwrap();
     let (sim, mut cell) = start(d.path()).await;
-    let key = d.path().join("lee.key");
-    let made = cellwatch(&[
-        "keygen",
-        "--operator",
-        "lee",
-        "--out",
-        key.to_str().unwrap(),
-        "--allow",
-        "ack",
-    ]);
-    assert_eq!(made.code, 0, "{}", made.stderr);
-    let operators = d.path().join("operators.toml");
-    let all = format!(
-        "{}\n{}",
-        std::fs::read_to_string(&operators).unwrap(),
-        made.stdout
-    );
-    std::fs::write(&operators, all).unwrap();
+    let (key, _) = allowed_to_ack(d.path());
     for round in 0..3 {
         let mut child = cell.spawn(&format!("agent-{round}.log")).await;
         let client = cell.client().await;
