@@ -223,14 +223,7 @@ impl Validator<'_> {
         let mut out = Vec::new();
         for (i, c) in raw.into_iter().enumerate() {
             let key = format!("checks.limit[{i}]");
-            self.key_chunk(c.id.span(), &format!("{key}.id"), "", c.id.get_ref());
-            if !ids.insert(c.id.get_ref().clone()) {
-                self.problem(
-                    c.id.span(),
-                    &format!("{key}.id"),
-                    format!("'{}' is used twice", c.id.get_ref()),
-                );
-            }
+            self.unique_id(&c.id, &key, ids);
             let tag = match self.addressing.signal(c.tag.get_ref()) {
                 Ok(a) => a,
                 Err(e) => {

@@ -100,6 +100,19 @@ impl Validator<'_> {
     /// A problem unless `id` can be a chunk of a Zenoh key and part of a
     /// file name ([`key_chunk`]): a check's id, a chart's, step's or
     /// transition's name, which alarm ids (`alarms/<id>`) are made of.
+    /// The id of check `key` (`checks.limit[2]`): a key chunk, and not
+    /// used before among `ids`.
+    fn unique_id(&mut self, id: &Spanned<String>, key: &str, ids: &mut HashSet<String>) {
+        self.key_chunk(id.span(), &format!("{key}.id"), "", id.get_ref());
+        if !ids.insert(id.get_ref().clone()) {
+            self.problem(
+                id.span(),
+                &format!("{key}.id"),
+                format!("'{}' is used twice", id.get_ref()),
+            );
+        }
+    }
+
     fn key_chunk(&mut self, span: Range<usize>, key: &str, what: &str, id: &str) {
         if !key_chunk(id) {
             self.problem(
@@ -319,14 +332,7 @@ impl Validator<'_> {
         let mut timers = Vec::new();
         for (i, t) in raw.checks.timers.into_iter().enumerate() {
             let key = format!("checks.timers[{i}]");
-            self.key_chunk(t.id.span(), &format!("{key}.id"), "", t.id.get_ref());
-            if !ids.insert(t.id.get_ref().clone()) {
-                self.problem(
-                    t.id.span(),
-                    &format!("{key}.id"),
-                    format!("'{}' is used twice", t.id.get_ref()),
-                );
-            }
+            self.unique_id(&t.id, &key, &mut ids);
             let severity = self.parsed(
                 t.severity.clone(),
                 &format!("{key}.severity"),

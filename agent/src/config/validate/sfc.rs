@@ -52,14 +52,7 @@ impl Validator<'_> {
         let mut charts = HashSet::new();
         for (i, c) in raw.into_iter().enumerate() {
             let key = format!("checks.sfc[{i}]");
-            self.key_chunk(c.id.span(), &format!("{key}.id"), "", c.id.get_ref());
-            if !ids.insert(c.id.get_ref().clone()) {
-                self.problem(
-                    c.id.span(),
-                    &format!("{key}.id"),
-                    format!("'{}' is used twice", c.id.get_ref()),
-                );
-            }
+            self.unique_id(&c.id, &key, ids);
             let severity = self.parsed(
                 c.severity.clone(),
                 &format!("{key}.severity"),
