@@ -5,7 +5,7 @@ use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use cellwatch::cell::{self, Agent};
+use cellwatch::agent::{self, Agent};
 use cellwatch::config::{self, CellConfig};
 use cellwatch::operator::Command;
 use cellwatch::payload::AlarmPayload;
@@ -61,7 +61,7 @@ impl Fixture {
         let sim = SimulatedCnc::start(&sim_opts).await.unwrap();
         let config = config(&dir, &sim.endpoint());
         crate::util::trust_sim(&config, &dir.join("sim-pki"));
-        let agent = cell::start(config.clone(), None).await.unwrap();
+        let agent = agent::start(config.clone(), None).await.unwrap();
         let zenoh_port = crate::util::agent_port(&agent).await;
         let client = crate::util::operator_session(&dir, "operator-kim", zenoh_port).await;
         let sim_addr = sim.addr();
@@ -514,7 +514,7 @@ pub(crate) async fn line_cell(dir: &Path) -> (cellwatch::sim::line::SimulatedLin
     c.zenoh.tls = Some(crate::util::bus_tls(dir, "agent-line01"));
     c.metrics = Some("127.0.0.1:0".parse().unwrap());
     crate::util::trust_sim(&c, &dir.join("sim-pki"));
-    let agent = cell::start(c, None).await.unwrap();
+    let agent = agent::start(c, None).await.unwrap();
     let zenoh_port = crate::util::agent_port(&agent).await;
     (sim, agent, zenoh_port)
 }
@@ -766,13 +766,13 @@ async fn only_clients_with_a_plant_certificate_get_in() {
     let mut plain = crate::util::client_config(&fx.dir, "operator-kim", port);
     plain.connect = vec![format!("tcp/127.0.0.1:{port}")];
     plain.tls = None;
-    assert!(cellwatch::sinks::zenoh::open(&plain).await.is_err());
+    assert!(cellwatch::bus::open(&plain).await.is_err());
     let elsewhere = fx.dir.join("elsewhere");
     crate::util::bus_pki(&elsewhere, &["operator-kim"]);
     let mut foreign = crate::util::client_config(&elsewhere, "operator-kim", port);
     // Trusting the plant CA is not enough: the certificate must be from it.
     foreign.tls.as_mut().unwrap().ca = fx.dir.join("pki-bus/ca.pem");
-    assert!(cellwatch::sinks::zenoh::open(&foreign).await.is_err());
+    assert!(cellwatch::bus::open(&foreign).await.is_err());
     // A certificate from the plant CA: queries and subscriptions work.
     fx.settled().await;
     fx.agent.unwrap().stop().await;
@@ -834,7 +834,7 @@ pub(crate) async fn behind_a_router(
     c.zenoh.listen = Vec::new();
     c.zenoh.connect = vec![format!("quic/127.0.0.1:{port}")];
     crate::util::trust_sim(&c, &dir.join("sim-pki"));
-    let agent = cell::start(c, None).await.unwrap();
+    let agent = agent::start(c, None).await.unwrap();
     (router, port, sim, agent)
 }
 
@@ -843,7 +843,7 @@ async fn router_client(dir: &Path, name: &str, port: u16) -> zenoh::Session {
     crate::util::bus_pki(dir, &[name]);
     let mut c = crate::util::client_config(dir, name, port);
     c.mode = cellwatch::config::ZenohMode::Client;
-    cellwatch::sinks::zenoh::open(&c).await.unwrap()
+    cellwatch::bus::open(&c).await.unwrap()
 }
 
 /// Through the shipped router, an intruder with a valid plant certificate

@@ -91,9 +91,9 @@ async fn a_scripted_alarm_day_gives_the_kpis_and_the_report_computed_by_hand() {
     let at = |h: u64, m: u64, s: u64| day + h * H + m * 60_000 + s * 1000;
     let clock = Clock::manual(day - 14 * H);
     let (source, script) = ScriptedSource::new();
-    let agent = cellwatch::cell::start_with(
+    let agent = cellwatch::agent::start_with(
         config,
-        cellwatch::cell::Options {
+        cellwatch::agent::Options {
             source: Some(Box::new(source)),
             clock: clock.clone(),
             ..Default::default()

@@ -7,7 +7,7 @@ use cellwatch::cell::{compile, CellLoop, CellStep, Input, Request};
 use cellwatch::config;
 use cellwatch::metrics::Metrics;
 use cellwatch::operator::{Action, Command, Gate, OperatorKeys};
-use cellwatch::sinks::zenoh::publish::ZenohPublisher;
+use cellwatch::sinks::zenoh::ZenohPublisher;
 use cellwatch::sinks::{RecordingSink, Sink};
 use cellwatch::sources::scripted::ScriptedSource;
 use cellwatch::sources::{Source, SourceEvent, QUEUE_CAPACITY};
@@ -264,9 +264,7 @@ async fn the_loop_on_its_own_thread_closes_the_bus_sink() {
         .await
         .unwrap();
     let metrics = std::sync::Arc::new(Metrics::new(&config.cell));
-    let key = std::sync::Arc::new(cellwatch::sinks::zenoh::envelope::AgentKey::generate(
-        &config.cell,
-    ));
+    let key = std::sync::Arc::new(cellwatch::bus::envelope::AgentKey::generate(&config.cell));
     let publisher = ZenohPublisher::start(bus.clone(), &prefix, key, metrics)
         .await
         .unwrap();

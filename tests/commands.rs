@@ -184,7 +184,7 @@ async fn control_characters_are_refused_by_the_cli_and_the_agent_and_escaped_in_
     let db = dir.path().join("journal.sqlite");
     let fake = "2026-01-01T00:00:00.000Z  command   ack front-door by boss: (accepted)";
     {
-        let conn = cellwatch::sinks::journal::open(&db).unwrap();
+        let conn = cellwatch::journal::open(&db).unwrap();
         conn.execute(
             "INSERT INTO commands (at_ms, operator, action, alarm, nonce, accepted, detail) VALUES (?1, 'kim', 'shelve', 'front-door', 'n', 0, ?2)",
             rusqlite::params![
@@ -425,7 +425,7 @@ async fn a_write_killed_before_the_plc_answered_is_a_replay_after_the_restart() 
 /// A journal with command rows from before the chain, then chained ones
 /// written by the journal's writer, interleaved with other rows.
 async fn chained_journal(db: &Path) {
-    use cellwatch::sinks::journal::{Entry, Journal};
+    use cellwatch::journal::{Entry, Journal};
     // An older agent's journal: no chain columns yet.
     {
         let c = rusqlite::Connection::open(db).unwrap();
@@ -439,7 +439,7 @@ async fn chained_journal(db: &Path) {
         .unwrap();
     }
     struct Quiet;
-    impl cellwatch::sinks::journal::CommitObserver for Quiet {
+    impl cellwatch::journal::CommitObserver for Quiet {
         fn committed(&self, _: usize, _: Duration) {}
         fn failed(&self, _: &str) {}
     }

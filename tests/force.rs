@@ -5,7 +5,7 @@
 
 use std::time::Duration;
 
-use cellwatch::cell;
+use cellwatch::agent;
 use cellwatch::config;
 use cellwatch::operator::{Action, Command, OperatorKey};
 use cellwatch::payload::AlarmPayload;
@@ -76,7 +76,7 @@ fn rows_of(db: &std::path::Path, nonce: &str) -> Vec<(String, bool, String)> {
 /// its agent on Zenoh TLS with a journal, and kim's session on the bus.
 pub(crate) struct RobotCell {
     pub(crate) robot: SimulatedRobot,
-    pub(crate) agent: cell::Agent,
+    pub(crate) agent: agent::Agent,
     /// An operator who may only acknowledge.
     pub(crate) lee: OperatorKey,
     pub(crate) journal: std::path::PathBuf,
@@ -136,7 +136,7 @@ impl RobotCell {
         configure(&mut c);
         crate::util::trust_sim(&c, &dir.join("sim-pki"));
         let journal = c.journal.path.clone();
-        let agent = cell::start(c, None).await.unwrap();
+        let agent = agent::start(c, None).await.unwrap();
         let zenoh_port = crate::util::agent_port(&agent).await;
         let bus = crate::util::operator_session(dir, "operator-kim", zenoh_port).await;
         RobotCell {

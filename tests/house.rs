@@ -407,14 +407,6 @@ fn the_circle_check_finds_a_circle() {
     assert_eq!(circles(&edges).len(), 1, "{:?}", describe(&krate, &edges));
 }
 
-/// Files still longer than [`MAX_LINES`], each with the most lines it may
-/// have: none may grow, and one brought under the limit leaves the list
-/// (the test says so), until the list is empty.
-const STILL_LONG: &[(&str, usize)] = &[
-    ("agent/src/cell/mod.rs", 962),
-    ("agent/src/sinks/journal/mod.rs", 869),
-];
-
 #[test]
 fn no_file_of_the_agent_is_longer_than_the_limit() {
     let mut wrong = Vec::new();
@@ -431,19 +423,8 @@ fn no_file_of_the_agent_is_longer_than_the_limit() {
             }
             let lines = std::fs::read_to_string(&path).unwrap().lines().count();
             let name = path.strip_prefix(root()).unwrap().display().to_string();
-            match STILL_LONG.iter().find(|(f, _)| *f == name) {
-                None if lines > MAX_LINES => {
-                    wrong.push(format!("{name}: {lines} lines, more than {MAX_LINES}"));
-                }
-                Some((_, most)) if lines > *most => {
-                    wrong.push(format!(
-                        "{name}: {lines} lines, it had {most}: split it, do not grow it"
-                    ));
-                }
-                Some(_) if lines <= MAX_LINES => {
-                    wrong.push(format!("{name}: {lines} lines now: take it off STILL_LONG"));
-                }
-                _ => {}
+            if lines > MAX_LINES {
+                wrong.push(format!("{name}: {lines} lines, more than {MAX_LINES}"));
             }
         }
     }

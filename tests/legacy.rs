@@ -457,7 +457,7 @@ pub(crate) async fn moulding_agent(
 ) -> (
     MouldingBus,
     Option<tokio::task::JoinHandle<()>>,
-    cellwatch::cell::Agent,
+    cellwatch::agent::Agent,
     zenoh::Session,
     u16,
 ) {
@@ -492,7 +492,7 @@ pub(crate) async fn moulding_agent(
     let operators_file = dir.join("operators.toml");
     std::fs::write(&operators_file, operators).unwrap();
     c.operators_file = Some(operators_file);
-    let agent = cellwatch::cell::start(c, None).await.unwrap();
+    let agent = cellwatch::agent::start(c, None).await.unwrap();
     let port = crate::util::agent_port(&agent).await;
     let client = crate::util::operator_session(dir, "operator-kim", port).await;
     (bus, server, agent, client, port)
@@ -805,12 +805,12 @@ async fn each_unit_a_cell_of_its_own_reports_its_day_as_the_simulator_logged_it(
     assert_eq!(buses.len(), 1, "one poller for the three cells");
     let mut agents = Vec::new();
     for (c, share) in configs.into_iter().zip(shares) {
-        let options = cellwatch::cell::Options {
+        let options = cellwatch::agent::Options {
             source: Some(Box::new(share.expect("a share of the bus"))),
             clock: clock.clone(),
             ..Default::default()
         };
-        agents.push(cellwatch::cell::start_with(c, options).await.unwrap());
+        agents.push(cellwatch::agent::start_with(c, options).await.unwrap());
     }
     let (stop_bus, mut stopped) = tokio::sync::watch::channel(false);
     let bus_poller = buses.into_iter().next().unwrap().timed_by(clock.clone());

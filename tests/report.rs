@@ -5,7 +5,7 @@
 use std::time::Duration;
 
 use cellwatch::config;
-use cellwatch::sinks::journal::{CommitObserver, Entry, Journal};
+use cellwatch::journal::{CommitObserver, Entry, Journal};
 use cellwatch_models::engine::{CellEngine, EngineEvent, Reading, SwitchingChecks};
 use cellwatch_models::signal::Signal;
 use cellwatch_models::value::Num;

@@ -1,5 +1,5 @@
 //! The agent never dies silently and never leaves a switch on:
-//! - a cell loop that panics ends the agent ([`cellwatch::cell::Agent::wait`]
+//! - a cell loop that panics ends the agent ([`cellwatch::agent::Agent::wait`]
 //!   says why) after its journal rows are committed and its liveliness
 //!   token is gone;
 //! - source timestamps out of order are counted, and neither stop the cell
@@ -12,7 +12,8 @@
 use std::process::Child;
 use std::time::Duration;
 
-use cellwatch::cell::{self, CellStep, Ended};
+use cellwatch::agent::{self, Ended};
+use cellwatch::cell::CellStep;
 use cellwatch::operator::{Action, Command};
 use cellwatch::payload::AlarmPayload;
 use cellwatch::sim::cnc::{SimOptions, SimulatedCnc};
@@ -89,11 +90,11 @@ async fn a_panicking_cell_loop_ends_the_agent_after_flushing_its_journal_and_tok
     let config = crate::agent::config(dir, &sim.endpoint());
     crate::util::trust_sim(&config, &dir.join("sim-pki"));
     let journal = config.journal.path.clone();
-    let mut agent = cell::start_with(
+    let mut agent = agent::start_with(
         config,
-        cell::Options {
+        agent::Options {
             sinks: vec![Box::new(PanicsOnEse)],
-            ..cell::Options::default()
+            ..agent::Options::default()
         },
     )
     .await
@@ -232,7 +233,7 @@ path = {}
     .unwrap();
     let c = cellwatch::config::load(&file).unwrap();
     crate::util::trust_sim(&c, &dir.join("sim-pki"));
-    let agent = cell::start(c, None).await.unwrap();
+    let agent = agent::start(c, None).await.unwrap();
     let port = crate::util::agent_port(&agent).await;
     let client = crate::util::operator_session(dir, "operator-kim", port).await;
     let sub = alarms(&client, "m01ps0004").await;

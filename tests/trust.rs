@@ -6,9 +6,9 @@
 use std::path::Path;
 use std::time::Duration;
 
-use cellwatch::cell;
+use cellwatch::agent;
+use cellwatch::bus::envelope::{AgentKey, Kind};
 use cellwatch::sim::cnc::{SimOptions, SimulatedCnc};
-use cellwatch::sinks::zenoh::envelope::{AgentKey, Kind};
 
 use crate::agent::{config, Fixture};
 
@@ -89,7 +89,7 @@ async fn an_agent_in_peer_mode_relays_no_impostor() {
     crate::util::bus_pki(dir, &["operator-mallory"]);
     let mut as_client = crate::util::client_config(dir, "operator-mallory", port);
     as_client.mode = cellwatch::config::ZenohMode::Client;
-    let mallory = cellwatch::sinks::zenoh::open(&as_client).await.unwrap();
+    let mallory = cellwatch::bus::open(&as_client).await.unwrap();
     let seen = kim.declare_subscriber("cellwatch/**").await.unwrap();
     let tokens = kim
         .liveliness()
@@ -216,7 +216,7 @@ async fn a_zenoh_file_opens_no_plain_listener() {
     let file = dir.join("zenoh.json5");
     std::fs::write(&file, "{ transport: { unicast: { max_links: 2 } } }\n").unwrap();
     c.zenoh.config_file = Some(file.clone());
-    let agent = cell::start(c.clone(), None).await.unwrap();
+    let agent = agent::start(c.clone(), None).await.unwrap();
     let locators = agent.zenoh_locators().await;
     assert!(
         !locators.is_empty() && locators.iter().all(|l| l.starts_with("quic/")),
@@ -225,7 +225,7 @@ async fn a_zenoh_file_opens_no_plain_listener() {
     agent.stop().await;
     // A file asking for a plain listener: the agent's own endpoints win.
     std::fs::write(&file, "{ listen: { endpoints: [\"tcp/127.0.0.1:0\"] } }\n").unwrap();
-    let agent = cell::start(c.clone(), None).await.unwrap();
+    let agent = agent::start(c.clone(), None).await.unwrap();
     let locators = agent.zenoh_locators().await;
     assert!(
         locators.iter().all(|l| l.starts_with("quic/")),
@@ -235,7 +235,7 @@ async fn a_zenoh_file_opens_no_plain_listener() {
     // No [zenoh.tls] and a file without TLS: refused, with the reason.
     c.zenoh.tls = None;
     c.zenoh.listen = vec!["tcp/127.0.0.1:0".into()];
-    let err = cell::start(c, None).await.err().unwrap();
+    let err = agent::start(c, None).await.err().unwrap();
     assert!(err.is_input());
     assert_eq!(
         err.to_string(),
@@ -288,7 +288,7 @@ async fn the_cli_listens_on_nothing_and_refuses_plain_tcp() {
     assert!(!udp.is_empty(), "the CLI has no QUIC socket");
     crate::util::bus_pki(dir, &["operator-mallory"]);
     for port in udp {
-        let mut cfg = cellwatch::sinks::zenoh::session_config(&crate::util::client_config(
+        let mut cfg = cellwatch::bus::session_config(&crate::util::client_config(
             dir,
             "operator-mallory",
             port,
@@ -498,7 +498,7 @@ async fn the_same_signed_command_sent_again_gets_its_original_outcome() {
     let d = tempfile::tempdir().unwrap();
     let dir = d.path();
     let (sim, c) = cnc(dir).await;
-    let agent = cell::start(c.clone(), None).await.unwrap();
+    let agent = agent::start(c.clone(), None).await.unwrap();
     let port = crate::util::agent_port(&agent).await;
     let kim = crate::util::operator_session(dir, "operator-kim", port).await;
     let alarms = kim
@@ -535,7 +535,7 @@ async fn the_same_signed_command_sent_again_gets_its_original_outcome() {
     assert_eq!(send_until_answered(&kim, &ack).await, first);
     // After a restart: the outcome read back from the journal.
     agent.stop().await;
-    let agent = cell::start(c, None).await.unwrap();
+    let agent = agent::start(c, None).await.unwrap();
     let port = crate::util::agent_port(&agent).await;
     let kim = crate::util::operator_session(dir, "operator-kim", port).await;
     assert_eq!(send_until_answered(&kim, &ack).await, first);
@@ -591,7 +591,7 @@ async fn private_keys_are_the_owners_only() {
     let d = tempfile::tempdir().unwrap();
     let dir = d.path();
     let (sim, c) = cnc(dir).await;
-    let agent = cell::start(c.clone(), None).await.unwrap();
+    let agent = agent::start(c.clone(), None).await.unwrap();
     agent.stop().await;
     let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
     let tls_key = c.zenoh.tls.as_ref().unwrap().key.clone();
@@ -604,7 +604,7 @@ async fn private_keys_are_the_owners_only() {
         assert_eq!(mode(&key), 0o600, "{}", key.display());
     }
     std::fs::set_permissions(&tls_key, std::fs::Permissions::from_mode(0o644)).unwrap();
-    let err = cell::start(c, None).await.err().unwrap();
+    let err = agent::start(c, None).await.err().unwrap();
     assert!(err.is_input());
     assert_eq!(
         err.to_string(),

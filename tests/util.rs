@@ -56,7 +56,7 @@ impl Dir {
 /// A plant CA and certificates for `names` in `dir/pki-bus`, where the
 /// shipped configurations look for them; existing ones are kept.
 pub(crate) fn bus_pki(dir: &Path, names: &[&str]) {
-    use cellwatch::sinks::zenoh::certs;
+    use cellwatch::bus::certs;
     let pki = dir.join("pki-bus");
     certs::make_ca(&pki, "test plant CA").unwrap();
     for name in names {
@@ -69,7 +69,7 @@ pub(crate) fn bus_pki(dir: &Path, names: &[&str]) {
 /// The TLS files of `name` in `dir/pki-bus`.
 pub(crate) fn bus_tls(dir: &Path, name: &str) -> cellwatch::config::ZenohTls {
     let pki = dir.join("pki-bus");
-    let (cert, key) = cellwatch::sinks::zenoh::certs::cert_files(&pki, name);
+    let (cert, key) = cellwatch::bus::certs::cert_files(&pki, name);
     cellwatch::config::ZenohTls {
         ca: pki.join("ca.pem"),
         cert,
@@ -80,7 +80,7 @@ pub(crate) fn bus_tls(dir: &Path, name: &str) -> cellwatch::config::ZenohTls {
 /// A client session (peer) of operator `name`'s certificate to `port`.
 pub(crate) async fn operator_session(dir: &Path, name: &str, port: u16) -> zenoh::Session {
     bus_pki(dir, &[name]);
-    cellwatch::sinks::zenoh::open(&client_config(dir, name, port))
+    cellwatch::bus::open(&client_config(dir, name, port))
         .await
         .unwrap()
 }
@@ -130,7 +130,7 @@ pub(crate) fn trust_file(dir: &Path) -> PathBuf {
             if path.is_dir() {
                 folders.push(path);
             } else if path.to_string_lossy().ends_with(".agent.key") {
-                let key = cellwatch::sinks::zenoh::envelope::AgentKey::load(&path).unwrap();
+                let key = cellwatch::bus::envelope::AgentKey::load(&path).unwrap();
                 entries += &key.trust_entry();
             }
         }
@@ -141,8 +141,8 @@ pub(crate) fn trust_file(dir: &Path) -> PathBuf {
 }
 
 /// The plant trust of the agents whose keys are in `dir` ([`trust_file`]).
-pub(crate) fn trust(dir: &Path) -> cellwatch::sinks::zenoh::envelope::Trust {
-    cellwatch::sinks::zenoh::envelope::Trust::load(&trust_file(dir)).unwrap()
+pub(crate) fn trust(dir: &Path) -> cellwatch::bus::envelope::Trust {
+    cellwatch::bus::envelope::Trust::load(&trust_file(dir)).unwrap()
 }
 
 /// The body of a signed envelope as it arrived (a test that checks the
@@ -200,7 +200,7 @@ pub(crate) fn tls_port(locators: &[String]) -> u16 {
 }
 
 /// The port `agent`'s Zenoh session listens on.
-pub(crate) async fn agent_port(agent: &cellwatch::cell::Agent) -> u16 {
+pub(crate) async fn agent_port(agent: &cellwatch::agent::Agent) -> u16 {
     tls_port(&agent.zenoh_locators().await)
 }
 

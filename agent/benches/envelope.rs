@@ -10,7 +10,7 @@
 
 use std::hint::black_box;
 
-use cellwatch::sinks::zenoh::envelope::{AgentKey, Kind, Trust};
+use cellwatch::bus::envelope::{AgentKey, Kind, Trust};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use serde_json::{json, Value};
 

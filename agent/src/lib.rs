@@ -8,34 +8,52 @@
 //! [`cellwatch_models`], which does no I/O.
 //!
 //! # Layout
+//! Data flows one way: sources (and the query services, which are inputs
+//! too) → the cell loop's step → sinks. Nothing imports what stands above
+//! it (`tests/house.rs` checks it).
 //! - [`cli`]: the command line: parses it (each command module owns its
 //!   arguments), dispatches, and turns outcomes into exit statuses.
 //! - `commands/`: one module per command, its clap arguments with it;
 //!   `commands/inputs.rs` reads programs, comment databases and snapshots
 //!   from files, with errors that name the file, line and column.
-//! - [`config`]: the cell configuration file, parsed and validated.
-//! - [`cell`]: the cell loop, the engine built from a configuration, and a
-//!   running agent's wiring.
-//! - [`sources`]: the [`sources::Source`] trait, the OPC UA client, a
-//!   scripted source, PKI helpers.
+//! - [`agent`]: one running agent composed: source, journal, bus, services,
+//!   sinks, metrics and the cell loop, started and stopped together.
+//! - [`cell`]: the cell loop and the engine built from a configuration.
+//! - [`sources`]: the [`sources::Source`] trait, the OPC UA client, the `@`
+//!   bus, a scripted source, PKI helpers.
+//! - [`services`]: the agent's query services on the bus (history,
+//!   snapshot, command): inputs to the cell loop beside the sources.
+//! - [`sinks`]: the [`sinks::Sink`] trait and the sinks: the journal's
+//!   adapter, Zenoh publication, metrics, the demo console.
 //! - [`step`]: what one input to the cell loop caused, as every sink is
 //!   given it (below both the loop and the sinks).
-//! - [`sinks`]: the [`sinks::Sink`] trait, the SQLite journal, Zenoh
-//!   (publication and services), the demo console.
-//! - [`metrics`]: Prometheus metrics, their sink and `/metrics`.
+//! - [`journal`]: the SQLite journal, a store: writes, restores, history
+//!   pages, report inputs, the command rows' hash chain.
+//! - [`client`]: the bus client (ask agents, believe only what the trust
+//!   file verifies), for the CLI and any plant-side process.
+//! - [`bus`]: the bus itself: key layout, signed envelope, sessions,
+//!   certificates.
+//! - [`metrics`]: the Prometheus registry and `/metrics`.
 //! - [`operator`]: signed operator commands and their gate.
 //! - [`payload`]: the JSON payloads on the bus.
+//! - [`config`]: the cell configuration file, parsed and validated; a leaf
+//!   that imports no component.
 //! - [`sim`]: simulated cells served over OPC UA.
 //! - [`clock`]: wall-clock time in the models' unit.
 
+pub mod agent;
+pub mod bus;
 pub mod cell;
 pub mod cli;
+pub mod client;
 pub mod clock;
 mod commands;
 pub mod config;
+pub mod journal;
 pub mod metrics;
 pub mod operator;
 pub mod payload;
+pub mod services;
 pub mod sim;
 pub mod sinks;
 pub mod sources;

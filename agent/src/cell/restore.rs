@@ -8,9 +8,9 @@ use cellwatch_models::alarm::Alarm;
 use cellwatch_models::engine::{HistoryKind, MachineState};
 
 use crate::config::CellConfig;
+use crate::journal::{self, JournalError, SavedState};
 use crate::operator::Gate;
 use crate::payload::AlarmPayload;
-use crate::sinks::journal::{self, JournalError, SavedState};
 
 /// What the journal kept for this start.
 #[derive(Debug, Default)]

@@ -15,7 +15,7 @@ use std::time::Duration;
 
 use super::signals::StopSignals;
 use super::Failure;
-use crate::cell;
+use crate::agent;
 use crate::config::{self, CellConfig};
 
 pub(super) fn load(path: &Path) -> Result<CellConfig, Failure> {
@@ -23,7 +23,7 @@ pub(super) fn load(path: &Path) -> Result<CellConfig, Failure> {
 }
 
 /// A start failure: bad input if the configuration is at fault.
-pub(super) fn start_failure(e: cell::StartError) -> Failure {
+pub(super) fn start_failure(e: agent::StartError) -> Failure {
     if e.is_input() {
         Failure::input(e)
     } else {
@@ -35,12 +35,12 @@ pub(super) fn start_failure(e: cell::StartError) -> Failure {
 /// connects to.
 pub(crate) fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<(), Failure> {
     let c = load(&args.config)?;
-    cell::compile::engine(&c)
+    crate::cell::compile::engine(&c)
         .map_err(|e| Failure::Input(format!("{}: {e}", args.config.display())))?;
     if let Some(path) = &c.operators_file {
         crate::operator::OperatorKeys::load(path).map_err(Failure::input)?;
     }
-    crate::sinks::zenoh::session_config(&c.zenoh)
+    crate::bus::session_config(&c.zenoh)
         .map_err(|e| Failure::Input(format!("{}: {e}", args.config.display())))?;
     let io = Failure::output;
     writeln!(
@@ -94,11 +94,11 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
     let mut started = Vec::new();
     for ((path, c), share) in configs.into_iter().zip(shares) {
         let cell = c.cell.clone();
-        let options = cell::Options {
+        let options = agent::Options {
             source: share.map(|s| Box::new(s) as Box<dyn crate::sources::Source>),
-            ..cell::Options::default()
+            ..agent::Options::default()
         };
-        match cell::start_with(c, options).await {
+        match agent::start_with(c, options).await {
             Ok(agent) => {
                 let zenoh = agent.zenoh_locators().await.join(",");
                 let metrics = agent

@@ -1,12 +1,12 @@
 //! `cellwatch audit verify JOURNAL`: checks the hash chain of a journal's
-//! command rows ([`crate::sinks::journal::chain`]) and names the first row
+//! command rows ([`crate::journal::chain`]) and names the first row
 //! edited, inserted or deleted. Reads the file only; never repairs it.
 
 use std::io::Write;
 use std::path::PathBuf;
 
 use super::Failure;
-use crate::sinks::journal::{self, chain};
+use crate::journal::{self, chain};
 
 /// `cellwatch audit`.
 #[derive(Debug, clap::Args)]

@@ -11,7 +11,8 @@ use tokio::sync::mpsc;
 use super::agent::{load, start_failure};
 use super::signals::StopSignals;
 use super::Failure;
-use crate::cell;
+use crate::agent;
+use crate::bus::keys::{CellKeys, Service};
 use crate::config::{CellConfig, OpcUaConfig};
 use crate::sim::cnc::{Scenario, SimOptions, SimulatedCnc};
 use crate::sim::line::SimulatedLine;
@@ -47,7 +48,7 @@ struct DemoBus {
     /// The demo's state directory.
     state: PathBuf,
     endpoints: Vec<String>,
-    trust: crate::sinks::zenoh::envelope::Trust,
+    trust: crate::bus::envelope::Trust,
     entries: String,
 }
 
@@ -65,7 +66,7 @@ impl DemoBus {
     /// `state/pki-bus`, made on first use) and its signing key
     /// (`state/<cell>.agent.key`), whose public key the trust file gets.
     fn join(&mut self, c: &mut CellConfig) -> Result<(), Failure> {
-        use crate::sinks::zenoh::envelope::AgentKey;
+        use crate::bus::envelope::AgentKey;
         let state = self.state.as_path();
         c.zenoh.tls = Some(bus_tls(state, &format!("agent-{}", c.cell))?);
         let key_path = state.join(format!("{}.agent.key", c.cell));
@@ -73,7 +74,7 @@ impl DemoBus {
             .map_err(|e| Failure::Runtime(e.to_string()))?;
         c.zenoh.signing_key = Some(key_path);
         self.entries += &key.trust_entry();
-        self.trust = crate::sinks::zenoh::envelope::Trust::parse("the demo's trust", &self.entries)
+        self.trust = crate::bus::envelope::Trust::parse("the demo's trust", &self.entries)
             .map_err(|e| Failure::Runtime(e.to_string()))?;
         self.endpoints.extend(
             c.zenoh
@@ -122,7 +123,7 @@ impl DemoBus {
 
 /// `name`'s certificate from the demo's CA, made on first use.
 fn bus_tls(state: &Path, name: &str) -> Result<crate::config::ZenohTls, Failure> {
-    use crate::sinks::zenoh::certs;
+    use crate::bus::certs;
     let pki = state.join("pki-bus");
     certs::make_ca(&pki, "cellwatch demo CA").map_err(Failure::Runtime)?;
     let (cert, key) = certs::cert_files(&pki, name);
@@ -214,13 +215,14 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         sim.endpoint()
     )
     .map_err(io)?;
+    let keys = CellKeys::new(&c.zenoh.prefix);
     writeln!(
         out,
-        "  Zenoh           {}/alarms/**, {}/state, {}/history, {}/snapshot (listening on {})",
-        c.zenoh.prefix,
-        c.zenoh.prefix,
-        c.zenoh.prefix,
-        c.zenoh.prefix,
+        "  Zenoh           {}, {}, {}, {} (listening on {})",
+        keys.alarms(),
+        keys.state(),
+        keys.service(Service::History),
+        keys.service(Service::Snapshot),
         c.zenoh.listen.join(", ")
     )
     .map_err(io)?;
@@ -280,7 +282,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
             l.metrics.map_or_else(|| "off".to_string(), |m| m.to_string())
         )
         .map_err(io)?;
-        let line_agent = cell::start(l, Some(tx.clone()))
+        let line_agent = agent::start(l, Some(tx.clone()))
             .await
             .map_err(start_failure)?;
         let player_sim = line_sim.clone();
@@ -336,7 +338,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
             m.metrics.map_or_else(|| "off".to_string(), |a| a.to_string())
         )
         .map_err(io)?;
-        let agent = cell::start(m, Some(tx.clone()))
+        let agent = agent::start(m, Some(tx.clone()))
             .await
             .map_err(start_failure)?;
         let notes = note_tx.clone();
@@ -370,7 +372,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     writeln!(out).map_err(io)?;
     out.flush().map_err(io)?;
 
-    let agent = cell::start(c, Some(tx.clone()))
+    let agent = agent::start(c, Some(tx.clone()))
         .await
         .map_err(start_failure)?;
     let scenario_sim = sim.clone();
@@ -452,7 +454,7 @@ async fn demo_robot(
 ) -> Result<
     (
         crate::sim::robot::SimulatedRobot,
-        cell::Agent,
+        agent::Agent,
         tokio::task::JoinHandle<()>,
         tokio::task::JoinHandle<()>,
     ),
@@ -525,9 +527,9 @@ async fn demo_robot(
         .map(|e| e.replace("0.0.0.0", "127.0.0.1"))
         .collect();
     let cell_id = r.cell.clone();
-    let agent = cell::start(r, Some(tx)).await.map_err(start_failure)?;
+    let agent = agent::start(r, Some(tx)).await.map_err(start_failure)?;
     // Connected once the agent listens.
-    let bus = crate::sinks::zenoh::open(&crate::config::ZenohConfig {
+    let bus = crate::bus::open(&crate::config::ZenohConfig {
         mode: crate::config::ZenohMode::Peer,
         connect,
         listen: Vec::new(),
@@ -540,6 +542,7 @@ async fn demo_robot(
     })
     .await
     .map_err(Failure::runtime)?;
+    let bus = crate::client::BusClient::on(bus, trust, crate::config::DEFAULT_ROOT);
     let player_robot = robot.clone();
     let player = tokio::spawn(async move {
         let force = |transition: &'static str| {
@@ -556,21 +559,11 @@ async fn demo_robot(
             };
             cmd.sign(&cell_id, &key);
             let bus = &bus;
-            let trust = &trust;
             let cell_id = &cell_id;
             async move {
-                super::bus::send_signed(
-                    bus,
-                    trust,
-                    "cellwatch",
-                    cell_id,
-                    &cmd,
-                    Duration::from_secs(10),
-                )
-                .await
-                .map_err(|e| match e {
-                    Failure::Input(why) | Failure::Runtime(why) => why,
-                })
+                bus.command(cell_id, &cmd, Duration::from_secs(10))
+                    .await
+                    .map_err(|e| e.to_string())
             }
         };
         let stuck = |step: &'static str| {

@@ -49,7 +49,7 @@ pub(crate) fn run(args: &KeygenArgs, out: &mut dyn Write) -> Result<(), Failure>
 
 /// Creates `path` readable by its owner only; an existing file is kept.
 pub(crate) fn write_private(path: &Path, text: &str) -> Result<(), Failure> {
-    crate::sinks::zenoh::certs::write_private(path, text).map_err(|e| {
+    crate::bus::certs::write_private(path, text).map_err(|e| {
         if e.ends_with("not overwritten") {
             Failure::Input(e)
         } else {

@@ -7,8 +7,8 @@ use std::path::PathBuf;
 use std::io::Write;
 
 use super::Failure;
-use crate::sinks::zenoh::certs::{ca_files, issue, make_ca};
-use crate::sinks::zenoh::envelope::AgentKey;
+use crate::bus::certs::{ca_files, issue, make_ca};
+use crate::bus::envelope::AgentKey;
 
 /// `cellwatch pki ca`.
 pub(crate) fn ca(args: &PkiCaArgs, out: &mut dyn Write) -> Result<(), Failure> {

@@ -14,8 +14,8 @@ use cellwatch_models::report::{
 use chrono::{Datelike, FixedOffset, NaiveDate, TimeZone};
 
 use super::Failure;
+use crate::journal;
 use crate::operator::escaped;
-use crate::sinks::journal;
 
 fn causes(path: &Path) -> Result<StopCauses, Failure> {
     let text = std::fs::read_to_string(path).map_err(|e| {

@@ -45,6 +45,15 @@ pub fn link_problem(endpoint: &str) -> Option<String> {
     }
 }
 
+/// The root of every cell's keys unless `zenoh.key_prefix` says otherwise.
+pub const DEFAULT_ROOT: &str = "cellwatch";
+
+/// A cell's key prefix under a root: `<root>/<cell>`. The one place the
+/// prefix is spelled; the keys under it are `crate::bus::keys`'.
+pub fn cell_prefix(root: &str, cell: &str) -> String {
+    format!("{}/{cell}", root.trim_end_matches('/'))
+}
+
 /// The Zenoh session and keys.
 #[derive(Debug, Clone)]
 pub struct ZenohConfig {

@@ -25,7 +25,7 @@ mod raw;
 mod tags;
 mod validate;
 
-pub use bus::{link_problem, ZenohConfig, ZenohMode, ZenohTls};
+pub use bus::{cell_prefix, link_problem, ZenohConfig, ZenohMode, ZenohTls, DEFAULT_ROOT};
 pub use cell::{CellConfig, JournalConfig, DEFAULT_MAX_SHELVE, MAX_SHELVE_LIMIT};
 pub use checks::{
     SfcCheck, TimerCheck, DEFAULT_FORCE_PULSE, DEFAULT_FORCE_TIMEOUT, MAX_FORCE_TIMEOUT,

@@ -9,10 +9,6 @@
 //! timestamp. Federation across hundreds of cells is Prometheus's own job:
 //! every series carries `cell`.
 
-mod sink;
-
-pub use sink::MetricsSink;
-
 use std::future::Future;
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -491,7 +487,7 @@ impl Metrics {
     }
 }
 
-impl crate::sinks::journal::CommitObserver for Metrics {
+impl crate::journal::CommitObserver for Metrics {
     fn committed(&self, rows: usize, took: Duration) {
         self.journal_rows.inc_by(rows as u64);
         self.journal_write_seconds.observe(took.as_secs_f64());

@@ -11,14 +11,15 @@
 //! - [`journal`]: the SQLite journal (rows, history queries, reports).
 //! - [`zenoh`]: publication on the bus, and the query services.
 //! - [`console`]: the demo's printed view.
-//! - the metrics ([`crate::metrics::MetricsSink`]): Prometheus.
+//! - the metrics ([`crate::sinks::metrics::MetricsSink`]): Prometheus.
 //! - [`RecordingSink`]: keeps every step, for tests; the smallest example
 //!   of a sink.
 //!
-//! To add a sink: implement [`Sink`] and push it in [`crate::cell::start`].
+//! To add a sink: implement [`Sink`] and push it in [`crate::agent::start`].
 
 pub mod console;
 pub mod journal;
+pub mod metrics;
 pub mod zenoh;
 
 use futures_util::future::BoxFuture;

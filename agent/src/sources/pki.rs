@@ -31,7 +31,7 @@ pub fn own_key(pki_dir: &Path) -> PathBuf {
 pub fn protect_own_key(pki_dir: &Path, existed: bool) -> Result<(), String> {
     let key = own_key(pki_dir);
     if existed {
-        return crate::sinks::zenoh::envelope::check_private(&key).map_err(|e| e.to_string());
+        return crate::bus::envelope::check_private(&key).map_err(|e| e.to_string());
     }
     #[cfg(unix)]
     {
@@ -44,7 +44,10 @@ pub fn protect_own_key(pki_dir: &Path, existed: bool) -> Result<(), String> {
     Ok(())
 }
 
-/// Copies the certificate at `cert` into `pki_dir/trusted/`.
+/// Copies the certificate at `cert` into `pki_dir/trusted/`, and takes it
+/// out of `pki_dir/rejected/` if an earlier refused connection left it
+/// there (the certificate store takes a certificate found in `rejected/`
+/// as untrusted, whatever `trusted/` holds).
 ///
 /// # Errors
 /// The certificate cannot be read or parsed, or the copy fails.
@@ -58,5 +61,13 @@ pub fn trust(cert: &Path, pki_dir: &Path) -> Result<PathBuf, String> {
     let target = dir.join(CertificateStore::cert_file_name(&x509));
     std::fs::write(&target, &bytes)
         .map_err(|e| format!("cannot write {}: {e}", target.display()))?;
+    let rejected = pki_dir
+        .join("rejected")
+        .join(CertificateStore::cert_file_name(&x509));
+    match std::fs::remove_file(&rejected) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => return Err(format!("cannot remove {}: {e}", rejected.display())),
+    }
     Ok(target)
 }

@@ -37,7 +37,7 @@ pub(crate) struct ZenohArgs {
     #[arg(long, default_value = "peer")]
     pub(crate) mode: String,
     /// Root of the agents' key prefixes (`<root>/<cell>/...`).
-    #[arg(long, default_value = "cellwatch")]
+    #[arg(long, default_value = crate::config::DEFAULT_ROOT)]
     pub(crate) root: String,
     /// Seconds to wait for answers.
     #[arg(long = "timeout", default_value_t = 5)]

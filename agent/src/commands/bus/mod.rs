@@ -14,23 +14,17 @@ pub(crate) use args::{
     WriteArgs, ZenohArgs,
 };
 
+use crate::bus::envelope::Trust;
+use crate::bus::keys::Service;
+use crate::client::{BusClient, CellAnswer, ClientError};
 use crate::commands::Failure;
 use crate::config::{ZenohConfig, ZenohMode};
 use crate::operator::{Action, Command, OperatorKey};
 use crate::payload::AlarmPayload;
-use crate::sinks::zenoh::envelope::{Distrust, Kind, Trust};
-use crate::sinks::zenoh::ZenohError;
-
-/// A client's view of the bus: its session, and the plant trust file that
-/// every payload is opened against.
-struct Bus {
-    session: zenoh::Session,
-    trust: Trust,
-}
 
 /// Opens the client's session: TLS only unless `--plain`, listening on
 /// nothing, linking only to the endpoints given; and reads the trust file.
-async fn session(z: &ZenohArgs) -> Result<Bus, Failure> {
+async fn session(z: &ZenohArgs) -> Result<BusClient, Failure> {
     let trust = trust(z)?;
     let mode = match z.mode.as_str() {
         "peer" => ZenohMode::Peer,
@@ -66,13 +60,17 @@ async fn session(z: &ZenohArgs) -> Result<Bus, Failure> {
         plain: z.plain,
         signing_key: None,
     };
-    let session = crate::sinks::zenoh::open(&cfg).await.map_err(|e| match e {
-        e @ (ZenohError::Insecure { .. } | ZenohError::Config { .. }) => {
-            Failure::Input(e.to_string())
-        }
-        e => Failure::runtime(e),
-    })?;
-    Ok(Bus { session, trust })
+    BusClient::open(&cfg, trust, &z.root).await.map_err(failure)
+}
+
+/// How the CLI reports what the bus client could not do: a refused
+/// configuration and an agent's error answer are the user's input, the
+/// rest a runtime failure.
+fn failure(e: ClientError) -> Failure {
+    match e {
+        e @ (ClientError::Config(_) | ClientError::Answered(_)) => Failure::Input(e.to_string()),
+        e => Failure::Runtime(e.to_string()),
+    }
 }
 
 /// The plant trust file named by `--trust` (or `CELLWATCH_TRUST`).
@@ -83,120 +81,6 @@ fn trust(z: &ZenohArgs) -> Result<Trust, Failure> {
         )
     })?;
     Trust::load(path).map_err(|e| Failure::Input(e.to_string()))
-}
-
-/// A fresh query parameter: an answer is believed only if the agent sealed
-/// it for this very query.
-fn fresh() -> String {
-    format!("nonce={}", crate::operator::nonce())
-}
-
-/// What came back to one query.
-enum Answer {
-    /// A cell's agent's answer (believed): the cell and its text, or its
-    /// error (an error answer from the agent is [`Failure::Input`]).
-    Agent(String, Result<String, Failure>),
-    /// Nothing believed; why each answer that came was not.
-    Nothing(Vec<String>),
-}
-
-/// Opens one reply to a query with `parameters` on `key`: believed only
-/// if a cell's agent in the trust file sealed it for this query.
-fn open_reply(
-    trust: &Trust,
-    reply: &zenoh::query::Reply,
-    key: &str,
-    parameters: &str,
-) -> Result<(String, Result<String, Failure>), String> {
-    let from = reply
-        .replier_id()
-        .map_or_else(|| "an unknown node".into(), |id| id.zid().to_string());
-    let distrust = |e: Distrust| format!("{e} (from Zenoh session {from})");
-    match reply.result() {
-        Ok(sample) => {
-            let opened = trust
-                .open(
-                    &sample.payload().to_bytes(),
-                    Kind::Reply,
-                    sample.key_expr().as_str(),
-                    parameters,
-                )
-                .map_err(distrust)?;
-            let body = match opened.kind {
-                Kind::Error => Err(Failure::Input(opened.body)),
-                _ => Ok(opened.body),
-            };
-            Ok((opened.cell, body))
-        }
-        Err(e) => {
-            // An error answer has no key of its own: the envelope's, if it
-            // is one the query could be answered on.
-            let bytes = e.payload().to_bytes();
-            let sealed_on = serde_json::from_slice::<serde_json::Value>(&bytes)
-                .ok()
-                .and_then(|v| v["key"].as_str().map(str::to_string))
-                .unwrap_or_default();
-            let fits = match (
-                zenoh::key_expr::KeyExpr::try_from(sealed_on.as_str()),
-                zenoh::key_expr::KeyExpr::try_from(key),
-            ) {
-                (Ok(a), Ok(b)) => a.intersects(&b),
-                _ => false,
-            };
-            if !fits {
-                return Err(distrust(Distrust::NotAnEnvelope(format!(
-                    "an error answer sealed for '{sealed_on}', not {key}"
-                ))));
-            }
-            let opened = trust
-                .open(&bytes, Kind::Reply, &sealed_on, parameters)
-                .map_err(distrust)?;
-            Ok((
-                opened.cell,
-                Err(Failure::Input(format!("{key}: {}", opened.body))),
-            ))
-        }
-    }
-}
-
-/// The first believed answer among `replies`; answers not believed are
-/// logged and named in the error when nothing was believed.
-async fn answer_of(
-    replies: zenoh::handlers::FifoChannelHandler<zenoh::query::Reply>,
-    trust: &Trust,
-    key: &str,
-    parameters: &str,
-) -> Answer {
-    let mut refused = Vec::new();
-    while let Ok(reply) = replies.recv_async().await {
-        match open_reply(trust, &reply, key, parameters) {
-            Ok((cell, answer)) => return Answer::Agent(cell, answer),
-            Err(why) => {
-                tracing::error!(key, why = %why, "an answer not believed: ignored");
-                refused.push(why);
-            }
-        }
-    }
-    Answer::Nothing(refused)
-}
-
-impl Answer {
-    fn into_result(self, cell: &str, what: &str) -> Result<String, Failure> {
-        match self {
-            Answer::Agent(from, _) if from != cell => Err(Failure::Runtime(format!(
-                "{what}: answered by cell {from}'s agent, not {cell}'s"
-            ))),
-            Answer::Agent(_, answer) => answer,
-            Answer::Nothing(refused) if refused.is_empty() => Err(Failure::Runtime(format!(
-                "the agent of cell {cell} did not answer {what}"
-            ))),
-            Answer::Nothing(refused) => Err(Failure::Runtime(format!(
-                "the agent of cell {cell} did not answer {what}; {} answer(s) were not believed: {}",
-                refused.len(),
-                refused.join("; ")
-            ))),
-        }
-    }
 }
 
 fn io(e: std::io::Error) -> Failure {
@@ -237,13 +121,12 @@ fn print_alarm(out: &mut dyn Write, a: &AlarmPayload, json: bool) -> std::io::Re
 /// `cellwatch alarms`.
 pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(), Failure> {
     let bus = session(&args.zenoh).await?;
-    let s = &bus.session;
     let cell = args.cell.as_deref().unwrap_or("*");
-    let root = &args.zenoh.root;
     let timeout = Duration::from_secs(args.zenoh.timeout_secs);
     if args.follow {
-        let sub = s
-            .declare_subscriber(format!("{root}/{cell}/alarms/**"))
+        let sub = bus
+            .session()
+            .declare_subscriber(bus.keys(cell).alarms())
             .history(HistoryConfig::default().detect_late_publishers())
             .recovery(RecoveryConfig::default().heartbeat())
             .await
@@ -258,11 +141,19 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
                     "--since needs --cell: the journal is read from one agent".into(),
                 ));
             };
-            let base = format!("{root}/{cell}/history?kind=alarm;since={since};limit=1000");
+            let base = format!("kind=alarm;since={since};limit=1000");
             let mut after = 0;
             loop {
-                let text =
-                    history_page(&bus, cell, &format!("{base};after={after}"), timeout).await?;
+                let text = bus
+                    .ask(
+                        cell,
+                        Service::History,
+                        &format!("{base};after={after}"),
+                        None,
+                        timeout,
+                    )
+                    .await
+                    .map_err(failure)?;
                 let page: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
                 for r in page["rows"].as_array().into_iter().flatten() {
                     if let Ok(a) =
@@ -287,7 +178,7 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
                     let key = sample.key_expr().as_str();
                     // Believed only if the cell's own agent sealed it for
                     // this key, whoever relayed it.
-                    let opened = match bus.trust.open(&sample.payload().to_bytes(), Kind::Put, key, "") {
+                    let opened = match bus.open_put(&sample.payload().to_bytes(), key) {
                         Ok(opened) => opened,
                         Err(why) => {
                             tracing::error!(key, why = %why, "an alarm event not believed: ignored");
@@ -314,28 +205,22 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
         }
         return Ok(());
     }
-    let key = format!("{root}/{cell}/snapshot");
-    let parameters = fresh();
-    let querier = querier(s, &key, timeout).await?;
-    wait_for_queryable(&querier, timeout).await;
-    let replies = querier
-        .get()
-        .parameters(parameters.as_str())
+    let key = bus.keys(cell).service(Service::Snapshot);
+    let (answers, mut refused) = bus
+        .ask_every(cell, Service::Snapshot, timeout)
         .await
-        .map_err(|e| Failure::Runtime(format!("query failed: {e}")))?;
+        .map_err(failure)?;
     let mut answered = 0;
-    let mut refused = Vec::new();
-    while let Ok(reply) = replies.recv_async().await {
-        let (of_cell, text) = match open_reply(&bus.trust, &reply, &key, &parameters) {
-            Ok((of_cell, Ok(text))) => (of_cell, text),
-            Ok((of_cell, Err(Failure::Input(e) | Failure::Runtime(e)))) => {
+    for CellAnswer {
+        cell: of_cell,
+        answer,
+    } in answers
+    {
+        let text = match answer {
+            Ok(text) => text,
+            Err(e) => {
                 tracing::warn!(cell = %of_cell, error = %e, "the agent could not answer");
                 refused.push(format!("cell {of_cell}: {e}"));
-                continue;
-            }
-            Err(why) => {
-                tracing::error!(key, why = %why, "an answer not believed: ignored");
-                refused.push(why);
                 continue;
             }
         };
@@ -369,103 +254,6 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
     Ok(())
 }
 
-/// Asks `selector` for one history page of `cell`.
-async fn history_page(
-    bus: &Bus,
-    cell: &str,
-    selector: &str,
-    timeout: Duration,
-) -> Result<String, Failure> {
-    ask_agent(bus, cell, selector, None, timeout).await
-}
-
-/// A querier on `key` that takes every answer (none consolidated away).
-async fn querier<'a>(
-    s: &'a zenoh::Session,
-    key: &str,
-    timeout: Duration,
-) -> Result<zenoh::query::Querier<'a>, Failure> {
-    s.declare_querier(key.to_string())
-        .consolidation(zenoh::query::ConsolidationMode::None)
-        .timeout(timeout)
-        .await
-        .map_err(|e| Failure::Runtime(format!("query failed: {e}")))
-}
-
-/// Waits, up to `timeout`, until a queryable for the querier's key is
-/// known: a session just opened may not know the agents' queryables yet.
-async fn wait_for_queryable(querier: &zenoh::query::Querier<'_>, timeout: Duration) {
-    let Ok(listener) = querier.matching_listener().await else {
-        return;
-    };
-    let known = querier
-        .matching_status()
-        .await
-        .map(|m| m.matching())
-        .unwrap_or(false);
-    if !known {
-        let deadline = tokio::time::Instant::now() + timeout;
-        while let Ok(Ok(status)) = tokio::time::timeout_at(deadline, listener.recv_async()).await {
-            if status.matching() {
-                break;
-            }
-        }
-    }
-}
-
-/// Asks `selector` (`key?parameters`, a fresh nonce added) with `payload`
-/// and returns `cell`'s agent's answer ([`answer_of`]).
-async fn ask_agent(
-    bus: &Bus,
-    cell: &str,
-    selector: &str,
-    payload: Option<String>,
-    timeout: Duration,
-) -> Result<String, Failure> {
-    let (key, parameters) = selector.split_once('?').unwrap_or((selector, ""));
-    let querier = querier(&bus.session, key, timeout).await?;
-    wait_for_queryable(&querier, timeout).await;
-    // A query that ends with no answer at all before its time is up (the
-    // routes to the agent's queryable still being set up, the agent
-    // restarting) or with "busy" is asked again. A command too: the same
-    // signed command, which the agent answers with its original outcome
-    // if it already carried it out.
-    let deadline = tokio::time::Instant::now() + timeout;
-    loop {
-        let parameters = if parameters.is_empty() {
-            fresh()
-        } else {
-            format!("{parameters};{}", fresh())
-        };
-        let mut get = querier.get().parameters(parameters.as_str());
-        if let Some(p) = &payload {
-            get = get.payload(p.clone());
-        }
-        let replies = get
-            .await
-            .map_err(|e| Failure::Runtime(format!("query failed: {e}")))?;
-        let answer = answer_of(replies, &bus.trust, key, &parameters).await;
-        let again = match &answer {
-            Answer::Nothing(refused) => refused.is_empty(),
-            Answer::Agent(_, Err(Failure::Input(why))) => why.contains(BUSY),
-            Answer::Agent(..) => false,
-        };
-        if again && tokio::time::Instant::now() + RETRY_AFTER < deadline {
-            tracing::debug!(selector, "no answer yet, or busy: asking again");
-            tokio::time::sleep(RETRY_AFTER).await;
-            continue;
-        }
-        return answer.into_result(cell, selector);
-    }
-}
-
-/// What an agent answers when it is answering as many queries as it may.
-const BUSY: &str = "the agent is busy";
-
-/// The pause before a query that got no answer, or "busy", is asked
-/// again.
-const RETRY_AFTER: Duration = Duration::from_millis(250);
-
 /// `cellwatch history`: the newest rows, or with `--all` every row of the
 /// range, fetched in bounded pages.
 pub(crate) async fn history(args: &HistoryArgs, out: &mut dyn Write) -> Result<(), Failure> {
@@ -478,12 +266,7 @@ pub(crate) async fn history(args: &HistoryArgs, out: &mut dyn Write) -> Result<(
         params.push(format!("kind={k}"));
     }
     params.push(format!("limit={}", args.limit));
-    let base = format!(
-        "{}/{}/history?{}",
-        args.zenoh.root,
-        args.cell,
-        params.join(";")
-    );
+    let base = params.join(";");
     let timeout = Duration::from_secs(args.zenoh.timeout_secs);
     let mut after = args.all.then_some(0);
     loop {
@@ -491,7 +274,10 @@ pub(crate) async fn history(args: &HistoryArgs, out: &mut dyn Write) -> Result<(
             Some(a) => format!("{base};after={a}"),
             None => base.clone(),
         };
-        let text = history_page(&bus, &args.cell, &selector, timeout).await?;
+        let text = bus
+            .ask(&args.cell, Service::History, &selector, None, timeout)
+            .await
+            .map_err(failure)?;
         if args.json {
             writeln!(out, "{text}").map_err(io)?;
         }
@@ -627,11 +413,6 @@ pub(crate) async fn out_of_service(args: &ReasonArgs, out: &mut dyn Write) -> Re
     .await
 }
 
-/// How long `cellwatch force` waits for the agent's answer at least: the
-/// agent answers when the chart has arrived or its `force_timeout` (at
-/// most a minute) has passed.
-pub(crate) const FORCE_ANSWER: Duration = Duration::from_secs(75);
-
 /// `cellwatch force`: a signed forced transition.
 pub(crate) async fn force(args: &ForceArgs, out: &mut dyn Write) -> Result<(), Failure> {
     let transition = format!("{}.{}", args.chart, args.transition);
@@ -720,15 +501,7 @@ async fn signed(t: Target<'_>, args: &SignerArgs, out: &mut dyn Write) -> Result
     cmd.sign(t.cell, &key);
     let bus = session(&args.zenoh).await?;
     let timeout = Duration::from_secs(args.zenoh.timeout_secs);
-    let (accepted, detail) = send_signed(
-        &bus.session,
-        &bus.trust,
-        &args.zenoh.root,
-        t.cell,
-        &cmd,
-        timeout,
-    )
-    .await?;
+    let (accepted, detail) = send_signed(&bus, t.cell, &cmd, timeout).await?;
     if accepted {
         writeln!(out, "accepted: {detail}").map_err(io)?;
         Ok(())
@@ -737,42 +510,18 @@ async fn signed(t: Target<'_>, args: &SignerArgs, out: &mut dyn Write) -> Result
     }
 }
 
-/// Sends the signed command `cmd` to the agent of `cell` (a force waits at
-/// least [`FORCE_ANSWER`] for its answer) and returns (accepted, detail):
-/// the answer believed only if `cell`'s agent sealed it for this query.
-pub(crate) async fn send_signed(
-    s: &zenoh::Session,
-    trust: &Trust,
-    root: &str,
+/// Sends the signed command `cmd` to the agent of `cell` and returns
+/// (accepted, detail): the answer believed only if `cell`'s agent sealed
+/// it for this query. Any failure to get one is a runtime failure (the
+/// command was well formed; the agent's error answer says why it was not
+/// taken).
+async fn send_signed(
+    bus: &BusClient,
     cell: &str,
     cmd: &Command,
     timeout: Duration,
 ) -> Result<(bool, String), Failure> {
-    let timeout = if cmd.action == Action::Force {
-        timeout.max(FORCE_ANSWER)
-    } else {
-        timeout
-    };
-    let bus = Bus {
-        session: s.clone(),
-        trust: trust.clone(),
-    };
-    let selector = format!("{root}/{cell}/command");
-    let text = ask_agent(
-        &bus,
-        cell,
-        &selector,
-        Some(serde_json::to_string(cmd).unwrap_or_default()),
-        timeout,
-    )
-    .await
-    .map_err(|e| match e {
-        Failure::Input(why) => Failure::Runtime(why),
-        other => other,
-    })?;
-    let v: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
-    Ok((
-        v["accepted"].as_bool() == Some(true),
-        v["detail"].as_str().unwrap_or("").to_string(),
-    ))
+    bus.command(cell, cmd, timeout)
+        .await
+        .map_err(|e| Failure::Runtime(e.to_string()))
 }

@@ -4,7 +4,7 @@ use toml::Spanned;
 
 use super::Validator;
 use crate::config::raw;
-use crate::config::{link_problem, ZenohConfig, ZenohMode, ZenohTls};
+use crate::config::{cell_prefix, link_problem, ZenohConfig, ZenohMode, ZenohTls, DEFAULT_ROOT};
 
 impl Validator<'_> {
     pub(super) fn zenoh(&mut self, raw: raw::RawZenoh, cell: &str) -> ZenohConfig {
@@ -87,7 +87,7 @@ impl Validator<'_> {
             self.warnings.push("zenoh.mode is client but zenoh.connect is empty: the agent relies on scouting to find a router".into());
         }
         let prefix = match raw.key_prefix {
-            None => format!("cellwatch/{cell}"),
+            None => cell_prefix(DEFAULT_ROOT, cell),
             Some(p) => {
                 let s = p.get_ref().trim_end_matches('/').to_string();
                 if s.is_empty() || s.contains(['*', '$', '?', '#']) {

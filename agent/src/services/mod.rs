@@ -10,7 +10,7 @@
 //!   of the cell loop;
 //! - `<prefix>/command`: a signed [`crate::operator::Command`], carried out
 //!   (or refused) by the cell loop; the reply is a
-//!   [`crate::cell::CommandOutcome`].
+//!   [`crate::step::CommandOutcome`].
 //!
 //! Queries are answered concurrently, at most [`MAX_CONCURRENT`] at a time
 //! and [`MAX_CONCURRENT_HISTORY`] history queries among them; more are told
@@ -30,13 +30,14 @@ use tokio::task::JoinSet;
 use zenoh::query::Query;
 use zenoh::Session;
 
-use super::envelope::{AgentKey, Kind as Sealed};
-use super::ZenohError;
-pub use super::MAX_MESSAGE_BYTES;
+use crate::bus::envelope::{AgentKey, Kind as Sealed};
+use crate::bus::keys::{CellKeys, Service};
+use crate::bus::ZenohError;
+pub use crate::bus::MAX_MESSAGE_BYTES;
 use crate::clock::{now_ms, parse_time};
+use crate::journal::{self, Barrier, HistoryQuery, Journal};
 use crate::metrics::Metrics;
 use crate::operator::{Command, NotACommand};
-use crate::sinks::journal::{self, Barrier, HistoryQuery, Journal};
 use crate::step::{CommandOutcome, Request};
 
 /// Queries answered at the same time; more are refused as busy.
@@ -72,11 +73,11 @@ pub struct Services {
     metrics: Arc<Metrics>,
 }
 
-/// What sealing an answer needs: the agent's key and its prefix.
+/// What sealing an answer needs: the agent's key and its keys.
 #[derive(Clone)]
 struct Seal {
     key: Arc<AgentKey>,
-    prefix: String,
+    keys: CellKeys,
 }
 
 impl Services {
@@ -92,8 +93,9 @@ impl Services {
         requests: mpsc::Sender<Request>,
         metrics: Arc<Metrics>,
     ) -> Result<Services, ZenohError> {
-        let declare = |name: &'static str| {
-            let key = format!("{prefix}/{name}");
+        let keys = CellKeys::new(prefix);
+        let declare = |service: Service| {
+            let key = keys.service(service);
             async move {
                 session
                     .declare_queryable(key.clone())
@@ -106,9 +108,9 @@ impl Services {
             }
         };
         Ok(Services {
-            history: declare("history").await?,
-            snapshot: declare("snapshot").await?,
-            command: declare("command").await?,
+            history: declare(Service::History).await?,
+            snapshot: declare(Service::Snapshot).await?,
+            command: declare(Service::Command).await?,
             journal: journal.path().to_path_buf(),
             journal_settled: journal.barrier(),
             requests,
@@ -116,7 +118,7 @@ impl Services {
             history_permits: Arc::new(Semaphore::new(MAX_CONCURRENT_HISTORY)),
             seal: Seal {
                 key,
-                prefix: prefix.into(),
+                keys: keys.clone(),
             },
             metrics,
         })
@@ -130,17 +132,17 @@ impl Services {
         loop {
             let (kind, q) = tokio::select! {
                 _ = &mut shutdown => break,
-                Ok(q) = self.history.recv_async() => (Kind::History, q),
-                Ok(q) = self.snapshot.recv_async() => (Kind::Snapshot, q),
-                Ok(q) = self.command.recv_async() => (Kind::Command, q),
+                Ok(q) = self.history.recv_async() => (Service::History, q),
+                Ok(q) = self.snapshot.recv_async() => (Service::Snapshot, q),
+                Ok(q) = self.command.recv_async() => (Service::Command, q),
                 Some(_) = answering.join_next(), if !answering.is_empty() => continue,
             };
             let history_permit = match kind {
-                Kind::History => self.history_permits.clone().try_acquire_owned().ok(),
+                Service::History => self.history_permits.clone().try_acquire_owned().ok(),
                 _ => None,
             };
             let permit = self.permits.clone().try_acquire_owned().ok();
-            if permit.is_none() || (matches!(kind, Kind::History) && history_permit.is_none()) {
+            if permit.is_none() || (matches!(kind, Service::History) && history_permit.is_none()) {
                 self.metrics.refused(kind.name(), "busy");
                 reply(
                     &self.seal,
@@ -162,7 +164,7 @@ impl Services {
             answering.spawn(async move {
                 let _permits = (permit, history_permit);
                 let result = match kind {
-                    Kind::History => match history_query(q.parameters().as_str(), now_ms()) {
+                    Service::History => match history_query(q.parameters().as_str(), now_ms()) {
                         Ok(query) => {
                             settled.settled().await;
                             history(&journal, query).await
@@ -172,30 +174,13 @@ impl Services {
                             Err(e)
                         }
                     },
-                    Kind::Snapshot => snapshot(&requests).await,
-                    Kind::Command => command(&requests, &q, &metrics).await,
+                    Service::Snapshot => snapshot(&requests).await,
+                    Service::Command => command(&requests, &q, &metrics).await,
                 };
                 reply(&seal, kind, &metrics, q, result).await;
             });
         }
         answering.shutdown().await;
-    }
-}
-
-#[derive(Clone, Copy)]
-enum Kind {
-    History,
-    Snapshot,
-    Command,
-}
-
-impl Kind {
-    fn name(self) -> &'static str {
-        match self {
-            Kind::History => "history",
-            Kind::Snapshot => "snapshot",
-            Kind::Command => "command",
-        }
     }
 }
 
@@ -317,12 +302,12 @@ async fn command(
 /// the cell's agent) and bound to the query's parameters.
 async fn reply(
     seal: &Seal,
-    kind: Kind,
+    kind: Service,
     metrics: &Metrics,
     q: Query,
     result: Result<String, String>,
 ) {
-    let key = format!("{}/{}", seal.prefix, kind.name());
+    let key = seal.keys.service(kind);
     let parameters = q.parameters().as_str().to_string();
     let at = now_ms();
     let sent = match result {

@@ -1,5 +1,5 @@
 //! Publication on the bus: alarm events and machine state, each sealed in
-//! a signed envelope ([`super::envelope`]), and the agent's liveliness
+//! a signed envelope ([`crate::bus::envelope`]), and the agent's liveliness
 //! token. This is the Zenoh sink of the cell loop.
 
 use std::collections::HashMap;
@@ -12,8 +12,9 @@ use zenoh::liveliness::LivelinessToken;
 use zenoh::Session;
 use zenoh_ext::{AdvancedPublisher, AdvancedPublisherBuilderExt, CacheConfig, MissDetectionConfig};
 
-use super::envelope::{AgentKey, Kind};
-use super::ZenohError;
+use crate::bus::envelope::{AgentKey, Kind};
+use crate::bus::keys::CellKeys;
+use crate::bus::ZenohError;
 use crate::metrics::Metrics;
 use crate::sinks::Sink;
 use crate::step::CellStep;
@@ -24,7 +25,7 @@ const ALARM_CACHE: usize = 256;
 /// The publishing side of one agent.
 pub struct ZenohPublisher {
     session: Session,
-    prefix: String,
+    keys: CellKeys,
     /// One advanced publisher per alarm id, declared on first use.
     alarms: HashMap<String, Arc<AdvancedPublisher<'static>>>,
     state: AdvancedPublisher<'static>,
@@ -52,15 +53,16 @@ impl ZenohPublisher {
                 reason: e.to_string(),
             }
         };
+        let keys = CellKeys::new(prefix);
         let state = session
-            .declare_publisher(format!("{prefix}/state"))
+            .declare_publisher(keys.state())
             .cache(CacheConfig::default().max_samples(1))
             .publisher_detection()
             .await
-            .map_err(declare_error(format!("{prefix}/state")))?;
+            .map_err(declare_error(keys.state()))?;
         // The token names the session: clients accept answers for the cell
         // from this Zenoh id only.
-        let token = format!("{prefix}/agent/{}", session.zid());
+        let token = keys.agent_token(session.zid());
         let agent = session
             .liveliness()
             .declare_token(token.clone())
@@ -68,7 +70,7 @@ impl ZenohPublisher {
             .map_err(declare_error(token))?;
         Ok(ZenohPublisher {
             session,
-            prefix: prefix.into(),
+            keys,
             alarms: HashMap::new(),
             state,
             agent,
@@ -84,7 +86,7 @@ impl ZenohPublisher {
 
     /// The key prefix.
     pub fn prefix(&self) -> &str {
-        &self.prefix
+        self.keys.prefix()
     }
 
     /// Publishes an alarm event on `alarms/<id>`.
@@ -96,7 +98,7 @@ impl ZenohPublisher {
                 None => {
                     let declared = self
                         .session
-                        .declare_publisher(format!("{}/alarms/{id}", self.prefix))
+                        .declare_publisher(self.keys.alarm(id))
                         .cache(CacheConfig::default().max_samples(ALARM_CACHE))
                         .sample_miss_detection(
                             MissDetectionConfig::default().heartbeat(Duration::from_millis(500)),
@@ -120,7 +122,7 @@ impl ZenohPublisher {
         };
         let sealed = self.key.seal(
             Kind::Put,
-            &format!("{}/alarms/{id}", self.prefix),
+            &self.keys.alarm(id),
             "",
             crate::clock::now_ms(),
             json,
@@ -135,7 +137,7 @@ impl ZenohPublisher {
     pub async fn state(&self, json: String) {
         let sealed = self.key.seal(
             Kind::Put,
-            &format!("{}/state", self.prefix),
+            &self.keys.state(),
             "",
             crate::clock::now_ms(),
             json,

@@ -7,7 +7,7 @@
 use futures_util::future::BoxFuture;
 use futures_util::FutureExt;
 
-use super::{Entry, Journal};
+use crate::journal::{Entry, Journal};
 use crate::sinks::{Settled, Sink};
 use crate::step::{CellStep, Input};
 use std::sync::Arc;

@@ -18,19 +18,20 @@ use futures_util::FutureExt;
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 
-use super::compile::{self, CompileError};
-use super::{CellLoop, JOURNAL_ALARM};
+use crate::bus::envelope::{check_private, AgentKey, KeyFileError};
+use crate::bus::ZenohError;
+use crate::cell::compile::{self, CompileError};
+use crate::cell::{CellLoop, JOURNAL_ALARM};
 use crate::clock::Clock;
 use crate::config::CellConfig;
-use crate::metrics::{Metrics, MetricsSink};
+use crate::journal::{Journal, JournalError};
+use crate::metrics::Metrics;
 use crate::operator::{Gate, KeysError, OperatorKeys};
+use crate::services::Services;
 use crate::sinks::console::{ConsoleSink, Notice};
-use crate::sinks::journal::sink::JournalSink;
-use crate::sinks::journal::{Journal, JournalError};
-use crate::sinks::zenoh::envelope::{check_private, AgentKey, KeyFileError};
-use crate::sinks::zenoh::publish::ZenohPublisher;
-use crate::sinks::zenoh::services::Services;
-use crate::sinks::zenoh::ZenohError;
+use crate::sinks::journal::JournalSink;
+use crate::sinks::metrics::MetricsSink;
+use crate::sinks::zenoh::ZenohPublisher;
 use crate::sinks::Sink;
 use crate::sources::{self, Source, SourceError, QUEUE_CAPACITY};
 
@@ -288,11 +289,11 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     let committed = journal.committed();
     let journal_health = journal.health();
     let clock = options.clock.clone();
-    let restored = super::restore::load(&config, clock.now_ms(), |id| {
+    let restored = crate::cell::restore::load(&config, clock.now_ms(), |id| {
         engine.can_raise(id) || id == JOURNAL_ALARM
     })?;
     let signing = signing_key(&config)?;
-    let session = crate::sinks::zenoh::open_agent(&config.zenoh).await?;
+    let session = crate::bus::open_agent(&config.zenoh).await?;
     let prefix = config.zenoh.prefix.clone();
     let (requests_tx, requests_rx) = mpsc::channel(REQUEST_CAPACITY);
     let services = Services::declare(
@@ -336,7 +337,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         sinks.push(Box::new(ConsoleSink::new(observer)));
     }
     sinks.extend(options.sinks);
-    let forcing = super::forcing::Forcing::of(&config);
+    let forcing = crate::cell::forcing::Forcing::of(&config);
     let mut source = match options.source {
         Some(source) => source,
         None => {
@@ -353,11 +354,11 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     for (at, nonce) in restored.nonces {
         gate.remember(at, nonce);
     }
-    let answers = super::answers::Answers::default();
+    let answers = crate::cell::answers::Answers::default();
     for saved in restored.outcomes {
         let outcome = match saved.outcome {
-            Some((accepted, detail)) => super::CommandOutcome::new(accepted, detail),
-            None => super::CommandOutcome::new(
+            Some((accepted, detail)) => crate::step::CommandOutcome::new(accepted, detail),
+            None => crate::step::CommandOutcome::new(
                 false,
                 "the agent stopped before this command's outcome was known: see its history",
             ),

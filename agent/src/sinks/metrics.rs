@@ -9,8 +9,8 @@ use cellwatch_models::kpi::LiveKpis;
 use futures_util::future::BoxFuture;
 use futures_util::FutureExt;
 
-use super::Metrics;
 use crate::config::CellConfig;
+use crate::metrics::Metrics;
 use crate::sinks::Sink;
 use crate::step::{CellStep, Input};
 

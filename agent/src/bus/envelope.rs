@@ -31,8 +31,8 @@
 //!   in one field can pass for another.
 //!
 //! This module owns the agent's signing key file ([`AgentKey`]), the plant
-//! trust file ([`Trust`]) and the envelope; [`super::publish`] and
-//! [`super::services`] seal, the CLI opens.
+//! trust file ([`Trust`]) and the envelope; [`crate::sinks::zenoh`] and
+//! [`crate::services`] seal, the CLI opens.
 
 use std::collections::BTreeMap;
 use std::path::Path;

@@ -11,7 +11,7 @@
 //! committed — staged, queued, or in the writer's batch — is counted, and
 //! the count reported ([`CommitObserver::pending`]) as it changes.
 //!
-//! [`sink::JournalSink`] is the cell loop's side: it turns each step into
+//! [`crate::sinks::journal::JournalSink`] is the cell loop's side: it turns each step into
 //! rows, [`Journal::stage`]s them before the step goes on the bus and
 //! queues them once the bus has it ([`Journal::queue_staged`]), so the
 //! writer thread is not woken on the alarm's path. A [`Barrier`] waits for
@@ -30,7 +30,7 @@ pub mod chain;
 mod history;
 mod reports;
 mod saved;
-pub mod sink;
+mod schema;
 
 pub use history::{
     history, HistoryError, HistoryPage, HistoryQuery, HistoryRow, DEFAULT_ROWS, HISTORY_SCHEMA,
@@ -38,8 +38,11 @@ pub use history::{
 };
 pub use reports::{alarm_events, report_input, AlarmEvents, ReportInput};
 pub use saved::{saved, Saved, SavedOutcome, SavedState};
+pub use schema::{open, open_read, JournalError};
 
-use rusqlite::{params, Connection, OpenFlags};
+use schema::{last_seq, purge, TABLES};
+
+use rusqlite::{params, Connection};
 use tokio::sync::{mpsc, oneshot, watch};
 
 /// One row to write.
@@ -124,176 +127,11 @@ pub enum Entry {
     },
 }
 
-/// Why the journal failed.
-#[derive(Debug, thiserror::Error)]
-pub enum JournalError {
-    /// SQLite said no.
-    #[error("journal {path}: {source}")]
-    Sqlite {
-        /// The file.
-        path: PathBuf,
-        /// The error.
-        source: rusqlite::Error,
-    },
-    /// The writer thread could not be started.
-    #[error("journal {path}: cannot start the writer thread: {source}")]
-    Thread {
-        /// The file.
-        path: PathBuf,
-        /// The error.
-        source: std::io::Error,
-    },
-    /// A batch could not be committed; its rows are lost.
-    #[error("journal {path}: commit failed: {message}")]
-    Commit {
-        /// The file.
-        path: PathBuf,
-        /// SQLite's message.
-        message: String,
-    },
-    /// The writer thread has stopped.
-    #[error("journal {path}: the writer has stopped")]
-    Stopped {
-        /// The file.
-        path: PathBuf,
-    },
-}
-
 /// Rows for the writer, and who waits for their commit.
 struct Batch {
     entries: Vec<Entry>,
     /// Told the outcome once the rows are committed (or not).
     done: Option<oneshot::Sender<Result<(), String>>>,
-}
-
-/// The tables of journal rows (one sequence across them).
-const TABLES: [&str; 5] = [
-    "alarm_events",
-    "state_history",
-    "commands",
-    "production",
-    "orders",
-];
-
-const SCHEMA: &str = "
-CREATE TABLE IF NOT EXISTS alarm_events (
-    seq INTEGER PRIMARY KEY AUTOINCREMENT,
-    at_ms INTEGER NOT NULL,
-    alarm TEXT NOT NULL,
-    kind TEXT NOT NULL,
-    severity TEXT NOT NULL,
-    transition TEXT NOT NULL,
-    payload TEXT NOT NULL
-);
-CREATE INDEX IF NOT EXISTS alarm_events_at ON alarm_events (at_ms);
-CREATE TABLE IF NOT EXISTS state_history (
-    seq INTEGER PRIMARY KEY AUTOINCREMENT,
-    at_ms INTEGER NOT NULL,
-    kind TEXT NOT NULL,
-    state TEXT NOT NULL,
-    fault_type TEXT,
-    element TEXT
-);
-CREATE INDEX IF NOT EXISTS state_history_at ON state_history (at_ms);
-CREATE TABLE IF NOT EXISTS commands (
-    seq INTEGER PRIMARY KEY AUTOINCREMENT,
-    at_ms INTEGER NOT NULL,
-    operator TEXT NOT NULL,
-    action TEXT NOT NULL,
-    alarm TEXT NOT NULL,
-    nonce TEXT NOT NULL,
-    accepted INTEGER NOT NULL,
-    detail TEXT NOT NULL
-);
-CREATE INDEX IF NOT EXISTS commands_at ON commands (at_ms);
-CREATE TABLE IF NOT EXISTS production (
-    seq INTEGER PRIMARY KEY AUTOINCREMENT,
-    at_ms INTEGER NOT NULL,
-    parts INTEGER NOT NULL DEFAULT 1
-);
-CREATE INDEX IF NOT EXISTS production_at ON production (at_ms);
-CREATE TABLE IF NOT EXISTS orders (
-    seq INTEGER PRIMARY KEY AUTOINCREMENT,
-    at_ms INTEGER NOT NULL,
-    item TEXT,
-    target INTEGER
-);
-CREATE INDEX IF NOT EXISTS orders_at ON orders (at_ms);
-CREATE TABLE IF NOT EXISTS alarm_current (
-    alarm TEXT PRIMARY KEY,
-    at_ms INTEGER NOT NULL,
-    payload TEXT NOT NULL
-);
-";
-
-/// How long the writer waits for a lock held by another connection.
-const WRITE_BUSY_TIMEOUT: Duration = Duration::from_secs(1);
-
-/// Columns added after the first release, added to older journals at open.
-const MIGRATIONS: &[(&str, &str, &str)] = &[
-    ("commands", "verified", "INTEGER NOT NULL DEFAULT 0"),
-    ("production", "parts", "INTEGER NOT NULL DEFAULT 1"),
-    ("commands", "stage", "TEXT NOT NULL DEFAULT 'command'"),
-    ("commands", "source", "TEXT NOT NULL DEFAULT ''"),
-    ("commands", "count", "INTEGER NOT NULL DEFAULT 1"),
-    // The hash chain (`chain`): empty in rows written before it.
-    ("commands", "chain_index", "INTEGER"),
-    ("commands", "prev_hash", "TEXT"),
-    ("commands", "hash", "TEXT"),
-];
-
-fn migrate(conn: &Connection) -> rusqlite::Result<()> {
-    for (table, column, decl) in MIGRATIONS {
-        let exists: bool = conn.query_row(
-            &format!("SELECT count(*) FROM pragma_table_info('{table}') WHERE name = ?1"),
-            [column],
-            |r| r.get::<_, i64>(0).map(|n| n > 0),
-        )?;
-        if !exists {
-            conn.execute_batch(&format!("ALTER TABLE {table} ADD COLUMN {column} {decl}"))?;
-        }
-    }
-    Ok(())
-}
-
-/// Opens (creating if needed) the journal for writing.
-///
-/// # Errors
-/// The file cannot be opened or is not a cellwatch journal.
-pub fn open(path: &Path) -> Result<Connection, JournalError> {
-    let err = |source| JournalError::Sqlite {
-        path: path.to_path_buf(),
-        source,
-    };
-    let conn = Connection::open(path).map_err(err)?;
-    conn.pragma_update(None, "journal_mode", "WAL")
-        .map_err(err)?;
-    conn.pragma_update(None, "synchronous", "FULL")
-        .map_err(err)?;
-    // Short: a journal locked by someone else is reported (and its rows
-    // queued) within a second rather than stalling the cell loop.
-    conn.busy_timeout(WRITE_BUSY_TIMEOUT).map_err(err)?;
-    conn.execute_batch(SCHEMA).map_err(err)?;
-    migrate(&conn).map_err(err)?;
-    Ok(conn)
-}
-
-/// Opens the journal read-only, for queries and reports.
-///
-/// # Errors
-/// The file does not exist or cannot be read.
-pub fn open_read(path: &Path) -> Result<Connection, JournalError> {
-    let err = |source| JournalError::Sqlite {
-        path: path.to_path_buf(),
-        source,
-    };
-    let conn = Connection::open_with_flags(
-        path,
-        OpenFlags::SQLITE_OPEN_READ_ONLY | OpenFlags::SQLITE_OPEN_NO_MUTEX,
-    )
-    .map_err(err)?;
-    conn.busy_timeout(Duration::from_secs(5)).map_err(err)?;
-    Ok(conn)
 }
 
 /// The handle the engine writes through.
@@ -733,21 +571,6 @@ fn writer(
     }
 }
 
-/// The last sequence number used by any table: rows share one sequence,
-/// so that history pages in journal order across tables.
-fn last_seq(conn: &Connection) -> i64 {
-    TABLES
-        .iter()
-        .map(|t| {
-            conn.query_row(&format!("SELECT coalesce(max(seq), 0) FROM {t}"), [], |r| {
-                r.get::<_, i64>(0)
-            })
-            .unwrap_or(0)
-        })
-        .max()
-        .unwrap_or(0)
-}
-
 /// Writes `batch` in one transaction, numbering rows from `*seq + 1` and
 /// chaining command rows after `*chain`; `*seq` and `*chain` move only if
 /// the transaction commits.
@@ -854,15 +677,6 @@ fn write_batch(
     *seq = next;
     *chain = link;
     Ok(())
-}
-
-fn purge(conn: &Connection, retention: Duration, path: &Path) {
-    let cutoff = crate::clock::now_ms().saturating_sub(retention.as_millis() as u64) as i64;
-    for table in TABLES {
-        if let Err(e) = conn.execute(&format!("DELETE FROM {table} WHERE at_ms < ?1"), [cutoff]) {
-            tracing::warn!(path = %path.display(), error = %e, "journal retention purge failed");
-        }
-    }
 }
 
 #[cfg(test)]

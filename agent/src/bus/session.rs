@@ -1,25 +1,6 @@
-//! Zenoh: where alarms and machine state go, and where services answer.
-//!
-//! Keys under the cell's prefix (default `cellwatch/<cell>`):
-//! - `alarms/<alarm-id>`: alarm events ([`crate::payload::AlarmPayload`]),
-//!   published with zenoh-ext's advanced publisher: a cache and sample-miss
-//!   detection, so a subscriber that was away recovers what it missed, and
-//!   a late joiner gets recent history;
-//! - `state`: the machine state ([`crate::payload::StatePayload`]) on every
-//!   change and periodically, cached so a late joiner sees the current one;
-//! - `history`, `snapshot`, `command`: queryables ([`services`]);
-//! - `agent/<zenoh id>`: a liveliness token naming the agent's session,
-//!   gone when the agent stops or dies; clients accept answers for the cell
-//!   from that session only.
-//!
-//! [`publish::ZenohPublisher`] is the sink; [`services::Services`] answers
-//! queries. Scaling to a plant is Zenoh's job: agents run in client mode
-//! against `zenohd` routers; nothing here changes.
-
-pub mod certs;
-pub mod envelope;
-pub mod publish;
-pub mod services;
+//! A session on the bus: its configuration (TLS only with the plant CA,
+//! whatever a Zenoh file says, unless `plain`), the agent's access control
+//! (it routes for nobody), and opening a session for an agent or a client.
 
 use zenoh::Session;
 
@@ -53,7 +34,7 @@ pub enum ZenohError {
     },
     /// A signing key or trust file is unusable.
     #[error(transparent)]
-    Key(#[from] envelope::KeyFileError),
+    Key(#[from] super::envelope::KeyFileError),
     /// A publisher, queryable or token cannot be declared.
     #[error("cannot declare {key}: {reason}")]
     Declare {

@@ -1,0 +1,109 @@
+//! The key layout of the bus, spelled once. Under a cell's prefix
+//! ([`CellKeys`]; by default `cellwatch/<cell>`, see
+//! [`crate::config::cell_prefix`]):
+//!
+//! | key | what | who |
+//! |---|---|---|
+//! | `alarms/<alarm-id>` | alarm events (`cellwatch.alarm.v1`) | the agent puts |
+//! | `state` | the machine state (`cellwatch.state.v1`) | the agent puts |
+//! | `history` | journal pages | the agent answers |
+//! | `snapshot` | values, active alarms, values at the last fault | the agent answers |
+//! | `command` | signed operator commands | the agent answers |
+//! | `agent/<zenoh id>` | a liveliness token while the agent runs | the agent declares |
+//!
+//! The agent uses the prefix its configuration gives (`zenoh.key_prefix`);
+//! clients build it from a root and a cell ([`CellKeys::of`]).
+
+use std::fmt::Display;
+
+/// A query service an agent answers under its prefix.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Service {
+    /// `history`: pages of the journal.
+    History,
+    /// `snapshot`: the cell's values and alarms now.
+    Snapshot,
+    /// `command`: a signed operator command.
+    Command,
+}
+
+impl Service {
+    /// The service's key under the prefix.
+    pub fn name(self) -> &'static str {
+        match self {
+            Service::History => "history",
+            Service::Snapshot => "snapshot",
+            Service::Command => "command",
+        }
+    }
+}
+
+/// Every key of one cell.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CellKeys {
+    prefix: String,
+}
+
+impl CellKeys {
+    /// The keys under an agent's configured prefix (`zenoh.key_prefix`).
+    pub fn new(prefix: impl Into<String>) -> CellKeys {
+        CellKeys {
+            prefix: prefix.into(),
+        }
+    }
+
+    /// The keys of `cell` under `root` (`<root>/<cell>`), as clients name
+    /// a cell. `cell` may be `*` to mean every cell under the root.
+    pub fn of(root: &str, cell: &str) -> CellKeys {
+        CellKeys::new(crate::config::cell_prefix(root, cell))
+    }
+
+    /// The prefix itself.
+    pub fn prefix(&self) -> &str {
+        &self.prefix
+    }
+
+    /// `alarms/<id>`: one alarm's events.
+    pub fn alarm(&self, id: &str) -> String {
+        format!("{}/alarms/{id}", self.prefix)
+    }
+
+    /// `alarms/**`: every alarm's events, to subscribe to.
+    pub fn alarms(&self) -> String {
+        format!("{}/alarms/**", self.prefix)
+    }
+
+    /// `state`: the machine state.
+    pub fn state(&self) -> String {
+        format!("{}/state", self.prefix)
+    }
+
+    /// A query service's key.
+    pub fn service(&self, service: Service) -> String {
+        format!("{}/{}", self.prefix, service.name())
+    }
+
+    /// `agent/<zenoh id>`: the running agent's liveliness token.
+    pub fn agent_token(&self, zid: impl Display) -> String {
+        format!("{}/agent/{zid}", self.prefix)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_layout_under_a_prefix() {
+        let k = CellKeys::of("cellwatch", "m01");
+        assert_eq!(k.prefix(), "cellwatch/m01");
+        assert_eq!(k.alarm("ese"), "cellwatch/m01/alarms/ese");
+        assert_eq!(k.alarms(), "cellwatch/m01/alarms/**");
+        assert_eq!(k.state(), "cellwatch/m01/state");
+        assert_eq!(k.service(Service::History), "cellwatch/m01/history");
+        assert_eq!(k.service(Service::Snapshot), "cellwatch/m01/snapshot");
+        assert_eq!(k.service(Service::Command), "cellwatch/m01/command");
+        assert_eq!(k.agent_token("ab12"), "cellwatch/m01/agent/ab12");
+        assert_eq!(CellKeys::new("plant/a/m02").state(), "plant/a/m02/state");
+    }
+}

@@ -1,0 +1,348 @@
+//! Operators' commands in the cell loop: through the gate, carried out or
+//! refused, journaled and answered. Acknowledge, reset, shelve, out of
+//! service and writes are here; forced transitions and the stop switch in
+//! `force.rs`. Refusals before a signature was verified are counted per
+//! source and reason and journaled as summaries (`summaries`).
+
+use std::future::Future;
+use std::time::Duration;
+
+use cellwatch_models::engine::Step;
+use tokio::sync::oneshot;
+
+use super::answers;
+use super::{
+    CellLoop, CommandOutcome, CommandRecord, Input, Stage, Then, Written, RECORD_FIELD_BYTES,
+    WRITE_TIMEOUT,
+};
+use crate::operator::refusals;
+use crate::operator::{clip, Action, Command, NotACommand, Refusal};
+use crate::sources::{Write, WriteRequest};
+
+impl CellLoop {
+    /// Until when a `shelve` command shelves (`None`: one-shot), or why
+    /// it may not.
+    pub(super) fn shelf(&self, cmd: &Command, now: u64) -> Result<Option<u64>, String> {
+        if cmd.reason.as_deref().unwrap_or("").trim().is_empty() {
+            return Err("a shelf needs a reason".into());
+        }
+        match cmd.value.as_deref() {
+            Some("once") => Ok(None),
+            Some(text) => {
+                let d = humantime::parse_duration(text).map_err(|_| {
+                    format!("shelve for '{text}': give a duration (30m, 2h) or once")
+                })?;
+                if d.is_zero() || d > self.max_shelve {
+                    return Err(format!(
+                        "shelve for {text}: at most {} on this cell",
+                        humantime::format_duration(self.max_shelve)
+                    ));
+                }
+                Ok(Some(now.saturating_add(
+                    d.as_millis().try_into().unwrap_or(u64::MAX),
+                )))
+            }
+            None => Err("shelve needs a duration (30m, 2h) or once".into()),
+        }
+    }
+
+    /// An operator's command: through the gate, then carried out (or
+    /// refused), journaled and answered on `reply`.
+    pub(super) async fn command(
+        &mut self,
+        source: String,
+        command: Result<Command, NotACommand>,
+        mut reply: oneshot::Sender<CommandOutcome>,
+    ) {
+        let now = self.clock.now_ms();
+        let cmd = match command {
+            Err(not) => {
+                let record = CommandRecord::refused(
+                    format!("not a command: {}", not.reason),
+                    String::new(),
+                    1,
+                );
+                // Counted by the services, which parse it.
+                let outcome = CommandOutcome::new(false, record.detail.clone());
+                return self
+                    .unauthenticated(&source, not.kind, record, outcome, reply, now)
+                    .await;
+            }
+            Ok(cmd) => cmd,
+        };
+        let target = match cmd.action {
+            Action::Write => cmd.tag.as_deref().unwrap_or(""),
+            Action::Force | Action::Stop => cmd.value.as_deref().unwrap_or(""),
+            _ => &cmd.alarm,
+        };
+        let base = CommandRecord::of(&cmd, target, Stage::Command);
+        let checked = self.gate.check(&cmd, now);
+        // The same signed command again (its answer lost, or the agent
+        // restarted): its original outcome, not a refusal as a replay.
+        if let Err(Refusal::Replay) = &checked {
+            match self.answers.retry(&cmd.nonce, reply) {
+                answers::Retry::Now(outcome) => {
+                    tracing::info!(operator = %cmd.operator, action = %cmd.action, accepted = outcome.accepted, "a command sent again: answered with its outcome");
+                    return;
+                }
+                answers::Retry::Later => return,
+                answers::Retry::Unknown(r) => reply = r,
+            }
+        }
+        if checked.is_ok() {
+            self.answers.begin(&cmd.nonce, now);
+        }
+        if let Err(refusal) = &checked {
+            if let Some(reason) = refusal.unauthenticated() {
+                let detail = refusal.to_string();
+                let record = CommandRecord {
+                    stage: Stage::Refused,
+                    ..base.saying(false, &detail)
+                };
+                let outcome = CommandOutcome {
+                    refused: Some(reason),
+                    ..CommandOutcome::new(false, detail)
+                };
+                return self
+                    .unauthenticated(&source, reason, record, outcome, reply, now)
+                    .await;
+            }
+        }
+        if matches!(cmd.action, Action::Force | Action::Stop) {
+            let checked = checked.map_err(|r| r.to_string());
+            return self.switch_command(cmd, checked, reply, now).await;
+        }
+        let verified = checked.is_ok();
+        let done = match checked {
+            Err(refusal) => Err(refusal.to_string()),
+            Ok(())
+                if (cmd.action != Action::Write && cmd.tag.is_some())
+                    || (!matches!(cmd.action, Action::Write | Action::Shelve)
+                        && cmd.value.is_some())
+                    || (!matches!(cmd.action, Action::Shelve | Action::OutOfService)
+                        && cmd.reason.is_some()) =>
+            {
+                Err(format!(
+                    "{} takes an alarm only, no tag, value or reason",
+                    cmd.action
+                ))
+            }
+            Ok(()) => match cmd.action {
+                Action::Ack => self
+                    .engine
+                    .acknowledge(&cmd.alarm, &cmd.operator, now)
+                    .map_err(|e| e.to_string()),
+                Action::Reset => self
+                    .engine
+                    .reset(&cmd.alarm, &cmd.operator, now)
+                    .map_err(|e| e.to_string()),
+                Action::Shelve => self.shelf(&cmd, now).and_then(|until| {
+                    self.engine
+                        .shelve(
+                            &cmd.alarm,
+                            &cmd.operator,
+                            &clip(cmd.reason.as_deref().unwrap_or(""), RECORD_FIELD_BYTES),
+                            until,
+                            now,
+                        )
+                        .map_err(|e| e.to_string())
+                }),
+                Action::Unshelve => self
+                    .engine
+                    .unshelve(&cmd.alarm, now)
+                    .map_err(|e| e.to_string()),
+                Action::OutOfService => match cmd.reason.as_deref().map(str::trim) {
+                    None | Some("") => Err("out-of-service needs a reason (--reason)".into()),
+                    Some(reason) => self
+                        .engine
+                        .take_out_of_service(
+                            &cmd.alarm,
+                            &cmd.operator,
+                            &clip(reason, RECORD_FIELD_BYTES),
+                            now,
+                        )
+                        .map_err(|e| e.to_string()),
+                },
+                Action::InService => self
+                    .engine
+                    .return_to_service(&cmd.alarm, now)
+                    .map_err(|e| e.to_string()),
+                // Taken by `switch_command` above.
+                Action::Force | Action::Stop => Err(format!("{} is not handled here", cmd.action)),
+                Action::Write => match self.write(&cmd) {
+                    Err(why) => Err(why),
+                    Ok((tag, value)) => {
+                        let record = CommandRecord {
+                            verified: true,
+                            ..base
+                        };
+                        return self.write_value(record, tag, value, reply).await;
+                    }
+                },
+            },
+        };
+        let (accepted, detail, step) = match done {
+            Ok(step) => (
+                true,
+                format!("{} {} by {}", cmd.action, cmd.alarm, cmd.operator),
+                step,
+            ),
+            Err(why) => (false, why, Step::default()),
+        };
+        let record = CommandRecord {
+            verified,
+            ..base.saying(accepted, &detail)
+        };
+        if !record.accepted {
+            tracing::warn!(detail = %record.detail, "operator command refused");
+        }
+        let outcome = CommandOutcome::new(record.accepted, record.detail.clone());
+        self.dispatch(now, Input::Command(record), step, 0).await;
+        let _ = reply.send(outcome);
+    }
+
+    /// A command refused before a known operator's signature was verified:
+    /// journaled as a row of its own only when it is the first of its
+    /// source and reason this minute, otherwise counted for the minute's
+    /// summary ([`refusals`]); the journal grows by at most two rows per
+    /// source, reason and minute whatever arrives.
+    pub(super) async fn unauthenticated(
+        &mut self,
+        source: &str,
+        reason: &'static str,
+        record: CommandRecord,
+        outcome: CommandOutcome,
+        reply: oneshot::Sender<CommandOutcome>,
+        now: u64,
+    ) {
+        let noted = self.refusals.note(source, reason, now);
+        self.summaries(noted.ended, now).await;
+        if noted.first {
+            tracing::warn!(source = %noted.source, reason, detail = %record.detail, "command refused before its signature was verified (more from this source this minute are only counted)");
+            let record = CommandRecord {
+                source: noted.source,
+                ..record
+            };
+            self.dispatch(now, Input::Command(record), Step::default(), 0)
+                .await;
+        }
+        let _ = reply.send(outcome);
+    }
+
+    /// Journals the summaries of refusals of windows that have ended.
+    pub(super) async fn summaries(&mut self, ended: Vec<refusals::Summary>, now: u64) {
+        for s in ended {
+            let record = CommandRecord::refused(s.detail(), s.source, s.count);
+            self.dispatch(now, Input::Command(record), Step::default(), 0)
+                .await;
+        }
+    }
+
+    /// What an authorised write writes: the tag's index and the value; or
+    /// why it is refused here (never sent) when the tag is unknown, the
+    /// command carries no value, or the source cannot write.
+    pub(super) fn write(&mut self, cmd: &Command) -> Result<(usize, String), String> {
+        if !cmd.alarm.is_empty() {
+            return Err("a write names a tag, not an alarm".into());
+        }
+        let (Some(tag), Some(value)) = (&cmd.tag, &cmd.value) else {
+            return Err("a write needs a tag and a value".into());
+        };
+        let Some(index) = self
+            .engine
+            .tag_index(&cellwatch_models::signal::Signal::new(tag))
+        else {
+            return Err(format!("no tag {}", clip(tag, RECORD_FIELD_BYTES)));
+        };
+        if self.writer.is_none() {
+            return Err("this cell's source takes no writes".into());
+        }
+        Ok((index, value.clone()))
+    }
+
+    /// Carries out an authorised write: its request row (with the nonce)
+    /// journaled and committed first, then the value handed to the source;
+    /// the PLC's answer comes back as a [`Written`] (the loop goes on
+    /// meanwhile), journaled as the result, and only then answered.
+    pub(super) async fn write_value(
+        &mut self,
+        record: CommandRecord,
+        tag: usize,
+        value: String,
+        reply: oneshot::Sender<CommandOutcome>,
+    ) {
+        let now = self.clock.now_ms();
+        let request = CommandRecord {
+            stage: Stage::Request,
+            ..record.clone().saying(
+                true,
+                &format!(
+                    "write {} to {} asked by {}",
+                    clip(&value, RECORD_FIELD_BYTES),
+                    record.alarm,
+                    record.operator
+                ),
+            )
+        };
+        self.dispatch(now, Input::Command(request), Step::default(), 0)
+            .await;
+        let written = self.write_when_journaled(tag, Write::Value(value), WRITE_TIMEOUT);
+        let back = self.written_tx.clone();
+        self.start_task(async move {
+            let (accepted, detail) = match written.await {
+                Ok(d) => (true, d),
+                Err(d) => (false, d),
+            };
+            let record = CommandRecord {
+                stage: Stage::Result,
+                ..record.saying(accepted, &detail)
+            };
+            let _ = back
+                .send(Written {
+                    record,
+                    reply,
+                    then: Then::Answer,
+                })
+                .await;
+        });
+    }
+
+    /// Hands `what` for tag `tag` to the source once every row dispatched
+    /// so far (the command's nonce among them) is committed, so that a
+    /// crash between the write and its journal row cannot make the same
+    /// signed command new again; resolves to what the PLC answered, within
+    /// `limit`. Not written while the journal cannot write.
+    pub(super) fn write_when_journaled(
+        &self,
+        tag: usize,
+        what: Write,
+        limit: Duration,
+    ) -> impl Future<Output = Result<String, String>> + Send + 'static {
+        let settled = self.settled();
+        let health = self.journal_health.clone();
+        let writer = self.writer.clone();
+        async move {
+            settled.await;
+            if let Some(why) = health.as_ref().and_then(|h| h.borrow().clone()) {
+                return Err(format!(
+                    "not written: the journal cannot write ({why}), and a write waits until its command is on disk"
+                ));
+            }
+            let Some(writer) = writer else {
+                return Err("this cell's source takes no writes".into());
+            };
+            let (reply, pending) = oneshot::channel();
+            writer
+                .try_send(WriteRequest { tag, what, reply })
+                .map_err(|_| "busy: other writes are waiting for the PLC".to_string())?;
+            match tokio::time::timeout(limit, pending).await {
+                Ok(Ok(r)) => r,
+                Ok(Err(_)) => Err("the source stopped before writing".into()),
+                Err(_) => Err(format!(
+                    "no answer from the PLC within {} s",
+                    limit.as_secs()
+                )),
+            }
+        }
+    }
+}
