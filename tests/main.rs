@@ -24,6 +24,7 @@ mod legacy;
 mod liveness;
 mod opcua;
 mod operators;
+mod quickstart;
 mod real_programs;
 mod report;
 mod restart;
