@@ -78,8 +78,9 @@ async fn killed_agent_keeps_every_committed_row() {
     );
 }
 
-/// The README's main command (`cellwatch demo`) prints a diagnosed alarm
-/// within 20 s of start, its bus is mutual TLS (a plain client gets
+/// The README's main command (`cellwatch demo`, on ports the system
+/// picks: two runs on one machine never collide) prints a diagnosed alarm
+/// on the simulator's first fault, its bus is mutual TLS (a plain client gets
 /// nothing), and the client commands of `docs/demo.md` work against it as
 /// written.
 #[test]
@@ -93,6 +94,7 @@ fn demo_prints_a_diagnosed_alarm_and_serves_the_readme_commands_over_tls() {
             "120s",
             "--state-dir",
             state.path().to_str().unwrap(),
+            "--any-ports",
         ])
         .current_dir(root())
         .stdout(std::process::Stdio::piped())
@@ -109,11 +111,13 @@ fn demo_prints_a_diagnosed_alarm_and_serves_the_readme_commands_over_tls() {
         .iter()
         .all(|w| seen.iter().any(|l: &String| l.contains(w)))
     {
-        match lines.recv_timeout(Duration::from_secs(20).saturating_sub(start.elapsed())) {
+        // The first fault comes on the scenario's schedule; the bound only
+        // ends a demo that never shows it.
+        match lines.recv_timeout(Duration::from_secs(90).saturating_sub(start.elapsed())) {
             Ok(line) => seen.push(line),
             Err(_) => {
                 let _ = demo.kill();
-                panic!("no diagnosed ESE within 20 s:\n{}", seen.join("\n"));
+                panic!("no diagnosed ESE:\n{}", seen.join("\n"));
             }
         }
     }

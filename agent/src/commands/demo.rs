@@ -76,13 +76,18 @@ impl DemoBus {
         self.entries += &key.trust_entry();
         self.trust = crate::bus::envelope::Trust::parse("the demo's trust", &self.entries)
             .map_err(|e| Failure::Runtime(e.to_string()))?;
+        Ok(())
+    }
+
+    /// Notes where a started agent's session listens, for the CLI.
+    async fn listening(&mut self, agent: &agent::Agent) {
         self.endpoints.extend(
-            c.zenoh
-                .listen
+            agent
+                .zenoh_locators()
+                .await
                 .iter()
                 .map(|e| e.replace("0.0.0.0", "127.0.0.1")),
         );
-        Ok(())
     }
 
     /// Writes the CLI's files into `state`: `client.json5` (every agent's
@@ -178,6 +183,9 @@ fn endpoint_addr(endpoint: &str) -> Result<std::net::SocketAddr, Failure> {
 pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Failure> {
     let mut signals = StopSignals::listen()?;
     let mut c = load(&args.config)?;
+    if args.any_ports {
+        any_ports(&mut c);
+    }
     let state: PathBuf = args.state_dir.clone();
     std::fs::create_dir_all(&state)
         .map_err(|e| Failure::Runtime(format!("cannot create {}: {e}", state.display())))?;
@@ -202,6 +210,14 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     .await
     .map_err(Failure::runtime)?;
     trust_each_other(&c.cell, &ua, &sim_pki)?;
+    opcua_of(&mut c, &args.config)?.endpoint = sim.endpoint();
+    let keys = CellKeys::new(&c.zenoh.prefix);
+    let journal = c.journal.path.clone();
+    let (tx, mut rx) = mpsc::unbounded_channel();
+    let cnc_agent = agent::start(c.clone(), Some(tx.clone()))
+        .await
+        .map_err(start_failure)?;
+    demo_bus.listening(&cnc_agent).await;
     let io = Failure::output;
     writeln!(
         out,
@@ -215,7 +231,6 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         sim.endpoint()
     )
     .map_err(io)?;
-    let keys = CellKeys::new(&c.zenoh.prefix);
     writeln!(
         out,
         "  Zenoh           {}, {}, {}, {} (listening on {})",
@@ -223,13 +238,13 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         keys.state(),
         keys.service(Service::History),
         keys.service(Service::Snapshot),
-        c.zenoh.listen.join(", ")
+        cnc_agent.zenoh_locators().await.join(", ")
     )
     .map_err(io)?;
-    if let Some(m) = c.metrics {
+    if let Some(m) = cnc_agent.metrics_addr() {
         writeln!(out, "  metrics         http://{m}/metrics").map_err(io)?;
     }
-    writeln!(out, "  journal         {}", c.journal.path.display()).map_err(io)?;
+    writeln!(out, "  journal         {}", journal.display()).map_err(io)?;
     writeln!(
         out,
         "  bus             mutual TLS, certificates from the CA in {}, everything signed by its cell's agent; clients: --zenoh-config {} --trust {}",
@@ -246,7 +261,6 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     )
     .map_err(io)?;
     writeln!(out, "  faults injected every 24 s: Y over-travel limit switch (ESE), cycle start in JOG mode (CSD)").map_err(io)?;
-    let (tx, mut rx) = mpsc::unbounded_channel();
     let (note_tx, mut note_rx) = mpsc::unbounded_channel::<String>();
     // The active alarms of every cell, for the robot's scenario to wait on.
     let (active_tx, active_rx) = tokio::sync::watch::channel(std::collections::HashSet::new());
@@ -254,6 +268,9 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         None
     } else {
         let mut l = load(&args.line_config)?;
+        if args.any_ports {
+            any_ports(&mut l);
+        }
         opcua_of(&mut l, &args.line_config)?.pki_dir = state.join("line-agent-pki");
         let lua = opcua_of(&mut l, &args.line_config)?.clone();
         l.journal.path = state.join(format!("{}.sqlite", l.cell));
@@ -272,19 +289,20 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
             .await
             .map_err(Failure::runtime)?;
         trust_each_other(&l.cell, &lua, &line_pki)?;
+        opcua_of(&mut l, &args.line_config)?.endpoint = line_sim.endpoint();
         let timers: usize = l.timers.iter().map(|t| t.model.transitions.len()).sum();
-        writeln!(
-            out,
-            "  cell {}: body-shop line on {}, {timers} transition timers; one motion made slow early on (Zenoh {}, metrics {})",
-            l.cell,
-            line_sim.endpoint(),
-            l.zenoh.listen.join(", "),
-            l.metrics.map_or_else(|| "off".to_string(), |m| m.to_string())
-        )
-        .map_err(io)?;
+        let cell = l.cell.clone();
         let line_agent = agent::start(l, Some(tx.clone()))
             .await
             .map_err(start_failure)?;
+        demo_bus.listening(&line_agent).await;
+        writeln!(
+            out,
+            "  cell {cell}: body-shop line on {}, {timers} transition timers; one motion made slow early on ({})",
+            line_sim.endpoint(),
+            listening(&line_agent).await
+        )
+        .map_err(io)?;
         let player_sim = line_sim.clone();
         let notes = note_tx.clone();
         let line_player = tokio::spawn(async move {
@@ -307,6 +325,9 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         None
     } else {
         let mut m = load(&args.moulding_config)?;
+        if args.any_ports {
+            any_ports(&mut m);
+        }
         let addr = match m.legacy.as_ref().map(|l| &l.transport) {
             Some(crate::sources::legacy::Transport::Tcp(a)) => a.parse::<std::net::SocketAddr>().map_err(|_| {
                 Failure::Input(format!(
@@ -330,17 +351,20 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         let (local, server) = bus.listen_tcp(addr).await.map_err(|e| {
             Failure::Runtime(format!("cannot serve the moulding bus on {addr}: {e}"))
         })?;
-        writeln!(
-            out,
-            "  cell {}: injection-moulding units 1-3 on an @ bus at tcp {local}; a door, a mould change, a silent gateway every 40 s (Zenoh {}, metrics {})",
-            m.cell,
-            m.zenoh.listen.join(", "),
-            m.metrics.map_or_else(|| "off".to_string(), |a| a.to_string())
-        )
-        .map_err(io)?;
+        if let Some(l) = &mut m.legacy {
+            l.transport = crate::config::legacy::Transport::Tcp(local.to_string());
+        }
+        let cell = m.cell.clone();
         let agent = agent::start(m, Some(tx.clone()))
             .await
             .map_err(start_failure)?;
+        demo_bus.listening(&agent).await;
+        writeln!(
+            out,
+            "  cell {cell}: injection-moulding units 1-3 on an @ bus at tcp {local}; a door, a mould change, a silent gateway every 40 s ({})",
+            listening(&agent).await
+        )
+        .map_err(io)?;
         let notes = note_tx.clone();
         let player_bus = bus.clone();
         let player = tokio::spawn(async move {
@@ -372,9 +396,8 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     writeln!(out).map_err(io)?;
     out.flush().map_err(io)?;
 
-    let agent = agent::start(c, Some(tx.clone()))
-        .await
-        .map_err(start_failure)?;
+    let agent = cnc_agent;
+    drop(c);
     let scenario_sim = sim.clone();
     let player = tokio::spawn(async move {
         Scenario::demo()
@@ -464,6 +487,9 @@ async fn demo_robot(
     let state = demo_bus.state.clone();
     let state = state.as_path();
     let mut r = load(&args.robot_config)?;
+    if args.any_ports {
+        any_ports(&mut r);
+    }
     opcua_of(&mut r, &args.robot_config)?.pki_dir = state.join("robot-agent-pki");
     let rua = opcua_of(&mut r, &args.robot_config)?.clone();
     r.journal.path = state.join(format!("{}.sqlite", r.cell));
@@ -485,19 +511,11 @@ async fn demo_robot(
     .await
     .map_err(Failure::runtime)?;
     trust_each_other(&r.cell, &rua, &robot_pki)?;
+    opcua_of(&mut r, &args.robot_config)?.endpoint = robot.endpoint();
     let scanning = tokio::spawn({
         let robot = robot.clone();
         async move { robot.run().await }
     });
-    writeln!(
-        out,
-        "  cell {}: paper 004's LCD-glass robot on {}, charts F1 and F2 supervised; S2 then S15 stuck, forced on by operator demo (Zenoh {}, metrics {})",
-        r.cell,
-        robot.endpoint(),
-        r.zenoh.listen.join(", "),
-        r.metrics.map_or_else(|| "off".to_string(), |m| m.to_string())
-    )
-    .map_err(Failure::output)?;
     // The stuck alarm of each step, by CHART.STEP.
     let alarm_of: std::collections::HashMap<String, String> = r
         .sfc
@@ -520,14 +538,22 @@ async fn demo_robot(
         .map_err(|e| Failure::Runtime(format!("cannot read {}: {e}", operator_key.display())))?;
     let key = crate::operator::OperatorKey::parse(&operator_key.display().to_string(), &key_text)
         .map_err(Failure::Runtime)?;
-    let connect: Vec<String> = r
-        .zenoh
-        .listen
+    let cell_id = r.cell.clone();
+    let agent = agent::start(r, Some(tx)).await.map_err(start_failure)?;
+    demo_bus.listening(&agent).await;
+    writeln!(
+        out,
+        "  cell {cell_id}: paper 004's LCD-glass robot on {}, charts F1 and F2 supervised; S2 then S15 stuck, forced on by operator demo ({})",
+        robot.endpoint(),
+        listening(&agent).await
+    )
+    .map_err(Failure::output)?;
+    let connect: Vec<String> = agent
+        .zenoh_locators()
+        .await
         .iter()
         .map(|e| e.replace("0.0.0.0", "127.0.0.1"))
         .collect();
-    let cell_id = r.cell.clone();
-    let agent = agent::start(r, Some(tx)).await.map_err(start_failure)?;
     // Connected once the agent listens.
     let bus = crate::bus::open(&crate::config::ZenohConfig {
         mode: crate::config::ZenohMode::Peer,
@@ -666,4 +692,44 @@ pub(crate) struct DemoArgs {
     /// Stop after this long (e.g. 60s); default: until Ctrl-C.
     #[arg(long, value_parser = crate::commands::agent::parse_duration)]
     pub(crate) duration: Option<std::time::Duration>,
+    /// Serve every simulated PLC, bus endpoint and metrics port on a port
+    /// the system picks instead of the configurations' (printed as they
+    /// start; the client file in the state directory says where the agents
+    /// listen): a second demo beside a first on one machine.
+    #[arg(long)]
+    pub(crate) any_ports: bool,
+}
+
+/// With `--any-ports`: every address `c` listens or serves on, on port 0.
+fn any_ports(c: &mut CellConfig) {
+    let port_zero = |endpoint: &str| match endpoint.rsplit_once(':') {
+        Some((host, port)) => {
+            let rest = port.find('/').map_or("", |i| &port[i..]);
+            format!("{host}:0{rest}")
+        }
+        None => endpoint.to_string(),
+    };
+    c.zenoh.listen = c.zenoh.listen.iter().map(|e| port_zero(e)).collect();
+    if let Some(m) = &mut c.metrics {
+        m.set_port(0);
+    }
+    if let Some(ua) = &mut c.opcua {
+        ua.endpoint = port_zero(&ua.endpoint);
+    }
+    if let Some(l) = &mut c.legacy {
+        if let crate::config::legacy::Transport::Tcp(a) = &mut l.transport {
+            *a = port_zero(a);
+        }
+    }
+}
+
+/// Where a started agent listens, as the demo prints it.
+async fn listening(agent: &agent::Agent) -> String {
+    format!(
+        "Zenoh {}, metrics {}",
+        agent.zenoh_locators().await.join(", "),
+        agent
+            .metrics_addr()
+            .map_or_else(|| "off".to_string(), |m| format!("http://{m}/metrics"))
+    )
 }
