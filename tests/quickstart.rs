@@ -13,7 +13,7 @@
 //! as printed, `history`, `ack` — is the page's own text, and a change of
 //! the page's blocks fails here until this test follows it.
 
-use std::io::{BufRead, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, Output, Stdio};
 use std::sync::mpsc::Receiver;
@@ -69,19 +69,6 @@ impl Drop for Running {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
-}
-
-/// Lines of a child's output, as they come.
-fn lines(out: impl std::io::Read + Send + 'static) -> Receiver<String> {
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        for line in std::io::BufReader::new(out).lines().map_while(Result::ok) {
-            if tx.send(line).is_err() {
-                break;
-            }
-        }
-    });
-    rx
 }
 
 /// Waits for the first line of `rx` for which `f` says something.
@@ -145,7 +132,7 @@ impl Desk {
             .stdout(Stdio::piped())
             .spawn()
             .unwrap();
-        let rx = lines(child.stdout.take().unwrap());
+        let rx = crate::util::lines_of(&mut child);
         (Running { child }, rx)
     }
 
@@ -171,7 +158,7 @@ impl Desk {
             .spawn()
             .unwrap();
         let stdin = child.stdin.take().unwrap();
-        let rx = lines(child.stdout.take().unwrap());
+        let rx = crate::util::lines_of(&mut child);
         let endpoint = wait_for(&rx, "simulator endpoint", |l| {
             l.strip_prefix("simulated CNC on ")
                 .and_then(|r| r.split_whitespace().next())

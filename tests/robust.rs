@@ -107,6 +107,13 @@ async fn a_panicking_cell_loop_ends_the_agent_after_flushing_its_journal_and_tok
     })
     .await;
     assert_eq!(agents_alive(&client, "m01ps0004").await, 1);
+    // The client hears the agent's token come and go.
+    let tokens = client
+        .liveliness()
+        .declare_subscriber("cellwatch/m01ps0004/agent/*")
+        .history(true)
+        .await
+        .unwrap();
 
     sim.set("X0.06", false).unwrap();
     let mut seen = Vec::new();
@@ -143,6 +150,18 @@ async fn a_panicking_cell_loop_ends_the_agent_after_flushing_its_journal_and_tok
             .any(|p| serde_json::from_str::<AlarmPayload>(p).unwrap() == raised),
         "{on_bus} not in {payloads:?}"
     );
+    // The token was undeclared as the loop closed its sinks, before the
+    // agent is stopped: the client hears it leave (over QUIC that can take
+    // until its lease ends), and then finds no agent for the cell.
+    loop {
+        let sample = tokio::time::timeout(Duration::from_secs(30), tokens.recv_async())
+            .await
+            .expect("the agent's token is undeclared before the agent is stopped")
+            .unwrap();
+        if sample.kind() == zenoh::sample::SampleKind::Delete {
+            break;
+        }
+    }
     assert_eq!(agents_alive(&client, "m01ps0004").await, 0);
     // The rest stops; the panic, already reported, is not raised again.
     agent.stop().await;
