@@ -18,7 +18,7 @@ use crate::agent::alarm_until;
 use crate::spawned::kim;
 use crate::util::root;
 
-const CELL: &str = "robot01";
+pub(crate) const CELL: &str = "robot01";
 
 /// A signed command of `key`'s operator.
 fn signed(key: &OperatorKey, action: Action, value: &str) -> Command {
@@ -179,7 +179,7 @@ impl RobotCell {
 }
 
 /// The supervision of step `name` of chart `chart` set to `ms`.
-fn supervise(c: &mut config::CellConfig, chart: usize, name: &str, ms: u64) {
+pub(crate) fn supervise(c: &mut config::CellConfig, chart: usize, name: &str, ms: u64) {
     let step = c.sfc[0].sfc.charts[chart]
         .steps
         .iter_mut()

@@ -10,6 +10,7 @@ use crate::commands::agent::{RunArgs, ValidateArgs};
 use crate::commands::bus::{
     AlarmsArgs, CommandArgs, ForceArgs, HistoryArgs, ReasonArgs, ShelveArgs, StopArgs, WriteArgs,
 };
+use crate::commands::console::ConsoleArgs;
 use crate::commands::demo::DemoArgs;
 use crate::commands::discover::DiscoverArgs;
 use crate::commands::explain::ExplainArgs;
@@ -72,6 +73,11 @@ enum Command {
     /// Serve a simulated cell over OPC UA.
     #[command(subcommand)]
     Simulate(SimulateCommand),
+    /// Serve the operators' web console for the plant: every cell's state
+    /// and alarms live, each alarm's diagnosis, the cells' history, and
+    /// operators' commands signed in the browser with their own key and
+    /// forwarded to the cell's agent (the console holds no operator key).
+    Console(ConsoleArgs),
     /// Show active alarms of running agents, or follow alarm events (Zenoh).
     Alarms(AlarmsArgs),
     /// Show a cell's machine-state, alarm and command history (Zenoh).
@@ -234,6 +240,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::Simulate(SimulateCommand::Moulding(args)) => {
                 commands::simulate::moulding(&args, out).await
             }
+            Command::Console(args) => commands::console::run(&args, out).await,
             Command::Alarms(args) => commands::bus::alarms(&args, out).await,
             Command::History(args) => commands::bus::history(&args, out).await,
             Command::Ack(args) => commands::bus::command(Action::Ack, &args, out).await,

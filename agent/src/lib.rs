@@ -29,6 +29,8 @@
 //!   given it (below both the loop and the sinks).
 //! - [`journal`]: the SQLite journal, a store: writes, restores, history
 //!   pages, report inputs, the command rows' hash chain.
+//! - [`console`]: the operators' web console (`cellwatch console`): the
+//!   plant's cells and alarms live in a browser, commands signed there.
 //! - [`client`]: the bus client (ask agents, believe only what the trust
 //!   file verifies), for the CLI and any plant-side process.
 //! - [`bus`]: the bus itself: key layout, signed envelope, sessions,
@@ -49,6 +51,7 @@ pub mod client;
 pub mod clock;
 mod commands;
 pub mod config;
+pub mod console;
 pub mod journal;
 pub mod metrics;
 pub mod operator;

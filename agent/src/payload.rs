@@ -354,4 +354,144 @@ pub struct SnapshotPayload {
     pub alarms: Vec<AlarmPayload>,
     /// The values at the last fault.
     pub last_fault: Option<LastFault>,
+    /// The cell's supervised charts (paper 004), as a console draws them;
+    /// their steps' flags and conditions' operands are among `tags`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub charts: Vec<ChartPayload>,
+}
+
+/// A supervised chart in the snapshot: its steps and transitions, each
+/// transition's condition and the contacts it reads.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ChartPayload {
+    /// The `[[checks.sfc]]` id.
+    pub check: String,
+    /// The chart's name (`F1`).
+    pub name: String,
+    /// Its initial step.
+    pub initial: Option<String>,
+    /// Its steps, in the chart's order.
+    pub steps: Vec<StepPayload>,
+    /// Its transitions.
+    pub transitions: Vec<TransitionPayload>,
+}
+
+/// A step of a chart.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct StepPayload {
+    /// Its name (`S2`).
+    pub name: String,
+    /// The tag address true while it is active.
+    pub flag: String,
+    /// What it does.
+    pub comment: Option<String>,
+    /// Its supervision time, ms.
+    pub supervision_ms: Option<u64>,
+    /// Whether it is active now; `null` while its flag is unknown.
+    pub active: Option<bool>,
+    /// The id of its stuck alarm.
+    pub alarm: String,
+}
+
+/// A transition of a chart.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TransitionPayload {
+    /// Its id in its chart (`t3`).
+    pub id: String,
+    /// The steps it leaves, `CHART.STEP`.
+    pub from: Vec<String>,
+    /// The steps it activates, `CHART.STEP` (another chart's: a jump).
+    pub to: Vec<String>,
+    /// Its condition (`+` or, `*` and, `-` not).
+    pub condition: String,
+    /// The contacts the condition reads.
+    pub operands: Vec<OperandPayload>,
+    /// Whether the condition holds now; `null` while an operand is unknown.
+    pub holds: Option<bool>,
+    /// What it waits for.
+    pub comment: Option<String>,
+    /// Whether an operator may force it (declared forcible).
+    pub forcible: bool,
+}
+
+/// A contact a transition's condition reads.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct OperandPayload {
+    /// Its tag address.
+    pub address: String,
+    /// Its comment (the I/O list's).
+    pub comment: Option<String>,
+    /// Its value now; `null` while unknown.
+    pub value: Option<bool>,
+}
+
+impl ChartPayload {
+    /// Every chart of a `[[checks.sfc]]` with id `check`, its forcible
+    /// transitions, its contacts' comments, and each contact's value now.
+    pub fn of(
+        check: &str,
+        sfc: &cellwatch_models::sfc::Sfc,
+        forcible: &[(String, String)],
+        comments: &cellwatch_models::comments::CommentDb,
+        value: &dyn Fn(&cellwatch_models::signal::Signal) -> Option<bool>,
+    ) -> Vec<ChartPayload> {
+        use cellwatch_models::sfc::StepRef;
+        let holds = |e: &cellwatch_models::expr::Expr| {
+            let known = e.signals().iter().all(|s| value(s).is_some());
+            known.then(|| e.eval(&|s| value(s).unwrap_or(false)))
+        };
+        let name = |r: &StepRef| format!("{}.{}", sfc.charts[r.chart].name, sfc.step(*r).name);
+        sfc.charts
+            .iter()
+            .enumerate()
+            .map(|(ci, c)| ChartPayload {
+                check: check.into(),
+                name: c.name.clone(),
+                initial: c.initial.map(|i| c.steps[i].name.clone()),
+                steps: c
+                    .steps
+                    .iter()
+                    .enumerate()
+                    .map(|(si, st)| StepPayload {
+                        name: st.name.clone(),
+                        flag: st.flag.to_string(),
+                        comment: st.comment.clone(),
+                        supervision_ms: st.supervision_ms,
+                        active: value(&st.flag),
+                        alarm: cellwatch_models::sfc::supervise::alarm_id(
+                            check,
+                            sfc,
+                            StepRef {
+                                chart: ci,
+                                step: si,
+                            },
+                        ),
+                    })
+                    .collect(),
+                transitions: c
+                    .transitions
+                    .iter()
+                    .map(|t| TransitionPayload {
+                        id: t.id.clone(),
+                        from: t.from.iter().map(name).collect(),
+                        to: t.to.iter().map(name).collect(),
+                        condition: t.condition.to_string(),
+                        operands: t
+                            .condition
+                            .signals()
+                            .iter()
+                            .map(|s| OperandPayload {
+                                address: s.to_string(),
+                                comment: comments.get(s).map(str::to_string),
+                                value: value(s),
+                            })
+                            .collect(),
+                        holds: holds(&t.condition),
+                        comment: t.comment.clone(),
+                        forcible: forcible.iter().any(|(fc, ft)| *fc == c.name && *ft == t.id),
+                    })
+                    .collect(),
+            })
+            .collect()
+    }
 }

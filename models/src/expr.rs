@@ -108,6 +108,49 @@ impl Expr {
     }
 }
 
+/// The expression as [`Expr::parse`] reads it: `+` or, `*` and, `-` not,
+/// parentheses where an `or` is inside an `and` or a `not`.
+impl std::fmt::Display for Expr {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let inner = |e: &Expr, f: &mut std::fmt::Formatter<'_>| match e {
+            Expr::Or(items) if items.len() > 1 => write!(f, "({e})"),
+            Expr::And(items) if items.len() > 1 => write!(f, "({e})"),
+            _ => write!(f, "{e}"),
+        };
+        match self {
+            Expr::Const(true) => f.write_str("TRUE"),
+            Expr::Const(false) => f.write_str("FALSE"),
+            Expr::Lit(s, false) => write!(f, "{s}"),
+            Expr::Lit(s, true) => write!(f, "-{s}"),
+            Expr::Not(e) => {
+                f.write_str("-")?;
+                inner(e, f)
+            }
+            Expr::And(items) => {
+                for (i, e) in items.iter().enumerate() {
+                    if i > 0 {
+                        f.write_str(" * ")?;
+                    }
+                    match e {
+                        Expr::Or(o) if o.len() > 1 => write!(f, "({e})")?,
+                        _ => write!(f, "{e}")?,
+                    }
+                }
+                Ok(())
+            }
+            Expr::Or(items) => {
+                for (i, e) in items.iter().enumerate() {
+                    if i > 0 {
+                        f.write_str(" + ")?;
+                    }
+                    write!(f, "{e}")?;
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
 struct Parser {
     tokens: Vec<(usize, char)>,
     at: usize,
@@ -273,6 +316,20 @@ mod tests {
             Expr::parse("a b").unwrap_err(),
             "unexpected 'b' at character 3"
         );
+    }
+
+    #[test]
+    fn it_prints_as_it_is_read() {
+        for text in [
+            "X4 * -Y2 * (X1 * -X2 + -X3) * -Y1",
+            "-(a + b)",
+            "%IX0.0.3 * -(%IX0.1.0 * S2.X)",
+            "TEMP > 80.5 + TRUE",
+        ] {
+            let e = Expr::parse(text).unwrap();
+            assert_eq!(e.to_string(), text);
+            assert_eq!(Expr::parse(&e.to_string()).unwrap(), e);
+        }
     }
 
     #[test]

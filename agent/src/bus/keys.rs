@@ -89,9 +89,27 @@ impl CellKeys {
     }
 }
 
+/// The cell a key under `root` belongs to (`<root>/<cell>/…`), if it is
+/// under `root` and names one.
+pub fn cell_of<'k>(root: &str, key: &'k str) -> Option<&'k str> {
+    let rest = key
+        .strip_prefix(root.trim_end_matches('/'))?
+        .strip_prefix('/')?;
+    let cell = rest.split('/').next()?;
+    (!cell.is_empty() && rest.len() > cell.len()).then_some(cell)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_cell_of_a_key() {
+        assert_eq!(cell_of("cellwatch", "cellwatch/m01/agent/ab"), Some("m01"));
+        assert_eq!(cell_of("plant/a", "plant/a/m01/state"), Some("m01"));
+        assert_eq!(cell_of("cellwatch", "cellwatchx/m01/state"), None);
+        assert_eq!(cell_of("cellwatch", "cellwatch/m01"), None);
+    }
 
     #[test]
     fn the_layout_under_a_prefix() {

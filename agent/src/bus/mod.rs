@@ -23,6 +23,6 @@ pub mod keys;
 mod session;
 
 pub use session::{
-    agent_access_control, open, open_agent, secure, session_config, ZenohError,
-    CLIENT_CONNECT_TIMEOUT_MS, MAX_MESSAGE_BYTES,
+    agent_access_control, open, open_agent, open_console, secure, session_config, ZenohError,
+    CLIENT_CONNECT_TIMEOUT_MS, CONSOLE_MAX_MESSAGE_BYTES, MAX_MESSAGE_BYTES,
 };

@@ -288,6 +288,56 @@ pub async fn open_agent(c: &ZenohConfig) -> Result<Session, ZenohError> {
     open_config(cfg).await
 }
 
+/// Opens the console's session: a client (as [`open`]) that accepts no
+/// message over [`CONSOLE_MAX_MESSAGE_BYTES`] and, by its own access
+/// control, sends no put, delete, answer, queryable or liveliness token:
+/// it reads the bus and asks agents (forwarding operators' signed
+/// commands), nothing more.
+///
+/// # Errors
+/// As [`open`].
+pub async fn open_console(c: &ZenohConfig) -> Result<Session, ZenohError> {
+    let mut cfg = session_config(c)?;
+    if !c.connect.is_empty() {
+        set(
+            &mut cfg,
+            "connect/timeout_ms",
+            CLIENT_CONNECT_TIMEOUT_MS.to_string(),
+        )?;
+        set(&mut cfg, "connect/exit_on_failure", "true".into())?;
+    }
+    set(
+        &mut cfg,
+        "transport/link/rx/max_message_size",
+        CONSOLE_MAX_MESSAGE_BYTES.to_string(),
+    )?;
+    set(
+        &mut cfg,
+        "access_control",
+        r#"{
+  enabled: true,
+  default_permission: "allow",
+  rules: [
+    {
+      id: "the-console-only-reads-and-asks",
+      messages: ["put", "delete", "declare_queryable", "reply", "liveliness_token"],
+      flows: ["egress"],
+      permission: "deny",
+      key_exprs: ["**", "**/@adv/**"],
+    },
+  ],
+  subjects: [{ id: "anyone" }],
+  policies: [{ rules: ["the-console-only-reads-and-asks"], subjects: ["anyone"] }],
+}"#
+        .into(),
+    )?;
+    open_config(cfg).await
+}
+
+/// The largest message the console's session accepts: a snapshot of a
+/// cell with many tags and alarms is larger than an agent's limit.
+pub const CONSOLE_MAX_MESSAGE_BYTES: usize = 8 << 20;
+
 /// The largest message the agent's Zenoh session accepts; a larger one is
 /// dropped by Zenoh before it reaches the agent.
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;

@@ -36,7 +36,8 @@ use crate::clock::{rfc3339, Clock};
 use crate::operator::refusals::Refusals;
 use crate::operator::Gate;
 use crate::payload::{
-    AlarmPayload, LastFault, Quality, SnapshotPayload, StatePayload, TagValue, SNAPSHOT_SCHEMA,
+    AlarmPayload, ChartPayload, LastFault, Quality, SnapshotPayload, StatePayload, TagValue,
+    SNAPSHOT_SCHEMA,
 };
 use crate::sinks::{Settled, Sink};
 use crate::sources::{SourceEvent, WriteSender};
@@ -571,6 +572,22 @@ impl CellLoop {
             value: v.map(|v| json_value(&v)),
         };
         let now = self.clock.now_ms();
+        // A contact's value now, by its address (the charts' signals);
+        // unknown while its quality is bad.
+        let contacts: std::collections::HashMap<&str, Option<bool>> = tags
+            .iter()
+            .zip(self.engine.all_values())
+            .enumerate()
+            .map(|(i, (t, v))| {
+                let b = match v {
+                    Some(Value::Bool(b)) if !bad.contains(&i) => Some(b),
+                    _ => None,
+                };
+                (t.address.name(), b)
+            })
+            .collect();
+        let contact =
+            |s: &cellwatch_models::signal::Signal| contacts.get(s.name()).copied().flatten();
         SnapshotPayload {
             schema: SNAPSHOT_SCHEMA.into(),
             cell: self.cell.clone(),
@@ -603,6 +620,12 @@ impl CellLoop {
                     .map(|(i, v)| value(i, v.clone(), false))
                     .collect(),
             }),
+            charts: self
+                .forcing
+                .sets
+                .iter()
+                .flat_map(|s| ChartPayload::of(&s.id, &s.sfc, &s.forcible, &s.comments, &contact))
+                .collect(),
         }
     }
 }

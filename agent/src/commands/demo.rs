@@ -90,6 +90,44 @@ impl DemoBus {
         );
     }
 
+    /// Starts the web console on the demo's bus (its own certificate,
+    /// every agent's endpoint, the trust file, the operators file), on
+    /// loopback.
+    async fn console(
+        &self,
+        listen: std::net::SocketAddr,
+        operators: &Path,
+    ) -> Result<crate::console::Console, Failure> {
+        if !listen.ip().is_loopback() {
+            return Err(Failure::Input(format!(
+                "--console {listen}: the demo serves its console on loopback only (plain HTTP)"
+            )));
+        }
+        let cfg = crate::console::ConsoleConfig {
+            listen,
+            tls: None,
+            bus: crate::config::ZenohConfig {
+                mode: crate::config::ZenohMode::Peer,
+                connect: self.endpoints.clone(),
+                listen: Vec::new(),
+                prefix: String::new(),
+                multicast_scouting: false,
+                tls: Some(bus_tls(&self.state, "console")?),
+                config_file: None,
+                plain: false,
+                signing_key: None,
+            },
+            trust: self.state.join("trust.toml"),
+            root: crate::config::DEFAULT_ROOT.into(),
+            operators_file: Some(operators.to_path_buf()),
+            areas: std::collections::BTreeMap::new(),
+            max_alarms: crate::console::config::DEFAULT_MAX_ALARMS,
+        };
+        crate::console::Console::start(&cfg)
+            .await
+            .map_err(|e| Failure::Runtime(format!("the console: {e}")))
+    }
+
     /// Writes the CLI's files into `state`: `client.json5` (every agent's
     /// endpoint, the CA, operator `demo`'s certificate) and `trust.toml`
     /// (every agent's public key). Returns their paths.
@@ -393,6 +431,23 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         )
     };
     demo_bus.write()?;
+    let console = if args.no_console {
+        None
+    } else {
+        let mut listen = args.console;
+        if args.any_ports {
+            listen.set_port(0);
+        }
+        let console = demo_bus.console(listen, &secrets).await?;
+        writeln!(
+            out,
+            "  console         {} (load {} in the page to act as operator demo)",
+            console.url(),
+            operator_key.display()
+        )
+        .map_err(io)?;
+        Some(console)
+    };
     writeln!(out).map_err(io)?;
     out.flush().map_err(io)?;
 
@@ -440,6 +495,9 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         out.flush().map_err(io)?;
     }
     player.abort();
+    if let Some(console) = console {
+        console.stop().await;
+    }
     agent.stop().await;
     sim.stop();
     if let Some((robot, agent, scanning, player)) = robot {
@@ -698,6 +756,13 @@ pub(crate) struct DemoArgs {
     /// listen): a second demo beside a first on one machine.
     #[arg(long)]
     pub(crate) any_ports: bool,
+    /// Where the operators' web console serves (plain HTTP, loopback
+    /// only; port 0 with --any-ports).
+    #[arg(long, default_value = "127.0.0.1:8470", value_name = "IP:PORT")]
+    pub(crate) console: std::net::SocketAddr,
+    /// No web console.
+    #[arg(long)]
+    pub(crate) no_console: bool,
 }
 
 /// With `--any-ports`: every address `c` listens or serves on, on port 0.

@@ -5,6 +5,7 @@
 pub(crate) mod agent;
 pub(crate) mod audit;
 pub(crate) mod bus;
+pub(crate) mod console;
 pub(crate) mod demo;
 pub(crate) mod discover;
 pub(crate) mod explain;

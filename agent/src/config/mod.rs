@@ -19,7 +19,7 @@ mod files;
 pub mod legacy;
 pub mod node;
 mod opcua;
-mod position;
+pub(crate) mod position;
 mod problems;
 mod raw;
 mod tags;

@@ -529,6 +529,24 @@ impl OperatorKeys {
     pub fn is_empty(&self) -> bool {
         self.operators.is_empty()
     }
+
+    /// Every operator, by name: the public key (hex) and the actions
+    /// allowed.
+    pub fn entries(&self) -> Vec<(String, String, Vec<Action>)> {
+        let mut entries: Vec<_> = self
+            .operators
+            .iter()
+            .map(|(name, o)| {
+                (
+                    name.clone(),
+                    hex::encode(o.key.to_bytes()),
+                    o.allow.iter().copied().collect(),
+                )
+            })
+            .collect();
+        entries.sort();
+        entries
+    }
 }
 
 /// Checks signatures and permissions, and remembers nonces.

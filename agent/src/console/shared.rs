@@ -1,0 +1,63 @@
+//! What the console's parts share: the plant behind its lock, the channel
+//! of changes the pages follow, the bus client, the operators' public
+//! permissions, and the cells to snapshot again.
+
+use std::sync::{Arc, Mutex};
+
+use tokio::sync::broadcast;
+
+use super::plant::{Change, Plant};
+use crate::client::BusClient;
+
+/// Why the console could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum ConsoleError {
+    /// A file it needs is missing or wrong (the trust file, the operators
+    /// file, the HTTPS certificate).
+    #[error("{0}")]
+    Input(String),
+    /// The bus or the listening socket could not be had.
+    #[error("{0}")]
+    Runtime(String),
+}
+
+/// How many changes a page may fall behind before it is sent everything
+/// again.
+pub(super) const CHANGES_QUEUED: usize = 4096;
+
+/// What every part of the console shares.
+pub(super) struct Shared {
+    pub(super) plant: Mutex<Plant>,
+    pub(super) changes: broadcast::Sender<Arc<str>>,
+    pub(super) bus: BusClient,
+    /// The operators (name, public key, actions), for the page to offer
+    /// only what each may do.
+    pub(super) operators: Vec<(String, String, Vec<crate::operator::Action>)>,
+    /// Cells to snapshot again.
+    pub(super) resync: tokio::sync::mpsc::UnboundedSender<String>,
+}
+
+impl Shared {
+    /// Applies a change to the plant and tells the pages, under one lock,
+    /// so that a page that starts sees each change once: in its first
+    /// view or after it.
+    pub(super) fn change(&self, apply: impl FnOnce(&mut Plant) -> Vec<Change>) {
+        let Ok(mut plant) = self.plant.lock() else {
+            return;
+        };
+        for change in apply(&mut plant) {
+            if let Ok(json) = serde_json::to_string(&change) {
+                let _ = self.changes.send(json.into());
+            }
+        }
+    }
+
+    /// Everything now, and the changes after it.
+    pub(super) fn view(&self) -> (String, broadcast::Receiver<Arc<str>>) {
+        let Ok(plant) = self.plant.lock() else {
+            return (String::from("{}"), self.changes.subscribe());
+        };
+        let view = serde_json::to_string(&plant.view()).unwrap_or_default();
+        (view, self.changes.subscribe())
+    }
+}

@@ -1,0 +1,600 @@
+//! `cellwatch console` end to end: the real agent and console binaries on
+//! the simulated CNC, a real headless Chromium on the console's pages
+//! (`browser`), operators' keys loaded into the page and commands signed
+//! there with WebCrypto Ed25519.
+
+use std::io::BufRead;
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use cellwatch::operator::{Action, OperatorKey};
+use cellwatch::sim::cnc::SimulatedCnc;
+use fantoccini::Locator;
+
+use crate::browser::{self, Browser};
+use crate::spawned::{self, kim, Cell};
+use crate::util::{bus_args, bus_pki, bus_tls, cellwatch, trust_file};
+
+/// Operator ana may acknowledge, nothing else.
+const ANA: &str = "ffeeddccbbaa99887766554433221100ffeeddccbbaa99887766554433221100";
+
+/// What a hostile comment in an I/O list would do if the page made HTML
+/// of it.
+const HOSTILE: &str =
+    "Auto Mode <script>window.__pwned=1</script><img src=x onerror=window.__pwned=2>";
+
+/// The agent, the console and their files.
+struct Plant {
+    sim: SimulatedCnc,
+    cell: Cell,
+    agent: Child,
+    console: Child,
+    url: String,
+}
+
+impl Drop for Plant {
+    fn drop(&mut self) {
+        for child in [&mut self.console, &mut self.agent] {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+        self.sim.stop();
+    }
+}
+
+/// The simulated CNC, its agent (kim may do everything, ana only
+/// acknowledge; the CSD check's I/O list says [`HOSTILE`] of X201.02) and
+/// a console on it, on ports the system picks.
+async fn plant(dir: &Path) -> Plant {
+    plant_with(dir, "").await
+}
+
+/// [`plant`] with `http` added to the console's `[http]` section.
+async fn plant_with(dir: &Path, http: &str) -> Plant {
+    let (sim, mut cell) = spawned::start(dir).await;
+    let ana = OperatorKey::from_hex("ana", ANA).unwrap();
+    let operators = dir.join("operators.toml");
+    let all =
+        std::fs::read_to_string(&operators).unwrap() + "\n" + &ana.operators_entry(&[Action::Ack]);
+    std::fs::write(&operators, all).unwrap();
+    std::fs::write(dir.join("kim.key"), kim().to_file()).unwrap();
+    std::fs::write(dir.join("ana.key"), ana.to_file()).unwrap();
+    let csd = std::fs::read_to_string(crate::util::root().join("config/cnc/csd-comments.csv"))
+        .unwrap()
+        .replace("X201.02,Auto Mode", &format!("X201.02,{HOSTILE}"));
+    std::fs::write(dir.join("csd-comments.csv"), csd).unwrap();
+    let config = std::fs::read_to_string(&cell.config).unwrap().replace(
+        &format!(
+            "{}/config/cnc/csd-comments.csv",
+            crate::util::root().display()
+        ),
+        &dir.join("csd-comments.csv").display().to_string(),
+    );
+    std::fs::write(&cell.config, config).unwrap();
+    let agent = cell.spawn("agent.log").await;
+
+    let trust = trust_file(dir);
+    bus_pki(dir, &["console"]);
+    let tls = bus_tls(dir, "console");
+    std::fs::write(
+        dir.join("console.toml"),
+        format!(
+            "[http]\nlisten = \"127.0.0.1:0\"\n{http}\n\n[bus]\nconnect = [\"quic/127.0.0.1:{}\"]\ntrust = {:?}\ntls = {{ ca = {:?}, cert = {:?}, key = {:?} }}\n\n[operators]\nfile = {:?}\n\n[areas]\nmachining = [\"m01ps0004\"]\n",
+            cell.zenoh_port, trust, tls.ca, tls.cert, tls.key, operators
+        ),
+    )
+    .unwrap();
+    let mut console = Command::new(env!("CARGO_BIN_EXE_cellwatch"))
+        .args(["console", "--config"])
+        .arg(dir.join("console.toml"))
+        .stdout(Stdio::piped())
+        .stderr(std::fs::File::create(dir.join("console.log")).unwrap())
+        .spawn()
+        .unwrap();
+    let mut first = String::new();
+    std::io::BufReader::new(console.stdout.take().unwrap())
+        .read_line(&mut first)
+        .unwrap();
+    let url = first
+        .trim()
+        .strip_prefix("cellwatch console: ")
+        .unwrap_or_else(|| {
+            panic!(
+                "the console said {first:?}:\n{}",
+                std::fs::read_to_string(dir.join("console.log")).unwrap_or_default()
+            )
+        })
+        .to_string();
+    assert!(url.contains("://127.0.0.1:"), "{url}");
+    Plant {
+        sim,
+        cell,
+        agent,
+        console,
+        url,
+    }
+}
+
+/// Opens `route` of the console and waits until its live stream runs and
+/// the cell's agent is known to be there.
+async fn open(b: &Browser, p: &Plant, route: &str) {
+    open_at(b, &p.url, "m01ps0004", route).await;
+}
+
+/// Opens `route` of the console at `url`, as [`open`], for `cell`.
+async fn open_at(b: &Browser, url: &str, cell: &str, route: &str) {
+    b.client.goto(&format!("{url}{route}")).await.unwrap();
+    b.wait_for("#link.up").await;
+    b.wait_until(
+        "the console knows the agent is up",
+        &format!("return typeof S !== 'undefined' && S.cells.has('{cell}') && S.cells.get('{cell}').agent === true;"),
+    )
+    .await;
+}
+
+/// Loads the operator key file `key` into the page.
+async fn load_key(b: &Browser, key: &Path, operator: &str) {
+    b.client
+        .find(Locator::Css("#key-file"))
+        .await
+        .unwrap()
+        .send_keys(key.to_str().unwrap())
+        .await
+        .unwrap();
+    b.wait_until(
+        "the key is loaded",
+        &format!("return S.key !== null && S.key.operator === '{operator}';"),
+    )
+    .await;
+}
+
+/// The answer line after an action, once the agent answered.
+async fn answer(b: &Browser) -> String {
+    b.wait_until(
+        "the agent answered",
+        "const a = document.getElementById('answer'); return !!a && (a.classList.contains('accepted') || a.classList.contains('refused'));",
+    )
+    .await;
+    b.text("#answer").await
+}
+
+/// The cell's command rows in its journal, as `cellwatch history` prints
+/// them (JSON), asked as operator kim.
+fn journaled_commands(cell: &Cell) -> Vec<serde_json::Value> {
+    let mut args = vec![
+        "history",
+        "--cell",
+        "m01ps0004",
+        "--kind",
+        "command",
+        "--json",
+        "--timeout",
+        "30",
+    ];
+    let bus = bus_args(&cell.dir, "operator-kim", cell.zenoh_port);
+    args.extend(bus.iter().map(String::as_str));
+    let run = cellwatch(&args);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    run.stdout
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .flat_map(|page| page["rows"].as_array().cloned().unwrap_or_default())
+        .collect()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_fault_shows_live_with_its_culprits_and_an_operator_acknowledges_and_shelves_it() {
+    let d = tempfile::tempdir().unwrap();
+    let p = plant(d.path()).await;
+    let b = browser::start().await;
+    open(&b, &p, "#/alarms").await;
+    // When each alarm's row first appears, by the page's clock (the same
+    // machine's as the agent's).
+    b.client
+        .execute(
+            "window.__seen = {}; new MutationObserver(() => { for (const r of document.querySelectorAll('tr[data-alarm]')) { if (!(r.dataset.alarm in window.__seen)) window.__seen[r.dataset.alarm] = Date.now(); } }).observe(document.getElementById('view'), { childList: true, subtree: true }); return true;",
+            vec![],
+        )
+        .await
+        .unwrap();
+    p.sim.set("X0.06", false).unwrap();
+    b.wait_for("tr[data-alarm='ese']").await;
+    let late = b
+        .client
+        .execute(
+            "const a = S.alarms.get('m01ps0004\\u0000ese'); return window.__seen['ese'] - Date.parse(a.raised_at);",
+            vec![],
+        )
+        .await
+        .unwrap();
+    let late = late.as_f64().unwrap();
+    assert!(
+        late <= 1000.0,
+        "the raise showed in the table {late} ms after it happened"
+    );
+    let row = b.text("tr[data-alarm='ese']").await;
+    assert!(row.contains("Y Over Travel Limit SW (B)"), "{row}");
+    assert!(row.contains("Active, unacknowledged"), "{row}");
+    b.screenshot("alarms").await;
+
+    // The overview and the cell page show it too.
+    open(&b, &p, "#/").await;
+    b.wait_until(
+        "the tile counts the alarm",
+        "const t = document.querySelector(\"a.tile[data-cell='m01ps0004']\"); return !!t && t.textContent.includes('ESE');",
+    )
+    .await;
+    b.screenshot("overview").await;
+    open(&b, &p, "#/cell/m01ps0004").await;
+    b.wait_for("section.timeline svg rect").await;
+    b.wait_until(
+        "the cell page lists the alarm",
+        "return [...document.querySelectorAll('#view a')].some(a => a.textContent === 'ese');",
+    )
+    .await;
+    b.screenshot("cell").await;
+
+    // Its detail: the step, the culprits with their comments and values.
+    open(&b, &p, "#/alarm/m01ps0004/ese").await;
+    b.wait_for("table.culprits").await;
+    let diagnosis = b.text("section.diagnosis").await;
+    assert!(diagnosis.contains("ESE at step 6"), "{diagnosis}");
+    assert!(
+        diagnosis.contains("X0.06 Y Over Travel Limit SW (B) 0 1 trigger"),
+        "{diagnosis}"
+    );
+    let actions = b.text("section.actions").await;
+    assert!(actions.contains("Load your operator key"), "{actions}");
+
+    // Kim loads her key and acknowledges: the agent journals it under her.
+    load_key(&b, &d.path().join("kim.key"), "kim").await;
+    b.wait_for("button[data-action='ack']")
+        .await
+        .click()
+        .await
+        .unwrap();
+    let said = answer(&b).await;
+    assert!(said.starts_with("ack accepted"), "{said}");
+    b.wait_until(
+        "the page shows it acknowledged (and no longer offers to)",
+        "return document.querySelector('dl.facts').textContent.includes('Acknowledged bykim') && !document.querySelector(\"button[data-action='ack']\");",
+    )
+    .await;
+    let rows = journaled_commands(&p.cell);
+    assert!(
+        rows.iter().any(|r| r["fields"]["action"] == "ack"
+            && r["fields"]["operator"] == "kim"
+            && r["fields"]["alarm"] == "ese"
+            && r["fields"]["accepted"] == true),
+        "{rows:#?}"
+    );
+
+    // A shelf for 30 minutes, with a reason.
+    b.wait_for("select[name='shelve-for']")
+        .await
+        .select_by_value("30m")
+        .await
+        .unwrap();
+    b.wait_for("input[name='shelve-reason']")
+        .await
+        .send_keys("limit switch being replaced")
+        .await
+        .unwrap();
+    b.wait_for("button[data-action='shelve']")
+        .await
+        .click()
+        .await
+        .unwrap();
+    b.wait_until(
+        "the page shows it shelved with its reason",
+        "const a = S.alarms.get('m01ps0004\\u0000ese'); return !!a && !!a.shelved && a.shelved.reason === 'limit switch being replaced' && a.shelved.by === 'kim' && document.querySelector('dl.facts').textContent.includes('limit switch being replaced');",
+    )
+    .await;
+    b.wait_until(
+        "the detail lists the operator actions",
+        "return document.querySelectorAll('table.actions-log tbody tr').length >= 2;",
+    )
+    .await;
+    let facts = b.text("dl.facts").await;
+    assert!(
+        facts.contains("by kim until") && facts.contains("limit switch being replaced"),
+        "{facts}"
+    );
+    b.screenshot("alarm").await;
+    assert!(journaled_commands(&p.cell)
+        .iter()
+        .any(|r| r["fields"]["action"] == "shelve" && r["fields"]["accepted"] == true));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn what_an_operator_may_not_do_is_not_offered_and_bus_texts_render_inert() {
+    let d = tempfile::tempdir().unwrap();
+    let p = plant(d.path()).await;
+    let b = browser::start().await;
+    // CSD, whose culprit's comment is hostile markup.
+    // Auto mode left for JOG, cycle start pressed: CSD, auto mode (X201.02)
+    // among its culprits.
+    p.sim.set("X201.02", false).unwrap();
+    p.sim.set("X201.06", true).unwrap();
+    p.sim.set("X200.01", true).unwrap();
+    open(&b, &p, "#/alarms").await;
+    b.wait_until(
+        "CSD is shown, auto mode among its culprits",
+        "const a = S.alarms.get('m01ps0004\\u0000csd'); return !!a && a.culprits.some(c => c.address === 'X201.02') && !!document.querySelector(\"tr[data-alarm='csd']\");",
+    )
+    .await;
+    open(&b, &p, "#/alarm/m01ps0004/csd").await;
+    b.wait_for("table.culprits").await;
+    let culprits = b.text("table.culprits").await;
+    assert!(culprits.contains(HOSTILE), "{culprits}");
+    let pwned = b
+        .client
+        .execute(
+            "return [typeof window.__pwned, document.querySelectorAll('#view img, #view script').length];",
+            vec![],
+        )
+        .await
+        .unwrap();
+    assert_eq!(pwned, serde_json::json!(["undefined", 0]));
+
+    // Ana may acknowledge only: nothing else is offered her.
+    load_key(&b, &d.path().join("ana.key"), "ana").await;
+    b.wait_for("button[data-action='ack']").await;
+    for action in [
+        "shelve",
+        "out-of-service",
+        "reset",
+        "unshelve",
+        "in-service",
+    ] {
+        assert_eq!(
+            b.count(&format!("[data-action='{action}']")).await,
+            0,
+            "{action} offered to ana"
+        );
+    }
+    assert!(b
+        .text("#operator-name")
+        .await
+        .contains("operator ana (ack)"));
+    // A shelve she makes by hand, signed with her key, is refused by the
+    // agent, which journals the refusal.
+    let answer = b
+        .client
+        .execute_async(
+            "const done = arguments[arguments.length - 1]; sign('m01ps0004', { action: 'shelve', alarm: 'csd', value: '30m', reason: 'by hand' }).then(cmd => fetch('/api/cells/m01ps0004/command', { method: 'POST', headers: { 'Content-Type': 'application/json' }, body: JSON.stringify(cmd) })).then(r => r.json()).then(done, e => done(String(e)));",
+            vec![],
+        )
+        .await
+        .unwrap();
+    assert_eq!(answer["accepted"], false, "{answer}");
+    assert!(
+        answer["detail"]
+            .as_str()
+            .unwrap_or_default()
+            .contains("operator 'ana' may not shelve"),
+        "{answer}"
+    );
+    assert!(journaled_commands(&p.cell)
+        .iter()
+        .any(|r| r["fields"]["operator"] == "ana"
+            && r["fields"]["action"] == "shelve"
+            && r["fields"]["accepted"] == false));
+    // A key that is not the operators file's for that name is refused in
+    // the page.
+    let forged = d.path().join("forged.key");
+    std::fs::write(
+        &forged,
+        OperatorKey::from_hex("kim", ANA).unwrap().to_file(),
+    )
+    .unwrap();
+    b.client
+        .find(Locator::Css("#key-file"))
+        .await
+        .unwrap()
+        .send_keys(forged.to_str().unwrap())
+        .await
+        .unwrap();
+    b.wait_until(
+        "the forged key is refused",
+        "return S.key === null && document.getElementById('operator-name').textContent.includes('not the key the operators file holds');",
+    )
+    .await;
+    // Every response forbids inline script and HTML sinks, framing and
+    // sniffing.
+    let headers = head(&p.url);
+    for expected in [
+        "content-security-policy: default-src 'none'; script-src 'self';",
+        "require-trusted-types-for 'script'",
+        "x-frame-options: DENY",
+        "x-content-type-options: nosniff",
+    ] {
+        assert!(headers.contains(expected), "{expected} not in:\n{headers}");
+    }
+}
+
+/// The response head of `GET /` at `url` (`http://IP:PORT/`).
+fn head(url: &str) -> String {
+    use std::io::{Read, Write};
+    let addr = url.trim_start_matches("http://").trim_end_matches('/');
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+    s.write_all(b"GET / HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n")
+        .unwrap();
+    let mut text = String::new();
+    s.read_to_string(&mut text).unwrap();
+    text.split("\r\n\r\n")
+        .next()
+        .unwrap_or_default()
+        .to_string()
+}
+
+/// With `http.tls`, the console serves HTTPS only, with the certificate
+/// given (here from the plant CA), and says so to browsers (HSTS).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn with_a_certificate_the_console_serves_https_only() {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    use tokio_rustls::rustls;
+    use tokio_rustls::rustls::pki_types::pem::PemObject;
+    let d = tempfile::tempdir().unwrap();
+    bus_pki(d.path(), &["console"]);
+    let tls = bus_tls(d.path(), "console");
+    let p = plant_with(
+        d.path(),
+        &format!("tls = {{ cert = {:?}, key = {:?} }}", tls.cert, tls.key),
+    )
+    .await;
+    assert!(p.url.starts_with("https://127.0.0.1:"), "{}", p.url);
+    let addr = p.url.trim_start_matches("https://").trim_end_matches('/');
+    let mut roots = rustls::RootCertStore::empty();
+    roots
+        .add(rustls::pki_types::CertificateDer::from_pem_file(&tls.ca).unwrap())
+        .unwrap();
+    let config = rustls::ClientConfig::builder_with_provider(std::sync::Arc::new(
+        rustls::crypto::ring::default_provider(),
+    ))
+    .with_safe_default_protocol_versions()
+    .unwrap()
+    .with_root_certificates(roots)
+    .with_no_client_auth();
+    let connector = tokio_rustls::TlsConnector::from(std::sync::Arc::new(config));
+    let tcp = tokio::net::TcpStream::connect(addr).await.unwrap();
+    let mut stream = connector
+        .connect("127.0.0.1".try_into().unwrap(), tcp)
+        .await
+        .expect("the console's certificate, checked against the plant CA");
+    stream
+        .write_all(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n")
+        .await
+        .unwrap();
+    let mut text = Vec::new();
+    let _ = stream.read_to_end(&mut text).await;
+    let text = String::from_utf8_lossy(&text);
+    assert!(text.starts_with("HTTP/1.1 200 OK"), "{text}");
+    assert!(
+        text.contains("strict-transport-security: max-age=31536000"),
+        "{text}"
+    );
+    assert!(text.contains("<title>cellwatch console</title>"), "{text}");
+    // Plain HTTP on the same port gets no page.
+    let mut plain = tokio::net::TcpStream::connect(addr).await.unwrap();
+    plain
+        .write_all(b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n")
+        .await
+        .unwrap();
+    let mut got = Vec::new();
+    let _ = plain.read_to_end(&mut got).await;
+    assert!(!String::from_utf8_lossy(&got).contains("cellwatch console"));
+}
+
+/// The robot's cell page draws its charts live; a stuck step's forcible
+/// transition is offered to an operator who may force (not to one who may
+/// not, whose hand-made request the agent refuses), refused while its
+/// condition is false and carried out once it holds.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stuck_step_is_drawn_and_forced_from_the_cell_page_once_its_condition_holds() {
+    use crate::force::{supervise, RobotCell, CELL};
+    let d = tempfile::tempdir().unwrap();
+    // S2 is in error from the start and the shuttle not yet at its
+    // waiting position (t3 false); its supervision shortened to 2 s.
+    let cell = RobotCell::start(
+        d.path(),
+        Duration::from_millis(200),
+        |robot| {
+            robot.stick("F1.S2", true).unwrap();
+            robot.pin("%IX0.0.3", Some(false));
+        },
+        |c| supervise(c, 0, "S2", 2000),
+    )
+    .await;
+    let port = crate::util::agent_port(&cell.agent).await;
+    bus_pki(d.path(), &["console"]);
+    let console = cellwatch::console::Console::start(&cellwatch::console::ConsoleConfig {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        tls: None,
+        bus: crate::util::client_config(d.path(), "console", port),
+        trust: trust_file(d.path()),
+        root: "cellwatch".into(),
+        operators_file: Some(d.path().join("operators.toml")),
+        areas: Default::default(),
+        max_alarms: 1000,
+    })
+    .await
+    .unwrap();
+    std::fs::write(d.path().join("kim.key"), kim().to_file()).unwrap();
+    std::fs::write(d.path().join("lee.key"), cell.lee.to_file()).unwrap();
+    let b = browser::start().await;
+    open_at(&b, &console.url(), CELL, &format!("#/cell/{CELL}")).await;
+    b.wait_for(".sfc-step.stuck[data-step='F1.S2']").await;
+    b.wait_for("[data-transition='F1.t3'].waits").await;
+    let t3 = b.text("[data-transition='F1.t3']").await;
+    assert!(
+        t3.contains("%IX0.0.3 = 0 (Shuttle at waiting position)"),
+        "{t3}"
+    );
+
+    // Lee may only acknowledge: no force is offered her, and one she
+    // signs by hand is refused by the agent.
+    load_key(&b, &d.path().join("lee.key"), "lee").await;
+    assert_eq!(b.count("button[data-action='force']").await, 0);
+    let by_hand = b
+        .client
+        .execute_async(
+            &format!("const done = arguments[arguments.length - 1]; sign('{CELL}', {{ action: 'force', value: 'F1.t3' }}).then(cmd => fetch('/api/cells/{CELL}/command', {{ method: 'POST', headers: {{ 'Content-Type': 'application/json' }}, body: JSON.stringify(cmd) }})).then(r => r.json()).then(done, e => done(String(e)));"),
+            vec![],
+        )
+        .await
+        .unwrap();
+    assert_eq!(by_hand["accepted"], false, "{by_hand}");
+    assert_eq!(
+        by_hand["detail"], "operator 'lee' may not force",
+        "{by_hand}"
+    );
+
+    // Kim may: refused while t3 is false, for that reason.
+    load_key(&b, &d.path().join("kim.key"), "kim").await;
+    b.wait_for("[data-transition='F1.t3'] button[data-action='force']")
+        .await
+        .click()
+        .await
+        .unwrap();
+    let said = answer(&b).await;
+    assert!(
+        said.starts_with(
+            "force refused: condition: t3 (Shuttle at waiting position) does not hold"
+        ),
+        "{said}"
+    );
+    b.client
+        .execute(
+            "document.querySelector(\"[data-chart='F1']\").scrollIntoView(); return true;",
+            vec![],
+        )
+        .await
+        .unwrap();
+    b.screenshot("sfc").await;
+
+    // The shuttle arrives (arm 1 held at its sub-job, so that the arrival
+    // can be seen): t3 holds on the page, and the force is carried out.
+    cell.robot.pin("%IX0.1.0", Some(false));
+    cell.robot.pin("%IX0.0.3", None);
+    b.wait_for("[data-transition='F1.t3'].holds").await;
+    b.client
+        .execute(
+            "document.getElementById('answer').className = 'answer';",
+            vec![],
+        )
+        .await
+        .unwrap();
+    b.wait_for("[data-transition='F1.t3'] button[data-action='force']")
+        .await
+        .click()
+        .await
+        .unwrap();
+    let said = answer(&b).await;
+    assert!(said.starts_with("force accepted: F1.t3 forced"), "{said}");
+    b.wait_for(".sfc-step.active[data-step='F2.S5']").await;
+    console.stop().await;
+    cell.stop().await;
+}
