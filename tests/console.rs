@@ -162,12 +162,21 @@ async fn answer(b: &Browser) -> String {
 /// The cell's command rows in its journal, as `cellwatch history` prints
 /// them (JSON), asked as operator kim.
 fn journaled_commands(cell: &Cell) -> Vec<serde_json::Value> {
+    journal_rows(cell, "command")
+}
+
+/// The cell's rows of `kind` in its journal over the last 24 hours, as
+/// `cellwatch history` prints them (JSON), asked as operator kim.
+fn journal_rows(cell: &Cell, kind: &str) -> Vec<serde_json::Value> {
     let mut args = vec![
         "history",
         "--cell",
         "m01ps0004",
         "--kind",
-        "command",
+        kind,
+        "--since",
+        "24h",
+        "--all",
         "--json",
         "--timeout",
         "30",
@@ -305,6 +314,42 @@ async fn a_fault_shows_live_with_its_culprits_and_an_operator_acknowledges_and_s
     assert!(journaled_commands(&p.cell)
         .iter()
         .any(|r| r["fields"]["action"] == "shelve" && r["fields"]["accepted"] == true));
+
+    // The ISA-18.2 figures of the last 24 hours, asked of the agent: as
+    // many raises as its journal has raised rows.
+    open(&b, &p, "#/kpi").await;
+    b.wait_for("table.kpi-cells tbody tr").await;
+    let raised: usize = b.text("[data-kpi='raised']").await.parse().unwrap();
+    let rows = journal_rows(&p.cell, "alarm");
+    let in_journal = rows
+        .iter()
+        .filter(|r| r["fields"]["transition"] == "raised")
+        .count();
+    assert!(in_journal >= 1);
+    assert_eq!(raised, in_journal, "{rows:#?}");
+    let cells = b.text("table.kpi-cells").await;
+    assert!(cells.contains("m01ps0004 machining"), "{cells}");
+    b.screenshot("kpi").await;
+
+    // A write from the cell page goes to the agent, which answers for it:
+    // here a tag the cell does not have.
+    open(&b, &p, "#/cell/m01ps0004").await;
+    b.wait_for("input[name='write-tag']")
+        .await
+        .send_keys("X9.99")
+        .await
+        .unwrap();
+    b.wait_for("input[name='write-value']")
+        .await
+        .send_keys("1")
+        .await
+        .unwrap();
+    b.wait_for("button[data-action='write']")
+        .await
+        .click()
+        .await
+        .unwrap();
+    assert_eq!(answer(&b).await, "write refused: no tag X9.99");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -146,6 +146,7 @@ fn router(shared: Arc<Shared>, https: bool) -> Router {
         .route("/api/plant", get(plant))
         .route("/api/events", get(events))
         .route("/api/operators", get(operators))
+        .route("/api/kpi", get(kpi))
         .route("/api/cells/{cell}/history", get(history))
         .route("/api/cells/{cell}/snapshot", get(snapshot))
         .route("/api/cells/{cell}/command", post(command))
@@ -292,14 +293,8 @@ async fn history(
                 ),
             );
         }
-        let plain = value
-            .bytes()
-            .all(|b| b.is_ascii_alphanumeric() || b":.+-_".contains(&b));
-        if value.is_empty() || value.len() > 64 || !plain {
-            return error(
-                StatusCode::BAD_REQUEST,
-                format!("{name}: '{value}' is not a time, duration, kind or number"),
-            );
+        if let Err(why) = plain_value(name, value) {
+            return error(StatusCode::BAD_REQUEST, why);
         }
         parameters.push(format!("{name}={value}"));
     }
@@ -308,6 +303,88 @@ async fn history(
             .ask(&cell, Service::History, &parameters.join(";"), None, ANSWER)
             .await,
     )
+}
+
+/// How many agents are asked for their figures at once.
+const KPI_AT_ONCE: usize = 16;
+
+/// The ISA-18.2 alarm figures of every cell whose agent is up, for
+/// `since` and `until` (as `history` takes them), each asked of the cell's
+/// agent (`history?kind=kpi`): `{"cells": [{"cell", "area", "report"} or
+/// {"cell", "area", "error"}]}`.
+async fn kpi(
+    State(s): State<Arc<Shared>>,
+    Query(q): Query<std::collections::BTreeMap<String, String>>,
+) -> Response {
+    use futures_util::StreamExt;
+    let mut parameters = vec!["kind=kpi".to_string()];
+    for (name, value) in &q {
+        if !["since", "until"].contains(&name.as_str()) {
+            return error(
+                StatusCode::BAD_REQUEST,
+                format!("unknown parameter '{name}': use since, until"),
+            );
+        }
+        if let Err(why) = plain_value(name, value) {
+            return error(StatusCode::BAD_REQUEST, why);
+        }
+        parameters.push(format!("{name}={value}"));
+    }
+    let parameters = parameters.join(";");
+    let cells: Vec<(String, Option<String>)> = s
+        .plant
+        .lock()
+        .map(|p| {
+            p.view()
+                .cells
+                .iter()
+                .filter(|c| c.agent)
+                .map(|c| (c.cell.clone(), c.area.clone()))
+                .collect()
+        })
+        .unwrap_or_default();
+    let answers: Vec<serde_json::Value> = futures_util::stream::iter(cells)
+        .map(|(cell, area)| {
+            let s = s.clone();
+            let parameters = parameters.clone();
+            async move {
+                match s
+                    .bus
+                    .ask(&cell, Service::History, &parameters, None, ANSWER)
+                    .await
+                    .map_err(|e| e.to_string())
+                    .and_then(|t| {
+                        serde_json::from_str::<serde_json::Value>(&t).map_err(|e| e.to_string())
+                    }) {
+                    Ok(report) => {
+                        serde_json::json!({ "cell": cell, "area": area, "report": report })
+                    }
+                    Err(e) => serde_json::json!({ "cell": cell, "area": area, "error": e }),
+                }
+            }
+        })
+        .buffered(KPI_AT_ONCE)
+        .collect()
+        .await;
+    json(
+        StatusCode::OK,
+        serde_json::json!({ "cells": answers }).to_string(),
+    )
+}
+
+/// Whether a query parameter's value holds nothing but letters, digits and
+/// `:.+-_` (at most 64 of them): what times, durations, kinds and numbers
+/// need, and nothing that could end a Zenoh parameter.
+fn plain_value(name: &str, value: &str) -> Result<(), String> {
+    let plain = value
+        .bytes()
+        .all(|b| b.is_ascii_alphanumeric() || b":.+-_".contains(&b));
+    if value.is_empty() || value.len() > 64 || !plain {
+        return Err(format!(
+            "{name}: '{value}' is not a time, duration, kind or number"
+        ));
+    }
+    Ok(())
 }
 
 /// The cell's values, alarms and values at its last fault, asked of its

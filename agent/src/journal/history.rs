@@ -22,7 +22,7 @@ pub struct HistoryRow {
 #[derive(Debug, thiserror::Error)]
 pub enum HistoryError {
     /// The query asks for a kind of row there is none of.
-    #[error("unknown kind '{0}': use alarm, state or command")]
+    #[error("unknown kind '{0}': use alarm, state, command or kpi")]
     UnknownKind(String),
     /// The journal cannot be read.
     #[error(transparent)]

@@ -5,6 +5,9 @@
 //!   oldest first; the newest rows, or with `after` the rows after that
 //!   sequence number and the `next` one to ask for), read from the journal
 //!   file on a blocking thread, never holding up the cell loop;
+//!   with `kind=kpi`, instead, the ISA-18.2 alarm figures of `[since,
+//!   until)` (default the last 24 h) computed from the journal as
+//!   `cellwatch report alarms` computes them;
 //! - `<prefix>/snapshot`: tag values with quality, active alarms, and the
 //!   values at the last fault ([`crate::payload::SnapshotPayload`]), asked
 //!   of the cell loop;
@@ -187,6 +190,9 @@ impl Services {
 /// One page of `query` from the journal. A read that fails is logged and
 /// answered with the reason; it is not a refusal of the request.
 async fn history(journal: &Path, query: HistoryQuery) -> Result<String, String> {
+    if query.kind.as_deref() == Some("kpi") {
+        return kpi(journal, &query).await;
+    }
     let path = journal.to_path_buf();
     let rows = tokio::task::spawn_blocking(move || {
         let conn = journal::open_read(&path)?;
@@ -199,6 +205,34 @@ async fn history(journal: &Path, query: HistoryQuery) -> Result<String, String> 
         e.to_string()
     })?;
     Ok(serde_json::to_string(&rows).unwrap_or_default())
+}
+
+/// The ISA-18.2 figures of `[since, until)` (default: the last 24 h, until
+/// now) from the journal, with their benchmarks, as `cellwatch report
+/// alarms --format json` prints them.
+async fn kpi(journal: &Path, query: &HistoryQuery) -> Result<String, String> {
+    let now = now_ms();
+    let until = query.until.unwrap_or(now);
+    let since = query.since.unwrap_or(until.saturating_sub(24 * 3_600_000));
+    if since >= until {
+        return Err("kind=kpi: since must be before until".into());
+    }
+    let path = journal.to_path_buf();
+    let read = tokio::task::spawn_blocking(move || {
+        let conn = journal::open_read(&path).map_err(journal::HistoryError::from)?;
+        journal::alarm_events(&conn, since, until).map_err(journal::HistoryError::from)
+    })
+    .await
+    .map_err(|e| format!("kpi query failed: {e}"))?
+    .map_err(|e| {
+        tracing::error!(journal = %journal.display(), error = %e, "cannot read the journal for the alarm figures");
+        e.to_string()
+    })?;
+    let report = cellwatch_models::kpi::alarm_report(&read.events, &read.before, since, until, now);
+    let mut v = serde_json::to_value(&report).unwrap_or_default();
+    v["benchmarks"] = serde_json::to_value(report.benchmarks()).unwrap_or_default();
+    v["unreadable"] = read.unreadable.into();
+    Ok(v.to_string())
 }
 
 /// Parses a history selector's parameters at `now`.

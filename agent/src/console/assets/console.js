@@ -510,7 +510,9 @@ function cellPage(cell) {
       this.tags = el('section', { class: 'tags' });
       const period = el('select', { name: 'period', onchange: e => { this.period = e.target.value; this.fetch(); } },
         PERIODS.map(([p, t]) => el('option', { value: p, selected: p === this.period }, t)));
-      v.append(this.head, el('div', { class: 'period' }, el('span', {}, 'Machine state over the '), period), this.timeline, this.alarms, this.charts, this.answer, this.tags);
+      this.write = el('section', { class: 'write' });
+      v.append(this.head, el('div', { class: 'period' }, el('span', {}, 'Machine state over the '), period), this.timeline, this.alarms, this.charts, this.write, this.answer, this.tags);
+      this.drawWrite();
       this.drawn = '';
       this.fetch();
       // The charts and tags live: the cell's snapshot every second while
@@ -541,6 +543,17 @@ function cellPage(cell) {
       this.charts.replaceChildren(...(charts.length ? [el('h3', {}, 'Charts')] : []), ...charts.map(c => this.chart(c, stuck)));
       this.tags.replaceChildren(el('h3', {}, 'Tags now'),
         table('values', ['Tag', 'Address', 'Value', 'Quality'], snap.tags.map(t => [t.name, t.address, valueText(t.value), t.quality])));
+    },
+    drawWrite() {
+      if (!may('write')) { this.write.replaceChildren(); return; }
+      const tag = el('input', { name: 'write-tag', placeholder: 'tag address', maxlength: 64 });
+      const value = el('input', { name: 'write-value', placeholder: 'value', maxlength: 64 });
+      this.write.replaceChildren(el('h3', {}, 'Write to the PLC'), el('form', { class: 'form', onsubmit: async e => {
+        e.preventDefault();
+        if (!tag.value.trim() || !value.value.trim()) { this.answer.className = 'answer refused'; this.answer.textContent = 'write: give a tag and a value'; return; }
+        await send(cell, { action: 'write', tag: tag.value.trim(), value: value.value.trim() }, this.answer);
+      } }, tag, el('span', {}, ' = '), value, el('button', { type: 'submit', 'data-action': 'write' }, 'Write')),
+      el('p', { class: 'note' }, 'The agent writes only what its cell lets operators write (a legacy unit\'s item code, target or production correction), journals the request before it goes to the PLC, and answers with the PLC\'s answer.'));
     },
     chart(c, stuck) {
       const rows = [];
@@ -629,6 +642,79 @@ function cellPage(cell) {
   };
 }
 
+
+const KPI_PERIODS = [['1h', 'last hour'], ['8h', 'last 8 hours (a shift)'], ['24h', 'last 24 hours'], ['7d', 'last 7 days']];
+
+function fixed(n, d = 2) { return typeof n === 'number' ? n.toFixed(d) : '—'; }
+
+const kpiView = {
+  period: '24h',
+  mount(v) {
+    const period = el('select', { name: 'kpi-period', onchange: e => { this.period = e.target.value; this.fetch(); } },
+      KPI_PERIODS.map(([p, t]) => el('option', { value: p, selected: p === this.period }, t)));
+    this.body = el('section', { class: 'kpi' }, el('p', { class: 'note' }, 'asking the agents…'));
+    this.standing = el('section', { class: 'standing' });
+    v.append(el('h2', {}, 'Alarm performance (ISA-18.2)'), el('div', { class: 'period' }, el('span', {}, 'Over the '), period),
+      this.body, this.standing);
+    this.fetch();
+  },
+  async fetch() {
+    try {
+      const r = await api(`/api/kpi?since=${this.period}`);
+      this.draw(r.cells);
+    } catch (err) {
+      this.body.replaceChildren(el('p', { class: 'refused' }, err.message));
+    }
+  },
+  draw(cells) {
+    const ok = cells.filter(c => c.report);
+    const failed = cells.filter(c => c.error);
+    const raised = ok.reduce((n, c) => n + c.report.raised, 0);
+    const rate = ok.reduce((n, c) => n + c.report.average_rate, 0);
+    const top = ok.flatMap(c => c.report.top.map(t => ({ cell: c.cell, ...t }))).sort((a, b) => b.raised - a.raised).slice(0, 10);
+    const chattering = ok.flatMap(c => c.report.chattering.map(t => ({ cell: c.cell, ...t })));
+    const stale = ok.flatMap(c => c.report.stale.map(t => ({ cell: c.cell, ...t })));
+    const met = b => b.met === null || b.met === undefined ? '' : b.met ? 'met' : 'NOT MET';
+    this.body.replaceChildren(
+      el('dl', { class: 'facts' },
+        el('dt', {}, 'Alarms raised'), el('dd', { 'data-kpi': 'raised' }, String(raised)),
+        el('dt', {}, 'Alarms per 10 minutes, plant'), el('dd', { 'data-kpi': 'rate' }, fixed(rate)),
+        el('dt', {}, 'Cells'), el('dd', {}, `${ok.length} answered${failed.length ? `, ${failed.length} did not: ${failed.map(c => `${c.cell} (${c.error})`).join('; ')}` : ''}`)),
+      el('h3', {}, 'Per cell'),
+      table('kpi-cells', ['Cell', 'Area', 'Raised', 'Per 10 min', 'Peak / 10 min', 'Flood %', 'Top 10 share %', 'Chattering', 'Stale', 'Shelved', 'Out of service', 'Median ack'],
+        ok.map(c => {
+          const r = c.report;
+          return [el('a', { href: href('cell', c.cell) }, c.cell), c.area || '', String(r.raised), fixed(r.average_rate), String(r.peak_rate),
+            fixed(r.flood_percent), fixed(r.top_share, 1), String(r.chattering.length), String(r.stale.length), String(r.shelved), String(r.out_of_service),
+            r.ack.median === null ? '—' : `${fixed(r.ack.median, 1)} s`];
+        })),
+      el('h3', {}, 'Top 10 alarms'),
+      top.length ? table('kpi-top', ['Cell', 'Alarm', 'Raised', 'Share of its cell %'], top.map(t => [t.cell, t.id, String(t.raised), fixed(t.share, 1)]))
+        : el('p', { class: 'note' }, 'No alarm raised in this period.'),
+      el('h3', {}, 'Chattering (3 or more raises within 60 s)'),
+      chattering.length ? table('kpi-chattering', ['Cell', 'Alarm', 'Raises in its busiest minute'], chattering.map(t => [t.cell, t.id, String(t.raises_in_60s)]))
+        : el('p', { class: 'note' }, 'None.'),
+      el('h3', {}, 'Stale (active longer than 24 h)'),
+      stale.length ? table('kpi-stale', ['Cell', 'Alarm', 'Raised', 'Hours'], stale.map(t => [t.cell, t.id, when(t.raised_at), fixed(t.hours, 1)]))
+        : el('p', { class: 'note' }, 'None.'),
+      el('h3', {}, 'Against the ISA-18.2 targets'),
+      table('kpi-benchmarks', ['Cell', 'Figure', 'Value', 'Target', ''],
+        ok.flatMap(c => c.report.benchmarks.filter(b => b.met === false).map(b => [c.cell, b.metric, b.value, b.target, met(b)]))
+          .concat(ok.every(c => c.report.benchmarks.every(b => b.met !== false)) ? [['every cell', 'every figure', '', '', 'met']] : [])));
+    this.update();
+  },
+  update() {
+    const now = Date.now();
+    const standing = [...S.alarms.values()].filter(a => active(a) && !kept(a)).sort((x, y) => (x.raised_at < y.raised_at ? -1 : 1));
+    this.standing.replaceChildren(el('h3', {}, 'Standing now (active, oldest first)'), standing.length
+      ? table('kpi-standing', ['Cell', 'Alarm', 'Priority', 'Raised', 'Active for'], standing.slice(0, 50).map(a => {
+        const mins = Math.max(0, Math.round((now - Date.parse(a.raised_at)) / 60000));
+        return [a.cell, el('a', { href: href('alarm', a.cell, a.id) }, a.id), a.severity, when(a.raised_at), mins >= 120 ? `${(mins / 60).toFixed(1)} h` : `${mins} min`];
+      }))
+      : el('p', { class: 'note' }, 'No alarm active.'));
+  },
+};
+
 // ---- routing ----
 
 function banner() {
@@ -652,6 +738,7 @@ function route() {
   const parts = location.hash.replace(/^#\/?/, '').split('/').map(decodeURIComponent);
   let view;
   if (parts[0] === 'alarms') view = alarmsView;
+  else if (parts[0] === 'kpi') view = kpiView;
   else if (parts[0] === 'alarm' && parts.length === 3) view = alarmDetail(parts[1], parts[2]);
   else if (parts[0] === 'cell' && parts.length === 2) view = cellPage(parts[1]);
   else view = overview;
