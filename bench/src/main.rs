@@ -6,6 +6,8 @@
 // A binary: `pub` marks what its modules offer each other.
 #![allow(unreachable_pub)]
 
+mod console;
+mod console_browser;
 mod fanout;
 mod load;
 mod measure;
@@ -115,6 +117,33 @@ enum Cmd {
         #[arg(long)]
         listen: String,
     },
+    /// The operators' console under a plant's alarms: a publisher seals
+    /// alarm events with CELLS agents' keys; the console (`cellwatch
+    /// console`, its own process) with its alarm table open in a headless
+    /// Chromium, and a bare bus subscriber as the baseline, take them.
+    /// Prints when each has all of them, the page's heap and the console's
+    /// memory, over four rounds (then every alarm cleared and as many new
+    /// raised, three times).
+    Console {
+        /// Simulated cells.
+        #[arg(long, default_value_t = 200)]
+        cells: usize,
+        /// Alarms active at once.
+        #[arg(long, default_value_t = 5000)]
+        alarms: usize,
+        /// The `cellwatch` binary under test.
+        #[arg(long, default_value = "target/release/cellwatch")]
+        agent: PathBuf,
+        /// Where the configuration, trust file and log go.
+        #[arg(long, default_value = "target/bench-console")]
+        workdir: PathBuf,
+        /// Chromium.
+        #[arg(long, default_value = "/usr/bin/chromium")]
+        chromium: PathBuf,
+        /// Its WebDriver.
+        #[arg(long, default_value = "/usr/bin/chromedriver")]
+        chromedriver: PathBuf,
+    },
 }
 
 fn main() -> ExitCode {
@@ -220,5 +249,24 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
             Ok(())
         }
         Cmd::Router { listen } => fanout::router(&listen).await,
+        Cmd::Console {
+            cells,
+            alarms,
+            agent,
+            workdir,
+            chromium,
+            chromedriver,
+        } => {
+            let setup = console::Setup {
+                agent,
+                workdir,
+                cells,
+                alarms,
+                chromium,
+                chromedriver,
+            };
+            print!("{}", console::run(&setup).await?);
+            Ok(())
+        }
     }
 }
