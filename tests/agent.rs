@@ -274,7 +274,7 @@ async fn ese_alarm_with_culprit_then_cleared_and_in_history() {
         fx.query("cellwatch/m01ps0004/history?kind=weather", None)
             .await
             .unwrap_err(),
-        "unknown kind 'weather': use alarm, state, command or kpi"
+        "unknown kind 'weather': use alarm, state, command, kpi or production"
     );
     // Metrics over HTTP: the alarm counter and the connection state.
     let metrics = fx.scrape().await;

@@ -350,6 +350,36 @@ async fn a_fault_shows_live_with_its_culprits_and_an_operator_acknowledges_and_s
         .await
         .unwrap();
     assert_eq!(answer(&b).await, "write refused: no tag X9.99");
+
+    // Today's production on the cell page, asked of the agent: as
+    // `cellwatch report daily` reads it from the journal.
+    let parts: u64 = b
+        .wait_for("[data-production='parts']")
+        .await
+        .text()
+        .await
+        .unwrap()
+        .parse()
+        .unwrap();
+    let today = chrono::Utc::now().format("%Y-%m-%d").to_string();
+    let journal = p.cell.dir.join("journal.sqlite");
+    let report = cellwatch(&[
+        "report",
+        "daily",
+        "--date",
+        &today,
+        "--db",
+        journal.to_str().unwrap(),
+        "--causes",
+        crate::util::root()
+            .join("config/stop-causes.toml")
+            .to_str()
+            .unwrap(),
+        "--json",
+    ]);
+    assert_eq!(report.code, 0, "{}", report.stderr);
+    let report: serde_json::Value = serde_json::from_str(&report.stdout).unwrap();
+    assert_eq!(report["production"], parts);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -358,11 +388,40 @@ async fn what_an_operator_may_not_do_is_not_offered_and_bus_texts_render_inert()
     let p = plant(d.path()).await;
     let b = browser::start().await;
     // CSD, whose culprit's comment is hostile markup.
+    // The cell page, watched for when CSD's row first appears.
+    open(&b, &p, "#/cell/m01ps0004").await;
+    b.wait_for("section.timeline svg").await;
+    b.client
+        .execute(
+            "window.__seen = null; new MutationObserver(() => { if (window.__seen === null && [...document.querySelectorAll('#view a')].some(a => a.textContent === 'csd')) window.__seen = Date.now(); }).observe(document.getElementById('view'), { childList: true, subtree: true }); return true;",
+            vec![],
+        )
+        .await
+        .unwrap();
     // Auto mode left for JOG, cycle start pressed: CSD, auto mode (X201.02)
     // among its culprits.
     p.sim.set("X201.02", false).unwrap();
     p.sim.set("X201.06", true).unwrap();
     p.sim.set("X200.01", true).unwrap();
+    b.wait_until(
+        "CSD shows on the cell page",
+        "return window.__seen !== null;",
+    )
+    .await;
+    let late = b
+        .client
+        .execute(
+            "const a = S.alarms.get('m01ps0004\\u0000csd'); return window.__seen - Date.parse(a.raised_at);",
+            vec![],
+        )
+        .await
+        .unwrap()
+        .as_f64()
+        .unwrap();
+    assert!(
+        late <= 1000.0,
+        "the raise showed on the cell page {late} ms after it happened"
+    );
     open(&b, &p, "#/alarms").await;
     b.wait_until(
         "CSD is shown, auto mode among its culprits",
@@ -642,4 +701,75 @@ async fn a_stuck_step_is_drawn_and_forced_from_the_cell_page_once_its_condition_
     b.wait_for(".sfc-step.active[data-step='F2.S5']").await;
     console.stop().await;
     cell.stop().await;
+}
+
+/// The console's own session sends no put and declares no queryable (its
+/// access control, egress): it reads the bus and asks, nothing more. A
+/// query it sends after its put reaches the other side, the put does not.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_console_session_puts_nothing_and_answers_nothing() {
+    let plain = |connect: Vec<String>, listen: Vec<String>| cellwatch::config::ZenohConfig {
+        mode: cellwatch::config::ZenohMode::Peer,
+        connect,
+        listen,
+        prefix: String::new(),
+        multicast_scouting: false,
+        tls: None,
+        config_file: None,
+        plain: true,
+        signing_key: None,
+    };
+    let bus = cellwatch::bus::open(&plain(vec![], vec!["tcp/127.0.0.1:0".into()]))
+        .await
+        .unwrap();
+    let endpoint = bus.info().locators().await[0].to_string();
+    let puts = bus.declare_subscriber("cellwatch/**").await.unwrap();
+    let asked = bus
+        .declare_queryable("cellwatch/m01/snapshot")
+        .await
+        .unwrap();
+    let console = cellwatch::bus::open_console(&plain(vec![endpoint], vec![]))
+        .await
+        .unwrap();
+    // What a cell's agent would say, said by the console.
+    console
+        .put("cellwatch/m01/alarms/ese", "forged")
+        .await
+        .unwrap();
+    let queryable = console.declare_queryable("cellwatch/m01/history").await;
+    // Then a query, which is allowed: once it has arrived, so would have
+    // the put before it on the same link.
+    let replies = console
+        .get("cellwatch/m01/snapshot")
+        .timeout(Duration::from_secs(30))
+        .await
+        .unwrap();
+    let query = asked.recv_async().await.unwrap();
+    query
+        .reply("cellwatch/m01/snapshot", "answered")
+        .await
+        .unwrap();
+    // The query ends (its final message) when it is dropped.
+    drop(query);
+    let reply = replies.recv_async().await.unwrap();
+    assert!(
+        reply.result().is_ok(),
+        "{:?}",
+        reply
+            .result()
+            .err()
+            .map(|e| e.payload().try_to_string().map(|s| s.to_string()))
+    );
+    assert!(
+        puts.try_recv().unwrap().is_none(),
+        "the console's put arrived"
+    );
+    // Its queryable, if Zenoh declared it locally, is never known outside.
+    let mut answers = bus
+        .get("cellwatch/m01/history")
+        .timeout(Duration::from_secs(2))
+        .await
+        .unwrap();
+    assert!(answers.recv_async().await.is_err(), "the console answered");
+    drop((queryable, &mut answers));
 }

@@ -22,7 +22,7 @@ pub struct HistoryRow {
 #[derive(Debug, thiserror::Error)]
 pub enum HistoryError {
     /// The query asks for a kind of row there is none of.
-    #[error("unknown kind '{0}': use alarm, state, command or kpi")]
+    #[error("unknown kind '{0}': use alarm, state, command, kpi or production")]
     UnknownKind(String),
     /// The journal cannot be read.
     #[error(transparent)]

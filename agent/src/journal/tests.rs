@@ -65,7 +65,7 @@ async fn writes_commit_and_query_back() {
         )
         .unwrap_err()
         .to_string(),
-        "unknown kind 'x': use alarm, state, command or kpi"
+        "unknown kind 'x': use alarm, state, command, kpi or production"
     );
     // Old rows go at the next start.
     drop(j);

@@ -7,7 +7,8 @@
 //!   file on a blocking thread, never holding up the cell loop;
 //!   with `kind=kpi`, instead, the ISA-18.2 alarm figures of `[since,
 //!   until)` (default the last 24 h) computed from the journal as
-//!   `cellwatch report alarms` computes them;
+//!   `cellwatch report alarms` computes them; with `kind=production`, the
+//!   production day from `since`, as `cellwatch report daily`;
 //! - `<prefix>/snapshot`: tag values with quality, active alarms, and the
 //!   values at the last fault ([`crate::payload::SnapshotPayload`]), asked
 //!   of the cell loop;
@@ -190,8 +191,10 @@ impl Services {
 /// One page of `query` from the journal. A read that fails is logged and
 /// answered with the reason; it is not a refusal of the request.
 async fn history(journal: &Path, query: HistoryQuery) -> Result<String, String> {
-    if query.kind.as_deref() == Some("kpi") {
-        return kpi(journal, &query).await;
+    match query.kind.as_deref() {
+        Some("kpi") => return kpi(journal, &query).await,
+        Some("production") => return production(journal, &query).await,
+        _ => {}
     }
     let path = journal.to_path_buf();
     let rows = tokio::task::spawn_blocking(move || {
@@ -233,6 +236,36 @@ async fn kpi(journal: &Path, query: &HistoryQuery) -> Result<String, String> {
     v["benchmarks"] = serde_json::to_value(report.benchmarks()).unwrap_or_default();
     v["unreadable"] = read.unreadable.into();
     Ok(v.to_string())
+}
+
+/// The production day that starts at `since` (default: the 24 hours up to
+/// now): minutes per state hour by hour, availability, stop causes (named
+/// by their fault type), parts and work orders, as `cellwatch report daily
+/// --format json` computes them from the same journal rows.
+async fn production(journal: &Path, query: &HistoryQuery) -> Result<String, String> {
+    const DAY: u64 = 86_400_000;
+    let now = now_ms();
+    let start = query.since.unwrap_or(now.saturating_sub(DAY));
+    let path = journal.to_path_buf();
+    let input = tokio::task::spawn_blocking(move || {
+        let conn = journal::open_read(&path).map_err(journal::HistoryError::from)?;
+        journal::report_input(&conn, start, start + DAY).map_err(journal::HistoryError::from)
+    })
+    .await
+    .map_err(|e| format!("production query failed: {e}"))?
+    .map_err(|e| {
+        tracing::error!(journal = %journal.display(), error = %e, "cannot read the journal for the production figures");
+        e.to_string()
+    })?;
+    let day = cellwatch_models::report::daily(
+        &input.changes,
+        &input.parts,
+        &input.orders,
+        start,
+        &cellwatch_models::report::StopCauses::default(),
+        now,
+    );
+    Ok(serde_json::to_string(&day).unwrap_or_default())
 }
 
 /// Parses a history selector's parameters at `now`.

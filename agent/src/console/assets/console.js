@@ -62,6 +62,15 @@ function when(iso) {
     `${pad(d.getHours())}:${pad(d.getMinutes())}:${pad(d.getSeconds())}`;
 }
 
+// Today's local midnight, RFC 3339 with the browser's offset.
+function midnight() {
+  const d = new Date();
+  d.setHours(0, 0, 0, 0);
+  const off = -d.getTimezoneOffset();
+  const a = Math.abs(off);
+  return `${d.getFullYear()}-${pad(d.getMonth() + 1)}-${pad(d.getDate())}T00:00:00${off >= 0 ? '+' : '-'}${pad(Math.floor(a / 60))}:${pad(a % 60)}`;
+}
+
 function href(...parts) { return '#/' + parts.map(encodeURIComponent).join('/'); }
 
 function alarmKey(cell, id) { return cell + '\u0000' + id; }
@@ -511,7 +520,8 @@ function cellPage(cell) {
       const period = el('select', { name: 'period', onchange: e => { this.period = e.target.value; this.fetch(); } },
         PERIODS.map(([p, t]) => el('option', { value: p, selected: p === this.period }, t)));
       this.write = el('section', { class: 'write' });
-      v.append(this.head, el('div', { class: 'period' }, el('span', {}, 'Machine state over the '), period), this.timeline, this.alarms, this.charts, this.write, this.answer, this.tags);
+      this.production = el('section', { class: 'production' });
+      v.append(this.head, el('div', { class: 'period' }, el('span', {}, 'Machine state over the '), period), this.timeline, this.production, this.alarms, this.charts, this.write, this.answer, this.tags);
       this.drawWrite();
       this.drawn = '';
       this.fetch();
@@ -543,6 +553,21 @@ function cellPage(cell) {
       this.charts.replaceChildren(...(charts.length ? [el('h3', {}, 'Charts')] : []), ...charts.map(c => this.chart(c, stuck)));
       this.tags.replaceChildren(el('h3', {}, 'Tags now'),
         table('values', ['Tag', 'Address', 'Value', 'Quality'], snap.tags.map(t => [t.name, t.address, valueText(t.value), t.quality])));
+    },
+    drawProduction(d) {
+      const m = d.total;
+      const parts = [el('h3', {}, 'Production today')];
+      parts.push(el('dl', { class: 'facts' },
+        el('dt', {}, 'Parts'), el('dd', { 'data-production': 'parts' }, String(d.production)),
+        el('dt', {}, 'Availability'), el('dd', {}, d.availability === null ? '—' : `${d.availability.toFixed(1)} %`),
+        el('dt', {}, 'Minutes'), el('dd', {}, `running ${m.running.toFixed(0)}, idle ${m.idle.toFixed(0)}, fault ${m.fault.toFixed(0)}, offline ${m.offline.toFixed(0)}`)));
+      if (d.orders.length) {
+        parts.push(table('orders', ['Item', 'Target', 'Parts', 'From', 'Until'], d.orders.map(o => [o.item || '—', o.target === null ? '—' : String(o.target), String(o.parts), when(o.from), when(o.to)])));
+      }
+      if (d.stop_causes.length) {
+        parts.push(table('causes', ['Stop', 'Cause', 'Stops', 'Minutes'], d.stop_causes.map(c => [c.code, c.name, String(c.count), c.minutes.toFixed(1)])));
+      }
+      this.production.replaceChildren(...parts);
     },
     drawWrite() {
       if (!may('write')) { this.write.replaceChildren(); return; }
@@ -585,11 +610,13 @@ function cellPage(cell) {
     },
     async fetch() {
       try {
-        const [history] = await Promise.all([
+        const [history, day] = await Promise.all([
           api(`/api/cells/${encodeURIComponent(cell)}/history?kind=state&since=${this.period}&limit=5000`),
+          api(`/api/cells/${encodeURIComponent(cell)}/history?kind=production&since=${encodeURIComponent(midnight())}`),
           this.live(),
         ]);
         this.drawTimeline(history.rows);
+        this.drawProduction(day);
       } catch (err) {
         this.timeline.replaceChildren(el('p', { class: 'refused' }, err.message));
       }
