@@ -56,11 +56,13 @@ struct Round {
 /// Runs the benchmark; returns its Markdown.
 pub async fn run(setup: &Setup) -> anyhow::Result<String> {
     std::fs::create_dir_all(&setup.workdir)?;
+    // Absolute: the console takes relative paths from its file's folder.
+    let workdir = std::fs::canonicalize(&setup.workdir)?;
     let keys: Vec<AgentKey> = (0..setup.cells)
         .map(|i| AgentKey::generate(&format!("cell{i:03}")))
         .collect();
     let entries: String = keys.iter().map(AgentKey::trust_entry).collect();
-    let trust_path = setup.workdir.join("trust.toml");
+    let trust_path = workdir.join("trust.toml");
     std::fs::write(&trust_path, &entries)?;
     let trust = Trust::parse("trust.toml", &entries)?;
 
