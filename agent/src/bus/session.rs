@@ -222,22 +222,31 @@ fn set(cfg: &mut zenoh::Config, key: &str, value: String) -> Result<(), ZenohErr
 /// Subscribing and querying are allowed; who may reach the agent at all is
 /// TLS's business.
 pub fn agent_access_control() -> String {
-    r#"{
+    speaking_denied("an-agent-routes-for-nobody", "ingress")
+}
+
+/// An access control that denies, on `flow` (`ingress`: what others send
+/// through this session; `egress`: what it sends), every put, delete,
+/// queryable, answer and liveliness token under any key (the advanced
+/// publishers' `@adv` keys included), and allows everything else.
+fn speaking_denied(id: &str, flow: &str) -> String {
+    format!(
+        r#"{{
   enabled: true,
   default_permission: "allow",
   rules: [
-    {
-      id: "an-agent-routes-for-nobody",
+    {{
+      id: "{id}",
       messages: ["put", "delete", "declare_queryable", "reply", "liveliness_token"],
-      flows: ["ingress"],
+      flows: ["{flow}"],
       permission: "deny",
       key_exprs: ["**", "**/@adv/**"],
-    },
+    }},
   ],
-  subjects: [{ id: "anyone" }],
-  policies: [{ rules: ["an-agent-routes-for-nobody"], subjects: ["anyone"] }],
-}"#
-    .to_string()
+  subjects: [{{ id: "anyone" }}],
+  policies: [{{ rules: ["{id}"], subjects: ["anyone"] }}],
+}}"#
+    )
 }
 
 /// Opens a client's session (CLI, tests): it fails when no endpoint it
@@ -248,6 +257,12 @@ pub fn agent_access_control() -> String {
 /// # Errors
 /// The configuration is refused, or nothing can be reached.
 pub async fn open(c: &ZenohConfig) -> Result<Session, ZenohError> {
+    open_config(client_config(c)?).await
+}
+
+/// A client's session configuration: as [`session_config`], giving up on
+/// its endpoints after [`CLIENT_CONNECT_TIMEOUT_MS`].
+fn client_config(c: &ZenohConfig) -> Result<zenoh::Config, ZenohError> {
     let mut cfg = session_config(c)?;
     if !c.connect.is_empty() {
         set(
@@ -257,7 +272,7 @@ pub async fn open(c: &ZenohConfig) -> Result<Session, ZenohError> {
         )?;
         set(&mut cfg, "connect/exit_on_failure", "true".into())?;
     }
-    open_config(cfg).await
+    Ok(cfg)
 }
 
 /// How long a client tries its endpoints before giving up, ms.
@@ -297,15 +312,7 @@ pub async fn open_agent(c: &ZenohConfig) -> Result<Session, ZenohError> {
 /// # Errors
 /// As [`open`].
 pub async fn open_console(c: &ZenohConfig) -> Result<Session, ZenohError> {
-    let mut cfg = session_config(c)?;
-    if !c.connect.is_empty() {
-        set(
-            &mut cfg,
-            "connect/timeout_ms",
-            CLIENT_CONNECT_TIMEOUT_MS.to_string(),
-        )?;
-        set(&mut cfg, "connect/exit_on_failure", "true".into())?;
-    }
+    let mut cfg = client_config(c)?;
     set(
         &mut cfg,
         "transport/link/rx/max_message_size",
@@ -314,22 +321,7 @@ pub async fn open_console(c: &ZenohConfig) -> Result<Session, ZenohError> {
     set(
         &mut cfg,
         "access_control",
-        r#"{
-  enabled: true,
-  default_permission: "allow",
-  rules: [
-    {
-      id: "the-console-only-reads-and-asks",
-      messages: ["put", "delete", "declare_queryable", "reply", "liveliness_token"],
-      flows: ["egress"],
-      permission: "deny",
-      key_exprs: ["**", "**/@adv/**"],
-    },
-  ],
-  subjects: [{ id: "anyone" }],
-  policies: [{ rules: ["the-console-only-reads-and-asks"], subjects: ["anyone"] }],
-}"#
-        .into(),
+        speaking_denied("the-console-only-reads-and-asks", "egress"),
     )?;
     open_config(cfg).await
 }
