@@ -327,6 +327,24 @@ async fn a_fault_shows_live_with_its_culprits_and_an_operator_acknowledges_and_s
         .count();
     assert!(in_journal >= 1);
     assert_eq!(raised, in_journal, "{rows:#?}");
+    // The same figures over the bus from the CLI.
+    let mut args = vec![
+        "history",
+        "--cell",
+        "m01ps0004",
+        "--kind",
+        "kpi",
+        "--since",
+        "24h",
+        "--timeout",
+        "30",
+    ];
+    let bus = bus_args(&p.cell.dir, "operator-kim", p.cell.zenoh_port);
+    args.extend(bus.iter().map(String::as_str));
+    let cli = cellwatch(&args);
+    assert_eq!(cli.code, 0, "{}", cli.stderr);
+    let figures: serde_json::Value = serde_json::from_str(&cli.stdout).unwrap();
+    assert_eq!(figures["raised"], raised, "{figures:#}");
     let cells = b.text("table.kpi-cells").await;
     assert!(cells.contains("m01ps0004 machining"), "{cells}");
     b.screenshot("kpi").await;

@@ -75,7 +75,11 @@ pub(crate) struct HistoryArgs {
     /// Until: same forms; default now.
     #[arg(long)]
     pub(crate) until: Option<String>,
-    /// Only `state`, `alarm` or `command` rows.
+    /// Only `state`, `alarm` or `command` rows; or, instead of rows, the
+    /// agent's figures from its journal (JSON): `kpi`, the ISA-18.2 alarm
+    /// figures of --since to --until (`cellwatch report alarms`), or
+    /// `production`, the production day from --since (`cellwatch report
+    /// daily`).
     #[arg(long)]
     pub(crate) kind: Option<String>,
     /// At most this many rows (the newest); one reply also holds at most

@@ -278,6 +278,17 @@ pub(crate) async fn history(args: &HistoryArgs, out: &mut dyn Write) -> Result<(
             .ask(&args.cell, Service::History, &selector, None, timeout)
             .await
             .map_err(failure)?;
+        if matches!(args.kind.as_deref(), Some("kpi" | "production")) {
+            // Figures, not rows: printed as the agent computed them.
+            let v: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
+            writeln!(
+                out,
+                "{}",
+                serde_json::to_string_pretty(&v).unwrap_or_default()
+            )
+            .map_err(io)?;
+            return Ok(());
+        }
         if args.json {
             writeln!(out, "{text}").map_err(io)?;
         }
