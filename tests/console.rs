@@ -398,6 +398,29 @@ async fn a_fault_shows_live_with_its_culprits_and_an_operator_acknowledges_and_s
     assert_eq!(report.code, 0, "{}", report.stderr);
     let report: serde_json::Value = serde_json::from_str(&report.stdout).unwrap();
     assert_eq!(report["production"], parts);
+
+    // A timed transition taken far too early (F17.01 falls at once instead
+    // of 60 s after F17.00): its measurement shows against its window.
+    b.wait_for("tr[data-timer='tmr-001']").await;
+    p.sim.set("F17.00", false).unwrap();
+    // The transition arms on the state the PLC reports: wait for it.
+    b.wait_until(
+        "the page's snapshot has F17.00 off",
+        "return !!S.view.snap && S.view.snap.tags.some(t => t.address === 'F17.00' && t.value === false);",
+    )
+    .await;
+    p.sim.set("F17.01", false).unwrap();
+    b.wait_for("tr[data-timer='tmr-001'] .m.early").await;
+    let row = b.text("tr[data-timer='tmr-001']").await;
+    assert!(row.contains("60.0 – 70.0"), "{row}");
+    b.client
+        .execute(
+            "document.querySelector('section.timers').scrollIntoView(); return true;",
+            vec![],
+        )
+        .await
+        .unwrap();
+    b.screenshot("timers").await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -338,6 +338,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     }
     sinks.extend(options.sinks);
     let forcing = crate::cell::forcing::Forcing::of(&config);
+    let timing = crate::cell::timers::Timers::of(&config);
     let mut source = match options.source {
         Some(source) => source,
         None => {
@@ -379,7 +380,8 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         .watching_journal(journal_health)
         .writing_to(writer)
         .answering_again(answers)
-        .forcing(forcing);
+        .forcing(forcing)
+        .timing(timing);
     let cell_loop = cell_loop
         .spawn(source_rx, requests_rx, stopped(stop_rx.clone()))
         .map_err(StartError::Loop)?;

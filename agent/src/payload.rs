@@ -358,6 +358,34 @@ pub struct SnapshotPayload {
     /// their steps' flags and conditions' operands are among `tags`.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub charts: Vec<ChartPayload>,
+    /// The cell's timed transitions (paper 001): each window and the last
+    /// measurements.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub timers: Vec<TimerPayload>,
+}
+
+/// A timed transition in the snapshot.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TimerPayload {
+    /// Its alarm id (`line-007`).
+    pub alarm: String,
+    /// What it measures (`+WR2B_DONE after +WR2A_START`).
+    pub label: String,
+    /// Its window, ms: earlier is early, later is late.
+    pub window_ms: [u64; 2],
+    /// The learned duration, ms.
+    pub delta_ms: u64,
+    /// Its last measured durations, oldest first (at most 10).
+    pub recent: Vec<MeasurementPayload>,
+}
+
+/// One measured duration of a timed transition.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct MeasurementPayload {
+    /// When it ended (RFC 3339).
+    pub at: String,
+    /// How long, ms.
+    pub ms: u64,
 }
 
 /// A supervised chart in the snapshot: its steps and transitions, each

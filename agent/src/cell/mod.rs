@@ -18,6 +18,7 @@ pub mod compile;
 pub mod force;
 pub mod forcing;
 pub mod restore;
+pub mod timers;
 
 use std::future::Future;
 use std::time::Duration;
@@ -78,6 +79,8 @@ pub struct CellLoop {
     max_shelve: Duration,
     /// The charts' switches and the force under way.
     forcing: forcing::Forcing,
+    /// The timed transitions' recent measurements.
+    timers: timers::Timers,
     /// Refusals before a signature was verified, counted per source and
     /// reason for the journal's summaries (bounded).
     refusals: Refusals,
@@ -148,6 +151,7 @@ impl CellLoop {
             written_tx,
             written_rx,
             forcing: forcing::Forcing::default(),
+            timers: timers::Timers::default(),
             refusals: Refusals::default(),
             answers: answers::Answers::default(),
             allowance: 0,
@@ -209,6 +213,13 @@ impl CellLoop {
     #[must_use]
     pub fn forcing(mut self, forcing: forcing::Forcing) -> CellLoop {
         self.forcing = forcing;
+        self
+    }
+
+    /// Keeps the recent measurements of these timed transitions.
+    #[must_use]
+    pub fn timing(mut self, timers: timers::Timers) -> CellLoop {
+        self.timers = timers;
         self
     }
 
@@ -526,6 +537,7 @@ impl CellLoop {
         } else if step.order.is_some() {
             state = Some(self.state_payload(now));
         }
+        self.timers.observe(now, &step.observations);
         let received = self.received.take();
         self.deliver(CellStep {
             at: now,
@@ -626,6 +638,7 @@ impl CellLoop {
                 .iter()
                 .flat_map(|s| ChartPayload::of(&s.id, &s.sfc, &s.forcible, &s.comments, &contact))
                 .collect(),
+            timers: self.timers.payload(),
         }
     }
 }

@@ -319,6 +319,7 @@ mod tests {
             alarms,
             last_fault: None,
             charts: Vec::new(),
+            timers: Vec::new(),
         }
     }
 

@@ -64,26 +64,11 @@ impl TimerChecks {
             .enumerate()
             .map(|(i, s)| (s.clone(), i))
             .collect();
-        let edge = |e: Edge| if e == Edge::Rise { "+" } else { "-" };
         let transitions = model
             .transitions
             .iter()
             .map(|t| {
-                let what = match &t.trigger {
-                    Some(tr) => format!(
-                        "{}{} after {}{}",
-                        edge(t.event.edge),
-                        t.event.tag,
-                        edge(tr.edge),
-                        tr.tag
-                    ),
-                    None => format!(
-                        "{}{} in {}",
-                        edge(t.event.edge),
-                        t.event.tag,
-                        t.from.join(":")
-                    ),
-                };
+                let what = label(t);
                 let s = model
                     .signals
                     .iter()
@@ -169,6 +154,28 @@ impl TimerChecks {
             out.push(base);
             out.push(over);
         }
+    }
+}
+
+/// What a transition measures, for people: `+DONE after +START` (timed
+/// from a trigger), or `-F17.01 in -F17.00:F17.01` (timed from entering its
+/// state).
+pub fn label(t: &super::learn::Transition) -> String {
+    let edge = |e: Edge| if e == Edge::Rise { "+" } else { "-" };
+    match &t.trigger {
+        Some(tr) => format!(
+            "{}{} after {}{}",
+            edge(t.event.edge),
+            t.event.tag,
+            edge(tr.edge),
+            tr.tag
+        ),
+        None => format!(
+            "{}{} in {}",
+            edge(t.event.edge),
+            t.event.tag,
+            t.from.join(":")
+        ),
     }
 }
 

@@ -515,13 +515,14 @@ function cellPage(cell) {
       this.timeline = el('section', { class: 'timeline' });
       this.alarms = el('section', {});
       this.charts = el('section', { class: 'charts' });
+      this.timers = el('section', { class: 'timers' });
       this.answer = el('p', { class: 'answer', id: 'answer', 'aria-live': 'polite' });
       this.tags = el('section', { class: 'tags' });
       const period = el('select', { name: 'period', onchange: e => { this.period = e.target.value; this.fetch(); } },
         PERIODS.map(([p, t]) => el('option', { value: p, selected: p === this.period }, t)));
       this.write = el('section', { class: 'write' });
       this.production = el('section', { class: 'production' });
-      v.append(this.head, el('div', { class: 'period' }, el('span', {}, 'Machine state over the '), period), this.timeline, this.production, this.alarms, this.charts, this.write, this.answer, this.tags);
+      v.append(this.head, el('div', { class: 'period' }, el('span', {}, 'Machine state over the '), period), this.timeline, this.production, this.alarms, this.charts, this.timers, this.write, this.answer, this.tags);
       this.drawWrite();
       this.drawn = '';
       this.fetch();
@@ -546,13 +547,26 @@ function cellPage(cell) {
       const snap = this.snap;
       if (!snap) return;
       const stuck = new Set([...S.alarms.values()].filter(a => a.cell === cell && a.kind === 'step' && active(a) && !kept(a)).map(a => a.id));
-      const drawn = JSON.stringify([snap.charts || [], [...stuck], S.key && S.key.operator, snap.tags]);
+      const drawn = JSON.stringify([snap.charts || [], snap.timers || [], [...stuck], S.key && S.key.operator, snap.tags]);
       if (drawn === this.drawn) return;
       this.drawn = drawn;
       const charts = snap.charts || [];
       this.charts.replaceChildren(...(charts.length ? [el('h3', {}, 'Charts')] : []), ...charts.map(c => this.chart(c, stuck)));
+      this.drawTimers(snap.timers || []);
       this.tags.replaceChildren(el('h3', {}, 'Tags now'),
         table('values', ['Tag', 'Address', 'Value', 'Quality'], snap.tags.map(t => [t.name, t.address, valueText(t.value), t.quality])));
+    },
+    drawTimers(timers) {
+      if (!timers.length) { this.timers.replaceChildren(); return; }
+      const secs = ms => (ms / 1000).toFixed(1);
+      this.timers.replaceChildren(el('h3', {}, 'Transition timers: the last measurements against their windows'),
+        el('table', { class: 'timers' }, el('thead', {}, el('tr', {}, ['Transition', 'Measures', 'Window (s)', 'Learned (s)', 'Last measurements (s), newest last'].map(h => el('th', {}, h)))),
+          el('tbody', {}, timers.map(t => el('tr', { 'data-timer': t.alarm },
+            el('td', {}, t.alarm), el('td', {}, t.label), el('td', {}, `${secs(t.window_ms[0])} – ${secs(t.window_ms[1])}`), el('td', {}, secs(t.delta_ms)),
+            el('td', { class: 'measured' }, t.recent.length ? t.recent.map(m => {
+              const out = m.ms < t.window_ms[0] ? 'early' : m.ms > t.window_ms[1] ? 'late' : 'in';
+              return el('span', { class: `m ${out}`, title: `${when(m.at)}: ${m.ms} ms (${out === 'in' ? 'in its window' : out})` }, secs(m.ms));
+            }) : 'none yet'))))));
     },
     drawProduction(d) {
       const m = d.total;
