@@ -24,6 +24,7 @@ const S = {
   operators: null,
   key: null,
   live: false,
+  synced: false,
   sort: { col: 'time', dir: -1 },
   filter: { text: '', cell: '', area: '', priority: '', state: '' },
   view: null,
@@ -98,6 +99,7 @@ function shown(a) { return a.state !== 'normal' || a.shelved || a.out_of_service
 
 function take(m) {
   if (m.type === 'snapshot') {
+    S.synced = true;
     S.cells = new Map(m.cells.map(c => [c.cell, c]));
     S.alarms = new Map(m.alarms.map(a => [alarmKey(a.cell, a.id), a]));
     S.areas = m.areas;
@@ -273,7 +275,7 @@ const overview = {
       sections.push(el('h2', {}, area || (S.areas.length ? 'Other cells' : 'Cells')));
       sections.push(el('div', { class: 'tiles' }, cells.map(tile)));
     }
-    if (!sections.length) sections.push(el('p', { class: 'empty' }, 'No cell in the plant trust file.'));
+    if (!sections.length) sections.push(el('p', { class: 'empty' }, S.synced ? 'No cell in the plant trust file.' : 'Waiting for the console\'s first view of the plant…'));
     this.root.replaceChildren(...sections);
   },
 };
