@@ -180,11 +180,31 @@ impl Plant {
         changes
     }
 
-    /// Keeps or drops `a` unless what is known of it is newer.
-    fn take(&mut self, a: AlarmPayload) -> Option<Change> {
+    /// Keeps or drops `a` unless what is known of it is newer. A clear, an
+    /// acknowledgement, a shelf or a removal of the occurrence known keeps
+    /// that occurrence's diagnosis (message, culprits, step): the table
+    /// shows what the alarm is, not "cleared".
+    fn take(&mut self, mut a: AlarmPayload) -> Option<Change> {
         let key = (a.cell.clone(), a.id.clone());
-        if self.alarms.get(&key).is_some_and(|known| known.at > a.at) {
-            return None;
+        if let Some(known) = self.alarms.get(&key) {
+            if known.at > a.at {
+                return None;
+            }
+            let of_its_occurrence = matches!(
+                a.transition,
+                Transition::Cleared
+                    | Transition::Acknowledged
+                    | Transition::Shelved
+                    | Transition::Unshelved
+                    | Transition::OutOfService
+                    | Transition::InService
+            );
+            if of_its_occurrence && known.raised_at == a.raised_at {
+                a.message.clone_from(&known.message);
+                a.culprits.clone_from(&known.culprits);
+                a.fault_step = known.fault_step;
+                a.fault_type.clone_from(&known.fault_type);
+            }
         }
         if shown(&a) {
             if !self.alarms.contains_key(&key) && self.alarms.len() >= self.max_alarms {
@@ -416,6 +436,50 @@ mod tests {
             Transition::Raised,
         ));
         assert!(p.alarm("m1", "a").is_some());
+    }
+
+    #[test]
+    fn a_clear_keeps_the_diagnosis_of_its_occurrence() {
+        let mut p = plant();
+        let mut raised = alarm(
+            "ese",
+            T1,
+            AlarmState::ActiveUnacknowledged,
+            Transition::Raised,
+        );
+        raised.culprits = vec![crate::payload::CulpritPayload {
+            address: "X0.06".into(),
+            value: false,
+            expected: true,
+            comment: Some("Y limit".into()),
+            trigger: true,
+        }];
+        p.alarm_event(raised.clone());
+        let mut cleared = alarm(
+            "ese",
+            T2,
+            AlarmState::ClearedUnacknowledged,
+            Transition::Cleared,
+        );
+        cleared.raised_at = T1.into();
+        cleared.message = "ESE cleared".into();
+        p.alarm_event(cleared);
+        let kept = p.alarm("m1", "ese").unwrap();
+        assert_eq!(kept.state, AlarmState::ClearedUnacknowledged);
+        assert_eq!(
+            (kept.message.as_str(), kept.culprits.len()),
+            (raised.message.as_str(), 1)
+        );
+        // A new occurrence brings its own.
+        let mut again = alarm(
+            "ese",
+            T3,
+            AlarmState::ActiveUnacknowledged,
+            Transition::Raised,
+        );
+        again.message = "ESE again".into();
+        p.alarm_event(again);
+        assert_eq!(p.alarm("m1", "ese").unwrap().message, "ESE again");
     }
 
     #[test]

@@ -576,7 +576,7 @@ function cellPage(cell) {
       parts.push(el('dl', { class: 'facts' },
         el('dt', {}, 'Parts'), el('dd', { 'data-production': 'parts' }, String(d.production)),
         el('dt', {}, 'Availability'), el('dd', {}, d.availability === null ? '—' : `${d.availability.toFixed(1)} %`),
-        el('dt', {}, 'Minutes'), el('dd', {}, `running ${m.running.toFixed(0)}, idle ${m.idle.toFixed(0)}, fault ${m.fault.toFixed(0)}, offline ${m.offline.toFixed(0)}`)));
+        el('dt', {}, 'Minutes'), el('dd', {}, `running ${m.running.toFixed(1)}, idle ${m.idle.toFixed(1)}, in fault ${m.fault.toFixed(1)}, offline or no data ${m.offline.toFixed(1)}`)));
       if (d.orders.length) {
         parts.push(table('orders', ['Item', 'Target', 'Parts', 'From', 'Until'], d.orders.map(o => [o.item || '—', o.target === null ? '—' : String(o.target), String(o.parts), when(o.from), when(o.to)])));
       }
