@@ -278,3 +278,35 @@ fn latin1_and_utf16_programs_are_read() {
         r.stderr
     );
 }
+
+/// `discover` against a server that takes the connection and never
+/// answers ends with an error naming the endpoint, rather than waiting for
+/// ever.
+#[test]
+fn discover_gives_up_on_a_server_that_never_answers() {
+    let silent = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = silent.local_addr().unwrap().port();
+    // Takes every connection and keeps it open, saying nothing.
+    std::thread::spawn(move || {
+        let mut held = Vec::new();
+        for stream in silent.incoming().map_while(Result::ok) {
+            held.push(stream);
+        }
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let endpoint = format!("opc.tcp://127.0.0.1:{port}/");
+    let run = crate::util::cellwatch(&[
+        "discover",
+        &endpoint,
+        "--pki-dir",
+        dir.path().join("pki").to_str().unwrap(),
+    ]);
+    assert_ne!(run.code, 0, "{}", run.stdout);
+    assert!(
+        run.stderr.contains(&format!(
+            "{endpoint}: no answer to the request for its endpoints within 30 s"
+        )),
+        "{}",
+        run.stderr
+    );
+}

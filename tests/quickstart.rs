@@ -154,7 +154,7 @@ impl Desk {
             .current_dir(&self.dir)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
-            .stderr(Stdio::null())
+            .stderr(std::fs::File::create(self.dir.join("sim.log")).unwrap())
             .spawn()
             .unwrap();
         let stdin = child.stdin.take().unwrap();
@@ -314,8 +314,21 @@ fn the_quickstart_runs_end_to_end() {
     // The alarm as the quickstart prints it, but for its time.
     let expected: Vec<&str> = b[9].text.lines().collect();
     let without_time = |l: &str| l.split_once("  ").map(|(_, r)| r.to_string());
-    let raised = wait_for(&alarms, "raised ese alarm", |l| {
-        l.contains("press7/ese  raised").then(|| l.to_string())
+    let raised = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        wait_for(&alarms, "raised ese alarm", |l| {
+            l.contains("press7/ese  raised").then(|| l.to_string())
+        })
+    }))
+    .unwrap_or_else(|e| {
+        // What the agent said meanwhile, to tell why.
+        let said: Vec<String> = agent_log.try_iter().collect();
+        panic!(
+            "{}\nthe agent said:\n{}\nthe simulator: {:?}, its log:\n{}",
+            e.downcast_ref::<String>().map_or("", String::as_str),
+            said.join("\n"),
+            sim.child.try_wait(),
+            std::fs::read_to_string(desk.dir.join("sim.log")).unwrap_or_default()
+        )
     });
     assert_eq!(without_time(&raised), without_time(expected[0]));
     let culprit = alarms.recv_timeout(PATIENCE).unwrap();

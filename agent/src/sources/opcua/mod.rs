@@ -380,8 +380,17 @@ pub async fn connect_once(
 > {
     let mut client = client(name, config)?;
     let token = identity(config)?;
-    let endpoint = server_endpoint(&client, config)
+    // A server that takes the connection and never answers, or goes away
+    // while answering, must not hold a one-off connection forever.
+    let endpoint = tokio::time::timeout(ENDPOINTS_ANSWER, server_endpoint(&client, config))
         .await
+        .map_err(|_| {
+            SourceError::Connect(format!(
+                "{}: no answer to the request for its endpoints within {} s",
+                config.endpoint,
+                ENDPOINTS_ANSWER.as_secs()
+            ))
+        })?
         .map_err(|e| SourceError::Connect(format!("{}: {e}", config.endpoint)))?;
     let (session, event_loop) = client
         .connect_to_endpoint_directly(endpoint, token)
@@ -398,6 +407,9 @@ pub async fn connect_once(
     }
     Ok((session, task))
 }
+
+/// How long a one-off connection waits for the server's endpoints.
+const ENDPOINTS_ANSWER: Duration = Duration::from_secs(30);
 
 /// The server's `NamespaceArray` (index → URI).
 ///
