@@ -1115,7 +1115,11 @@ async fn the_cli_believes_only_the_agent() {
             .filter(|l| l.contains(&format!("\"transition\":\"{t}\"")) && !l.contains("FORGED"))
             .count()
     };
-    for round in 1..=2 {
+    // Mallory's subscription may reach the agent after the first fault on
+    // a loaded machine: faults go on until she has replayed one, then one
+    // more.
+    let mut replayed_in = None;
+    for round in 1.. {
         for (value, transition) in [(false, "raised"), (true, "cleared")] {
             sim.set("X0.06", value).unwrap();
             while count(&printed, transition) < round {
@@ -1128,14 +1132,19 @@ async fn the_cli_believes_only_the_agent() {
                 );
             }
         }
-        let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
-        while round == 1 && replayed.load(std::sync::atomic::Ordering::SeqCst) < 2 {
-            assert!(
-                tokio::time::Instant::now() < deadline,
-                "mallory never replayed"
-            );
+        if replayed_in.is_some_and(|r| round > r) {
+            break;
+        }
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(5);
+        while replayed.load(std::sync::atomic::Ordering::SeqCst) < 2
+            && tokio::time::Instant::now() < deadline
+        {
             tokio::time::sleep(Duration::from_millis(20)).await;
         }
+        if replayed_in.is_none() && replayed.load(std::sync::atomic::Ordering::SeqCst) >= 2 {
+            replayed_in = Some(round);
+        }
+        assert!(round < 10, "mallory never replayed in {round} faults");
     }
     assert!(replayed.load(std::sync::atomic::Ordering::SeqCst) >= 1);
     child.kill().unwrap();
