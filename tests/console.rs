@@ -21,8 +21,7 @@ const ANA: &str = "ffeeddccbbaa99887766554433221100ffeeddccbbaa99887766554433221
 
 /// What a hostile comment in an I/O list would do if the page made HTML
 /// of it.
-const HOSTILE: &str =
-    "Auto Mode <script>window.__pwned=1</script><img src=x onerror=window.__pwned=2>";
+const HOSTILE: &str = "<script>window.__pwned=1</script><img src=x onerror=window.__pwned=2>";
 
 /// The agent, the console and their files.
 struct Plant {
@@ -44,7 +43,7 @@ impl Drop for Plant {
 }
 
 /// The simulated CNC, its agent (kim may do everything, ana only
-/// acknowledge; the CSD check's I/O list says [`HOSTILE`] of X201.02) and
+/// acknowledge; every comment of the CSD check's I/O list ends with [`HOSTILE`]) and
 /// a console on it, on ports the system picks.
 async fn plant(dir: &Path) -> Plant {
     plant_with(dir, "").await
@@ -60,9 +59,21 @@ async fn plant_with(dir: &Path, http: &str) -> Plant {
     std::fs::write(&operators, all).unwrap();
     std::fs::write(dir.join("kim.key"), kim().to_file()).unwrap();
     std::fs::write(dir.join("ana.key"), ana.to_file()).unwrap();
-    let csd = std::fs::read_to_string(crate::util::root().join("config/cnc/csd-comments.csv"))
-        .unwrap()
-        .replace("X201.02,Auto Mode", &format!("X201.02,{HOSTILE}"));
+    // Every comment of the CSD machine's I/O list ends with it: whichever
+    // contacts CSD names, their comments carry it.
+    let csd: String =
+        std::fs::read_to_string(crate::util::root().join("config/cnc/csd-comments.csv"))
+            .unwrap()
+            .lines()
+            .enumerate()
+            .map(|(i, l)| {
+                if i == 0 {
+                    format!("{l}\n")
+                } else {
+                    format!("{l} {HOSTILE}\n")
+                }
+            })
+            .collect();
     std::fs::write(dir.join("csd-comments.csv"), csd).unwrap();
     let config = std::fs::read_to_string(&cell.config).unwrap().replace(
         &format!(
@@ -439,8 +450,8 @@ async fn what_an_operator_may_not_do_is_not_offered_and_bus_texts_render_inert()
         )
         .await
         .unwrap();
-    // Auto mode left for JOG, cycle start pressed: CSD, auto mode (X201.02)
-    // among its culprits.
+    // Auto mode left for JOG, cycle start pressed: CSD, with the contacts
+    // the changes as they arrive make its culprits.
     p.sim.set("X201.02", false).unwrap();
     p.sim.set("X201.06", true).unwrap();
     p.sim.set("X200.01", true).unwrap();
@@ -465,8 +476,8 @@ async fn what_an_operator_may_not_do_is_not_offered_and_bus_texts_render_inert()
     );
     open(&b, &p, "#/alarms").await;
     b.wait_until(
-        "CSD is shown, auto mode among its culprits",
-        "const a = S.alarms.get('m01ps0004\\u0000csd'); return !!a && a.culprits.some(c => c.address === 'X201.02') && !!document.querySelector(\"tr[data-alarm='csd']\");",
+        "CSD is shown with its culprits",
+        "const a = S.alarms.get('m01ps0004\\u0000csd'); return !!a && a.culprits.length > 0 && !!document.querySelector(\"tr[data-alarm='csd']\");",
     )
     .await;
     open(&b, &p, "#/alarm/m01ps0004/csd").await;
