@@ -3,6 +3,7 @@
 //! missing, as the interoperability tests install node-opcua.
 
 use std::io::BufRead;
+use std::os::unix::process::CommandExt;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::sync::Once;
@@ -62,9 +63,22 @@ pub(crate) struct Browser {
 
 impl Drop for Browser {
     fn drop(&mut self) {
-        let _ = self.driver.kill();
-        let _ = self.driver.wait();
+        // chromedriver and the Chromium it started share a process group of
+        // their own: all of it goes, not only chromedriver.
+        kill_group(&mut self.driver);
     }
+}
+
+/// Kills `child`'s process group (it leads one) and reaps it.
+fn kill_group(child: &mut Child) {
+    if let Ok(pid) = i32::try_from(child.id()) {
+        let _ = nix::sys::signal::killpg(
+            nix::unistd::Pid::from_raw(pid),
+            nix::sys::signal::Signal::SIGKILL,
+        );
+    }
+    let _ = child.kill();
+    let _ = child.wait();
 }
 
 /// Starts chromedriver on a port the system picks and a headless Chromium
@@ -73,6 +87,7 @@ pub(crate) async fn start() -> Browser {
     installed();
     let mut driver = Command::new(CHROMEDRIVER)
         .arg("--port=0")
+        .process_group(0)
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()

@@ -2,6 +2,7 @@
 //! (its garbage collector exposed and its heap figures precise).
 
 use std::io::BufRead;
+use std::os::unix::process::CommandExt;
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -15,6 +16,14 @@ pub struct Browser {
 
 impl Drop for Browser {
     fn drop(&mut self) {
+        // chromedriver and the Chromium it started share a process group of
+        // their own: all of it goes.
+        if let Ok(pid) = i32::try_from(self.driver.id()) {
+            let _ = rustix::process::kill_process_group(
+                rustix::process::Pid::from_raw(pid).expect("a child's pid"),
+                rustix::process::Signal::KILL,
+            );
+        }
         let _ = self.driver.kill();
         let _ = self.driver.wait();
     }
@@ -26,6 +35,7 @@ impl Browser {
     pub async fn start(chromium: &Path, chromedriver: &Path) -> anyhow::Result<Browser> {
         let mut driver = Command::new(chromedriver)
             .arg("--port=0")
+            .process_group(0)
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
             .spawn()
