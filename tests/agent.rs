@@ -77,6 +77,27 @@ impl Fixture {
         }
     }
 
+    /// Starts the simulated CNC again (after `sim.stop()`): the same
+    /// server on the same address with the same certificate.
+    pub(crate) async fn restart_sim(&mut self) {
+        let opts = SimOptions {
+            listen: self.sim_addr,
+            pki_dir: self.dir.join("sim-pki"),
+            insecure: false,
+            decoy: None,
+        };
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
+        self.sim = loop {
+            match SimulatedCnc::start(&opts).await {
+                Ok(s) => break s,
+                Err(e) => {
+                    assert!(tokio::time::Instant::now() < deadline, "{e}");
+                    tokio::time::sleep(Duration::from_millis(200)).await;
+                }
+            }
+        };
+    }
+
     /// The fixture's directory (certificates, keys, journal).
     pub(crate) fn dir(&self) -> &Path {
         &self.dir
@@ -317,23 +338,7 @@ async fn server_outage_is_one_communication_alarm_and_faults_resume() {
     .await;
     // While the PLC is away, nothing else is raised.
     tokio::time::sleep(Duration::from_secs(2)).await;
-    // The same server comes back on the same address with the same certificate.
-    let opts = SimOptions {
-        listen: fx.sim_addr,
-        pki_dir: fx.dir.join("sim-pki"),
-        insecure: false,
-        decoy: None,
-    };
-    let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
-    fx.sim = loop {
-        match SimulatedCnc::start(&opts).await {
-            Ok(s) => break s,
-            Err(e) => {
-                assert!(tokio::time::Instant::now() < deadline, "{e}");
-                tokio::time::sleep(Duration::from_millis(200)).await;
-            }
-        }
-    };
+    fx.restart_sim().await;
     alarm_until(&sub, "communication restored", &mut seen, |a| {
         a.id == "communication" && a.transition.as_str() == "cleared"
     })

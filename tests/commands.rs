@@ -359,6 +359,8 @@ async fn a_write_killed_before_the_plc_answered_is_a_replay_after_the_restart() 
         config: path,
         zenoh_port: 0,
         metrics_port: 0,
+        env: Vec::new(),
+        watchdog_pid: false,
     };
     let mut child = cell.spawn("agent.log").await;
     let client = cell.client().await;

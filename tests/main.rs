@@ -25,6 +25,7 @@ mod interop;
 mod legacy;
 mod liveness;
 mod opcua;
+mod operations;
 mod operators;
 mod quickstart;
 mod real_programs;

@@ -318,7 +318,7 @@ fn force(value: &str) -> Command {
     c
 }
 
-fn sigterm(child: &Child) {
+pub(crate) fn sigterm(child: &Child) {
     nix::sys::signal::kill(
         nix::unistd::Pid::from_raw(child.id() as i32),
         nix::sys::signal::Signal::SIGTERM,
@@ -327,7 +327,7 @@ fn sigterm(child: &Child) {
 }
 
 /// Waits for `child` to end (it was told to); its exit code.
-async fn exit_code(mut child: Child) -> Option<i32> {
+pub(crate) async fn exit_code(mut child: Child) -> Option<i32> {
     let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
     loop {
         if let Some(status) = child.try_wait().unwrap() {
@@ -488,6 +488,8 @@ async fn robot_cell(dir: &std::path::Path) -> (SimulatedRobot, crate::spawned::C
         config: file,
         zenoh_port: 0,
         metrics_port: 0,
+        env: Vec::new(),
+        watchdog_pid: false,
     };
     (robot, cell)
 }

@@ -48,6 +48,11 @@ pub(crate) struct Cell {
     pub(crate) zenoh_port: u16,
     /// Where the running agent serves `/metrics` (the same).
     pub(crate) metrics_port: u16,
+    /// More environment for the agent's process.
+    pub(crate) env: Vec<(String, String)>,
+    /// Also `WATCHDOG_PID`, the agent's own process id, as systemd sets it
+    /// with `WATCHDOG_USEC`.
+    pub(crate) watchdog_pid: bool,
 }
 
 impl Cell {
@@ -61,9 +66,22 @@ impl Cell {
     /// [`Cell::spawn`] with `args` after the configuration.
     pub(crate) async fn spawn_with(&mut self, log: &str, args: &[&str]) -> Child {
         use std::io::{BufRead, Write};
-        let mut child = Command::new(env!("CARGO_BIN_EXE_cellwatch"))
+        let mut command = if self.watchdog_pid {
+            // The shell becomes the agent: its process id is the agent's.
+            let mut c = Command::new("sh");
+            c.args([
+                "-c",
+                "WATCHDOG_PID=$$; export WATCHDOG_PID; exec \"$0\" \"$@\"",
+                env!("CARGO_BIN_EXE_cellwatch"),
+            ]);
+            c
+        } else {
+            Command::new(env!("CARGO_BIN_EXE_cellwatch"))
+        };
+        let mut child = command
             .args(["run", self.config.to_str().unwrap()])
             .args(args)
+            .envs(self.env.iter().map(|(k, v)| (k, v)))
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
             .spawn()
@@ -190,6 +208,8 @@ pub(crate) fn cell(dir: &Path, sim: &SimulatedCnc) -> Cell {
         config: path,
         zenoh_port: 0,
         metrics_port: 0,
+        env: Vec::new(),
+        watchdog_pid: false,
     }
 }
 

@@ -24,6 +24,7 @@ use crate::cell::compile::{self, CompileError};
 use crate::cell::{CellLoop, JOURNAL_ALARM};
 use crate::clock::Clock;
 use crate::config::CellConfig;
+use crate::health::{CellHealth, Health};
 use crate::journal::{Journal, JournalError};
 use crate::metrics::Metrics;
 use crate::operator::{Gate, KeysError, OperatorKeys};
@@ -99,6 +100,10 @@ pub struct Options {
     /// each step goes to them last, inside the cell loop (tests that watch
     /// the steps, or make the loop fail on purpose).
     pub sinks: Vec<Box<dyn Sink>>,
+    /// The health of every cell of the process (`/healthz`, `/readyz`,
+    /// systemd's watchdog): this agent's cell is added to it; a health of
+    /// its own if `None`.
+    pub health: Option<Health>,
 }
 
 /// Why an agent could not go on by itself ([`Agent::wait`]).
@@ -135,6 +140,7 @@ pub struct Agent {
     metrics: Arc<Metrics>,
     metrics_addr: Option<SocketAddr>,
     committed: watch::Receiver<u64>,
+    health: (Health, Arc<CellHealth>),
 }
 
 impl Agent {
@@ -172,6 +178,7 @@ impl Agent {
     /// A task panicked: its panic goes on once everything else has
     /// stopped, so that a bug is never taken for a clean stop.
     pub async fn stop(mut self) {
+        self.health.0.remove(&self.health.1);
         let _ = self.stop.send(true);
         let mut panic = None;
         for task in [
@@ -288,12 +295,16 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     )?;
     let committed = journal.committed();
     let journal_health = journal.health();
+    let health = options.health.clone().unwrap_or_default();
+    let cell_health = health.add(&config.cell);
+    cell_health.journal(journal.health());
     let clock = options.clock.clone();
     let restored = crate::cell::restore::load(&config, clock.now_ms(), |id| {
         engine.can_raise(id) || id == JOURNAL_ALARM
     })?;
     let signing = signing_key(&config)?;
     let session = crate::bus::open_agent(&config.zenoh).await?;
+    cell_health.bus(session.clone(), config.zenoh.connect.clone());
     let prefix = config.zenoh.prefix.clone();
     let (requests_tx, requests_rx) = mpsc::channel(REQUEST_CAPACITY);
     let services = Services::declare(
@@ -318,9 +329,10 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
                 .map_err(|source| StartError::Metrics { addr, source })?;
             let bound = listener.local_addr().ok();
             let m = metrics.clone();
+            let h = health.clone();
             let shutdown = stopped(stop_rx.clone());
             let task = tokio::spawn(async move {
-                if let Err(e) = crate::metrics::serve(listener, m, shutdown).await {
+                if let Err(e) = crate::metrics::serve(listener, m, h, shutdown).await {
                     tracing::error!(error = %e, "metrics server stopped");
                 }
             });
@@ -381,7 +393,8 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         .writing_to(writer)
         .answering_again(answers)
         .forcing(forcing)
-        .timing(timing);
+        .timing(timing)
+        .reporting_to(cell_health.clone());
     let cell_loop = cell_loop
         .spawn(source_rx, requests_rx, stopped(stop_rx.clone()))
         .map_err(StartError::Loop)?;
@@ -396,6 +409,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         metrics,
         metrics_addr,
         committed,
+        health: (health, cell_health),
     })
 }
 

@@ -52,6 +52,7 @@ pub mod clock;
 mod commands;
 pub mod config;
 pub mod console;
+pub mod health;
 pub mod journal;
 pub mod metrics;
 pub mod operator;

@@ -96,6 +96,9 @@ pub struct CellLoop {
     /// its own thread ([`CellLoop::spawn`]), so they outlive the loop;
     /// `None`: the loop's own.
     tasks: Option<tokio::runtime::Handle>,
+    /// Told of every round of the loop and of the source's connection
+    /// (`/healthz`, `/readyz`, systemd's watchdog).
+    health: Option<std::sync::Arc<crate::health::CellHealth>>,
 }
 
 /// A write's outcome on its way back into the loop.
@@ -156,6 +159,7 @@ impl CellLoop {
             answers: answers::Answers::default(),
             allowance: 0,
             tasks: None,
+            health: None,
         }
     }
 
@@ -220,6 +224,14 @@ impl CellLoop {
     #[must_use]
     pub fn timing(mut self, timers: timers::Timers) -> CellLoop {
         self.timers = timers;
+        self
+    }
+
+    /// Tells `health` of every round of the loop (a stuck loop stops
+    /// going round) and of the source's connection.
+    #[must_use]
+    pub fn reporting_to(mut self, health: std::sync::Arc<crate::health::CellHealth>) -> CellLoop {
+        self.health = Some(health);
         self
     }
 
@@ -302,6 +314,9 @@ impl CellLoop {
         let served = std::panic::AssertUnwindSafe(self.serve(source, requests, shutdown))
             .catch_unwind()
             .await;
+        if let Some(health) = &self.health {
+            health.ended();
+        }
         for sink in self.sinks {
             sink.close().await;
         }
@@ -339,6 +354,9 @@ impl CellLoop {
         let mut source_open = true;
         let mut requests_open = true;
         loop {
+            if let Some(health) = &self.health {
+                health.progressed();
+            }
             // Wake when the next deadline (plus the allowance) falls due.
             wake.as_mut().reset(self.next_wake());
             tokio::select! {
@@ -390,6 +408,11 @@ impl CellLoop {
 
     async fn source(&mut self, ev: SourceEvent, queue_depth: usize) {
         let now = self.clock.now_ms();
+        if let (Some(health), SourceEvent::Connected(detail) | SourceEvent::Disconnected(detail)) =
+            (&self.health, &ev)
+        {
+            health.source(matches!(ev, SourceEvent::Connected(_)), detail);
+        }
         let (input, step) = match ev {
             SourceEvent::Connected(endpoint) => (
                 Input::Connection {

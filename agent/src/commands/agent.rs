@@ -92,10 +92,14 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
     drop(cells);
     let mut agents = Vec::new();
     let mut started = Vec::new();
+    // One health for every cell of the process: each metrics port's
+    // `/healthz` and systemd's watchdog cover them all.
+    let health = crate::health::Health::default();
     for ((path, c), share) in configs.into_iter().zip(shares) {
         let cell = c.cell.clone();
         let options = agent::Options {
             source: share.map(|s| Box::new(s) as Box<dyn crate::sources::Source>),
+            health: Some(health.clone()),
             ..agent::Options::default()
         };
         match agent::start_with(c, options).await {
@@ -130,6 +134,8 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
             let _ = stopped.wait_for(|s| *s).await;
         })));
     }
+    super::systemd::ready(&started);
+    let watchdog = super::systemd::watchdog(health);
     let waits = agents.iter_mut().map(|a| Box::pin(a.wait()));
     let failed = tokio::select! {
         signal = signals.recv() => {
@@ -148,6 +154,10 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
         tracing::warn!(signal, "stopped again while stopping: exiting now");
         std::process::exit(1);
     });
+    super::systemd::stopping();
+    if let Some(w) = watchdog {
+        w.abort();
+    }
     let _ = stop_buses.send(true);
     for agent in agents {
         agent.stop().await;

@@ -17,6 +17,7 @@ pub(crate) mod sf;
 pub(crate) mod sfc;
 pub(crate) mod signals;
 pub(crate) mod simulate;
+pub(crate) mod systemd;
 pub(crate) mod timers;
 
 /// Why a command failed. Each error is sorted into one of the two by the

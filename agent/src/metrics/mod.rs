@@ -14,8 +14,10 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
 
+use crate::health::{Health, STALLED_AFTER};
 use crate::operator::Action;
-use axum::http::header::CONTENT_TYPE;
+use axum::http::header::{HeaderName, CACHE_CONTROL, CONTENT_TYPE};
+use axum::http::StatusCode;
 use axum::routing::get;
 use axum::Router;
 use cellwatch_models::alarm::{AlarmKind, Severity};
@@ -514,25 +516,70 @@ impl Metrics {
     }
 }
 
-/// Serves `GET /metrics` on `listener` until `shutdown` completes.
+/// Serves `GET /metrics`, `/healthz` (every cell loop of the process goes
+/// round) and `/readyz` (every cell's source connected, bus session up,
+/// journal writable) on `listener` until `shutdown` completes. The health
+/// answers are 200 or 503, with one line per cell saying why.
 ///
 /// # Errors
 /// The server fails.
 pub async fn serve(
     listener: tokio::net::TcpListener,
     metrics: Arc<Metrics>,
+    health: Health,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
-    let app = Router::new().route(
-        "/metrics",
-        get(move || {
-            let m = metrics.clone();
-            async move { ([(CONTENT_TYPE, "text/plain; version=0.0.4")], m.render()) }
-        }),
-    );
+    let alive = health.clone();
+    let app = Router::new()
+        .route(
+            "/metrics",
+            get(move || {
+                let m = metrics.clone();
+                async move { ([(CONTENT_TYPE, "text/plain; version=0.0.4")], m.render()) }
+            }),
+        )
+        .route(
+            "/healthz",
+            get(move || {
+                let answer = alive.alive(std::time::Instant::now(), STALLED_AFTER);
+                async move { health_answer("ok", "not ok", answer) }
+            }),
+        )
+        .route(
+            "/readyz",
+            get(move || {
+                let health = health.clone();
+                async move { health_answer("ready", "not ready", health.ready().await) }
+            }),
+        );
     axum::serve(listener, app)
         .with_graceful_shutdown(shutdown)
         .await
+}
+
+/// 200 and `good`, or 503 and `bad`, then the lines.
+fn health_answer(
+    good: &str,
+    bad: &str,
+    answer: Result<Vec<String>, Vec<String>>,
+) -> (StatusCode, [(HeaderName, &'static str); 2], String) {
+    let (status, head, lines) = match answer {
+        Ok(lines) => (StatusCode::OK, good, lines),
+        Err(lines) => (StatusCode::SERVICE_UNAVAILABLE, bad, lines),
+    };
+    let mut body = format!("{head}\n");
+    for l in lines {
+        body.push_str(&l);
+        body.push('\n');
+    }
+    (
+        status,
+        [
+            (CONTENT_TYPE, "text/plain; charset=utf-8"),
+            (CACHE_CONTROL, "no-store"),
+        ],
+        body,
+    )
 }
 
 /// Binds the metrics address.

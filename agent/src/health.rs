@@ -1,0 +1,397 @@
+//! Is the process alive, and is each cell ready? What `/healthz` and
+//! `/readyz` answer, and what feeds systemd's watchdog.
+//!
+//! - **Alive**: every cell loop of the process went round within
+//!   [`STALLED_AFTER`]. An idle loop still goes round at least every
+//!   [`crate::cell::TICK`] (it looks at the time), so a loop that has not
+//!   is stuck in a step: an engine call, a sink, or the journal's queue.
+//! - **Ready**: each cell's source is connected, its bus session is up
+//!   (open, and linked to a router or peer when `zenoh.connect` names
+//!   one), and its journal can write.
+//!
+//! One [`Health`] is kept per process (`cellwatch run A.toml B.toml`: both
+//! cells), so that whichever metrics port a supervisor probes, the answer
+//! covers every cell a restart would restart. The cell loop reports to its
+//! [`CellHealth`] (a clock read and an atomic store per round); the
+//! answers read it.
+
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use tokio::sync::watch;
+
+/// A cell loop that has not gone round for this long is stuck.
+pub const STALLED_AFTER: Duration = Duration::from_secs(5);
+
+/// The health of every cell of this process.
+#[derive(Clone)]
+pub struct Health {
+    cells: Arc<Mutex<Vec<Arc<CellHealth>>>>,
+    /// What progress is measured from.
+    base: Instant,
+}
+
+impl Default for Health {
+    fn default() -> Self {
+        Health {
+            cells: Arc::default(),
+            base: Instant::now(),
+        }
+    }
+}
+
+/// What one cell reports: its loop's progress, its source's connection,
+/// and where to look for its journal's and bus's health.
+pub struct CellHealth {
+    cell: String,
+    base: Instant,
+    /// When the loop last went round, µs after `base`.
+    progress: AtomicU64,
+    /// The loop has ended.
+    ended: AtomicBool,
+    /// The source's connection: `None` until it has said.
+    source: Mutex<Option<(bool, String)>>,
+    /// `Some(why)` while the journal cannot write.
+    journal: Mutex<Option<watch::Receiver<Option<String>>>>,
+    bus: Mutex<Option<BusProbe>>,
+}
+
+/// How to tell whether a cell's bus session is up.
+struct BusProbe {
+    session: zenoh::Session,
+    /// The endpoints the session connects to (none: it only listens, and
+    /// being open is being up).
+    connect: Vec<String>,
+}
+
+impl Health {
+    /// A cell's health, kept with the others of this process until
+    /// [`Health::remove`].
+    pub fn add(&self, cell: &str) -> Arc<CellHealth> {
+        let health = Arc::new(CellHealth {
+            cell: cell.into(),
+            base: self.base,
+            progress: AtomicU64::new(micros(self.base, Instant::now())),
+            ended: AtomicBool::new(false),
+            source: Mutex::new(None),
+            journal: Mutex::new(None),
+            bus: Mutex::new(None),
+        });
+        self.lock().push(health.clone());
+        health
+    }
+
+    /// Forgets `cell` (its agent was stopped on purpose).
+    pub fn remove(&self, cell: &Arc<CellHealth>) {
+        self.lock().retain(|c| !Arc::ptr_eq(c, cell));
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Vec<Arc<CellHealth>>> {
+        self.cells
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    fn cells(&self) -> Vec<Arc<CellHealth>> {
+        self.lock().clone()
+    }
+
+    /// `/healthz`: every cell loop's progress at `now`; `Err` names each
+    /// loop that has not gone round within `stalled_after` or has ended.
+    ///
+    /// # Errors
+    /// One line per cell that is not alive.
+    pub fn alive(&self, now: Instant, stalled_after: Duration) -> Result<Vec<String>, Vec<String>> {
+        let mut ok = Vec::new();
+        let mut bad = Vec::new();
+        for c in self.cells() {
+            let ago = c.since_progress(now);
+            if c.ended.load(Ordering::Acquire) {
+                bad.push(format!("cell {}: the cell loop has ended", c.cell));
+            } else if ago > stalled_after {
+                bad.push(format!(
+                    "cell {}: the cell loop has made no progress for {:.1} s",
+                    c.cell,
+                    ago.as_secs_f64()
+                ));
+            } else {
+                ok.push(format!(
+                    "cell {}: the cell loop went round {:.1} s ago",
+                    c.cell,
+                    ago.as_secs_f64()
+                ));
+            }
+        }
+        if bad.is_empty() {
+            Ok(ok)
+        } else {
+            Err(bad)
+        }
+    }
+
+    /// `/readyz`: per cell, its source, bus and journal.
+    ///
+    /// # Errors
+    /// One line per cell that is not ready, saying each reason.
+    pub async fn ready(&self) -> Result<Vec<String>, Vec<String>> {
+        let mut ok = Vec::new();
+        let mut bad = Vec::new();
+        for c in self.cells() {
+            let (fine, line) = c.ready().await;
+            if fine {
+                ok.push(line);
+            } else {
+                bad.push(line);
+            }
+        }
+        if bad.is_empty() {
+            Ok(ok)
+        } else {
+            Err(bad)
+        }
+    }
+}
+
+fn micros(base: Instant, at: Instant) -> u64 {
+    u64::try_from(at.saturating_duration_since(base).as_micros()).unwrap_or(u64::MAX)
+}
+
+impl CellHealth {
+    /// The loop went round now.
+    pub fn progressed(&self) {
+        self.progressed_at(Instant::now());
+    }
+
+    /// The loop went round at `at`.
+    pub fn progressed_at(&self, at: Instant) {
+        self.progress
+            .store(micros(self.base, at), Ordering::Release);
+    }
+
+    /// The loop has ended.
+    pub fn ended(&self) {
+        self.ended.store(true, Ordering::Release);
+    }
+
+    /// How long ago, at `now`, the loop last went round.
+    fn since_progress(&self, now: Instant) -> Duration {
+        let at = self.base + Duration::from_micros(self.progress.load(Ordering::Acquire));
+        now.saturating_duration_since(at)
+    }
+
+    /// The source connected (`up`, to `detail`) or lost its connection
+    /// (`detail` says why).
+    pub fn source(&self, up: bool, detail: &str) {
+        *self
+            .source
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = Some((up, detail.into()));
+    }
+
+    /// Reads the journal's health from `health` (`Some(why)` while it
+    /// cannot write).
+    pub fn journal(&self, health: watch::Receiver<Option<String>>) {
+        *self
+            .journal
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(health);
+    }
+
+    /// Tells the bus's health from `session`, which connects to `connect`.
+    pub fn bus(&self, session: zenoh::Session, connect: Vec<String>) {
+        *self
+            .bus
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner) =
+            Some(BusProbe { session, connect });
+    }
+
+    /// Whether the cell is ready, and one line saying so or why not.
+    async fn ready(&self) -> (bool, String) {
+        let mut why = Vec::new();
+        let mut fine = Vec::new();
+        let source = self
+            .source
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone();
+        match source {
+            Some((true, to)) => fine.push(format!("source connected ({to})")),
+            Some((false, detail)) => why.push(format!("source not connected: {detail}")),
+            None => why.push("source not connected yet".into()),
+        }
+        let journal = self
+            .journal
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .as_ref()
+            .map(|h| h.borrow().clone());
+        match journal {
+            Some(Some(problem)) => why.push(format!("journal cannot write: {problem}")),
+            Some(None) => fine.push("journal writable".into()),
+            None => why.push("journal not open".into()),
+        }
+        let bus = self
+            .bus
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .as_ref()
+            .map(|b| (b.session.clone(), b.connect.clone()));
+        match bus {
+            None => why.push("bus session not open".into()),
+            Some((session, _)) if session.is_closed() => why.push("bus session closed".into()),
+            Some((session, connect)) => {
+                let info = session.info();
+                let linked = info.routers_zid().await.count() + info.peers_zid().await.count() > 0;
+                if connect.is_empty() || linked {
+                    fine.push("bus session up".into());
+                } else {
+                    why.push(format!(
+                        "bus session linked to none of {}",
+                        connect.join(", ")
+                    ));
+                }
+            }
+        }
+        if why.is_empty() {
+            (true, format!("cell {}: {}", self.cell, fine.join(", ")))
+        } else {
+            (false, format!("cell {}: {}", self.cell, why.join(", ")))
+        }
+    }
+}
+
+/// Feeds systemd's watchdog only while every cell loop makes progress:
+/// a stuck loop stops the feeding, and systemd restarts the process
+/// (`WatchdogSec`).
+pub struct Feeder {
+    stalled_after: Duration,
+    /// The last round withheld (the reasons are said once, when it
+    /// starts).
+    withheld: bool,
+}
+
+/// What one round of the feeder decided.
+#[derive(Debug, PartialEq, Eq)]
+pub enum Feed {
+    /// Every loop is alive: `WATCHDOG=1`.
+    Feed,
+    /// Not fed; the reasons, the first round not fed (`None` after, until
+    /// fed again).
+    Withhold(Option<Vec<String>>),
+}
+
+impl Feeder {
+    /// A feeder for a watchdog of `interval` (systemd's `WATCHDOG_USEC`):
+    /// a loop is stuck after [`STALLED_AFTER`], or half the interval if
+    /// that is shorter, so that systemd hears of it in time.
+    pub fn new(interval: Duration) -> Feeder {
+        Feeder {
+            stalled_after: STALLED_AFTER.min(interval / 2),
+            withheld: false,
+        }
+    }
+
+    /// How often to decide: four times per interval (systemd advises at
+    /// least twice).
+    pub fn period(interval: Duration) -> Duration {
+        (interval / 4).max(Duration::from_millis(10))
+    }
+
+    /// Decides at `now`.
+    pub fn round(&mut self, health: &Health, now: Instant) -> Feed {
+        match health.alive(now, self.stalled_after) {
+            Ok(_) => {
+                self.withheld = false;
+                Feed::Feed
+            }
+            Err(_) if self.withheld => Feed::Withhold(None),
+            Err(why) => {
+                self.withheld = true;
+                Feed::Withhold(Some(why))
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_loop_that_stops_going_round_stops_feeding_the_watchdog() {
+        let health = Health::default();
+        let press = health.add("press");
+        let lathe = health.add("lathe");
+        let t0 = Instant::now();
+        press.progressed_at(t0);
+        lathe.progressed_at(t0);
+        let mut feeder = Feeder::new(Duration::from_secs(20));
+        assert_eq!(
+            feeder.round(&health, t0 + Duration::from_secs(1)),
+            Feed::Feed
+        );
+        // The press goes on; the lathe's loop is stuck from t0.
+        for s in 1..=5 {
+            press.progressed_at(t0 + Duration::from_secs(s));
+        }
+        assert_eq!(
+            feeder.round(&health, t0 + Duration::from_millis(4_900)),
+            Feed::Feed
+        );
+        let Feed::Withhold(Some(why)) = feeder.round(&health, t0 + Duration::from_millis(5_100))
+        else {
+            panic!("fed with a stuck loop");
+        };
+        assert_eq!(
+            why,
+            ["cell lathe: the cell loop has made no progress for 5.1 s"]
+        );
+        // Said once; still not fed.
+        assert_eq!(
+            feeder.round(&health, t0 + Duration::from_millis(5_200)),
+            Feed::Withhold(None)
+        );
+        // Going round again feeds again.
+        lathe.progressed_at(t0 + Duration::from_secs(6));
+        press.progressed_at(t0 + Duration::from_secs(6));
+        assert_eq!(
+            feeder.round(&health, t0 + Duration::from_secs(6)),
+            Feed::Feed
+        );
+        // An ended loop is not alive, however recent its last round.
+        lathe.ended();
+        assert!(matches!(
+            feeder.round(&health, t0 + Duration::from_secs(6)),
+            Feed::Withhold(Some(_))
+        ));
+        // A cell stopped on purpose is forgotten.
+        health.remove(&lathe);
+        assert_eq!(
+            feeder.round(&health, t0 + Duration::from_secs(6)),
+            Feed::Feed
+        );
+    }
+
+    #[test]
+    fn a_short_watchdog_judges_sooner() {
+        let health = Health::default();
+        let cell = health.add("press");
+        let t0 = Instant::now();
+        cell.progressed_at(t0);
+        let mut feeder = Feeder::new(Duration::from_secs(2));
+        assert_eq!(
+            feeder.round(&health, t0 + Duration::from_millis(900)),
+            Feed::Feed
+        );
+        assert!(matches!(
+            feeder.round(&health, t0 + Duration::from_millis(1_100)),
+            Feed::Withhold(Some(_))
+        ));
+        assert_eq!(
+            Feeder::period(Duration::from_secs(2)),
+            Duration::from_millis(500)
+        );
+    }
+}

@@ -1,0 +1,280 @@
+//! Running the agent like plant infrastructure:
+//! - `/healthz` and `/readyz` on the metrics port tell the truth across a
+//!   PLC outage, a journal another process holds, and a cell loop stuck in
+//!   a step;
+//! - `cellwatch run` speaks systemd's notify protocol (`READY=1`,
+//!   `WATCHDOG=1`, `STOPPING=1`) to a real datagram socket, as systemd
+//!   would hear it;
+//! - the shipped systemd unit passes `systemd-analyze verify`.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use cellwatch::cell::CellStep;
+use cellwatch::sinks::Sink;
+use cellwatch::sources::scripted::ScriptedSource;
+use cellwatch::sources::SourceEvent;
+use futures_util::future::BoxFuture;
+use futures_util::FutureExt;
+use tokio::sync::watch;
+
+use crate::util::{http_get, root};
+
+/// Asks `path` until its status is `status` and its body contains each of
+/// `says`; the last answer.
+async fn answers(addr: std::net::SocketAddr, path: &str, status: u16, says: &[&str]) -> String {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    loop {
+        let (got, body) = http_get(addr, path).await;
+        if got == status && says.iter().all(|s| body.contains(s)) {
+            return body;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "{path} never answered {status} with {says:?}; last: {got} {body}"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn health_and_readiness_tell_the_truth_across_a_plc_outage_and_a_held_journal() {
+    let mut fx = crate::agent::Fixture::start().await;
+    let addr = fx.agent().metrics_addr().unwrap();
+    fx.settled().await;
+    let ready = answers(addr, "/readyz", 200, &["ready\n"]).await;
+    assert!(
+        ready.contains("cell m01ps0004: source connected (opc.tcp://")
+            && ready.contains("journal writable")
+            && ready.contains("bus session up"),
+        "{ready}"
+    );
+    let alive = answers(addr, "/healthz", 200, &["ok\n"]).await;
+    assert!(
+        alive.contains("cell m01ps0004: the cell loop went round"),
+        "{alive}"
+    );
+
+    // The PLC goes away: not ready, saying why; still alive.
+    fx.sim.stop();
+    answers(
+        addr,
+        "/readyz",
+        503,
+        &["not ready\n", "cell m01ps0004: source not connected"],
+    )
+    .await;
+    answers(addr, "/healthz", 200, &["ok\n"]).await;
+    fx.restart_sim().await;
+    answers(addr, "/readyz", 200, &["ready\n", "source connected"]).await;
+
+    // Another process holds the journal's write lock: the next rows
+    // cannot be written, and readiness says so; released, ready again.
+    fx.settled().await;
+    let lock = rusqlite::Connection::open(fx.journal_path()).unwrap();
+    lock.execute_batch("BEGIN EXCLUSIVE").unwrap();
+    fx.sim.set("X0.06", false).unwrap();
+    let held = answers(
+        addr,
+        "/readyz",
+        503,
+        &["not ready\n", "journal cannot write: "],
+    )
+    .await;
+    assert!(held.contains("locked"), "{held}");
+    answers(addr, "/healthz", 200, &["ok\n"]).await;
+    lock.execute_batch("ROLLBACK").unwrap();
+    drop(lock);
+    answers(addr, "/readyz", 200, &["ready\n", "journal writable"]).await;
+    fx.stop().await;
+    fx.sim.stop();
+}
+
+/// A sink of the test's own that, once told, holds the cell loop inside a
+/// step until told again: a loop stuck in a step.
+struct Holds(watch::Receiver<bool>);
+
+impl Sink for Holds {
+    fn name(&self) -> &'static str {
+        "holds"
+    }
+
+    fn handle<'a>(&'a mut self, _step: &'a CellStep) -> BoxFuture<'a, ()> {
+        async move {
+            let _ = self.0.wait_for(|hold| !*hold).await;
+        }
+        .boxed()
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_cell_loop_stuck_in_a_step_fails_healthz_and_its_source_says_not_ready() {
+    let d = tempfile::tempdir().unwrap();
+    let config = crate::agent::config(d.path(), "opc.tcp://127.0.0.1:1");
+    let (source, script) = ScriptedSource::new();
+    let (hold, held) = watch::channel(false);
+    let agent = cellwatch::agent::start_with(
+        config,
+        cellwatch::agent::Options {
+            source: Some(Box::new(source)),
+            sinks: vec![Box::new(Holds(held))],
+            ..Default::default()
+        },
+    )
+    .await
+    .unwrap();
+    let addr = agent.metrics_addr().unwrap();
+    // Before the source has said anything, the cell is not ready.
+    answers(
+        addr,
+        "/readyz",
+        503,
+        &["cell m01ps0004: source not connected yet"],
+    )
+    .await;
+    script
+        .send(SourceEvent::Connected("scripted".into()))
+        .await
+        .unwrap();
+    answers(addr, "/readyz", 200, &["source connected (scripted)"]).await;
+    answers(addr, "/healthz", 200, &["ok\n"]).await;
+    // The next step holds the loop.
+    hold.send(true).unwrap();
+    script
+        .send(SourceEvent::Disconnected("cable pulled".into()))
+        .await
+        .unwrap();
+    let stuck = answers(
+        addr,
+        "/healthz",
+        503,
+        &[
+            "not ok\n",
+            "cell m01ps0004: the cell loop has made no progress for ",
+        ],
+    )
+    .await;
+    assert!(!stuck.contains("went round"), "{stuck}");
+    // Let go: it goes round again.
+    hold.send(false).unwrap();
+    answers(addr, "/healthz", 200, &["ok\n"]).await;
+    answers(
+        addr,
+        "/readyz",
+        503,
+        &["source not connected: cable pulled"],
+    )
+    .await;
+    agent.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn run_tells_systemd_it_is_ready_feeds_the_watchdog_and_says_it_stops() {
+    let d = tempfile::tempdir().unwrap();
+    let (sim, mut cell) = crate::spawned::start(d.path()).await;
+    // systemd's side: a datagram socket named by NOTIFY_SOCKET.
+    let socket_path = d.path().join("notify.sock");
+    let socket = Arc::new(tokio::net::UnixDatagram::bind(&socket_path).unwrap());
+    cell.env = vec![
+        ("NOTIFY_SOCKET".into(), socket_path.to_str().unwrap().into()),
+        ("WATCHDOG_USEC".into(), "2000000".into()),
+    ];
+    cell.watchdog_pid = true;
+    let child = cell.spawn("agent.log").await;
+    let mut heard = Vec::new();
+    let next = async |heard: &mut Vec<String>| {
+        let mut buf = vec![0; 4096];
+        let n = tokio::time::timeout(Duration::from_secs(30), socket.recv(&mut buf))
+            .await
+            .unwrap_or_else(|_| panic!("systemd heard nothing more after {heard:?}"))
+            .unwrap();
+        let message = String::from_utf8_lossy(&buf[..n]).to_string();
+        heard.push(message.clone());
+        message
+    };
+    let first = next(&mut heard).await;
+    assert!(
+        first.lines().any(|l| l == "READY=1")
+            && first.lines().any(|l| l == "STATUS=watching m01ps0004"),
+        "{first:?}"
+    );
+    // Fed while the loop goes round (every half second for a 2 s watchdog).
+    for _ in 0..3 {
+        assert_eq!(next(&mut heard).await.trim_end(), "WATCHDOG=1", "{heard:?}");
+    }
+    let metrics: std::net::SocketAddr = ([127, 0, 0, 1], cell.metrics_port).into();
+    answers(
+        metrics,
+        "/healthz",
+        200,
+        &["cell m01ps0004: the cell loop went round"],
+    )
+    .await;
+    crate::robust::sigterm(&child);
+    loop {
+        if next(&mut heard).await.trim_end() == "STOPPING=1" {
+            break;
+        }
+    }
+    assert_eq!(
+        crate::robust::exit_code(child).await,
+        Some(0),
+        "{}",
+        cell.log("agent.log")
+    );
+    assert!(
+        cell.log("agent.log")
+            .contains("feeding systemd's watchdog while every cell loop goes round"),
+        "{}",
+        cell.log("agent.log")
+    );
+    sim.stop();
+}
+
+#[test]
+fn the_shipped_unit_passes_systemd_analyze_verify() {
+    if std::process::Command::new("systemd-analyze")
+        .arg("--version")
+        .output()
+        .is_err()
+    {
+        eprintln!("systemd-analyze is not on this machine: the unit is not verified here");
+        return;
+    }
+    // A root with the system's own units, the unit, the binary where the
+    // unit runs it, and a cell's configuration where it looks for one.
+    let d = tempfile::tempdir().unwrap();
+    let units = d.path().join("usr/lib/systemd/system");
+    std::fs::create_dir_all(&units).unwrap();
+    for dir in ["/usr/lib/systemd/system", "/lib/systemd/system"] {
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            if e.file_type().is_ok_and(|t| t.is_file()) {
+                let _ = std::fs::copy(e.path(), units.join(e.file_name()));
+            }
+        }
+    }
+    std::fs::copy(
+        root().join("deploy/cellwatch@.service"),
+        units.join("cellwatch@.service"),
+    )
+    .unwrap();
+    std::fs::create_dir_all(d.path().join("usr/bin")).unwrap();
+    std::fs::copy(
+        env!("CARGO_BIN_EXE_cellwatch"),
+        d.path().join("usr/bin/cellwatch"),
+    )
+    .unwrap();
+    std::fs::create_dir_all(d.path().join("etc/cellwatch")).unwrap();
+    std::fs::write(d.path().join("etc/cellwatch/press-4.toml"), "").unwrap();
+    let out = std::process::Command::new("systemd-analyze")
+        .args(["verify", "--man=no"])
+        .arg(format!("--root={}", d.path().display()))
+        .arg("cellwatch@press-4.service")
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && said.trim().is_empty(), "{said}");
+}
