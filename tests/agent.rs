@@ -50,6 +50,12 @@ pub(crate) struct Fixture {
 
 impl Fixture {
     pub(crate) async fn start() -> Fixture {
+        Fixture::start_with(|_| {}).await
+    }
+
+    /// [`Fixture::start`] with the agent's configuration changed by
+    /// `change` first.
+    pub(crate) async fn start_with(change: impl FnOnce(&mut CellConfig)) -> Fixture {
         let d = tempfile::tempdir().unwrap();
         let dir = d.path().to_path_buf();
         let sim_opts = SimOptions {
@@ -59,7 +65,8 @@ impl Fixture {
             decoy: None,
         };
         let sim = SimulatedCnc::start(&sim_opts).await.unwrap();
-        let config = config(&dir, &sim.endpoint());
+        let mut config = config(&dir, &sim.endpoint());
+        change(&mut config);
         crate::util::trust_sim(&config, &dir.join("sim-pki"));
         let agent = agent::start(config.clone(), None).await.unwrap();
         let zenoh_port = crate::util::agent_port(&agent).await;

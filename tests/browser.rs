@@ -6,7 +6,6 @@ use std::io::BufRead;
 use std::os::unix::process::CommandExt;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
-use std::sync::Once;
 use std::time::Duration;
 
 use fantoccini::{Client, Locator};
@@ -16,41 +15,7 @@ const CHROMEDRIVER: &str = "/usr/bin/chromedriver";
 
 /// Installs Debian's chromium and chromium-driver unless both are there.
 fn installed() {
-    static ONCE: Once = Once::new();
-    ONCE.call_once(|| {
-        if std::path::Path::new(CHROMIUM).exists() && std::path::Path::new(CHROMEDRIVER).exists() {
-            return;
-        }
-        let install = || {
-            Command::new("apt-get")
-                .args([
-                    "install",
-                    "-y",
-                    "--no-install-recommends",
-                    "chromium",
-                    "chromium-driver",
-                ])
-                .env("DEBIAN_FRONTEND", "noninteractive")
-                .output()
-                .expect("apt-get is needed to install Chromium for the console's tests")
-        };
-        let mut out = install();
-        if !out.status.success() {
-            // A fresh machine's package lists may be missing or stale.
-            let update = Command::new("apt-get").arg("update").output().unwrap();
-            assert!(
-                update.status.success(),
-                "apt-get update failed:\n{}",
-                String::from_utf8_lossy(&update.stderr)
-            );
-            out = install();
-        }
-        assert!(
-            out.status.success(),
-            "installing chromium and chromium-driver failed (root needed):\n{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-    });
+    crate::util::debian_packages(&[(CHROMIUM, "chromium"), (CHROMEDRIVER, "chromium-driver")]);
 }
 
 /// A headless Chromium and the chromedriver that drives it; both end when

@@ -339,3 +339,55 @@ pub(crate) fn trust_sim(config: &cellwatch::config::CellConfig, sim_pki: &Path) 
     pki::trust(&pki::own_cert(&ua.pki_dir), sim_pki).unwrap();
     pki::trust(&pki::own_cert(sim_pki), &ua.pki_dir).unwrap();
 }
+
+/// Installs the Debian packages whose files are missing (`(file,
+/// package)`), with apt-get (root needed), once per process at a time;
+/// apt-get waits for another's lock.
+pub(crate) fn debian_packages(wanted: &[(&str, &str)]) {
+    use std::process::Command;
+    static APT: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _one = APT
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    let missing: Vec<&str> = wanted
+        .iter()
+        .filter(|(file, _)| !Path::new(file).exists())
+        .map(|(_, package)| *package)
+        .collect();
+    if missing.is_empty() {
+        return;
+    }
+    let install = || {
+        Command::new("apt-get")
+            .args([
+                "-o",
+                "DPkg::Lock::Timeout=600",
+                "install",
+                "-y",
+                "--no-install-recommends",
+            ])
+            .args(&missing)
+            .env("DEBIAN_FRONTEND", "noninteractive")
+            .output()
+            .expect("apt-get is needed to install what the tests run")
+    };
+    let mut out = install();
+    if !out.status.success() {
+        // A fresh machine's package lists may be missing or stale.
+        let update = Command::new("apt-get")
+            .args(["-o", "DPkg::Lock::Timeout=600", "update"])
+            .output()
+            .unwrap();
+        assert!(
+            update.status.success(),
+            "apt-get update failed:\n{}",
+            String::from_utf8_lossy(&update.stderr)
+        );
+        out = install();
+    }
+    assert!(
+        out.status.success(),
+        "installing {missing:?} failed (root needed):\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

@@ -66,6 +66,9 @@ pub enum StartError {
         /// Why.
         source: std::io::Error,
     },
+    /// The Alertmanager's TLS files are unusable.
+    #[error(transparent)]
+    Alertmanager(#[from] crate::sinks::alertmanager::TlsError),
     /// The cell loop's thread cannot be started.
     #[error("cannot start the cell loop's thread: {0}")]
     Loop(std::io::Error),
@@ -78,6 +81,7 @@ impl StartError {
         matches!(
             self,
             StartError::Compile(_)
+                | StartError::Alertmanager(_)
                 | StartError::Keys(_)
                 | StartError::Key(_)
                 | StartError::Zenoh(ZenohError::Insecure { .. } | ZenohError::Key(_))
@@ -136,6 +140,8 @@ pub struct Agent {
     services: Option<JoinHandle<()>>,
     /// The `/metrics` server.
     metrics_server: Option<JoinHandle<()>>,
+    /// Sends the alarms to Alertmanager; ends after the cell loop.
+    alertmanager: Option<JoinHandle<()>>,
     session: zenoh::Session,
     metrics: Arc<Metrics>,
     metrics_addr: Option<SocketAddr>,
@@ -183,6 +189,7 @@ impl Agent {
         let mut panic = None;
         for task in [
             self.cell_loop.take(),
+            self.alertmanager.take(),
             self.services.take(),
             self.metrics_server.take(),
         ]
@@ -345,6 +352,15 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         Box::new(publisher),
         Box::new(MetricsSink::new(metrics.clone(), &config, clock.now_ms())),
     ];
+    let alertmanager = match &config.alertmanager {
+        Some(am) => {
+            let (sink, pusher) =
+                crate::sinks::alertmanager::start(&config.cell, am, metrics.clone())?;
+            sinks.push(Box::new(sink));
+            Some(tokio::spawn(pusher.run()))
+        }
+        None => None,
+    };
     if let Some(observer) = options.observer {
         sinks.push(Box::new(ConsoleSink::new(observer)));
     }
@@ -405,6 +421,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         source: Some(source),
         services: Some(services),
         metrics_server,
+        alertmanager,
         session,
         metrics,
         metrics_addr,

@@ -42,6 +42,10 @@ pub(crate) fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<(), F
     }
     crate::bus::session_config(&c.zenoh)
         .map_err(|e| Failure::Input(format!("{}: {e}", args.config.display())))?;
+    if let Some(am) = &c.alertmanager {
+        crate::sinks::alertmanager::check(am)
+            .map_err(|e| Failure::Input(format!("{}: {e}", args.config.display())))?;
+    }
     let io = Failure::output;
     writeln!(
         out,

@@ -12,7 +12,9 @@ use cellwatch_models::signal::Signal;
 use cellwatch_models::value::Counter;
 
 use crate::config::legacy::LegacyConfig;
-use crate::config::{Addressing, OpcUaConfig, SfcCheck, TagConfig, TimerCheck, ZenohConfig};
+use crate::config::{
+    Addressing, AlertmanagerConfig, OpcUaConfig, SfcCheck, TagConfig, TimerCheck, ZenohConfig,
+};
 
 /// The longest shelf unless the configuration says (`commands.max_shelve`).
 pub const DEFAULT_MAX_SHELVE: Duration = Duration::from_secs(8 * 3600);
@@ -78,6 +80,8 @@ pub struct CellConfig {
     pub sfc: Vec<SfcCheck>,
     /// Alarm delays: alarm id, on-delay and off-delay, ms.
     pub delays: Vec<(String, u64, u64)>,
+    /// Where alarms are pushed for people (`[alertmanager]`).
+    pub alertmanager: Option<AlertmanagerConfig>,
     /// Things worth saying at start (security off, ...).
     pub warnings: Vec<String>,
 }

@@ -30,6 +30,26 @@ pub(crate) struct RawConfig {
     pub(crate) commands: RawCommands,
     #[serde(default)]
     pub(crate) production: RawProduction,
+    pub(crate) alertmanager: Option<Spanned<RawAlertmanager>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawAlertmanager {
+    #[serde(default)]
+    pub(crate) urls: Vec<Spanned<String>>,
+    pub(crate) area: Option<String>,
+    pub(crate) console: Option<Spanned<String>>,
+    pub(crate) resend_interval: Option<Spanned<String>>,
+    pub(crate) tls: Option<Spanned<RawAlertmanagerTls>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawAlertmanagerTls {
+    pub(crate) ca: Spanned<String>,
+    pub(crate) cert: Option<Spanned<String>>,
+    pub(crate) key: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Default, Deserialize)]

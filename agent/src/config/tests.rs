@@ -349,3 +349,54 @@ fn shipped_configs_parse() {
 }
 
 mod checks;
+
+#[test]
+fn alertmanager_urls_tls_and_interval_are_checked() {
+    let good = format!(
+        "{GOOD}\n[alertmanager]\nurls = [\"http://127.0.0.1:9093/\", \"https://am.plant:9093/am\"]\narea = \"press shop\"\nconsole = \"https://console.plant:8470/\"\nresend_interval = \"30s\"\n[alertmanager.tls]\nca = \"pki/am-ca.pem\"\n"
+    );
+    let c = parse("cell.toml", &good, Path::new("base"), &mem()).unwrap();
+    let am = c.alertmanager.unwrap();
+    assert_eq!(
+        am.urls,
+        ["http://127.0.0.1:9093", "https://am.plant:9093/am"]
+    );
+    assert_eq!(am.area.as_deref(), Some("press shop"));
+    assert_eq!(am.console.as_deref(), Some("https://console.plant:8470"));
+    assert_eq!(am.resend, Duration::from_secs(30));
+    assert_eq!(am.tls.unwrap().ca, PathBuf::from("base/pki/am-ca.pem"));
+    // Without the section, nothing is pushed; plain HTTP off this machine
+    // is said.
+    assert!(parse("cell.toml", GOOD, Path::new("base"), &mem())
+        .unwrap()
+        .alertmanager
+        .is_none());
+    let plain = format!("{GOOD}\n[alertmanager]\nurls = [\"http://am.plant:9093\"]\n");
+    let c = parse("cell.toml", &plain, Path::new("base"), &mem()).unwrap();
+    assert!(
+        c.warnings.iter().any(|w| w
+            == "alertmanager.urls: http://am.plant:9093 is plain HTTP: alerts cross the network unencrypted and unauthenticated"),
+        "{:?}",
+        c.warnings
+    );
+    assert_eq!(c.alertmanager.unwrap().resend, DEFAULT_RESEND);
+
+    let bad = format!(
+        "{GOOD}\n[alertmanager]\nurls = [\"am.plant:9093\", \"https://am.plant:9093\", \"http://am?x=1\"]\nresend_interval = \"2h\"\n[alertmanager.tls]\nca = \"ca.pem\"\ncert = \"agent.pem\"\n"
+    );
+    assert_eq!(
+        errors(&bad),
+        [
+            "cell.toml:29:9: alertmanager.urls: 'am.plant:9093': use http:// or https://",
+            "cell.toml:29:51: alertmanager.urls: 'http://am?x=1': no query (?…) is allowed",
+            "cell.toml:30:19: alertmanager.resend_interval: at most 1h: active alerts end four intervals after they were last sent",
+            "cell.toml:31:1: alertmanager.tls: give both cert and key (a client certificate), or neither",
+        ]
+        .join("\n")
+    );
+    let https = format!("{GOOD}\n[alertmanager]\nurls = [\"https://am.plant:9093\"]\n");
+    assert_eq!(
+        errors(&https),
+        "cell.toml:29:9: alertmanager.tls: an https:// Alertmanager needs [alertmanager.tls] ca = the CA that signed its certificate"
+    );
+}

@@ -96,6 +96,12 @@ pub struct Metrics {
     pub alarms_out_of_service: IntGauge,
     /// Time from raise to acknowledgement.
     pub alarm_ack_seconds: Histogram,
+    /// Sends to Alertmanager, by result (`ok`, `failed`).
+    alertmanager_sends: IntCounterVec,
+    /// Alarms sent to Alertmanager as active alerts now.
+    pub alertmanager_alerts: IntGauge,
+    /// Alert changes not yet accepted by every Alertmanager.
+    pub alertmanager_unsent: IntGauge,
     /// Time the agent adds: values received from the PLC → their alarm
     /// journaled and published.
     pub alarm_latency_seconds: Histogram,
@@ -193,6 +199,17 @@ impl Metrics {
             ),
             &["service", "reason"]
         ));
+        let alertmanager_sends = reg!(IntCounterVec::new(
+            opts(
+                "cellwatch_alertmanager_sends_total",
+                "Sends of the cell's alerts to an Alertmanager, by result (ok, failed: refused, unreachable or timed out; retried with backoff).",
+                cell
+            ),
+            &["result"]
+        ));
+        for result in ["ok", "failed"] {
+            alertmanager_sends.with_label_values(&[result]).inc_by(0);
+        }
         // Every series exists from the start, at 0, so that rates and
         // dashboards see the first refusal.
         for (service, reason) in [
@@ -397,6 +414,17 @@ impl Metrics {
                     1.0, 5.0, 10.0, 30.0, 60.0, 120.0, 300.0, 600.0, 1800.0, 3600.0, 14400.0
                 ])
             )),
+            alertmanager_sends,
+            alertmanager_alerts: reg!(IntGauge::with_opts(opts(
+                "cellwatch_alertmanager_alerts",
+                "Alarms sent to Alertmanager as active alerts now (active, not shelved, in service).",
+                cell
+            ))),
+            alertmanager_unsent: reg!(IntGauge::with_opts(opts(
+                "cellwatch_alertmanager_unsent",
+                "Alert changes (raised, updated, ended) not yet accepted by every Alertmanager.",
+                cell
+            ))),
             alarm_latency_seconds: reg!(Histogram::with_opts(
                 HistogramOpts::new(
                     "cellwatch_alarm_latency_seconds",
@@ -509,6 +537,13 @@ impl crate::journal::CommitObserver for Metrics {
 }
 
 impl Metrics {
+    /// A send to an Alertmanager succeeded (`true`) or failed.
+    pub fn alertmanager_sent(&self, ok: bool) {
+        self.alertmanager_sends
+            .with_label_values(&[if ok { "ok" } else { "failed" }])
+            .inc();
+    }
+
     /// A query to `service` refused for `reason` (`busy`, `too_large`,
     /// `invalid`).
     pub fn refused(&self, service: &str, reason: &str) {

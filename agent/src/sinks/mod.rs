@@ -11,12 +11,15 @@
 //! - [`journal`]: the SQLite journal (rows, history queries, reports).
 //! - [`zenoh`]: publication on the bus, and the query services.
 //! - [`console`]: the demo's printed view.
+//! - [`alertmanager`]: alarms to people through Prometheus Alertmanager
+//!   (a task of its own sends them, off the loop).
 //! - the metrics ([`crate::sinks::metrics::MetricsSink`]): Prometheus.
 //! - [`RecordingSink`]: keeps every step, for tests; the smallest example
 //!   of a sink.
 //!
 //! To add a sink: implement [`Sink`] and push it in [`crate::agent::start`].
 
+pub mod alertmanager;
 pub mod console;
 pub mod journal;
 pub mod metrics;

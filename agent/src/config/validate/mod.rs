@@ -3,6 +3,7 @@
 //! `Validator` walks the file; its methods are split by component over
 //! this folder's files.
 
+mod alertmanager;
 mod bus;
 mod checks;
 mod legacy;
@@ -396,6 +397,7 @@ impl Validator<'_> {
             Duration::from_secs(10),
         );
         let zenoh = self.zenoh(raw.zenoh, &cell);
+        let alertmanager = self.alertmanager(raw.alertmanager);
         let journal = JournalConfig {
             path: self.path(
                 raw.journal
@@ -582,6 +584,7 @@ impl Validator<'_> {
             limits,
             sfc,
             delays,
+            alertmanager,
             warnings: Vec::new(),
         })
     }

@@ -1,0 +1,142 @@
+//! Validating the configuration: `[alertmanager]`.
+
+use toml::Spanned;
+
+use super::Validator;
+use crate::config::raw::RawAlertmanager;
+use crate::config::{AlertmanagerConfig, AlertmanagerTls, DEFAULT_RESEND};
+
+/// The longest `alertmanager.resend_interval`: an alert says it ends four
+/// intervals after it was sent, and an hour's silence hides a dead agent.
+const MAX_RESEND: std::time::Duration = std::time::Duration::from_secs(3600);
+
+impl Validator<'_> {
+    pub(super) fn alertmanager(
+        &mut self,
+        raw: Option<Spanned<RawAlertmanager>>,
+    ) -> Option<AlertmanagerConfig> {
+        let raw = raw?;
+        let table = raw.span();
+        let raw = raw.into_inner();
+        if raw.urls.is_empty() {
+            self.problem(
+                table.clone(),
+                "alertmanager.urls",
+                "name at least one Alertmanager, like [\"http://alertmanager:9093\"]",
+            );
+        }
+        let mut urls = Vec::new();
+        let mut https = None;
+        for u in &raw.urls {
+            match web_url(u.get_ref()) {
+                Ok(secure) => {
+                    if secure && https.is_none() {
+                        https = Some(u.span());
+                    }
+                    if !secure && !is_loopback(u.get_ref()) {
+                        self.warnings.push(format!(
+                            "alertmanager.urls: {} is plain HTTP: alerts cross the network unencrypted and unauthenticated",
+                            u.get_ref()
+                        ));
+                    }
+                    urls.push(u.get_ref().trim_end_matches('/').to_string());
+                }
+                Err(why) => self.problem(u.span(), "alertmanager.urls", why),
+            }
+        }
+        let console = raw.console.and_then(|c| match web_url(c.get_ref()) {
+            Ok(_) => Some(c.get_ref().trim_end_matches('/').to_string()),
+            Err(why) => {
+                self.problem(c.span(), "alertmanager.console", why);
+                None
+            }
+        });
+        let resend_span = raw.resend_interval.as_ref().map(Spanned::span);
+        let resend = self.duration(
+            raw.resend_interval,
+            "alertmanager.resend_interval",
+            DEFAULT_RESEND,
+        );
+        if resend > MAX_RESEND {
+            self.problem(
+                resend_span.unwrap_or(table.clone()),
+                "alertmanager.resend_interval",
+                "at most 1h: active alerts end four intervals after they were last sent",
+            );
+        }
+        let tls = raw.tls.map(|t| {
+            let span = t.span();
+            let t = t.into_inner();
+            let client = match (t.cert, t.key) {
+                (Some(c), Some(k)) => Some((self.path(c.get_ref()), self.path(k.get_ref()))),
+                (None, None) => None,
+                _ => {
+                    self.problem(
+                        span,
+                        "alertmanager.tls",
+                        "give both cert and key (a client certificate), or neither",
+                    );
+                    None
+                }
+            };
+            AlertmanagerTls {
+                ca: self.path(t.ca.get_ref()),
+                client,
+            }
+        });
+        if let (Some(span), None) = (https, &tls) {
+            self.problem(
+                span,
+                "alertmanager.tls",
+                "an https:// Alertmanager needs [alertmanager.tls] ca = the CA that signed its certificate",
+            );
+        }
+        if let Some(area) = &raw.area {
+            if area.trim().is_empty() {
+                self.problem(table, "alertmanager.area", "must not be empty");
+            }
+        }
+        Some(AlertmanagerConfig {
+            urls,
+            area: raw.area,
+            console,
+            resend,
+            tls,
+        })
+    }
+}
+
+/// Whether `text` is an `http://` (false) or `https://` (true) address
+/// with a host and no query; why not otherwise.
+fn web_url(text: &str) -> Result<bool, String> {
+    let uri: hyper::Uri = text
+        .parse()
+        .map_err(|e| format!("'{text}' is not a URL like http://alertmanager:9093 ({e})"))?;
+    let secure = match uri.scheme_str() {
+        Some("http") => false,
+        Some("https") => true,
+        _ => return Err(format!("'{text}': use http:// or https://")),
+    };
+    if uri.host().is_none_or(str::is_empty) {
+        return Err(format!("'{text}' names no host"));
+    }
+    if uri.query().is_some() {
+        return Err(format!("'{text}': no query (?…) is allowed"));
+    }
+    Ok(secure)
+}
+
+/// Whether the URL's host is this machine.
+fn is_loopback(text: &str) -> bool {
+    let Ok(uri) = text.parse::<hyper::Uri>() else {
+        return false;
+    };
+    match uri.host() {
+        Some("localhost") => true,
+        Some(h) => h
+            .trim_matches(['[', ']'])
+            .parse::<std::net::IpAddr>()
+            .is_ok_and(|ip| ip.is_loopback()),
+        None => false,
+    }
+}

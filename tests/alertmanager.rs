@@ -1,0 +1,270 @@
+//! Alarms to people through a real Prometheus Alertmanager (Debian's
+//! `prometheus-alertmanager`, installed on first use), run with the
+//! shipped `deploy/alertmanager.yml`: a fault appears in
+//! `/api/v2/alerts` with its labels and culprits, clearing and shelving
+//! end it, an Alertmanager restarted with nothing stored gets every active
+//! alert back, alarms go on reaching the bus while it is down, and the
+//! shipped inhibition rule holds back a cell's process alarms while its
+//! PLC cannot be reached.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+use cellwatch::config::AlertmanagerConfig;
+use cellwatch::operator::Action;
+use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
+
+use crate::agent::{alarm_until, Fixture};
+use crate::spawned::{send, signed, signed_with};
+use crate::util::{http_get, root};
+
+const ALERTMANAGER: &str = "/usr/bin/prometheus-alertmanager";
+
+/// A real Alertmanager on loopback; killed when dropped.
+struct Alertmanager {
+    child: Child,
+    port: u16,
+    dir: PathBuf,
+}
+
+impl Drop for Alertmanager {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Alertmanager {
+    /// Starts one with the shipped configuration on `port`, its storage
+    /// (silences, notification log) under `dir`, clustering off; returns
+    /// once it says it is ready.
+    async fn start(dir: &Path, port: u16) -> Alertmanager {
+        crate::util::debian_packages(&[(ALERTMANAGER, "prometheus-alertmanager")]);
+        std::fs::create_dir_all(dir).unwrap();
+        let log = std::fs::File::create(dir.join("alertmanager.log")).unwrap();
+        let child = Command::new(ALERTMANAGER)
+            .arg(format!(
+                "--config.file={}",
+                root().join("deploy/alertmanager.yml").display()
+            ))
+            .arg(format!("--storage.path={}", dir.display()))
+            .arg(format!("--web.listen-address=127.0.0.1:{port}"))
+            .arg("--cluster.listen-address=")
+            .stdout(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .unwrap();
+        let mut am = Alertmanager {
+            child,
+            port,
+            dir: dir.to_path_buf(),
+        };
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+        loop {
+            if let Some(status) = am.child.try_wait().unwrap() {
+                panic!("Alertmanager ended ({status}):\n{}", am.log());
+            }
+            if let Ok(Ok(s)) = tokio::time::timeout(
+                Duration::from_secs(5),
+                tokio::net::TcpStream::connect(am.addr()),
+            )
+            .await
+            {
+                drop(s);
+                if http_get(am.addr(), "/-/ready").await.0 == 200 {
+                    return am;
+                }
+            }
+            assert!(
+                tokio::time::Instant::now() < deadline,
+                "Alertmanager never got ready:\n{}",
+                am.log()
+            );
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+    }
+
+    fn addr(&self) -> std::net::SocketAddr {
+        ([127, 0, 0, 1], self.port).into()
+    }
+
+    fn url(&self) -> String {
+        format!("http://127.0.0.1:{}", self.port)
+    }
+
+    fn log(&self) -> String {
+        std::fs::read_to_string(self.dir.join("alertmanager.log")).unwrap_or_default()
+    }
+
+    /// The alerts it holds now, unresolved, of alarm `id`.
+    async fn alerts_of(&self, id: &str) -> Vec<serde_json::Value> {
+        let (status, body) = http_get(self.addr(), "/api/v2/alerts").await;
+        assert_eq!(status, 200, "{body}");
+        let all: Vec<serde_json::Value> = serde_json::from_str(&body).unwrap();
+        all.into_iter()
+            .filter(|a| a["labels"]["alarm"] == id && a["status"]["state"] != "resolved")
+            .collect()
+    }
+
+    /// Waits until alarm `id` is an alert that `ok` accepts; the alert.
+    async fn until(
+        &self,
+        id: &str,
+        what: &str,
+        ok: impl Fn(&serde_json::Value) -> bool,
+    ) -> serde_json::Value {
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+        loop {
+            if let Some(a) = self.alerts_of(id).await.into_iter().find(|a| ok(a)) {
+                return a;
+            }
+            assert!(
+                tokio::time::Instant::now() < deadline,
+                "{what}: {:#?}\n{}",
+                self.alerts_of(id).await,
+                self.log()
+            );
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+    }
+
+    /// Waits until alarm `id` is no alert.
+    async fn gone(&self, id: &str, what: &str) {
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+        while !self.alerts_of(id).await.is_empty() {
+            assert!(
+                tokio::time::Instant::now() < deadline,
+                "{what}: {:#?}",
+                self.alerts_of(id).await
+            );
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+    }
+}
+
+/// The value of a metric line starting with `prefix`.
+fn metric(body: &str, prefix: &str) -> f64 {
+    body.lines()
+        .find(|l| l.starts_with(prefix))
+        .and_then(|l| l.rsplit(' ').next()?.parse().ok())
+        .unwrap_or_else(|| panic!("no {prefix} in {body}"))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn alarms_reach_a_real_alertmanager_end_there_and_survive_its_restart() {
+    let d = tempfile::tempdir().unwrap();
+    let port = crate::util::restartable_port();
+    let am = Alertmanager::start(&d.path().join("am-1"), port).await;
+    let url = am.url();
+    let mut fx = Fixture::start_with(|c| {
+        c.alertmanager = Some(AlertmanagerConfig {
+            urls: vec![url],
+            area: Some("press shop".into()),
+            console: Some("https://console.plant.example:8470".into()),
+            resend: Duration::from_secs(2),
+            tls: None,
+        });
+    })
+    .await;
+    let sub = fx
+        .client()
+        .declare_subscriber("cellwatch/m01ps0004/alarms/**")
+        .history(HistoryConfig::default().detect_late_publishers())
+        .recovery(RecoveryConfig::default().heartbeat())
+        .await
+        .unwrap();
+    fx.settled().await;
+    let mut seen = Vec::new();
+
+    // A fault: an alert with the cell's labels and the culprit.
+    fx.sim.set("X0.06", false).unwrap();
+    alarm_until(&sub, "ESE raised", &mut seen, |a| {
+        a.id == "ese" && a.transition.as_str() == "raised"
+    })
+    .await;
+    let alert = am
+        .until("ese", "ESE never reached Alertmanager", |_| true)
+        .await;
+    let labels = &alert["labels"];
+    assert_eq!(labels["alertname"], "ese", "{alert:#}");
+    assert_eq!(labels["cell"], "m01ps0004", "{alert:#}");
+    assert_eq!(labels["area"], "press shop", "{alert:#}");
+    assert_eq!(labels["kind"], "switching", "{alert:#}");
+    assert!(
+        ["low", "medium", "high", "critical"].contains(&labels["priority"].as_str().unwrap()),
+        "{alert:#}"
+    );
+    let culprits = alert["annotations"]["culprits"].as_str().unwrap();
+    assert!(culprits.starts_with("X0.06 ("), "{alert:#}");
+    assert!(culprits.contains("= 0, needs 1"), "{alert:#}");
+    assert_eq!(
+        alert["generatorURL"],
+        "https://console.plant.example:8470/#/alarm/m01ps0004/ese"
+    );
+    assert!(!alert["annotations"]["summary"].as_str().unwrap().is_empty());
+
+    // Cleared: it ends.
+    fx.sim.set("X0.06", true).unwrap();
+    alarm_until(&sub, "ESE cleared", &mut seen, |a| {
+        a.id == "ese" && a.transition.as_str() == "cleared"
+    })
+    .await;
+    am.gone("ese", "a cleared alarm still alerts").await;
+
+    // Raised again and shelved: it ends; unshelved, it is back.
+    fx.sim.set("X0.06", false).unwrap();
+    am.until("ese", "ESE raised again", |_| true).await;
+    let shelve = signed_with(Action::Shelve, "ese", Some("30m"), Some("sensor cable"));
+    let (ok, detail) = send(fx.client(), &shelve).await;
+    assert!(ok, "{detail}");
+    am.gone("ese", "a shelved alarm still alerts").await;
+    let (ok, detail) = send(fx.client(), &signed(Action::Unshelve, "ese")).await;
+    assert!(ok, "{detail}");
+    am.until("ese", "ESE back after the shelf", |_| true).await;
+
+    // Alertmanager goes away: sends fail and are counted; alarms still
+    // reach the bus.
+    drop(am);
+    let failed = "cellwatch_alertmanager_sends_total{cell=\"m01ps0004\",result=\"failed\"}";
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    while metric(&fx.scrape().await, failed) < 1.0 {
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "no failed send counted"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let (ok, detail) = send(fx.client(), &signed(Action::Ack, "ese")).await;
+    assert!(ok, "{detail}");
+    alarm_until(
+        &sub,
+        "ESE acknowledged while Alertmanager is down",
+        &mut seen,
+        |a| a.id == "ese" && a.transition.as_str() == "acknowledged",
+    )
+    .await;
+
+    // Back with nothing stored: every active alert is sent again, with
+    // what changed meanwhile.
+    let am = Alertmanager::start(&d.path().join("am-2"), port).await;
+    let back = am
+        .until("ese", "ESE lost across Alertmanager's restart", |a| {
+            a["annotations"]["acknowledged"] == "by kim"
+        })
+        .await;
+    assert_eq!(back["labels"]["cell"], "m01ps0004");
+
+    // The PLC goes away: the communication alarm alerts, and the shipped
+    // inhibition rule holds back the cell's process alarm.
+    fx.sim.stop();
+    am.until("communication", "the communication alarm", |_| true)
+        .await;
+    am.until("ese", "ESE not inhibited by the communication alarm", |a| {
+        a["status"]["inhibitedBy"]
+            .as_array()
+            .is_some_and(|by| !by.is_empty())
+    })
+    .await;
+    fx.stop().await;
+}
