@@ -6,6 +6,7 @@
 // A binary: `pub` marks what its modules offer each other.
 #![allow(unreachable_pub)]
 
+mod alertmanager;
 mod console;
 mod console_browser;
 mod fanout;
@@ -43,6 +44,10 @@ enum Cmd {
         /// OPC UA security of the agent's rows; repeat for several.
         #[arg(long = "security", value_enum, default_values_t = [peer::Security::None])]
         security: Vec<peer::Security>,
+        /// What stands where the agent's `[alertmanager]` points (`off`:
+        /// no section); repeat for several rows.
+        #[arg(long = "alertmanager", value_enum, default_values_t = [alertmanager::Alertmanager::Off])]
+        alertmanagers: Vec<alertmanager::Alertmanager>,
         /// How long each load runs.
         #[arg(long, default_value = "20s", value_parser = humantime::parse_duration)]
         duration: Duration,
@@ -182,6 +187,7 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
         Cmd::Peer {
             loads,
             security,
+            alertmanagers,
             duration: seconds,
             publishing,
             max_notifications,
@@ -211,11 +217,13 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
             let mut rows = Vec::new();
             for &load in &loads {
                 for &s in &security {
-                    eprintln!(
-                        "cellwatch-bench: agent, {} tags, {}/s, {s:?}",
-                        load.tags, load.rate
-                    );
-                    rows.push(peer::agent(&setup, load, s).await?);
+                    for &am in &alertmanagers {
+                        eprintln!(
+                            "cellwatch-bench: agent, {} tags, {}/s, {s:?}, Alertmanager {am:?}",
+                            load.tags, load.rate
+                        );
+                        rows.push(peer::agent(&setup, load, s, am).await?);
+                    }
                 }
                 if let Some(python) = &setup.python {
                     eprintln!(

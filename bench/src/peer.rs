@@ -14,6 +14,7 @@ use std::time::{Duration, Instant, SystemTime};
 
 use anyhow::{anyhow, bail, Context};
 
+use crate::alertmanager::Alertmanager;
 use crate::load::{self, Fault, LoadServer, SWITCHES};
 use crate::measure::{self, Scrape};
 
@@ -308,10 +309,16 @@ async fn fresh_server(dir: &Path, load: Load, nice: i32) -> anyhow::Result<LoadS
 }
 
 /// Runs the agent under `load`: one row.
-pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Result<Row> {
-    let dir = setup
-        .workdir
-        .join(format!("agent-{}-{}-{:?}", load.tags, load.rate, security));
+pub async fn agent(
+    setup: &Setup,
+    load: Load,
+    security: Security,
+    alertmanager: Alertmanager,
+) -> anyhow::Result<Row> {
+    let dir = setup.workdir.join(format!(
+        "agent-{}-{}-{:?}-{:?}",
+        load.tags, load.rate, security, alertmanager
+    ));
     let server = fresh_server(&dir, load, setup.server_nice).await?;
     let (zenoh_port, metrics_port) = (free_port()?, free_port()?);
     let config = dir.join("cell.toml");
@@ -334,6 +341,7 @@ pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Res
         std::fs::write(dir.join("fault.il"), program())?;
         trust(&config, &dir.join("server-pki"))?;
     }
+    let stand_in = alertmanager.stand_in(&config).await?;
     let mut child = spawn_agent(&setup.agent, &dir, setup.agent_priority)?;
     let pid = child.id();
     let result = async {
@@ -375,8 +383,12 @@ pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Res
         let latencies = match_faults(&faults, &seen);
         Ok(Row {
             subject: match setup.agent_priority {
-                Some(p) => format!("cellwatch ({}, SCHED_FIFO {p})", security.label()),
-                None => format!("cellwatch ({})", security.label()),
+                Some(p) => format!(
+                    "cellwatch ({}, SCHED_FIFO {p}{})",
+                    security.label(),
+                    alertmanager.label()
+                ),
+                None => format!("cellwatch ({}{})", security.label(), alertmanager.label()),
             },
             load,
             produced,
@@ -398,6 +410,9 @@ pub async fn agent(setup: &Setup, load: Load, security: Security) -> anyhow::Res
     .await;
     stop_agent(child);
     server.stop();
+    if let Some(task) = stand_in {
+        task.abort();
+    }
     result
 }
 
