@@ -445,7 +445,12 @@ async fn chained_journal(db: &Path) {
         fn committed(&self, _: usize, _: Duration) {}
         fn failed(&self, _: &str) {}
     }
-    let j = Journal::start(db, Duration::from_secs(3600), Quiet).unwrap();
+    let j = Journal::start(
+        db,
+        &cellwatch::config::Keep::all(Duration::from_secs(3600)),
+        Quiet,
+    )
+    .unwrap();
     let now = cellwatch::clock::now_ms();
     let mut rows = Vec::new();
     for i in 0..6u64 {

@@ -278,3 +278,70 @@ fn the_shipped_unit_passes_systemd_analyze_verify() {
     let said = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success() && said.trim().is_empty(), "{said}");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_journal_backed_up_while_the_agent_writes_is_whole_and_verifies() {
+    use crate::spawned::{send, signed};
+    use crate::util::cellwatch;
+    let fx = crate::agent::Fixture::start().await;
+    fx.settled().await;
+    let journal = fx.journal_path();
+    // Alarms and a signed command, committed before the backup starts.
+    for k in 0..6 {
+        fx.sim.set("X0.06", k % 2 == 1).unwrap();
+        fx.tag_value_is("X0.06", serde_json::json!(k % 2 == 1))
+            .await;
+    }
+    let (ok, detail) = send(
+        fx.client(),
+        &signed(cellwatch::operator::Action::Ack, "ese"),
+    )
+    .await;
+    assert!(ok, "{detail}");
+    let count = |db: &std::path::Path, table: &str| -> i64 {
+        let c = rusqlite::Connection::open(db).unwrap();
+        c.query_row(&format!("SELECT count(*) FROM {table}"), [], |r| r.get(0))
+            .unwrap()
+    };
+    let events_before = count(&journal, "alarm_events");
+    let commands_before = count(&journal, "commands");
+    assert!(events_before >= 6 && commands_before >= 1);
+    // The agent goes on writing while the copy is made.
+    let writing = {
+        let sim = fx.sim.clone();
+        std::thread::spawn(move || {
+            for k in 0..40 {
+                sim.set("X0.04", k % 2 == 1).unwrap();
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        })
+    };
+    let dest = fx.dir().join("backup.sqlite");
+    let run = cellwatch(&[
+        "journal",
+        "backup",
+        journal.to_str().unwrap(),
+        dest.to_str().unwrap(),
+    ]);
+    writing.join().unwrap();
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    assert!(run.stdout.contains("integrity ok"), "{}", run.stdout);
+    assert!(count(&dest, "alarm_events") >= events_before);
+    assert!(count(&dest, "commands") >= commands_before);
+    assert!(!fx.dir().join("backup.sqlite.partial").exists());
+    // The copy is a journal: its command rows' chain holds.
+    let audit = cellwatch(&["audit", "verify", dest.to_str().unwrap()]);
+    assert_eq!(audit.code, 0, "{}{}", audit.stdout, audit.stderr);
+    // Never over an existing file.
+    let again = cellwatch(&[
+        "journal",
+        "backup",
+        journal.to_str().unwrap(),
+        dest.to_str().unwrap(),
+    ]);
+    assert_eq!(again.code, 2, "{}", again.stderr);
+    assert!(again.stderr.contains("exists already"), "{}", again.stderr);
+    let mut fx = fx;
+    fx.stop().await;
+    fx.sim.stop();
+}

@@ -31,7 +31,12 @@ async fn scripted_journal(path: &std::path::Path) {
         c.state.clone(),
     )
     .unwrap();
-    let j = Journal::start(path, Duration::from_secs(10 * 365 * 86_400), Quiet).unwrap();
+    let j = Journal::start(
+        path,
+        &cellwatch::config::Keep::all(Duration::from_secs(10 * 365 * 86_400)),
+        Quiet,
+    )
+    .unwrap();
     let mut rows = 0u64;
     let record = |events: Vec<EngineEvent>, out: &mut Vec<Entry>| {
         for ev in events {

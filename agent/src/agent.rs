@@ -297,7 +297,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     let metrics = Arc::new(Metrics::new(&config.cell));
     let journal = Journal::start(
         &config.journal.path,
-        config.journal.retention,
+        &config.journal.keep,
         (*metrics).clone(),
     )?;
     let committed = journal.committed();

@@ -151,6 +151,13 @@ enum Command {
     Discover(DiscoverArgs),
     /// Check a journal: its command rows' hash chain (audit verify).
     Audit(commands::audit::Args),
+    /// Look after a journal: an online, consistent backup while its agent
+    /// runs (journal backup).
+    Journal(commands::journal::Args),
+    /// Write the manual pages (troff), one per command, into a folder:
+    /// generated from the command line's own definitions, as the package
+    /// installs them.
+    Man(commands::man::Args),
 }
 
 /// Puts the calling thread under SCHED_FIFO at `priority`; on Linux every
@@ -264,7 +271,9 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             | Command::Pki(_)
             | Command::Replay(_)
             | Command::ExportSt(_)
-            | Command::Audit(_) => Ok(()),
+            | Command::Audit(_)
+            | Command::Journal(_)
+            | Command::Man(_) => Ok(()),
         }
     })
 }
@@ -303,6 +312,10 @@ pub fn run(
         Command::Replay(args) => commands::timers::replay(&args, out),
         Command::ExportSt(args) => commands::timers::export_st(&args, out),
         Command::Audit(args) => commands::audit::run(&args, out),
+        Command::Journal(args) => commands::journal::run(&args, out),
+        Command::Man(args) => {
+            commands::man::run(&args, <Cli as clap::CommandFactory>::command(), out)
+        }
         other => asynchronous(other, out),
     };
     match result {

@@ -10,6 +10,7 @@ mod alertmanager;
 mod console;
 mod console_browser;
 mod fanout;
+mod journal;
 mod load;
 mod measure;
 mod peer;
@@ -113,6 +114,19 @@ enum Cmd {
         agent: PathBuf,
         /// Where the agents' directories go.
         #[arg(long, default_value = "target/bench-fanout")]
+        workdir: PathBuf,
+    },
+    /// What the journal costs on disk: ROWS rows each of alarm events
+    /// (the demo's ESE raise, one or two culprits), machine states,
+    /// commands (verified acknowledgements, hash-chained) and parts,
+    /// written through the agent's journal writer; bytes per row per
+    /// table, measured with SQLite's dbstat.
+    Journal {
+        /// Rows of each kind.
+        #[arg(long, default_value_t = 100_000)]
+        rows: u64,
+        /// Where the journal goes.
+        #[arg(long, default_value = "target/bench-journal")]
         workdir: PathBuf,
     },
     /// Serves as a Zenoh router on LISTEN until killed (used by `fanout`);
@@ -257,6 +271,10 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
             Ok(())
         }
         Cmd::Router { listen } => fanout::router(&listen).await,
+        Cmd::Journal { rows, workdir } => {
+            print!("{}", journal::run(&workdir, rows).await?);
+            Ok(())
+        }
         Cmd::Console {
             cells,
             alarms,

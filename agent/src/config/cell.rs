@@ -27,8 +27,44 @@ pub const MAX_SHELVE_LIMIT: Duration = Duration::from_secs(365 * 24 * 3600);
 pub struct JournalConfig {
     /// Database file.
     pub path: PathBuf,
+    /// What each table keeps (`journal.retention`, `[journal.tables.*]`):
+    /// one entry per table of rows, in [`JOURNAL_TABLES`] order.
+    pub keep: Vec<Keep>,
+}
+
+/// The journal's tables of rows, as `[journal.tables.*]` names them.
+pub const JOURNAL_TABLES: [&str; 5] = [
+    "alarm_events",
+    "state_history",
+    "commands",
+    "production",
+    "orders",
+];
+
+/// What one table of the journal keeps: rows younger than `age`, and at
+/// most `max_rows` of them (the newest).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Keep {
+    /// The table (one of [`JOURNAL_TABLES`]).
+    pub table: &'static str,
     /// Rows older than this are deleted.
-    pub retention: Duration,
+    pub age: Duration,
+    /// Beyond this many rows, the oldest are deleted.
+    pub max_rows: Option<u64>,
+}
+
+impl Keep {
+    /// Every table keeps rows younger than `age`, however many.
+    pub fn all(age: Duration) -> Vec<Keep> {
+        JOURNAL_TABLES
+            .into_iter()
+            .map(|table| Keep {
+                table,
+                age,
+                max_rows: None,
+            })
+            .collect()
+    }
 }
 
 /// A validated cell configuration.

@@ -253,6 +253,26 @@ pub(crate) struct RawTls {
 pub(crate) struct RawJournal {
     pub(crate) path: Option<String>,
     pub(crate) retention: Option<Spanned<String>>,
+    #[serde(default)]
+    pub(crate) tables: RawJournalTables,
+}
+
+/// `[journal.tables.<table>]`, one per table of rows.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawJournalTables {
+    pub(crate) alarm_events: Option<Spanned<RawKeep>>,
+    pub(crate) state_history: Option<Spanned<RawKeep>>,
+    pub(crate) commands: Option<Spanned<RawKeep>>,
+    pub(crate) production: Option<Spanned<RawKeep>>,
+    pub(crate) orders: Option<Spanned<RawKeep>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawKeep {
+    pub(crate) retention: Option<Spanned<String>>,
+    pub(crate) max_rows: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Default, Deserialize)]

@@ -400,3 +400,41 @@ fn alertmanager_urls_tls_and_interval_are_checked() {
         "cell.toml:29:9: alertmanager.tls: an https:// Alertmanager needs [alertmanager.tls] ca = the CA that signed its certificate"
     );
 }
+
+#[test]
+fn journal_tables_keep_their_own_retention_and_rows() {
+    let text = format!(
+        "{GOOD}\n[journal]\nretention = \"30d\"\n[journal.tables.commands]\nretention = \"3650d\"\n[journal.tables.state_history]\nmax_rows = 2000000\n"
+    );
+    let c = parse("cell.toml", &text, Path::new("base"), &mem()).unwrap();
+    let day = |d: u64| Duration::from_secs(d * 86_400);
+    let keep: Vec<(&str, Duration, Option<u64>)> = c
+        .journal
+        .keep
+        .iter()
+        .map(|k| (k.table, k.age, k.max_rows))
+        .collect();
+    assert_eq!(
+        keep,
+        [
+            ("alarm_events", day(30), None),
+            ("state_history", day(30), Some(2_000_000)),
+            ("commands", day(3650), None),
+            ("production", day(30), None),
+            ("orders", day(30), None),
+        ]
+    );
+    let bad = format!(
+        "{GOOD}\n[journal]\nretention = \"10m\"\n[journal.tables.state_history]\nmax_rows = 10\n"
+    );
+    assert_eq!(
+        errors(&bad),
+        "cell.toml:29:13: journal.retention: at least 1h\ncell.toml:31:12: journal.tables.state_history.max_rows: at least 1000"
+    );
+    let unknown = format!("{GOOD}\n[journal.tables.alarm_current]\nmax_rows = 5000\n");
+    assert!(
+        errors(&unknown).contains("unknown field `alarm_current`, expected one of `alarm_events`, `state_history`, `commands`, `production`, `orders`"),
+        "{}",
+        errors(&unknown)
+    );
+}

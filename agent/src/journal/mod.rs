@@ -26,6 +26,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Weak};
 use std::time::{Duration, Instant};
 
+pub mod backup;
 pub mod chain;
 mod history;
 mod reports;
@@ -41,6 +42,8 @@ pub use saved::{saved, Saved, SavedOutcome, SavedState};
 pub use schema::{open, open_read, JournalError};
 
 use schema::{last_seq, purge, TABLES};
+
+use crate::config::Keep;
 
 use rusqlite::{params, Connection};
 use tokio::sync::{mpsc, oneshot, watch};
@@ -243,14 +246,14 @@ pub trait CommitObserver: Send + Sync + 'static {
 }
 
 impl Journal {
-    /// Opens the journal at `path`, deletes rows older than `retention`, and
-    /// starts the writer thread.
+    /// Opens the journal at `path`, deletes what its tables no longer keep
+    /// (`keep`: again every hour), and starts the writer thread.
     ///
     /// # Errors
     /// The database cannot be opened.
     pub fn start(
         path: &Path,
-        retention: Duration,
+        keep: &[Keep],
         observer: impl CommitObserver,
     ) -> Result<Journal, JournalError> {
         let conn = open(path)?;
@@ -267,6 +270,7 @@ impl Journal {
         let (committed_tx, committed) = watch::channel(existing);
         let (health_tx, health) = watch::channel(None);
         let p = path.to_path_buf();
+        let keep = keep.to_vec();
         let observer: Arc<dyn CommitObserver> = Arc::new(observer);
         let uncommitted = Arc::new(Uncommitted {
             rows: std::sync::Mutex::new(0),
@@ -282,7 +286,7 @@ impl Journal {
                     observer,
                     uncommitted: counted,
                 };
-                writer(conn, rx, reports, existing, retention, p)
+                writer(conn, rx, reports, existing, keep, p)
             })
             .map_err(|source| JournalError::Thread {
                 path: path.to_path_buf(),
@@ -441,7 +445,7 @@ fn writer(
     mut rx: mpsc::Receiver<Batch>,
     reports: Reports<Arc<dyn CommitObserver>>,
     mut total: u64,
-    retention: Duration,
+    keep: Vec<Keep>,
     path: PathBuf,
 ) {
     let Reports {
@@ -451,7 +455,7 @@ fn writer(
         uncommitted,
     } = reports;
     let mut last_purge = Instant::now();
-    purge(&conn, retention, &path);
+    purge(&conn, &keep, &path);
     let mut seq = last_seq(&conn);
     let mut chain = chain::Link::last(&conn).unwrap_or_else(|e| {
         tracing::error!(path = %path.display(), error = %e, "cannot read the end of the command rows' hash chain; it starts again");
@@ -562,7 +566,7 @@ fn writer(
             }
         }
         if last_purge.elapsed() > Duration::from_secs(3600) {
-            purge(&conn, retention, &path);
+            purge(&conn, &keep, &path);
             last_purge = Instant::now();
         }
     }

@@ -8,6 +8,8 @@ use std::time::Duration;
 
 use rusqlite::{Connection, OpenFlags};
 
+use crate::config::Keep;
+
 /// Why the journal failed.
 #[derive(Debug, thiserror::Error)]
 pub enum JournalError {
@@ -44,13 +46,7 @@ pub enum JournalError {
 }
 
 /// The tables of journal rows (one sequence across them).
-pub(super) const TABLES: [&str; 5] = [
-    "alarm_events",
-    "state_history",
-    "commands",
-    "production",
-    "orders",
-];
+pub(super) const TABLES: [&str; 5] = crate::config::JOURNAL_TABLES;
 
 const SCHEMA: &str = "
 CREATE TABLE IF NOT EXISTS alarm_events (
@@ -188,12 +184,72 @@ pub(super) fn last_seq(conn: &Connection) -> i64 {
         .unwrap_or(0)
 }
 
-/// Deletes rows older than `retention`; a failure is logged, not fatal.
-pub(super) fn purge(conn: &Connection, retention: Duration, path: &Path) {
-    let cutoff = crate::clock::now_ms().saturating_sub(retention.as_millis() as u64) as i64;
-    for table in TABLES {
-        if let Err(e) = conn.execute(&format!("DELETE FROM {table} WHERE at_ms < ?1"), [cutoff]) {
-            tracing::warn!(path = %path.display(), error = %e, "journal retention purge failed");
+/// Rows deleted by one statement of the purge: a large purge goes in
+/// steps, so the writer's own batches are never held up long.
+const PURGE_STEP: i64 = 10_000;
+
+/// Deletes what each table no longer keeps (`keep`): rows older than its
+/// age, then the oldest beyond its row limit. A failure is logged, not
+/// fatal.
+pub(super) fn purge(conn: &Connection, keep: &[Keep], path: &Path) {
+    let now = crate::clock::now_ms();
+    for k in keep {
+        let cutoff = now.saturating_sub(k.age.as_millis() as u64) as i64;
+        let by_age = delete_in_steps(
+            conn,
+            &format!(
+                "DELETE FROM {t} WHERE seq IN (SELECT seq FROM {t} WHERE at_ms < ?1 LIMIT {PURGE_STEP})",
+                t = k.table
+            ),
+            cutoff,
+        );
+        // The seq of the newest row beyond the limit, if there are more.
+        let by_rows = match k.max_rows.and_then(|n| i64::try_from(n).ok()) {
+            None => Ok(0),
+            Some(n) => conn
+                .query_row(
+                    &format!(
+                        "SELECT seq FROM {} ORDER BY seq DESC LIMIT 1 OFFSET ?1",
+                        k.table
+                    ),
+                    [n],
+                    |r| r.get::<_, i64>(0),
+                )
+                .map_or(Ok(0), |last| {
+                    delete_in_steps(
+                        conn,
+                        &format!(
+                            "DELETE FROM {t} WHERE seq IN (SELECT seq FROM {t} WHERE seq <= ?1 ORDER BY seq LIMIT {PURGE_STEP})",
+                            t = k.table
+                        ),
+                        last,
+                    )
+                }),
+        };
+        match (by_age, by_rows) {
+            (Ok(0), Ok(0)) => {}
+            (Ok(old), Ok(over)) => tracing::info!(
+                path = %path.display(),
+                table = k.table,
+                older = old,
+                beyond_max_rows = over,
+                "journal retention: rows deleted"
+            ),
+            (Err(e), _) | (_, Err(e)) => {
+                tracing::warn!(path = %path.display(), table = k.table, error = %e, "journal retention purge failed");
+            }
+        }
+    }
+}
+
+/// Runs `statement` with `arg` until it deletes nothing: rows deleted.
+fn delete_in_steps(conn: &Connection, statement: &str, arg: i64) -> rusqlite::Result<u64> {
+    let mut deleted = 0u64;
+    loop {
+        let n = conn.execute(statement, [arg])?;
+        deleted += n as u64;
+        if (n as i64) < PURGE_STEP {
+            return Ok(deleted);
         }
     }
 }

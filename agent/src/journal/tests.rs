@@ -13,7 +13,12 @@ async fn writes_commit_and_query_back() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("j.sqlite");
     let now = crate::clock::now_ms();
-    let j = Journal::start(&path, Duration::from_secs(3600), Quiet).unwrap();
+    let j = Journal::start(
+        &path,
+        &crate::config::Keep::all(Duration::from_secs(3600)),
+        Quiet,
+    )
+    .unwrap();
     j.write(Entry::State {
         at: now,
         kind: "fault".into(),
@@ -73,7 +78,12 @@ async fn writes_commit_and_query_back() {
     conn.execute("UPDATE state_history SET at_ms = 5", [])
         .unwrap();
     drop(conn);
-    let j = Journal::start(&path, Duration::from_secs(3600), Quiet).unwrap();
+    let j = Journal::start(
+        &path,
+        &crate::config::Keep::all(Duration::from_secs(3600)),
+        Quiet,
+    )
+    .unwrap();
     let conn = open_read(&path).unwrap();
     // The purge runs on the writer thread: wait for it through a write.
     j.write(Entry::Alarm {
@@ -115,7 +125,12 @@ fn state(at: u64, n: usize) -> Entry {
 async fn a_barrier_waits_for_rows_staged_before_it() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("j.sqlite");
-    let j = Journal::start(&path, Duration::from_secs(3600), Quiet).unwrap();
+    let j = Journal::start(
+        &path,
+        &crate::config::Keep::all(Duration::from_secs(3600)),
+        Quiet,
+    )
+    .unwrap();
     // The cell loop stages a step's rows before the bus has the alarm;
     // a client that saw it asks for history (a barrier) before the
     // rows are queued.
@@ -151,7 +166,12 @@ async fn history_comes_in_bounded_pages_in_journal_order() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("j.sqlite");
     let now = crate::clock::now_ms();
-    let j = Journal::start(&path, Duration::from_secs(3600), Quiet).unwrap();
+    let j = Journal::start(
+        &path,
+        &crate::config::Keep::all(Duration::from_secs(3600)),
+        Quiet,
+    )
+    .unwrap();
     // Rows of two tables, interleaved: one sequence for all.
     let mut rows = Vec::new();
     for n in 0..12_000 {
@@ -245,7 +265,12 @@ async fn every_row_not_yet_committed_counts_as_pending() {
     let path = dir.path().join("j.sqlite");
     let now = crate::clock::now_ms();
     let watch = Watch::default();
-    let j = Journal::start(&path, Duration::from_secs(3600), watch.clone()).unwrap();
+    let j = Journal::start(
+        &path,
+        &crate::config::Keep::all(Duration::from_secs(3600)),
+        watch.clone(),
+    )
+    .unwrap();
     // Busy for a moment: another connection holds the write lock.
     let admin = Connection::open(&path).unwrap();
     admin.execute_batch("BEGIN IMMEDIATE").unwrap();
@@ -277,7 +302,12 @@ async fn an_unwritable_journal_keeps_its_rows_and_writes_them_later() {
     let path = dir.path().join("j.sqlite");
     let now = crate::clock::now_ms();
     let watch = Watch::default();
-    let j = Journal::start(&path, Duration::from_secs(3600), watch.clone()).unwrap();
+    let j = Journal::start(
+        &path,
+        &crate::config::Keep::all(Duration::from_secs(3600)),
+        watch.clone(),
+    )
+    .unwrap();
     let _ = watch.health.set(j.health());
     j.commit(vec![state(now, 0)]).await.unwrap();
     // Another process holds the journal's write lock: nothing can be
@@ -311,4 +341,65 @@ async fn an_unwritable_journal_keeps_its_rows_and_writes_them_later() {
         .query_row("SELECT count(*) FROM state_history", [], |r| r.get(0))
         .unwrap();
     assert_eq!(n, 400);
+}
+
+#[test]
+fn each_table_keeps_its_own_age_and_row_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("j.sqlite");
+    let conn = schema::open(&path).unwrap();
+    let now = crate::clock::now_ms() as i64;
+    let day = 86_400_000i64;
+    // 25,000 state rows over the last 25 days, 30 alarm events of the
+    // last 30 days, 30 production rows likewise.
+    conn.execute_batch("BEGIN").unwrap();
+    for i in 0..25_000i64 {
+        conn.execute(
+            "INSERT INTO state_history (at_ms, kind, state) VALUES (?1, 'beat', 'running')",
+            [now - 25 * day + i * day / 1000],
+        )
+        .unwrap();
+    }
+    for d in 0..30i64 {
+        conn.execute(
+            "INSERT INTO alarm_events (at_ms, alarm, kind, severity, transition, payload) VALUES (?1, 'ese', 'switching', 'high', 'raised', '{}')",
+            [now - d * day - 1000],
+        )
+        .unwrap();
+        conn.execute(
+            "INSERT INTO production (at_ms) VALUES (?1)",
+            [now - d * day - 1000],
+        )
+        .unwrap();
+    }
+    conn.execute_batch("COMMIT").unwrap();
+    let mut keep = crate::config::Keep::all(Duration::from_secs(20 * 86_400));
+    for k in &mut keep {
+        match k.table {
+            // The newest 12,345 state rows, whatever their age.
+            "state_history" => {
+                k.age = Duration::from_secs(365 * 86_400);
+                k.max_rows = Some(12_345);
+            }
+            "alarm_events" => k.age = Duration::from_secs(10 * 86_400),
+            _ => {}
+        }
+    }
+    schema::purge(&conn, &keep, &path);
+    let count = |t: &str, since: i64| -> i64 {
+        conn.query_row(
+            &format!("SELECT count(*) FROM {t} WHERE at_ms >= ?1"),
+            [since],
+            |r| r.get(0),
+        )
+        .unwrap()
+    };
+    assert_eq!(count("state_history", 0), 12_345);
+    let newest_kept: i64 = conn
+        .query_row("SELECT min(seq) FROM state_history", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(newest_kept, 25_000 - 12_345 + 1);
+    // Alarm events: the last 10 days (days 0..=9); production: 20 days.
+    assert_eq!(count("alarm_events", 0), 10);
+    assert_eq!(count("production", 0), 20);
 }

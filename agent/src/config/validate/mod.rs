@@ -6,6 +6,7 @@
 mod alertmanager;
 mod bus;
 mod checks;
+mod journal;
 mod legacy;
 mod opcua;
 mod sfc;
@@ -405,11 +406,7 @@ impl Validator<'_> {
                     .as_deref()
                     .unwrap_or(&format!("cellwatch-{cell}.sqlite")),
             ),
-            retention: self.duration(
-                raw.journal.retention,
-                "journal.retention",
-                Duration::from_secs(90 * 86_400),
-            ),
+            keep: self.keep(raw.journal.retention, raw.journal.tables),
         };
         let metrics = match raw.metrics.listen {
             None => Some(SocketAddr::from(([127, 0, 0, 1], 9464))),

@@ -1,0 +1,153 @@
+//! An online, consistent copy of a journal (`cellwatch journal backup`):
+//! SQLite's backup API copies the file as of one read transaction while
+//! the agent goes on writing (WAL: a reader never holds up the writer),
+//! then the copy is checked (`PRAGMA integrity_check`) and counted, and
+//! only then given its name. A backup is a journal like any other.
+
+use std::path::{Path, PathBuf};
+
+use rusqlite::{Connection, OpenFlags};
+
+use super::schema::TABLES;
+
+/// What a backup holds.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Copied {
+    /// Rows per table, in [`TABLES`] order, and `alarm_current`.
+    pub rows: Vec<(&'static str, u64)>,
+    /// The copy's size, bytes.
+    pub bytes: u64,
+}
+
+/// Why a backup failed.
+#[derive(Debug, thiserror::Error)]
+pub enum BackupError {
+    /// The source is missing, or the destination exists already.
+    #[error("{0}")]
+    Input(String),
+    /// SQLite or the file system failed.
+    #[error("{path}: {message}")]
+    Failed {
+        /// The file at fault.
+        path: PathBuf,
+        /// Why.
+        message: String,
+    },
+}
+
+/// Copies the journal at `from` to `to` (which must not exist) and checks
+/// the copy.
+///
+/// # Errors
+/// See [`BackupError`]; a failed backup leaves nothing at `to`.
+pub fn backup(from: &Path, to: &Path) -> Result<Copied, BackupError> {
+    if !from.is_file() {
+        return Err(BackupError::Input(format!(
+            "{}: no such journal",
+            from.display()
+        )));
+    }
+    if to.exists() {
+        return Err(BackupError::Input(format!(
+            "{}: exists already (a backup never overwrites a file: name a new one)",
+            to.display()
+        )));
+    }
+    let partial = partial_name(to);
+    let result = copy(from, &partial).and_then(|copied| {
+        std::fs::rename(&partial, to).map_err(|e| BackupError::Failed {
+            path: to.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        Ok(copied)
+    });
+    if result.is_err() {
+        let _ = std::fs::remove_file(&partial);
+    }
+    result
+}
+
+/// Where the copy is made before it is checked: beside `to`, so the
+/// rename is atomic.
+fn partial_name(to: &Path) -> PathBuf {
+    let mut name = to.file_name().unwrap_or_default().to_os_string();
+    name.push(".partial");
+    to.with_file_name(name)
+}
+
+fn copy(from: &Path, partial: &Path) -> Result<Copied, BackupError> {
+    let failed = |path: &Path| {
+        let path = path.to_path_buf();
+        move |e: rusqlite::Error| BackupError::Failed {
+            path,
+            message: e.to_string(),
+        }
+    };
+    let _ = std::fs::remove_file(partial);
+    let source = Connection::open_with_flags(
+        from,
+        OpenFlags::SQLITE_OPEN_READ_ONLY | OpenFlags::SQLITE_OPEN_NO_MUTEX,
+    )
+    .map_err(failed(from))?;
+    source
+        .busy_timeout(std::time::Duration::from_secs(10))
+        .map_err(failed(from))?;
+    let mut dest = Connection::open(partial).map_err(failed(partial))?;
+    {
+        let backup = rusqlite::backup::Backup::new(&source, &mut dest).map_err(failed(partial))?;
+        // Every page in one step: one read transaction, so the copy is the
+        // journal at one instant, whatever the agent writes meanwhile.
+        // Busy or locked (a checkpoint under way): again, for up to 10 s.
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        loop {
+            use rusqlite::backup::StepResult;
+            match backup.step(-1).map_err(failed(partial))? {
+                StepResult::Done => break,
+                StepResult::More | StepResult::Busy | StepResult::Locked
+                    if std::time::Instant::now() < deadline =>
+                {
+                    std::thread::sleep(std::time::Duration::from_millis(20));
+                }
+                other => {
+                    return Err(BackupError::Failed {
+                        path: from.to_path_buf(),
+                        message: format!("the journal stayed busy for 10 s ({other:?})"),
+                    })
+                }
+            }
+        }
+    }
+    let verdict: String = dest
+        .query_row("PRAGMA integrity_check", [], |r| r.get(0))
+        .map_err(failed(partial))?;
+    if verdict != "ok" {
+        return Err(BackupError::Failed {
+            path: partial.to_path_buf(),
+            message: format!("the copy fails SQLite's integrity check: {verdict}"),
+        });
+    }
+    let mut rows = Vec::new();
+    for table in TABLES.into_iter().chain(["alarm_current"]) {
+        let n: i64 = dest
+            .query_row(&format!("SELECT count(*) FROM {table}"), [], |r| r.get(0))
+            .map_err(|e| {
+                BackupError::Input(format!(
+                    "{}: not a cellwatch journal (table {table}: {e})",
+                    from.display()
+                ))
+            })?;
+        rows.push((table, n as u64));
+    }
+    // The copy is a file of its own, not a WAL database waiting for a
+    // checkpoint.
+    dest.pragma_update(None, "journal_mode", "DELETE")
+        .map_err(failed(partial))?;
+    drop(dest);
+    let bytes = std::fs::metadata(partial)
+        .map_err(|e| BackupError::Failed {
+            path: partial.to_path_buf(),
+            message: e.to_string(),
+        })?
+        .len();
+    Ok(Copied { rows, bytes })
+}
