@@ -5,7 +5,10 @@
 //! - `cellwatch run` speaks systemd's notify protocol (`READY=1`,
 //!   `WATCHDOG=1`, `STOPPING=1`) to a real datagram socket, as systemd
 //!   would hear it;
-//! - the shipped systemd unit passes `systemd-analyze verify`.
+//! - the Debian package (cargo-deb, `deploy/build-deb`) installs into a
+//!   root of its own, user and man pages included, and its systemd unit
+//!   passes `systemd-analyze verify` there;
+//! - `cellwatch journal backup` copies a journal its agent is writing.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -231,9 +234,111 @@ async fn run_tells_systemd_it_is_ready_feeds_the_watchdog_and_says_it_stops() {
     sim.stop();
 }
 
+/// cargo-deb at the version `deploy/build-deb` names, installed unless
+/// there.
+fn cargo_deb() {
+    use std::process::Command;
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let there = Command::new("cargo")
+            .args(["deb", "--version"])
+            .output()
+            .is_ok_and(|o| {
+                o.status.success() && String::from_utf8_lossy(&o.stdout).contains("3.8.0")
+            });
+        if !there {
+            let out = Command::new("cargo")
+                .args(["install", "cargo-deb", "--locked", "--version", "3.8.0"])
+                .output()
+                .unwrap();
+            assert!(
+                out.status.success(),
+                "installing cargo-deb failed:\n{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+    });
+}
+
 #[test]
-fn the_shipped_unit_passes_systemd_analyze_verify() {
-    if std::process::Command::new("systemd-analyze")
+fn the_deb_installs_and_its_unit_passes_systemd_analyze_verify() {
+    use std::process::Command;
+    cargo_deb();
+    let d = tempfile::tempdir().unwrap();
+    let deb = d.path().join("cellwatch.deb");
+    // The dev build the tests run, packaged as the release one is.
+    let build = Command::new(root().join("deploy/build-deb"))
+        .args(["--dev", "--no-build", "--fast", "--output"])
+        .arg(&deb)
+        .output()
+        .unwrap();
+    assert!(
+        build.status.success(),
+        "{}",
+        String::from_utf8_lossy(&build.stderr)
+    );
+    // Installed into a root of its own, its scripts run as dpkg runs them
+    // there (DPKG_ROOT).
+    let r = d.path().join("root");
+    for dir in [
+        "var/lib/dpkg/info",
+        "var/lib/dpkg/updates",
+        "var/lib/dpkg/triggers",
+        "etc",
+    ] {
+        std::fs::create_dir_all(r.join(dir)).unwrap();
+    }
+    std::fs::write(r.join("var/lib/dpkg/status"), "").unwrap();
+    let install = Command::new("dpkg")
+        .arg(format!("--root={}", r.display()))
+        .args([
+            "--force-script-chrootless",
+            "--force-depends",
+            "--log=/dev/null",
+            "-i",
+        ])
+        .arg(&deb)
+        .output()
+        .unwrap();
+    assert!(
+        install.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&install.stdout),
+        String::from_utf8_lossy(&install.stderr)
+    );
+    for file in [
+        "usr/bin/cellwatch",
+        "usr/lib/systemd/system/cellwatch@.service",
+        "usr/lib/sysusers.d/cellwatch.conf",
+        "usr/share/man/man1/cellwatch.1.gz",
+        "usr/share/man/man1/cellwatch-run.1.gz",
+        "usr/share/man/man1/cellwatch-journal-backup.1.gz",
+        "usr/share/doc/cellwatch/examples/demo.toml",
+        "usr/share/doc/cellwatch/examples/cnc/ese.il",
+        "usr/share/doc/cellwatch/examples/alertmanager.yml",
+        "etc/cellwatch",
+    ] {
+        assert!(r.join(file).exists(), "{file} not installed");
+    }
+    let passwd = std::fs::read_to_string(r.join("etc/passwd")).unwrap();
+    assert!(
+        passwd
+            .lines()
+            .any(|l| l.starts_with("cellwatch:")
+                && l.ends_with(":/var/lib/cellwatch:/usr/sbin/nologin")),
+        "{passwd}"
+    );
+    let version = Command::new(r.join("usr/bin/cellwatch"))
+        .arg("--version")
+        .output()
+        .unwrap();
+    assert!(
+        String::from_utf8_lossy(&version.stdout).starts_with("cellwatch "),
+        "{version:?}"
+    );
+    // The unit as installed, against the system's own units, with a
+    // cell's configuration where it looks for one.
+    if Command::new("systemd-analyze")
         .arg("--version")
         .output()
         .is_err()
@@ -241,37 +346,21 @@ fn the_shipped_unit_passes_systemd_analyze_verify() {
         eprintln!("systemd-analyze is not on this machine: the unit is not verified here");
         return;
     }
-    // A root with the system's own units, the unit, the binary where the
-    // unit runs it, and a cell's configuration where it looks for one.
-    let d = tempfile::tempdir().unwrap();
-    let units = d.path().join("usr/lib/systemd/system");
-    std::fs::create_dir_all(&units).unwrap();
+    let units = r.join("usr/lib/systemd/system");
     for dir in ["/usr/lib/systemd/system", "/lib/systemd/system"] {
         let Ok(entries) = std::fs::read_dir(dir) else {
             continue;
         };
         for e in entries.flatten() {
-            if e.file_type().is_ok_and(|t| t.is_file()) {
+            if e.file_type().is_ok_and(|t| t.is_file()) && !units.join(e.file_name()).exists() {
                 let _ = std::fs::copy(e.path(), units.join(e.file_name()));
             }
         }
     }
-    std::fs::copy(
-        root().join("deploy/cellwatch@.service"),
-        units.join("cellwatch@.service"),
-    )
-    .unwrap();
-    std::fs::create_dir_all(d.path().join("usr/bin")).unwrap();
-    std::fs::copy(
-        env!("CARGO_BIN_EXE_cellwatch"),
-        d.path().join("usr/bin/cellwatch"),
-    )
-    .unwrap();
-    std::fs::create_dir_all(d.path().join("etc/cellwatch")).unwrap();
-    std::fs::write(d.path().join("etc/cellwatch/press-4.toml"), "").unwrap();
-    let out = std::process::Command::new("systemd-analyze")
+    std::fs::write(r.join("etc/cellwatch/press-4.toml"), "").unwrap();
+    let out = Command::new("systemd-analyze")
         .args(["verify", "--man=no"])
-        .arg(format!("--root={}", d.path().display()))
+        .arg(format!("--root={}", r.display()))
         .arg("cellwatch@press-4.service")
         .output()
         .unwrap();
