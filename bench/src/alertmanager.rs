@@ -36,7 +36,11 @@ impl Alertmanager {
     ) -> anyhow::Result<Option<tokio::task::JoinHandle<()>>> {
         let (port, task) = match self {
             Alertmanager::Off => return Ok(None),
-            Alertmanager::Refusing => (crate::peer::free_port()?, None),
+            // A port the system had free a moment ago, left unbound.
+            Alertmanager::Refusing => (
+                std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port(),
+                None,
+            ),
             Alertmanager::Silent => {
                 let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
                 let port = listener.local_addr()?.port();
