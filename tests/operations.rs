@@ -358,6 +358,12 @@ fn the_deb_installs_and_its_unit_passes_systemd_analyze_verify() {
         }
     }
     std::fs::write(r.join("etc/cellwatch/press-4.toml"), "").unwrap();
+    // What the unit runs besides the agent: kill(1), as on the system.
+    let kill = std::fs::canonicalize("/bin/kill").unwrap();
+    std::fs::copy(&kill, r.join("usr/bin/kill")).unwrap();
+    if !r.join("bin").exists() {
+        std::os::unix::fs::symlink("usr/bin", r.join("bin")).unwrap();
+    }
     let out = Command::new("systemd-analyze")
         .args(["verify", "--man=no"])
         .arg(format!("--root={}", r.display()))
@@ -433,4 +439,172 @@ async fn a_journal_backed_up_while_the_agent_writes_is_whole_and_verifies() {
     let mut fx = fx;
     fx.stop().await;
     fx.sim.stop();
+}
+
+fn sighup(child: &std::process::Child) {
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(child.id() as i32),
+        nix::sys::signal::Signal::SIGHUP,
+    )
+    .unwrap();
+}
+
+/// Waits until the agent's log (`agent.log`) has said `what` `times` times.
+async fn logged(cell: &crate::spawned::Cell, what: &str, times: usize) -> String {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    loop {
+        let log = cell.log("agent.log");
+        if log.matches(what).count() >= times {
+            return log;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "never logged {what:?} {times} times:\n{log}"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn sighup_takes_a_changed_limit_keeps_acknowledgements_and_refuses_a_bad_file() {
+    use crate::agent::alarm_until;
+    use crate::spawned::{send, signed};
+    use cellwatch::operator::Action;
+    use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
+    let d = tempfile::tempdir().unwrap();
+    let (sim, mut cell) = crate::spawned::start(d.path()).await;
+    let child = cell.spawn("agent.log").await;
+    let client = cell.client().await;
+    let sub = client
+        .declare_subscriber("cellwatch/m01ps0004/alarms/**")
+        .history(HistoryConfig::default().detect_late_publishers())
+        .recovery(RecoveryConfig::default().heartbeat())
+        .await
+        .unwrap();
+    crate::spawned::snapshot_until(&client, "connected and running", |s| {
+        s["connected"] == true && s["state"] == "running"
+    })
+    .await;
+    let mut seen = Vec::new();
+    // The spindle above its H limit (85 °C) and an emergency stop, both
+    // acknowledged.
+    for id in ["ese", "spindle-temp-h"] {
+        if id == "ese" {
+            sim.set("X0.06", false).unwrap();
+        } else {
+            sim.set_temperature(90.0).unwrap();
+        }
+        alarm_until(&sub, "raised", &mut seen, |a| {
+            a.id == id && a.transition.as_str() == "raised"
+        })
+        .await;
+        let (ok, detail) = send(&client, &signed(Action::Ack, id)).await;
+        assert!(ok, "{detail}");
+        alarm_until(&sub, "acknowledged", &mut seen, |a| {
+            a.id == id && a.transition.as_str() == "acknowledged"
+        })
+        .await;
+    }
+    let before_reload = seen.len();
+
+    // The limit raised to 95 °C, read again on SIGHUP: the spindle alarm
+    // is carried and cleared by the new limit; the emergency stop is
+    // carried, still acknowledged by kim.
+    let text = std::fs::read_to_string(&cell.config).unwrap();
+    let raised_limit = text.replace(
+        "h = { limit = 85.0, severity = \"high\" }",
+        "h = { limit = 95.0, severity = \"high\" }",
+    );
+    assert_ne!(text, raised_limit);
+    std::fs::write(&cell.config, &raised_limit).unwrap();
+    sighup(&child);
+    alarm_until(
+        &sub,
+        "the spindle alarm cleared by the new limit",
+        &mut seen,
+        |a| a.id == "spindle-temp-h" && a.transition.as_str() == "cleared",
+    )
+    .await;
+    let log = logged(&cell, "configuration read again and taken", 1).await;
+    assert!(!log.contains("taken only by a restart"), "{log}");
+    let carried =
+        |a: &cellwatch::payload::AlarmPayload| a.id == "ese" && a.transition.as_str() == "restored";
+    let ese = match seen[before_reload..].iter().find(|a| carried(a)) {
+        Some(a) => a.clone(),
+        None => alarm_until(&sub, "the emergency stop carried", &mut seen, carried).await,
+    };
+    assert_eq!(ese.state.as_str(), "active_acknowledged");
+    assert_eq!(ese.acked_by.as_deref(), Some("kim"));
+    // No gap: the source never went away, the journal has every event in
+    // order, and nothing was raised anew.
+    let snap =
+        crate::spawned::snapshot_until(&client, "connected", |s| s["connected"] == true).await;
+    assert_eq!(
+        crate::spawned::alarm(&snap, "ese").unwrap()["acked_by"],
+        "kim"
+    );
+    assert!(
+        seen[before_reload..]
+            .iter()
+            .all(|a| a.transition.as_str() != "raised" && a.id != "communication"),
+        "{:#?}",
+        &seen[before_reload..]
+    );
+
+    // A file that does not validate: refused with where and why; the
+    // running configuration (H at 95 °C) goes on.
+    std::fs::write(
+        &cell.config,
+        raised_limit.replace("h = { limit = 95.0,", "h = { limit = \"hot\","),
+    )
+    .unwrap();
+    sighup(&child);
+    let log = logged(
+        &cell,
+        "the configuration read again is refused, the running one goes on",
+        1,
+    )
+    .await;
+    assert!(
+        log.contains("cell.toml:") && log.contains("invalid type: string \"hot\", expected f64"),
+        "{log}"
+    );
+    sim.set_temperature(97.0).unwrap();
+    let again = alarm_until(&sub, "raised above the running limit", &mut seen, |a| {
+        a.id == "spindle-temp-h" && a.transition.as_str() == "raised"
+    })
+    .await;
+    assert!(
+        again.message.contains("above the H limit 95 °C"),
+        "{}",
+        again.message
+    );
+
+    // What only a restart changes is said, the rest taken.
+    std::fs::write(
+        &cell.config,
+        raised_limit
+            .replace("# publish_interval = \"10s\"", "publish_interval = \"7s\"")
+            .replace("h = { limit = 95.0,", "h = { limit = 110.0,")
+            .replace("hh = { limit = 100.0,", "hh = { limit = 120.0,"),
+    )
+    .unwrap();
+    sighup(&child);
+    let log = logged(&cell, "configuration read again and taken", 2).await;
+    alarm_until(&sub, "cleared by the 110 °C limit", &mut seen, |a| {
+        a.id == "spindle-temp-h" && a.transition.as_str() == "cleared"
+    })
+    .await;
+    assert!(
+        log.contains("changed, but taken only by a restart (the running values go on): state.publish_interval"),
+        "{log}"
+    );
+    crate::robust::sigterm(&child);
+    assert_eq!(
+        crate::robust::exit_code(child).await,
+        Some(0),
+        "{}",
+        cell.log("agent.log")
+    );
+    sim.stop();
 }

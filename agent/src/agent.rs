@@ -147,6 +147,36 @@ pub struct Agent {
     metrics_addr: Option<SocketAddr>,
     committed: watch::Receiver<u64>,
     health: (Health, Arc<CellHealth>),
+    /// Configurations read again go to the cell loop here.
+    reloads: mpsc::Sender<crate::cell::swap::Reload>,
+    /// The running configuration's parts only a restart changes.
+    fixed: [u64; 10],
+}
+
+/// Why a configuration read again was not taken.
+#[derive(Debug, thiserror::Error)]
+pub enum ReloadError {
+    /// Its checks do not compile: the running configuration goes on.
+    #[error(transparent)]
+    Compile(#[from] CompileError),
+    /// It changes what only a restart changes, and nothing else could be
+    /// taken without it (the tags: the checks are compiled against them).
+    #[error(
+        "{0} changed: restart the agent to take the new configuration (the running one goes on)"
+    )]
+    Restart(String),
+    /// The loop would not take it now, or has ended.
+    #[error("{0}")]
+    Refused(String),
+}
+
+/// A configuration taken by a running agent.
+#[derive(Debug)]
+pub struct Reloaded {
+    /// Alarms carried over to the new checks.
+    pub carried: usize,
+    /// What changed but only a restart takes (the running values go on).
+    pub needs_restart: Vec<&'static str>,
 }
 
 impl Agent {
@@ -176,6 +206,55 @@ impl Agent {
     /// Rows committed to the journal so far.
     pub fn committed(&self) -> watch::Receiver<u64> {
         self.committed.clone()
+    }
+
+    /// Takes `config`, read again, while running: its checks, limits,
+    /// delays, timers, charts, state rules, production counting and
+    /// longest shelf replace the running ones in the cell loop, which
+    /// carries over every alarm (acknowledged, shelved or out of service
+    /// as it was), the machine state and the tags' values
+    /// (`cell/reload.rs`). What only a restart changes (the cell
+    /// id, the journal, the source, the bus, the metrics and Alertmanager
+    /// settings, the operators file, the state interval) is named in
+    /// [`Reloaded::needs_restart`], the running values going on; a change
+    /// of the tags refuses the whole configuration.
+    ///
+    /// # Errors
+    /// See [`ReloadError`]; the running configuration goes on.
+    pub async fn reload(&mut self, config: &CellConfig) -> Result<Reloaded, ReloadError> {
+        let fixed = config.fixed_parts();
+        let changed: Vec<&'static str> = crate::config::FIXED_PARTS
+            .iter()
+            .zip(fixed.iter().zip(self.fixed))
+            .filter(|(_, (new, old))| **new != *old)
+            .map(|(name, _)| *name)
+            .collect();
+        if changed.contains(&"the tags") {
+            return Err(ReloadError::Restart("the tags".into()));
+        }
+        if changed.contains(&"cell.id") {
+            return Err(ReloadError::Restart("cell.id".into()));
+        }
+        let engine = compile::engine(config)?;
+        let (done, taken) = tokio::sync::oneshot::channel();
+        let reload = crate::cell::swap::Reload {
+            engine,
+            forcing: crate::cell::forcing::Forcing::of(config),
+            timers: crate::cell::timers::Timers::of(config),
+            max_shelve: config.max_shelve,
+            done,
+        };
+        if self.reloads.send(reload).await.is_err() {
+            return Err(ReloadError::Refused("the cell loop has ended".into()));
+        }
+        let carried = taken
+            .await
+            .map_err(|_| ReloadError::Refused("the cell loop has ended".into()))?
+            .map_err(ReloadError::Refused)?;
+        Ok(Reloaded {
+            carried,
+            needs_restart: changed,
+        })
     }
 
     /// Stops every task, waits for each, and closes the Zenoh session.
@@ -290,6 +369,8 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         tracing::warn!("{w}");
     }
     let mut engine = compile::engine(&config)?;
+    // Before the tags go to the source.
+    let fixed = config.fixed_parts();
     let keys = match &config.operators_file {
         Some(path) => OperatorKeys::load(path)?,
         None => OperatorKeys::default(),
@@ -400,6 +481,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         restored.state.map(|(s, _, _)| s),
         clock.now_ms(),
     );
+    let (reloads, reload_rx) = mpsc::channel(1);
     let cell_loop = CellLoop::new(&config.cell, engine, gate, sinks, config.state_interval)
         .timed_by(clock)
         .allowing(allowance)
@@ -410,7 +492,8 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         .answering_again(answers)
         .forcing(forcing)
         .timing(timing)
-        .reporting_to(cell_health.clone());
+        .reporting_to(cell_health.clone())
+        .reloading(reload_rx);
     let cell_loop = cell_loop
         .spawn(source_rx, requests_rx, stopped(stop_rx.clone()))
         .map_err(StartError::Loop)?;
@@ -427,6 +510,8 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         metrics_addr,
         committed,
         health: (health, cell_health),
+        reloads,
+        fixed,
     })
 }
 

@@ -27,6 +27,9 @@ pub enum Input {
     StateBeat,
     /// The alarms and machine state taken back from the journal at start.
     Restored,
+    /// The configuration was read again: the new engine took over the
+    /// running one's alarms, state and values.
+    Reloaded,
     /// A condition of the agent itself changed (the journal's health).
     System,
     /// An operator command, carried out or refused.

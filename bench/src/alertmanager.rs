@@ -38,7 +38,9 @@ impl Alertmanager {
             Alertmanager::Off => return Ok(None),
             // A port the system had free a moment ago, left unbound.
             Alertmanager::Refusing => (
-                std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port(),
+                std::net::TcpListener::bind("127.0.0.1:0")?
+                    .local_addr()?
+                    .port(),
                 None,
             ),
             Alertmanager::Silent => {

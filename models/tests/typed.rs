@@ -321,3 +321,81 @@ fn on_and_off_delays_announce_only_conditions_that_last() {
         ]
     );
 }
+
+fn temp_limit(h: f64) -> LimitCheck {
+    LimitCheck {
+        id: "temp".into(),
+        tag: Signal::new("TEMP"),
+        label: "temp".into(),
+        unit: "°C".into(),
+        deadband: 2.0,
+        on_delay: 0,
+        off_delay: 0,
+        levels: vec![LimitLevel {
+            level: Level::H,
+            limit: h,
+            severity: Severity::High,
+        }],
+    }
+}
+
+fn transitions(steps: &[cellwatch_models::engine::Step]) -> Vec<(String, Transition)> {
+    steps
+        .iter()
+        .flat_map(|s| s.alarms().map(|(a, t, _)| (a.id.clone(), t)))
+        .collect()
+}
+
+#[test]
+fn a_reload_keeps_what_holds_and_judges_the_rest_by_the_new_checks() {
+    let mut old = engine(vec![temp_limit(85.0)]);
+    load_normal(&mut old, 0);
+    assert_eq!(
+        raised(&number(&mut old, "TEMP", Num::Float(90.0), 1_000)),
+        ["temp-h"]
+    );
+    old.acknowledge("temp-h", "kim", 2_000).unwrap();
+
+    // The same limit: the alarm is carried, still acknowledged, and the
+    // value as it was changes nothing.
+    let mut same = engine(vec![temp_limit(85.0)]);
+    let steps = same.take_over(old.carry_over(), 3_000);
+    assert_eq!(
+        transitions(&steps),
+        [("temp-h".to_string(), Transition::Restored)]
+    );
+    let a = same.alarms().find(|a| a.id == "temp-h").unwrap();
+    assert!(a.active && a.acknowledged && a.acked_by.as_deref() == Some("kim"));
+    assert!(same.connected());
+    assert_eq!(
+        same.value(tag(&same, "TEMP")),
+        Some(cellwatch_models::engine::Value::Num(Num::Float(90.0)))
+    );
+    assert_eq!(same.state(), old.state());
+
+    // The limit raised above the value: carried, then cleared by the new
+    // check on the value as it was.
+    let mut higher = engine(vec![temp_limit(95.0)]);
+    let steps = higher.take_over(old.carry_over(), 3_000);
+    assert_eq!(
+        transitions(&steps),
+        [
+            ("temp-h".to_string(), Transition::Restored),
+            ("temp-h".to_string(), Transition::Cleared),
+        ]
+    );
+    // A check removed: its alarm is not carried.
+    let mut without = engine(Vec::new());
+    let steps = without.take_over(old.carry_over(), 3_000);
+    assert!(transitions(&steps).is_empty(), "{:?}", transitions(&steps));
+    // A new check whose condition holds on the values as they were: raised.
+    let mut calm = engine(Vec::new());
+    load_normal(&mut calm, 0);
+    number(&mut calm, "TEMP", Num::Float(90.0), 1_000);
+    let mut added = engine(vec![temp_limit(85.0)]);
+    let steps = added.take_over(calm.carry_over(), 3_000);
+    assert_eq!(
+        transitions(&steps),
+        [("temp-h".to_string(), Transition::Raised)]
+    );
+}

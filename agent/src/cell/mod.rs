@@ -17,7 +17,9 @@ mod commands;
 pub mod compile;
 pub mod force;
 pub mod forcing;
+mod reload;
 pub mod restore;
+pub mod swap;
 pub mod timers;
 
 use std::future::Future;
@@ -99,6 +101,8 @@ pub struct CellLoop {
     /// Told of every round of the loop and of the source's connection
     /// (`/healthz`, `/readyz`, systemd's watchdog).
     health: Option<std::sync::Arc<crate::health::CellHealth>>,
+    /// Configurations read again, to take over (`None`: none will come).
+    reloads: Option<mpsc::Receiver<swap::Reload>>,
 }
 
 /// A write's outcome on its way back into the loop.
@@ -160,6 +164,7 @@ impl CellLoop {
             allowance: 0,
             tasks: None,
             health: None,
+            reloads: None,
         }
     }
 
@@ -232,6 +237,14 @@ impl CellLoop {
     #[must_use]
     pub fn reporting_to(mut self, health: std::sync::Arc<crate::health::CellHealth>) -> CellLoop {
         self.health = Some(health);
+        self
+    }
+
+    /// Takes over from each configuration read again that comes on
+    /// `reloads` (`reload.rs`).
+    #[must_use]
+    pub fn reloading(mut self, reloads: mpsc::Receiver<swap::Reload>) -> CellLoop {
+        self.reloads = Some(reloads);
         self
     }
 
@@ -375,6 +388,7 @@ impl CellLoop {
                 },
                 Some(w) = self.written_rx.recv() => self.written(w).await,
                 problem = journal_changed(&mut self.journal_health) => self.system(JOURNAL_ALARM, problem).await,
+                r = swap::next(&mut self.reloads) => self.reload(r).await,
                 () = &mut wake => self.tick().await,
                 _ = beat.tick() => self.beat().await,
             }

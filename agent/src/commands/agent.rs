@@ -13,7 +13,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use super::signals::StopSignals;
+use super::signals::{Hangups, StopSignals};
 use super::Failure;
 use crate::agent;
 use crate::config::{self, CellConfig};
@@ -74,6 +74,7 @@ pub(crate) fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<(), F
 /// same `@` bus share one poller on it.
 pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
     let mut signals = StopSignals::listen()?;
+    let mut hangups = Hangups::listen()?;
     let mut configs = Vec::new();
     for path in &args.config {
         configs.push((path.clone(), load(path)?));
@@ -96,6 +97,7 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
     drop(cells);
     let mut agents = Vec::new();
     let mut started = Vec::new();
+    let mut paths = Vec::new();
     // One health for every cell of the process: each metrics port's
     // `/healthz` and systemd's watchdog cover them all.
     let health = crate::health::Health::default();
@@ -117,6 +119,7 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
                 tracing::info!(cell, %zenoh, %metrics, "agent running");
                 agents.push(agent);
                 started.push(cell);
+                paths.push(path);
             }
             Err(e) => {
                 for agent in agents {
@@ -140,15 +143,36 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
     }
     super::systemd::ready(&started);
     let watchdog = super::systemd::watchdog(health);
-    let waits = agents.iter_mut().map(|a| Box::pin(a.wait()));
-    let failed = tokio::select! {
-        signal = signals.recv() => {
-            tracing::info!(signal, "stopping");
-            None
-        }
-        (ended, i, _) = futures_util::future::select_all(waits) => {
-            tracing::error!(cell = %started[i], why = %ended, "the agent cannot go on; stopping every cell");
-            Some((i, ended))
+    enum Event {
+        Stop(&'static str),
+        Reload,
+        Ended(usize, agent::Ended),
+    }
+    let failed = loop {
+        let event = {
+            let waits = agents.iter_mut().map(|a| Box::pin(a.wait()));
+            tokio::select! {
+                signal = signals.recv() => Event::Stop(signal),
+                () = hangups.recv() => Event::Reload,
+                (ended, i, _) = futures_util::future::select_all(waits) => Event::Ended(i, ended),
+            }
+        };
+        match event {
+            Event::Stop(signal) => {
+                tracing::info!(signal, "stopping");
+                break None;
+            }
+            Event::Reload => {
+                super::systemd::reloading();
+                for (agent, path) in agents.iter_mut().zip(&paths) {
+                    reload(agent, path).await;
+                }
+                super::systemd::ready(&started);
+            }
+            Event::Ended(i, ended) => {
+                tracing::error!(cell = %started[i], why = %ended, "the agent cannot go on; stopping every cell");
+                break Some((i, ended));
+            }
         }
     };
     // A second stop signal while the cells stop: asked twice, the process
@@ -172,6 +196,39 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
     match failed {
         None => Ok(()),
         Some((i, ended)) => Err(Failure::Runtime(format!("cell {}: {ended}", started[i]))),
+    }
+}
+
+/// Reads `path` again and hands it to its running `agent` (SIGHUP): taken
+/// live, or refused with why, the running configuration going on.
+async fn reload(agent: &mut agent::Agent, path: &Path) {
+    let file = path.display().to_string();
+    let config = match config::load(path) {
+        Ok(c) => c,
+        Err(e) => {
+            tracing::error!(%file, "the configuration read again is refused, the running one goes on:\n{e}");
+            return;
+        }
+    };
+    for w in &config.warnings {
+        tracing::warn!(%file, "{w}");
+    }
+    let cell = config.cell.clone();
+    match agent.reload(&config).await {
+        Ok(r) => {
+            tracing::info!(%cell, %file, carried = r.carried, "configuration read again and taken");
+            if !r.needs_restart.is_empty() {
+                tracing::warn!(
+                    %cell,
+                    %file,
+                    "changed, but taken only by a restart (the running values go on): {}",
+                    r.needs_restart.join(", ")
+                );
+            }
+        }
+        Err(e) => {
+            tracing::error!(%cell, %file, "the configuration read again is refused, the running one goes on: {e}");
+        }
     }
 }
 

@@ -38,6 +38,29 @@ impl StopSignals {
     }
 }
 
+/// SIGHUP: read the configuration again (`cellwatch run`; systemd's
+/// `systemctl reload`). Listened to from the moment it is made: a SIGHUP no
+/// longer ends the process.
+pub(crate) struct Hangups(tokio::signal::unix::Signal);
+
+impl Hangups {
+    /// Starts listening.
+    ///
+    /// # Errors
+    /// The system refuses the handler.
+    pub(crate) fn listen() -> Result<Hangups, Failure> {
+        use tokio::signal::unix::{signal, SignalKind};
+        signal(SignalKind::hangup())
+            .map(Hangups)
+            .map_err(|e| Failure::Runtime(format!("cannot listen for SIGHUP: {e}")))
+    }
+
+    /// The next SIGHUP.
+    pub(crate) async fn recv(&mut self) {
+        let _ = self.0.recv().await;
+    }
+}
+
 /// The next Ctrl-C or SIGTERM, by name (Ctrl-C only where the handlers
 /// cannot be set).
 pub(crate) async fn stop_requested() -> &'static str {

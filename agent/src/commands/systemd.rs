@@ -22,6 +22,15 @@ pub(crate) fn ready(cells: &[String]) {
     send(&[NotifyState::Ready, NotifyState::Status(&status)]);
 }
 
+/// The configurations are being read again (systemd's `notify-reload`
+/// protocol wants the monotonic time with it); [`ready`] follows.
+pub(crate) fn reloading() {
+    match NotifyState::monotonic_usec_now() {
+        Ok(now) => send(&[NotifyState::Reloading, now]),
+        Err(_) => send(&[NotifyState::Reloading]),
+    }
+}
+
 /// The process is stopping.
 pub(crate) fn stopping() {
     send(&[NotifyState::Stopping]);

@@ -122,7 +122,52 @@ pub struct CellConfig {
     pub warnings: Vec<String>,
 }
 
+/// The parts of a configuration a reload cannot change in a running
+/// agent ([`CellConfig::fixed_parts`]): what it is, where it keeps and
+/// says things, whom it talks to, what it reads.
+pub const FIXED_PARTS: [&str; 10] = [
+    "cell.id",
+    "journal.path",
+    "[opcua]",
+    "[legacy]",
+    "[zenoh]",
+    "[metrics]",
+    "[alertmanager]",
+    "commands.operators_file",
+    "state.publish_interval",
+    "the tags",
+];
+
 impl CellConfig {
+    /// A fingerprint of each of [`FIXED_PARTS`], in that order: compared
+    /// between the running configuration and one read again, it names what
+    /// only a restart changes. (Hashes of the parts' debug forms: the tags
+    /// of a 100,000-tag cell are not kept twice for it.)
+    pub fn fixed_parts(&self) -> [u64; 10] {
+        use std::hash::{Hash, Hasher};
+        let hash = |part: &dyn fmt::Debug| {
+            let mut h = std::collections::hash_map::DefaultHasher::new();
+            format!("{part:?}").hash(&mut h);
+            h.finish()
+        };
+        let mut tags = std::collections::hash_map::DefaultHasher::new();
+        for t in &self.tags {
+            format!("{t:?}").hash(&mut tags);
+        }
+        [
+            hash(&self.cell),
+            hash(&self.journal.path),
+            hash(&self.opcua),
+            hash(&self.legacy),
+            hash(&self.zenoh),
+            hash(&self.metrics),
+            hash(&self.alertmanager),
+            hash(&self.operators_file),
+            hash(&self.state_interval),
+            tags.finish(),
+        ]
+    }
+
     /// The tags that are the flags of supervised steps: per tag index,
     /// (check, chart, step) of each step it flags. A step told by a
     /// step-number comparison (`D300 == 2`) has no flag tag and is not here.

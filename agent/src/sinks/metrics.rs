@@ -149,7 +149,11 @@ impl MetricsSink {
                         .set(step.at.saturating_sub(t) as f64 / 1000.0);
                 }
             }
-            Input::Readings | Input::StateBeat | Input::Restored | Input::System => {}
+            Input::Readings
+            | Input::StateBeat
+            | Input::Restored
+            | Input::Reloaded
+            | Input::System => {}
         }
         let e = &step.engine;
         if e.readings > 0 {

@@ -339,6 +339,21 @@ impl PerTag {
     }
 }
 
+/// What a reload carries from one engine to the next
+/// ([`CellEngine::carry_over`], [`CellEngine::take_over`]).
+#[derive(Debug, Clone)]
+pub struct Carried {
+    /// Every alarm not back to normal, shelved or out of service.
+    pub alarms: Vec<Alarm>,
+    /// The machine state.
+    pub state: MachineState,
+    /// The connection, if the source has said.
+    pub connected: Option<bool>,
+    /// Each known tag's value (or bad quality) by address, with its source
+    /// time.
+    pub readings: Vec<(Signal, Reading, u64)>,
+}
+
 /// One cell's engine.
 pub struct CellEngine {
     cell: String,
@@ -718,6 +733,85 @@ impl CellEngine {
             self.state = state;
         }
         step
+    }
+
+    /// What a reload carries from this engine into the one built from the
+    /// new configuration ([`CellEngine::take_over`]).
+    pub fn carry_over(&self) -> Carried {
+        let readings = (0..self.configured)
+            .filter_map(|t| {
+                let reading = match self.bad.get(&t) {
+                    Some(Some((expected, received))) => Reading::WrongType {
+                        expected: *expected,
+                        received: *received,
+                    },
+                    Some(None) => Reading::Bad,
+                    None => match self.value(t)? {
+                        Value::Bool(b) => Reading::Good(b),
+                        Value::Num(n) => Reading::Number(n),
+                        Value::Text(text) => Reading::Text(text),
+                    },
+                };
+                let at = self.timestamps[t].or(self.latest).unwrap_or(0);
+                Some((self.tags[t].address.clone(), reading, at))
+            })
+            .collect();
+        Carried {
+            alarms: self
+                .alarms
+                .iter()
+                .filter(|a| {
+                    a.active || !a.acknowledged || a.shelved.is_some() || a.out_of_service.is_some()
+                })
+                .cloned()
+                .collect(),
+            state: self.state.clone(),
+            connected: self.connected,
+            readings,
+        }
+    }
+
+    /// Takes over from the engine a reload replaces (`carried`), before
+    /// any other input: its alarms as they were (acknowledgements, shelves
+    /// and removals kept; the alarms of checks no longer configured
+    /// dropped, the agent's own kept), each reported once as
+    /// [`Transition::Restored`]; its machine state; its connection; then
+    /// the tags' values as they were, at their source times, which the new
+    /// checks judge: an alarm whose condition no longer holds clears, a
+    /// new check's condition that holds raises. What was under way is
+    /// started again from here: a condition waiting out its delay, a
+    /// transition being timed, a step's supervision time.
+    pub fn take_over(&mut self, carried: Carried, now: u64) -> Vec<Step> {
+        let Carried {
+            alarms,
+            state,
+            connected,
+            readings,
+        } = carried;
+        let alarms = alarms
+            .into_iter()
+            .filter(|a| a.kind == AlarmKind::System || self.can_raise(&a.id))
+            .collect();
+        let mut steps = vec![self.restore(alarms, Some(state), now)];
+        if let Some(up) = connected {
+            steps.push(self.on_connection(up, now));
+        }
+        let mut values: Vec<TagReading> = readings
+            .into_iter()
+            .filter_map(|(address, reading, source_time)| {
+                let tag = self.tag_index(&address).filter(|&t| t < self.configured)?;
+                Some(TagReading {
+                    tag,
+                    reading,
+                    source_time,
+                })
+            })
+            .collect();
+        values.sort_by_key(|r| r.source_time);
+        if !values.is_empty() {
+            steps.push(self.on_readings(&values, now));
+        }
+        steps
     }
 
     /// A condition of the agent itself (`journal`: it cannot write) began

@@ -1,0 +1,38 @@
+//! What a reload hands the cell loop ([`Reload`]), shared by the loop
+//! (`mod.rs`, which waits for one) and its taking over (`reload.rs`).
+
+use std::time::Duration;
+
+use cellwatch_models::engine::CellEngine;
+use tokio::sync::{mpsc, oneshot};
+
+use super::{forcing::Forcing, timers::Timers};
+
+/// What takes over, and who hears that it has.
+pub struct Reload {
+    /// Built from the new configuration.
+    pub engine: CellEngine,
+    /// The new configuration's charts and switches.
+    pub forcing: Forcing,
+    /// Its timed transitions.
+    pub timers: Timers,
+    /// Its longest shelf.
+    pub max_shelve: Duration,
+    /// Told once the new engine runs: the alarms it carried over; or why
+    /// it was not taken.
+    pub done: oneshot::Sender<Result<usize, String>>,
+}
+
+/// The next reload; pending forever once nobody can send one.
+pub(super) async fn next(reloads: &mut Option<mpsc::Receiver<Reload>>) -> Reload {
+    let Some(rx) = reloads else {
+        return std::future::pending().await;
+    };
+    match rx.recv().await {
+        Some(r) => r,
+        None => {
+            *reloads = None;
+            std::future::pending().await
+        }
+    }
+}
