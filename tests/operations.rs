@@ -599,6 +599,67 @@ async fn sighup_takes_a_changed_limit_keeps_acknowledgements_and_refuses_a_bad_f
         log.contains("changed, but taken only by a restart (the running values go on): state.publish_interval"),
         "{log}"
     );
+    // Remotely: `cellwatch reload`, signed by an operator allowed
+    // `configure`, is answered with what came of it and journaled.
+    std::fs::write(
+        &cell.config,
+        raised_limit
+            .replace("# publish_interval = \"10s\"", "publish_interval = \"7s\"")
+            .replace("h = { limit = 95.0,", "h = { limit = 90.0,"),
+    )
+    .unwrap();
+    let key = d.path().join("kim.key");
+    std::fs::write(&key, crate::spawned::kim().to_file()).unwrap();
+    let mut args: Vec<String> = [
+        "reload",
+        "--cell",
+        "m01ps0004",
+        "--key-file",
+        key.to_str().unwrap(),
+    ]
+    .map(String::from)
+    .to_vec();
+    args.extend(cell.bus_args());
+    let run = tokio::task::spawn_blocking(move || {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        crate::util::cellwatch(&args)
+    })
+    .await
+    .unwrap();
+    assert_eq!(run.code, 0, "{}{}", run.stdout, run.stderr);
+    assert!(
+        run.stdout.contains("read again and taken (")
+            && run
+                .stdout
+                .contains("taken only by a restart: state.publish_interval"),
+        "{}",
+        run.stdout
+    );
+    // 97 °C is above the 90 °C limit read remotely: raised again.
+    alarm_until(
+        &sub,
+        "raised above the limit read remotely",
+        &mut seen,
+        |a| a.id == "spindle-temp-h" && a.transition.as_str() == "raised",
+    )
+    .await;
+    let journal = rusqlite::Connection::open(cell.dir.join("journal.sqlite")).unwrap();
+    let rows: Vec<(String, String, bool)> = journal
+        .prepare(
+            "SELECT action, stage, accepted FROM commands WHERE action = 'configure' ORDER BY seq",
+        )
+        .unwrap()
+        .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))
+        .unwrap()
+        .map(Result::unwrap)
+        .collect();
+    assert_eq!(
+        rows,
+        [
+            ("configure".to_string(), "request".to_string(), true),
+            ("configure".to_string(), "result".to_string(), true),
+        ]
+    );
     crate::robust::sigterm(&child);
     assert_eq!(
         crate::robust::exit_code(child).await,

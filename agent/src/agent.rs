@@ -108,6 +108,10 @@ pub struct Options {
     /// systemd's watchdog): this agent's cell is added to it; a health of
     /// its own if `None`.
     pub health: Option<Health>,
+    /// The agent runs from a configuration file its runner can read again:
+    /// an operator's signed `configure reload` is handed to the runner
+    /// ([`Agent::next_event`]); refused otherwise.
+    pub reads_its_file: bool,
 }
 
 /// Why an agent could not go on by itself ([`Agent::wait`]).
@@ -149,6 +153,8 @@ pub struct Agent {
     health: (Health, Arc<CellHealth>),
     /// Configurations read again go to the cell loop here.
     reloads: mpsc::Sender<crate::cell::swap::Reload>,
+    /// Operators' `configure reload`, for the runner.
+    reload_asks: Option<mpsc::Receiver<crate::cell::swap::ReloadAsk>>,
     /// The running configuration's parts only a restart changes.
     fixed: [u64; 10],
 }
@@ -168,6 +174,15 @@ pub enum ReloadError {
     /// The loop would not take it now, or has ended.
     #[error("{0}")]
     Refused(String),
+}
+
+/// What a running agent needs from whoever runs it ([`Agent::next_event`]).
+pub enum AgentEvent {
+    /// It cannot go on by itself.
+    Ended(Ended),
+    /// An operator asked for its configuration file to be read again:
+    /// read it, [`Agent::reload`] it, and answer.
+    ReloadAsked(crate::cell::swap::ReloadAsk),
 }
 
 /// A configuration taken by a running agent.
@@ -292,6 +307,31 @@ impl Agent {
         }
     }
 
+    /// Waits until the agent needs its runner: it cannot go on
+    /// ([`Agent::wait`]), or an operator asked for its file to be read
+    /// again.
+    pub async fn next_event(&mut self) -> AgentEvent {
+        let Agent {
+            source,
+            cell_loop,
+            reload_asks,
+            ..
+        } = self;
+        let asks = async {
+            match reload_asks.as_mut() {
+                Some(rx) => match rx.recv().await {
+                    Some(ask) => ask,
+                    None => std::future::pending().await,
+                },
+                None => std::future::pending().await,
+            }
+        };
+        tokio::select! {
+            ask = asks => AgentEvent::ReloadAsked(ask),
+            ended = wait_for(source, cell_loop) => AgentEvent::Ended(ended),
+        }
+    }
+
     /// Waits until the agent cannot go on by itself: its source could not
     /// run or ended, or its cell loop ended (a panic: the loop has closed
     /// its sinks, its rows are committed and its liveliness token is
@@ -301,6 +341,16 @@ impl Agent {
         let Agent {
             source, cell_loop, ..
         } = self;
+        wait_for(source, cell_loop).await
+    }
+}
+
+/// See [`Agent::wait`].
+async fn wait_for(
+    source: &mut Option<JoinHandle<Result<(), SourceError>>>,
+    cell_loop: &mut Option<JoinHandle<()>>,
+) -> Ended {
+    {
         let from_source = async {
             match source.as_mut() {
                 Some(task) => task.await,
@@ -482,6 +532,12 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         clock.now_ms(),
     );
     let (reloads, reload_rx) = mpsc::channel(1);
+    let (asks_tx, reload_asks) = if options.reads_its_file {
+        let (tx, rx) = mpsc::channel(4);
+        (Some(tx), Some(rx))
+    } else {
+        (None, None)
+    };
     let cell_loop = CellLoop::new(&config.cell, engine, gate, sinks, config.state_interval)
         .timed_by(clock)
         .allowing(allowance)
@@ -494,6 +550,10 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         .timing(timing)
         .reporting_to(cell_health.clone())
         .reloading(reload_rx);
+    let cell_loop = match asks_tx {
+        Some(tx) => cell_loop.asking_reloads(tx),
+        None => cell_loop,
+    };
     let cell_loop = cell_loop
         .spawn(source_rx, requests_rx, stopped(stop_rx.clone()))
         .map_err(StartError::Loop)?;
@@ -511,6 +571,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         committed,
         health: (health, cell_health),
         reloads,
+        reload_asks,
         fixed,
     })
 }

@@ -8,7 +8,8 @@ use clap::{Parser, Subcommand};
 
 use crate::commands::agent::{RunArgs, ValidateArgs};
 use crate::commands::bus::{
-    AlarmsArgs, CommandArgs, ForceArgs, HistoryArgs, ReasonArgs, ShelveArgs, StopArgs, WriteArgs,
+    AlarmsArgs, CommandArgs, ForceArgs, HistoryArgs, ReasonArgs, ReloadArgs, ShelveArgs, StopArgs,
+    WriteArgs,
 };
 use crate::commands::console::ConsoleArgs;
 use crate::commands::demo::DemoArgs;
@@ -117,6 +118,11 @@ enum Command {
     /// Press a chart's remote stop switch (permission `stop`): a signed
     /// command, journaled with the PLC's answer.
     Stop(StopArgs),
+    /// Have a cell's agent read its configuration file again (permission
+    /// `configure`): checks, limits, delays and timers taken live with
+    /// every alarm state kept, as on SIGHUP; answers what was taken, what
+    /// only a restart changes, or why the file was refused.
+    Reload(ReloadArgs),
     /// Make an operator's key pair for signing commands (Ed25519).
     ///
     /// Writes the private key file, which stays with the operator (give it
@@ -200,6 +206,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             | Command::Write(_)
             | Command::Force(_)
             | Command::Stop(_)
+            | Command::Reload(_)
             | Command::Shelve(_)
             | Command::Unshelve(_)
             | Command::OutOfService(_)
@@ -255,6 +262,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::Write(args) => commands::bus::write(&args, out).await,
             Command::Force(args) => commands::bus::force(&args, out).await,
             Command::Stop(args) => commands::bus::stop(&args, out).await,
+            Command::Reload(args) => commands::bus::reload(&args, out).await,
             Command::Shelve(args) => commands::bus::shelve(&args, out).await,
             Command::Unshelve(args) => commands::bus::command(Action::Unshelve, &args, out).await,
             Command::OutOfService(args) => commands::bus::out_of_service(&args, out).await,

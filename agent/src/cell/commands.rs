@@ -72,7 +72,7 @@ impl CellLoop {
         };
         let target = match cmd.action {
             Action::Write => cmd.tag.as_deref().unwrap_or(""),
-            Action::Force | Action::Stop => cmd.value.as_deref().unwrap_or(""),
+            Action::Force | Action::Stop | Action::Configure => cmd.value.as_deref().unwrap_or(""),
             _ => &cmd.alarm,
         };
         let base = CommandRecord::of(&cmd, target, Stage::Command);
@@ -117,8 +117,10 @@ impl CellLoop {
             Err(refusal) => Err(refusal.to_string()),
             Ok(())
                 if (cmd.action != Action::Write && cmd.tag.is_some())
-                    || (!matches!(cmd.action, Action::Write | Action::Shelve)
-                        && cmd.value.is_some())
+                    || (!matches!(
+                        cmd.action,
+                        Action::Write | Action::Shelve | Action::Configure
+                    ) && cmd.value.is_some())
                     || (!matches!(cmd.action, Action::Shelve | Action::OutOfService)
                         && cmd.reason.is_some()) =>
             {
@@ -169,6 +171,16 @@ impl CellLoop {
                     .map_err(|e| e.to_string()),
                 // Taken by `switch_command` above.
                 Action::Force | Action::Stop => Err(format!("{} is not handled here", cmd.action)),
+                Action::Configure => match self.configure(&cmd) {
+                    Err(why) => Err(why),
+                    Ok(asks) => {
+                        let record = CommandRecord {
+                            verified: true,
+                            ..base
+                        };
+                        return self.reload_asked(record, asks, reply).await;
+                    }
+                },
                 Action::Write => match self.write(&cmd) {
                     Err(why) => Err(why),
                     Ok((tag, value)) => {

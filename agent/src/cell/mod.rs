@@ -103,6 +103,9 @@ pub struct CellLoop {
     health: Option<std::sync::Arc<crate::health::CellHealth>>,
     /// Configurations read again, to take over (`None`: none will come).
     reloads: Option<mpsc::Receiver<swap::Reload>>,
+    /// Where an operator's `configure reload` goes (`None`: the agent
+    /// was not started from a file, and it is refused).
+    reload_asks: Option<mpsc::Sender<swap::ReloadAsk>>,
 }
 
 /// A write's outcome on its way back into the loop.
@@ -165,6 +168,7 @@ impl CellLoop {
             tasks: None,
             health: None,
             reloads: None,
+            reload_asks: None,
         }
     }
 
@@ -245,6 +249,14 @@ impl CellLoop {
     #[must_use]
     pub fn reloading(mut self, reloads: mpsc::Receiver<swap::Reload>) -> CellLoop {
         self.reloads = Some(reloads);
+        self
+    }
+
+    /// Hands an operator's `configure reload` to `asks` (the process that
+    /// runs the agent from its file).
+    #[must_use]
+    pub fn asking_reloads(mut self, asks: mpsc::Sender<swap::ReloadAsk>) -> CellLoop {
+        self.reload_asks = Some(asks);
         self
     }
 

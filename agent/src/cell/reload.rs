@@ -7,8 +7,16 @@
 //! journal, the bus session and the sinks go on untouched: nothing is
 //! lost, and history has no gap.
 
-use super::swap::Reload;
-use super::{CellLoop, Input};
+use cellwatch_models::engine::Step;
+use tokio::sync::{mpsc, oneshot};
+
+use super::swap::{Reload, ReloadAsk};
+use super::{CellLoop, CommandOutcome, CommandRecord, Input, Stage, Then, Written};
+use crate::operator::Command;
+
+/// How long an operator's `configure reload` may take (reading and
+/// compiling the file, the loop taking it over).
+const RELOAD_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(60);
 
 impl CellLoop {
     /// Reloads the loop from `reload` (see the module).
@@ -39,5 +47,72 @@ impl CellLoop {
             self.dispatch(now, Input::Reloaded, step, 0).await;
         }
         let _ = done.send(Ok(alarms));
+    }
+}
+
+impl CellLoop {
+    /// Where an authorised `configure` command goes: `value` must be
+    /// `reload`, and the agent must run from a file.
+    pub(super) fn configure(&self, cmd: &Command) -> Result<mpsc::Sender<ReloadAsk>, String> {
+        if !cmd.alarm.is_empty() || cmd.tag.is_some() {
+            return Err("configure names no alarm or tag".into());
+        }
+        if cmd.value.as_deref() != Some("reload") {
+            return Err(
+                "configure: the only value is reload (read the configuration file again)".into(),
+            );
+        }
+        self.reload_asks.clone().ok_or_else(|| {
+            "this agent was not started from a configuration file: nothing to read again".into()
+        })
+    }
+
+    /// Carries out an authorised `configure reload`: its request row (with
+    /// the nonce) journaled and committed first, then the file read again
+    /// by the process that runs the agent, and handed to this loop (the
+    /// loop goes on meanwhile); what came of it comes back as a
+    /// [`Written`], journaled as the result, and only then answered.
+    pub(super) async fn reload_asked(
+        &mut self,
+        record: CommandRecord,
+        asks: mpsc::Sender<ReloadAsk>,
+        reply: oneshot::Sender<CommandOutcome>,
+    ) {
+        let now = self.clock.now_ms();
+        let request = CommandRecord {
+            stage: Stage::Request,
+            ..record
+                .clone()
+                .saying(true, &format!("reload asked by {}", record.operator))
+        };
+        self.dispatch(now, Input::Command(request), Step::default(), 0)
+            .await;
+        let settled = self.settled();
+        let back = self.written_tx.clone();
+        self.start_task(async move {
+            settled.await;
+            let (answer, outcome) = oneshot::channel();
+            let asked = asks.send(ReloadAsk { reply: answer }).await.is_ok();
+            let done = match (asked, tokio::time::timeout(RELOAD_TIMEOUT, outcome).await) {
+                (false, _) | (true, Ok(Err(_))) => Err("the agent is stopping".to_string()),
+                (true, Ok(Ok(done))) => done,
+                (true, Err(_)) => Err(format!("no outcome within {} s", RELOAD_TIMEOUT.as_secs())),
+            };
+            let (accepted, detail) = match done {
+                Ok(d) => (true, d),
+                Err(d) => (false, d),
+            };
+            let record = CommandRecord {
+                stage: Stage::Result,
+                ..record.saying(accepted, &detail)
+            };
+            let _ = back
+                .send(Written {
+                    record,
+                    reply,
+                    then: Then::Answer,
+                })
+                .await;
+        });
     }
 }

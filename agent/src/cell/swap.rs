@@ -36,3 +36,12 @@ pub(super) async fn next(reloads: &mut Option<mpsc::Receiver<Reload>>) -> Reload
         }
     }
 }
+
+/// An operator's signed `configure` command asks for the configuration to
+/// be read again: whoever runs the agent from its file (`cellwatch run`)
+/// reads it and hands it over as on SIGHUP, and answers what came of it.
+pub struct ReloadAsk {
+    /// What came of it, for the operator and the journal: taken (and what
+    /// only a restart changes), or why not.
+    pub reply: oneshot::Sender<Result<String, String>>,
+}

@@ -106,6 +106,7 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
         let options = agent::Options {
             source: share.map(|s| Box::new(s) as Box<dyn crate::sources::Source>),
             health: Some(health.clone()),
+            reads_its_file: true,
             ..agent::Options::default()
         };
         match agent::start_with(c, options).await {
@@ -146,15 +147,15 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
     enum Event {
         Stop(&'static str),
         Reload,
-        Ended(usize, agent::Ended),
+        Agent(usize, agent::AgentEvent),
     }
     let failed = loop {
         let event = {
-            let waits = agents.iter_mut().map(|a| Box::pin(a.wait()));
+            let events = agents.iter_mut().map(|a| Box::pin(a.next_event()));
             tokio::select! {
                 signal = signals.recv() => Event::Stop(signal),
                 () = hangups.recv() => Event::Reload,
-                (ended, i, _) = futures_util::future::select_all(waits) => Event::Ended(i, ended),
+                (event, i, _) = futures_util::future::select_all(events) => Event::Agent(i, event),
             }
         };
         match event {
@@ -165,11 +166,16 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
             Event::Reload => {
                 super::systemd::reloading();
                 for (agent, path) in agents.iter_mut().zip(&paths) {
-                    reload(agent, path).await;
+                    let _ = reload(agent, path).await;
                 }
                 super::systemd::ready(&started);
             }
-            Event::Ended(i, ended) => {
+            Event::Agent(i, agent::AgentEvent::ReloadAsked(ask)) => {
+                super::systemd::reloading();
+                let _ = ask.reply.send(reload(&mut agents[i], &paths[i]).await);
+                super::systemd::ready(&started);
+            }
+            Event::Agent(i, agent::AgentEvent::Ended(ended)) => {
                 tracing::error!(cell = %started[i], why = %ended, "the agent cannot go on; stopping every cell");
                 break Some((i, ended));
             }
@@ -199,16 +205,20 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
     }
 }
 
-/// Reads `path` again and hands it to its running `agent` (SIGHUP): taken
-/// live, or refused with why, the running configuration going on.
-async fn reload(agent: &mut agent::Agent, path: &Path) {
+/// Reads `path` again and hands it to its running `agent` (SIGHUP, or an
+/// operator's `configure reload`): taken live, or refused with why, the
+/// running configuration going on. Logged, and said for the operator.
+async fn reload(agent: &mut agent::Agent, path: &Path) -> Result<String, String> {
     let file = path.display().to_string();
+    let refused = |why: String| {
+        tracing::error!(%file, "the configuration read again is refused, the running one goes on:\n{why}");
+        Err(format!(
+            "{file}: refused, the running configuration goes on: {why}"
+        ))
+    };
     let config = match config::load(path) {
         Ok(c) => c,
-        Err(e) => {
-            tracing::error!(%file, "the configuration read again is refused, the running one goes on:\n{e}");
-            return;
-        }
+        Err(e) => return refused(e.to_string()),
     };
     for w in &config.warnings {
         tracing::warn!(%file, "{w}");
@@ -217,18 +227,22 @@ async fn reload(agent: &mut agent::Agent, path: &Path) {
     match agent.reload(&config).await {
         Ok(r) => {
             tracing::info!(%cell, %file, carried = r.carried, "configuration read again and taken");
+            let mut said = format!(
+                "{file}: read again and taken ({} alarms carried over)",
+                r.carried
+            );
             if !r.needs_restart.is_empty() {
+                let parts = r.needs_restart.join(", ");
                 tracing::warn!(
                     %cell,
                     %file,
-                    "changed, but taken only by a restart (the running values go on): {}",
-                    r.needs_restart.join(", ")
+                    "changed, but taken only by a restart (the running values go on): {parts}"
                 );
+                said += &format!("; taken only by a restart: {parts}");
             }
+            Ok(said)
         }
-        Err(e) => {
-            tracing::error!(%cell, %file, "the configuration read again is refused, the running one goes on: {e}");
-        }
+        Err(e) => refused(e.to_string()),
     }
 }
 

@@ -57,11 +57,14 @@ pub enum Action {
     Force,
     /// Press the remote stop switch.
     Stop,
+    /// Change the agent's configuration: `value` `reload`, the file read
+    /// again and taken live (as on SIGHUP).
+    Configure,
 }
 
 impl Action {
     /// Every action.
-    pub const ALL: [Action; 9] = [
+    pub const ALL: [Action; 10] = [
         Action::Ack,
         Action::Reset,
         Action::Write,
@@ -71,6 +74,7 @@ impl Action {
         Action::InService,
         Action::Force,
         Action::Stop,
+        Action::Configure,
     ];
 
     /// The name on the wire, in the journal and in operators files.
@@ -85,6 +89,7 @@ impl Action {
             Action::InService => "in-service",
             Action::Force => "force",
             Action::Stop => "stop",
+            Action::Configure => "configure",
         }
     }
 

@@ -105,7 +105,7 @@ fn bad_operators_files() {
             "[operators.kim]\npublic_key = \"{}\"\nallow = [\"fly\"]",
             kim.public_hex()
         )),
-        "ops.toml: operators.kim: allow: unknown action 'fly': use ack, reset, write, shelve, unshelve, out-of-service, in-service, force, stop"
+        "ops.toml: operators.kim: allow: unknown action 'fly': use ack, reset, write, shelve, unshelve, out-of-service, in-service, force, stop, configure"
     );
     assert!(err(&format!(
         "[operators.kim]\npublic_key = \"{}\"",

@@ -190,6 +190,15 @@ pub(crate) struct StopArgs {
     pub(crate) signer: SignerArgs,
 }
 
+#[derive(Debug, clap::Args)]
+pub(crate) struct ReloadArgs {
+    /// The cell whose agent reads its configuration file again.
+    #[arg(long)]
+    pub(crate) cell: String,
+    #[command(flatten)]
+    pub(crate) signer: SignerArgs,
+}
+
 /// Who signs a command, and how it reaches the agent.
 #[derive(Debug, clap::Args)]
 pub(crate) struct SignerArgs {

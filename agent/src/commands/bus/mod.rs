@@ -10,8 +10,8 @@ use std::time::Duration;
 use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
 pub(crate) use args::{
-    AlarmsArgs, CommandArgs, ForceArgs, HistoryArgs, ReasonArgs, ShelveArgs, SignerArgs, StopArgs,
-    WriteArgs, ZenohArgs,
+    AlarmsArgs, CommandArgs, ForceArgs, HistoryArgs, ReasonArgs, ReloadArgs, ShelveArgs,
+    SignerArgs, StopArgs, WriteArgs, ZenohArgs,
 };
 
 use crate::bus::envelope::Trust;
@@ -451,6 +451,24 @@ pub(crate) async fn stop(args: &StopArgs, out: &mut dyn Write) -> Result<(), Fai
             alarm: "",
             tag: None,
             value: Some(&args.chart),
+            reason: None,
+        },
+        &args.signer,
+        out,
+    )
+    .await
+}
+
+/// `cellwatch reload`: a signed `configure reload`: the agent's
+/// configuration file read again and taken live.
+pub(crate) async fn reload(args: &ReloadArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    signed(
+        Target {
+            action: Action::Configure,
+            cell: &args.cell,
+            alarm: "",
+            tag: None,
+            value: Some("reload"),
             reason: None,
         },
         &args.signer,
