@@ -669,3 +669,106 @@ async fn sighup_takes_a_changed_limit_keeps_acknowledgements_and_refuses_a_bad_f
     );
     sim.stop();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn sighup_with_a_new_tag_starts_a_source_of_its_own_and_keeps_every_alarm() {
+    use crate::agent::alarm_until;
+    use crate::spawned::{send, signed};
+    use cellwatch::operator::Action;
+    use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
+    let d = tempfile::tempdir().unwrap();
+    let (sim, mut cell) = crate::spawned::start(d.path()).await;
+    let child = cell.spawn("agent.log").await;
+    let client = cell.client().await;
+    let sub = client
+        .declare_subscriber("cellwatch/m01ps0004/alarms/**")
+        .history(HistoryConfig::default().detect_late_publishers())
+        .recovery(RecoveryConfig::default().heartbeat())
+        .await
+        .unwrap();
+    crate::spawned::snapshot_until(&client, "connected and running", |s| {
+        s["connected"] == true && s["state"] == "running"
+    })
+    .await;
+    let mut seen = Vec::new();
+    sim.set("X0.06", false).unwrap();
+    alarm_until(&sub, "ESE raised", &mut seen, |a| {
+        a.id == "ese" && a.transition.as_str() == "raised"
+    })
+    .await;
+    let (ok, detail) = send(&client, &signed(Action::Ack, "ese")).await;
+    assert!(ok, "{detail}");
+    alarm_until(&sub, "ESE acknowledged", &mut seen, |a| {
+        a.id == "ese" && a.transition.as_str() == "acknowledged"
+    })
+    .await;
+    sim.set_temperature(82.0).unwrap();
+    crate::spawned::snapshot_until(&client, "the spindle at 82 °C", |s| {
+        s["tags"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|t| t["address"] == "D100" && t["value"] == 82.0)
+    })
+    .await;
+    // A second view of the spindle's temperature, with a limit of its own.
+    let text = std::fs::read_to_string(&cell.config).unwrap();
+    std::fs::write(
+        &cell.config,
+        format!(
+            "{text}\n[[tags]]\nname = \"spindle_temperature_2\"\nnode_id = \"ns=2;s=D100\"\naddress = \"D900\"\ntype = \"Double\"\n\n[[checks.limit]]\nid = \"spindle-2\"\ntag = \"D900\"\nunit = \"°C\"\nh = {{ limit = 80.0 }}\n"
+        ),
+    )
+    .unwrap();
+    sighup(&child);
+    let raised = alarm_until(&sub, "the new tag's limit raised", &mut seen, |a| {
+        a.id == "spindle-2-h" && a.transition.as_str() == "raised"
+    })
+    .await;
+    assert!(raised.message.contains("= 82 °C"), "{}", raised.message);
+    let log = logged(&cell, "configuration read again and taken", 1).await;
+    assert!(
+        log.contains("starting a source for the configuration read again"),
+        "{log}"
+    );
+    let snap = crate::spawned::snapshot_until(&client, "the new tag known", |s| {
+        s["tags"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|t| t["address"] == "D900" && t["value"] == 82.0)
+    })
+    .await;
+    assert_eq!(snap["connected"], true);
+    let ese = crate::spawned::alarm(&snap, "ese").unwrap();
+    assert_eq!(ese["state"], "active_acknowledged", "{ese}");
+    assert_eq!(ese["acked_by"], "kim");
+    // The new source reads: the contacts still move the alarms, the new
+    // tag follows the PLC.
+    sim.set("X0.06", true).unwrap();
+    alarm_until(&sub, "ESE cleared through the new source", &mut seen, |a| {
+        a.id == "ese" && a.transition.as_str() == "cleared"
+    })
+    .await;
+    sim.set_temperature(60.0).unwrap();
+    alarm_until(&sub, "the new tag's limit cleared", &mut seen, |a| {
+        a.id == "spindle-2-h" && a.transition.as_str() == "cleared"
+    })
+    .await;
+    // Neither the communication alarm nor a second raise of ESE: no gap.
+    assert!(
+        !seen.iter().any(|a| a.id == "communication"
+            || (a.id == "ese"
+                && a.transition.as_str() == "restored"
+                && a.state.as_str() != "active_acknowledged")),
+        "{seen:#?}"
+    );
+    crate::robust::sigterm(&child);
+    assert_eq!(
+        crate::robust::exit_code(child).await,
+        Some(0),
+        "{}",
+        cell.log("agent.log")
+    );
+    sim.stop();
+}

@@ -140,6 +140,13 @@ pub struct Agent {
     cell_loop: Option<JoinHandle<()>>,
     /// The source; its error, if it could not run.
     source: Option<JoinHandle<Result<(), SourceError>>>,
+    /// Stops the source alone (a reload that starts another).
+    source_stop: watch::Sender<bool>,
+    /// The source was built from the configuration (not given): a reload
+    /// may start another.
+    own_source: bool,
+    /// Says when every task must stop (new sources listen to it too).
+    stopping: watch::Receiver<bool>,
     /// The Zenoh services (history, snapshot, command).
     services: Option<JoinHandle<()>>,
     /// The `/metrics` server.
@@ -158,6 +165,10 @@ pub struct Agent {
     /// The running configuration's parts only a restart changes.
     fixed: [u64; 10],
 }
+
+/// The parts of a configuration a reload takes by starting a source of its
+/// own (see [`crate::config::FIXED_PARTS`]).
+const SOURCE_PARTS: [&str; 3] = ["the tags", "[opcua]", "[legacy]"];
 
 /// Why a configuration read again was not taken.
 #[derive(Debug, thiserror::Error)]
@@ -228,11 +239,13 @@ impl Agent {
     /// longest shelf replace the running ones in the cell loop, which
     /// carries over every alarm (acknowledged, shelved or out of service
     /// as it was), the machine state and the tags' values
-    /// (`cell/reload.rs`). What only a restart changes (the cell
-    /// id, the journal, the source, the bus, the metrics and Alertmanager
-    /// settings, the operators file, the state interval) is named in
-    /// [`Reloaded::needs_restart`], the running values going on; a change
-    /// of the tags refuses the whole configuration.
+    /// (`cell/reload.rs`). Changed tags or source settings start a source
+    /// of their own, which the loop reads from the new engine on; the old
+    /// one is stopped (not for a source given to the agent, such as a
+    /// shared `@` bus's). What only a restart changes (the journal, the
+    /// bus, the metrics and Alertmanager settings, the operators file,
+    /// the state interval) is named in [`Reloaded::needs_restart`], the
+    /// running values going on; a changed cell id is refused.
     ///
     /// # Errors
     /// See [`ReloadError`]; the running configuration goes on.
@@ -244,32 +257,103 @@ impl Agent {
             .filter(|(_, (new, old))| **new != *old)
             .map(|(name, _)| *name)
             .collect();
-        if changed.contains(&"the tags") {
-            return Err(ReloadError::Restart("the tags".into()));
-        }
         if changed.contains(&"cell.id") {
             return Err(ReloadError::Restart("cell.id".into()));
         }
+        // The tags and the source's settings are taken by a source of
+        // their own, started beside the running one.
+        let by_source = |p: &&str| SOURCE_PARTS.contains(p);
+        let new_source = changed.iter().any(by_source);
+        if new_source && !self.own_source {
+            return Err(ReloadError::Restart(
+                "the tags or the source's settings, on a source shared by several cells,".into(),
+            ));
+        }
         let engine = compile::engine(config)?;
+        let started = new_source.then(|| self.start_source(config));
         let (done, taken) = tokio::sync::oneshot::channel();
+        let (source, task) = match started {
+            Some((new, task, stop)) => (Some(new), Some((task, stop))),
+            None => (None, None),
+        };
         let reload = crate::cell::swap::Reload {
             engine,
             forcing: crate::cell::forcing::Forcing::of(config),
             timers: crate::cell::timers::Timers::of(config),
             max_shelve: config.max_shelve,
+            source,
             done,
         };
-        if self.reloads.send(reload).await.is_err() {
-            return Err(ReloadError::Refused("the cell loop has ended".into()));
+        let outcome = match self.reloads.send(reload).await {
+            Err(_) => Err(ReloadError::Refused("the cell loop has ended".into())),
+            Ok(()) => taken
+                .await
+                .map_err(|_| ReloadError::Refused("the cell loop has ended".into()))
+                .and_then(|r| r.map_err(ReloadError::Refused)),
+        };
+        match (outcome, task) {
+            (Err(e), Some((task, stop))) => {
+                let _ = stop.send(true);
+                let _ = task.await;
+                Err(e)
+            }
+            (Err(e), None) => Err(e),
+            (Ok(carried), task) => {
+                if let Some((task, stop)) = task {
+                    // The loop reads the new source: the old one goes.
+                    let old_stop = std::mem::replace(&mut self.source_stop, stop);
+                    let old = self.source.replace(task);
+                    let _ = old_stop.send(true);
+                    if let Some(old) = old {
+                        if tokio::time::timeout(std::time::Duration::from_secs(10), old)
+                            .await
+                            .is_err()
+                        {
+                            tracing::warn!("the replaced source took more than 10 s to stop");
+                        }
+                    }
+                }
+                // What was taken is what runs now.
+                for (i, part) in crate::config::FIXED_PARTS.iter().enumerate() {
+                    if SOURCE_PARTS.contains(part) {
+                        self.fixed[i] = fixed[i];
+                    }
+                }
+                Ok(Reloaded {
+                    carried,
+                    needs_restart: changed.into_iter().filter(|p| !by_source(p)).collect(),
+                })
+            }
         }
-        let carried = taken
-            .await
-            .map_err(|_| ReloadError::Refused("the cell loop has ended".into()))?
-            .map_err(ReloadError::Refused)?;
-        Ok(Reloaded {
-            carried,
-            needs_restart: changed,
-        })
+    }
+
+    /// A source for `config`, started; the loop takes its events once it
+    /// takes the reload.
+    fn start_source(
+        &self,
+        config: &CellConfig,
+    ) -> (
+        crate::cell::swap::NewSource,
+        JoinHandle<Result<(), SourceError>>,
+        watch::Sender<bool>,
+    ) {
+        let mut source = sources::for_config(config, config.tags.clone());
+        let writer = source.writer();
+        let allowance = source.delivery_allowance();
+        tracing::info!(cell = %config.cell, source = %source.describe(), "starting a source for the configuration read again");
+        let (tx, events) = mpsc::channel(QUEUE_CAPACITY);
+        let (stop, stopped) = watch::channel(false);
+        let task =
+            tokio::spawn(source.run(tx, either_stops(self.stopping.clone(), stopped).boxed()));
+        (
+            crate::cell::swap::NewSource {
+                events,
+                writer,
+                allowance,
+            },
+            task,
+            stop,
+        )
     }
 
     /// Stops every task, waits for each, and closes the Zenoh session.
@@ -498,6 +582,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     sinks.extend(options.sinks);
     let forcing = crate::cell::forcing::Forcing::of(&config);
     let timing = crate::cell::timers::Timers::of(&config);
+    let own_source = options.source.is_none();
     let mut source = match options.source {
         Some(source) => source,
         None => {
@@ -509,7 +594,11 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     let allowance = source.delivery_allowance();
     tracing::info!(cell = %config.cell, source = %source.describe(), "starting");
     let (source_tx, source_rx) = mpsc::channel(QUEUE_CAPACITY);
-    let source = tokio::spawn(source.run(source_tx, stopped(stop_rx.clone()).boxed()));
+    let (source_stop, source_stopped) = watch::channel(false);
+    let source = tokio::spawn(source.run(
+        source_tx,
+        either_stops(stop_rx.clone(), source_stopped).boxed(),
+    ));
     let mut gate = Gate::new(&config.cell, keys);
     for (at, nonce) in restored.nonces {
         gate.remember(at, nonce);
@@ -557,11 +646,14 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     let cell_loop = cell_loop
         .spawn(source_rx, requests_rx, stopped(stop_rx.clone()))
         .map_err(StartError::Loop)?;
-    let services = tokio::spawn(services.run(stopped(stop_rx)));
+    let services = tokio::spawn(services.run(stopped(stop_rx.clone())));
     Ok(Agent {
         stop,
         cell_loop: Some(cell_loop),
         source: Some(source),
+        source_stop,
+        own_source,
+        stopping: stop_rx,
         services: Some(services),
         metrics_server,
         alertmanager,
@@ -574,6 +666,15 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         reload_asks,
         fixed,
     })
+}
+
+/// Completes when either says stop: the agent's stop, or the source's own
+/// (a reload that replaces it).
+async fn either_stops(mut agent: watch::Receiver<bool>, mut source: watch::Receiver<bool>) {
+    tokio::select! {
+        _ = agent.wait_for(|s| *s) => {}
+        _ = source.wait_for(|s| *s) => {}
+    }
 }
 
 /// The agent's signing key (made now if its file does not exist), after

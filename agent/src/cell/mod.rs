@@ -400,7 +400,20 @@ impl CellLoop {
                 },
                 Some(w) = self.written_rx.recv() => self.written(w).await,
                 problem = journal_changed(&mut self.journal_health) => self.system(JOURNAL_ALARM, problem).await,
-                r = swap::next(&mut self.reloads) => self.reload(r).await,
+                r = swap::next(&mut self.reloads) => {
+                    if let Some(mut r) = self.acceptable(r) {
+                        if let Some(new) = r.source.take() {
+                            // The old source's events not yet taken are
+                            // dropped with its channel: the new engine has
+                            // the values, the new source sends its own.
+                            source = new.events;
+                            source_open = true;
+                            self.writer = new.writer;
+                            self.allowance = new.allowance.as_millis() as u64;
+                        }
+                        self.reload(r).await;
+                    }
+                }
                 () = &mut wake => self.tick().await,
                 _ = beat.tick() => self.beat().await,
             }

@@ -19,21 +19,30 @@ use crate::operator::Command;
 const RELOAD_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(60);
 
 impl CellLoop {
-    /// Reloads the loop from `reload` (see the module).
+    /// `reload`, unless the loop cannot take one now (a forced transition
+    /// or stop under way: its switch and target belong to the running
+    /// charts), which is said to its sender.
+    pub(super) fn acceptable(&self, reload: Reload) -> Option<Reload> {
+        if self.forcing.pending.is_some() {
+            let _ = reload.done.send(Err(
+                "a forced transition or stop is under way: read the configuration again once it has ended".into(),
+            ));
+            return None;
+        }
+        Some(reload)
+    }
+
+    /// Reloads the loop from `reload` (see the module); its source, if it
+    /// brings one, has been taken by the caller.
     pub(super) async fn reload(&mut self, reload: Reload) {
         let Reload {
             mut engine,
             mut forcing,
             timers,
             max_shelve,
+            source: _,
             done,
         } = reload;
-        if self.forcing.pending.is_some() {
-            let _ = done.send(Err(
-                "a forced transition or stop is under way: read the configuration again once it has ended".into(),
-            ));
-            return;
-        }
         forcing.pending = None;
         let now = self.clock.now_ms();
         let carried = self.engine.carry_over();

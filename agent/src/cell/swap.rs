@@ -7,6 +7,7 @@ use cellwatch_models::engine::CellEngine;
 use tokio::sync::{mpsc, oneshot};
 
 use super::{forcing::Forcing, timers::Timers};
+use crate::sources::{SourceEvent, WriteSender};
 
 /// What takes over, and who hears that it has.
 pub struct Reload {
@@ -18,9 +19,23 @@ pub struct Reload {
     pub timers: Timers,
     /// Its longest shelf.
     pub max_shelve: Duration,
+    /// A source of its own when the tags or the source's settings changed:
+    /// the loop reads it from the new engine on, the old one is stopped
+    /// by the agent afterwards.
+    pub source: Option<NewSource>,
     /// Told once the new engine runs: the alarms it carried over; or why
     /// it was not taken.
     pub done: oneshot::Sender<Result<usize, String>>,
+}
+
+/// A source started for a reload, as the loop takes it.
+pub struct NewSource {
+    /// Its events.
+    pub events: mpsc::Receiver<SourceEvent>,
+    /// Where its writes go, if it can write.
+    pub writer: Option<WriteSender>,
+    /// Its delivery allowance (the publishing interval).
+    pub allowance: Duration,
 }
 
 /// The next reload; pending forever once nobody can send one.

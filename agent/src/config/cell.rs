@@ -122,9 +122,11 @@ pub struct CellConfig {
     pub warnings: Vec<String>,
 }
 
-/// The parts of a configuration a reload cannot change in a running
-/// agent ([`CellConfig::fixed_parts`]): what it is, where it keeps and
-/// says things, whom it talks to, what it reads.
+/// The parts of a configuration a reload compares
+/// ([`CellConfig::fixed_parts`]): what the cell is, where it keeps and
+/// says things, whom it talks to, what it reads. The tags and the source's
+/// settings are taken by starting a source of their own; the others only
+/// by a restart.
 pub const FIXED_PARTS: [&str; 10] = [
     "cell.id",
     "journal.path",
@@ -141,7 +143,7 @@ pub const FIXED_PARTS: [&str; 10] = [
 impl CellConfig {
     /// A fingerprint of each of [`FIXED_PARTS`], in that order: compared
     /// between the running configuration and one read again, it names what
-    /// only a restart changes. (Hashes of the parts' debug forms: the tags
+    /// changed beyond the checks. (Hashes of the parts' debug forms: the tags
     /// of a 100,000-tag cell are not kept twice for it.)
     pub fn fixed_parts(&self) -> [u64; 10] {
         use std::hash::{Hash, Hasher};
@@ -150,9 +152,14 @@ impl CellConfig {
             format!("{part:?}").hash(&mut h);
             h.finish()
         };
+        // The tags, and which of them are the charts' switches (the
+        // source writes those only).
         let mut tags = std::collections::hash_map::DefaultHasher::new();
         for t in &self.tags {
             format!("{t:?}").hash(&mut tags);
+        }
+        for s in &self.sfc {
+            (s.force_switch, s.stop_switch).hash(&mut tags);
         }
         [
             hash(&self.cell),
