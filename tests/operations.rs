@@ -465,102 +465,145 @@ async fn logged(cell: &crate::spawned::Cell, what: &str, times: usize) -> String
     }
 }
 
+/// A spawned agent on the simulated CNC (`cellwatch run`, its log in
+/// `agent.log`), a client following its alarms, and its emergency stop
+/// raised and acknowledged by kim.
+struct Acknowledged {
+    sim: cellwatch::sim::cnc::SimulatedCnc,
+    cell: crate::spawned::Cell,
+    child: std::process::Child,
+    client: zenoh::Session,
+    sub: crate::robust::AlarmSubscriber,
+    seen: Vec<cellwatch::payload::AlarmPayload>,
+}
+
+impl Acknowledged {
+    async fn start(dir: &std::path::Path) -> Acknowledged {
+        let (sim, mut cell) = crate::spawned::start(dir).await;
+        let child = cell.spawn("agent.log").await;
+        let client = cell.client().await;
+        let sub = crate::robust::alarms(&client, "m01ps0004").await;
+        crate::spawned::snapshot_until(&client, "connected and running", |s| {
+            s["connected"] == true && s["state"] == "running"
+        })
+        .await;
+        let mut a = Acknowledged {
+            sim,
+            cell,
+            child,
+            client,
+            sub,
+            seen: Vec::new(),
+        };
+        a.sim.set("X0.06", false).unwrap();
+        a.until("ESE raised", "ese", "raised").await;
+        a.ack("ese").await;
+        a
+    }
+
+    /// Waits for `transition` of alarm `id`.
+    async fn until(
+        &mut self,
+        what: &str,
+        id: &str,
+        transition: &str,
+    ) -> cellwatch::payload::AlarmPayload {
+        crate::agent::alarm_until(&self.sub, what, &mut self.seen, |a| {
+            a.id == id && a.transition.as_str() == transition
+        })
+        .await
+    }
+
+    /// Kim acknowledges `id`; waits until the bus says so.
+    async fn ack(&mut self, id: &str) {
+        let (ok, detail) = crate::spawned::send(
+            &self.client,
+            &crate::spawned::signed(cellwatch::operator::Action::Ack, id),
+        )
+        .await;
+        assert!(ok, "{detail}");
+        self.until("acknowledged", id, "acknowledged").await;
+    }
+
+    /// SIGTERM: a clean stop.
+    async fn stop(self) {
+        crate::robust::sigterm(&self.child);
+        assert_eq!(
+            crate::robust::exit_code(self.child).await,
+            Some(0),
+            "{}",
+            self.cell.log("agent.log")
+        );
+        self.sim.stop();
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn sighup_takes_a_changed_limit_keeps_acknowledgements_and_refuses_a_bad_file() {
-    use crate::agent::alarm_until;
-    use crate::spawned::{send, signed};
-    use cellwatch::operator::Action;
-    use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
     let d = tempfile::tempdir().unwrap();
-    let (sim, mut cell) = crate::spawned::start(d.path()).await;
-    let child = cell.spawn("agent.log").await;
-    let client = cell.client().await;
-    let sub = client
-        .declare_subscriber("cellwatch/m01ps0004/alarms/**")
-        .history(HistoryConfig::default().detect_late_publishers())
-        .recovery(RecoveryConfig::default().heartbeat())
-        .await
-        .unwrap();
-    crate::spawned::snapshot_until(&client, "connected and running", |s| {
-        s["connected"] == true && s["state"] == "running"
-    })
-    .await;
-    let mut seen = Vec::new();
-    // The spindle above its H limit (85 °C) and an emergency stop, both
-    // acknowledged.
-    for id in ["ese", "spindle-temp-h"] {
-        if id == "ese" {
-            sim.set("X0.06", false).unwrap();
-        } else {
-            sim.set_temperature(90.0).unwrap();
-        }
-        alarm_until(&sub, "raised", &mut seen, |a| {
-            a.id == id && a.transition.as_str() == "raised"
-        })
-        .await;
-        let (ok, detail) = send(&client, &signed(Action::Ack, id)).await;
-        assert!(ok, "{detail}");
-        alarm_until(&sub, "acknowledged", &mut seen, |a| {
-            a.id == id && a.transition.as_str() == "acknowledged"
-        })
-        .await;
-    }
-    let before_reload = seen.len();
+    let mut a = Acknowledged::start(d.path()).await;
+    // The spindle above its H limit (85 °C), acknowledged too.
+    a.sim.set_temperature(90.0).unwrap();
+    a.until("the spindle hot", "spindle-temp-h", "raised").await;
+    a.ack("spindle-temp-h").await;
+    let before_reload = a.seen.len();
 
     // The limit raised to 95 °C, read again on SIGHUP: the spindle alarm
     // is carried and cleared by the new limit; the emergency stop is
     // carried, still acknowledged by kim.
-    let text = std::fs::read_to_string(&cell.config).unwrap();
+    let text = std::fs::read_to_string(&a.cell.config).unwrap();
     let raised_limit = text.replace(
         "h = { limit = 85.0, severity = \"high\" }",
         "h = { limit = 95.0, severity = \"high\" }",
     );
     assert_ne!(text, raised_limit);
-    std::fs::write(&cell.config, &raised_limit).unwrap();
-    sighup(&child);
-    alarm_until(
-        &sub,
+    std::fs::write(&a.cell.config, &raised_limit).unwrap();
+    sighup(&a.child);
+    a.until(
         "the spindle alarm cleared by the new limit",
-        &mut seen,
-        |a| a.id == "spindle-temp-h" && a.transition.as_str() == "cleared",
+        "spindle-temp-h",
+        "cleared",
     )
     .await;
-    let log = logged(&cell, "configuration read again and taken", 1).await;
+    let log = logged(&a.cell, "configuration read again and taken", 1).await;
     assert!(!log.contains("taken only by a restart"), "{log}");
-    let carried =
-        |a: &cellwatch::payload::AlarmPayload| a.id == "ese" && a.transition.as_str() == "restored";
-    let ese = match seen[before_reload..].iter().find(|a| carried(a)) {
-        Some(a) => a.clone(),
-        None => alarm_until(&sub, "the emergency stop carried", &mut seen, carried).await,
+    let ese = match a.seen[before_reload..]
+        .iter()
+        .find(|p| p.id == "ese" && p.transition.as_str() == "restored")
+    {
+        Some(p) => p.clone(),
+        None => {
+            a.until("the emergency stop carried", "ese", "restored")
+                .await
+        }
     };
     assert_eq!(ese.state.as_str(), "active_acknowledged");
     assert_eq!(ese.acked_by.as_deref(), Some("kim"));
-    // No gap: the source never went away, the journal has every event in
-    // order, and nothing was raised anew.
+    // No gap: the source never went away, and nothing was raised anew.
     let snap =
-        crate::spawned::snapshot_until(&client, "connected", |s| s["connected"] == true).await;
+        crate::spawned::snapshot_until(&a.client, "connected", |s| s["connected"] == true).await;
     assert_eq!(
         crate::spawned::alarm(&snap, "ese").unwrap()["acked_by"],
         "kim"
     );
     assert!(
-        seen[before_reload..]
+        a.seen[before_reload..]
             .iter()
-            .all(|a| a.transition.as_str() != "raised" && a.id != "communication"),
+            .all(|p| p.transition.as_str() != "raised" && p.id != "communication"),
         "{:#?}",
-        &seen[before_reload..]
+        &a.seen[before_reload..]
     );
 
     // A file that does not validate: refused with where and why; the
     // running configuration (H at 95 °C) goes on.
     std::fs::write(
-        &cell.config,
+        &a.cell.config,
         raised_limit.replace("h = { limit = 95.0,", "h = { limit = \"hot\","),
     )
     .unwrap();
-    sighup(&child);
+    sighup(&a.child);
     let log = logged(
-        &cell,
+        &a.cell,
         "the configuration read again is refused, the running one goes on",
         1,
     )
@@ -569,11 +612,10 @@ async fn sighup_takes_a_changed_limit_keeps_acknowledgements_and_refuses_a_bad_f
         log.contains("cell.toml:") && log.contains("invalid type: string \"hot\", expected f64"),
         "{log}"
     );
-    sim.set_temperature(97.0).unwrap();
-    let again = alarm_until(&sub, "raised above the running limit", &mut seen, |a| {
-        a.id == "spindle-temp-h" && a.transition.as_str() == "raised"
-    })
-    .await;
+    a.sim.set_temperature(97.0).unwrap();
+    let again = a
+        .until("raised above the running limit", "spindle-temp-h", "raised")
+        .await;
     assert!(
         again.message.contains("above the H limit 95 °C"),
         "{}",
@@ -582,27 +624,27 @@ async fn sighup_takes_a_changed_limit_keeps_acknowledgements_and_refuses_a_bad_f
 
     // What only a restart changes is said, the rest taken.
     std::fs::write(
-        &cell.config,
+        &a.cell.config,
         raised_limit
             .replace("# publish_interval = \"10s\"", "publish_interval = \"7s\"")
             .replace("h = { limit = 95.0,", "h = { limit = 110.0,")
             .replace("hh = { limit = 100.0,", "hh = { limit = 120.0,"),
     )
     .unwrap();
-    sighup(&child);
-    let log = logged(&cell, "configuration read again and taken", 2).await;
-    alarm_until(&sub, "cleared by the 110 °C limit", &mut seen, |a| {
-        a.id == "spindle-temp-h" && a.transition.as_str() == "cleared"
-    })
-    .await;
+    sighup(&a.child);
+    let log = logged(&a.cell, "configuration read again and taken", 2).await;
+    a.until("cleared by the 110 °C limit", "spindle-temp-h", "cleared")
+        .await;
     assert!(
-        log.contains("changed, but taken only by a restart (the running values go on): state.publish_interval"),
+        log.contains(
+            "changed, but taken only by a restart (the running values go on): state.publish_interval"
+        ),
         "{log}"
     );
     // Remotely: `cellwatch reload`, signed by an operator allowed
     // `configure`, is answered with what came of it and journaled.
     std::fs::write(
-        &cell.config,
+        &a.cell.config,
         raised_limit
             .replace("# publish_interval = \"10s\"", "publish_interval = \"7s\"")
             .replace("h = { limit = 95.0,", "h = { limit = 90.0,"),
@@ -619,7 +661,7 @@ async fn sighup_takes_a_changed_limit_keeps_acknowledgements_and_refuses_a_bad_f
     ]
     .map(String::from)
     .to_vec();
-    args.extend(cell.bus_args());
+    args.extend(a.cell.bus_args());
     let run = tokio::task::spawn_blocking(move || {
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
         crate::util::cellwatch(&args)
@@ -636,14 +678,13 @@ async fn sighup_takes_a_changed_limit_keeps_acknowledgements_and_refuses_a_bad_f
         run.stdout
     );
     // 97 °C is above the 90 °C limit read remotely: raised again.
-    alarm_until(
-        &sub,
+    a.until(
         "raised above the limit read remotely",
-        &mut seen,
-        |a| a.id == "spindle-temp-h" && a.transition.as_str() == "raised",
+        "spindle-temp-h",
+        "raised",
     )
     .await;
-    let journal = rusqlite::Connection::open(cell.dir.join("journal.sqlite")).unwrap();
+    let journal = rusqlite::Connection::open(a.cell.dir.join("journal.sqlite")).unwrap();
     let rows: Vec<(String, String, bool)> = journal
         .prepare(
             "SELECT action, stage, accepted FROM commands WHERE action = 'configure' ORDER BY seq",
@@ -660,115 +701,62 @@ async fn sighup_takes_a_changed_limit_keeps_acknowledgements_and_refuses_a_bad_f
             ("configure".to_string(), "result".to_string(), true),
         ]
     );
-    crate::robust::sigterm(&child);
-    assert_eq!(
-        crate::robust::exit_code(child).await,
-        Some(0),
-        "{}",
-        cell.log("agent.log")
-    );
-    sim.stop();
+    a.stop().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn sighup_with_a_new_tag_starts_a_source_of_its_own_and_keeps_every_alarm() {
-    use crate::agent::alarm_until;
-    use crate::spawned::{send, signed};
-    use cellwatch::operator::Action;
-    use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
     let d = tempfile::tempdir().unwrap();
-    let (sim, mut cell) = crate::spawned::start(d.path()).await;
-    let child = cell.spawn("agent.log").await;
-    let client = cell.client().await;
-    let sub = client
-        .declare_subscriber("cellwatch/m01ps0004/alarms/**")
-        .history(HistoryConfig::default().detect_late_publishers())
-        .recovery(RecoveryConfig::default().heartbeat())
-        .await
-        .unwrap();
-    crate::spawned::snapshot_until(&client, "connected and running", |s| {
-        s["connected"] == true && s["state"] == "running"
-    })
-    .await;
-    let mut seen = Vec::new();
-    sim.set("X0.06", false).unwrap();
-    alarm_until(&sub, "ESE raised", &mut seen, |a| {
-        a.id == "ese" && a.transition.as_str() == "raised"
-    })
-    .await;
-    let (ok, detail) = send(&client, &signed(Action::Ack, "ese")).await;
-    assert!(ok, "{detail}");
-    alarm_until(&sub, "ESE acknowledged", &mut seen, |a| {
-        a.id == "ese" && a.transition.as_str() == "acknowledged"
-    })
-    .await;
-    sim.set_temperature(82.0).unwrap();
-    crate::spawned::snapshot_until(&client, "the spindle at 82 °C", |s| {
-        s["tags"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .any(|t| t["address"] == "D100" && t["value"] == 82.0)
-    })
-    .await;
+    let mut a = Acknowledged::start(d.path()).await;
+    a.sim.set_temperature(82.0).unwrap();
+    let at = |address: &'static str| {
+        move |s: &serde_json::Value| {
+            s["tags"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|t| t["address"] == address && t["value"] == 82.0)
+        }
+    };
+    crate::spawned::snapshot_until(&a.client, "the spindle at 82 °C", at("D100")).await;
     // A second view of the spindle's temperature, with a limit of its own.
-    let text = std::fs::read_to_string(&cell.config).unwrap();
+    let text = std::fs::read_to_string(&a.cell.config).unwrap();
     std::fs::write(
-        &cell.config,
+        &a.cell.config,
         format!(
             "{text}\n[[tags]]\nname = \"spindle_temperature_2\"\nnode_id = \"ns=2;s=D100\"\naddress = \"D900\"\ntype = \"Double\"\n\n[[checks.limit]]\nid = \"spindle-2\"\ntag = \"D900\"\nunit = \"°C\"\nh = {{ limit = 80.0 }}\n"
         ),
     )
     .unwrap();
-    sighup(&child);
-    let raised = alarm_until(&sub, "the new tag's limit raised", &mut seen, |a| {
-        a.id == "spindle-2-h" && a.transition.as_str() == "raised"
-    })
-    .await;
+    sighup(&a.child);
+    let raised = a
+        .until("the new tag's limit raised", "spindle-2-h", "raised")
+        .await;
     assert!(raised.message.contains("= 82 °C"), "{}", raised.message);
-    let log = logged(&cell, "configuration read again and taken", 1).await;
+    let log = logged(&a.cell, "configuration read again and taken", 1).await;
     assert!(
         log.contains("starting a source for the configuration read again"),
         "{log}"
     );
-    let snap = crate::spawned::snapshot_until(&client, "the new tag known", |s| {
-        s["tags"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .any(|t| t["address"] == "D900" && t["value"] == 82.0)
-    })
-    .await;
+    let snap = crate::spawned::snapshot_until(&a.client, "the new tag known", at("D900")).await;
     assert_eq!(snap["connected"], true);
     let ese = crate::spawned::alarm(&snap, "ese").unwrap();
     assert_eq!(ese["state"], "active_acknowledged", "{ese}");
     assert_eq!(ese["acked_by"], "kim");
     // The new source reads: the contacts still move the alarms, the new
     // tag follows the PLC.
-    sim.set("X0.06", true).unwrap();
-    alarm_until(&sub, "ESE cleared through the new source", &mut seen, |a| {
-        a.id == "ese" && a.transition.as_str() == "cleared"
-    })
-    .await;
-    sim.set_temperature(60.0).unwrap();
-    alarm_until(&sub, "the new tag's limit cleared", &mut seen, |a| {
-        a.id == "spindle-2-h" && a.transition.as_str() == "cleared"
-    })
-    .await;
-    // Neither the communication alarm nor a second raise of ESE: no gap.
+    a.sim.set("X0.06", true).unwrap();
+    a.until("ESE cleared through the new source", "ese", "cleared")
+        .await;
+    a.sim.set_temperature(60.0).unwrap();
+    a.until("the new tag's limit cleared", "spindle-2-h", "cleared")
+        .await;
+    // No communication alarm, no raise of ESE again: no gap.
     assert!(
-        !seen.iter().any(|a| a.id == "communication"
-            || (a.id == "ese"
-                && a.transition.as_str() == "restored"
-                && a.state.as_str() != "active_acknowledged")),
-        "{seen:#?}"
+        !a.seen.iter().any(|p| p.id == "communication"
+            || (p.id == "ese" && p.transition.as_str() == "raised" && p.at != a.seen[0].at)),
+        "{:#?}",
+        a.seen
     );
-    crate::robust::sigterm(&child);
-    assert_eq!(
-        crate::robust::exit_code(child).await,
-        Some(0),
-        "{}",
-        cell.log("agent.log")
-    );
-    sim.stop();
+    a.stop().await;
 }

@@ -27,10 +27,10 @@ use crate::agent::alarm_until;
 use crate::spawned::{kim, scrape, snapshot_until};
 use crate::util::root;
 
-type AlarmSubscriber =
+pub(crate) type AlarmSubscriber =
     zenoh_ext::AdvancedSubscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
 
-async fn alarms(session: &zenoh::Session, cell: &str) -> AlarmSubscriber {
+pub(crate) async fn alarms(session: &zenoh::Session, cell: &str) -> AlarmSubscriber {
     session
         .declare_subscriber(format!("cellwatch/{cell}/alarms/**"))
         .history(HistoryConfig::default().detect_late_publishers())

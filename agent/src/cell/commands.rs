@@ -12,7 +12,7 @@ use tokio::sync::oneshot;
 
 use super::answers;
 use super::{
-    CellLoop, CommandOutcome, CommandRecord, Input, Stage, Then, Written, RECORD_FIELD_BYTES,
+    CellLoop, CommandOutcome, CommandRecord, Input, Stage, Written, RECORD_FIELD_BYTES,
     WRITE_TIMEOUT,
 };
 use crate::operator::refusals;
@@ -301,20 +301,8 @@ impl CellLoop {
         let written = self.write_when_journaled(tag, Write::Value(value), WRITE_TIMEOUT);
         let back = self.written_tx.clone();
         self.start_task(async move {
-            let (accepted, detail) = match written.await {
-                Ok(d) => (true, d),
-                Err(d) => (false, d),
-            };
-            let record = CommandRecord {
-                stage: Stage::Result,
-                ..record.saying(accepted, &detail)
-            };
             let _ = back
-                .send(Written {
-                    record,
-                    reply,
-                    then: Then::Answer,
-                })
+                .send(Written::answer(record, written.await, reply))
                 .await;
         });
     }

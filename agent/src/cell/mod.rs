@@ -116,6 +116,30 @@ struct Written {
     then: Then,
 }
 
+impl Written {
+    /// The `result` row of `record` for `done` (what the PLC, or whoever
+    /// carried the command out, said; or why not), to be answered on
+    /// `reply` once journaled.
+    fn answer(
+        record: CommandRecord,
+        done: Result<String, String>,
+        reply: oneshot::Sender<CommandOutcome>,
+    ) -> Written {
+        let (accepted, detail) = match done {
+            Ok(d) => (true, d),
+            Err(d) => (false, d),
+        };
+        Written {
+            record: CommandRecord {
+                stage: Stage::Result,
+                ..record.saying(accepted, &detail)
+            },
+            reply,
+            then: Then::Answer,
+        }
+    }
+}
+
 /// What the loop does once a write is done.
 enum Then {
     /// Answer the operator (a value written).

@@ -11,7 +11,7 @@ use cellwatch_models::engine::Step;
 use tokio::sync::{mpsc, oneshot};
 
 use super::swap::{Reload, ReloadAsk};
-use super::{CellLoop, CommandOutcome, CommandRecord, Input, Stage, Then, Written};
+use super::{CellLoop, CommandOutcome, CommandRecord, Input, Stage, Written};
 use crate::operator::Command;
 
 /// How long an operator's `configure reload` may take (reading and
@@ -107,21 +107,7 @@ impl CellLoop {
                 (true, Ok(Ok(done))) => done,
                 (true, Err(_)) => Err(format!("no outcome within {} s", RELOAD_TIMEOUT.as_secs())),
             };
-            let (accepted, detail) = match done {
-                Ok(d) => (true, d),
-                Err(d) => (false, d),
-            };
-            let record = CommandRecord {
-                stage: Stage::Result,
-                ..record.saying(accepted, &detail)
-            };
-            let _ = back
-                .send(Written {
-                    record,
-                    reply,
-                    then: Then::Answer,
-                })
-                .await;
+            let _ = back.send(Written::answer(record, done, reply)).await;
         });
     }
 }
