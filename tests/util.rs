@@ -222,13 +222,15 @@ pub(crate) fn lines_of(child: &mut std::process::Child) -> std::sync::mpsc::Rece
     let (tx, lines) = std::sync::mpsc::channel();
     let stdout = child.stdout.take().expect("stdout piped");
     std::thread::spawn(move || {
+        // Read to the end even once nobody listens: a child whose standard
+        // output stopped being read dies of a broken pipe at its next line
+        // (the simulator did, once its endpoint had been read and the
+        // receiver dropped, when it said a fault was set).
         for line in std::io::BufReader::new(stdout)
             .lines()
             .map_while(Result::ok)
         {
-            if tx.send(line).is_err() {
-                break;
-            }
+            let _ = tx.send(line);
         }
     });
     lines
