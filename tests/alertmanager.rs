@@ -40,6 +40,12 @@ impl Alertmanager {
     /// (silences, notification log) under `dir`, clustering off; returns
     /// once it says it is ready.
     async fn start(dir: &Path, port: u16) -> Alertmanager {
+        Alertmanager::start_with(dir, port, None).await
+    }
+
+    /// [`Alertmanager::start`] with a web configuration (TLS): ready once
+    /// it says it listens.
+    async fn start_with(dir: &Path, port: u16, web: Option<&Path>) -> Alertmanager {
         crate::util::debian_packages(&[(ALERTMANAGER, "prometheus-alertmanager")]);
         std::fs::create_dir_all(dir).unwrap();
         let log = std::fs::File::create(dir.join("alertmanager.log")).unwrap();
@@ -51,6 +57,7 @@ impl Alertmanager {
             .arg(format!("--storage.path={}", dir.display()))
             .arg(format!("--web.listen-address=127.0.0.1:{port}"))
             .arg("--cluster.listen-address=")
+            .args(web.map(|w| format!("--web.config.file={}", w.display())))
             .stdout(Stdio::null())
             .stderr(log)
             .spawn()
@@ -65,7 +72,11 @@ impl Alertmanager {
             if let Some(status) = am.child.try_wait().unwrap() {
                 panic!("Alertmanager ended ({status}):\n{}", am.log());
             }
-            if let Ok(Ok(s)) = tokio::time::timeout(
+            if web.is_some() {
+                if am.log().contains("TLS is enabled") && am.log().contains("Listening on") {
+                    return am;
+                }
+            } else if let Ok(Ok(s)) = tokio::time::timeout(
                 Duration::from_secs(5),
                 tokio::net::TcpStream::connect(am.addr()),
             )
@@ -267,4 +278,124 @@ async fn alarms_reach_a_real_alertmanager_end_there_and_survive_its_restart() {
     })
     .await;
     fx.stop().await;
+}
+
+/// `GET path` over HTTPS to 127.0.0.1:`port` as `localhost`, trusting
+/// `ca` and presenting `cert`/`key`: the status and the body.
+async fn https_get(port: u16, path: &str, ca: &Path, cert: &Path, key: &Path) -> (u16, String) {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    use tokio_rustls::rustls;
+    use tokio_rustls::rustls::pki_types::pem::PemObject;
+    use tokio_rustls::rustls::pki_types::{CertificateDer, PrivateKeyDer, ServerName};
+    let mut roots = rustls::RootCertStore::empty();
+    for c in CertificateDer::pem_file_iter(ca).unwrap() {
+        roots.add(c.unwrap()).unwrap();
+    }
+    let chain: Vec<CertificateDer<'static>> = CertificateDer::pem_file_iter(cert)
+        .unwrap()
+        .map(Result::unwrap)
+        .collect();
+    let config = rustls::ClientConfig::builder_with_provider(std::sync::Arc::new(
+        rustls::crypto::ring::default_provider(),
+    ))
+    .with_safe_default_protocol_versions()
+    .unwrap()
+    .with_root_certificates(roots)
+    .with_client_auth_cert(chain, PrivateKeyDer::from_pem_file(key).unwrap())
+    .unwrap();
+    let tcp = tokio::net::TcpStream::connect(("127.0.0.1", port))
+        .await
+        .unwrap();
+    let mut tls = tokio_rustls::TlsConnector::from(std::sync::Arc::new(config))
+        .connect(ServerName::try_from("localhost").unwrap(), tcp)
+        .await
+        .unwrap();
+    tls.write_all(
+        format!("GET {path} HTTP/1.1\r\nHost: localhost\r\nConnection: close\r\n\r\n").as_bytes(),
+    )
+    .await
+    .unwrap();
+    let mut answer = Vec::new();
+    let _ = tls.read_to_end(&mut answer).await;
+    let answer = String::from_utf8_lossy(&answer).to_string();
+    let status = answer
+        .strip_prefix("HTTP/1.1 ")
+        .and_then(|r| r.get(..3)?.parse().ok())
+        .unwrap_or_else(|| panic!("not an HTTP answer: {answer}"));
+    let body = answer
+        .split_once("\r\n\r\n")
+        .map_or("", |(_, b)| b)
+        .to_string();
+    (status, body)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn an_https_alertmanager_asking_for_a_client_certificate_gets_the_alerts() {
+    let port = crate::util::restartable_port();
+    let mut pki = None;
+    let fx = Fixture::start_with(|c| {
+        // The agent's own bus certificate from the plant CA is its client
+        // certificate; Alertmanager's is issued by the same CA.
+        let bus = c.zenoh.tls.clone().unwrap();
+        pki = Some(bus.clone());
+        c.alertmanager = Some(AlertmanagerConfig {
+            urls: vec![format!("https://localhost:{port}")],
+            area: None,
+            console: None,
+            resend: Duration::from_secs(2),
+            tls: Some(cellwatch::config::AlertmanagerTls {
+                ca: bus.ca,
+                client: Some((bus.cert, bus.key)),
+            }),
+        });
+    })
+    .await;
+    let bus = pki.unwrap();
+    let dir = bus.ca.parent().unwrap().to_path_buf();
+    let (am_cert, am_key) = cellwatch::bus::certs::issue(
+        &dir,
+        "alertmanager",
+        &["localhost".into(), "127.0.0.1".into()],
+    )
+    .unwrap();
+    let web = fx.dir().join("web.yml");
+    std::fs::write(
+        &web,
+        format!(
+            "tls_server_config:\n  cert_file: {}\n  key_file: {}\n  client_auth_type: RequireAndVerifyClientCert\n  client_ca_file: {}\n",
+            am_cert.display(),
+            am_key.display(),
+            bus.ca.display()
+        ),
+    )
+    .unwrap();
+    let am = Alertmanager::start_with(&fx.dir().join("am"), port, Some(&web)).await;
+    fx.settled().await;
+    fx.sim.set("X0.06", false).unwrap();
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    loop {
+        let (status, body) = https_get(port, "/api/v2/alerts", &bus.ca, &bus.cert, &bus.key).await;
+        assert_eq!(status, 200, "{body}");
+        let alerts: Vec<serde_json::Value> = serde_json::from_str(&body).unwrap();
+        if alerts
+            .iter()
+            .any(|a| a["labels"]["alarm"] == "ese" && a["labels"]["cell"] == "m01ps0004")
+        {
+            break;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "ESE never reached the HTTPS Alertmanager: {body}\n{}",
+            am.log()
+        );
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    let metrics = fx.scrape().await;
+    assert!(
+        metrics.contains("cellwatch_alertmanager_sends_total{cell=\"m01ps0004\",result=\"ok\"}"),
+        "{metrics}"
+    );
+    let mut fx = fx;
+    fx.stop().await;
+    fx.sim.stop();
 }
