@@ -56,6 +56,15 @@ impl Fixture {
     /// [`Fixture::start`] with the agent's configuration changed by
     /// `change` first.
     pub(crate) async fn start_with(change: impl FnOnce(&mut CellConfig)) -> Fixture {
+        Fixture::start_with_sim(|_| {}, change).await
+    }
+
+    /// [`Fixture::start_with`], the simulated CNC set up by `setup` before
+    /// the agent starts (registers added).
+    pub(crate) async fn start_with_sim(
+        setup: impl FnOnce(&SimulatedCnc),
+        change: impl FnOnce(&mut CellConfig),
+    ) -> Fixture {
         let d = tempfile::tempdir().unwrap();
         let dir = d.path().to_path_buf();
         let sim_opts = SimOptions {
@@ -65,6 +74,7 @@ impl Fixture {
             decoy: None,
         };
         let sim = SimulatedCnc::start(&sim_opts).await.unwrap();
+        setup(&sim);
         let mut config = config(&dir, &sim.endpoint());
         change(&mut config);
         crate::util::trust_sim(&config, &dir.join("sim-pki"));

@@ -28,6 +28,7 @@ mod liveness;
 mod opcua;
 mod operations;
 mod operators;
+mod papercuts;
 mod quickstart;
 mod real_programs;
 mod report;

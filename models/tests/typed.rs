@@ -399,3 +399,48 @@ fn a_reload_keeps_what_holds_and_judges_the_rest_by_the_new_checks() {
         [("temp-h".to_string(), Transition::Raised)]
     );
 }
+
+#[test]
+fn a_number_that_is_not_one_is_bad_quality_never_a_limit_violation() {
+    let mut e = engine(vec![temp_limit(85.0)]);
+    load_normal(&mut e, 0);
+    number(&mut e, "TEMP", Num::Float(40.0), 1_000);
+    let t = tag(&e, "TEMP");
+    for (i, (x, name)) in [
+        (f64::INFINITY, "+inf"),
+        (f64::NAN, "NaN"),
+        (f64::NEG_INFINITY, "-inf"),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let at = 2_000 + i as u64 * 1_000;
+        let step = number(&mut e, "TEMP", Num::Float(x), at);
+        assert!(
+            raised(&step).iter().all(|id| id == "tag-quality"),
+            "{:?}",
+            raised(&step)
+        );
+        assert!(raised(&e.advance(at + 500)).is_empty());
+        let quality = e.alarms().find(|a| a.id == "tag-quality").unwrap();
+        assert!(quality.active);
+        assert!(
+            quality
+                .message
+                .ends_with(&format!("TEMP (temp): {name} received, not a number")),
+            "{}",
+            quality.message
+        );
+        assert_eq!(e.value(t), None, "unknown while not a number");
+        assert!(e.bad_tags().any(|b| b == t));
+    }
+    // A number again: the quality clears, and the limit is judged on it.
+    let step = number(&mut e, "TEMP", Num::Float(90.0), 6_000);
+    assert_eq!(raised(&step), ["temp-h"]);
+    assert!(!e.alarms().find(|a| a.id == "tag-quality").unwrap().active);
+    // While a limit alarm is active, NaN suspends the check: the alarm
+    // holds, and the tag-quality alarm says why nothing is judged.
+    let step = number(&mut e, "TEMP", Num::Float(f64::NAN), 7_000);
+    assert_eq!(raised(&step), ["tag-quality"]);
+    assert!(e.alarms().find(|a| a.id == "temp-h").unwrap().active);
+}

@@ -339,6 +339,28 @@ impl PerTag {
     }
 }
 
+/// Why a tag's quality is bad.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum BadQuality {
+    /// The source said so (a bad or uncertain status).
+    Status,
+    /// A value of another type than the tag is used as: the type the tag
+    /// is configured with, and the one that came.
+    WrongType(ValueType, Option<ValueType>),
+    /// A number that is not one: `NaN`, `+inf` or `-inf`.
+    NotFinite(&'static str),
+}
+
+/// The name of a non-finite number, or `None` for a finite one.
+fn not_finite(reading: &Reading) -> Option<&'static str> {
+    match reading {
+        Reading::Number(Num::Float(x)) if x.is_nan() => Some("NaN"),
+        Reading::Number(Num::Float(x)) if x.is_infinite() && *x > 0.0 => Some("+inf"),
+        Reading::Number(Num::Float(x)) if x.is_infinite() => Some("-inf"),
+        _ => None,
+    }
+}
+
 /// What a reload carries from one engine to the next
 /// ([`CellEngine::carry_over`], [`CellEngine::take_over`]).
 #[derive(Debug, Clone)]
@@ -373,8 +395,8 @@ pub struct CellEngine {
     latest: Option<u64>,
     /// The reading being handled came out of time order.
     untimed: bool,
-    /// Tags of bad quality; with what came, if it was of the wrong type.
-    bad: BTreeMap<usize, Option<(ValueType, Option<ValueType>)>>,
+    /// Tags of bad quality, and why.
+    bad: BTreeMap<usize, BadQuality>,
     /// How many tags are unknown now.
     unknown: usize,
     sets: Vec<Box<dyn CheckSet>>,
@@ -741,11 +763,16 @@ impl CellEngine {
         let readings = (0..self.configured)
             .filter_map(|t| {
                 let reading = match self.bad.get(&t) {
-                    Some(Some((expected, received))) => Reading::WrongType {
+                    Some(BadQuality::WrongType(expected, received)) => Reading::WrongType {
                         expected: *expected,
                         received: *received,
                     },
-                    Some(None) => Reading::Bad,
+                    Some(BadQuality::NotFinite(name)) => Reading::Number(Num::Float(match *name {
+                        "+inf" => f64::INFINITY,
+                        "-inf" => f64::NEG_INFINITY,
+                        _ => f64::NAN,
+                    })),
+                    Some(BadQuality::Status) => Reading::Bad,
                     None => match self.value(t)? {
                         Value::Bool(b) => Reading::Good(b),
                         Value::Num(n) => Reading::Number(n),
@@ -962,13 +989,20 @@ impl CellEngine {
             }
         }
         self.timestamps[tag] = Some(r.source_time);
-        let quality_changed = match &r.reading {
-            Reading::Bad => self.bad.insert(tag, None) != Some(None),
-            Reading::WrongType { expected, received } => {
-                let why = Some((*expected, *received));
-                self.bad.insert(tag, why) != Some(why)
+        // A number that is not one (NaN, ±inf) is bad quality, as a bad
+        // status is: no limit is judged on it.
+        let non_finite = not_finite(&r.reading);
+        let why = match (&r.reading, non_finite) {
+            (_, Some(name)) => Some(BadQuality::NotFinite(name)),
+            (Reading::Bad, None) => Some(BadQuality::Status),
+            (Reading::WrongType { expected, received }, None) => {
+                Some(BadQuality::WrongType(*expected, *received))
             }
-            _ => self.bad.remove(&tag).is_some(),
+            _ => None,
+        };
+        let quality_changed = match why {
+            Some(why) => self.bad.insert(tag, why) != Some(why),
+            None => self.bad.remove(&tag).is_some(),
         };
         findings.clear();
         // Checks time events by when the PLC saw them, not when they
@@ -987,6 +1021,7 @@ impl CellEngine {
             }
         };
         let changed = match &r.reading {
+            _ if non_finite.is_some() => self.set_unknown(tag, at, findings, step),
             Reading::Good(v) => self.set_value(tag, Some(*v), at, findings, step),
             Reading::Number(n) => self.set_other(tag, Some(Value::Num(*n)), at, findings, step),
             Reading::Text(t) => {
@@ -1405,11 +1440,12 @@ impl CellEngine {
             .map(|(&t, why)| {
                 let tag = format!("{} ({})", self.tags[t].address, self.tags[t].name);
                 match why {
-                    None => tag,
-                    Some((expected, received)) => format!(
+                    BadQuality::Status => tag,
+                    BadQuality::WrongType(expected, received) => format!(
                         "{tag}: {} received where {expected} is expected",
                         received.map_or("a value cellwatch does not read", |r| r.as_str())
                     ),
+                    BadQuality::NotFinite(name) => format!("{tag}: {name} received, not a number"),
                 }
             })
             .collect();

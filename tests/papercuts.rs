@@ -1,0 +1,130 @@
+//! What a plant engineer hits configuring a new cell, against a real OPC UA
+//! server with its own namespace (the simulated CNC, a Float register
+//! added): a number that is not one (NaN, +Inf, −Inf on Float and Double)
+//! is bad quality, never a limit violation.
+
+use cellwatch::config::TagConfig;
+use cellwatch::payload::AlarmPayload;
+use cellwatch::sim::cnc::NAMESPACE;
+use cellwatch_models::alarm::Severity;
+use cellwatch_models::limit::{Level, LimitCheck, LimitLevel};
+use cellwatch_models::signal::Signal;
+use cellwatch_models::value::ValueType;
+use opcua::types::Variant;
+use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
+
+use crate::agent::{alarm_until, Fixture};
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn nan_and_infinities_are_bad_quality_on_float_and_double_never_a_limit() {
+    let fx = Fixture::start_with_sim(
+        |sim| sim.add_register("D208", Variant::Float(3.0)).unwrap(),
+        |c| {
+            // A server-side deadband never reports a NaN (no difference
+            // with NaN exceeds it): the spindle's is taken off here.
+            for t in &mut c.tags {
+                if t.address == Signal::new("D100") {
+                    t.deadband = None;
+                }
+            }
+            c.tags.push(TagConfig {
+                value_type: ValueType::Float,
+                ..TagConfig::boolean(
+                    "coolant_pressure",
+                    &format!("nsu={NAMESPACE};s=D208"),
+                    Signal::new("D208"),
+                )
+            });
+            c.limits.push(LimitCheck {
+                id: "coolant".into(),
+                tag: Signal::new("D208"),
+                label: "coolant_pressure".into(),
+                unit: "bar".into(),
+                deadband: 0.0,
+                on_delay: 0,
+                off_delay: 0,
+                levels: vec![LimitLevel {
+                    level: Level::H,
+                    limit: 6.0,
+                    severity: Severity::High,
+                }],
+            });
+        },
+    )
+    .await;
+    let sub = fx
+        .client()
+        .declare_subscriber("cellwatch/m01ps0004/alarms/**")
+        .history(HistoryConfig::default().detect_late_publishers())
+        .recovery(RecoveryConfig::default().heartbeat())
+        .await
+        .unwrap();
+    fx.settled().await;
+    let mut seen: Vec<AlarmPayload> = Vec::new();
+    // D100 is a Double (the spindle, H 85 °C after 2 s), D208 a Float
+    // (H 6 bar at once).
+    let set = |address: &str, x: f64| match address {
+        "D100" => fx.sim.set_temperature(x).unwrap(),
+        _ => fx
+            .sim
+            .set_registers(&[("D208".into(), Variant::Float(x as f32))])
+            .unwrap(),
+    };
+    for (address, name) in [
+        ("D100", "spindle_temperature"),
+        ("D208", "coolant_pressure"),
+    ] {
+        for (x, said) in [
+            (f64::INFINITY, "+inf"),
+            (f64::NAN, "NaN"),
+            (f64::NEG_INFINITY, "-inf"),
+        ] {
+            set(address, x);
+            let expected = format!("{address} ({name}): {said} received, not a number");
+            let quality = alarm_until(&sub, &expected, &mut seen, |a| {
+                a.id == "tag-quality"
+                    && a.state.as_str().starts_with("active")
+                    && a.message.contains(&expected)
+            })
+            .await;
+            assert!(
+                quality
+                    .message
+                    .starts_with("bad or uncertain quality, checks reading them suspended"),
+                "{}",
+                quality.message
+            );
+            fx.tag_value_is(address, serde_json::Value::Null).await;
+        }
+        // A number again: the quality clears and the limit is judged on it.
+        let from = seen.len();
+        set(address, 120.0);
+        alarm_until(&sub, "the quality good again", &mut seen, |a| {
+            a.id == "tag-quality" && a.transition.as_str() == "cleared"
+        })
+        .await;
+        let check = if address == "D100" {
+            "spindle-temp-"
+        } else {
+            "coolant-"
+        };
+        let judged =
+            |a: &AlarmPayload| a.id.starts_with(check) && a.transition.as_str() == "raised";
+        let raised = match seen[from..].iter().find(|a| judged(a)) {
+            Some(a) => a.clone(),
+            None => alarm_until(&sub, "the limit on a number", &mut seen, judged).await,
+        };
+        assert!(raised.message.contains("= 120"), "{}", raised.message);
+    }
+    // No limit was ever raised on a number that is not one.
+    let on_no_number: Vec<&AlarmPayload> = seen
+        .iter()
+        .filter(|a| {
+            a.kind.as_str() == "limit" && (a.message.contains("inf") || a.message.contains("NaN"))
+        })
+        .collect();
+    assert!(on_no_number.is_empty(), "{on_no_number:#?}");
+    let mut fx = fx;
+    fx.stop().await;
+    fx.sim.stop();
+}
