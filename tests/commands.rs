@@ -440,15 +440,10 @@ async fn chained_journal(db: &Path) {
         )
         .unwrap();
     }
-    struct Quiet;
-    impl cellwatch::journal::CommitObserver for Quiet {
-        fn committed(&self, _: usize, _: Duration) {}
-        fn failed(&self, _: &str) {}
-    }
     let j = Journal::start(
         db,
         &cellwatch::config::Keep::all(Duration::from_secs(3600)),
-        Quiet,
+        crate::util::NoCommits,
     )
     .unwrap();
     let now = cellwatch::clock::now_ms();

@@ -1,7 +1,8 @@
 //! What a plant engineer hits configuring a new cell, against a real OPC UA
 //! server with its own namespace (the simulated CNC, a Float register
 //! added): a number that is not one (NaN, +Inf, −Inf on Float and Double)
-//! is bad quality, never a limit violation.
+//! is bad quality, never a limit violation; `report daily` runs anywhere
+//! with the shipped stop causes.
 
 use cellwatch::config::TagConfig;
 use cellwatch::payload::AlarmPayload;
@@ -127,4 +128,51 @@ async fn nan_and_infinities_are_bad_quality_on_float_and_double_never_a_limit() 
     let mut fx = fx;
     fx.stop().await;
     fx.sim.stop();
+}
+
+#[tokio::test]
+async fn report_daily_runs_outside_the_checkout_with_the_shipped_stop_causes() {
+    let d = tempfile::tempdir().unwrap();
+    let db = d.path().join("cell.sqlite");
+    let j = cellwatch::journal::Journal::start(
+        &db,
+        &cellwatch::config::Keep::all(std::time::Duration::from_secs(86_400)),
+        crate::util::NoCommits,
+    )
+    .unwrap();
+    j.close().await;
+    // Run from a folder that has no config/ beside it.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_cellwatch"))
+        .args(["report", "daily", "--date", "2026-11-26", "--db"])
+        .arg(&db)
+        .current_dir(d.path())
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(out.status.success(), "{stdout}{stderr}");
+    assert!(stdout.contains("stop causes:"), "{stdout}");
+    // A table named that is not there is said, naming it.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_cellwatch"))
+        .args([
+            "report",
+            "daily",
+            "--date",
+            "2026-11-26",
+            "--causes",
+            "mine.toml",
+            "--db",
+        ])
+        .arg(&db)
+        .current_dir(d.path())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("cannot read stop causes 'mine.toml'"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }

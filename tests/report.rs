@@ -5,18 +5,12 @@
 use std::time::Duration;
 
 use cellwatch::config;
-use cellwatch::journal::{CommitObserver, Entry, Journal};
+use cellwatch::journal::{Entry, Journal};
 use cellwatch_models::engine::{CellEngine, EngineEvent, Reading, SwitchingChecks};
 use cellwatch_models::signal::Signal;
 use cellwatch_models::value::Num;
 
 use crate::util::{cellwatch, root};
-
-struct Quiet;
-impl CommitObserver for Quiet {
-    fn committed(&self, _: usize, _: Duration) {}
-    fn failed(&self, _: &str) {}
-}
 
 /// 2026-11-20T00:00:00Z.
 const DAY: u64 = 1_795_132_800_000;
@@ -34,7 +28,7 @@ async fn scripted_journal(path: &std::path::Path) {
     let j = Journal::start(
         path,
         &cellwatch::config::Keep::all(Duration::from_secs(10 * 365 * 86_400)),
-        Quiet,
+        crate::util::NoCommits,
     )
     .unwrap();
     let mut rows = 0u64;

@@ -393,3 +393,11 @@ pub(crate) fn debian_packages(wanted: &[(&str, &str)]) {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// A journal observer that notes nothing (journals written by tests).
+pub(crate) struct NoCommits;
+
+impl cellwatch::journal::CommitObserver for NoCommits {
+    fn committed(&self, _: usize, _: std::time::Duration) {}
+    fn failed(&self, _: &str) {}
+}

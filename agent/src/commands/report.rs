@@ -17,7 +17,16 @@ use super::Failure;
 use crate::journal;
 use crate::operator::escaped;
 
-fn causes(path: &Path) -> Result<StopCauses, Failure> {
+/// The stop causes shipped (`config/stop-causes.toml`): paper 002's Table
+/// 4 and the demo's faults, used unless `--causes` names a table.
+const SHIPPED_CAUSES: &str = include_str!("../../../config/stop-causes.toml");
+
+/// The table `--causes` names, or the shipped one.
+fn causes(path: Option<&Path>) -> Result<StopCauses, Failure> {
+    let Some(path) = path else {
+        return toml::from_str(SHIPPED_CAUSES)
+            .map_err(|e| Failure::Runtime(format!("the shipped stop causes: {e}")));
+    };
     let text = std::fs::read_to_string(path).map_err(|e| {
         Failure::Input(format!("cannot read stop causes '{}': {e}", path.display()))
     })?;
@@ -80,7 +89,7 @@ pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure>
         ReportCommand::Daily { date } => {
             let d = NaiveDate::parse_from_str(date, "%Y-%m-%d")
                 .map_err(|_| Failure::Input(format!("--date '{date}': write it as 2026-11-21")))?;
-            let causes = causes(&args.causes)?;
+            let causes = causes(args.causes.as_deref())?;
             let start = day_start(d, &tz);
             let i = journal::report_input(&conn, start, start + 86_400_000)
                 .map_err(|e| Failure::Runtime(e.to_string()))?;
@@ -100,7 +109,7 @@ pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure>
         }
         ReportCommand::Monthly { month } => {
             let days = month_days(month)?;
-            let causes = causes(&args.causes)?;
+            let causes = causes(args.causes.as_deref())?;
             let starts: Vec<u64> = days.iter().map(|d| day_start(*d, &tz)).collect();
             let end = starts.last().copied().unwrap_or(0) + 86_400_000;
             let i = journal::report_input(&conn, starts[0], end)
@@ -489,9 +498,11 @@ pub(crate) struct ReportArgs {
     /// The agent's SQLite journal.
     #[arg(long, global = true, default_value = "cellwatch.sqlite")]
     pub(crate) db: PathBuf,
-    /// Stop-cause table (TOML, `[[cause]] code, name, fault_type | state`).
-    #[arg(long, global = true, default_value = "config/stop-causes.toml")]
-    pub(crate) causes: PathBuf,
+    /// Stop-cause table (TOML, `[[cause]] code, name, fault_type | state`);
+    /// without it, the shipped table (paper 002's Table 4 and the demo's
+    /// faults, `config/stop-causes.toml`), wherever the command runs.
+    #[arg(long, global = true)]
+    pub(crate) causes: Option<PathBuf>,
     /// The plant's offset from UTC, for day boundaries (+09:00).
     #[arg(
         long,
