@@ -37,6 +37,7 @@ async fn nan_and_infinities_are_bad_quality_on_float_and_double_never_a_limit() 
                 )
             });
             c.limits.push(LimitCheck {
+                comment: None,
                 id: "coolant".into(),
                 tag: Signal::new("D208"),
                 label: "coolant_pressure".into(),
@@ -116,6 +117,14 @@ async fn nan_and_infinities_are_bad_quality_on_float_and_double_never_a_limit() 
             None => alarm_until(&sub, "the limit on a number", &mut seen, judged).await,
         };
         assert!(raised.message.contains("= 120"), "{}", raised.message);
+        if address == "D100" {
+            // The tag's comment ends the message, as a culprit's does.
+            assert!(
+                raised.message.ends_with(": Spindle temperature, degrees C"),
+                "{}",
+                raised.message
+            );
+        }
     }
     // No limit was ever raised on a number that is not one.
     let on_no_number: Vec<&AlarmPayload> = seen

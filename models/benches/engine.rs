@@ -68,6 +68,7 @@ fn engine() -> (CellEngine, usize, common::Rng) {
         .collect();
     let limits = (0..NUMBERS)
         .map(|i| LimitCheck {
+            comment: None,
             id: format!("d{i}"),
             tag: Signal::new(&format!("D{i}")),
             label: String::new(),

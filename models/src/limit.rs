@@ -73,6 +73,9 @@ pub struct LimitCheck {
     pub tag: Signal,
     /// What the value is, for messages (`spindle temperature`).
     pub label: String,
+    /// The tag's comment from the I/O list, ending each message, as a
+    /// switching alarm's culprits end with theirs.
+    pub comment: Option<String>,
     /// The unit, for messages (`°C`); may be empty.
     pub unit: String,
     /// Hysteresis, in the tag's unit (≥ 0).
@@ -229,6 +232,10 @@ fn finding(
             lasted as f64 / 1000.0
         )
     };
+    let message = match &check.comment {
+        Some(comment) => format!("{message}: {comment}"),
+        None => message,
+    };
     Finding {
         id: check.alarm_id(level.level),
         kind: AlarmKind::Limit,
@@ -321,6 +328,7 @@ mod tests {
 
     fn check(deadband: f64, on_delay: u64) -> LimitChecks {
         LimitChecks::new(vec![LimitCheck {
+            comment: None,
             id: "temp".into(),
             tag: Signal::new("TEMP"),
             label: "spindle temperature".into(),

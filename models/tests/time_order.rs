@@ -207,6 +207,7 @@ fn checks(w1: [u64; 2], w2: [u64; 2], delays: (u64, u64)) -> (Vec<Tag>, Vec<Box<
         severity: Severity::High,
     };
     let limits = LimitChecks::new(vec![LimitCheck {
+        comment: None,
         id: "temp".into(),
         tag: Signal::new("TEMP"),
         label: String::new(),

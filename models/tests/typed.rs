@@ -216,6 +216,7 @@ fn the_work_order_follows_the_item_and_target_tags_and_survives_an_outage() {
 #[test]
 fn limit_levels_through_the_engine_with_an_on_delay_in_virtual_time() {
     let limit = LimitCheck {
+        comment: None,
         id: "temp".into(),
         tag: Signal::new("TEMP"),
         label: "temp".into(),
@@ -324,6 +325,7 @@ fn on_and_off_delays_announce_only_conditions_that_last() {
 
 fn temp_limit(h: f64) -> LimitCheck {
     LimitCheck {
+        comment: None,
         id: "temp".into(),
         tag: Signal::new("TEMP"),
         label: "temp".into(),

@@ -569,3 +569,32 @@ fn a_shelf_limit_beyond_a_year_is_refused() {
     let c = parse("cell.toml", &text, Path::new("base"), &mem()).unwrap();
     assert_eq!(c.max_shelve, Duration::from_secs(365 * 24 * 3600));
 }
+
+#[test]
+fn a_limit_and_production_name_their_tag_by_name_or_address() {
+    let text = typed(
+        "[[checks.limit]]\nid = \"t\"\ntag = \"temp\"\nh = { limit = 80.0 }\n\n\
+         [production]\ncounter = \"count\"\n",
+    )
+    .replace(
+        "address = \"D1\"\ntype = \"Double\"",
+        "address = \"D1\"\ntype = \"Double\"\ncomment = \"Spindle temperature\"",
+    );
+    let c = parse("cell.toml", &text, Path::new("base"), &mem()).unwrap();
+    assert_eq!(c.limits[0].tag, Signal::new("D1"));
+    assert_eq!(c.limits[0].label, "temp");
+    assert_eq!(c.limits[0].comment.as_deref(), Some("Spindle temperature"));
+    assert_eq!(c.part_counters, [3]);
+    // A name that is another tag's address is ambiguous; a name no tag
+    // has is said as such.
+    let bad = typed(
+        "[[checks.limit]]\nid = \"t\"\ntag = \"D2\"\nh = { limit = 80.0 }\n\n\
+         [[checks.limit]]\nid = \"u\"\ntag = \"tmp\"\nh = { limit = 1.0 }\n",
+    )
+    .replace("name = \"temp\"", "name = \"D2\"");
+    assert_eq!(
+        errors(&bad),
+        "cell.toml:43:7: checks.limit[0].tag: 'D2' is the name of the tag at D1 and the address of another tag: write the address you mean\n\
+         cell.toml:48:7: checks.limit[1].tag: no tag is named 'tmp' or has the address tmp"
+    );
+}

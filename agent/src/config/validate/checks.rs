@@ -224,7 +224,7 @@ impl Validator<'_> {
         for (i, c) in raw.into_iter().enumerate() {
             let key = format!("checks.limit[{i}]");
             self.unique_id(&c.id, &key, ids);
-            let tag = match self.addressing.signal(c.tag.get_ref()) {
+            let tag = match self.tag_ref(c.tag.get_ref()) {
                 Ok(a) => a,
                 Err(e) => {
                     self.problem(c.tag.span(), &format!("{key}.tag"), e);
@@ -232,14 +232,7 @@ impl Validator<'_> {
                 }
             };
             match self.kinds.get(&tag) {
-                None => {
-                    self.problem(
-                        c.tag.span(),
-                        &format!("{key}.tag"),
-                        format!("no tag has the address {tag}"),
-                    );
-                    continue;
-                }
+                None => continue,
                 Some((t, _)) if !t.is_numeric() => {
                     self.problem(
                         c.tag.span(),
@@ -313,6 +306,7 @@ impl Validator<'_> {
             out.push(LimitCheck {
                 id: c.id.into_inner(),
                 label: String::new(),
+                comment: None,
                 tag,
                 unit: c.unit,
                 deadband,

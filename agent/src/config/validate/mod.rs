@@ -51,6 +51,7 @@ pub(super) fn validate(
         warnings: Vec::new(),
         namespace_uri: None,
         kinds: HashMap::new(),
+        names: HashMap::new(),
         bus: false,
         tag_comments: HashMap::new(),
         tags_file: None,
@@ -77,6 +78,8 @@ pub(super) struct Validator<'a> {
     namespace_uri: Option<(Range<usize>, String)>,
     /// Every tag's type and whether it is a contact, by address.
     kinds: HashMap<Signal, (ValueType, bool)>,
+    /// Every tag's address, by name (a check may name a tag either way).
+    names: HashMap<String, Signal>,
     /// The tags' node ids are `@` bus nodes.
     bus: bool,
     /// The tags' comments, by address.
@@ -134,6 +137,29 @@ impl Validator<'_> {
             p.to_path_buf()
         } else {
             self.base.join(p)
+        }
+    }
+
+    /// The address of the tag `text` names: a tag's name, or an address
+    /// (in the cell's dialect) — a name first; ambiguous when it is one
+    /// tag's name and another's address.
+    fn tag_ref(&self, text: &str) -> Result<Signal, String> {
+        let by_name = self.names.get(text);
+        let by_address = self
+            .addressing
+            .signal(text)
+            .ok()
+            .filter(|a| self.kinds.contains_key(a));
+        match (by_name, by_address) {
+            (Some(n), Some(a)) if *n != a => Err(format!(
+                "'{text}' is the name of the tag at {n} and the address of another tag: write the address you mean"
+            )),
+            (Some(n), _) => Ok(n.clone()),
+            (None, Some(a)) => Ok(a),
+            (None, None) => match self.addressing.signal(text) {
+                Ok(a) => Err(format!("no tag is named '{text}' or has the address {a}")),
+                Err(e) => Err(format!("no tag is named '{text}', and it is not an address: {e}")),
+            },
         }
     }
 
@@ -307,6 +333,10 @@ impl Validator<'_> {
             .iter()
             .filter_map(|t| Some((t.address.clone(), t.comment.clone()?)))
             .collect();
+        self.names = tags
+            .iter()
+            .map(|t| (t.name.clone(), t.address.clone()))
+            .collect();
         let mut switching = Vec::new();
         let mut ids = HashSet::new();
         let mut delays = Vec::new();
@@ -389,6 +419,7 @@ impl Validator<'_> {
         for l in &mut limits {
             if let Some(t) = by_address.get(&l.tag) {
                 l.label = tags[*t].name.clone();
+                l.comment = tags[*t].comment.clone();
             }
         }
         let state = self.state(&raw.state, &by_address);
@@ -454,19 +485,16 @@ impl Validator<'_> {
             Counter,
             Item,
         }
-        let addressing = self.addressing;
         let mut production = |p: Spanned<String>, key: &str, usage: Use| {
-            let found = addressing
-                .signal(p.get_ref())
-                .ok()
-                .and_then(|a| by_address.get(&a).copied());
-            let Some(t) = found else {
-                self.problem(
-                    p.span(),
-                    key,
-                    format!("no tag has the address '{}'", p.get_ref()),
-                );
-                return None;
+            let found = self
+                .tag_ref(p.get_ref())
+                .and_then(|a| by_address.get(&a).copied().ok_or_else(String::new));
+            let t = match found {
+                Ok(t) => t,
+                Err(why) => {
+                    self.problem(p.span(), key, why);
+                    return None;
+                }
             };
             let tag = &tags[t];
             if usage == Use::Contact && !tag.is_contact() {
