@@ -175,6 +175,8 @@ pub(crate) struct RawLimit {
     pub(crate) tag: Spanned<String>,
     #[serde(default)]
     pub(crate) unit: String,
+    pub(crate) hysteresis: Option<Spanned<f64>>,
+    /// The former name of `hysteresis`: taken, with a warning.
     pub(crate) deadband: Option<Spanned<f64>>,
     pub(crate) on_delay: Option<Spanned<String>>,
     pub(crate) off_delay: Option<Spanned<String>>,

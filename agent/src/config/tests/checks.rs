@@ -598,3 +598,32 @@ fn a_limit_and_production_name_their_tag_by_name_or_address() {
          cell.toml:48:7: checks.limit[1].tag: no tag is named 'tmp' or has the address tmp"
     );
 }
+
+#[test]
+fn a_limits_hysteresis_is_not_the_tags_deadband() {
+    let text = typed(
+        "[[checks.limit]]\nid = \"t\"\ntag = \"D1\"\nhysteresis = 1.5\nh = { limit = 80.0 }\n",
+    );
+    let c = parse("cell.toml", &text, Path::new("base"), &mem()).unwrap();
+    assert_eq!(c.limits[0].deadband, 1.5);
+    assert!(
+        c.warnings.iter().all(|w| !w.contains("hysteresis")),
+        "{:?}",
+        c.warnings
+    );
+    // The former name: taken, and said.
+    let old =
+        typed("[[checks.limit]]\nid = \"t\"\ntag = \"D1\"\ndeadband = 1.5\nh = { limit = 80.0 }\n");
+    let c = parse("cell.toml", &old, Path::new("base"), &mem()).unwrap();
+    assert_eq!(c.limits[0].deadband, 1.5);
+    assert!(
+        c.warnings.contains(&"checks.limit[0] (t): deadband is called hysteresis now (the deadband of [[tags]] is the server's change filter): rename it".to_string()),
+        "{:?}",
+        c.warnings
+    );
+    let both = typed("[[checks.limit]]\nid = \"t\"\ntag = \"D1\"\nhysteresis = 1.5\ndeadband = 1.5\nh = { limit = 80.0 }\n");
+    assert_eq!(
+        errors(&both),
+        "cell.toml:45:12: checks.limit[0].deadband: give hysteresis only (deadband is its former name)"
+    );
+}

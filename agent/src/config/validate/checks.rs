@@ -243,13 +243,34 @@ impl Validator<'_> {
                 }
                 Some(_) => {}
             }
-            let deadband = match c.deadband {
+            // `hysteresis`; `deadband` is its former name, which the
+            // server-side change filter of [[tags]] also has.
+            let (hysteresis, name) = match (c.hysteresis, c.deadband) {
+                (Some(h), Some(d)) => {
+                    self.problem(
+                        d.span(),
+                        &format!("{key}.deadband"),
+                        "give hysteresis only (deadband is its former name)",
+                    );
+                    (Some(h), "hysteresis")
+                }
+                (Some(h), None) => (Some(h), "hysteresis"),
+                (None, Some(d)) => {
+                    self.warnings.push(format!(
+                        "{key} ({}): deadband is called hysteresis now (the deadband of [[tags]] is the server's change filter): rename it",
+                        c.id.get_ref()
+                    ));
+                    (Some(d), "deadband")
+                }
+                (None, None) => (None, "hysteresis"),
+            };
+            let deadband = match hysteresis {
                 None => 0.0,
                 Some(d) if *d.get_ref() >= 0.0 && d.get_ref().is_finite() => *d.get_ref(),
                 Some(d) => {
                     self.problem(
                         d.span(),
-                        &format!("{key}.deadband"),
+                        &format!("{key}.{name}"),
                         format!("{} must be zero or more", d.get_ref()),
                     );
                     0.0
