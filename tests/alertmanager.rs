@@ -13,7 +13,6 @@ use std::time::Duration;
 
 use cellwatch::config::AlertmanagerConfig;
 use cellwatch::operator::Action;
-use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
 use crate::agent::{alarm_until, Fixture};
 use crate::spawned::{send, signed, signed_with};
@@ -178,13 +177,7 @@ async fn alarms_reach_a_real_alertmanager_end_there_and_survive_its_restart() {
         });
     })
     .await;
-    let sub = fx
-        .client()
-        .declare_subscriber("cellwatch/m01ps0004/alarms/**")
-        .history(HistoryConfig::default().detect_late_publishers())
-        .recovery(RecoveryConfig::default().heartbeat())
-        .await
-        .unwrap();
+    let sub = crate::robust::alarms(fx.client(), "m01ps0004").await;
     fx.settled().await;
     let mut seen = Vec::new();
 
@@ -317,16 +310,7 @@ async fn https_get(port: u16, path: &str, ca: &Path, cert: &Path, key: &Path) ->
     .unwrap();
     let mut answer = Vec::new();
     let _ = tls.read_to_end(&mut answer).await;
-    let answer = String::from_utf8_lossy(&answer).to_string();
-    let status = answer
-        .strip_prefix("HTTP/1.1 ")
-        .and_then(|r| r.get(..3)?.parse().ok())
-        .unwrap_or_else(|| panic!("not an HTTP answer: {answer}"));
-    let body = answer
-        .split_once("\r\n\r\n")
-        .map_or("", |(_, b)| b)
-        .to_string();
-    (status, body)
+    crate::util::http_answer(&String::from_utf8_lossy(&answer))
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]

@@ -12,7 +12,6 @@ use cellwatch_models::limit::{Level, LimitCheck, LimitLevel};
 use cellwatch_models::signal::Signal;
 use cellwatch_models::value::ValueType;
 use opcua::types::Variant;
-use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
 use crate::agent::{alarm_until, Fixture};
 
@@ -54,13 +53,7 @@ async fn nan_and_infinities_are_bad_quality_on_float_and_double_never_a_limit() 
         },
     )
     .await;
-    let sub = fx
-        .client()
-        .declare_subscriber("cellwatch/m01ps0004/alarms/**")
-        .history(HistoryConfig::default().detect_late_publishers())
-        .recovery(RecoveryConfig::default().heartbeat())
-        .await
-        .unwrap();
+    let sub = crate::robust::alarms(fx.client(), "m01ps0004").await;
     fx.settled().await;
     let mut seen: Vec<AlarmPayload> = Vec::new();
     // D100 is a Double (the spindle, H 85 °C after 2 s), D208 a Float

@@ -254,6 +254,11 @@ pub(crate) async fn http_get(addr: std::net::SocketAddr, path: &str) -> (u16, St
     .unwrap();
     let mut answer = String::new();
     s.read_to_string(&mut answer).await.unwrap();
+    http_answer(&answer)
+}
+
+/// An HTTP/1.1 answer read to its end: the status and the body.
+pub(crate) fn http_answer(answer: &str) -> (u16, String) {
     let status = answer
         .strip_prefix("HTTP/1.1 ")
         .and_then(|r| r.get(..3)?.parse().ok())
