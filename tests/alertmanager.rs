@@ -200,8 +200,11 @@ async fn alarms_reach_a_real_alertmanager_end_there_and_survive_its_restart() {
         "{alert:#}"
     );
     let culprits = alert["annotations"]["culprits"].as_str().unwrap();
-    assert!(culprits.starts_with("X0.06 ("), "{alert:#}");
-    assert!(culprits.contains("= 0, needs 1"), "{alert:#}");
+    assert!(
+        culprits.starts_with("X0.06 = 0 (expected 1): "),
+        "{alert:#}"
+    );
+    assert!(culprits.contains("<- trigger"), "{alert:#}");
     assert_eq!(
         alert["generatorURL"],
         "https://console.plant.example:8470/#/alarm/m01ps0004/ese"

@@ -51,7 +51,8 @@ pub struct Alert {
     /// What identifies it: `alertname`, `alarm`, `cell`, `area`,
     /// `priority`, `kind`.
     pub labels: BTreeMap<&'static str, String>,
-    /// What people read: `summary`, `culprits`, `acknowledged`, `console`.
+    /// What people read: `summary`, `culprits` (each culprit's line, as
+    /// the CLI prints it, joined by `; `), `acknowledged`, `console`.
     pub annotations: BTreeMap<&'static str, String>,
     /// When the occurrence was raised (RFC 3339).
     #[serde(rename = "startsAt")]
@@ -95,23 +96,11 @@ impl Labels {
             labels.insert("area", area.clone());
         }
         let mut annotations = BTreeMap::from([("summary", alarm.message.clone())]);
+        // The same line the CLI and the console show for each culprit.
         let culprits: Vec<String> = alarm
             .culprits
             .iter()
-            .map(|c| {
-                let comment = c
-                    .comment
-                    .as_deref()
-                    .map(|t| format!(" ({t})"))
-                    .unwrap_or_default();
-                let trigger = if c.trigger { ", changed last" } else { "" };
-                format!(
-                    "{}{comment} = {}, needs {}{trigger}",
-                    c.address,
-                    u8::from(c.value),
-                    u8::from(c.expected)
-                )
-            })
+            .map(|c| c.line().trim_end().to_string())
             .collect();
         if !culprits.is_empty() {
             annotations.insert("culprits", culprits.join("; "));
@@ -644,7 +633,7 @@ mod tests {
         assert_eq!(a.labels["kind"], "switching");
         assert_eq!(
             a.annotations["culprits"],
-            "X0.06 (Emergency stop) = 0, needs 1, changed last"
+            "X0.06 = 0 (expected 1): Emergency stop   <- trigger"
         );
         assert_eq!(a.annotations["summary"], "Emergency stop error");
         assert_eq!(a.starts_at, "2026-11-26T10:00:00.000Z");
