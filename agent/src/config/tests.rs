@@ -394,6 +394,16 @@ fn alertmanager_urls_tls_and_interval_are_checked() {
         ]
         .join("\n")
     );
+    let many: Vec<String> = (0..17)
+        .map(|i| format!("\"http://127.0.0.1:{}\"", 9000 + i))
+        .collect();
+    let too_many = format!("{GOOD}\n[alertmanager]\nurls = [{}]\n", many.join(", "));
+    assert!(
+        errors(&too_many)
+            .ends_with("alertmanager.urls: at most 16 Alertmanagers (a cluster's instances)"),
+        "{}",
+        errors(&too_many)
+    );
     let https = format!("{GOOD}\n[alertmanager]\nurls = [\"https://am.plant:9093\"]\n");
     assert_eq!(
         errors(&https),

@@ -6,6 +6,10 @@ use super::Validator;
 use crate::config::raw::RawAlertmanager;
 use crate::config::{AlertmanagerConfig, AlertmanagerTls, DEFAULT_RESEND};
 
+/// The most Alertmanagers one cell sends to (each is owed every ended
+/// alert until it has taken it).
+const MAX_URLS: usize = 16;
+
 /// The longest `alertmanager.resend_interval`: an alert says it ends four
 /// intervals after it was sent, and an hour's silence hides a dead agent.
 const MAX_RESEND: std::time::Duration = std::time::Duration::from_secs(3600);
@@ -25,9 +29,16 @@ impl Validator<'_> {
                 "name at least one Alertmanager, like [\"http://alertmanager:9093\"]",
             );
         }
+        if raw.urls.len() > MAX_URLS {
+            self.problem(
+                table.clone(),
+                "alertmanager.urls",
+                format!("at most {MAX_URLS} Alertmanagers (a cluster's instances)"),
+            );
+        }
         let mut urls = Vec::new();
         let mut https = None;
-        for u in &raw.urls {
+        for u in raw.urls.iter().take(MAX_URLS) {
             match web_url(u.get_ref()) {
                 Ok(secure) => {
                     if secure && https.is_none() {
