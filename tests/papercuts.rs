@@ -1,8 +1,8 @@
 //! What a plant engineer hits configuring a new cell, against a real OPC UA
 //! server with its own namespace (the simulated CNC, a Float register
 //! added): a number that is not one (NaN, +Inf, −Inf on Float and Double)
-//! is bad quality, never a limit violation; `report daily` runs anywhere
-//! with the shipped stop causes.
+//! is bad quality, never a limit violation; a discrete alarm needs no
+//! program; `report daily` runs anywhere with the shipped stop causes.
 
 use cellwatch::config::TagConfig;
 use cellwatch::payload::AlarmPayload;
@@ -127,6 +127,52 @@ async fn nan_and_infinities_are_bad_quality_on_float_and_double_never_a_limit() 
         })
         .collect();
     assert!(on_no_number.is_empty(), "{on_no_number:#?}");
+    let mut fx = fx;
+    fx.stop().await;
+    fx.sim.stop();
+}
+
+/// `[[checks.discrete]]` of config/demo.toml: the Z2 over-travel switch
+/// (a B contact, off is the fault), no program.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_discrete_alarm_from_the_config_names_its_contact_and_comment_and_is_acknowledged() {
+    let fx = Fixture::start().await;
+    let sub = crate::robust::alarms(fx.client(), "m01ps0004").await;
+    fx.settled().await;
+    let mut seen: Vec<AlarmPayload> = Vec::new();
+    fx.sim.set("X0.0A", false).unwrap();
+    let raised = alarm_until(&sub, "the Z2 over-travel alarm", &mut seen, |a| {
+        a.id == "z2-overtravel" && a.transition.as_str() == "raised"
+    })
+    .await;
+    assert_eq!(
+        raised.message,
+        "Z axis 2 on its over-travel limit: X0.0A = 0 (expected 1): Z2 Over Travel Limit SW (B)"
+    );
+    assert_eq!(raised.severity, Severity::Critical);
+    assert_eq!(raised.kind.as_str(), "switching");
+    assert_eq!(raised.culprits.len(), 1);
+    assert_eq!(
+        raised.culprits[0].comment.as_deref(),
+        Some("Z2 Over Travel Limit SW (B)")
+    );
+    // The lifecycle of every alarm: kim acknowledges, the switch closes.
+    let (ok, detail) = crate::spawned::send(
+        fx.client(),
+        &crate::spawned::signed(cellwatch::operator::Action::Ack, "z2-overtravel"),
+    )
+    .await;
+    assert!(ok, "{detail}");
+    let acked = alarm_until(&sub, "acknowledged", &mut seen, |a| {
+        a.id == "z2-overtravel" && a.transition.as_str() == "acknowledged"
+    })
+    .await;
+    assert_eq!(acked.acked_by.as_deref(), Some("kim"));
+    fx.sim.set("X0.0A", true).unwrap();
+    alarm_until(&sub, "cleared", &mut seen, |a| {
+        a.id == "z2-overtravel" && a.transition.as_str() == "cleared"
+    })
+    .await;
     let mut fx = fx;
     fx.stop().await;
     fx.sim.stop();

@@ -148,7 +148,22 @@ pub(crate) struct RawChecks {
     #[serde(default)]
     pub(crate) limit: Vec<RawLimit>,
     #[serde(default)]
+    pub(crate) discrete: Vec<RawDiscrete>,
+    #[serde(default)]
     pub(crate) sfc: Vec<RawSfc>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawDiscrete {
+    pub(crate) id: Spanned<String>,
+    pub(crate) tag: Spanned<String>,
+    pub(crate) fault_when: Option<Spanned<String>>,
+    pub(crate) message: Option<Spanned<String>>,
+    pub(crate) severity: Option<Spanned<String>>,
+    pub(crate) on_delay: Option<Spanned<String>>,
+    pub(crate) off_delay: Option<Spanned<String>>,
+    pub(crate) armed_when: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -627,3 +627,52 @@ fn a_limits_hysteresis_is_not_the_tags_deadband() {
         "cell.toml:45:12: checks.limit[0].deadband: give hysteresis only (deadband is its former name)"
     );
 }
+
+#[test]
+fn a_discrete_alarm_is_a_switching_check_over_one_contact() {
+    let text = typed(
+        "[[checks.discrete]]\nid = \"door\"\ntag = \"x2\"\nfault_when = \"off\"\n\
+         message = \"Guard door open\"\nseverity = \"critical\"\non_delay = \"2s\"\n\n\
+         [[checks.discrete]]\nid = \"x1-on\"\ntag = \"X1\"\n",
+    );
+    let c = parse("cell.toml", &text, Path::new("base"), &mem()).unwrap();
+    let door = c.switching.iter().find(|s| s.id == "door").unwrap();
+    assert_eq!(door.fault_type, "Guard door open");
+    assert_eq!(door.severity, Severity::Critical);
+    assert_eq!(door.polarity, cellwatch_models::explain::Polarity::Off);
+    assert_eq!(door.sf.leaves(), vec![Signal::new("X2")]);
+    assert!(c.delays.contains(&("door".into(), 2000, 0)));
+    // Defaults: on is the fault, high, the tag's name as the message
+    // (it has no comment), no delay.
+    let x1 = c.switching.iter().find(|s| s.id == "x1-on").unwrap();
+    assert_eq!(
+        (x1.fault_type.as_str(), x1.severity, x1.polarity),
+        (
+            "x1",
+            Severity::High,
+            cellwatch_models::explain::Polarity::On
+        )
+    );
+    assert!(!c.delays.iter().any(|d| d.0 == "x1-on"));
+}
+
+#[test]
+fn a_discrete_alarm_needs_a_contact_a_known_tag_and_its_own_id() {
+    let bad = typed(
+        "[[checks.discrete]]\nid = \"hot\"\ntag = \"temp\"\n\n\
+         [[checks.discrete]]\nid = \"gone\"\ntag = \"x9\"\n\n\
+         [[checks.discrete]]\nid = \"tag-quality\"\ntag = \"x1\"\n\n\
+         [[checks.discrete]]\nid = \"fig6\"\ntag = \"x1\"\nmessage = \" \"\nfault_when = \"open\"\n",
+    );
+    let e = errors(&bad);
+    for expected in [
+        "checks.discrete[0].tag: D1 is a Double: a discrete alarm needs a Boolean tag or one bit of a word (bit = n); for a number use [[checks.limit]]",
+        "checks.discrete[1].tag: no tag is named 'x9' or has the address X9",
+        "checks.discrete[2].id: 'tag-quality' is the id of the agent's own alarm: choose another",
+        "checks.discrete[3].id: 'fig6' is used twice",
+        "checks.discrete[3].message: is empty: leave it out to use the tag's comment",
+        "checks.discrete[3].fault_when: unknown polarity 'open': use on or off",
+    ] {
+        assert!(e.contains(expected), "{expected}\nin\n{e}");
+    }
+}

@@ -159,6 +159,88 @@ impl Validator<'_> {
         })
     }
 
+    /// The discrete alarms: one contact on (or off) is the fault. Each is
+    /// a switching check over that one contact, so it has the same
+    /// lifecycle, explanation and delays (pushed to `delays`).
+    pub(super) fn discrete(
+        &mut self,
+        raw: Vec<raw::RawDiscrete>,
+        ids: &mut HashSet<String>,
+        delays: &mut Vec<(String, u64, u64)>,
+        tags: &HashMap<Signal, usize>,
+    ) -> Vec<SwitchingCheck> {
+        let mut out = Vec::new();
+        for (i, c) in raw.into_iter().enumerate() {
+            let key = format!("checks.discrete[{i}]");
+            self.unique_id(&c.id, &key, ids);
+            let on = self.delay(c.on_delay, &format!("{key}.on_delay"));
+            let off = self.delay(c.off_delay, &format!("{key}.off_delay"));
+            let polarity = self.parsed(c.fault_when, &format!("{key}.fault_when"), Polarity::On);
+            let severity = self.parsed(c.severity, &format!("{key}.severity"), Severity::High);
+            let tag = match self.tag_ref(c.tag.get_ref()) {
+                Ok(a) => a,
+                Err(e) => {
+                    self.problem(c.tag.span(), &format!("{key}.tag"), e);
+                    continue;
+                }
+            };
+            if let Some((t, false)) = self.kinds.get(&tag) {
+                self.problem(
+                    c.tag.span(),
+                    &format!("{key}.tag"),
+                    format!("{tag} is a {t}: a discrete alarm needs a Boolean tag or one bit of a word (bit = n); for a number use [[checks.limit]]"),
+                );
+                continue;
+            }
+            let armed_when = match &c.armed_when {
+                None => None,
+                Some(a) => {
+                    let Some(expr) = self.expression(a, &format!("{key}.armed_when"), tags) else {
+                        continue;
+                    };
+                    Some(SwitchingFunction::from_expr(
+                        Signal::new(&format!("{}.armed", c.id.get_ref())),
+                        &expr,
+                    ))
+                }
+            };
+            let comment = self.tag_comments.get(&tag).cloned();
+            let message = match c.message {
+                Some(m) if m.get_ref().trim().is_empty() => {
+                    self.problem(
+                        m.span(),
+                        &format!("{key}.message"),
+                        "is empty: leave it out to use the tag's comment",
+                    );
+                    continue;
+                }
+                Some(m) => m.into_inner(),
+                None => comment.clone().unwrap_or_else(|| {
+                    let name = self
+                        .names
+                        .iter()
+                        .find(|(_, a)| **a == tag)
+                        .map(|(n, _)| n.clone());
+                    name.unwrap_or_else(|| tag.to_string())
+                }),
+            };
+            let id = c.id.into_inner();
+            if on > 0 || off > 0 {
+                delays.push((id.clone(), on, off));
+            }
+            out.push(SwitchingCheck {
+                armed_when,
+                sf: SwitchingFunction::from_expr(Signal::new(&id), &Expr::Lit(tag.clone(), false)),
+                id,
+                fault_type: message,
+                polarity,
+                severity,
+                comments: comment.into_iter().map(|c| (tag.clone(), c)).collect(),
+            });
+        }
+        out
+    }
+
     /// A condition over tag addresses in the paper's notation, every
     /// address a contact tag's; comparisons (`TEMP > 80.5`) read numeric
     /// tags.

@@ -33,6 +33,9 @@ use crate::config::{
     TimerCheck, DEFAULT_MAX_SHELVE, MAX_SHELVE_LIMIT,
 };
 
+/// Ids of the alarms the agent raises of itself, which no check may take.
+const RESERVED_IDS: [&str; 3] = ["communication", "tag-quality", "journal"];
+
 /// Validates `raw`, read from `text` (named `origin`), relative paths
 /// from `base`, files read through `files`.
 pub(super) fn validate(
@@ -109,7 +112,16 @@ impl Validator<'_> {
     /// used before among `ids`.
     fn unique_id(&mut self, id: &Spanned<String>, key: &str, ids: &mut HashSet<String>) {
         self.key_chunk(id.span(), &format!("{key}.id"), "", id.get_ref());
-        if !ids.insert(id.get_ref().clone()) {
+        if RESERVED_IDS.contains(&id.get_ref().as_str()) {
+            self.problem(
+                id.span(),
+                &format!("{key}.id"),
+                format!(
+                    "'{}' is the id of the agent's own alarm: choose another",
+                    id.get_ref()
+                ),
+            );
+        } else if !ids.insert(id.get_ref().clone()) {
             self.problem(
                 id.span(),
                 &format!("{key}.id"),
@@ -347,20 +359,12 @@ impl Validator<'_> {
             if on > 0 || off > 0 {
                 delays.push((c.id.get_ref().clone(), on, off));
             }
-            self.key_chunk(c.id.span(), &format!("{key}.id"), "", c.id.get_ref());
-            if !ids.insert(c.id.get_ref().clone())
-                || matches!(c.id.get_ref().as_str(), "communication" | "tag-quality")
-            {
-                self.problem(
-                    c.id.span(),
-                    &format!("{key}.id"),
-                    format!("'{}' is used twice or reserved", c.id.get_ref()),
-                );
-            }
+            self.unique_id(&c.id, &key, &mut ids);
             if let Some(check) = self.switching(&key, c, &by_address) {
                 switching.push(check);
             }
         }
+        switching.extend(self.discrete(raw.checks.discrete, &mut ids, &mut delays, &by_address));
         let mut timers = Vec::new();
         for (i, t) in raw.checks.timers.into_iter().enumerate() {
             let key = format!("checks.timers[{i}]");
