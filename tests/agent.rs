@@ -586,6 +586,18 @@ async fn live_line_slow_motion_raises_its_timer_alarm() {
     })
     .await;
     assert_eq!(raised.culprits[0].address, "TR0_AT_STATION", "{seen:#?}");
+    // The sensor's comment, in the culprit and at the message's end.
+    assert_eq!(
+        raised.culprits[0].comment.as_deref(),
+        Some("Transport robot 0: at station 0 sensor")
+    );
+    assert!(
+        raised
+            .message
+            .ends_with("ms: Transport robot 0: at station 0 sensor"),
+        "{}",
+        raised.message
+    );
     assert_eq!(raised.state.as_str(), "active_unacknowledged");
     assert!(
         raised

@@ -29,6 +29,7 @@ async fn nan_and_infinities_are_bad_quality_on_float_and_double_never_a_limit() 
             }
             c.tags.push(TagConfig {
                 value_type: ValueType::Float,
+                comment: Some("Coolant pressure after the filter".into()),
                 ..TagConfig::boolean(
                     "coolant_pressure",
                     &format!("nsu={NAMESPACE};s=D208"),
@@ -65,9 +66,16 @@ async fn nan_and_infinities_are_bad_quality_on_float_and_double_never_a_limit() 
             .set_registers(&[("D208".into(), Variant::Float(x as f32))])
             .unwrap(),
     };
+    // Each bad tag is named with its comment.
     for (address, name) in [
-        ("D100", "spindle_temperature"),
-        ("D208", "coolant_pressure"),
+        (
+            "D100",
+            "spindle_temperature: Spindle temperature, degrees C",
+        ),
+        (
+            "D208",
+            "coolant_pressure: Coolant pressure after the filter",
+        ),
     ] {
         for (x, said) in [
             (f64::INFINITY, "+inf"),

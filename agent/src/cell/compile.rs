@@ -33,6 +33,11 @@ pub enum CompileError {
 /// # Errors
 /// A timer model or a check reads something the cell does not have.
 pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
+    let comments: CommentDb = config
+        .tags
+        .iter()
+        .filter_map(|t| Some((t.address.clone(), t.comment.clone()?)))
+        .collect();
     let mut sets: Vec<Box<dyn CheckSet>> =
         vec![Box::new(SwitchingChecks::new(config.switching.clone()))];
     for t in &config.timers {
@@ -42,18 +47,14 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
         .map_err(|source| CompileError::Timer {
             id: t.id.clone(),
             source,
-        })?;
+        })?
+        .commented(comments.clone());
         sets.push(Box::new(checks));
     }
     if !config.limits.is_empty() {
         sets.push(Box::new(LimitChecks::new(config.limits.clone())));
     }
     if !config.sfc.is_empty() {
-        let comments: CommentDb = config
-            .tags
-            .iter()
-            .filter_map(|t| Some((t.address.clone(), t.comment.clone()?)))
-            .collect();
         for s in &config.sfc {
             sets.push(Box::new(SfcChecks::new(
                 &s.id,
@@ -73,6 +74,7 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
         |e, (id, on, off)| e.delaying(id, *on, *off),
     );
     Ok(engine
+        .commenting(comments)
         .counting(config.part_counting())
         .ordering(config.order_item, config.order_target)
         .exporting(

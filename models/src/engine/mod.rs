@@ -47,6 +47,7 @@ pub use state::{HistoryKind, MachineState, StateName, StateRules};
 pub use switching::{SwitchingCheck, SwitchingChecks};
 
 use crate::alarm::{Alarm, AlarmKind, CommandRefused, Severity, Transition};
+use crate::comments::CommentDb;
 use crate::signal::Signal;
 use crate::value::{Comparison, Counter, Num, Operand, ValueType};
 use alarms::AlarmBook;
@@ -428,6 +429,8 @@ pub struct CellEngine {
     order_tags: (Option<usize>, Option<usize>),
     /// The work order now.
     order: Order,
+    /// The tags' comments (I/O list), by address, for messages.
+    comments: CommentDb,
 }
 
 impl CellEngine {
@@ -559,6 +562,7 @@ impl CellEngine {
             parts: PartCounting::None,
             exported: vec![false; configured],
             delays: HashMap::new(),
+            comments: CommentDb::default(),
             pending: BTreeMap::new(),
             order_tags: (None, None),
             order: Order::default(),
@@ -580,6 +584,14 @@ impl CellEngine {
                 *e = true;
             }
         }
+        self
+    }
+
+    /// The tags' comments (the I/O list), by address: the `tag-quality`
+    /// alarm names each bad tag with its comment.
+    #[must_use]
+    pub fn commenting(mut self, comments: CommentDb) -> Self {
+        self.comments = comments;
         self
     }
 
@@ -1438,7 +1450,11 @@ impl CellEngine {
             .bad
             .iter()
             .map(|(&t, why)| {
-                let tag = format!("{} ({})", self.tags[t].address, self.tags[t].name);
+                let Tag { name, address } = &self.tags[t];
+                let tag = match self.comments.get(address) {
+                    Some(comment) => format!("{address} ({name}: {comment})"),
+                    None => format!("{address} ({name})"),
+                };
                 match why {
                     BadQuality::Status => tag,
                     BadQuality::WrongType(expected, received) => format!(

@@ -12,6 +12,7 @@ use std::collections::HashMap;
 use super::learn::{Edge, TimerModel};
 use super::monitor::{ModelError, Outcome, TimerMonitor};
 use crate::alarm::{AlarmKind, Severity};
+use crate::comments::CommentDb;
 use crate::engine::{CheckSet, Declared, Finding, Observation};
 use crate::explain::Culprit;
 use crate::signal::Signal;
@@ -39,6 +40,8 @@ pub struct TimerChecks {
     transitions: HashMap<u32, (String, usize, bool, [u64; 2])>,
     /// Durations observed since the last `take_observations`.
     observed: Vec<Observation>,
+    /// The signals' comments (I/O list), for culprits and messages.
+    comments: CommentDb,
 }
 
 impl TimerChecks {
@@ -85,7 +88,16 @@ impl TimerChecks {
             by_signal,
             transitions,
             observed: Vec::new(),
+            comments: CommentDb::default(),
         })
+    }
+
+    /// The signals' comments (the tags' I/O-list comments): each alarm's
+    /// culprit carries its signal's, and its message ends with it.
+    #[must_use]
+    pub fn commented(mut self, comments: CommentDb) -> Self {
+        self.comments = comments;
+        self
     }
 
     fn findings(&mut self, outcomes: Vec<Outcome>, out: &mut Vec<Finding>) {
@@ -128,11 +140,16 @@ impl TimerChecks {
                     window[1]
                 ),
             };
+            let comment = self.comments.get(&self.signals[*s]).map(str::to_string);
+            let message = match &comment {
+                Some(c) => format!("{message}: {c}"),
+                None => message,
+            };
             let culprit = Culprit {
                 address: self.signals[*s].clone(),
                 value: if late { !*expected } else { *expected },
                 expected: if late { *expected } else { !*expected },
-                comment: None,
+                comment,
                 trigger: !late,
             };
             let alarm = format!("{}-{id:03}", self.id);
