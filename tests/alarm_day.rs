@@ -8,10 +8,12 @@
 //! - 2026-03-01 10:00:01: a04 raised, never cleared (stale the next day);
 //! - 00:01:00, 00:01:20, 00:01:50: a01 raised three times (chatters);
 //! - 01:00:00 + k·30 s, k = 0..11: a01, a02, a03, a05..a13 raised once each
-//!   (12 in one interval: a flood from the 11th raise, 01:05:00, until the
-//!   second raise leaves the window at 01:10:30: 330 s);
+//!   (12 in one interval: a flood from the 11th raise, 01:05:00, until
+//!   fewer than 5 are left in the window (ISA-18.2's hysteresis), when the
+//!   eighth raise leaves it at 01:13:30: 510 s);
 //! - 02:00:00 + k·50 s, k = 0..10: a02 raised 11 times (a flood from
-//!   02:08:20 until 02:10:00: 100 s; not chattering, 50 s apart);
+//!   02:08:20 until the seventh raise leaves at 02:15:00: 400 s; not
+//!   chattering, 50 s apart);
 //! - 03:00:00: a03 raised, never cleared (21 h at the day's end: not stale);
 //! - 10:00:00: a05 raised, cleared 10:05:00.
 //!
@@ -189,11 +191,11 @@ async fn a_scripted_alarm_day_gives_the_kpis_and_the_report_computed_by_hand() {
         sum_of(s, "cellwatch_alarm_rate_10m") == 0.0 && sum_of(s, "cellwatch_alarms_stale") == 1.0
     })
     .await;
-    // By hand: 330 s + 100 s of flood; 28 raises on the day and a04's the
+    // By hand: 510 s + 400 s of flood; 28 raises on the day and a04's the
     // day before; a04 (38 h) stale, a03 (21 h) not.
     assert_eq!(
         sum_of(&s, "cellwatch_alarm_flood_seconds_total"),
-        430.0,
+        910.0,
         "{s}"
     );
     assert_eq!(sum_of(&s, "cellwatch_alarm_flood"), 0.0, "{s}");
@@ -242,7 +244,7 @@ async fn a_scripted_alarm_day_gives_the_kpis_and_the_report_computed_by_hand() {
     assert!(close(&r["top_share"], 100.0 * 26.0 / 28.0), "{r:#}");
     assert!(close(&r["top"][0]["share"], 100.0 * 12.0 / 28.0));
     assert_eq!(r["chattering"][0]["id"], "a01-h");
-    assert_eq!(r["chattering"][0]["raises_in_60s"], 3);
+    assert_eq!(r["chattering"][0]["raises_in_window"], 3);
     assert_eq!(r["chattering"].as_array().unwrap().len(), 1);
     assert_eq!(r["stale"].as_array().unwrap().len(), 1, "{r:#}");
     assert_eq!(r["stale"][0]["id"], "a04-h");
@@ -274,5 +276,38 @@ async fn a_scripted_alarm_day_gives_the_kpis_and_the_report_computed_by_hand() {
             .any(|l| l == "\"peak alarm rate (per 10 min)\",\"12\",\"<= 10\",no"),
         "{}",
         csv.stdout
+    );
+
+    // The plant's own rules, from the cell's [kpi]: a flood above 11, a
+    // chatter within 30 s, stale after 12 h.
+    let own = d.path().join("own-rules.toml");
+    std::fs::write(
+        &own,
+        std::fs::read_to_string(&path).unwrap()
+            + "\n[kpi]\nflood_raises = 11\nchatter_window = \"30s\"\nstale_after = \"12h\"\n",
+    )
+    .unwrap();
+    let run = crate::util::cellwatch(&[
+        "report",
+        "alarms",
+        "--date",
+        "2026-03-02",
+        "--json",
+        "--db",
+        db.to_str().unwrap(),
+        "--config",
+        own.to_str().unwrap(),
+    ]);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    let r: serde_json::Value = serde_json::from_str(&run.stdout).unwrap();
+    // Only 01:00's 12 is a flood now; a01's raises 20 s and 30 s apart are
+    // two within 30 s at most; a03 (21 h) is stale as well as a04.
+    assert_eq!(r["flood_intervals"], 1, "{r:#}");
+    assert_eq!(r["chattering"].as_array().unwrap().len(), 0, "{r:#}");
+    assert_eq!(r["stale"].as_array().unwrap().len(), 2, "{r:#}");
+    assert_eq!(r["rules"]["flood_ends_below"], 6, "{r:#}");
+    assert_eq!(
+        r["benchmarks"][4]["metric"],
+        "chattering alarms (3+ raises in 30 s)"
     );
 }

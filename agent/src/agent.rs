@@ -163,7 +163,7 @@ pub struct Agent {
     /// Operators' `configure reload`, for the runner.
     reload_asks: Option<mpsc::Receiver<crate::cell::swap::ReloadAsk>>,
     /// The running configuration's parts only a restart changes.
-    fixed: [u64; 10],
+    fixed: [u64; 11],
 }
 
 /// The parts of a configuration a reload takes by starting a source of its
@@ -534,6 +534,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         &prefix,
         signing.clone(),
         &journal,
+        config.kpi,
         requests_tx,
         metrics.clone(),
     )

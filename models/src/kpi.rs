@@ -5,12 +5,16 @@
 //!
 //! Definitions (the same on both sides):
 //! - the *alarm rate* counts raises (new occurrences) per 10 minutes;
-//! - a *flood* is more than [`FLOOD_RAISES`] raises within 10 minutes: live,
-//!   over the sliding last 10 minutes; in a report, per fixed 10-minute
-//!   interval from the period's start;
-//! - an alarm *chatters* when it is raised [`CHATTER_RAISES`] times or more
-//!   within [`CHATTER_WINDOW_MS`];
-//! - an occurrence is *stale* once active longer than [`STALE_MS`];
+//! - a *flood* begins with more than [`KpiRules::flood_raises`] raises
+//!   within 10 minutes and ends when fewer than
+//!   [`KpiRules::flood_ends_below`] are left (ISA-18.2's hysteresis: 10 and
+//!   5): live, over the sliding last 10 minutes; in a report, per fixed
+//!   10-minute interval from the period's start (an interval after one in
+//!   flood stays in flood while it has at least `flood_ends_below` raises);
+//! - an alarm *chatters* when it is raised [`KpiRules::chatter_raises`]
+//!   times or more within [`KpiRules::chatter_window_ms`];
+//! - an occurrence is *stale* once active longer than
+//!   [`KpiRules::stale_ms`];
 //! - the *acknowledgement time* runs from the raise to the acknowledgement.
 //!
 //! Everything here is bounded: the live side keeps one counter per second
@@ -22,8 +26,11 @@ use crate::alarm::{Severity, Transition};
 
 /// The rate window and report interval: 10 minutes, ms.
 pub const INTERVAL_MS: u64 = 600_000;
-/// More raises than this within [`INTERVAL_MS`] is a flood.
+/// More raises than this within [`INTERVAL_MS`] is a flood (ISA-18.2).
 pub const FLOOD_RAISES: u64 = 10;
+/// A flood ends when fewer raises than this are left within
+/// [`INTERVAL_MS`] (ISA-18.2).
+pub const FLOOD_ENDS_BELOW: u64 = 5;
 /// Raises of one alarm within [`CHATTER_WINDOW_MS`] that make it chatter.
 pub const CHATTER_RAISES: usize = 3;
 /// See [`CHATTER_RAISES`]: 60 s.
@@ -32,6 +39,49 @@ pub const CHATTER_WINDOW_MS: u64 = 60_000;
 pub const STALE_MS: u64 = 24 * 3_600_000;
 
 const SECONDS: usize = (INTERVAL_MS / 1000) as usize;
+
+/// The plant's rules the figures are judged by; by default ISA-18.2's
+/// example figures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct KpiRules {
+    /// More raises than this within 10 minutes begins a flood.
+    pub flood_raises: u64,
+    /// Fewer raises than this within 10 minutes ends it (at most
+    /// `flood_raises + 1`, which is no hysteresis).
+    pub flood_ends_below: u64,
+    /// Raises of one alarm within `chatter_window_ms` that make it chatter.
+    pub chatter_raises: usize,
+    /// See `chatter_raises`, ms.
+    pub chatter_window_ms: u64,
+    /// Active longer than this is stale, ms.
+    pub stale_ms: u64,
+}
+
+impl Default for KpiRules {
+    fn default() -> Self {
+        KpiRules {
+            flood_raises: FLOOD_RAISES,
+            flood_ends_below: FLOOD_ENDS_BELOW,
+            chatter_raises: CHATTER_RAISES,
+            chatter_window_ms: CHATTER_WINDOW_MS,
+            stale_ms: STALE_MS,
+        }
+    }
+}
+
+/// `ms` for people: `60 s`, `2 min`, `24 h`, `1.5 h`.
+fn span(ms: u64) -> String {
+    let s = ms as f64 / 1000.0;
+    if ms % 3_600_000 == 0 {
+        format!("{} h", ms / 3_600_000)
+    } else if ms % 60_000 == 0 && ms >= 120_000 {
+        format!("{} min", ms / 60_000)
+    } else if s >= 3600.0 {
+        format!("{:.1} h", s / 3600.0)
+    } else {
+        format!("{s} s")
+    }
+}
 
 /// The live figures, updated from alarm transitions and the passing of
 /// time (ms since the epoch, passed in).
@@ -43,10 +93,12 @@ pub struct LiveKpis {
     second: Option<u64>,
     /// Raises in the last 10 minutes.
     in_window: u64,
+    /// Whether a flood is on (begun, not yet ended).
+    in_flood: bool,
     /// Time spent in flood, ms, and up to when it is counted.
     flood_ms: u64,
     counted_to: Option<u64>,
-    /// Per alarm: its last raise times (at most [`CHATTER_RAISES`]).
+    /// Per alarm: its last raise times (at most `chatter_raises`).
     raises: HashMap<String, VecDeque<u64>>,
     /// Chattering alarms by (until when, id).
     chattering: BTreeSet<(u64, String)>,
@@ -54,6 +106,7 @@ pub struct LiveKpis {
     /// Active occurrences by (raised_at, id).
     active: BTreeSet<(u64, String)>,
     active_since: HashMap<String, u64>,
+    rules: KpiRules,
 }
 
 impl Default for LiveKpis {
@@ -62,6 +115,7 @@ impl Default for LiveKpis {
             per_second: Box::new([0; SECONDS]),
             second: None,
             in_window: 0,
+            in_flood: false,
             flood_ms: 0,
             counted_to: None,
             raises: HashMap::new(),
@@ -69,6 +123,7 @@ impl Default for LiveKpis {
             chatter_until: HashMap::new(),
             active: BTreeSet::new(),
             active_since: HashMap::new(),
+            rules: KpiRules::default(),
         }
     }
 }
@@ -89,9 +144,17 @@ pub struct KpiSnapshot {
 }
 
 impl LiveKpis {
-    /// Figures from no alarm at all.
+    /// Figures from no alarm at all, by ISA-18.2's rules.
     pub fn new() -> LiveKpis {
         LiveKpis::default()
+    }
+
+    /// Figures from no alarm at all, by `rules`.
+    pub fn with_rules(rules: KpiRules) -> LiveKpis {
+        LiveKpis {
+            rules,
+            ..LiveKpis::default()
+        }
     }
 
     /// Time passed up to `now`. Time in flood is counted exactly: the
@@ -108,19 +171,22 @@ impl LiveKpis {
                 // At the start of second `gone`, the raises of second
                 // `gone - 600` fall out of the window.
                 let at = gone * 1000;
-                if self.in_window > FLOOD_RAISES {
+                if self.in_flood {
                     self.flood_ms += at.saturating_sub(t);
                 }
                 t = t.max(at);
                 let slot = &mut self.per_second[(gone % SECONDS as u64) as usize];
                 self.in_window -= u64::from(*slot);
                 *slot = 0;
+                if self.in_window < self.rules.flood_ends_below {
+                    self.in_flood = false;
+                }
                 if self.in_window == 0 {
                     // Every slot is empty: nothing more falls out.
                     break;
                 }
             }
-            if self.in_window > FLOOD_RAISES {
+            if self.in_flood {
                 self.flood_ms += now - t;
             }
             self.counted_to = Some(now);
@@ -152,13 +218,17 @@ impl LiveKpis {
             let s = self.second.unwrap_or(at / 1000);
             self.per_second[(s % SECONDS as u64) as usize] += 1;
             self.in_window += 1;
+            if self.in_window > self.rules.flood_raises {
+                self.in_flood = true;
+            }
+            let chatter = self.rules.chatter_raises;
             let times = self.raises.entry(id.to_string()).or_default();
             times.push_back(at);
-            if times.len() > CHATTER_RAISES {
+            if times.len() > chatter {
                 times.pop_front();
             }
-            if times.len() == CHATTER_RAISES {
-                let until = times[0] + CHATTER_WINDOW_MS;
+            if times.len() == chatter {
+                let until = times[0] + self.rules.chatter_window_ms;
                 if until > at {
                     if let Some(old) = self.chatter_until.insert(id.to_string(), until) {
                         self.chattering.remove(&(old, id.to_string()));
@@ -180,12 +250,14 @@ impl LiveKpis {
     pub fn snapshot(&self, now: u64) -> KpiSnapshot {
         KpiSnapshot {
             raised_last_10m: self.in_window,
-            in_flood: self.in_window > FLOOD_RAISES,
+            in_flood: self.in_flood,
             flood_ms: self.flood_ms,
             chattering: self.chattering.len() as u64,
-            stale: now.checked_sub(STALE_MS).map_or(0, |raised_before| {
-                self.active.range(..(raised_before, String::new())).count() as u64
-            }),
+            stale: now
+                .checked_sub(self.rules.stale_ms)
+                .map_or(0, |raised_before| {
+                    self.active.range(..(raised_before, String::new())).count() as u64
+                }),
         }
     }
 }
@@ -218,16 +290,16 @@ pub struct Frequent {
     pub share: f64,
 }
 
-/// A chattering alarm: its most raises within [`CHATTER_WINDOW_MS`].
+/// A chattering alarm: its most raises within the chattering window.
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
 pub struct Chattering {
     /// The alarm.
     pub id: String,
-    /// Raises in its busiest minute.
-    pub raises_in_60s: u64,
+    /// Raises in its busiest chattering window.
+    pub raises_in_window: u64,
 }
 
-/// An occurrence active longer than 24 h in the period.
+/// An occurrence active longer than the stale threshold in the period.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Stale {
     /// The alarm.
@@ -266,7 +338,7 @@ pub struct AlarmReport {
     pub average_rate: f64,
     /// The most raises in one 10-minute interval.
     pub peak_rate: u64,
-    /// Intervals with more than [`FLOOD_RAISES`] raises.
+    /// Intervals in flood.
     pub flood_intervals: u64,
     /// Those, % of all intervals.
     pub flood_percent: f64,
@@ -288,17 +360,20 @@ pub struct AlarmReport {
     pub out_of_service: u64,
     /// Acknowledgement times.
     pub ack: AckTimes,
+    /// The rules the figures were judged by.
+    pub rules: KpiRules,
 }
 
 /// The figures of `[from, to)` from `events` (time order); `before` holds
 /// each alarm's last event before `from` (what was active then). A period
-/// still running ends at `now`.
+/// still running ends at `now`. Judged by `rules`.
 pub fn alarm_report(
     events: &[AlarmEvent],
     before: &[AlarmEvent],
     from: u64,
     to: u64,
     now: u64,
+    rules: &KpiRules,
 ) -> AlarmReport {
     let end = to.min(now).max(from);
     let intervals = (end - from).div_ceil(INTERVAL_MS).max(1);
@@ -316,7 +391,14 @@ pub fn alarm_report(
     for e in &raises {
         per_interval[((e.at - from) / INTERVAL_MS) as usize] += 1;
     }
-    let flood_intervals = per_interval.iter().filter(|&&n| n > FLOOD_RAISES).count() as u64;
+    let mut flooding = false;
+    let flood_intervals = per_interval
+        .iter()
+        .filter(|&&n| {
+            flooding = n > rules.flood_raises || (flooding && n >= rules.flood_ends_below);
+            flooding
+        })
+        .count() as u64;
     let share = |n: u64| {
         if raised == 0 {
             0.0
@@ -348,22 +430,22 @@ pub fn alarm_report(
     let chattering = by_id
         .iter()
         .filter_map(|(id, times)| {
-            // The most raises in any window of 60 s (two pointers).
+            // The most raises in any chattering window (two pointers).
             let (mut most, mut first) = (0usize, 0usize);
             for (last, &t) in times.iter().enumerate() {
-                while t - times[first] >= CHATTER_WINDOW_MS {
+                while t - times[first] >= rules.chatter_window_ms {
                     first += 1;
                 }
                 most = most.max(last - first + 1);
             }
-            (most >= CHATTER_RAISES).then(|| Chattering {
+            (most >= rules.chatter_raises).then(|| Chattering {
                 id: id.to_string(),
-                raises_in_60s: most as u64,
+                raises_in_window: most as u64,
             })
         })
         .collect();
-    // Stale: occurrences active at some moment of the period for more than
-    // 24 h; those active at its start come from `before`.
+    // Stale: occurrences active at some moment of the period for longer
+    // than the rules allow; those active at its start come from `before`.
     let mut open: BTreeMap<&str, u64> = before
         .iter()
         .filter(|e| e.active)
@@ -372,7 +454,7 @@ pub fn alarm_report(
     let mut stale = Vec::new();
     let mut note = |id: &str, raised_at: u64, until: u64| {
         let lasted = until.saturating_sub(raised_at);
-        if lasted > STALE_MS {
+        if lasted > rules.stale_ms {
             stale.push(Stale {
                 id: id.to_string(),
                 raised_at,
@@ -434,6 +516,7 @@ pub fn alarm_report(
         alarms_shelved,
         out_of_service: of(Transition::OutOfService).count() as u64,
         ack,
+        rules: *rules,
     }
 }
 
@@ -441,12 +524,12 @@ pub fn alarm_report(
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct Benchmark {
     /// What is measured.
-    pub metric: &'static str,
+    pub metric: String,
     /// The figure, as text.
     pub value: String,
     /// The target (ISA-18.2 / EEMUA 191), or `-` where the standard sets
     /// none.
-    pub target: &'static str,
+    pub target: String,
     /// Whether the target is met; `None` without a target.
     pub met: Option<bool>,
 }
@@ -456,79 +539,93 @@ impl AlarmReport {
     pub fn benchmarks(&self) -> Vec<Benchmark> {
         let secs = |s: Option<f64>| s.map_or("-".into(), |s| format!("{s:.1} s"));
         let p = |s: &str| self.priorities.get(s).copied().unwrap_or(0.0);
+        let r = &self.rules;
+        let line = |metric: String, value: String, target: &str, met: Option<bool>| Benchmark {
+            metric,
+            value,
+            target: target.to_string(),
+            met,
+        };
         vec![
-            Benchmark {
-                metric: "average alarm rate (per 10 min)",
-                value: format!("{:.2}", self.average_rate),
-                target: "<= 1 (2 at most)",
-                met: Some(self.average_rate <= 1.0),
-            },
-            Benchmark {
-                metric: "peak alarm rate (per 10 min)",
-                value: self.peak_rate.to_string(),
-                target: "<= 10",
-                met: Some(self.peak_rate <= FLOOD_RAISES),
-            },
-            Benchmark {
-                metric: "10-min intervals in flood (> 10 alarms)",
-                value: format!("{:.2} %", self.flood_percent),
-                target: "< 1 %",
-                met: Some(self.flood_percent < 1.0),
-            },
-            Benchmark {
-                metric: "top 10 alarms' share of all alarms",
-                value: format!("{:.1} %", self.top_share),
-                target: "< 5 %",
-                met: Some(self.top_share < 5.0),
-            },
-            Benchmark {
-                metric: "chattering alarms (3+ raises in 60 s)",
-                value: self.chattering.len().to_string(),
-                target: "0",
-                met: Some(self.chattering.is_empty()),
-            },
-            Benchmark {
-                metric: "stale alarms (active > 24 h)",
-                value: self.stale.len().to_string(),
-                target: "< 5",
-                met: Some(self.stale.len() < 5),
-            },
-            Benchmark {
-                metric: "priority: low / medium / high / critical",
-                value: format!(
+            line(
+                "average alarm rate (per 10 min)".into(),
+                format!("{:.2}", self.average_rate),
+                "<= 1 (2 at most)",
+                Some(self.average_rate <= 1.0),
+            ),
+            line(
+                "peak alarm rate (per 10 min)".into(),
+                self.peak_rate.to_string(),
+                &format!("<= {}", r.flood_raises),
+                Some(self.peak_rate <= r.flood_raises),
+            ),
+            line(
+                format!(
+                    "10-min intervals in flood (> {}, until < {})",
+                    r.flood_raises, r.flood_ends_below
+                ),
+                format!("{:.2} %", self.flood_percent),
+                "< 1 %",
+                Some(self.flood_percent < 1.0),
+            ),
+            line(
+                "top 10 alarms' share of all alarms".into(),
+                format!("{:.1} %", self.top_share),
+                "< 5 %",
+                Some(self.top_share < 5.0),
+            ),
+            line(
+                format!(
+                    "chattering alarms ({}+ raises in {})",
+                    r.chatter_raises,
+                    span(r.chatter_window_ms)
+                ),
+                self.chattering.len().to_string(),
+                "0",
+                Some(self.chattering.is_empty()),
+            ),
+            line(
+                format!("stale alarms (active > {})", span(r.stale_ms)),
+                self.stale.len().to_string(),
+                "< 5",
+                Some(self.stale.len() < 5),
+            ),
+            line(
+                "priority: low / medium / high / critical".into(),
+                format!(
                     "{:.0} / {:.0} / {:.0} / {:.0} %",
                     p("low"),
                     p("medium"),
                     p("high"),
                     p("critical")
                 ),
-                target: "~80 / 15 / 5 / < 1 %",
-                met: None,
-            },
-            Benchmark {
-                metric: "shelves (alarms shelved)",
-                value: format!("{} ({})", self.shelved, self.alarms_shelved),
-                target: "-",
-                met: None,
-            },
-            Benchmark {
-                metric: "taken out of service",
-                value: self.out_of_service.to_string(),
-                target: "-",
-                met: None,
-            },
-            Benchmark {
-                metric: "acknowledgement time: mean / median / max",
-                value: format!(
+                "~80 / 15 / 5 / < 1 %",
+                None,
+            ),
+            line(
+                "shelves (alarms shelved)".into(),
+                format!("{} ({})", self.shelved, self.alarms_shelved),
+                "-",
+                None,
+            ),
+            line(
+                "taken out of service".into(),
+                self.out_of_service.to_string(),
+                "-",
+                None,
+            ),
+            line(
+                "acknowledgement time: mean / median / max".into(),
+                format!(
                     "{} / {} / {} ({} acks)",
                     secs(self.ack.mean),
                     secs(self.ack.median),
                     secs(self.ack.max),
                     self.ack.count
                 ),
-                target: "-",
-                met: None,
-            },
+                "-",
+                None,
+            ),
         ]
     }
 }
@@ -555,14 +652,94 @@ mod tests {
         assert!(k.snapshot(10_000).in_flood);
         k.advance(10 * MIN - 1);
         assert_eq!(k.snapshot(10 * MIN - 1).raised_last_10m, 11);
-        // The first raise (second 0) leaves the window at 600 s.
+        // The first raise (second 0) leaves the window at 600 s: 10 left,
+        // still a flood until fewer than 5 are (ISA-18.2), at 606 s.
         k.advance(10 * MIN);
         let s = k.snapshot(10 * MIN);
-        assert_eq!((s.raised_last_10m, s.in_flood), (10, false));
-        assert_eq!(s.flood_ms, 10 * MIN - 10_000);
+        assert_eq!((s.raised_last_10m, s.in_flood), (10, true));
+        k.advance(10 * MIN + 5_999);
+        assert!(k.snapshot(10 * MIN + 5_999).in_flood);
+        k.advance(10 * MIN + 6_000);
+        let s = k.snapshot(10 * MIN + 6_000);
+        assert_eq!((s.raised_last_10m, s.in_flood), (4, false));
+        assert_eq!(s.flood_ms, 10 * MIN + 6_000 - 10_000);
         // A long gap empties it.
         k.advance(60 * MIN);
         assert_eq!(k.snapshot(60 * MIN).raised_last_10m, 0);
+    }
+
+    #[test]
+    fn a_plant_sets_its_own_flood_chatter_and_stale_rules() {
+        // A flood above 3, ended at once below 4 (no hysteresis); two
+        // raises in 5 min chatter; stale after 1 h.
+        let rules = KpiRules {
+            flood_raises: 3,
+            flood_ends_below: 4,
+            chatter_raises: 2,
+            chatter_window_ms: 5 * MIN,
+            stale_ms: 3_600_000,
+        };
+        let mut k = LiveKpis::with_rules(rules);
+        for i in 0..4 {
+            k.on_transition("a", Transition::Raised, i * MIN, i == 3, i * MIN);
+        }
+        let s = k.snapshot(3 * MIN);
+        assert_eq!((s.in_flood, s.chattering), (true, 1));
+        k.advance(10 * MIN);
+        let s = k.snapshot(10 * MIN);
+        assert_eq!((s.raised_last_10m, s.in_flood), (3, false));
+        assert_eq!(s.flood_ms, 7 * MIN);
+        assert_eq!(k.snapshot(3 * MIN + 3_600_001).stale, 1);
+        // The report judges by the same rules, and says them.
+        let events: Vec<AlarmEvent> = (0..4)
+            .map(|i| AlarmEvent {
+                at: i * MIN,
+                id: "a".into(),
+                transition: Transition::Raised,
+                severity: Severity::High,
+                raised_at: i * MIN,
+                active: false,
+            })
+            .collect();
+        let r = alarm_report(&events, &[], 0, 20 * MIN, 20 * MIN, &rules);
+        assert_eq!(r.flood_intervals, 1);
+        assert_eq!(r.chattering[0].raises_in_window, 4);
+        let b = r.benchmarks();
+        assert_eq!(b[1].target, "<= 3");
+        assert_eq!(b[2].metric, "10-min intervals in flood (> 3, until < 4)");
+        assert_eq!(b[4].metric, "chattering alarms (2+ raises in 5 min)");
+        assert_eq!(b[5].metric, "stale alarms (active > 1 h)");
+    }
+
+    #[test]
+    fn a_report_interval_after_a_flood_stays_in_flood_until_fewer_than_5() {
+        let raise = |at: u64| AlarmEvent {
+            at,
+            id: format!("a{at}"),
+            transition: Transition::Raised,
+            severity: Severity::Low,
+            raised_at: at,
+            active: false,
+        };
+        // 11, 6, 4, 6 raises in four intervals: flood, flood (6 >= 5),
+        // over (4 < 5), not again (6 is no more than 10).
+        let mut events = Vec::new();
+        for (interval, n) in [11u64, 6, 4, 6].into_iter().enumerate() {
+            for k in 0..n {
+                events.push(raise(interval as u64 * 10 * MIN + k * 1000));
+            }
+        }
+        let r = alarm_report(&events, &[], 0, 40 * MIN, 40 * MIN, &KpiRules::default());
+        assert_eq!((r.intervals, r.flood_intervals), (4, 2));
+        assert_eq!(
+            r.benchmarks()[2].metric,
+            "10-min intervals in flood (> 10, until < 5)"
+        );
+        assert_eq!(r.benchmarks()[5].metric, "stale alarms (active > 24 h)");
+        assert_eq!(
+            r.benchmarks()[4].metric,
+            "chattering alarms (3+ raises in 60 s)"
+        );
     }
 
     #[test]
@@ -621,7 +798,14 @@ mod tests {
         ];
         // "old" was raised the day before, at 06:00, and never cleared.
         let before = [ev(6 * 3_600_000, "old", Raised, 6 * 3_600_000, true)];
-        let r = alarm_report(&events, &before, day, 2 * day, 3 * day);
+        let r = alarm_report(
+            &events,
+            &before,
+            day,
+            2 * day,
+            3 * day,
+            &KpiRules::default(),
+        );
         assert_eq!((r.raised, r.intervals, r.peak_rate), (2, 144, 2));
         assert_eq!(r.ack.count, 2);
         assert_eq!(r.ack.mean, Some(35.0));
@@ -633,7 +817,14 @@ mod tests {
         assert!((r.stale[0].hours - 42.0).abs() < 1e-9);
         // "a" is still active at the end, for less than 24 h: not stale.
         // A day still running ends now.
-        let r = alarm_report(&events, &before, day, 2 * day, day + 600_001);
+        let r = alarm_report(
+            &events,
+            &before,
+            day,
+            2 * day,
+            day + 600_001,
+            &KpiRules::default(),
+        );
         assert_eq!((r.intervals, r.to), (2, day + 600_001));
     }
 }

@@ -187,7 +187,22 @@ fn alarms(
             args.db.display()
         );
     }
-    let r = kpi::alarm_report(&read.events, &read.before, from, to, crate::clock::now_ms());
+    let rules = match &args.config {
+        None => kpi::KpiRules::default(),
+        Some(path) => {
+            crate::config::load(path)
+                .map_err(|e| Failure::Input(e.to_string()))?
+                .kpi
+        }
+    };
+    let r = kpi::alarm_report(
+        &read.events,
+        &read.before,
+        from,
+        to,
+        crate::clock::now_ms(),
+        &rules,
+    );
     let io = Failure::output;
     match args.format() {
         Format::Json => {
@@ -212,9 +227,9 @@ fn alarms_csv(out: &mut dyn Write, r: &AlarmReport) -> std::io::Result<()> {
         writeln!(
             out,
             "{},{},{},{}",
-            quote(b.metric),
+            quote(&b.metric),
             quote(&b.value),
-            quote(b.target),
+            quote(&b.target),
             b.met.map_or("", |m| if m { "yes" } else { "no" })
         )?;
     }
@@ -263,14 +278,24 @@ fn alarms_table(
             f.share
         )?;
     }
-    writeln!(out, "chattering alarms (most raises within 60 s):")?;
+    let rules = &r.rules;
+    writeln!(
+        out,
+        "chattering alarms (most raises within {} s, {} or more):",
+        rules.chatter_window_ms as f64 / 1000.0,
+        rules.chatter_raises
+    )?;
     if r.chattering.is_empty() {
         writeln!(out, "  none")?;
     }
     for c in &r.chattering {
-        writeln!(out, "  {:<32} {:>6}", escaped(&c.id), c.raises_in_60s)?;
+        writeln!(out, "  {:<32} {:>6}", escaped(&c.id), c.raises_in_window)?;
     }
-    writeln!(out, "stale alarms (active > 24 h):")?;
+    writeln!(
+        out,
+        "stale alarms (active > {} h):",
+        rules.stale_ms as f64 / 3_600_000.0
+    )?;
     if r.stale.is_empty() {
         writeln!(out, "  none")?;
     }
@@ -503,6 +528,10 @@ pub(crate) struct ReportArgs {
     /// faults, `config/stop-causes.toml`), wherever the command runs.
     #[arg(long, global = true)]
     pub(crate) causes: Option<PathBuf>,
+    /// The cell's configuration: `report alarms` judges by its `[kpi]`
+    /// rules (flood, chattering, stale); without it, by ISA-18.2's.
+    #[arg(long, global = true)]
+    pub(crate) config: Option<PathBuf>,
     /// The plant's offset from UTC, for day boundaries (+09:00).
     #[arg(
         long,

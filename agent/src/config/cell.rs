@@ -118,6 +118,8 @@ pub struct CellConfig {
     pub delays: Vec<(String, u64, u64)>,
     /// Where alarms are pushed for people (`[alertmanager]`).
     pub alertmanager: Option<AlertmanagerConfig>,
+    /// The alarm-performance rules (`[kpi]`): flood, chattering, stale.
+    pub kpi: cellwatch_models::kpi::KpiRules,
     /// Things worth saying at start (security off, ...).
     pub warnings: Vec<String>,
 }
@@ -127,7 +129,7 @@ pub struct CellConfig {
 /// says things, whom it talks to, what it reads. The tags and the source's
 /// settings are taken by starting a source of their own; the others only
 /// by a restart.
-pub const FIXED_PARTS: [&str; 10] = [
+pub const FIXED_PARTS: [&str; 11] = [
     "cell.id",
     "journal.path",
     "[opcua]",
@@ -135,6 +137,7 @@ pub const FIXED_PARTS: [&str; 10] = [
     "[zenoh]",
     "[metrics]",
     "[alertmanager]",
+    "[kpi]",
     "commands.operators_file",
     "state.publish_interval",
     "the tags",
@@ -145,7 +148,7 @@ impl CellConfig {
     /// between the running configuration and one read again, it names what
     /// changed beyond the checks. (Hashes of the parts' debug forms: the tags
     /// of a 100,000-tag cell are not kept twice for it.)
-    pub fn fixed_parts(&self) -> [u64; 10] {
+    pub fn fixed_parts(&self) -> [u64; 11] {
         use std::hash::{Hash, Hasher};
         let hash = |part: &dyn fmt::Debug| {
             let mut h = std::collections::hash_map::DefaultHasher::new();
@@ -169,6 +172,7 @@ impl CellConfig {
             hash(&self.zenoh),
             hash(&self.metrics),
             hash(&self.alertmanager),
+            hash(&self.kpi),
             hash(&self.operators_file),
             hash(&self.state_interval),
             tags.finish(),

@@ -31,6 +31,19 @@ pub(crate) struct RawConfig {
     #[serde(default)]
     pub(crate) production: RawProduction,
     pub(crate) alertmanager: Option<Spanned<RawAlertmanager>>,
+    #[serde(default)]
+    pub(crate) kpi: RawKpi,
+}
+
+/// `[kpi]`: the plant's alarm-performance rules.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawKpi {
+    pub(crate) flood_raises: Option<Spanned<i64>>,
+    pub(crate) flood_ends_below: Option<Spanned<i64>>,
+    pub(crate) chatter_raises: Option<Spanned<i64>>,
+    pub(crate) chatter_window: Option<Spanned<String>>,
+    pub(crate) stale_after: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

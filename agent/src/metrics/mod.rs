@@ -82,11 +82,11 @@ pub struct Metrics {
     pub sfc_step_active: IntGaugeVec,
     /// ISA-18.2: alarms raised in the last 10 minutes.
     pub alarm_rate_10m: IntGauge,
-    /// 1 while that is a flood (more than 10).
+    /// 1 while a flood is on (`[kpi]`; ISA-18.2: begun above 10, ended below 5).
     pub alarm_flood: IntGauge,
     /// Time spent in flood.
     pub alarm_flood_seconds: prometheus::Counter,
-    /// Alarms chattering now (3+ raises within 60 s).
+    /// Alarms chattering now (`[kpi]`; ISA-18.2: 3+ raises within 60 s).
     pub alarms_chattering: IntGauge,
     /// Active occurrences older than 24 h.
     pub alarms_stale: IntGauge,
@@ -376,7 +376,7 @@ impl Metrics {
             ))),
             alarm_flood: reg!(IntGauge::with_opts(opts(
                 "cellwatch_alarm_flood",
-                "1 while more than 10 alarms were raised in the last 10 minutes (ISA-18.2 flood).",
+                "1 while an alarm flood is on: begun with more than kpi.flood_raises (10) raises in the last 10 minutes, ended when fewer than kpi.flood_ends_below (5) are left (ISA-18.2).",
                 cell
             ))),
             alarm_flood_seconds: reg!(prometheus::Counter::with_opts(opts(
@@ -386,12 +386,12 @@ impl Metrics {
             ))),
             alarms_chattering: reg!(IntGauge::with_opts(opts(
                 "cellwatch_alarms_chattering",
-                "Alarms chattering now: raised 3 or more times within 60 s (target 0).",
+                "Alarms chattering now: raised kpi.chatter_raises (3) or more times within kpi.chatter_window (60 s) (target 0).",
                 cell
             ))),
             alarms_stale: reg!(IntGauge::with_opts(opts(
                 "cellwatch_alarms_stale",
-                "Alarms active for more than 24 hours (target: fewer than 5).",
+                "Alarms active for longer than kpi.stale_after (24 hours) (target: fewer than 5).",
                 cell
             ))),
             alarms_shelved: reg!(IntGauge::with_opts(opts(

@@ -43,6 +43,7 @@ use crate::journal::{self, Barrier, HistoryQuery, Journal};
 use crate::metrics::Metrics;
 use crate::operator::{Command, NotACommand};
 use crate::step::{CommandOutcome, Request};
+use cellwatch_models::kpi::KpiRules;
 
 /// Queries answered at the same time; more are refused as busy.
 pub const MAX_CONCURRENT: usize = 16;
@@ -62,6 +63,8 @@ pub struct Services {
     snapshot: Queryable,
     command: Queryable,
     journal: PathBuf,
+    /// The rules the alarm figures (`kind=kpi`) are judged by.
+    kpi: KpiRules,
     /// Waits for the journal's queued rows: a history page shows every
     /// alarm already published.
     journal_settled: Barrier,
@@ -94,6 +97,7 @@ impl Services {
         prefix: &str,
         key: Arc<AgentKey>,
         journal: &Journal,
+        kpi: KpiRules,
         requests: mpsc::Sender<Request>,
         metrics: Arc<Metrics>,
     ) -> Result<Services, ZenohError> {
@@ -116,6 +120,7 @@ impl Services {
             snapshot: declare(Service::Snapshot).await?,
             command: declare(Service::Command).await?,
             journal: journal.path().to_path_buf(),
+            kpi,
             journal_settled: journal.barrier(),
             requests,
             permits: Arc::new(Semaphore::new(MAX_CONCURRENT)),
@@ -158,8 +163,9 @@ impl Services {
                 .await;
                 continue;
             }
-            let (journal, settled, requests, seal, metrics) = (
+            let (journal, rules, settled, requests, seal, metrics) = (
                 self.journal.clone(),
+                self.kpi,
                 self.journal_settled.clone(),
                 self.requests.clone(),
                 self.seal.clone(),
@@ -171,7 +177,7 @@ impl Services {
                     Service::History => match history_query(q.parameters().as_str(), now_ms()) {
                         Ok(query) => {
                             settled.settled().await;
-                            history(&journal, query).await
+                            history(&journal, &rules, query).await
                         }
                         Err(e) => {
                             metrics.refused(kind.name(), "invalid");
@@ -190,9 +196,9 @@ impl Services {
 
 /// One page of `query` from the journal. A read that fails is logged and
 /// answered with the reason; it is not a refusal of the request.
-async fn history(journal: &Path, query: HistoryQuery) -> Result<String, String> {
+async fn history(journal: &Path, rules: &KpiRules, query: HistoryQuery) -> Result<String, String> {
     match query.kind.as_deref() {
-        Some("kpi") => return kpi(journal, &query).await,
+        Some("kpi") => return kpi(journal, rules, &query).await,
         Some("production") => return production(journal, &query).await,
         _ => {}
     }
@@ -213,7 +219,7 @@ async fn history(journal: &Path, query: HistoryQuery) -> Result<String, String> 
 /// The ISA-18.2 figures of `[since, until)` (default: the last 24 h, until
 /// now) from the journal, with their benchmarks, as `cellwatch report
 /// alarms --format json` prints them.
-async fn kpi(journal: &Path, query: &HistoryQuery) -> Result<String, String> {
+async fn kpi(journal: &Path, rules: &KpiRules, query: &HistoryQuery) -> Result<String, String> {
     let now = now_ms();
     let until = query.until.unwrap_or(now);
     let since = query.since.unwrap_or(until.saturating_sub(24 * 3_600_000));
@@ -231,7 +237,8 @@ async fn kpi(journal: &Path, query: &HistoryQuery) -> Result<String, String> {
         tracing::error!(journal = %journal.display(), error = %e, "cannot read the journal for the alarm figures");
         e.to_string()
     })?;
-    let report = cellwatch_models::kpi::alarm_report(&read.events, &read.before, since, until, now);
+    let report =
+        cellwatch_models::kpi::alarm_report(&read.events, &read.before, since, until, now, rules);
     let mut v = serde_json::to_value(&report).unwrap_or_default();
     v["benchmarks"] = serde_json::to_value(report.benchmarks()).unwrap_or_default();
     v["unreadable"] = read.unreadable.into();

@@ -76,7 +76,7 @@ impl MetricsSink {
             accounted_until: now,
             last_update: None,
             ever_connected: false,
-            kpis: LiveKpis::new(),
+            kpis: LiveKpis::with_rules(config.kpi),
             kept: HashMap::new(),
             flood_counted: 0,
         }

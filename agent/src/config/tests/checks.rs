@@ -676,3 +676,37 @@ fn a_discrete_alarm_needs_a_contact_a_known_tag_and_its_own_id() {
         assert!(e.contains(expected), "{expected}\nin\n{e}");
     }
 }
+
+#[test]
+fn kpi_rules_default_to_isa_18_2_and_are_checked() {
+    let c = parse("cell.toml", GOOD, Path::new("base"), &mem()).unwrap();
+    assert_eq!(c.kpi, cellwatch_models::kpi::KpiRules::default());
+    assert_eq!((c.kpi.flood_raises, c.kpi.flood_ends_below), (10, 5));
+    let own = format!(
+        "{GOOD}\n[kpi]\nflood_raises = 20\nchatter_raises = 4\nchatter_window = \"2min\"\nstale_after = \"8h\"\n"
+    );
+    let c = parse("cell.toml", &own, Path::new("base"), &mem()).unwrap();
+    assert_eq!(
+        c.kpi,
+        cellwatch_models::kpi::KpiRules {
+            flood_raises: 20,
+            flood_ends_below: 10,
+            chatter_raises: 4,
+            chatter_window_ms: 120_000,
+            stale_ms: 8 * 3_600_000,
+        }
+    );
+    let bad = format!(
+        "{GOOD}\n[kpi]\nflood_raises = 0\nflood_ends_below = 12\nchatter_raises = 1\nchatter_window = \"2h\"\nstale_after = \"10s\"\n"
+    );
+    let e = errors(&bad);
+    for expected in [
+        "kpi.flood_raises: 0 is not between 1 and 10000",
+        "kpi.flood_ends_below: 12 is not between 1 and 11 (flood_raises + 1: no hysteresis)",
+        "kpi.chatter_raises: 1 is not between 2 and 100",
+        "kpi.chatter_window: must be between 1s and 1h",
+        "kpi.stale_after: must be between 1min and 366d",
+    ] {
+        assert!(e.contains(expected), "{expected}\nin\n{e}");
+    }
+}

@@ -7,6 +7,7 @@ mod alertmanager;
 mod bus;
 mod checks;
 mod journal;
+mod kpi;
 mod legacy;
 mod opcua;
 mod sfc;
@@ -434,6 +435,7 @@ impl Validator<'_> {
         );
         let zenoh = self.zenoh(raw.zenoh, &cell);
         let alertmanager = self.alertmanager(raw.alertmanager);
+        let kpi = self.kpi(raw.kpi);
         let journal = JournalConfig {
             path: self.path(
                 raw.journal
@@ -614,6 +616,7 @@ impl Validator<'_> {
             sfc,
             delays,
             alertmanager,
+            kpi,
             warnings: Vec::new(),
         })
     }
