@@ -155,6 +155,11 @@ enum Command {
     /// directory's key pair, a server certificate trusted only from its
     /// `trusted/` folder.
     Discover(DiscoverArgs),
+    /// Trust an OPC UA server's certificate in one go: shows it (subject,
+    /// validity, SHA-256 fingerprint, thumbprint), trusts it on
+    /// confirmation (or --yes), shows the agent's own certificate for the
+    /// server's trusted clients and whether the server accepts it yet.
+    TrustServer(commands::trust_server::TrustServerArgs),
     /// Check a journal: its command rows' hash chain (audit verify).
     Audit(commands::audit::Args),
     /// Look after a journal: an online, consistent backup while its agent
@@ -212,10 +217,13 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             | Command::OutOfService(_)
             | Command::InService(_)
             | Command::Discover(_)
+            | Command::TrustServer(_)
     );
     let filter = std::env::var("RUST_LOG").unwrap_or_else(|_| {
         if quiet {
-            "error".into()
+            // The OPC UA stack's own errors of a refused connection are
+            // said once, with what to do, by the command.
+            "error,opcua_client=off,opcua_types=off,opcua_core=off".into()
         } else {
             "warn,cellwatch=info".into()
         }
@@ -268,6 +276,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::OutOfService(args) => commands::bus::out_of_service(&args, out).await,
             Command::InService(args) => commands::bus::command(Action::InService, &args, out).await,
             Command::Discover(args) => commands::discover::run(&args, out).await,
+            Command::TrustServer(args) => commands::trust_server::run(&args, out).await,
             // Dispatched synchronously by `run`; never sent here.
             Command::Sf(_)
             | Command::Sfc(_)

@@ -529,39 +529,54 @@ pub(crate) struct DiscoverArgs {
 impl DiscoverArgs {
     /// The connection the flags describe.
     pub(crate) fn opcua(&self) -> Result<crate::config::OpcUaConfig, Failure> {
-        use crate::config::{Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy};
-        let endpoint = self.endpoint.clone().unwrap_or_default();
-        if !endpoint.starts_with("opc.tcp://") {
-            return Err(Failure::input(format!(
-                "'{endpoint}' must start with opc.tcp://"
-            )));
-        }
-        if (self.security_policy == SecurityPolicy::None)
-            != (self.security_mode == SecurityMode::None)
-        {
-            return Err(Failure::input(
-                "--security-policy None goes with --security-mode None, and only with it",
-            ));
-        }
-        let publishing = std::time::Duration::from_millis(100);
-        let sampling = std::time::Duration::from_millis(50);
-        Ok(OpcUaConfig {
-            endpoint,
-            policy: self.security_policy,
-            mode: self.security_mode,
-            pki_dir: self.pki_dir.clone(),
-            identity: match (&self.user, &self.password_env) {
-                (Some(user), Some(var)) => Identity::User {
-                    user: user.clone(),
-                    password: PasswordSource::Env(var.clone()),
-                },
-                _ => Identity::Anonymous,
-            },
-            publishing_interval: publishing,
-            sampling_interval: sampling,
-            namespace_uri: None,
-            queue_size: OpcUaConfig::default_queue_size(publishing, sampling),
-            max_notifications_per_publish: OpcUaConfig::DEFAULT_MAX_NOTIFICATIONS,
-        })
+        connection(
+            self.endpoint.as_deref().unwrap_or_default(),
+            &self.pki_dir,
+            self.security_policy,
+            self.security_mode,
+            self.user.as_deref().zip(self.password_env.as_deref()),
+        )
     }
+}
+
+/// A one-off connection to `endpoint`: security, the PKI directory, a
+/// user and the environment variable of its password.
+pub(crate) fn connection(
+    endpoint: &str,
+    pki_dir: &std::path::Path,
+    policy: crate::config::SecurityPolicy,
+    mode: crate::config::SecurityMode,
+    user: Option<(&str, &str)>,
+) -> Result<crate::config::OpcUaConfig, Failure> {
+    use crate::config::{Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy};
+    if !endpoint.starts_with("opc.tcp://") {
+        return Err(Failure::input(format!(
+            "'{endpoint}' must start with opc.tcp://"
+        )));
+    }
+    if (policy == SecurityPolicy::None) != (mode == SecurityMode::None) {
+        return Err(Failure::input(
+            "--security-policy None goes with --security-mode None, and only with it",
+        ));
+    }
+    let publishing = std::time::Duration::from_millis(100);
+    let sampling = std::time::Duration::from_millis(50);
+    Ok(OpcUaConfig {
+        endpoint: endpoint.to_string(),
+        policy,
+        mode,
+        pki_dir: pki_dir.to_path_buf(),
+        identity: match user {
+            Some((user, var)) => Identity::User {
+                user: user.to_string(),
+                password: PasswordSource::Env(var.to_string()),
+            },
+            None => Identity::Anonymous,
+        },
+        publishing_interval: publishing,
+        sampling_interval: sampling,
+        namespace_uri: None,
+        queue_size: OpcUaConfig::default_queue_size(publishing, sampling),
+        max_notifications_per_publish: OpcUaConfig::DEFAULT_MAX_NOTIFICATIONS,
+    })
 }

@@ -21,6 +21,7 @@ pub(crate) mod signals;
 pub(crate) mod simulate;
 pub(crate) mod systemd;
 pub(crate) mod timers;
+pub(crate) mod trust_server;
 
 /// Why a command failed. Each error is sorted into one of the two by the
 /// code that knows what failed; there is no blanket conversion.

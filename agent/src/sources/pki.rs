@@ -54,12 +54,19 @@ pub fn protect_own_key(pki_dir: &Path, existed: bool) -> Result<(), String> {
 pub fn trust(cert: &Path, pki_dir: &Path) -> Result<PathBuf, String> {
     let bytes = std::fs::read(cert)
         .map_err(|e| format!("cannot read certificate {}: {e}", cert.display()))?;
-    let x509 = X509::from_der(&bytes)
-        .map_err(|e| format!("{} is not a DER certificate: {e}", cert.display()))?;
+    trust_der(&bytes, pki_dir).map_err(|e| format!("{}: {e}", cert.display()))
+}
+
+/// [`trust`] for a certificate in hand (DER).
+///
+/// # Errors
+/// The bytes are no certificate, or the copy fails.
+pub fn trust_der(bytes: &[u8], pki_dir: &Path) -> Result<PathBuf, String> {
+    let x509 = X509::from_der(bytes).map_err(|e| format!("not a DER certificate: {e}"))?;
     let dir = pki_dir.join("trusted");
     std::fs::create_dir_all(&dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
     let target = dir.join(CertificateStore::cert_file_name(&x509));
-    std::fs::write(&target, &bytes)
+    std::fs::write(&target, bytes)
         .map_err(|e| format!("cannot write {}: {e}", target.display()))?;
     let rejected = pki_dir
         .join("rejected")
@@ -70,4 +77,65 @@ pub fn trust(cert: &Path, pki_dir: &Path) -> Result<PathBuf, String> {
         Err(e) => return Err(format!("cannot remove {}: {e}", rejected.display())),
     }
     Ok(target)
+}
+
+/// What a person checks before trusting a certificate.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CertificateFacts {
+    /// `CN=…/O=…`.
+    pub subject: String,
+    /// Valid from, RFC 3339.
+    pub not_before: String,
+    /// Valid until, RFC 3339.
+    pub not_after: String,
+    /// Whether it is valid now.
+    pub valid_now: bool,
+    /// SHA-256 of the DER, `AB:CD:…`.
+    pub sha256: String,
+    /// SHA-1 of the DER, as OPC UA servers list certificates (thumbprint).
+    pub thumbprint: String,
+}
+
+impl CertificateFacts {
+    /// The facts of the DER certificate `bytes`, validity judged at `now`
+    /// (ms since the epoch).
+    ///
+    /// # Errors
+    /// The bytes are no certificate.
+    pub fn of(bytes: &[u8], now: u64) -> Result<CertificateFacts, String> {
+        use sha2::Digest;
+        let x509 = X509::from_der(bytes).map_err(|e| format!("not a DER certificate: {e}"))?;
+        let colons = |b: &[u8]| {
+            b.iter()
+                .map(|x| format!("{x:02X}"))
+                .collect::<Vec<_>>()
+                .join(":")
+        };
+        let from = x509.not_before().ok();
+        let until = x509.not_after().ok();
+        let now = chrono::DateTime::from_timestamp_millis(now as i64).unwrap_or_default();
+        let when = |t: Option<chrono::DateTime<chrono::Utc>>| {
+            t.map_or_else(|| "unreadable".into(), |t| t.to_rfc3339_opts(chrono::SecondsFormat::Secs, true))
+        };
+        Ok(CertificateFacts {
+            subject: x509.subject_name(),
+            not_before: when(from),
+            not_after: when(until),
+            valid_now: from.is_some_and(|f| f <= now) && until.is_some_and(|u| now <= u),
+            sha256: colons(&sha2::Sha256::digest(bytes)),
+            thumbprint: x509.thumbprint().as_hex_string().to_ascii_uppercase(),
+        })
+    }
+}
+
+/// Whether `pki_dir/trusted/` holds exactly the DER certificate `bytes`
+/// (under the name the certificate store looks for), and `rejected/` does
+/// not (the store takes a rejected certificate as untrusted).
+pub fn is_trusted(bytes: &[u8], pki_dir: &Path) -> bool {
+    let Ok(x509) = X509::from_der(bytes) else {
+        return false;
+    };
+    let name = CertificateStore::cert_file_name(&x509);
+    let trusted = std::fs::read(pki_dir.join("trusted").join(&name)).is_ok_and(|b| b == bytes);
+    trusted && !pki_dir.join("rejected").join(&name).exists()
 }

@@ -64,6 +64,19 @@ pub(super) fn array_limit(config: &OpcUaConfig) -> usize {
 /// # Errors
 /// The client configuration is invalid.
 pub fn client(cell: &str, config: &OpcUaConfig) -> Result<opcua::client::Client, SourceError> {
+    client_retrying(cell, config, -1)
+}
+
+/// [`client`], its sessions retried `retries` times (`-1`: for ever; `0`:
+/// a failed connection ends the event loop with the server's status).
+///
+/// # Errors
+/// The client configuration is invalid.
+pub(super) fn client_retrying(
+    cell: &str,
+    config: &OpcUaConfig,
+    retries: i32,
+) -> Result<opcua::client::Client, SourceError> {
     let key_existed = crate::sources::pki::own_key(&config.pki_dir).exists();
     let client = ClientBuilder::new()
         .application_name(format!("cellwatch {cell}"))
@@ -73,7 +86,7 @@ pub fn client(cell: &str, config: &OpcUaConfig) -> Result<opcua::client::Client,
         .create_sample_keypair(true)
         .trust_server_certs(false)
         .verify_server_certs(true)
-        .session_retry_limit(-1)
+        .session_retry_limit(retries)
         .session_retry_initial(Duration::from_millis(500))
         .session_retry_max(Duration::from_secs(10))
         .keep_alive_interval(Duration::from_secs(1))
