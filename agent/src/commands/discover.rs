@@ -76,6 +76,21 @@ pub(crate) async fn run(args: &DiscoverArgs, out: &mut dyn Write) -> Result<(), 
                             .map_err(|e| Failure::input(format!("--filter '{g}': {e}")))?,
                     ),
                 };
+                let id = match &args.cell {
+                    Some(id) if config::key_chunk(id) => id.clone(),
+                    Some(id) => {
+                        return Err(Failure::input(format!(
+                            "--cell '{id}': letters, digits, '-' and '_' only"
+                        )))
+                    }
+                    None => cell_id(
+                        &opcua::server_identity(&opcua)
+                            .await
+                            .map_err(Failure::runtime)?
+                            .application_name,
+                    ),
+                };
+                let cell = Cell { id, args };
                 let found = browse(&session, root, args.depth, filter.as_ref()).await?;
                 let (tags, skipped) = discovered_tags(&namespaces, &found);
                 if let Some(path) = &args.tags_file {
@@ -83,8 +98,17 @@ pub(crate) async fn run(args: &DiscoverArgs, out: &mut dyn Write) -> Result<(), 
                         Failure::runtime(format!("--tags-file {}: {e}", path.display()))
                     })?;
                 }
-                print_config(&opcua, &tags, &skipped, args.tags_file.as_deref(), out)
-                    .map_err(Failure::output)
+                print_config(&opcua, &cell, &tags, &skipped, out).map_err(Failure::output)?;
+                let missing = cell.missing();
+                if !missing.is_empty() {
+                    eprintln!(
+                        "note: the configuration names files that are not there yet; `cellwatch validate` wants them:"
+                    );
+                    for m in missing {
+                        eprintln!("  {m}");
+                    }
+                }
+                Ok(())
             }
         }
     }
@@ -332,19 +356,21 @@ fn write_tags_file(path: &std::path::Path, tags: &[Discovered]) -> Result<(), St
 
 fn print_config(
     opcua: &OpcUaConfig,
+    cell: &Cell<'_>,
     tags: &[Discovered],
     skipped: &BTreeMap<String, String>,
-    tags_file: Option<&std::path::Path>,
     out: &mut dyn Write,
 ) -> std::io::Result<()> {
+    let args = cell.args;
+    let tags_file = args.tags_file.as_deref();
     writeln!(
         out,
-        "# Discovered by `cellwatch discover` on {}.",
-        opcua.endpoint
+        "# Cell {} as `cellwatch discover` found it on {}.",
+        cell.id, opcua.endpoint
     )?;
     writeln!(
         out,
-        "# Keep the tags your checks read; set [cell] id, and the bus ([zenoh.tls])."
+        "# Keep the tags your checks read and add the checks ([[checks.limit]],\n# [[checks.discrete]], ...); `cellwatch validate` this file before `run`."
     )?;
     if let Some(path) = tags_file {
         writeln!(
@@ -354,7 +380,7 @@ fn print_config(
         )?;
         writeln!(out, "tags_file = {}", quoted(&path.display().to_string()))?;
     }
-    writeln!(out, "\n[cell]\nid = \"new-cell\"\n")?;
+    writeln!(out, "\n[cell]\nid = {}\n", quoted(&cell.id))?;
     writeln!(out, "[opcua]\nendpoint = {}", quoted(&opcua.endpoint))?;
     writeln!(out, "security_policy = {}", quoted(opcua.policy.as_str()))?;
     writeln!(out, "security_mode = {}", quoted(opcua.mode.as_str()))?;
@@ -363,6 +389,12 @@ fn print_config(
         "pki_dir = {}",
         quoted(&opcua.pki_dir.display().to_string())
     )?;
+    if let crate::config::Identity::User { user, password } = &opcua.identity {
+        writeln!(out, "\n[opcua.identity]\nkind = \"user\"\nuser = {}", quoted(user))?;
+        if let crate::config::PasswordSource::Env(var) = password {
+            writeln!(out, "password_env = {}", quoted(var))?;
+        }
+    }
     if tags_file.is_none() {
         for t in tags {
             writeln!(out, "\n[[tags]]")?;
@@ -380,9 +412,39 @@ fn print_config(
     for (node, why) in skipped {
         writeln!(out, "# skipped {node}: {why}")?;
     }
+    let list = |items: &[String]| {
+        items
+            .iter()
+            .map(|i| quoted(i))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let listen = if args.listen.is_empty() && args.connect.is_empty() {
+        vec!["quic/127.0.0.1:7447".to_string()]
+    } else {
+        args.listen.clone()
+    };
+    writeln!(out, "\n[zenoh]")?;
+    if !listen.is_empty() {
+        writeln!(out, "listen = [{}]", list(&listen))?;
+    }
+    if !args.connect.is_empty() {
+        writeln!(out, "connect = [{}]", list(&args.connect))?;
+    }
     writeln!(
         out,
-        "\n[zenoh]\n# Give the bus its certificates (cellwatch pki) and remove `plain`:\n# [zenoh.tls]\n# ca = \"pki-bus/ca.pem\"\n# cert = \"pki-bus/agent-new-cell.pem\"\n# key = \"pki-bus/agent-new-cell.key\"\nplain = true"
+        "signing_key = {}",
+        quoted(&cell.signing_key().display().to_string())
+    )?;
+    let [ca, cert, key] = cell.bus_files();
+    writeln!(out, "\n[zenoh.tls]")?;
+    for (k, path) in [("ca", ca), ("cert", cert), ("key", key)] {
+        writeln!(out, "{k} = {}", quoted(&path.display().to_string()))?;
+    }
+    writeln!(
+        out,
+        "\n[commands]\noperators_file = {}",
+        quoted(&args.operators.display().to_string())
     )
 }
 
@@ -524,6 +586,108 @@ pub(crate) struct DiscoverArgs {
     /// The environment variable holding the user's password.
     #[arg(long)]
     pub(crate) password_env: Option<String>,
+    /// The cell's id; by default made from the server's application name
+    /// (`Press 7 PLC` → `press-7-plc`).
+    #[arg(long, conflicts_with = "check")]
+    pub(crate) cell: Option<String>,
+    /// The bus's certificates (`cellwatch pki`): its ca.pem and the cell's
+    /// agent-<cell>.pem and .key.
+    #[arg(long, value_name = "DIR", default_value = "pki-bus", conflicts_with = "check")]
+    pub(crate) bus_pki: PathBuf,
+    /// Where the agent listens on the bus (repeatable); without --listen or
+    /// --connect, quic/127.0.0.1:7447.
+    #[arg(long, value_name = "ENDPOINT", conflicts_with = "check")]
+    pub(crate) listen: Vec<String>,
+    /// A Zenoh router or peer the agent connects to (repeatable),
+    /// quic/host:port.
+    #[arg(long, value_name = "ENDPOINT", conflicts_with = "check")]
+    pub(crate) connect: Vec<String>,
+    /// The agent's signing key (`cellwatch pki agent-key`); by default
+    /// <cell>.agent.key.
+    #[arg(long, value_name = "FILE", conflicts_with = "check")]
+    pub(crate) signing_key: Option<PathBuf>,
+    /// The operators file (`cellwatch keygen`).
+    #[arg(long, value_name = "FILE", default_value = "operators.toml", conflicts_with = "check")]
+    pub(crate) operators: PathBuf,
+}
+
+/// What `discover` writes beyond the server's variables: the cell and its
+/// place on the bus.
+struct Cell<'a> {
+    id: String,
+    args: &'a DiscoverArgs,
+}
+
+impl Cell<'_> {
+    fn signing_key(&self) -> PathBuf {
+        self.args
+            .signing_key
+            .clone()
+            .unwrap_or_else(|| PathBuf::from(format!("{}.agent.key", self.id)))
+    }
+
+    fn bus_files(&self) -> [PathBuf; 3] {
+        let dir = &self.args.bus_pki;
+        [
+            dir.join("ca.pem"),
+            dir.join(format!("agent-{}.pem", self.id)),
+            dir.join(format!("agent-{}.key", self.id)),
+        ]
+    }
+
+    /// The files the configuration names that are not there yet, with the
+    /// command that makes each.
+    fn missing(&self) -> Vec<String> {
+        let [ca, cert, key] = self.bus_files();
+        let dir = self.args.bus_pki.display();
+        let mut out = Vec::new();
+        if !ca.exists() {
+            out.push(format!("{}: cellwatch pki ca --dir {dir}", ca.display()));
+        }
+        if !cert.exists() || !key.exists() {
+            out.push(format!(
+                "{}: cellwatch pki issue --dir {dir} --name agent-{}",
+                cert.display(),
+                self.id
+            ));
+        }
+        let signing = self.signing_key();
+        if !signing.exists() {
+            out.push(format!(
+                "{}: cellwatch pki agent-key --cell {} --out {} >> trust.toml",
+                signing.display(),
+                self.id,
+                signing.display()
+            ));
+        }
+        if !self.args.operators.exists() {
+            out.push(format!(
+                "{}: cellwatch keygen --operator NAME --out NAME.key --allow ack >> {}",
+                self.args.operators.display(),
+                self.args.operators.display()
+            ));
+        }
+        out
+    }
+}
+
+/// A cell id from a server's application name: lower case, every run of
+/// other characters than letters, digits, `-` and `_` one `-`.
+fn cell_id(application_name: &str) -> String {
+    let mut id = String::new();
+    for c in application_name.trim().chars() {
+        if c.is_alphanumeric() || c == '_' {
+            id.extend(c.to_lowercase());
+        } else if !id.ends_with('-') {
+            id.push('-');
+        }
+    }
+    let id = id.trim_matches('-').to_string();
+    if id.is_empty() {
+        "cell".into()
+    } else {
+        id
+    }
 }
 
 impl DiscoverArgs {

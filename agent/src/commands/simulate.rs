@@ -12,6 +12,9 @@ use crate::sim::cnc::{Scenario, SimOptions, SimulatedCnc};
 use crate::sim::moulding::{Event, MouldingBus};
 use crate::sources::pki;
 
+/// The simulated CNC's commands on its standard input.
+const COMMANDS: &str = "set ADDRESS 0|1, temp CELSIUS, bad ADDRESS, quit";
+
 /// Serves a simulated moulding bus until interrupted or `quit`.
 pub(crate) async fn moulding(args: &MouldingArgs, out: &mut dyn Write) -> Result<(), Failure> {
     let mut signals = StopSignals::listen()?;
@@ -124,7 +127,8 @@ pub(crate) async fn moulding(args: &MouldingArgs, out: &mut dyn Write) -> Result
 }
 
 /// Runs the simulator until interrupted. Commands on standard input:
-/// `set ADDRESS 0|1`, `bad ADDRESS`, `quit`.
+/// `set ADDRESS 0|1`, `temp CELSIUS` (the spindle, D100), `bad ADDRESS`,
+/// `quit` ([`COMMANDS`]).
 pub(crate) async fn cnc(args: &SimulateArgs, out: &mut dyn Write) -> Result<(), Failure> {
     let mut signals = StopSignals::listen()?;
     let sim = SimulatedCnc::start(&SimOptions {
@@ -153,7 +157,7 @@ pub(crate) async fn cnc(args: &SimulateArgs, out: &mut dyn Write) -> Result<(), 
         pki::own_cert(&args.pki_dir).display()
     )
     .map_err(io)?;
-    writeln!(out, "commands: set ADDRESS 0|1, bad ADDRESS, quit").map_err(io)?;
+    writeln!(out, "commands: {COMMANDS}").map_err(io)?;
     out.flush().map_err(io)?;
     let player = if args.scenario == "demo" {
         let s = sim.clone();
@@ -178,10 +182,14 @@ pub(crate) async fn cnc(args: &SimulateArgs, out: &mut dyn Write) -> Result<(), 
                 let words: Vec<&str> = line.split_whitespace().collect();
                 let result = match words.as_slice() {
                     ["set", addr, v] => sim.set(addr, matches!(*v, "1" | "true" | "on")),
+                    ["temp", celsius] => match celsius.parse::<f64>() {
+                        Ok(c) => sim.set_temperature(c),
+                        Err(_) => Err(format!("temp {celsius}: not a number")),
+                    },
                     ["bad", addr] => sim.set_bad(addr),
                     ["quit"] => break,
                     [] => Ok(()),
-                    _ => Err(format!("unknown command '{line}': set ADDRESS 0|1, bad ADDRESS, quit")),
+                    _ => Err(format!("unknown command '{line}': {COMMANDS}")),
                 };
                 match result {
                     Ok(()) => writeln!(out, "ok").map_err(io)?,
