@@ -54,6 +54,7 @@ fn engine() -> (CellEngine, usize, common::Rng) {
         .into_iter()
         .enumerate()
         .map(|(c, sf)| SwitchingCheck {
+            text: None,
             id: format!("c{c}"),
             sf,
             polarity: Polarity::On,

@@ -48,6 +48,7 @@ fn engine(limits: Vec<LimitCheck>) -> CellEngine {
         });
     }
     let check = SwitchingCheck {
+        text: None,
         id: "ese".into(),
         sf,
         polarity: Polarity::On,

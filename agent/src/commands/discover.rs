@@ -390,7 +390,11 @@ fn print_config(
         quoted(&opcua.pki_dir.display().to_string())
     )?;
     if let crate::config::Identity::User { user, password } = &opcua.identity {
-        writeln!(out, "\n[opcua.identity]\nkind = \"user\"\nuser = {}", quoted(user))?;
+        writeln!(
+            out,
+            "\n[opcua.identity]\nkind = \"user\"\nuser = {}",
+            quoted(user)
+        )?;
         if let crate::config::PasswordSource::Env(var) = password {
             writeln!(out, "password_env = {}", quoted(var))?;
         }
@@ -592,7 +596,12 @@ pub(crate) struct DiscoverArgs {
     pub(crate) cell: Option<String>,
     /// The bus's certificates (`cellwatch pki`): its ca.pem and the cell's
     /// agent-<cell>.pem and .key.
-    #[arg(long, value_name = "DIR", default_value = "pki-bus", conflicts_with = "check")]
+    #[arg(
+        long,
+        value_name = "DIR",
+        default_value = "pki-bus",
+        conflicts_with = "check"
+    )]
     pub(crate) bus_pki: PathBuf,
     /// Where the agent listens on the bus (repeatable); without --listen or
     /// --connect, quic/127.0.0.1:7447.
@@ -607,7 +616,12 @@ pub(crate) struct DiscoverArgs {
     #[arg(long, value_name = "FILE", conflicts_with = "check")]
     pub(crate) signing_key: Option<PathBuf>,
     /// The operators file (`cellwatch keygen`).
-    #[arg(long, value_name = "FILE", default_value = "operators.toml", conflicts_with = "check")]
+    #[arg(
+        long,
+        value_name = "FILE",
+        default_value = "operators.toml",
+        conflicts_with = "check"
+    )]
     pub(crate) operators: PathBuf,
 }
 

@@ -3,7 +3,7 @@
 //! trusts it on confirmation, shows the agent's own and whether the server
 //! accepts it yet.
 
-use std::io::{BufRead, IsTerminal, Write};
+use std::io::{BufRead, Write};
 use std::path::PathBuf;
 
 use super::Failure;
@@ -67,7 +67,12 @@ pub(crate) async fn run(args: &TrustServerArgs, out: &mut dyn Write) -> Result<(
         .map_err(io)?;
     }
     if pki::is_trusted(&server.certificate, &args.pki_dir) {
-        writeln!(out, "is trusted already ({}/trusted).", args.pki_dir.display()).map_err(io)?;
+        writeln!(
+            out,
+            "is trusted already ({}/trusted).",
+            args.pki_dir.display()
+        )
+        .map_err(io)?;
     } else {
         let yes = args.yes
             || ask(
@@ -76,7 +81,7 @@ pub(crate) async fn run(args: &TrustServerArgs, out: &mut dyn Write) -> Result<(
             )?;
         if !yes {
             return Err(Failure::Input(
-                "not trusted: nothing changed (on a terminal, answer y; elsewhere, pass --yes once the fingerprint is checked)".into(),
+                "not trusted: nothing changed (answer y, or pass --yes once the fingerprint is checked)".into(),
             ));
         }
         let path = pki::trust_der(&server.certificate, &args.pki_dir).map_err(Failure::runtime)?;
@@ -125,12 +130,9 @@ fn facts_lines(f: &CertificateFacts, out: &mut dyn Write) -> std::io::Result<()>
     )
 }
 
-/// Asks `question` on the terminal: whether the answer is yes. Not a
-/// terminal: no.
+/// Asks `question`: whether the answer on standard input is yes. No
+/// answer (end of input): no.
 fn ask(out: &mut dyn Write, question: &str) -> Result<bool, Failure> {
-    if !std::io::stdin().is_terminal() {
-        return Ok(false);
-    }
     write!(out, "{question}").map_err(Failure::output)?;
     out.flush().map_err(Failure::output)?;
     let mut line = String::new();
@@ -138,5 +140,8 @@ fn ask(out: &mut dyn Write, question: &str) -> Result<bool, Failure> {
         .lock()
         .read_line(&mut line)
         .map_err(|e| Failure::runtime(format!("cannot read the answer: {e}")))?;
-    Ok(matches!(line.trim().to_ascii_lowercase().as_str(), "y" | "yes"))
+    Ok(matches!(
+        line.trim().to_ascii_lowercase().as_str(),
+        "y" | "yes"
+    ))
 }

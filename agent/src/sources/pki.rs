@@ -115,7 +115,10 @@ impl CertificateFacts {
         let until = x509.not_after().ok();
         let now = chrono::DateTime::from_timestamp_millis(now as i64).unwrap_or_default();
         let when = |t: Option<chrono::DateTime<chrono::Utc>>| {
-            t.map_or_else(|| "unreadable".into(), |t| t.to_rfc3339_opts(chrono::SecondsFormat::Secs, true))
+            t.map_or_else(
+                || "unreadable".into(),
+                |t| t.to_rfc3339_opts(chrono::SecondsFormat::Secs, true),
+            )
         };
         Ok(CertificateFacts {
             subject: x509.subject_name(),

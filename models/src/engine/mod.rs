@@ -1618,6 +1618,7 @@ mod tests {
             .collect();
         tags.extend_from_slice(extra);
         let check = SwitchingCheck {
+            text: None,
             id: "ese".into(),
             sf,
             polarity: Polarity::On,
@@ -2317,6 +2318,7 @@ mod armed {
             })
             .collect();
         let check = SwitchingCheck {
+            text: None,
             id: "csd".into(),
             sf,
             polarity: Polarity::On,

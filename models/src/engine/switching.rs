@@ -22,6 +22,9 @@ pub struct SwitchingCheck {
     pub severity: Severity,
     /// Fault type for history (`ESE`).
     pub fault_type: String,
+    /// What the alarm's message says before its culprit; `None`: the
+    /// fault type (a discrete alarm's text is its own).
+    pub text: Option<String>,
     /// Comments for the culprits.
     pub comments: CommentDb,
     /// The check is armed only while this holds (CSD: cycle start pressed);
@@ -232,7 +235,10 @@ fn finding(
         active: fault,
         fault_step: None,
         culprits: Vec::new(),
-        message: format!("{} cleared", check.fault_type),
+        message: format!(
+            "{} cleared",
+            check.text.as_ref().unwrap_or(&check.fault_type)
+        ),
     };
     if !fault {
         return finding;
@@ -247,10 +253,11 @@ fn finding(
     );
     finding.fault_step = e.fault_step;
     finding.culprits = e.culprits;
+    let text = check.text.as_ref().unwrap_or(&check.fault_type);
     let mut message = match (finding.fault_step, finding.culprits.first()) {
-        (Some(step), Some(c)) => format!("{} at step {step}: {c}", check.fault_type),
-        (None, Some(c)) => format!("{}: {c}", check.fault_type),
-        _ => check.fault_type.clone(),
+        (Some(step), Some(c)) => format!("{text} at step {step}: {c}"),
+        (None, Some(c)) => format!("{text}: {c}"),
+        _ => text.clone(),
     };
     if !e.unknown.is_empty() {
         let names: Vec<&str> = e.unknown.iter().map(Signal::name).collect();

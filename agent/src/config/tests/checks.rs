@@ -637,7 +637,8 @@ fn a_discrete_alarm_is_a_switching_check_over_one_contact() {
     );
     let c = parse("cell.toml", &text, Path::new("base"), &mem()).unwrap();
     let door = c.switching.iter().find(|s| s.id == "door").unwrap();
-    assert_eq!(door.fault_type, "Guard door open");
+    assert_eq!(door.text.as_deref(), Some("Guard door open"));
+    assert_eq!(door.fault_type, "X2 OFF");
     assert_eq!(door.severity, Severity::Critical);
     assert_eq!(door.polarity, cellwatch_models::explain::Polarity::Off);
     assert_eq!(door.sf.leaves(), vec![Signal::new("X2")]);
@@ -646,9 +647,15 @@ fn a_discrete_alarm_is_a_switching_check_over_one_contact() {
     // (it has no comment), no delay.
     let x1 = c.switching.iter().find(|s| s.id == "x1-on").unwrap();
     assert_eq!(
-        (x1.fault_type.as_str(), x1.severity, x1.polarity),
         (
-            "x1",
+            x1.text.as_deref(),
+            x1.fault_type.as_str(),
+            x1.severity,
+            x1.polarity
+        ),
+        (
+            Some("x1"),
+            "X1 ON",
             Severity::High,
             cellwatch_models::explain::Polarity::On
         )

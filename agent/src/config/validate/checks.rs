@@ -149,6 +149,7 @@ impl Validator<'_> {
             }
         };
         Some(SwitchingCheck {
+            text: None,
             armed_when,
             id: c.id.into_inner(),
             fault_type: c.fault_type.unwrap_or_else(|| coil.to_string()),
@@ -232,7 +233,15 @@ impl Validator<'_> {
                 armed_when,
                 sf: SwitchingFunction::from_expr(Signal::new(&id), &Expr::Lit(tag.clone(), false)),
                 id,
-                fault_type: message,
+                fault_type: format!(
+                    "{tag} {}",
+                    if polarity == Polarity::On {
+                        "ON"
+                    } else {
+                        "OFF"
+                    }
+                ),
+                text: Some(message),
                 polarity,
                 severity,
                 comments: comment.into_iter().map(|c| (tag.clone(), c)).collect(),

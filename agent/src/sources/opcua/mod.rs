@@ -487,7 +487,9 @@ fn refused(config: &OpcUaConfig, status: Option<opcua::types::StatusCode>) -> St
             let own = crate::sources::pki::own_cert(&config.pki_dir);
             let facts = std::fs::read(&own)
                 .map_err(|e| e.to_string())
-                .and_then(|der| crate::sources::pki::CertificateFacts::of(&der, crate::clock::now_ms()))
+                .and_then(|der| {
+                    crate::sources::pki::CertificateFacts::of(&der, crate::clock::now_ms())
+                })
                 .map_or_else(
                     |e| format!("unreadable: {e}"),
                     |f| format!("thumbprint {}, SHA-256 {}", f.thumbprint, f.sha256),
@@ -497,7 +499,11 @@ fn refused(config: &OpcUaConfig, status: Option<opcua::types::StatusCode>) -> St
                 own.display()
             )
         }
-        Some(s @ (StatusCode::BadIdentityTokenRejected | StatusCode::BadIdentityTokenInvalid | StatusCode::BadUserAccessDenied)) => format!(
+        Some(
+            s @ (StatusCode::BadIdentityTokenRejected
+            | StatusCode::BadIdentityTokenInvalid
+            | StatusCode::BadUserAccessDenied),
+        ) => format!(
             "{endpoint}: the server refused the login ({s}): check the user and its password"
         ),
         Some(s) => format!("{endpoint}: no session: {s}"),
