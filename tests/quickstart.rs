@@ -100,10 +100,6 @@ struct Desk {
 }
 
 impl Desk {
-    fn sh(&self, script: &str) -> Output {
-        self.sh_with(script, "")
-    }
-
     /// `script` with `input` on its standard input.
     fn sh_with(&self, script: &str, input: &str) -> Output {
         let mut child = Command::new("sh")
@@ -212,12 +208,6 @@ fn tags_known(addr: &str) {
         );
         std::thread::sleep(Duration::from_millis(100));
     }
-}
-
-fn files_in(dir: &Path) -> Vec<PathBuf> {
-    std::fs::read_dir(dir)
-        .map(|d| d.map_while(Result::ok).map(|e| e.path()).collect())
-        .unwrap_or_default()
 }
 
 #[test]
