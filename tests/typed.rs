@@ -263,6 +263,38 @@ async fn discover_prints_a_configuration_of_the_demos_tags_and_checks_one() {
             .await
             .unwrap();
     assert_eq!(r.code, 0, "{}", r.stderr);
+    // The cell's id from the server's application name; the bus's files
+    // it names are listed, with the commands that make them, until there.
+    let cell = "cellwatch-simulated-cnc";
+    assert!(
+        r.stdout.contains(&format!("[cell]\nid = \"{cell}\"\n")),
+        "{}",
+        r.stdout
+    );
+    assert!(
+        r.stderr.contains(&format!(
+            "cellwatch pki issue --dir pki-bus --name agent-{cell}"
+        )),
+        "{}",
+        r.stderr
+    );
+    crate::util::bus_pki(dir.path(), &[&format!("agent-{cell}")]);
+    let key = dir.path().join(format!("{cell}.agent.key"));
+    let made = cellwatch(&[
+        "pki",
+        "agent-key",
+        "--cell",
+        cell,
+        "--out",
+        key.to_str().unwrap(),
+    ]);
+    assert_eq!(made.code, 0, "{}", made.stderr);
+    std::fs::write(
+        dir.path().join("operators.toml"),
+        crate::spawned::operators_file(&cellwatch::operator::Action::ALL),
+    )
+    .unwrap();
+    // Written as it is, it validates: secure, complete.
     let found = dir.path().join("found.toml");
     std::fs::write(&found, &r.stdout).unwrap();
     let v = cellwatch(&["validate", found.to_str().unwrap()]);

@@ -47,13 +47,29 @@ pub(crate) fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<(), F
             .map_err(|e| Failure::Input(format!("{}: {e}", args.config.display())))?;
     }
     let io = Failure::output;
+    let discrete = c.switching.iter().filter(|s| s.text.is_some()).count();
+    let checks: Vec<String> = [
+        (c.switching.len() - discrete, "switching-function"),
+        (discrete, "discrete"),
+        (c.limits.len(), "limit"),
+        (c.timers.len(), "timer"),
+        (c.sfc.len(), "SFC"),
+    ]
+    .iter()
+    .filter(|(n, _)| *n > 0)
+    .map(|(n, what)| format!("{n} {what}"))
+    .collect();
     writeln!(
         out,
-        "{}: cell {}, {} tags, {} switching-function checks, {}, Zenoh {} {}",
+        "{}: cell {}, {} tags, checks: {}, {}, Zenoh {} {}",
         args.config.display(),
         c.cell,
         c.tags.len(),
-        c.switching.len(),
+        if checks.is_empty() {
+            "none".to_string()
+        } else {
+            checks.join(", ")
+        },
         match (&c.opcua, &c.legacy) {
             (Some(o), _) => format!("OPC UA {} ({} {:?})", o.endpoint, o.policy.as_str(), o.mode),
             (None, Some(l)) => l.describe(),
