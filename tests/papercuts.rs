@@ -2,7 +2,8 @@
 //! server with its own namespace (the simulated CNC, a Float register
 //! added): a number that is not one (NaN, +Inf, −Inf on Float and Double)
 //! is bad quality, never a limit violation; a discrete alarm needs no
-//! program; `report daily` runs anywhere with the shipped stop causes.
+//! program; a cell's own KPI rules; an untrusted server certificate said
+//! at once; `report daily` runs anywhere with the shipped stop causes.
 
 use cellwatch::config::TagConfig;
 use cellwatch::payload::AlarmPayload;
@@ -184,6 +185,108 @@ async fn a_discrete_alarm_from_the_config_names_its_contact_and_comment_and_is_a
     let mut fx = fx;
     fx.stop().await;
     fx.sim.stop();
+}
+
+/// The cell's `[kpi]` rules judge the live figures: here a flood above 1
+/// raise in 10 minutes (ended below 1) and a chatter of 2 raises within
+/// 10 minutes, on the Z2 over-travel alarm from the server.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn the_cells_own_kpi_rules_judge_its_live_figures() {
+    let fx = Fixture::start_with(|c| {
+        c.kpi = cellwatch_models::kpi::KpiRules {
+            flood_raises: 1,
+            flood_ends_below: 1,
+            chatter_raises: 2,
+            chatter_window_ms: 600_000,
+            stale_ms: 3_600_000,
+        };
+    })
+    .await;
+    let sub = crate::robust::alarms(fx.client(), "m01ps0004").await;
+    fx.settled().await;
+    let mut seen: Vec<AlarmPayload> = Vec::new();
+    let figure = |scrape: &str, metric: &str| {
+        scrape
+            .lines()
+            .find(|l| l.starts_with(&format!("{metric}{{")))
+            .and_then(|l| l.rsplit(' ').next()?.parse::<f64>().ok())
+    };
+    // By ISA-18.2's rules one raise is no flood; by this cell's, none yet.
+    let s = fx.scrape().await;
+    assert_eq!(figure(&s, "cellwatch_alarm_flood"), Some(0.0), "{s}");
+    for round in 0..2 {
+        fx.sim.set("X0.0A", false).unwrap();
+        alarm_until(&sub, "z2-overtravel raised", &mut seen, |a| {
+            a.id == "z2-overtravel" && a.transition.as_str() == "raised"
+        })
+        .await;
+        fx.sim.set("X0.0A", true).unwrap();
+        let cleared = alarm_until(&sub, "z2-overtravel cleared", &mut seen, |a| {
+            a.id == "z2-overtravel" && a.transition.as_str() == "cleared"
+        })
+        .await;
+        assert_eq!(cleared.id, "z2-overtravel", "round {round}");
+    }
+    // The over-travel switch also opens the emergency-stop chain (ESE):
+    // four raises in all, a flood above one; the Z2 alarm (and ESE) raised
+    // twice within 10 minutes: chattering by this cell's rule.
+    let deadline = tokio::time::Instant::now() + std::time::Duration::from_secs(60);
+    loop {
+        let s = fx.scrape().await;
+        let (flood, chattering) = (
+            figure(&s, "cellwatch_alarm_flood"),
+            figure(&s, "cellwatch_alarms_chattering"),
+        );
+        if flood == Some(1.0) && chattering.is_some_and(|c| c >= 1.0) {
+            break;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "flood {flood:?}, chattering {chattering:?}:\n{s}"
+        );
+        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+    }
+    let mut fx = fx;
+    fx.stop().await;
+    fx.sim.stop();
+}
+
+/// `discover` on a server whose certificate is not trusted says so at
+/// once, with the certificate's fingerprint and the command that trusts it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_untrusted_server_certificate_is_refused_at_once_with_the_command_to_trust_it() {
+    use cellwatch::sim::cnc::{SimOptions, SimulatedCnc};
+    let dir = tempfile::tempdir().unwrap();
+    let sim = SimulatedCnc::start(&SimOptions {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        pki_dir: dir.path().join("sim-pki"),
+        insecure: false,
+        decoy: None,
+    })
+    .await
+    .unwrap();
+    let endpoint = sim.endpoint();
+    let pki = dir.path().join("pki").to_str().unwrap().to_string();
+    let r = tokio::task::spawn_blocking({
+        let (endpoint, pki) = (endpoint.clone(), pki.clone());
+        move || crate::util::cellwatch(&["discover", &endpoint, "--pki-dir", &pki])
+    })
+    .await
+    .unwrap();
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    assert!(
+        r.stderr
+            .contains("the server's certificate is not trusted (CN=cellwatch simulated CNC")
+            && r.stderr.contains("SHA-256 ")
+            && r.stderr.contains(&format!(
+                "`cellwatch trust-server {endpoint} --pki-dir {pki}`"
+            )),
+        "{}",
+        r.stderr
+    );
+    // Nothing of the stack's own retries or errors besides.
+    assert_eq!(r.stderr.lines().count(), 1, "{}", r.stderr);
+    sim.stop();
 }
 
 #[tokio::test]
