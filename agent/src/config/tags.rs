@@ -144,29 +144,28 @@ impl Addressing {
 
 /// The expression with its addresses in canonical form (`x0.6` → `X0.06`).
 pub(crate) fn canonical_expr(addressing: Addressing, e: Expr) -> Expr {
-    let canonical = |s: &Signal| addressing.signal(s.name()).unwrap_or_else(|_| s.clone());
+    map_signals(e, &|s| {
+        addressing.signal(s.name()).unwrap_or_else(|_| s.clone())
+    })
+}
+
+/// `e` with every signal it reads (both sides of a comparison) put
+/// through `f`.
+pub(crate) fn map_signals(e: Expr, f: &dyn Fn(&Signal) -> Signal) -> Expr {
     match e {
         Expr::Lit(s, n) => match Comparison::of_signal(&s) {
             Some(mut c) => {
-                c.lhs = canonical(&c.lhs);
+                c.lhs = f(&c.lhs);
                 if let Operand::Tag(t) = &c.rhs {
-                    c.rhs = Operand::Tag(canonical(t));
+                    c.rhs = Operand::Tag(f(t));
                 }
                 Expr::Lit(c.signal(), n)
             }
-            None => Expr::Lit(canonical(&s), n),
+            None => Expr::Lit(f(&s), n),
         },
-        Expr::Not(inner) => Expr::Not(Box::new(canonical_expr(addressing, *inner))),
-        Expr::And(es) => Expr::And(
-            es.into_iter()
-                .map(|e| canonical_expr(addressing, e))
-                .collect(),
-        ),
-        Expr::Or(es) => Expr::Or(
-            es.into_iter()
-                .map(|e| canonical_expr(addressing, e))
-                .collect(),
-        ),
+        Expr::Not(inner) => Expr::Not(Box::new(map_signals(*inner, f))),
+        Expr::And(es) => Expr::And(es.into_iter().map(|e| map_signals(e, f)).collect()),
+        Expr::Or(es) => Expr::Or(es.into_iter().map(|e| map_signals(e, f)).collect()),
         c @ Expr::Const(_) => c,
     }
 }

@@ -717,3 +717,27 @@ fn kpi_rules_default_to_isa_18_2_and_are_checked() {
         assert!(e.contains(expected), "{expected}\nin\n{e}");
     }
 }
+
+#[test]
+fn conditions_name_tags_by_name_or_address() {
+    // x1 and x2 are the names of X1 and X2; temp of the Double D1.
+    let text = typed(
+        "[state]\nrunning = \"x1 * -X2 * temp < 80\"\n\n\
+         [[checks.discrete]]\nid = \"x2-on\"\ntag = \"x2\"\narmed_when = \"x1 + count > 3\"\n",
+    );
+    let c = parse("cell.toml", &text, Path::new("base"), &mem()).unwrap();
+    let running = c.state.running.as_ref().unwrap().to_string();
+    assert!(
+        running.contains("X1") && running.contains("D1 < 80") && !running.contains("x1"),
+        "{running}"
+    );
+    let armed = c.switching.iter().find(|s| s.id == "x2-on").unwrap();
+    let armed = armed.armed_when.as_ref().unwrap().notation();
+    assert!(armed.contains("X1") && armed.contains("D2 > 3"), "{armed}");
+    // A name no tag has, and no address of one: said.
+    let e = errors(&typed("[state]\nrunning = \"x1 * ghost\"\n"));
+    assert!(
+        e.contains("state.running: no tag has the name or address ghost"),
+        "{e}"
+    );
+}

@@ -17,7 +17,7 @@ use toml::Spanned;
 
 use super::Validator;
 use crate::config::raw;
-use crate::config::tags::canonical_expr;
+use crate::config::tags::map_signals;
 use crate::config::Addressing;
 
 impl Validator<'_> {
@@ -259,8 +259,22 @@ impl Validator<'_> {
         key: &str,
         tags: &HashMap<Signal, usize>,
     ) -> Option<Expr> {
+        // Each signal by address, or by a tag's name where no tag has it
+        // as its address.
+        let (addressing, kinds, names) = (self.addressing, &self.kinds, &self.names);
+        let by_name_or_address = |s: &Signal| {
+            let address = addressing.signal(s.name()).ok();
+            match address {
+                Some(a) if kinds.contains_key(&a) => a,
+                _ => names
+                    .get(s.name())
+                    .cloned()
+                    .or(address)
+                    .unwrap_or_else(|| s.clone()),
+            }
+        };
         let e = match Expr::parse(text.get_ref()) {
-            Ok(e) => canonical_expr(self.addressing, e),
+            Ok(e) => map_signals(e, &by_name_or_address),
             Err(m) => {
                 self.problem(text.span(), key, format!("'{}': {m}", text.get_ref()));
                 return None;
@@ -276,7 +290,8 @@ impl Validator<'_> {
                     });
                     for a in operands {
                         match self.kinds.get(a) {
-                            None => problems.push(format!("no tag has the address {a} (in '{s}')")),
+                            None => problems
+                                .push(format!("no tag has the name or address {a} (in '{s}')")),
                             Some((t, _)) if !t.is_numeric() && *t != ValueType::Boolean => problems
                                 .push(format!(
                                     "{a} is a {t} and cannot be compared as a number (in '{s}')"
@@ -286,7 +301,7 @@ impl Validator<'_> {
                     }
                 }
                 None if !tags.contains_key(&s) => {
-                    problems.push(format!("no tag has the address {s}"));
+                    problems.push(format!("no tag has the name or address {s}"));
                 }
                 None => {
                     if let Some((t, false)) = self.kinds.get(&s) {

@@ -151,8 +151,8 @@ impl Validator<'_> {
                     let mut switch = |v: Option<Spanned<String>>, name: &str| {
                         let v = v?;
                         let key = format!("{key}.{name}");
-                        let found = addressing
-                            .signal(v.get_ref())
+                        let found = self
+                            .tag_ref(v.get_ref())
                             .ok()
                             .and_then(|a| Some((tags.get(&a).copied()?, self.kinds.get(&a)?.0)));
                         match found {
