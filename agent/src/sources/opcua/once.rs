@@ -1,0 +1,164 @@
+//! One-off OPC UA connections (`cellwatch discover`, `trust-server`): no
+//! retries, and a refusal said at once with what to do about it.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use opcua::client::Session;
+
+use super::client::{self, identity};
+use super::server_endpoint;
+use crate::config::OpcUaConfig;
+use crate::sources::SourceError;
+
+/// A session for a one-off job (`cellwatch discover`): connected with the
+/// same security, PKI and identity as the source, its event loop running
+/// on its own task (stop it by disconnecting the session and aborting
+/// the task).
+///
+/// # Errors
+/// The client cannot be configured or the server cannot be reached.
+pub async fn connect_once(
+    name: &str,
+    config: &OpcUaConfig,
+) -> Result<
+    (
+        Arc<Session>,
+        tokio::task::JoinHandle<opcua::types::StatusCode>,
+    ),
+    SourceError,
+> {
+    let mut client = client::client_retrying(name, config, 0)?;
+    let token = identity(config)?;
+    let endpoint = endpoint_once(&client, config).await?;
+    // An untrusted server certificate fails here, at once, with what to do
+    // (the stack would only retry).
+    if config.policy != crate::config::SecurityPolicy::None {
+        let der = endpoint.server_certificate.as_ref();
+        if !crate::sources::pki::is_trusted(der, &config.pki_dir) {
+            let facts = crate::sources::pki::CertificateFacts::of(der, crate::clock::now_ms())
+                .map_or_else(
+                    |e| format!("its certificate is unreadable: {e}"),
+                    |f| format!("{}, SHA-256 {}", f.subject, f.sha256),
+                );
+            return Err(SourceError::Connect(format!(
+                "{}: the server's certificate is not trusted ({facts}): check it and trust it with `cellwatch trust-server {} --pki-dir {}`",
+                config.endpoint,
+                config.endpoint,
+                config.pki_dir.display()
+            )));
+        }
+    }
+    let (session, event_loop) = client
+        .connect_to_endpoint_directly(endpoint, token)
+        .map_err(|e| SourceError::Connect(format!("{}: {e}", config.endpoint)))?;
+    let mut task = event_loop.spawn();
+    // No retries: a refused connection ends the event loop at once, with
+    // the server's reason.
+    let outcome = tokio::time::timeout(Duration::from_secs(15), async {
+        tokio::select! {
+            up = session.wait_for_connection() => if up { Ok(()) } else { Err(None) },
+            status = &mut task => Err(status.ok()),
+        }
+    })
+    .await;
+    match outcome {
+        Ok(Ok(())) => Ok((session, task)),
+        Ok(Err(status)) => {
+            task.abort();
+            Err(SourceError::Connect(refused(config, status)))
+        }
+        Err(_) => {
+            task.abort();
+            Err(SourceError::Connect(refused(config, None)))
+        }
+    }
+}
+
+/// The server's own view of itself, from its endpoint list (asked without
+/// a session, before trusting anything).
+pub struct ServerIdentity {
+    /// Its certificate (DER); empty for security policy `None`.
+    pub certificate: Vec<u8>,
+    /// Its application name.
+    pub application_name: String,
+    /// Its application URI.
+    pub application_uri: String,
+}
+
+/// Asks the server at `config.endpoint` for the endpoint with the
+/// configured security, making the agent's key pair in `config.pki_dir` if
+/// it has none.
+///
+/// # Errors
+/// No client, no answer, no such endpoint.
+pub async fn server_identity(config: &OpcUaConfig) -> Result<ServerIdentity, SourceError> {
+    let client = client::client_retrying("trust", config, 0)?;
+    let endpoint = endpoint_once(&client, config).await?;
+    Ok(ServerIdentity {
+        certificate: endpoint.server_certificate.as_ref().to_vec(),
+        application_name: endpoint.server.application_name.text.to_string(),
+        application_uri: endpoint.server.application_uri.to_string(),
+    })
+}
+
+/// Why a one-off connection got no session, and what to do about it.
+fn refused(config: &OpcUaConfig, status: Option<opcua::types::StatusCode>) -> String {
+    use opcua::types::StatusCode;
+    let endpoint = &config.endpoint;
+    match status {
+        Some(
+            StatusCode::BadSecurityChecksFailed
+            | StatusCode::BadCertificateUntrusted
+            | StatusCode::BadCertificateInvalid
+            | StatusCode::BadCertificateRevoked
+            | StatusCode::BadCertificateUriInvalid,
+        ) => {
+            let own = crate::sources::pki::own_cert(&config.pki_dir);
+            let facts = std::fs::read(&own)
+                .map_err(|e| e.to_string())
+                .and_then(|der| {
+                    crate::sources::pki::CertificateFacts::of(&der, crate::clock::now_ms())
+                })
+                .map_or_else(
+                    |e| format!("unreadable: {e}"),
+                    |f| format!("thumbprint {}, SHA-256 {}", f.thumbprint, f.sha256),
+                );
+            format!(
+                "{endpoint}: the server refused this agent's certificate ({}: {facts}): add it to the server's trusted clients, as its vendor's tool says",
+                own.display()
+            )
+        }
+        Some(
+            s @ (StatusCode::BadIdentityTokenRejected
+            | StatusCode::BadIdentityTokenInvalid
+            | StatusCode::BadUserAccessDenied),
+        ) => format!(
+            "{endpoint}: the server refused the login ({s}): check the user and its password"
+        ),
+        Some(s) => format!("{endpoint}: no session: {s}"),
+        None => format!("{endpoint}: no session within 15 s"),
+    }
+}
+
+/// The server's endpoint for a one-off connection. A server that takes
+/// the connection and never answers, or goes away while answering, must
+/// not hold it forever.
+async fn endpoint_once(
+    client: &opcua::client::Client,
+    config: &OpcUaConfig,
+) -> Result<opcua::types::EndpointDescription, SourceError> {
+    tokio::time::timeout(ENDPOINTS_ANSWER, server_endpoint(client, config))
+        .await
+        .map_err(|_| {
+            SourceError::Connect(format!(
+                "{}: no answer to the request for its endpoints within {} s",
+                config.endpoint,
+                ENDPOINTS_ANSWER.as_secs()
+            ))
+        })?
+        .map_err(|e| SourceError::Connect(format!("{}: {e}", config.endpoint)))
+}
+
+/// How long a one-off connection waits for the server's endpoints.
+const ENDPOINTS_ANSWER: Duration = Duration::from_secs(30);
