@@ -138,6 +138,38 @@ impl LimitChecks {
         }
     }
 
+    /// Judges check `i`'s delays that ran out before `now` (the source time of
+    /// its next value), each at its own time with the value that held
+    /// until then: values sampled over a while and delivered together, late
+    /// or republished, raise and clear as they happened.
+    fn run_out(&mut self, i: usize, now: u64, out: &mut Vec<Finding>) {
+        loop {
+            let check = &self.checks[i];
+            let earliest = self.states[i]
+                .iter()
+                .filter_map(|s| {
+                    let since = s.pending_since?;
+                    // Pending: the level wants the other verdict.
+                    let delay = if s.active {
+                        check.off_delay
+                    } else {
+                        check.on_delay
+                    };
+                    Some(since.saturating_add(delay))
+                })
+                .min();
+            match earliest {
+                // A delay ending just as the next value comes is judged
+                // on that value.
+                Some(due) if due < now => {
+                    self.due.remove(&(due, i));
+                    self.evaluate(i, due, out);
+                }
+                _ => break,
+            }
+        }
+    }
+
     /// Moves check `i`'s levels on, at `now`.
     fn evaluate(&mut self, i: usize, now: u64, out: &mut Vec<Finding>) {
         let Some(value) = self.values[i] else {
@@ -288,6 +320,7 @@ impl CheckSet for LimitChecks {
         let n = self.by_tag.get(signal).map_or(0, Vec::len);
         for k in 0..n {
             let i = self.by_tag[signal][k];
+            self.run_out(i, now, out);
             self.values[i] = value.map(Num::as_f64);
             self.evaluate(i, now, out);
         }

@@ -9,7 +9,7 @@ use cellwatch_models::alarm::{AlarmKind, Severity, Transition};
 use cellwatch_models::comments::CommentDb;
 use cellwatch_models::engine::{
     CellEngine, CheckSet, MachineState, Order, PartCounting, Reading, StateRules, SwitchingCheck,
-    SwitchingChecks, Tag,
+    SwitchingChecks, Tag, TagReading,
 };
 use cellwatch_models::explain::Polarity;
 use cellwatch_models::expr::Expr;
@@ -446,4 +446,70 @@ fn a_number_that_is_not_one_is_bad_quality_never_a_limit_violation() {
     let step = number(&mut e, "TEMP", Num::Float(f64::NAN), 7_000);
     assert_eq!(raised(&step), ["tag-quality"]);
     assert!(e.alarms().find(|a| a.id == "temp-h").unwrap().active);
+}
+
+/// Values sampled over a while and delivered together (one publish, a
+/// republish after a cut, a late batch) are judged at their source times:
+/// an excursion of 1.5 s with an on-delay of 1 s raises at 1 s into it and
+/// clears at its end, though both values arrive in one call at one moment.
+#[test]
+fn a_batch_sampled_over_a_while_is_judged_at_its_source_times() {
+    let mut limit = temp_limit(85.0);
+    limit.on_delay = 1000;
+    let mut e = engine(vec![limit]);
+    load_normal(&mut e, 0);
+    number(&mut e, "TEMP", Num::Float(40.0), 1_000);
+    let temp = tag(&e, "TEMP");
+    let at = |t: u64, v: f64| TagReading {
+        tag: temp,
+        reading: Reading::Number(Num::Float(v)),
+        source_time: t,
+    };
+    let step = e.on_readings(&[at(10_000, 90.0), at(11_500, 60.0)], 20_000);
+    let seen: Vec<(String, Transition)> =
+        step.alarms().map(|(a, t, _)| (a.id.clone(), t)).collect();
+    assert_eq!(
+        seen,
+        [
+            ("temp-h".to_string(), Transition::Raised),
+            ("temp-h".to_string(), Transition::Cleared)
+        ]
+    );
+    let raised = step.alarms().next().unwrap().0;
+    assert!(
+        raised
+            .message
+            .contains("= 90 °C, above the H limit 85 °C for 1.0 s"),
+        "{}",
+        raised.message
+    );
+    // Shorter than the delay, together: nothing.
+    let step = e.on_readings(&[at(30_000, 90.0), at(30_900, 60.0)], 40_000);
+    assert_eq!(step.alarms().count(), 0);
+}
+
+/// The same for an alarm delay of a contact check (switching or discrete):
+/// the fault lasted 1.5 s at the source, the delay is 1 s.
+#[test]
+fn a_contact_fault_in_a_batch_outlasting_its_delay_is_raised_and_cleared() {
+    let mut e = engine(Vec::new()).delaying("ese", 1000, 0);
+    load_normal(&mut e, 0);
+    number(&mut e, "MODE", Num::Int(1), 0);
+    number(&mut e, "TEMP", Num::Float(40.0), 0);
+    let x006 = tag(&e, "X0.06");
+    let at = |t: u64, v: bool| TagReading {
+        tag: x006,
+        reading: Reading::Good(v),
+        source_time: t,
+    };
+    let step = e.on_readings(&[at(10_000, false), at(11_500, true)], 12_000);
+    let seen: Vec<Transition> = step
+        .alarms()
+        .filter(|(a, _, _)| a.id == "ese")
+        .map(|(_, t, _)| t)
+        .collect();
+    assert_eq!(seen, [Transition::Raised, Transition::Cleared]);
+    // 0.9 s: nothing, together or not.
+    let step = e.on_readings(&[at(20_000, false), at(20_900, true)], 21_000);
+    assert_eq!(step.alarms().filter(|(a, _, _)| a.id == "ese").count(), 0);
 }

@@ -1032,6 +1032,14 @@ impl CellEngine {
                 r.source_time
             }
         };
+        // Delays that ran out before this value was sampled (values sampled
+        // over a while and delivered together, late or republished) are
+        // over first, at their own time: a condition that lasted its delay
+        // is announced before the value that ends it.
+        if !self.pending.is_empty() {
+            // One ending just as this value comes is judged on it.
+            self.run_out(at.saturating_sub(1), now, step);
+        }
         let changed = match &r.reading {
             _ if non_finite.is_some() => self.set_unknown(tag, at, findings, step),
             Reading::Good(v) => self.set_value(tag, Some(*v), at, findings, step),
@@ -1048,9 +1056,27 @@ impl CellEngine {
             findings.push(self.quality_finding());
         }
         for f in findings.drain(..) {
-            self.apply(f, now, step);
+            self.apply_at(f, at, now, step);
         }
         changed
+    }
+
+    /// Announces the delayed findings whose delay ended by `at`.
+    fn run_out(&mut self, at: u64, now: u64, step: &mut Step) {
+        let due: Vec<String> = self
+            .pending
+            .iter()
+            .filter(|(id, (since, f))| {
+                let (on, off) = self.delays.get(*id).copied().unwrap_or_default();
+                at >= since.saturating_add(if f.active { on } else { off })
+            })
+            .map(|(id, _)| id.clone())
+            .collect();
+        for id in due {
+            if let Some((_, f)) = self.pending.remove(&id) {
+                self.announce(f, now, step);
+            }
+        }
     }
 
     /// The earliest time at which [`CellEngine::advance`] has something to
@@ -1077,20 +1103,7 @@ impl CellEngine {
             self.apply(f, now, &mut step);
         }
         // Delayed findings whose condition lasted.
-        let due: Vec<String> = self
-            .pending
-            .iter()
-            .filter(|(id, (since, f))| {
-                let (on, off) = self.delays.get(*id).copied().unwrap_or_default();
-                now >= since.saturating_add(if f.active { on } else { off })
-            })
-            .map(|(id, _)| id.clone())
-            .collect();
-        for id in due {
-            if let Some((_, f)) = self.pending.remove(&id) {
-                self.announce(f, now, &mut step);
-            }
-        }
+        self.run_out(now, now, &mut step);
         // Shelves that expired: the alarms are announced again as they are.
         for alarm in self.alarms.expire(now) {
             step.events.push(EngineEvent::Alarm {
@@ -1486,6 +1499,12 @@ impl CellEngine {
     }
 
     fn apply(&mut self, f: Finding, now: u64, step: &mut Step) {
+        self.apply_at(f, now, now, step);
+    }
+
+    /// [`CellEngine::apply`] of a finding whose condition began at `at`
+    /// (source time): its delay runs from then.
+    fn apply_at(&mut self, f: Finding, at: u64, now: u64, step: &mut Step) {
         if let Some(&(on, off)) = self.delays.get(&f.id) {
             let active = self.alarms.get(&f.id).is_some_and(|a| a.active);
             if f.active == active {
@@ -1494,7 +1513,7 @@ impl CellEngine {
             } else if (if f.active { on } else { off }) > 0 {
                 let since = match self.pending.get(&f.id) {
                     Some((since, p)) if p.active == f.active => *since,
-                    _ => now,
+                    _ => at,
                 };
                 self.pending.insert(f.id.clone(), (since, f));
                 return;
