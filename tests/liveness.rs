@@ -479,6 +479,10 @@ async fn every_change_within_one_publishing_interval_arrives_with_sampling_zero(
     sim.stop();
 }
 
+/// Changes lost in the server's queue raise `opcua-overflow` once while
+/// they keep being lost (burst after burst, publish after publish), never a
+/// raise and a clear per publish; it clears once none was lost for
+/// `overflow_clear_after`.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn changes_lost_in_a_full_server_queue_raise_the_overflow_alarm() {
     let dir = tempfile::tempdir().unwrap();
@@ -486,6 +490,7 @@ async fn changes_lost_in_a_full_server_queue_raise_the_overflow_alarm() {
     config.publishing_interval = Duration::from_millis(500);
     config.sampling_interval = Duration::ZERO;
     config.queue_size = 4;
+    config.overflow_clear_after = Duration::from_secs(3);
     let tags = vec![tag("X0.06", &format!("nsu={NAMESPACE};s=X0.06"))];
     let mut source = Running::start(config, tags);
     source.connected().await;
@@ -500,18 +505,41 @@ async fn changes_lost_in_a_full_server_queue_raise_the_overflow_alarm() {
     else {
         unreachable!()
     };
-    assert_eq!(
-        why,
-        "changes lost in the server's queue (queue size 4) for x0.06: raise opcua.queue_size or sample less often"
+    assert!(
+        why.starts_with("changes lost in the server's queue (queue size 4) for x0.06 (1 tag, ")
+            && why.ends_with(" so far): raise opcua.queue_size or sample less often"),
+        "{why}"
     );
-    // The next change arrives whole: the alarm clears.
-    sim.set("X0.06", false).unwrap();
-    next(
+    // More bursts, publish after publish, each losing changes again within
+    // the clear time: the alarm is not cleared between them (one
+    // occurrence), though publishes without a loss come in between.
+    for burst in 0..3 {
+        // A burst that overflows, then one change that arrives whole.
+        for (what, last) in [("the burst", true), ("the whole change", false)] {
+            if last {
+                toggle(&sim, 20);
+            } else {
+                sim.set("X0.06", false).unwrap();
+            }
+            let ev = next(&mut source.rx, what, |e| {
+                matches!(e, SourceEvent::Readings(_))
+                    || matches!(e, SourceEvent::Problem { id, problem: None } if id == opcua::OVERFLOW_ALARM)
+            })
+            .await;
+            assert!(
+                matches!(ev, SourceEvent::Readings(_)),
+                "cleared at {what} of burst {burst}"
+            );
+        }
+    }
+    // Then quiet: one clear, after the clear time.
+    let cleared = next(
         &mut source.rx,
         "the overflow alarm cleared",
         |e| matches!(e, SourceEvent::Problem { id, problem: None } if id == opcua::OVERFLOW_ALARM),
     )
     .await;
+    drop(cleared);
     source.stop().await;
     sim.stop();
 }

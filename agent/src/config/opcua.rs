@@ -132,6 +132,9 @@ pub struct OpcUaConfig {
     /// The most notifications the server may put in one publish; the
     /// client's decoding limits are sized from it.
     pub max_notifications_per_publish: u32,
+    /// How long without a lost change before the `opcua-overflow` alarm
+    /// clears (`opcua.overflow_clear_after`).
+    pub overflow_clear_after: Duration,
 }
 
 impl OpcUaConfig {
@@ -142,6 +145,9 @@ impl OpcUaConfig {
     /// 100,000-tag cell (BENCHMARKS.md), against 2 ms at 10,000. More
     /// publishes cost the source a little more per change.
     pub const DEFAULT_MAX_NOTIFICATIONS: u32 = 1_000;
+
+    /// `opcua.overflow_clear_after` unless configured.
+    pub const DEFAULT_OVERFLOW_CLEAR_AFTER: Duration = Duration::from_secs(10);
 
     /// The default queue size: room for every sample of four publishing
     /// intervals (sampling 0, exception-based, counts as 1 ms), at least 10

@@ -123,6 +123,22 @@ impl Validator<'_> {
             other => other.map(|u| (u.span(), u.into_inner())),
         };
         self.namespace_uri = namespace_uri.clone();
+        let overflow_clear_after = match raw.overflow_clear_after {
+            None => OpcUaConfig::DEFAULT_OVERFLOW_CLEAR_AFTER,
+            Some(v) if v.get_ref().trim() == "0" => Duration::ZERO,
+            Some(v) => {
+                let span = v.span();
+                let d = self.duration(
+                    Some(v),
+                    "opcua.overflow_clear_after",
+                    OpcUaConfig::DEFAULT_OVERFLOW_CLEAR_AFTER,
+                );
+                if d > Duration::from_secs(3600) {
+                    self.problem(span, "opcua.overflow_clear_after", "at most 1h");
+                }
+                d
+            }
+        };
         Some(OpcUaConfig {
             endpoint,
             policy,
@@ -134,6 +150,7 @@ impl Validator<'_> {
             namespace_uri: namespace_uri.map(|(_, u)| u),
             queue_size,
             max_notifications_per_publish,
+            overflow_clear_after,
         })
     }
 

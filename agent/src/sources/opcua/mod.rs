@@ -34,6 +34,7 @@ use std::time::Duration;
 mod client;
 mod names;
 mod once;
+mod overflow;
 mod subscription;
 mod switches;
 

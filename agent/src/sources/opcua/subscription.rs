@@ -1,6 +1,7 @@
 //! The subscription: monitored items created in chunks the server accepts,
 //! and each publish's changes passed on in source-time order.
 
+use super::overflow::Overflow;
 use std::collections::{BTreeSet, HashMap};
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::Arc;
@@ -115,7 +116,7 @@ pub(super) async fn subscribe(
         heard: heard.clone(),
         names: names.clone(),
         queue_size: queue_size.clone(),
-        overflowing: BTreeSet::new(),
+        overflow: Overflow::new(config.overflow_clear_after),
     };
     let sub = match session
         .create_subscription(
@@ -277,9 +278,8 @@ struct InTimeOrder {
     names: Arc<Names>,
     /// The queue size the server granted.
     queue_size: Arc<AtomicU32>,
-    /// Tags whose last delivery said the server's queue overflowed
-    /// (changes were lost), until one arrives without.
-    overflowing: BTreeSet<usize>,
+    /// Changes lost in the server's queues, and the alarm of them.
+    overflow: Overflow,
 }
 
 /// The alarm of changes lost in the server's queues (kind `system`).
@@ -292,6 +292,8 @@ struct Collector<'a> {
     readings: Vec<TagReading>,
     /// Tags with a value flagged `Overflow` in this publish.
     overflowed: BTreeSet<usize>,
+    /// Values flagged `Overflow` in this publish.
+    lost: u64,
     /// A bad status change: the server closed the subscription.
     closed: Option<StatusCode>,
 }
@@ -348,6 +350,7 @@ impl Collector<'_> {
         let tag = tag as usize;
         if overflow {
             self.overflowed.insert(tag);
+            self.lost += 1;
         }
         self.readings.push(TagReading {
             tag,
@@ -373,6 +376,7 @@ impl OnSubscriptionNotificationCore for InTimeOrder {
             uses: &self.uses,
             readings: Vec::new(),
             overflowed: BTreeSet::new(),
+            lost: 0,
             closed: None,
         };
         c.notification(notification);
@@ -381,21 +385,33 @@ impl OnSubscriptionNotificationCore for InTimeOrder {
             tracing::warn!(%status, "the server closed the subscription");
             self.heard.closed.store(status.bits(), Ordering::Relaxed);
         }
+        // Overflow bookkeeping only while changes are being lost: the usual
+        // publish costs one test here. Keep-alives count, so the alarm
+        // clears on a quiet subscription too.
+        let say = (c.lost > 0 || self.overflow.said.is_some())
+            && self.overflow.publish(&c.overflowed, c.lost, received);
+        let problem = say.then(|| {
+            let problem = self.overflow.say(
+                &self.names,
+                self.queue_size.load(Ordering::Relaxed),
+                received,
+            );
+            match &problem {
+                Some(text) => tracing::warn!("{text}"),
+                None => tracing::info!("no change lost in the server's queues for a while"),
+            }
+            SourceEvent::Problem {
+                id: OVERFLOW_ALARM.into(),
+                problem,
+            }
+        });
         if c.readings.is_empty() {
+            if let Some(p) = problem {
+                send_blocking(&self.tx, p);
+            }
             return;
         }
         c.readings.sort_by_key(|r| r.source_time);
-        // Overflow bookkeeping only while some tag has lost changes: the
-        // usual publish costs nothing here.
-        let mut changed = !c.overflowed.is_empty();
-        if !self.overflowing.is_empty() {
-            for r in &c.readings {
-                if !c.overflowed.contains(&r.tag) {
-                    changed |= self.overflowing.remove(&r.tag);
-                }
-            }
-        }
-        self.overflowing.extend(&c.overflowed);
         self.heard.busy.store(true, Ordering::Relaxed);
         send_blocking(
             &self.tx,
@@ -404,41 +420,11 @@ impl OnSubscriptionNotificationCore for InTimeOrder {
                 received,
             }),
         );
-        if changed {
-            send_blocking(&self.tx, self.overflow_problem(&c.overflowed));
+        if let Some(p) = problem {
+            send_blocking(&self.tx, p);
         }
         self.heard.beat();
         self.heard.busy.store(false, Ordering::Relaxed);
-    }
-}
-
-impl InTimeOrder {
-    /// The overflow alarm as it stands: the tags whose changes were lost.
-    fn overflow_problem(&self, now: &BTreeSet<usize>) -> SourceEvent {
-        if !now.is_empty() {
-            let names: Vec<&str> = now.iter().map(|&t| &self.names[t]).collect();
-            tracing::error!(tags = ?names, queue_size = self.queue_size.load(Ordering::Relaxed), "changes lost in the server's queues");
-        }
-        let problem = (!self.overflowing.is_empty()).then(|| {
-            let mut names: Vec<&str> = self
-                .overflowing
-                .iter()
-                .take(5)
-                .map(|&t| &self.names[t])
-                .collect();
-            if self.overflowing.len() > names.len() {
-                names.push("...");
-            }
-            format!(
-                "changes lost in the server's queue (queue size {}) for {}: raise opcua.queue_size or sample less often",
-                self.queue_size.load(Ordering::Relaxed),
-                names.join(", ")
-            )
-        });
-        SourceEvent::Problem {
-            id: OVERFLOW_ALARM.into(),
-            problem,
-        }
     }
 }
 
