@@ -424,7 +424,11 @@ pub struct CellEngine {
     /// to clear, ms.
     delays: HashMap<String, (u64, u64)>,
     /// Findings waiting out their delay, by alarm id, with since when.
-    pending: BTreeMap<String, (u64, Finding)>,
+    /// (since when by the clock, since when in source time, finding): the
+    /// clock decides when nothing arrives (`advance`), source time between
+    /// values delivered together (`run_out`): neither is compared with the
+    /// other, so a PLC clock off the agent's bends no delay.
+    pending: BTreeMap<String, (u64, u64, Finding)>,
     /// The tags of the item code and the target quantity.
     order_tags: (Option<usize>, Option<usize>),
     /// The work order now.
@@ -1038,7 +1042,7 @@ impl CellEngine {
         // is announced before the value that ends it.
         if !self.pending.is_empty() {
             // One ending just as this value comes is judged on it.
-            self.run_out(at.saturating_sub(1), now, step);
+            self.run_out(at.saturating_sub(1), true, now, step);
         }
         let changed = match &r.reading {
             _ if non_finite.is_some() => self.set_unknown(tag, at, findings, step),
@@ -1061,19 +1065,21 @@ impl CellEngine {
         changed
     }
 
-    /// Announces the delayed findings whose delay ended by `at`.
-    fn run_out(&mut self, at: u64, now: u64, step: &mut Step) {
+    /// Announces the delayed findings whose delay ended by `at`: by the
+    /// clock (`source` false) or in source time (`source` true).
+    fn run_out(&mut self, at: u64, source: bool, now: u64, step: &mut Step) {
         let due: Vec<String> = self
             .pending
             .iter()
-            .filter(|(id, (since, f))| {
+            .filter(|(id, (by_clock, by_source, f))| {
                 let (on, off) = self.delays.get(*id).copied().unwrap_or_default();
+                let since = if source { *by_source } else { *by_clock };
                 at >= since.saturating_add(if f.active { on } else { off })
             })
             .map(|(id, _)| id.clone())
             .collect();
         for id in due {
-            if let Some((_, f)) = self.pending.remove(&id) {
+            if let Some((_, _, f)) = self.pending.remove(&id) {
                 self.announce(f, now, step);
             }
         }
@@ -1085,7 +1091,7 @@ impl CellEngine {
     /// check kind, and one per alarm waiting out its delay.
     pub fn next_deadline(&self) -> Option<u64> {
         let sets = self.sets.iter().filter_map(|s| s.next_deadline());
-        let delayed = self.pending.iter().map(|(id, (since, f))| {
+        let delayed = self.pending.iter().map(|(id, (since, _, f))| {
             let (on, off) = self.delays.get(id).copied().unwrap_or_default();
             since.saturating_add(if f.active { on } else { off })
         });
@@ -1103,7 +1109,7 @@ impl CellEngine {
             self.apply(f, now, &mut step);
         }
         // Delayed findings whose condition lasted.
-        self.run_out(now, now, &mut step);
+        self.run_out(now, false, now, &mut step);
         // Shelves that expired: the alarms are announced again as they are.
         for alarm in self.alarms.expire(now) {
             step.events.push(EngineEvent::Alarm {
@@ -1503,7 +1509,8 @@ impl CellEngine {
     }
 
     /// [`CellEngine::apply`] of a finding whose condition began at `at`
-    /// (source time): its delay runs from then.
+    /// (source time) and is taken at `now` (the clock): its delay runs from
+    /// both, each compared only with its own kind of time.
     fn apply_at(&mut self, f: Finding, at: u64, now: u64, step: &mut Step) {
         if let Some(&(on, off)) = self.delays.get(&f.id) {
             let active = self.alarms.get(&f.id).is_some_and(|a| a.active);
@@ -1512,10 +1519,12 @@ impl CellEngine {
                 self.pending.remove(&f.id);
             } else if (if f.active { on } else { off }) > 0 {
                 let since = match self.pending.get(&f.id) {
-                    Some((since, p)) if p.active == f.active => *since,
-                    _ => at,
+                    Some((by_clock, by_source, p)) if p.active == f.active => {
+                        (*by_clock, *by_source)
+                    }
+                    _ => (now, at),
                 };
-                self.pending.insert(f.id.clone(), (since, f));
+                self.pending.insert(f.id.clone(), (since.0, since.1, f));
                 return;
             }
         }
