@@ -166,7 +166,15 @@ async fn unknown_server_certificate_is_rejected() {
         matches!(e, SourceEvent::Disconnected(_))
     })
     .await;
-    assert!(matches!(ev, SourceEvent::Disconnected(_)));
+    // The communication alarm says why and what to do.
+    let SourceEvent::Disconnected(why) = ev else {
+        unreachable!()
+    };
+    assert!(
+        why.contains("the server's certificate is not trusted (CN=cellwatch simulated CNC")
+            && why.contains("`cellwatch trust-server "),
+        "{why}"
+    );
     // The refused certificate waits in rejected/ for an engineer to review.
     let deadline = tokio::time::Instant::now() + Duration::from_secs(10);
     loop {
@@ -182,6 +190,19 @@ async fn unknown_server_certificate_is_rejected() {
         );
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
+    // Trusted while the source runs (as trust-server does: out of
+    // rejected/, into trusted/): the next attempt connects.
+    let rejected = std::fs::read_dir(agent_pki.join("rejected"))
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    pki::trust(&rejected, &agent_pki).unwrap();
+    next(&mut rx, "connected once trusted", |e| {
+        matches!(e, SourceEvent::Connected(_))
+    })
+    .await;
     let _ = stop_tx.send(());
     task.await.unwrap().unwrap();
     sim.stop();

@@ -142,3 +142,20 @@ pub fn is_trusted(bytes: &[u8], pki_dir: &Path) -> bool {
     let trusted = std::fs::read(pki_dir.join("trusted").join(&name)).is_ok_and(|b| b == bytes);
     trusted && !pki_dir.join("rejected").join(&name).exists()
 }
+
+/// Leaves the DER certificate `bytes` in `pki_dir/rejected/` for an engineer
+/// to review (as the certificate store does with one it refuses), unless it
+/// is there already. Best effort: a failure is logged.
+pub fn reject(bytes: &[u8], pki_dir: &Path) {
+    let Ok(x509) = X509::from_der(bytes) else {
+        return;
+    };
+    let dir = pki_dir.join("rejected");
+    let target = dir.join(CertificateStore::cert_file_name(&x509));
+    if target.exists() {
+        return;
+    }
+    if let Err(e) = std::fs::create_dir_all(&dir).and_then(|()| std::fs::write(&target, bytes)) {
+        tracing::warn!(path = %target.display(), error = %e, "cannot keep the refused server certificate for review");
+    }
+}

@@ -225,6 +225,16 @@ async fn run_writing(
     loop {
         let attempt = async {
             let endpoint = server_endpoint(&client, config).await?;
+            // An untrusted server certificate is said with what to do, and
+            // left in rejected/ for review; it is looked at again on the
+            // next attempt, so trusting it while the agent runs is enough.
+            if let Some(why) = once::untrusted(config, &endpoint) {
+                crate::sources::pki::reject(endpoint.server_certificate.as_ref(), &config.pki_dir);
+                return Err(opcua::types::Error::new(
+                    opcua::types::StatusCode::BadCertificateUntrusted,
+                    why,
+                ));
+            }
             client.connect_to_endpoint_directly(endpoint, token.clone())
         };
         let (session, event_loop) = tokio::select! {
