@@ -159,3 +159,28 @@ pub fn reject(bytes: &[u8], pki_dir: &Path) {
         tracing::warn!(path = %target.display(), error = %e, "cannot keep the refused server certificate for review");
     }
 }
+
+/// Why the server certificate of `endpoint` is not trusted, with its
+/// fingerprint and the command that trusts it; `None` when it is (or the
+/// connection has no security).
+pub fn untrusted(
+    config: &crate::config::OpcUaConfig,
+    endpoint: &opcua::types::EndpointDescription,
+) -> Option<String> {
+    if config.policy == crate::config::SecurityPolicy::None {
+        return None;
+    }
+    let der = endpoint.server_certificate.as_ref();
+    if is_trusted(der, &config.pki_dir) {
+        return None;
+    }
+    let facts = CertificateFacts::of(der, crate::clock::now_ms()).map_or_else(
+        |e| format!("its certificate is unreadable: {e}"),
+        |f| format!("{}, SHA-256 {}", f.subject, f.sha256),
+    );
+    Some(format!(
+        "the server's certificate is not trusted ({facts}): check it and trust it with `cellwatch trust-server {} --pki-dir {}`",
+        config.endpoint,
+        config.pki_dir.display()
+    ))
+}

@@ -228,7 +228,7 @@ async fn run_writing(
             // An untrusted server certificate is said with what to do, and
             // left in rejected/ for review; it is looked at again on the
             // next attempt, so trusting it while the agent runs is enough.
-            if let Some(why) = once::untrusted(config, &endpoint) {
+            if let Some(why) = crate::sources::pki::untrusted(config, &endpoint) {
                 crate::sources::pki::reject(endpoint.server_certificate.as_ref(), &config.pki_dir);
                 return Err(opcua::types::Error::new(
                     opcua::types::StatusCode::BadCertificateUntrusted,

@@ -33,7 +33,7 @@ pub async fn connect_once(
     let endpoint = endpoint_once(&client, config).await?;
     // An untrusted server certificate fails here, at once, with what to do
     // (the stack would only retry).
-    if let Some(why) = untrusted(config, &endpoint) {
+    if let Some(why) = crate::sources::pki::untrusted(config, &endpoint) {
         return Err(SourceError::Connect(format!("{}: {why}", config.endpoint)));
     }
     let (session, event_loop) = client
@@ -149,28 +149,3 @@ async fn endpoint_once(
 
 /// How long a one-off connection waits for the server's endpoints.
 const ENDPOINTS_ANSWER: Duration = Duration::from_secs(30);
-
-/// Why the server certificate of `endpoint` is not trusted, with its
-/// fingerprint and the command that trusts it; `None` when it is (or the
-/// connection has no security).
-pub(super) fn untrusted(
-    config: &OpcUaConfig,
-    endpoint: &opcua::types::EndpointDescription,
-) -> Option<String> {
-    if config.policy == crate::config::SecurityPolicy::None {
-        return None;
-    }
-    let der = endpoint.server_certificate.as_ref();
-    if crate::sources::pki::is_trusted(der, &config.pki_dir) {
-        return None;
-    }
-    let facts = crate::sources::pki::CertificateFacts::of(der, crate::clock::now_ms()).map_or_else(
-        |e| format!("its certificate is unreadable: {e}"),
-        |f| format!("{}, SHA-256 {}", f.subject, f.sha256),
-    );
-    Some(format!(
-        "the server's certificate is not trusted ({facts}): check it and trust it with `cellwatch trust-server {} --pki-dir {}`",
-        config.endpoint,
-        config.pki_dir.display()
-    ))
-}
