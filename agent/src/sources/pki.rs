@@ -144,19 +144,14 @@ pub fn is_trusted(bytes: &[u8], pki_dir: &Path) -> bool {
 }
 
 /// Leaves the DER certificate `bytes` in `pki_dir/rejected/` for an engineer
-/// to review (as the certificate store does with one it refuses), unless it
-/// is there already. Best effort: a failure is logged.
+/// to review, as the certificate store does with one it refuses. Best
+/// effort: a failure is logged.
 pub fn reject(bytes: &[u8], pki_dir: &Path) {
     let Ok(x509) = X509::from_der(bytes) else {
         return;
     };
-    let dir = pki_dir.join("rejected");
-    let target = dir.join(CertificateStore::cert_file_name(&x509));
-    if target.exists() {
-        return;
-    }
-    if let Err(e) = std::fs::create_dir_all(&dir).and_then(|()| std::fs::write(&target, bytes)) {
-        tracing::warn!(path = %target.display(), error = %e, "cannot keep the refused server certificate for review");
+    if let Err(e) = CertificateStore::new(pki_dir).store_rejected_cert(&x509) {
+        tracing::warn!(pki = %pki_dir.display(), error = %e, "cannot keep the refused server certificate for review");
     }
 }
 
