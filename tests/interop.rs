@@ -179,6 +179,7 @@ async fn node_opcua_server_five_thousand_items_bursts_and_a_restart() {
                 problem: Some(p), ..
             } => panic!("{p}"),
             SourceEvent::Problem { .. } => {}
+            SourceEvent::Gap { why, .. } => panic!("changes lost: {why}"),
         }
     }
     eprintln!("all {TAGS} tags in {:?}", started.elapsed());
@@ -270,6 +271,8 @@ async fn node_opcua_network_cut_longer_than_the_subscription_lifetime() {
     .await;
     let mut config = opcua_config(&format!("opc.tcp://{via}/"), &dir.path().join("agent-pki"));
     config.publishing_interval = Duration::from_millis(100);
+    // The shortest lifetime allowed: 30 publishing intervals.
+    config.subscription_lifetime = config.publishing_interval * 30;
     pki::trust(&server.cert, &config.pki_dir).unwrap();
     let mut source = Running::start(config, (0..10).map(tag).collect());
     // The first values may come before the connection is reported.
@@ -314,6 +317,84 @@ async fn node_opcua_network_cut_longer_than_the_subscription_lifetime() {
             _ => {}
         }
     }
+    source.stop().await;
+    tokio::task::spawn_blocking(move || server.stop())
+        .await
+        .unwrap();
+}
+
+/// A network cut shorter than the subscription's lifetime, against
+/// node-opcua: the new session takes the subscription over, and a pulse
+/// made during the cut arrives in order, with nothing said lost.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn node_opcua_pulse_during_a_network_cut_arrives_through_the_taken_over_subscription() {
+    let dir = tempfile::tempdir().unwrap();
+    let server_pki = dir.path().join("server-pki");
+    let port = crate::util::restartable_port();
+    trusted_by_server(&dir.path().join("agent-pki"), &server_pki);
+    let server = tokio::task::spawn_blocking({
+        let server_pki = server_pki.clone();
+        move || NodeServer::start(port, &server_pki, 10)
+    })
+    .await
+    .unwrap();
+    let cut = crate::liveness::Cut::default();
+    let via = crate::liveness::relay_with_cut(
+        format!("127.0.0.1:{port}").parse().unwrap(),
+        std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false)),
+        cut.clone(),
+    )
+    .await;
+    let mut config = opcua_config(&format!("opc.tcp://{via}/"), &dir.path().join("agent-pki"));
+    config.publishing_interval = Duration::from_millis(100);
+    pki::trust(&server.cert, &config.pki_dir).unwrap();
+    let mut source = Running::start(config, (0..10).map(tag).collect());
+    all(
+        &mut source.rx,
+        "connected, and T3's value",
+        &[
+            &|e| matches!(e, SourceEvent::Connected(_)),
+            &|e| matches!(e, SourceEvent::Readings(rs) if rs.iter().any(|r| r.tag == 3)),
+        ],
+    )
+    .await;
+    cut.set(true);
+    next(&mut source.rx, "connection lost", |e| {
+        matches!(e, SourceEvent::Disconnected(_))
+    })
+    .await;
+    let server = tokio::task::spawn_blocking(move || {
+        let mut server = server;
+        // Held long enough to be sampled (the server samples every 20 ms).
+        server.send("set T3 0");
+        std::thread::sleep(Duration::from_millis(200));
+        server.send("set T3 1");
+        server
+    })
+    .await
+    .unwrap();
+    cut.set(false);
+    let mut t3 = Vec::new();
+    let mut connected = false;
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    while !(connected && t3.last() == Some(&Reading::Good(true)) && t3.len() >= 2) {
+        let ev = tokio::time::timeout_at(deadline, source.rx.recv())
+            .await
+            .unwrap_or_else(|_| panic!("connected again {connected}, T3 {t3:?}"))
+            .unwrap();
+        match ev {
+            SourceEvent::Connected(_) => connected = true,
+            SourceEvent::Readings(rs) => {
+                t3.extend(rs.iter().filter(|r| r.tag == 3).map(|r| r.reading.clone()));
+            }
+            SourceEvent::Gap { why, .. } => panic!("changes lost: {why}"),
+            SourceEvent::Disconnected(why) if why.contains("dropped subscription") => {
+                panic!("{why}")
+            }
+            _ => {}
+        }
+    }
+    assert_eq!(t3, [Reading::Good(false), Reading::Good(true)]);
     source.stop().await;
     tokio::task::spawn_blocking(move || server.stop())
         .await

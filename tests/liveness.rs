@@ -62,7 +62,7 @@ impl Running {
     }
 
     /// Waits for the connection and tag 0's initial value (true).
-    async fn connected(&mut self) {
+    pub(crate) async fn connected(&mut self) {
         all(
             &mut self.rx,
             "connection and initial value",
@@ -105,7 +105,7 @@ async fn cnc(
 }
 
 /// A simulated CNC and an agent configuration that trust each other.
-async fn trusted_cnc(dir: &Path) -> (SimulatedCnc, OpcUaConfig, PathBuf) {
+pub(crate) async fn trusted_cnc(dir: &Path) -> (SimulatedCnc, OpcUaConfig, PathBuf) {
     let server_pki = dir.join("server-pki");
     let sim = cnc("127.0.0.1:0".parse().unwrap(), &server_pki, false, None).await;
     let config = opcua_config(&sim.endpoint(), &dir.join("agent-pki"));
@@ -495,6 +495,17 @@ async fn changes_lost_in_a_full_server_queue_raise_the_overflow_alarm() {
     let mut source = Running::start(config, tags);
     source.connected().await;
     toggle(&sim, 20);
+    // The loss is said before the values behind it, with the tag and the
+    // count: the checks judge them knowing it (and it is counted).
+    let gap = next(&mut source.rx, "the gap", |e| {
+        matches!(e, SourceEvent::Gap { .. } | SourceEvent::Readings(_))
+    })
+    .await;
+    let SourceEvent::Gap { tags, values, why } = gap else {
+        panic!("values before the gap: {gap:?}")
+    };
+    assert_eq!(tags, Some(vec![0]));
+    assert!(values > 0 && why.contains("x0.06"), "{values} {why}");
     let ev = next(&mut source.rx, "the overflow alarm", |e| {
         matches!(e, SourceEvent::Problem { id, problem: Some(_) } if id == opcua::OVERFLOW_ALARM)
     })
@@ -578,12 +589,18 @@ async fn a_change_made_while_the_connection_was_down_arrives_after_the_reactivat
 /// subscription that delivers again.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_subscription_the_server_dropped_during_a_cut_is_replaced_after_the_reactivation() {
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+        .with_test_writer()
+        .try_init();
     let dir = tempfile::tempdir().unwrap();
     let cut = Cut::default();
-    let (sim, config) = insecure_behind(dir.path(), |addr| {
+    let (sim, mut config) = insecure_behind(dir.path(), |addr| {
         relay_with_cut(addr, Arc::new(AtomicBool::new(false)), cut.clone())
     })
     .await;
+    // The shortest lifetime allowed: 30 publishing intervals.
+    config.subscription_lifetime = config.publishing_interval * 30;
     let tags = vec![tag("X0.06", &format!("nsu={NAMESPACE};s=X0.06"))];
     let mut source = Running::start(config, tags);
     source.connected().await;
@@ -594,7 +611,7 @@ async fn a_subscription_the_server_dropped_during_a_cut_is_replaced_after_the_re
     })
     .await;
     // No publish requests reach the server: after the subscription's
-    // lifetime (60 publishing intervals) it closes it; the session (30 s)
+    // lifetime it closes it; the session (30 s)
     // stays. (This server then says so in the next publish, with a
     // `BadTimeout` status change; others forget the subscription at once.)
     let deadline = tokio::time::Instant::now() + Duration::from_secs(60);

@@ -25,6 +25,7 @@ mod house;
 mod interop;
 mod legacy;
 mod liveness;
+mod network_cut;
 mod opcua;
 mod operations;
 mod operators;

@@ -513,6 +513,13 @@ impl CellLoop {
                 Input::System,
                 self.engine.on_system(&id, problem.as_deref(), now),
             ),
+            SourceEvent::Gap { tags, values, why } => {
+                tracing::warn!(cell = %self.cell, %why, "changes lost: alarms judged across the gap say trigger uncertain");
+                (
+                    Input::Readings,
+                    self.engine.on_gap(tags.as_deref(), values, &why),
+                )
+            }
         };
         self.dispatch(now, input, step, queue_depth).await;
     }

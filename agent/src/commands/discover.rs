@@ -757,5 +757,6 @@ pub(crate) fn connection(
         queue_size: OpcUaConfig::default_queue_size(publishing, sampling),
         max_notifications_per_publish: OpcUaConfig::DEFAULT_MAX_NOTIFICATIONS,
         overflow_clear_after: OpcUaConfig::DEFAULT_OVERFLOW_CLEAR_AFTER,
+        subscription_lifetime: OpcUaConfig::DEFAULT_SUBSCRIPTION_LIFETIME,
     })
 }

@@ -135,6 +135,10 @@ pub struct OpcUaConfig {
     /// How long without a lost change before the `opcua-overflow` alarm
     /// clears (`opcua.overflow_clear_after`).
     pub overflow_clear_after: Duration,
+    /// How long the server keeps the subscription, and the changes it
+    /// queues, while the agent is cut off (`opcua.subscription_lifetime`):
+    /// a network cut shorter than this loses nothing.
+    pub subscription_lifetime: Duration,
 }
 
 impl OpcUaConfig {
@@ -145,6 +149,9 @@ impl OpcUaConfig {
     /// 100,000-tag cell (BENCHMARKS.md), against 2 ms at 10,000. More
     /// publishes cost the source a little more per change.
     pub const DEFAULT_MAX_NOTIFICATIONS: u32 = 1_000;
+
+    /// `opcua.subscription_lifetime` unless configured.
+    pub const DEFAULT_SUBSCRIPTION_LIFETIME: Duration = Duration::from_secs(60);
 
     /// `opcua.overflow_clear_after` unless configured.
     pub const DEFAULT_OVERFLOW_CLEAR_AFTER: Duration = Duration::from_secs(10);

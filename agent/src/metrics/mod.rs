@@ -41,6 +41,10 @@ pub struct Metrics {
     pub duplicate_updates: IntCounter,
     /// Values whose source timestamp was earlier than one already seen.
     pub out_of_order: IntCounter,
+    /// Gaps in the source's delivery: changes lost for good.
+    pub source_gaps: IntCounter,
+    /// Values the source knows it lost (dropped from a full queue).
+    pub source_lost_values: IntCounter,
     /// Tags whose value is unknown now.
     pub tags_unknown: IntGauge,
     /// Changes fed to checks.
@@ -250,6 +254,16 @@ impl Metrics {
             out_of_order: reg!(IntCounter::with_opts(opts(
                 "cellwatch_out_of_order_readings_total",
                 "Tag values whose source timestamp was earlier than one already seen, taken at the latest time seen (no duration measured through them).",
+                cell
+            ))),
+            source_gaps: reg!(IntCounter::with_opts(opts(
+                "cellwatch_source_gaps_total",
+                "Gaps in what the PLC's server delivered: notifications it could no longer resend after a network cut, publishes with values dropped from a full queue. An alarm judged across one says \"trigger uncertain\".",
+                cell
+            ))),
+            source_lost_values: reg!(IntCounter::with_opts(opts(
+                "cellwatch_source_lost_values_total",
+                "Tag values the server dropped from a full queue before publishing them (OPC UA overflow bit); raise opcua.queue_size if this grows.",
                 cell
             ))),
             tags_unknown: reg!(IntGauge::with_opts(opts(

@@ -162,6 +162,8 @@ impl MetricsSink {
         }
         m.duplicate_updates.inc_by(e.duplicates);
         m.out_of_order.inc_by(e.out_of_order);
+        m.source_gaps.inc_by(e.gaps);
+        m.source_lost_values.inc_by(e.lost_values);
         m.check_evaluations.inc_by(e.evaluations);
         if e.unknown_delta != 0 {
             m.tags_unknown.add(e.unknown_delta);

@@ -75,6 +75,17 @@ pub enum SourceEvent {
         /// What is wrong, or `None` when nothing is.
         problem: Option<String>,
     },
+    /// Changes were lost for good (a sequence gap the server could not
+    /// fill, values dropped from a full queue): sent before the values
+    /// that follow the gap.
+    Gap {
+        /// The tags that lost changes; `None`: any of them may have.
+        tags: Option<Vec<usize>>,
+        /// How many values were lost, when the source knows (0 if not).
+        values: u64,
+        /// What was lost, for the alarms judged across it.
+        why: String,
+    },
 }
 
 /// The sending half a source writes to: bounded, so a slow cell loop makes

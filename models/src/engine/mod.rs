@@ -167,6 +167,11 @@ pub struct Step {
     pub exported: Vec<(usize, Option<f64>)>,
     /// The work order changed (item code or target quantity): the new one.
     pub order: Option<Order>,
+    /// Gaps in the source's delivery: changes lost for good (a sequence
+    /// gap the server could not fill, a queue that overflowed).
+    pub gaps: u64,
+    /// Values the source knows were lost (dropped from a full queue).
+    pub lost_values: u64,
 }
 
 /// What the cell is making: the item (mould, product) code and the target
@@ -290,6 +295,25 @@ pub enum PartCounting {
     Counters(Vec<(usize, Counter)>),
 }
 
+/// Tags whose changes may have been lost, and the latest gap's reason.
+#[derive(Debug, Clone)]
+struct Lost {
+    tags: Vec<bool>,
+    why: String,
+}
+
+/// Marks a finding judged across a gap: no contact is named its trigger,
+/// and the message says why.
+fn uncertain_trigger(f: &mut Finding, why: &str) {
+    if matches!(f.kind, AlarmKind::Communication | AlarmKind::System) {
+        return;
+    }
+    for c in &mut f.culprits {
+        c.trigger = false;
+    }
+    f.message = format!("{} (trigger uncertain: {why})", f.message);
+}
+
 /// A comparison contact computed from numeric tags.
 #[derive(Debug, Clone)]
 struct Derived {
@@ -396,6 +420,10 @@ pub struct CellEngine {
     latest: Option<u64>,
     /// The reading being handled came out of time order.
     untimed: bool,
+    /// Tags whose changes may have been lost, until their next value.
+    lost: Option<Lost>,
+    /// Why the tag of the reading being handled may have lost changes.
+    lost_now: Option<String>,
     /// Tags of bad quality, and why.
     bad: BTreeMap<usize, BadQuality>,
     /// How many tags are unknown now.
@@ -550,6 +578,8 @@ impl CellEngine {
             timestamps: vec![None; n],
             latest: None,
             untimed: false,
+            lost: None,
+            lost_now: None,
             bad: BTreeMap::new(),
             unknown: configured,
             sets,
@@ -857,6 +887,67 @@ impl CellEngine {
         steps
     }
 
+    /// The source lost changes for good (`why`): of `tags`, or of any tag
+    /// (`None`: a sequence gap says nothing of what was in it); `values`
+    /// of them when it knows how many. Until each such tag's next value,
+    /// an alarm raised or cleared on it carries "trigger uncertain" and
+    /// names no trigger: the change that tripped it may be among the lost.
+    pub fn on_gap(&mut self, tags: Option<&[usize]>, values: u64, why: &str) -> Step {
+        let n = self.tags.len();
+        let lost = self.lost.get_or_insert_with(|| Lost {
+            tags: vec![false; n],
+            why: String::new(),
+        });
+        lost.why = why.to_string();
+        match tags {
+            None => lost.tags.iter_mut().for_each(|t| *t = true),
+            Some(tags) => {
+                for &t in tags {
+                    if let Some(t) = lost.tags.get_mut(t) {
+                        *t = true;
+                    }
+                }
+            }
+        }
+        Step {
+            gaps: 1,
+            lost_values: values,
+            ..Step::default()
+        }
+    }
+
+    /// Why `tag`'s changes may have been lost, if they may; the mark is
+    /// taken off: its value is here.
+    fn take_lost(&mut self, tag: usize) -> Option<String> {
+        let lost = self.lost.as_mut()?;
+        if !std::mem::take(lost.tags.get_mut(tag)?) {
+            return None;
+        }
+        let why = lost.why.clone();
+        if !lost.tags.iter().any(|&t| t) {
+            self.lost = None;
+        }
+        Some(why)
+    }
+
+    /// Why the trigger of `f` is uncertain, if it is: the reading that
+    /// judged it, or a contact it names, may have lost changes.
+    fn uncertain(&self, f: &Finding) -> Option<String> {
+        if let Some(why) = &self.lost_now {
+            return Some(why.clone());
+        }
+        let lost = self.lost.as_ref()?;
+        let marked = |t: usize| lost.tags.get(t).copied().unwrap_or(false);
+        f.culprits.iter().find_map(|c| {
+            let t = self.tag_index(&c.address)?;
+            let hit = marked(t)
+                || self.derived.iter().any(|d| {
+                    d.tag == t && (marked(d.lhs) || matches!(d.rhs, Rhs::Tag(r) if marked(r)))
+                });
+            hit.then(|| lost.why.clone())
+        })
+    }
+
     /// A condition of the agent itself (`journal`: it cannot write) began
     /// (`problem` is why) or ended.
     pub fn on_system(&mut self, id: &str, problem: Option<&str>, now: u64) -> Step {
@@ -988,6 +1079,9 @@ impl CellEngine {
         if tag >= self.configured {
             return false;
         }
+        if self.lost.is_some() {
+            self.lost_now = self.take_lost(tag);
+        }
         if let Some(last) = self.timestamps[tag] {
             let same = match &r.reading {
                 Reading::Good(v) => self.values[tag] == Some(*v),
@@ -1001,6 +1095,7 @@ impl CellEngine {
             };
             if same && r.source_time <= last {
                 step.duplicates += 1;
+                self.lost_now = None;
                 return false;
             }
         }
@@ -1062,6 +1157,7 @@ impl CellEngine {
         for f in findings.drain(..) {
             self.apply_at(f, at, now, step);
         }
+        self.lost_now = None;
         changed
     }
 
@@ -1511,7 +1607,12 @@ impl CellEngine {
     /// [`CellEngine::apply`] of a finding whose condition began at `at`
     /// (source time) and is taken at `now` (the clock): its delay runs from
     /// both, each compared only with its own kind of time.
-    fn apply_at(&mut self, f: Finding, at: u64, now: u64, step: &mut Step) {
+    fn apply_at(&mut self, mut f: Finding, at: u64, now: u64, step: &mut Step) {
+        if self.lost.is_some() || self.lost_now.is_some() {
+            if let Some(why) = self.uncertain(&f) {
+                uncertain_trigger(&mut f, &why);
+            }
+        }
         if let Some(&(on, off)) = self.delays.get(&f.id) {
             let active = self.alarms.get(&f.id).is_some_and(|a| a.active);
             if f.active == active {
@@ -1757,6 +1858,53 @@ mod tests {
             Err(CommandRefused::NothingToAcknowledge("ese".into()))
         );
         assert!(e.reset("ese", "kim", 32).is_err());
+    }
+
+    #[test]
+    fn an_alarm_judged_across_a_gap_names_no_trigger_until_each_tag_is_heard_again() {
+        let mut e = engine();
+        e.on_connection(true, 1);
+        load_normal(&mut e, 2);
+        let x006 = e.tag_index(&Signal::new("X0.06")).unwrap();
+        // Changes of any tag lost (a sequence gap): counted, and the next
+        // alarm on a tag not heard since names no trigger.
+        let gap = e.on_gap(None, 0, "publishes 7 to 9 lost");
+        assert_eq!((gap.gaps, gap.lost_values), (1, 0));
+        let ev = e.on_reading(x006, Reading::Good(false), 10, 10).events;
+        let EngineEvent::Alarm { alarm, .. } = &ev[0] else {
+            panic!("{ev:?}")
+        };
+        assert!(alarm.culprits.iter().all(|c| !c.trigger), "{alarm:?}");
+        assert!(
+            alarm
+                .message
+                .ends_with("(trigger uncertain: publishes 7 to 9 lost)"),
+            "{}",
+            alarm.message
+        );
+        // Heard again: the clear names its trigger as usual.
+        let ev = e.on_reading(x006, Reading::Good(true), 20, 20).events;
+        let EngineEvent::Alarm { alarm, .. } = &ev[0] else {
+            panic!("{ev:?}")
+        };
+        assert!(!alarm.message.contains("uncertain"), "{}", alarm.message);
+        // A gap of other tags leaves this one's alarms alone; every mark
+        // goes once each of them is heard.
+        let others: Vec<usize> = (0..e.tags().len()).filter(|&t| t != x006).collect();
+        let gap = e.on_gap(Some(&others), 3, "3 values lost in a full queue");
+        assert_eq!((gap.gaps, gap.lost_values), (1, 3));
+        let ev = e.on_reading(x006, Reading::Good(false), 30, 30).events;
+        let EngineEvent::Alarm { alarm, .. } = &ev[0] else {
+            panic!("{ev:?}")
+        };
+        // X0.06 is the only culprit: certain.
+        assert!(alarm.culprits[0].trigger, "{alarm:?}");
+        assert!(!alarm.message.contains("uncertain"), "{}", alarm.message);
+        for &t in &others {
+            let v = e.values()[t];
+            e.on_reading(t, Reading::Good(v.unwrap_or(false)), 40, 40);
+        }
+        assert!(e.lost.is_none());
     }
 
     #[test]

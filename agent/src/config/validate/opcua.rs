@@ -139,6 +139,33 @@ impl Validator<'_> {
                 d
             }
         };
+        // At least three keep-alive periods (OPC UA Part 4): the server
+        // sends a keep-alive every 10 publishing intervals without data.
+        let shortest = publishing_interval * 30;
+        let subscription_lifetime = match raw.subscription_lifetime {
+            None => OpcUaConfig::DEFAULT_SUBSCRIPTION_LIFETIME.max(shortest),
+            Some(v) => {
+                let span = v.span();
+                let d = self.duration(
+                    Some(v),
+                    "opcua.subscription_lifetime",
+                    OpcUaConfig::DEFAULT_SUBSCRIPTION_LIFETIME,
+                );
+                if d < shortest {
+                    self.problem(
+                        span,
+                        "opcua.subscription_lifetime",
+                        &format!(
+                            "at least three keep-alive periods (30 publishing intervals: {})",
+                            humantime::format_duration(shortest)
+                        ),
+                    );
+                } else if d > Duration::from_secs(3600) {
+                    self.problem(span, "opcua.subscription_lifetime", "at most 1h");
+                }
+                d
+            }
+        };
         Some(OpcUaConfig {
             endpoint,
             policy,
@@ -151,6 +178,7 @@ impl Validator<'_> {
             queue_size,
             max_notifications_per_publish,
             overflow_clear_after,
+            subscription_lifetime,
         })
     }
 

@@ -92,7 +92,10 @@ pub(super) fn client_retrying(
         .keep_alive_interval(Duration::from_secs(1))
         .max_failed_keep_alive_count(3)
         .request_timeout(Duration::from_secs(5))
-        .session_timeout(30_000)
+        // The session outlives the subscription: a server that ends the
+        // subscriptions with a timed-out session would otherwise lose them
+        // sooner than `opcua.subscription_lifetime` says.
+        .session_timeout(session_timeout(config))
         // Decoding limits sized from what the subscription can produce: a
         // publish holds at most `max_notifications_per_publish` values (asked
         // of the server), a monitored-item call at most
@@ -102,9 +105,11 @@ pub(super) fn client_retrying(
         .max_array_length(array_limit(config))
         .max_message_size(MAX_MESSAGE_BYTES)
         .max_chunk_count(0)
-        // The source recreates its subscription itself after a new session
-        // (see `run`); async-opcua 0.19's own re-creation leaves the new
-        // subscription without publish requests.
+        // The source takes its subscription over into a new session itself,
+        // without asking the server to send every value again before the
+        // publishes it still holds are sent again (see `resume`), and
+        // recreates it when it cannot; async-opcua 0.19's own re-creation
+        // leaves the new subscription without publish requests.
         .recreate_subscriptions(false)
         .client()
         .map_err(|e| SourceError::Client(e.join("; ")))?;
@@ -139,3 +144,13 @@ pub(super) async fn namespace_array(session: &Session) -> Result<Vec<String>, St
 
 /// `Server_NamespaceArray`.
 pub(super) const NAMESPACE_ARRAY: u32 = 2255;
+
+/// The session timeout asked for, ms: 30 s, or the subscription's lifetime
+/// if longer.
+fn session_timeout(config: &OpcUaConfig) -> u32 {
+    let ms = config
+        .subscription_lifetime
+        .max(Duration::from_secs(30))
+        .as_millis();
+    u32::try_from(ms).unwrap_or(u32::MAX)
+}

@@ -32,9 +32,12 @@ use std::sync::Arc;
 use std::time::Duration;
 
 mod client;
+mod delivery;
 mod names;
 mod once;
 mod overflow;
+mod resume;
+mod sequence;
 mod subscription;
 mod switches;
 
@@ -455,11 +458,13 @@ pub const NAMESPACE_ALARM: &str = "opcua-namespace";
 pub const SILENT_KEEP_ALIVES: u32 = 3;
 
 /// Supervises one session, beside its event loop: resolves the tags'
-/// namespaces against the server's `NamespaceArray`, (re)creates the
-/// subscription when there is none or the namespaces moved, says
-/// [`SourceEvent::Connected`], then watches that the subscription keeps
-/// publishing (data or keep-alives). A silent one is reported as
-/// [`SourceEvent::Disconnected`], deleted and created again.
+/// namespaces against the server's `NamespaceArray`; takes the
+/// subscription over from a lost session, or subscribes when there is
+/// none or the namespaces moved; says [`SourceEvent::Connected`]; then
+/// fills every gap in the publishes (`Republish`) and watches that the
+/// subscription keeps publishing (data or keep-alives). A silent one is
+/// asked for what it holds, then reported as [`SourceEvent::Disconnected`],
+/// deleted and created again.
 async fn supervise(
     session: Arc<Session>,
     ctx: Arc<Context>,
@@ -467,11 +472,9 @@ async fn supervise(
     new_session: bool,
 ) {
     let mut live = current.lock_owned().await;
-    if new_session {
-        // The old subscription went with the old session.
-        *live = None;
-    }
     let mut retry = Duration::from_millis(500);
+    // The subscription of the lost connection is to be taken over.
+    let mut resuming = live.is_some();
     loop {
         let namespaces = match namespace_array(&session).await {
             Ok(n) => n,
@@ -488,38 +491,55 @@ async fn supervise(
                 continue;
             }
         };
-        // A reactivated session keeps its subscription only if the server
-        // did (it drops one that went without publish requests for its
-        // lifetime): ask, and start over if it is gone.
-        if let Some(l) = live.as_ref().filter(|l| l.namespaces == namespaces) {
-            let id = l.subscription.id;
-            let kept = session
-                .set_publishing_mode(&[id], true)
-                .await
-                .ok()
-                .and_then(|r| r.first().copied())
-                .is_some_and(|s| s.is_good());
-            if !kept {
-                tracing::warn!(
-                    subscription = id,
-                    "the server no longer has the subscription: subscribing again"
+        let resumed = match live
+            .as_ref()
+            .filter(|l| resuming && l.namespaces == namespaces)
+        {
+            Some(l) => Some(resume(&session, l, new_session).await),
+            None => None,
+        };
+        match (resumed, live.as_ref()) {
+            (Some(Err(why)), Some(l)) => {
+                let sub = &l.subscription;
+                tracing::warn!(subscription = sub.id, %why, "subscribing again");
+                resume::give_up(
+                    sub,
+                    format!("subscription {} could not be taken over ({why}): changes while the connection was down may be lost", sub.id),
                 );
                 let _ = ctx
                     .tx
                     .send(SourceEvent::Disconnected(format!(
-                        "the server dropped subscription {id} while the connection was down"
+                        "the server dropped subscription {} while the connection was down",
+                        sub.id
                     )))
                     .await;
-                let _ = session.delete_subscription(id).await;
+                // Also out of the library's state (the server has it no
+                // more, or never will again).
+                let _ = session.delete_subscription(sub.id).await;
                 *live = None;
             }
+            (Some(Ok(())), Some(l)) => {
+                // Silence is counted from here: the connection was down,
+                // not the subscription.
+                l.heard.beat();
+                if !new_session {
+                    // Values the server never sent, because they did not
+                    // change, were forgotten while the connection was down:
+                    // read them after what it held (the engine ignores what
+                    // it has).
+                    read_current(&session, &ctx, &l.nodes).await;
+                }
+            }
+            _ => {}
         }
+        resuming = false;
         if live.as_ref().is_none_or(|l| l.namespaces != namespaces) {
             if let Some(old) = live.take() {
                 tracing::info!(
                     subscription = old.subscription.id,
                     "the server's namespaces changed: subscribing again"
                 );
+                resume::give_up(&old.subscription, format!("the server's namespaces changed: subscription {} replaced", old.subscription.id));
                 let _ = session.delete_subscription(old.subscription.id).await;
             }
             match subscribe(&session, &ctx, namespaces).await {
@@ -532,42 +552,93 @@ async fn supervise(
             }
         }
         retry = Duration::from_millis(500);
-        if !new_session {
-            // Publishes sent while the connection was down are lost with
-            // it: read every tag's current value, so that nothing that
-            // changed meanwhile is missed (the engine ignores what it
-            // already has).
-            if let Some(l) = live.as_ref() {
-                read_current(&session, &ctx, &l.nodes).await;
-            }
-        }
         let _ = ctx
             .tx
             .send(SourceEvent::Connected(ctx.endpoint.clone()))
             .await;
         let l = live.as_ref().expect("subscribed above");
-        let limit = l.subscription.keep_alive * SILENT_KEEP_ALIVES;
-        let period = (l.subscription.keep_alive / 2).max(Duration::from_millis(50));
-        let why = loop {
-            tokio::time::sleep(period).await;
-            if let Some(status) = l.heard.closed() {
-                break format!(
-                    "the server dropped subscription {} ({status}): subscribing again",
-                    l.subscription.id
-                );
-            }
-            let silent = l.heard.silent_for();
-            if silent > limit {
-                break format!(
-                    "subscription silent for {:.1} s (no data, no keep-alive) while the session lives",
-                    silent.as_secs_f64()
-                );
-            }
-        };
+        let why = watch(&session, l).await;
         let l = live.take().expect("subscribed above");
         tracing::warn!(subscription = l.subscription.id, "{why}");
+        resume::give_up(
+            &l.subscription,
+            format!(
+                "subscription {} replaced ({why}): changes meanwhile may be lost",
+                l.subscription.id
+            ),
+        );
         let _ = ctx.tx.send(SourceEvent::Disconnected(why)).await;
         let _ = session.delete_subscription(l.subscription.id).await;
+    }
+}
+
+/// The subscription of a lost connection in this session: taken over
+/// into a new session, or still there in a reactivated one, with every
+/// publish the server holds sent again.
+///
+/// # Errors
+/// Why it cannot be: the server no longer has it, or refuses.
+async fn resume(session: &Session, l: &Live, new_session: bool) -> Result<(), String> {
+    let sub = &l.subscription;
+    if new_session {
+        return resume::transfer(session, sub).await;
+    }
+    match resume::catch_up(session, sub).await {
+        Ok(()) | Err(resume::Unfilled::Failed(_)) => Ok(()),
+        Err(resume::Unfilled::Gone(status)) => Err(status.to_string()),
+    }
+}
+
+/// Watches a subscription in place: fills every gap found in its
+/// publishes, and says why it must be replaced — the server closed it, or
+/// it went silent (no data, no keep-alive) and held nothing to send again.
+async fn watch(session: &Session, l: &Live) -> String {
+    let sub = &l.subscription;
+    let limit = sub.keep_alive * SILENT_KEEP_ALIVES;
+    let period = (sub.keep_alive / 2).max(Duration::from_millis(50));
+    loop {
+        tokio::select! {
+            () = tokio::time::sleep(period) => {}
+            () = sub.shared.missing.notified() => {
+                if let Err(resume::Unfilled::Gone(status)) = resume::fill(session, sub).await {
+                    return format!("the server dropped subscription {} ({status}): subscribing again", sub.id);
+                }
+            }
+        }
+        if let Some(status) = l.heard.closed() {
+            return format!(
+                "the server dropped subscription {} ({status}): subscribing again",
+                sub.id
+            );
+        }
+        if l.heard.silent_for() <= limit {
+            continue;
+        }
+        // Silent: whatever the server sent and the agent never got is
+        // asked for again. A request that fails (a stalled connection)
+        // leaves the subscription alone: the session's keep-alive judges
+        // the connection, and a subscription deleted now would drop what
+        // arrives once the traffic flows again.
+        match resume::catch_up(session, sub).await {
+            Err(resume::Unfilled::Gone(status)) => {
+                return format!(
+                    "the server dropped subscription {} ({status}): subscribing again",
+                    sub.id
+                )
+            }
+            Err(resume::Unfilled::Failed(status)) => {
+                tracing::debug!(subscription = sub.id, %status, "silent, and cannot be asked for what it holds: waiting");
+                continue;
+            }
+            Ok(()) => {}
+        }
+        let silent = l.heard.silent_for();
+        if silent > limit {
+            return format!(
+                "subscription silent for {:.1} s (no data, no keep-alive) while the session lives",
+                silent.as_secs_f64()
+            );
+        }
     }
 }
 

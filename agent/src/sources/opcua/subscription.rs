@@ -1,21 +1,20 @@
 //! The subscription: monitored items created in chunks the server accepts,
 //! and each publish's changes passed on in source-time order.
 
-use super::overflow::Overflow;
-use std::collections::{BTreeSet, HashMap};
+use super::delivery::{delivery, Feed, Shared};
+use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use cellwatch_models::engine::{Reading, TagReading};
 use opcua::client::services::CreateMonitoredItems;
-use opcua::client::{MonitoredItemMap, OnSubscriptionNotificationCore, Session, UARequest};
+use opcua::client::{Session, UARequest};
 use opcua::types::{
-    DataChangeFilter, DataChangeNotification, DataChangeTrigger, DataValue, ExtensionObject,
-    MonitoredItemCreateRequest, MonitoringMode, MonitoringParameters, NodeId, NotificationMessage,
-    ReadValueId, StatusChangeNotification, StatusCode, TimestampsToReturn, Variant,
+    DataChangeFilter, DataChangeTrigger, DataValue, ExtensionObject,
+    MonitoredItemCreateRequest, MonitoringMode, MonitoringParameters, NodeId,
+    ReadValueId, StatusCode, TimestampsToReturn, Variant,
 };
-use tokio::sync::mpsc::error::TrySendError;
 
 use super::names::Names;
 use crate::config::node::TagNode;
@@ -30,9 +29,6 @@ const DEFAULT_CHUNK: usize = 1000;
 /// The most monitored items created in one call, whatever the server
 /// allows (the client's decoding limits are sized from it).
 pub(super) const MAX_ITEMS_PER_CALL: usize = 10_000;
-/// Publishing intervals without a publish request before the server drops
-/// the subscription.
-const LIFETIME_COUNT: u32 = 60;
 /// Publishing intervals without data before the server sends a keep-alive.
 const KEEP_ALIVE_COUNT: u32 = 10;
 
@@ -44,10 +40,10 @@ pub(super) struct Heard {
     last: AtomicU64,
     /// A publish is being handed to the cell loop (which may be behind):
     /// not silence.
-    busy: AtomicBool,
+    pub(super) busy: AtomicBool,
     /// The bad status the server closed the subscription with (its
     /// `StatusChangeNotification`, `BadTimeout` when it expired), or 0.
-    closed: AtomicU32,
+    pub(super) closed: AtomicU32,
 }
 
 impl Heard {
@@ -68,7 +64,7 @@ impl Heard {
         }
     }
 
-    fn beat(&self) {
+    pub(super) fn beat(&self) {
         let ms = self.start.elapsed().as_millis() as u64;
         self.last.store(ms, Ordering::Relaxed);
     }
@@ -89,6 +85,8 @@ impl Heard {
 pub(super) struct Subscribed {
     pub(super) id: u32,
     pub(super) keep_alive: Duration,
+    /// Its publishes' way to the cell loop, in order.
+    pub(super) shared: Shared,
 }
 
 /// Creates the subscription and its monitored items in chunks; `None` if the
@@ -109,24 +107,24 @@ pub(super) async fn subscribe(
     // Each node's monitored item gets client handle i + 1 (0 would let the
     // library choose): a notification finds its tags by index, without a
     // lookup in the library's item maps or a hash of the node id.
-    let callback = InTimeOrder {
-        monitored: monitored.clone(),
-        uses: uses.clone(),
-        tx: tx.clone(),
-        heard: heard.clone(),
-        names: names.clone(),
-        queue_size: queue_size.clone(),
-        overflow: Overflow::new(config.overflow_clear_after),
-    };
+    let shared = delivery(
+        monitored.clone(),
+        uses.clone(),
+        tx.clone(),
+        heard.clone(),
+        names.clone(),
+        queue_size.clone(),
+        config.overflow_clear_after,
+    );
     let sub = match session
         .create_subscription(
             config.publishing_interval,
-            LIFETIME_COUNT,
+            lifetime_count(config),
             KEEP_ALIVE_COUNT,
             config.max_notifications_per_publish,
             0,
             true,
-            callback,
+            Feed(shared.clone()),
         )
         .await
     {
@@ -256,203 +254,27 @@ pub(super) async fn subscribe(
             Err(e) => tracing::error!(error = %e, "cannot create monitored items"),
         }
     }
+    shared.lock().id = sub;
     Some(Subscribed {
         id: sub,
         keep_alive,
+        shared,
     })
 }
 
-/// Passes each publish's data changes to the engine in source-time order.
-///
-/// A server sends the changes of one publish in no particular order; a
-/// trigger processed before the change it depends on would leave a timer
-/// unarmed. The library's own dispatch collects them ([`Collector`]), then
-/// they are sorted by source timestamp (stable, so equal times keep the
-/// server's order).
-struct InTimeOrder {
-    /// The node of client handle `i + 1`, and its tags.
-    monitored: Arc<Monitored>,
-    uses: Arc<Uses>,
-    tx: SourceSender,
-    heard: Arc<Heard>,
-    names: Arc<Names>,
-    /// The queue size the server granted.
-    queue_size: Arc<AtomicU32>,
-    /// Changes lost in the server's queues, and the alarm of them.
-    overflow: Overflow,
+/// Publishing intervals without a publish request before the server drops
+/// the subscription: `opcua.subscription_lifetime`, and at least three
+/// keep-alive periods.
+fn lifetime_count(config: &OpcUaConfig) -> u32 {
+    let interval = config.publishing_interval.as_millis().max(1);
+    let count = config.subscription_lifetime.as_millis().div_ceil(interval);
+    u32::try_from(count)
+        .unwrap_or(u32::MAX)
+        .max(3 * KEEP_ALIVE_COUNT)
 }
 
 /// The alarm of changes lost in the server's queues (kind `system`).
 pub const OVERFLOW_ALARM: &str = "opcua-overflow";
-
-/// One publish's readings, in the server's order.
-struct Collector<'a> {
-    monitored: &'a Monitored,
-    uses: &'a Uses,
-    readings: Vec<TagReading>,
-    /// Tags with a value flagged `Overflow` in this publish.
-    overflowed: BTreeSet<usize>,
-    /// Values flagged `Overflow` in this publish.
-    lost: u64,
-    /// A bad status change: the server closed the subscription.
-    closed: Option<StatusCode>,
-}
-
-impl Collector<'_> {
-    fn notification(&mut self, notification: NotificationMessage) {
-        for obj in notification.notification_data.into_iter().flatten() {
-            if obj.inner_is::<DataChangeNotification>() {
-                let Some(change) = obj.into_inner_as::<DataChangeNotification>() else {
-                    continue;
-                };
-                let items = change.monitored_items.unwrap_or_default();
-                self.readings.reserve(items.len());
-                for n in items {
-                    self.data_value(n.client_handle, n.value);
-                }
-            } else if obj.inner_is::<StatusChangeNotification>() {
-                if let Some(status) = obj.into_inner_as::<StatusChangeNotification>() {
-                    if status.status.is_bad() {
-                        self.closed = Some(status.status);
-                    }
-                }
-            }
-        }
-    }
-
-    fn data_value(&mut self, handle: u32, value: DataValue) {
-        let Some(item) = (handle as usize)
-            .checked_sub(1)
-            .and_then(|i| self.monitored.items.get(i))
-        else {
-            tracing::warn!(
-                handle,
-                "a notification for a monitored item this agent did not create"
-            );
-            return;
-        };
-        let at = source_time(&value);
-        let overflow = value.status.is_some_and(|s| s.overflow());
-        // The usual node, one tag: its item says the tag and how it is
-        // read, one look-up per change.
-        if let Some(how) = item.one() {
-            let reading = reading(&value, self.uses.kind(how));
-            self.push(item.at, reading, at, overflow);
-            return;
-        }
-        for &tag in self.monitored.several(*item) {
-            let reading = reading(&value, &self.uses[tag as usize]);
-            self.push(tag, reading, at, overflow);
-        }
-    }
-
-    fn push(&mut self, tag: u32, reading: Reading, source_time: u64, overflow: bool) {
-        let tag = tag as usize;
-        if overflow {
-            self.overflowed.insert(tag);
-            self.lost += 1;
-        }
-        self.readings.push(TagReading {
-            tag,
-            reading,
-            source_time,
-        });
-    }
-}
-
-impl OnSubscriptionNotificationCore for InTimeOrder {
-    fn on_subscription_notification(
-        &mut self,
-        notification: NotificationMessage,
-        _items: MonitoredItemMap<'_>,
-    ) {
-        // The start of the agent's own latency: the publish is decoded,
-        // its values not yet looked at.
-        let received = std::time::Instant::now();
-        // Keep-alives (no data) come here too: the subscription is alive.
-        self.heard.beat();
-        let mut c = Collector {
-            monitored: &self.monitored,
-            uses: &self.uses,
-            readings: Vec::new(),
-            overflowed: BTreeSet::new(),
-            lost: 0,
-            closed: None,
-        };
-        c.notification(notification);
-        if let Some(status) = c.closed {
-            // The supervisor sees it and subscribes again.
-            tracing::warn!(%status, "the server closed the subscription");
-            self.heard.closed.store(status.bits(), Ordering::Relaxed);
-        }
-        // Overflow bookkeeping only while changes are being lost: the usual
-        // publish costs one test here. Keep-alives count, so the alarm
-        // clears on a quiet subscription too.
-        let say = (c.lost > 0 || self.overflow.said.is_some())
-            && self.overflow.publish(&c.overflowed, c.lost, received);
-        let problem = say.then(|| {
-            let problem = self.overflow.say(
-                &self.names,
-                self.queue_size.load(Ordering::Relaxed),
-                received,
-            );
-            match &problem {
-                Some(text) => tracing::warn!("{text}"),
-                None => tracing::info!("no change lost in the server's queues for a while"),
-            }
-            SourceEvent::Problem {
-                id: OVERFLOW_ALARM.into(),
-                problem,
-            }
-        });
-        if c.readings.is_empty() {
-            if let Some(p) = problem {
-                send_blocking(&self.tx, p);
-            }
-            return;
-        }
-        c.readings.sort_by_key(|r| r.source_time);
-        self.heard.busy.store(true, Ordering::Relaxed);
-        send_blocking(
-            &self.tx,
-            SourceEvent::Readings(crate::sources::Batch {
-                readings: c.readings,
-                received,
-            }),
-        );
-        if let Some(p) = problem {
-            send_blocking(&self.tx, p);
-        }
-        self.heard.beat();
-        self.heard.busy.store(false, Ordering::Relaxed);
-    }
-}
-
-/// Sends from the session's (synchronous) notification callback. When the
-/// cell loop is behind and the channel full, the callback waits: the
-/// session's event loop stops taking publishes, and the server's queues
-/// hold the changes. Nothing is dropped here.
-fn send_blocking(tx: &SourceSender, event: SourceEvent) {
-    let event = match tx.try_send(event) {
-        Ok(()) | Err(TrySendError::Closed(_)) => return,
-        Err(TrySendError::Full(event)) => event,
-    };
-    match tokio::runtime::Handle::try_current().map(|h| h.runtime_flavor()) {
-        Ok(tokio::runtime::RuntimeFlavor::CurrentThread) => {
-            // A single-threaded runtime cannot block here without stopping
-            // the loop that would empty the channel.
-            tracing::error!(
-                "the cell loop is behind on a single-threaded runtime; a publish is dropped"
-            );
-        }
-        Ok(_) => {
-            let _ = tokio::task::block_in_place(|| tx.blocking_send(event));
-        }
-        Err(_) => {
-            let _ = tx.blocking_send(event);
-        }
-    }
-}
 
 /// The server's limit on monitored items per call, or [`DEFAULT_CHUNK`].
 async fn max_items_per_call(session: &Session) -> usize {
@@ -533,17 +355,17 @@ impl TagUse {
 pub(super) struct Monitored {
     tag_nodes: Arc<Vec<Option<TagNode>>>,
     namespaces: Vec<String>,
-    items: Vec<Item>,
+    pub(super) items: Vec<Item>,
     /// The tags of the nodes that have several, one run each.
     several: Vec<u32>,
 }
 
 /// One monitored node as a notification finds it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Item {
+pub(super) struct Item {
     /// Its tag; for a node with several, where they start in
     /// [`Monitored::several`].
-    at: u32,
+    pub(super) at: u32,
     /// How its tag is read (an index into the [`Uses`]' kinds); for a node
     /// with several, [`SEVERAL`] and how many.
     how: u32,
@@ -554,7 +376,7 @@ const SEVERAL: u32 = 1 << 31;
 
 impl Item {
     /// How its one tag is read, if it has one.
-    fn one(self) -> Option<u32> {
+    pub(super) fn one(self) -> Option<u32> {
         (self.how & SEVERAL == 0).then_some(self.how)
     }
 }
@@ -616,7 +438,7 @@ impl Monitored {
     }
 
     /// The tags of a node with several.
-    fn several(&self, item: Item) -> &[u32] {
+    pub(super) fn several(&self, item: Item) -> &[u32] {
         let (from, n) = (item.at as usize, (item.how & !SEVERAL) as usize);
         &self.several[from..from + n]
     }
@@ -680,7 +502,7 @@ impl Uses {
     }
 
     /// Kind `k` of reading a tag.
-    fn kind(&self, k: u32) -> &TagUse {
+    pub(super) fn kind(&self, k: u32) -> &TagUse {
         &self.kinds[k as usize]
     }
 }

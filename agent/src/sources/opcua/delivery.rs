@@ -1,0 +1,344 @@
+//! Each publish's changes handed to the cell loop: in sequence-number
+//! order across publishes ([`Sequence`]), in source-time order within one,
+//! with what the server's queues dropped said (the `opcua-overflow` alarm)
+//! and every loss said as a [`SourceEvent::Gap`] before what follows it.
+
+use std::collections::BTreeSet;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use cellwatch_models::engine::{Reading, TagReading};
+use opcua::client::{MonitoredItemMap, OnSubscriptionNotificationCore};
+use opcua::types::{
+    DataChangeNotification, DataValue, NotificationMessage, StatusChangeNotification, StatusCode,
+};
+use tokio::sync::mpsc::error::TrySendError;
+use tokio::sync::Notify;
+
+use super::names::Names;
+use super::overflow::Overflow;
+use super::sequence::{Next, Sequence};
+use super::subscription::{reading, source_time, Heard, Monitored, Uses, OVERFLOW_ALARM};
+use crate::sources::{SourceEvent, SourceSender};
+
+/// One subscription's delivery, shared by the session's notification
+/// callback and the supervisor that fills gaps by `Republish`.
+pub(super) struct Delivery {
+    /// The subscription's id, once the server gave one.
+    pub(super) id: u32,
+    pub(super) sequence: Sequence,
+    order: InTimeOrder,
+}
+
+/// A [`Delivery`] behind its lock, and the supervisor's wake-up when a
+/// publish is missing.
+#[derive(Clone)]
+pub(super) struct Shared {
+    delivery: Arc<Mutex<Delivery>>,
+    /// Woken when a publish is found missing.
+    pub(super) missing: Arc<Notify>,
+}
+
+impl Shared {
+    pub(super) fn lock(&self) -> MutexGuard<'_, Delivery> {
+        self.delivery.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+impl Delivery {
+    /// Does what the sequence says, in order.
+    pub(super) fn handle(&mut self, next: Vec<Next>) {
+        for n in next {
+            match n {
+                Next::Deliver(m) => self.order.publish(m),
+                Next::Lost { from, to } => {
+                    let which = if from == to {
+                        format!("publish {from}")
+                    } else {
+                        format!("publishes {from} to {to}")
+                    };
+                    self.order.gap(format!(
+                        "{which} of subscription {} lost: the server no longer had them to send again",
+                        self.id
+                    ));
+                }
+            }
+        }
+    }
+
+    /// A publish, data or keep-alive, as it came: handed on in order.
+    pub(super) fn arrived(&mut self, m: NotificationMessage) {
+        let mut next = Vec::new();
+        self.sequence.arrived(m, &mut next);
+        self.handle(next);
+    }
+
+    /// Changes were lost for good (`why`): said before what follows.
+    pub(super) fn gap(&mut self, why: String) {
+        self.order.gap(why);
+    }
+}
+
+/// The library's notification callback: every publish goes through the
+/// shared [`Delivery`].
+pub(super) struct Feed(pub(super) Shared);
+
+impl OnSubscriptionNotificationCore for Feed {
+    fn on_subscription_notification(
+        &mut self,
+        notification: NotificationMessage,
+        _items: MonitoredItemMap<'_>,
+    ) {
+        let mut d = self.0.lock();
+        d.arrived(notification);
+        if d.sequence.missing().is_some() {
+            self.0.missing.notify_one();
+        }
+    }
+}
+
+/// A delivery for a subscription about to be created.
+pub(super) fn delivery(
+    monitored: Arc<Monitored>,
+    uses: Arc<Uses>,
+    tx: SourceSender,
+    heard: Arc<Heard>,
+    names: Arc<Names>,
+    queue_size: Arc<AtomicU32>,
+    overflow_clear_after: std::time::Duration,
+) -> Shared {
+    Shared {
+        delivery: Arc::new(Mutex::new(Delivery {
+            id: 0,
+            sequence: Sequence::default(),
+            order: InTimeOrder {
+                monitored,
+                uses,
+                tx,
+                heard,
+                names,
+                queue_size,
+                overflow: Overflow::new(overflow_clear_after),
+            },
+        })),
+        missing: Arc::new(Notify::new()),
+    }
+}
+
+/// Passes each publish's data changes to the engine in source-time order.
+///
+/// A server sends the changes of one publish in no particular order; a
+/// trigger processed before the change it depends on would leave a timer
+/// unarmed. The library's own dispatch collects them ([`Collector`]), then
+/// they are sorted by source timestamp (stable, so equal times keep the
+/// server's order).
+struct InTimeOrder {
+    /// The node of client handle `i + 1`, and its tags.
+    monitored: Arc<Monitored>,
+    uses: Arc<Uses>,
+    tx: SourceSender,
+    heard: Arc<Heard>,
+    names: Arc<Names>,
+    /// The queue size the server granted.
+    queue_size: Arc<AtomicU32>,
+    /// Changes lost in the server's queues, and the alarm of them.
+    overflow: Overflow,
+}
+
+/// One publish's readings, in the server's order.
+struct Collector<'a> {
+    monitored: &'a Monitored,
+    uses: &'a Uses,
+    readings: Vec<TagReading>,
+    /// Tags with a value flagged `Overflow` in this publish.
+    overflowed: BTreeSet<usize>,
+    /// Values flagged `Overflow` in this publish.
+    lost: u64,
+    /// A bad status change: the server closed the subscription.
+    closed: Option<StatusCode>,
+}
+
+impl Collector<'_> {
+    fn notification(&mut self, notification: NotificationMessage) {
+        for obj in notification.notification_data.into_iter().flatten() {
+            if obj.inner_is::<DataChangeNotification>() {
+                let Some(change) = obj.into_inner_as::<DataChangeNotification>() else {
+                    continue;
+                };
+                let items = change.monitored_items.unwrap_or_default();
+                self.readings.reserve(items.len());
+                for n in items {
+                    self.data_value(n.client_handle, n.value);
+                }
+            } else if obj.inner_is::<StatusChangeNotification>() {
+                if let Some(status) = obj.into_inner_as::<StatusChangeNotification>() {
+                    if status.status.is_bad() {
+                        self.closed = Some(status.status);
+                    }
+                }
+            }
+        }
+    }
+
+    fn data_value(&mut self, handle: u32, value: DataValue) {
+        let Some(item) = (handle as usize)
+            .checked_sub(1)
+            .and_then(|i| self.monitored.items.get(i))
+        else {
+            tracing::warn!(
+                handle,
+                "a notification for a monitored item this agent did not create"
+            );
+            return;
+        };
+        let at = source_time(&value);
+        let overflow = value.status.is_some_and(|s| s.overflow());
+        // The usual node, one tag: its item says the tag and how it is
+        // read, one look-up per change.
+        if let Some(how) = item.one() {
+            let reading = reading(&value, self.uses.kind(how));
+            self.push(item.at, reading, at, overflow);
+            return;
+        }
+        for &tag in self.monitored.several(*item) {
+            let reading = reading(&value, &self.uses[tag as usize]);
+            self.push(tag, reading, at, overflow);
+        }
+    }
+
+    fn push(&mut self, tag: u32, reading: Reading, source_time: u64, overflow: bool) {
+        let tag = tag as usize;
+        if overflow {
+            self.overflowed.insert(tag);
+            self.lost += 1;
+        }
+        self.readings.push(TagReading {
+            tag,
+            reading,
+            source_time,
+        });
+    }
+}
+
+impl InTimeOrder {
+    /// Changes were lost for good: the cell loop is told before what
+    /// follows.
+    fn gap(&mut self, why: String) {
+        tracing::warn!("{why}");
+        send_blocking(
+            &self.tx,
+            SourceEvent::Gap {
+                tags: None,
+                values: 0,
+                why,
+            },
+        );
+    }
+
+    fn publish(&mut self, notification: NotificationMessage) {
+        // The start of the agent's own latency: the publish is decoded,
+        // its values not yet looked at.
+        let received = std::time::Instant::now();
+        // Keep-alives (no data) come here too: the subscription is alive.
+        self.heard.beat();
+        let mut c = Collector {
+            monitored: &self.monitored,
+            uses: &self.uses,
+            readings: Vec::new(),
+            overflowed: BTreeSet::new(),
+            lost: 0,
+            closed: None,
+        };
+        c.notification(notification);
+        if let Some(status) = c.closed {
+            // The supervisor sees it and subscribes again.
+            tracing::warn!(%status, "the server closed the subscription");
+            self.heard.closed.store(status.bits(), Ordering::Relaxed);
+        }
+        // Overflow bookkeeping only while changes are being lost: the usual
+        // publish costs one test here. Keep-alives count, so the alarm
+        // clears on a quiet subscription too.
+        let say = (c.lost > 0 || self.overflow.said.is_some())
+            && self.overflow.publish(&c.overflowed, c.lost, received);
+        let problem = say.then(|| {
+            let problem = self.overflow.say(
+                &self.names,
+                self.queue_size.load(Ordering::Relaxed),
+                received,
+            );
+            match &problem {
+                Some(text) => tracing::warn!("{text}"),
+                None => tracing::info!("no change lost in the server's queues for a while"),
+            }
+            SourceEvent::Problem {
+                id: OVERFLOW_ALARM.into(),
+                problem,
+            }
+        });
+        if c.readings.is_empty() {
+            if let Some(p) = problem {
+                send_blocking(&self.tx, p);
+            }
+            return;
+        }
+        c.readings.sort_by_key(|r| r.source_time);
+        self.heard.busy.store(true, Ordering::Relaxed);
+        if c.lost > 0 {
+            // The values behind the loss are judged knowing it.
+            let tags: Vec<usize> = c.overflowed.iter().copied().collect();
+            let mut names: Vec<&str> = tags.iter().take(5).map(|&t| &self.names[t][..]).collect();
+            if tags.len() > names.len() {
+                names.push("...");
+            }
+            send_blocking(
+                &self.tx,
+                SourceEvent::Gap {
+                    why: format!(
+                        "the server's queue dropped changes before this value ({})",
+                        names.join(", ")
+                    ),
+                    tags: Some(tags),
+                    values: c.lost,
+                },
+            );
+        }
+        send_blocking(
+            &self.tx,
+            SourceEvent::Readings(crate::sources::Batch {
+                readings: c.readings,
+                received,
+            }),
+        );
+        if let Some(p) = problem {
+            send_blocking(&self.tx, p);
+        }
+        self.heard.beat();
+        self.heard.busy.store(false, Ordering::Relaxed);
+    }
+}
+
+/// Sends from the session's (synchronous) notification callback. When the
+/// cell loop is behind and the channel full, the callback waits: the
+/// session's event loop stops taking publishes, and the server's queues
+/// hold the changes. Nothing is dropped here.
+fn send_blocking(tx: &SourceSender, event: SourceEvent) {
+    let event = match tx.try_send(event) {
+        Ok(()) | Err(TrySendError::Closed(_)) => return,
+        Err(TrySendError::Full(event)) => event,
+    };
+    match tokio::runtime::Handle::try_current().map(|h| h.runtime_flavor()) {
+        Ok(tokio::runtime::RuntimeFlavor::CurrentThread) => {
+            // A single-threaded runtime cannot block here without stopping
+            // the loop that would empty the channel.
+            tracing::error!(
+                "the cell loop is behind on a single-threaded runtime; a publish is dropped"
+            );
+        }
+        Ok(_) => {
+            let _ = tokio::task::block_in_place(|| tx.blocking_send(event));
+        }
+        Err(_) => {
+            let _ = tx.blocking_send(event);
+        }
+    }
+}

@@ -1,0 +1,166 @@
+//! A network cut between the agent and its OPC UA server (a TCP relay
+//! that closes every connection and refuses new ones, with
+//! Basic256Sha256 + SignAndEncrypt end to end): the subscription is taken
+//! over by the new session and every change the server queued meanwhile
+//! arrives, in order; a subscription the server dropped is said as a gap.
+
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use std::time::Duration;
+
+use cellwatch::config::TagConfig;
+use cellwatch::sim::cnc::NAMESPACE;
+use cellwatch::sources::SourceEvent;
+use cellwatch_models::engine::Reading;
+use cellwatch_models::signal::Signal;
+
+use crate::liveness::{relay_with_cut, trusted_cnc, Cut, Running};
+use crate::opcua::next;
+
+fn tag(address: &str) -> TagConfig {
+    TagConfig::boolean(
+        &address.to_lowercase(),
+        &format!("nsu={NAMESPACE};s={address}"),
+        Signal::new(address),
+    )
+}
+
+fn logs() {
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+        .with_test_writer()
+        .try_init();
+}
+
+/// Every event until `until` matches one, then that one.
+async fn until(
+    source: &mut Running,
+    what: &str,
+    until: impl Fn(&SourceEvent) -> bool,
+) -> Vec<SourceEvent> {
+    let mut seen = Vec::new();
+    loop {
+        let ev = next(&mut source.rx, what, |_| true).await;
+        let last = until(&ev);
+        seen.push(ev);
+        if last {
+            return seen;
+        }
+    }
+}
+
+/// The readings of tag `tag` among `events`, in order.
+fn of_tag(events: &[SourceEvent], tag: usize) -> Vec<(Reading, u64)> {
+    events
+        .iter()
+        .filter_map(|e| match e {
+            SourceEvent::Readings(rs) => Some(rs.iter()),
+            _ => None,
+        })
+        .flatten()
+        .filter(|r| r.tag == tag)
+        .map(|r| (r.reading.clone(), r.source_time))
+        .collect()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_pulse_during_a_network_cut_arrives_in_order_through_the_taken_over_subscription() {
+    logs();
+    let dir = tempfile::tempdir().unwrap();
+    let (sim, mut config, _) = trusted_cnc(dir.path()).await;
+    let cut = Cut::default();
+    let via = relay_with_cut(sim.addr(), Arc::new(AtomicBool::new(false)), cut.clone()).await;
+    config.endpoint = format!("opc.tcp://{via}/");
+    let mut source = Running::start(config, vec![tag("X0.06"), tag("X0.04")]);
+    source.connected().await;
+    cut.set(true);
+    next(&mut source.rx, "the cut seen", |e| {
+        matches!(e, SourceEvent::Disconnected(_))
+    })
+    .await;
+    // A limit switch opens and closes again while the agent is cut off.
+    let before = cellwatch::clock::now_ms();
+    sim.set("X0.06", false).unwrap();
+    tokio::time::sleep(Duration::from_millis(30)).await;
+    sim.set("X0.06", true).unwrap();
+    cut.set(false);
+    let mut events = until(&mut source, "the pulse after the cut", |e| {
+        of_tag(std::slice::from_ref(e), 0)
+            .iter()
+            .any(|(r, t)| *r == Reading::Good(true) && *t >= before)
+    })
+    .await;
+    if !events.iter().any(|e| matches!(e, SourceEvent::Connected(_))) {
+        events.extend(
+            until(&mut source, "connected again", |e| {
+                matches!(e, SourceEvent::Connected(_))
+            })
+            .await,
+        );
+    }
+    let pulse = of_tag(&events, 0);
+    assert_eq!(
+        pulse.iter().map(|(r, _)| r.clone()).collect::<Vec<_>>(),
+        [Reading::Good(false), Reading::Good(true)],
+        "{events:?}"
+    );
+    assert!(pulse[0].1 >= before && pulse[0].1 < pulse[1].1, "{pulse:?}");
+    assert!(
+        events.iter().any(|e| matches!(e, SourceEvent::Connected(_))),
+        "{events:?}"
+    );
+    // Taken over, not recreated: nothing was lost.
+    for e in &events {
+        assert!(!matches!(e, SourceEvent::Gap { .. }), "{e:?}");
+        if let SourceEvent::Disconnected(why) = e {
+            assert!(!why.contains("dropped subscription"), "{why}");
+        }
+    }
+    source.stop().await;
+    sim.stop();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_subscription_the_server_dropped_during_a_cut_is_said_as_a_gap_before_the_values_after_it() {
+    logs();
+    let dir = tempfile::tempdir().unwrap();
+    let (sim, mut config, _) = trusted_cnc(dir.path()).await;
+    // The shortest lifetime allowed: 30 publishing intervals.
+    config.subscription_lifetime = config.publishing_interval * 30;
+    let cut = Cut::default();
+    let via = relay_with_cut(sim.addr(), Arc::new(AtomicBool::new(false)), cut.clone()).await;
+    config.endpoint = format!("opc.tcp://{via}/");
+    let mut source = Running::start(config, vec![tag("X0.06"), tag("X0.04")]);
+    source.connected().await;
+    cut.set(true);
+    next(&mut source.rx, "the cut seen", |e| {
+        matches!(e, SourceEvent::Disconnected(_))
+    })
+    .await;
+    // The server closes the subscription once its lifetime is over; a
+    // change after that is queued nowhere.
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    while sim.subscriptions() > 0 {
+        assert!(tokio::time::Instant::now() < deadline, "the subscription outlived its lifetime");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    sim.set("X0.06", false).unwrap();
+    cut.set(false);
+    let events = until(&mut source, "X0.06 = 0 after the cut", |e| {
+        of_tag(std::slice::from_ref(e), 0)
+            .iter()
+            .any(|(r, _)| *r == Reading::Good(false))
+    })
+    .await;
+    let gap = events
+        .iter()
+        .position(|e| matches!(e, SourceEvent::Gap { tags: None, .. }))
+        .unwrap_or_else(|| panic!("no gap said: {events:?}"));
+    let SourceEvent::Gap { why, .. } = &events[gap] else {
+        unreachable!()
+    };
+    assert!(why.contains("may be lost"), "{why}");
+    assert!(gap < events.len() - 1, "{events:?}");
+    source.stop().await;
+    sim.stop();
+}
