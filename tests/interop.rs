@@ -180,6 +180,7 @@ async fn node_opcua_server_five_thousand_items_bursts_and_a_restart() {
             } => panic!("{p}"),
             SourceEvent::Problem { .. } => {}
             SourceEvent::Gap { why, .. } => panic!("changes lost: {why}"),
+            SourceEvent::Resumed => {}
         }
     }
     eprintln!("all {TAGS} tags in {:?}", started.elapsed());

@@ -90,7 +90,10 @@ async fn a_pulse_during_a_network_cut_arrives_in_order_through_the_taken_over_su
             .any(|(r, t)| *r == Reading::Good(true) && *t >= before)
     })
     .await;
-    if !events.iter().any(|e| matches!(e, SourceEvent::Connected(_))) {
+    if !events
+        .iter()
+        .any(|e| matches!(e, SourceEvent::Connected(_)))
+    {
         events.extend(
             until(&mut source, "connected again", |e| {
                 matches!(e, SourceEvent::Connected(_))
@@ -106,7 +109,9 @@ async fn a_pulse_during_a_network_cut_arrives_in_order_through_the_taken_over_su
     );
     assert!(pulse[0].1 >= before && pulse[0].1 < pulse[1].1, "{pulse:?}");
     assert!(
-        events.iter().any(|e| matches!(e, SourceEvent::Connected(_))),
+        events
+            .iter()
+            .any(|e| matches!(e, SourceEvent::Connected(_))),
         "{events:?}"
     );
     // Taken over, not recreated: nothing was lost.
@@ -121,7 +126,8 @@ async fn a_pulse_during_a_network_cut_arrives_in_order_through_the_taken_over_su
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_subscription_the_server_dropped_during_a_cut_is_said_as_a_gap_before_the_values_after_it() {
+async fn a_subscription_the_server_dropped_during_a_cut_is_said_as_a_gap_before_the_values_after_it(
+) {
     logs();
     let dir = tempfile::tempdir().unwrap();
     let (sim, mut config, _) = trusted_cnc(dir.path()).await;
@@ -141,7 +147,10 @@ async fn a_subscription_the_server_dropped_during_a_cut_is_said_as_a_gap_before_
     // change after that is queued nowhere.
     let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
     while sim.subscriptions() > 0 {
-        assert!(tokio::time::Instant::now() < deadline, "the subscription outlived its lifetime");
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "the subscription outlived its lifetime"
+        );
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
     sim.set("X0.06", false).unwrap();
@@ -163,4 +172,134 @@ async fn a_subscription_the_server_dropped_during_a_cut_is_said_as_a_gap_before_
     assert!(gap < events.len() - 1, "{events:?}");
     source.stop().await;
     sim.stop();
+}
+
+/// The demo cell behind a relay that can cut the network, with alarms
+/// subscribed.
+async fn cell_behind_a_cut(
+    lifetime: Option<Duration>,
+) -> (crate::agent::Fixture, Cut, crate::agent::AlarmSubscriber) {
+    use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
+    let cut = Cut::default();
+    let via = Arc::new(std::sync::Mutex::new(None));
+    let fx = crate::agent::Fixture::start_with_sim(
+        |sim| {
+            let (addr, cut) = (sim.addr(), cut.clone());
+            let relay = tokio::task::block_in_place(|| {
+                tokio::runtime::Handle::current().block_on(relay_with_cut(
+                    addr,
+                    Arc::new(AtomicBool::new(false)),
+                    cut,
+                ))
+            });
+            *via.lock().unwrap() = Some(relay);
+        },
+        |config| {
+            let ua = config.opcua.as_mut().unwrap();
+            ua.endpoint = format!("opc.tcp://{}/", via.lock().unwrap().unwrap());
+            if let Some(l) = lifetime {
+                ua.subscription_lifetime = l;
+            }
+        },
+    )
+    .await;
+    let sub = fx
+        .client()
+        .declare_subscriber("cellwatch/m01ps0004/alarms/**")
+        .history(HistoryConfig::default().detect_late_publishers())
+        .recovery(RecoveryConfig::default().heartbeat())
+        .await
+        .unwrap();
+    fx.settled().await;
+    (fx, cut, sub)
+}
+
+fn metric(metrics: &str, name: &str) -> f64 {
+    metrics
+        .lines()
+        .find_map(|l| l.strip_prefix(&format!("{name}{{cell=\"m01ps0004\"}} ")))
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no {name} in {metrics}"))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_fault_during_a_network_cut_is_diagnosed_with_its_culprit_after_it() {
+    logs();
+    let (mut fx, cut, sub) = cell_behind_a_cut(None).await;
+    let mut seen = Vec::new();
+    cut.set(true);
+    crate::agent::alarm_until(&sub, "communication lost", &mut seen, |a| {
+        a.id == "communication" && a.transition.as_str() == "raised"
+    })
+    .await;
+    // The Y over-travel switch opens for a moment while the agent is cut
+    // off.
+    fx.sim.set("X0.06", false).unwrap();
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    fx.sim.set("X0.06", true).unwrap();
+    cut.set(false);
+    let raised = crate::agent::alarm_until(&sub, "ESE raised after the cut", &mut seen, |a| {
+        a.id == "ese" && a.transition.as_str() == "raised"
+    })
+    .await;
+    let c = &raised.culprits[0];
+    assert_eq!(
+        (c.address.as_str(), c.value, c.trigger),
+        ("X0.06", false, true),
+        "{raised:?}"
+    );
+    assert!(!raised.message.contains("uncertain"), "{}", raised.message);
+    crate::agent::alarm_until(&sub, "ESE cleared", &mut seen, |a| {
+        a.id == "ese" && a.transition.as_str() == "cleared"
+    })
+    .await;
+    crate::agent::alarm_until(&sub, "communication back", &mut seen, |a| {
+        a.id == "communication" && a.transition.as_str() == "cleared"
+    })
+    .await;
+    let metrics = fx.scrape().await;
+    assert_eq!(metric(&metrics, "cellwatch_source_gaps_total"), 0.0);
+    fx.stop().await;
+    fx.sim.stop();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_fault_judged_across_a_gap_says_its_trigger_is_uncertain_and_the_gap_is_counted() {
+    logs();
+    let (mut fx, cut, sub) = cell_behind_a_cut(Some(Duration::from_secs(3))).await;
+    let mut seen = Vec::new();
+    cut.set(true);
+    crate::agent::alarm_until(&sub, "communication lost", &mut seen, |a| {
+        a.id == "communication" && a.transition.as_str() == "raised"
+    })
+    .await;
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    while fx.sim.subscriptions() > 0 {
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "the subscription outlived its lifetime"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    // Queued nowhere: the server dropped the subscription.
+    fx.sim.set("X0.06", false).unwrap();
+    cut.set(false);
+    let raised = crate::agent::alarm_until(&sub, "ESE raised after the gap", &mut seen, |a| {
+        a.id == "ese" && a.transition.as_str() == "raised"
+    })
+    .await;
+    assert!(raised.culprits.iter().all(|c| !c.trigger), "{raised:?}");
+    assert_eq!(raised.culprits[0].address.as_str(), "X0.06");
+    assert!(
+        raised.message.contains("(trigger uncertain: subscription"),
+        "{}",
+        raised.message
+    );
+    let metrics = fx.scrape().await;
+    assert!(
+        metric(&metrics, "cellwatch_source_gaps_total") >= 1.0,
+        "{metrics}"
+    );
+    fx.stop().await;
+    fx.sim.stop();
 }

@@ -513,6 +513,7 @@ impl CellLoop {
                 Input::System,
                 self.engine.on_system(&id, problem.as_deref(), now),
             ),
+            SourceEvent::Resumed => (Input::Readings, self.engine.on_resumed(now)),
             SourceEvent::Gap { tags, values, why } => {
                 tracing::warn!(cell = %self.cell, %why, "changes lost: alarms judged across the gap say trigger uncertain");
                 (

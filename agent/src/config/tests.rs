@@ -195,6 +195,53 @@ fn sampling_zero_is_exception_based_and_queues_fit_it() {
 }
 
 #[test]
+fn the_subscription_outlives_a_network_cut_within_bounds() {
+    let with = |extra: &str| {
+        GOOD.replace(
+            "endpoint = \"opc.tcp://127.0.0.1:4840/\"",
+            &format!("endpoint = \"opc.tcp://127.0.0.1:4840/\"\n{extra}"),
+        )
+    };
+    let c = parse("cell.toml", GOOD, Path::new("base"), &mem()).unwrap();
+    assert_eq!(
+        c.opcua.unwrap().subscription_lifetime,
+        Duration::from_secs(60)
+    );
+    let c = parse(
+        "cell.toml",
+        &with("subscription_lifetime = \"5m\""),
+        Path::new("base"),
+        &mem(),
+    )
+    .unwrap();
+    assert_eq!(
+        c.opcua.unwrap().subscription_lifetime,
+        Duration::from_secs(300)
+    );
+    // At least three keep-alive periods of the publishing interval (100 ms).
+    assert_eq!(
+        errors(&with("subscription_lifetime = \"2s\"")),
+        "cell.toml:7:25: opcua.subscription_lifetime: at least three keep-alive periods (30 publishing intervals: 3s)"
+    );
+    assert_eq!(
+        errors(&with("subscription_lifetime = \"2h\"")),
+        "cell.toml:7:25: opcua.subscription_lifetime: at most 1h"
+    );
+    // A slow publishing interval stretches the default.
+    let c = parse(
+        "cell.toml",
+        &with("publishing_interval = \"5s\""),
+        Path::new("base"),
+        &mem(),
+    )
+    .unwrap();
+    assert_eq!(
+        c.opcua.unwrap().subscription_lifetime,
+        Duration::from_secs(150)
+    );
+}
+
+#[test]
 fn the_bus_is_tls_unless_plain_is_written() {
     let c = parse("cell.toml", GOOD, Path::new("base"), &mem()).unwrap();
     let tls = c.zenoh.tls.unwrap();

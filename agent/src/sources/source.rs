@@ -75,6 +75,11 @@ pub enum SourceEvent {
         /// What is wrong, or `None` when nothing is.
         problem: Option<String>,
     },
+    /// The connection is back and nothing was lost: the server kept
+    /// what changed meanwhile and sends it next, in order. Each value from
+    /// before the cut stands until a change says otherwise. Sent before
+    /// those changes.
+    Resumed,
     /// Changes were lost for good (a sequence gap the server could not
     /// fill, values dropped from a full queue): sent before the values
     /// that follow the gap.

@@ -295,6 +295,14 @@ pub enum PartCounting {
     Counters(Vec<(usize, Counter)>),
 }
 
+/// The configured tags' values and times when the connection was lost.
+#[derive(Debug, Clone)]
+struct AtCut {
+    values: Vec<Option<bool>>,
+    others: Vec<Option<Value>>,
+    timestamps: Vec<Option<u64>>,
+}
+
 /// Tags whose changes may have been lost, and the latest gap's reason.
 #[derive(Debug, Clone)]
 struct Lost {
@@ -424,6 +432,9 @@ pub struct CellEngine {
     lost: Option<Lost>,
     /// Why the tag of the reading being handled may have lost changes.
     lost_now: Option<String>,
+    /// The values and their times when the connection was lost, for a
+    /// source that resumes without losing a change.
+    at_cut: Option<Box<AtCut>>,
     /// Tags of bad quality, and why.
     bad: BTreeMap<usize, BadQuality>,
     /// How many tags are unknown now.
@@ -580,6 +591,7 @@ impl CellEngine {
             untimed: false,
             lost: None,
             lost_now: None,
+            at_cut: None,
             bad: BTreeMap::new(),
             unknown: configured,
             sets,
@@ -900,7 +912,11 @@ impl CellEngine {
         });
         lost.why = why.to_string();
         match tags {
-            None => lost.tags.iter_mut().for_each(|t| *t = true),
+            None => {
+                lost.tags.iter_mut().for_each(|t| *t = true);
+                // Not resumed: what was before the cut is no longer known.
+                self.at_cut = None;
+            }
             Some(tags) => {
                 for &t in tags {
                     if let Some(t) = lost.tags.get_mut(t) {
@@ -914,6 +930,47 @@ impl CellEngine {
             lost_values: values,
             ..Step::default()
         }
+    }
+
+    /// The source took up where the lost connection left off, losing
+    /// nothing (the server kept the subscription and sends every change
+    /// made meanwhile, in order): each tag not heard since the cut is again
+    /// what it was then, so that the changes that follow are judged
+    /// against it — a contact that opened during the cut is a trigger,
+    /// not a value out of nowhere. Call it before those changes.
+    pub fn on_resumed(&mut self, now: u64) -> Step {
+        let mut step = Step::default();
+        let Some(cut) = self.at_cut.take() else {
+            return step;
+        };
+        let mut findings = Vec::new();
+        // Back to what was, at the last time seen: no timer measures
+        // through it.
+        let at = self.latest.unwrap_or(now);
+        self.untimed = true;
+        for t in 0..cut.values.len().min(self.configured) {
+            if self.timestamps[t].is_some() {
+                // Heard since: its own value stands.
+                continue;
+            }
+            match (cut.values[t], &cut.others[t]) {
+                (Some(v), _) => {
+                    self.set_value(t, Some(v), at, &mut findings, &mut step);
+                }
+                (None, Some(v)) => {
+                    self.set_other(t, Some(v.clone()), at, &mut findings, &mut step);
+                }
+                (None, None) => continue,
+            }
+            self.timestamps[t] = cut.timestamps[t];
+        }
+        self.untimed = false;
+        for f in findings {
+            self.apply(f, now, &mut step);
+        }
+        self.update_state(now, &mut step);
+        self.collect_observations(&mut step);
+        step
     }
 
     /// Why `tag`'s changes may have been lost, if they may; the mark is
@@ -977,6 +1034,9 @@ impl CellEngine {
             return step;
         }
         self.connected = Some(up);
+        // Up: what the source resumes with, or a new subscription's
+        // values, is here.
+        self.at_cut = None;
         if !up {
             // A condition waiting out its delay is no longer seen to hold.
             self.pending.clear();
@@ -997,6 +1057,11 @@ impl CellEngine {
             },
         };
         if !up {
+            self.at_cut = Some(Box::new(AtCut {
+                values: self.values[..self.configured].to_vec(),
+                others: self.others[..self.configured].to_vec(),
+                timestamps: self.timestamps[..self.configured].to_vec(),
+            }));
             // Every value is now unknown; checks hold their verdicts.
             let mut ignored = Vec::new();
             for t in 0..self.configured {
@@ -1905,6 +1970,33 @@ mod tests {
             e.on_reading(t, Reading::Good(v.unwrap_or(false)), 40, 40);
         }
         assert!(e.lost.is_none());
+    }
+
+    #[test]
+    fn a_fault_made_during_a_cut_the_source_resumed_from_has_its_trigger() {
+        let mut e = engine();
+        e.on_connection(true, 1);
+        load_normal(&mut e, 2);
+        let x006 = e.tag_index(&Signal::new("X0.06")).unwrap();
+        e.on_connection(false, 5);
+        assert!(e.values().iter().all(Option::is_none), "{:?}", e.values());
+        // Resumed: the values are back, with no alarm of their own.
+        let back = e.on_resumed(8);
+        assert!(alarm_transitions(&back.events).is_empty(), "{back:?}");
+        assert!(e.values().iter().all(Option::is_some));
+        // The change made during the cut, delivered after it.
+        let ev = e.on_reading(x006, Reading::Good(false), 6, 9).events;
+        let EngineEvent::Alarm { alarm, .. } = &ev[0] else {
+            panic!("{ev:?}")
+        };
+        assert!(alarm.culprits[0].trigger, "{alarm:?}");
+        assert!(!alarm.message.contains("unknown"), "{}", alarm.message);
+        // Not resumed (a new subscription): nothing comes back.
+        e.on_connection(true, 10);
+        e.on_connection(false, 10);
+        e.on_gap(None, 0, "subscription replaced");
+        e.on_resumed(11);
+        assert!(e.values().iter().all(Option::is_none));
     }
 
     #[test]

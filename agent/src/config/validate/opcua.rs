@@ -155,7 +155,7 @@ impl Validator<'_> {
                     self.problem(
                         span,
                         "opcua.subscription_lifetime",
-                        &format!(
+                        format!(
                             "at least three keep-alive periods (30 publishing intervals: {})",
                             humantime::format_duration(shortest)
                         ),

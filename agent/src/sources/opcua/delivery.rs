@@ -28,6 +28,10 @@ pub(super) struct Delivery {
     pub(super) id: u32,
     pub(super) sequence: Sequence,
     order: InTimeOrder,
+    /// The connection was lost: publishes wait until the source knows
+    /// whether it resumes without a loss.
+    paused: bool,
+    waiting: Vec<NotificationMessage>,
 }
 
 /// A [`Delivery`] behind its lock, and the supervisor's wake-up when a
@@ -66,8 +70,39 @@ impl Delivery {
         }
     }
 
+    /// The connection is lost: what arrives after waits for
+    /// [`Delivery::resume`] or [`Delivery::gap`].
+    pub(super) fn pause(&mut self) {
+        self.paused = true;
+    }
+
+    /// The subscription goes on where it was, nothing lost: the cell loop
+    /// is told so before the changes that follow, which it judges against
+    /// the values from before the cut.
+    pub(super) fn resume(&mut self) {
+        if self.paused {
+            send_blocking(&self.order.tx, SourceEvent::Resumed);
+            self.unpause();
+        }
+    }
+
+    fn unpause(&mut self) {
+        self.paused = false;
+        for m in std::mem::take(&mut self.waiting) {
+            self.arrived(m);
+        }
+    }
+
     /// A publish, data or keep-alive, as it came: handed on in order.
     pub(super) fn arrived(&mut self, m: NotificationMessage) {
+        if self.paused {
+            if self.waiting.len() < super::sequence::MAX_HELD {
+                self.waiting.push(m);
+                return;
+            }
+            // Undecided for too long: on, as after a loss.
+            self.unpause();
+        }
         let mut next = Vec::new();
         self.sequence.arrived(m, &mut next);
         self.handle(next);
@@ -76,6 +111,7 @@ impl Delivery {
     /// Changes were lost for good (`why`): said before what follows.
     pub(super) fn gap(&mut self, why: String) {
         self.order.gap(why);
+        self.unpause();
     }
 }
 
@@ -111,6 +147,8 @@ pub(super) fn delivery(
         delivery: Arc::new(Mutex::new(Delivery {
             id: 0,
             sequence: Sequence::default(),
+            paused: false,
+            waiting: Vec::new(),
             order: InTimeOrder {
                 monitored,
                 uses,

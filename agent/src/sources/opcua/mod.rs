@@ -15,10 +15,16 @@
 //! - The channel to the cell loop is bounded: when the loop falls behind,
 //!   the session's event loop waits, and the server's queues hold the
 //!   changes.
-//! - Connection lost: one [`SourceEvent::Disconnected`]; async-opcua
-//!   reconnects with exponential backoff; on a new session the source
-//!   recreates its subscription, then [`SourceEvent::Connected`]. Values delivered again after the
-//!   re-creation are filtered by the engine (same value, same timestamp).
+//! - Connection lost: one [`SourceEvent::Disconnected`], and the
+//!   subscription's publishes wait; async-opcua reconnects with exponential
+//!   backoff; the new session takes the subscription over
+//!   (`TransferSubscriptions`), the source says [`SourceEvent::Resumed`]
+//!   and asks again for every publish it missed (`Republish`, `resume`),
+//!   in sequence-number order (`sequence`), then
+//!   [`SourceEvent::Connected`]. What cannot be had again is a
+//!   [`SourceEvent::Gap`]; a subscription the server no longer has is
+//!   created again. Values delivered twice are filtered by the engine
+//!   (same value, same timestamp).
 //! - The charts' force and stop switches are the only writes, each a pulse
 //!   (on, held, off). None is left on by the agent: on every (re)connected
 //!   session every switch found on is written off first (an agent killed
@@ -326,12 +332,14 @@ async fn run_writing(
                     None => break,
                     Some(Err(status)) => {
                         supervisor.abort_all();
+                        ctx.pause();
                         let _ = tx.send(SourceEvent::Disconnected(format!("session ended: {status}"))).await;
                         said_down = true;
                         break;
                     }
                     Some(Ok(SessionPollResult::ConnectionLost(status))) => {
                         supervisor.abort_all();
+                        ctx.pause();
                         let _ = tx.send(SourceEvent::Disconnected(format!("connection lost: {status}"))).await;
                         said_down = true;
                     }
@@ -425,9 +433,25 @@ struct Context {
     uses: Arc<subscription::Uses>,
     names: Arc<Names>,
     tx: SourceSender,
+    /// The delivery of the subscription in place, paused when the
+    /// connection is lost.
+    delivery: std::sync::Mutex<Option<subscription::Shared>>,
 }
 
 impl Context {
+    /// The connection is lost: the subscription's publishes wait until the
+    /// source knows whether it resumes without a loss.
+    fn pause(&self) {
+        if let Some(d) = self
+            .delivery
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .as_ref()
+        {
+            d.lock().pause();
+        }
+    }
+
     fn new(config: &OpcUaConfig, tags: TagTable, tx: SourceSender) -> Context {
         Context {
             endpoint: config.endpoint.clone(),
@@ -436,6 +460,7 @@ impl Context {
             uses: tags.uses,
             names: tags.names,
             tx,
+            delivery: std::sync::Mutex::new(None),
         }
     }
 }
@@ -539,7 +564,13 @@ async fn supervise(
                     subscription = old.subscription.id,
                     "the server's namespaces changed: subscribing again"
                 );
-                resume::give_up(&old.subscription, format!("the server's namespaces changed: subscription {} replaced", old.subscription.id));
+                resume::give_up(
+                    &old.subscription,
+                    format!(
+                        "the server's namespaces changed: subscription {} replaced",
+                        old.subscription.id
+                    ),
+                );
                 let _ = session.delete_subscription(old.subscription.id).await;
             }
             match subscribe(&session, &ctx, namespaces).await {
@@ -723,6 +754,7 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
         &heard,
     )
     .await?;
+    *ctx.delivery.lock().unwrap_or_else(|e| e.into_inner()) = Some(subscription.shared.clone());
     Some(Live {
         subscription,
         nodes,

@@ -90,6 +90,7 @@ pub(super) async fn catch_up(session: &Session, sub: &Subscribed) -> Result<(), 
         Err(e) if is_gone(e.status()) => return Err(Unfilled::Gone(e.status())),
         Err(e) => return Err(Unfilled::Failed(e.status())),
     }
+    sub.shared.lock().resume();
     loop {
         fill(session, sub).await?;
         let next = sub.shared.lock().sequence.next();
@@ -122,8 +123,12 @@ pub(super) async fn transfer(session: &Session, sub: &Subscribed) -> Result<(), 
     if !result.status_code.is_good() {
         return Err(result.status_code.to_string());
     }
-    if let Some(last) = result.available_sequence_numbers.iter().flatten().max() {
-        sub.shared.lock().sequence.sent(*last);
+    {
+        let mut d = sub.shared.lock();
+        d.resume();
+        if let Some(last) = result.available_sequence_numbers.iter().flatten().max() {
+            d.sequence.sent(*last);
+        }
     }
     match fill(session, sub).await {
         Ok(()) | Err(Unfilled::Failed(_)) => Ok(()),

@@ -114,7 +114,10 @@ impl Sequence {
         if after(next, seq) {
             return;
         }
-        out.push(Next::Lost { from: next, to: seq });
+        out.push(Next::Lost {
+            from: next,
+            to: seq,
+        });
         self.exists(seq);
         self.next = Some(succ(seq));
         self.drain(out);
@@ -168,7 +171,11 @@ impl Sequence {
         }
         self.next = None;
         self.known = None;
-        out.extend(std::mem::take(&mut self.held).into_values().map(Next::Deliver));
+        out.extend(
+            std::mem::take(&mut self.held)
+                .into_values()
+                .map(Next::Deliver),
+        );
     }
 
     /// Publish `seq` was sent by the server.

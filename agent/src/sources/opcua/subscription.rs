@@ -1,7 +1,8 @@
 //! The subscription: monitored items created in chunks the server accepts,
 //! and each publish's changes passed on in source-time order.
 
-use super::delivery::{delivery, Feed, Shared};
+pub(super) use super::delivery::Shared;
+use super::delivery::{delivery, Feed};
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::Arc;
@@ -11,9 +12,9 @@ use cellwatch_models::engine::{Reading, TagReading};
 use opcua::client::services::CreateMonitoredItems;
 use opcua::client::{Session, UARequest};
 use opcua::types::{
-    DataChangeFilter, DataChangeTrigger, DataValue, ExtensionObject,
-    MonitoredItemCreateRequest, MonitoringMode, MonitoringParameters, NodeId,
-    ReadValueId, StatusCode, TimestampsToReturn, Variant,
+    DataChangeFilter, DataChangeTrigger, DataValue, ExtensionObject, MonitoredItemCreateRequest,
+    MonitoringMode, MonitoringParameters, NodeId, ReadValueId, StatusCode, TimestampsToReturn,
+    Variant,
 };
 
 use super::names::Names;
