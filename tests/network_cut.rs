@@ -234,9 +234,11 @@ async fn a_fault_during_a_network_cut_is_diagnosed_with_its_culprit_after_it() {
     .await;
     // The Y over-travel switch opens for a moment while the agent is cut
     // off.
+    let opened = cellwatch::clock::now_ms();
     fx.sim.set("X0.06", false).unwrap();
     tokio::time::sleep(Duration::from_millis(300)).await;
     fx.sim.set("X0.06", true).unwrap();
+    let closed = cellwatch::clock::now_ms();
     cut.set(false);
     let raised = crate::agent::alarm_until(&sub, "ESE raised after the cut", &mut seen, |a| {
         a.id == "ese" && a.transition.as_str() == "raised"
@@ -249,10 +251,24 @@ async fn a_fault_during_a_network_cut_is_diagnosed_with_its_culprit_after_it() {
         "{raised:?}"
     );
     assert!(!raised.message.contains("uncertain"), "{}", raised.message);
-    crate::agent::alarm_until(&sub, "ESE cleared", &mut seen, |a| {
+    let cleared = crate::agent::alarm_until(&sub, "ESE cleared", &mut seen, |a| {
         a.id == "ese" && a.transition.as_str() == "cleared"
     })
     .await;
+    // Raised and cleared when the PLC saw it, not when it arrived.
+    let ms = |t: &str| {
+        chrono::DateTime::parse_from_rfc3339(t)
+            .unwrap()
+            .timestamp_millis() as u64
+    };
+    let (from, to) = (
+        ms(&raised.raised_at),
+        ms(cleared.cleared_at.as_deref().unwrap()),
+    );
+    assert!(
+        opened <= from && from < to && to <= closed,
+        "raised {from}, cleared {to}, the switch open from {opened} to {closed}"
+    );
     crate::agent::alarm_until(&sub, "communication back", &mut seen, |a| {
         a.id == "communication" && a.transition.as_str() == "cleared"
     })

@@ -221,7 +221,11 @@ impl LimitChecks {
             if !wants {
                 s.excursion_since = None;
             }
-            out.push(finding(check, level, value, wants, lasted));
+            let mut f = finding(check, level, value, wants, lasted);
+            // Judged at `now`: the source time its delay ran out, when
+            // values sampled over a while came together.
+            f.at = Some(now);
+            out.push(f);
         }
     }
 }
@@ -269,6 +273,7 @@ fn finding(
         None => message,
     };
     Finding {
+        at: None,
         id: check.alarm_id(level.level),
         kind: AlarmKind::Limit,
         severity: level.severity,

@@ -488,6 +488,77 @@ fn a_batch_sampled_over_a_while_is_judged_at_its_source_times() {
     assert_eq!(step.alarms().count(), 0);
 }
 
+/// Trusting the source's clock, the alarms of a batch are stamped with the
+/// times the conditions changed at the source, not when the batch came; a
+/// source time further back than the trust, or ahead of the agent, is not
+/// believed.
+#[test]
+fn alarms_judged_in_a_late_batch_carry_the_source_times_the_agent_trusts() {
+    let mut limit = temp_limit(85.0);
+    limit.on_delay = 1000;
+    let mut e = engine(vec![limit])
+        .delaying("ese", 1000, 0)
+        .trusting_source_time(60_000);
+    load_normal(&mut e, 0);
+    number(&mut e, "MODE", Num::Int(1), 0);
+    number(&mut e, "TEMP", Num::Float(40.0), 1_000);
+    let temp = tag(&e, "TEMP");
+    let x006 = tag(&e, "X0.06");
+    let num = |t: u64, v: f64| TagReading {
+        tag: temp,
+        reading: Reading::Number(Num::Float(v)),
+        source_time: t,
+    };
+    let bit = |t: u64, v: bool| TagReading {
+        tag: x006,
+        reading: Reading::Good(v),
+        source_time: t,
+    };
+    let times = |step: &cellwatch_models::engine::Step, id: &str| -> Vec<(Transition, u64)> {
+        step.alarms()
+            .filter(|(a, _, _)| a.id == id)
+            .map(|(_, t, at)| (t, at))
+            .collect()
+    };
+    // Both excursions arrive 8 s late, together.
+    let step = e.on_readings(
+        &[
+            num(10_000, 90.0),
+            bit(10_200, false),
+            num(11_500, 60.0),
+            bit(11_700, true),
+        ],
+        20_000,
+    );
+    assert_eq!(
+        times(&step, "temp-h"),
+        [(Transition::Raised, 11_000), (Transition::Cleared, 11_500)]
+    );
+    assert_eq!(
+        times(&step, "ese"),
+        [(Transition::Raised, 11_200), (Transition::Cleared, 11_700)]
+    );
+    // Further back than trusted (a source clock 2 min behind): the agent's
+    // clock.
+    let step = e.on_readings(&[bit(100_000, false), bit(101_500, true)], 220_000);
+    assert_eq!(
+        times(&step, "ese"),
+        [
+            (Transition::Raised, 220_000),
+            (Transition::Cleared, 220_000)
+        ]
+    );
+    // Ahead of the agent: the agent's clock.
+    let step = e.on_readings(&[bit(300_000, false), bit(301_500, true)], 250_000);
+    assert_eq!(
+        times(&step, "ese"),
+        [
+            (Transition::Raised, 250_000),
+            (Transition::Cleared, 250_000)
+        ]
+    );
+}
+
 /// The same for an alarm delay of a contact check (switching or discrete):
 /// the fault lasted 1.5 s at the source, the delay is 1 s.
 #[test]

@@ -28,6 +28,10 @@ pub enum CompileError {
     Engine(#[from] EngineError),
 }
 
+/// How much later than the subscription's lifetime a change may still
+/// arrive: the longest reconnect backoff.
+const SOURCE_TIME_SLACK: std::time::Duration = std::time::Duration::from_secs(10);
+
 /// Builds the engine for `config`.
 ///
 /// # Errors
@@ -73,7 +77,15 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
         )?,
         |e, (id, on, off)| e.delaying(id, *on, *off),
     );
+    // An OPC UA server's source times are trusted as the times of the
+    // alarms judged on them as far back as a change can arrive late: the
+    // subscription's lifetime (a network cut it survives) and the longest
+    // reconnect backoff. An `@` unit's values are stamped on arrival.
+    let trust = config.opcua.as_ref().map_or(0, |ua| {
+        (ua.subscription_lifetime + SOURCE_TIME_SLACK).as_millis() as u64
+    });
     Ok(engine
+        .trusting_source_time(trust)
         .commenting(comments)
         .counting(config.part_counting())
         .ordering(config.order_item, config.order_target)

@@ -261,6 +261,7 @@ impl AlarmBook {
                 self.held.insert(
                     id.to_string(),
                     Finding {
+                        at: None,
                         id: alarm.id.clone(),
                         kind: alarm.kind,
                         severity: alarm.severity,

@@ -49,6 +49,9 @@ pub struct Finding {
     pub culprits: Vec<Culprit>,
     /// One line for people.
     pub message: String,
+    /// When the condition changed, in source time, if not at the value
+    /// being judged (a delay that ran out between two values).
+    pub at: Option<u64>,
 }
 
 /// A family of checks sharing one view of the signals.

@@ -435,6 +435,10 @@ pub struct CellEngine {
     /// The values and their times when the connection was lost, for a
     /// source that resumes without losing a change.
     at_cut: Option<Box<AtCut>>,
+    /// How far behind the agent's clock a source time is trusted as the
+    /// time of an alarm judged on it, ms (0: alarms are stamped by the
+    /// agent's clock).
+    source_trust: u64,
     /// Tags of bad quality, and why.
     bad: BTreeMap<usize, BadQuality>,
     /// How many tags are unknown now.
@@ -592,6 +596,7 @@ impl CellEngine {
             lost: None,
             lost_now: None,
             at_cut: None,
+            source_trust: 0,
             bad: BTreeMap::new(),
             unknown: configured,
             sets,
@@ -638,6 +643,18 @@ impl CellEngine {
     #[must_use]
     pub fn commenting(mut self, comments: CommentDb) -> Self {
         self.comments = comments;
+        self
+    }
+
+    /// Stamps an alarm judged on a value with the time the source sampled
+    /// it, rather than when it arrived, when that time is at most `trust`
+    /// ms behind the agent's clock and not ahead of it: a change delivered
+    /// late (after a network cut, republished, in a batch) raises its
+    /// alarm at the time it happened. A source clock off by more than
+    /// `trust` is not believed.
+    #[must_use]
+    pub fn trusting_source_time(mut self, trust: u64) -> Self {
+        self.source_trust = trust;
         self
     }
 
@@ -1010,6 +1027,7 @@ impl CellEngine {
     pub fn on_system(&mut self, id: &str, problem: Option<&str>, now: u64) -> Step {
         let mut step = Step::default();
         let finding = Finding {
+            at: None,
             id: id.into(),
             kind: AlarmKind::System,
             severity: Severity::High,
@@ -1042,6 +1060,7 @@ impl CellEngine {
             self.pending.clear();
         }
         let finding = Finding {
+            at: None,
             id: "communication".into(),
             kind: AlarmKind::Communication,
             severity: Severity::High,
@@ -1240,8 +1259,19 @@ impl CellEngine {
             .map(|(id, _)| id.clone())
             .collect();
         for id in due {
-            if let Some((_, _, f)) = self.pending.remove(&id) {
-                self.announce(f, now, step);
+            if let Some((_, by_source, f)) = self.pending.remove(&id) {
+                // Ran out between values delivered together: at the source
+                // time it ran out, if the source's clock is trusted.
+                let stamp = if source {
+                    let (on, off) = self.delays.get(&id).copied().unwrap_or_default();
+                    self.stamp(
+                        by_source.saturating_add(if f.active { on } else { off }),
+                        now,
+                    )
+                } else {
+                    now
+                };
+                self.announce(f, stamp, step);
             }
         }
     }
@@ -1646,6 +1676,7 @@ impl CellEngine {
             })
             .collect();
         Finding {
+            at: None,
             id: "tag-quality".into(),
             kind: AlarmKind::TagQuality,
             severity: Severity::Medium,
@@ -1673,6 +1704,7 @@ impl CellEngine {
     /// (source time) and is taken at `now` (the clock): its delay runs from
     /// both, each compared only with its own kind of time.
     fn apply_at(&mut self, mut f: Finding, at: u64, now: u64, step: &mut Step) {
+        let at = f.at.unwrap_or(at);
         if self.lost.is_some() || self.lost_now.is_some() {
             if let Some(why) = self.uncertain(&f) {
                 uncertain_trigger(&mut f, &why);
@@ -1694,11 +1726,29 @@ impl CellEngine {
                 return;
             }
         }
-        self.announce(f, now, step);
+        let stamp = self.stamp(at, now);
+        self.announce(f, stamp, step);
     }
 
-    /// Applies a finding to the alarm book and reports the transition.
+    /// When a change the source sampled at `source` happened, for alarms
+    /// judged on it: `source`, if the source's clock is trusted and `source`
+    /// is neither ahead of the agent's clock `now` nor further behind it
+    /// than the trust allows; otherwise `now`.
+    fn stamp(&self, source: u64, now: u64) -> u64 {
+        if source <= now && now - source <= self.source_trust {
+            source
+        } else {
+            now
+        }
+    }
+
+    /// Applies a finding to the alarm book and reports the transition, at
+    /// `now` (never before the alarm's last transition).
     fn announce(&mut self, mut f: Finding, now: u64, step: &mut Step) {
+        let now = match self.alarms.get(&f.id) {
+            Some(a) => now.max(a.raised_at).max(a.cleared_at.unwrap_or(0)),
+            None => now,
+        };
         if !self.derived.is_empty() {
             for c in &mut f.culprits {
                 if c.comment.is_none() {

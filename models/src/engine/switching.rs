@@ -227,6 +227,7 @@ fn finding(
     before: Option<bool>,
 ) -> Finding {
     let mut finding = Finding {
+        at: None,
         id: check.id.clone(),
         kind: AlarmKind::Switching,
         severity: check.severity,

@@ -121,6 +121,7 @@ impl SfcChecks {
             .get(&r)
             .map_or(0, |&since| now.saturating_sub(since));
         let mut finding = Finding {
+            at: None,
             id: self.alarm_id(r),
             kind: AlarmKind::Step,
             severity: self.severity,

@@ -154,6 +154,7 @@ impl TimerChecks {
             };
             let alarm = format!("{}-{id:03}", self.id);
             let base = Finding {
+                at: None,
                 id: alarm,
                 kind: AlarmKind::Timer,
                 severity: self.severity,
