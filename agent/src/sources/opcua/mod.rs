@@ -34,6 +34,7 @@
 
 use std::collections::BTreeMap;
 use std::future::Future;
+use std::sync::atomic::AtomicU32;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -435,7 +436,7 @@ struct Context {
     tx: SourceSender,
     /// The delivery of the subscription in place, paused when the
     /// connection is lost.
-    delivery: std::sync::Mutex<Option<subscription::Shared>>,
+    delivery: std::sync::Mutex<Option<delivery::Shared>>,
 }
 
 impl Context {
@@ -468,6 +469,8 @@ impl Context {
 /// A subscription in place on the server.
 struct Live {
     subscription: subscription::Subscribed,
+    /// Its publishes' way to the cell loop, in order.
+    shared: delivery::Shared,
     /// The monitored nodes and their tags.
     nodes: Arc<subscription::Monitored>,
     /// The namespace array its node ids were resolved against.
@@ -528,7 +531,7 @@ async fn supervise(
                 let sub = &l.subscription;
                 tracing::warn!(subscription = sub.id, %why, "subscribing again");
                 resume::give_up(
-                    sub,
+                    &l.shared,
                     format!("subscription {} could not be taken over ({why}): changes while the connection was down may be lost", sub.id),
                 );
                 let _ = ctx
@@ -565,7 +568,7 @@ async fn supervise(
                     "the server's namespaces changed: subscribing again"
                 );
                 resume::give_up(
-                    &old.subscription,
+                    &old.shared,
                     format!(
                         "the server's namespaces changed: subscription {} replaced",
                         old.subscription.id
@@ -592,7 +595,7 @@ async fn supervise(
         let l = live.take().expect("subscribed above");
         tracing::warn!(subscription = l.subscription.id, "{why}");
         resume::give_up(
-            &l.subscription,
+            &l.shared,
             format!(
                 "subscription {} replaced ({why}): changes meanwhile may be lost",
                 l.subscription.id
@@ -612,9 +615,9 @@ async fn supervise(
 async fn resume(session: &Session, l: &Live, new_session: bool) -> Result<(), String> {
     let sub = &l.subscription;
     if new_session {
-        return resume::transfer(session, sub).await;
+        return resume::transfer(session, sub.id, &l.shared).await;
     }
-    match resume::catch_up(session, sub).await {
+    match resume::catch_up(session, sub.id, &l.shared).await {
         Ok(()) | Err(resume::Unfilled::Failed(_)) => Ok(()),
         Err(resume::Unfilled::Gone(status)) => Err(status.to_string()),
     }
@@ -630,8 +633,8 @@ async fn watch(session: &Session, l: &Live) -> String {
     loop {
         tokio::select! {
             () = tokio::time::sleep(period) => {}
-            () = sub.shared.missing.notified() => {
-                if let Err(resume::Unfilled::Gone(status)) = resume::fill(session, sub).await {
+            () = l.shared.missing.notified() => {
+                if let Err(resume::Unfilled::Gone(status)) = resume::fill(session, sub.id, &l.shared).await {
                     return format!("the server dropped subscription {} ({status}): subscribing again", sub.id);
                 }
             }
@@ -650,7 +653,7 @@ async fn watch(session: &Session, l: &Live) -> String {
         // leaves the subscription alone: the session's keep-alive judges
         // the connection, and a subscription deleted now would drop what
         // arrives once the traffic flows again.
-        match resume::catch_up(session, sub).await {
+        match resume::catch_up(session, sub.id, &l.shared).await {
             Err(resume::Unfilled::Gone(status)) => {
                 return format!(
                     "the server dropped subscription {} ({status}): subscribing again",
@@ -744,19 +747,33 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
         ctx.nodes.clone(),
         namespaces.clone(),
     ));
+    // What the server granted, which may be less than asked.
+    let queue_size = Arc::new(AtomicU32::new(ctx.config.queue_size));
+    let shared = delivery::delivery(
+        nodes.clone(),
+        ctx.uses.clone(),
+        ctx.tx.clone(),
+        heard.clone(),
+        ctx.names.clone(),
+        queue_size.clone(),
+        ctx.config.overflow_clear_after,
+    );
     let subscription = subscription::subscribe(
         session,
         &ctx.config,
         &nodes,
         &ctx.uses,
-        &ctx.names,
         &ctx.tx,
         &heard,
+        &queue_size,
+        delivery::Feed(shared.clone()),
     )
     .await?;
-    *ctx.delivery.lock().unwrap_or_else(|e| e.into_inner()) = Some(subscription.shared.clone());
+    shared.lock().id = subscription.id;
+    *ctx.delivery.lock().unwrap_or_else(|e| e.into_inner()) = Some(shared.clone());
     Some(Live {
         subscription,
+        shared,
         nodes,
         namespaces,
         heard,

@@ -11,8 +11,8 @@
 use opcua::client::Session;
 use opcua::types::StatusCode;
 
+use super::delivery::Shared;
 use super::sequence::succ;
-use super::subscription::Subscribed;
 
 /// How a gap could not be filled.
 #[derive(Debug)]
@@ -29,21 +29,21 @@ pub(super) enum Unfilled {
 ///
 /// # Errors
 /// The subscription is gone, or a request failed.
-pub(super) async fn fill(session: &Session, sub: &Subscribed) -> Result<(), Unfilled> {
+pub(super) async fn fill(session: &Session, id: u32, shared: &Shared) -> Result<(), Unfilled> {
     // The last of a run of lost publishes.
     let mut lost: Option<u32> = None;
     let result = loop {
         let seq = {
-            let d = sub.shared.lock();
+            let d = shared.lock();
             match lost {
                 None => d.sequence.missing(),
                 Some(l) => d.sequence.missing_from(succ(l)),
             }
         };
         let Some(seq) = seq else { break Ok(()) };
-        match session.republish(sub.id, seq).await {
+        match session.republish(id, seq).await {
             Ok(m) => {
-                let mut d = sub.shared.lock();
+                let mut d = shared.lock();
                 if let Some(l) = lost.take() {
                     gone(&mut d, l);
                 }
@@ -55,7 +55,7 @@ pub(super) async fn fill(session: &Session, sub: &Subscribed) -> Result<(), Unfi
         }
     };
     if let Some(l) = lost {
-        gone(&mut sub.shared.lock(), l);
+        gone(&mut shared.lock(), l);
     }
     result
 }
@@ -79,10 +79,10 @@ fn is_gone(status: StatusCode) -> bool {
 ///
 /// # Errors
 /// The subscription is gone, or a request failed.
-pub(super) async fn catch_up(session: &Session, sub: &Subscribed) -> Result<(), Unfilled> {
+pub(super) async fn catch_up(session: &Session, id: u32, shared: &Shared) -> Result<(), Unfilled> {
     // Is it still there? (A server may answer a republish for a
     // subscription it dropped as if it merely had nothing to resend.)
-    match session.set_publishing_mode(&[sub.id], true).await {
+    match session.set_publishing_mode(&[id], true).await {
         Ok(r) => match r.first() {
             Some(s) if !s.is_good() => return Err(Unfilled::Gone(*s)),
             _ => {}
@@ -90,13 +90,13 @@ pub(super) async fn catch_up(session: &Session, sub: &Subscribed) -> Result<(), 
         Err(e) if is_gone(e.status()) => return Err(Unfilled::Gone(e.status())),
         Err(e) => return Err(Unfilled::Failed(e.status())),
     }
-    sub.shared.lock().resume();
+    shared.lock().resume();
     loop {
-        fill(session, sub).await?;
-        let next = sub.shared.lock().sequence.next();
+        fill(session, id, shared).await?;
+        let next = shared.lock().sequence.next();
         let Some(seq) = next else { return Ok(()) };
-        match session.republish(sub.id, seq).await {
-            Ok(m) => sub.shared.lock().arrived(m),
+        match session.republish(id, seq).await {
+            Ok(m) => shared.lock().arrived(m),
             // Not sent yet: nothing more to catch up.
             Err(e) if e.status() == StatusCode::BadMessageNotAvailable => return Ok(()),
             Err(e) if is_gone(e.status()) => return Err(Unfilled::Gone(e.status())),
@@ -111,9 +111,9 @@ pub(super) async fn catch_up(session: &Session, sub: &Subscribed) -> Result<(), 
 /// # Errors
 /// Why it could not be taken over (the server dropped it, refuses the
 /// transfer, or does not offer the service).
-pub(super) async fn transfer(session: &Session, sub: &Subscribed) -> Result<(), String> {
+pub(super) async fn transfer(session: &Session, id: u32, shared: &Shared) -> Result<(), String> {
     let results = session
-        .transfer_subscriptions(&[sub.id], true)
+        .transfer_subscriptions(&[id], true)
         .await
         .map_err(|e| e.to_string())?;
     let result = results
@@ -124,13 +124,13 @@ pub(super) async fn transfer(session: &Session, sub: &Subscribed) -> Result<(), 
         return Err(result.status_code.to_string());
     }
     {
-        let mut d = sub.shared.lock();
+        let mut d = shared.lock();
         d.resume();
         if let Some(last) = result.available_sequence_numbers.iter().flatten().max() {
             d.sequence.sent(*last);
         }
     }
-    match fill(session, sub).await {
+    match fill(session, id, shared).await {
         Ok(()) | Err(Unfilled::Failed(_)) => Ok(()),
         Err(Unfilled::Gone(status)) => Err(status.to_string()),
     }
@@ -139,8 +139,8 @@ pub(super) async fn transfer(session: &Session, sub: &Subscribed) -> Result<(), 
 /// The subscription is given up (gone, or replaced): what was held behind a
 /// missing publish is delivered after the loss is said, and the changes
 /// since the last publish delivered may be lost (`why`).
-pub(super) fn give_up(sub: &Subscribed, why: String) {
-    let mut d = sub.shared.lock();
+pub(super) fn give_up(shared: &Shared, why: String) {
+    let mut d = shared.lock();
     let mut next = Vec::new();
     d.sequence.give_up(&mut next);
     d.handle(next);

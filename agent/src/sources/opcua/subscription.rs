@@ -1,8 +1,6 @@
 //! The subscription: monitored items created in chunks the server accepts,
 //! and each publish's changes passed on in source-time order.
 
-pub(super) use super::delivery::Shared;
-use super::delivery::{delivery, Feed};
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::Arc;
@@ -10,14 +8,13 @@ use std::time::{Duration, Instant};
 
 use cellwatch_models::engine::{Reading, TagReading};
 use opcua::client::services::CreateMonitoredItems;
-use opcua::client::{Session, UARequest};
+use opcua::client::{OnSubscriptionNotificationCore, Session, UARequest};
 use opcua::types::{
     DataChangeFilter, DataChangeTrigger, DataValue, ExtensionObject, MonitoredItemCreateRequest,
     MonitoringMode, MonitoringParameters, NodeId, ReadValueId, StatusCode, TimestampsToReturn,
     Variant,
 };
 
-use super::names::Names;
 use crate::config::node::TagNode;
 use crate::config::{Deadband, OpcUaConfig, TagConfig};
 use crate::sources::{SourceEvent, SourceSender};
@@ -86,8 +83,6 @@ impl Heard {
 pub(super) struct Subscribed {
     pub(super) id: u32,
     pub(super) keep_alive: Duration,
-    /// Its publishes' way to the cell loop, in order.
-    pub(super) shared: Shared,
 }
 
 /// Creates the subscription and its monitored items in chunks; `None` if the
@@ -98,25 +93,15 @@ pub(super) async fn subscribe(
     config: &OpcUaConfig,
     monitored: &Arc<Monitored>,
     uses: &Arc<Uses>,
-    names: &Arc<Names>,
     tx: &SourceSender,
     heard: &Arc<Heard>,
+    queue_size: &AtomicU32,
+    callback: impl OnSubscriptionNotificationCore + 'static,
 ) -> Option<Subscribed> {
     heard.beat();
-    // What the server granted, which may be less than asked.
-    let queue_size = Arc::new(AtomicU32::new(config.queue_size));
     // Each node's monitored item gets client handle i + 1 (0 would let the
     // library choose): a notification finds its tags by index, without a
     // lookup in the library's item maps or a hash of the node id.
-    let shared = delivery(
-        monitored.clone(),
-        uses.clone(),
-        tx.clone(),
-        heard.clone(),
-        names.clone(),
-        queue_size.clone(),
-        config.overflow_clear_after,
-    );
     let sub = match session
         .create_subscription(
             config.publishing_interval,
@@ -125,7 +110,7 @@ pub(super) async fn subscribe(
             config.max_notifications_per_publish,
             0,
             true,
-            Feed(shared.clone()),
+            callback,
         )
         .await
     {
@@ -255,11 +240,9 @@ pub(super) async fn subscribe(
             Err(e) => tracing::error!(error = %e, "cannot create monitored items"),
         }
     }
-    shared.lock().id = sub;
     Some(Subscribed {
         id: sub,
         keep_alive,
-        shared,
     })
 }
 
