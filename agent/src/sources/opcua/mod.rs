@@ -740,7 +740,9 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
             ))
             .await;
     }
+    // Silence is counted from the subscription's start.
     let heard = Arc::new(subscription::Heard::new());
+    heard.beat();
     let nodes = Arc::new(subscription::Monitored::group(
         found,
         &ctx.uses,
@@ -764,7 +766,6 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
         &nodes,
         &ctx.uses,
         &ctx.tx,
-        &heard,
         &queue_size,
         delivery::Feed(shared.clone()),
     )

@@ -94,11 +94,9 @@ pub(super) async fn subscribe(
     monitored: &Arc<Monitored>,
     uses: &Arc<Uses>,
     tx: &SourceSender,
-    heard: &Arc<Heard>,
     queue_size: &AtomicU32,
     callback: impl OnSubscriptionNotificationCore + 'static,
 ) -> Option<Subscribed> {
-    heard.beat();
     // Each node's monitored item gets client handle i + 1 (0 would let the
     // library choose): a notification finds its tags by index, without a
     // lookup in the library's item maps or a hash of the node id.

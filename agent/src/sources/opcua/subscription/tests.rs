@@ -1,4 +1,5 @@
 use super::*;
+use crate::sources::opcua::Names;
 
 #[test]
 fn monitored_nodes_group_bits_of_one_word_in_first_seen_order() {
