@@ -243,20 +243,19 @@ async fn node_opcua_server_five_thousand_items_bursts_and_a_restart() {
         .unwrap();
 }
 
-/// The network is down longer than the subscription's lifetime (the server
-/// says when it dropped it) but not the session's: the communication alarm
-/// covers the gap, the agent subscribes again (node-opcua hands it a new
-/// session), and the change made meanwhile arrives.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn node_opcua_network_cut_longer_than_the_subscription_lifetime() {
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
-        .with_test_writer()
-        .try_init();
-    let dir = tempfile::tempdir().unwrap();
-    let server_pki = dir.path().join("server-pki");
+/// A node-opcua server with ten tags, trusted by the agent and trusting
+/// it, reached through a relay that can cut the network; the agent's
+/// configuration for it (publishing every 100 ms).
+async fn node_behind_a_cut(
+    dir: &std::path::Path,
+) -> (
+    NodeServer,
+    crate::liveness::Cut,
+    cellwatch::config::OpcUaConfig,
+) {
+    let server_pki = dir.join("server-pki");
     let port = crate::util::restartable_port();
-    trusted_by_server(&dir.path().join("agent-pki"), &server_pki);
+    trusted_by_server(&dir.join("agent-pki"), &server_pki);
     let server = tokio::task::spawn_blocking({
         let server_pki = server_pki.clone();
         move || NodeServer::start(port, &server_pki, 10)
@@ -270,8 +269,23 @@ async fn node_opcua_network_cut_longer_than_the_subscription_lifetime() {
         cut.clone(),
     )
     .await;
-    let mut config = opcua_config(&format!("opc.tcp://{via}/"), &dir.path().join("agent-pki"));
+    let mut config = opcua_config(&format!("opc.tcp://{via}/"), &dir.join("agent-pki"));
     config.publishing_interval = Duration::from_millis(100);
+    (server, cut, config)
+}
+
+/// The network is down longer than the subscription's lifetime (the server
+/// says when it dropped it) but not the session's: the communication alarm
+/// covers the gap, the agent subscribes again (node-opcua hands it a new
+/// session), and the change made meanwhile arrives.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn node_opcua_network_cut_longer_than_the_subscription_lifetime() {
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+        .with_test_writer()
+        .try_init();
+    let dir = tempfile::tempdir().unwrap();
+    let (server, cut, mut config) = node_behind_a_cut(dir.path()).await;
     // The shortest lifetime allowed: 30 publishing intervals.
     config.subscription_lifetime = config.publishing_interval * 30;
     pki::trust(&server.cert, &config.pki_dir).unwrap();
@@ -330,24 +344,7 @@ async fn node_opcua_network_cut_longer_than_the_subscription_lifetime() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn node_opcua_pulse_during_a_network_cut_arrives_through_the_taken_over_subscription() {
     let dir = tempfile::tempdir().unwrap();
-    let server_pki = dir.path().join("server-pki");
-    let port = crate::util::restartable_port();
-    trusted_by_server(&dir.path().join("agent-pki"), &server_pki);
-    let server = tokio::task::spawn_blocking({
-        let server_pki = server_pki.clone();
-        move || NodeServer::start(port, &server_pki, 10)
-    })
-    .await
-    .unwrap();
-    let cut = crate::liveness::Cut::default();
-    let via = crate::liveness::relay_with_cut(
-        format!("127.0.0.1:{port}").parse().unwrap(),
-        std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false)),
-        cut.clone(),
-    )
-    .await;
-    let mut config = opcua_config(&format!("opc.tcp://{via}/"), &dir.path().join("agent-pki"));
-    config.publishing_interval = Duration::from_millis(100);
+    let (server, cut, config) = node_behind_a_cut(dir.path()).await;
     pki::trust(&server.cert, &config.pki_dir).unwrap();
     let mut source = Running::start(config, (0..10).map(tag).collect());
     all(

@@ -25,6 +25,25 @@ fn tag(address: &str) -> TagConfig {
     )
 }
 
+/// The source reading X0.06 and X0.04 of `sim` through a relay, once
+/// connected and cut off.
+async fn cut_off(
+    sim: &cellwatch::sim::cnc::SimulatedCnc,
+    mut config: cellwatch::config::OpcUaConfig,
+) -> (Running, Cut) {
+    let cut = Cut::default();
+    let via = relay_with_cut(sim.addr(), Arc::new(AtomicBool::new(false)), cut.clone()).await;
+    config.endpoint = format!("opc.tcp://{via}/");
+    let mut source = Running::start(config, vec![tag("X0.06"), tag("X0.04")]);
+    source.connected().await;
+    cut.set(true);
+    next(&mut source.rx, "the cut seen", |e| {
+        matches!(e, SourceEvent::Disconnected(_))
+    })
+    .await;
+    (source, cut)
+}
+
 fn logs() {
     let _ = tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
@@ -67,17 +86,8 @@ fn of_tag(events: &[SourceEvent], tag: usize) -> Vec<(Reading, u64)> {
 async fn a_pulse_during_a_network_cut_arrives_in_order_through_the_taken_over_subscription() {
     logs();
     let dir = tempfile::tempdir().unwrap();
-    let (sim, mut config, _) = trusted_cnc(dir.path()).await;
-    let cut = Cut::default();
-    let via = relay_with_cut(sim.addr(), Arc::new(AtomicBool::new(false)), cut.clone()).await;
-    config.endpoint = format!("opc.tcp://{via}/");
-    let mut source = Running::start(config, vec![tag("X0.06"), tag("X0.04")]);
-    source.connected().await;
-    cut.set(true);
-    next(&mut source.rx, "the cut seen", |e| {
-        matches!(e, SourceEvent::Disconnected(_))
-    })
-    .await;
+    let (sim, config, _) = trusted_cnc(dir.path()).await;
+    let (mut source, cut) = cut_off(&sim, config).await;
     // A limit switch opens and closes again while the agent is cut off.
     let before = cellwatch::clock::now_ms();
     sim.set("X0.06", false).unwrap();
@@ -133,16 +143,7 @@ async fn a_subscription_the_server_dropped_during_a_cut_is_said_as_a_gap_before_
     let (sim, mut config, _) = trusted_cnc(dir.path()).await;
     // The shortest lifetime allowed: 30 publishing intervals.
     config.subscription_lifetime = config.publishing_interval * 30;
-    let cut = Cut::default();
-    let via = relay_with_cut(sim.addr(), Arc::new(AtomicBool::new(false)), cut.clone()).await;
-    config.endpoint = format!("opc.tcp://{via}/");
-    let mut source = Running::start(config, vec![tag("X0.06"), tag("X0.04")]);
-    source.connected().await;
-    cut.set(true);
-    next(&mut source.rx, "the cut seen", |e| {
-        matches!(e, SourceEvent::Disconnected(_))
-    })
-    .await;
+    let (mut source, cut) = cut_off(&sim, config).await;
     // The server closes the subscription once its lifetime is over; a
     // change after that is queued nowhere.
     let deadline = tokio::time::Instant::now() + Duration::from_secs(30);

@@ -62,7 +62,6 @@ use futures_util::future::BoxFuture;
 use futures_util::{FutureExt, StreamExt};
 use opcua::client::{Session, SessionConnectMode, SessionPollResult};
 use opcua::crypto::SecurityPolicy as UaPolicy;
-use opcua::types::{ReadValueId, TimestampsToReturn};
 
 use tokio::sync::mpsc;
 
@@ -555,7 +554,7 @@ async fn supervise(
                     // change, were forgotten while the connection was down:
                     // read them after what it held (the engine ignores what
                     // it has).
-                    read_current(&session, &ctx, &l.nodes).await;
+                    subscription::read_current(&session, &l.nodes, &ctx.uses, &ctx.tx).await;
                 }
             }
             _ => {}
@@ -780,37 +779,3 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
         heard,
     })
 }
-
-/// Reads the current value of every node and sends them as readings, in
-/// chunks of [`READ_CHUNK`]. A failed read is logged; the subscription's
-/// liveness check covers what follows.
-async fn read_current(session: &Session, ctx: &Context, nodes: &subscription::Monitored) {
-    for from in (0..nodes.len()).step_by(READ_CHUNK) {
-        let part = || nodes.nodes(from..from + READ_CHUNK);
-        let ids: Vec<ReadValueId> = part().map(|(_, n, _)| ReadValueId::from(n)).collect();
-        match session.read(&ids, TimestampsToReturn::Both, 0.0).await {
-            Ok(values) => {
-                let mut readings: Vec<TagReading> = values
-                    .iter()
-                    .zip(part())
-                    .flat_map(|(v, (_, _, tags))| {
-                        tags.iter().map(|&tag| TagReading {
-                            tag: tag as usize,
-                            reading: reading(v, &ctx.uses[tag as usize]),
-                            source_time: subscription::source_time(v),
-                        })
-                    })
-                    .collect();
-                readings.sort_by_key(|r| r.source_time);
-                let _ = ctx.tx.send(SourceEvent::Readings(readings.into())).await;
-            }
-            Err(e) => {
-                tracing::warn!(error = %e, "cannot read the tags' current values after reconnecting");
-                return;
-            }
-        }
-    }
-}
-
-/// Nodes read per call when catching up after a reactivation.
-const READ_CHUNK: usize = 1000;

@@ -560,3 +560,42 @@ pub(super) fn source_time(value: &DataValue) -> u64 {
 
 #[cfg(test)]
 mod tests;
+
+/// Reads the current value of every node and sends them as readings, in
+/// chunks of [`READ_CHUNK`]. A failed read is logged; the subscription's
+/// liveness check covers what follows.
+pub(super) async fn read_current(
+    session: &Session,
+    nodes: &Monitored,
+    uses: &Uses,
+    tx: &SourceSender,
+) {
+    for from in (0..nodes.len()).step_by(READ_CHUNK) {
+        let part = || nodes.nodes(from..from + READ_CHUNK);
+        let ids: Vec<ReadValueId> = part().map(|(_, n, _)| ReadValueId::from(n)).collect();
+        match session.read(&ids, TimestampsToReturn::Both, 0.0).await {
+            Ok(values) => {
+                let mut readings: Vec<TagReading> = values
+                    .iter()
+                    .zip(part())
+                    .flat_map(|(v, (_, _, tags))| {
+                        tags.iter().map(|&tag| TagReading {
+                            tag: tag as usize,
+                            reading: reading(v, &uses[tag as usize]),
+                            source_time: source_time(v),
+                        })
+                    })
+                    .collect();
+                readings.sort_by_key(|r| r.source_time);
+                let _ = tx.send(SourceEvent::Readings(readings.into())).await;
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, "cannot read the tags' current values after reconnecting");
+                return;
+            }
+        }
+    }
+}
+
+/// Nodes read per call when catching up after a reactivation.
+const READ_CHUNK: usize = 1000;
