@@ -240,7 +240,7 @@ pub(crate) async fn alarm_until(
     }
 }
 
-pub(crate) type AlarmSubscriber =
+type AlarmSubscriber =
     zenoh_ext::AdvancedSubscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
 
 /// Subscribes to `key`, waits for the agent to settle, opens the Y

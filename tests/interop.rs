@@ -244,15 +244,13 @@ async fn node_opcua_server_five_thousand_items_bursts_and_a_restart() {
 }
 
 /// A node-opcua server with ten tags, trusted by the agent and trusting
-/// it, reached through a relay that can cut the network; the agent's
-/// configuration for it (publishing every 100 ms).
-async fn node_behind_a_cut(
+/// it, reached through a relay that can cut the network; the source
+/// reading them (publishing every 100 ms, a subscription lifetime of
+/// `lifetime` publishing intervals if given), once connected and cut off.
+async fn node_cut_off(
     dir: &std::path::Path,
-) -> (
-    NodeServer,
-    crate::liveness::Cut,
-    cellwatch::config::OpcUaConfig,
-) {
+    lifetime: Option<u32>,
+) -> (NodeServer, crate::liveness::Cut, Running) {
     let server_pki = dir.join("server-pki");
     let port = crate::util::restartable_port();
     trusted_by_server(&dir.join("agent-pki"), &server_pki);
@@ -271,23 +269,9 @@ async fn node_behind_a_cut(
     .await;
     let mut config = opcua_config(&format!("opc.tcp://{via}/"), &dir.join("agent-pki"));
     config.publishing_interval = Duration::from_millis(100);
-    (server, cut, config)
-}
-
-/// The network is down longer than the subscription's lifetime (the server
-/// says when it dropped it) but not the session's: the communication alarm
-/// covers the gap, the agent subscribes again (node-opcua hands it a new
-/// session), and the change made meanwhile arrives.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn node_opcua_network_cut_longer_than_the_subscription_lifetime() {
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
-        .with_test_writer()
-        .try_init();
-    let dir = tempfile::tempdir().unwrap();
-    let (server, cut, mut config) = node_behind_a_cut(dir.path()).await;
-    // The shortest lifetime allowed: 30 publishing intervals.
-    config.subscription_lifetime = config.publishing_interval * 30;
+    if let Some(n) = lifetime {
+        config.subscription_lifetime = config.publishing_interval * n;
+    }
     pki::trust(&server.cert, &config.pki_dir).unwrap();
     let mut source = Running::start(config, (0..10).map(tag).collect());
     // The first values may come before the connection is reported.
@@ -305,6 +289,22 @@ async fn node_opcua_network_cut_longer_than_the_subscription_lifetime() {
         matches!(e, SourceEvent::Disconnected(_))
     })
     .await;
+    (server, cut, source)
+}
+
+/// The network is down longer than the subscription's lifetime (the server
+/// says when it dropped it) but not the session's: the communication alarm
+/// covers the gap, the agent subscribes again (node-opcua hands it a new
+/// session), and the change made meanwhile arrives.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn node_opcua_network_cut_longer_than_the_subscription_lifetime() {
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+        .with_test_writer()
+        .try_init();
+    let dir = tempfile::tempdir().unwrap();
+    // The shortest lifetime allowed: 30 publishing intervals.
+    let (server, cut, mut source) = node_cut_off(dir.path(), Some(30)).await;
     let server = tokio::task::spawn_blocking(move || {
         let mut server = server;
         server.send("set T3 0");
@@ -344,23 +344,7 @@ async fn node_opcua_network_cut_longer_than_the_subscription_lifetime() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn node_opcua_pulse_during_a_network_cut_arrives_through_the_taken_over_subscription() {
     let dir = tempfile::tempdir().unwrap();
-    let (server, cut, config) = node_behind_a_cut(dir.path()).await;
-    pki::trust(&server.cert, &config.pki_dir).unwrap();
-    let mut source = Running::start(config, (0..10).map(tag).collect());
-    all(
-        &mut source.rx,
-        "connected, and T3's value",
-        &[
-            &|e| matches!(e, SourceEvent::Connected(_)),
-            &|e| matches!(e, SourceEvent::Readings(rs) if rs.iter().any(|r| r.tag == 3)),
-        ],
-    )
-    .await;
-    cut.set(true);
-    next(&mut source.rx, "connection lost", |e| {
-        matches!(e, SourceEvent::Disconnected(_))
-    })
-    .await;
+    let (server, cut, mut source) = node_cut_off(dir.path(), None).await;
     let server = tokio::task::spawn_blocking(move || {
         let mut server = server;
         // Held long enough to be sampled (the server samples every 20 ms).

@@ -179,8 +179,7 @@ async fn a_subscription_the_server_dropped_during_a_cut_is_said_as_a_gap_before_
 /// subscribed.
 async fn cell_behind_a_cut(
     lifetime: Option<Duration>,
-) -> (crate::agent::Fixture, Cut, crate::agent::AlarmSubscriber) {
-    use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
+) -> (crate::agent::Fixture, Cut, crate::robust::AlarmSubscriber) {
     let cut = Cut::default();
     let via = Arc::new(std::sync::Mutex::new(None));
     let fx = crate::agent::Fixture::start_with_sim(
@@ -204,13 +203,7 @@ async fn cell_behind_a_cut(
         },
     )
     .await;
-    let sub = fx
-        .client()
-        .declare_subscriber("cellwatch/m01ps0004/alarms/**")
-        .history(HistoryConfig::default().detect_late_publishers())
-        .recovery(RecoveryConfig::default().heartbeat())
-        .await
-        .unwrap();
+    let sub = crate::robust::alarms(fx.client(), "m01ps0004").await;
     fx.settled().await;
     (fx, cut, sub)
 }

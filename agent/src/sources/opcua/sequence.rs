@@ -118,7 +118,6 @@ impl Sequence {
             from: next,
             to: seq,
         });
-        self.exists(seq);
         self.next = Some(succ(seq));
         self.drain(out);
     }
