@@ -26,6 +26,7 @@ mod interop;
 mod legacy;
 mod liveness;
 mod network_cut;
+mod nodes_back;
 mod opcua;
 mod operations;
 mod operators;

@@ -208,7 +208,7 @@ async fn cell_behind_a_cut(
     (fx, cut, sub)
 }
 
-fn metric(metrics: &str, name: &str) -> f64 {
+pub(crate) fn metric(metrics: &str, name: &str) -> f64 {
     metrics
         .lines()
         .find_map(|l| l.strip_prefix(&format!("{name}{{cell=\"m01ps0004\"}} ")))

@@ -32,6 +32,7 @@ pub(crate) fn opcua_config(endpoint: &str, pki_dir: &std::path::Path) -> OpcUaCo
         max_notifications_per_publish: 10_000,
         overflow_clear_after: OpcUaConfig::DEFAULT_OVERFLOW_CLEAR_AFTER,
         subscription_lifetime: OpcUaConfig::DEFAULT_SUBSCRIPTION_LIFETIME,
+        verify_interval: OpcUaConfig::DEFAULT_VERIFY_INTERVAL,
     }
 }
 

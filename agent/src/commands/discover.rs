@@ -758,5 +758,6 @@ pub(crate) fn connection(
         max_notifications_per_publish: OpcUaConfig::DEFAULT_MAX_NOTIFICATIONS,
         overflow_clear_after: OpcUaConfig::DEFAULT_OVERFLOW_CLEAR_AFTER,
         subscription_lifetime: OpcUaConfig::DEFAULT_SUBSCRIPTION_LIFETIME,
+        verify_interval: OpcUaConfig::DEFAULT_VERIFY_INTERVAL,
     })
 }

@@ -139,6 +139,11 @@ pub struct OpcUaConfig {
     /// queues, while the agent is cut off (`opcua.subscription_lifetime`):
     /// a network cut shorter than this loses nothing.
     pub subscription_lifetime: Duration,
+    /// How often every monitored item is checked against the server's
+    /// nodes (`opcua.verify_interval`): a node deleted, or deleted and
+    /// added again, by a server that said nothing is found and monitored
+    /// again.
+    pub verify_interval: Duration,
 }
 
 impl OpcUaConfig {
@@ -152,6 +157,9 @@ impl OpcUaConfig {
 
     /// `opcua.subscription_lifetime` unless configured.
     pub const DEFAULT_SUBSCRIPTION_LIFETIME: Duration = Duration::from_secs(60);
+
+    /// `opcua.verify_interval` unless configured.
+    pub const DEFAULT_VERIFY_INTERVAL: Duration = Duration::from_secs(30);
 
     /// `opcua.overflow_clear_after` unless configured.
     pub const DEFAULT_OVERFLOW_CLEAR_AFTER: Duration = Duration::from_secs(10);

@@ -107,6 +107,7 @@ pub(crate) struct RawOpcUa {
     pub(crate) max_notifications_per_publish: Option<Spanned<i64>>,
     pub(crate) overflow_clear_after: Option<Spanned<String>>,
     pub(crate) subscription_lifetime: Option<Spanned<String>>,
+    pub(crate) verify_interval: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

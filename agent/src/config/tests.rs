@@ -242,6 +242,34 @@ fn the_subscription_outlives_a_network_cut_within_bounds() {
 }
 
 #[test]
+fn monitored_items_are_verified_every_thirty_seconds_unless_configured() {
+    let with = |extra: &str| {
+        GOOD.replace(
+            "endpoint = \"opc.tcp://127.0.0.1:4840/\"",
+            &format!("endpoint = \"opc.tcp://127.0.0.1:4840/\"\n{extra}"),
+        )
+    };
+    let c = parse("cell.toml", GOOD, Path::new("base"), &mem()).unwrap();
+    assert_eq!(c.opcua.unwrap().verify_interval, Duration::from_secs(30));
+    let c = parse(
+        "cell.toml",
+        &with("verify_interval = \"5s\""),
+        Path::new("base"),
+        &mem(),
+    )
+    .unwrap();
+    assert_eq!(c.opcua.unwrap().verify_interval, Duration::from_secs(5));
+    assert_eq!(
+        errors(&with("verify_interval = \"500ms\"")),
+        "cell.toml:7:19: opcua.verify_interval: at least 1s"
+    );
+    assert_eq!(
+        errors(&with("verify_interval = \"2h\"")),
+        "cell.toml:7:19: opcua.verify_interval: at most 1h"
+    );
+}
+
+#[test]
 fn the_bus_is_tls_unless_plain_is_written() {
     let c = parse("cell.toml", GOOD, Path::new("base"), &mem()).unwrap();
     let tls = c.zenoh.tls.unwrap();

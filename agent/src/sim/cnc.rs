@@ -269,6 +269,57 @@ impl SimulatedCnc {
         self.server.delete(address)
     }
 
+    /// Deletes a variable and tells its monitored items nothing (see
+    /// [`SimServer::delete_quietly`]).
+    ///
+    /// # Errors
+    /// No such variable.
+    pub fn delete_quietly(&self, address: &str) -> Result<(), String> {
+        self.server.delete_quietly(address)
+    }
+
+    /// Adds a deleted input or register back, with the value the machine
+    /// holds (see [`SimServer::restore`]).
+    ///
+    /// # Errors
+    /// Not a variable of the machine, or not deleted.
+    pub fn restore(&self, address: &str) -> Result<(), String> {
+        let value = self.holds(address)?;
+        self.server.restore(address, value)
+    }
+
+    /// Recreates an input or register with the value the machine holds,
+    /// telling its monitored items nothing (see
+    /// [`SimServer::recreate_quietly`]).
+    ///
+    /// # Errors
+    /// Not a variable of the machine.
+    pub fn recreate_quietly(&self, address: &str) -> Result<(), String> {
+        let value = self.holds(address)?;
+        self.server.recreate_quietly(address, value)
+    }
+
+    /// The value the machine holds at `address`, an input or a register.
+    fn holds(&self, address: &str) -> Result<Variant, String> {
+        let value = {
+            let plc = self.plc.lock().map_err(|_| "simulator state poisoned")?;
+            match plc
+                .registers()
+                .into_iter()
+                .find(|(name, _)| name == address)
+            {
+                Some((_, v)) => v,
+                None => {
+                    let signal = cellwatch_models::signal::pmc_address(address)?;
+                    Variant::Boolean(*plc.inputs.get(&signal).ok_or_else(|| {
+                        format!("{signal} is not a variable of the simulated CNC")
+                    })?)
+                }
+            }
+        };
+        Ok(value)
+    }
+
     /// How many subscriptions the server holds (see
     /// [`SimServer::subscriptions`]).
     pub fn subscriptions(&self) -> usize {

@@ -5,13 +5,13 @@
 //! a Basic256Sha256 + SignAndEncrypt endpoint, client certificates trusted
 //! only from `trusted/` (and an endpoint without security only on request).
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
 use opcua::crypto::SecurityPolicy;
-use opcua::server::address_space::{NodeBase, Variable};
+use opcua::server::address_space::{NodeBase, NodeType, Variable};
 use opcua::server::diagnostics::NamespaceMetadata;
 use opcua::server::node_manager::memory::{simple_node_manager, SimpleNodeManager};
 use opcua::server::{
@@ -55,6 +55,9 @@ fn add_variables(
         .collect();
     space.add_variables(vars, &folder);
 }
+
+/// Monitored items, each as (subscription id, item id).
+type Items = HashSet<(u32, u32)>;
 
 /// The writes clients made to a simulated PLC's writable variables.
 #[derive(Clone, Default)]
@@ -107,6 +110,10 @@ pub struct SimServer {
     decoy: Option<(Arc<SimpleNodeManager>, u16)>,
     /// Variables deleted ([`SimServer::delete`]): no longer written.
     deleted: Arc<Mutex<HashSet<String>>>,
+    /// The monitored items (subscription, item) that a node deleted in
+    /// silence left behind ([`SimServer::delete_quietly`]): they never hear
+    /// of it again.
+    deaf: Arc<Mutex<HashMap<NodeId, Items>>>,
     subscriptions: Arc<SubscriptionCache>,
     ns: u16,
     addr: SocketAddr,
@@ -220,6 +227,7 @@ impl SimServer {
             manager,
             decoy,
             deleted: Arc::default(),
+            deaf: Arc::default(),
             subscriptions,
             ns,
             addr,
@@ -254,14 +262,45 @@ impl SimServer {
         self.write(&values)
     }
 
-    /// Writes values to their nodes, notifying subscribers.
+    /// Writes values to their nodes, notifying subscribers (but the deaf
+    /// ones a silent deletion left behind).
     fn write(&self, values: &[(NodeId, DataValue)]) -> Result<(), String> {
+        let deaf = self.deaf.lock().map_err(|_| "simulator state poisoned")?;
+        let (quiet, loud): (Vec<_>, Vec<_>) =
+            values.iter().partition(|(n, _)| deaf.contains_key(n));
         self.manager
             .set_values(
                 &self.subscriptions,
-                values.iter().map(|(n, v)| (n, None, v.clone())),
+                loud.into_iter().map(|(n, v)| (n, None, v.clone())),
             )
-            .map_err(|e| format!("cannot update the simulated PLC: {e}"))
+            .map_err(|e| format!("cannot update the simulated PLC: {e}"))?;
+        if quiet.is_empty() {
+            return Ok(());
+        }
+        {
+            let space = self.manager.address_space();
+            let mut space = space.write();
+            for (node, value) in &quiet {
+                if let Some(NodeType::Variable(v)) = space.find_mut(node) {
+                    v.set_data_value(value.clone());
+                }
+            }
+        }
+        let mut notifier = self.subscriptions.data_notifier();
+        for (node, value) in quiet {
+            let Some(mut batch) = notifier.notify_for(node, AttributeId::Value) else {
+                continue;
+            };
+            let heard: Vec<_> = batch
+                .entries()
+                .map(|(h, _)| *h)
+                .filter(|h| !deaf[node].contains(&(h.subscription_id, h.monitored_item_id)))
+                .collect();
+            for h in heard {
+                batch.data_value_to_item(value.clone(), &h);
+            }
+        }
+        Ok(())
     }
 
     /// Writes values in the decoy namespace.
@@ -287,12 +326,14 @@ impl SimServer {
 
     /// Deletes a variable, as a server whose configuration changed does;
     /// its monitored items get `BadNodeIdUnknown`, as from a server that
-    /// samples its nodes.
+    /// samples its nodes, and never hear of it again, even once it is
+    /// added back ([`SimServer::restore`]).
     ///
     /// # Errors
     /// No such variable.
     pub fn delete(&self, name: &str) -> Result<(), String> {
         let node = NodeId::new(self.ns, name);
+        let items = self.items_on(&node);
         self.manager
             .address_space()
             .write()
@@ -307,7 +348,100 @@ impl SimServer {
         gone.server_timestamp = Some(DateTime::now());
         self.subscriptions
             .notify_data_change([(gone, &node, AttributeId::Value)].into_iter());
+        self.deafen(node, items)
+    }
+
+    /// The monitored items on `node` now: (subscription, item).
+    fn items_on(&self, node: &NodeId) -> HashSet<(u32, u32)> {
+        let mut notifier = self.subscriptions.data_notifier();
+        notifier
+            .notify_for(node, AttributeId::Value)
+            .map(|b| {
+                b.entries()
+                    .map(|(h, _)| (h.subscription_id, h.monitored_item_id))
+                    .collect()
+            })
+            .unwrap_or_default()
+    }
+
+    /// `items` never hear of `node` again.
+    fn deafen(&self, node: NodeId, items: HashSet<(u32, u32)>) -> Result<(), String> {
+        self.deaf
+            .lock()
+            .map_err(|_| "simulator state poisoned")?
+            .entry(node)
+            .or_default()
+            .extend(items);
         Ok(())
+    }
+
+    /// Deletes a variable and says nothing to its monitored items, which
+    /// stay on the server and never hear of the node again, even once it
+    /// is added back ([`SimServer::restore`]) — as servers do that lose
+    /// track of their items when a PLC download recreates a data block.
+    ///
+    /// # Errors
+    /// No such variable.
+    pub fn delete_quietly(&self, name: &str) -> Result<(), String> {
+        let node = NodeId::new(self.ns, name);
+        let items = self.items_on(&node);
+        self.manager
+            .address_space()
+            .write()
+            .delete(&node, true)
+            .ok_or_else(|| format!("no variable {name}"))?;
+        self.deleted
+            .lock()
+            .map_err(|_| "simulator state poisoned")?
+            .insert(name.to_string());
+        self.deafen(node, items)
+    }
+
+    /// Deletes a variable and adds it back holding `value` in one step (no
+    /// client sees it missing), telling its monitored items nothing: they
+    /// never hear of it again — a PLC download that recreates a data
+    /// block, on a server that loses track of its items.
+    ///
+    /// # Errors
+    /// No such variable.
+    pub fn recreate_quietly(&self, name: &str, value: Variant) -> Result<(), String> {
+        let node = NodeId::new(self.ns, name);
+        let items = self.items_on(&node);
+        {
+            let space = self.manager.address_space();
+            let mut space = space.write();
+            space
+                .delete(&node, true)
+                .ok_or_else(|| format!("no variable {name}"))?;
+            let var = Variable::new(&node, name, name, value.clone());
+            space.add_variables(vec![var], &NodeId::new(self.ns, self.app.as_str()));
+        }
+        self.deafen(node.clone(), items)?;
+        self.write(&[(node, DataValue::new_now(value))])
+    }
+
+    /// Adds a deleted variable back, holding `value`, as a PLC download
+    /// does: new monitored items see it; those a silent deletion left
+    /// behind do not.
+    ///
+    /// # Errors
+    /// The variable exists.
+    pub fn restore(&self, name: &str, value: Variant) -> Result<(), String> {
+        let node = NodeId::new(self.ns, name);
+        {
+            let space = self.manager.address_space();
+            let mut space = space.write();
+            if space.find(&node).is_some() {
+                return Err(format!("{name} exists already"));
+            }
+            let var = Variable::new(&node, name, name, value.clone());
+            space.add_variables(vec![var], &NodeId::new(self.ns, self.app.as_str()));
+        }
+        self.deleted
+            .lock()
+            .map_err(|_| "simulator state poisoned")?
+            .remove(name);
+        self.write(&[(node, DataValue::new_now(value))])
     }
 
     /// How many live subscriptions the server holds for all its sessions; a
@@ -366,8 +500,14 @@ impl SimServer {
     /// A name that is not a variable of this server.
     pub fn set_registers(&self, values: &[(String, Variant)]) -> Result<(), String> {
         let now = DateTime::now();
+        let deleted = self
+            .deleted
+            .lock()
+            .map_err(|_| "simulator state poisoned")?
+            .clone();
         let values: Vec<(NodeId, DataValue)> = values
             .iter()
+            .filter(|(s, _)| !deleted.contains(s))
             .map(|(s, v)| {
                 (
                     NodeId::new(self.ns, s.as_str()),

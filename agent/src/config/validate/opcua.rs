@@ -166,6 +166,23 @@ impl Validator<'_> {
                 d
             }
         };
+        let verify_interval = match raw.verify_interval {
+            None => OpcUaConfig::DEFAULT_VERIFY_INTERVAL,
+            Some(v) => {
+                let span = v.span();
+                let d = self.duration(
+                    Some(v),
+                    "opcua.verify_interval",
+                    OpcUaConfig::DEFAULT_VERIFY_INTERVAL,
+                );
+                if d < Duration::from_secs(1) {
+                    self.problem(span, "opcua.verify_interval", "at least 1s");
+                } else if d > Duration::from_secs(3600) {
+                    self.problem(span, "opcua.verify_interval", "at most 1h");
+                }
+                d
+            }
+        };
         Some(OpcUaConfig {
             endpoint,
             policy,
@@ -179,6 +196,7 @@ impl Validator<'_> {
             max_notifications_per_publish,
             overflow_clear_after,
             subscription_lifetime,
+            verify_interval,
         })
     }
 

@@ -15,6 +15,7 @@ use opcua::types::{
 use tokio::sync::mpsc::error::TrySendError;
 use tokio::sync::Notify;
 
+use super::items::{Items, Standing};
 use super::names::Names;
 use super::overflow::Overflow;
 use super::sequence::{Next, Sequence};
@@ -41,6 +42,10 @@ pub(super) struct Shared {
     delivery: Arc<Mutex<Delivery>>,
     /// Woken when a publish is found missing.
     pub(super) missing: Arc<Notify>,
+    /// Each monitored item's standing.
+    pub(super) items: Arc<Mutex<Items>>,
+    /// Woken when a monitored item fails.
+    pub(super) failed: Arc<Notify>,
 }
 
 impl Shared {
@@ -68,6 +73,12 @@ impl Delivery {
                 }
             }
         }
+    }
+
+    /// Publishes are handed on as they come: none held back by a cut or
+    /// for a missing one before them.
+    pub(super) fn flowing(&self) -> bool {
+        !self.paused && self.sequence.missing().is_none()
     }
 
     /// The connection is lost: what arrives after waits for
@@ -143,6 +154,8 @@ pub(super) fn delivery(
     queue_size: Arc<AtomicU32>,
     overflow_clear_after: std::time::Duration,
 ) -> Shared {
+    let items = Arc::new(Mutex::new(Items::new(monitored.len())));
+    let failed = Arc::new(Notify::new());
     Shared {
         delivery: Arc::new(Mutex::new(Delivery {
             id: 0,
@@ -157,9 +170,13 @@ pub(super) fn delivery(
                 names,
                 queue_size,
                 overflow: Overflow::new(overflow_clear_after),
+                items: items.clone(),
+                failed: failed.clone(),
             },
         })),
         missing: Arc::new(Notify::new()),
+        items,
+        failed,
     }
 }
 
@@ -181,12 +198,18 @@ struct InTimeOrder {
     queue_size: Arc<AtomicU32>,
     /// Changes lost in the server's queues, and the alarm of them.
     overflow: Overflow,
+    items: Arc<Mutex<Items>>,
+    /// Woken when a monitored item fails.
+    failed: Arc<Notify>,
 }
 
 /// One publish's readings, in the server's order.
 struct Collector<'a> {
     monitored: &'a Monitored,
     uses: &'a Uses,
+    items: &'a mut Items,
+    /// An item failed in this publish.
+    failed: bool,
     readings: Vec<TagReading>,
     /// Tags with a value flagged `Overflow` in this publish.
     overflowed: BTreeSet<usize>,
@@ -229,6 +252,12 @@ impl Collector<'_> {
             );
             return;
         };
+        if self.items.heard(handle as usize - 1, &value) == Standing::Failed {
+            let status = value.status.unwrap_or(StatusCode::GoodNoData);
+            self.items
+                .fail(handle as usize - 1, status, std::time::Instant::now());
+            self.failed = true;
+        }
         let at = source_time(&value);
         let overflow = value.status.is_some_and(|s| s.overflow());
         // The usual node, one tag: its item says the tag and how it is
@@ -279,16 +308,30 @@ impl InTimeOrder {
         let received = std::time::Instant::now();
         // Keep-alives (no data) come here too: the subscription is alive.
         self.heard.beat();
+        let mut items = self.items.lock().unwrap_or_else(|e| e.into_inner());
         let mut c = Collector {
             monitored: &self.monitored,
             uses: &self.uses,
+            items: &mut items,
+            failed: false,
             readings: Vec::new(),
             overflowed: BTreeSet::new(),
             lost: 0,
             closed: None,
         };
         c.notification(notification);
-        if let Some(status) = c.closed {
+        if c.failed {
+            self.failed.notify_one();
+        }
+        let Collector {
+            mut readings,
+            overflowed,
+            lost,
+            closed,
+            ..
+        } = c;
+        drop(items);
+        if let Some(status) = closed {
             // The supervisor sees it and subscribes again.
             tracing::warn!(%status, "the server closed the subscription");
             self.heard.closed.store(status.bits(), Ordering::Relaxed);
@@ -296,8 +339,8 @@ impl InTimeOrder {
         // Overflow bookkeeping only while changes are being lost: the usual
         // publish costs one test here. Keep-alives count, so the alarm
         // clears on a quiet subscription too.
-        let say = (c.lost > 0 || self.overflow.said.is_some())
-            && self.overflow.publish(&c.overflowed, c.lost, received);
+        let say = (lost > 0 || self.overflow.said.is_some())
+            && self.overflow.publish(&overflowed, lost, received);
         let problem = say.then(|| {
             let problem = self.overflow.say(
                 &self.names,
@@ -313,17 +356,17 @@ impl InTimeOrder {
                 problem,
             }
         });
-        if c.readings.is_empty() {
+        if readings.is_empty() {
             if let Some(p) = problem {
                 send_blocking(&self.tx, p);
             }
             return;
         }
-        c.readings.sort_by_key(|r| r.source_time);
+        readings.sort_by_key(|r| r.source_time);
         self.heard.busy.store(true, Ordering::Relaxed);
-        if c.lost > 0 {
+        if lost > 0 {
             // The values behind the loss are judged knowing it.
-            let tags: Vec<usize> = c.overflowed.iter().copied().collect();
+            let tags: Vec<usize> = overflowed.iter().copied().collect();
             let mut names: Vec<&str> = tags.iter().take(5).map(|&t| &self.names[t][..]).collect();
             if tags.len() > names.len() {
                 names.push("...");
@@ -336,16 +379,13 @@ impl InTimeOrder {
                         names.join(", ")
                     ),
                     tags: Some(tags),
-                    values: c.lost,
+                    values: lost,
                 },
             );
         }
         send_blocking(
             &self.tx,
-            SourceEvent::Readings(crate::sources::Batch {
-                readings: c.readings,
-                received,
-            }),
+            SourceEvent::Readings(crate::sources::Batch { readings, received }),
         );
         if let Some(p) = problem {
             send_blocking(&self.tx, p);

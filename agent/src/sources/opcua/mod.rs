@@ -40,6 +40,7 @@ use std::time::Duration;
 
 mod client;
 mod delivery;
+mod items;
 mod names;
 mod once;
 mod overflow;
@@ -47,6 +48,7 @@ mod resume;
 mod sequence;
 mod subscription;
 mod switches;
+mod tend;
 
 pub use crate::config::node::{Namespace, TagNode};
 pub use client::client;
@@ -590,7 +592,7 @@ async fn supervise(
             .send(SourceEvent::Connected(ctx.endpoint.clone()))
             .await;
         let l = live.as_ref().expect("subscribed above");
-        let why = watch(&session, l).await;
+        let why = watch(&session, &ctx, l).await;
         let l = live.take().expect("subscribed above");
         tracing::warn!(subscription = l.subscription.id, "{why}");
         resume::give_up(
@@ -623,15 +625,21 @@ async fn resume(session: &Session, l: &Live, new_session: bool) -> Result<(), St
 }
 
 /// Watches a subscription in place: fills every gap found in its
-/// publishes, and says why it must be replaced — the server closed it, or
-/// it went silent (no data, no keep-alive) and held nothing to send again.
-async fn watch(session: &Session, l: &Live) -> String {
+/// publishes, tends its monitored items (`tend`), and says why it must be
+/// replaced — the server closed it, or it went silent (no data, no
+/// keep-alive) and held nothing to send again.
+async fn watch(session: &Session, ctx: &Context, l: &Live) -> String {
     let sub = &l.subscription;
     let limit = sub.keep_alive * SILENT_KEEP_ALIVES;
     let period = (sub.keep_alive / 2).max(Duration::from_millis(50));
+    let (mut tending, mut next) = (tend::Tending::new(&ctx.config), std::time::Instant::now());
     loop {
+        let wait = period.min(next.saturating_duration_since(std::time::Instant::now()));
         tokio::select! {
-            () = tokio::time::sleep(period) => {}
+            () = tokio::time::sleep(wait) => {
+                next = tending.tend(&tend::Tended { session, sub: sub.id, config: &ctx.config, uses: &ctx.uses, nodes: &l.nodes, shared: &l.shared, heard: &l.heard, tx: &ctx.tx }).await;
+            }
+            () = l.shared.failed.notified() => next = std::time::Instant::now(),
             () = l.shared.missing.notified() => {
                 if let Err(resume::Unfilled::Gone(status)) = resume::fill(session, sub.id, &l.shared).await {
                     return format!("the server dropped subscription {} ({status}): subscribing again", sub.id);
@@ -765,7 +773,10 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
         &nodes,
         &ctx.uses,
         &ctx.tx,
-        &queue_size,
+        subscription::Granted {
+            queue_size: &queue_size,
+            items: &shared.items,
+        },
         delivery::Feed(shared.clone()),
     )
     .await?;

@@ -3,7 +3,7 @@
 
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use cellwatch_models::engine::{Reading, TagReading};
@@ -11,10 +11,11 @@ use opcua::client::services::CreateMonitoredItems;
 use opcua::client::{OnSubscriptionNotificationCore, Session, UARequest};
 use opcua::types::{
     DataChangeFilter, DataChangeTrigger, DataValue, ExtensionObject, MonitoredItemCreateRequest,
-    MonitoringMode, MonitoringParameters, NodeId, ReadValueId, StatusCode, TimestampsToReturn,
-    Variant,
+    MonitoredItemCreateResult, MonitoringMode, MonitoringParameters, NodeId, ReadValueId,
+    StatusCode, TimestampsToReturn, Variant,
 };
 
+use super::items::Items;
 use crate::config::node::TagNode;
 use crate::config::{Deadband, OpcUaConfig, TagConfig};
 use crate::sources::{SourceEvent, SourceSender};
@@ -85,6 +86,13 @@ pub(super) struct Subscribed {
     pub(super) keep_alive: Duration,
 }
 
+/// What the server grants a subscription's items: the queue size per item
+/// (which may be less than asked), and each item's id (or refusal).
+pub(super) struct Granted<'a> {
+    pub(super) queue_size: &'a AtomicU32,
+    pub(super) items: &'a Mutex<Items>,
+}
+
 /// Creates the subscription and its monitored items in chunks; `None` if the
 /// server refused the subscription (reported as
 /// [`SourceEvent::Disconnected`]).
@@ -94,9 +102,10 @@ pub(super) async fn subscribe(
     monitored: &Arc<Monitored>,
     uses: &Arc<Uses>,
     tx: &SourceSender,
-    queue_size: &AtomicU32,
+    granted: Granted<'_>,
     callback: impl OnSubscriptionNotificationCore + 'static,
 ) -> Option<Subscribed> {
+    let Granted { queue_size, items } = granted;
     // Each node's monitored item gets client handle i + 1 (0 would let the
     // library choose): a notification finds its tags by index, without a
     // lookup in the library's item maps or a hash of the node id.
@@ -135,113 +144,174 @@ pub(super) async fn subscribe(
     let chunk = max_items_per_call(session).await.min(MAX_ITEMS_PER_CALL);
     // Requests are made one call's worth at a time: 100,000 of them at
     // once would be 15 MB held for the length of the creation.
-    let request = |i: usize, n: NodeId, tags: &[u32]| {
-        // Several tags on one node are bits of one word: the first
-        // says how it is sampled.
-        let tag = &uses[tags[0] as usize];
-        let sampling = tag
-            .sampling
-            .unwrap_or(config.sampling_interval)
-            .as_secs_f64()
-            * 1000.0;
-        // Without a filter a server reports value changes only; quality
-        // changes (a broken sensor wire) must be reported too.
-        let (deadband_type, deadband_value) = match tag.deadband {
-            None => (0, 0.0),
-            Some(Deadband::Absolute(v)) => (1, v),
-            Some(Deadband::Percent(v)) => (2, v),
-        };
-        let filter = DataChangeFilter {
-            trigger: DataChangeTrigger::StatusValue,
-            deadband_type,
-            deadband_value,
-        };
-        // When the queue is full the server drops the oldest change and
-        // flags the next one it delivers with the overflow bit.
-        let params = MonitoringParameters {
-            client_handle: i as u32 + 1,
-            sampling_interval: sampling,
-            queue_size: config.queue_size,
-            discard_oldest: true,
-            filter: ExtensionObject::from_message(filter),
-        };
-        MonitoredItemCreateRequest::new(ReadValueId::from(n), MonitoringMode::Reporting, params)
-    };
     tracing::debug!(
         subscription = sub,
         items = monitored.len(),
         chunk,
         "creating monitored items"
     );
+    // Requests are made one call's worth at a time: 100,000 of them at
+    // once would be 15 MB held for the length of the creation.
     for from in (0..monitored.len()).step_by(chunk.max(1)) {
-        let part = || monitored.nodes(from..from + chunk);
-        let requests = part().map(|(i, n, tags)| request(i, n, tags)).collect();
-        // The service itself, not `Session::create_monitored_items`: that
-        // also keeps every item in the library's subscription state (about
-        // 370 bytes an item, 37 MB for 100,000 tags), which this source
-        // never reads — notifications find their tags by client handle, and
-        // the source recreates the subscription itself after a reconnect.
-        // Source timestamps only: the checks judge time by the PLC's
-        // clock, and a server timestamp per change would cost its decoding
-        // (about a fifth of the agent's time at 500,000 changes/s). A
-        // value without one is stamped when it arrives.
-        match CreateMonitoredItems::new(sub, session)
-            .items_to_create(requests)
-            .timestamps_to_return(TimestampsToReturn::Source)
-            .send(session.channel())
-            .await
-        {
-            Ok(created) => {
-                let results = created.results;
-                if let Some(granted) = results
-                    .iter()
-                    .filter(|r| r.result.status_code.is_good())
-                    .map(|r| r.result.revised_queue_size)
-                    .min()
-                {
-                    if granted < queue_size.load(Ordering::Relaxed) {
-                        tracing::warn!(
-                            asked = config.queue_size,
-                            granted,
-                            "the server granted a smaller queue per tag"
-                        );
-                        queue_size.store(granted, Ordering::Relaxed);
-                    }
-                }
-                if let Some(slowest) = results
-                    .iter()
-                    .filter(|r| r.result.status_code.is_good())
-                    .map(|r| r.result.revised_sampling_interval)
-                    .max_by(f64::total_cmp)
-                {
-                    let sampling = config.sampling_interval.as_secs_f64() * 1000.0;
-                    if slowest > sampling {
-                        tracing::warn!(asked_ms = sampling, granted_ms = slowest, "the server samples less often than asked: changes shorter than its interval are not seen");
-                    }
-                }
-                for (r, (_, node, tags)) in results.iter().zip(part()) {
-                    if !r.result.status_code.is_good() {
-                        tracing::error!(node = %node, status = %r.result.status_code, "monitored item refused");
-                        let now = crate::clock::now_ms();
-                        let readings: Vec<TagReading> = tags
-                            .iter()
-                            .map(|&tag| TagReading {
-                                tag: tag as usize,
-                                reading: Reading::Bad,
-                                source_time: now,
-                            })
-                            .collect();
-                        let _ = tx.send(SourceEvent::Readings(readings.into())).await;
-                    }
-                }
+        let part: Vec<_> = monitored.nodes(from..from + chunk).collect();
+        let results = match create(session, sub, config, uses, &part).await {
+            Ok(results) => results,
+            Err(e) => {
+                tracing::error!(error = %e, "cannot create monitored items");
+                continue;
             }
-            Err(e) => tracing::error!(error = %e, "cannot create monitored items"),
+        };
+        if let Some(granted) = results
+            .iter()
+            .filter(|r| r.status_code.is_good())
+            .map(|r| r.revised_queue_size)
+            .min()
+        {
+            if granted < queue_size.load(Ordering::Relaxed) {
+                tracing::warn!(
+                    asked = config.queue_size,
+                    granted,
+                    "the server granted a smaller queue per tag"
+                );
+                queue_size.store(granted, Ordering::Relaxed);
+            }
+        }
+        if let Some(slowest) = results
+            .iter()
+            .filter(|r| r.status_code.is_good())
+            .map(|r| r.revised_sampling_interval)
+            .max_by(f64::total_cmp)
+        {
+            let sampling = config.sampling_interval.as_secs_f64() * 1000.0;
+            if slowest > sampling {
+                tracing::warn!(asked_ms = sampling, granted_ms = slowest, "the server samples less often than asked: changes shorter than its interval are not seen");
+            }
+        }
+        let refused = taken(items, &results, &part);
+        if !refused.is_empty() {
+            let _ = tx.send(bad(&refused)).await;
         }
     }
     Some(Subscribed {
         id: sub,
         keep_alive,
     })
+}
+
+/// The request that creates node `i`'s monitored item (client handle
+/// `i + 1`), reading `tags` from `node`.
+pub(super) fn item_request(
+    config: &OpcUaConfig,
+    uses: &Uses,
+    i: usize,
+    n: NodeId,
+    tags: &[u32],
+) -> MonitoredItemCreateRequest {
+    // Several tags on one node are bits of one word: the first
+    // says how it is sampled.
+    let tag = &uses[tags[0] as usize];
+    let sampling = tag
+        .sampling
+        .unwrap_or(config.sampling_interval)
+        .as_secs_f64()
+        * 1000.0;
+    // Without a filter a server reports value changes only; quality
+    // changes (a broken sensor wire) must be reported too.
+    let (deadband_type, deadband_value) = match tag.deadband {
+        None => (0, 0.0),
+        Some(Deadband::Absolute(v)) => (1, v),
+        Some(Deadband::Percent(v)) => (2, v),
+    };
+    let filter = DataChangeFilter {
+        trigger: DataChangeTrigger::StatusValue,
+        deadband_type,
+        deadband_value,
+    };
+    // When the queue is full the server drops the oldest change and
+    // flags the next one it delivers with the overflow bit.
+    let params = MonitoringParameters {
+        client_handle: i as u32 + 1,
+        sampling_interval: sampling,
+        queue_size: config.queue_size,
+        discard_oldest: true,
+        filter: ExtensionObject::from_message(filter),
+    };
+    MonitoredItemCreateRequest::new(ReadValueId::from(n), MonitoringMode::Reporting, params)
+}
+
+/// Creates the monitored items of `nodes` (index, id, tags) in one call:
+/// each one's result, in order.
+///
+/// # Errors
+/// The call failed.
+pub(super) async fn create(
+    session: &Session,
+    sub: u32,
+    config: &OpcUaConfig,
+    uses: &Uses,
+    nodes: &[(usize, NodeId, &[u32])],
+) -> Result<Vec<MonitoredItemCreateResult>, opcua::types::Error> {
+    let requests = nodes
+        .iter()
+        .map(|(i, n, tags)| item_request(config, uses, *i, n.clone(), tags))
+        .collect();
+    // The service itself, not `Session::create_monitored_items`: that
+    // also keeps every item in the library's subscription state (about
+    // 370 bytes an item, 37 MB for 100,000 tags), which this source
+    // never reads — notifications find their tags by client handle, and
+    // the source recreates the subscription itself after a reconnect.
+    // Source timestamps only: the checks judge time by the PLC's
+    // clock, and a server timestamp per change would cost its decoding
+    // (about a fifth of the agent's time at 500,000 changes/s). A
+    // value without one is stamped when it arrives.
+    let created = CreateMonitoredItems::new(sub, session)
+        .items_to_create(requests)
+        .timestamps_to_return(TimestampsToReturn::Source)
+        .send(session.channel())
+        .await?;
+    Ok(created.results.into_iter().map(|r| r.result).collect())
+}
+
+/// Every tag of `tags` bad, now.
+pub(super) fn bad(tags: &[usize]) -> SourceEvent {
+    let now = crate::clock::now_ms();
+    SourceEvent::Readings(
+        tags.iter()
+            .map(|&tag| TagReading {
+                tag,
+                reading: Reading::Bad,
+                source_time: now,
+            })
+            .collect::<Vec<_>>()
+            .into(),
+    )
+}
+/// Records what the server made of `nodes`' items: the ids of those
+/// created; those refused because the node is not there are created again
+/// later. The tags of the refused ones.
+pub(super) fn taken(
+    items: &Mutex<Items>,
+    results: &[MonitoredItemCreateResult],
+    nodes: &[(usize, NodeId, &[u32])],
+) -> Vec<usize> {
+    let mut refused = Vec::new();
+    let mut items = items.lock().unwrap_or_else(|e| e.into_inner());
+    let now = Instant::now();
+    for (r, (i, node, tags)) in results.iter().zip(nodes) {
+        let status = r.status_code;
+        if status.is_good() {
+            items.created(*i, r.monitored_item_id);
+            continue;
+        }
+        if super::items::is_gone(status) {
+            tracing::warn!(node = %node, %status, "monitored item refused: created again once the node exists");
+            items.fail(*i, status, now);
+        } else {
+            tracing::error!(node = %node, %status, "monitored item refused");
+        }
+        refused.extend(tags.iter().map(|&t| t as usize));
+    }
+    refused
 }
 
 /// Publishing intervals without a publish request before the server drops
@@ -481,6 +551,16 @@ impl Uses {
             uses.of.push(k);
         }
         uses
+    }
+
+    /// The slowest sampling of any tag (`default` where a tag has none of
+    /// its own).
+    pub(super) fn slowest(&self, default: Duration) -> Duration {
+        self.kinds
+            .iter()
+            .map(|k| k.sampling.unwrap_or(default))
+            .max()
+            .unwrap_or(default)
     }
 
     /// Kind `k` of reading a tag.
