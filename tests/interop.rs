@@ -16,7 +16,7 @@ use cellwatch_models::engine::Reading;
 use cellwatch_models::signal::Signal;
 
 use crate::liveness::Running;
-use crate::opcua::{all, next, opcua_config};
+use crate::opcua::{all, has, next, opcua_config};
 use crate::util::root;
 
 const URI: &str = "urn:cellwatch:test:node-opcua:plc";
@@ -380,6 +380,98 @@ async fn node_opcua_pulse_during_a_network_cut_arrives_through_the_taken_over_su
     // one) is a duplicate the engine ignores.
     t3.dedup();
     assert_eq!(t3, [Reading::Good(false), Reading::Good(true)]);
+    source.stop().await;
+    tokio::task::spawn_blocking(move || server.stop())
+        .await
+        .unwrap();
+}
+
+/// A node node-opcua deletes (its items get `BadNodeIdInvalid` and stop)
+/// and adds back: the tag is bad in between, and the item is created again
+/// in the same session and subscription once the node exists.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn node_opcua_node_deleted_and_added_back_is_monitored_again_without_a_reconnect() {
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
+        .with_test_writer()
+        .try_init();
+    let dir = tempfile::tempdir().unwrap();
+    let server_pki = dir.path().join("server-pki");
+    let port = crate::util::restartable_port();
+    trusted_by_server(&dir.path().join("agent-pki"), &server_pki);
+    let mut server = tokio::task::spawn_blocking({
+        let server_pki = server_pki.clone();
+        move || NodeServer::start(port, &server_pki, 10)
+    })
+    .await
+    .unwrap();
+    let mut config = opcua_config(
+        &format!("opc.tcp://127.0.0.1:{port}/"),
+        &dir.path().join("agent-pki"),
+    );
+    config.publishing_interval = Duration::from_millis(100);
+    pki::trust(&server.cert, &config.pki_dir).unwrap();
+    let mut source = Running::start(config, (0..10).map(tag).collect());
+    all(
+        &mut source.rx,
+        "connected, and T3's value",
+        &[&|e| matches!(e, SourceEvent::Connected(_)), &|e| {
+            has(e, 3, Reading::Good(true))
+        }],
+    )
+    .await;
+    let mut seen = Vec::new();
+    async fn until(
+        source: &mut Running,
+        seen: &mut Vec<SourceEvent>,
+        what: &str,
+        f: impl Fn(&SourceEvent) -> bool,
+    ) {
+        loop {
+            let ev = next(&mut source.rx, what, |_| true).await;
+            let done = f(&ev);
+            seen.push(ev);
+            if done {
+                return;
+            }
+        }
+    }
+    server = tokio::task::spawn_blocking(move || {
+        server.send("delete T3");
+        server
+    })
+    .await
+    .unwrap();
+    until(&mut source, &mut seen, "T3 bad", |e| {
+        has(e, 3, Reading::Bad)
+    })
+    .await;
+    server = tokio::task::spawn_blocking(move || {
+        server.send("add T3 0");
+        server
+    })
+    .await
+    .unwrap();
+    until(&mut source, &mut seen, "T3 = 0 from a new item", |e| {
+        has(e, 3, Reading::Good(false))
+    })
+    .await;
+    server = tokio::task::spawn_blocking(move || {
+        server.send("set T3 1");
+        server
+    })
+    .await
+    .unwrap();
+    until(&mut source, &mut seen, "T3 = 1", |e| {
+        has(e, 3, Reading::Good(true))
+    })
+    .await;
+    assert!(
+        !seen
+            .iter()
+            .any(|e| matches!(e, SourceEvent::Disconnected(_) | SourceEvent::Connected(_))),
+        "{seen:?}"
+    );
     source.stop().await;
     tokio::task::spawn_blocking(move || server.stop())
         .await

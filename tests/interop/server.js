@@ -94,14 +94,16 @@ async function main() {
   const ns = server.engine.addressSpace.registerNamespace(uri);
   const folder = ns.addFolder(server.engine.addressSpace.rootFolder.objects, { browseName: "Plc" });
   const tags = new Map();
-  for (let i = 0; i < Number(n); i++) {
-    const name = `T${i}`;
+  const add = (name, value) => {
     const v = ns.addVariable({
       componentOf: folder, browseName: name, nodeId: `s=${name}`, dataType: "Boolean",
       minimumSamplingInterval: 0,
     });
-    v.setValueFromSource(new Variant({ dataType: DataType.Boolean, value: true }));
+    v.setValueFromSource(new Variant({ dataType: DataType.Boolean, value }));
     tags.set(name, v);
+  };
+  for (let i = 0; i < Number(n); i++) {
+    add(`T${i}`, true);
   }
   // Say when a subscription outlives its lifetime without publish
   // requests (a client cut off): the server drops it.
@@ -126,6 +128,13 @@ async function main() {
       for (let i = 0; i < Number(arg); i++) {
         v.setValueFromSource(new Variant({ dataType: DataType.Boolean, value: i % 2 === 1 }));
       }
+    } else if (cmd === "delete" && v) {
+      // As a changed configuration does: node-opcua tells the node's
+      // monitored items (BadNodeIdInvalid) and stops them.
+      server.engine.addressSpace.deleteNode(v);
+      tags.delete(name);
+    } else if (cmd === "add" && !v) {
+      add(name, arg === "1");
     } else if (cmd === "quit") {
       break;
     }
