@@ -108,6 +108,7 @@ async fn start_cell(setup: &Setup, id: String, zenoh: &str) -> anyhow::Result<Ce
             peer::Subscription {
                 publishing: Duration::from_millis(100),
                 max_notifications: None,
+                verify_interval: None,
             },
             zenoh,
             metrics_port,

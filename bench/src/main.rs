@@ -49,6 +49,10 @@ enum Cmd {
         /// no section); repeat for several rows.
         #[arg(long = "alertmanager", value_enum, default_values_t = [alertmanager::Alertmanager::Off])]
         alertmanagers: Vec<alertmanager::Alertmanager>,
+        /// The agent's `opcua.verify_interval` (every monitored item read
+        /// back that often); repeat for several rows. Default: the agent's.
+        #[arg(long = "verify-interval", value_parser = humantime::parse_duration)]
+        verify_intervals: Vec<Duration>,
         /// How long each load runs.
         #[arg(long, default_value = "20s", value_parser = humantime::parse_duration)]
         duration: Duration,
@@ -202,6 +206,7 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
             loads,
             security,
             alertmanagers,
+            verify_intervals,
             duration: seconds,
             publishing,
             max_notifications,
@@ -232,11 +237,18 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
             for &load in &loads {
                 for &s in &security {
                     for &am in &alertmanagers {
-                        eprintln!(
-                            "cellwatch-bench: agent, {} tags, {}/s, {s:?}, Alertmanager {am:?}",
-                            load.tags, load.rate
-                        );
-                        rows.push(peer::agent(&setup, load, s, am).await?);
+                        let verify: Vec<Option<Duration>> = if verify_intervals.is_empty() {
+                            vec![None]
+                        } else {
+                            verify_intervals.iter().copied().map(Some).collect()
+                        };
+                        for v in verify {
+                            eprintln!(
+                                "cellwatch-bench: agent, {} tags, {}/s, {s:?}, Alertmanager {am:?}, verify {v:?}",
+                                load.tags, load.rate
+                            );
+                            rows.push(peer::agent(&setup, load, s, am, v).await?);
+                        }
                     }
                 }
                 if let Some(python) = &setup.python {

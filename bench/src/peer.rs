@@ -242,6 +242,8 @@ pub struct Subscription {
     pub publishing: Duration,
     /// `opcua.max_notifications_per_publish`; `None`: the agent's default.
     pub max_notifications: Option<u32>,
+    /// `opcua.verify_interval`; `None`: the agent's default.
+    pub verify_interval: Option<Duration>,
 }
 
 /// The agent's configuration against `endpoint`; its tags are in
@@ -264,7 +266,7 @@ pub fn agent_config(
          [cell]\nid = \"{cell}\"\n\n\
          [opcua]\nendpoint = \"{endpoint}\"\nsecurity_policy = \"{policy}\"\n\
          security_mode = \"{mode}\"\npki_dir = \"pki\"\n\
-         publishing_interval = \"{}ms\"\nsampling_interval = \"0\"\n{}\
+         publishing_interval = \"{}ms\"\nsampling_interval = \"0\"\n{}{}\
          namespace_uri = \"{}\"\n\n\
          [[checks.switching]]\nid = \"fault\"\nprogram = \"fault.il\"\ndialect = \"iec\"\n\
          coil = \"FAULT\"\nfault_when = \"on\"\nseverity = \"high\"\n\n\
@@ -275,6 +277,10 @@ pub fn agent_config(
         subscription
             .max_notifications
             .map(|n| format!("max_notifications_per_publish = {n}\n"))
+            .unwrap_or_default(),
+        subscription
+            .verify_interval
+            .map(|d| format!("verify_interval = \"{}ms\"\n", d.as_millis()))
             .unwrap_or_default(),
         load::NAMESPACE
     )
@@ -314,10 +320,15 @@ pub async fn agent(
     load: Load,
     security: Security,
     alertmanager: Alertmanager,
+    verify_interval: Option<Duration>,
 ) -> anyhow::Result<Row> {
     let dir = setup.workdir.join(format!(
-        "agent-{}-{}-{:?}-{:?}",
-        load.tags, load.rate, security, alertmanager
+        "agent-{}-{}-{:?}-{:?}-{}",
+        load.tags,
+        load.rate,
+        security,
+        alertmanager,
+        verify_interval.map_or(0, |d| d.as_millis())
     ));
     let server = fresh_server(&dir, load, setup.server_nice).await?;
     let (zenoh_port, metrics_port) = (free_port()?, free_port()?);
@@ -332,6 +343,7 @@ pub async fn agent(
             Subscription {
                 publishing: setup.publishing,
                 max_notifications: setup.max_notifications,
+                verify_interval,
             },
             &format!("mode = \"peer\"\nlisten = [\"tcp/127.0.0.1:{zenoh_port}\"]"),
             metrics_port,
@@ -381,14 +393,28 @@ pub async fn agent(
             .and_then(|a| a.get("bench").cloned())
             .unwrap_or_default();
         let latencies = match_faults(&faults, &seen);
+        // Gaps said by the source: under a load without one, a deaf item
+        // found by the verification would be a false one.
+        let gaps = after.value("cellwatch_source_gaps_total")
+            - before.value("cellwatch_source_gaps_total");
+        if gaps > 0.0 {
+            eprintln!("cellwatch-bench: the agent said {gaps} gap(s) in the source");
+        }
+        let verify = verify_interval
+            .map(|d| format!(", verify every {}", humantime::format_duration(d)))
+            .unwrap_or_default();
         Ok(Row {
             subject: match setup.agent_priority {
                 Some(p) => format!(
-                    "cellwatch ({}, SCHED_FIFO {p}{})",
+                    "cellwatch ({}, SCHED_FIFO {p}{}{verify})",
                     security.label(),
                     alertmanager.label()
                 ),
-                None => format!("cellwatch ({}{})", security.label(), alertmanager.label()),
+                None => format!(
+                    "cellwatch ({}{}{verify})",
+                    security.label(),
+                    alertmanager.label()
+                ),
             },
             load,
             produced,
@@ -945,6 +971,7 @@ mod tests {
             Subscription {
                 publishing: Duration::from_millis(100),
                 max_notifications: Some(1000),
+                verify_interval: None,
             },
             "mode = \"peer\"",
             9000,
