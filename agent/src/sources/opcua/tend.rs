@@ -20,7 +20,7 @@ use std::time::{Duration, Instant};
 
 use opcua::client::Session;
 use opcua::client::{services::DeleteMonitoredItems, UARequest};
-use opcua::types::{ReadValueId, TimestampsToReturn};
+use opcua::types::{ReadValueId, StatusCode, TimestampsToReturn};
 
 use super::delivery::Shared;
 use super::items::{is_gone, print};
@@ -56,6 +56,11 @@ pub(super) struct Tending {
     suspects: Vec<(usize, u32)>,
     /// When the suspects are judged.
     judge_at: Option<Instant>,
+    /// Nodes read per call: [`READ_CHUNK`], halved while the server says
+    /// it is too many.
+    chunk: usize,
+    /// A failed read was said (once per subscription; then at debug).
+    said: bool,
 }
 
 impl Tending {
@@ -66,6 +71,8 @@ impl Tending {
             cursor: None,
             suspects: Vec::new(),
             judge_at: None,
+            chunk: READ_CHUNK,
+            said: false,
         }
     }
 
@@ -106,19 +113,30 @@ impl Tending {
     /// Reads up to [`CHUNKS_PER_TURN`] chunks of nodes from `from`; where
     /// the round goes on, if it does.
     async fn verify(&mut self, t: &Tended<'_>, from: usize) -> Option<usize> {
-        let end = (from + READ_CHUNK * CHUNKS_PER_TURN).min(t.nodes.len());
-        for at in (from..end).step_by(READ_CHUNK) {
-            let part: Vec<_> = t.nodes.nodes(at..(at + READ_CHUNK).min(end)).collect();
+        let chunk = self.chunk;
+        let end = (from + chunk * CHUNKS_PER_TURN).min(t.nodes.len());
+        for at in (from..end).step_by(chunk) {
+            let part: Vec<_> = t.nodes.nodes(at..(at + chunk).min(end)).collect();
             let ids: Vec<ReadValueId> = part
                 .iter()
                 .map(|(_, n, _)| ReadValueId::from(n.clone()))
                 .collect();
             let values = match t.session.read(&ids, TimestampsToReturn::Neither, 0.0).await {
                 Ok(values) => values,
+                Err(e) if e.status() == StatusCode::BadTooManyOperations && chunk > 1 => {
+                    // The server's `MaxNodesPerRead` is lower: on from here
+                    // with half.
+                    self.chunk = chunk / 2;
+                    return Some(at);
+                }
                 Err(e) => {
                     // The session's keep-alive judges the connection; the
                     // next round tries again.
-                    tracing::debug!(error = %e, "cannot verify the monitored items");
+                    if std::mem::replace(&mut self.said, true) {
+                        tracing::debug!(error = %e, "cannot verify the monitored items");
+                    } else {
+                        tracing::warn!(error = %e, "cannot read the monitored nodes back to verify their items: a node the server deletes and adds again without a word is not found until it can");
+                    }
                     return None;
                 }
             };
