@@ -2,8 +2,9 @@
 //! data block, a server whose configuration changed), with the session and
 //! subscription kept: a server that says so (`BadNodeIdUnknown`), and one
 //! that says nothing, whose old monitored items never hear of the node
-//! again. The item is created again without a reconnect, the tag bad in
-//! between; a silent server is caught by the periodic verification.
+//! again, and one that says it has no data and then nothing. The item is
+//! created again without a reconnect, the tag bad in between; a silent
+//! server is caught by the periodic verification.
 
 use std::time::Duration;
 
@@ -145,6 +146,25 @@ async fn a_node_gone_in_silence_makes_its_tag_bad_until_it_is_back() {
     sim.restore("X0.04").unwrap();
     seen.extend(
         until(&mut source, "X0.04 = 0 once back", |e| {
+            has(e, 1, Reading::Good(false))
+        })
+        .await,
+    );
+    assert!(!reconnected(&seen), "{seen:?}");
+    source.stop().await;
+    sim.stop();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_item_that_says_no_data_and_then_nothing_is_created_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let (sim, mut source) = watching(dir.path()).await;
+    // `GoodNoData`, and the item says nothing more, whatever the node does.
+    sim.no_data("X0.04");
+    let mut seen = until(&mut source, "X0.04 bad", |e| has(e, 1, Reading::Bad)).await;
+    sim.set("X0.04", false).unwrap();
+    seen.extend(
+        until(&mut source, "X0.04 = 0 from a new item", |e| {
             has(e, 1, Reading::Good(false))
         })
         .await,

@@ -269,6 +269,12 @@ impl SimulatedCnc {
         self.server.delete(address)
     }
 
+    /// Tells a variable's monitored items it has no data, then nothing
+    /// more (see [`SimServer::no_data`]).
+    pub fn no_data(&self, address: &str) {
+        self.server.no_data(address);
+    }
+
     /// Deletes a variable and tells its monitored items nothing (see
     /// [`SimServer::delete_quietly`]).
     ///

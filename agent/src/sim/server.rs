@@ -375,6 +375,21 @@ impl SimServer {
         Ok(())
     }
 
+    /// Tells a variable's monitored items it has no data (`GoodNoData`, no
+    /// value) and then nothing more, as a server whose device had nothing
+    /// to give at the time: those items never hear of the node again;
+    /// items created after do, and read what it holds.
+    pub fn no_data(&self, name: &str) {
+        let node = NodeId::new(self.ns, name);
+        let items = self.items_on(&node);
+        let mut none = DataValue::null();
+        none.status = Some(StatusCode::GoodNoData);
+        none.source_timestamp = Some(DateTime::now());
+        self.subscriptions
+            .notify_data_change([(none, &node, AttributeId::Value)].into_iter());
+        let _ = self.deafen(node, items);
+    }
+
     /// Deletes a variable and says nothing to its monitored items, which
     /// stay on the server and never hear of the node again, even once it
     /// is added back ([`SimServer::restore`]) — as servers do that lose
