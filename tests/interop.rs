@@ -16,6 +16,7 @@ use cellwatch_models::engine::Reading;
 use cellwatch_models::signal::Signal;
 
 use crate::liveness::Running;
+use crate::network_cut::until;
 use crate::opcua::{all, has, next, opcua_config};
 use crate::util::root;
 
@@ -227,12 +228,7 @@ async fn node_opcua_server_five_thousand_items_bursts_and_a_restart() {
         matches!(e, SourceEvent::Connected(_))
     })
     .await;
-    server = tokio::task::spawn_blocking(move || {
-        server.send("set T42 0");
-        server
-    })
-    .await
-    .unwrap();
+    server = sent(server, "set T42 0").await;
     next(&mut source.rx, "T42 = 0 after the restart", |e| {
         matches!(e, SourceEvent::Readings(rs) if rs.iter().any(|r| r.tag == 42 && r.reading == Reading::Good(false)))
     })
@@ -386,15 +382,22 @@ async fn node_opcua_pulse_during_a_network_cut_arrives_through_the_taken_over_su
         .unwrap();
 }
 
+/// `server` once it has carried `command` out.
+async fn sent(mut server: NodeServer, command: &'static str) -> NodeServer {
+    tokio::task::spawn_blocking(move || {
+        server.send(command);
+        server
+    })
+    .await
+    .unwrap()
+}
+
 /// A node node-opcua deletes (its items get `BadNodeIdInvalid` and stop)
 /// and adds back: the tag is bad in between, and the item is created again
 /// in the same session and subscription once the node exists.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn node_opcua_node_deleted_and_added_back_is_monitored_again_without_a_reconnect() {
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
-        .with_test_writer()
-        .try_init();
+    crate::network_cut::logs();
     let dir = tempfile::tempdir().unwrap();
     let server_pki = dir.path().join("server-pki");
     let port = crate::util::restartable_port();
@@ -420,52 +423,17 @@ async fn node_opcua_node_deleted_and_added_back_is_monitored_again_without_a_rec
         }],
     )
     .await;
-    let mut seen = Vec::new();
-    async fn until(
-        source: &mut Running,
-        seen: &mut Vec<SourceEvent>,
-        what: &str,
-        f: impl Fn(&SourceEvent) -> bool,
-    ) {
-        loop {
-            let ev = next(&mut source.rx, what, |_| true).await;
-            let done = f(&ev);
-            seen.push(ev);
-            if done {
-                return;
-            }
-        }
-    }
-    server = tokio::task::spawn_blocking(move || {
-        server.send("delete T3");
-        server
-    })
-    .await
-    .unwrap();
-    until(&mut source, &mut seen, "T3 bad", |e| {
-        has(e, 3, Reading::Bad)
-    })
-    .await;
-    server = tokio::task::spawn_blocking(move || {
-        server.send("add T3 0");
-        server
-    })
-    .await
-    .unwrap();
-    until(&mut source, &mut seen, "T3 = 0 from a new item", |e| {
-        has(e, 3, Reading::Good(false))
-    })
-    .await;
-    server = tokio::task::spawn_blocking(move || {
-        server.send("set T3 1");
-        server
-    })
-    .await
-    .unwrap();
-    until(&mut source, &mut seen, "T3 = 1", |e| {
-        has(e, 3, Reading::Good(true))
-    })
-    .await;
+    server = sent(server, "delete T3").await;
+    let mut seen = until(&mut source, "T3 bad", |e| has(e, 3, Reading::Bad)).await;
+    server = sent(server, "add T3 0").await;
+    seen.extend(
+        until(&mut source, "T3 = 0 from a new item", |e| {
+            has(e, 3, Reading::Good(false))
+        })
+        .await,
+    );
+    server = sent(server, "set T3 1").await;
+    seen.extend(until(&mut source, "T3 = 1", |e| has(e, 3, Reading::Good(true))).await);
     assert!(
         !seen
             .iter()

@@ -44,7 +44,7 @@ async fn cut_off(
     (source, cut)
 }
 
-fn logs() {
+pub(crate) fn logs() {
     let _ = tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
         .with_test_writer()
@@ -52,7 +52,7 @@ fn logs() {
 }
 
 /// Every event until `until` matches one, then that one.
-async fn until(
+pub(crate) async fn until(
     source: &mut Running,
     what: &str,
     until: impl Fn(&SourceEvent) -> bool,

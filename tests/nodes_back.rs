@@ -15,7 +15,8 @@ use cellwatch_models::engine::Reading;
 use cellwatch_models::signal::Signal;
 
 use crate::liveness::{trusted_cnc, Running};
-use crate::opcua::{all, has, next};
+use crate::network_cut::until;
+use crate::opcua::{all, has};
 
 fn tag(address: &str) -> TagConfig {
     TagConfig::boolean(
@@ -25,30 +26,10 @@ fn tag(address: &str) -> TagConfig {
     )
 }
 
-/// Every event until one matches `until`, that one included.
-async fn until(
-    source: &mut Running,
-    what: &str,
-    until: impl Fn(&SourceEvent) -> bool,
-) -> Vec<SourceEvent> {
-    let mut seen = Vec::new();
-    loop {
-        let ev = next(&mut source.rx, what, |_| true).await;
-        let last = until(&ev);
-        seen.push(ev);
-        if last {
-            return seen;
-        }
-    }
-}
-
 /// The source reading X0.06 (tag 0) and X0.04 (tag 1) of a simulated CNC,
 /// verifying its items every second, connected.
 async fn watching(dir: &std::path::Path) -> (cellwatch::sim::cnc::SimulatedCnc, Running) {
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
-        .with_test_writer()
-        .try_init();
+    crate::network_cut::logs();
     let (sim, mut config, _) = trusted_cnc(dir).await;
     config.verify_interval = Duration::from_secs(1);
     let mut source = Running::start(config, vec![tag("X0.06"), tag("X0.04")]);

@@ -332,17 +332,7 @@ impl SimServer {
     /// # Errors
     /// No such variable.
     pub fn delete(&self, name: &str) -> Result<(), String> {
-        let node = NodeId::new(self.ns, name);
-        let items = self.items_on(&node);
-        self.manager
-            .address_space()
-            .write()
-            .delete(&node, true)
-            .ok_or_else(|| format!("no variable {name}"))?;
-        self.deleted
-            .lock()
-            .map_err(|_| "simulator state poisoned")?
-            .insert(name.to_string());
+        let (node, items) = self.remove(name)?;
         let mut gone = DataValue::null();
         gone.status = Some(StatusCode::BadNodeIdUnknown);
         gone.server_timestamp = Some(DateTime::now());
@@ -398,6 +388,13 @@ impl SimServer {
     /// # Errors
     /// No such variable.
     pub fn delete_quietly(&self, name: &str) -> Result<(), String> {
+        let (node, items) = self.remove(name)?;
+        self.deafen(node, items)
+    }
+
+    /// Takes a variable out of the address space; no longer written. Its
+    /// node, and the monitored items on it.
+    fn remove(&self, name: &str) -> Result<(NodeId, Items), String> {
         let node = NodeId::new(self.ns, name);
         let items = self.items_on(&node);
         self.manager
@@ -409,7 +406,7 @@ impl SimServer {
             .lock()
             .map_err(|_| "simulator state poisoned")?
             .insert(name.to_string());
-        self.deafen(node, items)
+        Ok((node, items))
     }
 
     /// Deletes a variable and adds it back holding `value` in one step (no
