@@ -10,8 +10,8 @@
 //! - Every publish becomes one [`SourceEvent::Readings`], in source-time
 //!   order (`subscription`); each value is read as its tag is configured
 //!   (a Boolean, a bit of an integer word, a number, a string); a bad or
-//!   uncertain status is [`Reading::Bad`],
-//!   a value of another type [`Reading::WrongType`].
+//!   uncertain status is [`Reading::Bad`](cellwatch_models::engine::Reading::Bad),
+//!   a value of another type [`Reading::WrongType`](cellwatch_models::engine::Reading::WrongType).
 //! - The channel to the cell loop is bounded: when the loop falls behind,
 //!   the session's event loop waits, and the server's queues hold the
 //!   changes.
@@ -59,7 +59,6 @@ use switches::{pulse, reset_switches, Writes};
 
 pub use subscription::{reading, OVERFLOW_ALARM};
 
-use cellwatch_models::engine::{Reading, TagReading};
 use futures_util::future::BoxFuture;
 use futures_util::{FutureExt, StreamExt};
 use opcua::client::{Session, SessionConnectMode, SessionPollResult};
@@ -731,21 +730,7 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
         .await;
     unread.extend(missing.into_values().flatten());
     if !unread.is_empty() {
-        let now = crate::clock::now_ms();
-        let _ = ctx
-            .tx
-            .send(SourceEvent::Readings(
-                unread
-                    .into_iter()
-                    .map(|tag| TagReading {
-                        tag,
-                        reading: Reading::Bad,
-                        source_time: now,
-                    })
-                    .collect::<Vec<_>>()
-                    .into(),
-            ))
-            .await;
+        let _ = ctx.tx.send(subscription::bad(&unread)).await;
     }
     // Silence is counted from the subscription's start.
     let heard = Arc::new(subscription::Heard::new());

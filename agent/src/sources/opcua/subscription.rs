@@ -677,5 +677,6 @@ pub(super) async fn read_current(
     }
 }
 
-/// Nodes read per call when catching up after a reactivation.
-const READ_CHUNK: usize = 1000;
+/// Nodes read per call when catching up after a reactivation, or when
+/// verifying the items.
+pub(super) const READ_CHUNK: usize = 1000;

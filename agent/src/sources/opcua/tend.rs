@@ -24,12 +24,10 @@ use opcua::types::{ReadValueId, StatusCode, TimestampsToReturn};
 
 use super::delivery::Shared;
 use super::items::{is_gone, print};
-use super::subscription::{bad, create, Heard, Monitored, Uses, MAX_ITEMS_PER_CALL};
+use super::subscription::{bad, create, Heard, Monitored, Uses, MAX_ITEMS_PER_CALL, READ_CHUNK};
 use crate::config::{Deadband, OpcUaConfig};
 use crate::sources::{SourceEvent, SourceSender};
 
-/// Nodes read per call when verifying.
-const READ_CHUNK: usize = 1000;
 /// Chunks read per turn of the supervisor: it fills gaps in between.
 const CHUNKS_PER_TURN: usize = 10;
 
