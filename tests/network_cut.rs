@@ -313,3 +313,81 @@ async fn a_fault_judged_across_a_gap_says_its_trigger_is_uncertain_and_the_gap_i
     fx.stop().await;
     fx.sim.stop();
 }
+
+/// Scrapes until the agent says its OPC UA session is up again.
+async fn reconnected(fx: &crate::agent::Fixture) {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    loop {
+        let metrics = fx.scrape().await;
+        if metric(&metrics, "cellwatch_opcua_connected") == 1.0 {
+            return;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "not reconnected: {metrics}"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_link_that_comes_and_goes_is_one_communication_alarm_its_losses_counted() {
+    logs();
+    // The default off-delay: the alarm clears once the link has stayed up
+    // for 10 s.
+    let (mut fx, cut, sub) = cell_behind_a_cut(None).await;
+    let mut seen = Vec::new();
+    cut.set(true);
+    crate::agent::alarm_until(&sub, "communication lost", &mut seen, |a| {
+        a.id == "communication" && a.transition.as_str() == "raised"
+    })
+    .await;
+    cut.set(false);
+    reconnected(&fx).await;
+    // Lost again within 10 s of coming back: the same occurrence.
+    cut.set(true);
+    let again = crate::agent::alarm_until(&sub, "the second loss", &mut seen, |a| {
+        a.id == "communication" && a.transition.as_str() != "raised"
+    })
+    .await;
+    assert_eq!(
+        (again.transition.as_str(), again.message.as_str()),
+        (
+            "updated",
+            "communication lost: every tag is unknown (2 losses since it was raised)"
+        ),
+        "{seen:#?}"
+    );
+    cut.set(false);
+    let cleared = crate::agent::alarm_until(&sub, "communication cleared", &mut seen, |a| {
+        a.id == "communication" && a.transition.as_str() != "updated"
+    })
+    .await;
+    assert_eq!(
+        (cleared.transition.as_str(), cleared.message.as_str()),
+        (
+            "cleared",
+            "communication restored (2 losses since it was raised)"
+        ),
+        "{seen:#?}"
+    );
+    // Nothing but the one occurrence: no raise per loss, no process alarm.
+    let raised: Vec<&str> = seen
+        .iter()
+        .filter(|a| a.transition.as_str() == "raised")
+        .map(|a| a.id.as_str())
+        .collect();
+    assert_eq!(raised, ["communication"], "{seen:#?}");
+    let metrics = fx.scrape().await;
+    assert_eq!(metric(&metrics, "cellwatch_connection_losses_total"), 2.0);
+    let raises: f64 = metrics
+        .lines()
+        .filter(|l| {
+            l.starts_with("cellwatch_alarms_raised_total{") && l.contains("check=\"communication\"")
+        })
+        .filter_map(|l| l.rsplit(' ').next()?.parse::<f64>().ok())
+        .sum();
+    assert_eq!(raises, 1.0, "{metrics}");
+    fx.stop().await;
+    fx.sim.stop();
+}

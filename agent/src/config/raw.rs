@@ -33,6 +33,25 @@ pub(crate) struct RawConfig {
     pub(crate) alertmanager: Option<Spanned<RawAlertmanager>>,
     #[serde(default)]
     pub(crate) kpi: RawKpi,
+    #[serde(default)]
+    pub(crate) alarms: RawSystemAlarms,
+}
+
+/// `[alarms.<id>]`: the delays of the agent's own alarms.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawSystemAlarms {
+    pub(crate) communication: Option<RawDelays>,
+    #[serde(rename = "tag-quality")]
+    pub(crate) tag_quality: Option<RawDelays>,
+}
+
+/// An alarm's on-delay and off-delay.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawDelays {
+    pub(crate) on_delay: Option<Spanned<String>>,
+    pub(crate) off_delay: Option<Spanned<String>>,
 }
 
 /// `[kpi]`: the plant's alarm-performance rules.

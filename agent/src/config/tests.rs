@@ -523,3 +523,37 @@ fn journal_tables_keep_their_own_retention_and_rows() {
         errors(&unknown)
     );
 }
+
+#[test]
+fn the_agents_own_alarms_clear_after_an_off_delay_unless_configured() {
+    let c = parse(
+        "cell.toml",
+        &format!(
+            "{GOOD}\n[alarms.communication]\non_delay = \"2s\"\noff_delay = \"0\"\n\n[alarms.tag-quality]\noff_delay = \"30s\"\n"
+        ),
+        Path::new("base"),
+        &mem(),
+    )
+    .unwrap();
+    assert_eq!(
+        c.delays,
+        [
+            ("communication".to_string(), 2_000, 0),
+            ("tag-quality".to_string(), 0, 30_000)
+        ]
+    );
+    assert_eq!(
+        errors(&format!(
+            "{GOOD}\n[alarms.communication]\noff_delay = \"2h\"\n"
+        )),
+        "cell.toml:29:13: alarms.communication.off_delay: at most 1h"
+    );
+    assert_eq!(
+        errors(&format!("{GOOD}\n[alarms.tag-quality]\non_delay = \"soon\"\n")),
+        "cell.toml:29:12: alarms.tag-quality.on_delay: 'soon' is not a duration (expected number at 0); write e.g. 100ms, 2s, 30d"
+    );
+    assert_eq!(
+        errors(&format!("{GOOD}\n[alarms.ese]\noff_delay = \"1s\"\n")),
+        "cell.toml:28:9: unknown field `ese`, expected `communication` or `tag-quality`"
+    );
+}

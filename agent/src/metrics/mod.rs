@@ -35,6 +35,10 @@ pub struct Metrics {
     pub opcua_connected: IntGauge,
     /// Connections lost and re-established.
     pub opcua_reconnects: IntCounter,
+    /// Connections to the PLC lost (any source).
+    pub connection_losses: IntCounter,
+    /// Tags that went from good to bad or uncertain quality.
+    pub tags_gone_bad: IntCounter,
     /// Tag values received.
     pub tag_updates: IntCounter,
     /// Deliveries ignored as duplicates.
@@ -239,6 +243,16 @@ impl Metrics {
             opcua_reconnects: reg!(IntCounter::with_opts(opts(
                 "cellwatch_opcua_reconnects_total",
                 "OPC UA connections re-established after a loss.",
+                cell
+            ))),
+            connection_losses: reg!(IntCounter::with_opts(opts(
+                "cellwatch_connection_losses_total",
+                "Connections to the PLC lost (OPC UA session or @ unit), each one, also those within one occurrence of the communication alarm.",
+                cell
+            ))),
+            tags_gone_bad: reg!(IntCounter::with_opts(opts(
+                "cellwatch_tags_gone_bad_total",
+                "Tags that went from good to bad or uncertain quality, each time, also those within one occurrence of the tag-quality alarm.",
                 cell
             ))),
             tag_updates: reg!(IntCounter::with_opts(opts(

@@ -132,7 +132,14 @@ impl MetricsSink {
                 self.ever_connected = true;
                 m.opcua_connected.set(1);
             }
-            Input::Connection { up: false, .. } => m.opcua_connected.set(0),
+            Input::Connection { up: false, .. } => {
+                // The first word from a source that never connected is no
+                // loss.
+                if self.ever_connected && m.opcua_connected.get() == 1 {
+                    m.connection_losses.inc();
+                }
+                m.opcua_connected.set(0);
+            }
             // A force or stop is journaled in several rows: counted once.
             Input::Command(c) if c.stage.is_final() => {
                 m.command(c.action, if c.accepted { "accepted" } else { "refused" });
@@ -164,6 +171,7 @@ impl MetricsSink {
         m.out_of_order.inc_by(e.out_of_order);
         m.source_gaps.inc_by(e.gaps);
         m.source_lost_values.inc_by(e.lost_values);
+        m.tags_gone_bad.inc_by(e.went_bad);
         m.check_evaluations.inc_by(e.evaluations);
         if e.unknown_delta != 0 {
             m.tags_unknown.add(e.unknown_delta);

@@ -52,6 +52,13 @@ use crate::signal::Signal;
 use crate::value::{Comparison, Counter, Num, Operand, ValueType};
 use alarms::AlarmBook;
 
+/// How often the `tag-quality` alarm's text is brought up to date while
+/// other tags go bad or good and it stays active, ms.
+const QUALITY_UPDATE_MS: u64 = 10_000;
+
+/// How many bad tags the `tag-quality` alarm names.
+const QUALITY_NAMED: usize = 20;
+
 /// A PLC tag as the engine knows it.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Tag {
@@ -172,6 +179,8 @@ pub struct Step {
     pub gaps: u64,
     /// Values the source knows were lost (dropped from a full queue).
     pub lost_values: u64,
+    /// Tags that went from good to bad or uncertain quality.
+    pub went_bad: u64,
 }
 
 /// What the cell is making: the item (mould, product) code and the target
@@ -441,6 +450,16 @@ pub struct CellEngine {
     source_trust: u64,
     /// Tags of bad quality, and why.
     bad: BTreeMap<usize, BadQuality>,
+    /// Connection losses in the `communication` alarm's occurrence (or
+    /// the last loss, while it is not active).
+    losses: u64,
+    /// Tags that went bad in the `tag-quality` alarm's occurrence.
+    went_bad: u64,
+    /// When the `tag-quality` alarm was last said (clock, ms), and whether
+    /// its tags changed since: its text is brought up to date at most
+    /// every [`QUALITY_UPDATE_MS`].
+    quality_said: u64,
+    quality_unsaid: bool,
     /// How many tags are unknown now.
     unknown: usize,
     sets: Vec<Box<dyn CheckSet>>,
@@ -598,6 +617,10 @@ impl CellEngine {
             at_cut: None,
             source_trust: 0,
             bad: BTreeMap::new(),
+            losses: 0,
+            went_bad: 0,
+            quality_said: 0,
+            quality_unsaid: false,
             unknown: configured,
             sets,
             readers,
@@ -1055,10 +1078,18 @@ impl CellEngine {
         // Up: what the source resumes with, or a new subscription's
         // values, is here.
         self.at_cut = None;
+        // One occurrence while the connection keeps going (the alarm's
+        // off-delay): its losses are counted in its text.
+        let occurring = self.is_active("communication");
         if !up {
             // A condition waiting out its delay is no longer seen to hold.
             self.pending.clear();
+            self.losses = if occurring { self.losses + 1 } else { 1 };
         }
+        let losses = match self.losses {
+            0 | 1 => String::new(),
+            n => format!(" ({n} losses since it was raised)"),
+        };
         let finding = Finding {
             at: None,
             id: "communication".into(),
@@ -1070,9 +1101,9 @@ impl CellEngine {
             fault_step: None,
             culprits: Vec::new(),
             message: if up {
-                "communication restored".into()
+                format!("communication restored{losses}")
             } else {
-                "communication lost: every tag is unknown".into()
+                format!("communication lost: every tag is unknown{losses}")
             },
         };
         if !up {
@@ -1196,7 +1227,17 @@ impl CellEngine {
             _ => None,
         };
         let quality_changed = match why {
-            Some(why) => self.bad.insert(tag, why) != Some(why),
+            Some(why) => {
+                let was = self.bad.insert(tag, why);
+                if was.is_none() {
+                    step.went_bad += 1;
+                    // One occurrence while tags keep going bad (the
+                    // alarm's off-delay): counted in its text.
+                    let occurring = self.bad.len() > 1 || self.is_active("tag-quality");
+                    self.went_bad = if occurring { self.went_bad + 1 } else { 1 };
+                }
+                was != Some(why)
+            }
             None => self.bad.remove(&tag).is_some(),
         };
         findings.clear();
@@ -1236,7 +1277,22 @@ impl CellEngine {
         };
         self.untimed = false;
         if quality_changed {
-            findings.push(self.quality_finding());
+            // Raised, cleared (or its clear called off) at once; a text
+            // that only names other tags at most every QUALITY_UPDATE_MS.
+            let (active, bad) = (self.is_active("tag-quality"), !self.bad.is_empty());
+            if active && bad && self.pending.remove("tag-quality").is_some() {
+                // Bad again before its clear was announced: the same
+                // occurrence goes on.
+                self.quality_unsaid = true;
+            } else if bad != active || now >= self.quality_said.saturating_add(QUALITY_UPDATE_MS) {
+                findings.push(self.quality_finding());
+                if bad {
+                    self.quality_said = now;
+                }
+                self.quality_unsaid = false;
+            } else {
+                self.quality_unsaid = true;
+            }
         }
         for f in findings.drain(..) {
             self.apply_at(f, at, now, step);
@@ -1286,7 +1342,13 @@ impl CellEngine {
             let (on, off) = self.delays.get(id).copied().unwrap_or_default();
             since.saturating_add(if f.active { on } else { off })
         });
-        sets.chain(delayed).chain(self.alarms.next_expiry()).min()
+        let quality = self
+            .quality_unsaid
+            .then(|| self.quality_said.saturating_add(QUALITY_UPDATE_MS));
+        sets.chain(delayed)
+            .chain(quality)
+            .chain(self.alarms.next_expiry())
+            .min()
     }
 
     /// Time passed: timers fire.
@@ -1301,6 +1363,15 @@ impl CellEngine {
         }
         // Delayed findings whose condition lasted.
         self.run_out(now, false, now, &mut step);
+        // The bad tags' text, held back while they kept changing.
+        if self.quality_unsaid && now >= self.quality_said.saturating_add(QUALITY_UPDATE_MS) {
+            self.quality_unsaid = false;
+            self.quality_said = now;
+            if self.is_active("tag-quality") && !self.bad.is_empty() {
+                let f = self.quality_finding();
+                self.apply(f, now, &mut step);
+            }
+        }
         // Shelves that expired: the alarms are announced again as they are.
         for alarm in self.alarms.expire(now) {
             step.events.push(EngineEvent::Alarm {
@@ -1655,10 +1726,17 @@ impl CellEngine {
         ))
     }
 
+    /// Whether alarm `id` is active now (raised, or its clear waiting out
+    /// its off-delay).
+    fn is_active(&self, id: &str) -> bool {
+        self.alarms.get(id).is_some_and(|a| a.active)
+    }
+
     fn quality_finding(&self) -> Finding {
-        let names: Vec<String> = self
+        let mut names: Vec<String> = self
             .bad
             .iter()
+            .take(QUALITY_NAMED)
             .map(|(&t, why)| {
                 let Tag { name, address } = &self.tags[t];
                 let tag = match self.comments.get(address) {
@@ -1675,6 +1753,9 @@ impl CellEngine {
                 }
             })
             .collect();
+        if self.bad.len() > names.len() {
+            names.push(format!("... ({} tags in all)", self.bad.len()));
+        }
         Finding {
             at: None,
             id: "tag-quality".into(),
@@ -1685,13 +1766,17 @@ impl CellEngine {
             active: !self.bad.is_empty(),
             fault_step: None,
             culprits: Vec::new(),
-            message: if names.is_empty() {
-                "all tags good".into()
-            } else {
-                format!(
+            message: match (names.is_empty(), self.went_bad) {
+                (true, 0 | 1) => "all tags good".into(),
+                (true, n) => format!("all tags good ({n} went bad since it was raised)"),
+                (false, 0 | 1) => format!(
                     "bad or uncertain quality, checks reading them suspended: {}",
                     names.join(", ")
-                )
+                ),
+                (false, n) => format!(
+                    "bad or uncertain quality, checks reading them suspended: {} ({n} went bad since it was raised)",
+                    names.join(", ")
+                ),
             },
         }
     }
@@ -2191,6 +2276,145 @@ mod tests {
         );
         let ev = load_normal(&mut e, 8);
         assert!(alarm_transitions(&ev).is_empty(), "{ev:?}");
+    }
+
+    /// The alarm `id`'s transitions and texts in `events`.
+    fn said(events: &[EngineEvent], id: &str) -> Vec<(Transition, String)> {
+        events
+            .iter()
+            .filter_map(|e| match e {
+                EngineEvent::Alarm {
+                    alarm, transition, ..
+                } if alarm.id == id => Some((*transition, alarm.message.clone())),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_flapping_connection_is_one_communication_alarm_its_losses_counted() {
+        let mut e = engine().delaying("communication", 0, 10_000);
+        e.on_connection(true, 1);
+        load_normal(&mut e, 2);
+        let lost = "communication lost: every tag is unknown";
+        assert_eq!(
+            said(&e.on_connection(false, 1_000).events, "communication"),
+            [(Transition::Raised, lost.to_string())]
+        );
+        // Back, and lost again before the off-delay ran out: the same
+        // occurrence, its text counting the losses.
+        assert!(said(&e.on_connection(true, 2_000).events, "communication").is_empty());
+        assert_eq!(e.next_deadline(), Some(12_000));
+        assert_eq!(
+            said(&e.on_connection(false, 3_000).events, "communication"),
+            [(
+                Transition::Updated,
+                format!("{lost} (2 losses since it was raised)")
+            )]
+        );
+        assert!(said(&e.on_connection(true, 4_000).events, "communication").is_empty());
+        load_normal(&mut e, 4_001);
+        assert!(said(&e.advance(13_999).events, "communication").is_empty());
+        assert_eq!(
+            said(&e.advance(14_000).events, "communication"),
+            [(
+                Transition::Cleared,
+                "communication restored (2 losses since it was raised)".to_string()
+            )]
+        );
+        // The next loss is a new occurrence, counted from one.
+        assert_eq!(
+            said(&e.on_connection(false, 20_000).events, "communication"),
+            [(Transition::Raised, lost.to_string())]
+        );
+    }
+
+    #[test]
+    fn a_flapping_sensor_is_one_tag_quality_alarm_its_text_brought_up_to_date_at_most_every_ten_seconds(
+    ) {
+        let mut e = engine().delaying("tag-quality", 0, 10_000);
+        e.on_connection(true, 1);
+        load_normal(&mut e, 2);
+        let x006 = e.tag_index(&Signal::new("X0.06")).unwrap();
+        let x004 = e.tag_index(&Signal::new("X0.04")).unwrap();
+        let step = e.on_reading(x006, Reading::Bad, 1_000, 1_000);
+        assert_eq!(step.went_bad, 1);
+        assert_eq!(
+            said(&step.events, "tag-quality"),
+            [(
+                Transition::Raised,
+                "bad or uncertain quality, checks reading them suspended: X0.06 (x0.06)"
+                    .to_string()
+            )]
+        );
+        // Good, bad, good again every 100 ms: nothing said (the clear
+        // waits out its off-delay; coming back calls it off).
+        for k in 1..=20u64 {
+            let at = 1_000 + k * 100;
+            let r = if k % 2 == 1 {
+                Reading::Good(true)
+            } else {
+                Reading::Bad
+            };
+            let step = e.on_reading(x006, r, at, at);
+            assert!(
+                said(&step.events, "tag-quality").is_empty(),
+                "{k}: {step:?}"
+            );
+        }
+        // Another tag goes bad within 10 s of the last text: held back...
+        let step = e.on_reading(x004, Reading::Bad, 3_100, 3_100);
+        assert!(said(&step.events, "tag-quality").is_empty(), "{step:?}");
+        assert_eq!(e.next_deadline(), Some(11_000));
+        // ... and said when 10 s have passed, with both tags and the count.
+        assert_eq!(
+            said(&e.advance(11_000).events, "tag-quality"),
+            [(
+                Transition::Updated,
+                "bad or uncertain quality, checks reading them suspended: X0.06 (x0.06), X0.04 (x0.04) (12 went bad since it was raised)".to_string()
+            )]
+        );
+        // Both good: cleared once the off-delay has run out.
+        e.on_reading(x004, Reading::Good(true), 12_000, 12_000);
+        let step = e.on_reading(x006, Reading::Good(true), 12_100, 12_100);
+        assert!(said(&step.events, "tag-quality").is_empty());
+        assert!(said(&e.advance(22_099).events, "tag-quality").is_empty());
+        assert_eq!(
+            said(&e.advance(22_100).events, "tag-quality"),
+            [(
+                Transition::Cleared,
+                "all tags good (12 went bad since it was raised)".to_string()
+            )]
+        );
+    }
+
+    #[test]
+    fn the_tag_quality_alarm_names_twenty_bad_tags_and_counts_the_rest() {
+        let tags: Vec<Tag> = (0..30)
+            .map(|i| Tag {
+                name: format!("n{i:02}"),
+                address: Signal::new(&format!("D{i:02}")),
+            })
+            .collect();
+        let mut e = engine_with(&tags, "G0.00 * F0.00");
+        e.on_connection(true, 1);
+        let readings: Vec<TagReading> = (0..30)
+            .map(|i| TagReading {
+                tag: e.tag_index(&Signal::new(&format!("D{i:02}"))).unwrap(),
+                reading: Reading::Bad,
+                source_time: 2,
+            })
+            .collect();
+        let step = e.on_readings(&readings, 2);
+        assert_eq!(step.went_bad, 30);
+        // Raised on the first; the other 29 within 10 s wait.
+        assert_eq!(said(&step.events, "tag-quality").len(), 1);
+        let text = &said(&e.advance(10_002).events, "tag-quality")[0].1;
+        assert!(
+            text.contains("D19 (n19), ... (30 tags in all) (30 went bad since it was raised)"),
+            "{text}"
+        );
+        assert!(!text.contains("D20"), "{text}");
     }
 
     #[test]

@@ -3,6 +3,7 @@
 //! `Validator` walks the file; its methods are split by component over
 //! this folder's files.
 
+mod alarms;
 mod alertmanager;
 mod bus;
 mod checks;
@@ -436,6 +437,7 @@ impl Validator<'_> {
         let zenoh = self.zenoh(raw.zenoh, &cell);
         let alertmanager = self.alertmanager(raw.alertmanager);
         let kpi = self.kpi(raw.kpi);
+        delays.extend(self.system_alarms(raw.alarms));
         let journal = JournalConfig {
             path: self.path(
                 raw.journal
