@@ -235,3 +235,30 @@ fn malformed_rungs_and_names_are_errors_at_the_character() {
         Program::compile("t.L5X", &export("", "", &[]), Some(crate::il::Dialect::Iec)).unwrap_err();
     assert!(e.to_string().contains("leave --dialect out"), "{e}");
 }
+
+#[test]
+fn mutated_exports_never_panic() {
+    // Every prefix of an export, and every byte of it replaced by the
+    // characters the rung and tag readers care about: an answer, never a
+    // panic.
+    let text = export(
+        "<Tag Name=\"S\" TagType=\"Alias\" AliasFor=\"S\"/>\n",
+        "",
+        &[(
+            "Main",
+            "RLL",
+            &["[XIC(a),XIO(b)[,XIC(T1.DN)]]GRT(t,16#1F)LIM(1,x,2)JSR(Main,0)MCR()OTE(S);"],
+        )],
+    );
+    for cut in (0..text.len()).filter(|&c| text.is_char_boundary(c)) {
+        let _ = Program::compile("m.L5X", &text[..cut], None);
+    }
+    for (k, _) in text.char_indices().filter(|(k, _)| k % 3 == 0) {
+        for c in ["[", "]", ",", "(", ")", ";", ".", "'", "#", "<", "é"] {
+            let mut m = text.clone();
+            let end = k + m[k..].chars().next().map_or(0, char::len_utf8);
+            m.replace_range(k..end, c);
+            let _ = Program::compile("m.L5X", &m, None);
+        }
+    }
+}
