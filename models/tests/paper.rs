@@ -416,3 +416,89 @@ fn csd_cycle_start_in_jog_mode_is_step_3() {
         .iter()
         .any(|n| n.starts_with("F17") || n.starts_with("F18")));
 }
+
+const FIG6_L5X: &str = include_str!("../../tests/data/paper000/fig6.L5X");
+
+/// `e` with the Studio 5000 export's tag names renamed to the paper's.
+fn l5x_to_paper(e: &Expr) -> Expr {
+    rename(e, &|s: &Signal| {
+        let paper = match s.name() {
+            "Program:MainProgram.R1" => "R1",
+            "G0_00" => "G0.00",
+            other => other,
+        };
+        Signal::new(paper)
+    })
+}
+
+#[test]
+fn fig6_as_a_studio_5000_export_gives_the_paper_s_functions_step_blocks_and_culprits() {
+    let p = Program::compile("fig6.L5X", FIG6_L5X, None).unwrap();
+    assert!(p.warnings().is_empty(), "{:?}", p.warnings());
+    let names: Vec<&str> = p.coils().iter().map(|c| c.signal.name()).collect();
+    assert_eq!(names, ["Program:MainProgram.R1", "G0_00"]);
+    let g = sf("fig6.L5X", FIG6_L5X, "G0_00");
+    let il = sf("fig6.il", FIG6, "G0.00");
+    assert_eq!(l5x_to_paper(&g.to_expr()), il.to_expr());
+    assert_eq!(g.steps.len(), il.steps.len());
+    for i in 1..=il.steps.len() {
+        assert_eq!(
+            l5x_to_paper(&step_expr(&g, i)),
+            step_expr(&il, i),
+            "Fig. 6 step {i}"
+        );
+    }
+    // The aliases' comments: X1's own description; X2 has none, so the
+    // input card's comment on Local:1:I.Data.2 shows, as in Studio 5000.
+    let docs = p.documentation();
+    assert_eq!(
+        docs.get(&Signal::new("X1")),
+        Some("Cycle start push button")
+    );
+    assert_eq!(docs.get(&Signal::new("X2")), Some("X2: door open"));
+    assert_eq!(docs.get(&Signal::new("Y1")), Some("Y1: spindle alarm lamp"));
+    assert_eq!(
+        docs.get(&Signal::new("Program:MainProgram.R1")),
+        Some("Internal relay R1")
+    );
+
+    // The same fault, the same culprits: X1 drops while X3 is on (not
+    // manual), so SSF1 = 0, SSF2 = 0 and the fault coil falls.
+    let before = [
+        ("X1", true),
+        ("X2", false),
+        ("X3", true),
+        ("X4", true),
+        ("Y1", false),
+        ("Y2", false),
+    ];
+    let culprits_of = |sf: &SwitchingFunction, rename: &dyn Fn(&str) -> String| {
+        let mut b = Values::new();
+        for (s, v) in before {
+            b.set(Signal::new(&rename(s)), v);
+        }
+        let mut now = b.clone();
+        now.set(Signal::new(&rename("X1")), false);
+        let was = |s: &Signal| b.get(s);
+        let e = explain(
+            sf,
+            |s| now.get(s),
+            Some(&was),
+            Polarity::Off,
+            &CommentDb::default(),
+        )
+        .unwrap();
+        (
+            e.fault_step,
+            e.culprits
+                .iter()
+                .map(ToString::to_string)
+                .collect::<Vec<_>>(),
+        )
+    };
+    let from_l5x = culprits_of(&g, &|s| s.to_string());
+    let from_il = culprits_of(&il, &|s| s.to_string());
+    assert_eq!(from_l5x, from_il);
+    assert_eq!(from_l5x.0, Some(1));
+    assert_eq!(from_l5x.1[0], "X1 = 0 (expected 1)");
+}

@@ -482,3 +482,108 @@ fn openplc_ladders_give_what_the_openplc_compiler_gives() {
     );
     assert!(e.culprits[0].trigger && !e.culprits[1].trigger);
 }
+
+// --- Studio 5000 exports (L5X) -------------------------------------------
+
+#[test]
+fn l5x2c_examples() {
+    // A routine export with no main routine: read as if it ran every
+    // scan; five rungs write D, the last one wins. Empty branches `[,]`
+    // are shorts.
+    let p = program("l5x2c-ex1.L5X");
+    pinned(&p, &[("D", "A")]);
+    let warned: Vec<&str> = p.warnings().iter().map(|w| w.message.as_str()).collect();
+    assert_eq!(
+        warned,
+        ["program 'MainProgram' names no main routine (a partial export): each routine is read as if it ran every scan"]
+    );
+    assert_eq!(p.documentation().get(&Signal::new("A")), Some("BOOL 1"));
+
+    // A belt conveyor: timers in branches, failure bits (BIT members of a
+    // SINT) unlatched by OTU, outputs at the ends of nested branches.
+    let p = program("l5x2c-belt_conveyor.L5X");
+    let got = outcome(&p);
+    let names: Vec<&str> = got.iter().map(|(c, _)| c.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "Conveyor_Failures.Contactor_Failure",
+            "Conveyor_Failures.Break_Jammed",
+            "Conveyor_Failures.Overload",
+            "Conveyor_Failures.Emergency_Stop",
+            "Conveyor_Failures.Misalignment",
+            "Failure_Summary",
+            "Ready_to_Start",
+            "Ready_to_Run",
+            "Started",
+            "Horn",
+            "Contactor",
+            "Open_Break",
+        ]
+    );
+    assert_eq!(got[2].1, "Overload * Conveyor_Failures.Overload");
+    assert_eq!(got[6].1, "TRUE");
+    assert!(got.iter().all(|(_, s)| !s.starts_with('!')), "{got:?}");
+    let lines: Vec<usize> = p.warnings().iter().map(|w| w.at.line).collect();
+    assert_eq!(lines, [258, 265, 272, 328, 328]);
+    assert_eq!(
+        p.warnings()[0].message,
+        "'MOV(-1,Conveyor_Failures.Failures)': word instruction, not boolean logic: the boolean result is left as it is"
+    );
+    assert_eq!(
+        p.documentation().get(&Signal::new("Horn")),
+        Some("Motor's Horn Output")
+    );
+
+    // By hand: the overload bit is only ever unlatched, OTU when
+    // ¬Overload: SSF1 = Overload (XIO negated, then the reset's ¬),
+    // SSF2 = SSF1 · Conveyor_Failures.Overload. The overload input drops
+    // (0): the bit falls, step 1, Overload to blame.
+    let before = values(&[("Overload", true), ("Conveyor_Failures.Overload", true)]);
+    let mut now = before.clone();
+    now.set(Signal::new("Overload"), false);
+    let e = explained(
+        &p,
+        "Conveyor_Failures.Overload",
+        &before,
+        &now,
+        Polarity::Off,
+    );
+    assert_eq!(e.fault_step, Some(1));
+    assert_eq!(
+        culprits(&e),
+        ["Overload = 0 (expected 1): Motor's Overload Input"]
+    );
+}
+
+#[test]
+fn l5sharp_exports_say_what_they_do_not_read() {
+    // A program export whose only logic is an Add-On Instruction's.
+    let p = program("l5sharp-TestProgram.L5X");
+    pinned(&p, &[]);
+    let warned: Vec<String> = p
+        .warnings()
+        .iter()
+        .map(|w| format!("{}: {}", w.at, w.message))
+        .collect();
+    assert_eq!(
+        warned,
+        ["134:13: Add-On Instruction 'aoi_Test': its logic is not expanded where it is called"]
+    );
+    // A structured-text routine: named, not read.
+    let p = program("l5sharp-ST.L5X");
+    pinned(&p, &[]);
+    let warned: Vec<String> = p
+        .warnings()
+        .iter()
+        .map(|w| format!("{}: {}", w.at, w.message))
+        .collect();
+    assert_eq!(
+        warned,
+        [
+            "113:1: Add-On Instruction 'aoi_Test': its logic is not expanded where it is called",
+            "452:1: program 'MainProgram' names no main routine (a partial export): each routine is read as if it ran every scan",
+            "454:1: routine ST: ST routine not read (ladder routines are)",
+        ]
+    );
+}

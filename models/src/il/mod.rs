@@ -9,6 +9,7 @@
 //! job of [`crate::program`]; this module only reads text.
 
 pub(crate) mod iec;
+pub(crate) mod l5x;
 pub(crate) mod plcopen;
 mod pmc;
 pub(crate) mod stl;
@@ -33,7 +34,7 @@ impl Dialect {
     pub fn signal(self, text: &str) -> Result<Signal, String> {
         match self {
             Dialect::Pmc => crate::signal::pmc_address(text),
-            Dialect::Iec => iec::operand_signal(text),
+            Dialect::Iec => logix_or(iec::operand_signal(text), text),
             Dialect::Stl => stl::operand_signal(text),
         }
     }
@@ -47,7 +48,7 @@ impl Dialect {
     pub fn tag_signal(self, text: &str) -> Result<Signal, String> {
         match self {
             Dialect::Pmc => crate::signal::pmc_address(text),
-            Dialect::Iec => iec::operand_signal(text),
+            Dialect::Iec => logix_or(iec::operand_signal(text), text),
             Dialect::Stl => stl::tag_signal(text),
         }
     }
@@ -104,6 +105,18 @@ impl Dialect {
     }
 }
 
+/// An IEC name, or else a Logix tag name as an L5X export's programs use
+/// them (`Local:1:I.Data.3`, `Program:Main.Start`, `Arr[2]`).
+fn logix_or(iec: Result<Signal, String>, text: &str) -> Result<Signal, String> {
+    iec.or_else(|e| {
+        if l5x::is_tag_name(text) {
+            Ok(Signal::new(text))
+        } else {
+            Err(e)
+        }
+    })
+}
+
 /// Parses a program in `dialect`, or in the detected dialect when `None`.
 ///
 /// `origin` names the text in messages (usually the file name).
@@ -112,6 +125,34 @@ impl Dialect {
 /// Every line that cannot be read, each as `ORIGIN:LINE:COL: message`; an
 /// empty program; a dialect that cannot be told.
 pub fn parse(origin: &str, source: &str, dialect: Option<Dialect>) -> Result<Parsed, SourceErrors> {
+    if l5x::is_l5x(source) {
+        if dialect.is_some() {
+            return Err(SourceError::new(
+                origin,
+                Location::line_start(1),
+                "this is a Studio 5000 export (L5X), not an instruction list: leave --dialect out, and its ladder routines are read",
+            )
+            .into());
+        }
+        let project = l5x::lex(origin, source)?;
+        if project
+            .instructions
+            .iter()
+            .all(|i| i.operation == Operation::EndBlock)
+        {
+            return Err(SourceError::new(
+                origin,
+                Location::line_start(1),
+                "no routine with any rung in it in this L5X export",
+            )
+            .into());
+        }
+        return Ok(Parsed {
+            dialect: Dialect::Iec,
+            instructions: project.instructions,
+            documentation: project.documentation,
+        });
+    }
     if is_xml(source) {
         if dialect.is_some() {
             return Err(SourceError::new(

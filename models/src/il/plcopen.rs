@@ -37,7 +37,7 @@ const MAX_DEPTH: usize = 512;
 
 /// What flows out of an element.
 #[derive(Debug, Clone, PartialEq)]
-enum Flow {
+pub(crate) enum Flow {
     True,
     False,
     /// A contact: its variable, negated, the element (for identity).
@@ -79,7 +79,7 @@ impl Flow {
         ])
     }
 
-    fn and(parts: Vec<Flow>) -> Flow {
+    pub(crate) fn and(parts: Vec<Flow>) -> Flow {
         let mut out = Vec::new();
         for p in parts {
             out.extend(p.series());
@@ -92,7 +92,7 @@ impl Flow {
     }
 
     /// Parallel branches joining: their common start factored out.
-    fn or(branches: Vec<Flow>) -> Flow {
+    pub(crate) fn or(branches: Vec<Flow>) -> Flow {
         if branches.len() == 1 {
             return branches.into_iter().next().unwrap_or(Flow::True);
         }
@@ -389,7 +389,7 @@ fn variable(node: Node<'_, '_>) -> Option<String> {
 }
 
 /// Emits the instructions that compute `flow`, starting a new result.
-fn emit(flow: &Flow, at: Location, out: &mut Vec<Instruction>) {
+pub(crate) fn emit(flow: &Flow, at: Location, out: &mut Vec<Instruction>) {
     let ins = |operation: Operation, operand: Option<Operand>, text: String| Instruction {
         at,
         text: text.clone(),
