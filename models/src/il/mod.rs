@@ -5,12 +5,16 @@
 //! column it came from. The dialects differ mostly in spelling (`pmc`: the
 //! FANUC PMC mnemonics of paper 000; `iec`: IEC 61131-3 IL; `stl`: Siemens
 //! STL/AWL, German or English), so the lexers produce the same
-//! [`Operation`]s; STL's "first check" is the compiler's business. What the instructions compute is the
+//! [`Operation`]s; STL's "first check" is the compiler's business. The
+//! graphical formats are read into the same instructions: PLCopen XML
+//! (`plcopen`, read as IEC) and TIA Portal SimaticML (`simaticml`, read
+//! as STL). What the instructions compute is the
 //! job of [`crate::program`]; this module only reads text.
 
 pub(crate) mod iec;
 pub(crate) mod plcopen;
 mod pmc;
+pub(crate) mod simaticml;
 pub(crate) mod stl;
 
 mod dialect;
@@ -112,6 +116,34 @@ impl Dialect {
 /// Every line that cannot be read, each as `ORIGIN:LINE:COL: message`; an
 /// empty program; a dialect that cannot be told.
 pub fn parse(origin: &str, source: &str, dialect: Option<Dialect>) -> Result<Parsed, SourceErrors> {
+    if simaticml::is_simaticml(source) {
+        if dialect.is_some() {
+            return Err(SourceError::new(
+                origin,
+                Location::line_start(1),
+                "this is a TIA Portal export (SimaticML), not an instruction list: leave --dialect out, and its LAD and FBD networks are read",
+            )
+            .into());
+        }
+        let read = simaticml::lex(origin, source)?;
+        if read
+            .instructions
+            .iter()
+            .all(|i| i.operation == Operation::EndBlock)
+        {
+            return Err(SourceError::new(
+                origin,
+                Location::line_start(1),
+                "no LAD or FBD network with anything in it in this TIA Portal export",
+            )
+            .into());
+        }
+        return Ok(Parsed {
+            dialect: Dialect::Stl,
+            instructions: read.instructions,
+            documentation: read.documentation,
+        });
+    }
     if is_xml(source) {
         if dialect.is_some() {
             return Err(SourceError::new(
