@@ -140,6 +140,7 @@ pub fn parse(origin: &str, source: &str, dialect: Option<Dialect>) -> Result<Par
         }
         return Ok(Parsed {
             dialect: Dialect::Stl,
+            first_checks: false,
             instructions: read.instructions,
             documentation: read.documentation,
         });
@@ -168,6 +169,7 @@ pub fn parse(origin: &str, source: &str, dialect: Option<Dialect>) -> Result<Par
         }
         return Ok(Parsed {
             dialect: Dialect::Iec,
+            first_checks: false,
             instructions: project.instructions,
             documentation: project.documentation,
         });
@@ -204,6 +206,7 @@ pub fn parse(origin: &str, source: &str, dialect: Option<Dialect>) -> Result<Par
     }
     Ok(Parsed {
         dialect,
+        first_checks: dialect == Dialect::Stl,
         instructions,
         documentation,
     })
@@ -213,8 +216,13 @@ pub fn parse(origin: &str, source: &str, dialect: Option<Dialect>) -> Result<Par
 /// declarations carry.
 #[derive(Debug, Clone)]
 pub struct Parsed {
-    /// The dialect it was read in (PLCopen XML bodies read as IEC).
+    /// The dialect it was read in (PLCopen XML bodies read as IEC, TIA
+    /// Portal networks as STL).
     pub dialect: Dialect,
+    /// Whether the instructions rely on STL's first check (a check after
+    /// a write starts a new result): STL text; not the instructions read
+    /// from a drawn network, where every result starts with a load.
+    pub first_checks: bool,
     /// Every instruction, in order.
     pub instructions: Vec<Instruction>,
     /// `(name or address, comment)` from the program's declarations: the

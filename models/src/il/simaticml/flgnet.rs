@@ -494,7 +494,7 @@ impl<'a, 'i> Network<'a, 'i> {
                     "Part",
                     "Contact" | "O" | "A" | "X" | "Not" | "NOT" | "Eq" | "Ne" | "Gt" | "Ge" | "Lt"
                     | "Le" | "TON" | "TOF" | "TP" | "TONR" | "CTU" | "CTD" | "CTUD" | "PContact"
-                    | "NContact",
+                    | "NContact" | "PBox" | "NBox",
                 ) => {}
                 _ => {
                     let what = match part.tag_name().name() {
