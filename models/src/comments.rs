@@ -1,9 +1,11 @@
 //! The I/O database of paper 000: address → comment.
 //!
 //! Read from CSV `address,comment` (a header row `address,comment` is
-//! optional; quote comments that contain commas). A comment ending in `(B)`
-//! marks a normally-closed contact. This module parses text it is given; it
-//! opens no file.
+//! optional; quote comments that contain commas), or from a TIA Portal tag
+//! table exported as SimaticML (`SW.Tags.PlcTagTable`: each tag's name and
+//! address get its comment). A comment ending in `(B)` marks a
+//! normally-closed contact. This module parses text it is given; it opens
+//! no file.
 
 use std::collections::HashMap;
 
@@ -25,16 +27,20 @@ impl FromIterator<(Signal, String)> for CommentDb {
 }
 
 impl CommentDb {
-    /// Parses `address,comment` rows; `resolve` canonicalises addresses in
-    /// the program's dialect.
+    /// Parses `address,comment` rows, or a TIA Portal tag table (told by
+    /// its content); `resolve` canonicalises addresses in the program's
+    /// dialect.
     ///
     /// # Errors
-    /// The first malformed row, as `ORIGIN:LINE:COL: message`.
+    /// The first malformed row or tag, as `ORIGIN:LINE:COL: message`.
     pub fn parse(
         origin: &str,
         text: &str,
         resolve: impl Fn(&str) -> Result<Signal, String>,
     ) -> Result<CommentDb, SourceError> {
+        if crate::il::simaticml::is_simaticml(text) {
+            return Self::tag_table(origin, text, resolve);
+        }
         let mut reader = csv::ReaderBuilder::new()
             .has_headers(false)
             .flexible(true)
@@ -72,6 +78,28 @@ impl CommentDb {
             }
             let signal = resolve(&record[0]).map_err(|m| SourceError::new(origin, at, m))?;
             comments.insert(signal, record[1].to_string());
+        }
+        Ok(CommentDb { comments })
+    }
+
+    /// A tag table's comments: each tag's name (`"Start"`) and, when the
+    /// program's dialect reads it as a bit, its address (`%I0.0`).
+    fn tag_table(
+        origin: &str,
+        text: &str,
+        resolve: impl Fn(&str) -> Result<Signal, String>,
+    ) -> Result<CommentDb, SourceError> {
+        let mut comments = HashMap::new();
+        for tag in crate::il::simaticml::tag_table(origin, text)? {
+            let Some(comment) = tag.comment else {
+                continue;
+            };
+            let signal = resolve(&tag.name).map_err(|m| SourceError::new(origin, tag.at, m))?;
+            comments.insert(signal, comment.clone());
+            // A word (`%MW10`) is not a contact: its name carries the comment.
+            if let Some(address) = tag.address.and_then(|a| resolve(&a).ok()) {
+                comments.insert(address, comment);
+            }
         }
         Ok(CommentDb { comments })
     }

@@ -99,7 +99,7 @@ impl Program {
     ) -> Result<Program, SourceErrors> {
         let parsed = il::parse(origin, source, dialect)?;
         let (dialect, instructions) = (parsed.dialect, parsed.instructions);
-        let mut machine = Machine::new(origin, dialect);
+        let mut machine = Machine::new(origin, parsed.first_checks);
         for ins in &instructions {
             machine.step(ins)?;
         }
@@ -293,10 +293,10 @@ struct Machine<'a> {
 }
 
 impl<'a> Machine<'a> {
-    fn new(origin: &'a str, dialect: Dialect) -> Self {
+    fn new(origin: &'a str, first_checks: bool) -> Self {
         Machine {
-            first_check: dialect == Dialect::Stl,
-            checks_first: dialect == Dialect::Stl,
+            first_check: first_checks,
+            checks_first: first_checks,
             numeric: None,
             origin,
             blocks: Vec::new(),

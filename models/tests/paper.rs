@@ -23,6 +23,9 @@ const ESE_STL: &str = include_str!("../../tests/data/paper000/ese.awl");
 const FIG6_STL: &str = include_str!("../../tests/data/paper000/fig6.awl");
 const ESE_LD: &str = include_str!("../../tests/data/paper000/ese.xml");
 const FIG6_LD: &str = include_str!("../../tests/data/paper000/fig6.xml");
+const FIG6_TIA_LAD: &str = include_str!("../../tests/data/paper000/fig6.lad.SimaticML.xml");
+const FIG6_TIA_FBD: &str = include_str!("../../tests/data/paper000/fig6.fbd.SimaticML.xml");
+const FIG6_TIA_TAGS: &str = include_str!("../../tests/data/paper000/fig6.tags.SimaticML.xml");
 
 /// `e` with the IEC direct addresses of the ladders renamed to the STL
 /// addresses of the same map (`%IX20.4` → `E20.4`, or `I20.4` for the
@@ -253,6 +256,84 @@ fn fig6_and_ese_drawn_as_plcopen_ladders_give_the_paper_s_functions_and_step_blo
             "ESE step {i}"
         );
     }
+}
+
+/// `e` with the TIA tags of Fig. 6 (`X1`, ..., `G0_00`) named as the paper.
+fn tags_to_paper(e: &Expr) -> Expr {
+    rename(e, &|s: &Signal| Signal::new(&s.name().replace('_', ".")))
+}
+
+#[test]
+fn fig6_exported_from_tia_portal_in_lad_and_fbd_gives_the_il_s_functions_steps_and_culprits() {
+    let il = sf("fig6.il", FIG6, "G0.00");
+    // LAD by tag (`"X1"`...), FBD by absolute address (`%I0.1`...).
+    let lad = sf("fig6.lad.SimaticML.xml", FIG6_TIA_LAD, "G0_00");
+    let fbd = sf("fig6.fbd.SimaticML.xml", FIG6_TIA_FBD, "Q10.0");
+    let renamings: [fn(&Expr) -> Expr; 2] = [tags_to_paper, to_paper];
+    for (g, to_paper) in [&lad, &fbd].into_iter().zip(renamings) {
+        assert_eq!(to_paper(&g.to_expr()), il.to_expr());
+        assert_eq!(g.steps.len(), il.steps.len());
+        for i in 1..=il.steps.len() {
+            assert_eq!(to_paper(&step_expr(g, i)), step_expr(&il, i), "step {i}");
+        }
+    }
+    // The same culprits for every state of the six contacts.
+    let inputs = ["X1", "X2", "X3", "X4", "Y1", "Y2"];
+    let lad_names = |s: &Signal| Signal::new(s.name());
+    let fbd_names = |s: &Signal| {
+        let (stl, _) = STL_ADDRESSES[STL_ADDRESSES.len() - 8..]
+            .iter()
+            .find(|(_, paper)| *paper == s.name())
+            .unwrap();
+        Signal::new(stl)
+    };
+    for bits in 0u32..1 << inputs.len() {
+        let value = |s: &Signal| {
+            let i = inputs.iter().position(|x| *x == s.name())?;
+            Some(bits >> i & 1 == 1)
+        };
+        let culprits = |g: &SwitchingFunction, named: &dyn Fn(&Signal) -> Signal| {
+            let now = |s: &Signal| {
+                inputs.iter().find_map(|x| {
+                    (named(&Signal::new(x)) == *s)
+                        .then(|| value(&Signal::new(x)))
+                        .flatten()
+                })
+            };
+            let e = explain(g, now, None, Polarity::On, &CommentDb::default()).unwrap();
+            let names: Vec<String> = e
+                .culprits
+                .iter()
+                .map(|c| {
+                    let back = inputs
+                        .iter()
+                        .find(|x| named(&Signal::new(x)) == c.address)
+                        .unwrap();
+                    format!("{back}={}", u8::from(c.value))
+                })
+                .collect();
+            (e.value, e.fault_step, names)
+        };
+        let want = culprits(&il, &|s| s.clone());
+        assert_eq!(culprits(&lad, &lad_names), want, "bits {bits:06b}");
+        assert_eq!(culprits(&fbd, &fbd_names), want, "bits {bits:06b}");
+    }
+    // The tag table names both the tags and their addresses.
+    let p = Program::compile("fig6.lad.SimaticML.xml", FIG6_TIA_LAD, None).unwrap();
+    let q = Program::compile("fig6.fbd.SimaticML.xml", FIG6_TIA_FBD, None).unwrap();
+    for (p, stop) in [(&p, "X2"), (&q, "I0.2")] {
+        let tags =
+            CommentDb::parse("fig6.tags.SimaticML.xml", FIG6_TIA_TAGS, |a| p.resolve(a)).unwrap();
+        assert_eq!(tags.get(&Signal::new(stop)), Some("Stop push button (B)"));
+        assert_eq!(tags.len(), 16);
+    }
+    // The interface's comment, in en-US.
+    assert_eq!(
+        p.documentation().get(&Signal::new("Fig6_LAD.#Enable")),
+        Some("Cell enabled")
+    );
+    assert!(p.warnings().is_empty(), "{:?}", p.warnings());
+    assert!(q.warnings().is_empty(), "{:?}", q.warnings());
 }
 
 #[test]

@@ -7,7 +7,10 @@
 //! - incremental evaluation equals full re-evaluation after every change;
 //! - three-valued evaluation with unknown contacts: Kleene logic is never
 //!   wrong, and [`SwitchingFunction::certain`] equals "all completions of
-//!   the unknowns agree".
+//!   the unknowns agree";
+//! - mutated TIA Portal exports (SimaticML: wires pointed elsewhere, loops,
+//!   parts renamed, text cut out) give a program or located errors, never
+//!   a panic.
 
 #![allow(clippy::unwrap_used)] // test helpers fail loudly by design
 
@@ -319,6 +322,105 @@ proptest! {
         // Kleene alone may say less, never something else.
         if let Some(v) = sf.evaluate3(lookup).0 {
             prop_assert_eq!(Some(v), agreed, "kleene, {}", sf);
+        }
+    }
+}
+
+const TIA_LAD: &str = include_str!("../../tests/data/paper000/fig6.lad.SimaticML.xml");
+const TIA_FBD: &str = include_str!("../../tests/data/paper000/fig6.fbd.SimaticML.xml");
+
+/// Part names a mutation may give a part.
+const PART_NAMES: &[&str] = &[
+    "Contact", "Coil", "SCoil", "RCoil", "Sr", "Rs", "O", "A", "X", "Not", "Gt", "Eq", "TON",
+    "PBox", "PContact", "Move", "Calc", "",
+];
+
+/// One change to an export.
+#[derive(Debug, Clone)]
+enum Mutation {
+    /// The `n`th UId reference (of a wire end or a part) becomes `to`.
+    Rewire { n: usize, to: u32 },
+    /// The `n`th part is renamed.
+    Rename { n: usize, name: usize },
+    /// The `n`th pin name becomes another part's pin name.
+    Pin { n: usize, to: usize },
+    /// Bytes `at..at+len` are cut out.
+    Cut { at: usize, len: usize },
+}
+
+fn mutation() -> impl Strategy<Value = Mutation> {
+    prop_oneof![
+        (0..64usize, 0..48u32).prop_map(|(n, to)| Mutation::Rewire { n, to }),
+        (0..16usize, 0..PART_NAMES.len()).prop_map(|(n, name)| Mutation::Rename { n, name }),
+        (0..64usize, 0..64usize).prop_map(|(n, to)| Mutation::Pin { n, to }),
+        (0..20_000usize, 0..200usize).prop_map(|(at, len)| Mutation::Cut { at, len }),
+    ]
+}
+
+/// `text` with its `n`th match of `pattern` (`UId="`, `Name="`) given the
+/// value `value`.
+fn replace_nth(text: &str, pattern: &str, n: usize, value: &str) -> String {
+    let starts: Vec<usize> = text.match_indices(pattern).map(|(i, _)| i).collect();
+    if starts.is_empty() {
+        return text.to_string();
+    }
+    let start = starts[n % starts.len()] + pattern.len();
+    let end = text[start..].find('"').map_or(text.len(), |e| start + e);
+    format!("{}{value}{}", &text[..start], &text[end..])
+}
+
+fn mutate(text: &str, m: &Mutation) -> String {
+    match m {
+        Mutation::Rewire { n, to } => replace_nth(text, "UId=\"", *n, &to.to_string()),
+        Mutation::Rename { n, name } => replace_nth(text, "<Part Name=\"", *n, PART_NAMES[*name]),
+        Mutation::Pin { n, to } => {
+            let pins: Vec<&str> = text
+                .match_indices("NameCon UId=")
+                .filter_map(|(i, _)| text[i..].split('"').nth(3))
+                .collect();
+            let pin = pins.get(to % pins.len().max(1)).copied().unwrap_or("in");
+            replace_nth(text, "\" Name=\"", *n, pin)
+        }
+        Mutation::Cut { at, len } => {
+            let at = (*at).min(text.len());
+            let end = (at + len).min(text.len());
+            match (text.get(..at), text.get(end..)) {
+                (Some(a), Some(b)) => format!("{a}{b}"),
+                _ => text.to_string(),
+            }
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    #[test]
+    fn mutated_tia_exports_compile_or_fail_with_located_errors(
+        fbd in any::<bool>(),
+        mutations in prop::collection::vec(mutation(), 1..6),
+    ) {
+        let mut text = if fbd { TIA_FBD } else { TIA_LAD }.to_string();
+        for m in &mutations {
+            text = mutate(&text, m);
+        }
+        match Program::compile("m.xml", &text, None) {
+            Ok(p) => {
+                let observable = Observability::default_for(p.dialect());
+                for coil in p.coils() {
+                    if let Ok(sf) = SwitchingFunction::expand(&p, &coil.signal, &observable) {
+                        let _ = sf.notation();
+                    }
+                }
+                for w in p.warnings() {
+                    prop_assert!(w.at.line >= 1, "{:?}", w);
+                }
+            }
+            Err(e) => {
+                for line in e.lines() {
+                    prop_assert!(line.starts_with("m.xml:") || line.starts_with("... and "), "{}", line);
+                }
+            }
         }
     }
 }

@@ -587,3 +587,56 @@ fn l5sharp_exports_say_what_they_do_not_read() {
         ]
     );
 }
+
+// --- TIA Portal exports (SimaticML) ----------------------------------------
+
+/// Every warning as `LINE:COL: message`.
+fn warnings(p: &Program) -> Vec<String> {
+    p.warnings()
+        .iter()
+        .map(|w| format!("{}: {}", w.at, w.message))
+        .collect()
+}
+
+#[test]
+fn tia_portal_exports_give_their_latches_and_say_which_networks_are_not_read() {
+    // An FB in LAD: a valve opened by an S coil and closed by an R coil,
+    // its state copied to an output. Locals are the block's own.
+    let p = program("codegeneratoropenness-LAD_Valve_V0.1.xml");
+    let latch = "-(Valve.#CloseValve * Valve.#Release) * ((Valve.#OpenValve * Valve.#Release) + Valve.#StateValve)";
+    pinned(&p, &[("Valve.#StateValve", latch), ("Valve.#Valve", latch)]);
+    assert!(warnings(&p).is_empty(), "{:?}", warnings(&p));
+    // A contact on a global tag beside locals.
+    let p = program("codegeneratoropenness-plcBlock_LAD_Block_Logic.xml");
+    pinned(
+        &p,
+        &[
+            ("Block_Logic.#MyValue", "Block_Logic.#A1"),
+            ("Block_Logic.#Out1", "Block_Logic.#A1 * Tag_5"),
+        ],
+    );
+    // Calls of an FB: said where they are, the coils around them read.
+    let p = program("codegeneratoropenness-LAD_TemplateValve_V0.3.xml");
+    pinned(
+        &p,
+        &[
+            ("GenerateValve.#Release", "AlwaysOFF"),
+            ("GenerateValve.#OpenValve", "AlwaysON * AlwaysOFF"),
+            ("GenerateValve.#CloseValve", "AlwaysON * AlwaysOFF"),
+        ],
+    );
+    assert_eq!(
+        warnings(&p),
+        [
+            "296:5: block \"GenerateValve\" network 3: call of Valve is not read",
+            "578:5: block \"GenerateValve\" network 6: call of Valve is not read",
+        ]
+    );
+    // A GRAPH sequence: no coil, one located warning per network.
+    let p = program("codegeneratoropenness-GraphBranch.xml");
+    pinned(&p, &[]);
+    assert_eq!(
+        warnings(&p),
+        ["723:13: block \"FB_SEQ_One\" network 1: GRAPH network not read (LAD and FBD networks are)"]
+    );
+}

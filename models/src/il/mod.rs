@@ -5,13 +5,17 @@
 //! column it came from. The dialects differ mostly in spelling (`pmc`: the
 //! FANUC PMC mnemonics of paper 000; `iec`: IEC 61131-3 IL; `stl`: Siemens
 //! STL/AWL, German or English), so the lexers produce the same
-//! [`Operation`]s; STL's "first check" is the compiler's business. What the instructions compute is the
+//! [`Operation`]s; STL's "first check" is the compiler's business. The
+//! graphical formats are read into the same instructions: PLCopen XML
+//! (`plcopen`, read as IEC) and TIA Portal SimaticML (`simaticml`, read
+//! as STL). What the instructions compute is the
 //! job of [`crate::program`]; this module only reads text.
 
 pub(crate) mod iec;
 pub(crate) mod l5x;
 pub(crate) mod plcopen;
 mod pmc;
+pub(crate) mod simaticml;
 pub(crate) mod stl;
 
 mod dialect;
@@ -117,6 +121,41 @@ fn logix_or(iec: Result<Signal, String>, text: &str) -> Result<Signal, String> {
     })
 }
 
+/// A vendor's XML export given with `--dialect`: refused, saying what it is.
+fn refuse_dialect(
+    origin: &str,
+    dialect: Option<Dialect>,
+    what: &str,
+    read: &str,
+) -> Result<(), SourceErrors> {
+    match dialect {
+        None => Ok(()),
+        Some(_) => Err(SourceError::new(
+            origin,
+            Location::line_start(1),
+            format!(
+                "this is {what}, not an instruction list: leave --dialect out, and {read} are read"
+            ),
+        )
+        .into()),
+    }
+}
+
+/// An export with nothing but block ends in it: refused with `nothing`.
+fn something(
+    origin: &str,
+    instructions: &[Instruction],
+    nothing: &str,
+) -> Result<(), SourceErrors> {
+    if instructions
+        .iter()
+        .all(|i| i.operation == Operation::EndBlock)
+    {
+        return Err(SourceError::new(origin, Location::line_start(1), nothing).into());
+    }
+    Ok(())
+}
+
 /// Parses a program in `dialect`, or in the detected dialect when `None`.
 ///
 /// `origin` names the text in messages (usually the file name).
@@ -126,31 +165,43 @@ fn logix_or(iec: Result<Signal, String>, text: &str) -> Result<Signal, String> {
 /// empty program; a dialect that cannot be told.
 pub fn parse(origin: &str, source: &str, dialect: Option<Dialect>) -> Result<Parsed, SourceErrors> {
     if l5x::is_l5x(source) {
-        if dialect.is_some() {
-            return Err(SourceError::new(
-                origin,
-                Location::line_start(1),
-                "this is a Studio 5000 export (L5X), not an instruction list: leave --dialect out, and its ladder routines are read",
-            )
-            .into());
-        }
+        refuse_dialect(
+            origin,
+            dialect,
+            "a Studio 5000 export (L5X)",
+            "its ladder routines",
+        )?;
         let project = l5x::lex(origin, source)?;
-        if project
-            .instructions
-            .iter()
-            .all(|i| i.operation == Operation::EndBlock)
-        {
-            return Err(SourceError::new(
-                origin,
-                Location::line_start(1),
-                "no routine with any rung in it in this L5X export",
-            )
-            .into());
-        }
+        something(
+            origin,
+            &project.instructions,
+            "no routine with any rung in it in this L5X export",
+        )?;
         return Ok(Parsed {
             dialect: Dialect::Iec,
+            first_checks: false,
             instructions: project.instructions,
             documentation: project.documentation,
+        });
+    }
+    if simaticml::is_simaticml(source) {
+        refuse_dialect(
+            origin,
+            dialect,
+            "a TIA Portal export (SimaticML)",
+            "its LAD and FBD networks",
+        )?;
+        let read = simaticml::lex(origin, source)?;
+        something(
+            origin,
+            &read.instructions,
+            "no LAD or FBD network with anything in it in this TIA Portal export",
+        )?;
+        return Ok(Parsed {
+            dialect: Dialect::Stl,
+            first_checks: false,
+            instructions: read.instructions,
+            documentation: read.documentation,
         });
     }
     if is_xml(source) {
@@ -177,6 +228,7 @@ pub fn parse(origin: &str, source: &str, dialect: Option<Dialect>) -> Result<Par
         }
         return Ok(Parsed {
             dialect: Dialect::Iec,
+            first_checks: false,
             instructions: project.instructions,
             documentation: project.documentation,
         });
@@ -213,6 +265,7 @@ pub fn parse(origin: &str, source: &str, dialect: Option<Dialect>) -> Result<Par
     }
     Ok(Parsed {
         dialect,
+        first_checks: dialect == Dialect::Stl,
         instructions,
         documentation,
     })
@@ -222,8 +275,13 @@ pub fn parse(origin: &str, source: &str, dialect: Option<Dialect>) -> Result<Par
 /// declarations carry.
 #[derive(Debug, Clone)]
 pub struct Parsed {
-    /// The dialect it was read in (PLCopen XML bodies read as IEC).
+    /// The dialect it was read in (PLCopen XML bodies read as IEC, TIA
+    /// Portal networks as STL).
     pub dialect: Dialect,
+    /// Whether the instructions rely on STL's first check (a check after
+    /// a write starts a new result): STL text; not the instructions read
+    /// from a drawn network, where every result starts with a load.
+    pub first_checks: bool,
     /// Every instruction, in order.
     pub instructions: Vec<Instruction>,
     /// `(name or address, comment)` from the program's declarations: the

@@ -33,9 +33,9 @@ use crate::signal::Signal;
 use crate::source::{Location, SourceError, SourceErrors};
 
 /// How deep a rung's connections may chain.
-const MAX_DEPTH: usize = 512;
+pub(super) const MAX_DEPTH: usize = 512;
 
-/// What flows out of an element.
+/// What flows out of an element (a TIA Portal part too: `simaticml`).
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) enum Flow {
     True,
@@ -60,7 +60,7 @@ impl Flow {
 
     /// The flow negated: a contact's negation flips, AND and OR swap (De
     /// Morgan); what is not boolean logic stays so.
-    fn not(self) -> Flow {
+    pub(super) fn not(self) -> Flow {
         match self {
             Flow::True => Flow::False,
             Flow::False => Flow::True,
@@ -72,7 +72,7 @@ impl Flow {
     }
 
     /// Exclusive OR of two flows: `a·¬b + ¬a·b`.
-    fn xor(a: Flow, b: Flow) -> Flow {
+    pub(super) fn xor(a: Flow, b: Flow) -> Flow {
         Flow::or(vec![
             Flow::and(vec![a.clone(), b.clone().not()]),
             Flow::and(vec![a.not(), b]),
@@ -470,18 +470,17 @@ pub(crate) fn emit(flow: &Flow, at: Location, out: &mut Vec<Instruction>) {
     }
 }
 
-/// Reads every LD and IL body of the project `text` as instructions.
+/// The XML document `text`, without a DTD and at most a million nodes.
 ///
 /// # Errors
-/// XML that is not well-formed, or elements that cannot be read, each at
-/// its line.
-pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
+/// XML that is not well-formed, at the place it stops being so.
+pub(super) fn document<'i>(origin: &str, text: &'i str) -> Result<Document<'i>, SourceError> {
     let options = roxmltree::ParsingOptions {
         allow_dtd: false,
         nodes_limit: 1_000_000,
         ..roxmltree::ParsingOptions::default()
     };
-    let doc = Document::parse_with_options(text, options).map_err(|e| {
+    Document::parse_with_options(text, options).map_err(|e| {
         let pos = e.pos();
         SourceError::new(
             origin,
@@ -491,7 +490,16 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
             },
             format!("not well-formed XML: {e}"),
         )
-    })?;
+    })
+}
+
+/// Reads every LD and IL body of the project `text` as instructions.
+///
+/// # Errors
+/// XML that is not well-formed, or elements that cannot be read, each at
+/// its line.
+pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
+    let doc = document(origin, text)?;
     let mut out = Vec::new();
     let mut errors = Vec::new();
     // The project's function blocks and functions, for every IL body.

@@ -174,6 +174,22 @@ fn bit_operand(text: &str) -> Result<Option<Signal>, String> {
             None => Ok(None),
         };
     }
+    // A member of a global DB: `"Line_DB".Ready` → `Line_DB.Ready`.
+    if let Some((db, member)) = text
+        .strip_prefix('"')
+        .and_then(|inner| inner.split_once("\"."))
+    {
+        let ok = !db.is_empty()
+            && !db.contains('"')
+            && member
+                .split('.')
+                .all(|p| !p.is_empty() && p.chars().all(|c| c.is_alphanumeric() || c == '_'));
+        return if ok {
+            Ok(Some(Signal::new(&format!("{db}.{member}"))))
+        } else {
+            Err(format!("malformed member {text}: expected \"DB\".member"))
+        };
+    }
     if let Some(inner) = text.strip_prefix('"') {
         return match inner.strip_suffix('"') {
             Some(name) if !name.is_empty() && !name.contains('"') => Ok(Some(Signal::new(name))),
@@ -191,6 +207,8 @@ fn bit_operand(text: &str) -> Result<Option<Signal>, String> {
             Err(format!("malformed local name '{text}'"))
         };
     }
+    // TIA Portal writes addresses with a `%`: `%I0.0` is `I 0.0`.
+    let text = text.strip_prefix('%').unwrap_or(text);
     let compact: String = text.chars().filter(|c| !c.is_whitespace()).collect();
     // Typed constants (S5T#5S, W#16#FF, L#5, P#M1.0), strings, numbers.
     if compact.contains('#')
@@ -333,6 +351,7 @@ pub(crate) fn tag_signal(text: &str) -> Result<Signal, String> {
     if let Some(bit) = bit_operand(text)? {
         return Ok(bit);
     }
+    let text = text.strip_prefix('%').unwrap_or(text);
     let compact: String = text.chars().filter(|c| !c.is_whitespace()).collect();
     let upper = compact.to_ascii_uppercase();
     let (db, rest) = match upper.split_once('.') {
