@@ -127,3 +127,41 @@ fn help_explains_the_commands() {
     assert_eq!(r.code, 0);
     assert!(r.stdout.contains("--fault-when <on|off>"), "{}", r.stdout);
 }
+
+#[test]
+fn a_tia_portal_block_gets_the_comments_of_the_tag_table_exported_beside_it() {
+    // TIA Portal exports one object per file: the block and its tag table
+    // side by side, and no --comments.
+    let d = Dir::new();
+    let block = d.file(
+        "Fig6.xml",
+        include_str!("data/paper000/fig6.lad.SimaticML.xml"),
+    );
+    let table = d.file(
+        "PLC tags.xml",
+        include_str!("data/paper000/fig6.tags.SimaticML.xml"),
+    );
+    // Another export of the folder that is no tag table is passed over.
+    d.file(
+        "Other.xml",
+        include_str!("data/paper000/fig6.fbd.SimaticML.xml"),
+    );
+    let r = cellwatch(&["sf", &block, "--coil", "G0_00"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert_eq!(
+        r.stderr,
+        format!("{table}:1:1: note: the program's comments are read from this tag table, exported beside it\n")
+    );
+    assert!(
+        r.stdout.contains("    X3  Door closed switch\n"),
+        "{}",
+        r.stdout
+    );
+    assert!(r.stdout.contains("    Y2  Alarm lamp\n"), "{}", r.stdout);
+    // Without it, only the block's own interface comments are left.
+    std::fs::remove_file(&table).unwrap();
+    let r = cellwatch(&["sf", &block, "--coil", "G0_00"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(r.stderr.is_empty(), "{}", r.stderr);
+    assert!(!r.stdout.contains("Door closed switch"), "{}", r.stdout);
+}

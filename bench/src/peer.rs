@@ -962,6 +962,10 @@ mod tests {
                     _ => Err(std::io::ErrorKind::NotFound.into()),
                 }
             }
+
+            fn list(&self, _: &std::path::Path) -> std::io::Result<Vec<std::path::PathBuf>> {
+                Ok(vec!["tags.csv".into(), "fault.il".into()])
+            }
         }
         let load: Load = "1000:100".parse().unwrap();
         let text = agent_config(

@@ -26,6 +26,20 @@ impl FromIterator<(Signal, String)> for CommentDb {
     }
 }
 
+/// Whether `text` is a TIA Portal export (SimaticML) whose comments a
+/// program exported beside it should get: a PLC tag table. TIA writes one
+/// object per file, so a block's tag table is a file of its own in the
+/// same folder.
+pub fn is_tag_table(text: &str) -> bool {
+    crate::il::simaticml::is_simaticml(text) && text.contains("<SW.Tags.PlcTagTable")
+}
+
+/// Whether `text` is a TIA Portal export (SimaticML): a block or a tag
+/// table.
+pub fn is_simaticml(text: &str) -> bool {
+    crate::il::simaticml::is_simaticml(text)
+}
+
 impl CommentDb {
     /// Parses `address,comment` rows, or a TIA Portal tag table (told by
     /// its content); `resolve` canonicalises addresses in the program's
@@ -130,6 +144,18 @@ impl CommentDb {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_tag_table_is_told_from_a_block_and_from_csv() {
+        let table = include_str!("../../tests/data/paper000/fig6.tags.SimaticML.xml");
+        let block = include_str!("../../tests/data/paper000/fig6.lad.SimaticML.xml");
+        assert!(super::is_tag_table(table));
+        assert!(!super::is_tag_table(block));
+        assert!(super::is_simaticml(block));
+        assert!(!super::is_tag_table(
+            "address,comment\nX1,<SW.Tags.PlcTagTable\n"
+        ));
+    }
+
     use super::*;
     use crate::signal::pmc_address;
 

@@ -48,16 +48,34 @@ pub(crate) fn load(
     for w in program.warnings() {
         let _ = writeln!(err, "{name}:{}: warning: {}", w.at, w.message);
     }
-    // The program's declarations comment its signals; a CSV adds to them
-    // and wins where both say something.
+    // The program's declarations comment its signals, then the TIA Portal
+    // tag tables exported beside it; a CSV (or a tag table) given with
+    // --comments adds to them and wins where both say something.
+    let mut declared = program.documentation().clone();
+    let given = args.comments.as_ref().and_then(|c| c.canonicalize().ok());
+    for (table, text) in
+        crate::config::tag_tables_beside(&crate::config::Disk, &args.program, &text)
+    {
+        if table.canonicalize().ok() == given {
+            continue;
+        }
+        let _ = writeln!(
+            err,
+            "{}:1:1: note: the program's comments are read from this tag table, exported beside it",
+            table.display()
+        );
+        let db = CommentDb::parse(&table.display().to_string(), &text, |a| program.resolve(a))
+            .map_err(Failure::input)?;
+        declared = declared.overridden_by(db);
+    }
     let comments = match &args.comments {
         Some(path) => {
             let text = read_text(path, "comment database")?;
             let csv = CommentDb::parse(&path.display().to_string(), &text, |a| program.resolve(a))
                 .map_err(Failure::input)?;
-            program.documentation().clone().overridden_by(csv)
+            declared.overridden_by(csv)
         }
-        None => program.documentation().clone(),
+        None => declared,
     };
     let observable = match &args.observable {
         Some(list) => Observability::parse(program.dialect(), list)

@@ -35,7 +35,7 @@ pub use cell::{
 pub use checks::{
     SfcCheck, TimerCheck, DEFAULT_FORCE_PULSE, DEFAULT_FORCE_TIMEOUT, MAX_FORCE_TIMEOUT,
 };
-pub use files::{Disk, Files};
+pub use files::{tag_tables_beside, Disk, Files};
 pub use opcua::{Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy};
 pub use problems::ConfigErrors;
 pub use tags::{key_chunk, tag_address, timer_signal, Addressing, Deadband, TagConfig};

@@ -26,6 +26,17 @@ impl Files for Mem {
             .cloned()
             .ok_or_else(|| io::Error::new(io::ErrorKind::NotFound, "No such file or directory"))
     }
+
+    fn list(&self, dir: &Path) -> io::Result<Vec<PathBuf>> {
+        let mut files: Vec<PathBuf> = self
+            .0
+            .keys()
+            .filter(|p| p.parent() == Some(dir))
+            .cloned()
+            .collect();
+        files.sort();
+        Ok(files)
+    }
 }
 
 fn mem() -> Mem {
@@ -555,5 +566,42 @@ fn the_agents_own_alarms_clear_after_an_off_delay_unless_configured() {
     assert_eq!(
         errors(&format!("{GOOD}\n[alarms.ese]\noff_delay = \"1s\"\n")),
         "cell.toml:28:9: unknown field `ese`, expected `communication` or `tag-quality`"
+    );
+}
+
+#[test]
+fn a_tia_portal_block_gets_the_comments_of_the_tag_table_exported_beside_it() {
+    let mut files = mem();
+    files.0.insert(
+        PathBuf::from("base/tia/Fig6.xml"),
+        include_bytes!("../../../tests/data/paper000/fig6.lad.SimaticML.xml").to_vec(),
+    );
+    files.0.insert(
+        PathBuf::from("base/tia/PLC tags.xml"),
+        include_bytes!("../../../tests/data/paper000/fig6.tags.SimaticML.xml").to_vec(),
+    );
+    let tags: String = ["X1", "X2", "X3", "X4", "Y1", "Y2"]
+        .iter()
+        .map(|a| format!("[[tags]]\nname = \"{a}\"\nnode_id = \"nsu=urn:plc;s={a}\"\naddress = '\"{a}\"'\n\n"))
+        .collect();
+    let text = format!(
+        "[cell]\nid = \"c1\"\ndialect = \"stl\"\n\n[opcua]\nendpoint = \"opc.tcp://127.0.0.1:4840/\"\n\n{tags}\
+         [[checks.switching]]\nid = \"fig6\"\nprogram = \"tia/Fig6.xml\"\ncoil = '\"G0_00\"'\n\n\
+         [zenoh.tls]\nca = \"ca.pem\"\ncert = \"c.pem\"\nkey = \"c.key\"\n"
+    );
+    let c = parse("cell.toml", &text, Path::new("base"), &files).unwrap();
+    let comments = &c.switching[0].comments;
+    assert_eq!(comments.get(&Signal::new("X3")), Some("Door closed switch"));
+    // A broken tag table beside it is said, with its place.
+    files.0.insert(
+        PathBuf::from("base/tia/PLC tags.xml"),
+        b"<?xml version=\"1.0\"?>\n<Document>\n<SW.Tags.PlcTagTable>\n</Document>\n".to_vec(),
+    );
+    let e = parse("cell.toml", &text, Path::new("base"), &files)
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        e,
+        "base/tia/PLC tags.xml:4:1: not well-formed XML: expected 'SW.Tags.PlcTagTable' tag, not 'Document' at 4:1"
     );
 }

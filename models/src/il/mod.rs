@@ -39,7 +39,7 @@ impl Dialect {
         match self {
             Dialect::Pmc => crate::signal::pmc_address(text),
             Dialect::Iec => logix_or(iec::operand_signal(text), text),
-            Dialect::Stl => stl::operand_signal(text),
+            Dialect::Stl => symbol_or(stl::operand_signal(text), text),
         }
     }
 
@@ -53,7 +53,7 @@ impl Dialect {
         match self {
             Dialect::Pmc => crate::signal::pmc_address(text),
             Dialect::Iec => logix_or(iec::operand_signal(text), text),
-            Dialect::Stl => stl::tag_signal(text),
+            Dialect::Stl => symbol_or(stl::tag_signal(text), text),
         }
     }
 
@@ -154,6 +154,38 @@ fn something(
         return Err(SourceError::new(origin, Location::line_start(1), nothing).into());
     }
     Ok(())
+}
+
+/// An STL address, or else a symbol written without its quotes (`G0_00`
+/// for `"G0_00"`), as `cellwatch sf` prints a TIA Portal tag's name.
+fn symbol_or(stl: Result<Signal, String>, text: &str) -> Result<Signal, String> {
+    stl.or_else(|e| {
+        let mut chars = text.chars();
+        let plain = chars.next().is_some_and(|c| c.is_alphabetic() || c == '_')
+            && chars.all(|c| c.is_alphanumeric() || c == '_');
+        if plain && !address_shaped(text) {
+            Ok(Signal::new(text))
+        } else {
+            Err(e)
+        }
+    })
+}
+
+/// Whether `text` is an STL area and a number (`MW10`, `DB5`, `T1`): an
+/// address written wrong, never taken for a symbol.
+fn address_shaped(text: &str) -> bool {
+    let digits = text.trim_start_matches(|c: char| c.is_ascii_alphabetic());
+    let area = text[..text.len() - digits.len()].to_ascii_uppercase();
+    let area = area
+        .strip_suffix(['B', 'W', 'D', 'X'])
+        .filter(|a| !a.is_empty() && *a != "D")
+        .unwrap_or(&area);
+    !digits.is_empty()
+        && digits.bytes().all(|b| b.is_ascii_digit())
+        && [
+            "E", "A", "I", "Q", "M", "T", "Z", "C", "L", "P", "DB", "DI", "PE", "PA", "PI", "PQ",
+        ]
+        .contains(&area)
 }
 
 /// Parses a program in `dialect`, or in the detected dialect when `None`.
@@ -313,6 +345,18 @@ fn wrong_format(source: &str, dialect: Dialect) -> Option<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_stl_symbol_may_be_written_without_its_quotes_an_address_never() {
+        let stl = |t: &str| Dialect::Stl.signal(t).map(|s| s.to_string());
+        assert_eq!(stl("G0_00").unwrap(), stl("\"G0_00\"").unwrap());
+        assert_eq!(stl("Start").unwrap(), "Start");
+        assert_eq!(stl("E 0.0").unwrap(), "E0.0");
+        // An address written wrong stays an error, never a symbol.
+        for wrong in ["MW10", "DB5", "m10", "DBX4", "E1", "Start button"] {
+            assert!(Dialect::Stl.signal(wrong).is_err(), "{wrong}");
+        }
+    }
 
     #[test]
     fn detects_dialects() {

@@ -111,14 +111,26 @@ impl Validator<'_> {
                 );
             }
         }
-        // The program's own declarations, then the tags' comments, then the
-        // I/O list: each overrides the one before.
+        // The program's own declarations, then the tag tables exported
+        // beside it, then the tags' comments, then the I/O list: each
+        // overrides the one before.
         let tag_comments: CommentDb = sf
             .leaves()
             .into_iter()
             .filter_map(|s| Some((s.clone(), self.tag_comments.get(&s)?.clone())))
             .collect();
-        let declared = program.documentation().clone().overridden_by(tag_comments);
+        let mut declared = program.documentation().clone();
+        // A TIA Portal block's tag tables, exported beside it.
+        for (table, text) in crate::config::tag_tables_beside(self.files, &path, &text) {
+            match CommentDb::parse(&table.display().to_string(), &text, |a| program.resolve(a)) {
+                Ok(db) => declared = declared.overridden_by(db),
+                Err(e) => {
+                    self.problems.push(e.to_string());
+                    return None;
+                }
+            }
+        }
+        let declared = declared.overridden_by(tag_comments);
         let comments = match &c.comments {
             None => declared,
             Some(p) => {

@@ -20,7 +20,7 @@ use std::collections::HashMap;
 use roxmltree::{Document, Node};
 
 use super::super::plcopen::{emit, Flow, MAX_DEPTH};
-use super::{access_signal, at, child, text_of, Place};
+use super::access::{access_signal, at, child, text_of, Place};
 use crate::il::{Instruction, Operand, Operation, Outside};
 use crate::signal::Signal;
 use crate::source::{Location, SourceError};

@@ -35,31 +35,17 @@
 //! table's tags (`Comment`) carry comments in several languages; the
 //! `en-US` text is taken, else the first language that has one.
 
+mod access;
 mod flgnet;
-
-use std::fmt;
 
 use roxmltree::{Document, Node};
 
 use super::{plcopen, Instruction, Operation, Outside};
-use crate::signal::Signal;
 use crate::source::{Location, SourceError, SourceErrors};
+use access::{at, child, text_of, Place};
 
 /// The comment language taken when a text has it.
 pub(crate) const LANGUAGE: &str = "en-US";
-
-/// A network of a block, as messages name it.
-#[derive(Debug, Clone)]
-pub(super) struct Place {
-    block: String,
-    network: usize,
-}
-
-impl fmt::Display for Place {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "block \"{}\" network {}", self.block, self.network)
-    }
-}
 
 /// Whether `text` is a SimaticML document: its root element is
 /// `<Document>`.
@@ -82,101 +68,6 @@ pub(crate) fn is_simaticml(text: &str) -> bool {
     }
     rest.strip_prefix("<Document")
         .is_some_and(|r| r.starts_with(['>', '/']) || r.starts_with(char::is_whitespace))
-}
-
-pub(super) fn at(doc: &Document<'_>, node: Node<'_, '_>) -> Location {
-    let pos = doc.text_pos_at(node.range().start);
-    Location {
-        line: pos.row as usize,
-        col: pos.col as usize,
-    }
-}
-
-/// The first child element named `name`.
-pub(super) fn child<'a, 'i>(node: Node<'a, 'i>, name: &str) -> Option<Node<'a, 'i>> {
-    node.children().find(|c| c.has_tag_name(name))
-}
-
-/// An element's text, trimmed.
-pub(super) fn text_of(node: Node<'_, '_>) -> String {
-    node.text().unwrap_or("").trim().to_string()
-}
-
-/// The signal an `Access` (or a part's `Instance`) names, and whether it
-/// may be a bit (`false`: a word or byte address).
-///
-/// # Errors
-/// Why it is not read: an indexed or sliced access, an unknown area.
-pub(super) fn access_signal(
-    place: &Place,
-    scope: &str,
-    access: Node<'_, '_>,
-) -> Result<(Signal, bool), String> {
-    // A part's `Instance` holds its components itself.
-    let symbol = child(access, "Symbol").or_else(|| {
-        (access.has_tag_name("Instance") && child(access, "Component").is_some()).then_some(access)
-    });
-    if let Some(symbol) = symbol {
-        let mut names = Vec::new();
-        for c in symbol.children().filter(|c| c.has_tag_name("Component")) {
-            let name = c.attribute("Name").unwrap_or("");
-            let indexed = c.children().any(|i| i.is_element())
-                || c.attributes()
-                    .any(|a| a.name().ends_with("AccessModifier") && a.value() != "None");
-            if indexed {
-                return Err(format!(
-                    "indexed or sliced access '{name}' (known only at run time)"
-                ));
-            }
-            if name.is_empty() {
-                return Err("a symbol without a name".into());
-            }
-            names.push(name);
-        }
-        if names.is_empty() {
-            return Err("a symbol without a name".into());
-        }
-        let joined = names.join(".");
-        return Ok(match scope {
-            "LocalVariable" => (Signal::new(&format!("{}.#{joined}", place.block)), true),
-            _ => (Signal::new(&joined), true),
-        });
-    }
-    if let Some(address) = child(access, "Address") {
-        let area = match address.attribute("Area").unwrap_or("") {
-            "Input" => "I",
-            "Output" => "Q",
-            "Memory" => "M",
-            "Local" => "L",
-            "PeripheryInput" => "PI",
-            "PeripheryOutput" => "PQ",
-            "DB" => "DB",
-            other => return Err(format!("address in area '{other}'")),
-        };
-        let offset: u64 = address
-            .attribute("BitOffset")
-            .and_then(|b| b.parse().ok())
-            .ok_or("an address without a bit offset")?;
-        let ty = address.attribute("Type").unwrap_or("Bool");
-        let (byte, bit) = (offset / 8, offset % 8);
-        let prefix = if area == "DB" {
-            let n = address.attribute("BlockNumber").unwrap_or("?");
-            format!("DB{n}.DB")
-        } else {
-            area.to_string()
-        };
-        if ty.eq_ignore_ascii_case("Bool") {
-            let x = if area == "DB" { "X" } else { "" };
-            return Ok((Signal::new(&format!("{prefix}{x}{byte}.{bit}")), true));
-        }
-        let size = match ty.to_ascii_uppercase().as_str() {
-            "BYTE" | "SINT" | "USINT" | "CHAR" => "B",
-            "WORD" | "INT" | "UINT" => "W",
-            _ => "D",
-        };
-        return Ok((Signal::new(&format!("{prefix}{size}{byte}")), false));
-    }
-    Err("an operand without a symbol or an address".into())
 }
 
 /// The text of `texts` (`(language, text)`) in [`LANGUAGE`], else the
