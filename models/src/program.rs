@@ -451,7 +451,7 @@ impl<'a> Machine<'a> {
                 self.first_check = first;
                 self.iec_step(ins)?;
             }
-            Operation::Outside(Outside::Call | Outside::Jump) => {
+            Operation::Outside(Outside::Call | Outside::Jump | Outside::Bits) => {
                 self.drop_or_groups();
                 self.iec_step(ins)?;
                 self.first_check = true;
@@ -769,6 +769,10 @@ impl<'a> Machine<'a> {
                 "",
                 "indirect address: the bit it writes is known only at run time, so no coil is derived for it",
             ),
+            Outside::Bits => (
+                "written as a bit of a number by a word instruction",
+                "a word instruction writes this coil as a bit of a number: it is not derivable",
+            ),
         };
         self.warnings.push(Warning {
             at: ins.at,
@@ -808,7 +812,7 @@ impl<'a> Machine<'a> {
                 self.open_paren(ins, None, false, Some(poison.clone()))?;
                 self.acc = Acc::Poisoned(poison);
             }
-            Outside::Arithmetic | Outside::Call => {
+            Outside::Arithmetic | Outside::Call | Outside::Bits => {
                 self.acc = Acc::Poisoned(poison);
                 self.open = None;
             }

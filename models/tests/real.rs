@@ -500,18 +500,22 @@ fn l5x2c_examples() {
     assert_eq!(p.documentation().get(&Signal::new("A")), Some("BOOL 1"));
 
     // A belt conveyor: timers in branches, failure bits (BIT members of a
-    // SINT) unlatched by OTU, outputs at the ends of nested branches.
+    // SINT) set all at once by a MOV of -1 and unlatched by OTU, outputs
+    // at the ends of nested branches.
     let p = program("l5x2c-belt_conveyor.L5X");
     let got = outcome(&p);
     let names: Vec<&str> = got.iter().map(|(c, _)| c.as_str()).collect();
+    let bits = [
+        "Conveyor_Failures.Break_Jammed",
+        "Conveyor_Failures.Contactor_Failure",
+        "Conveyor_Failures.Emergency_Stop",
+        "Conveyor_Failures.Misalignment",
+        "Conveyor_Failures.Overload",
+    ];
+    assert_eq!(names[..5], bits);
     assert_eq!(
-        names,
+        names[5..],
         [
-            "Conveyor_Failures.Contactor_Failure",
-            "Conveyor_Failures.Break_Jammed",
-            "Conveyor_Failures.Overload",
-            "Conveyor_Failures.Emergency_Stop",
-            "Conveyor_Failures.Misalignment",
             "Failure_Summary",
             "Ready_to_Start",
             "Ready_to_Run",
@@ -521,38 +525,53 @@ fn l5x2c_examples() {
             "Open_Break",
         ]
     );
-    assert_eq!(got[2].1, "Overload * Conveyor_Failures.Overload");
+    // The MOV writes the failure bits as a number: never read as if only
+    // the OTUs wrote them.
+    for (coil, shown) in &got[..5] {
+        assert_eq!(shown, "! line 258", "{coil}");
+    }
     assert_eq!(got[6].1, "TRUE");
-    assert!(got.iter().all(|(_, s)| !s.starts_with('!')), "{got:?}");
     let lines: Vec<usize> = p.warnings().iter().map(|w| w.at.line).collect();
-    assert_eq!(lines, [258, 265, 272, 328, 328]);
+    assert_eq!(lines, [258, 258, 258, 258, 258, 258, 265, 272, 328, 328]);
     assert_eq!(
         p.warnings()[0].message,
         "'MOV(-1,Conveyor_Failures.Failures)': word instruction, not boolean logic: the boolean result is left as it is"
+    );
+    assert_eq!(
+        p.warnings()[5].message,
+        "'MOV(-1,Conveyor_Failures.Failures) → Conveyor_Failures.Overload': a word instruction writes this coil as a bit of a number: it is not derivable"
     );
     assert_eq!(
         p.documentation().get(&Signal::new("Horn")),
         Some("Motor's Horn Output")
     );
 
-    // By hand: the overload bit is only ever unlatched, OTU when
-    // ¬Overload: SSF1 = Overload (XIO negated, then the reset's ¬),
-    // SSF2 = SSF1 · Conveyor_Failures.Overload. The overload input drops
-    // (0): the bit falls, step 1, Overload to blame.
-    let before = values(&[("Overload", true), ("Conveyor_Failures.Overload", true)]);
-    let mut now = before.clone();
-    now.set(Signal::new("Overload"), false);
-    let e = explained(
-        &p,
-        "Conveyor_Failures.Overload",
-        &before,
-        &now,
-        Polarity::Off,
+    // By hand, with the failure bits observed (they are the PLC's tags):
+    // the summary is the AND of the five; the overload bit falls, step 1,
+    // the overload bit to blame.
+    let observable = Observability::parse(p.dialect(), &bits.join(",")).unwrap();
+    let summary =
+        SwitchingFunction::expand(&p, &Signal::new("Failure_Summary"), &observable).unwrap();
+    assert_eq!(
+        summary.notation(),
+        "Conveyor_Failures.Emergency_Stop * Conveyor_Failures.Misalignment * Conveyor_Failures.Overload * Conveyor_Failures.Break_Jammed * Conveyor_Failures.Contactor_Failure"
     );
+    let before = values(&bits.map(|b| (b, true)));
+    let mut now = before.clone();
+    now.set(Signal::new("Conveyor_Failures.Overload"), false);
+    let b = |s: &Signal| before.get(s);
+    let e = explain(
+        &summary,
+        |s| now.get(s),
+        Some(&b),
+        Polarity::Off,
+        p.documentation(),
+    )
+    .unwrap();
     assert_eq!(e.fault_step, Some(1));
     assert_eq!(
         culprits(&e),
-        ["Overload = 0 (expected 1): Motor's Overload Input"]
+        ["Conveyor_Failures.Overload = 0 (expected 1)"]
     );
 }
 

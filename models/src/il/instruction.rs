@@ -47,6 +47,10 @@ pub enum Outside {
     /// bit is written, which one is known only at run time. The result
     /// is left as it is.
     Indirect,
+    /// A word instruction writing a number whose bits are coils (Logix
+    /// `MOV(-1, Fail.Failures)` with `Fail.Overload` a BIT of it): the
+    /// next write gives that coil a value that is not boolean logic.
+    Bits,
 }
 
 /// One instruction, in either dialect.

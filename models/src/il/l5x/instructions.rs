@@ -360,18 +360,95 @@ impl<'d> Reader<'_, 'd> {
         Flow::Lit(signal, false, self.ids)
     }
 
-    /// Word instructions that write a tag a comparison reads say so.
-    pub(super) fn mark_compared_words(&mut self) {
-        for (index, dest) in std::mem::take(&mut self.words) {
+    /// Word instructions that write a tag a comparison reads say so; one
+    /// that writes a word whose bits are coils (`D.3`), or a member of a
+    /// structure whose BOOL members are coils (`MOV(-1, Fail.Failures)`
+    /// with `Fail.Overload` a BIT of that SINT), makes those coils not
+    /// derivable from there on: the PLC writes them as a number. Which
+    /// member a BIT aliases is the data type's business, so every coil of
+    /// the structure counts — never a coil read as derivable that a word
+    /// instruction writes.
+    pub(super) fn mark_word_writes(&mut self) {
+        let coils: Vec<String> = self
+            .out
+            .iter()
+            .filter(|i| {
+                matches!(
+                    i.operation,
+                    Operation::Write { .. } | Operation::Set | Operation::Reset
+                )
+            })
+            .filter_map(|i| match &i.operand {
+                Some(Operand::Signal(s)) => Some(s.name().to_string()),
+                _ => None,
+            })
+            .collect::<std::collections::BTreeSet<_>>()
+            .into_iter()
+            .collect();
+        let words = std::mem::take(&mut self.words);
+        for (index, dest) in words.into_iter().rev() {
+            let Some(ins) = self.out.get_mut(index) else {
+                continue;
+            };
             if self.compared.contains(&dest) {
-                if let Some(ins) = self.out.get_mut(index) {
-                    ins.text = format!(
-                        "{} (writes '{dest}', which a comparison contact reads as the PLC holds it)",
-                        ins.text
-                    );
-                }
+                ins.text = format!(
+                    "{} (writes '{dest}', which a comparison contact reads as the PLC holds it)",
+                    ins.text
+                );
             }
+            let (at, mnemonic, text) = (ins.at, ins.mnemonic.clone(), ins.text.clone());
+            let written: Vec<Instruction> = coils
+                .iter()
+                .filter(|c| holds(&dest, c))
+                .flat_map(|c| {
+                    [
+                        Instruction {
+                            at,
+                            text: format!("{text} → {c}"),
+                            mnemonic: mnemonic.clone(),
+                            operation: Operation::Outside(Outside::Bits),
+                            operand: None,
+                            operand_at: at,
+                        },
+                        Instruction {
+                            at,
+                            text: format!("OTE({c})"),
+                            mnemonic: "OTE".into(),
+                            operation: Operation::Write { negated: false },
+                            operand: Some(Operand::Signal(Signal::new(c))),
+                            operand_at: at,
+                        },
+                    ]
+                })
+                .collect();
+            self.out.splice(index + 1..index + 1, written);
         }
+    }
+}
+
+/// Whether a word instruction writing `dest` may write coil `coil`: a bit
+/// of it (`dest.3`, `dest.Member`), or a member of the structure `dest` is
+/// a member of. A program tag's `Program:<name>.` prefix is its scope, not
+/// a structure.
+fn holds(dest: &str, coil: &str) -> bool {
+    if coil.strip_prefix(dest).is_some_and(|r| r.starts_with('.')) {
+        return true;
+    }
+    let scope = |name: &str| -> usize {
+        match name.strip_prefix("Program:") {
+            Some(rest) => rest
+                .find('.')
+                .map_or(name.len(), |dot| "Program:".len() + dot + 1),
+            None => 0,
+        }
+    };
+    let tag = &dest[scope(dest)..];
+    match tag.rfind('.') {
+        Some(dot) => {
+            let structure = &dest[..scope(dest) + dot + 1];
+            coil.starts_with(structure)
+        }
+        None => false,
     }
 }
 
@@ -410,5 +487,22 @@ fn format_number(n: f64) -> String {
         format!("{}", n as i64)
     } else {
         format!("{n}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_word_write_holds_its_bits_and_its_structure_s_members() {
+        use super::holds;
+        assert!(holds("D", "D.3"));
+        assert!(holds("Fail.Failures", "Fail.Overload"));
+        assert!(holds(
+            "Program:Main.Fail.Failures",
+            "Program:Main.Fail.Overload"
+        ));
+        assert!(!holds("Program:Main.Count", "Program:Main.Seal"));
+        assert!(!holds("Count", "Counter.0"));
+        assert!(!holds("Fail.Failures", "Failures.Overload"));
     }
 }

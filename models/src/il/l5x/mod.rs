@@ -131,7 +131,7 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
     {
         reader.program(program);
     }
-    reader.mark_compared_words();
+    reader.mark_word_writes();
     let Reader {
         out, mut errors, ..
     } = reader;
