@@ -35,6 +35,7 @@ mod quickstart;
 mod real_programs;
 mod report;
 mod restart;
+mod reverse;
 mod robust;
 mod scheduling;
 mod sf;

@@ -33,6 +33,7 @@ pub(crate) fn opcua_config(endpoint: &str, pki_dir: &std::path::Path) -> OpcUaCo
         overflow_clear_after: OpcUaConfig::DEFAULT_OVERFLOW_CLEAR_AFTER,
         subscription_lifetime: OpcUaConfig::DEFAULT_SUBSCRIPTION_LIFETIME,
         verify_interval: OpcUaConfig::DEFAULT_VERIFY_INTERVAL,
+        reverse_listen: None,
     }
 }
 

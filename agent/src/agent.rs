@@ -156,6 +156,8 @@ pub struct Agent {
     session: zenoh::Session,
     metrics: Arc<Metrics>,
     metrics_addr: Option<SocketAddr>,
+    /// Where the source listens for its PLC to connect (reverse connect).
+    source_listening: Option<SocketAddr>,
     committed: watch::Receiver<u64>,
     health: (Health, Arc<CellHealth>),
     /// Configurations read again go to the cell loop here.
@@ -209,6 +211,13 @@ impl Agent {
     /// Where `/metrics` is served, if it is.
     pub fn metrics_addr(&self) -> Option<SocketAddr> {
         self.metrics_addr
+    }
+
+    /// Where the source listens for the PLC's server to connect to the
+    /// agent (`opcua.reverse_listen`; with port 0, the port the system
+    /// gave), if it was bound at start.
+    pub fn source_listening(&self) -> Option<SocketAddr> {
+        self.source_listening
     }
 
     /// Where the agent's Zenoh session listens, as locators
@@ -593,6 +602,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     };
     let writer = source.writer();
     let allowance = source.delivery_allowance();
+    let source_listening = source.listening();
     tracing::info!(cell = %config.cell, source = %source.describe(), "starting");
     let (source_tx, source_rx) = mpsc::channel(QUEUE_CAPACITY);
     let (source_stop, source_stopped) = watch::channel(false);
@@ -661,6 +671,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         session,
         metrics,
         metrics_addr,
+        source_listening,
         committed,
         health: (health, cell_health),
         reloads,

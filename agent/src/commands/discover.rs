@@ -759,5 +759,6 @@ pub(crate) fn connection(
         overflow_clear_after: OpcUaConfig::DEFAULT_OVERFLOW_CLEAR_AFTER,
         subscription_lifetime: OpcUaConfig::DEFAULT_SUBSCRIPTION_LIFETIME,
         verify_interval: OpcUaConfig::DEFAULT_VERIFY_INTERVAL,
+        reverse_listen: None,
     })
 }

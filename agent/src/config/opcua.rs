@@ -144,6 +144,10 @@ pub struct OpcUaConfig {
     /// added again, by a server that said nothing is found and monitored
     /// again.
     pub verify_interval: Duration,
+    /// Where the agent listens for the server to connect to it (OPC UA
+    /// reverse connect, `opcua.reverse_listen`): the server dials out, the
+    /// agent never dials `endpoint`, which then only names the server.
+    pub reverse_listen: Option<std::net::SocketAddr>,
 }
 
 impl OpcUaConfig {

@@ -127,6 +127,7 @@ pub(crate) struct RawOpcUa {
     pub(crate) overflow_clear_after: Option<Spanned<String>>,
     pub(crate) subscription_lifetime: Option<Spanned<String>>,
     pub(crate) verify_interval: Option<Spanned<String>>,
+    pub(crate) reverse_listen: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

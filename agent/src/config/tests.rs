@@ -605,3 +605,34 @@ fn a_tia_portal_block_gets_the_comments_of_the_tag_table_exported_beside_it() {
         "base/tia/PLC tags.xml:4:1: not well-formed XML: expected 'SW.Tags.PlcTagTable' tag, not 'Document' at 4:1"
     );
 }
+
+#[test]
+fn a_server_that_dials_out_is_listened_for_at_an_ip_address() {
+    let with = |v: &str| {
+        GOOD.replace(
+            "endpoint = \"opc.tcp://127.0.0.1:4840/\"",
+            &format!("endpoint = \"opc.tcp://127.0.0.1:4840/\"\nreverse_listen = \"{v}\""),
+        )
+    };
+    let c = parse(
+        "cell.toml",
+        &with("opc.tcp://0.0.0.0:4843"),
+        Path::new("base"),
+        &mem(),
+    )
+    .unwrap();
+    assert_eq!(
+        c.opcua.unwrap().reverse_listen,
+        Some(SocketAddr::from(([0, 0, 0, 0], 4843)))
+    );
+    assert!(parse("cell.toml", GOOD, Path::new("base"), &mem())
+        .unwrap()
+        .opcua
+        .unwrap()
+        .reverse_listen
+        .is_none());
+    assert_eq!(
+        errors(&with("opc.tcp://agent-host:4843")),
+        "cell.toml:7:18: opcua.reverse_listen: 'opc.tcp://agent-host:4843' is not opc.tcp://ADDRESS:PORT with an IP address: write e.g. opc.tcp://0.0.0.0:4843"
+    );
+}

@@ -168,6 +168,12 @@ impl SimulatedCnc {
         self.server.addr()
     }
 
+    /// Dials out to a client listening at `client` (OPC UA reverse
+    /// connect).
+    pub fn reverse_connect(&self, client: SocketAddr) {
+        self.server.reverse_connect(client);
+    }
+
     /// The namespace index of the tags.
     pub fn namespace(&self) -> u16 {
         self.server.namespace()

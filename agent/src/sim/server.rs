@@ -119,6 +119,8 @@ pub struct SimServer {
     addr: SocketAddr,
     /// The folder the variables are in.
     app: String,
+    /// The clients it dials (reverse connect), by target id.
+    dialled: Arc<Mutex<Vec<String>>>,
 }
 
 impl SimServer {
@@ -192,6 +194,9 @@ impl SimServer {
             .limits_mut()
             .subscriptions
             .max_monitored_item_queue_size = 1000;
+        // A client it connects to (reverse connect) that was not listening
+        // is tried again a second later.
+        builder.config_mut().reverse_connect_failure_delay_ms = 1_000;
         let (server, handle) = builder.build()?;
         crate::sources::pki::protect_own_key(&options.pki_dir, key_existed)?;
         let manager = handle
@@ -232,6 +237,7 @@ impl SimServer {
             ns,
             addr,
             app: app.to_string(),
+            dialled: Arc::default(),
         })
     }
 
@@ -553,6 +559,23 @@ impl SimServer {
         self.addr
     }
 
+    /// Dials out to a client listening at `client` (OPC UA reverse
+    /// connect), saying its endpoint URL, and again whenever that
+    /// connection ends, as a PLC in a DMZ reaches its clients.
+    pub fn reverse_connect(&self, client: SocketAddr) {
+        let id = format!("client-{client}");
+        self.dialled
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .push(id.clone());
+        self.handle
+            .add_reverse_connect_target(opcua::server::ReverseConnectTargetConfig {
+                address: client,
+                endpoint_url: self.endpoint(),
+                id,
+            });
+    }
+
     /// The namespace index of the tags.
     pub fn namespace(&self) -> u16 {
         self.ns
@@ -621,8 +644,17 @@ impl SimServer {
         Ok(log)
     }
 
-    /// Stops the server; connected clients see the connection drop.
+    /// Stops the server; connected clients see the connection drop, and
+    /// it dials none any more.
     pub fn stop(&self) {
+        for id in self
+            .dialled
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .drain(..)
+        {
+            self.handle.remove_reverse_connect_target(&id);
+        }
         self.handle.cancel();
     }
 }

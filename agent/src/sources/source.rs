@@ -159,6 +159,12 @@ pub trait Source: Send + 'static {
         Duration::ZERO
     }
 
+    /// Where it listens for its PLC to connect to it (an OPC UA server's
+    /// reverse connect), once bound.
+    fn listening(&self) -> Option<std::net::SocketAddr> {
+        None
+    }
+
     /// Runs until `shutdown` completes, sending events on `tx`.
     ///
     /// # Errors

@@ -183,6 +183,7 @@ impl Validator<'_> {
                 d
             }
         };
+        let reverse_listen = raw.reverse_listen.and_then(|r| self.reverse_listen(&r));
         Some(OpcUaConfig {
             endpoint,
             policy,
@@ -197,7 +198,30 @@ impl Validator<'_> {
             overflow_clear_after,
             subscription_lifetime,
             verify_interval,
+            reverse_listen,
         })
+    }
+
+    /// `opcua.reverse_listen`: `opc.tcp://ADDRESS:PORT` with an IP address
+    /// (`0.0.0.0` or `[::]` for every interface).
+    fn reverse_listen(&mut self, raw: &Spanned<String>) -> Option<std::net::SocketAddr> {
+        let text = raw.get_ref().trim();
+        let address = text
+            .strip_prefix("opc.tcp://")
+            .map(|a| a.trim_end_matches('/'));
+        match address.map(str::parse::<std::net::SocketAddr>) {
+            Some(Ok(a)) => Some(a),
+            _ => {
+                self.problem(
+                    raw.span(),
+                    "opcua.reverse_listen",
+                    format!(
+                        "'{text}' is not opc.tcp://ADDRESS:PORT with an IP address: write e.g. opc.tcp://0.0.0.0:4843"
+                    ),
+                );
+                None
+            }
+        }
     }
 
     pub(super) fn identity(&mut self, id: raw::RawIdentity) -> Option<Identity> {

@@ -154,3 +154,40 @@ fn session_timeout(config: &OpcUaConfig) -> u32 {
         .as_millis();
     u32::try_from(ms).unwrap_or(u32::MAX)
 }
+
+/// The server's endpoint with the configured policy and mode, at the
+/// configured address. The server's own endpoint URL is not used: a server
+/// behind NAT or port forwarding advertises an address the agent may not
+/// reach.
+pub(super) async fn server_endpoint(
+    client: &opcua::client::Client,
+    config: &OpcUaConfig,
+    reverse: Option<&std::sync::Arc<tokio::net::TcpListener>>,
+) -> Result<opcua::types::EndpointDescription, opcua::types::Error> {
+    let policy = ua_policy(config.policy);
+    let mode = ua_mode(config.mode);
+    let endpoints = match reverse {
+        Some(listener) => super::reverse::endpoints(client, listener, &config.endpoint).await?,
+        None => {
+            client
+                .get_server_endpoints_from_url(config.endpoint.as_str())
+                .await?
+        }
+    };
+    let mut endpoint = endpoints
+        .into_iter()
+        .find(|e| {
+            e.security_mode == mode && UaPolicy::from_uri(e.security_policy_uri.as_ref()) == policy
+        })
+        .ok_or_else(|| {
+            opcua::types::Error::new(
+                opcua::types::StatusCode::BadSecurityPolicyRejected,
+                format!(
+                    "the server offers no endpoint with security policy {} and mode {mode}",
+                    policy.to_str()
+                ),
+            )
+        })?;
+    endpoint.endpoint_url = config.endpoint.as_str().into();
+    Ok(endpoint)
+}

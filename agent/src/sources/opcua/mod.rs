@@ -45,6 +45,7 @@ mod names;
 mod once;
 mod overflow;
 mod resume;
+mod reverse;
 mod sequence;
 mod subscription;
 mod switches;
@@ -52,7 +53,7 @@ mod tend;
 
 pub use crate::config::node::{Namespace, TagNode};
 pub use client::client;
-use client::{identity, namespace_array, ua_mode, ua_policy};
+use client::{identity, namespace_array, server_endpoint};
 pub use names::Names;
 pub use once::{connect_once, server_identity, ServerIdentity};
 use switches::{pulse, reset_switches, Writes};
@@ -62,7 +63,6 @@ pub use subscription::{reading, OVERFLOW_ALARM};
 use futures_util::future::BoxFuture;
 use futures_util::{FutureExt, StreamExt};
 use opcua::client::{Session, SessionConnectMode, SessionPollResult};
-use opcua::crypto::SecurityPolicy as UaPolicy;
 
 use tokio::sync::mpsc;
 
@@ -81,6 +81,9 @@ pub struct OpcUaSource {
     /// with its name and address.
     switches: BTreeMap<usize, String>,
     writes: Option<mpsc::Receiver<WriteRequest>>,
+    /// `opcua.reverse_listen` bound when the source was made (`None`:
+    /// not configured, or to be bound when it runs).
+    reverse: Option<std::net::TcpListener>,
 }
 
 impl OpcUaSource {
@@ -98,12 +101,25 @@ impl OpcUaSource {
             .into_iter()
             .filter_map(|i| Some((i, format!("{} ({})", tags.get(i)?.name, tags[i].address))))
             .collect();
+        // Bound now, so that its address is known before the source runs;
+        // a port still held by the source this one replaces is bound when
+        // it runs.
+        let reverse = config
+            .reverse_listen
+            .and_then(|addr| match reverse::bind(addr) {
+                Ok(l) => Some(l),
+                Err(e) => {
+                    tracing::warn!(%addr, error = %e, "cannot listen for the OPC UA server yet");
+                    None
+                }
+            });
         OpcUaSource {
             cell: cell.into(),
             tags: TagTable::new(&config, &tags),
             config,
             switches,
             writes: None,
+            reverse,
         }
     }
 }
@@ -147,6 +163,10 @@ impl Source for OpcUaSource {
         self.config.publishing_interval
     }
 
+    fn listening(&self) -> Option<std::net::SocketAddr> {
+        self.reverse.as_ref().and_then(|l| l.local_addr().ok())
+    }
+
     fn writer(&mut self) -> Option<WriteSender> {
         if self.switches.is_empty() {
             return None;
@@ -166,7 +186,20 @@ impl Source for OpcUaSource {
                 rx: self.writes,
                 switches: self.switches,
             };
-            run_writing(&self.cell, &self.config, self.tags, tx, writes, shutdown).await
+            let reverse = match self.config.reverse_listen {
+                Some(addr) => Some(reverse::listen(addr, self.reverse).await),
+                None => None,
+            };
+            run_writing(
+                &self.cell,
+                &self.config,
+                self.tags,
+                tx,
+                writes,
+                reverse,
+                shutdown,
+            )
+            .await
         }
         .boxed()
     }
@@ -191,7 +224,11 @@ pub async fn run(
         switches: BTreeMap::new(),
     };
     let tags = TagTable::new(config, tags);
-    run_writing(cell, config, tags, tx, writes, shutdown).await
+    let reverse = match config.reverse_listen {
+        Some(addr) => Some(reverse::listen(addr, None).await),
+        None => None,
+    };
+    run_writing(cell, config, tags, tx, writes, reverse, shutdown).await
 }
 
 async fn run_writing(
@@ -200,6 +237,7 @@ async fn run_writing(
     tags: TagTable,
     tx: SourceSender,
     mut writes: Writes,
+    reverse: Option<Arc<tokio::net::TcpListener>>,
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), SourceError> {
     // Pulses under way; each writes its switch off before it ends.
@@ -234,7 +272,7 @@ async fn run_writing(
     let mut said_down = false;
     loop {
         let attempt = async {
-            let endpoint = server_endpoint(&client, config).await?;
+            let endpoint = server_endpoint(&client, config, reverse.as_ref()).await?;
             // An untrusted server certificate is said with what to do, and
             // left in rejected/ for review; it is looked at again on the
             // next attempt, so trusting it while the agent runs is enough.
@@ -245,7 +283,12 @@ async fn run_writing(
                     why,
                 ));
             }
-            client.connect_to_endpoint_directly(endpoint, token.clone())
+            match &reverse {
+                Some(listener) => reverse::session(&client, listener, endpoint, token.clone()),
+                None => client
+                    .connect_to_endpoint_directly(endpoint, token.clone())
+                    .map(|(s, l)| (s, Box::pin(l.enter()) as reverse::Events)),
+            }
         };
         let (session, event_loop) = tokio::select! {
             _ = &mut shutdown => return Ok(()),
@@ -267,7 +310,7 @@ async fn run_writing(
             }
         };
         backoff = Duration::from_millis(250);
-        let mut events = Box::pin(event_loop.enter());
+        let mut events = event_loop;
         let mut subscribed = false;
         // Drive the event loop until the session is usable, then subscribe.
         loop {
@@ -392,37 +435,6 @@ async fn run_writing(
 /// The read fails or the value is not an array of strings.
 pub async fn namespaces(session: &Session) -> Result<Vec<String>, String> {
     namespace_array(session).await
-}
-
-/// The server's endpoint with the configured policy and mode, at the
-/// configured address. The server's own endpoint URL is not used: a server
-/// behind NAT or port forwarding advertises an address the agent may not
-/// reach.
-async fn server_endpoint(
-    client: &opcua::client::Client,
-    config: &OpcUaConfig,
-) -> Result<opcua::types::EndpointDescription, opcua::types::Error> {
-    let policy = ua_policy(config.policy);
-    let mode = ua_mode(config.mode);
-    let endpoints = client
-        .get_server_endpoints_from_url(config.endpoint.as_str())
-        .await?;
-    let mut endpoint = endpoints
-        .into_iter()
-        .find(|e| {
-            e.security_mode == mode && UaPolicy::from_uri(e.security_policy_uri.as_ref()) == policy
-        })
-        .ok_or_else(|| {
-            opcua::types::Error::new(
-                opcua::types::StatusCode::BadSecurityPolicyRejected,
-                format!(
-                    "the server offers no endpoint with security policy {} and mode {mode}",
-                    policy.to_str()
-                ),
-            )
-        })?;
-    endpoint.endpoint_url = config.endpoint.as_str().into();
-    Ok(endpoint)
 }
 
 /// What every supervisor of this source needs.

@@ -1,13 +1,15 @@
 //! One-off OPC UA connections (`cellwatch discover`, `trust-server`): no
-//! retries, and a refusal said at once with what to do about it.
+//! retries, and a refusal said at once with what to do about it. A cell
+//! whose server connects to the agent (`opcua.reverse_listen`) is reached
+//! the same way: the command listens there for the server's connection.
 
 use std::sync::Arc;
 use std::time::Duration;
 
 use opcua::client::Session;
 
+use super::client::server_endpoint;
 use super::client::{self, identity};
-use super::server_endpoint;
 use crate::config::OpcUaConfig;
 use crate::sources::SourceError;
 
@@ -30,16 +32,32 @@ pub async fn connect_once(
 > {
     let mut client = client::client_retrying(name, config, 0)?;
     let token = identity(config)?;
-    let endpoint = endpoint_once(&client, config).await?;
+    let reverse = reverse_listener(config).await?;
+    let endpoint = endpoint_once(&client, config, reverse.as_ref()).await?;
     // An untrusted server certificate fails here, at once, with what to do
     // (the stack would only retry).
     if let Some(why) = crate::sources::pki::untrusted(config, &endpoint) {
         return Err(SourceError::Connect(format!("{}: {why}", config.endpoint)));
     }
-    let (session, event_loop) = client
-        .connect_to_endpoint_directly(endpoint, token)
-        .map_err(|e| SourceError::Connect(format!("{}: {e}", config.endpoint)))?;
-    let mut task = event_loop.spawn();
+    let connected = match &reverse {
+        Some(listener) => super::reverse::session(&client, listener, endpoint, token),
+        None => client
+            .connect_to_endpoint_directly(endpoint, token)
+            .map(|(s, l)| (s, Box::pin(l.enter()) as super::reverse::Events)),
+    };
+    let (session, mut events) =
+        connected.map_err(|e| SourceError::Connect(format!("{}: {e}", config.endpoint)))?;
+    // The event loop on its own task, ending with the status it ended on.
+    let mut task = tokio::spawn(async move {
+        use futures_util::TryStreamExt;
+        loop {
+            match events.try_next().await {
+                Ok(None) => break opcua::types::StatusCode::Good,
+                Err(e) => break e,
+                Ok(Some(_)) => {}
+            }
+        }
+    });
     // No retries: a refused connection ends the event loop at once, with
     // the server's reason.
     let outcome = tokio::time::timeout(Duration::from_secs(15), async {
@@ -81,7 +99,8 @@ pub struct ServerIdentity {
 /// No client, no answer, no such endpoint.
 pub async fn server_identity(config: &OpcUaConfig) -> Result<ServerIdentity, SourceError> {
     let client = client::client_retrying("trust", config, 0)?;
-    let endpoint = endpoint_once(&client, config).await?;
+    let reverse = reverse_listener(config).await?;
+    let endpoint = endpoint_once(&client, config, reverse.as_ref()).await?;
     Ok(ServerIdentity {
         certificate: endpoint.server_certificate.as_ref().to_vec(),
         application_name: endpoint.server.application_name.text.to_string(),
@@ -134,8 +153,9 @@ fn refused(config: &OpcUaConfig, status: Option<opcua::types::StatusCode>) -> St
 async fn endpoint_once(
     client: &opcua::client::Client,
     config: &OpcUaConfig,
+    reverse: Option<&Arc<tokio::net::TcpListener>>,
 ) -> Result<opcua::types::EndpointDescription, SourceError> {
-    tokio::time::timeout(ENDPOINTS_ANSWER, server_endpoint(client, config))
+    tokio::time::timeout(ENDPOINTS_ANSWER, server_endpoint(client, config, reverse))
         .await
         .map_err(|_| {
             SourceError::Connect(format!(
@@ -145,6 +165,27 @@ async fn endpoint_once(
             ))
         })?
         .map_err(|e| SourceError::Connect(format!("{}: {e}", config.endpoint)))
+}
+
+/// Where a one-off connection listens for the server to connect, for a
+/// cell configured with `opcua.reverse_listen`.
+///
+/// # Errors
+/// The address is in use (by the cell's agent, most likely).
+async fn reverse_listener(
+    config: &OpcUaConfig,
+) -> Result<Option<Arc<tokio::net::TcpListener>>, SourceError> {
+    let Some(addr) = config.reverse_listen else {
+        return Ok(None);
+    };
+    match tokio::net::TcpListener::bind(addr).await {
+        Ok(l) => Ok(Some(Arc::new(l))),
+        Err(e) => Err(SourceError::Connect(format!(
+            "{}: cannot listen on {addr} for the server to connect (opcua.reverse_listen): {e}; if the cell's agent is running there, stop it first (an untrusted server certificate it saw is in {}/rejected/)",
+            config.endpoint,
+            config.pki_dir.display()
+        ))),
+    }
 }
 
 /// How long a one-off connection waits for the server's endpoints.
