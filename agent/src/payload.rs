@@ -184,6 +184,7 @@ impl AlarmPayload {
                     expected: c.expected,
                     comment: c.comment.clone(),
                     trigger: c.trigger,
+                    compared: None,
                 })
                 .collect(),
             message: self.message.clone(),
