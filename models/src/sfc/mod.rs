@@ -15,7 +15,8 @@
 //! step-number word). [`SfcChecks`] supervises them: a step active longer
 //! than its supervision time is *stuck*, and its alarm carries the
 //! criteria analysis of every transition leaving it — the operands that
-//! keep it from firing, with values, expected values and comments.
+//! keep it from firing, with values, expected values and comments (a
+//! comparison with the number it compares and the limit it needs).
 //!
 //! Charts are read from a TOML text form ([`text::parse`]) or from the SFC
 //! bodies of a PLCopen XML project ([`plcopen::parse`]); [`read`] picks. [`run::Runner`]

@@ -25,7 +25,9 @@
 //! logic of its coil or output variable of the transition's name), or
 //! contacts and boxes in the chart wired to the transition's condition,
 //! read by the PLCopen ladder reader. A step's flag is the IEC step flag `NAME.X`;
-//! `documentation` becomes the comment of a step or transition.
+//! `documentation` becomes the comment of a step or transition, and that
+//! of a declared variable (`T1`, `rSpindleSpeed`) the comment of the
+//! operands that read it ([`super::Sfc::variables`]).
 //!
 //! The result goes through the same checks as the TOML form: every
 //! problem is `FILE:LINE:COL: what`, at the XML element that is wrong: a
@@ -39,6 +41,7 @@ use toml::Spanned;
 
 use super::text::{build, Errors, OneOrMany, RawChart, RawFile, RawStep, RawTransition};
 use super::Sfc;
+use crate::comments::CommentDb;
 use crate::expr::Expr;
 use crate::signal::Signal;
 
@@ -90,7 +93,23 @@ pub fn parse(file: &str, text: &str, known: &dyn Fn(&Signal) -> bool) -> Result<
         );
         return Err(errors.finish());
     }
-    build(errors, &raw, known, &st_condition)
+    let mut sfc = build(errors, &raw, known, &st_condition)?;
+    sfc.variables = variables(&doc);
+    Ok(sfc)
+}
+
+/// The documentation of every variable the project declares (a POU's
+/// interface, a resource's or configuration's global variables), by name:
+/// `<localVars><variable name="T1">…<documentation>`.
+fn variables(doc: &Document<'_>) -> CommentDb {
+    doc.descendants()
+        .filter(|n| n.has_tag_name("variable"))
+        .filter(|n| {
+            n.parent_element()
+                .is_some_and(|p| p.tag_name().name().ends_with("Vars"))
+        })
+        .filter_map(|n| Some((Signal::new(n.attribute("name")?), documentation(n)?)))
+        .collect()
 }
 
 fn child<'a, 'i>(node: Node<'a, 'i>, name: &str) -> Option<Node<'a, 'i>> {

@@ -30,6 +30,7 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::{Chart, Sfc, Step, StepRef, Transition};
+use crate::comments::CommentDb;
 use crate::expr::Expr;
 use crate::signal::Signal;
 
@@ -319,7 +320,10 @@ pub(super) fn build(
         }
     }
     if errors.list.is_empty() {
-        Ok(Sfc { charts })
+        Ok(Sfc {
+            charts,
+            variables: CommentDb::default(),
+        })
     } else {
         Err(errors.finish())
     }
