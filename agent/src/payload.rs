@@ -27,6 +27,11 @@ pub struct CulpritPayload {
     pub comment: Option<String>,
     /// Changed just before the fault.
     pub trigger: bool,
+    /// For a comparison (`address` its text): the variable compared, its
+    /// number and what it needs, `rSpindleSpeed = 1650.0 (needs >= 1800)`;
+    /// absent for a contact.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub compared: Option<String>,
 }
 
 impl From<&Culprit> for CulpritPayload {
@@ -37,12 +42,17 @@ impl From<&Culprit> for CulpritPayload {
             expected: c.expected,
             comment: c.comment.clone(),
             trigger: c.trigger,
+            compared: c
+                .compared
+                .as_ref()
+                .map(|k| format!("{} = {} (needs {})", k.variable, k.value, k.needs)),
         }
     }
 }
 
 impl CulpritPayload {
-    /// One line for people: `X0.06 = 0 (expected 1): Y Over Travel Limit SW (B)   <- trigger`.
+    /// One line for people: `X0.06 = 0 (expected 1): Y Over Travel Limit SW (B)   <- trigger`;
+    /// a comparison `rSpindleSpeed = 1650.0 (needs >= 1800): Spindle speed`.
     pub fn line(&self) -> String {
         let comment = self
             .comment
@@ -50,12 +60,15 @@ impl CulpritPayload {
             .map(|c| format!(": {c}"))
             .unwrap_or_default();
         let trigger = if self.trigger { "   <- trigger" } else { "" };
-        format!(
-            "{} = {} (expected {}){comment}{trigger}",
-            self.address,
-            u8::from(self.value),
-            u8::from(self.expected)
-        )
+        match &self.compared {
+            Some(compared) => format!("{compared}{comment}{trigger}"),
+            None => format!(
+                "{} = {} (expected {}){comment}{trigger}",
+                self.address,
+                u8::from(self.value),
+                u8::from(self.expected)
+            ),
+        }
     }
 }
 
@@ -184,6 +197,7 @@ impl AlarmPayload {
                     expected: c.expected,
                     comment: c.comment.clone(),
                     trigger: c.trigger,
+                    compared: None,
                 })
                 .collect(),
             message: self.message.clone(),

@@ -14,6 +14,11 @@
 //! *fault step* is the lowest-numbered step on those paths; the *culprits*
 //! are the contacts reached, each with the value that would clear it, and
 //! those that changed since the values before are the trigger, listed first.
+//!
+//! A culprit that is a comparison (`rSpindleSpeed >= 1800`) is shown with
+//! the number compared once [`read_comparisons`] is given the numbers:
+//! `rSpindleSpeed = 1650.0 (needs >= 1800)`, with the variable's comment;
+//! a contact as `X2 = 0 (expected 1)`.
 
 use std::collections::HashSet;
 use std::fmt;
@@ -24,6 +29,7 @@ use crate::il::Op;
 use crate::logic::Term;
 use crate::signal::Signal;
 use crate::switching::SwitchingFunction;
+use crate::value::{CmpOp, Comparison, Num, Operand};
 
 /// Which coil value is the fault.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -76,22 +82,119 @@ pub struct Culprit {
     pub comment: Option<String>,
     /// It changed between the values before and at the fault.
     pub trigger: bool,
+    /// For a comparison, the number compared and what it needs
+    /// ([`read_comparisons`]); `None` for a contact, or while the numbers
+    /// are not known.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub compared: Option<Compared>,
+}
+
+/// What a comparison culprit compared: `rSpindleSpeed = 1650.0 (needs >= 1800)`.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct Compared {
+    /// The variable compared (`rSpindleSpeed`).
+    pub variable: Signal,
+    /// Its value at the fault, as the PLC gave it (`1650.0`).
+    pub value: String,
+    /// What it would need to take the fault away: `>= 1800`; against
+    /// another variable, `>= P2, P2 = 12`.
+    pub needs: String,
 }
 
 impl fmt::Display for Culprit {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "{} = {} (expected {})",
-            self.address,
-            u8::from(self.value),
-            u8::from(self.expected)
-        )?;
+        match &self.compared {
+            Some(c) => write!(f, "{} = {} (needs {})", c.variable, c.value, c.needs)?,
+            None => write!(
+                f,
+                "{} = {} (expected {})",
+                self.address,
+                u8::from(self.value),
+                u8::from(self.expected)
+            )?,
+        }
         if let Some(c) = &self.comment {
             write!(f, ": {c}")?;
         }
         Ok(())
     }
+}
+
+/// A number as a culprit shows it: integers as they are, floating point
+/// numbers with their point (`1650.0`).
+pub fn show_number(n: Num) -> String {
+    match n {
+        Num::Float(v) => format!("{v:?}"),
+        other => other.to_string(),
+    }
+}
+
+/// Gives every culprit that is a comparison the number of the variable it
+/// compares (`number`) and what it needs; its comment becomes the
+/// variable's comment in `comments`, when it has one. A culprit whose
+/// variable has no known number is left as it is.
+pub fn read_comparisons(
+    culprits: &mut [Culprit],
+    number: impl Fn(&Signal) -> Option<Num>,
+    comments: &CommentDb,
+) {
+    for c in culprits {
+        if c.compared.is_some() {
+            continue;
+        }
+        let Some(cmp) = Comparison::of_signal(&c.address) else {
+            continue;
+        };
+        let Some(value) = number(&cmp.lhs) else {
+            continue;
+        };
+        // The comparison must hold to take the fault away, or fail.
+        let op = if c.expected { cmp.op } else { negated(cmp.op) };
+        let needs = match &cmp.rhs {
+            Operand::Const(n) => format!("{} {n}", op.as_str()),
+            Operand::Tag(t) => match number(t) {
+                Some(v) => format!("{} {t}, {t} = {}", op.as_str(), show_number(v)),
+                None => format!("{} {t}", op.as_str()),
+            },
+        };
+        if let Some(comment) = comments.get(&cmp.lhs) {
+            c.comment = Some(comment.to_string());
+        }
+        c.compared = Some(Compared {
+            variable: cmp.lhs,
+            value: show_number(value),
+            needs,
+        });
+    }
+}
+
+/// The operator that holds exactly when `op` does not.
+fn negated(op: CmpOp) -> CmpOp {
+    match op {
+        CmpOp::Gt => CmpOp::Le,
+        CmpOp::Ge => CmpOp::Lt,
+        CmpOp::Lt => CmpOp::Ge,
+        CmpOp::Le => CmpOp::Gt,
+        CmpOp::Eq => CmpOp::Ne,
+        CmpOp::Ne => CmpOp::Eq,
+    }
+}
+
+/// The comment of `signal` in `comments`; for an instance's output with
+/// none of its own (`T1.Q`, `Fb1.Done`), the instance's (`T1`).
+pub fn comment_of(comments: &CommentDb, signal: &Signal) -> Option<String> {
+    if let Some(c) = comments.get(signal) {
+        return Some(c.to_string());
+    }
+    let (instance, output) = signal.name().rsplit_once('.')?;
+    let is_output = output.starts_with(|c: char| c.is_ascii_alphabetic())
+        && output
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_');
+    if !is_output || instance.is_empty() {
+        return None;
+    }
+    comments.get(&Signal::new(instance)).map(str::to_string)
 }
 
 /// What the check found.
@@ -243,6 +346,7 @@ fn walk(
                 value,
                 trigger,
                 address,
+                compared: None,
             }
         })
         .collect();
@@ -392,6 +496,89 @@ mod tests {
         .unwrap();
         let c: Vec<&str> = e.culprits.iter().map(|c| c.address.name()).collect();
         assert_eq!(c, ["%IX0.2"]);
+    }
+
+    #[test]
+    fn a_comparison_culprit_shows_its_variable_and_what_it_needs() {
+        // Enable = speed reached * door shut * P1 below P2 * not in mode 3.
+        let sf = SwitchingFunction::from_expr(
+            Signal::new("Enable"),
+            &crate::expr::Expr::parse(
+                "rSpindleSpeed >= 1800 * -bDoorOpen * P1 < P2 * -(iMode == 3) * bReady",
+            )
+            .unwrap(),
+        );
+        let bits = |s: &Signal| {
+            Some(match s.name() {
+                "rSpindleSpeed >= 1800" | "P1 < P2" => false,
+                "bDoorOpen" | "iMode == 3" | "bReady" => true,
+                other => panic!("{other}"),
+            })
+        };
+        let numbers = |s: &Signal| match s.name() {
+            "rSpindleSpeed" => Some(Num::Float(1650.0)),
+            "P1" => Some(Num::Int(12)),
+            "P2" => Some(Num::Int(10)),
+            "iMode" => Some(Num::UInt(3)),
+            _ => None,
+        };
+        let comments: CommentDb = [
+            ("rSpindleSpeed", "Spindle speed"),
+            ("bDoorOpen", "Door open"),
+            ("iMode", "Operating mode"),
+        ]
+        .into_iter()
+        .map(|(a, c)| (Signal::new(a), c.to_string()))
+        .collect();
+        let mut e = explain(&sf, bits, None, Polarity::Off, &comments).unwrap();
+        let before: Vec<String> = e.culprits.iter().map(ToString::to_string).collect();
+        assert_eq!(
+            before,
+            [
+                "rSpindleSpeed >= 1800 = 0 (expected 1)",
+                "bDoorOpen = 1 (expected 0): Door open",
+                "P1 < P2 = 0 (expected 1)",
+                "iMode == 3 = 1 (expected 0)",
+            ],
+            "without numbers a comparison is a contact"
+        );
+        read_comparisons(&mut e.culprits, numbers, &comments);
+        let after: Vec<String> = e.culprits.iter().map(ToString::to_string).collect();
+        assert_eq!(
+            after,
+            [
+                "rSpindleSpeed = 1650.0 (needs >= 1800): Spindle speed",
+                "bDoorOpen = 1 (expected 0): Door open",
+                "P1 = 12 (needs < P2, P2 = 10)",
+                "iMode = 3 (needs != 3): Operating mode",
+            ]
+        );
+        // The address stays the comparison's; the culprit says what it is.
+        assert_eq!(e.culprits[0].address.name(), "rSpindleSpeed >= 1800");
+        assert!(!e.culprits[0].value && e.culprits[0].expected);
+        assert_eq!(
+            serde_json::to_value(&e.culprits[0]).unwrap()["compared"],
+            serde_json::json!({"variable": "rSpindleSpeed", "value": "1650.0", "needs": ">= 1800"})
+        );
+        assert!(serde_json::to_value(&e.culprits[1])
+            .unwrap()
+            .get("compared")
+            .is_none());
+    }
+
+    #[test]
+    fn an_instance_output_without_a_comment_of_its_own_has_its_instance_s() {
+        let comments: CommentDb = [
+            (Signal::new("T1"), "Clamp settle time".to_string()),
+            (Signal::new("X0"), "Input byte 0".to_string()),
+        ]
+        .into_iter()
+        .collect();
+        let of = |s: &str| comment_of(&comments, &Signal::new(s));
+        assert_eq!(of("T1.Q").as_deref(), Some("Clamp settle time"));
+        assert_eq!(of("T1"), of("T1.Q"));
+        assert_eq!(of("X0.07"), None, "a bit of a byte is no output");
+        assert_eq!(of("C1.Q"), None);
     }
 
     fn values_iec(s: &str) -> Values {

@@ -585,3 +585,147 @@ fn a_contact_fault_in_a_batch_outlasting_its_delay_is_raised_and_cleared() {
     let step = e.on_readings(&[at(20_000, false), at(20_900, true)], 21_000);
     assert_eq!(step.alarms().filter(|(a, _, _)| a.id == "ese").count(), 0);
 }
+
+/// A coil that is a comparison: its culprit, raised through the engine,
+/// names the number compared and what it needs, with the variable's
+/// comment.
+#[test]
+fn a_comparison_culprit_names_the_number_it_compared() {
+    let tags: Vec<Tag> = ["TEMP", "LIMIT", "X1"]
+        .iter()
+        .map(|n| Tag {
+            name: n.to_lowercase(),
+            address: Signal::new(n),
+        })
+        .collect();
+    let check = |id: &str, condition: &str| SwitchingCheck {
+        text: None,
+        id: id.into(),
+        sf: SwitchingFunction::from_expr(Signal::new(id), &Expr::parse(condition).unwrap()),
+        polarity: Polarity::On,
+        severity: Severity::High,
+        fault_type: id.to_uppercase(),
+        comments: [
+            (Signal::new("X1"), "Coolant on".to_string()),
+            (Signal::new("TEMP"), "Spindle temperature".to_string()),
+        ]
+        .into_iter()
+        .collect(),
+        armed_when: None,
+    };
+    let sets: Vec<Box<dyn CheckSet>> = vec![Box::new(SwitchingChecks::new(vec![
+        check("hot", "TEMP > 80.5 * X1"),
+        check("over", "TEMP >= LIMIT"),
+    ]))];
+    let mut e = CellEngine::new("m01", tags, sets, StateRules::default()).unwrap();
+    e.on_connection(true, 1);
+    contact(&mut e, "X1", true, 1);
+    number(&mut e, "LIMIT", Num::Int(95), 1);
+    number(&mut e, "TEMP", Num::Float(70.0), 2);
+    let step = number(&mut e, "TEMP", Num::Float(85.25), 3);
+    let raised: Vec<(String, String)> = step
+        .alarms()
+        .filter(|(_, t, _)| *t == Transition::Raised)
+        .map(|(a, _, _)| {
+            (
+                a.message.clone(),
+                a.culprits
+                    .iter()
+                    .map(ToString::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            )
+        })
+        .collect();
+    assert_eq!(
+        raised,
+        [(
+            "HOT at step 1: TEMP = 85.25 (needs <= 80.5): Spindle temperature".to_string(),
+            "TEMP = 85.25 (needs <= 80.5): Spindle temperature, X1 = 1 (expected 0): Coolant on"
+                .to_string()
+        )]
+    );
+    let step = number(&mut e, "TEMP", Num::Float(96.0), 4);
+    let (over, _, _) = step
+        .alarms()
+        .find(|(a, t, _)| a.id == "over" && *t == Transition::Raised)
+        .unwrap();
+    assert_eq!(
+        over.message,
+        "OVER: TEMP = 96.0 (needs < LIMIT, LIMIT = 95): Spindle temperature"
+    );
+    assert_eq!(
+        over.culprits[0].to_string(),
+        "TEMP = 96.0 (needs < LIMIT, LIMIT = 95): Spindle temperature"
+    );
+}
+
+/// A check set that raises one alarm blaming a comparison, as a set that
+/// reads no numbers does.
+struct BlamesHot;
+
+impl CheckSet for BlamesHot {
+    fn inputs(&self) -> Vec<Signal> {
+        vec![Signal::new("TEMP > 80")]
+    }
+
+    fn alarms(&self) -> Vec<cellwatch_models::engine::Declared> {
+        Vec::new()
+    }
+
+    fn on_change(
+        &mut self,
+        signal: &Signal,
+        value: Option<bool>,
+        _before: Option<bool>,
+        _now: u64,
+        out: &mut Vec<cellwatch_models::engine::Finding>,
+    ) {
+        out.push(cellwatch_models::engine::Finding {
+            id: "hot".into(),
+            kind: AlarmKind::Switching,
+            severity: Severity::High,
+            fault_type: "HOT".into(),
+            latched: false,
+            active: value == Some(true),
+            fault_step: None,
+            culprits: vec![cellwatch_models::explain::Culprit {
+                address: signal.clone(),
+                value: true,
+                expected: false,
+                comment: None,
+                trigger: true,
+                compared: None,
+            }],
+            message: "hot".into(),
+            at: None,
+        });
+    }
+}
+
+#[test]
+fn the_engine_shows_a_comparison_culprit_a_check_could_not_with_its_numbers() {
+    let tags = vec![Tag {
+        name: "temp".into(),
+        address: Signal::new("TEMP"),
+    }];
+    let io: CommentDb = [(Signal::new("TEMP"), "Spindle temperature".to_string())]
+        .into_iter()
+        .collect();
+    let mut e = CellEngine::new(
+        "m01",
+        tags,
+        vec![Box::new(BlamesHot)],
+        StateRules::default(),
+    )
+    .unwrap()
+    .commenting(io);
+    e.on_connection(true, 1);
+    number(&mut e, "TEMP", Num::Int(70), 2);
+    let step = number(&mut e, "TEMP", Num::Int(85), 3);
+    let (alarm, _, _) = step.alarms().next().unwrap();
+    assert_eq!(
+        alarm.culprits[0].to_string(),
+        "TEMP = 85 (needs <= 80): Spindle temperature"
+    );
+}

@@ -453,6 +453,7 @@ mod tests {
             expected: true,
             comment: Some("Y limit".into()),
             trigger: true,
+            compared: None,
         }];
         p.alarm_event(raised.clone());
         let mut cleared = alarm(

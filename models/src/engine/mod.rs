@@ -1690,17 +1690,22 @@ impl CellEngine {
         }
     }
 
-    /// A comparison's value now: unknown while an operand is.
-    fn compare(&self, d: &Derived) -> Option<bool> {
-        let num = |t: usize| match (&self.others[t], self.values[t]) {
+    /// Tag `t`'s value as a number (a contact as 0 or 1); `None` while
+    /// unknown or text.
+    fn number(&self, t: usize) -> Option<Num> {
+        match (&self.others[t], self.values[t]) {
             (Some(Value::Num(n)), _) => Some(*n),
             (_, Some(b)) => Some(Num::UInt(u64::from(b))),
             _ => None,
-        };
-        let lhs = num(d.lhs)?;
+        }
+    }
+
+    /// A comparison's value now: unknown while an operand is.
+    fn compare(&self, d: &Derived) -> Option<bool> {
+        let lhs = self.number(d.lhs)?;
         let rhs = match d.rhs {
             Rhs::Const(n) => n,
-            Rhs::Tag(t) => num(t)?,
+            Rhs::Tag(t) => self.number(t)?,
         };
         Some(d.op.holds(lhs, rhs))
     }
@@ -1835,9 +1840,15 @@ impl CellEngine {
             None => now,
         };
         if !self.derived.is_empty() {
+            // A comparison a check could not show with its numbers: the
+            // engine's, and the compared variable's comment.
+            // A comment the check gave stays.
+            let number = |s: &Signal| self.tag_index(s).and_then(|t| self.number(t));
             for c in &mut f.culprits {
-                if c.comment.is_none() {
-                    c.comment = self.describe_comparison(&c.address);
+                let given = c.comment.take();
+                crate::explain::read_comparisons(std::slice::from_mut(c), number, &self.comments);
+                if given.is_some() {
+                    c.comment = given;
                 }
             }
         }

@@ -1,13 +1,16 @@
 //! Switching-function checks: fault coils compiled over one bitset and
 //! evaluated incrementally, explained with paper 000's step blocks.
 
+use std::collections::HashMap;
+
 use super::checks::{CheckSet, Declared, Finding};
 use crate::alarm::{AlarmKind, Severity};
 use crate::comments::CommentDb;
 use crate::compiled::CompiledCell;
-use crate::explain::{explain_partial, Polarity};
+use crate::explain::{explain_partial, read_comparisons, Polarity};
 use crate::signal::Signal;
 use crate::switching::SwitchingFunction;
+use crate::value::{Comparison, Num, Operand};
 
 /// One switching-function check: a fault coil and its fault value.
 #[derive(Debug, Clone)]
@@ -51,6 +54,11 @@ pub struct SwitchingChecks {
     /// the journal clear).
     reported: Vec<Option<bool>>,
     changed: Vec<usize>,
+    /// The variables the comparison contacts compare, for culprits shown
+    /// with their numbers.
+    compared: Vec<Signal>,
+    /// Their numbers now.
+    numbers: HashMap<Signal, Num>,
 }
 
 impl SwitchingChecks {
@@ -95,7 +103,20 @@ impl SwitchingChecks {
             }
             *r = owners;
         }
+        let mut compared: Vec<Signal> = cell
+            .signals()
+            .iter()
+            .filter_map(Comparison::of_signal)
+            .flat_map(|c| match c.rhs {
+                Operand::Tag(t) => vec![c.lhs, t],
+                Operand::Const(_) => vec![c.lhs],
+            })
+            .collect();
+        compared.sort();
+        compared.dedup();
         SwitchingChecks {
+            compared,
+            numbers: HashMap::new(),
             reported: vec![None; checks.len()],
             checks,
             cell,
@@ -121,6 +142,23 @@ impl SwitchingChecks {
 impl CheckSet for SwitchingChecks {
     fn inputs(&self) -> Vec<Signal> {
         self.cell.signals().to_vec()
+    }
+
+    fn number_inputs(&self) -> Vec<Signal> {
+        self.compared.clone()
+    }
+
+    fn on_number(
+        &mut self,
+        signal: &Signal,
+        value: Option<Num>,
+        _now: u64,
+        _out: &mut Vec<Finding>,
+    ) {
+        match value {
+            Some(n) => self.numbers.insert(signal.clone(), n),
+            None => self.numbers.remove(signal),
+        };
     }
 
     fn alarms(&self) -> Vec<Declared> {
@@ -187,6 +225,7 @@ impl CheckSet for SwitchingChecks {
                 check,
                 fault,
                 &|x| self.known_value(x),
+                &|x| self.numbers.get(x).copied(),
                 signal,
                 before,
             ));
@@ -218,11 +257,13 @@ impl SwitchingChecks {
 
 /// The finding of `check` going to `fault`, explained from the `known`
 /// values (and `before` for the signal that just changed). Contacts whose
-/// value is unknown are named in the message.
+/// value is unknown are named in the message; comparisons are shown with
+/// the `numbers` they compare.
 fn finding(
     check: &SwitchingCheck,
     fault: bool,
     known: &dyn Fn(&Signal) -> Option<bool>,
+    numbers: &dyn Fn(&Signal) -> Option<Num>,
     changed: &Signal,
     before: Option<bool>,
 ) -> Finding {
@@ -254,6 +295,7 @@ fn finding(
     );
     finding.fault_step = e.fault_step;
     finding.culprits = e.culprits;
+    read_comparisons(&mut finding.culprits, numbers, &check.comments);
     let text = check.text.as_ref().unwrap_or(&check.fault_type);
     let mut message = match (finding.fault_step, finding.culprits.first()) {
         (Some(step), Some(c)) => format!("{text} at step {step}: {c}"),

@@ -1,6 +1,7 @@
 //! A cell's sequential function charts as cellwatch holds them, whatever
 //! they were read from: charts, steps, transitions, and where each is.
 
+use crate::comments::CommentDb;
 use crate::expr::Expr;
 use crate::signal::Signal;
 
@@ -9,6 +10,10 @@ use crate::signal::Signal;
 pub struct Sfc {
     /// The charts, in the order written.
     pub charts: Vec<Chart>,
+    /// The comments of the variables the chart file declares, by name
+    /// (PLCopen XML: each variable's `documentation`); the I/O list given
+    /// to the supervision comes before them.
+    pub variables: CommentDb,
 }
 
 /// One chart.

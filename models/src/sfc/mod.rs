@@ -15,7 +15,8 @@
 //! step-number word). [`SfcChecks`] supervises them: a step active longer
 //! than its supervision time is *stuck*, and its alarm carries the
 //! criteria analysis of every transition leaving it — the operands that
-//! keep it from firing, with values, expected values and comments.
+//! keep it from firing, with values, expected values and comments (a
+//! comparison with the number it compares and the limit it needs).
 //!
 //! Charts are read from a TOML text form ([`text::parse`]) or from the SFC
 //! bodies of a PLCopen XML project ([`plcopen::parse`]); [`read`] picks. [`run::Runner`]
@@ -169,9 +170,29 @@ mod tests {
             errors,
             [
                 "bad.xml:5:1: transition t1 has no source step",
-                "bad.xml:7:1: transition t2 jumps to 'F9.S5': no chart 'F9'",
+                "bad.xml:8:1: transition t2 jumps to 'F9.S5': no chart 'F9'",
                 "bad.xml:7:129: transition t2: unknown contact 'Y9': no tag has this address",
                 "bad.xml:9:1: step F1.S7 is unreachable: it is not the initial step and no transition leads to it",
+            ]
+        );
+        // A jump to a step of its own chart that is not there, and a
+        // connection to an element that is not there: each at itself.
+        let dangling = format!(
+            "{head}<step localId=\"1\" name=\"S0\" initialStep=\"true\"/>\n\
+             <transition localId=\"2\" name=\"t1\"><connectionPointIn><connection refLocalId=\"1\"/></connectionPointIn>{}</transition>\n\
+             <jumpStep localId=\"3\" targetName=\"S9\"><connectionPointIn><connection refLocalId=\"2\"/></connectionPointIn></jumpStep>\n\
+             <transition localId=\"4\" name=\"t2\"><connectionPointIn>\n<connection refLocalId=\"77\"/></connectionPointIn>{}</transition>\n\
+             <jumpStep localId=\"5\" targetName=\"S0\"><connectionPointIn><connection refLocalId=\"4\"/></connectionPointIn></jumpStep>\n{tail}",
+            st("X1"),
+            st("X2")
+        );
+        let errors = read("dangling.xml", &dangling, &|_| true).unwrap_err();
+        assert_eq!(
+            errors,
+            [
+                "dangling.xml:8:1: connection to localId 77, which is not in this SFC",
+                "dangling.xml:6:1: transition t1 goes to 'S9': no step 'S9' in chart F1",
+                "dangling.xml:7:1: transition t2 has no source step",
             ]
         );
         // Not XML at all, and a condition in a language not read.

@@ -25,10 +25,14 @@
 //! logic of its coil or output variable of the transition's name), or
 //! contacts and boxes in the chart wired to the transition's condition,
 //! read by the PLCopen ladder reader. A step's flag is the IEC step flag `NAME.X`;
-//! `documentation` becomes the comment of a step or transition.
+//! `documentation` becomes the comment of a step or transition, and that
+//! of a declared variable (`T1`, `rSpindleSpeed`) the comment of the
+//! operands that read it ([`super::Sfc::variables`]).
 //!
 //! The result goes through the same checks as the TOML form: every
-//! problem is `FILE:LINE:COL: what`, at the XML element concerned.
+//! problem is `FILE:LINE:COL: what`, at the XML element that is wrong: a
+//! jump to a step that does not exist at its `jumpStep`, a connection to a
+//! `localId` that does not exist at its `connection`.
 
 use std::collections::HashMap;
 
@@ -37,6 +41,7 @@ use toml::Spanned;
 
 use super::text::{build, Errors, OneOrMany, RawChart, RawFile, RawStep, RawTransition};
 use super::Sfc;
+use crate::comments::CommentDb;
 use crate::expr::Expr;
 use crate::signal::Signal;
 
@@ -88,7 +93,23 @@ pub fn parse(file: &str, text: &str, known: &dyn Fn(&Signal) -> bool) -> Result<
         );
         return Err(errors.finish());
     }
-    build(errors, &raw, known, &st_condition)
+    let mut sfc = build(errors, &raw, known, &st_condition)?;
+    sfc.variables = variables(&doc);
+    Ok(sfc)
+}
+
+/// The documentation of every variable the project declares (a POU's
+/// interface, a resource's or configuration's global variables), by name:
+/// `<localVars><variable name="T1">…<documentation>`.
+fn variables(doc: &Document<'_>) -> CommentDb {
+    doc.descendants()
+        .filter(|n| n.has_tag_name("variable"))
+        .filter(|n| {
+            n.parent_element()
+                .is_some_and(|p| p.tag_name().name().ends_with("Vars"))
+        })
+        .filter_map(|n| Some((Signal::new(n.attribute("name")?), documentation(n)?)))
+        .collect()
 }
 
 fn child<'a, 'i>(node: Node<'a, 'i>, name: &str) -> Option<Node<'a, 'i>> {
@@ -113,14 +134,32 @@ fn documentation(node: Node<'_, '_>) -> Option<String> {
     (!text.is_empty()).then_some(text)
 }
 
-/// The `refLocalId`s of every connection into `node`.
-fn inputs(node: Node<'_, '_>) -> Vec<String> {
+/// Every `connection` element into `node`.
+fn connections<'a, 'i>(node: Node<'a, 'i>) -> impl Iterator<Item = Node<'a, 'i>> {
     node.children()
         .filter(|n| n.has_tag_name("connectionPointIn"))
         .flat_map(|c| c.children().filter(|n| n.has_tag_name("connection")))
+}
+
+/// The `refLocalId`s of every connection into `node`.
+fn inputs(node: Node<'_, '_>) -> Vec<String> {
+    connections(node)
         .filter_map(|c| c.attribute("refLocalId").map(str::to_string))
         .collect()
 }
+
+/// The elements of an SFC body that are joined by connections (actions
+/// and drawn conditions are not: their wiring is read elsewhere).
+const SEQUENCE_ELEMENTS: [&str; 8] = [
+    "step",
+    "macroStep",
+    "transition",
+    "jumpStep",
+    "selectionDivergence",
+    "selectionConvergence",
+    "simultaneousDivergence",
+    "simultaneousConvergence",
+];
 
 /// An ST body's text: `<ST><xhtml:p>…</xhtml:p></ST>` or `<ST>…</ST>`.
 fn st_text(st: Node<'_, '_>) -> String {
@@ -170,6 +209,18 @@ fn chart(pou: Node<'_, '_>, sfc: Node<'_, '_>, name: &str, errors: &mut Errors<'
         *uses.entry(r).or_default() += 1;
     }
     for n in sfc.children().filter(|n| n.is_element()) {
+        // A connection to nothing, at the connection.
+        if SEQUENCE_ELEMENTS.contains(&n.tag_name().name()) {
+            for c in connections(n) {
+                let id = c.attribute("refLocalId").unwrap_or_default();
+                if !by_id.contains_key(id) {
+                    errors.at(
+                        c.range().start,
+                        format!("connection to localId {id}, which is not in this SFC"),
+                    );
+                }
+            }
+        }
         match n.tag_name().name() {
             "step" => {
                 let step = n.attribute("name").unwrap_or_default().to_string();
@@ -203,6 +254,7 @@ fn chart(pou: Node<'_, '_>, sfc: Node<'_, '_>, name: &str, errors: &mut Errors<'
                 if let Some(id) = n.attribute("localId") {
                     on(&next, id, &mut to, errors, n, 0);
                 }
+                let (to, to_at): (Vec<String>, Vec<usize>) = to.into_iter().unzip();
                 let reference = n
                     .descendants()
                     .find(|c| c.has_tag_name("reference"))
@@ -224,6 +276,7 @@ fn chart(pou: Node<'_, '_>, sfc: Node<'_, '_>, name: &str, errors: &mut Errors<'
                     to: spanned(n, OneOrMany::Many(to)),
                     condition: spanned(at, condition),
                     comment: documentation(n),
+                    to_at,
                 });
             }
             "macroStep" => errors.at(
@@ -311,11 +364,8 @@ fn back(
     t: Node<'_, '_>,
     depth: usize,
 ) {
+    // A connection to nothing is reported at the connection.
     let Some(n) = by_id.get(id) else {
-        errors.at(
-            t.range().start,
-            format!("connection to localId {id}, which is not in this SFC"),
-        );
         return;
     };
     if depth > 64 {
@@ -336,11 +386,12 @@ fn back(
     }
 }
 
-/// Walks on from element `id` to the steps a transition activates.
+/// Walks on from element `id` to the steps a transition activates, each
+/// with where it is written (the `step` or the `jumpStep`).
 fn on(
     next: &HashMap<String, Vec<Node<'_, '_>>>,
     id: &str,
-    out: &mut Vec<String>,
+    out: &mut Vec<(String, usize)>,
     errors: &mut Errors<'_>,
     t: Node<'_, '_>,
     depth: usize,
@@ -351,8 +402,14 @@ fn on(
     }
     for n in next.get(id).into_iter().flatten() {
         match n.tag_name().name() {
-            "step" => out.push(n.attribute("name").unwrap_or_default().to_string()),
-            "jumpStep" => out.push(n.attribute("targetName").unwrap_or_default().to_string()),
+            "step" => out.push((
+                n.attribute("name").unwrap_or_default().to_string(),
+                n.range().start,
+            )),
+            "jumpStep" => out.push((
+                n.attribute("targetName").unwrap_or_default().to_string(),
+                n.range().start,
+            )),
             "simultaneousDivergence" | "selectionConvergence" => {
                 if let Some(nid) = n.attribute("localId") {
                     on(next, nid, out, errors, t, depth + 1);

@@ -8,6 +8,15 @@
 //! keep it false, with their values, the values that would let it fire and
 //! their comments. It is made when the step becomes stuck and again
 //! whenever one of those operands changes while it is.
+//!
+//! An operand is named as the explanation names culprits: a contact as
+//! `bDoorOpen = 1 (expected 0): Door open`, a comparison by the variable it
+//! compares, its number and what it needs,
+//! `rSpindleSpeed = 1650.0 (needs >= 1800): Spindle speed`, an instance's
+//! output (`T1.Q`, `fbClamp.Done`) by itself with the instance's comment
+//! when it has none of its own. The numbers are those known when the
+//! analysis is made: a number that moves without changing what the
+//! comparison says makes no new analysis.
 
 use std::collections::{BTreeSet, HashMap, HashSet};
 
@@ -15,9 +24,10 @@ use super::{Sfc, StepRef};
 use crate::alarm::{Alarm, AlarmKind, Severity};
 use crate::comments::CommentDb;
 use crate::engine::{CheckSet, Declared, Finding};
-use crate::explain::{explain_partial, Culprit, Polarity};
+use crate::explain::{comment_of, explain_partial, read_comparisons, Culprit, Polarity};
 use crate::signal::Signal;
 use crate::switching::SwitchingFunction;
+use crate::value::{Comparison, Num, Operand};
 
 /// The supervision of a cell's charts.
 pub struct SfcChecks {
@@ -28,6 +38,10 @@ pub struct SfcChecks {
     inputs: Vec<Signal>,
     /// Known values of the inputs.
     values: HashMap<Signal, bool>,
+    /// The variables the comparison operands compare.
+    compared: Vec<Signal>,
+    /// Their numbers now.
+    numbers: HashMap<Signal, Num>,
     /// Per step flag: its steps.
     by_flag: HashMap<Signal, Vec<StepRef>>,
     /// Per operand of a transition: the steps that transition leaves.
@@ -44,8 +58,10 @@ pub struct SfcChecks {
 
 impl SfcChecks {
     /// Supervises `sfc`; alarms are `<id>-<chart>-<step>`, culprits get
-    /// their comments from `comments`.
+    /// their comments from `comments`, else from the chart file's
+    /// variables.
     pub fn new(id: &str, sfc: Sfc, severity: Severity, comments: CommentDb) -> SfcChecks {
+        let comments = sfc.variables.clone().overridden_by(comments);
         let mut inputs = BTreeSet::new();
         let mut by_flag: HashMap<Signal, Vec<StepRef>> = HashMap::new();
         for (r, step) in sfc.steps() {
@@ -69,7 +85,19 @@ impl SfcChecks {
                 needs.insert((c, i), sf);
             }
         }
+        let mut compared: Vec<Signal> = inputs
+            .iter()
+            .filter_map(Comparison::of_signal)
+            .flat_map(|c| match c.rhs {
+                Operand::Tag(t) => vec![c.lhs, t],
+                Operand::Const(_) => vec![c.lhs],
+            })
+            .collect();
+        compared.sort();
+        compared.dedup();
         SfcChecks {
+            compared,
+            numbers: HashMap::new(),
             id: id.to_string(),
             sfc,
             severity,
@@ -96,20 +124,32 @@ impl SfcChecks {
     }
 
     /// The criteria analysis of transition `i` of chart `c` at the values
-    /// known now: the operands keeping it from firing (empty when it may
-    /// fire or an operand is unknown).
+    /// known now: the operands keeping it from firing, each with its value
+    /// and comment (a comparison with the number it compares), empty when
+    /// it may fire or an operand is unknown.
     pub fn criteria(&self, c: usize, i: usize) -> Vec<Culprit> {
         let Some(sf) = self.needs.get(&(c, i)) else {
             return Vec::new();
         };
-        explain_partial(
+        let mut culprits = explain_partial(
             sf,
             |s| self.values.get(s).copied(),
             None,
             Polarity::Off,
             &self.comments,
         )
-        .culprits
+        .culprits;
+        for k in &mut culprits {
+            if k.comment.is_none() {
+                k.comment = comment_of(&self.comments, &k.address);
+            }
+        }
+        read_comparisons(
+            &mut culprits,
+            |s| self.numbers.get(s).copied(),
+            &self.comments,
+        );
+        culprits
     }
 
     fn finding(&self, r: StepRef, active: bool, now: u64) -> Finding {
@@ -194,6 +234,25 @@ fn needs_of(sfc: &Sfc, c: usize, i: usize) -> SwitchingFunction {
 impl CheckSet for SfcChecks {
     fn inputs(&self) -> Vec<Signal> {
         self.inputs.clone()
+    }
+
+    fn number_inputs(&self) -> Vec<Signal> {
+        self.compared.clone()
+    }
+
+    /// The number is kept for the next analysis; what the comparison says
+    /// comes as a change of its contact.
+    fn on_number(
+        &mut self,
+        signal: &Signal,
+        value: Option<Num>,
+        _now: u64,
+        _out: &mut Vec<Finding>,
+    ) {
+        match value {
+            Some(n) => self.numbers.insert(signal.clone(), n),
+            None => self.numbers.remove(signal),
+        };
     }
 
     fn alarms(&self) -> Vec<Declared> {

@@ -30,6 +30,7 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::{Chart, Sfc, Step, StepRef, Transition};
+use crate::comments::CommentDb;
 use crate::expr::Expr;
 use crate::signal::Signal;
 
@@ -93,6 +94,10 @@ pub(super) struct RawTransition {
     pub(super) to: Spanned<OneOrMany>,
     pub(super) condition: Spanned<String>,
     pub(super) comment: Option<String>,
+    /// Where each target is written, when not at `to` (PLCopen XML: the
+    /// `step` or `jumpStep` element), in the order of `to`.
+    #[serde(skip)]
+    pub(super) to_at: Vec<usize>,
 }
 
 /// Parses the charts of `text` (the file `file`); `known` says whether a
@@ -243,17 +248,14 @@ pub(super) fn build(
                     format!("transition {id} has no target step"),
                 );
             }
-            for s in targets {
+            for (k, s) in targets.into_iter().enumerate() {
+                let at = t.to_at.get(k).copied().unwrap_or(t.to.span().start);
                 match find(ci, s) {
                     Ok(r) => to.push(r),
-                    Err(why) if s.contains('.') => errors.at(
-                        t.to.span().start,
-                        format!("transition {id} jumps to '{s}': {why}"),
-                    ),
-                    Err(why) => errors.at(
-                        t.to.span().start,
-                        format!("transition {id} goes to '{s}': {why}"),
-                    ),
+                    Err(why) if s.contains('.') => {
+                        errors.at(at, format!("transition {id} jumps to '{s}': {why}"))
+                    }
+                    Err(why) => errors.at(at, format!("transition {id} goes to '{s}': {why}")),
                 }
             }
             let condition = match condition(t.condition.get_ref()) {
@@ -318,7 +320,10 @@ pub(super) fn build(
         }
     }
     if errors.list.is_empty() {
-        Ok(Sfc { charts })
+        Ok(Sfc {
+            charts,
+            variables: CommentDb::default(),
+        })
     } else {
         Err(errors.finish())
     }

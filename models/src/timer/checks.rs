@@ -151,6 +151,7 @@ impl TimerChecks {
                 expected: if late { *expected } else { !*expected },
                 comment,
                 trigger: !late,
+                compared: None,
             };
             let alarm = format!("{}-{id:03}", self.id);
             let base = Finding {
