@@ -127,3 +127,34 @@ fn enable_coil_faults_when_off() {
         r.stdout
     );
 }
+
+#[test]
+fn a_studio_5000_export_is_explained_as_its_instruction_list_is() {
+    // Fig. 6 as Logix Designer exports it: the alarm lamp Y2 lit disables
+    // cycle start at the last step block, the lamp to blame.
+    let r = cellwatch(&[
+        "explain",
+        "tests/data/paper000/fig6.L5X",
+        "--coil",
+        "G0_00",
+        "--snapshot",
+        "X1=1,X2=0,X3=1,Y1=0,X4=1,Y2=1",
+        "--before",
+        "X1=1,X2=0,X3=1,Y1=0,X4=1,Y2=0",
+        "--fault-when",
+        "off",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        r.stdout
+            .starts_with("G0_00 = 0: FAULT (fault when off), at step 4\n"),
+        "{}",
+        r.stdout
+    );
+    assert!(
+        r.stdout
+            .ends_with("culprits:\n  Y2 = 1 (expected 0): Y2: axis alarm lamp   [trigger]\n"),
+        "{}",
+        r.stdout
+    );
+}

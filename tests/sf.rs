@@ -158,6 +158,14 @@ fn a_tia_portal_block_gets_the_comments_of_the_tag_table_exported_beside_it() {
         r.stdout
     );
     assert!(r.stdout.contains("    Y2  Alarm lamp\n"), "{}", r.stdout);
+    // The project's comments in the language asked for.
+    let r = cellwatch(&["sf", &block, "--coil", "G0_00", "--language", "de-DE"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        r.stdout.contains("    X3  Tür geschlossen\n"),
+        "{}",
+        r.stdout
+    );
     // Without it, only the block's own interface comments are left.
     std::fs::remove_file(&table).unwrap();
     let r = cellwatch(&["sf", &block, "--coil", "G0_00"]);

@@ -52,8 +52,24 @@ impl CommentDb {
         text: &str,
         resolve: impl Fn(&str) -> Result<Signal, String>,
     ) -> Result<CommentDb, SourceError> {
+        Self::parse_in(origin, text, resolve, None)
+    }
+
+    /// [`CommentDb::parse`], a TIA Portal tag table's comments taken in
+    /// `language` (`de-DE`) where they have it; `None`: in `en-US`. Else in
+    /// the first language that has a text.
+    ///
+    /// # Errors
+    /// As [`CommentDb::parse`].
+    pub fn parse_in(
+        origin: &str,
+        text: &str,
+        resolve: impl Fn(&str) -> Result<Signal, String>,
+        language: Option<&str>,
+    ) -> Result<CommentDb, SourceError> {
         if crate::il::simaticml::is_simaticml(text) {
-            return Self::tag_table(origin, text, resolve);
+            let language = language.unwrap_or(crate::il::simaticml::LANGUAGE);
+            return Self::tag_table(origin, text, resolve, language);
         }
         let mut reader = csv::ReaderBuilder::new()
             .has_headers(false)
@@ -102,9 +118,10 @@ impl CommentDb {
         origin: &str,
         text: &str,
         resolve: impl Fn(&str) -> Result<Signal, String>,
+        language: &str,
     ) -> Result<CommentDb, SourceError> {
         let mut comments = HashMap::new();
-        for tag in crate::il::simaticml::tag_table(origin, text)? {
+        for tag in crate::il::simaticml::tag_table(origin, text, language)? {
             let Some(comment) = tag.comment else {
                 continue;
             };

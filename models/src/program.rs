@@ -97,7 +97,21 @@ impl Program {
         source: &str,
         dialect: Option<Dialect>,
     ) -> Result<Program, SourceErrors> {
-        let parsed = il::parse(origin, source, dialect)?;
+        Program::compile_in(origin, source, dialect, None)
+    }
+
+    /// [`Program::compile`], a TIA Portal export's comments taken in
+    /// `language` (`de-DE`) where they have it (see [`il::parse_in`]).
+    ///
+    /// # Errors
+    /// As [`Program::compile`].
+    pub fn compile_in(
+        origin: &str,
+        source: &str,
+        dialect: Option<Dialect>,
+        language: Option<&str>,
+    ) -> Result<Program, SourceErrors> {
+        let parsed = il::parse_in(origin, source, dialect, language)?;
         let (dialect, instructions) = (parsed.dialect, parsed.instructions);
         let mut machine = Machine::new(origin, parsed.first_checks);
         for ins in &instructions {

@@ -44,7 +44,9 @@ pub(crate) fn load(
 ) -> Result<(Program, CommentDb, Observability), Failure> {
     let name = args.program.display().to_string();
     let text = read_encoded(&args.program, "program", args.encoding)?;
-    let program = Program::compile(&name, &text, args.dialect).map_err(Failure::input)?;
+    let language = args.language.as_deref();
+    let program =
+        Program::compile_in(&name, &text, args.dialect, language).map_err(Failure::input)?;
     for w in program.warnings() {
         let _ = writeln!(err, "{name}:{}: warning: {}", w.at, w.message);
     }
@@ -64,15 +66,25 @@ pub(crate) fn load(
             "{}:1:1: note: the program's comments are read from this tag table, exported beside it",
             table.display()
         );
-        let db = CommentDb::parse(&table.display().to_string(), &text, |a| program.resolve(a))
-            .map_err(Failure::input)?;
+        let db = CommentDb::parse_in(
+            &table.display().to_string(),
+            &text,
+            |a| program.resolve(a),
+            language,
+        )
+        .map_err(Failure::input)?;
         declared = declared.overridden_by(db);
     }
     let comments = match &args.comments {
         Some(path) => {
             let text = read_text(path, "comment database")?;
-            let csv = CommentDb::parse(&path.display().to_string(), &text, |a| program.resolve(a))
-                .map_err(Failure::input)?;
+            let csv = CommentDb::parse_in(
+                &path.display().to_string(),
+                &text,
+                |a| program.resolve(a),
+                language,
+            )
+            .map_err(Failure::input)?;
             declared.overridden_by(csv)
         }
         None => declared,
@@ -104,7 +116,9 @@ pub(crate) fn values(option: &str, arg: &str, program: &Program) -> Result<Value
 /// Where the program comes from and how to read it.
 #[derive(Debug, clap::Args)]
 pub(crate) struct ProgramArgs {
-    /// The PLC program: an instruction list file.
+    /// The PLC program: an instruction list (FANUC PMC, IEC IL, Siemens
+    /// STL), PLCopen XML, a Studio 5000 export (.L5X) or a TIA Portal
+    /// block export (SimaticML); the format is told by its content.
     #[arg(value_name = "PROGRAM")]
     pub(crate) program: PathBuf,
     /// The instruction-list dialect: `pmc` (RD, AND.NOT, WRT; X0.07),
@@ -117,9 +131,16 @@ pub(crate) struct ProgramArgs {
     /// for pmc; %I, %Q for iec; E, A, I, Q for stl.
     #[arg(long, value_name = "LIST")]
     pub(crate) observable: Option<String>,
-    /// The I/O database: CSV `address,comment`, one row per address.
+    /// The I/O database: CSV `address,comment`, one row per address, or
+    /// a TIA Portal tag table (SimaticML). A tag table exported beside a
+    /// TIA Portal block is read without it.
     #[arg(long, value_name = "CSV")]
     pub(crate) comments: Option<PathBuf>,
+    /// The language of a TIA Portal export's comments (`de-DE`, `en-US`):
+    /// a comment in several languages is read in this one where it has
+    /// it, else in the first that has a text. Default: en-US.
+    #[arg(long, value_name = "CULTURE")]
+    pub(crate) language: Option<String>,
     /// The program file's encoding: `utf-8`, `utf-16le`, `utf-16be`,
     /// `latin1` (Windows-1252)... Default: a byte-order mark decides, then
     /// UTF-8 if the bytes are UTF-8, else Latin-1 (Windows-1252).

@@ -263,6 +263,7 @@ pub(crate) struct RawSwitching {
     pub(crate) severity: Option<Spanned<String>>,
     pub(crate) fault_type: Option<String>,
     pub(crate) comments: Option<Spanned<String>>,
+    pub(crate) comment_language: Option<Spanned<String>>,
     pub(crate) observable: Option<Spanned<String>>,
     pub(crate) armed_when: Option<Spanned<String>>,
     pub(crate) on_delay: Option<Spanned<String>>,

@@ -592,6 +592,26 @@ fn a_tia_portal_block_gets_the_comments_of_the_tag_table_exported_beside_it() {
     let c = parse("cell.toml", &text, Path::new("base"), &files).unwrap();
     let comments = &c.switching[0].comments;
     assert_eq!(comments.get(&Signal::new("X3")), Some("Door closed switch"));
+    // The project's comments in German.
+    let german = text.replace(
+        "coil = '\"G0_00\"'",
+        "coil = '\"G0_00\"'\ncomment_language = \"de-DE\"",
+    );
+    let c = parse("cell.toml", &german, Path::new("base"), &files).unwrap();
+    let comments = &c.switching[0].comments;
+    assert_eq!(comments.get(&Signal::new("X3")), Some("Tür geschlossen"));
+    let e = parse(
+        "cell.toml",
+        &german.replace("\"de-DE\"", "\"German\""),
+        Path::new("base"),
+        &files,
+    )
+    .unwrap_err()
+    .to_string();
+    assert_eq!(
+        e,
+        "cell.toml:42:20: checks.switching[0].comment_language: 'German' is not a language as TIA Portal names one: write e.g. de-DE or en-US"
+    );
     // A broken tag table beside it is said, with its place.
     files.0.insert(
         PathBuf::from("base/tia/PLC tags.xml"),
@@ -634,5 +654,36 @@ fn a_server_that_dials_out_is_listened_for_at_an_ip_address() {
     assert_eq!(
         errors(&with("opc.tcp://agent-host:4843")),
         "cell.toml:7:18: opcua.reverse_listen: 'opc.tcp://agent-host:4843' is not opc.tcp://ADDRESS:PORT with an IP address: write e.g. opc.tcp://0.0.0.0:4843"
+    );
+}
+
+#[test]
+fn a_studio_5000_export_is_a_cells_program() {
+    let mut files = mem();
+    files.0.insert(
+        PathBuf::from("base/fig6.L5X"),
+        include_bytes!("../../../tests/data/paper000/fig6.L5X").to_vec(),
+    );
+    let tags: String = ["X1", "X2", "X3", "X4", "Y1", "Y2"]
+        .iter()
+        .map(|a| {
+            format!(
+                "[[tags]]\nname = \"{a}\"\nnode_id = \"nsu=urn:plc;s={a}\"\naddress = \"{a}\"\n\n"
+            )
+        })
+        .collect();
+    let text = format!(
+        "[cell]\nid = \"c1\"\ndialect = \"iec\"\n\n[opcua]\nendpoint = \"opc.tcp://127.0.0.1:4840/\"\n\n{tags}\
+         [[checks.switching]]\nid = \"csd\"\nprogram = \"fig6.L5X\"\ncoil = \"G0_00\"\nfault_when = \"off\"\n\n\
+         [zenoh.tls]\nca = \"ca.pem\"\ncert = \"c.pem\"\nkey = \"c.key\"\n"
+    );
+    let c = parse("cell.toml", &text, Path::new("base"), &files).unwrap();
+    assert_eq!(
+        c.switching[0].sf.notation(),
+        "X4 * -Y2 * ((X1 * -X2) + -X3) * -Y1"
+    );
+    assert_eq!(
+        c.switching[0].comments.get(&Signal::new("Y2")),
+        Some("Y2: axis alarm lamp")
     );
 }

@@ -15,7 +15,7 @@ pub(crate) mod iec;
 pub(crate) mod l5x;
 pub(crate) mod plcopen;
 mod pmc;
-pub(crate) mod simaticml;
+pub mod simaticml;
 pub(crate) mod stl;
 
 mod dialect;
@@ -196,6 +196,21 @@ fn address_shaped(text: &str) -> bool {
 /// Every line that cannot be read, each as `ORIGIN:LINE:COL: message`; an
 /// empty program; a dialect that cannot be told.
 pub fn parse(origin: &str, source: &str, dialect: Option<Dialect>) -> Result<Parsed, SourceErrors> {
+    parse_in(origin, source, dialect, None)
+}
+
+/// [`parse`], a TIA Portal export's comments taken in `language` (`de-DE`)
+/// where they have it; `None`: in `en-US` ([`simaticml::LANGUAGE`]). Else
+/// in the first language that has a text.
+///
+/// # Errors
+/// As [`parse`].
+pub fn parse_in(
+    origin: &str,
+    source: &str,
+    dialect: Option<Dialect>,
+    language: Option<&str>,
+) -> Result<Parsed, SourceErrors> {
     if l5x::is_l5x(source) {
         refuse_dialect(
             origin,
@@ -223,7 +238,7 @@ pub fn parse(origin: &str, source: &str, dialect: Option<Dialect>) -> Result<Par
             "a TIA Portal export (SimaticML)",
             "its LAD and FBD networks",
         )?;
-        let read = simaticml::lex(origin, source)?;
+        let read = simaticml::lex(origin, source, language.unwrap_or(simaticml::LANGUAGE))?;
         something(
             origin,
             &read.instructions,

@@ -54,13 +54,34 @@ impl Validator<'_> {
             &path,
             "program",
         )?;
-        let program = match Program::compile(&path.display().to_string(), &text, dialect) {
-            Ok(p) => p,
-            Err(e) => {
-                self.problems.extend(e.lines());
-                return None;
-            }
-        };
+        let language = c
+            .comment_language
+            .as_ref()
+            .map(|l| l.get_ref().trim().to_string());
+        if let Some(l) = c
+            .comment_language
+            .as_ref()
+            .filter(|l| !is_culture(l.get_ref()))
+        {
+            self.problem(
+                l.span(),
+                &format!("{key}.comment_language"),
+                format!(
+                    "'{}' is not a language as TIA Portal names one: write e.g. de-DE or en-US",
+                    l.get_ref()
+                ),
+            );
+            return None;
+        }
+        let language = language.as_deref();
+        let program =
+            match Program::compile_in(&path.display().to_string(), &text, dialect, language) {
+                Ok(p) => p,
+                Err(e) => {
+                    self.problems.extend(e.lines());
+                    return None;
+                }
+            };
         let observable = match &c.observable {
             None => Observability::default_for(program.dialect()),
             Some(o) => match Observability::parse(program.dialect(), o.get_ref()) {
@@ -122,7 +143,12 @@ impl Validator<'_> {
         let mut declared = program.documentation().clone();
         // A TIA Portal block's tag tables, exported beside it.
         for (table, text) in crate::config::tag_tables_beside(self.files, &path, &text) {
-            match CommentDb::parse(&table.display().to_string(), &text, |a| program.resolve(a)) {
+            match CommentDb::parse_in(
+                &table.display().to_string(),
+                &text,
+                |a| program.resolve(a),
+                language,
+            ) {
                 Ok(db) => declared = declared.overridden_by(db),
                 Err(e) => {
                     self.problems.push(e.to_string());
@@ -141,7 +167,12 @@ impl Validator<'_> {
                     &path,
                     "comment database",
                 )?;
-                match CommentDb::parse(&path.display().to_string(), &text, |a| program.resolve(a)) {
+                match CommentDb::parse_in(
+                    &path.display().to_string(),
+                    &text,
+                    |a| program.resolve(a),
+                    language,
+                ) {
                     Ok(db) => declared.overridden_by(db),
                     Err(e) => {
                         self.problems.push(e.to_string());
@@ -476,4 +507,16 @@ impl Validator<'_> {
             fault_severity,
         }
     }
+}
+
+/// Whether `text` is a culture name as TIA Portal writes one (`de-DE`,
+/// `en-US`, `zh-CN`): two or three letters, a dash, two letters or digits.
+fn is_culture(text: &str) -> bool {
+    let Some((lang, region)) = text.trim().split_once('-') else {
+        return false;
+    };
+    (2..=3).contains(&lang.len())
+        && lang.bytes().all(|b| b.is_ascii_alphabetic())
+        && (2..=3).contains(&region.len())
+        && region.bytes().all(|b| b.is_ascii_alphanumeric())
 }

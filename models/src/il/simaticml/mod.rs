@@ -44,8 +44,9 @@ use super::{plcopen, Instruction, Operation, Outside};
 use crate::source::{Location, SourceError, SourceErrors};
 use access::{at, child, text_of, Place};
 
-/// The comment language taken when a text has it.
-pub(crate) const LANGUAGE: &str = "en-US";
+/// The comment language taken when a text has it, unless one is asked
+/// for (`--language`, `comment_language`).
+pub const LANGUAGE: &str = "en-US";
 
 /// Whether `text` is a SimaticML document: its root element is
 /// `<Document>`.
@@ -70,24 +71,25 @@ pub(crate) fn is_simaticml(text: &str) -> bool {
         .is_some_and(|r| r.starts_with(['>', '/']) || r.starts_with(char::is_whitespace))
 }
 
-/// The text of `texts` (`(language, text)`) in [`LANGUAGE`], else the
-/// first that is not empty; whitespace collapsed.
-fn pick<'a>(texts: impl Iterator<Item = (&'a str, String)>) -> Option<String> {
+/// The text of `texts` (`(language, text)`) in `lang`, else the first
+/// that is not empty; whitespace collapsed.
+fn pick<'a>(lang: &str, texts: impl Iterator<Item = (&'a str, String)>) -> Option<String> {
     let texts: Vec<(&str, String)> = texts
         .map(|(l, t)| (l, t.split_whitespace().collect::<Vec<_>>().join(" ")))
         .filter(|(_, t)| !t.is_empty())
         .collect();
     texts
         .iter()
-        .find(|(l, _)| l.eq_ignore_ascii_case(LANGUAGE))
+        .find(|(l, _)| l.eq_ignore_ascii_case(lang))
         .or_else(|| texts.first())
         .map(|(_, t)| t.clone())
 }
 
 /// An interface member's comment (`<Comment><MultiLanguageText Lang=..>`).
-fn member_comment(member: Node<'_, '_>) -> Option<String> {
+fn member_comment(member: Node<'_, '_>, lang: &str) -> Option<String> {
     let comment = child(member, "Comment")?;
     pick(
+        lang,
         comment
             .children()
             .filter(|c| c.has_tag_name("MultiLanguageText"))
@@ -97,11 +99,12 @@ fn member_comment(member: Node<'_, '_>) -> Option<String> {
 
 /// An object's comment (`<MultilingualText CompositionName="Comment">`
 /// with its items' `Culture` and `Text`).
-fn object_comment(object: Node<'_, '_>) -> Option<String> {
+fn object_comment(object: Node<'_, '_>, lang: &str) -> Option<String> {
     let text = child(object, "ObjectList")?.children().find(|c| {
         c.has_tag_name("MultilingualText") && c.attribute("CompositionName") == Some("Comment")
     })?;
     pick(
+        lang,
         text.descendants()
             .filter(|c| c.has_tag_name("MultilingualTextItem"))
             .filter_map(|item| {
@@ -120,7 +123,13 @@ const MAX_MEMBER_DEPTH: usize = 16;
 
 /// `(name, comment)` of every member under `parent` with a comment, the
 /// name `prefix` + the member's path.
-fn members(parent: Node<'_, '_>, prefix: &str, depth: usize, out: &mut Vec<(String, String)>) {
+fn members(
+    parent: Node<'_, '_>,
+    prefix: &str,
+    depth: usize,
+    lang: &str,
+    out: &mut Vec<(String, String)>,
+) {
     if depth > MAX_MEMBER_DEPTH {
         return;
     }
@@ -129,16 +138,21 @@ fn members(parent: Node<'_, '_>, prefix: &str, depth: usize, out: &mut Vec<(Stri
             continue;
         };
         let path = format!("{prefix}{name}");
-        if let Some(c) = member_comment(m) {
+        if let Some(c) = member_comment(m, lang) {
             out.push((path.clone(), c));
         }
-        members(m, &format!("{path}."), depth + 1, out);
+        members(m, &format!("{path}."), depth + 1, lang, out);
     }
 }
 
 /// The comments of a block's or a global DB's interface, named as STL
 /// names them: `"Valve".#Release`, `"Line_DB".Ready`.
-fn interface_comments(block: Node<'_, '_>, name: &str, db: bool) -> Vec<(String, String)> {
+fn interface_comments(
+    block: Node<'_, '_>,
+    name: &str,
+    db: bool,
+    lang: &str,
+) -> Vec<(String, String)> {
     let mut out = Vec::new();
     let sections = child(block, "AttributeList")
         .and_then(|a| child(a, "Interface"))
@@ -153,7 +167,7 @@ fn interface_comments(block: Node<'_, '_>, name: &str, db: bool) -> Vec<(String,
         } else {
             format!("\"{name}\".#")
         };
-        members(section, &prefix, 0, &mut out);
+        members(section, &prefix, 0, lang, &mut out);
     }
     out
 }
@@ -169,7 +183,7 @@ pub(crate) struct Tag {
 }
 
 /// The tags of every tag table in `doc`.
-fn tags(doc: &Document<'_>) -> Vec<Tag> {
+fn tags(doc: &Document<'_>, lang: &str) -> Vec<Tag> {
     doc.descendants()
         .filter(|n| n.has_tag_name("SW.Tags.PlcTag"))
         .filter_map(|tag| {
@@ -182,7 +196,7 @@ fn tags(doc: &Document<'_>) -> Vec<Tag> {
             Some(Tag {
                 name: format!("\"{name}\""),
                 address,
-                comment: object_comment(tag),
+                comment: object_comment(tag, lang),
                 at: at(doc, tag),
             })
         })
@@ -193,7 +207,7 @@ fn tags(doc: &Document<'_>) -> Vec<Tag> {
 ///
 /// # Errors
 /// XML that is not well-formed; a document with no tag table.
-pub(crate) fn tag_table(origin: &str, text: &str) -> Result<Vec<Tag>, SourceError> {
+pub(crate) fn tag_table(origin: &str, text: &str, lang: &str) -> Result<Vec<Tag>, SourceError> {
     let doc = plcopen::document(origin, text)?;
     if !doc
         .descendants()
@@ -205,7 +219,7 @@ pub(crate) fn tag_table(origin: &str, text: &str) -> Result<Vec<Tag>, SourceErro
             "this SimaticML document has no tag table (SW.Tags.PlcTagTable): export the PLC tag table, not a block",
         ));
     }
-    Ok(tags(&doc))
+    Ok(tags(&doc, lang))
 }
 
 /// The block kinds read.
@@ -218,11 +232,11 @@ const BLOCKS: &[&str] = &["SW.Blocks.FC", "SW.Blocks.FB", "SW.Blocks.OB"];
 /// # Errors
 /// XML that is not well-formed, a document with no block, parts that
 /// cannot be read, each at its place.
-pub(crate) fn lex(origin: &str, text: &str) -> Result<plcopen::Parsed, SourceErrors> {
+pub(crate) fn lex(origin: &str, text: &str, lang: &str) -> Result<plcopen::Parsed, SourceErrors> {
     let doc = plcopen::document(origin, text)?;
     let root = doc.root_element();
     let mut documentation = Vec::new();
-    for tag in tags(&doc) {
+    for tag in tags(&doc, lang) {
         if let Some(c) = &tag.comment {
             documentation.push((tag.name.clone(), c.clone()));
             if let Some(a) = &tag.address {
@@ -235,7 +249,7 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<plcopen::Parsed, SourceErr
         .filter(|c| c.has_tag_name("SW.Blocks.GlobalDB"))
     {
         if let Some(name) = block_name(db) {
-            documentation.extend(interface_comments(db, &name, true));
+            documentation.extend(interface_comments(db, &name, true, lang));
         }
     }
     let blocks: Vec<Node> = root
@@ -262,7 +276,7 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<plcopen::Parsed, SourceErr
     let mut errors = Vec::new();
     for block in blocks {
         let name = block_name(block).unwrap_or_else(|| "?".into());
-        documentation.extend(interface_comments(block, &name, false));
+        documentation.extend(interface_comments(block, &name, false, lang));
         let units = child(block, "ObjectList")
             .into_iter()
             .flat_map(|o| o.children())
@@ -597,6 +611,12 @@ mod tests {
         assert_eq!(db.get(&Signal::new("Q4.0")), Some("Lampe"));
         assert_eq!(db.get(&Signal::new("Bad")), Some("bad"));
         assert_eq!(db.len(), 6);
+        // In the language asked for, where a text has it; else the first.
+        let de = CommentDb::parse_in("io.xml", &table, stl, Some("de-DE")).unwrap();
+        assert_eq!(de.get(&Signal::new("Start")), Some("Starttaster"));
+        assert_eq!(de.get(&Signal::new("Lamp")), Some("Lampe"));
+        assert_eq!(de.get(&Signal::new("Speed")), Some("Velocità"));
+        assert_eq!(de.get(&Signal::new("Bad")), Some("bad"));
         let pmc = CommentDb::parse("io.xml", &table, crate::signal::pmc_address).unwrap_err();
         assert_eq!(
             pmc.to_string(),
