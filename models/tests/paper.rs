@@ -514,11 +514,26 @@ fn l5x_to_paper(e: &Expr) -> Expr {
 
 #[test]
 fn fig6_as_a_studio_5000_export_gives_the_paper_s_functions_step_blocks_and_culprits() {
-    let p = Program::compile("fig6.L5X", FIG6_L5X, None).unwrap();
+    fig6_from_studio_5000("fig6.L5X", FIG6_L5X);
+}
+
+const FIG6_FBD_L5X: &str = include_str!("../../tests/data/paper000/fig6.fbd.L5X");
+
+#[test]
+fn fig6_as_a_studio_5000_function_block_diagram_gives_the_same() {
+    // R1 on sheet 1 (BAND, BOR and BNOT blocks), G0_00 on sheet 2 reading
+    // R1 through an IRef: the same coils, step blocks and culprits.
+    fig6_from_studio_5000("fig6.fbd.L5X", FIG6_FBD_L5X);
+}
+
+/// The Fig. 6 export `text` gives the IL's switching functions, step
+/// blocks and culprits, and the tags' comments.
+fn fig6_from_studio_5000(origin: &str, text: &str) {
+    let p = Program::compile(origin, text, None).unwrap();
     assert!(p.warnings().is_empty(), "{:?}", p.warnings());
     let names: Vec<&str> = p.coils().iter().map(|c| c.signal.name()).collect();
     assert_eq!(names, ["Program:MainProgram.R1", "G0_00"]);
-    let g = sf("fig6.L5X", FIG6_L5X, "G0_00");
+    let g = sf(origin, text, "G0_00");
     let il = sf("fig6.il", FIG6, "G0.00");
     assert_eq!(l5x_to_paper(&g.to_expr()), il.to_expr());
     assert_eq!(g.steps.len(), il.steps.len());

@@ -602,7 +602,7 @@ fn l5sharp_exports_say_what_they_do_not_read() {
         [
             "113:1: Add-On Instruction 'aoi_Test': its logic is not expanded where it is called",
             "452:1: program 'MainProgram' names no main routine (a partial export): each routine is read as if it ran every scan",
-            "454:1: routine ST: ST routine not read (ladder routines are)",
+            "454:1: routine ST: ST routine not read (ladder and FBD routines are)",
         ]
     );
 }

@@ -216,13 +216,13 @@ pub fn parse_in(
             origin,
             dialect,
             "a Studio 5000 export (L5X)",
-            "its ladder routines",
+            "its ladder and FBD routines",
         )?;
         let project = l5x::lex(origin, source)?;
         something(
             origin,
             &project.instructions,
-            "no routine with any rung in it in this L5X export",
+            "no routine with any rung or output reference (ORef) in it in this L5X export",
         )?;
         return Ok(Parsed {
             dialect: Dialect::Iec,

@@ -464,7 +464,7 @@ fn mirror(op: CmpOp) -> CmpOp {
 }
 
 /// A Logix number: `12`, `-1`, `1.5`, `2.0e3`, `16#FF`, `2#0101_1010`, `8#17`.
-fn number(text: &str) -> Option<f64> {
+pub(super) fn number(text: &str) -> Option<f64> {
     let t = text.replace('_', "");
     let (negative, t) = match t.strip_prefix('-') {
         Some(rest) => (true, rest.to_string()),

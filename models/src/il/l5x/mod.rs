@@ -23,8 +23,10 @@
 //! `MOV` and other word instructions leave it as it is; one-shots (`ONS`,
 //! `OSR`, `OSF`), Add-On Instructions (not expanded), `CMP` and any
 //! instruction not named here make what follows them on the rung not
-//! derivable, each with a warning at its place. ST, FBD and SFC routines
-//! are warnings. Malformed rung text is an error at the character.
+//! derivable, each with a warning at its place. FBD routines are read by
+//! `fbd.rs`: each output reference (`ORef`) a coil, the blocks `BAND`,
+//! `BOR`, `BXOR` and `BNOT` logic. ST and SFC routines are warnings.
+//! Malformed rung text is an error at the character.
 //!
 //! Signals (see `names.rs`): a controller tag is its name as declared
 //! (`Start`, `Local:1:I.Data.3`, `Timer1.DN`); a program tag is
@@ -305,10 +307,13 @@ impl<'a, 'd> Reader<'a, 'd> {
             );
             return;
         }
+        if ty == "FBD" {
+            return self.fbd(node, frame, reached);
+        }
         if ty != "RLL" {
             self.note(
                 node,
-                format!("routine {name}: {ty} routine not read (ladder routines are)"),
+                format!("routine {name}: {ty} routine not read (ladder and FBD routines are)"),
             );
             return;
         }
@@ -493,6 +498,7 @@ fn rung_text<'d>(doc: &'d Document<'d>, rung: Node<'d, 'd>) -> Option<RungText<'
     })
 }
 
+mod fbd;
 mod instructions;
 
 #[cfg(test)]

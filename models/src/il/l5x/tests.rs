@@ -229,7 +229,7 @@ fn malformed_rungs_and_names_are_errors_at_the_character() {
     let e = Program::compile("t.L5X", &export("", "", &[]), None).unwrap_err();
     assert_eq!(
         e.to_string(),
-        "t.L5X:1:1: no routine with any rung in it in this L5X export"
+        "t.L5X:1:1: no routine with any rung or output reference (ORef) in it in this L5X export"
     );
     let e =
         Program::compile("t.L5X", &export("", "", &[]), Some(crate::il::Dialect::Iec)).unwrap_err();
@@ -256,6 +256,161 @@ fn mutated_exports_never_panic() {
     for (k, _) in text.char_indices().filter(|(k, _)| k % 3 == 0) {
         for c in ["[", "]", ",", "(", ")", ";", ".", "'", "#", "<", "é"] {
             let mut m = text.clone();
+            let end = k + m[k..].chars().next().map_or(0, char::len_utf8);
+            m.replace_range(k..end, c);
+            let _ = Program::compile("m.L5X", &m, None);
+        }
+    }
+}
+
+/// An export whose program `Main` has one FBD routine `Main` with
+/// `sheets` (each the elements and wires of one `<Sheet>`), and an RLL
+/// routine `Sub` that writes `sub`.
+fn fbd_export(sheets: &[&str]) -> String {
+    let sheets: String = sheets
+        .iter()
+        .enumerate()
+        .map(|(k, s)| format!("<Sheet Number=\"{}\">\n{s}</Sheet>\n", k + 1))
+        .collect();
+    format!(
+        "<?xml version=\"1.0\" encoding=\"UTF-8\" standalone=\"yes\"?>\n\
+         <RSLogix5000Content SchemaRevision=\"1.0\" SoftwareRevision=\"33.01\" TargetName=\"T\" TargetType=\"Controller\">\n\
+         <Controller Use=\"Target\" Name=\"T\">\n<Programs>\n\
+         <Program Name=\"Main\" MainRoutineName=\"Main\">\n<Routines>\n\
+         <Routine Name=\"Main\" Type=\"FBD\">\n<FBDContent SheetSize=\"Letter - 8.5 x 11 in\" SheetOrientation=\"Landscape\">\n{sheets}</FBDContent>\n</Routine>\n\
+         <Routine Name=\"Sub\" Type=\"RLL\">\n<RLLContent>\n<Rung Number=\"0\" Type=\"N\">\n<Text>\n<![CDATA[XIC(a)OTE(sub);]]>\n</Text>\n</Rung>\n</RLLContent>\n</Routine>\n\
+         </Routines>\n</Program>\n</Programs>\n</Controller>\n</RSLogix5000Content>\n"
+    )
+}
+
+fn fbd(sheets: &[&str]) -> Program {
+    Program::compile("f.L5X", &fbd_export(sheets), None).unwrap_or_else(|e| panic!("{e}"))
+}
+
+#[test]
+fn fbd_boolean_blocks_functions_connectors_and_calls() {
+    let p = fbd(&[
+        "<IRef ID=\"0\" Operand=\"a\"/>\n<IRef ID=\"1\" Operand=\"b\"/>\n<IRef ID=\"2\" Operand=\"c\"/>\n\
+         <IRef ID=\"3\" Operand=\"1\"/>\n\
+         <Block Type=\"BAND\" ID=\"4\" Operand=\"BAND_01\" VisiblePins=\"In1 In2 In3 Out\"/>\n\
+         <Block Type=\"BOR\" ID=\"5\" Operand=\"BOR_01\" VisiblePins=\"In1 In2 Out\"/>\n\
+         <Function Type=\"BXOR__F\" ID=\"6\"/>\n<Function Type=\"BNOT__F\" ID=\"7\"/>\n\
+         <ORef ID=\"8\" Operand=\"both\"/>\n<ORef ID=\"9\" Operand=\"either\"/>\n<ORef ID=\"10\" Operand=\"odd\"/>\n\
+         <OCon ID=\"11\" Name=\"NotA\"/>\n<JSR ID=\"12\" Routine=\"Sub\"/>\n\
+         <Wire FromID=\"0\" ToID=\"4\" ToParam=\"In1\"/>\n<Wire FromID=\"1\" ToID=\"4\" ToParam=\"In2\"/>\n\
+         <Wire FromID=\"3\" ToID=\"4\" ToParam=\"In3\"/>\n\
+         <Wire FromID=\"0\" ToID=\"5\" ToParam=\"In1\"/>\n<Wire FromID=\"2\" ToID=\"5\" ToParam=\"In2\"/>\n\
+         <Wire FromID=\"0\" ToID=\"6\" ToParam=\"In1\"/>\n<Wire FromID=\"1\" ToID=\"6\" ToParam=\"In2\"/>\n\
+         <Wire FromID=\"0\" ToID=\"7\" ToParam=\"In\"/>\n<Wire FromID=\"7\" FromParam=\"Out\" ToID=\"11\"/>\n\
+         <Wire FromID=\"4\" FromParam=\"Out\" ToID=\"8\"/>\n<Wire FromID=\"5\" FromParam=\"Out\" ToID=\"9\"/>\n\
+         <Wire FromID=\"6\" FromParam=\"Out\" ToID=\"10\"/>\n",
+        "<ICon ID=\"0\" Name=\"NotA\"/>\n<IRef ID=\"1\" Operand=\"both\"/>\n\
+         <Block Type=\"BAND\" ID=\"2\" Operand=\"BAND_02\"/>\n<ORef ID=\"3\" Operand=\"later\"/>\n\
+         <Wire FromID=\"0\" ToID=\"2\" ToParam=\"In1\"/>\n<Wire FromID=\"1\" ToID=\"2\" ToParam=\"In2\"/>\n\
+         <Wire FromID=\"2\" FromParam=\"Out\" ToID=\"3\"/>\n",
+    ]);
+    assert_eq!(warnings(&p), Vec::<String>::new());
+    let names: Vec<&str> = p.coils().iter().map(|c| c.signal.name()).collect();
+    assert_eq!(names, ["both", "either", "odd", "later", "sub"]);
+    // The IRef of 1 is TRUE; BAND's hidden In4..In8 leave it as it is.
+    assert_eq!(sf(&p, "both"), "a * b");
+    assert_eq!(sf(&p, "either"), "a + c");
+    assert_eq!(sf(&p, "odd"), "(a * -b) + (-a * b)");
+    // NOT a across the sheets through the connector; the IRef of a coil
+    // the routine writes is that coil.
+    assert_eq!(sf(&p, "later"), "-a * both");
+    assert_eq!(sf(&p, "sub"), "a");
+}
+
+#[test]
+fn fbd_what_is_not_logic_is_a_warning_at_its_element() {
+    let p = fbd(&[
+        // An unknown block, an unwired shown input, a loop, a feedback
+        // wire, a wired EnableIn, a connector with no OCon, a number.
+        "<IRef ID=\"0\" Operand=\"a\"/>\n\
+         <Block Type=\"TONR\" ID=\"1\" Operand=\"TONR_01\" VisiblePins=\"TimerEnable PRE Reset ACC DN\"/>\n\
+         <ORef ID=\"2\" Operand=\"timed\"/>\n\
+         <Block Type=\"BAND\" ID=\"3\" Operand=\"BAND_01\"/>\n<ORef ID=\"4\" Operand=\"half\"/>\n\
+         <Block Type=\"BOR\" ID=\"5\" Operand=\"BOR_01\"/>\n<Block Type=\"BAND\" ID=\"6\" Operand=\"BAND_02\"/>\n\
+         <ORef ID=\"7\" Operand=\"looped\"/>\n\
+         <Block Type=\"BOR\" ID=\"8\" Operand=\"BOR_02\"/>\n<ORef ID=\"9\" Operand=\"fed\"/>\n\
+         <Block Type=\"BNOT\" ID=\"10\" Operand=\"BNOT_01\" VisiblePins=\"EnableIn In Out\"/>\n<ORef ID=\"11\" Operand=\"enabled\"/>\n\
+         <ICon ID=\"12\" Name=\"Nowhere\"/>\n<ORef ID=\"13\" Operand=\"lost\"/>\n\
+         <IRef ID=\"14\" Operand=\"100\"/>\n<ORef ID=\"15\" Operand=\"hundred\"/>\n<ORef ID=\"16\" Operand=\"empty\"/>\n\
+         <Wire FromID=\"0\" ToID=\"1\" ToParam=\"TimerEnable\"/>\n<Wire FromID=\"1\" FromParam=\"DN\" ToID=\"2\"/>\n\
+         <Wire FromID=\"0\" ToID=\"3\" ToParam=\"In1\"/>\n<Wire FromID=\"3\" FromParam=\"Out\" ToID=\"4\"/>\n\
+         <Wire FromID=\"0\" ToID=\"5\" ToParam=\"In1\"/>\n<Wire FromID=\"6\" FromParam=\"Out\" ToID=\"5\" ToParam=\"In2\"/>\n\
+         <Wire FromID=\"5\" FromParam=\"Out\" ToID=\"6\" ToParam=\"In1\"/>\n<Wire FromID=\"0\" ToID=\"6\" ToParam=\"In2\"/>\n\
+         <Wire FromID=\"6\" FromParam=\"Out\" ToID=\"7\"/>\n\
+         <Wire FromID=\"0\" ToID=\"8\" ToParam=\"In1\"/>\n<FeedbackWire FromID=\"8\" FromParam=\"Out\" ToID=\"8\" ToParam=\"In2\"/>\n\
+         <Wire FromID=\"8\" FromParam=\"Out\" ToID=\"9\"/>\n\
+         <Wire FromID=\"0\" ToID=\"10\" ToParam=\"EnableIn\"/>\n<Wire FromID=\"0\" ToID=\"10\" ToParam=\"In\"/>\n\
+         <Wire FromID=\"10\" FromParam=\"Out\" ToID=\"11\"/>\n\
+         <Wire FromID=\"12\" ToID=\"13\"/>\n<Wire FromID=\"14\" ToID=\"15\"/>\n",
+    ]);
+    for coil in [
+        "timed", "half", "looped", "fed", "enabled", "lost", "hundred", "empty",
+    ] {
+        assert!(sf(&p, coil).starts_with("! "), "{coil}: {}", sf(&p, coil));
+    }
+    let not = "a call, timer, counter, edge or function, not boolean logic: the coils it feeds are not derivable";
+    let sheet = "routine Main, sheet 1";
+    let feeds = "what it feeds is not derivable";
+    assert_eq!(
+        warnings(&p),
+        [
+            format!("11:1: {sheet}: TONR block 'TONR_01' is not read: {feeds}"),
+            format!("11:1: 'TONR(TONR_01)': {not}"),
+            format!("13:1: {sheet}: input In2 of BAND block 'BAND_01' is not wired: {feeds}"),
+            format!("13:1: 'BAND(BAND_01).In2 (not wired)': {not}"),
+            format!("16:1: {sheet}: BAND block 'BAND_02' is in a loop of wires (its output comes back to its input): {feeds}"),
+            format!("16:1: 'BAND(BAND_02) (in a loop)': {not}"),
+            format!("37:1: {sheet}: a feedback wire into input In2 of BOR block 'BOR_02' carries the value of the previous scan: {feeds}"),
+            format!("37:1: 'BOR(BOR_02).In2 (feedback wire)': {not}"),
+            format!("20:1: {sheet}: EnableIn of BNOT block 'BNOT_01' is wired: while it is off the block holds its output, so {feeds}"),
+            format!("20:1: 'BNOT(BNOT_01).EnableIn (wired)': {not}"),
+            format!("22:1: {sheet}: ICon 'Nowhere' has no OCon of that name in this routine: {feeds}"),
+            format!("22:1: 'ICon(Nowhere)': {not}"),
+            format!("24:1: {sheet}: IRef '100' is a number, not a boolean: {feeds}"),
+            format!("24:1: 'IRef(100)': {not}"),
+            format!("26:1: {sheet}: ORef 'empty' is not wired: {feeds}"),
+            format!("26:1: 'ORef(empty) (not wired)': {not}"),
+            "47:1: program 'Main': routine 'Sub' is not called from the main routine by a JSR: not read".to_string(),
+        ]
+    );
+}
+
+#[test]
+fn fbd_malformed_wires_and_names_are_errors_at_the_element() {
+    let text = fbd_export(&[
+        "<IRef ID=\"0\" Operand=\"1abc\"/>\n<ORef ID=\"1\" Operand=\"x\"/>\n<ORef ID=\"2\" Operand=\"y\"/>\n\
+         <Wire FromID=\"0\" ToID=\"1\"/>\n<Wire FromID=\"7\" ToID=\"2\"/>\n<Wire ToID=\"2\"/>\n",
+    ]);
+    let e = Program::compile("f.L5X", &text, None).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "f.L5X:10:1: routine Main, sheet 1: '1abc' is not a tag name\n\
+         f.L5X:14:1: routine Main, sheet 1: a wire from element 7, which this sheet does not have\n\
+         f.L5X:15:1: routine Main, sheet 1: a wire without a FromID and a ToID"
+    );
+}
+
+#[test]
+fn mutated_fbd_exports_never_panic() {
+    let text = include_str!("../../../../tests/data/paper000/fig6.fbd.L5X");
+    let routine = text.find("<Routine ").unwrap_or(0);
+    for cut in (routine..text.len())
+        .filter(|&c| text.is_char_boundary(c))
+        .step_by(7)
+    {
+        let _ = Program::compile("m.L5X", &text[..cut], None);
+    }
+    for (k, _) in text
+        .char_indices()
+        .filter(|(k, _)| *k >= routine && k % 5 == 0)
+    {
+        for c in ["0", "1", "\"", "<", "ID", "_", "é"] {
+            let mut m = text.to_string();
             let end = k + m[k..].chars().next().map_or(0, char::len_utf8);
             m.replace_range(k..end, c);
             let _ = Program::compile("m.L5X", &m, None);
