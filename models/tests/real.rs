@@ -605,6 +605,29 @@ fn l5sharp_exports_say_what_they_do_not_read() {
             "454:1: routine ST: ST routine not read (ladder and FBD routines are)",
         ]
     );
+    // An FBD routine: BAND__F of SimpleBool and BNOT__F of it wired to the
+    // one ORef; a SEL block feeding itself, a DEDT, a TOFR, an Add-On
+    // Instruction and two JSRs to a routine the export only references,
+    // all wired to no ORef.
+    let p = program("l5sharp-FBD.L5X");
+    pinned(
+        &p,
+        &[(
+            "TestComplexTag.SimpleMember.BoolMember",
+            "SimpleBool * -SimpleBool",
+        )],
+    );
+    // One AND node: one step block, located at the ORef.
+    let bool_member = sf(&p, "TestComplexTag.SimpleMember.BoolMember");
+    assert_eq!(bool_member.steps.len(), 1);
+    assert_eq!(
+        warnings(&p),
+        [
+            "113:1: Add-On Instruction 'aoi_Test': its logic is not expanded where it is called",
+            "463:1: program 'MainProgram' names no main routine (a partial export): each routine is read as if it ran every scan",
+            "670:1: routine ST: only referenced by this export (Use=\"Reference\"), its logic is not in it: not read",
+        ]
+    );
 }
 
 // --- TIA Portal exports (SimaticML) ----------------------------------------

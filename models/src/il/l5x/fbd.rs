@@ -232,8 +232,18 @@ impl<'d> Reader<'_, 'd> {
                 }
             }
         }
+        // Two JSRs of one routine write what it writes the same way.
+        let mut called = HashSet::new();
         for (k, e) in calls {
-            self.fbd_call(&mut d, k, e, frame, reached);
+            let target = e.attribute("Routine").unwrap_or("").to_ascii_uppercase();
+            let id = e
+                .attribute("ID")
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(u64::MAX);
+            let enabled = d.wires.contains_key(&(k, id, "ENABLEIN".to_string()));
+            if called.insert((target, enabled)) {
+                self.fbd_call(&mut d, k, e, frame, reached);
+            }
         }
     }
 

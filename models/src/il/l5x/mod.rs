@@ -300,6 +300,13 @@ impl<'a, 'd> Reader<'a, 'd> {
         reached.insert(frame.routine.to_ascii_uppercase());
         let ty = node.attribute("Type").unwrap_or("RLL");
         let name = &frame.routine;
+        if node.attribute("Use") == Some("Reference") {
+            self.note(
+                node,
+                format!("routine {name}: only referenced by this export (Use=\"Reference\"), its logic is not in it: not read"),
+            );
+            return;
+        }
         if node.children().any(|c| c.has_tag_name("EncodedData")) {
             self.note(
                 node,
