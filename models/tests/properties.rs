@@ -10,7 +10,9 @@
 //!   the unknowns agree";
 //! - mutated TIA Portal exports (SimaticML: wires pointed elsewhere, loops,
 //!   parts renamed, text cut out) give a program or located errors, never
-//!   a panic.
+//!   a panic;
+//! - mutated Studio 5000 FBD exports (wire ends and pins pointed elsewhere,
+//!   blocks retyped, feedback wires, text cut out): the same.
 
 #![allow(clippy::unwrap_used)] // test helpers fail loudly by design
 
@@ -419,6 +421,105 @@ proptest! {
             Err(e) => {
                 for line in e.lines() {
                     prop_assert!(line.starts_with("m.xml:") || line.starts_with("... and "), "{}", line);
+                }
+            }
+        }
+    }
+}
+
+const L5X_FBD: &str = include_str!("../../tests/data/paper000/fig6.fbd.L5X");
+
+/// Block types a mutation may give an L5X FBD block.
+const BLOCK_TYPES: &[&str] = &[
+    "BAND", "BOR", "BXOR", "BNOT", "BAND__F", "TONR", "CMP", "OSRI", "band", "",
+];
+
+/// Pin names a mutation may give an L5X wire's end.
+const L5X_PINS: &[&str] = &[
+    "In", "In1", "In2", "In3", "In8", "Out", "EnableIn", "DN", "",
+];
+
+/// One change to an L5X FBD export.
+#[derive(Debug, Clone)]
+enum FbdMutation {
+    /// The `n`th `FromID` or `ToID` becomes `to`.
+    Rewire { n: usize, to: u32, from: bool },
+    /// The `n`th block's type becomes another.
+    Retype { n: usize, to: usize },
+    /// The `n`th `ToParam` or `FromParam` becomes another pin.
+    Pin { n: usize, to: usize, from: bool },
+    /// The `n`th wire becomes a feedback wire.
+    Feedback { n: usize },
+    /// Bytes `at..at+len` are cut out.
+    Cut { at: usize, len: usize },
+}
+
+fn fbd_mutation() -> impl Strategy<Value = FbdMutation> {
+    prop_oneof![
+        (0..32usize, 0..24u32, any::<bool>()).prop_map(|(n, to, from)| FbdMutation::Rewire {
+            n,
+            to,
+            from
+        }),
+        (0..16usize, 0..BLOCK_TYPES.len()).prop_map(|(n, to)| FbdMutation::Retype { n, to }),
+        (0..32usize, 0..L5X_PINS.len(), any::<bool>()).prop_map(|(n, to, from)| FbdMutation::Pin {
+            n,
+            to,
+            from
+        }),
+        (0..32usize).prop_map(|n| FbdMutation::Feedback { n }),
+        (0..20_000usize, 0..200usize).prop_map(|(at, len)| FbdMutation::Cut { at, len }),
+    ]
+}
+
+fn mutate_fbd(text: &str, m: &FbdMutation) -> String {
+    match m {
+        FbdMutation::Rewire { n, to, from } => {
+            let end = if *from { "FromID=\"" } else { "ToID=\"" };
+            replace_nth(text, end, *n, &to.to_string())
+        }
+        FbdMutation::Retype { n, to } => replace_nth(text, "<Block Type=\"", *n, BLOCK_TYPES[*to]),
+        FbdMutation::Pin { n, to, from } => {
+            let end = if *from { "FromParam=\"" } else { "ToParam=\"" };
+            replace_nth(text, end, *n, L5X_PINS[*to])
+        }
+        FbdMutation::Feedback { n } => {
+            let starts: Vec<usize> = text.match_indices("<Wire ").map(|(i, _)| i).collect();
+            match starts.get(n % starts.len().max(1)) {
+                Some(&i) => format!("{}<FeedbackWire {}", &text[..i], &text[i + 6..]),
+                None => text.to_string(),
+            }
+        }
+        FbdMutation::Cut { at, len } => mutate(text, &Mutation::Cut { at: *at, len: *len }),
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    #[test]
+    fn mutated_l5x_fbd_exports_compile_or_fail_with_located_errors(
+        mutations in prop::collection::vec(fbd_mutation(), 1..6),
+    ) {
+        let mut text = L5X_FBD.to_string();
+        for m in &mutations {
+            text = mutate_fbd(&text, m);
+        }
+        match Program::compile("m.L5X", &text, None) {
+            Ok(p) => {
+                let observable = Observability::default_for(p.dialect());
+                for coil in p.coils() {
+                    if let Ok(sf) = SwitchingFunction::expand(&p, &coil.signal, &observable) {
+                        let _ = sf.notation();
+                    }
+                }
+                for w in p.warnings() {
+                    prop_assert!(w.at.line >= 1, "{:?}", w);
+                }
+            }
+            Err(e) => {
+                for line in e.lines() {
+                    prop_assert!(line.starts_with("m.L5X:") || line.starts_with("... and "), "{}", line);
                 }
             }
         }
