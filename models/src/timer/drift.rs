@@ -2,16 +2,20 @@
 //! scatters) over days, seen before its window is left.
 //!
 //! A [`DriftTracker`] follows one transition's measured durations in O(1)
-//! memory: an exponentially weighted mean of the duration and of its
-//! absolute deviation from that mean (no history is kept). It places the
+//! memory: an exponentially weighted mean of the duration and of the
+//! difference between one duration and the next (no history is kept). The
+//! differences measure the jitter whether or not the mean moves: a motion
+//! that slows down, gradually or at once, does not read as one that
+//! scatters. It places the
 //! mean in the learned window as a *position*: 0 at the learned typical Δt,
 //! +1 at the upper limit (`hi`, late), −1 at the lower one (`lo`, early).
 //! It warns, by [`DriftRules`]:
 //! - *slowing* when the position reaches `+fraction`, *speeding up* at
 //!   `−fraction`, held until it is back within `fraction / 2`;
-//! - *scattering* when the spread (twice the mean deviation: for an even
-//!   jitter, its half-width) reaches `spread` times the learned one (half
-//!   the training range), held until it is back below halfway.
+//! - *scattering* when the spread (1.5 × the mean difference between
+//!   successive durations: for an even jitter, its half-width) reaches
+//!   `spread` times the learned one (half the training range), held until
+//!   it is back below halfway.
 //!
 //! Nothing is judged before `min_samples` measurements. This module knows
 //! neither alarms nor signals: [`super::checks`] turns its verdicts into
@@ -120,8 +124,10 @@ pub struct DriftTracker {
     samples: u64,
     /// Moving mean of the duration, ms.
     mean: f64,
-    /// Moving mean of the absolute deviation from `mean`, ms.
-    deviation: f64,
+    /// Moving mean of the difference between successive durations, ms.
+    step: f64,
+    /// The latest duration, ms.
+    previous: f64,
     /// When the first and the latest measurement ended, ms.
     since: u64,
     last: u64,
@@ -144,7 +150,8 @@ impl DriftTracker {
             learned_spread: range.max(hi.saturating_sub(lo) as f64 / 20.0).max(1.0),
             samples: 0,
             mean: 0.0,
-            deviation: 0.0,
+            step: 0.0,
+            previous: 0.0,
             since: 0,
             last: 0,
             tendency: None,
@@ -160,7 +167,7 @@ impl DriftTracker {
         self.samples = self.samples.saturating_add(1);
         if self.samples == 1 {
             self.mean = x;
-            self.deviation = 0.0;
+            self.step = 0.0;
             self.since = at;
         } else {
             // A plain mean while there are fewer than 1 / weight: no start
@@ -168,9 +175,10 @@ impl DriftTracker {
             let n = self.samples as f64;
             let w = rules.weight.max(1.0 / n);
             let wd = rules.weight.max(1.0 / (n - 1.0));
-            self.deviation += wd * ((x - self.mean).abs() - self.deviation);
+            self.step += wd * ((x - self.previous).abs() - self.step);
             self.mean += w * (x - self.mean);
         }
+        self.previous = x;
         self.last = self.last.max(at);
         if self.samples < u64::from(rules.min_samples) {
             return None;
@@ -232,9 +240,16 @@ impl DriftTracker {
         (self.samples > 0).then_some(self.mean)
     }
 
-    /// The tracked spread (twice the moving mean deviation), ms.
+    /// The tracked spread (1.5 × the moving mean difference between
+    /// successive durations), ms.
     pub fn spread_ms(&self) -> Option<f64> {
-        (self.samples > 0).then_some(2.0 * self.deviation)
+        (self.samples > 0).then(|| self.spread_now())
+    }
+
+    /// Of durations spread evenly over ±a, two successive ones differ by
+    /// 2a/3 on average.
+    fn spread_now(&self) -> f64 {
+        1.5 * self.step
     }
 
     /// Where the mean is in the window: 0 at the learned typical Δt, +1 at
@@ -254,7 +269,7 @@ impl DriftTracker {
     }
 
     fn spread_ratio(&self) -> f64 {
-        2.0 * self.deviation / self.learned_spread
+        self.spread_now() / self.learned_spread
     }
 
     /// The evidence, for the warning's message: `slowing: mean 4.90 s →
@@ -294,7 +309,7 @@ impl fmt::Display for Evidence<'_> {
                 f,
                 "scattering: spread ±{} → ±{} over {over}, window {}",
                 Seconds(t.learned_spread),
-                Seconds(2.0 * t.deviation),
+                Seconds(t.spread_now()),
                 Window(t.lo, t.hi)
             )?;
             first = false;
@@ -305,7 +320,7 @@ impl fmt::Display for Evidence<'_> {
                 "back to normal: mean {} (learned {}), spread ±{} (learned ±{}), window {}",
                 Seconds(t.mean),
                 Seconds(t.typical),
-                Seconds(2.0 * t.deviation),
+                Seconds(t.spread_now()),
                 Seconds(t.learned_spread),
                 Window(t.lo, t.hi)
             )?;
@@ -356,6 +371,7 @@ impl fmt::Display for Span {
 mod tests {
     use super::*;
     use crate::timer::learn::{Edge, Event};
+    use crate::timer::line::Rng;
 
     /// A motion learned at 4.90 s, training 4.80–5.00 s, window 4.65–5.15 s.
     fn tracker() -> DriftTracker {
@@ -490,19 +506,24 @@ mod tests {
         let mut t = tracker();
         let mut at = 0;
         // Learned ±0.10 s. An even ±0.10 s now: nothing.
-        let even = |i: u64| 4800 + (i * 83) % 201;
-        assert!(feed(&mut t, &rules, &mut { even }, 100, &mut at).is_empty());
-        assert!((t.spread_ms().unwrap() - 100.0).abs() < 15.0);
+        let mut rng = Rng::new(1);
+        let mut even = |_| 4800 + rng.between(0, 200);
+        assert!(feed(&mut t, &rules, &mut even, 100, &mut at).is_empty());
+        let spread = t.spread_ms().unwrap();
+        assert!((spread - 100.0).abs() < 30.0, "{spread}");
         // ±0.25 s, mean unchanged: scattering, and back.
-        let wide = |i: u64| 4650 + (i * 83) % 501;
-        let changes = feed(&mut t, &rules, &mut { wide }, 100, &mut at);
+        let mut rng = Rng::new(2);
+        let mut wide = |_| 4650 + rng.between(0, 500);
+        let changes = feed(&mut t, &rules, &mut wide, 100, &mut at);
         assert_eq!(changes.len(), 1);
         assert_eq!(changes[0].1, DriftChange::Raised);
         assert_eq!(
             t.evidence().to_string(),
-            "scattering: spread ±0.10 s → ±0.26 s over 3.3 h, window 4.65–5.15 s"
+            "scattering: spread ±0.10 s → ±0.25 s over 3.3 h, window 4.65–5.15 s"
         );
-        let changes = feed(&mut t, &rules, &mut { even }, 100, &mut at);
+        let mut rng = Rng::new(3);
+        let mut even = |_| 4800 + rng.between(0, 200);
+        let changes = feed(&mut t, &rules, &mut even, 100, &mut at);
         assert_eq!(changes.len(), 1);
         assert_eq!(changes[0].1, DriftChange::Cleared);
     }
@@ -517,13 +538,14 @@ mod tests {
         let mut at = 0;
         let changes = feed(&mut t, &rules, &mut |_| 5060, 100, &mut at);
         assert_eq!(changes, [(4, DriftChange::Raised)]);
-        let wide = |i: u64| 4810 + (i * 83) % 501;
-        let changes = feed(&mut t, &rules, &mut { wide }, 60, &mut at);
+        let mut rng = Rng::new(4);
+        let mut wide = |_| 4810 + rng.between(0, 500);
+        let changes = feed(&mut t, &rules, &mut wide, 60, &mut at);
         assert_eq!(changes.len(), 1);
         assert_eq!(changes[0].1, DriftChange::Updated);
         assert_eq!(
             t.evidence().to_string(),
-            "slowing: mean 4.90 s → 5.08 s over 2.6 h, limit 5.15 s; \
+            "slowing: mean 4.90 s → 5.07 s over 2.6 h, limit 5.15 s; \
              scattering: spread ±0.10 s → ±0.24 s over 2.6 h, window 4.65–5.15 s"
         );
     }
