@@ -610,6 +610,42 @@ mod tests {
     }
 
     #[test]
+    fn a_drift_warning_restored_clears_when_fresh_durations_are_normal() {
+        let rules = DriftRules {
+            min_samples: 10,
+            ..DriftRules::default()
+        };
+        let mut e = drifting_engine(Some(rules));
+        let mut t = 0;
+        for _ in 0..60 {
+            cycle(&mut e, &mut t, 6250);
+        }
+        let warning = e
+            .alarms()
+            .find(|a| a.id == "line-007-drift")
+            .unwrap()
+            .clone();
+        assert!(warning.active);
+        // The agent restarts with the warning in its journal.
+        let mut e = drifting_engine(Some(rules));
+        e.restore(vec![warning], None, t);
+        for i in 0..20 {
+            let changes = cycle(&mut e, &mut t, 6000);
+            if i < 9 {
+                assert!(changes.is_empty(), "{i}: {changes:?}");
+            } else if i == 9 {
+                assert_eq!(changes.len(), 1);
+                assert_eq!(changes[0].1, AlarmTransition::Cleared);
+                assert_eq!(
+                    changes[0].0.message,
+                    "transition #007 (+arrived after +move) back to normal: mean 6.00 s \
+                     (learned 6.00 s), spread ±0.00 s (learned ±0.05 s), window 5.70–6.30 s"
+                );
+            }
+        }
+    }
+
+    #[test]
     fn without_drift_rules_nothing_is_tracked_or_declared() {
         let mut e = drifting_engine(None);
         assert!(!e.can_raise("line-007-drift"));
