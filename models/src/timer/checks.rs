@@ -539,7 +539,10 @@ mod tests {
             tags.iter().find(|t| t.name == n).map(|t| t.address.clone())
         })
         .unwrap()
-        .drifting(rules);
+        .drifting(rules)
+        .commented(
+            CommentDb::parse("io.csv", "X1.00,slide in front\n", |a| Ok(Signal::new(a))).unwrap(),
+        );
         let mut e =
             CellEngine::new("c", tags, vec![Box::new(checks)], StateRules::default()).unwrap();
         e.on_connection(true, 0);
@@ -588,7 +591,7 @@ mod tests {
         assert_eq!(
             a.message,
             "transition #007 (+arrived after +move) slowing: \
-             mean 6.00 s → 6.15 s over 47 min, limit 6.30 s"
+             mean 6.00 s → 6.15 s over 47 min, limit 6.30 s: slide in front"
         );
         assert_eq!(
             (a.severity, a.kind, a.latched),
@@ -639,7 +642,8 @@ mod tests {
                 assert_eq!(
                     changes[0].0.message,
                     "transition #007 (+arrived after +move) back to normal: mean 6.00 s \
-                     (learned 6.00 s), spread ±0.00 s (learned ±0.05 s), window 5.70–6.30 s"
+                     (learned 6.00 s), spread ±0.00 s (learned ±0.05 s), window 5.70–6.30 s: \
+                     slide in front"
                 );
             }
         }
