@@ -21,7 +21,8 @@
 //! - [`legacy`]: the `@`-framed serial protocol of paper 002 (frames, FCS, end codes).
 //! - [`limit`]: limit alarms (HH/H/L/LL) on numbers, with deadband and delays.
 //! - [`report`]: daily and monthly production reports from state history.
-//! - [`timer`]: transition timers: run logs, the learner, the runtime monitor.
+//! - [`timer`]: transition timers: run logs, the learner, the runtime monitor,
+//!   drift warnings.
 
 pub mod alarm;
 pub mod comments;

@@ -3,7 +3,7 @@
 //!   (backwards, repeated, at both ends of `u64`) never panics, and gives
 //!   no verdict (early or normal) on a change earlier than the latest known
 //!   value;
-//! - the cell engine with timers, limits with delays, step supervision and
+//! - the cell engine with timers (and their drift warnings), limits with delays, step supervision and
 //!   a delayed alarm, fed arbitrary readings, connection changes and the
 //!   passing of time at arbitrary times, never panics, and counts as out of
 //!   order exactly the readings (not duplicates) stamped before the latest
@@ -18,6 +18,7 @@ use cellwatch_models::limit::{Level, LimitCheck, LimitChecks, LimitLevel};
 use cellwatch_models::sfc::supervise::SfcChecks;
 use cellwatch_models::signal::Signal;
 use cellwatch_models::timer::checks::TimerChecks;
+use cellwatch_models::timer::drift::DriftRules;
 use cellwatch_models::timer::learn::{Edge, Event, TimerModel, Transition, MODEL_VERSION};
 use cellwatch_models::timer::monitor::{Outcome, TimerMonitor};
 use cellwatch_models::value::Num;
@@ -197,10 +198,15 @@ fn checks(w1: [u64; 2], w2: [u64; 2], delays: (u64, u64)) -> (Vec<Tag>, Vec<Box<
     )
     .unwrap();
     let sfc = SfcChecks::new("sfc", sfc, Severity::High, CommentDb::default());
+    // Drift tracked from the first duration, so that it is judged too.
     let timers = TimerChecks::new("tmr", &model(w1, w2), Severity::High, |n| {
         Some(Signal::new(n))
     })
-    .unwrap();
+    .unwrap()
+    .drifting(Some(DriftRules {
+        min_samples: 1,
+        ..DriftRules::default()
+    }));
     let level = |level, limit| LimitLevel {
         level,
         limit,

@@ -129,6 +129,27 @@ pub trait CheckSet: Send + Sync {
 
     /// Moves the measurements made since the last call into `out`.
     fn take_observations(&mut self, _out: &mut Vec<Observation>) {}
+
+    /// Adds where each tracked transition's recent durations lie in its
+    /// window (timer checks with drift tracking on; others add nothing).
+    fn window_positions(&self, _out: &mut Vec<WindowPosition>) {}
+}
+
+/// Where a transition's recent durations lie in its learned window.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WindowPosition {
+    /// The transition's alarm id (`line-007`).
+    pub check: String,
+    /// The moving mean's place: 0 at the learned typical Δt, +1 at the
+    /// upper limit (late), −1 at the lower one (early), beyond ±1 outside.
+    pub position: f64,
+    /// The moving mean of the duration, ms.
+    pub mean_ms: f64,
+    /// The tracked spread (1.5 × the moving mean difference between
+    /// successive durations: for an even jitter, its half-width), ms.
+    pub spread_ms: f64,
+    /// Durations measured since the agent started.
+    pub samples: u64,
 }
 
 /// A measurement a check made: a transition's observed duration.

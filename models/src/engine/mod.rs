@@ -42,7 +42,7 @@ pub mod switching;
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
-pub use checks::{CheckSet, Declared, Finding, Observation};
+pub use checks::{CheckSet, Declared, Finding, Observation, WindowPosition};
 pub use state::{HistoryKind, MachineState, StateName, StateRules};
 pub use switching::{SwitchingCheck, SwitchingChecks};
 
@@ -816,6 +816,16 @@ impl CellEngine {
                 }
             }
         }
+    }
+
+    /// Where each tracked transition's recent durations lie in its window
+    /// (timer checks with drift tracking on), in the checks' order.
+    pub fn window_positions(&self) -> Vec<WindowPosition> {
+        let mut out = Vec::new();
+        for set in &self.sets {
+            set.window_positions(&mut out);
+        }
+        out
     }
 
     /// Whether this engine can raise alarm `id`: one its checks declared,

@@ -6,14 +6,21 @@
 //! transition and blaming its event's signal; it stays active until an
 //! operator resets it (`ERROR_RESET_nnn`). A signal the model reads but the
 //! cell maps to no tag is refused when the check is built.
+//!
+//! With drift tracking on ([`TimerChecks::drifting`]), each transition's
+//! durations inside its window also feed a [`DriftTracker`]: a low-priority
+//! warning `<id>-<nnn>-drift`, not latched, says when they drift towards a
+//! limit or scatter, and clears by itself when they are back; their place
+//! in the window is [`CheckSet::window_positions`].
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 
+use super::drift::{DriftRules, DriftTracker};
 use super::learn::{Edge, TimerModel};
 use super::monitor::{ModelError, Outcome, TimerMonitor};
-use crate::alarm::{AlarmKind, Severity};
+use crate::alarm::{Alarm, AlarmKind, Severity};
 use crate::comments::CommentDb;
-use crate::engine::{CheckSet, Declared, Finding, Observation};
+use crate::engine::{CheckSet, Declared, Finding, Observation, WindowPosition};
 use crate::explain::Culprit;
 use crate::signal::Signal;
 
@@ -42,6 +49,16 @@ pub struct TimerChecks {
     observed: Vec<Observation>,
     /// The signals' comments (I/O list), for culprits and messages.
     comments: CommentDb,
+    /// When drift is warned; `None`: not tracked.
+    drift: Option<DriftRules>,
+    /// Per transition id: its recent durations.
+    trackers: BTreeMap<u32, DriftTracker>,
+}
+
+/// The id of transition `nnn`'s drift warning in timer check `check`:
+/// `line-020-drift`.
+pub fn drift_alarm(check: &str, transition: u32) -> String {
+    format!("{check}-{transition:03}-drift")
 }
 
 impl TimerChecks {
@@ -89,7 +106,53 @@ impl TimerChecks {
             transitions,
             observed: Vec::new(),
             comments: CommentDb::default(),
+            drift: None,
+            trackers: model
+                .transitions
+                .iter()
+                .map(|t| (t.id, DriftTracker::new(t)))
+                .collect(),
         })
+    }
+
+    /// Tracks each transition's durations and warns of drift by `rules`
+    /// (`None`: off, the default). Rules out of range
+    /// ([`DriftRules::problems`]) are the caller's to refuse.
+    #[must_use]
+    pub fn drifting(mut self, rules: Option<DriftRules>) -> Self {
+        self.drift = rules;
+        self
+    }
+
+    /// A duration of transition `id` inside its window, `ms` long, ended at
+    /// `at`: its drift warning raised, updated or cleared, if it changes.
+    fn track(&mut self, id: u32, ms: u64, at: u64, out: &mut Vec<Finding>) {
+        let (Some(rules), Some(tracker)) = (&self.drift, self.trackers.get_mut(&id)) else {
+            return;
+        };
+        if tracker.measure(ms, at, rules).is_none() {
+            return;
+        }
+        let Some((what, s, _, _)) = self.transitions.get(&id) else {
+            return;
+        };
+        let message = format!("transition #{id:03} ({what}) {}", tracker.evidence());
+        let message = match self.comments.get(&self.signals[*s]) {
+            Some(c) => format!("{message}: {c}"),
+            None => message,
+        };
+        out.push(Finding {
+            at: None,
+            id: drift_alarm(&self.id, id),
+            kind: AlarmKind::Timer,
+            severity: Severity::Low,
+            fault_type: "DRIFT".into(),
+            latched: false,
+            active: tracker.active(),
+            fault_step: None,
+            culprits: Vec::new(),
+            message,
+        });
     }
 
     /// The signals' comments (the tags' I/O-list comments): each alarm's
@@ -112,12 +175,13 @@ impl TimerChecks {
                 Outcome::Normal {
                     transition,
                     observed_ms,
-                    ..
+                    at_ms,
                 } => {
                     self.observed.push(Observation {
                         check: format!("{}-{transition:03}", self.id),
                         ms: observed_ms,
                     });
+                    self.track(transition, observed_ms, at_ms, out);
                     continue;
                 }
             };
@@ -206,7 +270,8 @@ impl CheckSet for TimerChecks {
     fn alarms(&self) -> Vec<Declared> {
         let mut ids: Vec<u32> = self.transitions.keys().copied().collect();
         ids.sort_unstable();
-        ids.into_iter()
+        let mut out: Vec<Declared> = ids
+            .iter()
             .map(|t| Declared {
                 id: format!("{}-{t:03}", self.id),
                 kind: AlarmKind::Timer,
@@ -214,7 +279,17 @@ impl CheckSet for TimerChecks {
                 fault_type: "TIMER".into(),
                 latched: true,
             })
-            .collect()
+            .collect();
+        if self.drift.is_some() {
+            out.extend(ids.iter().map(|&t| Declared {
+                id: drift_alarm(&self.id, t),
+                kind: AlarmKind::Timer,
+                severity: Severity::Low,
+                fault_type: "DRIFT".into(),
+                latched: false,
+            }));
+        }
+        out
     }
 
     fn on_change(
@@ -258,6 +333,37 @@ impl CheckSet for TimerChecks {
 
     fn take_observations(&mut self, out: &mut Vec<Observation>) {
         out.append(&mut self.observed);
+    }
+
+    fn restored(&mut self, alarm: &Alarm) {
+        if self.drift.is_none() {
+            return;
+        }
+        for (&id, tracker) in &mut self.trackers {
+            if alarm.id == drift_alarm(&self.id, id) {
+                tracker.restored();
+            }
+        }
+    }
+
+    fn window_positions(&self, out: &mut Vec<WindowPosition>) {
+        if self.drift.is_none() {
+            return;
+        }
+        for (&id, t) in &self.trackers {
+            let (Some(position), Some(mean_ms), Some(spread_ms)) =
+                (t.position(), t.mean_ms(), t.spread_ms())
+            else {
+                continue;
+            };
+            out.push(WindowPosition {
+                check: format!("{}-{id:03}", self.id),
+                position,
+                mean_ms,
+                spread_ms,
+                samples: t.samples(),
+            });
+        }
     }
 }
 
@@ -415,6 +521,143 @@ mod tests {
                 ms: 6000
             }]
         );
+    }
+
+    /// An engine over `model()` with drift tracking by `rules`.
+    fn drifting_engine(rules: Option<DriftRules>) -> CellEngine {
+        let tags = vec![
+            Tag {
+                name: "move".into(),
+                address: Signal::new("Y1.00"),
+            },
+            Tag {
+                name: "arrived".into(),
+                address: Signal::new("X1.00"),
+            },
+        ];
+        let checks = TimerChecks::new("line", &model(), Severity::High, |n| {
+            tags.iter().find(|t| t.name == n).map(|t| t.address.clone())
+        })
+        .unwrap()
+        .drifting(rules)
+        .commented(
+            CommentDb::parse("io.csv", "X1.00,slide in front\n", |a| Ok(Signal::new(a))).unwrap(),
+        );
+        let mut e =
+            CellEngine::new("c", tags, vec![Box::new(checks)], StateRules::default()).unwrap();
+        e.on_connection(true, 0);
+        e.on_reading(0, Reading::Good(false), 0, 0);
+        e.on_reading(1, Reading::Good(false), 0, 0);
+        e
+    }
+
+    /// One cycle a minute from `*t`: the motion takes `ms`. The alarm
+    /// transitions it caused.
+    fn cycle(e: &mut CellEngine, t: &mut u64, ms: u64) -> Vec<(Alarm, AlarmTransition)> {
+        *t += 60_000;
+        let mut out = Vec::new();
+        for (tag, v, at) in [(0, true, *t), (1, true, *t + ms), (0, false, *t + ms + 100)] {
+            let step = e.on_reading(tag, Reading::Good(v), at, at);
+            out.extend(step.alarms().map(|(a, tr, _)| (a.clone(), tr)));
+        }
+        e.on_reading(1, Reading::Good(false), *t + ms + 200, *t + ms + 200);
+        out
+    }
+
+    #[test]
+    fn a_slowing_motion_warns_low_before_its_window_closes_and_clears_when_back() {
+        let rules = DriftRules {
+            min_samples: 10,
+            ..DriftRules::default()
+        };
+        let mut e = drifting_engine(Some(rules));
+        assert!(e.can_raise("line-007-drift"));
+        let mut t = 0;
+        for _ in 0..20 {
+            assert!(cycle(&mut e, &mut t, 6000).is_empty());
+        }
+        // 6.2 s, inside the window [5.7, 6.3] s: no timer alarm, but the
+        // mean walks towards 6.3 s and warns past 6.15 s.
+        let mut raised = Vec::new();
+        for i in 0..60 {
+            for (a, tr) in cycle(&mut e, &mut t, 6200) {
+                raised.push((i, a, tr));
+            }
+        }
+        assert_eq!(raised.len(), 1, "{raised:?}");
+        let (i, a, tr) = &raised[0];
+        assert_eq!((*i, *tr), (27, AlarmTransition::Raised));
+        assert_eq!(a.id, "line-007-drift");
+        assert_eq!(
+            a.message,
+            "transition #007 (+arrived after +move) slowing: \
+             mean 6.00 s → 6.15 s over 47 min, limit 6.30 s: slide in front"
+        );
+        assert_eq!(
+            (a.severity, a.kind, a.latched),
+            (Severity::Low, AlarmKind::Timer, false)
+        );
+        let p = &e.window_positions()[0];
+        assert_eq!((p.check.as_str(), p.samples), ("line-007", 80));
+        assert!(p.position > 0.6 && p.position < 0.67, "{p:?}");
+        // Back to 6.0 s: cleared once the mean is below 6.075 s.
+        let mut cleared = Vec::new();
+        for i in 0..60 {
+            for (a, tr) in cycle(&mut e, &mut t, 6000) {
+                cleared.push((i, a, tr));
+            }
+        }
+        assert_eq!(cleared.len(), 1, "{cleared:?}");
+        assert_eq!(cleared[0].2, AlarmTransition::Cleared);
+        assert!(!e.alarms().any(|a| a.active));
+    }
+
+    #[test]
+    fn a_drift_warning_restored_clears_when_fresh_durations_are_normal() {
+        let rules = DriftRules {
+            min_samples: 10,
+            ..DriftRules::default()
+        };
+        let mut e = drifting_engine(Some(rules));
+        let mut t = 0;
+        for _ in 0..60 {
+            cycle(&mut e, &mut t, 6250);
+        }
+        let warning = e
+            .alarms()
+            .find(|a| a.id == "line-007-drift")
+            .unwrap()
+            .clone();
+        assert!(warning.active);
+        // The agent restarts with the warning in its journal.
+        let mut e = drifting_engine(Some(rules));
+        e.restore(vec![warning], None, t);
+        for i in 0..20 {
+            let changes = cycle(&mut e, &mut t, 6000);
+            if i < 9 {
+                assert!(changes.is_empty(), "{i}: {changes:?}");
+            } else if i == 9 {
+                assert_eq!(changes.len(), 1);
+                assert_eq!(changes[0].1, AlarmTransition::Cleared);
+                assert_eq!(
+                    changes[0].0.message,
+                    "transition #007 (+arrived after +move) back to normal: mean 6.00 s \
+                     (learned 6.00 s), spread ±0.00 s (learned ±0.05 s), window 5.70–6.30 s: \
+                     slide in front"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn without_drift_rules_nothing_is_tracked_or_declared() {
+        let mut e = drifting_engine(None);
+        assert!(!e.can_raise("line-007-drift"));
+        let mut t = 0;
+        for _ in 0..100 {
+            assert!(cycle(&mut e, &mut t, 6250).is_empty());
+        }
+        assert!(e.window_positions().is_empty());
     }
 
     #[test]

@@ -13,7 +13,9 @@
 //!
 //! Faults can be injected at a given motion ([`Fault`]): a sensor that
 //! never comes, a motion too fast, a motion too slow, an actuator stuck
-//! (the command given but the motion never starts).
+//! (the command given but the motion never starts). One motion can wear
+//! instead ([`Slowdown`], [`run_slowing`]): it takes a little longer every
+//! hour of the run.
 
 use super::log::{Change, RunLog};
 
@@ -89,6 +91,33 @@ pub struct InjectedFault {
     pub sensor: String,
     /// When its command was given, ms.
     pub command_at: u64,
+}
+
+/// A motion that slows down steadily through a run (a cylinder wearing,
+/// a valve clogging): its time grows by `percent_per_hour` of itself per
+/// hour since the run began, jitter on top.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Slowdown {
+    /// Its end-of-motion sensor (`WR2B_DONE`).
+    pub sensor: String,
+    /// Whether the sensor's rising edge ends it (the clamp's sensor ends
+    /// two motions: closing rises, opening falls).
+    pub rising: bool,
+    /// How much longer per hour, percent.
+    pub percent_per_hour: f64,
+}
+
+impl Slowdown {
+    /// `mo`'s time when commanded at `t`, ms.
+    fn motion_ms(slowdown: Option<&Slowdown>, mo: &Motion, t: u64) -> u64 {
+        match slowdown {
+            Some(s) if s.sensor == mo.sensor && s.rising == mo.sensor_value => {
+                let hours = t as f64 / 3_600_000.0;
+                (mo.ms as f64 * (1.0 + s.percent_per_hour / 100.0 * hours)).round() as u64
+            }
+            _ => mo.ms,
+        }
+    }
 }
 
 /// One motion: its command and end-of-motion sensor, motion time, jitter.
@@ -180,6 +209,17 @@ pub fn signals() -> Vec<String> {
 
 /// Simulates one run of `cycles` cycles per station.
 pub fn run(seed: u64, cycles: usize, fault: Option<Fault>) -> (RunLog, Option<InjectedFault>) {
+    run_slowing(seed, cycles, fault, None)
+}
+
+/// Simulates one run like [`run`], with one motion slowing down through
+/// it; with `None`, exactly [`run`].
+pub fn run_slowing(
+    seed: u64,
+    cycles: usize,
+    fault: Option<Fault>,
+    slowdown: Option<&Slowdown>,
+) -> (RunLog, Option<InjectedFault>) {
     let names = signals();
     let idx = |n: &str| names.iter().position(|x| x == n).expect("known signal");
     let mut rng = Rng::new(seed);
@@ -236,7 +276,7 @@ pub fn run(seed: u64, cycles: usize, fault: Option<Fault>) -> (RunLog, Option<In
                     cycle,
                 });
                 station.push((t, idx(&mo.command), mo.command_value));
-                let mut end = t + jitter(&mut rng, mo.ms);
+                let mut end = t + jitter(&mut rng, Slowdown::motion_ms(slowdown, mo, t));
                 if parallel {
                     let b = &motions[3];
                     planned.push(Planned {
@@ -246,13 +286,13 @@ pub fn run(seed: u64, cycles: usize, fault: Option<Fault>) -> (RunLog, Option<In
                         cycle,
                     });
                     station.push((t, idx(&b.command), b.command_value));
-                    let end_b = t + jitter(&mut rng, b.ms);
+                    let end_b = t + jitter(&mut rng, Slowdown::motion_ms(slowdown, b, t));
                     station.push((end_b, idx(&b.sensor), b.sensor_value));
                     let drop_b = end_b + scan(&mut rng);
                     station.push((drop_b, idx(&b.command), !b.command_value));
                     station.push((drop_b + scan(&mut rng), idx(&b.sensor), !b.sensor_value));
                     end = end.max(end_b);
-                    let end_a = t + jitter(&mut rng, mo.ms);
+                    let end_a = t + jitter(&mut rng, Slowdown::motion_ms(slowdown, mo, t));
                     station.push((end_a, idx(&mo.sensor), mo.sensor_value));
                     let drop_a = end_a + scan(&mut rng);
                     station.push((drop_a, idx(&mo.command), !mo.command_value));
@@ -404,6 +444,43 @@ mod tests {
         assert_ne!(a.changes, c.changes);
         assert_eq!(a.signals.len(), 94);
         assert!(a.changes.windows(2).all(|w| w[0].at <= w[1].at));
+    }
+
+    #[test]
+    fn a_slowdown_stretches_only_its_motion_and_more_as_time_goes() {
+        let slow = Slowdown {
+            sensor: "WR2B_DONE".into(),
+            rising: true,
+            percent_per_hour: 10.0,
+        };
+        assert_eq!(run_slowing(5, 3, None, None), run(5, 3, None));
+        let (normal, _) = run(5, 200, None);
+        let (worn, _) = run_slowing(5, 200, None, Some(&slow));
+        // A weld's START → DONE, per cycle.
+        let durations = |log: &RunLog, weld: &str| {
+            let at = |n: String| log.signals.iter().position(|s| *s == n).unwrap();
+            let (start, done) = (at(format!("{weld}_START")), at(format!("{weld}_DONE")));
+            let mut since = 0;
+            let mut out = Vec::new();
+            for c in &log.changes {
+                if c.signal == start && c.value {
+                    since = c.at;
+                } else if c.signal == done && c.value {
+                    out.push(c.at - since);
+                }
+            }
+            out
+        };
+        let (n, w) = (durations(&normal, "WR2B"), durations(&worn, "WR2B"));
+        assert_eq!(n.len(), w.len());
+        // 4.9 s ± 2 % at first; 200 cycles (over an hour) later, more
+        // than 10 % slower.
+        assert!(w[0] <= 5000, "{}", w[0]);
+        assert!(w[199] > n[199] * 110 / 100, "{} {}", w[199], n[199]);
+        // The other motions keep their times.
+        for weld in ["WR2A", "WR1B"] {
+            assert_eq!(durations(&normal, weld), durations(&worn, weld));
+        }
     }
 
     #[test]

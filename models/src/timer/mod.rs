@@ -8,9 +8,12 @@
 //! - [`monitor`]: the runtime monitor, fed changes and the passing of time;
 //! - [`line`]: a simulated body-shop line that writes runs, normal or faulty;
 //! - [`checks`]: timers as engine checks, with latched alarms;
+//! - [`drift`]: each transition's recent durations in fixed memory, and
+//!   the warning when they drift towards a limit;
 //! - [`st`]: the diagnosis functions as IEC 61131-3 Structured Text.
 
 pub mod checks;
+pub mod drift;
 pub mod learn;
 pub mod line;
 pub mod log;
