@@ -854,6 +854,9 @@ fn exported_metrics() -> BTreeSet<String> {
     m.transition_window_seconds
         .with_label_values(&["line-001", "lo"])
         .set(1.0);
+    m.transition_window_position
+        .with_label_values(&["line-001"])
+        .set(0.1);
     m.tag_value.with_label_values(&["t"]).set(1.0);
     m.sfc_step_active
         .with_label_values(&["sfc", "F1", "S2"])

@@ -181,6 +181,9 @@ pub struct CellStep {
     /// When the source received the values this step handles: the start
     /// of the agent's own latency (`cellwatch_alarm_latency_seconds`).
     pub received: Option<std::time::Instant>,
+    /// Where the transitions measured in this step stand in their learned
+    /// windows (drift tracking), one entry each.
+    pub positions: Vec<cellwatch_models::engine::WindowPosition>,
 }
 
 impl CellStep {

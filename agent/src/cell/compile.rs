@@ -52,7 +52,8 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
             id: t.id.clone(),
             source,
         })?
-        .commented(comments.clone());
+        .commented(comments.clone())
+        .drifting(t.drift);
         sets.push(Box::new(checks));
     }
     if !config.limits.is_empty() {

@@ -554,6 +554,7 @@ impl CellLoop {
             state,
             queue_depth: 0,
             received: None,
+            positions: Vec::new(),
         })
         .await;
     }
@@ -632,6 +633,14 @@ impl CellLoop {
             state = Some(self.state_payload(now));
         }
         self.timers.observe(now, &step.observations);
+        // Where each transition measured now stands in its window.
+        let positions = if step.observations.is_empty() {
+            Vec::new()
+        } else {
+            let mut all = self.engine.window_positions();
+            all.retain(|p| step.observations.iter().any(|o| o.check == p.check));
+            all
+        };
         let received = self.received.take();
         self.deliver(CellStep {
             at: now,
@@ -641,6 +650,7 @@ impl CellLoop {
             state,
             queue_depth,
             received,
+            positions,
         })
         .await;
     }

@@ -13,6 +13,9 @@ pub struct TimerCheck {
     pub model: cellwatch_models::timer::learn::TimerModel,
     /// Severity of its alarms.
     pub severity: Severity,
+    /// Drift warnings before a transition times out (`drift`, `drift_*`):
+    /// `None` when off.
+    pub drift: Option<cellwatch_models::timer::drift::DriftRules>,
 }
 
 /// Step supervision of sequential function charts (paper 004).

@@ -250,6 +250,11 @@ pub(crate) struct RawTimers {
     pub(crate) id: Spanned<String>,
     pub(crate) model: Spanned<String>,
     pub(crate) severity: Option<Spanned<String>>,
+    pub(crate) drift: Option<bool>,
+    pub(crate) drift_fraction: Option<Spanned<f64>>,
+    pub(crate) drift_spread: Option<Spanned<f64>>,
+    pub(crate) drift_min_samples: Option<Spanned<i64>>,
+    pub(crate) drift_weight: Option<Spanned<f64>>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -84,6 +84,9 @@ pub struct Metrics {
     pub transition_seconds: HistogramVec,
     /// Learned transition windows, by timer check and bound.
     pub transition_window_seconds: GaugeVec,
+    /// Where each transition's recent durations stand in its window (0 at
+    /// the learned Δt, ±1 at its limits), by timer check.
+    pub transition_window_position: GaugeVec,
     /// Values of the tags configured with `export = true`, by tag name.
     pub tag_value: GaugeVec,
     /// 1 while a supervised chart's step is active, by check, chart, step.
@@ -380,6 +383,14 @@ impl Metrics {
                     cell
                 ),
                 &["check", "bound"]
+            )),
+            transition_window_position: reg!(GaugeVec::new(
+                opts(
+                    "cellwatch_transition_window_position",
+                    "Where each transition's moving mean duration stands in its learned window: 0 at the learned typical time, +1 at the upper limit (late), -1 at the lower (early); a drift warning at +-drift_fraction (0.5).",
+                    cell
+                ),
+                &["check"]
             )),
             tag_value: reg!(GaugeVec::new(
                 opts(

@@ -210,6 +210,11 @@ impl MetricsSink {
                 .with_label_values(&[o.check.as_str()])
                 .observe(o.ms as f64 / 1000.0);
         }
+        for p in &step.positions {
+            m.transition_window_position
+                .with_label_values(&[p.check.as_str()])
+                .set(p.position);
+        }
         for (alarm, transition, _) in e.alarms() {
             if transition == Transition::Raised {
                 m.raised(&alarm.id, alarm.kind, alarm.severity);

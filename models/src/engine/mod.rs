@@ -1720,27 +1720,6 @@ impl CellEngine {
         Some(d.op.holds(lhs, rhs))
     }
 
-    /// A comparison contact shown with its operands' values:
-    /// `TEMP = 85.2 (> 80.5)`.
-    pub fn describe_comparison(&self, address: &Signal) -> Option<String> {
-        let t = self.tag_index(address)?;
-        let d = self.derived.iter().find(|d| d.tag == t)?;
-        let show = |t: usize| {
-            self.value(t)
-                .map_or_else(|| "unknown".to_string(), |v| v.to_string())
-        };
-        let rhs = match d.rhs {
-            Rhs::Const(n) => n.to_string(),
-            Rhs::Tag(r) => format!("{} = {}", self.tags[r].address, show(r)),
-        };
-        Some(format!(
-            "{} = {} ({} {rhs})",
-            self.tags[d.lhs].address,
-            show(d.lhs),
-            d.op.as_str()
-        ))
-    }
-
     /// Whether alarm `id` is active now (raised, or its clear waiting out
     /// its off-delay).
     fn is_active(&self, id: &str) -> bool {

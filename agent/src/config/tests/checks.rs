@@ -27,6 +27,41 @@ fn timer_model_signals_must_be_tags() {
         timer_signal(c.addressing, &c.tags, "X2"),
         Some(Signal::new("X2"))
     );
+    // Drift warnings are on, with the model's defaults, unless said.
+    assert_eq!(
+        c.timers[0].drift,
+        Some(cellwatch_models::timer::drift::DriftRules::default())
+    );
+    let off = parse(
+        "cell.toml",
+        &format!("{ok}drift = false\n"),
+        Path::new("base"),
+        &files,
+    )
+    .unwrap();
+    assert_eq!(off.timers[0].drift, None);
+    let tuned = parse(
+        "cell.toml",
+        &format!("{ok}drift_fraction = 0.3\ndrift_min_samples = 50\n"),
+        Path::new("base"),
+        &files,
+    )
+    .unwrap();
+    let rules = tuned.timers[0].drift.unwrap();
+    assert_eq!((rules.fraction, rules.min_samples), (0.3, 50));
+    let e = parse(
+        "cell.toml",
+        &format!("{ok}drift_fraction = 1.5\ndrift_weight = 0.0\n"),
+        Path::new("base"),
+        &files,
+    )
+    .unwrap_err()
+    .to_string();
+    assert_eq!(
+        e,
+        "cell.toml:31:18: checks.timers[0].drift_fraction: fraction must be in (0, 1], not 1.5\n\
+         cell.toml:32:16: checks.timers[0].drift_weight: weight must be in (0, 1], not 0"
+    );
 }
 
 /// GOOD with numeric tags `D1` (Double) and `D2` (UInt16) and `S1`

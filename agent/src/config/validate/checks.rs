@@ -509,6 +509,45 @@ impl Validator<'_> {
     }
 }
 
+impl Validator<'_> {
+    /// A timer check's drift warnings (`drift`, on unless `false`, and
+    /// `drift_fraction`, `drift_spread`, `drift_min_samples`,
+    /// `drift_weight`), each setting checked at its place.
+    pub(super) fn drift(
+        &mut self,
+        t: &crate::config::raw::RawTimers,
+        key: &str,
+    ) -> Option<cellwatch_models::timer::drift::DriftRules> {
+        if t.drift == Some(false) {
+            return None;
+        }
+        let mut rules = cellwatch_models::timer::drift::DriftRules::default();
+        let mut spans = std::collections::HashMap::new();
+        if let Some(v) = &t.drift_fraction {
+            rules.fraction = *v.get_ref();
+            spans.insert("fraction", v.span());
+        }
+        if let Some(v) = &t.drift_spread {
+            rules.spread = *v.get_ref();
+            spans.insert("spread", v.span());
+        }
+        if let Some(v) = &t.drift_min_samples {
+            rules.min_samples = u32::try_from(*v.get_ref()).unwrap_or(0);
+            spans.insert("min_samples", v.span());
+        }
+        if let Some(v) = &t.drift_weight {
+            rules.weight = *v.get_ref();
+            spans.insert("weight", v.span());
+        }
+        let problems = rules.problems();
+        for p in &problems {
+            let span = spans.get(p.field).cloned().unwrap_or(t.id.span());
+            self.problem(span, &format!("{key}.drift_{}", p.field), p.to_string());
+        }
+        problems.is_empty().then_some(rules)
+    }
+}
+
 /// Whether `text` is a culture name as TIA Portal writes one (`de-DE`,
 /// `en-US`, `zh-CN`): two or three letters, a dash, two letters or digits.
 fn is_culture(text: &str) -> bool {

@@ -414,10 +414,12 @@ impl Validator<'_> {
                 );
                 continue;
             }
+            let drift = self.drift(&t, &key);
             timers.push(TimerCheck {
                 id: t.id.into_inner(),
                 model,
                 severity,
+                drift,
             });
         }
         let sfc = self.sfc(raw.checks.sfc, &mut ids, &by_address);
