@@ -682,3 +682,105 @@ fn tia_portal_exports_give_their_latches_and_say_which_networks_are_not_read() {
         ["723:13: block \"FB_SEQ_One\" network 1: GRAPH network not read (LAD and FBD networks are)"]
     );
 }
+
+#[test]
+fn tia_portal_exports_of_other_projects() {
+    // A V21 LAD FC of a pump starter (Portuguese names): global tags with
+    // hyphens, members of a DB whose name has a space, R coils without an
+    // S coil, a negated coil, two empty networks (comments only). Calls of
+    // FBs and MOVEs are said where they are; what they write reads as inputs.
+    let p = program("tia-portal-cli-BombaTemplateFc.xml");
+    let motor = "DB GLOBAL.AREA_01.AREA_01_MOTORES.MOTOR_S-01A";
+    let reset_liga = "(S-01A_CMD_RESET_LIGA + -CCM-1_STS_PAINEL_OK)";
+    pinned(
+        &p,
+        &[
+            ("S-01A_STS_MODO_LOCAL", "S-01A_STS_MOTOR_MODO_LOCAL_1"),
+            ("S-01A_STS_MODO_REMOTO", "S-01A_STS_MOTOR_MODO_REMOTO_1"),
+            ("S-01A_CMD_BOTAO_RESET_FALHA", "QA-01_CMD_RESET_REMOTA"),
+            (
+                &format!("{motor}.CMD_LIGA"),
+                &format!("-(S-01A_STS_MOTOR_MODO_LOCAL_1 + -S-01A_STS_MOTOR_MODO_REMOTO_1) * -{reset_liga} * {motor}.CMD_LIGA"),
+            ),
+            (
+                &format!("{motor}.CMD_MODO_OPERACAO"),
+                &format!("-({reset_liga} * S-01A_STS_REMOTO_AUTO) * {motor}.CMD_MODO_OPERACAO"),
+            ),
+            (
+                &format!("{motor}.CMD_INTERTRAVAMENTO_LIGA"),
+                "-(-S-01A_STS_MOTOR_MODO_LOCAL_1 * -S-01A_STS_LOCAL_AUTO * -S-01A_STS_LOCAL_MANUAL * S-01A_STS_MOTOR_MODO_REMOTO_1 * S-01A_STS_REMOTO_MANUAL * -S-01A_FALHA)",
+            ),
+            ("S-01A_CMD_LIGA_PROFINET", "S-01A_CMD_LIGA_BOMBA"),
+        ],
+    );
+    let block = "block \"PARTIDA_MOTOR_1 (S-01A)\"";
+    assert_eq!(
+        warnings(&p),
+        [
+            format!("349:17: {block} network 2: call of FB FALHA is not read"),
+            format!("724:17: {block} network 5: call of FB CONDIÇÃO DE PARTIDA is not read"),
+            format!("1022:17: {block} network 6: part 'Move' is not read"),
+            format!("1025:17: {block} network 6: part 'Move' is not read"),
+            format!("1028:17: {block} network 6: call of FB SETPOINT ESCALONAMENTO is not read"),
+            format!("1706:17: {block} network 10: call of SINA_SPEED_TLG20 is not read"),
+        ]
+    );
+
+    // A V16 FBD FB stepping a sequence: every S coil is fed by a call's
+    // ENO, every coil by a comparison of a local of a block whose name has
+    // a space ("Program Logic"), which a comparison signal cannot carry:
+    // no coil derivable, each saying where.
+    let p = program("tia-xml-modcheck-Program_Logic.xml");
+    pinned(
+        &p,
+        &[
+            ("Program Logic.#StepDone", "! line 2037"),
+            ("DB_ProgramLogic.VlvDrn_Open", "! line 2285"),
+            ("DB_ProgramLogic.VlvLiq1_Open", "! line 2298"),
+            ("DB_ProgramLogic.VlvLiq2_Open", "! line 2302"),
+        ],
+    );
+    let w = warnings(&p);
+    assert_eq!(w.len(), 31, "{w:?}");
+    assert_eq!(
+        w[0],
+        "161:5: block \"Program Logic\" network 1: call of fcStepChooser is not read"
+    );
+    assert_eq!(
+        w[30],
+        "2302:5: 'block \"Program Logic\" network 22: comparator 'Eq' of operands that are not a tag and a number or two tags': a call, timer, counter, edge or function, not boolean logic: the coils it feeds are not derivable"
+    );
+
+    // V16 safety FBD (F_FBD): a muting FC read whole, the negated AND
+    // output as its De Morgan form.
+    let p = program("block-diagram-z3-Demo.xml");
+    let scanners = "(Demo.#left_clear + (Demo.#is_slow * Demo.#mute_req)) * (Demo.#right_clear + Demo.#mute_req)";
+    pinned(
+        &p,
+        &[
+            ("Demo.#mute_granted", "Demo.#is_slow * Demo.#mute_req"),
+            ("Demo.#scanners_ok", scanners),
+            ("Demo.#stop", &format!("-({scanners}) + -Demo.#estop_clear")),
+        ],
+    );
+    assert!(warnings(&p).is_empty(), "{:?}", warnings(&p));
+    // A safety FB latching on edges (NBox resets, PBox sets) and a coil
+    // chained after a coil: the edges are pulses, so nothing they reach is
+    // derivable.
+    let p = program("block-diagram-z3-Step2.xml");
+    pinned(
+        &p,
+        &[
+            ("Step2.#faults_clear", "! line 130"),
+            ("DataFromSafety.running", "! line 130"),
+            ("interlock", "! line 130"),
+        ],
+    );
+    assert_eq!(
+        warnings(&p),
+        [
+            "128:5: 'block \"Step2\" network 1: edge 'NBox' on 'Step2.#last_estop_clear' (a pulse, not a function of the signals)': a call, timer, counter, edge or function, not boolean logic: the coils it feeds are not derivable",
+            "130:5: 'block \"Step2\" network 1: edge 'PBox' on 'Step2.#last_reset' (a pulse, not a function of the signals)': a call, timer, counter, edge or function, not boolean logic: the coils it feeds are not derivable",
+        ]
+    );
+}
