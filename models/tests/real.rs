@@ -748,7 +748,7 @@ fn tia_portal_exports_of_other_projects() {
     );
     assert_eq!(
         w[30],
-        "2302:5: 'block \"Program Logic\" network 22: comparator 'Eq' of operands that are not a tag and a number or two tags': a call, timer, counter, edge or function, not boolean logic: the coils it feeds are not derivable"
+        "2302:5: 'block \"Program Logic\" network 22: comparator 'Eq' of 'Program Logic.#CurrentStep', a name with a space, which a comparison contact cannot name': a call, timer, counter, edge or function, not boolean logic: the coils it feeds are not derivable"
     );
 
     // V16 safety FBD (F_FBD): a muting FC read whole, the negated AND

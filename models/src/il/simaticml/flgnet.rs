@@ -418,6 +418,23 @@ impl<'a, 'i> Network<'a, 'i> {
         };
         let a = self.operand_of(node, "in1");
         let b = self.operand_of(node, "in2");
+        // A comparison contact is written `LHS OP RHS`: a name with a
+        // space in it (a block or DB named `Program Logic`) cannot stand in
+        // one, and is said as such.
+        let spaced = [&a, &b].into_iter().find_map(|v| match v {
+            Some((Value::Var(s) | Value::Word(s), _)) if s.name().contains(' ') => {
+                Some(s.name().to_string())
+            }
+            _ => None,
+        });
+        if let Some(spaced) = spaced {
+            return self.opaque(
+                node,
+                format!(
+                    "comparator '{name}' of '{spaced}', a name with a space, which a comparison contact cannot name"
+                ),
+            );
+        }
         let (lhs, op, rhs) = match (side(a), side(b)) {
             (Some((l, false)), Some((r, _))) => (l, op, r),
             // `80 < TEMP` is `TEMP > 80`.
