@@ -81,7 +81,8 @@ pub struct AlarmPayload {
     pub cell: String,
     /// Stable alarm id.
     pub id: String,
-    /// `switching`, `timer`, `tag_quality`, `communication`.
+    /// `switching`, `timer`, `drift`, `limit`, `step`, `tag_quality`,
+    /// `communication`, `system`.
     pub kind: AlarmKind,
     /// `low` .. `critical`.
     pub severity: Severity,

@@ -74,6 +74,9 @@ pub enum AlarmKind {
     Switching,
     /// A transition timer: an event too early or too late.
     Timer,
+    /// A transition whose recent durations drift towards a limit of its
+    /// window: a warning before it times out, never a fault.
+    Drift,
     /// A number past one of its limits (HH, H, L, LL).
     Limit,
     /// A step of a sequential function chart active longer than its
@@ -89,9 +92,10 @@ pub enum AlarmKind {
 
 impl AlarmKind {
     /// All kinds.
-    pub const ALL: [AlarmKind; 7] = [
+    pub const ALL: [AlarmKind; 8] = [
         AlarmKind::Switching,
         AlarmKind::Timer,
+        AlarmKind::Drift,
         AlarmKind::Limit,
         AlarmKind::Step,
         AlarmKind::TagQuality,
@@ -104,6 +108,7 @@ impl AlarmKind {
         match self {
             AlarmKind::Switching => "switching",
             AlarmKind::Timer => "timer",
+            AlarmKind::Drift => "drift",
             AlarmKind::Limit => "limit",
             AlarmKind::Step => "step",
             AlarmKind::TagQuality => "tag_quality",

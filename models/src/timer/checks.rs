@@ -144,7 +144,7 @@ impl TimerChecks {
         out.push(Finding {
             at: None,
             id: drift_alarm(&self.id, id),
-            kind: AlarmKind::Timer,
+            kind: AlarmKind::Drift,
             severity: Severity::Low,
             fault_type: "DRIFT".into(),
             latched: false,
@@ -283,7 +283,7 @@ impl CheckSet for TimerChecks {
         if self.drift.is_some() {
             out.extend(ids.iter().map(|&t| Declared {
                 id: drift_alarm(&self.id, t),
-                kind: AlarmKind::Timer,
+                kind: AlarmKind::Drift,
                 severity: Severity::Low,
                 fault_type: "DRIFT".into(),
                 latched: false,
@@ -493,8 +493,13 @@ mod tests {
             tags.iter().find(|t| t.name == n).map(|t| t.address.clone())
         })
         .unwrap();
-        let mut e =
-            CellEngine::new("c", tags, vec![Box::new(checks)], StateRules::default()).unwrap();
+        // Every alarm of low severity or above is a fault here: a drift
+        // warning is none all the same.
+        let rules = StateRules {
+            fault_severity: Severity::Low,
+            ..StateRules::default()
+        };
+        let mut e = CellEngine::new("c", tags, vec![Box::new(checks)], rules).unwrap();
         e.on_connection(true, 0);
         e.on_reading(0, Reading::Good(false), 0, 0);
         e.on_reading(1, Reading::Good(false), 0, 0);
@@ -588,6 +593,11 @@ mod tests {
         let (i, a, tr) = &raised[0];
         assert_eq!((*i, *tr), (27, AlarmTransition::Raised));
         assert_eq!(a.id, "line-007-drift");
+        assert!(
+            !matches!(e.state(), crate::engine::MachineState::Fault { .. }),
+            "{:?}",
+            e.state()
+        );
         assert_eq!(
             a.message,
             "transition #007 (+arrived after +move) slowing: \
@@ -595,7 +605,7 @@ mod tests {
         );
         assert_eq!(
             (a.severity, a.kind, a.latched),
-            (Severity::Low, AlarmKind::Timer, false)
+            (Severity::Low, AlarmKind::Drift, false)
         );
         let p = &e.window_positions()[0];
         assert_eq!((p.check.as_str(), p.samples), ("line-007", 80));
