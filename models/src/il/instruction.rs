@@ -135,6 +135,21 @@ pub struct Instruction {
     pub operand_at: Location,
 }
 
+impl Instruction {
+    /// An instruction without an operand (a block's end, a part of the
+    /// program not read), its operand placed where it stands.
+    pub(crate) fn bare(at: Location, text: String, mnemonic: String, operation: Operation) -> Self {
+        Instruction {
+            at,
+            text,
+            mnemonic,
+            operation,
+            operand: None,
+            operand_at: at,
+        }
+    }
+}
+
 /// Splits a line into whitespace-separated words with their byte offsets.
 pub(crate) fn words(line: &str) -> Vec<(usize, &str)> {
     let mut out = Vec::new();

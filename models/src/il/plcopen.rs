@@ -612,14 +612,12 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
                             "SFC" => format!("POU '{pou_name}': SFC body, read as a chart by [[checks.sfc]], not here"),
                             _ => format!("POU '{pou_name}': {other} body not read (ladder and IL bodies are)"),
                         };
-                        out.push(Instruction {
+                        out.push(Instruction::bare(
                             at,
-                            text: why.clone(),
-                            mnemonic: other.to_string(),
-                            operation: Operation::Outside(Outside::Unread),
-                            operand: None,
-                            operand_at: at,
-                        });
+                            why.clone(),
+                            other.to_string(),
+                            Operation::Outside(Outside::Unread),
+                        ));
                     }
                 }
             }
@@ -629,14 +627,12 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
                 line: pos.row as usize,
                 col: pos.col as usize,
             };
-            out.push(Instruction {
+            out.push(Instruction::bare(
                 at,
-                text: format!("end of POU '{pou_name}'"),
-                mnemonic: String::new(),
-                operation: Operation::EndBlock,
-                operand: None,
-                operand_at: at,
-            });
+                format!("end of POU '{pou_name}'"),
+                String::new(),
+                Operation::EndBlock,
+            ));
         }
         for i in &mut out[first..] {
             qualify(i, pou_id, &locals);

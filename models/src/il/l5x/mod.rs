@@ -207,14 +207,12 @@ impl<'a, 'd> Reader<'a, 'd> {
     }
 
     fn note_at(&mut self, at: Location, message: String) {
-        self.out.push(Instruction {
+        self.out.push(Instruction::bare(
             at,
-            text: message,
-            mnemonic: String::new(),
-            operation: Operation::Outside(Outside::Unread),
-            operand: None,
-            operand_at: at,
-        });
+            message,
+            String::new(),
+            Operation::Outside(Outside::Unread),
+        ));
     }
 
     fn program(&mut self, program: Node<'d, 'd>) {
@@ -286,14 +284,12 @@ impl<'a, 'd> Reader<'a, 'd> {
             self.note(*r, why);
         }
         let end = self.at(program.range().end);
-        self.out.push(Instruction {
-            at: end,
-            text: format!("end of program '{name}'"),
-            mnemonic: String::new(),
-            operation: Operation::EndBlock,
-            operand: None,
-            operand_at: end,
-        });
+        self.out.push(Instruction::bare(
+            end,
+            format!("end of program '{name}'"),
+            String::new(),
+            Operation::EndBlock,
+        ));
     }
 
     fn routine(&mut self, node: Node<'d, 'd>, frame: &Frame<'d>, reached: &mut HashSet<String>) {

@@ -519,14 +519,12 @@ impl<'a, 'i> Network<'a, 'i> {
                         _ => Self::part_name(part),
                     };
                     let text = format!("{}: {what} is not read", self.place);
-                    out.push(Instruction {
-                        at: here,
+                    out.push(Instruction::bare(
+                        here,
                         text,
-                        mnemonic: what,
-                        operation: Operation::Outside(Outside::Unread),
-                        operand: None,
-                        operand_at: here,
-                    });
+                        what,
+                        Operation::Outside(Outside::Unread),
+                    ));
                 }
             }
         }

@@ -309,14 +309,12 @@ pub(crate) fn lex(origin: &str, text: &str, lang: &str) -> Result<plcopen::Parse
                 } else {
                     language
                 };
-                out.push(Instruction {
-                    at: here,
-                    text: format!("{place}: {what} network not read (LAD and FBD networks are)"),
-                    mnemonic: what,
-                    operation: Operation::Outside(Outside::Unread),
-                    operand: None,
-                    operand_at: here,
-                });
+                out.push(Instruction::bare(
+                    here,
+                    format!("{place}: {what} network not read (LAD and FBD networks are)"),
+                    what,
+                    Operation::Outside(Outside::Unread),
+                ));
             }
         }
         // Jumps and labels stay inside their block.
@@ -325,14 +323,12 @@ pub(crate) fn lex(origin: &str, text: &str, lang: &str) -> Result<plcopen::Parse
             line: pos.row as usize,
             col: pos.col as usize,
         };
-        out.push(Instruction {
-            at: end,
-            text: format!("end of block \"{name}\""),
-            mnemonic: String::new(),
-            operation: Operation::EndBlock,
-            operand: None,
-            operand_at: end,
-        });
+        out.push(Instruction::bare(
+            end,
+            format!("end of block \"{name}\""),
+            String::new(),
+            Operation::EndBlock,
+        ));
     }
     SourceErrors::or_ok(
         plcopen::Parsed {
