@@ -406,24 +406,7 @@ proptest! {
         for m in &mutations {
             text = mutate(&text, m);
         }
-        match Program::compile("m.xml", &text, None) {
-            Ok(p) => {
-                let observable = Observability::default_for(p.dialect());
-                for coil in p.coils() {
-                    if let Ok(sf) = SwitchingFunction::expand(&p, &coil.signal, &observable) {
-                        let _ = sf.notation();
-                    }
-                }
-                for w in p.warnings() {
-                    prop_assert!(w.at.line >= 1, "{:?}", w);
-                }
-            }
-            Err(e) => {
-                for line in e.lines() {
-                    prop_assert!(line.starts_with("m.xml:") || line.starts_with("... and "), "{}", line);
-                }
-            }
-        }
+        compiles_or_fails_located("m.xml", &text)?;
     }
 }
 
@@ -505,23 +488,34 @@ proptest! {
         for m in &mutations {
             text = mutate_fbd(&text, m);
         }
-        match Program::compile("m.L5X", &text, None) {
-            Ok(p) => {
-                let observable = Observability::default_for(p.dialect());
-                for coil in p.coils() {
-                    if let Ok(sf) = SwitchingFunction::expand(&p, &coil.signal, &observable) {
-                        let _ = sf.notation();
-                    }
-                }
-                for w in p.warnings() {
-                    prop_assert!(w.at.line >= 1, "{:?}", w);
+        compiles_or_fails_located("m.L5X", &text)?;
+    }
+}
+
+/// A mutated export compiles (every coil expands and prints, every
+/// warning has a line) or fails with every message located in `origin`.
+fn compiles_or_fails_located(origin: &str, text: &str) -> Result<(), TestCaseError> {
+    match Program::compile(origin, text, None) {
+        Ok(p) => {
+            let observable = Observability::default_for(p.dialect());
+            for coil in p.coils() {
+                if let Ok(sf) = SwitchingFunction::expand(&p, &coil.signal, &observable) {
+                    let _ = sf.notation();
                 }
             }
-            Err(e) => {
-                for line in e.lines() {
-                    prop_assert!(line.starts_with("m.L5X:") || line.starts_with("... and "), "{}", line);
-                }
+            for w in p.warnings() {
+                prop_assert!(w.at.line >= 1, "{:?}", w);
+            }
+        }
+        Err(e) => {
+            for line in e.lines() {
+                prop_assert!(
+                    line.starts_with(&format!("{origin}:")) || line.starts_with("... and "),
+                    "{}",
+                    line
+                );
             }
         }
     }
+    Ok(())
 }
