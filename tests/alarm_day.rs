@@ -219,6 +219,13 @@ async fn a_scripted_alarm_day_gives_the_kpis_and_the_report_computed_by_hand() {
     assert!(close(&r["average_rate"], 28.0 / 144.0), "{r:#}");
     assert_eq!(r["peak_rate"], 12);
     assert_eq!(r["flood_intervals"], 2);
+    // No alarm of the day follows from another: the first-outs are every
+    // raise, and flood as often.
+    assert_eq!(
+        (&r["first_outs"], &r["first_out_flood_intervals"]),
+        (&serde_json::json!(28), &serde_json::json!(2)),
+        "{r:#}"
+    );
     assert!(close(&r["flood_percent"], 200.0 / 144.0), "{r:#}");
     let top: Vec<(&str, u64)> = r["top"]
         .as_array()
@@ -307,7 +314,7 @@ async fn a_scripted_alarm_day_gives_the_kpis_and_the_report_computed_by_hand() {
     assert_eq!(r["stale"].as_array().unwrap().len(), 2, "{r:#}");
     assert_eq!(r["rules"]["flood_ends_below"], 6, "{r:#}");
     assert_eq!(
-        r["benchmarks"][4]["metric"],
+        r["benchmarks"][5]["metric"],
         "chattering alarms (3+ raises in 30 s)"
     );
 }

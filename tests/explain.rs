@@ -158,3 +158,79 @@ fn a_studio_5000_export_is_explained_as_its_instruction_list_is() {
         r.stdout
     );
 }
+
+/// `explain --consequences` on paper 000's machine with the emergency-stop
+/// coil a contact of the cycle-start logic (`tests/data/paper000/csd-ese.il`):
+/// the relation an engineer reviews, pinned; and the paper's own programs,
+/// where ESE and CSD stay independent.
+#[test]
+fn the_consequence_relation_is_printed_for_review() {
+    let root = crate::util::root();
+    let d = Dir::new();
+    let mut signals: Vec<String> = Vec::new();
+    for values in [
+        "config/cnc/ese-normal.values",
+        "config/cnc/csd-normal.values",
+    ] {
+        for line in std::fs::read_to_string(root.join(values)).unwrap().lines() {
+            if let Some((a, _)) = line.split_once(',').filter(|_| !line.starts_with('#')) {
+                if a != "address" && !signals.iter().any(|s| s == a) {
+                    signals.push(a.to_string());
+                }
+            }
+        }
+    }
+    signals.push("G8.02".into());
+    let config = |csd: &str| {
+        let mut t = String::from(
+            "[cell]\nid = \"m01\"\n\n[opcua]\nendpoint = \"opc.tcp://127.0.0.1:4840/\"\n\n\
+             [zenoh.tls]\nca = \"ca.pem\"\ncert = \"agent.pem\"\nkey = \"agent.key\"\n\n",
+        );
+        for s in &signals {
+            t += &format!(
+                "[[tags]]\nname = \"{}\"\nnode_id = \"ns=2;s={s}\"\naddress = \"{s}\"\n\n",
+                s.replace('.', "_").to_lowercase()
+            );
+        }
+        t += &format!(
+            "[[checks.switching]]\nid = \"ese\"\nprogram = \"{}\"\ncoil = \"G8.02\"\n\n\
+             [[checks.switching]]\nid = \"csd\"\nprogram = \"{}\"\ncoil = \"G9.00\"\narmed_when = \"X200.01\"\n",
+            root.join("config/cnc/ese.il").display(),
+            root.join(csd).display()
+        );
+        t
+    };
+    let related = d.file("related.toml", config("tests/data/paper000/csd-ese.il"));
+    let r = cellwatch(&["explain", "--consequences", &related]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert_eq!(
+        r.stdout,
+        "cell m01: consequences annunciated, each marked with its cause (alarms.consequences.suppress = false)\n\
+         ese -> csd   csd reads G8.02, which ese's fault holds\n\
+         communication -> every alarm raised while the link is down\n\
+         tag-quality -> an alarm whose culprits are all tags of bad quality\n"
+    );
+    let independent = d.file("independent.toml", config("config/cnc/csd.il"));
+    let r = cellwatch(&["explain", "--consequences", &independent]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        r.stdout
+            .contains("\nno alarm of the cell's checks follows from another\n"),
+        "{}",
+        r.stdout
+    );
+    // A configuration that does not compile: bad input, said.
+    let bad = d.file(
+        "bad.toml",
+        config("config/cnc/csd.il")
+            + "\n[alarms.consequences]\nremove = [{ cause = \"ese\", effect = \"csd\" }]\n",
+    );
+    let r = cellwatch(&["explain", "--consequences", &bad]);
+    assert_eq!(r.code, 2, "{}", r.stdout);
+    assert!(
+        r.stderr
+            .contains("alarms.consequences.remove[0]: ese -> csd is no edge"),
+        "{}",
+        r.stderr
+    );
+}

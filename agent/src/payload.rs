@@ -2,7 +2,9 @@
 //! journal. Each carries a `schema` name so that subscribers can tell
 //! versions apart.
 
-use cellwatch_models::alarm::{Alarm, AlarmKind, AlarmState, Removal, Severity, Shelf, Transition};
+use cellwatch_models::alarm::{
+    Alarm, AlarmKind, AlarmState, Consequence, Removal, Severity, Shelf, Transition,
+};
 use cellwatch_models::engine::{HistoryKind, MachineState, Order, StateName};
 use cellwatch_models::explain::Culprit;
 use serde::{Deserialize, Serialize};
@@ -118,6 +120,23 @@ pub struct AlarmPayload {
     /// is not raised whatever its condition.
     #[serde(default)]
     pub out_of_service: Option<RemovalPayload>,
+    /// Raised as the consequence of another active alarm: its cause, the
+    /// first-out of the cascade, and whether it is suppressed (journaled
+    /// and shown, not annunciated). `null`: a first-out.
+    #[serde(default)]
+    pub consequence: Option<ConsequencePayload>,
+}
+
+/// Why an occurrence is a consequence, in its payload.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ConsequencePayload {
+    /// The active alarm it follows from.
+    pub cause: String,
+    /// The first-out of the cascade.
+    pub first_out: String,
+    /// Not annunciated: not an alert, not counted as a raise of its own
+    /// in the KPIs without consequences.
+    pub suppressed: bool,
 }
 
 impl AlarmPayload {
@@ -137,6 +156,11 @@ impl AlarmPayload {
         AlarmPayload {
             shelved,
             out_of_service,
+            consequence: alarm.consequence.as_ref().map(|c| ConsequencePayload {
+                cause: c.cause.clone(),
+                first_out: c.first_out.clone(),
+                suppressed: c.suppressed,
+            }),
             schema: ALARM_SCHEMA.into(),
             cell: cell.into(),
             id: alarm.id.clone(),
@@ -222,6 +246,13 @@ impl AlarmPayload {
                 })),
                 None => None,
             },
+            consequence: self.consequence.as_ref().map(|c| {
+                Box::new(Consequence {
+                    cause: c.cause.clone(),
+                    first_out: c.first_out.clone(),
+                    suppressed: c.suppressed,
+                })
+            }),
         })
     }
 }

@@ -179,6 +179,7 @@ fn event(key: &AgentKey, id: &str, n: usize, raised: bool) -> (String, String) {
         ),
         shelved: None,
         out_of_service: None,
+        consequence: None,
     };
     let key_expr = format!("cellwatch/{}/alarms/{id}", key.cell());
     let body = serde_json::to_string(&a).unwrap_or_default();

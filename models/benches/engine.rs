@@ -54,6 +54,7 @@ fn engine() -> (CellEngine, usize, common::Rng) {
         .into_iter()
         .enumerate()
         .map(|(c, sf)| SwitchingCheck {
+            forces: Vec::new(),
             text: None,
             id: format!("c{c}"),
             sf,

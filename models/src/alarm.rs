@@ -243,6 +243,23 @@ pub struct Alarm {
     /// Out of service (ISA-18.2: removed from service, e.g. a broken
     /// instrument), if it is.
     pub out_of_service: Option<Box<Removal>>,
+    /// The active alarm this occurrence follows from, if it was raised as
+    /// a consequence of one ([`crate::consequence`]); `None`: a first-out.
+    pub consequence: Option<Box<Consequence>>,
+}
+
+/// Why an occurrence is a consequence: the alarm it follows from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Consequence {
+    /// The active alarm whose fault explains this one's culprits
+    /// (`ese`).
+    pub cause: String,
+    /// The first-out of the cascade: the cause's own first-out, or the
+    /// cause.
+    pub first_out: String,
+    /// Not annunciated (the cell suppresses consequences): journaled and
+    /// shown as suppressed, never lost.
+    pub suppressed: bool,
 }
 
 /// Who took an alarm out of service, when and why.
@@ -290,6 +307,7 @@ impl Alarm {
             message: id.into(),
             shelved: None,
             out_of_service: None,
+            consequence: None,
         }
     }
 
@@ -301,6 +319,11 @@ impl Alarm {
             (false, false) => AlarmState::ClearedUnacknowledged,
             (false, true) => AlarmState::Normal,
         }
+    }
+
+    /// Whether it is a consequence the cell does not annunciate.
+    pub fn is_suppressed(&self) -> bool {
+        self.consequence.as_ref().is_some_and(|c| c.suppressed)
     }
 
     /// The element to name in machine-state history: the first culprit.

@@ -83,10 +83,9 @@ fn span(ms: u64) -> String {
     }
 }
 
-/// The live figures, updated from alarm transitions and the passing of
-/// time (ms since the epoch, passed in).
+/// Raises over the sliding last 10 minutes, and the floods they make.
 #[derive(Debug)]
-pub struct LiveKpis {
+struct Floods {
     /// Raises per second of the last 10 minutes, by second mod 600.
     per_second: Box<[u32; SECONDS]>,
     /// The second last counted into `per_second`.
@@ -98,6 +97,80 @@ pub struct LiveKpis {
     /// Time spent in flood, ms, and up to when it is counted.
     flood_ms: u64,
     counted_to: Option<u64>,
+}
+
+impl Default for Floods {
+    fn default() -> Self {
+        Floods {
+            per_second: Box::new([0; SECONDS]),
+            second: None,
+            in_window: 0,
+            in_flood: false,
+            flood_ms: 0,
+            counted_to: None,
+        }
+    }
+}
+
+impl Floods {
+    /// Time passed up to `now`. Time in flood is counted exactly: the
+    /// window's count changes only when a second falls out of it.
+    fn advance(&mut self, now: u64, rules: &KpiRules) {
+        let (Some(mut t), Some(last)) = (self.counted_to, self.second) else {
+            self.counted_to = Some(now);
+            self.second = Some(now / 1000);
+            return;
+        };
+        if now > t {
+            let s = now / 1000;
+            for gone in (last + 1)..=s {
+                // At the start of second `gone`, the raises of second
+                // `gone - 600` fall out of the window.
+                let at = gone * 1000;
+                if self.in_flood {
+                    self.flood_ms += at.saturating_sub(t);
+                }
+                t = t.max(at);
+                let slot = &mut self.per_second[(gone % SECONDS as u64) as usize];
+                self.in_window -= u64::from(*slot);
+                *slot = 0;
+                if self.in_window < rules.flood_ends_below {
+                    self.in_flood = false;
+                }
+                if self.in_window == 0 {
+                    // Every slot is empty: nothing more falls out.
+                    break;
+                }
+            }
+            if self.in_flood {
+                self.flood_ms += now - t;
+            }
+            self.counted_to = Some(now);
+            self.second = Some(s);
+        }
+    }
+
+    /// One raise at `at` (after [`Floods::advance`] to it).
+    fn raise(&mut self, at: u64, rules: &KpiRules) {
+        // A raise at a time before the window's newest second counts
+        // there (the loop's steps are in time order, to the ms).
+        let s = self.second.unwrap_or(at / 1000);
+        self.per_second[(s % SECONDS as u64) as usize] += 1;
+        self.in_window += 1;
+        if self.in_window > rules.flood_raises {
+            self.in_flood = true;
+        }
+    }
+}
+
+/// The live figures, updated from alarm transitions and the passing of
+/// time (ms since the epoch, passed in).
+#[derive(Debug, Default)]
+pub struct LiveKpis {
+    /// Every raise.
+    all: Floods,
+    /// Raises that are no consequence of another active alarm.
+    first_outs: Floods,
     /// Per alarm: its last raise times (at most `chatter_raises`).
     raises: HashMap<String, VecDeque<u64>>,
     /// Chattering alarms by (until when, id).
@@ -109,25 +182,6 @@ pub struct LiveKpis {
     rules: KpiRules,
 }
 
-impl Default for LiveKpis {
-    fn default() -> Self {
-        LiveKpis {
-            per_second: Box::new([0; SECONDS]),
-            second: None,
-            in_window: 0,
-            in_flood: false,
-            flood_ms: 0,
-            counted_to: None,
-            raises: HashMap::new(),
-            chattering: BTreeSet::new(),
-            chatter_until: HashMap::new(),
-            active: BTreeSet::new(),
-            active_since: HashMap::new(),
-            rules: KpiRules::default(),
-        }
-    }
-}
-
 /// The live figures at one moment.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct KpiSnapshot {
@@ -137,6 +191,13 @@ pub struct KpiSnapshot {
     pub in_flood: bool,
     /// Time spent in flood so far, ms.
     pub flood_ms: u64,
+    /// The same three counting only first-outs: raises that are no
+    /// consequence of another active alarm.
+    pub first_outs_last_10m: u64,
+    /// See `first_outs_last_10m`.
+    pub first_outs_in_flood: bool,
+    /// See `first_outs_last_10m`.
+    pub first_outs_flood_ms: u64,
     /// Alarms chattering now.
     pub chattering: u64,
     /// Active occurrences older than 24 h.
@@ -157,41 +218,10 @@ impl LiveKpis {
         }
     }
 
-    /// Time passed up to `now`. Time in flood is counted exactly: the
-    /// window's count changes only when a second falls out of it.
+    /// Time passed up to `now`.
     pub fn advance(&mut self, now: u64) {
-        let (Some(mut t), Some(last)) = (self.counted_to, self.second) else {
-            self.counted_to = Some(now);
-            self.second = Some(now / 1000);
-            return;
-        };
-        if now > t {
-            let s = now / 1000;
-            for gone in (last + 1)..=s {
-                // At the start of second `gone`, the raises of second
-                // `gone - 600` fall out of the window.
-                let at = gone * 1000;
-                if self.in_flood {
-                    self.flood_ms += at.saturating_sub(t);
-                }
-                t = t.max(at);
-                let slot = &mut self.per_second[(gone % SECONDS as u64) as usize];
-                self.in_window -= u64::from(*slot);
-                *slot = 0;
-                if self.in_window < self.rules.flood_ends_below {
-                    self.in_flood = false;
-                }
-                if self.in_window == 0 {
-                    // Every slot is empty: nothing more falls out.
-                    break;
-                }
-            }
-            if self.in_flood {
-                self.flood_ms += now - t;
-            }
-            self.counted_to = Some(now);
-            self.second = Some(s);
-        }
+        self.all.advance(now, &self.rules);
+        self.first_outs.advance(now, &self.rules);
         while let Some((until, id)) = self.chattering.first().cloned() {
             if until > now {
                 break;
@@ -202,24 +232,20 @@ impl LiveKpis {
     }
 
     /// Alarm `id` went through `transition` at `at`; `raised_at` is its
-    /// occurrence's, `active` whether it is active after it.
+    /// occurrence's, `active` whether it is active after it, `consequence`
+    /// whether it was raised as the consequence of another.
     pub fn on_transition(
         &mut self,
         id: &str,
         transition: Transition,
-        raised_at: u64,
-        active: bool,
+        (raised_at, active, consequence): (u64, bool, bool),
         at: u64,
     ) {
         self.advance(at);
         if transition == Transition::Raised {
-            // A raise at a time before the window's newest second counts
-            // there (the loop's steps are in time order, to the ms).
-            let s = self.second.unwrap_or(at / 1000);
-            self.per_second[(s % SECONDS as u64) as usize] += 1;
-            self.in_window += 1;
-            if self.in_window > self.rules.flood_raises {
-                self.in_flood = true;
+            self.all.raise(at, &self.rules);
+            if !consequence {
+                self.first_outs.raise(at, &self.rules);
             }
             let chatter = self.rules.chatter_raises;
             let times = self.raises.entry(id.to_string()).or_default();
@@ -249,9 +275,12 @@ impl LiveKpis {
     /// The figures at `now` (after [`LiveKpis::advance`] to it).
     pub fn snapshot(&self, now: u64) -> KpiSnapshot {
         KpiSnapshot {
-            raised_last_10m: self.in_window,
-            in_flood: self.in_flood,
-            flood_ms: self.flood_ms,
+            raised_last_10m: self.all.in_window,
+            in_flood: self.all.in_flood,
+            flood_ms: self.all.flood_ms,
+            first_outs_last_10m: self.first_outs.in_window,
+            first_outs_in_flood: self.first_outs.in_flood,
+            first_outs_flood_ms: self.first_outs.flood_ms,
             chattering: self.chattering.len() as u64,
             stale: now
                 .checked_sub(self.rules.stale_ms)
@@ -277,6 +306,8 @@ pub struct AlarmEvent {
     pub raised_at: u64,
     /// Active after the transition.
     pub active: bool,
+    /// Raised as the consequence of another active alarm.
+    pub consequence: bool,
 }
 
 /// One of the most frequent alarms.
@@ -342,6 +373,12 @@ pub struct AlarmReport {
     pub flood_intervals: u64,
     /// Those, % of all intervals.
     pub flood_percent: f64,
+    /// Raises that were no consequence of another active alarm.
+    pub first_outs: u64,
+    /// Intervals in flood counting first-outs only.
+    pub first_out_flood_intervals: u64,
+    /// Those, % of all intervals.
+    pub first_out_flood_percent: f64,
     /// The 10 most frequent alarms, most first.
     pub top: Vec<Frequent>,
     /// Their share of all raises, %.
@@ -388,17 +425,26 @@ pub fn alarm_report(
         .collect();
     let raised = raises.len() as u64;
     let mut per_interval = vec![0u64; intervals as usize];
+    let mut first_outs_per_interval = vec![0u64; intervals as usize];
     for e in &raises {
-        per_interval[((e.at - from) / INTERVAL_MS) as usize] += 1;
+        let i = ((e.at - from) / INTERVAL_MS) as usize;
+        per_interval[i] += 1;
+        if !e.consequence {
+            first_outs_per_interval[i] += 1;
+        }
     }
-    let mut flooding = false;
-    let flood_intervals = per_interval
-        .iter()
-        .filter(|&&n| {
-            flooding = n > rules.flood_raises || (flooding && n >= rules.flood_ends_below);
-            flooding
-        })
-        .count() as u64;
+    let floods = |per_interval: &[u64]| {
+        let mut flooding = false;
+        per_interval
+            .iter()
+            .filter(|&&n| {
+                flooding = n > rules.flood_raises || (flooding && n >= rules.flood_ends_below);
+                flooding
+            })
+            .count() as u64
+    };
+    let flood_intervals = floods(&per_interval);
+    let first_out_flood_intervals = floods(&first_outs_per_interval);
     let share = |n: u64| {
         if raised == 0 {
             0.0
@@ -504,6 +550,9 @@ pub fn alarm_report(
         peak_rate: per_interval.iter().copied().max().unwrap_or(0),
         flood_intervals,
         flood_percent: 100.0 * flood_intervals as f64 / intervals as f64,
+        first_outs: raises.iter().filter(|e| !e.consequence).count() as u64,
+        first_out_flood_intervals,
+        first_out_flood_percent: 100.0 * first_out_flood_intervals as f64 / intervals as f64,
         top,
         top_share,
         priorities: by_severity
@@ -567,6 +616,15 @@ impl AlarmReport {
                 format!("{:.2} %", self.flood_percent),
                 "< 1 %",
                 Some(self.flood_percent < 1.0),
+            ),
+            line(
+                "  the same, first-outs only (consequences left out)".into(),
+                format!(
+                    "{:.2} % ({} of {} raises first-outs)",
+                    self.first_out_flood_percent, self.first_outs, self.raised
+                ),
+                "-",
+                None,
             ),
             line(
                 "top 10 alarms' share of all alarms".into(),
@@ -643,8 +701,7 @@ mod tests {
             k.on_transition(
                 &format!("a{i}"),
                 Transition::Raised,
-                i * 1000,
-                false,
+                (i * 1000, false, false),
                 i * 1000,
             );
         }
@@ -669,6 +726,48 @@ mod tests {
     }
 
     #[test]
+    fn a_cascade_is_a_flood_of_raises_and_no_flood_of_first_outs() {
+        // One emergency stop and ten alarms that follow from it.
+        let mut k = LiveKpis::new();
+        let mut events = Vec::new();
+        for i in 0..11u64 {
+            let consequence = i > 0;
+            k.on_transition(
+                &format!("a{i}"),
+                Transition::Raised,
+                (i, true, consequence),
+                i,
+            );
+            events.push(AlarmEvent {
+                consequence,
+                ..ev(i, &format!("a{i}"), Transition::Raised, i, true)
+            });
+        }
+        let s = k.snapshot(11);
+        assert_eq!((s.raised_last_10m, s.in_flood), (11, true));
+        assert_eq!((s.first_outs_last_10m, s.first_outs_in_flood), (1, false));
+        k.advance(MIN);
+        let s = k.snapshot(MIN);
+        assert_eq!((s.flood_ms, s.first_outs_flood_ms), (MIN - 10, 0));
+        let r = alarm_report(
+            &events,
+            &[],
+            0,
+            INTERVAL_MS,
+            INTERVAL_MS,
+            &KpiRules::default(),
+        );
+        assert_eq!((r.raised, r.flood_intervals), (11, 1));
+        assert_eq!((r.first_outs, r.first_out_flood_intervals), (1, 0));
+        let line = r
+            .benchmarks()
+            .into_iter()
+            .find(|b| b.metric.contains("first-outs only"))
+            .unwrap();
+        assert_eq!(line.value, "0.00 % (1 of 11 raises first-outs)");
+    }
+
+    #[test]
     fn a_plant_sets_its_own_flood_chatter_and_stale_rules() {
         // A flood above 3, ended at once below 4 (no hysteresis); two
         // raises in 5 min chatter; stale after 1 h.
@@ -681,7 +780,7 @@ mod tests {
         };
         let mut k = LiveKpis::with_rules(rules);
         for i in 0..4 {
-            k.on_transition("a", Transition::Raised, i * MIN, i == 3, i * MIN);
+            k.on_transition("a", Transition::Raised, (i * MIN, i == 3, false), i * MIN);
         }
         let s = k.snapshot(3 * MIN);
         assert_eq!((s.in_flood, s.chattering), (true, 1));
@@ -699,6 +798,7 @@ mod tests {
                 severity: Severity::High,
                 raised_at: i * MIN,
                 active: false,
+                consequence: false,
             })
             .collect();
         let r = alarm_report(&events, &[], 0, 20 * MIN, 20 * MIN, &rules);
@@ -707,8 +807,8 @@ mod tests {
         let b = r.benchmarks();
         assert_eq!(b[1].target, "<= 3");
         assert_eq!(b[2].metric, "10-min intervals in flood (> 3, until < 4)");
-        assert_eq!(b[4].metric, "chattering alarms (2+ raises in 5 min)");
-        assert_eq!(b[5].metric, "stale alarms (active > 1 h)");
+        assert_eq!(b[5].metric, "chattering alarms (2+ raises in 5 min)");
+        assert_eq!(b[6].metric, "stale alarms (active > 1 h)");
     }
 
     #[test]
@@ -720,6 +820,7 @@ mod tests {
             severity: Severity::Low,
             raised_at: at,
             active: false,
+            consequence: false,
         };
         // 11, 6, 4, 6 raises in four intervals: flood, flood (6 >= 5),
         // over (4 < 5), not again (6 is no more than 10).
@@ -735,9 +836,9 @@ mod tests {
             r.benchmarks()[2].metric,
             "10-min intervals in flood (> 10, until < 5)"
         );
-        assert_eq!(r.benchmarks()[5].metric, "stale alarms (active > 24 h)");
+        assert_eq!(r.benchmarks()[6].metric, "stale alarms (active > 24 h)");
         assert_eq!(
-            r.benchmarks()[4].metric,
+            r.benchmarks()[5].metric,
             "chattering alarms (3+ raises in 60 s)"
         );
     }
@@ -746,8 +847,8 @@ mod tests {
     fn three_raises_within_a_minute_chatter_until_the_minute_is_over() {
         let mut k = LiveKpis::new();
         for at in [0, 20_000, 50_000] {
-            k.on_transition("x", Transition::Raised, at, true, at);
-            k.on_transition("x", Transition::Cleared, at, false, at + 1);
+            k.on_transition("x", Transition::Raised, (at, true, false), at);
+            k.on_transition("x", Transition::Cleared, (at, false, false), at + 1);
         }
         assert_eq!(k.snapshot(50_001).chattering, 1);
         k.advance(59_999);
@@ -756,7 +857,7 @@ mod tests {
         assert_eq!(k.snapshot(60_000).chattering, 0);
         // Three raises spread over more than a minute: no chatter.
         for at in [100_000, 140_000, 170_000] {
-            k.on_transition("y", Transition::Raised, at, false, at);
+            k.on_transition("y", Transition::Raised, (at, false, false), at);
         }
         assert_eq!(k.snapshot(170_000).chattering, 0);
     }
@@ -764,16 +865,17 @@ mod tests {
     #[test]
     fn an_occurrence_is_stale_after_24_hours() {
         let mut k = LiveKpis::new();
-        k.on_transition("x", Transition::Raised, 0, true, 0);
-        k.on_transition("x", Transition::Acknowledged, 0, true, 5);
+        k.on_transition("x", Transition::Raised, (0, true, false), 0);
+        k.on_transition("x", Transition::Acknowledged, (0, true, false), 5);
         assert_eq!(k.snapshot(STALE_MS).stale, 0);
         assert_eq!(k.snapshot(STALE_MS + 1).stale, 1);
-        k.on_transition("x", Transition::Cleared, 0, false, STALE_MS + 2);
+        k.on_transition("x", Transition::Cleared, (0, false, false), STALE_MS + 2);
         assert_eq!(k.snapshot(STALE_MS + 3).stale, 0);
     }
 
     fn ev(at: u64, id: &str, transition: Transition, raised_at: u64, active: bool) -> AlarmEvent {
         AlarmEvent {
+            consequence: false,
             at,
             id: id.into(),
             transition,

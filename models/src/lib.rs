@@ -27,6 +27,7 @@
 pub mod alarm;
 pub mod comments;
 pub mod compiled;
+pub mod consequence;
 pub mod engine;
 pub mod explain;
 pub mod expr;

@@ -48,6 +48,7 @@ fn engine(limits: Vec<LimitCheck>) -> CellEngine {
         });
     }
     let check = SwitchingCheck {
+        forces: Vec::new(),
         text: None,
         id: "ese".into(),
         sf,
@@ -599,6 +600,7 @@ fn a_comparison_culprit_names_the_number_it_compared() {
         })
         .collect();
     let check = |id: &str, condition: &str| SwitchingCheck {
+        forces: Vec::new(),
         text: None,
         id: id.into(),
         sf: SwitchingFunction::from_expr(Signal::new(id), &Expr::parse(condition).unwrap()),

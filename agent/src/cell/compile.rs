@@ -10,7 +10,9 @@ use cellwatch_models::limit::LimitChecks;
 use cellwatch_models::sfc::SfcChecks;
 use cellwatch_models::timer::checks::{TimerCheckError, TimerChecks};
 
-use crate::config::CellConfig;
+use cellwatch_models::consequence::Relation;
+
+use crate::config::{CellConfig, Consequences};
 
 /// Why a configuration cannot be turned into an engine.
 #[derive(Debug, thiserror::Error)]
@@ -26,6 +28,15 @@ pub enum CompileError {
     /// The engine refuses the checks.
     #[error(transparent)]
     Engine(#[from] EngineError),
+    /// An edge of `[alarms.consequences]` names no alarm of the cell, or
+    /// removes one the checks do not give.
+    #[error("{key}: {why}")]
+    Consequence {
+        /// The key (`alarms.consequences.add[0]`).
+        key: String,
+        /// Why.
+        why: String,
+    },
 }
 
 /// How much later than the subscription's lifetime a change may still
@@ -85,7 +96,9 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
     let trust = config.opcua.as_ref().map_or(0, |ua| {
         (ua.subscription_lifetime + SOURCE_TIME_SLACK).as_millis() as u64
     });
+    let relation = relation(&engine, &config.consequences)?;
     Ok(engine
+        .relating(relation, config.consequences.suppress)
         .trusting_source_time(trust)
         .commenting(comments)
         .counting(config.part_counting())
@@ -99,4 +112,37 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
                 .map(|(i, _)| i)
                 .chain(config.step_flags().into_keys()),
         ))
+}
+
+/// The relation the checks give, with the configuration's edges added and
+/// removed.
+///
+/// # Errors
+/// An edge names an alarm the cell cannot raise, or removes one that is
+/// not there.
+fn relation(engine: &CellEngine, edits: &Consequences) -> Result<Relation, CompileError> {
+    let mut relation = engine.relation().clone();
+    let unknown = |key: &str, id: &str| CompileError::Consequence {
+        key: key.to_string(),
+        why: format!("'{id}' is no alarm of this cell's checks"),
+    };
+    for (key, cause, effect) in &edits.add {
+        for id in [cause, effect] {
+            if !engine.can_raise(id) {
+                return Err(unknown(key, id));
+            }
+        }
+        relation.add(cause, effect);
+    }
+    for (key, cause, effect) in &edits.remove {
+        if !relation.remove(cause, effect) {
+            return Err(CompileError::Consequence {
+                key: key.clone(),
+                why: format!(
+                    "{cause} -> {effect} is no edge of the relation the checks give (`cellwatch explain --consequences` prints it)"
+                ),
+            });
+        }
+    }
+    Ok(relation)
 }

@@ -1,7 +1,9 @@
 //! `cellwatch explain`: the fault step and culprits of one coil at a
-//! snapshot of signal values.
+//! snapshot of signal values; with `--consequences`, which alarms of a
+//! cell follow from which.
 
 use std::io::Write;
+use std::path::{Path, PathBuf};
 
 use cellwatch_models::explain::{explain, Culprit, Explanation, Polarity};
 use cellwatch_models::signal::Signal;
@@ -35,12 +37,21 @@ pub(crate) fn run(
     out: &mut dyn Write,
     err: &mut dyn Write,
 ) -> Result<(), Failure> {
-    let (program, comments, observable) = inputs::load(&args.program, err)?;
+    if let Some(config) = &args.consequences {
+        return consequences(config, out);
+    }
+    let (Some(file), Some(coil), Some(snapshot)) = (&args.file, &args.coil, &args.snapshot) else {
+        return Err(Failure::Input(
+            "give the PROGRAM, --coil and --snapshot (or --consequences CONFIG)".into(),
+        ));
+    };
+    let program_args = &args.program;
+    let (program, comments, observable) = inputs::load(file, program_args, err)?;
     let coil = program
-        .resolve(&args.coil)
+        .resolve(coil)
         .map_err(|m| Failure::Input(format!("--coil: {m}")))?;
     let sf = SwitchingFunction::expand(&program, &coil, &observable).map_err(Failure::input)?;
-    let now = inputs::values("--snapshot", &args.snapshot, &program)?;
+    let now = inputs::values("--snapshot", snapshot, &program)?;
     let before = args
         .before
         .as_deref()
@@ -52,7 +63,7 @@ pub(crate) fn run(
     let e = explain(&sf, |s| now.get(s), before_ref, args.fault_when, &comments)
         .map_err(|e| Failure::Input(format!("--snapshot: {e}")))?;
     let io = Failure::output;
-    if args.program.json {
+    if program_args.json {
         let json = ExplanationJson {
             coil: &e.coil,
             value: e.value,
@@ -78,6 +89,29 @@ pub(crate) fn run(
         print(out, &sf, &e).map_err(io)?;
     }
     Ok(())
+}
+
+/// `--consequences CONFIG`: the relation the cell's checks give, with the
+/// configuration's edges added and removed, as the agent runs it.
+fn consequences(config: &Path, out: &mut dyn Write) -> Result<(), Failure> {
+    let c = crate::config::load(config).map_err(Failure::input)?;
+    let engine = crate::cell::compile::engine(&c)
+        .map_err(|e| Failure::Input(format!("{}: {e}", config.display())))?;
+    let io = Failure::output;
+    writeln!(
+        out,
+        "cell {}: consequences {} (alarms.consequences.suppress = {})",
+        c.cell,
+        if c.consequences.suppress {
+            "suppressed: journaled and shown, not annunciated"
+        } else {
+            "annunciated, each marked with its cause"
+        },
+        c.consequences.suppress
+    )
+    .map_err(io)?;
+    out.write_all(engine.relation().render().as_bytes())
+        .map_err(io)
 }
 
 fn print(out: &mut dyn Write, sf: &SwitchingFunction, e: &Explanation) -> std::io::Result<()> {
@@ -119,16 +153,29 @@ fn print(out: &mut dyn Write, sf: &SwitchingFunction, e: &Explanation) -> std::i
 
 #[derive(Debug, clap::Args)]
 pub(crate) struct ExplainArgs {
+    /// The PLC program: an instruction list (FANUC PMC, IEC IL, Siemens
+    /// STL), PLCopen XML, a Studio 5000 export (.L5X) or a TIA Portal
+    /// block export (SimaticML); the format is told by its content.
+    #[arg(value_name = "PROGRAM", required_unless_present = "consequences")]
+    pub(crate) file: Option<PathBuf>,
     #[command(flatten)]
     pub(crate) program: ProgramArgs,
     /// The fault coil to explain.
-    #[arg(long, value_name = "NAME")]
-    pub(crate) coil: String,
+    #[arg(long, value_name = "NAME", required_unless_present = "consequences")]
+    pub(crate) coil: Option<String>,
     /// Signal values at the fault: inline `X0.06=0,X0.07=1`, or a file with
     /// one `ADDRESS=VALUE` (or CSV `ADDRESS,VALUE`) a line. Values: 0/1,
     /// true/false, on/off.
-    #[arg(long, value_name = "VALUES")]
-    pub(crate) snapshot: String,
+    #[arg(long, value_name = "VALUES", required_unless_present = "consequences")]
+    pub(crate) snapshot: Option<String>,
+    /// Instead of one fault: print which alarms of the cell configured in
+    /// CONFIG follow from which, as derived from its programs and checks
+    /// (an alarm whose check reads a signal another's fault holds: its
+    /// fault coil, an output the program derives from it, a contact, the
+    /// operand a stuck step waits for), with `[alarms.consequences]`'s
+    /// edges added and removed, for review.
+    #[arg(long, value_name = "CONFIG", conflicts_with_all = ["file", "coil", "snapshot", "before"])]
+    pub(crate) consequences: Option<PathBuf>,
     /// Signal values just before the fault, same forms; contacts that changed
     /// are marked as the trigger.
     #[arg(long, value_name = "VALUES")]

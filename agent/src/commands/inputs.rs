@@ -39,11 +39,12 @@ pub(crate) fn read_encoded(
 /// The compiled program, its comment database and observability, with
 /// compiler warnings written to `err`.
 pub(crate) fn load(
+    file: &std::path::Path,
     args: &ProgramArgs,
     err: &mut dyn std::io::Write,
 ) -> Result<(Program, CommentDb, Observability), Failure> {
-    let name = args.program.display().to_string();
-    let text = read_encoded(&args.program, "program", args.encoding)?;
+    let name = file.display().to_string();
+    let text = read_encoded(file, "program", args.encoding)?;
     let language = args.language.as_deref();
     let program =
         Program::compile_in(&name, &text, args.dialect, language).map_err(Failure::input)?;
@@ -55,9 +56,7 @@ pub(crate) fn load(
     // --comments adds to them and wins where both say something.
     let mut declared = program.documentation().clone();
     let given = args.comments.as_ref().and_then(|c| c.canonicalize().ok());
-    for (table, text) in
-        crate::config::tag_tables_beside(&crate::config::Disk, &args.program, &text)
-    {
+    for (table, text) in crate::config::tag_tables_beside(&crate::config::Disk, file, &text) {
         if table.canonicalize().ok() == given {
             continue;
         }
@@ -113,14 +112,12 @@ pub(crate) fn values(option: &str, arg: &str, program: &Program) -> Result<Value
     Values::parse_inline(option, arg, |a| program.resolve(a)).map_err(Failure::input)
 }
 
-/// Where the program comes from and how to read it.
+/// How to read the program (the file itself is each command's positional
+/// PROGRAM: an instruction list (FANUC PMC, IEC IL, Siemens STL), PLCopen
+/// XML, a Studio 5000 export (.L5X) or a TIA Portal block export
+/// (SimaticML), the format told by its content).
 #[derive(Debug, clap::Args)]
 pub(crate) struct ProgramArgs {
-    /// The PLC program: an instruction list (FANUC PMC, IEC IL, Siemens
-    /// STL), PLCopen XML, a Studio 5000 export (.L5X) or a TIA Portal
-    /// block export (SimaticML); the format is told by its content.
-    #[arg(value_name = "PROGRAM")]
-    pub(crate) program: PathBuf,
     /// The instruction-list dialect: `pmc` (RD, AND.NOT, WRT; X0.07),
     /// `iec` (LD, ANDN, ST; %IX0.0.3) or `stl` (Siemens STL/AWL: U, UN, =;
     /// E 0.0, or A, AN; I 0.0). Detected from the mnemonics if not given.

@@ -46,7 +46,7 @@ struct ContactJson {
 }
 
 pub(crate) fn run(args: &SfArgs, out: &mut dyn Write, err: &mut dyn Write) -> Result<(), Failure> {
-    let (program, comments, observable) = inputs::load(&args.program, err)?;
+    let (program, comments, observable) = inputs::load(&args.file, &args.program, err)?;
     let coils: Vec<Signal> = if args.coil.is_empty() {
         program.coils().iter().map(|c| c.signal.clone()).collect()
     } else {
@@ -188,6 +188,11 @@ fn print_coil(
 
 #[derive(Debug, clap::Args)]
 pub(crate) struct SfArgs {
+    /// The PLC program: an instruction list (FANUC PMC, IEC IL, Siemens
+    /// STL), PLCopen XML, a Studio 5000 export (.L5X) or a TIA Portal
+    /// block export (SimaticML); the format is told by its content.
+    #[arg(value_name = "PROGRAM")]
+    pub(crate) file: std::path::PathBuf,
     #[command(flatten)]
     pub(crate) program: ProgramArgs,
     /// A coil to print; repeat for several. Default: every coil the program writes.

@@ -120,6 +120,8 @@ pub struct CellConfig {
     pub alertmanager: Option<AlertmanagerConfig>,
     /// The alarm-performance rules (`[kpi]`): flood, chattering, stale.
     pub kpi: cellwatch_models::kpi::KpiRules,
+    /// Alarms that follow from others (`[alarms.consequences]`).
+    pub consequences: crate::config::Consequences,
     /// Things worth saying at start (security off, ...).
     pub warnings: Vec<String>,
 }

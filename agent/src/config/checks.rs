@@ -18,6 +18,18 @@ pub struct TimerCheck {
     pub drift: Option<cellwatch_models::timer::drift::DriftRules>,
 }
 
+/// `[alarms.consequences]`: how the cell treats alarms that follow from
+/// others ([`cellwatch_models::consequence`]).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Consequences {
+    /// A consequence is not annunciated: journaled and shown as suppressed.
+    pub suppress: bool,
+    /// Edges added to the derived relation: `(key, cause, effect)`.
+    pub add: Vec<(String, String, String)>,
+    /// Edges removed from it: `(key, cause, effect)`.
+    pub remove: Vec<(String, String, String)>,
+}
+
 /// Step supervision of sequential function charts (paper 004).
 #[derive(Debug, Clone)]
 pub struct SfcCheck {

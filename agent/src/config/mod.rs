@@ -33,7 +33,8 @@ pub use cell::{
     MAX_SHELVE_LIMIT,
 };
 pub use checks::{
-    SfcCheck, TimerCheck, DEFAULT_FORCE_PULSE, DEFAULT_FORCE_TIMEOUT, MAX_FORCE_TIMEOUT,
+    Consequences, SfcCheck, TimerCheck, DEFAULT_FORCE_PULSE, DEFAULT_FORCE_TIMEOUT,
+    MAX_FORCE_TIMEOUT,
 };
 pub use files::{tag_tables_beside, Disk, Files};
 pub use opcua::{Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy};

@@ -37,13 +37,35 @@ pub(crate) struct RawConfig {
     pub(crate) alarms: RawSystemAlarms,
 }
 
-/// `[alarms.<id>]`: the delays of the agent's own alarms.
+/// `[alarms.<id>]`: the delays of the agent's own alarms, and
+/// `[alarms.consequences]`.
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawSystemAlarms {
     pub(crate) communication: Option<RawDelays>,
     #[serde(rename = "tag-quality")]
     pub(crate) tag_quality: Option<RawDelays>,
+    pub(crate) consequences: Option<RawConsequences>,
+}
+
+/// `[alarms.consequences]`: whether consequences are annunciated, and
+/// edges added to or removed from the derived relation.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawConsequences {
+    pub(crate) suppress: Option<bool>,
+    #[serde(default)]
+    pub(crate) add: Vec<Spanned<RawEdge>>,
+    #[serde(default)]
+    pub(crate) remove: Vec<Spanned<RawEdge>>,
+}
+
+/// One edge of the consequence relation: `effect` follows from `cause`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawEdge {
+    pub(crate) cause: String,
+    pub(crate) effect: String,
 }
 
 /// An alarm's on-delay and off-delay.

@@ -435,6 +435,7 @@ fn shipped_configs_parse() {
 }
 
 mod checks;
+mod consequences;
 
 #[test]
 fn alertmanager_urls_tls_and_interval_are_checked() {
@@ -565,7 +566,7 @@ fn the_agents_own_alarms_clear_after_an_off_delay_unless_configured() {
     );
     assert_eq!(
         errors(&format!("{GOOD}\n[alarms.ese]\noff_delay = \"1s\"\n")),
-        "cell.toml:28:9: unknown field `ese`, expected `communication` or `tag-quality`"
+        "cell.toml:28:9: unknown field `ese`, expected one of `communication`, `tag-quality`, `consequences`"
     );
 }
 

@@ -325,6 +325,7 @@ mod tests {
             message: format!("{id} at {at}"),
             shelved: None,
             out_of_service: None,
+            consequence: None,
         }
     }
 

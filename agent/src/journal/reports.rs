@@ -106,6 +106,7 @@ pub fn alarm_events(conn: &Connection, since: u64, until: u64) -> rusqlite::Resu
             severity: alarm.severity,
             raised_at: alarm.raised_at,
             active: alarm.active,
+            consequence: alarm.consequence.is_some(),
         })
     };
     let row = |r: &rusqlite::Row<'_>| {

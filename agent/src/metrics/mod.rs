@@ -105,6 +105,14 @@ pub struct Metrics {
     pub alarms_shelved: IntGauge,
     /// Alarms out of service now.
     pub alarms_out_of_service: IntGauge,
+    /// Active alarms suppressed as consequences now.
+    pub alarms_suppressed: IntGauge,
+    /// Alarms raised as the consequence of another active alarm.
+    pub alarm_consequences: IntCounter,
+    /// First-outs (raises that are no consequence) in the last 10 minutes.
+    pub alarm_rate_first_outs_10m: IntGauge,
+    /// 1 while the first-outs alone make a flood.
+    pub alarm_flood_first_outs: IntGauge,
     /// Time from raise to acknowledgement.
     pub alarm_ack_seconds: Histogram,
     /// Sends to Alertmanager, by result (`ok`, `failed`).
@@ -441,6 +449,26 @@ impl Metrics {
             alarms_out_of_service: reg!(IntGauge::with_opts(opts(
                 "cellwatch_alarms_out_of_service",
                 "Alarms out of service now.",
+                cell
+            ))),
+            alarms_suppressed: reg!(IntGauge::with_opts(opts(
+                "cellwatch_alarms_suppressed",
+                "Active alarms suppressed now: raised as the consequence of another active alarm in a cell that suppresses consequences (journaled and shown, not annunciated).",
+                cell
+            ))),
+            alarm_consequences: reg!(IntCounter::with_opts(opts(
+                "cellwatch_alarm_consequences_total",
+                "Alarms raised as the consequence of another active alarm (derived from the PLC's logic and the cell's checks), suppressed or not.",
+                cell
+            ))),
+            alarm_rate_first_outs_10m: reg!(IntGauge::with_opts(opts(
+                "cellwatch_alarm_rate_first_outs_10m",
+                "First-outs raised in the last 10 minutes: the ISA-18.2 alarm rate with the consequences of other alarms left out.",
+                cell
+            ))),
+            alarm_flood_first_outs: reg!(IntGauge::with_opts(opts(
+                "cellwatch_alarm_flood_first_outs",
+                "1 while the first-outs alone make a flood (the rules of cellwatch_alarm_flood, consequences left out).",
                 cell
             ))),
             alarm_ack_seconds: reg!(Histogram::with_opts(

@@ -5,8 +5,9 @@
 //! Each agent pushes its own alarms: it knows their state first-hand, no
 //! plant-side process stands between an alarm and a person, and
 //! Alertmanager is made to be pushed to by many senders (every Prometheus
-//! does). Every active alarm that is not shelved and in service is an
-//! alert; it is sent when it is raised or changes, again every
+//! does). Every active alarm that is not shelved, in service and no
+//! suppressed consequence is an alert (a consequence announced carries
+//! its cause and first-out as labels, for Alertmanager's inhibition); it is sent when it is raised or changes, again every
 //! `resend_interval`, each time saying it ends four intervals later unless
 //! sent again (as Prometheus does: an agent that dies stops renewing its
 //! alerts rather than leaving them firing for ever; its `up` and health
@@ -95,6 +96,10 @@ impl Labels {
         if let Some(area) = &self.area {
             labels.insert("area", area.clone());
         }
+        if let Some(c) = &alarm.consequence {
+            labels.insert("consequence_of", c.cause.clone());
+            labels.insert("first_out", c.first_out.clone());
+        }
         let mut annotations = BTreeMap::from([("summary", alarm.message.clone())]);
         // The same line the CLI and the console show for each culprit.
         let culprits: Vec<String> = alarm
@@ -169,7 +174,8 @@ impl Book {
             alarm.state,
             AlarmState::ActiveUnacknowledged | AlarmState::ActiveAcknowledged
         ) && alarm.shelved.is_none()
-            && alarm.out_of_service.is_none();
+            && alarm.out_of_service.is_none()
+            && !alarm.consequence.as_ref().is_some_and(|c| c.suppressed);
         if alerting {
             let alert = labels.alert(alarm);
             if self.active.get(&alarm.id) == Some(&alert) {
@@ -610,6 +616,33 @@ mod tests {
             area: Some("press shop".into()),
             console: Some("https://console:8470".into()),
         }
+    }
+
+    #[test]
+    fn a_consequence_is_an_alert_naming_its_cause_unless_suppressed() {
+        let mut book = Book::new(1);
+        let l = labels();
+        let mut csd = payload(
+            "csd",
+            AlarmState::ActiveUnacknowledged,
+            "2026-11-26T10:00:00.000Z",
+        );
+        csd.consequence = Some(crate::payload::ConsequencePayload {
+            cause: "ese".into(),
+            first_out: "ese".into(),
+            suppressed: false,
+        });
+        assert!(book.take(&l, &csd));
+        let b = book.batch(0, "2026-11-26T10:04:00.000Z");
+        assert_eq!(b.alerts[0].labels["consequence_of"], "ese");
+        assert_eq!(b.alerts[0].labels["first_out"], "ese");
+        // Suppressed: no alert (and the one sent ends).
+        let mut book = Book::new(1);
+        if let Some(c) = csd.consequence.as_mut() {
+            c.suppressed = true;
+        }
+        assert!(!book.take(&l, &csd));
+        assert!(book.batch(0, "2026-11-26T10:04:00.000Z").alerts.is_empty());
     }
 
     #[test]

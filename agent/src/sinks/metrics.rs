@@ -36,8 +36,9 @@ pub struct MetricsSink {
     steps: HashMap<usize, Vec<[String; 3]>>,
     /// The ISA-18.2 figures.
     kpis: LiveKpis,
-    /// Per alarm: whether it is counted shelved, out of service.
-    kept: HashMap<String, (bool, bool)>,
+    /// Per alarm: whether it is counted shelved, out of service,
+    /// suppressed (active).
+    kept: HashMap<String, (bool, bool, bool)>,
     /// Flood time already added to its counter, ms.
     flood_counted: u64,
 }
@@ -88,17 +89,30 @@ impl MetricsSink {
         let mut any = false;
         for (alarm, transition, at) in step.engine.alarms() {
             any = true;
-            self.kpis
-                .on_transition(&alarm.id, transition, alarm.raised_at, alarm.active, at);
+            let consequence = alarm.consequence.is_some();
+            self.kpis.on_transition(
+                &alarm.id,
+                transition,
+                (alarm.raised_at, alarm.active, consequence),
+                at,
+            );
+            if transition == Transition::Raised && consequence {
+                m.alarm_consequences.inc();
+            }
             if transition == Transition::Acknowledged {
                 m.alarm_ack_seconds
                     .observe(at.saturating_sub(alarm.raised_at) as f64 / 1000.0);
             }
-            let now = (alarm.shelved.is_some(), alarm.out_of_service.is_some());
+            let now = (
+                alarm.shelved.is_some(),
+                alarm.out_of_service.is_some(),
+                alarm.active && alarm.is_suppressed(),
+            );
             let was = self.kept.insert(alarm.id.clone(), now).unwrap_or_default();
             m.alarms_shelved.add(i64::from(now.0) - i64::from(was.0));
             m.alarms_out_of_service
                 .add(i64::from(now.1) - i64::from(was.1));
+            m.alarms_suppressed.add(i64::from(now.2) - i64::from(was.2));
         }
         if !any && step.input != Input::Tick {
             return;
@@ -107,6 +121,10 @@ impl MetricsSink {
         let k = self.kpis.snapshot(step.at);
         m.alarm_rate_10m.set(k.raised_last_10m as i64);
         m.alarm_flood.set(i64::from(k.in_flood));
+        m.alarm_rate_first_outs_10m
+            .set(k.first_outs_last_10m as i64);
+        m.alarm_flood_first_outs
+            .set(i64::from(k.first_outs_in_flood));
         m.alarm_flood_seconds
             .inc_by(k.flood_ms.saturating_sub(self.flood_counted) as f64 / 1000.0);
         self.flood_counted = self.flood_counted.max(k.flood_ms);

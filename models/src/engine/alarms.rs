@@ -7,7 +7,7 @@
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use super::checks::{Declared, Finding};
-use crate::alarm::{Alarm, AlarmKind, CommandRefused, Removal, Shelf, Transition};
+use crate::alarm::{Alarm, AlarmKind, CommandRefused, Consequence, Removal, Shelf, Transition};
 
 /// Alarms by id, with the conditions behind them.
 #[derive(Debug, Default)]
@@ -136,6 +136,7 @@ impl AlarmBook {
                     // A shelf outlives occurrences until it expires.
                     shelved: self.alarms.get(&f.id).and_then(|a| a.shelved.clone()),
                     out_of_service: None,
+                    consequence: None,
                 };
                 self.alarms.insert(f.id.clone(), alarm);
                 self.set_active(&f.id, true);
@@ -143,6 +144,13 @@ impl AlarmBook {
             }
         };
         Applied { transition }
+    }
+
+    /// Marks alarm `id`'s occurrence as a consequence.
+    pub(crate) fn set_consequence(&mut self, id: &str, c: Consequence) {
+        if let Some(a) = self.alarms.get_mut(id) {
+            a.consequence = Some(Box::new(c));
+        }
     }
 
     /// Puts back an alarm as it was before a restart. Its condition is
@@ -240,6 +248,7 @@ impl AlarmBook {
                     message: String::new(),
                     shelved: None,
                     out_of_service: None,
+                    consequence: None,
                 },
             );
         }

@@ -130,6 +130,12 @@ pub trait CheckSet: Send + Sync {
     /// Moves the measurements made since the last call into `out`.
     fn take_observations(&mut self, _out: &mut Vec<Observation>) {}
 
+    /// Adds, per alarm it can raise, the signals its check reads and those
+    /// its fault holds at their fault value, from which the cell's
+    /// consequence relation is derived ([`crate::consequence`]). Default:
+    /// nothing (its alarms neither follow from nor cause another).
+    fn facts(&self, _out: &mut Vec<crate::consequence::AlarmFacts>) {}
+
     /// Adds where each tracked transition's recent durations lie in its
     /// window (timer checks with drift tracking on; others add nothing).
     fn window_positions(&self, _out: &mut Vec<WindowPosition>) {}

@@ -46,8 +46,10 @@ pub use checks::{CheckSet, Declared, Finding, Observation, WindowPosition};
 pub use state::{HistoryKind, MachineState, StateName, StateRules};
 pub use switching::{SwitchingCheck, SwitchingChecks};
 
+use crate::alarm::Consequence;
 use crate::alarm::{Alarm, AlarmKind, CommandRefused, Severity, Transition};
 use crate::comments::CommentDb;
+use crate::consequence::Relation;
 use crate::signal::Signal;
 use crate::value::{Comparison, Counter, Num, Operand, ValueType};
 use alarms::AlarmBook;
@@ -497,6 +499,10 @@ pub struct CellEngine {
     order: Order,
     /// The tags' comments (I/O list), by address, for messages.
     comments: CommentDb,
+    /// Which alarms may follow from which ([`crate::consequence`]).
+    relation: Relation,
+    /// Consequences are not annunciated (journaled, shown as suppressed).
+    suppress: bool,
 }
 
 impl CellEngine {
@@ -602,7 +608,14 @@ impl CellEngine {
         by_address
             .sort_unstable_by(|&a, &b| tags[a as usize].address.cmp(&tags[b as usize].address));
         let alarms = AlarmBook::declaring(sets.iter().flat_map(|s| s.alarms()));
+        let mut facts = Vec::new();
+        for set in &sets {
+            set.facts(&mut facts);
+        }
+        let relation = Relation::derive(&facts);
         Ok(CellEngine {
+            relation,
+            suppress: false,
             cell: cell.to_string(),
             tags,
             configured,
@@ -641,6 +654,23 @@ impl CellEngine {
             order_tags: (None, None),
             order: Order::default(),
         })
+    }
+
+    /// Which alarms may follow from which, as derived from the checks
+    /// ([`crate::consequence`]).
+    pub fn relation(&self) -> &Relation {
+        &self.relation
+    }
+
+    /// Takes `relation` as the cell's (the derived one with the
+    /// configuration's edges added or removed); with `suppress`, an alarm
+    /// raised as a consequence is not annunciated (journaled and shown as
+    /// suppressed).
+    #[must_use]
+    pub fn relating(mut self, relation: Relation, suppress: bool) -> Self {
+        self.relation = relation;
+        self.suppress = suppress;
+        self
     }
 
     /// Counts rising edges of tag `tag` as parts produced
@@ -1304,6 +1334,18 @@ impl CellEngine {
                 self.quality_unsaid = true;
             }
         }
+        if findings.len() > 1 && !self.relation.is_empty() {
+            // Causes first: within one change, an alarm that may follow
+            // from another found with it is judged after it.
+            let ids: Vec<String> = findings.iter().map(|f| f.id.clone()).collect();
+            findings.sort_by_key(|f| {
+                self.relation
+                    .causes_of(&f.id)
+                    .iter()
+                    .filter(|(c, _)| ids.contains(c))
+                    .count()
+            });
+        }
         for f in findings.drain(..) {
             self.apply_at(f, at, now, step);
         }
@@ -1846,6 +1888,11 @@ impl CellEngine {
         let Some(transition) = applied.transition else {
             return;
         };
+        if transition == Transition::Raised {
+            if let Some(c) = self.consequence_of(&id) {
+                self.alarms.set_consequence(&id, c);
+            }
+        }
         let Some(alarm) = self.alarms.get(&id) else {
             return;
         };
@@ -1864,6 +1911,43 @@ impl CellEngine {
             transition,
             at: now,
         });
+    }
+
+    /// Whether alarm `id`, just raised, follows from an active alarm: the
+    /// communication alarm while the link is down (every tag unknown), an
+    /// active cause in the relation that explains its culprits, or the
+    /// tag-quality alarm when every culprit is a tag of bad quality.
+    fn consequence_of(&self, id: &str) -> Option<Consequence> {
+        let alarm = self.alarms.get(id)?;
+        if matches!(
+            alarm.kind,
+            AlarmKind::Communication | AlarmKind::System | AlarmKind::TagQuality
+        ) {
+            return None;
+        }
+        let active = |c: &str| self.alarms.get(c).filter(|a| a.active);
+        let cut = self.connected == Some(false);
+        let bad = |s: &Signal| self.tag_index(s).is_some_and(|t| self.bad.contains_key(&t));
+        let cause = cut
+            .then(|| active("communication"))
+            .flatten()
+            .or_else(|| {
+                self.relation
+                    .cause_of(id, &alarm.culprits, |c| self.alarms.get(c))
+            })
+            .or_else(|| {
+                (!alarm.culprits.is_empty() && alarm.culprits.iter().all(|c| bad(&c.address)))
+                    .then(|| active("tag-quality"))
+                    .flatten()
+            })?;
+        Some(Consequence {
+            cause: cause.id.clone(),
+            first_out: cause
+                .consequence
+                .as_ref()
+                .map_or_else(|| cause.id.clone(), |c| c.first_out.clone()),
+            suppressed: self.suppress,
+        })
     }
 
     fn update_state(&mut self, now: u64, step: &mut Step) {
@@ -1947,6 +2031,7 @@ mod tests {
             .collect();
         tags.extend_from_slice(extra);
         let check = SwitchingCheck {
+            forces: Vec::new(),
             text: None,
             id: "ese".into(),
             sf,
@@ -2503,6 +2588,7 @@ mod tests {
             message: "ESE".into(),
             shelved: None,
             out_of_service: None,
+            consequence: None,
         }
     }
 
@@ -2860,6 +2946,7 @@ mod armed {
             })
             .collect();
         let check = SwitchingCheck {
+            forces: Vec::new(),
             text: None,
             id: "csd".into(),
             sf,

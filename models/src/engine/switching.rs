@@ -7,6 +7,7 @@ use super::checks::{CheckSet, Declared, Finding};
 use crate::alarm::{AlarmKind, Severity};
 use crate::comments::CommentDb;
 use crate::compiled::CompiledCell;
+use crate::consequence::AlarmFacts;
 use crate::explain::{explain_partial, read_comparisons, Polarity};
 use crate::signal::Signal;
 use crate::switching::SwitchingFunction;
@@ -33,6 +34,10 @@ pub struct SwitchingCheck {
     /// The check is armed only while this holds (CSD: cycle start pressed);
     /// `None`: always armed.
     pub armed_when: Option<SwitchingFunction>,
+    /// The outputs the program derives from the fault coil (its forced
+    /// outputs, [`crate::consequence::forced_outputs`]): a check reading
+    /// one follows from this one's fault.
+    pub forces: Vec<Signal>,
 }
 
 /// Switching-function checks compiled over one bitset.
@@ -159,6 +164,30 @@ impl CheckSet for SwitchingChecks {
             Some(n) => self.numbers.insert(signal.clone(), n),
             None => self.numbers.remove(signal),
         };
+    }
+
+    /// A check reads its function's and its arming condition's signals;
+    /// its fault holds its coil and the outputs the program derives from
+    /// it (a discrete alarm: its contact).
+    fn facts(&self, out: &mut Vec<AlarmFacts>) {
+        for c in &self.checks {
+            let mut reads = c.sf.leaves();
+            if let Some(a) = &c.armed_when {
+                reads.extend(a.leaves());
+            }
+            let mut effects = if c.text.is_some() {
+                // A discrete alarm's function is its one contact.
+                c.sf.leaves()
+            } else {
+                vec![c.sf.coil.clone()]
+            };
+            effects.extend(c.forces.iter().cloned());
+            out.push(AlarmFacts {
+                id: c.id.clone(),
+                effects,
+                reads,
+            });
+        }
     }
 
     fn alarms(&self) -> Vec<Declared> {

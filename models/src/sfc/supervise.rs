@@ -255,6 +255,39 @@ impl CheckSet for SfcChecks {
         };
     }
 
+    /// A stuck step reads and holds what the transitions leaving it wait
+    /// for: a timer waiting for the same operand follows from it.
+    fn facts(&self, out: &mut Vec<crate::consequence::AlarmFacts>) {
+        for (r, s) in self.sfc.steps() {
+            if s.supervision_ms.is_none() {
+                continue;
+            }
+            let mut waits: Vec<Signal> = Vec::new();
+            for (c, chart) in self.sfc.charts.iter().enumerate() {
+                for (i, t) in chart.transitions.iter().enumerate() {
+                    if !t.from.contains(&r) {
+                        continue;
+                    }
+                    for leaf in self
+                        .needs
+                        .get(&(c, i))
+                        .map(|sf| sf.leaves())
+                        .unwrap_or_default()
+                    {
+                        if leaf != s.flag && !waits.contains(&leaf) {
+                            waits.push(leaf);
+                        }
+                    }
+                }
+            }
+            out.push(crate::consequence::AlarmFacts {
+                id: self.alarm_id(r),
+                effects: waits.clone(),
+                reads: waits,
+            });
+        }
+    }
+
     fn alarms(&self) -> Vec<Declared> {
         self.sfc
             .steps()

@@ -267,6 +267,18 @@ impl CheckSet for TimerChecks {
         self.signals.clone()
     }
 
+    /// A transition's alarm reads the event it waits for; a late event
+    /// holds nothing.
+    fn facts(&self, out: &mut Vec<crate::consequence::AlarmFacts>) {
+        for (t, (_, s, _, _)) in &self.transitions {
+            out.push(crate::consequence::AlarmFacts {
+                id: format!("{}-{t:03}", self.id),
+                effects: Vec::new(),
+                reads: vec![self.signals[*s].clone()],
+            });
+        }
+    }
+
     fn alarms(&self) -> Vec<Declared> {
         let mut ids: Vec<u32> = self.transitions.keys().copied().collect();
         ids.sort_unstable();

@@ -105,10 +105,21 @@ fn print_alarm(out: &mut dyn Write, a: &AlarmPayload, json: bool) -> std::io::Re
     if let Some(r) = &a.out_of_service {
         kept += &format!("OUT OF SERVICE since {} by {} ({})  ", r.at, r.by, r.reason);
     }
+    let mut consequence = String::new();
+    if let Some(c) = &a.consequence {
+        if c.suppressed {
+            kept += "SUPPRESSED  ";
+        }
+        consequence = format!(" (consequence of {}", c.cause);
+        if c.first_out != c.cause {
+            consequence += &format!(", first-out {}", c.first_out);
+        }
+        consequence.push(')');
+    }
     // Operators' and the journal's text on one line each: a newline in a
     // reason never prints a line of its own.
     let line = format!(
-        "{}  {}/{}  {kept}{} {} [{}] {}{step}: {}",
+        "{}  {}/{}  {kept}{} {} [{}] {}{step}: {}{consequence}",
         a.at, a.cell, a.id, a.transition, a.state, a.severity, a.fault_type, a.message
     );
     writeln!(out, "{}", crate::operator::escaped(&line))?;

@@ -1,12 +1,14 @@
 //! Validating the configuration: the delays of the agent's own alarms
-//! (`[alarms.communication]`, `[alarms.tag-quality]`).
+//! (`[alarms.communication]`, `[alarms.tag-quality]`) and
+//! `[alarms.consequences]`.
 
 use std::time::Duration;
 
 use toml::Spanned;
 
 use super::Validator;
-use crate::config::raw::{RawDelays, RawSystemAlarms};
+use crate::config::checks::Consequences;
+use crate::config::raw::{RawConsequences, RawDelays, RawEdge, RawSystemAlarms};
 
 /// How long the connection, or every tag, must be good again before the
 /// `communication` or `tag-quality` alarm clears, unless configured: a
@@ -20,8 +22,12 @@ const MAX_SYSTEM_DELAY: Duration = Duration::from_secs(3600);
 impl Validator<'_> {
     /// `[alarms.*]`: `(alarm id, on-delay, off-delay)` in ms for the
     /// `communication` and `tag-quality` alarms, defaults where unsaid.
-    pub(super) fn system_alarms(&mut self, raw: RawSystemAlarms) -> Vec<(String, u64, u64)> {
-        [
+    pub(super) fn system_alarms(
+        &mut self,
+        raw: RawSystemAlarms,
+    ) -> (Vec<(String, u64, u64)>, Consequences) {
+        let consequences = self.consequences(raw.consequences);
+        let delays = [
             ("communication", raw.communication),
             ("tag-quality", raw.tag_quality),
         ]
@@ -42,7 +48,44 @@ impl Validator<'_> {
             );
             (id.to_string(), on, off)
         })
-        .collect()
+        .collect();
+        (delays, consequences)
+    }
+
+    /// `[alarms.consequences]`: an edge names two different alarms; whether
+    /// they are alarms of the cell's checks is known once the checks are
+    /// built ([`crate::cell::compile::engine`]).
+    fn consequences(&mut self, raw: Option<RawConsequences>) -> Consequences {
+        let Some(raw) = raw else {
+            return Consequences::default();
+        };
+        let mut edges = |list: Vec<toml::Spanned<RawEdge>>, what: &str| {
+            let mut out = Vec::new();
+            for (i, e) in list.into_iter().enumerate() {
+                let key = format!("alarms.consequences.{what}[{i}]");
+                let span = e.span();
+                let RawEdge { cause, effect } = e.into_inner();
+                if cause.trim().is_empty() || effect.trim().is_empty() {
+                    self.problem(
+                        span,
+                        &key,
+                        "names no alarm: give cause and effect alarm ids",
+                    );
+                } else if cause == effect {
+                    self.problem(span, &key, format!("'{cause}' cannot follow from itself"));
+                } else {
+                    out.push((key, cause, effect));
+                }
+            }
+            out
+        };
+        let add = edges(raw.add, "add");
+        let remove = edges(raw.remove, "remove");
+        Consequences {
+            suppress: raw.suppress.unwrap_or(false),
+            add,
+            remove,
+        }
     }
 
     /// A delay of the agent's own alarm in ms: `0` or a duration of at

@@ -191,7 +191,14 @@ impl Validator<'_> {
                 ))
             }
         };
+        // The outputs the program derives from the fault coil, where the
+        // cell reads them: a check reading one follows from this fault.
+        let forces =
+            cellwatch_models::consequence::forced_outputs(&program, &coil, &observable, |s| {
+                tags.contains_key(s)
+            });
         Some(SwitchingCheck {
+            forces,
             text: None,
             armed_when,
             id: c.id.into_inner(),
@@ -273,6 +280,7 @@ impl Validator<'_> {
                 delays.push((id.clone(), on, off));
             }
             out.push(SwitchingCheck {
+                forces: Vec::new(),
                 armed_when,
                 sf: SwitchingFunction::from_expr(Signal::new(&id), &Expr::Lit(tag.clone(), false)),
                 id,

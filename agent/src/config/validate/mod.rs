@@ -439,7 +439,8 @@ impl Validator<'_> {
         let zenoh = self.zenoh(raw.zenoh, &cell);
         let alertmanager = self.alertmanager(raw.alertmanager);
         let kpi = self.kpi(raw.kpi);
-        delays.extend(self.system_alarms(raw.alarms));
+        let (system_delays, consequences) = self.system_alarms(raw.alarms);
+        delays.extend(system_delays);
         let journal = JournalConfig {
             path: self.path(
                 raw.journal
@@ -621,6 +622,7 @@ impl Validator<'_> {
             delays,
             alertmanager,
             kpi,
+            consequences,
             warnings: Vec::new(),
         })
     }

@@ -78,7 +78,8 @@ function alarmKey(cell, id) { return cell + '\u0000' + id; }
 
 function active(a) { return a.state === 'active_unacknowledged' || a.state === 'active_acknowledged'; }
 function unacked(a) { return a.state === 'active_unacknowledged' || a.state === 'cleared_unacknowledged'; }
-function kept(a) { return !!(a.shelved || a.out_of_service); }
+function suppressed(a) { return !!(a.consequence && a.consequence.suppressed); }
+function kept(a) { return !!(a.shelved || a.out_of_service || suppressed(a)); }
 
 function badge(a) {
   const cls = ['badge', 'p-' + a.severity, unacked(a) ? 'unack' : 'ack', kept(a) ? 'kept' : ''].join(' ');
@@ -90,6 +91,7 @@ function stateText(a) {
   if (a.latched) parts.push('latched');
   if (a.shelved) parts.push('shelved');
   if (a.out_of_service) parts.push('out of service');
+  if (a.consequence) parts.push((suppressed(a) ? 'suppressed, ' : '') + 'consequence of ' + a.consequence.cause);
   return parts.join(', ');
 }
 
@@ -449,6 +451,11 @@ function alarmDetail(cell, id) {
         ['Raised', when(a.raised_at)], ['Cleared', a.cleared_at ? when(a.cleared_at) : '—'], ['Acknowledged by', a.acked_by || '—']];
       if (a.shelved) facts.push(['Shelved', `by ${a.shelved.by} until ${a.shelved.until ? when(a.shelved.until) : 'it clears'}: ${a.shelved.reason}`]);
       if (a.out_of_service) facts.push(['Out of service', `since ${when(a.out_of_service.at)} by ${a.out_of_service.by}: ${a.out_of_service.reason}`]);
+      if (a.consequence) {
+        const c = a.consequence;
+        facts.push(['Consequence of', [el('a', { href: href('alarm', a.cell, c.cause) }, c.cause),
+          c.first_out !== c.cause ? ` (first-out ${c.first_out})` : '', c.suppressed ? ', suppressed: not annunciated' : '']]);
+      }
       this.head.replaceChildren(
         el('h2', {}, badge(a), ' ', el('span', { class: 'message' }, a.message)),
         el('dl', { class: 'facts' }, facts.map(([k, v]) => [el('dt', {}, k), el('dd', {}, v)])));

@@ -1,0 +1,103 @@
+//! Configuration tests of `[alarms.consequences]`: the relation the checks
+//! give (a fault coil read by another check, a forced output), edges added
+//! and removed, and the errors that name the bad edge.
+
+use super::*;
+
+/// GOOD, plus: fig6's program also drives the lamp Y1.00 from its coil
+/// G0.00 (a forced output); check `start` reads G0.00, check `lamp` reads
+/// Y1.00, check `other` reads neither.
+fn cascade(extra: &str) -> (String, Mem) {
+    let mut files = mem();
+    files.0.insert(
+        PathBuf::from("base/fig6.il"),
+        b"RD X1\nANDN X2\nWRT G0.00\nRD G0.00\nWRT Y1.00\n".to_vec(),
+    );
+    files.0.insert(
+        PathBuf::from("base/start.il"),
+        b"RD X2\nOR G0.00\nWRT G1.00\nRD X1\nOR Y1.00\nWRT G2.00\nRD X1\nAND X2\nWRT G3.00\n"
+            .to_vec(),
+    );
+    let mut text = GOOD.replace("[zenoh.tls]", &format!("{}\n[zenoh.tls]", extra_checks()));
+    text.push_str(extra);
+    (text, files)
+}
+
+fn extra_checks() -> String {
+    let mut s = String::new();
+    for (addr, name) in [("G0.00", "g0"), ("Y1.00", "y1")] {
+        s += &format!("[[tags]]\nname = \"{name}\"\nnode_id = \"nsu=urn:plc;s={addr}\"\naddress = \"{addr}\"\n\n");
+    }
+    for (id, coil) in [("start", "G1.00"), ("lamp", "G2.00"), ("other", "G3.00")] {
+        s += &format!(
+            "[[checks.switching]]\nid = \"{id}\"\nprogram = \"start.il\"\ncoil = \"{coil}\"\n\n"
+        );
+    }
+    s
+}
+
+fn relation(text: &str, files: &Mem) -> Result<String, String> {
+    let c = parse("cell.toml", text, Path::new("base"), files).map_err(|e| e.to_string())?;
+    crate::cell::compile::engine(&c)
+        .map(|e| e.relation().render())
+        .map_err(|e| e.to_string())
+}
+
+#[test]
+fn a_coil_read_by_another_check_and_its_forced_outputs_relate_the_alarms() {
+    let (text, files) = cascade("");
+    let c = parse("cell.toml", &text, Path::new("base"), &files).unwrap();
+    assert_eq!(c.switching[0].forces, [Signal::new("Y1.00")]);
+    assert!(!c.consequences.suppress);
+    assert_eq!(
+        relation(&text, &files).unwrap(),
+        "fig6 -> lamp    lamp reads Y1.00, which fig6's fault holds\n\
+         fig6 -> start   start reads G0.00, which fig6's fault holds\n\
+         communication -> every alarm raised while the link is down\n\
+         tag-quality -> an alarm whose culprits are all tags of bad quality\n"
+    );
+}
+
+#[test]
+fn edges_are_added_and_removed_by_the_configuration() {
+    let (text, files) = cascade(
+        "\n[alarms.consequences]\nsuppress = true\n\
+         add = [{ cause = \"start\", effect = \"other\" }]\n\
+         remove = [{ cause = \"fig6\", effect = \"lamp\" }]\n",
+    );
+    let c = parse("cell.toml", &text, Path::new("base"), &files).unwrap();
+    assert!(c.consequences.suppress);
+    assert_eq!(
+        relation(&text, &files).unwrap(),
+        "fig6 -> start    start reads G0.00, which fig6's fault holds\n\
+         start -> other   written in the configuration\n\
+         communication -> every alarm raised while the link is down\n\
+         tag-quality -> an alarm whose culprits are all tags of bad quality\n"
+    );
+}
+
+#[test]
+fn a_bad_edge_is_named_with_its_key() {
+    let (text, files) =
+        cascade("\n[alarms.consequences]\nadd = [{ cause = \"fig7\", effect = \"start\" }]\n");
+    assert_eq!(
+        relation(&text, &files).unwrap_err(),
+        "alarms.consequences.add[0]: 'fig7' is no alarm of this cell's checks"
+    );
+    let (text, files) =
+        cascade("\n[alarms.consequences]\nremove = [{ cause = \"start\", effect = \"fig6\" }]\n");
+    assert_eq!(
+        relation(&text, &files).unwrap_err(),
+        "alarms.consequences.remove[0]: start -> fig6 is no edge of the relation the checks give (`cellwatch explain --consequences` prints it)"
+    );
+    let (text, files) =
+        cascade("\n[alarms.consequences]\nadd = [{ cause = \"start\", effect = \"start\" }]\n");
+    let e = parse("cell.toml", &text, Path::new("base"), &files)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.ends_with("alarms.consequences.add[0]: 'start' cannot follow from itself"),
+        "{e}"
+    );
+    assert!(e.starts_with("cell.toml:"), "{e}");
+}

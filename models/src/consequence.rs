@@ -1,0 +1,354 @@
+//! Consequence alarms and first-out, derived from the PLC's logic and the
+//! cell's checks.
+//!
+//! When one fault makes others follow, the later alarms are *consequences*
+//! (ISA-18.2's "designed suppression", which other alarm systems make
+//! engineers write by hand). cellwatch reads the relation off what it has
+//! compiled: every alarm's check says which signals its fault *holds* at
+//! their fault value (its effects) and which signals it *reads*; alarm B
+//! may follow from alarm A when B's check reads a signal A's fault holds:
+//!
+//! - a switching check holds its fault coil, and every output the program
+//!   derives from that coil (its forced outputs): on many machines the
+//!   emergency-stop coil is a contact of the cycle-start logic, so an
+//!   emergency stop also makes cycle start impossible (paper 000's ESE and
+//!   CSD);
+//! - a discrete alarm holds its contact (an over-travel switch open is a
+//!   culprit of the emergency stop that reads it);
+//! - a stuck step holds the operands its leaving transitions wait for
+//!   (paper 004): a transition timer waiting for one of them follows;
+//! - a lost connection makes every tag unknown: everything raised under a
+//!   `communication` alarm follows from it, and an alarm whose culprits
+//!   are all tags of bad quality follows from `tag-quality` (the engine
+//!   applies both; they are no edges here).
+//!
+//! The relation only says what *may* follow. At run time an alarm raised
+//! while one of its causes is active is that cause's consequence only if
+//! every one of its culprits is explained by the cause: a signal the
+//! cause's fault holds, or one of the cause's own culprits. An alarm with a
+//! culprit of its own is never taken for a consequence; an edge written in
+//! the configuration explains whatever its effect names.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fmt::Write;
+
+use crate::alarm::Alarm;
+use crate::explain::Culprit;
+use crate::il::Observability;
+use crate::program::Program;
+use crate::signal::Signal;
+use crate::switching::SwitchingFunction;
+
+/// What one alarm's check reads and what its fault holds.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct AlarmFacts {
+    /// The alarm id.
+    pub id: String,
+    /// Signals its fault holds at their fault value.
+    pub effects: Vec<Signal>,
+    /// Signals its check reads.
+    pub reads: Vec<Signal>,
+}
+
+/// Why one alarm may follow from another.
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Link {
+    /// The effect's check reads this signal, which the cause's fault holds.
+    Reads(Signal),
+    /// Written in the cell's configuration.
+    Configured,
+}
+
+/// One edge of the relation: `effect` may follow from `cause`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Edge {
+    /// The alarm that comes first.
+    pub cause: String,
+    /// The alarm that follows from it.
+    pub effect: String,
+    /// Why.
+    pub link: Link,
+}
+
+/// Which alarms of a cell may follow from which.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Relation {
+    /// Per effect: its causes, each with the first link found.
+    causes: BTreeMap<String, Vec<(String, Link)>>,
+    /// Per alarm: the signals its fault holds.
+    effects: HashMap<String, Vec<Signal>>,
+}
+
+impl Relation {
+    /// The relation among alarms with `facts`: B follows from A when B
+    /// reads a signal A holds (A ≠ B). Costs one look per signal read.
+    pub fn derive(facts: &[AlarmFacts]) -> Relation {
+        let mut held: HashMap<&Signal, Vec<&str>> = HashMap::new();
+        for f in facts {
+            for s in &f.effects {
+                let by = held.entry(s).or_default();
+                if !by.contains(&f.id.as_str()) {
+                    by.push(&f.id);
+                }
+            }
+        }
+        let mut causes: BTreeMap<String, Vec<(String, Link)>> = BTreeMap::new();
+        for f in facts {
+            for s in &f.reads {
+                for &cause in held.get(s).into_iter().flatten() {
+                    if cause == f.id {
+                        continue;
+                    }
+                    let list = causes.entry(f.id.clone()).or_default();
+                    if !list.iter().any(|(c, _)| c == cause) {
+                        list.push((cause.to_string(), Link::Reads(s.clone())));
+                    }
+                }
+            }
+        }
+        for list in causes.values_mut() {
+            list.sort();
+        }
+        Relation {
+            causes,
+            effects: facts
+                .iter()
+                .filter(|f| !f.effects.is_empty())
+                .map(|f| (f.id.clone(), f.effects.clone()))
+                .collect(),
+        }
+    }
+
+    /// Adds an edge the logic does not show (`effect` follows from
+    /// `cause` whatever its culprits); an edge already there becomes a
+    /// configured one.
+    pub fn add(&mut self, cause: &str, effect: &str) {
+        let list = self.causes.entry(effect.to_string()).or_default();
+        list.retain(|(c, _)| c != cause);
+        list.push((cause.to_string(), Link::Configured));
+        list.sort();
+    }
+
+    /// Removes an edge; whether there was one.
+    pub fn remove(&mut self, cause: &str, effect: &str) -> bool {
+        let Some(list) = self.causes.get_mut(effect) else {
+            return false;
+        };
+        let before = list.len();
+        list.retain(|(c, _)| c != cause);
+        let removed = list.len() < before;
+        if list.is_empty() {
+            self.causes.remove(effect);
+        }
+        removed
+    }
+
+    /// Whether there is no edge.
+    pub fn is_empty(&self) -> bool {
+        self.causes.is_empty()
+    }
+
+    /// Whether `effect` may follow from `cause`.
+    pub fn has(&self, cause: &str, effect: &str) -> bool {
+        self.causes_of(effect).iter().any(|(c, _)| c == cause)
+    }
+
+    /// The alarms `effect` may follow from, with why.
+    pub fn causes_of(&self, effect: &str) -> &[(String, Link)] {
+        self.causes.get(effect).map_or(&[], Vec::as_slice)
+    }
+
+    /// The signals alarm `id`'s fault holds.
+    pub fn effects_of(&self, id: &str) -> &[Signal] {
+        self.effects.get(id).map_or(&[], Vec::as_slice)
+    }
+
+    /// Every edge, by effect then cause.
+    pub fn edges(&self) -> impl Iterator<Item = Edge> + '_ {
+        self.causes.iter().flat_map(|(effect, list)| {
+            list.iter().map(move |(cause, link)| Edge {
+                cause: cause.clone(),
+                effect: effect.clone(),
+                link: link.clone(),
+            })
+        })
+    }
+
+    /// The cause of alarm `effect`, raised now with `culprits`, among the
+    /// active alarms `active` gives: the earliest raised active cause that
+    /// explains every culprit, if any.
+    pub fn cause_of<'a>(
+        &self,
+        effect: &str,
+        culprits: &[Culprit],
+        active: impl Fn(&str) -> Option<&'a Alarm>,
+    ) -> Option<&'a Alarm> {
+        self.causes_of(effect)
+            .iter()
+            .filter_map(|(cause, link)| {
+                let a = active(cause).filter(|a| a.active)?;
+                let explained = match link {
+                    Link::Configured => true,
+                    Link::Reads(_) => explains(self.effects_of(cause), a, culprits),
+                };
+                explained.then_some(a)
+            })
+            .min_by_key(|a| (a.raised_at, a.id.as_str()))
+    }
+
+    /// The relation for people: one edge a line, by cause, then the rules
+    /// the engine applies to its own alarms.
+    pub fn render(&self) -> String {
+        let mut out = String::new();
+        let mut edges: Vec<Edge> = self.edges().collect();
+        edges.sort_by(|a, b| (&a.cause, &a.effect).cmp(&(&b.cause, &b.effect)));
+        let width = edges
+            .iter()
+            .map(|e| e.cause.len() + e.effect.len() + 4)
+            .max()
+            .unwrap_or(0);
+        if edges.is_empty() {
+            out.push_str("no alarm of the cell's checks follows from another\n");
+        }
+        for e in &edges {
+            let pair = format!("{} -> {}", e.cause, e.effect);
+            let why = match &e.link {
+                Link::Reads(s) => {
+                    format!("{} reads {s}, which {}'s fault holds", e.effect, e.cause)
+                }
+                Link::Configured => "written in the configuration".to_string(),
+            };
+            let _ = writeln!(out, "{pair:<width$}   {why}");
+        }
+        out.push_str("communication -> every alarm raised while the link is down\n");
+        out.push_str("tag-quality -> an alarm whose culprits are all tags of bad quality\n");
+        out
+    }
+}
+
+/// Whether every culprit of an alarm is a signal `cause`'s fault holds or
+/// one of `cause`'s own culprits. No culprit: nothing to explain by.
+fn explains(held: &[Signal], cause: &Alarm, culprits: &[Culprit]) -> bool {
+    !culprits.is_empty()
+        && culprits.iter().all(|c| {
+            held.contains(&c.address) || cause.culprits.iter().any(|k| k.address == c.address)
+        })
+}
+
+/// The outputs `program` derives from `coil` (its forced outputs): the
+/// coils `is_tag` accepts whose switching function over `observable` reads
+/// `coil`. A coil that is not derivable forces nothing.
+pub fn forced_outputs(
+    program: &Program,
+    coil: &Signal,
+    observable: &Observability,
+    is_tag: impl Fn(&Signal) -> bool,
+) -> Vec<Signal> {
+    program
+        .coils()
+        .iter()
+        .filter(|c| c.signal != *coil && is_tag(&c.signal))
+        .filter(|c| {
+            SwitchingFunction::expand(program, &c.signal, observable)
+                .is_ok_and(|sf| sf.leaves().contains(coil))
+        })
+        .map(|c| c.signal.clone())
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::alarm::AlarmKind;
+
+    fn facts(id: &str, effects: &[&str], reads: &[&str]) -> AlarmFacts {
+        AlarmFacts {
+            id: id.into(),
+            effects: effects.iter().map(|s| Signal::new(s)).collect(),
+            reads: reads.iter().map(|s| Signal::new(s)).collect(),
+        }
+    }
+
+    fn culprit(address: &str) -> Culprit {
+        Culprit {
+            address: Signal::new(address),
+            value: true,
+            expected: false,
+            comment: None,
+            trigger: true,
+            compared: None,
+        }
+    }
+
+    #[test]
+    fn an_alarm_follows_from_one_whose_held_signal_its_check_reads() {
+        let r = Relation::derive(&[
+            facts("ese", &["G8.02"], &["X0.06", "G0.00"]),
+            facts("csd", &["G9.00"], &["X200.01", "G8.02", "G0.00"]),
+            facts("z2", &["X0.0A"], &["X0.0A"]),
+            facts("ese2", &["G8.03"], &["X0.0A"]),
+        ]);
+        let edges: Vec<(String, String)> = r.edges().map(|e| (e.cause, e.effect)).collect();
+        assert_eq!(
+            edges,
+            [("ese".into(), "csd".into()), ("z2".into(), "ese2".into())]
+        );
+        // A signal both read (G0.00) relates nothing; nor does an alarm
+        // reading what it holds itself.
+        assert!(!r.has("csd", "ese"));
+        assert!(!r.has("z2", "z2"));
+    }
+
+    #[test]
+    fn a_consequence_needs_an_active_cause_that_explains_every_culprit() {
+        let r = Relation::derive(&[
+            facts("ese", &["G8.02"], &["X0.06"]),
+            facts("csd", &["G9.00"], &["X200.01", "G8.02", "X201.06"]),
+        ]);
+        let mut ese = Alarm::active_since("ese", AlarmKind::Switching, 1_000);
+        ese.culprits = vec![culprit("X0.06")];
+        let active = |id: &str| (id == "ese").then_some(&ese);
+        assert_eq!(
+            r.cause_of("csd", &[culprit("G8.02")], active)
+                .map(|a| a.id.as_str()),
+            Some("ese")
+        );
+        // The cause's own culprit explains too.
+        assert!(r.cause_of("csd", &[culprit("X0.06")], active).is_some());
+        // A culprit of its own: not a consequence.
+        assert!(r
+            .cause_of("csd", &[culprit("G8.02"), culprit("X201.06")], active)
+            .is_none());
+        // Nothing to explain by.
+        assert!(r.cause_of("csd", &[], active).is_none());
+        // The cause cleared: not a consequence.
+        let mut cleared = ese.clone();
+        cleared.active = false;
+        assert!(r
+            .cause_of("csd", &[culprit("G8.02")], |id: &str| (id == "ese")
+                .then_some(&cleared))
+            .is_none());
+    }
+
+    #[test]
+    fn a_configured_edge_explains_whatever_its_effect_names_and_edges_can_be_removed() {
+        let mut r = Relation::derive(&[
+            facts("ese", &["G8.02"], &["X0.06"]),
+            facts("csd", &["G9.00"], &["G8.02"]),
+        ]);
+        let ese = Alarm::active_since("ese", AlarmKind::Switching, 1_000);
+        r.add("ese", "door");
+        assert!(r
+            .cause_of("door", &[], |id: &str| (id == "ese").then_some(&ese))
+            .is_some());
+        assert!(r.remove("ese", "csd"));
+        assert!(!r.remove("ese", "csd"));
+        assert!(!r.has("ese", "csd"));
+        assert_eq!(
+            r.render(),
+            "ese -> door   written in the configuration\n\
+             communication -> every alarm raised while the link is down\n\
+             tag-quality -> an alarm whose culprits are all tags of bad quality\n"
+        );
+    }
+}

@@ -1,0 +1,257 @@
+//! Consequence alarms and first-out on paper 000's engraving machine:
+//! ESE (emergency stop error, coil G8.02) and CSD (cycle start disability,
+//! coil G9.00), once as the paper writes them (independent) and once with
+//! the emergency-stop coil a contact of the cycle-start logic, as on real
+//! machines (`tests/data/paper000/csd-ese.il`): there an emergency stop
+//! also trips CSD, which is ESE's consequence.
+
+#![allow(clippy::unwrap_used)] // test helpers fail loudly by design
+
+use std::collections::BTreeSet;
+
+use cellwatch_models::alarm::{Alarm, Severity, Transition};
+use cellwatch_models::comments::CommentDb;
+use cellwatch_models::engine::{
+    CellEngine, CheckSet, Reading, StateRules, Step, SwitchingCheck, SwitchingChecks, Tag,
+};
+use cellwatch_models::explain::Polarity;
+use cellwatch_models::expr::Expr;
+use cellwatch_models::program::Program;
+use cellwatch_models::signal::{Observability, Signal};
+use cellwatch_models::switching::SwitchingFunction;
+use proptest::prelude::*;
+
+const ESE: &str = include_str!("../../config/cnc/ese.il");
+const CSD: &str = include_str!("../../config/cnc/csd.il");
+const CSD_ESE: &str = include_str!("../../tests/data/paper000/csd-ese.il");
+const ESE_NORMAL: &str = include_str!("../../config/cnc/ese-normal.values");
+const CSD_NORMAL: &str = include_str!("../../config/cnc/csd-normal.values");
+
+fn check(id: &str, source: &str, coil: &str, armed_when: Option<&str>) -> SwitchingCheck {
+    let p = Program::compile(&format!("{id}.il"), source, None).unwrap();
+    let sf = SwitchingFunction::expand(
+        &p,
+        &Signal::new(coil),
+        &Observability::default_for(p.dialect()),
+    )
+    .unwrap();
+    SwitchingCheck {
+        forces: Vec::new(),
+        text: None,
+        id: id.into(),
+        sf,
+        polarity: Polarity::On,
+        severity: Severity::High,
+        fault_type: id.to_uppercase(),
+        comments: CommentDb::default(),
+        armed_when: armed_when.map(|a| {
+            SwitchingFunction::from_expr(
+                Signal::new(&format!("{id}.armed")),
+                &Expr::parse(a).unwrap(),
+            )
+        }),
+    }
+}
+
+/// ESE and CSD (armed while cycle start is pressed) over `csd`, every
+/// contact they read a tag, with G8.02 a tag too (the PLC's coil, as the
+/// server publishes it).
+fn engine(csd: &str, suppress: bool) -> CellEngine {
+    let checks = vec![
+        check("ese", ESE, "G8.02", None),
+        check("csd", csd, "G9.00", Some("X200.01")),
+    ];
+    let mut signals = BTreeSet::new();
+    for c in &checks {
+        signals.extend(c.sf.leaves());
+        signals.extend(c.armed_when.iter().flat_map(SwitchingFunction::leaves));
+    }
+    signals.insert(Signal::new("G8.02"));
+    let tags = signals
+        .into_iter()
+        .map(|s| Tag {
+            name: s.name().to_lowercase(),
+            address: s,
+        })
+        .collect();
+    let sets: Vec<Box<dyn CheckSet>> = vec![Box::new(SwitchingChecks::new(checks))];
+    let e = CellEngine::new("m01", tags, sets, StateRules::default()).unwrap();
+    let relation = e.relation().clone();
+    e.relating(relation, suppress)
+}
+
+fn set(e: &mut CellEngine, address: &str, v: bool, at: u64) -> Step {
+    let t = e.tag_index(&Signal::new(address)).unwrap();
+    e.on_reading(t, Reading::Good(v), at, at)
+}
+
+/// Both machines' normal values, cycle start released, G8.02 off.
+fn normal(e: &mut CellEngine) {
+    e.on_connection(true, 1);
+    for values in [ESE_NORMAL, CSD_NORMAL] {
+        for line in values
+            .lines()
+            .filter(|l| !l.starts_with('#') && !l.starts_with("address"))
+        {
+            let (a, v) = line.split_once(',').unwrap();
+            if e.tag_index(&Signal::new(a)).is_some() {
+                set(e, a, v == "1", 1);
+            }
+        }
+    }
+    set(e, "G8.02", false, 1);
+    assert!(
+        e.alarms().all(|a| !a.active),
+        "the normal values raise nothing"
+    );
+}
+
+fn raised(step: &Step) -> Vec<Alarm> {
+    step.alarms()
+        .filter(|(_, t, _)| *t == Transition::Raised)
+        .map(|(a, _, _)| a.clone())
+        .collect()
+}
+
+/// An alarm raised, and its (cause, first-out, suppressed) if it is a
+/// consequence.
+type Mark = (String, Option<(String, String, bool)>);
+
+/// The mark of each alarm raised.
+fn marks(step: &Step) -> Vec<Mark> {
+    raised(step)
+        .into_iter()
+        .map(|a| {
+            let c = a
+                .consequence
+                .map(|c| (c.cause.clone(), c.first_out.clone(), c.suppressed));
+            (a.id, c)
+        })
+        .collect()
+}
+
+#[test]
+fn the_relation_is_derived_from_the_programs_and_printed_for_review() {
+    let independent = engine(CSD, false);
+    assert!(independent.relation().is_empty());
+    assert_eq!(
+        independent.relation().render(),
+        "no alarm of the cell's checks follows from another\n\
+         communication -> every alarm raised while the link is down\n\
+         tag-quality -> an alarm whose culprits are all tags of bad quality\n"
+    );
+    let related = engine(CSD_ESE, false);
+    assert_eq!(
+        related.relation().render(),
+        "ese -> csd   csd reads G8.02, which ese's fault holds\n\
+         communication -> every alarm raised while the link is down\n\
+         tag-quality -> an alarm whose culprits are all tags of bad quality\n"
+    );
+}
+
+#[test]
+fn an_emergency_stop_that_trips_cycle_start_is_first_out_and_csd_its_consequence() {
+    for suppress in [false, true] {
+        let mut e = engine(CSD_ESE, suppress);
+        normal(&mut e);
+        set(&mut e, "X200.01", true, 2); // cycle start pressed
+                                         // The Y over-travel switch opens: ESE, a first-out.
+        let s = set(&mut e, "X0.06", false, 3);
+        assert_eq!(marks(&s), [("ese".to_string(), None)]);
+        // The PLC's emergency-stop coil comes on: CSD follows from ESE.
+        let s = set(&mut e, "G8.02", true, 4);
+        assert_eq!(
+            marks(&s),
+            [(
+                "csd".to_string(),
+                Some(("ese".into(), "ese".into(), suppress))
+            )]
+        );
+        let csd = &raised(&s)[0];
+        assert_eq!(csd.culprits.len(), 1);
+        assert_eq!(csd.culprits[0].address, Signal::new("G8.02"));
+        assert_eq!(csd.is_suppressed(), suppress);
+    }
+}
+
+#[test]
+fn on_the_papers_programs_ese_and_csd_stay_independent() {
+    let mut e = engine(CSD, true);
+    normal(&mut e);
+    set(&mut e, "X200.01", true, 2);
+    let s = set(&mut e, "X0.06", false, 3);
+    assert_eq!(marks(&s), [("ese".to_string(), None)]);
+    // The coil comes on: CSD does not read it.
+    assert!(raised(&set(&mut e, "G8.02", true, 4)).is_empty());
+    // Cycle start in JOG mode: CSD by its own culprit, a first-out too.
+    let s = set(&mut e, "X201.06", true, 5);
+    assert_eq!(marks(&s), [("csd".to_string(), None)]);
+}
+
+#[test]
+fn two_independent_faults_stay_two_first_outs() {
+    let mut e = engine(CSD_ESE, true);
+    normal(&mut e);
+    set(&mut e, "X200.01", true, 2);
+    // CSD first, by JOG mode: its own culprit.
+    let s = set(&mut e, "X201.06", true, 3);
+    assert_eq!(marks(&s), [("csd".to_string(), None)]);
+    // Then an emergency stop: ESE does not follow from CSD.
+    let s = set(&mut e, "X0.06", false, 4);
+    assert_eq!(marks(&s), [("ese".to_string(), None)]);
+}
+
+#[test]
+fn an_alarm_raised_while_the_link_is_down_follows_from_the_communication_alarm() {
+    let mut e = engine(CSD_ESE, false);
+    normal(&mut e);
+    set(&mut e, "X200.01", true, 2);
+    e.on_connection(false, 3);
+    assert!(e.alarms().any(|a| a.id == "communication" && a.active));
+    // Nothing raises while every tag is unknown; back up, a fault on fresh
+    // values is a first-out even while the alarm waits out its off-delay.
+    e.on_connection(true, 4);
+    set(&mut e, "X0.06", true, 4);
+    let s = set(&mut e, "X0.06", false, 5);
+    assert_eq!(marks(&s), [("ese".to_string(), None)]);
+}
+
+/// Each contact either machine reads, and G8.02.
+fn contacts() -> Vec<&'static str> {
+    vec![
+        "X0.06", "X0.04", "X0.0F", "X200.03", "X200.01", "X201.06", "X201.02", "X201.03", "G0.00",
+        "F17.00", "R0.00", "G8.02",
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    /// Suppression never hides an alarm whose own culprit is not explained
+    /// by an active cause: a suppressed occurrence's cause is active when
+    /// it is raised and every one of its culprits is the cause's fault
+    /// coil or one of the cause's own culprits.
+    #[test]
+    fn suppression_never_hides_an_alarm_with_a_culprit_of_its_own(
+        changes in prop::collection::vec((0..12usize, any::<bool>()), 1..60),
+    ) {
+        let coil = |id: &str| Signal::new(if id == "ese" { "G8.02" } else { "G9.00" });
+        let mut e = engine(CSD_ESE, true);
+        normal(&mut e);
+        for (k, (c, v)) in changes.into_iter().enumerate() {
+            let s = set(&mut e, contacts()[c], v, 10 + k as u64);
+            for a in raised(&s) {
+                let Some(c) = &a.consequence else { continue };
+                prop_assert!(c.suppressed);
+                let cause = e.alarms().find(|x| x.id == c.cause).unwrap();
+                prop_assert!(cause.active, "{} suppressed under {} which is not active", a.id, c.cause);
+                prop_assert!(!a.culprits.is_empty());
+                for culprit in &a.culprits {
+                    let explained = culprit.address == coil(&cause.id)
+                        || cause.culprits.iter().any(|k| k.address == culprit.address);
+                    prop_assert!(explained, "{}'s culprit {} is not explained by {}", a.id, culprit.address, cause.id);
+                }
+            }
+        }
+    }
+}
