@@ -310,6 +310,15 @@ impl CheckSet for LimitChecks {
         self.by_tag.keys().cloned().collect()
     }
 
+    /// The number a level's alarm watches.
+    fn reads(&self, id: &str, out: &mut Vec<Signal>) {
+        let check = self
+            .checks
+            .iter()
+            .find(|c| c.levels.iter().any(|l| c.alarm_id(l.level) == id));
+        out.extend(check.map(|c| c.tag.clone()));
+    }
+
     fn on_change(
         &mut self,
         _signal: &Signal,
@@ -397,6 +406,22 @@ mod tests {
                 },
             ],
         }])
+    }
+
+    #[test]
+    fn each_level_reads_its_number() {
+        let c = check(1.0, 0);
+        let reads = |id: &str| {
+            let mut out = Vec::new();
+            c.reads(id, &mut out);
+            out
+        };
+        for id in ["temp-hh", "temp-h", "temp-l", "temp-ll"] {
+            assert_eq!(reads(id), [Signal::new("TEMP")], "{id}");
+        }
+        for id in ["temp", "temp-x", "other-h"] {
+            assert!(reads(id).is_empty(), "{id}");
+        }
     }
 
     fn feed(c: &mut LimitChecks, values: &[(u64, f64)]) -> Vec<(String, bool)> {
