@@ -11,6 +11,7 @@
 //! - [`checks`]: the [`CheckSet`] trait every check kind implements.
 //! - [`switching`]: switching-function checks (paper 000).
 //! - `alarms`: the alarm book (findings → ISA-18.2 transitions).
+//! - [`recorder`]: the flight recorder (the changes around each raise).
 //! - [`state`]: machine state and history-row kinds.
 //!
 //! Rules that keep alarms honest:
@@ -36,6 +37,7 @@
 
 mod alarms;
 pub mod checks;
+pub mod recorder;
 pub mod state;
 pub mod switching;
 
@@ -43,6 +45,9 @@ use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
 pub use checks::{CheckSet, Declared, Finding, Observation, WindowPosition};
+pub use recorder::{
+    Cut, RecordedSignal, RecorderConfig, RecorderFill, Recording, Sample, Truncated,
+};
 pub use state::{HistoryKind, MachineState, StateName, StateRules};
 pub use switching::{SwitchingCheck, SwitchingChecks};
 
@@ -51,6 +56,7 @@ use crate::comments::CommentDb;
 use crate::signal::Signal;
 use crate::value::{Comparison, Counter, Num, Operand, ValueType};
 use alarms::AlarmBook;
+use recorder::Recorder;
 
 /// How often the `tag-quality` alarm's text is brought up to date while
 /// other tags go bad or good and it stays active, ms.
@@ -181,6 +187,9 @@ pub struct Step {
     pub lost_values: u64,
     /// Tags that went from good to bad or uncertain quality.
     pub went_bad: u64,
+    /// Flight recordings complete ([`CellEngine::recording`]): one per
+    /// alarm raised whose check reads signals, once its window is over.
+    pub recordings: Vec<Recording>,
 }
 
 /// What the cell is making: the item (mould, product) code and the target
@@ -203,6 +212,7 @@ impl Step {
             && self.parts.is_empty()
             && self.exported.is_empty()
             && self.order.is_none()
+            && self.recordings.is_empty()
     }
 
     /// The alarm transitions.
@@ -497,6 +507,8 @@ pub struct CellEngine {
     order: Order,
     /// The tags' comments (I/O list), by address, for messages.
     comments: CommentDb,
+    /// The flight recorder, if configured.
+    recorder: Option<Box<Recorder>>,
 }
 
 impl CellEngine {
@@ -640,6 +652,7 @@ impl CellEngine {
             pending: BTreeMap::new(),
             order_tags: (None, None),
             order: Order::default(),
+            recorder: None,
         })
     }
 
@@ -1266,6 +1279,9 @@ impl CellEngine {
                 r.source_time
             }
         };
+        if let Some(recorder) = &mut self.recorder {
+            recorder.pass(at);
+        }
         // Delays that ran out before this value was sampled (values sampled
         // over a while and delivered together, late or republished) are
         // over first, at their own time: a condition that lasted its delay
@@ -1355,9 +1371,11 @@ impl CellEngine {
         let quality = self
             .quality_unsaid
             .then(|| self.quality_said.saturating_add(QUALITY_UPDATE_MS));
+        let recording = self.recorder.as_ref().and_then(|r| r.next_deadline());
         sets.chain(delayed)
             .chain(quality)
             .chain(self.alarms.next_expiry())
+            .chain(recording)
             .min()
     }
 
@@ -1392,6 +1410,9 @@ impl CellEngine {
         }
         if !step.events.is_empty() {
             self.update_state(now, &mut step);
+        }
+        if let Some(recorder) = &mut self.recorder {
+            recorder.finish_due(now);
         }
         self.collect_observations(&mut step);
         step
@@ -1548,6 +1569,9 @@ impl CellEngine {
         for set in &mut self.sets {
             set.take_observations(&mut step.observations);
         }
+        if let Some(recorder) = &mut self.recorder {
+            recorder.take_done(&mut step.recordings);
+        }
     }
 
     /// Counts tag `tag` known or unknown.
@@ -1605,6 +1629,9 @@ impl CellEngine {
         }
         self.remember(tag);
         self.values[tag] = value;
+        if let Some(recorder) = &mut self.recorder {
+            recorder.change_bool(tag, now, before, value);
+        }
         step.evaluations += 1;
         if self.exported.get(tag) == Some(&true) {
             step.exported
@@ -1642,6 +1669,9 @@ impl CellEngine {
         }
         self.remember(tag);
         let before = std::mem::replace(&mut self.others[tag], value);
+        if let Some(recorder) = &mut self.recorder {
+            recorder.change(tag, now, &before, &self.others[tag]);
+        }
         self.known_changed(tag, before.is_some(), self.others[tag].is_some(), step);
         step.evaluations += 1;
         let number = |v: &Option<Value>| match v {
@@ -1846,6 +1876,7 @@ impl CellEngine {
         let Some(transition) = applied.transition else {
             return;
         };
+        self.recording_starts(&id, transition, now);
         let Some(alarm) = self.alarms.get(&id) else {
             return;
         };
