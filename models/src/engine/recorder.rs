@@ -46,6 +46,8 @@
 //! when the engine's clock passes it ([`super::CellEngine::advance`]): a
 //! change of its window delivered later than that is not in it.
 
+mod timeline;
+
 use std::collections::VecDeque;
 use std::fmt;
 
@@ -884,6 +886,14 @@ mod tests {
             };
             assert_eq!(bool_changes(s), expected, "{}", s.address);
         }
+        // As a timing chart, 500 ms a column, the raise in column 20.
+        let chart = r.timeline(30);
+        let row = |a: &str| {
+            let line = chart.lines().find(|l| l.starts_with(a)).unwrap();
+            line.rsplit(' ').next().unwrap().to_string()
+        };
+        assert_eq!(row("X0.06 "), "▔▔▔▔▔▔▔▔▔▔▔▔▔▔▔▔▔▔▔▔╲▁╱▔▔▔▔▔▔▔");
+        assert_eq!(row("R1024.00 "), "▔▔▔▔╲▁▁▁╱▔▔▔▔▔▔▔▔▔▔▔▔▔▔▔▔▔░░░░");
         // The ring holds the 21 contacts' changes, none of the spare tag.
         let fill = e.recorder_fill().unwrap();
         assert_eq!((fill.changes, fill.open), (21 + 7, 0));
