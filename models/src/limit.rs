@@ -113,6 +113,8 @@ pub struct LimitChecks {
     /// Per check: the last known value.
     values: Vec<Option<f64>>,
     by_tag: HashMap<Signal, Vec<usize>>,
+    /// Per level's alarm id: its check.
+    by_alarm: HashMap<String, usize>,
     /// (when a delay runs out, check): checks to evaluate again as time
     /// passes. An entry may outlive its delay (the value went back); it
     /// then costs one evaluation that changes nothing.
@@ -126,7 +128,13 @@ impl LimitChecks {
         for (i, c) in checks.iter().enumerate() {
             by_tag.entry(c.tag.clone()).or_default().push(i);
         }
+        let by_alarm = checks
+            .iter()
+            .enumerate()
+            .flat_map(|(i, c)| c.levels.iter().map(move |l| (c.alarm_id(l.level), i)))
+            .collect();
         LimitChecks {
+            by_alarm,
             states: checks
                 .iter()
                 .map(|c| vec![LevelState::default(); c.levels.len()])
@@ -312,11 +320,9 @@ impl CheckSet for LimitChecks {
 
     /// The number a level's alarm watches.
     fn reads(&self, id: &str, out: &mut Vec<Signal>) {
-        let check = self
-            .checks
-            .iter()
-            .find(|c| c.levels.iter().any(|l| c.alarm_id(l.level) == id));
-        out.extend(check.map(|c| c.tag.clone()));
+        if let Some(&i) = self.by_alarm.get(id) {
+            out.push(self.checks[i].tag.clone());
+        }
     }
 
     fn on_change(

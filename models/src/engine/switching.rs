@@ -59,6 +59,8 @@ pub struct SwitchingChecks {
     compared: Vec<Signal>,
     /// Their numbers now.
     numbers: HashMap<Signal, Num>,
+    /// Per alarm id: its check.
+    by_id: HashMap<String, usize>,
 }
 
 impl SwitchingChecks {
@@ -115,6 +117,11 @@ impl SwitchingChecks {
         compared.sort();
         compared.dedup();
         SwitchingChecks {
+            by_id: checks
+                .iter()
+                .enumerate()
+                .map(|(i, c)| (c.id.clone(), i))
+                .collect(),
             compared,
             numbers: HashMap::new(),
             reported: vec![None; checks.len()],
@@ -164,7 +171,7 @@ impl CheckSet for SwitchingChecks {
     /// The check's leaves and its arming condition's, each comparison
     /// followed by the variables it compares.
     fn reads(&self, id: &str, out: &mut Vec<Signal>) {
-        let Some(check) = self.checks.iter().find(|c| c.id == id) else {
+        let Some(check) = self.by_id.get(id).map(|&i| &self.checks[i]) else {
             return;
         };
         let arming = check.armed_when.iter().flat_map(SwitchingFunction::leaves);
