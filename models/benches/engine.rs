@@ -7,6 +7,17 @@
 //! - **half_numeric**: every other change is a new value of a numeric tag
 //!   (comparison contact and limit levels follow).
 //!
+//! The flight recorder, on the same cell grown to 100,000 tags (the 10,000
+//! contacts and 90,000 numeric tags, each with its limit check), every
+//! other change a contact toggle and every other a new value (0..100) of a
+//! random numeric tag, so that alarms raise all the time:
+//!
+//! - **recorder_off** (baseline): the recorder not configured.
+//! - **recorder_on**: the recorder with its default configuration.
+//!
+//! After them it prints what the recorder kept: the ring's bytes at
+//! capacity, and per alarm recorded its JSON size and its memory.
+//!
 //! Run: `cargo bench -p cellwatch-models --bench engine`
 
 #![allow(missing_docs)] // criterion_group! generates undocumented items
@@ -18,7 +29,8 @@ use std::hint::black_box;
 use cellwatch_models::alarm::Severity;
 use cellwatch_models::comments::CommentDb;
 use cellwatch_models::engine::{
-    CellEngine, CheckSet, Reading, StateRules, SwitchingCheck, SwitchingChecks, Tag, TagReading,
+    CellEngine, CheckSet, Reading, RecorderConfig, Recording, StateRules, SwitchingCheck,
+    SwitchingChecks, Tag, TagReading,
 };
 use cellwatch_models::explain::Polarity;
 use cellwatch_models::expr::Expr;
@@ -30,7 +42,16 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
 const NUMBERS: usize = common::CHECKS;
 
+/// The numeric tags of the 100,000-tag cell.
+const MANY_NUMBERS: usize = 100_000 - common::SIGNALS;
+
 fn engine() -> (CellEngine, usize, common::Rng) {
+    engine_of(NUMBERS, None)
+}
+
+/// The generated cell with `numbers` numeric tags (the first
+/// `common::CHECKS` arming the checks), recording by `recorder`.
+fn engine_of(numbers: usize, recorder: Option<RecorderConfig>) -> (CellEngine, usize, common::Rng) {
     let (sfs, rng) = common::generated_sfs();
     let mut contacts: Vec<Signal> = sfs.iter().flat_map(|sf| sf.leaves()).collect();
     contacts.sort();
@@ -43,7 +64,7 @@ fn engine() -> (CellEngine, usize, common::Rng) {
             address: s,
         })
         .collect();
-    for i in 0..NUMBERS {
+    for i in 0..numbers {
         let s = Signal::new(&format!("D{i}"));
         tags.push(Tag {
             name: s.to_string(),
@@ -68,7 +89,7 @@ fn engine() -> (CellEngine, usize, common::Rng) {
             )),
         })
         .collect();
-    let limits = (0..NUMBERS)
+    let limits = (0..numbers)
         .map(|i| LimitCheck {
             comment: None,
             id: format!("d{i}"),
@@ -106,6 +127,9 @@ fn engine() -> (CellEngine, usize, common::Rng) {
         },
     )
     .expect("engine");
+    if let Some(config) = recorder {
+        e = e.recording(config);
+    }
     e.on_connection(true, 0);
     // Normal state: every contact closed, every number mid-range.
     let mut normal: Vec<TagReading> = (0..n)
@@ -115,7 +139,7 @@ fn engine() -> (CellEngine, usize, common::Rng) {
             source_time: 1,
         })
         .collect();
-    normal.extend((0..NUMBERS).map(|i| TagReading {
+    normal.extend((0..numbers).map(|i| TagReading {
         tag: n + i,
         reading: Reading::Number(Num::Float(50.0)),
         source_time: 1,
@@ -187,5 +211,132 @@ fn changes_per_second(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, changes_per_second);
+/// Every other change a contact toggle, every other a new value of one of
+/// the many numeric tags.
+fn flood(contacts: usize, rng: &mut common::Rng) -> Vec<(usize, Reading)> {
+    let mut values = vec![true; contacts];
+    (0..65_536)
+        .map(|k| {
+            if k % 2 == 0 {
+                let tag = rng.below(contacts);
+                values[tag] = !values[tag];
+                (tag, Reading::Good(values[tag]))
+            } else {
+                let tag = contacts + rng.below(MANY_NUMBERS);
+                (tag, Reading::Number(Num::Float(rng.below(101) as f64)))
+            }
+        })
+        .collect()
+}
+
+fn flight_recorder(c: &mut Criterion) {
+    let (mut off, contacts, mut rng) = engine_of(MANY_NUMBERS, None);
+    let (mut on, _, _) = engine_of(MANY_NUMBERS, Some(RecorderConfig::default()));
+    let changes = flood(contacts, &mut rng);
+    let mut group = c.benchmark_group("flight_recorder");
+    group.throughput(Throughput::Elements(1));
+    let mut recordings: Vec<Recording> = Vec::new();
+    let mut raised = 0u64;
+    let mut kept = std::collections::HashMap::new();
+    for (name, e, keep) in [
+        ("recorder_off", &mut off, false),
+        ("recorder_on", &mut on, true),
+    ] {
+        // Each engine its own time and its own pass through the same
+        // changes; both toggle from the same state.
+        let mut k = 0usize;
+        let mut t = 2u64;
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                let (tag, reading) = &changes[k % changes.len()];
+                k += 1;
+                // 100 changes a millisecond: 100,000 a second.
+                if k % 100 == 0 {
+                    t += 1;
+                }
+                let step = e.on_readings(
+                    &[TagReading {
+                        tag: *tag,
+                        reading: reading.clone(),
+                        source_time: t,
+                    }],
+                    t,
+                );
+                if keep {
+                    raised += step
+                        .alarms()
+                        .filter(|(_, tr, _)| *tr == cellwatch_models::alarm::Transition::Raised)
+                        .count() as u64;
+                    // Up to 1,000 of each: switching alarms (`c…`) and
+                    // limit alarms (`d…`), whole or cut short.
+                    for r in step.recordings {
+                        let count = kept.entry(kind(&r)).or_insert(0usize);
+                        if *count < 1_000 {
+                            *count += 1;
+                            recordings.push(r);
+                        }
+                    }
+                }
+                black_box(step.events.len())
+            })
+        });
+    }
+    group.finish();
+    let fill = on.recorder_fill().expect("recorder on");
+    println!(
+        "flight recorder: ring {} of {} changes, {} bytes ({:.1} MiB) with its per-tag indices, {} recordings open",
+        fill.changes,
+        fill.capacity,
+        fill.bytes,
+        fill.bytes as f64 / (1024.0 * 1024.0),
+        fill.open
+    );
+    println!("flight recorder: {raised} alarms raised");
+    let mut kinds: Vec<_> = recordings.iter().map(kind).collect();
+    kinds.sort();
+    kinds.dedup();
+    for k in kinds {
+        let of: Vec<&Recording> = recordings.iter().filter(|r| kind(r) == k).collect();
+        let n = of.len();
+        let json: usize = of
+            .iter()
+            .map(|r| serde_json::to_vec(r).expect("json").len())
+            .sum();
+        let memory: usize = of.iter().map(|r| r.bytes()).sum();
+        let changes: usize = of.iter().map(|r| r.changes()).sum();
+        let signals: usize = of.iter().map(|r| r.signals.len()).sum();
+        let largest = of.iter().max_by_key(|r| r.changes()).expect("one");
+        println!(
+            "flight recorder: {} {}: {n} recordings, each {:.1} signals, {:.1} changes, {} bytes of JSON, {} bytes in memory; the largest {} changes, {} bytes of JSON, {} in memory",
+            k.0,
+            k.1,
+            signals as f64 / n as f64,
+            changes as f64 / n as f64,
+            json / n,
+            memory / n,
+            largest.changes(),
+            serde_json::to_vec(largest).expect("json").len(),
+            largest.bytes()
+        );
+    }
+}
+
+/// A recording's alarm kind (switching or limit) and whether it holds its
+/// whole window.
+fn kind(r: &Recording) -> (&'static str, &'static str) {
+    (
+        if r.alarm.starts_with('c') {
+            "switching"
+        } else {
+            "limit"
+        },
+        if r.truncated.end == Some(cellwatch_models::engine::Cut::Busy) {
+            "cut short (busy)"
+        } else {
+            "whole after"
+        },
+    )
+}
+
+criterion_group!(benches, changes_per_second, flight_recorder);
 criterion_main!(benches);

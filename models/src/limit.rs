@@ -113,6 +113,8 @@ pub struct LimitChecks {
     /// Per check: the last known value.
     values: Vec<Option<f64>>,
     by_tag: HashMap<Signal, Vec<usize>>,
+    /// Per level's alarm id: its check.
+    by_alarm: HashMap<String, usize>,
     /// (when a delay runs out, check): checks to evaluate again as time
     /// passes. An entry may outlive its delay (the value went back); it
     /// then costs one evaluation that changes nothing.
@@ -126,7 +128,13 @@ impl LimitChecks {
         for (i, c) in checks.iter().enumerate() {
             by_tag.entry(c.tag.clone()).or_default().push(i);
         }
+        let by_alarm = checks
+            .iter()
+            .enumerate()
+            .flat_map(|(i, c)| c.levels.iter().map(move |l| (c.alarm_id(l.level), i)))
+            .collect();
         LimitChecks {
+            by_alarm,
             states: checks
                 .iter()
                 .map(|c| vec![LevelState::default(); c.levels.len()])
@@ -310,6 +318,13 @@ impl CheckSet for LimitChecks {
         self.by_tag.keys().cloned().collect()
     }
 
+    /// The number a level's alarm watches.
+    fn reads(&self, id: &str, out: &mut Vec<Signal>) {
+        if let Some(&i) = self.by_alarm.get(id) {
+            out.push(self.checks[i].tag.clone());
+        }
+    }
+
     fn on_change(
         &mut self,
         _signal: &Signal,
@@ -397,6 +412,22 @@ mod tests {
                 },
             ],
         }])
+    }
+
+    #[test]
+    fn each_level_reads_its_number() {
+        let c = check(1.0, 0);
+        let reads = |id: &str| {
+            let mut out = Vec::new();
+            c.reads(id, &mut out);
+            out
+        };
+        for id in ["temp-hh", "temp-h", "temp-l", "temp-ll"] {
+            assert_eq!(reads(id), [Signal::new("TEMP")], "{id}");
+        }
+        for id in ["temp", "temp-x", "other-h"] {
+            assert!(reads(id).is_empty(), "{id}");
+        }
     }
 
     fn feed(c: &mut LimitChecks, values: &[(u64, f64)]) -> Vec<(String, bool)> {

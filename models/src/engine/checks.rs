@@ -10,7 +10,7 @@
 use crate::alarm::{Alarm, AlarmKind, Severity};
 use crate::explain::Culprit;
 use crate::signal::Signal;
-use crate::value::Num;
+use crate::value::{Comparison, Num, Operand};
 
 /// An alarm a check set can raise, known before it ever is (so that it
 /// can be taken out of service before its first occurrence).
@@ -139,6 +139,31 @@ pub trait CheckSet: Send + Sync {
     /// Adds where each tracked transition's recent durations lie in its
     /// window (timer checks with drift tracking on; others add nothing).
     fn window_positions(&self, _out: &mut Vec<WindowPosition>) {}
+
+    /// Adds to `out` the signals alarm `id`'s own check reads (contacts
+    /// and numbers, each among [`CheckSet::inputs`] or
+    /// [`CheckSet::number_inputs`]); nothing for an alarm not of this set.
+    /// The flight recorder keeps their changes around the alarm's raise.
+    fn reads(&self, _id: &str, _out: &mut Vec<Signal>) {}
+}
+
+/// Adds `signal` to `out`, and, when it is a comparison contact
+/// (`D100 > 5`), the variables it compares after it; each unless `out`
+/// has it already.
+pub(crate) fn read_with_compared(signal: Signal, out: &mut Vec<Signal>) {
+    let compared = Comparison::of_signal(&signal);
+    let mut add = |s: Signal| {
+        if !out.contains(&s) {
+            out.push(s);
+        }
+    };
+    add(signal);
+    if let Some(c) = compared {
+        add(c.lhs);
+        if let Operand::Tag(t) = c.rhs {
+            add(t);
+        }
+    }
 }
 
 /// Where a transition's recent durations lie in its learned window.

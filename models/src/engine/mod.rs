@@ -11,6 +11,7 @@
 //! - [`checks`]: the [`CheckSet`] trait every check kind implements.
 //! - [`switching`]: switching-function checks (paper 000).
 //! - `alarms`: the alarm book (findings → ISA-18.2 transitions).
+//! - [`recorder`]: the flight recorder (the changes around each raise).
 //! - [`state`]: machine state and history-row kinds.
 //!
 //! Rules that keep alarms honest:
@@ -36,6 +37,7 @@
 
 mod alarms;
 pub mod checks;
+pub mod recorder;
 pub mod state;
 pub mod switching;
 
@@ -43,6 +45,9 @@ use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
 pub use checks::{CheckSet, Declared, Finding, Observation, WindowPosition};
+pub use recorder::{
+    Cut, RecordedSignal, RecorderConfig, RecorderFill, Recording, Sample, Truncated,
+};
 pub use state::{HistoryKind, MachineState, StateName, StateRules};
 pub use switching::{SwitchingCheck, SwitchingChecks};
 
@@ -53,6 +58,7 @@ use crate::consequence::Relation;
 use crate::signal::Signal;
 use crate::value::{Comparison, Counter, Num, Operand, ValueType};
 use alarms::AlarmBook;
+use recorder::Recorder;
 
 /// How often the `tag-quality` alarm's text is brought up to date while
 /// other tags go bad or good and it stays active, ms.
@@ -183,6 +189,9 @@ pub struct Step {
     pub lost_values: u64,
     /// Tags that went from good to bad or uncertain quality.
     pub went_bad: u64,
+    /// Flight recordings complete ([`CellEngine::recording`]): one per
+    /// alarm raised whose check reads signals, once its window is over.
+    pub recordings: Vec<Recording>,
 }
 
 /// What the cell is making: the item (mould, product) code and the target
@@ -205,6 +214,7 @@ impl Step {
             && self.parts.is_empty()
             && self.exported.is_empty()
             && self.order.is_none()
+            && self.recordings.is_empty()
     }
 
     /// The alarm transitions.
@@ -503,6 +513,8 @@ pub struct CellEngine {
     relation: Relation,
     /// Consequences are not annunciated (journaled, shown as suppressed).
     suppress: bool,
+    /// The flight recorder, if configured.
+    recorder: Option<Box<Recorder>>,
 }
 
 impl CellEngine {
@@ -653,6 +665,7 @@ impl CellEngine {
             pending: BTreeMap::new(),
             order_tags: (None, None),
             order: Order::default(),
+            recorder: None,
         })
     }
 
@@ -1296,6 +1309,9 @@ impl CellEngine {
                 r.source_time
             }
         };
+        if let Some(recorder) = &mut self.recorder {
+            recorder.pass(at);
+        }
         // Delays that ran out before this value was sampled (values sampled
         // over a while and delivered together, late or republished) are
         // over first, at their own time: a condition that lasted its delay
@@ -1397,9 +1413,11 @@ impl CellEngine {
         let quality = self
             .quality_unsaid
             .then(|| self.quality_said.saturating_add(QUALITY_UPDATE_MS));
+        let recording = self.recorder.as_ref().and_then(|r| r.next_deadline());
         sets.chain(delayed)
             .chain(quality)
             .chain(self.alarms.next_expiry())
+            .chain(recording)
             .min()
     }
 
@@ -1434,6 +1452,9 @@ impl CellEngine {
         }
         if !step.events.is_empty() {
             self.update_state(now, &mut step);
+        }
+        if let Some(recorder) = &mut self.recorder {
+            recorder.finish_due(now);
         }
         self.collect_observations(&mut step);
         step
@@ -1590,6 +1611,9 @@ impl CellEngine {
         for set in &mut self.sets {
             set.take_observations(&mut step.observations);
         }
+        if let Some(recorder) = &mut self.recorder {
+            recorder.take_done(&mut step.recordings);
+        }
     }
 
     /// Counts tag `tag` known or unknown.
@@ -1647,6 +1671,9 @@ impl CellEngine {
         }
         self.remember(tag);
         self.values[tag] = value;
+        if let Some(recorder) = &mut self.recorder {
+            recorder.change_bool(tag, now, before, value);
+        }
         step.evaluations += 1;
         if self.exported.get(tag) == Some(&true) {
             step.exported
@@ -1684,6 +1711,9 @@ impl CellEngine {
         }
         self.remember(tag);
         let before = std::mem::replace(&mut self.others[tag], value);
+        if let Some(recorder) = &mut self.recorder {
+            recorder.change(tag, now, &before, &self.others[tag]);
+        }
         self.known_changed(tag, before.is_some(), self.others[tag].is_some(), step);
         step.evaluations += 1;
         let number = |v: &Option<Value>| match v {
@@ -1893,6 +1923,7 @@ impl CellEngine {
                 self.alarms.set_consequence(&id, c);
             }
         }
+        self.recording_starts(&id, transition, now);
         let Some(alarm) = self.alarms.get(&id) else {
             return;
         };

@@ -3,7 +3,7 @@
 
 use std::collections::HashMap;
 
-use super::checks::{CheckSet, Declared, Finding};
+use super::checks::{read_with_compared, CheckSet, Declared, Finding};
 use crate::alarm::{AlarmKind, Severity};
 use crate::comments::CommentDb;
 use crate::compiled::CompiledCell;
@@ -64,6 +64,8 @@ pub struct SwitchingChecks {
     compared: Vec<Signal>,
     /// Their numbers now.
     numbers: HashMap<Signal, Num>,
+    /// Per alarm id: its check.
+    by_id: HashMap<String, usize>,
 }
 
 impl SwitchingChecks {
@@ -120,6 +122,11 @@ impl SwitchingChecks {
         compared.sort();
         compared.dedup();
         SwitchingChecks {
+            by_id: checks
+                .iter()
+                .enumerate()
+                .map(|(i, c)| (c.id.clone(), i))
+                .collect(),
             compared,
             numbers: HashMap::new(),
             reported: vec![None; checks.len()],
@@ -187,6 +194,18 @@ impl CheckSet for SwitchingChecks {
                 effects,
                 reads,
             });
+        }
+    }
+
+    /// The check's leaves and its arming condition's, each comparison
+    /// followed by the variables it compares.
+    fn reads(&self, id: &str, out: &mut Vec<Signal>) {
+        let Some(check) = self.by_id.get(id).map(|&i| &self.checks[i]) else {
+            return;
+        };
+        let arming = check.armed_when.iter().flat_map(SwitchingFunction::leaves);
+        for s in check.sf.leaves().into_iter().chain(arming) {
+            read_with_compared(s, out);
         }
     }
 
@@ -337,4 +356,56 @@ fn finding(
     }
     finding.message = message;
     finding
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::expr::Expr;
+    use crate::program::Program;
+    use crate::signal::Observability;
+
+    #[test]
+    fn a_check_reads_its_leaves_its_arming_and_the_compared_variables() {
+        let p =
+            Program::compile("ese.il", include_str!("../../../config/cnc/ese.il"), None).unwrap();
+        let sf = SwitchingFunction::expand(
+            &p,
+            &Signal::new("G8.02"),
+            &Observability::default_for(p.dialect()),
+        )
+        .unwrap();
+        let leaves = sf.leaves();
+        let check = |id: &str, armed_when: Option<&str>| SwitchingCheck {
+            forces: Vec::new(),
+            text: None,
+            id: id.into(),
+            sf: sf.clone(),
+            polarity: Polarity::On,
+            severity: Severity::Critical,
+            fault_type: "ESE".into(),
+            comments: CommentDb::default(),
+            armed_when: armed_when.map(|e| {
+                SwitchingFunction::from_expr(Signal::new("armed"), &Expr::parse(e).unwrap())
+            }),
+        };
+        let set = SwitchingChecks::new(vec![
+            check("ese", None),
+            check("ese-armed", Some("X0.06 * D0 > 5")),
+        ]);
+        let reads = |id: &str| {
+            let mut out = Vec::new();
+            set.reads(id, &mut out);
+            out
+        };
+        assert_eq!(reads("ese"), leaves);
+        let mut armed = leaves.clone();
+        armed.extend([Signal::new("D0 > 5"), Signal::new("D0")]);
+        assert_eq!(reads("ese-armed"), armed);
+        assert!(reads("nope").is_empty());
+        let (inputs, numbers) = (set.inputs(), set.number_inputs());
+        assert!(armed
+            .iter()
+            .all(|s| inputs.contains(s) || numbers.contains(s)));
+    }
 }

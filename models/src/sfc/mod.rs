@@ -307,6 +307,26 @@ condition = "X2 * Y9"
     }
 
     #[test]
+    fn a_stuck_step_reads_its_flag_and_what_its_transitions_need() {
+        let c = checks();
+        let reads = |id: &str| {
+            let mut out = Vec::new();
+            c.reads(id, &mut out);
+            out.iter().map(Signal::to_string).collect::<Vec<_>>()
+        };
+        assert_eq!(reads("sfc-F1-S2"), ["S2.X", "%IX0.0.3"]);
+        assert!(reads("sfc-F1-S99").is_empty());
+        // Every step's reads are among what the set reads.
+        let inputs = c.inputs();
+        for d in c.alarms() {
+            let mut out = Vec::new();
+            c.reads(&d.id, &mut out);
+            assert!(!out.is_empty(), "{}", d.id);
+            assert!(out.iter().all(|s| inputs.contains(s)), "{}: {out:?}", d.id);
+        }
+    }
+
+    #[test]
     fn a_stuck_step_names_what_its_transitions_wait_for() {
         let mut c = checks();
         assert!(c

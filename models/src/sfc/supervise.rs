@@ -23,6 +23,7 @@ use std::collections::{BTreeSet, HashMap, HashSet};
 use super::{Sfc, StepRef};
 use crate::alarm::{Alarm, AlarmKind, Severity};
 use crate::comments::CommentDb;
+use crate::engine::checks::read_with_compared;
 use crate::engine::{CheckSet, Declared, Finding};
 use crate::explain::{comment_of, explain_partial, read_comparisons, Culprit, Polarity};
 use crate::signal::Signal;
@@ -238,6 +239,30 @@ impl CheckSet for SfcChecks {
 
     fn number_inputs(&self) -> Vec<Signal> {
         self.compared.clone()
+    }
+
+    /// The step's flag and the operands of the transitions leaving it
+    /// (their source steps' flags and their conditions' contacts, each
+    /// comparison followed by the variables it compares).
+    fn reads(&self, id: &str, out: &mut Vec<Signal>) {
+        let Some((r, step)) = self.sfc.steps().find(|(r, _)| self.alarm_id(*r) == id) else {
+            return;
+        };
+        read_with_compared(step.flag.clone(), out);
+        let chart = &self.sfc.charts[r.chart];
+        for (i, t) in chart.transitions.iter().enumerate() {
+            if !t.from.contains(&r) {
+                continue;
+            }
+            for s in self
+                .needs
+                .get(&(r.chart, i))
+                .into_iter()
+                .flat_map(|sf| sf.leaves())
+            {
+                read_with_compared(s, out);
+            }
+        }
     }
 
     /// The number is kept for the next analysis; what the comparison says

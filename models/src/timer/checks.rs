@@ -45,6 +45,9 @@ pub struct TimerChecks {
     by_signal: HashMap<Signal, usize>,
     /// Per transition id: description, event signal and expected value.
     transitions: HashMap<u32, (String, usize, bool, [u64; 2])>,
+    /// Per transition id: the signals it reads (its start condition's,
+    /// its trigger's and its event's), for the flight recorder.
+    reads: HashMap<u32, Vec<usize>>,
     /// Durations observed since the last `take_observations`.
     observed: Vec<Observation>,
     /// The signals' comments (I/O list), for culprits and messages.
@@ -97,6 +100,26 @@ impl TimerChecks {
                 (t.id, (what, s, t.event.edge == Edge::Rise, t.window_ms))
             })
             .collect();
+        let index = |name: &str| model.signals.iter().position(|n| n == name);
+        let reads = model
+            .transitions
+            .iter()
+            .map(|t| {
+                let from = t.from.iter().map(|l| l.strip_prefix('-').unwrap_or(l));
+                let trigger = t.trigger.iter().map(|e| e.tag.as_str());
+                let mut read: Vec<usize> = Vec::new();
+                for s in from
+                    .chain(trigger)
+                    .chain(std::iter::once(t.event.tag.as_str()))
+                    .filter_map(index)
+                {
+                    if !read.contains(&s) {
+                        read.push(s);
+                    }
+                }
+                (t.id, read)
+            })
+            .collect();
         Ok(TimerChecks {
             id: id.into(),
             severity,
@@ -104,6 +127,7 @@ impl TimerChecks {
             signals,
             by_signal,
             transitions,
+            reads,
             observed: Vec::new(),
             comments: CommentDb::default(),
             drift: None,
@@ -279,6 +303,28 @@ impl CheckSet for TimerChecks {
         }
     }
 
+    /// Transition `nnn`'s start condition, trigger and event signals, for
+    /// its alarm `<id>-<nnn>` and its drift warning `<id>-<nnn>-drift`.
+    fn reads(&self, id: &str, out: &mut Vec<Signal>) {
+        let Some(rest) = id
+            .strip_prefix(self.id.as_str())
+            .and_then(|r| r.strip_prefix('-'))
+        else {
+            return;
+        };
+        let number = rest.strip_suffix("-drift").unwrap_or(rest);
+        let Some(t) = number
+            .parse::<u32>()
+            .ok()
+            .filter(|t| format!("{t:03}") == number)
+        else {
+            return;
+        };
+        for &s in self.reads.get(&t).into_iter().flatten() {
+            out.push(self.signals[s].clone());
+        }
+    }
+
     fn alarms(&self) -> Vec<Declared> {
         let mut ids: Vec<u32> = self.transitions.keys().copied().collect();
         ids.sort_unstable();
@@ -410,6 +456,28 @@ mod tests {
                     edge: Edge::Rise,
                 }),
             }],
+        }
+    }
+
+    #[test]
+    fn a_transition_alarm_and_its_drift_warning_read_the_transition_signals() {
+        let mut m = model();
+        m.signals.push("clamped".into());
+        m.signals.push("spare".into());
+        m.transitions[0].from = vec!["-clamped".into()];
+        let address = |n: &str| Some(Signal::new(&format!("@{n}")));
+        let checks = TimerChecks::new("line", &m, Severity::High, address)
+            .unwrap()
+            .drifting(Some(DriftRules::default()));
+        let reads = |id: &str| {
+            let mut out = Vec::new();
+            checks.reads(id, &mut out);
+            out.iter().map(Signal::to_string).collect::<Vec<_>>()
+        };
+        assert_eq!(reads("line-007"), ["@clamped", "@move", "@arrived"]);
+        assert_eq!(reads("line-007-drift"), reads("line-007"));
+        for other in ["line-7", "line-008", "lines-007", "line-007-x", "other-007"] {
+            assert!(reads(other).is_empty(), "{other}");
         }
     }
 
