@@ -163,7 +163,7 @@ impl Fixture {
     }
 
     /// The rows of one history page.
-    async fn history_rows(&self, selector: &str) -> Vec<serde_json::Value> {
+    pub(crate) async fn history_rows(&self, selector: &str) -> Vec<serde_json::Value> {
         let page: serde_json::Value =
             serde_json::from_str(&self.query(selector, None).await.unwrap()).unwrap();
         assert_eq!(page["schema"], "cellwatch.history.v1", "{page}");
@@ -312,7 +312,7 @@ async fn ese_alarm_with_culprit_then_cleared_and_in_history() {
         fx.query("cellwatch/m01ps0004/history?kind=weather", None)
             .await
             .unwrap_err(),
-        "unknown kind 'weather': use alarm, state, command, kpi or production"
+        "unknown kind 'weather': use alarm, state, command, recording, kpi or production"
     );
     // Metrics over HTTP: the alarm counter and the connection state.
     let metrics = fx.scrape().await;

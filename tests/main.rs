@@ -33,6 +33,7 @@ mod operators;
 mod papercuts;
 mod quickstart;
 mod real_programs;
+mod recorder;
 mod report;
 mod restart;
 mod reverse;

@@ -344,6 +344,43 @@ impl StatePayload {
 /// Schema name of snapshots.
 pub const SNAPSHOT_SCHEMA: &str = "cellwatch.snapshot.v1";
 
+/// Schema name of flight recordings.
+pub const RECORDING_SCHEMA: &str = "cellwatch.recording.v1";
+
+/// `<prefix>/recordings/<alarm-id>`: an alarm's flight recording, the
+/// signals its check reads from `recorder.before` before its raise to
+/// `recorder.after` after it ([`Recording`]'s fields beside these).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RecordingPayload {
+    /// [`RECORDING_SCHEMA`].
+    pub schema: String,
+    /// Cell id.
+    pub cell: String,
+    /// The recording.
+    #[serde(flatten)]
+    pub recording: cellwatch_models::engine::Recording,
+}
+
+impl RecordingPayload {
+    /// The payload of `recording`, as JSON (journaled and published byte
+    /// for byte).
+    pub fn json(cell: &str, recording: &cellwatch_models::engine::Recording) -> String {
+        #[derive(Serialize)]
+        struct Out<'a> {
+            schema: &'static str,
+            cell: &'a str,
+            #[serde(flatten)]
+            recording: &'a cellwatch_models::engine::Recording,
+        }
+        serde_json::to_string(&Out {
+            schema: RECORDING_SCHEMA,
+            cell,
+            recording,
+        })
+        .unwrap_or_default()
+    }
+}
+
 /// Quality of a tag's value in a snapshot.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]

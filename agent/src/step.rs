@@ -184,12 +184,16 @@ pub struct CellStep {
     /// Where the transitions measured in this step stand in their learned
     /// windows (drift tracking), one entry each.
     pub positions: Vec<cellwatch_models::engine::WindowPosition>,
+    /// The engine's finished flight recordings as JSON
+    /// ([`crate::payload::RecordingPayload`]), in the same order.
+    pub recordings: Vec<String>,
 }
 
 impl CellStep {
     /// Whether the step carries something worth a journal row.
     pub fn has_rows(&self) -> bool {
         !self.alarms.is_empty()
+            || !self.recordings.is_empty()
             || self.engine.states().next().is_some()
             || !self.engine.parts.is_empty()
             || matches!(self.input, Input::Command(_))

@@ -73,6 +73,16 @@ impl CellKeys {
         format!("{}/alarms/**", self.prefix)
     }
 
+    /// `recordings/<id>`: one alarm's flight recordings.
+    pub fn recording(&self, id: &str) -> String {
+        format!("{}/recordings/{id}", self.prefix)
+    }
+
+    /// `recordings/**`: every alarm's flight recordings, to subscribe to.
+    pub fn recordings(&self) -> String {
+        format!("{}/recordings/**", self.prefix)
+    }
+
     /// `state`: the machine state.
     pub fn state(&self) -> String {
         format!("{}/state", self.prefix)

@@ -97,6 +97,10 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
         (ua.subscription_lifetime + SOURCE_TIME_SLACK).as_millis() as u64
     });
     let relation = relation(&engine, &config.consequences)?;
+    let engine = match &config.recorder {
+        Some(r) => engine.recording(r.clone()),
+        None => engine,
+    };
     Ok(engine
         .relating(relation, config.consequences.suppress)
         .trusting_source_time(trust)

@@ -39,8 +39,8 @@ use crate::clock::{rfc3339, Clock};
 use crate::operator::refusals::Refusals;
 use crate::operator::Gate;
 use crate::payload::{
-    AlarmPayload, ChartPayload, LastFault, Quality, SnapshotPayload, StatePayload, TagValue,
-    SNAPSHOT_SCHEMA,
+    AlarmPayload, ChartPayload, LastFault, Quality, RecordingPayload, SnapshotPayload,
+    StatePayload, TagValue, SNAPSHOT_SCHEMA,
 };
 use crate::sinks::{Settled, Sink};
 use crate::sources::{SourceEvent, WriteSender};
@@ -555,6 +555,7 @@ impl CellLoop {
             queue_depth: 0,
             received: None,
             positions: Vec::new(),
+            recordings: Vec::new(),
         })
         .await;
     }
@@ -642,7 +643,12 @@ impl CellLoop {
             all
         };
         let received = self.received.take();
+        let recordings = step.recordings.iter();
+        let recordings = recordings
+            .map(|r| RecordingPayload::json(&self.cell, r))
+            .collect();
         self.deliver(CellStep {
+            recordings,
             at: now,
             input,
             engine: step,

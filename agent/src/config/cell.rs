@@ -33,12 +33,13 @@ pub struct JournalConfig {
 }
 
 /// The journal's tables of rows, as `[journal.tables.*]` names them.
-pub const JOURNAL_TABLES: [&str; 5] = [
+pub const JOURNAL_TABLES: [&str; 6] = [
     "alarm_events",
     "state_history",
     "commands",
     "production",
     "orders",
+    "recordings",
 ];
 
 /// What one table of the journal keeps: rows younger than `age`, and at
@@ -122,6 +123,8 @@ pub struct CellConfig {
     pub kpi: cellwatch_models::kpi::KpiRules,
     /// Alarms that follow from others (`[alarms.consequences]`).
     pub consequences: crate::config::Consequences,
+    /// The flight recorder around every alarm (`[recorder]`); `None`: off.
+    pub recorder: Option<cellwatch_models::engine::RecorderConfig>,
     /// Things worth saying at start (security off, ...).
     pub warnings: Vec<String>,
 }

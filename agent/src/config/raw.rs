@@ -35,6 +35,20 @@ pub(crate) struct RawConfig {
     pub(crate) kpi: RawKpi,
     #[serde(default)]
     pub(crate) alarms: RawSystemAlarms,
+    #[serde(default)]
+    pub(crate) recorder: RawRecorder,
+}
+
+/// `[recorder]`: the flight recorder around every alarm.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawRecorder {
+    pub(crate) enabled: Option<bool>,
+    pub(crate) before: Option<Spanned<String>>,
+    pub(crate) after: Option<Spanned<String>>,
+    pub(crate) capacity: Option<Spanned<i64>>,
+    pub(crate) max_changes: Option<Spanned<i64>>,
+    pub(crate) max_open: Option<Spanned<i64>>,
 }
 
 /// `[alarms.<id>]`: the delays of the agent's own alarms, and
@@ -347,6 +361,7 @@ pub(crate) struct RawJournalTables {
     pub(crate) commands: Option<Spanned<RawKeep>>,
     pub(crate) production: Option<Spanned<RawKeep>>,
     pub(crate) orders: Option<Spanned<RawKeep>>,
+    pub(crate) recordings: Option<Spanned<RawKeep>>,
 }
 
 #[derive(Debug, Deserialize)]

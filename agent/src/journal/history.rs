@@ -10,7 +10,7 @@ use super::JournalError;
 pub struct HistoryRow {
     /// Row number in the journal.
     pub seq: i64,
-    /// `alarm`, `state` or `command`.
+    /// `alarm`, `state`, `command` or `recording`.
     pub table: &'static str,
     /// When, ms since the epoch.
     pub at: u64,
@@ -22,7 +22,7 @@ pub struct HistoryRow {
 #[derive(Debug, thiserror::Error)]
 pub enum HistoryError {
     /// The query asks for a kind of row there is none of.
-    #[error("unknown kind '{0}': use alarm, state, command, kpi or production")]
+    #[error("unknown kind '{0}': use alarm, state, command, recording, kpi or production")]
     UnknownKind(String),
     /// The journal cannot be read.
     #[error(transparent)]
@@ -89,6 +89,7 @@ fn table_query(table: &str, forward: bool) -> (String, &'static [&'static str], 
             &["alarm", "kind", "severity", "transition", "payload"],
             "alarm",
         ),
+        "recording" => ("recordings", &["alarm", "payload"], "recording"),
         "state" => (
             "state_history",
             &["kind", "state", "fault_type", "element"],
@@ -122,6 +123,8 @@ pub fn history(conn: &Connection, q: &HistoryQuery) -> Result<HistoryPage, Histo
         Some("alarm") => &["alarm"],
         Some("state") => &["state"],
         Some("command") => &["command"],
+        // Recordings are large: asked for by name only.
+        Some("recording") => &["recording"],
         Some(other) => return Err(HistoryError::UnknownKind(other.to_string())),
     };
     let since = q.since.unwrap_or(0) as i64;
@@ -176,6 +179,27 @@ pub fn history(conn: &Connection, q: &HistoryQuery) -> Result<HistoryPage, Histo
     })
 }
 
+/// The payload of alarm `alarm`'s flight recording raised last at or
+/// before `at` (ms; `None`: the newest), if the journal has one.
+///
+/// # Errors
+/// SQLite failing.
+pub fn recording(
+    conn: &Connection,
+    alarm: &str,
+    at: Option<u64>,
+) -> Result<Option<String>, HistoryError> {
+    let at = at.map_or(i64::MAX, |t| t.min(i64::MAX as u64) as i64);
+    let mut stmt = conn.prepare_cached(
+        "SELECT payload FROM recordings WHERE alarm = ?1 AND at_ms <= ?2 ORDER BY at_ms DESC, seq DESC LIMIT 1",
+    )?;
+    let mut rows = stmt.query(params![alarm, at])?;
+    Ok(match rows.next()? {
+        Some(r) => Some(r.get(0)?),
+        None => None,
+    })
+}
+
 fn history_row(
     r: &rusqlite::Row<'_>,
     cols: &[&str],
@@ -190,6 +214,11 @@ fn history_row(
                 serde_json::Value::Bool(n != 0)
             }
             rusqlite::types::Value::Integer(n) => n.into(),
+            // A recording is bounded by the recorder (`recorder.max_changes`)
+            // and the reply's bytes, not cut: cut, it would be no JSON.
+            rusqlite::types::Value::Text(s) if table == "recording" && *c == "payload" => {
+                serde_json::from_str(&s).unwrap_or(serde_json::Value::String(s))
+            }
             rusqlite::types::Value::Text(s) if s.len() > MAX_FIELD_BYTES => {
                 crate::operator::clip(&s, MAX_FIELD_BYTES).into()
             }

@@ -34,8 +34,8 @@ mod saved;
 mod schema;
 
 pub use history::{
-    history, HistoryError, HistoryPage, HistoryQuery, HistoryRow, DEFAULT_ROWS, HISTORY_SCHEMA,
-    MAX_FIELD_BYTES, MAX_REPLY_BYTES, MAX_ROWS,
+    history, recording, HistoryError, HistoryPage, HistoryQuery, HistoryRow, DEFAULT_ROWS,
+    HISTORY_SCHEMA, MAX_FIELD_BYTES, MAX_REPLY_BYTES, MAX_ROWS,
 };
 pub use reports::{alarm_events, report_input, AlarmEvents, ReportInput};
 pub use saved::{saved, Saved, SavedOutcome, SavedState};
@@ -99,6 +99,16 @@ pub enum Entry {
         item: Option<String>,
         /// The target quantity.
         target: Option<u64>,
+    },
+    /// An alarm's flight recording: the signals its check reads around
+    /// its raise ([`cellwatch_models::engine::Recording`]).
+    Recording {
+        /// When its alarm was raised, ms since the epoch.
+        at: u64,
+        /// The alarm.
+        alarm: String,
+        /// The recording as published on Zenoh (JSON).
+        payload: String,
     },
     /// An operator command, accepted or refused.
     Command {
@@ -634,6 +644,12 @@ fn write_batch(
                     *at as i64,
                     i64::try_from(*count).unwrap_or(i64::MAX)
                 ])?;
+            }
+            Entry::Recording { at, alarm, payload } => {
+                tx.prepare_cached(
+                    "INSERT INTO recordings (seq, at_ms, alarm, payload) VALUES (?1, ?2, ?3, ?4)",
+                )?
+                .execute(params![next, *at as i64, alarm, payload])?;
             }
             Entry::Order { at, item, target } => {
                 tx.prepare_cached(

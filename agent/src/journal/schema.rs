@@ -46,7 +46,7 @@ pub enum JournalError {
 }
 
 /// The tables of journal rows (one sequence across them).
-pub(super) const TABLES: [&str; 5] = crate::config::JOURNAL_TABLES;
+pub(super) const TABLES: [&str; 6] = crate::config::JOURNAL_TABLES;
 
 const SCHEMA: &str = "
 CREATE TABLE IF NOT EXISTS alarm_events (
@@ -92,6 +92,14 @@ CREATE TABLE IF NOT EXISTS orders (
     target INTEGER
 );
 CREATE INDEX IF NOT EXISTS orders_at ON orders (at_ms);
+CREATE TABLE IF NOT EXISTS recordings (
+    seq INTEGER PRIMARY KEY AUTOINCREMENT,
+    at_ms INTEGER NOT NULL,
+    alarm TEXT NOT NULL,
+    payload TEXT NOT NULL
+);
+CREATE INDEX IF NOT EXISTS recordings_at ON recordings (at_ms);
+CREATE INDEX IF NOT EXISTS recordings_alarm ON recordings (alarm, at_ms);
 CREATE TABLE IF NOT EXISTS alarm_current (
     alarm TEXT PRIMARY KEY,
     at_ms INTEGER NOT NULL,

@@ -70,7 +70,7 @@ async fn writes_commit_and_query_back() {
         )
         .unwrap_err()
         .to_string(),
-        "unknown kind 'x': use alarm, state, command, kpi or production"
+        "unknown kind 'x': use alarm, state, command, recording, kpi or production"
     );
     // Old rows go at the next start.
     drop(j);

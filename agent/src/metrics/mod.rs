@@ -113,6 +113,10 @@ pub struct Metrics {
     pub alarm_rate_first_outs_10m: IntGauge,
     /// 1 while the first-outs alone make a flood.
     pub alarm_flood_first_outs: IntGauge,
+    /// Flight recordings journaled and published.
+    pub recordings: IntCounter,
+    /// Those holding less than their window (ring, changes, busy).
+    pub recordings_cut: IntCounter,
     /// Time from raise to acknowledgement.
     pub alarm_ack_seconds: Histogram,
     /// Sends to Alertmanager, by result (`ok`, `failed`).
@@ -464,6 +468,16 @@ impl Metrics {
             alarm_rate_first_outs_10m: reg!(IntGauge::with_opts(opts(
                 "cellwatch_alarm_rate_first_outs_10m",
                 "First-outs raised in the last 10 minutes: the ISA-18.2 alarm rate with the consequences of other alarms left out.",
+                cell
+            ))),
+            recordings: reg!(IntCounter::with_opts(opts(
+                "cellwatch_recordings_total",
+                "Flight recordings journaled and published: for each alarm raised, the signals its check reads from recorder.before before the raise to recorder.after after it.",
+                cell
+            ))),
+            recordings_cut: reg!(IntCounter::with_opts(opts(
+                "cellwatch_recordings_cut_total",
+                "Flight recordings that hold less than their window: the ring had dropped older changes (recorder.capacity), a side had more than recorder.max_changes, or recorder.max_open recordings were under way.",
                 cell
             ))),
             alarm_flood_first_outs: reg!(IntGauge::with_opts(opts(

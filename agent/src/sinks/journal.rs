@@ -74,6 +74,13 @@ pub fn entries(step: &CellStep) -> Vec<Entry> {
     for &(at, count) in &step.engine.parts {
         rows.push(Entry::Part { at, count });
     }
+    for (r, json) in step.engine.recordings.iter().zip(&step.recordings) {
+        rows.push(Entry::Recording {
+            at: r.raised_at,
+            alarm: r.alarm.clone(),
+            payload: json.clone(),
+        });
+    }
     if let Some(o) = &step.engine.order {
         rows.push(Entry::Order {
             at: step.at,

@@ -135,6 +135,12 @@ impl MetricsSink {
     fn step(&mut self, step: &CellStep) {
         let m = &self.metrics;
         m.source_queue_depth.set(step.queue_depth as i64);
+        for r in &step.engine.recordings {
+            m.recordings.inc();
+            if r.truncated.start.is_some() || r.truncated.end.is_some() {
+                m.recordings_cut.inc();
+            }
+        }
         // The journal and the bus have had this step (they come first).
         if let Some(received) = step.received.filter(|_| !step.alarms.is_empty()) {
             let seconds = received.elapsed().as_secs_f64();

@@ -1,5 +1,6 @@
-//! Publication on the bus: alarm events and machine state, each sealed in
-//! a signed envelope ([`crate::bus::envelope`]), and the agent's liveliness
+//! Publication on the bus: alarm events, machine state and alarms' flight
+//! recordings, each sealed in a signed envelope
+//! ([`crate::bus::envelope`]), and the agent's liveliness
 //! token. This is the Zenoh sink of the cell loop.
 
 use std::collections::HashMap;
@@ -133,6 +134,19 @@ impl ZenohPublisher {
         }
     }
 
+    /// Publishes an alarm's flight recording on `recordings/<id>`: once,
+    /// not kept for late joiners (the history service has it).
+    pub async fn recording(&self, id: &str, json: String) {
+        let key = self.keys.recording(id);
+        let sealed = self
+            .key
+            .seal(Kind::Put, &key, "", crate::clock::now_ms(), json);
+        if let Err(e) = self.session.put(&key, sealed).await {
+            tracing::error!(alarm = id, error = %e, "recording publication failed");
+            self.metrics.zenoh_publish_errors.inc();
+        }
+    }
+
     /// Publishes the machine state on `state`.
     pub async fn state(&self, json: String) {
         let sealed = self.key.seal(
@@ -162,6 +176,9 @@ impl Sink for ZenohPublisher {
             if let Some(s) = &step.state {
                 self.state(serde_json::to_string(s).unwrap_or_default())
                     .await;
+            }
+            for (r, json) in step.engine.recordings.iter().zip(&step.recordings) {
+                self.recording(&r.alarm, json.clone()).await;
             }
         }
         .boxed()

@@ -75,7 +75,9 @@ pub(crate) struct HistoryArgs {
     /// Until: same forms; default now.
     #[arg(long)]
     pub(crate) until: Option<String>,
-    /// Only `state`, `alarm` or `command` rows; or, instead of rows, the
+    /// Only `state`, `alarm` or `command` rows, or `recording`: the
+    /// alarms' flight recordings, drawn as timing charts (asked for by name
+    /// only: they are large); or, instead of rows, the
     /// agent's figures from its journal (JSON): `kpi`, the ISA-18.2 alarm
     /// figures of --since to --until (`cellwatch report alarms`), or
     /// `production`, the production day from --since (`cellwatch report

@@ -331,6 +331,20 @@ fn print_rows(out: &mut dyn Write, rows: &serde_json::Value) -> Result<(), Failu
                 f["fault_type"].as_str().unwrap_or("None"),
                 f["element"].as_str().unwrap_or("None")
             ),
+            Some("recording") => {
+                // The chart as the cell drew it: each line escaped.
+                let chart = serde_json::from_value::<crate::payload::RecordingPayload>(
+                    f["payload"].clone(),
+                )
+                .map(|p| p.recording.timeline(80))
+                .unwrap_or_else(|e| format!("(a recording that does not read: {e})\n"));
+                let head = format!("recording {}", f["alarm"].as_str().unwrap_or(""));
+                writeln!(out, "{at}  {}", crate::operator::escaped(&head)).map_err(io)?;
+                for l in chart.lines() {
+                    writeln!(out, "    {}", crate::operator::escaped(l)).map_err(io)?;
+                }
+                continue;
+            }
             Some("alarm") => format!(
                 "alarm     {} {} [{}] {}",
                 f["alarm"].as_str().unwrap_or(""),

@@ -36,8 +36,16 @@ impl Validator<'_> {
             commands,
             production,
             orders,
+            recordings,
         } = tables;
-        let raws = [alarm_events, state_history, commands, production, orders];
+        let raws = [
+            alarm_events,
+            state_history,
+            commands,
+            production,
+            orders,
+            recordings,
+        ];
         JOURNAL_TABLES
             .into_iter()
             .zip(raws)

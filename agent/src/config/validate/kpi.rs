@@ -65,7 +65,7 @@ impl Validator<'_> {
     }
 
     /// A duration in `range` (`said` in words), or a problem and `default`.
-    fn within(
+    pub(super) fn within(
         &mut self,
         value: Option<Spanned<String>>,
         key: &str,

@@ -11,6 +11,7 @@ mod journal;
 mod kpi;
 mod legacy;
 mod opcua;
+mod recorder;
 mod sfc;
 mod tags;
 
@@ -439,6 +440,7 @@ impl Validator<'_> {
         let zenoh = self.zenoh(raw.zenoh, &cell);
         let alertmanager = self.alertmanager(raw.alertmanager);
         let kpi = self.kpi(raw.kpi);
+        let recorder = self.recorder(raw.recorder);
         let (system_delays, consequences) = self.system_alarms(raw.alarms);
         delays.extend(system_delays);
         let journal = JournalConfig {
@@ -623,6 +625,7 @@ impl Validator<'_> {
             alertmanager,
             kpi,
             consequences,
+            recorder,
             warnings: Vec::new(),
         })
     }

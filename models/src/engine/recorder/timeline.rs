@@ -24,7 +24,9 @@ const LABEL: usize = 28;
 
 impl Recording {
     /// The recording as a timing chart `width` columns wide (at least 10),
-    /// plus the row labels; lines end with `\n`.
+    /// plus the row labels; lines end with `\n`. Times are read from the
+    /// raise (its date is the caller's to say: the models know no
+    /// calendar).
     pub fn timeline(&self, width: usize) -> String {
         let width = width.max(10);
         let span = self.to.saturating_sub(self.from).max(1);
@@ -38,9 +40,8 @@ impl Recording {
         let labels: Vec<String> = self.signals.iter().map(label).collect();
         let pad = labels.iter().map(|l| l.chars().count()).max().unwrap_or(0);
         let mut out = format!(
-            "{} raised at {} ms: {} signal{}, {} ms a column\n",
+            "{}: {} signal{}, {} ms a column\n",
             self.alarm,
-            self.raised_at,
             self.signals.len(),
             if self.signals.len() == 1 { "" } else { "s" },
             step
@@ -326,7 +327,7 @@ mod tests {
         assert_eq!(
             r.timeline(30),
             "\
-ese raised at 10000 ms: 3 signals, 500 ms a column
+ese: 3 signals, 500 ms a column
                          -10 s               0     +5 s
                          ├───────────────────▼────────┤
 X0.06 x0.06              ··▔▔▔▔▔▔▔▔▔▔▔▔▔▔▔▔▔▔╲▁▁▁2▁▁▁▁▁
