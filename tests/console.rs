@@ -321,7 +321,37 @@ async fn a_fault_shows_live_with_its_culprits_and_an_operator_acknowledges_and_s
         facts.contains("by kim until") && facts.contains("limit switch being replaced"),
         "{facts}"
     );
+    // Its flight recording, journaled once complete (`recorder.after` after
+    // the raise), drawn on the alarm's page: ESE's signals, X0.06 among
+    // them, and the raise.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while !journal_rows(&p.cell, "recording")
+        .iter()
+        .any(|r| r["fields"]["alarm"] == "ese")
+    {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "ESE's recording never reached the journal"
+        );
+        tokio::time::sleep(std::time::Duration::from_millis(200)).await;
+    }
+    open(&b, &p, "#/alarms").await;
+    open(&b, &p, "#/alarm/m01ps0004/ese").await;
+    b.wait_for("svg.recording-chart line.raise").await;
+    let recording = b.text("section.recording").await;
+    assert!(
+        recording.contains("X0.06 x0_06") && recording.contains("signals ese's check reads"),
+        "{recording}"
+    );
     b.screenshot("alarm").await;
+    b.client
+        .execute(
+            "document.querySelector('section.recording').scrollIntoView(); return true;",
+            vec![],
+        )
+        .await
+        .unwrap();
+    b.screenshot("alarm-recording").await;
     assert!(journaled_commands(&p.cell)
         .iter()
         .any(|r| r["fields"]["action"] == "shelve" && r["fields"]["accepted"] == true));

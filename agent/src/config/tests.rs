@@ -519,6 +519,7 @@ fn journal_tables_keep_their_own_retention_and_rows() {
             ("commands", day(3650), None),
             ("production", day(30), None),
             ("orders", day(30), None),
+            ("recordings", day(30), None),
         ]
     );
     let bad = format!(

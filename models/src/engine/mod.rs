@@ -40,6 +40,7 @@ pub mod checks;
 pub mod recorder;
 pub mod state;
 pub mod switching;
+mod tag;
 
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
@@ -50,6 +51,7 @@ pub use recorder::{
 };
 pub use state::{HistoryKind, MachineState, StateName, StateRules};
 pub use switching::{SwitchingCheck, SwitchingChecks};
+pub use tag::{Tag, Value};
 
 use crate::alarm::Consequence;
 use crate::alarm::{Alarm, AlarmKind, CommandRefused, Severity, Transition};
@@ -58,7 +60,7 @@ use crate::consequence::Relation;
 use crate::signal::Signal;
 use crate::value::{Comparison, Counter, Num, Operand, ValueType};
 use alarms::AlarmBook;
-use recorder::Recorder;
+use recorder::{Read, Recorder};
 
 /// How often the `tag-quality` alarm's text is brought up to date while
 /// other tags go bad or good and it stays active, ms.
@@ -66,15 +68,6 @@ const QUALITY_UPDATE_MS: u64 = 10_000;
 
 /// How many bad tags the `tag-quality` alarm names.
 const QUALITY_NAMED: usize = 20;
-
-/// A PLC tag as the engine knows it.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Tag {
-    /// The name used in the plant (`y_overtravel`).
-    pub name: String,
-    /// The PLC address the models use (`X0.06`).
-    pub address: Signal,
-}
 
 /// A tag's value as delivered by the source.
 #[derive(Debug, Clone, PartialEq)]
@@ -100,27 +93,6 @@ pub enum Reading {
         /// such as an array).
         received: Option<ValueType>,
     },
-}
-
-/// A tag's value as the engine holds it.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Value {
-    /// A contact.
-    Bool(bool),
-    /// A number.
-    Num(Num),
-    /// A string.
-    Text(Arc<str>),
-}
-
-impl std::fmt::Display for Value {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Value::Bool(b) => write!(f, "{}", u8::from(*b)),
-            Value::Num(n) => write!(f, "{n}"),
-            Value::Text(t) => write!(f, "{t:?}"),
-        }
-    }
 }
 
 /// One delivered value: which tag, what, and when the PLC saw it.
@@ -2021,6 +1993,61 @@ impl CellEngine {
             return false;
         }
         expr.eval(&|s: &Signal| value(s).unwrap_or(false))
+    }
+}
+
+/// The engine's side: the recorder is built over the tags the checks read,
+/// fed by `set_value`/`set_other`, started by `announce` and emptied into
+/// each [`Step`].
+impl CellEngine {
+    /// Keeps, for every alarm raised whose check reads signals, the changes
+    /// of those signals around its raise, by `config` (the recorder is off
+    /// until this is called); each is handed out in
+    /// [`Step::recordings`] once its window is over.
+    #[must_use]
+    pub fn recording(mut self, config: RecorderConfig) -> Self {
+        let watched = (0..self.tags.len())
+            .map(|t| !self.readers.of(t).is_empty() || !self.number_readers.of(t).is_empty())
+            .collect();
+        self.recorder = Some(Box::new(Recorder::new(config, watched)));
+        self
+    }
+
+    /// What the flight recorder's ring holds now, if it is on.
+    pub fn recorder_fill(&self) -> Option<RecorderFill> {
+        self.recorder.as_ref().map(|r| r.fill())
+    }
+
+    /// Starts the flight recording of alarm `id` if `transition` raised
+    /// it: the signals its check reads, around `now`.
+    fn recording_starts(&mut self, id: &str, transition: Transition, now: u64) {
+        if transition != Transition::Raised || self.recorder.is_none() {
+            return;
+        }
+        let mut signals = Vec::new();
+        for set in &self.sets {
+            set.reads(id, &mut signals);
+        }
+        let mut reads: Vec<Read> = Vec::new();
+        for s in signals {
+            let Some(t) = self.tag_index(&s) else {
+                continue;
+            };
+            if reads.iter().any(|r| r.tag == t) {
+                continue;
+            }
+            let Tag { name, address } = &self.tags[t];
+            let address = address.to_string();
+            reads.push(Read {
+                tag: t,
+                name: (*name != address).then(|| name.clone()),
+                address,
+                value: self.value(t),
+            });
+        }
+        if let Some(r) = &mut self.recorder {
+            r.start(id, now, reads);
+        }
     }
 }
 

@@ -53,8 +53,7 @@ use std::fmt;
 
 use serde::{Deserialize, Serialize};
 
-use super::{CellEngine, Tag, Value};
-use crate::alarm::Transition;
+use super::tag::Value;
 use crate::value::Num;
 
 /// How many recordings may follow their changes at once, at most.
@@ -621,61 +620,6 @@ impl Recorder {
         recording.holds_to = holds_to;
         recording.truncated.end = cut;
         self.done.push(recording);
-    }
-}
-
-/// The engine's side: the recorder is built over the tags the checks read,
-/// fed by `set_value`/`set_other`, started by `announce` and emptied into
-/// each [`super::Step`].
-impl CellEngine {
-    /// Keeps, for every alarm raised whose check reads signals, the changes
-    /// of those signals around its raise, by `config` (the recorder is off
-    /// until this is called); each is handed out in
-    /// [`super::Step::recordings`] once its window is over.
-    #[must_use]
-    pub fn recording(mut self, config: RecorderConfig) -> Self {
-        let watched = (0..self.tags.len())
-            .map(|t| !self.readers.of(t).is_empty() || !self.number_readers.of(t).is_empty())
-            .collect();
-        self.recorder = Some(Box::new(Recorder::new(config, watched)));
-        self
-    }
-
-    /// What the flight recorder's ring holds now, if it is on.
-    pub fn recorder_fill(&self) -> Option<RecorderFill> {
-        self.recorder.as_ref().map(|r| r.fill())
-    }
-
-    /// Starts the flight recording of alarm `id` if `transition` raised
-    /// it: the signals its check reads, around `now`.
-    pub(super) fn recording_starts(&mut self, id: &str, transition: Transition, now: u64) {
-        if transition != Transition::Raised || self.recorder.is_none() {
-            return;
-        }
-        let mut signals = Vec::new();
-        for set in &self.sets {
-            set.reads(id, &mut signals);
-        }
-        let mut reads: Vec<Read> = Vec::new();
-        for s in signals {
-            let Some(t) = self.tag_index(&s) else {
-                continue;
-            };
-            if reads.iter().any(|r| r.tag == t) {
-                continue;
-            }
-            let Tag { name, address } = &self.tags[t];
-            let address = address.to_string();
-            reads.push(Read {
-                tag: t,
-                name: (*name != address).then(|| name.clone()),
-                address,
-                value: self.value(t),
-            });
-        }
-        if let Some(r) = &mut self.recorder {
-            r.start(id, now, reads);
-        }
     }
 }
 

@@ -405,19 +405,25 @@ function alarmDetail(cell, id) {
       this.actions = el('section', { class: 'actions' });
       this.values = el('section', { class: 'values' }, el('h3', {}, 'Values at the fault'), el('p', { class: 'note' }, 'asking the agent…'));
       this.events = el('section', { class: 'events' }, el('h3', {}, 'Events'), el('p', { class: 'note' }, 'asking the agent…'));
+      this.recording = el('section', { class: 'recording' }, el('h3', {}, 'Flight recording'), el('p', { class: 'note' }, 'asking the agent…'));
       this.commands = el('section', { class: 'commands' }, el('h3', {}, 'Operator actions'));
       this.answer = el('p', { class: 'answer', id: 'answer', 'aria-live': 'polite' });
-      v.append(this.head, el('div', { class: 'columns' }, el('div', {}, this.diagnosis, this.values), el('div', {}, this.actions, this.answer)), this.events, this.commands);
+      v.append(this.head, el('div', { class: 'columns' }, el('div', {}, this.diagnosis, this.values), el('div', {}, this.actions, this.answer)), this.recording, this.events, this.commands);
       this.actionsFor = null;
       this.fetch();
     },
     async fetch() {
       try {
-        const [snap, alarms, commands] = await Promise.all([
+        const [snap, alarms, commands, recordings] = await Promise.all([
           api(`/api/cells/${encodeURIComponent(cell)}/snapshot`),
           api(`/api/cells/${encodeURIComponent(cell)}/history?kind=alarm&since=7d&limit=2000`),
           api(`/api/cells/${encodeURIComponent(cell)}/history?kind=command&since=7d&limit=2000`),
+          api(`/api/cells/${encodeURIComponent(cell)}/history?kind=recording&since=7d&limit=100`),
         ]);
+        const rec = recordings.rows.filter(r => r.fields.alarm === id).pop();
+        this.recording.replaceChildren(el('h3', {}, 'Flight recording'), rec
+          ? drawRecording(rec.fields.payload)
+          : el('p', { class: 'note' }, 'No recording of this alarm in the last 7 days (one is kept for each raise, complete recorder.after after it).'));
         const fault = snap.last_fault && snap.last_fault.alarm === id ? snap.last_fault : null;
         this.values.replaceChildren(el('h3', {}, 'Values at the fault'), fault
           ? table('values', ['Tag', 'Address', 'Value', 'Quality'], fault.values.map(t => [t.name, t.address, valueText(t.value), t.quality]))
@@ -512,6 +518,56 @@ function alarmDetail(cell, id) {
       this.actions.replaceChildren(...box);
     },
   };
+}
+
+// An alarm's flight recording as a timing chart: one row per signal the
+// check reads, contacts as high/low traces, numbers at their changes,
+// unknown hatched, the raise marked.
+function drawRecording(r) {
+  const LEFT = 240, W = 760, ROW = 22, span = Math.max(1, r.to - r.from);
+  const rows = r.signals || [];
+  const H = rows.length * ROW + 20;
+  const x = t => LEFT + Math.max(0, Math.min(W, (t - r.from) / span * W));
+  const chart = svg('svg', { viewBox: `0 0 ${LEFT + W} ${H}`, class: 'recording-chart', role: 'img', 'aria-label': `recording of ${r.alarm}` });
+  rows.forEach((s, i) => {
+    const top = i * ROW + 3, low = top + ROW - 6, high = top + 2;
+    const name = svg('text', { x: 4, y: low, class: 'signal' });
+    name.textContent = s.name ? `${s.address} ${s.name}` : s.address;
+    chart.append(name);
+    const points = [[r.from, s.start === undefined ? null : s.start], ...(s.changes || [])];
+    points.forEach(([t, v], k) => {
+      const end = k + 1 < points.length ? points[k + 1][0] : r.to;
+      const x0 = x(Math.max(t, r.from)), x1 = x(end);
+      if (v === null || v === undefined) {
+        chart.append(svg('rect', { x: x0, y: high, width: Math.max(1, x1 - x0), height: low - high, class: 'unknown' }));
+      } else if (typeof v === 'boolean') {
+        const y = v ? high : low;
+        chart.append(svg('line', { x1: x0, y1: y, x2: x1, y2: y, class: 'trace' }));
+        if (k > 0) chart.append(svg('line', { x1: x0, y1: high, x2: x0, y2: low, class: 'trace' }));
+      } else {
+        chart.append(svg('line', { x1: x0, y1: low, x2: x1, y2: low, class: 'trace' }));
+        if (k > 0) chart.append(svg('line', { x1: x0, y1: high, x2: x0, y2: low, class: 'trace' }));
+        const label = svg('text', { x: x0 + 3, y: low - 3, class: 'value' });
+        label.textContent = String(v);
+        chart.append(label);
+      }
+    });
+  });
+  const raise = x(r.raised_at);
+  chart.append(svg('line', { x1: raise, y1: 0, x2: raise, y2: H - 16, class: 'raise' }));
+  for (const [t, anchor] of [[r.from, 'start'], [r.raised_at, 'middle'], [r.to, 'end']]) {
+    const label = svg('text', { x: x(t), y: H - 4, 'text-anchor': anchor });
+    const s = (t - r.raised_at) / 1000;
+    label.textContent = t === r.raised_at ? `raised ${when(t)}` : `${s > 0 ? '+' : ''}${s} s`;
+    chart.append(label);
+  }
+  const cut = r.truncated || {};
+  const notes = [];
+  if (cut.start) notes.push(`holds only from ${when(r.holds_from)} (${cut.start})`);
+  if (cut.end) notes.push(`holds only until ${when(r.holds_to)} (${cut.end})`);
+  return el('div', {}, chart,
+    el('p', { class: 'note' }, `The ${rows.length} signals ${r.alarm}'s check reads, from ${(r.from - r.raised_at) / 1000} s to +${(r.to - r.raised_at) / 1000} s around its raise; a grey band: the value was unknown.`),
+    notes.length ? el('p', { class: 'note' }, 'Cut short: ' + notes.join('; ')) : null);
 }
 
 const PERIODS = [['1h', 'last hour'], ['8h', 'last 8 hours'], ['24h', 'last 24 hours'], ['7d', 'last 7 days']];
