@@ -255,3 +255,113 @@ proptest! {
         }
     }
 }
+
+/// A clamp cylinder: step S1 drives it out and waits for its end switch
+/// (`X1.00`); a learned transition timer waits for the same switch after
+/// the valve (`Y1.00`).
+const CLAMP: &str = r#"
+[[chart]]
+name = "C1"
+initial = "S0"
+
+[[chart.step]]
+name = "S0"
+flag = "S0.X"
+
+[[chart.step]]
+name = "S1"
+flag = "S1.X"
+supervision = "1s"
+
+[[chart.transition]]
+id = "t1"
+from = "S0"
+to = "S1"
+condition = "X0.00"
+
+[[chart.transition]]
+id = "t2"
+from = "S1"
+to = "S0"
+condition = "X1.00"
+"#;
+
+#[test]
+fn a_timer_waiting_for_what_a_stuck_step_waits_for_follows_from_it() {
+    use cellwatch_models::sfc::{self, SfcChecks};
+    use cellwatch_models::timer::checks::TimerChecks;
+    use cellwatch_models::timer::learn::{Edge, Event, TimerModel, Transition, MODEL_VERSION};
+    let model = TimerModel {
+        version: MODEL_VERSION,
+        method: "common".into(),
+        signals: vec!["Y1.00".into(), "X1.00".into()],
+        transitions: vec![Transition {
+            id: 2,
+            from: vec![],
+            event: Event {
+                tag: "X1.00".into(),
+                edge: Edge::Rise,
+            },
+            to: vec![],
+            delta_ms: 1000,
+            min_ms: 950,
+            max_ms: 1050,
+            support: 4,
+            window_ms: [800, 4000],
+            from_numbered: None,
+            trigger: Some(Event {
+                tag: "Y1.00".into(),
+                edge: Edge::Rise,
+            }),
+        }],
+    };
+    let timers =
+        TimerChecks::new("clamp", &model, Severity::High, |n| Some(Signal::new(n))).unwrap();
+    let chart = SfcChecks::new(
+        "sfc",
+        sfc::read("clamp.sfc.toml", CLAMP, &|_| true).unwrap(),
+        Severity::High,
+        CommentDb::default(),
+    );
+    let tags = ["S0.X", "S1.X", "X0.00", "X1.00", "Y1.00"]
+        .into_iter()
+        .map(|a| Tag {
+            name: a.to_lowercase(),
+            address: Signal::new(a),
+        })
+        .collect();
+    let sets: Vec<Box<dyn CheckSet>> = vec![Box::new(chart), Box::new(timers)];
+    let e = CellEngine::new("c", tags, sets, StateRules::default()).unwrap();
+    assert_eq!(
+        e.relation().render(),
+        "sfc-C1-S1 -> clamp-002   clamp-002 reads X1.00, which sfc-C1-S1's fault holds\n\
+         communication -> every alarm raised while the link is down\n\
+         tag-quality -> an alarm whose culprits are all tags of bad quality\n"
+    );
+    // The clamp sticks: S1 is stuck first (1 s), then the timer is late
+    // (4 s), waiting for the same switch: a consequence.
+    let relation = e.relation().clone();
+    let mut e = e.relating(relation, false);
+    e.on_connection(true, 0);
+    for (a, v) in [
+        ("S0.X", true),
+        ("S1.X", false),
+        ("X0.00", false),
+        ("X1.00", false),
+        ("Y1.00", false),
+    ] {
+        set(&mut e, a, v, 0);
+    }
+    set(&mut e, "X0.00", true, 100);
+    set(&mut e, "S0.X", false, 100);
+    set(&mut e, "S1.X", true, 100);
+    set(&mut e, "Y1.00", true, 100);
+    assert_eq!(marks(&e.advance(1_200)), [("sfc-C1-S1".to_string(), None)]);
+    assert_eq!(
+        marks(&e.advance(4_200)),
+        [(
+            "clamp-002".to_string(),
+            Some(("sfc-C1-S1".into(), "sfc-C1-S1".into(), false))
+        )]
+    );
+}

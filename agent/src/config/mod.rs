@@ -16,6 +16,7 @@ mod alertmanager;
 mod bus;
 mod cell;
 mod checks;
+mod document;
 mod files;
 pub mod legacy;
 pub mod node;
@@ -74,14 +75,9 @@ pub fn parse(
     base: &Path,
     files: &dyn Files,
 ) -> Result<CellConfig, ConfigErrors> {
-    let raw: RawConfig = toml::from_str(text).map_err(|e| {
-        let at = e.span().map_or((1, 1), |s| line_col(text, s.start));
-        ConfigErrors(vec![format!(
-            "{origin}:{}:{}: {}",
-            at.0,
-            at.1,
-            e.message().trim_end()
-        )])
+    let raw: RawConfig = document::read(text).map_err(|e| {
+        let at = e.at.map_or((1, 1), |s| line_col(text, s));
+        ConfigErrors(vec![format!("{origin}:{}:{}: {}", at.0, at.1, e.message)])
     })?;
     validate::validate(origin, text, base, files, raw)
 }
