@@ -56,6 +56,11 @@ enum Cmd {
         /// How long each load runs.
         #[arg(long, default_value = "20s", value_parser = humantime::parse_duration)]
         duration: Duration,
+        /// How the agent is given its tags: `file` (a `tags_file`) or
+        /// `toml` (`[[tags]]` tables in its configuration); repeat for
+        /// several rows.
+        #[arg(long = "tags-in", value_enum, default_values_t = [peer::TagsIn::File])]
+        tags_in: Vec<peer::TagsIn>,
         /// Subscription publishing interval (agent and baseline).
         #[arg(long, default_value = "100ms", value_parser = humantime::parse_duration)]
         publishing: Duration,
@@ -207,6 +212,7 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
             security,
             alertmanagers,
             verify_intervals,
+            tags_in,
             duration: seconds,
             publishing,
             max_notifications,
@@ -219,7 +225,8 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
             workdir,
             drain,
         } => {
-            let setup = peer::Setup {
+            let mut setup = peer::Setup {
+                tags_in: peer::TagsIn::File,
                 agent,
                 python,
                 script,
@@ -243,11 +250,14 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
                             verify_intervals.iter().copied().map(Some).collect()
                         };
                         for v in verify {
-                            eprintln!(
-                                "cellwatch-bench: agent, {} tags, {}/s, {s:?}, Alertmanager {am:?}, verify {v:?}",
-                                load.tags, load.rate
-                            );
-                            rows.push(peer::agent(&setup, load, s, am, v).await?);
+                            for &t in &tags_in {
+                                setup.tags_in = t;
+                                eprintln!(
+                                    "cellwatch-bench: agent, {} tags, {}/s, {s:?}, Alertmanager {am:?}, verify {v:?}, tags in {t:?}",
+                                    load.tags, load.rate
+                                );
+                                rows.push(peer::agent(&setup, load, s, am, v).await?);
+                            }
                         }
                     }
                 }

@@ -92,6 +92,18 @@ pub struct Setup {
     pub agent_priority: Option<u8>,
     /// How long the baseline may take to drain after the load stops.
     pub drain: Duration,
+    /// How the agent is given its tags.
+    pub tags_in: TagsIn,
+}
+
+/// How the agent's configuration gives its tags.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum TagsIn {
+    /// A `tags_file` (`tags.csv` beside the configuration).
+    File,
+    /// `[[tags]]` tables in the configuration itself, as `cellwatch
+    /// discover` prints them without `--tags-file`.
+    Toml,
 }
 
 /// What one subscriber did under one load.
@@ -286,6 +298,27 @@ pub fn agent_config(
     )
 }
 
+/// The tags of `load` as `[[tags]]` tables, in [`tags_csv`]'s order.
+pub fn tags_toml(load: Load) -> String {
+    let mut s = String::new();
+    let mut table = |name: &str, id: String, address: &str| {
+        s.push_str(&format!(
+            "\n[[tags]]\nname = \"{name}\"\nnode_id = \"{id}\"\naddress = \"{address}\"\n"
+        ));
+    };
+    for k in 0..SWITCHES {
+        table(
+            &format!("ls_{k}"),
+            format!("ns=1;i={}", load::switch_id(k)),
+            &format!("LS_{k}"),
+        );
+    }
+    for i in 1..=load.tags {
+        table(&format!("n_{i}"), format!("ns=1;i={i}"), &format!("N_{i}"));
+    }
+    s
+}
+
 /// The tags of `load` as the agent's `tags_file` (`tags.csv` beside its
 /// configuration): the limit switches, then the noise tags.
 pub fn tags_csv(load: Load) -> String {
@@ -323,32 +356,36 @@ pub async fn agent(
     verify_interval: Option<Duration>,
 ) -> anyhow::Result<Row> {
     let dir = setup.workdir.join(format!(
-        "agent-{}-{}-{:?}-{:?}-{}",
+        "agent-{}-{}-{:?}-{:?}-{}-{:?}",
         load.tags,
         load.rate,
         security,
         alertmanager,
-        verify_interval.map_or(0, |d| d.as_millis())
+        verify_interval.map_or(0, |d| d.as_millis()),
+        setup.tags_in
     ));
     let server = fresh_server(&dir, load, setup.server_nice).await?;
     let (zenoh_port, metrics_port) = (free_port()?, free_port()?);
     let config = dir.join("cell.toml");
-    std::fs::write(dir.join("tags.csv"), tags_csv(load))?;
-    std::fs::write(
-        &config,
-        agent_config(
-            "bench",
-            &server.endpoint(),
-            security,
-            Subscription {
-                publishing: setup.publishing,
-                max_notifications: setup.max_notifications,
-                verify_interval,
-            },
-            &format!("mode = \"peer\"\nlisten = [\"tcp/127.0.0.1:{zenoh_port}\"]"),
-            metrics_port,
-        ),
-    )?;
+    let mut text = agent_config(
+        "bench",
+        &server.endpoint(),
+        security,
+        Subscription {
+            publishing: setup.publishing,
+            max_notifications: setup.max_notifications,
+            verify_interval,
+        },
+        &format!("mode = \"peer\"\nlisten = [\"tcp/127.0.0.1:{zenoh_port}\"]"),
+        metrics_port,
+    );
+    match setup.tags_in {
+        TagsIn::File => std::fs::write(dir.join("tags.csv"), tags_csv(load))?,
+        TagsIn::Toml => {
+            text = text.replacen("tags_file = \"tags.csv\"\n", "", 1) + &tags_toml(load);
+        }
+    }
+    std::fs::write(&config, text)?;
     if security == Security::SignEncrypt {
         std::fs::write(dir.join("fault.il"), program())?;
         trust(&config, &dir.join("server-pki"))?;
@@ -400,9 +437,12 @@ pub async fn agent(
         if gaps > 0.0 {
             eprintln!("cellwatch-bench: the agent said {gaps} gap(s) in the source");
         }
-        let verify = verify_interval
+        let mut verify = verify_interval
             .map(|d| format!(", verify every {}", humantime::format_duration(d)))
             .unwrap_or_default();
+        if setup.tags_in == TagsIn::Toml {
+            verify.push_str(", [[tags]] tables");
+        }
         Ok(Row {
             subject: match setup.agent_priority {
                 Some(p) => format!(
@@ -986,5 +1026,15 @@ mod tests {
         assert_eq!(c.tags.len(), SWITCHES + 1000);
         assert_eq!(c.tags[0].address.to_string(), "LS_0");
         assert_eq!(c.switching.len(), 1);
+        // The same tags as [[tags]] tables in the configuration.
+        let inline = text.replacen("tags_file = \"tags.csv\"\n", "", 1) + &tags_toml(load);
+        let i = cellwatch::config::parse(
+            "cell.toml",
+            &inline,
+            std::path::Path::new("."),
+            &Files(load),
+        )
+        .unwrap();
+        assert_eq!(i.tags, c.tags);
     }
 }

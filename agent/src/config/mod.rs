@@ -45,7 +45,6 @@ pub use tags::{key_chunk, tag_address, timer_signal, Addressing, Deadband, TagCo
 use std::path::{Path, PathBuf};
 
 use position::line_col;
-use raw::RawConfig;
 
 /// Loads and validates the configuration at `path`.
 ///
@@ -75,11 +74,11 @@ pub fn parse(
     base: &Path,
     files: &dyn Files,
 ) -> Result<CellConfig, ConfigErrors> {
-    let raw: RawConfig = document::read(text).map_err(|e| {
+    let (raw, tags) = document::read(text).map_err(|e| {
         let at = e.at.map_or((1, 1), |s| line_col(text, s));
         ConfigErrors(vec![format!("{origin}:{}:{}: {}", at.0, at.1, e.message)])
     })?;
-    validate::validate(origin, text, base, files, raw)
+    validate::validate(origin, text, base, files, raw, tags)
 }
 
 #[cfg(test)]

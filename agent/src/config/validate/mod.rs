@@ -47,6 +47,7 @@ pub(super) fn validate(
     base: &Path,
     files: &dyn Files,
     raw: RawConfig,
+    toml_tags: Option<crate::config::document::TomlTags<'_>>,
 ) -> Result<CellConfig, ConfigErrors> {
     let mut v = Validator {
         origin,
@@ -63,7 +64,7 @@ pub(super) fn validate(
         tags_file: None,
         addressing: Addressing::PmcOrIec,
     };
-    let config = v.config(raw);
+    let config = v.config(raw, toml_tags);
     if v.problems.is_empty() {
         let mut config = config.expect("a configuration with no problems is complete");
         config.warnings = v.warnings;
@@ -283,7 +284,11 @@ impl Validator<'_> {
         }
     }
 
-    fn config(&mut self, raw: RawConfig) -> Option<CellConfig> {
+    fn config(
+        &mut self,
+        raw: RawConfig,
+        toml_tags: Option<crate::config::document::TomlTags<'_>>,
+    ) -> Option<CellConfig> {
         if let Some(d) = &raw.cell.dialect {
             match d.get_ref().parse::<Dialect>() {
                 Ok(d) => self.addressing = Addressing::In(d),
@@ -322,10 +327,11 @@ impl Validator<'_> {
                 (None, None)
             }
         };
-        let tags = match raw.tags_file {
-            None => self.tags(raw.tags.into_iter()),
-            Some(file) => {
-                if !raw.tags.is_empty() {
+        let tags = match (raw.tags_file, toml_tags) {
+            (None, Some(tables)) => self.tags(tables),
+            (None, None) => self.tags(raw.tags.into_iter()),
+            (Some(file), tables) => {
+                if !raw.tags.is_empty() || tables.is_some() {
                     self.problem(
                         file.span(),
                         "tags_file",
