@@ -222,7 +222,7 @@ impl AlarmPayload {
                     expected: c.expected,
                     comment: c.comment.clone(),
                     trigger: c.trigger,
-                    compared: None,
+                    compared: c.compared.as_deref().and_then(compared),
                 })
                 .collect(),
             message: self.message.clone(),
@@ -604,5 +604,62 @@ impl ChartPayload {
                     .collect(),
             })
             .collect()
+    }
+}
+
+/// A comparison culprit's `compared` text read back
+/// (`rSpindleSpeed = 1650.0 (needs >= 1800)`), as a restored alarm shows
+/// it again.
+fn compared(text: &str) -> Option<cellwatch_models::explain::Compared> {
+    let (variable, rest) = text.split_once(" = ")?;
+    let (value, needs) = rest.strip_suffix(')')?.rsplit_once(" (needs ")?;
+    Some(cellwatch_models::explain::Compared {
+        variable: cellwatch_models::signal::Signal::new(variable),
+        value: value.to_string(),
+        needs: needs.to_string(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_comparison_culprit_is_restored_with_its_numbers() {
+        let alarm = Alarm {
+            id: "spindle-temp".into(),
+            kind: AlarmKind::Switching,
+            severity: Severity::High,
+            fault_type: "HOT".into(),
+            active: true,
+            acknowledged: false,
+            latched: false,
+            raised_at: 1_764_000_000_000,
+            cleared_at: None,
+            acked_by: None,
+            fault_step: Some(1),
+            message: "HOT".into(),
+            shelved: None,
+            out_of_service: None,
+            consequence: None,
+            culprits: vec![Culprit {
+                address: cellwatch_models::signal::Signal::new("TEMP <= 80.5"),
+                value: false,
+                expected: true,
+                comment: Some("Spindle temperature".into()),
+                trigger: true,
+                compared: Some(cellwatch_models::explain::Compared {
+                    variable: cellwatch_models::signal::Signal::new("TEMP"),
+                    value: "85.25".into(),
+                    needs: "<= 80.5".into(),
+                }),
+            }],
+        };
+        let payload = AlarmPayload::new("m01", &alarm, Transition::Raised, alarm.raised_at);
+        let back = payload.to_alarm().unwrap();
+        assert_eq!(back.culprits, alarm.culprits);
+        assert!(back.culprits[0]
+            .to_string()
+            .starts_with("TEMP = 85.25 (needs <= 80.5)"));
     }
 }
