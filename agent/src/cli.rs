@@ -54,7 +54,8 @@ enum Command {
     #[command(subcommand)]
     Sfc(SfcCommand),
     /// Explain a fault: the coil's value, every step's value, the fault step
-    /// and the contacts that caused it.
+    /// and the contacts that caused it; or a cell's consequence relation
+    /// (--consequences), or an alarm's flight recording (--alarm).
     ///
     /// Culprits that changed between --before and --snapshot are the trigger
     /// and come first. Each culprit shows its value, the value that would

@@ -8,8 +8,8 @@
 use cellwatch_models::alarm::{AlarmKind, Severity, Transition};
 use cellwatch_models::comments::CommentDb;
 use cellwatch_models::engine::{
-    CellEngine, CheckSet, MachineState, Order, PartCounting, Reading, StateRules, SwitchingCheck,
-    SwitchingChecks, Tag, TagReading,
+    CellEngine, CheckSet, HistoryKind, MachineState, Order, PartCounting, Reading, StateRules,
+    SwitchingCheck, SwitchingChecks, Tag, TagReading,
 };
 use cellwatch_models::explain::Polarity;
 use cellwatch_models::expr::Expr;
@@ -539,6 +539,18 @@ fn alarms_judged_in_a_late_batch_carry_the_source_times_the_agent_trusts() {
     assert_eq!(
         times(&step, "ese"),
         [(Transition::Raised, 11_200), (Transition::Cleared, 11_700)]
+    );
+    // The machine-state history rows too, not when the batch came: idle
+    // when the spindle got hot (the running rule), the fault when ESE was
+    // raised, the recovery when it cleared.
+    let states: Vec<(HistoryKind, u64)> = step.states().map(|(_, k, at)| (k, at)).collect();
+    assert_eq!(
+        states,
+        [
+            (HistoryKind::Normal, 10_000),
+            (HistoryKind::Fault, 11_200),
+            (HistoryKind::Recovery, 11_700)
+        ]
     );
     // Further back than trusted (a source clock 2 min behind): the agent's
     // clock.

@@ -487,6 +487,8 @@ pub struct CellEngine {
     suppress: bool,
     /// The flight recorder, if configured.
     recorder: Option<Box<Recorder>>,
+    /// When the machine state last changed (its history row's time).
+    state_at: u64,
 }
 
 impl CellEngine {
@@ -600,6 +602,7 @@ impl CellEngine {
         Ok(CellEngine {
             relation,
             suppress: false,
+            state_at: 0,
             cell: cell.to_string(),
             tags,
             configured,
@@ -1197,7 +1200,10 @@ impl CellEngine {
             // The state follows each reading, so that a fault raised and
             // cleared within one publish still leaves its history rows.
             if self.reading(r, now, &mut findings, &mut step) || step.events.len() > events {
-                self.update_state(now, &mut step);
+                // At the time the change was sampled, as the alarms judged
+                // on it are (when the source's clock is trusted).
+                let at = self.latest.map_or(now, |t| self.stamp(t, now));
+                self.update_state(at, &mut step);
                 if to_alarm && step.alarms().next().is_some() {
                     break;
                 }
@@ -1290,7 +1296,16 @@ impl CellEngine {
         // is announced before the value that ends it.
         if !self.pending.is_empty() {
             // One ending just as this value comes is judged on it.
+            let before = step.events.len();
             self.run_out(at.saturating_sub(1), true, now, step);
+            // The state follows them, at their time.
+            let ran_out = step.events[before..].iter().rev().find_map(|e| match e {
+                EngineEvent::Alarm { at, .. } => Some(*at),
+                EngineEvent::State { .. } => None,
+            });
+            if let Some(t) = ran_out {
+                self.update_state(t, step);
+            }
         }
         let changed = match &r.reading {
             _ if non_finite.is_some() => self.set_unknown(tag, at, findings, step),
@@ -1975,10 +1990,13 @@ impl CellEngine {
         }
         let kind = HistoryKind::between(&self.state, &next);
         self.state = next.clone();
+        // Never before the last row.
+        let at = now.max(self.state_at);
+        self.state_at = at;
         step.events.push(EngineEvent::State {
             state: next,
             kind,
-            at: now,
+            at,
         });
     }
 
