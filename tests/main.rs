@@ -34,6 +34,7 @@ mod papercuts;
 mod quickstart;
 mod real_programs;
 mod recorder;
+mod redundancy;
 mod report;
 mod restart;
 mod reverse;

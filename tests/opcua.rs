@@ -34,6 +34,7 @@ pub(crate) fn opcua_config(endpoint: &str, pki_dir: &std::path::Path) -> OpcUaCo
         subscription_lifetime: OpcUaConfig::DEFAULT_SUBSCRIPTION_LIFETIME,
         verify_interval: OpcUaConfig::DEFAULT_VERIFY_INTERVAL,
         reverse_listen: None,
+        redundant: Vec::new(),
     }
 }
 

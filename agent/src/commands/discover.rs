@@ -760,5 +760,6 @@ pub(crate) fn connection(
         subscription_lifetime: OpcUaConfig::DEFAULT_SUBSCRIPTION_LIFETIME,
         verify_interval: OpcUaConfig::DEFAULT_VERIFY_INTERVAL,
         reverse_listen: None,
+        redundant: Vec::new(),
     })
 }

@@ -148,9 +148,30 @@ pub struct OpcUaConfig {
     /// reverse connect, `opcua.reverse_listen`): the server dials out, the
     /// agent never dials `endpoint`, which then only names the server.
     pub reverse_listen: Option<std::net::SocketAddr>,
+    /// The other servers of a redundant set (`opcua.redundant`,
+    /// non-transparent redundancy): the agent reads from whichever of
+    /// `endpoint` and these says the highest `ServiceLevel`, and moves to
+    /// another when it drops or degrades.
+    pub redundant: Vec<String>,
 }
 
 impl OpcUaConfig {
+    /// Every server the cell may be read from: `endpoint`, then
+    /// `redundant`.
+    pub fn servers(&self) -> Vec<&str> {
+        std::iter::once(self.endpoint.as_str())
+            .chain(self.redundant.iter().map(String::as_str))
+            .collect()
+    }
+
+    /// The same configuration for server `endpoint` of the set.
+    pub fn at(&self, endpoint: &str) -> OpcUaConfig {
+        OpcUaConfig {
+            endpoint: endpoint.to_string(),
+            ..self.clone()
+        }
+    }
+
     /// The default of `opcua.max_notifications_per_publish`. A publish is
     /// handled as one step, cut after each alarm; an alarm waits for the
     /// changes ahead of it in its publish and for the publish being

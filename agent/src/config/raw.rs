@@ -164,6 +164,8 @@ pub(crate) struct RawOpcUa {
     pub(crate) subscription_lifetime: Option<Spanned<String>>,
     pub(crate) verify_interval: Option<Spanned<String>>,
     pub(crate) reverse_listen: Option<Spanned<String>>,
+    #[serde(default)]
+    pub(crate) redundant: Vec<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -660,6 +660,42 @@ fn a_server_that_dials_out_is_listened_for_at_an_ip_address() {
 }
 
 #[test]
+fn a_redundant_set_names_each_other_server_once() {
+    let with = |v: &str| {
+        GOOD.replace(
+            "endpoint = \"opc.tcp://127.0.0.1:4840/\"",
+            &format!("endpoint = \"opc.tcp://127.0.0.1:4840/\"\nredundant = {v}"),
+        )
+    };
+    let c = parse(
+        "cell.toml",
+        &with("[\"opc.tcp://127.0.0.2:4840/\"]"),
+        Path::new("base"),
+        &mem(),
+    )
+    .unwrap();
+    let ua = c.opcua.unwrap();
+    assert_eq!(
+        ua.servers(),
+        ["opc.tcp://127.0.0.1:4840/", "opc.tcp://127.0.0.2:4840/"]
+    );
+    assert_eq!(ua.at("opc.tcp://127.0.0.2:4840/").endpoint, ua.redundant[0]);
+    assert_eq!(
+        errors(&with("[\"opc.tcp://127.0.0.1:4840/\"]")),
+        "cell.toml:7:14: opcua.redundant[0]: 'opc.tcp://127.0.0.1:4840/' is named twice in the set"
+    );
+    assert_eq!(
+        errors(&with("[\"http://b:4840/\"]")),
+        "cell.toml:7:14: opcua.redundant[0]: 'http://b:4840/' must start with opc.tcp://"
+    );
+    let reverse = with("[\"opc.tcp://b:4840/\"]\nreverse_listen = \"opc.tcp://0.0.0.0:4843\"");
+    assert_eq!(
+        errors(&reverse),
+        "cell.toml:7:14: opcua.redundant[0]: a redundant set is dialled by the agent: not with opcua.reverse_listen"
+    );
+}
+
+#[test]
 fn a_studio_5000_export_is_a_cells_program() {
     let mut files = mem();
     files.0.insert(

@@ -338,6 +338,12 @@ impl SimulatedCnc {
         self.server.subscriptions()
     }
 
+    /// Says `level` as the server's `ServiceLevel` (see
+    /// [`SimServer::set_service_level`]).
+    pub fn set_service_level(&self, level: u8) {
+        self.server.set_service_level(level);
+    }
+
     /// Stops the server; connected clients see the connection drop.
     pub fn stop(&self) {
         self.server.stop();

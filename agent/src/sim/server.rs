@@ -486,6 +486,13 @@ impl SimServer {
             .sum()
     }
 
+    /// Says `level` as the server's `ServiceLevel` (OPC UA redundancy:
+    /// 200–255 healthy, 2–199 degraded), to clients reading it and those
+    /// subscribed to it.
+    pub fn set_service_level(&self, level: u8) {
+        self.handle.set_service_level(level);
+    }
+
     /// Adds a variable of any scalar type (a data register) beside the
     /// contacts, with an optional description (what `cellwatch discover`
     /// prints as the comment).

@@ -184,7 +184,30 @@ impl Validator<'_> {
             }
         };
         let reverse_listen = raw.reverse_listen.and_then(|r| self.reverse_listen(&r));
+        let mut redundant: Vec<String> = Vec::new();
+        for (i, r) in raw.redundant.iter().enumerate() {
+            let key = format!("opcua.redundant[{i}]");
+            let url = r.get_ref().trim().to_string();
+            if !url.starts_with("opc.tcp://") {
+                self.problem(
+                    r.span(),
+                    &key,
+                    format!("'{url}' must start with opc.tcp://"),
+                );
+            } else if url == endpoint || redundant.contains(&url) {
+                self.problem(r.span(), &key, format!("'{url}' is named twice in the set"));
+            } else if reverse_listen.is_some() {
+                self.problem(
+                    r.span(),
+                    &key,
+                    "a redundant set is dialled by the agent: not with opcua.reverse_listen",
+                );
+            } else {
+                redundant.push(url);
+            }
+        }
         Some(OpcUaConfig {
+            redundant,
             endpoint,
             policy,
             mode,

@@ -39,11 +39,13 @@ use std::sync::Arc;
 use std::time::Duration;
 
 mod client;
+mod context;
 mod delivery;
 mod items;
 mod names;
 mod once;
 mod overflow;
+mod redundancy;
 mod resume;
 mod reverse;
 mod sequence;
@@ -54,6 +56,7 @@ mod tend;
 pub use crate::config::node::{Namespace, TagNode};
 pub use client::client;
 use client::{identity, namespace_array, server_endpoint};
+use context::{Context, Live, TagTable};
 pub use names::Names;
 pub use once::{connect_once, server_identity, ServerIdentity};
 use switches::{pulse, reset_switches, Writes};
@@ -120,36 +123,6 @@ impl OpcUaSource {
             switches,
             writes: None,
             reverse,
-        }
-    }
-}
-
-/// What the source reads of each tag: its node (`None` when its node id
-/// cannot be read), how it is read, its name for messages.
-struct TagTable {
-    nodes: Arc<Vec<Option<TagNode>>>,
-    uses: Arc<subscription::Uses>,
-    names: Arc<Names>,
-}
-
-impl TagTable {
-    fn new(config: &OpcUaConfig, tags: &[TagConfig]) -> TagTable {
-        let nodes = tags
-            .iter()
-            .map(
-                |t| match TagNode::parse(&t.node_id, config.namespace_uri.as_deref()) {
-                    Ok(n) => Some(n),
-                    Err(e) => {
-                        tracing::error!(tag = %t.name, error = %e, "tag not read");
-                        None
-                    }
-                },
-            )
-            .collect();
-        TagTable {
-            nodes: Arc::new(nodes),
-            uses: Arc::new(subscription::Uses::of_tags(tags)),
-            names: Arc::new(Names::of(tags)),
         }
     }
 }
@@ -270,13 +243,22 @@ async fn run_writing(
     let mut supervisor = tokio::task::JoinSet::new();
     let mut backoff = Duration::from_millis(250);
     let mut said_down = false;
+    // A redundant set: the server read from, and the watch of its level
+    // saying to move.
+    let redundant = !config.redundant.is_empty();
+    let (mut active, move_on) = (0, Arc::new(tokio::sync::Notify::new()));
     loop {
         let attempt = async {
-            let endpoint = server_endpoint(&client, config, reverse.as_ref()).await?;
+            if redundant {
+                active = redundancy::choose(&redundancy::levels(cell, config).await, active);
+                ctx.reading_from(config.servers()[active]);
+            }
+            let server = config.at(&ctx.endpoint());
+            let endpoint = server_endpoint(&client, &server, reverse.as_ref()).await?;
             // An untrusted server certificate is said with what to do, and
             // left in rejected/ for review; it is looked at again on the
             // next attempt, so trusting it while the agent runs is enough.
-            if let Some(why) = crate::sources::pki::untrusted(config, &endpoint) {
+            if let Some(why) = crate::sources::pki::untrusted(&server, &endpoint) {
                 crate::sources::pki::reject(endpoint.server_certificate.as_ref(), &config.pki_dir);
                 return Err(opcua::types::Error::new(
                     opcua::types::StatusCode::BadCertificateUntrusted,
@@ -296,10 +278,10 @@ async fn run_writing(
                 Ok(pair) => pair,
                 Err(e) => {
                     if !said_down {
-                        let _ = tx.send(SourceEvent::Disconnected(format!("cannot connect to {}: {e}", config.endpoint))).await;
+                        let _ = tx.send(SourceEvent::Disconnected(format!("cannot connect to {}: {e}", ctx.endpoint()))).await;
                         said_down = true;
                     }
-                    tracing::warn!(endpoint = %config.endpoint, error = %e, retry_in = ?backoff, "OPC UA connect failed");
+                    tracing::warn!(endpoint = %ctx.endpoint(), error = %e, retry_in = ?backoff, "OPC UA connect failed");
                     tokio::select! {
                         _ = &mut shutdown => return Ok(()),
                         _ = tokio::time::sleep(backoff) => {}
@@ -372,6 +354,15 @@ async fn run_writing(
                     }
                 }
                 Some(_) = pulses.join_next(), if !pulses.is_empty() => {}
+                () = move_on.notified(), if redundant => {
+                    supervisor.abort_all();
+                    ctx.pause();
+                    *current.lock().await = None;
+                    let _ = tx.send(SourceEvent::Disconnected(format!("{} degraded: moving to another server of the set", ctx.endpoint()))).await;
+                    said_down = true;
+                    // The session ends with its event loop, dropped here.
+                    break;
+                }
                 item = events.next() => match item {
                     None => break,
                     Some(Err(status)) => {
@@ -386,6 +377,11 @@ async fn run_writing(
                         ctx.pause();
                         let _ = tx.send(SourceEvent::Disconnected(format!("connection lost: {status}"))).await;
                         said_down = true;
+                        if redundant {
+                            // Another server of the set, fresh.
+                            *current.lock().await = None;
+                            break;
+                        }
                     }
                     Some(Ok(SessionPollResult::ReconnectFailed(status))) => {
                         if !said_down {
@@ -415,6 +411,9 @@ async fn run_writing(
                             });
                         }
                         supervisor.spawn(supervise(session.clone(), ctx.clone(), current.clone(), new_session));
+                        if redundant {
+                            supervisor.spawn(redundancy::watch(session.clone(), cell.to_string(), config.clone(), active, move_on.clone()));
+                        }
                     }
                     Some(Ok(other)) => tracing::debug!(event = ?other, "OPC UA session event"),
                 },
@@ -435,59 +434,6 @@ async fn run_writing(
 /// The read fails or the value is not an array of strings.
 pub async fn namespaces(session: &Session) -> Result<Vec<String>, String> {
     namespace_array(session).await
-}
-
-/// What every supervisor of this source needs.
-struct Context {
-    endpoint: String,
-    config: OpcUaConfig,
-    /// Each tag's node, `None` when its node id cannot be read.
-    nodes: Arc<Vec<Option<TagNode>>>,
-    uses: Arc<subscription::Uses>,
-    names: Arc<Names>,
-    tx: SourceSender,
-    /// The delivery of the subscription in place, paused when the
-    /// connection is lost.
-    delivery: std::sync::Mutex<Option<delivery::Shared>>,
-}
-
-impl Context {
-    /// The connection is lost: the subscription's publishes wait until the
-    /// source knows whether it resumes without a loss.
-    fn pause(&self) {
-        if let Some(d) = self
-            .delivery
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .as_ref()
-        {
-            d.lock().pause();
-        }
-    }
-
-    fn new(config: &OpcUaConfig, tags: TagTable, tx: SourceSender) -> Context {
-        Context {
-            endpoint: config.endpoint.clone(),
-            config: config.clone(),
-            nodes: tags.nodes,
-            uses: tags.uses,
-            names: tags.names,
-            tx,
-            delivery: std::sync::Mutex::new(None),
-        }
-    }
-}
-
-/// A subscription in place on the server.
-struct Live {
-    subscription: subscription::Subscribed,
-    /// Its publishes' way to the cell loop, in order.
-    shared: delivery::Shared,
-    /// The monitored nodes and their tags.
-    nodes: Arc<subscription::Monitored>,
-    /// The namespace array its node ids were resolved against.
-    namespaces: Vec<String>,
-    heard: Arc<subscription::Heard>,
 }
 
 /// The alarm a missing namespace raises (kind `system`).
@@ -523,7 +469,7 @@ async fn supervise(
                     .tx
                     .send(SourceEvent::Disconnected(format!(
                         "cannot read the namespace array of {}: {e}",
-                        ctx.endpoint
+                        ctx.endpoint()
                     )))
                     .await;
                 tokio::time::sleep(retry).await;
@@ -598,10 +544,7 @@ async fn supervise(
             }
         }
         retry = Duration::from_millis(500);
-        let _ = ctx
-            .tx
-            .send(SourceEvent::Connected(ctx.endpoint.clone()))
-            .await;
+        let _ = ctx.tx.send(SourceEvent::Connected(ctx.endpoint())).await;
         let l = live.as_ref().expect("subscribed above");
         let why = watch(&session, &ctx, l).await;
         let l = live.take().expect("subscribed above");
@@ -731,7 +674,7 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
         each.join("; ")
     });
     if let Some(p) = &problem {
-        tracing::error!(endpoint = %ctx.endpoint, problem = %p, "OPC UA namespaces missing");
+        tracing::error!(endpoint = %ctx.endpoint(), problem = %p, "OPC UA namespaces missing");
     }
     let _ = ctx
         .tx
