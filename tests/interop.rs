@@ -445,3 +445,59 @@ async fn node_opcua_node_deleted_and_added_back_is_monitored_again_without_a_rec
         .await
         .unwrap();
 }
+
+/// A redundant pair of node-opcua servers: the source reads from the first
+/// (both say 255), and moves to the second when the first says 120; each
+/// server's T0 differs, so the value read shows the server.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn node_opcua_redundant_pair_the_source_moves_to_the_healthier_server() {
+    crate::network_cut::logs();
+    let dir = tempfile::tempdir().unwrap();
+    let agent_pki = dir.path().join("agent-pki");
+    let (a_pki, b_pki) = (dir.path().join("a-pki"), dir.path().join("b-pki"));
+    let (a_port, b_port) = (
+        crate::util::restartable_port(),
+        crate::util::restartable_port(),
+    );
+    trusted_by_server(&agent_pki, &a_pki);
+    trusted_by_server(&agent_pki, &b_pki);
+    let start = |port: u16, pki: PathBuf| {
+        tokio::task::spawn_blocking(move || NodeServer::start(port, &pki, 10))
+    };
+    let (a, b) = (
+        start(a_port, a_pki).await.unwrap(),
+        start(b_port, b_pki).await.unwrap(),
+    );
+    let b = sent(b, "set T0 0").await;
+    let mut config = opcua_config(&format!("opc.tcp://127.0.0.1:{a_port}/"), &agent_pki);
+    config.redundant = vec![format!("opc.tcp://127.0.0.1:{b_port}/")];
+    config.publishing_interval = Duration::from_millis(100);
+    pki::trust(&a.cert, &config.pki_dir).unwrap();
+    pki::trust(&b.cert, &config.pki_dir).unwrap();
+    let mut source = Running::start(config, (0..10).map(tag).collect());
+    all(
+        &mut source.rx,
+        "connected to the first, its T0",
+        &[&|e| matches!(e, SourceEvent::Connected(_)), &|e| {
+            has(e, 0, Reading::Good(true))
+        }],
+    )
+    .await;
+    let a = sent(a, "level 120").await;
+    let seen = until(&mut source, "T0 = 0 from the second", |e| {
+        has(e, 0, Reading::Good(false))
+    })
+    .await;
+    assert!(
+        seen.iter()
+            .any(|e| matches!(e, SourceEvent::Connected(s) if s.contains(&b_port.to_string()))),
+        "{seen:?}"
+    );
+    source.stop().await;
+    tokio::task::spawn_blocking(move || {
+        a.stop();
+        b.stop();
+    })
+    .await
+    .unwrap();
+}

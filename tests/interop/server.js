@@ -8,6 +8,8 @@
 // subscription ID" when one outlives its lifetime. Standard input:
 //   set NAME 0|1        write a tag
 //   toggle NAME K       write it K times, alternating, as fast as possible
+//   delete NAME         delete a tag's node; add NAME 0|1 adds it (back)
+//   level N             say N as the server's ServiceLevel (redundancy)
 //   quit
 "use strict";
 const fs = require("fs");
@@ -135,6 +137,12 @@ async function main() {
       tags.delete(name);
     } else if (cmd === "add" && !v) {
       add(name, arg === "1");
+    } else if (cmd === "level" && name) {
+      // ServiceLevel is bound to a getter by the engine (255): bound again
+      // to the level asked.
+      const level = Number(name);
+      const node = server.engine.addressSpace.findNode("ns=0;i=2267");
+      node.bindVariable({ get: () => new Variant({ dataType: DataType.Byte, value: level }) }, true);
     } else if (cmd === "quit") {
       break;
     }

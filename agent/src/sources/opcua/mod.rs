@@ -250,7 +250,13 @@ async fn run_writing(
     loop {
         let attempt = async {
             if redundant {
-                active = redundancy::choose(&redundancy::levels(cell, config).await, active);
+                let levels = redundancy::levels(cell, config).await;
+                active = redundancy::choose(&levels, active);
+                tracing::info!(
+                    ?levels,
+                    server = config.servers()[active],
+                    "OPC UA redundant set: the server read from"
+                );
                 ctx.reading_from(config.servers()[active]);
             }
             let server = config.at(&ctx.endpoint());

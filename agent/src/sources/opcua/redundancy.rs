@@ -62,11 +62,20 @@ pub(super) async fn level(session: &Session) -> Option<u8> {
 pub(super) async fn levels(cell: &str, config: &OpcUaConfig) -> Vec<Option<u8>> {
     let asks = config.servers().into_iter().map(|server| {
         let config = config.at(server);
-        let name = format!("{cell}-level");
+        // The cell's own application name: its certificate says it, and a
+        // server checks the two agree.
+        let name = cell.to_string();
         async move {
             let ask = async {
-                let (session, task) = super::connect_once(&name, &config).await.ok()?;
+                let (session, task) = match super::connect_once(&name, &config).await {
+                    Ok(s) => s,
+                    Err(e) => {
+                        tracing::debug!(server = %config.endpoint, error = %e, "no ServiceLevel");
+                        return None;
+                    }
+                };
                 let l = level(&session).await;
+                tracing::debug!(server = %config.endpoint, level = ?l, "ServiceLevel");
                 let _ = tokio::time::timeout(Duration::from_secs(1), session.disconnect()).await;
                 task.abort();
                 l
