@@ -103,6 +103,9 @@ struct LevelState {
     pending_since: Option<u64>,
     /// When the current excursion began (for "for how long").
     excursion_since: Option<u64>,
+    /// Why the verdict it waits for was judged across a gap in the
+    /// source's delivery, if it was.
+    across_gap: Option<String>,
 }
 
 /// Every limit check of a cell.
@@ -205,6 +208,7 @@ impl LimitChecks {
             let wants = if s.active { !back } else { beyond };
             if wants == s.active {
                 s.pending_since = None;
+                s.across_gap = None;
                 if !s.active && !beyond {
                     s.excursion_since = None;
                 }
@@ -233,6 +237,9 @@ impl LimitChecks {
             // Judged at `now`: the source time its delay ran out, when
             // values sampled over a while came together.
             f.at = Some(now);
+            if let Some(why) = s.across_gap.take() {
+                f.message = format!("{} (trigger uncertain: {why})", f.message);
+            }
             out.push(f);
         }
     }
@@ -343,6 +350,27 @@ impl CheckSet for LimitChecks {
             self.run_out(i, now, out);
             self.values[i] = value.map(Num::as_f64);
             self.evaluate(i, now, out);
+        }
+    }
+
+    /// A level waiting out its delay across the gap says so when it
+    /// raises or clears.
+    fn on_gap(&mut self, signals: Option<&[Signal]>, why: &str) {
+        let checks: Vec<usize> = match signals {
+            None => (0..self.checks.len()).collect(),
+            Some(s) => s
+                .iter()
+                .filter_map(|s| self.by_tag.get(s))
+                .flatten()
+                .copied()
+                .collect(),
+        };
+        for i in checks {
+            for s in &mut self.states[i] {
+                if s.pending_since.is_some() {
+                    s.across_gap = Some(why.to_string());
+                }
+            }
         }
     }
 

@@ -573,6 +573,56 @@ fn alarms_judged_in_a_late_batch_carry_the_source_times_the_agent_trusts() {
     );
 }
 
+/// A verdict waiting out its delay while changes of what it reads were
+/// lost for good (a queue that overflowed, a publish the server could not
+/// send again) says so when it comes: the excursion may have ended and
+/// begun again unseen. A gap elsewhere, or none, says nothing.
+#[test]
+fn a_delay_run_across_a_gap_says_its_trigger_is_uncertain() {
+    let mut limit = temp_limit(85.0);
+    limit.on_delay = 1000;
+    let mut e = engine(vec![limit]).delaying("ese", 1000, 0);
+    load_normal(&mut e, 0);
+    number(&mut e, "MODE", Num::Int(1), 0);
+    number(&mut e, "TEMP", Num::Float(40.0), 1_000);
+    let (temp, x006, count) = (tag(&e, "TEMP"), tag(&e, "X0.06"), tag(&e, "COUNT"));
+    let message = |step: &cellwatch_models::engine::Step, id: &str| {
+        step.alarms()
+            .find(|(a, t, _)| a.id == id && *t == Transition::Raised)
+            .map(|(a, _, _)| a.message.clone())
+    };
+    // The spindle runs hot and the Y switch opens, both waiting out 1 s;
+    // a value of TEMP and one of X0.06 are lost meanwhile, then values
+    // come again (which end the tags' own marks).
+    number(&mut e, "TEMP", Num::Float(90.0), 10_000);
+    contact(&mut e, "X0.06", false, 10_000);
+    e.on_gap(Some(&[temp, x006]), 2, "2 values lost in a full queue");
+    number(&mut e, "TEMP", Num::Float(91.0), 10_500);
+    contact(&mut e, "X0.06", false, 10_500);
+    let step = e.advance(11_100);
+    let temp_h = message(&step, "temp-h").unwrap();
+    assert!(
+        temp_h.ends_with("(trigger uncertain: 2 values lost in a full queue)"),
+        "{temp_h}"
+    );
+    let ese = message(&step, "ese").unwrap();
+    assert!(
+        ese.ends_with("(trigger uncertain: 2 values lost in a full queue)"),
+        "{ese}"
+    );
+    // Both back; again, with a gap on a tag neither reads (the parts
+    // counter): nothing said.
+    number(&mut e, "TEMP", Num::Float(40.0), 20_000);
+    contact(&mut e, "X0.06", true, 20_000);
+    e.advance(21_100);
+    number(&mut e, "TEMP", Num::Float(90.0), 30_000);
+    contact(&mut e, "X0.06", false, 30_000);
+    e.on_gap(Some(&[count]), 1, "1 value lost in a full queue");
+    let step = e.advance(31_100);
+    assert!(!message(&step, "temp-h").unwrap().contains("uncertain"));
+    assert!(!message(&step, "ese").unwrap().contains("uncertain"));
+}
+
 /// The same for an alarm delay of a contact check (switching or discrete):
 /// the fault lasted 1.5 s at the source, the delay is 1 s.
 #[test]

@@ -108,6 +108,12 @@ pub trait CheckSet: Send + Sync {
     ) {
     }
 
+    /// Changes of `signals` (`None`: of every signal) may have been lost
+    /// for good, for the reason `why`: a verdict a set is waiting out a
+    /// delay for was judged across the gap, and is to say so when it
+    /// comes (`trigger uncertain`). Default: nothing waits.
+    fn on_gap(&mut self, _signals: Option<&[Signal]>, _why: &str) {}
+
     /// Time passed; timers fire here.
     fn advance(&mut self, _now: u64, _out: &mut Vec<Finding>) {}
 

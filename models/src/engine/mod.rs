@@ -993,6 +993,33 @@ impl CellEngine {
                 }
             }
         }
+        // Verdicts waiting out a delay across the gap say so when they come.
+        let signals: Option<Vec<Signal>> = tags.map(|ts| {
+            ts.iter()
+                .filter_map(|&t| self.tags.get(t))
+                .map(|t| t.address.clone())
+                .collect()
+        });
+        for set in &mut self.sets {
+            set.on_gap(signals.as_deref(), why);
+        }
+        let waiting: Vec<String> = self.pending.keys().cloned().collect();
+        let gone: Option<std::collections::HashSet<&Signal>> =
+            signals.as_ref().map(|s| s.iter().collect());
+        for id in waiting {
+            let touched = gone.as_ref().is_none_or(|gone| {
+                let mut reads = Vec::new();
+                for set in &self.sets {
+                    set.reads(&id, &mut reads);
+                }
+                reads.iter().any(|r| gone.contains(r))
+            });
+            if let Some((_, _, f)) = self.pending.get_mut(&id).filter(|_| touched) {
+                if !f.message.contains("(trigger uncertain") {
+                    uncertain_trigger(f, why);
+                }
+            }
+        }
         Step {
             gaps: 1,
             lost_values: values,
