@@ -20,7 +20,7 @@ use crate::network_cut::until;
 use crate::opcua::{all, has, next, opcua_config};
 use crate::util::root;
 
-const URI: &str = "urn:cellwatch:test:node-opcua:plc";
+pub(crate) const URI: &str = "urn:cellwatch:test:node-opcua:plc";
 
 /// `npm ci` in tests/interop, once per test run, unless already installed.
 fn installed() -> PathBuf {
@@ -45,16 +45,16 @@ fn installed() -> PathBuf {
 }
 
 /// A running node-opcua server.
-struct NodeServer {
+pub(crate) struct NodeServer {
     child: Child,
     stdin: ChildStdin,
     lines: std_mpsc::Receiver<String>,
     /// Its own certificate (DER).
-    cert: PathBuf,
+    pub(crate) cert: PathBuf,
 }
 
 impl NodeServer {
-    fn start(port: u16, pki_dir: &Path, tags: usize) -> NodeServer {
+    pub(crate) fn start(port: u16, pki_dir: &Path, tags: usize) -> NodeServer {
         let dir = installed();
         let mut child = Command::new("node")
             .arg(dir.join("server.js"))
@@ -82,7 +82,7 @@ impl NodeServer {
         server
     }
 
-    fn wait_for(&mut self, prefix: &str) -> String {
+    pub(crate) fn wait_for(&mut self, prefix: &str) -> String {
         loop {
             match self.lines.recv_timeout(Duration::from_secs(120)) {
                 Ok(line) if line.starts_with(prefix) => return line,
@@ -93,12 +93,12 @@ impl NodeServer {
     }
 
     /// Sends a command and waits until the server has carried it out.
-    fn send(&mut self, command: &str) {
+    pub(crate) fn send(&mut self, command: &str) {
         writeln!(self.stdin, "{command}").unwrap();
         self.wait_for(&format!("done {command}"));
     }
 
-    fn stop(mut self) {
+    pub(crate) fn stop(mut self) {
         let _ = writeln!(self.stdin, "quit");
         let _ = self.child.wait();
     }
@@ -109,7 +109,7 @@ impl NodeServer {
 /// its trusted folder at start, and a certificate added later is seen only
 /// when its folder watch catches up (on a loaded machine, after the first
 /// connection was refused).
-fn trusted_by_server(agent_pki: &Path, server_pki: &Path) {
+pub(crate) fn trusted_by_server(agent_pki: &Path, server_pki: &Path) {
     let config = opcua_config("opc.tcp://127.0.0.1:1/", agent_pki);
     drop(opcua::client("test", &config).unwrap());
     let trusted = server_pki.join("trusted/certs");
@@ -182,6 +182,9 @@ async fn node_opcua_server_five_thousand_items_bursts_and_a_restart() {
             SourceEvent::Problem { .. } => {}
             SourceEvent::Gap { why, .. } => panic!("changes lost: {why}"),
             SourceEvent::Resumed => {}
+            SourceEvent::Conditions(_) | SourceEvent::ConditionsHeld { .. } => {
+                panic!("no PLC alarm asked for: {ev:?}")
+            }
         }
     }
     eprintln!("all {TAGS} tags in {:?}", started.elapsed());
@@ -383,7 +386,7 @@ async fn node_opcua_pulse_during_a_network_cut_arrives_through_the_taken_over_su
 }
 
 /// `server` once it has carried `command` out.
-async fn sent(mut server: NodeServer, command: &'static str) -> NodeServer {
+pub(crate) async fn sent(mut server: NodeServer, command: &'static str) -> NodeServer {
     tokio::task::spawn_blocking(move || {
         server.send(command);
         server

@@ -31,6 +31,7 @@ mod opcua;
 mod operations;
 mod operators;
 mod papercuts;
+mod plc_alarms;
 mod quickstart;
 mod real_programs;
 mod recorder;

@@ -35,6 +35,7 @@ pub(crate) fn opcua_config(endpoint: &str, pki_dir: &std::path::Path) -> OpcUaCo
         verify_interval: OpcUaConfig::DEFAULT_VERIFY_INTERVAL,
         reverse_listen: None,
         redundant: Vec::new(),
+        events: Vec::new(),
     }
 }
 

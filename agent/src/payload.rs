@@ -84,7 +84,7 @@ pub struct AlarmPayload {
     /// Stable alarm id.
     pub id: String,
     /// `switching`, `timer`, `drift`, `limit`, `step`, `tag_quality`,
-    /// `communication`, `system`.
+    /// `communication`, `system`, `plc` (the PLC's own).
     pub kind: AlarmKind,
     /// `low` .. `critical`.
     pub severity: Severity,

@@ -88,11 +88,14 @@ pub enum AlarmKind {
     Communication,
     /// The agent itself is in trouble (its journal cannot write).
     System,
+    /// The PLC's own alarm: a condition its OPC UA server reports (Alarms
+    /// & Conditions), with the PLC's text.
+    Plc,
 }
 
 impl AlarmKind {
     /// All kinds.
-    pub const ALL: [AlarmKind; 8] = [
+    pub const ALL: [AlarmKind; 9] = [
         AlarmKind::Switching,
         AlarmKind::Timer,
         AlarmKind::Drift,
@@ -101,6 +104,7 @@ impl AlarmKind {
         AlarmKind::TagQuality,
         AlarmKind::Communication,
         AlarmKind::System,
+        AlarmKind::Plc,
     ];
 
     /// The snake-case name.
@@ -114,6 +118,7 @@ impl AlarmKind {
             AlarmKind::TagQuality => "tag_quality",
             AlarmKind::Communication => "communication",
             AlarmKind::System => "system",
+            AlarmKind::Plc => "plc",
         }
     }
 }

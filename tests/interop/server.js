@@ -10,7 +10,19 @@
 //   toggle NAME K       write it K times, alternating, as fast as possible
 //   delete NAME         delete a tag's node; add NAME 0|1 adds it (back)
 //   level N             say N as the server's ServiceLevel (redundancy)
+//   alarm NAME SEV MSG  make the alarm NAME (AlarmConditionType ns=URI;
+//                       s=Press.NAME, source the object Press, made on
+//                       first use) active and unacknowledged, Severity SEV
+//                       (1..1000), Message MSG (the rest of the line): an
+//                       event, a new one each time
+//   normal NAME         make it inactive: an event (none if it was), still
+//                       retained while unacknowledged
+//   hmi-ack NAME USER COMMENT   acknowledge it from the server, ClientUserId
+//                       USER, Comment COMMENT (the rest): an event (none if
+//                       it was acknowledged)
 //   quit
+// A client's Acknowledge of an alarm, once done, is told as "acknowledged
+// NAME COMMENT". node-opcua drops Retain on acknowledging, active or not.
 "use strict";
 const fs = require("fs");
 const path = require("path");
@@ -107,6 +119,37 @@ async function main() {
   for (let i = 0; i < Number(n); i++) {
     add(`T${i}`, true);
   }
+  // Alarms & Conditions: Press, an event notifier under Objects and an
+  // event source of the Server object (HasEventSource: node-opcua wants
+  // exactly that of a condition's source, HasNotifier won't do), is the
+  // source of the alarms, made on demand.
+  const addressSpace = server.engine.addressSpace;
+  // Binds Acknowledge (i=9111) and ConditionRefresh (i=3875) on the types.
+  addressSpace.installAlarmsAndConditionsService();
+  const press = ns.addObject({
+    organizedBy: addressSpace.rootFolder.objects, browseName: "Press", nodeId: "s=Press",
+    eventNotifier: 1, eventSourceOf: addressSpace.rootFolder.objects.server,
+  });
+  const alarms = new Map();
+  let hmiAck = false;
+  const alarmOf = (name) => {
+    if (!alarms.has(name)) {
+      const a = ns.instantiateAlarmCondition("AlarmConditionType", {
+        componentOf: press, conditionSource: press, browseName: name, nodeId: `s=Press.${name}`,
+        conditionName: name, inputNode: addressSpace.resolveNodeId("i=0"),
+      });
+      // node-opcua would name the source "N:Press", its qualified name.
+      a.setSourceName("Press");
+      // Told once node-opcua has acknowledged it, events raised.
+      a.on("acknowledged", (_eventId, comment) => {
+        if (!hmiAck) {
+          setImmediate(() => console.log(`acknowledged ${name} ${comment?.text ?? ""}`));
+        }
+      });
+      alarms.set(name, a);
+    }
+    return alarms.get(name);
+  };
   // Say when a subscription outlives its lifetime without publish
   // requests (a client cut off): the server drops it.
   server.on("create_session", (session) => {
@@ -124,6 +167,9 @@ async function main() {
   for await (const line of rl) {
     const [cmd, name, arg] = line.trim().split(/\s+/);
     const v = tags.get(name);
+    // The line's words from the K-th on, as written.
+    const rest = (k) => line.trim().split(/\s+/).length > k
+      ? line.trim().replace(new RegExp(`^(?:\\S+\\s+){${k}}`), "") : "";
     if (cmd === "set" && v) {
       v.setValueFromSource(new Variant({ dataType: DataType.Boolean, value: arg === "1" }));
     } else if (cmd === "toggle" && v) {
@@ -143,6 +189,27 @@ async function main() {
       const level = Number(name);
       const node = server.engine.addressSpace.findNode("ns=0;i=2267");
       node.bindVariable({ get: () => new Variant({ dataType: DataType.Byte, value: level }) }, true);
+    } else if (cmd === "alarm" && name && Number(arg) >= 1 && Number(arg) <= 1000) {
+      const a = alarmOf(name);
+      a.activateAlarm();
+      a.raiseNewCondition({ severity: Number(arg), message: rest(3), retain: true });
+    } else if (cmd === "normal" && alarms.get(name)?.currentBranch().getActiveState()) {
+      const a = alarms.get(name);
+      const b = a.currentBranch();
+      a.deactivateAlarm(!b.getAckedState());
+      a.raiseNewCondition({ severity: b.getSeverity(), message: b.getMessage() });
+    } else if (cmd === "hmi-ack" && alarms.has(name) && arg) {
+      const a = alarms.get(name);
+      const b = a.currentBranch();
+      if (!b.getAckedState()) {
+        b.setClientUserId(arg);
+        hmiAck = true;
+        try {
+          a.acknowledgeAndAutoConfirmBranch(b, rest(3));
+        } finally {
+          hmiAck = false;
+        }
+      }
     } else if (cmd === "quit") {
       break;
     }

@@ -129,6 +129,9 @@ impl CellLoop {
                     cmd.action
                 ))
             }
+            Ok(()) if cmd.action == Action::Ack && self.engine.is_condition(&cmd.alarm) => {
+                return self.acknowledge_at_plc(base, reply).await;
+            }
             Ok(()) => match cmd.action {
                 Action::Ack => self
                     .engine
@@ -298,7 +301,7 @@ impl CellLoop {
         };
         self.dispatch(now, Input::Command(request), Step::default(), 0)
             .await;
-        let written = self.write_when_journaled(tag, Write::Value(value), WRITE_TIMEOUT);
+        let written = self.write_when_journaled(Some(tag), Write::Value(value), WRITE_TIMEOUT);
         let back = self.written_tx.clone();
         self.start_task(async move {
             let _ = back
@@ -314,7 +317,7 @@ impl CellLoop {
     /// `limit`. Not written while the journal cannot write.
     pub(super) fn write_when_journaled(
         &self,
-        tag: usize,
+        tag: Option<usize>,
         what: Write,
         limit: Duration,
     ) -> impl Future<Output = Result<String, String>> + Send + 'static {

@@ -101,8 +101,11 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
         Some(r) => engine.recording(r.clone()),
         None => engine,
     };
+    // The PLC's own alarms (`[[opcua.events]]`), by their ids' prefixes.
+    let conditions = config.opcua.iter().flat_map(|ua| &ua.events);
     Ok(engine
         .relating(relation, config.consequences.suppress)
+        .taking_conditions(conditions.map(|e| e.prefix.clone()))
         .trusting_source_time(trust)
         .commenting(comments)
         .counting(config.part_counting())

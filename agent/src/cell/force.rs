@@ -274,7 +274,8 @@ impl CellLoop {
         };
         // The request row, with the nonce, is on disk before the switch
         // is touched.
-        let written = self.write_when_journaled(switch, Write::Pulse(pulse), WRITE_TIMEOUT + pulse);
+        let written =
+            self.write_when_journaled(Some(switch), Write::Pulse(pulse), WRITE_TIMEOUT + pulse);
         self.start_task(async move {
             let w = match written.await {
                 Ok(d) => done(true, d),
@@ -306,6 +307,12 @@ impl CellLoop {
         self.record(record).await;
         match then {
             Then::Answer => {
+                let _ = reply.send(outcome);
+            }
+            Then::Acknowledge => {
+                if ok {
+                    self.acknowledged_at_plc(&failed).await;
+                }
                 let _ = reply.send(outcome);
             }
             Then::Stop | Then::Force if !ok => {

@@ -17,6 +17,7 @@ mod commands;
 pub mod compile;
 pub mod force;
 pub mod forcing;
+mod plc;
 mod reload;
 pub mod restore;
 pub mod swap;
@@ -149,6 +150,9 @@ enum Then {
     Force,
     /// Record the stop's result and answer.
     Stop,
+    /// Acknowledge the PLC's alarm in cellwatch too (if the PLC took it),
+    /// then answer.
+    Acknowledge,
 }
 
 pub use crate::config::DEFAULT_MAX_SHELVE;
@@ -512,6 +516,17 @@ impl CellLoop {
             SourceEvent::Problem { id, problem } => (
                 Input::System,
                 self.engine.on_system(&id, problem.as_deref(), now),
+            ),
+            SourceEvent::Conditions(events) => {
+                for c in events {
+                    let step = self.engine.on_condition(c, now);
+                    self.dispatch(now, Input::Readings, step, queue_depth).await;
+                }
+                return;
+            }
+            SourceEvent::ConditionsHeld { prefix, held } => (
+                Input::Readings,
+                self.engine.on_conditions_held(&prefix, &held, now),
             ),
             SourceEvent::Resumed => (Input::Readings, self.engine.on_resumed(now)),
             SourceEvent::Gap { tags, values, why } => {

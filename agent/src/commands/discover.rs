@@ -761,5 +761,6 @@ pub(crate) fn connection(
         verify_interval: OpcUaConfig::DEFAULT_VERIFY_INTERVAL,
         reverse_listen: None,
         redundant: Vec::new(),
+        events: Vec::new(),
     })
 }

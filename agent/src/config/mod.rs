@@ -38,7 +38,7 @@ pub use checks::{
     MAX_FORCE_TIMEOUT,
 };
 pub use files::{tag_tables_beside, Disk, Files};
-pub use opcua::{Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy};
+pub use opcua::{EventSource, Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy};
 pub use problems::ConfigErrors;
 pub use tags::{key_chunk, tag_address, timer_signal, Addressing, Deadband, TagConfig};
 

@@ -153,6 +153,31 @@ pub struct OpcUaConfig {
     /// `endpoint` and these says the highest `ServiceLevel`, and moves to
     /// another when it drops or degrades.
     pub redundant: Vec<String>,
+    /// Where the PLC's own alarms are read from (`[[opcua.events]]`): each
+    /// condition the server reports there is an alarm of the cell.
+    pub events: Vec<EventSource>,
+}
+
+/// A notifier whose Alarms & Conditions events are the cell's alarms
+/// (`[[opcua.events]]`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct EventSource {
+    /// The node whose events are read (`source`; the Server object,
+    /// `i=2253`, by default: every event of the server).
+    pub source: crate::config::node::TagNode,
+    /// The alarms' ids start with this and `-` (`prefix`, `plc` by
+    /// default).
+    pub prefix: String,
+    /// Events of a lower severity (1–1000) are not alarms
+    /// (`min_severity`, 1 by default).
+    pub min_severity: u16,
+}
+
+impl EventSource {
+    /// The Server object: every event the server reports.
+    pub const SERVER: &'static str = "i=2253";
+    /// `prefix` unless configured.
+    pub const DEFAULT_PREFIX: &'static str = "plc";
 }
 
 impl OpcUaConfig {

@@ -166,6 +166,17 @@ pub(crate) struct RawOpcUa {
     pub(crate) reverse_listen: Option<Spanned<String>>,
     #[serde(default)]
     pub(crate) redundant: Vec<Spanned<String>>,
+    #[serde(default)]
+    pub(crate) events: Vec<Spanned<RawEvents>>,
+}
+
+/// `[[opcua.events]]`: the PLC's own alarms, read from a notifier.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawEvents {
+    pub(crate) source: Option<Spanned<String>>,
+    pub(crate) prefix: Option<Spanned<String>>,
+    pub(crate) min_severity: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Deserialize)]

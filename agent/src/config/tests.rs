@@ -436,6 +436,7 @@ fn shipped_configs_parse() {
 
 mod checks;
 mod consequences;
+mod events;
 
 #[test]
 fn alertmanager_urls_tls_and_interval_are_checked() {

@@ -80,6 +80,19 @@ pub enum SourceEvent {
     /// before the cut stands until a change says otherwise. Sent before
     /// those changes.
     Resumed,
+    /// Events of the PLC's own alarms (OPC UA Alarms & Conditions), in
+    /// the order the server sent them.
+    Conditions(Vec<cellwatch_models::engine::PlcCondition>),
+    /// The conditions the server holds now for the notifier of alarm-id
+    /// prefix `prefix` (its answer to a refresh, told after their events):
+    /// any other alarm of that prefix has ended and been acknowledged at
+    /// the PLC.
+    ConditionsHeld {
+        /// The notifier's alarm-id prefix.
+        prefix: String,
+        /// The alarm ids of the conditions it holds.
+        held: Vec<String>,
+    },
     /// Changes were lost for good (a sequence gap the server could not
     /// fill, values dropped from a full queue): sent before the values
     /// that follow the gap.
@@ -101,8 +114,9 @@ pub type SourceSender = mpsc::Sender<SourceEvent>;
 /// authorised by the cell loop.
 #[derive(Debug)]
 pub struct WriteRequest {
-    /// The tag written (index into the cell's tags).
-    pub tag: usize,
+    /// The tag written (index into the cell's tags); `None` for what
+    /// names its own target (an acknowledgement).
+    pub tag: Option<usize>,
     /// What to write.
     pub what: Write,
     /// What the PLC answered (`Ok`: done), or why it was not done.
@@ -118,6 +132,14 @@ pub enum Write {
     /// A push button: the Boolean tag on for this long, then off, each
     /// read back (the force and stop switches of paper 004, over OPC UA).
     Pulse(std::time::Duration),
+    /// An operator's acknowledgement of one of the PLC's own alarms: the
+    /// condition's `Acknowledge` method, with `comment` saying who.
+    Acknowledge {
+        /// The alarm's id.
+        alarm: String,
+        /// Who acknowledged it, and where.
+        comment: String,
+    },
 }
 
 /// Where the cell loop hands writes to its source.

@@ -37,6 +37,7 @@
 
 mod alarms;
 pub mod checks;
+mod conditions;
 pub mod recorder;
 pub mod state;
 pub mod switching;
@@ -46,6 +47,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
 pub use checks::{CheckSet, Declared, Finding, Observation, WindowPosition};
+pub use conditions::{PlcCondition, ACKED_AT_PLC};
 pub use recorder::{
     Cut, RecordedSignal, RecorderConfig, RecorderFill, Recording, Sample, Truncated,
 };
@@ -489,6 +491,9 @@ pub struct CellEngine {
     recorder: Option<Box<Recorder>>,
     /// When the machine state last changed (its history row's time).
     state_at: u64,
+    /// The PLC's conditions are alarms whose ids start with one of these
+    /// (`<prefix>-`).
+    conditions: Vec<String>,
 }
 
 impl CellEngine {
@@ -641,6 +646,7 @@ impl CellEngine {
             order_tags: (None, None),
             order: Order::default(),
             recorder: None,
+            conditions: Vec::new(),
         })
     }
 
@@ -847,9 +853,15 @@ impl CellEngine {
     }
 
     /// Whether this engine can raise alarm `id`: one its checks declared,
-    /// or `communication` or `tag-quality`. (System alarms are the
+    /// `communication` or `tag-quality`, or a PLC condition of a prefix it
+    /// takes ([`CellEngine::taking_conditions`]). (System alarms are the
     /// agent's: [`CellEngine::on_system`] takes any id.)
     pub fn can_raise(&self, id: &str) -> bool {
+        self.can_raise_own(id) || self.is_condition(id)
+    }
+
+    /// [`CellEngine::can_raise`] but for the PLC's conditions.
+    fn can_raise_own(&self, id: &str) -> bool {
         matches!(id, "communication" | "tag-quality") || self.alarms.is_declared(id)
     }
 

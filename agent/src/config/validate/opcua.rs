@@ -5,8 +5,11 @@ use std::time::Duration;
 use toml::Spanned;
 
 use super::Validator;
+use crate::config::node::TagNode;
 use crate::config::raw;
-use crate::config::{Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy};
+use crate::config::{
+    EventSource, Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy,
+};
 
 impl Validator<'_> {
     pub(super) fn opcua(&mut self, raw: raw::RawOpcUa) -> Option<OpcUaConfig> {
@@ -206,7 +209,9 @@ impl Validator<'_> {
                 redundant.push(url);
             }
         }
+        let events = self.events(&raw.events, namespace_uri.as_ref().map(|(_, u)| u.as_str()));
         Some(OpcUaConfig {
+            events,
             redundant,
             endpoint,
             policy,
@@ -223,6 +228,74 @@ impl Validator<'_> {
             verify_interval,
             reverse_listen,
         })
+    }
+
+    /// `[[opcua.events]]`: each notifier once, each prefix once and a key
+    /// chunk, severities within 1–1000.
+    fn events(
+        &mut self,
+        raw: &[Spanned<raw::RawEvents>],
+        namespace_uri: Option<&str>,
+    ) -> Vec<EventSource> {
+        let mut events: Vec<EventSource> = Vec::new();
+        for (i, e) in raw.iter().enumerate() {
+            let key = |k: &str| format!("opcua.events[{i}].{k}");
+            let e_span = e.span();
+            let e = e.get_ref();
+            let (text, span) = match &e.source {
+                Some(s) => (s.get_ref().trim().to_string(), s.span()),
+                None => (EventSource::SERVER.to_string(), e_span.clone()),
+            };
+            let source = match TagNode::parse(&text, namespace_uri) {
+                Ok(n) => n,
+                Err(why) => {
+                    self.problem(span, &key("source"), why);
+                    continue;
+                }
+            };
+            let (prefix, prefix_span) = match &e.prefix {
+                Some(p) => (p.get_ref().clone(), p.span()),
+                None => (EventSource::DEFAULT_PREFIX.to_string(), e_span.clone()),
+            };
+            if !crate::config::key_chunk(&prefix) {
+                self.problem(
+                    prefix_span,
+                    &key("prefix"),
+                    format!("'{prefix}' must be letters, digits, - and _ only (it begins the alarms' ids)"),
+                );
+                continue;
+            }
+            let min_severity = match &e.min_severity {
+                None => 1,
+                Some(v) => match u16::try_from(*v.get_ref()) {
+                    Ok(s @ 1..=1000) => s,
+                    _ => {
+                        self.problem(
+                            v.span(),
+                            &key("min_severity"),
+                            "an OPC UA severity: 1 to 1000",
+                        );
+                        continue;
+                    }
+                },
+            };
+            if events.iter().any(|o| o.source == source) {
+                self.problem(span, &key("source"), format!("'{text}' is read twice"));
+            } else if events.iter().any(|o| o.prefix == prefix) {
+                self.problem(
+                    prefix_span,
+                    &key("prefix"),
+                    format!("'{prefix}' is used twice"),
+                );
+            } else {
+                events.push(EventSource {
+                    source,
+                    prefix,
+                    min_severity,
+                });
+            }
+        }
+        events
     }
 
     /// `opcua.reverse_listen`: `opc.tcp://ADDRESS:PORT` with an IP address

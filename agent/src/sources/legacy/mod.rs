@@ -681,12 +681,16 @@ async fn write_one(
     w: WriteRequest,
 ) -> Result<(), String> {
     let frame = match &w.what {
-        Write::Value(value) => tags
-            .get(w.tag)
+        Write::Value(value) => w
+            .tag
+            .and_then(|t| tags.get(t))
             .ok_or_else(|| "no such tag".to_string())
             .and_then(|t| BusNode::parse(&t.node_id))
             .and_then(|node| write_frame(node, value)),
         Write::Pulse(_) => Err("an @ unit takes item writes, not switch pulses".to_string()),
+        Write::Acknowledge { .. } => {
+            Err("an @ unit has no alarms of its own to acknowledge".to_string())
+        }
     };
     let frame = match frame {
         Ok(f) => f,

@@ -4,6 +4,7 @@
 
 use std::sync::Arc;
 
+use super::conditions::Conditions;
 use super::names::Names;
 use super::{delivery, subscription};
 use crate::config::node::TagNode;
@@ -23,6 +24,8 @@ pub(super) struct Context {
     /// The delivery of the subscription in place, paused when the
     /// connection is lost.
     pub(super) delivery: std::sync::Mutex<Option<delivery::Shared>>,
+    /// The PLC's own alarms (`opcua.events`), across subscriptions.
+    pub(super) conditions: Arc<std::sync::Mutex<Conditions>>,
 }
 
 impl Context {
@@ -61,6 +64,7 @@ impl Context {
             names: tags.names,
             tx,
             delivery: std::sync::Mutex::new(None),
+            conditions: Arc::new(std::sync::Mutex::new(Conditions::new(&config.events))),
         }
     }
 }

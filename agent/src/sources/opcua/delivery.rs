@@ -10,11 +10,13 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use cellwatch_models::engine::{Reading, TagReading};
 use opcua::client::{MonitoredItemMap, OnSubscriptionNotificationCore};
 use opcua::types::{
-    DataChangeNotification, DataValue, NotificationMessage, StatusChangeNotification, StatusCode,
+    DataChangeNotification, DataValue, EventFieldList, EventNotificationList, NotificationMessage,
+    StatusChangeNotification, StatusCode,
 };
 use tokio::sync::mpsc::error::TrySendError;
 use tokio::sync::Notify;
 
+use super::conditions::Conditions;
 use super::items::{Items, Standing};
 use super::names::Names;
 use super::overflow::Overflow;
@@ -144,16 +146,28 @@ impl OnSubscriptionNotificationCore for Feed {
     }
 }
 
+/// Where a delivery tells what it has, and what it reads it with: the
+/// tags' names, the PLC's alarms.
+pub(super) struct Told {
+    pub(super) tx: SourceSender,
+    pub(super) names: Arc<Names>,
+    pub(super) conditions: Arc<Mutex<Conditions>>,
+}
+
 /// A delivery for a subscription about to be created.
 pub(super) fn delivery(
     monitored: Arc<Monitored>,
     uses: Arc<Uses>,
-    tx: SourceSender,
+    told: Told,
     heard: Arc<Heard>,
-    names: Arc<Names>,
     queue_size: Arc<AtomicU32>,
     overflow_clear_after: std::time::Duration,
 ) -> Shared {
+    let Told {
+        tx,
+        names,
+        conditions,
+    } = told;
     let items = Arc::new(Mutex::new(Items::new(monitored.len())));
     let failed = Arc::new(Notify::new());
     Shared {
@@ -172,6 +186,7 @@ pub(super) fn delivery(
                 overflow: Overflow::new(overflow_clear_after),
                 items: items.clone(),
                 failed: failed.clone(),
+                conditions,
             },
         })),
         missing: Arc::new(Notify::new()),
@@ -201,6 +216,8 @@ struct InTimeOrder {
     items: Arc<Mutex<Items>>,
     /// Woken when a monitored item fails.
     failed: Arc<Notify>,
+    /// The PLC's own alarms, read from the publishes' events.
+    conditions: Arc<Mutex<Conditions>>,
 }
 
 /// One publish's readings, in the server's order.
@@ -217,6 +234,8 @@ struct Collector<'a> {
     lost: u64,
     /// A bad status change: the server closed the subscription.
     closed: Option<StatusCode>,
+    /// Events (the PLC's alarms), in the server's order.
+    events: Vec<EventFieldList>,
 }
 
 impl Collector<'_> {
@@ -230,6 +249,10 @@ impl Collector<'_> {
                 self.readings.reserve(items.len());
                 for n in items {
                     self.data_value(n.client_handle, n.value);
+                }
+            } else if obj.inner_is::<EventNotificationList>() {
+                if let Some(list) = obj.into_inner_as::<EventNotificationList>() {
+                    self.events.extend(list.events.unwrap_or_default());
                 }
             } else if obj.inner_is::<StatusChangeNotification>() {
                 if let Some(status) = obj.into_inner_as::<StatusChangeNotification>() {
@@ -318,6 +341,7 @@ impl InTimeOrder {
             overflowed: BTreeSet::new(),
             lost: 0,
             closed: None,
+            events: Vec::new(),
         };
         c.notification(notification);
         if c.failed {
@@ -328,9 +352,17 @@ impl InTimeOrder {
             overflowed,
             lost,
             closed,
+            events,
             ..
         } = c;
         drop(items);
+        // The PLC's alarms after the values of the same publish.
+        let conditions = (!events.is_empty()).then(|| {
+            self.conditions
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .events(events, crate::clock::now_ms())
+        });
         if let Some(status) = closed {
             // The supervisor sees it and subscribes again.
             tracing::warn!(%status, "the server closed the subscription");
@@ -357,8 +389,8 @@ impl InTimeOrder {
             }
         });
         if readings.is_empty() {
-            if let Some(p) = problem {
-                send_blocking(&self.tx, p);
+            for e in problem.into_iter().chain(conditions.into_iter().flatten()) {
+                send_blocking(&self.tx, e);
             }
             return;
         }
@@ -387,8 +419,8 @@ impl InTimeOrder {
             &self.tx,
             SourceEvent::Readings(crate::sources::Batch { readings, received }),
         );
-        if let Some(p) = problem {
-            send_blocking(&self.tx, p);
+        for e in problem.into_iter().chain(conditions.into_iter().flatten()) {
+            send_blocking(&self.tx, e);
         }
         self.heard.beat();
         self.heard.busy.store(false, Ordering::Relaxed);

@@ -39,6 +39,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 mod client;
+mod conditions;
 mod context;
 mod delivery;
 mod items;
@@ -61,6 +62,7 @@ pub use names::Names;
 pub use once::{connect_once, server_identity, ServerIdentity};
 use switches::{pulse, reset_switches, Writes};
 
+pub use conditions::EVENTS_ALARM;
 pub use subscription::{reading, OVERFLOW_ALARM};
 
 use futures_util::future::BoxFuture;
@@ -141,7 +143,7 @@ impl Source for OpcUaSource {
     }
 
     fn writer(&mut self) -> Option<WriteSender> {
-        if self.switches.is_empty() {
+        if self.switches.is_empty() && self.config.events.is_empty() {
             return None;
         }
         let (tx, rx) = mpsc::channel(WRITE_CAPACITY);
@@ -337,7 +339,16 @@ async fn run_writing(
                     return Ok(());
                 }
                 Some(w) = writes.next() => {
-                    let checked = match (&w.what, writes.switches.get(&w.tag), ctx.nodes.get(w.tag).cloned().flatten()) {
+                    if let Write::Acknowledge { alarm, comment } = &w.what {
+                        let (session, ctx, alarm, comment) = (session.clone(), ctx.clone(), alarm.clone(), comment.clone());
+                        pulses.spawn(async move {
+                            let done = conditions::acknowledge(&session, &ctx.conditions, &alarm, &comment).await;
+                            let _ = w.reply.send(done);
+                        });
+                        continue;
+                    }
+                    let node = w.tag.and_then(|t| ctx.nodes.get(t).cloned().flatten());
+                    let checked = match (&w.what, w.tag.and_then(|t| writes.switches.get(&t)), node) {
                         (Write::Pulse(held), Some(name), Some(node)) => Ok((*held, name.clone(), node)),
                         (Write::Value(_), _, _) => Err("this OPC UA source writes only the charts' force and stop switches".to_string()),
                         _ => Err("not a switch of this cell".to_string()),
@@ -704,12 +715,16 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
     ));
     // What the server granted, which may be less than asked.
     let queue_size = Arc::new(AtomicU32::new(ctx.config.queue_size));
+    let told = delivery::Told {
+        tx: ctx.tx.clone(),
+        names: ctx.names.clone(),
+        conditions: ctx.conditions.clone(),
+    };
     let shared = delivery::delivery(
         nodes.clone(),
         ctx.uses.clone(),
-        ctx.tx.clone(),
+        told,
         heard.clone(),
-        ctx.names.clone(),
         queue_size.clone(),
         ctx.config.overflow_clear_after,
     );
@@ -727,6 +742,14 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
     )
     .await?;
     shared.lock().id = subscription.id;
+    conditions::follow(
+        session,
+        subscription.id,
+        &ctx.conditions,
+        &namespaces,
+        &ctx.tx,
+    )
+    .await;
     *ctx.delivery.lock().unwrap_or_else(|e| e.into_inner()) = Some(shared.clone());
     Some(Live {
         subscription,

@@ -1,0 +1,83 @@
+//! The PLC's own alarms in the cell loop: an operator's acknowledgement of
+//! one is the PLC's first. Its request row is journaled and committed, the
+//! source calls the condition's `Acknowledge` method (with the operator in
+//! its comment), and only when the PLC has taken it is the alarm
+//! acknowledged in cellwatch, by that operator; a refusal is the
+//! command's, with the PLC's reason. An acknowledgement made at the PLC
+//! (an HMI's) comes back as the condition's event.
+
+use tokio::sync::oneshot;
+
+use super::{CellLoop, CommandOutcome, CommandRecord, Input, Stage, Then, Written, WRITE_TIMEOUT};
+use crate::sources::Write;
+use cellwatch_models::engine::Step;
+
+impl CellLoop {
+    /// Carries out an authorised acknowledgement of PLC alarm
+    /// `record.alarm`; answered once the PLC has said and it is journaled.
+    pub(super) async fn acknowledge_at_plc(
+        &mut self,
+        record: CommandRecord,
+        reply: oneshot::Sender<CommandOutcome>,
+    ) {
+        let now = self.clock.now_ms();
+        let alarm = record.alarm.clone();
+        let refused = match self.engine.alarms().find(|a| a.id == alarm) {
+            None => Some(format!("unknown alarm '{alarm}'")),
+            Some(a) if a.acknowledged => Some(format!("{alarm} is already acknowledged")),
+            Some(_) if self.writer.is_none() => Some("this cell's source takes no writes".into()),
+            Some(_) => None,
+        };
+        if let Some(why) = refused {
+            let record = CommandRecord {
+                verified: true,
+                ..record.saying(false, &why)
+            };
+            let outcome = CommandOutcome::new(false, why);
+            self.dispatch(now, Input::Command(record), Step::default(), 0)
+                .await;
+            let _ = reply.send(outcome);
+            return;
+        }
+        let request = CommandRecord {
+            stage: Stage::Request,
+            verified: true,
+            ..record.clone().saying(
+                true,
+                &format!(
+                    "acknowledge {alarm} at the PLC, asked by {}",
+                    record.operator
+                ),
+            )
+        };
+        self.dispatch(now, Input::Command(request), Step::default(), 0)
+            .await;
+        let comment = format!("acknowledged in cellwatch by {}", record.operator);
+        let written =
+            self.write_when_journaled(None, Write::Acknowledge { alarm, comment }, WRITE_TIMEOUT);
+        let back = self.written_tx.clone();
+        let record = CommandRecord {
+            verified: true,
+            ..record
+        };
+        self.start_task(async move {
+            let w = Written {
+                then: Then::Acknowledge,
+                ..Written::answer(record, written.await, reply)
+            };
+            let _ = back.send(w).await;
+        });
+    }
+
+    /// The PLC took the acknowledgement: the alarm is acknowledged in
+    /// cellwatch by the operator (unless the PLC's event said so first).
+    pub(super) async fn acknowledged_at_plc(&mut self, record: &CommandRecord) {
+        let now = self.clock.now_ms();
+        if let Ok(step) = self
+            .engine
+            .acknowledge(&record.alarm, &record.operator, now)
+        {
+            self.dispatch(now, Input::Readings, step, 0).await;
+        }
+    }
+}

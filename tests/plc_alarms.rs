@@ -1,0 +1,181 @@
+//! The PLC's own alarms (OPC UA Alarms & Conditions) as the cell's: a
+//! node-opcua server's conditions on its `Press` object, read by the whole
+//! agent (SignAndEncrypt, Zenoh with TLS, SQLite), acknowledged by an
+//! operator through cellwatch (the condition's `Acknowledge` at the PLC
+//! first) and at the PLC (an HMI's).
+
+use cellwatch::config::{self, CellConfig};
+use cellwatch::operator::Action;
+use cellwatch::payload::AlarmPayload;
+use cellwatch::sources::pki;
+use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
+
+use crate::agent::alarm_until;
+use crate::interop::{trusted_by_server, NodeServer, URI};
+use crate::spawned::{send, signed};
+
+/// A cell of two node-opcua tags, one discrete alarm of its own, and the
+/// server's conditions as alarms `plc-…`.
+fn cell(dir: &std::path::Path, port: u16) -> CellConfig {
+    crate::util::bus_pki(dir, &["agent-m01ps0004"]);
+    let tls = crate::util::bus_tls(dir, "agent-m01ps0004");
+    let text = format!(
+        r#"
+[cell]
+id = "m01ps0004"
+
+[opcua]
+endpoint = "opc.tcp://127.0.0.1:{port}/"
+pki_dir = "agent-pki"
+publishing_interval = "100ms"
+
+[[opcua.events]]
+# The Server object: every condition the server reports.
+min_severity = 100
+
+[[tags]]
+name = "door"
+node_id = "nsu={URI};s=T0"
+address = "T0"
+
+[[checks.discrete]]
+id = "door-open"
+tag = "door"
+fault_when = "off"
+
+[journal]
+path = "journal.sqlite"
+
+[zenoh]
+listen = ["quic/127.0.0.1:0"]
+signing_key = "agent.key"
+tls = {{ ca = "{}", cert = "{}", key = "{}" }}
+"#,
+        tls.ca.display(),
+        tls.cert.display(),
+        tls.key.display()
+    );
+    let mut c = config::parse("cell.toml", &text, dir, &config::Disk).unwrap();
+    let secrets = dir.join("operators.toml");
+    std::fs::write(&secrets, crate::spawned::operators_file(&Action::ALL)).unwrap();
+    c.operators_file = Some(secrets);
+    c
+}
+
+async fn said(server: NodeServer, command: String) -> NodeServer {
+    tokio::task::spawn_blocking(move || {
+        let mut server = server;
+        server.send(&command);
+        server
+    })
+    .await
+    .unwrap()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_plcs_own_alarms_are_the_cells_acknowledged_at_the_plc_first() {
+    crate::network_cut::logs();
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path().to_path_buf();
+    let server_pki = dir.join("server-pki");
+    let port = crate::util::restartable_port();
+    // The agent's certificate names the cell in its application URI.
+    let made = crate::opcua::opcua_config("opc.tcp://127.0.0.1:1/", &dir.join("agent-pki"));
+    drop(cellwatch::sources::opcua::client("m01ps0004", &made).unwrap());
+    trusted_by_server(&dir.join("agent-pki"), &server_pki);
+    let server = tokio::task::spawn_blocking({
+        let server_pki = server_pki.clone();
+        move || NodeServer::start(port, &server_pki, 1)
+    })
+    .await
+    .unwrap();
+    // Active before the agent subscribes: found by the refresh.
+    let server = said(
+        server,
+        "alarm Overpressure 700 Hydraulic pressure above 210 bar".into(),
+    )
+    .await;
+    let config = cell(&dir, port);
+    pki::trust(&server.cert, &config.opcua.as_ref().unwrap().pki_dir).unwrap();
+    let agent = cellwatch::agent::start(config, None).await.unwrap();
+    let zenoh_port = crate::util::agent_port(&agent).await;
+    let client = crate::util::operator_session(&dir, "operator-kim", zenoh_port).await;
+    let sub = client
+        .declare_subscriber("cellwatch/m01ps0004/alarms/*")
+        .history(HistoryConfig::default().detect_late_publishers())
+        .recovery(RecoveryConfig::default().heartbeat())
+        .await
+        .unwrap();
+    let mut seen: Vec<AlarmPayload> = Vec::new();
+    let over = "plc-Press-Overpressure";
+    let raised = alarm_until(&sub, "the PLC's overpressure raised", &mut seen, |a| {
+        a.id == over && a.transition.as_str() == "raised"
+    })
+    .await;
+    assert_eq!(raised.kind.as_str(), "plc");
+    assert_eq!(raised.severity.as_str(), "high");
+    assert_eq!(raised.message, "Hydraulic pressure above 210 bar");
+    assert_eq!(raised.state.as_str(), "active_unacknowledged");
+
+    // Raised while the agent watches; below min_severity: not an alarm.
+    let server = said(server, "alarm Lube 50 Lubrication due".into()).await;
+    let server = said(server, "alarm Guard 300 Guard door open".into()).await;
+    let guard = "plc-Press-Guard";
+    let g = alarm_until(&sub, "the guard raised", &mut seen, |a| a.id == guard).await;
+    assert_eq!(
+        (
+            g.transition.as_str(),
+            g.severity.as_str(),
+            g.message.as_str()
+        ),
+        ("raised", "medium", "Guard door open")
+    );
+
+    // Kim acknowledges the overpressure in cellwatch: at the PLC first,
+    // with her name in the condition's comment.
+    let (ok, detail) = send(&client, &signed(Action::Ack, over)).await;
+    assert!(ok, "{detail}");
+    let server = tokio::task::spawn_blocking(move || {
+        let mut server = server;
+        let line = server.wait_for("acknowledged Overpressure");
+        assert_eq!(
+            line,
+            "acknowledged Overpressure acknowledged in cellwatch by kim"
+        );
+        server
+    })
+    .await
+    .unwrap();
+    let acked = alarm_until(&sub, "the overpressure acknowledged", &mut seen, |a| {
+        a.id == over && a.transition.as_str() == "acknowledged"
+    })
+    .await;
+    assert_eq!(acked.acked_by.as_deref(), Some("kim"));
+    // Once, not again when the PLC's event says so.
+    let (ok, detail) = send(&client, &signed(Action::Ack, over)).await;
+    assert!(!ok && detail.contains("already acknowledged"), "{detail}");
+
+    // Anna acknowledges the guard at the HMI; it returns to normal.
+    let server = said(server, "hmi-ack Guard anna door checked".into()).await;
+    let acked = alarm_until(&sub, "the guard acknowledged at the HMI", &mut seen, |a| {
+        a.id == guard && a.transition.as_str() == "acknowledged"
+    })
+    .await;
+    assert_eq!(acked.acked_by.as_deref(), Some("plc: anna"));
+    let server = said(server, "normal Guard".into()).await;
+    let cleared = alarm_until(&sub, "the guard cleared", &mut seen, |a| {
+        a.id == guard && a.transition.as_str() == "cleared"
+    })
+    .await;
+    assert_eq!(cleared.state.as_str(), "normal");
+
+    assert!(!seen.iter().any(|a| a.id.contains("Lube")), "{seen:#?}");
+    // An alarm the PLC does not hold cannot be acknowledged at it.
+    let (ok, detail) = send(&client, &signed(Action::Ack, "plc-Press-Nothing")).await;
+    assert!(!ok && detail.contains("unknown alarm"), "{detail}");
+
+    agent.stop().await;
+    tokio::task::spawn_blocking(move || server.stop())
+        .await
+        .unwrap();
+}
