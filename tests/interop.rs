@@ -11,9 +11,10 @@ use std::sync::Once;
 use std::time::Duration;
 
 use cellwatch::config::TagConfig;
-use cellwatch::sources::{opcua, pki, SourceEvent};
+use cellwatch::sources::{opcua, pki, Source, SourceEvent, QUEUE_CAPACITY};
 use cellwatch_models::engine::Reading;
 use cellwatch_models::signal::Signal;
+use futures_util::FutureExt;
 
 use crate::liveness::Running;
 use crate::network_cut::until;
@@ -505,4 +506,69 @@ async fn node_opcua_redundant_pair_the_source_moves_to_the_healthier_server() {
     })
     .await
     .unwrap();
+}
+
+/// Reverse connect (`opcua.reverse_listen`) with a server nobody here
+/// wrote: the agent listens on a port the system picks, node-opcua is told
+/// to dial it (a ReverseHello naming its endpoint, then the same secure
+/// channel and session as a dialled connection), and dials again whenever
+/// a connection ends (the agent asks the endpoints over the first and runs
+/// the session over the next): the source connects, reads T0, and a change
+/// made on the server arrives.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn node_opcua_reverse_connect_the_server_dials_the_agent() {
+    crate::network_cut::logs();
+    let dir = tempfile::tempdir().unwrap();
+    let server_pki = dir.path().join("server-pki");
+    let port = crate::util::restartable_port();
+    trusted_by_server(&dir.path().join("agent-pki"), &server_pki);
+    let server = tokio::task::spawn_blocking({
+        let server_pki = server_pki.clone();
+        move || NodeServer::start(port, &server_pki, 10)
+    })
+    .await
+    .unwrap();
+    // The endpoint the server names in its ReverseHello.
+    let mut config = opcua_config(
+        &format!("opc.tcp://127.0.0.1:{port}/"),
+        &dir.path().join("agent-pki"),
+    );
+    config.publishing_interval = Duration::from_millis(100);
+    config.reverse_listen = Some("127.0.0.1:0".parse().unwrap());
+    pki::trust(&server.cert, &config.pki_dir).unwrap();
+    let source = opcua::OpcUaSource::new("test", config, (0..10).map(tag).collect(), []);
+    let listening = source.listening().expect("bound when made");
+    assert_ne!(listening.port(), 0);
+    let (tx, mut rx) = tokio::sync::mpsc::channel(QUEUE_CAPACITY);
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let shutdown = async {
+        let _ = stopped.await;
+    };
+    let task = tokio::spawn(Box::new(source).run(tx, shutdown.boxed()));
+    let server = tokio::task::spawn_blocking(move || {
+        let mut server = server;
+        server.send(&format!("reverse opc.tcp://{listening}"));
+        server
+    })
+    .await
+    .unwrap();
+    // The first values may come before the connection is reported.
+    all(
+        &mut rx,
+        "connected over the server's connection, and T0's value",
+        &[&|e| matches!(e, SourceEvent::Connected(_)), &|e| {
+            has(e, 0, Reading::Good(true))
+        }],
+    )
+    .await;
+    let server = sent(server, "set T0 0").await;
+    next(&mut rx, "T0 = 0 over the server's connection", |e| {
+        has(e, 0, Reading::Good(false))
+    })
+    .await;
+    let _ = stop.send(());
+    task.await.unwrap().unwrap();
+    tokio::task::spawn_blocking(move || server.stop())
+        .await
+        .unwrap();
 }

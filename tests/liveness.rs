@@ -313,14 +313,36 @@ async fn relay(server: SocketAddr, mute: Arc<AtomicBool>) -> SocketAddr {
 }
 
 /// Cuts a relay's connections: while set, every connection is closed and
-/// new ones are refused.
-#[derive(Clone, Default)]
+/// new ones are refused. Or stalls them: while stalled, nothing is passed
+/// either way (what was sent waits in the sockets), then it all flows on.
+#[derive(Clone)]
 pub(crate) struct Cut {
     on: Arc<AtomicBool>,
     links: Arc<std::sync::Mutex<Vec<tokio::task::AbortHandle>>>,
+    stalled: Arc<tokio::sync::watch::Sender<bool>>,
+}
+
+impl Default for Cut {
+    fn default() -> Cut {
+        Cut {
+            on: Arc::default(),
+            links: Arc::default(),
+            stalled: Arc::new(tokio::sync::watch::channel(false).0),
+        }
+    }
 }
 
 impl Cut {
+    pub(crate) fn stall(&self, on: bool) {
+        self.stalled.send_replace(on);
+    }
+
+    /// Returns once traffic may flow.
+    async fn flowing(&self) {
+        let mut rx = self.stalled.subscribe();
+        let _ = rx.wait_for(|stalled| !stalled).await;
+    }
+
     pub(crate) fn set(&self, on: bool) {
         self.on.store(on, Ordering::SeqCst);
         if on {
@@ -348,9 +370,23 @@ pub(crate) async fn relay_with_cut(
             };
             let (mut cr, mut cw) = client.into_split();
             let (mut ur, mut uw) = upstream.into_split();
-            let up = tokio::spawn(async move { tokio::io::copy(&mut cr, &mut uw).await });
+            let flow = cut.clone();
+            let up = tokio::spawn(async move {
+                let mut buf = vec![0u8; 64 * 1024];
+                loop {
+                    let n = match cr.read(&mut buf).await {
+                        Ok(0) | Err(_) => break,
+                        Ok(n) => n,
+                    };
+                    flow.flowing().await;
+                    if uw.write_all(&buf[..n]).await.is_err() {
+                        break;
+                    }
+                }
+            });
             cut.links.lock().unwrap().push(up.abort_handle());
             let mute = mute.clone();
+            let flow = cut.clone();
             let down = tokio::spawn(async move {
                 let mut muted_requests = std::collections::HashSet::new();
                 let mut dropped = 0u32;
@@ -386,6 +422,7 @@ pub(crate) async fn relay_with_cut(
                         let n = u32::from_le_bytes(chunk[at..at + 4].try_into().unwrap());
                         chunk[at..at + 4].copy_from_slice(&n.wrapping_sub(dropped).to_le_bytes());
                     }
+                    flow.flowing().await;
                     if cw.write_all(&chunk).await.is_err() {
                         break;
                     }

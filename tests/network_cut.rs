@@ -135,6 +135,52 @@ async fn a_pulse_during_a_network_cut_arrives_in_order_through_the_taken_over_su
     sim.stop();
 }
 
+/// The traffic stalled (nothing passes either way, nothing is closed)
+/// for longer than the subscription's silence allows, while a limit switch
+/// opens and closes: what the server sent during the stall, arriving once
+/// it flows again, is delivered in order and nothing is said lost.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_pulse_during_a_stall_longer_than_the_silence_allowed_arrives_after_it() {
+    logs();
+    let dir = tempfile::tempdir().unwrap();
+    let (sim, mut config, _) = trusted_cnc(dir.path()).await;
+    let stall = Cut::default();
+    let via = relay_with_cut(sim.addr(), Arc::new(AtomicBool::new(false)), stall.clone()).await;
+    config.endpoint = format!("opc.tcp://{via}/");
+    let mut source = Running::start(config, vec![tag("X0.06"), tag("X0.04")]);
+    source.connected().await;
+    let before = cellwatch::clock::now_ms();
+    stall.stall(true);
+    sim.set("X0.06", false).unwrap();
+    tokio::time::sleep(Duration::from_millis(30)).await;
+    sim.set("X0.06", true).unwrap();
+    // Three keep-alive periods (1 s each at a 100 ms publishing interval)
+    // and more: the subscription is silent for longer than allowed.
+    tokio::time::sleep(Duration::from_secs(5)).await;
+    stall.stall(false);
+    let events = until(&mut source, "the pulse after the stall", |e| {
+        of_tag(std::slice::from_ref(e), 0)
+            .iter()
+            .any(|(r, t)| *r == Reading::Good(true) && *t >= before)
+    })
+    .await;
+    let pulse: Vec<Reading> = of_tag(&events, 0)
+        .into_iter()
+        .filter(|(_, t)| *t >= before)
+        .map(|(r, _)| r)
+        .collect();
+    assert_eq!(
+        pulse,
+        [Reading::Good(false), Reading::Good(true)],
+        "{events:?}"
+    );
+    for e in &events {
+        assert!(!matches!(e, SourceEvent::Gap { .. }), "{e:?}");
+    }
+    source.stop().await;
+    sim.stop();
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_subscription_the_server_dropped_during_a_cut_is_said_as_a_gap_before_the_values_after_it(
 ) {

@@ -20,6 +20,12 @@
 //   hmi-ack NAME USER COMMENT   acknowledge it from the server, ClientUserId
 //                       USER, Comment COMMENT (the rest): an event (none if
 //                       it was acknowledged)
+//   reverse URL         reverse connect (OPC UA Part 6 §7.1.3): dial the
+//                       client listening at URL (opc.tcp://HOST:PORT), send
+//                       it a ReverseHello naming this server's endpoint, and
+//                       dial again whenever that connection ends or a dial
+//                       fails (node-opcua's ReverseConnectManager: 5 s later,
+//                       doubling up to 60 s while dials fail), until quit
 //   quit
 // A client's Acknowledge of an alarm, once done, is told as "acknowledged
 // NAME COMMENT". node-opcua drops Retain on acknowledging, active or not.
@@ -27,7 +33,7 @@
 const fs = require("fs");
 const path = require("path");
 const readline = require("readline");
-const { OPCUAServer } = require("node-opcua-server");
+const { OPCUAServer, ReverseConnectManager } = require("node-opcua-server");
 const { SecurityPolicy, MessageSecurityMode } = require("node-opcua-secure-channel");
 const { DataType, Variant } = require("node-opcua-variant");
 const { OPCUACertificateManager } = require("node-opcua-certificate-manager");
@@ -163,6 +169,9 @@ async function main() {
   const derFile = path.join(pkiDir, "server.der");
   fs.writeFileSync(derFile, der);
   console.log(`ready ${derFile}`);
+  // Clients dialled (reverse connect), each by its own dial loop: what
+  // OPCUAServer starts for its reverseConnect option, started on demand.
+  const dialling = [];
   const rl = readline.createInterface({ input: process.stdin });
   for await (const line of rl) {
     const [cmd, name, arg] = line.trim().split(/\s+/);
@@ -210,11 +219,20 @@ async function main() {
           hmiAck = false;
         }
       }
+    } else if (cmd === "reverse" && name) {
+      const dialer = new ReverseConnectManager({
+        getDialEndpoint: () => server.endpoints[0],
+        getServerUri: () => server.serverInfo.applicationUri || "",
+        getEndpointUrl: () => server.getEndpointUrl(),
+      }, { connections: [{ endpointUrl: name }] });
+      dialer.start();
+      dialling.push(dialer);
     } else if (cmd === "quit") {
       break;
     }
     console.log(`done ${line.trim()}`);
   }
+  dialling.forEach((d) => d.stop());
   await server.shutdown(0);
   process.exit(0);
 }

@@ -243,6 +243,28 @@ mod tests {
     }
 
     #[test]
+    fn a_reload_carries_the_plcs_alarms_over_and_one_without_the_prefix_drops_them() {
+        let mut e = engine();
+        e.on_condition(event(true, None, 1_000), 1_000);
+        let mut next = engine();
+        let steps = next.take_over(e.carry_over(), 2_000);
+        let restored: Vec<_> = steps
+            .iter()
+            .flat_map(|s| s.alarms())
+            .map(|(a, t, _)| (a.id.clone(), t))
+            .collect();
+        assert_eq!(
+            restored,
+            [("plc-Press-Overpressure".to_string(), Transition::Restored)]
+        );
+        assert!(next.alarms().next().unwrap().active);
+        let mut without =
+            CellEngine::new("c1", Vec::new(), Vec::new(), StateRules::default()).unwrap();
+        without.take_over(e.carry_over(), 2_000);
+        assert_eq!(without.alarms().count(), 0);
+    }
+
+    #[test]
     fn only_ids_of_a_configured_prefix_are_conditions() {
         let mut e = engine();
         let mut other = event(true, None, 1_000);
