@@ -165,7 +165,7 @@ pub struct Agent {
     /// Operators' `configure reload`, for the runner.
     reload_asks: Option<mpsc::Receiver<crate::cell::swap::ReloadAsk>>,
     /// The running configuration's parts only a restart changes.
-    fixed: [u64; 11],
+    fixed: [u64; 12],
 }
 
 /// The parts of a configuration a reload takes by starting a source of its

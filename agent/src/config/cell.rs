@@ -119,6 +119,8 @@ pub struct CellConfig {
     pub delays: Vec<(String, u64, u64)>,
     /// Where alarms are pushed for people (`[alertmanager]`).
     pub alertmanager: Option<AlertmanagerConfig>,
+    /// The alarms served to SCADA clients over OPC UA (`[alarm_server]`).
+    pub alarm_server: Option<crate::config::AlarmServerConfig>,
     /// The alarm-performance rules (`[kpi]`): flood, chattering, stale.
     pub kpi: cellwatch_models::kpi::KpiRules,
     /// Alarms that follow from others (`[alarms.consequences]`).
@@ -134,7 +136,7 @@ pub struct CellConfig {
 /// says things, whom it talks to, what it reads. The tags and the source's
 /// settings are taken by starting a source of their own; the others only
 /// by a restart.
-pub const FIXED_PARTS: [&str; 11] = [
+pub const FIXED_PARTS: [&str; 12] = [
     "cell.id",
     "journal.path",
     "[opcua]",
@@ -142,6 +144,7 @@ pub const FIXED_PARTS: [&str; 11] = [
     "[zenoh]",
     "[metrics]",
     "[alertmanager]",
+    "[alarm_server]",
     "[kpi]",
     "commands.operators_file",
     "state.publish_interval",
@@ -153,7 +156,7 @@ impl CellConfig {
     /// between the running configuration and one read again, it names what
     /// changed beyond the checks. (Hashes of the parts' debug forms: the tags
     /// of a 100,000-tag cell are not kept twice for it.)
-    pub fn fixed_parts(&self) -> [u64; 11] {
+    pub fn fixed_parts(&self) -> [u64; 12] {
         use std::hash::{Hash, Hasher};
         let hash = |part: &dyn fmt::Debug| {
             let mut h = std::collections::hash_map::DefaultHasher::new();
@@ -177,6 +180,7 @@ impl CellConfig {
             hash(&self.zenoh),
             hash(&self.metrics),
             hash(&self.alertmanager),
+            hash(&self.alarm_server),
             hash(&self.kpi),
             hash(&self.operators_file),
             hash(&self.state_interval),

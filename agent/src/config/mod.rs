@@ -12,6 +12,7 @@
 //! Secrets never live in the file: an OPC UA password comes from an
 //! environment variable or a file, and an inline `password` is an error.
 
+mod alarm_server;
 mod alertmanager;
 mod bus;
 mod cell;
@@ -27,6 +28,7 @@ mod raw;
 mod tags;
 mod validate;
 
+pub use alarm_server::AlarmServerConfig;
 pub use alertmanager::{AlertmanagerConfig, AlertmanagerTls, DEFAULT_RESEND};
 pub use bus::{cell_prefix, link_problem, ZenohConfig, ZenohMode, ZenohTls, DEFAULT_ROOT};
 pub use cell::{

@@ -31,6 +31,7 @@ pub(crate) struct RawConfig {
     #[serde(default)]
     pub(crate) production: RawProduction,
     pub(crate) alertmanager: Option<Spanned<RawAlertmanager>>,
+    pub(crate) alarm_server: Option<Spanned<RawAlarmServer>>,
     #[serde(default)]
     pub(crate) kpi: RawKpi,
     #[serde(default)]
@@ -99,6 +100,15 @@ pub(crate) struct RawKpi {
     pub(crate) chatter_raises: Option<Spanned<i64>>,
     pub(crate) chatter_window: Option<Spanned<String>>,
     pub(crate) stale_after: Option<Spanned<String>>,
+}
+
+/// `[alarm_server]`: the alarms served over OPC UA.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawAlarmServer {
+    pub(crate) listen: Option<Spanned<String>>,
+    pub(crate) pki_dir: Option<Spanned<String>>,
+    pub(crate) users_file: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -726,3 +726,24 @@ fn a_studio_5000_export_is_a_cells_program() {
         Some("Y2: axis alarm lamp")
     );
 }
+
+#[test]
+fn alarm_server_listens_on_opc_tcp_with_a_users_file() {
+    let good = format!(
+        "{GOOD}\n[alarm_server]\nlisten = \"opc.tcp://0.0.0.0:4855\"\nusers_file = \"opcua-users.toml\"\n"
+    );
+    let c = parse("cell.toml", &good, Path::new("base"), &mem()).unwrap();
+    let s = c.alarm_server.unwrap();
+    assert_eq!(s.listen, "0.0.0.0:4855".parse().unwrap());
+    assert_eq!(s.users_file, PathBuf::from("base/opcua-users.toml"));
+    assert_eq!(s.pki_dir, PathBuf::from("base/alarm-server-pki"));
+    let bad = format!("{GOOD}\n[alarm_server]\nlisten = \"scada:4855\"\n");
+    assert_eq!(
+        errors(&bad),
+        [
+            "cell.toml:30:10: alarm_server.listen: 'scada:4855' is not like opc.tcp://0.0.0.0:4855",
+            "cell.toml:29:1: alarm_server.users_file: required: the file of the OPC UA users and the operators they act as",
+        ]
+        .join("\n")
+    );
+}

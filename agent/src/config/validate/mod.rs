@@ -3,6 +3,7 @@
 //! `Validator` walks the file; its methods are split by component over
 //! this folder's files.
 
+mod alarm_server;
 mod alarms;
 mod alertmanager;
 mod bus;
@@ -445,6 +446,7 @@ impl Validator<'_> {
         );
         let zenoh = self.zenoh(raw.zenoh, &cell);
         let alertmanager = self.alertmanager(raw.alertmanager);
+        let alarm_server = self.alarm_server(raw.alarm_server);
         let kpi = self.kpi(raw.kpi);
         let recorder = self.recorder(raw.recorder);
         let (system_delays, consequences) = self.system_alarms(raw.alarms);
@@ -629,6 +631,7 @@ impl Validator<'_> {
             sfc,
             delays,
             alertmanager,
+            alarm_server,
             kpi,
             consequences,
             recorder,
