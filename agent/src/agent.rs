@@ -28,7 +28,9 @@ use crate::health::{CellHealth, Health};
 use crate::journal::{Journal, JournalError};
 use crate::metrics::Metrics;
 use crate::operator::{Gate, KeysError, OperatorKeys};
+use crate::services::alarm_server::AlarmServer;
 use crate::services::Services;
+use crate::sinks::alarm_server::AlarmServerSink;
 use crate::sinks::console::{ConsoleSink, Notice};
 use crate::sinks::journal::JournalSink;
 use crate::sinks::metrics::MetricsSink;
@@ -69,6 +71,9 @@ pub enum StartError {
     /// The Alertmanager's TLS files are unusable.
     #[error(transparent)]
     Alertmanager(#[from] crate::sinks::alertmanager::TlsError),
+    /// The alarm server cannot start (its users file, address or PKI).
+    #[error(transparent)]
+    AlarmServer(#[from] crate::services::alarm_server::AlarmServerError),
     /// The cell loop's thread cannot be started.
     #[error("cannot start the cell loop's thread: {0}")]
     Loop(std::io::Error),
@@ -82,6 +87,9 @@ impl StartError {
             self,
             StartError::Compile(_)
                 | StartError::Alertmanager(_)
+                | StartError::AlarmServer(
+                    crate::services::alarm_server::AlarmServerError::Users(_)
+                )
                 | StartError::Keys(_)
                 | StartError::Key(_)
                 | StartError::Zenoh(ZenohError::Insecure { .. } | ZenohError::Key(_))
@@ -153,6 +161,9 @@ pub struct Agent {
     metrics_server: Option<JoinHandle<()>>,
     /// Sends the alarms to Alertmanager; ends after the cell loop.
     alertmanager: Option<JoinHandle<()>>,
+    /// The OPC UA alarm server (`[alarm_server]`); ends with the agent.
+    alarm_server: Option<JoinHandle<()>>,
+    alarm_server_addr: Option<SocketAddr>,
     session: zenoh::Session,
     metrics: Arc<Metrics>,
     metrics_addr: Option<SocketAddr>,
@@ -211,6 +222,11 @@ impl Agent {
     /// Where `/metrics` is served, if it is.
     pub fn metrics_addr(&self) -> Option<SocketAddr> {
         self.metrics_addr
+    }
+
+    /// Where the OPC UA alarm server listens, if there is one.
+    pub fn alarm_server_addr(&self) -> Option<SocketAddr> {
+        self.alarm_server_addr
     }
 
     /// Where the source listens for the PLC's server to connect to the
@@ -377,6 +393,7 @@ impl Agent {
         for task in [
             self.cell_loop.take(),
             self.alertmanager.take(),
+            self.alarm_server.take(),
             self.services.take(),
             self.metrics_server.take(),
         ]
@@ -586,6 +603,15 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         }
         None => None,
     };
+    let (alarm_server, session_acks) = match &config.alarm_server {
+        Some(c) => {
+            let (tx, rx) = mpsc::channel(crate::services::alarm_server::ACK_QUEUE);
+            let server = AlarmServer::start(&config.cell, c, tx, stopped(stop_rx.clone())).await?;
+            sinks.push(Box::new(AlarmServerSink::new(server.feed())));
+            (Some(server), Some(rx))
+        }
+        None => (None, None),
+    };
     if let Some(observer) = options.observer {
         sinks.push(Box::new(ConsoleSink::new(observer)));
     }
@@ -654,6 +680,10 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         Some(tx) => cell_loop.asking_reloads(tx),
         None => cell_loop,
     };
+    let cell_loop = match session_acks {
+        Some(rx) => cell_loop.acknowledging_sessions(rx),
+        None => cell_loop,
+    };
     let cell_loop = cell_loop
         .spawn(source_rx, requests_rx, stopped(stop_rx.clone()))
         .map_err(StartError::Loop)?;
@@ -668,6 +698,8 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         services: Some(services),
         metrics_server,
         alertmanager,
+        alarm_server_addr: alarm_server.as_ref().map(AlarmServer::addr),
+        alarm_server: alarm_server.map(AlarmServer::task),
         session,
         metrics,
         metrics_addr,

@@ -242,3 +242,50 @@ pub enum Request {
         reply: oneshot::Sender<CommandOutcome>,
     },
 }
+
+/// An acknowledgement asked by a user of the alarm server's OPC UA session
+/// (`services::alarm_server`): the session authenticated the user, who
+/// acts as `operator`; the loop checks the operator's permission, carries
+/// it out and journals it like a signed command. It comes on a channel of
+/// its own that only the alarm server holds, never from the bus.
+#[derive(Debug)]
+pub struct SessionAck {
+    /// The OPC UA user of the session.
+    pub user: String,
+    /// The operator the user acts as (the alarm server's users file).
+    pub operator: String,
+    /// The alarm acknowledged.
+    pub alarm: String,
+    /// Where the outcome goes, once journaled.
+    pub reply: oneshot::Sender<SessionAckOutcome>,
+}
+
+/// What a [`SessionAck`] came to.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SessionAckOutcome {
+    /// Carried out: what it did.
+    Accepted(String),
+    /// The operator may not acknowledge (or is not known): why.
+    Denied(String),
+    /// The alarm has nothing to acknowledge.
+    AlreadyAcknowledged(String),
+    /// Refused for another reason (no such alarm, the PLC refused): why.
+    Refused(String),
+}
+
+/// The next [`SessionAck`] on `acks`; never, when there is no alarm
+/// server (`None`) or it has stopped.
+pub async fn next_session_ack(
+    acks: &mut Option<tokio::sync::mpsc::Receiver<SessionAck>>,
+) -> Option<SessionAck> {
+    match acks {
+        Some(rx) => match rx.recv().await {
+            Some(a) => Some(a),
+            None => {
+                *acks = None;
+                None
+            }
+        },
+        None => std::future::pending().await,
+    }
+}

@@ -19,6 +19,7 @@ pub mod force;
 pub mod forcing;
 mod plc;
 mod reload;
+mod session;
 pub mod restore;
 pub mod swap;
 pub mod timers;
@@ -107,6 +108,8 @@ pub struct CellLoop {
     /// Where an operator's `configure reload` goes (`None`: the agent
     /// was not started from a file, and it is refused).
     reload_asks: Option<mpsc::Sender<swap::ReloadAsk>>,
+    /// Acknowledgements from the alarm server's sessions (`session.rs`).
+    session_acks: Option<mpsc::Receiver<crate::step::SessionAck>>,
 }
 
 /// A write's outcome on its way back into the loop.
@@ -197,6 +200,7 @@ impl CellLoop {
             health: None,
             reloads: None,
             reload_asks: None,
+            session_acks: None,
         }
     }
 
@@ -427,6 +431,7 @@ impl CellLoop {
                     None => requests_open = false,
                 },
                 Some(w) = self.written_rx.recv() => self.written(w).await,
+                Some(a) = crate::step::next_session_ack(&mut self.session_acks) => self.session_ack(a).await,
                 problem = journal_changed(&mut self.journal_health) => self.system(JOURNAL_ALARM, problem).await,
                 r = swap::next(&mut self.reloads) => {
                     if let Some(mut r) = self.acceptable(r) {

@@ -583,6 +583,25 @@ impl Gate {
     /// this is refused for its skew anyway.
     pub const NONCE_WINDOW_MS: u64 = 2 * MAX_SKEW_MS;
 
+    /// Whether `operator` may `action`, for a command whose sender was
+    /// authenticated otherwise than by a signature (the alarm server's
+    /// OPC UA session): no signature, time or nonce to check.
+    ///
+    /// # Errors
+    /// The operator is not known, or may not `action`.
+    pub fn permits(&self, operator: &str, action: Action) -> Result<(), Refusal> {
+        let Some(known) = self.keys.operators.get(operator) else {
+            return Err(Refusal::UnknownOperator(operator.into()));
+        };
+        if !known.allow.contains(&action) {
+            return Err(Refusal::NotAllowed {
+                operator: operator.into(),
+                action,
+            });
+        }
+        Ok(())
+    }
+
     /// Lets `cmd` through at `now`, or says why not.
     ///
     /// # Errors

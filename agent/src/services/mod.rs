@@ -24,6 +24,8 @@
 //! repeats the request. Refusals are counted
 //! (`cellwatch_requests_refused_total`).
 
+pub mod alarm_server;
+
 use std::collections::HashMap;
 use std::future::Future;
 use std::path::{Path, PathBuf};

@@ -19,6 +19,7 @@
 //!
 //! To add a sink: implement [`Sink`] and push it in [`crate::agent::start`].
 
+pub mod alarm_server;
 pub mod alertmanager;
 pub mod console;
 pub mod journal;

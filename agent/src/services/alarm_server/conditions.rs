@@ -1,0 +1,275 @@
+//! The cell's alarms as conditions: one `CellAlarmType` object per alarm
+//! id, kept from the alarm payloads the sink hands over (`apply`), each
+//! change sent as an event from the cell's notifier (and so from the
+//! `Server` object). The conditions' nodes are made on an alarm's first
+//! transition. Acknowledging and refreshing are `methods.rs`'s.
+
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, OnceLock};
+
+use cellwatch_models::alarm::{AlarmState, Severity};
+use opcua::nodes::{BaseEventType, Event};
+use opcua::server::address_space::{AddressSpace, ObjectBuilder, VariableBuilder};
+use opcua::server::node_manager::memory::SimpleNodeManager;
+use opcua::server::SubscriptionCache;
+use opcua::sync::{Mutex, RwLock};
+use opcua::types::{
+    ByteString, DataTypeId, DateTime, LocalizedText, MethodId, NodeId, ObjectTypeId,
+    ReferenceTypeId, StatusCode, VariableTypeId,
+};
+
+use super::events::{AlarmFields, CellAlarmEvent, CommentVar, QualityVar, SeverityVar, TwoState};
+use crate::payload::{AlarmPayload, CulpritPayload};
+
+/// What the conditions need of the built server: set once, before it runs.
+pub(super) struct Served {
+    /// The server's namespace for the cell's nodes.
+    pub(super) ns: u16,
+    /// The cell's object: every condition's event comes from it.
+    pub(super) notifier: NodeId,
+    /// `CellAlarmType`.
+    pub(super) event_type: NodeId,
+    /// Where events are delivered to the subscriptions' monitored items.
+    pub(super) subscriptions: Arc<SubscriptionCache>,
+    /// The cell's namespace, where the conditions' nodes are added.
+    pub(super) nodes: Arc<SimpleNodeManager>,
+    /// Namespace 0's address space: each condition needs its
+    /// `HasComponent` to `Acknowledge` there for calls to reach it.
+    pub(super) core: Arc<RwLock<AddressSpace>>,
+}
+
+/// One alarm as its condition.
+#[derive(Debug, Clone)]
+pub(super) struct Condition {
+    /// The condition's node.
+    pub(super) node: NodeId,
+    pub(super) message: String,
+    pub(super) severity: u16,
+    pub(super) culprits: String,
+    pub(super) active: bool,
+    pub(super) acked: bool,
+    pub(super) active_at: DateTime,
+    pub(super) acked_at: DateTime,
+    /// The operator who acknowledged it.
+    pub(super) acked_by: String,
+    /// The event last sent: an `Acknowledge` must name it.
+    pub(super) event_id: ByteString,
+    pub(super) time: DateTime,
+}
+
+impl Condition {
+    /// Kept for clients (ConditionRefresh) while active or unacknowledged.
+    pub(super) fn retain(&self) -> bool {
+        self.active || !self.acked
+    }
+}
+
+/// The cell's conditions, shared by the sink (changes) and the server's
+/// methods (acknowledge, refresh).
+pub(super) struct Conditions {
+    pub(super) cell: String,
+    /// Set once the server is built ([`Served`]).
+    pub(super) served: OnceLock<Served>,
+    /// By alarm id; held only to change or copy a condition, never while
+    /// events are delivered.
+    alarms: Mutex<HashMap<String, Condition>>,
+    /// The last event id handed out.
+    counter: AtomicU64,
+}
+
+/// OPC UA's severity (1–1000) of a cellwatch severity.
+pub(super) fn severity(s: Severity) -> u16 {
+    match s {
+        Severity::Low => 250,
+        Severity::Medium => 500,
+        Severity::High => 750,
+        Severity::Critical => 1000,
+    }
+}
+
+/// The culprits as one line: `X0.06 is 0, needs 1 (emergency stop), trigger; …`.
+pub(super) fn culprits_text(culprits: &[CulpritPayload]) -> String {
+    let one = |c: &CulpritPayload| {
+        let mut s = match &c.compared {
+            Some(compared) => format!("{} ({compared})", c.address),
+            None => format!(
+                "{} is {}, needs {}",
+                c.address,
+                u8::from(c.value),
+                u8::from(c.expected)
+            ),
+        };
+        if let Some(comment) = &c.comment {
+            s += &format!(" ({comment})");
+        }
+        if c.trigger {
+            s += ", trigger";
+        }
+        s
+    };
+    culprits.iter().map(one).collect::<Vec<_>>().join("; ")
+}
+
+impl Conditions {
+    /// The conditions of `cell`, none yet.
+    pub(super) fn new(cell: &str) -> Conditions {
+        Conditions {
+            cell: cell.into(),
+            served: OnceLock::new(),
+            alarms: Mutex::new(HashMap::new()),
+            counter: AtomicU64::new(1),
+        }
+    }
+
+    /// A fresh event id.
+    pub(super) fn next_event_id(&self) -> ByteString {
+        let n = self.counter.fetch_add(1, Ordering::Relaxed);
+        ByteString::from(format!("{}-{n:016}", self.cell).into_bytes())
+    }
+
+    /// The alarm whose condition is `node`, and a copy of it.
+    pub(super) fn by_node(&self, node: &NodeId) -> Option<(String, Condition)> {
+        let alarms = self.alarms.lock();
+        alarms
+            .iter()
+            .find(|(_, c)| c.node == *node)
+            .map(|(id, c)| (id.clone(), c.clone()))
+    }
+
+    /// One alarm transition: the condition made if new, changed, and its
+    /// event sent.
+    pub(super) fn apply(&self, p: &AlarmPayload) {
+        let Some(served) = self.served.get() else {
+            return;
+        };
+        let now = DateTime::now();
+        let active = matches!(
+            p.state,
+            AlarmState::ActiveUnacknowledged | AlarmState::ActiveAcknowledged
+        );
+        let acked = matches!(p.state, AlarmState::ActiveAcknowledged | AlarmState::Normal);
+        let event = {
+            let mut alarms = self.alarms.lock();
+            let c = alarms
+                .entry(p.id.clone())
+                .or_insert_with(|| self.add_condition(served, &p.id, now));
+            if active != c.active {
+                c.active_at = now;
+            }
+            if acked != c.acked {
+                c.acked_at = now;
+            }
+            c.active = active;
+            c.acked = acked;
+            c.acked_by = p.acked_by.clone().unwrap_or_default();
+            c.message = p.message.clone();
+            c.severity = severity(p.severity);
+            c.culprits = culprits_text(&p.culprits);
+            c.event_id = self.next_event_id();
+            c.time = now;
+            self.event(served, &p.id, c)
+        };
+        served
+            .subscriptions
+            .notify_events([(&event as &dyn Event, &served.notifier)].into_iter());
+    }
+
+    /// The events of the conditions clients must keep (ConditionRefresh).
+    pub(super) fn retained(&self) -> Vec<CellAlarmEvent> {
+        let Some(served) = self.served.get() else {
+            return Vec::new();
+        };
+        let alarms = self.alarms.lock();
+        alarms
+            .iter()
+            .filter(|(_, c)| c.retain())
+            .map(|(id, c)| self.event(served, id, c))
+            .collect()
+    }
+
+    /// A new condition's nodes for alarm `id`.
+    fn add_condition(&self, served: &Served, id: &str, now: DateTime) -> Condition {
+        let node = NodeId::new(served.ns, format!("{}.{id}", self.cell));
+        {
+            let space = served.nodes.address_space();
+            let mut space = space.write();
+            ObjectBuilder::new(&node, id, id)
+                .has_type_definition(served.event_type.clone())
+                .component_of(served.notifier.clone())
+                .insert(&mut *space);
+            space.insert_reference(&served.notifier, &node, ReferenceTypeId::HasCondition);
+            VariableBuilder::new(
+                &NodeId::new(served.ns, format!("{}.{id}.ConditionName", self.cell)),
+                "ConditionName",
+                "ConditionName",
+            )
+            .data_type(DataTypeId::String)
+            .value(id)
+            .property_of(node.clone())
+            .has_type_definition(VariableTypeId::PropertyType)
+            .insert(&mut *space);
+        }
+        served.core.write().insert_reference(
+            &node,
+            &MethodId::AcknowledgeableConditionType_Acknowledge.into(),
+            ReferenceTypeId::HasComponent,
+        );
+        Condition {
+            node,
+            message: String::new(),
+            severity: 0,
+            culprits: String::new(),
+            active: false,
+            acked: true,
+            active_at: now,
+            acked_at: now,
+            acked_by: String::new(),
+            event_id: ByteString::null(),
+            time: now,
+        }
+    }
+
+    /// The event saying condition `c` of alarm `id` as it stands.
+    fn event(&self, served: &Served, id: &str, c: &Condition) -> CellAlarmEvent {
+        let mut base = BaseEventType::new(
+            served.event_type.clone(),
+            c.event_id.clone(),
+            c.message.as_str(),
+            c.time,
+        );
+        base.source_node = served.notifier.clone();
+        base.source_name = self.cell.as_str().into();
+        base.severity = c.severity;
+        base.condition_class_id = Some(ObjectTypeId::ProcessConditionClassType.into());
+        base.condition_class_name = Some("ProcessConditionClassType".into());
+        CellAlarmEvent {
+            condition_id: c.node.clone(),
+            fields: AlarmFields {
+                base,
+                condition_name: id.into(),
+                branch_id: NodeId::null(),
+                retain: c.retain(),
+                client_user_id: c.acked_by.as_str().into(),
+                comment: CommentVar {
+                    value: LocalizedText::null(),
+                    source_timestamp: c.acked_at,
+                },
+                last_severity: SeverityVar {
+                    value: c.severity,
+                    source_timestamp: c.time,
+                },
+                quality: QualityVar {
+                    value: StatusCode::Good,
+                    source_timestamp: c.time,
+                },
+                enabled_state: TwoState::new(true, "Enabled", "Disabled", c.active_at),
+                active_state: TwoState::new(c.active, "Active", "Inactive", c.active_at),
+                acked_state: TwoState::new(c.acked, "Acknowledged", "Unacknowledged", c.acked_at),
+                confirmed_state: TwoState::new(true, "Confirmed", "Unconfirmed", c.acked_at),
+                suppressed_or_shelved: false,
+                culprits: c.culprits.as_str().into(),
+            },
+        }
+    }
+}

@@ -1,0 +1,263 @@
+//! Namespace 0's node manager with the two condition methods a SCADA
+//! client calls: `Acknowledge` (i=9111) and `ConditionRefresh` (i=3875).
+//! Both belong to namespace 0, so calls to them reach the core node
+//! manager, which answers neither: it is wrapped, those two taken here,
+//! everything else passed on. An acknowledgement goes to the cell loop
+//! ([`SessionAck`]) and is answered Good only once the loop took it.
+
+use std::sync::Arc;
+
+use async_trait::async_trait;
+use opcua::nodes::BaseEventType;
+use opcua::server::address_space::AddressSpace;
+use opcua::server::diagnostics::NamespaceMetadata;
+use opcua::server::node_manager::memory::{
+    CoreNodeManagerBuilder, CoreNodeManagerImpl, InMemoryNodeManagerImpl,
+    InMemoryNodeManagerImplBuilder,
+};
+use opcua::server::node_manager::{
+    MethodCall, MonitoredItemRef, MonitoredItemUpdateRef, ParsedReadValueId, RequestContext,
+    ServerContext,
+};
+use opcua::server::CreateMonitoredItem;
+use opcua::sync::RwLock;
+use opcua::types::{
+    AttributeId, DataValue, MethodId, MonitoringMode, NodeId, ObjectId, ObjectTypeId,
+    StatusCode, TimestampsToReturn, Variant,
+};
+use tokio::sync::{mpsc, oneshot};
+
+use super::conditions::Conditions;
+use super::users::Users;
+use crate::step::{SessionAck, SessionAckOutcome};
+
+/// Builds the core node manager wrapped ([`AlarmCore`]).
+pub(super) struct AlarmCoreBuilder {
+    pub(super) conditions: Arc<Conditions>,
+    pub(super) users: Users,
+    pub(super) acks: mpsc::Sender<SessionAck>,
+}
+
+impl InMemoryNodeManagerImplBuilder for AlarmCoreBuilder {
+    type Impl = AlarmCore;
+
+    fn build(self, context: ServerContext, address_space: &mut AddressSpace) -> AlarmCore {
+        AlarmCore {
+            core: CoreNodeManagerBuilder.build(context, address_space),
+            conditions: self.conditions,
+            users: self.users,
+            acks: self.acks,
+        }
+    }
+}
+
+/// The core node manager, with `Acknowledge` and `ConditionRefresh`.
+pub(super) struct AlarmCore {
+    core: CoreNodeManagerImpl,
+    conditions: Arc<Conditions>,
+    users: Users,
+    /// To the cell loop: each acknowledgement a session asks for.
+    acks: mpsc::Sender<SessionAck>,
+}
+
+impl AlarmCore {
+    /// `Acknowledge(EventId, Comment)` on a condition, by the session's
+    /// user as the operator they act as, through the cell loop.
+    async fn acknowledge(&self, context: &RequestContext, call: &mut MethodCall) {
+        let token = context.user_token();
+        if token.is_anonymous() {
+            call.set_status(StatusCode::BadUserAccessDenied);
+            return;
+        }
+        let user = token.0.clone();
+        let args = call.arguments();
+        let event_id = match args.first() {
+            Some(Variant::ByteString(b)) => b.clone(),
+            _ => {
+                call.set_status(StatusCode::BadInvalidArgument);
+                return;
+            }
+        };
+        let Some((alarm, condition)) = self.conditions.by_node(call.object_id()) else {
+            call.set_status(StatusCode::BadNodeIdUnknown);
+            return;
+        };
+        if condition.event_id != event_id {
+            call.set_status(StatusCode::BadEventIdUnknown);
+            return;
+        }
+        if condition.acked {
+            call.set_status(StatusCode::BadConditionBranchAlreadyAcked);
+            return;
+        }
+        let Some(operator) = self.users.operator(&user) else {
+            tracing::warn!(user = %crate::operator::escaped(&user), alarm, "acknowledgement over OPC UA refused: the user acts as no operator");
+            call.set_status(StatusCode::BadUserAccessDenied);
+            return;
+        };
+        let (reply, outcome) = oneshot::channel();
+        let ack = SessionAck {
+            user,
+            operator: operator.to_string(),
+            alarm,
+            reply,
+        };
+        if self.acks.send(ack).await.is_err() {
+            call.set_status(StatusCode::BadShutdown);
+            return;
+        }
+        let status = match outcome.await {
+            Ok(SessionAckOutcome::Accepted(_)) => {
+                call.set_outputs(Vec::new());
+                StatusCode::Good
+            }
+            Ok(SessionAckOutcome::Denied(_)) => StatusCode::BadUserAccessDenied,
+            Ok(SessionAckOutcome::AlreadyAcknowledged(_)) => {
+                StatusCode::BadConditionBranchAlreadyAcked
+            }
+            Ok(SessionAckOutcome::Refused(_)) => StatusCode::BadInvalidState,
+            Err(_) => StatusCode::BadShutdown,
+        };
+        call.set_status(status);
+    }
+
+    /// `ConditionRefresh(SubscriptionId)`: a refresh start, every retained
+    /// condition's event and a refresh end, to that subscription's event
+    /// items on the `Server` object or the cell.
+    fn condition_refresh(&self, context: &RequestContext, call: &mut MethodCall) {
+        let Some(Variant::UInt32(subscription)) = call.arguments().first().cloned() else {
+            call.set_status(StatusCode::BadInvalidArgument);
+            return;
+        };
+        let Some(served) = self.conditions.served.get() else {
+            call.set_status(StatusCode::BadInvalidState);
+            return;
+        };
+        let server: NodeId = ObjectId::Server.into();
+        let marker = |kind: ObjectTypeId, text: &str| {
+            let mut e = BaseEventType::new_now(kind, self.conditions.next_event_id(), text);
+            e.source_node = server.clone();
+            e.source_name = "Server".into();
+            e.severity = 1;
+            e
+        };
+        let start = marker(ObjectTypeId::RefreshStartEventType, "ConditionRefresh start");
+        let end = marker(ObjectTypeId::RefreshEndEventType, "ConditionRefresh end");
+        let retained = self.conditions.retained();
+        let Some(subscriptions) = context
+            .subscriptions
+            .get_session_subscriptions(context.session_id)
+        else {
+            call.set_status(StatusCode::BadSubscriptionIdInvalid);
+            return;
+        };
+        let type_tree = context.type_tree.read();
+        let mut subscriptions = subscriptions.lock();
+        let Some(sub) = subscriptions.get_mut(subscription) else {
+            call.set_status(StatusCode::BadSubscriptionIdInvalid);
+            return;
+        };
+        let items: Vec<u32> = sub
+            .items()
+            .filter(|i| {
+                let r = i.item_to_monitor();
+                r.attribute_id == AttributeId::EventNotifier
+                    && (r.node_id == server || r.node_id == served.notifier)
+            })
+            .map(|i| i.id())
+            .collect();
+        for id in &items {
+            sub.notify_event(id, &start, &*type_tree);
+            for e in &retained {
+                sub.notify_event(id, e, &*type_tree);
+            }
+            sub.notify_event(id, &end, &*type_tree);
+        }
+        call.set_outputs(Vec::new());
+        call.set_status(StatusCode::Good);
+    }
+}
+
+#[async_trait]
+impl InMemoryNodeManagerImpl for AlarmCore {
+    async fn init(&self, address_space: &mut AddressSpace, context: ServerContext) {
+        self.core.init(address_space, context).await;
+    }
+
+    fn name(&self) -> &str {
+        self.core.name()
+    }
+
+    fn namespaces(&self) -> Vec<NamespaceMetadata> {
+        self.core.namespaces()
+    }
+
+    async fn read_values(
+        &self,
+        context: &RequestContext,
+        address_space: &RwLock<AddressSpace>,
+        nodes: &[&ParsedReadValueId],
+        max_age: f64,
+        timestamps_to_return: TimestampsToReturn,
+    ) -> Vec<DataValue> {
+        self.core
+            .read_values(context, address_space, nodes, max_age, timestamps_to_return)
+            .await
+    }
+
+    async fn create_value_monitored_items(
+        &self,
+        context: &RequestContext,
+        address_space: &RwLock<AddressSpace>,
+        items: &mut [&mut &mut CreateMonitoredItem],
+    ) {
+        self.core
+            .create_value_monitored_items(context, address_space, items)
+            .await;
+    }
+
+    async fn set_monitoring_mode(
+        &self,
+        context: &RequestContext,
+        mode: MonitoringMode,
+        items: &[&MonitoredItemRef],
+    ) {
+        self.core.set_monitoring_mode(context, mode, items).await;
+    }
+
+    async fn modify_monitored_items(
+        &self,
+        context: &RequestContext,
+        items: &[&MonitoredItemUpdateRef],
+    ) {
+        self.core.modify_monitored_items(context, items).await;
+    }
+
+    async fn delete_monitored_items(&self, context: &RequestContext, items: &[&MonitoredItemRef]) {
+        self.core.delete_monitored_items(context, items).await;
+    }
+
+    async fn call(
+        &self,
+        context: &RequestContext,
+        address_space: &RwLock<AddressSpace>,
+        methods_to_call: &mut [&mut &mut MethodCall],
+    ) -> Result<(), StatusCode> {
+        // The library checked each call first: the object has the method
+        // as a component (in this address space), it is executable, and
+        // not too many arguments came.
+        let mut rest: Vec<&mut &mut MethodCall> = Vec::new();
+        for m in methods_to_call.iter_mut() {
+            match m.method_id().as_method_id() {
+                Ok(MethodId::AcknowledgeableConditionType_Acknowledge) => {
+                    self.acknowledge(context, m).await;
+                }
+                Ok(MethodId::ConditionType_ConditionRefresh) => {
+                    self.condition_refresh(context, m);
+                }
+                _ => rest.push(&mut **m),
+            }
+        }
+        self.core.call(context, address_space, &mut rest).await
+    }
+}

@@ -1,0 +1,308 @@
+//! The alarm server (`[alarm_server]`): the cell's alarms served to SCADA
+//! clients as OPC UA Alarms & Conditions, beside the cell loop. One
+//! `CellAlarmType` (an `AlarmConditionType` with the alarm's culprits as
+//! `Culprits`) per alarm id under the cell's object, a notifier the
+//! `Server` object reaches, so a client subscribing to events on i=2253
+//! sees every transition; `ConditionRefresh` is answered, and
+//! `Acknowledge` is carried out by the cell loop as the operator the
+//! session's user acts as ([`users`]).
+//!
+//! Security: Basic256Sha256 with SignAndEncrypt only; the server's key pair
+//! is made in its PKI directory on first start, client certificates are
+//! trusted only from `trusted/` (others land in `rejected/`). Anonymous
+//! sessions may browse and subscribe, never acknowledge.
+//!
+//! - `events.rs`: the event and its fields; `conditions.rs`: the
+//!   conditions kept from the alarm payloads; `methods.rs`: Acknowledge
+//!   and ConditionRefresh; `users.rs`: the users file, passwords.
+//!
+//! Not here: the sink that feeds it (`sinks::alarm_server`), the loop's
+//! side of an acknowledgement (`cell/session.rs`).
+
+mod conditions;
+mod events;
+mod methods;
+pub mod users;
+
+use std::future::Future;
+use std::net::SocketAddr;
+use std::sync::Arc;
+
+use opcua::crypto::SecurityPolicy;
+use opcua::server::address_space::{
+    EventNotifier, ObjectBuilder, ObjectTypeBuilder, VariableBuilder,
+};
+use opcua::server::diagnostics::{DiagnosticsNodeManagerBuilder, NamespaceMetadata};
+use opcua::server::node_manager::memory::{
+    simple_node_manager, InMemoryNodeManager, InMemoryNodeManagerBuilder, SimpleNodeManager,
+};
+use opcua::server::{ServerBuilder, ServerUserToken, ANONYMOUS_USER_TOKEN_ID};
+use opcua::types::{
+    DataTypeId, MessageSecurityMode, NodeClass, NodeId, ObjectId, ObjectTypeId, QualifiedName,
+    ReferenceTypeId, VariableTypeId,
+};
+use tokio::net::TcpListener;
+use tokio::sync::mpsc;
+use tokio::task::JoinHandle;
+
+use crate::config::AlarmServerConfig;
+use crate::payload::AlarmPayload;
+use crate::step::SessionAck;
+use conditions::{Conditions, Served};
+use methods::{AlarmCore, AlarmCoreBuilder};
+use users::{Users, UsersError};
+
+/// The node manager of the cell's namespace.
+const NODES: &str = "cellwatch-alarms";
+
+/// The endpoint's user token id for user names (the authenticator
+/// decides; the library wants an id).
+const USER_TOKEN_ID: &str = "cellwatch-users";
+
+/// How many acknowledgements may wait for the cell loop.
+pub const ACK_QUEUE: usize = 16;
+
+/// Why the alarm server cannot start.
+#[derive(Debug, thiserror::Error)]
+pub enum AlarmServerError {
+    /// The users file is unusable.
+    #[error(transparent)]
+    Users(#[from] UsersError),
+    /// The address cannot be listened on.
+    #[error("alarm server: cannot listen on {addr}: {source}")]
+    Listen {
+        /// The address.
+        addr: SocketAddr,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The server cannot be built (its PKI directory, its key).
+    #[error("alarm server: {0}")]
+    Build(String),
+}
+
+/// A running alarm server.
+pub struct AlarmServer {
+    conditions: Arc<Conditions>,
+    addr: SocketAddr,
+    /// Runs the server until the agent stops.
+    task: JoinHandle<()>,
+}
+
+impl AlarmServer {
+    /// Serves the alarms of `cell` as `config` says; acknowledgements go
+    /// to `acks` (the cell loop's); stops when `shutdown` completes.
+    ///
+    /// # Errors
+    /// The users file, the address or the PKI directory is unusable.
+    pub async fn start(
+        cell: &str,
+        config: &AlarmServerConfig,
+        acks: mpsc::Sender<SessionAck>,
+        shutdown: impl Future<Output = ()> + Send + 'static,
+    ) -> Result<AlarmServer, AlarmServerError> {
+        let users = Users::load(&config.users_file)?;
+        let listener =
+            TcpListener::bind(config.listen)
+                .await
+                .map_err(|source| AlarmServerError::Listen {
+                    addr: config.listen,
+                    source,
+                })?;
+        let addr = listener
+            .local_addr()
+            .map_err(|e| AlarmServerError::Build(e.to_string()))?;
+        let conditions = Arc::new(Conditions::new(cell));
+        let namespace = format!("urn:cellwatch:alarms:{cell}");
+        let key_existed = crate::sources::pki::own_key(&config.pki_dir).exists();
+        let tokens: &[&str] = &[ANONYMOUS_USER_TOKEN_ID, USER_TOKEN_ID];
+        let (server, handle) = ServerBuilder::new()
+            // Namespace 0's manager wrapped (the condition methods), then
+            // the diagnostics and the cell's namespace as usual.
+            .without_node_managers()
+            .with_node_manager(InMemoryNodeManagerBuilder::new(AlarmCoreBuilder {
+                conditions: conditions.clone(),
+                users: users.clone(),
+                acks,
+            }))
+            .with_node_manager(DiagnosticsNodeManagerBuilder)
+            .with_node_manager(simple_node_manager(
+                NamespaceMetadata {
+                    namespace_uri: namespace.clone(),
+                    ..Default::default()
+                },
+                NODES,
+            ))
+            .with_authenticator(Arc::new(users))
+            .application_name(format!("cellwatch alarms of {cell}"))
+            .application_uri(format!("urn:cellwatch:alarm-server:{cell}"))
+            .product_uri("urn:cellwatch")
+            .create_sample_keypair(true)
+            .pki_dir(&config.pki_dir)
+            .certificate_path("own/cert.der")
+            .private_key_path("private/private.pem")
+            .trust_client_certs(false)
+            .host(addr.ip().to_string())
+            .port(addr.port())
+            .discovery_urls(vec!["/".to_owned()])
+            .add_user_token(
+                USER_TOKEN_ID,
+                ServerUserToken::user_pass(USER_TOKEN_ID, ""),
+            )
+            .add_endpoint(
+                "basic256sha256_sign_encrypt",
+                (
+                    "/",
+                    SecurityPolicy::Basic256Sha256,
+                    MessageSecurityMode::SignAndEncrypt,
+                    tokens,
+                ),
+            )
+            .build()
+            .map_err(AlarmServerError::Build)?;
+        crate::sources::pki::protect_own_key(&config.pki_dir, key_existed)
+            .map_err(AlarmServerError::Build)?;
+        let missing = |what: &str| AlarmServerError::Build(format!("{what} is missing"));
+        let ns = handle
+            .get_namespace_index(&namespace)
+            .ok_or_else(|| missing("the cell's namespace"))?;
+        let nodes = handle
+            .node_managers()
+            .get_by_name::<SimpleNodeManager>(NODES)
+            .ok_or_else(|| missing("the cell's node manager"))?;
+        let core = handle
+            .node_managers()
+            .get_of_type::<InMemoryNodeManager<AlarmCore>>()
+            .ok_or_else(|| missing("the core node manager"))?;
+        let notifier = NodeId::new(ns, cell);
+        let event_type = NodeId::new(ns, "CellAlarmType");
+        declare(&nodes, ns, cell, &notifier, &event_type);
+        accept_condition_fields(&handle, ns, &event_type);
+        let served = Served {
+            ns,
+            notifier,
+            event_type,
+            subscriptions: handle.subscriptions().clone(),
+            nodes,
+            core: core.address_space().clone(),
+        };
+        if conditions.served.set(served).is_err() {
+            return Err(AlarmServerError::Build("served twice".into()));
+        }
+        let stop = handle.clone();
+        let task = tokio::spawn(async move {
+            tokio::select! {
+                r = server.run_with(listener) => {
+                    if let Err(e) = r {
+                        tracing::error!(error = %e, "alarm server stopped");
+                    }
+                }
+                () = shutdown => stop.cancel(),
+            }
+        });
+        tracing::info!(cell, %addr, "serving the cell's alarms over OPC UA");
+        Ok(AlarmServer {
+            conditions,
+            addr,
+            task,
+        })
+    }
+
+    /// Where it listens (with port 0, the port the system gave).
+    pub fn addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// What the sink calls with each alarm transition.
+    pub fn feed(&self) -> Arc<dyn Fn(&AlarmPayload) + Send + Sync> {
+        let conditions = self.conditions.clone();
+        Arc::new(move |p| conditions.apply(p))
+    }
+
+    /// The server's task, which ends after the agent's stop.
+    pub fn task(self) -> JoinHandle<()> {
+        self.task
+    }
+}
+
+/// `CellAlarmType` (with `Culprits`) and the cell's object, a notifier the
+/// `Server` object reaches.
+fn declare(nodes: &SimpleNodeManager, ns: u16, cell: &str, cell_node: &NodeId, ty: &NodeId) {
+    let space = nodes.address_space();
+    let mut space = space.write();
+    ObjectTypeBuilder::new(ty, "CellAlarmType", "CellAlarmType")
+        .subtype_of(ObjectTypeId::AlarmConditionType)
+        .insert(&mut *space);
+    VariableBuilder::new(
+        &NodeId::new(ns, "CellAlarmType.Culprits"),
+        QualifiedName::new(ns, "Culprits"),
+        "Culprits",
+    )
+    .data_type(DataTypeId::String)
+    .value("")
+    .property_of(ty.clone())
+    .has_type_definition(VariableTypeId::PropertyType)
+    .has_modelling_rule(ObjectId::ModellingRule_Mandatory)
+    .insert(&mut *space);
+    ObjectBuilder::new(cell_node, cell, cell)
+        .event_notifier(EventNotifier::SUBSCRIBE_TO_EVENTS)
+        .organized_by(ObjectId::ObjectsFolder)
+        .has_type_definition(ObjectTypeId::BaseObjectType)
+        .insert(&mut *space);
+    space.insert_reference(&ObjectId::Server.into(), cell_node, ReferenceTypeId::HasNotifier);
+}
+
+/// Lets clients select the conditions' fields. async-opcua 0.19 checks a
+/// select clause against the type tree, which knows only the properties a
+/// type declares (so `AlarmConditionType`'s `Message` is refused) and no
+/// empty path (so `ConditionId` is refused); and a refused clause is
+/// dropped from the event's fields, shifting those after it. Every field
+/// served is registered under each condition type, and the empty path
+/// under `ConditionType`.
+fn accept_condition_fields(handle: &opcua::server::ServerHandle, ns: u16, ty: &NodeId) {
+    let mut tree = handle.type_tree().write();
+    tree.add_type_property(
+        &NodeId::new(ns, "ConditionType.ConditionId"),
+        &ObjectTypeId::ConditionType.into(),
+        &[],
+        NodeClass::Object,
+    );
+    let types: [NodeId; 4] = [
+        ObjectTypeId::ConditionType.into(),
+        ObjectTypeId::AcknowledgeableConditionType.into(),
+        ObjectTypeId::AlarmConditionType.into(),
+        ty.clone(),
+    ];
+    let mut paths: Vec<Vec<QualifiedName>> = [
+        "EventId", "EventType", "SourceNode", "SourceName", "Time", "ReceiveTime", "Message",
+        "Severity", "ConditionClassId", "ConditionClassName", "ConditionName", "BranchId",
+        "Retain", "ClientUserId", "Comment", "Comment/SourceTimestamp", "LastSeverity",
+        "LastSeverity/SourceTimestamp", "Quality", "Quality/SourceTimestamp",
+        "SuppressedOrShelved",
+    ]
+    .iter()
+    .map(|p| p.split('/').map(|n| QualifiedName::new(0, n)).collect())
+    .collect();
+    for state in ["EnabledState", "ActiveState", "AckedState", "ConfirmedState"] {
+        for sub in ["", "/Id", "/TransitionTime", "/TrueState", "/FalseState"] {
+            paths.push(
+                format!("{state}{sub}")
+                    .split('/')
+                    .map(|n| QualifiedName::new(0, n))
+                    .collect(),
+            );
+        }
+    }
+    paths.push(vec![QualifiedName::new(ns, "Culprits")]);
+    for (t, ty) in types.iter().enumerate() {
+        for (p, path) in paths.iter().enumerate() {
+            let path: Vec<&QualifiedName> = path.iter().collect();
+            tree.add_type_property(
+                &NodeId::new(ns, format!("field.{t}.{p}")),
+                ty,
+                &path,
+                NodeClass::Variable,
+            );
+        }
+    }
+}

@@ -1,0 +1,240 @@
+//! The alarm server's users (`alarm_server.users_file`): who may open a
+//! session with a user name, and the operator each acts as. Passwords are
+//! kept as Argon2 PHC strings, never in clear; a user without an operator
+//! may browse and subscribe but not acknowledge.
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::Arc;
+
+use argon2::password_hash::{PasswordHash, PasswordHasher, PasswordVerifier, SaltString};
+use argon2::Argon2;
+use async_trait::async_trait;
+use opcua::server::authenticator::{
+    user_pass_security_policy_id, user_pass_security_policy_uri, AuthManager, Password, UserToken,
+};
+use opcua::server::ServerEndpoint;
+use opcua::types::{Error, StatusCode, UAString, UserTokenPolicy, UserTokenType};
+use serde::Deserialize;
+
+/// Why the users file cannot be taken.
+#[derive(Debug, thiserror::Error)]
+pub enum UsersError {
+    /// The file cannot be read.
+    #[error("{path}: cannot read the alarm server's users: {source}")]
+    Read {
+        /// The file.
+        path: String,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// Not TOML of the expected shape.
+    #[error("{origin}: {message}")]
+    Syntax {
+        /// The file.
+        origin: String,
+        /// What is wrong, as the TOML reader says.
+        message: String,
+    },
+    /// One user's entry is wrong.
+    #[error("{origin}: users.{user}: {message}")]
+    Entry {
+        /// The file.
+        origin: String,
+        /// The user.
+        user: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct UsersFile {
+    users: HashMap<String, UserEntry>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct UserEntry {
+    operator: Option<String>,
+    password_hash: String,
+}
+
+/// One user: the operator they act as, and their password's hash.
+#[derive(Debug, Clone)]
+struct User {
+    operator: Option<String>,
+    hash: String,
+}
+
+/// The users of the alarm server.
+#[derive(Debug, Clone, Default)]
+pub struct Users {
+    users: Arc<HashMap<String, User>>,
+}
+
+impl Users {
+    /// Parses a users file's text, named `origin`.
+    ///
+    /// # Errors
+    /// Malformed TOML, an unknown key, a user name or operator that is not
+    /// letters, digits, `-`, `_` or `.`, or a hash that is not a PHC string.
+    pub fn parse(origin: &str, text: &str) -> Result<Users, UsersError> {
+        let file: UsersFile = toml::from_str(text).map_err(|e| UsersError::Syntax {
+            origin: origin.into(),
+            message: e.message().into(),
+        })?;
+        let entry = |user: &str, message: String| UsersError::Entry {
+            origin: origin.into(),
+            user: user.into(),
+            message,
+        };
+        let mut users = HashMap::new();
+        for (name, e) in file.users {
+            if !crate::operator::valid_operator_name(&name) {
+                return Err(entry(
+                    &format!("{name:?}"),
+                    "a user name is letters, digits, '-', '_' or '.'".into(),
+                ));
+            }
+            if let Some(op) = &e.operator {
+                if !crate::operator::valid_operator_name(op) {
+                    return Err(entry(&name, format!("operator: {op:?} is not an operator's name")));
+                }
+            }
+            if let Err(why) = PasswordHash::new(&e.password_hash) {
+                return Err(entry(
+                    &name,
+                    format!("password_hash: not an Argon2 PHC string ({why}): make one with `cellwatch hash-password`"),
+                ));
+            }
+            users.insert(
+                name,
+                User {
+                    operator: e.operator,
+                    hash: e.password_hash,
+                },
+            );
+        }
+        Ok(Users {
+            users: Arc::new(users),
+        })
+    }
+
+    /// Loads the users file.
+    ///
+    /// # Errors
+    /// The file cannot be read or parsed.
+    pub fn load(path: &Path) -> Result<Users, UsersError> {
+        let name = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| UsersError::Read {
+            path: name.clone(),
+            source,
+        })?;
+        Users::parse(&name, &text)
+    }
+
+    /// The operator `user` acts as, if any.
+    pub fn operator(&self, user: &str) -> Option<&str> {
+        self.users.get(user)?.operator.as_deref()
+    }
+
+    /// Whether `password` is `user`'s (Argon2, so slow on purpose: run it
+    /// off the server's tasks).
+    fn verify(&self, user: &str, password: &str) -> bool {
+        let Some(u) = self.users.get(user) else {
+            return false;
+        };
+        PasswordHash::new(&u.hash).is_ok_and(|h| {
+            Argon2::default()
+                .verify_password(password.as_bytes(), &h)
+                .is_ok()
+        })
+    }
+}
+
+/// `password`'s Argon2id hash as a PHC string, with a fresh salt.
+///
+/// # Panics
+/// Never for a password: Argon2's defaults take any length used here.
+pub fn hash_password(password: &str) -> String {
+    let salt = SaltString::generate(&mut argon2::password_hash::rand_core::OsRng);
+    Argon2::default()
+        .hash_password(password.as_bytes(), &salt)
+        .expect("Argon2 with its default parameters hashes any password")
+        .to_string()
+}
+
+#[async_trait]
+impl AuthManager for Users {
+    /// Anyone may browse and subscribe; acknowledging asks for a user.
+    async fn authenticate_anonymous_token(&self, _endpoint: &ServerEndpoint) -> Result<(), Error> {
+        Ok(())
+    }
+
+    async fn authenticate_username_identity_token(
+        &self,
+        _endpoint: &ServerEndpoint,
+        username: &str,
+        password: &Password,
+    ) -> Result<UserToken, Error> {
+        let users = self.clone();
+        let (name, pass) = (username.to_string(), password.get().to_string());
+        let ok = tokio::task::spawn_blocking(move || users.verify(&name, &pass))
+            .await
+            .unwrap_or(false);
+        if ok {
+            Ok(UserToken(username.to_string()))
+        } else {
+            tracing::warn!(user = %crate::operator::escaped(username), "alarm server: a session refused: unknown user or wrong password");
+            Err(Error::new(
+                StatusCode::BadIdentityTokenRejected,
+                "unknown user or wrong password",
+            ))
+        }
+    }
+
+    fn user_token_policies(&self, endpoint: &ServerEndpoint) -> Vec<UserTokenPolicy> {
+        let mut policies = vec![UserTokenPolicy {
+            policy_id: user_pass_security_policy_id(endpoint),
+            token_type: UserTokenType::UserName,
+            issued_token_type: UAString::null(),
+            issuer_endpoint_url: UAString::null(),
+            security_policy_uri: user_pass_security_policy_uri(endpoint),
+        }];
+        policies.push(UserTokenPolicy {
+            // The library's own id for the anonymous policy.
+            policy_id: "anonymous".into(),
+            token_type: UserTokenType::Anonymous,
+            issued_token_type: UAString::null(),
+            issuer_endpoint_url: UAString::null(),
+            security_policy_uri: UAString::null(),
+        });
+        policies
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_user_acts_as_an_operator_by_password() {
+        let hash = hash_password("s3cret");
+        let text = format!(
+            "[users.scada-kim]\noperator = \"kim\"\npassword_hash = \"{hash}\"\n[users.viewer]\npassword_hash = \"{hash}\"\n"
+        );
+        let users = Users::parse("users.toml", &text).unwrap();
+        assert_eq!(users.operator("scada-kim"), Some("kim"));
+        assert_eq!(users.operator("viewer"), None);
+        assert!(users.verify("scada-kim", "s3cret"));
+        assert!(!users.verify("scada-kim", "secret"));
+        assert!(!users.verify("nobody", "s3cret"));
+        let bad = "[users.x]\noperator = \"kim\"\npassword_hash = \"s3cret\"\n";
+        assert_eq!(
+            Users::parse("users.toml", bad).unwrap_err().to_string(),
+            "users.toml: users.x: password_hash: not an Argon2 PHC string (password hash string missing field): make one with `cellwatch hash-password`"
+        );
+    }
+}
