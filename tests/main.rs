@@ -9,6 +9,7 @@
 mod agent;
 mod alarm_day;
 mod alarm_management;
+mod alarm_server;
 mod alertmanager;
 mod bad_input;
 mod bounded;

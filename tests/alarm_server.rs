@@ -1,0 +1,346 @@
+//! The alarm server (`[alarm_server]`) with real parts: the agent over the
+//! simulated CNC, a SCADA client of async-opcua over Basic256Sha256 with
+//! SignAndEncrypt subscribing to events on the `Server` object, seeing ESE
+//! raised with its diagnosis and culprits, and acknowledging it as users
+//! mapped (or not) to operators; the bus and the journal say what the cell
+//! loop did.
+
+use std::path::Path;
+use std::time::Duration;
+
+use cellwatch::config::AlarmServerConfig;
+use cellwatch::services::alarm_server::users::hash_password;
+use opcua::client::{Client, ClientBuilder, IdentityToken, MonitoredItem, OnSubscriptionNotification, Session};
+use opcua::crypto::SecurityPolicy;
+use opcua::types::{
+    AttributeId, ByteString, CallMethodRequest, EventFilter, ExtensionObject, LocalizedText,
+    MessageSecurityMode, MethodId, MonitoredItemCreateRequest, MonitoringMode,
+    MonitoringParameters, NodeId, NumericRange, ObjectId, ObjectTypeId, QualifiedName,
+    ReadValueId, SimpleAttributeOperand, StatusCode, TimestampsToReturn, Variant,
+};
+use tokio::sync::mpsc;
+use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
+
+use crate::agent::{alarm_until, Fixture};
+
+/// The users: kim's SCADA account, one acting as an operator the agent
+/// does not know, one acting as nobody.
+fn users_file(path: &Path) {
+    let hash = hash_password("kims-password");
+    std::fs::write(
+        path,
+        format!(
+            "[users.scada-kim]\noperator = \"kim\"\npassword_hash = \"{hash}\"\n\n\
+             [users.scada-lee]\noperator = \"lee\"\npassword_hash = \"{hash}\"\n\n\
+             [users.viewer]\npassword_hash = \"{hash}\"\n"
+        ),
+    )
+    .unwrap();
+}
+
+/// Each event's fields, in the order of [`select`].
+struct Events(mpsc::UnboundedSender<Vec<Variant>>);
+
+impl OnSubscriptionNotification for Events {
+    fn on_event(&mut self, fields: Option<Vec<Variant>>, _item: &MonitoredItem) {
+        let _ = self.0.send(fields.unwrap_or_default());
+    }
+}
+
+const EVENT_ID: usize = 0;
+const EVENT_TYPE: usize = 1;
+const SOURCE_NAME: usize = 2;
+const MESSAGE: usize = 3;
+const SEVERITY: usize = 4;
+const CONDITION_NAME: usize = 5;
+const ACTIVE: usize = 6;
+const ACKED: usize = 7;
+const RETAIN: usize = 8;
+const CLIENT_USER: usize = 9;
+const CONDITION_ID: usize = 10;
+const CULPRITS: usize = 11;
+
+/// The select clauses of a SCADA client of `CellAlarmType` (in namespace
+/// `ns`).
+fn select(ns: u16) -> Vec<SimpleAttributeOperand> {
+    let base = |p: &str| SimpleAttributeOperand::new_value(ObjectTypeId::BaseEventType, p);
+    let alarm = |p: &str| SimpleAttributeOperand::new_value(ObjectTypeId::AlarmConditionType, p);
+    vec![
+        base("EventId"),
+        base("EventType"),
+        base("SourceName"),
+        base("Message"),
+        base("Severity"),
+        alarm("ConditionName"),
+        alarm("ActiveState/Id"),
+        alarm("AckedState/Id"),
+        alarm("Retain"),
+        alarm("ClientUserId"),
+        SimpleAttributeOperand {
+            type_definition_id: ObjectTypeId::ConditionType.into(),
+            browse_path: Some(vec![]),
+            attribute_id: AttributeId::NodeId as u32,
+            index_range: NumericRange::None,
+        },
+        SimpleAttributeOperand {
+            type_definition_id: NodeId::new(ns, "CellAlarmType"),
+            browse_path: Some(vec![QualifiedName::new(ns, "Culprits")]),
+            attribute_id: AttributeId::Value as u32,
+            index_range: NumericRange::None,
+        },
+    ]
+}
+
+/// The SCADA's client, its key pair in `pki` (made if missing); it
+/// trusts only the server certificates in `pki/trusted`.
+fn scada(pki: &Path) -> Client {
+    ClientBuilder::new()
+        .application_name("scada")
+        .application_uri("urn:cellwatch:test:scada")
+        .product_uri("urn:cellwatch:test")
+        .pki_dir(pki)
+        .create_sample_keypair(true)
+        .trust_server_certs(false)
+        .session_retry_limit(0)
+        .client()
+        .unwrap()
+}
+
+/// A session to the alarm server at `url` as `identity`, the client's
+/// certificate in `pki`.
+async fn connect(url: &str, pki: &Path, identity: IdentityToken) -> std::sync::Arc<Session> {
+    let mut client = scada(pki);
+    let (session, event_loop) = client
+        .connect_to_matching_endpoint(
+            (
+                url,
+                SecurityPolicy::Basic256Sha256.to_str(),
+                MessageSecurityMode::SignAndEncrypt,
+            ),
+            identity,
+        )
+        .await
+        .unwrap();
+    event_loop.spawn();
+    tokio::time::timeout(Duration::from_secs(30), session.wait_for_connection())
+        .await
+        .unwrap();
+    session
+}
+
+/// Acknowledges condition `condition`'s event `event_id`.
+async fn acknowledge(session: &Session, condition: &NodeId, event_id: &Variant) -> StatusCode {
+    session
+        .call_one(CallMethodRequest {
+            object_id: condition.clone(),
+            method_id: MethodId::AcknowledgeableConditionType_Acknowledge.into(),
+            input_arguments: Some(vec![
+                event_id.clone(),
+                LocalizedText::from("seen on the SCADA").into(),
+            ]),
+        })
+        .await
+        .unwrap()
+        .status_code
+}
+
+/// Receives events until `f` accepts one.
+async fn event_until(
+    rx: &mut mpsc::UnboundedReceiver<Vec<Variant>>,
+    what: &str,
+    f: impl Fn(&[Variant]) -> bool,
+) -> Vec<Variant> {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    let mut seen = Vec::new();
+    loop {
+        let e = tokio::time::timeout_at(deadline, rx.recv())
+            .await
+            .unwrap_or_else(|_| panic!("timed out waiting for {what}; saw {seen:#?}"))
+            .unwrap();
+        if f(&e) {
+            return e;
+        }
+        seen.push(e);
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
+    let fx = Fixture::start_with(|c| {
+        let dir = c.journal.path.parent().unwrap().to_path_buf();
+        users_file(&dir.join("opcua-users.toml"));
+        c.alarm_server = Some(AlarmServerConfig {
+            listen: "127.0.0.1:0".parse().unwrap(),
+            pki_dir: dir.join("alarm-server-pki"),
+            users_file: dir.join("opcua-users.toml"),
+        });
+    })
+    .await;
+    let addr = fx.agent().alarm_server_addr().unwrap();
+    let url = format!("opc.tcp://{addr}/");
+    // Each trusts the other's certificate.
+    let (server_pki, scada_pki) = (fx.dir().join("alarm-server-pki"), fx.dir().join("scada-pki"));
+    drop(scada(&scada_pki));
+    use cellwatch::sources::pki;
+    pki::trust(&pki::own_cert(&scada_pki), &server_pki).unwrap();
+    pki::trust(&pki::own_cert(&server_pki), &scada_pki).unwrap();
+
+    let kim = connect(
+        &url,
+        &scada_pki,
+        IdentityToken::UserName("scada-kim".into(), "kims-password".into()),
+    )
+    .await;
+    let ns = kim
+        .get_namespace_index("urn:cellwatch:alarms:m01ps0004")
+        .await
+        .unwrap();
+    let (tx, mut events) = mpsc::unbounded_channel();
+    let subscription = kim
+        .create_subscription(Duration::from_millis(50), 600, 20, 1000, 0, true, Events(tx))
+        .await
+        .unwrap();
+    let created = kim
+        .create_monitored_items(
+            subscription,
+            TimestampsToReturn::Both,
+            vec![MonitoredItemCreateRequest {
+                item_to_monitor: ReadValueId {
+                    node_id: ObjectId::Server.into(),
+                    attribute_id: AttributeId::EventNotifier as u32,
+                    ..Default::default()
+                },
+                monitoring_mode: MonitoringMode::Reporting,
+                requested_parameters: MonitoringParameters {
+                    queue_size: 100,
+                    discard_oldest: true,
+                    filter: ExtensionObject::new(EventFilter {
+                        select_clauses: Some(select(ns)),
+                        where_clause: Default::default(),
+                    }),
+                    ..Default::default()
+                },
+            }],
+        )
+        .await
+        .unwrap();
+    assert!(created[0].result.status_code.is_good(), "{created:?}");
+
+    let bus = fx
+        .client()
+        .declare_subscriber("cellwatch/m01ps0004/alarms/ese")
+        .history(HistoryConfig::default().detect_late_publishers())
+        .recovery(RecoveryConfig::default().heartbeat())
+        .await
+        .unwrap();
+    fx.settled().await;
+    fx.sim.set("X0.06", false).unwrap();
+
+    // The event of ESE raised: the diagnosis as its message, the culprits.
+    let raised = event_until(&mut events, "ESE raised", |e| {
+        e[CONDITION_NAME] == Variant::from("ese") && e[ACTIVE] == Variant::from(true)
+    })
+    .await;
+    let mut seen = Vec::new();
+    let payload = alarm_until(&bus, "ESE raised on the bus", &mut seen, |a| {
+        a.transition.as_str() == "raised"
+    })
+    .await;
+    assert_eq!(raised[MESSAGE], Variant::from(LocalizedText::from(payload.message.as_str())));
+    assert!(payload.message.contains("X0.06"), "{}", payload.message);
+    assert_eq!(raised[SOURCE_NAME], Variant::from("m01ps0004"));
+    assert_eq!(raised[ACKED], Variant::from(false));
+    assert_eq!(raised[RETAIN], Variant::from(true));
+    assert_eq!(
+        raised[EVENT_TYPE],
+        Variant::from(NodeId::new(ns, "CellAlarmType"))
+    );
+    let expected = match payload.severity.as_str() {
+        "low" => 250u16,
+        "medium" => 500,
+        "high" => 750,
+        _ => 1000,
+    };
+    assert_eq!(raised[SEVERITY], Variant::from(expected));
+    let Variant::String(culprits) = &raised[CULPRITS] else {
+        panic!("culprits: {:?}", raised[CULPRITS]);
+    };
+    assert!(culprits.as_ref().contains("X0.06 is 0, needs 1"), "{culprits}");
+    let Variant::NodeId(condition) = &raised[CONDITION_ID] else {
+        panic!("condition id: {:?}", raised[CONDITION_ID]);
+    };
+    let condition = (**condition).clone();
+    let event_id = raised[EVENT_ID].clone();
+
+    // No one but a user acting as an operator allowed `ack` acknowledges.
+    let anonymous = connect(&url, &scada_pki, IdentityToken::Anonymous).await;
+    assert_eq!(
+        acknowledge(&anonymous, &condition, &event_id).await,
+        StatusCode::BadUserAccessDenied
+    );
+    let viewer = connect(
+        &url,
+        &scada_pki,
+        IdentityToken::UserName("viewer".into(), "kims-password".into()),
+    )
+    .await;
+    assert_eq!(
+        acknowledge(&viewer, &condition, &event_id).await,
+        StatusCode::BadUserAccessDenied
+    );
+    let lee = connect(
+        &url,
+        &scada_pki,
+        IdentityToken::UserName("scada-lee".into(), "kims-password".into()),
+    )
+    .await;
+    assert_eq!(
+        acknowledge(&lee, &condition, &event_id).await,
+        StatusCode::BadUserAccessDenied
+    );
+    assert_eq!(
+        acknowledge(&kim, &condition, &Variant::from(ByteString::from(b"old".to_vec()))).await,
+        StatusCode::BadEventIdUnknown
+    );
+
+    // Kim acknowledges: Good once the cell loop took it.
+    assert_eq!(acknowledge(&kim, &condition, &event_id).await, StatusCode::Good);
+    let acked = event_until(&mut events, "ESE acknowledged", |e| {
+        e[CONDITION_NAME] == Variant::from("ese") && e[ACKED] == Variant::from(true)
+    })
+    .await;
+    assert_eq!(acked[CLIENT_USER], Variant::from("kim"));
+    assert_eq!(acked[ACTIVE], Variant::from(true));
+    assert_eq!(
+        acknowledge(&kim, &condition, &acked[EVENT_ID]).await,
+        StatusCode::BadConditionBranchAlreadyAcked
+    );
+    let on_bus = alarm_until(&bus, "ESE acknowledged on the bus", &mut seen, |a| {
+        a.transition.as_str() == "acknowledged"
+    })
+    .await;
+    assert_eq!(on_bus.acked_by.as_deref(), Some("kim"));
+    // Journaled before the answer: the rows are there at once.
+    let rows = fx
+        .history_rows("cellwatch/m01ps0004/history?since=1h;kind=command")
+        .await;
+    let commands: Vec<(bool, &str, &str, &str)> = rows
+        .iter()
+        .map(|r| {
+            let f = &r["fields"];
+            (
+                f["accepted"].as_bool().unwrap(),
+                f["operator"].as_str().unwrap(),
+                f["detail"].as_str().unwrap(),
+                f["source"].as_str().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        commands,
+        [
+            (false, "lee", "unknown operator 'lee'", "opcua user scada-lee"),
+            (true, "kim", "ack ese by kim", "opcua user scada-kim"),
+        ]
+    );
+}
