@@ -741,8 +741,8 @@ fn alarm_server_listens_on_opc_tcp_with_a_users_file() {
     assert_eq!(
         errors(&bad),
         [
-            "cell.toml:30:10: alarm_server.listen: 'scada:4855' is not like opc.tcp://0.0.0.0:4855",
-            "cell.toml:29:1: alarm_server.users_file: required: the file of the OPC UA users and the operators they act as",
+            "cell.toml:29:10: alarm_server.listen: 'scada:4855' is not like opc.tcp://0.0.0.0:4855",
+            "cell.toml:28:1: alarm_server.users_file: required: the file of the OPC UA users and the operators they act as",
         ]
         .join("\n")
     );
