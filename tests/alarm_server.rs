@@ -10,13 +10,15 @@ use std::time::Duration;
 
 use cellwatch::config::AlarmServerConfig;
 use cellwatch::services::alarm_server::users::hash_password;
-use opcua::client::{Client, ClientBuilder, IdentityToken, MonitoredItem, OnSubscriptionNotification, Session};
+use opcua::client::{
+    Client, ClientBuilder, IdentityToken, MonitoredItem, OnSubscriptionNotification, Session,
+};
 use opcua::crypto::SecurityPolicy;
 use opcua::types::{
     AttributeId, ByteString, CallMethodRequest, EventFilter, ExtensionObject, LocalizedText,
     MessageSecurityMode, MethodId, MonitoredItemCreateRequest, MonitoringMode,
-    MonitoringParameters, NodeId, NumericRange, ObjectId, ObjectTypeId, QualifiedName,
-    ReadValueId, SimpleAttributeOperand, StatusCode, TimestampsToReturn, Variant,
+    MonitoringParameters, NodeId, NumericRange, ObjectId, ObjectTypeId, QualifiedName, ReadValueId,
+    SimpleAttributeOperand, StatusCode, TimestampsToReturn, Variant,
 };
 use tokio::sync::mpsc;
 use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
@@ -179,7 +181,10 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
     let addr = fx.agent().alarm_server_addr().unwrap();
     let url = format!("opc.tcp://{addr}/");
     // Each trusts the other's certificate.
-    let (server_pki, scada_pki) = (fx.dir().join("alarm-server-pki"), fx.dir().join("scada-pki"));
+    let (server_pki, scada_pki) = (
+        fx.dir().join("alarm-server-pki"),
+        fx.dir().join("scada-pki"),
+    );
     drop(scada(&scada_pki));
     use cellwatch::sources::pki;
     pki::trust(&pki::own_cert(&scada_pki), &server_pki).unwrap();
@@ -197,7 +202,15 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
         .unwrap();
     let (tx, mut events) = mpsc::unbounded_channel();
     let subscription = kim
-        .create_subscription(Duration::from_millis(50), 600, 20, 1000, 0, true, Events(tx))
+        .create_subscription(
+            Duration::from_millis(50),
+            600,
+            20,
+            1000,
+            0,
+            true,
+            Events(tx),
+        )
         .await
         .unwrap();
     let created = kim
@@ -246,7 +259,10 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
         a.transition.as_str() == "raised"
     })
     .await;
-    assert_eq!(raised[MESSAGE], Variant::from(LocalizedText::from(payload.message.as_str())));
+    assert_eq!(
+        raised[MESSAGE],
+        Variant::from(LocalizedText::from(payload.message.as_str()))
+    );
     assert!(payload.message.contains("X0.06"), "{}", payload.message);
     assert_eq!(raised[SOURCE_NAME], Variant::from("m01ps0004"));
     assert_eq!(raised[ACKED], Variant::from(false));
@@ -265,7 +281,10 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
     let Variant::String(culprits) = &raised[CULPRITS] else {
         panic!("culprits: {:?}", raised[CULPRITS]);
     };
-    assert!(culprits.as_ref().contains("X0.06 is 0, needs 1"), "{culprits}");
+    assert!(
+        culprits.as_ref().contains("X0.06 = 0 (expected 1)"),
+        "{culprits}"
+    );
     let Variant::NodeId(condition) = &raised[CONDITION_ID] else {
         panic!("condition id: {:?}", raised[CONDITION_ID]);
     };
@@ -299,12 +318,20 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
         StatusCode::BadUserAccessDenied
     );
     assert_eq!(
-        acknowledge(&kim, &condition, &Variant::from(ByteString::from(b"old".to_vec()))).await,
+        acknowledge(
+            &kim,
+            &condition,
+            &Variant::from(ByteString::from(b"old".to_vec()))
+        )
+        .await,
         StatusCode::BadEventIdUnknown
     );
 
     // Kim acknowledges: Good once the cell loop took it.
-    assert_eq!(acknowledge(&kim, &condition, &event_id).await, StatusCode::Good);
+    assert_eq!(
+        acknowledge(&kim, &condition, &event_id).await,
+        StatusCode::Good
+    );
     let acked = event_until(&mut events, "ESE acknowledged", |e| {
         e[CONDITION_NAME] == Variant::from("ese") && e[ACKED] == Variant::from(true)
     })
@@ -339,7 +366,12 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
     assert_eq!(
         commands,
         [
-            (false, "lee", "unknown operator 'lee'", "opcua user scada-lee"),
+            (
+                false,
+                "lee",
+                "unknown operator 'lee'",
+                "opcua user scada-lee"
+            ),
             (true, "kim", "ack ese by kim", "opcua user scada-kim"),
         ]
     );

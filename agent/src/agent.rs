@@ -87,9 +87,9 @@ impl StartError {
             self,
             StartError::Compile(_)
                 | StartError::Alertmanager(_)
-                | StartError::AlarmServer(
-                    crate::services::alarm_server::AlarmServerError::Users(_)
-                )
+                | StartError::AlarmServer(crate::services::alarm_server::AlarmServerError::Users(
+                    _
+                ))
                 | StartError::Keys(_)
                 | StartError::Key(_)
                 | StartError::Zenoh(ZenohError::Insecure { .. } | ZenohError::Key(_))

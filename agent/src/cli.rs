@@ -15,6 +15,7 @@ use crate::commands::console::ConsoleArgs;
 use crate::commands::demo::DemoArgs;
 use crate::commands::discover::DiscoverArgs;
 use crate::commands::explain::ExplainArgs;
+use crate::commands::hash_password::HashPasswordArgs;
 use crate::commands::keygen::KeygenArgs;
 use crate::commands::pki::PkiCommand;
 use crate::commands::report::ReportArgs;
@@ -131,6 +132,11 @@ enum Command {
     /// agents' operators file: the public key and the actions allowed. An
     /// agent holds public keys only.
     Keygen(KeygenArgs),
+    /// Hash a password for the alarm server's users file (Argon2id).
+    ///
+    /// Reads the password from standard input, one line, and prints the
+    /// PHC string for a user's `password_hash`.
+    HashPassword(HashPasswordArgs),
     /// Certificates for the Zenoh bus: a plant CA, and certificates issued
     /// from it for agents, routers and operators (mutual TLS; the access
     /// control matches their common names).
@@ -286,6 +292,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             | Command::Report(_)
             | Command::Learn(_)
             | Command::Keygen(_)
+            | Command::HashPassword(_)
             | Command::Pki(_)
             | Command::Replay(_)
             | Command::ExportSt(_)
@@ -324,6 +331,7 @@ pub fn run(
         Command::Report(args) => commands::report::run(&args, out),
         Command::Learn(args) => commands::timers::learn(&args, out),
         Command::Keygen(args) => commands::keygen::run(&args, out),
+        Command::HashPassword(_) => commands::hash_password::run(&mut std::io::stdin().lock(), out),
         Command::Pki(PkiCommand::Ca(args)) => commands::pki::ca(&args, out),
         Command::Pki(PkiCommand::Issue(args)) => commands::pki::issue_command(&args, out),
         Command::Pki(PkiCommand::AgentKey(args)) => commands::pki::agent_key(&args, out),

@@ -19,8 +19,8 @@ pub mod force;
 pub mod forcing;
 mod plc;
 mod reload;
-mod session;
 pub mod restore;
+mod session;
 pub mod swap;
 pub mod timers;
 

@@ -84,9 +84,10 @@ impl CellLoop {
                 SessionAckOutcome::Accepted(format!("ack {} by {}", cmd.alarm, cmd.operator)),
                 step,
             ),
-            Err(e @ CommandRefused::NothingToAcknowledge(_)) => {
-                (SessionAckOutcome::AlreadyAcknowledged(e.to_string()), Step::default())
-            }
+            Err(e @ CommandRefused::NothingToAcknowledge(_)) => (
+                SessionAckOutcome::AlreadyAcknowledged(e.to_string()),
+                Step::default(),
+            ),
             Err(e) => (SessionAckOutcome::Refused(e.to_string()), Step::default()),
         };
         let (accepted, detail) = match &outcome {

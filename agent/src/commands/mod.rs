@@ -9,6 +9,7 @@ pub(crate) mod console;
 pub(crate) mod demo;
 pub(crate) mod discover;
 pub(crate) mod explain;
+pub(crate) mod hash_password;
 pub(crate) mod inputs;
 pub(crate) mod journal;
 pub(crate) mod keygen;

@@ -88,27 +88,15 @@ pub(super) fn severity(s: Severity) -> u16 {
     }
 }
 
-/// The culprits as one line: `X0.06 is 0, needs 1 (emergency stop), trigger; …`.
+/// The culprits as one text, each as the CLI, the console and the
+/// Alertmanager show it, joined by `; `:
+/// `X0.06 = 0 (expected 1): Y Over Travel Limit SW (B)   <- trigger`.
 pub(super) fn culprits_text(culprits: &[CulpritPayload]) -> String {
-    let one = |c: &CulpritPayload| {
-        let mut s = match &c.compared {
-            Some(compared) => format!("{} ({compared})", c.address),
-            None => format!(
-                "{} is {}, needs {}",
-                c.address,
-                u8::from(c.value),
-                u8::from(c.expected)
-            ),
-        };
-        if let Some(comment) = &c.comment {
-            s += &format!(" ({comment})");
-        }
-        if c.trigger {
-            s += ", trigger";
-        }
-        s
-    };
-    culprits.iter().map(one).collect::<Vec<_>>().join("; ")
+    culprits
+        .iter()
+        .map(CulpritPayload::line)
+        .collect::<Vec<_>>()
+        .join("; ")
 }
 
 impl Conditions {

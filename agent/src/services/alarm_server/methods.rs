@@ -22,8 +22,8 @@ use opcua::server::node_manager::{
 use opcua::server::CreateMonitoredItem;
 use opcua::sync::RwLock;
 use opcua::types::{
-    AttributeId, DataValue, MethodId, MonitoringMode, NodeId, ObjectId, ObjectTypeId,
-    StatusCode, TimestampsToReturn, Variant,
+    AttributeId, DataValue, MethodId, MonitoringMode, NodeId, ObjectId, ObjectTypeId, StatusCode,
+    TimestampsToReturn, Variant,
 };
 use tokio::sync::{mpsc, oneshot};
 
@@ -141,7 +141,10 @@ impl AlarmCore {
             e.severity = 1;
             e
         };
-        let start = marker(ObjectTypeId::RefreshStartEventType, "ConditionRefresh start");
+        let start = marker(
+            ObjectTypeId::RefreshStartEventType,
+            "ConditionRefresh start",
+        );
         let end = marker(ObjectTypeId::RefreshEndEventType, "ConditionRefresh end");
         let retained = self.conditions.retained();
         let Some(subscriptions) = context

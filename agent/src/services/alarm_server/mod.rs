@@ -145,10 +145,7 @@ impl AlarmServer {
             .host(addr.ip().to_string())
             .port(addr.port())
             .discovery_urls(vec!["/".to_owned()])
-            .add_user_token(
-                USER_TOKEN_ID,
-                ServerUserToken::user_pass(USER_TOKEN_ID, ""),
-            )
+            .add_user_token(USER_TOKEN_ID, ServerUserToken::user_pass(USER_TOKEN_ID, ""))
             .add_endpoint(
                 "basic256sha256_sign_encrypt",
                 (
@@ -249,7 +246,11 @@ fn declare(nodes: &SimpleNodeManager, ns: u16, cell: &str, cell_node: &NodeId, t
         .organized_by(ObjectId::ObjectsFolder)
         .has_type_definition(ObjectTypeId::BaseObjectType)
         .insert(&mut *space);
-    space.insert_reference(&ObjectId::Server.into(), cell_node, ReferenceTypeId::HasNotifier);
+    space.insert_reference(
+        &ObjectId::Server.into(),
+        cell_node,
+        ReferenceTypeId::HasNotifier,
+    );
 }
 
 /// Lets clients select the conditions' fields. async-opcua 0.19 checks a
@@ -274,16 +275,37 @@ fn accept_condition_fields(handle: &opcua::server::ServerHandle, ns: u16, ty: &N
         ty.clone(),
     ];
     let mut paths: Vec<Vec<QualifiedName>> = [
-        "EventId", "EventType", "SourceNode", "SourceName", "Time", "ReceiveTime", "Message",
-        "Severity", "ConditionClassId", "ConditionClassName", "ConditionName", "BranchId",
-        "Retain", "ClientUserId", "Comment", "Comment/SourceTimestamp", "LastSeverity",
-        "LastSeverity/SourceTimestamp", "Quality", "Quality/SourceTimestamp",
+        "EventId",
+        "EventType",
+        "SourceNode",
+        "SourceName",
+        "Time",
+        "ReceiveTime",
+        "Message",
+        "Severity",
+        "ConditionClassId",
+        "ConditionClassName",
+        "ConditionName",
+        "BranchId",
+        "Retain",
+        "ClientUserId",
+        "Comment",
+        "Comment/SourceTimestamp",
+        "LastSeverity",
+        "LastSeverity/SourceTimestamp",
+        "Quality",
+        "Quality/SourceTimestamp",
         "SuppressedOrShelved",
     ]
     .iter()
     .map(|p| p.split('/').map(|n| QualifiedName::new(0, n)).collect())
     .collect();
-    for state in ["EnabledState", "ActiveState", "AckedState", "ConfirmedState"] {
+    for state in [
+        "EnabledState",
+        "ActiveState",
+        "AckedState",
+        "ConfirmedState",
+    ] {
         for sub in ["", "/Id", "/TransitionTime", "/TrueState", "/FalseState"] {
             paths.push(
                 format!("{state}{sub}")

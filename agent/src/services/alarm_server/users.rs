@@ -79,7 +79,7 @@ impl Users {
     ///
     /// # Errors
     /// Malformed TOML, an unknown key, a user name or operator that is not
-    /// letters, digits, `-`, `_` or `.`, or a hash that is not a PHC string.
+    /// letters, digits, `-` or `_`, or a hash that is not a PHC string.
     pub fn parse(origin: &str, text: &str) -> Result<Users, UsersError> {
         let file: UsersFile = toml::from_str(text).map_err(|e| UsersError::Syntax {
             origin: origin.into(),
@@ -95,12 +95,15 @@ impl Users {
             if !crate::operator::valid_operator_name(&name) {
                 return Err(entry(
                     &format!("{name:?}"),
-                    "a user name is letters, digits, '-', '_' or '.'".into(),
+                    "a user name is letters, digits, '-' or '_'".into(),
                 ));
             }
             if let Some(op) = &e.operator {
                 if !crate::operator::valid_operator_name(op) {
-                    return Err(entry(&name, format!("operator: {op:?} is not an operator's name")));
+                    return Err(entry(
+                        &name,
+                        format!("operator: {op:?} is not an operator's name"),
+                    ));
                 }
             }
             if let Err(why) = PasswordHash::new(&e.password_hash) {
