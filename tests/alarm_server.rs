@@ -342,6 +342,45 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
         acknowledge(&kim, &condition, &acked[EVENT_ID]).await,
         StatusCode::BadConditionBranchAlreadyAcked
     );
+    // A client that (re)connects asks for what it must show: ESE, active
+    // and acknowledged, between the refresh's start and end.
+    let refreshed = kim
+        .call_one(CallMethodRequest {
+            object_id: ObjectTypeId::ConditionType.into(),
+            method_id: MethodId::ConditionType_ConditionRefresh.into(),
+            input_arguments: Some(vec![Variant::UInt32(subscription)]),
+        })
+        .await
+        .unwrap();
+    assert_eq!(refreshed.status_code, StatusCode::Good);
+    let is_type = |e: &[Variant], t: ObjectTypeId| e[EVENT_TYPE] == Variant::from(NodeId::from(t));
+    event_until(&mut events, "the refresh's start", |e| {
+        is_type(e, ObjectTypeId::RefreshStartEventType)
+    })
+    .await;
+    let mut retained = Vec::new();
+    loop {
+        let e = tokio::time::timeout(Duration::from_secs(60), events.recv())
+            .await
+            .expect("the refresh's end never came")
+            .unwrap();
+        if is_type(&e, ObjectTypeId::RefreshEndEventType) {
+            break;
+        }
+        retained.push((
+            e[CONDITION_NAME].clone(),
+            e[ACTIVE].clone(),
+            e[ACKED].clone(),
+        ));
+    }
+    assert_eq!(
+        retained,
+        [(
+            Variant::from("ese"),
+            Variant::from(true),
+            Variant::from(true)
+        )]
+    );
     let on_bus = alarm_until(&bus, "ESE acknowledged on the bus", &mut seen, |a| {
         a.transition.as_str() == "acknowledged"
     })
