@@ -13,6 +13,8 @@
 //! - [`console`]: the demo's printed view.
 //! - [`alertmanager`]: alarms to people through Prometheus Alertmanager
 //!   (a task of its own sends them, off the loop).
+//! - [`alarm_server`]: alarms to SCADA clients through the agent's OPC UA
+//!   alarm server (Alarms & Conditions).
 //! - the metrics ([`crate::sinks::metrics::MetricsSink`]): Prometheus.
 //! - [`RecordingSink`]: keeps every step, for tests; the smallest example
 //!   of a sink.
