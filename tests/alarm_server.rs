@@ -60,7 +60,10 @@ const ACKED: usize = 7;
 const RETAIN: usize = 8;
 const CLIENT_USER: usize = 9;
 const CONDITION_ID: usize = 10;
-const CULPRITS: usize = 11;
+/// A field no condition has: refused, null, and the fields after it in
+/// their places (the patched async-opcua-nodes, vendor/README.md).
+const NO_SUCH_FIELD: usize = 11;
+const CULPRITS: usize = 12;
 
 /// The select clauses of a SCADA client of `CellAlarmType` (in namespace
 /// `ns`).
@@ -84,6 +87,7 @@ fn select(ns: u16) -> Vec<SimpleAttributeOperand> {
             attribute_id: AttributeId::NodeId as u32,
             index_range: NumericRange::None,
         },
+        alarm("NoSuchField"),
         SimpleAttributeOperand {
             type_definition_id: NodeId::new(ns, "CellAlarmType"),
             browse_path: Some(vec![QualifiedName::new(ns, "Culprits")]),
@@ -238,6 +242,20 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
         .await
         .unwrap();
     assert!(created[0].result.status_code.is_good(), "{created:?}");
+    let filter = created[0]
+        .result
+        .filter_result
+        .inner_as::<opcua::types::EventFilterResult>()
+        .unwrap();
+    let refused: Vec<usize> = filter
+        .select_clause_results
+        .iter()
+        .flatten()
+        .enumerate()
+        .filter(|(_, s)| !s.is_good())
+        .map(|(i, _)| i)
+        .collect();
+    assert_eq!(refused, [NO_SUCH_FIELD], "{filter:?}");
 
     let bus = fx
         .client()
@@ -267,6 +285,7 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
     assert_eq!(raised[SOURCE_NAME], Variant::from("m01ps0004"));
     assert_eq!(raised[ACKED], Variant::from(false));
     assert_eq!(raised[RETAIN], Variant::from(true));
+    assert_eq!(raised[NO_SUCH_FIELD], Variant::Empty);
     assert_eq!(
         raised[EVENT_TYPE],
         Variant::from(NodeId::new(ns, "CellAlarmType"))
@@ -414,4 +433,9 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
             (true, "kim", "ack ese by kim", "opcua user scada-kim"),
         ]
     );
+    // The agent stops with SCADA sessions open.
+    let mut fx = fx;
+    tokio::time::timeout(Duration::from_secs(60), fx.stop())
+        .await
+        .expect("the agent stops with the alarm server's sessions open");
 }
