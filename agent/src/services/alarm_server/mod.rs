@@ -256,10 +256,10 @@ fn declare(nodes: &SimpleNodeManager, ns: u16, cell: &str, cell_node: &NodeId, t
 /// Lets clients select the conditions' fields. async-opcua 0.19 checks a
 /// select clause against the type tree, which knows only the properties a
 /// type declares (so `AlarmConditionType`'s `Message` is refused) and no
-/// empty path (so `ConditionId` is refused); and a refused clause is
-/// dropped from the event's fields, shifting those after it. Every field
-/// served is registered under each condition type, and the empty path
-/// under `ConditionType`.
+/// empty path (so `ConditionId` is refused). Every field served is
+/// registered under each condition type, and the empty path under
+/// `ConditionType`. (A clause still refused is null in its place: the
+/// patched async-opcua-nodes, `vendor/README.md`.)
 fn accept_condition_fields(handle: &opcua::server::ServerHandle, ns: u16, ty: &NodeId) {
     let mut tree = handle.type_tree().write();
     tree.add_type_property(
