@@ -261,3 +261,26 @@ impl Conditions {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn severities_spread_over_opc_uas_range_and_culprits_read_as_on_the_console() {
+        let all: Vec<u16> = Severity::ALL.iter().map(|s| severity(*s)).collect();
+        assert_eq!(all, [250, 500, 750, 1000]);
+        let culprit = |address: &str, trigger| CulpritPayload {
+            address: address.into(),
+            value: false,
+            expected: true,
+            comment: Some("Y Over Travel Limit SW (B)".into()),
+            trigger,
+            compared: None,
+        };
+        assert_eq!(
+            culprits_text(&[culprit("X0.06", true), culprit("X0.07", false)]),
+            "X0.06 = 0 (expected 1): Y Over Travel Limit SW (B)   <- trigger; X0.07 = 0 (expected 1): Y Over Travel Limit SW (B)"
+        );
+    }
+}
