@@ -26,7 +26,8 @@ use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 use crate::agent::{alarm_until, Fixture};
 
 /// The users: kim's SCADA account, one acting as an operator the agent
-/// does not know, one acting as nobody.
+/// does not know, one as an operator who may not acknowledge, one acting
+/// as nobody.
 fn users_file(path: &Path) {
     let hash = hash_password("kims-password");
     std::fs::write(
@@ -34,6 +35,7 @@ fn users_file(path: &Path) {
         format!(
             "[users.scada-kim]\noperator = \"kim\"\npassword_hash = \"{hash}\"\n\n\
              [users.scada-lee]\noperator = \"lee\"\npassword_hash = \"{hash}\"\n\n\
+             [users.scada-ana]\noperator = \"ana\"\npassword_hash = \"{hash}\"\n\n\
              [users.viewer]\npassword_hash = \"{hash}\"\n"
         ),
     )
@@ -175,6 +177,12 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
     let fx = Fixture::start_with(|c| {
         let dir = c.journal.path.parent().unwrap().to_path_buf();
         users_file(&dir.join("opcua-users.toml"));
+        // Ana may reset, not acknowledge.
+        let operators = c.operators_file.clone().unwrap();
+        let mut text = std::fs::read_to_string(&operators).unwrap();
+        text += &cellwatch::operator::OperatorKey::generate("ana")
+            .operators_entry(&[cellwatch::operator::Action::Reset]);
+        std::fs::write(&operators, text).unwrap();
         c.alarm_server = Some(AlarmServerConfig {
             listen: "127.0.0.1:0".parse().unwrap(),
             pki_dir: dir.join("alarm-server-pki"),
@@ -336,6 +344,16 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
         acknowledge(&lee, &condition, &event_id).await,
         StatusCode::BadUserAccessDenied
     );
+    let ana = connect(
+        &url,
+        &scada_pki,
+        IdentityToken::UserName("scada-ana".into(), "kims-password".into()),
+    )
+    .await;
+    assert_eq!(
+        acknowledge(&ana, &condition, &event_id).await,
+        StatusCode::BadUserAccessDenied
+    );
     assert_eq!(
         acknowledge(
             &kim,
@@ -429,6 +447,12 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
                 "lee",
                 "unknown operator 'lee'",
                 "opcua user scada-lee"
+            ),
+            (
+                false,
+                "ana",
+                "operator 'ana' may not ack",
+                "opcua user scada-ana"
             ),
             (true, "kim", "ack ese by kim", "opcua user scada-kim"),
         ]
