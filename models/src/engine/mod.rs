@@ -1497,6 +1497,9 @@ impl CellEngine {
         now: u64,
     ) -> Result<Step, CommandRefused> {
         let alarm = self.alarms.acknowledge(id, operator)?.clone();
+        if self.is_condition(id) {
+            self.alarms.forget_if_normal(id);
+        }
         Ok(Step {
             events: vec![EngineEvent::Alarm {
                 alarm,
