@@ -446,10 +446,12 @@ impl CellLoop {
                 _ = beat.tick() => self.beat().await,
             }
         }
-        // The refusals counted this minute: journaled before the sinks
-        // close.
-        let rest = self.refusals.flush();
+        // The recordings under way and the refusals counted this minute:
+        // journaled before the sinks close.
         let now = self.clock.now_ms();
+        let ended = self.engine.end_recordings(now);
+        self.dispatch(now, Input::Tick, ended, 0).await;
+        let rest = self.refusals.flush();
         self.summaries(rest, now).await;
     }
 

@@ -2073,6 +2073,18 @@ impl CellEngine {
         self
     }
 
+    /// Ends every flight recording under way at `now` — the agent stops,
+    /// or a reload replaces this engine — so that none is lost: each holds
+    /// what came until then (`truncated.end` [`Cut::Stopped`]).
+    pub fn end_recordings(&mut self, now: u64) -> Step {
+        let mut step = Step::default();
+        if let Some(recorder) = &mut self.recorder {
+            recorder.finish_all(now);
+            recorder.take_done(&mut step.recordings);
+        }
+        step
+    }
+
     /// What the flight recorder's ring holds now, if it is on.
     pub fn recorder_fill(&self) -> Option<RecorderFill> {
         self.recorder.as_ref().map(|r| r.fill())

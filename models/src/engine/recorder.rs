@@ -162,6 +162,9 @@ pub enum Cut {
     /// As many recordings were under way as may be
     /// ([`RecorderConfig::max_open`]): nothing after the raise was followed.
     Busy,
+    /// The agent stopped, or read its configuration again, before the
+    /// window's end: what came until then.
+    Stopped,
 }
 
 /// Where a recording holds less than its window, and why.
@@ -456,6 +459,18 @@ impl Recorder {
                 if due(to) {
                     self.complete(k, to, None);
                 }
+            }
+        }
+    }
+
+    /// Every recording under way ends at `now` (the agent stops, or its
+    /// engine is replaced), each holding what came until then.
+    pub(crate) fn finish_all(&mut self, now: u64) {
+        for k in 0..self.open.len() {
+            if let Some(to) = self.open[k].as_ref().map(|o| o.recording.to) {
+                let holds_to = now.min(to);
+                let cut = (holds_to < to).then_some(Cut::Stopped);
+                self.complete(k, holds_to, cut);
             }
         }
     }
