@@ -241,6 +241,42 @@ async fn the_plcs_own_alarms_are_the_cells_acknowledged_at_the_plc_first() {
     assert_eq!(cleared.state.as_str(), "normal");
 
     assert!(!seen.iter().any(|a| a.id.contains("Lube")), "{seen:#?}");
+    // Journaled as any command: the request, committed before the PLC was
+    // asked, and what the PLC answered.
+    let page: serde_json::Value = serde_json::from_str(
+        &crate::spawned::query(
+            &client,
+            "cellwatch/m01ps0004/history?kind=command;since=1h",
+            None,
+        )
+        .await
+        .unwrap(),
+    )
+    .unwrap();
+    let rows: Vec<(String, String, String)> = page["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["fields"]["alarm"] == over)
+        .map(|r| {
+            let f = |k: &str| r["fields"][k].as_str().unwrap_or_default().to_string();
+            (f("operator"), f("stage"), f("detail"))
+        })
+        .collect();
+    let row =
+        |stage: &str, detail: &str| ("kim".to_string(), stage.to_string(), detail.to_string());
+    assert_eq!(
+        rows,
+        [
+            row(
+                "request",
+                "acknowledge plc-Press-Overpressure at the PLC, asked by kim"
+            ),
+            row("result", "plc-Press-Overpressure acknowledged at the PLC"),
+            row("command", "plc-Press-Overpressure is already acknowledged"),
+        ],
+        "{page:#}"
+    );
     // An alarm the PLC does not hold cannot be acknowledged at it.
     let (ok, detail) = send(&client, &signed(Action::Ack, "plc-Press-Nothing")).await;
     assert!(!ok && detail.contains("unknown alarm"), "{detail}");
