@@ -886,6 +886,37 @@ mod tests {
         assert_eq!(r.value_at(i, 8_000), Some(Some(&Sample::Bool(true))));
     }
 
+    /// A PLC whose clock is an hour ahead is not believed: its alarm is
+    /// stamped by the agent's clock, and so are the changes recorded
+    /// around it — the recording holds the fault, not an empty window.
+    #[test]
+    fn a_plc_clock_not_believed_still_gives_the_fault_its_recording() {
+        const AHEAD: u64 = 3_600_000;
+        let mut e = ese_engine(false, config(3_000, 1_000)).trusting_source_time(60_000);
+        let at = |e: &mut CellEngine, address: &str, v: bool, now: u64| {
+            let t = e.tag_index(&Signal::new(address)).unwrap();
+            e.on_reading(t, Reading::Good(v), now + AHEAD, now)
+        };
+        for line in NORMAL
+            .lines()
+            .filter(|l| !l.starts_with('#') && !l.starts_with("address"))
+        {
+            let (a, v) = line.split_once(',').unwrap();
+            at(&mut e, a, v == "1", 1_000);
+        }
+        let step = at(&mut e, "X0.06", false, 10_000);
+        let (_, _, raised_at) = step.alarms().next().unwrap();
+        assert_eq!(raised_at, 10_000, "stamped by the agent's clock");
+        let step = e.advance(11_000);
+        let [r] = &step.recordings[..] else {
+            panic!("{step:?}")
+        };
+        assert_eq!((r.raised_at, r.from, r.to), (10_000, 7_000, 11_000));
+        let y = r.signals.iter().position(|s| s.address == "X0.06").unwrap();
+        assert_eq!(r.value_at(y, 9_999), Some(Some(&Sample::Bool(true))));
+        assert_eq!(r.value_at(y, 10_000), Some(Some(&Sample::Bool(false))));
+    }
+
     #[test]
     fn a_limit_alarm_records_its_number_and_a_lost_connection_as_unknown() {
         let mut e = ese_engine(true, config(3_000, 4_000));
