@@ -59,6 +59,7 @@ tls = {{ ca = "{}", cert = "{}", key = "{}" }}
     let secrets = dir.join("operators.toml");
     std::fs::write(&secrets, crate::spawned::operators_file(&Action::ALL)).unwrap();
     c.operators_file = Some(secrets);
+    c.metrics = Some("127.0.0.1:0".parse().unwrap());
     c
 }
 
@@ -72,40 +73,110 @@ async fn said(server: NodeServer, command: String) -> NodeServer {
     .unwrap()
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn the_plcs_own_alarms_are_the_cells_acknowledged_at_the_plc_first() {
-    crate::network_cut::logs();
-    let d = tempfile::tempdir().unwrap();
-    let dir = d.path().to_path_buf();
+/// A node-opcua server trusting the agent of `dir` (its certificate names
+/// the cell), on a port of its own.
+async fn plc(dir: &std::path::Path) -> (NodeServer, u16) {
     let server_pki = dir.join("server-pki");
     let port = crate::util::restartable_port();
-    // The agent's certificate names the cell in its application URI.
     let made = crate::opcua::opcua_config("opc.tcp://127.0.0.1:1/", &dir.join("agent-pki"));
     drop(cellwatch::sources::opcua::client("m01ps0004", &made).unwrap());
     trusted_by_server(&dir.join("agent-pki"), &server_pki);
-    let server = tokio::task::spawn_blocking({
-        let server_pki = server_pki.clone();
-        move || NodeServer::start(port, &server_pki, 1)
-    })
-    .await
-    .unwrap();
-    // Active before the agent subscribes: found by the refresh.
-    let server = said(
-        server,
-        "alarm Overpressure 700 Hydraulic pressure above 210 bar".into(),
-    )
-    .await;
-    let config = cell(&dir, port);
-    pki::trust(&server.cert, &config.opcua.as_ref().unwrap().pki_dir).unwrap();
-    let agent = cellwatch::agent::start(config, None).await.unwrap();
+    let server = tokio::task::spawn_blocking(move || NodeServer::start(port, &server_pki, 1))
+        .await
+        .unwrap();
+    (server, port)
+}
+
+type Alarms =
+    zenoh_ext::AdvancedSubscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
+
+/// The agent of `config` started, and its alarms subscribed to.
+async fn agent_of(
+    dir: &std::path::Path,
+    config: &CellConfig,
+) -> (cellwatch::agent::Agent, zenoh::Session, Alarms) {
+    let agent = cellwatch::agent::start(config.clone(), None).await.unwrap();
     let zenoh_port = crate::util::agent_port(&agent).await;
-    let client = crate::util::operator_session(&dir, "operator-kim", zenoh_port).await;
+    let client = crate::util::operator_session(dir, "operator-kim", zenoh_port).await;
     let sub = client
         .declare_subscriber("cellwatch/m01ps0004/alarms/*")
         .history(HistoryConfig::default().detect_late_publishers())
         .recovery(RecoveryConfig::default().heartbeat())
         .await
         .unwrap();
+    (agent, client, sub)
+}
+
+/// The agent stopped while the PLC's alarms go on: back, it restores them
+/// from the journal, and the server's refresh says which it still holds —
+/// the one that ended and was acknowledged at the PLC meanwhile clears,
+/// the one still active is not raised a second time.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_plcs_alarms_survive_a_restart_and_what_ended_meanwhile_clears() {
+    crate::network_cut::logs();
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let (server, port) = plc(dir).await;
+    let config = cell(dir, port);
+    pki::trust(&server.cert, &config.opcua.as_ref().unwrap().pki_dir).unwrap();
+    let server = said(server, "alarm Guard 300 Guard door open".into()).await;
+    let server = said(server, "alarm Oil 600 Oil temperature high".into()).await;
+    let (agent, _client, sub) = agent_of(dir, &config).await;
+    let mut seen = Vec::new();
+    for id in ["plc-Press-Guard", "plc-Press-Oil"] {
+        alarm_until(&sub, id, &mut seen, |a| {
+            a.id == id && a.transition.as_str() == "raised"
+        })
+        .await;
+    }
+    agent.stop().await;
+    let server = said(server, "hmi-ack Oil anna cooled down".into()).await;
+    let server = said(server, "normal Oil".into()).await;
+
+    let (agent, _client, sub) = agent_of(dir, &config).await;
+    let mut seen = Vec::new();
+    let oil = alarm_until(&sub, "oil cleared after the restart", &mut seen, |a| {
+        a.id == "plc-Press-Oil" && a.transition.as_str() == "acknowledged"
+    })
+    .await;
+    assert_eq!(oil.state.as_str(), "normal", "{seen:#?}");
+    assert_eq!(oil.acked_by.as_deref(), Some("plc"));
+    assert!(
+        oil.message.ends_with("(no longer held by the PLC)"),
+        "{}",
+        oil.message
+    );
+    // The guard came back from the journal and stays, raised once.
+    let guard: Vec<&str> = seen
+        .iter()
+        .filter(|a| a.id == "plc-Press-Guard")
+        .map(|a| a.transition.as_str())
+        .collect();
+    assert!(
+        guard.contains(&"restored") && !guard.contains(&"raised"),
+        "{seen:#?}"
+    );
+    agent.stop().await;
+    tokio::task::spawn_blocking(move || server.stop())
+        .await
+        .unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_plcs_own_alarms_are_the_cells_acknowledged_at_the_plc_first() {
+    crate::network_cut::logs();
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let (server, port) = plc(dir).await;
+    // Active before the agent subscribes: found by the refresh.
+    let server = said(
+        server,
+        "alarm Overpressure 700 Hydraulic pressure above 210 bar".into(),
+    )
+    .await;
+    let config = cell(dir, port);
+    pki::trust(&server.cert, &config.opcua.as_ref().unwrap().pki_dir).unwrap();
+    let (agent, client, sub) = agent_of(dir, &config).await;
     let mut seen: Vec<AlarmPayload> = Vec::new();
     let over = "plc-Press-Overpressure";
     let raised = alarm_until(&sub, "the PLC's overpressure raised", &mut seen, |a| {
@@ -170,6 +241,42 @@ async fn the_plcs_own_alarms_are_the_cells_acknowledged_at_the_plc_first() {
     assert_eq!(cleared.state.as_str(), "normal");
 
     assert!(!seen.iter().any(|a| a.id.contains("Lube")), "{seen:#?}");
+    // Journaled as any command: the request, committed before the PLC was
+    // asked, and what the PLC answered.
+    let page: serde_json::Value = serde_json::from_str(
+        &crate::spawned::query(
+            &client,
+            "cellwatch/m01ps0004/history?kind=command;since=1h",
+            None,
+        )
+        .await
+        .unwrap(),
+    )
+    .unwrap();
+    let rows: Vec<(String, String, String)> = page["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["fields"]["alarm"] == over)
+        .map(|r| {
+            let f = |k: &str| r["fields"][k].as_str().unwrap_or_default().to_string();
+            (f("operator"), f("stage"), f("detail"))
+        })
+        .collect();
+    let row =
+        |stage: &str, detail: &str| ("kim".to_string(), stage.to_string(), detail.to_string());
+    assert_eq!(
+        rows,
+        [
+            row(
+                "request",
+                "acknowledge plc-Press-Overpressure at the PLC, asked by kim"
+            ),
+            row("result", "plc-Press-Overpressure acknowledged at the PLC"),
+            row("command", "plc-Press-Overpressure is already acknowledged"),
+        ],
+        "{page:#}"
+    );
     // An alarm the PLC does not hold cannot be acknowledged at it.
     let (ok, detail) = send(&client, &signed(Action::Ack, "plc-Press-Nothing")).await;
     assert!(!ok && detail.contains("unknown alarm"), "{detail}");

@@ -8,6 +8,7 @@ use std::time::Duration;
 
 use cellwatch::payload::RecordingPayload;
 use cellwatch_models::engine::{RecorderConfig, Sample};
+use zenoh_ext::AdvancedSubscriberBuilderExt;
 
 use crate::agent::Fixture;
 
@@ -143,4 +144,47 @@ async fn a_fault_is_recorded_with_the_signals_its_check_reads_and_read_back() {
         "{metrics}"
     );
     fx.sim.stop();
+}
+
+/// A recording under way when the agent stops is journaled with what came
+/// until then, saying so — not lost with the process.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_recording_under_way_when_the_agent_stops_is_kept_cut_short() {
+    let mut fx = Fixture::start_with(|c| {
+        c.recorder = Some(RecorderConfig {
+            after: 3_600_000,
+            ..RecorderConfig::default()
+        });
+    })
+    .await;
+    let sub = fx
+        .client()
+        .declare_subscriber("cellwatch/m01ps0004/alarms/ese")
+        .history(zenoh_ext::HistoryConfig::default().detect_late_publishers())
+        .await
+        .unwrap();
+    fx.settled().await;
+    fx.sim.set("X0.06", false).unwrap();
+    let mut seen = Vec::new();
+    crate::agent::alarm_until(&sub, "ESE raised", &mut seen, |a| {
+        a.transition.as_str() == "raised"
+    })
+    .await;
+    fx.stop().await;
+    let journal = fx.journal_path();
+    let run = crate::util::cellwatch(&[
+        "explain",
+        "--alarm",
+        "ese",
+        "--journal",
+        journal.to_str().unwrap(),
+        "--timeline",
+    ]);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    assert!(
+        run.stdout
+            .contains("only: the agent stopped or read its configuration again"),
+        "{}",
+        run.stdout
+    );
 }

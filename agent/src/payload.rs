@@ -139,6 +139,17 @@ pub struct ConsequencePayload {
     pub suppressed: bool,
 }
 
+impl std::fmt::Display for ConsequencePayload {
+    /// `consequence of ese`, and `suppressed` when it is.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "consequence of {}", self.cause)?;
+        if self.suppressed {
+            f.write_str(", suppressed")?;
+        }
+        Ok(())
+    }
+}
+
 impl AlarmPayload {
     /// The payload of `alarm` after `transition` at `at` (ms).
     pub fn new(cell: &str, alarm: &Alarm, transition: Transition, at: u64) -> Self {
@@ -620,6 +631,20 @@ fn compared(text: &str) -> Option<cellwatch_models::explain::Compared> {
     })
 }
 
+/// A tag value as JSON: a boolean, a number (integers exact) or a string.
+pub fn json_value(v: &cellwatch_models::engine::Value) -> serde_json::Value {
+    use cellwatch_models::engine::Value;
+    use cellwatch_models::value::Num;
+    match v {
+        Value::Bool(b) => (*b).into(),
+        Value::Num(Num::Int(n)) => (*n).into(),
+        Value::Num(Num::UInt(n)) => (*n).into(),
+        Value::Num(Num::Float(n)) => serde_json::Number::from_f64(*n)
+            .map_or(serde_json::Value::Null, serde_json::Value::Number),
+        Value::Text(t) => t.to_string().into(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -661,5 +686,17 @@ mod tests {
         assert!(back.culprits[0]
             .to_string()
             .starts_with("TEMP = 85.25 (needs <= 80.5)"));
+    }
+
+    #[test]
+    fn a_consequence_says_its_cause_and_whether_it_is_suppressed() {
+        let mut c = ConsequencePayload {
+            cause: "ese".into(),
+            first_out: "ese".into(),
+            suppressed: false,
+        };
+        assert_eq!(c.to_string(), "consequence of ese");
+        c.suppressed = true;
+        assert_eq!(c.to_string(), "consequence of ese, suppressed");
     }
 }

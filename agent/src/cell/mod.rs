@@ -29,7 +29,6 @@ use std::time::Duration;
 
 use cellwatch_models::alarm::Transition;
 use cellwatch_models::engine::{CellEngine, HistoryKind, Step, Value};
-use cellwatch_models::value::Num;
 use tokio::sync::{mpsc, oneshot, watch};
 
 pub use crate::step::{
@@ -451,10 +450,12 @@ impl CellLoop {
                 _ = beat.tick() => self.beat().await,
             }
         }
-        // The refusals counted this minute: journaled before the sinks
-        // close.
-        let rest = self.refusals.flush();
+        // The recordings under way and the refusals counted this minute:
+        // journaled before the sinks close.
         let now = self.clock.now_ms();
+        let ended = self.engine.end_recordings(now);
+        self.dispatch(now, Input::Tick, ended, 0).await;
+        let rest = self.refusals.flush();
         self.summaries(rest, now).await;
     }
 
@@ -711,7 +712,7 @@ impl CellLoop {
                 (Some(_), false) => Quality::Good,
                 (None, false) => Quality::Unknown,
             },
-            value: v.map(|v| json_value(&v)),
+            value: v.map(|v| crate::payload::json_value(&v)),
         };
         let now = self.clock.now_ms();
         // A contact's value now, by its address (the charts' signals);
@@ -770,18 +771,6 @@ impl CellLoop {
                 .collect(),
             timers: self.timers.payload(),
         }
-    }
-}
-
-/// A tag value as JSON: a boolean, a number (integers exact) or a string.
-fn json_value(v: &Value) -> serde_json::Value {
-    match v {
-        Value::Bool(b) => (*b).into(),
-        Value::Num(Num::Int(n)) => (*n).into(),
-        Value::Num(Num::UInt(n)) => (*n).into(),
-        Value::Num(Num::Float(n)) => serde_json::Number::from_f64(*n)
-            .map_or(serde_json::Value::Null, serde_json::Value::Number),
-        Value::Text(t) => t.to_string().into(),
     }
 }
 

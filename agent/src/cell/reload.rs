@@ -45,6 +45,9 @@ impl CellLoop {
         } = reload;
         forcing.pending = None;
         let now = self.clock.now_ms();
+        // The recordings under way end with the engine that keeps them.
+        let ended = self.engine.end_recordings(now);
+        self.dispatch(now, Input::Reloaded, ended, 0).await;
         let carried = self.engine.carry_over();
         let alarms = carried.alarms.len();
         let steps = engine.take_over(carried, now);

@@ -693,10 +693,9 @@ fn print_notice(
         }
         Notice::Alarm(a) => match a.transition {
             Transition::Raised => {
-                let step = a
-                    .fault_step
-                    .map(|s| format!(" at step {s}"))
-                    .unwrap_or_default();
+                let step = a.fault_step.map(|s| format!(" at step {s}"));
+                let of = a.consequence.as_ref().map(|c| format!(" ({c})"));
+                let step = step.unwrap_or_default() + &of.unwrap_or_default();
                 writeln!(
                     out,
                     "{}  ALARM  {} [{}] {}{step}",

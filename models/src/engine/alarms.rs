@@ -356,6 +356,25 @@ impl AlarmBook {
         Ok(alarm)
     }
 
+    /// Forgets alarm `id` if it has nothing left to show (cleared,
+    /// acknowledged, neither shelved nor out of service) and is no fault:
+    /// for alarms whose ids are not known beforehand (the PLC's own), so
+    /// that the book holds the ones that matter, not every one ever seen.
+    pub(crate) fn forget_if_normal(&mut self, id: &str) {
+        let normal = self.alarms.get(id).is_some_and(|a| {
+            !a.active
+                && a.acknowledged
+                && a.shelved.is_none()
+                && a.out_of_service.is_none()
+                && !is_fault(a.kind)
+        });
+        if normal {
+            self.alarms.remove(id);
+            self.conditions.remove(id);
+            self.held.remove(id);
+        }
+    }
+
     /// An operator resets latched alarm `id`, whose condition must be gone.
     pub(crate) fn reset(
         &mut self,

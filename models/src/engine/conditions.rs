@@ -95,6 +95,7 @@ impl CellEngine {
         if let Some(by) = c.acked {
             self.acked_at_plc(&c.id, &by, now, &mut step);
         }
+        self.alarms.forget_if_normal(&c.id);
         step
     }
 
@@ -134,6 +135,7 @@ impl CellEngine {
             if !acknowledged {
                 self.acked_at_plc(&id, ACKED_AT_PLC, now, &mut step);
             }
+            self.alarms.forget_if_normal(&id);
         }
         self.update_state(now, &mut step);
         step
@@ -228,13 +230,14 @@ mod tests {
             transitions(&s),
             [Transition::Cleared, Transition::Acknowledged]
         );
-        let a = e.alarms().next().unwrap();
+        let (a, _, _) = s.alarms().last().unwrap();
         assert_eq!(a.acked_by.as_deref(), Some(ACKED_AT_PLC));
         assert!(
             a.message.ends_with("(no longer held by the PLC)"),
             "{}",
             a.message
         );
+        assert_eq!(e.alarms().count(), 0, "back to normal: forgotten");
         // Held: untouched.
         let mut e = engine();
         e.on_condition(event(true, None, 1_000), 1_000);
@@ -262,6 +265,34 @@ mod tests {
             CellEngine::new("c1", Vec::new(), Vec::new(), StateRules::default()).unwrap();
         without.take_over(e.carry_over(), 2_000);
         assert_eq!(without.alarms().count(), 0);
+    }
+
+    #[test]
+    fn a_condition_back_to_normal_is_forgotten_and_raised_anew_when_it_comes_back() {
+        let mut e = engine();
+        e.on_condition(event(true, None, 1_000), 1_000);
+        e.on_condition(event(false, None, 2_000), 2_000);
+        assert_eq!(
+            e.alarms().count(),
+            1,
+            "cleared, not acknowledged: still shown"
+        );
+        e.acknowledge("plc-Press-Overpressure", "op1", 3_000)
+            .unwrap();
+        assert_eq!(e.alarms().count(), 0, "normal: nothing left to show");
+        // A server naming a new condition for every occurrence leaves
+        // nothing behind once each is over.
+        for k in 0..100 {
+            let mut c = event(true, None, 4_000 + k);
+            c.id = format!("plc-Press-Run{k}");
+            e.on_condition(c.clone(), 4_000 + k);
+            c.active = false;
+            c.acked = Some("hmi".into());
+            e.on_condition(c, 4_000 + k);
+        }
+        assert_eq!(e.alarms().count(), 0);
+        let s = e.on_condition(event(true, None, 9_000), 9_000);
+        assert_eq!(transitions(&s), [Transition::Raised]);
     }
 
     #[test]

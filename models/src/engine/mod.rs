@@ -494,6 +494,10 @@ pub struct CellEngine {
     /// The PLC's conditions are alarms whose ids start with one of these
     /// (`<prefix>-`).
     conditions: Vec<String>,
+    /// The agent's clock at the readings being handled (ms): the flight
+    /// recorder keeps their changes at the time their alarms are stamped
+    /// with, so that a PLC clock not believed leaves no recording empty.
+    clock: u64,
 }
 
 impl CellEngine {
@@ -647,6 +651,7 @@ impl CellEngine {
             order: Order::default(),
             recorder: None,
             conditions: Vec::new(),
+            clock: 0,
         })
     }
 
@@ -1046,6 +1051,7 @@ impl CellEngine {
     /// against it — a contact that opened during the cut is a trigger,
     /// not a value out of nowhere. Call it before those changes.
     pub fn on_resumed(&mut self, now: u64) -> Step {
+        self.clock = now;
         let mut step = Step::default();
         let Some(cut) = self.at_cut.take() else {
             return step;
@@ -1137,6 +1143,7 @@ impl CellEngine {
 
     /// The connection to the PLC came up or went down.
     pub fn on_connection(&mut self, up: bool, now: u64) -> Step {
+        self.clock = now;
         let mut step = Step::default();
         if Some(up) == self.connected {
             return step;
@@ -1226,6 +1233,7 @@ impl CellEngine {
     }
 
     fn readings(&mut self, readings: &[TagReading], now: u64, to_alarm: bool) -> (Step, usize) {
+        self.clock = now;
         let mut step = Step::default();
         let mut findings = Vec::new();
         let mut used = 0;
@@ -1326,8 +1334,9 @@ impl CellEngine {
                 r.source_time
             }
         };
+        let ring_at = self.ring_time(at);
         if let Some(recorder) = &mut self.recorder {
-            recorder.pass(at);
+            recorder.pass(ring_at);
         }
         // Delays that ran out before this value was sampled (values sampled
         // over a while and delivered together, late or republished) are
@@ -1497,6 +1506,9 @@ impl CellEngine {
         now: u64,
     ) -> Result<Step, CommandRefused> {
         let alarm = self.alarms.acknowledge(id, operator)?.clone();
+        if self.is_condition(id) {
+            self.alarms.forget_if_normal(id);
+        }
         Ok(Step {
             events: vec![EngineEvent::Alarm {
                 alarm,
@@ -1697,8 +1709,9 @@ impl CellEngine {
         }
         self.remember(tag);
         self.values[tag] = value;
+        let ring_at = self.ring_time(now);
         if let Some(recorder) = &mut self.recorder {
-            recorder.change_bool(tag, now, before, value);
+            recorder.change_bool(tag, ring_at, before, value);
         }
         step.evaluations += 1;
         if self.exported.get(tag) == Some(&true) {
@@ -1737,8 +1750,9 @@ impl CellEngine {
         }
         self.remember(tag);
         let before = std::mem::replace(&mut self.others[tag], value);
+        let ring_at = self.ring_time(now);
         if let Some(recorder) = &mut self.recorder {
-            recorder.change(tag, now, &before, &self.others[tag]);
+            recorder.change(tag, ring_at, &before, &self.others[tag]);
         }
         self.known_changed(tag, before.is_some(), self.others[tag].is_some(), step);
         step.evaluations += 1;
@@ -1907,6 +1921,16 @@ impl CellEngine {
         self.announce(f, stamp, step);
     }
 
+    /// The time the flight recorder keeps a change sampled at `at` with:
+    /// the time an alarm judged on it is stamped with.
+    fn ring_time(&self, at: u64) -> u64 {
+        if self.clock == 0 {
+            at
+        } else {
+            self.stamp(at, self.clock)
+        }
+    }
+
     /// When a change the source sampled at `source` happened, for alarms
     /// judged on it: `source`, if the source's clock is trusted and `source`
     /// is neither ahead of the agent's clock `now` nor further behind it
@@ -2068,6 +2092,18 @@ impl CellEngine {
             .collect();
         self.recorder = Some(Box::new(Recorder::new(config, watched)));
         self
+    }
+
+    /// Ends every flight recording under way at `now` — the agent stops,
+    /// or a reload replaces this engine — so that none is lost: each holds
+    /// what came until then (`truncated.end` [`Cut::Stopped`]).
+    pub fn end_recordings(&mut self, now: u64) -> Step {
+        let mut step = Step::default();
+        if let Some(recorder) = &mut self.recorder {
+            recorder.finish_all(now);
+            recorder.take_done(&mut step.recordings);
+        }
+        step
     }
 
     /// What the flight recorder's ring holds now, if it is on.

@@ -162,6 +162,9 @@ pub enum Cut {
     /// As many recordings were under way as may be
     /// ([`RecorderConfig::max_open`]): nothing after the raise was followed.
     Busy,
+    /// The agent stopped, or read its configuration again, before the
+    /// window's end: what came until then.
+    Stopped,
 }
 
 /// Where a recording holds less than its window, and why.
@@ -456,6 +459,18 @@ impl Recorder {
                 if due(to) {
                     self.complete(k, to, None);
                 }
+            }
+        }
+    }
+
+    /// Every recording under way ends at `now` (the agent stops, or its
+    /// engine is replaced), each holding what came until then.
+    pub(crate) fn finish_all(&mut self, now: u64) {
+        for k in 0..self.open.len() {
+            if let Some(to) = self.open[k].as_ref().map(|o| o.recording.to) {
+                let holds_to = now.min(to);
+                let cut = (holds_to < to).then_some(Cut::Stopped);
+                self.complete(k, holds_to, cut);
             }
         }
     }
@@ -869,6 +884,37 @@ mod tests {
             .unwrap();
         assert_eq!(r.value_at(i, 7_999), Some(Some(&Sample::Bool(false))));
         assert_eq!(r.value_at(i, 8_000), Some(Some(&Sample::Bool(true))));
+    }
+
+    /// A PLC whose clock is an hour ahead is not believed: its alarm is
+    /// stamped by the agent's clock, and so are the changes recorded
+    /// around it — the recording holds the fault, not an empty window.
+    #[test]
+    fn a_plc_clock_not_believed_still_gives_the_fault_its_recording() {
+        const AHEAD: u64 = 3_600_000;
+        let mut e = ese_engine(false, config(3_000, 1_000)).trusting_source_time(60_000);
+        let at = |e: &mut CellEngine, address: &str, v: bool, now: u64| {
+            let t = e.tag_index(&Signal::new(address)).unwrap();
+            e.on_reading(t, Reading::Good(v), now + AHEAD, now)
+        };
+        for line in NORMAL
+            .lines()
+            .filter(|l| !l.starts_with('#') && !l.starts_with("address"))
+        {
+            let (a, v) = line.split_once(',').unwrap();
+            at(&mut e, a, v == "1", 1_000);
+        }
+        let step = at(&mut e, "X0.06", false, 10_000);
+        let (_, _, raised_at) = step.alarms().next().unwrap();
+        assert_eq!(raised_at, 10_000, "stamped by the agent's clock");
+        let step = e.advance(11_000);
+        let [r] = &step.recordings[..] else {
+            panic!("{step:?}")
+        };
+        assert_eq!((r.raised_at, r.from, r.to), (10_000, 7_000, 11_000));
+        let y = r.signals.iter().position(|s| s.address == "X0.06").unwrap();
+        assert_eq!(r.value_at(y, 9_999), Some(Some(&Sample::Bool(true))));
+        assert_eq!(r.value_at(y, 10_000), Some(Some(&Sample::Bool(false))));
     }
 
     #[test]

@@ -386,8 +386,15 @@ pub(super) async fn acknowledge(
     let target = conditions
         .lock()
         .unwrap_or_else(|e| e.into_inner())
-        .target(id)
-        .ok_or_else(|| format!("{id}: the PLC holds no such condition now"))?;
+        .target(id);
+    // A condition the server keeps no more (it ended, and a server that
+    // does not keep it while unacknowledged said so) has nothing to
+    // acknowledge at the PLC: the alarm is acknowledged in cellwatch.
+    let Some(target) = target else {
+        return Ok(format!(
+            "{id}: the PLC holds this condition no more; acknowledged in cellwatch only"
+        ));
+    };
     let call = (
         target.condition,
         NodeId::from(MethodId::AcknowledgeableConditionType_Acknowledge),

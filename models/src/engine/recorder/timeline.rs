@@ -91,6 +91,10 @@ impl Recording {
                 "recorded up to {} only: as many recordings were under way as may be\n",
                 at(self.holds_to)
             )),
+            Some(Cut::Stopped) => out.push_str(&format!(
+                "recorded up to {} only: the agent stopped or read its configuration again\n",
+                at(self.holds_to)
+            )),
             _ => {}
         }
         out
