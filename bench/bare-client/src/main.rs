@@ -196,7 +196,7 @@ fn make_cert(cert: &str, key: &str, uri: &str) {
         UA_KeyValueMap_setScalar(
             &mut params,
             name,
-            &mut bits as *mut _ as *const c_void,
+            &mut bits as *mut _ as *mut c_void,
             &UA_TYPES[UA_TYPES_UINT16 as usize],
         );
         UA_CreateCertificate(
@@ -263,7 +263,10 @@ fn main() {
                 if s != UA_STATUSCODE_GOOD {
                     fail("cannot configure the client", s);
                 }
-                (UA_MessageSecurityMode::UA_MESSAGESECURITYMODE_NONE, POLICY_NONE)
+                (
+                    UA_MessageSecurityMode::UA_MESSAGESECURITYMODE_NONE,
+                    POLICY_NONE,
+                )
             }
             Some((cert, key, server)) => {
                 let trust = [ua_bytes(&read(server))];
