@@ -101,7 +101,10 @@ enum Cmd {
         references: Vec<peer::Reference>,
         /// The bare open62541 client (`bench/bare-client`, built by
         /// `bench/run peer --reference c`).
-        #[arg(long, default_value = "target/bare-client/release/cellwatch-bare-client")]
+        #[arg(
+            long,
+            default_value = "target/bare-client/release/cellwatch-bare-client"
+        )]
         bare_client: PathBuf,
         /// Where configurations, PKI directories, journals and logs go.
         #[arg(long, default_value = "target/bench-peer")]

@@ -814,7 +814,11 @@ pub async fn bare(
     let interval = ua.publishing_interval.as_millis().max(1);
     // The agent's lifetime count (subscription.rs): the lifetime in
     // publishing intervals, at least three keep-alive periods.
-    let lifetime = ua.subscription_lifetime.as_millis().div_ceil(interval).max(30);
+    let lifetime = ua
+        .subscription_lifetime
+        .as_millis()
+        .div_ceil(interval)
+        .max(30);
     let mut command = Command::new(client);
     command
         .arg("--endpoint")
@@ -920,13 +924,16 @@ async fn counted(
         if ready["ready"] != true {
             bail!("{subject} said {ready} (see {})", log.display());
         }
-        // Settled: the initial values all in.
+        // Settled: the initial values all in. A subscriber that says its
+        // own CPU time (the bare client: getrusage, in µs where /proc has
+        // 10 ms ticks) is measured by it.
         let mut last = u64::MAX;
-        let c0 = loop {
+        let (c0, own_cpu0) = loop {
             tokio::time::sleep(Duration::from_millis(500)).await;
-            let n = b.ask()?["received"].as_u64().unwrap_or(0);
+            let a = b.ask()?;
+            let n = a["received"].as_u64().unwrap_or(0);
             if n == last && n >= (load.tags + SWITCHES) as u64 {
-                break n;
+                break (n, a["cpu"].as_f64());
             }
             last = n;
         };
@@ -952,6 +959,10 @@ async fn counted(
         };
         let drain = last.1.saturating_duration_since(stopped).as_secs_f64();
         let m = window.close(seconds + drain)?;
+        let cpu = match (own_cpu0, answer["cpu"].as_f64()) {
+            (Some(a), Some(b)) => b - a,
+            _ => m.cpu,
+        };
         let seen: Vec<(SystemTime, Option<usize>)> = answer["alarms"]
             .as_array()
             .map(|a| {
@@ -977,7 +988,7 @@ async fn counted(
             received: answer["received"].as_u64().unwrap_or(0) - c0,
             seconds,
             drain,
-            cpu: m.cpu,
+            cpu,
             rss_ready: m.rss_ready,
             rss_end: m.rss_end,
             rss_peak: m.rss_peak,
