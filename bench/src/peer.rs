@@ -1192,6 +1192,58 @@ mod tests {
         assert!((l[0] - 0.12).abs() < 1e-9 && (l[1] - 0.09).abs() < 1e-9);
     }
 
+    /// The agent's CPU per change over asyncua's and over the bare
+    /// client's at the same load (the bare client's with the agent's
+    /// security when measured, else None's); the references get none.
+    #[test]
+    fn the_table_shows_the_agent_over_each_reference() {
+        let load: Load = "1000:10000".parse().unwrap();
+        let row = |kind, security, subject: &str, cpu: f64| Row {
+            kind,
+            security,
+            subject: subject.into(),
+            load,
+            produced: 100_000,
+            received: 100_000,
+            seconds: 10.0,
+            drain: 0.0,
+            cpu,
+            rss_ready: 0,
+            rss_end: 0,
+            rss_peak: 0,
+            server_cpu: 0.0,
+            latencies: Vec::new(),
+            faults: (0, 0),
+            internal: (kind == Kind::Agent).then_some((0.001, 0.01)),
+            internal_counts: Vec::new(),
+            generator_lag: 0.0,
+        };
+        let rows = [
+            row(Kind::Agent, Security::None, "cellwatch (None)", 0.08),
+            row(
+                Kind::Agent,
+                Security::SignEncrypt,
+                "cellwatch (secure)",
+                0.12,
+            ),
+            row(Kind::Asyncua, Security::None, "Python asyncua (None)", 3.2),
+            row(Kind::Bare, Security::None, "bare (None)", 0.02),
+        ];
+        let t = table(&rows);
+        // 0.80 µs over 32 µs, and over 0.20 µs.
+        assert!(
+            t.contains("| cellwatch (None) | 1000 | 10000 | 10000 | 1 % | 0.80 | 0.03 | 4.00 |")
+        );
+        // No secure bare client row: over the one without security.
+        assert!(t.contains("| 1.20 | 0.04 | 6.00 |"));
+        assert!(t.contains("| bare (None) | 1000 | 10000 | 10000 | 0 % | 0.20 | - | - |"));
+        assert!(t.contains("cellwatch (None) vs the bare (None): 1.00× the changes handled per second, CPU per change 4.00× the bare client's (0.80 vs 0.20 µs)"));
+        // The bare client checks nothing: no faults column of its own.
+        assert!(t
+            .lines()
+            .any(|l| l.starts_with("| bare (None)") && l.contains("| - | 0 |")));
+    }
+
     #[test]
     fn loads_parse_and_bad_ones_say_why() {
         let l: Load = "100_000:500000".parse().unwrap();

@@ -13,7 +13,7 @@
 //! object per line on stdout:
 //!   {"ready": true, "received": n}      once every item is created
 //! and, on each line read from stdin ("count"; "quit" ends it):
-//!   {"received": n, "alarms": [], "cpu": s}
+//!   {"received": n, "alarms": [], "cpu": s}   (s: to the µs)
 //! (`cpu`: its own user + system time from getrusage). On "quit" it prints
 //! the count and its CPU time a last time, with `"final": true`, and exits.
 //!
@@ -406,7 +406,7 @@ fn main() {
                     break;
                 }
                 answer(format!(
-                    "{{\"received\": {}, \"alarms\": [], \"cpu\": {:.3}}}",
+                    "{{\"received\": {}, \"alarms\": [], \"cpu\": {:.6}}}",
                     RECEIVED.load(Ordering::Relaxed),
                     cpu_seconds()
                 ));
@@ -421,7 +421,7 @@ fn main() {
             }
         }
         say(format!(
-            "{{\"received\": {}, \"alarms\": [], \"cpu\": {:.3}, \"final\": true}}",
+            "{{\"received\": {}, \"alarms\": [], \"cpu\": {:.6}, \"final\": true}}",
             RECEIVED.load(Ordering::Relaxed),
             cpu_seconds()
         ));
