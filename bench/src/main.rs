@@ -29,15 +29,20 @@ struct Cli {
     command: Cmd,
 }
 
+// Parsed once per run: the peer benchmark's many options need no box.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 enum Cmd {
     /// The peer benchmark: a load OPC UA server (async-opcua, this build)
     /// toggling Boolean tags and opening limit switches; the agent
     /// (`cellwatch run`, its own process) and the Python asyncua baseline
     /// each subscribe alone to a fresh server and must report every
-    /// opened switch as the fault's cause. Prints a Markdown table:
-    /// changes handled per second, CPU, peak RSS, fault → alarm latency,
-    /// faults reported, notifications lost, and the ratios.
+    /// opened switch as the fault's cause; with `--reference c`, the bare
+    /// open62541 client subscribes as the agent does and only counts.
+    /// Prints a Markdown table: changes handled per second, CPU, the
+    /// agent's CPU per change over the baseline's and the bare client's,
+    /// peak RSS, fault → alarm latency, faults reported, notifications
+    /// lost, and the ratios.
     Peer {
         /// A load as TAGS:CHANGES_PER_SECOND; repeat for several rows.
         #[arg(long = "load", required = true, value_name = "TAGS:RATE")]
@@ -92,6 +97,17 @@ enum Cmd {
         /// The baseline script.
         #[arg(long, default_value = "bench/baseline.py")]
         script: PathBuf,
+        /// A reference to run as well, for each load and security: `c`,
+        /// the bare open62541 client (`--bare-client`).
+        #[arg(long = "reference", value_enum)]
+        references: Vec<peer::Reference>,
+        /// The bare open62541 client (`bench/bare-client`, built by
+        /// `bench/run peer --reference c`).
+        #[arg(
+            long,
+            default_value = "target/bare-client/release/cellwatch-bare-client"
+        )]
+        bare_client: PathBuf,
         /// Where configurations, PKI directories, journals and logs go.
         #[arg(long, default_value = "target/bench-peer")]
         workdir: PathBuf,
@@ -222,6 +238,8 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
             agent,
             python,
             script,
+            references,
+            bare_client,
             workdir,
             drain,
         } => {
@@ -239,6 +257,9 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
                 server_nice,
                 agent_priority,
                 drain,
+                bare_client: references
+                    .contains(&peer::Reference::C)
+                    .then_some(bare_client),
             };
             let mut rows = Vec::new();
             for &load in &loads {
@@ -267,6 +288,15 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
                         load.tags, load.rate
                     );
                     rows.push(peer::baseline(&setup, python, load).await?);
+                }
+                if let Some(client) = &setup.bare_client {
+                    for &s in &security {
+                        eprintln!(
+                            "cellwatch-bench: bare open62541 client, {} tags, {}/s, {s:?}",
+                            load.tags, load.rate
+                        );
+                        rows.push(peer::bare(&setup, client, load, s).await?);
+                    }
                 }
             }
             print!("{}", peer::table(&rows));

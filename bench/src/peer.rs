@@ -1,7 +1,8 @@
 //! The peer benchmark: for each load, the agent under test (the release
-//! `cellwatch` binary, its own process) and the Python asyncua baseline
-//! (its own process), each alone against a fresh load server, measured the
-//! same way.
+//! `cellwatch` binary, its own process), the Python asyncua baseline (its
+//! own process) and, with `--reference c`, the bare open62541 client
+//! (`bench/bare-client`, its own process), each alone against a fresh load
+//! server, measured the same way.
 
 use std::collections::HashMap;
 use std::io::{BufRead, BufReader, Write};
@@ -94,6 +95,27 @@ pub struct Setup {
     pub drain: Duration,
     /// How the agent is given its tags.
     pub tags_in: TagsIn,
+    /// The bare open62541 client, when the C reference runs.
+    pub bare_client: Option<PathBuf>,
+}
+
+/// A reference besides the Python baseline (`--reference`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Reference {
+    /// The bare open62541 client (`bench/bare-client`): subscribes as the
+    /// agent does and only counts the notifications.
+    C,
+}
+
+/// Who a row measured.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    /// The agent under test.
+    Agent,
+    /// The Python asyncua baseline.
+    Asyncua,
+    /// The bare open62541 client.
+    Bare,
 }
 
 /// How the agent's configuration gives its tags.
@@ -109,7 +131,9 @@ pub enum TagsIn {
 /// What one subscriber did under one load.
 #[derive(Debug, Clone)]
 pub struct Row {
-    /// Agent or baseline, and security.
+    /// Agent, baseline or bare client.
+    pub kind: Kind,
+    /// Who, and security.
     pub subject: String,
     /// The load.
     pub load: Load,
@@ -144,6 +168,8 @@ pub struct Row {
     pub internal_counts: Vec<(f64, f64)>,
     /// The most the load generator fell behind its schedule, seconds.
     pub generator_lag: f64,
+    /// The security the subscriber connected with.
+    pub security: Security,
 }
 
 impl Row {
@@ -444,6 +470,8 @@ pub async fn agent(
             verify.push_str(", [[tags]] tables");
         }
         Ok(Row {
+            kind: Kind::Agent,
+            security,
             subject: match setup.agent_priority {
                 Some(p) => format!(
                     "cellwatch ({}, SCHED_FIFO {p}{}{verify})",
@@ -718,19 +746,153 @@ pub async fn baseline(setup: &Setup, python: &Path, load: Load) -> anyhow::Resul
         .workdir
         .join(format!("baseline-{}-{}", load.tags, load.rate));
     let server = fresh_server(&dir, load, setup.server_nice).await?;
-    let mut child = Command::new(python)
+    let mut command = Command::new(python);
+    command
         .arg(&setup.script)
         .arg("--endpoint")
         .arg(server.endpoint())
         .arg("--noise")
         .arg(load.tags.to_string())
         .arg("--publishing-ms")
-        .arg(setup.publishing.as_millis().to_string())
+        .arg(setup.publishing.as_millis().to_string());
+    let log = dir.join("baseline.log");
+    counted(
+        setup,
+        load,
+        server,
+        command,
+        &log,
+        (Kind::Asyncua, Security::None),
+        "Python asyncua (None)".into(),
+    )
+    .await
+}
+
+/// The URI in the bare client's certificate (and its application
+/// description).
+const BARE_URI: &str = "urn:cellwatch:bench:bare-client";
+
+/// Runs the bare open62541 client `client` under `load`: one row. It
+/// subscribes with what the agent's configuration for the same load says
+/// (publishing and sampling intervals, queue size, notifications per
+/// publish, lifetime; the keep-alive count, the filter and the timestamps
+/// are the agent's constants), read from that configuration.
+pub async fn bare(
+    setup: &Setup,
+    client: &Path,
+    load: Load,
+    security: Security,
+) -> anyhow::Result<Row> {
+    let dir = setup
+        .workdir
+        .join(format!("bare-{}-{}-{:?}", load.tags, load.rate, security));
+    let server = fresh_server(&dir, load, setup.server_nice).await?;
+    // The agent's configuration for this load, never run: what it asks.
+    let config = dir.join("cell.toml");
+    std::fs::write(
+        &config,
+        agent_config(
+            "bench",
+            &server.endpoint(),
+            security,
+            Subscription {
+                publishing: setup.publishing,
+                max_notifications: setup.max_notifications,
+                verify_interval: None,
+            },
+            "mode = \"peer\"",
+            9,
+        ),
+    )?;
+    std::fs::write(dir.join("tags.csv"), tags_csv(load))?;
+    std::fs::write(dir.join("fault.il"), program())?;
+    let cell = cellwatch::config::load(&config).map_err(|e| anyhow!("{e}"))?;
+    let ua = cell
+        .opcua
+        .as_ref()
+        .ok_or_else(|| anyhow!("no [opcua] in the generated configuration"))?;
+    let interval = ua.publishing_interval.as_millis().max(1);
+    // The agent's lifetime count (subscription.rs): the lifetime in
+    // publishing intervals, at least three keep-alive periods.
+    let lifetime = ua
+        .subscription_lifetime
+        .as_millis()
+        .div_ceil(interval)
+        .max(30);
+    let mut command = Command::new(client);
+    command
+        .arg("--endpoint")
+        .arg(server.endpoint())
+        .arg("--noise")
+        .arg(load.tags.to_string())
+        .arg("--publishing-ms")
+        .arg(interval.to_string())
+        .arg("--sampling-ms")
+        .arg(ua.sampling_interval.as_millis().to_string())
+        .arg("--queue-size")
+        .arg(ua.queue_size.to_string())
+        .arg("--max-notifications")
+        .arg(ua.max_notifications_per_publish.to_string())
+        .arg("--lifetime-count")
+        .arg(lifetime.to_string());
+    if security == Security::SignEncrypt {
+        // Its own key pair, made by open62541 and trusted by the server;
+        // the server's certificate trusted by it.
+        let pki = dir.join("bare-pki");
+        std::fs::create_dir_all(&pki)?;
+        let (cert, key) = (pki.join("cert.der"), pki.join("key.der"));
+        let made = Command::new(client)
+            .arg("make-cert")
+            .arg(&cert)
+            .arg(&key)
+            .arg(BARE_URI)
+            .status()
+            .with_context(|| format!("cannot start {}", client.display()))?;
+        if !made.success() {
+            bail!("{} make-cert failed ({made})", client.display());
+        }
+        let server_pki = dir.join("server-pki");
+        cellwatch::sources::pki::trust(&cert, &server_pki).map_err(|e| anyhow!(e))?;
+        command
+            .arg("--cert")
+            .arg(&cert)
+            .arg("--key")
+            .arg(&key)
+            .arg("--server-cert")
+            .arg(cellwatch::sources::pki::own_cert(&server_pki))
+            .arg("--application-uri")
+            .arg(BARE_URI);
+    }
+    let log = dir.join("bare-client.log");
+    counted(
+        setup,
+        load,
+        server,
+        command,
+        &log,
+        (Kind::Bare, security),
+        format!("open62541 bare client ({})", security.label()),
+    )
+    .await
+}
+
+/// Runs `command`, a subscriber speaking `bench/baseline.py`'s protocol
+/// (its stderr to `log`), against `server` under `load`: one row.
+async fn counted(
+    setup: &Setup,
+    load: Load,
+    server: LoadServer,
+    mut command: Command,
+    log: &Path,
+    (kind, security): (Kind, Security),
+    subject: String,
+) -> anyhow::Result<Row> {
+    let mut child = command
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
-        .stderr(std::fs::File::create(dir.join("baseline.log"))?)
+        .stderr(std::fs::File::create(log)?)
         .spawn()
-        .with_context(|| format!("cannot start {}", python.display()))?;
+        .with_context(|| format!("cannot start {}", command.get_program().to_string_lossy()))?;
     let pid = child.id();
     let stdout = child.stdout.take().ok_or_else(|| anyhow!("no stdout"))?;
     let stdin = child.stdin.take().ok_or_else(|| anyhow!("no stdin"))?;
@@ -753,17 +915,25 @@ pub async fn baseline(setup: &Setup, python: &Path, load: Load) -> anyhow::Resul
         let ready = b
             .lines
             .recv_timeout(Duration::from_secs(900))
-            .map_err(|_| anyhow!("the baseline did not subscribe within 900 s"))?;
+            .map_err(|_| {
+                anyhow!(
+                    "{subject} did not subscribe within 900 s (see {})",
+                    log.display()
+                )
+            })?;
         if ready["ready"] != true {
-            bail!("the baseline said {ready}");
+            bail!("{subject} said {ready} (see {})", log.display());
         }
-        // Settled: the initial values all in.
+        // Settled: the initial values all in. A subscriber that says its
+        // own CPU time (the bare client: getrusage, in µs where /proc has
+        // 10 ms ticks) is measured by it.
         let mut last = u64::MAX;
-        let c0 = loop {
+        let (c0, own_cpu0) = loop {
             tokio::time::sleep(Duration::from_millis(500)).await;
-            let n = b.ask()?["received"].as_u64().unwrap_or(0);
+            let a = b.ask()?;
+            let n = a["received"].as_u64().unwrap_or(0);
             if n == last && n >= (load.tags + SWITCHES) as u64 {
-                break n;
+                break (n, a["cpu"].as_f64());
             }
             last = n;
         };
@@ -789,6 +959,10 @@ pub async fn baseline(setup: &Setup, python: &Path, load: Load) -> anyhow::Resul
         };
         let drain = last.1.saturating_duration_since(stopped).as_secs_f64();
         let m = window.close(seconds + drain)?;
+        let cpu = match (own_cpu0, answer["cpu"].as_f64()) {
+            (Some(a), Some(b)) => b - a,
+            _ => m.cpu,
+        };
         let seen: Vec<(SystemTime, Option<usize>)> = answer["alarms"]
             .as_array()
             .map(|a| {
@@ -806,13 +980,15 @@ pub async fn baseline(setup: &Setup, python: &Path, load: Load) -> anyhow::Resul
             .unwrap_or_default();
         let latencies = match_faults(&faults, &seen);
         Ok(Row {
-            subject: "Python asyncua (None)".into(),
+            kind,
+            security,
+            subject,
             load,
             produced,
             received: answer["received"].as_u64().unwrap_or(0) - c0,
             seconds,
             drain,
-            cpu: m.cpu,
+            cpu,
             rss_ready: m.rss_ready,
             rss_end: m.rss_end,
             rss_peak: m.rss_peak,
@@ -832,8 +1008,31 @@ pub async fn baseline(setup: &Setup, python: &Path, load: Load) -> anyhow::Resul
     result
 }
 
-/// The table of rows, and the agent's ratios to the baseline.
+/// The row of `kind` under `a`'s load: with `a`'s security if measured,
+/// else with none.
+fn reference<'a>(rows: &'a [Row], a: &Row, kind: Kind) -> Option<&'a Row> {
+    let under = |s: Security| {
+        rows.iter().find(|r| {
+            r.kind == kind
+                && r.security == s
+                && r.load.tags == a.load.tags
+                && r.load.rate == a.load.rate
+        })
+    };
+    under(a.security).or_else(|| under(Security::None))
+}
+
+/// The table of rows, and the agent's ratios to the baseline and to the
+/// bare client.
 pub fn table(rows: &[Row]) -> String {
+    // The agent's CPU per change over a reference's.
+    let over = |a: &Row, kind: Kind| match (a.kind, reference(rows, a, kind)) {
+        (Kind::Agent, Some(r)) => format!(
+            "{:.2}",
+            a.cpu_per_change_us() / r.cpu_per_change_us().max(1e-9)
+        ),
+        _ => "-".into(),
+    };
     let ms = |v: Option<f64>| v.map_or("-".into(), |s| format!("{:.1}", s * 1e3));
     let bound = |v: f64| {
         if v.is_infinite() {
@@ -843,18 +1042,20 @@ pub fn table(rows: &[Row]) -> String {
         }
     };
     let mut out = String::from(
-        "| subscriber | tags | offered/s | handled/s | CPU (core) | CPU µs/change | RSS ready / end / peak (MB) | alarm latency p50 / p99 (ms) | agent's own p50 / p99 | faults reported | lost | drain | load server CPU |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| subscriber | tags | offered/s | handled/s | CPU (core) | CPU µs/change | cellwatch ÷ asyncua | cellwatch ÷ C | RSS ready / end / peak (MB) | alarm latency p50 / p99 (ms) | agent's own p50 / p99 | faults reported | lost | drain | load server CPU |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         out.push_str(&format!(
-            "| {} | {} | {} | {:.0} | {:.0} % | {:.2} | {:.0} / {:.0} / {:.0} | {} / {} | {} | {}/{} | {} | {:.1} s | {:.0} % |\n",
+            "| {} | {} | {} | {:.0} | {:.0} % | {:.2} | {} | {} | {:.0} / {:.0} / {:.0} | {} / {} | {} | {} | {} | {:.1} s | {:.0} % |\n",
             r.subject,
             r.load.tags,
             r.load.rate,
             r.rate(),
             r.cpu_share() * 100.0,
             r.cpu_per_change_us(),
+            over(r, Kind::Asyncua),
+            over(r, Kind::Bare),
             r.rss_ready as f64 / 1048576.0,
             r.rss_end as f64 / 1048576.0,
             r.rss_peak as f64 / 1048576.0,
@@ -862,17 +1063,21 @@ pub fn table(rows: &[Row]) -> String {
             ms(measure::quantile(&r.latencies, 0.99)),
             r.internal
                 .map_or("-".into(), |(a, b)| format!("{} / {}", bound(a), bound(b))),
-            r.faults.1,
-            r.faults.0,
+            // The bare client checks nothing.
+            if r.kind == Kind::Bare {
+                "-".into()
+            } else {
+                format!("{}/{}", r.faults.1, r.faults.0)
+            },
             r.lost(),
             r.drain,
             r.server_cpu * 100.0,
         ));
     }
     let mut ratios = String::new();
-    for b in rows.iter().filter(|r| r.internal.is_none()) {
+    for b in rows.iter().filter(|r| r.kind == Kind::Asyncua) {
         for a in rows.iter().filter(|r| {
-            r.internal.is_some() && r.load.tags == b.load.tags && r.load.rate == b.load.rate
+            r.kind == Kind::Agent && r.load.tags == b.load.tags && r.load.rate == b.load.rate
         }) {
             ratios.push_str(&format!(
                 "- {} tags, {}/s, {} vs the baseline: {:.1}× the changes handled per second, {:.1}× less CPU per change, p99 latency {:.1}× lower\n",
@@ -886,8 +1091,23 @@ pub fn table(rows: &[Row]) -> String {
             ));
         }
     }
+    for a in rows.iter().filter(|r| r.kind == Kind::Agent) {
+        if let Some(c) = reference(rows, a, Kind::Bare) {
+            ratios.push_str(&format!(
+                "- {} tags, {}/s, {} vs the {}: {:.2}× the changes handled per second, CPU per change {:.2}× the bare client's ({:.2} vs {:.2} µs)\n",
+                a.load.tags,
+                a.load.rate,
+                a.subject,
+                c.subject,
+                a.rate() / c.rate().max(1.0),
+                a.cpu_per_change_us() / c.cpu_per_change_us().max(1e-9),
+                a.cpu_per_change_us(),
+                c.cpu_per_change_us(),
+            ));
+        }
+    }
     // Cell size alone: the same subject (security) at the same rate.
-    let agents: Vec<&Row> = rows.iter().filter(|r| r.internal.is_some()).collect();
+    let agents: Vec<&Row> = rows.iter().filter(|r| r.kind == Kind::Agent).collect();
     for big in &agents {
         let small = agents
             .iter()
@@ -970,6 +1190,58 @@ mod tests {
         let l = match_faults(&faults, &seen);
         assert_eq!(l.len(), 2);
         assert!((l[0] - 0.12).abs() < 1e-9 && (l[1] - 0.09).abs() < 1e-9);
+    }
+
+    /// The agent's CPU per change over asyncua's and over the bare
+    /// client's at the same load (the bare client's with the agent's
+    /// security when measured, else None's); the references get none.
+    #[test]
+    fn the_table_shows_the_agent_over_each_reference() {
+        let load: Load = "1000:10000".parse().unwrap();
+        let row = |kind, security, subject: &str, cpu: f64| Row {
+            kind,
+            security,
+            subject: subject.into(),
+            load,
+            produced: 100_000,
+            received: 100_000,
+            seconds: 10.0,
+            drain: 0.0,
+            cpu,
+            rss_ready: 0,
+            rss_end: 0,
+            rss_peak: 0,
+            server_cpu: 0.0,
+            latencies: Vec::new(),
+            faults: (0, 0),
+            internal: (kind == Kind::Agent).then_some((0.001, 0.01)),
+            internal_counts: Vec::new(),
+            generator_lag: 0.0,
+        };
+        let rows = [
+            row(Kind::Agent, Security::None, "cellwatch (None)", 0.08),
+            row(
+                Kind::Agent,
+                Security::SignEncrypt,
+                "cellwatch (secure)",
+                0.12,
+            ),
+            row(Kind::Asyncua, Security::None, "Python asyncua (None)", 3.2),
+            row(Kind::Bare, Security::None, "bare (None)", 0.02),
+        ];
+        let t = table(&rows);
+        // 0.80 µs over 32 µs, and over 0.20 µs.
+        assert!(
+            t.contains("| cellwatch (None) | 1000 | 10000 | 10000 | 1 % | 0.80 | 0.03 | 4.00 |")
+        );
+        // No secure bare client row: over the one without security.
+        assert!(t.contains("| 1.20 | 0.04 | 6.00 |"));
+        assert!(t.contains("| bare (None) | 1000 | 10000 | 10000 | 0 % | 0.20 | - | - |"));
+        assert!(t.contains("cellwatch (None) vs the bare (None): 1.00× the changes handled per second, CPU per change 4.00× the bare client's (0.80 vs 0.20 µs)"));
+        // The bare client checks nothing: no faults column of its own.
+        assert!(t
+            .lines()
+            .any(|l| l.starts_with("| bare (None)") && l.contains("| - | 0 |")));
     }
 
     #[test]
