@@ -28,7 +28,7 @@ use crate::agent::{alarm_until, Fixture};
 /// The users: kim's SCADA account, one acting as an operator the agent
 /// does not know, one as an operator who may not acknowledge, one acting
 /// as nobody.
-fn users_file(path: &Path) {
+pub(crate) fn users_file(path: &Path) {
     let hash = hash_password("kims-password");
     std::fs::write(
         path,
@@ -172,9 +172,10 @@ async fn event_until(
     }
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
-    let fx = Fixture::start_with(|c| {
+/// The agent over the simulated CNC with its alarm server: the users of
+/// [`users_file`], ana an operator who may reset, not acknowledge.
+async fn serving() -> Fixture {
+    Fixture::start_with(|c| {
         let dir = c.journal.path.parent().unwrap().to_path_buf();
         users_file(&dir.join("opcua-users.toml"));
         // Ana may reset, not acknowledge.
@@ -189,7 +190,12 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
             users_file: dir.join("opcua-users.toml"),
         });
     })
-    .await;
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
+    let fx = serving().await;
     let addr = fx.agent().alarm_server_addr().unwrap();
     let url = format!("opc.tcp://{addr}/");
     // Each trusts the other's certificate.
@@ -454,7 +460,12 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
                 "operator 'ana' may not ack",
                 "opcua user scada-ana"
             ),
-            (true, "kim", "ack ese by kim", "opcua user scada-kim"),
+            (
+                true,
+                "kim",
+                "ack ese by kim: seen on the SCADA",
+                "opcua user scada-kim"
+            ),
         ]
     );
     // The agent stops with SCADA sessions open.
@@ -462,4 +473,238 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
     tokio::time::timeout(Duration::from_secs(60), fx.stop())
         .await
         .expect("the agent stops with the alarm server's sessions open");
+}
+
+/// node-opcua's client as a SCADA (`tests/interop/scada.js`): its lines on
+/// standard output, its errors in a file shown when a wait fails.
+pub(crate) struct NodeScada {
+    child: std::process::Child,
+    stdin: std::process::ChildStdin,
+    lines: std::sync::mpsc::Receiver<String>,
+    log: std::path::PathBuf,
+}
+
+impl NodeScada {
+    /// Started with its key pair in `pki` (which trusts what is in
+    /// `pki/trusted/certs`); returns it and its certificate (DER).
+    fn start(url: &str, pki: &Path, user: &str, password: &str) -> (NodeScada, std::path::PathBuf) {
+        use std::process::{Command, Stdio};
+        let dir = crate::interop::installed();
+        let log = pki.with_extension("log");
+        let mut child = Command::new("node")
+            .arg(dir.join("scada.js"))
+            .args([
+                url,
+                pki.to_str().unwrap(),
+                user,
+                password,
+                "urn:cellwatch:alarms:m01ps0004",
+            ])
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(std::fs::File::create(&log).unwrap())
+            .spawn()
+            .unwrap();
+        let stdin = child.stdin.take().unwrap();
+        let lines = crate::util::lines_of(&mut child);
+        let mut scada = NodeScada {
+            child,
+            stdin,
+            lines,
+            log,
+        };
+        let cert = scada.line("its certificate", |l| {
+            l.strip_prefix("certificate ").map(Into::into)
+        });
+        (scada, cert)
+    }
+
+    /// Connected to the alarm server at `url` (its PKI directory
+    /// `server_pki`) as `user` (password `kims-password`), each trusting the
+    /// other's certificate, and subscribed to its events.
+    pub(crate) fn connected(url: &str, pki: &Path, server_pki: &Path, user: &str) -> NodeScada {
+        use cellwatch::sources::pki;
+        // The SCADA trusts the agent's certificate from the start; the
+        // agent trusts the SCADA's once it is made.
+        let trusted = pki.join("trusted/certs");
+        std::fs::create_dir_all(&trusted).unwrap();
+        std::fs::copy(pki::own_cert(server_pki), trusted.join("cellwatch.der")).unwrap();
+        let (mut scada, cert) = NodeScada::start(url, pki, user, "kims-password");
+        pki::trust(&cert, server_pki).unwrap();
+        scada.ask("connect", "connected");
+        scada
+    }
+
+    /// The first line `f` takes, skipping the others.
+    fn line<T>(&mut self, what: &str, f: impl Fn(&str) -> Option<T>) -> T {
+        tokio::task::block_in_place(|| {
+            let deadline = std::time::Instant::now() + Duration::from_secs(120);
+            let mut seen = Vec::new();
+            loop {
+                let left = deadline.saturating_duration_since(std::time::Instant::now());
+                match self.lines.recv_timeout(left) {
+                    Ok(line) => match f(&line) {
+                        Some(t) => return t,
+                        None => seen.push(line),
+                    },
+                    Err(_) => panic!(
+                        "node-opcua SCADA: no {what}; saw {seen:#?}; its errors:\n{}",
+                        std::fs::read_to_string(&self.log).unwrap_or_default()
+                    ),
+                }
+            }
+        })
+    }
+
+    /// The next event `f` accepts.
+    pub(crate) fn event(
+        &mut self,
+        what: &str,
+        f: impl Fn(&serde_json::Value) -> bool,
+    ) -> serde_json::Value {
+        self.line(what, |l| {
+            let e: serde_json::Value = serde_json::from_str(l.strip_prefix("event ")?).unwrap();
+            f(&e).then_some(e)
+        })
+    }
+
+    /// Sends `command`; its answer (the line after `answer`).
+    pub(crate) fn ask(&mut self, command: &str, answer: &str) -> String {
+        writeln!(self.stdin, "{command}").unwrap();
+        self.line(answer, |l| l.strip_prefix(answer).map(str::to_string))
+    }
+}
+
+impl Drop for NodeScada {
+    fn drop(&mut self) {
+        let _ = writeln!(self.stdin, "quit");
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+use std::io::Write as _;
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_node_opcua_scada_sees_ese_and_kim_acknowledges_it_with_a_comment() {
+    let fx = serving().await;
+    let addr = fx.agent().alarm_server_addr().unwrap();
+    let url = format!("opc.tcp://127.0.0.1:{}", addr.port());
+    let mut scada = NodeScada::connected(
+        &url,
+        &fx.dir().join("node-scada-pki"),
+        &fx.dir().join("alarm-server-pki"),
+        "scada-kim",
+    );
+
+    fx.settled().await;
+    fx.sim.set("X0.06", false).unwrap();
+    let raised = scada.event("ESE raised", |e| {
+        e["conditionName"] == "ese" && e["active"] == true
+    });
+    assert_eq!(raised["sourceName"], "m01ps0004");
+    assert_eq!(raised["acked"], false);
+    assert_eq!(raised["retain"], true);
+    assert!(
+        raised["message"].as_str().unwrap().contains("X0.06"),
+        "{raised}"
+    );
+    assert!(
+        raised["culprits"]
+            .as_str()
+            .unwrap()
+            .contains("X0.06 = 0 (expected 1)"),
+        "{raised}"
+    );
+    assert!(
+        raised["eventType"]
+            .as_str()
+            .unwrap()
+            .ends_with(";s=CellAlarmType"),
+        "{raised}"
+    );
+    let severity = raised["severity"].as_u64().unwrap();
+    assert!([250, 500, 750, 1000].contains(&severity), "{raised}");
+    let condition = raised["conditionId"].as_str().unwrap().to_string();
+    let event_id = raised["eventId"].as_str().unwrap().to_string();
+
+    // An old event id is refused; the latest is taken, with the comment.
+    assert_eq!(
+        scada.ask(&format!("ack {condition} 00ff nothing"), "ack "),
+        "BadEventIdUnknown"
+    );
+    assert_eq!(
+        scada.ask(
+            &format!("ack {condition} {event_id} seen on WinCC, tool changed"),
+            "ack "
+        ),
+        "Good"
+    );
+    let acked = scada.event("ESE acknowledged", |e| {
+        e["conditionName"] == "ese" && e["acked"] == true
+    });
+    assert_eq!(acked["clientUserId"], "kim");
+    assert_eq!(acked["active"], true);
+    assert_eq!(
+        scada.ask(
+            &format!(
+                "ack {condition} {} again",
+                acked["eventId"].as_str().unwrap()
+            ),
+            "ack "
+        ),
+        "BadConditionBranchAlreadyAcked"
+    );
+
+    // A refresh: ESE between the refresh's start (i=2787) and end (i=2788).
+    assert_eq!(scada.ask("refresh", "refresh "), "Good");
+    let is = |e: &serde_json::Value, id: &str| {
+        e["eventType"] == format!("ns=0;{id}") || e["eventType"] == id
+    };
+    scada.event("the refresh's start", |e| is(e, "i=2787"));
+    let mut retained = Vec::new();
+    loop {
+        let e = scada.event("the refresh's end", |_| true);
+        if is(&e, "i=2788") {
+            break;
+        }
+        retained.push((
+            e["conditionName"].clone(),
+            e["active"].clone(),
+            e["acked"].clone(),
+        ));
+    }
+    assert_eq!(
+        retained,
+        [(
+            serde_json::json!("ese"),
+            serde_json::json!(true),
+            serde_json::json!(true)
+        )]
+    );
+    // Journaled with kim's comment, before the answer.
+    let rows = fx
+        .history_rows("cellwatch/m01ps0004/history?since=1h;kind=command")
+        .await;
+    let commands: Vec<(bool, &str, &str, &str)> = rows
+        .iter()
+        .map(|r| {
+            let f = &r["fields"];
+            (
+                f["accepted"].as_bool().unwrap(),
+                f["operator"].as_str().unwrap(),
+                f["detail"].as_str().unwrap(),
+                f["source"].as_str().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        commands,
+        [(
+            true,
+            "kim",
+            "ack ese by kim: seen on WinCC, tool changed",
+            "opcua user scada-kim"
+        )]
+    );
 }

@@ -24,11 +24,13 @@ use crate::util::root;
 pub(crate) const URI: &str = "urn:cellwatch:test:node-opcua:plc";
 
 /// `npm ci` in tests/interop, once per test run, unless already installed.
-fn installed() -> PathBuf {
+pub(crate) fn installed() -> PathBuf {
     static ONCE: Once = Once::new();
     let dir = root().join("tests/interop");
     ONCE.call_once(|| {
-        if dir.join("node_modules/node-opcua-server").exists() {
+        let modules = dir.join("node_modules");
+        if modules.join("node-opcua-server").exists() && modules.join("node-opcua-client").exists()
+        {
             return;
         }
         let out = Command::new("npm")

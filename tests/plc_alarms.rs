@@ -8,9 +8,11 @@ use cellwatch::config::{self, CellConfig};
 use cellwatch::operator::Action;
 use cellwatch::payload::AlarmPayload;
 use cellwatch::sources::pki;
+use serde_json::json;
 use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
 use crate::agent::alarm_until;
+use crate::alarm_server::NodeScada;
 use crate::interop::{trusted_by_server, NodeServer, URI};
 use crate::spawned::{send, signed};
 
@@ -281,6 +283,114 @@ async fn the_plcs_own_alarms_are_the_cells_acknowledged_at_the_plc_first() {
     let (ok, detail) = send(&client, &signed(Action::Ack, "plc-Press-Nothing")).await;
     assert!(!ok && detail.contains("unknown alarm"), "{detail}");
 
+    agent.stop().await;
+    tokio::task::spawn_blocking(move || server.stop())
+        .await
+        .unwrap();
+}
+
+/// The whole chain across two stacks nobody here wrote: a SCADA (node-opcua's
+/// client) acknowledges the PLC's own alarm (node-opcua's server) on
+/// cellwatch's alarm server as kim; cellwatch acknowledges it at the PLC
+/// first, with kim's name and comment, and only then is it acknowledged —
+/// on the bus, on the SCADA and in the journal.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_scada_acknowledges_the_plcs_alarm_through_cellwatch_at_the_plc_first() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    let (server, port) = plc(dir).await;
+    let server = said(server, "alarm Guard 300 Guard door open".into()).await;
+    let mut config = cell(dir, port);
+    pki::trust(&server.cert, &config.opcua.as_ref().unwrap().pki_dir).unwrap();
+    crate::alarm_server::users_file(&dir.join("opcua-users.toml"));
+    config.alarm_server = Some(cellwatch::config::AlarmServerConfig {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        pki_dir: dir.join("alarm-server-pki"),
+        users_file: dir.join("opcua-users.toml"),
+    });
+    let (agent, client, sub) = agent_of(dir, &config).await;
+    let guard = "plc-Press-Guard";
+    let mut seen: Vec<AlarmPayload> = Vec::new();
+    alarm_until(&sub, "the guard raised", &mut seen, |a| a.id == guard).await;
+
+    let url = format!("opc.tcp://{}", agent.alarm_server_addr().unwrap());
+    let (scada_pki, server_pki) = (dir.join("scada-pki"), dir.join("alarm-server-pki"));
+    let mut scada = tokio::task::spawn_blocking(move || {
+        NodeScada::connected(&url, &scada_pki, &server_pki, "scada-kim")
+    })
+    .await
+    .unwrap();
+    // Raised before the SCADA came: its refresh finds it.
+    assert_eq!(scada.ask("refresh", "refresh "), "Good");
+    let shown = scada.event("the guard, refreshed", |e| e["conditionName"] == guard);
+    assert_eq!(
+        (&shown["active"], &shown["acked"], &shown["message"]),
+        (&json!(true), &json!(false), &json!("Guard door open"))
+    );
+    let ack = format!(
+        "ack {} {} door checked on the SCADA",
+        shown["conditionId"].as_str().unwrap(),
+        shown["eventId"].as_str().unwrap()
+    );
+    assert_eq!(scada.ask(&ack, "ack "), "Good");
+    let server = tokio::task::spawn_blocking(move || {
+        let mut server = server;
+        let line = server.wait_for("acknowledged Guard");
+        assert_eq!(
+            line,
+            "acknowledged Guard acknowledged in cellwatch by kim: door checked on the SCADA"
+        );
+        server
+    })
+    .await
+    .unwrap();
+    let acked = scada.event("the guard acknowledged", |e| {
+        e["conditionName"] == guard && e["acked"] == true
+    });
+    assert_eq!(acked["clientUserId"], "kim");
+    let on_bus = alarm_until(&sub, "the guard acknowledged", &mut seen, |a| {
+        a.id == guard && a.transition.as_str() == "acknowledged"
+    })
+    .await;
+    assert_eq!(on_bus.acked_by.as_deref(), Some("kim"));
+    let page: serde_json::Value = serde_json::from_str(
+        &crate::spawned::query(
+            &client,
+            "cellwatch/m01ps0004/history?kind=command;since=1h",
+            None,
+        )
+        .await
+        .unwrap(),
+    )
+    .unwrap();
+    let rows: Vec<(String, String, String)> = page["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| {
+            let f = |k: &str| r["fields"][k].as_str().unwrap_or_default().to_string();
+            (f("stage"), f("detail"), f("source"))
+        })
+        .collect();
+    let row = |stage: &str, detail: &str| {
+        (
+            stage.to_string(),
+            detail.to_string(),
+            "opcua user scada-kim".to_string(),
+        )
+    };
+    assert_eq!(
+        rows,
+        [
+            row(
+                "request",
+                "acknowledge plc-Press-Guard at the PLC, asked by kim: door checked on the SCADA"
+            ),
+            row("result", "plc-Press-Guard acknowledged at the PLC"),
+        ],
+        "{page:#}"
+    );
+    drop(scada);
     agent.stop().await;
     tokio::task::spawn_blocking(move || server.stop())
         .await

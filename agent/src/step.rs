@@ -256,6 +256,8 @@ pub struct SessionAck {
     pub operator: String,
     /// The alarm acknowledged.
     pub alarm: String,
+    /// The method's `Comment`, clipped and escaped; may be empty.
+    pub comment: String,
     /// Where the outcome goes, once journaled.
     pub reply: oneshot::Sender<SessionAckOutcome>,
 }

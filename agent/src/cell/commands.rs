@@ -130,7 +130,7 @@ impl CellLoop {
                 ))
             }
             Ok(()) if cmd.action == Action::Ack && self.engine.is_condition(&cmd.alarm) => {
-                return self.acknowledge_at_plc(base, reply).await;
+                return self.acknowledge_at_plc(base, "", reply).await;
             }
             Ok(()) => match cmd.action {
                 Action::Ack => self

@@ -15,9 +15,12 @@ use cellwatch_models::engine::Step;
 impl CellLoop {
     /// Carries out an authorised acknowledgement of PLC alarm
     /// `record.alarm`; answered once the PLC has said and it is journaled.
+    /// `said` (empty, or `: ` and the operator's comment) follows the
+    /// request's row and the comment the PLC is given.
     pub(super) async fn acknowledge_at_plc(
         &mut self,
         record: CommandRecord,
+        said: &str,
         reply: oneshot::Sender<CommandOutcome>,
     ) {
         let now = self.clock.now_ms();
@@ -45,14 +48,14 @@ impl CellLoop {
             ..record.clone().saying(
                 true,
                 &format!(
-                    "acknowledge {alarm} at the PLC, asked by {}",
+                    "acknowledge {alarm} at the PLC, asked by {}{said}",
                     record.operator
                 ),
             )
         };
         self.dispatch(now, Input::Command(request), Step::default(), 0)
             .await;
-        let comment = format!("acknowledged in cellwatch by {}", record.operator);
+        let comment = format!("acknowledged in cellwatch by {}{said}", record.operator);
         let written =
             self.write_when_journaled(None, Write::Acknowledge { alarm, comment }, WRITE_TIMEOUT);
         let back = self.written_tx.clone();

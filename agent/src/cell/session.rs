@@ -47,6 +47,12 @@ impl CellLoop {
             ..CommandRecord::of(&cmd, &cmd.alarm, Stage::Command)
         };
         let reply = ack.reply;
+        // The operator's own words, after what was done.
+        let said = if ack.comment.is_empty() {
+            String::new()
+        } else {
+            format!(": {}", ack.comment)
+        };
         if let Err(refusal) = self.gate.permits(&cmd.operator, Action::Ack) {
             let detail = refusal.to_string();
             tracing::warn!(source = %base.source, %detail, "acknowledgement over OPC UA refused");
@@ -62,7 +68,7 @@ impl CellLoop {
         }
         if self.engine.is_condition(&cmd.alarm) {
             let (outcome_tx, outcome) = oneshot::channel::<CommandOutcome>();
-            self.acknowledge_at_plc(base, outcome_tx).await;
+            self.acknowledge_at_plc(base, &said, outcome_tx).await;
             // Its rows come later (the PLC's answer): waited for then.
             let sinks: Vec<Settled> = self.sinks.iter().filter_map(|s| s.settled()).collect();
             self.start_task(async move {
@@ -81,7 +87,7 @@ impl CellLoop {
         }
         let (outcome, step) = match self.engine.acknowledge(&cmd.alarm, &cmd.operator, now) {
             Ok(step) => (
-                SessionAckOutcome::Accepted(format!("ack {} by {}", cmd.alarm, cmd.operator)),
+                SessionAckOutcome::Accepted(format!("ack {} by {}{said}", cmd.alarm, cmd.operator)),
                 step,
             ),
             Err(e @ CommandRefused::NothingToAcknowledge(_)) => (

@@ -31,6 +31,9 @@ use super::conditions::Conditions;
 use super::users::Users;
 use crate::step::{SessionAck, SessionAckOutcome};
 
+/// How much of an acknowledgement's comment is journaled (bytes).
+const COMMENT_BYTES: usize = 256;
+
 /// Builds the core node manager wrapped ([`AlarmCore`]).
 pub(super) struct AlarmCoreBuilder {
     pub(super) conditions: Arc<Conditions>,
@@ -95,11 +98,17 @@ impl AlarmCore {
             call.set_status(StatusCode::BadUserAccessDenied);
             return;
         };
+        let comment = match args.get(1) {
+            Some(Variant::LocalizedText(t)) => t.text.as_ref(),
+            _ => "",
+        };
+        let comment = crate::operator::clip(&crate::operator::escaped(comment), COMMENT_BYTES);
         let (reply, outcome) = oneshot::channel();
         let ack = SessionAck {
             user,
             operator: operator.to_string(),
             alarm,
+            comment,
             reply,
         };
         if self.acks.send(ack).await.is_err() {
