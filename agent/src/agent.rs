@@ -637,6 +637,11 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         either_stops(stop_rx.clone(), source_stopped).boxed(),
     ));
     let mut gate = Gate::new(&config.cell, keys);
+    if let (Some(server), Some(c)) = (&alarm_server, &config.alarm_server) {
+        for why in server.users().cannot_acknowledge(&gate) {
+            tracing::warn!(cell = %config.cell, file = %c.users_file.display(), "alarm server: {why}");
+        }
+    }
     for (at, nonce) in restored.nonces {
         gate.remember(at, nonce);
     }

@@ -37,8 +37,21 @@ pub(crate) fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<(), F
     let c = load(&args.config)?;
     crate::cell::compile::engine(&c)
         .map_err(|e| Failure::Input(format!("{}: {e}", args.config.display())))?;
-    if let Some(path) = &c.operators_file {
-        crate::operator::OperatorKeys::load(path).map_err(Failure::input)?;
+    let keys = match &c.operators_file {
+        Some(path) => crate::operator::OperatorKeys::load(path).map_err(Failure::input)?,
+        None => crate::operator::OperatorKeys::default(),
+    };
+    let mut warnings = c.warnings.clone();
+    if let Some(server) = &c.alarm_server {
+        let users = crate::services::alarm_server::users::Users::load(&server.users_file)
+            .map_err(Failure::input)?;
+        let gate = crate::operator::Gate::new(&c.cell, keys);
+        warnings.extend(
+            users
+                .cannot_acknowledge(&gate)
+                .into_iter()
+                .map(|w| format!("{}: {w}", server.users_file.display())),
+        );
     }
     crate::bus::session_config(&c.zenoh)
         .map_err(|e| Failure::Input(format!("{}: {e}", args.config.display())))?;
@@ -79,7 +92,7 @@ pub(crate) fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<(), F
         c.zenoh.prefix
     )
     .map_err(io)?;
-    for w in &c.warnings {
+    for w in &warnings {
         writeln!(out, "warning: {w}").map_err(io)?;
     }
     writeln!(out, "ok").map_err(io)

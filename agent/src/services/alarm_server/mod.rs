@@ -84,6 +84,8 @@ pub enum AlarmServerError {
 /// A running alarm server.
 pub struct AlarmServer {
     conditions: Arc<Conditions>,
+    /// Its users, as read at start.
+    users: Users,
     addr: SocketAddr,
     /// Runs the server until the agent stops.
     task: JoinHandle<()>,
@@ -133,7 +135,7 @@ impl AlarmServer {
                 },
                 NODES,
             ))
-            .with_authenticator(Arc::new(users))
+            .with_authenticator(Arc::new(users.clone()))
             .application_name(format!("cellwatch alarms of {cell}"))
             .application_uri(format!("urn:cellwatch:alarm-server:{cell}"))
             .product_uri("urn:cellwatch")
@@ -200,6 +202,7 @@ impl AlarmServer {
         tracing::info!(cell, %addr, "serving the cell's alarms over OPC UA");
         Ok(AlarmServer {
             conditions,
+            users,
             addr,
             task,
         })
@@ -208,6 +211,11 @@ impl AlarmServer {
     /// Where it listens (with port 0, the port the system gave).
     pub fn addr(&self) -> SocketAddr {
         self.addr
+    }
+
+    /// Its users, as read at start.
+    pub fn users(&self) -> &Users {
+        &self.users
     }
 
     /// What the sink calls with each alarm transition.

@@ -82,7 +82,13 @@ impl Users {
     /// letters, digits, `-` or `_`, or a hash that is not a PHC string.
     pub fn parse(origin: &str, text: &str) -> Result<Users, UsersError> {
         let file: UsersFile = toml::from_str(text).map_err(|e| UsersError::Syntax {
-            origin: origin.into(),
+            origin: match e.span() {
+                Some(span) => {
+                    let (line, col) = crate::config::position::line_col(text, span.start);
+                    format!("{origin}:{line}:{col}")
+                }
+                None => origin.into(),
+            },
             message: e.message().into(),
         })?;
         let entry = |user: &str, message: String| UsersError::Entry {
@@ -141,6 +147,28 @@ impl Users {
     /// The operator `user` acts as, if any.
     pub fn operator(&self, user: &str) -> Option<&str> {
         self.users.get(user)?.operator.as_deref()
+    }
+
+    /// What stands between each user acting as an operator and an
+    /// acknowledgement, as `gate` (the cell's operators) would say it:
+    /// `users.NAME acts as 'OPERATOR': WHY`, sorted by user. A user acting
+    /// as nobody is meant to watch, and not named.
+    pub fn cannot_acknowledge(&self, gate: &crate::operator::Gate) -> Vec<String> {
+        let mut out: Vec<String> = self
+            .users
+            .iter()
+            .filter_map(|(name, u)| {
+                let operator = u.operator.as_deref()?;
+                let why = gate.permits(operator, crate::operator::Action::Ack).err()?;
+                Some(format!(
+                    "users.{}: acts as '{}': {why}",
+                    crate::operator::escaped(name),
+                    crate::operator::escaped(operator)
+                ))
+            })
+            .collect();
+        out.sort();
+        out
     }
 
     /// Whether `password` is `user`'s (Argon2, so slow on purpose: run it
@@ -238,6 +266,41 @@ mod tests {
         assert_eq!(
             Users::parse("users.toml", bad).unwrap_err().to_string(),
             "users.toml: users.x: password_hash: not an Argon2 PHC string (password hash string missing field): make one with `cellwatch hash-password`"
+        );
+    }
+
+    #[test]
+    fn a_missing_hash_is_located() {
+        let bad = "[users.x]\noperator = \"kim\"\n";
+        assert_eq!(
+            Users::parse("users.toml", bad).unwrap_err().to_string(),
+            "users.toml:1:1: missing field `password_hash`"
+        );
+    }
+
+    #[test]
+    fn who_cannot_acknowledge_is_named() {
+        use crate::operator::{Action, Gate, OperatorKey, OperatorKeys};
+        let hash = hash_password("s3cret");
+        let text = format!(
+            "[users.scada-kim]\noperator = \"kim\"\npassword_hash = \"{hash}\"\n\
+             [users.scada-ana]\noperator = \"ana\"\npassword_hash = \"{hash}\"\n\
+             [users.scada-lee]\noperator = \"lee\"\npassword_hash = \"{hash}\"\n\
+             [users.viewer]\npassword_hash = \"{hash}\"\n"
+        );
+        let users = Users::parse("users.toml", &text).unwrap();
+        let operators = OperatorKey::generate("kim").operators_entry(&[Action::Ack])
+            + &OperatorKey::generate("ana").operators_entry(&[Action::Reset]);
+        let gate = Gate::new(
+            "m01",
+            OperatorKeys::parse("operators.toml", &operators).unwrap(),
+        );
+        assert_eq!(
+            users.cannot_acknowledge(&gate),
+            [
+                "users.scada-ana: acts as 'ana': operator 'ana' may not ack",
+                "users.scada-lee: acts as 'lee': unknown operator 'lee'",
+            ]
         );
     }
 }
