@@ -644,7 +644,9 @@ async fn a_node_opcua_scada_sees_ese_and_kim_acknowledges_it_with_a_comment() {
         e["conditionName"] == "ese" && e["acked"] == true
     });
     assert_eq!(acked["clientUserId"], "kim");
+    assert_eq!(acked["comment"], "seen on WinCC, tool changed");
     assert_eq!(acked["active"], true);
+    assert_eq!(acked["suppressedOrShelved"], false);
     assert_eq!(
         scada.ask(
             &format!(
@@ -707,4 +709,24 @@ async fn a_node_opcua_scada_sees_ese_and_kim_acknowledges_it_with_a_comment() {
             "opcua user scada-kim"
         )]
     );
+
+    // Shelved by an operator on the bus: the SCADA sees it shelved, then
+    // back.
+    let shelve = crate::spawned::signed_with(
+        cellwatch::operator::Action::Shelve,
+        "ese",
+        Some("30m"),
+        Some("sensor cable"),
+    );
+    let (ok, detail) = crate::spawned::send(fx.client(), &shelve).await;
+    assert!(ok, "{detail}");
+    scada.event("ESE shelved", |e| {
+        e["conditionName"] == "ese" && e["suppressedOrShelved"] == true
+    });
+    let unshelve = crate::spawned::signed(cellwatch::operator::Action::Unshelve, "ese");
+    let (ok, detail) = crate::spawned::send(fx.client(), &unshelve).await;
+    assert!(ok, "{detail}");
+    scada.event("ESE unshelved", |e| {
+        e["conditionName"] == "ese" && e["suppressedOrShelved"] == false
+    });
 }

@@ -9,7 +9,7 @@
 // server), then waits for "connect" on standard input; once subscribed,
 // prints "connected". Each event: "event {json}" with eventId (hex),
 // eventType, sourceName, message, severity, conditionName, active, acked,
-// retain, clientUserId, conditionId and culprits (NAMESPACE_URI's
+// retain, clientUserId, comment, suppressedOrShelved, conditionId and culprits (NAMESPACE_URI's
 // CellAlarmType's Culprits). Standard input then:
 //   ack CONDITION_ID EVENT_ID COMMENT   Acknowledge (i=9111) on the condition
 //                       (a node id as printed), the event's id (hex), the
@@ -33,11 +33,13 @@ const { ownCertificate } = require("./certificate");
 const APPLICATION_URI = "urn:cellwatch:test:node-opcua-scada";
 const FIELDS = [
   "EventId", "EventType", "SourceName", "Message", "Severity", "ConditionName",
-  "ActiveState.Id", "AckedState.Id", "Retain", "ClientUserId", "ConditionId",
+  "ActiveState.Id", "AckedState.Id", "Retain", "ClientUserId", "Comment", "SuppressedOrShelved",
+  "ConditionId",
 ];
 const NAMES = [
   "eventId", "eventType", "sourceName", "message", "severity", "conditionName",
-  "active", "acked", "retain", "clientUserId", "conditionId", "culprits",
+  "active", "acked", "retain", "clientUserId", "comment", "suppressedOrShelved", "conditionId",
+  "culprits",
 ];
 
 function plain(v) {

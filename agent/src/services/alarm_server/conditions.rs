@@ -53,6 +53,10 @@ pub(super) struct Condition {
     pub(super) acked_at: DateTime,
     /// The operator who acknowledged it.
     pub(super) acked_by: String,
+    /// The comment of the acknowledgement made over OPC UA, if any.
+    pub(super) comment: String,
+    /// Shelved, out of service, or suppressed as a consequence.
+    pub(super) suppressed_or_shelved: bool,
     /// The event last sent: an `Acknowledge` must name it.
     pub(super) event_id: ByteString,
     pub(super) time: DateTime,
@@ -76,6 +80,9 @@ pub(super) struct Conditions {
     alarms: Mutex<HashMap<String, Condition>>,
     /// The last event id handed out.
     counter: AtomicU64,
+    /// Per alarm, the comment of an acknowledgement under way over OPC UA:
+    /// the condition's `Comment` once the alarm is acknowledged.
+    comments: Mutex<HashMap<String, String>>,
 }
 
 /// OPC UA's severity (1–1000) of a cellwatch severity.
@@ -107,6 +114,7 @@ impl Conditions {
             served: OnceLock::new(),
             alarms: Mutex::new(HashMap::new()),
             counter: AtomicU64::new(1),
+            comments: Mutex::new(HashMap::new()),
         }
     }
 
@@ -123,6 +131,20 @@ impl Conditions {
             .iter()
             .find(|(_, c)| c.node == *node)
             .map(|(id, c)| (id.clone(), c.clone()))
+    }
+
+    /// An acknowledgement of `alarm` with `comment` is under way (`Some`)
+    /// or over (`None`, whatever it came to).
+    pub(super) fn acknowledging(&self, alarm: &str, comment: Option<&str>) {
+        let mut comments = self.comments.lock();
+        match comment {
+            Some(c) => {
+                comments.insert(alarm.to_string(), c.to_string());
+            }
+            None => {
+                comments.remove(alarm);
+            }
+        }
     }
 
     /// One alarm transition: the condition made if new, changed, and its
@@ -145,8 +167,15 @@ impl Conditions {
             if active != c.active {
                 c.active_at = now;
             }
+            if active && !c.active {
+                // A new occurrence: the last one's comment is not its.
+                c.comment.clear();
+            }
             if acked != c.acked {
                 c.acked_at = now;
+                if acked {
+                    c.comment = self.comments.lock().remove(&p.id).unwrap_or_default();
+                }
             }
             c.active = active;
             c.acked = acked;
@@ -154,6 +183,9 @@ impl Conditions {
             c.message = p.message.clone();
             c.severity = severity(p.severity);
             c.culprits = culprits_text(&p.culprits);
+            c.suppressed_or_shelved = p.shelved.is_some()
+                || p.out_of_service.is_some()
+                || p.consequence.as_ref().is_some_and(|c| c.suppressed);
             c.event_id = self.next_event_id();
             c.time = now;
             self.event(served, &p.id, c)
@@ -213,6 +245,8 @@ impl Conditions {
             active_at: now,
             acked_at: now,
             acked_by: String::new(),
+            comment: String::new(),
+            suppressed_or_shelved: false,
             event_id: ByteString::null(),
             time: now,
         }
@@ -240,7 +274,11 @@ impl Conditions {
                 retain: c.retain(),
                 client_user_id: c.acked_by.as_str().into(),
                 comment: CommentVar {
-                    value: LocalizedText::null(),
+                    value: if c.comment.is_empty() {
+                        LocalizedText::null()
+                    } else {
+                        c.comment.as_str().into()
+                    },
                     source_timestamp: c.acked_at,
                 },
                 last_severity: SeverityVar {
@@ -255,7 +293,7 @@ impl Conditions {
                 active_state: TwoState::new(c.active, "Active", "Inactive", c.active_at),
                 acked_state: TwoState::new(c.acked, "Acknowledged", "Unacknowledged", c.acked_at),
                 confirmed_state: TwoState::new(true, "Confirmed", "Unconfirmed", c.acked_at),
-                suppressed_or_shelved: false,
+                suppressed_or_shelved: c.suppressed_or_shelved,
                 culprits: c.culprits.as_str().into(),
             },
         }

@@ -103,19 +103,23 @@ impl AlarmCore {
             _ => "",
         };
         let comment = crate::operator::clip(&crate::operator::escaped(comment), COMMENT_BYTES);
+        self.conditions.acknowledging(&alarm, Some(&comment));
         let (reply, outcome) = oneshot::channel();
         let ack = SessionAck {
             user,
             operator: operator.to_string(),
-            alarm,
+            alarm: alarm.clone(),
             comment,
             reply,
         };
         if self.acks.send(ack).await.is_err() {
+            self.conditions.acknowledging(&alarm, None);
             call.set_status(StatusCode::BadShutdown);
             return;
         }
-        let status = match outcome.await {
+        let outcome = outcome.await;
+        self.conditions.acknowledging(&alarm, None);
+        let status = match outcome {
             Ok(SessionAckOutcome::Accepted(_)) => {
                 call.set_outputs(Vec::new());
                 StatusCode::Good
