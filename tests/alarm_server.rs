@@ -597,6 +597,13 @@ async fn a_node_opcua_scada_sees_ese_and_kim_acknowledges_it_with_a_comment() {
         "scada-kim",
     );
 
+    // The SCADA's session is counted.
+    let line = "cellwatch_alarm_server_sessions{cell=\"m01ps0004\"} ";
+    let scraped = fx.scrape().await;
+    assert!(
+        scraped.lines().any(|l| l == format!("{line}1")),
+        "{scraped}"
+    );
     fx.settled().await;
     fx.sim.set("X0.06", false).unwrap();
     let raised = scada.event("ESE raised", |e| {

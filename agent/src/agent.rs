@@ -607,6 +607,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         Some(c) => {
             let (tx, rx) = mpsc::channel(crate::services::alarm_server::ACK_QUEUE);
             let server = AlarmServer::start(&config.cell, c, tx, stopped(stop_rx.clone())).await?;
+            metrics.sample_alarm_server_sessions(server.sessions());
             sinks.push(Box::new(AlarmServerSink::new(server.feed())));
             (Some(server), Some(rx))
         }

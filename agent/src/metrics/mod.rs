@@ -11,7 +11,7 @@
 
 use std::future::Future;
 use std::net::SocketAddr;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
 use crate::health::{Health, STALLED_AFTER};
@@ -27,10 +27,17 @@ use prometheus::{
     IntGauge, IntGaugeVec, Opts, Registry, TextEncoder,
 };
 
+/// A value read when metrics are scraped.
+pub type Sampler = Arc<dyn Fn() -> i64 + Send + Sync>;
+
 /// Every metric of one agent, bound to its cell.
 #[derive(Clone)]
 pub struct Metrics {
     registry: Registry,
+    /// Sessions open on the alarm server, sampled at each scrape.
+    pub alarm_server_sessions: IntGauge,
+    /// Where `alarm_server_sessions` is read from, once the server runs.
+    alarm_server_sampler: Arc<OnceLock<Sampler>>,
     /// 1 while the OPC UA session is up.
     pub opcua_connected: IntGauge,
     /// Connections lost and re-established.
@@ -501,6 +508,12 @@ impl Metrics {
                 "Alarms sent to Alertmanager as active alerts now (active, not shelved, in service).",
                 cell
             ))),
+            alarm_server_sessions: reg!(IntGauge::with_opts(opts(
+                "cellwatch_alarm_server_sessions",
+                "Sessions the alarm server's clients (SCADA, HMI) hold open now; 0 without [alarm_server].",
+                cell
+            ))),
+            alarm_server_sampler: Arc::new(OnceLock::new()),
             alertmanager_unsent: reg!(IntGauge::with_opts(opts(
                 "cellwatch_alertmanager_unsent",
                 "Alert changes (raised, updated, ended) not yet accepted by every Alertmanager.",
@@ -590,8 +603,17 @@ impl Metrics {
         self.commands.with_label_values(&[action, result]).inc();
     }
 
+    /// Reads `cellwatch_alarm_server_sessions` from `sessions` at each
+    /// scrape.
+    pub fn sample_alarm_server_sessions(&self, sessions: Sampler) {
+        let _ = self.alarm_server_sampler.set(sessions);
+    }
+
     /// The text exposition of every metric.
     pub fn render(&self) -> String {
+        if let Some(sessions) = self.alarm_server_sampler.get() {
+            self.alarm_server_sessions.set(sessions());
+        }
         let mut buf = Vec::new();
         let _ = TextEncoder::new().encode(&self.registry.gather(), &mut buf);
         String::from_utf8(buf).unwrap_or_default()

@@ -84,6 +84,8 @@ pub enum AlarmServerError {
 /// A running alarm server.
 pub struct AlarmServer {
     conditions: Arc<Conditions>,
+    /// The running server's own (its sessions).
+    info: Arc<opcua::server::ServerInfo>,
     /// Its users, as read at start.
     users: Users,
     addr: SocketAddr,
@@ -140,6 +142,8 @@ impl AlarmServer {
             .application_uri(format!("urn:cellwatch:alarm-server:{cell}"))
             .product_uri("urn:cellwatch")
             .create_sample_keypair(true)
+            // For the count of its sessions (`sessions`).
+            .diagnostics_enabled(true)
             .pki_dir(&config.pki_dir)
             .certificate_path("own/cert.der")
             .private_key_path("private/private.pem")
@@ -202,6 +206,7 @@ impl AlarmServer {
         tracing::info!(cell, %addr, "serving the cell's alarms over OPC UA");
         Ok(AlarmServer {
             conditions,
+            info: handle.info().clone(),
             users,
             addr,
             task,
@@ -211,6 +216,20 @@ impl AlarmServer {
     /// Where it listens (with port 0, the port the system gave).
     pub fn addr(&self) -> SocketAddr {
         self.addr
+    }
+
+    /// How many sessions its clients hold open now.
+    pub fn sessions(&self) -> Arc<dyn Fn() -> i64 + Send + Sync> {
+        let info = self.info.clone();
+        Arc::new(move || {
+            let count = info.diagnostics.summary.get(
+                opcua::types::VariableId::Server_ServerDiagnostics_ServerDiagnosticsSummary_CurrentSessionCount,
+            );
+            match count.and_then(|v| v.value) {
+                Some(opcua::types::Variant::UInt32(n)) => i64::from(n),
+                _ => 0,
+            }
+        })
     }
 
     /// Its users, as read at start.
