@@ -129,6 +129,11 @@ impl Fixture {
         &self.client
     }
 
+    /// The agent's configuration.
+    pub(crate) fn config(&self) -> &CellConfig {
+        &self.config
+    }
+
     /// The agent's journal file.
     pub(crate) fn journal_path(&self) -> PathBuf {
         self.config.journal.path.clone()

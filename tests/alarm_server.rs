@@ -586,7 +586,7 @@ impl Drop for NodeScada {
 use std::io::Write as _;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_node_opcua_scada_sees_ese_and_kim_acknowledges_it_with_a_comment() {
+async fn a_node_opcua_scada_acknowledges_ese_with_a_comment_and_finds_it_after_a_restart() {
     let fx = serving().await;
     let addr = fx.agent().alarm_server_addr().unwrap();
     let url = format!("opc.tcp://127.0.0.1:{}", addr.port());
@@ -736,4 +736,39 @@ async fn a_node_opcua_scada_sees_ese_and_kim_acknowledges_it_with_a_comment() {
     scada.event("ESE unshelved", |e| {
         e["conditionName"] == "ese" && e["suppressedOrShelved"] == false
     });
+
+    // The agent restarts: ESE, restored from the journal, is on its alarm
+    // server again for a SCADA that refreshes, active and acknowledged by
+    // kim.
+    drop(scada);
+    let config = fx.config().clone();
+    let mut fx = fx;
+    fx.stop().await;
+    let again = cellwatch::agent::start(config, None).await.unwrap();
+    let url = format!("opc.tcp://{}", again.alarm_server_addr().unwrap());
+    let (scada_pki, server_pki) = (
+        fx.dir().join("node-scada-pki"),
+        fx.dir().join("alarm-server-pki"),
+    );
+    let mut scada = tokio::task::spawn_blocking(move || {
+        NodeScada::connected(&url, &scada_pki, &server_pki, "scada-kim")
+    })
+    .await
+    .unwrap();
+    assert_eq!(scada.ask("refresh", "refresh "), "Good");
+    let restored = scada.event("ESE after the restart", |e| e["conditionName"] == "ese");
+    assert_eq!(
+        (
+            &restored["active"],
+            &restored["acked"],
+            &restored["clientUserId"]
+        ),
+        (
+            &serde_json::json!(true),
+            &serde_json::json!(true),
+            &serde_json::json!("kim")
+        )
+    );
+    drop(scada);
+    again.stop().await;
 }
