@@ -42,6 +42,27 @@ pub(crate) fn users_file(path: &Path) {
     .unwrap();
 }
 
+/// The journal's command rows are `expected`: accepted, operator,
+/// detail, source.
+async fn commands_journaled(fx: &Fixture, expected: &[(bool, &str, &str, &str)]) {
+    let rows = fx
+        .history_rows("cellwatch/m01ps0004/history?since=1h;kind=command")
+        .await;
+    let commands: Vec<(bool, &str, &str, &str)> = rows
+        .iter()
+        .map(|r| {
+            let f = &r["fields"];
+            (
+                f["accepted"].as_bool().unwrap(),
+                f["operator"].as_str().unwrap(),
+                f["detail"].as_str().unwrap(),
+                f["source"].as_str().unwrap(),
+            )
+        })
+        .collect();
+    assert_eq!(commands, expected);
+}
+
 /// Each event's fields, in the order of [`select`].
 struct Events(mpsc::UnboundedSender<Vec<Variant>>);
 
@@ -430,44 +451,30 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
     .await;
     assert_eq!(on_bus.acked_by.as_deref(), Some("kim"));
     // Journaled before the answer: the rows are there at once.
-    let rows = fx
-        .history_rows("cellwatch/m01ps0004/history?since=1h;kind=command")
-        .await;
-    let commands: Vec<(bool, &str, &str, &str)> = rows
-        .iter()
-        .map(|r| {
-            let f = &r["fields"];
-            (
-                f["accepted"].as_bool().unwrap(),
-                f["operator"].as_str().unwrap(),
-                f["detail"].as_str().unwrap(),
-                f["source"].as_str().unwrap(),
-            )
-        })
-        .collect();
-    assert_eq!(
-        commands,
-        [
+    commands_journaled(
+        &fx,
+        &[
             (
                 false,
                 "lee",
                 "unknown operator 'lee'",
-                "opcua user scada-lee"
+                "opcua user scada-lee",
             ),
             (
                 false,
                 "ana",
                 "operator 'ana' may not ack",
-                "opcua user scada-ana"
+                "opcua user scada-ana",
             ),
             (
                 true,
                 "kim",
                 "ack ese by kim: seen on the SCADA",
-                "opcua user scada-kim"
+                "opcua user scada-kim",
             ),
-        ]
-    );
+        ],
+    )
+    .await;
     // The agent stops with SCADA sessions open.
     let mut fx = fx;
     tokio::time::timeout(Duration::from_secs(60), fx.stop())
@@ -692,30 +699,16 @@ async fn a_node_opcua_scada_acknowledges_ese_with_a_comment_and_finds_it_after_a
         )]
     );
     // Journaled with kim's comment, before the answer.
-    let rows = fx
-        .history_rows("cellwatch/m01ps0004/history?since=1h;kind=command")
-        .await;
-    let commands: Vec<(bool, &str, &str, &str)> = rows
-        .iter()
-        .map(|r| {
-            let f = &r["fields"];
-            (
-                f["accepted"].as_bool().unwrap(),
-                f["operator"].as_str().unwrap(),
-                f["detail"].as_str().unwrap(),
-                f["source"].as_str().unwrap(),
-            )
-        })
-        .collect();
-    assert_eq!(
-        commands,
-        [(
+    commands_journaled(
+        &fx,
+        &[(
             true,
             "kim",
             "ack ese by kim: seen on WinCC, tool changed",
-            "opcua user scada-kim"
-        )]
-    );
+            "opcua user scada-kim",
+        )],
+    )
+    .await;
 
     // Shelved by an operator on the bus: the SCADA sees it shelved, then
     // back.

@@ -89,6 +89,18 @@ async fn plc(dir: &std::path::Path) -> (NodeServer, u16) {
     (server, port)
 }
 
+/// The journal's command rows of the last hour, as the bus answers.
+async fn command_page(client: &zenoh::Session) -> serde_json::Value {
+    let answer = crate::spawned::query(
+        client,
+        "cellwatch/m01ps0004/history?kind=command;since=1h",
+        None,
+    )
+    .await
+    .unwrap();
+    serde_json::from_str(&answer).unwrap()
+}
+
 type Alarms =
     zenoh_ext::AdvancedSubscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
 
@@ -245,16 +257,7 @@ async fn the_plcs_own_alarms_are_the_cells_acknowledged_at_the_plc_first() {
     assert!(!seen.iter().any(|a| a.id.contains("Lube")), "{seen:#?}");
     // Journaled as any command: the request, committed before the PLC was
     // asked, and what the PLC answered.
-    let page: serde_json::Value = serde_json::from_str(
-        &crate::spawned::query(
-            &client,
-            "cellwatch/m01ps0004/history?kind=command;since=1h",
-            None,
-        )
-        .await
-        .unwrap(),
-    )
-    .unwrap();
+    let page = command_page(&client).await;
     let rows: Vec<(String, String, String)> = page["rows"]
         .as_array()
         .unwrap()
@@ -353,16 +356,7 @@ async fn a_scada_acknowledges_the_plcs_alarm_through_cellwatch_at_the_plc_first(
     })
     .await;
     assert_eq!(on_bus.acked_by.as_deref(), Some("kim"));
-    let page: serde_json::Value = serde_json::from_str(
-        &crate::spawned::query(
-            &client,
-            "cellwatch/m01ps0004/history?kind=command;since=1h",
-            None,
-        )
-        .await
-        .unwrap(),
-    )
-    .unwrap();
+    let page = command_page(&client).await;
     let rows: Vec<(String, String, String)> = page["rows"]
         .as_array()
         .unwrap()
