@@ -96,16 +96,17 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
     let trust = config.opcua.as_ref().map_or(0, |ua| {
         (ua.subscription_lifetime + SOURCE_TIME_SLACK).as_millis() as u64
     });
+    // The PLC's own alarms (`[[opcua.events]]`), by their ids' prefixes:
+    // taken before the relation, whose edges may name them.
+    let conditions = config.opcua.iter().flat_map(|ua| &ua.events);
+    let engine = engine.taking_conditions(conditions.map(|e| e.prefix.clone()));
     let relation = relation(&engine, &config.consequences)?;
     let engine = match &config.recorder {
         Some(r) => engine.recording(r.clone()),
         None => engine,
     };
-    // The PLC's own alarms (`[[opcua.events]]`), by their ids' prefixes.
-    let conditions = config.opcua.iter().flat_map(|ua| &ua.events);
     Ok(engine
         .relating(relation, config.consequences.suppress)
-        .taking_conditions(conditions.map(|e| e.prefix.clone()))
         .trusting_source_time(trust)
         .commenting(comments)
         .counting(config.part_counting())
@@ -129,9 +130,11 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
 /// not there.
 fn relation(engine: &CellEngine, edits: &Consequences) -> Result<Relation, CompileError> {
     let mut relation = engine.relation().clone();
-    let unknown = |key: &str, id: &str| CompileError::Consequence {
+    let unknown = |key: &str, id: &str| {
+        CompileError::Consequence {
         key: key.to_string(),
-        why: format!("'{id}' is no alarm of this cell's checks"),
+        why: format!("'{id}' is no alarm of this cell's checks or of the PLC's (`[[opcua.events]]` prefixes)"),
+    }
     };
     for (key, cause, effect) in &edits.add {
         for id in [cause, effect] {

@@ -183,6 +183,26 @@ mod tests {
     }
 
     #[test]
+    fn a_plc_alarm_follows_from_another_by_the_configurations_edge() {
+        let mut relation = crate::consequence::Relation::default();
+        relation.add("plc-Press-Overpressure", "plc-Press-Pump");
+        let mut e = engine().relating(relation, true);
+        e.on_condition(event(true, None, 1_000), 1_000);
+        let pump = PlcCondition {
+            id: "plc-Press-Pump".into(),
+            message: "Pump motor overload".into(),
+            ..event(true, None, 1_200)
+        };
+        e.on_condition(pump, 1_200);
+        let a = e.alarms().find(|a| a.id == "plc-Press-Pump").unwrap();
+        let c = a.consequence.as_ref().expect("a consequence");
+        assert_eq!(
+            (c.cause.as_str(), c.first_out.as_str(), c.suppressed),
+            ("plc-Press-Overpressure", "plc-Press-Overpressure", true)
+        );
+    }
+
+    #[test]
     fn a_condition_is_raised_at_the_plcs_time_and_cleared_when_it_returns_to_normal() {
         let mut e = engine();
         let s = e.on_condition(event(true, None, 1_000), 5_000);

@@ -77,13 +77,31 @@ fn edges_are_added_and_removed_by_the_configuration() {
 }
 
 #[test]
+fn an_edge_may_name_an_alarm_of_the_plcs_own() {
+    let (text, files) = cascade(
+        "\n[[opcua.events]]\n\n[alarms.consequences]\n\
+         add = [{ cause = \"fig6\", effect = \"plc-Press-Guard\" }]\n",
+    );
+    assert!(relation(&text, &files)
+        .unwrap()
+        .contains("fig6 -> plc-Press-Guard   written in the configuration"));
+}
+
+#[test]
 fn a_bad_edge_is_named_with_its_key() {
     let (text, files) =
         cascade("\n[alarms.consequences]\nadd = [{ cause = \"fig7\", effect = \"start\" }]\n");
     assert_eq!(
         relation(&text, &files).unwrap_err(),
-        "alarms.consequences.add[0]: 'fig7' is no alarm of this cell's checks"
+        "alarms.consequences.add[0]: 'fig7' is no alarm of this cell's checks or of the PLC's (`[[opcua.events]]` prefixes)"
     );
+    // The PLC's own alarms only when the cell takes them.
+    let plc =
+        "\n[alarms.consequences]\nadd = [{ cause = \"fig6\", effect = \"plc-Press-Guard\" }]\n";
+    let (text, files) = cascade(plc);
+    assert!(relation(&text, &files)
+        .unwrap_err()
+        .contains("'plc-Press-Guard' is no alarm"));
     let (text, files) =
         cascade("\n[alarms.consequences]\nremove = [{ cause = \"start\", effect = \"fig6\" }]\n");
     assert_eq!(
