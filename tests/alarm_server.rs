@@ -173,6 +173,49 @@ async fn acknowledge(session: &Session, condition: &NodeId, event_id: &Variant) 
         .status_code
 }
 
+/// The value of ESE's state variable `name` (`ActiveState.Id`).
+async fn state(session: &Session, ns: u16, name: &str) -> Variant {
+    let read = session
+        .read(
+            &[ReadValueId {
+                node_id: NodeId::new(ns, format!("m01ps0004.ese.{name}")),
+                attribute_id: AttributeId::Value as u32,
+                ..Default::default()
+            }],
+            TimestampsToReturn::Both,
+            0.0,
+        )
+        .await
+        .unwrap();
+    read[0].value.clone().unwrap_or_default()
+}
+
+/// The browse names of what `node` organises or has as components and
+/// properties.
+async fn browse(session: &Session, node: &NodeId) -> Vec<String> {
+    let results = session
+        .browse(
+            &[opcua::types::BrowseDescription {
+                node_id: node.clone(),
+                browse_direction: opcua::types::BrowseDirection::Forward,
+                reference_type_id: opcua::types::ReferenceTypeId::HierarchicalReferences.into(),
+                include_subtypes: true,
+                node_class_mask: 0,
+                result_mask: opcua::types::BrowseResultMask::All as u32,
+            }],
+            100,
+            None,
+        )
+        .await
+        .unwrap();
+    results[0]
+        .references
+        .iter()
+        .flatten()
+        .map(|r| r.browse_name.name.to_string())
+        .collect()
+}
+
 /// Receives events until `f` accepts one.
 async fn event_until(
     rx: &mut mpsc::UnboundedReceiver<Vec<Variant>>,
@@ -344,6 +387,19 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
     };
     let condition = (**condition).clone();
     let event_id = raised[EVENT_ID].clone();
+    // Its state is in variables too, for clients that browse and read.
+    let children = browse(&kim, &condition).await;
+    for name in ["ActiveState", "AckedState", "Retain", "Message", "Culprits"] {
+        assert!(children.iter().any(|c| c == name), "{name}: {children:?}");
+    }
+    assert_eq!(
+        browse(&kim, &NodeId::new(ns, "m01ps0004.ese.ActiveState")).await,
+        ["Id"]
+    );
+    assert_eq!(state(&kim, ns, "ActiveState.Id").await, Variant::from(true));
+    assert_eq!(state(&kim, ns, "AckedState.Id").await, Variant::from(false));
+    assert_eq!(state(&kim, ns, "Message").await, raised[MESSAGE]);
+    assert_eq!(state(&kim, ns, "Culprits").await, raised[CULPRITS]);
 
     // No one but a user acting as an operator allowed `ack` acknowledges.
     let anonymous = connect(&url, &scada_pki, IdentityToken::Anonymous).await;
@@ -402,6 +458,8 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
     .await;
     assert_eq!(acked[CLIENT_USER], Variant::from("kim"));
     assert_eq!(acked[ACTIVE], Variant::from(true));
+    assert_eq!(state(&kim, ns, "AckedState.Id").await, Variant::from(true));
+    assert_eq!(state(&kim, ns, "ClientUserId").await, Variant::from("kim"));
     assert_eq!(
         acknowledge(&kim, &condition, &acked[EVENT_ID]).await,
         StatusCode::BadConditionBranchAlreadyAcked

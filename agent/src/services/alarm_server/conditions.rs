@@ -2,7 +2,9 @@
 //! id, kept from the alarm payloads the sink hands over (`apply`), each
 //! change sent as an event from the cell's notifier (and so from the
 //! `Server` object). The conditions' nodes are made on an alarm's first
-//! transition. Acknowledging and refreshing are `methods.rs`'s.
+//! transition, with their state as variables a client may read or
+//! subscribe to ([`STATE_VARIABLES`]). Acknowledging and refreshing are
+//! `methods.rs`'s.
 
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -15,12 +17,34 @@ use opcua::server::node_manager::memory::SimpleNodeManager;
 use opcua::server::SubscriptionCache;
 use opcua::sync::{Mutex, RwLock};
 use opcua::types::{
-    ByteString, DataTypeId, DateTime, LocalizedText, MethodId, NodeId, ObjectTypeId,
-    ReferenceTypeId, StatusCode, VariableTypeId,
+    ByteString, DataTypeId, DataValue, DateTime, LocalizedText, MethodId, NodeId, ObjectTypeId,
+    ReferenceTypeId, StatusCode, VariableTypeId, Variant,
 };
 
 use super::events::{AlarmFields, CellAlarmEvent, CommentVar, QualityVar, SeverityVar, TwoState};
 use crate::payload::{AlarmPayload, CulpritPayload};
+
+/// The state variables of each condition, readable and subscribable:
+/// name (the node id's last part after the alarm's, `m01.ese.ActiveState.Id`),
+/// data type, initial value. `…State` are `TwoStateVariableType` components
+/// with their `Id` property; the others properties of the condition.
+pub(super) const STATE_VARIABLES: [(&str, DataTypeId, fn() -> Variant); 9] = [
+    ("ActiveState", DataTypeId::LocalizedText, || {
+        LocalizedText::from("Inactive").into()
+    }),
+    ("ActiveState.Id", DataTypeId::Boolean, || false.into()),
+    ("AckedState", DataTypeId::LocalizedText, || {
+        LocalizedText::from("Acknowledged").into()
+    }),
+    ("AckedState.Id", DataTypeId::Boolean, || true.into()),
+    ("Retain", DataTypeId::Boolean, || false.into()),
+    ("Message", DataTypeId::LocalizedText, || {
+        LocalizedText::null().into()
+    }),
+    ("Severity", DataTypeId::UInt16, || 0u16.into()),
+    ("ClientUserId", DataTypeId::String, || "".into()),
+    ("Culprits", DataTypeId::String, || "".into()),
+];
 
 /// What the conditions need of the built server: set once, before it runs.
 pub(super) struct Served {
@@ -188,8 +212,18 @@ impl Conditions {
                 || p.consequence.as_ref().is_some_and(|c| c.suppressed);
             c.event_id = self.next_event_id();
             c.time = now;
-            self.event(served, &p.id, c)
+            (
+                self.event(served, &p.id, c),
+                self.state_values(served.ns, &p.id, c),
+            )
         };
+        let (event, values) = event;
+        if let Err(e) = served.nodes.set_values(
+            &served.subscriptions,
+            values.iter().map(|(n, v)| (n, None, v.clone())),
+        ) {
+            tracing::warn!(alarm = %p.id, error = %e, "alarm server: a condition's state variables not updated");
+        }
         served
             .subscriptions
             .notify_events([(&event as &dyn Event, &served.notifier)].into_iter());
@@ -229,6 +263,26 @@ impl Conditions {
             .property_of(node.clone())
             .has_type_definition(VariableTypeId::PropertyType)
             .insert(&mut *space);
+            for (name, data_type, initial) in STATE_VARIABLES {
+                let var = self.state_node(served.ns, id, name);
+                let (parent, browse) = match name.split_once('.') {
+                    Some((state, leaf)) => (self.state_node(served.ns, id, state), leaf),
+                    None => (node.clone(), name),
+                };
+                let builder = VariableBuilder::new(&var, browse, browse)
+                    .data_type(data_type)
+                    .value(initial());
+                let builder = if name.ends_with("State") {
+                    builder
+                        .component_of(parent)
+                        .has_type_definition(VariableTypeId::TwoStateVariableType)
+                } else {
+                    builder
+                        .property_of(parent)
+                        .has_type_definition(VariableTypeId::PropertyType)
+                };
+                builder.insert(&mut *space);
+            }
         }
         served.core.write().insert_reference(
             &node,
@@ -250,6 +304,49 @@ impl Conditions {
             event_id: ByteString::null(),
             time: now,
         }
+    }
+
+    /// The node of state variable `name` (`ActiveState.Id`) of alarm `id`.
+    fn state_node(&self, ns: u16, id: &str, name: &str) -> NodeId {
+        NodeId::new(ns, format!("{}.{id}.{name}", self.cell))
+    }
+
+    /// The values of the state variables of condition `c` of alarm `id`.
+    fn state_values(&self, ns: u16, id: &str, c: &Condition) -> Vec<(NodeId, DataValue)> {
+        let text = |on: bool, yes: &str, no: &str| {
+            Variant::from(LocalizedText::from(if on { yes } else { no }))
+        };
+        let values: [(&str, Variant, DateTime); 9] = [
+            (
+                "ActiveState",
+                text(c.active, "Active", "Inactive"),
+                c.active_at,
+            ),
+            ("ActiveState.Id", c.active.into(), c.active_at),
+            (
+                "AckedState",
+                text(c.acked, "Acknowledged", "Unacknowledged"),
+                c.acked_at,
+            ),
+            ("AckedState.Id", c.acked.into(), c.acked_at),
+            ("Retain", c.retain().into(), c.time),
+            (
+                "Message",
+                LocalizedText::from(c.message.as_str()).into(),
+                c.time,
+            ),
+            ("Severity", c.severity.into(), c.time),
+            ("ClientUserId", c.acked_by.as_str().into(), c.acked_at),
+            ("Culprits", c.culprits.as_str().into(), c.time),
+        ];
+        values
+            .into_iter()
+            .map(|(name, v, at)| {
+                let mut dv = DataValue::new_now(v);
+                dv.source_timestamp = Some(at);
+                (self.state_node(ns, id, name), dv)
+            })
+            .collect()
     }
 
     /// The event saying condition `c` of alarm `id` as it stands.
