@@ -546,6 +546,9 @@ pub(crate) struct NodeScada {
     child: std::process::Child,
     stdin: std::process::ChildStdin,
     lines: std::sync::mpsc::Receiver<String>,
+    /// Events that came while an answer was awaited, in order: the next
+    /// [`NodeScada::event`] looks at them first.
+    events: std::collections::VecDeque<String>,
     log: std::path::PathBuf,
 }
 
@@ -576,9 +579,10 @@ impl NodeScada {
             child,
             stdin,
             lines,
+            events: std::collections::VecDeque::new(),
             log,
         };
-        let cert = scada.line("its certificate", |l| {
+        let cert = scada.line("its certificate", false, |l| {
             l.strip_prefix("certificate ").map(Into::into)
         });
         (scada, cert)
@@ -601,15 +605,21 @@ impl NodeScada {
     }
 
     /// The first line `f` takes, skipping the others.
-    fn line<T>(&mut self, what: &str, f: impl Fn(&str) -> Option<T>) -> T {
+    /// (An event line skipped is kept for [`NodeScada::event`] when `keep`.)
+    fn line<T>(&mut self, what: &str, keep: bool, f: impl Fn(&str) -> Option<T>) -> T {
         tokio::task::block_in_place(|| {
             let deadline = std::time::Instant::now() + Duration::from_secs(120);
             let mut seen = Vec::new();
             loop {
                 let left = deadline.saturating_duration_since(std::time::Instant::now());
-                match self.lines.recv_timeout(left) {
+                let next = match self.events.pop_front() {
+                    Some(line) if !keep => Ok(line),
+                    _ => self.lines.recv_timeout(left),
+                };
+                match next {
                     Ok(line) => match f(&line) {
                         Some(t) => return t,
+                        None if keep && line.starts_with("event ") => self.events.push_back(line),
                         None => seen.push(line),
                     },
                     Err(_) => panic!(
@@ -627,7 +637,7 @@ impl NodeScada {
         what: &str,
         f: impl Fn(&serde_json::Value) -> bool,
     ) -> serde_json::Value {
-        self.line(what, |l| {
+        self.line(what, false, |l| {
             let e: serde_json::Value = serde_json::from_str(l.strip_prefix("event ")?).unwrap();
             f(&e).then_some(e)
         })
@@ -636,7 +646,7 @@ impl NodeScada {
     /// Sends `command`; its answer (the line after `answer`).
     pub(crate) fn ask(&mut self, command: &str, answer: &str) -> String {
         writeln!(self.stdin, "{command}").unwrap();
-        self.line(answer, |l| l.strip_prefix(answer).map(str::to_string))
+        self.line(answer, true, |l| l.strip_prefix(answer).map(str::to_string))
     }
 }
 
@@ -822,4 +832,102 @@ async fn a_node_opcua_scada_acknowledges_ese_with_a_comment_and_finds_it_after_a
     );
     drop(scada);
     again.stop().await;
+}
+
+/// A reload (SIGHUP, `cellwatch reload`) reads the alarm server's users
+/// and the operators again: a session already open acknowledges as the
+/// operator its user acts as now, and an operator taken out of the file
+/// is refused at once.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_reload_reads_the_users_and_the_operators_again() {
+    let mut fx = serving().await;
+    let url = format!("opc.tcp://{}", fx.agent().alarm_server_addr().unwrap());
+    let mut scada = NodeScada::connected(
+        &url,
+        &fx.dir().join("node-scada-pki"),
+        &fx.dir().join("alarm-server-pki"),
+        "scada-lee",
+    );
+    fx.settled().await;
+    fx.sim.set("X0.06", false).unwrap();
+    let raised = scada.event("ESE raised", |e| {
+        e["conditionName"] == "ese" && e["active"] == true
+    });
+    let ack = format!(
+        "ack {} {} seen",
+        raised["conditionId"].as_str().unwrap(),
+        raised["eventId"].as_str().unwrap()
+    );
+    // scada-lee acts as lee, whom the operators file does not name.
+    assert_eq!(scada.ask(&ack, "ack "), "BadUserAccessDenied");
+
+    // Lee's account now acts as kim: read again, the open session's
+    // acknowledgement is kim's.
+    let users = fx.dir().join("opcua-users.toml");
+    let text = std::fs::read_to_string(&users).unwrap();
+    let changed = text.replacen("operator = \"lee\"", "operator = \"kim\"", 1);
+    assert_ne!(text, changed);
+    std::fs::write(&users, changed).unwrap();
+    let config = fx.config().clone();
+    fx.agent.as_mut().unwrap().reload(&config).await.unwrap();
+    // (The reload carries ESE over to the checks read again: a new event,
+    // whose id an acknowledgement names.)
+    assert_eq!(scada.ask("refresh", "refresh "), "Good");
+    scada.event("the refresh's start", |e| {
+        e["eventType"] == "ns=0;i=2787" || e["eventType"] == "i=2787"
+    });
+    let latest = scada.event("ESE, refreshed", |e| e["conditionName"] == "ese");
+    let ack = format!(
+        "ack {} {} seen",
+        latest["conditionId"].as_str().unwrap(),
+        latest["eventId"].as_str().unwrap()
+    );
+    assert_eq!(scada.ask(&ack, "ack "), "Good");
+    let acked = scada.event("ESE acknowledged", |e| {
+        e["conditionName"] == "ese" && e["acked"] == true
+    });
+    assert_eq!(acked["clientUserId"], "kim");
+
+    // Kim taken out of the operators file: read again, her signed
+    // command is refused.
+    let operators = config.operators_file.clone().unwrap();
+    let text = std::fs::read_to_string(&operators).unwrap();
+    let without_kim: String = text
+        .split_inclusive('\n')
+        .scan(false, |in_kim, line| {
+            if line.starts_with("[operators.") {
+                *in_kim = line.starts_with("[operators.kim]");
+            }
+            Some(if *in_kim { "" } else { line })
+        })
+        .collect();
+    assert!(!without_kim.contains("[operators.kim]") && without_kim.contains("[operators.ana]"));
+    std::fs::write(&operators, without_kim).unwrap();
+    let shelve = crate::spawned::signed_with(
+        cellwatch::operator::Action::Shelve,
+        "ese",
+        Some("30m"),
+        Some("sensor cable"),
+    );
+    let (ok, detail) = crate::spawned::send(fx.client(), &shelve).await;
+    assert!(ok, "kim may shelve before the reload: {detail}");
+    fx.agent.as_mut().unwrap().reload(&config).await.unwrap();
+    let unshelve = crate::spawned::signed(cellwatch::operator::Action::Unshelve, "ese");
+    let (ok, detail) = crate::spawned::send(fx.client(), &unshelve).await;
+    assert!(!ok && detail.contains("unknown operator 'kim'"), "{detail}");
+    // A users file that does not read is refused; the running users go on.
+    std::fs::write(&users, "[users.x]\n").unwrap();
+    let refused = fx
+        .agent
+        .as_mut()
+        .unwrap()
+        .reload(&config)
+        .await
+        .unwrap_err();
+    assert!(
+        refused
+            .to_string()
+            .contains("missing field `password_hash`"),
+        "{refused}"
+    );
 }

@@ -164,6 +164,8 @@ pub struct Agent {
     /// The OPC UA alarm server (`[alarm_server]`); ends with the agent.
     alarm_server: Option<JoinHandle<()>>,
     alarm_server_addr: Option<SocketAddr>,
+    /// The alarm server's users, read again on a reload.
+    alarm_server_users: Option<crate::services::alarm_server::users::Users>,
     session: zenoh::Session,
     metrics: Arc<Metrics>,
     metrics_addr: Option<SocketAddr>,
@@ -176,7 +178,7 @@ pub struct Agent {
     /// Operators' `configure reload`, for the runner.
     reload_asks: Option<mpsc::Receiver<crate::cell::swap::ReloadAsk>>,
     /// The running configuration's parts only a restart changes.
-    fixed: [u64; 12],
+    fixed: [u64; 11],
 }
 
 /// The parts of a configuration a reload takes by starting a source of its
@@ -198,6 +200,10 @@ pub enum ReloadError {
     /// The loop would not take it now, or has ended.
     #[error("{0}")]
     Refused(String),
+    /// The operators file or the alarm server's users file it names is
+    /// unusable.
+    #[error("{0}")]
+    File(String),
 }
 
 /// What a running agent needs from whoever runs it ([`Agent::next_event`]).
@@ -295,6 +301,19 @@ impl Agent {
             ));
         }
         let engine = compile::engine(config)?;
+        // The operators and the alarm server's users, read again: a key
+        // revoked, an operator's permissions changed, a user added.
+        let keys = match &config.operators_file {
+            Some(path) => OperatorKeys::load(path).map_err(|e| ReloadError::File(e.to_string()))?,
+            None => OperatorKeys::default(),
+        };
+        let users = match (&self.alarm_server_users, &config.alarm_server) {
+            (Some(_), Some(c)) => Some(
+                crate::services::alarm_server::users::Users::load(&c.users_file)
+                    .map_err(|e| ReloadError::File(e.to_string()))?,
+            ),
+            _ => None,
+        };
         let started = new_source.then(|| self.start_source(config));
         let (done, taken) = tokio::sync::oneshot::channel();
         let (source, task) = match started {
@@ -306,6 +325,7 @@ impl Agent {
             forcing: crate::cell::forcing::Forcing::of(config),
             timers: crate::cell::timers::Timers::of(config),
             max_shelve: config.max_shelve,
+            keys,
             source,
             done,
         };
@@ -324,6 +344,9 @@ impl Agent {
             }
             (Err(e), None) => Err(e),
             (Ok(carried), task) => {
+                if let (Some(running), Some(users)) = (&self.alarm_server_users, users) {
+                    running.replace_with(users);
+                }
                 if let Some((task, stop)) = task {
                     // The loop reads the new source: the old one goes.
                     let old_stop = std::mem::replace(&mut self.source_stop, stop);
@@ -705,6 +728,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         metrics_server,
         alertmanager,
         alarm_server_addr: alarm_server.as_ref().map(AlarmServer::addr),
+        alarm_server_users: alarm_server.as_ref().map(|s| s.users().clone()),
         alarm_server: alarm_server.map(AlarmServer::task),
         session,
         metrics,

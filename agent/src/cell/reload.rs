@@ -40,6 +40,7 @@ impl CellLoop {
             mut forcing,
             timers,
             max_shelve,
+            keys,
             source: _,
             done,
         } = reload;
@@ -55,6 +56,7 @@ impl CellLoop {
         self.forcing = forcing;
         self.timers = timers;
         self.max_shelve = max_shelve;
+        self.gate.set_keys(keys);
         for step in steps {
             self.dispatch(now, Input::Reloaded, step, 0).await;
         }

@@ -19,6 +19,8 @@ pub struct Reload {
     pub timers: Timers,
     /// Its longest shelf.
     pub max_shelve: Duration,
+    /// Its operators (`commands.operators_file`, read again).
+    pub keys: crate::operator::OperatorKeys,
     /// A source of its own when the tags or the source's settings changed:
     /// the loop reads it from the new engine on, the old one is stopped
     /// by the agent afterwards.

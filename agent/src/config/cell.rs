@@ -136,7 +136,7 @@ pub struct CellConfig {
 /// says things, whom it talks to, what it reads. The tags and the source's
 /// settings are taken by starting a source of their own; the others only
 /// by a restart.
-pub const FIXED_PARTS: [&str; 12] = [
+pub const FIXED_PARTS: [&str; 11] = [
     "cell.id",
     "journal.path",
     "[opcua]",
@@ -146,7 +146,6 @@ pub const FIXED_PARTS: [&str; 12] = [
     "[alertmanager]",
     "[alarm_server]",
     "[kpi]",
-    "commands.operators_file",
     "state.publish_interval",
     "the tags",
 ];
@@ -156,7 +155,7 @@ impl CellConfig {
     /// between the running configuration and one read again, it names what
     /// changed beyond the checks. (Hashes of the parts' debug forms: the tags
     /// of a 100,000-tag cell are not kept twice for it.)
-    pub fn fixed_parts(&self) -> [u64; 12] {
+    pub fn fixed_parts(&self) -> [u64; 11] {
         use std::hash::{Hash, Hasher};
         let hash = |part: &dyn fmt::Debug| {
             let mut h = std::collections::hash_map::DefaultHasher::new();
@@ -182,7 +181,6 @@ impl CellConfig {
             hash(&self.alertmanager),
             hash(&self.alarm_server),
             hash(&self.kpi),
-            hash(&self.operators_file),
             hash(&self.state_interval),
             tags.finish(),
         ]

@@ -563,6 +563,11 @@ pub struct Gate {
 }
 
 impl Gate {
+    /// The operators read again (a reload): the nonces seen stay seen.
+    pub fn set_keys(&mut self, keys: OperatorKeys) {
+        self.keys = keys;
+    }
+
     /// A gate for `cell` with `keys`.
     pub fn new(cell: &str, keys: OperatorKeys) -> Gate {
         Gate {

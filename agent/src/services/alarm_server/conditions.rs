@@ -24,11 +24,14 @@ use opcua::types::{
 use super::events::{AlarmFields, CellAlarmEvent, CommentVar, QualityVar, SeverityVar, TwoState};
 use crate::payload::{AlarmPayload, CulpritPayload};
 
+/// A state variable: its name, data type and initial value.
+pub(super) type StateVariable = (&'static str, DataTypeId, fn() -> Variant);
+
 /// The state variables of each condition, readable and subscribable:
 /// name (the node id's last part after the alarm's, `m01.ese.ActiveState.Id`),
 /// data type, initial value. `…State` are `TwoStateVariableType` components
 /// with their `Id` property; the others properties of the condition.
-pub(super) const STATE_VARIABLES: [(&str, DataTypeId, fn() -> Variant); 9] = [
+pub(super) const STATE_VARIABLES: [StateVariable; 9] = [
     ("ActiveState", DataTypeId::LocalizedText, || {
         LocalizedText::from("Inactive").into()
     }),

@@ -5,7 +5,7 @@
 
 use std::collections::HashMap;
 use std::path::Path;
-use std::sync::Arc;
+use std::sync::{Arc, RwLock};
 
 use argon2::password_hash::{PasswordHash, PasswordHasher, PasswordVerifier, SaltString};
 use argon2::Argon2;
@@ -68,10 +68,11 @@ struct User {
     hash: String,
 }
 
-/// The users of the alarm server.
+/// The users of the alarm server: clones share them, and a reload
+/// replaces them for all ([`Users::replace_with`]).
 #[derive(Debug, Clone, Default)]
 pub struct Users {
-    users: Arc<HashMap<String, User>>,
+    users: Arc<RwLock<Arc<HashMap<String, User>>>>,
 }
 
 impl Users {
@@ -127,7 +128,7 @@ impl Users {
             );
         }
         Ok(Users {
-            users: Arc::new(users),
+            users: Arc::new(RwLock::new(Arc::new(users))),
         })
     }
 
@@ -144,9 +145,27 @@ impl Users {
         Users::parse(&name, &text)
     }
 
+    /// The users now (a reload may replace them meanwhile).
+    fn now(&self) -> Arc<HashMap<String, User>> {
+        self.users
+            .read()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone()
+    }
+
+    /// From now on, `other`'s users (a reload): sessions open stay open,
+    /// each acknowledgement and new session is judged by these.
+    pub fn replace_with(&self, other: Users) {
+        let new = other.now();
+        *self
+            .users
+            .write()
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = new;
+    }
+
     /// The operator `user` acts as, if any.
-    pub fn operator(&self, user: &str) -> Option<&str> {
-        self.users.get(user)?.operator.as_deref()
+    pub fn operator(&self, user: &str) -> Option<String> {
+        self.now().get(user)?.operator.clone()
     }
 
     /// What stands between each user acting as an operator and an
@@ -155,7 +174,7 @@ impl Users {
     /// as nobody is meant to watch, and not named.
     pub fn cannot_acknowledge(&self, gate: &crate::operator::Gate) -> Vec<String> {
         let mut out: Vec<String> = self
-            .users
+            .now()
             .iter()
             .filter_map(|(name, u)| {
                 let operator = u.operator.as_deref()?;
@@ -174,7 +193,8 @@ impl Users {
     /// Whether `password` is `user`'s (Argon2, so slow on purpose: run it
     /// off the server's tasks).
     fn verify(&self, user: &str, password: &str) -> bool {
-        let Some(u) = self.users.get(user) else {
+        let users = self.now();
+        let Some(u) = users.get(user) else {
             return false;
         };
         PasswordHash::new(&u.hash).is_ok_and(|h| {
@@ -257,7 +277,7 @@ mod tests {
             "[users.scada-kim]\noperator = \"kim\"\npassword_hash = \"{hash}\"\n[users.viewer]\npassword_hash = \"{hash}\"\n"
         );
         let users = Users::parse("users.toml", &text).unwrap();
-        assert_eq!(users.operator("scada-kim"), Some("kim"));
+        assert_eq!(users.operator("scada-kim").as_deref(), Some("kim"));
         assert_eq!(users.operator("viewer"), None);
         assert!(users.verify("scada-kim", "s3cret"));
         assert!(!users.verify("scada-kim", "secret"));
