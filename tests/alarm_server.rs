@@ -661,7 +661,7 @@ impl Drop for NodeScada {
 use std::io::Write as _;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_node_opcua_scada_acknowledges_ese_with_a_comment_and_finds_it_after_a_restart() {
+async fn a_node_opcua_scada_acknowledges_and_shelves_ese_and_finds_it_after_a_restart() {
     let fx = serving().await;
     let addr = fx.agent().alarm_server_addr().unwrap();
     let url = format!("opc.tcp://127.0.0.1:{}", addr.port());
@@ -797,6 +797,62 @@ async fn a_node_opcua_scada_acknowledges_ese_with_a_comment_and_finds_it_after_a
     scada.event("ESE unshelved", |e| {
         e["conditionName"] == "ese" && e["suppressedOrShelved"] == false
     });
+
+    // Shelved from the SCADA, through its ShelvingState's methods, as kim.
+    let shelving = format!("{condition}.ShelvingState");
+    let call = |method: &str, ms: Option<u64>| {
+        let ms = ms.map_or(String::new(), |ms| format!(" {ms}"));
+        format!("call {shelving} {method}{ms}")
+    };
+    let (timed, one_shot, unshelve) = ("i=2949", "i=2948", "i=2947");
+    // 30 days: longer than commands.max_shelve (8 h unless set).
+    assert_eq!(
+        scada.ask(&call(timed, Some(30 * 24 * 3_600_000)), "call "),
+        "BadShelvingTimeOutOfRange"
+    );
+    assert_eq!(scada.ask(&call(timed, Some(600_000)), "call "), "Good");
+    let shelved = scada.event("ESE shelved from the SCADA", |e| {
+        e["conditionName"] == "ese" && e["shelving"] == "ns=0;i=2932"
+    });
+    assert_eq!(shelved["suppressedOrShelved"], true);
+    assert_eq!(
+        scada.ask(&call(one_shot, None), "call "),
+        "BadConditionAlreadyShelved"
+    );
+    assert_eq!(scada.ask(&call(unshelve, None), "call "), "Good");
+    scada.event("ESE unshelved from the SCADA", |e| {
+        e["conditionName"] == "ese" && e["shelving"] == "ns=0;i=2930"
+    });
+    assert_eq!(
+        scada.ask(&call(unshelve, None), "call "),
+        "BadConditionNotShelved"
+    );
+    assert_eq!(scada.ask(&call(one_shot, None), "call "), "Good");
+    scada.event("ESE shelved once from the SCADA", |e| {
+        e["conditionName"] == "ese" && e["shelving"] == "ns=0;i=2933"
+    });
+    let shelves: Vec<(String, String)> = fx
+        .history_rows("cellwatch/m01ps0004/history?since=1h;kind=command")
+        .await
+        .iter()
+        .filter(|r| r["fields"]["source"] == "opcua user scada-kim")
+        .map(|r| {
+            let f = |k: &str| r["fields"][k].as_str().unwrap_or_default().to_string();
+            (f("action"), f("detail"))
+        })
+        .collect();
+    assert_eq!(
+        shelves[1..],
+        [
+            (
+                "shelve".into(),
+                "shelve for 2592000000ms: at most 8h on this cell".into()
+            ),
+            ("shelve".into(), "shelve ese by kim".into()),
+            ("unshelve".into(), "unshelve ese by kim".into()),
+            ("shelve".into(), "shelve ese by kim".into()),
+        ]
+    );
 
     // The agent restarts: ESE, restored from the journal, is on its alarm
     // server again for a SCADA that refreshes, active and acknowledged by

@@ -626,7 +626,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         }
         None => None,
     };
-    let (alarm_server, session_acks) = match &config.alarm_server {
+    let (alarm_server, session_commands) = match &config.alarm_server {
         Some(c) => {
             let (tx, rx) = mpsc::channel(crate::services::alarm_server::ACK_QUEUE);
             let server = AlarmServer::start(&config.cell, c, tx, stopped(stop_rx.clone())).await?;
@@ -709,7 +709,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         Some(tx) => cell_loop.asking_reloads(tx),
         None => cell_loop,
     };
-    let cell_loop = match session_acks {
+    let cell_loop = match session_commands {
         Some(rx) => cell_loop.acknowledging_sessions(rx),
         None => cell_loop,
     };

@@ -243,43 +243,52 @@ pub enum Request {
     },
 }
 
-/// An acknowledgement asked by a user of the alarm server's OPC UA session
-/// (`services::alarm_server`): the session authenticated the user, who
-/// acts as `operator`; the loop checks the operator's permission, carries
-/// it out and journals it like a signed command. It comes on a channel of
-/// its own that only the alarm server holds, never from the bus.
+/// An acknowledgement or a shelf asked by an OPC UA session of the alarm
+/// server: the session's user was authenticated by the server and maps to
+/// `operator`; the cell loop checks the operator's permission for
+/// `action`, carries it out and journals it like a signed command. It
+/// comes on a channel of its own that only the alarm server holds, never
+/// from the bus.
 #[derive(Debug)]
-pub struct SessionAck {
+pub struct SessionCommand {
     /// The OPC UA user of the session.
     pub user: String,
     /// The operator the user acts as (the alarm server's users file).
     pub operator: String,
-    /// The alarm acknowledged.
+    /// `ack`, `shelve` or `unshelve`.
+    pub action: crate::operator::Action,
+    /// The alarm it names.
     pub alarm: String,
+    /// A shelf's length (`1800000ms`), or `once`; none for the others.
+    pub value: Option<String>,
     /// The method's `Comment`, clipped and escaped; may be empty.
     pub comment: String,
     /// Where the outcome goes, once journaled.
-    pub reply: oneshot::Sender<SessionAckOutcome>,
+    pub reply: oneshot::Sender<SessionOutcome>,
 }
 
-/// What a [`SessionAck`] came to.
+/// What a [`SessionCommand`] came to.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub enum SessionAckOutcome {
+pub enum SessionOutcome {
     /// Carried out: what it did.
     Accepted(String),
-    /// The operator may not acknowledge (or is not known): why.
+    /// The operator may not do it (or is not known): why.
     Denied(String),
-    /// The alarm has nothing to acknowledge.
-    AlreadyAcknowledged(String),
+    /// The alarm is not in a state it applies to (nothing to acknowledge,
+    /// not shelved): why.
+    WrongState(String),
+    /// A value out of the cell's range (a shelf longer than
+    /// `commands.max_shelve`): why.
+    OutOfRange(String),
     /// Refused for another reason (no such alarm, the PLC refused): why.
     Refused(String),
 }
 
-/// The next [`SessionAck`] on `acks`; never, when there is no alarm
+/// The next [`SessionCommand`] on `acks`; never, when there is no alarm
 /// server (`None`) or it has stopped.
-pub async fn next_session_ack(
-    acks: &mut Option<tokio::sync::mpsc::Receiver<SessionAck>>,
-) -> Option<SessionAck> {
+pub async fn next_session_command(
+    acks: &mut Option<tokio::sync::mpsc::Receiver<SessionCommand>>,
+) -> Option<SessionCommand> {
     match acks {
         Some(rx) => match rx.recv().await {
             Some(a) => Some(a),

@@ -9,11 +9,14 @@
 // server), then waits for "connect" on standard input; once subscribed,
 // prints "connected". Each event: "event {json}" with eventId (hex),
 // eventType, sourceName, message, severity, conditionName, active, acked,
-// retain, clientUserId, comment, suppressedOrShelved, conditionId and culprits (NAMESPACE_URI's
+// retain, clientUserId, comment, suppressedOrShelved, shelving (the
+// ShelvingState's CurrentState/Id), conditionId and culprits (NAMESPACE_URI's
 // CellAlarmType's Culprits). Standard input then:
 //   ack CONDITION_ID EVENT_ID COMMENT   Acknowledge (i=9111) on the condition
 //                       (a node id as printed), the event's id (hex), the
 //                       comment the rest of the line: "ack <status name>"
+//   call OBJECT METHOD [MS]  a method (node ids) with no argument, or a
+//                       Duration of MS milliseconds: "call <status name>"
 //   refresh             ConditionRefresh on the subscription: "refresh
 //                       <status name>", the retained conditions' events
 //                       between a RefreshStart and a RefreshEnd event
@@ -34,12 +37,12 @@ const APPLICATION_URI = "urn:cellwatch:test:node-opcua-scada";
 const FIELDS = [
   "EventId", "EventType", "SourceName", "Message", "Severity", "ConditionName",
   "ActiveState.Id", "AckedState.Id", "Retain", "ClientUserId", "Comment", "SuppressedOrShelved",
-  "ConditionId",
+  "ShelvingState.CurrentState.Id", "ConditionId",
 ];
 const NAMES = [
   "eventId", "eventType", "sourceName", "message", "severity", "conditionName",
-  "active", "acked", "retain", "clientUserId", "comment", "suppressedOrShelved", "conditionId",
-  "culprits",
+  "active", "acked", "retain", "clientUserId", "comment", "suppressedOrShelved", "shelving",
+  "conditionId", "culprits",
 ];
 
 function plain(v) {
@@ -145,6 +148,11 @@ async function main() {
         ],
       });
       console.log(`ack ${result.statusCode.name}`);
+    } else if (command === "call") {
+      const [objectId, methodId, ms] = rest;
+      const inputArguments = ms === undefined ? [] : [new Variant({ dataType: DataType.Double, value: Number(ms) })];
+      const result = await session.call({ objectId: coerceNodeId(objectId), methodId: coerceNodeId(methodId), inputArguments });
+      console.log(`call ${result.statusCode.name}`);
     } else if (command === "refresh") {
       const result = await session.call({
         objectId: coerceNodeId("i=2782"),

@@ -108,7 +108,7 @@ pub struct CellLoop {
     /// was not started from a file, and it is refused).
     reload_asks: Option<mpsc::Sender<swap::ReloadAsk>>,
     /// Acknowledgements from the alarm server's sessions (`session.rs`).
-    session_acks: Option<mpsc::Receiver<crate::step::SessionAck>>,
+    session_commands: Option<mpsc::Receiver<crate::step::SessionCommand>>,
 }
 
 /// A write's outcome on its way back into the loop.
@@ -199,7 +199,7 @@ impl CellLoop {
             health: None,
             reloads: None,
             reload_asks: None,
-            session_acks: None,
+            session_commands: None,
         }
     }
 
@@ -430,7 +430,7 @@ impl CellLoop {
                     None => requests_open = false,
                 },
                 Some(w) = self.written_rx.recv() => self.written(w).await,
-                Some(a) = crate::step::next_session_ack(&mut self.session_acks) => self.session_ack(a).await,
+                Some(a) = crate::step::next_session_command(&mut self.session_commands) => self.session_command(a).await,
                 problem = journal_changed(&mut self.journal_health) => self.system(JOURNAL_ALARM, problem).await,
                 r = swap::next(&mut self.reloads) => {
                     if let Some(mut r) = self.acceptable(r) {

@@ -1,10 +1,11 @@
-//! Acknowledgements from the alarm server's OPC UA sessions: the user was
-//! authenticated by the session (a password over an encrypted channel),
-//! not by a signature, so this entry takes only what such a user may ask
-//! (an acknowledgement) and only from the channel the alarm server holds
-//! (`CellLoop::acknowledging_sessions`); commands from the bus stay signed.
-//! The operator's permission is the gate's; the row is journaled like a
-//! signed command's, its source naming the OPC UA user.
+//! Acknowledgements and shelves from the alarm server's OPC UA sessions:
+//! the user was authenticated by the session (a password over an
+//! encrypted channel), not by a signature, so this entry takes only what
+//! such a user may ask (`ack`, `shelve`, `unshelve`) and only from the
+//! channel the alarm server holds (`CellLoop::acknowledging_sessions`);
+//! commands from the bus stay signed. The operator's permission is the
+//! gate's; the row is journaled like a signed command's, its source naming
+//! the OPC UA user.
 
 use cellwatch_models::alarm::CommandRefused;
 use cellwatch_models::engine::Step;
@@ -13,60 +14,81 @@ use tokio::sync::{mpsc, oneshot};
 use super::{CellLoop, CommandOutcome, CommandRecord, Input, Stage};
 use crate::operator::{Action, Command};
 use crate::sinks::Settled;
-use crate::step::{SessionAck, SessionAckOutcome};
+use crate::step::{SessionCommand, SessionOutcome};
 
 impl CellLoop {
-    /// Takes acknowledgements from the alarm server's sessions on `acks`.
+    /// Takes acknowledgements and shelves from the alarm server's sessions
+    /// on `commands`.
     #[must_use]
-    pub fn acknowledging_sessions(mut self, acks: mpsc::Receiver<SessionAck>) -> CellLoop {
-        self.session_acks = Some(acks);
+    pub fn acknowledging_sessions(mut self, commands: mpsc::Receiver<SessionCommand>) -> CellLoop {
+        self.session_commands = Some(commands);
         self
     }
 
-    /// One acknowledgement from an OPC UA session: the operator's
-    /// permission checked, carried out (at the PLC first for the PLC's own
-    /// alarms), journaled, and answered once durable.
-    pub(super) async fn session_ack(&mut self, ack: SessionAck) {
+    /// One command from an OPC UA session: the operator's permission
+    /// checked, carried out (an acknowledgement of the PLC's own alarm at
+    /// the PLC first), journaled, and answered once durable.
+    pub(super) async fn session_command(&mut self, asked: SessionCommand) {
         let now = self.clock.now_ms();
+        let SessionCommand {
+            user,
+            operator,
+            action,
+            alarm,
+            value,
+            comment,
+            reply,
+        } = asked;
+        // A shelf needs a reason: the operator's comment, or where it came
+        // from.
+        let reason = (action == Action::Shelve).then(|| {
+            if comment.is_empty() {
+                format!(
+                    "shelved over OPC UA by {}",
+                    crate::operator::clip(&user, 64)
+                )
+            } else {
+                comment.clone()
+            }
+        });
         let cmd = Command {
-            action: Action::Ack,
-            alarm: ack.alarm,
+            action,
+            alarm,
             tag: None,
-            value: None,
-            reason: None,
-            operator: ack.operator,
+            value,
+            reason,
+            operator,
             // The row's own: nothing can send it again.
             nonce: crate::operator::nonce(),
             issued_at: now,
             signature: String::new(),
         };
         let base = CommandRecord {
-            source: format!("opcua user {}", crate::operator::clip(&ack.user, 64)),
+            source: format!("opcua user {}", crate::operator::clip(&user, 64)),
             // The user was authenticated by the session.
             verified: true,
             ..CommandRecord::of(&cmd, &cmd.alarm, Stage::Command)
         };
-        let reply = ack.reply;
         // The operator's own words, after what was done.
-        let said = if ack.comment.is_empty() {
+        let said = if comment.is_empty() {
             String::new()
         } else {
-            format!(": {}", ack.comment)
+            format!(": {comment}")
         };
-        if let Err(refusal) = self.gate.permits(&cmd.operator, Action::Ack) {
+        if let Err(refusal) = self.gate.permits(&cmd.operator, cmd.action) {
             let detail = refusal.to_string();
-            tracing::warn!(source = %base.source, %detail, "acknowledgement over OPC UA refused");
+            tracing::warn!(source = %base.source, %detail, "a command over OPC UA refused");
             let record = base.saying(false, &detail);
             self.dispatch(now, Input::Command(record), Step::default(), 0)
                 .await;
             let settled = self.settled();
             self.start_task(async move {
                 settled.await;
-                let _ = reply.send(SessionAckOutcome::Denied(detail));
+                let _ = reply.send(SessionOutcome::Denied(detail));
             });
             return;
         }
-        if self.engine.is_condition(&cmd.alarm) {
+        if cmd.action == Action::Ack && self.engine.is_condition(&cmd.alarm) {
             let (outcome_tx, outcome) = oneshot::channel::<CommandOutcome>();
             self.acknowledge_at_plc(base, &said, outcome_tx).await;
             // Its rows come later (the PLC's answer): waited for then.
@@ -77,30 +99,49 @@ impl CellLoop {
                         s().await;
                     }
                     let _ = reply.send(if o.accepted {
-                        SessionAckOutcome::Accepted(o.detail)
+                        SessionOutcome::Accepted(o.detail)
                     } else {
-                        SessionAckOutcome::Refused(o.detail)
+                        SessionOutcome::Refused(o.detail)
                     });
                 }
             });
             return;
         }
-        let (outcome, step) = match self.engine.acknowledge(&cmd.alarm, &cmd.operator, now) {
+        let done = match cmd.action {
+            Action::Ack => self
+                .engine
+                .acknowledge(&cmd.alarm, &cmd.operator, now)
+                .map_err(outcome_of),
+            Action::Shelve => self
+                .shelf(&cmd, now)
+                .map_err(SessionOutcome::OutOfRange)
+                .and_then(|until| {
+                    let reason = cmd.reason.as_deref().unwrap_or_default();
+                    self.engine
+                        .shelve(&cmd.alarm, &cmd.operator, reason, until, now)
+                        .map_err(outcome_of)
+                }),
+            Action::Unshelve => self.engine.unshelve(&cmd.alarm, now).map_err(outcome_of),
+            other => Err(SessionOutcome::Refused(format!(
+                "{other} is not taken over OPC UA"
+            ))),
+        };
+        let (outcome, step) = match done {
             Ok(step) => (
-                SessionAckOutcome::Accepted(format!("ack {} by {}{said}", cmd.alarm, cmd.operator)),
+                SessionOutcome::Accepted(format!(
+                    "{} {} by {}{said}",
+                    cmd.action, cmd.alarm, cmd.operator
+                )),
                 step,
             ),
-            Err(e @ CommandRefused::NothingToAcknowledge(_)) => (
-                SessionAckOutcome::AlreadyAcknowledged(e.to_string()),
-                Step::default(),
-            ),
-            Err(e) => (SessionAckOutcome::Refused(e.to_string()), Step::default()),
+            Err(o) => (o, Step::default()),
         };
         let (accepted, detail) = match &outcome {
-            SessionAckOutcome::Accepted(d) => (true, d.as_str()),
-            SessionAckOutcome::Denied(d)
-            | SessionAckOutcome::AlreadyAcknowledged(d)
-            | SessionAckOutcome::Refused(d) => (false, d.as_str()),
+            SessionOutcome::Accepted(d) => (true, d.as_str()),
+            SessionOutcome::Denied(d)
+            | SessionOutcome::WrongState(d)
+            | SessionOutcome::OutOfRange(d)
+            | SessionOutcome::Refused(d) => (false, d.as_str()),
         };
         let record = base.saying(accepted, detail);
         self.dispatch(now, Input::Command(record), step, 0).await;
@@ -109,5 +150,17 @@ impl CellLoop {
             settled.await;
             let _ = reply.send(outcome);
         });
+    }
+}
+
+/// What the engine's refusal is to an OPC UA client: the alarm not in a
+/// state the method applies to, or refused.
+fn outcome_of(e: CommandRefused) -> SessionOutcome {
+    match e {
+        CommandRefused::NothingToAcknowledge(_) => SessionOutcome::WrongState(e.to_string()),
+        CommandRefused::Shelving {
+            what: "unshelved", ..
+        } => SessionOutcome::WrongState(e.to_string()),
+        _ => SessionOutcome::Refused(e.to_string()),
     }
 }

@@ -17,11 +17,14 @@ use opcua::server::node_manager::memory::SimpleNodeManager;
 use opcua::server::SubscriptionCache;
 use opcua::sync::{Mutex, RwLock};
 use opcua::types::{
-    ByteString, DataTypeId, DataValue, DateTime, LocalizedText, MethodId, NodeId, ObjectTypeId,
-    ReferenceTypeId, StatusCode, VariableTypeId, Variant,
+    ByteString, DataTypeId, DataValue, DateTime, LocalizedText, MethodId, NodeId, ObjectId,
+    ObjectTypeId, ReferenceTypeId, StatusCode, VariableTypeId, Variant,
 };
 
-use super::events::{AlarmFields, CellAlarmEvent, CommentVar, QualityVar, SeverityVar, TwoState};
+use super::events::{
+    AlarmFields, CellAlarmEvent, CommentVar, CurrentStateVar, QualityVar, SeverityVar, ShelvingVar,
+    TwoState,
+};
 use crate::payload::{AlarmPayload, CulpritPayload};
 
 /// A state variable: its name, data type and initial value.
@@ -30,8 +33,9 @@ pub(super) type StateVariable = (&'static str, DataTypeId, fn() -> Variant);
 /// The state variables of each condition, readable and subscribable:
 /// name (the node id's last part after the alarm's, `m01.ese.ActiveState.Id`),
 /// data type, initial value. `…State` are `TwoStateVariableType` components
-/// with their `Id` property; the others properties of the condition.
-pub(super) const STATE_VARIABLES: [StateVariable; 9] = [
+/// with their `Id` property (`ShelvingState`'s `CurrentState` a
+/// `FiniteStateVariableType`); the others properties of what they follow.
+pub(super) const STATE_VARIABLES: [StateVariable; 12] = [
     ("ActiveState", DataTypeId::LocalizedText, || {
         LocalizedText::from("Inactive").into()
     }),
@@ -47,6 +51,17 @@ pub(super) const STATE_VARIABLES: [StateVariable; 9] = [
     ("Severity", DataTypeId::UInt16, || 0u16.into()),
     ("ClientUserId", DataTypeId::String, || "".into()),
     ("Culprits", DataTypeId::String, || "".into()),
+    (
+        "ShelvingState.CurrentState",
+        DataTypeId::LocalizedText,
+        || LocalizedText::from("Unshelved").into(),
+    ),
+    ("ShelvingState.CurrentState.Id", DataTypeId::NodeId, || {
+        NodeId::from(ObjectId::ShelvedStateMachineType_Unshelved).into()
+    }),
+    ("ShelvingState.UnshelveTime", DataTypeId::Duration, || {
+        0.0f64.into()
+    }),
 ];
 
 /// What the conditions need of the built server: set once, before it runs.
@@ -84,6 +99,10 @@ pub(super) struct Condition {
     pub(super) comment: String,
     /// Shelved, out of service, or suppressed as a consequence.
     pub(super) suppressed_or_shelved: bool,
+    /// Shelved: until when (`None`: one-shot, until the alarm clears).
+    pub(super) shelved: Option<Option<DateTime>>,
+    /// Its `ShelvingState` object, where the shelving methods are called.
+    pub(super) shelving_node: NodeId,
     /// The event last sent: an `Acknowledge` must name it.
     pub(super) event_id: ByteString,
     pub(super) time: DateTime,
@@ -110,6 +129,31 @@ pub(super) struct Conditions {
     /// Per alarm, the comment of an acknowledgement under way over OPC UA:
     /// the condition's `Comment` once the alarm is acknowledged.
     comments: Mutex<HashMap<String, String>>,
+}
+
+/// The shelving state machine's state of a shelf: its name and node.
+pub(super) fn shelving_state(shelved: Option<Option<DateTime>>) -> (&'static str, ObjectId) {
+    match shelved {
+        None => ("Unshelved", ObjectId::ShelvedStateMachineType_Unshelved),
+        Some(Some(_)) => (
+            "TimedShelved",
+            ObjectId::ShelvedStateMachineType_TimedShelved,
+        ),
+        Some(None) => (
+            "OneShotShelved",
+            ObjectId::ShelvedStateMachineType_OneShotShelved,
+        ),
+    }
+}
+
+/// A timed shelf's milliseconds left now (0 for none, or one-shot).
+fn unshelve_in(shelved: Option<Option<DateTime>>) -> f64 {
+    match shelved {
+        Some(Some(until)) => (until.as_chrono() - DateTime::now().as_chrono())
+            .num_milliseconds()
+            .max(0) as f64,
+        _ => 0.0,
+    }
 }
 
 /// OPC UA's severity (1–1000) of a cellwatch severity.
@@ -174,6 +218,16 @@ impl Conditions {
         }
     }
 
+    /// The alarm whose condition's `ShelvingState` is `node`, and a copy
+    /// of the condition.
+    pub(super) fn by_shelving_node(&self, node: &NodeId) -> Option<(String, Condition)> {
+        let alarms = self.alarms.lock();
+        alarms
+            .iter()
+            .find(|(_, c)| c.shelving_node == *node)
+            .map(|(id, c)| (id.clone(), c.clone()))
+    }
+
     /// One alarm transition: the condition made if new, changed, and its
     /// event sent.
     pub(super) fn apply(&self, p: &AlarmPayload) {
@@ -210,6 +264,12 @@ impl Conditions {
             c.message = p.message.clone();
             c.severity = severity(p.severity);
             c.culprits = culprits_text(&p.culprits);
+            c.shelved = p.shelved.as_ref().map(|shelf| {
+                shelf
+                    .until
+                    .as_deref()
+                    .and_then(|t| t.parse::<DateTime>().ok())
+            });
             c.suppressed_or_shelved = p.shelved.is_some()
                 || p.out_of_service.is_some()
                 || p.consequence.as_ref().is_some_and(|c| c.suppressed);
@@ -266,16 +326,28 @@ impl Conditions {
             .property_of(node.clone())
             .has_type_definition(VariableTypeId::PropertyType)
             .insert(&mut *space);
+            ObjectBuilder::new(
+                &self.state_node(served.ns, id, "ShelvingState"),
+                "ShelvingState",
+                "ShelvingState",
+            )
+            .has_type_definition(ObjectTypeId::ShelvedStateMachineType)
+            .component_of(node.clone())
+            .insert(&mut *space);
             for (name, data_type, initial) in STATE_VARIABLES {
                 let var = self.state_node(served.ns, id, name);
-                let (parent, browse) = match name.split_once('.') {
+                let (parent, browse) = match name.rsplit_once('.') {
                     Some((state, leaf)) => (self.state_node(served.ns, id, state), leaf),
                     None => (node.clone(), name),
                 };
                 let builder = VariableBuilder::new(&var, browse, browse)
                     .data_type(data_type)
                     .value(initial());
-                let builder = if name.ends_with("State") {
+                let builder = if name.ends_with("CurrentState") {
+                    builder
+                        .component_of(parent)
+                        .has_type_definition(VariableTypeId::FiniteStateVariableType)
+                } else if name.ends_with("State") {
                     builder
                         .component_of(parent)
                         .has_type_definition(VariableTypeId::TwoStateVariableType)
@@ -287,11 +359,22 @@ impl Conditions {
                 builder.insert(&mut *space);
             }
         }
-        served.core.write().insert_reference(
-            &node,
-            &MethodId::AcknowledgeableConditionType_Acknowledge.into(),
-            ReferenceTypeId::HasComponent,
-        );
+        {
+            let mut core = served.core.write();
+            core.insert_reference(
+                &node,
+                &MethodId::AcknowledgeableConditionType_Acknowledge.into(),
+                ReferenceTypeId::HasComponent,
+            );
+            let shelving = self.state_node(served.ns, id, "ShelvingState");
+            for method in [
+                MethodId::ShelvedStateMachineType_TimedShelve,
+                MethodId::ShelvedStateMachineType_OneShotShelve,
+                MethodId::ShelvedStateMachineType_Unshelve,
+            ] {
+                core.insert_reference(&shelving, &method.into(), ReferenceTypeId::HasComponent);
+            }
+        }
         Condition {
             node,
             message: String::new(),
@@ -304,6 +387,8 @@ impl Conditions {
             acked_by: String::new(),
             comment: String::new(),
             suppressed_or_shelved: false,
+            shelved: None,
+            shelving_node: self.state_node(served.ns, id, "ShelvingState"),
             event_id: ByteString::null(),
             time: now,
         }
@@ -319,7 +404,8 @@ impl Conditions {
         let text = |on: bool, yes: &str, no: &str| {
             Variant::from(LocalizedText::from(if on { yes } else { no }))
         };
-        let values: [(&str, Variant, DateTime); 9] = [
+        let (shelf_name, shelf_id) = shelving_state(c.shelved);
+        let values: [(&str, Variant, DateTime); 12] = [
             (
                 "ActiveState",
                 text(c.active, "Active", "Inactive"),
@@ -341,6 +427,21 @@ impl Conditions {
             ("Severity", c.severity.into(), c.time),
             ("ClientUserId", c.acked_by.as_str().into(), c.acked_at),
             ("Culprits", c.culprits.as_str().into(), c.time),
+            (
+                "ShelvingState.CurrentState",
+                LocalizedText::from(shelf_name).into(),
+                c.time,
+            ),
+            (
+                "ShelvingState.CurrentState.Id",
+                NodeId::from(shelf_id).into(),
+                c.time,
+            ),
+            (
+                "ShelvingState.UnshelveTime",
+                unshelve_in(c.shelved).into(),
+                c.time,
+            ),
         ];
         values
             .into_iter()
@@ -354,6 +455,7 @@ impl Conditions {
 
     /// The event saying condition `c` of alarm `id` as it stands.
     fn event(&self, served: &Served, id: &str, c: &Condition) -> CellAlarmEvent {
+        let (shelf_name, shelf_id) = shelving_state(c.shelved);
         let mut base = BaseEventType::new(
             served.event_type.clone(),
             c.event_id.clone(),
@@ -394,6 +496,13 @@ impl Conditions {
                 acked_state: TwoState::new(c.acked, "Acknowledged", "Unacknowledged", c.acked_at),
                 confirmed_state: TwoState::new(true, "Confirmed", "Unconfirmed", c.acked_at),
                 suppressed_or_shelved: c.suppressed_or_shelved,
+                shelving_state: ShelvingVar {
+                    current_state: CurrentStateVar {
+                        value: shelf_name.into(),
+                        id: shelf_id.into(),
+                    },
+                    unshelve_time: unshelve_in(c.shelved),
+                },
                 culprits: c.culprits.as_str().into(),
             },
         }

@@ -55,6 +55,22 @@ pub(super) struct QualityVar {
     pub(super) source_timestamp: DateTime,
 }
 
+/// `ShelvingState/CurrentState` (a `FiniteStateVariableType`): the
+/// state's name, `Id` its node.
+#[derive(Debug, Default, EventField)]
+pub(super) struct CurrentStateVar {
+    pub(super) value: LocalizedText,
+    pub(super) id: NodeId,
+}
+
+/// `ShelvingState`: its state, and the milliseconds until a timed shelf
+/// ends.
+#[derive(Debug, Default, EventField)]
+pub(super) struct ShelvingVar {
+    pub(super) current_state: CurrentStateVar,
+    pub(super) unshelve_time: f64,
+}
+
 /// Every field of a cell alarm's event; each answers to its PascalCase
 /// browse name, `base` to `BaseEventType`'s (EventId, Message, Severity…).
 #[derive(Debug, EventField)]
@@ -72,6 +88,7 @@ pub(super) struct AlarmFields {
     pub(super) acked_state: TwoState,
     pub(super) confirmed_state: TwoState,
     pub(super) suppressed_or_shelved: bool,
+    pub(super) shelving_state: ShelvingVar,
     /// `CellAlarmType`'s own: the alarm's culprits as one text.
     pub(super) culprits: UAString,
 }

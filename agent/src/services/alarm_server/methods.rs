@@ -1,9 +1,11 @@
-//! Namespace 0's node manager with the two condition methods a SCADA
-//! client calls: `Acknowledge` (i=9111) and `ConditionRefresh` (i=3875).
-//! Both belong to namespace 0, so calls to them reach the core node
-//! manager, which answers neither: it is wrapped, those two taken here,
-//! everything else passed on. An acknowledgement goes to the cell loop
-//! ([`SessionAck`]) and is answered Good only once the loop took it.
+//! Namespace 0's node manager with the condition methods a SCADA client
+//! calls: `Acknowledge` (i=9111), `ConditionRefresh` (i=3875), and the
+//! shelving state machine's `TimedShelve` (i=2949), `OneShotShelve`
+//! (i=2948) and `Unshelve` (i=2947). They belong to namespace 0, so calls
+//! to them reach the core node manager, which answers none: it is wrapped,
+//! those taken here, everything else passed on. An acknowledgement or a
+//! shelf goes to the cell loop ([`SessionCommand`]) and is answered Good
+//! only once the loop took it.
 
 use std::sync::Arc;
 
@@ -29,7 +31,8 @@ use tokio::sync::{mpsc, oneshot};
 
 use super::conditions::Conditions;
 use super::users::Users;
-use crate::step::{SessionAck, SessionAckOutcome};
+use crate::operator::Action;
+use crate::step::{SessionCommand, SessionOutcome};
 
 /// How much of an acknowledgement's comment is journaled (bytes).
 const COMMENT_BYTES: usize = 256;
@@ -38,7 +41,7 @@ const COMMENT_BYTES: usize = 256;
 pub(super) struct AlarmCoreBuilder {
     pub(super) conditions: Arc<Conditions>,
     pub(super) users: Users,
-    pub(super) acks: mpsc::Sender<SessionAck>,
+    pub(super) acks: mpsc::Sender<SessionCommand>,
 }
 
 impl InMemoryNodeManagerImplBuilder for AlarmCoreBuilder {
@@ -60,19 +63,43 @@ pub(super) struct AlarmCore {
     conditions: Arc<Conditions>,
     users: Users,
     /// To the cell loop: each acknowledgement a session asks for.
-    acks: mpsc::Sender<SessionAck>,
+    acks: mpsc::Sender<SessionCommand>,
 }
 
 impl AlarmCore {
+    /// The session's user and the operator they act as; refused for an
+    /// anonymous session or a user acting as nobody.
+    fn operator_of(&self, context: &RequestContext, alarm: &str) -> Option<(String, String)> {
+        let token = context.user_token();
+        if token.is_anonymous() {
+            return None;
+        }
+        let user = token.0.clone();
+        let Some(operator) = self.users.operator(&user) else {
+            tracing::warn!(user = %crate::operator::escaped(&user), alarm, "a command over OPC UA refused: the user acts as no operator");
+            return None;
+        };
+        Some((user, operator))
+    }
+
+    /// Hands `asked` to the cell loop and waits until it is done and
+    /// journaled: what it came to.
+    async fn ask_loop(
+        &self,
+        asked: SessionCommand,
+        reply: oneshot::Receiver<SessionOutcome>,
+    ) -> Option<SessionOutcome> {
+        self.acks.send(asked).await.ok()?;
+        reply.await.ok()
+    }
+
     /// `Acknowledge(EventId, Comment)` on a condition, by the session's
     /// user as the operator they act as, through the cell loop.
     async fn acknowledge(&self, context: &RequestContext, call: &mut MethodCall) {
-        let token = context.user_token();
-        if token.is_anonymous() {
+        if context.user_token().is_anonymous() {
             call.set_status(StatusCode::BadUserAccessDenied);
             return;
         }
-        let user = token.0.clone();
         let args = call.arguments();
         let event_id = match args.first() {
             Some(Variant::ByteString(b)) => b.clone(),
@@ -93,8 +120,7 @@ impl AlarmCore {
             call.set_status(StatusCode::BadConditionBranchAlreadyAcked);
             return;
         }
-        let Some(operator) = self.users.operator(&user) else {
-            tracing::warn!(user = %crate::operator::escaped(&user), alarm, "acknowledgement over OPC UA refused: the user acts as no operator");
+        let Some((user, operator)) = self.operator_of(context, &alarm) else {
             call.set_status(StatusCode::BadUserAccessDenied);
             return;
         };
@@ -105,31 +131,96 @@ impl AlarmCore {
         let comment = crate::operator::clip(&crate::operator::escaped(comment), COMMENT_BYTES);
         self.conditions.acknowledging(&alarm, Some(&comment));
         let (reply, outcome) = oneshot::channel();
-        let ack = SessionAck {
+        let asked = SessionCommand {
             user,
-            operator: operator.to_string(),
+            operator,
+            action: Action::Ack,
             alarm: alarm.clone(),
+            value: None,
             comment,
             reply,
         };
-        if self.acks.send(ack).await.is_err() {
-            self.conditions.acknowledging(&alarm, None);
-            call.set_status(StatusCode::BadShutdown);
-            return;
-        }
-        let outcome = outcome.await;
+        let outcome = self.ask_loop(asked, outcome).await;
         self.conditions.acknowledging(&alarm, None);
         let status = match outcome {
-            Ok(SessionAckOutcome::Accepted(_)) => {
+            Some(SessionOutcome::Accepted(_)) => {
                 call.set_outputs(Vec::new());
                 StatusCode::Good
             }
-            Ok(SessionAckOutcome::Denied(_)) => StatusCode::BadUserAccessDenied,
-            Ok(SessionAckOutcome::AlreadyAcknowledged(_)) => {
-                StatusCode::BadConditionBranchAlreadyAcked
+            Some(SessionOutcome::Denied(_)) => StatusCode::BadUserAccessDenied,
+            Some(SessionOutcome::WrongState(_)) => StatusCode::BadConditionBranchAlreadyAcked,
+            Some(SessionOutcome::Refused(_) | SessionOutcome::OutOfRange(_)) => {
+                StatusCode::BadInvalidState
             }
-            Ok(SessionAckOutcome::Refused(_)) => StatusCode::BadInvalidState,
-            Err(_) => StatusCode::BadShutdown,
+            None => StatusCode::BadShutdown,
+        };
+        call.set_status(status);
+    }
+
+    /// `TimedShelve(ShelvingTime)`, `OneShotShelve()` or `Unshelve()` on
+    /// a condition's `ShelvingState`, by the session's user as the
+    /// operator they act as (who needs `shelve` or `unshelve`), through
+    /// the cell loop.
+    async fn shelving(&self, context: &RequestContext, call: &mut MethodCall, method: MethodId) {
+        if context.user_token().is_anonymous() {
+            call.set_status(StatusCode::BadUserAccessDenied);
+            return;
+        }
+        let Some((alarm, condition)) = self.conditions.by_shelving_node(call.object_id()) else {
+            call.set_status(StatusCode::BadNodeIdUnknown);
+            return;
+        };
+        let (action, value) = match method {
+            MethodId::ShelvedStateMachineType_TimedShelve => {
+                let ms = match call.arguments().first() {
+                    Some(Variant::Double(ms)) if ms.is_finite() && *ms >= 1.0 => *ms,
+                    _ => {
+                        call.set_status(StatusCode::BadInvalidArgument);
+                        return;
+                    }
+                };
+                (Action::Shelve, Some(format!("{}ms", ms.round() as u64)))
+            }
+            MethodId::ShelvedStateMachineType_OneShotShelve => {
+                (Action::Shelve, Some("once".to_string()))
+            }
+            _ => (Action::Unshelve, None),
+        };
+        match (action, condition.shelved) {
+            (Action::Shelve, Some(_)) => {
+                call.set_status(StatusCode::BadConditionAlreadyShelved);
+                return;
+            }
+            (Action::Unshelve, None) => {
+                call.set_status(StatusCode::BadConditionNotShelved);
+                return;
+            }
+            _ => {}
+        }
+        let Some((user, operator)) = self.operator_of(context, &alarm) else {
+            call.set_status(StatusCode::BadUserAccessDenied);
+            return;
+        };
+        let (reply, outcome) = oneshot::channel();
+        let asked = SessionCommand {
+            user,
+            operator,
+            action,
+            alarm,
+            value,
+            comment: String::new(),
+            reply,
+        };
+        let status = match self.ask_loop(asked, outcome).await {
+            Some(SessionOutcome::Accepted(_)) => {
+                call.set_outputs(Vec::new());
+                StatusCode::Good
+            }
+            Some(SessionOutcome::Denied(_)) => StatusCode::BadUserAccessDenied,
+            Some(SessionOutcome::WrongState(_)) => StatusCode::BadConditionNotShelved,
+            Some(SessionOutcome::OutOfRange(_)) => StatusCode::BadShelvingTimeOutOfRange,
+            Some(SessionOutcome::Refused(_)) => StatusCode::BadInvalidState,
+            None => StatusCode::BadShutdown,
         };
         call.set_status(status);
     }
@@ -270,6 +361,13 @@ impl InMemoryNodeManagerImpl for AlarmCore {
                 }
                 Ok(MethodId::ConditionType_ConditionRefresh) => {
                     self.condition_refresh(context, m);
+                }
+                Ok(
+                    method @ (MethodId::ShelvedStateMachineType_TimedShelve
+                    | MethodId::ShelvedStateMachineType_OneShotShelve
+                    | MethodId::ShelvedStateMachineType_Unshelve),
+                ) => {
+                    self.shelving(context, m, method).await;
                 }
                 _ => rest.push(&mut **m),
             }

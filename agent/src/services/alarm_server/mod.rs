@@ -47,7 +47,7 @@ use tokio::task::JoinHandle;
 
 use crate::config::AlarmServerConfig;
 use crate::payload::AlarmPayload;
-use crate::step::SessionAck;
+use crate::step::SessionCommand;
 use conditions::{Conditions, Served};
 use methods::{AlarmCore, AlarmCoreBuilder};
 use users::{Users, UsersError};
@@ -102,7 +102,7 @@ impl AlarmServer {
     pub async fn start(
         cell: &str,
         config: &AlarmServerConfig,
-        acks: mpsc::Sender<SessionAck>,
+        acks: mpsc::Sender<SessionCommand>,
         shutdown: impl Future<Output = ()> + Send + 'static,
     ) -> Result<AlarmServer, AlarmServerError> {
         let users = Users::load(&config.users_file)?;
@@ -323,6 +323,9 @@ fn accept_condition_fields(handle: &opcua::server::ServerHandle, ns: u16, ty: &N
         "Quality",
         "Quality/SourceTimestamp",
         "SuppressedOrShelved",
+        "ShelvingState/CurrentState",
+        "ShelvingState/CurrentState/Id",
+        "ShelvingState/UnshelveTime",
     ]
     .iter()
     .map(|p| p.split('/').map(|n| QualifiedName::new(0, n)).collect())
