@@ -208,12 +208,13 @@ impl CellLoop {
     /// over, never queued behind the source's or the services' tasks on a
     /// shared worker. The tasks the loop starts run on the calling runtime.
     ///
-    /// The thread's runtime is a multi-threaded one with a single worker,
-    /// the loop itself running on the thread that blocks on it: Zenoh
-    /// blocks in place when a publisher or a token is dropped (at the
-    /// latest when the sinks close), which Tokio's current-thread runtime
-    /// refuses with a panic. The returned task ends with the loop and
-    /// carries its panic, if it had one.
+    /// The thread's runtime is multi-threaded with a single worker
+    /// (`cell-loop`), the loop a task on it: Zenoh blocks in place when a
+    /// publisher or a token is dropped, which a current-thread runtime
+    /// refuses with a panic; and the worker that fires the loop's timers
+    /// runs it, with no second thread to wake per tick (BENCHMARKS.md,
+    /// "The floor"). The returned task ends with the loop and carries its
+    /// panic, if it had one.
     ///
     /// # Errors
     /// The runtime or the thread cannot be started.
@@ -226,15 +227,20 @@ impl CellLoop {
         self.tasks = Some(tokio::runtime::Handle::current());
         let runtime = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(1)
-            .thread_name("cell-loop-io")
+            .thread_name("cell-loop")
             .enable_all()
             .build()?;
         let (done, ended) = oneshot::channel();
         std::thread::Builder::new()
-            .name("cell-loop".into())
+            .name("cell-loop-owner".into())
             .spawn(move || {
                 let run = std::panic::AssertUnwindSafe(|| {
-                    runtime.block_on(self.run(source, requests, shutdown));
+                    let task = runtime.spawn(self.run(source, requests, shutdown));
+                    if let Err(e) = runtime.block_on(task) {
+                        if e.is_panic() {
+                            std::panic::resume_unwind(e.into_panic());
+                        }
+                    }
                 });
                 let _ = done.send(std::panic::catch_unwind(run));
             })?;
