@@ -9,6 +9,7 @@ use std::path::Path;
 use std::time::Duration;
 
 use cellwatch::config::AlarmServerConfig;
+use cellwatch::operator::Action;
 use cellwatch::services::alarm_server::users::hash_password;
 use opcua::client::{
     Client, ClientBuilder, IdentityToken, MonitoredItem, OnSubscriptionNotification, Session,
@@ -40,6 +41,18 @@ pub(crate) fn users_file(path: &Path) {
         ),
     )
     .unwrap();
+}
+
+/// Kim's signed `action` on ESE over the bus (a shelf: 30 minutes, for
+/// a sensor cable): accepted, and what the agent said.
+async fn kim_says(fx: &Fixture, action: Action) -> (bool, String) {
+    let command = match action {
+        Action::Shelve => {
+            crate::spawned::signed_with(action, "ese", Some("30m"), Some("sensor cable"))
+        }
+        _ => crate::spawned::signed(action, "ese"),
+    };
+    crate::spawned::send(fx.client(), &command).await
 }
 
 /// The journal's command rows are `expected`: accepted, operator,
@@ -245,8 +258,8 @@ async fn serving() -> Fixture {
         // Ana may reset, not acknowledge.
         let operators = c.operators_file.clone().unwrap();
         let mut text = std::fs::read_to_string(&operators).unwrap();
-        text += &cellwatch::operator::OperatorKey::generate("ana")
-            .operators_entry(&[cellwatch::operator::Action::Reset]);
+        text +=
+            &cellwatch::operator::OperatorKey::generate("ana").operators_entry(&[Action::Reset]);
         std::fs::write(&operators, text).unwrap();
         c.alarm_server = Some(AlarmServerConfig {
             listen: "127.0.0.1:0".parse().unwrap(),
@@ -780,19 +793,12 @@ async fn a_node_opcua_scada_acknowledges_and_shelves_ese_and_finds_it_after_a_re
 
     // Shelved by an operator on the bus: the SCADA sees it shelved, then
     // back.
-    let shelve = crate::spawned::signed_with(
-        cellwatch::operator::Action::Shelve,
-        "ese",
-        Some("30m"),
-        Some("sensor cable"),
-    );
-    let (ok, detail) = crate::spawned::send(fx.client(), &shelve).await;
+    let (ok, detail) = kim_says(&fx, Action::Shelve).await;
     assert!(ok, "{detail}");
     scada.event("ESE shelved", |e| {
         e["conditionName"] == "ese" && e["suppressedOrShelved"] == true
     });
-    let unshelve = crate::spawned::signed(cellwatch::operator::Action::Unshelve, "ese");
-    let (ok, detail) = crate::spawned::send(fx.client(), &unshelve).await;
+    let (ok, detail) = kim_says(&fx, Action::Unshelve).await;
     assert!(ok, "{detail}");
     scada.event("ESE unshelved", |e| {
         e["conditionName"] == "ese" && e["suppressedOrShelved"] == false
@@ -959,17 +965,10 @@ async fn a_reload_reads_the_users_and_the_operators_again() {
         .collect();
     assert!(!without_kim.contains("[operators.kim]") && without_kim.contains("[operators.ana]"));
     std::fs::write(&operators, without_kim).unwrap();
-    let shelve = crate::spawned::signed_with(
-        cellwatch::operator::Action::Shelve,
-        "ese",
-        Some("30m"),
-        Some("sensor cable"),
-    );
-    let (ok, detail) = crate::spawned::send(fx.client(), &shelve).await;
+    let (ok, detail) = kim_says(&fx, Action::Shelve).await;
     assert!(ok, "kim may shelve before the reload: {detail}");
     fx.agent.as_mut().unwrap().reload(&config).await.unwrap();
-    let unshelve = crate::spawned::signed(cellwatch::operator::Action::Unshelve, "ese");
-    let (ok, detail) = crate::spawned::send(fx.client(), &unshelve).await;
+    let (ok, detail) = kim_says(&fx, Action::Unshelve).await;
     assert!(!ok && detail.contains("unknown operator 'kim'"), "{detail}");
     // A users file that does not read is refused; the running users go on.
     std::fs::write(&users, "[users.x]\n").unwrap();
