@@ -123,18 +123,11 @@ impl LoadServer {
             .with_context(|| format!("cannot listen on {listen}"))?;
         let addr = listener.local_addr()?;
         let tokens: &[&str] = &[ANONYMOUS_USER_TOKEN_ID];
-        let mut builder = ServerBuilder::new()
+        let builder = ServerBuilder::new()
             .application_name("cellwatch load server")
             .application_uri("urn:cellwatch:bench:server")
-            .product_uri("urn:cellwatch")
-            .create_sample_keypair(true)
-            .pki_dir(pki)
-            .certificate_path("own/cert.der")
-            .private_key_path("private/private.pem")
-            .trust_client_certs(false)
-            .host(addr.ip().to_string())
-            .port(addr.port())
-            .discovery_urls(vec!["/".to_owned()])
+            .product_uri("urn:cellwatch");
+        let mut builder = cellwatch::sources::pki::served_from(builder, pki, addr)
             .add_endpoint(
                 "basic256sha256_sign_encrypt",
                 (

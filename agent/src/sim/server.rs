@@ -146,15 +146,8 @@ impl SimServer {
         let mut builder = ServerBuilder::new()
             .application_name(title)
             .application_uri(format!("urn:cellwatch:sim:{app}"))
-            .product_uri("urn:cellwatch")
-            .create_sample_keypair(true)
-            .pki_dir(&options.pki_dir)
-            .certificate_path("own/cert.der")
-            .private_key_path("private/private.pem")
-            .trust_client_certs(false)
-            .host(addr.ip().to_string())
-            .port(addr.port())
-            .discovery_urls(vec!["/".to_owned()]);
+            .product_uri("urn:cellwatch");
+        builder = crate::sources::pki::served_from(builder, &options.pki_dir, addr);
         if let Some(uri) = &options.decoy {
             builder = builder.with_node_manager(simple_node_manager(
                 NamespaceMetadata {

@@ -19,6 +19,26 @@ pub fn own_key(pki_dir: &Path) -> PathBuf {
     pki_dir.join("private").join("private.pem")
 }
 
+/// An OPC UA server's security as every server of this project has it:
+/// its key pair in `pki_dir` (made on first start), client certificates
+/// trusted only from `trusted/`, listening on `addr` with its endpoints at
+/// `/`.
+pub fn served_from(
+    builder: opcua::server::ServerBuilder,
+    pki_dir: &Path,
+    addr: std::net::SocketAddr,
+) -> opcua::server::ServerBuilder {
+    builder
+        .create_sample_keypair(true)
+        .pki_dir(pki_dir)
+        .certificate_path("own/cert.der")
+        .private_key_path("private/private.pem")
+        .trust_client_certs(false)
+        .host(addr.ip().to_string())
+        .port(addr.port())
+        .discovery_urls(vec!["/".to_owned()])
+}
+
 /// Makes the private key that the OPC UA stack has just created in
 /// `pki_dir` (it writes it with the process's umask, often readable by
 /// everyone) readable by its owner only, and refuses an existing one that

@@ -120,7 +120,7 @@ impl AlarmServer {
         let namespace = format!("urn:cellwatch:alarms:{cell}");
         let key_existed = crate::sources::pki::own_key(&config.pki_dir).exists();
         let tokens: &[&str] = &[ANONYMOUS_USER_TOKEN_ID, USER_TOKEN_ID];
-        let (server, handle) = ServerBuilder::new()
+        let builder = ServerBuilder::new()
             // Namespace 0's manager wrapped (the condition methods), then
             // the diagnostics and the cell's namespace as usual.
             .without_node_managers()
@@ -141,16 +141,9 @@ impl AlarmServer {
             .application_name(format!("cellwatch alarms of {cell}"))
             .application_uri(format!("urn:cellwatch:alarm-server:{cell}"))
             .product_uri("urn:cellwatch")
-            .create_sample_keypair(true)
             // For the count of its sessions (`sessions`).
-            .diagnostics_enabled(true)
-            .pki_dir(&config.pki_dir)
-            .certificate_path("own/cert.der")
-            .private_key_path("private/private.pem")
-            .trust_client_certs(false)
-            .host(addr.ip().to_string())
-            .port(addr.port())
-            .discovery_urls(vec!["/".to_owned()])
+            .diagnostics_enabled(true);
+        let (server, handle) = crate::sources::pki::served_from(builder, &config.pki_dir, addr)
             .add_user_token(USER_TOKEN_ID, ServerUserToken::user_pass(USER_TOKEN_ID, ""))
             .add_endpoint(
                 "basic256sha256_sign_encrypt",
