@@ -224,6 +224,43 @@ impl Fixture {
     }
 }
 
+/// ESE's raise and the fault state it made, put in one step, are sealed
+/// with one signature, and each opens alone against the trust file.
+async fn sealed_with_the_state_it_changed(
+    fx: &Fixture,
+    raw: &zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
+) {
+    let trust = crate::util::trust(&fx.dir);
+    let (alarm, state) = (
+        "cellwatch/m01ps0004/alarms/ese",
+        "cellwatch/m01ps0004/state",
+    );
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
+    let (mut raise, mut fault) = (None, None);
+    while raise.is_none() || fault.is_none() {
+        let sample = tokio::time::timeout_at(deadline, raw.recv_async())
+            .await
+            .expect("ESE's raise and the fault state on the bus")
+            .unwrap();
+        let key = sample.key_expr().as_str().to_string();
+        let bytes = sample.payload().to_bytes().to_vec();
+        let Ok(opened) = trust.open(&bytes, cellwatch::bus::envelope::Kind::Put, &key, "") else {
+            continue;
+        };
+        let env: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+        if key == alarm && opened.body.contains("\"transition\":\"raised\"") {
+            raise = Some(env);
+        } else if key == state && opened.body.contains("\"fault\"") {
+            fault = Some(env);
+        }
+    }
+    let (raise, fault) = (raise.unwrap(), fault.unwrap());
+    assert_eq!(raise["schema"], "cellwatch.signed.v2", "{raise}");
+    assert_eq!(raise["signature"], fault["signature"], "{raise}\n{fault}");
+    assert_eq!(raise["group"], fault["group"]);
+    assert_eq!(raise["group"].as_array().unwrap().len(), 2, "{raise}");
+}
+
 /// Receives alarm payloads until `f` accepts one.
 pub(crate) async fn alarm_until(
     sub: &zenoh_ext::AdvancedSubscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>,
@@ -271,7 +308,13 @@ async fn ese_raised(fx: &Fixture, key: &str) -> (AlarmSubscriber, AlarmPayload, 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn ese_alarm_with_culprit_then_cleared_and_in_history() {
     let fx = Fixture::start().await;
+    let raw = fx
+        .client
+        .declare_subscriber("cellwatch/m01ps0004/**")
+        .await
+        .unwrap();
     let (sub, raised, mut seen) = ese_raised(&fx, "cellwatch/m01ps0004/alarms/**").await;
+    sealed_with_the_state_it_changed(&fx, &raw).await;
     assert_eq!(raised.schema, "cellwatch.alarm.v1");
     assert_eq!(raised.cell, "m01ps0004");
     assert_eq!(raised.kind.as_str(), "switching");
@@ -333,6 +376,24 @@ async fn ese_alarm_with_culprit_then_cleared_and_in_history() {
         .find_map(|l| l.strip_prefix("cellwatch_alarm_latency_seconds_count{cell=\"m01ps0004\"} "))
         .and_then(|n| n.parse::<u64>().ok());
     assert!(latencies.is_some_and(|n| n >= 2), "{metrics}");
+    // The signatures made, their CPU time and the process's, so that their
+    // share can be read.
+    let value = |name: &str| {
+        metrics
+            .lines()
+            .find_map(|l| l.strip_prefix(&format!("{name}{{cell=\"m01ps0004\"}} ")))
+            .and_then(|n| n.parse::<f64>().ok())
+            .unwrap_or_else(|| panic!("{name} missing: {metrics}"))
+    };
+    let (signatures, signing, cpu) = (
+        value("cellwatch_bus_signatures_total"),
+        value("cellwatch_bus_signing_seconds_total"),
+        value("process_cpu_seconds_total"),
+    );
+    assert!(
+        signatures >= 2.0 && signing > 0.0 && cpu > signing,
+        "{metrics}"
+    );
     fx.agent.unwrap().stop().await;
     fx.sim.stop();
 }

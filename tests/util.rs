@@ -150,7 +150,10 @@ pub(crate) fn trust(dir: &Path) -> cellwatch::bus::envelope::Trust {
 pub(crate) fn opened(payload: &zenoh::bytes::ZBytes) -> String {
     let env: serde_json::Value = serde_json::from_slice(&payload.to_bytes())
         .unwrap_or_else(|e| panic!("not a signed envelope: {e}"));
-    assert_eq!(env["schema"], "cellwatch.signed.v1", "{env}");
+    assert!(
+        env["schema"] == "cellwatch.signed.v1" || env["schema"] == "cellwatch.signed.v2",
+        "{env}"
+    );
     env["body"].as_str().unwrap().to_string()
 }
 
@@ -160,7 +163,9 @@ pub(crate) fn opened_or_raw(payload: &zenoh::bytes::ZBytes) -> String {
     let bytes = payload.to_bytes();
     serde_json::from_slice::<serde_json::Value>(&bytes)
         .ok()
-        .filter(|env| env["schema"] == "cellwatch.signed.v1")
+        .filter(|env| {
+            env["schema"] == "cellwatch.signed.v1" || env["schema"] == "cellwatch.signed.v2"
+        })
         .and_then(|env| Some(env["body"].as_str()?.to_string()))
         .unwrap_or_else(|| String::from_utf8_lossy(&bytes).into_owned())
 }

@@ -574,6 +574,8 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         engine.can_raise(id) || id == JOURNAL_ALARM
     })?;
     let signing = signing_key(&config)?;
+    let key = signing.clone();
+    metrics.sample_signing(Arc::new(move || key.signing()));
     let session = crate::bus::open_agent(&config.zenoh).await?;
     cell_health.bus(session.clone(), config.zenoh.connect.clone());
     let prefix = config.zenoh.prefix.clone();

@@ -77,6 +77,11 @@ enum Cmd {
         /// (more faults: more alarms for the latency's quantiles).
         #[arg(long, default_value = "500ms", value_parser = humantime::parse_duration)]
         fault_every: Duration,
+        /// Alarms each fault raises: the agent's cell gets this many checks
+        /// on the one switch (an interlock chain one opened guard breaks:
+        /// an alarm flood), the latency measured on the first.
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=1000))]
+        alarms_per_fault: u16,
         /// Run the load server this much lower in priority than the agent
         /// (niceness, 0–19): it stands in for a PLC on its own hardware,
         /// and with a positive value it does not take the agent's turn on
@@ -233,6 +238,7 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
             publishing,
             max_notifications,
             fault_every,
+            alarms_per_fault,
             server_nice,
             agent_priority,
             agent,
@@ -260,6 +266,7 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
                 bare_client: references
                     .contains(&peer::Reference::C)
                     .then_some(bare_client),
+                alarms_per_fault: usize::from(alarms_per_fault),
             };
             let mut rows = Vec::new();
             for &load in &loads {

@@ -97,6 +97,9 @@ pub struct Setup {
     pub tags_in: TagsIn,
     /// The bare open62541 client, when the C reference runs.
     pub bare_client: Option<PathBuf>,
+    /// Alarms each fault raises in the agent's cell (one cause, several
+    /// checks: an alarm flood); 1: the one check `fault`.
+    pub alarms_per_fault: usize,
 }
 
 /// A reference besides the Python baseline (`--reference`).
@@ -170,6 +173,9 @@ pub struct Row {
     pub generator_lag: f64,
     /// The security the subscriber connected with.
     pub security: Security,
+    /// The agent's signatures between the two scrapes: how many, their
+    /// CPU seconds, and the agent process's CPU seconds.
+    pub signing: Option<(f64, f64, f64)>,
 }
 
 impl Row {
@@ -324,6 +330,20 @@ pub fn agent_config(
     )
 }
 
+/// The checks besides `fault` that the same switch trips, for `alarms` in
+/// all per fault: the same program under other ids (an interlock chain
+/// one opened guard breaks at once).
+pub fn flood_checks(alarms: usize) -> String {
+    (2..=alarms)
+        .map(|k| {
+            format!(
+                "\n[[checks.switching]]\nid = \"fault{k}\"\nprogram = \"fault.il\"\n\
+                 dialect = \"iec\"\ncoil = \"FAULT\"\nfault_when = \"on\"\nseverity = \"high\"\n"
+            )
+        })
+        .collect()
+}
+
 /// The tags of `load` as `[[tags]]` tables, in [`tags_csv`]'s order.
 pub fn tags_toml(load: Load) -> String {
     let mut s = String::new();
@@ -411,6 +431,7 @@ pub async fn agent(
             text = text.replacen("tags_file = \"tags.csv\"\n", "", 1) + &tags_toml(load);
         }
     }
+    text.push_str(&flood_checks(setup.alarms_per_fault));
     std::fs::write(&config, text)?;
     if security == Security::SignEncrypt {
         std::fs::write(dir.join("fault.il"), program())?;
@@ -458,8 +479,8 @@ pub async fn agent(
         let latencies = match_faults(&faults, &seen);
         // Gaps said by the source: under a load without one, a deaf item
         // found by the verification would be a false one.
-        let gaps = after.value("cellwatch_source_gaps_total")
-            - before.value("cellwatch_source_gaps_total");
+        let delta = |name: &str| after.value(name) - before.value(name);
+        let gaps = delta("cellwatch_source_gaps_total");
         if gaps > 0.0 {
             eprintln!("cellwatch-bench: the agent said {gaps} gap(s) in the source");
         }
@@ -468,6 +489,9 @@ pub async fn agent(
             .unwrap_or_default();
         if setup.tags_in == TagsIn::Toml {
             verify.push_str(", [[tags]] tables");
+        }
+        if setup.alarms_per_fault > 1 {
+            verify.push_str(&format!(", {} alarms per fault", setup.alarms_per_fault));
         }
         Ok(Row {
             kind: Kind::Agent,
@@ -499,6 +523,11 @@ pub async fn agent(
             internal,
             internal_counts,
             generator_lag: lag,
+            signing: Some((
+                delta("cellwatch_bus_signatures_total"),
+                delta("cellwatch_bus_signing_seconds_total"),
+                delta("process_cpu_seconds_total"),
+            )),
         })
     }
     .await;
@@ -998,6 +1027,7 @@ async fn counted(
             internal: None,
             internal_counts: Vec::new(),
             generator_lag: lag,
+            signing: None,
         })
     }
     .await;
@@ -1103,6 +1133,22 @@ pub fn table(rows: &[Row]) -> String {
                 a.cpu_per_change_us() / c.cpu_per_change_us().max(1e-9),
                 a.cpu_per_change_us(),
                 c.cpu_per_change_us(),
+            ));
+        }
+    }
+    // What sealing the bus's payloads cost the agent.
+    for a in rows.iter().filter(|r| r.kind == Kind::Agent) {
+        if let Some((signatures, seconds, cpu)) = a.signing {
+            ratios.push_str(&format!(
+                "- {} tags, {}/s, {}: {:.0} signatures ({:.1} per fault), {:.1} ms of CPU signing, {:.1} % of the agent's CPU ({:.1} ms, its own process_cpu_seconds_total)\n",
+                a.load.tags,
+                a.load.rate,
+                a.subject,
+                signatures,
+                signatures / a.faults.0.max(1) as f64,
+                seconds * 1e3,
+                seconds * 100.0 / cpu.max(1e-9),
+                cpu * 1e3,
             ));
         }
     }
@@ -1217,6 +1263,7 @@ mod tests {
             internal: (kind == Kind::Agent).then_some((0.001, 0.01)),
             internal_counts: Vec::new(),
             generator_lag: 0.0,
+            signing: None,
         };
         let rows = [
             row(Kind::Agent, Security::None, "cellwatch (None)", 0.08),

@@ -11,7 +11,7 @@
 
 use std::future::Future;
 use std::net::SocketAddr;
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Duration;
 
 use crate::health::{Health, STALLED_AFTER};
@@ -23,12 +23,16 @@ use axum::Router;
 use cellwatch_models::alarm::{AlarmKind, Severity};
 use cellwatch_models::engine::MachineState;
 use prometheus::{
-    Encoder, Gauge, GaugeVec, Histogram, HistogramOpts, HistogramVec, IntCounter, IntCounterVec,
-    IntGauge, IntGaugeVec, Opts, Registry, TextEncoder,
+    Counter, Encoder, Gauge, GaugeVec, Histogram, HistogramOpts, HistogramVec, IntCounter,
+    IntCounterVec, IntGauge, IntGaugeVec, Opts, Registry, TextEncoder,
 };
 
 /// A value read when metrics are scraped.
 pub type Sampler = Arc<dyn Fn() -> i64 + Send + Sync>;
+
+/// Signatures made and the CPU seconds they took, read when metrics are
+/// scraped.
+pub type SigningSampler = Arc<dyn Fn() -> (u64, f64) + Send + Sync>;
 
 /// Every metric of one agent, bound to its cell.
 #[derive(Clone)]
@@ -78,6 +82,14 @@ pub struct Metrics {
     pub journal_dropped: IntCounter,
     /// Zenoh puts and replies that failed.
     pub zenoh_publish_errors: IntCounter,
+    /// Ed25519 signatures the agent made, and their CPU time, sampled from
+    /// `signing_sampler` at each scrape (under `signing_lock`).
+    signatures: IntCounter,
+    signing_seconds: Counter,
+    signing_sampler: Arc<OnceLock<SigningSampler>>,
+    signing_lock: Arc<Mutex<()>>,
+    /// The process's CPU time (user + system), sampled at each scrape.
+    process_cpu: Counter,
     /// Queries refused, by service and reason.
     refused: IntCounterVec,
     commands: IntCounterVec,
@@ -357,6 +369,23 @@ impl Metrics {
                 "Zenoh publications and replies that failed.",
                 cell
             ))),
+            signatures: reg!(IntCounter::with_opts(opts(
+                "cellwatch_bus_signatures_total",
+                "Ed25519 signatures made to seal what the agent puts and answers on the bus (one per step's puts, one per answer).",
+                cell
+            ))),
+            signing_seconds: reg!(Counter::with_opts(opts(
+                "cellwatch_bus_signing_seconds_total",
+                "CPU seconds the agent's threads spent making those signatures.",
+                cell
+            ))),
+            signing_sampler: Arc::new(OnceLock::new()),
+            signing_lock: Arc::new(Mutex::new(())),
+            process_cpu: reg!(Counter::with_opts(opts(
+                "process_cpu_seconds_total",
+                "CPU seconds (user and system) of the whole agent process.",
+                cell
+            ))),
             commands,
             last_update_age: reg!(Gauge::with_opts(opts(
                 "cellwatch_tag_last_update_age_seconds",
@@ -609,15 +638,45 @@ impl Metrics {
         let _ = self.alarm_server_sampler.set(sessions);
     }
 
+    /// Reads `cellwatch_bus_signatures_total` and
+    /// `cellwatch_bus_signing_seconds_total` from `signing` at each scrape.
+    pub fn sample_signing(&self, signing: SigningSampler) {
+        let _ = self.signing_sampler.set(signing);
+    }
+
     /// The text exposition of every metric.
     pub fn render(&self) -> String {
         if let Some(sessions) = self.alarm_server_sampler.get() {
             self.alarm_server_sessions.set(sessions());
         }
+        if let Ok(_one_at_a_time) = self.signing_lock.lock() {
+            let raise = |counter: &Counter, to: f64| {
+                let more = to - counter.get();
+                if more > 0.0 {
+                    counter.inc_by(more);
+                }
+            };
+            if let Some(signing) = self.signing_sampler.get() {
+                let (made, seconds) = signing();
+                self.signatures
+                    .inc_by(made.saturating_sub(self.signatures.get()));
+                raise(&self.signing_seconds, seconds);
+            }
+            raise(&self.process_cpu, process_cpu_seconds());
+        }
         let mut buf = Vec::new();
         let _ = TextEncoder::new().encode(&self.registry.gather(), &mut buf);
         String::from_utf8(buf).unwrap_or_default()
     }
+}
+
+/// The process's CPU seconds so far, user and system (0 where unknown).
+fn process_cpu_seconds() -> f64 {
+    use nix::sys::resource::{getrusage, UsageWho};
+    getrusage(UsageWho::RUSAGE_SELF).map_or(0.0, |u| {
+        let seconds = |t: nix::sys::time::TimeVal| t.tv_sec() as f64 + t.tv_usec() as f64 / 1e6;
+        seconds(u.user_time()) + seconds(u.system_time())
+    })
 }
 
 impl crate::journal::CommitObserver for Metrics {

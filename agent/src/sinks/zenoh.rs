@@ -1,6 +1,6 @@
 //! Publication on the bus: alarm events, machine state and alarms' flight
-//! recordings, each sealed in a signed envelope
-//! ([`crate::bus::envelope`]), and the agent's liveliness
+//! recordings, sealed in signed envelopes ([`crate::bus::envelope`]) —
+//! what one step puts under one signature — and the agent's liveliness
 //! token. This is the Zenoh sink of the cell loop.
 
 use std::collections::HashMap;
@@ -13,7 +13,7 @@ use zenoh::liveliness::LivelinessToken;
 use zenoh::Session;
 use zenoh_ext::{AdvancedPublisher, AdvancedPublisherBuilderExt, CacheConfig, MissDetectionConfig};
 
-use crate::bus::envelope::{AgentKey, Kind};
+use crate::bus::envelope::AgentKey;
 use crate::bus::keys::CellKeys;
 use crate::bus::ZenohError;
 use crate::metrics::Metrics;
@@ -90,8 +90,9 @@ impl ZenohPublisher {
         self.keys.prefix()
     }
 
-    /// Publishes an alarm event on `alarms/<id>`.
-    pub async fn alarm(&mut self, id: &str, json: String) {
+    /// The publisher of `alarms/<id>`, declared on first use; `None`: Zenoh
+    /// refused it (logged and counted).
+    async fn alarm_publisher(&mut self, id: &str) -> Option<Arc<AdvancedPublisher<'static>>> {
         let publisher = {
             let map = &mut self.alarms;
             match map.get(id) {
@@ -115,52 +116,66 @@ impl ZenohPublisher {
                         Err(e) => {
                             tracing::error!(alarm = id, error = %e, "cannot declare the alarm publisher");
                             self.metrics.zenoh_publish_errors.inc();
-                            return;
+                            return None;
                         }
                     }
                 }
             }
         };
-        let sealed = self.key.seal(
-            Kind::Put,
-            &self.keys.alarm(id),
-            "",
-            crate::clock::now_ms(),
-            json,
-        );
-        if let Err(e) = publisher.put(sealed).await {
-            tracing::error!(alarm = id, error = %e, "alarm publication failed");
-            self.metrics.zenoh_publish_errors.inc();
-        }
+        Some(publisher)
     }
 
-    /// Publishes an alarm's flight recording on `recordings/<id>`: once,
-    /// not kept for late joiners (the history service has it).
-    pub async fn recording(&self, id: &str, json: String) {
-        let key = self.keys.recording(id);
-        let sealed = self
-            .key
-            .seal(Kind::Put, &key, "", crate::clock::now_ms(), json);
-        if let Err(e) = self.session.put(&key, sealed).await {
-            tracing::error!(alarm = id, error = %e, "recording publication failed");
-            self.metrics.zenoh_publish_errors.inc();
+    /// Puts what `step` publishes: its alarm events on `alarms/<id>`, the
+    /// machine state on `state`, the flight recordings that ended on
+    /// `recordings/<id>` (once, not kept for late joiners: the history
+    /// service has them) — sealed together, one signature for the step.
+    async fn publish(&mut self, step: &CellStep) {
+        let mut to: Vec<Put> = Vec::new();
+        let mut puts: Vec<(String, String)> = Vec::new();
+        for a in &step.alarms {
+            if let Some(p) = self.alarm_publisher(&a.payload.id).await {
+                to.push(Put::Alarm(&a.payload.id, p));
+                puts.push((self.keys.alarm(&a.payload.id), a.json.clone()));
+            }
+        }
+        if let Some(s) = &step.state {
+            to.push(Put::State);
+            puts.push((
+                self.keys.state(),
+                serde_json::to_string(s).unwrap_or_default(),
+            ));
+        }
+        for (r, json) in step.engine.recordings.iter().zip(&step.recordings) {
+            to.push(Put::Recording(&r.alarm));
+            puts.push((self.keys.recording(&r.alarm), json.clone()));
+        }
+        if puts.is_empty() {
+            return;
+        }
+        let keys: Vec<String> = puts.iter().map(|(k, _)| k.clone()).collect();
+        let sealed = self.key.seal_puts(crate::clock::now_ms(), puts);
+        for ((put, key), sealed) in to.into_iter().zip(keys).zip(sealed) {
+            let (what, result) = match put {
+                Put::Alarm(id, publisher) => (id, publisher.put(sealed).await),
+                Put::State => ("state", self.state.put(sealed).await),
+                Put::Recording(id) => (id, self.session.put(&key, sealed).await),
+            };
+            if let Err(e) = result {
+                tracing::error!(key, what, error = %e, "publication failed");
+                self.metrics.zenoh_publish_errors.inc();
+            }
         }
     }
+}
 
-    /// Publishes the machine state on `state`.
-    pub async fn state(&self, json: String) {
-        let sealed = self.key.seal(
-            Kind::Put,
-            &self.keys.state(),
-            "",
-            crate::clock::now_ms(),
-            json,
-        );
-        if let Err(e) = self.state.put(sealed).await {
-            tracing::error!(error = %e, "state publication failed");
-            self.metrics.zenoh_publish_errors.inc();
-        }
-    }
+/// Where one of a step's sealed payloads goes.
+enum Put<'a> {
+    /// An alarm event, on its alarm's publisher.
+    Alarm(&'a str, Arc<AdvancedPublisher<'static>>),
+    /// The machine state, on the state publisher.
+    State,
+    /// A flight recording, put once on the session.
+    Recording(&'a str),
 }
 
 impl Sink for ZenohPublisher {
@@ -169,19 +184,7 @@ impl Sink for ZenohPublisher {
     }
 
     fn handle<'a>(&'a mut self, step: &'a CellStep) -> BoxFuture<'a, ()> {
-        async move {
-            for a in &step.alarms {
-                self.alarm(&a.payload.id, a.json.clone()).await;
-            }
-            if let Some(s) = &step.state {
-                self.state(serde_json::to_string(s).unwrap_or_default())
-                    .await;
-            }
-            for (r, json) in step.engine.recordings.iter().zip(&step.recordings) {
-                self.recording(&r.alarm, json.clone()).await;
-            }
-        }
-        .boxed()
+        self.publish(step).boxed()
     }
 
     fn close(self: Box<Self>) -> BoxFuture<'static, ()> {

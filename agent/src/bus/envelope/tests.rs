@@ -1,0 +1,260 @@
+use super::*;
+
+fn trust_of(key: &AgentKey) -> Trust {
+    Trust::parse("trust.toml", &key.trust_entry()).unwrap()
+}
+
+#[test]
+fn a_sealed_put_opens_with_the_cells_key_only() {
+    let m01 = AgentKey::generate("m01");
+    let m02 = AgentKey::generate("m02");
+    let sealed = m01.seal(Kind::Put, "cellwatch/m01/state", "", 7, "{\"a\":1}".into());
+    let opened = trust_of(&m01)
+        .open(sealed.as_bytes(), Kind::Put, "cellwatch/m01/state", "")
+        .unwrap();
+    assert_eq!((opened.cell.as_str(), opened.at), ("m01", 7));
+    assert_eq!(opened.body, "{\"a\":1}");
+    // Another cell's trust file does not know m01.
+    assert_eq!(
+        trust_of(&m02).open(sealed.as_bytes(), Kind::Put, "cellwatch/m01/state", ""),
+        Err(Distrust::UnknownCell("m01".into()))
+    );
+    // m02's agent claiming to be m01: its signature is not m01's.
+    let mut forged: Envelope =
+        serde_json::from_str(&m02.seal(Kind::Put, "cellwatch/m01/state", "", 7, "{}".into()))
+            .unwrap();
+    forged.cell = "m01".into();
+    assert_eq!(
+        trust_of(&m01).open(
+            serde_json::to_string(&forged).unwrap().as_bytes(),
+            Kind::Put,
+            "cellwatch/m01/state",
+            ""
+        ),
+        Err(Distrust::BadSignature("m01".into()))
+    );
+}
+
+#[test]
+fn an_envelope_moved_to_another_key_kind_or_query_is_refused() {
+    let m01 = AgentKey::generate("m01");
+    let trust = trust_of(&m01);
+    let put = m01.seal(Kind::Put, "cellwatch/m01/alarms/ese", "", 7, "{}".into());
+    assert!(matches!(
+        trust.open(put.as_bytes(), Kind::Put, "cellwatch/m01/alarms/csd", ""),
+        Err(Distrust::Misplaced { .. })
+    ));
+    assert!(matches!(
+        trust.open(put.as_bytes(), Kind::Reply, "cellwatch/m01/alarms/ese", ""),
+        Err(Distrust::Misplaced { .. })
+    ));
+    let reply = m01.seal(
+        Kind::Reply,
+        "cellwatch/m01/snapshot",
+        "nonce=aa",
+        7,
+        "{}".into(),
+    );
+    assert!(trust
+        .open(
+            reply.as_bytes(),
+            Kind::Reply,
+            "cellwatch/m01/snapshot",
+            "nonce=aa"
+        )
+        .is_ok());
+    // An old answer replayed to a new query.
+    assert!(matches!(
+        trust.open(
+            reply.as_bytes(),
+            Kind::Reply,
+            "cellwatch/m01/snapshot",
+            "nonce=bb"
+        ),
+        Err(Distrust::Misplaced { .. })
+    ));
+    // A body edited after sealing.
+    let mut edited: Envelope = serde_json::from_str(&reply).unwrap();
+    edited.body = "{\"x\":1}".into();
+    assert_eq!(
+        trust.open(
+            serde_json::to_string(&edited).unwrap().as_bytes(),
+            Kind::Reply,
+            "cellwatch/m01/snapshot",
+            "nonce=aa"
+        ),
+        Err(Distrust::BadSignature("m01".into()))
+    );
+}
+
+#[test]
+fn the_signed_bytes_are_length_prefixed() {
+    // A field boundary moved by text inside a field changes the bytes.
+    let a = signed_bytes(Kind::Put, "m01", "k", "a\u{0}", 1, "b");
+    let b = signed_bytes(Kind::Put, "m01", "k", "a", 1, "\u{0}b");
+    assert_ne!(a, b);
+    let mut expected = b"cellwatch.signed.v1".to_vec();
+    for f in ["put", "m01", "k", "", "12", "{}"] {
+        expected.extend_from_slice(&(f.len() as u32).to_be_bytes());
+        expected.extend_from_slice(f.as_bytes());
+    }
+    assert_eq!(signed_bytes(Kind::Put, "m01", "k", "", 12, "{}"), expected);
+}
+
+#[test]
+fn key_files_round_trip_and_trust_files_name_their_errors() {
+    let key = AgentKey::generate("m01");
+    let back = AgentKey::parse("m01.key", &key.to_file()).unwrap();
+    assert_eq!((back.cell(), back.public_hex()), ("m01", key.public_hex()));
+    assert_eq!(
+        Trust::parse("trust.toml", "[cells.m01]\npublic_key = \"abc\"\n")
+            .unwrap_err()
+            .to_string(),
+        "trust.toml: cells.m01.public_key: not an Ed25519 public key (64 hex digits)"
+    );
+    assert!(Trust::parse("trust.toml", "[cells.m01]\nkey = \"abc\"\n").is_err());
+}
+
+#[cfg(unix)]
+#[test]
+fn a_private_key_others_may_read_is_refused() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m01.key");
+    let (_, made) = AgentKey::load_or_create(&path, "m01").unwrap();
+    assert!(made);
+    let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
+    assert_eq!(mode, 0o600);
+    assert!(!AgentKey::load_or_create(&path, "m01").unwrap().1);
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o644)).unwrap();
+    let err = AgentKey::load(&path).err().unwrap().to_string();
+    assert_eq!(
+        err,
+        format!(
+            "{0}: a private key readable by others (mode 644); make it the owner's only: chmod 600 {0}",
+            path.display()
+        )
+    );
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
+    let err = AgentKey::load_or_create(&path, "m02")
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        err.ends_with("the signing key of cell 'm01', not of 'm02': each cell's agent has its own"),
+        "{err}"
+    );
+}
+
+/// The puts of one step: an alarm event, the state, a recording.
+fn step_puts() -> Vec<(String, String)> {
+    vec![
+        ("cellwatch/m01/alarms/ese".into(), "{\"id\":\"ese\"}".into()),
+        ("cellwatch/m01/state".into(), "{\"state\":\"fault\"}".into()),
+        (
+            "cellwatch/m01/recordings/csd".into(),
+            "{\"alarm\":\"csd\"}".into(),
+        ),
+    ]
+}
+
+fn reparsed(sealed: &str, edit: impl FnOnce(&mut Envelope)) -> String {
+    let mut env: Envelope = serde_json::from_str(sealed).unwrap();
+    edit(&mut env);
+    serde_json::to_string(&env).unwrap()
+}
+
+#[test]
+fn a_steps_puts_are_sealed_with_one_signature_and_each_opens_alone() {
+    let m01 = AgentKey::generate("m01");
+    let sealed = m01.seal_puts(7, step_puts());
+    assert_eq!(m01.signing().0, 1, "one signature for the step");
+    assert_eq!(sealed.len(), 3);
+    for ((key, body), sealed) in step_puts().iter().zip(&sealed) {
+        // A fresh trust each time: nothing remembered from a sibling.
+        let opened = trust_of(&m01)
+            .open(sealed.as_bytes(), Kind::Put, key, "")
+            .unwrap();
+        assert_eq!(
+            (opened.cell.as_str(), opened.at, &opened.body),
+            ("m01", 7, body)
+        );
+        let env: Envelope = serde_json::from_str(sealed).unwrap();
+        assert_eq!((env.schema.as_str(), env.group.len()), (GROUP_SCHEMA, 3));
+    }
+    // Opened in turn by one trust: the second and third from memory.
+    let trust = trust_of(&m01);
+    for ((key, _), sealed) in step_puts().iter().zip(&sealed) {
+        assert!(trust.open(sealed.as_bytes(), Kind::Put, key, "").is_ok());
+    }
+    // A put alone is sealed as ever.
+    let one = m01.seal_puts(8, step_puts().into_iter().take(1).collect());
+    let env: Envelope = serde_json::from_str(&one[0]).unwrap();
+    assert_eq!((env.schema.as_str(), env.group.len()), (SIGNED_SCHEMA, 0));
+    assert!(trust
+        .open(one[0].as_bytes(), Kind::Put, "cellwatch/m01/alarms/ese", "")
+        .is_ok());
+    assert_eq!(m01.signing().0, 2);
+}
+
+#[test]
+fn a_grouped_envelope_edited_moved_or_forged_is_refused() {
+    let m01 = AgentKey::generate("m01");
+    let m02 = AgentKey::generate("m02");
+    let trust = trust_of(&m01);
+    let sealed = m01.seal_puts(7, step_puts());
+    let (alarm, state) = ("cellwatch/m01/alarms/ese", "cellwatch/m01/state");
+    // Opened once, so its group's signature is remembered: what follows
+    // must be refused all the same.
+    assert!(trust
+        .open(sealed[0].as_bytes(), Kind::Put, alarm, "")
+        .is_ok());
+    let bad = Err(Distrust::BadSignature("m01".into()));
+    // Its body edited: its digest is no longer in the group.
+    let edited = reparsed(&sealed[0], |e| e.body = "{\"id\":\"csd\"}".into());
+    assert_eq!(trust.open(edited.as_bytes(), Kind::Put, alarm, ""), bad);
+    // Its body edited and the group made to name the new digest.
+    let regrouped = reparsed(&sealed[0], |e| {
+        e.body = "{\"id\":\"csd\"}".into();
+        e.group[0] = hex::encode(Sha256::digest(signed_bytes(
+            Kind::Put,
+            "m01",
+            alarm,
+            "",
+            7,
+            &e.body,
+        )));
+    });
+    assert_eq!(trust.open(regrouped.as_bytes(), Kind::Put, alarm, ""), bad);
+    // Its time changed (a replay as news).
+    let later = reparsed(&sealed[1], |e| e.at = 9);
+    assert_eq!(trust.open(later.as_bytes(), Kind::Put, state, ""), bad);
+    // A sibling put on another key than sealed for.
+    assert!(matches!(
+        trust.open(sealed[1].as_bytes(), Kind::Put, alarm, ""),
+        Err(Distrust::Misplaced { .. })
+    ));
+    // m02's agent sealing a group in m01's name.
+    let forged = m02.seal_puts(7, step_puts());
+    let forged = reparsed(&forged[0], |e| e.cell = "m01".into());
+    assert_eq!(trust.open(forged.as_bytes(), Kind::Put, alarm, ""), bad);
+    // m01's key replaced in the trust file: the remembered group is not
+    // believed under the new key.
+    let mut rekeyed = trust.clone();
+    rekeyed.insert("m01", *trust_of(&m02).cells.get("m02").unwrap());
+    assert_eq!(
+        rekeyed.open(sealed[0].as_bytes(), Kind::Put, alarm, ""),
+        bad
+    );
+    // A group of one, a group in a v1 envelope, a digest that is no digest.
+    let not_an_envelope = |sealed: String| {
+        assert!(matches!(
+            trust.open(sealed.as_bytes(), Kind::Put, alarm, ""),
+            Err(Distrust::NotAnEnvelope(_))
+        ));
+    };
+    not_an_envelope(reparsed(&sealed[0], |e| e.group.truncate(1)));
+    not_an_envelope(reparsed(&sealed[0], |e| e.schema = SIGNED_SCHEMA.into()));
+    let odd = reparsed(&sealed[0], |e| e.group[2] = "zz".into());
+    assert_eq!(trust.open(odd.as_bytes(), Kind::Put, alarm, ""), bad);
+}
