@@ -1,5 +1,6 @@
 //! Wall-clock time for the agent: milliseconds since the Unix epoch, the
-//! unit the models take, and RFC 3339 text for payloads.
+//! unit the models take, and RFC 3339 text for payloads; and the calling
+//! thread's CPU time, for what the agent measures of its own work.
 
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
@@ -8,6 +9,15 @@ pub fn now_ms() -> u64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
         .map_or(0, |d| d.as_millis() as u64)
+}
+
+/// The calling thread's CPU time, ns (0 where the clock cannot be read).
+pub fn thread_cpu_ns() -> u64 {
+    use nix::time::{clock_gettime, ClockId};
+    clock_gettime(ClockId::CLOCK_THREAD_CPUTIME_ID).map_or(0, |t| {
+        u64::try_from(t.tv_sec()).unwrap_or(0) * 1_000_000_000
+            + u64::try_from(t.tv_nsec()).unwrap_or(0)
+    })
 }
 
 /// `ms` since the epoch as RFC 3339 UTC with milliseconds.

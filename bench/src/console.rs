@@ -8,10 +8,15 @@
 //! (every alarm in its model) and its table (drawn) have all of them, the
 //! page's JavaScript heap and the console's memory, then clears every alarm
 //! and raises as many new ones, three times, to show both stay bounded.
+//! Each round it also takes the console's CPU time and the CPU time the
+//! baseline spent opening the envelopes (the same [`Trust::open`] the
+//! console runs): the share of the console's CPU that goes to verifying
+//! signatures. A cell's alarms may be sealed `alarms_per_step` at a time,
+//! as an agent seals what one step raises together.
 
 use std::io::BufRead;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -34,6 +39,9 @@ pub struct Setup {
     pub chromium: PathBuf,
     /// See `chromium`.
     pub chromedriver: PathBuf,
+    /// A cell's alarms sealed together, as one step of its agent puts
+    /// them (1: each alone).
+    pub alarms_per_step: usize,
 }
 
 const SEVERITIES: [Severity; 4] = [
@@ -51,6 +59,10 @@ struct Round {
     table_ms: f64,
     heap_mb: f64,
     console_rss_mb: f64,
+    /// The console's CPU over the round, ms.
+    console_cpu_ms: f64,
+    /// The baseline's CPU opening the round's envelopes, ms.
+    opening_ms: f64,
 }
 
 /// Runs the benchmark; returns its Markdown.
@@ -79,22 +91,22 @@ pub async fn run(setup: &Setup) -> anyhow::Result<String> {
         .map(ToString::to_string)
         .context("the publisher listens nowhere")?;
 
-    // The baseline: a bare subscriber opening every event.
+    // The baseline: a bare subscriber opening every event, timing it.
     let seen = Arc::new(AtomicUsize::new(0));
+    let opening_ns = Arc::new(AtomicU64::new(0));
     let baseline = cellwatch::bus::open(&plain(vec![endpoint.clone()], vec![])).await?;
-    let counted = seen.clone();
+    let (counted, timed) = (seen.clone(), opening_ns.clone());
     let _sub = baseline
         .declare_subscriber("cellwatch/*/alarms/**")
         .callback(move |s| {
-            if trust
-                .open(
-                    &s.payload().to_bytes(),
-                    Kind::Put,
-                    s.key_expr().as_str(),
-                    "",
-                )
-                .is_ok()
-            {
+            let payload = s.payload().to_bytes();
+            let start = cellwatch::clock::thread_cpu_ns();
+            let opened = trust.open(&payload, Kind::Put, s.key_expr().as_str(), "");
+            timed.fetch_add(
+                cellwatch::clock::thread_cpu_ns().saturating_sub(start),
+                Ordering::Relaxed,
+            );
+            if opened.is_ok() {
                 counted.fetch_add(1, Ordering::Relaxed);
             }
         })
@@ -123,7 +135,12 @@ pub async fn run(setup: &Setup) -> anyhow::Result<String> {
         .strip_prefix("cellwatch console: ")
         .context("the console did not say its URL (see console.log)")?
         .to_string();
-    let result = measure(setup, &keys, &publisher, &seen, &url, console.id()).await;
+    let bus = Bus {
+        publisher: &publisher,
+        seen: &seen,
+        opening_ns: &opening_ns,
+    };
+    let result = measure(setup, &keys, &bus, &url, console.id()).await;
     let _ = console.kill();
     let _ = console.wait();
     result
@@ -143,7 +160,53 @@ fn plain(connect: Vec<String>, listen: Vec<String>) -> cellwatch::config::ZenohC
     }
 }
 
-/// An alarm event of `cell` sealed by its agent's key.
+/// The publisher's session, and what the baseline counted and spent.
+struct Bus<'a> {
+    publisher: &'a zenoh::Session,
+    seen: &'a AtomicUsize,
+    opening_ns: &'a AtomicU64,
+}
+
+impl Bus<'_> {
+    /// Puts `(key, sealed)` each, in order, as an agent does (blocking
+    /// congestion control).
+    async fn put(&self, sealed: Vec<(String, String)>) -> anyhow::Result<()> {
+        for (k, v) in sealed {
+            self.publisher
+                .put(k, v)
+                .congestion_control(zenoh::qos::CongestionControl::Block)
+                .await
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+        }
+        Ok(())
+    }
+}
+
+/// Alarm events `(cell, id, n, raised)` sealed by their cells' keys, each
+/// cell's `per_step` at a time under one signature, in the cells' order.
+fn sealed(
+    keys: &[AgentKey],
+    events: impl IntoIterator<Item = (usize, String, usize, bool)>,
+    per_step: usize,
+) -> Vec<(String, String)> {
+    let mut by_cell: Vec<Vec<(String, String)>> = vec![Vec::new(); keys.len()];
+    for (cell, id, n, raised) in events {
+        by_cell[cell].push(event(&keys[cell], &id, n, raised));
+    }
+    let now = cellwatch::clock::now_ms();
+    let mut out = Vec::new();
+    for (cell, puts) in by_cell.into_iter().enumerate() {
+        let mut puts = puts.into_iter().peekable();
+        while puts.peek().is_some() {
+            let step: Vec<(String, String)> = puts.by_ref().take(per_step.max(1)).collect();
+            let keys_of: Vec<String> = step.iter().map(|(k, _)| k.clone()).collect();
+            out.extend(keys_of.into_iter().zip(keys[cell].seal_puts(now, step)));
+        }
+    }
+    out
+}
+
+/// An alarm event of `cell`, unsealed: its key and body.
 fn event(key: &AgentKey, id: &str, n: usize, raised: bool) -> (String, String) {
     let now = cellwatch::clock::now_ms();
     let at = cellwatch::clock::rfc3339(now);
@@ -182,19 +245,17 @@ fn event(key: &AgentKey, id: &str, n: usize, raised: bool) -> (String, String) {
         consequence: None,
     };
     let key_expr = format!("cellwatch/{}/alarms/{id}", key.cell());
-    let body = serde_json::to_string(&a).unwrap_or_default();
-    let sealed = key.seal(Kind::Put, &key_expr, "", now, body);
-    (key_expr, sealed)
+    (key_expr, serde_json::to_string(&a).unwrap_or_default())
 }
 
 async fn measure(
     setup: &Setup,
     keys: &[AgentKey],
-    publisher: &zenoh::Session,
-    seen: &AtomicUsize,
+    bus: &Bus<'_>,
     url: &str,
     console_pid: u32,
 ) -> anyhow::Result<String> {
+    let seen = bus.seen;
     let browser =
         crate::console_browser::Browser::start(&setup.chromium, &setup.chromedriver).await?;
     let b = &browser.client;
@@ -208,12 +269,8 @@ async fn measure(
     // One event first, until both take it: the subscriptions are known to
     // the publisher.
     loop {
-        let (k, v) = event(&keys[0], "warmup", 0, true);
-        publisher
-            .put(k, v)
-            .congestion_control(zenoh::qos::CongestionControl::Block)
-            .await
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        bus.put(sealed(keys, [(0, "warmup".into(), 0, true)], 1))
+            .await?;
         tokio::time::sleep(Duration::from_millis(200)).await;
         let page = b
             .execute("return S.alarms.size;", vec![])
@@ -224,12 +281,8 @@ async fn measure(
             break;
         }
     }
-    let (k, v) = event(&keys[0], "warmup", 0, false);
-    publisher
-        .put(k, v)
-        .congestion_control(zenoh::qos::CongestionControl::Block)
-        .await
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    bus.put(sealed(keys, [(0, "warmup".into(), 0, false)], 1))
+        .await?;
     browser.until("return S.alarms.size === 0;").await?;
 
     let n = setup.alarms;
@@ -246,29 +299,15 @@ async fn measure(
         .await?;
         let started = Instant::now();
         let t0 = cellwatch::clock::now_ms() as f64;
+        let (cpu0, opening0) = (cpu_ms(console_pid), bus.opening_ns.load(Ordering::Relaxed));
+        let cells = keys.len();
+        let per_step = setup.alarms_per_step;
         if round > 0 {
-            for i in 0..n {
-                let (k, v) = event(
-                    &keys[i % keys.len()],
-                    &format!("r{}-{i}", round - 1),
-                    i,
-                    false,
-                );
-                publisher
-                    .put(k, v)
-                    .congestion_control(zenoh::qos::CongestionControl::Block)
-                    .await
-                    .map_err(|e| anyhow::anyhow!("{e}"))?;
-            }
+            let ended = (0..n).map(|i| (i % cells, format!("r{}-{i}", round - 1), i, false));
+            bus.put(sealed(keys, ended, per_step)).await?;
         }
-        for i in 0..n {
-            let (k, v) = event(&keys[i % keys.len()], &format!("r{round}-{i}"), i, true);
-            publisher
-                .put(k, v)
-                .congestion_control(zenoh::qos::CongestionControl::Block)
-                .await
-                .map_err(|e| anyhow::anyhow!("{e}"))?;
-        }
+        let raised = (0..n).map(|i| (i % cells, format!("r{round}-{i}"), i, true));
+        bus.put(sealed(keys, raised, per_step)).await?;
         let deadline = Instant::now() + Duration::from_secs(300);
         let baseline_ms = loop {
             if seen.load(Ordering::Relaxed) >= before + puts {
@@ -281,6 +320,12 @@ async fn measure(
             tokio::time::sleep(Duration::from_millis(2)).await;
         };
         browser.until("return window.__table !== null;").await?;
+        let console_cpu_ms = cpu_ms(console_pid) - cpu0;
+        let opening_ms = bus
+            .opening_ns
+            .load(Ordering::Relaxed)
+            .saturating_sub(opening0) as f64
+            / 1e6;
         let times = b
             .execute("return [window.__all, window.__table];", vec![])
             .await?;
@@ -306,6 +351,8 @@ async fn measure(
             table_ms: at(1),
             heap_mb: heap / 1e6,
             console_rss_mb: rss_mb(console_pid, "VmRSS"),
+            console_cpu_ms,
+            opening_ms,
         });
         eprintln!(
             "cellwatch-bench: console round {round}: baseline {:.0} ms, page {:.0} ms, table {:.0} ms",
@@ -315,13 +362,21 @@ async fn measure(
         );
     }
     let mut out = format!(
-        "{} cells, {n} alarms active at once; time from the first put, ms (one machine, one clock)\n\n| round | events | baseline: bare subscriber has all | console's page has all | its table drawn | page JS heap after GC (MB) | console RSS (MB) |\n|---|---|---|---|---|---|---|\n",
-        setup.cells
+        "{} cells, {n} alarms active at once, {} a cell's alarms under one signature; time from the first put, ms (one machine, one clock)\n\n| round | events | baseline: bare subscriber has all | console's page has all | its table drawn | page JS heap after GC (MB) | console RSS (MB) | console CPU (ms) | opening them (ms, in the baseline) | opening ÷ console CPU |\n|---|---|---|---|---|---|---|---|---|---|\n",
+        setup.cells, setup.alarms_per_step
     );
     for (i, r) in rounds.iter().enumerate() {
         out += &format!(
-            "| {i} | {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.1} |\n",
-            r.what, r.baseline_ms, r.model_ms, r.table_ms, r.heap_mb, r.console_rss_mb
+            "| {i} | {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.1} | {:.0} | {:.0} | {:.0} % |\n",
+            r.what,
+            r.baseline_ms,
+            r.model_ms,
+            r.table_ms,
+            r.heap_mb,
+            r.console_rss_mb,
+            r.console_cpu_ms,
+            r.opening_ms,
+            r.opening_ms * 100.0 / r.console_cpu_ms.max(1e-9)
         );
     }
     out += &format!(
@@ -330,6 +385,11 @@ async fn measure(
         rounds[0].model_ms / rounds[0].baseline_ms
     );
     Ok(out)
+}
+
+/// A process's CPU time so far (user and system), ms.
+fn cpu_ms(pid: u32) -> f64 {
+    crate::measure::cpu_seconds(pid).map_or(f64::NAN, |s| s * 1000.0)
 }
 
 /// A process's memory line from /proc (`VmRSS`, `VmHWM`), MB.

@@ -192,6 +192,10 @@ enum Cmd {
         /// Its WebDriver.
         #[arg(long, default_value = "/usr/bin/chromedriver")]
         chromedriver: PathBuf,
+        /// A cell's alarms sealed together under one signature, as its
+        /// agent seals what one step raises (1: each alone).
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=1024))]
+        alarms_per_step: u16,
     },
 }
 
@@ -341,6 +345,7 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
             workdir,
             chromium,
             chromedriver,
+            alarms_per_step,
         } => {
             let setup = console::Setup {
                 agent,
@@ -349,6 +354,7 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
                 alarms,
                 chromium,
                 chromedriver,
+                alarms_per_step: usize::from(alarms_per_step),
             };
             print!("{}", console::run(&setup).await?);
             Ok(())

@@ -57,6 +57,8 @@ use ed25519_dalek::{Signature, Signer, SigningKey, VerifyingKey};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
+use crate::clock::thread_cpu_ns;
+
 /// Schema name of the envelope sealed alone.
 pub const SIGNED_SCHEMA: &str = "cellwatch.signed.v1";
 
@@ -419,15 +421,6 @@ impl AgentKey {
             })
             .collect()
     }
-}
-
-/// The calling thread's CPU time, ns (0 where the clock cannot be read).
-fn thread_cpu_ns() -> u64 {
-    use nix::time::{clock_gettime, ClockId};
-    clock_gettime(ClockId::CLOCK_THREAD_CPUTIME_ID).map_or(0, |t| {
-        u64::try_from(t.tv_sec()).unwrap_or(0) * 1_000_000_000
-            + u64::try_from(t.tv_nsec()).unwrap_or(0)
-    })
 }
 
 /// The plant trust file: each cell's agent's public key.
