@@ -257,8 +257,14 @@ async fn sealed_with_the_state_it_changed(
     let (raise, fault) = (raise.unwrap(), fault.unwrap());
     assert_eq!(raise["schema"], "cellwatch.signed.v2", "{raise}");
     assert_eq!(raise["signature"], fault["signature"], "{raise}\n{fault}");
-    assert_eq!(raise["group"], fault["group"]);
-    assert_eq!(raise["group"].as_array().unwrap().len(), 2, "{raise}");
+    assert_eq!(
+        (
+            raise["tree"]["size"].as_u64(),
+            fault["tree"]["size"].as_u64()
+        ),
+        (Some(2), Some(2))
+    );
+    assert_ne!(raise["tree"]["index"], fault["tree"]["index"]);
 }
 
 /// Receives alarm payloads until `f` accepts one.

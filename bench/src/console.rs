@@ -199,8 +199,12 @@ fn sealed(
         let mut puts = puts.into_iter().peekable();
         while puts.peek().is_some() {
             let step: Vec<(String, String)> = puts.by_ref().take(per_step.max(1)).collect();
-            let keys_of: Vec<String> = step.iter().map(|(k, _)| k.clone()).collect();
-            out.extend(keys_of.into_iter().zip(keys[cell].seal_puts(now, step)));
+            let refs: Vec<(&str, &str)> =
+                step.iter().map(|(k, b)| (k.as_str(), b.as_str())).collect();
+            let sealed = keys[cell].seal_puts(now, &refs);
+            for (i, (k, b)) in step.iter().enumerate() {
+                out.push((k.clone(), sealed.envelope(i, k, b)));
+            }
         }
     }
     out

@@ -31,18 +31,20 @@
 //!   in one field can pass for another.
 //!
 //! What one step of the cell loop puts (an alarm event and the machine
-//! state it changed, several alarms raised together, the recordings that
-//! end together) is sealed with **one** signature (`cellwatch.signed.v2`):
-//! each envelope then also carries `group`, the hex SHA-256 digests of the
-//! [`signed_bytes`] of every payload sealed with it (its own among them),
-//! and `signature` is Ed25519 over [`group_bytes`]: the bytes
-//! `cellwatch.signed.v2`, the number of digests as a 4-byte big-endian
-//! number, then the 32-byte digests in order. Each envelope still opens on
-//! its own: a reader hashes what it got, finds the digest in `group` and
-//! verifies the one signature ([`Trust`] verifies a group's signature once
-//! and remembers it for its other members). The signature, the one cost
-//! that counts in sealing, is made once per step instead of once per
-//! payload.
+//! state it changed, the alarms one cause raised together, the recordings
+//! that end together) is sealed with **one** signature
+//! (`cellwatch.signed.v2`): the [`signed_bytes`] of each payload are the
+//! leaves of a Merkle tree (RFC 9162's, as Certificate Transparency's:
+//! [`tree`]), and `signature` is Ed25519 over [`tree_bytes`]: the bytes
+//! `cellwatch.signed.v2`, the number of leaves as a 4-byte big-endian
+//! number and the 32-byte root. Each envelope carries its place in the
+//! tree, `"tree": {"size", "index", "path"}` (its inclusion path, hex, at
+//! most 16 hashes for the largest step), and opens on its own: a reader
+//! hashes what it got, climbs the path to the root (RFC 9162 §2.1.3.2) and
+//! verifies the one signature ([`Trust`] remembers a verified root for the
+//! step's other envelopes). The signature, the one cost that counts in
+//! sealing, is made once per step instead of once per payload; an envelope
+//! grows by its path only.
 //!
 //! This module owns the agent's signing key file ([`AgentKey`]), the plant
 //! trust file ([`Trust`]) and the envelope; [`crate::sinks::zenoh`] and
@@ -65,12 +67,14 @@ pub const SIGNED_SCHEMA: &str = "cellwatch.signed.v1";
 /// Schema name of an envelope sealed with others under one signature.
 pub const GROUP_SCHEMA: &str = "cellwatch.signed.v2";
 
-/// The most payloads one signature may cover; a longer `group` is refused
-/// unread.
-pub const MAX_GROUP: usize = 1024;
+/// The most payloads one signature covers; a step that puts more is
+/// sealed in trees of this many.
+pub const MAX_GROUP: usize = 65_536;
 
-/// How many verified group signatures a [`Trust`] remembers.
-const VERIFIED_GROUPS: usize = 256;
+/// How many verified roots a [`Trust`] remembers.
+const VERIFIED_ROOTS: usize = 256;
+
+mod tree;
 
 /// What an envelope carries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -113,13 +117,41 @@ pub struct Envelope {
     pub at: u64,
     /// The payload (JSON text), or an error's text.
     pub body: String,
-    /// [`GROUP_SCHEMA`] only: the hex SHA-256 of the [`signed_bytes`] of
-    /// each payload sealed together, this one's among them.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub group: Vec<String>,
+    /// [`GROUP_SCHEMA`] only: its place in the tree of the payloads sealed
+    /// together.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tree: Option<InTree>,
     /// Hex Ed25519 signature of [`signed_bytes`] ([`SIGNED_SCHEMA`]) or of
-    /// [`group_bytes`] ([`GROUP_SCHEMA`]).
+    /// [`tree_bytes`] ([`GROUP_SCHEMA`]).
     pub signature: String,
+}
+
+/// An envelope's place in the Merkle tree of the payloads sealed with it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InTree {
+    /// How many payloads were sealed together (2 to [`MAX_GROUP`]).
+    pub size: u64,
+    /// This one's number among them, from 0.
+    pub index: u64,
+    /// Its inclusion path (RFC 9162 §2.1.3.1): the sibling hashes from the
+    /// leaf up, hex.
+    pub path: Vec<String>,
+}
+
+/// An envelope as it is written: the fields borrowed.
+#[derive(Serialize)]
+struct Writing<'a> {
+    schema: &'a str,
+    kind: Kind,
+    cell: &'a str,
+    key: &'a str,
+    query: &'a str,
+    at: u64,
+    body: &'a str,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    tree: Option<InTree>,
+    signature: &'a str,
 }
 
 /// The bytes an envelope's signature covers: the schema name, then each
@@ -145,17 +177,55 @@ pub fn signed_bytes(
     out
 }
 
-/// The bytes a group's signature covers: `cellwatch.signed.v2`, the number
-/// of digests as a 4-byte big-endian number, then each 32-byte digest.
-pub fn group_bytes(digests: &[[u8; 32]]) -> Vec<u8> {
-    let mut out = Vec::with_capacity(GROUP_SCHEMA.len() + 4 + 32 * digests.len());
+/// The bytes the signature of payloads sealed together covers:
+/// `cellwatch.signed.v2`, the number of payloads as a 4-byte big-endian
+/// number, then the tree's 32-byte root.
+pub fn tree_bytes(size: u64, root: &[u8; 32]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(GROUP_SCHEMA.len() + 4 + 32);
     out.extend_from_slice(GROUP_SCHEMA.as_bytes());
-    let n = u32::try_from(digests.len()).unwrap_or(u32::MAX);
-    out.extend_from_slice(&n.to_be_bytes());
-    for d in digests {
-        out.extend_from_slice(d);
-    }
+    out.extend_from_slice(&u32::try_from(size).unwrap_or(u32::MAX).to_be_bytes());
+    out.extend_from_slice(root);
     out
+}
+
+/// Payloads put together, sealed under one signature by
+/// [`AgentKey::seal_puts`]: each envelope is written when it is put.
+pub struct SealedPuts<'a> {
+    key: &'a AgentKey,
+    at: u64,
+    size: usize,
+    /// Hex; `None` for one payload alone, sealed on its own.
+    signature: Option<String>,
+    paths: Vec<Vec<tree::Hash>>,
+}
+
+impl SealedPuts<'_> {
+    /// The envelope of payload `index`, put on `key` with `body` — the
+    /// same as were sealed.
+    pub fn envelope(&self, index: usize, key: &str, body: &str) -> String {
+        let Some(signature) = &self.signature else {
+            return self.key.seal(Kind::Put, key, "", self.at, body.to_string());
+        };
+        let envelope = Writing {
+            schema: GROUP_SCHEMA,
+            kind: Kind::Put,
+            cell: &self.key.cell,
+            key,
+            query: "",
+            at: self.at,
+            body,
+            tree: Some(InTree {
+                size: self.size as u64,
+                index: index as u64,
+                path: self
+                    .paths
+                    .get(index)
+                    .map_or_else(Vec::new, |p| p.iter().map(hex::encode).collect()),
+            }),
+            signature,
+        };
+        serde_json::to_string(&envelope).unwrap_or_default()
+    }
 }
 
 /// Why a key or trust file is refused.
@@ -379,7 +449,7 @@ impl AgentKey {
             query: query.into(),
             at,
             body,
-            group: Vec::new(),
+            tree: None,
             signature: hex::encode(signature.to_bytes()),
         };
         serde_json::to_string(&envelope).unwrap_or_default()
@@ -387,39 +457,33 @@ impl AgentKey {
 
     /// Seals publications put together, `(key, body)` each, at `at` (ms):
     /// one signature over them all ([`GROUP_SCHEMA`]); one alone is sealed
-    /// as [`AgentKey::seal`] does. The envelopes come back in `puts`'
-    /// order.
-    pub fn seal_puts(&self, at: u64, puts: Vec<(String, String)>) -> Vec<String> {
-        if puts.len() < 2 || puts.len() > MAX_GROUP {
-            return puts
-                .into_iter()
-                .map(|(key, body)| self.seal(Kind::Put, &key, "", at, body))
-                .collect();
+    /// as [`AgentKey::seal`] does. At most [`MAX_GROUP`] (the caller
+    /// splits a longer list); each envelope is then written by
+    /// [`SealedPuts::envelope`] with the same key and body.
+    pub fn seal_puts(&self, at: u64, puts: &[(&str, &str)]) -> SealedPuts<'_> {
+        let size = puts.len();
+        if size < 2 {
+            return SealedPuts {
+                key: self,
+                at,
+                size,
+                signature: None,
+                paths: Vec::new(),
+            };
         }
-        let digests: Vec<[u8; 32]> = puts
+        let leaves: Vec<tree::Hash> = puts
             .iter()
-            .map(|(key, body)| {
-                Sha256::digest(signed_bytes(Kind::Put, &self.cell, key, "", at, body)).into()
-            })
+            .map(|(key, body)| tree::leaf(&signed_bytes(Kind::Put, &self.cell, key, "", at, body)))
             .collect();
-        let signature = hex::encode(self.sign(&group_bytes(&digests)).to_bytes());
-        let group: Vec<String> = digests.iter().map(hex::encode).collect();
-        puts.into_iter()
-            .map(|(key, body)| {
-                let envelope = Envelope {
-                    schema: GROUP_SCHEMA.into(),
-                    kind: Kind::Put,
-                    cell: self.cell.clone(),
-                    key,
-                    query: String::new(),
-                    at,
-                    body,
-                    group: group.clone(),
-                    signature: signature.clone(),
-                };
-                serde_json::to_string(&envelope).unwrap_or_default()
-            })
-            .collect()
+        let (root, paths) = tree::root_and_paths(&leaves);
+        let signature = self.sign(&tree_bytes(size as u64, &root));
+        SealedPuts {
+            key: self,
+            at,
+            size,
+            signature: Some(hex::encode(signature.to_bytes())),
+            paths,
+        }
     }
 }
 
@@ -432,8 +496,8 @@ impl AgentKey {
 #[derive(Debug, Clone, Default)]
 pub struct Trust {
     cells: BTreeMap<String, VerifyingKey>,
-    /// Group signatures verified lately: the SHA-256 of the public key,
-    /// the [`group_bytes`] and the signature, the newest last.
+    /// Roots verified lately: the SHA-256 of the public key, the
+    /// [`tree_bytes`] and the signature, the newest last.
     verified: Arc<Mutex<VecDeque<[u8; 32]>>>,
 }
 
@@ -552,17 +616,24 @@ impl Trust {
     ) -> Result<Opened, Distrust> {
         let env: Envelope =
             serde_json::from_slice(payload).map_err(|e| Distrust::NotAnEnvelope(e.to_string()))?;
-        let grouped = match env.schema.as_str() {
-            SIGNED_SCHEMA if env.group.is_empty() => false,
-            GROUP_SCHEMA if (2..=MAX_GROUP).contains(&env.group.len()) => true,
-            SIGNED_SCHEMA | GROUP_SCHEMA => {
+        let placed = match (env.schema.as_str(), &env.tree) {
+            (SIGNED_SCHEMA, None) => None,
+            (GROUP_SCHEMA, Some(t))
+                if (2..=MAX_GROUP as u64).contains(&t.size) && t.path.len() <= tree::MAX_PATH =>
+            {
+                Some(t)
+            }
+            (SIGNED_SCHEMA, Some(_)) => {
                 return Err(Distrust::NotAnEnvelope(format!(
-                    "{} with a group of {}",
-                    env.schema,
-                    env.group.len()
+                    "{SIGNED_SCHEMA} with a tree"
                 )))
             }
-            other => return Err(Distrust::NotAnEnvelope(format!("schema '{other}'"))),
+            (GROUP_SCHEMA, _) => {
+                return Err(Distrust::NotAnEnvelope(format!(
+                    "{GROUP_SCHEMA} without a tree of 2 to {MAX_GROUP} payloads"
+                )))
+            }
+            (other, _) => return Err(Distrust::NotAnEnvelope(format!("schema '{other}'"))),
         };
         let public = self
             .cells
@@ -575,8 +646,8 @@ impl Trust {
             .map(|b| Signature::from_bytes(&b))
             .ok_or_else(bad)?;
         let signed = signed_bytes(env.kind, &env.cell, &env.key, &env.query, env.at, &env.body);
-        if grouped {
-            self.verify_group(public, &signed, &env.group, &signature)
+        if let Some(place) = placed {
+            self.verify_in_tree(public, &signed, place, &signature)
                 .ok_or_else(bad)?;
         } else {
             public
@@ -598,38 +669,35 @@ impl Trust {
         })
     }
 
-    /// Whether `group`'s `signature` is `public`'s and covers `signed`:
-    /// verified once per group, remembered for its other members.
-    fn verify_group(
+    /// Whether `signed`, at `place` in its tree, reaches a root that
+    /// `signature` of `public` covers: each root verified once, remembered
+    /// for the tree's other envelopes.
+    fn verify_in_tree(
         &self,
         public: &VerifyingKey,
         signed: &[u8],
-        group: &[String],
+        place: &InTree,
         signature: &Signature,
     ) -> Option<()> {
-        let own: [u8; 32] = Sha256::digest(signed).into();
-        let mut digests = Vec::with_capacity(group.len());
-        for d in group {
-            let mut digest = [0u8; 32];
-            hex::decode_to_slice(d, &mut digest).ok()?;
-            digests.push(digest);
+        let mut path = Vec::with_capacity(place.path.len());
+        for h in &place.path {
+            let mut hash = [0u8; 32];
+            hex::decode_to_slice(h, &mut hash).ok()?;
+            path.push(hash);
         }
-        if !digests.contains(&own) {
-            return None;
-        }
-        let bytes = group_bytes(&digests);
+        let root = tree::root_from(place.index, place.size, tree::leaf(signed), &path)?;
+        let bytes = tree_bytes(place.size, &root);
         let mut seen = Sha256::new();
         seen.update(public.as_bytes());
         seen.update(&bytes);
         seen.update(signature.to_bytes());
         let seen: [u8; 32] = seen.finalize().into();
-        let verified = |v: &VecDeque<[u8; 32]>| v.contains(&seen);
-        if self.verified.lock().is_ok_and(|v| verified(&v)) {
+        if self.verified.lock().is_ok_and(|v| v.contains(&seen)) {
             return Some(());
         }
         public.verify_strict(&bytes, signature).ok()?;
         if let Ok(mut v) = self.verified.lock() {
-            if v.len() == VERIFIED_GROUPS {
+            if v.len() == VERIFIED_ROOTS {
                 v.pop_front();
             }
             v.push_back(seen);

@@ -13,7 +13,7 @@ use zenoh::liveliness::LivelinessToken;
 use zenoh::Session;
 use zenoh_ext::{AdvancedPublisher, AdvancedPublisherBuilderExt, CacheConfig, MissDetectionConfig};
 
-use crate::bus::envelope::AgentKey;
+use crate::bus::envelope::{AgentKey, MAX_GROUP};
 use crate::bus::keys::CellKeys;
 use crate::bus::ZenohError;
 use crate::metrics::Metrics;
@@ -128,41 +128,48 @@ impl ZenohPublisher {
     /// Puts what `step` publishes: its alarm events on `alarms/<id>`, the
     /// machine state on `state`, the flight recordings that ended on
     /// `recordings/<id>` (once, not kept for late joiners: the history
-    /// service has them) — sealed together, one signature for the step.
+    /// service has them) — sealed together, one signature for the step
+    /// (each envelope written as it is put).
     async fn publish(&mut self, step: &CellStep) {
-        let mut to: Vec<Put> = Vec::new();
-        let mut puts: Vec<(String, String)> = Vec::new();
+        let mut to: Vec<(Put, String, &str)> = Vec::new();
         for a in &step.alarms {
             if let Some(p) = self.alarm_publisher(&a.payload.id).await {
-                to.push(Put::Alarm(&a.payload.id, p));
-                puts.push((self.keys.alarm(&a.payload.id), a.json.clone()));
+                to.push((
+                    Put::Alarm(&a.payload.id, p),
+                    self.keys.alarm(&a.payload.id),
+                    &a.json,
+                ));
             }
         }
-        if let Some(s) = &step.state {
-            to.push(Put::State);
-            puts.push((
-                self.keys.state(),
-                serde_json::to_string(s).unwrap_or_default(),
-            ));
+        let state = step
+            .state
+            .as_ref()
+            .map(|s| serde_json::to_string(s).unwrap_or_default());
+        if let Some(json) = &state {
+            to.push((Put::State, self.keys.state(), json));
         }
         for (r, json) in step.engine.recordings.iter().zip(&step.recordings) {
-            to.push(Put::Recording(&r.alarm));
-            puts.push((self.keys.recording(&r.alarm), json.clone()));
+            to.push((
+                Put::Recording(&r.alarm),
+                self.keys.recording(&r.alarm),
+                json,
+            ));
         }
-        if puts.is_empty() {
-            return;
-        }
-        let keys: Vec<String> = puts.iter().map(|(k, _)| k.clone()).collect();
-        let sealed = self.key.seal_puts(crate::clock::now_ms(), puts);
-        for ((put, key), sealed) in to.into_iter().zip(keys).zip(sealed) {
-            let (what, result) = match put {
-                Put::Alarm(id, publisher) => (id, publisher.put(sealed).await),
-                Put::State => ("state", self.state.put(sealed).await),
-                Put::Recording(id) => (id, self.session.put(&key, sealed).await),
-            };
-            if let Err(e) = result {
-                tracing::error!(key, what, error = %e, "publication failed");
-                self.metrics.zenoh_publish_errors.inc();
+        let at = crate::clock::now_ms();
+        for chunk in to.chunks(MAX_GROUP) {
+            let puts: Vec<(&str, &str)> = chunk.iter().map(|(_, k, b)| (k.as_str(), *b)).collect();
+            let sealed = self.key.seal_puts(at, &puts);
+            for (i, (put, key, body)) in chunk.iter().enumerate() {
+                let envelope = sealed.envelope(i, key, body);
+                let (what, result) = match put {
+                    Put::Alarm(id, publisher) => (*id, publisher.put(envelope).await),
+                    Put::State => ("state", self.state.put(envelope).await),
+                    Put::Recording(id) => (*id, self.session.put(key, envelope).await),
+                };
+                if let Err(e) = result {
+                    tracing::error!(key, what, error = %e, "publication failed");
+                    self.metrics.zenoh_publish_errors.inc();
+                }
             }
         }
     }

@@ -147,15 +147,19 @@ fn a_private_key_others_may_read_is_refused() {
 }
 
 /// The puts of one step: an alarm event, the state, a recording.
-fn step_puts() -> Vec<(String, String)> {
-    vec![
-        ("cellwatch/m01/alarms/ese".into(), "{\"id\":\"ese\"}".into()),
-        ("cellwatch/m01/state".into(), "{\"state\":\"fault\"}".into()),
-        (
-            "cellwatch/m01/recordings/csd".into(),
-            "{\"alarm\":\"csd\"}".into(),
-        ),
-    ]
+const STEP: [(&str, &str); 3] = [
+    ("cellwatch/m01/alarms/ese", "{\"id\":\"ese\"}"),
+    ("cellwatch/m01/state", "{\"state\":\"fault\"}"),
+    ("cellwatch/m01/recordings/csd", "{\"alarm\":\"csd\"}"),
+];
+
+/// `puts` sealed together at 7 ms, each envelope as written.
+fn sealed_together(key: &AgentKey, puts: &[(&str, &str)]) -> Vec<String> {
+    let sealed = key.seal_puts(7, puts);
+    puts.iter()
+        .enumerate()
+        .map(|(i, (k, b))| sealed.envelope(i, k, b))
+        .collect()
 }
 
 fn reparsed(sealed: &str, edit: impl FnOnce(&mut Envelope)) -> String {
@@ -167,78 +171,93 @@ fn reparsed(sealed: &str, edit: impl FnOnce(&mut Envelope)) -> String {
 #[test]
 fn a_steps_puts_are_sealed_with_one_signature_and_each_opens_alone() {
     let m01 = AgentKey::generate("m01");
-    let sealed = m01.seal_puts(7, step_puts());
+    let sealed = sealed_together(&m01, &STEP);
     assert_eq!(m01.signing().0, 1, "one signature for the step");
-    assert_eq!(sealed.len(), 3);
-    for ((key, body), sealed) in step_puts().iter().zip(&sealed) {
+    for (i, ((key, body), sealed)) in STEP.iter().zip(&sealed).enumerate() {
         // A fresh trust each time: nothing remembered from a sibling.
         let opened = trust_of(&m01)
             .open(sealed.as_bytes(), Kind::Put, key, "")
             .unwrap();
         assert_eq!(
-            (opened.cell.as_str(), opened.at, &opened.body),
-            ("m01", 7, body)
+            (opened.cell.as_str(), opened.at, opened.body.as_str()),
+            ("m01", 7, *body)
         );
         let env: Envelope = serde_json::from_str(sealed).unwrap();
-        assert_eq!((env.schema.as_str(), env.group.len()), (GROUP_SCHEMA, 3));
+        let tree = env.tree.unwrap();
+        assert_eq!(env.schema, GROUP_SCHEMA);
+        assert_eq!((tree.size, tree.index), (3, i as u64));
+        // Three leaves: the first two one level deeper than the third.
+        assert_eq!(tree.path.len(), if i < 2 { 2 } else { 1 });
     }
     // Opened in turn by one trust: the second and third from memory.
     let trust = trust_of(&m01);
-    for ((key, _), sealed) in step_puts().iter().zip(&sealed) {
+    for ((key, _), sealed) in STEP.iter().zip(&sealed) {
         assert!(trust.open(sealed.as_bytes(), Kind::Put, key, "").is_ok());
     }
     // A put alone is sealed as ever.
-    let one = m01.seal_puts(8, step_puts().into_iter().take(1).collect());
+    let one = sealed_together(&m01, &STEP[..1]);
     let env: Envelope = serde_json::from_str(&one[0]).unwrap();
-    assert_eq!((env.schema.as_str(), env.group.len()), (SIGNED_SCHEMA, 0));
+    assert_eq!((env.schema.as_str(), env.tree), (SIGNED_SCHEMA, None));
     assert!(trust
         .open(one[0].as_bytes(), Kind::Put, "cellwatch/m01/alarms/ese", "")
         .is_ok());
     assert_eq!(m01.signing().0, 2);
+    // A large step: one signature, each path short.
+    let keys: Vec<String> = (0..1000)
+        .map(|i| format!("cellwatch/m01/alarms/a{i}"))
+        .collect();
+    let puts: Vec<(&str, &str)> = keys.iter().map(|k| (k.as_str(), "{}")).collect();
+    let sealed = sealed_together(&m01, &puts);
+    assert_eq!(m01.signing().0, 3);
+    for (i, sealed) in sealed.iter().enumerate().step_by(97) {
+        let env: Envelope = serde_json::from_str(sealed).unwrap();
+        assert!(env.tree.unwrap().path.len() <= 10);
+        assert!(trust
+            .open(sealed.as_bytes(), Kind::Put, &keys[i], "")
+            .is_ok());
+    }
 }
 
 #[test]
-fn a_grouped_envelope_edited_moved_or_forged_is_refused() {
+fn a_sealed_together_envelope_edited_moved_or_forged_is_refused() {
     let m01 = AgentKey::generate("m01");
     let m02 = AgentKey::generate("m02");
     let trust = trust_of(&m01);
-    let sealed = m01.seal_puts(7, step_puts());
-    let (alarm, state) = ("cellwatch/m01/alarms/ese", "cellwatch/m01/state");
-    // Opened once, so its group's signature is remembered: what follows
+    let sealed = sealed_together(&m01, &STEP);
+    let (alarm, state) = (STEP[0].0, STEP[1].0);
+    // Opened once, so its root's signature is remembered: what follows
     // must be refused all the same.
     assert!(trust
         .open(sealed[0].as_bytes(), Kind::Put, alarm, "")
         .is_ok());
     let bad = Err(Distrust::BadSignature("m01".into()));
-    // Its body edited: its digest is no longer in the group.
+    // Its body edited: its leaf no longer leads to the signed root.
     let edited = reparsed(&sealed[0], |e| e.body = "{\"id\":\"csd\"}".into());
     assert_eq!(trust.open(edited.as_bytes(), Kind::Put, alarm, ""), bad);
-    // Its body edited and the group made to name the new digest.
-    let regrouped = reparsed(&sealed[0], |e| {
-        e.body = "{\"id\":\"csd\"}".into();
-        e.group[0] = hex::encode(Sha256::digest(signed_bytes(
-            Kind::Put,
-            "m01",
-            alarm,
-            "",
-            7,
-            &e.body,
-        )));
-    });
-    assert_eq!(trust.open(regrouped.as_bytes(), Kind::Put, alarm, ""), bad);
     // Its time changed (a replay as news).
     let later = reparsed(&sealed[1], |e| e.at = 9);
     assert_eq!(trust.open(later.as_bytes(), Kind::Put, state, ""), bad);
+    // Its place changed: another index, another size, a sibling's path.
+    let moved = |edit: fn(&mut InTree)| reparsed(&sealed[0], |e| edit(e.tree.as_mut().unwrap()));
+    for forged in [
+        moved(|t| t.index = 1),
+        moved(|t| t.size = 4),
+        moved(|t| t.path.truncate(1)),
+        moved(|t| t.path.swap(0, 1)),
+        moved(|t| t.path[0] = "zz".into()),
+    ] {
+        assert_eq!(trust.open(forged.as_bytes(), Kind::Put, alarm, ""), bad);
+    }
     // A sibling put on another key than sealed for.
     assert!(matches!(
         trust.open(sealed[1].as_bytes(), Kind::Put, alarm, ""),
         Err(Distrust::Misplaced { .. })
     ));
-    // m02's agent sealing a group in m01's name.
-    let forged = m02.seal_puts(7, step_puts());
+    // m02's agent sealing a step in m01's name.
+    let forged = sealed_together(&m02, &STEP);
     let forged = reparsed(&forged[0], |e| e.cell = "m01".into());
     assert_eq!(trust.open(forged.as_bytes(), Kind::Put, alarm, ""), bad);
-    // m01's key replaced in the trust file: the remembered group is not
+    // m01's key replaced in the trust file: the remembered root is not
     // believed under the new key.
     let mut rekeyed = trust.clone();
     rekeyed.insert("m01", *trust_of(&m02).cells.get("m02").unwrap());
@@ -246,15 +265,14 @@ fn a_grouped_envelope_edited_moved_or_forged_is_refused() {
         rekeyed.open(sealed[0].as_bytes(), Kind::Put, alarm, ""),
         bad
     );
-    // A group of one, a group in a v1 envelope, a digest that is no digest.
+    // A tree of one, a tree in a v1 envelope, a v2 envelope without one.
     let not_an_envelope = |sealed: String| {
         assert!(matches!(
             trust.open(sealed.as_bytes(), Kind::Put, alarm, ""),
             Err(Distrust::NotAnEnvelope(_))
         ));
     };
-    not_an_envelope(reparsed(&sealed[0], |e| e.group.truncate(1)));
+    not_an_envelope(moved(|t| t.size = 1));
     not_an_envelope(reparsed(&sealed[0], |e| e.schema = SIGNED_SCHEMA.into()));
-    let odd = reparsed(&sealed[0], |e| e.group[2] = "zz".into());
-    assert_eq!(trust.open(odd.as_bytes(), Kind::Put, alarm, ""), bad);
+    not_an_envelope(reparsed(&sealed[0], |e| e.tree = None));
 }
