@@ -457,12 +457,13 @@ impl AgentKey {
 
     /// Seals publications put together, `(key, body)` each, at `at` (ms):
     /// one signature over them all ([`GROUP_SCHEMA`]); one alone is sealed
-    /// as [`AgentKey::seal`] does. At most [`MAX_GROUP`] (the caller
-    /// splits a longer list); each envelope is then written by
-    /// [`SealedPuts::envelope`] with the same key and body.
+    /// as [`AgentKey::seal`] does, and so is each of a list longer than
+    /// [`MAX_GROUP`] (which no reader would take as one tree: the caller
+    /// splits it). Each envelope is then written by [`SealedPuts::envelope`]
+    /// with the same key and body.
     pub fn seal_puts(&self, at: u64, puts: &[(&str, &str)]) -> SealedPuts<'_> {
         let size = puts.len();
-        if size < 2 {
+        if !(2..=MAX_GROUP).contains(&size) {
             return SealedPuts {
                 key: self,
                 at,
