@@ -17,6 +17,7 @@ mod browser;
 mod cell_loop;
 mod commands;
 mod console;
+mod cycle;
 mod dashboards;
 mod docs;
 mod durability;

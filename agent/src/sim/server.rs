@@ -261,6 +261,25 @@ impl SimServer {
         self.write(&values)
     }
 
+    /// Writes values, each with its own source timestamp, in one write: the
+    /// server takes them in one publishing cycle, as a PLC's changes of one
+    /// scan.
+    ///
+    /// # Errors
+    /// A name that is not a variable of this server.
+    pub fn set_each_at(&self, values: &[(String, bool, DateTime)]) -> Result<(), String> {
+        let deleted = self
+            .deleted
+            .lock()
+            .map_err(|_| "simulator state poisoned")?;
+        let values: Vec<(NodeId, DataValue)> = values
+            .iter()
+            .filter(|(s, _, _)| !deleted.contains(s))
+            .map(|(s, v, at)| (NodeId::new(self.ns, s.as_str()), DataValue::new_at(*v, *at)))
+            .collect();
+        self.write(&values)
+    }
+
     /// Writes values to their nodes, notifying subscribers (but the deaf
     /// ones a silent deletion left behind).
     fn write(&self, values: &[(NodeId, DataValue)]) -> Result<(), String> {

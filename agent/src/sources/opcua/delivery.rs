@@ -1,11 +1,14 @@
 //! Each publish's changes handed to the cell loop: in sequence-number
-//! order across publishes ([`Sequence`]), in source-time order within one,
-//! with what the server's queues dropped said (the `opcua-overflow` alarm)
-//! and every loss said as a [`SourceEvent::Gap`] before what follows it.
+//! order across publishes ([`Sequence`]), in source-time order within one
+//! publishing cycle — a cycle the server split over several publishes is
+//! taken whole ([`InTimeOrder`]) — with what the server's queues dropped
+//! said (the `opcua-overflow` alarm) and every loss said as a
+//! [`SourceEvent::Gap`] before what follows it.
 
 use std::collections::BTreeSet;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
 
 use cellwatch_models::engine::{Reading, TagReading};
 use opcua::client::{MonitoredItemMap, OnSubscriptionNotificationCore};
@@ -22,6 +25,7 @@ use super::names::Names;
 use super::overflow::Overflow;
 use super::sequence::{Next, Sequence};
 use super::subscription::{reading, source_time, Heard, Monitored, Uses, OVERFLOW_ALARM};
+use crate::config::OpcUaConfig;
 use crate::sources::{SourceEvent, SourceSender};
 
 /// One subscription's delivery, shared by the session's notification
@@ -48,6 +52,9 @@ pub(super) struct Shared {
     pub(super) items: Arc<Mutex<Items>>,
     /// Woken when a monitored item fails.
     pub(super) failed: Arc<Notify>,
+    /// Woken when the publishes of a cycle start being held for the rest
+    /// of it: the supervisor hands them on if the rest never comes.
+    pub(super) held: Arc<Notify>,
 }
 
 impl Shared {
@@ -87,6 +94,27 @@ impl Delivery {
     /// [`Delivery::resume`] or [`Delivery::gap`].
     pub(super) fn pause(&mut self) {
         self.paused = true;
+        // A cycle cut short by the loss: what came of it goes on now.
+        self.order.flush();
+    }
+
+    /// The publishing interval the server granted: publishes stamped
+    /// further apart than half of it are of different cycles.
+    pub(super) fn granted(&mut self, interval: Duration) {
+        self.order.cycle.interval = interval;
+    }
+
+    /// Hands on a cycle held a publishing interval for the rest of it (the
+    /// rest never came: its last publish was full too). When to look
+    /// again, if one is held still.
+    pub(super) fn flush_stale(&mut self) -> Option<Instant> {
+        let since = self.order.cycle.since?;
+        let until = since + self.order.cycle.interval;
+        if Instant::now() < until {
+            return Some(until);
+        }
+        self.order.flush();
+        None
     }
 
     /// The subscription goes on where it was, nothing lost: the cell loop
@@ -161,7 +189,7 @@ pub(super) fn delivery(
     told: Told,
     heard: Arc<Heard>,
     queue_size: Arc<AtomicU32>,
-    overflow_clear_after: std::time::Duration,
+    config: &OpcUaConfig,
 ) -> Shared {
     let Told {
         tx,
@@ -170,6 +198,7 @@ pub(super) fn delivery(
     } = told;
     let items = Arc::new(Mutex::new(Items::new(monitored.len())));
     let failed = Arc::new(Notify::new());
+    let held = Arc::new(Notify::new());
     Shared {
         delivery: Arc::new(Mutex::new(Delivery {
             id: 0,
@@ -183,25 +212,41 @@ pub(super) fn delivery(
                 heard,
                 names,
                 queue_size,
-                overflow: Overflow::new(overflow_clear_after),
+                overflow: Overflow::new(config.overflow_clear_after),
                 items: items.clone(),
                 failed: failed.clone(),
                 conditions,
+                cycle: Cycle {
+                    full: config.max_notifications_per_publish as usize,
+                    interval: config.publishing_interval,
+                    held: Vec::new(),
+                    since: None,
+                    stamp: 0,
+                    told: held.clone(),
+                },
             },
         })),
         missing: Arc::new(Notify::new()),
         items,
         failed,
+        held,
     }
 }
 
-/// Passes each publish's data changes to the engine in source-time order.
+/// Passes each publishing cycle's data changes to the engine in
+/// source-time order.
 ///
 /// A server sends the changes of one publish in no particular order; a
 /// trigger processed before the change it depends on would leave a timer
-/// unarmed. The library's own dispatch collects them ([`Collector`]), then
-/// they are sorted by source timestamp (stable, so equal times keep the
-/// server's order).
+/// unarmed. And a cycle with more changes than a publish may carry is
+/// split over several, in the server's own order of items (async-opcua's
+/// server goes through its items in hash order): a later change of one
+/// tag may come a publish before an earlier change of another, and two
+/// contacts never closed together would be seen closed together. So a
+/// full publish ([`Cycle`]) is held for the rest of its cycle, the
+/// library's own dispatch collects the cycle's changes ([`Collector`]),
+/// then they are sorted by source timestamp (stable, so equal times keep
+/// the server's order).
 struct InTimeOrder {
     /// The node of client handle `i + 1`, and its tags.
     monitored: Arc<Monitored>,
@@ -218,6 +263,66 @@ struct InTimeOrder {
     failed: Arc<Notify>,
     /// The PLC's own alarms, read from the publishes' events.
     conditions: Arc<Mutex<Conditions>>,
+    cycle: Cycle,
+}
+
+/// The publishes of a cycle held for the rest of it.
+///
+/// Servers fill a publish up to `max_notifications_per_publish` and send
+/// the rest of the cycle in the next (OPC UA Part 4, 5.13.5: the flag
+/// `MoreNotifications`, which async-opcua's server sets only on the last
+/// response it sends at once, and its client does not pass on): a full
+/// publish may not be the last of its cycle, one with fewer is. A full
+/// one is held; the cycle is handed on whole at the first that is not
+/// full, before a publish stamped half a publishing interval or more
+/// later (async-opcua stamps a cycle's publishes alike, open62541 and
+/// node-opcua each as sent, when their order is already the order of
+/// time), after [`MAX_CYCLE`] publishes, or when the supervisor finds it
+/// held a publishing interval (a last publish that was full too).
+struct Cycle {
+    /// A publish with this many notifications is full (0: none is).
+    full: usize,
+    /// The publishing interval the server granted.
+    interval: Duration,
+    held: Vec<NotificationMessage>,
+    /// When the first held publish came, and its publish time (ticks).
+    since: Option<Instant>,
+    stamp: i64,
+    /// The supervisor, told when a cycle starts being held.
+    told: Arc<Notify>,
+}
+
+/// The most publishes of one cycle held before they are handed on anyway.
+const MAX_CYCLE: usize = 64;
+
+impl Cycle {
+    /// `m` is of the cycle held (if one is).
+    fn same(&self, m: &NotificationMessage) -> bool {
+        let half = i64::try_from(self.interval.as_nanos() / 200).unwrap_or(i64::MAX);
+        m.publish_time.ticks().abs_diff(self.stamp) < half.unsigned_abs()
+    }
+
+    /// `m` is full: more of its cycle may follow.
+    fn is_full(&self, m: &NotificationMessage) -> bool {
+        self.full > 0 && notifications(m) >= self.full
+    }
+}
+
+/// How many notifications (data changes and events) a publish carries.
+fn notifications(m: &NotificationMessage) -> usize {
+    m.notification_data
+        .iter()
+        .flatten()
+        .map(|o| {
+            if let Some(d) = o.inner_as::<DataChangeNotification>() {
+                d.monitored_items.as_ref().map_or(0, Vec::len)
+            } else if let Some(e) = o.inner_as::<EventNotificationList>() {
+                e.events.as_ref().map_or(0, Vec::len)
+            } else {
+                0
+            }
+        })
+        .sum()
 }
 
 /// One publish's readings, in the server's order.
@@ -314,6 +419,7 @@ impl InTimeOrder {
     /// Changes were lost for good: the cell loop is told before what
     /// follows.
     fn gap(&mut self, why: String) {
+        self.flush();
         tracing::warn!("{why}");
         send_blocking(
             &self.tx,
@@ -325,12 +431,39 @@ impl InTimeOrder {
         );
     }
 
+    /// A publish, in sequence: held if full (more of its cycle may
+    /// follow), else handed on with the cycle held before it.
     fn publish(&mut self, notification: NotificationMessage) {
-        // The start of the agent's own latency: the publish is decoded,
-        // its values not yet looked at.
-        let received = std::time::Instant::now();
         // Keep-alives (no data) come here too: the subscription is alive.
         self.heard.beat();
+        if self.cycle.since.is_some() && !self.cycle.same(&notification) {
+            self.flush();
+        }
+        if self.cycle.is_full(&notification) && self.cycle.held.len() + 1 < MAX_CYCLE {
+            if self.cycle.since.is_none() {
+                self.cycle.since = Some(Instant::now());
+                self.cycle.stamp = notification.publish_time.ticks();
+                self.cycle.told.notify_one();
+            }
+            self.cycle.held.push(notification);
+            return;
+        }
+        self.hand_on(Some(notification));
+    }
+
+    /// Hands on the cycle held, if one is (the rest of it will not come).
+    fn flush(&mut self) {
+        if self.cycle.since.is_some() {
+            self.hand_on(None);
+        }
+    }
+
+    /// Hands on the cycle held and `last`, their changes together.
+    fn hand_on(&mut self, last: Option<NotificationMessage>) {
+        // The start of the agent's own latency: the cycle's first publish
+        // is decoded, its values not yet looked at.
+        let received = self.cycle.since.take().unwrap_or_else(Instant::now);
+        let held = std::mem::take(&mut self.cycle.held);
         let mut items = self.items.lock().unwrap_or_else(|e| e.into_inner());
         let mut c = Collector {
             monitored: &self.monitored,
@@ -343,7 +476,9 @@ impl InTimeOrder {
             closed: None,
             events: Vec::new(),
         };
-        c.notification(notification);
+        for m in held.into_iter().chain(last) {
+            c.notification(m);
+        }
         if c.failed {
             self.failed.notify_one();
         }
@@ -452,3 +587,6 @@ fn send_blocking(tx: &SourceSender, event: SourceEvent) {
         }
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -604,12 +604,25 @@ async fn watch(session: &Session, ctx: &Context, l: &Live) -> String {
     let limit = sub.keep_alive * SILENT_KEEP_ALIVES;
     let period = (sub.keep_alive / 2).max(Duration::from_millis(50));
     let (mut tending, mut next) = (tend::Tending::new(&ctx.config), std::time::Instant::now());
+    // When a cycle held for the rest of it is handed on anyway.
+    let mut held: Option<std::time::Instant> = None;
     loop {
-        let wait = period.min(next.saturating_duration_since(std::time::Instant::now()));
+        let now = std::time::Instant::now();
+        let wait = period
+            .min(next.saturating_duration_since(now))
+            .min(held.map_or(period, |at| at.saturating_duration_since(now)));
         tokio::select! {
             () = tokio::time::sleep(wait) => {
-                next = tending.tend(&tend::Tended { session, sub: sub.id, config: &ctx.config, uses: &ctx.uses, nodes: &l.nodes, shared: &l.shared, heard: &l.heard, tx: &ctx.tx }).await;
+                let now = std::time::Instant::now();
+                let for_held = held.is_some_and(|at| at <= now);
+                if for_held {
+                    held = l.shared.lock().flush_stale();
+                }
+                if !for_held || next <= now {
+                    next = tending.tend(&tend::Tended { session, sub: sub.id, config: &ctx.config, uses: &ctx.uses, nodes: &l.nodes, shared: &l.shared, heard: &l.heard, tx: &ctx.tx }).await;
+                }
             }
+            () = l.shared.held.notified() => held = l.shared.lock().flush_stale(),
             () = l.shared.failed.notified() => next = std::time::Instant::now(),
             () = l.shared.missing.notified() => {
                 if let Err(resume::Unfilled::Gone(status)) = resume::fill(session, sub.id, &l.shared).await {
@@ -726,7 +739,7 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
         told,
         heard.clone(),
         queue_size.clone(),
-        ctx.config.overflow_clear_after,
+        &ctx.config,
     );
     let subscription = subscription::subscribe(
         session,
@@ -741,7 +754,11 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
         delivery::Feed(shared.clone()),
     )
     .await?;
-    shared.lock().id = subscription.id;
+    {
+        let mut d = shared.lock();
+        d.id = subscription.id;
+        d.granted(subscription.interval);
+    }
     conditions::follow(
         session,
         subscription.id,

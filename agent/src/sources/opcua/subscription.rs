@@ -84,6 +84,8 @@ impl Heard {
 pub(super) struct Subscribed {
     pub(super) id: u32,
     pub(super) keep_alive: Duration,
+    /// The publishing interval granted.
+    pub(super) interval: Duration,
 }
 
 /// What the server grants a subscription's items: the queue size per item
@@ -133,13 +135,20 @@ pub(super) async fn subscribe(
         }
     };
     // The server may revise the interval and the keep-alive count.
-    let keep_alive = {
+    let (interval, keep_alive) = {
         let state = session.subscription_state().lock();
-        state
-            .get(sub)
-            .map_or(config.publishing_interval * KEEP_ALIVE_COUNT, |s| {
-                s.publishing_interval() * s.max_keep_alive_count().max(1)
-            })
+        state.get(sub).map_or(
+            (
+                config.publishing_interval,
+                config.publishing_interval * KEEP_ALIVE_COUNT,
+            ),
+            |s| {
+                (
+                    s.publishing_interval(),
+                    s.publishing_interval() * s.max_keep_alive_count().max(1),
+                )
+            },
+        )
     };
     let chunk = max_items_per_call(session).await.min(MAX_ITEMS_PER_CALL);
     // Requests are made one call's worth at a time: 100,000 of them at
@@ -195,6 +204,7 @@ pub(super) async fn subscribe(
     Some(Subscribed {
         id: sub,
         keep_alive,
+        interval,
     })
 }
 
