@@ -197,7 +197,7 @@ fn sampling_zero_is_exception_based_and_queues_fit_it() {
             c.opcua.as_ref().unwrap().queue_size,
             c.opcua.as_ref().unwrap().max_notifications_per_publish
         ),
-        (10, 1_000)
+        (10, 10_000)
     );
     assert_eq!(
         errors(&with("queue_size = 0")),

@@ -104,12 +104,12 @@ impl Delivery {
         self.order.cycle.interval = interval;
     }
 
-    /// Hands on a cycle held a publishing interval for the rest of it (the
-    /// rest never came: its last publish was full too). When to look
-    /// again, if one is held still.
+    /// Hands on a cycle whose rest has not come for a publishing interval
+    /// (its last publish was full too). When to look again, if one is
+    /// held still.
     pub(super) fn flush_stale(&mut self) -> Option<Instant> {
-        let since = self.order.cycle.since?;
-        let until = since + self.order.cycle.interval;
+        self.order.cycle.since?;
+        let until = self.order.cycle.last + self.order.cycle.interval;
         if Instant::now() < until {
             return Some(until);
         }
@@ -222,6 +222,7 @@ pub(super) fn delivery(
                     held: Vec::new(),
                     since: None,
                     stamp: 0,
+                    last: Instant::now(),
                     told: held.clone(),
                 },
             },
@@ -277,8 +278,9 @@ struct InTimeOrder {
 /// full, before a publish stamped half a publishing interval or more
 /// later (async-opcua stamps a cycle's publishes alike, open62541 and
 /// node-opcua each as sent, when their order is already the order of
-/// time), after [`MAX_CYCLE`] publishes, or when the supervisor finds it
-/// held a publishing interval (a last publish that was full too).
+/// time), after [`MAX_CYCLE`] publishes, or when the supervisor finds
+/// nothing more of it came for a publishing interval (a last publish that
+/// was full too).
 struct Cycle {
     /// A publish with this many notifications is full (0: none is).
     full: usize,
@@ -288,6 +290,8 @@ struct Cycle {
     /// When the first held publish came, and its publish time (ticks).
     since: Option<Instant>,
     stamp: i64,
+    /// When the last held publish came.
+    last: Instant,
     /// The supervisor, told when a cycle starts being held.
     told: Arc<Notify>,
 }
@@ -440,8 +444,9 @@ impl InTimeOrder {
             self.flush();
         }
         if self.cycle.is_full(&notification) && self.cycle.held.len() + 1 < MAX_CYCLE {
+            self.cycle.last = Instant::now();
             if self.cycle.since.is_none() {
-                self.cycle.since = Some(Instant::now());
+                self.cycle.since = Some(self.cycle.last);
                 self.cycle.stamp = notification.publish_time.ticks();
                 self.cycle.told.notify_one();
             }
