@@ -113,6 +113,10 @@ impl Delivery {
         if Instant::now() < until {
             return Some(until);
         }
+        tracing::debug!(
+            held = self.order.cycle.changes,
+            "nothing more of a split publishing cycle for a publishing interval: judged as it came"
+        );
         self.order.flush();
         None
     }
@@ -444,8 +448,15 @@ impl InTimeOrder {
             self.flush();
         }
         let count = notifications(&notification);
-        if self.cycle.full > 0 && count >= self.cycle.full && self.cycle.changes + count < MAX_CYCLE
-        {
+        let full = self.cycle.full > 0 && count >= self.cycle.full;
+        if full && self.cycle.changes + count >= MAX_CYCLE {
+            tracing::warn!(
+                held = self.cycle.changes,
+                "a publishing cycle of more than {MAX_CYCLE} changes: judged in parts, \
+                 their order across the parts not assured"
+            );
+        }
+        if full && self.cycle.changes + count < MAX_CYCLE {
             self.cycle.changes += count;
             self.cycle.last = Instant::now();
             if self.cycle.since.is_none() {
