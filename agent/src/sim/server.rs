@@ -248,17 +248,7 @@ impl SimServer {
     /// # Errors
     /// A name that is not a variable of this server.
     pub fn set_at(&self, values: &[(String, bool)], at: DateTime) -> Result<(), String> {
-        let now = at;
-        let deleted = self
-            .deleted
-            .lock()
-            .map_err(|_| "simulator state poisoned")?;
-        let values: Vec<(NodeId, DataValue)> = values
-            .iter()
-            .filter(|(s, _)| !deleted.contains(s))
-            .map(|(s, v)| (NodeId::new(self.ns, s.as_str()), DataValue::new_at(*v, now)))
-            .collect();
-        self.write(&values)
+        self.write_named(values.iter().map(|(s, v)| (s.as_str(), *v, at)))
     }
 
     /// Writes values, each with its own source timestamp, in one write: the
@@ -268,14 +258,22 @@ impl SimServer {
     /// # Errors
     /// A name that is not a variable of this server.
     pub fn set_each_at(&self, values: &[(String, bool, DateTime)]) -> Result<(), String> {
+        self.write_named(values.iter().map(|(s, v, at)| (s.as_str(), *v, *at)))
+    }
+
+    /// Writes named values with their source timestamps, but to the
+    /// variables deleted.
+    fn write_named<'a>(
+        &self,
+        values: impl Iterator<Item = (&'a str, bool, DateTime)>,
+    ) -> Result<(), String> {
         let deleted = self
             .deleted
             .lock()
             .map_err(|_| "simulator state poisoned")?;
         let values: Vec<(NodeId, DataValue)> = values
-            .iter()
-            .filter(|(s, _, _)| !deleted.contains(s))
-            .map(|(s, v, at)| (NodeId::new(self.ns, s.as_str()), DataValue::new_at(*v, *at)))
+            .filter(|(s, _, _)| !deleted.contains(*s))
+            .map(|(s, v, at)| (NodeId::new(self.ns, s), DataValue::new_at(v, at)))
             .collect();
         self.write(&values)
     }

@@ -104,12 +104,14 @@ impl Delivery {
         self.order.cycle.interval = interval;
     }
 
-    /// Hands on a cycle whose rest has not come for a publishing interval
-    /// (its last publish was full too). When to look again, if one is
-    /// held still.
+    /// Hands on a cycle whose rest has not come for a publishing interval,
+    /// or four times the longest wait seen between two publishes of a
+    /// cycle if longer (a server slow to answer), when its last publish
+    /// was full too. When to look again, if one is held still.
     pub(super) fn flush_stale(&mut self) -> Option<Instant> {
         self.order.cycle.since?;
-        let until = self.order.cycle.last + self.order.cycle.interval;
+        let cycle = &self.order.cycle;
+        let until = cycle.last + cycle.interval.max(cycle.slowest * 4);
         if Instant::now() < until {
             return Some(until);
         }
@@ -228,6 +230,7 @@ pub(super) fn delivery(
                     stamp: 0,
                     last: Instant::now(),
                     changes: 0,
+                    slowest: Duration::ZERO,
                     told: held.clone(),
                 },
             },
@@ -284,7 +287,8 @@ struct InTimeOrder {
 /// later (async-opcua stamps a cycle's publishes alike, open62541 and
 /// node-opcua each as sent, when their order is already the order of
 /// time), past [`MAX_CYCLE`] changes held, or when the supervisor finds
-/// nothing more of it came for a publishing interval (a last publish that
+/// nothing more of it came for a publishing interval, or four times the
+/// longest wait seen between two publishes of a cycle (a last publish that
 /// was full too).
 struct Cycle {
     /// A publish with this many notifications is full (0: none is).
@@ -299,6 +303,9 @@ struct Cycle {
     last: Instant,
     /// The changes held.
     changes: usize,
+    /// The longest wait seen between two publishes of one cycle, a
+    /// sixteenth forgotten with each cycle.
+    slowest: Duration,
     /// The supervisor, told when a cycle starts being held.
     told: Arc<Notify>,
 }
@@ -444,8 +451,13 @@ impl InTimeOrder {
     fn publish(&mut self, notification: NotificationMessage) {
         // Keep-alives (no data) come here too: the subscription is alive.
         self.heard.beat();
-        if self.cycle.since.is_some() && !self.cycle.same(&notification) {
-            self.flush();
+        if self.cycle.since.is_some() {
+            if self.cycle.same(&notification) {
+                let waited = self.cycle.last.elapsed();
+                self.cycle.slowest = self.cycle.slowest.max(waited);
+            } else {
+                self.flush();
+            }
         }
         let count = notifications(&notification);
         let full = self.cycle.full > 0 && count >= self.cycle.full;
@@ -483,7 +495,10 @@ impl InTimeOrder {
         // is decoded, its values not yet looked at.
         let received = self.cycle.since.take().unwrap_or_else(Instant::now);
         let held = std::mem::take(&mut self.cycle.held);
-        self.cycle.changes = 0;
+        if !held.is_empty() {
+            self.cycle.changes = 0;
+            self.cycle.slowest -= self.cycle.slowest / 16;
+        }
         let mut items = self.items.lock().unwrap_or_else(|e| e.into_inner());
         let mut c = Collector {
             monitored: &self.monitored,

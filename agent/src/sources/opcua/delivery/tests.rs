@@ -184,3 +184,26 @@ fn a_cycle_is_held_for_at_most_max_cycle_changes() {
     assert_eq!(got.len(), 1);
     assert_eq!(got[0].len(), super::MAX_CYCLE);
 }
+
+#[test]
+fn a_server_slow_to_send_the_rest_of_a_cycle_is_waited_for_longer() {
+    let (shared, mut rx, _dir) = cell();
+    shared.lock().granted(Duration::from_millis(1));
+    shared.lock().arrived(publish(1, T, &noise(FULL, T)));
+    // The next publish of the cycle came ten seconds after the first.
+    let before = std::time::Instant::now().checked_sub(Duration::from_secs(10));
+    shared.lock().order.cycle.last = before.unwrap();
+    shared.lock().arrived(publish(2, T, &noise(FULL, T)));
+    assert!(batches(&mut rx).is_empty());
+    // Full too, and nothing after it: held four times that wait, not
+    // the publishing interval (here 1 ms).
+    let again = shared.lock().flush_stale().expect("still held");
+    assert!(again >= std::time::Instant::now() + Duration::from_secs(30));
+    assert!(batches(&mut rx).is_empty());
+    // The cycle's rest: handed on whole; the wait is remembered, a
+    // sixteenth of it forgotten.
+    shared.lock().arrived(publish(3, T, &[(1, true, T + 1)]));
+    assert_eq!(batches(&mut rx)[0].len(), 2 * FULL + 1);
+    let slowest = shared.lock().order.cycle.slowest;
+    assert!(slowest >= Duration::from_secs(9) && slowest < Duration::from_secs(10));
+}
