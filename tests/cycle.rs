@@ -24,12 +24,27 @@ const NOISE: usize = 160;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn two_contacts_never_closed_together_raise_nothing_when_the_server_splits_the_cycle() {
+    // The agent asks 100 a publish, and the server grants them.
+    split_cycles(100, 0).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_server_that_sends_fewer_than_asked_is_found_out_and_its_cycles_judged_whole() {
+    // The agent asks the default 10,000; the server sends 100 at most and
+    // does not say so.
+    split_cycles(10_000, 100).await;
+}
+
+/// Rounds of cycles of more than 100 changes in which A and B are never
+/// closed together, the agent asking `asked` notifications a publish of
+/// a server that sends `server_cap` at most (0: as many as asked).
+async fn split_cycles(asked: u32, server_cap: u64) {
     let d = tempfile::tempdir().unwrap();
     let dir = d.path();
     let noise = |k: usize| format!("N{k:03}");
     let mut initial = vec![("A".to_string(), false), ("B".to_string(), true)];
     initial.extend((0..NOISE).map(|k| (noise(k), false)));
-    let server = cellwatch::sim::server::SimServer::start(
+    let server = cellwatch::sim::server::SimServer::start_sending_at_most(
         &SimOptions {
             listen: "127.0.0.1:0".parse().unwrap(),
             pki_dir: dir.join("sim-pki"),
@@ -39,6 +54,7 @@ async fn two_contacts_never_closed_together_raise_nothing_when_the_server_splits
         "cnc",
         "cellwatch simulated PLC",
         &initial,
+        server_cap,
     )
     .await
     .unwrap();
@@ -68,7 +84,7 @@ id = "m01ps0004"
 endpoint = "{}"
 pki_dir = {}
 namespace_uri = "urn:cellwatch:sim:cnc:plc"
-max_notifications_per_publish = 100
+max_notifications_per_publish = {asked}
 sampling_interval = "0"
 
 {tags}[[checks.switching]]
@@ -142,6 +158,21 @@ path = {}
             })
             .collect()
     };
+    if server_cap > 0 {
+        // A cycle of noise alone, split by the server: its two publishes,
+        // stamped alike, the first not full by what the agent asked, tell
+        // the agent the server's limit before A and B move.
+        server.set_each_at(&flip(NOISE)).unwrap();
+        snapshot_until(&client, "every noise tag set", |s| {
+            s["tags"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .filter(|t| t["address"].as_str().is_some_and(|a| a.starts_with('N')))
+                .all(|t| t["value"] == true)
+        })
+        .await;
+    }
     for round in 0..12usize {
         let count = NOISE - 4 * round;
         let mut opening = flip(count);

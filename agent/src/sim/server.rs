@@ -136,6 +136,22 @@ impl SimServer {
         title: &str,
         variables: &[(String, bool)],
     ) -> Result<SimServer, String> {
+        Self::start_sending_at_most(options, app, title, variables, 0).await
+    }
+
+    /// [`SimServer::start`], a server that sends at most
+    /// `max_notifications` notifications a publish whatever a client asks
+    /// (0: the library's limit), as some PLCs' servers do.
+    ///
+    /// # Errors
+    /// The port cannot be bound or the server cannot be built.
+    pub async fn start_sending_at_most(
+        options: &SimOptions,
+        app: &str,
+        title: &str,
+        variables: &[(String, bool)],
+        max_notifications: u64,
+    ) -> Result<SimServer, String> {
         let listener = TcpListener::bind(options.listen)
             .await
             .map_err(|e| format!("cannot listen on {}: {e}", options.listen))?;
@@ -187,6 +203,12 @@ impl SimServer {
             .limits_mut()
             .subscriptions
             .max_monitored_item_queue_size = 1000;
+        if max_notifications > 0 {
+            builder
+                .limits_mut()
+                .subscriptions
+                .max_notifications_per_publish = max_notifications;
+        }
         // A client it connects to (reverse connect) that was not listening
         // is tried again a second later.
         builder.config_mut().reverse_connect_failure_delay_ms = 1_000;

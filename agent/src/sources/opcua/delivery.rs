@@ -117,7 +117,7 @@ impl Delivery {
         }
         tracing::debug!(
             held = self.order.cycle.changes,
-            "nothing more of a split publishing cycle for a publishing interval: judged as it came"
+            "nothing more of a split publishing cycle came in time: judged as it came"
         );
         self.order.flush();
         None
@@ -203,6 +203,7 @@ pub(super) fn delivery(
         conditions,
     } = told;
     let items = Arc::new(Mutex::new(Items::new(monitored.len())));
+    let bound = MAX_CYCLE.max(monitored.len() * CHANGES_PER_ITEM);
     let failed = Arc::new(Notify::new());
     let held = Arc::new(Notify::new());
     Shared {
@@ -224,14 +225,17 @@ pub(super) fn delivery(
                 conditions,
                 cycle: Cycle {
                     full: config.max_notifications_per_publish as usize,
+                    asked: config.max_notifications_per_publish as usize,
                     interval: config.publishing_interval,
-                    held: Vec::new(),
+                    bound,
+                    held: Collected::default(),
                     since: None,
                     stamp: 0,
                     last: Instant::now(),
                     changes: 0,
                     slowest: Duration::ZERO,
                     told: held.clone(),
+                    handed: None,
                 },
             },
         })),
@@ -286,16 +290,22 @@ struct InTimeOrder {
 /// full, before a publish stamped half a publishing interval or more
 /// later (async-opcua stamps a cycle's publishes alike, open62541 and
 /// node-opcua each as sent, when their order is already the order of
-/// time), past [`MAX_CYCLE`] changes held, or when the supervisor finds
+/// time), past `bound` changes held, or when the supervisor finds
 /// nothing more of it came for a publishing interval, or four times the
 /// longest wait seen between two publishes of a cycle (a last publish that
 /// was full too).
 struct Cycle {
     /// A publish with this many notifications is full (0: none is).
     full: usize,
+    /// `opcua.max_notifications_per_publish`: what the agent asked.
+    asked: usize,
     /// The publishing interval the server granted.
     interval: Duration,
-    held: Vec<NotificationMessage>,
+    /// The most changes held ([`MAX_CYCLE`], or [`CHANGES_PER_ITEM`] per
+    /// monitored item if more).
+    bound: usize,
+    /// What the held publishes said, read as they came.
+    held: Collected,
     /// When the first held publish came, and its publish time (ticks).
     since: Option<Instant>,
     stamp: i64,
@@ -308,12 +318,23 @@ struct Cycle {
     slowest: Duration,
     /// The supervisor, told when a cycle starts being held.
     told: Arc<Notify>,
+    /// The last publish handed on as it came (not full, data in it): its
+    /// notifications and publish time, to tell a server that sends fewer
+    /// than asked.
+    handed: Option<(usize, i64)>,
 }
 
-/// The most changes of one cycle held before they are handed on anyway: a
-/// 100,000-tag cell's whole cycle at 1,000,000 changes/s and a 100 ms
-/// publishing interval.
+/// The changes of one cycle held before they are handed on anyway, in a
+/// cell of up to 25,000 monitored items: a 100,000-tag cell's whole cycle
+/// at 1,000,000 changes/s and a 100 ms publishing interval.
 const MAX_CYCLE: usize = 100_000;
+
+/// A cycle of a cell with many monitored items is held up to this many
+/// changes per item, if more than [`MAX_CYCLE`]: a server catching up after
+/// falling behind sends several changes of an item in one cycle. Held as
+/// readings (40 bytes each), a 100,000-item cell's bound is 16 MB.
+const CHANGES_PER_ITEM: usize = 4;
+const _: () = assert!(std::mem::size_of::<TagReading>() <= 40);
 
 impl Cycle {
     /// `m` is of the cycle held (if one is).
@@ -340,22 +361,47 @@ fn notifications(m: &NotificationMessage) -> usize {
         .sum()
 }
 
-/// One publish's readings, in the server's order.
-struct Collector<'a> {
-    monitored: &'a Monitored,
-    uses: &'a Uses,
-    items: &'a mut Items,
-    /// An item failed in this publish.
+/// What publishes said, read: their readings in the server's order, and
+/// the rest.
+#[derive(Default)]
+struct Collected {
+    /// An item failed.
     failed: bool,
     readings: Vec<TagReading>,
-    /// Tags with a value flagged `Overflow` in this publish.
+    /// Tags with a value flagged `Overflow`.
     overflowed: BTreeSet<usize>,
-    /// Values flagged `Overflow` in this publish.
+    /// Values flagged `Overflow`.
     lost: u64,
     /// A bad status change: the server closed the subscription.
     closed: Option<StatusCode>,
     /// Events (the PLC's alarms), in the server's order.
     events: Vec<EventFieldList>,
+}
+
+/// Reads one publish into `out`.
+fn collect(
+    monitored: &Monitored,
+    uses: &Uses,
+    items: &Mutex<Items>,
+    notification: NotificationMessage,
+    out: &mut Collected,
+) {
+    let mut items = items.lock().unwrap_or_else(|e| e.into_inner());
+    Collector {
+        monitored,
+        uses,
+        items: &mut items,
+        out,
+    }
+    .notification(notification);
+}
+
+/// Reads a publish's notifications.
+struct Collector<'a> {
+    monitored: &'a Monitored,
+    uses: &'a Uses,
+    items: &'a mut Items,
+    out: &'a mut Collected,
 }
 
 impl Collector<'_> {
@@ -366,18 +412,18 @@ impl Collector<'_> {
                     continue;
                 };
                 let items = change.monitored_items.unwrap_or_default();
-                self.readings.reserve(items.len());
+                self.out.readings.reserve(items.len());
                 for n in items {
                     self.data_value(n.client_handle, n.value);
                 }
             } else if obj.inner_is::<EventNotificationList>() {
                 if let Some(list) = obj.into_inner_as::<EventNotificationList>() {
-                    self.events.extend(list.events.unwrap_or_default());
+                    self.out.events.extend(list.events.unwrap_or_default());
                 }
             } else if obj.inner_is::<StatusChangeNotification>() {
                 if let Some(status) = obj.into_inner_as::<StatusChangeNotification>() {
                     if status.status.is_bad() {
-                        self.closed = Some(status.status);
+                        self.out.closed = Some(status.status);
                     }
                 }
             }
@@ -399,7 +445,7 @@ impl Collector<'_> {
             let status = value.status.unwrap_or(StatusCode::GoodNoData);
             self.items
                 .fail(handle as usize - 1, status, std::time::Instant::now());
-            self.failed = true;
+            self.out.failed = true;
         }
         let at = source_time(&value);
         let overflow = value.status.is_some_and(|s| s.overflow());
@@ -419,10 +465,10 @@ impl Collector<'_> {
     fn push(&mut self, tag: u32, reading: Reading, source_time: u64, overflow: bool) {
         let tag = tag as usize;
         if overflow {
-            self.overflowed.insert(tag);
-            self.lost += 1;
+            self.out.overflowed.insert(tag);
+            self.out.lost += 1;
         }
-        self.readings.push(TagReading {
+        self.out.readings.push(TagReading {
             tag,
             reading,
             source_time,
@@ -460,26 +506,58 @@ impl InTimeOrder {
             }
         }
         let count = notifications(&notification);
+        let stamp = notification.publish_time.ticks();
+        self.fewer_than_asked(stamp);
         let full = self.cycle.full > 0 && count >= self.cycle.full;
-        if full && self.cycle.changes + count >= MAX_CYCLE {
+        let bound = self.cycle.bound;
+        if full && self.cycle.changes + count >= bound {
             tracing::warn!(
                 held = self.cycle.changes,
-                "a publishing cycle of more than {MAX_CYCLE} changes: judged in parts, \
+                "a publishing cycle of more than {bound} changes: judged in parts, \
                  their order across the parts not assured"
             );
         }
-        if full && self.cycle.changes + count < MAX_CYCLE {
+        if full && self.cycle.changes + count < bound {
             self.cycle.changes += count;
             self.cycle.last = Instant::now();
             if self.cycle.since.is_none() {
                 self.cycle.since = Some(self.cycle.last);
-                self.cycle.stamp = notification.publish_time.ticks();
+                self.cycle.stamp = stamp;
                 self.cycle.told.notify_one();
             }
-            self.cycle.held.push(notification);
+            collect(
+                &self.monitored,
+                &self.uses,
+                &self.items,
+                notification,
+                &mut self.cycle.held,
+            );
             return;
         }
+        self.cycle.handed = (!full && count > 0).then_some((count, stamp));
         self.hand_on(Some(notification));
+    }
+
+    /// A publish stamped `stamp` exactly as the one before, which was
+    /// handed on as not full: the two are one cycle (a server stamps a
+    /// cycle's publishes with one time, or each as it sends it), and the
+    /// server sends fewer notifications a publish than the agent asked
+    /// (the response does not say how many it grants). From now on a
+    /// publish of that many is held for the rest of its cycle; the cycle
+    /// that showed it was judged in parts.
+    fn fewer_than_asked(&mut self, stamp: i64) {
+        let Some((n, at)) = self.cycle.handed.take() else {
+            return;
+        };
+        if at == stamp && n < self.cycle.full {
+            tracing::warn!(
+                "the server sends at most {n} notifications a publish, fewer than the {} asked \
+                 (opcua.max_notifications_per_publish): a publish of {n} is held for the rest \
+                 of its cycle from now on, and one cycle was judged in parts",
+                self.cycle.asked
+            );
+            self.cycle.full = n;
+        }
     }
 
     /// Hands on the cycle held, if one is (the rest of it will not come).
@@ -494,30 +572,18 @@ impl InTimeOrder {
         // The start of the agent's own latency: the cycle's first publish
         // is decoded, its values not yet looked at.
         let received = self.cycle.since.take().unwrap_or_else(Instant::now);
-        let held = std::mem::take(&mut self.cycle.held);
-        if !held.is_empty() {
+        let mut c = std::mem::take(&mut self.cycle.held);
+        if self.cycle.changes > 0 {
             self.cycle.changes = 0;
             self.cycle.slowest -= self.cycle.slowest / 16;
         }
-        let mut items = self.items.lock().unwrap_or_else(|e| e.into_inner());
-        let mut c = Collector {
-            monitored: &self.monitored,
-            uses: &self.uses,
-            items: &mut items,
-            failed: false,
-            readings: Vec::new(),
-            overflowed: BTreeSet::new(),
-            lost: 0,
-            closed: None,
-            events: Vec::new(),
-        };
-        for m in held.into_iter().chain(last) {
-            c.notification(m);
+        if let Some(m) = last {
+            collect(&self.monitored, &self.uses, &self.items, m, &mut c);
         }
         if c.failed {
             self.failed.notify_one();
         }
-        let Collector {
+        let Collected {
             mut readings,
             overflowed,
             lost,
@@ -525,7 +591,6 @@ impl InTimeOrder {
             events,
             ..
         } = c;
-        drop(items);
         // The PLC's alarms after the values of the same publish.
         let conditions = (!events.is_empty()).then(|| {
             self.conditions

@@ -21,19 +21,26 @@ const FULL: usize = 100;
 /// A delivery for tags `a`, `b` and `c` (client handles 1, 2, 3) whose
 /// publishes are full at [`FULL`], and what it hands on.
 fn cell() -> (Shared, mpsc::Receiver<SourceEvent>, tempfile::TempDir) {
+    cell_of(0)
+}
+
+/// [`cell`] with `more` tags besides (`x1`…, handles 4…).
+fn cell_of(more: usize) -> (Shared, mpsc::Receiver<SourceEvent>, tempfile::TempDir) {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("cell.toml");
-    std::fs::write(
-        &file,
-        format!(
-            "[cell]\nid = \"m01\"\n\n[opcua]\nendpoint = \"opc.tcp://127.0.0.1:4840/\"\n\
-             max_notifications_per_publish = {FULL}\npublishing_interval = \"100ms\"\n\n\
-             [zenoh]\nplain = true\n\n[[tags]]\nname = \"a\"\nnode_id = \"ns=2;s=A\"\naddress = \"A\"\n\n\
-             [[tags]]\nname = \"b\"\nnode_id = \"ns=2;s=B\"\naddress = \"B\"\n\n\
-             [[tags]]\nname = \"c\"\nnode_id = \"ns=2;s=C\"\naddress = \"C\"\n"
-        ),
-    )
-    .unwrap();
+    let mut text = format!(
+        "[cell]\nid = \"m01\"\n\n[opcua]\nendpoint = \"opc.tcp://127.0.0.1:4840/\"\n\
+         max_notifications_per_publish = {FULL}\npublishing_interval = \"100ms\"\n\n\
+         [zenoh]\nplain = true\n\n[[tags]]\nname = \"a\"\nnode_id = \"ns=2;s=A\"\naddress = \"A\"\n\n\
+         [[tags]]\nname = \"b\"\nnode_id = \"ns=2;s=B\"\naddress = \"B\"\n\n\
+         [[tags]]\nname = \"c\"\nnode_id = \"ns=2;s=C\"\naddress = \"C\"\n"
+    );
+    for i in 1..=more {
+        text.push_str(&format!(
+            "\n[[tags]]\nname = \"x{i}\"\nnode_id = \"ns=2;i={i}\"\naddress = \"X{i}\"\n"
+        ));
+    }
+    std::fs::write(&file, text).unwrap();
     let config = crate::config::load(&file).unwrap();
     let tags: &[TagConfig] = &config.tags;
     let uses = Arc::new(Uses::of_tags(tags));
@@ -206,4 +213,59 @@ fn a_server_slow_to_send_the_rest_of_a_cycle_is_waited_for_longer() {
     assert_eq!(batches(&mut rx)[0].len(), 2 * FULL + 1);
     let slowest = shared.lock().order.cycle.slowest;
     assert!(slowest >= Duration::from_secs(9) && slowest < Duration::from_secs(10));
+}
+
+#[test]
+fn a_big_cells_cycle_is_held_up_to_four_changes_per_monitored_item() {
+    // 30,000 items: a cycle of up to 120,000 changes is one.
+    let (shared, mut rx, _dir) = cell_of(30_000 - 3);
+    let publishes = 120_000 / FULL - 1;
+    for seq in 1..=publishes as u32 {
+        shared.lock().arrived(publish(seq, T, &noise(FULL, T)));
+    }
+    assert!(batches(&mut rx).is_empty(), "past 100,000 and still held");
+    shared
+        .lock()
+        .arrived(publish(publishes as u32 + 1, T, &[(1, true, T - 1)]));
+    let got = batches(&mut rx);
+    assert_eq!(got.len(), 1);
+    assert_eq!(got[0].len(), publishes * FULL + 1);
+    assert_eq!(got[0][0].0, 0, "the cycle's earliest change first");
+}
+
+#[test]
+fn a_server_sending_fewer_than_asked_is_found_out_by_two_publishes_stamped_alike() {
+    let (shared, mut rx, _dir) = cell();
+    // The server sends at most 60 a publish, not the 100 asked: its first
+    // split cycle cannot be told (two publishes, each not full, judged
+    // apart)...
+    let cap = 60;
+    shared.lock().arrived(publish(1, T, &noise(cap, T - 50)));
+    shared.lock().arrived(publish(2, T, &noise(10, T - 40)));
+    assert_eq!(batches(&mut rx).len(), 2);
+    assert_eq!(shared.lock().order.cycle.full, cap);
+    // ... but from then on a publish of 60 waits for the rest of its
+    // cycle: B's later change, then A's earlier one, judged A first.
+    let mut first = noise(cap - 1, T + 50);
+    first.push((2, true, T + 60));
+    shared.lock().arrived(publish(3, T + 100, &first));
+    assert!(
+        batches(&mut rx).is_empty(),
+        "a publish of the server's limit waits"
+    );
+    shared
+        .lock()
+        .arrived(publish(4, T + 100, &[(1, false, T + 55)]));
+    let got = batches(&mut rx);
+    assert_eq!(got.len(), 1, "{got:?}");
+    assert_eq!(order(&got[0]), [0, 1], "A's change before B's");
+    // Two cycles each in one publish, not full: nothing learnt from them.
+    shared
+        .lock()
+        .arrived(publish(5, T + 200, &noise(20, T + 150)));
+    shared
+        .lock()
+        .arrived(publish(6, T + 300, &noise(10, T + 250)));
+    assert_eq!(batches(&mut rx).len(), 2);
+    assert_eq!(shared.lock().order.cycle.full, cap);
 }
