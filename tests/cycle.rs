@@ -11,11 +11,10 @@
 //! the last one to the next sample's time, which can put A's and B's
 //! changes in either order when a round follows the last within 50 ms.
 
-use cellwatch::agent;
 use cellwatch::sim::cnc::SimOptions;
 use opcua::types::DateTime;
 
-use crate::robust::alarms;
+use crate::robust::{bus_metrics_journal, started};
 use crate::spawned::snapshot_until;
 
 /// Changes of other tags in each cycle besides the two contacts: more than
@@ -70,8 +69,6 @@ async fn split_cycles(asked: u32, server_cap: u64) {
             )
         })
         .collect();
-    crate::util::bus_pki(dir, &["agent-m01ps0004", "operator-kim"]);
-    let tls = crate::util::bus_tls(dir, "agent-m01ps0004");
     let path = |p: &std::path::Path| format!("{:?}", p.display().to_string());
     let file = dir.join("cell.toml");
     std::fs::write(
@@ -95,35 +92,14 @@ coil = "BOTH"
 fault_when = "on"
 severity = "high"
 
-[zenoh]
-listen = ["quic/127.0.0.1:0"]
-
-[zenoh.tls]
-ca = {}
-cert = {}
-key = {}
-
-[metrics]
-listen = "127.0.0.1:0"
-
-[journal]
-path = {}
-"#,
+{}"#,
             server.endpoint(),
             path(&dir.join("agent-pki")),
-            path(&tls.ca),
-            path(&tls.cert),
-            path(&tls.key),
-            path(&dir.join("journal.sqlite")),
+            bus_metrics_journal(dir),
         ),
     )
     .unwrap();
-    let c = cellwatch::config::load(&file).unwrap();
-    crate::util::trust_sim(&c, &dir.join("sim-pki"));
-    let agent = agent::start(c, None).await.unwrap();
-    let port = crate::util::agent_port(&agent).await;
-    let client = crate::util::operator_session(dir, "operator-kim", port).await;
-    let sub = alarms(&client, "m01ps0004").await;
+    let (agent, client, sub) = started(dir, &file).await;
     let seen = |a: bool, b: bool| {
         let client = client.clone();
         async move {

@@ -39,6 +39,53 @@ pub(crate) async fn alarms(session: &zenoh::Session, cell: &str) -> AlarmSubscri
         .unwrap()
 }
 
+/// The sections after a test cell's tags and checks: its bus (QUIC on a
+/// loopback port the system picks, TLS as `agent-m01ps0004` of a plant CA
+/// made in `dir`, with `operator-kim` beside it), its metrics and its
+/// journal in `dir`.
+pub(crate) fn bus_metrics_journal(dir: &std::path::Path) -> String {
+    crate::util::bus_pki(dir, &["agent-m01ps0004", "operator-kim"]);
+    let tls = crate::util::bus_tls(dir, "agent-m01ps0004");
+    let path = |p: &std::path::Path| format!("{:?}", p.display().to_string());
+    format!(
+        r#"[zenoh]
+listen = ["quic/127.0.0.1:0"]
+
+[zenoh.tls]
+ca = {}
+cert = {}
+key = {}
+
+[metrics]
+listen = "127.0.0.1:0"
+
+[journal]
+path = {}
+"#,
+        path(&tls.ca),
+        path(&tls.cert),
+        path(&tls.key),
+        path(&dir.join("journal.sqlite")),
+    )
+}
+
+/// The agent of cell `m01ps0004` configured in `file` (the sections of
+/// [`bus_metrics_journal`] in it) started, trusting the simulated PLC's
+/// certificate from `dir/sim-pki`; `operator-kim`'s session on its bus;
+/// and its alarms.
+pub(crate) async fn started(
+    dir: &std::path::Path,
+    file: &std::path::Path,
+) -> (agent::Agent, zenoh::Session, AlarmSubscriber) {
+    let c = cellwatch::config::load(file).unwrap();
+    crate::util::trust_sim(&c, &dir.join("sim-pki"));
+    let agent = agent::start(c, None).await.unwrap();
+    let port = crate::util::agent_port(&agent).await;
+    let client = crate::util::operator_session(dir, "operator-kim", port).await;
+    let sub = alarms(&client, "m01ps0004").await;
+    (agent, client, sub)
+}
+
 /// How many liveliness tokens of agents of `cell` the bus knows.
 async fn agents_alive(client: &zenoh::Session, cell: &str) -> usize {
     let replies = client
@@ -196,8 +243,6 @@ async fn source_timestamps_going_back_are_counted_and_the_agent_goes_on() {
     )
     .await
     .unwrap();
-    crate::util::bus_pki(dir, &["agent-m01ps0004", "operator-kim"]);
-    let tls = crate::util::bus_tls(dir, "agent-m01ps0004");
     let path = |p: &std::path::Path| format!("{:?}", p.display().to_string());
     let file = dir.join("cell.toml");
     std::fs::write(
@@ -226,36 +271,15 @@ id = "tmr"
 model = {}
 severity = "high"
 
-[zenoh]
-listen = ["quic/127.0.0.1:0"]
-
-[zenoh.tls]
-ca = {}
-cert = {}
-key = {}
-
-[metrics]
-listen = "127.0.0.1:0"
-
-[journal]
-path = {}
-"#,
+{}"#,
             server.endpoint(),
             path(&dir.join("agent-pki")),
             path(&dir.join("timers.json")),
-            path(&tls.ca),
-            path(&tls.cert),
-            path(&tls.key),
-            path(&dir.join("journal.sqlite")),
+            bus_metrics_journal(dir),
         ),
     )
     .unwrap();
-    let c = cellwatch::config::load(&file).unwrap();
-    crate::util::trust_sim(&c, &dir.join("sim-pki"));
-    let agent = agent::start(c, None).await.unwrap();
-    let port = crate::util::agent_port(&agent).await;
-    let client = crate::util::operator_session(dir, "operator-kim", port).await;
-    let sub = alarms(&client, "m01ps0004").await;
+    let (agent, client, sub) = started(dir, &file).await;
     let value_is = |address: &'static str, value: bool| {
         let client = client.clone();
         async move {
