@@ -71,3 +71,59 @@ impl Clock {
         }
     }
 }
+
+/// A warning that may recur as fast as the network sends its cause, said
+/// at most once per period with how many times it happened since it was
+/// last said: a log that stays readable and bounded on disk.
+#[derive(Debug)]
+pub struct Every {
+    period: std::time::Duration,
+    said: Option<std::time::Instant>,
+    unsaid: u64,
+}
+
+impl Every {
+    /// Said at most once per `period`.
+    pub const fn new(period: std::time::Duration) -> Every {
+        Every {
+            period,
+            said: None,
+            unsaid: 0,
+        }
+    }
+
+    /// It happened `at`: `Some(n)` if it is to be said now, `n` the times it
+    /// happened since it was last said (this one included); `None` to keep
+    /// quiet.
+    pub fn happened(&mut self, at: std::time::Instant) -> Option<u64> {
+        self.unsaid += 1;
+        if self
+            .said
+            .is_some_and(|said| at.saturating_duration_since(said) < self.period)
+        {
+            return None;
+        }
+        self.said = Some(at);
+        Some(std::mem::take(&mut self.unsaid))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::{Duration, Instant};
+
+    use super::Every;
+
+    #[test]
+    fn a_recurring_warning_is_said_once_a_period_with_how_often_it_happened() {
+        let mut every = Every::new(Duration::from_secs(60));
+        let t = Instant::now();
+        assert_eq!(every.happened(t), Some(1));
+        for s in 1..60 {
+            assert_eq!(every.happened(t + Duration::from_secs(s)), None);
+        }
+        assert_eq!(every.happened(t + Duration::from_secs(60)), Some(60));
+        assert_eq!(every.happened(t + Duration::from_secs(61)), None);
+        assert_eq!(every.happened(t + Duration::from_secs(500)), Some(2));
+    }
+}

@@ -25,6 +25,7 @@ use super::names::Names;
 use super::overflow::Overflow;
 use super::sequence::{Next, Sequence};
 use super::subscription::{reading, source_time, Heard, Monitored, Uses, OVERFLOW_ALARM};
+use crate::clock::Every;
 use crate::config::OpcUaConfig;
 use crate::sources::{SourceEvent, SourceSender};
 
@@ -236,6 +237,8 @@ pub(super) fn delivery(
                     slowest: Duration::ZERO,
                     told: held.clone(),
                     handed: None,
+                    parted: Every::new(WARN_EVERY),
+                    strangers: Every::new(WARN_EVERY),
                 },
             },
         })),
@@ -322,7 +325,15 @@ struct Cycle {
     /// notifications and publish time, to tell a server that sends fewer
     /// than asked.
     handed: Option<(usize, i64)>,
+    /// Cycles judged in parts, warned of once a minute.
+    parted: Every,
+    /// Notifications for items the agent did not create, warned of once a
+    /// minute.
+    strangers: Every,
 }
+
+/// How often a warning that recurs with each publish is said.
+const WARN_EVERY: Duration = Duration::from_secs(60);
 
 /// The changes of one cycle held before they are handed on anyway, in a
 /// cell of up to 25,000 monitored items: a 100,000-tag cell's whole cycle
@@ -376,6 +387,9 @@ struct Collected {
     closed: Option<StatusCode>,
     /// Events (the PLC's alarms), in the server's order.
     events: Vec<EventFieldList>,
+    /// Notifications for a client handle the agent did not give: how many,
+    /// and the first handle.
+    strangers: Option<(u64, u32)>,
 }
 
 /// Reads one publish into `out`.
@@ -435,10 +449,8 @@ impl Collector<'_> {
             .checked_sub(1)
             .and_then(|i| self.monitored.items.get(i))
         else {
-            tracing::warn!(
-                handle,
-                "a notification for a monitored item this agent did not create"
-            );
+            let (n, _) = self.out.strangers.get_or_insert((0, handle));
+            *n += 1;
             return;
         };
         if self.items.heard(handle as usize - 1, &value) == Standing::Failed {
@@ -511,11 +523,14 @@ impl InTimeOrder {
         let full = self.cycle.full > 0 && count >= self.cycle.full;
         let bound = self.cycle.bound;
         if full && self.cycle.changes + count >= bound {
-            tracing::warn!(
-                held = self.cycle.changes,
-                "a publishing cycle of more than {bound} changes: judged in parts, \
-                 their order across the parts not assured"
-            );
+            if let Some(cycles) = self.cycle.parted.happened(Instant::now()) {
+                tracing::warn!(
+                    held = self.cycle.changes,
+                    "a publishing cycle of more than {bound} changes: judged in parts, \
+                     their order across the parts not assured ({cycles} such since the \
+                     last warning, said at most once a minute)"
+                );
+            }
         }
         if full && self.cycle.changes + count < bound {
             self.cycle.changes += count;
@@ -589,8 +604,19 @@ impl InTimeOrder {
             lost,
             closed,
             events,
+            strangers,
             ..
         } = c;
+        if let Some((n, handle)) = strangers {
+            if let Some(publishes) = self.cycle.strangers.happened(Instant::now()) {
+                tracing::warn!(
+                    handle,
+                    "{n} notifications for monitored items this agent did not create, \
+                     ignored ({publishes} publishes with such since the last warning, said \
+                     at most once a minute)"
+                );
+            }
+        }
         // The PLC's alarms after the values of the same publish.
         let conditions = (!events.is_empty()).then(|| {
             self.conditions
