@@ -135,7 +135,7 @@ fn select(ns: u16) -> Vec<SimpleAttributeOperand> {
 
 /// The SCADA's client, its key pair in `pki` (made if missing); it
 /// trusts only the server certificates in `pki/trusted`.
-fn scada(pki: &Path) -> Client {
+pub(crate) fn scada(pki: &Path) -> Client {
     ClientBuilder::new()
         .application_name("scada")
         .application_uri("urn:cellwatch:test:scada")
@@ -150,7 +150,11 @@ fn scada(pki: &Path) -> Client {
 
 /// A session to the alarm server at `url` as `identity`, the client's
 /// certificate in `pki`.
-async fn connect(url: &str, pki: &Path, identity: IdentityToken) -> std::sync::Arc<Session> {
+pub(crate) async fn connect(
+    url: &str,
+    pki: &Path,
+    identity: IdentityToken,
+) -> std::sync::Arc<Session> {
     let mut client = scada(pki);
     let (session, event_loop) = client
         .connect_to_matching_endpoint(
@@ -187,7 +191,7 @@ async fn acknowledge(session: &Session, condition: &NodeId, event_id: &Variant) 
 }
 
 /// The value of ESE's state variable `name` (`ActiveState.Id`).
-async fn state(session: &Session, ns: u16, name: &str) -> Variant {
+pub(crate) async fn state(session: &Session, ns: u16, name: &str) -> Variant {
     let read = session
         .read(
             &[ReadValueId {

@@ -86,6 +86,15 @@ async fn killed_agent_keeps_every_committed_row() {
 #[test]
 fn demo_prints_a_diagnosed_alarm_and_serves_the_readme_commands_over_tls() {
     let state = tempfile::tempdir().unwrap();
+    // A SCADA client whose certificate the demo's alarm server trusts from
+    // its first start, as docs/demo.md says to do by hand.
+    let (server_pki, scada_pki) = (
+        state.path().join("alarm-server-pki"),
+        state.path().join("scada-pki"),
+    );
+    drop(crate::alarm_server::scada(&scada_pki));
+    use cellwatch::sources::pki;
+    pki::trust(&pki::own_cert(&scada_pki), &server_pki).unwrap();
     let start = Instant::now();
     let mut demo = Command::new(env!("CARGO_BIN_EXE_cellwatch"))
         .args([
@@ -121,6 +130,28 @@ fn demo_prints_a_diagnosed_alarm_and_serves_the_readme_commands_over_tls() {
             }
         }
     }
+    // The engraving machine's alarms over OPC UA, as user demo with the
+    // password the demo made: ESE is a condition, its severity critical's.
+    let scada_url = seen
+        .iter()
+        .find_map(|l| l.strip_prefix("  SCADA           "))
+        .and_then(|l| l.split(' ').next())
+        .unwrap_or_else(|| panic!("no SCADA endpoint printed:\n{}", seen.join("\n")))
+        .to_string();
+    pki::trust(&pki::own_cert(&server_pki), &scada_pki).unwrap();
+    let password = std::fs::read_to_string(state.path().join("opcua-demo-password")).unwrap();
+    let severity = tokio::runtime::Runtime::new().unwrap().block_on(async {
+        let demo = opcua::client::IdentityToken::UserName("demo".into(), password.trim().into());
+        let session = crate::alarm_server::connect(&scada_url, &scada_pki, demo).await;
+        let ns = session
+            .get_namespace_index("urn:cellwatch:alarms:m01ps0004")
+            .await
+            .unwrap();
+        let severity = crate::alarm_server::state(&session, ns, "Severity").await;
+        let _ = session.disconnect().await;
+        severity
+    });
+    assert_eq!(severity, opcua::types::Variant::UInt16(1000));
     let client = state.path().join("client.json5");
     let key = state.path().join("operator-demo.key");
     let trust = state.path().join("trust.toml");

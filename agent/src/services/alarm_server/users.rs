@@ -192,7 +192,7 @@ impl Users {
 
     /// Whether `password` is `user`'s (Argon2, so slow on purpose: run it
     /// off the server's tasks).
-    fn verify(&self, user: &str, password: &str) -> bool {
+    pub(crate) fn verify(&self, user: &str, password: &str) -> bool {
         let users = self.now();
         let Some(u) = users.get(user) else {
             return false;
