@@ -267,8 +267,14 @@ async fn a_fault_shows_live_with_its_culprits_and_an_operator_acknowledges_and_s
     let actions = b.text("section.actions").await;
     assert!(actions.contains("Load your operator key"), "{actions}");
 
-    // Kim loads her key and acknowledges: the agent journals it under her.
+    // Kim loads her key and acknowledges with a comment: the agent
+    // journals it under her, her words after what was done.
     load_key(&b, &d.path().join("kim.key"), "kim").await;
+    b.wait_for("input[name='ack-comment']")
+        .await
+        .send_keys("limit switch cable re-seated")
+        .await
+        .unwrap();
     b.wait_for("button[data-action='ack']")
         .await
         .click()
@@ -286,7 +292,8 @@ async fn a_fault_shows_live_with_its_culprits_and_an_operator_acknowledges_and_s
         rows.iter().any(|r| r["fields"]["action"] == "ack"
             && r["fields"]["operator"] == "kim"
             && r["fields"]["alarm"] == "ese"
-            && r["fields"]["accepted"] == true),
+            && r["fields"]["accepted"] == true
+            && r["fields"]["detail"] == "ack ese by kim: limit switch cable re-seated"),
         "{rows:#?}"
     );
 

@@ -183,10 +183,12 @@ fn demo_prints_a_diagnosed_alarm_and_serves_the_readme_commands_over_tls() {
         "ese",
         "--key-file",
         key.to_str().unwrap(),
+        "--comment",
+        "limit switch checked",
     ]);
     assert_eq!(
         (ack.code, ack.stdout.as_str()),
-        (0, "accepted: ack ese by demo\n"),
+        (0, "accepted: ack ese by demo: limit switch checked\n"),
         "{}",
         ack.stderr
     );

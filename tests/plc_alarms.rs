@@ -217,15 +217,19 @@ async fn the_plcs_own_alarms_are_the_cells_acknowledged_at_the_plc_first() {
     );
 
     // Kim acknowledges the overpressure in cellwatch: at the PLC first,
-    // with her name in the condition's comment.
-    let (ok, detail) = send(&client, &signed(Action::Ack, over)).await;
+    // with her name and her comment in the condition's comment.
+    let (ok, detail) = send(
+        &client,
+        &crate::spawned::signed_with(Action::Ack, over, None, Some("relief valve checked")),
+    )
+    .await;
     assert!(ok, "{detail}");
     let server = tokio::task::spawn_blocking(move || {
         let mut server = server;
         let line = server.wait_for("acknowledged Overpressure");
         assert_eq!(
             line,
-            "acknowledged Overpressure acknowledged in cellwatch by kim"
+            "acknowledged Overpressure acknowledged in cellwatch by kim: relief valve checked"
         );
         server
     })
@@ -275,7 +279,7 @@ async fn the_plcs_own_alarms_are_the_cells_acknowledged_at_the_plc_first() {
         [
             row(
                 "request",
-                "acknowledge plc-Press-Overpressure at the PLC, asked by kim"
+                "acknowledge plc-Press-Overpressure at the PLC, asked by kim: relief valve checked"
             ),
             row("result", "plc-Press-Overpressure acknowledged at the PLC"),
             row("command", "plc-Press-Overpressure is already acknowledged"),

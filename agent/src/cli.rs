@@ -8,8 +8,8 @@ use clap::{Parser, Subcommand};
 
 use crate::commands::agent::{RunArgs, ValidateArgs};
 use crate::commands::bus::{
-    AlarmsArgs, CommandArgs, ForceArgs, HistoryArgs, ReasonArgs, ReloadArgs, ShelveArgs, StopArgs,
-    WriteArgs,
+    AckArgs, AlarmsArgs, CommandArgs, ForceArgs, HistoryArgs, ReasonArgs, ReloadArgs, ShelveArgs,
+    StopArgs, WriteArgs,
 };
 use crate::commands::console::ConsoleArgs;
 use crate::commands::demo::DemoArgs;
@@ -86,7 +86,7 @@ enum Command {
     /// Show a cell's machine-state, alarm and command history (Zenoh).
     History(HistoryArgs),
     /// Acknowledge an alarm: a signed command to the cell's agent (Zenoh).
-    Ack(CommandArgs),
+    Ack(AckArgs),
     /// Reset a latched alarm whose condition has ended: a signed command (Zenoh).
     Reset(CommandArgs),
     /// Shelve an alarm (ISA-18.2): still evaluated and journaled, but not
@@ -272,7 +272,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::Console(args) => commands::console::run(&args, out).await,
             Command::Alarms(args) => commands::bus::alarms(&args, out).await,
             Command::History(args) => commands::bus::history(&args, out).await,
-            Command::Ack(args) => commands::bus::command(Action::Ack, &args, out).await,
+            Command::Ack(args) => commands::bus::ack(&args, out).await,
             Command::Reset(args) => commands::bus::command(Action::Reset, &args, out).await,
             Command::Write(args) => commands::bus::write(&args, out).await,
             Command::Force(args) => commands::bus::force(&args, out).await,

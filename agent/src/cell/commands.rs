@@ -19,6 +19,30 @@ use crate::operator::refusals;
 use crate::operator::{clip, Action, Command, NotACommand, Refusal};
 use crate::sources::{Write, WriteRequest};
 
+/// A field `cmd`'s action does not take (`tag`, `value`, or `reason`: an
+/// acknowledgement's comment, a shelf's or a removal's reason), if it has
+/// one.
+fn stray_field(cmd: &Command) -> Option<&'static str> {
+    if cmd.action != Action::Write && cmd.tag.is_some() {
+        return Some("tag");
+    }
+    if !matches!(
+        cmd.action,
+        Action::Write | Action::Shelve | Action::Configure
+    ) && cmd.value.is_some()
+    {
+        return Some("value");
+    }
+    if !matches!(
+        cmd.action,
+        Action::Ack | Action::Shelve | Action::OutOfService
+    ) && cmd.reason.is_some()
+    {
+        return Some("reason");
+    }
+    None
+}
+
 impl CellLoop {
     /// Until when a `shelve` command shelves (`None`: one-shot), or why
     /// it may not.
@@ -113,24 +137,23 @@ impl CellLoop {
             return self.switch_command(cmd, checked, reply, now).await;
         }
         let verified = checked.is_ok();
+        // An acknowledgement's comment, the operator's own words after what
+        // was done (as an acknowledgement over OPC UA has it).
+        let said = match cmd.reason.as_deref().map(str::trim) {
+            Some(comment) if cmd.action == Action::Ack && !comment.is_empty() => {
+                format!(": {}", clip(comment, RECORD_FIELD_BYTES))
+            }
+            _ => String::new(),
+        };
         let done = match checked {
             Err(refusal) => Err(refusal.to_string()),
-            Ok(())
-                if (cmd.action != Action::Write && cmd.tag.is_some())
-                    || (!matches!(
-                        cmd.action,
-                        Action::Write | Action::Shelve | Action::Configure
-                    ) && cmd.value.is_some())
-                    || (!matches!(cmd.action, Action::Shelve | Action::OutOfService)
-                        && cmd.reason.is_some()) =>
-            {
-                Err(format!(
-                    "{} takes an alarm only, no tag, value or reason",
-                    cmd.action
-                ))
-            }
+            Ok(()) if stray_field(&cmd).is_some() => Err(format!(
+                "{} takes no {}",
+                cmd.action,
+                stray_field(&cmd).unwrap_or_default()
+            )),
             Ok(()) if cmd.action == Action::Ack && self.engine.is_condition(&cmd.alarm) => {
-                return self.acknowledge_at_plc(base, "", reply).await;
+                return self.acknowledge_at_plc(base, &said, reply).await;
             }
             Ok(()) => match cmd.action {
                 Action::Ack => self
@@ -199,7 +222,7 @@ impl CellLoop {
         let (accepted, detail, step) = match done {
             Ok(step) => (
                 true,
-                format!("{} {} by {}", cmd.action, cmd.alarm, cmd.operator),
+                format!("{} {} by {}{said}", cmd.action, cmd.alarm, cmd.operator),
                 step,
             ),
             Err(why) => (false, why, Step::default()),
@@ -347,5 +370,58 @@ impl CellLoop {
                 )),
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::stray_field;
+    use crate::operator::{Action, Command};
+
+    fn command(action: Action, tag: bool, value: bool, reason: bool) -> Command {
+        Command {
+            action,
+            alarm: "ese".into(),
+            tag: tag.then(|| "D100".into()),
+            value: value.then(|| "30m".into()),
+            reason: reason.then(|| "tool changed".into()),
+            operator: "kim".into(),
+            nonce: crate::operator::nonce(),
+            issued_at: 0,
+            signature: String::new(),
+        }
+    }
+
+    #[test]
+    fn an_acknowledgement_takes_a_comment_and_a_reset_none() {
+        assert_eq!(stray_field(&command(Action::Ack, false, false, true)), None);
+        assert_eq!(
+            stray_field(&command(Action::Ack, false, true, false)),
+            Some("value")
+        );
+        assert_eq!(
+            stray_field(&command(Action::Reset, false, false, true)),
+            Some("reason")
+        );
+        assert_eq!(
+            stray_field(&command(Action::Shelve, false, true, true)),
+            None
+        );
+        assert_eq!(
+            stray_field(&command(Action::Unshelve, false, false, true)),
+            Some("reason")
+        );
+        assert_eq!(
+            stray_field(&command(Action::Write, true, true, false)),
+            None
+        );
+        assert_eq!(
+            stray_field(&command(Action::Write, true, true, true)),
+            Some("reason")
+        );
+        assert_eq!(
+            stray_field(&command(Action::Ack, true, false, false)),
+            Some("tag")
+        );
     }
 }

@@ -113,6 +113,22 @@ pub(crate) struct CommandArgs {
 }
 
 #[derive(Debug, clap::Args)]
+pub(crate) struct AckArgs {
+    /// The cell.
+    #[arg(long)]
+    pub(crate) cell: String,
+    /// The alarm id.
+    #[arg(long)]
+    pub(crate) alarm: String,
+    /// What you found or did, journaled after the acknowledgement (`ack
+    /// ese by kim: tool changed`; its first 256 bytes).
+    #[arg(long)]
+    pub(crate) comment: Option<String>,
+    #[command(flatten)]
+    pub(crate) signer: SignerArgs,
+}
+
+#[derive(Debug, clap::Args)]
 pub(crate) struct ShelveArgs {
     /// The cell.
     #[arg(long)]

@@ -10,7 +10,7 @@ use std::time::Duration;
 use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
 pub(crate) use args::{
-    AlarmsArgs, CommandArgs, ForceArgs, HistoryArgs, ReasonArgs, ReloadArgs, ShelveArgs,
+    AckArgs, AlarmsArgs, CommandArgs, ForceArgs, HistoryArgs, ReasonArgs, ReloadArgs, ShelveArgs,
     SignerArgs, StopArgs, WriteArgs, ZenohArgs,
 };
 
@@ -371,7 +371,7 @@ fn print_rows(out: &mut dyn Write, rows: &serde_json::Value) -> Result<(), Failu
     Ok(())
 }
 
-/// `cellwatch ack` and `cellwatch reset`.
+/// `cellwatch reset`, `unshelve` and `in-service`.
 pub(crate) async fn command(
     action: Action,
     args: &CommandArgs,
@@ -385,6 +385,24 @@ pub(crate) async fn command(
             tag: None,
             value: None,
             reason: None,
+        },
+        &args.signer,
+        out,
+    )
+    .await
+}
+
+/// `cellwatch ack`: a signed acknowledgement, with the operator's comment
+/// if given.
+pub(crate) async fn ack(args: &AckArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    signed(
+        Target {
+            action: Action::Ack,
+            cell: &args.cell,
+            alarm: &args.alarm,
+            tag: None,
+            value: None,
+            reason: args.comment.as_deref(),
         },
         &args.signer,
         out,

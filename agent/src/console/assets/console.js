@@ -491,8 +491,15 @@ function alarmDetail(cell, id) {
         type: 'button', 'data-action': action, disabled: !enabled,
         onclick: async () => { await send(cell, Object.assign({ action, alarm: id }, fields ? fields() : {}), out); done(); },
       }, label);
+      if (may('ack') && unacked(a)) {
+        const comment = el('input', { name: 'ack-comment', placeholder: 'comment (optional, journaled)', maxlength: 120 });
+        box.push(el('form', { class: 'form', onsubmit: async e => {
+          e.preventDefault();
+          const fields = comment.value.trim() ? { reason: comment.value.trim() } : {};
+          await send(cell, Object.assign({ action: 'ack', alarm: id }, fields), out); done();
+        } }, el('button', { type: 'submit', 'data-action': 'ack' }, 'Acknowledge'), comment));
+      }
       const offered = [];
-      if (may('ack') && unacked(a)) offered.push(button('Acknowledge', 'ack'));
       if (may('reset') && a.latched) offered.push(button('Reset', 'reset'));
       if (may('unshelve') && a.shelved) offered.push(button('Unshelve', 'unshelve'));
       if (may('in-service') && a.out_of_service) offered.push(button('Return to service', 'in-service'));
