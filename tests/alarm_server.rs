@@ -524,7 +524,10 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
         a.transition.as_str() == "acknowledged"
     })
     .await;
-    assert_eq!(on_bus.acked_by.as_deref(), Some("kim"));
+    assert_eq!(
+        (on_bus.acked_by.as_deref(), on_bus.ack_comment.as_deref()),
+        (Some("kim"), Some("seen on the SCADA"))
+    );
     // Journaled before the answer: the rows are there at once.
     commands_journaled(
         &fx,
@@ -866,7 +869,7 @@ async fn a_node_opcua_scada_acknowledges_and_shelves_ese_and_finds_it_after_a_re
 
     // The agent restarts: ESE, restored from the journal, is on its alarm
     // server again for a SCADA that refreshes, active and acknowledged by
-    // kim.
+    // kim, with her comment.
     drop(scada);
     let config = fx.config().clone();
     let mut fx = fx;
@@ -888,12 +891,14 @@ async fn a_node_opcua_scada_acknowledges_and_shelves_ese_and_finds_it_after_a_re
         (
             &restored["active"],
             &restored["acked"],
-            &restored["clientUserId"]
+            &restored["clientUserId"],
+            &restored["comment"]
         ),
         (
             &serde_json::json!(true),
             &serde_json::json!(true),
-            &serde_json::json!("kim")
+            &serde_json::json!("kim"),
+            &serde_json::json!("seen on WinCC, tool changed")
         )
     );
     drop(scada);

@@ -332,6 +332,7 @@ async fn a_restored_journal_alarm_follows_the_journal_at_the_start() {
         raised_at: 1_000,
         cleared_at: None,
         acked_by: None,
+        ack_comment: None,
         fault_step: None,
         culprits: Vec::new(),
         message: "journal: database is locked".into(),

@@ -275,6 +275,7 @@ async fn a_fault_shows_live_with_its_culprits_and_an_operator_acknowledges_and_s
         .send_keys("limit switch cable re-seated")
         .await
         .unwrap();
+    b.screenshot("alarm-ack").await;
     b.wait_for("button[data-action='ack']")
         .await
         .click()
@@ -283,8 +284,8 @@ async fn a_fault_shows_live_with_its_culprits_and_an_operator_acknowledges_and_s
     let said = answer(&b).await;
     assert!(said.starts_with("ack accepted"), "{said}");
     b.wait_until(
-        "the page shows it acknowledged (and no longer offers to)",
-        "return document.querySelector('dl.facts').textContent.includes('Acknowledged bykim') && !document.querySelector(\"button[data-action='ack']\");",
+        "the page shows it acknowledged with her comment (and no longer offers to)",
+        "return document.querySelector('dl.facts').textContent.includes('Acknowledged bykim: limit switch cable re-seated') && !document.querySelector(\"button[data-action='ack']\");",
     )
     .await;
     let rows = journaled_commands(&p.cell);

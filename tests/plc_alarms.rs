@@ -239,7 +239,10 @@ async fn the_plcs_own_alarms_are_the_cells_acknowledged_at_the_plc_first() {
         a.id == over && a.transition.as_str() == "acknowledged"
     })
     .await;
-    assert_eq!(acked.acked_by.as_deref(), Some("kim"));
+    assert_eq!(
+        (acked.acked_by.as_deref(), acked.ack_comment.as_deref()),
+        (Some("kim"), Some("relief valve checked"))
+    );
     // Once, not again when the PLC's event says so.
     let (ok, detail) = send(&client, &signed(Action::Ack, over)).await;
     assert!(!ok && detail.contains("already acknowledged"), "{detail}");

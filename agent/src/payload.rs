@@ -101,6 +101,10 @@ pub struct AlarmPayload {
     pub cleared_at: Option<String>,
     /// Who acknowledged it.
     pub acked_by: Option<String>,
+    /// What they said acknowledging it (their comment); absent in payloads
+    /// from before comments were carried.
+    #[serde(default)]
+    pub ack_comment: Option<String>,
     /// Stays active until an operator resets it.
     #[serde(default)]
     pub latched: bool,
@@ -183,6 +187,7 @@ impl AlarmPayload {
             raised_at: rfc3339(alarm.raised_at),
             cleared_at: alarm.cleared_at.map(rfc3339),
             acked_by: alarm.acked_by.clone(),
+            ack_comment: alarm.ack_comment.clone(),
             latched: alarm.latched,
             fault_type: alarm.fault_type.clone(),
             fault_step: alarm.fault_step,
@@ -223,6 +228,7 @@ impl AlarmPayload {
             raised_at: ms(&self.raised_at)?,
             cleared_at,
             acked_by: self.acked_by.clone(),
+            ack_comment: self.ack_comment.clone(),
             fault_step: self.fault_step,
             culprits: self
                 .culprits
@@ -662,6 +668,7 @@ mod tests {
             raised_at: 1_764_000_000_000,
             cleared_at: None,
             acked_by: None,
+            ack_comment: None,
             fault_step: Some(1),
             message: "HOT".into(),
             shelved: None,
@@ -686,6 +693,46 @@ mod tests {
         assert!(back.culprits[0]
             .to_string()
             .starts_with("TEMP = 85.25 (needs <= 80.5)"));
+    }
+
+    #[test]
+    fn an_acknowledgements_comment_is_restored_and_absent_in_older_payloads() {
+        let alarm = Alarm {
+            id: "ese".into(),
+            kind: AlarmKind::Switching,
+            severity: Severity::Critical,
+            fault_type: "ESE".into(),
+            active: true,
+            acknowledged: true,
+            latched: false,
+            raised_at: 1_764_000_000_000,
+            cleared_at: None,
+            acked_by: Some("kim".into()),
+            ack_comment: Some("tool changed".into()),
+            fault_step: Some(6),
+            message: "ESE at step 6".into(),
+            shelved: None,
+            out_of_service: None,
+            consequence: None,
+            culprits: Vec::new(),
+        };
+        let payload = AlarmPayload::new("m01", &alarm, Transition::Acknowledged, 1_764_000_001_000);
+        let text = serde_json::to_string(&payload).unwrap();
+        assert!(text.contains(r#""ack_comment":"tool changed""#), "{text}");
+        let back: AlarmPayload = serde_json::from_str(&text).unwrap();
+        assert_eq!(
+            back.to_alarm().unwrap().ack_comment.as_deref(),
+            Some("tool changed")
+        );
+        // A journal row from before comments were carried.
+        let older = text.replace(r#""ack_comment":"tool changed","#, "");
+        assert!(!older.contains("ack_comment"), "{older}");
+        let back: AlarmPayload = serde_json::from_str(&older).unwrap();
+        let back = back.to_alarm().unwrap();
+        assert_eq!(
+            (back.acked_by.as_deref(), back.ack_comment),
+            (Some("kim"), None)
+        );
     }
 
     #[test]

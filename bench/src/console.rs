@@ -234,6 +234,7 @@ fn event(key: &AgentKey, id: &str, n: usize, raised: bool) -> (String, String) {
         raised_at: at,
         cleared_at: None,
         acked_by: None,
+        ack_comment: None,
         latched: false,
         fault_type: "ESE".into(),
         fault_step: Some(n % 9),

@@ -236,6 +236,8 @@ pub struct Alarm {
     pub cleared_at: Option<u64>,
     /// Who acknowledged it.
     pub acked_by: Option<String>,
+    /// What they said acknowledging it (their comment), if anything.
+    pub ack_comment: Option<String>,
     /// The step block at which the fault formed.
     pub fault_step: Option<usize>,
     /// The contacts that caused it, triggers first.
@@ -307,6 +309,7 @@ impl Alarm {
             raised_at,
             cleared_at: None,
             acked_by: None,
+            ack_comment: None,
             fault_step: None,
             culprits: Vec::new(),
             message: id.into(),

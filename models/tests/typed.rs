@@ -358,7 +358,7 @@ fn a_reload_keeps_what_holds_and_judges_the_rest_by_the_new_checks() {
         raised(&number(&mut old, "TEMP", Num::Float(90.0), 1_000)),
         ["temp-h"]
     );
-    old.acknowledge("temp-h", "kim", 2_000).unwrap();
+    old.acknowledge("temp-h", "kim", None, 2_000).unwrap();
 
     // The same limit: the alarm is carried, still acknowledged, and the
     // value as it was changes nothing.

@@ -139,12 +139,15 @@ impl CellLoop {
         let verified = checked.is_ok();
         // An acknowledgement's comment, the operator's own words after what
         // was done (as an acknowledgement over OPC UA has it).
-        let said = match cmd.reason.as_deref().map(str::trim) {
+        let comment = match cmd.reason.as_deref().map(str::trim) {
             Some(comment) if cmd.action == Action::Ack && !comment.is_empty() => {
-                format!(": {}", clip(comment, RECORD_FIELD_BYTES))
+                Some(clip(comment, RECORD_FIELD_BYTES))
             }
-            _ => String::new(),
+            _ => None,
         };
+        let said = comment
+            .as_ref()
+            .map_or_else(String::new, |c| format!(": {c}"));
         let done = match checked {
             Err(refusal) => Err(refusal.to_string()),
             Ok(()) if stray_field(&cmd).is_some() => Err(format!(
@@ -153,12 +156,14 @@ impl CellLoop {
                 stray_field(&cmd).unwrap_or_default()
             )),
             Ok(()) if cmd.action == Action::Ack && self.engine.is_condition(&cmd.alarm) => {
-                return self.acknowledge_at_plc(base, &said, reply).await;
+                return self
+                    .acknowledge_at_plc(base, comment.as_deref(), reply)
+                    .await;
             }
             Ok(()) => match cmd.action {
                 Action::Ack => self
                     .engine
-                    .acknowledge(&cmd.alarm, &cmd.operator, now)
+                    .acknowledge(&cmd.alarm, &cmd.operator, comment.as_deref(), now)
                     .map_err(|e| e.to_string()),
                 Action::Reset => self
                     .engine

@@ -309,9 +309,9 @@ impl CellLoop {
             Then::Answer => {
                 let _ = reply.send(outcome);
             }
-            Then::Acknowledge => {
+            Then::Acknowledge(comment) => {
                 if ok {
-                    self.acknowledged_at_plc(&failed).await;
+                    self.acknowledged_at_plc(&failed, comment.as_deref()).await;
                 }
                 let _ = reply.send(outcome);
             }

@@ -153,8 +153,8 @@ enum Then {
     /// Record the stop's result and answer.
     Stop,
     /// Acknowledge the PLC's alarm in cellwatch too (if the PLC took it),
-    /// then answer.
-    Acknowledge,
+    /// with the operator's comment, then answer.
+    Acknowledge(Option<String>),
 }
 
 pub use crate::config::DEFAULT_MAX_SHELVE;

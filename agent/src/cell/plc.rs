@@ -15,15 +15,16 @@ use cellwatch_models::engine::Step;
 impl CellLoop {
     /// Carries out an authorised acknowledgement of PLC alarm
     /// `record.alarm`; answered once the PLC has said and it is journaled.
-    /// `said` (empty, or `: ` and the operator's comment) follows the
-    /// request's row and the comment the PLC is given.
+    /// The operator's `comment` follows the request's row and the comment
+    /// the PLC is given, and is kept with the alarm.
     pub(super) async fn acknowledge_at_plc(
         &mut self,
         record: CommandRecord,
-        said: &str,
+        comment: Option<&str>,
         reply: oneshot::Sender<CommandOutcome>,
     ) {
         let now = self.clock.now_ms();
+        let said = comment.map_or_else(String::new, |c| format!(": {c}"));
         let alarm = record.alarm.clone();
         let refused = match self.engine.alarms().find(|a| a.id == alarm) {
             None => Some(format!("unknown alarm '{alarm}'")),
@@ -55,9 +56,16 @@ impl CellLoop {
         };
         self.dispatch(now, Input::Command(request), Step::default(), 0)
             .await;
-        let comment = format!("acknowledged in cellwatch by {}{said}", record.operator);
-        let written =
-            self.write_when_journaled(None, Write::Acknowledge { alarm, comment }, WRITE_TIMEOUT);
+        let to_plc = format!("acknowledged in cellwatch by {}{said}", record.operator);
+        let written = self.write_when_journaled(
+            None,
+            Write::Acknowledge {
+                alarm,
+                comment: to_plc,
+            },
+            WRITE_TIMEOUT,
+        );
+        let comment = comment.map(str::to_string);
         let back = self.written_tx.clone();
         let record = CommandRecord {
             verified: true,
@@ -65,7 +73,7 @@ impl CellLoop {
         };
         self.start_task(async move {
             let w = Written {
-                then: Then::Acknowledge,
+                then: Then::Acknowledge(comment),
                 ..Written::answer(record, written.await, reply)
             };
             let _ = back.send(w).await;
@@ -74,11 +82,15 @@ impl CellLoop {
 
     /// The PLC took the acknowledgement: the alarm is acknowledged in
     /// cellwatch by the operator (unless the PLC's event said so first).
-    pub(super) async fn acknowledged_at_plc(&mut self, record: &CommandRecord) {
+    pub(super) async fn acknowledged_at_plc(
+        &mut self,
+        record: &CommandRecord,
+        comment: Option<&str>,
+    ) {
         let now = self.clock.now_ms();
         if let Ok(step) = self
             .engine
-            .acknowledge(&record.alarm, &record.operator, now)
+            .acknowledge(&record.alarm, &record.operator, comment, now)
         {
             self.dispatch(now, Input::Readings, step, 0).await;
         }

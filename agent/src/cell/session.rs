@@ -90,7 +90,8 @@ impl CellLoop {
         }
         if cmd.action == Action::Ack && self.engine.is_condition(&cmd.alarm) {
             let (outcome_tx, outcome) = oneshot::channel::<CommandOutcome>();
-            self.acknowledge_at_plc(base, &said, outcome_tx).await;
+            let comment = (!comment.is_empty()).then_some(comment.as_str());
+            self.acknowledge_at_plc(base, comment, outcome_tx).await;
             // Its rows come later (the PLC's answer): waited for then.
             let sinks: Vec<Settled> = self.sinks.iter().filter_map(|s| s.settled()).collect();
             self.start_task(async move {
@@ -110,7 +111,12 @@ impl CellLoop {
         let done = match cmd.action {
             Action::Ack => self
                 .engine
-                .acknowledge(&cmd.alarm, &cmd.operator, now)
+                .acknowledge(
+                    &cmd.alarm,
+                    &cmd.operator,
+                    (!comment.is_empty()).then_some(comment.as_str()),
+                    now,
+                )
                 .map_err(outcome_of),
             Action::Shelve => self
                 .shelf(&cmd, now)

@@ -318,6 +318,7 @@ mod tests {
             raised_at: at.into(),
             cleared_at: None,
             acked_by: None,
+            ack_comment: None,
             latched: false,
             fault_type: "ESE".into(),
             fault_step: Some(6),

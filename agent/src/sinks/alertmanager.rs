@@ -111,7 +111,11 @@ impl Labels {
             annotations.insert("culprits", culprits.join("; "));
         }
         if let Some(by) = &alarm.acked_by {
-            annotations.insert("acknowledged", format!("by {by}"));
+            let said = alarm
+                .ack_comment
+                .as_ref()
+                .map_or_else(String::new, |c| format!(": {c}"));
+            annotations.insert("acknowledged", format!("by {by}{said}"));
         }
         let generator_url = self
             .console
@@ -685,10 +689,11 @@ mod tests {
             "2026-11-26T10:01:00.000Z",
         );
         acked.acked_by = Some("kim".into());
+        acked.ack_comment = Some("tool changed".into());
         assert!(book.take(&l, &acked));
         assert_eq!(
             book.batch(0, "x").alerts[0].annotations["acknowledged"],
-            "by kim"
+            "by kim: tool changed"
         );
 
         // Shelved: ended at the shelf's time, owed to both.

@@ -130,6 +130,7 @@ impl AlarmBook {
                     raised_at: now,
                     cleared_at: None,
                     acked_by: None,
+                    ack_comment: None,
                     fault_step: f.fault_step,
                     culprits: f.culprits,
                     message: f.message,
@@ -243,6 +244,7 @@ impl AlarmBook {
                     raised_at: now,
                     cleared_at: None,
                     acked_by: None,
+                    ack_comment: None,
                     fault_step: None,
                     culprits: Vec::new(),
                     message: String::new(),
@@ -338,11 +340,12 @@ impl AlarmBook {
         out
     }
 
-    /// An operator acknowledges alarm `id`.
+    /// An operator acknowledges alarm `id`, saying `comment` if anything.
     pub(crate) fn acknowledge(
         &mut self,
         id: &str,
         operator: &str,
+        comment: Option<&str>,
     ) -> Result<&Alarm, CommandRefused> {
         let alarm = self
             .alarms
@@ -353,6 +356,7 @@ impl AlarmBook {
         }
         alarm.acknowledged = true;
         alarm.acked_by = Some(operator.to_string());
+        alarm.ack_comment = comment.map(str::to_string);
         Ok(alarm)
     }
 

@@ -145,7 +145,7 @@ impl CellEngine {
         if self.alarms.get(id).is_none_or(|a| a.acknowledged) {
             return;
         }
-        if let Ok(alarm) = self.alarms.acknowledge(id, by) {
+        if let Ok(alarm) = self.alarms.acknowledge(id, by, None) {
             step.events.push(EngineEvent::Alarm {
                 alarm: alarm.clone(),
                 transition: Transition::Acknowledged,
@@ -234,7 +234,7 @@ mod tests {
         // second acknowledgement.
         let mut e = engine();
         e.on_condition(event(true, None, 1_000), 1_000);
-        e.acknowledge("plc-Press-Overpressure", "op1", 1_200)
+        e.acknowledge("plc-Press-Overpressure", "op1", None, 1_200)
             .unwrap();
         assert!(e
             .on_condition(event(true, Some("op1"), 1_300), 1_300)
@@ -297,7 +297,7 @@ mod tests {
             1,
             "cleared, not acknowledged: still shown"
         );
-        e.acknowledge("plc-Press-Overpressure", "op1", 3_000)
+        e.acknowledge("plc-Press-Overpressure", "op1", None, 3_000)
             .unwrap();
         assert_eq!(e.alarms().count(), 0, "normal: nothing left to show");
         // A server naming a new condition for every occurrence leaves

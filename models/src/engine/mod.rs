@@ -1495,7 +1495,8 @@ impl CellEngine {
         step
     }
 
-    /// An operator acknowledges an alarm.
+    /// An operator acknowledges an alarm, saying `comment` if anything
+    /// (kept with the occurrence, gone when it is raised again).
     ///
     /// # Errors
     /// No such alarm, or nothing to acknowledge.
@@ -1503,9 +1504,10 @@ impl CellEngine {
         &mut self,
         id: &str,
         operator: &str,
+        comment: Option<&str>,
         now: u64,
     ) -> Result<Step, CommandRefused> {
-        let alarm = self.alarms.acknowledge(id, operator)?.clone();
+        let alarm = self.alarms.acknowledge(id, operator, comment)?.clone();
         if self.is_condition(id) {
             self.alarms.forget_if_normal(id);
         }
@@ -2283,17 +2285,33 @@ mod tests {
         ));
         let a = e.alarms().next().unwrap();
         assert_eq!(a.state(), AlarmState::ClearedUnacknowledged);
-        let ev = e.acknowledge("ese", "kim", 30).unwrap().events;
+        let ev = e
+            .acknowledge("ese", "kim", Some("limit switch re-seated"), 30)
+            .unwrap()
+            .events;
         assert_eq!(
             alarm_transitions(&ev),
             [("ese".to_string(), Transition::Acknowledged)]
         );
-        assert_eq!(e.alarms().next().unwrap().state(), AlarmState::Normal);
+        let a = e.alarms().next().unwrap();
+        assert_eq!(a.state(), AlarmState::Normal);
         assert_eq!(
-            e.acknowledge("ese", "kim", 31),
+            (a.acked_by.as_deref(), a.ack_comment.as_deref()),
+            (Some("kim"), Some("limit switch re-seated"))
+        );
+        assert_eq!(
+            e.acknowledge("ese", "kim", None, 31),
             Err(CommandRefused::NothingToAcknowledge("ese".into()))
         );
         assert!(e.reset("ese", "kim", 32).is_err());
+        // Raised again: the last occurrence's comment is not this one's.
+        e.on_reading(x006, Reading::Good(false), 40, 40);
+        let a = e.alarms().next().unwrap();
+        assert_eq!(a.state(), AlarmState::ActiveUnacknowledged);
+        assert_eq!(
+            (a.acked_by.as_deref(), a.ack_comment.as_deref()),
+            (None, None)
+        );
     }
 
     #[test]
@@ -2734,6 +2752,7 @@ mod tests {
             raised_at: 1_000,
             cleared_at: None,
             acked_by: (!latched).then(|| "kim".to_string()),
+            ack_comment: None,
             fault_step: Some(6),
             culprits: Vec::new(),
             message: "ESE".into(),

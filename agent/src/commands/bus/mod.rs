@@ -116,6 +116,16 @@ fn print_alarm(out: &mut dyn Write, a: &AlarmPayload, json: bool) -> std::io::Re
         }
         consequence.push(')');
     }
+    // Who acknowledged it, and what they said, with the acknowledgement.
+    if let (cellwatch_models::alarm::Transition::Acknowledged, Some(by)) =
+        (a.transition, &a.acked_by)
+    {
+        consequence += &format!(" (by {by}");
+        if let Some(c) = &a.ack_comment {
+            consequence += &format!(": {c}");
+        }
+        consequence.push(')');
+    }
     // Operators' and the journal's text on one line each: a newline in a
     // reason never prints a line of its own.
     let line = format!(
@@ -596,4 +606,31 @@ async fn send_signed(
     bus.command(cell, cmd, timeout)
         .await
         .map_err(|e| Failure::Runtime(e.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::print_alarm;
+    use crate::payload::AlarmPayload;
+
+    #[test]
+    fn an_acknowledgement_prints_who_made_it_and_their_comment() {
+        let a: AlarmPayload = serde_json::from_value(serde_json::json!({
+            "schema": "cellwatch.alarm.v1", "cell": "m01ps0004", "id": "ese",
+            "kind": "switching", "severity": "critical", "state": "active_acknowledged",
+            "transition": "acknowledged", "at": "2026-11-28T10:00:00.000Z",
+            "raised_at": "2026-11-28T09:59:00.000Z", "cleared_at": null,
+            "acked_by": "kim", "ack_comment": "tool changed\nnext line",
+            "fault_type": "ESE", "fault_step": 6, "culprits": [], "message": "ESE at step 6"
+        }))
+        .unwrap();
+        let mut out = Vec::new();
+        print_alarm(&mut out, &a, false).unwrap();
+        let text = String::from_utf8(out).unwrap();
+        assert_eq!(text.lines().count(), 1, "{text}");
+        assert!(
+            text.ends_with("ESE step 6: ESE at step 6 (by kim: tool changed\\nnext line)\n"),
+            "{text}"
+        );
+    }
 }

@@ -454,7 +454,7 @@ function alarmDetail(cell, id) {
         return;
       }
       const facts = [['Cell', el('a', { href: href('cell', a.cell) }, a.cell)], ['Alarm', a.id], ['Kind', a.kind], ['State', stateText(a)],
-        ['Raised', when(a.raised_at)], ['Cleared', a.cleared_at ? when(a.cleared_at) : '—'], ['Acknowledged by', a.acked_by || '—']];
+        ['Raised', when(a.raised_at)], ['Cleared', a.cleared_at ? when(a.cleared_at) : '—'], ['Acknowledged by', a.acked_by ? a.acked_by + (a.ack_comment ? `: ${a.ack_comment}` : '') : '—']];
       if (a.shelved) facts.push(['Shelved', `by ${a.shelved.by} until ${a.shelved.until ? when(a.shelved.until) : 'it clears'}: ${a.shelved.reason}`]);
       if (a.out_of_service) facts.push(['Out of service', `since ${when(a.out_of_service.at)} by ${a.out_of_service.by}: ${a.out_of_service.reason}`]);
       if (a.consequence) {

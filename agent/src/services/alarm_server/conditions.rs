@@ -95,7 +95,7 @@ pub(super) struct Condition {
     pub(super) acked_at: DateTime,
     /// The operator who acknowledged it.
     pub(super) acked_by: String,
-    /// The comment of the acknowledgement made over OPC UA, if any.
+    /// The comment of the occurrence's acknowledgement, if any.
     pub(super) comment: String,
     /// Shelved, out of service, or suppressed as a consequence.
     pub(super) suppressed_or_shelved: bool,
@@ -126,9 +126,6 @@ pub(super) struct Conditions {
     alarms: Mutex<HashMap<String, Condition>>,
     /// The last event id handed out.
     counter: AtomicU64,
-    /// Per alarm, the comment of an acknowledgement under way over OPC UA:
-    /// the condition's `Comment` once the alarm is acknowledged.
-    comments: Mutex<HashMap<String, String>>,
 }
 
 /// The shelving state machine's state of a shelf: its name and node.
@@ -185,7 +182,6 @@ impl Conditions {
             served: OnceLock::new(),
             alarms: Mutex::new(HashMap::new()),
             counter: AtomicU64::new(1),
-            comments: Mutex::new(HashMap::new()),
         }
     }
 
@@ -202,20 +198,6 @@ impl Conditions {
             .iter()
             .find(|(_, c)| c.node == *node)
             .map(|(id, c)| (id.clone(), c.clone()))
-    }
-
-    /// An acknowledgement of `alarm` with `comment` is under way (`Some`)
-    /// or over (`None`, whatever it came to).
-    pub(super) fn acknowledging(&self, alarm: &str, comment: Option<&str>) {
-        let mut comments = self.comments.lock();
-        match comment {
-            Some(c) => {
-                comments.insert(alarm.to_string(), c.to_string());
-            }
-            None => {
-                comments.remove(alarm);
-            }
-        }
     }
 
     /// The alarm whose condition's `ShelvingState` is `node`, and a copy
@@ -248,16 +230,12 @@ impl Conditions {
             if active != c.active {
                 c.active_at = now;
             }
-            if active && !c.active {
-                // A new occurrence: the last one's comment is not its.
-                c.comment.clear();
-            }
             if acked != c.acked {
                 c.acked_at = now;
-                if acked {
-                    c.comment = self.comments.lock().remove(&p.id).unwrap_or_default();
-                }
             }
+            // The acknowledgement's comment, wherever it was made; none
+            // for a new occurrence.
+            c.comment = p.ack_comment.clone().unwrap_or_default();
             c.active = active;
             c.acked = acked;
             c.acked_by = p.acked_by.clone().unwrap_or_default();

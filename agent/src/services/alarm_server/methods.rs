@@ -129,7 +129,6 @@ impl AlarmCore {
             _ => "",
         };
         let comment = crate::operator::clip(&crate::operator::escaped(comment), COMMENT_BYTES);
-        self.conditions.acknowledging(&alarm, Some(&comment));
         let (reply, outcome) = oneshot::channel();
         let asked = SessionCommand {
             user,
@@ -140,9 +139,7 @@ impl AlarmCore {
             comment,
             reply,
         };
-        let outcome = self.ask_loop(asked, outcome).await;
-        self.conditions.acknowledging(&alarm, None);
-        let status = match outcome {
+        let status = match self.ask_loop(asked, outcome).await {
             Some(SessionOutcome::Accepted(_)) => {
                 call.set_outputs(Vec::new());
                 StatusCode::Good
