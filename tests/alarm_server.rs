@@ -190,6 +190,19 @@ async fn acknowledge(session: &Session, condition: &NodeId, event_id: &Variant) 
         .status_code
 }
 
+/// Calls `method` (no arguments) on `object`.
+async fn call(session: &Session, object: &NodeId, method: MethodId) -> StatusCode {
+    session
+        .call_one(CallMethodRequest {
+            object_id: object.clone(),
+            method_id: method.into(),
+            input_arguments: Some(Vec::new()),
+        })
+        .await
+        .unwrap()
+        .status_code
+}
+
 /// The value of ESE's state variable `name` (`ActiveState.Id`).
 pub(crate) async fn state(session: &Session, ns: u16, name: &str) -> Variant {
     let read = session
@@ -553,6 +566,72 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
         ],
     )
     .await;
+
+    // Disabled from the SCADA: ESE out of service (ISA-18.2) as kim, not
+    // by ana, who may not; enabled again.
+    assert_eq!(
+        call(&ana, &condition, MethodId::ConditionType_Disable).await,
+        StatusCode::BadUserAccessDenied
+    );
+    assert_eq!(
+        call(&kim, &condition, MethodId::ConditionType_Enable).await,
+        StatusCode::BadConditionAlreadyEnabled
+    );
+    assert_eq!(
+        call(&kim, &condition, MethodId::ConditionType_Disable).await,
+        StatusCode::Good
+    );
+    let removed = alarm_until(&bus, "ESE out of service on the bus", &mut seen, |a| {
+        a.transition.as_str() == "out_of_service"
+    })
+    .await;
+    let removal = removed.out_of_service.unwrap();
+    assert_eq!(
+        (removal.by.as_str(), removal.reason.as_str()),
+        ("kim", "disabled over OPC UA by scada-kim")
+    );
+    assert_eq!(
+        state(&kim, ns, "EnabledState.Id").await,
+        Variant::from(false)
+    );
+    assert_eq!(state(&kim, ns, "Retain").await, Variant::from(false));
+    assert_eq!(
+        call(&kim, &condition, MethodId::ConditionType_Disable).await,
+        StatusCode::BadConditionAlreadyDisabled
+    );
+    assert_eq!(
+        call(&kim, &condition, MethodId::ConditionType_Enable).await,
+        StatusCode::Good
+    );
+    alarm_until(&bus, "ESE in service on the bus", &mut seen, |a| {
+        a.transition.as_str() == "in_service"
+    })
+    .await;
+    assert_eq!(
+        state(&kim, ns, "EnabledState.Id").await,
+        Variant::from(true)
+    );
+    let rows = fx
+        .history_rows("cellwatch/m01ps0004/history?since=1h;kind=command")
+        .await;
+    let last: Vec<(&str, &str)> = rows[rows.len() - 3..]
+        .iter()
+        .map(|r| {
+            let f = &r["fields"];
+            (f["detail"].as_str().unwrap(), f["source"].as_str().unwrap())
+        })
+        .collect();
+    assert_eq!(
+        last,
+        [
+            (
+                "operator 'ana' may not out-of-service",
+                "opcua user scada-ana"
+            ),
+            ("out-of-service ese by kim", "opcua user scada-kim"),
+            ("in-service ese by kim", "opcua user scada-kim"),
+        ]
+    );
     // The agent stops with SCADA sessions open.
     let mut fx = fx;
     tokio::time::timeout(Duration::from_secs(60), fx.stop())

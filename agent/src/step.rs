@@ -255,7 +255,7 @@ pub struct SessionCommand {
     pub user: String,
     /// The operator the user acts as (the alarm server's users file).
     pub operator: String,
-    /// `ack`, `shelve` or `unshelve`.
+    /// `ack`, `shelve`, `unshelve`, `out-of-service` or `in-service`.
     pub action: crate::operator::Action,
     /// The alarm it names.
     pub alarm: String,

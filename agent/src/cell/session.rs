@@ -39,14 +39,16 @@ impl CellLoop {
             comment,
             reply,
         } = asked;
-        // A shelf needs a reason: the operator's comment, or where it came
-        // from.
-        let reason = (action == Action::Shelve).then(|| {
+        // A shelf or a removal from service needs a reason: the operator's
+        // comment, or where it came from.
+        let reason = match action {
+            Action::Shelve => Some("shelved"),
+            Action::OutOfService => Some("disabled"),
+            _ => None,
+        }
+        .map(|done| {
             if comment.is_empty() {
-                format!(
-                    "shelved over OPC UA by {}",
-                    crate::operator::clip(&user, 64)
-                )
+                format!("{done} over OPC UA by {}", crate::operator::clip(&user, 64))
             } else {
                 comment.clone()
             }
@@ -128,6 +130,19 @@ impl CellLoop {
                         .map_err(outcome_of)
                 }),
             Action::Unshelve => self.engine.unshelve(&cmd.alarm, now).map_err(outcome_of),
+            Action::OutOfService => self
+                .engine
+                .take_out_of_service(
+                    &cmd.alarm,
+                    &cmd.operator,
+                    cmd.reason.as_deref().unwrap_or_default(),
+                    now,
+                )
+                .map_err(outcome_of),
+            Action::InService => self
+                .engine
+                .return_to_service(&cmd.alarm, now)
+                .map_err(outcome_of),
             other => Err(SessionOutcome::Refused(format!(
                 "{other} is not taken over OPC UA"
             ))),
@@ -166,7 +181,8 @@ fn outcome_of(e: CommandRefused) -> SessionOutcome {
         CommandRefused::NothingToAcknowledge(_) => SessionOutcome::WrongState(e.to_string()),
         CommandRefused::Shelving {
             what: "unshelved", ..
-        } => SessionOutcome::WrongState(e.to_string()),
+        }
+        | CommandRefused::Service { .. } => SessionOutcome::WrongState(e.to_string()),
         _ => SessionOutcome::Refused(e.to_string()),
     }
 }

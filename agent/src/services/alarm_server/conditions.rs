@@ -35,7 +35,11 @@ pub(super) type StateVariable = (&'static str, DataTypeId, fn() -> Variant);
 /// data type, initial value. `…State` are `TwoStateVariableType` components
 /// with their `Id` property (`ShelvingState`'s `CurrentState` a
 /// `FiniteStateVariableType`); the others properties of what they follow.
-pub(super) const STATE_VARIABLES: [StateVariable; 12] = [
+pub(super) const STATE_VARIABLES: [StateVariable; 14] = [
+    ("EnabledState", DataTypeId::LocalizedText, || {
+        LocalizedText::from("Enabled").into()
+    }),
+    ("EnabledState.Id", DataTypeId::Boolean, || true.into()),
     ("ActiveState", DataTypeId::LocalizedText, || {
         LocalizedText::from("Inactive").into()
     }),
@@ -77,7 +81,8 @@ pub(super) struct Served {
     /// The cell's namespace, where the conditions' nodes are added.
     pub(super) nodes: Arc<SimpleNodeManager>,
     /// Namespace 0's address space: each condition needs its
-    /// `HasComponent` to `Acknowledge` there for calls to reach it.
+    /// `HasComponent` to `Acknowledge`, `Enable` and `Disable` there for
+    /// calls to reach them.
     pub(super) core: Arc<RwLock<AddressSpace>>,
 }
 
@@ -91,8 +96,11 @@ pub(super) struct Condition {
     pub(super) culprits: String,
     pub(super) active: bool,
     pub(super) acked: bool,
+    /// In service (ISA-18.2): not disabled.
+    pub(super) enabled: bool,
     pub(super) active_at: DateTime,
     pub(super) acked_at: DateTime,
+    pub(super) enabled_at: DateTime,
     /// The operator who acknowledged it.
     pub(super) acked_by: String,
     /// The comment of the occurrence's acknowledgement, if any.
@@ -236,8 +244,13 @@ impl Conditions {
             // The acknowledgement's comment, wherever it was made; none
             // for a new occurrence.
             c.comment = p.ack_comment.clone().unwrap_or_default();
+            let enabled = p.out_of_service.is_none();
+            if enabled != c.enabled {
+                c.enabled_at = now;
+            }
             c.active = active;
             c.acked = acked;
+            c.enabled = enabled;
             c.acked_by = p.acked_by.clone().unwrap_or_default();
             c.message = p.message.clone();
             c.severity = severity(p.severity);
@@ -339,11 +352,13 @@ impl Conditions {
         }
         {
             let mut core = served.core.write();
-            core.insert_reference(
-                &node,
-                &MethodId::AcknowledgeableConditionType_Acknowledge.into(),
-                ReferenceTypeId::HasComponent,
-            );
+            for method in [
+                MethodId::AcknowledgeableConditionType_Acknowledge,
+                MethodId::ConditionType_Enable,
+                MethodId::ConditionType_Disable,
+            ] {
+                core.insert_reference(&node, &method.into(), ReferenceTypeId::HasComponent);
+            }
             let shelving = self.state_node(served.ns, id, "ShelvingState");
             for method in [
                 MethodId::ShelvedStateMachineType_TimedShelve,
@@ -360,8 +375,10 @@ impl Conditions {
             culprits: String::new(),
             active: false,
             acked: true,
+            enabled: true,
             active_at: now,
             acked_at: now,
+            enabled_at: now,
             acked_by: String::new(),
             comment: String::new(),
             suppressed_or_shelved: false,
@@ -383,7 +400,13 @@ impl Conditions {
             Variant::from(LocalizedText::from(if on { yes } else { no }))
         };
         let (shelf_name, shelf_id) = shelving_state(c.shelved);
-        let values: [(&str, Variant, DateTime); 12] = [
+        let values: [(&str, Variant, DateTime); 14] = [
+            (
+                "EnabledState",
+                text(c.enabled, "Enabled", "Disabled"),
+                c.enabled_at,
+            ),
+            ("EnabledState.Id", c.enabled.into(), c.enabled_at),
             (
                 "ActiveState",
                 text(c.active, "Active", "Inactive"),
@@ -469,7 +492,7 @@ impl Conditions {
                     value: StatusCode::Good,
                     source_timestamp: c.time,
                 },
-                enabled_state: TwoState::new(true, "Enabled", "Disabled", c.active_at),
+                enabled_state: TwoState::new(c.enabled, "Enabled", "Disabled", c.enabled_at),
                 active_state: TwoState::new(c.active, "Active", "Inactive", c.active_at),
                 acked_state: TwoState::new(c.acked, "Acknowledged", "Unacknowledged", c.acked_at),
                 confirmed_state: TwoState::new(true, "Confirmed", "Unconfirmed", c.acked_at),

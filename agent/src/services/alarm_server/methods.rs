@@ -1,7 +1,8 @@
 //! Namespace 0's node manager with the condition methods a SCADA client
-//! calls: `Acknowledge` (i=9111), `ConditionRefresh` (i=3875), and the
-//! shelving state machine's `TimedShelve` (i=2949), `OneShotShelve`
-//! (i=2948) and `Unshelve` (i=2947). They belong to namespace 0, so calls
+//! calls: `Acknowledge` (i=9111), `ConditionRefresh` (i=3875), `Disable`
+//! (i=9028) and `Enable` (i=9027) — out of service and back, in ISA-18.2's
+//! words — and the shelving state machine's `TimedShelve` (i=2949),
+//! `OneShotShelve` (i=2948) and `Unshelve` (i=2947). They belong to namespace 0, so calls
 //! to them reach the core node manager, which answers none: it is wrapped,
 //! those taken here, everything else passed on. An acknowledgement or a
 //! shelf goes to the cell loop ([`SessionCommand`]) and is answered Good
@@ -222,6 +223,61 @@ impl AlarmCore {
         call.set_status(status);
     }
 
+    /// `Disable()` or `Enable()` on a condition: its alarm taken out of
+    /// service or put back (ISA-18.2), by the session's user as the
+    /// operator they act as (who needs `out-of-service` or `in-service`),
+    /// through the cell loop.
+    async fn enabling(&self, context: &RequestContext, call: &mut MethodCall, enable: bool) {
+        if context.user_token().is_anonymous() {
+            call.set_status(StatusCode::BadUserAccessDenied);
+            return;
+        }
+        let Some((alarm, condition)) = self.conditions.by_node(call.object_id()) else {
+            call.set_status(StatusCode::BadNodeIdUnknown);
+            return;
+        };
+        let already = if enable {
+            StatusCode::BadConditionAlreadyEnabled
+        } else {
+            StatusCode::BadConditionAlreadyDisabled
+        };
+        if condition.enabled == enable {
+            call.set_status(already);
+            return;
+        }
+        let Some((user, operator)) = self.operator_of(context, &alarm) else {
+            call.set_status(StatusCode::BadUserAccessDenied);
+            return;
+        };
+        let (reply, outcome) = oneshot::channel();
+        let asked = SessionCommand {
+            user,
+            operator,
+            action: if enable {
+                Action::InService
+            } else {
+                Action::OutOfService
+            },
+            alarm,
+            value: None,
+            comment: String::new(),
+            reply,
+        };
+        let status = match self.ask_loop(asked, outcome).await {
+            Some(SessionOutcome::Accepted(_)) => {
+                call.set_outputs(Vec::new());
+                StatusCode::Good
+            }
+            Some(SessionOutcome::Denied(_)) => StatusCode::BadUserAccessDenied,
+            Some(SessionOutcome::WrongState(_)) => already,
+            Some(SessionOutcome::Refused(_) | SessionOutcome::OutOfRange(_)) => {
+                StatusCode::BadInvalidState
+            }
+            None => StatusCode::BadShutdown,
+        };
+        call.set_status(status);
+    }
+
     /// `ConditionRefresh(SubscriptionId)`: a refresh start, every retained
     /// condition's event and a refresh end, to that subscription's event
     /// items on the `Server` object or the cell.
@@ -359,6 +415,8 @@ impl InMemoryNodeManagerImpl for AlarmCore {
                 Ok(MethodId::ConditionType_ConditionRefresh) => {
                     self.condition_refresh(context, m);
                 }
+                Ok(MethodId::ConditionType_Enable) => self.enabling(context, m, true).await,
+                Ok(MethodId::ConditionType_Disable) => self.enabling(context, m, false).await,
                 Ok(
                     method @ (MethodId::ShelvedStateMachineType_TimedShelve
                     | MethodId::ShelvedStateMachineType_OneShotShelve

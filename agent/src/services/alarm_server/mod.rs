@@ -4,8 +4,8 @@
 //! `Culprits`) per alarm id under the cell's object, a notifier the
 //! `Server` object reaches, so a client subscribing to events on i=2253
 //! sees every transition; `ConditionRefresh` is answered, and
-//! `Acknowledge` is carried out by the cell loop as the operator the
-//! session's user acts as ([`users`]).
+//! `Acknowledge`, shelving and `Disable`/`Enable` are carried out by the
+//! cell loop as the operator the session's user acts as ([`users`]).
 //!
 //! Security: Basic256Sha256 with SignAndEncrypt only; the server's key pair
 //! is made in its PKI directory on first start, client certificates are
@@ -13,8 +13,8 @@
 //! sessions may browse and subscribe, never acknowledge.
 //!
 //! - `events.rs`: the event and its fields; `conditions.rs`: the
-//!   conditions kept from the alarm payloads; `methods.rs`: Acknowledge
-//!   and ConditionRefresh; `users.rs`: the users file, passwords.
+//!   conditions kept from the alarm payloads; `methods.rs`: the methods
+//!   (Acknowledge, ConditionRefresh, Disable/Enable, shelving); `users.rs`: the users file, passwords.
 //!
 //! Not here: the sink that feeds it (`sinks::alarm_server`), the loop's
 //! side of an acknowledgement (`cell/session.rs`).
