@@ -38,6 +38,15 @@ use crate::step::{SessionCommand, SessionOutcome};
 /// How much of an acknowledgement's comment is journaled (bytes).
 const COMMENT_BYTES: usize = 256;
 
+/// What a method asks of the cell loop: the action on an alarm, a shelf's
+/// length, the operator's comment (may be empty).
+struct Asked {
+    action: Action,
+    alarm: String,
+    value: Option<String>,
+    comment: String,
+}
+
 /// Builds the core node manager wrapped ([`AlarmCore`]).
 pub(super) struct AlarmCoreBuilder {
     pub(super) conditions: Arc<Conditions>,
@@ -121,38 +130,24 @@ impl AlarmCore {
             call.set_status(StatusCode::BadConditionBranchAlreadyAcked);
             return;
         }
-        let Some((user, operator)) = self.operator_of(context, &alarm) else {
-            call.set_status(StatusCode::BadUserAccessDenied);
-            return;
-        };
         let comment = match args.get(1) {
             Some(Variant::LocalizedText(t)) => t.text.as_ref(),
             _ => "",
         };
         let comment = crate::operator::clip(&crate::operator::escaped(comment), COMMENT_BYTES);
-        let (reply, outcome) = oneshot::channel();
-        let asked = SessionCommand {
-            user,
-            operator,
+        let asked = Asked {
             action: Action::Ack,
-            alarm: alarm.clone(),
+            alarm,
             value: None,
             comment,
-            reply,
         };
-        let status = match self.ask_loop(asked, outcome).await {
-            Some(SessionOutcome::Accepted(_)) => {
-                call.set_outputs(Vec::new());
-                StatusCode::Good
-            }
-            Some(SessionOutcome::Denied(_)) => StatusCode::BadUserAccessDenied,
-            Some(SessionOutcome::WrongState(_)) => StatusCode::BadConditionBranchAlreadyAcked,
-            Some(SessionOutcome::Refused(_) | SessionOutcome::OutOfRange(_)) => {
-                StatusCode::BadInvalidState
-            }
-            None => StatusCode::BadShutdown,
-        };
-        call.set_status(status);
+        self.carry_out(
+            context,
+            call,
+            asked,
+            StatusCode::BadConditionBranchAlreadyAcked,
+        )
+        .await;
     }
 
     /// `TimedShelve(ShelvingTime)`, `OneShotShelve()` or `Unshelve()` on
@@ -195,32 +190,14 @@ impl AlarmCore {
             }
             _ => {}
         }
-        let Some((user, operator)) = self.operator_of(context, &alarm) else {
-            call.set_status(StatusCode::BadUserAccessDenied);
-            return;
-        };
-        let (reply, outcome) = oneshot::channel();
-        let asked = SessionCommand {
-            user,
-            operator,
+        let asked = Asked {
             action,
             alarm,
             value,
             comment: String::new(),
-            reply,
         };
-        let status = match self.ask_loop(asked, outcome).await {
-            Some(SessionOutcome::Accepted(_)) => {
-                call.set_outputs(Vec::new());
-                StatusCode::Good
-            }
-            Some(SessionOutcome::Denied(_)) => StatusCode::BadUserAccessDenied,
-            Some(SessionOutcome::WrongState(_)) => StatusCode::BadConditionNotShelved,
-            Some(SessionOutcome::OutOfRange(_)) => StatusCode::BadShelvingTimeOutOfRange,
-            Some(SessionOutcome::Refused(_)) => StatusCode::BadInvalidState,
-            None => StatusCode::BadShutdown,
-        };
-        call.set_status(status);
+        self.carry_out(context, call, asked, StatusCode::BadConditionNotShelved)
+            .await;
     }
 
     /// `Disable()` or `Enable()` on a condition: its alarm taken out of
@@ -245,34 +222,54 @@ impl AlarmCore {
             call.set_status(already);
             return;
         }
-        let Some((user, operator)) = self.operator_of(context, &alarm) else {
+        let action = if enable {
+            Action::InService
+        } else {
+            Action::OutOfService
+        };
+        let asked = Asked {
+            action,
+            alarm,
+            value: None,
+            comment: String::new(),
+        };
+        self.carry_out(context, call, asked, already).await;
+    }
+
+    /// `asked`, by the session's user as the operator they act as, carried
+    /// out by the cell loop and journaled: the call's status, `wrong_state`
+    /// when the alarm is not in a state the method applies to.
+    async fn carry_out(
+        &self,
+        context: &RequestContext,
+        call: &mut MethodCall,
+        asked: Asked,
+        wrong_state: StatusCode,
+    ) {
+        let Some((user, operator)) = self.operator_of(context, &asked.alarm) else {
             call.set_status(StatusCode::BadUserAccessDenied);
             return;
         };
         let (reply, outcome) = oneshot::channel();
-        let asked = SessionCommand {
+        let command = SessionCommand {
             user,
             operator,
-            action: if enable {
-                Action::InService
-            } else {
-                Action::OutOfService
-            },
-            alarm,
-            value: None,
-            comment: String::new(),
+            action: asked.action,
+            alarm: asked.alarm,
+            value: asked.value,
+            comment: asked.comment,
             reply,
         };
-        let status = match self.ask_loop(asked, outcome).await {
+        let status = match self.ask_loop(command, outcome).await {
             Some(SessionOutcome::Accepted(_)) => {
                 call.set_outputs(Vec::new());
                 StatusCode::Good
             }
             Some(SessionOutcome::Denied(_)) => StatusCode::BadUserAccessDenied,
-            Some(SessionOutcome::WrongState(_)) => already,
-            Some(SessionOutcome::Refused(_) | SessionOutcome::OutOfRange(_)) => {
-                StatusCode::BadInvalidState
-            }
+            Some(SessionOutcome::WrongState(_)) => wrong_state,
+            // Only a shelf has a length.
+            Some(SessionOutcome::OutOfRange(_)) => StatusCode::BadShelvingTimeOutOfRange,
+            Some(SessionOutcome::Refused(_)) => StatusCode::BadInvalidState,
             None => StatusCode::BadShutdown,
         };
         call.set_status(status);
