@@ -351,6 +351,12 @@ async fn a_fault_shows_live_with_its_culprits_and_an_operator_acknowledges_and_s
         recording.contains("X0.06 x0_06") && recording.contains("signals ese's check reads"),
         "{recording}"
     );
+    // The alarm's events say who acknowledged it, and what she said.
+    let events = b.text("section.events").await;
+    assert!(
+        events.contains("kim: limit switch cable re-seated"),
+        "{events}"
+    );
     b.screenshot("alarm").await;
     b.client
         .execute(

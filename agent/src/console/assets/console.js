@@ -432,7 +432,8 @@ function alarmDetail(cell, id) {
         this.events.replaceChildren(el('h3', {}, 'Events'), mine.length
           ? table('events', ['Time', 'Transition', 'State', 'By'], mine.map(r => {
             const p = r.fields.payload || {};
-            const by = p.acked_by || (p.shelved && p.shelved.by) || (p.out_of_service && p.out_of_service.by) || '';
+            const acked = p.acked_by && r.fields.transition === 'acknowledged' && p.ack_comment ? `${p.acked_by}: ${p.ack_comment}` : p.acked_by;
+            const by = acked || (p.shelved && p.shelved.by) || (p.out_of_service && p.out_of_service.by) || '';
             return [when(r.at), r.fields.transition, STATE_TEXT[p.state] || p.state || '', by];
           }))
           : el('p', { class: 'note' }, 'No event of this alarm in the last 7 days.'));
