@@ -116,10 +116,8 @@ fn print_alarm(out: &mut dyn Write, a: &AlarmPayload, json: bool) -> std::io::Re
         }
         consequence.push(')');
     }
-    // Who acknowledged it, and what they said, with the acknowledgement.
-    if let (cellwatch_models::alarm::Transition::Acknowledged, Some(by)) =
-        (a.transition, &a.acked_by)
-    {
+    // Who acknowledged it, and what they said.
+    if let Some(by) = &a.acked_by {
         consequence += &format!(" (by {by}");
         if let Some(c) = &a.ack_comment {
             consequence += &format!(": {c}");
@@ -632,5 +630,13 @@ mod tests {
             text.ends_with("ESE step 6: ESE at step 6 (by kim: tool changed\\nnext line)\n"),
             "{text}"
         );
+        // Cleared afterwards, acknowledged without a comment: who, still.
+        let mut cleared = a.clone();
+        cleared.transition = cellwatch_models::alarm::Transition::Cleared;
+        cleared.ack_comment = None;
+        let mut out = Vec::new();
+        print_alarm(&mut out, &cleared, false).unwrap();
+        let text = String::from_utf8(out).unwrap();
+        assert!(text.ends_with("ESE at step 6 (by kim)\n"), "{text}");
     }
 }
