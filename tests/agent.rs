@@ -631,26 +631,18 @@ async fn live_line_slow_motion_raises_its_timer_alarm() {
         .unwrap();
     // The agent has its subscription, and every tag's first value, before
     // the line starts moving.
-    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
-    loop {
-        let snap: serde_json::Value = serde_json::from_str(
-            &crate::spawned::query(&client, "cellwatch/line01/snapshot", None)
-                .await
-                .unwrap(),
-        )
-        .unwrap();
-        let known = snap["tags"]
-            .as_array()
-            .is_some_and(|tags| tags.iter().all(|t| t["quality"] == "good"));
-        if known && snap["connected"] == true {
-            break;
-        }
-        assert!(
-            tokio::time::Instant::now() < deadline,
-            "the line's agent never had every tag: {snap:#}"
-        );
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    }
+    crate::spawned::cell_snapshot_until(
+        &client,
+        "line01",
+        "the line's agent never had every tag",
+        |snap| {
+            let known = snap["tags"]
+                .as_array()
+                .is_some_and(|tags| tags.iter().all(|t| t["quality"] == "good"));
+            known && snap["connected"] == true
+        },
+    )
+    .await;
     let (note_tx, mut note_rx) = tokio::sync::mpsc::unbounded_channel();
     let player_sim = sim.clone();
     let player = tokio::spawn(async move {

@@ -316,22 +316,7 @@ async fn bus_cell(serial: bool) {
         .unwrap();
     let snapshot_until = |what: &'static str, ready: fn(&serde_json::Value) -> bool| {
         let client = client.clone();
-        async move {
-            let deadline = tokio::time::Instant::now() + Duration::from_secs(30);
-            loop {
-                let snap: serde_json::Value = serde_json::from_str(
-                    &crate::spawned::query(&client, "cellwatch/moulding-bus1/snapshot", None)
-                        .await
-                        .unwrap(),
-                )
-                .unwrap();
-                if ready(&snap) {
-                    return snap;
-                }
-                assert!(tokio::time::Instant::now() < deadline, "{what}: {snap}");
-                tokio::time::sleep(Duration::from_millis(100)).await;
-            }
-        }
+        async move { crate::spawned::cell_snapshot_until(&client, "moulding-bus1", what, ready).await }
     };
     let value = |snap: &serde_json::Value, address: &str| {
         snap["tags"]

@@ -246,14 +246,21 @@ pub(crate) async fn snapshot_until(
     what: &str,
     ready: impl Fn(&serde_json::Value) -> bool,
 ) -> serde_json::Value {
+    cell_snapshot_until(session, "m01ps0004", what, ready).await
+}
+
+/// Polls `cell`'s snapshot until `ready` holds; returns it.
+pub(crate) async fn cell_snapshot_until(
+    session: &zenoh::Session,
+    cell: &str,
+    what: &str,
+    ready: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
     let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    let selector = format!("cellwatch/{cell}/snapshot");
     loop {
-        let snap: serde_json::Value = serde_json::from_str(
-            &query(session, "cellwatch/m01ps0004/snapshot", None)
-                .await
-                .unwrap(),
-        )
-        .unwrap();
+        let snap: serde_json::Value =
+            serde_json::from_str(&query(session, &selector, None).await.unwrap()).unwrap();
         if ready(&snap) {
             return snap;
         }
