@@ -371,42 +371,9 @@ fn the_readme_python_recipe_verifies_an_envelope() {
     );
 }
 
-/// A Python 3 that has the `cryptography` package: the machine's, or one
-/// in a virtual environment under `target/` that this makes once.
+/// A Python 3 that has the `cryptography` package.
 fn python_with_cryptography() -> std::path::PathBuf {
-    let has = |python: &Path| {
-        std::process::Command::new(python)
-            .args(["-c", "import cryptography"])
-            .output()
-            .is_ok_and(|o| o.status.success())
-    };
-    let system = Path::new("python3");
-    if has(system) {
-        return system.to_path_buf();
-    }
-    let venv = crate::util::root().join("target/py-cryptography");
-    let python = venv.join("bin/python3");
-    if !has(&python) {
-        let run = |cmd: &mut std::process::Command| {
-            let out = cmd.output().unwrap();
-            assert!(
-                out.status.success(),
-                "{}",
-                String::from_utf8_lossy(&out.stderr)
-            );
-        };
-        run(std::process::Command::new("python3")
-            .args(["-m", "venv"])
-            .arg(&venv));
-        run(std::process::Command::new(&python).args([
-            "-m",
-            "pip",
-            "install",
-            "--quiet",
-            "cryptography",
-        ]));
-    }
-    python
+    crate::util::python_with("cryptography", "cryptography", &["cryptography"])
 }
 
 /// Plant-wide views through the shipped router and its access control: the

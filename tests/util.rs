@@ -411,3 +411,36 @@ impl cellwatch::journal::CommitObserver for NoCommits {
     fn committed(&self, _: usize, _: std::time::Duration) {}
     fn failed(&self, _: &str) {}
 }
+
+/// A Python 3 that can `import module`: the machine's, or one in a virtual
+/// environment `target/py-NAME` that this makes once, with `pip install
+/// packages` (pinned versions, so every run gets the same stack). One
+/// installation at a time in this process.
+pub(crate) fn python_with(name: &str, module: &str, packages: &[&str]) -> PathBuf {
+    static PIP: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _one = PIP.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let has = |python: &Path| {
+        Command::new(python)
+            .args(["-c", &format!("import {module}")])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    };
+    let venv = root().join("target").join(format!("py-{name}"));
+    let python = venv.join("bin/python3");
+    if has(&python) {
+        return python;
+    }
+    let run = |cmd: &mut Command| {
+        let out = cmd.output().unwrap();
+        assert!(
+            out.status.success(),
+            "{cmd:?} failed:\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    run(Command::new("python3").args(["-m", "venv"]).arg(&venv));
+    run(Command::new(&python)
+        .args(["-m", "pip", "install", "--quiet"])
+        .args(packages));
+    python
+}
