@@ -46,11 +46,12 @@ impl Drop for Plant {
 /// acknowledge; every comment of the CSD check's I/O list ends with [`HOSTILE`]) and
 /// a console on it, on ports the system picks.
 async fn plant(dir: &Path) -> Plant {
-    plant_with(dir, "").await
+    plant_with(dir, "", "").await
 }
 
-/// [`plant`] with `http` added to the console's `[http]` section.
-async fn plant_with(dir: &Path, http: &str) -> Plant {
+/// [`plant`] with `http` added to the console's `[http]` section and
+/// `sections` at the end of its configuration.
+async fn plant_with(dir: &Path, http: &str, sections: &str) -> Plant {
     let (sim, mut cell) = spawned::start(dir).await;
     let ana = OperatorKey::from_hex("ana", ANA).unwrap();
     let operators = dir.join("operators.toml");
@@ -91,7 +92,7 @@ async fn plant_with(dir: &Path, http: &str) -> Plant {
     std::fs::write(
         dir.join("console.toml"),
         format!(
-            "[http]\nlisten = \"127.0.0.1:0\"\n{http}\n\n[bus]\nconnect = [\"quic/127.0.0.1:{}\"]\ntrust = {:?}\ntls = {{ ca = {:?}, cert = {:?}, key = {:?} }}\n\n[operators]\nfile = {:?}\n\n[areas]\nmachining = [\"m01ps0004\"]\n",
+            "[http]\nlisten = \"127.0.0.1:0\"\n{http}\n\n[bus]\nconnect = [\"quic/127.0.0.1:{}\"]\ntrust = {:?}\ntls = {{ ca = {:?}, cert = {:?}, key = {:?} }}\n\n[operators]\nfile = {:?}\n\n[areas]\nmachining = [\"m01ps0004\"]\n{sections}\n",
             cell.zenoh_port, trust, tls.ca, tls.cert, tls.key, operators
         ),
     )
@@ -127,15 +128,30 @@ async fn plant_with(dir: &Path, http: &str) -> Plant {
     }
 }
 
-/// Opens `route` of the console and waits until its live stream runs and
-/// the cell's agent is known to be there.
+/// Opens `route` of the console, signed in as kim, and waits until its
+/// live stream runs and the cell's agent is known to be there.
 async fn open(b: &Browser, p: &Plant, route: &str) {
-    open_at(b, &p.url, "m01ps0004", route).await;
+    let key = p.cell.dir.join("kim.key");
+    open_at(b, &p.url, "m01ps0004", route, &key, "kim").await;
 }
 
-/// Opens `route` of the console at `url`, as [`open`], for `cell`.
-async fn open_at(b: &Browser, url: &str, cell: &str, route: &str) {
+/// Opens `route` of the console at `url`, as [`open`], for `cell`,
+/// signed in with `key` (of `operator`) unless a key is loaded already.
+async fn open_at(b: &Browser, url: &str, cell: &str, route: &str, key: &Path, operator: &str) {
     b.client.goto(&format!("{url}{route}")).await.unwrap();
+    b.wait_until(
+        "the page knows whether it is signed in",
+        "return typeof S !== 'undefined' && document.getElementById('operator-name').textContent !== '';",
+    )
+    .await;
+    let loaded = b
+        .client
+        .execute("return S.key !== null;", vec![])
+        .await
+        .unwrap();
+    if loaded != serde_json::json!(true) {
+        load_key(b, key, operator).await;
+    }
     b.wait_for("#link.up").await;
     b.wait_until(
         "the console knows the agent is up",
@@ -208,6 +224,22 @@ async fn a_fault_shows_live_with_its_culprits_and_an_operator_acknowledges_and_s
     let d = tempfile::tempdir().unwrap();
     let p = plant(d.path()).await;
     let b = browser::start().await;
+    // Before anyone signs in the page shows nothing of the plant, and
+    // asks for a key.
+    b.client.goto(&p.url).await.unwrap();
+    b.wait_until(
+        "the page asks to sign in",
+        "return typeof S !== 'undefined' && document.getElementById('link').textContent === 'signed out';",
+    )
+    .await;
+    assert!(b.text("#operator-name").await.contains("sign in"));
+    assert_eq!(
+        b.client
+            .execute("return S.cells.size;", vec![])
+            .await
+            .unwrap(),
+        serde_json::json!(0)
+    );
     open(&b, &p, "#/alarms").await;
     // When each alarm's row first appears, by the page's clock (the same
     // machine's as the agent's).
@@ -264,12 +296,9 @@ async fn a_fault_shows_live_with_its_culprits_and_an_operator_acknowledges_and_s
         diagnosis.contains("X0.06 Y Over Travel Limit SW (B) 0 1 trigger"),
         "{diagnosis}"
     );
-    let actions = b.text("section.actions").await;
-    assert!(actions.contains("Load your operator key"), "{actions}");
 
-    // Kim loads her key and acknowledges with a comment: the agent
-    // journals it under her, her words after what was done.
-    load_key(&b, &d.path().join("kim.key"), "kim").await;
+    // Kim, signed in with her key, acknowledges with a comment: the
+    // agent journals it under her, her words after what was done.
     b.wait_for("input[name='ack-comment']")
         .await
         .send_keys("limit switch cable re-seated")
@@ -643,6 +672,7 @@ async fn with_a_certificate_the_console_serves_https_only() {
     let p = plant_with(
         d.path(),
         &format!("tls = {{ cert = {:?}, key = {:?} }}", tls.cert, tls.key),
+        "",
     )
     .await;
     assert!(p.url.starts_with("https://127.0.0.1:"), "{}", p.url);
@@ -719,13 +749,25 @@ async fn a_stuck_step_is_drawn_and_forced_from_the_cell_page_once_its_condition_
         operators_file: Some(d.path().join("operators.toml")),
         areas: Default::default(),
         max_alarms: 1000,
+        session: cellwatch::console::config::DEFAULT_SESSION,
+        names: Vec::new(),
+        readers: None,
     })
     .await
     .unwrap();
     std::fs::write(d.path().join("kim.key"), kim().to_file()).unwrap();
     std::fs::write(d.path().join("lee.key"), cell.lee.to_file()).unwrap();
     let b = browser::start().await;
-    open_at(&b, &console.url(), CELL, &format!("#/cell/{CELL}")).await;
+    let lee = d.path().join("lee.key");
+    open_at(
+        &b,
+        &console.url(),
+        CELL,
+        &format!("#/cell/{CELL}"),
+        &lee,
+        "lee",
+    )
+    .await;
     b.wait_for(".sfc-step.stuck[data-step='F1.S2']").await;
     b.wait_for("[data-transition='F1.t3'].waits").await;
     let t3 = b.text("[data-transition='F1.t3']").await;
@@ -868,4 +910,220 @@ async fn the_console_session_puts_nothing_and_answers_nothing() {
         .unwrap();
     assert!(answers.recv_async().await.is_err(), "the console answered");
     drop((queryable, &mut answers));
+}
+
+/// One HTTP/1.1 request to `addr` (`IP:PORT`) as written in `head` (the
+/// `Connection: close` and length added), and its status, head and body.
+fn request(addr: &str, head: &str, body: &str) -> (u16, String, String) {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+    let text = format!(
+        "{head}\r\nConnection: close\r\nContent-Length: {}\r\n\r\n{body}",
+        body.len()
+    );
+    s.write_all(text.as_bytes()).unwrap();
+    let mut got = String::new();
+    let _ = s.read_to_string(&mut got);
+    let (head, body) = got.split_once("\r\n\r\n").unwrap_or((&got, ""));
+    let status = head
+        .split(' ')
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+        .unwrap_or(0);
+    (status, head.to_string(), body.to_string())
+}
+
+/// Signs `operator` (key file `key`) in over HTTP as the page does, and
+/// returns the session's `Cookie` header line.
+fn sign_in(addr: &str, key: &Path) -> Result<String, (u16, String)> {
+    use ed25519_dalek::Signer;
+    let file =
+        cellwatch::operator::OperatorKey::parse("key", &std::fs::read_to_string(key).unwrap())
+            .unwrap();
+    let seed = std::fs::read_to_string(key)
+        .unwrap()
+        .lines()
+        .find_map(|l| l.strip_prefix("private_key = \""))
+        .map(|l| l.trim_end_matches('"').to_string())
+        .unwrap();
+    let signing =
+        ed25519_dalek::SigningKey::from_bytes(&hex::decode(seed).unwrap().try_into().unwrap());
+    let host = format!("Host: {addr}");
+    let (_, _, body) = request(
+        addr,
+        &format!("POST /api/sign-in/challenge HTTP/1.1\r\n{host}"),
+        "",
+    );
+    let challenge = serde_json::from_str::<serde_json::Value>(&body).unwrap()["challenge"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let text = format!("cellwatch-console-sign-in-v1\n{challenge}\n{addr}\n");
+    let signature = hex::encode(signing.sign(text.as_bytes()).to_bytes());
+    let answer = serde_json::json!({ "operator": file.operator, "challenge": challenge, "signature": signature });
+    let (status, head, body) = request(
+        addr,
+        &format!("POST /api/sign-in HTTP/1.1\r\n{host}\r\nContent-Type: application/json"),
+        &answer.to_string(),
+    );
+    if status != 200 {
+        return Err((status, body));
+    }
+    let cookie = head
+        .lines()
+        .find_map(|l| l.strip_prefix("set-cookie: "))
+        .and_then(|c| c.split(';').next())
+        .unwrap()
+        .to_string();
+    Ok(format!("Cookie: {cookie}"))
+}
+
+/// Nothing of the plant without a plant identity: every route under
+/// `/api/` refuses a client that has not signed in (the page itself holds
+/// nothing), a request for another host name (DNS rebinding) or from
+/// another site's page is refused, a reader sees only the cells
+/// `[readers]` gives it, an operator signs in only with the key the
+/// operators file holds, and one client's share of the console is bounded.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_console_serves_nothing_without_a_plant_identity_and_each_reader_its_cells() {
+    let d = tempfile::tempdir().unwrap();
+    // A second cell in the trust file (its agent not running), which ana
+    // alone reads.
+    std::fs::create_dir(d.path().join("press7")).unwrap();
+    cellwatch::bus::envelope::AgentKey::load_or_create(
+        &d.path().join("press7/press7.agent.key"),
+        "press7",
+    )
+    .unwrap();
+    let p = plant_with(
+        d.path(),
+        "",
+        "press-shop = [\"press7\"]\n\n[readers]\nkim = [\"*\"]\nana = [\"press-shop\"]\n",
+    )
+    .await;
+    let addr = p
+        .url
+        .trim_start_matches("http://")
+        .trim_end_matches('/')
+        .to_string();
+    let host = format!("Host: {addr}");
+    let get = |path: &str, extra: &str| {
+        let extra = if extra.is_empty() {
+            String::new()
+        } else {
+            format!("\r\n{extra}")
+        };
+        request(&addr, &format!("GET {path} HTTP/1.1\r\n{host}{extra}"), "")
+    };
+
+    // Anonymous: the page, yes; the plant, no.
+    assert_eq!(get("/", "").0, 200);
+    for path in [
+        "/api/plant",
+        "/api/operators",
+        "/api/kpi?since=24h",
+        "/api/cells/m01ps0004/snapshot",
+        "/api/cells/m01ps0004/history?kind=command&since=24h",
+        "/api/events",
+    ] {
+        let (status, _, body) = get(path, "");
+        assert_eq!(status, 401, "{path}: {body}");
+        assert!(body.contains("sign in first"), "{path}: {body}");
+    }
+    let (status, _, _) = request(
+        &addr,
+        &format!("POST /api/cells/m01ps0004/command HTTP/1.1\r\n{host}\r\nContent-Type: application/json"),
+        "{}",
+    );
+    assert_eq!(status, 401);
+
+    // Kim signs in with her key: she reads everything.
+    let kim = sign_in(&addr, &d.path().join("kim.key")).expect("kim signs in");
+    let (status, _, body) = get("/api/plant", &kim);
+    assert_eq!(status, 200, "{body}");
+    let view: serde_json::Value = serde_json::from_str(&body).unwrap();
+    let cells: Vec<&str> = view["cells"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["cell"].as_str().unwrap())
+        .collect();
+    assert_eq!(cells, ["m01ps0004", "press7"], "{body}");
+    assert_eq!(get("/api/cells/m01ps0004/snapshot", &kim).0, 200);
+    let (_, _, mine) = get("/api/operators", &kim);
+    assert!(
+        mine.contains("\"operator\":\"kim\"") && !mine.contains("ana"),
+        "{mine}"
+    );
+    // A window further back than a month is not asked of the agents.
+    let (status, _, body) = get("/api/kpi?since=1970-01-01T00:00:00Z", &kim);
+    assert_eq!(status, 400, "{body}");
+
+    // The same cookie under another host name, or from another site's
+    // page, gets nothing.
+    let (status, _, _) = request(
+        &addr,
+        &format!(
+            "GET /api/plant HTTP/1.1\r\nHost: attacker.example:{}\r\n{kim}",
+            addr.rsplit(':').next().unwrap()
+        ),
+        "",
+    );
+    assert_eq!(status, 421);
+    let (status, _, _) = get(
+        "/api/plant",
+        &format!("{kim}\r\nOrigin: http://attacker.example"),
+    );
+    assert_eq!(status, 403);
+
+    // Ana reads the press shop only.
+    let ana = sign_in(&addr, &d.path().join("ana.key")).expect("ana signs in");
+    let (_, _, body) = get("/api/plant", &ana);
+    assert!(!body.contains("m01ps0004"), "{body}");
+    let (status, _, body) = get("/api/cells/m01ps0004/snapshot", &ana);
+    assert_eq!(status, 403, "{body}");
+    // Nor does she forward kim's commands.
+    let (status, _, body) = request(
+        &addr,
+        &format!("POST /api/cells/press7/command HTTP/1.1\r\n{host}\r\n{ana}\r\nContent-Type: application/json"),
+        &serde_json::json!({"action": "ack", "alarm": "x", "operator": "kim", "nonce": "00", "issued_at": 0, "signature": "00"}).to_string(),
+    );
+    assert_eq!(status, 403, "{body}");
+
+    // A key that is not the operators file's signs nobody in.
+    let forged = cellwatch::operator::OperatorKey::generate("kim");
+    std::fs::write(d.path().join("forged.key"), forged.to_file()).unwrap();
+    let (status, body) = sign_in(&addr, &d.path().join("forged.key")).unwrap_err();
+    assert_eq!(status, 403);
+    assert!(
+        body.contains("not the key the operators file holds for 'kim'"),
+        "{body}"
+    );
+
+    // One identity holds at most 8 live streams.
+    let streams: Vec<std::net::TcpStream> = (0..8)
+        .map(|_| {
+            use std::io::{BufRead, Write};
+            let mut s = std::net::TcpStream::connect(&addr).unwrap();
+            s.write_all(format!("GET /api/events HTTP/1.1\r\n{host}\r\n{kim}\r\n\r\n").as_bytes())
+                .unwrap();
+            let mut first = String::new();
+            std::io::BufReader::new(s.try_clone().unwrap())
+                .read_line(&mut first)
+                .unwrap();
+            assert!(first.starts_with("HTTP/1.1 200"), "{first}");
+            s
+        })
+        .collect();
+    let (status, _, body) = get("/api/events", &kim);
+    assert_eq!(status, 429, "{body}");
+    drop(streams);
+
+    // One address gets 100 requests at once, then 20 a second.
+    let refused = (0..150)
+        .map(|_| get("/api/session", &kim).0)
+        .filter(|s| *s == 429)
+        .count();
+    assert!(refused > 0, "no request of 150 was refused");
 }

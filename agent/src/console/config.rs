@@ -15,6 +15,10 @@ use crate::config::{link_problem, ConfigErrors, ZenohConfig, ZenohMode, ZenohTls
 /// The address the console serves on unless `http.listen` says otherwise.
 pub const DEFAULT_LISTEN: &str = "127.0.0.1:8470";
 
+/// How long an operator's sign-in lasts unless `http.session` says
+/// otherwise: a shift and its handover.
+pub const DEFAULT_SESSION: std::time::Duration = std::time::Duration::from_secs(12 * 3600);
+
 /// The most alarms the console keeps (active, unacknowledged, shelved or
 /// out of service) unless `console.max_alarms` says otherwise.
 pub const DEFAULT_MAX_ALARMS: usize = 20_000;
@@ -41,6 +45,15 @@ pub struct ConsoleConfig {
     pub areas: BTreeMap<String, Vec<String>>,
     /// The most alarms kept at once.
     pub max_alarms: usize,
+    /// How long an operator's sign-in lasts.
+    pub session: std::time::Duration,
+    /// The host names the console is reached by, besides loopback's, its
+    /// listening address and its certificate's names: a request for any
+    /// other `Host` or from any other `Origin` is refused.
+    pub names: Vec<String>,
+    /// Who may read which cells (`[readers]`: identity → areas, cells or
+    /// `*`); `None`: every plant identity reads every cell.
+    pub readers: Option<BTreeMap<String, Vec<String>>>,
 }
 
 /// The console's HTTPS files.
@@ -50,6 +63,9 @@ pub struct HttpTls {
     pub cert: PathBuf,
     /// Its private key (PEM).
     pub key: PathBuf,
+    /// The plant CA (PEM) whose client certificates sign a reader in
+    /// (mutual TLS); `None`: operators sign in with their keys only.
+    pub clients: Option<PathBuf>,
 }
 
 #[derive(Deserialize)]
@@ -64,6 +80,7 @@ struct Raw {
     areas: BTreeMap<String, Spanned<Vec<String>>>,
     #[serde(default)]
     console: RawConsole,
+    readers: Option<BTreeMap<String, Spanned<Vec<String>>>>,
 }
 
 #[derive(Default, Deserialize)]
@@ -72,6 +89,9 @@ struct RawHttp {
     listen: Option<Spanned<String>>,
     tls: Option<Spanned<RawHttpTls>>,
     plain: Option<bool>,
+    session: Option<Spanned<String>>,
+    #[serde(default)]
+    names: Vec<Spanned<String>>,
 }
 
 #[derive(Deserialize)]
@@ -79,6 +99,7 @@ struct RawHttp {
 struct RawHttpTls {
     cert: String,
     key: String,
+    clients: Option<String>,
 }
 
 #[derive(Deserialize)]
@@ -169,6 +190,7 @@ pub fn parse(origin: &str, text: &str, base: &Path) -> Result<ConsoleConfig, Con
     let tls = raw.http.tls.as_ref().map(|t| HttpTls {
         cert: path(&t.get_ref().cert),
         key: path(&t.get_ref().key),
+        clients: t.get_ref().clients.as_deref().map(path),
     });
     if let (Some(listen), None) = (listen, &tls) {
         if !listen.ip().is_loopback() && raw.http.plain != Some(true) {
@@ -260,6 +282,54 @@ pub fn parse(origin: &str, text: &str, base: &Path) -> Result<ConsoleConfig, Con
         }
     };
 
+    let session = match &raw.http.session {
+        None => DEFAULT_SESSION,
+        Some(text) => match humantime::parse_duration(text.get_ref()) {
+            Ok(d) if (300..=7 * 86_400).contains(&d.as_secs()) => d,
+            _ => {
+                problems.push(at(
+                    text.span(),
+                    "http.session",
+                    format!(
+                        "'{}' is not a duration from 5m to 7d (e.g. 12h)",
+                        text.get_ref()
+                    ),
+                ));
+                DEFAULT_SESSION
+            }
+        },
+    };
+    let mut names = Vec::new();
+    for n in &raw.http.names {
+        let name = n.get_ref();
+        let plain = !name.is_empty()
+            && name
+                .bytes()
+                .all(|b| b.is_ascii_alphanumeric() || b".-:[]".contains(&b));
+        if plain {
+            names.push(name.to_ascii_lowercase());
+        } else {
+            problems.push(at(
+                n.span(),
+                "http.names",
+                format!(
+                    "'{name}' is not a host name or address (console.plant.example, 10.20.0.9)"
+                ),
+            ));
+        }
+    }
+    let clients = tls.as_ref().and_then(|t| t.clients.as_ref());
+    if raw.operators.file.is_none() && clients.is_none() {
+        problems.push(format!(
+            "{origin}: nobody could sign in: give operators.file (operators sign in with their keys) or http.tls.clients (the plant CA, for client certificates)"
+        ));
+    }
+    let readers = raw.readers.map(|r| {
+        r.into_iter()
+            .map(|(who, cells)| (who, cells.into_inner()))
+            .collect()
+    });
+
     if !problems.is_empty() {
         return Err(ConfigErrors(problems));
     }
@@ -282,6 +352,9 @@ pub fn parse(origin: &str, text: &str, base: &Path) -> Result<ConsoleConfig, Con
         operators_file: raw.operators.file.as_deref().map(path),
         areas,
         max_alarms,
+        session,
+        names,
+        readers,
     })
 }
 
@@ -299,6 +372,9 @@ connect = ["quic/10.0.0.5:7447"]
 tls = { ca = "ca.pem", cert = "c.pem", key = "c.key" }
 trust = "trust.toml"
 
+[operators]
+file = "operators.toml"
+
 [areas]
 press-shop = ["press7", "press8"]
 "#;
@@ -311,6 +387,54 @@ press-shop = ["press7", "press8"]
         assert_eq!(c.bus.mode, ZenohMode::Client);
         assert_eq!(c.areas.len(), 2);
         assert!(c.tls.is_some() && c.operators_file.is_some());
+        assert_eq!(
+            c.tls.as_ref().and_then(|t| t.clients.clone()),
+            Some(PathBuf::from("/etc/cellwatch/pki/ca.pem"))
+        );
+        assert_eq!(c.names, vec!["console.plant.example"]);
+        assert_eq!(c.session, DEFAULT_SESSION);
+        assert_eq!(
+            c.readers.as_ref().map(|r| r["ana"].clone()),
+            Some(vec!["press-shop".to_string()])
+        );
+    }
+
+    #[test]
+    fn a_console_nobody_could_sign_in_to_is_refused() {
+        let text = GOOD.replace("[operators]\nfile = \"operators.toml\"\n", "");
+        let e = parse("c.toml", &text, Path::new("."))
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "c.toml: nobody could sign in: give operators.file (operators sign in with their keys) or http.tls.clients (the plant CA, for client certificates)"
+        );
+        let with_clients = text.replace(
+            "key = \"console.key\" }",
+            "key = \"console.key\", clients = \"ca.pem\" }",
+        );
+        assert!(parse("c.toml", &with_clients, Path::new(".")).is_ok());
+    }
+
+    #[test]
+    fn a_session_and_names_out_of_form_are_said_with_their_place() {
+        let text = GOOD.replace(
+            "[http]\n",
+            "[http]\nsession = \"1s\"\nnames = [\"console.plant.example\", \"a b\"]\n",
+        );
+        let e = parse("c.toml", &text, Path::new("."))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(
+                "c.toml:3:11: http.session: '1s' is not a duration from 5m to 7d (e.g. 12h)"
+            ),
+            "{e}"
+        );
+        assert!(
+            e.contains("c.toml:4:35: http.names: 'a b' is not a host name or address"),
+            "{e}"
+        );
     }
 
     #[test]

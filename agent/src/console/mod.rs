@@ -12,11 +12,19 @@
 //!   agents' history and snapshots asked on the page's behalf, and
 //!   operators' commands, signed in the browser, forwarded as they are.
 //!
+//! Nothing of the plant is served without a plant identity ([`access`]:
+//! a client certificate from the plant CA, or an operator signed in with
+//! their own key), and only the cells it may read; every request passes
+//! the door's checks and bounds (`gate`).
+//!
 //! The console holds no operator key: it cannot act on its own, and its
 //! own session sends nothing under a cell's prefix
 //! ([`crate::bus::open_console`]). Its configuration: [`config`].
 
+mod access;
+mod api;
 pub mod config;
+mod gate;
 mod http;
 mod listen;
 pub mod plant;
@@ -50,6 +58,10 @@ impl Console {
     /// A file it needs is wrong ([`ConsoleError::Input`]), or the bus or
     /// the address cannot be had.
     pub async fn start(cfg: &ConsoleConfig) -> Result<Console, ConsoleError> {
+        if let Some(tls) = &cfg.bus.tls {
+            crate::bus::envelope::check_private(&tls.key)
+                .map_err(|e| ConsoleError::Input(format!("bus.tls: {e}")))?;
+        }
         let trust = Trust::load(&cfg.trust).map_err(|e| ConsoleError::Input(e.to_string()))?;
         let session = crate::bus::open_console(&cfg.bus)
             .await
@@ -72,10 +84,16 @@ impl Console {
                 .entries(),
             None => Vec::new(),
         };
-        let tls = match &cfg.tls {
-            Some(t) => Some(http::tls_acceptor(t)?),
-            None => None,
+        let (tls, certificate_names) = match &cfg.tls {
+            Some(t) => {
+                let (acceptor, names) = http::tls_acceptor(t)?;
+                (Some(acceptor), names)
+            }
+            None => (None, Vec::new()),
         };
+        let cells: std::collections::BTreeSet<String> = trust.cells().map(str::to_string).collect();
+        let readers = access::Readers::resolve(cfg.readers.as_ref(), &cfg.areas, &cells)
+            .map_err(ConsoleError::Input)?;
         let listener = tokio::net::TcpListener::bind(cfg.listen)
             .await
             .map_err(|e| ConsoleError::Runtime(format!("cannot listen on {}: {e}", cfg.listen)))?;
@@ -96,8 +114,16 @@ impl Console {
         let mut tasks = listen::start(shared.clone(), &cfg.root, resync_rx)
             .await
             .map_err(ConsoleError::Runtime)?;
+        let gate = Arc::new(gate::Gate::new(
+            gate::names_of(addr, &certificate_names, &cfg.names),
+            readers,
+            access::Sessions::new(cfg.session),
+            cells.iter().map(String::as_str),
+        ));
         let secure = tls.is_some();
-        tasks.push(tokio::spawn(http::serve(listener, tls, shared, stopped)));
+        tasks.push(tokio::spawn(http::serve(
+            listener, tls, shared, gate, stopped,
+        )));
         tracing::info!(%addr, tls = secure, "console serving");
         Ok(Console {
             addr,

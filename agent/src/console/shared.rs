@@ -1,11 +1,13 @@
 //! What the console's parts share: the plant behind its lock, the channel
-//! of changes the pages follow, the bus client, the operators' public
-//! permissions, and the cells to snapshot again.
+//! of changes the pages follow (each with the cell it concerns, so a page
+//! is sent only its reader's cells), the bus client, the operators'
+//! public permissions, and the cells to snapshot again.
 
 use std::sync::{Arc, Mutex};
 
 use tokio::sync::broadcast;
 
+use super::access::Scope;
 use super::plant::{Change, Plant};
 use crate::client::BusClient;
 
@@ -28,7 +30,7 @@ pub(super) const CHANGES_QUEUED: usize = 4096;
 /// What every part of the console shares.
 pub(super) struct Shared {
     pub(super) plant: Mutex<Plant>,
-    pub(super) changes: broadcast::Sender<Arc<str>>,
+    pub(super) changes: broadcast::Sender<Arc<Routed>>,
     pub(super) bus: BusClient,
     /// The operators (name, public key, actions), for the page to offer
     /// only what each may do.
@@ -46,18 +48,39 @@ impl Shared {
             return;
         };
         for change in apply(&mut plant) {
+            let cell = match &change {
+                Change::Alarm { alarm } => alarm.cell.clone(),
+                Change::Cell { cell } => cell.cell.clone(),
+            };
             if let Ok(json) = serde_json::to_string(&change) {
-                let _ = self.changes.send(json.into());
+                let _ = self.changes.send(Arc::new(Routed { cell, json }));
             }
         }
     }
 
-    /// Everything now, and the changes after it.
-    pub(super) fn view(&self) -> (String, broadcast::Receiver<Arc<str>>) {
+    /// Everything `scope` may read now, and the changes after it.
+    pub(super) fn view(&self, scope: &Scope) -> (String, broadcast::Receiver<Arc<Routed>>) {
         let Ok(plant) = self.plant.lock() else {
             return (String::from("{}"), self.changes.subscribe());
         };
-        let view = serde_json::to_string(&plant.view()).unwrap_or_default();
+        let mut view = plant.view();
+        view.cells.retain(|c| scope.covers(&c.cell));
+        view.alarms.retain(|a| scope.covers(&a.cell));
+        let areas: std::collections::BTreeSet<&str> = view
+            .cells
+            .iter()
+            .filter_map(|c| c.area.as_deref())
+            .collect();
+        view.areas.retain(|a| areas.contains(a));
+        let view = serde_json::to_string(&view).unwrap_or_default();
         (view, self.changes.subscribe())
     }
+}
+
+/// A change as the pages are sent it, with the cell it concerns.
+pub(super) struct Routed {
+    /// The cell.
+    pub(super) cell: String,
+    /// The change, JSON.
+    pub(super) json: String,
 }

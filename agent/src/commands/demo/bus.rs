@@ -88,6 +88,9 @@ impl DemoBus {
             operators_file: Some(operators.to_path_buf()),
             areas: std::collections::BTreeMap::new(),
             max_alarms: crate::console::config::DEFAULT_MAX_ALARMS,
+            session: crate::console::config::DEFAULT_SESSION,
+            names: Vec::new(),
+            readers: None,
         };
         crate::console::Console::start(&cfg)
             .await

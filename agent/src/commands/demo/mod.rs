@@ -328,7 +328,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         let console = demo_bus.console(listen, &secrets).await?;
         writeln!(
             out,
-            "  console         {} (load {} in the page to act as operator demo)",
+            "  console         {} (sign in with {} in the page, as operator demo)",
             console.url(),
             operator_key.display()
         )

@@ -21,7 +21,8 @@ const S = {
   alarms: new Map(),
   areas: [],
   dropped: 0,
-  operators: null,
+  identity: null,
+  stream: null,
   key: null,
   live: false,
   synced: false,
@@ -124,11 +125,20 @@ function schedule() {
   setTimeout(() => { pending = false; update(); }, 150);
 }
 
+// The live stream, for whoever is signed in: opened again when someone
+// else signs in (their cells may differ), closed when nobody is.
 function connect() {
+  if (S.stream) S.stream.close();
   const link = document.getElementById('link');
   const es = new EventSource('/api/events');
+  S.stream = es;
   es.onopen = () => { S.live = true; link.textContent = 'live'; link.className = 'up'; };
-  es.onerror = () => { S.live = false; link.textContent = 'reconnecting…'; link.className = 'down'; };
+  es.onerror = () => {
+    S.live = false; link.textContent = 'reconnecting…'; link.className = 'down';
+    // A stream refused (its session ended) is not tried again by the
+    // browser: find out who we are now.
+    if (es.readyState === EventSource.CLOSED && S.stream === es) setTimeout(whoAmI, 1000);
+  };
   es.onmessage = e => {
     try { take(JSON.parse(e.data)); } catch (err) { console.error('bad event', err); return; }
     schedule();
@@ -179,33 +189,58 @@ async function loadKey(file) {
   const key = await crypto.subtle.importKey('pkcs8', hexBytes(PKCS8_ED25519 + pk[1].toLowerCase()),
     { name: 'Ed25519' }, false, ['sign']);
   const operator = op[1];
-  const entry = (S.operators || []).find(o => o.operator === operator);
-  let allow = null;
-  if (S.operators && S.operators.length) {
-    if (!entry) throw new Error(`operator '${operator}' is not in the console's operators file: nothing can be offered`);
-    const pub = await crypto.subtle.importKey('raw', hexBytes(entry.public_key), { name: 'Ed25519' }, false, ['verify']);
-    const probe = crypto.getRandomValues(new Uint8Array(32));
-    const sig = await crypto.subtle.sign({ name: 'Ed25519' }, key, probe);
-    if (!await crypto.subtle.verify({ name: 'Ed25519' }, pub, sig, probe)) {
-      throw new Error(`${file.name}: this is not the key the operators file holds for '${operator}'`);
-    }
-    allow = new Set(entry.allow);
-  }
-  return { operator, key, allow };
+  const signedIn = await signIn(operator, key).catch(err => { throw new Error(`${file.name}: ${err.message}`); });
+  return { operator, key, allow: new Set(signedIn.allow) };
 }
 
-function may(action) { return S.key && (S.key.allow === null || S.key.allow.has(action)); }
+// Signs in to the console as `operator`: the console gives a challenge,
+// the key signs it with this page's host here, the console checks the
+// signature against the operators file. The key never leaves the page.
+async function signIn(operator, key) {
+  const post = async (path, body) => {
+    const r = await fetch(path, { method: 'POST', headers: { 'Content-Type': 'application/json' }, body: JSON.stringify(body) });
+    const answer = await r.json();
+    if (answer.error) throw new Error(answer.error);
+    return answer;
+  };
+  const { challenge } = await post('/api/sign-in/challenge', {});
+  const text = new TextEncoder().encode(`cellwatch-console-sign-in-v1\n${challenge}\n${location.host}\n`);
+  const signature = bytesHex(await crypto.subtle.sign({ name: 'Ed25519' }, key, text));
+  return post('/api/sign-in', { operator, challenge, signature });
+}
+
+// Who the console takes us for (a session, or a client certificate):
+// the stream runs while someone is; otherwise the page asks for a key.
+async function whoAmI() {
+  const r = await fetch('/api/session');
+  S.identity = r.ok ? await r.json() : null;
+  if (!S.identity) {
+    if (S.stream) { S.stream.close(); S.stream = null; }
+    const was = S.key;
+    S.key = null;
+    showOperator(was ? 'signed out: load your operator key to sign in again' : null);
+    const link = document.getElementById('link');
+    link.textContent = 'signed out'; link.className = 'down';
+    return;
+  }
+  if (!S.stream || S.stream.readyState === EventSource.CLOSED) connect();
+}
+
+function may(action) { return S.key && S.key.allow.has(action); }
 
 function showOperator(message) {
   const name = document.getElementById('operator-name');
   const forget = document.getElementById('forget-key');
   if (S.key) {
-    const allowed = S.key.allow === null ? 'actions not known here: the agent decides' : [...S.key.allow].join(', ') || 'no actions';
+    const allowed = [...S.key.allow].join(', ') || 'no actions';
     name.replaceChildren(`operator ${S.key.operator} `, el('small', {}, `(${allowed})`));
     name.className = 'loaded';
     forget.hidden = false;
   } else {
-    name.textContent = message || 'no operator key loaded';
+    const who = !S.identity ? 'sign in: load your operator key'
+      : S.identity.by === 'certificate' ? `certificate ${S.identity.identity}: load an operator key to act`
+        : `signed in as ${S.identity.identity}: load your key again to act`;
+    name.textContent = message || who;
     name.className = message ? 'refused' : '';
     forget.hidden = true;
   }
@@ -385,6 +420,7 @@ const alarmsView = {
 
 async function api(path) {
   const r = await fetch(path);
+  if (r.status === 401) whoAmI();
   const body = await r.json();
   if (body.error) throw new Error(body.error);
   return body;
@@ -875,11 +911,6 @@ function route() {
 }
 
 async function start() {
-  try {
-    S.operators = await api('/api/operators');
-  } catch (err) {
-    S.operators = [];
-  }
   const file = document.getElementById('key-file');
   file.addEventListener('change', async () => {
     const f = file.files[0];
@@ -888,17 +919,24 @@ async function start() {
     try {
       S.key = await loadKey(f);
       showOperator();
+      connect();
     } catch (err) {
       S.key = null;
       showOperator(err.message);
     }
     route();
   });
-  document.getElementById('forget-key').addEventListener('click', () => { S.key = null; showOperator(); route(); });
+  document.getElementById('forget-key').addEventListener('click', async () => {
+    S.key = null;
+    await fetch('/api/sign-out', { method: 'POST' });
+    await whoAmI();
+    showOperator();
+    route();
+  });
   window.addEventListener('hashchange', route);
+  await whoAmI();
   showOperator();
   route();
-  connect();
 }
 
 document.addEventListener('DOMContentLoaded', start);
