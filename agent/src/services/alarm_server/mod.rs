@@ -12,8 +12,9 @@
 //! trusted only from `trusted/` (others land in `rejected/`). Anonymous
 //! sessions may browse and subscribe, never acknowledge.
 //!
-//! - `events.rs`: the event and its fields; `conditions.rs`: the
-//!   conditions kept from the alarm payloads; `methods.rs`: the methods
+//! - `events.rs`: the event and its fields; `filters.rs`: the fields a
+//!   client's event filter may name, and the filters over a real event;
+//!   `conditions.rs`: the conditions kept from the alarm payloads; `methods.rs`: the methods
 //!   (Acknowledge, ConditionRefresh, Disable/Enable, shelving); `users.rs`: the users file, passwords.
 //!
 //! Not here: the sink that feeds it (`sinks::alarm_server`), the loop's
@@ -21,6 +22,7 @@
 
 mod conditions;
 mod events;
+mod filters;
 mod methods;
 pub mod users;
 
@@ -38,7 +40,7 @@ use opcua::server::node_manager::memory::{
 };
 use opcua::server::{ServerBuilder, ServerUserToken, ANONYMOUS_USER_TOKEN_ID};
 use opcua::types::{
-    DataTypeId, MessageSecurityMode, NodeClass, NodeId, ObjectId, ObjectTypeId, QualifiedName,
+    DataTypeId, MessageSecurityMode, NodeId, ObjectId, ObjectTypeId, QualifiedName,
     ReferenceTypeId, VariableTypeId,
 };
 use tokio::net::TcpListener;
@@ -173,7 +175,7 @@ impl AlarmServer {
         let notifier = NodeId::new(ns, cell);
         let event_type = NodeId::new(ns, "CellAlarmType");
         declare(&nodes, ns, cell, &notifier, &event_type);
-        accept_condition_fields(&handle, ns, &event_type);
+        filters::accept_condition_fields(&mut handle.type_tree().write(), ns, &event_type);
         let served = Served {
             ns,
             notifier,
@@ -271,83 +273,4 @@ fn declare(nodes: &SimpleNodeManager, ns: u16, cell: &str, cell_node: &NodeId, t
         cell_node,
         ReferenceTypeId::HasNotifier,
     );
-}
-
-/// Lets clients select the conditions' fields. async-opcua 0.19 checks a
-/// select clause against the type tree, which knows only the properties a
-/// type declares (so `AlarmConditionType`'s `Message` is refused) and no
-/// empty path (so `ConditionId` is refused). Every field served is
-/// registered under each condition type, and the empty path under
-/// `ConditionType`. (A clause still refused is null in its place: the
-/// patched async-opcua-nodes, `vendor/README.md`.)
-fn accept_condition_fields(handle: &opcua::server::ServerHandle, ns: u16, ty: &NodeId) {
-    let mut tree = handle.type_tree().write();
-    tree.add_type_property(
-        &NodeId::new(ns, "ConditionType.ConditionId"),
-        &ObjectTypeId::ConditionType.into(),
-        &[],
-        NodeClass::Object,
-    );
-    let types: [NodeId; 4] = [
-        ObjectTypeId::ConditionType.into(),
-        ObjectTypeId::AcknowledgeableConditionType.into(),
-        ObjectTypeId::AlarmConditionType.into(),
-        ty.clone(),
-    ];
-    let mut paths: Vec<Vec<QualifiedName>> = [
-        "EventId",
-        "EventType",
-        "SourceNode",
-        "SourceName",
-        "Time",
-        "ReceiveTime",
-        "Message",
-        "Severity",
-        "ConditionClassId",
-        "ConditionClassName",
-        "ConditionName",
-        "BranchId",
-        "Retain",
-        "ClientUserId",
-        "Comment",
-        "Comment/SourceTimestamp",
-        "LastSeverity",
-        "LastSeverity/SourceTimestamp",
-        "Quality",
-        "Quality/SourceTimestamp",
-        "SuppressedOrShelved",
-        "ShelvingState/CurrentState",
-        "ShelvingState/CurrentState/Id",
-        "ShelvingState/UnshelveTime",
-    ]
-    .iter()
-    .map(|p| p.split('/').map(|n| QualifiedName::new(0, n)).collect())
-    .collect();
-    for state in [
-        "EnabledState",
-        "ActiveState",
-        "AckedState",
-        "ConfirmedState",
-    ] {
-        for sub in ["", "/Id", "/TransitionTime", "/TrueState", "/FalseState"] {
-            paths.push(
-                format!("{state}{sub}")
-                    .split('/')
-                    .map(|n| QualifiedName::new(0, n))
-                    .collect(),
-            );
-        }
-    }
-    paths.push(vec![QualifiedName::new(ns, "Culprits")]);
-    for (t, ty) in types.iter().enumerate() {
-        for (p, path) in paths.iter().enumerate() {
-            let path: Vec<&QualifiedName> = path.iter().collect();
-            tree.add_type_property(
-                &NodeId::new(ns, format!("field.{t}.{p}")),
-                ty,
-                &path,
-                NodeClass::Variable,
-            );
-        }
-    }
 }
