@@ -64,6 +64,13 @@ const USER_TOKEN_ID: &str = "cellwatch-users";
 /// How many acknowledgements may wait for the cell loop.
 pub const ACK_QUEUE: usize = 16;
 
+/// How many events a client's event item keeps between two publishes: the
+/// queue of an item asking 0 or 1 (Python asyncua's default; the patched
+/// async-opcua-server, `vendor/README.md`) and the most any may ask. A
+/// refresh sends every retained condition at once, between its start and
+/// end.
+const EVENT_QUEUE: usize = 1_000;
+
 /// Why the alarm server cannot start.
 #[derive(Debug, thiserror::Error)]
 pub enum AlarmServerError {
@@ -122,7 +129,7 @@ impl AlarmServer {
         let namespace = format!("urn:cellwatch:alarms:{cell}");
         let key_existed = crate::sources::pki::own_key(&config.pki_dir).exists();
         let tokens: &[&str] = &[ANONYMOUS_USER_TOKEN_ID, USER_TOKEN_ID];
-        let builder = ServerBuilder::new()
+        let mut builder = ServerBuilder::new()
             // Namespace 0's manager wrapped (the condition methods), then
             // the diagnostics and the cell's namespace as usual.
             .without_node_managers()
@@ -145,6 +152,10 @@ impl AlarmServer {
             .product_uri("urn:cellwatch")
             // For the count of its sessions (`sessions`).
             .diagnostics_enabled(true);
+        builder
+            .limits_mut()
+            .subscriptions
+            .max_monitored_item_queue_size = EVENT_QUEUE;
         let (server, handle) = crate::sources::pki::served_from(builder, &config.pki_dir, addr)
             .add_user_token(USER_TOKEN_ID, ServerUserToken::user_pass(USER_TOKEN_ID, ""))
             .add_endpoint(
