@@ -26,6 +26,10 @@ use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
 use crate::agent::{alarm_until, Fixture};
 
+mod asyncua;
+mod scada;
+pub(crate) use scada::ScadaProgram;
+
 /// The users: kim's SCADA account, one acting as an operator the agent
 /// does not know, one as an operator who may not acknowledge, one acting
 /// as nobody.
@@ -639,132 +643,12 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
         .expect("the agent stops with the alarm server's sessions open");
 }
 
-/// node-opcua's client as a SCADA (`tests/interop/scada.js`): its lines on
-/// standard output, its errors in a file shown when a wait fails.
-pub(crate) struct NodeScada {
-    child: std::process::Child,
-    stdin: std::process::ChildStdin,
-    lines: std::sync::mpsc::Receiver<String>,
-    /// Events that came while an answer was awaited, in order: the next
-    /// [`NodeScada::event`] looks at them first.
-    events: std::collections::VecDeque<String>,
-    log: std::path::PathBuf,
-}
-
-impl NodeScada {
-    /// Started with its key pair in `pki` (which trusts what is in
-    /// `pki/trusted/certs`); returns it and its certificate (DER).
-    fn start(url: &str, pki: &Path, user: &str, password: &str) -> (NodeScada, std::path::PathBuf) {
-        use std::process::{Command, Stdio};
-        let dir = crate::interop::installed();
-        let log = pki.with_extension("log");
-        let mut child = Command::new("node")
-            .arg(dir.join("scada.js"))
-            .args([
-                url,
-                pki.to_str().unwrap(),
-                user,
-                password,
-                "urn:cellwatch:alarms:m01ps0004",
-            ])
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(std::fs::File::create(&log).unwrap())
-            .spawn()
-            .unwrap();
-        let stdin = child.stdin.take().unwrap();
-        let lines = crate::util::lines_of(&mut child);
-        let mut scada = NodeScada {
-            child,
-            stdin,
-            lines,
-            events: std::collections::VecDeque::new(),
-            log,
-        };
-        let cert = scada.line("its certificate", false, |l| {
-            l.strip_prefix("certificate ").map(Into::into)
-        });
-        (scada, cert)
-    }
-
-    /// Connected to the alarm server at `url` (its PKI directory
-    /// `server_pki`) as `user` (password `kims-password`), each trusting the
-    /// other's certificate, and subscribed to its events.
-    pub(crate) fn connected(url: &str, pki: &Path, server_pki: &Path, user: &str) -> NodeScada {
-        use cellwatch::sources::pki;
-        // The SCADA trusts the agent's certificate from the start; the
-        // agent trusts the SCADA's once it is made.
-        let trusted = pki.join("trusted/certs");
-        std::fs::create_dir_all(&trusted).unwrap();
-        std::fs::copy(pki::own_cert(server_pki), trusted.join("cellwatch.der")).unwrap();
-        let (mut scada, cert) = NodeScada::start(url, pki, user, "kims-password");
-        pki::trust(&cert, server_pki).unwrap();
-        scada.ask("connect", "connected");
-        scada
-    }
-
-    /// The first line `f` takes, skipping the others.
-    /// (An event line skipped is kept for [`NodeScada::event`] when `keep`.)
-    fn line<T>(&mut self, what: &str, keep: bool, f: impl Fn(&str) -> Option<T>) -> T {
-        tokio::task::block_in_place(|| {
-            let deadline = std::time::Instant::now() + Duration::from_secs(120);
-            let mut seen = Vec::new();
-            loop {
-                let left = deadline.saturating_duration_since(std::time::Instant::now());
-                let next = match self.events.pop_front() {
-                    Some(line) if !keep => Ok(line),
-                    _ => self.lines.recv_timeout(left),
-                };
-                match next {
-                    Ok(line) => match f(&line) {
-                        Some(t) => return t,
-                        None if keep && line.starts_with("event ") => self.events.push_back(line),
-                        None => seen.push(line),
-                    },
-                    Err(_) => panic!(
-                        "node-opcua SCADA: no {what}; saw {seen:#?}; its errors:\n{}",
-                        std::fs::read_to_string(&self.log).unwrap_or_default()
-                    ),
-                }
-            }
-        })
-    }
-
-    /// The next event `f` accepts.
-    pub(crate) fn event(
-        &mut self,
-        what: &str,
-        f: impl Fn(&serde_json::Value) -> bool,
-    ) -> serde_json::Value {
-        self.line(what, false, |l| {
-            let e: serde_json::Value = serde_json::from_str(l.strip_prefix("event ")?).unwrap();
-            f(&e).then_some(e)
-        })
-    }
-
-    /// Sends `command`; its answer (the line after `answer`).
-    pub(crate) fn ask(&mut self, command: &str, answer: &str) -> String {
-        writeln!(self.stdin, "{command}").unwrap();
-        self.line(answer, true, |l| l.strip_prefix(answer).map(str::to_string))
-    }
-}
-
-impl Drop for NodeScada {
-    fn drop(&mut self) {
-        let _ = writeln!(self.stdin, "quit");
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-use std::io::Write as _;
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_node_opcua_scada_acknowledges_and_shelves_ese_and_finds_it_after_a_restart() {
     let fx = serving().await;
     let addr = fx.agent().alarm_server_addr().unwrap();
     let url = format!("opc.tcp://127.0.0.1:{}", addr.port());
-    let mut scada = NodeScada::connected(
+    let mut scada = ScadaProgram::connected(
         &url,
         &fx.dir().join("node-scada-pki"),
         &fx.dir().join("alarm-server-pki"),
@@ -960,7 +844,7 @@ async fn a_node_opcua_scada_acknowledges_and_shelves_ese_and_finds_it_after_a_re
         fx.dir().join("alarm-server-pki"),
     );
     let mut scada = tokio::task::spawn_blocking(move || {
-        NodeScada::connected(&url, &scada_pki, &server_pki, "scada-kim")
+        ScadaProgram::connected(&url, &scada_pki, &server_pki, "scada-kim")
     })
     .await
     .unwrap();
@@ -992,7 +876,7 @@ async fn a_node_opcua_scada_acknowledges_and_shelves_ese_and_finds_it_after_a_re
 async fn a_reload_reads_the_users_and_the_operators_again() {
     let mut fx = serving().await;
     let url = format!("opc.tcp://{}", fx.agent().alarm_server_addr().unwrap());
-    let mut scada = NodeScada::connected(
+    let mut scada = ScadaProgram::connected(
         &url,
         &fx.dir().join("node-scada-pki"),
         &fx.dir().join("alarm-server-pki"),

@@ -456,57 +456,70 @@ impl Conditions {
 
     /// The event saying condition `c` of alarm `id` as it stands.
     fn event(&self, served: &Served, id: &str, c: &Condition) -> CellAlarmEvent {
-        let (shelf_name, shelf_id) = shelving_state(c.shelved);
-        let mut base = BaseEventType::new(
-            served.event_type.clone(),
-            c.event_id.clone(),
-            c.message.as_str(),
-            c.time,
-        );
-        base.source_node = served.notifier.clone();
-        base.source_name = self.cell.as_str().into();
-        base.severity = c.severity;
-        base.condition_class_id = Some(ObjectTypeId::ProcessConditionClassType.into());
-        base.condition_class_name = Some("ProcessConditionClassType".into());
-        CellAlarmEvent {
-            condition_id: c.node.clone(),
-            fields: AlarmFields {
-                base,
-                condition_name: id.into(),
-                branch_id: NodeId::null(),
-                retain: c.retain(),
-                client_user_id: c.acked_by.as_str().into(),
-                comment: CommentVar {
-                    value: if c.comment.is_empty() {
-                        LocalizedText::null()
-                    } else {
-                        c.comment.as_str().into()
-                    },
-                    source_timestamp: c.acked_at,
+        condition_event(&self.cell, &served.event_type, &served.notifier, id, c)
+    }
+}
+
+/// The event saying condition `c` of alarm `id` of `cell` as it stands,
+/// of type `event_type` (`CellAlarmType`) from `notifier` (the cell's
+/// object).
+pub(super) fn condition_event(
+    cell: &str,
+    event_type: &NodeId,
+    notifier: &NodeId,
+    id: &str,
+    c: &Condition,
+) -> CellAlarmEvent {
+    let (shelf_name, shelf_id) = shelving_state(c.shelved);
+    let mut base = BaseEventType::new(
+        event_type.clone(),
+        c.event_id.clone(),
+        c.message.as_str(),
+        c.time,
+    );
+    base.source_node = notifier.clone();
+    base.source_name = cell.into();
+    base.severity = c.severity;
+    base.condition_class_id = Some(ObjectTypeId::ProcessConditionClassType.into());
+    base.condition_class_name = Some("ProcessConditionClassType".into());
+    CellAlarmEvent {
+        condition_id: c.node.clone(),
+        fields: AlarmFields {
+            base,
+            condition_name: id.into(),
+            branch_id: NodeId::null(),
+            retain: c.retain(),
+            client_user_id: c.acked_by.as_str().into(),
+            comment: CommentVar {
+                value: if c.comment.is_empty() {
+                    LocalizedText::null()
+                } else {
+                    c.comment.as_str().into()
                 },
-                last_severity: SeverityVar {
-                    value: c.severity,
-                    source_timestamp: c.time,
-                },
-                quality: QualityVar {
-                    value: StatusCode::Good,
-                    source_timestamp: c.time,
-                },
-                enabled_state: TwoState::new(c.enabled, "Enabled", "Disabled", c.enabled_at),
-                active_state: TwoState::new(c.active, "Active", "Inactive", c.active_at),
-                acked_state: TwoState::new(c.acked, "Acknowledged", "Unacknowledged", c.acked_at),
-                confirmed_state: TwoState::new(true, "Confirmed", "Unconfirmed", c.acked_at),
-                suppressed_or_shelved: c.suppressed_or_shelved,
-                shelving_state: ShelvingVar {
-                    current_state: CurrentStateVar {
-                        value: shelf_name.into(),
-                        id: shelf_id.into(),
-                    },
-                    unshelve_time: unshelve_in(c.shelved),
-                },
-                culprits: c.culprits.as_str().into(),
+                source_timestamp: c.acked_at,
             },
-        }
+            last_severity: SeverityVar {
+                value: c.severity,
+                source_timestamp: c.time,
+            },
+            quality: QualityVar {
+                value: StatusCode::Good,
+                source_timestamp: c.time,
+            },
+            enabled_state: TwoState::new(c.enabled, "Enabled", "Disabled", c.enabled_at),
+            active_state: TwoState::new(c.active, "Active", "Inactive", c.active_at),
+            acked_state: TwoState::new(c.acked, "Acknowledged", "Unacknowledged", c.acked_at),
+            confirmed_state: TwoState::new(true, "Confirmed", "Unconfirmed", c.acked_at),
+            suppressed_or_shelved: c.suppressed_or_shelved,
+            shelving_state: ShelvingVar {
+                current_state: CurrentStateVar {
+                    value: shelf_name.into(),
+                    id: shelf_id.into(),
+                },
+                unshelve_time: unshelve_in(c.shelved),
+            },
+            culprits: c.culprits.as_str().into(),
+        },
     }
 }
 

@@ -12,8 +12,9 @@
 //! trusted only from `trusted/` (others land in `rejected/`). Anonymous
 //! sessions may browse and subscribe, never acknowledge.
 //!
-//! - `events.rs`: the event and its fields; `conditions.rs`: the
-//!   conditions kept from the alarm payloads; `methods.rs`: the methods
+//! - `events.rs`: the event and its fields; `filters.rs`: the fields a
+//!   client's event filter may name, and the filters over a real event;
+//!   `conditions.rs`: the conditions kept from the alarm payloads; `methods.rs`: the methods
 //!   (Acknowledge, ConditionRefresh, Disable/Enable, shelving); `users.rs`: the users file, passwords.
 //!
 //! Not here: the sink that feeds it (`sinks::alarm_server`), the loop's
@@ -21,6 +22,7 @@
 
 mod conditions;
 mod events;
+mod filters;
 mod methods;
 pub mod users;
 
@@ -38,7 +40,7 @@ use opcua::server::node_manager::memory::{
 };
 use opcua::server::{ServerBuilder, ServerUserToken, ANONYMOUS_USER_TOKEN_ID};
 use opcua::types::{
-    DataTypeId, MessageSecurityMode, NodeClass, NodeId, ObjectId, ObjectTypeId, QualifiedName,
+    DataTypeId, MessageSecurityMode, NodeId, ObjectId, ObjectTypeId, QualifiedName,
     ReferenceTypeId, VariableTypeId,
 };
 use tokio::net::TcpListener;
@@ -61,6 +63,13 @@ const USER_TOKEN_ID: &str = "cellwatch-users";
 
 /// How many acknowledgements may wait for the cell loop.
 pub const ACK_QUEUE: usize = 16;
+
+/// How many events a client's event item keeps between two publishes: the
+/// queue of an item asking 0 or 1 (Python asyncua's default; the patched
+/// async-opcua-server, `vendor/README.md`) and the most any may ask. A
+/// refresh sends every retained condition at once, between its start and
+/// end.
+const EVENT_QUEUE: usize = 1_000;
 
 /// Why the alarm server cannot start.
 #[derive(Debug, thiserror::Error)]
@@ -120,7 +129,7 @@ impl AlarmServer {
         let namespace = format!("urn:cellwatch:alarms:{cell}");
         let key_existed = crate::sources::pki::own_key(&config.pki_dir).exists();
         let tokens: &[&str] = &[ANONYMOUS_USER_TOKEN_ID, USER_TOKEN_ID];
-        let builder = ServerBuilder::new()
+        let mut builder = ServerBuilder::new()
             // Namespace 0's manager wrapped (the condition methods), then
             // the diagnostics and the cell's namespace as usual.
             .without_node_managers()
@@ -143,6 +152,10 @@ impl AlarmServer {
             .product_uri("urn:cellwatch")
             // For the count of its sessions (`sessions`).
             .diagnostics_enabled(true);
+        builder
+            .limits_mut()
+            .subscriptions
+            .max_monitored_item_queue_size = EVENT_QUEUE;
         let (server, handle) = crate::sources::pki::served_from(builder, &config.pki_dir, addr)
             .add_user_token(USER_TOKEN_ID, ServerUserToken::user_pass(USER_TOKEN_ID, ""))
             .add_endpoint(
@@ -173,7 +186,7 @@ impl AlarmServer {
         let notifier = NodeId::new(ns, cell);
         let event_type = NodeId::new(ns, "CellAlarmType");
         declare(&nodes, ns, cell, &notifier, &event_type);
-        accept_condition_fields(&handle, ns, &event_type);
+        filters::accept_condition_fields(&mut handle.type_tree().write(), ns, &event_type);
         let served = Served {
             ns,
             notifier,
@@ -271,83 +284,4 @@ fn declare(nodes: &SimpleNodeManager, ns: u16, cell: &str, cell_node: &NodeId, t
         cell_node,
         ReferenceTypeId::HasNotifier,
     );
-}
-
-/// Lets clients select the conditions' fields. async-opcua 0.19 checks a
-/// select clause against the type tree, which knows only the properties a
-/// type declares (so `AlarmConditionType`'s `Message` is refused) and no
-/// empty path (so `ConditionId` is refused). Every field served is
-/// registered under each condition type, and the empty path under
-/// `ConditionType`. (A clause still refused is null in its place: the
-/// patched async-opcua-nodes, `vendor/README.md`.)
-fn accept_condition_fields(handle: &opcua::server::ServerHandle, ns: u16, ty: &NodeId) {
-    let mut tree = handle.type_tree().write();
-    tree.add_type_property(
-        &NodeId::new(ns, "ConditionType.ConditionId"),
-        &ObjectTypeId::ConditionType.into(),
-        &[],
-        NodeClass::Object,
-    );
-    let types: [NodeId; 4] = [
-        ObjectTypeId::ConditionType.into(),
-        ObjectTypeId::AcknowledgeableConditionType.into(),
-        ObjectTypeId::AlarmConditionType.into(),
-        ty.clone(),
-    ];
-    let mut paths: Vec<Vec<QualifiedName>> = [
-        "EventId",
-        "EventType",
-        "SourceNode",
-        "SourceName",
-        "Time",
-        "ReceiveTime",
-        "Message",
-        "Severity",
-        "ConditionClassId",
-        "ConditionClassName",
-        "ConditionName",
-        "BranchId",
-        "Retain",
-        "ClientUserId",
-        "Comment",
-        "Comment/SourceTimestamp",
-        "LastSeverity",
-        "LastSeverity/SourceTimestamp",
-        "Quality",
-        "Quality/SourceTimestamp",
-        "SuppressedOrShelved",
-        "ShelvingState/CurrentState",
-        "ShelvingState/CurrentState/Id",
-        "ShelvingState/UnshelveTime",
-    ]
-    .iter()
-    .map(|p| p.split('/').map(|n| QualifiedName::new(0, n)).collect())
-    .collect();
-    for state in [
-        "EnabledState",
-        "ActiveState",
-        "AckedState",
-        "ConfirmedState",
-    ] {
-        for sub in ["", "/Id", "/TransitionTime", "/TrueState", "/FalseState"] {
-            paths.push(
-                format!("{state}{sub}")
-                    .split('/')
-                    .map(|n| QualifiedName::new(0, n))
-                    .collect(),
-            );
-        }
-    }
-    paths.push(vec![QualifiedName::new(ns, "Culprits")]);
-    for (t, ty) in types.iter().enumerate() {
-        for (p, path) in paths.iter().enumerate() {
-            let path: Vec<&QualifiedName> = path.iter().collect();
-            tree.add_type_property(
-                &NodeId::new(ns, format!("field.{t}.{p}")),
-                ty,
-                &path,
-                NodeClass::Variable,
-            );
-        }
-    }
 }

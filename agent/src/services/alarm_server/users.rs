@@ -1,14 +1,16 @@
 //! The alarm server's users (`alarm_server.users_file`): who may open a
 //! session with a user name, and the operator each acts as. Passwords are
 //! kept as Argon2 PHC strings, never in clear; a user without an operator
-//! may browse and subscribe but not acknowledge.
+//! may browse and subscribe but not acknowledge. An unknown user name
+//! costs the same Argon2 verification as a known one, so that how long a
+//! refusal takes does not tell which names exist.
 
 use std::collections::HashMap;
 use std::path::Path;
 use std::sync::{Arc, RwLock};
 
 use argon2::password_hash::{PasswordHash, PasswordHasher, PasswordVerifier, SaltString};
-use argon2::Argon2;
+use argon2::{Algorithm, Argon2, Params, Version};
 use async_trait::async_trait;
 use opcua::server::authenticator::{
     user_pass_security_policy_id, user_pass_security_policy_uri, AuthManager, Password, UserToken,
@@ -68,11 +70,22 @@ struct User {
     hash: String,
 }
 
+/// The users of one reading of the file.
+#[derive(Debug, Default)]
+struct Table {
+    by_name: HashMap<String, User>,
+    /// The hash of no one's password, with the parameters of the first
+    /// user's (by name; Argon2's defaults, `cellwatch hash-password`'s,
+    /// without users): what a password given for an unknown user is
+    /// verified against.
+    nobody: String,
+}
+
 /// The users of the alarm server: clones share them, and a reload
 /// replaces them for all ([`Users::replace_with`]).
 #[derive(Debug, Clone, Default)]
 pub struct Users {
-    users: Arc<RwLock<Arc<HashMap<String, User>>>>,
+    users: Arc<RwLock<Arc<Table>>>,
 }
 
 impl Users {
@@ -127,8 +140,17 @@ impl Users {
                 },
             );
         }
+        let nobody = nobodys_hash(
+            users
+                .iter()
+                .min_by(|a, b| a.0.cmp(b.0))
+                .map(|(_, u)| u.hash.as_str()),
+        );
         Ok(Users {
-            users: Arc::new(RwLock::new(Arc::new(users))),
+            users: Arc::new(RwLock::new(Arc::new(Table {
+                by_name: users,
+                nobody,
+            }))),
         })
     }
 
@@ -146,7 +168,7 @@ impl Users {
     }
 
     /// The users now (a reload may replace them meanwhile).
-    fn now(&self) -> Arc<HashMap<String, User>> {
+    fn now(&self) -> Arc<Table> {
         self.users
             .read()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
@@ -165,7 +187,7 @@ impl Users {
 
     /// The operator `user` acts as, if any.
     pub fn operator(&self, user: &str) -> Option<String> {
-        self.now().get(user)?.operator.clone()
+        self.now().by_name.get(user)?.operator.clone()
     }
 
     /// What stands between each user acting as an operator and an
@@ -175,6 +197,7 @@ impl Users {
     pub fn cannot_acknowledge(&self, gate: &crate::operator::Gate) -> Vec<String> {
         let mut out: Vec<String> = self
             .now()
+            .by_name
             .iter()
             .filter_map(|(name, u)| {
                 let operator = u.operator.as_deref()?;
@@ -191,18 +214,51 @@ impl Users {
     }
 
     /// Whether `password` is `user`'s (Argon2, so slow on purpose: run it
-    /// off the server's tasks).
+    /// off the server's tasks). An unknown user's password is verified all
+    /// the same, against no one's hash, and refused.
     pub(crate) fn verify(&self, user: &str, password: &str) -> bool {
         let users = self.now();
-        let Some(u) = users.get(user) else {
-            return false;
-        };
-        PasswordHash::new(&u.hash).is_ok_and(|h| {
-            Argon2::default()
-                .verify_password(password.as_bytes(), &h)
-                .is_ok()
-        })
+        match users.by_name.get(user) {
+            Some(u) => argon2_verify(&u.hash, password),
+            None => {
+                let _same_cost = argon2_verify(&users.nobody, password);
+                false
+            }
+        }
     }
+}
+
+/// Whether `password` matches the PHC string `hash` (with the algorithm
+/// and parameters it names).
+fn argon2_verify(hash: &str, password: &str) -> bool {
+    #[cfg(test)]
+    tests::VERIFICATIONS.with(|n| n.set(n.get() + 1));
+    PasswordHash::new(hash).is_ok_and(|h| {
+        Argon2::default()
+            .verify_password(password.as_bytes(), &h)
+            .is_ok()
+    })
+}
+
+/// A hash of no one's password (random, thrown away) with the algorithm,
+/// version and parameters of `like` when it reads, else Argon2's defaults.
+fn nobodys_hash(like: Option<&str>) -> String {
+    let argon2 = like
+        .and_then(|h| PasswordHash::new(h).ok())
+        .and_then(|h| {
+            Some(Argon2::new(
+                Algorithm::try_from(h.algorithm).ok()?,
+                Version::try_from(h.version?).ok()?,
+                Params::try_from(&h).ok()?,
+            ))
+        })
+        .unwrap_or_default();
+    let salt = SaltString::generate(&mut argon2::password_hash::rand_core::OsRng);
+    let password = SaltString::generate(&mut argon2::password_hash::rand_core::OsRng);
+    argon2
+        .hash_password(password.as_str().as_bytes(), &salt)
+        .map(|h| h.to_string())
+        .unwrap_or_else(|_| hash_password(password.as_str()))
 }
 
 /// `password`'s Argon2id hash as a PHC string, with a fresh salt.
@@ -269,6 +325,69 @@ impl AuthManager for Users {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    thread_local! {
+        /// Argon2 verifications run on this thread.
+        pub(super) static VERIFICATIONS: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
+    }
+
+    /// How many Argon2 verifications `f` ran.
+    fn verifications(f: impl FnOnce() -> bool) -> (bool, u64) {
+        let before = VERIFICATIONS.with(std::cell::Cell::get);
+        let ok = f();
+        (ok, VERIFICATIONS.with(std::cell::Cell::get) - before)
+    }
+
+    #[test]
+    fn an_unknown_user_costs_the_verification_a_known_one_does() {
+        let hash = hash_password("s3cret");
+        let text = format!("[users.scada-kim]\noperator = \"kim\"\npassword_hash = \"{hash}\"\n");
+        let users = Users::parse("users.toml", &text).unwrap();
+        assert_eq!(
+            verifications(|| users.verify("scada-kim", "s3cret")),
+            (true, 1)
+        );
+        assert_eq!(
+            verifications(|| users.verify("scada-kim", "wrong")),
+            (false, 1)
+        );
+        assert_eq!(
+            verifications(|| users.verify("scada-kym", "s3cret")),
+            (false, 1)
+        );
+        // No one's hash has the users' parameters, and takes no password.
+        let table = users.now();
+        let (ours, nobodys) = (
+            PasswordHash::new(&table.by_name["scada-kim"].hash).unwrap(),
+            PasswordHash::new(&table.nobody).unwrap(),
+        );
+        assert_eq!(
+            (
+                nobodys.algorithm,
+                nobodys.version,
+                nobodys.params.to_string()
+            ),
+            (ours.algorithm, ours.version, ours.params.to_string())
+        );
+        assert!(!argon2_verify(&table.nobody, ""));
+        // Other parameters are followed; no users, Argon2's defaults.
+        let light = Argon2::new(
+            Algorithm::Argon2id,
+            Version::V0x13,
+            Params::new(8192, 1, 1, None).unwrap(),
+        )
+        .hash_password(
+            b"s3cret",
+            &SaltString::generate(&mut argon2::password_hash::rand_core::OsRng),
+        )
+        .unwrap()
+        .to_string();
+        let nobody = nobodys_hash(Some(&light));
+        assert!(nobody.contains("$m=8192,t=1,p=1$"), "{nobody}");
+        let empty = Users::parse("users.toml", "[users]\n").unwrap();
+        assert_eq!(verifications(|| empty.verify("anyone", "x")), (false, 1));
+        assert!(empty.now().nobody.contains("$m=19456,t=2,p=1$"));
+    }
 
     #[test]
     fn a_user_acts_as_an_operator_by_password() {

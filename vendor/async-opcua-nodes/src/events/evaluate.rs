@@ -4,8 +4,8 @@ use regex::Regex;
 use tracing::error;
 
 use opcua_types::{
-    AttributeId, EventFieldList, FilterOperator, NodeId, NumericRange, QualifiedName, Variant,
-    VariantScalarTypeId, VariantTypeId,
+    AttributeId, EventFieldList, FilterOperator, NodeId, NumericRange, ObjectTypeId,
+    QualifiedName, Variant, VariantScalarTypeId, VariantTypeId,
 };
 
 use crate::TypeTree;
@@ -27,7 +27,11 @@ impl ParsedEventFilter {
         client_handle: u32,
         type_tree: &dyn TypeTree,
     ) -> Option<EventFieldList> {
-        if !self.content_filter.evaluate(event, type_tree) {
+        // cellwatch's patch: a refresh's markers pass whatever the where
+        // clause (OPC UA Part 9 4.5); 0.19.0 filtered them out with the rest.
+        if !is_refresh_marker(event.event_type_id(), type_tree)
+            && !self.content_filter.evaluate(event, type_tree)
+        {
             return None;
         }
 
@@ -41,6 +45,19 @@ impl ParsedEventFilter {
             event_fields: Some(fields),
         })
     }
+}
+
+/// Whether events of `event_type` ignore the where clause: the three event
+/// types of a condition refresh, which a client is always sent (OPC UA
+/// Part 9 4.5). (cellwatch's patch.)
+fn is_refresh_marker(event_type: &NodeId, type_tree: &dyn TypeTree) -> bool {
+    [
+        ObjectTypeId::RefreshStartEventType,
+        ObjectTypeId::RefreshEndEventType,
+        ObjectTypeId::RefreshRequiredEventType,
+    ]
+    .into_iter()
+    .any(|t| event_type == &t || type_tree.is_subtype_of(event_type, &t.into()))
 }
 
 macro_rules! cmp_op {
@@ -139,8 +156,11 @@ impl ParsedContentFilter {
 
         match op.operator {
             FilterOperator::Equals => cmp_op!(self, item, type_tree, op, Some(Ordering::Equal)),
+            // cellwatch's patch: a null String, ByteString, NodeId… is null
+            // too (a condition's BranchId is the null NodeId); 0.19.0 took
+            // only an absent value.
             FilterOperator::IsNull => {
-                (self.evaluate_operand(item, type_tree, &op.operands[0]) == Variant::Empty).into()
+                is_null(&self.evaluate_operand(item, type_tree, &op.operands[0])).into()
             }
             FilterOperator::GreaterThan => {
                 cmp_op!(self, item, type_tree, op, Some(Ordering::Greater))
@@ -265,18 +285,24 @@ impl ParsedContentFilter {
         (!rhs).into()
     }
 
+    // cellwatch's patch: And and Or with OPC UA Part 4's three values
+    // (Table 120: FALSE And NULL is FALSE, TRUE Or NULL is TRUE); 0.19.0
+    // made either NULL as soon as one operand was.
     fn and(lhs: Variant, rhs: Variant) -> Variant {
-        let lhs = as_type!(lhs, Boolean, Variant::Empty);
-        let rhs = as_type!(rhs, Boolean, Variant::Empty);
-
-        (lhs && rhs).into()
+        match (as_boolean(lhs), as_boolean(rhs)) {
+            (Some(false), _) | (_, Some(false)) => false.into(),
+            (Some(true), Some(true)) => true.into(),
+            _ => Variant::Empty,
+        }
     }
 
+    // cellwatch's patch: see `and`.
     fn or(lhs: Variant, rhs: Variant) -> Variant {
-        let lhs = as_type!(lhs, Boolean, Variant::Empty);
-        let rhs = as_type!(rhs, Boolean, Variant::Empty);
-
-        (lhs || rhs).into()
+        match (as_boolean(lhs), as_boolean(rhs)) {
+            (Some(true), _) | (_, Some(true)) => true.into(),
+            (Some(false), Some(false)) => false.into(),
+            _ => Variant::Empty,
+        }
     }
 
     fn like(lhs: Variant, rhs: Variant) -> bool {
@@ -349,15 +375,99 @@ impl ParsedContentFilter {
             (Variant::Double(lhs), Variant::Double(rhs)) => Some(lhs.total_cmp(&rhs)),
             (Variant::Float(lhs), Variant::Float(rhs)) => Some(lhs.total_cmp(&rhs)),
             (Variant::Boolean(lhs), Variant::Boolean(rhs)) => Some(lhs.cmp(&rhs)),
+            // cellwatch's patch, down to `_`: the other built-in types.
+            // 0.19.0 compared only numbers and Booleans, so that an InList
+            // or Equals of NodeIds (a client's `EventType InList [...]`),
+            // strings or texts was never true. Texts and times are ordered;
+            // the others are equal or not. A NodeId against an
+            // ExpandedNodeId is compared as ExpandedNodeIds (Part 4 Table
+            // 122's precedence), whose literals the validation resolved to
+            // namespace indexes.
+            (Variant::String(lhs), Variant::String(rhs)) => {
+                Some(lhs.as_ref().cmp(rhs.as_ref()))
+            }
+            (Variant::DateTime(lhs), Variant::DateTime(rhs)) => Some(lhs.cmp(&rhs)),
+            (Variant::StatusCode(lhs), Variant::StatusCode(rhs)) => {
+                Some(lhs.bits().cmp(&rhs.bits()))
+            }
+            (Variant::Guid(lhs), Variant::Guid(rhs)) => equal(lhs == rhs),
+            (Variant::ByteString(lhs), Variant::ByteString(rhs)) => equal(lhs == rhs),
+            (Variant::NodeId(lhs), Variant::NodeId(rhs)) => equal(lhs == rhs),
+            (Variant::ExpandedNodeId(lhs), Variant::ExpandedNodeId(rhs)) => equal(lhs == rhs),
+            (Variant::QualifiedName(lhs), Variant::QualifiedName(rhs)) => equal(lhs == rhs),
+            // Texts in the same locale, or where either names none.
+            (Variant::LocalizedText(lhs), Variant::LocalizedText(rhs)) => equal(
+                lhs.text.as_ref() == rhs.text.as_ref()
+                    && (lhs.locale.is_empty()
+                        || rhs.locale.is_empty()
+                        || lhs.locale.as_ref() == rhs.locale.as_ref()),
+            ),
+            // Arrays of as many elements, each equal to its counterpart.
+            (Variant::Array(lhs), Variant::Array(rhs)) => equal(
+                lhs.values.len() == rhs.values.len()
+                    && lhs.values.iter().zip(rhs.values.iter()).all(|(l, r)| {
+                        matches!(
+                            Self::compare_op(l.clone(), r.clone()),
+                            Some(Ordering::Equal)
+                        )
+                    }),
+            ),
             _ => None,
         }
     }
 
     fn of_type(lhs: Variant, item: impl AttributeQueryable, type_tree: &dyn TypeTree) -> bool {
-        let type_id = as_type!(lhs, NodeId, false);
+        // cellwatch's patch: an ExpandedNodeId of this server is taken as
+        // its NodeId (0.19.0 took only a NodeId).
+        let Some(type_id) = as_node_id(lhs) else {
+            return false;
+        };
 
         let item_type = item.get_type();
         type_tree.is_subtype_of(&item_type, &type_id)
+    }
+}
+
+/// `Some(Equal)` if `same`: for types that are equal or not, never ordered.
+/// (cellwatch's patch.)
+fn equal(same: bool) -> Option<Ordering> {
+    same.then_some(Ordering::Equal)
+}
+
+/// The Boolean `v` converts to, if any (`None` is NULL). (cellwatch's patch.)
+fn as_boolean(v: Variant) -> Option<bool> {
+    match v.convert(VariantTypeId::Scalar(VariantScalarTypeId::Boolean)) {
+        Variant::Boolean(b) => Some(b),
+        _ => None,
+    }
+}
+
+/// `v` as a NodeId of this server: a NodeId, or an ExpandedNodeId with no
+/// namespace URI left (the validation resolved those it knows) and no
+/// server index. (cellwatch's patch.)
+fn as_node_id(v: Variant) -> Option<NodeId> {
+    match v {
+        Variant::NodeId(n) => Some(*n),
+        Variant::ExpandedNodeId(n) if n.server_index == 0 && n.namespace_uri.is_null() => {
+            Some(n.node_id)
+        }
+        _ => None,
+    }
+}
+
+/// Whether `v` is null (OPC UA Part 4 IsNull): absent, or a null value of
+/// a type that has one. (cellwatch's patch.)
+fn is_null(v: &Variant) -> bool {
+    match v {
+        Variant::Empty => true,
+        Variant::String(s) => s.is_null(),
+        Variant::ByteString(b) => b.is_null(),
+        Variant::XmlElement(x) => x == &opcua_types::XmlElement::null(),
+        Variant::NodeId(n) => n.is_null(),
+        Variant::ExpandedNodeId(n) => n.is_null(),
+        Variant::LocalizedText(t) => t.text.is_null() && t.locale.is_null(),
+        Variant::QualifiedName(q) => q.is_null(),
+        _ => false,
     }
 }
 
@@ -403,7 +513,9 @@ fn like_to_regex(v: &str) -> Result<Regex, ()> {
             }
         } else {
             match c {
-                '$' | '^' | '(' | ')' | '.' | '+' | '*' | '?' => {
+                // cellwatch's patch: '|', '{' and '}' escaped too (0.19.0
+                // read them as the regex's alternation and repetition)
+                '$' | '^' | '(' | ')' | '.' | '+' | '*' | '?' | '|' | '{' | '}' => {
                     // Other regex chars are escaped
                     pattern.push('\\');
                     pattern.push(*c);
@@ -423,7 +535,9 @@ fn like_to_regex(v: &str) -> Result<Regex, ()> {
                 '_' => {
                     if i == 0 || v[i - 1] != '\\' {
                         // A _ is a match on a single char unless it is escaped
-                        pattern.push('?');
+                        // (cellwatch's patch: '.', where 0.19.0 pushed '?',
+                        // which matched no character)
+                        pattern.push('.');
                     } else {
                         // Remove escaping of the underscore
                         let _ = pattern.pop();
@@ -473,7 +587,8 @@ mod tests {
             like_to_regex("[$().+*?]").unwrap(),
             Regex::new(r"^[\$\(\)\.\+\*\?]$").unwrap(),
         );
-        compare_regex(like_to_regex("_").unwrap(), Regex::new("^?$").unwrap());
+        // cellwatch's patch: any one character.
+        compare_regex(like_to_regex("_").unwrap(), Regex::new("^.$").unwrap());
         compare_regex(
             like_to_regex("[a-z]").unwrap(),
             Regex::new("^[a-z]$").unwrap(),

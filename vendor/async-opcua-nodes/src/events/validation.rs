@@ -4,9 +4,9 @@ use hashbrown::HashMap;
 
 use opcua_types::{
     AttributeId, ContentFilter, ContentFilterElementResult, ContentFilterResult, ElementOperand,
-    EventFilter, EventFilterResult, FilterOperator, LiteralOperand, NodeClass, NodeId,
-    NumericRange, ObjectTypeId, Operand, QualifiedName, RelativePath, SimpleAttributeOperand,
-    StatusCode, UAString,
+    EventFilter, EventFilterResult, ExpandedNodeId, FilterOperator, LiteralOperand, NodeClass,
+    NodeId, NumericRange, ObjectTypeId, Operand, QualifiedName, RelativePath,
+    SimpleAttributeOperand, StatusCode, UAString, Variant,
 };
 
 use crate::TypeTree;
@@ -67,7 +67,18 @@ impl ParsedOperand {
                     Ok(Self::ElementOperand(e))
                 }
             }
-            Operand::LiteralOperand(o) => Ok(Self::LiteralOperand(o)),
+            // cellwatch's patch: an ExpandedNodeId literal with a namespace
+            // URI this server knows is compared as the NodeId it names
+            // (its index for the URI); 0.19.0 compared it as sent, never
+            // equal to an event's NodeId.
+            Operand::LiteralOperand(mut o) => {
+                if let Variant::ExpandedNodeId(id) = &o.value {
+                    if let Some(node) = id.try_resolve(type_tree.namespaces()) {
+                        o.value = ExpandedNodeId::from(node.into_owned()).into();
+                    }
+                }
+                Ok(Self::LiteralOperand(o))
+            }
             Operand::AttributeOperand(o) => {
                 if !allow_attribute_operands {
                     return Err(StatusCode::BadFilterOperandInvalid);
