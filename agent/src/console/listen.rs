@@ -18,6 +18,10 @@ use crate::payload::{AlarmPayload, SnapshotPayload, StatePayload};
 /// How long the console waits for an agent's snapshot.
 const SNAPSHOT_ANSWER: Duration = Duration::from_secs(5);
 
+/// The most sessions remembered as one cell's agent (a restart gives a new
+/// one; a flapping agent or a forged token must not grow the map).
+const SESSIONS_PER_CELL: usize = 4;
+
 /// How often every agent's snapshot is asked again, whatever happened: a
 /// safety net under the events.
 const RESYNC_EVERY: Duration = Duration::from_secs(60);
@@ -87,10 +91,30 @@ pub(super) async fn start(
             let Some(cell) = cell_of(&root_owned, key).map(str::to_string) else {
                 continue;
             };
+            // Tokens are not signed: one of a cell outside the trust file
+            // (where a router's access control is off) is ignored.
+            let trusted = s.plant.lock().is_ok_and(|p| p.cell(&cell).is_some());
+            if !trusted {
+                tracing::debug!(
+                    key,
+                    "a liveliness token of a cell outside the trust file: ignored"
+                );
+                continue;
+            }
             let zid = key.rsplit('/').next().unwrap_or_default().to_string();
             let up = sample.kind() == SampleKind::Put;
             if let Ok(mut known) = known.lock() {
                 if up {
+                    let theirs: Vec<String> = known
+                        .iter()
+                        .filter(|(_, c)| **c == cell)
+                        .map(|(z, _)| z.clone())
+                        .collect();
+                    if theirs.len() >= SESSIONS_PER_CELL {
+                        for z in theirs {
+                            known.remove(&z);
+                        }
+                    }
                     known.insert(zid, cell.clone());
                 } else {
                     known.remove(&zid);
@@ -171,15 +195,34 @@ impl HasCell for StatePayload {
 
 /// Asks every agent's snapshot at once, then each cell's when asked
 /// (`*`: every cell), and every agent's again every [`RESYNC_EVERY`].
+///
+/// The cells asked while a snapshot is under way are taken together, each
+/// once: an agent whose token flaps does not queue a snapshot per flap
+/// ahead of the other cells.
 async fn snapshots(s: Arc<Shared>, mut resync: mpsc::UnboundedReceiver<String>) {
     let mut every = tokio::time::interval(RESYNC_EVERY);
+    let mut pending = std::collections::BTreeSet::new();
     loop {
-        let cell = tokio::select! {
-            _ = every.tick() => "*".to_string(),
-            cell = resync.recv() => match cell {
+        if pending.is_empty() {
+            tokio::select! {
+                _ = every.tick() => { pending.insert("*".to_string()); }
+                cell = resync.recv() => match cell {
+                    Some(cell) => { pending.insert(cell); }
+                    None => return,
+                },
+            }
+        }
+        while let Ok(cell) = resync.try_recv() {
+            pending.insert(cell);
+        }
+        let cell = if pending.remove("*") {
+            pending.clear();
+            "*".to_string()
+        } else {
+            match pending.pop_first() {
                 Some(cell) => cell,
-                None => return,
-            },
+                None => continue,
+            }
         };
         if cell == "*" {
             match s

@@ -88,6 +88,11 @@ pub struct Plant {
     areas: Vec<String>,
     max_alarms: usize,
     dropped: u64,
+    /// When each alarm no longer shown ended (its last event), so that a
+    /// replayed older event does not bring it back before the cell's next
+    /// snapshot: at most `max_alarms`, the oldest forgotten first.
+    ended: HashMap<(String, String), String>,
+    ended_order: std::collections::VecDeque<(String, String)>,
 }
 
 /// Whether an operator must see `a`: active or unacknowledged, shelved or
@@ -115,6 +120,8 @@ impl Plant {
             areas: areas.keys().cloned().collect(),
             max_alarms,
             dropped: 0,
+            ended: HashMap::new(),
+            ended_order: std::collections::VecDeque::new(),
         };
         for cell in trusted {
             plant.cell_mut(cell);
@@ -160,6 +167,9 @@ impl Plant {
     /// Takes an alarm event its cell's agent signed; returns what changed.
     pub fn alarm_event(&mut self, a: AlarmPayload) -> Vec<Change> {
         let mut changes = Vec::new();
+        if self.stale(&a) {
+            return changes;
+        }
         let cell = self.cell_mut(&a.cell);
         if cell.synced_at.as_deref().is_some_and(|s| a.at.as_str() < s) {
             return changes;
@@ -186,6 +196,9 @@ impl Plant {
     /// shows what the alarm is, not "cleared".
     fn take(&mut self, mut a: AlarmPayload) -> Option<Change> {
         let key = (a.cell.clone(), a.id.clone());
+        if self.ended.get(&key).is_some_and(|at| *at > a.at) {
+            return None;
+        }
         if let Some(known) = self.alarms.get(&key) {
             if known.at > a.at {
                 return None;
@@ -218,11 +231,38 @@ impl Plant {
                 }
                 return None;
             }
+            if self.ended.remove(&key).is_some() {
+                self.ended_order.retain(|k| *k != key);
+            }
             self.alarms.insert(key, a.clone());
         } else {
             self.alarms.remove(&key);
+            self.end(key, &a.at);
         }
         Some(Change::Alarm { alarm: Box::new(a) })
+    }
+
+    /// Whether what is known of `a`'s alarm (shown, or ended) is newer.
+    fn stale(&self, a: &AlarmPayload) -> bool {
+        let key = (a.cell.clone(), a.id.clone());
+        self.ended.get(&key).is_some_and(|at| *at > a.at)
+            || self.alarms.get(&key).is_some_and(|known| known.at > a.at)
+    }
+
+    /// Remembers when the alarm `key` ended.
+    fn end(&mut self, key: (String, String), at: &str) {
+        match self.ended.get_mut(&key) {
+            Some(known) => at.clone_into(known),
+            None => {
+                if self.ended.len() >= self.max_alarms {
+                    if let Some(oldest) = self.ended_order.pop_front() {
+                        self.ended.remove(&oldest);
+                    }
+                }
+                self.ended.insert(key.clone(), at.to_string());
+                self.ended_order.push_back(key);
+            }
+        }
     }
 
     /// Takes a cell's machine state; returns the cell's new view unless an
@@ -238,9 +278,10 @@ impl Plant {
         })
     }
 
-    /// A cell's agent came (`true`) or went.
+    /// A cell's agent came (`true`) or went; a cell outside the trust
+    /// file is not taken from a token (tokens are not signed).
     pub fn agent(&mut self, cell: &str, up: bool) -> Option<Change> {
-        let c = self.cell_mut(cell);
+        let c = self.cells.get_mut(cell)?;
         if c.agent == up {
             return None;
         }
@@ -283,7 +324,9 @@ impl Plant {
             .map(|(_, a)| a.clone())
             .collect();
         for mut a in gone {
-            self.alarms.remove(&(a.cell.clone(), a.id.clone()));
+            let key = (a.cell.clone(), a.id.clone());
+            self.alarms.remove(&key);
+            self.end(key, &s.at);
             // Said to the pages as an alarm that ended.
             a.state = AlarmState::Normal;
             a.shelved = None;
@@ -522,5 +565,38 @@ mod tests {
         assert!(p.agent("m1", true).is_some());
         assert!(p.agent("m1", true).is_none(), "no change, nothing said");
         assert!(p.cell("m1").is_some_and(|c| c.agent));
+        // A token of a cell outside the trust file adds nothing.
+        assert!(p.agent("stranger", true).is_none());
+        assert!(p.cell("stranger").is_none());
+    }
+
+    #[test]
+    fn a_replayed_raise_of_an_alarm_that_ended_does_not_bring_it_back() {
+        let mut p = plant();
+        let raised = alarm(
+            "ese",
+            T1,
+            AlarmState::ActiveUnacknowledged,
+            Transition::Raised,
+        );
+        p.alarm_event(raised.clone());
+        p.alarm_event(alarm(
+            "ese",
+            T2,
+            AlarmState::Normal,
+            Transition::Acknowledged,
+        ));
+        assert_eq!(p.alarm_count(), 0);
+        // The genuine, signed raise, replayed after the alarm ended.
+        assert!(p.alarm_event(raised).is_empty());
+        assert_eq!(p.alarm_count(), 0);
+        // A new raise after it is shown.
+        p.alarm_event(alarm(
+            "ese",
+            T3,
+            AlarmState::ActiveUnacknowledged,
+            Transition::Raised,
+        ));
+        assert_eq!(p.alarm_count(), 1);
     }
 }

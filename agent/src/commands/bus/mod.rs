@@ -137,6 +137,38 @@ fn print_alarm(out: &mut dyn Write, a: &AlarmPayload, json: bool) -> std::io::Re
     Ok(())
 }
 
+/// The newest event time known of each alarm (cell, id), at most
+/// [`Latest::KEPT`] alarms (the oldest known forgotten first).
+#[derive(Default)]
+struct Latest {
+    at: std::collections::HashMap<(String, String), String>,
+    order: std::collections::VecDeque<(String, String)>,
+}
+
+impl Latest {
+    const KEPT: usize = 100_000;
+
+    /// Whether `a` is not older than what is known of its alarm; if so,
+    /// it becomes what is known.
+    fn newer(&mut self, a: &AlarmPayload) -> bool {
+        let key = (a.cell.clone(), a.id.clone());
+        match self.at.get_mut(&key) {
+            Some(known) if a.at < *known => return false,
+            Some(known) => known.clone_from(&a.at),
+            None => {
+                if self.at.len() >= Self::KEPT {
+                    if let Some(oldest) = self.order.pop_front() {
+                        self.at.remove(&oldest);
+                    }
+                }
+                self.at.insert(key.clone(), a.at.clone());
+                self.order.push_back(key);
+            }
+        }
+        true
+    }
+}
+
 /// `cellwatch alarms`.
 pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(), Failure> {
     let bus = session(&args.zenoh).await?;
@@ -154,6 +186,9 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
         // agent restarted gets them too); what the subscription then
         // delivers again is not printed twice.
         let mut printed = std::collections::HashSet::new();
+        // The newest event printed of each alarm: an older one (a replay of
+        // a genuine, signed event) is not printed after it.
+        let mut latest = Latest::default();
         if let Some(since) = &args.since {
             let Some(cell) = &args.cell else {
                 return Err(Failure::Input(
@@ -179,6 +214,7 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
                         serde_json::from_value::<AlarmPayload>(r["fields"]["payload"].clone())
                     {
                         printed.insert((a.id.clone(), a.at.clone(), a.transition));
+                        latest.newer(&a);
                         print_alarm(out, &a, args.json).map_err(io)?;
                     }
                 }
@@ -215,9 +251,14 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
                             continue;
                         }
                     };
-                    if !printed.remove(&(a.id.clone(), a.at.clone(), a.transition)) {
-                        print_alarm(out, &a, args.json).map_err(io)?;
+                    if printed.remove(&(a.id.clone(), a.at.clone(), a.transition)) {
+                        continue;
                     }
+                    if !latest.newer(&a) {
+                        tracing::warn!(key, at = %a.at, "an alarm event older than one already printed of that alarm (replayed?): not printed");
+                        continue;
+                    }
+                    print_alarm(out, &a, args.json).map_err(io)?;
                     out.flush().map_err(io)?;
                 }
             }
@@ -608,8 +649,33 @@ async fn send_signed(
 
 #[cfg(test)]
 mod tests {
-    use super::print_alarm;
+    use super::{print_alarm, Latest};
     use crate::payload::AlarmPayload;
+
+    #[test]
+    fn an_event_older_than_the_newest_of_its_alarm_is_not_taken() {
+        let at = |id: &str, at: &str| -> AlarmPayload {
+            serde_json::from_value(serde_json::json!({
+                "schema": "cellwatch.alarm.v1", "cell": "m01", "id": id,
+                "kind": "switching", "severity": "critical", "state": "normal",
+                "transition": "cleared", "at": at, "raised_at": at, "cleared_at": null,
+                "acked_by": null, "fault_type": "ESE", "fault_step": 6, "culprits": [],
+                "message": "ESE at step 6"
+            }))
+            .unwrap()
+        };
+        let mut l = Latest::default();
+        assert!(l.newer(&at("ese", "2026-11-28T10:00:01.000Z")));
+        assert!(!l.newer(&at("ese", "2026-11-28T10:00:00.000Z")), "a replay");
+        assert!(
+            l.newer(&at("ese", "2026-11-28T10:00:01.000Z")),
+            "the same instant"
+        );
+        assert!(
+            l.newer(&at("csd", "2026-11-28T09:00:00.000Z")),
+            "another alarm"
+        );
+    }
 
     #[test]
     fn an_acknowledgement_prints_who_made_it_and_their_comment() {
