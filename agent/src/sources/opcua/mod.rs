@@ -68,6 +68,7 @@ use switches::{pulse, reset_switches, Writes};
 
 pub use conditions::EVENTS_ALARM;
 pub use subscription::{reading, OVERFLOW_ALARM};
+pub use watch::SILENT_KEEP_ALIVES;
 
 use futures_util::future::BoxFuture;
 use futures_util::{FutureExt, StreamExt};
@@ -487,10 +488,6 @@ async fn delete(session: &Session, id: u32, requests: &Requests) {
 
 /// The alarm a missing namespace raises (kind `system`).
 pub const NAMESPACE_ALARM: &str = "opcua-namespace";
-
-/// Keep-alive periods without any publish before a subscription is called
-/// silent and recreated.
-pub const SILENT_KEEP_ALIVES: u32 = 3;
 
 /// Supervises one session, beside its event loop: resolves the tags'
 /// namespaces against the server's `NamespaceArray`; takes the

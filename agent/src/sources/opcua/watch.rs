@@ -15,7 +15,10 @@ use opcua::client::Session;
 use super::context::{Context, Live};
 use super::resume::{self, Unfilled};
 use super::tend::{Tended, Tending};
-use super::SILENT_KEEP_ALIVES;
+
+/// Keep-alive periods without any publish before a subscription is called
+/// silent and recreated.
+pub const SILENT_KEEP_ALIVES: u32 = 3;
 
 /// Watches a subscription in place: fills every gap found in its
 /// publishes, tends its monitored items, and says why it must be
