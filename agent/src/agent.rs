@@ -386,6 +386,7 @@ impl Agent {
         watch::Sender<bool>,
     ) {
         let mut source = sources::for_config(config, config.tags.clone());
+        source.count_requests(self.metrics.opcua_requests.clone());
         let writer = source.writer();
         let allowance = source.delivery_allowance();
         tracing::info!(cell = %config.cell, source = %source.describe(), "starting a source for the configuration read again");
@@ -652,6 +653,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
             sources::for_config(&config, tags)
         }
     };
+    source.count_requests(metrics.opcua_requests.clone());
     let writer = source.writer();
     let allowance = source.delivery_allowance();
     let source_listening = source.listening();

@@ -92,6 +92,8 @@ pub struct Metrics {
     process_cpu: Counter,
     /// Queries refused, by service and reason.
     refused: IntCounterVec,
+    /// Requests the OPC UA source made of the PLC, by service and result.
+    pub opcua_requests: IntCounterVec,
     commands: IntCounterVec,
     /// Seconds since the last tag update.
     pub last_update_age: Gauge,
@@ -241,6 +243,14 @@ impl Metrics {
             ),
             &["service", "reason"]
         ));
+        let opcua_requests = reg!(IntCounterVec::new(
+            opts(
+                "cellwatch_opcua_requests_total",
+                "Requests the OPC UA source made of the PLC, by service (Read, Republish, CreateMonitoredItems, TransferSubscriptions, ...) and result (good, or the status code's name: BadTimeout, BadMessageNotAvailable, ...). The client library's own Publish and keep-alive requests are not counted.",
+                cell
+            ),
+            &["service", "result"]
+        ));
         let alertmanager_sends = reg!(IntCounterVec::new(
             opts(
                 "cellwatch_alertmanager_sends_total",
@@ -364,6 +374,7 @@ impl Metrics {
                 cell
             ))),
             refused,
+            opcua_requests,
             zenoh_publish_errors: reg!(IntCounter::with_opts(opts(
                 "cellwatch_zenoh_publish_errors_total",
                 "Zenoh publications and replies that failed.",

@@ -174,6 +174,11 @@ pub trait Source: Send + 'static {
         None
     }
 
+    /// Where to count the requests it makes of its PLC, by service and
+    /// result (`cellwatch_opcua_requests_total`), if it makes any (called
+    /// once, before `run`).
+    fn count_requests(&mut self, _counter: prometheus::IntCounterVec) {}
+
     /// How long a change the PLC saw may take to reach the agent, beyond
     /// the moment its source timestamp names: the publishing interval of a
     /// subscription. Zero for a source that stamps readings on arrival.

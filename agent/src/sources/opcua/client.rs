@@ -6,6 +6,7 @@ use opcua::client::{ClientBuilder, IdentityToken, Session};
 use opcua::crypto::SecurityPolicy as UaPolicy;
 use opcua::types::{MessageSecurityMode, NodeId, ReadValueId, TimestampsToReturn, Variant};
 
+use super::requests::Requests;
 use super::subscription;
 
 use crate::config::{Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy};
@@ -119,12 +120,16 @@ pub(super) fn client_retrying(
 }
 
 /// The server's `NamespaceArray` (index → URI).
-pub(super) async fn namespace_array(session: &Session) -> Result<Vec<String>, String> {
+pub(super) async fn namespace_array(
+    session: &Session,
+    requests: &Requests,
+) -> Result<Vec<String>, String> {
     let node = NodeId::new(0, NAMESPACE_ARRAY);
     let values = session
         .read(&[ReadValueId::from(node)], TimestampsToReturn::Neither, 0.0)
-        .await
-        .map_err(|e| e.to_string())?;
+        .await;
+    requests.answered("Read", &values);
+    let values = values.map_err(|e| e.to_string())?;
     let value = values.into_iter().next().ok_or("empty read result")?;
     if let Some(status) = value.status.filter(|s| !s.is_good()) {
         return Err(status.to_string());

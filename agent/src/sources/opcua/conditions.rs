@@ -17,6 +17,7 @@ use opcua::types::{
     Variant,
 };
 
+use super::requests::Requests;
 use crate::config::EventSource;
 use crate::sources::SourceEvent;
 
@@ -122,6 +123,7 @@ pub(super) async fn follow(
     conditions: &std::sync::Mutex<Conditions>,
     namespaces: &[String],
     tx: &crate::sources::SourceSender,
+    requests: &Requests,
 ) {
     let notifiers: Vec<Option<NodeId>> = {
         let c = conditions.lock().unwrap_or_else(|e| e.into_inner());
@@ -130,7 +132,7 @@ pub(super) async fn follow(
         }
         c.sources().map(|s| s.source.resolve(namespaces)).collect()
     };
-    let problem = subscribe(session, sub, &notifiers).await;
+    let problem = subscribe(session, sub, &notifiers, requests).await;
     match &problem {
         Some(p) => tracing::warn!(problem = %p, "the PLC's alarms"),
         None => tracing::info!(
@@ -155,21 +157,23 @@ pub(super) async fn subscribe(
     session: &Session,
     sub: u32,
     notifiers: &[Option<NodeId>],
+    requests: &Requests,
 ) -> Option<String> {
-    let requests: Vec<_> = notifiers
+    let items: Vec<_> = notifiers
         .iter()
         .enumerate()
         .filter_map(|(k, n)| Some(item_request(k, n.clone()?)))
         .collect();
-    if requests.is_empty() {
+    if items.is_empty() {
         return (!notifiers.is_empty())
             .then(|| "no notifier of opcua.events is on the server (namespace missing)".into());
     }
     let created = opcua::client::services::CreateMonitoredItems::new(sub, session)
-        .items_to_create(requests)
+        .items_to_create(items)
         .timestamps_to_return(TimestampsToReturn::Neither)
         .send(session.channel())
         .await;
+    requests.answered("CreateMonitoredItems", &created);
     let refused: Vec<String> = match created {
         Err(e) => return Some(format!("cannot subscribe to the PLC's alarms: {e}")),
         Ok(r) => r
@@ -190,7 +194,9 @@ pub(super) async fn subscribe(
         NodeId::from(MethodId::ConditionType_ConditionRefresh),
         Some(vec![Variant::from(sub)]),
     );
-    match session.call_one(refresh).await {
+    let refreshed = session.call_one(refresh).await;
+    requests.answered("Call", &refreshed);
+    match refreshed {
         Ok(r) if r.status_code.is_good() => None,
         Ok(r) => Some(format!(
             "the server cannot say which alarms the PLC holds now (ConditionRefresh: {})",
@@ -382,6 +388,7 @@ pub(super) async fn acknowledge(
     conditions: &std::sync::Mutex<Conditions>,
     id: &str,
     comment: &str,
+    requests: &Requests,
 ) -> Result<String, String> {
     let target = conditions
         .lock()
@@ -403,7 +410,9 @@ pub(super) async fn acknowledge(
             Variant::from(LocalizedText::new("", comment)),
         ]),
     );
-    match session.call_one(call).await {
+    let called = session.call_one(call).await;
+    requests.answered("Call", &called);
+    match called {
         Ok(r) if r.status_code.is_good() => Ok(format!("{id} acknowledged at the PLC")),
         Ok(r) => Err(format!(
             "the PLC refused to acknowledge {id}: {}",

@@ -6,6 +6,7 @@ use std::sync::Arc;
 
 use super::conditions::Conditions;
 use super::names::Names;
+use super::requests::Requests;
 use super::{delivery, subscription};
 use crate::config::node::TagNode;
 use crate::config::{OpcUaConfig, TagConfig};
@@ -26,6 +27,8 @@ pub(super) struct Context {
     pub(super) delivery: std::sync::Mutex<Option<delivery::Shared>>,
     /// The PLC's own alarms (`opcua.events`), across subscriptions.
     pub(super) conditions: Arc<std::sync::Mutex<Conditions>>,
+    /// Where the requests made of the server are counted.
+    pub(super) requests: Requests,
 }
 
 impl Context {
@@ -55,7 +58,12 @@ impl Context {
         }
     }
 
-    pub(super) fn new(config: &OpcUaConfig, tags: TagTable, tx: SourceSender) -> Context {
+    pub(super) fn new(
+        config: &OpcUaConfig,
+        tags: TagTable,
+        tx: SourceSender,
+        requests: Requests,
+    ) -> Context {
         Context {
             endpoint: std::sync::Mutex::new(config.endpoint.clone()),
             config: config.clone(),
@@ -65,6 +73,7 @@ impl Context {
             tx,
             delivery: std::sync::Mutex::new(None),
             conditions: Arc::new(std::sync::Mutex::new(Conditions::new(&config.events))),
+            requests,
         }
     }
 }

@@ -23,6 +23,7 @@ use super::conditions::Conditions;
 use super::items::{Items, Standing};
 use super::names::Names;
 use super::overflow::Overflow;
+use super::republishes::Republishes;
 use super::sequence::{Next, Sequence};
 use super::subscription::{reading, source_time, Heard, Monitored, Uses, OVERFLOW_ALARM};
 use crate::clock::Every;
@@ -56,11 +57,17 @@ pub(super) struct Shared {
     /// Woken when the publishes of a cycle start being held for the rest
     /// of it: the supervisor hands them on if the rest never comes.
     pub(super) held: Arc<Notify>,
+    /// The bounds on the `Republish` requests filling the gaps.
+    republishes: Arc<Mutex<Republishes>>,
 }
 
 impl Shared {
     pub(super) fn lock(&self) -> MutexGuard<'_, Delivery> {
         self.delivery.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    pub(super) fn republishes(&self) -> MutexGuard<'_, Republishes> {
+        self.republishes.lock().unwrap_or_else(|e| e.into_inner())
     }
 }
 
@@ -246,6 +253,7 @@ pub(super) fn delivery(
         items,
         failed,
         held,
+        republishes: Arc::new(Mutex::new(Republishes::new(Instant::now()))),
     }
 }
 
@@ -715,4 +723,4 @@ fn send_blocking(tx: &SourceSender, event: SourceEvent) {
 }
 
 #[cfg(test)]
-mod tests;
+pub(super) mod tests;

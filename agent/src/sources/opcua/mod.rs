@@ -47,12 +47,15 @@ mod names;
 mod once;
 mod overflow;
 mod redundancy;
+mod republishes;
+mod requests;
 mod resume;
 mod reverse;
 mod sequence;
 mod subscription;
 mod switches;
 mod tend;
+mod watch;
 
 pub use crate::config::node::{Namespace, TagNode};
 pub use client::client;
@@ -60,10 +63,12 @@ use client::{identity, namespace_array, server_endpoint};
 use context::{Context, Live, TagTable};
 pub use names::Names;
 pub use once::{connect_once, server_identity, ServerIdentity};
+use requests::Requests;
 use switches::{pulse, reset_switches, Writes};
 
 pub use conditions::EVENTS_ALARM;
 pub use subscription::{reading, OVERFLOW_ALARM};
+pub use watch::SILENT_KEEP_ALIVES;
 
 use futures_util::future::BoxFuture;
 use futures_util::{FutureExt, StreamExt};
@@ -89,6 +94,8 @@ pub struct OpcUaSource {
     /// `opcua.reverse_listen` bound when the source was made (`None`:
     /// not configured, or to be bound when it runs).
     reverse: Option<std::net::TcpListener>,
+    /// Where the requests made of the server are counted.
+    requests: Requests,
 }
 
 impl OpcUaSource {
@@ -125,6 +132,7 @@ impl OpcUaSource {
             switches,
             writes: None,
             reverse,
+            requests: Requests::default(),
         }
     }
 }
@@ -140,6 +148,10 @@ impl Source for OpcUaSource {
 
     fn listening(&self) -> Option<std::net::SocketAddr> {
         self.reverse.as_ref().and_then(|l| l.local_addr().ok())
+    }
+
+    fn count_requests(&mut self, counter: prometheus::IntCounterVec) {
+        self.requests = Requests::new(Some(counter));
     }
 
     fn writer(&mut self) -> Option<WriteSender> {
@@ -165,16 +177,12 @@ impl Source for OpcUaSource {
                 Some(addr) => Some(reverse::listen(addr, self.reverse).await),
                 None => None,
             };
-            run_writing(
-                &self.cell,
-                &self.config,
-                self.tags,
-                tx,
-                writes,
-                reverse,
-                shutdown,
-            )
-            .await
+            let setup = Setup {
+                cell: &self.cell,
+                config: &self.config,
+                requests: self.requests,
+            };
+            run_writing(setup, self.tags, tx, writes, reverse, shutdown).await
         }
         .boxed()
     }
@@ -203,18 +211,35 @@ pub async fn run(
         Some(addr) => Some(reverse::listen(addr, None).await),
         None => None,
     };
-    run_writing(cell, config, tags, tx, writes, reverse, shutdown).await
+    let setup = Setup {
+        cell,
+        config,
+        requests: Requests::default(),
+    };
+    run_writing(setup, tags, tx, writes, reverse, shutdown).await
+}
+
+/// The source's own: its cell, its configuration, and where the requests
+/// it makes are counted.
+struct Setup<'a> {
+    cell: &'a str,
+    config: &'a OpcUaConfig,
+    requests: Requests,
 }
 
 async fn run_writing(
-    cell: &str,
-    config: &OpcUaConfig,
+    setup: Setup<'_>,
     tags: TagTable,
     tx: SourceSender,
     mut writes: Writes,
     reverse: Option<Arc<tokio::net::TcpListener>>,
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), SourceError> {
+    let Setup {
+        cell,
+        config,
+        requests,
+    } = setup;
     // Pulses under way; each writes its switch off before it ends.
     let mut pulses = tokio::task::JoinSet::new();
     // Every switch it may write, with its node: all written off on each
@@ -236,7 +261,7 @@ async fn run_writing(
     // Anonymous or user name: the server's endpoint says which token
     // policies it accepts.
     let token = identity(config)?;
-    let ctx = Arc::new(Context::new(config, tags, tx.clone()));
+    let ctx = Arc::new(Context::new(config, tags, tx.clone(), requests));
     // The subscription of the current session, kept across reactivations.
     let current = Arc::new(tokio::sync::Mutex::new(None));
     tokio::pin!(shutdown);
@@ -310,7 +335,7 @@ async fn run_writing(
                     // written off, with the event loop polled.
                     pulses.abort_all();
                     supervisor.abort_all();
-                    let off = reset_switches(&session, &switch_nodes, "stopping");
+                    let off = reset_switches(&session, &switch_nodes, "stopping", &ctx.requests);
                     tokio::pin!(off);
                     let limit = tokio::time::sleep(Duration::from_secs(5));
                     tokio::pin!(limit);
@@ -342,7 +367,7 @@ async fn run_writing(
                     if let Write::Acknowledge { alarm, comment } = &w.what {
                         let (session, ctx, alarm, comment) = (session.clone(), ctx.clone(), alarm.clone(), comment.clone());
                         pulses.spawn(async move {
-                            let done = conditions::acknowledge(&session, &ctx.conditions, &alarm, &comment).await;
+                            let done = conditions::acknowledge(&session, &ctx.conditions, &alarm, &comment, &ctx.requests).await;
                             let _ = w.reply.send(done);
                         });
                         continue;
@@ -358,9 +383,10 @@ async fn run_writing(
                         Ok((held, name, node)) => {
                             let session = session.clone();
                             let switching = switching.clone();
+                            let requests = ctx.requests.clone();
                             pulses.spawn(async move {
                                 let _turn = switching.lock_owned().await;
-                                let done = pulse(session, node, name, held).await;
+                                let done = pulse(session, node, name, held, requests).await;
                                 match &done {
                                     Ok(d) => tracing::info!(write = %d, "switch pulsed"),
                                     Err(e) => tracing::warn!(error = %e, "switch pulse failed"),
@@ -417,14 +443,14 @@ async fn run_writing(
                         // Whatever a pulse cut short (this agent's or a
                         // killed one's) left on is written off first.
                         if !switch_nodes.is_empty() {
-                            let (session, switches, switching) = (session.clone(), switch_nodes.clone(), switching.clone());
+                            let (session, switches, switching, requests) = (session.clone(), switch_nodes.clone(), switching.clone(), ctx.requests.clone());
                             let turn = switching.clone().try_lock_owned();
                             supervisor.spawn(async move {
                                 let _turn = match turn {
                                     Ok(turn) => turn,
                                     Err(_) => switching.lock_owned().await,
                                 };
-                                reset_switches(&session, &switches, "connected").await;
+                                reset_switches(&session, &switches, "connected", &requests).await;
                             });
                         }
                         supervisor.spawn(supervise(session.clone(), ctx.clone(), current.clone(), new_session));
@@ -450,15 +476,18 @@ async fn run_writing(
 /// # Errors
 /// The read fails or the value is not an array of strings.
 pub async fn namespaces(session: &Session) -> Result<Vec<String>, String> {
-    namespace_array(session).await
+    namespace_array(session, &Requests::default()).await
+}
+
+/// Deletes subscription `id`, also out of the library's state; an error
+/// (the server has it no more) changes nothing.
+async fn delete(session: &Session, id: u32, requests: &Requests) {
+    let deleted = session.delete_subscription(id).await;
+    requests.answered("DeleteSubscriptions", &deleted);
 }
 
 /// The alarm a missing namespace raises (kind `system`).
 pub const NAMESPACE_ALARM: &str = "opcua-namespace";
-
-/// Keep-alive periods without any publish before a subscription is called
-/// silent and recreated.
-pub const SILENT_KEEP_ALIVES: u32 = 3;
 
 /// Supervises one session, beside its event loop: resolves the tags'
 /// namespaces against the server's `NamespaceArray`; takes the
@@ -479,7 +508,7 @@ async fn supervise(
     // The subscription of the lost connection is to be taken over.
     let mut resuming = live.is_some();
     loop {
-        let namespaces = match namespace_array(&session).await {
+        let namespaces = match namespace_array(&session, &ctx.requests).await {
             Ok(n) => n,
             Err(e) => {
                 let _ = ctx
@@ -498,7 +527,7 @@ async fn supervise(
             .as_ref()
             .filter(|l| resuming && l.namespaces == namespaces)
         {
-            Some(l) => Some(resume(&session, l, new_session).await),
+            Some(l) => Some(resume(&session, l, new_session, &ctx.requests).await),
             None => None,
         };
         match (resumed, live.as_ref()) {
@@ -518,7 +547,7 @@ async fn supervise(
                     .await;
                 // Also out of the library's state (the server has it no
                 // more, or never will again).
-                let _ = session.delete_subscription(sub.id).await;
+                delete(&session, sub.id, &ctx.requests).await;
                 *live = None;
             }
             (Some(Ok(())), Some(l)) => {
@@ -530,7 +559,14 @@ async fn supervise(
                     // change, were forgotten while the connection was down:
                     // read them after what it held (the engine ignores what
                     // it has).
-                    subscription::read_current(&session, &l.nodes, &ctx.uses, &ctx.tx).await;
+                    subscription::read_current(
+                        &session,
+                        &l.nodes,
+                        &ctx.uses,
+                        &ctx.tx,
+                        &ctx.requests,
+                    )
+                    .await;
                 }
             }
             _ => {}
@@ -549,7 +585,7 @@ async fn supervise(
                         old.subscription.id
                     ),
                 );
-                let _ = session.delete_subscription(old.subscription.id).await;
+                delete(&session, old.subscription.id, &ctx.requests).await;
             }
             match subscribe(&session, &ctx, namespaces).await {
                 Some(l) => *live = Some(l),
@@ -563,7 +599,7 @@ async fn supervise(
         retry = Duration::from_millis(500);
         let _ = ctx.tx.send(SourceEvent::Connected(ctx.endpoint())).await;
         let l = live.as_ref().expect("subscribed above");
-        let why = watch(&session, &ctx, l).await;
+        let why = watch::watch(&session, &ctx, l).await;
         let l = live.take().expect("subscribed above");
         tracing::warn!(subscription = l.subscription.id, "{why}");
         resume::give_up(
@@ -574,7 +610,7 @@ async fn supervise(
             ),
         );
         let _ = ctx.tx.send(SourceEvent::Disconnected(why)).await;
-        let _ = session.delete_subscription(l.subscription.id).await;
+        delete(&session, l.subscription.id, &ctx.requests).await;
     }
 }
 
@@ -584,86 +620,19 @@ async fn supervise(
 ///
 /// # Errors
 /// Why it cannot be: the server no longer has it, or refuses.
-async fn resume(session: &Session, l: &Live, new_session: bool) -> Result<(), String> {
+async fn resume(
+    session: &Session,
+    l: &Live,
+    new_session: bool,
+    requests: &requests::Requests,
+) -> Result<(), String> {
     let sub = &l.subscription;
     if new_session {
-        return resume::transfer(session, sub.id, &l.shared).await;
+        return resume::transfer(session, sub.id, &l.shared, requests).await;
     }
-    match resume::catch_up(session, sub.id, &l.shared).await {
+    match resume::catch_up(session, sub.id, &l.shared, requests).await {
         Ok(()) | Err(resume::Unfilled::Failed(_)) => Ok(()),
         Err(resume::Unfilled::Gone(status)) => Err(status.to_string()),
-    }
-}
-
-/// Watches a subscription in place: fills every gap found in its
-/// publishes, tends its monitored items (`tend`), and says why it must be
-/// replaced — the server closed it, or it went silent (no data, no
-/// keep-alive) and held nothing to send again.
-async fn watch(session: &Session, ctx: &Context, l: &Live) -> String {
-    let sub = &l.subscription;
-    let limit = sub.keep_alive * SILENT_KEEP_ALIVES;
-    let period = (sub.keep_alive / 2).max(Duration::from_millis(50));
-    let (mut tending, mut next) = (tend::Tending::new(&ctx.config), std::time::Instant::now());
-    // When a cycle held for the rest of it is handed on anyway.
-    let mut held: Option<std::time::Instant> = None;
-    loop {
-        let now = std::time::Instant::now();
-        let wait = period
-            .min(next.saturating_duration_since(now))
-            .min(held.map_or(period, |at| at.saturating_duration_since(now)));
-        tokio::select! {
-            () = tokio::time::sleep(wait) => {
-                let now = std::time::Instant::now();
-                let for_held = held.is_some_and(|at| at <= now);
-                if for_held {
-                    held = l.shared.lock().flush_stale();
-                }
-                if !for_held || next <= now {
-                    next = tending.tend(&tend::Tended { session, sub: sub.id, config: &ctx.config, uses: &ctx.uses, nodes: &l.nodes, shared: &l.shared, heard: &l.heard, tx: &ctx.tx }).await;
-                }
-            }
-            () = l.shared.held.notified() => held = l.shared.lock().flush_stale(),
-            () = l.shared.failed.notified() => next = std::time::Instant::now(),
-            () = l.shared.missing.notified() => {
-                if let Err(resume::Unfilled::Gone(status)) = resume::fill(session, sub.id, &l.shared).await {
-                    return format!("the server dropped subscription {} ({status}): subscribing again", sub.id);
-                }
-            }
-        }
-        if let Some(status) = l.heard.closed() {
-            return format!(
-                "the server dropped subscription {} ({status}): subscribing again",
-                sub.id
-            );
-        }
-        if l.heard.silent_for() <= limit {
-            continue;
-        }
-        // Silent: whatever the server sent and the agent never got is
-        // asked for again. A request that fails (a stalled connection)
-        // leaves the subscription alone: the session's keep-alive judges
-        // the connection, and a subscription deleted now would drop what
-        // arrives once the traffic flows again.
-        match resume::catch_up(session, sub.id, &l.shared).await {
-            Err(resume::Unfilled::Gone(status)) => {
-                return format!(
-                    "the server dropped subscription {} ({status}): subscribing again",
-                    sub.id
-                )
-            }
-            Err(resume::Unfilled::Failed(status)) => {
-                tracing::debug!(subscription = sub.id, %status, "silent, and cannot be asked for what it holds: waiting");
-                continue;
-            }
-            Ok(()) => {}
-        }
-        let silent = l.heard.silent_for();
-        if silent > limit {
-            return format!(
-                "subscription silent for {:.1} s (no data, no keep-alive) while the session lives",
-                silent.as_secs_f64()
-            );
-        }
     }
 }
 
@@ -750,6 +719,7 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
         subscription::Granted {
             queue_size: &queue_size,
             items: &shared.items,
+            requests: &ctx.requests,
         },
         delivery::Feed(shared.clone()),
     )
@@ -765,6 +735,7 @@ async fn subscribe(session: &Arc<Session>, ctx: &Context, namespaces: Vec<String
         &ctx.conditions,
         &namespaces,
         &ctx.tx,
+        &ctx.requests,
     )
     .await;
     *ctx.delivery.lock().unwrap_or_else(|e| e.into_inner()) = Some(shared.clone());

@@ -6,13 +6,18 @@
 //! (`opcua.subscription_lifetime`), queues the changes meanwhile, and keeps
 //! every publish it sent until the client acknowledges it. Whatever it can
 //! no longer send is said as a gap: the alarms judged across it say
-//! "trigger uncertain".
+//! "trigger uncertain". The requests are bounded (`republishes`): a few
+//! for each missing publish, whatever the server answers, and a rate.
+
+use std::time::Instant;
 
 use opcua::client::Session;
-use opcua::types::StatusCode;
+use opcua::types::{NotificationMessage, StatusCode};
 
 use super::delivery::Shared;
-use super::sequence::succ;
+use super::republishes::{Unserved, TRIES};
+use super::requests::Requests;
+use super::sequence::{has_data, succ};
 
 /// How a gap could not be filled.
 #[derive(Debug)]
@@ -24,12 +29,77 @@ pub(super) enum Unfilled {
     Failed(StatusCode),
 }
 
+/// What one `Republish` brought.
+enum Answer {
+    /// The publish asked for.
+    Got(NotificationMessage),
+    /// Nothing: why.
+    Unserved(Unserved),
+    /// The server no longer has the subscription.
+    Gone(StatusCode),
+}
+
+/// Where a missing publish is asked for again: the session's server.
+pub(super) trait Retransmission: Sync {
+    /// `Republish`: publish `seq` of subscription `id`, sent again.
+    fn republish(
+        &self,
+        id: u32,
+        seq: u32,
+    ) -> impl std::future::Future<Output = Result<NotificationMessage, opcua::types::Error>> + Send;
+}
+
+impl Retransmission for Session {
+    fn republish(
+        &self,
+        id: u32,
+        seq: u32,
+    ) -> impl std::future::Future<Output = Result<NotificationMessage, opcua::types::Error>> + Send
+    {
+        Session::republish(self, id, seq)
+    }
+}
+
+/// Asks the server for publish `seq` of subscription `id` again, once its
+/// turn comes (`Republishes::turn`); an answer that does not carry it is
+/// none.
+async fn ask(
+    server: &impl Retransmission,
+    id: u32,
+    seq: u32,
+    shared: &Shared,
+    requests: &Requests,
+) -> Answer {
+    let wait = shared.republishes().turn(Instant::now());
+    if !wait.is_zero() {
+        tokio::time::sleep(wait).await;
+    }
+    let answer = server.republish(id, seq).await;
+    requests.answered("Republish", &answer);
+    match answer {
+        Ok(m) if m.sequence_number == seq && has_data(&m) => Answer::Got(m),
+        Ok(m) => Answer::Unserved(Unserved::Other {
+            carried: m.sequence_number,
+        }),
+        Err(e) if is_gone(e.status()) => Answer::Gone(e.status()),
+        Err(e) if not_available(e.status()) => Answer::Unserved(Unserved::NotAvailable(e.status())),
+        Err(e) => Answer::Unserved(Unserved::Failed(e.status())),
+    }
+}
+
 /// Asks the server again for every publish found missing, in order; one it
-/// no longer has is lost, said once per run.
+/// cannot send (it says it no longer has it, answers with another or none,
+/// or a request fails [`TRIES`](super::republishes::TRIES) times) is lost,
+/// said once per run.
 ///
 /// # Errors
-/// The subscription is gone, or a request failed.
-pub(super) async fn fill(session: &Session, id: u32, shared: &Shared) -> Result<(), Unfilled> {
+/// The subscription is gone, or a request failed and may be tried again.
+pub(super) async fn fill(
+    session: &impl Retransmission,
+    id: u32,
+    shared: &Shared,
+    requests: &Requests,
+) -> Result<(), Unfilled> {
     // The last of a run of lost publishes.
     let mut lost: Option<u32> = None;
     let result = loop {
@@ -41,23 +111,58 @@ pub(super) async fn fill(session: &Session, id: u32, shared: &Shared) -> Result<
             }
         };
         let Some(seq) = seq else { break Ok(()) };
-        match session.republish(id, seq).await {
-            Ok(m) => {
+        match ask(session, id, seq, shared, requests).await {
+            Answer::Got(m) => {
+                shared.republishes().served(seq);
                 let mut d = shared.lock();
                 if let Some(l) = lost.take() {
                     gone(&mut d, l);
                 }
                 d.arrived(m);
             }
-            Err(e) if e.status() == StatusCode::BadMessageNotAvailable => lost = Some(seq),
-            Err(e) if is_gone(e.status()) => break Err(Unfilled::Gone(e.status())),
-            Err(e) => break Err(Unfilled::Failed(e.status())),
+            Answer::Unserved(why) => {
+                unserved(shared, id, seq, why);
+                if shared.republishes().unserved(seq, why) {
+                    let Unserved::Failed(status) = why else {
+                        unreachable!("only a failed request is tried again")
+                    };
+                    break Err(Unfilled::Failed(status));
+                }
+                lost = Some(seq);
+            }
+            Answer::Gone(status) => break Err(Unfilled::Gone(status)),
         }
     };
     if let Some(l) = lost {
         gone(&mut shared.lock(), l);
     }
     result
+}
+
+/// Warns, at most once a minute for each kind, that a `Republish` of
+/// publish `seq` brought nothing.
+fn unserved(shared: &Shared, id: u32, seq: u32, why: Unserved) {
+    let Some(times) = shared.republishes().warn(why, Instant::now()) else {
+        return;
+    };
+    let said = match why {
+        Unserved::NotAvailable(status) => format!("the server no longer has it ({status})"),
+        Unserved::Other { carried: 0 } => {
+            "the server answered with an empty message: it does not have it".into()
+        }
+        Unserved::Other { carried } => {
+            format!("the server answered with publish {carried}: it does not have it")
+        }
+        Unserved::Failed(status) => {
+            format!("the request failed ({status}); given up as lost after {TRIES} tries")
+        }
+    };
+    tracing::warn!(
+        subscription = id,
+        publish = seq,
+        "a publish asked for again (Republish) was not sent: {said} ({times} such \
+         since the last warning, said at most once a minute)"
+    );
 }
 
 fn gone(d: &mut super::delivery::Delivery, seq: u32) {
@@ -73,16 +178,32 @@ fn is_gone(status: StatusCode) -> bool {
     )
 }
 
-/// After the session was reactivated: every publish the server sent while
-/// the connection was down is asked for again, from the next one expected
-/// until the server has no more.
+/// The server says it does not hold the publish asked for.
+fn not_available(status: StatusCode) -> bool {
+    matches!(
+        status,
+        StatusCode::BadMessageNotAvailable | StatusCode::BadSequenceNumberUnknown
+    )
+}
+
+/// After the session was reactivated, or the subscription fell silent:
+/// every publish the server sent and the agent never got is asked for
+/// again, from the next one expected until the server has no more (it says
+/// so, or answers with another or none).
 ///
 /// # Errors
 /// The subscription is gone, or a request failed.
-pub(super) async fn catch_up(session: &Session, id: u32, shared: &Shared) -> Result<(), Unfilled> {
+pub(super) async fn catch_up(
+    session: &Session,
+    id: u32,
+    shared: &Shared,
+    requests: &Requests,
+) -> Result<(), Unfilled> {
     // Is it still there? (A server may answer a republish for a
     // subscription it dropped as if it merely had nothing to resend.)
-    match session.set_publishing_mode(&[id], true).await {
+    let mode = session.set_publishing_mode(&[id], true).await;
+    requests.answered("SetPublishingMode", &mode);
+    match mode {
         Ok(r) => match r.first() {
             Some(s) if !s.is_good() => return Err(Unfilled::Gone(*s)),
             _ => {}
@@ -92,15 +213,15 @@ pub(super) async fn catch_up(session: &Session, id: u32, shared: &Shared) -> Res
     }
     shared.lock().resume();
     loop {
-        fill(session, id, shared).await?;
+        fill(session, id, shared, requests).await?;
         let next = shared.lock().sequence.next();
         let Some(seq) = next else { return Ok(()) };
-        match session.republish(id, seq).await {
-            Ok(m) => shared.lock().arrived(m),
+        match ask(session, id, seq, shared, requests).await {
+            Answer::Got(m) => shared.lock().arrived(m),
             // Not sent yet: nothing more to catch up.
-            Err(e) if e.status() == StatusCode::BadMessageNotAvailable => return Ok(()),
-            Err(e) if is_gone(e.status()) => return Err(Unfilled::Gone(e.status())),
-            Err(e) => return Err(Unfilled::Failed(e.status())),
+            Answer::Unserved(Unserved::NotAvailable(_) | Unserved::Other { .. }) => return Ok(()),
+            Answer::Unserved(Unserved::Failed(status)) => return Err(Unfilled::Failed(status)),
+            Answer::Gone(status) => return Err(Unfilled::Gone(status)),
         }
     }
 }
@@ -111,11 +232,15 @@ pub(super) async fn catch_up(session: &Session, id: u32, shared: &Shared) -> Res
 /// # Errors
 /// Why it could not be taken over (the server dropped it, refuses the
 /// transfer, or does not offer the service).
-pub(super) async fn transfer(session: &Session, id: u32, shared: &Shared) -> Result<(), String> {
-    let results = session
-        .transfer_subscriptions(&[id], true)
-        .await
-        .map_err(|e| e.to_string())?;
+pub(super) async fn transfer(
+    session: &Session,
+    id: u32,
+    shared: &Shared,
+    requests: &Requests,
+) -> Result<(), String> {
+    let results = session.transfer_subscriptions(&[id], true).await;
+    requests.answered("TransferSubscriptions", &results);
+    let results = results.map_err(|e| e.to_string())?;
     let result = results
         .into_iter()
         .next()
@@ -130,7 +255,7 @@ pub(super) async fn transfer(session: &Session, id: u32, shared: &Shared) -> Res
             d.sequence.sent(*last);
         }
     }
-    match fill(session, id, shared).await {
+    match fill(session, id, shared, requests).await {
         Ok(()) | Err(Unfilled::Failed(_)) => Ok(()),
         Err(Unfilled::Gone(status)) => Err(status.to_string()),
     }
@@ -146,3 +271,6 @@ pub(super) fn give_up(shared: &Shared, why: String) {
     d.handle(next);
     d.gap(why);
 }
+
+#[cfg(test)]
+mod tests;

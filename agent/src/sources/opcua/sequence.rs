@@ -39,7 +39,9 @@ pub(super) struct Sequence {
     known: Option<u32>,
 }
 
-fn has_data(m: &NotificationMessage) -> bool {
+/// `m` carries notifications: a publish numbered for itself, not a
+/// keep-alive.
+pub(super) fn has_data(m: &NotificationMessage) -> bool {
     m.notification_data.as_ref().is_some_and(|d| !d.is_empty())
 }
 

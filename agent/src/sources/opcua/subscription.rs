@@ -16,6 +16,7 @@ use opcua::types::{
 };
 
 use super::items::Items;
+use super::requests::Requests;
 use crate::config::node::TagNode;
 use crate::config::{Deadband, OpcUaConfig, TagConfig};
 use crate::sources::{SourceEvent, SourceSender};
@@ -89,10 +90,12 @@ pub(super) struct Subscribed {
 }
 
 /// What the server grants a subscription's items: the queue size per item
-/// (which may be less than asked), and each item's id (or refusal).
+/// (which may be less than asked), and each item's id (or refusal); and
+/// where the requests for them are counted.
 pub(super) struct Granted<'a> {
     pub(super) queue_size: &'a AtomicU32,
     pub(super) items: &'a Mutex<Items>,
+    pub(super) requests: &'a Requests,
 }
 
 /// Creates the subscription and its monitored items in chunks; `None` if the
@@ -107,7 +110,11 @@ pub(super) async fn subscribe(
     granted: Granted<'_>,
     callback: impl OnSubscriptionNotificationCore + 'static,
 ) -> Option<Subscribed> {
-    let Granted { queue_size, items } = granted;
+    let Granted {
+        queue_size,
+        items,
+        requests,
+    } = granted;
     // Each node's monitored item gets client handle i + 1 (0 would let the
     // library choose): a notification finds its tags by index, without a
     // lookup in the library's item maps or a hash of the node id.
@@ -123,8 +130,12 @@ pub(super) async fn subscribe(
         )
         .await
     {
-        Ok(id) => id,
+        Ok(id) => {
+            requests.status("CreateSubscription", StatusCode::Good);
+            id
+        }
         Err(e) => {
+            requests.status("CreateSubscription", e.status());
             tracing::error!(error = %e, "cannot create the OPC UA subscription");
             let _ = tx
                 .send(SourceEvent::Disconnected(format!(
@@ -150,7 +161,9 @@ pub(super) async fn subscribe(
             },
         )
     };
-    let chunk = max_items_per_call(session).await.min(MAX_ITEMS_PER_CALL);
+    let chunk = max_items_per_call(session, requests)
+        .await
+        .min(MAX_ITEMS_PER_CALL);
     // Requests are made one call's worth at a time: 100,000 of them at
     // once would be 15 MB held for the length of the creation.
     tracing::debug!(
@@ -163,7 +176,7 @@ pub(super) async fn subscribe(
     // once would be 15 MB held for the length of the creation.
     for from in (0..monitored.len()).step_by(chunk.max(1)) {
         let part: Vec<_> = monitored.nodes(from..from + chunk).collect();
-        let results = match create(session, sub, config, uses, &part).await {
+        let results = match create(session, sub, config, uses, &part, requests).await {
             Ok(results) => results,
             Err(e) => {
                 tracing::error!(error = %e, "cannot create monitored items");
@@ -260,8 +273,9 @@ pub(super) async fn create(
     config: &OpcUaConfig,
     uses: &Uses,
     nodes: &[(usize, NodeId, &[u32])],
+    requests: &Requests,
 ) -> Result<Vec<MonitoredItemCreateResult>, opcua::types::Error> {
-    let requests = nodes
+    let items = nodes
         .iter()
         .map(|(i, n, tags)| item_request(config, uses, *i, n.clone(), tags))
         .collect();
@@ -275,11 +289,12 @@ pub(super) async fn create(
     // (about a fifth of the agent's time at 500,000 changes/s). A
     // value without one is stamped when it arrives.
     let created = CreateMonitoredItems::new(sub, session)
-        .items_to_create(requests)
+        .items_to_create(items)
         .timestamps_to_return(TimestampsToReturn::Source)
         .send(session.channel())
-        .await?;
-    Ok(created.results.into_iter().map(|r| r.result).collect())
+        .await;
+    requests.answered("CreateMonitoredItems", &created);
+    Ok(created?.results.into_iter().map(|r| r.result).collect())
 }
 
 /// Every tag of `tags` bad, now.
@@ -339,12 +354,13 @@ fn lifetime_count(config: &OpcUaConfig) -> u32 {
 pub const OVERFLOW_ALARM: &str = "opcua-overflow";
 
 /// The server's limit on monitored items per call, or [`DEFAULT_CHUNK`].
-async fn max_items_per_call(session: &Session) -> usize {
+async fn max_items_per_call(session: &Session, requests: &Requests) -> usize {
     let node = NodeId::new(0, MAX_MONITORED_ITEMS_PER_CALL);
-    match session
+    let read = session
         .read(&[ReadValueId::from(node)], TimestampsToReturn::Neither, 0.0)
-        .await
-    {
+        .await;
+    requests.answered("Read", &read);
+    match read {
         Ok(values) => match values.first().and_then(|v| v.value.as_ref()) {
             Some(Variant::UInt32(n)) if *n > 0 => *n as usize,
             _ => DEFAULT_CHUNK,
@@ -659,11 +675,14 @@ pub(super) async fn read_current(
     nodes: &Monitored,
     uses: &Uses,
     tx: &SourceSender,
+    requests: &Requests,
 ) {
     for from in (0..nodes.len()).step_by(READ_CHUNK) {
         let part = || nodes.nodes(from..from + READ_CHUNK);
         let ids: Vec<ReadValueId> = part().map(|(_, n, _)| ReadValueId::from(n)).collect();
-        match session.read(&ids, TimestampsToReturn::Both, 0.0).await {
+        let read = session.read(&ids, TimestampsToReturn::Both, 0.0).await;
+        requests.answered("Read", &read);
+        match read {
             Ok(values) => {
                 let mut readings: Vec<TagReading> = values
                     .iter()

@@ -11,6 +11,7 @@ use opcua::types::{NodeId, ReadValueId, TimestampsToReturn, Variant};
 use tokio::sync::mpsc;
 
 use super::client::namespace_array;
+use super::requests::Requests;
 use crate::config::node::TagNode;
 
 use crate::sources::WriteRequest;
@@ -44,21 +45,23 @@ pub(super) async fn pulse(
     node: TagNode,
     name: String,
     held: Duration,
+    requests: Requests,
 ) -> Result<String, String> {
-    let namespaces = namespace_array(&session)
+    let requests = &requests;
+    let namespaces = namespace_array(&session, requests)
         .await
         .map_err(|e| format!("{name}: cannot read the namespace array: {e}"))?;
     let id = node
         .resolve(&namespaces)
         .ok_or_else(|| format!("{name}: its namespace is not on the server"))?;
-    set_switch(&session, &id, &name, true).await?;
-    let on = read_back(&session, &id, &name, true).await;
+    set_switch(&session, &id, &name, true, requests).await?;
+    let on = read_back(&session, &id, &name, true, requests).await;
     if on.is_ok() {
         tokio::time::sleep(held).await;
     }
-    let off = set_switch(&session, &id, &name, false).await;
+    let off = set_switch(&session, &id, &name, false, requests).await;
     let off = match off {
-        Ok(()) => read_back(&session, &id, &name, false).await,
+        Ok(()) => read_back(&session, &id, &name, false, requests).await,
         Err(e) => Err(e),
     };
     on?;
@@ -74,6 +77,7 @@ pub(super) async fn set_switch(
     id: &NodeId,
     name: &str,
     on: bool,
+    requests: &Requests,
 ) -> Result<(), String> {
     let value = opcua::types::WriteValue {
         node_id: id.clone(),
@@ -81,10 +85,9 @@ pub(super) async fn set_switch(
         index_range: opcua::types::NumericRange::None,
         value: opcua::types::DataValue::value_only(on),
     };
-    let status = session
-        .write(&[value])
-        .await
-        .map_err(|e| format!("{name}: write {} failed: {e}", u8::from(on)))?;
+    let status = session.write(&[value]).await;
+    requests.answered("Write", &status);
+    let status = status.map_err(|e| format!("{name}: write {} failed: {e}", u8::from(on)))?;
     match status.first() {
         Some(s) if s.is_good() => Ok(()),
         Some(s) => Err(format!("{name}: the server refused {}: {s}", u8::from(on))),
@@ -97,11 +100,12 @@ pub(super) async fn set_switch(
 pub(super) async fn switches_off(
     session: &Session,
     switches: &[(String, TagNode)],
+    requests: &Requests,
 ) -> Result<usize, String> {
     if switches.is_empty() {
         return Ok(0);
     }
-    let namespaces = namespace_array(session)
+    let namespaces = namespace_array(session, requests)
         .await
         .map_err(|e| format!("cannot read the namespace array: {e}"))?;
     let mut written = 0;
@@ -118,6 +122,7 @@ pub(super) async fn switches_off(
                 0.0,
             )
             .await;
+        requests.answered("Read", &read);
         if let Ok(values) = &read {
             if matches!(
                 values.first().and_then(|v| v.value.as_ref()),
@@ -126,8 +131,8 @@ pub(super) async fn switches_off(
                 continue;
             }
         }
-        match set_switch(session, &id, name, false).await {
-            Ok(()) => match read_back(session, &id, name, false).await {
+        match set_switch(session, &id, name, false, requests).await {
+            Ok(()) => match read_back(session, &id, name, false, requests).await {
                 Ok(()) => written += 1,
                 Err(e) => failed.push(e),
             },
@@ -142,8 +147,13 @@ pub(super) async fn switches_off(
 }
 
 /// [`switches_off`], its outcome logged: `when` says why.
-pub(super) async fn reset_switches(session: &Session, switches: &[(String, TagNode)], when: &str) {
-    match switches_off(session, switches).await {
+pub(super) async fn reset_switches(
+    session: &Session,
+    switches: &[(String, TagNode)],
+    when: &str,
+    requests: &Requests,
+) {
+    match switches_off(session, switches, requests).await {
         Ok(0) => tracing::debug!(when, "chart switches all off"),
         Ok(n) => tracing::warn!(switches = n, when, "chart switches found on, written off"),
         Err(e) => tracing::error!(error = %e, when, "chart switches not written off"),
@@ -158,6 +168,7 @@ pub(super) async fn read_back(
     id: &NodeId,
     name: &str,
     on: bool,
+    requests: &Requests,
 ) -> Result<(), String> {
     let until = tokio::time::Instant::now() + READ_BACK;
     loop {
@@ -167,8 +178,9 @@ pub(super) async fn read_back(
                 TimestampsToReturn::Neither,
                 0.0,
             )
-            .await
-            .map_err(|e| format!("{name}: read back failed: {e}"))?;
+            .await;
+        requests.answered("Read", &read);
+        let read = read.map_err(|e| format!("{name}: read back failed: {e}"))?;
         let last = match read.first().and_then(|v| v.value.clone()) {
             Some(Variant::Boolean(b)) if b == on => return Ok(()),
             other => format!("{other:?}"),

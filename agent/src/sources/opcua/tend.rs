@@ -24,6 +24,7 @@ use opcua::types::{ReadValueId, StatusCode, TimestampsToReturn};
 
 use super::delivery::Shared;
 use super::items::{is_gone, print};
+use super::requests::Requests;
 use super::subscription::{bad, create, Heard, Monitored, Uses, MAX_ITEMS_PER_CALL, READ_CHUNK};
 use crate::config::{Deadband, OpcUaConfig};
 use crate::sources::{SourceEvent, SourceSender};
@@ -41,6 +42,8 @@ pub(super) struct Tended<'a> {
     pub(super) shared: &'a Shared,
     pub(super) heard: &'a Heard,
     pub(super) tx: &'a SourceSender,
+    /// Where the requests are counted.
+    pub(super) requests: &'a Requests,
 }
 
 /// Where the verification stands.
@@ -119,7 +122,9 @@ impl Tending {
                 .iter()
                 .map(|(_, n, _)| ReadValueId::from(n.clone()))
                 .collect();
-            let values = match t.session.read(&ids, TimestampsToReturn::Neither, 0.0).await {
+            let values = t.session.read(&ids, TimestampsToReturn::Neither, 0.0).await;
+            t.requests.answered("Read", &values);
+            let values = match values {
                 Ok(values) => values,
                 Err(e) if e.status() == StatusCode::BadTooManyOperations && chunk > 1 => {
                     // The server's `MaxNodesPerRead` is lower: on from here
@@ -191,8 +196,12 @@ impl Tending {
             "judging monitored items that said nothing"
         );
         if !t.shared.lock().flowing() || t.heard.silent_for().is_zero() {
-            // Publishes are held back (a cut, a missing one, a cell loop
-            // behind): silence proves nothing; the next round looks again.
+            // Publishes are held back (a missing one being asked for, a
+            // cell loop behind): silence proves nothing yet. Judged again
+            // a grace later, when what was held has come (a missing
+            // publish is asked for a few times at most, then given up).
+            self.suspects = suspects;
+            self.judge_at = Some(Instant::now() + grace(t));
             return;
         }
         let deaf: Vec<usize> = {
@@ -271,7 +280,7 @@ async fn renew_due(t: &Tended<'_>, now: Instant) {
         .filter_map(|&(i, _)| t.nodes.node(i).map(|(id, tags)| (i, id, tags)))
         .collect();
     for chunk in part.chunks(MAX_ITEMS_PER_CALL) {
-        let results = match create(t.session, t.sub, t.config, t.uses, chunk).await {
+        let results = match create(t.session, t.sub, t.config, t.uses, chunk, t.requests).await {
             Ok(r) => r,
             Err(e) => {
                 tracing::debug!(error = %e, "cannot create monitored items again: later");
@@ -299,10 +308,11 @@ async fn renew_due(t: &Tended<'_>, now: Instant) {
         if !replaced.is_empty() {
             // The old items, which may still be on the server: an error
             // (the server deleted them itself) changes nothing.
-            let _ = DeleteMonitoredItems::new(t.sub, t.session)
+            let deleted = DeleteMonitoredItems::new(t.sub, t.session)
                 .items_to_delete(replaced)
                 .send(t.session.channel())
                 .await;
+            t.requests.answered("DeleteMonitoredItems", &deleted);
         }
     }
 }

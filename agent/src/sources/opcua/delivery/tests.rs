@@ -20,7 +20,8 @@ const FULL: usize = 100;
 
 /// A delivery for tags `a`, `b` and `c` (client handles 1, 2, 3) whose
 /// publishes are full at [`FULL`], and what it hands on.
-fn cell() -> (Shared, mpsc::Receiver<SourceEvent>, tempfile::TempDir) {
+pub(in crate::sources::opcua) fn cell() -> (Shared, mpsc::Receiver<SourceEvent>, tempfile::TempDir)
+{
     cell_of(0)
 }
 
@@ -75,7 +76,11 @@ fn cell_of(more: usize) -> (Shared, mpsc::Receiver<SourceEvent>, tempfile::TempD
 
 /// Publish `seq`, stamped `stamp_ms`, with `(handle, value, source ms)`
 /// changes.
-fn publish(seq: u32, stamp_ms: i64, changes: &[(u32, bool, i64)]) -> NotificationMessage {
+pub(in crate::sources::opcua) fn publish(
+    seq: u32,
+    stamp_ms: i64,
+    changes: &[(u32, bool, i64)],
+) -> NotificationMessage {
     let at = |ms: i64| DateTime::from(chrono::DateTime::from_timestamp_millis(ms).unwrap());
     let items = changes
         .iter()
