@@ -233,6 +233,7 @@ async fn a_fault_shows_live_with_its_culprits_and_an_operator_acknowledges_and_s
     )
     .await;
     assert!(b.text("#operator-name").await.contains("sign in"));
+    b.screenshot("sign-in").await;
     assert_eq!(
         b.client
             .execute("return S.cells.size;", vec![])

@@ -113,11 +113,18 @@ pub async fn run(setup: &Setup) -> anyhow::Result<String> {
         .await
         .map_err(|e| anyhow::anyhow!("{e}"))?;
 
-    // The console under test.
+    // The console under test, and the operator who signs in to its page.
+    let operator = cellwatch::operator::OperatorKey::generate("bench");
+    std::fs::write(
+        setup.workdir.join("operators.toml"),
+        operator.operators_entry(&[cellwatch::operator::Action::Ack]),
+    )?;
+    std::fs::write(setup.workdir.join("bench.key"), operator.to_file())?;
     std::fs::write(
         setup.workdir.join("console.toml"),
         format!(
-            "[http]\nlisten = \"127.0.0.1:0\"\n[bus]\nconnect = [\"{endpoint}\"]\nplain = true\ntrust = {trust_path:?}\n[console]\nmax_alarms = {}\n",
+            "[http]\nlisten = \"127.0.0.1:0\"\n[bus]\nconnect = [\"{endpoint}\"]\nplain = true\ntrust = {trust_path:?}\n[operators]\nfile = {:?}\n[console]\nmax_alarms = {}\n",
+            setup.workdir.join("operators.toml"),
             (setup.alarms * 2).max(100)
         ),
     )?;
@@ -265,6 +272,17 @@ async fn measure(
         crate::console_browser::Browser::start(&setup.chromium, &setup.chromedriver).await?;
     let b = &browser.client;
     b.goto(&format!("{url}#/alarms")).await?;
+    browser
+        .until("return typeof S !== 'undefined' && document.getElementById('link').textContent === 'signed out';")
+        .await?;
+    b.find(fantoccini::Locator::Css("#key-file"))
+        .await?
+        .send_keys(
+            &std::fs::canonicalize(setup.workdir.join("bench.key"))?
+                .display()
+                .to_string(),
+        )
+        .await?;
     let cells = setup.cells;
     browser
         .until(&format!(

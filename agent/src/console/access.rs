@@ -39,7 +39,7 @@ const MAX_SESSIONS: usize = 4096;
 const MAX_SESSIONS_EACH: usize = 16;
 
 /// The cookie that carries a session.
-pub(super) const COOKIE: &str = "cellwatch_session";
+pub(super) const COOKIE: &str = "cellwatch-session";
 
 /// Who is asking.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -502,7 +502,7 @@ mod tests {
     #[test]
     fn the_session_cookie_is_found_among_others() {
         assert_eq!(
-            session_cookie("a=1; cellwatch_session=abc; b=2"),
+            session_cookie("a=1; cellwatch-session=abc; b=2"),
             Some("abc")
         );
         assert_eq!(session_cookie("a=1"), None);

@@ -6,10 +6,10 @@
 //!
 //! What a question costs the agents is bounded: the alarm figures and a
 //! history page look back at most [`MAX_WINDOW`], the same figures asked
-//! again within [`KPI_FRESH`] are answered from what was asked, and each
+//! again within [`super::web::KPI_FRESH`] are answered from what was asked, and each
 //! identity and each agent has its turns at history ([`super::gate`]).
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::BTreeMap;
 use std::convert::Infallible;
 use std::sync::Arc;
 use std::time::Duration;
@@ -24,7 +24,7 @@ use futures_util::Stream;
 use tokio::sync::broadcast::error::RecvError;
 use tokio::time::Instant;
 
-use super::http::{error, json, Web, Who};
+use super::web::{error, json, Web, Who};
 use crate::bus::keys::Service;
 use crate::client::ClientError;
 use crate::operator::Command;
@@ -38,39 +38,8 @@ const ANSWER: Duration = Duration::from_secs(10);
 /// How far back a page may ask an agent's history or figures.
 pub(super) const MAX_WINDOW: Duration = Duration::from_secs(31 * 86_400);
 
-/// How long the same alarm figures are answered from what was asked.
-pub(super) const KPI_FRESH: Duration = Duration::from_secs(10);
-
-/// The most answers of alarm figures kept.
-const KPI_KEPT: usize = 64;
-
 /// How often a live stream checks that its session is still open.
 const SESSION_CHECK: Duration = Duration::from_secs(15);
-
-/// Alarm figures asked recently: (what was asked, of which cells) → when,
-/// the answer.
-#[derive(Default)]
-pub(super) struct KpiCache {
-    answers: VecDeque<(String, Instant, String)>,
-}
-
-impl KpiCache {
-    fn get(&self, key: &str, now: Instant) -> Option<String> {
-        self.answers
-            .iter()
-            .find(|(k, at, _)| k == key && now.duration_since(*at) < KPI_FRESH)
-            .map(|(_, _, answer)| answer.clone())
-    }
-
-    fn put(&mut self, key: String, now: Instant, answer: String) {
-        self.answers
-            .retain(|(k, at, _)| *k != key && now.duration_since(*at) < KPI_FRESH);
-        if self.answers.len() >= KPI_KEPT {
-            self.answers.pop_front();
-        }
-        self.answers.push_back((key, now, answer));
-    }
-}
 
 /// Everything the identity may read at once (`type: snapshot`), as the
 /// live stream starts.
@@ -490,21 +459,5 @@ mod tests {
             let r = window(&bad, &HISTORY_PARAMETERS).unwrap_err();
             assert_eq!(r.status(), StatusCode::BAD_REQUEST, "{bad:?}");
         }
-    }
-
-    #[tokio::test]
-    async fn the_same_figures_are_answered_from_the_cache_for_a_while() {
-        let mut k = KpiCache::default();
-        let now = Instant::now();
-        k.put("a".into(), now, "A".into());
-        assert_eq!(
-            k.get("a", now + Duration::from_secs(1)).as_deref(),
-            Some("A")
-        );
-        assert_eq!(k.get("a", now + KPI_FRESH), None);
-        for i in 0..KPI_KEPT + 5 {
-            k.put(format!("k{i}"), now, String::new());
-        }
-        assert_eq!(k.answers.len(), KPI_KEPT);
     }
 }

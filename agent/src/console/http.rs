@@ -23,10 +23,11 @@ use axum::{Extension, Router};
 use tokio::time::Instant;
 
 use super::access::{self, Identity, Proof, SignIn};
-use super::api::{self, KpiCache};
+use super::api;
 use super::config::HttpTls;
 use super::gate::Gate;
 use super::shared::{ConsoleError, Shared};
+use super::web::{error, json, Web, Who};
 
 const INDEX: &str = include_str!("assets/index.html");
 const SCRIPT: &str = include_str!("assets/console.js");
@@ -49,32 +50,12 @@ const OPEN: [&str; 4] = [
     "/api/session",
 ];
 
-/// What the HTTP side works with.
-pub(super) struct Web {
-    /// The plant, the bus and the operators.
-    pub(super) shared: Arc<Shared>,
-    /// Doors and counts.
-    pub(super) gate: Arc<Gate>,
-    /// The alarm figures asked recently, answered again for a while.
-    pub(super) kpi: Mutex<KpiCache>,
-    /// Whether the console serves HTTPS (cookies marked `Secure`).
-    https: bool,
-}
-
 /// Who is on the other end of a connection.
 #[derive(Debug, Clone)]
 struct Peer {
     ip: IpAddr,
     /// The common name of its client certificate, if it gave one.
     certificate: Option<String>,
-}
-
-/// Who is asking, as the routes see it: the identity and, when signed in
-/// with a key, the session it holds.
-#[derive(Debug, Clone)]
-pub(super) struct Who {
-    pub(super) identity: Identity,
-    pub(super) session: Option<String>,
 }
 
 /// The TLS acceptor of the console's certificate and key (PEM), asking
@@ -502,7 +483,7 @@ async fn sign_out(State(web): State<Arc<Web>>, who: Option<Extension<Who>>) -> R
     r.headers_mut().insert(
         header::SET_COOKIE,
         HeaderValue::from_static(
-            "cellwatch_session=; Path=/; HttpOnly; SameSite=Strict; Max-Age=0",
+            "cellwatch-session=; Path=/; HttpOnly; SameSite=Strict; Max-Age=0",
         ),
     );
     r
@@ -531,20 +512,4 @@ async fn session(who: Option<Extension<Who>>) -> Response {
 
 fn page(body: &'static str, kind: &'static str) -> Response {
     ([(header::CONTENT_TYPE, kind)], body).into_response()
-}
-
-pub(super) fn json(status: StatusCode, body: String) -> Response {
-    (
-        status,
-        [(header::CONTENT_TYPE, "application/json; charset=utf-8")],
-        body,
-    )
-        .into_response()
-}
-
-pub(super) fn error(status: StatusCode, message: impl std::fmt::Display) -> Response {
-    json(
-        status,
-        serde_json::json!({ "error": message.to_string() }).to_string(),
-    )
 }

@@ -29,6 +29,7 @@ mod http;
 mod listen;
 pub mod plant;
 mod shared;
+mod web;
 
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
