@@ -141,7 +141,7 @@ async fn open_at(b: &Browser, url: &str, cell: &str, route: &str, key: &Path, op
     b.client.goto(&format!("{url}{route}")).await.unwrap();
     b.wait_until(
         "the page knows whether it is signed in",
-        "return typeof S !== 'undefined' && document.getElementById('operator-name').textContent !== '';",
+        "return typeof S !== 'undefined' && S.started === true;",
     )
     .await;
     let loaded = b
@@ -229,7 +229,7 @@ async fn a_fault_shows_live_with_its_culprits_and_an_operator_acknowledges_and_s
     b.client.goto(&p.url).await.unwrap();
     b.wait_until(
         "the page asks to sign in",
-        "return typeof S !== 'undefined' && document.getElementById('link').textContent === 'signed out';",
+        "return typeof S !== 'undefined' && S.started === true && document.getElementById('link').textContent === 'signed out';",
     )
     .await;
     assert!(b.text("#operator-name").await.contains("sign in"));

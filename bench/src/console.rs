@@ -273,7 +273,7 @@ async fn measure(
     let b = &browser.client;
     b.goto(&format!("{url}#/alarms")).await?;
     browser
-        .until("return typeof S !== 'undefined' && document.getElementById('link').textContent === 'signed out';")
+        .until("return typeof S !== 'undefined' && S.started === true;")
         .await?;
     b.find(fantoccini::Locator::Css("#key-file"))
         .await?

@@ -23,6 +23,7 @@ const S = {
   dropped: 0,
   identity: null,
   stream: null,
+  started: false,
   key: null,
   live: false,
   synced: false,
@@ -212,8 +213,12 @@ async function signIn(operator, key) {
 // Who the console takes us for (a session, or a client certificate):
 // the stream runs while someone is; otherwise the page asks for a key.
 async function whoAmI() {
+  const before = S.key;
   const r = await fetch('/api/session');
-  S.identity = r.ok ? await r.json() : null;
+  const identity = r.ok ? await r.json() : null;
+  // Someone signed in while this was asked: theirs is the newer answer.
+  if (S.key !== before) return;
+  S.identity = identity;
   if (!S.identity) {
     if (S.stream) { S.stream.close(); S.stream = null; }
     const was = S.key;
@@ -221,6 +226,8 @@ async function whoAmI() {
     showOperator(was ? 'signed out: load your operator key to sign in again' : null);
     const link = document.getElementById('link');
     link.textContent = 'signed out'; link.className = 'down';
+    S.synced = false; S.cells = new Map(); S.alarms = new Map();
+    if (S.view) route();
     return;
   }
   if (!S.stream || S.stream.readyState === EventSource.CLOSED) connect();
@@ -312,7 +319,7 @@ const overview = {
       sections.push(el('h2', {}, area || (S.areas.length ? 'Other cells' : 'Cells')));
       sections.push(el('div', { class: 'tiles' }, cells.map(tile)));
     }
-    if (!sections.length) sections.push(el('p', { class: 'empty' }, S.synced ? 'No cell in the plant trust file.' : 'Waiting for the console\'s first view of the plant…'));
+    if (!sections.length) sections.push(el('p', { class: 'empty' }, S.synced ? 'No cell in the plant trust file, or none you may read.' : !S.identity && !S.key ? 'The console shows the plant to a plant identity only: sign in with your operator key (top right), or present a client certificate from the plant CA.' : 'Waiting for the console\'s first view of the plant…'));
     this.root.replaceChildren(...sections);
   },
 };
@@ -420,7 +427,7 @@ const alarmsView = {
 
 async function api(path) {
   const r = await fetch(path);
-  if (r.status === 401) whoAmI();
+  if (r.status === 401 && (S.key || S.identity)) whoAmI();
   const body = await r.json();
   if (body.error) throw new Error(body.error);
   return body;
@@ -918,6 +925,7 @@ async function start() {
     if (!f) return;
     try {
       S.key = await loadKey(f);
+      S.identity = { identity: S.key.operator, by: 'operator key' };
       showOperator();
       connect();
     } catch (err) {
@@ -937,6 +945,7 @@ async function start() {
   await whoAmI();
   showOperator();
   route();
+  S.started = true;
 }
 
 document.addEventListener('DOMContentLoaded', start);
