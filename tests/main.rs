@@ -12,6 +12,7 @@ mod alarm_management;
 mod alarm_server;
 mod alertmanager;
 mod bad_input;
+mod binding;
 mod bounded;
 mod browser;
 mod cell_loop;

@@ -418,7 +418,9 @@ impl cellwatch::journal::CommitObserver for NoCommits {
 /// installation at a time in this process.
 pub(crate) fn python_with(name: &str, module: &str, packages: &[&str]) -> PathBuf {
     static PIP: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    let _one = PIP.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let _one = PIP
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     let has = |python: &Path| {
         Command::new(python)
             .args(["-c", &format!("import {module}")])

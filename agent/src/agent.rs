@@ -680,7 +680,11 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
                 "the agent stopped before this command's outcome was known: see its history",
             ),
         };
-        answers.restore(saved.nonce, saved.at, outcome);
+        let sent = crate::cell::answers::Sent::Journaled {
+            operator: saved.operator,
+            action: saved.action,
+        };
+        answers.restore(saved.nonce, saved.at, sent, outcome);
     }
     let state = restored.state.as_ref().map(|(_, at, kind)| (*at, *kind));
     let step = engine.restore(

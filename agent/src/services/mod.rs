@@ -13,8 +13,11 @@
 //!   values at the last fault ([`crate::payload::SnapshotPayload`]), asked
 //!   of the cell loop;
 //! - `<prefix>/command`: a signed [`crate::operator::Command`], carried out
-//!   (or refused) by the cell loop; the reply is a
-//!   [`crate::step::CommandOutcome`].
+//!   (or refused) by the cell loop; every reply, "busy" included, is a
+//!   [`crate::step::CommandOutcome`] naming the payload it answers
+//!   ([`crate::step::command_digest`]), so that an answer to another or a
+//!   garbled payload sent with the same query parameters is never taken
+//!   for the answer to the command.
 //!
 //! Queries are answered concurrently, at most [`MAX_CONCURRENT`] at a time
 //! and [`MAX_CONCURRENT_HISTORY`] history queries among them; more are told
@@ -44,7 +47,7 @@ use crate::clock::{now_ms, parse_time};
 use crate::journal::{self, Barrier, HistoryQuery, Journal};
 use crate::metrics::Metrics;
 use crate::operator::{Command, NotACommand};
-use crate::step::{CommandOutcome, Request};
+use crate::step::{command_digest, CommandOutcome, Request};
 use cellwatch_models::kpi::KpiRules;
 
 /// Queries answered at the same time; more are refused as busy.
@@ -155,14 +158,12 @@ impl Services {
             let permit = self.permits.clone().try_acquire_owned().ok();
             if permit.is_none() || (matches!(kind, Service::History) && history_permit.is_none()) {
                 self.metrics.refused(kind.name(), "busy");
-                reply(
-                    &self.seal,
-                    kind,
-                    &self.metrics,
-                    q,
-                    Err("the agent is busy: try again".into()),
-                )
-                .await;
+                let busy = "the agent is busy: try again";
+                let answer = match kind {
+                    Service::Command => Ok(command_answer(&q, CommandOutcome::new(false, busy))),
+                    _ => Err(busy.into()),
+                };
+                reply(&self.seal, kind, &self.metrics, q, answer).await;
                 continue;
             }
             let (journal, rules, settled, requests, seal, metrics) = (
@@ -187,7 +188,12 @@ impl Services {
                         }
                     },
                     Service::Snapshot => snapshot(&requests).await,
-                    Service::Command => command(&requests, &q, &metrics).await,
+                    Service::Command => Ok(command_answer(
+                        &q,
+                        command(&requests, &q, &metrics)
+                            .await
+                            .unwrap_or_else(|why| CommandOutcome::new(false, why)),
+                    )),
                 };
                 reply(&seal, kind, &metrics, q, result).await;
             });
@@ -320,11 +326,20 @@ async fn snapshot(requests: &mpsc::Sender<Request>) -> Result<String, String> {
     Ok(serde_json::to_string(&snap).unwrap_or_default())
 }
 
+/// `outcome` as the answer to the command `q` carries: naming its payload.
+fn command_answer(q: &Query, outcome: CommandOutcome) -> String {
+    let digest = match q.payload() {
+        Some(p) => command_digest(p.slices()),
+        None => command_digest(std::iter::empty()),
+    };
+    serde_json::to_string(&outcome.answering(digest)).unwrap_or_default()
+}
+
 async fn command(
     requests: &mpsc::Sender<Request>,
     q: &Query,
     metrics: &Metrics,
-) -> Result<String, String> {
+) -> Result<CommandOutcome, String> {
     // As the querier says: anyone may claim any id, which only moves its
     // refusals to another summary row (at most 16 sources a minute).
     let source = q
@@ -369,7 +384,7 @@ async fn command(
     if let Some(reason) = outcome.refused {
         metrics.refused("command", reason);
     }
-    Ok(serde_json::to_string(&outcome).unwrap_or_default())
+    Ok(outcome)
 }
 
 /// Answers a query with JSON, or with an error text, sealed: on the
