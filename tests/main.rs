@@ -11,6 +11,7 @@ mod alarm_day;
 mod alarm_management;
 mod alarm_server;
 mod alertmanager;
+mod anchor;
 mod bad_input;
 mod binding;
 mod bounded;

@@ -590,8 +590,9 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         metrics.clone(),
     )
     .await?;
-    let publisher =
-        ZenohPublisher::start(session.clone(), &prefix, signing, metrics.clone()).await?;
+    let publisher = ZenohPublisher::start(session.clone(), &prefix, signing, metrics.clone())
+        .await?
+        .anchoring(journal.command_chain());
     let (stop, stop_rx) = watch::channel(false);
     let stopped = |mut rx: watch::Receiver<bool>| async move {
         let _ = rx.wait_for(|s| *s).await;

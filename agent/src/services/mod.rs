@@ -73,6 +73,9 @@ pub struct Services {
     /// Waits for the journal's queued rows: a history page shows every
     /// alarm already published.
     journal_settled: Barrier,
+    /// The end of the journal's command chain, as committed: carried in
+    /// the snapshot's answer.
+    command_chain: tokio::sync::watch::Receiver<journal::chain::Link>,
     /// Requests to the cell loop (snapshot, command), answered on a
     /// one-shot channel each.
     requests: mpsc::Sender<Request>,
@@ -127,6 +130,7 @@ impl Services {
             journal: journal.path().to_path_buf(),
             kpi,
             journal_settled: journal.barrier(),
+            command_chain: journal.command_chain(),
             requests,
             permits: Arc::new(Semaphore::new(MAX_CONCURRENT)),
             history_permits: Arc::new(Semaphore::new(MAX_CONCURRENT_HISTORY)),
@@ -174,6 +178,7 @@ impl Services {
                 self.seal.clone(),
                 self.metrics.clone(),
             );
+            let chain = self.command_chain.clone();
             answering.spawn(async move {
                 let _permits = (permit, history_permit);
                 let result = match kind {
@@ -187,7 +192,7 @@ impl Services {
                             Err(e)
                         }
                     },
-                    Service::Snapshot => snapshot(&requests).await,
+                    Service::Snapshot => snapshot(&requests, &chain).await,
                     Service::Command => Ok(command_answer(
                         &q,
                         command(&requests, &q, &metrics)
@@ -316,14 +321,29 @@ pub fn history_query(parameters: &str, now: u64) -> Result<HistoryQuery, String>
     })
 }
 
-async fn snapshot(requests: &mpsc::Sender<Request>) -> Result<String, String> {
+/// The snapshot as the loop answers it (once the rows staged before it are
+/// committed), with the end of the command chain committed by then.
+async fn snapshot(
+    requests: &mpsc::Sender<Request>,
+    chain: &tokio::sync::watch::Receiver<journal::chain::Link>,
+) -> Result<String, String> {
+    #[derive(serde::Serialize)]
+    struct Answer<'a> {
+        #[serde(flatten)]
+        snapshot: &'a crate::payload::SnapshotPayload,
+        command_chain: crate::payload::CommandChain,
+    }
     let (tx, rx) = oneshot::channel();
     requests
         .send(Request::Snapshot(tx))
         .await
         .map_err(|_| "the agent is stopping".to_string())?;
     let snap = rx.await.map_err(|_| "the agent is stopping".to_string())?;
-    Ok(serde_json::to_string(&snap).unwrap_or_default())
+    let answer = Answer {
+        snapshot: &snap,
+        command_chain: chain.borrow().announced(),
+    };
+    Ok(serde_json::to_string(&answer).unwrap_or_default())
 }
 
 /// `outcome` as the answer to the command `q` carries: naming its payload.
