@@ -25,6 +25,7 @@ mod docs;
 mod durability;
 mod explain;
 mod force;
+mod hardening;
 mod house;
 mod interop;
 mod legacy;
