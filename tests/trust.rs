@@ -457,8 +457,8 @@ async fn plant_wide_views_work_through_the_shipped_router() {
 }
 
 /// A client that sends the same signed command again (its answer lost,
-/// or the agent restarted meanwhile) gets the original outcome, not
-/// "replayed": the command is carried out once.
+/// or the agent restarted meanwhile) is told it is a replay and what the
+/// first sending came to: the command is carried out once.
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn the_same_signed_command_sent_again_gets_its_original_outcome() {
     use cellwatch::operator::{Action, Command};
@@ -497,15 +497,22 @@ async fn the_same_signed_command_sent_again_gets_its_original_outcome() {
     };
     ack.sign("m01ps0004", &crate::spawned::kim());
     let ack = serde_json::to_string(&ack).unwrap();
+    let digest = cellwatch::step::command_digest([ack.as_bytes()]);
     let first = send_until_answered(&kim, &ack).await;
-    assert_eq!(first, r#"{"accepted":true,"detail":"ack ese by kim"}"#);
-    assert_eq!(send_until_answered(&kim, &ack).await, first);
+    assert_eq!(
+        first,
+        format!(r#"{{"accepted":true,"detail":"ack ese by kim","command":"{digest}"}}"#)
+    );
+    let replayed = format!(
+        r#"{{"accepted":false,"detail":"replayed command: sent before and accepted (ack ese by kim); not carried out again","command":"{digest}","replayed":{{"accepted":true,"detail":"ack ese by kim"}}}}"#
+    );
+    assert_eq!(send_until_answered(&kim, &ack).await, replayed);
     // After a restart: the outcome read back from the journal.
     agent.stop().await;
     let agent = agent::start(c, None).await.unwrap();
     let port = crate::util::agent_port(&agent).await;
     let kim = crate::util::operator_session(dir, "operator-kim", port).await;
-    assert_eq!(send_until_answered(&kim, &ack).await, first);
+    assert_eq!(send_until_answered(&kim, &ack).await, replayed);
     // Carried out once: one accepted row for its nonce in the journal.
     let journal = rusqlite::Connection::open(dir.join("journal.sqlite")).unwrap();
     let nonce = serde_json::from_str::<serde_json::Value>(&ack).unwrap()["nonce"]

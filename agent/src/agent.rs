@@ -591,8 +591,9 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         metrics.clone(),
     )
     .await?;
-    let publisher =
-        ZenohPublisher::start(session.clone(), &prefix, signing, metrics.clone()).await?;
+    let publisher = ZenohPublisher::start(session.clone(), &prefix, signing, metrics.clone())
+        .await?
+        .anchoring(journal.command_chain());
     let (stop, stop_rx) = watch::channel(false);
     let stopped = |mut rx: watch::Receiver<bool>| async move {
         let _ = rx.wait_for(|s| *s).await;
@@ -682,7 +683,11 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
                 "the agent stopped before this command's outcome was known: see its history",
             ),
         };
-        answers.restore(saved.nonce, saved.at, outcome);
+        let sent = crate::cell::answers::Sent::Journaled {
+            operator: saved.operator,
+            action: saved.action,
+        };
+        answers.restore(saved.nonce, saved.at, sent, outcome);
     }
     let state = restored.state.as_ref().map(|(_, at, kind)| (*at, *kind));
     let step = engine.restore(

@@ -272,6 +272,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::Console(args) => commands::console::run(&args, out).await,
             Command::Alarms(args) => commands::bus::alarms(&args, out).await,
             Command::History(args) => commands::bus::history(&args, out).await,
+            Command::Audit(args) => commands::audit::run(&args, out).await,
             Command::Ack(args) => commands::bus::ack(&args, out).await,
             Command::Reset(args) => commands::bus::command(Action::Reset, &args, out).await,
             Command::Write(args) => commands::bus::write(&args, out).await,
@@ -296,7 +297,6 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             | Command::Pki(_)
             | Command::Replay(_)
             | Command::ExportSt(_)
-            | Command::Audit(_)
             | Command::Journal(_)
             | Command::Man(_) => Ok(()),
         }
@@ -337,7 +337,6 @@ pub fn run(
         Command::Pki(PkiCommand::AgentKey(args)) => commands::pki::agent_key(&args, out),
         Command::Replay(args) => commands::timers::replay(&args, out),
         Command::ExportSt(args) => commands::timers::export_st(&args, out),
-        Command::Audit(args) => commands::audit::run(&args, out),
         Command::Journal(args) => commands::journal::run(&args, out),
         Command::Man(args) => {
             commands::man::run(&args, <Cli as clap::CommandFactory>::command(), out)

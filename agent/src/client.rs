@@ -17,6 +17,7 @@ use crate::bus::keys::{CellKeys, Service};
 use crate::bus::ZenohError;
 use crate::config::ZenohConfig;
 use crate::operator::{Action, Command};
+use crate::step::{command_digest, CommandOutcome};
 
 /// What an agent answers when it is answering as many queries as it may.
 pub const BUSY: &str = "the agent is busy";
@@ -151,8 +152,7 @@ impl BusClient {
 
     /// Asks `service` of `cell`'s agent with `parameters` (`a=1;b=2`, a
     /// fresh nonce added) and `payload`, and returns its believed answer.
-    /// No answer yet, or "busy", is asked again until `timeout`; the same
-    /// signed command sent again is answered with its original outcome.
+    /// No answer yet, or "busy", is asked again until `timeout`.
     ///
     /// # Errors
     /// As [`ClientError`].
@@ -163,6 +163,26 @@ impl BusClient {
         parameters: &str,
         payload: Option<String>,
         timeout: Duration,
+    ) -> Result<String, ClientError> {
+        let judge = |answer: &Result<String, String>| match answer {
+            Err(why) if why.contains(BUSY) => Judged::Again,
+            _ => Judged::Take,
+        };
+        self.ask_judging(cell, service, parameters, payload, timeout, judge)
+            .await
+    }
+
+    /// [`BusClient::ask`], each believed answer judged by `judge`: taken,
+    /// asked again (busy), or not the answer to what was asked (skipped,
+    /// as an answer not believed).
+    async fn ask_judging(
+        &self,
+        cell: &str,
+        service: Service,
+        parameters: &str,
+        payload: Option<String>,
+        timeout: Duration,
+        judge: impl Fn(&Result<String, String>) -> Judged,
     ) -> Result<String, ClientError> {
         let key = self.keys(cell).service(service);
         let what = if parameters.is_empty() {
@@ -184,11 +204,10 @@ impl BusClient {
                 get = get.payload(p.clone());
             }
             let replies = get.await.map_err(|e| ClientError::Query(e.to_string()))?;
-            let answer = self.first_believed(replies, &key, &asked).await;
+            let answer = self.first_believed(replies, &key, &asked, &judge).await;
             let again = match &answer {
                 Answer::Nothing(refused) => refused.is_empty(),
-                Answer::Agent(_, Err(why)) => why.contains(BUSY),
-                Answer::Agent(..) => false,
+                Answer::Agent(_, answer) => matches!(judge(answer), Judged::Again),
             };
             if again && tokio::time::Instant::now() + RETRY_AFTER < deadline {
                 tracing::debug!(key, "no answer yet, or busy: asking again");
@@ -236,7 +255,12 @@ impl BusClient {
 
     /// Sends the signed command `cmd` to `cell`'s agent (a force waits at
     /// least [`FORCE_ANSWER`]) and returns (accepted, detail), believed
-    /// only if `cell`'s agent sealed it for this query.
+    /// only if `cell`'s agent sealed it for this query and it names this
+    /// very payload ([`command_digest`]): the agent's answer to another or
+    /// a garbled payload sent with the same parameters is never taken. The
+    /// same command sent before (its first answer lost, or someone sent it
+    /// first) is answered as a replay: what its first sending came to,
+    /// said so.
     ///
     /// # Errors
     /// As [`BusClient::ask`]; an error answer is [`ClientError::Answered`].
@@ -251,20 +275,31 @@ impl BusClient {
         } else {
             timeout
         };
+        let payload = serde_json::to_string(cmd).unwrap_or_default();
+        let digest = command_digest([payload.as_bytes()]);
+        let judge = |answer: &Result<String, String>| judge_command(answer, &digest);
         let text = self
-            .ask(
+            .ask_judging(
                 cell,
                 Service::Command,
                 "",
-                Some(serde_json::to_string(cmd).unwrap_or_default()),
+                Some(payload.clone()),
                 timeout,
+                judge,
             )
             .await?;
-        let v: serde_json::Value = serde_json::from_str(&text).unwrap_or_default();
-        Ok((
-            v["accepted"].as_bool() == Some(true),
-            v["detail"].as_str().unwrap_or_default().to_string(),
-        ))
+        let outcome: CommandOutcome = serde_json::from_str(&text)
+            .map_err(|e| ClientError::Answered(format!("not a command's outcome: {e}")))?;
+        Ok(match outcome.replayed {
+            Some(first) => (
+                first.accepted,
+                format!(
+                    "{} (sent before: the outcome of its first sending; not carried out again)",
+                    first.detail
+                ),
+            ),
+            None => (outcome.accepted, outcome.detail),
+        })
     }
 
     /// A querier on `key` that takes every answer (none consolidated away).
@@ -288,10 +323,17 @@ impl BusClient {
         replies: zenoh::handlers::FifoChannelHandler<zenoh::query::Reply>,
         key: &str,
         parameters: &str,
+        judge: &impl Fn(&Result<String, String>) -> Judged,
     ) -> Answer {
         let mut refused = Vec::new();
         while let Ok(reply) = replies.recv_async().await {
-            match self.open_reply(&reply, key, parameters) {
+            let opened = self
+                .open_reply(&reply, key, parameters)
+                .and_then(|(cell, answer)| match judge(&answer) {
+                    Judged::Unbound(why) => Err(why),
+                    _ => Ok((cell, answer)),
+                });
+            match opened {
                 Ok((cell, answer)) => return Answer::Agent(cell, answer),
                 Err(why) => {
                     tracing::error!(key, why = %why, "an answer not believed: ignored");
@@ -360,6 +402,52 @@ impl BusClient {
                 Ok((opened.cell, Err(format!("{key}: {}", opened.body))))
             }
         }
+    }
+}
+
+/// What a caller makes of an answer its cell's agent sealed for its query.
+enum Judged {
+    /// The answer.
+    Take,
+    /// "Busy": ask again.
+    Again,
+    /// Sealed for this query, but not the answer to what was sent: why.
+    Unbound(String),
+}
+
+/// Judges an answer to the command whose payload's digest is `digest`:
+/// only an outcome naming it is the command's.
+fn judge_command(answer: &Result<String, String>, digest: &str) -> Judged {
+    let text = match answer {
+        Ok(text) => text,
+        // An agent that answers commands with outcomes only never sends
+        // these; "busy" costs only another try.
+        Err(why) if why.contains(BUSY) => return Judged::Again,
+        Err(why) => {
+            return Judged::Unbound(format!(
+                "an error answer that names no command: {}",
+                crate::operator::escaped(why)
+            ))
+        }
+    };
+    let Ok(outcome) = serde_json::from_str::<CommandOutcome>(text) else {
+        return Judged::Unbound("an answer that is not a command's outcome".into());
+    };
+    match outcome.command.as_deref() {
+        Some(d) if d == digest => {}
+        Some(d) => {
+            return Judged::Unbound(format!(
+                "the answer to another command (sha256 {}), not to this one ({})",
+                crate::operator::escaped(d),
+                digest
+            ))
+        }
+        None => return Judged::Unbound("an answer that names no command".into()),
+    }
+    if !outcome.accepted && outcome.replayed.is_none() && outcome.detail.contains(BUSY) {
+        Judged::Again
+    } else {
+        Judged::Take
     }
 }
 

@@ -324,6 +324,23 @@ pub struct StatePayload {
     /// The target quantity, when the cell has one (`production.target`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub target: Option<u64>,
+    /// The end of the journal's command chain when this was put (set by
+    /// the Zenoh sink).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub command_chain: Option<CommandChain>,
+}
+
+/// The end of the journal's command-row hash chain, as committed: signed
+/// on the bus, so that rows cut off the journal's end are found
+/// (`cellwatch audit verify --against-bus`).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct CommandChain {
+    /// The last chained row's position (0: none yet).
+    pub position: i64,
+    /// Its sequence number in the journal.
+    pub seq: i64,
+    /// Its hash (hex SHA-256; 64 zeros before the first row).
+    pub hash: String,
 }
 
 impl StatePayload {
@@ -354,6 +371,7 @@ impl StatePayload {
             at: rfc3339(at),
             item: order.item.clone(),
             target: order.target,
+            command_chain: None,
         }
     }
 }

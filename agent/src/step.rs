@@ -200,17 +200,37 @@ impl CellStep {
     }
 }
 
-/// What an operator's command came to.
+/// What an operator's command came to, as the agent answers it.
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct CommandOutcome {
-    /// Whether it was carried out.
+    /// Whether it was carried out (never for a command sent again: see
+    /// `replayed`).
     pub accepted: bool,
     /// What it did, or why not.
     pub detail: String,
+    /// The command answered: [`command_digest`] of the payload exactly as
+    /// the query carried it (set by the services, which read it). A client
+    /// believes only an answer naming its own payload.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub command: Option<String>,
+    /// The same signed command was sent before (its answer lost, or
+    /// someone sent it again): this one is not carried out, and this is
+    /// what the first came to.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub replayed: Option<FirstOutcome>,
     /// Why it was refused before a known operator's signature was
     /// verified (`cellwatch_requests_refused_total`'s reason); not sent.
     #[serde(skip)]
     pub refused: Option<&'static str>,
+}
+
+/// What the first sending of a command sent again came to.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct FirstOutcome {
+    /// Whether it was carried out.
+    pub accepted: bool,
+    /// What it did, or why not.
+    pub detail: String,
 }
 
 impl CommandOutcome {
@@ -219,9 +239,56 @@ impl CommandOutcome {
         CommandOutcome {
             accepted,
             detail: detail.into(),
+            command: None,
+            replayed: None,
             refused: None,
         }
     }
+
+    /// The answer to the same signed command sent again, this outcome
+    /// being its first's: not accepted, saying "replayed", the first
+    /// outcome beside.
+    pub fn replayed(&self) -> CommandOutcome {
+        let first = self.replayed.clone().unwrap_or(FirstOutcome {
+            accepted: self.accepted,
+            detail: self.detail.clone(),
+        });
+        let then = if first.accepted {
+            "accepted"
+        } else {
+            "refused"
+        };
+        CommandOutcome {
+            replayed: Some(first.clone()),
+            ..CommandOutcome::new(
+                false,
+                format!(
+                    "replayed command: sent before and {then} ({}); not carried out again",
+                    first.detail
+                ),
+            )
+        }
+    }
+
+    /// The same outcome, answering the payload whose digest is `command`.
+    pub fn answering(self, command: String) -> CommandOutcome {
+        CommandOutcome {
+            command: Some(command),
+            ..self
+        }
+    }
+}
+
+/// The digest that binds an answer to its command: SHA-256, hex, of the
+/// command's payload exactly as sent (the JSON text, signature included),
+/// given in pieces as it arrived.
+pub fn command_digest<'a>(pieces: impl IntoIterator<Item = &'a [u8]>) -> String {
+    use sha2::Digest;
+    let mut hash = sha2::Sha256::new();
+    for piece in pieces {
+        hash.update(piece);
+    }
+    hex::encode(hash.finalize())
 }
 
 /// A request from the services to the loop, answered on its channel.

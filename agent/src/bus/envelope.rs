@@ -283,6 +283,26 @@ pub fn check_private(path: &Path) -> Result<(), KeyFileError> {
     Ok(())
 }
 
+/// [`check_private`] for each private key file a process reads (a
+/// console's HTTPS and bus TLS keys, an agent's): every one refused, in
+/// order, so that a configuration's check can say them all at once.
+///
+/// # Errors
+/// Each file that cannot be looked at or that others may read.
+pub fn check_private_keys<'a>(
+    paths: impl IntoIterator<Item = &'a Path>,
+) -> Result<(), Vec<KeyFileError>> {
+    let refused: Vec<KeyFileError> = paths
+        .into_iter()
+        .filter_map(|p| check_private(p).err())
+        .collect();
+    if refused.is_empty() {
+        Ok(())
+    } else {
+        Err(refused)
+    }
+}
+
 /// An agent's signing key: Ed25519, one per cell, kept on the agent's
 /// machine only (`zenoh.signing_key`). Its public half goes into the plant
 /// trust file.

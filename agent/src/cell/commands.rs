@@ -102,11 +102,11 @@ impl CellLoop {
         let base = CommandRecord::of(&cmd, target, Stage::Command);
         let checked = self.gate.check(&cmd, now);
         // The same signed command again (its answer lost, or the agent
-        // restarted): its original outcome, not a refusal as a replay.
+        // restarted): said to be a replay, with its original outcome.
         if let Err(Refusal::Replay) = &checked {
-            match self.answers.retry(&cmd.nonce, reply) {
-                answers::Retry::Now(outcome) => {
-                    tracing::info!(operator = %cmd.operator, action = %cmd.action, accepted = outcome.accepted, "a command sent again: answered with its outcome");
+            match self.answers.retry(&cmd, reply) {
+                answers::Retry::Now(_) => {
+                    tracing::info!(operator = %cmd.operator, action = %cmd.action, "a command sent again: answered as a replay with its first outcome");
                     return;
                 }
                 answers::Retry::Later => return,
@@ -114,7 +114,7 @@ impl CellLoop {
             }
         }
         if checked.is_ok() {
-            self.answers.begin(&cmd.nonce, now);
+            self.answers.begin(&cmd, now);
         }
         if let Err(refusal) = &checked {
             if let Some(reason) = refusal.unauthenticated() {

@@ -605,7 +605,7 @@ impl CellLoop {
                 // The outcome may come later (a forced transition's pulse
                 // and read-back); it is sent once its rows are durable.
                 let (outcome_tx, outcome) = oneshot::channel();
-                let nonce = command.as_ref().ok().map(|c| c.nonce.clone());
+                let sent = command.as_ref().ok().cloned();
                 self.command(source, command, outcome_tx).await;
                 let sinks: Vec<Settled> = self.sinks.iter().filter_map(|s| s.settled()).collect();
                 let answers = self.answers.clone();
@@ -616,8 +616,8 @@ impl CellLoop {
                         }
                         // Kept for a retry of the same command (only a
                         // verified one was begun).
-                        if let Some(nonce) = &nonce {
-                            answers.finish(nonce, &outcome);
+                        if let Some(cmd) = &sent {
+                            answers.finish(cmd, &outcome);
                         }
                         let _ = reply.send(outcome);
                     }

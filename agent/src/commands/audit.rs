@@ -1,10 +1,13 @@
 //! `cellwatch audit verify JOURNAL`: checks the hash chain of a journal's
 //! command rows ([`crate::journal::chain`]) and names the first row
-//! edited, inserted or deleted. Reads the file only; never repairs it.
+//! edited, inserted or deleted; with `--against-bus`, also compares its end
+//! with the head the cell's agent signs on the bus, finding rows cut off
+//! the end. Reads the file only; never repairs it.
 
 use std::io::Write;
 use std::path::PathBuf;
 
+use super::bus::ZenohArgs;
 use super::Failure;
 use crate::journal::{self, chain};
 
@@ -23,15 +26,36 @@ enum AuditCommand {
     Verify {
         /// The agent's SQLite journal.
         journal: PathBuf,
+        /// Also ask the cell's agent on the bus for the end of the chain it
+        /// signs (its snapshot) and find rows cut off the journal's end.
+        /// Needs --cell and the bus flags.
+        #[arg(long, requires = "cell")]
+        against_bus: bool,
+        /// The cell whose journal it is (with --against-bus).
+        #[arg(long, requires = "against_bus")]
+        cell: Option<String>,
+        #[command(flatten)]
+        zenoh: ZenohArgs,
     },
 }
 
 /// Runs `cellwatch audit`.
-pub(crate) fn run(args: &Args, out: &mut dyn Write) -> Result<(), Failure> {
-    let AuditCommand::Verify { journal: path } = &args.command;
+pub(crate) async fn run(args: &Args, out: &mut dyn Write) -> Result<(), Failure> {
+    let AuditCommand::Verify {
+        journal: path,
+        against_bus,
+        cell,
+        zenoh,
+    } = &args.command;
     if !path.is_file() {
         return Err(Failure::Input(format!("{}: no such file", path.display())));
     }
+    // Asked before the file is read: every row the agent's head names was
+    // committed by then.
+    let head = match cell.as_deref().filter(|_| *against_bus) {
+        Some(cell) => Some((cell, super::bus::command_chain(zenoh, cell).await?)),
+        None => None,
+    };
     let conn = journal::open_read(path).map_err(Failure::input)?;
     let verdict = chain::verify(&conn).map_err(|e| {
         Failure::Input(format!(
@@ -39,7 +63,7 @@ pub(crate) fn run(args: &Args, out: &mut dyn Write) -> Result<(), Failure> {
             path.display()
         ))
     })?;
-    match verdict {
+    let line = match verdict {
         chain::Verdict::Intact { rows, before, from } => {
             let mut line = format!("{}: {rows} command rows intact", path.display());
             if from > 1 {
@@ -49,11 +73,49 @@ pub(crate) fn run(args: &Args, out: &mut dyn Write) -> Result<(), Failure> {
                 let rows = if before == 1 { "row" } else { "rows" };
                 line += &format!("; {before} {rows} before the chain (not checked)");
             }
-            writeln!(out, "{line}").map_err(Failure::output)
+            line
         }
-        chain::Verdict::Broken { seq, what, intact } => Err(Failure::Runtime(format!(
-            "{}: seq {seq}: {what} ({intact} command rows intact before it)",
-            path.display()
+        chain::Verdict::Broken { seq, what, intact } => {
+            return Err(Failure::Runtime(format!(
+                "{}: seq {seq}: {what} ({intact} command rows intact before it)",
+                path.display()
+            )))
+        }
+    };
+    let Some((cell, head)) = head else {
+        return writeln!(out, "{line}").map_err(Failure::output);
+    };
+    let announced = chain::Link::from_announced(&head);
+    let against = chain::against(&conn, &announced)
+        .map_err(|e| Failure::Runtime(format!("{}: cannot read the chain: {e}", path.display())))?;
+    let said = format!(
+        "cell {cell}'s agent signs the chain's end at position {} (seq {})",
+        head.position, head.seq
+    );
+    match against {
+        chain::Against::Holds { .. } => {
+            writeln!(out, "{line}; {said}: it is there").map_err(Failure::output)
+        }
+        chain::Against::Purged => writeln!(
+            out,
+            "{line}; {said}: older than the oldest row kept, not compared"
+        )
+        .map_err(Failure::output),
+        chain::Against::CutOff { missing, ends } => {
+            let rows = if missing == 1 { "row" } else { "rows" };
+            Err(Failure::Runtime(format!(
+                "{}: {missing} command {rows} cut off the end: {said}; the journal's chain ends at position {} (seq {}): positions {} to {} are missing",
+                path.display(),
+                ends.index,
+                ends.seq,
+                ends.index + 1,
+                head.position
+            )))
+        }
+        chain::Against::Rewritten { seq } => Err(Failure::Runtime(format!(
+            "{}: seq {seq}: not the row the agent signed at position {}: {said}, with another hash (the chain rewritten from there)",
+            path.display(),
+            head.position
         ))),
     }
 }

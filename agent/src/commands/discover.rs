@@ -414,6 +414,10 @@ fn print_config(
         }
     }
     for (node, why) in skipped {
+        let (node, why) = (
+            crate::operator::escaped(node),
+            crate::operator::escaped(why),
+        );
         writeln!(out, "# skipped {node}: {why}")?;
     }
     let list = |items: &[String]| {
@@ -529,7 +533,8 @@ async fn check_tags(
         }
     }
     for p in &problems {
-        writeln!(out, "{p}").map_err(Failure::output)?;
+        // Node ids and the server's reasons are the server's text.
+        writeln!(out, "{}", crate::operator::escaped(p)).map_err(Failure::output)?;
     }
     if problems.is_empty() {
         writeln!(

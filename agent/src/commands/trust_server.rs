@@ -7,6 +7,7 @@ use std::io::{BufRead, Write};
 use std::path::PathBuf;
 
 use super::Failure;
+use crate::operator::escaped;
 use crate::sources::opcua;
 use crate::sources::pki::{self, CertificateFacts};
 
@@ -52,10 +53,13 @@ pub(crate) async fn run(args: &TrustServerArgs, out: &mut dyn Write) -> Result<(
     })?;
     let io = Failure::output;
     writeln!(out, "The server at {}", args.endpoint).map_err(io)?;
+    // What the server says of itself is its own text: escaped, so that no
+    // line of it can pass for one of ours (a fingerprint line drawn).
     writeln!(
         out,
         "  application  {} ({})",
-        server.application_name, server.application_uri
+        escaped(&server.application_name),
+        escaped(&server.application_uri)
     )
     .map_err(io)?;
     facts_lines(&facts, out).map_err(io)?;
@@ -109,7 +113,8 @@ pub(crate) async fn run(args: &TrustServerArgs, out: &mut dyn Write) -> Result<(
         Err(e) => {
             writeln!(
                 out,
-                "\nThe server does not accept this agent yet: {e}\nAdd {} to the server's trusted clients (for `cellwatch simulate cnc`: --trust {}), then run this command again to check.",
+                "\nThe server does not accept this agent yet: {}\nAdd {} to the server's trusted clients (for `cellwatch simulate cnc`: --trust {}), then run this command again to check.",
+                escaped(&e.to_string()),
                 own.display(),
                 own.display()
             )

@@ -1,8 +1,9 @@
 //! An online, consistent copy of a journal (`cellwatch journal backup`):
 //! SQLite's backup API copies the file as of one read transaction while
 //! the agent goes on writing (WAL: a reader never holds up the writer),
-//! then the copy is checked (`PRAGMA integrity_check`) and counted, and
-//! only then given its name. A backup is a journal like any other.
+//! into a file of its own (owner-only, a private name), then the copy is
+//! checked (`PRAGMA integrity_check`) and counted, and only then given its
+//! name, never over another file. A backup is a journal like any other.
 
 use std::path::{Path, PathBuf};
 
@@ -36,7 +37,10 @@ pub enum BackupError {
 }
 
 /// Copies the journal at `from` to `to` (which must not exist) and checks
-/// the copy.
+/// the copy. The copy is made in a file of its own, created owner-only
+/// (0600) under a private random name beside `to` (never through a
+/// symbolic link, never over a file), and linked to `to` only once checked:
+/// a file made at `to` meanwhile is never overwritten.
 ///
 /// # Errors
 /// See [`BackupError`]; a failed backup leaves nothing at `to`.
@@ -47,32 +51,59 @@ pub fn backup(from: &Path, to: &Path) -> Result<Copied, BackupError> {
             from.display()
         )));
     }
-    if to.exists() {
-        return Err(BackupError::Input(format!(
+    let exists = || {
+        BackupError::Input(format!(
             "{}: exists already (a backup never overwrites a file: name a new one)",
             to.display()
-        )));
+        ))
+    };
+    // A symbolic link counts, whether or not it leads anywhere.
+    if to.symlink_metadata().is_ok() {
+        return Err(exists());
     }
-    let partial = partial_name(to);
+    let partial = private_file(to)?;
     let result = copy(from, &partial).and_then(|copied| {
-        std::fs::rename(&partial, to).map_err(|e| BackupError::Failed {
-            path: to.to_path_buf(),
-            message: e.to_string(),
+        // link(2) never replaces a file: one made at `to` since the check
+        // above is refused, not overwritten.
+        std::fs::hard_link(&partial, to).map_err(|e| match e.kind() {
+            std::io::ErrorKind::AlreadyExists => exists(),
+            _ => BackupError::Failed {
+                path: to.to_path_buf(),
+                message: e.to_string(),
+            },
         })?;
         Ok(copied)
     });
-    if result.is_err() {
-        let _ = std::fs::remove_file(&partial);
-    }
+    let _ = std::fs::remove_file(&partial);
     result
 }
 
-/// Where the copy is made before it is checked: beside `to`, so the
-/// rename is atomic.
-fn partial_name(to: &Path) -> PathBuf {
-    let mut name = to.file_name().unwrap_or_default().to_os_string();
-    name.push(".partial");
-    to.with_file_name(name)
+/// Creates the file the copy is made in: beside `to` (same file system, so
+/// it can be linked there), under a random name of its own, owner-only
+/// from the start, refusing to follow or reuse anything at that name.
+fn private_file(to: &Path) -> Result<PathBuf, BackupError> {
+    let mut name = std::ffi::OsString::from(".");
+    name.push(to.file_name().unwrap_or_default());
+    name.push(format!(
+        ".{}.partial",
+        hex::encode(rand::random::<[u8; 8]>())
+    ));
+    let partial = to.with_file_name(name);
+    let mut options = std::fs::OpenOptions::new();
+    options.write(true).create_new(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.mode(0o600).custom_flags(nix::libc::O_NOFOLLOW);
+    }
+    options
+        .open(&partial)
+        .map(drop)
+        .map_err(|e| BackupError::Failed {
+            path: partial.clone(),
+            message: format!("cannot create the copy: {e}"),
+        })?;
+    Ok(partial)
 }
 
 fn copy(from: &Path, partial: &Path) -> Result<Copied, BackupError> {
@@ -83,7 +114,6 @@ fn copy(from: &Path, partial: &Path) -> Result<Copied, BackupError> {
             message: e.to_string(),
         }
     };
-    let _ = std::fs::remove_file(partial);
     let source = Connection::open_with_flags(
         from,
         OpenFlags::SQLITE_OPEN_READ_ONLY | OpenFlags::SQLITE_OPEN_NO_MUTEX,
@@ -92,7 +122,14 @@ fn copy(from: &Path, partial: &Path) -> Result<Copied, BackupError> {
     source
         .busy_timeout(std::time::Duration::from_secs(10))
         .map_err(failed(from))?;
-    let mut dest = Connection::open(partial).map_err(failed(partial))?;
+    // The file just made, not whatever may have taken its name since.
+    let mut dest = Connection::open_with_flags(
+        partial,
+        OpenFlags::SQLITE_OPEN_READ_WRITE
+            | OpenFlags::SQLITE_OPEN_NOFOLLOW
+            | OpenFlags::SQLITE_OPEN_NO_MUTEX,
+    )
+    .map_err(failed(partial))?;
     {
         let backup = rusqlite::backup::Backup::new(&source, &mut dest).map_err(failed(partial))?;
         // Every page in one step: one read transaction, so the copy is the

@@ -12,8 +12,10 @@
 //! Rows purged by the retention leave the chain starting at a later
 //! position; it is checked from the oldest row kept. The chain is
 //! tamper-evident, not tamper-proof: whoever can write the file can
-//! rewrite every hash after an edit, unless the last hash is kept
-//! elsewhere too.
+//! rewrite every hash after an edit, or cut the end, unless the last hash
+//! is kept elsewhere too: the writer says the end as committed
+//! ([`Link`]), the agent signs it on the bus (its state and snapshot), and
+//! [`against`] compares a file with the end so announced.
 //!
 //! Owns the encoding, the insert of a command row ([`insert`], in the
 //! writer's transaction) and the check.
@@ -90,11 +92,15 @@ pub fn hash(row: &ChainedRow<'_>, index: i64, prev: &str) -> String {
     hex::encode(Sha256::digest(encode(row, index, prev)))
 }
 
-/// The end of the chain: the last chained row's position and hash.
+/// The end of the chain: the last chained row's position, sequence number
+/// and hash (what the agent's signed state carries on the bus, so that
+/// rows cut off the end are found: [`against`]).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Link {
     /// Its position (0: no row yet).
     pub index: i64,
+    /// Its sequence number in the journal (0: no row yet).
+    pub seq: i64,
     /// Its hash ([`GENESIS`] before the first row).
     pub hash: String,
 }
@@ -103,16 +109,36 @@ impl Default for Link {
     fn default() -> Link {
         Link {
             index: 0,
+            seq: 0,
             hash: GENESIS.into(),
         }
     }
 }
 
 impl Link {
+    /// As the agent's signed state and snapshot carry it.
+    pub fn announced(&self) -> crate::payload::CommandChain {
+        crate::payload::CommandChain {
+            position: self.index,
+            seq: self.seq,
+            hash: self.hash.clone(),
+        }
+    }
+
+    /// The head carried on the bus.
+    pub fn from_announced(head: &crate::payload::CommandChain) -> Link {
+        Link {
+            index: head.position,
+            seq: head.seq,
+            hash: head.hash.clone(),
+        }
+    }
+
     /// The link of `row`, chained after this one.
     pub fn next(&self, row: &ChainedRow<'_>) -> Link {
         Link {
             index: self.index + 1,
+            seq: row.seq,
             hash: hash(row, self.index + 1, &self.hash),
         }
     }
@@ -123,12 +149,13 @@ impl Link {
     /// SQLite failing.
     pub fn last(conn: &Connection) -> rusqlite::Result<Link> {
         let last = conn.query_row(
-            "SELECT chain_index, hash FROM commands WHERE hash IS NOT NULL ORDER BY seq DESC LIMIT 1",
+            "SELECT chain_index, seq, hash FROM commands WHERE hash IS NOT NULL ORDER BY seq DESC LIMIT 1",
             [],
             |r| {
                 Ok(Link {
                     index: r.get(0)?,
-                    hash: r.get(1)?,
+                    seq: r.get(1)?,
+                    hash: r.get(2)?,
                 })
             },
         );
@@ -310,6 +337,7 @@ pub fn verify(conn: &Connection) -> rusqlite::Result<Verdict> {
             seq,
             Link {
                 index,
+                seq,
                 hash: stored,
             },
         ));
@@ -319,6 +347,65 @@ pub fn verify(conn: &Connection) -> rusqlite::Result<Verdict> {
         before,
         from,
     })
+}
+
+/// How a journal's chain stands against the head the agent announced
+/// (its signed state or snapshot on the bus).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Against {
+    /// The announced head is in the journal, with its hash; `after` rows
+    /// were chained since it was announced.
+    Holds {
+        /// Chained rows after it.
+        after: i64,
+    },
+    /// Rows announced are missing from the end: the journal's chain ends
+    /// at `ends` (position, seq), before the announced head.
+    CutOff {
+        /// How many chained rows are missing.
+        missing: i64,
+        /// The journal's last chained row.
+        ends: Link,
+    },
+    /// The row at the announced position is another than the one
+    /// announced (the chain rewritten from there, or forked after a cut).
+    Rewritten {
+        /// The journal's row at that position.
+        seq: i64,
+    },
+    /// The announced position is older than the oldest row kept (purged
+    /// by the retention): nothing to compare.
+    Purged,
+}
+
+/// Compares the chain in `conn` with the head `announced` by the agent.
+///
+/// # Errors
+/// SQLite failing.
+pub fn against(conn: &Connection, announced: &Link) -> rusqlite::Result<Against> {
+    let ends = Link::last(conn)?;
+    if announced.index > ends.index {
+        return Ok(Against::CutOff {
+            missing: announced.index - ends.index,
+            ends,
+        });
+    }
+    if announced.index == 0 {
+        return Ok(Against::Holds { after: ends.index });
+    }
+    let at = conn.query_row(
+        "SELECT seq, hash FROM commands WHERE chain_index = ?1 AND hash IS NOT NULL ORDER BY seq LIMIT 1",
+        [announced.index],
+        |r| Ok((r.get::<_, i64>(0)?, r.get::<_, String>(1)?)),
+    );
+    match at {
+        Ok((seq, hash)) if seq == announced.seq && hash == announced.hash => Ok(Against::Holds {
+            after: ends.index - announced.index,
+        }),
+        Ok((seq, _)) => Ok(Against::Rewritten { seq }),
+        Err(rusqlite::Error::QueryReturnedNoRows) => Ok(Against::Purged),
+        Err(e) => Err(e),
+    }
 }
 
 #[cfg(test)]

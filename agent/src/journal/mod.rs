@@ -157,6 +157,8 @@ pub struct Journal {
     committed: watch::Receiver<u64>,
     /// `Some(why)` while the journal cannot write.
     health: watch::Receiver<Option<String>>,
+    /// The end of the command rows' hash chain, as committed.
+    chain: watch::Receiver<chain::Link>,
     path: PathBuf,
     /// Steps whose rows are promised but not yet queued.
     staging: Arc<Staging>,
@@ -279,6 +281,7 @@ impl Journal {
         let (tx, rx) = mpsc::channel(1024);
         let (committed_tx, committed) = watch::channel(existing);
         let (health_tx, health) = watch::channel(None);
+        let (chain_tx, chain) = watch::channel(chain::Link::last(&conn).unwrap_or_default());
         let p = path.to_path_buf();
         let keep = keep.to_vec();
         let observer: Arc<dyn CommitObserver> = Arc::new(observer);
@@ -293,6 +296,7 @@ impl Journal {
                 let reports = Reports {
                     committed: committed_tx,
                     health: health_tx,
+                    chain: chain_tx,
                     observer,
                     uncommitted: counted,
                 };
@@ -306,6 +310,7 @@ impl Journal {
             tx,
             committed,
             health,
+            chain,
             path: path.to_path_buf(),
             staging: Arc::new(Staging {
                 staged: AtomicU64::new(0),
@@ -425,6 +430,12 @@ impl Journal {
         self.health.clone()
     }
 
+    /// The end of the command rows' hash chain, as committed; changes
+    /// after every commit that chains a row.
+    pub fn command_chain(&self) -> watch::Receiver<chain::Link> {
+        self.chain.clone()
+    }
+
     /// The database file.
     pub fn path(&self) -> &Path {
         &self.path
@@ -445,6 +456,8 @@ struct Reports<O> {
     committed: watch::Sender<u64>,
     /// `Some(why)` while nothing can be written.
     health: watch::Sender<Option<String>>,
+    /// The end of the command rows' hash chain, once committed.
+    chain: watch::Sender<chain::Link>,
     observer: O,
     /// Rows not yet committed, less those it commits or drops.
     uncommitted: Arc<Uncommitted>,
@@ -461,6 +474,7 @@ fn writer(
     let Reports {
         committed,
         health,
+        chain: head,
         observer,
         uncommitted,
     } = reports;
@@ -536,6 +550,13 @@ fn writer(
                     // told: whoever sees either sees none of these rows
                     // pending.
                     uncommitted.remove(rows.len());
+                    head.send_if_modified(|h| {
+                        let moved = *h != chain;
+                        if moved {
+                            *h = chain.clone();
+                        }
+                        moved
+                    });
                     let _ = committed.send(total);
                     pending.clear();
                     if health.borrow().is_some() {

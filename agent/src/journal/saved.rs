@@ -22,6 +22,10 @@ pub struct Saved {
 pub struct SavedOutcome {
     /// Its nonce.
     pub nonce: String,
+    /// Who signed it, as journaled.
+    pub operator: String,
+    /// What it asked, as journaled.
+    pub action: String,
     /// When it was first journaled (ms).
     pub at: u64,
     /// Accepted and the detail, from its final row; `None` when only its
@@ -73,7 +77,7 @@ pub fn saved(conn: &Connection, nonces_since: u64) -> rusqlite::Result<Saved> {
             e => Err(e),
         })?;
     let mut stmt = conn.prepare(
-        "SELECT at_ms, nonce, accepted, detail, stage FROM commands \
+        "SELECT at_ms, nonce, accepted, detail, stage, operator, action FROM commands \
          WHERE verified != 0 AND at_ms >= ?1 ORDER BY seq",
     )?;
     let rows = stmt
@@ -84,16 +88,20 @@ pub fn saved(conn: &Connection, nonces_since: u64) -> rusqlite::Result<Saved> {
                 r.get::<_, i64>(2)? != 0,
                 r.get::<_, String>(3)?,
                 r.get::<_, String>(4)?,
+                r.get::<_, String>(5)?,
+                r.get::<_, String>(6)?,
             ))
         })?
         .collect::<Result<Vec<_>, _>>()?;
     let mut nonces = Vec::new();
     let mut outcomes: Vec<SavedOutcome> = Vec::new();
-    for (at, nonce, accepted, detail, stage) in rows {
+    for (at, nonce, accepted, detail, stage, operator, action) in rows {
         if outcomes.last().is_none_or(|o| o.nonce != nonce) {
             nonces.push((at, nonce.clone()));
             outcomes.push(SavedOutcome {
                 nonce: nonce.clone(),
+                operator,
+                action,
                 at,
                 outcome: None,
             });

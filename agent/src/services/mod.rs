@@ -13,8 +13,11 @@
 //!   values at the last fault ([`crate::payload::SnapshotPayload`]), asked
 //!   of the cell loop;
 //! - `<prefix>/command`: a signed [`crate::operator::Command`], carried out
-//!   (or refused) by the cell loop; the reply is a
-//!   [`crate::step::CommandOutcome`].
+//!   (or refused) by the cell loop; every reply, "busy" included, is a
+//!   [`crate::step::CommandOutcome`] naming the payload it answers
+//!   ([`crate::step::command_digest`]), so that an answer to another or a
+//!   garbled payload sent with the same query parameters is never taken
+//!   for the answer to the command.
 //!
 //! Queries are answered concurrently, at most [`MAX_CONCURRENT`] at a time
 //! and [`MAX_CONCURRENT_HISTORY`] history queries among them; more are told
@@ -44,7 +47,7 @@ use crate::clock::{now_ms, parse_time};
 use crate::journal::{self, Barrier, HistoryQuery, Journal};
 use crate::metrics::Metrics;
 use crate::operator::{Command, NotACommand};
-use crate::step::{CommandOutcome, Request};
+use crate::step::{command_digest, CommandOutcome, Request};
 use cellwatch_models::kpi::KpiRules;
 
 /// Queries answered at the same time; more are refused as busy.
@@ -70,6 +73,9 @@ pub struct Services {
     /// Waits for the journal's queued rows: a history page shows every
     /// alarm already published.
     journal_settled: Barrier,
+    /// The end of the journal's command chain, as committed: carried in
+    /// the snapshot's answer.
+    command_chain: tokio::sync::watch::Receiver<journal::chain::Link>,
     /// Requests to the cell loop (snapshot, command), answered on a
     /// one-shot channel each.
     requests: mpsc::Sender<Request>,
@@ -124,6 +130,7 @@ impl Services {
             journal: journal.path().to_path_buf(),
             kpi,
             journal_settled: journal.barrier(),
+            command_chain: journal.command_chain(),
             requests,
             permits: Arc::new(Semaphore::new(MAX_CONCURRENT)),
             history_permits: Arc::new(Semaphore::new(MAX_CONCURRENT_HISTORY)),
@@ -155,14 +162,12 @@ impl Services {
             let permit = self.permits.clone().try_acquire_owned().ok();
             if permit.is_none() || (matches!(kind, Service::History) && history_permit.is_none()) {
                 self.metrics.refused(kind.name(), "busy");
-                reply(
-                    &self.seal,
-                    kind,
-                    &self.metrics,
-                    q,
-                    Err("the agent is busy: try again".into()),
-                )
-                .await;
+                let busy = "the agent is busy: try again";
+                let answer = match kind {
+                    Service::Command => Ok(command_answer(&q, CommandOutcome::new(false, busy))),
+                    _ => Err(busy.into()),
+                };
+                reply(&self.seal, kind, &self.metrics, q, answer).await;
                 continue;
             }
             let (journal, rules, settled, requests, seal, metrics) = (
@@ -173,6 +178,7 @@ impl Services {
                 self.seal.clone(),
                 self.metrics.clone(),
             );
+            let chain = self.command_chain.clone();
             answering.spawn(async move {
                 let _permits = (permit, history_permit);
                 let result = match kind {
@@ -186,8 +192,13 @@ impl Services {
                             Err(e)
                         }
                     },
-                    Service::Snapshot => snapshot(&requests).await,
-                    Service::Command => command(&requests, &q, &metrics).await,
+                    Service::Snapshot => snapshot(&requests, &chain).await,
+                    Service::Command => Ok(command_answer(
+                        &q,
+                        command(&requests, &q, &metrics)
+                            .await
+                            .unwrap_or_else(|why| CommandOutcome::new(false, why)),
+                    )),
                 };
                 reply(&seal, kind, &metrics, q, result).await;
             });
@@ -310,21 +321,45 @@ pub fn history_query(parameters: &str, now: u64) -> Result<HistoryQuery, String>
     })
 }
 
-async fn snapshot(requests: &mpsc::Sender<Request>) -> Result<String, String> {
+/// The snapshot as the loop answers it (once the rows staged before it are
+/// committed), with the end of the command chain committed by then.
+async fn snapshot(
+    requests: &mpsc::Sender<Request>,
+    chain: &tokio::sync::watch::Receiver<journal::chain::Link>,
+) -> Result<String, String> {
+    #[derive(serde::Serialize)]
+    struct Answer<'a> {
+        #[serde(flatten)]
+        snapshot: &'a crate::payload::SnapshotPayload,
+        command_chain: crate::payload::CommandChain,
+    }
     let (tx, rx) = oneshot::channel();
     requests
         .send(Request::Snapshot(tx))
         .await
         .map_err(|_| "the agent is stopping".to_string())?;
     let snap = rx.await.map_err(|_| "the agent is stopping".to_string())?;
-    Ok(serde_json::to_string(&snap).unwrap_or_default())
+    let answer = Answer {
+        snapshot: &snap,
+        command_chain: chain.borrow().announced(),
+    };
+    Ok(serde_json::to_string(&answer).unwrap_or_default())
+}
+
+/// `outcome` as the answer to the command `q` carries: naming its payload.
+fn command_answer(q: &Query, outcome: CommandOutcome) -> String {
+    let digest = match q.payload() {
+        Some(p) => command_digest(p.slices()),
+        None => command_digest(std::iter::empty()),
+    };
+    serde_json::to_string(&outcome.answering(digest)).unwrap_or_default()
 }
 
 async fn command(
     requests: &mpsc::Sender<Request>,
     q: &Query,
     metrics: &Metrics,
-) -> Result<String, String> {
+) -> Result<CommandOutcome, String> {
     // As the querier says: anyone may claim any id, which only moves its
     // refusals to another summary row (at most 16 sources a minute).
     let source = q
@@ -369,7 +404,7 @@ async fn command(
     if let Some(reason) = outcome.refused {
         metrics.refused("command", reason);
     }
-    Ok(serde_json::to_string(&outcome).unwrap_or_default())
+    Ok(outcome)
 }
 
 /// Answers a query with JSON, or with an error text, sealed: on the

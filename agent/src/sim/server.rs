@@ -163,6 +163,12 @@ impl SimServer {
             .application_name(title)
             .application_uri(format!("urn:cellwatch:sim:{app}"))
             .product_uri("urn:cellwatch");
+        // Its key pair made here, so that a failure stops the start.
+        crate::sources::pki::own_key_pair(
+            &options.pki_dir,
+            title,
+            &format!("urn:cellwatch:sim:{app}"),
+        )?;
         builder = crate::sources::pki::served_from(builder, &options.pki_dir, addr);
         if let Some(uri) = &options.decoy {
             builder = builder.with_node_manager(simple_node_manager(

@@ -43,6 +43,11 @@ use crate::step::CellStep;
 /// How long one send may take.
 const SEND_TIMEOUT: Duration = Duration::from_secs(10);
 
+/// The most of an error answer's body read (its first 300 bytes are
+/// logged): an Alertmanager, or whatever answers in its place, cannot make
+/// the agent hold more.
+const MAX_ERROR_BODY: usize = 64 * 1024;
+
 /// The first retry after a failed send; doubled up to the resend interval.
 const FIRST_RETRY: Duration = Duration::from_secs(1);
 
@@ -567,14 +572,26 @@ impl Pusher {
         if status.is_success() {
             return Ok(());
         }
+        // What it says of the error: at most MAX_ERROR_BODY bytes read,
+        // the rest never asked for (the connection is dropped with it).
         use http_body_util::BodyExt;
-        let body = tokio::time::timeout(SEND_TIMEOUT, response.into_body().collect())
-            .await
-            .ok()
-            .and_then(Result::ok)
-            .map(|b| b.to_bytes())
-            .unwrap_or_default();
-        let said = String::from_utf8_lossy(&body[..body.len().min(300)]).to_string();
+        let mut body = response.into_body();
+        let mut said = Vec::new();
+        let read = async {
+            while said.len() < MAX_ERROR_BODY {
+                match body.frame().await {
+                    Some(Ok(frame)) => {
+                        if let Ok(data) = frame.into_data() {
+                            let room = MAX_ERROR_BODY - said.len();
+                            said.extend_from_slice(&data[..data.len().min(room)]);
+                        }
+                    }
+                    _ => break,
+                }
+            }
+        };
+        let _ = tokio::time::timeout(SEND_TIMEOUT, read).await;
+        let said = String::from_utf8_lossy(&said[..said.len().min(300)]).to_string();
         Err(format!("{status}: {}", said.trim()))
     }
 }

@@ -35,6 +35,9 @@ pub struct ZenohPublisher {
     /// Seals every payload put.
     key: Arc<AgentKey>,
     metrics: Arc<Metrics>,
+    /// The end of the journal's command chain, as committed: carried in
+    /// every state put.
+    command_chain: Option<tokio::sync::watch::Receiver<crate::journal::chain::Link>>,
 }
 
 impl ZenohPublisher {
@@ -77,6 +80,7 @@ impl ZenohPublisher {
             agent,
             key,
             metrics,
+            command_chain: None,
         })
     }
 
@@ -125,6 +129,18 @@ impl ZenohPublisher {
         Some(publisher)
     }
 
+    /// Carries `chain`, the journal's command chain as committed, in every
+    /// state put: its head signed on the bus, off the agent's disk.
+    pub fn anchoring(
+        self,
+        chain: tokio::sync::watch::Receiver<crate::journal::chain::Link>,
+    ) -> Self {
+        ZenohPublisher {
+            command_chain: Some(chain),
+            ..self
+        }
+    }
+
     /// Puts what `step` publishes: its alarm events on `alarms/<id>`, the
     /// machine state on `state`, the flight recordings that ended on
     /// `recordings/<id>` (once, not kept for late joiners: the history
@@ -141,10 +157,14 @@ impl ZenohPublisher {
                 ));
             }
         }
-        let state = step
-            .state
-            .as_ref()
-            .map(|s| serde_json::to_string(s).unwrap_or_default());
+        let state = step.state.as_ref().map(|s| {
+            let head = self.command_chain.as_ref().map(|c| c.borrow().announced());
+            let s = crate::payload::StatePayload {
+                command_chain: head,
+                ..s.clone()
+            };
+            serde_json::to_string(&s).unwrap_or_default()
+        });
         if let Some(json) = &state {
             to.push((Put::State, self.keys.state(), json));
         }

@@ -20,7 +20,8 @@ pub fn own_key(pki_dir: &Path) -> PathBuf {
 }
 
 /// An OPC UA server's security as every server of this project has it:
-/// its key pair in `pki_dir` (made on first start), client certificates
+/// its key pair in `pki_dir` (made now if it has none, the private key
+/// owner-only from the start: [`own_key_pair`]), client certificates
 /// trusted only from `trusted/`, listening on `addr` with its endpoints at
 /// `/`.
 pub fn served_from(
@@ -28,8 +29,17 @@ pub fn served_from(
     pki_dir: &Path,
     addr: std::net::SocketAddr,
 ) -> opcua::server::ServerBuilder {
+    let (name, uri) = (
+        builder.config().application_name.clone(),
+        builder.config().application_uri.clone(),
+    );
+    // Not made: the stack makes none either (it would write through a
+    // link planted at the key's name); the server says it has no key.
+    let made = own_key_pair(pki_dir, &name, &uri)
+        .inspect_err(|e| tracing::error!(pki = %pki_dir.display(), error = %e, "cannot make the server's key pair"))
+        .is_ok();
     builder
-        .create_sample_keypair(true)
+        .create_sample_keypair(made)
         .pki_dir(pki_dir)
         .certificate_path("own/cert.der")
         .private_key_path("private/private.pem")
@@ -39,10 +49,104 @@ pub fn served_from(
         .discovery_urls(vec!["/".to_owned()])
 }
 
+/// Makes the application's key pair in `pki_dir` when it has neither
+/// certificate nor key, as the OPC UA stack would (RSA 2048, the
+/// certificate named and addressed after `name` and `uri`), but with the
+/// private key created owner-only (0600, never through a symbolic link or
+/// over a file) and in a `private/` directory only its owner may enter:
+/// the stack writes it with the process's umask. Returns whether it made
+/// them.
+///
+/// # Errors
+/// The files cannot be written, or one of the two is there without the
+/// other.
+pub fn own_key_pair(pki_dir: &Path, name: &str, uri: &str) -> Result<bool, String> {
+    let (cert, key) = (own_cert(pki_dir), own_key(pki_dir));
+    match (
+        cert.symlink_metadata().is_ok(),
+        key.symlink_metadata().is_ok(),
+    ) {
+        (true, true) => return Ok(false),
+        (false, false) => {}
+        (has_cert, _) => {
+            let (there, missing) = if has_cert {
+                (&cert, &key)
+            } else {
+                (&key, &cert)
+            };
+            return Err(format!(
+                "{} is there without {}: restore it, or remove both to make a new pair",
+                there.display(),
+                missing.display()
+            ));
+        }
+    }
+    let description = opcua::types::ApplicationDescription {
+        application_name: opcua::types::LocalizedText::new("", name),
+        application_uri: uri.into(),
+        ..Default::default()
+    };
+    let (x509, pkey) = X509::cert_and_pkey(&opcua::crypto::X509Data::from(description))?;
+    let der = pkey
+        .to_der()
+        .map_err(|e| format!("cannot encode the private key: {e}"))?;
+    let private = key.parent().unwrap_or(pki_dir);
+    let mut dirs = std::fs::DirBuilder::new();
+    dirs.recursive(true);
+    #[cfg(unix)]
+    std::os::unix::fs::DirBuilderExt::mode(&mut dirs, 0o700);
+    dirs.create(private)
+        .map_err(|e| format!("cannot create {}: {e}", private.display()))?;
+    crate::bus::certs::write_private(&key, &pem("PRIVATE KEY", der.as_bytes()))?;
+    let cert_der = x509
+        .to_der()
+        .map_err(|e| format!("cannot encode the certificate: {e}"))?;
+    let own = cert.parent().unwrap_or(pki_dir);
+    std::fs::create_dir_all(own).map_err(|e| format!("cannot create {}: {e}", own.display()))?;
+    let mut options = std::fs::OpenOptions::new();
+    options.write(true).create_new(true);
+    std::io::Write::write_all(
+        &mut options
+            .open(&cert)
+            .map_err(|e| format!("cannot create {}: {e}", cert.display()))?,
+        &cert_der,
+    )
+    .map_err(|e| format!("cannot write {}: {e}", cert.display()))?;
+    Ok(true)
+}
+
+/// `der` in PEM under `label` (RFC 7468: base64, 64 characters a line).
+fn pem(label: &str, der: &[u8]) -> String {
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut text = String::with_capacity(der.len() * 4 / 3 + 4);
+    for chunk in der.chunks(3) {
+        let b = [
+            chunk[0],
+            *chunk.get(1).unwrap_or(&0),
+            *chunk.get(2).unwrap_or(&0),
+        ];
+        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+        for i in 0..4 {
+            if i <= chunk.len() {
+                text.push(ALPHABET[(n >> (18 - 6 * i)) as usize & 63] as char);
+            } else {
+                text.push('=');
+            }
+        }
+    }
+    let mut out = format!("-----BEGIN {label}-----\n");
+    for line in text.as_bytes().chunks(64) {
+        out.push_str(std::str::from_utf8(line).unwrap_or_default());
+        out.push('\n');
+    }
+    out.push_str(&format!("-----END {label}-----\n"));
+    out
+}
+
 /// Makes the private key that the OPC UA stack has just created in
 /// `pki_dir` (it writes it with the process's umask, often readable by
-/// everyone) readable by its owner only, and refuses an existing one that
-/// others may read. `existed`: whether the key was there before the stack
+/// everyone, unless [`own_key_pair`] made it first) readable by its owner
+/// only, and refuses an existing one that others may read. `existed`: whether the key was there before the stack
 /// ran.
 ///
 /// # Errors
@@ -102,7 +206,7 @@ pub fn trust_der(bytes: &[u8], pki_dir: &Path) -> Result<PathBuf, String> {
 /// What a person checks before trusting a certificate.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct CertificateFacts {
-    /// `CN=…/O=…`.
+    /// `CN=…/O=…`, escaped ([`crate::operator::escaped`]).
     pub subject: String,
     /// Valid from, RFC 3339.
     pub not_before: String,
@@ -141,7 +245,9 @@ impl CertificateFacts {
             )
         };
         Ok(CertificateFacts {
-            subject: x509.subject_name(),
+            // Whoever made the certificate wrote it: escaped, so that it
+            // prints on one line of its own (no line drawn after it).
+            subject: crate::operator::escaped(&x509.subject_name()).into_owned(),
             not_before: when(from),
             not_after: when(until),
             valid_now: from.is_some_and(|f| f <= now) && until.is_some_and(|u| now <= u),
@@ -198,4 +304,26 @@ pub fn untrusted(
         config.endpoint,
         config.pki_dir.display()
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn pem_is_base64_in_lines_of_64() {
+        assert_eq!(
+            super::pem("X", b"Man"),
+            "-----BEGIN X-----\nTWFu\n-----END X-----\n"
+        );
+        assert_eq!(
+            super::pem("X", b"Ma"),
+            "-----BEGIN X-----\nTWE=\n-----END X-----\n"
+        );
+        assert_eq!(
+            super::pem("X", b"M"),
+            "-----BEGIN X-----\nTQ==\n-----END X-----\n"
+        );
+        let long = super::pem("X", &[0u8; 60]);
+        assert_eq!(long.lines().nth(1).unwrap().len(), 64);
+        assert_eq!(long.lines().nth(2).unwrap(), "AAAAAAAAAAAAAAAA");
+    }
 }

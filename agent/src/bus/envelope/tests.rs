@@ -276,3 +276,39 @@ fn a_sealed_together_envelope_edited_moved_or_forged_is_refused() {
     not_an_envelope(reparsed(&sealed[0], |e| e.schema = SIGNED_SCHEMA.into()));
     not_an_envelope(reparsed(&sealed[0], |e| e.tree = None));
 }
+
+#[cfg(unix)]
+#[test]
+fn every_private_key_file_others_may_read_is_named() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let (https, bus, missing) = (
+        dir.path().join("console.key"),
+        dir.path().join("operator-kim.key"),
+        dir.path().join("gone.key"),
+    );
+    for (path, mode) in [(&https, 0o640), (&bus, 0o600)] {
+        std::fs::write(path, "-----BEGIN PRIVATE KEY-----\n").unwrap();
+        std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode)).unwrap();
+    }
+    assert!(check_private_keys([bus.as_path()]).is_ok());
+    let refused: Vec<String> =
+        check_private_keys([https.as_path(), bus.as_path(), missing.as_path()])
+            .unwrap_err()
+            .iter()
+            .map(ToString::to_string)
+            .collect();
+    assert_eq!(refused.len(), 2, "{refused:?}");
+    assert_eq!(
+        refused[0],
+        format!(
+            "{0}: a private key readable by others (mode 640); make it the owner's only: chmod 600 {0}",
+            https.display()
+        )
+    );
+    assert!(
+        refused[1].starts_with(&format!("{}: ", missing.display())),
+        "{}",
+        refused[1]
+    );
+}

@@ -63,6 +63,27 @@ async fn session(z: &ZenohArgs) -> Result<BusClient, Failure> {
     BusClient::open(&cfg, trust, &z.root).await.map_err(failure)
 }
 
+/// The end of `cell`'s journal command chain as its agent signs it now
+/// (in its snapshot's answer, the rows staged before it committed).
+pub(crate) async fn command_chain(
+    z: &ZenohArgs,
+    cell: &str,
+) -> Result<crate::payload::CommandChain, Failure> {
+    let bus = session(z).await?;
+    let timeout = Duration::from_secs(z.timeout_secs);
+    let text = bus
+        .ask(cell, Service::Snapshot, "", None, timeout)
+        .await
+        .map_err(failure)?;
+    let v: serde_json::Value = serde_json::from_str(&text)
+        .map_err(|e| Failure::Runtime(format!("cell {cell}: not a snapshot: {e}")))?;
+    serde_json::from_value(v["command_chain"].clone()).map_err(|_| {
+        Failure::Runtime(format!(
+            "cell {cell}: its agent's snapshot carries no command chain (an agent older than this client)"
+        ))
+    })
+}
+
 /// How the CLI reports what the bus client could not do: a refused
 /// configuration and an agent's error answer are the user's input, the
 /// rest a runtime failure.
