@@ -25,6 +25,7 @@ mod durability;
 mod explain;
 mod force;
 mod house;
+mod installed;
 mod interop;
 mod legacy;
 mod liveness;
