@@ -28,6 +28,7 @@ mod explain;
 mod force;
 mod hardening;
 mod house;
+mod installed;
 mod interop;
 mod legacy;
 mod liveness;

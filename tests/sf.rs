@@ -123,6 +123,34 @@ fn help_explains_the_commands() {
     let r = cellwatch(&["--help"]);
     assert_eq!(r.code, 0);
     assert!(r.stdout.contains("sf") && r.stdout.contains("explain"));
+    // What the program is now, not its first version: every program format
+    // it reads and every way its alarms leave the cell.
+    let text = r.stdout.split_whitespace().collect::<Vec<_>>().join(" ");
+    for said in [
+        "FANUC PMC",
+        "IEC 61131-3 IL",
+        "Siemens STL",
+        "PLCopen XML",
+        "(.L5X)",
+        "(SimaticML)",
+        "OPC UA Alarms & Conditions server",
+        "`@` serial bus",
+        "Prometheus Alertmanager",
+        "operators' web console",
+    ] {
+        assert!(
+            text.contains(said),
+            "--help does not say {said:?}:\n{}",
+            r.stdout
+        );
+    }
+    let r = cellwatch(&["-h"]);
+    assert!(
+        r.stdout
+            .starts_with("cellwatch — one agent per manufacturing cell"),
+        "{}",
+        r.stdout
+    );
     let r = cellwatch(&["explain", "--help"]);
     assert_eq!(r.code, 0);
     assert!(r.stdout.contains("--fault-when <on|off>"), "{}", r.stdout);

@@ -26,12 +26,25 @@ use crate::commands::timers::{ExportStArgs, LearnArgs, ReplayArgs};
 use crate::commands::{self, Failure};
 use crate::operator::Action;
 
-/// cellwatch — watches a PLC and names the step and the contact behind every fault.
+/// cellwatch — one agent per manufacturing cell: alarms that name the step and the contact behind every fault.
 ///
-/// Compiles PLC logic (instruction lists, FANUC PMC or IEC 61131-3) into the
-/// switching function of each fault coil, splits it into step blocks, and at
-/// fault time names the step and the contacts that caused it, with their
-/// comments from the machine's I/O list.
+/// Reads the PLC's own program — instruction lists (FANUC PMC, IEC 61131-3
+/// IL, Siemens STL), PLCopen XML, Rockwell Studio 5000 exports (.L5X) and
+/// Siemens TIA Portal block exports (SimaticML) — and compiles each fault
+/// coil into its switching function and step blocks; at fault time the
+/// alarm names the step and the contacts that caused it, with their
+/// comments from the machine's I/O list. Beside them: limit and discrete
+/// alarms, transition timers learned from normal runs, and supervision of
+/// sequential function charts with forcing of stuck steps.
+///
+/// An agent (`run`) watches one cell over OPC UA, or legacy units on the
+/// `@` serial bus; it publishes alarms and machine state on Eclipse Zenoh
+/// (mutual TLS, every payload signed), journals to SQLite, serves
+/// Prometheus metrics, sends alarms to people through Prometheus
+/// Alertmanager, serves the cell's alarms to SCADA as an OPC UA Alarms &
+/// Conditions server, and takes operators' signed commands. The operators'
+/// web console (`console`) shows the plant's cells live; `demo` runs
+/// simulated cells with all of it on one machine.
 #[derive(Debug, Parser)]
 #[command(name = "cellwatch", version, max_term_width = 100)]
 pub struct Cli {

@@ -9,6 +9,9 @@
 //! timestamp. Federation across hundreds of cells is Prometheus's own job:
 //! every series carries `cell`.
 
+mod labels;
+pub use labels::{COMMAND_RESULTS, REFUSED};
+
 use std::future::Future;
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex, OnceLock};
@@ -264,18 +267,7 @@ impl Metrics {
         }
         // Every series exists from the start, at 0, so that rates and
         // dashboards see the first refusal.
-        for (service, reason) in [
-            ("history", "busy"),
-            ("history", "invalid"),
-            ("snapshot", "busy"),
-            ("command", "busy"),
-            ("command", "too_large"),
-            ("command", "invalid"),
-            ("command", "unsigned"),
-            ("command", "unknown_operator"),
-            ("command", "bad_signature"),
-            ("command", "malformed"),
-        ] {
+        for (service, reason) in REFUSED {
             refused.with_label_values(&[service, reason]).inc_by(0);
         }
         Metrics {
@@ -636,10 +628,12 @@ impl Metrics {
         }
     }
 
-    /// An operator command was `result` (`accepted`, `refused`); `None`:
-    /// the request was no command.
-    pub fn command(&self, action: Option<Action>, result: &str) {
+    /// An operator command was accepted or refused (`result` is one of
+    /// [`COMMAND_RESULTS`]); `None`: the request was no command (`action`
+    /// `other`).
+    pub fn command(&self, action: Option<Action>, accepted: bool) {
         let action = action.map_or("other", Action::as_str);
+        let result = COMMAND_RESULTS[usize::from(!accepted)];
         self.commands.with_label_values(&[action, result]).inc();
     }
 
@@ -717,9 +711,12 @@ impl Metrics {
             .inc();
     }
 
-    /// A query to `service` refused for `reason` (`busy`, `too_large`,
-    /// `invalid`).
+    /// A query to `service` refused for `reason`: one of [`REFUSED`].
     pub fn refused(&self, service: &str, reason: &str) {
+        debug_assert!(
+            REFUSED.contains(&(service, reason)),
+            "{service}/{reason}: not in REFUSED (nor in docs/reference/metrics.md)"
+        );
         self.refused.with_label_values(&[service, reason]).inc();
     }
 }

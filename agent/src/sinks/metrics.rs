@@ -166,7 +166,7 @@ impl MetricsSink {
             }
             // A force or stop is journaled in several rows: counted once.
             Input::Command(c) if c.stage.is_final() => {
-                m.command(c.action, if c.accepted { "accepted" } else { "refused" });
+                m.command(c.action, c.accepted);
             }
             Input::Command(_) => {}
             Input::Tick => {

@@ -23,6 +23,7 @@ use cellwatch_models::timer::line::{Fault, FaultKind};
 
 mod bus;
 mod scada;
+mod shipped;
 
 use bus::{bus_tls, DemoBus};
 
@@ -85,15 +86,17 @@ fn endpoint_addr(endpoint: &str) -> Result<std::net::SocketAddr, Failure> {
 /// watching it, in one process; alarms printed as they happen.
 pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Failure> {
     let mut signals = StopSignals::listen()?;
-    let mut c = load(&args.config)?;
-    if args.any_ports {
-        any_ports(&mut c);
-    }
     let state: PathBuf = args.state_dir.clone();
     std::fs::create_dir_all(&state)
         .map_err(|e| Failure::Runtime(format!("cannot create {}: {e}", state.display())))?;
+    let shipped = shipped::write(&state)?;
+    let files = ConfigFiles::of(args, &shipped.dir);
+    let mut c = load(&files.cnc)?;
+    if args.any_ports {
+        any_ports(&mut c);
+    }
     let sim_pki = state.join("sim-pki");
-    opcua_of(&mut c, &args.config)?.pki_dir = state.join("agent-pki");
+    opcua_of(&mut c, &files.cnc)?.pki_dir = state.join("agent-pki");
     c.journal.path = state.join(format!("{}.sqlite", c.cell));
     let (operator_key, secrets) = demo_operator(&state)?;
     let mut demo_bus = DemoBus::new(&state);
@@ -112,7 +115,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         }
         Some(scada::serve(&mut c, &state, listen)?)
     };
-    let ua = opcua_of(&mut c, &args.config)?.clone();
+    let ua = opcua_of(&mut c, &files.cnc)?.clone();
     let listen = endpoint_addr(&ua.endpoint)?;
     let sim = SimulatedCnc::start(&SimOptions {
         listen,
@@ -123,7 +126,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     .await
     .map_err(Failure::runtime)?;
     trust_each_other(&c.cell, &ua, &sim_pki)?;
-    opcua_of(&mut c, &args.config)?.endpoint = sim.endpoint();
+    opcua_of(&mut c, &files.cnc)?.endpoint = sim.endpoint();
     let keys = CellKeys::new(&c.zenoh.prefix);
     let journal = c.journal.path.clone();
     let (tx, mut rx) = mpsc::unbounded_channel();
@@ -158,6 +161,17 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         writeln!(out, "  metrics         http://{m}/metrics").map_err(io)?;
     }
     writeln!(out, "  journal         {}", journal.display()).map_err(io)?;
+    let kept = if shipped.kept.is_empty() {
+        String::new()
+    } else {
+        format!("; kept as edited: {}", shipped.kept.join(", "))
+    };
+    writeln!(
+        out,
+        "  configuration   {} (the demo's own, written by this binary{kept})",
+        shipped.dir.display()
+    )
+    .map_err(io)?;
     if let (Some(addr), Some(password)) = (cnc_agent.alarm_server_addr(), &scada_password) {
         let pki = state.join("alarm-server-pki");
         writeln!(
@@ -192,12 +206,12 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     let line = if args.no_line {
         None
     } else {
-        let mut l = load(&args.line_config)?;
+        let mut l = load(&files.line)?;
         if args.any_ports {
             any_ports(&mut l);
         }
-        opcua_of(&mut l, &args.line_config)?.pki_dir = state.join("line-agent-pki");
-        let lua = opcua_of(&mut l, &args.line_config)?.clone();
+        opcua_of(&mut l, &files.line)?.pki_dir = state.join("line-agent-pki");
+        let lua = opcua_of(&mut l, &files.line)?.clone();
         l.journal.path = state.join(format!("{}.sqlite", l.cell));
         l.operators_file = Some(secrets.clone());
         demo_bus.join(&mut l)?;
@@ -214,7 +228,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
             .await
             .map_err(Failure::runtime)?;
         trust_each_other(&l.cell, &lua, &line_pki)?;
-        opcua_of(&mut l, &args.line_config)?.endpoint = line_sim.endpoint();
+        opcua_of(&mut l, &files.line)?.endpoint = line_sim.endpoint();
         let timers: usize = l.timers.iter().map(|t| t.model.transitions.len()).sum();
         let cell = l.cell.clone();
         let line_agent = agent::start(l, Some(tx.clone()))
@@ -249,7 +263,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     let moulding = if args.no_moulding {
         None
     } else {
-        let mut m = load(&args.moulding_config)?;
+        let mut m = load(&files.moulding)?;
         if args.any_ports {
             any_ports(&mut m);
         }
@@ -257,13 +271,13 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
             Some(crate::sources::legacy::Transport::Tcp(a)) => a.parse::<std::net::SocketAddr>().map_err(|_| {
                 Failure::Input(format!(
                     "{}: legacy.tcp '{a}': the demo needs an IP:port on this machine",
-                    args.moulding_config.display()
+                    files.moulding.display()
                 ))
             })?,
             _ => {
                 return Err(Failure::Input(format!(
                     "{}: the demo serves the moulding units on TCP; its configuration needs [legacy] tcp = \"IP:port\"",
-                    args.moulding_config.display()
+                    files.moulding.display()
                 )))
             }
         };
@@ -307,6 +321,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
         Some(
             demo_robot(
                 args,
+                &files.robot,
                 &mut demo_bus,
                 (&operator_key, &secrets),
                 tx.clone(),
@@ -413,6 +428,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
 /// alarms active in the demo, for a step to be stuck.
 async fn demo_robot(
     args: &DemoArgs,
+    robot_config: &Path,
     demo_bus: &mut DemoBus,
     (operator_key, secrets): (&Path, &Path),
     tx: mpsc::UnboundedSender<Notice>,
@@ -431,12 +447,12 @@ async fn demo_robot(
     use crate::sim::robot::SimulatedRobot;
     let state = demo_bus.state.clone();
     let state = state.as_path();
-    let mut r = load(&args.robot_config)?;
+    let mut r = load(&robot_config)?;
     if args.any_ports {
         any_ports(&mut r);
     }
-    opcua_of(&mut r, &args.robot_config)?.pki_dir = state.join("robot-agent-pki");
-    let rua = opcua_of(&mut r, &args.robot_config)?.clone();
+    opcua_of(&mut r, &robot_config)?.pki_dir = state.join("robot-agent-pki");
+    let rua = opcua_of(&mut r, &robot_config)?.clone();
     r.journal.path = state.join(format!("{}.sqlite", r.cell));
     r.operators_file = Some(secrets.to_path_buf());
     demo_bus.join(&mut r)?;
@@ -456,7 +472,7 @@ async fn demo_robot(
     .await
     .map_err(Failure::runtime)?;
     trust_each_other(&r.cell, &rua, &robot_pki)?;
-    opcua_of(&mut r, &args.robot_config)?.endpoint = robot.endpoint();
+    opcua_of(&mut r, &robot_config)?.endpoint = robot.endpoint();
     let scanning = tokio::spawn({
         let robot = robot.clone();
         async move { robot.run().await }
@@ -607,30 +623,36 @@ fn print_notice(
 #[derive(Debug, clap::Args)]
 pub(crate) struct DemoArgs {
     /// The cell configuration to run (its OPC UA endpoint is where the
-    /// simulator listens).
-    #[arg(long, default_value = "config/demo.toml")]
-    pub(crate) config: PathBuf,
+    /// simulator listens). Default: the demo's own, which the binary
+    /// carries and writes to STATE_DIR/config/demo.toml.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) config: Option<PathBuf>,
     /// The body-shop line's cell configuration, run beside the CNC.
-    #[arg(long, default_value = "config/line.toml")]
-    pub(crate) line_config: PathBuf,
+    /// Default: STATE_DIR/config/line.toml, the demo's own.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) line_config: Option<PathBuf>,
     /// Run the CNC only (no line).
     #[arg(long)]
     pub(crate) no_line: bool,
     /// The moulding units' cell configuration (paper 002), run beside the
-    /// CNC: three units on one simulated `@` bus.
-    #[arg(long, default_value = "config/moulding.toml")]
-    pub(crate) moulding_config: PathBuf,
+    /// CNC: three units on one simulated `@` bus. Default:
+    /// STATE_DIR/config/moulding.toml, the demo's own.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) moulding_config: Option<PathBuf>,
     /// No moulding units.
     #[arg(long)]
     pub(crate) no_moulding: bool,
     /// The robot's cell configuration (paper 004), run beside the CNC: the
     /// LCD-glass robot's charts supervised, stuck steps forced on.
-    #[arg(long, default_value = "config/robot.toml")]
-    pub(crate) robot_config: PathBuf,
+    /// Default: STATE_DIR/config/robot.toml, the demo's own.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) robot_config: Option<PathBuf>,
     /// No robot.
     #[arg(long)]
     pub(crate) no_robot: bool,
-    /// Where the demo keeps certificates, the journal and operator keys.
+    /// Where the demo keeps certificates, the journal, operator keys and
+    /// its own configuration (config/: written when missing, never over a
+    /// file someone edited).
     #[arg(long, default_value = "cellwatch-demo")]
     pub(crate) state_dir: PathBuf,
     /// Stop after this long (e.g. 60s); default: until Ctrl-C.
@@ -657,6 +679,28 @@ pub(crate) struct DemoArgs {
     /// No OPC UA alarm server.
     #[arg(long)]
     pub(crate) no_alarm_server: bool,
+}
+
+/// The four cells' configuration files: those given, else the demo's own.
+struct ConfigFiles {
+    cnc: PathBuf,
+    line: PathBuf,
+    moulding: PathBuf,
+    robot: PathBuf,
+}
+
+impl ConfigFiles {
+    fn of(args: &DemoArgs, shipped: &Path) -> Self {
+        let or_shipped = |given: &Option<PathBuf>, name: &str| {
+            given.clone().unwrap_or_else(|| shipped.join(name))
+        };
+        ConfigFiles {
+            cnc: or_shipped(&args.config, "demo.toml"),
+            line: or_shipped(&args.line_config, "line.toml"),
+            moulding: or_shipped(&args.moulding_config, "moulding.toml"),
+            robot: or_shipped(&args.robot_config, "robot.toml"),
+        }
+    }
 }
 
 /// With `--any-ports`: every address `c` listens or serves on, on port 0.
