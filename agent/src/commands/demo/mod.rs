@@ -320,8 +320,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
     } else {
         Some(
             demo_robot(
-                args,
-                &files.robot,
+                (args, &files.robot),
                 &mut demo_bus,
                 (&operator_key, &secrets),
                 tx.clone(),
@@ -427,8 +426,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
 /// operators file), over the bus, signed; it waits on `active`, the
 /// alarms active in the demo, for a step to be stuck.
 async fn demo_robot(
-    args: &DemoArgs,
-    robot_config: &Path,
+    (args, robot_config): (&DemoArgs, &Path),
     demo_bus: &mut DemoBus,
     (operator_key, secrets): (&Path, &Path),
     tx: mpsc::UnboundedSender<Notice>,
@@ -447,12 +445,12 @@ async fn demo_robot(
     use crate::sim::robot::SimulatedRobot;
     let state = demo_bus.state.clone();
     let state = state.as_path();
-    let mut r = load(&robot_config)?;
+    let mut r = load(robot_config)?;
     if args.any_ports {
         any_ports(&mut r);
     }
-    opcua_of(&mut r, &robot_config)?.pki_dir = state.join("robot-agent-pki");
-    let rua = opcua_of(&mut r, &robot_config)?.clone();
+    opcua_of(&mut r, robot_config)?.pki_dir = state.join("robot-agent-pki");
+    let rua = opcua_of(&mut r, robot_config)?.clone();
     r.journal.path = state.join(format!("{}.sqlite", r.cell));
     r.operators_file = Some(secrets.to_path_buf());
     demo_bus.join(&mut r)?;
@@ -472,7 +470,7 @@ async fn demo_robot(
     .await
     .map_err(Failure::runtime)?;
     trust_each_other(&r.cell, &rua, &robot_pki)?;
-    opcua_of(&mut r, &robot_config)?.endpoint = robot.endpoint();
+    opcua_of(&mut r, robot_config)?.endpoint = robot.endpoint();
     let scanning = tokio::spawn({
         let robot = robot.clone();
         async move { robot.run().await }
