@@ -80,7 +80,10 @@ async fn trust_server_prints_a_servers_own_text_escaped() {
         .lines()
         .find(|l| l.starts_with("  subject"))
         .unwrap();
-    assert!(subject.starts_with("  subject      CN=rogue\\\\0a  SHA-256"), "{subject}");
+    assert!(
+        subject.starts_with("  subject      CN=rogue\\\\0a  SHA-256"),
+        "{subject}"
+    );
     server.stop();
 }
 
