@@ -534,8 +534,16 @@ async fn only_correctly_signed_acks_are_carried_out_and_all_are_journaled() {
         send(good.clone()).await,
         (true, "ack ese by kim".to_string())
     );
-    // Sent again (an answer lost): its original outcome, carried out once.
-    assert_eq!(send(good).await, (true, "ack ese by kim".to_string()));
+    // Sent again (an answer lost): a replay with its original outcome,
+    // carried out once.
+    assert_eq!(
+        send(good).await,
+        (
+            false,
+            "replayed command: sent before (accepted: ack ese by kim); not carried out again"
+                .to_string()
+        )
+    );
     let snap: serde_json::Value = serde_json::from_str(
         &fx.query("cellwatch/m01ps0004/snapshot", None)
             .await

@@ -117,7 +117,7 @@ async fn an_answer_to_another_payload_with_the_same_query_is_never_believed() {
         seen[2].1["detail"]
             .as_str()
             .unwrap()
-            .starts_with("replayed command: sent before and accepted"),
+            .starts_with("replayed command: sent before (accepted: "),
         "{}",
         seen[2].1
     );
@@ -140,7 +140,7 @@ async fn a_command_sent_again_is_answered_as_a_replay() {
         again,
         (
             false,
-            "replayed command: sent before and accepted (out-of-service csd by kim); \
+            "replayed command: sent before (accepted: out-of-service csd by kim); \
              not carried out again"
                 .to_string()
         )

@@ -408,13 +408,15 @@ async fn a_write_killed_before_the_plc_answered_is_a_replay_after_the_restart() 
     let answer = query(&client, &format!("cellwatch/{CELL}/command"), Some(json))
         .await
         .unwrap();
-    // Sent again: not carried out again, and its outcome is said to be
-    // unknown (the agent stopped before the PLC answered).
+    // Sent again: a replay, not carried out again, and its first
+    // sending's outcome said to be unknown (the agent stopped before the
+    // PLC answered).
     assert_eq!(
         outcome(&answer),
         (
             false,
-            "the agent stopped before this command's outcome was known: see its history"
+            "replayed command: sent before (not accepted: the agent stopped before this \
+             command's outcome was known: see its history); not carried out again"
                 .to_string()
         )
     );

@@ -271,10 +271,14 @@ async fn a_stuck_step_is_explained_and_forced_on_only_as_paper_004_allows() {
     let (ok, detail) = send(bus, &forged).await;
     assert!(!ok);
     assert!(detail.contains("signature"), "{detail}");
-    // Sent again: its original outcome, and not carried out again.
+    // Sent again: a replay with its original outcome, and not carried out
+    // again.
     let (ok, detail) = send(bus, &first).await;
     assert!(!ok);
-    assert!(detail.starts_with("condition: t3"), "{detail}");
+    assert!(
+        detail.starts_with("replayed command: sent before (not accepted: condition: t3"),
+        "{detail}"
+    );
     assert_eq!(rows_of(journal, &first.nonce).len(), 7);
     // Not forcible: t2.
     let (ok, detail) = send(bus, &signed(&kim(), Action::Force, "F1.t2")).await;

@@ -3,7 +3,7 @@
 //! `raised_at`), are not counted as raised again, latched ones can be
 //! reset, one whose condition ended while the agent was down clears on
 //! the first fresh value, and a command accepted before the kill, sent
-//! again after it, gets its original outcome without being carried out
+//! again after it, is a replay with its original outcome, not carried out
 //! again.
 
 use cellwatch::operator::Action;
@@ -116,9 +116,17 @@ async fn killed_agent_restores_its_alarms_and_answers_a_resent_command_once() {
         alarm(&spindle, "spindle-temp-h").unwrap()["raised_at"],
         alarm(&before, "spindle-temp-h").unwrap()["raised_at"]
     );
-    // The ack accepted before the kill, sent again after it: its original
-    // outcome, read back from the journal (not carried out again).
-    assert_eq!(send(&client, &ack).await, (true, "ack ese by kim".into()));
+    // The ack accepted before the kill, sent again after it: a replay with
+    // its original outcome, read back from the journal (not carried out
+    // again).
+    assert_eq!(
+        send(&client, &ack).await,
+        (
+            false,
+            "replayed command: sent before (accepted: ack ese by kim); not carried out again"
+                .into()
+        )
+    );
     // A latched one resets, its condition being gone.
     assert_eq!(
         send(&client, &signed(Action::Reset, "tmr-001")).await,

@@ -504,7 +504,7 @@ async fn the_same_signed_command_sent_again_gets_its_original_outcome() {
         format!(r#"{{"accepted":true,"detail":"ack ese by kim","command":"{digest}"}}"#)
     );
     let replayed = format!(
-        r#"{{"accepted":false,"detail":"replayed command: sent before and accepted (ack ese by kim); not carried out again","command":"{digest}","replayed":{{"accepted":true,"detail":"ack ese by kim"}}}}"#
+        r#"{{"accepted":false,"detail":"replayed command: sent before (accepted: ack ese by kim); not carried out again","command":"{digest}","replayed":{{"accepted":true,"detail":"ack ese by kim"}}}}"#
     );
     assert_eq!(send_until_answered(&kim, &ack).await, replayed);
     // After a restart: the outcome read back from the journal.

@@ -325,9 +325,9 @@ pub struct StatePayload {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub target: Option<u64>,
     /// The end of the journal's command chain when this was put (set by
-    /// the Zenoh sink).
+    /// the Zenoh sink; boxed: most copies of the state never carry it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub command_chain: Option<CommandChain>,
+    pub command_chain: Option<Box<CommandChain>>,
 }
 
 /// The end of the journal's command-row hash chain, as committed: signed

@@ -253,17 +253,19 @@ impl CommandOutcome {
             accepted: self.accepted,
             detail: self.detail.clone(),
         });
+        // "Not accepted", not "refused": a first sending whose outcome the
+        // journal never got (the agent stopped) was not refused either.
         let then = if first.accepted {
             "accepted"
         } else {
-            "refused"
+            "not accepted"
         };
         CommandOutcome {
             replayed: Some(first.clone()),
             ..CommandOutcome::new(
                 false,
                 format!(
-                    "replayed command: sent before and {then} ({}); not carried out again",
+                    "replayed command: sent before ({then}: {}); not carried out again",
                     first.detail
                 ),
             )

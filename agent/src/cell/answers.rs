@@ -185,7 +185,7 @@ mod tests {
         assert!(!replayed.accepted);
         assert_eq!(
             replayed.detail,
-            "replayed command: sent before and accepted (ack ese by kim); not carried out again"
+            "replayed command: sent before (accepted: ack ese by kim); not carried out again"
         );
         let first = replayed.replayed.unwrap();
         assert!(first.accepted);

@@ -158,7 +158,10 @@ impl ZenohPublisher {
             }
         }
         let state = step.state.as_ref().map(|s| {
-            let head = self.command_chain.as_ref().map(|c| c.borrow().announced());
+            let head = self
+                .command_chain
+                .as_ref()
+                .map(|c| Box::new(c.borrow().announced()));
             let s = crate::payload::StatePayload {
                 command_chain: head,
                 ..s.clone()
