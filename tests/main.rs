@@ -38,6 +38,7 @@ mod opcua;
 mod operations;
 mod operators;
 mod papercuts;
+mod plant;
 mod plc_alarms;
 mod quickstart;
 mod real_programs;

@@ -179,6 +179,8 @@ pub struct Agent {
     reload_asks: Option<mpsc::Receiver<crate::cell::swap::ReloadAsk>>,
     /// The running configuration's parts only a restart changes.
     fixed: [u64; 11],
+    /// What `about` answers (the configuration's hash follows a reload).
+    about: watch::Sender<crate::payload::AboutPayload>,
 }
 
 /// The parts of a configuration a reload takes by starting a source of its
@@ -362,6 +364,8 @@ impl Agent {
                     }
                 }
                 // What was taken is what runs now.
+                let hash = config.source_sha256.clone();
+                self.about.send_modify(|a| a.config_sha256 = hash);
                 for (i, part) in crate::config::FIXED_PARTS.iter().enumerate() {
                     if SOURCE_PARTS.contains(part) {
                         self.fixed[i] = fixed[i];
@@ -591,6 +595,8 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         metrics.clone(),
     )
     .await?;
+    let (about, about_rx) = watch::channel(crate::services::about::about(&config, &signing));
+    let services = services.telling(about_rx);
     let publisher = ZenohPublisher::start(session.clone(), &prefix, signing, metrics.clone())
         .await?
         .anchoring(journal.command_chain());
@@ -748,6 +754,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         reloads,
         reload_asks,
         fixed,
+        about,
     })
 }
 

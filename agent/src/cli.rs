@@ -18,6 +18,7 @@ use crate::commands::explain::ExplainArgs;
 use crate::commands::hash_password::HashPasswordArgs;
 use crate::commands::keygen::KeygenArgs;
 use crate::commands::pki::PkiCommand;
+use crate::commands::plant::PlantCommand;
 use crate::commands::report::ReportArgs;
 use crate::commands::sf::SfArgs;
 use crate::commands::sfc::SfcCommand;
@@ -155,6 +156,12 @@ enum Command {
     /// control matches their common names).
     #[command(subcommand)]
     Pki(PkiCommand),
+    /// A plant of many cells from one inventory (plant.toml): certificates,
+    /// keys, trust file, operators files, routers' access control,
+    /// Prometheus targets, console and systemd instances made from it, and
+    /// the running plant checked against it.
+    #[command(subcommand)]
+    Plant(PlantCommand),
     /// Learn transition timers δ(A, E | Δt) = B from logs of normal runs;
     /// with --sfc, the supervision time of every step of the charts instead.
     Learn(LearnArgs),
@@ -298,6 +305,9 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::InService(args) => commands::bus::command(Action::InService, &args, out).await,
             Command::Discover(args) => commands::discover::run(&args, out).await,
             Command::TrustServer(args) => commands::trust_server::run(&args, out).await,
+            Command::Plant(PlantCommand::Check(args)) => {
+                commands::plant::run_check(&args, out).await
+            }
             // Dispatched synchronously by `run`; never sent here.
             Command::Sf(_)
             | Command::Sfc(_)
@@ -308,6 +318,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             | Command::Keygen(_)
             | Command::HashPassword(_)
             | Command::Pki(_)
+            | Command::Plant(_)
             | Command::Replay(_)
             | Command::ExportSt(_)
             | Command::Journal(_)
@@ -348,6 +359,11 @@ pub fn run(
         Command::Pki(PkiCommand::Ca(args)) => commands::pki::ca(&args, out),
         Command::Pki(PkiCommand::Issue(args)) => commands::pki::issue_command(&args, out),
         Command::Pki(PkiCommand::AgentKey(args)) => commands::pki::agent_key(&args, out),
+        Command::Plant(PlantCommand::Init(args)) => commands::plant::init(&args, out),
+        Command::Plant(PlantCommand::AddCell(args)) => commands::plant::add_cell(&args, out),
+        Command::Plant(PlantCommand::AddOperator(args)) => {
+            commands::plant::add_operator(&args, out)
+        }
         Command::Replay(args) => commands::timers::replay(&args, out),
         Command::ExportSt(args) => commands::timers::export_st(&args, out),
         Command::Journal(args) => commands::journal::run(&args, out),

@@ -57,6 +57,7 @@ pub mod journal;
 pub mod metrics;
 pub mod operator;
 pub mod payload;
+pub mod plant;
 pub mod services;
 pub mod sim;
 pub mod sinks;

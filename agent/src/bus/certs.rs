@@ -56,6 +56,22 @@ pub fn make_ca(dir: &Path, name: &str) -> Result<bool, String> {
 /// # Errors
 /// No CA in `dir`, an existing certificate of that name, or a bad host.
 pub fn issue(dir: &Path, name: &str, hosts: &[String]) -> Result<(PathBuf, PathBuf), String> {
+    let (cert_path, key_path) = cert_files(dir, name);
+    issue_to(dir, name, hosts, (&cert_path, &key_path))?;
+    Ok((cert_path, key_path))
+}
+
+/// Issues `name` from the CA in `dir` as [`issue`] does, the certificate
+/// and its key written to `to` (the key owner-only).
+///
+/// # Errors
+/// No CA in `dir`, an existing certificate or key there, or a bad host.
+pub fn issue_to(
+    dir: &Path,
+    name: &str,
+    hosts: &[String],
+    to: (&Path, &Path),
+) -> Result<(), String> {
     let (ca_cert, ca_key) = ca_files(dir);
     let read = |p: &Path| {
         std::fs::read_to_string(p).map_err(|e| {
@@ -70,7 +86,7 @@ pub fn issue(dir: &Path, name: &str, hosts: &[String]) -> Result<(PathBuf, PathB
         .map_err(|e| format!("{}: {e}", ca_files(dir).1.display()))?;
     let issuer = Issuer::from_ca_cert_pem(&read(&ca_cert)?, ca_key)
         .map_err(|e| format!("{}: {e}", ca_files(dir).0.display()))?;
-    let (cert_path, key_path) = cert_files(dir, name);
+    let (cert_path, key_path) = to;
     if cert_path.exists() || key_path.exists() {
         return Err(format!("{} exists; not overwritten", cert_path.display()));
     }
@@ -91,9 +107,9 @@ pub fn issue(dir: &Path, name: &str, hosts: &[String]) -> Result<(PathBuf, PathB
     params.not_after = rcgen::date_time_ymd(2036, 1, 1);
     let key = KeyPair::generate().map_err(runtime)?;
     let cert = params.signed_by(&key, &issuer).map_err(runtime)?;
-    write_private(&key_path, &key.serialize_pem())?;
-    write_public(&cert_path, &cert.pem())?;
-    Ok((cert_path, key_path))
+    write_private(key_path, &key.serialize_pem())?;
+    write_public(cert_path, &cert.pem())?;
+    Ok(())
 }
 
 fn dn(name: &str) -> DistinguishedName {
@@ -133,4 +149,41 @@ pub fn write_private(path: &Path, text: &str) -> Result<(), String> {
     })?;
     file.write_all(text.as_bytes())
         .map_err(|e| format!("cannot write {}: {e}", path.display()))
+}
+
+/// What a certificate says of itself: whose, until when, which.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CertFacts {
+    /// Its subject's common name.
+    pub name: String,
+    /// The end of its validity, ms since the Unix epoch.
+    pub not_after_ms: u64,
+    /// SHA-256 (hex) of its DER bytes.
+    pub sha256: String,
+}
+
+/// The facts of the first certificate in PEM text `pem`.
+///
+/// # Errors
+/// No certificate in it, or one that does not parse.
+pub fn facts(pem: &str) -> Result<CertFacts, String> {
+    use sha2::{Digest, Sha256};
+    let (_, block) = x509_parser::pem::parse_x509_pem(pem.as_bytes())
+        .map_err(|e| format!("no PEM certificate: {e}"))?;
+    let cert = block
+        .parse_x509()
+        .map_err(|e| format!("not an X.509 certificate: {e}"))?;
+    let name = cert
+        .subject()
+        .iter_common_name()
+        .next()
+        .and_then(|n| n.as_str().ok())
+        .unwrap_or_default()
+        .to_string();
+    let seconds = cert.validity().not_after.timestamp();
+    Ok(CertFacts {
+        name,
+        not_after_ms: u64::try_from(seconds).unwrap_or(0).saturating_mul(1000),
+        sha256: hex::encode(Sha256::digest(&block.contents)),
+    })
 }

@@ -617,6 +617,11 @@ impl Trust {
         self.cells.insert(cell.into(), public);
     }
 
+    /// Cell `cell`'s public key (hex), if it knows the cell.
+    pub fn public_hex(&self, cell: &str) -> Option<String> {
+        self.cells.get(cell).map(|k| hex::encode(k.as_bytes()))
+    }
+
     /// The cells it knows.
     pub fn cells(&self) -> impl Iterator<Item = &str> {
         self.cells.keys().map(String::as_str)

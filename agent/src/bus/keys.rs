@@ -9,6 +9,7 @@
 //! | `history` | journal pages | the agent answers |
 //! | `snapshot` | values, active alarms, values at the last fault | the agent answers |
 //! | `command` | signed operator commands | the agent answers |
+//! | `about` | its version, configuration hash, keys | the agent answers |
 //! | `agent/<zenoh id>` | a liveliness token while the agent runs | the agent declares |
 //!
 //! The agent uses the prefix its configuration gives (`zenoh.key_prefix`);
@@ -25,6 +26,8 @@ pub enum Service {
     Snapshot,
     /// `command`: a signed operator command.
     Command,
+    /// `about`: what the agent is and runs.
+    About,
 }
 
 impl Service {
@@ -34,6 +37,7 @@ impl Service {
             Service::History => "history",
             Service::Snapshot => "snapshot",
             Service::Command => "command",
+            Service::About => "about",
         }
     }
 }

@@ -15,6 +15,7 @@ pub(crate) mod journal;
 pub(crate) mod keygen;
 pub(crate) mod man;
 pub(crate) mod pki;
+pub(crate) mod plant;
 pub(crate) mod report;
 pub(crate) mod sf;
 pub(crate) mod sfc;

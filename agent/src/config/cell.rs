@@ -129,6 +129,9 @@ pub struct CellConfig {
     pub recorder: Option<cellwatch_models::engine::RecorderConfig>,
     /// Things worth saying at start (security off, ...).
     pub warnings: Vec<String>,
+    /// SHA-256 (hex) of the configuration's text: what `about` tells
+    /// `cellwatch plant check`.
+    pub source_sha256: String,
 }
 
 /// The parts of a configuration a reload compares

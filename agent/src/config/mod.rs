@@ -46,7 +46,7 @@ pub use tags::{key_chunk, tag_address, timer_signal, Addressing, Deadband, TagCo
 
 use std::path::{Path, PathBuf};
 
-use position::line_col;
+pub(crate) use position::line_col;
 
 /// Loads and validates the configuration at `path`.
 ///

@@ -27,6 +27,7 @@
 //! repeats the request. Refusals are counted
 //! (`cellwatch_requests_refused_total`).
 
+pub mod about;
 pub mod alarm_server;
 
 use std::collections::HashMap;
@@ -67,6 +68,9 @@ pub struct Services {
     history: Queryable,
     snapshot: Queryable,
     command: Queryable,
+    about: Queryable,
+    /// What `about` answers: kept current by the agent.
+    about_now: tokio::sync::watch::Receiver<crate::payload::AboutPayload>,
     journal: PathBuf,
     /// The rules the alarm figures (`kind=kpi`) are judged by.
     kpi: KpiRules,
@@ -127,6 +131,8 @@ impl Services {
             history: declare(Service::History).await?,
             snapshot: declare(Service::Snapshot).await?,
             command: declare(Service::Command).await?,
+            about: declare(Service::About).await?,
+            about_now: tokio::sync::watch::channel(crate::payload::AboutPayload::default()).1,
             journal: journal.path().to_path_buf(),
             kpi,
             journal_settled: journal.barrier(),
@@ -142,6 +148,15 @@ impl Services {
         })
     }
 
+    /// `about` answered from `about`, which the agent keeps current.
+    pub fn telling(
+        mut self,
+        about: tokio::sync::watch::Receiver<crate::payload::AboutPayload>,
+    ) -> Services {
+        self.about_now = about;
+        self
+    }
+
     /// Answers queries until `shutdown` completes; then waits for the
     /// answers under way and undeclares the queryables.
     pub async fn run(self, shutdown: impl Future<Output = ()>) {
@@ -153,6 +168,11 @@ impl Services {
                 Ok(q) = self.history.recv_async() => (Service::History, q),
                 Ok(q) = self.snapshot.recv_async() => (Service::Snapshot, q),
                 Ok(q) = self.command.recv_async() => (Service::Command, q),
+                Ok(q) = self.about.recv_async() => {
+                    let about = serde_json::to_string(&*self.about_now.borrow()).unwrap_or_default();
+                    reply(&self.seal, Service::About, &self.metrics, q, Ok(about)).await;
+                    continue;
+                }
                 Some(_) = answering.join_next(), if !answering.is_empty() => continue,
             };
             let history_permit = match kind {
@@ -193,6 +213,7 @@ impl Services {
                         }
                     },
                     Service::Snapshot => snapshot(&requests, &chain).await,
+                    Service::About => Err("about is answered at once".into()),
                     Service::Command => Ok(command_answer(
                         &q,
                         command(&requests, &q, &metrics)

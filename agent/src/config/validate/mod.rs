@@ -69,6 +69,10 @@ pub(super) fn validate(
     if v.problems.is_empty() {
         let mut config = config.expect("a configuration with no problems is complete");
         config.warnings = v.warnings;
+        config.source_sha256 = {
+            use sha2::Digest;
+            hex::encode(sha2::Sha256::digest(text.as_bytes()))
+        };
         Ok(config)
     } else {
         Err(ConfigErrors(v.problems))
@@ -636,6 +640,7 @@ impl Validator<'_> {
             consequences,
             recorder,
             warnings: Vec::new(),
+            source_sha256: String::new(),
         })
     }
 }

@@ -765,3 +765,6 @@ mod tests {
         assert_eq!(c.to_string(), "consequence of ese, suppressed");
     }
 }
+
+mod about;
+pub use about::{AboutPayload, CertificateAbout, ABOUT_SCHEMA};

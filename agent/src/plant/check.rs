@@ -1,0 +1,295 @@
+//! `cellwatch plant check`: the plant's folder and the running plant
+//! against the inventory, cell by cell and router by router. From the
+//! folder: each agent's signing key against the trust file, its
+//! certificate's end, a router whose access control is not the
+//! inventory's. Over the bus, from each agent's signed `about`: whether it
+//! answers, is believed with the trust file's key, runs the configuration
+//! deployed and this version, its certificate's end; over HTTP its
+//! `/readyz`.
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+use sha2::{Digest, Sha256};
+
+use super::inventory::Inventory;
+use super::layout::Layout;
+use super::render;
+use crate::bus::certs::facts;
+use crate::bus::envelope::{AgentKey, Trust};
+use crate::bus::keys::Service;
+use crate::client::BusClient;
+use crate::payload::AboutPayload;
+
+/// A certificate ending sooner than this is a problem.
+pub const EXPIRY_WARNING: Duration = Duration::from_secs(30 * 86_400);
+
+/// What the check found about one part of the plant.
+#[derive(Debug, Default, Clone, PartialEq, Eq)]
+pub struct Finding {
+    /// `cell m01ps0004`, `router router-1`, `plant`.
+    pub subject: String,
+    /// What is as it should be (shown after `ok`).
+    pub facts: Vec<String>,
+    /// What is wrong, each with what to do.
+    pub problems: Vec<String>,
+}
+
+/// Every part's finding, cells first.
+#[derive(Debug, Default)]
+pub struct Report {
+    /// By subject, in the inventory's order.
+    pub findings: Vec<Finding>,
+}
+
+impl Report {
+    /// Whether anything is wrong.
+    pub fn wrong(&self) -> bool {
+        self.findings.iter().any(|f| !f.problems.is_empty())
+    }
+
+    /// The report as text, one block per part.
+    pub fn text(&self) -> String {
+        let mut out = String::new();
+        for f in &self.findings {
+            if f.problems.is_empty() {
+                out.push_str(&format!("{}: ok — {}\n", f.subject, f.facts.join(", ")));
+            } else {
+                out.push_str(&format!("{}: WRONG\n", f.subject));
+                for p in &f.problems {
+                    out.push_str(&format!("  - {p}\n"));
+                }
+            }
+        }
+        let wrong = self
+            .findings
+            .iter()
+            .filter(|f| !f.problems.is_empty())
+            .count();
+        out.push_str(&format!(
+            "{} of {} parts wrong\n",
+            wrong,
+            self.findings.len()
+        ));
+        out
+    }
+}
+
+fn sha256(bytes: &[u8]) -> String {
+    hex::encode(Sha256::digest(bytes))
+}
+
+/// What a certificate's end means at `now_ms`.
+fn expiry(what: &str, not_after_ms: u64, now_ms: u64, f: &mut Finding) {
+    let day = 86_400_000;
+    if not_after_ms <= now_ms {
+        f.problems.push(format!(
+            "{what} ended {}: renew it (cellwatch plant renew)",
+            crate::clock::rfc3339(not_after_ms)
+        ));
+    } else if not_after_ms - now_ms < EXPIRY_WARNING.as_millis() as u64 {
+        f.problems.push(format!(
+            "{what} ends in {} days ({}): renew it",
+            (not_after_ms - now_ms) / day,
+            crate::clock::rfc3339(not_after_ms)
+        ));
+    } else {
+        f.facts.push(format!(
+            "{what} until {}",
+            &crate::clock::rfc3339(not_after_ms)[..10]
+        ));
+    }
+}
+
+/// The check of the plant's folder at `now_ms`; the trust file it holds
+/// (for the bus part) if it reads.
+pub fn folder(inventory: &Inventory, now_ms: u64) -> (Report, Option<Trust>) {
+    let layout = Layout::of(inventory);
+    let mut report = Report::default();
+    let trust = match Trust::load(&layout.trust()) {
+        Ok(t) => Some(t),
+        Err(e) => {
+            report.findings.push(Finding {
+                subject: "plant".into(),
+                facts: Vec::new(),
+                problems: vec![format!("{e}: make the plant first (cellwatch plant init)")],
+            });
+            None
+        }
+    };
+    let etc = layout.etc().to_string();
+    for (id, cell) in &inventory.cells {
+        let mut f = Finding {
+            subject: format!("cell {id}"),
+            ..Finding::default()
+        };
+        let signing = layout.on_host(&cell.host, &layout.signing_key(id));
+        match (AgentKey::load(&signing), &trust) {
+            (Ok(key), Some(trust)) => {
+                if trust.public_hex(id).as_deref() != Some(key.public_hex().as_str()) {
+                    f.problems.push(format!(
+                        "its signing key {} is not the trust file's: make the plant again (cellwatch plant init) and give every client the new trust file",
+                        layout.shown(&signing)
+                    ));
+                }
+            }
+            (Err(e), _) => f.problems.push(format!("{e}")),
+            (_, None) => {}
+        }
+        let cert = layout.on_host(&cell.host, &format!("{etc}/agent-{id}.pem"));
+        match std::fs::read_to_string(&cert)
+            .map_err(|e| e.to_string())
+            .and_then(|pem| facts(&pem))
+        {
+            Ok(c) => expiry("its bus certificate", c.not_after_ms, now_ms, &mut f),
+            Err(e) => f.problems.push(format!("{}: {e}", layout.shown(&cert))),
+        }
+        report.findings.push(f);
+    }
+    for (name, r) in &inventory.routers {
+        let mut f = Finding {
+            subject: format!("router {name}"),
+            ..Finding::default()
+        };
+        let file = layout
+            .router(name)
+            .join(layout.router_etc().trim_start_matches('/'))
+            .join("router.json5");
+        let expected = render::router(inventory, name, r, &layout);
+        match std::fs::read_to_string(&file) {
+            Ok(text) if text == expected => {
+                f.facts.push("access control as the inventory says".into());
+            }
+            Ok(_) => f.problems.push(format!(
+                "{}: its access control is not the inventory's (changed by hand, or the inventory changed since: cellwatch plant init)",
+                layout.shown(&file)
+            )),
+            Err(e) => f.problems.push(format!("{}: {e}", layout.shown(&file))),
+        }
+        report.findings.push(f);
+    }
+    (report, trust)
+}
+
+/// The running plant: each cell's agent asked `about` over `bus` (and its
+/// `/readyz` over HTTP), its findings added to `report`'s.
+pub async fn running(
+    inventory: &Inventory,
+    bus: &BusClient,
+    timeout: Duration,
+    now_ms: u64,
+    report: &mut Report,
+) {
+    let layout = Layout::of(inventory);
+    let etc = layout.etc().to_string();
+    let asks = inventory.cells.keys().map(|id| async move {
+        let about = bus.ask(id, Service::About, "", None, timeout).await;
+        (id.clone(), about)
+    });
+    let answers: BTreeMap<String, _> = futures_util::future::join_all(asks)
+        .await
+        .into_iter()
+        .collect();
+    let readiness = inventory
+        .cells
+        .iter()
+        .map(|(id, c)| async move { (id.clone(), ready(&c.host, c.metrics, timeout).await) });
+    let ready: BTreeMap<String, _> = futures_util::future::join_all(readiness)
+        .await
+        .into_iter()
+        .collect();
+    for (id, cell) in &inventory.cells {
+        let Some(f) = report
+            .findings
+            .iter_mut()
+            .find(|f| f.subject == format!("cell {id}"))
+        else {
+            continue;
+        };
+        match &answers[id] {
+            Err(e) => {
+                let said = e.to_string();
+                if said.contains("signature") || said.contains("not believed") {
+                    f.problems.push(format!(
+                        "its agent answers, but is not believed with the trust file's key: it signs with another key ({said})"
+                    ));
+                } else {
+                    f.problems
+                        .push(format!("its agent does not answer on the bus: {said}"));
+                }
+            }
+            Ok(text) => match serde_json::from_str::<AboutPayload>(text) {
+                Err(e) => f
+                    .problems
+                    .push(format!("its agent's about does not read: {e}")),
+                Ok(about) => {
+                    let deployed = layout.on_host(&cell.host, &format!("{etc}/{id}.toml"));
+                    let ours = env!("CARGO_PKG_VERSION");
+                    if about.version == ours {
+                        f.facts.push(format!("cellwatch {ours}"));
+                    } else {
+                        f.problems.push(format!(
+                            "its agent runs cellwatch {}, the plant's is {ours}",
+                            about.version
+                        ));
+                    }
+                    match std::fs::read(&deployed) {
+                        Ok(bytes) if sha256(&bytes) == about.config_sha256 => {
+                            f.facts.push("runs the configuration deployed".into());
+                        }
+                        Ok(_) => f.problems.push(format!(
+                            "its agent runs another configuration than {} (copy it to the host and reload: systemctl reload cellwatch@{id})",
+                            layout.shown(&deployed)
+                        )),
+                        Err(e) => f.problems.push(format!("{}: {e}", layout.shown(&deployed))),
+                    }
+                    if let Some(c) = &about.bus_certificate {
+                        let end = crate::clock::parse_time(&c.not_after, now_ms).unwrap_or(0);
+                        let mut certificate = Finding::default();
+                        expiry(
+                            "the certificate it runs with",
+                            end,
+                            now_ms,
+                            &mut certificate,
+                        );
+                        f.problems.extend(certificate.problems);
+                    }
+                }
+            },
+        }
+        match &ready[id] {
+            Ok(()) => f.facts.push("ready".into()),
+            Err(why) => f.problems.push(format!(
+                "its /readyz on {}:{}: {why}",
+                cell.host, cell.metrics
+            )),
+        }
+    }
+}
+
+/// Asks `http://host:port/readyz`.
+async fn ready(host: &str, port: u16, timeout: Duration) -> Result<(), String> {
+    use http_body_util::{BodyExt, Empty};
+    use hyper_util::client::legacy::Client;
+    let client: Client<_, Empty<bytes::Bytes>> =
+        Client::builder(hyper_util::rt::TokioExecutor::new()).build_http();
+    let uri: hyper::Uri = format!("http://{host}:{port}/readyz")
+        .parse()
+        .map_err(|e| format!("{e}"))?;
+    let asked = tokio::time::timeout(timeout, async {
+        let response = client.get(uri).await.map_err(|e| format!("{e}"))?;
+        let status = response.status();
+        let body = http_body_util::Limited::new(response.into_body(), 4096)
+            .collect()
+            .await
+            .map(|b| String::from_utf8_lossy(&b.to_bytes()).trim().to_string())
+            .unwrap_or_default();
+        if status.is_success() {
+            Ok(())
+        } else {
+            Err(format!("{status}: {body}"))
+        }
+    })
+    .await;
+    asked.unwrap_or_else(|_| Err(format!("no answer in {} s", timeout.as_secs())))
+}

@@ -1,0 +1,223 @@
+//! Making the plant's folder from its inventory: what is missing is made,
+//! what exists is kept. The CA, every certificate and key once (keys
+//! owner-only, each on its host's folder); the trust file, the operators
+//! files, each cell's configuration for its host with the files it reads,
+//! the routers' configurations, Prometheus's targets, the console's
+//! configuration, the Alertmanager routes and the systemd instances from
+//! the inventory every time, unchanged when it has not changed.
+
+use std::cell::RefCell;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use super::files::{make_dir, Made, Writer};
+use super::inventory::{Cell, Inventory};
+use super::layout::Layout;
+use super::{render, PlantError};
+use crate::bus::certs::{ca_files, issue_to, make_ca};
+use crate::bus::envelope::AgentKey;
+
+/// Where the packaged unit of `cellwatch@.service` is, which an instance
+/// links to.
+const UNIT: &str = "/usr/lib/systemd/system/cellwatch@.service";
+
+/// Makes what the inventory asks for and is missing, and writes again the
+/// derived files it changed.
+///
+/// # Errors
+/// A file cannot be read or written, a certificate made, or a cell's
+/// configuration does not read; files changed by hand are no error here
+/// (they are in [`Made::edited`]).
+pub fn make(inventory: &Inventory) -> Result<Made, PlantError> {
+    let layout = Layout::of(inventory);
+    let mut w = Writer::open(&layout)?;
+    let ca_dir = layout.ca_dir();
+    let (ca_pem, ca_key) = ca_files(&ca_dir);
+    make_dir(&ca_dir, 0o700)?;
+    w.once(&ca_key, || {
+        make_ca(&ca_dir, &format!("{} plant CA", inventory.name))
+            .map(|_| ())
+            .map_err(|message| PlantError::Certificate {
+                name: "the plant CA".into(),
+                message,
+            })
+    })?;
+    let ca = std::fs::read_to_string(&ca_pem).map_err(|source| PlantError::Read {
+        path: ca_pem.clone(),
+        source,
+    })?;
+    let issue = |w: &mut Writer, name: &str, hosts: Vec<String>, cert: PathBuf, key: PathBuf| {
+        w.once(&key, || {
+            if let Some(parent) = key.parent() {
+                make_dir(parent, 0o700)?;
+            }
+            if let Some(parent) = cert.parent() {
+                std::fs::create_dir_all(parent).map_err(|source| PlantError::Write {
+                    path: parent.to_path_buf(),
+                    source,
+                })?;
+            }
+            issue_to(&ca_dir, name, &hosts, (&cert, &key)).map_err(|message| {
+                PlantError::Certificate {
+                    name: name.into(),
+                    message,
+                }
+            })
+        })
+    };
+    let etc = layout.etc().to_string();
+    let (cert, key) = layout.checker();
+    if let Some(dir) = key.parent() {
+        make_dir(dir, 0o700)?;
+    }
+    issue(&mut w, "plant-check", vec!["localhost".into()], cert, key)?;
+    // Routers.
+    for (name, r) in &inventory.routers {
+        let root = layout.router(name);
+        let on = |path: &str| root.join(path.trim_start_matches('/'));
+        let dir = layout.router_etc();
+        let mut hosts = vec![r.host.clone()];
+        hosts.extend(r.addresses.iter().cloned());
+        issue(
+            &mut w,
+            name,
+            hosts,
+            on(&format!("{dir}/{name}.pem")),
+            on(&format!("{dir}/{name}.key")),
+        )?;
+        w.derived(&on(&format!("{dir}/ca.pem")), &ca)?;
+        w.derived(
+            &on(&format!("{dir}/router.json5")),
+            render::router(inventory, name, r, &layout),
+        )?;
+    }
+    // Cells: keys and certificates first, the trust file needs them.
+    let mut public = BTreeMap::new();
+    for (id, cell) in &inventory.cells {
+        let host = &cell.host;
+        make_dir(&layout.on_host(host, &layout.cell_state(id)), 0o700)?;
+        let signing = layout.on_host(host, &layout.signing_key(id));
+        let (key, made) =
+            AgentKey::load_or_create(&signing, id).map_err(|e| PlantError::Certificate {
+                name: format!("agent {id}'s signing key"),
+                message: e.to_string(),
+            })?;
+        if made {
+            w.made.made.push(layout.shown(&signing));
+        }
+        public.insert(id.clone(), key.public_hex());
+        issue(
+            &mut w,
+            &format!("agent-{id}"),
+            vec![host.clone()],
+            layout.on_host(host, &format!("{etc}/agent-{id}.pem")),
+            layout.on_host(host, &layout.bus_key(id)),
+        )?;
+    }
+    let trust = render::trust(inventory, &public);
+    w.derived(&layout.trust(), &trust)?;
+    for (id, cell) in &inventory.cells {
+        let host = &cell.host;
+        let at = |path: &str| layout.on_host(host, path);
+        w.derived(&at(&format!("{etc}/ca.pem")), &ca)?;
+        w.derived(&at(&format!("{etc}/trust.toml")), &trust)?;
+        w.derived(
+            &at(&format!("{etc}/{id}.operators.toml")),
+            render::operators(inventory, Some((id, cell))),
+        )?;
+        cell_files(&mut w, inventory, &layout, id, cell)?;
+        w.link(&layout.systemd_instance(host, id), UNIT)?;
+    }
+    w.derived(&layout.scrape_targets(), render::scrape_targets(inventory))?;
+    w.derived(
+        &layout.alertmanager_routes(),
+        render::alertmanager_routes(inventory),
+    )?;
+    if let (Some(c), Some(text)) = (&inventory.console, render::console(inventory, &layout)) {
+        let root = layout.console();
+        let on = |path: &str| root.join(path.trim_start_matches('/'));
+        issue(
+            &mut w,
+            "console",
+            vec![c.host.clone()],
+            on(&format!("{etc}/console.pem")),
+            on(&layout.console_key()),
+        )?;
+        w.derived(&on(&format!("{etc}/console.toml")), &text)?;
+        w.derived(&on(&format!("{etc}/ca.pem")), &ca)?;
+        w.derived(&on(&format!("{etc}/trust.toml")), &trust)?;
+        w.derived(
+            &on(&format!("{etc}/operators.toml")),
+            render::operators(inventory, None),
+        )?;
+    }
+    w.finish()
+}
+
+/// Reads what a configuration names and keeps the list.
+struct Recording {
+    read: RefCell<Vec<PathBuf>>,
+}
+
+impl crate::config::Files for Recording {
+    fn read(&self, path: &Path) -> std::io::Result<Vec<u8>> {
+        let bytes = std::fs::read(path)?;
+        self.read.borrow_mut().push(path.to_path_buf());
+        Ok(bytes)
+    }
+
+    fn list(&self, dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+        crate::config::Disk.list(dir)
+    }
+}
+
+/// Cell `id`'s configuration for its host, validated as the agent will,
+/// and every file it reads (programs, comments, tags files), copied beside
+/// it as they are relative to it.
+fn cell_files(
+    w: &mut Writer,
+    inventory: &Inventory,
+    layout: &Layout,
+    id: &str,
+    cell: &Cell,
+) -> Result<(), PlantError> {
+    let text = std::fs::read_to_string(&cell.config).map_err(|source| PlantError::Read {
+        path: cell.config.clone(),
+        source,
+    })?;
+    let generated = render::cell_config(inventory, id, cell, &text, layout)?;
+    let etc = layout.etc();
+    let target = layout.on_host(&cell.host, &format!("{etc}/{id}.toml"));
+    let base = cell
+        .config
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .map_or_else(|| PathBuf::from("."), Path::to_path_buf);
+    let files = Recording {
+        read: RefCell::new(Vec::new()),
+    };
+    crate::config::parse(&layout.shown(&target), &generated, &base, &files).map_err(|e| {
+        PlantError::CellConfig {
+            path: cell.config.clone(),
+            message: format!("does not validate as the plant makes it:\n{e}"),
+        }
+    })?;
+    w.derived(&target, &generated)?;
+    for read in files.read.into_inner() {
+        let rel = read.strip_prefix(&base).map_err(|_| PlantError::CellConfig {
+            path: cell.config.clone(),
+            message: format!(
+                "it reads {}, outside its own folder {}: the plant copies a cell's files to its host beside its configuration; move the file into that folder",
+                read.display(),
+                base.display()
+            ),
+        })?;
+        let bytes = std::fs::read(&read).map_err(|source| PlantError::Read {
+            path: read.clone(),
+            source,
+        })?;
+        let to = layout.on_host(&cell.host, etc).join(rel);
+        w.derived(&to, &bytes)?;
+    }
+    Ok(())
+}
