@@ -29,6 +29,7 @@ use crate::journal::{Journal, JournalError};
 use crate::metrics::Metrics;
 use crate::operator::{Gate, KeysError, OperatorKeys};
 use crate::services::alarm_server::AlarmServer;
+use crate::services::plant_operators::Listener;
 use crate::services::Services;
 use crate::sinks::alarm_server::AlarmServerSink;
 use crate::sinks::console::{ConsoleSink, Notice};
@@ -180,7 +181,7 @@ pub struct Agent {
     /// The running configuration's parts only a restart changes.
     fixed: [u64; 11],
     /// What `about` answers (the configuration's hash follows a reload).
-    about: watch::Sender<crate::payload::AboutPayload>,
+    about: Arc<watch::Sender<crate::payload::AboutPayload>>,
 }
 
 /// The parts of a configuration a reload takes by starting a source of its
@@ -305,10 +306,8 @@ impl Agent {
         let engine = compile::engine(config)?;
         // The operators and the alarm server's users, read again: a key
         // revoked, an operator's permissions changed, a user added.
-        let keys = match &config.operators_file {
-            Some(path) => OperatorKeys::load(path).map_err(|e| ReloadError::File(e.to_string()))?,
-            None => OperatorKeys::default(),
-        };
+        let (keys, held) = crate::services::plant_operators::operators(config)
+            .map_err(|e| ReloadError::File(e.to_string()))?;
         let users = match (&self.alarm_server_users, &config.alarm_server) {
             (Some(_), Some(c)) => Some(
                 crate::services::alarm_server::users::Users::load(&c.users_file)
@@ -328,6 +327,7 @@ impl Agent {
             timers: crate::cell::timers::Timers::of(config),
             max_shelve: config.max_shelve,
             keys,
+            keys_version: held.as_ref().map(|h| h.version()),
             source,
             done,
         };
@@ -559,10 +559,8 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     let mut engine = compile::engine(&config)?;
     // Before the tags go to the source.
     let fixed = config.fixed_parts();
-    let keys = match &config.operators_file {
-        Some(path) => OperatorKeys::load(path)?,
-        None => OperatorKeys::default(),
-    };
+    let (keys, held) = crate::services::plant_operators::operators(&config)?;
+    let keys_version = held.as_ref().map(|h| h.version());
     let metrics = Arc::new(Metrics::new(&config.cell));
     let journal = Journal::start(
         &config.journal.path,
@@ -596,7 +594,9 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     )
     .await?;
     let (about, about_rx) = watch::channel(crate::services::about::about(&config, &signing));
-    let services = services.telling(about_rx);
+    let about = Arc::new(about);
+    let listener = Listener::declare(&session, &config, held, about.clone()).await?;
+    let services = services.telling(about_rx).taking_operators(listener);
     let publisher = ZenohPublisher::start(session.clone(), &prefix, signing, metrics.clone())
         .await?
         .anchoring(journal.command_chain());
@@ -671,7 +671,8 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         source_tx,
         either_stops(stop_rx.clone(), source_stopped).boxed(),
     ));
-    let mut gate = Gate::new(&config.cell, keys);
+    let mut gate = Gate::new(&config.cell, OperatorKeys::default());
+    gate.reloaded(keys, keys_version);
     if let (Some(server), Some(c)) = (&alarm_server, &config.alarm_server) {
         for why in server.users().cannot_acknowledge(&gate) {
             tracing::warn!(cell = %config.cell, file = %c.users_file.display(), "alarm server: {why}");

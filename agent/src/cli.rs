@@ -308,6 +308,9 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::Plant(PlantCommand::Check(args)) => {
                 commands::plant::run_check(&args, out).await
             }
+            Command::Plant(PlantCommand::Publish(args)) => {
+                commands::plant::publish(&args, out).await
+            }
             // Dispatched synchronously by `run`; never sent here.
             Command::Sf(_)
             | Command::Sfc(_)

@@ -310,6 +310,21 @@ pub enum Request {
         /// Where the outcome goes.
         reply: oneshot::Sender<CommandOutcome>,
     },
+    /// A newer plant operators list, verified: the operators commands are
+    /// judged by from now on.
+    Operators(OperatorsTaken),
+}
+
+/// The operators of a plant operators list for this cell, to be taken by
+/// the loop (between two commands) and journaled.
+#[derive(Debug)]
+pub struct OperatorsTaken {
+    /// The list's version.
+    pub version: u64,
+    /// Its operators for this cell.
+    pub keys: crate::operator::OperatorKeys,
+    /// Told once the loop judges by them, with what changed in words.
+    pub reply: oneshot::Sender<String>,
 }
 
 /// An acknowledgement or a shelf asked by an OPC UA session of the alarm

@@ -10,6 +10,11 @@
 //! | `snapshot` | values, active alarms, values at the last fault | the agent answers |
 //! | `command` | signed operator commands | the agent answers |
 //! | `about` | its version, configuration hash, keys | the agent answers |
+//! | `operators` | the plant operators list it holds | the agent answers |
+//!
+//! Under the root, `_plant/operators` is the plant's own key: the signed
+//! plant operators list, put by `cellwatch plant publish`
+//! ([`plant_operators`]). No cell is named `_plant`.
 //! | `agent/<zenoh id>` | a liveliness token while the agent runs | the agent declares |
 //!
 //! The agent uses the prefix its configuration gives (`zenoh.key_prefix`);
@@ -97,10 +102,30 @@ impl CellKeys {
         format!("{}/{}", self.prefix, service.name())
     }
 
+    /// `operators`: the plant operators list the agent holds, answered.
+    pub fn operators(&self) -> String {
+        format!("{}/operators", self.prefix)
+    }
+
     /// `agent/<zenoh id>`: the running agent's liveliness token.
     pub fn agent_token(&self, zid: impl Display) -> String {
         format!("{}/agent/{zid}", self.prefix)
     }
+}
+
+/// `<root>/_plant/operators`: where the plant operators list is put.
+pub fn plant_operators(root: &str) -> String {
+    format!("{}/_plant/operators", root.trim_end_matches('/'))
+}
+
+/// `<root>/*/operators`: every agent's held plant operators list, to ask.
+pub fn every_cells_operators(root: &str) -> String {
+    format!("{}/*/operators", root.trim_end_matches('/'))
+}
+
+/// The root of an agent's prefix (`cellwatch` of `cellwatch/m01`).
+pub fn root_of(prefix: &str) -> &str {
+    prefix.rsplit_once('/').map_or("", |(root, _)| root)
 }
 
 /// The cell a key under `root` belongs to (`<root>/<cell>/…`), if it is

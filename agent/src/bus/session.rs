@@ -220,9 +220,36 @@ fn set(cfg: &mut zenoh::Config, key: &str, value: String) -> Result<(), ZenohErr
 /// whatever another session puts, it never reaches anyone by way of an
 /// agent, so in peer mode an agent is never a relay for an impostor.
 /// Subscribing and querying are allowed; who may reach the agent at all is
-/// TLS's business.
-pub fn agent_access_control() -> String {
-    speaking_denied("an-agent-routes-for-nobody", "ingress")
+/// TLS's business. Two things only come in: the plant operators list put
+/// under `root` (`<root>/_plant/operators`) and the lists other agents
+/// answer (`<root>/*/operators`); both are signed by the plant
+/// administrator, and believed only then.
+pub fn agent_access_control(root: &str) -> String {
+    let all = r#"["put", "delete", "declare_subscriber", "query", "declare_queryable", "reply",
+                 "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"]"#;
+    let list = serde_json::to_string(&crate::bus::keys::plant_operators(root)).unwrap_or_default();
+    let held =
+        serde_json::to_string(&crate::bus::keys::every_cells_operators(root)).unwrap_or_default();
+    format!(
+        r#"{{
+  enabled: true,
+  default_permission: "deny",
+  rules: [
+    {{ id: "the-agent-speaks", messages: {all}, flows: ["egress"], permission: "allow",
+       key_exprs: ["**", "**/@adv/**"] }},
+    {{ id: "others-ask", flows: ["ingress"], permission: "allow",
+       messages: ["declare_subscriber", "query", "declare_liveliness_subscriber", "liveliness_query"],
+       key_exprs: ["**", "**/@adv/**"] }},
+    {{ id: "the-plant-operators-list", messages: ["put"], flows: ["ingress"], permission: "allow",
+       key_exprs: [{list}] }},
+    {{ id: "lists-held-by-agents", messages: ["reply"], flows: ["ingress"], permission: "allow",
+       key_exprs: [{held}] }},
+  ],
+  subjects: [{{ id: "anyone" }}],
+  policies: [{{ rules: ["the-agent-speaks", "others-ask", "the-plant-operators-list", "lists-held-by-agents"],
+                subjects: ["anyone"] }}],
+}}"#
+    )
 }
 
 /// An access control that denies, on `flow` (`ingress`: what others send
@@ -299,7 +326,8 @@ pub async fn open_agent(c: &ZenohConfig) -> Result<Session, ZenohError> {
         "transport/link/rx/max_message_size",
         MAX_MESSAGE_BYTES.to_string(),
     )?;
-    set(&mut cfg, "access_control", agent_access_control())?;
+    let root = crate::bus::keys::root_of(&c.prefix);
+    set(&mut cfg, "access_control", agent_access_control(root))?;
     open_config(cfg).await
 }
 

@@ -623,6 +623,7 @@ impl CellLoop {
                     }
                 });
             }
+            Request::Operators(taken) => self.take_operators(taken).await,
         }
     }
 

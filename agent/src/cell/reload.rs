@@ -41,6 +41,7 @@ impl CellLoop {
             timers,
             max_shelve,
             keys,
+            keys_version,
             source: _,
             done,
         } = reload;
@@ -56,11 +57,50 @@ impl CellLoop {
         self.forcing = forcing;
         self.timers = timers;
         self.max_shelve = max_shelve;
-        self.gate.set_keys(keys);
+        self.gate.reloaded(keys, keys_version);
         for step in steps {
             self.dispatch(now, Input::Reloaded, step, 0).await;
         }
         let _ = done.send(Ok(alarms));
+    }
+}
+
+impl CellLoop {
+    /// Judges commands by a newer plant operators list's operators from
+    /// now on, and journals it as the plant's `configure` (what changed).
+    pub(super) async fn take_operators(&mut self, taken: crate::step::OperatorsTaken) {
+        let now = self.clock.now_ms();
+        let said = crate::operator::plant::changes(self.gate.keys(), &taken.keys);
+        self.gate.from_plant(taken.keys, taken.version);
+        let detail = format!(
+            "plant operators list v{} taken: {}",
+            taken.version,
+            if said.is_empty() {
+                "no change for this cell"
+            } else {
+                &said
+            }
+        );
+        tracing::info!(cell = %self.cell, "{detail}");
+        let record = CommandRecord {
+            operator: "plant".into(),
+            action: Some(crate::operator::Action::Configure),
+            alarm: String::new(),
+            nonce: String::new(),
+            accepted: true,
+            verified: true,
+            detail,
+            stage: Stage::Command,
+            source: "plant".into(),
+            count: 1,
+        };
+        self.dispatch(now, Input::Command(record), Step::default(), 0)
+            .await;
+        let settled = self.settled();
+        self.start_task(async move {
+            settled.await;
+            let _ = taken.reply.send(said);
+        });
     }
 }
 

@@ -21,6 +21,8 @@ pub struct Reload {
     pub max_shelve: Duration,
     /// Its operators (`commands.operators_file`, read again).
     pub keys: crate::operator::OperatorKeys,
+    /// The plant operators list they come from, if they do.
+    pub keys_version: Option<u64>,
     /// A source of its own when the tags or the source's settings changed:
     /// the loop reads it from the new engine on, the old one is stopped
     /// by the agent afterwards.

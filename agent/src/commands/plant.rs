@@ -26,6 +26,12 @@ pub(crate) enum PlantCommand {
     /// Add an operator (their public key from `cellwatch keygen` on their
     /// own machine) and what they may do, then write every operators file.
     AddOperator(AddOperatorArgs),
+    /// Put the plant operators list (operators.signed.json, signed by the
+    /// plant administrator's key) on the bus, and wait until every cell's
+    /// agent judges commands by it: a key revoked or a permission changed
+    /// in the inventory reaches every agent at once, without a restart.
+    /// Exit status 1 when an agent has not taken it within --timeout.
+    Publish(PublishArgs),
     /// Check the plant's folder and the running plant against the
     /// inventory: per cell, whether its agent answers on the bus, is
     /// believed with the trust file's key, runs the configuration deployed
@@ -97,6 +103,18 @@ pub(crate) struct AddOperatorArgs {
     /// What they may do on one cell, as CELL=ACTION,ACTION; repeatable.
     #[arg(long = "on-cell", value_name = "CELL=ACTIONS")]
     pub(crate) on_cell: Vec<String>,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct PublishArgs {
+    #[command(flatten)]
+    pub(crate) inventory: InventoryArg,
+    /// Where to join the bus (default: every router of the inventory).
+    #[arg(long)]
+    pub(crate) connect: Vec<String>,
+    /// Seconds to wait for every agent to take it.
+    #[arg(long = "timeout", default_value_t = 30)]
+    pub(crate) timeout_secs: u64,
 }
 
 #[derive(Debug, clap::Args)]
@@ -273,41 +291,119 @@ pub(crate) fn add_operator(args: &AddOperatorArgs, out: &mut dyn Write) -> Resul
     made(&inventory, out)
 }
 
+/// The plant's bus, joined as its administrator (`admin/plant-admin.pem`)
+/// at the inventory's routers or `connect`.
+async fn join(
+    inventory: &Inventory,
+    connect: &[String],
+    trust: crate::bus::envelope::Trust,
+) -> Result<crate::client::BusClient, Failure> {
+    let layout = crate::plant::layout::Layout::of(inventory);
+    let (cert, key) = layout.admin_cert();
+    let connect = if connect.is_empty() {
+        inventory
+            .routers
+            .values()
+            .map(|r| format!("quic/{}:{}", r.host, r.port))
+            .collect()
+    } else {
+        connect.to_vec()
+    };
+    let config = crate::config::ZenohConfig {
+        mode: crate::config::ZenohMode::Client,
+        connect,
+        listen: Vec::new(),
+        prefix: String::new(),
+        multicast_scouting: false,
+        tls: Some(crate::config::ZenohTls {
+            ca: layout.ca_dir().join("ca.pem"),
+            cert,
+            key,
+        }),
+        config_file: None,
+        plain: false,
+        signing_key: None,
+    };
+    crate::client::BusClient::open(&config, trust, &inventory.root)
+        .await
+        .map_err(|e| Failure::Runtime(format!("cannot join the plant's bus: {e}")))
+}
+
+/// `cellwatch plant publish`.
+pub(crate) async fn publish(args: &PublishArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    let inventory = crate::plant::inventory::load(&args.inventory.plant).map_err(plant_failure)?;
+    let layout = crate::plant::layout::Layout::of(&inventory);
+    let (signed, version) = check::operators_list(&layout)
+        .map_err(|e| Failure::Input(format!("{e} (make it: cellwatch plant init)")))?;
+    let trust = crate::bus::envelope::Trust::load(&layout.trust()).map_err(Failure::input)?;
+    let bus = join(&inventory, &args.connect, trust).await?;
+    let key = crate::bus::keys::plant_operators(&inventory.root);
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(args.timeout_secs);
+    let mut waiting: Vec<&String> = inventory.cells.keys().collect();
+    let mut held = std::collections::BTreeMap::new();
+    loop {
+        bus.session()
+            .put(&key, signed.clone())
+            .await
+            .map_err(|e| Failure::Runtime(format!("cannot put {key}: {e}")))?;
+        let asks = waiting.iter().map(|cell| {
+            let bus = &bus;
+            async move {
+                let about = bus
+                    .ask(
+                        cell,
+                        crate::bus::keys::Service::About,
+                        "",
+                        None,
+                        Duration::from_secs(3),
+                    )
+                    .await;
+                let v = about.ok().and_then(|t| {
+                    serde_json::from_str::<crate::payload::AboutPayload>(&t)
+                        .ok()?
+                        .operators_version
+                });
+                (cell.to_string(), v)
+            }
+        });
+        for (cell, v) in futures_util::future::join_all(asks).await {
+            held.insert(cell, v);
+        }
+        waiting.retain(|c| held.get(*c).copied().flatten().unwrap_or(0) < version);
+        if waiting.is_empty() || tokio::time::Instant::now() >= deadline {
+            break;
+        }
+        tokio::time::sleep(Duration::from_secs(1)).await;
+    }
+    let io = Failure::output;
+    for (cell, v) in &held {
+        match v {
+            Some(v) if *v >= version => writeln!(out, "cell {cell}: judges by operators list v{v}"),
+            Some(v) => writeln!(out, "cell {cell}: still judges by operators list v{v}"),
+            None => writeln!(out, "cell {cell}: has not taken the list (no answer, or it judges by its operators file)"),
+        }
+        .map_err(io)?;
+    }
+    if waiting.is_empty() {
+        writeln!(out, "operators list v{version} taken by every cell").map_err(io)?;
+        Ok(())
+    } else {
+        Err(Failure::Runtime(format!(
+            "operators list v{version} not taken by {} of {} cells within {} s",
+            waiting.len(),
+            inventory.cells.len(),
+            args.timeout_secs
+        )))
+    }
+}
+
 /// `cellwatch plant check`.
 pub(crate) async fn run_check(args: &CheckArgs, out: &mut dyn Write) -> Result<(), Failure> {
     let inventory = crate::plant::inventory::load(&args.inventory.plant).map_err(plant_failure)?;
     let now = crate::clock::now_ms();
     let (mut report, trust) = check::folder(&inventory, now);
     if let (false, Some(trust)) = (args.offline, trust) {
-        let layout = crate::plant::layout::Layout::of(&inventory);
-        let (cert, key) = layout.checker();
-        let connect = if args.connect.is_empty() {
-            inventory
-                .routers
-                .values()
-                .map(|r| format!("quic/{}:{}", r.host, r.port))
-                .collect()
-        } else {
-            args.connect.clone()
-        };
-        let config = crate::config::ZenohConfig {
-            mode: crate::config::ZenohMode::Client,
-            connect,
-            listen: Vec::new(),
-            prefix: String::new(),
-            multicast_scouting: false,
-            tls: Some(crate::config::ZenohTls {
-                ca: layout.ca_dir().join("ca.pem"),
-                cert,
-                key,
-            }),
-            config_file: None,
-            plain: false,
-            signing_key: None,
-        };
-        let bus = crate::client::BusClient::open(&config, trust, &inventory.root)
-            .await
-            .map_err(|e| Failure::Runtime(format!("cannot join the plant's bus: {e}")))?;
+        let bus = join(&inventory, &args.connect, trust).await?;
         let timeout = Duration::from_secs(args.timeout_secs);
         check::running(&inventory, &bus, timeout, now, &mut report).await;
     }

@@ -101,6 +101,10 @@ pub struct CellConfig {
     pub metrics: Option<SocketAddr>,
     /// The operators' public keys and permissions (`commands.operators_file`).
     pub operators_file: Option<PathBuf>,
+    /// The plant operators list (`commands.plant_key`, `plant_list`): the
+    /// plant administrator's public key, and where the newest list taken
+    /// is kept; its operators replace the operators file's once one is held.
+    pub plant_operators: Option<PlantOperatorsConfig>,
     /// The longest an operator may shelve an alarm (`commands.max_shelve`).
     pub max_shelve: Duration,
     /// The tag whose rising edge is one part done (index into `tags`).
@@ -132,6 +136,15 @@ pub struct CellConfig {
     /// SHA-256 (hex) of the configuration's text: what `about` tells
     /// `cellwatch plant check`.
     pub source_sha256: String,
+}
+
+/// Where a cell takes its operators from when the plant signs them.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PlantOperatorsConfig {
+    /// The plant administrator's Ed25519 public key, 64 hex digits.
+    pub key: String,
+    /// The newest list taken, kept across restarts.
+    pub list: PathBuf,
 }
 
 /// The parts of a configuration a reload compares

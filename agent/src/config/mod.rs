@@ -32,8 +32,8 @@ pub use alarm_server::AlarmServerConfig;
 pub use alertmanager::{AlertmanagerConfig, AlertmanagerTls, DEFAULT_RESEND};
 pub use bus::{cell_prefix, link_problem, ZenohConfig, ZenohMode, ZenohTls, DEFAULT_ROOT};
 pub use cell::{
-    CellConfig, JournalConfig, Keep, DEFAULT_MAX_SHELVE, FIXED_PARTS, JOURNAL_TABLES,
-    MAX_SHELVE_LIMIT,
+    CellConfig, JournalConfig, Keep, PlantOperatorsConfig, DEFAULT_MAX_SHELVE, FIXED_PARTS,
+    JOURNAL_TABLES, MAX_SHELVE_LIMIT,
 };
 pub use checks::{
     Consequences, SfcCheck, TimerCheck, DEFAULT_FORCE_PULSE, DEFAULT_FORCE_TIMEOUT,

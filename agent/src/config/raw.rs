@@ -404,6 +404,8 @@ pub(crate) struct RawMetrics {
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawCommands {
     pub(crate) operators_file: Option<Spanned<String>>,
+    pub(crate) plant_key: Option<Spanned<String>>,
+    pub(crate) plant_list: Option<Spanned<String>>,
     pub(crate) max_shelve: Option<Spanned<String>>,
     /// The shared-secret file of earlier versions: refused with a message.
     pub(crate) secrets_file: Option<Spanned<toml::Value>>,

@@ -17,6 +17,7 @@
 //! Also here: [`escaped`], how every printer shows text an operator or a
 //! journal supplies.
 
+pub mod plant;
 pub mod refusals;
 
 use std::collections::{BTreeSet, HashMap, VecDeque};
@@ -316,6 +317,11 @@ impl OperatorKey {
         )
     }
 
+    /// The public key.
+    pub fn public(&self) -> VerifyingKey {
+        self.key.verifying_key()
+    }
+
     /// The public key, hex.
     pub fn public_hex(&self) -> String {
         hex::encode(self.key.verifying_key().to_bytes())
@@ -436,7 +442,7 @@ struct Operator {
 }
 
 /// The operators an agent accepts commands from (public keys only).
-#[derive(Default)]
+#[derive(Default, Debug)]
 pub struct OperatorKeys {
     operators: HashMap<String, Operator>,
 }
@@ -558,6 +564,8 @@ impl OperatorKeys {
 pub struct Gate {
     cell: String,
     keys: OperatorKeys,
+    /// The plant operators list `keys` come from, if they do.
+    plant_version: Option<u64>,
     /// Nonces seen within the skew window, oldest first.
     seen: VecDeque<(u64, String)>,
 }
@@ -568,11 +576,33 @@ impl Gate {
         self.keys = keys;
     }
 
+    /// The operators of a configuration read again, from plant operators
+    /// list `version` (`None`: the operators file): kept out when the
+    /// gate already judges by a newer list.
+    pub fn reloaded(&mut self, keys: OperatorKeys, version: Option<u64>) {
+        if self.plant_version <= version {
+            self.keys = keys;
+            self.plant_version = version;
+        }
+    }
+
+    /// The operators of plant operators list `version`.
+    pub fn from_plant(&mut self, keys: OperatorKeys, version: u64) {
+        self.keys = keys;
+        self.plant_version = Some(version);
+    }
+
+    /// The operators it judges by.
+    pub fn keys(&self) -> &OperatorKeys {
+        &self.keys
+    }
+
     /// A gate for `cell` with `keys`.
     pub fn new(cell: &str, keys: OperatorKeys) -> Gate {
         Gate {
             cell: cell.into(),
             keys,
+            plant_version: None,
             seen: VecDeque::new(),
         }
     }

@@ -24,6 +24,10 @@ pub struct AboutPayload {
     pub bus_certificate: Option<CertificateAbout>,
     /// When it started (RFC 3339).
     pub started: String,
+    /// The version of the plant operators list it judges commands by
+    /// (`null`: its operators file).
+    #[serde(default)]
+    pub operators_version: Option<u64>,
 }
 
 /// A certificate as `about` tells it.

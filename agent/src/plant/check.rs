@@ -79,6 +79,21 @@ fn sha256(bytes: &[u8]) -> String {
     hex::encode(Sha256::digest(bytes))
 }
 
+/// The plant's signed operators list, as `plant publish` puts it, and
+/// its version.
+///
+/// # Errors
+/// It cannot be read, or it does not read as one.
+pub fn operators_list(layout: &Layout) -> Result<(Vec<u8>, u64), String> {
+    let path = layout.operators_list();
+    let bytes = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let signed = crate::operator::plant::SignedList::parse(&bytes)
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    let list: crate::operator::plant::PlantList =
+        serde_json::from_str(&signed.list).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok((bytes, list.version))
+}
+
 /// What a certificate's end means at `now_ms`.
 fn expiry(what: &str, not_after_ms: u64, now_ms: u64, f: &mut Finding) {
     let day = 86_400_000;
@@ -242,6 +257,16 @@ pub async fn running(
                             layout.shown(&deployed)
                         )),
                         Err(e) => f.problems.push(format!("{}: {e}", layout.shown(&deployed))),
+                    }
+                    match (operators_list(&layout).ok().map(|l| l.1), about.operators_version) {
+                        (Some(ours), Some(v)) if v == ours => {
+                            f.facts.push(format!("operators list v{v}"));
+                        }
+                        (Some(ours), held) => f.problems.push(format!(
+                            "its agent judges commands by {}, the plant's list is v{ours}: cellwatch plant publish",
+                            held.map_or_else(|| "its operators file".to_string(), |v| format!("operators list v{v}"))
+                        )),
+                        (None, _) => {}
                     }
                     if let Some(c) = &about.bus_certificate {
                         let end = crate::clock::parse_time(&c.not_after, now_ms).unwrap_or(0);

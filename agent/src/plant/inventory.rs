@@ -412,11 +412,11 @@ fn cells(
     let mut ports: BTreeMap<(String, u16), String> = BTreeMap::new();
     for (id, entry) in raw {
         let key = format!("cells.{id}");
-        if !is_name(&id) {
+        if !is_name(&id) || id.starts_with('_') {
             p.at(
                 entry.span(),
                 &key,
-                "a cell id is letters, digits, '-' and '_'",
+                "a cell id is letters, digits, '-' and '_', not '_' first (`<root>/_plant` is the plant's own key)",
             );
         }
         let entry = entry.into_inner();

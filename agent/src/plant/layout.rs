@@ -35,10 +35,26 @@ impl Layout {
         self.dir.join("ca")
     }
 
-    /// The certificate `cellwatch plant check` joins the bus with.
-    pub fn checker(&self) -> (PathBuf, PathBuf) {
+    /// The plant administrator's bus certificate and key: `plant check`
+    /// and `plant publish` join the bus with it.
+    pub fn admin_cert(&self) -> (PathBuf, PathBuf) {
         let dir = self.dir.join("admin");
-        (dir.join("plant-check.pem"), dir.join("plant-check.key"))
+        (dir.join("plant-admin.pem"), dir.join("plant-admin.key"))
+    }
+
+    /// The plant administrator's signing key (the operators list's), and
+    /// its public half as the agents' configurations name it.
+    pub fn admin_signing(&self) -> (PathBuf, PathBuf) {
+        let dir = self.dir.join("admin");
+        (
+            dir.join("plant-admin.signing.key"),
+            dir.join("plant-admin.pub"),
+        )
+    }
+
+    /// The signed plant operators list, as `plant publish` puts it.
+    pub fn operators_list(&self) -> PathBuf {
+        self.dir.join("operators.signed.json")
     }
 
     /// The plant's own copy of the trust file.

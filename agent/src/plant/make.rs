@@ -16,6 +16,8 @@ use super::layout::Layout;
 use super::{render, PlantError};
 use crate::bus::certs::{ca_files, issue_to, make_ca};
 use crate::bus::envelope::AgentKey;
+use crate::operator::plant::{ListedOperator, PlantList, SignedList, LIST_SCHEMA};
+use crate::operator::OperatorKey;
 
 /// Where the packaged unit of `cellwatch@.service` is, which an instance
 /// links to.
@@ -66,11 +68,13 @@ pub fn make(inventory: &Inventory) -> Result<Made, PlantError> {
         })
     };
     let etc = layout.etc().to_string();
-    let (cert, key) = layout.checker();
+    let (cert, key) = layout.admin_cert();
     if let Some(dir) = key.parent() {
         make_dir(dir, 0o700)?;
     }
-    issue(&mut w, "plant-check", vec!["localhost".into()], cert, key)?;
+    issue(&mut w, "plant-admin", vec!["localhost".into()], cert, key)?;
+    let admin = admin_signing(&mut w, &layout)?;
+    operators_list(&mut w, inventory, &layout, &admin)?;
     // Routers.
     for (name, r) in &inventory.routers {
         let root = layout.router(name);
@@ -124,6 +128,14 @@ pub fn make(inventory: &Inventory) -> Result<Made, PlantError> {
         w.derived(
             &at(&format!("{etc}/{id}.operators.toml")),
             render::operators(inventory, Some((id, cell))),
+        )?;
+        // The list the agent starts with, until a newer one reaches it.
+        let list = layout.operators_list();
+        let signed =
+            std::fs::read(&list).map_err(|source| PlantError::Read { path: list, source })?;
+        w.derived(
+            &at(&format!("{}/{id}/plant-operators.json", inventory.state)),
+            signed,
         )?;
         cell_files(&mut w, inventory, &layout, id, cell)?;
         w.link(&layout.systemd_instance(host, id), UNIT)?;
@@ -185,7 +197,12 @@ fn cell_files(
         path: cell.config.clone(),
         source,
     })?;
-    let generated = render::cell_config(inventory, id, cell, &text, layout)?;
+    let admin =
+        std::fs::read_to_string(layout.admin_signing().1).map_err(|source| PlantError::Read {
+            path: layout.admin_signing().1,
+            source,
+        })?;
+    let generated = render::cell_config(inventory, id, cell, &text, layout, admin.trim())?;
     let etc = layout.etc();
     let target = layout.on_host(&cell.host, &format!("{etc}/{id}.toml"));
     let base = cell
@@ -220,4 +237,88 @@ fn cell_files(
         w.derived(&to, &bytes)?;
     }
     Ok(())
+}
+
+/// The plant administrator's signing key, made once (owner-only) with its
+/// public half beside it.
+fn admin_signing(w: &mut Writer, layout: &Layout) -> Result<OperatorKey, PlantError> {
+    let (private, public) = layout.admin_signing();
+    w.once(&private, || {
+        let key = OperatorKey::generate("plant-admin");
+        crate::bus::certs::write_private(&private, &key.to_file()).map_err(|message| {
+            PlantError::Certificate {
+                name: "the plant administrator's signing key".into(),
+                message,
+            }
+        })
+    })?;
+    let text = std::fs::read_to_string(&private).map_err(|source| PlantError::Read {
+        path: private.clone(),
+        source,
+    })?;
+    let key = OperatorKey::parse(&private.display().to_string(), &text).map_err(|message| {
+        PlantError::Certificate {
+            name: "the plant administrator's signing key".into(),
+            message,
+        }
+    })?;
+    w.derived(&public, format!("{}\n", key.public_hex()))?;
+    Ok(key)
+}
+
+/// The plant operators list: each operator's key and, per cell, what they
+/// may do there; signed anew, one version up, only when that changes.
+fn operators_list(
+    w: &mut Writer,
+    inventory: &Inventory,
+    layout: &Layout,
+    admin: &OperatorKey,
+) -> Result<(), PlantError> {
+    let mut operators = BTreeMap::new();
+    for (name, op) in &inventory.operators {
+        let cells = inventory
+            .cells
+            .iter()
+            .map(|(id, c)| (id.clone(), op.allowed_on(id, &c.area)))
+            .filter(|(_, allowed)| !allowed.is_empty())
+            .collect();
+        operators.insert(
+            name.clone(),
+            ListedOperator {
+                public_key: op.public_key.clone(),
+                cells,
+            },
+        );
+    }
+    let path = layout.operators_list();
+    let before = match std::fs::read(&path) {
+        Ok(bytes) => {
+            let list = SignedList::parse(&bytes)
+                .and_then(|s| s.open(&admin.public()))
+                .map_err(|e| PlantError::Edit {
+                    path: path.clone(),
+                    message: format!("{e}: it was not made by this plant's administrator key; move it away to have it made again (agents take only a version above the one they hold)"),
+                })?;
+            Some(list)
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+        Err(source) => return Err(PlantError::Read { path, source }),
+    };
+    if let Some(b) = &before {
+        if b.operators == operators && b.plant == inventory.name {
+            return Ok(());
+        }
+    }
+    let list = PlantList {
+        schema: LIST_SCHEMA.into(),
+        plant: inventory.name.clone(),
+        version: before.map_or(1, |b| b.version + 1),
+        issued_at: crate::clock::rfc3339(crate::clock::now_ms()),
+        operators,
+    };
+    let signed = list.signed_by(admin);
+    w.derived(
+        &path,
+        serde_json::to_string_pretty(&signed).unwrap_or_default(),
+    )
 }

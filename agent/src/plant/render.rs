@@ -135,7 +135,8 @@ pub fn router(inventory: &Inventory, name: &str, r: &Router, layout: &Layout) ->
     );
     let _ = write!(
         out,
-        "      {{\n        id: \"plant-asks\",\n        messages: [\"declare_subscriber\", \"query\", \"declare_liveliness_subscriber\", \"liveliness_query\"],\n        flows: [\"ingress\"],\n        permission: \"allow\",\n        key_exprs: {every},\n      }},\n      {{\n        id: \"plant-hears\",\n        messages: {AGENT_MESSAGES},\n        flows: [\"egress\"],\n        permission: \"allow\",\n        key_exprs: {every},\n      }},\n    ],\n    subjects: [\n"
+        "      {{\n        id: \"plant-admin-publishes\",\n        messages: [\"put\"],\n        flows: [\"ingress\"],\n        permission: \"allow\",\n        key_exprs: [{}],\n      }},\n      {{\n        id: \"plant-asks\",\n        messages: [\"declare_subscriber\", \"query\", \"declare_liveliness_subscriber\", \"liveliness_query\"],\n        flows: [\"ingress\"],\n        permission: \"allow\",\n        key_exprs: {every},\n      }},\n      {{\n        id: \"plant-hears\",\n        messages: {AGENT_MESSAGES},\n        flows: [\"egress\"],\n        permission: \"allow\",\n        key_exprs: {every},\n      }},\n    ],\n    subjects: [\n",
+        quoted(&crate::bus::keys::plant_operators(root))
     );
     for cell in inventory.cells.keys() {
         let _ = writeln!(
@@ -146,7 +147,7 @@ pub fn router(inventory: &Inventory, name: &str, r: &Router, layout: &Layout) ->
     let routers: Vec<String> = inventory.routers.keys().map(|r| quoted(r)).collect();
     let _ = write!(
         out,
-        "      {{ id: \"routers\", cert_common_names: [{}] }},\n      {{ id: \"plant\", link_protocols: [\"tls\", \"quic\"] }},\n    ],\n    policies: [\n",
+        "      {{ id: \"routers\", cert_common_names: [{}] }},\n      {{ id: \"plant-admin\", cert_common_names: [\"plant-admin\"] }},\n      {{ id: \"plant\", link_protocols: [\"tls\", \"quic\"] }},\n    ],\n    policies: [\n",
         routers.join(", ")
     );
     for cell in inventory.cells.keys() {
@@ -155,7 +156,7 @@ pub fn router(inventory: &Inventory, name: &str, r: &Router, layout: &Layout) ->
             "      {{ rules: [\"agent-{cell}-speaks\", \"agent-{cell}-hears\"], subjects: [\"agent-{cell}\"] }},"
         );
     }
-    out.push_str("      { rules: [\"routers-relay\"], subjects: [\"routers\"] },\n      { rules: [\"plant-asks\", \"plant-hears\"], subjects: [\"plant\"] },\n    ],\n  },\n}\n");
+    out.push_str("      { rules: [\"routers-relay\"], subjects: [\"routers\"] },\n      { rules: [\"plant-admin-publishes\"], subjects: [\"plant-admin\"] },\n      { rules: [\"plant-asks\", \"plant-hears\"], subjects: [\"plant\"] },\n    ],\n  },\n}\n");
     out
 }
 
@@ -246,6 +247,7 @@ pub fn cell_config(
     cell: &Cell,
     text: &str,
     layout: &Layout,
+    admin_public: &str,
 ) -> Result<String, PlantError> {
     use toml_edit::{value, Array, DocumentMut, InlineTable, Item, Table};
     let bad = |message: String| PlantError::CellConfig {
@@ -299,6 +301,8 @@ pub fn cell_config(
     };
     table(&mut doc, "commands")?;
     doc["commands"]["operators_file"] = value(format!("{etc}/{id}.operators.toml"));
+    doc["commands"]["plant_key"] = value(admin_public);
+    doc["commands"]["plant_list"] = value(format!("{}/{id}/plant-operators.json", inventory.state));
     table(&mut doc, "journal")?;
     doc["journal"]["path"] = value(format!("{}/{id}/journal.sqlite", inventory.state));
     table(&mut doc, "metrics")?;
@@ -309,7 +313,7 @@ pub fn cell_config(
     let mut out = header("#", inventory);
     let _ = writeln!(
         out,
-        "# From {} with [zenoh], opcua.endpoint and pki_dir, commands.operators_file, journal.path\n# and metrics.listen set by the plant.",
+        "# From {} with [zenoh], opcua.endpoint and pki_dir, commands.operators_file, plant_key and\n# plant_list, journal.path and metrics.listen set by the plant.",
         layout.shown(&cell.config)
     );
     out.push_str(&doc.to_string());

@@ -30,5 +30,6 @@ pub fn about(config: &CellConfig, key: &AgentKey) -> AboutPayload {
         signing_key: key.public_hex(),
         bus_certificate,
         started: rfc3339(now_ms()),
+        operators_version: None,
     }
 }

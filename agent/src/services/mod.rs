@@ -29,6 +29,7 @@
 
 pub mod about;
 pub mod alarm_server;
+pub mod plant_operators;
 
 use std::collections::HashMap;
 use std::future::Future;
@@ -69,6 +70,8 @@ pub struct Services {
     snapshot: Queryable,
     command: Queryable,
     about: Queryable,
+    /// The plant operators list's side, when the plant signs operators.
+    plant: Option<plant_operators::Listener>,
     /// What `about` answers: kept current by the agent.
     about_now: tokio::sync::watch::Receiver<crate::payload::AboutPayload>,
     journal: PathBuf,
@@ -132,6 +135,7 @@ impl Services {
             snapshot: declare(Service::Snapshot).await?,
             command: declare(Service::Command).await?,
             about: declare(Service::About).await?,
+            plant: None,
             about_now: tokio::sync::watch::channel(crate::payload::AboutPayload::default()).1,
             journal: journal.path().to_path_buf(),
             kpi,
@@ -157,9 +161,15 @@ impl Services {
         self
     }
 
+    /// Plant operators lists heard, taken and answered by `listener`.
+    pub fn taking_operators(mut self, listener: Option<plant_operators::Listener>) -> Services {
+        self.plant = listener;
+        self
+    }
+
     /// Answers queries until `shutdown` completes; then waits for the
     /// answers under way and undeclares the queryables.
-    pub async fn run(self, shutdown: impl Future<Output = ()>) {
+    pub async fn run(mut self, shutdown: impl Future<Output = ()>) {
         tokio::pin!(shutdown);
         let mut answering = JoinSet::new();
         loop {
@@ -168,6 +178,15 @@ impl Services {
                 Ok(q) = self.history.recv_async() => (Service::History, q),
                 Ok(q) = self.snapshot.recv_async() => (Service::Snapshot, q),
                 Ok(q) = self.command.recv_async() => (Service::Command, q),
+                heard = heard(&mut self.plant) => {
+                    if let Some(plant) = self.plant.as_mut() {
+                        match heard {
+                            plant_operators::Heard::List(bytes) => plant.consider(&bytes, &self.requests).await,
+                            plant_operators::Heard::Asked(q) => plant.answer(q).await,
+                        }
+                    }
+                    continue;
+                }
                 Ok(q) = self.about.recv_async() => {
                     let about = serde_json::to_string(&*self.about_now.borrow()).unwrap_or_default();
                     reply(&self.seal, Service::About, &self.metrics, q, Ok(about)).await;
@@ -225,6 +244,14 @@ impl Services {
             });
         }
         answering.shutdown().await;
+    }
+}
+
+/// What the plant operators list's listener heard next; never, without one.
+async fn heard(plant: &mut Option<plant_operators::Listener>) -> plant_operators::Heard {
+    match plant {
+        Some(p) => p.next().await,
+        None => std::future::pending().await,
     }
 }
 

@@ -8,6 +8,7 @@ mod alarms;
 mod alertmanager;
 mod bus;
 mod checks;
+mod commands;
 mod journal;
 mod kpi;
 mod legacy;
@@ -490,6 +491,11 @@ impl Validator<'_> {
             );
         }
         let operators_file = raw.commands.operators_file.map(|s| self.path(s.get_ref()));
+        let plant_operators = self.plant_operators(
+            raw.commands.plant_key,
+            raw.commands.plant_list,
+            &journal.path,
+        );
         let max_shelve_span = raw.commands.max_shelve.as_ref().map(Spanned::span);
         let max_shelve = self.duration(
             raw.commands.max_shelve,
@@ -626,6 +632,7 @@ impl Validator<'_> {
             journal,
             metrics,
             operators_file,
+            plant_operators,
             max_shelve,
             part_done,
             part_counters,
