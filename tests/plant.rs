@@ -376,63 +376,20 @@ fn as_on_host(dir: &Path, host: &str, id: &str, router_port: u16) -> cellwatch::
     c
 }
 
-fn free_tcp_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
-async fn plant_check_says_per_cell_what_is_wrong_in_the_running_plant() {
-    let d = tempfile::tempdir().unwrap();
-    let dir = d.path().to_path_buf();
-    let sim = SimulatedCnc::start(&SimOptions {
-        listen: "127.0.0.1:0".parse().unwrap(),
-        pki_dir: dir.join("sim-pki"),
-        insecure: false,
-        decoy: None,
+/// `cellwatch plant ARGS` in `dir`, off the test's runtime.
+async fn plant_async(dir: PathBuf, args: Vec<String>) -> Ran {
+    tokio::task::spawn_blocking(move || {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        plant(&dir, &args)
     })
     .await
-    .unwrap();
-    let run = |args: Vec<String>| {
-        let dir = dir.clone();
-        async move {
-            tokio::task::spawn_blocking(move || {
-                let args: Vec<&str> = args.iter().map(String::as_str).collect();
-                plant(&dir, &args)
-            })
-            .await
-            .unwrap()
-        }
-    };
-    let s = |v: &[&str]| v.iter().map(|a| a.to_string()).collect::<Vec<_>>();
-    let r = run(s(&["init", "--router", "router-1=127.0.0.1"])).await;
-    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
-    let (m1, m2) = (free_tcp_port(), free_tcp_port());
-    for (id, port) in [("m01", m1), ("m02", m2)] {
-        let config = cell_config(&dir, id);
-        let r = run(s(&[
-            "add-cell",
-            "--cell",
-            id,
-            "--area",
-            "machining",
-            "--host",
-            "127.0.0.1",
-            "--plc",
-            &sim.endpoint(),
-            "--config",
-            &config,
-            "--metrics",
-            &port.to_string(),
-        ]))
-        .await;
-        assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
-    }
-    // The router, from the configuration the plant made (its files under
-    // the plant's tree, listening on a port of its own).
+    .unwrap()
+}
+
+/// Router `router-1` of the plant in `dir`, from the configuration the
+/// plant made (its files under the plant's tree, listening on a port of
+/// its own), and that port.
+async fn plant_router(dir: &Path) -> (zenoh::Session, u16) {
     let router_dir = dir.join("routers/router-1/etc/cellwatch/router");
     let mut cfg = zenoh::Config::from_file(router_dir.join("router.json5")).unwrap();
     let file =
@@ -461,6 +418,57 @@ async fn plant_check_says_per_cell_what_is_wrong_in_the_running_plant() {
     }
     let router = zenoh::open(cfg).await.unwrap();
     let port = crate::util::session_port(&router).await;
+    (router, port)
+}
+
+fn free_tcp_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn plant_check_says_per_cell_what_is_wrong_in_the_running_plant() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path().to_path_buf();
+    let sim = SimulatedCnc::start(&SimOptions {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        pki_dir: dir.join("sim-pki"),
+        insecure: false,
+        decoy: None,
+    })
+    .await
+    .unwrap();
+    let run = |args: Vec<String>| plant_async(dir.clone(), args);
+    let s = |v: &[&str]| v.iter().map(|a| a.to_string()).collect::<Vec<_>>();
+    let r = run(s(&["init", "--router", "router-1=127.0.0.1"])).await;
+    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    let (m1, m2) = (free_tcp_port(), free_tcp_port());
+    for (id, port) in [("m01", m1), ("m02", m2)] {
+        let config = cell_config(&dir, id);
+        let r = run(s(&[
+            "add-cell",
+            "--cell",
+            id,
+            "--area",
+            "machining",
+            "--host",
+            "127.0.0.1",
+            "--plc",
+            &sim.endpoint(),
+            "--config",
+            &config,
+            "--metrics",
+            &port.to_string(),
+        ]))
+        .await;
+        assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    }
+    // The router, from the configuration the plant made (its files under
+    // the plant's tree, listening on a port of its own).
+    let (router, port) = plant_router(&dir).await;
     let connect = format!("quic/127.0.0.1:{port}");
 
     // m01 as the plant made it; m02 signing with a key of its own.
@@ -614,17 +622,7 @@ async fn a_key_revoked_in_the_inventory_reaches_every_agent_at_once() {
     })
     .await
     .unwrap();
-    let run = |args: Vec<String>| {
-        let dir = dir.clone();
-        async move {
-            tokio::task::spawn_blocking(move || {
-                let args: Vec<&str> = args.iter().map(String::as_str).collect();
-                plant(&dir, &args)
-            })
-            .await
-            .unwrap()
-        }
-    };
+    let run = |args: Vec<String>| plant_async(dir.clone(), args);
     let s = |v: &[&str]| v.iter().map(|a| a.to_string()).collect::<Vec<_>>();
     assert_eq!(
         run(s(&["init", "--router", "router-1=127.0.0.1"]))
@@ -678,34 +676,7 @@ async fn a_key_revoked_in_the_inventory_reaches_every_agent_at_once() {
     let first_list = std::fs::read(dir.join("operators.signed.json")).unwrap();
 
     // The router and both agents, as the plant made them.
-    let router_dir = dir.join("routers/router-1/etc/cellwatch/router");
-    let mut cfg = zenoh::Config::from_file(router_dir.join("router.json5")).unwrap();
-    let file =
-        |name: &str| serde_json::to_string(&router_dir.join(name).display().to_string()).unwrap();
-    for (key, value) in [
-        ("listen/endpoints", "[\"quic/127.0.0.1:0\"]".to_string()),
-        ("transport/link/tls/root_ca_certificate", file("ca.pem")),
-        (
-            "transport/link/tls/listen_certificate",
-            file("router-1.pem"),
-        ),
-        (
-            "transport/link/tls/listen_private_key",
-            file("router-1.key"),
-        ),
-        (
-            "transport/link/tls/connect_certificate",
-            file("router-1.pem"),
-        ),
-        (
-            "transport/link/tls/connect_private_key",
-            file("router-1.key"),
-        ),
-    ] {
-        cfg.insert_json5(key, &value).unwrap();
-    }
-    let router = zenoh::open(cfg).await.unwrap();
-    let port = crate::util::session_port(&router).await;
+    let (router, port) = plant_router(&dir).await;
     let connect = format!("quic/127.0.0.1:{port}");
     let c1 = agent_config(&dir, "m01", port);
     crate::util::trust_sim(&c1, &dir.join("sim-pki"));

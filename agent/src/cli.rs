@@ -364,6 +364,8 @@ pub fn run(
         Command::Pki(PkiCommand::AgentKey(args)) => commands::pki::agent_key(&args, out),
         Command::Plant(PlantCommand::Init(args)) => commands::plant::init(&args, out),
         Command::Plant(PlantCommand::AddCell(args)) => commands::plant::add_cell(&args, out),
+        Command::Plant(PlantCommand::RotateKey(args)) => commands::plant::rotate_key(&args, out),
+        Command::Plant(PlantCommand::Renew(args)) => commands::plant::renew(&args, out),
         Command::Plant(PlantCommand::AddOperator(args)) => {
             commands::plant::add_operator(&args, out)
         }

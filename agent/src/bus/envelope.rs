@@ -516,7 +516,9 @@ impl AgentKey {
 /// ```
 #[derive(Debug, Clone, Default)]
 pub struct Trust {
-    cells: BTreeMap<String, VerifyingKey>,
+    /// Each cell's keys: its current one first, then those it is being
+    /// rotated from (`previous_keys`), each believed.
+    cells: BTreeMap<String, Vec<VerifyingKey>>,
     /// Roots verified lately: the SHA-256 of the public key, the
     /// [`tree_bytes`] and the signature, the newest last.
     verified: Arc<Mutex<VecDeque<[u8; 32]>>>,
@@ -533,6 +535,9 @@ struct TrustFile {
 #[serde(deny_unknown_fields)]
 struct TrustEntry {
     public_key: String,
+    /// Keys the agent is being rotated from, believed until removed.
+    #[serde(default)]
+    previous_keys: Vec<String>,
 }
 
 /// Why an envelope is not believed.
@@ -583,16 +588,22 @@ impl Trust {
         let f: TrustFile = toml::from_str(text).map_err(|e| invalid(e.message().into()))?;
         let mut cells = BTreeMap::new();
         for (cell, entry) in f.cells {
-            let key = hex::decode(entry.public_key.trim())
-                .ok()
-                .and_then(|b| <[u8; 32]>::try_from(b).ok())
-                .and_then(|b| VerifyingKey::from_bytes(&b).ok())
-                .ok_or_else(|| {
-                    invalid(format!(
-                        "cells.{cell}.public_key: not an Ed25519 public key (64 hex digits)"
-                    ))
-                })?;
-            cells.insert(cell, key);
+            let mut keys = Vec::new();
+            let texts = std::iter::once(("public_key", &entry.public_key))
+                .chain(entry.previous_keys.iter().map(|k| ("previous_keys", k)));
+            for (name, text) in texts {
+                let key = hex::decode(text.trim())
+                    .ok()
+                    .and_then(|b| <[u8; 32]>::try_from(b).ok())
+                    .and_then(|b| VerifyingKey::from_bytes(&b).ok())
+                    .ok_or_else(|| {
+                        invalid(format!(
+                            "cells.{cell}.{name}: not an Ed25519 public key (64 hex digits)"
+                        ))
+                    })?;
+                keys.push(key);
+            }
+            cells.insert(cell, keys);
         }
         Ok(Trust {
             cells,
@@ -614,12 +625,22 @@ impl Trust {
 
     /// Adds (or replaces) `cell`'s public key.
     pub fn insert(&mut self, cell: &str, public: VerifyingKey) {
-        self.cells.insert(cell.into(), public);
+        self.cells.insert(cell.into(), vec![public]);
     }
 
-    /// Cell `cell`'s public key (hex), if it knows the cell.
+    /// Cell `cell`'s current public key (hex), if it knows the cell.
     pub fn public_hex(&self, cell: &str) -> Option<String> {
-        self.cells.get(cell).map(|k| hex::encode(k.as_bytes()))
+        self.cells
+            .get(cell)
+            .and_then(|k| k.first())
+            .map(|k| hex::encode(k.as_bytes()))
+    }
+
+    /// The keys cell `cell` is being rotated from (hex).
+    pub fn previous_hex(&self, cell: &str) -> Vec<String> {
+        self.cells.get(cell).map_or_else(Vec::new, |k| {
+            k.iter().skip(1).map(|k| hex::encode(k.as_bytes())).collect()
+        })
     }
 
     /// The cells it knows.
@@ -661,7 +682,7 @@ impl Trust {
             }
             (other, _) => return Err(Distrust::NotAnEnvelope(format!("schema '{other}'"))),
         };
-        let public = self
+        let keys = self
             .cells
             .get(&env.cell)
             .ok_or_else(|| Distrust::UnknownCell(env.cell.clone()))?;
@@ -672,13 +693,14 @@ impl Trust {
             .map(|b| Signature::from_bytes(&b))
             .ok_or_else(bad)?;
         let signed = signed_bytes(env.kind, &env.cell, &env.key, &env.query, env.at, &env.body);
-        if let Some(place) = placed {
-            self.verify_in_tree(public, &signed, place, &signature)
-                .ok_or_else(bad)?;
-        } else {
-            public
-                .verify_strict(&signed, &signature)
-                .map_err(|_| bad())?;
+        let verified = keys.iter().any(|public| match placed {
+            Some(place) => self
+                .verify_in_tree(public, &signed, place, &signature)
+                .is_some(),
+            None => public.verify_strict(&signed, &signature).is_ok(),
+        });
+        if !verified {
+            return Err(bad());
         }
         let kind_ok = env.kind == kind || (kind == Kind::Reply && env.kind == Kind::Error);
         if !kind_ok || env.key != key || env.query != query {

@@ -26,6 +26,15 @@ pub(crate) enum PlantCommand {
     /// Add an operator (their public key from `cellwatch keygen` on their
     /// own machine) and what they may do, then write every operators file.
     AddOperator(AddOperatorArgs),
+    /// Rotate a cell agent's signing key with an overlap: a new key is
+    /// made and the trust file holds the old and the new one (every
+    /// client believes either) until `--done`, once every client has it
+    /// and the agent signs with the new key.
+    RotateKey(RotateKeyArgs),
+    /// Issue a cell agent's bus certificate again, with a new key, in
+    /// place of the one it has (one ending soon, or a key feared known);
+    /// copy it to the host and restart the agent.
+    Renew(RenewArgs),
     /// Put the plant operators list (operators.signed.json, signed by the
     /// plant administrator's key) on the bus, and wait until every cell's
     /// agent judges commands by it: a key revoked or a permission changed
@@ -103,6 +112,27 @@ pub(crate) struct AddOperatorArgs {
     /// What they may do on one cell, as CELL=ACTION,ACTION; repeatable.
     #[arg(long = "on-cell", value_name = "CELL=ACTIONS")]
     pub(crate) on_cell: Vec<String>,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct RotateKeyArgs {
+    #[command(flatten)]
+    pub(crate) inventory: InventoryArg,
+    /// The cell whose agent's signing key is rotated.
+    #[arg(long)]
+    pub(crate) cell: String,
+    /// End the rotation: the trust file keeps the new key only.
+    #[arg(long)]
+    pub(crate) done: bool,
+}
+
+#[derive(Debug, clap::Args)]
+pub(crate) struct RenewArgs {
+    #[command(flatten)]
+    pub(crate) inventory: InventoryArg,
+    /// The cell whose agent's bus certificate is renewed; repeatable.
+    #[arg(long, required = true)]
+    pub(crate) cell: Vec<String>,
 }
 
 #[derive(Debug, clap::Args)]
@@ -289,6 +319,47 @@ pub(crate) fn add_operator(args: &AddOperatorArgs, out: &mut dyn Write) -> Resul
     )
     .map_err(plant_failure)?;
     made(&inventory, out)
+}
+
+/// `cellwatch plant rotate-key`.
+pub(crate) fn rotate_key(args: &RotateKeyArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    let inventory = crate::plant::inventory::load(&args.inventory.plant).map_err(plant_failure)?;
+    let layout = crate::plant::layout::Layout::of(&inventory);
+    let id = &args.cell;
+    let done = if args.done {
+        make::finish_rotation(&inventory, id)
+    } else {
+        make::rotate(&inventory, id)
+    }
+    .map_err(plant_failure)?;
+    say(&done, &inventory, out)?;
+    let host = inventory.cells.get(id).map_or("", |c| c.host.as_str());
+    let key = layout.shown(&layout.on_host(host, &layout.signing_key(id)));
+    let text = if args.done {
+        format!("the trust file holds cell {id}'s new key only: give trust.toml to every client")
+    } else {
+        format!(
+            "the trust file holds cell {id}'s old and new keys: 1. give trust.toml to every client; 2. copy {key} to {host} and restart cellwatch@{id}; 3. once `cellwatch plant check` says it signs with the new key, cellwatch plant rotate-key --cell {id} --done"
+        )
+    };
+    writeln!(out, "{text}").map_err(Failure::output)
+}
+
+/// `cellwatch plant renew`.
+pub(crate) fn renew(args: &RenewArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    let inventory = crate::plant::inventory::load(&args.inventory.plant).map_err(plant_failure)?;
+    let layout = crate::plant::layout::Layout::of(&inventory);
+    for id in &args.cell {
+        let files = make::renew(&inventory, id).map_err(plant_failure)?;
+        let shown: Vec<String> = files.iter().map(|f| layout.shown(f)).collect();
+        writeln!(
+            out,
+            "renewed  {} (copy them to its host and restart cellwatch@{id})",
+            shown.join(", ")
+        )
+        .map_err(Failure::output)?;
+    }
+    Ok(())
 }
 
 /// The plant's bus, joined as its administrator (`admin/plant-admin.pem`)

@@ -141,6 +141,11 @@ pub fn folder(inventory: &Inventory, now_ms: u64) -> (Report, Option<Trust>) {
         let signing = layout.on_host(&cell.host, &layout.signing_key(id));
         match (AgentKey::load(&signing), &trust) {
             (Ok(key), Some(trust)) => {
+                if !trust.previous_hex(id).is_empty() {
+                    f.problems.push(format!(
+                        "the rotation of its signing key is under way: once every client has trust.toml and the agent signs with the new key, cellwatch plant rotate-key --cell {id} --done"
+                    ));
+                }
                 if trust.public_hex(id).as_deref() != Some(key.public_hex().as_str()) {
                     f.problems.push(format!(
                         "its signing key {} is not the trust file's: make the plant again (cellwatch plant init) and give every client the new trust file",
@@ -268,6 +273,25 @@ pub async fn running(
                         )),
                         (None, _) => {}
                     }
+                    if trust_previous(&layout, id).contains(&about.signing_key) {
+                        f.problems.push(format!(
+                            "its agent still signs with the key it is being rotated from: copy {} to it and restart cellwatch@{id}",
+                            layout.shown(&layout.on_host(&cell.host, &layout.signing_key(id)))
+                        ));
+                    }
+                    let deployed_cert = layout.on_host(&cell.host, &format!("{etc}/agent-{id}.pem"));
+                    let deployed_sha = std::fs::read_to_string(&deployed_cert)
+                        .ok()
+                        .and_then(|pem| facts(&pem).ok())
+                        .map(|c| c.sha256);
+                    if let (Some(c), Some(sha)) = (&about.bus_certificate, &deployed_sha) {
+                        if &c.sha256 != sha {
+                            f.problems.push(format!(
+                                "its agent runs with another bus certificate than {} (renewed: copy it and its key to the host and restart cellwatch@{id})",
+                                layout.shown(&deployed_cert)
+                            ));
+                        }
+                    }
                     if let Some(c) = &about.bus_certificate {
                         let end = crate::clock::parse_time(&c.not_after, now_ms).unwrap_or(0);
                         let mut certificate = Finding::default();
@@ -290,6 +314,12 @@ pub async fn running(
             )),
         }
     }
+}
+
+/// The keys cell `id` is being rotated from, as the plant's trust file
+/// says.
+fn trust_previous(layout: &Layout, id: &str) -> Vec<String> {
+    Trust::load(&layout.trust()).map_or_else(|_| Vec::new(), |t| t.previous_hex(id))
 }
 
 /// Asks `http://host:port/readyz`.

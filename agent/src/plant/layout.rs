@@ -30,6 +30,11 @@ impl Layout {
         }
     }
 
+    /// The plant's folder.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
     /// The plant CA's folder (its private key never leaves it).
     pub fn ca_dir(&self) -> PathBuf {
         self.dir.join("ca")
@@ -55,6 +60,12 @@ impl Layout {
     /// The signed plant operators list, as `plant publish` puts it.
     pub fn operators_list(&self) -> PathBuf {
         self.dir.join("operators.signed.json")
+    }
+
+    /// The public key cell `id`'s agent is being rotated from, while the
+    /// rotation is under way.
+    pub fn rotating(&self, id: &str) -> PathBuf {
+        self.dir.join("rotating").join(format!("{id}.pub"))
     }
 
     /// The plant's own copy of the trust file.

@@ -118,7 +118,13 @@ pub fn make(inventory: &Inventory) -> Result<Made, PlantError> {
             layout.on_host(host, &layout.bus_key(id)),
         )?;
     }
-    let trust = render::trust(inventory, &public);
+    let mut previous = BTreeMap::new();
+    for id in inventory.cells.keys() {
+        if let Ok(text) = std::fs::read_to_string(layout.rotating(id)) {
+            previous.insert(id.clone(), text.lines().map(|l| l.trim().to_string()).filter(|l| !l.is_empty()).collect());
+        }
+    }
+    let trust = render::trust(inventory, &public, &previous);
     w.derived(&layout.trust(), &trust)?;
     for (id, cell) in &inventory.cells {
         let host = &cell.host;
@@ -321,4 +327,95 @@ fn operators_list(
         &path,
         serde_json::to_string_pretty(&signed).unwrap_or_default(),
     )
+}
+
+/// Starts rotating cell `id`'s signing key: its public key kept as the one
+/// rotated from, a new key made in its place; the trust file then holds
+/// both (every client believes either) until [`finish_rotation`].
+///
+/// # Errors
+/// A rotation under way, no key to rotate, or a file that cannot be
+/// written.
+pub fn rotate(inventory: &Inventory, id: &str) -> Result<Made, PlantError> {
+    let layout = Layout::of(inventory);
+    let cell = inventory.cells.get(id).ok_or_else(|| PlantError::Edit {
+        path: inventory.path.clone(),
+        message: format!("no cell '{id}' in the inventory"),
+    })?;
+    let rotating = layout.rotating(id);
+    if rotating.exists() {
+        return Err(PlantError::Edit {
+            path: rotating,
+            message: format!("a rotation of {id}'s key is under way: end it first (cellwatch plant rotate-key --cell {id} --done)"),
+        });
+    }
+    let signing = layout.on_host(&cell.host, &layout.signing_key(id));
+    let old = AgentKey::load(&signing).map_err(|e| PlantError::Certificate {
+        name: format!("agent {id}'s signing key"),
+        message: format!("{e} (make the plant first: cellwatch plant init)"),
+    })?;
+    make_dir(&layout.dir().join("rotating"), 0o755)?;
+    std::fs::write(&rotating, format!("{}\n", old.public_hex())).map_err(|source| {
+        PlantError::Write {
+            path: rotating.clone(),
+            source,
+        }
+    })?;
+    std::fs::remove_file(&signing).map_err(|source| PlantError::Write {
+        path: signing.clone(),
+        source,
+    })?;
+    make(inventory)
+}
+
+/// Ends the rotation of cell `id`'s signing key: the trust file holds the
+/// new key only.
+///
+/// # Errors
+/// No rotation under way, or a file that cannot be written.
+pub fn finish_rotation(inventory: &Inventory, id: &str) -> Result<Made, PlantError> {
+    let layout = Layout::of(inventory);
+    let rotating = layout.rotating(id);
+    std::fs::remove_file(&rotating).map_err(|source| PlantError::Write {
+        path: rotating,
+        source,
+    })?;
+    make(inventory)
+}
+
+/// Issues cell `id`'s bus certificate again (a new key, owner-only), in
+/// place of the one it has: for a certificate ending soon or a key
+/// feared known.
+///
+/// # Errors
+/// No such cell, or the certificate cannot be made.
+pub fn renew(inventory: &Inventory, id: &str) -> Result<Vec<PathBuf>, PlantError> {
+    let layout = Layout::of(inventory);
+    let cell = inventory.cells.get(id).ok_or_else(|| PlantError::Edit {
+        path: inventory.path.clone(),
+        message: format!("no cell '{id}' in the inventory"),
+    })?;
+    let cert = layout.on_host(&cell.host, &format!("{}/agent-{id}.pem", layout.etc()));
+    let key = layout.on_host(&cell.host, &layout.bus_key(id));
+    let (new_cert, new_key) = (cert.with_extension("renewing"), key.with_extension("renewing"));
+    for p in [&new_cert, &new_key] {
+        let _ = std::fs::remove_file(p);
+    }
+    issue_to(
+        &layout.ca_dir(),
+        &format!("agent-{id}"),
+        std::slice::from_ref(&cell.host),
+        (&new_cert, &new_key),
+    )
+    .map_err(|message| PlantError::Certificate {
+        name: format!("agent-{id}"),
+        message,
+    })?;
+    for (from, to) in [(&new_key, &key), (&new_cert, &cert)] {
+        std::fs::rename(from, to).map_err(|source| PlantError::Write {
+            path: to.clone(),
+            source,
+        })?;
+    }
+    Ok(vec![cert, key])
 }

@@ -25,14 +25,27 @@ fn quoted(s: &str) -> String {
 }
 
 /// The plant trust file: every cell's agent's public key (`public` by
-/// cell; cells without one yet are left out).
-pub fn trust(inventory: &Inventory, public: &BTreeMap<String, String>) -> String {
+/// cell; cells without one yet are left out), and the keys of a rotation
+/// under way (`previous`).
+pub fn trust(
+    inventory: &Inventory,
+    public: &BTreeMap<String, String>,
+    previous: &BTreeMap<String, Vec<String>>,
+) -> String {
     let mut out = header("#", inventory);
     out.push_str(
         "# Each cell's agent's signing key: clients believe a payload only if it verifies.\n",
     );
     for (cell, key) in public {
         let _ = write!(out, "\n[cells.{cell}]\npublic_key = \"{key}\"\n");
+        if let Some(old) = previous.get(cell).filter(|o| !o.is_empty()) {
+            let old: Vec<String> = old.iter().map(|k| quoted(k)).collect();
+            let _ = writeln!(
+                out,
+                "# Being rotated from (cellwatch plant rotate-key --cell {cell} --done ends it):\nprevious_keys = [{}]",
+                old.join(", ")
+            );
+        }
     }
     out
 }

@@ -260,7 +260,7 @@ fn a_sealed_together_envelope_edited_moved_or_forged_is_refused() {
     // m01's key replaced in the trust file: the remembered root is not
     // believed under the new key.
     let mut rekeyed = trust.clone();
-    rekeyed.insert("m01", *trust_of(&m02).cells.get("m02").unwrap());
+    rekeyed.insert("m01", trust_of(&m02).cells.get("m02").unwrap()[0]);
     assert_eq!(
         rekeyed.open(sealed[0].as_bytes(), Kind::Put, alarm, ""),
         bad
@@ -311,4 +311,35 @@ fn every_private_key_file_others_may_read_is_named() {
         "{}",
         refused[1]
     );
+}
+
+#[test]
+fn a_key_being_rotated_from_is_believed_beside_the_new_one_until_removed() {
+    let old = AgentKey::generate("m01");
+    let new = AgentKey::generate("m01");
+    let sealed = |k: &AgentKey| k.seal(Kind::Put, "cellwatch/m01/state", "", 1, "{}".into());
+    let both = Trust::parse(
+        "trust.toml",
+        &format!(
+            "[cells.m01]\npublic_key = \"{}\"\nprevious_keys = [\"{}\"]\n",
+            new.public_hex(),
+            old.public_hex()
+        ),
+    )
+    .unwrap();
+    for k in [&old, &new] {
+        both.open(sealed(k).as_bytes(), Kind::Put, "cellwatch/m01/state", "")
+            .unwrap();
+    }
+    assert_eq!(both.public_hex("m01"), Some(new.public_hex()));
+    assert_eq!(both.previous_hex("m01"), vec![old.public_hex()]);
+    let done = Trust::parse(
+        "trust.toml",
+        &format!("[cells.m01]\npublic_key = \"{}\"\n", new.public_hex()),
+    )
+    .unwrap();
+    assert!(matches!(
+        done.open(sealed(&old).as_bytes(), Kind::Put, "cellwatch/m01/state", ""),
+        Err(Distrust::BadSignature(_))
+    ));
 }
