@@ -51,6 +51,7 @@ mod scheduling;
 mod sf;
 mod sfc;
 mod spawned;
+mod stacks;
 mod timers;
 mod trust;
 mod typed;
