@@ -1,7 +1,7 @@
 //! An independent OPC UA server (open62541, the C stack, through its Rust
 //! bindings) for cellwatch's interoperability tests: Basic256Sha256 +
-//! SignAndEncrypt (and open62541's other secure policies; never None),
-//! client certificates all accepted, Double tags under an object Plc in
+//! SignAndEncrypt (beside open62541's other policies, None among them: the
+//! endpoints are asked for over None), client certificates all accepted, Double tags under an object Plc in
 //! namespace URI, node ids s=NAME.
 //!
 //!   cellwatch-open62541-server PORT PKI_DIR URI NAME=VALUE...
@@ -62,12 +62,14 @@ fn own_certificate(pki: &std::path::Path) -> (PathBuf, Vec<u8>, Vec<u8>) {
     };
     let (cert, private) = open62541::create_certificate(
         &strings(&["C=DE", "O=cellwatch", "CN=cellwatch interop open62541"]),
-        // The application URI open62541 describes itself with, then the
-        // host names a client may reach it by.
+        // The application URI open62541 describes itself with first
+        // (clients skip the first alternative name), then the host names a
+        // client may reach it by: given last first, as Mbed TLS writes
+        // them in the reverse order.
         &strings(&[
-            "URI:urn:open62541.unconfigured.application",
-            "DNS:localhost",
             "IP:127.0.0.1",
+            "DNS:localhost",
+            "URI:urn:open62541.unconfigured.application",
         ]),
         &ua::CertificateFormat::DER,
         // 2048 bits, not open62541's 4096: made in a moment.
@@ -125,7 +127,14 @@ fn main() {
     };
     let port: u16 = port.parse().expect("a port");
     let (der, cert, key) = own_certificate(std::path::Path::new(pki));
-    let (server, runner) = ServerBuilder::default_with_secure_security_policies(port, &cert, &key)
+    // The secure policies and None: a client asks for the endpoints over
+    // None (the bindings have no switch for None only for that), then
+    // opens its session over Basic256Sha256 + SignAndEncrypt.
+    let (cert, key) = (
+        open62541::Certificate::from_bytes(&cert),
+        open62541::PrivateKey::from_bytes(&key),
+    );
+    let (server, runner) = ServerBuilder::default_with_security_policies(port, &cert, &key)
         .expect("server configured")
         .server_urls(&[&format!("opc.tcp://127.0.0.1:{port}")])
         .accept_all()
