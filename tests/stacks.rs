@@ -489,6 +489,8 @@ async fn play(stack: Stack, fault: Fault) {
         }
     };
     let before = requests(&counted, None);
+    // The value the tag holds after the fault.
+    let mut last = 2;
     match fault {
         Fault::Cut | Fault::Stall | Fault::StallAnswers => {
             match fault {
@@ -513,6 +515,7 @@ async fn play(stack: Stack, fault: Fault) {
             cut.stall(false);
             let events = until(&mut source, "the pulse's end", delivered(3)).await;
             nothing_lost_silently(stack, &events, &[2, 3]);
+            last = 3;
         }
         Fault::Restart => {
             server = tokio::task::spawn_blocking(move || server.restarted())
@@ -568,8 +571,8 @@ async fn play(stack: Stack, fault: Fault) {
         }
     }
     // And followed from then on.
-    server = server.said(&stack.command("set", 5)).await;
-    until(&mut source, "a value after the fault", delivered(5)).await;
+    server = server.said(&stack.command("set", last + 1)).await;
+    until(&mut source, "a value after the fault", delivered(last + 1)).await;
     let (all_requests, republishes) = (
         requests(&counted, None) - before,
         requests(&counted, Some("Republish")),

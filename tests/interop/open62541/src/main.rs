@@ -20,6 +20,8 @@
 //!                         id, holding VALUE, telling nobody (open62541's
 //!                         items sample the node id: bad while it is gone,
 //!                         then the new node's value)
+//!   delete NAME           delete the tag's node (its items' samples say
+//!                         BadNodeIdUnknown); add NAME VALUE adds it (back)
 //!   quit
 //! Each command done is told as "done <the command>".
 
@@ -183,6 +185,16 @@ fn main() {
                     .delete_node(&ua::NodeId::string(ns, name))
                     .expect("deleted");
                 add(&server, &plc, ns, name, value.parse().unwrap());
+            }
+            ["delete", name] if names.iter().any(|n| n == name) => {
+                server
+                    .delete_node(&ua::NodeId::string(ns, name))
+                    .expect("deleted");
+                names.retain(|n| n != name);
+            }
+            ["add", name, value] if !names.iter().any(|n| n == name) => {
+                add(&server, &plc, ns, name, value.parse().unwrap());
+                names.push(name.to_string());
             }
             ["quit"] => break,
             _ => {}
