@@ -13,8 +13,8 @@
 #   recreate NAME VALUE   delete the tag's node and add it again, same node
 #                         id, holding VALUE, telling its monitored items
 #                         nothing (asyncua would send them a status change)
-#   delete NAME           delete the tag's node as asyncua does: its items'
-#                         subscriptions get a StatusChangeNotification
+#   delete NAME           delete the tag's node as asyncua means to: its
+#                         items' subscriptions get a StatusChangeNotification
 #                         BadNodeIdUnknown, naming no item, and go on
 #   add NAME VALUE        add it (back)
 #   republishes           print "republishes N": the Republish requests
@@ -134,7 +134,14 @@ async def main():
                 await server.delete_nodes([node])
                 await add(args[0], float(args[1]))
             elif cmd == "delete" and len(args) == 1 and args[0] in tags:
-                await server.delete_nodes([tags.pop(args[0])])
+                node = tags.pop(args[0])
+                # What asyncua's own delete means to do: it calls each
+                # item's callback with BadNodeIdUnknown but does not await
+                # it (2.1.0), so nothing would be sent.
+                data = aspace[node.nodeid]
+                for handle, callback in list(data.attributes[ua.AttributeIds.Value].datachange_callbacks.items()):
+                    await callback(handle, None, ua.StatusCode(ua.StatusCodes.BadNodeIdUnknown))
+                await server.delete_nodes([node])
             elif cmd == "add" and len(args) == 2 and args[0] not in tags:
                 await add(args[0], float(args[1]))
             elif cmd == "republishes":
