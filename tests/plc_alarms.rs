@@ -14,8 +14,8 @@ use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 use crate::agent::alarm_until;
 use crate::alarm_server::ScadaProgram;
 use crate::interop::{trusted_by_server, URI};
-use crate::stacks::StackServer;
 use crate::spawned::{send, signed};
+use crate::stacks::StackServer;
 
 /// A cell of two node-opcua tags, one discrete alarm of its own, and the
 /// server's conditions as alarms `plc-…`.

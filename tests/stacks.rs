@@ -379,12 +379,12 @@ fn told(events: &[SourceEvent]) -> Vec<Result<Reading, String>> {
     let mut out = Vec::new();
     for e in events {
         match e {
-            SourceEvent::Readings(rs) => {
-                out.extend(rs.iter().filter(|r| r.tag == 0).map(|r| Ok(r.reading.clone())))
-            }
-            SourceEvent::Gap { tags, why, .. }
-                if tags.as_ref().is_none_or(|t| t.contains(&0)) =>
-            {
+            SourceEvent::Readings(rs) => out.extend(
+                rs.iter()
+                    .filter(|r| r.tag == 0)
+                    .map(|r| Ok(r.reading.clone())),
+            ),
+            SourceEvent::Gap { tags, why, .. } if tags.as_ref().is_none_or(|t| t.contains(&0)) => {
                 out.push(Err(why.clone()))
             }
             _ => {}
@@ -483,11 +483,7 @@ async fn play(stack: Stack, fault: Fault) {
         }],
     )
     .await;
-    let delivered = |k: u32| {
-        move |e: &SourceEvent| {
-            matches!(e, SourceEvent::Readings(rs) if rs.iter().any(|r| r.tag == 0 && stack.is(&r.reading, k)))
-        }
-    };
+    let delivered = |k: u32| move |e: &SourceEvent| matches!(e, SourceEvent::Readings(rs) if rs.iter().any(|r| r.tag == 0 && stack.is(&r.reading, k)));
     let before = requests(&counted, None);
     // The value the tag holds after the fault.
     let mut last = 2;

@@ -100,7 +100,8 @@ fn add(server: &Server, plc: &ua::NodeId, ns: u16, name: &str, value: f64) {
         )
         .with_display_name(&ua::LocalizedText::new("", name).unwrap());
     // SAFETY: the attributes' own value, replaced (the old one freed).
-    ua::Variant::scalar(ua::Double::new(value)).move_into_raw(unsafe { &mut attributes.as_mut().value });
+    ua::Variant::scalar(ua::Double::new(value))
+        .move_into_raw(unsafe { &mut attributes.as_mut().value });
     server
         .add_variable_node(VariableNode {
             requested_new_node_id: Some(ua::NodeId::string(ns, name)),

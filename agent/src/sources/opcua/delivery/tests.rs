@@ -280,7 +280,7 @@ fn a_status_change_about_a_node_verifies_the_items_and_only_a_timeout_closes_the
     use opcua::types::StatusCode;
     use std::sync::atomic::Ordering;
     let (shared, _rx, _dir) = cell();
-    let heard = shared.lock().heard.clone();
+    let heard = shared.lock().order.heard.clone();
     // Python asyncua, a node deleted under an item: the subscription goes
     // on, its items verified now.
     let now = DateTime::now();
@@ -292,8 +292,10 @@ fn a_status_change_about_a_node_verifies_the_items_and_only_a_timeout_closes_the
     assert_eq!(heard.closed(), None);
     assert!(heard.doubted.load(Ordering::Relaxed));
     // Its lifetime over: closed.
-    shared
-        .lock()
-        .arrived(NotificationMessage::status_change(2, now, StatusCode::BadTimeout));
+    shared.lock().arrived(NotificationMessage::status_change(
+        2,
+        now,
+        StatusCode::BadTimeout,
+    ));
     assert_eq!(heard.closed(), Some(StatusCode::BadTimeout));
 }

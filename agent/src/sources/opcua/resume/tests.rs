@@ -172,7 +172,10 @@ async fn a_republish_answered_subscription_id_invalid_gives_the_whole_subscripti
     // second missing publish is not asked for.
     let filled = fill(&server, 7, &shared, &Requests::default()).await;
     assert!(
-        matches!(filled, Err(Unfilled::Gone(StatusCode::BadSubscriptionIdInvalid))),
+        matches!(
+            filled,
+            Err(Unfilled::Gone(StatusCode::BadSubscriptionIdInvalid))
+        ),
         "{filled:?}"
     );
     assert_eq!(*server.asked.lock().unwrap(), [2]);
