@@ -367,11 +367,11 @@ const STALLED: Duration = Duration::from_secs(5);
 /// reconnection reads the namespaces and takes the subscription over or
 /// creates it and its item, a recovery asks for a few publishes, and the
 /// verification reads the node every 2 s while the fault lasts (0 to 6 in
-/// all on an idle machine); a storm is hundreds.
+/// all in the runs so far); a storm is hundreds.
 const REQUESTS_AT_MOST: u64 = 40;
 
 /// `Republish` requests a fault may cost at most: three missing publishes
-/// asked for three times each (at most one asked for on an idle machine).
+/// asked for three times each (one or two asked for in the runs so far).
 const REPUBLISHES_AT_MOST: u64 = 9;
 
 /// The readings of tag 0 among `events`, and where the gaps for it were
