@@ -375,7 +375,7 @@ const REQUESTS_AT_MOST: u64 = 40;
 const REPUBLISHES_AT_MOST: u64 = 9;
 
 /// The readings of tag 0 among `events`, and where the gaps for it were
-/// said: `None` for a reading, `Some(why)` for a gap.
+/// said, in order: `Ok` for a reading, `Err(why)` for a gap.
 fn told(events: &[SourceEvent]) -> Vec<Result<Reading, String>> {
     let mut out = Vec::new();
     for e in events {
