@@ -5,10 +5,8 @@
 //! numbers and resends its publishes in its own way, and answers a
 //! Republish of what it does not hold with an empty message, not an error.
 
-use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStdin, Command, Stdio};
+use std::path::Path;
 use std::sync::atomic::AtomicBool;
-use std::sync::mpsc as std_mpsc;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -18,103 +16,13 @@ use cellwatch::sources::pki;
 use crate::agent::alarm_until;
 use crate::liveness::{relay_with_cut, Cut};
 use crate::network_cut::metric;
-use crate::util::root;
-
-const URI: &str = "urn:cellwatch:test:asyncua:plc";
-
-/// The asyncua release the interoperability is checked against.
-const ASYNCUA: &str = "asyncua==2.1.0";
-
-/// A running asyncua server.
-struct PythonServer {
-    child: Child,
-    stdin: ChildStdin,
-    lines: std_mpsc::Receiver<String>,
-    /// Its own certificate (DER).
-    cert: PathBuf,
-    port: u16,
-}
-
-impl PythonServer {
-    /// Serves the Double tags `tags` (name, value) in namespace [`URI`].
-    fn start(pki_dir: &Path, tags: &[(&str, f64)]) -> PythonServer {
-        let python = crate::util::python_with("asyncua", "asyncua", &[ASYNCUA]);
-        let mut child = Command::new(python)
-            .arg(root().join("tests/interop/asyncua_server.py"))
-            .arg(pki_dir)
-            .arg(URI)
-            .args(tags.iter().map(|(n, v)| format!("{n}={v}")))
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
-        let stdin = child.stdin.take().unwrap();
-        let lines = crate::util::lines_of(&mut child);
-        let mut server = PythonServer {
-            child,
-            stdin,
-            lines,
-            cert: PathBuf::new(),
-            port: 0,
-        };
-        let ready = server.wait_for("ready ");
-        let mut words = ready.split_whitespace().skip(1);
-        server.cert = PathBuf::from(words.next().unwrap());
-        server.port = words.next().unwrap().parse().unwrap();
-        server
-    }
-
-    fn wait_for(&mut self, prefix: &str) -> String {
-        loop {
-            match self.lines.recv_timeout(Duration::from_secs(120)) {
-                Ok(line) if line.starts_with(prefix) => return line,
-                Ok(_) => {}
-                Err(_) => panic!("asyncua server: no '{prefix}' line"),
-            }
-        }
-    }
-
-    /// Sends a command and waits until the server has carried it out.
-    fn send(&mut self, command: &str) {
-        use std::io::Write;
-        writeln!(self.stdin, "{command}").unwrap();
-        self.wait_for(&format!("done {command}"));
-    }
-
-    /// The Republish requests it answered so far.
-    fn republishes(&mut self) -> u64 {
-        use std::io::Write;
-        writeln!(self.stdin, "republishes").unwrap();
-        let line = self.wait_for("republishes ");
-        line["republishes ".len()..].parse().unwrap()
-    }
-}
-
-impl Drop for PythonServer {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-/// `command` carried out by `server`, off the runtime's workers.
-async fn said(server: PythonServer, command: &str) -> PythonServer {
-    let command = command.to_string();
-    tokio::task::spawn_blocking(move || {
-        let mut server = server;
-        server.send(&command);
-        server
-    })
-    .await
-    .unwrap()
-}
+use crate::stacks::{StackServer, URI};
 
 /// The Republish requests `server` answered so far.
-async fn republishes(server: PythonServer) -> (PythonServer, u64) {
+async fn republishes(server: StackServer) -> (StackServer, u64) {
     tokio::task::spawn_blocking(move || {
         let mut server = server;
-        let n = server.republishes();
+        let n = server.ask("republishes", "republishes ").parse().unwrap();
         (server, n)
     })
     .await
@@ -197,7 +105,7 @@ async fn asyncua_server_a_stall_ends_in_few_republishes_and_a_node_recreated_in_
     let dir = d.path();
     let server = tokio::task::spawn_blocking({
         let pki = dir.join("server-pki");
-        move || PythonServer::start(&pki, &[("Temp", 20.0), ("Level", 50.0)])
+        move || StackServer::asyncua(0, &pki, &[("Temp", 20.0), ("Level", 50.0)])
     })
     .await
     .unwrap();
@@ -244,8 +152,8 @@ async fn asyncua_server_a_stall_ends_in_few_republishes_and_a_node_recreated_in_
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
     stall.stall(true);
-    let server = said(server, "set Temp 95").await;
-    let server = said(server, "set Temp 20").await;
+    let server = server.said("set Temp 95").await;
+    let server = server.said("set Temp 20").await;
     // Three keep-alive periods (1 s each at a 100 ms publishing interval)
     // and more: the subscription is silent for longer than allowed, and
     // asked for what it holds.
@@ -262,7 +170,7 @@ async fn asyncua_server_a_stall_ends_in_few_republishes_and_a_node_recreated_in_
     .await;
     // The tank's node deleted and added again in silence, over its limit:
     // found within a verification interval and its grace.
-    let server = said(server, "recreate Level 95").await;
+    let server = server.said("recreate Level 95").await;
     let found = std::time::Instant::now();
     let raised = alarm_until(&sub, "tank-h raised", &mut seen, |a| {
         a.id == "tank-h" && a.transition.as_str() == "raised"

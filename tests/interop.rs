@@ -3,10 +3,8 @@
 //! lock file on first use), Basic256Sha256 + SignAndEncrypt with mutual
 //! certificate trust.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Child, ChildStdin, Command, Stdio};
-use std::sync::mpsc as std_mpsc;
+use std::process::Command;
 use std::sync::Once;
 use std::time::Duration;
 
@@ -19,6 +17,7 @@ use futures_util::FutureExt;
 use crate::liveness::Running;
 use crate::network_cut::until;
 use crate::opcua::{all, has, next, opcua_config};
+use crate::stacks::StackServer;
 use crate::util::root;
 
 pub(crate) const URI: &str = "urn:cellwatch:test:node-opcua:plc";
@@ -45,66 +44,6 @@ pub(crate) fn installed() -> PathBuf {
         );
     });
     dir
-}
-
-/// A running node-opcua server.
-pub(crate) struct NodeServer {
-    child: Child,
-    stdin: ChildStdin,
-    lines: std_mpsc::Receiver<String>,
-    /// Its own certificate (DER).
-    pub(crate) cert: PathBuf,
-}
-
-impl NodeServer {
-    pub(crate) fn start(port: u16, pki_dir: &Path, tags: usize) -> NodeServer {
-        let dir = installed();
-        let mut child = Command::new("node")
-            .arg(dir.join("server.js"))
-            .args([
-                &port.to_string(),
-                pki_dir.to_str().unwrap(),
-                &tags.to_string(),
-                URI,
-            ])
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
-        let stdin = child.stdin.take().unwrap();
-        let lines = crate::util::lines_of(&mut child);
-        let mut server = NodeServer {
-            child,
-            stdin,
-            lines,
-            cert: PathBuf::new(),
-        };
-        let ready = server.wait_for("ready ");
-        server.cert = PathBuf::from(ready.trim_start_matches("ready "));
-        server
-    }
-
-    pub(crate) fn wait_for(&mut self, prefix: &str) -> String {
-        loop {
-            match self.lines.recv_timeout(Duration::from_secs(120)) {
-                Ok(line) if line.starts_with(prefix) => return line,
-                Ok(_) => {}
-                Err(_) => panic!("node-opcua server: no '{prefix}' line"),
-            }
-        }
-    }
-
-    /// Sends a command and waits until the server has carried it out.
-    pub(crate) fn send(&mut self, command: &str) {
-        writeln!(self.stdin, "{command}").unwrap();
-        self.wait_for(&format!("done {command}"));
-    }
-
-    pub(crate) fn stop(mut self) {
-        let _ = writeln!(self.stdin, "quit");
-        let _ = self.child.wait();
-    }
 }
 
 /// The agent's key pair made in `agent_pki` and its certificate trusted by
@@ -138,7 +77,7 @@ async fn node_opcua_server_five_thousand_items_bursts_and_a_restart() {
     trusted_by_server(&dir.path().join("agent-pki"), &server_pki);
     let mut server = tokio::task::spawn_blocking({
         let server_pki = server_pki.clone();
-        move || NodeServer::start(port, &server_pki, TAGS)
+        move || StackServer::node_opcua(port, &server_pki, TAGS)
     })
     .await
     .unwrap();
@@ -226,7 +165,7 @@ async fn node_opcua_server_five_thousand_items_bursts_and_a_restart() {
     .await;
     let mut server = tokio::task::spawn_blocking({
         let server_pki = server_pki.clone();
-        move || NodeServer::start(port, &server_pki, TAGS)
+        move || StackServer::node_opcua(port, &server_pki, TAGS)
     })
     .await
     .unwrap();
@@ -234,218 +173,11 @@ async fn node_opcua_server_five_thousand_items_bursts_and_a_restart() {
         matches!(e, SourceEvent::Connected(_))
     })
     .await;
-    server = sent(server, "set T42 0").await;
+    server = server.said("set T42 0").await;
     next(&mut source.rx, "T42 = 0 after the restart", |e| {
         matches!(e, SourceEvent::Readings(rs) if rs.iter().any(|r| r.tag == 42 && r.reading == Reading::Good(false)))
     })
     .await;
-    source.stop().await;
-    tokio::task::spawn_blocking(move || server.stop())
-        .await
-        .unwrap();
-}
-
-/// A node-opcua server with ten tags, trusted by the agent and trusting
-/// it, reached through a relay that can cut the network; the source
-/// reading them (publishing every 100 ms, a subscription lifetime of
-/// `lifetime` publishing intervals if given), once connected and cut off.
-async fn node_cut_off(
-    dir: &std::path::Path,
-    lifetime: Option<u32>,
-) -> (NodeServer, crate::liveness::Cut, Running) {
-    let server_pki = dir.join("server-pki");
-    let port = crate::util::restartable_port();
-    trusted_by_server(&dir.join("agent-pki"), &server_pki);
-    let server = tokio::task::spawn_blocking({
-        let server_pki = server_pki.clone();
-        move || NodeServer::start(port, &server_pki, 10)
-    })
-    .await
-    .unwrap();
-    let cut = crate::liveness::Cut::default();
-    let via = crate::liveness::relay_with_cut(
-        format!("127.0.0.1:{port}").parse().unwrap(),
-        std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false)),
-        cut.clone(),
-    )
-    .await;
-    let mut config = opcua_config(&format!("opc.tcp://{via}/"), &dir.join("agent-pki"));
-    config.publishing_interval = Duration::from_millis(100);
-    if let Some(n) = lifetime {
-        config.subscription_lifetime = config.publishing_interval * n;
-    }
-    pki::trust(&server.cert, &config.pki_dir).unwrap();
-    let mut source = Running::start(config, (0..10).map(tag).collect());
-    // The first values may come before the connection is reported.
-    all(
-        &mut source.rx,
-        "connected, and T3's value",
-        &[
-            &|e| matches!(e, SourceEvent::Connected(_)),
-            &|e| matches!(e, SourceEvent::Readings(rs) if rs.iter().any(|r| r.tag == 3)),
-        ],
-    )
-    .await;
-    cut.set(true);
-    next(&mut source.rx, "connection lost", |e| {
-        matches!(e, SourceEvent::Disconnected(_))
-    })
-    .await;
-    (server, cut, source)
-}
-
-/// The network is down longer than the subscription's lifetime (the server
-/// says when it dropped it) but not the session's: the communication alarm
-/// covers the gap, the agent subscribes again (node-opcua hands it a new
-/// session), and the change made meanwhile arrives.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn node_opcua_network_cut_longer_than_the_subscription_lifetime() {
-    let _ = tracing_subscriber::fmt()
-        .with_env_filter(tracing_subscriber::EnvFilter::from_default_env())
-        .with_test_writer()
-        .try_init();
-    let dir = tempfile::tempdir().unwrap();
-    // The shortest lifetime allowed: 30 publishing intervals.
-    let (server, cut, mut source) = node_cut_off(dir.path(), Some(30)).await;
-    let server = tokio::task::spawn_blocking(move || {
-        let mut server = server;
-        server.send("set T3 0");
-        server.wait_for("expired subscription");
-        server
-    })
-    .await
-    .unwrap();
-    cut.set(false);
-    let mut connected = false;
-    let mut changed = false;
-    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
-    while !(changed && connected) {
-        let ev = tokio::time::timeout_at(deadline, source.rx.recv())
-            .await
-            .unwrap_or_else(|_| panic!("connected again {connected}, change seen {changed}"))
-            .unwrap();
-        match ev {
-            SourceEvent::Connected(_) => connected = true,
-            SourceEvent::Readings(rs) => {
-                changed |= rs
-                    .iter()
-                    .any(|r| r.tag == 3 && r.reading == Reading::Good(false));
-            }
-            _ => {}
-        }
-    }
-    source.stop().await;
-    tokio::task::spawn_blocking(move || server.stop())
-        .await
-        .unwrap();
-}
-
-/// A network cut shorter than the subscription's lifetime, against
-/// node-opcua: the new session takes the subscription over, and a pulse
-/// made during the cut arrives in order, with nothing said lost.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn node_opcua_pulse_during_a_network_cut_arrives_through_the_taken_over_subscription() {
-    let dir = tempfile::tempdir().unwrap();
-    let (server, cut, mut source) = node_cut_off(dir.path(), None).await;
-    let server = tokio::task::spawn_blocking(move || {
-        let mut server = server;
-        // Held long enough to be sampled (the server samples every 20 ms).
-        server.send("set T3 0");
-        std::thread::sleep(Duration::from_millis(200));
-        server.send("set T3 1");
-        server
-    })
-    .await
-    .unwrap();
-    cut.set(false);
-    let mut t3 = Vec::new();
-    let mut connected = false;
-    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
-    while !(connected && t3.last() == Some(&Reading::Good(true)) && t3.len() >= 2) {
-        let ev = tokio::time::timeout_at(deadline, source.rx.recv())
-            .await
-            .unwrap_or_else(|_| panic!("connected again {connected}, T3 {t3:?}"))
-            .unwrap();
-        match ev {
-            SourceEvent::Connected(_) => connected = true,
-            SourceEvent::Readings(rs) => {
-                t3.extend(rs.iter().filter(|r| r.tag == 3).map(|r| r.reading.clone()));
-            }
-            SourceEvent::Gap { why, .. } => panic!("changes lost: {why}"),
-            SourceEvent::Disconnected(why) if why.contains("dropped subscription") => {
-                panic!("{why}")
-            }
-            _ => {}
-        }
-    }
-    // In order; the value sent again after the take-over (the current
-    // one) is a duplicate the engine ignores.
-    t3.dedup();
-    assert_eq!(t3, [Reading::Good(false), Reading::Good(true)]);
-    source.stop().await;
-    tokio::task::spawn_blocking(move || server.stop())
-        .await
-        .unwrap();
-}
-
-/// `server` once it has carried `command` out.
-pub(crate) async fn sent(mut server: NodeServer, command: &'static str) -> NodeServer {
-    tokio::task::spawn_blocking(move || {
-        server.send(command);
-        server
-    })
-    .await
-    .unwrap()
-}
-
-/// A node node-opcua deletes (its items get `BadNodeIdInvalid` and stop)
-/// and adds back: the tag is bad in between, and the item is created again
-/// in the same session and subscription once the node exists.
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn node_opcua_node_deleted_and_added_back_is_monitored_again_without_a_reconnect() {
-    crate::network_cut::logs();
-    let dir = tempfile::tempdir().unwrap();
-    let server_pki = dir.path().join("server-pki");
-    let port = crate::util::restartable_port();
-    trusted_by_server(&dir.path().join("agent-pki"), &server_pki);
-    let mut server = tokio::task::spawn_blocking({
-        let server_pki = server_pki.clone();
-        move || NodeServer::start(port, &server_pki, 10)
-    })
-    .await
-    .unwrap();
-    let mut config = opcua_config(
-        &format!("opc.tcp://127.0.0.1:{port}/"),
-        &dir.path().join("agent-pki"),
-    );
-    config.publishing_interval = Duration::from_millis(100);
-    pki::trust(&server.cert, &config.pki_dir).unwrap();
-    let mut source = Running::start(config, (0..10).map(tag).collect());
-    all(
-        &mut source.rx,
-        "connected, and T3's value",
-        &[&|e| matches!(e, SourceEvent::Connected(_)), &|e| {
-            has(e, 3, Reading::Good(true))
-        }],
-    )
-    .await;
-    server = sent(server, "delete T3").await;
-    let mut seen = until(&mut source, "T3 bad", |e| has(e, 3, Reading::Bad)).await;
-    server = sent(server, "add T3 0").await;
-    seen.extend(
-        until(&mut source, "T3 = 0 from a new item", |e| {
-            has(e, 3, Reading::Good(false))
-        })
-        .await,
-    );
-    server = sent(server, "set T3 1").await;
-    seen.extend(until(&mut source, "T3 = 1", |e| has(e, 3, Reading::Good(true))).await);
-    assert!(
-        !seen
-            .iter()
-            .any(|e| matches!(e, SourceEvent::Disconnected(_) | SourceEvent::Connected(_))),
-        "{seen:?}"
-    );
     source.stop().await;
     tokio::task::spawn_blocking(move || server.stop())
         .await
@@ -468,13 +200,13 @@ async fn node_opcua_redundant_pair_the_source_moves_to_the_healthier_server() {
     trusted_by_server(&agent_pki, &a_pki);
     trusted_by_server(&agent_pki, &b_pki);
     let start = |port: u16, pki: PathBuf| {
-        tokio::task::spawn_blocking(move || NodeServer::start(port, &pki, 10))
+        tokio::task::spawn_blocking(move || StackServer::node_opcua(port, &pki, 10))
     };
     let (a, b) = (
         start(a_port, a_pki).await.unwrap(),
         start(b_port, b_pki).await.unwrap(),
     );
-    let b = sent(b, "set T0 0").await;
+    let b = b.said("set T0 0").await;
     let mut config = opcua_config(&format!("opc.tcp://127.0.0.1:{a_port}/"), &agent_pki);
     config.redundant = vec![format!("opc.tcp://127.0.0.1:{b_port}/")];
     config.publishing_interval = Duration::from_millis(100);
@@ -489,7 +221,7 @@ async fn node_opcua_redundant_pair_the_source_moves_to_the_healthier_server() {
         }],
     )
     .await;
-    let a = sent(a, "level 120").await;
+    let a = a.said("level 120").await;
     // T0 from the second, and the source saying it reads from it (its
     // first values may come before it says so).
     let to_b =
@@ -526,7 +258,7 @@ async fn node_opcua_reverse_connect_the_server_dials_the_agent() {
     trusted_by_server(&dir.path().join("agent-pki"), &server_pki);
     let server = tokio::task::spawn_blocking({
         let server_pki = server_pki.clone();
-        move || NodeServer::start(port, &server_pki, 10)
+        move || StackServer::node_opcua(port, &server_pki, 10)
     })
     .await
     .unwrap();
@@ -563,7 +295,7 @@ async fn node_opcua_reverse_connect_the_server_dials_the_agent() {
         }],
     )
     .await;
-    let server = sent(server, "set T0 0").await;
+    let server = server.said("set T0 0").await;
     next(&mut rx, "T0 = 0 over the server's connection", |e| {
         has(e, 0, Reading::Good(false))
     })

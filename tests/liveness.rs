@@ -61,6 +61,36 @@ impl Running {
         }
     }
 
+    /// [`Running::start`] with the source's requests counted by service
+    /// and result (`cellwatch_opcua_requests_total`) in the counter
+    /// returned.
+    pub(crate) fn counted(
+        config: OpcUaConfig,
+        tags: Vec<TagConfig>,
+    ) -> (Running, prometheus::IntCounterVec) {
+        use cellwatch::sources::Source;
+        use futures_util::FutureExt;
+        let requests = prometheus::IntCounterVec::new(
+            prometheus::Opts::new("cellwatch_opcua_requests_total", "requests"),
+            &["service", "result"],
+        )
+        .unwrap();
+        let mut source = opcua::OpcUaSource::new("test", config, tags, []);
+        source.count_requests(requests.clone());
+        let (tx, rx) = mpsc::channel(cellwatch::sources::QUEUE_CAPACITY);
+        let (stop, stop_rx) = tokio::sync::oneshot::channel::<()>();
+        let shutdown = async {
+            let _ = stop_rx.await;
+        };
+        let task = tokio::spawn(Box::new(source).run(tx, shutdown.boxed()));
+        let running = Running {
+            rx,
+            stop: Some(stop),
+            task,
+        };
+        (running, requests)
+    }
+
     /// Waits for the connection and tag 0's initial value (true).
     pub(crate) async fn connected(&mut self) {
         all(
@@ -314,12 +344,15 @@ async fn relay(server: SocketAddr, mute: Arc<AtomicBool>) -> SocketAddr {
 
 /// Cuts a relay's connections: while set, every connection is closed and
 /// new ones are refused. Or stalls them: while stalled, nothing is passed
-/// either way (what was sent waits in the sockets), then it all flows on.
+/// either way (what was sent waits in the sockets), or only the server's
+/// way (the client's requests reach it, its answers wait), then it all
+/// flows on.
 #[derive(Clone)]
 pub(crate) struct Cut {
     on: Arc<AtomicBool>,
     links: Arc<std::sync::Mutex<Vec<tokio::task::AbortHandle>>>,
-    stalled: Arc<tokio::sync::watch::Sender<bool>>,
+    /// Held: (towards the server, towards the client).
+    stalled: Arc<tokio::sync::watch::Sender<(bool, bool)>>,
 }
 
 impl Default for Cut {
@@ -327,20 +360,29 @@ impl Default for Cut {
         Cut {
             on: Arc::default(),
             links: Arc::default(),
-            stalled: Arc::new(tokio::sync::watch::channel(false).0),
+            stalled: Arc::new(tokio::sync::watch::channel((false, false)).0),
         }
     }
 }
 
 impl Cut {
+    /// Holds (or lets flow) what passes either way.
     pub(crate) fn stall(&self, on: bool) {
-        self.stalled.send_replace(on);
+        self.stalled.send_replace((on, on));
     }
 
-    /// Returns once traffic may flow.
-    async fn flowing(&self) {
+    /// Holds (or lets flow) what the server sends, only.
+    pub(crate) fn stall_answers(&self, on: bool) {
+        self.stalled.send_replace((false, on));
+    }
+
+    /// Returns once traffic may flow towards the server (`up`) or the
+    /// client.
+    async fn flowing(&self, up: bool) {
         let mut rx = self.stalled.subscribe();
-        let _ = rx.wait_for(|stalled| !stalled).await;
+        let _ = rx
+            .wait_for(|&(to_server, to_client)| !if up { to_server } else { to_client })
+            .await;
     }
 
     pub(crate) fn set(&self, on: bool) {
@@ -378,7 +420,7 @@ pub(crate) async fn relay_with_cut(
                         Ok(0) | Err(_) => break,
                         Ok(n) => n,
                     };
-                    flow.flowing().await;
+                    flow.flowing(true).await;
                     if uw.write_all(&buf[..n]).await.is_err() {
                         break;
                     }
@@ -422,7 +464,7 @@ pub(crate) async fn relay_with_cut(
                         let n = u32::from_le_bytes(chunk[at..at + 4].try_into().unwrap());
                         chunk[at..at + 4].copy_from_slice(&n.wrapping_sub(dropped).to_le_bytes());
                     }
-                    flow.flowing().await;
+                    flow.flowing(false).await;
                     if cw.write_all(&chunk).await.is_err() {
                         break;
                     }

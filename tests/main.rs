@@ -52,6 +52,7 @@ mod scheduling;
 mod sf;
 mod sfc;
 mod spawned;
+mod stacks;
 mod timers;
 mod trust;
 mod typed;

@@ -13,8 +13,9 @@ use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
 use crate::agent::alarm_until;
 use crate::alarm_server::ScadaProgram;
-use crate::interop::{trusted_by_server, NodeServer, URI};
+use crate::interop::{trusted_by_server, URI};
 use crate::spawned::{send, signed};
+use crate::stacks::StackServer;
 
 /// A cell of two node-opcua tags, one discrete alarm of its own, and the
 /// server's conditions as alarms `plc-…`.
@@ -65,25 +66,19 @@ tls = {{ ca = "{}", cert = "{}", key = "{}" }}
     c
 }
 
-async fn said(server: NodeServer, command: String) -> NodeServer {
-    tokio::task::spawn_blocking(move || {
-        let mut server = server;
-        server.send(&command);
-        server
-    })
-    .await
-    .unwrap()
+async fn said(server: StackServer, command: String) -> StackServer {
+    server.said(&command).await
 }
 
 /// A node-opcua server trusting the agent of `dir` (its certificate names
 /// the cell), on a port of its own.
-async fn plc(dir: &std::path::Path) -> (NodeServer, u16) {
+async fn plc(dir: &std::path::Path) -> (StackServer, u16) {
     let server_pki = dir.join("server-pki");
     let port = crate::util::restartable_port();
     let made = crate::opcua::opcua_config("opc.tcp://127.0.0.1:1/", &dir.join("agent-pki"));
     drop(cellwatch::sources::opcua::client("m01ps0004", &made).unwrap());
     trusted_by_server(&dir.join("agent-pki"), &server_pki);
-    let server = tokio::task::spawn_blocking(move || NodeServer::start(port, &server_pki, 1))
+    let server = tokio::task::spawn_blocking(move || StackServer::node_opcua(port, &server_pki, 1))
         .await
         .unwrap();
     (server, port)

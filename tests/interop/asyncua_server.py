@@ -2,20 +2,28 @@
 # interoperability tests: Basic256Sha256 + SignAndEncrypt only, Double tags
 # under an object Plc in namespace URI, node ids s=NAME.
 #
-#   python asyncua_server.py PKI_DIR URI NAME=VALUE...
+#   python asyncua_server.py PKI_DIR URI PORT NAME=VALUE...
 #
-# Listens on a loopback port the system picks; prints "ready <own
-# certificate, DER> <port>" once listening. Standard input:
+# Listens on 127.0.0.1:PORT (0: a port the system picks) with the
+# certificate and key it keeps in PKI_DIR (made on the first start, the same
+# after a restart); prints "ready <own certificate, DER> <port>" once
+# listening, "expired subscription" when one outlives its lifetime without
+# publish requests (a client cut off: the server drops it). Standard input:
 #   set NAME VALUE        write a tag (a Double)
 #   recreate NAME VALUE   delete the tag's node and add it again, same node
 #                         id, holding VALUE, telling its monitored items
 #                         nothing (asyncua would send them a status change)
+#   delete NAME           delete the tag's node as asyncua means to: its
+#                         items' subscriptions get a StatusChangeNotification
+#                         BadNodeIdUnknown, naming no item, and go on
+#   add NAME VALUE        add it (back)
 #   republishes           print "republishes N": the Republish requests
 #                         answered so far
 #   quit
 # Each command done is told as "done <the command>".
 import asyncio
 import ipaddress
+import logging
 import sys
 from pathlib import Path
 
@@ -44,8 +52,12 @@ def count_republish():
 
 
 def own_certificate(pki: Path):
-    # The application URI first among the alternative names, then the host
-    # names the agent may reach it by.
+    # Made once: a restarted server is the same server. The application URI
+    # first among the alternative names, then the host names the agent may
+    # reach it by.
+    der, pem = pki / "server.der", pki / "server-key.pem"
+    if der.exists() and pem.exists():
+        return der, pem
     key = cert_gen.generate_private_key()
     cert = cert_gen.generate_self_signed_app_certificate(
         key,
@@ -59,10 +71,16 @@ def own_certificate(pki: Path):
         [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH],
     )
     pki.mkdir(parents=True, exist_ok=True)
-    der, pem = pki / "server.der", pki / "server-key.pem"
     der.write_bytes(cert.public_bytes(serialization.Encoding.DER))
     pem.write_bytes(cert_gen.dump_private_key_as_pem(key))
     return der, pem
+
+
+class Expiry(logging.Handler):
+    # asyncua says a subscription's end only in its log.
+    def emit(self, record):
+        if "has expired" in record.getMessage():
+            print("expired subscription", flush=True)
 
 
 async def lines():
@@ -75,12 +93,13 @@ async def lines():
 
 
 async def main():
-    pki, uri = Path(sys.argv[1]), sys.argv[2]
+    pki, uri, port = Path(sys.argv[1]), sys.argv[2], int(sys.argv[3])
+    logging.getLogger("asyncua.server.internal_subscription").addHandler(Expiry())
     count_republish()
     der, pem = own_certificate(pki)
     server = Server()
     await server.init()
-    server.set_endpoint("opc.tcp://127.0.0.1:0/")
+    server.set_endpoint(f"opc.tcp://127.0.0.1:{port}/")
     server.set_server_name("cellwatch interop asyncua")
     await server.set_application_uri(APPLICATION_URI)
     server.set_security_policy([ua.SecurityPolicyType.Basic256Sha256_SignAndEncrypt])
@@ -94,7 +113,7 @@ async def main():
         node = await plc.add_variable(ua.NodeId(name, idx), name, ua.Variant(value, ua.VariantType.Double))
         tags[name] = node
 
-    for arg in sys.argv[3:]:
+    for arg in sys.argv[4:]:
         name, value = arg.split("=")
         await add(name, float(value))
     aspace = server.iserver.aspace
@@ -113,6 +132,17 @@ async def main():
                 for handle in list(data.attributes[ua.AttributeIds.Value].datachange_callbacks):
                     aspace.delete_datachange_callback(handle)
                 await server.delete_nodes([node])
+                await add(args[0], float(args[1]))
+            elif cmd == "delete" and len(args) == 1 and args[0] in tags:
+                node = tags.pop(args[0])
+                # What asyncua's own delete means to do: it calls each
+                # item's callback with BadNodeIdUnknown but does not await
+                # it (2.1.0), so nothing would be sent.
+                data = aspace[node.nodeid]
+                for handle, callback in list(data.attributes[ua.AttributeIds.Value].datachange_callbacks.items()):
+                    await callback(handle, None, ua.StatusCode(ua.StatusCodes.BadNodeIdUnknown))
+                await server.delete_nodes([node])
+            elif cmd == "add" and len(args) == 2 and args[0] not in tags:
                 await add(args[0], float(args[1]))
             elif cmd == "republishes":
                 print(f"republishes {republishes}", flush=True)

@@ -9,6 +9,9 @@
 //   set NAME 0|1        write a tag
 //   toggle NAME K       write it K times, alternating, as fast as possible
 //   delete NAME         delete a tag's node; add NAME 0|1 adds it (back)
+//   recreate NAME 0|1   delete the tag's node and add it again, same node
+//                       id, holding the value, its old items' listeners
+//                       taken off first: they are told nothing
 //   level N             say N as the server's ServiceLevel (redundancy)
 //   alarm NAME SEV MSG  make the alarm NAME (AlarmConditionType ns=URI;
 //                       s=Press.NAME, source the object Press, made on
@@ -148,6 +151,10 @@ async function main() {
       // monitored items (BadNodeIdInvalid) and stops them.
       server.engine.addressSpace.deleteNode(v);
       tags.delete(name);
+    } else if (cmd === "recreate" && v) {
+      v.removeAllListeners();
+      server.engine.addressSpace.deleteNode(v);
+      add(name, arg === "1");
     } else if (cmd === "add" && !v) {
       add(name, arg === "1");
     } else if (cmd === "level" && name) {

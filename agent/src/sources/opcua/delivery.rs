@@ -391,13 +391,33 @@ struct Collected {
     overflowed: BTreeSet<usize>,
     /// Values flagged `Overflow`.
     lost: u64,
-    /// A bad status change: the server closed the subscription.
+    /// A status change that ends the subscription: the server closed it.
     closed: Option<StatusCode>,
+    /// Another bad status change, naming no item (Python asyncua's
+    /// `BadNodeIdUnknown` for a node deleted under an item): the items
+    /// are to be verified now.
+    doubted: Option<StatusCode>,
     /// Events (the PLC's alarms), in the server's order.
     events: Vec<EventFieldList>,
     /// Notifications for a client handle the agent did not give: how many,
     /// and the first handle.
     strangers: Option<(u64, u32)>,
+}
+
+/// A status change that ends the subscription (Part 4 §7.25.4: `BadTimeout`
+/// once its lifetime is over; a subscription, session or server gone).
+/// Any other is about items, not the subscription.
+fn ends_subscription(status: StatusCode) -> bool {
+    matches!(
+        status,
+        StatusCode::BadTimeout
+            | StatusCode::BadSubscriptionIdInvalid
+            | StatusCode::BadNoSubscription
+            | StatusCode::BadSessionClosed
+            | StatusCode::BadSessionIdInvalid
+            | StatusCode::BadShutdown
+            | StatusCode::BadServerHalted
+    )
 }
 
 /// Reads one publish into `out`.
@@ -444,8 +464,10 @@ impl Collector<'_> {
                 }
             } else if obj.inner_is::<StatusChangeNotification>() {
                 if let Some(status) = obj.into_inner_as::<StatusChangeNotification>() {
-                    if status.status.is_bad() {
+                    if ends_subscription(status.status) {
                         self.out.closed = Some(status.status);
+                    } else if status.status.is_bad() {
+                        self.out.doubted = Some(status.status);
                     }
                 }
             }
@@ -611,6 +633,7 @@ impl InTimeOrder {
             overflowed,
             lost,
             closed,
+            doubted,
             events,
             strangers,
             ..
@@ -636,6 +659,12 @@ impl InTimeOrder {
             // The supervisor sees it and subscribes again.
             tracing::warn!(%status, "the server closed the subscription");
             self.heard.closed.store(status.bits(), Ordering::Relaxed);
+        } else if let Some(status) = doubted {
+            // The subscription goes on; which item it means, a
+            // verification finds.
+            tracing::info!(%status, "a status change for no item in particular: verifying the items now");
+            self.heard.doubted.store(true, Ordering::Relaxed);
+            self.failed.notify_one();
         }
         // Overflow bookkeeping only while changes are being lost: the usual
         // publish costs one test here. Keep-alives count, so the alarm

@@ -44,6 +44,9 @@ pub(super) struct Heard {
     /// The bad status the server closed the subscription with (its
     /// `StatusChangeNotification`, `BadTimeout` when it expired), or 0.
     pub(super) closed: AtomicU32,
+    /// A bad status change that did not end the subscription (a node
+    /// deleted under an item, Python asyncua): the items are verified now.
+    pub(super) doubted: AtomicBool,
 }
 
 impl Heard {
@@ -53,6 +56,7 @@ impl Heard {
             last: AtomicU64::new(0),
             busy: AtomicBool::new(false),
             closed: AtomicU32::new(0),
+            doubted: AtomicBool::new(false),
         }
     }
 

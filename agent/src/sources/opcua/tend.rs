@@ -16,6 +16,7 @@
 //! change (the server rightly reports none); an item with a percent
 //! deadband (of a range the server holds) is checked for its node only.
 
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use opcua::client::Session;
@@ -85,6 +86,10 @@ impl Tending {
         renew_due(t, now).await;
         if self.judge_at.is_some_and(|at| at <= now) {
             self.judge(t).await;
+        }
+        // A status change named no item: a round now.
+        if t.heard.doubted.swap(false, Ordering::Relaxed) {
+            self.next_round = self.next_round.min(now);
         }
         // A round starts once the last one's suspects are judged.
         if self.cursor.is_none() && self.judge_at.is_none() && now >= self.next_round {

@@ -274,3 +274,28 @@ fn a_server_sending_fewer_than_asked_is_found_out_by_two_publishes_stamped_alike
     assert_eq!(batches(&mut rx).len(), 2);
     assert_eq!(shared.lock().order.cycle.full, cap);
 }
+
+#[test]
+fn a_status_change_about_a_node_verifies_the_items_and_only_a_timeout_closes_the_subscription() {
+    use opcua::types::StatusCode;
+    use std::sync::atomic::Ordering;
+    let (shared, _rx, _dir) = cell();
+    let heard = shared.lock().order.heard.clone();
+    // Python asyncua, a node deleted under an item: the subscription goes
+    // on, its items verified now.
+    let now = DateTime::now();
+    shared.lock().arrived(NotificationMessage::status_change(
+        1,
+        now,
+        StatusCode::BadNodeIdUnknown,
+    ));
+    assert_eq!(heard.closed(), None);
+    assert!(heard.doubted.load(Ordering::Relaxed));
+    // Its lifetime over: closed.
+    shared.lock().arrived(NotificationMessage::status_change(
+        2,
+        now,
+        StatusCode::BadTimeout,
+    ));
+    assert_eq!(heard.closed(), Some(StatusCode::BadTimeout));
+}

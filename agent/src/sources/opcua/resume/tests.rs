@@ -153,3 +153,30 @@ async fn a_request_that_keeps_failing_is_tried_a_few_times_then_the_publish_is_s
     assert_eq!(seen[2], "0=Good(false)");
     assert!(shared.lock().flowing());
 }
+
+#[tokio::test]
+async fn a_republish_answered_subscription_id_invalid_gives_the_whole_subscription_up_at_once() {
+    let (shared, _rx, _dir) = cell();
+    shared.lock().id = 7;
+    shared.lock().arrived(publish(1, T, &[(1, true, T)]));
+    shared
+        .lock()
+        .arrived(publish(4, T + 300, &[(1, false, T + 300)]));
+    let mut server = Queue::default();
+    for seq in [2, 3] {
+        server
+            .answers
+            .insert(seq, Err(StatusCode::BadSubscriptionIdInvalid));
+    }
+    // Gone: the supervisor replaces the subscription (`watch`); the
+    // second missing publish is not asked for.
+    let filled = fill(&server, 7, &shared, &Requests::default()).await;
+    assert!(
+        matches!(
+            filled,
+            Err(Unfilled::Gone(StatusCode::BadSubscriptionIdInvalid))
+        ),
+        "{filled:?}"
+    );
+    assert_eq!(*server.asked.lock().unwrap(), [2]);
+}
