@@ -5,6 +5,8 @@
 //! started from the cells' configurations it made, each fault said for
 //! its cell.
 
+mod rotation;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -639,7 +639,10 @@ impl Trust {
     /// The keys cell `cell` is being rotated from (hex).
     pub fn previous_hex(&self, cell: &str) -> Vec<String> {
         self.cells.get(cell).map_or_else(Vec::new, |k| {
-            k.iter().skip(1).map(|k| hex::encode(k.as_bytes())).collect()
+            k.iter()
+                .skip(1)
+                .map(|k| hex::encode(k.as_bytes()))
+                .collect()
         })
     }
 

@@ -279,7 +279,8 @@ pub async fn running(
                             layout.shown(&layout.on_host(&cell.host, &layout.signing_key(id)))
                         ));
                     }
-                    let deployed_cert = layout.on_host(&cell.host, &format!("{etc}/agent-{id}.pem"));
+                    let deployed_cert =
+                        layout.on_host(&cell.host, &format!("{etc}/agent-{id}.pem"));
                     let deployed_sha = std::fs::read_to_string(&deployed_cert)
                         .ok()
                         .and_then(|pem| facts(&pem).ok())

@@ -121,7 +121,13 @@ pub fn make(inventory: &Inventory) -> Result<Made, PlantError> {
     let mut previous = BTreeMap::new();
     for id in inventory.cells.keys() {
         if let Ok(text) = std::fs::read_to_string(layout.rotating(id)) {
-            previous.insert(id.clone(), text.lines().map(|l| l.trim().to_string()).filter(|l| !l.is_empty()).collect());
+            previous.insert(
+                id.clone(),
+                text.lines()
+                    .map(|l| l.trim().to_string())
+                    .filter(|l| !l.is_empty())
+                    .collect(),
+            );
         }
     }
     let trust = render::trust(inventory, &public, &previous);
@@ -397,7 +403,10 @@ pub fn renew(inventory: &Inventory, id: &str) -> Result<Vec<PathBuf>, PlantError
     })?;
     let cert = layout.on_host(&cell.host, &format!("{}/agent-{id}.pem", layout.etc()));
     let key = layout.on_host(&cell.host, &layout.bus_key(id));
-    let (new_cert, new_key) = (cert.with_extension("renewing"), key.with_extension("renewing"));
+    let (new_cert, new_key) = (
+        cert.with_extension("renewing"),
+        key.with_extension("renewing"),
+    );
     for p in [&new_cert, &new_key] {
         let _ = std::fs::remove_file(p);
     }

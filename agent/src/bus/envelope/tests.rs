@@ -339,7 +339,12 @@ fn a_key_being_rotated_from_is_believed_beside_the_new_one_until_removed() {
     )
     .unwrap();
     assert!(matches!(
-        done.open(sealed(&old).as_bytes(), Kind::Put, "cellwatch/m01/state", ""),
+        done.open(
+            sealed(&old).as_bytes(),
+            Kind::Put,
+            "cellwatch/m01/state",
+            ""
+        ),
         Err(Distrust::BadSignature(_))
     ));
 }
