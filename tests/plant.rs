@@ -392,6 +392,12 @@ async fn plant_async(dir: PathBuf, args: Vec<String>) -> Ran {
 /// plant made (its files under the plant's tree, listening on a port of
 /// its own), and that port.
 async fn plant_router(dir: &Path) -> (zenoh::Session, u16) {
+    plant_router_with(dir, true).await
+}
+
+/// [`plant_router`], its access control on or (a router misconfigured)
+/// off.
+async fn plant_router_with(dir: &Path, access_control: bool) -> (zenoh::Session, u16) {
     let router_dir = dir.join("routers/router-1/etc/cellwatch/router");
     let mut cfg = zenoh::Config::from_file(router_dir.join("router.json5")).unwrap();
     let file =
@@ -415,6 +421,7 @@ async fn plant_router(dir: &Path) -> (zenoh::Session, u16) {
             "transport/link/tls/connect_private_key",
             file("router-1.key"),
         ),
+        ("access_control/enabled", access_control.to_string()),
     ] {
         cfg.insert_json5(key, &value).unwrap();
     }
@@ -524,7 +531,11 @@ async fn plant_check_says_per_cell_what_is_wrong_in_the_running_plant() {
         "{}",
         r.stdout
     );
-    assert!(r.stdout.contains("router router-1: ok"), "{}", r.stdout);
+    assert!(
+        r.stdout.contains("router router-1: ok — access control as the inventory says, its running access control keeps others from speaking for a cell"),
+        "{}",
+        r.stdout
+    );
 
     // m02 up, with a key the trust file does not hold.
     let a2 = cellwatch::agent::start(c2, None).await.unwrap();
@@ -564,6 +575,26 @@ async fn plant_check_says_per_cell_what_is_wrong_in_the_running_plant() {
         "{}",
         r.stdout
     );
+    // A router running without the inventory's access control: the probe
+    // comes through it.
+    let (open_router, open_port) = plant_router_with(&dir, false).await;
+    let r = plant_async(
+        dir.clone(),
+        vec![
+            "check".into(),
+            "--connect".into(),
+            format!("quic/127.0.0.1:{open_port}"),
+            "--timeout".into(),
+            "2".into(),
+        ],
+    )
+    .await;
+    assert!(
+        r.stdout.contains("router router-1: WRONG\n  - it carried a put under cellwatch/m01/_probe from the plant-admin certificate"),
+        "{}",
+        r.stdout
+    );
+    open_router.close().await.unwrap();
     a1.stop().await;
     a2.stop().await;
     router.close().await.unwrap();

@@ -477,6 +477,33 @@ pub(crate) async fn run_check(args: &CheckArgs, out: &mut dyn Write) -> Result<(
         let bus = join(&inventory, &args.connect, trust).await?;
         let timeout = Duration::from_secs(args.timeout_secs);
         check::running(&inventory, &bus, timeout, now, &mut report).await;
+        // Each router alone: given --connect, the inventory's only router
+        // is there.
+        let routers: Vec<(&String, String)> = match (&args.connect[..], inventory.routers.len()) {
+            ([one], 1) => inventory.routers.keys().map(|n| (n, one.clone())).collect(),
+            ([], _) => inventory
+                .routers
+                .iter()
+                .map(|(n, r)| (n, format!("quic/{}:{}", r.host, r.port)))
+                .collect(),
+            _ => Vec::new(),
+        };
+        for (name, endpoint) in routers {
+            let through = |_| async {
+                let t = crate::bus::envelope::Trust::default();
+                join(&inventory, std::slice::from_ref(&endpoint), t).await
+            };
+            if let (Ok(speaker), Ok(hearer)) = (through(()).await, through(()).await) {
+                check::probe(
+                    &inventory,
+                    name,
+                    speaker.session(),
+                    hearer.session(),
+                    &mut report,
+                )
+                .await;
+            }
+        }
     }
     write!(out, "{}", report.text()).map_err(Failure::output)?;
     if report.wrong() {

@@ -349,3 +349,53 @@ async fn ready(host: &str, port: u16, timeout: Duration) -> Result<(), String> {
     .await;
     asked.unwrap_or_else(|_| Err(format!("no answer in {} s", timeout.as_secs())))
 }
+
+/// How long a probe put is repeated, waiting for it to come through.
+const PROBE_FOR: Duration = Duration::from_secs(2);
+
+/// Whether router `name` (reached by `speaker` and `hearer`, two sessions
+/// of the plant administrator's certificate through it alone) lets a
+/// certificate that is not a cell's agent put under that cell's prefix:
+/// `hearer` subscribes, `speaker` puts a probe there again and again for
+/// [`PROBE_FOR`]. Through a router with the inventory's access control
+/// nothing comes; the finding is added to `report`'s.
+pub async fn probe(
+    inventory: &Inventory,
+    name: &str,
+    speaker: &zenoh::Session,
+    hearer: &zenoh::Session,
+    report: &mut Report,
+) {
+    let Some(cell) = inventory.cells.keys().next() else {
+        return;
+    };
+    let key = format!(
+        "{}/_probe",
+        crate::config::cell_prefix(&inventory.root, cell)
+    );
+    let Ok(heard) = hearer.declare_subscriber(&key).await else {
+        return;
+    };
+    let until = tokio::time::Instant::now() + PROBE_FOR;
+    let mut through = false;
+    while tokio::time::Instant::now() < until && !through {
+        let _ = speaker
+            .put(&key, "cellwatch plant check: a put no router may carry")
+            .await;
+        through = tokio::time::timeout(Duration::from_millis(100), heard.recv_async())
+            .await
+            .is_ok_and(|s| s.is_ok());
+    }
+    let subject = format!("router {name}");
+    let Some(f) = report.findings.iter_mut().find(|f| f.subject == subject) else {
+        return;
+    };
+    if through {
+        f.problems.push(format!(
+            "it carried a put under {key} from the plant-admin certificate: its running access control is off or not the inventory's (start it with routers/{name}/…/router.json5)"
+        ));
+    } else {
+        f.facts
+            .push("its running access control keeps others from speaking for a cell".into());
+    }
+}
