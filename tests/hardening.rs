@@ -225,3 +225,30 @@ async fn an_alertmanagers_endless_error_answer_is_read_bounded() {
     // What loopback's socket buffers hold at most, far from the endless.
     assert!(sent < 32 << 20, "{sent} bytes read of an error answer");
 }
+
+/// The agent's own OPC UA key pair is made owner-only from its first byte,
+/// whatever the process's umask: its folders 0700 and its key 0600 as they
+/// are created (not made so afterwards), before any connection.
+#[test]
+fn the_opcua_key_pair_is_owner_only_from_the_start_whatever_the_umask() {
+    let d = tempfile::tempdir().unwrap();
+    let pki = d.path().join("pki");
+    let out = std::process::Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "umask 000; exec {} discover opc.tcp://127.0.0.1:1/ --pki-dir {}",
+            env!("CARGO_BIN_EXE_cellwatch"),
+            pki.display()
+        ))
+        .output()
+        .unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(mode(&pki), 0o700, "the PKI folder");
+    assert_eq!(mode(&pki.join("private")), 0o700);
+    assert_eq!(mode(&pki.join("private/private.pem")), 0o600);
+}

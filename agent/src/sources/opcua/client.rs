@@ -79,12 +79,19 @@ pub(super) fn client_retrying(
     retries: i32,
 ) -> Result<opcua::client::Client, SourceError> {
     let key_existed = crate::sources::pki::own_key(&config.pki_dir).exists();
+    let (name, uri) = (
+        format!("cellwatch {cell}"),
+        format!("urn:cellwatch:agent:{cell}"),
+    );
+    // The key pair made here, its private key owner-only from its first
+    // byte (the library would write it with the process's umask).
+    crate::sources::pki::own_key_pair(&config.pki_dir, &name, &uri).map_err(SourceError::Client)?;
     let client = ClientBuilder::new()
-        .application_name(format!("cellwatch {cell}"))
-        .application_uri(format!("urn:cellwatch:agent:{cell}"))
+        .application_name(name)
+        .application_uri(uri)
         .product_uri("urn:cellwatch")
         .pki_dir(&config.pki_dir)
-        .create_sample_keypair(true)
+        .create_sample_keypair(false)
         .trust_server_certs(false)
         .verify_server_certs(true)
         .session_retry_limit(retries)
