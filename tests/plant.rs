@@ -320,6 +320,17 @@ fn a_plant_is_made_from_its_inventory_and_made_again_changes_nothing() {
     assert_eq!(r.code, 1, "{}{}", r.stdout, r.stderr);
     assert!(r.stdout.contains("router router-1: WRONG\n  - routers/router-1/etc/cellwatch/router/router.json5: its access control is not the inventory's"), "{}", r.stdout);
     assert!(r.stdout.contains("router router-2: ok"), "{}", r.stdout);
+    // A cell taken out of the inventory: its agent's instance on its host
+    // is named.
+    let inventory = dir.join("plant.toml");
+    let mut doc: toml_edit::DocumentMut = std::fs::read_to_string(&inventory)
+        .unwrap()
+        .parse()
+        .unwrap();
+    doc["cells"].as_table_mut().unwrap().remove("m02").unwrap();
+    std::fs::write(&inventory, doc.to_string()).unwrap();
+    let r = plant(dir, &["check", "--offline"]);
+    assert!(r.stdout.contains("host cnc-1.plant: WRONG\n  - cell m02 is no longer in the inventory on this host: stop and disable cellwatch@m02 there"), "{}", r.stdout);
 }
 
 #[test]

@@ -166,6 +166,37 @@ pub fn folder(inventory: &Inventory, now_ms: u64) -> (Report, Option<Trust>) {
         }
         report.findings.push(f);
     }
+    // Agents the folder still makes start on a host, the inventory no
+    // longer naming them there.
+    if let Ok(hosts) = std::fs::read_dir(layout.dir().join("hosts")) {
+        for host in hosts.flatten() {
+            let host = host.file_name().to_string_lossy().to_string();
+            let wants = layout.on_host(&host, "/etc/systemd/system/multi-user.target.wants");
+            let Ok(links) = std::fs::read_dir(&wants) else {
+                continue;
+            };
+            for link in links.flatten() {
+                let name = link.file_name().to_string_lossy().to_string();
+                let Some(id) = name
+                    .strip_prefix("cellwatch@")
+                    .and_then(|n| n.strip_suffix(".service"))
+                else {
+                    continue;
+                };
+                if inventory.cells.get(id).is_some_and(|c| c.host == host) {
+                    continue;
+                }
+                report.findings.push(Finding {
+                    subject: format!("host {host}"),
+                    facts: Vec::new(),
+                    problems: vec![format!(
+                        "cell {id} is no longer in the inventory on this host: stop and disable cellwatch@{id} there, then remove its files from {}",
+                        layout.shown(&layout.host(&host))
+                    )],
+                });
+            }
+        }
+    }
     for (name, r) in &inventory.routers {
         let mut f = Finding {
             subject: format!("router {name}"),
