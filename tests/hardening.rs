@@ -175,7 +175,10 @@ async fn the_agents_opcua_client_key_is_the_owners_only_from_the_start() {
     let cert = std::fs::read(made.join("own/cert.der")).unwrap();
     let run = trust_server(made.clone()).await.unwrap();
     assert_eq!(run.status.code(), Some(2), "{run:?}");
-    assert_eq!(std::fs::read(made.join("private/private.pem")).unwrap(), key);
+    assert_eq!(
+        std::fs::read(made.join("private/private.pem")).unwrap(),
+        key
+    );
     assert_eq!(std::fs::read(made.join("own/cert.der")).unwrap(), cert);
     // One that others may read is refused, naming it.
     let loose = made.join("private/private.pem");

@@ -140,8 +140,7 @@ pub(super) fn client_retrying(
         .map_err(|e| SourceError::Client(e.join("; ")))?;
     // A key that was there before, and that others may read, is refused.
     if made {
-        crate::sources::pki::protect_own_key(&config.pki_dir, true)
-            .map_err(SourceError::Client)?;
+        crate::sources::pki::protect_own_key(&config.pki_dir, true).map_err(SourceError::Client)?;
     }
     Ok(client)
 }
