@@ -115,6 +115,18 @@ impl Fixture {
         };
     }
 
+    /// Stops the agent and starts it again on the same configuration and
+    /// journal: a real restart (a new bus session, on a new port; kim's
+    /// client session opened again to it).
+    pub(crate) async fn restart(&mut self) {
+        self.stop().await;
+        let agent = agent::start(self.config.clone(), None).await.unwrap();
+        self.zenoh_port = crate::util::agent_port(&agent).await;
+        self.client =
+            crate::util::operator_session(&self.dir, "operator-kim", self.zenoh_port).await;
+        self.agent = Some(agent);
+    }
+
     /// The fixture's directory (certificates, keys, journal).
     pub(crate) fn dir(&self) -> &Path {
         &self.dir

@@ -27,6 +27,7 @@ use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 use crate::agent::{alarm_until, Fixture};
 
 mod asyncua;
+mod channels;
 mod scada;
 pub(crate) use scada::ScadaProgram;
 

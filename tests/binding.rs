@@ -2,7 +2,8 @@
 //! answer names the payload it answers (`command`, SHA-256), and the bus
 //! client (the CLI's commands, the console's forwarding, the demo's
 //! operator) believes only the answer naming its own. A command sent again
-//! is answered as a replay, never as accepted.
+//! is answered as a replay, never as accepted, before a restart and after:
+//! the journal keeps each command's digest with its nonce.
 
 use std::time::Duration;
 
@@ -183,4 +184,55 @@ async fn a_command_sent_again_is_answered_as_a_replay() {
         .filter(|r| r["fields"]["nonce"] == cmd.nonce.as_str())
         .count();
     assert_eq!(of_nonce, 2, "{rows:#?}");
+}
+
+/// After a restart, a command sent again is known by its digest, kept in
+/// the journal with its nonce: the same signed command gets its own first
+/// outcome, and another command of the same operator and action with the
+/// same nonce (kim's earlier out-of-service of csd, its reason changed and
+/// signed again) gets nobody's, as before the restart.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn after_a_restart_a_replay_is_matched_by_its_digest() {
+    let mut fx = Fixture::start().await;
+    fx.settled().await;
+    let cmd = signed(Action::OutOfService, "csd", Some("sensor swap"));
+    let payload = serde_json::to_string(&cmd).unwrap();
+    let first = crate::spawned::send(fx.client(), &payload).await;
+    assert_eq!(first, (true, "out-of-service csd by kim".to_string()));
+    let mut other = Command {
+        reason: Some("cable cut".into()),
+        signature: String::new(),
+        ..cmd.clone()
+    };
+    other.sign("m01ps0004", &crate::spawned::kim());
+    let other = serde_json::to_string(&other).unwrap();
+    let refused = (false, "replayed command (nonce already used)".to_string());
+    assert_eq!(crate::spawned::send(fx.client(), &other).await, refused);
+
+    fx.restart().await;
+    let replayed = (
+        false,
+        "replayed command: sent before (accepted: out-of-service csd by kim); \
+         not carried out again"
+            .to_string(),
+    );
+    // Its JSON spaced otherwise: the same signed command.
+    let spaced = serde_json::to_string_pretty(&cmd).unwrap();
+    assert_eq!(crate::spawned::send(fx.client(), &spaced).await, replayed);
+    assert_eq!(crate::spawned::send(fx.client(), &other).await, refused);
+    assert_eq!(crate::spawned::send(fx.client(), &payload).await, replayed);
+    // Carried out once; each command's rows keep its digest.
+    let journal = rusqlite::Connection::open(fx.journal_path()).unwrap();
+    let rows: Vec<(bool, bool, Option<String>)> = journal
+        .prepare("SELECT accepted, verified, digest FROM commands WHERE nonce = ?1 ORDER BY seq")
+        .unwrap()
+        .query_map([&cmd.nonce], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))
+        .unwrap()
+        .collect::<Result<_, _>>()
+        .unwrap();
+    let own = Some(hex::encode(cmd.digest()));
+    assert_eq!(rows[0], (true, true, own.clone()), "{rows:?}");
+    assert_eq!(rows.iter().filter(|r| r.0).count(), 1, "{rows:?}");
+    assert!(rows.iter().all(|r| r.2.is_some()), "{rows:?}");
+    fx.stop().await;
 }

@@ -463,6 +463,7 @@ async fn chained_journal(db: &Path) {
             stage: "command".into(),
             source: String::new(),
             count: 1,
+            digest: None,
         });
         rows.push(Entry::Part {
             at: now + i,

@@ -122,6 +122,74 @@ async fn an_opcua_private_key_is_the_owners_only_from_the_start() {
     assert!(!stolen.exists(), "the key was written through the link");
 }
 
+/// The agent's own OPC UA client key pair is made owner-only before the
+/// client library runs, whatever the process's umask: `trust-server`
+/// (and so `discover` and the source, which build their client the same
+/// way) run with umask 000 leaves a `private/` only its owner may enter
+/// (the library would make it open to all, and the key in it, before
+/// tightening the key alone), and a key pair made before is kept as it is.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_agents_opcua_client_key_is_the_owners_only_from_the_start() {
+    let d = tempfile::tempdir().unwrap();
+    let server = SimServer::start(
+        &sim_options(&d.path().join("sim-pki")),
+        "cnc",
+        "cellwatch simulated CNC",
+        &[],
+    )
+    .await
+    .unwrap();
+    let endpoint = server.endpoint();
+    let trust_server = |pki: std::path::PathBuf| {
+        let endpoint = endpoint.clone();
+        tokio::task::spawn_blocking(move || {
+            // umask 000: whatever the library made itself would be open to all.
+            std::process::Command::new("sh")
+                .args(["-c", "umask 000; exec \"$0\" \"$@\""])
+                .arg(env!("CARGO_BIN_EXE_cellwatch"))
+                .args(["trust-server", &endpoint, "--pki-dir"])
+                .arg(&pki)
+                .stdin(std::process::Stdio::null())
+                .output()
+                .unwrap()
+        })
+    };
+    let fresh = d.path().join("pki");
+    let run = trust_server(fresh.clone()).await.unwrap();
+    // Not confirmed (no standard input): nothing trusted, but the client
+    // had its key pair.
+    assert_eq!(run.status.code(), Some(2), "{run:?}");
+    assert_eq!(mode(&fresh.join("private")), 0o700);
+    assert_eq!(mode(&fresh.join("private/private.pem")), 0o600);
+    assert!(fresh.join("own/cert.der").exists());
+    // A key pair made before (as `own_key_pair` makes it) is the client's.
+    let made = d.path().join("made-pki");
+    let cell = "trust";
+    assert!(cellwatch::sources::pki::own_key_pair(
+        &made,
+        &format!("cellwatch {cell}"),
+        &format!("urn:cellwatch:agent:{cell}"),
+    )
+    .unwrap());
+    let key = std::fs::read(made.join("private/private.pem")).unwrap();
+    let cert = std::fs::read(made.join("own/cert.der")).unwrap();
+    let run = trust_server(made.clone()).await.unwrap();
+    assert_eq!(run.status.code(), Some(2), "{run:?}");
+    assert_eq!(
+        std::fs::read(made.join("private/private.pem")).unwrap(),
+        key
+    );
+    assert_eq!(std::fs::read(made.join("own/cert.der")).unwrap(), cert);
+    // One that others may read is refused, naming it.
+    let loose = made.join("private/private.pem");
+    std::fs::set_permissions(&loose, std::fs::Permissions::from_mode(0o644)).unwrap();
+    let run = trust_server(made.clone()).await.unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_ne!(run.status.code(), Some(0), "{run:?}");
+    assert!(stderr.contains(loose.to_str().unwrap()), "{stderr}");
+    server.stop();
+}
+
 /// `journal backup` makes a copy its owner only may read, under a private
 /// name while it is made, and never writes through or over what is at the
 /// destination.

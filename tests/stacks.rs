@@ -17,8 +17,9 @@
 //! each, a tag's value changes and the source must deliver it, saying a
 //! gap first wherever changes may have been lost (never losing one
 //! silently), the node comes back, and the requests the source made
-//! (`cellwatch_opcua_requests_total`, counted as the agent counts them)
-//! stay few: a storm fails the test.
+//! (`cellwatch_opcua_requests_total`, counted as the agent counts them,
+//! the client library's own `Publish` requests among them) stay few: a
+//! storm fails the test.
 
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -363,12 +364,18 @@ const HELD: Duration = Duration::from_millis(300);
 /// periods of 1 s at a 100 ms publishing interval): the stall's length.
 const STALLED: Duration = Duration::from_secs(5);
 
-/// The requests a fault may cost at most, all services together: a
+/// The requests a fault may cost at most, all services but `Publish`: a
 /// reconnection reads the namespaces and takes the subscription over or
 /// creates it and its item, a recovery asks for a few publishes, and the
 /// verification reads the node every 2 s while the fault lasts (0 to 6 in
 /// all in the runs so far); a storm is hundreds.
 const REQUESTS_AT_MOST: u64 = 40;
+
+/// `Publish` requests (the client library's, kept queued) a second may
+/// cost at most: one per publishing interval of 100 ms while data flows,
+/// twice that for what a fault's recovery asks again; a storm is hundreds
+/// a second.
+const PUBLISHES_PER_SECOND_AT_MOST: u64 = 20;
 
 /// `Republish` requests a fault may cost at most: three missing publishes
 /// asked for three times each (one or two asked for in the runs so far).
@@ -480,7 +487,11 @@ async fn play(stack: Stack, fault: Fault) {
     )
     .await;
     let delivered = |k: u32| move |e: &SourceEvent| matches!(e, SourceEvent::Readings(rs) if rs.iter().any(|r| r.tag == 0 && stack.is(&r.reading, k)));
-    let before = requests(&counted, None);
+    let (before, publishes_before, started) = (
+        requests(&counted, None),
+        requests(&counted, Some("Publish")),
+        std::time::Instant::now(),
+    );
     // The value the tag holds after the fault.
     let mut last = 2;
     match fault {
@@ -565,11 +576,20 @@ async fn play(stack: Stack, fault: Fault) {
     // And followed from then on.
     server = server.said(&stack.command("set", last + 1)).await;
     until(&mut source, "a value after the fault", delivered(last + 1)).await;
+    let publishes = requests(&counted, Some("Publish")) - publishes_before;
     let (all_requests, republishes) = (
-        requests(&counted, None) - before,
+        requests(&counted, None) - before - publishes,
         requests(&counted, Some("Republish")),
     );
-    eprintln!("{stack:?} {fault:?}: {all_requests} requests, {republishes} Republish");
+    let seconds = started.elapsed().as_secs() + 1;
+    eprintln!("{stack:?} {fault:?}: {all_requests} requests, {republishes} Republish, {publishes} Publish in {seconds} s");
+    // The library's publishes are counted (one at least answered the
+    // value after the fault), and never a storm.
+    assert!(publishes > 0, "{stack:?} {fault:?}: no Publish counted");
+    assert!(
+        publishes <= PUBLISHES_PER_SECOND_AT_MOST * seconds,
+        "{stack:?} {fault:?}: {publishes} Publish requests in {seconds} s"
+    );
     assert!(
         all_requests <= REQUESTS_AT_MOST,
         "{stack:?} {fault:?}: {all_requests} requests: {:?}",

@@ -681,21 +681,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     for (at, nonce) in restored.nonces {
         gate.remember(at, nonce);
     }
-    let answers = crate::cell::answers::Answers::default();
-    for saved in restored.outcomes {
-        let outcome = match saved.outcome {
-            Some((accepted, detail)) => crate::step::CommandOutcome::new(accepted, detail),
-            None => crate::step::CommandOutcome::new(
-                false,
-                "the agent stopped before this command's outcome was known: see its history",
-            ),
-        };
-        let sent = crate::cell::answers::Sent::Journaled {
-            operator: saved.operator,
-            action: saved.action,
-        };
-        answers.restore(saved.nonce, saved.at, sent, outcome);
-    }
+    let answers = crate::cell::answers::Answers::restored(restored.outcomes);
     let state = restored.state.as_ref().map(|(_, at, kind)| (*at, *kind));
     let step = engine.restore(
         restored.alarms,

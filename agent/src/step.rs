@@ -61,6 +61,9 @@ pub struct CommandRecord {
     /// How many refusals the row stands for ([`Stage::Refused`]); 1 for
     /// every other row.
     pub count: u64,
+    /// The command's [`Command::digest`] (hex), in every row of a command;
+    /// `None` in a refusal that names no command.
+    pub digest: Option<String>,
 }
 
 impl CommandRecord {
@@ -78,6 +81,7 @@ impl CommandRecord {
             stage: Stage::Refused,
             source,
             count,
+            digest: None,
         }
     }
 
@@ -96,6 +100,7 @@ impl CommandRecord {
             stage,
             source: String::new(),
             count: 1,
+            digest: Some(hex::encode(cmd.digest())),
         }
     }
 

@@ -153,7 +153,7 @@ pub async fn run(setup: &Setup) -> anyhow::Result<String> {
     result
 }
 
-fn plain(connect: Vec<String>, listen: Vec<String>) -> cellwatch::config::ZenohConfig {
+pub fn plain(connect: Vec<String>, listen: Vec<String>) -> cellwatch::config::ZenohConfig {
     cellwatch::config::ZenohConfig {
         mode: cellwatch::config::ZenohMode::Peer,
         connect,
@@ -217,8 +217,9 @@ fn sealed(
     out
 }
 
-/// An alarm event of `cell`, unsealed: its key and body.
-fn event(key: &AgentKey, id: &str, n: usize, raised: bool) -> (String, String) {
+/// An alarm event of `cell`, unsealed: its key and body (`n` picks its
+/// severity and text).
+pub fn event(key: &AgentKey, id: &str, n: usize, raised: bool) -> (String, String) {
     let now = cellwatch::clock::now_ms();
     let at = cellwatch::clock::rfc3339(now);
     let a = AlarmPayload {

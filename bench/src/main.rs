@@ -8,6 +8,7 @@
 
 mod alertmanager;
 mod console;
+mod console_bounds;
 mod console_browser;
 mod fanout;
 mod journal;
@@ -197,6 +198,30 @@ enum Cmd {
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u16).range(1..=1024))]
         alarms_per_step: u16,
     },
+    /// One client's share of the console: an operator from 127.0.0.1
+    /// asking the plant and a cell's history, alone and then while
+    /// another signed-in operator from 127.0.0.2 opens as many
+    /// connections and live streams as it can and floods requests
+    /// (`/api/kpi?since=1970-01-01` among them). Stand-in agents answer
+    /// each cell's history, sealed. Prints the operator's latencies, their
+    /// ratio, and what the attacker got.
+    ConsoleBounds {
+        /// Cells the console reads.
+        #[arg(long, default_value_t = 8)]
+        cells: usize,
+        /// How long each phase lasts.
+        #[arg(long, default_value = "20s", value_parser = humantime::parse_duration)]
+        phase: Duration,
+        /// Connections the attacker tries to hold.
+        #[arg(long, default_value_t = 200)]
+        connections: usize,
+        /// The `cellwatch` binary under test.
+        #[arg(long, default_value = "target/release/cellwatch")]
+        agent: PathBuf,
+        /// Where the configuration, trust file and log go.
+        #[arg(long, default_value = "target/bench-console-bounds")]
+        workdir: PathBuf,
+    },
 }
 
 fn main() -> ExitCode {
@@ -357,6 +382,23 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
                 alarms_per_step: usize::from(alarms_per_step),
             };
             print!("{}", console::run(&setup).await?);
+            Ok(())
+        }
+        Cmd::ConsoleBounds {
+            cells,
+            phase,
+            connections,
+            agent,
+            workdir,
+        } => {
+            let setup = console_bounds::Setup {
+                agent,
+                workdir,
+                cells,
+                phase,
+                connections,
+            };
+            print!("{}", console_bounds::run(&setup).await?);
             Ok(())
         }
     }

@@ -7,14 +7,16 @@
 //! the same nonce is refused as a replay, with nobody's outcome. Kept as
 //! long as a nonce is remembered ([`Gate::NONCE_WINDOW_MS`]), so memory is
 //! bounded by the verified commands of that window; restored from the
-//! journal at start.
+//! journal at start, each command known by its digest
+//! ([`Command::digest`], kept with its rows), so that after a restart too
+//! only the same signed command gets its outcome.
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
-use sha2::{Digest, Sha256};
 use tokio::sync::oneshot;
 
+use crate::journal::SavedOutcome;
 use crate::operator::{clip, Command, Gate};
 use crate::step::{CommandOutcome, RECORD_FIELD_BYTES};
 
@@ -35,11 +37,11 @@ struct Entry {
 /// Which command a nonce was first used by.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Sent {
-    /// SHA-256 of the command as parsed, signature included: the same
-    /// signed command, however its JSON was spaced.
+    /// [`Command::digest`]: the same signed command, however its JSON
+    /// was spaced; read back from the journal too.
     Signed([u8; 32]),
-    /// Read back from the journal, which keeps no signature: its operator
-    /// and action, as journaled.
+    /// Read back from rows journaled before the journal kept digests: its
+    /// operator and action, as journaled.
     Journaled {
         /// Who signed it (clipped as journaled).
         operator: String,
@@ -51,7 +53,21 @@ pub enum Sent {
 impl Sent {
     /// The identity of `cmd`.
     pub fn of(cmd: &Command) -> Sent {
-        Sent::Signed(Sha256::digest(serde_json::to_vec(cmd).unwrap_or_default()).into())
+        Sent::Signed(cmd.digest())
+    }
+
+    /// The identity of a command read back from the journal: its digest,
+    /// or, in rows written before digests were kept, its operator and
+    /// action.
+    pub fn journaled(saved: &SavedOutcome) -> Sent {
+        let digest = saved.digest.as_deref().and_then(|d| hex::decode(d).ok());
+        match digest.and_then(|d| <[u8; 32]>::try_from(d).ok()) {
+            Some(d) => Sent::Signed(d),
+            None => Sent::Journaled {
+                operator: saved.operator.clone(),
+                action: saved.action.clone(),
+            },
+        }
     }
 
     fn is(&self, cmd: &Command) -> bool {
@@ -114,6 +130,24 @@ impl Answers {
                 entry.answer = Answer::Done(outcome.clone());
             }
         }
+    }
+
+    /// The outcomes read back from the journal at start (its recent
+    /// verified commands).
+    pub fn restored(saved: Vec<SavedOutcome>) -> Answers {
+        let answers = Answers::default();
+        for s in saved {
+            let outcome = match &s.outcome {
+                Some((accepted, detail)) => CommandOutcome::new(*accepted, detail.clone()),
+                None => CommandOutcome::new(
+                    false,
+                    "the agent stopped before this command's outcome was known: see its history",
+                ),
+            };
+            let sent = Sent::journaled(&s);
+            answers.restore(s.nonce, s.at, sent, outcome);
+        }
+        answers
     }
 
     /// An outcome read back from the journal at start.
@@ -246,5 +280,43 @@ mod tests {
         reset.action = Action::Reset;
         let (tx, _) = oneshot::channel();
         assert!(matches!(answers.retry(&reset, tx), Retry::Unknown(_)));
+    }
+
+    #[test]
+    fn a_journaled_command_is_known_by_its_digest_or_in_older_rows_by_who_and_what() {
+        let saved = |nonce: &str, digest: Option<String>| SavedOutcome {
+            nonce: nonce.into(),
+            operator: "kim".into(),
+            action: "ack".into(),
+            digest,
+            at: 1_000,
+            outcome: Some((true, "ack ese by kim".into())),
+        };
+        let first = ack("ee", "ese");
+        let answers = Answers::restored(vec![
+            saved("ee", Some(hex::encode(first.digest()))),
+            saved("ff", None),
+        ]);
+        let (tx, _) = oneshot::channel();
+        assert!(matches!(answers.retry(&first, tx), Retry::Now(_)));
+        // Another ack of kim's with the same nonce: nobody's outcome.
+        let (tx, _) = oneshot::channel();
+        assert!(matches!(
+            answers.retry(&ack("ee", "csd"), tx),
+            Retry::Unknown(_)
+        ));
+        // A row from before digests were kept: kim's ack, as journaled.
+        let (tx, _) = oneshot::channel();
+        assert!(matches!(
+            answers.retry(&ack("ff", "csd"), tx),
+            Retry::Now(_)
+        ));
+        assert_eq!(
+            Sent::journaled(&saved("gg", Some("not hex".into()))),
+            Sent::Journaled {
+                operator: "kim".into(),
+                action: "ack".into()
+            }
+        );
     }
 }

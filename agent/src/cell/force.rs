@@ -200,6 +200,7 @@ impl CellLoop {
         self.forcing.pending = Some(Pending {
             operator: String::new(),
             nonce: String::new(),
+            digest: None,
             transition: target.to_string(),
             seen: vec![false; targets.len()],
             targets,
@@ -254,6 +255,7 @@ impl CellLoop {
             (Action::Force, Some(pending)) => {
                 pending.operator = base.operator.clone();
                 pending.nonce = base.nonce.clone();
+                pending.digest = base.digest.clone();
                 (force_switch, Then::Force)
             }
             _ => (stop_switch, Then::Stop),
@@ -415,6 +417,7 @@ impl CellLoop {
             stage: Stage::Result,
             source: String::new(),
             count: 1,
+            digest: p.digest.clone(),
         };
         self.record(record).await;
         let step = self.engine.on_system(&alarm, Some(&why), now);
@@ -444,6 +447,7 @@ impl CellLoop {
             },
             source: String::new(),
             count: 1,
+            digest: p.digest.clone(),
         };
         self.record(record).await;
         if p.overdue {

@@ -78,6 +78,8 @@ impl Forcing {
 pub(crate) struct Pending {
     pub operator: String,
     pub nonce: String,
+    /// The command's digest, for its later rows.
+    pub digest: Option<String>,
     /// `F1.t3`.
     pub transition: String,
     /// The steps it leads to: name and flag tag.

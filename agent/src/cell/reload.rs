@@ -87,6 +87,7 @@ impl CellLoop {
             action: Some(crate::operator::Action::Configure),
             alarm: String::new(),
             nonce: String::new(),
+            digest: None,
             accepted: true,
             verified: true,
             detail,

@@ -167,16 +167,23 @@ impl Link {
     }
 }
 
-/// Inserts `row` into `commands`, chained after `prev`; returns its link.
+/// Inserts `row` into `commands`, chained after `prev`, with its
+/// command's digest beside the chain (not hashed: a lookup for replays,
+/// absent from rows written before it); returns its link.
 ///
 /// # Errors
 /// SQLite failing.
-pub fn insert(tx: &Connection, row: &ChainedRow<'_>, prev: &Link) -> rusqlite::Result<Link> {
+pub fn insert(
+    tx: &Connection,
+    row: &ChainedRow<'_>,
+    digest: Option<&str>,
+    prev: &Link,
+) -> rusqlite::Result<Link> {
     let link = prev.next(row);
     tx.prepare_cached(
         "INSERT INTO commands (seq, at_ms, operator, action, alarm, nonce, accepted, verified, \
-         detail, stage, source, count, chain_index, prev_hash, hash) \
-         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15)",
+         detail, stage, source, count, chain_index, prev_hash, hash, digest) \
+         VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16)",
     )?
     .execute(rusqlite::params![
         row.seq,
@@ -193,7 +200,8 @@ pub fn insert(tx: &Connection, row: &ChainedRow<'_>, prev: &Link) -> rusqlite::R
         row.count,
         link.index,
         prev.hash,
-        link.hash
+        link.hash,
+        digest
     ])?;
     Ok(link)
 }

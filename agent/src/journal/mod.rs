@@ -137,6 +137,9 @@ pub enum Entry {
         source: String,
         /// How many refusals the row stands for; 1 for other rows.
         count: u64,
+        /// SHA-256 of the command as signed (hex), in the rows of a
+        /// command; not chained (rows before it have none).
+        digest: Option<String>,
     },
 }
 
@@ -695,6 +698,7 @@ fn write_batch(
                 stage,
                 source,
                 count,
+                digest,
             } => {
                 let row = chain::ChainedRow {
                     seq: next,
@@ -710,7 +714,7 @@ fn write_batch(
                     source,
                     count: i64::try_from(*count).unwrap_or(i64::MAX),
                 };
-                link = chain::insert(&tx, &row, &link)?;
+                link = chain::insert(&tx, &row, digest.as_deref(), &link)?;
             }
         }
     }

@@ -26,6 +26,9 @@ pub struct SavedOutcome {
     pub operator: String,
     /// What it asked, as journaled.
     pub action: String,
+    /// SHA-256 of the command as signed (hex); `None` in rows journaled
+    /// before digests were kept.
+    pub digest: Option<String>,
     /// When it was first journaled (ms).
     pub at: u64,
     /// Accepted and the detail, from its final row; `None` when only its
@@ -77,7 +80,7 @@ pub fn saved(conn: &Connection, nonces_since: u64) -> rusqlite::Result<Saved> {
             e => Err(e),
         })?;
     let mut stmt = conn.prepare(
-        "SELECT at_ms, nonce, accepted, detail, stage, operator, action FROM commands \
+        "SELECT at_ms, nonce, accepted, detail, stage, operator, action, digest FROM commands \
          WHERE verified != 0 AND at_ms >= ?1 ORDER BY seq",
     )?;
     let rows = stmt
@@ -90,18 +93,20 @@ pub fn saved(conn: &Connection, nonces_since: u64) -> rusqlite::Result<Saved> {
                 r.get::<_, String>(4)?,
                 r.get::<_, String>(5)?,
                 r.get::<_, String>(6)?,
+                r.get::<_, Option<String>>(7)?,
             ))
         })?
         .collect::<Result<Vec<_>, _>>()?;
     let mut nonces = Vec::new();
     let mut outcomes: Vec<SavedOutcome> = Vec::new();
-    for (at, nonce, accepted, detail, stage, operator, action) in rows {
+    for (at, nonce, accepted, detail, stage, operator, action, digest) in rows {
         if outcomes.last().is_none_or(|o| o.nonce != nonce) {
             nonces.push((at, nonce.clone()));
             outcomes.push(SavedOutcome {
                 nonce: nonce.clone(),
                 operator,
                 action,
+                digest,
                 at,
                 outcome: None,
             });

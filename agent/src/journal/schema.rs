@@ -121,6 +121,8 @@ const MIGRATIONS: &[(&str, &str, &str)] = &[
     ("commands", "chain_index", "INTEGER"),
     ("commands", "prev_hash", "TEXT"),
     ("commands", "hash", "TEXT"),
+    // The command's digest (`Command::digest`): empty in rows before it.
+    ("commands", "digest", "TEXT"),
 ];
 
 fn migrate(conn: &Connection) -> rusqlite::Result<()> {

@@ -40,6 +40,7 @@ async fn writes_commit_and_query_back() {
         stage: "command".into(),
         source: String::new(),
         count: 1,
+        digest: None,
     })
     .await
     .unwrap();
@@ -402,4 +403,37 @@ fn each_table_keeps_its_own_age_and_row_limit() {
     // Alarm events: the last 10 days (days 0..=9); production: 20 days.
     assert_eq!(count("alarm_events", 0), 10);
     assert_eq!(count("production", 0), 20);
+}
+
+/// A journal written before command digests were kept: opened, its
+/// `commands` table gains the column, and its verified commands read back
+/// with no digest (known by operator and action, `cell::answers`).
+#[test]
+fn commands_journaled_before_digests_read_back_without_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("old.sqlite");
+    let old = Connection::open(&path).unwrap();
+    old.execute_batch(
+        "CREATE TABLE commands (seq INTEGER PRIMARY KEY AUTOINCREMENT, at_ms INTEGER NOT NULL, \
+         operator TEXT NOT NULL, action TEXT NOT NULL, alarm TEXT NOT NULL, nonce TEXT NOT NULL, \
+         accepted INTEGER NOT NULL, detail TEXT NOT NULL, verified INTEGER NOT NULL DEFAULT 0, \
+         stage TEXT NOT NULL DEFAULT 'command');
+         INSERT INTO commands (at_ms, operator, action, alarm, nonce, accepted, detail, verified) \
+         VALUES (5000, 'kim', 'ack', 'ese', 'n1', 1, 'ack ese by kim', 1);",
+    )
+    .unwrap();
+    drop(old);
+    drop(open(&path).unwrap());
+    let saved = saved(&open_read(&path).unwrap(), 0).unwrap();
+    assert_eq!(
+        saved.outcomes,
+        [SavedOutcome {
+            nonce: "n1".into(),
+            operator: "kim".into(),
+            action: "ack".into(),
+            digest: None,
+            at: 5000,
+            outcome: Some((true, "ack ese by kim".into())),
+        }]
+    );
 }

@@ -168,6 +168,20 @@ impl Command {
         text
     }
 
+    /// SHA-256 of the command as signed: its canonical text (without its
+    /// cell, the agent's own) and its signature. The same signed command
+    /// has the same digest however its JSON was spaced or ordered, and
+    /// from one version of the agent to the next; the journal keeps it
+    /// with the command's rows, so that a command sent again after a
+    /// restart is told apart from another with the same nonce.
+    pub fn digest(&self) -> [u8; 32] {
+        use sha2::Digest;
+        let mut hash = sha2::Sha256::new();
+        hash.update(self.canonical(""));
+        hash.update(format!("{}:{}\n", self.signature.len(), self.signature).as_bytes());
+        hash.finalize().into()
+    }
+
     /// Signs the command for `cell` with the operator's private key.
     pub fn sign(&mut self, cell: &str, key: &OperatorKey) {
         self.signature = hex::encode(key.key.sign(&self.canonical(cell)).to_bytes());

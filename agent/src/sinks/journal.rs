@@ -101,6 +101,7 @@ pub fn entries(step: &CellStep) -> Vec<Entry> {
             stage: c.stage.as_str().into(),
             source: c.source.clone(),
             count: c.count,
+            digest: c.digest.clone(),
         });
     }
     rows

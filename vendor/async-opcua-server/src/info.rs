@@ -91,9 +91,18 @@ pub struct ServerInfo {
     pub type_loaders: RwLock<TypeLoaderCollection>,
     /// Current server diagnostics.
     pub diagnostics: ServerDiagnostics,
+    /// cellwatch's patch: which OpenSecureChannel requests are decrypted
+    /// (`transport/admission.rs`).
+    pub(crate) channel_admission: crate::transport::admission::ChannelAdmission,
 }
 
 impl ServerInfo {
+    /// cellwatch's patch: what became of the OpenSecureChannel requests
+    /// under a security policy other than None (`transport/admission.rs`).
+    pub fn secure_channels(&self) -> crate::SecureChannelCounts {
+        self.channel_admission.counts()
+    }
+
     /// Get the list of endpoints that match the provided filters.
     pub fn endpoints(
         &self,

@@ -37,6 +37,10 @@ pub use reverse_connect::ReverseConnectTargetConfig;
 pub use server::Server;
 pub use server_handle::ServerHandle;
 pub use server_status::ServerStatusWrapper;
+// cellwatch's patch: what became of the secure channels asked for.
+pub use transport::admission::{
+    SecureChannelCounts, SECURE_CHANNELS_PER_SECOND, SECURE_CHANNEL_BURST,
+};
 pub use session::continuation_points::ContinuationPoint;
 pub use subscriptions::{
     CreateMonitoredItem, MonitoredItem, MonitoredItemHandle, SessionSubscriptions, Subscription,

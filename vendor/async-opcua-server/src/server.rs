@@ -149,7 +149,21 @@ impl Server {
 
         let type_tree = Arc::new(RwLock::new(DefaultTypeTree::new()));
 
+        // cellwatch's patch: the store shared with the admission of secure
+        // channels (`transport/admission.rs`), which checks trust before
+        // decrypting.
+        let certificate_store = Arc::new(RwLock::new(certificate_store));
+        let offered = config
+            .endpoints
+            .values()
+            .filter_map(|e| e.security_policy.parse::<opcua_crypto::SecurityPolicy>().ok());
+        let channel_admission = crate::transport::admission::ChannelAdmission::new(
+            offered,
+            certificate_store.clone(),
+        );
+
         let info = ServerInfo {
+            channel_admission,
             authenticator: builder
                 .authenticator
                 .unwrap_or_else(|| Arc::new(DefaultAuthenticator::new(config.user_tokens.clone()))),
@@ -184,8 +198,6 @@ impl Server {
                 ..Default::default()
             },
         };
-
-        let certificate_store = Arc::new(RwLock::new(certificate_store));
 
         let info = Arc::new(info);
         let subscriptions = Arc::new(SubscriptionCache::new(config.limits.subscriptions));

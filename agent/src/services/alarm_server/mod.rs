@@ -9,8 +9,11 @@
 //!
 //! Security: Basic256Sha256 with SignAndEncrypt only; the server's key pair
 //! is made in its PKI directory on first start, client certificates are
-//! trusted only from `trusted/` (others land in `rejected/`). Anonymous
-//! sessions may browse and subscribe, never acknowledge.
+//! trusted only from `trusted/` (others land in `rejected/`), checked before
+//! a secure channel's request is decrypted, and each address may open a
+//! few secure channels a second (the patched async-opcua-server,
+//! `vendor/README.md`). Anonymous sessions may browse and subscribe, never
+//! acknowledge.
 //!
 //! - `events.rs`: the event and its fields; `filters.rs`: the fields a
 //!   client's event filter may name, and the filters over a real event;
@@ -236,6 +239,14 @@ impl AlarmServer {
                 _ => 0,
             }
         })
+    }
+
+    /// What became of the secure channels its clients asked for: each
+    /// decrypted only from an address within its share, under the
+    /// endpoint's policy, with a trusted certificate (the patched
+    /// async-opcua-server, `vendor/README.md`).
+    pub fn secure_channels(&self) -> opcua::server::SecureChannelCounts {
+        self.info.secure_channels()
     }
 
     /// Its users, as read at start.

@@ -60,7 +60,8 @@ pub(super) fn array_limit(config: &OpcUaConfig) -> usize {
 }
 
 /// Builds the client, creating the agent's key pair in the PKI directory if
-/// it has none.
+/// it has none (the private key owner-only from the start:
+/// [`crate::sources::pki::own_key_pair`]).
 ///
 /// # Errors
 /// The client configuration is invalid.
@@ -72,25 +73,41 @@ pub fn client(cell: &str, config: &OpcUaConfig) -> Result<opcua::client::Client,
 /// a failed connection ends the event loop with the server's status).
 ///
 /// # Errors
-/// The client configuration is invalid.
+/// The client configuration is invalid, or (with security) the key pair
+/// cannot be made or its private key is readable by others.
 pub(super) fn client_retrying(
     cell: &str,
     config: &OpcUaConfig,
     retries: i32,
 ) -> Result<opcua::client::Client, SourceError> {
-    let key_existed = crate::sources::pki::own_key(&config.pki_dir).exists();
     let (name, uri) = (
         format!("cellwatch {cell}"),
         format!("urn:cellwatch:agent:{cell}"),
     );
-    // The key pair made here, its private key owner-only from its first
-    // byte (the library would write it with the process's umask).
-    crate::sources::pki::own_key_pair(&config.pki_dir, &name, &uri).map_err(SourceError::Client)?;
+    // The key pair made here, the private key owner-only from the start
+    // (the stack would write it with the process's umask, and only then
+    // could it be tightened), with the name and URI the stack would give
+    // it. Without one, a secured connection is impossible: refused now,
+    // naming the PKI directory; one without security goes on without it.
+    let made = match crate::sources::pki::own_key_pair(&config.pki_dir, &name, &uri) {
+        Ok(_) => true,
+        Err(e) if config.policy == SecurityPolicy::None => {
+            tracing::warn!(pki = %config.pki_dir.display(), error = %e, "cannot make the agent's OPC UA key pair");
+            false
+        }
+        Err(e) => {
+            return Err(SourceError::Client(format!(
+                "the agent's OPC UA key pair in {}: {e}",
+                config.pki_dir.display()
+            )))
+        }
+    };
     let client = ClientBuilder::new()
         .application_name(name)
         .application_uri(uri)
         .product_uri("urn:cellwatch")
         .pki_dir(&config.pki_dir)
+        // Never the stack's own: it would write the key with the umask.
         .create_sample_keypair(false)
         .trust_server_certs(false)
         .verify_server_certs(true)
@@ -121,8 +138,10 @@ pub(super) fn client_retrying(
         .recreate_subscriptions(false)
         .client()
         .map_err(|e| SourceError::Client(e.join("; ")))?;
-    crate::sources::pki::protect_own_key(&config.pki_dir, key_existed)
-        .map_err(SourceError::Client)?;
+    // A key that was there before, and that others may read, is refused.
+    if made {
+        crate::sources::pki::protect_own_key(&config.pki_dir, true).map_err(SourceError::Client)?;
+    }
     Ok(client)
 }
 

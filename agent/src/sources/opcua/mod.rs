@@ -458,6 +458,11 @@ async fn run_writing(
                             supervisor.spawn(redundancy::watch(session.clone(), cell.to_string(), config.clone(), active, move_on.clone()));
                         }
                     }
+                    // The client library's own requests: the publishes it
+                    // keeps queued and the keep-alive reads of the server's
+                    // state, counted as the source's are.
+                    Some(Ok(SessionPollResult::Subscription(activity))) => ctx.requests.publish(&activity),
+                    Some(Ok(SessionPollResult::SessionActivity(activity))) => ctx.requests.keep_alive(&activity),
                     Some(Ok(other)) => tracing::debug!(event = ?other, "OPC UA session event"),
                 },
             }

@@ -3,9 +3,10 @@
 //! result}`: `good`, or the status code's name). The counter is the
 //! metrics registry's, handed to the source before it runs; a source run
 //! without one (tests, `cellwatch discover`) counts nothing. The client
-//! library's own requests (`Publish`, the session's keep-alive reads) are
-//! not counted here.
+//! library's own requests, the `Publish` requests it keeps queued and the
+//! session's keep-alive reads, are counted from its event loop's reports.
 
+use opcua::client::{SessionActivity, SubscriptionActivity};
 use opcua::types::StatusCode;
 use prometheus::IntCounterVec;
 
@@ -38,6 +39,26 @@ impl Requests {
                 .as_ref()
                 .map_or_else(|e| e.status(), |_| StatusCode::Good),
         );
+    }
+
+    /// A `Publish` the client library queued was answered (a failure it
+    /// retries and a fatal one alike are counted with their status).
+    pub(super) fn publish(&self, activity: &SubscriptionActivity) {
+        let status = match activity {
+            SubscriptionActivity::Publish => StatusCode::Good,
+            SubscriptionActivity::PublishFailed(s) | SubscriptionActivity::FatalFailure(s) => *s,
+        };
+        self.status("Publish", status);
+    }
+
+    /// The client library's keep-alive read of the server's state was
+    /// answered (a state other than running is its failure).
+    pub(super) fn keep_alive(&self, activity: &SessionActivity) {
+        let status = match activity {
+            SessionActivity::KeepAliveSucceeded => StatusCode::Good,
+            SessionActivity::KeepAliveFailed(s) => *s,
+        };
+        self.status("Read", status);
     }
 }
 

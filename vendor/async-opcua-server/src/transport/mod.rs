@@ -1,3 +1,5 @@
+// cellwatch's patch: which OpenSecureChannel requests are decrypted.
+pub(crate) mod admission;
 mod connect;
 mod reverse_tcp;
 pub(crate) mod tcp;

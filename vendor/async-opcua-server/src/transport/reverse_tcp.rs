@@ -96,7 +96,9 @@ impl Connector for ReverseTcpConnector {
                             read,
                             write,
                             self.config,
-                            self.decoding_options
+                            self.decoding_options,
+                            // cellwatch's patch: the address dialled.
+                            Some(self.target.ip()),
                         );
                         inner.connect(info, token).await
                     }

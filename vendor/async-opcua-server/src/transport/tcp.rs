@@ -42,6 +42,10 @@ pub(crate) struct TcpTransport {
     pub(crate) client_protocol_version: u32,
     /// Last decoded sequence number
     sequence_numbers: SequenceNumberHandle,
+    /// cellwatch's patch: the server's admission of secure channels and
+    /// the client's address (`admission.rs`).
+    info: Arc<ServerInfo>,
+    peer: Option<std::net::IpAddr>,
 }
 
 enum TransportState {
@@ -92,6 +96,9 @@ pub(crate) struct TcpConnector {
     deadline: Instant,
     config: TransportConfig,
     decoding_options: DecodingOptions,
+    /// cellwatch's patch: the client's address, whose share of secure
+    /// channels is counted (`admission.rs`).
+    peer: Option<std::net::IpAddr>,
 }
 
 impl TcpConnector {
@@ -100,6 +107,8 @@ impl TcpConnector {
         config: TransportConfig,
         decoding_options: DecodingOptions,
     ) -> Self {
+        // cellwatch's patch: the client's address.
+        let peer = stream.peer_addr().ok().map(|a| a.ip());
         let (read, write) = tokio::io::split(stream);
         let read = FramedRead::new(read, TcpCodec::new(decoding_options.clone()));
         TcpConnector {
@@ -108,6 +117,7 @@ impl TcpConnector {
             deadline: Instant::now() + config.hello_timeout,
             config,
             decoding_options,
+            peer,
         }
     }
 
@@ -116,6 +126,8 @@ impl TcpConnector {
         write: WriteHalf<TcpStream>,
         config: TransportConfig,
         decoding_options: DecodingOptions,
+        // cellwatch's patch: the client's address.
+        peer: Option<std::net::IpAddr>,
     ) -> Self {
         TcpConnector {
             read,
@@ -123,6 +135,7 @@ impl TcpConnector {
             deadline: Instant::now() + config.hello_timeout,
             config,
             decoding_options,
+            peer,
         }
     }
 
@@ -227,9 +240,10 @@ impl Connector for TcpConnector {
             _ = token.cancelled() => {
                 ErrorMessage::new(StatusCode::BadServerHalted, "Server closed")
             }
-            r = self.connect_inner(info).instrument(tracing::info_span!("OPC-UA TCP handshake")) => {
+            r = self.connect_inner(info.clone()).instrument(tracing::info_span!("OPC-UA TCP handshake")) => {
                 match r {
-                    Ok(r) => return Ok(TcpTransport::new(self.read, self.write, r)),
+                    // cellwatch's patch: `info` and `peer` for the admission.
+                    Ok(r) => return Ok(TcpTransport::new(self.read, self.write, r, info, self.peer)),
                     Err(e) => e,
                 }
             }
@@ -251,8 +265,12 @@ impl TcpTransport {
         read: FramedRead<ReadHalf<TcpStream>, TcpCodec>,
         write: WriteHalf<TcpStream>,
         send_buffer: SendBuffer,
+        info: Arc<ServerInfo>,
+        peer: Option<std::net::IpAddr>,
     ) -> Self {
         Self {
+            info,
+            peer,
             read,
             write,
             state: TransportState::Running,
@@ -389,6 +407,17 @@ impl TcpTransport {
                     self.pending_chunks.clear();
                     Ok(None)
                 } else {
+                    // cellwatch's patch: an OpenSecureChannel request is
+                    // admitted (its address's share, its policy, its sender
+                    // certificate's trust) before anything is decrypted
+                    // (`admission.rs`); a refusal closes the connection.
+                    if header.message_type.is_open_secure_channel() {
+                        self.info.channel_admission.admit(
+                            self.peer,
+                            &chunk.data,
+                            &channel.decoding_options(),
+                        )?;
+                    }
                     let chunk = channel.verify_and_remove_security_server(chunk.data)?;
 
                     if self.send_buffer.max_chunk_count > 0
