@@ -288,6 +288,18 @@ async fn a_fault_shows_live_with_its_culprits_and_an_operator_acknowledges_and_s
     .await;
     b.screenshot("cell").await;
 
+    // The Agents page: what the agent says it runs, judged.
+    open(&b, &p, "#/agents").await;
+    b.wait_for("table.agents tbody tr").await;
+    let agents = b.text("table.agents").await;
+    assert!(
+        agents.contains("m01ps0004")
+            && agents.contains(env!("CARGO_PKG_VERSION"))
+            && agents.contains("ok — cellwatch"),
+        "{agents}"
+    );
+    b.screenshot("agents").await;
+
     // Its detail: the step, the culprits with their comments and values.
     open(&b, &p, "#/alarm/m01ps0004/ese").await;
     b.wait_for("table.culprits").await;
@@ -753,6 +765,7 @@ async fn a_stuck_step_is_drawn_and_forced_from_the_cell_page_once_its_condition_
         session: cellwatch::console::config::DEFAULT_SESSION,
         names: Vec::new(),
         readers: None,
+        deployed: None,
     })
     .await
     .unwrap();
@@ -1000,7 +1013,10 @@ async fn the_console_serves_nothing_without_a_plant_identity_and_each_reader_its
     let p = plant_with(
         d.path(),
         "",
-        "press-shop = [\"press7\"]\n\n[readers]\nkim = [\"*\"]\nana = [\"press-shop\"]\n",
+        &format!(
+            "press-shop = [\"press7\"]\n\n[readers]\nkim = [\"*\"]\nana = [\"press-shop\"]\n\n[plant]\ndeployed = {:?}\n",
+            d.path().join("plant-deployed.json")
+        ),
     )
     .await;
     let addr = p
@@ -1027,6 +1043,7 @@ async fn the_console_serves_nothing_without_a_plant_identity_and_each_reader_its
         "/api/cells/m01ps0004/snapshot",
         "/api/cells/m01ps0004/history?kind=command&since=24h",
         "/api/events",
+        "/api/agents",
     ] {
         let (status, _, body) = get(path, "");
         assert_eq!(status, 401, "{path}: {body}");
@@ -1061,6 +1078,85 @@ async fn the_console_serves_nothing_without_a_plant_identity_and_each_reader_its
     let (status, _, body) = get("/api/kpi?since=1970-01-01T00:00:00Z", &kim);
     assert_eq!(status, 400, "{body}");
 
+    // The Agents page: each agent's about judged against what the plant
+    // deployed. No such file yet: said, and the agent judged without it.
+    let agents = |who: &str| {
+        let (status, _, body) = get("/api/agents", who);
+        assert_eq!(status, 200, "{body}");
+        serde_json::from_str::<serde_json::Value>(&body).unwrap()
+    };
+    let of = |v: &serde_json::Value, cell: &str| {
+        v["cells"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|c| c["cell"] == cell)
+            .cloned()
+            .unwrap_or_else(|| panic!("no {cell} in {v}"))
+    };
+    let v = agents(&kim);
+    assert!(
+        v["deployed"]["error"]
+            .as_str()
+            .unwrap()
+            .contains("plant-deployed.json"),
+        "{v}"
+    );
+    assert_eq!(
+        of(&v, "m01ps0004")["problems"],
+        serde_json::json!([]),
+        "{v}"
+    );
+    assert_eq!(
+        of(&v, "press7")["problems"],
+        serde_json::json!(["its agent is not on the bus"]),
+        "{v}"
+    );
+    // Deployed: another configuration than the one it runs.
+    let deployed = |sha: &str| {
+        let cell = serde_json::json!({
+            "config": "hosts/h1/etc/cellwatch/m01ps0004.toml",
+            "config_sha256": { "Ok": sha },
+            "bus_certificate": "hosts/h1/etc/cellwatch/agent-m01ps0004.pem",
+            "bus_certificate_sha256": null,
+            "signing_key": "hosts/h1/var/lib/cellwatch/m01ps0004/signing.key",
+            "rotated_from": [],
+        });
+        std::fs::write(
+            d.path().join("plant-deployed.json"),
+            serde_json::json!({
+                "schema": "cellwatch.plant-deployed.v1",
+                "operators_version": null,
+                "cells": { "m01ps0004": cell },
+            })
+            .to_string(),
+        )
+        .unwrap();
+    };
+    deployed(&"0".repeat(64));
+    let m01 = of(&agents(&kim), "m01ps0004");
+    assert!(
+        m01["problems"][0]
+            .as_str()
+            .unwrap()
+            .contains("runs another configuration than hosts/h1/etc/cellwatch/m01ps0004.toml"),
+        "{m01}"
+    );
+    // The one it runs, by its own hash, computed here.
+    use sha2::Digest;
+    let runs = hex::encode(sha2::Sha256::digest(std::fs::read(&p.cell.config).unwrap()));
+    deployed(&runs);
+    let m01 = of(&agents(&kim), "m01ps0004");
+    assert_eq!(m01["problems"], serde_json::json!([]), "{m01}");
+    assert!(
+        m01["facts"]
+            .as_array()
+            .unwrap()
+            .contains(&serde_json::json!("runs the configuration deployed")),
+        "{m01}"
+    );
+    assert_eq!(m01["about"]["config_sha256"], runs.as_str());
+
     // The same cookie under another host name, or from another site's
     // page, gets nothing.
     let (status, _, _) = request(
@@ -1082,6 +1178,11 @@ async fn the_console_serves_nothing_without_a_plant_identity_and_each_reader_its
     let ana = sign_in(&addr, &d.path().join("ana.key")).expect("ana signs in");
     let (_, _, body) = get("/api/plant", &ana);
     assert!(!body.contains("m01ps0004"), "{body}");
+    let (_, _, body) = get("/api/agents", &ana);
+    assert!(
+        !body.contains("m01ps0004") && body.contains("press7"),
+        "{body}"
+    );
     let (status, _, body) = get("/api/cells/m01ps0004/snapshot", &ana);
     assert_eq!(status, 403, "{body}");
     // Nor does she forward kim's commands.

@@ -283,6 +283,39 @@ fn a_plant_is_made_from_its_inventory_and_made_again_changes_nothing() {
     );
     assert_eq!(every_file(dir), before);
 
+    // A console added: its configuration names what was deployed, which
+    // holds each agent's configuration by the hash of the file on its host.
+    let inventory = dir.join("plant.toml");
+    let text =
+        std::fs::read_to_string(&inventory).unwrap() + "\n[console]\nhost = \"console.plant\"\n";
+    std::fs::write(&inventory, text).unwrap();
+    let r = plant(dir, &["init"]);
+    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    let console =
+        cellwatch::console::config::load(&dir.join("console/etc/cellwatch/console.toml")).unwrap();
+    assert_eq!(
+        console.deployed.as_deref(),
+        Some(Path::new("/etc/cellwatch/plant-deployed.json"))
+    );
+    let deployed: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("console/etc/cellwatch/plant-deployed.json")).unwrap(),
+    )
+    .unwrap();
+    use sha2::Digest;
+    let m02 = hex::encode(sha2::Sha256::digest(
+        std::fs::read(etc.join("m02.toml")).unwrap(),
+    ));
+    assert_eq!(deployed["schema"], "cellwatch.plant-deployed.v1");
+    assert_eq!(
+        deployed["cells"]["m02"]["config_sha256"]["Ok"],
+        m02.as_str(),
+        "{deployed}"
+    );
+    assert_eq!(
+        deployed["cells"]["m02"]["config"],
+        "hosts/cnc-1.plant/etc/cellwatch/m02.toml"
+    );
+
     // A router's configuration changed by hand is kept and named; the rest
     // follows the inventory (an operator added).
     let router1 = dir.join("routers/router-1/etc/cellwatch/router/router.json5");

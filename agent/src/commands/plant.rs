@@ -359,7 +359,9 @@ pub(crate) fn renew(args: &RenewArgs, out: &mut dyn Write) -> Result<(), Failure
         )
         .map_err(Failure::output)?;
     }
-    Ok(())
+    // What the console judges agents against names the new certificates.
+    let done = make::make(&inventory).map_err(plant_failure)?;
+    say(&done, &inventory, out)
 }
 
 /// The plant's bus, joined as its administrator (`admin/plant-admin.pem`)

@@ -251,6 +251,145 @@ pub(super) async fn history(
     )
 }
 
+/// How many agents are asked what they are at once.
+const ABOUT_AT_ONCE: usize = 16;
+
+/// Every agent the identity may read, what it says it is (its signed
+/// `about`) judged against what the plant deployed to it (`plant.deployed`)
+/// as `cellwatch plant check` judges it: `{"deployed": {"file", "error"} or
+/// null, "cells": [{"cell", "area", "about" (or null), "facts",
+/// "problems"}]}`. The same question is answered from what was asked for
+/// [`super::web::KPI_FRESH`].
+pub(super) async fn agents(
+    State(web): State<Arc<Web>>,
+    Extension(who): Extension<Who>,
+) -> Response {
+    use futures_util::StreamExt;
+    let cells: Vec<(String, Option<String>, bool)> = web
+        .shared
+        .plant
+        .lock()
+        .map(|p| {
+            p.view()
+                .cells
+                .iter()
+                .filter(|c| who.identity.scope.covers(&c.cell))
+                .map(|c| (c.cell.clone(), c.area.clone(), c.agent))
+                .collect()
+        })
+        .unwrap_or_default();
+    // The file read each time (it is small): one written anew is judged
+    // against at once, not after the cache's while.
+    let read = web
+        .shared
+        .deployed
+        .as_deref()
+        .map(|path| (path, read_deployed(path)));
+    let key = format!(
+        "agents|{}|{}",
+        read.as_ref()
+            .map_or(String::new(), |(_, d)| format!("{d:?}")),
+        cells
+            .iter()
+            .map(|(c, _, up)| format!("{c}:{up}"))
+            .collect::<Vec<_>>()
+            .join(",")
+    );
+    if let Some(answer) = web
+        .kpi
+        .lock()
+        .ok()
+        .and_then(|k| k.get(&key, Instant::now()))
+    {
+        return json(StatusCode::OK, answer);
+    }
+    let (deployed, said) = match read {
+        None => (None, serde_json::Value::Null),
+        Some((path, read)) => match read {
+            Ok(d) => (
+                Some(d),
+                serde_json::json!({ "file": path.display().to_string(), "error": null }),
+            ),
+            Err(e) => (
+                None,
+                serde_json::json!({ "file": path.display().to_string(), "error": e }),
+            ),
+        },
+    };
+    let deployed = Arc::new(deployed);
+    let answers: Vec<serde_json::Value> = futures_util::stream::iter(cells)
+        .map(|(cell, area, up)| {
+            let (web, deployed) = (web.clone(), deployed.clone());
+            async move {
+                let said = |problem: String| {
+                    serde_json::json!({ "cell": cell, "area": area, "about": null, "facts": [], "problems": [problem] })
+                };
+                if !up {
+                    return said("its agent is not on the bus".into());
+                }
+                let about = web
+                    .shared
+                    .bus
+                    .ask(&cell, Service::About, "", None, ANSWER)
+                    .await
+                    .map_err(|e| format!("its agent does not answer about itself: {e}"))
+                    .and_then(|t| {
+                        serde_json::from_str::<crate::payload::AboutPayload>(&t)
+                            .map_err(|e| format!("its agent's about does not read: {e}"))
+                    });
+                match about {
+                    Err(problem) => said(problem),
+                    Ok(about) => {
+                        let plant = deployed.as_ref().as_ref();
+                        let j = crate::plant::judge::judge(
+                            &cell,
+                            &about,
+                            plant.and_then(|p| p.cells.get(&cell)),
+                            plant.and_then(|p| p.operators_version),
+                            crate::clock::now_ms(),
+                        );
+                        serde_json::json!({ "cell": cell, "area": area, "about": about, "facts": j.facts, "problems": j.problems })
+                    }
+                }
+            }
+        })
+        .buffered(ABOUT_AT_ONCE)
+        .collect()
+        .await;
+    let answer = serde_json::json!({ "deployed": said, "cells": answers }).to_string();
+    if let Ok(mut k) = web.kpi.lock() {
+        k.put(key, Instant::now(), answer.clone());
+    }
+    json(StatusCode::OK, answer)
+}
+
+/// The file of what the plant deployed, read whole (at most
+/// [`crate::plant::judge::MAX_DEPLOYED_BYTES`]).
+fn read_deployed(path: &std::path::Path) -> Result<crate::plant::judge::DeployedPlant, String> {
+    use crate::plant::judge::{DEPLOYED_SCHEMA, MAX_DEPLOYED_BYTES};
+    use std::io::Read;
+    let mut text = String::new();
+    std::fs::File::open(path)
+        .and_then(|f| f.take(MAX_DEPLOYED_BYTES + 1).read_to_string(&mut text))
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    if text.len() as u64 > MAX_DEPLOYED_BYTES {
+        return Err(format!(
+            "{}: larger than {MAX_DEPLOYED_BYTES} bytes",
+            path.display()
+        ));
+    }
+    let plant: crate::plant::judge::DeployedPlant =
+        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+    if plant.schema != DEPLOYED_SCHEMA {
+        return Err(format!(
+            "{}: schema '{}', not {DEPLOYED_SCHEMA}",
+            path.display(),
+            crate::operator::escaped(&plant.schema)
+        ));
+    }
+    Ok(plant)
+}
+
 /// How many agents are asked for their figures at once.
 const KPI_AT_ONCE: usize = 16;
 

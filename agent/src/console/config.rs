@@ -54,6 +54,11 @@ pub struct ConsoleConfig {
     /// Who may read which cells (`[readers]`: identity → areas, cells or
     /// `*`); `None`: every plant identity reads every cell.
     pub readers: Option<BTreeMap<String, Vec<String>>>,
+    /// What the plant deployed to each agent (`plant.deployed`, the file
+    /// `cellwatch plant` writes): the Agents page judges each agent's
+    /// `about` against it; `None`: only against this console's version
+    /// and the certificates' ends.
+    pub deployed: Option<PathBuf>,
 }
 
 /// The console's HTTPS files.
@@ -81,6 +86,14 @@ struct Raw {
     #[serde(default)]
     console: RawConsole,
     readers: Option<BTreeMap<String, Spanned<Vec<String>>>>,
+    #[serde(default)]
+    plant: RawPlant,
+}
+
+#[derive(Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawPlant {
+    deployed: Option<String>,
 }
 
 #[derive(Default, Deserialize)]
@@ -350,6 +363,7 @@ pub fn parse(origin: &str, text: &str, base: &Path) -> Result<ConsoleConfig, Con
         trust: path(bus.trust.get_ref()),
         root,
         operators_file: raw.operators.file.as_deref().map(path),
+        deployed: raw.plant.deployed.as_deref().map(path),
         areas,
         max_alarms,
         session,

@@ -259,6 +259,7 @@ fn router(web: Arc<Web>, https: bool) -> Router {
         .route("/api/events", get(api::events))
         .route("/api/operators", get(api::operators))
         .route("/api/kpi", get(api::kpi))
+        .route("/api/agents", get(api::agents))
         .route("/api/cells/{cell}/history", get(api::history))
         .route("/api/cells/{cell}/snapshot", get(api::snapshot))
         .route("/api/cells/{cell}/command", post(api::command))

@@ -110,6 +110,7 @@ impl Console {
             bus,
             operators,
             resync,
+            deployed: cfg.deployed.clone(),
         });
         let (stop, stopped) = tokio::sync::watch::channel(false);
         let mut tasks = listen::start(shared.clone(), &cfg.root, resync_rx)

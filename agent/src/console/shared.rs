@@ -37,6 +37,9 @@ pub(super) struct Shared {
     pub(super) operators: Vec<(String, String, Vec<crate::operator::Action>)>,
     /// Cells to snapshot again.
     pub(super) resync: tokio::sync::mpsc::UnboundedSender<String>,
+    /// The file of what the plant deployed (`plant.deployed`), read each
+    /// time the Agents page asks.
+    pub(super) deployed: Option<std::path::PathBuf>,
 }
 
 impl Shared {

@@ -13,6 +13,7 @@ use std::time::Duration;
 use sha2::{Digest, Sha256};
 
 use super::inventory::Inventory;
+use super::judge::{judge, DeployedCell, DeployedPlant, Judged};
 use super::layout::Layout;
 use super::render;
 use crate::bus::certs::facts;
@@ -21,8 +22,7 @@ use crate::bus::keys::Service;
 use crate::client::BusClient;
 use crate::payload::AboutPayload;
 
-/// A certificate ending sooner than this is a problem.
-pub const EXPIRY_WARNING: Duration = Duration::from_secs(30 * 86_400);
+pub use super::judge::EXPIRY_WARNING;
 
 /// What the check found about one part of the plant.
 #[derive(Debug, Default, Clone, PartialEq, Eq)]
@@ -94,25 +94,46 @@ pub fn operators_list(layout: &Layout) -> Result<(Vec<u8>, u64), String> {
     Ok((bytes, list.version))
 }
 
-/// What a certificate's end means at `now_ms`.
+/// What a certificate's end means at `now_ms`, added to `f`.
 fn expiry(what: &str, not_after_ms: u64, now_ms: u64, f: &mut Finding) {
-    let day = 86_400_000;
-    if not_after_ms <= now_ms {
-        f.problems.push(format!(
-            "{what} ended {}: renew it (cellwatch plant renew)",
-            crate::clock::rfc3339(not_after_ms)
-        ));
-    } else if not_after_ms - now_ms < EXPIRY_WARNING.as_millis() as u64 {
-        f.problems.push(format!(
-            "{what} ends in {} days ({}): renew it",
-            (not_after_ms - now_ms) / day,
-            crate::clock::rfc3339(not_after_ms)
-        ));
-    } else {
-        f.facts.push(format!(
-            "{what} until {}",
-            &crate::clock::rfc3339(not_after_ms)[..10]
-        ));
+    let mut j = Judged::default();
+    super::judge::expiry(what, not_after_ms, now_ms, &mut j);
+    f.facts.extend(j.facts);
+    f.problems.extend(j.problems);
+}
+
+/// What the plant deployed, read from its folder now: each cell's
+/// configuration and bus certificate on its host (by hash), the keys it is
+/// being rotated from, the operators list's version.
+pub fn deployed(inventory: &Inventory) -> DeployedPlant {
+    let layout = Layout::of(inventory);
+    let etc = layout.etc().to_string();
+    let cells = inventory
+        .cells
+        .iter()
+        .map(|(id, cell)| {
+            let config = layout.on_host(&cell.host, &format!("{etc}/{id}.toml"));
+            let cert = layout.on_host(&cell.host, &format!("{etc}/agent-{id}.pem"));
+            let deployed = DeployedCell {
+                config: layout.shown(&config),
+                config_sha256: std::fs::read(&config)
+                    .map(|bytes| sha256(&bytes))
+                    .map_err(|e| e.to_string()),
+                bus_certificate: layout.shown(&cert),
+                bus_certificate_sha256: std::fs::read_to_string(&cert)
+                    .ok()
+                    .and_then(|pem| facts(&pem).ok())
+                    .map(|c| c.sha256),
+                signing_key: layout.shown(&layout.on_host(&cell.host, &layout.signing_key(id))),
+                rotated_from: trust_previous(&layout, id),
+            };
+            (id.clone(), deployed)
+        })
+        .collect();
+    DeployedPlant {
+        schema: super::judge::DEPLOYED_SCHEMA.into(),
+        operators_version: operators_list(&layout).ok().map(|l| l.1),
+        cells,
     }
 }
 
@@ -231,8 +252,7 @@ pub async fn running(
     now_ms: u64,
     report: &mut Report,
 ) {
-    let layout = Layout::of(inventory);
-    let etc = layout.etc().to_string();
+    let plant = deployed(inventory);
     let asks = inventory.cells.keys().map(|id| async move {
         let about = bus.ask(id, Service::About, "", None, timeout).await;
         (id.clone(), about)
@@ -274,67 +294,15 @@ pub async fn running(
                     .problems
                     .push(format!("its agent's about does not read: {e}")),
                 Ok(about) => {
-                    let deployed = layout.on_host(&cell.host, &format!("{etc}/{id}.toml"));
-                    let ours = env!("CARGO_PKG_VERSION");
-                    if about.version == ours {
-                        f.facts.push(format!("cellwatch {ours}"));
-                    } else {
-                        f.problems.push(format!(
-                            "its agent runs cellwatch {}, the plant's is {ours}",
-                            about.version
-                        ));
-                    }
-                    match std::fs::read(&deployed) {
-                        Ok(bytes) if sha256(&bytes) == about.config_sha256 => {
-                            f.facts.push("runs the configuration deployed".into());
-                        }
-                        Ok(_) => f.problems.push(format!(
-                            "its agent runs another configuration than {} (copy it to the host and reload: systemctl reload cellwatch@{id})",
-                            layout.shown(&deployed)
-                        )),
-                        Err(e) => f.problems.push(format!("{}: {e}", layout.shown(&deployed))),
-                    }
-                    match (operators_list(&layout).ok().map(|l| l.1), about.operators_version) {
-                        (Some(ours), Some(v)) if v == ours => {
-                            f.facts.push(format!("operators list v{v}"));
-                        }
-                        (Some(ours), held) => f.problems.push(format!(
-                            "its agent judges commands by {}, the plant's list is v{ours}: cellwatch plant publish",
-                            held.map_or_else(|| "its operators file".to_string(), |v| format!("operators list v{v}"))
-                        )),
-                        (None, _) => {}
-                    }
-                    if trust_previous(&layout, id).contains(&about.signing_key) {
-                        f.problems.push(format!(
-                            "its agent still signs with the key it is being rotated from: copy {} to it and restart cellwatch@{id}",
-                            layout.shown(&layout.on_host(&cell.host, &layout.signing_key(id)))
-                        ));
-                    }
-                    let deployed_cert =
-                        layout.on_host(&cell.host, &format!("{etc}/agent-{id}.pem"));
-                    let deployed_sha = std::fs::read_to_string(&deployed_cert)
-                        .ok()
-                        .and_then(|pem| facts(&pem).ok())
-                        .map(|c| c.sha256);
-                    if let (Some(c), Some(sha)) = (&about.bus_certificate, &deployed_sha) {
-                        if &c.sha256 != sha {
-                            f.problems.push(format!(
-                                "its agent runs with another bus certificate than {} (renewed: copy it and its key to the host and restart cellwatch@{id})",
-                                layout.shown(&deployed_cert)
-                            ));
-                        }
-                    }
-                    if let Some(c) = &about.bus_certificate {
-                        let end = crate::clock::parse_time(&c.not_after, now_ms).unwrap_or(0);
-                        let mut certificate = Finding::default();
-                        expiry(
-                            "the certificate it runs with",
-                            end,
-                            now_ms,
-                            &mut certificate,
-                        );
-                        f.problems.extend(certificate.problems);
-                    }
+                    let j = judge(
+                        id,
+                        &about,
+                        plant.cells.get(id),
+                        plant.operators_version,
+                        now_ms,
+                    );
+                    f.facts.extend(j.facts);
+                    f.problems.extend(j.problems);
                 }
             },
         }

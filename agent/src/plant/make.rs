@@ -174,6 +174,16 @@ pub fn make(inventory: &Inventory) -> Result<Made, PlantError> {
             &on(&format!("{etc}/operators.toml")),
             render::operators(inventory, None),
         )?;
+        // What each agent runs is judged against this on the Agents page:
+        // the files deployed to the hosts, as they are now.
+        let deployed =
+            serde_json::to_string_pretty(&super::check::deployed(inventory)).map_err(|e| {
+                PlantError::Encode {
+                    what: "plant-deployed.json".into(),
+                    message: e.to_string(),
+                }
+            })?;
+        w.derived(&on(&format!("{etc}/plant-deployed.json")), deployed + "\n")?;
     }
     w.finish()
 }

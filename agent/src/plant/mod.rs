@@ -13,11 +13,14 @@
 //! - `files.rs`: writing them, never over a hand edit or a secret.
 //! - `make.rs`: the whole run.
 //! - `check.rs`: the running plant against the inventory.
+//! - `judge.rs`: an agent's `about` against what was deployed to it
+//!   (pure; the check's and the console's).
 
 pub mod check;
 pub mod edit;
 pub mod files;
 pub mod inventory;
+pub mod judge;
 pub mod layout;
 pub mod make;
 pub mod render;
@@ -48,6 +51,14 @@ pub enum PlantError {
         path: PathBuf,
         /// Why.
         source: std::io::Error,
+    },
+    /// A derived file's content cannot be written out.
+    #[error("{what}: cannot be encoded: {message}")]
+    Encode {
+        /// Which file.
+        what: String,
+        /// Why.
+        message: String,
     },
     /// A certificate or key cannot be made.
     #[error("{name}: {message}")]

@@ -206,7 +206,7 @@ pub fn console(inventory: &Inventory, layout: &Layout) -> Option<String> {
         .collect();
     let _ = write!(
         out,
-        "# cellwatch console --config {etc}/console.toml\n\n[http]\nlisten = \"0.0.0.0:{}\"\ntls = {{ cert = {}, key = {}, clients = {} }}\nnames = [{}]\n\n[bus]\nmode = \"client\"\nconnect = [{}]\ntls = {{ ca = {}, cert = {}, key = {} }}\ntrust = {}\nroot = {}\n\n[operators]\nfile = {}\n\n[areas]\n",
+        "# cellwatch console --config {etc}/console.toml\n\n[http]\nlisten = \"0.0.0.0:{}\"\ntls = {{ cert = {}, key = {}, clients = {} }}\nnames = [{}]\n\n[bus]\nmode = \"client\"\nconnect = [{}]\ntls = {{ ca = {}, cert = {}, key = {} }}\ntrust = {}\nroot = {}\n\n[operators]\nfile = {}\n\n[plant]\ndeployed = {}\n\n[areas]\n",
         c.port,
         quoted(&format!("{etc}/console.pem")),
         quoted(&layout.console_key()),
@@ -219,6 +219,7 @@ pub fn console(inventory: &Inventory, layout: &Layout) -> Option<String> {
         quoted(&format!("{etc}/trust.toml")),
         quoted(&inventory.root),
         quoted(&format!("{etc}/operators.toml")),
+        quoted(&format!("{etc}/plant-deployed.json")),
     );
     for (area, cells) in inventory.areas() {
         let cells: Vec<String> = cells.iter().map(|c| quoted(c)).collect();

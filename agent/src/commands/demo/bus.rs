@@ -91,6 +91,7 @@ impl DemoBus {
             session: crate::console::config::DEFAULT_SESSION,
             names: Vec::new(),
             readers: None,
+            deployed: None,
         };
         crate::console::Console::start(&cfg)
             .await

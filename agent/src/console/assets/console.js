@@ -879,6 +879,48 @@ const kpiView = {
   },
 };
 
+// ---- agents: what each runs, against what the plant deployed ----
+
+const agentsView = {
+  mount(v) {
+    this.body = el('section', { class: 'agents' }, el('p', { class: 'note' }, 'asking the agents…'));
+    v.append(el('h2', {}, 'Agents'),
+      el('p', { class: 'note' }, 'Each agent\'s signed answer about itself, judged as ', el('code', {}, 'cellwatch plant check'), ' judges it.'),
+      this.body);
+    this.fetch();
+  },
+  async fetch() {
+    try {
+      this.draw(await api('/api/agents'));
+    } catch (err) {
+      this.body.replaceChildren(el('p', { class: 'refused' }, err.message));
+    }
+  },
+  draw(r) {
+    const wrong = r.cells.filter(c => c.problems.length);
+    const d = r.deployed;
+    const against = !d ? 'No plant file given (plant.deployed): judged against this console\'s version and the certificates\' ends only.'
+      : d.error ? `What the plant deployed cannot be read: ${d.error}` : `Against what the plant deployed (${d.file}).`;
+    const cert = a => a && a.bus_certificate ? when(a.bus_certificate.not_after) : '—';
+    this.body.replaceChildren(
+      el('p', { class: d && d.error ? 'refused' : 'note' }, against),
+      el('p', { 'data-agents': 'summary', class: wrong.length ? 'refused' : 'note' },
+        wrong.length ? `${wrong.length} of ${r.cells.length} agents wrong` : `${r.cells.length} agent${r.cells.length === 1 ? '' : 's'}, nothing wrong`),
+      table('agents', ['Cell', 'Area', 'Version', 'Running since', 'Configuration', 'Operators list', 'Certificate until', 'Judged'],
+        r.cells.map(c => {
+          const a = c.about;
+          const judged = c.problems.length
+            ? el('ul', { class: 'problems' }, ...c.problems.map(p => el('li', {}, p)))
+            : el('span', { class: 'ok' }, 'ok — ' + c.facts.join(', '));
+          return [el('a', { href: href('cell', c.cell) }, c.cell), c.area || '', a ? a.version : '—', a ? when(a.started) : '—',
+            a ? el('code', { title: a.config_sha256 }, a.config_sha256.slice(0, 12)) : '—',
+            a ? (a.operators_version === null || a.operators_version === undefined ? 'operators file' : `v${a.operators_version}`) : '—',
+            cert(a), judged];
+        })));
+  },
+  update() {},
+};
+
 // ---- routing ----
 
 function banner() {
@@ -903,6 +945,7 @@ function route() {
   let view;
   if (parts[0] === 'alarms') view = alarmsView;
   else if (parts[0] === 'kpi') view = kpiView;
+  else if (parts[0] === 'agents') view = agentsView;
   else if (parts[0] === 'alarm' && parts.length === 3) view = alarmDetail(parts[1], parts[2]);
   else if (parts[0] === 'cell' && parts.length === 2) view = cellPage(parts[1]);
   else view = overview;
