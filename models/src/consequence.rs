@@ -175,13 +175,19 @@ impl Relation {
     }
 
     /// The cause of alarm `effect`, raised now with `culprits`, among the
-    /// active alarms `active` gives: the earliest raised active cause that
-    /// explains every culprit, if any.
+    /// active alarms `active` gives: the earliest raised active cause
+    /// without which the effect's fault would not hold. `still(cause)`
+    /// says whether the effect's fault would still hold with what the
+    /// cause's fault holds taken back to its normal values (the
+    /// counterfactual, [`crate::engine::CheckSet::would_hold`]); where it
+    /// cannot say (`None`), the cause must explain every culprit: each a
+    /// signal its fault holds or one of its own culprits.
     pub fn cause_of<'a>(
         &self,
         effect: &str,
         culprits: &[Culprit],
         active: impl Fn(&str) -> Option<&'a Alarm>,
+        still: impl Fn(&str) -> Option<bool>,
     ) -> Option<&'a Alarm> {
         self.causes_of(effect)
             .iter()
@@ -189,7 +195,10 @@ impl Relation {
                 let a = active(cause).filter(|a| a.active)?;
                 let explained = match link {
                     Link::Configured => true,
-                    Link::Reads(_) => explains(self.effects_of(cause), a, culprits),
+                    Link::Reads(_) => match still(cause) {
+                        Some(still) => !still,
+                        None => explains(self.effects_of(cause), a, culprits),
+                    },
                 };
                 explained.then_some(a)
             })
@@ -235,24 +244,25 @@ fn explains(held: &[Signal], cause: &Alarm, culprits: &[Culprit]) -> bool {
         })
 }
 
-/// The outputs `program` derives from `coil` (its forced outputs): the
-/// coils `is_tag` accepts whose switching function over `observable` reads
-/// `coil`. A coil that is not derivable forces nothing.
+/// The outputs `program` derives from `coil` (its forced outputs), each
+/// with its switching function: the coils `is_tag` accepts whose switching
+/// function over `observable` reads `coil`. A coil that is not derivable
+/// forces nothing.
 pub fn forced_outputs(
     program: &Program,
     coil: &Signal,
     observable: &Observability,
     is_tag: impl Fn(&Signal) -> bool,
-) -> Vec<Signal> {
+) -> Vec<SwitchingFunction> {
     program
         .coils()
         .iter()
         .filter(|c| c.signal != *coil && is_tag(&c.signal))
-        .filter(|c| {
+        .filter_map(|c| {
             SwitchingFunction::expand(program, &c.signal, observable)
-                .is_ok_and(|sf| sf.leaves().contains(coil))
+                .ok()
+                .filter(|sf| sf.leaves().contains(coil))
         })
-        .map(|c| c.signal.clone())
         .collect()
 }
 
@@ -300,7 +310,7 @@ mod tests {
     }
 
     #[test]
-    fn a_consequence_needs_an_active_cause_that_explains_every_culprit() {
+    fn without_a_counterfactual_a_consequence_needs_a_cause_that_explains_every_culprit() {
         let r = Relation::derive(&[
             facts("ese", &["G8.02"], &["X0.06"]),
             facts("csd", &["G9.00"], &["X200.01", "G8.02", "X201.06"]),
@@ -308,25 +318,57 @@ mod tests {
         let mut ese = Alarm::active_since("ese", AlarmKind::Switching, 1_000);
         ese.culprits = vec![culprit("X0.06")];
         let active = |id: &str| (id == "ese").then_some(&ese);
+        let unknown = |_: &str| None;
         assert_eq!(
-            r.cause_of("csd", &[culprit("G8.02")], active)
+            r.cause_of("csd", &[culprit("G8.02")], active, unknown)
                 .map(|a| a.id.as_str()),
             Some("ese")
         );
         // The cause's own culprit explains too.
-        assert!(r.cause_of("csd", &[culprit("X0.06")], active).is_some());
+        assert!(r
+            .cause_of("csd", &[culprit("X0.06")], active, unknown)
+            .is_some());
         // A culprit of its own: not a consequence.
         assert!(r
-            .cause_of("csd", &[culprit("G8.02"), culprit("X201.06")], active)
+            .cause_of(
+                "csd",
+                &[culprit("G8.02"), culprit("X201.06")],
+                active,
+                unknown
+            )
             .is_none());
         // Nothing to explain by.
-        assert!(r.cause_of("csd", &[], active).is_none());
+        assert!(r.cause_of("csd", &[], active, unknown).is_none());
         // The cause cleared: not a consequence.
         let mut cleared = ese.clone();
         cleared.active = false;
         assert!(r
-            .cause_of("csd", &[culprit("G8.02")], |id: &str| (id == "ese")
-                .then_some(&cleared))
+            .cause_of(
+                "csd",
+                &[culprit("G8.02")],
+                |id: &str| (id == "ese").then_some(&cleared),
+                unknown
+            )
+            .is_none());
+    }
+
+    #[test]
+    fn the_counterfactual_decides_whatever_the_culprits() {
+        let r = Relation::derive(&[
+            facts("ese", &["G8.02"], &["X0.06"]),
+            facts("csd", &["G9.00"], &["X200.01", "G8.02", "X201.06"]),
+        ]);
+        let ese = Alarm::active_since("ese", AlarmKind::Switching, 1_000);
+        let active = |id: &str| (id == "ese").then_some(&ese);
+        // A request among the culprits: still a consequence when the fault
+        // would not hold without the cause.
+        let culprits = [culprit("G8.02"), culprit("X201.06")];
+        assert!(r
+            .cause_of("csd", &culprits, active, |_: &str| Some(false))
+            .is_some());
+        // Every culprit held by the cause, but the fault would hold anyway.
+        assert!(r
+            .cause_of("csd", &[culprit("G8.02")], active, |_: &str| Some(true))
             .is_none());
     }
 
@@ -339,7 +381,12 @@ mod tests {
         let ese = Alarm::active_since("ese", AlarmKind::Switching, 1_000);
         r.add("ese", "door");
         assert!(r
-            .cause_of("door", &[], |id: &str| (id == "ese").then_some(&ese))
+            .cause_of(
+                "door",
+                &[],
+                |id: &str| (id == "ese").then_some(&ese),
+                |_: &str| Some(true)
+            )
             .is_some());
         assert!(r.remove("ese", "csd"));
         assert!(!r.remove("ese", "csd"));

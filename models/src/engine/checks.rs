@@ -151,6 +151,23 @@ pub trait CheckSet: Send + Sync {
     /// [`CheckSet::number_inputs`]); nothing for an alarm not of this set.
     /// The flight recorder keeps their changes around the alarm's raise.
     fn reads(&self, _id: &str, _out: &mut Vec<Signal>) {}
+
+    /// The signals alarm `id`'s fault holds, each with the value it would
+    /// have now without that fault: its coil (or contact) at its normal
+    /// value, and each output the program derives from the coil
+    /// re-derived with the coil normal. `None`: not an alarm of this set,
+    /// or one whose held signals cannot be taken back.
+    fn without(&self, _id: &str) -> Option<Vec<(Signal, bool)>> {
+        None
+    }
+
+    /// Whether alarm `id`'s fault would hold now with the signals of
+    /// `instead` at the values given and every other at its own: the
+    /// counterfactual a consequence is judged by. `None`: not an alarm of
+    /// this set, or what it would be is unknown.
+    fn would_hold(&self, _id: &str, _instead: &[(Signal, bool)]) -> Option<bool> {
+        None
+    }
 }
 
 /// Adds `signal` to `out`, and, when it is a comparison contact

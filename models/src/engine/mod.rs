@@ -2015,8 +2015,12 @@ impl CellEngine {
             .then(|| active("communication"))
             .flatten()
             .or_else(|| {
-                self.relation
-                    .cause_of(id, &alarm.culprits, |c| self.alarms.get(c))
+                self.relation.cause_of(
+                    id,
+                    &alarm.culprits,
+                    |c| self.alarms.get(c),
+                    |c| self.would_still_hold(id, c),
+                )
             })
             .or_else(|| {
                 (!alarm.culprits.is_empty() && alarm.culprits.iter().all(|c| bad(&c.address)))
@@ -2031,6 +2035,14 @@ impl CellEngine {
                 .map_or_else(|| cause.id.clone(), |c| c.first_out.clone()),
             suppressed: self.suppress,
         })
+    }
+
+    /// Whether alarm `effect`'s fault would still hold with what alarm
+    /// `cause`'s fault holds taken back to its normal values; `None` when
+    /// the check sets cannot say (then the culprits decide).
+    fn would_still_hold(&self, effect: &str, cause: &str) -> Option<bool> {
+        let normal = self.sets.iter().find_map(|s| s.without(cause))?;
+        self.sets.iter().find_map(|s| s.would_hold(effect, &normal))
     }
 
     fn update_state(&mut self, now: u64, step: &mut Step) {

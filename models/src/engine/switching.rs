@@ -35,9 +35,10 @@ pub struct SwitchingCheck {
     /// `None`: always armed.
     pub armed_when: Option<SwitchingFunction>,
     /// The outputs the program derives from the fault coil (its forced
-    /// outputs, [`crate::consequence::forced_outputs`]): a check reading
-    /// one follows from this one's fault.
-    pub forces: Vec<Signal>,
+    /// outputs, [`crate::consequence::forced_outputs`]), each with its
+    /// switching function: a check reading one may follow from this one's
+    /// fault, judged with the output re-derived from the coil normal.
+    pub forces: Vec<SwitchingFunction>,
 }
 
 /// Switching-function checks compiled over one bitset.
@@ -188,7 +189,7 @@ impl CheckSet for SwitchingChecks {
             } else {
                 vec![c.sf.coil.clone()]
             };
-            effects.extend(c.forces.iter().cloned());
+            effects.extend(c.forces.iter().map(|f| f.coil.clone()));
             out.push(AlarmFacts {
                 id: c.id.clone(),
                 effects,
@@ -207,6 +208,14 @@ impl CheckSet for SwitchingChecks {
         for s in check.sf.leaves().into_iter().chain(arming) {
             read_with_compared(s, out);
         }
+    }
+
+    fn without(&self, id: &str) -> Option<Vec<(Signal, bool)>> {
+        self.held_normal(id)
+    }
+
+    fn would_hold(&self, id: &str, instead: &[(Signal, bool)]) -> Option<bool> {
+        self.holds_with(id, instead)
     }
 
     fn alarms(&self) -> Vec<Declared> {
@@ -282,6 +291,52 @@ impl CheckSet for SwitchingChecks {
 }
 
 impl SwitchingChecks {
+    /// What alarm `id`'s fault holds, taken back: see
+    /// [`CheckSet::without`].
+    fn held_normal(&self, id: &str) -> Option<Vec<(Signal, bool)>> {
+        let check = &self.checks[*self.by_id.get(id)?];
+        let normal = !check.polarity.fault_value();
+        // A discrete alarm's function is its contact: the contact is what
+        // its fault holds; a coil's check holds the coil.
+        let held = if check.text.is_some() {
+            check.sf.leaves().into_iter().next()?
+        } else {
+            check.sf.coil.clone()
+        };
+        let mut out = vec![(held.clone(), normal)];
+        for f in &check.forces {
+            let value = f.certain(|x| {
+                if *x == held {
+                    Some(normal)
+                } else {
+                    self.known_value(x)
+                }
+            });
+            if let Some(v) = value {
+                out.push((f.coil.clone(), v));
+            }
+        }
+        Some(out)
+    }
+
+    /// Whether alarm `id`'s fault would hold with `instead`: see
+    /// [`CheckSet::would_hold`].
+    fn holds_with(&self, id: &str, instead: &[(Signal, bool)]) -> Option<bool> {
+        let check = &self.checks[*self.by_id.get(id)?];
+        let value = |x: &Signal| {
+            instead
+                .iter()
+                .find(|(s, _)| s == x)
+                .map(|&(_, v)| v)
+                .or_else(|| self.known_value(x))
+        };
+        let armed = match &check.armed_when {
+            None => true,
+            Some(a) => a.certain(value)?,
+        };
+        Some(armed && check.sf.certain(value)? == check.polarity.fault_value())
+    }
+
     /// Signal `x`'s value, `None` while unknown.
     fn known_value(&self, x: &Signal) -> Option<bool> {
         self.cell
