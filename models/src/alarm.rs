@@ -267,6 +267,11 @@ pub struct Consequence {
     /// Not annunciated (the cell suppresses consequences): journaled and
     /// shown as suppressed, never lost.
     pub suppressed: bool,
+    /// The signals through which it follows: each one the cause's fault
+    /// holds and this alarm's check reads, with its value now (without
+    /// the cause's fault it would have the other). Empty when an edge
+    /// written in the configuration or the culprits decided.
+    pub through: Vec<(crate::signal::Signal, bool)>,
 }
 
 /// Who took an alarm out of service, when and why.

@@ -521,6 +521,11 @@ fn a_hydraulic_fault_drops_the_clamp_and_an_operator_pressing_start_follows_from
         [("clamp".to_string(), mark("hydraulic", "hydraulic"))]
     );
     let clamp = &raised(&s)[0];
+    // Through the valve: 0 now, 1 without the hydraulic fault.
+    assert_eq!(
+        clamp.consequence.as_ref().unwrap().through,
+        [(Signal::new("Y2.00"), false)]
+    );
     assert!(
         clamp
             .culprits
@@ -536,6 +541,10 @@ fn a_hydraulic_fault_drops_the_clamp_and_an_operator_pressing_start_follows_from
     assert_eq!(
         marks(&s),
         [("cycle-start".to_string(), mark("clamp", "hydraulic"))]
+    );
+    assert_eq!(
+        raised(&s)[0].consequence.as_ref().unwrap().through,
+        [(Signal::new("G10.01"), true)]
     );
     // The coolant stops flowing meanwhile: a first-out of its own, though
     // it reads the pump contactor the hydraulic fault reads.

@@ -141,12 +141,62 @@ pub struct ConsequencePayload {
     /// Not annunciated: not an alert, not counted as a raise of its own
     /// in the KPIs without consequences.
     pub suppressed: bool,
+    /// The signals through which it follows: each held by the cause's
+    /// fault and read by this alarm's check, with its value now (without
+    /// the cause's fault it would have the other). Empty when an edge
+    /// written in the configuration or the culprits decided.
+    #[serde(default)]
+    pub through: Vec<ThroughPayload>,
+}
+
+/// A signal through which a consequence follows, in its payload.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ThroughPayload {
+    /// Its address (`G8.02`).
+    pub signal: String,
+    /// Its value now (`true`: 1).
+    pub value: bool,
+}
+
+impl ConsequencePayload {
+    /// Why, in words: `follows from ese: G8.02 = 1 (0 without ese's
+    /// fault)`.
+    pub fn why(&self) -> String {
+        let mut out = format!("follows from {}", self.cause);
+        let through: Vec<String> = self
+            .through
+            .iter()
+            .map(|t| {
+                format!(
+                    "{} = {} ({} without {}'s fault)",
+                    t.signal,
+                    u8::from(t.value),
+                    u8::from(!t.value),
+                    self.cause
+                )
+            })
+            .collect();
+        if !through.is_empty() {
+            out.push_str(": ");
+            out.push_str(&through.join(", "));
+        }
+        out
+    }
 }
 
 impl std::fmt::Display for ConsequencePayload {
-    /// `consequence of ese`, and `suppressed` when it is.
+    /// `consequence of ese through G8.02 = 1`, and `suppressed` when it
+    /// is.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "consequence of {}", self.cause)?;
+        let through: Vec<String> = self
+            .through
+            .iter()
+            .map(|t| format!("{} = {}", t.signal, u8::from(t.value)))
+            .collect();
+        if !through.is_empty() {
+            write!(f, " through {}", through.join(", "))?;
+        }
         if self.suppressed {
             f.write_str(", suppressed")?;
         }
@@ -175,6 +225,14 @@ impl AlarmPayload {
                 cause: c.cause.clone(),
                 first_out: c.first_out.clone(),
                 suppressed: c.suppressed,
+                through: c
+                    .through
+                    .iter()
+                    .map(|(s, v)| ThroughPayload {
+                        signal: s.to_string(),
+                        value: *v,
+                    })
+                    .collect(),
             }),
             schema: ALARM_SCHEMA.into(),
             cell: cell.into(),
@@ -268,6 +326,11 @@ impl AlarmPayload {
                     cause: c.cause.clone(),
                     first_out: c.first_out.clone(),
                     suppressed: c.suppressed,
+                    through: c
+                        .through
+                        .iter()
+                        .map(|t| (cellwatch_models::signal::Signal::new(&t.signal), t.value))
+                        .collect(),
                 })
             }),
         })
@@ -759,10 +822,24 @@ mod tests {
             cause: "ese".into(),
             first_out: "ese".into(),
             suppressed: false,
+            through: Vec::new(),
         };
         assert_eq!(c.to_string(), "consequence of ese");
+        assert_eq!(c.why(), "follows from ese");
         c.suppressed = true;
         assert_eq!(c.to_string(), "consequence of ese, suppressed");
+        c.through = vec![ThroughPayload {
+            signal: "G8.02".into(),
+            value: true,
+        }];
+        assert_eq!(
+            c.to_string(),
+            "consequence of ese through G8.02 = 1, suppressed"
+        );
+        assert_eq!(
+            c.why(),
+            "follows from ese: G8.02 = 1 (0 without ese's fault)"
+        );
     }
 }
 

@@ -106,6 +106,9 @@ impl Labels {
             labels.insert("first_out", c.first_out.clone());
         }
         let mut annotations = BTreeMap::from([("summary", alarm.message.clone())]);
+        if let Some(c) = &alarm.consequence {
+            annotations.insert("consequence", c.why());
+        }
         // The same line the CLI and the console show for each culprit.
         let culprits: Vec<String> = alarm
             .culprits
@@ -652,11 +655,19 @@ mod tests {
             cause: "ese".into(),
             first_out: "ese".into(),
             suppressed: false,
+            through: vec![crate::payload::ThroughPayload {
+                signal: "G8.02".into(),
+                value: true,
+            }],
         });
         assert!(book.take(&l, &csd));
         let b = book.batch(0, "2026-11-26T10:04:00.000Z");
         assert_eq!(b.alerts[0].labels["consequence_of"], "ese");
         assert_eq!(b.alerts[0].labels["first_out"], "ese");
+        assert_eq!(
+            b.alerts[0].annotations["consequence"],
+            "follows from ese: G8.02 = 1 (0 without ese's fault)"
+        );
         // Suppressed: no alert (and the one sent ends).
         let mut book = Book::new(1);
         if let Some(c) = csd.consequence.as_mut() {

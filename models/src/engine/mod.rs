@@ -2028,6 +2028,7 @@ impl CellEngine {
                     .flatten()
             })?;
         Some(Consequence {
+            through: self.through(id, &cause.id),
             cause: cause.id.clone(),
             first_out: cause
                 .consequence
@@ -2043,6 +2044,27 @@ impl CellEngine {
     fn would_still_hold(&self, effect: &str, cause: &str) -> Option<bool> {
         let normal = self.sets.iter().find_map(|s| s.without(cause))?;
         self.sets.iter().find_map(|s| s.would_hold(effect, &normal))
+    }
+
+    /// The signals `cause`'s fault holds that alarm `effect`'s check
+    /// reads and that differ now from their values without the fault, each
+    /// with its value now.
+    fn through(&self, effect: &str, cause: &str) -> Vec<(Signal, bool)> {
+        let Some(normal) = self.sets.iter().find_map(|s| s.without(cause)) else {
+            return Vec::new();
+        };
+        let mut reads = Vec::new();
+        for set in &self.sets {
+            set.reads(effect, &mut reads);
+        }
+        normal
+            .into_iter()
+            .filter(|(s, _)| reads.contains(s))
+            .filter_map(|(s, without)| {
+                let now = self.tag_index(&s).and_then(|t| self.values[t])?;
+                (now != without).then_some((s, now))
+            })
+            .collect()
     }
 
     fn update_state(&mut self, now: u64, step: &mut Step) {

@@ -135,6 +135,14 @@ fn print_alarm(out: &mut dyn Write, a: &AlarmPayload, json: bool) -> std::io::Re
         if c.first_out != c.cause {
             consequence += &format!(", first-out {}", c.first_out);
         }
+        let through: Vec<String> = c
+            .through
+            .iter()
+            .map(|t| format!("{} = {}", t.signal, u8::from(t.value)))
+            .collect();
+        if !through.is_empty() {
+            consequence += &format!(", through {}", through.join(", "));
+        }
         consequence.push(')');
     }
     // Who acknowledged it, and what they said.

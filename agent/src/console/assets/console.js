@@ -503,8 +503,10 @@ function alarmDetail(cell, id) {
       if (a.out_of_service) facts.push(['Out of service', `since ${when(a.out_of_service.at)} by ${a.out_of_service.by}: ${a.out_of_service.reason}`]);
       if (a.consequence) {
         const c = a.consequence;
+        const through = (c.through || []).map(t => `${t.signal} = ${t.value ? 1 : 0} (${t.value ? 0 : 1} without ${c.cause}'s fault)`);
         facts.push(['Consequence of', [el('a', { href: href('alarm', a.cell, c.cause) }, c.cause),
-          c.first_out !== c.cause ? ` (first-out ${c.first_out})` : '', c.suppressed ? ', suppressed: not annunciated' : '']]);
+          c.first_out !== c.cause ? ` (first-out ${c.first_out})` : '', through.length ? `: ${through.join(', ')}` : '',
+          c.suppressed ? '; suppressed: not annunciated' : '']]);
       }
       this.head.replaceChildren(
         el('h2', {}, badge(a), ' ', el('span', { class: 'message' }, a.message)),
