@@ -57,18 +57,25 @@ impl ConsequencePayload {
     }
 }
 
-impl std::fmt::Display for ConsequencePayload {
-    /// `consequence of ese through G8.02 = 1`, and `suppressed` when it
-    /// is.
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "consequence of {}", self.cause)?;
+impl ConsequencePayload {
+    /// The signals it follows through: `G8.02 = 1, Y2.00 = 0`.
+    pub fn through_text(&self) -> String {
         let through: Vec<String> = self
             .through
             .iter()
             .map(|t| format!("{} = {}", t.signal, u8::from(t.value)))
             .collect();
-        if !through.is_empty() {
-            write!(f, " through {}", through.join(", "))?;
+        through.join(", ")
+    }
+}
+
+impl std::fmt::Display for ConsequencePayload {
+    /// `consequence of ese through G8.02 = 1`, and `suppressed` when it
+    /// is.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "consequence of {}", self.cause)?;
+        if !self.through.is_empty() {
+            write!(f, " through {}", self.through_text())?;
         }
         if self.suppressed {
             f.write_str(", suppressed")?;

@@ -135,13 +135,8 @@ fn print_alarm(out: &mut dyn Write, a: &AlarmPayload, json: bool) -> std::io::Re
         if c.first_out != c.cause {
             consequence += &format!(", first-out {}", c.first_out);
         }
-        let through: Vec<String> = c
-            .through
-            .iter()
-            .map(|t| format!("{} = {}", t.signal, u8::from(t.value)))
-            .collect();
-        if !through.is_empty() {
-            consequence += &format!(", through {}", through.join(", "));
+        if !c.through.is_empty() {
+            consequence += &format!(", through {}", c.through_text());
         }
         consequence.push(')');
     }
