@@ -5,6 +5,7 @@
 //! started from the cells' configurations it made, each fault said for
 //! its cell.
 
+mod archive;
 mod rotation;
 
 use std::collections::BTreeMap;
@@ -12,6 +13,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, SystemTime};
 
+use cellwatch::archive::router::PlantRouter;
 use cellwatch::sim::cnc::{SimOptions, SimulatedCnc};
 
 use crate::util::root;
@@ -435,13 +437,24 @@ async fn plant_async(dir: PathBuf, args: Vec<String>) -> Ran {
 /// Router `router-1` of the plant in `dir`, from the configuration the
 /// plant made (its files under the plant's tree, listening on a port of
 /// its own), and that port.
-async fn plant_router(dir: &Path) -> (zenoh::Session, u16) {
+async fn plant_router(dir: &Path) -> (PlantRouter, u16) {
     plant_router_with(dir, true).await
 }
 
 /// [`plant_router`], its access control on or (a router misconfigured)
 /// off.
-async fn plant_router_with(dir: &Path, access_control: bool) -> (zenoh::Session, u16) {
+async fn plant_router_with(dir: &Path, access_control: bool) -> (PlantRouter, u16) {
+    let cfg = router_config(dir, access_control);
+    let router = PlantRouter::start(cfg, Path::new("router.json5"))
+        .await
+        .unwrap();
+    let port = crate::util::tls_port(&router.locators());
+    (router, port)
+}
+
+/// Router `router-1`'s configuration as the plant made it, with its files
+/// and its archive under the plant's tree, listening on a port of its own.
+fn router_config(dir: &Path, access_control: bool) -> zenoh::Config {
     let router_dir = dir.join("routers/router-1/etc/cellwatch/router");
     let mut cfg = zenoh::Config::from_file(router_dir.join("router.json5")).unwrap();
     let file =
@@ -466,12 +479,15 @@ async fn plant_router_with(dir: &Path, access_control: bool) -> (zenoh::Session,
             file("router-1.key"),
         ),
         ("access_control/enabled", access_control.to_string()),
+        (
+            "plugins/storage_manager/volumes/sqlite/dir",
+            serde_json::to_string(&dir.join("routers/router-1/archive").display().to_string())
+                .unwrap(),
+        ),
     ] {
         cfg.insert_json5(key, &value).unwrap();
     }
-    let router = zenoh::open(cfg).await.unwrap();
-    let port = crate::util::session_port(&router).await;
-    (router, port)
+    cfg
 }
 
 fn free_tcp_port() -> u16 {
@@ -638,10 +654,10 @@ async fn plant_check_says_per_cell_what_is_wrong_in_the_running_plant() {
         "{}",
         r.stdout
     );
-    open_router.close().await.unwrap();
+    open_router.close().await;
     a1.stop().await;
     a2.stop().await;
-    router.close().await.unwrap();
+    router.close().await;
     drop(sim);
 }
 
@@ -882,6 +898,6 @@ async fn a_key_revoked_in_the_inventory_reaches_every_agent_at_once() {
     assert!(detail.contains("unknown operator 'kim'"), "{detail}");
     a1.stop().await;
     a2.stop().await;
-    router.close().await.unwrap();
+    router.close().await;
     drop(sim);
 }

@@ -162,6 +162,11 @@ enum Command {
     /// the running plant checked against it.
     #[command(subcommand)]
     Plant(PlantCommand),
+    /// Run a plant router: Zenoh's router (as `zenohd -c` runs it) from
+    /// its configuration, with Zenoh's storage manager keeping the plant
+    /// archive (every cell's signed alarm events, states and recordings,
+    /// read by `history --plant` when an agent is down or gone).
+    Router(commands::router::Args),
     /// Learn transition timers δ(A, E | Δt) = B from logs of normal runs;
     /// with --sfc, the supervision time of every step of the charts instead.
     Learn(LearnArgs),
@@ -290,6 +295,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
                 commands::simulate::moulding(&args, out).await
             }
             Command::Console(args) => commands::console::run(&args, out).await,
+            Command::Router(args) => commands::router::run(&args, out).await,
             Command::Alarms(args) => commands::bus::alarms(&args, out).await,
             Command::History(args) => commands::bus::history(&args, out).await,
             Command::Audit(args) => commands::audit::run(&args, out).await,

@@ -42,8 +42,11 @@
 //!   that imports no component.
 //! - [`sim`]: simulated cells served over OPC UA.
 //! - [`clock`]: wall-clock time in the models' unit.
+//! - [`archive`]: the plant archive: `cellwatch router` (Zenoh's router
+//!   with its storage manager and a SQLite volume) and its readers.
 
 pub mod agent;
+pub mod archive;
 pub mod bus;
 pub mod cell;
 pub mod cli;

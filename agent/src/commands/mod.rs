@@ -17,6 +17,7 @@ pub(crate) mod man;
 pub(crate) mod pki;
 pub(crate) mod plant;
 pub(crate) mod report;
+pub(crate) mod router;
 pub(crate) mod sf;
 pub(crate) mod sfc;
 pub(crate) mod signals;

@@ -24,6 +24,9 @@ pub const CONSOLE_PORT: u16 = 8443;
 pub const ETC: &str = "/etc/cellwatch";
 /// The agents' state on every host: the unit's `StateDirectory`.
 pub const STATE: &str = "/var/lib/cellwatch";
+/// How long the routers' archive keeps what the agents put unless
+/// `[plant] archive_retention` says otherwise.
+pub const ARCHIVE_RETENTION: &str = "90d";
 
 /// The plant, as its inventory says.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -36,6 +39,9 @@ pub struct Inventory {
     pub name: String,
     /// The root of the agents' prefixes (`cellwatch`).
     pub root: String,
+    /// `[plant] archive_retention`: how long the routers' archive keeps
+    /// what the agents put ([`ARCHIVE_RETENTION`] unless set).
+    pub archive_retention: String,
     /// Where the hosts keep configuration: [`ETC`].
     pub etc: String,
     /// Where the hosts keep the agents' state: [`STATE`].
@@ -148,6 +154,7 @@ struct RawInventory {
 struct RawPlant {
     name: Option<Spanned<String>>,
     root: Option<Spanned<String>>,
+    archive_retention: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize)]
@@ -271,6 +278,20 @@ pub fn parse(path: &Path, text: &str) -> Result<Inventory, PlantError> {
         }
         None => "cellwatch".into(),
     };
+    let archive_retention = match &raw.plant.archive_retention {
+        Some(r) => match humantime::parse_duration(r.get_ref()) {
+            Ok(d) if !d.is_zero() => r.get_ref().clone(),
+            _ => {
+                p.at(
+                    r.span(),
+                    "plant.archive_retention",
+                    format!("'{}': a duration such as \"90d\" or \"2160h\"", r.get_ref()),
+                );
+                String::new()
+            }
+        },
+        None => ARCHIVE_RETENTION.into(),
+    };
     let routers = routers(&mut p, raw.routers);
     let cells = cells(&mut p, &dir, raw.cells);
     if !cells.is_empty() && routers.is_empty() {
@@ -354,6 +375,7 @@ pub fn parse(path: &Path, text: &str) -> Result<Inventory, PlantError> {
             .name
             .map_or_else(|| "plant".to_string(), Spanned::into_inner),
         root,
+        archive_retention,
         etc: ETC.into(),
         state: STATE.into(),
         routers,

@@ -103,6 +103,11 @@ impl Layout {
         format!("{}/{id}/agent-{id}.key", self.state)
     }
 
+    /// The plant archive's folder on a router's host (its SQLite files).
+    pub fn archive_dir(&self) -> String {
+        format!("{}/archive", self.state)
+    }
+
     /// Cell `id`'s state folder on its host (the agent's own, 0700).
     pub fn cell_state(&self, id: &str) -> String {
         format!("{}/{id}", self.state)

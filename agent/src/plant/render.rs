@@ -98,7 +98,7 @@ pub fn router(inventory: &Inventory, name: &str, r: &Router, layout: &Layout) ->
     let dir = layout.router_etc();
     let _ = write!(
         out,
-        "// zenohd -c {dir}/router.json5\n{{\n  mode: \"router\",\n  listen: {{ endpoints: [\"quic/0.0.0.0:{}\"] }},\n",
+        "// cellwatch router --config {dir}/router.json5\n// (Zenoh's router, as zenohd runs it, with the storage manager linked in:\n// the plugins section below keeps the plant archive.)\n{{\n  mode: \"router\",\n  listen: {{ endpoints: [\"quic/0.0.0.0:{}\"] }},\n",
         r.port
     );
     let others: Vec<String> = inventory
@@ -121,6 +121,7 @@ pub fn router(inventory: &Inventory, name: &str, r: &Router, layout: &Layout) ->
         quoted(&format!("{dir}/{name}.pem")),
         quoted(&format!("{dir}/{name}.key")),
     );
+    out.push_str(&archive(inventory, layout));
     out.push_str("  access_control: {\n    enabled: true,\n    default_permission: \"deny\",\n    rules: [\n");
     for cell in inventory.cells.keys() {
         let prefix = format!("{root}/{cell}");
@@ -170,6 +171,38 @@ pub fn router(inventory: &Inventory, name: &str, r: &Router, layout: &Layout) ->
         );
     }
     out.push_str("      { rules: [\"routers-relay\"], subjects: [\"routers\"] },\n      { rules: [\"plant-admin-publishes\"], subjects: [\"plant-admin\"] },\n      { rules: [\"plant-asks\", \"plant-hears\"], subjects: [\"plant\"] },\n    ],\n  },\n}\n");
+    out
+}
+
+/// A router's part of the plant archive: Zenoh's storage manager with the
+/// SQLite volume, one storage per kind of what the agents put, each
+/// keeping every sample for the plant's retention. Timestamps on: the
+/// storage manager orders what it keeps by them, and a router adds them to
+/// what it routes.
+fn archive(inventory: &Inventory, layout: &Layout) -> String {
+    let root = &inventory.root;
+    let volume = format!(
+        "{{ id: \"{}\", retention: {} }}",
+        crate::archive::volume::VOLUME,
+        quoted(&inventory.archive_retention)
+    );
+    let mut out = format!(
+        "  timestamping: {{ enabled: {{ router: true }} }},\n  // The plant archive (docs/reference/archive.md): every cell's signed\n  // alarm events, machine states and flight recordings, kept for\n  // [plant] archive_retention, read by `cellwatch history --plant`.\n  plugins: {{\n    storage_manager: {{\n      volumes: {{ {}: {{ dir: {} }} }},\n      storages: {{\n",
+        crate::archive::volume::VOLUME,
+        quoted(&layout.archive_dir())
+    );
+    for (name, keys) in [
+        ("alarms", "alarms/**"),
+        ("states", "state"),
+        ("recordings", "recordings/**"),
+    ] {
+        let _ = writeln!(
+            out,
+            "        {name}: {{ key_expr: {}, volume: {volume} }},",
+            quoted(&format!("{root}/*/{keys}"))
+        );
+    }
+    out.push_str("      },\n    },\n  },\n");
     out
 }
 

@@ -93,9 +93,18 @@ pub(crate) struct HistoryArgs {
     #[arg(long)]
     pub(crate) all: bool,
     /// The pages as the agent sends them (one JSON object per line:
-    /// `rows`, `more`, `next`).
+    /// `rows`, `more`, `next`); with --plant, each believed entry as its
+    /// payload (one JSON object per line).
     #[arg(long)]
     pub(crate) json: bool,
+    /// Read the plant archive the routers keep (`cellwatch router`), not
+    /// the agent's journal: the cell's alarm events and machine states
+    /// (and, with --kind recording, its flight recordings) even when its
+    /// agent is down or its host is gone, each believed only if the cell's
+    /// agent signed it. --cell '*' reads every cell. Commands are not in
+    /// the archive (they are answered, not put).
+    #[arg(long, conflicts_with_all = ["all", "limit"])]
+    pub(crate) plant: bool,
     #[command(flatten)]
     pub(crate) zenoh: ZenohArgs,
 }

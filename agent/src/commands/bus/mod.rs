@@ -3,6 +3,7 @@
 //! over Zenoh only and believe only what the plant trust file verifies.
 
 mod args;
+mod plant_history;
 
 use std::io::Write;
 use std::time::Duration;
@@ -341,6 +342,9 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
 /// `cellwatch history`: the newest rows, or with `--all` every row of the
 /// range, fetched in bounded pages.
 pub(crate) async fn history(args: &HistoryArgs, out: &mut dyn Write) -> Result<(), Failure> {
+    if args.plant {
+        return plant_history::run(args, out).await;
+    }
     let bus = session(&args.zenoh).await?;
     let mut params = vec![format!("since={}", args.since)];
     if let Some(u) = &args.until {

@@ -1,0 +1,190 @@
+//! Reading the plant archive: every cell's signed alarm events, machine
+//! states and flight recordings, as the routers' storages kept them,
+//! whether the cell's agent is running or its host is gone. Each entry is
+//! believed only if its cell's agent sealed it for the key it is kept
+//! under (the plant trust file); the routers are relays, not witnesses.
+
+use std::collections::HashSet;
+use std::time::Duration;
+
+use zenoh::query::{ConsolidationMode, QueryTarget};
+
+use crate::bus::envelope::Opened;
+use crate::client::BusClient;
+use crate::payload::{AlarmPayload, StatePayload};
+
+/// What the archive keeps, each under its own storage.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Kept {
+    /// `alarms/<id>`: alarm events.
+    Alarm,
+    /// `state`: machine states.
+    State,
+    /// `recordings/<id>`: flight recordings.
+    Recording,
+}
+
+impl Kept {
+    /// The key under a cell's prefix.
+    fn key(self) -> &'static str {
+        match self {
+            Kept::Alarm => "alarms/**",
+            Kept::State => "state",
+            Kept::Recording => "recordings/**",
+        }
+    }
+
+    /// What a key under a cell's prefix keeps.
+    fn of(suffix: &str) -> Option<Kept> {
+        if suffix.starts_with("alarms/") {
+            Some(Kept::Alarm)
+        } else if suffix == "state" {
+            Some(Kept::State)
+        } else if suffix.starts_with("recordings/") {
+            Some(Kept::Recording)
+        } else {
+            None
+        }
+    }
+}
+
+/// One believed entry.
+#[derive(Debug, Clone)]
+pub struct Entry {
+    /// What it is.
+    pub kept: Kept,
+    /// The key it was put and kept on.
+    pub key: String,
+    /// The envelope, opened.
+    pub opened: Opened,
+}
+
+/// What a reading found.
+#[derive(Debug, Default)]
+pub struct Reading {
+    /// Believed entries, oldest first (by the time their agent sealed
+    /// them), each once however many storages kept it.
+    pub entries: Vec<Entry>,
+    /// Entries not believed: the key and why.
+    pub refused: Vec<(String, String)>,
+}
+
+/// The time range of a reading, in Zenoh's time DSL.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Range(String);
+
+/// A `--since`/`--until` that reads neither as a duration nor a time.
+#[derive(Debug, thiserror::Error)]
+#[error("--{flag} `{text}`: neither a duration back from now (24h, 30m) nor an RFC 3339 time")]
+pub struct BadTime {
+    flag: &'static str,
+    text: String,
+}
+
+fn bound(flag: &'static str, text: &str) -> Result<String, BadTime> {
+    if let Ok(d) = humantime::parse_duration(text) {
+        return Ok(format!("now(-{}s)", d.as_secs()));
+    }
+    let t = humantime::parse_rfc3339_weak(text).map_err(|_| BadTime {
+        flag,
+        text: text.into(),
+    })?;
+    Ok(humantime::format_rfc3339_millis(t).to_string())
+}
+
+impl Range {
+    /// From `since` (a duration back from now, or an RFC 3339 time) until
+    /// `until` (the same forms; now when not given).
+    ///
+    /// # Errors
+    /// A bound that reads as neither.
+    pub fn new(since: &str, until: Option<&str>) -> Result<Range, BadTime> {
+        let from = bound("since", since)?;
+        let to = until.map(|u| bound("until", u)).transpose()?;
+        Ok(Range(format!("[{from}..{}]", to.unwrap_or_default())))
+    }
+
+    /// The selector parameter.
+    pub fn parameter(&self) -> String {
+        format!("_time={}", self.0)
+    }
+}
+
+/// At most this many entries in one reading: a day of a cell's states
+/// and alarms is a few thousand.
+pub const MOST_ENTRIES: usize = 1_000_000;
+
+/// Reads what the archive keeps of `cell` (`*`: every cell) in `range`,
+/// of the kinds asked, from every router's storage that answers within
+/// `timeout`.
+pub async fn read(
+    bus: &BusClient,
+    cell: &str,
+    kinds: &[Kept],
+    range: &Range,
+    timeout: Duration,
+) -> Result<Reading, zenoh::Error> {
+    let mut reading = Reading::default();
+    let mut seen = HashSet::new();
+    let prefix = bus.keys(cell).prefix().to_string();
+    let root_len = bus.keys("x").prefix().len() - 1;
+    for kind in kinds {
+        let selector = format!("{prefix}/{}?{}", kind.key(), range.parameter());
+        let replies = bus
+            .session()
+            .get(&selector)
+            .consolidation(ConsolidationMode::None)
+            .target(QueryTarget::All)
+            .timeout(timeout)
+            .await?;
+        while let Ok(reply) = replies.recv_async().await {
+            let Ok(sample) = reply.result() else { continue };
+            let key = sample.key_expr().as_str().to_string();
+            let payload = sample.payload().to_bytes();
+            // The same envelope from two routers' storages is one entry.
+            if !seen.insert(<sha2::Sha256 as sha2::Digest>::digest(&payload)) {
+                continue;
+            }
+            // The cell's part of the key: `<root>/<cell>/<suffix>`.
+            let suffix = key
+                .get(root_len..)
+                .and_then(|rest| rest.split_once('/'))
+                .map(|(_, s)| s)
+                .unwrap_or("");
+            let Some(kept) = Kept::of(suffix) else {
+                reading
+                    .refused
+                    .push((key, "not a key the archive keeps".into()));
+                continue;
+            };
+            match bus.open_put(&payload, &key) {
+                Ok(opened) => {
+                    if reading.entries.len() < MOST_ENTRIES {
+                        reading.entries.push(Entry { kept, key, opened });
+                    }
+                }
+                Err(why) => reading.refused.push((key, why.to_string())),
+            }
+        }
+    }
+    reading
+        .entries
+        .sort_by(|a, b| (a.opened.at, &a.key).cmp(&(b.opened.at, &b.key)));
+    Ok(reading)
+}
+
+impl Entry {
+    /// The alarm event, for an [`Kept::Alarm`] entry whose body reads.
+    pub fn alarm(&self) -> Option<AlarmPayload> {
+        (self.kept == Kept::Alarm)
+            .then(|| serde_json::from_str(&self.opened.body).ok())
+            .flatten()
+    }
+
+    /// The machine state, for a [`Kept::State`] entry whose body reads.
+    pub fn state(&self) -> Option<StatePayload> {
+        (self.kept == Kept::State)
+            .then(|| serde_json::from_str(&self.opened.body).ok())
+            .flatten()
+    }
+}

@@ -1,0 +1,226 @@
+//! The plant archive: a cell's alarm events and machine states kept by the
+//! plant's router (Zenoh's storage manager with the SQLite volume, as the
+//! router configuration the plant made says), read by `cellwatch history
+//! --plant` after the cell's agent is stopped for good and its host's files
+//! are gone, across a restart of the router as `cellwatch router`; an entry
+//! forged in the archive's file is not believed.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use cellwatch::sim::cnc::{SimOptions, SimulatedCnc};
+
+use super::{
+    agent_config, cell_config, free_tcp_port, plant_async, plant_router, router_config, Ran,
+};
+
+/// `cellwatch ARGS`, off the test's runtime.
+async fn cellwatch(args: Vec<String>) -> Ran {
+    tokio::task::spawn_blocking(move || {
+        let out = Command::new(env!("CARGO_BIN_EXE_cellwatch"))
+            .args(&args)
+            .output()
+            .unwrap();
+        Ran {
+            code: out.status.code().unwrap_or(-1),
+            stdout: String::from_utf8(out.stdout).unwrap(),
+            stderr: String::from_utf8(out.stderr).unwrap(),
+        }
+    })
+    .await
+    .unwrap()
+}
+
+/// `cellwatch history --plant --cell m01` as the plant's administrator,
+/// through the router on `port`.
+async fn archived(dir: &Path, port: u16, more: &[&str]) -> Ran {
+    let file = |p: &str| dir.join(p).display().to_string();
+    let mut args: Vec<String> = [
+        "history",
+        "--plant",
+        "--cell",
+        "m01",
+        "--since",
+        "1h",
+        "--connect",
+        &format!("quic/127.0.0.1:{port}"),
+        "--mode",
+        "client",
+        "--tls-ca",
+        &file("ca/ca.pem"),
+        "--tls-cert",
+        &file("admin/plant-admin.pem"),
+        "--tls-key",
+        &file("admin/plant-admin.key"),
+        "--trust",
+        &file("trust.toml"),
+        "--timeout",
+        "10",
+    ]
+    .map(String::from)
+    .to_vec();
+    args.extend(more.iter().map(|a| a.to_string()));
+    cellwatch(args).await
+}
+
+/// Reads the archive until `seen` holds of its output.
+async fn until(dir: &Path, port: u16, what: &str, seen: impl Fn(&str) -> bool) -> Ran {
+    let deadline = Instant::now() + Duration::from_secs(120);
+    loop {
+        let r = archived(dir, port, &[]).await;
+        if seen(&r.stdout) {
+            return r;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "never {what}: {}{}",
+            r.stdout,
+            r.stderr
+        );
+        tokio::time::sleep(Duration::from_millis(300)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_cells_history_is_read_from_the_plant_archive_after_its_agent_is_gone() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path().to_path_buf();
+    let sim = SimulatedCnc::start(&SimOptions {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        pki_dir: dir.join("sim-pki"),
+        insecure: false,
+        decoy: None,
+    })
+    .await
+    .unwrap();
+    let run =
+        |args: &[&str]| plant_async(dir.clone(), args.iter().map(|a| a.to_string()).collect());
+    let r = run(&["init", "--router", "router-1=127.0.0.1"]).await;
+    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    let config = cell_config(&dir, "m01");
+    let metrics = free_tcp_port().to_string();
+    let r = run(&[
+        "add-cell",
+        "--cell",
+        "m01",
+        "--area",
+        "a",
+        "--host",
+        "127.0.0.1",
+        "--plc",
+        &sim.endpoint(),
+        "--config",
+        &config,
+        "--metrics",
+        &metrics,
+    ])
+    .await;
+    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    // The router's configuration keeps the archive, as the plant made it.
+    let made =
+        std::fs::read_to_string(dir.join("routers/router-1/etc/cellwatch/router/router.json5"))
+            .unwrap();
+    for part in [
+        "storage_manager",
+        "\"cellwatch/*/alarms/**\"",
+        "\"cellwatch/*/state\"",
+        "retention: \"90d\"",
+        "timestamping",
+    ] {
+        assert!(made.contains(part), "{part}: {made}");
+    }
+
+    let (router, port) = plant_router(&dir).await;
+    let c = agent_config(&dir, "m01", port);
+    crate::util::trust_sim(&c, &dir.join("sim-pki"));
+    let agent = cellwatch::agent::start(c, None).await.unwrap();
+    // Its state reaches the archive once the PLC answers; then a fault
+    // comes and goes.
+    until(&dir, port, "a running state", |o| o.contains("m01  state=")).await;
+    sim.set("X0.06", false).unwrap();
+    until(&dir, port, "the raise", |o| o.contains("m01/ese  raised")).await;
+    sim.set("X0.06", true).unwrap();
+    let before = until(&dir, port, "the clear", |o| o.contains("m01/ese  cleared")).await;
+
+    // The agent stopped for good, its host's files gone, the router
+    // restarted: as `cellwatch router`, from its configuration file.
+    agent.stop().await;
+    std::fs::remove_dir_all(dir.join("hosts/127.0.0.1/var/lib/cellwatch/m01")).unwrap();
+    std::fs::remove_dir_all(dir.join("state-m01")).unwrap();
+    router.close().await;
+    let file = dir.join("router-test.json5");
+    std::fs::write(&file, router_config(&dir, true).to_string()).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_cellwatch"))
+        .args(["router", "--config"])
+        .arg(&file)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .unwrap();
+    let lines = crate::util::lines_of(&mut child);
+    let said = lines.recv_timeout(Duration::from_secs(60)).unwrap();
+    assert!(said.contains("keeping the plant archive"), "{said}");
+    let port = crate::util::tls_port(
+        &said
+            .split(": listening on ")
+            .nth(1)
+            .unwrap()
+            .split([',', ';'])
+            .map(|s| s.trim().to_string())
+            .collect::<Vec<_>>(),
+    );
+    let after = archived(&dir, port, &[]).await;
+    assert_eq!(after.code, 0, "{}{}", after.stdout, after.stderr);
+    for line in before.stdout.lines().filter(|l| l.contains("m01/ese")) {
+        assert!(
+            after.stdout.contains(line),
+            "{line} lost:\n{}",
+            after.stdout
+        );
+    }
+    assert!(
+        after.stdout.contains("X0.06"),
+        "the culprit: {}",
+        after.stdout
+    );
+
+    // An entry forged in the archive's file: a raise the agent never
+    // signed. It is said, not printed as the cell's.
+    let db = rusqlite::Connection::open(archive_file(&dir, "alarms")).unwrap();
+    let (key, time, id, encoding, payload): (String, i64, Vec<u8>, String, Vec<u8>) = db
+        .query_row(
+            "SELECT key, time, id, encoding, payload FROM samples ORDER BY time LIMIT 1",
+            [],
+            |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?, r.get(4)?)),
+        )
+        .unwrap();
+    let forged = String::from_utf8(payload)
+        .unwrap()
+        .replace("X0.06", "X0.07");
+    db.execute(
+        "INSERT INTO samples (key, time, id, encoding, payload) VALUES (?1, ?2, ?3, ?4, ?5)",
+        rusqlite::params![key, time + 1, id, encoding, forged.as_bytes()],
+    )
+    .unwrap();
+    drop(db);
+    let r = archived(&dir, port, &["--kind", "alarm"]).await;
+    assert_eq!(r.code, 1, "{}{}", r.stdout, r.stderr);
+    assert!(
+        r.stderr.contains(
+            "not believed: cellwatch/m01/alarms/ese: the signature is not cell m01's agent's"
+        ),
+        "{}",
+        r.stderr
+    );
+    assert!(!r.stdout.contains("X0.07"), "{}", r.stdout);
+    assert!(r.stdout.contains("m01/ese  raised"), "{}", r.stdout);
+    let _ = child.kill();
+    let _ = child.wait();
+    drop(sim);
+}
+
+/// A storage's SQLite file in the router's archive.
+fn archive_file(dir: &Path, storage: &str) -> PathBuf {
+    dir.join(format!("routers/router-1/archive/{storage}.sqlite"))
+}
