@@ -19,7 +19,12 @@
 //! evaluates it, so a network that is not series-parallel still gets the
 //! function the PLC computes. An FBD body is the same graph without
 //! rails: output variables are its coils, and the boxes AND, OR, XOR and
-//! NOT are logic (De Morgan gives a negated box its flow). IL bodies are
+//! NOT are logic (De Morgan gives a negated box its flow); such a box read
+//! by several connections is written once into an internal relay named
+//! after the POU and the block (`#Main.AND28`), which each reads, as the
+//! IL reads an internal relay: one step block read twice ([`shared`]). A
+//! connection to a `localId` the body does not have is an error at the
+//! connection. IL bodies are
 //! read by the IEC lexer at their own lines; ST and SFC bodies are
 //! warnings (charts are read by the chart reader, which reads drawn
 //! transition conditions here).

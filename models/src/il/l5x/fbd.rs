@@ -21,6 +21,13 @@
 //! latches it), so a tag that an `ORef` of the same routine writes is read
 //! as the coil it is, as a ladder contact on a coil written later in the
 //! scan is.
+//!
+//! A boolean block or function whose `Out` feeds several pins that read
+//! logic is written once into an internal relay named after the program,
+//! routine, sheet and block (`#MainProgram.Main.1.BAND_03`), which each
+//! pin reads: one step block read twice, as the IL reads an internal
+//! relay. A wire whose `FromID` or `ToID` its sheet does not have is an
+//! error at the wire.
 
 use std::collections::{HashMap, HashSet};
 

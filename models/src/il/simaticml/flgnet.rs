@@ -14,6 +14,14 @@
 //! comparison contact. Edges, other boxes and calls are warnings at their
 //! part; this module does not read the block around the network, nor
 //! tag comments (that is [`super`]'s job).
+//!
+//! A box (`A`, `O`, `X`, `Not`) whose output feeds several parts that
+//! read logic is written once, before the first coil that reads it, into
+//! an internal relay named after the block, network and part
+//! (`#Conveyor.NW3.A25`), which each of those parts reads: one step block
+//! read twice, as the IL reads an internal relay (paper 000's CSD: steps
+//! 6 and 7 share step 5). A wire naming a part the network does not have
+//! is an error at that end of the wire.
 
 use std::collections::HashMap;
 
