@@ -125,6 +125,20 @@ fn a_shared_box_is_an_internal_relay_named_after_the_box() {
 }
 
 #[test]
+fn a_plcopen_box_read_by_name_and_by_default_is_written_once() {
+    // Step 7 reads step 5's box as its first output, step 6 as `OUT`.
+    let text = CSD_PLCOPEN.replacen(
+        r#"refLocalId="28" formalParameter="OUT""#,
+        r#"refLocalId="28""#,
+        1,
+    );
+    let p = Program::compile("csd.fbd.xml", &text, None).unwrap();
+    let relay = p.coil(&Signal::new("#csd.AND28")).unwrap();
+    assert_eq!(relay.writes.len(), 1);
+    assert_eq!(sf("csd.fbd.xml", &text, "G9_00").steps.len(), 9);
+}
+
+#[test]
 fn csd_drawn_as_fbd_blames_what_the_il_blames() {
     // Cycle start pressed in JOG mode (paper 000, eq. 23): step 3, the
     // cycle start button and the JOG mode switch.

@@ -146,6 +146,9 @@ struct Reader<'a, 'i> {
     /// Shared boxes' relays written while reading the coil at hand: they
     /// go before it.
     relays: Vec<Instruction>,
+    /// The shared boxes written, by local id: a box read as `OUT` and as
+    /// its first output (no `formalParameter`) is written once.
+    written: HashMap<u64, Flow>,
     /// Every connection was checked against the elements beforehand, and
     /// a dangling one said there.
     checked: bool,
@@ -170,6 +173,7 @@ impl<'a, 'i> Reader<'a, 'i> {
             consumers: HashMap::new(),
             scope: String::new(),
             relays: Vec::new(),
+            written: HashMap::new(),
             checked: false,
             errors: Vec::new(),
         };
@@ -275,9 +279,14 @@ impl<'a, 'i> Reader<'a, 'i> {
         if !shared_box {
             return flow;
         }
+        if let Some(read) = self.written.get(&id) {
+            return read.clone();
+        }
         let relay = Signal::new(&format!("#{}.{ty}{id}", self.scope));
         let at = self.at(node);
-        shared(flow, relay, id, at, "ST", &mut self.relays)
+        let read = shared(flow, relay, id, at, "ST", &mut self.relays);
+        self.written.insert(id, read.clone());
+        read
     }
 
     /// Checks every connection of the body against its elements, each
