@@ -698,6 +698,13 @@ fn tia_portal_exports_of_other_projects() {
             ("S-01A_STS_MODO_LOCAL", "S-01A_STS_MOTOR_MODO_LOCAL_1"),
             ("S-01A_STS_MODO_REMOTO", "S-01A_STS_MOTOR_MODO_REMOTO_1"),
             ("S-01A_CMD_BOTAO_RESET_FALHA", "QA-01_CMD_RESET_REMOTA"),
+            // Network 7's OR box feeds both coils below: one relay, as
+            // the IL writes an internal relay (issue #69). Their
+            // functions are what they were when the box was read twice.
+            (
+                "#PARTIDA_MOTOR_1 (S-01A).NW7.O28",
+                "S-01A_CMD_RESET_LIGA + -CCM-1_STS_PAINEL_OK",
+            ),
             (
                 &format!("{motor}.CMD_LIGA"),
                 &format!("-(S-01A_STS_MOTOR_MODO_LOCAL_1 + -S-01A_STS_MOTOR_MODO_REMOTO_1) * -{reset_liga} * {motor}.CMD_LIGA"),

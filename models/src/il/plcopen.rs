@@ -19,7 +19,12 @@
 //! evaluates it, so a network that is not series-parallel still gets the
 //! function the PLC computes. An FBD body is the same graph without
 //! rails: output variables are its coils, and the boxes AND, OR, XOR and
-//! NOT are logic (De Morgan gives a negated box its flow). IL bodies are
+//! NOT are logic (De Morgan gives a negated box its flow); such a box read
+//! by several connections is written once into an internal relay named
+//! after the POU and the block (`#Main.AND28`), which each reads, as the
+//! IL reads an internal relay: one step block read twice ([`shared`]). A
+//! connection to a `localId` the body does not have is an error at the
+//! connection. IL bodies are
 //! read by the IEC lexer at their own lines; ST and SFC bodies are
 //! warnings (charts are read by the chart reader, which reads drawn
 //! transition conditions here).
@@ -131,6 +136,22 @@ struct Reader<'a, 'i> {
     /// Named connectors (`connector` / `continuation`).
     connectors: HashMap<String, Node<'a, 'i>>,
     memo: HashMap<(u64, String), Flow>,
+    /// How many connections read each element (a body's, not a chart's
+    /// condition): a boolean function read more than once is written
+    /// once, into an internal relay.
+    consumers: HashMap<u64, usize>,
+    /// The relays' names start `#` and this: the POU (and action or
+    /// transition) the body is.
+    scope: String,
+    /// Shared boxes' relays written while reading the coil at hand: they
+    /// go before it.
+    relays: Vec<Instruction>,
+    /// The shared boxes written, by local id: a box read as `OUT` and as
+    /// its first output (no `formalParameter`) is written once.
+    written: HashMap<u64, Flow>,
+    /// Every connection was checked against the elements beforehand, and
+    /// a dangling one said there.
+    checked: bool,
     errors: Vec<SourceError>,
 }
 
@@ -149,6 +170,11 @@ impl<'a, 'i> Reader<'a, 'i> {
             elements: HashMap::new(),
             connectors: HashMap::new(),
             memo: HashMap::new(),
+            consumers: HashMap::new(),
+            scope: String::new(),
+            relays: Vec::new(),
+            written: HashMap::new(),
+            checked: false,
             errors: Vec::new(),
         };
         for e in elements.filter(Node::is_element) {
@@ -213,10 +239,12 @@ impl<'a, 'i> Reader<'a, 'i> {
             return f.clone();
         }
         let Some(&node) = self.elements.get(&id) else {
-            self.error(
-                from,
-                format!("connection to element {id}, which this body does not have"),
-            );
+            if !self.checked {
+                self.error(
+                    from,
+                    format!("connection to element {id}, which this body does not have"),
+                );
+            }
             return Flow::True;
         };
         if depth > MAX_DEPTH {
@@ -232,8 +260,87 @@ impl<'a, 'i> Reader<'a, 'i> {
             Flow::Opaque("the rung loops back".into(), self.at(node)),
         );
         let flow = self.element(node, param, depth);
+        let flow = self.shared(node, id, flow);
         self.memo.insert(key, flow.clone());
         flow
+    }
+
+    /// The flow out of a boolean function (`AND`, `OR`, `XOR`, `NOT`)
+    /// that several connections read: written once into a relay named
+    /// after the POU and the block (`#Main.AND28`), which each reads.
+    fn shared(&mut self, node: Node<'a, 'i>, id: u64, flow: Flow) -> Flow {
+        let ty = node.attribute("typeName").unwrap_or("");
+        let shared_box = node.has_tag_name("block")
+            && node.attribute("instanceName").is_none()
+            && ["AND", "OR", "XOR", "NOT"]
+                .iter()
+                .any(|k| k.eq_ignore_ascii_case(ty))
+            && self.consumers.get(&id).is_some_and(|&n| n > 1);
+        if !shared_box {
+            return flow;
+        }
+        if let Some(read) = self.written.get(&id) {
+            return read.clone();
+        }
+        let relay = Signal::new(&format!("#{}.{ty}{id}", self.scope));
+        let at = self.at(node);
+        let read = shared(flow, relay, id, at, "ST", &mut self.relays);
+        self.written.insert(id, read.clone());
+        read
+    }
+
+    /// Checks every connection of the body against its elements, each
+    /// that names an element the body does not have an error at the
+    /// connection; and counts how often each element is read.
+    fn check_connections(&mut self, body: Node<'a, 'i>) {
+        for c in body.descendants().filter(|c| c.has_tag_name("connection")) {
+            let Some(id) = c
+                .attribute("refLocalId")
+                .and_then(|v| v.parse::<u64>().ok())
+            else {
+                continue;
+            };
+            if self.elements.contains_key(&id) {
+                let eno = c
+                    .attribute("formalParameter")
+                    .is_some_and(|p| p.eq_ignore_ascii_case("ENO"));
+                // What reads it as logic: what else reads it is not
+                // derivable anyway.
+                let logic = c
+                    .ancestors()
+                    .find(|a| local_id(*a).is_some())
+                    .is_some_and(reads_logic);
+                if !eno && logic {
+                    *self.consumers.entry(id).or_default() += 1;
+                }
+                continue;
+            }
+            let reader = c
+                .ancestors()
+                .find(|a| local_id(*a).is_some())
+                .map(|a| {
+                    let pin = c
+                        .ancestors()
+                        .find(|v| v.has_tag_name("variable"))
+                        .and_then(|v| v.attribute("formalParameter"))
+                        .map(|p| format!(" input {p}"))
+                        .unwrap_or_default();
+                    format!(
+                        "{} {}{pin}",
+                        a.tag_name().name(),
+                        a.attribute("localId").unwrap_or("?")
+                    )
+                })
+                .unwrap_or_else(|| "a connection".into());
+            self.error(
+                c,
+                format!(
+                    "{reader} is connected to element {id}, which is not in POU '{}'",
+                    self.scope
+                ),
+            );
+        }
+        self.checked = true;
     }
 
     fn element(&mut self, node: Node<'a, 'i>, param: &str, depth: usize) -> Flow {
@@ -374,6 +481,22 @@ impl<'a, 'i> Reader<'a, 'i> {
     }
 }
 
+/// Whether `element` reads its inputs as logic: a contact, a coil, an
+/// output variable, a connector, a boolean function.
+fn reads_logic(element: Node<'_, '_>) -> bool {
+    match element.tag_name().name() {
+        "contact" | "coil" | "outVariable" | "inOutVariable" | "connector" => true,
+        "block" => {
+            let ty = element.attribute("typeName").unwrap_or("");
+            element.attribute("instanceName").is_none()
+                && ["AND", "OR", "XOR", "NOT"]
+                    .iter()
+                    .any(|k| k.eq_ignore_ascii_case(ty))
+        }
+        _ => false,
+    }
+}
+
 fn local_id(node: Node<'_, '_>) -> Option<u64> {
     node.attribute("localId").and_then(|v| v.parse().ok())
 }
@@ -468,6 +591,45 @@ pub(crate) fn emit(flow: &Flow, at: Location, out: &mut Vec<Instruction>) {
             }
         }
     }
+}
+
+/// Whether `flow` is boolean logic through and through (no part of it
+/// opaque): what a shared box's relay may hold.
+fn is_logic(flow: &Flow) -> bool {
+    match flow {
+        Flow::True | Flow::False | Flow::Lit(..) => true,
+        Flow::And(parts) | Flow::Or(parts) => parts.iter().all(is_logic),
+        Flow::Opaque(..) => false,
+    }
+}
+
+/// A box whose output feeds several inputs, read as the IL reads an
+/// internal relay: its logic written once into `relay` (at `at`, with
+/// `mnemonic`, `ST` or `=`), each input reading the relay, so that the
+/// switching function has one step block read twice, not two copies.
+/// A single contact or a constant needs no relay, and logic that is not
+/// boolean stays where it is read, so that it is said there.
+pub(crate) fn shared(
+    flow: Flow,
+    relay: Signal,
+    id: u64,
+    at: Location,
+    mnemonic: &str,
+    out: &mut Vec<Instruction>,
+) -> Flow {
+    if !matches!(flow, Flow::And(_) | Flow::Or(_)) || !is_logic(&flow) {
+        return flow;
+    }
+    emit(&flow, at, out);
+    out.push(Instruction {
+        at,
+        text: format!("{mnemonic} {relay}"),
+        mnemonic: mnemonic.to_string(),
+        operation: Operation::Write { negated: false },
+        operand: Some(Operand::Signal(relay.clone())),
+        operand_at: at,
+    });
+    Flow::Lit(relay, false, id)
 }
 
 /// The XML document `text`, without a DTD and at most a million nodes.
@@ -854,6 +1016,18 @@ fn st_text(flow: &Flow, out: &mut String) -> Result<(), String> {
     Ok(())
 }
 
+/// The POU a body (`LD`, `FBD`) is of, and its action or transition:
+/// `Main`, `Main.Fill`.
+fn scope(body: Node<'_, '_>) -> String {
+    let mut names: Vec<&str> = body
+        .ancestors()
+        .filter(|a| matches!(a.tag_name().name(), "pou" | "action" | "transition"))
+        .filter_map(|a| a.attribute("name"))
+        .collect();
+    names.reverse();
+    names.join(".")
+}
+
 /// One LD body: each coil, in document order, as the instructions that
 /// compute and write it.
 fn ladder<'a, 'i>(
@@ -863,6 +1037,8 @@ fn ladder<'a, 'i>(
     declared: &iec::Declarations,
 ) -> (Vec<Instruction>, Vec<SourceError>) {
     let mut r = Reader::new(origin, doc, body.children());
+    r.scope = scope(body);
+    r.check_connections(body);
     let mut out = Vec::new();
     // Coils, and output variables a rung may end in instead (what writes
     // them is read the same way: a block's output is not derivable).
@@ -895,6 +1071,7 @@ fn ladder<'a, 'i>(
             }
         };
         let flow = r.input(coil, 0);
+        out.append(&mut r.relays);
         emit(&flow, at, &mut out);
         let negated = coil.attribute("negated") == Some("true");
         let (operation, mnemonic) = match coil.attribute("storage") {
@@ -912,6 +1089,7 @@ fn ladder<'a, 'i>(
             operand_at: at,
         });
     }
+    r.errors.sort_by_key(|e| e.at);
     (out, r.errors)
 }
 
@@ -1061,7 +1239,7 @@ mod tests {
         assert_eq!(
             e.to_string(),
             "p.xml:6:1: malformed address '%ZX1': a direct address starts with %I, %Q or %M\n\
-             p.xml:7:67: connection to element 9, which this body does not have"
+             p.xml:7:67: coil 3 is connected to element 9, which is not in POU 'p'"
         );
         let e = Program::compile(
             "p.xml",

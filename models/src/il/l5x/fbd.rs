@@ -21,6 +21,13 @@
 //! latches it), so a tag that an `ORef` of the same routine writes is read
 //! as the coil it is, as a ladder contact on a coil written later in the
 //! scan is.
+//!
+//! A boolean block or function whose `Out` feeds several pins that read
+//! logic is written once into an internal relay named after the program,
+//! routine, sheet and block (`#MainProgram.Main.1.BAND_03`), which each
+//! pin reads: one step block read twice, as the IL reads an internal
+//! relay. A wire whose `FromID` or `ToID` its sheet does not have is an
+//! error at the wire.
 
 use std::collections::{HashMap, HashSet};
 
@@ -29,7 +36,7 @@ use roxmltree::Node;
 use super::instructions::number;
 use super::names::NotSignal;
 use super::{Frame, Reader, MAX_CALL_DEPTH};
-use crate::il::plcopen::{emit, Flow, MAX_DEPTH};
+use crate::il::plcopen::{emit, shared, Flow, MAX_DEPTH};
 use crate::il::{Instruction, Operand, Operation, Outside};
 use crate::signal::Signal;
 use crate::source::{Location, SourceError};
@@ -66,6 +73,13 @@ struct Diagram<'d> {
     reading: HashSet<Pin>,
     /// Warnings given, so that each is given once.
     noted: HashSet<(Location, String)>,
+    /// How many input pins each output pin feeds (through an `OCon`, as
+    /// many as its `ICon`s): a boolean block that feeds more than one is
+    /// written once, into an internal relay.
+    consumers: HashMap<Pin, usize>,
+    /// Shared blocks' relays written while reading the `ORef` at hand:
+    /// they go before it.
+    relays: Vec<Instruction>,
 }
 
 impl<'d> Diagram<'d> {
@@ -175,6 +189,8 @@ impl<'d> Reader<'_, 'd> {
             memo: HashMap::new(),
             reading: HashSet::new(),
             noted: HashSet::new(),
+            consumers: HashMap::new(),
+            relays: Vec::new(),
         };
         for (k, sheet) in sheets.iter().enumerate() {
             d.sheets.push(
@@ -184,6 +200,27 @@ impl<'d> Reader<'_, 'd> {
             );
             for e in sheet.children().filter(Node::is_element) {
                 let id = e.attribute("ID").and_then(|v| v.parse::<u64>().ok());
+                if e.has_tag_name("OCon") {
+                    if let (Some(id), Some(name)) = (id, e.attribute("Name")) {
+                        d.connectors
+                            .entry(name.to_ascii_uppercase())
+                            .or_default()
+                            .push((k, id));
+                    }
+                }
+                if let Some(id) = id.filter(|_| !e.has_tag_name("Wire")) {
+                    d.elements.entry((k, id)).or_insert(e);
+                }
+            }
+        }
+        // ICons by upper-case name: what an `OCon` feeds.
+        let mut icons: HashMap<String, usize> = HashMap::new();
+        for e in d.elements.values().filter(|e| e.has_tag_name("ICon")) {
+            let name = e.attribute("Name").unwrap_or("").to_ascii_uppercase();
+            *icons.entry(name).or_default() += 1;
+        }
+        for (k, sheet) in sheets.iter().enumerate() {
+            for e in sheet.children().filter(Node::is_element) {
                 match e.tag_name().name() {
                     "Wire" | "FeedbackWire" => {
                         let ends = (
@@ -199,6 +236,37 @@ impl<'d> Reader<'_, 'd> {
                             ));
                             continue;
                         };
+                        let missing = [from, to]
+                            .into_iter()
+                            .find(|id| !d.elements.contains_key(&(k, *id)));
+                        if let Some(missing) = missing {
+                            let at = self.at(e.range().start);
+                            self.errors.push(SourceError::new(
+                                self.origin,
+                                at,
+                                format!(
+                                    "{}: the wire from {from} to {to} names element {missing}, which is not on this sheet",
+                                    d.where_(k)
+                                ),
+                            ));
+                            continue;
+                        }
+                        let from_param =
+                            e.attribute("FromParam").unwrap_or("").to_ascii_uppercase();
+                        // Pins that read logic: what else reads it is
+                        // not derivable anyway.
+                        let fed = match d.elements.get(&(k, to)) {
+                            Some(target) if target.has_tag_name("OCon") => {
+                                let name = target.attribute("Name").unwrap_or("");
+                                icons.get(&name.to_ascii_uppercase()).copied().unwrap_or(0)
+                            }
+                            Some(target) if target.has_tag_name("ORef") => 1,
+                            Some(target) => usize::from(
+                                boolean_kind(target.attribute("Type").unwrap_or("")).is_some(),
+                            ),
+                            None => 0,
+                        };
+                        *d.consumers.entry((k, from, from_param)).or_default() += fed;
                         let pin = e.attribute("ToParam").unwrap_or("").to_ascii_uppercase();
                         d.wires.entry((k, to, pin)).or_default().push(Wire {
                             from,
@@ -207,18 +275,7 @@ impl<'d> Reader<'_, 'd> {
                             feedback: e.has_tag_name("FeedbackWire"),
                         });
                     }
-                    "OCon" => {
-                        if let (Some(id), Some(name)) = (id, e.attribute("Name")) {
-                            d.connectors
-                                .entry(name.to_ascii_uppercase())
-                                .or_default()
-                                .push((k, id));
-                        }
-                    }
                     _ => {}
-                }
-                if let Some(id) = id {
-                    d.elements.entry((k, id)).or_insert(e);
                 }
             }
         }
@@ -299,6 +356,7 @@ impl<'d> Reader<'_, 'd> {
             .and_then(|v| v.parse().ok())
             .unwrap_or(u64::MAX);
         let flow = self.pin(d, (sheet, id, String::new()), node, "", 0);
+        self.out.append(&mut d.relays);
         let mut parts = vec![frame.guard.clone()];
         parts.extend(self.cut.clone());
         parts.push(flow);
@@ -407,9 +465,36 @@ impl<'d> Reader<'_, 'd> {
         }
         d.reading.insert(key.clone());
         let flow = self.element(d, sheet, node, wire.param, depth);
+        let flow = self.shared(d, &key, node, flow);
         d.reading.remove(&key);
         d.memo.insert(key, flow.clone());
         flow
+    }
+
+    /// The flow out of `Out` of a boolean block or function that feeds
+    /// several pins: written once into a relay named after the program,
+    /// routine, sheet and block (`#MainProgram.Main.1.BAND_03`, a
+    /// function by type and ID: `BOR__F_ID7`), which each pin reads.
+    fn shared(&mut self, d: &mut Diagram<'d>, key: &Pin, node: Node<'d, 'd>, flow: Flow) -> Flow {
+        let ty = node.attribute("Type").unwrap_or("");
+        let shared_box = matches!(node.tag_name().name(), "Block" | "Function")
+            && boolean_kind(ty).is_some()
+            && key.2 == "OUT"
+            && d.consumers.get(key).is_some_and(|&n| n > 1);
+        if !shared_box {
+            return flow;
+        }
+        let name = match node.attribute("Operand") {
+            Some(tag) => tag.to_string(),
+            None => format!("{ty}_ID{}", key.1),
+        };
+        let relay = Signal::new(&format!(
+            "#{}.{}.{}.{name}",
+            d.program, d.routine, d.sheets[key.0]
+        ));
+        let at = self.at(node.range().start);
+        self.ids += 1;
+        shared(flow, relay, self.ids, at, "OTE", &mut d.relays)
     }
 
     /// What flows out of output `param` of `node`.

@@ -390,7 +390,7 @@ fn fbd_malformed_wires_and_names_are_errors_at_the_element() {
     assert_eq!(
         e.to_string(),
         "f.L5X:10:1: routine Main, sheet 1: '1abc' is not a tag name\n\
-         f.L5X:14:1: routine Main, sheet 1: a wire from element 7, which this sheet does not have\n\
+         f.L5X:14:1: routine Main, sheet 1: the wire from 7 to 2 names element 7, which is not on this sheet\n\
          f.L5X:15:1: routine Main, sheet 1: a wire without a FromID and a ToID"
     );
 }

@@ -14,12 +14,20 @@
 //! comparison contact. Edges, other boxes and calls are warnings at their
 //! part; this module does not read the block around the network, nor
 //! tag comments (that is [`super`]'s job).
+//!
+//! A box (`A`, `O`, `X`, `Not`) whose output feeds several parts that
+//! read logic is written once, before the first coil that reads it, into
+//! an internal relay named after the block, network and part
+//! (`#Conveyor.NW3.A25`), which each of those parts reads: one step block
+//! read twice, as the IL reads an internal relay (paper 000's CSD: steps
+//! 6 and 7 share step 5). A wire naming a part the network does not have
+//! is an error at that end of the wire.
 
 use std::collections::HashMap;
 
 use roxmltree::{Document, Node};
 
-use super::super::plcopen::{emit, Flow, MAX_DEPTH};
+use super::super::plcopen::{emit, shared, Flow, MAX_DEPTH};
 use super::access::{access_signal, at, child, text_of, Place};
 use crate::il::{Instruction, Operand, Operation, Outside};
 use crate::signal::Signal;
@@ -51,6 +59,12 @@ pub(super) struct Network<'a, 'i> {
     /// The wires touching each pin (`""` for an operand's IdentCon).
     wires: HashMap<(u64, String), Vec<Node<'a, 'i>>>,
     memo: HashMap<(u64, String), Flow>,
+    /// How many input pins each output pin feeds: a box that feeds more
+    /// than one is written once, into an internal relay.
+    consumers: HashMap<(u64, String), usize>,
+    /// Shared boxes' relays written while reading the coil at hand: they
+    /// go before it.
+    relays: Vec<Instruction>,
     errors: Vec<SourceError>,
 }
 
@@ -63,6 +77,31 @@ fn is_output(pin: &str) -> bool {
     ) || pin
         .strip_prefix("out")
         .is_some_and(|n| n.chars().all(|c| c.is_ascii_digit()))
+}
+
+/// Whether `part` reads its inputs as logic (what else reads a box's
+/// output makes what it feeds not derivable anyway).
+fn reads_logic(part: Node<'_, '_>) -> bool {
+    part.has_tag_name("Part")
+        && matches!(
+            part.attribute("Name").unwrap_or(""),
+            "A" | "O"
+                | "X"
+                | "Not"
+                | "NOT"
+                | "Contact"
+                | "Coil"
+                | "SCoil"
+                | "RCoil"
+                | "Sr"
+                | "Rs"
+                | "Eq"
+                | "Ne"
+                | "Gt"
+                | "Ge"
+                | "Lt"
+                | "Le"
+        )
 }
 
 fn uid(node: Node<'_, '_>) -> Option<u64> {
@@ -90,6 +129,8 @@ impl<'a, 'i> Network<'a, 'i> {
             parts: HashMap::new(),
             wires: HashMap::new(),
             memo: HashMap::new(),
+            consumers: HashMap::new(),
+            relays: Vec::new(),
             errors: Vec::new(),
         };
         for part in child(flgnet, "Parts")
@@ -106,15 +147,35 @@ impl<'a, 'i> Network<'a, 'i> {
             .flat_map(|w| w.children())
             .filter(|w| w.has_tag_name("Wire"))
         {
+            let (mut outputs, mut inputs) = (Vec::new(), 0);
             for end in wire.children().filter(Node::is_element) {
                 let pin = match end.tag_name().name() {
                     "NameCon" => end.attribute("Name").unwrap_or("").to_string(),
                     "IdentCon" => String::new(),
                     _ => continue,
                 };
-                if let Some(id) = uid(end) {
-                    n.wires.entry((id, pin)).or_default().push(wire);
+                let Some(id) = uid(end) else {
+                    continue;
+                };
+                if !n.parts.contains_key(&id) {
+                    let name = wire.attribute("UId").unwrap_or("?");
+                    n.error(
+                        end,
+                        format!("wire {name} names part {id}, which is not in this network"),
+                    );
+                    continue;
                 }
+                if end.has_tag_name("NameCon") {
+                    if is_output(&pin) {
+                        outputs.push((id, pin.clone()));
+                    } else if n.parts.get(&id).is_some_and(|p| reads_logic(*p)) {
+                        inputs += 1;
+                    }
+                }
+                n.wires.entry((id, pin)).or_default().push(wire);
+            }
+            for pin in outputs {
+                *n.consumers.entry(pin).or_default() += inputs;
             }
         }
         n
@@ -150,7 +211,8 @@ impl<'a, 'i> Network<'a, 'i> {
         let mut branches = Vec::new();
         for wire in wires {
             for end in wire.children().filter(Node::is_element) {
-                let other = uid(end);
+                // A part the network does not have: said where it is named.
+                let other = uid(end).filter(|u| self.parts.contains_key(u));
                 match end.tag_name().name() {
                     "Powerrail" => branches.push(Flow::True),
                     "IdentCon" => {
@@ -287,8 +349,32 @@ impl<'a, 'i> Network<'a, 'i> {
         self.memo.insert(key.clone(), looped);
         let flow = self.part(node, pin, depth);
         let flow = if negated(node, pin) { flow.not() } else { flow };
+        let flow = self.shared(node, pin, flow);
         self.memo.insert(key, flow.clone());
         flow
+    }
+
+    /// The flow out of `pin` of a box (`A`, `O`, `X`, `Not`) that feeds
+    /// several inputs: written once into a relay named after the block,
+    /// network and part (`#Conveyor.NW3.A25`), which each input reads.
+    fn shared(&mut self, node: Node<'a, 'i>, pin: &str, flow: Flow) -> Flow {
+        let id = uid(node).unwrap_or(0);
+        let name = node.attribute("Name").unwrap_or("");
+        let shared_box = node.has_tag_name("Part")
+            && matches!(name, "A" | "O" | "X" | "Not" | "NOT")
+            && self
+                .consumers
+                .get(&(id, pin.to_string()))
+                .is_some_and(|&n| n > 1);
+        if !shared_box {
+            return flow;
+        }
+        let relay = Signal::new(&format!(
+            "#{}.NW{}.{name}{id}",
+            self.place.block, self.place.network
+        ));
+        let here = at(self.doc, node);
+        shared(flow, relay, id, here, "=", &mut self.relays)
     }
 
     /// What flows out of `pin` of `node`.
@@ -482,6 +568,7 @@ impl<'a, 'i> Network<'a, 'i> {
                         continue;
                     };
                     let flow = self.input(part, "in", 0);
+                    out.append(&mut self.relays);
                     emit(&flow, here, &mut out);
                     let (operation, mnemonic) = match name {
                         "SCoil" => (Operation::Set, "S"),
@@ -503,6 +590,7 @@ impl<'a, 'i> Network<'a, 'i> {
                     };
                     for (pin, operation, mnemonic) in order {
                         let flow = self.input(part, pin, 0);
+                        out.append(&mut self.relays);
                         emit(&flow, here, &mut out);
                         out.push(write(here, operation, mnemonic, target.clone()));
                     }
@@ -528,6 +616,7 @@ impl<'a, 'i> Network<'a, 'i> {
                 }
             }
         }
+        self.errors.sort_by_key(|e| e.at);
         (out, self.errors)
     }
 

@@ -542,7 +542,7 @@ mod tests {
         assert_eq!(
             e.to_string(),
             "c.xml:10:1: block \"Conveyor\" network 1: Coil on a constant\n\
-             c.xml:20:16: block \"Conveyor\" network 1: wire to part 30, which this network does not have"
+             c.xml:20:16: block \"Conveyor\" network 1: wire 99 names part 30, which is not in this network"
         );
         let e = Program::compile(
             "t.xml",
