@@ -663,6 +663,33 @@ async fn plant_check_says_per_cell_what_is_wrong_in_the_running_plant() {
 
 /// Kim's signed acknowledgement of `ese` on `cell`, as the agent answers
 /// it (accepted, detail).
+/// A bus client as the plant's administrator, through the router on
+/// `port`, believing what the plant's trust file does.
+async fn admin_client(dir: &Path, port: u16) -> cellwatch::client::BusClient {
+    let trust = cellwatch::bus::envelope::Trust::load(&dir.join("trust.toml")).unwrap();
+    cellwatch::client::BusClient::open(
+        &cellwatch::config::ZenohConfig {
+            mode: cellwatch::config::ZenohMode::Client,
+            connect: vec![format!("quic/127.0.0.1:{port}")],
+            listen: vec![],
+            prefix: String::new(),
+            multicast_scouting: false,
+            tls: Some(cellwatch::config::ZenohTls {
+                ca: dir.join("ca/ca.pem"),
+                cert: dir.join("admin/plant-admin.pem"),
+                key: dir.join("admin/plant-admin.key"),
+            }),
+            config_file: None,
+            plain: false,
+            signing_key: None,
+        },
+        trust,
+        "cellwatch",
+    )
+    .await
+    .unwrap()
+}
+
 async fn kim_acks(
     bus: &cellwatch::client::BusClient,
     kim: &cellwatch::operator::OperatorKey,
@@ -778,28 +805,7 @@ async fn a_key_revoked_in_the_inventory_reaches_every_agent_at_once() {
     let c2 = agent_config(&dir, "m02", port);
     crate::util::trust_sim(&c2, &dir.join("sim-pki"));
     let a2 = cellwatch::agent::start(c2, None).await.unwrap();
-    let trust = cellwatch::bus::envelope::Trust::load(&dir.join("trust.toml")).unwrap();
-    let bus = cellwatch::client::BusClient::open(
-        &cellwatch::config::ZenohConfig {
-            mode: cellwatch::config::ZenohMode::Client,
-            connect: vec![connect.clone()],
-            listen: vec![],
-            prefix: String::new(),
-            multicast_scouting: false,
-            tls: Some(cellwatch::config::ZenohTls {
-                ca: dir.join("ca/ca.pem"),
-                cert: dir.join("admin/plant-admin.pem"),
-                key: dir.join("admin/plant-admin.key"),
-            }),
-            config_file: None,
-            plain: false,
-            signing_key: None,
-        },
-        trust,
-        "cellwatch",
-    )
-    .await
-    .unwrap();
+    let bus = admin_client(&dir, port).await;
     // Kim is known to both agents (the list they started with).
     for cell in ["m01", "m02"] {
         let (_, detail) = kim_acks(&bus, &kim, cell).await;

@@ -297,6 +297,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             Command::Console(args) => commands::console::run(&args, out).await,
             Command::Router(args) => commands::router::run(&args, out).await,
             Command::Alarms(args) => commands::bus::alarms(&args, out).await,
+            Command::History(args) if args.plant => commands::archive::history(&args, out).await,
             Command::History(args) => commands::bus::history(&args, out).await,
             Command::Audit(args) => commands::audit::run(&args, out).await,
             Command::Ack(args) => commands::bus::ack(&args, out).await,

@@ -35,14 +35,18 @@ async fn cellwatch(args: Vec<String>) -> Ran {
 /// `cellwatch history --plant --cell m01` as the plant's administrator,
 /// through the router on `port`.
 async fn archived(dir: &Path, port: u16, more: &[&str]) -> Ran {
+    let mut args: Vec<String> = ["history", "--plant", "--cell", "m01", "--since", "1h"]
+        .map(String::from)
+        .to_vec();
+    args.extend(bus_flags(dir, port));
+    args.extend(more.iter().map(|a| a.to_string()));
+    cellwatch(args).await
+}
+
+/// The bus flags of the plant's administrator through the router on `port`.
+fn bus_flags(dir: &Path, port: u16) -> Vec<String> {
     let file = |p: &str| dir.join(p).display().to_string();
-    let mut args: Vec<String> = [
-        "history",
-        "--plant",
-        "--cell",
-        "m01",
-        "--since",
-        "1h",
+    [
         "--connect",
         &format!("quic/127.0.0.1:{port}"),
         "--mode",
@@ -59,9 +63,7 @@ async fn archived(dir: &Path, port: u16, more: &[&str]) -> Ran {
         "10",
     ]
     .map(String::from)
-    .to_vec();
-    args.extend(more.iter().map(|a| a.to_string()));
-    cellwatch(args).await
+    .to_vec()
 }
 
 /// Reads the archive until `seen` holds of its output.
@@ -117,6 +119,18 @@ async fn a_cells_history_is_read_from_the_plant_archive_after_its_agent_is_gone(
     ])
     .await;
     assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    let kim = cellwatch::operator::OperatorKey::generate("kim");
+    let r = run(&[
+        "add-operator",
+        "--name",
+        "kim",
+        "--public-key",
+        &kim.public_hex(),
+        "--allow",
+        "ack",
+    ])
+    .await;
+    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
     // The router's configuration keeps the archive, as the plant made it.
     let made =
         std::fs::read_to_string(dir.join("routers/router-1/etc/cellwatch/router/router.json5"))
@@ -132,8 +146,10 @@ async fn a_cells_history_is_read_from_the_plant_archive_after_its_agent_is_gone(
     }
 
     let (router, port) = plant_router(&dir).await;
-    let c = agent_config(&dir, "m01", port);
+    let mut c = agent_config(&dir, "m01", port);
+    c.state_interval = Duration::from_millis(200);
     crate::util::trust_sim(&c, &dir.join("sim-pki"));
+    let journal = c.journal.path.clone();
     let agent = cellwatch::agent::start(c, None).await.unwrap();
     // Its state reaches the archive once the PLC answers; then a fault
     // comes and goes.
@@ -143,9 +159,55 @@ async fn a_cells_history_is_read_from_the_plant_archive_after_its_agent_is_gone(
     sim.set("X0.06", true).unwrap();
     let before = until(&dir, port, "the clear", |o| o.contains("m01/ese  cleared")).await;
 
-    // The agent stopped for good, its host's files gone, the router
-    // restarted: as `cellwatch router`, from its configuration file.
+    // Kim acknowledges: a command row, the chain's end the agent then
+    // signs in its state, which the archive keeps.
+    let bus = super::admin_client(&dir, port).await;
+    let (accepted, detail) = super::kim_acks(&bus, &kim, "m01").await;
+    assert!(accepted, "{detail}");
+    let deadline = Instant::now() + Duration::from_secs(120);
+    let position = loop {
+        let r = archived(&dir, port, &["--kind", "state", "--json"]).await;
+        let acked = r.stdout.lines().find_map(|l| {
+            let v: serde_json::Value = serde_json::from_str(l).ok()?;
+            let chain = &v["command_chain"];
+            (chain["hash"] != serde_json::Value::Null)
+                .then(|| chain["position"].as_i64())
+                .flatten()
+                .filter(|p| *p >= 1)
+        });
+        if let Some(p) = acked {
+            break p;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "no signed chain end archived: {}{}",
+            r.stdout,
+            r.stderr
+        );
+        tokio::time::sleep(Duration::from_millis(300)).await;
+    };
+    drop(bus);
+
+    // The agent stopped for good; its journal kept aside, once whole and
+    // once with its last command row cut off (as whoever can write the
+    // file while the agent is stopped could); its host's files gone; the
+    // router restarted, as `cellwatch router`, from its configuration file.
     agent.stop().await;
+    let whole = dir.join("journal-whole.sqlite");
+    let cut = dir.join("journal-cut.sqlite");
+    for copy in [&whole, &cut] {
+        rusqlite::Connection::open(&journal)
+            .unwrap()
+            .execute("VACUUM INTO ?1", [copy.display().to_string()])
+            .unwrap();
+    }
+    rusqlite::Connection::open(&cut)
+        .unwrap()
+        .execute(
+            "DELETE FROM commands WHERE seq = (SELECT MAX(seq) FROM commands)",
+            [],
+        )
+        .unwrap();
     std::fs::remove_dir_all(dir.join("hosts/127.0.0.1/var/lib/cellwatch/m01")).unwrap();
     std::fs::remove_dir_all(dir.join("state-m01")).unwrap();
     router.close().await;
@@ -185,6 +247,38 @@ async fn a_cells_history_is_read_from_the_plant_archive_after_its_agent_is_gone(
         after.stdout
     );
 
+    // The journal held to the chain ends the archive keeps: whole, it
+    // holds; cut, the row is missed though the agent is gone.
+    let audit = |journal: &Path| {
+        let mut args = vec![
+            "audit".to_string(),
+            "verify".into(),
+            journal.display().to_string(),
+            "--against-archive".into(),
+            "--cell".into(),
+            "m01".into(),
+        ];
+        args.extend(bus_flags(&dir, port));
+        cellwatch(args)
+    };
+    let r = audit(&whole).await;
+    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    assert!(
+        r.stdout
+            .contains("every chain end cell m01's agent signed in the plant archive is there"),
+        "{}",
+        r.stdout
+    );
+    let r = audit(&cut).await;
+    assert_eq!(r.code, 1, "{}{}", r.stdout, r.stderr);
+    assert!(
+        r.stderr.contains(&format!(
+            "1 command row cut off: the plant archive keeps cell m01's agent's signed chain end at position {position}"
+        )),
+        "{}",
+        r.stderr
+    );
+
     // An entry forged in the archive's file: a raise the agent never
     // signed. It is said, not printed as the cell's.
     let db = rusqlite::Connection::open(archive_file(&dir, "alarms")).unwrap();
@@ -197,7 +291,7 @@ async fn a_cells_history_is_read_from_the_plant_archive_after_its_agent_is_gone(
         .unwrap();
     let forged = String::from_utf8(payload)
         .unwrap()
-        .replace("X0.06", "X0.07");
+        .replace("X0.06", "X9.99");
     db.execute(
         "INSERT INTO samples (key, time, id, encoding, payload) VALUES (?1, ?2, ?3, ?4, ?5)",
         rusqlite::params![key, time + 1, id, encoding, forged.as_bytes()],
@@ -213,7 +307,7 @@ async fn a_cells_history_is_read_from_the_plant_archive_after_its_agent_is_gone(
         "{}",
         r.stderr
     );
-    assert!(!r.stdout.contains("X0.07"), "{}", r.stdout);
+    assert!(!r.stdout.contains("X9.99"), "{}", r.stdout);
     assert!(r.stdout.contains("m01/ese  raised"), "{}", r.stdout);
     let _ = child.kill();
     let _ = child.wait();

@@ -3,6 +3,7 @@
 //! command that talks to agents over Zenoh).
 
 pub(crate) mod agent;
+pub(crate) mod archive;
 pub(crate) mod audit;
 pub(crate) mod bus;
 pub(crate) mod console;

@@ -3,7 +3,6 @@
 //! over Zenoh only and believe only what the plant trust file verifies.
 
 mod args;
-mod plant_history;
 
 use std::io::Write;
 use std::time::Duration;
@@ -25,7 +24,7 @@ use crate::payload::AlarmPayload;
 
 /// Opens the client's session: TLS only unless `--plain`, listening on
 /// nothing, linking only to the endpoints given; and reads the trust file.
-async fn session(z: &ZenohArgs) -> Result<BusClient, Failure> {
+pub(crate) async fn session(z: &ZenohArgs) -> Result<BusClient, Failure> {
     let trust = trust(z)?;
     let mode = match z.mode.as_str() {
         "peer" => ZenohMode::Peer,
@@ -105,11 +104,15 @@ fn trust(z: &ZenohArgs) -> Result<Trust, Failure> {
     Trust::load(path).map_err(|e| Failure::Input(e.to_string()))
 }
 
-fn io(e: std::io::Error) -> Failure {
+pub(crate) fn io(e: std::io::Error) -> Failure {
     Failure::output(e)
 }
 
-fn print_alarm(out: &mut dyn Write, a: &AlarmPayload, json: bool) -> std::io::Result<()> {
+pub(crate) fn print_alarm(
+    out: &mut dyn Write,
+    a: &AlarmPayload,
+    json: bool,
+) -> std::io::Result<()> {
     if json {
         return writeln!(out, "{}", serde_json::to_string(a).unwrap_or_default());
     }
@@ -342,9 +345,6 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
 /// `cellwatch history`: the newest rows, or with `--all` every row of the
 /// range, fetched in bounded pages.
 pub(crate) async fn history(args: &HistoryArgs, out: &mut dyn Write) -> Result<(), Failure> {
-    if args.plant {
-        return plant_history::run(args, out).await;
-    }
     let bus = session(&args.zenoh).await?;
     let mut params = vec![format!("since={}", args.since)];
     if let Some(u) = &args.until {

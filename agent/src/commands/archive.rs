@@ -1,9 +1,11 @@
-//! `cellwatch history --plant`: a cell's history from the plant archive.
+//! The plant archive's readers on the command line: `cellwatch history
+//! --plant` (a cell's history from the routers' storages) and the chain ends
+//! `audit verify --against-archive` holds a journal to.
 
 use std::io::Write;
 use std::time::Duration;
 
-use super::{io, print_alarm, session, HistoryArgs};
+use super::bus::{io, print_alarm, session, HistoryArgs, ZenohArgs};
 use crate::archive::read::{self, Kept, Range};
 use crate::commands::Failure;
 
@@ -11,7 +13,7 @@ use crate::commands::Failure;
 /// events as `cellwatch alarms` prints them, machine states when they
 /// change (an agent puts its state again every `publish_interval`), and
 /// recordings when asked; then what was not believed, on stderr.
-pub(super) async fn run(args: &HistoryArgs, out: &mut dyn Write) -> Result<(), Failure> {
+pub(crate) async fn history(args: &HistoryArgs, out: &mut dyn Write) -> Result<(), Failure> {
     let kinds: &[Kept] = match args.kind.as_deref() {
         None => &[Kept::Alarm, Kept::State],
         Some("alarm") => &[Kept::Alarm],
@@ -48,17 +50,19 @@ pub(super) async fn run(args: &HistoryArgs, out: &mut dyn Write) -> Result<(), F
                         s.element.as_deref().unwrap_or("None"),
                         s.since
                     );
+                    if args.json {
+                        // Every state as put (each carries the command
+                        // chain's end signed then).
+                        writeln!(out, "{}", entry.opened.body).map_err(io)?;
+                        continue;
+                    }
                     // Put again unchanged every publish_interval: said once.
                     let what = (s.state, s.kind, s.fault_type, s.element, s.since);
                     if last_state.get(&s.cell) == Some(&what) {
                         continue;
                     }
                     last_state.insert(s.cell.clone(), what);
-                    if args.json {
-                        writeln!(out, "{}", entry.opened.body).map_err(io)?;
-                    } else {
-                        writeln!(out, "{}", crate::operator::escaped(&line)).map_err(io)?;
-                    }
+                    writeln!(out, "{}", crate::operator::escaped(&line)).map_err(io)?;
                 }
                 None => eprintln!("{}: signed, but not a machine state", entry.key),
             },
@@ -100,4 +104,36 @@ pub(super) async fn run(args: &HistoryArgs, out: &mut dyn Write) -> Result<(), F
         )));
     }
     Ok(())
+}
+
+/// Every end of the command chain `cell`'s agent signed in a state the
+/// plant archive keeps (each once, oldest first): what `audit verify
+/// --against-archive` holds the journal to.
+pub(crate) async fn archived_chain_heads(
+    z: &ZenohArgs,
+    cell: &str,
+) -> Result<Vec<crate::payload::CommandChain>, Failure> {
+    // As far back as any retention goes.
+    let range = Range::new("36500d", None).map_err(Failure::input)?;
+    let bus = session(z).await?;
+    let timeout = Duration::from_secs(z.timeout_secs);
+    let reading = read::read(&bus, cell, &[Kept::State], &range, timeout)
+        .await
+        .map_err(|e| Failure::Runtime(format!("the plant archive could not be asked: {e}")))?;
+    if let Some((key, why)) = reading.refused.first() {
+        return Err(Failure::Runtime(format!(
+            "the plant archive holds {} entries not believed, the first {key}: {why}",
+            reading.refused.len()
+        )));
+    }
+    let mut heads: Vec<crate::payload::CommandChain> = Vec::new();
+    for entry in &reading.entries {
+        let Some(head) = entry.state().and_then(|s| s.command_chain) else {
+            continue;
+        };
+        if !heads.contains(&head) {
+            heads.push(*head);
+        }
+    }
+    Ok(heads)
 }
