@@ -928,7 +928,7 @@ async fn the_console_session_puts_nothing_and_answers_nothing() {
 
 /// One HTTP/1.1 request to `addr` (`IP:PORT`) as written in `head` (the
 /// `Connection: close` and length added), and its status, head and body.
-fn request(addr: &str, head: &str, body: &str) -> (u16, String, String) {
+pub(crate) fn request(addr: &str, head: &str, body: &str) -> (u16, String, String) {
     use std::io::{Read, Write};
     let mut s = std::net::TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
@@ -950,7 +950,7 @@ fn request(addr: &str, head: &str, body: &str) -> (u16, String, String) {
 
 /// Signs `operator` (key file `key`) in over HTTP as the page does, and
 /// returns the session's `Cookie` header line.
-fn sign_in(addr: &str, key: &Path) -> Result<String, (u16, String)> {
+pub(crate) fn sign_in(addr: &str, key: &Path) -> Result<String, (u16, String)> {
     use ed25519_dalek::Signer;
     let file =
         cellwatch::operator::OperatorKey::parse("key", &std::fs::read_to_string(key).unwrap())

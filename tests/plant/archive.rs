@@ -247,6 +247,72 @@ async fn a_cells_history_is_read_from_the_plant_archive_after_its_agent_is_gone(
         after.stdout
     );
 
+    // The console shows the cell's history from the archive: its agent's
+    // token is gone, so the routers' storages answer at once.
+    std::fs::write(dir.join("kim.key"), kim.to_file()).unwrap();
+    std::fs::write(
+        dir.join("console-operators.toml"),
+        kim.operators_entry(&[cellwatch::operator::Action::Ack]),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("console.toml"),
+        format!(
+            "[http]\nlisten = \"127.0.0.1:0\"\n\n[bus]\nconnect = [\"quic/127.0.0.1:{port}\"]\ntrust = {:?}\ntls = {{ ca = {:?}, cert = {:?}, key = {:?} }}\n\n[operators]\nfile = {:?}\n\n[areas]\na = [\"m01\"]\n",
+            dir.join("trust.toml"),
+            dir.join("ca/ca.pem"),
+            dir.join("admin/plant-admin.pem"),
+            dir.join("admin/plant-admin.key"),
+            dir.join("console-operators.toml"),
+        ),
+    )
+    .unwrap();
+    let mut console = Command::new(env!("CARGO_BIN_EXE_cellwatch"))
+        .args(["console", "--config"])
+        .arg(dir.join("console.toml"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .unwrap();
+    let url = crate::util::lines_of(&mut console)
+        .recv_timeout(Duration::from_secs(60))
+        .unwrap();
+    let addr = url
+        .trim()
+        .strip_prefix("cellwatch console: http://")
+        .unwrap()
+        .trim_end_matches('/')
+        .to_string();
+    let page = {
+        let addr = addr.clone();
+        let key = dir.join("kim.key");
+        tokio::task::spawn_blocking(move || {
+            let cookie = crate::console::sign_in(&addr, &key).unwrap();
+            crate::console::request(
+                &addr,
+                &format!(
+                    "GET /api/cells/m01/history?kind=alarm&since=1h HTTP/1.1\r\nHost: {addr}\r\n{cookie}"
+                ),
+                "",
+            )
+        })
+        .await
+        .unwrap()
+    };
+    assert_eq!(page.0, 200, "{page:?}");
+    let page: serde_json::Value = serde_json::from_str(&page.2).unwrap();
+    assert_eq!(page["from"], "archive", "{page}");
+    let transitions: Vec<&str> = page["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| r["fields"]["alarm"] == "ese")
+        .map(|r| r["fields"]["transition"].as_str().unwrap())
+        .collect();
+    assert_eq!(transitions, ["raised", "cleared", "acknowledged"], "{page}");
+    let _ = console.kill();
+    let _ = console.wait();
+
     // The journal held to the chain ends the archive keeps: whole, it
     // holds; cut, the row is missed though the agent is gone.
     let audit = |journal: &Path| {

@@ -188,3 +188,122 @@ impl Entry {
             .flatten()
     }
 }
+
+/// A reading as one page of an agent's history (`{"rows": [{"table",
+/// "at", "fields"}], "more", "next": null, "from": "archive"}`, the
+/// fields the journal's rows have), the newest `limit` rows, oldest
+/// first: what the console shows of a cell whose agent does not answer.
+/// A machine state put again unchanged is one row, as in the journal.
+pub fn as_history_page(reading: &Reading, limit: usize) -> serde_json::Value {
+    use serde_json::{json, Value};
+    let mut rows = Vec::new();
+    let mut last_state: std::collections::HashMap<String, Value> = Default::default();
+    for entry in &reading.entries {
+        let body: Value = serde_json::from_str(&entry.opened.body).unwrap_or(Value::Null);
+        let fields = match entry.kept {
+            Kept::Alarm => json!({
+                "alarm": body["id"],
+                "kind": body["kind"],
+                "severity": body["severity"],
+                "transition": body["transition"],
+                "payload": body,
+            }),
+            Kept::State => {
+                let fields = json!({
+                    "kind": body["kind"],
+                    "state": body["state"],
+                    "fault_type": body["fault_type"],
+                    "element": body["element"],
+                });
+                let cell = entry.opened.cell.clone();
+                if last_state.get(&cell) == Some(&fields) {
+                    continue;
+                }
+                last_state.insert(cell, fields.clone());
+                fields
+            }
+            Kept::Recording => json!({
+                "alarm": entry.key.rsplit('/').next().unwrap_or(""),
+                "payload": body,
+            }),
+        };
+        let table = match entry.kept {
+            Kept::Alarm => "alarm",
+            Kept::State => "state",
+            Kept::Recording => "recording",
+        };
+        rows.push(json!({"table": table, "at": entry.opened.at, "fields": fields}));
+    }
+    let more = rows.len() > limit;
+    let rows: Vec<Value> = rows.split_off(rows.len().saturating_sub(limit));
+    json!({"rows": rows, "more": more, "next": null, "from": "archive"})
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn entry(kept: Kept, key: &str, at: u64, body: &str) -> Entry {
+        Entry {
+            kept,
+            key: key.into(),
+            opened: Opened {
+                cell: "m01".into(),
+                kind: crate::bus::envelope::Kind::Put,
+                at,
+                body: body.into(),
+            },
+        }
+    }
+
+    #[test]
+    fn an_archived_reading_reads_as_the_journals_rows_each_change_once() {
+        let state = |state: &str, kind: &str| {
+            format!(r#"{{"state":"{state}","kind":"{kind}","fault_type":null,"element":null}}"#)
+        };
+        let reading = Reading {
+            entries: vec![
+                entry(
+                    Kept::State,
+                    "cellwatch/m01/state",
+                    1,
+                    &state("running", "normal"),
+                ),
+                entry(
+                    Kept::State,
+                    "cellwatch/m01/state",
+                    2,
+                    &state("running", "normal"),
+                ),
+                entry(
+                    Kept::Alarm,
+                    "cellwatch/m01/alarms/ese",
+                    3,
+                    r#"{"id":"ese","kind":"switching","severity":"critical","transition":"raised"}"#,
+                ),
+                entry(
+                    Kept::State,
+                    "cellwatch/m01/state",
+                    4,
+                    &state("fault", "fault"),
+                ),
+            ],
+            refused: vec![],
+        };
+        let page = as_history_page(&reading, 10);
+        let rows = page["rows"].as_array().unwrap();
+        let said: Vec<(&str, u64)> = rows
+            .iter()
+            .map(|r| (r["table"].as_str().unwrap(), r["at"].as_u64().unwrap()))
+            .collect();
+        assert_eq!(said, [("state", 1), ("alarm", 3), ("state", 4)]);
+        assert_eq!(rows[1]["fields"]["alarm"], "ese");
+        assert_eq!(rows[1]["fields"]["transition"], "raised");
+        assert_eq!(rows[2]["fields"]["kind"], "fault");
+        assert_eq!(page["from"], "archive");
+        // The newest `limit`, oldest first, and more said.
+        let page = as_history_page(&reading, 2);
+        assert_eq!(page["rows"][0]["at"], 3);
+        assert_eq!(page["more"], true);
+    }
+}

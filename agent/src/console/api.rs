@@ -243,12 +243,68 @@ pub(super) async fn history(
             format!("cell {cell}'s history is busy: ask again in a moment"),
         );
     };
-    answered(
-        web.shared
+    // An agent without its liveliness token is not asked: its rows come
+    // from the plant archive at once.
+    let up = web
+        .shared
+        .plant
+        .lock()
+        .map(|p| p.view().cells.iter().any(|c| c.cell == cell && c.agent))
+        .unwrap_or(true);
+    if up {
+        match web
+            .shared
             .bus
             .ask(&cell, Service::History, &parameters.join(";"), None, ANSWER)
-            .await,
-    )
+            .await
+        {
+            Err(ClientError::NoAnswer { .. }) => {}
+            answer => return answered(answer),
+        }
+    }
+    from_archive(&web, &cell, &q).await
+}
+
+/// A cell's history from the plant archive the routers keep (alarm events,
+/// machine states, recordings), for an agent that does not answer; the
+/// page says so (`"from": "archive"`). Commands are not archived: asked
+/// for, the agent's silence is the answer.
+async fn from_archive(web: &Web, cell: &str, q: &BTreeMap<String, String>) -> Response {
+    use crate::archive::read::{self, Kept, Range};
+    let silent = || {
+        error(
+            StatusCode::BAD_GATEWAY,
+            format!("the agent of cell {cell} did not answer history"),
+        )
+    };
+    let kinds: &[Kept] = match q.get("kind").map(String::as_str) {
+        None => &[Kept::Alarm, Kept::State],
+        Some("alarm") => &[Kept::Alarm],
+        Some("state") => &[Kept::State],
+        Some("recording") => &[Kept::Recording],
+        Some(_) => return silent(),
+    };
+    let since = q.get("since").map_or("24h", String::as_str);
+    let Ok(range) = Range::new(since, q.get("until").map(String::as_str)) else {
+        return silent();
+    };
+    let limit = q
+        .get("limit")
+        .and_then(|l| l.parse().ok())
+        .unwrap_or(crate::journal::DEFAULT_ROWS)
+        .min(crate::journal::MAX_ROWS);
+    match read::read(&web.shared.bus, cell, kinds, &range, ANSWER).await {
+        Ok(reading) if !reading.entries.is_empty() => {
+            for (key, why) in &reading.refused {
+                tracing::warn!(cell, key, "console: an archived entry not believed: {why}");
+            }
+            json(
+                StatusCode::OK,
+                read::as_history_page(&reading, limit).to_string(),
+            )
+        }
+        _ => silent(),
+    }
 }
 
 /// How many agents are asked what they are at once.

@@ -687,6 +687,7 @@ function cellPage(cell) {
             }) : 'none yet'))))));
     },
     drawProduction(d) {
+      if (d.refused) { this.production.replaceChildren(el('h3', {}, 'Production today'), el('p', { class: 'refused' }, d.refused)); return; }
       const m = d.total;
       const parts = [el('h3', {}, 'Production today')];
       parts.push(el('dl', { class: 'facts' },
@@ -744,10 +745,13 @@ function cellPage(cell) {
       try {
         const [history, day] = await Promise.all([
           api(`/api/cells/${encodeURIComponent(cell)}/history?kind=state&since=${this.period}&limit=5000`),
-          api(`/api/cells/${encodeURIComponent(cell)}/history?kind=production&since=${encodeURIComponent(midnight())}`),
+          // The production day is the agent's own figure: without the agent,
+          // the timeline (from the plant archive) is still drawn.
+          api(`/api/cells/${encodeURIComponent(cell)}/history?kind=production&since=${encodeURIComponent(midnight())}`).catch(err => ({ refused: err.message })),
           this.live(),
         ]);
         this.drawTimeline(history.rows);
+        if (history.from === 'archive') this.timeline.append(el('p', { class: 'note' }, 'From the plant archive: the agent does not answer.'));
         this.drawProduction(day);
       } catch (err) {
         this.timeline.replaceChildren(el('p', { class: 'refused' }, err.message));
