@@ -309,7 +309,9 @@ fn the_deb_installs_and_its_unit_passes_systemd_analyze_verify() {
     for file in [
         "usr/bin/cellwatch",
         "usr/lib/systemd/system/cellwatch@.service",
+        "usr/lib/systemd/system/cellwatch-router.service",
         "usr/lib/sysusers.d/cellwatch.conf",
+        "usr/share/man/man1/cellwatch-router.1.gz",
         "usr/share/man/man1/cellwatch.1.gz",
         "usr/share/man/man1/cellwatch-run.1.gz",
         "usr/share/man/man1/cellwatch-journal-backup.1.gz",
@@ -364,14 +366,22 @@ fn the_deb_installs_and_its_unit_passes_systemd_analyze_verify() {
     if !r.join("bin").exists() {
         std::os::unix::fs::symlink("usr/bin", r.join("bin")).unwrap();
     }
-    let out = Command::new("systemd-analyze")
-        .args(["verify", "--man=no"])
-        .arg(format!("--root={}", r.display()))
-        .arg("cellwatch@press-4.service")
-        .output()
-        .unwrap();
-    let said = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success() && said.trim().is_empty(), "{said}");
+    // The router's unit too, with a router's configuration.
+    std::fs::create_dir_all(r.join("etc/cellwatch/router")).unwrap();
+    std::fs::write(r.join("etc/cellwatch/router/router.json5"), "").unwrap();
+    for unit in ["cellwatch@press-4.service", "cellwatch-router.service"] {
+        let out = Command::new("systemd-analyze")
+            .args(["verify", "--man=no"])
+            .arg(format!("--root={}", r.display()))
+            .arg(unit)
+            .output()
+            .unwrap();
+        let said = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            out.status.success() && said.trim().is_empty(),
+            "{unit}: {said}"
+        );
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
