@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use cellwatch::agent::{self, Agent};
+use cellwatch::archive::router::PlantRouter;
 use cellwatch::config::{self, CellConfig};
 use cellwatch::operator::Command;
 use cellwatch::payload::AlarmPayload;
@@ -918,8 +919,9 @@ async fn only_clients_with_a_plant_certificate_get_in() {
 }
 
 /// The shipped router configuration (`config/zenoh/router.json5`), its
-/// certificates and port replaced, as a real router in this process.
-async fn router(dir: &Path, access_control: bool) -> (zenoh::Session, u16) {
+/// certificates, port and archive folder replaced, as a real router in
+/// this process (`cellwatch router`'s).
+async fn router(dir: &Path, access_control: bool) -> (PlantRouter, u16) {
     crate::util::bus_pki(dir, &["router-1"]);
     let mut cfg = zenoh::Config::from_file(root().join("config/zenoh/router.json5")).unwrap();
     let pki = dir.join("pki-bus");
@@ -944,11 +946,17 @@ async fn router(dir: &Path, access_control: bool) -> (zenoh::Session, u16) {
             file("router-1.key"),
         ),
         ("access_control/enabled", access_control.to_string()),
+        (
+            "plugins/storage_manager/volumes/sqlite/dir",
+            serde_json::to_string(&dir.join("archive").display().to_string()).unwrap(),
+        ),
     ] {
         cfg.insert_json5(key, &value).unwrap();
     }
-    let router = zenoh::open(cfg).await.unwrap();
-    let port = crate::util::session_port(&router).await;
+    let router = PlantRouter::start(cfg, Path::new("config/zenoh/router.json5"))
+        .await
+        .unwrap();
+    let port = crate::util::tls_port(&router.locators());
     (router, port)
 }
 
@@ -957,7 +965,7 @@ async fn router(dir: &Path, access_control: bool) -> (zenoh::Session, u16) {
 pub(crate) async fn behind_a_router(
     dir: &Path,
     access_control: bool,
-) -> (zenoh::Session, u16, SimulatedCnc, Agent) {
+) -> (PlantRouter, u16, SimulatedCnc, Agent) {
     let (router, port) = router(dir, access_control).await;
     let sim = SimulatedCnc::start(&SimOptions {
         listen: "127.0.0.1:0".parse().unwrap(),
