@@ -577,18 +577,13 @@ fn l5x2c_examples() {
 
 #[test]
 fn l5sharp_exports_say_what_they_do_not_read() {
-    // A program export whose only logic is an Add-On Instruction's.
+    // A program export whose only logic is an Add-On Instruction's, never
+    // called: nothing runs it.
     let p = program("l5sharp-TestProgram.L5X");
     pinned(&p, &[]);
-    let warned: Vec<String> = p
-        .warnings()
-        .iter()
-        .map(|w| format!("{}: {}", w.at, w.message))
-        .collect();
-    assert_eq!(
-        warned,
-        ["134:13: Add-On Instruction 'aoi_Test': its logic is not expanded where it is called"]
-    );
+    let never =
+        "Add-On Instruction 'aoi_Test' is called by no ladder rung read: its logic is not read";
+    assert_eq!(warnings(&p), [format!("134:13: {never}")]);
     // A structured-text routine: named, not read.
     let p = program("l5sharp-ST.L5X");
     pinned(&p, &[]);
@@ -600,7 +595,7 @@ fn l5sharp_exports_say_what_they_do_not_read() {
     assert_eq!(
         warned,
         [
-            "113:1: Add-On Instruction 'aoi_Test': its logic is not expanded where it is called",
+            "113:1: Add-On Instruction 'aoi_Test' is called by no ladder rung read: its logic is not read",
             "452:1: program 'MainProgram' names no main routine (a partial export): each routine is read as if it ran every scan",
             "454:1: routine ST: ST routine not read (ladder and FBD routines are)",
         ]
@@ -623,9 +618,37 @@ fn l5sharp_exports_say_what_they_do_not_read() {
     assert_eq!(
         warnings(&p),
         [
-            "113:1: Add-On Instruction 'aoi_Test': its logic is not expanded where it is called",
+            "113:1: Add-On Instruction 'aoi_Test' is called by no ladder rung read: its logic is not read",
             "463:1: program 'MainProgram' names no main routine (a partial export): each routine is read as if it ran every scan",
             "670:1: routine ST: only referenced by this export (Use=\"Reference\"), its logic is not in it: not read",
+        ]
+    );
+}
+
+#[test]
+fn l5sharp_rung_calling_an_add_on_instruction_runs_its_logic() {
+    // `aoi_Test(aoiTestInstance,TestSimpleTag,SimpleInt,RealArray,0)`: the
+    // instance, then the four required parameters (InOutTest, Config,
+    // InOutArray, New). Its Logic: `OTE(InputTest)`, a latch of a local
+    // on the InOut's member, a comparison of the input Config with a local
+    // array element, MOVs.
+    let p = program("l5sharp-Rung2_from_Main.L5X");
+    pinned(
+        &p,
+        &[
+            ("aoiTestInstance.InputTest", "TRUE"),
+            (
+                "aoiTestInstance.LocalBool",
+                "TestSimpleTag.BoolMember + aoiTestInstance.LocalBool",
+            ),
+        ],
+    );
+    assert_eq!(
+        warnings(&p),
+        [
+            "248:1: program 'MainProgram' names no main routine (a partial export): each routine is read as if it ran every scan",
+            "174:35: 'MOV(Config,InOutArray[0])': word instruction, not boolean logic: the boolean result is left as it is",
+            "179:10: 'MOV(100,LocalArray[2])': word instruction, not boolean logic: the boolean result is left as it is",
         ]
     );
 }

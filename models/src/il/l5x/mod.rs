@@ -20,8 +20,11 @@
 //! derivable. After a `JMP` (up to its `LBL`), an early `RET` or a `TND`
 //! the rungs may not run every scan: their coils are not derivable.
 //! Timers, counters (`TON`, `CTU`, ...) take the rung as an input;
-//! `MOV` and other word instructions leave it as it is; one-shots (`ONS`,
-//! `OSR`, `OSF`), Add-On Instructions (not expanded), `CMP` and any
+//! `MOV` and other word instructions leave it as it is. An Add-On
+//! Instruction defined in the export runs its `Logic` routine in place,
+//! its parameters bound to the call's operands and the instance's members
+//! (`aoi.rs`): a contact on its output is the logic inside, over the
+//! caller's tags. One-shots (`ONS`, `OSR`, `OSF`), `CMP` and any
 //! instruction not named here make what follows them on the rung not
 //! derivable, each with a warning at its place. FBD routines are read by
 //! `fbd.rs`: each output reference (`ORef`) a coil, the blocks `BAND`,
@@ -39,6 +42,7 @@
 //! each from its main routine; a routine no `JSR` reaches, a fault
 //! routine and a disabled program are warnings, not read.
 
+mod aoi;
 mod names;
 mod rung;
 
@@ -97,17 +101,17 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
     };
     let mut names = Names::read(controller);
     let documentation = names.documentation(controller);
-    let aois: HashSet<String> = controller
+    let aois: HashMap<String, Node> = controller
         .descendants()
         .filter(|d| d.has_tag_name("AddOnInstructionDefinition"))
-        .filter_map(|d| d.attribute("Name"))
-        .map(str::to_ascii_uppercase)
+        .filter_map(|d| Some((d.attribute("Name")?.to_ascii_uppercase(), d)))
         .collect();
     let mut reader = Reader {
         origin,
         doc: &doc,
         names,
         aois,
+        called: HashSet::new(),
         out: Vec::new(),
         errors: Vec::new(),
         cut: None,
@@ -115,16 +119,6 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
         compared: HashSet::new(),
         ids: 0,
     };
-    for aoi in controller
-        .descendants()
-        .filter(|d| d.has_tag_name("AddOnInstructionDefinition"))
-    {
-        let name = aoi.attribute("Name").unwrap_or("?");
-        reader.note(
-            aoi,
-            format!("Add-On Instruction '{name}': its logic is not expanded where it is called"),
-        );
-    }
     for program in controller
         .children()
         .filter(|c| c.has_tag_name("Programs"))
@@ -134,6 +128,21 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
         reader.program(program);
     }
     reader.mark_word_writes();
+    // Definitions no rung called, said first, where they are.
+    let read = std::mem::take(&mut reader.out);
+    for aoi in controller
+        .descendants()
+        .filter(|d| d.has_tag_name("AddOnInstructionDefinition"))
+    {
+        let name = aoi.attribute("Name").unwrap_or("?");
+        if !reader.called.contains(&name.to_ascii_uppercase()) {
+            reader.note(
+                aoi,
+                format!("Add-On Instruction '{name}' is called by no ladder rung read: its logic is not read"),
+            );
+        }
+    }
+    reader.out.extend(read);
     let Reader {
         out, mut errors, ..
     } = reader;
@@ -175,20 +184,25 @@ struct Frame<'d> {
     calls: Vec<String>,
     /// ANDed into every output: a conditional call's reason.
     guard: Flow,
+    /// The bindings of the Add-On Instruction whose logic this is.
+    aoi: Option<Rc<aoi::Scope>>,
 }
 
 struct Reader<'a, 'd> {
     origin: &'a str,
     doc: &'d Document<'d>,
     names: Names,
-    /// Add-On Instructions defined in the export, upper case.
-    aois: HashSet<String>,
+    /// Add-On Instructions defined in the export, by upper-case name.
+    aois: HashMap<String, Node<'d, 'd>>,
+    /// Add-On Instructions a rung called, upper case.
+    called: HashSet<String>,
     out: Vec<Instruction>,
     errors: Vec<SourceError>,
     /// After a `TND`: the rest of the scan may not run.
     cut: Option<Flow>,
-    /// Word instructions emitted: index in `out` and the tag written.
-    words: Vec<(usize, String)>,
+    /// Word instructions emitted: index in `out`, the tag written, and
+    /// whether it is a member of an Add-On Instruction's instance.
+    words: Vec<(usize, String, bool)>,
     /// Tags a comparison reads.
     compared: HashSet<String>,
     /// The last contact's identity (parallel legs share a start by it).
@@ -244,6 +258,7 @@ impl<'a, 'd> Reader<'a, 'd> {
             routine: routine.to_string(),
             calls: vec![routine.to_ascii_uppercase()],
             guard: Flow::True,
+            aoi: None,
         };
         let mut reached: HashSet<String> = HashSet::new();
         match program.attribute("MainRoutineName") {
