@@ -38,9 +38,13 @@
 //! names is named by the alias (`Start`, not `Local:1:I.Data.3`), so
 //! that the alias and its base are one signal. Logix names ignore case:
 //! each name is spelt as first seen. Indexes must be numbers (`Arr[3]`);
-//! `Arr[Idx]` is an indirect address. Programs are read in file order,
-//! each from its main routine; a routine no `JSR` reaches, a fault
-//! routine and a disabled program are warnings, not read.
+//! `Arr[Idx]` is an indirect address. Programs are read in the order the
+//! controller runs them: each task's scheduled programs, task by task
+//! (file order in an export without tasks), each from its main routine
+//! and then the routines its `JSR`s call where they call them, so that a
+//! coil two routines write ends with the last writer's value; a routine
+//! no `JSR` reaches, a fault routine, a disabled program, one no task
+//! schedules and an inhibited task's are warnings, not read.
 
 mod aoi;
 mod names;
@@ -119,12 +123,7 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
         compared: HashSet::new(),
         ids: 0,
     };
-    for program in controller
-        .children()
-        .filter(|c| c.has_tag_name("Programs"))
-        .flat_map(|p| p.children())
-        .filter(|p| p.has_tag_name("Program"))
-    {
+    for program in reader.in_task_order(controller) {
         reader.program(program);
     }
     reader.mark_word_writes();
@@ -227,6 +226,74 @@ impl<'a, 'd> Reader<'a, 'd> {
             String::new(),
             Operation::Outside(Outside::Unread),
         ));
+    }
+
+    /// The programs in the order the controller runs them: each task's
+    /// scheduled programs, task by task, as the export lists them; a
+    /// program no task schedules, and an inhibited task's, said and left
+    /// out. An export without tasks (a program or routine export) is read
+    /// in file order.
+    fn in_task_order(&mut self, controller: Node<'d, 'd>) -> Vec<Node<'d, 'd>> {
+        let programs: Vec<Node> = controller
+            .children()
+            .filter(|c| c.has_tag_name("Programs"))
+            .flat_map(|p| p.children())
+            .filter(|p| p.has_tag_name("Program"))
+            .collect();
+        let tasks: Vec<Node> = controller
+            .children()
+            .filter(|c| c.has_tag_name("Tasks"))
+            .flat_map(|t| t.children())
+            .filter(|t| t.has_tag_name("Task"))
+            .collect();
+        if tasks.is_empty() {
+            return programs;
+        }
+        let by_name: HashMap<String, Node> = programs
+            .iter()
+            .filter_map(|p| Some((p.attribute("Name")?.to_ascii_lowercase(), *p)))
+            .collect();
+        let mut order: Vec<Node> = Vec::new();
+        let mut scheduled: HashSet<String> = HashSet::new();
+        for task in tasks {
+            let name = task.attribute("Name").unwrap_or("?");
+            let inhibited = task.attribute("InhibitTask") == Some("true");
+            let mut held: Vec<&str> = Vec::new();
+            for s in task
+                .descendants()
+                .filter(|s| s.has_tag_name("ScheduledProgram"))
+            {
+                let Some(program) = s.attribute("Name") else {
+                    continue;
+                };
+                scheduled.insert(program.to_ascii_lowercase());
+                match by_name.get(&program.to_ascii_lowercase()) {
+                    Some(_) if inhibited => held.push(program),
+                    Some(p) if !order.contains(p) => order.push(*p),
+                    _ => {}
+                }
+            }
+            if !held.is_empty() {
+                self.note(
+                    task,
+                    format!(
+                        "task '{name}' is inhibited (InhibitTask=\"true\"): its programs {} are not read",
+                        held.join(", ")
+                    ),
+                );
+            }
+        }
+        for p in &programs {
+            let name = p.attribute("Name").unwrap_or("?");
+            let has_routines = p.children().any(|c| c.has_tag_name("Routines"));
+            if has_routines && !scheduled.contains(&name.to_ascii_lowercase()) {
+                self.note(
+                    *p,
+                    format!("program '{name}' is scheduled in no task, so the controller never runs it: not read"),
+                );
+            }
+        }
+        order
     }
 
     fn program(&mut self, program: Node<'d, 'd>) {

@@ -573,3 +573,55 @@ fn an_add_on_instruction_is_its_logic_over_the_caller_s_tags() {
     let culprits: Vec<String> = e.culprits.iter().map(ToString::to_string).collect();
     assert_eq!(culprits, ["Guard_Closed = 0 (expected 1)"]);
 }
+
+#[test]
+fn programs_are_read_in_the_order_their_tasks_run_them() {
+    // File order: Filling, then Draining, then Spare. The task runs
+    // Draining first, then Filling: Lamp ends with Filling's value, and
+    // in Filling the main routine's JSR runs Late after Early although
+    // the file lists Late first.
+    let rung = |r: &str| {
+        format!("<Rung Number=\"0\" Type=\"N\">\n<Text>\n<![CDATA[{r}]]>\n</Text>\n</Rung>\n")
+    };
+    let routine = |name: &str, rungs: &[&str]| {
+        let rungs: String = rungs.iter().map(|r| rung(r)).collect();
+        format!("<Routine Name=\"{name}\" Type=\"RLL\">\n<RLLContent>\n{rungs}</RLLContent>\n</Routine>\n")
+    };
+    let program = |name: &str, routines: &[String]| {
+        format!(
+            "<Program Name=\"{name}\" MainRoutineName=\"Main\">\n<Routines>\n{}</Routines>\n</Program>\n",
+            routines.concat()
+        )
+    };
+    let text = format!(
+        "<?xml version=\"1.0\" encoding=\"UTF-8\" standalone=\"yes\"?>\n\
+         <RSLogix5000Content SchemaRevision=\"1.0\" SoftwareRevision=\"33.01\" TargetName=\"T\" TargetType=\"Controller\">\n\
+         <Controller Use=\"Target\" Name=\"T\">\n<Programs>\n{}{}{}{}</Programs>\n<Tasks>\n\
+         <Task Name=\"MainTask\" Type=\"CONTINUOUS\" Priority=\"10\" Watchdog=\"500\" InhibitTask=\"false\">\n\
+         <ScheduledPrograms>\n<ScheduledProgram Name=\"Draining\"/>\n<ScheduledProgram Name=\"Filling\"/>\n</ScheduledPrograms>\n</Task>\n\
+         <Task Name=\"Test\" Type=\"PERIODIC\" Rate=\"10\" Priority=\"10\" Watchdog=\"500\" InhibitTask=\"true\">\n\
+         <ScheduledPrograms>\n<ScheduledProgram Name=\"Trial\"/>\n</ScheduledPrograms>\n</Task>\n\
+         </Tasks>\n</Controller>\n</RSLogix5000Content>\n",
+        program(
+            "Filling",
+            &[
+                routine("Late", &["XIC(late)OTE(Valve);"]),
+                routine("Main", &["XIC(fill)OTE(Lamp);", "JSR(Early,0);", "JSR(Late,0);"]),
+                routine("Early", &["XIC(early)OTE(Valve);"]),
+            ]
+        ),
+        program("Draining", &[routine("Main", &["XIC(drain)OTE(Lamp);"])]),
+        program("Spare", &[routine("Main", &["XIC(spare)OTE(Lamp);"])]),
+        program("Trial", &[routine("Main", &["XIC(trial)OTE(Lamp);"])]),
+    );
+    let p = Program::compile("t.L5X", &text, None).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(sf(&p, "Lamp"), "fill");
+    assert_eq!(sf(&p, "Valve"), "late");
+    assert_eq!(
+        warnings(&p),
+        [
+            "93:1: task 'Test' is inhibited (InhibitTask=\"true\"): its programs Trial are not read",
+            "59:1: program 'Spare' is scheduled in no task, so the controller never runs it: not read",
+        ]
+    );
+}
