@@ -28,7 +28,10 @@
 //!
 //! A tag table's address keeps the project's mnemonics (`%E0.0` in a
 //! German project, as STL's `E 0.0`); a block's `Address` is always
-//! English (`I`), the way Openness writes areas.
+//! English (`I`), the way Openness writes areas. So a German address's
+//! comment goes to its English form too (`%E0.0` to `I0.0`, `%A4.0` to
+//! `Q4.0`, `%PEW256` to `PIW256`, `%Z3` to `C3`), where a block's
+//! absolute operands meet it.
 //!
 //! # Comments
 //! A block's interface members (`Section/Member/Comment`) and a tag
@@ -182,6 +185,49 @@ pub(crate) struct Tag {
     pub(crate) at: Location,
 }
 
+impl Tag {
+    /// The addresses the tag's comment belongs to: its address as written
+    /// and, in German mnemonics, its English form too (`E0.0` and `I0.0`),
+    /// which a block's absolute addresses use.
+    pub(crate) fn addresses(&self) -> Vec<String> {
+        let Some(address) = &self.address else {
+            return Vec::new();
+        };
+        let mut out = vec![address.clone()];
+        out.extend(english(address));
+        out
+    }
+}
+
+/// A German-mnemonic address (`E0.0`, `AW4`, `PEW256`, `Z3`) in English
+/// mnemonics (`I0.0`, `QW4`, `PIW256`, `C3`); `None` for one written alike
+/// in both (`M10.1`, `MW10`, `T1`) or not an address.
+pub(crate) fn english(address: &str) -> Option<String> {
+    let letters = address
+        .chars()
+        .take_while(char::is_ascii_alphabetic)
+        .count();
+    let (area, rest) = address.split_at(letters);
+    if !rest.starts_with(|c: char| c.is_ascii_digit()) {
+        return None;
+    }
+    let area = area.to_ascii_uppercase();
+    let (head, size) = if let Some(size) = area.strip_prefix("PE") {
+        ("PI", size)
+    } else if let Some(size) = area.strip_prefix("PA") {
+        ("PQ", size)
+    } else if let Some(size) = area.strip_prefix('E') {
+        ("I", size)
+    } else if let Some(size) = area.strip_prefix('A') {
+        ("Q", size)
+    } else if area == "Z" {
+        ("C", "")
+    } else {
+        return None;
+    };
+    matches!(size, "" | "X" | "B" | "W" | "D").then(|| format!("{head}{size}{rest}"))
+}
+
 /// The tags of every tag table in `doc`.
 fn tags(doc: &Document<'_>, lang: &str) -> Vec<Tag> {
     doc.descendants()
@@ -239,8 +285,8 @@ pub(crate) fn lex(origin: &str, text: &str, lang: &str) -> Result<plcopen::Parse
     for tag in tags(&doc, lang) {
         if let Some(c) = &tag.comment {
             documentation.push((tag.name.clone(), c.clone()));
-            if let Some(a) = &tag.address {
-                documentation.push((a.clone(), c.clone()));
+            for a in tag.addresses() {
+                documentation.push((a, c.clone()));
             }
         }
     }
@@ -579,6 +625,29 @@ mod tests {
     }
 
     #[test]
+    fn german_addresses_in_english_mnemonics() {
+        for (german, english) in [
+            ("E0.0", Some("I0.0")),
+            ("A4.1", Some("Q4.1")),
+            ("EW10", Some("IW10")),
+            ("AB2", Some("QB2")),
+            ("PEW256", Some("PIW256")),
+            ("PAD4", Some("PQD4")),
+            ("Z3", Some("C3")),
+            ("M10.1", None),
+            ("MW10", None),
+            ("T1", None),
+            ("I0.0", None),
+            ("Q4.0", None),
+            ("DB1.DBX2.3", None),
+            ("Alarm", None),
+            ("EZ1", None),
+        ] {
+            assert_eq!(super::english(german).as_deref(), english, "{german}");
+        }
+    }
+
+    #[test]
     fn tag_tables_take_the_english_comment_and_the_project_s_mnemonics() {
         let item = |c: &str, t: &str| {
             format!("<MultilingualTextItem><AttributeList><Culture>{c}</Culture><Text>{t}</Text></AttributeList></MultilingualTextItem>")
@@ -602,11 +671,13 @@ mod tests {
         let db = e.unwrap();
         assert_eq!(db.get(&Signal::new("Start")), Some("Start button"));
         assert_eq!(db.get(&Signal::new("E0.0")), Some("Start button"));
+        // A block's absolute operand is English: `%E0.0` is `I0.0` too.
+        assert_eq!(db.get(&Signal::new("I0.0")), Some("Start button"));
         assert_eq!(db.get(&Signal::new("Speed")), Some("Velocità"));
         assert_eq!(db.get(&Signal::new("Lamp")), Some("Lampe"));
         assert_eq!(db.get(&Signal::new("Q4.0")), Some("Lampe"));
         assert_eq!(db.get(&Signal::new("Bad")), Some("bad"));
-        assert_eq!(db.len(), 6);
+        assert_eq!(db.len(), 7);
         // In the language asked for, where a text has it; else the first.
         let de = CommentDb::parse_in("io.xml", &table, stl, Some("de-DE")).unwrap();
         assert_eq!(de.get(&Signal::new("Start")), Some("Starttaster"));
