@@ -113,7 +113,8 @@ impl CommentDb {
     }
 
     /// A tag table's comments: each tag's name (`"Start"`) and, when the
-    /// program's dialect reads it as a bit, its address (`%I0.0`).
+    /// program's dialect reads it as a bit, its address (`%I0.0`; a German
+    /// `%E0.0` as `E0.0` and `I0.0`).
     fn tag_table(
         origin: &str,
         text: &str,
@@ -122,14 +123,16 @@ impl CommentDb {
     ) -> Result<CommentDb, SourceError> {
         let mut comments = HashMap::new();
         for tag in crate::il::simaticml::tag_table(origin, text, language)? {
-            let Some(comment) = tag.comment else {
+            let Some(comment) = tag.comment.clone() else {
                 continue;
             };
             let signal = resolve(&tag.name).map_err(|m| SourceError::new(origin, tag.at, m))?;
             comments.insert(signal, comment.clone());
-            // A word (`%MW10`) is not a contact: its name carries the comment.
-            if let Some(address) = tag.address.and_then(|a| resolve(&a).ok()) {
-                comments.insert(address, comment);
+            // A word (`%MW10`) is not a contact: its name carries the
+            // comment. A German address (`%E0.0`) gives its English form
+            // (`I0.0`), a block's absolute operand, the comment too.
+            for address in tag.addresses().iter().filter_map(|a| resolve(a).ok()) {
+                comments.insert(address, comment.clone());
             }
         }
         Ok(CommentDb { comments })

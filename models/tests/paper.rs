@@ -337,6 +337,63 @@ fn fig6_exported_from_tia_portal_in_lad_and_fbd_gives_the_il_s_functions_steps_a
 }
 
 #[test]
+fn a_german_tag_table_meets_the_block_s_english_addresses() {
+    // The same tag table as a project with German mnemonics exports it:
+    // inputs `%E`, outputs `%A`. A block's absolute addresses are always
+    // English (`I0.2`), so `%E0.2`'s comment must reach `I0.2`.
+    let german = FIG6_TIA_TAGS
+        .replace("<LogicalAddress>%I", "<LogicalAddress>%E")
+        .replace("<LogicalAddress>%Q", "<LogicalAddress>%A");
+    assert!(german.contains("<LogicalAddress>%E0.2<") && !german.contains("%I0."));
+    let p = Program::compile("fig6.fbd.SimaticML.xml", FIG6_TIA_FBD, None).unwrap();
+    let tags = CommentDb::parse("fig6.tags.SimaticML.xml", &german, |a| p.resolve(a)).unwrap();
+    for (address, comment) in [
+        ("I0.2", "Stop push button (B)"),
+        ("I0.4", "Cycle start"),
+        ("Q0.2", "Alarm lamp"),
+        ("Q10.0", "PLC run (fault coil)"),
+        ("M1.0", "Ready relay"),
+        // As written, for a German STL source.
+        ("E0.2", "Stop push button (B)"),
+        ("A0.2", "Alarm lamp"),
+    ] {
+        assert_eq!(tags.get(&Signal::new(address)), Some(comment), "{address}");
+    }
+    let german_texts =
+        CommentDb::parse_in("t.xml", &german, |a| p.resolve(a), Some("de-DE")).unwrap();
+    assert_eq!(
+        german_texts.get(&Signal::new("I0.2")),
+        Some("Stopptaster (B)")
+    );
+    // A fault coil explained with the table: the culprit, an input the
+    // block addresses as I0.x, carries its comment.
+    let g = SwitchingFunction::expand(
+        &p,
+        &Signal::new("Q10.0"),
+        &Observability::default_for(p.dialect()),
+    )
+    .unwrap();
+    // X1 (I0.1) drops while X3 (I0.3) is on: the fault coil falls.
+    let mut before = Values::new();
+    for (s, v) in [
+        ("I0.1", true),
+        ("I0.2", false),
+        ("I0.3", true),
+        ("I0.4", true),
+        ("Q0.1", false),
+        ("Q0.2", false),
+    ] {
+        before.set(Signal::new(s), v);
+    }
+    let mut now = before.clone();
+    now.set(Signal::new("I0.1"), false);
+    let was = |s: &Signal| before.get(s);
+    let e = explain(&g, |s| now.get(s), Some(&was), Polarity::Off, &tags).unwrap();
+    let culprits: Vec<String> = e.culprits.iter().map(ToString::to_string).collect();
+    assert_eq!(culprits[0], "I0.1 = 0 (expected 1): Start push button");
+}
+
+#[test]
 fn stl_ors_and_groups_as_s7_does() {
     // `O` alone ORs AND groups; `O x` ORs into the result so far, and a
     // later `U` ANDs with all of it (no precedence), as an S7 CPU computes.

@@ -577,18 +577,13 @@ fn l5x2c_examples() {
 
 #[test]
 fn l5sharp_exports_say_what_they_do_not_read() {
-    // A program export whose only logic is an Add-On Instruction's.
+    // A program export whose only logic is an Add-On Instruction's, never
+    // called: nothing runs it.
     let p = program("l5sharp-TestProgram.L5X");
     pinned(&p, &[]);
-    let warned: Vec<String> = p
-        .warnings()
-        .iter()
-        .map(|w| format!("{}: {}", w.at, w.message))
-        .collect();
-    assert_eq!(
-        warned,
-        ["134:13: Add-On Instruction 'aoi_Test': its logic is not expanded where it is called"]
-    );
+    let never =
+        "Add-On Instruction 'aoi_Test' is called by no ladder rung read: its logic is not read";
+    assert_eq!(warnings(&p), [format!("134:13: {never}")]);
     // A structured-text routine: named, not read.
     let p = program("l5sharp-ST.L5X");
     pinned(&p, &[]);
@@ -600,7 +595,7 @@ fn l5sharp_exports_say_what_they_do_not_read() {
     assert_eq!(
         warned,
         [
-            "113:1: Add-On Instruction 'aoi_Test': its logic is not expanded where it is called",
+            "113:1: Add-On Instruction 'aoi_Test' is called by no ladder rung read: its logic is not read",
             "452:1: program 'MainProgram' names no main routine (a partial export): each routine is read as if it ran every scan",
             "454:1: routine ST: ST routine not read (ladder and FBD routines are)",
         ]
@@ -623,9 +618,37 @@ fn l5sharp_exports_say_what_they_do_not_read() {
     assert_eq!(
         warnings(&p),
         [
-            "113:1: Add-On Instruction 'aoi_Test': its logic is not expanded where it is called",
+            "113:1: Add-On Instruction 'aoi_Test' is called by no ladder rung read: its logic is not read",
             "463:1: program 'MainProgram' names no main routine (a partial export): each routine is read as if it ran every scan",
             "670:1: routine ST: only referenced by this export (Use=\"Reference\"), its logic is not in it: not read",
+        ]
+    );
+}
+
+#[test]
+fn l5sharp_rung_calling_an_add_on_instruction_runs_its_logic() {
+    // `aoi_Test(aoiTestInstance,TestSimpleTag,SimpleInt,RealArray,0)`: the
+    // instance, then the four required parameters (InOutTest, Config,
+    // InOutArray, New). Its Logic: `OTE(InputTest)`, a latch of a local
+    // on the InOut's member, a comparison of the input Config with a local
+    // array element, MOVs.
+    let p = program("l5sharp-Rung2_from_Main.L5X");
+    pinned(
+        &p,
+        &[
+            ("aoiTestInstance.InputTest", "TRUE"),
+            (
+                "aoiTestInstance.LocalBool",
+                "TestSimpleTag.BoolMember + aoiTestInstance.LocalBool",
+            ),
+        ],
+    );
+    assert_eq!(
+        warnings(&p),
+        [
+            "248:1: program 'MainProgram' names no main routine (a partial export): each routine is read as if it ran every scan",
+            "174:35: 'MOV(Config,InOutArray[0])': word instruction, not boolean logic: the boolean result is left as it is",
+            "179:10: 'MOV(100,LocalArray[2])': word instruction, not boolean logic: the boolean result is left as it is",
         ]
     );
 }
@@ -665,6 +688,9 @@ fn tia_portal_exports_give_their_latches_and_say_which_networks_are_not_read() {
             ("GenerateValve.#Release", "AlwaysOFF"),
             ("GenerateValve.#OpenValve", "AlwaysON * AlwaysOFF"),
             ("GenerateValve.#CloseValve", "AlwaysON * AlwaysOFF"),
+            // Both calls write their output Valve into Valve_0: the last
+            // one's instance member.
+            ("Valve_0", "GenerateValve.#Valve_Instance_1.Valve"),
         ],
     );
     assert_eq!(
@@ -691,19 +717,42 @@ fn tia_portal_exports_of_other_projects() {
     // FBs and MOVEs are said where they are; what they write reads as inputs.
     let p = program("tia-portal-cli-BombaTemplateFc.xml");
     let motor = "DB GLOBAL.AREA_01.AREA_01_MOTORES.MOTOR_S-01A";
-    let reset_liga = "(S-01A_CMD_RESET_LIGA + -CCM-1_STS_PAINEL_OK)";
+    // The FB calls' Bool outputs are written into the tags wired to them,
+    // each the instance's member: a leaf named with the instance (#69).
+    let falha = "FB FALHA_S-01A";
+    let partida = "FB CONDIÇÃO DE PARTIDA_S-01A";
+    let reset_liga = format!("({partida}.RESET_CMD_LIGA + -CCM-1_STS_PAINEL_OK)");
     pinned(
         &p,
         &[
             ("S-01A_STS_MODO_LOCAL", "S-01A_STS_MOTOR_MODO_LOCAL_1"),
             ("S-01A_STS_MODO_REMOTO", "S-01A_STS_MOTOR_MODO_REMOTO_1"),
             ("S-01A_CMD_BOTAO_RESET_FALHA", "QA-01_CMD_RESET_REMOTA"),
+            ("S-01A_FALHA", &format!("{falha}.FALHA")),
+            (
+                "S-01A_CMD_RESET_FALHA_PROFINET",
+                &format!("{falha}.RESET_FALHA_INVERSOR"),
+            ),
+            (
+                "S-01A_STS_FALHA_NAO_LIGOU",
+                &format!("{falha}.FALHA_NÃO_LIGOU"),
+            ),
+            ("S-01A_CMD_LIGA_BOMBA", &format!("{partida}.LIGA_BOMBA")),
+            (
+                "S-01A_STS_REMOTO_AUTO",
+                &format!("{partida}.OUTPUT_REMOTO_AUTO"),
+            ),
+            ("S-01A_CMD_RESET_LIGA", &format!("{partida}.RESET_CMD_LIGA")),
+            (
+                &format!("{motor}.STS_INTERTRAVAMENTO_AUTOMATICO"),
+                &format!("{partida}.STS_INTERTRAVAMENTO_AUTOMATICO"),
+            ),
             // Network 7's OR box feeds both coils below: one relay, as
             // the IL writes an internal relay (issue #69). Their
             // functions are what they were when the box was read twice.
             (
                 "#PARTIDA_MOTOR_1 (S-01A).NW7.O28",
-                "S-01A_CMD_RESET_LIGA + -CCM-1_STS_PAINEL_OK",
+                &format!("{partida}.RESET_CMD_LIGA + -CCM-1_STS_PAINEL_OK"),
             ),
             (
                 &format!("{motor}.CMD_LIGA"),
@@ -711,13 +760,18 @@ fn tia_portal_exports_of_other_projects() {
             ),
             (
                 &format!("{motor}.CMD_MODO_OPERACAO"),
-                &format!("-({reset_liga} * S-01A_STS_REMOTO_AUTO) * {motor}.CMD_MODO_OPERACAO"),
+                &format!("-({reset_liga} * {partida}.OUTPUT_REMOTO_AUTO) * {motor}.CMD_MODO_OPERACAO"),
             ),
             (
                 &format!("{motor}.CMD_INTERTRAVAMENTO_LIGA"),
-                "-(-S-01A_STS_MOTOR_MODO_LOCAL_1 * -S-01A_STS_LOCAL_AUTO * -S-01A_STS_LOCAL_MANUAL * S-01A_STS_MOTOR_MODO_REMOTO_1 * S-01A_STS_REMOTO_MANUAL * -S-01A_FALHA)",
+                &format!("-(-S-01A_STS_MOTOR_MODO_LOCAL_1 * -S-01A_STS_LOCAL_AUTO * -S-01A_STS_LOCAL_MANUAL * S-01A_STS_MOTOR_MODO_REMOTO_1 * S-01A_STS_REMOTO_MANUAL * -{falha}.FALHA)"),
             ),
-            ("S-01A_CMD_LIGA_PROFINET", "S-01A_CMD_LIGA_BOMBA"),
+            (
+                "S-01A_STS_LIGADO_PROFINET",
+                "SINA_SPEED_TLG20_S-01A.axisEnabled",
+            ),
+            ("S-01A_STS_FALHA_PROFINET", "SINA_SPEED_TLG20_S-01A.error"),
+            ("S-01A_CMD_LIGA_PROFINET", &format!("{partida}.LIGA_BOMBA")),
         ],
     );
     let block = "block \"PARTIDA_MOTOR_1 (S-01A)\"";

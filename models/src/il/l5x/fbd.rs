@@ -30,9 +30,11 @@
 //! error at the wire.
 
 use std::collections::{HashMap, HashSet};
+use std::rc::Rc;
 
 use roxmltree::Node;
 
+use super::aoi::{Access, Scope};
 use super::instructions::number;
 use super::names::NotSignal;
 use super::{Frame, Reader, MAX_CALL_DEPTH};
@@ -58,6 +60,8 @@ struct Wire<'d> {
 /// One FBD routine being read.
 struct Diagram<'d> {
     program: &'d str,
+    /// The bindings of the Add-On Instruction whose logic this is.
+    aoi: Option<Rc<Scope>>,
     routine: String,
     /// The sheets' numbers, by index.
     sheets: Vec<String>,
@@ -181,6 +185,7 @@ impl<'d> Reader<'_, 'd> {
             .collect();
         let mut d = Diagram {
             program: frame.program,
+            aoi: frame.aoi.clone(),
             routine: frame.routine.clone(),
             sheets: Vec::new(),
             elements: HashMap::new(),
@@ -331,9 +336,9 @@ impl<'d> Reader<'_, 'd> {
             return;
         };
         let text = short(node);
-        let signal = match self.names.signal(Some(frame.program), operand) {
+        let signal = match self.signal(frame, operand, Access::Write) {
             Ok(s) => Signal::new(&s),
-            Err(NotSignal::Indirect(_)) => {
+            Err(NotSignal::Indirect(_) | NotSignal::Number(_)) => {
                 return self.out.push(Instruction {
                     at,
                     text,
@@ -585,11 +590,16 @@ impl<'d> Reader<'_, 'd> {
             self.fbd_note(d, node, why);
             return Flow::Opaque(short(node), at);
         }
-        match self.names.signal(Some(d.program), operand) {
+        let scope = d.aoi.clone();
+        match self.signal_in(d.program, scope.as_deref(), operand, Access::Read) {
             Ok(s) => {
                 self.ids += 1;
                 Flow::Lit(Signal::new(&s), false, self.ids)
             }
+            Err(NotSignal::Number(n)) => match number(&n) {
+                Some(v) if v != 0.0 => Flow::True,
+                _ => Flow::False,
+            },
             Err(NotSignal::Indirect(why)) => Flow::Opaque(format!("indirect address {why}"), at),
             Err(NotSignal::Malformed(why)) => {
                 self.errors.push(SourceError::new(
@@ -714,6 +724,7 @@ impl<'d> Reader<'_, 'd> {
             routine: routine.attribute("Name").unwrap_or(target).to_string(),
             calls,
             guard,
+            aoi: frame.aoi.clone(),
         };
         self.routine(routine, &inner, reached);
     }

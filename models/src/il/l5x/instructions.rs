@@ -4,6 +4,7 @@
 
 use std::collections::HashSet;
 
+use super::aoi::Access;
 use super::{names::NotSignal, Frame, Ins, Reader, RungCtx, MAX_CALL_DEPTH};
 use crate::il::plcopen::{emit, Flow};
 use crate::il::{Instruction, Operand, Operation, Outside};
@@ -47,7 +48,8 @@ impl<'d> Reader<'_, 'd> {
                     self.ids += 1;
                     and(Flow::Lit(s, upper == "XIO", self.ids))
                 }
-                Err(opaque) => and(opaque),
+                Err(constant @ (Flow::True | Flow::False)) if upper == "XIO" => and(constant.not()),
+                Err(other) => and(other),
             },
             "OTE" | "OTL" | "OTU" => {
                 let value = Flow::and(vec![rung.prefix(self.cut.as_ref()), flow.clone()]);
@@ -55,12 +57,18 @@ impl<'d> Reader<'_, 'd> {
                 flow
             }
             "ONS" => and(Flow::Opaque(
-                format!("'{}': a one-shot, a pulse that is not a function of the signals", i.text),
+                format!(
+                    "'{}': a one-shot, a pulse that is not a function of the signals",
+                    i.text
+                ),
                 place,
             )),
             "OSR" | "OSF" => {
                 let pulse = Flow::Opaque(
-                    format!("'{}': a one-shot, a pulse that is not a function of the signals", i.text),
+                    format!(
+                        "'{}': a one-shot, a pulse that is not a function of the signals",
+                        i.text
+                    ),
                     place,
                 );
                 self.write(i, 1, "OTE", pulse, rung);
@@ -106,29 +114,32 @@ impl<'d> Reader<'_, 'd> {
                     "MOV" | "COP" | "CPS" => i.args.get(1),
                     _ => i.args.last(),
                 };
-                let dest = dest.and_then(|(_, d)| self.names.signal(Some(rung.frame.program), d).ok());
+                let dest = dest.and_then(|(_, d)| self.signal(rung.frame, d, Access::Write).ok());
                 let index = self.out.len();
                 self.outside(i, place, Outside::Word);
                 if let Some(d) = dest {
-                    self.words.push((index, d));
+                    // An Add-On Instruction's members are its parameters
+                    // and local tags, none a BIT of another.
+                    let member = rung
+                        .frame
+                        .aoi
+                        .as_ref()
+                        .is_some_and(|scope| scope.holds_member(&d));
+                    self.words.push((index, d, member));
                 }
                 flow
             }
-            _ if self.aois.contains(&upper) => and(self.unread(
-                i,
-                rung,
-                format!(
-                    "Add-On Instruction '{}' is not expanded: what follows it on the rung is not derivable",
-                    i.name
-                ),
-            )),
+            _ if self.aois.contains_key(&upper) => {
+                let definition = self.aois[&upper];
+                self.add_on(i, definition, flow, rung, reached)
+            }
             _ => and(self.unread(i, rung, format!("instruction '{}' is not read", i.name))),
         }
     }
 
     /// A located warning naming the routine and rung, and the flow after
     /// the instruction: not derivable.
-    fn unread(&mut self, i: &Ins, rung: &RungCtx<'_, 'd>, why: String) -> Flow {
+    pub(super) fn unread(&mut self, i: &Ins, rung: &RungCtx<'_, 'd>, why: String) -> Flow {
         let place = self.place(rung.text, i.at);
         self.note_at(
             place,
@@ -151,7 +162,7 @@ impl<'d> Reader<'_, 'd> {
         ));
     }
 
-    fn outside(&mut self, i: &Ins, at: Location, kind: Outside) {
+    pub(super) fn outside(&mut self, i: &Ins, at: Location, kind: Outside) {
         self.out.push(Instruction {
             at,
             text: i.text.clone(),
@@ -162,16 +173,22 @@ impl<'d> Reader<'_, 'd> {
         });
     }
 
-    /// Operand `k` of `i` as a signal; else the flow it gives (not
-    /// derivable), an error recorded where it is malformed.
+    /// Operand `k` of `i` as a signal; else the flow it gives (a number
+    /// an Add-On Instruction's input was given, or not derivable), an
+    /// error recorded where it is malformed.
     fn tag(&mut self, i: &Ins, k: usize, rung: &RungCtx<'_, 'd>) -> Result<Signal, Flow> {
         let place = self.place(rung.text, i.at);
         let Some((offset, text)) = i.args.get(k) else {
             self.error(place, rung, format!("'{}' lacks operand {}", i.text, k + 1));
             return Err(Flow::Opaque(i.text.clone(), place));
         };
-        match self.names.signal(Some(rung.frame.program), text) {
+        match self.signal(rung.frame, text, Access::Read) {
             Ok(s) => Ok(Signal::new(&s)),
+            Err(NotSignal::Number(n)) => Err(match number(&n) {
+                Some(v) if v != 0.0 => Flow::True,
+                Some(_) => Flow::False,
+                None => Flow::Opaque(format!("'{}' reads the number {n}", i.text), place),
+            }),
             Err(NotSignal::Indirect(why)) => {
                 Err(Flow::Opaque(format!("indirect address {why}"), place))
             }
@@ -190,9 +207,11 @@ impl<'d> Reader<'_, 'd> {
             self.error(place, rung, format!("'{}' lacks operand {}", i.text, k + 1));
             return;
         };
-        let signal = match self.names.signal(Some(rung.frame.program), text) {
+        let signal = match self.signal(rung.frame, text, Access::Write) {
             Ok(s) => Signal::new(&s),
-            Err(NotSignal::Indirect(_)) => return self.outside(i, place, Outside::Indirect),
+            Err(NotSignal::Indirect(_) | NotSignal::Number(_)) => {
+                return self.outside(i, place, Outside::Indirect)
+            }
             Err(NotSignal::Malformed(why)) => {
                 let at = self.place(rung.text, *offset);
                 return self.error(at, rung, why);
@@ -219,7 +238,14 @@ impl<'d> Reader<'_, 'd> {
         if let Some(n) = number(text) {
             return Some(Value::Number(n, format_number(n)));
         }
-        let s = self.names.signal(Some(rung.frame.program), text).ok()?;
+        let s = match self.signal(rung.frame, text, Access::Read) {
+            Ok(s) => s,
+            Err(NotSignal::Number(n)) => {
+                let n = number(&n)?;
+                return Some(Value::Number(n, format_number(n)));
+            }
+            Err(_) => return None,
+        };
         self.compared.insert(s.clone());
         Some(Value::Tag(Signal::new(&s)))
     }
@@ -345,6 +371,7 @@ impl<'d> Reader<'_, 'd> {
             routine: node.attribute("Name").unwrap_or(target).to_string(),
             calls,
             guard,
+            aoi: rung.frame.aoi.clone(),
         };
         self.routine(node, &frame, reached);
     }
@@ -386,7 +413,7 @@ impl<'d> Reader<'_, 'd> {
             .into_iter()
             .collect();
         let words = std::mem::take(&mut self.words);
-        for (index, dest) in words.into_iter().rev() {
+        for (index, dest, member) in words.into_iter().rev() {
             let Some(ins) = self.out.get_mut(index) else {
                 continue;
             };
@@ -399,7 +426,14 @@ impl<'d> Reader<'_, 'd> {
             let (at, mnemonic, text) = (ins.at, ins.mnemonic.clone(), ins.text.clone());
             let written: Vec<Instruction> = coils
                 .iter()
-                .filter(|c| holds(&dest, c))
+                .filter(|c| {
+                    if member {
+                        c.strip_prefix(dest.as_str())
+                            .is_some_and(|r| r.starts_with('.'))
+                    } else {
+                        holds(&dest, c)
+                    }
+                })
                 .flat_map(|c| {
                     [
                         Instruction {

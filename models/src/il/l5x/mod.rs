@@ -20,8 +20,11 @@
 //! derivable. After a `JMP` (up to its `LBL`), an early `RET` or a `TND`
 //! the rungs may not run every scan: their coils are not derivable.
 //! Timers, counters (`TON`, `CTU`, ...) take the rung as an input;
-//! `MOV` and other word instructions leave it as it is; one-shots (`ONS`,
-//! `OSR`, `OSF`), Add-On Instructions (not expanded), `CMP` and any
+//! `MOV` and other word instructions leave it as it is. An Add-On
+//! Instruction defined in the export runs its `Logic` routine in place,
+//! its parameters bound to the call's operands and the instance's members
+//! (`aoi.rs`): a contact on its output is the logic inside, over the
+//! caller's tags. One-shots (`ONS`, `OSR`, `OSF`), `CMP` and any
 //! instruction not named here make what follows them on the rung not
 //! derivable, each with a warning at its place. FBD routines are read by
 //! `fbd.rs`: each output reference (`ORef`) a coil, the blocks `BAND`,
@@ -35,10 +38,15 @@
 //! names is named by the alias (`Start`, not `Local:1:I.Data.3`), so
 //! that the alias and its base are one signal. Logix names ignore case:
 //! each name is spelt as first seen. Indexes must be numbers (`Arr[3]`);
-//! `Arr[Idx]` is an indirect address. Programs are read in file order,
-//! each from its main routine; a routine no `JSR` reaches, a fault
-//! routine and a disabled program are warnings, not read.
+//! `Arr[Idx]` is an indirect address. Programs are read in the order the
+//! controller runs them: each task's scheduled programs, task by task
+//! (file order in an export without tasks), each from its main routine
+//! and then the routines its `JSR`s call where they call them, so that a
+//! coil two routines write ends with the last writer's value; a routine
+//! no `JSR` reaches, a fault routine, a disabled program, one no task
+//! schedules and an inhibited task's are warnings, not read.
 
+mod aoi;
 mod names;
 mod rung;
 
@@ -97,17 +105,17 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
     };
     let mut names = Names::read(controller);
     let documentation = names.documentation(controller);
-    let aois: HashSet<String> = controller
+    let aois: HashMap<String, Node> = controller
         .descendants()
         .filter(|d| d.has_tag_name("AddOnInstructionDefinition"))
-        .filter_map(|d| d.attribute("Name"))
-        .map(str::to_ascii_uppercase)
+        .filter_map(|d| Some((d.attribute("Name")?.to_ascii_uppercase(), d)))
         .collect();
     let mut reader = Reader {
         origin,
         doc: &doc,
         names,
         aois,
+        called: HashSet::new(),
         out: Vec::new(),
         errors: Vec::new(),
         cut: None,
@@ -115,25 +123,25 @@ pub(crate) fn lex(origin: &str, text: &str) -> Result<Parsed, SourceErrors> {
         compared: HashSet::new(),
         ids: 0,
     };
+    for program in reader.in_task_order(controller) {
+        reader.program(program);
+    }
+    reader.mark_word_writes();
+    // Definitions no rung called, said first, where they are.
+    let read = std::mem::take(&mut reader.out);
     for aoi in controller
         .descendants()
         .filter(|d| d.has_tag_name("AddOnInstructionDefinition"))
     {
         let name = aoi.attribute("Name").unwrap_or("?");
-        reader.note(
-            aoi,
-            format!("Add-On Instruction '{name}': its logic is not expanded where it is called"),
-        );
+        if !reader.called.contains(&name.to_ascii_uppercase()) {
+            reader.note(
+                aoi,
+                format!("Add-On Instruction '{name}' is called by no ladder rung read: its logic is not read"),
+            );
+        }
     }
-    for program in controller
-        .children()
-        .filter(|c| c.has_tag_name("Programs"))
-        .flat_map(|p| p.children())
-        .filter(|p| p.has_tag_name("Program"))
-    {
-        reader.program(program);
-    }
-    reader.mark_word_writes();
+    reader.out.extend(read);
     let Reader {
         out, mut errors, ..
     } = reader;
@@ -175,20 +183,25 @@ struct Frame<'d> {
     calls: Vec<String>,
     /// ANDed into every output: a conditional call's reason.
     guard: Flow,
+    /// The bindings of the Add-On Instruction whose logic this is.
+    aoi: Option<Rc<aoi::Scope>>,
 }
 
 struct Reader<'a, 'd> {
     origin: &'a str,
     doc: &'d Document<'d>,
     names: Names,
-    /// Add-On Instructions defined in the export, upper case.
-    aois: HashSet<String>,
+    /// Add-On Instructions defined in the export, by upper-case name.
+    aois: HashMap<String, Node<'d, 'd>>,
+    /// Add-On Instructions a rung called, upper case.
+    called: HashSet<String>,
     out: Vec<Instruction>,
     errors: Vec<SourceError>,
     /// After a `TND`: the rest of the scan may not run.
     cut: Option<Flow>,
-    /// Word instructions emitted: index in `out` and the tag written.
-    words: Vec<(usize, String)>,
+    /// Word instructions emitted: index in `out`, the tag written, and
+    /// whether it is a member of an Add-On Instruction's instance.
+    words: Vec<(usize, String, bool)>,
     /// Tags a comparison reads.
     compared: HashSet<String>,
     /// The last contact's identity (parallel legs share a start by it).
@@ -213,6 +226,74 @@ impl<'a, 'd> Reader<'a, 'd> {
             String::new(),
             Operation::Outside(Outside::Unread),
         ));
+    }
+
+    /// The programs in the order the controller runs them: each task's
+    /// scheduled programs, task by task, as the export lists them; a
+    /// program no task schedules, and an inhibited task's, said and left
+    /// out. An export without tasks (a program or routine export) is read
+    /// in file order.
+    fn in_task_order(&mut self, controller: Node<'d, 'd>) -> Vec<Node<'d, 'd>> {
+        let programs: Vec<Node> = controller
+            .children()
+            .filter(|c| c.has_tag_name("Programs"))
+            .flat_map(|p| p.children())
+            .filter(|p| p.has_tag_name("Program"))
+            .collect();
+        let tasks: Vec<Node> = controller
+            .children()
+            .filter(|c| c.has_tag_name("Tasks"))
+            .flat_map(|t| t.children())
+            .filter(|t| t.has_tag_name("Task"))
+            .collect();
+        if tasks.is_empty() {
+            return programs;
+        }
+        let by_name: HashMap<String, Node> = programs
+            .iter()
+            .filter_map(|p| Some((p.attribute("Name")?.to_ascii_lowercase(), *p)))
+            .collect();
+        let mut order: Vec<Node> = Vec::new();
+        let mut scheduled: HashSet<String> = HashSet::new();
+        for task in tasks {
+            let name = task.attribute("Name").unwrap_or("?");
+            let inhibited = task.attribute("InhibitTask") == Some("true");
+            let mut held: Vec<&str> = Vec::new();
+            for s in task
+                .descendants()
+                .filter(|s| s.has_tag_name("ScheduledProgram"))
+            {
+                let Some(program) = s.attribute("Name") else {
+                    continue;
+                };
+                scheduled.insert(program.to_ascii_lowercase());
+                match by_name.get(&program.to_ascii_lowercase()) {
+                    Some(_) if inhibited => held.push(program),
+                    Some(p) if !order.contains(p) => order.push(*p),
+                    _ => {}
+                }
+            }
+            if !held.is_empty() {
+                self.note(
+                    task,
+                    format!(
+                        "task '{name}' is inhibited (InhibitTask=\"true\"): its programs {} are not read",
+                        held.join(", ")
+                    ),
+                );
+            }
+        }
+        for p in &programs {
+            let name = p.attribute("Name").unwrap_or("?");
+            let has_routines = p.children().any(|c| c.has_tag_name("Routines"));
+            if has_routines && !scheduled.contains(&name.to_ascii_lowercase()) {
+                self.note(
+                    *p,
+                    format!("program '{name}' is scheduled in no task, so the controller never runs it: not read"),
+                );
+            }
+        }
+        order
     }
 
     fn program(&mut self, program: Node<'d, 'd>) {
@@ -244,6 +325,7 @@ impl<'a, 'd> Reader<'a, 'd> {
             routine: routine.to_string(),
             calls: vec![routine.to_ascii_uppercase()],
             guard: Flow::True,
+            aoi: None,
         };
         let mut reached: HashSet<String> = HashSet::new();
         match program.attribute("MainRoutineName") {

@@ -37,6 +37,8 @@ pub(super) enum NotSignal {
     Indirect(String),
     /// Not a tag name at all.
     Malformed(String),
+    /// A number, given as an Add-On Instruction's input (`1` for a BOOL).
+    Number(String),
 }
 
 impl Names {
@@ -135,12 +137,18 @@ impl Names {
         text: &str,
     ) -> Result<String, NotSignal> {
         let address = self.address(program, text, 0)?;
+        Ok(self.named(address))
+    }
+
+    /// The signal name of a resolved address (a scope and aliases already
+    /// followed): named by an alias of it or of a part of it, spelt as
+    /// first seen.
+    pub(super) fn named(&mut self, address: String) -> String {
         let named = self.aliased_name(&address).unwrap_or(address);
-        Ok(self
-            .spelling
+        self.spelling
             .entry(named.to_ascii_lowercase())
             .or_insert(named)
-            .clone())
+            .clone()
     }
 
     /// The alias naming `address` or a part of it (`InWord` for
@@ -205,7 +213,7 @@ impl Names {
 
 /// Splits a reference into its base tag (`Local:1:I`) and the members and
 /// indexes after it (`.Data.3`, `[2].DN`), checking their spelling.
-fn split(text: &str) -> Result<(&str, &str), NotSignal> {
+pub(super) fn split(text: &str) -> Result<(&str, &str), NotSignal> {
     let malformed = || NotSignal::Malformed(format!("'{text}' is not a tag name"));
     let base_len = text
         .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_' || c == ':'))

@@ -417,3 +417,211 @@ fn mutated_fbd_exports_never_panic() {
         }
     }
 }
+
+/// An Add-On Instruction definition: `(name, usage, required)`
+/// parameters after the system's `EnableIn` and `EnableOut`, local tags,
+/// and the rungs of its `Logic` routine.
+fn definition(
+    name: &str,
+    parameters: &[(&str, &str, bool)],
+    locals: &[&str],
+    rungs: &[&str],
+) -> String {
+    let parameters: String = [("EnableIn", "Input", false), ("EnableOut", "Output", false)]
+        .iter()
+        .chain(parameters)
+        .map(|(p, usage, required)| {
+            format!("<Parameter Name=\"{p}\" TagType=\"Base\" DataType=\"BOOL\" Usage=\"{usage}\" Required=\"{required}\" Visible=\"true\"/>\n")
+        })
+        .collect();
+    let locals: String = locals
+        .iter()
+        .map(|l| format!("<LocalTag Name=\"{l}\" DataType=\"BOOL\"/>\n"))
+        .collect();
+    let rungs: String = rungs
+        .iter()
+        .enumerate()
+        .map(|(k, r)| {
+            format!("<Rung Number=\"{k}\" Type=\"N\">\n<Text>\n<![CDATA[{r}]]>\n</Text>\n</Rung>\n")
+        })
+        .collect();
+    format!(
+        "<AddOnInstructionDefinition Name=\"{name}\" Revision=\"1.0\">\n<Parameters>\n{parameters}</Parameters>\n\
+         <LocalTags>\n{locals}</LocalTags>\n<Routines>\n<Routine Name=\"Logic\" Type=\"RLL\">\n<RLLContent>\n{rungs}</RLLContent>\n</Routine>\n</Routines>\n\
+         </AddOnInstructionDefinition>\n"
+    )
+}
+
+/// [`export`] of program `Main` with `rungs`, and the Add-On Instruction
+/// `definitions`.
+fn with_definitions(definitions: &[String], rungs: &[&str]) -> Program {
+    let text = export("", "", &[("Main", "RLL", rungs)]).replacen(
+        "<Tags>\n",
+        &format!(
+            "<AddOnInstructionDefinitions>\n{}</AddOnInstructionDefinitions>\n<Tags>\n",
+            definitions.concat()
+        ),
+        1,
+    );
+    Program::compile("a.L5X", &text, None).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn default_sf(p: &Program, coil: &str) -> String {
+    match SwitchingFunction::expand(
+        p,
+        &Signal::new(coil),
+        &Observability::default_for(p.dialect()),
+    ) {
+        Ok(sf) => sf.notation(),
+        Err(e) => format!("! {e}"),
+    }
+}
+
+#[test]
+fn an_add_on_instruction_is_its_logic_over_the_caller_s_tags() {
+    // An interlock: both inputs make the output; the required output is
+    // copied to the caller's tag.
+    let permissive = definition(
+        "Permissive",
+        &[
+            ("In1", "Input", true),
+            ("In2", "Input", true),
+            ("Out", "Output", true),
+        ],
+        &[],
+        &["XIC(In1)XIC(In2)OTE(Out);"],
+    );
+    // A seal-in on the caller's tag (InOut), stopped by an input given no
+    // operand (the instance's member), through a local tag.
+    let hold = definition(
+        "Hold",
+        &[
+            ("Cmd", "Input", true),
+            ("State", "InOut", true),
+            ("Stop", "Input", false),
+        ],
+        &["Sealed"],
+        &[
+            "[XIC(Cmd),XIC(State)]XIO(Stop)OTE(Sealed);",
+            "XIC(Sealed)OTE(State);",
+        ],
+    );
+    let p = with_definitions(
+        &[permissive, hold],
+        &[
+            "Permissive(Perm1,Guard_Closed,Air_OK,Perm_OK);",
+            "XIO(Perm1.Out)OTE(Fault);",
+            "XIO(Perm_OK)OTE(Fault2);",
+            "Hold(H1,Start,Motor)XIC(Motor)OTE(Running);",
+            "Permissive(Perm2,1,Air_OK,Air_Only);",
+            "XIC(Enable)Permissive(Perm3,a,b,c);",
+            "Permissive(Perm4,a)OTE(short);",
+        ],
+    );
+    // The instance's output is the logic inside, over the caller's tags.
+    assert_eq!(sf(&p, "Perm1.Out"), "Guard_Closed * Air_OK");
+    assert_eq!(sf(&p, "Perm_OK"), "Perm1.Out");
+    assert_eq!(default_sf(&p, "Fault"), "-(Guard_Closed * Air_OK)");
+    assert_eq!(default_sf(&p, "Fault2"), "-(Guard_Closed * Air_OK)");
+    // An InOut is the caller's tag; an input given no operand is the
+    // instance's member; a local tag is a member too.
+    assert_eq!(sf(&p, "H1.Sealed"), "(Start + Motor) * -H1.Stop");
+    assert_eq!(default_sf(&p, "Motor"), "(Start + Motor) * -H1.Stop");
+    // The rung goes on after the call with its condition.
+    assert_eq!(sf(&p, "Running"), "Motor");
+    // A number given to an input.
+    assert_eq!(sf(&p, "Perm2.Out"), "Air_OK");
+    // A call on a rung that may be false: its logic may not run.
+    assert!(
+        sf(&p, "Perm3.Out").contains(
+            "runs the logic of Add-On Instruction 'Permissive' only when the rung is true"
+        ),
+        "{}",
+        sf(&p, "Perm3.Out")
+    );
+    assert!(sf(&p, "c").starts_with("! "), "{}", sf(&p, "c"));
+    assert!(sf(&p, "short").starts_with("! "), "{}", sf(&p, "short"));
+    assert_eq!(
+        warnings(&p)
+            .into_iter()
+            .filter(|w| !w.contains("': a call"))
+            .collect::<Vec<_>>(),
+        ["97:10: routine Main, rung 6: 'Permissive(Perm4,a)' gives 2 operands, Add-On Instruction 'Permissive' takes 4 (its instance, then In1, In2, Out): what follows it on the rung is not derivable"]
+    );
+    // A fault coil driven through the instruction blames the logic's
+    // inputs, by the caller's names.
+    let fault = SwitchingFunction::expand(
+        &p,
+        &Signal::new("Fault"),
+        &Observability::default_for(p.dialect()),
+    )
+    .unwrap();
+    let mut before = crate::values::Values::new();
+    before.set(Signal::new("Guard_Closed"), true);
+    before.set(Signal::new("Air_OK"), true);
+    let mut now = before.clone();
+    now.set(Signal::new("Guard_Closed"), false);
+    let b = |s: &Signal| before.get(s);
+    let e = crate::explain::explain(
+        &fault,
+        |s| now.get(s),
+        Some(&b),
+        crate::explain::Polarity::On,
+        p.documentation(),
+    )
+    .unwrap();
+    let culprits: Vec<String> = e.culprits.iter().map(ToString::to_string).collect();
+    assert_eq!(culprits, ["Guard_Closed = 0 (expected 1)"]);
+}
+
+#[test]
+fn programs_are_read_in_the_order_their_tasks_run_them() {
+    // File order: Filling, then Draining, then Spare. The task runs
+    // Draining first, then Filling: Lamp ends with Filling's value, and
+    // in Filling the main routine's JSR runs Late after Early although
+    // the file lists Late first.
+    let rung = |r: &str| {
+        format!("<Rung Number=\"0\" Type=\"N\">\n<Text>\n<![CDATA[{r}]]>\n</Text>\n</Rung>\n")
+    };
+    let routine = |name: &str, rungs: &[&str]| {
+        let rungs: String = rungs.iter().map(|r| rung(r)).collect();
+        format!("<Routine Name=\"{name}\" Type=\"RLL\">\n<RLLContent>\n{rungs}</RLLContent>\n</Routine>\n")
+    };
+    let program = |name: &str, routines: &[String]| {
+        format!(
+            "<Program Name=\"{name}\" MainRoutineName=\"Main\">\n<Routines>\n{}</Routines>\n</Program>\n",
+            routines.concat()
+        )
+    };
+    let text = format!(
+        "<?xml version=\"1.0\" encoding=\"UTF-8\" standalone=\"yes\"?>\n\
+         <RSLogix5000Content SchemaRevision=\"1.0\" SoftwareRevision=\"33.01\" TargetName=\"T\" TargetType=\"Controller\">\n\
+         <Controller Use=\"Target\" Name=\"T\">\n<Programs>\n{}{}{}{}</Programs>\n<Tasks>\n\
+         <Task Name=\"MainTask\" Type=\"CONTINUOUS\" Priority=\"10\" Watchdog=\"500\" InhibitTask=\"false\">\n\
+         <ScheduledPrograms>\n<ScheduledProgram Name=\"Draining\"/>\n<ScheduledProgram Name=\"Filling\"/>\n</ScheduledPrograms>\n</Task>\n\
+         <Task Name=\"Test\" Type=\"PERIODIC\" Rate=\"10\" Priority=\"10\" Watchdog=\"500\" InhibitTask=\"true\">\n\
+         <ScheduledPrograms>\n<ScheduledProgram Name=\"Trial\"/>\n</ScheduledPrograms>\n</Task>\n\
+         </Tasks>\n</Controller>\n</RSLogix5000Content>\n",
+        program(
+            "Filling",
+            &[
+                routine("Late", &["XIC(late)OTE(Valve);"]),
+                routine("Main", &["XIC(fill)OTE(Lamp);", "JSR(Early,0);", "JSR(Late,0);"]),
+                routine("Early", &["XIC(early)OTE(Valve);"]),
+            ]
+        ),
+        program("Draining", &[routine("Main", &["XIC(drain)OTE(Lamp);"])]),
+        program("Spare", &[routine("Main", &["XIC(spare)OTE(Lamp);"])]),
+        program("Trial", &[routine("Main", &["XIC(trial)OTE(Lamp);"])]),
+    );
+    let p = Program::compile("t.L5X", &text, None).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(sf(&p, "Lamp"), "fill");
+    assert_eq!(sf(&p, "Valve"), "late");
+    assert_eq!(
+        warnings(&p),
+        [
+            "93:1: task 'Test' is inhibited (InhibitTask=\"true\"): its programs Trial are not read",
+            "59:1: program 'Spare' is scheduled in no task, so the controller never runs it: not read",
+        ]
+    );
+}

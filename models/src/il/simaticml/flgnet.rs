@@ -104,6 +104,20 @@ fn reads_logic(part: Node<'_, '_>) -> bool {
         )
 }
 
+/// The `Section` and `Type` of parameter `pin` of a `Call` part, where
+/// the call's block gives a value back: `Output` or `InOut`.
+fn call_output<'a>(part: Node<'a, '_>, pin: &str) -> Option<(&'a str, &'a str)> {
+    if !part.has_tag_name("Call") {
+        return None;
+    }
+    child(part, "CallInfo")?
+        .children()
+        .filter(|p| p.has_tag_name("Parameter"))
+        .find(|p| p.attribute("Name") == Some(pin))
+        .and_then(|p| Some((p.attribute("Section")?, p.attribute("Type").unwrap_or(""))))
+        .filter(|(section, _)| matches!(*section, "Output" | "InOut"))
+}
+
 fn uid(node: Node<'_, '_>) -> Option<u64> {
     node.attribute("UId").and_then(|v| v.parse().ok())
 }
@@ -166,7 +180,8 @@ impl<'a, 'i> Network<'a, 'i> {
                     continue;
                 }
                 if end.has_tag_name("NameCon") {
-                    if is_output(&pin) {
+                    let call = n.parts.get(&id).and_then(|p| call_output(*p, &pin));
+                    if is_output(&pin) || call.is_some() {
                         outputs.push((id, pin.clone()));
                     } else if n.parts.get(&id).is_some_and(|p| reads_logic(*p)) {
                         inputs += 1;
@@ -225,7 +240,12 @@ impl<'a, 'i> Network<'a, 'i> {
                         if other == Some(id) && name == pin {
                             continue;
                         }
-                        if let Some(other) = other.filter(|_| is_output(name)) {
+                        let from_call = |o: &u64| {
+                            self.parts
+                                .get(o)
+                                .is_some_and(|p| call_output(*p, name).is_some())
+                        };
+                        if let Some(other) = other.filter(|o| is_output(name) || from_call(o)) {
                             branches.push(self.output(other, name, end, depth + 1));
                         }
                     }
@@ -380,6 +400,9 @@ impl<'a, 'i> Network<'a, 'i> {
     /// What flows out of `pin` of `node`.
     fn part(&mut self, node: Node<'a, 'i>, pin: &str, depth: usize) -> Flow {
         let id = uid(node).unwrap_or(0);
+        if let Some((_, ty)) = call_output(node, pin) {
+            return self.call_output_flow(node, pin, ty, id);
+        }
         if !node.has_tag_name("Part") {
             return self.opaque(
                 node,
@@ -456,6 +479,76 @@ impl<'a, 'i> Network<'a, 'i> {
                 node,
                 format!("output '{pin}' of part '{other}' is not read"),
             ),
+        }
+    }
+
+    /// Output `pin` of a function block call: the instance's member
+    /// (`Motor_DB.Running`, `Line.#Motor.Running`), a leaf the block's own
+    /// logic writes. A function (FC) has no instance: its output is not
+    /// derivable.
+    fn call_output_flow(&mut self, node: Node<'a, 'i>, pin: &str, ty: &str, id: u64) -> Flow {
+        let name = Self::part_name(node);
+        if !ty.eq_ignore_ascii_case("Bool") {
+            return self.opaque(
+                node,
+                format!("output '{pin}' of {name} is a {ty}, not a bit"),
+            );
+        }
+        let instance = child(node, "CallInfo")
+            .and_then(|c| child(c, "Instance"))
+            .map(|i| access_signal(self.place, i.attribute("Scope").unwrap_or(""), i));
+        match instance {
+            Some(Ok((s, _))) => Flow::Lit(Signal::new(&format!("{}.{pin}", s.name())), false, id),
+            Some(Err(why)) => self.opaque(node, why),
+            None => self.opaque(
+                node,
+                format!("output '{pin}' of {name}, a function without an instance"),
+            ),
+        }
+    }
+
+    /// The operands a call's Bool outputs are wired to, each written with
+    /// the output (`#Open := "Valve_DB".Open`), when the call runs: every
+    /// scan when its `en` is powered, else not derivable. A number output
+    /// writes no bit.
+    fn call_assignments(&mut self, part: Node<'a, 'i>, out: &mut Vec<Instruction>) {
+        let Some(id) = uid(part) else {
+            return;
+        };
+        let here = at(self.doc, part);
+        let pins: Vec<String> = child(part, "CallInfo")
+            .into_iter()
+            .flat_map(|c| c.children())
+            .filter(|p| p.has_tag_name("Parameter"))
+            .filter_map(|p| p.attribute("Name"))
+            .filter(|pin| {
+                call_output(part, pin).is_some_and(|(_, ty)| ty.eq_ignore_ascii_case("Bool"))
+            })
+            .map(str::to_string)
+            .collect();
+        for pin in pins {
+            let Some((Value::Var(target), _)) = self.operand_of(part, &pin) else {
+                continue;
+            };
+            let value = self.part(part, &pin, 0);
+            let runs = match self.sources(id, "en", 0) {
+                None | Some(Flow::True) => Flow::True,
+                Some(_) => self.opaque(
+                    part,
+                    format!(
+                        "{} runs only while its 'en' is on, so '{target}' may not be written every scan",
+                        Self::part_name(part)
+                    ),
+                ),
+            };
+            out.append(&mut self.relays);
+            emit(&Flow::and(vec![runs, value]), here, out);
+            out.push(write(
+                here,
+                Operation::Write { negated: false },
+                "=",
+                target,
+            ));
         }
     }
 
@@ -602,6 +695,9 @@ impl<'a, 'i> Network<'a, 'i> {
                     | "NContact" | "PBox" | "NBox",
                 ) => {}
                 _ => {
+                    if part.has_tag_name("Call") {
+                        self.call_assignments(part, &mut out);
+                    }
                     let what = match part.tag_name().name() {
                         "Part" => format!("part '{name}'"),
                         _ => Self::part_name(part),

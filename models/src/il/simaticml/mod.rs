@@ -28,7 +28,10 @@
 //!
 //! A tag table's address keeps the project's mnemonics (`%E0.0` in a
 //! German project, as STL's `E 0.0`); a block's `Address` is always
-//! English (`I`), the way Openness writes areas.
+//! English (`I`), the way Openness writes areas. So a German address's
+//! comment goes to its English form too (`%E0.0` to `I0.0`, `%A4.0` to
+//! `Q4.0`, `%PEW256` to `PIW256`, `%Z3` to `C3`), where a block's
+//! absolute operands meet it.
 //!
 //! # Comments
 //! A block's interface members (`Section/Member/Comment`) and a tag
@@ -182,6 +185,49 @@ pub(crate) struct Tag {
     pub(crate) at: Location,
 }
 
+impl Tag {
+    /// The addresses the tag's comment belongs to: its address as written
+    /// and, in German mnemonics, its English form too (`E0.0` and `I0.0`),
+    /// which a block's absolute addresses use.
+    pub(crate) fn addresses(&self) -> Vec<String> {
+        let Some(address) = &self.address else {
+            return Vec::new();
+        };
+        let mut out = vec![address.clone()];
+        out.extend(english(address));
+        out
+    }
+}
+
+/// A German-mnemonic address (`E0.0`, `AW4`, `PEW256`, `Z3`) in English
+/// mnemonics (`I0.0`, `QW4`, `PIW256`, `C3`); `None` for one written alike
+/// in both (`M10.1`, `MW10`, `T1`) or not an address.
+pub(crate) fn english(address: &str) -> Option<String> {
+    let letters = address
+        .chars()
+        .take_while(char::is_ascii_alphabetic)
+        .count();
+    let (area, rest) = address.split_at(letters);
+    if !rest.starts_with(|c: char| c.is_ascii_digit()) {
+        return None;
+    }
+    let area = area.to_ascii_uppercase();
+    let (head, size) = if let Some(size) = area.strip_prefix("PE") {
+        ("PI", size)
+    } else if let Some(size) = area.strip_prefix("PA") {
+        ("PQ", size)
+    } else if let Some(size) = area.strip_prefix('E') {
+        ("I", size)
+    } else if let Some(size) = area.strip_prefix('A') {
+        ("Q", size)
+    } else if area == "Z" {
+        ("C", "")
+    } else {
+        return None;
+    };
+    matches!(size, "" | "X" | "B" | "W" | "D").then(|| format!("{head}{size}{rest}"))
+}
+
 /// The tags of every tag table in `doc`.
 fn tags(doc: &Document<'_>, lang: &str) -> Vec<Tag> {
     doc.descendants()
@@ -239,8 +285,8 @@ pub(crate) fn lex(origin: &str, text: &str, lang: &str) -> Result<plcopen::Parse
     for tag in tags(&doc, lang) {
         if let Some(c) = &tag.comment {
             documentation.push((tag.name.clone(), c.clone()));
-            if let Some(a) = &tag.address {
-                documentation.push((a.clone(), c.clone()));
+            for a in tag.addresses() {
+                documentation.push((a, c.clone()));
             }
         }
     }
@@ -348,275 +394,4 @@ fn block_name(block: Node<'_, '_>) -> Option<String> {
 }
 
 #[cfg(test)]
-mod tests {
-    use crate::comments::CommentDb;
-    use crate::program::Program;
-    use crate::signal::{Observability, Signal};
-    use crate::switching::SwitchingFunction;
-
-    /// A block `Conveyor` with one network per `(language, parts, wires)`.
-    fn block(networks: &[(&str, &str, &str)]) -> String {
-        let units: String = networks
-            .iter()
-            .enumerate()
-            .map(|(i, (lang, parts, wires))| {
-                let source = if *lang == "STL" {
-                    "<StatementList xmlns=\"http://www.siemens.com/automation/Openness/SW/NetworkSource/StatementList/v4\"/>".to_string()
-                } else {
-                    format!(
-                        "<FlgNet xmlns=\"http://www.siemens.com/automation/Openness/SW/NetworkSource/FlgNet/v{}\">\n<Parts>\n{parts}</Parts>\n<Wires>\n{wires}</Wires>\n</FlgNet>",
-                        i % 5 + 1
-                    )
-                };
-                format!(
-                    "<SW.Blocks.CompileUnit ID=\"{i}\" CompositionName=\"CompileUnits\"><AttributeList><NetworkSource>{source}</NetworkSource>\n<ProgrammingLanguage>{lang}</ProgrammingLanguage></AttributeList></SW.Blocks.CompileUnit>\n"
-                )
-            })
-            .collect();
-        format!(
-            "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<Document>\n<Engineering version=\"V18\" />\n<SW.Blocks.FB ID=\"0\"><AttributeList>\
-             <Interface><Sections xmlns=\"http://www.siemens.com/automation/Openness/SW/Interface/v5\"><Section Name=\"Static\">\
-             <Member Name=\"Busy\" Datatype=\"Bool\"><Comment><MultiLanguageText Lang=\"de-DE\">Belegt</MultiLanguageText></Comment></Member>\
-             </Section></Sections></Interface><Name>Conveyor</Name><ProgrammingLanguage>LAD</ProgrammingLanguage></AttributeList>\n<ObjectList>\n{units}</ObjectList></SW.Blocks.FB>\n</Document>\n"
-        )
-    }
-
-    fn tag(uid: u32, name: &str) -> String {
-        format!("<Access Scope=\"GlobalVariable\" UId=\"{uid}\"><Symbol><Component Name=\"{name}\"/></Symbol></Access>\n")
-    }
-
-    fn local(uid: u32, name: &str) -> String {
-        format!("<Access Scope=\"LocalVariable\" UId=\"{uid}\"><Symbol><Component Name=\"{name}\"/></Symbol></Access>\n")
-    }
-
-    fn number(uid: u32, value: &str) -> String {
-        format!("<Access Scope=\"LiteralConstant\" UId=\"{uid}\"><Constant><ConstantType>Int</ConstantType><ConstantValue>{value}</ConstantValue></Constant></Access>\n")
-    }
-
-    fn part(uid: u32, name: &str, inner: &str) -> String {
-        format!("<Part Name=\"{name}\" UId=\"{uid}\">{inner}</Part>\n")
-    }
-
-    /// A wire: `rail`, an operand's UId, or `UId.pin`.
-    fn wire(ends: &[&str]) -> String {
-        let ends: String = ends
-            .iter()
-            .map(|e| match e.split_once('.') {
-                _ if *e == "rail" => "<Powerrail/>".to_string(),
-                Some((u, pin)) => format!("<NameCon UId=\"{u}\" Name=\"{pin}\"/>"),
-                None => format!("<IdentCon UId=\"{e}\"/>"),
-            })
-            .collect();
-        format!("<Wire UId=\"99\">{ends}</Wire>\n")
-    }
-
-    fn sf(p: &Program, coil: &str) -> String {
-        SwitchingFunction::expand(
-            p,
-            &Signal::new(coil),
-            &Observability::everything(p.dialect()),
-        )
-        .unwrap_or_else(|e| panic!("{e}"))
-        .notation()
-    }
-
-    fn warnings(p: &Program) -> Vec<String> {
-        p.warnings()
-            .iter()
-            .map(|w| format!("{}: {}", w.at, w.message))
-            .collect()
-    }
-
-    #[test]
-    fn latches_timers_comparators_locals_and_edges() {
-        // 1: Sr latch of Run (reset wins), Rs of Hold (set wins).
-        let latch = tag(21, "Start")
-            + &tag(22, "Stop")
-            + &tag(23, "Run")
-            + &part(24, "Contact", "")
-            + &part(25, "Contact", "")
-            + &part(26, "Sr", "")
-            + &part(27, "Rs", "")
-            + &tag(28, "Hold")
-            + &part(29, "Coil", "")
-            + &tag(30, "Running");
-        let latch_wires = wire(&["rail", "24.in", "25.in"])
-            + &wire(&["21", "24.operand"])
-            + &wire(&["22", "25.operand"])
-            + &wire(&["24.out", "26.s", "27.s1"])
-            + &wire(&["25.out", "26.r1", "27.r"])
-            + &wire(&["23", "26.operand"])
-            + &wire(&["28", "27.operand"])
-            + &wire(&["26.q", "29.in"])
-            + &wire(&["30", "29.operand"]);
-        // 2: a TON's Q in series with a comparison `Speed > 80`, into a
-        // local; a negated coil.
-        let timer = tag(21, "Speed")
-            + &number(22, "80")
-            + &part(23, "TON", "<Instance Scope=\"GlobalVariable\" UId=\"24\"><Component Name=\"T1_DB\"/></Instance>")
-            + &part(25, "Gt", "")
-            + &local(26, "Busy")
-            + &part(27, "Coil", "")
-            + &part(28, "Coil", "<Negated Name=\"operand\"/>")
-            + &tag(29, "Idle");
-        let timer_wires = wire(&["rail", "23.IN"])
-            + &wire(&["23.Q", "25.pre"])
-            + &wire(&["21", "25.in1"])
-            + &wire(&["22", "25.in2"])
-            + &wire(&["25.out", "27.in", "28.in"])
-            + &wire(&["26", "27.operand"])
-            + &wire(&["29", "28.operand"]);
-        // 3 (FBD): an edge into an AND box, and a box that is not read.
-        let edge = tag(21, "Push")
-            + &tag(22, "Pulse")
-            + &part(23, "PBox", "")
-            + &part(
-                24,
-                "A",
-                "<TemplateValue Name=\"Card\" Type=\"Cardinality\">2</TemplateValue>",
-            )
-            + &part(25, "Coil", "")
-            + &part(26, "Calc", "")
-            + &tag(27, "Run")
-            + &tag(28, "Mem");
-        let edge_wires = wire(&["21", "23.in"])
-            + &wire(&["28", "23.bit"])
-            + &wire(&["23.out", "24.in1"])
-            + &wire(&["27", "24.in2"])
-            + &wire(&["24.out", "25.in"])
-            + &wire(&["22", "25.operand"]);
-        let text = block(&[
-            ("LAD", &latch, &latch_wires),
-            ("LAD", &timer, &timer_wires),
-            ("FBD", &edge, &edge_wires),
-            ("STL", "", ""),
-        ]);
-        let p = Program::compile("c.xml", &text, None).unwrap_or_else(|e| panic!("{e}"));
-        let names: Vec<&str> = p.coils().iter().map(|c| c.signal.name()).collect();
-        assert_eq!(
-            names,
-            ["Run", "Hold", "Running", "Conveyor.#Busy", "Idle", "Pulse"]
-        );
-        assert_eq!(sf(&p, "Run"), "-Stop * (Start + Run)");
-        assert_eq!(sf(&p, "Hold"), "Start + (-Stop * Hold)");
-        assert_eq!(sf(&p, "Running"), "Run");
-        assert_eq!(sf(&p, "Conveyor.#Busy"), "T1_DB.Q * Speed > 80");
-        assert_eq!(sf(&p, "Idle"), "-(T1_DB.Q * Speed > 80)");
-        assert!(p.coil(&Signal::new("Pulse")).unwrap().definition.is_err());
-        assert_eq!(
-            warnings(&p),
-            [
-                "58:1: 'block \"Conveyor\" network 3: edge 'PBox' on 'Mem' (a pulse, not a function of the signals)': a call, timer, counter, edge or function, not boolean logic: the coils it feeds are not derivable",
-                "61:1: block \"Conveyor\" network 3: part 'Calc' is not read",
-                "75:92: block \"Conveyor\" network 4: STL network not read (LAD and FBD networks are)",
-            ]
-        );
-        // A local's comment: the only language there is.
-        assert_eq!(
-            p.documentation().get(&Signal::new("Conveyor.#Busy")),
-            Some("Belegt")
-        );
-        assert_eq!(
-            p.resolve("\"Conveyor\".#Busy").unwrap().name(),
-            "Conveyor.#Busy"
-        );
-        assert_eq!(p.resolve("\"T1_DB\".Q").unwrap().name(), "T1_DB.Q");
-        assert_eq!(p.resolve("%I0.0").unwrap().name(), "I0.0");
-    }
-
-    #[test]
-    fn bad_networks_are_refused_at_their_part() {
-        let parts = tag(21, "Start")
-            + &part(22, "Contact", "")
-            + &part(23, "Coil", "")
-            + &number(24, "5")
-            + &part(25, "Coil", "")
-            + &part(26, "Contact", "");
-        let wires = wire(&["rail", "22.in", "26.in"])
-            + &wire(&["21", "22.operand"])
-            + &wire(&["22.out", "23.in"])
-            + &wire(&["24", "23.operand"])
-            + &wire(&["30.out", "25.in"])
-            + &wire(&["21", "25.operand"]);
-        let e = Program::compile("c.xml", &block(&[("LAD", &parts, &wires)]), None).unwrap_err();
-        assert_eq!(
-            e.to_string(),
-            "c.xml:10:1: block \"Conveyor\" network 1: Coil on a constant\n\
-             c.xml:20:16: block \"Conveyor\" network 1: wire 99 names part 30, which is not in this network"
-        );
-        let e = Program::compile(
-            "t.xml",
-            "<?xml version=\"1.0\"?>\n<Document>\n<SW.Blocks.FC>\n</Document>\n",
-            None,
-        )
-        .unwrap_err();
-        assert!(
-            e.to_string().starts_with("t.xml:4:1: not well-formed XML"),
-            "{e}"
-        );
-        let tags = "<?xml version=\"1.0\"?>\n<Document>\n  <SW.Tags.PlcTagTable ID=\"0\"><AttributeList><Name>IO</Name></AttributeList></SW.Tags.PlcTagTable>\n</Document>\n";
-        let e = Program::compile("io.xml", tags, None).unwrap_err();
-        assert_eq!(
-            e.to_string(),
-            "io.xml:3:3: this is a TIA Portal tag table, not a block: give it as the I/O list (--comments), and export the block (FC, FB or OB) to read its networks"
-        );
-        let e = Program::compile(
-            "c.xml",
-            &block(&[("STL", "", "")]),
-            Some(crate::il::Dialect::Stl),
-        )
-        .unwrap_err();
-        assert_eq!(
-            e.to_string(),
-            "c.xml:1:1: this is a TIA Portal export (SimaticML), not an instruction list: leave --dialect out, and its LAD and FBD networks are read"
-        );
-        let e = CommentDb::parse("b.xml", &block(&[]), |a| crate::il::Dialect::Stl.signal(a))
-            .unwrap_err();
-        assert_eq!(
-            e.to_string(),
-            "b.xml:2:1: this SimaticML document has no tag table (SW.Tags.PlcTagTable): export the PLC tag table, not a block"
-        );
-    }
-
-    #[test]
-    fn tag_tables_take_the_english_comment_and_the_project_s_mnemonics() {
-        let item = |c: &str, t: &str| {
-            format!("<MultilingualTextItem><AttributeList><Culture>{c}</Culture><Text>{t}</Text></AttributeList></MultilingualTextItem>")
-        };
-        let tag = |name: &str, address: &str, texts: &str| {
-            format!(
-                "<SW.Tags.PlcTag><AttributeList><LogicalAddress>{address}</LogicalAddress><Name>{name}</Name></AttributeList>\
-                 <ObjectList><MultilingualText CompositionName=\"Comment\"><ObjectList>{texts}</ObjectList></MultilingualText></ObjectList></SW.Tags.PlcTag>\n"
-            )
-        };
-        let table = format!(
-            "<?xml version=\"1.0\"?>\n<Document>\n<SW.Tags.PlcTagTable><ObjectList>\n{}{}{}{}</ObjectList></SW.Tags.PlcTagTable>\n</Document>\n",
-            tag("Start", "%E0.0", &(item("de-DE", "Starttaster") + &item("en-US", "Start button"))),
-            tag("Speed", "%MW10", &item("it-IT", "Velocità")),
-            tag("Lamp", "%Q4.0", &(item("en-US", "") + &item("de-DE", "Lampe"))),
-            tag("Bad", "%Q4.9", &item("en-US", "bad")),
-        );
-        let stl = |a: &str| crate::il::Dialect::Stl.signal(a);
-        let e = CommentDb::parse("io.xml", &table, stl);
-        // The bit 4.9 is no address: the tag's name carries the comment.
-        let db = e.unwrap();
-        assert_eq!(db.get(&Signal::new("Start")), Some("Start button"));
-        assert_eq!(db.get(&Signal::new("E0.0")), Some("Start button"));
-        assert_eq!(db.get(&Signal::new("Speed")), Some("Velocità"));
-        assert_eq!(db.get(&Signal::new("Lamp")), Some("Lampe"));
-        assert_eq!(db.get(&Signal::new("Q4.0")), Some("Lampe"));
-        assert_eq!(db.get(&Signal::new("Bad")), Some("bad"));
-        assert_eq!(db.len(), 6);
-        // In the language asked for, where a text has it; else the first.
-        let de = CommentDb::parse_in("io.xml", &table, stl, Some("de-DE")).unwrap();
-        assert_eq!(de.get(&Signal::new("Start")), Some("Starttaster"));
-        assert_eq!(de.get(&Signal::new("Lamp")), Some("Lampe"));
-        assert_eq!(de.get(&Signal::new("Speed")), Some("Velocità"));
-        assert_eq!(de.get(&Signal::new("Bad")), Some("bad"));
-        let pmc = CommentDb::parse("io.xml", &table, crate::signal::pmc_address).unwrap_err();
-        assert_eq!(
-            pmc.to_string(),
-            "io.xml:4:1: malformed address '\"Start\"': it must start with a signal class letter (X, Y, R, F, G, ...)"
-        );
-    }
-}
+mod tests;
