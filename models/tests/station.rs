@@ -1,6 +1,7 @@
-//! Consequences among a clamp station's transition timers (paper 001) and
-//! the hydraulic fault that drops its clamp valve: the same judgement as
-//! for switching checks (`consequences.rs`), on what a timer waits for.
+//! Consequences among a clamp station's transition timers (paper 001),
+//! its stuck steps (paper 004) and the hydraulic fault that drops its
+//! clamp valve: the same judgement as for switching checks
+//! (`consequences.rs`), on what a timer or a step waits for.
 //! The station (`tests/data/station/station.il`) drives its valves from
 //! its chart's step flags (`station.sfc.toml`), interlocked by the
 //! hydraulic fault G10.00: the clamp valve Y2.00 and the "part clamped"
@@ -18,6 +19,7 @@ use cellwatch_models::engine::{
 };
 use cellwatch_models::explain::Polarity;
 use cellwatch_models::program::Program;
+use cellwatch_models::sfc::{self, SfcChecks};
 use cellwatch_models::signal::{Observability, Signal};
 use cellwatch_models::switching::SwitchingFunction;
 use cellwatch_models::timer::checks::TimerChecks;
@@ -26,6 +28,7 @@ use cellwatch_models::timer::learn::{
 };
 
 const STATION: &str = include_str!("../../tests/data/station/station.il");
+const CHART: &str = include_str!("../../tests/data/station/station.sfc.toml");
 
 /// Every address the station's program, chart and timers name.
 const TAGS: [&str; 13] = [
@@ -93,6 +96,19 @@ fn hydraulic() -> SwitchingChecks {
         comments: CommentDb::default(),
         armed_when: None,
     }])
+}
+
+/// The chart's step supervision, each step reading the outputs the
+/// program drives from its flag.
+fn chart() -> Box<dyn CheckSet> {
+    let p = Program::compile("station.il", STATION, None).unwrap();
+    let charts = sfc::read("station.sfc.toml", CHART, &|_| true).unwrap();
+    let checks = SfcChecks::new("sfc", charts, Severity::High, CommentDb::default());
+    Box::new(
+        checks.driving(&p, &Observability::default_for(p.dialect()), |s| {
+            TAGS.contains(&s.name())
+        }),
+    )
 }
 
 fn station(extra: Vec<Box<dyn CheckSet>>) -> CellEngine {
@@ -288,4 +304,99 @@ fn a_broken_end_switch_keeps_the_robots_wait_its_own_though_the_pressure_falls_l
     assert_eq!(marks(&s), [first_out("station-001")]);
     let robot = &raised(&s)[0];
     assert_eq!(robot.culprits[0].address, Signal::new("Y3.00"));
+}
+
+#[test]
+fn a_step_follows_from_the_hydraulics_through_the_valve_it_drives() {
+    let e = station(vec![chart()]);
+    let edges: BTreeSet<(String, String)> =
+        e.relation().edges().map(|x| (x.cause, x.effect)).collect();
+    // S1 (clamp) and S2 (weld) read the clamp valve the program drives
+    // from their flags; S1 holds the end switch the clamp's timer waits
+    // for.
+    assert_eq!(
+        edges,
+        BTreeSet::from([
+            ("hydraulic".into(), "sfc-C1-S1".into()),
+            ("hydraulic".into(), "sfc-C1-S2".into()),
+            ("hydraulic".into(), "station-001".into()),
+            ("hydraulic".into(), "station-002".into()),
+            ("sfc-C1-S1".into(), "station-002".into()),
+        ])
+    );
+}
+
+#[test]
+fn the_clamp_step_stuck_with_its_valve_dropped_is_the_hydraulics_consequence() {
+    let mut e = station(vec![chart()]);
+    idle(&mut e);
+    place(&mut e, 100);
+    // The pressure falls before the clamp closes: the valve drops and the
+    // clamp stops short of its end switch; the locating pin goes in.
+    assert_eq!(pressure_falls(&mut e, 300), [first_out("hydraulic")]);
+    set(&mut e, "X1.05", true, 500);
+    assert_eq!(marks(&e.advance(1_300)), [hydraulics("station-002")]);
+    assert_eq!(marks(&e.advance(1_600)), [first_out("station-001")]);
+    // S1 is stuck at 2.1 s waiting for "clamp closed": with the
+    // hydraulics normal, the valve it drives would be on. A consequence,
+    // through the valve.
+    let s = e.advance(2_100);
+    assert_eq!(marks(&s), [hydraulics("sfc-C1-S1")]);
+    assert_eq!(through(&e, "sfc-C1-S1"), [(Signal::new("Y2.00"), false)]);
+    let stuck = &raised(&s)[0];
+    assert!(
+        stuck
+            .message
+            .contains("t2 (Clamp closed) waits for X1.02 = 0"),
+        "{}",
+        stuck.message
+    );
+}
+
+#[test]
+fn the_clamp_step_stuck_with_its_valve_on_and_its_end_switch_broken_is_its_own() {
+    let mut e = station(vec![chart()]);
+    idle(&mut e);
+    place(&mut e, 100);
+    set(&mut e, "X1.05", true, 500);
+    // The end switch never makes, with the valve on: the clamp's timer and
+    // the robot's are first-outs, nothing being in fault.
+    assert_eq!(marks(&e.advance(1_300)), [first_out("station-002")]);
+    assert_eq!(marks(&e.advance(1_600)), [first_out("station-001")]);
+    // The pressure switch drops at 2.05 s; the PLC's fault coil and the
+    // valve it drops come in the next publish, after S1's deadline.
+    assert_eq!(
+        marks(&set(&mut e, "X1.01", false, 2_050)),
+        [first_out("hydraulic")]
+    );
+    // S1 stuck with the hydraulic fault active, but the valve it drives is
+    // on and would be on without the fault; "clamp closed" would still be
+    // missing. Its own first-out.
+    assert_eq!(marks(&e.advance(2_100)), [first_out("sfc-C1-S1")]);
+    let later = set_all(&mut e, &[("G10.00", true), ("Y2.00", false)], 2_150);
+    assert!(later.iter().all(|s| raised(s).is_empty()));
+}
+
+#[test]
+fn the_weld_step_stuck_with_the_valve_holding_its_part_dropped_follows_from_the_hydraulics() {
+    let mut e = station(vec![chart()]);
+    idle(&mut e);
+    place(&mut e, 100);
+    let closed = [
+        (500, "X1.05", true),
+        (1_100, "X1.02", true),
+        (1_100, "Y3.00", true),
+        (1_100, "R100.01", false),
+        (1_100, "R100.02", true),
+        (1_100, "Y2.02", false),
+    ];
+    for (at, a, v) in closed {
+        assert!(raised(&set(&mut e, a, v, at)).is_empty(), "{a} at {at}");
+    }
+    // The weld never finishes; the pressure falls meanwhile and drops the
+    // valve S2 holds the part with (and "part clamped" to the robot): S2
+    // stuck at 6.1 s follows from it.
+    assert_eq!(pressure_falls(&mut e, 3_000), [first_out("hydraulic")]);
+    set(&mut e, "Y3.00", false, 3_000);
+    assert_eq!(marks(&e.advance(6_100)), [hydraulics("sfc-C1-S2")]);
 }

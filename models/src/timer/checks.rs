@@ -130,23 +130,11 @@ impl TimerChecks {
                 (t.id, read)
             })
             .collect();
+        let signal = |name: &str| index(name).map(|s| signals[s].clone());
         let awaits = model
             .transitions
             .iter()
-            .filter_map(|t| {
-                let at = |e: &super::learn::Event| {
-                    let s = index(&e.tag)?;
-                    Some((signals[s].clone(), e.edge == Edge::Rise))
-                };
-                let request = t.trigger.as_ref().and_then(at);
-                Some((
-                    t.id,
-                    Awaited {
-                        event: at(&t.event)?,
-                        request,
-                    },
-                ))
-            })
+            .filter_map(|t| Some((t.id, Awaited::of(t, signal)?)))
             .collect();
         Ok(TimerChecks {
             awaits,
@@ -213,9 +201,9 @@ impl TimerChecks {
     /// (`<id>-<nnn>-drift`, `true`) `id` is.
     fn transition_of(&self, id: &str) -> Option<(u32, bool)> {
         let rest = id.strip_prefix(self.id.as_str())?.strip_prefix('-')?;
-        let number = rest.strip_suffix("-drift");
-        let drift = number.is_some();
-        let number = number.unwrap_or(rest);
+        let (number, drift) = rest
+            .strip_suffix("-drift")
+            .map_or((rest, false), |n| (n, true));
         let t = number
             .parse::<u32>()
             .ok()
@@ -354,9 +342,7 @@ impl CheckSet for TimerChecks {
     /// Whether transition `nnn`'s event would still not have come (or
     /// still have come early): [`Awaited::would_hold`].
     fn would_hold(&self, id: &str, instead: &[(Signal, bool)]) -> Option<bool> {
-        let (t, false) = self.transition_of(id)? else {
-            return None;
-        };
+        let t = self.transition_of(id).filter(|(_, drift)| !drift)?.0;
         let now = |s: &Signal| self.by_signal.get(s).and_then(|&i| self.monitor.value(i));
         self.awaits
             .get(&t)?
