@@ -400,3 +400,23 @@ fn the_weld_step_stuck_with_the_valve_holding_its_part_dropped_follows_from_the_
     set(&mut e, "Y3.00", false, 3_000);
     assert_eq!(marks(&e.advance(6_100)), [hydraulics("sfc-C1-S2")]);
 }
+
+#[test]
+fn a_step_stuck_though_its_transition_could_fire_is_not_the_hydraulics_doing() {
+    let mut e = station(vec![chart()]);
+    idle(&mut e);
+    place(&mut e, 100);
+    set(&mut e, "X1.05", true, 500);
+    assert_eq!(marks(&e.advance(1_300)), [first_out("station-002")]);
+    assert_eq!(marks(&e.advance(1_600)), [first_out("station-001")]);
+    // The pressure switch drops (the coil and the valve not yet read
+    // back); the end switch makes, but the chart does not step on.
+    assert_eq!(
+        marks(&set(&mut e, "X1.01", false, 2_050)),
+        [first_out("hydraulic")]
+    );
+    set(&mut e, "X1.02", true, 2_060);
+    // S1 stuck with t2 able to fire now: the hydraulics keep nothing from
+    // it.
+    assert_eq!(marks(&e.advance(2_100)), [first_out("sfc-C1-S1")]);
+}

@@ -177,13 +177,15 @@ impl SfcChecks {
             if !t.from.contains(&r) {
                 continue;
             }
-            match self
-                .needs
-                .get(&(r.chart, i))
-                .and_then(|sf| sf.certain(value))
-            {
-                Some(true) => return Some(false),
-                Some(false) => {}
+            let Some(needs) = self.needs.get(&(r.chart, i)) else {
+                continue;
+            };
+            // One that can fire now, the step stuck all the same, is not
+            // what the cause keeps from firing.
+            let now = needs.certain(|x| self.values.get(x).copied());
+            match needs.certain(value) {
+                Some(true) if now == Some(false) => return Some(false),
+                Some(_) => {}
                 None => unknown = true,
             }
         }
