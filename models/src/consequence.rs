@@ -23,11 +23,17 @@
 //!   applies both; they are no edges here).
 //!
 //! The relation only says what *may* follow. At run time an alarm raised
-//! while one of its causes is active is that cause's consequence only if
-//! every one of its culprits is explained by the cause: a signal the
-//! cause's fault holds, or one of the cause's own culprits. An alarm with a
-//! culprit of its own is never taken for a consequence; an edge written in
-//! the configuration explains whatever its effect names.
+//! while one of its causes is active is that cause's consequence when its
+//! fault would not hold with what the cause's fault holds taken back to
+//! its values without it ([`crate::engine::CheckSet::would_hold`]): a
+//! switching check's function; a transition timer's event, which would
+//! have come (its signal, or the request starting its timer, held by the
+//! fault: [`crate::timer::awaits`]); a stuck step's leaving transition,
+//! which could fire, or an output driven from its flag, which the fault
+//! took back ([`crate::sfc::SfcChecks::driving`]). Where a check cannot
+//! say, every one of its culprits must be explained by the cause: a signal
+//! the cause's fault holds, or one of the cause's own culprits. An edge
+//! written in the configuration explains whatever its effect names.
 
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write;

@@ -155,15 +155,23 @@ pub trait CheckSet: Send + Sync {
     /// The signals alarm `id`'s fault holds, each with the value it would
     /// have now without that fault: its coil (or contact) at its normal
     /// value, and each output the program derives from the coil
-    /// re-derived with the coil normal. `None`: not an alarm of this set,
-    /// or one whose held signals cannot be taken back.
-    fn without(&self, _id: &str) -> Option<Vec<(Signal, bool)>> {
+    /// re-derived with the coil normal, its other contacts at their values
+    /// `now` gives (the cell's, whichever set reads them). `None`: not an
+    /// alarm of this set, or one whose held signals cannot be taken back.
+    fn without(
+        &self,
+        _id: &str,
+        _now: &dyn Fn(&Signal) -> Option<bool>,
+    ) -> Option<Vec<(Signal, bool)>> {
         None
     }
 
     /// Whether alarm `id`'s fault would hold now with the signals of
     /// `instead` at the values given and every other at its own: the
-    /// counterfactual a consequence is judged by. `None`: not an alarm of
+    /// counterfactual a consequence is judged by. For a switching check,
+    /// its function; for a transition timer, whether its event would have
+    /// come ([`crate::timer::checks`]); for a stuck step, whether what it
+    /// waits for would ([`crate::sfc::SfcChecks`]). `None`: not an alarm of
     /// this set, or what it would be is unknown.
     fn would_hold(&self, _id: &str, _instead: &[(Signal, bool)]) -> Option<bool> {
         None

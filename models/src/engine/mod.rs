@@ -2042,15 +2042,23 @@ impl CellEngine {
     /// `cause`'s fault holds taken back to its normal values; `None` when
     /// the check sets cannot say (then the culprits decide).
     fn would_still_hold(&self, effect: &str, cause: &str) -> Option<bool> {
-        let normal = self.sets.iter().find_map(|s| s.without(cause))?;
+        let normal = self.held_normal(cause)?;
         self.sets.iter().find_map(|s| s.would_hold(effect, &normal))
+    }
+
+    /// What alarm `cause`'s fault holds, each signal with its value
+    /// without the fault ([`CheckSet::without`]), re-derived from the
+    /// cell's values now.
+    fn held_normal(&self, cause: &str) -> Option<Vec<(Signal, bool)>> {
+        let now = |s: &Signal| self.tag_index(s).and_then(|t| self.values[t]);
+        self.sets.iter().find_map(|s| s.without(cause, &now))
     }
 
     /// The signals `cause`'s fault holds that alarm `effect`'s check
     /// reads and that differ now from their values without the fault, each
     /// with its value now.
     fn through(&self, effect: &str, cause: &str) -> Vec<(Signal, bool)> {
-        let Some(normal) = self.sets.iter().find_map(|s| s.without(cause)) else {
+        let Some(normal) = self.held_normal(cause) else {
             return Vec::new();
         };
         let mut reads = Vec::new();

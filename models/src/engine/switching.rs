@@ -210,8 +210,12 @@ impl CheckSet for SwitchingChecks {
         }
     }
 
-    fn without(&self, id: &str) -> Option<Vec<(Signal, bool)>> {
-        self.held_normal(id)
+    fn without(
+        &self,
+        id: &str,
+        now: &dyn Fn(&Signal) -> Option<bool>,
+    ) -> Option<Vec<(Signal, bool)>> {
+        self.held_normal(id, now)
     }
 
     fn would_hold(&self, id: &str, instead: &[(Signal, bool)]) -> Option<bool> {
@@ -293,7 +297,11 @@ impl CheckSet for SwitchingChecks {
 impl SwitchingChecks {
     /// What alarm `id`'s fault holds, taken back: see
     /// [`CheckSet::without`].
-    fn held_normal(&self, id: &str) -> Option<Vec<(Signal, bool)>> {
+    fn held_normal(
+        &self,
+        id: &str,
+        now: &dyn Fn(&Signal) -> Option<bool>,
+    ) -> Option<Vec<(Signal, bool)>> {
         let check = &self.checks[*self.by_id.get(id)?];
         let normal = !check.polarity.fault_value();
         // A discrete alarm's function is its contact: the contact is what
@@ -309,7 +317,9 @@ impl SwitchingChecks {
                 if *x == held {
                     Some(normal)
                 } else {
-                    self.known_value(x)
+                    // An output's other contacts need not be this set's
+                    // (a valve driven by a chart's step flag).
+                    self.known_value(x).or_else(|| now(x))
                 }
             });
             if let Some(v) = value {

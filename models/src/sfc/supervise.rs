@@ -17,6 +17,15 @@
 //! when it has none of its own. The numbers are those known when the
 //! analysis is made: a number that moves without changing what the
 //! comparison says makes no new analysis.
+//!
+//! A stuck step raised while a cause is active is that cause's consequence
+//! when, with the signals the cause's fault holds taken back to their
+//! values without it, what the step waits for would be there: a
+//! transition leaving it could fire, or an output the program drives from
+//! the step's flag ([`SfcChecks::driving`]: the valve that makes the motion
+//! the step waits for) would be at another value (the cause took the
+//! step's command back). The step's own contacts at fault with its outputs
+//! as commanded keep it a first-out.
 
 use std::collections::{BTreeSet, HashMap, HashSet};
 
@@ -26,7 +35,8 @@ use crate::comments::CommentDb;
 use crate::engine::checks::read_with_compared;
 use crate::engine::{CheckSet, Declared, Finding};
 use crate::explain::{comment_of, explain_partial, read_comparisons, Culprit, Polarity};
-use crate::signal::Signal;
+use crate::program::Program;
+use crate::signal::{Observability, Signal};
 use crate::switching::SwitchingFunction;
 use crate::value::{Comparison, Num, Operand};
 
@@ -55,6 +65,8 @@ pub struct SfcChecks {
     deadlines: BTreeSet<(u64, StepRef)>,
     /// Steps whose stuck alarm is raised.
     stuck: HashSet<StepRef>,
+    /// Per step: the outputs the program drives from its flag.
+    drives: HashMap<StepRef, Vec<Signal>>,
 }
 
 impl SfcChecks {
@@ -111,6 +123,76 @@ impl SfcChecks {
             since: HashMap::new(),
             deadlines: BTreeSet::new(),
             stuck: HashSet::new(),
+            drives: HashMap::new(),
+        }
+    }
+
+    /// Reads, with each supervised step, the outputs `program` derives
+    /// from its flag (its actions: the valve of the motion it waits for)
+    /// over `observable`, those `is_tag` accepts: a cause that holds one
+    /// explains the step stuck.
+    #[must_use]
+    pub fn driving(
+        mut self,
+        program: &Program,
+        observable: &Observability,
+        is_tag: impl Fn(&Signal) -> bool,
+    ) -> SfcChecks {
+        for (r, step) in self.sfc.steps() {
+            if step.supervision_ms.is_none() {
+                continue;
+            }
+            let outputs: Vec<Signal> =
+                crate::consequence::forced_outputs(program, &step.flag, observable, &is_tag)
+                    .into_iter()
+                    .map(|sf| sf.coil)
+                    .collect();
+            for o in &outputs {
+                if !self.inputs.contains(o) {
+                    self.inputs.push(o.clone());
+                }
+            }
+            self.drives.insert(r, outputs);
+        }
+        self.inputs.sort();
+        self
+    }
+
+    /// Whether step `r` would still be stuck with the signals of
+    /// `instead` at their values and every other at its own: see the
+    /// module's documentation. `None` where an operand is unknown.
+    fn stuck_with(&self, r: StepRef, instead: &[(Signal, bool)]) -> Option<bool> {
+        let held = |x: &Signal| instead.iter().find(|(s, _)| s == x).map(|&(_, v)| v);
+        let value = |x: &Signal| held(x).or_else(|| self.values.get(x).copied());
+        if !value(&self.sfc.step(r).flag)? {
+            return Some(false);
+        }
+        let taken =
+            self.drives.get(&r).into_iter().flatten().any(
+                |o| matches!((held(o), self.values.get(o)), (Some(v), Some(&now)) if v != now),
+            );
+        let mut unknown = false;
+        let chart = &self.sfc.charts[r.chart];
+        for (i, t) in chart.transitions.iter().enumerate() {
+            if !t.from.contains(&r) {
+                continue;
+            }
+            let Some(needs) = self.needs.get(&(r.chart, i)) else {
+                continue;
+            };
+            // One that can fire now, the step stuck all the same, is not
+            // what the cause keeps from firing.
+            let now = needs.certain(|x| self.values.get(x).copied());
+            match needs.certain(value) {
+                Some(true) if now == Some(false) => return Some(false),
+                Some(_) => {}
+                None => unknown = true,
+            }
+        }
+        if taken {
+            Some(false)
+        } else {
+            (!unknown).then_some(true)
         }
     }
 
@@ -249,6 +331,9 @@ impl CheckSet for SfcChecks {
             return;
         };
         read_with_compared(step.flag.clone(), out);
+        for o in self.drives.get(&r).into_iter().flatten() {
+            read_with_compared(o.clone(), out);
+        }
         let chart = &self.sfc.charts[r.chart];
         for (i, t) in chart.transitions.iter().enumerate() {
             if !t.from.contains(&r) {
@@ -281,7 +366,8 @@ impl CheckSet for SfcChecks {
     }
 
     /// A stuck step reads and holds what the transitions leaving it wait
-    /// for: a timer waiting for the same operand follows from it.
+    /// for: a timer waiting for the same operand follows from it. It reads
+    /// the outputs driven from its flag too.
     fn facts(&self, out: &mut Vec<crate::consequence::AlarmFacts>) {
         for (r, s) in self.sfc.steps() {
             if s.supervision_ms.is_none() {
@@ -305,12 +391,23 @@ impl CheckSet for SfcChecks {
                     }
                 }
             }
+            let mut reads = waits.clone();
+            reads.extend(self.drives.get(&r).into_iter().flatten().cloned());
             out.push(crate::consequence::AlarmFacts {
                 id: self.alarm_id(r),
-                effects: waits.clone(),
-                reads: waits,
+                effects: waits,
+                reads,
             });
         }
+    }
+
+    fn would_hold(&self, id: &str, instead: &[(Signal, bool)]) -> Option<bool> {
+        let r = self
+            .sfc
+            .steps()
+            .map(|(r, _)| r)
+            .find(|&r| self.alarm_id(r) == id)?;
+        self.stuck_with(r, instead)
     }
 
     fn alarms(&self) -> Vec<Declared> {

@@ -12,9 +12,15 @@
 //! warning `<id>-<nnn>-drift`, not latched, says when they drift towards a
 //! limit or scatter, and clears by itself when they are back; their place
 //! in the window is [`CheckSet::window_positions`].
+//!
+//! A transition's alarm raised while a cause is active is that cause's
+//! consequence when its event would have come without the cause's fault
+//! ([`super::awaits`]: the event's signal, or the request that starts its
+//! timer, held by the fault).
 
 use std::collections::{BTreeMap, HashMap};
 
+use super::awaits::Awaited;
 use super::drift::{DriftRules, DriftTracker};
 use super::learn::{Edge, TimerModel};
 use super::monitor::{ModelError, Outcome, TimerMonitor};
@@ -56,6 +62,10 @@ pub struct TimerChecks {
     drift: Option<DriftRules>,
     /// Per transition id: its recent durations.
     trackers: BTreeMap<u32, DriftTracker>,
+    /// Per transition id: what its alarm waits for.
+    awaits: HashMap<u32, Awaited>,
+    /// Per transition id: whether its last alarm was late (else early).
+    late: HashMap<u32, bool>,
 }
 
 /// The id of transition `nnn`'s drift warning in timer check `check`:
@@ -120,7 +130,15 @@ impl TimerChecks {
                 (t.id, read)
             })
             .collect();
+        let signal = |name: &str| index(name).map(|s| signals[s].clone());
+        let awaits = model
+            .transitions
+            .iter()
+            .filter_map(|t| Some((t.id, Awaited::of(t, signal)?)))
+            .collect();
         Ok(TimerChecks {
+            awaits,
+            late: HashMap::new(),
             id: id.into(),
             severity,
             monitor,
@@ -179,6 +197,20 @@ impl TimerChecks {
         });
     }
 
+    /// The transition whose alarm (`<id>-<nnn>`, `false`) or drift warning
+    /// (`<id>-<nnn>-drift`, `true`) `id` is.
+    fn transition_of(&self, id: &str) -> Option<(u32, bool)> {
+        let rest = id.strip_prefix(self.id.as_str())?.strip_prefix('-')?;
+        let (number, drift) = rest
+            .strip_suffix("-drift")
+            .map_or((rest, false), |n| (n, true));
+        let t = number
+            .parse::<u32>()
+            .ok()
+            .filter(|t| format!("{t:03}") == number)?;
+        self.transitions.contains_key(&t).then_some((t, drift))
+    }
+
     /// The signals' comments (the tags' I/O-list comments): each alarm's
     /// culprit carries its signal's, and its message ends with it.
     #[must_use]
@@ -218,6 +250,7 @@ impl TimerChecks {
             let Some((what, s, expected, window)) = self.transitions.get(&id) else {
                 continue;
             };
+            self.late.insert(id, late);
             let message = match observed {
                 Some(ms) => format!(
                     "transition #{id:03} ({what}) too early: after {ms} ms, window [{}, {}] ms",
@@ -291,33 +324,35 @@ impl CheckSet for TimerChecks {
         self.signals.clone()
     }
 
-    /// A transition's alarm reads the event it waits for; a late event
-    /// holds nothing.
+    /// A transition's alarm reads the event it waits for and the request
+    /// that starts its timer; a late event holds nothing.
     fn facts(&self, out: &mut Vec<crate::consequence::AlarmFacts>) {
         for (t, (_, s, _, _)) in &self.transitions {
+            let mut reads = vec![self.signals[*s].clone()];
+            let request = self.awaits.get(t).and_then(|a| a.request.as_ref());
+            reads.extend(request.map(|(r, _)| r.clone()));
             out.push(crate::consequence::AlarmFacts {
                 id: format!("{}-{t:03}", self.id),
                 effects: Vec::new(),
-                reads: vec![self.signals[*s].clone()],
+                reads,
             });
         }
+    }
+
+    /// Whether transition `nnn`'s event would still not have come (or
+    /// still have come early): [`Awaited::would_hold`].
+    fn would_hold(&self, id: &str, instead: &[(Signal, bool)]) -> Option<bool> {
+        let t = self.transition_of(id).filter(|(_, drift)| !drift)?.0;
+        let now = |s: &Signal| self.by_signal.get(s).and_then(|&i| self.monitor.value(i));
+        self.awaits
+            .get(&t)?
+            .would_hold(*self.late.get(&t)?, instead, now)
     }
 
     /// Transition `nnn`'s start condition, trigger and event signals, for
     /// its alarm `<id>-<nnn>` and its drift warning `<id>-<nnn>-drift`.
     fn reads(&self, id: &str, out: &mut Vec<Signal>) {
-        let Some(rest) = id
-            .strip_prefix(self.id.as_str())
-            .and_then(|r| r.strip_prefix('-'))
-        else {
-            return;
-        };
-        let number = rest.strip_suffix("-drift").unwrap_or(rest);
-        let Some(t) = number
-            .parse::<u32>()
-            .ok()
-            .filter(|t| format!("{t:03}") == number)
-        else {
+        let Some((t, _)) = self.transition_of(id) else {
             return;
         };
         for &s in self.reads.get(&t).into_iter().flatten() {

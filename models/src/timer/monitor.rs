@@ -247,6 +247,11 @@ impl TimerMonitor {
         self.index.get(name).copied()
     }
 
+    /// Signal `s`'s value now, `None` while unknown.
+    pub fn value(&self, s: usize) -> Option<bool> {
+        self.values.get(s).copied().flatten()
+    }
+
     /// The signals, by index.
     pub fn signals(&self) -> &[String] {
         &self.signals
