@@ -59,8 +59,9 @@ pub struct AlarmFacts {
 /// Why one alarm may follow from another.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Link {
-    /// The effect's check reads this signal, which the cause's fault holds.
-    Reads(Signal),
+    /// The effect's check reads these signals, which the cause's fault
+    /// holds: every one, in the order the effect reads them.
+    Reads(Vec<Signal>),
     /// Written in the cell's configuration.
     Configured,
 }
@@ -79,7 +80,7 @@ pub struct Edge {
 /// Which alarms of a cell may follow from which.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct Relation {
-    /// Per effect: its causes, each with the first link found.
+    /// Per effect: its causes, each with its link.
     causes: BTreeMap<String, Vec<(String, Link)>>,
     /// Per alarm: the signals its fault holds.
     effects: HashMap<String, Vec<Signal>>,
@@ -106,8 +107,14 @@ impl Relation {
                         continue;
                     }
                     let list = causes.entry(f.id.clone()).or_default();
-                    if !list.iter().any(|(c, _)| c == cause) {
-                        list.push((cause.to_string(), Link::Reads(s.clone())));
+                    match list.iter_mut().find(|(c, _)| c == cause) {
+                        Some((_, Link::Reads(through))) => {
+                            if !through.contains(s) {
+                                through.push(s.clone());
+                            }
+                        }
+                        Some((_, Link::Configured)) => {}
+                        None => list.push((cause.to_string(), Link::Reads(vec![s.clone()]))),
                     }
                 }
             }
@@ -228,8 +235,19 @@ impl Relation {
         for e in &edges {
             let pair = format!("{} -> {}", e.cause, e.effect);
             let why = match &e.link {
-                Link::Reads(s) => {
-                    format!("{} reads {s}, which {}'s fault holds", e.effect, e.cause)
+                Link::Reads(through) => {
+                    let signals: Vec<String> = through.iter().map(ToString::to_string).collect();
+                    let them = if through.len() == 1 {
+                        "which"
+                    } else {
+                        "each of which"
+                    };
+                    format!(
+                        "{} reads {}, {them} {}'s fault holds",
+                        e.effect,
+                        signals.join(", "),
+                        e.cause
+                    )
                 }
                 Link::Configured => "written in the configuration".to_string(),
             };
@@ -294,6 +312,31 @@ mod tests {
             trigger: true,
             compared: None,
         }
+    }
+
+    #[test]
+    fn an_edge_names_every_held_signal_it_runs_through() {
+        // The clamp reads the pump contactor and the valve, both held by
+        // the hydraulic fault; the coolant reads the contactor only.
+        let r = Relation::derive(&[
+            facts("hydraulic", &["K1", "Y2.00"], &["X1.00"]),
+            facts("clamp", &[], &["Y2.00", "X1.02", "K1"]),
+            facts("coolant", &[], &["K1"]),
+        ]);
+        assert_eq!(
+            r.causes_of("clamp"),
+            [(
+                "hydraulic".to_string(),
+                Link::Reads(vec![Signal::new("Y2.00"), Signal::new("K1")])
+            )]
+        );
+        assert_eq!(
+            r.render().lines().take(2).collect::<Vec<_>>(),
+            [
+                "hydraulic -> clamp     clamp reads Y2.00, K1, each of which hydraulic's fault holds",
+                "hydraulic -> coolant   coolant reads K1, which hydraulic's fault holds",
+            ]
+        );
     }
 
     #[test]
