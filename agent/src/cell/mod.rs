@@ -17,6 +17,7 @@ mod commands;
 pub mod compile;
 pub mod force;
 pub mod forcing;
+mod gaps;
 mod plc;
 mod reload;
 pub mod restore;
@@ -87,6 +88,8 @@ pub struct CellLoop {
     /// Refusals before a signature was verified, counted per source and
     /// reason for the journal's summaries (bounded).
     refusals: Refusals,
+    /// Changes lost for good (gaps), warned of at most once a minute.
+    gaps: crate::clock::Every,
     /// Recent verified commands' outcomes, for a client that sends one
     /// again (its answer lost, the agent restarted).
     answers: answers::Answers,
@@ -193,6 +196,7 @@ impl CellLoop {
             forcing: forcing::Forcing::default(),
             timers: timers::Timers::default(),
             refusals: Refusals::default(),
+            gaps: crate::clock::Every::new(Duration::from_secs(60)),
             answers: answers::Answers::default(),
             allowance: 0,
             tasks: None,
@@ -542,11 +546,7 @@ impl CellLoop {
             ),
             SourceEvent::Resumed => (Input::Readings, self.engine.on_resumed(now)),
             SourceEvent::Gap { tags, values, why } => {
-                tracing::warn!(cell = %self.cell, %why, "changes lost: alarms judged across the gap say trigger uncertain");
-                (
-                    Input::Readings,
-                    self.engine.on_gap(tags.as_deref(), values, &why),
-                )
+                (Input::Readings, self.lost(tags.as_deref(), values, &why))
             }
         };
         self.dispatch(now, input, step, queue_depth).await;
