@@ -23,7 +23,7 @@ use std::rc::Rc;
 
 use roxmltree::Node;
 
-use super::names::{split, NotSignal};
+use super::names::{number, split, NotSignal};
 use super::{Frame, Ins, Reader, RungCtx, MAX_CALL_DEPTH};
 use crate::il::plcopen::{emit, Flow};
 use crate::il::{Instruction, Operand, Operation, Outside};
@@ -231,7 +231,7 @@ impl<'d> Reader<'_, 'd> {
                         Binding::Member(p.name.to_string())
                     }
                     _ => {
-                        let argument = if super::instructions::number(text).is_some() {
+                        let argument = if number(text).is_some() {
                             Some(Argument::Number(text.clone()))
                         } else {
                             match self.signal(rung.frame, text, Access::Read) {

@@ -35,7 +35,7 @@ use std::rc::Rc;
 use roxmltree::Node;
 
 use super::aoi::{Access, Scope};
-use super::instructions::number;
+use super::names::number;
 use super::names::NotSignal;
 use super::{Frame, Reader, MAX_CALL_DEPTH};
 use crate::il::plcopen::{emit, shared, Flow, MAX_DEPTH};

@@ -5,7 +5,8 @@
 use std::collections::HashSet;
 
 use super::aoi::Access;
-use super::{names::NotSignal, Frame, Ins, Reader, RungCtx, MAX_CALL_DEPTH};
+use super::names::{number, NotSignal};
+use super::{Frame, Ins, Reader, RungCtx, MAX_CALL_DEPTH};
 use crate::il::plcopen::{emit, Flow};
 use crate::il::{Instruction, Operand, Operation, Outside};
 use crate::signal::Signal;
@@ -495,24 +496,6 @@ fn mirror(op: CmpOp) -> CmpOp {
         CmpOp::Le => CmpOp::Ge,
         other => other,
     }
-}
-
-/// A Logix number: `12`, `-1`, `1.5`, `2.0e3`, `16#FF`, `2#0101_1010`, `8#17`.
-pub(super) fn number(text: &str) -> Option<f64> {
-    let t = text.replace('_', "");
-    let (negative, t) = match t.strip_prefix('-') {
-        Some(rest) => (true, rest.to_string()),
-        None => (false, t),
-    };
-    let value = if let Some((radix, digits)) = t.split_once('#') {
-        let radix: u32 = radix.parse().ok().filter(|r| matches!(r, 2 | 8 | 16))?;
-        i64::from_str_radix(digits, radix).ok()? as f64
-    } else if t.starts_with(|c: char| c.is_ascii_digit()) {
-        t.parse::<f64>().ok().filter(|v| v.is_finite())?
-    } else {
-        return None;
-    };
-    Some(if negative { -value } else { value })
 }
 
 /// A number as the comparison contact writes it: integers without a point.

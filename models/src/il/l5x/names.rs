@@ -367,6 +367,24 @@ fn module_comments(controller: Node<'_, '_>) -> Vec<(String, String, String)> {
     out
 }
 
+/// A Logix number: `12`, `-1`, `1.5`, `2.0e3`, `16#FF`, `2#0101_1010`, `8#17`.
+pub(super) fn number(text: &str) -> Option<f64> {
+    let t = text.replace('_', "");
+    let (negative, t) = match t.strip_prefix('-') {
+        Some(rest) => (true, rest.to_string()),
+        None => (false, t),
+    };
+    let value = if let Some((radix, digits)) = t.split_once('#') {
+        let radix: u32 = radix.parse().ok().filter(|r| matches!(r, 2 | 8 | 16))?;
+        i64::from_str_radix(digits, radix).ok()? as f64
+    } else if t.starts_with(|c: char| c.is_ascii_digit()) {
+        t.parse::<f64>().ok().filter(|v| v.is_finite())?
+    } else {
+        return None;
+    };
+    Some(if negative { -value } else { value })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
