@@ -24,49 +24,11 @@ use std::rc::Rc;
 use roxmltree::Node;
 
 use super::names::{number, split, NotSignal};
+use super::scope::{Access, Argument, Binding, Scope};
 use super::{Frame, Ins, Reader, RungCtx, MAX_CALL_DEPTH};
 use crate::il::plcopen::{emit, Flow};
 use crate::il::{Instruction, Operand, Operation, Outside};
 use crate::signal::Signal;
-
-/// The names an Add-On Instruction's logic uses, bound for one call.
-pub(super) struct Scope {
-    /// The instance tag's signal name (`Perm1`, `Program:Main.Perm1`).
-    instance: String,
-    /// Lower-case parameter or local tag name → what it stands for.
-    bound: HashMap<String, Binding>,
-    /// Inputs the logic has written (lower case): read from the member
-    /// since.
-    written: RefCell<HashSet<String>>,
-}
-
-/// What a parameter or local tag of a definition stands for in one call.
-enum Binding {
-    /// A member of the instance, by its path under it (`Out`,
-    /// `LocalBool`, or an alias parameter's target).
-    Member(String),
-    /// An input given an operand: read as that operand until the logic
-    /// writes the member.
-    Input { member: String, argument: Argument },
-    /// An `InOut`: the caller's tag itself, by reference.
-    Reference(String),
-}
-
-/// An input's operand.
-enum Argument {
-    /// The caller's tag, as a signal name.
-    Signal(String),
-    /// A number (`1`, `0`).
-    Number(String),
-}
-
-/// Whether a name is read or written (an input's member is written,
-/// never its operand).
-#[derive(Clone, Copy, PartialEq, Eq)]
-pub(super) enum Access {
-    Read,
-    Write,
-}
 
 /// A parameter of a definition, as declared.
 struct Parameter<'d> {

@@ -34,9 +34,9 @@ use std::rc::Rc;
 
 use roxmltree::Node;
 
-use super::aoi::{Access, Scope};
 use super::names::number;
 use super::names::NotSignal;
+use super::scope::{Access, Scope};
 use super::{Frame, Reader, MAX_CALL_DEPTH};
 use crate::il::plcopen::{emit, shared, Flow, MAX_DEPTH};
 use crate::il::{Instruction, Operand, Operation, Outside};

@@ -4,8 +4,8 @@
 
 use std::collections::HashSet;
 
-use super::aoi::Access;
 use super::names::{number, NotSignal};
+use super::scope::Access;
 use super::{Frame, Ins, Reader, RungCtx, MAX_CALL_DEPTH};
 use crate::il::plcopen::{emit, Flow};
 use crate::il::{Instruction, Operand, Operation, Outside};

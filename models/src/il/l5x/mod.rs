@@ -49,6 +49,7 @@
 mod aoi;
 mod names;
 mod rung;
+mod scope;
 
 use std::collections::{HashMap, HashSet};
 use std::rc::Rc;
@@ -184,7 +185,7 @@ struct Frame<'d> {
     /// ANDed into every output: a conditional call's reason.
     guard: Flow,
     /// The bindings of the Add-On Instruction whose logic this is.
-    aoi: Option<Rc<aoi::Scope>>,
+    aoi: Option<Rc<scope::Scope>>,
 }
 
 struct Reader<'a, 'd> {
