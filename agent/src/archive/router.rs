@@ -53,9 +53,9 @@ pub struct PlantRouter {
 impl PlantRouter {
     /// Reads `path` (JSON5, as `zenohd -c` does) and starts the router.
     pub async fn start_from(path: &Path) -> Result<PlantRouter, RouterError> {
-        let config = zenoh::Config::from_file(path).map_err(|e| RouterError::Config {
+        let config = crate::config::zenoh_file(path).map_err(|problem| RouterError::Config {
             path: path.to_path_buf(),
-            problem: e.to_string(),
+            problem,
         })?;
         PlantRouter::start(config, path).await
     }

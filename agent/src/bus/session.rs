@@ -58,10 +58,10 @@ pub enum ZenohError {
 /// that would not be TLS-only.
 pub fn session_config(c: &ZenohConfig) -> Result<zenoh::Config, ZenohError> {
     let mut cfg = match &c.config_file {
-        Some(path) => zenoh::Config::from_file(path).map_err(|e| ZenohError::Config {
+        Some(path) => crate::config::zenoh_file(path).map_err(|reason| ZenohError::Config {
             key: "config_file".into(),
             value: path.display().to_string(),
-            reason: e.to_string(),
+            reason,
         })?,
         None => zenoh::Config::default(),
     };

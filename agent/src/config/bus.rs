@@ -24,6 +24,27 @@ impl ZenohMode {
     }
 }
 
+/// A Zenoh configuration file (JSON5, or YAML by its extension), read as
+/// Zenoh reads it; the error is what a reader can act on: the file
+/// missing, or Zenoh's words without the place in Zenoh's own source its
+/// errors end with.
+///
+/// # Errors
+/// The file cannot be read, or Zenoh refuses it.
+pub fn zenoh_file(path: &std::path::Path) -> Result<zenoh::Config, String> {
+    if let Err(e) = std::fs::metadata(path) {
+        return Err(e.to_string());
+    }
+    zenoh::Config::from_file(path).map_err(|e| {
+        let said = e.to_string();
+        // `… at /…/zenoh-config-1.10.2/src/lib.rs:1507.`
+        match said.rsplit_once(" at ") {
+            Some((words, place)) if place.contains(".rs:") => words.to_string(),
+            _ => said,
+        }
+    })
+}
+
 /// Why `endpoint` cannot carry a secure bus, if it cannot. The bus runs
 /// mutual TLS over QUIC (`quic/host:port`). Zenoh's TLS-over-TCP link
 /// (`tls/`) is refused: it reads and writes one TLS stream from two
@@ -92,4 +113,19 @@ pub struct ZenohTls {
     pub cert: PathBuf,
     /// Its private key.
     pub key: PathBuf,
+}
+
+#[cfg(test)]
+mod zenoh_file_tests {
+    #[test]
+    fn a_zenoh_file_that_does_not_read_is_said_without_zenoh_s_source_place() {
+        let dir = tempfile::tempdir().unwrap();
+        let missing = super::zenoh_file(&dir.path().join("router.json5")).unwrap_err();
+        assert!(missing.contains("No such file"), "{missing}");
+        let bad = dir.path().join("bad.json5");
+        std::fs::write(&bad, "{ mode: ").unwrap();
+        let said = super::zenoh_file(&bad).unwrap_err();
+        assert!(!said.contains(".rs:"), "{said}");
+        assert!(!said.is_empty());
+    }
 }

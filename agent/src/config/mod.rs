@@ -30,7 +30,9 @@ mod validate;
 
 pub use alarm_server::AlarmServerConfig;
 pub use alertmanager::{AlertmanagerConfig, AlertmanagerTls, DEFAULT_RESEND};
-pub use bus::{cell_prefix, link_problem, ZenohConfig, ZenohMode, ZenohTls, DEFAULT_ROOT};
+pub use bus::{
+    cell_prefix, link_problem, zenoh_file, ZenohConfig, ZenohMode, ZenohTls, DEFAULT_ROOT,
+};
 pub use cell::{
     CellConfig, JournalConfig, Keep, PlantOperatorsConfig, DEFAULT_MAX_SHELVE, FIXED_PARTS,
     JOURNAL_TABLES, MAX_SHELVE_LIMIT,

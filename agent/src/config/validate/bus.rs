@@ -32,7 +32,7 @@ impl Validator<'_> {
         });
         let config_file = raw.config_file.map(|f| {
             let path = self.path(f.get_ref());
-            if let Err(e) = zenoh::Config::from_file(&path) {
+            if let Err(e) = crate::config::zenoh_file(&path) {
                 self.problem(
                     f.span(),
                     "zenoh.config_file",
