@@ -37,6 +37,16 @@ pub enum RouterError {
         /// What is wrong.
         problem: &'static str,
     },
+    /// The archive's section names what `cellwatch router` cannot keep.
+    #[error("{path}: plugins.storage_manager.{key}: {problem}")]
+    Archive {
+        /// The file.
+        path: PathBuf,
+        /// The key under the storage manager's section.
+        key: String,
+        /// What is wrong.
+        problem: String,
+    },
     /// Zenoh could not start the router (a port taken, a certificate
     /// missing).
     #[error("the router did not start: {0}")]
@@ -96,6 +106,18 @@ impl PlantRouter {
                 ));
             }
         }
+        if archives {
+            let section = config
+                .get_json(&format!("plugins/{STORAGE_MANAGER}"))
+                .ok()
+                .and_then(|v| serde_json::from_str::<serde_json::Value>(&v).ok())
+                .unwrap_or_default();
+            archive_problem(&section).map_err(|(key, problem)| RouterError::Archive {
+                path: origin.to_path_buf(),
+                key,
+                problem,
+            })?;
+        }
         let mut plugins = PluginsManager::static_plugins_only();
         if archives {
             zenoh_plugin_storage_manager::declare_static_backend::<SqliteVolume>();
@@ -139,5 +161,107 @@ impl PlantRouter {
         if let Err(e) = self.runtime.close().await {
             tracing::warn!("the router did not close cleanly: {e}");
         }
+    }
+}
+
+/// What in the storage manager's section `cellwatch router` cannot keep,
+/// as the key under it and why: a volume other than the SQLite one (no
+/// backend library is loaded) or one without its folder, a storage
+/// without a key expression or naming a volume that is not there, a
+/// retention that is not a duration. Zenoh's storage manager would log
+/// these and run without the storage; a router that keeps nothing of
+/// what it was told to keep must not start.
+fn archive_problem(section: &serde_json::Value) -> Result<(), (String, String)> {
+    use super::volume::VOLUME;
+    let mut volumes = vec!["memory".to_string()];
+    for (name, v) in section["volumes"].as_object().into_iter().flatten() {
+        let backend = v["backend"].as_str().unwrap_or(name);
+        if backend != VOLUME {
+            return Err((
+                format!("volumes.{name}"),
+                format!("backend `{backend}`: cellwatch router has the `{VOLUME}` volume only (and Zenoh's `memory`)"),
+            ));
+        }
+        if v["dir"].as_str().is_none_or(str::is_empty) {
+            return Err((
+                format!("volumes.{name}.dir"),
+                "the folder of the archive's SQLite files is required".into(),
+            ));
+        }
+        volumes.push(name.clone());
+    }
+    for (name, st) in section["storages"].as_object().into_iter().flatten() {
+        if st["key_expr"].as_str().is_none() {
+            return Err((format!("storages.{name}.key_expr"), "required".into()));
+        }
+        let volume = st["volume"].as_str().or(st["volume"]["id"].as_str());
+        match volume {
+            Some(v) if volumes.iter().any(|known| known == v) => {}
+            Some(v) => {
+                return Err((
+                    format!("storages.{name}.volume"),
+                    format!(
+                        "`{v}` is no volume of this section (volumes: {})",
+                        volumes.join(", ")
+                    ),
+                ))
+            }
+            None => return Err((format!("storages.{name}.volume"), "required".into())),
+        }
+        if let Some(r) = st["volume"].get("retention") {
+            let fine = r
+                .as_str()
+                .and_then(|t| humantime::parse_duration(t).ok())
+                .is_some_and(|d| !d.is_zero());
+            if !fine {
+                return Err((
+                    format!("storages.{name}.volume.retention"),
+                    format!("{r}: a duration such as \"90d\""),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::archive_problem;
+
+    fn problem(section: &str) -> Option<(String, String)> {
+        archive_problem(&serde_json::from_str(section).unwrap()).err()
+    }
+
+    #[test]
+    fn an_archive_the_router_cannot_keep_is_refused_at_its_key() {
+        let good = r#"{"volumes": {"sqlite": {"dir": "/var/lib/cellwatch/archive"}},
+            "storages": {"alarms": {"key_expr": "cellwatch/*/alarms/**",
+                                    "volume": {"id": "sqlite", "retention": "90d"}}}}"#;
+        assert_eq!(problem(good), None);
+        let key = |s: &str| problem(s).map(|(k, _)| k);
+        assert_eq!(
+            key(r#"{"volumes": {"sqlite": {}}}"#).as_deref(),
+            Some("volumes.sqlite.dir")
+        );
+        assert_eq!(
+            key(r#"{"volumes": {"fs": {"backend": "filesystem"}}}"#).as_deref(),
+            Some("volumes.fs")
+        );
+        assert_eq!(
+            key(r#"{"storages": {"a": {"key_expr": "x/**", "volume": "sqlite"}}}"#).as_deref(),
+            Some("storages.a.volume")
+        );
+        assert_eq!(
+            key(r#"{"storages": {"a": {"volume": "memory"}}}"#).as_deref(),
+            Some("storages.a.key_expr")
+        );
+        assert_eq!(
+            key(
+                r#"{"volumes": {"sqlite": {"dir": "/a"}}, "storages": {"a": {"key_expr": "x/**",
+                "volume": {"id": "sqlite", "retention": "soon"}}}}"#
+            )
+            .as_deref(),
+            Some("storages.a.volume.retention")
+        );
     }
 }

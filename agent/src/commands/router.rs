@@ -13,9 +13,9 @@ pub(crate) async fn run(args: &Args, out: &mut dyn Write) -> Result<(), Failure>
     let router = PlantRouter::start_from(&args.config)
         .await
         .map_err(|e| match e {
-            e @ (RouterError::Config { .. } | RouterError::NotARouter { .. }) => {
-                Failure::Input(e.to_string())
-            }
+            e @ (RouterError::Config { .. }
+            | RouterError::NotARouter { .. }
+            | RouterError::Archive { .. }) => Failure::Input(e.to_string()),
             e @ RouterError::Start(_) => Failure::Runtime(e.to_string()),
         })?;
     writeln!(
