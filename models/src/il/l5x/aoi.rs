@@ -219,18 +219,13 @@ impl<'d> Reader<'_, 'd> {
                 .entry(local.to_ascii_lowercase())
                 .or_insert_with(|| Binding::Member(local.to_string()));
         }
-        let condition = Flow::and(vec![rung.prefix(self.cut.as_ref()), flow.clone()]);
-        let guard = if condition == Flow::True {
-            Flow::True
-        } else {
-            Flow::Opaque(
-                format!(
-                    "routine {}, rung {}: '{}' runs the logic of Add-On Instruction '{name}' only when the rung is true, so what it writes may not be written every scan",
-                    rung.frame.routine, rung.number, i.text
-                ),
-                place,
-            )
-        };
+        let guard = self.call_guard(
+            i,
+            &flow,
+            rung,
+            place,
+            &format!("the logic of Add-On Instruction '{name}'"),
+        );
         let scope = Rc::new(Scope {
             instance: instance.clone(),
             bound,

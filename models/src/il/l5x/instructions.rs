@@ -320,6 +320,31 @@ impl<'d> Reader<'_, 'd> {
         }
     }
 
+    /// What a call on this rung (a `JSR`, an Add-On Instruction) writes
+    /// under: nothing when the rung is always true at the call, else an
+    /// opaque condition saying that `what` runs only when the rung is
+    /// true, so that what it writes is not derivable.
+    pub(super) fn call_guard(
+        &self,
+        i: &Ins,
+        flow: &Flow,
+        rung: &RungCtx<'_, 'd>,
+        place: Location,
+        what: &str,
+    ) -> Flow {
+        let condition = Flow::and(vec![rung.prefix(self.cut.as_ref()), flow.clone()]);
+        if condition == Flow::True {
+            return Flow::True;
+        }
+        Flow::Opaque(
+            format!(
+                "routine {}, rung {}: '{}' runs {what} only when the rung is true, so what it writes may not be written every scan",
+                rung.frame.routine, rung.number, i.text
+            ),
+            place,
+        )
+    }
+
     /// `JSR(Routine,...)`: the routine runs here, on this rung's condition.
     fn call(
         &mut self,
@@ -352,18 +377,7 @@ impl<'d> Reader<'_, 'd> {
             );
             return;
         }
-        let condition = Flow::and(vec![rung.prefix(self.cut.as_ref()), flow.clone()]);
-        let guard = if condition == Flow::True {
-            Flow::True
-        } else {
-            Flow::Opaque(
-                format!(
-                    "routine {}, rung {}: '{}' runs routine {target} only when the rung is true, so what it writes may not be written every scan",
-                    rung.frame.routine, rung.number, i.text
-                ),
-                place,
-            )
-        };
+        let guard = self.call_guard(i, flow, rung, place, &format!("routine {target}"));
         let mut calls = rung.frame.calls.clone();
         calls.push(upper);
         let frame = Frame {
