@@ -712,6 +712,48 @@ async fn kim_acks(
         .unwrap()
 }
 
+/// The simulated CNC, and a plant made in `dir` around it: router
+/// `router-1` on loopback and cell `m01` of area `a` watching the CNC,
+/// its `/metrics` on a free port.
+async fn one_cell_plant(dir: &Path) -> SimulatedCnc {
+    let sim = SimulatedCnc::start(&SimOptions {
+        listen: "127.0.0.1:0".parse().unwrap(),
+        pki_dir: dir.join("sim-pki"),
+        insecure: false,
+        decoy: None,
+    })
+    .await
+    .unwrap();
+    let run = |args: &[&str]| {
+        plant_async(
+            dir.to_path_buf(),
+            args.iter().map(|a| a.to_string()).collect(),
+        )
+    };
+    let r = run(&["init", "--router", "router-1=127.0.0.1"]).await;
+    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    let config = cell_config(dir, "m01");
+    let metrics = free_tcp_port().to_string();
+    let r = run(&[
+        "add-cell",
+        "--cell",
+        "m01",
+        "--area",
+        "a",
+        "--host",
+        "127.0.0.1",
+        "--plc",
+        &sim.endpoint(),
+        "--config",
+        &config,
+        "--metrics",
+        &metrics,
+    ])
+    .await;
+    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    sim
+}
+
 /// Cell `id`'s agent as the plant made it, keeping its operators list
 /// where the host would (`dir/state-<id>`, seeded from the plant's tree
 /// at first start).

@@ -9,11 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use cellwatch::sim::cnc::{SimOptions, SimulatedCnc};
-
-use super::{
-    agent_config, cell_config, free_tcp_port, plant_async, plant_router, router_config, Ran,
-};
+use super::{agent_config, plant_async, plant_router, router_config, Ran};
 
 /// `cellwatch ARGS`, off the test's runtime.
 async fn cellwatch(args: Vec<String>) -> Ran {
@@ -88,37 +84,9 @@ async fn until(dir: &Path, port: u16, what: &str, seen: impl Fn(&str) -> bool) -
 async fn a_cells_history_is_read_from_the_plant_archive_after_its_agent_is_gone() {
     let d = tempfile::tempdir().unwrap();
     let dir = d.path().to_path_buf();
-    let sim = SimulatedCnc::start(&SimOptions {
-        listen: "127.0.0.1:0".parse().unwrap(),
-        pki_dir: dir.join("sim-pki"),
-        insecure: false,
-        decoy: None,
-    })
-    .await
-    .unwrap();
+    let sim = super::one_cell_plant(&dir).await;
     let run =
         |args: &[&str]| plant_async(dir.clone(), args.iter().map(|a| a.to_string()).collect());
-    let r = run(&["init", "--router", "router-1=127.0.0.1"]).await;
-    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
-    let config = cell_config(&dir, "m01");
-    let metrics = free_tcp_port().to_string();
-    let r = run(&[
-        "add-cell",
-        "--cell",
-        "m01",
-        "--area",
-        "a",
-        "--host",
-        "127.0.0.1",
-        "--plc",
-        &sim.endpoint(),
-        "--config",
-        &config,
-        "--metrics",
-        &metrics,
-    ])
-    .await;
-    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
     let kim = cellwatch::operator::OperatorKey::generate("kim");
     let r = run(&[
         "add-operator",

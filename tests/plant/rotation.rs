@@ -3,47 +3,15 @@
 
 use std::time::Duration;
 
-use cellwatch::sim::cnc::{SimOptions, SimulatedCnc};
-
-use super::{agent_config, cell_config, free_tcp_port, plant_async, plant_router};
+use super::{agent_config, plant_async, plant_router};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn a_signing_key_is_rotated_with_an_overlap_and_a_certificate_renewed() {
     let d = tempfile::tempdir().unwrap();
     let dir = d.path().to_path_buf();
-    let sim = SimulatedCnc::start(&SimOptions {
-        listen: "127.0.0.1:0".parse().unwrap(),
-        pki_dir: dir.join("sim-pki"),
-        insecure: false,
-        decoy: None,
-    })
-    .await
-    .unwrap();
+    let sim = super::one_cell_plant(&dir).await;
     let run =
         |args: &[&str]| plant_async(dir.clone(), args.iter().map(|a| a.to_string()).collect());
-    assert_eq!(
-        run(&["init", "--router", "router-1=127.0.0.1"]).await.code,
-        0
-    );
-    let config = cell_config(&dir, "m01");
-    let metrics = free_tcp_port().to_string();
-    let r = run(&[
-        "add-cell",
-        "--cell",
-        "m01",
-        "--area",
-        "a",
-        "--host",
-        "127.0.0.1",
-        "--plc",
-        &sim.endpoint(),
-        "--config",
-        &config,
-        "--metrics",
-        &metrics,
-    ])
-    .await;
-    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
     let (router, port) = plant_router(&dir).await;
     let connect = format!("quic/127.0.0.1:{port}");
     let start = || async {
