@@ -43,6 +43,9 @@ use crate::util::root;
 /// The namespace the asyncua and open62541 servers serve their tags in.
 pub(crate) const URI: &str = "urn:cellwatch:test:asyncua:plc";
 
+/// How long a server is given to be gone after `quit`.
+const STOPPED_WITHIN: Duration = Duration::from_secs(20);
+
 /// The asyncua release the interoperability is checked against.
 const ASYNCUA: &str = "asyncua==2.1.0";
 
@@ -176,10 +179,24 @@ impl StackServer {
         writeln!(self.stdin, "{command}").unwrap();
     }
 
-    /// Stops it: `quit`, and the process waited for.
+    /// Stops it: `quit`, and the process waited for; killed if it is not
+    /// gone within [`STOPPED_WITHIN`] (a stack's own shutdown that waits on
+    /// a connection is not what a test is about).
     pub(crate) fn stop(mut self) {
         use std::io::Write;
         let _ = writeln!(self.stdin, "quit");
+        let deadline = std::time::Instant::now() + STOPPED_WITHIN;
+        while matches!(self.child.try_wait(), Ok(None)) {
+            if std::time::Instant::now() > deadline {
+                eprintln!(
+                    "{} server: not gone {STOPPED_WITHIN:?} after quit, killed",
+                    self.name
+                );
+                let _ = self.child.kill();
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
         let _ = self.child.wait();
     }
 
