@@ -177,7 +177,7 @@ fn history_page() -> String {
 }
 
 /// A kept-alive HTTP/1.1 connection to the console.
-struct Connection {
+pub struct Connection {
     stream: TcpStream,
     host: String,
     buffered: Vec<u8>,
@@ -185,7 +185,7 @@ struct Connection {
 
 impl Connection {
     /// Connects to `addr` from `from` (the system's choice when `None`).
-    async fn open(addr: SocketAddr, from: Option<IpAddr>) -> std::io::Result<Connection> {
+    pub async fn open(addr: SocketAddr, from: Option<IpAddr>) -> std::io::Result<Connection> {
         let socket = tokio::net::TcpSocket::new_v4()?;
         if let Some(ip) = from {
             socket.bind(SocketAddr::new(ip, 0))?;
@@ -200,7 +200,7 @@ impl Connection {
     }
 
     /// Writes a request; `cookie` is a `Cookie` header line's value.
-    async fn send(
+    pub async fn send(
         &mut self,
         method: &str,
         path: &str,
@@ -221,7 +221,7 @@ impl Connection {
     }
 
     /// Reads the head of an answer: its status and header lines.
-    async fn head(&mut self) -> std::io::Result<(u16, Vec<String>)> {
+    pub async fn head(&mut self) -> std::io::Result<(u16, Vec<String>)> {
         let end = loop {
             if let Some(i) = self.buffered.windows(4).position(|w| w == b"\r\n\r\n") {
                 break i;
@@ -239,7 +239,7 @@ impl Connection {
     }
 
     /// Reads a whole answer (its length given): status, headers, body.
-    async fn answer(&mut self) -> std::io::Result<(u16, Vec<String>, Vec<u8>)> {
+    pub async fn answer(&mut self) -> std::io::Result<(u16, Vec<String>, Vec<u8>)> {
         let (status, headers) = self.head().await?;
         let length = headers
             .iter()
@@ -267,7 +267,7 @@ impl Connection {
     }
 
     /// A GET answered in full: its status.
-    async fn get(&mut self, path: &str, cookie: &str) -> std::io::Result<u16> {
+    pub async fn get(&mut self, path: &str, cookie: &str) -> std::io::Result<u16> {
         self.send("GET", path, cookie, "").await?;
         Ok(self.answer().await?.0)
     }
@@ -275,7 +275,7 @@ impl Connection {
 
 /// Signs `key`'s operator in from `from` as the page does: the session
 /// cookie (`name=value`).
-async fn sign_in(
+pub async fn sign_in(
     addr: SocketAddr,
     from: Option<IpAddr>,
     key: &cellwatch::operator::OperatorKey,

@@ -13,9 +13,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, Context};
 
+use crate::alarms::{self, Generator};
+use crate::cell::{self, Load, Security};
 use crate::load::LoadServer;
 use crate::measure;
-use crate::peer::{self, Generator, Load, Security};
 
 /// How a fan-out run is set up.
 #[derive(Debug, Clone)]
@@ -38,7 +39,7 @@ pub struct Setup {
 
 /// Serves as a Zenoh router on `listen` until killed.
 pub async fn router(listen: &str) -> anyhow::Result<()> {
-    let config = peer::zenoh_config("router", &[listen.to_string()], &[])?;
+    let config = cell::zenoh_config("router", &[listen.to_string()], &[])?;
     let _session = zenoh::open(config).await.map_err(|e| anyhow!("{e}"))?;
     println!("ready");
     std::future::pending::<()>().await;
@@ -58,7 +59,7 @@ struct Cell {
 pub async fn run(setup: &Setup) -> anyhow::Result<String> {
     let _ = std::fs::remove_dir_all(&setup.workdir);
     std::fs::create_dir_all(&setup.workdir)?;
-    let router_port = peer::free_port()?;
+    let router_port = cell::free_port()?;
     let router_endpoint = format!("tcp/127.0.0.1:{router_port}");
     let mut router = Command::new(&setup.bench)
         .arg("router")
@@ -97,15 +98,15 @@ async fn start_cell(setup: &Setup, id: String, zenoh: &str) -> anyhow::Result<Ce
         0,
     )
     .await?;
-    let metrics_port = peer::free_port()?;
-    std::fs::write(dir.join("tags.csv"), peer::tags_csv(setup.load))?;
+    let metrics_port = cell::free_port()?;
+    std::fs::write(dir.join("tags.csv"), cell::tags_csv(setup.load))?;
     std::fs::write(
         dir.join("cell.toml"),
-        peer::agent_config(
+        cell::agent_config(
             &id,
             &server.endpoint(),
             Security::None,
-            peer::Subscription {
+            cell::Subscription {
                 publishing: Duration::from_millis(100),
                 max_notifications: None,
                 verify_interval: None,
@@ -114,7 +115,7 @@ async fn start_cell(setup: &Setup, id: String, zenoh: &str) -> anyhow::Result<Ce
             metrics_port,
         ),
     )?;
-    let child = peer::spawn_agent(&setup.agent, &dir, None)?;
+    let child = cell::spawn_agent(&setup.agent, &dir, None)?;
     Ok(Cell {
         id,
         server,
@@ -129,7 +130,7 @@ async fn measure_cells(
     router_endpoint: &str,
     router_pid: u32,
 ) -> anyhow::Result<String> {
-    let direct_port = peer::free_port()?;
+    let direct_port = cell::free_port()?;
     let mut cells = Vec::new();
     let result = async {
         for i in 0..setup.agents {
@@ -138,7 +139,7 @@ async fn measure_cells(
         }
         let direct = format!("mode = \"peer\"\nlisten = [\"tcp/127.0.0.1:{direct_port}\"]");
         cells.push(start_cell(setup, "direct".into(), &direct).await?);
-        let (seen, transits) = peer::subscribe_alarms(
+        let (seen, transits) = alarms::subscribe_alarms(
             &[
                 router_endpoint.to_string(),
                 format!("tcp/127.0.0.1:{direct_port}"),
@@ -148,7 +149,7 @@ async fn measure_cells(
         .await?;
         for c in &mut cells {
             let dir = setup.workdir.join(&c.id);
-            peer::wait_ready(&mut c.child, c.metrics, &dir).await?;
+            cell::wait_ready(&mut c.child, c.metrics, &dir).await?;
         }
         let cpu0 = measure::cpu_seconds(router_pid)?;
         let started = Instant::now();
@@ -178,7 +179,7 @@ async fn measure_cells(
                 .ok()
                 .and_then(|m| m.get(&c.id).cloned())
                 .unwrap_or_default();
-            let l = peer::match_faults(&faults, &s);
+            let l = alarms::match_faults(&faults, &s);
             let bus = transits
                 .lock()
                 .ok()
@@ -231,7 +232,7 @@ async fn measure_cells(
         if let Some(g) = c.generator {
             let _ = g.stop();
         }
-        peer::stop_agent(c.child);
+        cell::stop_agent(c.child);
         c.server.stop();
     }
     result

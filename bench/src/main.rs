@@ -6,7 +6,9 @@
 // A binary: `pub` marks what its modules offer each other.
 #![allow(unreachable_pub)]
 
+mod alarms;
 mod alertmanager;
+mod cell;
 mod console;
 mod console_bounds;
 mod console_browser;
@@ -15,6 +17,8 @@ mod journal;
 mod load;
 mod measure;
 mod peer;
+mod plant;
+mod table;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -47,10 +51,10 @@ enum Cmd {
     Peer {
         /// A load as TAGS:CHANGES_PER_SECOND; repeat for several rows.
         #[arg(long = "load", required = true, value_name = "TAGS:RATE")]
-        loads: Vec<peer::Load>,
+        loads: Vec<cell::Load>,
         /// OPC UA security of the agent's rows; repeat for several.
-        #[arg(long = "security", value_enum, default_values_t = [peer::Security::None])]
-        security: Vec<peer::Security>,
+        #[arg(long = "security", value_enum, default_values_t = [cell::Security::None])]
+        security: Vec<cell::Security>,
         /// What stands where the agent's `[alertmanager]` points (`off`:
         /// no section); repeat for several rows.
         #[arg(long = "alertmanager", value_enum, default_values_t = [alertmanager::Alertmanager::Off])]
@@ -133,7 +137,7 @@ enum Cmd {
         agents: usize,
         /// Each cell's load as TAGS:CHANGES_PER_SECOND.
         #[arg(long, default_value = "100:1000")]
-        load: peer::Load,
+        load: cell::Load,
         /// How long the load runs.
         #[arg(long, default_value = "30s", value_parser = humantime::parse_duration)]
         duration: Duration,
@@ -145,6 +149,45 @@ enum Cmd {
         agent: PathBuf,
         /// Where the agents' directories go.
         #[arg(long, default_value = "target/bench-fanout")]
+        workdir: PathBuf,
+    },
+    /// The plant at scale: CELLS simulated cells on this host, each its
+    /// own OPC UA server (in this process, Basic256Sha256 +
+    /// SignAndEncrypt) and agent, every file made by `cellwatch plant
+    /// init` from one inventory; ROUTERS `cellwatch router`s with the
+    /// plant's access control and archive; the console; Prometheus
+    /// scraping every agent when `--prometheus` names it. Measures one
+    /// agent alone (the baseline), then the whole plant: CPU and memory
+    /// of the agents, routers, console and Prometheus; each alarm's
+    /// latency to the console's event stream and to a bare subscriber;
+    /// then kills the first router and measures how long until every
+    /// agent and the console are back, every fault still reaching the
+    /// console.
+    Plant {
+        /// Simulated cells.
+        #[arg(long, default_value_t = 50)]
+        cells: usize,
+        /// Routers (agents and the console are clients of every one).
+        #[arg(long, default_value_t = 2)]
+        routers: usize,
+        /// Each cell's noise as TAGS:CHANGES_PER_SECOND.
+        #[arg(long, default_value = "20:10")]
+        load: cell::Load,
+        /// How long the whole plant is measured before the kill.
+        #[arg(long, default_value = "5m", value_parser = humantime::parse_duration)]
+        duration: Duration,
+        /// A limit switch opens this often in each cell (each cell at its
+        /// own phase), held open for half of it.
+        #[arg(long, default_value = "60s", value_parser = humantime::parse_duration)]
+        fault_every: Duration,
+        /// Prometheus's binary; without it none runs.
+        #[arg(long)]
+        prometheus: Option<PathBuf>,
+        /// The `cellwatch` binary.
+        #[arg(long, default_value = "target/release/cellwatch")]
+        agent: PathBuf,
+        /// The plant's folder (emptied first).
+        #[arg(long, default_value = "target/bench-plant")]
         workdir: PathBuf,
     },
     /// What the journal costs on disk: ROWS rows each of alarm events
@@ -335,7 +378,7 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
                     }
                 }
             }
-            print!("{}", peer::table(&rows));
+            print!("{}", table::table(&rows));
             Ok(())
         }
         Cmd::Fanout {
@@ -359,6 +402,30 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
             Ok(())
         }
         Cmd::Router { listen } => fanout::router(&listen).await,
+        Cmd::Plant {
+            cells,
+            routers,
+            load,
+            duration: seconds,
+            fault_every,
+            prometheus,
+            agent,
+            workdir,
+        } => {
+            anyhow::ensure!(routers >= 2, "--routers: at least 2, one to kill");
+            let setup = plant::Setup {
+                agent,
+                workdir,
+                cells,
+                routers,
+                load,
+                seconds,
+                fault_every,
+                prometheus,
+            };
+            print!("{}", plant::run(&setup).await?);
+            Ok(())
+        }
         Cmd::Journal { rows, workdir } => {
             print!("{}", journal::run(&workdir, rows).await?);
             Ok(())
