@@ -6,6 +6,7 @@
 //! its cell.
 
 mod archive;
+mod failover;
 mod rotation;
 
 use std::collections::BTreeMap;
@@ -227,6 +228,11 @@ fn a_plant_is_made_from_its_inventory_and_made_again_changes_nothing() {
         for id in ["m01", "m02", "p07"] {
             assert!(acl.contains(&format!("agent-{id}")), "{router}: {acl}");
         }
+        // Its clients take it for gone after 3 s without a word, not 10.
+        assert_eq!(
+            cfg.get_json("transport/link/tx/lease").unwrap(),
+            cellwatch::plant::render::ROUTER_LEASE_MS.to_string()
+        );
     }
     let targets = std::fs::read_to_string(dir.join("prometheus/cellwatch.yml")).unwrap();
     assert!(
@@ -455,34 +461,43 @@ async fn plant_router_with(dir: &Path, access_control: bool) -> (PlantRouter, u1
 /// Router `router-1`'s configuration as the plant made it, with its files
 /// and its archive under the plant's tree, listening on a port of its own.
 fn router_config(dir: &Path, access_control: bool) -> zenoh::Config {
-    let router_dir = dir.join("routers/router-1/etc/cellwatch/router");
+    router_config_of(dir, "router-1", access_control)
+}
+
+/// Router `name`'s configuration as the plant made it, as
+/// [`router_config`] makes router-1's.
+fn router_config_of(dir: &Path, name: &str, access_control: bool) -> zenoh::Config {
+    let router_dir = dir.join(format!("routers/{name}/etc/cellwatch/router"));
     let mut cfg = zenoh::Config::from_file(router_dir.join("router.json5")).unwrap();
-    let file =
-        |name: &str| serde_json::to_string(&router_dir.join(name).display().to_string()).unwrap();
+    let file = |f: &str| serde_json::to_string(&router_dir.join(f).display().to_string()).unwrap();
     for (key, value) in [
         ("listen/endpoints", "[\"quic/127.0.0.1:0\"]".to_string()),
         ("transport/link/tls/root_ca_certificate", file("ca.pem")),
         (
             "transport/link/tls/listen_certificate",
-            file("router-1.pem"),
+            file(&format!("{name}.pem")),
         ),
         (
             "transport/link/tls/listen_private_key",
-            file("router-1.key"),
+            file(&format!("{name}.key")),
         ),
         (
             "transport/link/tls/connect_certificate",
-            file("router-1.pem"),
+            file(&format!("{name}.pem")),
         ),
         (
             "transport/link/tls/connect_private_key",
-            file("router-1.key"),
+            file(&format!("{name}.key")),
         ),
         ("access_control/enabled", access_control.to_string()),
         (
             "plugins/storage_manager/volumes/sqlite/dir",
-            serde_json::to_string(&dir.join("routers/router-1/archive").display().to_string())
-                .unwrap(),
+            serde_json::to_string(
+                &dir.join(format!("routers/{name}/archive"))
+                    .display()
+                    .to_string(),
+            )
+            .unwrap(),
         ),
     ] {
         cfg.insert_json5(key, &value).unwrap();

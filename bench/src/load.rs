@@ -218,6 +218,11 @@ impl LoadServer {
         format!("opc.tcp://{}/", self.addr)
     }
 
+    /// The port it listens on.
+    pub fn port(&self) -> u16 {
+        self.addr.port()
+    }
+
     /// Stops the server.
     pub fn stop(&self) {
         self.handle.cancel();

@@ -19,7 +19,7 @@ use crate::cell::{
     agent_config, flood_checks, free_port, handled, program, spawn_agent, stop_agent, tags_csv,
     tags_toml, trust, wait_ready, Load, Security, Subscription,
 };
-use crate::load::{Fault, LoadServer, SWITCHES};
+use crate::load::{LoadServer, SWITCHES};
 use crate::measure::{self, Scrape};
 
 /// How a run is set up.
@@ -649,6 +649,7 @@ async fn counted(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::load::Fault;
     use crate::table::table;
 
     #[test]

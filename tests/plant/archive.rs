@@ -30,7 +30,7 @@ async fn cellwatch(args: Vec<String>) -> Ran {
 
 /// `cellwatch history --plant --cell m01` as the plant's administrator,
 /// through the router on `port`.
-async fn archived(dir: &Path, port: u16, more: &[&str]) -> Ran {
+pub(super) async fn archived(dir: &Path, port: u16, more: &[&str]) -> Ran {
     let mut args: Vec<String> = ["history", "--plant", "--cell", "m01", "--since", "1h"]
         .map(String::from)
         .to_vec();

@@ -4,7 +4,7 @@
 
 use zenoh::Session;
 
-use crate::config::ZenohConfig;
+use crate::config::{ZenohConfig, ZenohMode};
 
 /// Why Zenoh refused.
 #[derive(Debug, thiserror::Error)]
@@ -94,6 +94,16 @@ pub fn session_config(c: &ZenohConfig) -> Result<zenoh::Config, ZenohError> {
         "transport/multicast/compression/enabled",
     ] {
         set(&mut cfg, key, "false".into())?;
+    }
+    // A client that loses its router opens a session to the next one of
+    // its list in turn: a router that is gone (a QUIC handshake nobody
+    // answers) holds it for this long, not Zenoh's 10 s, unless the Zenoh
+    // file says otherwise.
+    if c.mode == ZenohMode::Client
+        && c.connect.len() > 1
+        && cfg.get_json(OPEN_TIMEOUT).ok().as_deref() == Some(ZENOH_OPEN_TIMEOUT)
+    {
+        set(&mut cfg, OPEN_TIMEOUT, CLIENT_OPEN_TIMEOUT_MS.to_string())?;
     }
     if let Some(tls) = &c.tls {
         for (key, file) in [
@@ -203,6 +213,16 @@ pub fn secure(cfg: &zenoh::Config, plain: bool) -> Result<(), ZenohError> {
     }
     Ok(())
 }
+
+/// Zenoh's key for how long opening a session to one endpoint may take.
+const OPEN_TIMEOUT: &str = "transport/unicast/open_timeout";
+
+/// Its default in this Zenoh release, as `get_json` says it.
+const ZENOH_OPEN_TIMEOUT: &str = "10000";
+
+/// How long a client with several routers gives one to open a session
+/// (a QUIC and TLS handshake on a plant network takes milliseconds).
+const CLIENT_OPEN_TIMEOUT_MS: u64 = 3_000;
 
 fn set(cfg: &mut zenoh::Config, key: &str, value: String) -> Result<(), ZenohError> {
     cfg.insert_json5(key, &value)
@@ -361,3 +381,56 @@ pub const CONSOLE_MAX_MESSAGE_BYTES: usize = 8 << 20;
 /// The largest message the agent's Zenoh session accepts; a larger one is
 /// dropped by Zenoh before it reaches the agent.
 pub const MAX_MESSAGE_BYTES: usize = 1 << 20;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A plain client (as a test bus is) of `connect`.
+    fn client(connect: &[&str]) -> ZenohConfig {
+        ZenohConfig {
+            mode: ZenohMode::Client,
+            connect: connect.iter().map(|e| e.to_string()).collect(),
+            listen: Vec::new(),
+            prefix: "cellwatch/m01".into(),
+            multicast_scouting: false,
+            tls: None,
+            config_file: None,
+            plain: true,
+            signing_key: None,
+        }
+    }
+
+    const TWO: [&str; 2] = ["tcp/127.0.0.1:7447", "tcp/127.0.0.1:7448"];
+
+    #[test]
+    fn a_client_of_several_routers_gives_one_that_is_gone_three_seconds() {
+        let two = session_config(&client(&TWO)).unwrap();
+        assert_eq!(
+            two.get_json(OPEN_TIMEOUT).unwrap(),
+            CLIENT_OPEN_TIMEOUT_MS.to_string()
+        );
+        // One router: nothing to move to, Zenoh's own.
+        let one = session_config(&client(&TWO[..1])).unwrap();
+        assert_eq!(one.get_json(OPEN_TIMEOUT).unwrap(), ZENOH_OPEN_TIMEOUT);
+        let peer = session_config(&ZenohConfig {
+            mode: ZenohMode::Peer,
+            ..client(&TWO)
+        })
+        .unwrap();
+        assert_eq!(peer.get_json(OPEN_TIMEOUT).unwrap(), ZENOH_OPEN_TIMEOUT);
+    }
+
+    #[test]
+    fn a_zenoh_files_own_open_timeout_is_kept() {
+        let d = tempfile::tempdir().unwrap();
+        let file = d.path().join("zenoh.json5");
+        std::fs::write(&file, "{ transport: { unicast: { open_timeout: 5000 } } }").unwrap();
+        let cfg = session_config(&ZenohConfig {
+            config_file: Some(file),
+            ..client(&TWO)
+        })
+        .unwrap();
+        assert_eq!(cfg.get_json(OPEN_TIMEOUT).unwrap(), "5000");
+    }
+}

@@ -87,6 +87,11 @@ pub fn operators(inventory: &Inventory, cell: Option<(&str, &Cell)>) -> String {
 /// (ingress) and one `-hears` (egress) rule under its own prefix.
 const AGENT_MESSAGES: &str = "[\"put\", \"delete\", \"declare_queryable\", \"reply\", \"liveliness_token\",\n                   \"declare_subscriber\", \"query\", \"declare_liveliness_subscriber\", \"liveliness_query\"]";
 
+/// A router's lease, ms: its clients (agents, the console) take it for gone
+/// after this long without a word from it and move to the next router of
+/// their list; it says a word every quarter of it.
+pub const ROUTER_LEASE_MS: u64 = 3_000;
+
 /// Router `name`'s `zenohd` configuration: mutual TLS over QUIC with the
 /// plant CA, the other routers to link with, and access control from the
 /// inventory (default deny; an agent's certificate speaks under its own
@@ -114,7 +119,9 @@ pub fn router(inventory: &Inventory, name: &str, r: &Router, layout: &Layout) ->
     );
     let _ = write!(
         out,
-        "  scouting: {{ multicast: {{ enabled: false }}, gossip: {{ enabled: false }} }},\n  transport: {{\n    link: {{\n      tls: {{\n        root_ca_certificate: {},\n        listen_certificate: {},\n        listen_private_key: {},\n        connect_certificate: {},\n        connect_private_key: {},\n        enable_mtls: true,\n        verify_name_on_connect: true,\n      }},\n    }},\n  }},\n",
+        "  scouting: {{ multicast: {{ enabled: false }}, gossip: {{ enabled: false }} }},\n  transport: {{\n    link: {{\n      // Clients take this router for gone after {} ms without a word from it\n      // (Zenoh's default: 10 s), then move to the next of their list.\n      tx: {{ lease: {} }},\n      tls: {{\n        root_ca_certificate: {},\n        listen_certificate: {},\n        listen_private_key: {},\n        connect_certificate: {},\n        connect_private_key: {},\n        enable_mtls: true,\n        verify_name_on_connect: true,\n      }},\n    }},\n  }},\n",
+        ROUTER_LEASE_MS,
+        ROUTER_LEASE_MS,
         quoted(&format!("{dir}/ca.pem")),
         quoted(&format!("{dir}/{name}.pem")),
         quoted(&format!("{dir}/{name}.key")),

@@ -12,37 +12,7 @@ use anyhow::{anyhow, bail, Context};
 use crate::cell::{self};
 use crate::load::NAMESPACE;
 
-use super::{Cell, Setup, CELLS_PER_AREA};
-
-/// A child process killed when dropped (a run that fails leaves nothing).
-pub(super) struct Process {
-    pub(super) name: String,
-    pub(super) child: Child,
-}
-
-impl Process {
-    pub(super) fn pid(&self) -> u32 {
-        self.child.id()
-    }
-
-    /// Stops it as a service manager would (SIGTERM), and waits.
-    pub(super) fn stop(mut self) {
-        let _ = Command::new("kill")
-            .arg("-TERM")
-            .arg(self.pid().to_string())
-            .status();
-        let _ = self.child.wait();
-    }
-}
-
-impl Drop for Process {
-    fn drop(&mut self) {
-        if let Ok(None) = self.child.try_wait() {
-            let _ = self.child.kill();
-            let _ = self.child.wait();
-        }
-    }
-}
+use super::parts::{Cell, Process, Setup, CELLS_PER_AREA};
 
 /// Writes the plant's inventory and each cell's configuration.
 pub(super) fn inventory(
@@ -295,10 +265,4 @@ pub(super) async fn ready(c: &mut Cell, dir: &Path) -> anyhow::Result<()> {
                 c.config.with_extension("log").display()
             )
         })
-}
-
-impl std::fmt::Debug for Process {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{} ({})", self.name, self.child.id())
-    }
 }

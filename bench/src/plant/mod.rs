@@ -22,9 +22,10 @@
 //!    every one must reach the console.
 
 mod make;
+mod parts;
 mod watch;
 
-use std::net::SocketAddr;
+use std::collections::{HashMap, HashSet};
 use std::path::PathBuf;
 use std::process::Command;
 use std::time::{Duration, Instant, SystemTime};
@@ -32,54 +33,15 @@ use std::time::{Duration, Instant, SystemTime};
 use anyhow::{bail, Context};
 
 use crate::alarms::{self, Generator, Seen};
-use crate::cell::{self, Load};
+use crate::cell::{self};
 use crate::console_bounds::sign_in;
 use crate::load::LoadServer;
 use crate::measure;
 
-use make::{as_on_host, console, inventory, prometheus, ready, router, spawn_agent, Process};
+use make::{as_on_host, console, inventory, prometheus, ready, router, spawn_agent};
+pub use parts::Setup;
+use parts::{Cell, Process, ALONE, BACK_WITHIN};
 use watch::{console_alarms, console_back, targets_up, Bus, Pids};
-
-/// How a plant run is set up.
-#[derive(Debug, Clone)]
-pub struct Setup {
-    /// The `cellwatch` binary.
-    pub agent: PathBuf,
-    /// The plant's folder and everything the run writes.
-    pub workdir: PathBuf,
-    /// Simulated cells.
-    pub cells: usize,
-    /// Routers.
-    pub routers: usize,
-    /// Each cell's noise load.
-    pub load: Load,
-    /// How long the whole plant is measured.
-    pub seconds: Duration,
-    /// A limit switch opens this often in each cell, held half as long.
-    pub fault_every: Duration,
-    /// Prometheus, if installed.
-    pub prometheus: Option<PathBuf>,
-}
-
-/// Cells per area of the inventory.
-const CELLS_PER_AREA: usize = 10;
-
-/// How long the lone agent is measured.
-const ALONE: Duration = Duration::from_secs(60);
-
-/// How long the plant is given to be whole again after a router is killed.
-const BACK_WITHIN: Duration = Duration::from_secs(120);
-
-/// One cell: its server, its agent, its faults.
-struct Cell {
-    id: String,
-    server: LoadServer,
-    metrics: SocketAddr,
-    /// Its configuration as deployed, the plant's paths made this host's.
-    config: PathBuf,
-    agent: Option<Process>,
-    generator: Option<Generator>,
-}
 
 /// Runs the plant and prints its tables.
 pub async fn run(setup: &Setup) -> anyhow::Result<String> {
@@ -104,13 +66,25 @@ pub async fn run(setup: &Setup) -> anyhow::Result<String> {
         )
         .await?;
         cells.push(Cell {
-            metrics: format!("127.0.0.1:{}", cell::free_port()?).parse()?,
+            metrics: "127.0.0.1:0".parse()?,
             config: PathBuf::new(),
             id,
             server,
             agent: None,
             generator: None,
         });
+    }
+    // Every server listening first: a port one of them took after it was
+    // picked for an agent's metrics would be nobody's to bind.
+    let mut taken: HashSet<u16> = cells.iter().map(|c| c.server.port()).collect();
+    for c in &mut cells {
+        let port = loop {
+            let p = cell::free_port()?;
+            if taken.insert(p) {
+                break p;
+            }
+        };
+        c.metrics.set_port(port);
     }
     let ports: Vec<u16> = (0..setup.routers)
         .map(|_| cell::free_udp_port())
@@ -195,7 +169,7 @@ pub async fn run(setup: &Setup) -> anyhow::Result<String> {
         .map(|&p| measure::rss(p).map(|r| r.0))
         .collect::<anyhow::Result<_>>()?;
     let targets = match &prometheus {
-        Some((_, port)) => Some(targets_up(*port).await?),
+        Some((_, port)) => Some(targets_up(*port).await),
         None => None,
     };
     let faults_before_kill: usize = cells.iter().map(|c| c.generator_faults()).sum();
@@ -243,6 +217,18 @@ pub async fn run(setup: &Setup) -> anyhow::Result<String> {
     let total: usize = faults.iter().map(|(_, f)| f.len()).sum();
     let (console_l, console_missed) = matched(&at_console);
     let (bus_l, bus_missed) = matched(&bus.seen);
+    // What the last router's archive keeps of them.
+    let (archived, archive_error) = match archived(setup, &dir, &last) {
+        Ok(a) => (a, None),
+        Err(e) => (HashMap::new(), Some(format!("{e:#}"))),
+    };
+    let archive_missed: Vec<String> = faults
+        .iter()
+        .filter_map(|(cell, fs)| {
+            let kept = archived.get(cell).copied().unwrap_or(0);
+            (kept < fs.len()).then(|| format!("{cell}: {kept} of {}", fs.len()))
+        })
+        .collect();
 
     for c in cells {
         if let Some(a) = c.agent {
@@ -298,8 +284,10 @@ pub async fn run(setup: &Setup) -> anyhow::Result<String> {
         "\n- measured over {wall:.0} s, {total} faults in all ({} before the kill)\n",
         faults_before_kill
     ));
-    if let Some((up, all)) = targets {
-        out.push_str(&format!("- Prometheus: {up} of {all} targets up\n"));
+    match targets {
+        Some(Ok((up, all))) => out.push_str(&format!("- Prometheus: {up} of {all} targets up\n")),
+        Some(Err(e)) => out.push_str(&format!("- Prometheus's targets not read: {e:#}\n")),
+        None => {}
     }
     out.push_str(&format!(
         "\n| alarm latency, switch → | alarms / faults | p50 (ms) | p99 (ms) | max (ms) |\n|---|---|---|---|---|\n\
@@ -327,6 +315,20 @@ pub async fn run(setup: &Setup) -> anyhow::Result<String> {
         secs(&on_bus),
         secs(&at_console_back),
     ));
+    out.push_str(&format!(
+        "- raises of the faults in router-{}'s archive (`cellwatch history --plant`): {} of {total}\n",
+        setup.routers,
+        archived.values().sum::<usize>()
+    ));
+    if let Some(e) = archive_error {
+        out.push_str(&format!("- the archive not read: {e}\n"));
+    }
+    if !archive_missed.is_empty() {
+        out.push_str(&format!(
+            "- cells whose raises the archive lacks: {}\n",
+            archive_missed.join(", ")
+        ));
+    }
     for (what, missed) in [
         ("console", &console_missed),
         ("bare subscriber", &bus_missed),
@@ -341,8 +343,42 @@ pub async fn run(setup: &Setup) -> anyhow::Result<String> {
     Ok(out)
 }
 
-impl Cell {
-    fn generator_faults(&self) -> usize {
-        self.generator.as_ref().map_or(0, Generator::faults)
+/// Per cell, how many raises of check `fault` the archive of the router at
+/// `endpoint` keeps, read as an operator would (`cellwatch history --plant`,
+/// every entry verified).
+fn archived(
+    setup: &Setup,
+    dir: &std::path::Path,
+    endpoint: &str,
+) -> anyhow::Result<HashMap<String, usize>> {
+    let out = Command::new(&setup.agent)
+        .args([
+            "history", "--plant", "--cell", "*", "--kind", "alarm", "--since", "2h", "--json",
+        ])
+        .args(["--mode", "client", "--connect", endpoint])
+        .arg("--tls-ca")
+        .arg(dir.join("ca/ca.pem"))
+        .arg("--tls-cert")
+        .arg(dir.join("admin/plant-admin.pem"))
+        .arg("--tls-key")
+        .arg(dir.join("admin/plant-admin.key"))
+        .arg("--trust")
+        .arg(dir.join("trust.toml"))
+        .output()
+        .context("cannot run cellwatch history --plant")?;
+    anyhow::ensure!(
+        out.status.success(),
+        "cellwatch history --plant: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut kept = HashMap::new();
+    for line in String::from_utf8_lossy(&out.stdout).lines() {
+        let Ok(v) = serde_json::from_str::<serde_json::Value>(line) else {
+            continue;
+        };
+        if let Some((cell, _)) = alarms::fault_raised(&v) {
+            *kept.entry(cell).or_insert(0) += 1;
+        }
     }
+    Ok(kept)
 }

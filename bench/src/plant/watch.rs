@@ -8,26 +8,23 @@ use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime};
 
-use anyhow::{anyhow, bail};
+use anyhow::{anyhow, bail, Context};
 use tokio::io::{AsyncBufReadExt, AsyncWriteExt};
 
 use crate::alarms::{self, Seen};
 use crate::console_bounds::Connection;
 use crate::measure;
 
-use super::make::Process;
-use super::{Cell, BACK_WITHIN};
+use super::parts::{Cell, Process, BACK_WITHIN};
 
 /// Prometheus's targets: how many are up, of how many.
 pub(super) async fn targets_up(port: u16) -> anyhow::Result<(usize, usize)> {
     let addr: SocketAddr = format!("127.0.0.1:{port}").parse()?;
     let deadline = Instant::now() + Duration::from_secs(60);
     loop {
-        let mut c = Connection::open(addr, None).await?;
-        c.send("GET", "/api/v1/targets?state=active", "", "")
-            .await?;
-        let (_, _, body) = c.answer().await?;
-        let v: serde_json::Value = serde_json::from_slice(&body)?;
+        let v: serde_json::Value =
+            serde_json::from_slice(&read_to_end(addr, "/api/v1/targets?state=active").await?)
+                .context("Prometheus's targets")?;
         let targets = v["data"]["activeTargets"]
             .as_array()
             .cloned()
@@ -38,6 +35,22 @@ pub(super) async fn targets_up(port: u16) -> anyhow::Result<(usize, usize)> {
         }
         tokio::time::sleep(Duration::from_secs(1)).await;
     }
+}
+
+/// The body of `GET path` over HTTP/1.0 (read to the end: no chunks).
+async fn read_to_end(addr: SocketAddr, path: &str) -> anyhow::Result<Vec<u8>> {
+    use tokio::io::AsyncReadExt;
+    let mut stream = tokio::net::TcpStream::connect(addr).await?;
+    stream
+        .write_all(format!("GET {path} HTTP/1.0\r\nHost: {addr}\r\n\r\n").as_bytes())
+        .await?;
+    let mut all = Vec::new();
+    stream.read_to_end(&mut all).await?;
+    let start = all
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .map_or(all.len(), |i| i + 4);
+    Ok(all.split_off(start))
 }
 
 /// The processes measured.

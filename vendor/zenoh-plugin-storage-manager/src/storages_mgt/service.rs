@@ -20,6 +20,8 @@ use std::{
 };
 
 use async_trait::async_trait;
+// cellwatch's patch: the storage's subscriber is an advanced one.
+use zenoh_ext::AdvancedSubscriberBuilderExt;
 use tokio::sync::{broadcast::Receiver, Mutex, RwLock, RwLockWriteGuard};
 use zenoh::{
     bytes::{Encoding, ZBytes},
@@ -139,7 +141,20 @@ impl StorageService {
         let storage_key_expr = &self.configuration.key_expr;
 
         // subscribe on key_expr
-        let storage_sub = match self.session.declare_subscriber(storage_key_expr).await {
+        // cellwatch's patch: an advanced subscriber, so the storage recovers
+        // what it missed from each advanced publisher's cache, as any
+        // advanced subscriber does: the samples of a publisher met late
+        // (`history`), and those lost while the publisher had no path to
+        // this router (a client moving to it from a router that died),
+        // found by the publisher's heartbeat (`recovery`). A sample
+        // recovered twice is stored once (its timestamp is its own).
+        let storage_sub = match self
+            .session
+            .declare_subscriber(storage_key_expr)
+            .history(zenoh_ext::HistoryConfig::default().detect_late_publishers())
+            .recovery(zenoh_ext::RecoveryConfig::default().heartbeat())
+            .await
+        {
             Ok(storage_sub) => storage_sub,
             Err(e) => {
                 tracing::error!("Error starting storage '{}': {}", self.name, e);
