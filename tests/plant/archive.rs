@@ -63,7 +63,7 @@ fn bus_flags(dir: &Path, port: u16) -> Vec<String> {
 }
 
 /// Reads the archive until `seen` holds of its output.
-async fn until(dir: &Path, port: u16, what: &str, seen: impl Fn(&str) -> bool) -> Ran {
+pub(super) async fn until(dir: &Path, port: u16, what: &str, seen: impl Fn(&str) -> bool) -> Ran {
     let deadline = Instant::now() + Duration::from_secs(120);
     loop {
         let r = archived(dir, port, &[]).await;

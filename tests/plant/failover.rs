@@ -6,7 +6,7 @@
 
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use super::{agent_config, plant_async, router_config_of};
 
@@ -52,26 +52,10 @@ fn router(dir: &Path, name: &str, connect: &[u16]) -> (Child, u16) {
 /// Waits until router `port`'s archive (`cellwatch history --plant`)
 /// holds `n` events `transition` of cell m01's check `ese`, and no more.
 async fn until_kept(dir: &Path, port: u16, transition: &str, n: usize) {
-    let deadline = Instant::now() + Duration::from_secs(120);
-    loop {
-        let r = super::archive::archived(dir, port, &[]).await;
-        let kept = r
-            .stdout
-            .lines()
-            .filter(|l| l.contains(&format!("m01/ese  {transition}")))
-            .count();
-        if kept >= n {
-            assert_eq!(kept, n, "one event kept twice:\n{}", r.stdout);
-            return;
-        }
-        assert!(
-            Instant::now() < deadline,
-            "{kept} of {n} {transition} kept:\n{}{}",
-            r.stdout,
-            r.stderr
-        );
-        tokio::time::sleep(Duration::from_millis(300)).await;
-    }
+    let line = format!("m01/ese  {transition}");
+    let kept = |out: &str| out.lines().filter(|l| l.contains(&line)).count();
+    let r = super::archive::until(dir, port, &format!("{n} {transition}"), |o| kept(o) >= n).await;
+    assert_eq!(kept(&r.stdout), n, "one event kept twice:\n{}", r.stdout);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]

@@ -214,16 +214,27 @@ impl Bus {
         within: Duration,
     ) -> anyhow::Result<Duration> {
         let started = Instant::now();
+        if self.until(|up| up >= cells, within).await {
+            Ok(started.elapsed())
+        } else {
+            bail!("{} of {cells} agents' tokens", self.up())
+        }
+    }
+
+    /// Waits until `holds` of the number of tokens there, at most `within`:
+    /// whether it did.
+    async fn until(&self, holds: impl Fn(usize) -> bool, within: Duration) -> bool {
+        let deadline = Instant::now() + within;
         loop {
             let changed = self.changed.notified();
-            if self.up() >= cells {
-                return Ok(started.elapsed());
+            if holds(self.up()) {
+                return true;
             }
-            if tokio::time::timeout_at((started + within).into(), changed)
+            if tokio::time::timeout_at(deadline.into(), changed)
                 .await
                 .is_err()
             {
-                bail!("{} of {cells} agents' tokens", self.up());
+                return false;
             }
         }
     }
@@ -236,18 +247,9 @@ impl Bus {
         within: Duration,
     ) -> anyhow::Result<Duration> {
         let started = Instant::now();
-        loop {
-            let changed = self.changed.notified();
-            if self.up() < cells {
-                break;
-            }
-            if tokio::time::timeout(Duration::from_secs(20), changed)
-                .await
-                .is_err()
-            {
-                // No agent was on the lost router.
-                return Ok(Duration::ZERO);
-            }
+        if !self.until(|up| up < cells, Duration::from_secs(20)).await {
+            // No agent was on the lost router.
+            return Ok(Duration::ZERO);
         }
         let rest = within.saturating_sub(started.elapsed());
         self.all_alive(cells, rest).await?;
