@@ -325,6 +325,34 @@ async fn ese_raised(fx: &Fixture, key: &str) -> (AlarmSubscriber, AlarmPayload, 
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_fault_present_at_start_is_raised_on_whole_data() {
+    // The over-travel switch is open before the agent starts: its first
+    // values make ESE's fault certain from X0.06 alone, whatever order
+    // they come in. The raise names the step and the switch, and no
+    // contact the server reports as unknown.
+    let fx = Fixture::start_with_sim(|sim| sim.set("X0.06", false).unwrap(), |_| {}).await;
+    let sub = fx
+        .client
+        .declare_subscriber("cellwatch/m01ps0004/alarms/ese")
+        .history(HistoryConfig::default().detect_late_publishers())
+        .recovery(RecoveryConfig::default().heartbeat())
+        .await
+        .unwrap();
+    let mut seen = Vec::new();
+    let raised = alarm_until(&sub, "ESE raised", &mut seen, |a| {
+        a.transition.as_str() == "raised"
+    })
+    .await;
+    assert!(
+        raised.message.starts_with("ESE at step 6: X0.06 = 0 (expected 1)"),
+        "{}",
+        raised.message
+    );
+    assert!(!raised.message.contains("unknown"), "{}", raised.message);
+    assert_eq!(raised.culprits.len(), 1, "{:?}", raised.culprits);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn ese_alarm_with_culprit_then_cleared_and_in_history() {
     let fx = Fixture::start().await;
     let raw = fx

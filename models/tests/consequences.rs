@@ -88,6 +88,15 @@ fn set(e: &mut CellEngine, address: &str, v: bool, at: u64) -> Step {
 /// Both machines' normal values, cycle start released, G8.02 off.
 fn normal(e: &mut CellEngine) {
     e.on_connection(true, 1);
+    first_values(e, 1);
+    assert!(
+        e.alarms().all(|a| !a.active),
+        "the normal values raise nothing"
+    );
+}
+
+/// Every tag's normal value at `at`, as a new subscription's first values.
+fn first_values(e: &mut CellEngine, at: u64) {
     for values in [ESE_NORMAL, CSD_NORMAL] {
         for line in values
             .lines()
@@ -95,15 +104,11 @@ fn normal(e: &mut CellEngine) {
         {
             let (a, v) = line.split_once(',').unwrap();
             if e.tag_index(&Signal::new(a)).is_some() {
-                set(e, a, v == "1", 1);
+                set(e, a, v == "1", at);
             }
         }
     }
-    set(e, "G8.02", false, 1);
-    assert!(
-        e.alarms().all(|a| !a.active),
-        "the normal values raise nothing"
-    );
+    set(e, "G8.02", false, at);
 }
 
 fn raised(step: &Step) -> Vec<Alarm> {
@@ -211,7 +216,7 @@ fn an_alarm_raised_while_the_link_is_down_follows_from_the_communication_alarm()
     // Nothing raises while every tag is unknown; back up, a fault on fresh
     // values is a first-out even while the alarm waits out its off-delay.
     e.on_connection(true, 4);
-    set(&mut e, "X0.06", true, 4);
+    first_values(&mut e, 4);
     let s = set(&mut e, "X0.06", false, 5);
     assert_eq!(marks(&s), [("ese".to_string(), None)]);
 }

@@ -170,6 +170,8 @@ impl CellEngine {
             recorder: None,
             conditions: Vec::new(),
             clock: 0,
+            unheard: configured,
+            settling: None,
         })
     }
 

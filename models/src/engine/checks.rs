@@ -176,6 +176,11 @@ pub trait CheckSet: Send + Sync {
     fn would_hold(&self, _id: &str, _instead: &[(Signal, bool)]) -> Option<bool> {
         None
     }
+
+    /// Says fault `f`, found while the first values were coming and held
+    /// since (`settling.rs`), again with the values now: its culprits and
+    /// what is still unknown. Left as it is when not this set's.
+    fn restate(&self, _f: &mut Finding) {}
 }
 
 /// Adds `signal` to `out`, and, when it is a comparison contact

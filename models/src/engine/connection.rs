@@ -101,12 +101,16 @@ impl CellEngine {
                 }
                 (None, None) => continue,
             }
+            if cut.timestamps[t].is_some() {
+                self.heard(t);
+            }
             self.timestamps[t] = cut.timestamps[t];
         }
         self.untimed = false;
         for f in findings {
-            self.apply(f, now, &mut step);
+            self.judge_at(f, now, now, &mut step);
         }
+        self.settle(now, &mut step);
         self.update_state(now, &mut step);
         self.collect_observations(&mut step);
         step
@@ -195,6 +199,10 @@ impl CellEngine {
                 self.set_unknown(t, now, &mut ignored, &mut step);
             }
             self.timestamps.iter_mut().for_each(|t| *t = None);
+            self.unheard = self.configured;
+            self.settling = None;
+        } else {
+            self.begin_settling(now);
         }
         self.apply(finding, now, &mut step);
         if up && self.bad.is_empty() {

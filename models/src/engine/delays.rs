@@ -59,6 +59,7 @@ impl CellEngine {
             .chain(quality)
             .chain(self.alarms.next_expiry())
             .chain(recording)
+            .chain(self.settling_deadline())
             .min()
     }
 
@@ -72,6 +73,8 @@ impl CellEngine {
         for f in findings {
             self.apply(f, now, &mut step);
         }
+        // The first values' wait, up.
+        self.settle(now, &mut step);
         // Delayed findings whose condition lasted.
         self.run_out(now, false, now, &mut step);
         // The bad tags' text, held back while they kept changing.

@@ -70,6 +70,7 @@ mod reading;
 pub mod recorder;
 mod recording;
 mod restore;
+mod settling;
 mod snapshot;
 pub mod state;
 pub mod switching;
@@ -512,6 +513,12 @@ pub struct CellEngine {
     /// The PLC's conditions are alarms whose ids start with one of these
     /// (`<prefix>-`).
     conditions: Vec<String>,
+    /// Configured tags not heard (a value or a bad status) since the
+    /// connection came up.
+    unheard: usize,
+    /// The wait for the first values after a connection
+    /// (`settling.rs`), while it lasts.
+    settling: Option<Box<settling::Settling>>,
     /// The agent's clock at the readings being handled (ms): the flight
     /// recorder keeps their changes at the time their alarms are stamped
     /// with, so that a PLC clock not believed leaves no recording empty.

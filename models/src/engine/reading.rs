@@ -51,9 +51,13 @@ impl CellEngine {
             }
             step.readings += 1;
             let events = step.events.len();
+            let changed = self.reading(r, now, &mut findings, &mut step);
+            if self.settling.is_some() {
+                self.settle(now, &mut step);
+            }
             // The state follows each reading, so that a fault raised and
             // cleared within one publish still leaves its history rows.
-            if self.reading(r, now, &mut findings, &mut step) || step.events.len() > events {
+            if changed || step.events.len() > events {
                 // At the time the change was sampled, as the alarms judged
                 // on it are (when the source's clock is trusted).
                 let at = self.latest.map_or(now, |t| self.stamp(t, now));
@@ -99,6 +103,7 @@ impl CellEngine {
                 return false;
             }
         }
+        self.heard(tag);
         self.timestamps[tag] = Some(r.source_time);
         // A number that is not one (NaN, ±inf) is bad quality, as a bad
         // status is: no limit is judged on it.
@@ -205,7 +210,7 @@ impl CellEngine {
             });
         }
         for f in findings.drain(..) {
-            self.apply_at(f, at, now, step);
+            self.judge_at(f, at, now, step);
         }
         self.lost_now = None;
         changed

@@ -222,6 +222,32 @@ impl CheckSet for SwitchingChecks {
         self.holds_with(id, instead)
     }
 
+    fn restate(&self, f: &mut Finding) {
+        let Some(&c) = self.by_id.get(&f.id) else {
+            return;
+        };
+        if !f.active || self.reported[c] != Some(true) {
+            return;
+        }
+        // The contact whose first value made it certain, as first said (a
+        // first value has no value before it: none, usually).
+        let check = &self.checks[c];
+        let changed = f
+            .culprits
+            .iter()
+            .find(|c| c.trigger)
+            .map_or_else(|| check.sf.coil.clone(), |c| c.address.clone());
+        let again = finding(
+            check,
+            true,
+            &|x| self.known_value(x),
+            &|x| self.numbers.get(x).copied(),
+            &changed,
+            None,
+        );
+        *f = Finding { at: f.at, ..again };
+    }
+
     fn alarms(&self) -> Vec<Declared> {
         self.checks
             .iter()
