@@ -25,7 +25,7 @@ use super::events::{
     AlarmFields, CellAlarmEvent, CommentVar, CurrentStateVar, QualityVar, SeverityVar, ShelvingVar,
     TwoState,
 };
-use crate::payload::{AlarmPayload, CulpritPayload};
+use crate::payload::{AlarmPayload, ConsequencePayload, CulpritPayload};
 
 /// A state variable: its name, data type and initial value.
 pub(super) type StateVariable = (&'static str, DataTypeId, fn() -> Variant);
@@ -35,7 +35,7 @@ pub(super) type StateVariable = (&'static str, DataTypeId, fn() -> Variant);
 /// data type, initial value. `…State` are `TwoStateVariableType` components
 /// with their `Id` property (`ShelvingState`'s `CurrentState` a
 /// `FiniteStateVariableType`); the others properties of what they follow.
-pub(super) const STATE_VARIABLES: [StateVariable; 14] = [
+pub(super) const STATE_VARIABLES: [StateVariable; 15] = [
     ("EnabledState", DataTypeId::LocalizedText, || {
         LocalizedText::from("Enabled").into()
     }),
@@ -55,6 +55,7 @@ pub(super) const STATE_VARIABLES: [StateVariable; 14] = [
     ("Severity", DataTypeId::UInt16, || 0u16.into()),
     ("ClientUserId", DataTypeId::String, || "".into()),
     ("Culprits", DataTypeId::String, || "".into()),
+    ("Consequence", DataTypeId::String, || "".into()),
     (
         "ShelvingState.CurrentState",
         DataTypeId::LocalizedText,
@@ -94,6 +95,8 @@ pub(super) struct Condition {
     pub(super) message: String,
     pub(super) severity: u16,
     pub(super) culprits: String,
+    /// Why it is a consequence, if it is ([`consequence_text`]).
+    pub(super) consequence: String,
     pub(super) active: bool,
     pub(super) acked: bool,
     /// In service (ISA-18.2): not disabled.
@@ -182,6 +185,21 @@ pub(super) fn culprits_text(culprits: &[CulpritPayload]) -> String {
         .join("; ")
 }
 
+/// Why an occurrence is a consequence, as the console and Alertmanager
+/// say it, with the cascade's first-out when it is another alarm:
+/// `follows from clamp: G10.01 = 1 (0 without clamp's fault); first-out
+/// hydraulic`. Empty for a first-out.
+pub(super) fn consequence_text(consequence: Option<&ConsequencePayload>) -> String {
+    let Some(c) = consequence else {
+        return String::new();
+    };
+    let mut text = c.why();
+    if c.first_out != c.cause {
+        text.push_str(&format!("; first-out {}", c.first_out));
+    }
+    text
+}
+
 impl Conditions {
     /// The conditions of `cell`, none yet.
     pub(super) fn new(cell: &str) -> Conditions {
@@ -255,6 +273,7 @@ impl Conditions {
             c.message = p.message.clone();
             c.severity = severity(p.severity);
             c.culprits = culprits_text(&p.culprits);
+            c.consequence = consequence_text(p.consequence.as_ref());
             c.shelved = p.shelved.as_ref().map(|shelf| {
                 shelf
                     .until
@@ -373,6 +392,7 @@ impl Conditions {
             message: String::new(),
             severity: 0,
             culprits: String::new(),
+            consequence: String::new(),
             active: false,
             acked: true,
             enabled: true,
@@ -400,7 +420,7 @@ impl Conditions {
             Variant::from(LocalizedText::from(if on { yes } else { no }))
         };
         let (shelf_name, shelf_id) = shelving_state(c.shelved);
-        let values: [(&str, Variant, DateTime); 14] = [
+        let values: [(&str, Variant, DateTime); 15] = [
             (
                 "EnabledState",
                 text(c.enabled, "Enabled", "Disabled"),
@@ -428,6 +448,7 @@ impl Conditions {
             ("Severity", c.severity.into(), c.time),
             ("ClientUserId", c.acked_by.as_str().into(), c.acked_at),
             ("Culprits", c.culprits.as_str().into(), c.time),
+            ("Consequence", c.consequence.as_str().into(), c.time),
             (
                 "ShelvingState.CurrentState",
                 LocalizedText::from(shelf_name).into(),
@@ -519,6 +540,7 @@ pub(super) fn condition_event(
                 unshelve_time: unshelve_in(c.shelved),
             },
             culprits: c.culprits.as_str().into(),
+            consequence: c.consequence.as_str().into(),
         },
     }
 }
@@ -526,6 +548,7 @@ pub(super) fn condition_event(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::payload::ThroughPayload;
 
     #[test]
     fn severities_spread_over_opc_uas_range_and_culprits_read_as_on_the_console() {
@@ -542,6 +565,29 @@ mod tests {
         assert_eq!(
             culprits_text(&[culprit("X0.06", true), culprit("X0.07", false)]),
             "X0.06 = 0 (expected 1): Y Over Travel Limit SW (B)   <- trigger; X0.07 = 0 (expected 1): Y Over Travel Limit SW (B)"
+        );
+    }
+
+    #[test]
+    fn a_consequence_says_its_cause_the_signal_it_follows_through_and_the_first_out() {
+        assert_eq!(consequence_text(None), "");
+        let mut c = ConsequencePayload {
+            cause: "clamp".into(),
+            first_out: "hydraulic".into(),
+            suppressed: false,
+            through: vec![ThroughPayload {
+                signal: "G10.01".into(),
+                value: true,
+            }],
+        };
+        assert_eq!(
+            consequence_text(Some(&c)),
+            "follows from clamp: G10.01 = 1 (0 without clamp's fault); first-out hydraulic"
+        );
+        c.first_out = "clamp".into();
+        assert_eq!(
+            consequence_text(Some(&c)),
+            "follows from clamp: G10.01 = 1 (0 without clamp's fault)"
         );
     }
 }

@@ -1,6 +1,6 @@
 //! The event a condition sends on each transition (and on a
 //! `ConditionRefresh`): the fields of `AlarmConditionType` and the cell's
-//! own `Culprits`, answered to any select clause the server accepted.
+//! own `Culprits` and `Consequence`, answered to any select clause the server accepted.
 //! Holds no state: `conditions.rs` fills it in.
 
 use opcua::nodes::{BaseEventType, Event, EventField};
@@ -91,6 +91,10 @@ pub(super) struct AlarmFields {
     pub(super) shelving_state: ShelvingVar,
     /// `CellAlarmType`'s own: the alarm's culprits as one text.
     pub(super) culprits: UAString,
+    /// `CellAlarmType`'s own: why the occurrence is a consequence (the
+    /// cause, the signal it follows through, the first-out); empty for a
+    /// first-out.
+    pub(super) consequence: UAString,
 }
 
 /// One condition's event. `Event` is written by hand so that a select

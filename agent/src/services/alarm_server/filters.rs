@@ -74,6 +74,7 @@ pub(super) fn accept_condition_fields(tree: &mut DefaultTypeTree, ns: u16, ty: &
         }
     }
     paths.push(vec![QualifiedName::new(ns, "Culprits")]);
+    paths.push(vec![QualifiedName::new(ns, "Consequence")]);
     for (t, ty) in types.iter().enumerate() {
         for (p, path) in paths.iter().enumerate() {
             let path: Vec<&QualifiedName> = path.iter().collect();
@@ -134,6 +135,7 @@ mod tests {
             message: "ESE: X0.06 opened while the spindle ran".into(),
             severity: 750,
             culprits: "X0.06 = 0 (expected 1)".into(),
+            consequence: "follows from hydraulic: Y2.00 = 0 (1 without hydraulic's fault)".into(),
             active: true,
             acked: false,
             enabled: true,
@@ -344,6 +346,16 @@ mod tests {
             index_range: NumericRange::None,
         });
         assert!(eq(culprits, lit("X0.06 = 0 (expected 1)")));
+        let consequence = Operand::SimpleAttributeOperand(SimpleAttributeOperand {
+            type_definition_id: NodeId::new(ns, "CellAlarmType"),
+            browse_path: Some(vec![QualifiedName::new(ns, "Consequence")]),
+            attribute_id: AttributeId::Value as u32,
+            index_range: NumericRange::None,
+        });
+        assert!(eq(
+            consequence,
+            lit("follows from hydraulic: Y2.00 = 0 (1 without hydraulic's fault)")
+        ));
         // A value of no type comparable: false, not an error.
         assert!(!eq(field("Time"), lit(NodeId::new(ns, "CellAlarmType"))));
     }

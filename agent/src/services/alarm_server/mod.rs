@@ -1,7 +1,7 @@
 //! The alarm server (`[alarm_server]`): the cell's alarms served to SCADA
 //! clients as OPC UA Alarms & Conditions, beside the cell loop. One
 //! `CellAlarmType` (an `AlarmConditionType` with the alarm's culprits as
-//! `Culprits`) per alarm id under the cell's object, a notifier the
+//! `Culprits` and, for a consequence, why as `Consequence`) per alarm id under the cell's object, a notifier the
 //! `Server` object reaches, so a client subscribing to events on i=2253
 //! sees every transition; `ConditionRefresh` is answered, and
 //! `Acknowledge`, shelving and `Disable`/`Enable` are carried out by the
@@ -266,7 +266,7 @@ impl AlarmServer {
     }
 }
 
-/// `CellAlarmType` (with `Culprits`) and the cell's object, a notifier the
+/// `CellAlarmType` (with `Culprits` and `Consequence`) and the cell's object, a notifier the
 /// `Server` object reaches.
 fn declare(nodes: &SimpleNodeManager, ns: u16, cell: &str, cell_node: &NodeId, ty: &NodeId) {
     let space = nodes.address_space();
@@ -274,17 +274,19 @@ fn declare(nodes: &SimpleNodeManager, ns: u16, cell: &str, cell_node: &NodeId, t
     ObjectTypeBuilder::new(ty, "CellAlarmType", "CellAlarmType")
         .subtype_of(ObjectTypeId::AlarmConditionType)
         .insert(&mut *space);
-    VariableBuilder::new(
-        &NodeId::new(ns, "CellAlarmType.Culprits"),
-        QualifiedName::new(ns, "Culprits"),
-        "Culprits",
-    )
-    .data_type(DataTypeId::String)
-    .value("")
-    .property_of(ty.clone())
-    .has_type_definition(VariableTypeId::PropertyType)
-    .has_modelling_rule(ObjectId::ModellingRule_Mandatory)
-    .insert(&mut *space);
+    for name in ["Culprits", "Consequence"] {
+        VariableBuilder::new(
+            &NodeId::new(ns, format!("CellAlarmType.{name}")),
+            QualifiedName::new(ns, name),
+            name,
+        )
+        .data_type(DataTypeId::String)
+        .value("")
+        .property_of(ty.clone())
+        .has_type_definition(VariableTypeId::PropertyType)
+        .has_modelling_rule(ObjectId::ModellingRule_Mandatory)
+        .insert(&mut *space);
+    }
     ObjectBuilder::new(cell_node, cell, cell)
         .event_notifier(EventNotifier::SUBSCRIBE_TO_EVENTS)
         .organized_by(ObjectId::ObjectsFolder)
