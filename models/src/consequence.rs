@@ -9,10 +9,11 @@
 //! may follow from alarm A when B's check reads a signal A's fault holds:
 //!
 //! - a switching check holds its fault coil, and every output the program
-//!   derives from that coil (its forced outputs): on many machines the
-//!   emergency-stop coil is a contact of the cycle-start logic, so an
-//!   emergency stop also makes cycle start impossible (paper 000's ESE and
-//!   CSD);
+//!   derives from that coil or from such an output in turn (its forced
+//!   outputs): on many machines the emergency-stop coil is a contact of
+//!   the cycle-start logic, so an emergency stop also makes cycle start
+//!   impossible (paper 000's ESE and CSD); a hydraulic fault drops a
+//!   ready relay, which drops the ram's enable (a permissive chain);
 //! - a discrete alarm holds its contact (an over-travel switch open is a
 //!   culprit of the emergency stop that reads it);
 //! - a stuck step holds the operands its leaving transitions wait for
@@ -270,24 +271,77 @@ fn explains(held: &[Signal], cause: &Alarm, culprits: &[Culprit]) -> bool {
 
 /// The outputs `program` derives from `coil` (its forced outputs), each
 /// with its switching function: the coils `is_tag` accepts whose switching
-/// function over `observable` reads `coil`. A coil that is not derivable
-/// forces nothing.
+/// function over `observable` reads `coil` or an output forced already (a
+/// permissive chain: a ready relay the fault drops, a valve the relay
+/// enables), each after the forced outputs it reads, so that they can be
+/// re-derived in order. A coil that is not derivable forces nothing.
 pub fn forced_outputs(
     program: &Program,
     coil: &Signal,
     observable: &Observability,
     is_tag: impl Fn(&Signal) -> bool,
 ) -> Vec<SwitchingFunction> {
-    program
+    let mut candidates: Vec<SwitchingFunction> = program
         .coils()
         .iter()
         .filter(|c| c.signal != *coil && is_tag(&c.signal))
-        .filter_map(|c| {
-            SwitchingFunction::expand(program, &c.signal, observable)
-                .ok()
-                .filter(|sf| sf.leaves().contains(coil))
-        })
-        .collect()
+        .filter_map(|c| SwitchingFunction::expand(program, &c.signal, observable).ok())
+        .collect();
+    // Forced: reads the coil or a forced output; to a fixed point.
+    let mut forced: Vec<SwitchingFunction> = Vec::new();
+    loop {
+        let reads_forced = |sf: &SwitchingFunction| {
+            sf.leaves()
+                .iter()
+                .any(|l| l == coil || forced.iter().any(|f| f.coil == *l))
+        };
+        let (now, rest): (Vec<_>, Vec<_>) = candidates.into_iter().partition(reads_forced);
+        candidates = rest;
+        if now.is_empty() {
+            break;
+        }
+        forced.extend(now);
+    }
+    // Each after the forced outputs it reads (as written where they read
+    // each other round).
+    let mut ordered: Vec<SwitchingFunction> = Vec::with_capacity(forced.len());
+    while !forced.is_empty() {
+        let ready = forced
+            .iter()
+            .position(|sf| {
+                let leaves = sf.leaves();
+                !forced
+                    .iter()
+                    .any(|f| f.coil != sf.coil && leaves.contains(&f.coil))
+            })
+            .unwrap_or(0);
+        ordered.push(forced.remove(ready));
+    }
+    ordered
+}
+
+/// `forced` (as [`forced_outputs`] gives them for `coil`) without the
+/// fault coils of other alarms (`is_fault`) and what the chain reaches
+/// only through one: what follows from another alarm's fault is that
+/// alarm's, and the relation chains the two alarms (the hydraulic fault
+/// holds the clamp valve; the clamp fault's coil, which reads the valve,
+/// and the cycle-start fault's, which reads that coil, are the clamp's and
+/// the cycle start's).
+pub(crate) fn short_of_faults(
+    forced: Vec<SwitchingFunction>,
+    coil: &Signal,
+    is_fault: impl Fn(&Signal) -> bool,
+) -> Vec<SwitchingFunction> {
+    let mut kept: Vec<SwitchingFunction> = Vec::with_capacity(forced.len());
+    for f in forced {
+        let leaves = f.leaves();
+        if !is_fault(&f.coil)
+            && (leaves.contains(coil) || kept.iter().any(|k| leaves.contains(&k.coil)))
+        {
+            kept.push(f);
+        }
+    }
+    kept
 }
 
 #[cfg(test)]
@@ -312,6 +366,66 @@ mod tests {
             trigger: true,
             compared: None,
         }
+    }
+
+    fn coils(forced: &[SwitchingFunction]) -> Vec<&str> {
+        forced.iter().map(|f| f.coil.name()).collect()
+    }
+
+    #[test]
+    fn forced_outputs_follow_a_permissive_chain_each_after_what_it_reads() {
+        // The fault drops the ready relay Y2.01, which drops the ram
+        // enable Y2.02: both forced, the relay first even where the enable
+        // is written above it; Y2.03 reads neither, R1 is no tag.
+        for enable_first in [false, true] {
+            let relay = "RD X1.00\nAND.NOT G10.00\nWRT Y2.01\n";
+            let enable = "RD Y2.01\nAND X1.07\nWRT Y2.02\n";
+            let (a, b) = if enable_first {
+                (enable, relay)
+            } else {
+                (relay, enable)
+            };
+            let rest = "RD X1.01\nWRT Y2.03\nRD Y2.02\nWRT R1.00\nRD.NOT X1.00\nWRT G10.00\n";
+            let p = Program::compile("chain.il", &format!("{a}{b}{rest}"), None).unwrap();
+            let forced = forced_outputs(
+                &p,
+                &Signal::new("G10.00"),
+                &Observability::default_for(p.dialect()),
+                |s| s.name() != "R1.00",
+            );
+            assert_eq!(
+                coils(&forced),
+                ["Y2.01", "Y2.02"],
+                "enable first: {enable_first}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_chain_of_forced_outputs_stops_at_another_alarms_fault_coil() {
+        // The valve Y2.00 is forced; the clamp fault G10.01 reads it, the
+        // cycle-start fault G10.02 reads that, the lamp Y2.04 reads G10.02:
+        // all three another alarm's to hold. The ready relay Y2.01 and the
+        // enable Y2.02 it drives stay.
+        let p = Program::compile(
+            "press.il",
+            "RD X1.00\nAND.NOT X1.01\nWRT G10.00\nRD X1.03\nAND.NOT G10.00\nWRT Y2.00\n\
+             RD.NOT Y2.00\nWRT G10.01\nRD X1.04\nAND G10.01\nWRT G10.02\nRD G10.02\nWRT Y2.04\n\
+             RD X1.00\nAND.NOT G10.00\nWRT Y2.01\nRD Y2.01\nAND X1.07\nWRT Y2.02\n",
+            None,
+        )
+        .unwrap();
+        let coil = Signal::new("G10.00");
+        let forced = forced_outputs(&p, &coil, &Observability::default_for(p.dialect()), |_| {
+            true
+        });
+        assert_eq!(
+            coils(&forced),
+            ["Y2.00", "Y2.01", "G10.01", "Y2.02", "G10.02", "Y2.04"]
+        );
+        let faults = [Signal::new("G10.01"), Signal::new("G10.02")];
+        let kept = short_of_faults(forced, &coil, |s| faults.contains(s));
+        assert_eq!(coils(&kept), ["Y2.00", "Y2.01", "Y2.02"]);
     }
 
     #[test]

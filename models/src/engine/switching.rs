@@ -7,7 +7,7 @@ use super::checks::{read_with_compared, CheckSet, Declared, Finding};
 use crate::alarm::{AlarmKind, Severity};
 use crate::comments::CommentDb;
 use crate::compiled::CompiledCell;
-use crate::consequence::AlarmFacts;
+use crate::consequence::{short_of_faults, AlarmFacts};
 use crate::explain::{explain_partial, read_comparisons, Polarity};
 use crate::signal::Signal;
 use crate::switching::SwitchingFunction;
@@ -37,7 +37,10 @@ pub struct SwitchingCheck {
     /// The outputs the program derives from the fault coil (its forced
     /// outputs, [`crate::consequence::forced_outputs`]), each with its
     /// switching function: a check reading one may follow from this one's
-    /// fault, judged with the output re-derived from the coil normal.
+    /// fault, judged with the output re-derived from the coil normal (down
+    /// a permissive chain, from the outputs above it re-derived). The set
+    /// drops another of its checks' fault coils and what is forced only
+    /// through one ([`crate::consequence::short_of_faults`]).
     pub forces: Vec<SwitchingFunction>,
 }
 
@@ -78,6 +81,21 @@ impl SwitchingChecks {
     /// reported (naming them); anything else holds the last verdict, so a
     /// clear is only ever called on known values.
     pub fn new(checks: Vec<SwitchingCheck>) -> Self {
+        // A check's forced outputs stop at another check's fault coil.
+        let coils: Vec<Signal> = checks
+            .iter()
+            .filter(|c| c.text.is_none())
+            .map(|c| c.sf.coil.clone())
+            .collect();
+        let checks: Vec<SwitchingCheck> = checks
+            .into_iter()
+            .map(|mut c| {
+                let own = c.sf.coil.clone();
+                let forced = std::mem::take(&mut c.forces);
+                c.forces = short_of_faults(forced, &own, |s| *s != own && coils.contains(s));
+                c
+            })
+            .collect();
         let mut sfs: Vec<SwitchingFunction> = checks.iter().map(|c| c.sf.clone()).collect();
         let mut arm_entry = Vec::with_capacity(checks.len());
         for c in &checks {
@@ -337,11 +355,16 @@ impl SwitchingChecks {
         } else {
             check.sf.coil.clone()
         };
-        let mut out = vec![(held.clone(), normal)];
-        for f in &check.forces {
+        let mut out = vec![(held, normal)];
+        // Each forced output after those it reads (`forced_outputs`): one
+        // down a permissive chain reads the one above as re-derived, and
+        // is unknown when that one could not be.
+        for (k, f) in check.forces.iter().enumerate() {
             let value = f.certain(|x| {
-                if *x == held {
-                    Some(normal)
+                if let Some(&(_, v)) = out.iter().find(|(s, _)| s == x) {
+                    Some(v)
+                } else if check.forces[..k].iter().any(|g| g.coil == *x) {
+                    None
                 } else {
                     // An output's other contacts need not be this set's
                     // (a valve driven by a chart's step flag).

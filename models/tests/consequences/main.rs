@@ -3,7 +3,9 @@
 //! coil G9.00), once as the paper writes them (independent) and once with
 //! the emergency-stop coil a contact of the cycle-start logic, as on real
 //! machines (`tests/data/paper000/csd-ese.il`): there an emergency stop
-//! also trips CSD, which is ESE's consequence.
+//! also trips CSD, which is ESE's consequence. A transition timer waiting
+//! for what a stuck step waits for follows from the step. The press of
+//! `tests/data/press/`, in three languages, is in `press.rs`.
 
 #![allow(clippy::unwrap_used)] // test helpers fail loudly by design
 
@@ -21,11 +23,13 @@ use cellwatch_models::signal::{Observability, Signal};
 use cellwatch_models::switching::SwitchingFunction;
 use proptest::prelude::*;
 
-const ESE: &str = include_str!("../../config/cnc/ese.il");
-const CSD: &str = include_str!("../../config/cnc/csd.il");
-const CSD_ESE: &str = include_str!("../../tests/data/paper000/csd-ese.il");
-const ESE_NORMAL: &str = include_str!("../../config/cnc/ese-normal.values");
-const CSD_NORMAL: &str = include_str!("../../config/cnc/csd-normal.values");
+mod press;
+
+const ESE: &str = include_str!("../../../config/cnc/ese.il");
+const CSD: &str = include_str!("../../../config/cnc/csd.il");
+const CSD_ESE: &str = include_str!("../../../tests/data/paper000/csd-ese.il");
+const ESE_NORMAL: &str = include_str!("../../../config/cnc/ese-normal.values");
+const CSD_NORMAL: &str = include_str!("../../../config/cnc/csd-normal.values");
 
 fn check(id: &str, source: &str, coil: &str, armed_when: Option<&str>) -> SwitchingCheck {
     let p = Program::compile(&format!("{id}.il"), source, None).unwrap();
@@ -407,197 +411,5 @@ fn a_timer_waiting_for_what_a_stuck_step_waits_for_follows_from_it() {
             "clamp-002".to_string(),
             Some(("sfc-C1-S1".into(), "sfc-C1-S1".into(), false))
         )]
-    );
-}
-
-// ---- a press whose logic nobody here wrote the papers for ----
-
-const PRESS: &str = include_str!("../../tests/data/press/press.il");
-
-/// The press's four faults, each a switching check over its coil, with
-/// the outputs the program derives from it; every contact and coil a tag.
-fn press() -> CellEngine {
-    let p = Program::compile("press.il", PRESS, None).unwrap();
-    let observable = Observability::default_for(p.dialect());
-    let coils = [
-        ("hydraulic", "G10.00"),
-        ("clamp", "G10.01"),
-        ("cycle-start", "G10.02"),
-        ("coolant", "G10.03"),
-    ];
-    let mut signals: BTreeSet<Signal> = BTreeSet::new();
-    let mut sfs = Vec::new();
-    for (id, coil) in coils {
-        let sf = SwitchingFunction::expand(&p, &Signal::new(coil), &observable).unwrap();
-        signals.extend(sf.leaves());
-        signals.insert(Signal::new(coil));
-        sfs.push((id, coil, sf));
-    }
-    signals.insert(Signal::new("Y2.00"));
-    let checks = sfs
-        .into_iter()
-        .map(|(id, coil, sf)| SwitchingCheck {
-            forces: cellwatch_models::consequence::forced_outputs(
-                &p,
-                &Signal::new(coil),
-                &observable,
-                |s| signals.contains(s),
-            ),
-            text: None,
-            id: id.into(),
-            sf,
-            polarity: Polarity::On,
-            severity: Severity::High,
-            fault_type: id.to_uppercase(),
-            comments: CommentDb::default(),
-            armed_when: None,
-        })
-        .collect();
-    let tags = signals
-        .iter()
-        .map(|s| Tag {
-            name: s.name().to_lowercase(),
-            address: s.clone(),
-        })
-        .collect();
-    let sets: Vec<Box<dyn CheckSet>> = vec![Box::new(SwitchingChecks::new(checks))];
-    let e = CellEngine::new("press", tags, sets, StateRules::default()).unwrap();
-    let relation = e.relation().clone();
-    e.relating(relation, false)
-}
-
-/// Running normally: pump on with pressure, clamp requested and closed,
-/// coolant requested and flowing, cycle start released, no fault coil on.
-fn press_running(e: &mut CellEngine) {
-    e.on_connection(true, 1);
-    for (a, v) in [
-        ("X1.00", true),
-        ("X1.01", true),
-        ("X1.02", true),
-        ("X1.03", true),
-        ("X1.04", false),
-        ("X1.05", true),
-        ("X1.06", true),
-        ("Y2.00", true),
-        ("G10.00", false),
-        ("G10.01", false),
-        ("G10.02", false),
-        ("G10.03", false),
-    ] {
-        set(e, a, v, 1);
-    }
-    assert!(e.alarms().all(|a| !a.active), "running raises nothing");
-}
-
-fn mark(cause: &str, first_out: &str) -> Option<(String, String, bool)> {
-    Some((cause.into(), first_out.into(), false))
-}
-
-#[test]
-fn on_a_press_the_relation_runs_through_the_forced_valve_and_the_clamp_coil_only() {
-    let e = press();
-    let edges: Vec<(String, String)> = e.relation().edges().map(|x| (x.cause, x.effect)).collect();
-    // The coolant fault reads the pump contactor the hydraulic fault reads
-    // too: no edge, they stay independent.
-    assert_eq!(
-        edges,
-        [
-            ("hydraulic".into(), "clamp".into()),
-            ("clamp".into(), "cycle-start".into()),
-        ]
-    );
-}
-
-#[test]
-fn a_hydraulic_fault_drops_the_clamp_and_an_operator_pressing_start_follows_from_it() {
-    let mut e = press();
-    press_running(&mut e);
-    // The pressure is lost while the pump runs: the first-out.
-    let s = set(&mut e, "X1.01", false, 2);
-    assert_eq!(marks(&s), [("hydraulic".to_string(), None)]);
-    // The PLC drops the clamp valve: the clamp fault, whose term holds
-    // the clamp request too (a standing request, not the hydraulics'),
-    // would not hold with the hydraulic fault's coil normal (the valve
-    // re-derived on): its consequence.
-    set(&mut e, "G10.00", true, 3);
-    let s = set(&mut e, "Y2.00", false, 4);
-    assert_eq!(
-        marks(&s),
-        [("clamp".to_string(), mark("hydraulic", "hydraulic"))]
-    );
-    let clamp = &raised(&s)[0];
-    // Through the valve: 0 now, 1 without the hydraulic fault.
-    assert_eq!(
-        clamp.consequence.as_ref().unwrap().through,
-        [(Signal::new("Y2.00"), false)]
-    );
-    assert!(
-        clamp
-            .culprits
-            .iter()
-            .any(|c| c.address == Signal::new("Y2.00")),
-        "{:?}",
-        clamp.culprits
-    );
-    set(&mut e, "G10.01", true, 5);
-    // An operator presses cycle start on the faulted press: the cycle
-    // start fault follows from the clamp's, whose first-out it keeps.
-    let s = set(&mut e, "X1.04", true, 6);
-    assert_eq!(
-        marks(&s),
-        [("cycle-start".to_string(), mark("clamp", "hydraulic"))]
-    );
-    assert_eq!(
-        raised(&s)[0].consequence.as_ref().unwrap().through,
-        [(Signal::new("G10.01"), true)]
-    );
-    // The coolant stops flowing meanwhile: a first-out of its own, though
-    // it reads the pump contactor the hydraulic fault reads.
-    let s = set(&mut e, "X1.05", false, 7);
-    assert_eq!(marks(&s), [("coolant".to_string(), None)]);
-}
-
-#[test]
-fn a_contact_of_the_effects_own_gone_bad_keeps_it_a_first_out() {
-    let mut e = press();
-    press_running(&mut e);
-    // The clamp has opened by itself (its sensor) before the hydraulics
-    // fail: the clamp fault is raised by its own contact.
-    let s = set(&mut e, "X1.02", false, 2);
-    assert_eq!(marks(&s), [("clamp".to_string(), None)]);
-    set(&mut e, "X1.02", true, 3);
-    // Cleared; now the hydraulics fail and the sensor opens with the
-    // valve: with the valve re-derived on, the clamp is still not closed,
-    // so the clamp fault would hold anyway and is its own first-out.
-    set(&mut e, "X1.01", false, 4);
-    set(&mut e, "G10.00", true, 5);
-    set(&mut e, "X1.02", false, 6);
-    let s = set(&mut e, "Y2.00", false, 7);
-    assert!(raised(&s).is_empty(), "{:?}", marks(&s));
-    let clamp = e.alarms().find(|a| a.id == "clamp").unwrap();
-    assert!(clamp.active && clamp.consequence.is_none(), "{clamp:?}");
-}
-
-#[test]
-fn an_effect_raised_after_its_cause_cleared_is_a_first_out() {
-    let mut e = press();
-    press_running(&mut e);
-    set(&mut e, "X1.01", false, 2);
-    set(&mut e, "G10.00", true, 3);
-    let s = set(&mut e, "Y2.00", false, 4);
-    assert_eq!(
-        marks(&s),
-        [("clamp".to_string(), mark("hydraulic", "hydraulic"))]
-    );
-    set(&mut e, "G10.01", true, 5);
-    // The pressure comes back; the PLC keeps the clamp fault latched.
-    set(&mut e, "X1.01", true, 6);
-    assert!(!e.alarms().any(|a| a.id == "hydraulic" && a.active));
-    // Cycle start pressed now: it follows from the clamp, still in fault,
-    // whose first-out stays the hydraulic fault that made it.
-    let s = set(&mut e, "X1.04", true, 7);
-    assert_eq!(
-        marks(&s),
-        [("cycle-start".to_string(), mark("clamp", "hydraulic"))]
     );
 }
