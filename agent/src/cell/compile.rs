@@ -72,12 +72,16 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
     }
     if !config.sfc.is_empty() {
         for s in &config.sfc {
-            sets.push(Box::new(SfcChecks::new(
-                &s.id,
-                s.sfc.clone(),
-                s.severity,
-                comments.clone(),
-            )));
+            let checks = SfcChecks::new(&s.id, s.sfc.clone(), s.severity, comments.clone());
+            // The outputs the program drives from each step's flag, where
+            // the cell reads them.
+            let checks = match &s.program {
+                Some((program, observable)) => {
+                    checks.driving(program, observable, |a| config.tags.iter().any(|t| t.address == *a))
+                }
+                None => checks,
+            };
+            sets.push(Box::new(checks));
         }
     }
     let engine = config.delays.iter().fold(

@@ -52,6 +52,14 @@ pub struct SfcCheck {
     /// How long the steps a forced transition leads to may take to become
     /// active before the force is called failed (an alarm).
     pub force_timeout: Duration,
+    /// The PLC program that drives outputs from the supervised steps'
+    /// flags (`program`), with what it leaves observable: a fault that
+    /// holds such an output (the clamp valve a hydraulic fault drops)
+    /// explains the step stuck.
+    pub program: Option<(
+        cellwatch_models::program::Program,
+        cellwatch_models::signal::Observability,
+    )>,
 }
 
 /// How long the force switch is held on unless configured.

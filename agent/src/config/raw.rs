@@ -276,6 +276,8 @@ pub(crate) struct RawSfc {
     pub(crate) forcible: Vec<Spanned<String>>,
     pub(crate) force_pulse: Option<Spanned<String>>,
     pub(crate) force_timeout: Option<Spanned<String>>,
+    pub(crate) program: Option<Spanned<String>>,
+    pub(crate) dialect: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

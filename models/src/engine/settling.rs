@@ -19,7 +19,7 @@ use super::{CellEngine, Finding, Step};
 
 /// How long after a connection the first values are waited for before a
 /// fault found meanwhile is raised with what is still unknown named, ms.
-pub const FIRST_VALUES_MS: u64 = 5_000;
+pub(super) const FIRST_VALUES_MS: u64 = 5_000;
 
 /// The wait for the first values ([`CellEngine::on_connection`]).
 #[derive(Debug, Clone)]

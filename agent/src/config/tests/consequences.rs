@@ -120,3 +120,64 @@ fn a_bad_edge_is_named_with_its_key() {
     );
     assert!(e.starts_with("cell.toml:"), "{e}");
 }
+
+/// The clamp station of `tests/data/station`: its hydraulic fault and its
+/// chart supervised, with `extra` in the chart's table.
+fn station(extra: &str) -> (String, Mem) {
+    let mut files = mem();
+    files.0.insert(
+        PathBuf::from("base/station.il"),
+        include_bytes!("../../../../tests/data/station/station.il").to_vec(),
+    );
+    files.0.insert(
+        PathBuf::from("base/station.sfc.toml"),
+        include_bytes!("../../../../tests/data/station/station.sfc.toml").to_vec(),
+    );
+    let mut text = String::from(
+        "[cell]\nid = \"c1\"\n\n[opcua]\nendpoint = \"opc.tcp://127.0.0.1:4840/\"\n\n",
+    );
+    for addr in [
+        "X1.00", "X1.01", "X1.02", "X1.03", "X1.04", "X1.05", "R100.00", "R100.01", "R100.02",
+        "Y2.00", "Y2.02", "Y3.00", "G10.00",
+    ] {
+        text += &format!(
+            "[[tags]]\nname = \"{}\"\nnode_id = \"nsu=urn:plc;s={addr}\"\naddress = \"{addr}\"\n\n",
+            addr.to_lowercase().replace('.', "_")
+        );
+    }
+    text += "[[checks.switching]]\nid = \"hydraulic\"\nprogram = \"station.il\"\ncoil = \"G10.00\"\n\n";
+    text += &format!("[[checks.sfc]]\nid = \"sfc\"\ncharts = \"station.sfc.toml\"\n{extra}\n\n");
+    text += "[zenoh.tls]\nca = \"pki-bus/ca.pem\"\ncert = \"pki-bus/agent-c1.pem\"\nkey = \"pki-bus/agent-c1.key\"\n";
+    (text, files)
+}
+
+#[test]
+fn the_program_of_a_chart_relates_a_stuck_step_to_the_fault_that_drops_its_valve() {
+    // Without the program, the clamp step waits for the end switch only,
+    // which the hydraulic fault does not hold: no edge.
+    let (text, files) = station("");
+    let without = relation(&text, &files).unwrap();
+    assert!(!without.contains("hydraulic -> sfc-C1-S1"), "{without}");
+    // With it, the step's flag drives the clamp valve, which the
+    // hydraulic fault holds.
+    let (text, files) = station("program = \"station.il\"");
+    let with = relation(&text, &files).unwrap();
+    let edge = with
+        .lines()
+        .find(|l| l.starts_with("hydraulic -> sfc-C1-S1 "))
+        .unwrap_or_else(|| panic!("{with}"));
+    assert!(edge.contains("Y2.00"), "{edge}");
+}
+
+#[test]
+fn a_chart_program_that_drives_nothing_from_a_step_is_refused_at_its_key() {
+    let (text, files) = station("program = \"fig6.il\"");
+    let e = parse("cell.toml", &text, Path::new("base"), &files)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("checks.sfc[0].program"), "{e}");
+    assert!(
+        e.contains("drives none of the cell's tags from a supervised step's flag (R100.01, R100.02)"),
+        "{e}"
+    );
+}

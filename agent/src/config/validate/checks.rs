@@ -21,22 +21,26 @@ use crate::config::tags::map_signals;
 use crate::config::Addressing;
 
 impl Validator<'_> {
+    /// `KEY.dialect`, when given: a program's dialect where its text does
+    /// not tell.
+    pub(super) fn dialect(&mut self, key: &str, d: Option<&Spanned<String>>) -> Option<Dialect> {
+        let d = d?;
+        match d.get_ref().parse() {
+            Ok(d) => Some(d),
+            Err(e) => {
+                self.problem(d.span(), &format!("{key}.dialect"), e);
+                None
+            }
+        }
+    }
+
     pub(super) fn switching(
         &mut self,
         key: &str,
         c: raw::RawSwitching,
         tags: &HashMap<Signal, usize>,
     ) -> Option<SwitchingCheck> {
-        let dialect: Option<Dialect> = match &c.dialect {
-            None => None,
-            Some(d) => match d.get_ref().parse() {
-                Ok(d) => Some(d),
-                Err(e) => {
-                    self.problem(d.span(), &format!("{key}.dialect"), e);
-                    None
-                }
-            },
-        };
+        let dialect = self.dialect(key, c.dialect.as_ref());
         let polarity = self.parsed(
             c.fault_when.clone(),
             &format!("{key}.fault_when"),

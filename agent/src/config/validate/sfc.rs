@@ -4,9 +4,11 @@ use std::collections::{HashMap, HashSet};
 
 use cellwatch_models::alarm::Severity;
 use cellwatch_models::expr::Expr;
+use cellwatch_models::il::Dialect;
+use cellwatch_models::program::Program;
 use cellwatch_models::sfc::learn::StepModel;
 use cellwatch_models::sfc::Sfc;
-use cellwatch_models::signal::Signal;
+use cellwatch_models::signal::{Observability, Signal};
 use cellwatch_models::value::{Comparison, Operand, ValueType};
 use toml::Spanned;
 
@@ -16,6 +18,56 @@ use crate::config::tags::canonical_expr;
 use crate::config::{SfcCheck, DEFAULT_FORCE_PULSE, DEFAULT_FORCE_TIMEOUT, MAX_FORCE_TIMEOUT};
 
 impl Validator<'_> {
+    /// `KEY.program`: the PLC program that drives outputs from the
+    /// supervised steps' flags. One that drives none of the cell's tags
+    /// from any of them is refused: it would change nothing.
+    fn driving(
+        &mut self,
+        key: &str,
+        file: &Spanned<String>,
+        dialect: Option<Dialect>,
+        sfc: &Sfc,
+        tags: &HashMap<Signal, usize>,
+    ) -> Option<(Program, Observability)> {
+        let pkey = format!("{key}.program");
+        let path = self.path(file.get_ref());
+        let text = self.read_text(file.span(), &pkey, &path, "program")?;
+        let program = match Program::compile_in(&path.display().to_string(), &text, dialect, None)
+        {
+            Ok(p) => p,
+            Err(e) => {
+                self.problems.extend(e.lines());
+                return None;
+            }
+        };
+        let observable = Observability::default_for(program.dialect());
+        let flags: Vec<&Signal> = sfc
+            .steps()
+            .filter(|(_, s)| s.supervision_ms.is_some())
+            .map(|(_, s)| &s.flag)
+            .collect();
+        let drives = flags.iter().any(|flag| {
+            !cellwatch_models::consequence::forced_outputs(&program, flag, &observable, |s| {
+                tags.contains_key(s)
+            })
+            .is_empty()
+        });
+        if !drives {
+            let flags: Vec<String> = flags.iter().map(ToString::to_string).collect();
+            self.problem(
+                file.span(),
+                &pkey,
+                format!(
+                    "{} drives none of the cell's tags from a supervised step's flag ({}): name the program whose step actions set the outputs, or leave the key out",
+                    path.display(),
+                    if flags.is_empty() { "no step is supervised".to_string() } else { flags.join(", ") }
+                ),
+            );
+            return None;
+        }
+        Some((program, observable))
+    }
+
     /// Step supervision times learned by `cellwatch learn --sfc`, given to
     /// the steps of `sfc` that declare none.
     pub(super) fn learned_steps(&mut self, file: &Spanned<String>, key: &str, sfc: &mut Sfc) {
@@ -234,7 +286,15 @@ impl Validator<'_> {
                         );
                         force_timeout = DEFAULT_FORCE_TIMEOUT;
                     }
+                    let program = match &c.program {
+                        None => None,
+                        Some(p) => {
+                            let dialect = self.dialect(&key, c.dialect.as_ref());
+                            self.driving(&key, p, dialect, &sfc, tags)
+                        }
+                    };
                     out.push(SfcCheck {
+                        program,
                         id: c.id.into_inner(),
                         sfc,
                         severity,
