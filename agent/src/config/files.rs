@@ -53,11 +53,20 @@ pub fn tag_tables_beside(files: &dyn Files, program: &Path, text: &str) -> Vec<(
         return Vec::new();
     }
     let dir = program.parent().unwrap_or(Path::new(""));
+    tag_tables_in(files, dir)
+        .into_iter()
+        .filter(|(p, _)| p.file_name() != program.file_name())
+        .collect()
+}
+
+/// Every TIA Portal tag table of folder `dir` (each `.xml` file that is
+/// one), with its text, in name order: each file read once. A folder that
+/// cannot be listed, or a file that cannot be read, holds none.
+pub(super) fn tag_tables_in(files: &dyn Files, dir: &Path) -> Vec<(PathBuf, String)> {
     let Ok(list) = files.list(dir) else {
         return Vec::new();
     };
     list.into_iter()
-        .filter(|p| p.file_name() != program.file_name())
         .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("xml")))
         .filter_map(|p| {
             let bytes = files.read(&p).ok()?;

@@ -630,6 +630,53 @@ fn a_tia_portal_block_gets_the_comments_of_the_tag_table_exported_beside_it() {
 }
 
 #[test]
+fn a_folder_of_tia_portal_exports_is_read_once_however_many_checks_read_blocks_in_it() {
+    /// `Mem`, counting the reads of each file.
+    struct Counting(Mem, std::cell::RefCell<HashMap<PathBuf, usize>>);
+    impl Files for Counting {
+        fn read(&self, path: &Path) -> io::Result<Vec<u8>> {
+            *self.1.borrow_mut().entry(path.to_path_buf()).or_default() += 1;
+            self.0.read(path)
+        }
+        fn list(&self, dir: &Path) -> io::Result<Vec<PathBuf>> {
+            self.0.list(dir)
+        }
+    }
+    let mut files = mem();
+    files.0.insert(
+        PathBuf::from("base/tia/Fig6.xml"),
+        include_bytes!("../../../tests/data/paper000/fig6.lad.SimaticML.xml").to_vec(),
+    );
+    files.0.insert(
+        PathBuf::from("base/tia/PLC tags.xml"),
+        include_bytes!("../../../tests/data/paper000/fig6.tags.SimaticML.xml").to_vec(),
+    );
+    let tags: String = ["X1", "X2", "X3", "X4", "Y1", "Y2"]
+        .iter()
+        .map(|a| format!("[[tags]]\nname = \"{a}\"\nnode_id = \"nsu=urn:plc;s={a}\"\naddress = '\"{a}\"'\n\n"))
+        .collect();
+    let checks: String = (0..3)
+        .map(|i| format!("[[checks.switching]]\nid = \"fig6-{i}\"\nprogram = \"tia/Fig6.xml\"\ncoil = '\"G0_00\"'\n\n"))
+        .collect();
+    let text = format!(
+        "[cell]\nid = \"c1\"\ndialect = \"stl\"\n\n[opcua]\nendpoint = \"opc.tcp://127.0.0.1:4840/\"\n\n{tags}{checks}\
+         [zenoh.tls]\nca = \"ca.pem\"\ncert = \"c.pem\"\nkey = \"c.key\"\n"
+    );
+    let files = Counting(files, Default::default());
+    let c = parse("cell.toml", &text, Path::new("base"), &files).unwrap();
+    for check in &c.switching {
+        assert_eq!(
+            check.comments.get(&Signal::new("X3")),
+            Some("Door closed switch")
+        );
+    }
+    let reads = files.1.borrow();
+    // The tag table once for the folder; each check reads its block.
+    assert_eq!(reads[Path::new("base/tia/PLC tags.xml")], 1, "{reads:?}");
+    assert_eq!(reads[Path::new("base/tia/Fig6.xml")], 3 + 1, "{reads:?}");
+}
+
+#[test]
 fn a_server_that_dials_out_is_listened_for_at_an_ip_address() {
     let with = |v: &str| {
         GOOD.replace(

@@ -21,6 +21,25 @@ use crate::config::tags::map_signals;
 use crate::config::Addressing;
 
 impl Validator<'_> {
+    /// The tag tables exported beside SimaticML block `path` (of `text`),
+    /// the block itself among them if it is one: none for another format.
+    /// Each folder's files are read once.
+    fn tag_tables_beside(
+        &mut self,
+        path: &std::path::Path,
+        text: &str,
+    ) -> std::rc::Rc<Vec<(std::path::PathBuf, String)>> {
+        if !cellwatch_models::comments::is_simaticml(text) {
+            return std::rc::Rc::default();
+        }
+        let dir = path.parent().unwrap_or(std::path::Path::new("")).to_path_buf();
+        let files = self.files;
+        self.tag_tables
+            .entry(dir)
+            .or_insert_with_key(|dir| std::rc::Rc::new(crate::config::files::tag_tables_in(files, dir)))
+            .clone()
+    }
+
     /// `KEY.dialect`, when given: a program's dialect where its text does
     /// not tell.
     pub(super) fn dialect(&mut self, key: &str, d: Option<&Spanned<String>>) -> Option<Dialect> {
@@ -146,7 +165,10 @@ impl Validator<'_> {
             .collect();
         let mut declared = program.documentation().clone();
         // A TIA Portal block's tag tables, exported beside it.
-        for (table, text) in crate::config::tag_tables_beside(self.files, &path, &text) {
+        for (table, text) in self.tag_tables_beside(&path, &text).iter() {
+            if table.file_name() == path.file_name() {
+                continue;
+            }
             match CommentDb::parse_in(
                 &table.display().to_string(),
                 &text,

@@ -65,6 +65,7 @@ pub(super) fn validate(
         tag_comments: HashMap::new(),
         tags_file: None,
         addressing: Addressing::PmcOrIec,
+        tag_tables: HashMap::new(),
     };
     let config = v.config(raw, toml_tags);
     if v.problems.is_empty() {
@@ -102,6 +103,10 @@ pub(super) struct Validator<'a> {
     tags_file: Option<(String, String)>,
     /// How the tags' addresses are written (`cell.dialect`).
     addressing: Addressing,
+    /// The TIA Portal tag tables of each folder a SimaticML block was read
+    /// from: a folder's files are read once, however many checks read
+    /// blocks in it.
+    tag_tables: HashMap<PathBuf, std::rc::Rc<Vec<(PathBuf, String)>>>,
 }
 
 impl Validator<'_> {
