@@ -344,7 +344,9 @@ async fn a_fault_present_at_start_is_raised_on_whole_data() {
     })
     .await;
     assert!(
-        raised.message.starts_with("ESE at step 6: X0.06 = 0 (expected 1)"),
+        raised
+            .message
+            .starts_with("ESE at step 6: X0.06 = 0 (expected 1)"),
         "{}",
         raised.message
     );

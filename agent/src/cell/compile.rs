@@ -76,9 +76,9 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
             // The outputs the program drives from each step's flag, where
             // the cell reads them.
             let checks = match &s.program {
-                Some((program, observable)) => {
-                    checks.driving(program, observable, |a| config.tags.iter().any(|t| t.address == *a))
-                }
+                Some((program, observable)) => checks.driving(program, observable, |a| {
+                    config.tags.iter().any(|t| t.address == *a)
+                }),
                 None => checks,
             };
             sets.push(Box::new(checks));

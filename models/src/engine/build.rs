@@ -172,6 +172,7 @@ impl CellEngine {
             clock: 0,
             unheard: configured,
             settling: None,
+            awaiting_first: true,
         })
     }
 

@@ -201,6 +201,7 @@ impl CellEngine {
             self.timestamps.iter_mut().for_each(|t| *t = None);
             self.unheard = self.configured;
             self.settling = None;
+            self.awaiting_first = true;
         } else {
             self.begin_settling(now);
         }

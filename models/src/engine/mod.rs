@@ -519,6 +519,9 @@ pub struct CellEngine {
     /// The wait for the first values after a connection
     /// (`settling.rs`), while it lasts.
     settling: Option<Box<settling::Settling>>,
+    /// Built, or the connection lost: the next link's first sign begins
+    /// the wait for its first values.
+    awaiting_first: bool,
     /// The agent's clock at the readings being handled (ms): the flight
     /// recorder keeps their changes at the time their alarms are stamped
     /// with, so that a PLC clock not believed leaves no recording empty.

@@ -41,6 +41,7 @@ impl CellEngine {
 
     fn readings(&mut self, readings: &[TagReading], now: u64, to_alarm: bool) -> (Step, usize) {
         self.clock = now;
+        self.begin_settling(now);
         let mut step = Step::default();
         let mut findings = Vec::new();
         let mut used = 0;

@@ -4,7 +4,8 @@
 //! fault present when the agent starts (or reconnects) may be certain from
 //! the first of them alone (`X0.06 = 0` makes ESE's fault whatever the
 //! other contacts are), and judged then, its message would name every
-//! contact still to come as unknown. So from the connection until every
+//! contact still to come as unknown. So from the connection (or the first
+//! value, when a source delivers one before it says so) until every
 //! configured tag has been heard (a value or a bad status), or
 //! [`FIRST_VALUES_MS`] at the latest, a fault found by a check that reads
 //! a tag not heard yet is held: values are taken and the checks follow
@@ -32,8 +33,14 @@ pub(super) struct Settling {
 }
 
 impl CellEngine {
-    /// The connection came up with tags not heard: the wait begins.
+    /// The first sign of a new link (the connection up, or a value, which
+    /// a source may deliver before it says the connection is up): with
+    /// tags not heard, the wait begins. Once per link: the engine is
+    /// built, or the connection lost, awaiting it.
     pub(super) fn begin_settling(&mut self, now: u64) {
+        if !std::mem::take(&mut self.awaiting_first) {
+            return;
+        }
         self.settling = (self.unheard > 0).then(|| {
             Box::new(Settling {
                 until: now.saturating_add(FIRST_VALUES_MS),
@@ -78,10 +85,8 @@ impl CellEngine {
             return self.apply_at(f, at, now, step);
         };
         let held = settling.held.iter().position(|(h, ..)| h.id == f.id);
-        let hold = held.is_none()
-            && f.active
-            && !self.is_active(&f.id)
-            && self.reads_unheard(&f.id);
+        let hold =
+            held.is_none() && f.active && !self.is_active(&f.id) && self.reads_unheard(&f.id);
         let Some(settling) = self.settling.as_mut() else {
             return;
         };
@@ -198,6 +203,27 @@ mod tests {
         assert!(r[0].0.starts_with("ESE at step 6: X0.06 = 0"), "{}", r[0].0);
         assert!(!r[0].0.contains("unknown"), "{}", r[0].0);
         assert_eq!(e.next_deadline(), None);
+    }
+
+    #[test]
+    fn values_delivered_before_the_connection_is_said_are_waited_for_the_same() {
+        // A source may hand over a new subscription's first values before
+        // it says the connection is up.
+        let mut e = engine();
+        let values = values_with(&e, "X0.06");
+        let x006 = e.tag_index(&Signal::new("X0.06")).unwrap();
+        let s = e.on_reading(x006, Reading::Good(false), 900, 1_000);
+        assert!(raises(&s.events).is_empty(), "{:?}", s.events);
+        e.on_connection(true, 1_001);
+        let mut events = Vec::new();
+        for &(t, v) in values.iter().filter(|(t, _)| *t != x006) {
+            events.extend(e.on_reading(t, Reading::Good(v), 950, 1_010).events);
+        }
+        let r = raises(&events);
+        assert_eq!(r.len(), 1, "{events:?}");
+        assert!(!r[0].0.contains("unknown"), "{}", r[0].0);
+        // The wait's clock ran from the first value, not the connection.
+        assert_eq!(r[0].1, 1_000);
     }
 
     #[test]

@@ -145,7 +145,8 @@ fn station(extra: &str) -> (String, Mem) {
             addr.to_lowercase().replace('.', "_")
         );
     }
-    text += "[[checks.switching]]\nid = \"hydraulic\"\nprogram = \"station.il\"\ncoil = \"G10.00\"\n\n";
+    text +=
+        "[[checks.switching]]\nid = \"hydraulic\"\nprogram = \"station.il\"\ncoil = \"G10.00\"\n\n";
     text += &format!("[[checks.sfc]]\nid = \"sfc\"\ncharts = \"station.sfc.toml\"\n{extra}\n\n");
     text += "[zenoh.tls]\nca = \"pki-bus/ca.pem\"\ncert = \"pki-bus/agent-c1.pem\"\nkey = \"pki-bus/agent-c1.key\"\n";
     (text, files)
@@ -177,7 +178,9 @@ fn a_chart_program_that_drives_nothing_from_a_step_is_refused_at_its_key() {
         .to_string();
     assert!(e.contains("checks.sfc[0].program"), "{e}");
     assert!(
-        e.contains("drives none of the cell's tags from a supervised step's flag (R100.01, R100.02)"),
+        e.contains(
+            "drives none of the cell's tags from a supervised step's flag (R100.01, R100.02)"
+        ),
         "{e}"
     );
 }

@@ -32,11 +32,16 @@ impl Validator<'_> {
         if !cellwatch_models::comments::is_simaticml(text) {
             return std::rc::Rc::default();
         }
-        let dir = path.parent().unwrap_or(std::path::Path::new("")).to_path_buf();
+        let dir = path
+            .parent()
+            .unwrap_or(std::path::Path::new(""))
+            .to_path_buf();
         let files = self.files;
         self.tag_tables
             .entry(dir)
-            .or_insert_with_key(|dir| std::rc::Rc::new(crate::config::files::tag_tables_in(files, dir)))
+            .or_insert_with_key(|dir| {
+                std::rc::Rc::new(crate::config::files::tag_tables_in(files, dir))
+            })
             .clone()
     }
 

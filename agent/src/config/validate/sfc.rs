@@ -32,8 +32,7 @@ impl Validator<'_> {
         let pkey = format!("{key}.program");
         let path = self.path(file.get_ref());
         let text = self.read_text(file.span(), &pkey, &path, "program")?;
-        let program = match Program::compile_in(&path.display().to_string(), &text, dialect, None)
-        {
+        let program = match Program::compile_in(&path.display().to_string(), &text, dialect, None) {
             Ok(p) => p,
             Err(e) => {
                 self.problems.extend(e.lines());
