@@ -42,11 +42,13 @@
 //!   that imports no component.
 //! - [`sim`]: simulated cells served over OPC UA.
 //! - [`clock`]: wall-clock time in the models' unit.
+//! - [`backoff`]: the waits between tries, doubling up to a cap.
 //! - [`archive`]: the plant archive: `cellwatch router` (Zenoh's router
 //!   with its storage manager and a SQLite volume) and its readers.
 
 pub mod agent;
 pub mod archive;
+pub mod backoff;
 pub mod bus;
 pub mod cell;
 pub mod cli;

@@ -34,6 +34,7 @@ use serde::Serialize;
 use tokio::sync::Notify;
 
 use super::Sink;
+use crate::backoff::Backoff;
 use crate::clock::rfc3339;
 use crate::config::{AlertmanagerConfig, AlertmanagerTls};
 use crate::metrics::Metrics;
@@ -449,7 +450,7 @@ struct Due {
     /// The next send.
     at: tokio::time::Instant,
     /// The wait after the next failure.
-    backoff: Duration,
+    backoff: Backoff,
     /// The last send failed.
     failing: bool,
 }
@@ -462,7 +463,7 @@ impl Pusher {
         let mut due = vec![
             Due {
                 at: now,
-                backoff: FIRST_RETRY,
+                backoff: Backoff::new(FIRST_RETRY, self.resend),
                 failing: false,
             };
             self.urls.len()
@@ -503,14 +504,11 @@ impl Pusher {
             for (i, ok) in results {
                 let d = &mut due[i];
                 if ok {
-                    *d = Due {
-                        at: tokio::time::Instant::now() + self.resend,
-                        backoff: FIRST_RETRY,
-                        failing: false,
-                    };
+                    d.at = tokio::time::Instant::now() + self.resend;
+                    d.backoff.reset();
+                    d.failing = false;
                 } else {
-                    d.at = tokio::time::Instant::now() + d.backoff;
-                    d.backoff = (d.backoff * 2).min(self.resend);
+                    d.at = tokio::time::Instant::now() + d.backoff.next_wait();
                     d.failing = true;
                 }
             }

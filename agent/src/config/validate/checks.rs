@@ -176,7 +176,7 @@ impl Validator<'_> {
             }
             match CommentDb::parse_in(
                 &table.display().to_string(),
-                &text,
+                text,
                 |a| program.resolve(a),
                 language,
             ) {

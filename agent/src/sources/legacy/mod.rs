@@ -30,6 +30,7 @@ use super::{
     Source, SourceError, SourceEvent, SourceSender, Write, WriteRequest, WriteSender,
     WRITE_CAPACITY,
 };
+use crate::backoff::Backoff;
 use crate::clock::Clock;
 pub use crate::config::legacy::{BusNode, Item, LegacyConfig, Parity, SerialLine, Transport};
 use crate::config::TagConfig;
@@ -357,7 +358,7 @@ pub async fn poll(
         listening.iter().any(|l| *l)
     }
     tokio::pin!(shutdown);
-    let mut backoff = Duration::from_millis(250);
+    let mut backoff = Backoff::new(Duration::from_millis(250), Duration::from_secs(10));
     let mut said_down = false;
     loop {
         let opened = tokio::select! {
@@ -376,13 +377,12 @@ pub async fn poll(
                 }
                 tokio::select! {
                     _ = &mut shutdown => return Ok(()),
-                    _ = tokio::time::sleep(backoff) => {}
+                    _ = tokio::time::sleep(backoff.next_wait()) => {}
                 }
-                backoff = (backoff * 2).min(Duration::from_secs(10));
                 continue;
             }
         };
-        backoff = Duration::from_millis(250);
+        backoff.reset();
         if !tell_all(
             &members,
             &mut listening,

@@ -17,6 +17,8 @@ use std::time::{Duration, Instant};
 
 use opcua::types::{DataValue, StatusCode, Variant};
 
+use crate::backoff::Backoff;
+
 /// The first wait before a failed item is created again.
 pub(super) const FIRST_RETRY: Duration = Duration::from_secs(1);
 /// The longest wait between two attempts.
@@ -76,8 +78,8 @@ pub(super) struct Retry {
     /// When it is created again; `None` once created, until it says a
     /// value (or fails again).
     pub(super) due: Option<Instant>,
-    /// The wait before the attempt after this one.
-    pub(super) backoff: Duration,
+    /// The waits before the attempts after this one.
+    pub(super) backoff: Backoff,
 }
 
 /// What an item's value says of the item.
@@ -119,12 +121,11 @@ impl Items {
         let r = self.failed.entry(i as u32).or_insert(Retry {
             status,
             due: None,
-            backoff: FIRST_RETRY,
+            backoff: Backoff::new(FIRST_RETRY, LAST_RETRY),
         });
         r.status = status;
         if r.due.is_none() {
-            r.due = Some(now + r.backoff);
-            r.backoff = (r.backoff * 2).min(LAST_RETRY);
+            r.due = Some(now + r.backoff.next_wait());
         }
     }
 
@@ -135,7 +136,7 @@ impl Items {
             let r = self.failed.entry(i as u32).or_insert(Retry {
                 status: StatusCode::Good,
                 due: None,
-                backoff: FIRST_RETRY,
+                backoff: Backoff::new(FIRST_RETRY, LAST_RETRY),
             });
             r.due = Some(now);
         }
@@ -290,7 +291,11 @@ mod tests {
             items.fail(1, StatusCode::BadNodeIdUnknown, t);
             t = items.next_due().unwrap();
         }
-        assert_eq!(items.retry(1).unwrap().backoff, LAST_RETRY);
+        // At the cap: the wait after this one is the last retry's too.
+        let t = items.next_due().unwrap();
+        assert_eq!(items.take_due(t).len(), 1);
+        items.fail(1, StatusCode::BadNodeIdUnknown, t);
+        assert_eq!(items.next_due(), Some(t + LAST_RETRY));
         // Taken, and a value: no longer failed; the old item is to be
         // deleted.
         assert_eq!(items.created(1, 9), Some(7));

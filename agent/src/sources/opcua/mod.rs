@@ -76,6 +76,8 @@ use opcua::client::{Session, SessionConnectMode, SessionPollResult};
 
 use tokio::sync::mpsc;
 
+use crate::backoff::Backoff;
+
 use super::{
     Source, SourceError, SourceEvent, SourceSender, Write, WriteRequest, WriteSender,
     WRITE_CAPACITY,
@@ -268,7 +270,7 @@ async fn run_writing(
     // The session's supervisor (namespaces, subscription, liveness) beside
     // the session's event loop; owned here so that none outlives the source.
     let mut supervisor = tokio::task::JoinSet::new();
-    let mut backoff = Duration::from_millis(250);
+    let mut backoff = Backoff::new(Duration::from_millis(250), Duration::from_secs(10));
     let mut said_down = false;
     // A redundant set: the server read from, and the watch of its level
     // saying to move.
@@ -314,17 +316,17 @@ async fn run_writing(
                         let _ = tx.send(SourceEvent::Disconnected(format!("cannot connect to {}: {e}", ctx.endpoint()))).await;
                         said_down = true;
                     }
-                    tracing::warn!(endpoint = %ctx.endpoint(), error = %e, retry_in = ?backoff, "OPC UA connect failed");
+                    let wait = backoff.next_wait();
+                    tracing::warn!(endpoint = %ctx.endpoint(), error = %e, retry_in = ?wait, "OPC UA connect failed");
                     tokio::select! {
                         _ = &mut shutdown => return Ok(()),
-                        _ = tokio::time::sleep(backoff) => {}
+                        _ = tokio::time::sleep(wait) => {}
                     }
-                    backoff = (backoff * 2).min(Duration::from_secs(10));
                     continue;
                 }
             }
         };
-        backoff = Duration::from_millis(250);
+        backoff.reset();
         let mut events = event_loop;
         let mut subscribed = false;
         // Drive the event loop until the session is usable, then subscribe.
@@ -471,7 +473,7 @@ async fn run_writing(
         supervisor.abort_all();
         tokio::select! {
             _ = &mut shutdown => return Ok(()),
-            _ = tokio::time::sleep(backoff) => {}
+            _ = tokio::time::sleep(backoff.next_wait()) => {}
         }
     }
 }
@@ -509,7 +511,7 @@ async fn supervise(
     new_session: bool,
 ) {
     let mut live = current.lock_owned().await;
-    let mut retry = Duration::from_millis(500);
+    let mut retry = Backoff::new(Duration::from_millis(500), Duration::from_secs(10));
     // The subscription of the lost connection is to be taken over.
     let mut resuming = live.is_some();
     loop {
@@ -523,8 +525,7 @@ async fn supervise(
                         ctx.endpoint()
                     )))
                     .await;
-                tokio::time::sleep(retry).await;
-                retry = (retry * 2).min(Duration::from_secs(10));
+                tokio::time::sleep(retry.next_wait()).await;
                 continue;
             }
         };
@@ -595,13 +596,12 @@ async fn supervise(
             match subscribe(&session, &ctx, namespaces).await {
                 Some(l) => *live = Some(l),
                 None => {
-                    tokio::time::sleep(retry).await;
-                    retry = (retry * 2).min(Duration::from_secs(10));
+                    tokio::time::sleep(retry.next_wait()).await;
                     continue;
                 }
             }
         }
-        retry = Duration::from_millis(500);
+        retry.reset();
         let _ = ctx.tx.send(SourceEvent::Connected(ctx.endpoint())).await;
         let l = live.as_ref().expect("subscribed above");
         let why = watch::watch(&session, &ctx, l).await;
