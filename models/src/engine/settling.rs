@@ -222,7 +222,8 @@ mod tests {
         let r = raises(&events);
         assert_eq!(r.len(), 1, "{events:?}");
         assert!(!r[0].0.contains("unknown"), "{}", r[0].0);
-        // The wait's clock ran from the first value, not the connection.
+        // Raised at the time it was first seen, before the connection was
+        // said.
         assert_eq!(r[0].1, 1_000);
     }
 
