@@ -327,6 +327,27 @@ struct AtCut {
     timestamps: Vec<Option<u64>>,
 }
 
+/// The wait for the first values after a connection (`settling.rs`).
+#[derive(Debug, Clone)]
+struct Settling {
+    /// The clock time the wait ends at the latest.
+    until: u64,
+    /// The faults found meanwhile, in the order found.
+    held: Vec<Held>,
+}
+
+/// A fault found while the first values come, held until they have.
+#[derive(Debug, Clone)]
+struct Held {
+    finding: Finding,
+    /// The source time it was first seen at.
+    at: u64,
+    /// The clock time it was first seen at.
+    seen: u64,
+    /// Why its trigger is uncertain, if it was judged across lost changes.
+    uncertain: Option<String>,
+}
+
 /// Tags whose changes may have been lost, and the latest gap's reason.
 #[derive(Debug, Clone)]
 struct Lost {
@@ -337,7 +358,9 @@ struct Lost {
 /// Marks a finding judged across a gap: no contact is named its trigger,
 /// and the message says why.
 fn uncertain_trigger(f: &mut Finding, why: &str) {
-    if matches!(f.kind, AlarmKind::Communication | AlarmKind::System) {
+    if matches!(f.kind, AlarmKind::Communication | AlarmKind::System)
+        || f.message.contains("(trigger uncertain")
+    {
         return;
     }
     for c in &mut f.culprits {
@@ -518,7 +541,7 @@ pub struct CellEngine {
     unheard: usize,
     /// The wait for the first values after a connection
     /// (`settling.rs`), while it lasts.
-    settling: Option<Box<settling::Settling>>,
+    settling: Option<Box<Settling>>,
     /// Built, or the connection lost: the next link's first sign begins
     /// the wait for its first values.
     awaiting_first: bool,

@@ -16,21 +16,11 @@
 //! has heard all it reads (a limit on its number, a discrete alarm on its
 //! contact) is raised at once.
 
-use super::{CellEngine, Finding, Step};
+use super::{uncertain_trigger, CellEngine, Finding, Held, Settling, Step};
 
 /// How long after a connection the first values are waited for before a
 /// fault found meanwhile is raised with what is still unknown named, ms.
 pub(super) const FIRST_VALUES_MS: u64 = 5_000;
-
-/// The wait for the first values ([`CellEngine::on_connection`]).
-#[derive(Debug, Clone)]
-pub(super) struct Settling {
-    /// The clock time the wait ends at the latest.
-    until: u64,
-    /// The faults found meanwhile, each with the source time and the
-    /// clock time it was first seen at, in the order found.
-    held: Vec<(Finding, u64, u64)>,
-}
 
 impl CellEngine {
     /// The first sign of a new link (the connection up, or a value, which
@@ -84,9 +74,15 @@ impl CellEngine {
         let Some(settling) = self.settling.as_ref() else {
             return self.apply_at(f, at, now, step);
         };
-        let held = settling.held.iter().position(|(h, ..)| h.id == f.id);
+        let held = settling.held.iter().position(|h| h.finding.id == f.id);
         let hold =
             held.is_none() && f.active && !self.is_active(&f.id) && self.reads_unheard(&f.id);
+        // Judged across lost changes: said so when raised, though each tag
+        // will have been heard by then.
+        let uncertain = match hold && (self.lost.is_some() || self.lost_now.is_some()) {
+            true => self.uncertain(&f),
+            false => None,
+        };
         let Some(settling) = self.settling.as_mut() else {
             return;
         };
@@ -97,7 +93,12 @@ impl CellEngine {
             (Some(i), false) => {
                 settling.held.remove(i);
             }
-            (None, true) if hold => settling.held.push((f, at, now)),
+            (None, true) if hold => settling.held.push(Held {
+                finding: f,
+                at,
+                seen: now,
+                uncertain,
+            }),
             (None, _) => self.apply_at(f, at, now, step),
         }
     }
@@ -120,20 +121,24 @@ impl CellEngine {
         let mut held = settling.held;
         if held.len() > 1 && !self.relation.is_empty() {
             // Causes first, as within one change.
-            let ids: Vec<String> = held.iter().map(|(f, ..)| f.id.clone()).collect();
-            held.sort_by_key(|(f, ..)| {
+            let ids: Vec<String> = held.iter().map(|h| h.finding.id.clone()).collect();
+            held.sort_by_key(|h| {
                 self.relation
-                    .causes_of(&f.id)
+                    .causes_of(&h.finding.id)
                     .iter()
                     .filter(|(c, _)| ids.contains(c))
                     .count()
             });
         }
-        for (mut f, at, seen) in held {
+        for h in held {
+            let mut f = h.finding;
             for set in &self.sets {
                 set.restate(&mut f);
             }
-            self.apply_at(f, at, seen, step);
+            if let Some(why) = &h.uncertain {
+                uncertain_trigger(&mut f, why);
+            }
+            self.apply_at(f, h.at, h.seen, step);
         }
     }
 }
@@ -225,6 +230,31 @@ mod tests {
         // Raised at the time it was first seen, before the connection was
         // said.
         assert_eq!(r[0].1, 1_000);
+    }
+
+    #[test]
+    fn a_fault_held_across_lost_changes_says_its_trigger_is_uncertain_when_raised() {
+        let mut e = engine();
+        e.on_connection(true, 1);
+        load_normal(&mut e, 2);
+        e.on_connection(false, 10);
+        e.on_connection(true, 20);
+        // The server dropped the subscription while the link was down.
+        e.on_gap(None, 0, "subscription 1 dropped");
+        let values = values_with(&e, "X0.06");
+        let mut events = Vec::new();
+        for &(t, v) in &values {
+            events.extend(e.on_reading(t, Reading::Good(v), 30, 30).events);
+        }
+        let r = raises(&events);
+        assert_eq!(r.len(), 1, "{events:?}");
+        assert!(
+            r[0].0
+                .ends_with("(trigger uncertain: subscription 1 dropped)"),
+            "{}",
+            r[0].0
+        );
+        assert_eq!(r[0].0.matches("trigger uncertain").count(), 1, "{}", r[0].0);
     }
 
     #[test]
