@@ -119,7 +119,7 @@ pub async fn run(setup: &Setup) -> anyhow::Result<String> {
     let last = format!("quic/127.0.0.1:{}", ports[ports.len() - 1]);
     let bus = Bus::open(&dir, &last).await?;
     let cookie = sign_in(console_addr, None, &operator).await?;
-    let at_console = console_alarms(console_addr, cookie.clone()).await?;
+    let (at_console, known_to_console) = console_alarms(console_addr, cookie.clone()).await?;
 
     // 1. One agent alone.
     let lone = {
@@ -222,6 +222,7 @@ pub async fn run(setup: &Setup) -> anyhow::Result<String> {
     };
     let total: usize = faults.iter().map(|(_, f)| f.len()).sum();
     let (console_l, console_missed) = matched(&at_console);
+    let (_, console_unknown) = matched(&known_to_console);
     let (bus_l, bus_missed) = matched(&bus.seen);
     // What the last router's archive keeps of them.
     let (archived, archive_error) = match archived(setup, &dir, &last) {
@@ -336,8 +337,13 @@ pub async fn run(setup: &Setup) -> anyhow::Result<String> {
             archive_missed.join(", ")
         ));
     }
+    out.push_str(&format!(
+        "- faults the console showed active (its live raise, or the alarm in a snapshot it asked an agent that came back): {} of {total}\n",
+        total - console_unknown.len()
+    ));
     for (what, missed) in [
-        ("console", &console_missed),
+        ("console's live raises", &console_missed),
+        ("console's table at all", &console_unknown),
         ("bare subscriber", &bus_missed),
     ] {
         if !missed.is_empty() {

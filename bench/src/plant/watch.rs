@@ -257,10 +257,16 @@ impl Bus {
     }
 }
 
-/// The console's event stream, read on: every fault alarm's arrival.
-pub(super) async fn console_alarms(addr: SocketAddr, cookie: String) -> anyhow::Result<Seen> {
+/// The console's event stream, read on: every fault alarm's raise as it
+/// arrived, and every arrival of a fault alarm shown active (a raise, or
+/// the alarm as a snapshot the console asked brought it).
+pub(super) async fn console_alarms(
+    addr: SocketAddr,
+    cookie: String,
+) -> anyhow::Result<(Seen, Seen)> {
     let seen: Seen = Arc::default();
-    let out = seen.clone();
+    let known: Seen = Arc::default();
+    let (out, shown) = (seen.clone(), known.clone());
     let stream = tokio::net::TcpStream::connect(addr).await?;
     let (read, mut write) = stream.into_split();
     write
@@ -294,9 +300,21 @@ pub(super) async fn console_alarms(addr: SocketAddr, cookie: String) -> anyhow::
                     s.entry(cell).or_default().push((now, switch));
                 }
             }
+            let active = v["alarm"]["state"]
+                .as_str()
+                .is_some_and(|s| s.starts_with("active"));
+            if active && v["alarm"]["id"] == "fault" {
+                let mut raised = v["alarm"].clone();
+                raised["transition"] = "raised".into();
+                if let Some((cell, switch)) = alarms::fault_raised(&raised) {
+                    if let Ok(mut s) = shown.lock() {
+                        s.entry(cell).or_default().push((now, switch));
+                    }
+                }
+            }
         }
     });
-    Ok(seen)
+    Ok((seen, known))
 }
 
 /// After a router is killed at `killed`: how long until the console's
