@@ -572,8 +572,9 @@ fn the_agents_own_alarms_clear_after_an_off_delay_unless_configured() {
     );
 }
 
-#[test]
-fn a_tia_portal_block_gets_the_comments_of_the_tag_table_exported_beside_it() {
+/// Paper 000's fig6 as TIA Portal exports it (`base/tia/`: the block and
+/// its tag table, one object per file), and the `[[tags]]` of its contacts.
+fn tia_folder() -> (Mem, String) {
     let mut files = mem();
     files.0.insert(
         PathBuf::from("base/tia/Fig6.xml"),
@@ -583,10 +584,16 @@ fn a_tia_portal_block_gets_the_comments_of_the_tag_table_exported_beside_it() {
         PathBuf::from("base/tia/PLC tags.xml"),
         include_bytes!("../../../tests/data/paper000/fig6.tags.SimaticML.xml").to_vec(),
     );
-    let tags: String = ["X1", "X2", "X3", "X4", "Y1", "Y2"]
+    let tags = ["X1", "X2", "X3", "X4", "Y1", "Y2"]
         .iter()
         .map(|a| format!("[[tags]]\nname = \"{a}\"\nnode_id = \"nsu=urn:plc;s={a}\"\naddress = '\"{a}\"'\n\n"))
         .collect();
+    (files, tags)
+}
+
+#[test]
+fn a_tia_portal_block_gets_the_comments_of_the_tag_table_exported_beside_it() {
+    let (mut files, tags) = tia_folder();
     let text = format!(
         "[cell]\nid = \"c1\"\ndialect = \"stl\"\n\n[opcua]\nendpoint = \"opc.tcp://127.0.0.1:4840/\"\n\n{tags}\
          [[checks.switching]]\nid = \"fig6\"\nprogram = \"tia/Fig6.xml\"\ncoil = '\"G0_00\"'\n\n\
@@ -642,19 +649,7 @@ fn a_folder_of_tia_portal_exports_is_read_once_however_many_checks_read_blocks_i
             self.0.list(dir)
         }
     }
-    let mut files = mem();
-    files.0.insert(
-        PathBuf::from("base/tia/Fig6.xml"),
-        include_bytes!("../../../tests/data/paper000/fig6.lad.SimaticML.xml").to_vec(),
-    );
-    files.0.insert(
-        PathBuf::from("base/tia/PLC tags.xml"),
-        include_bytes!("../../../tests/data/paper000/fig6.tags.SimaticML.xml").to_vec(),
-    );
-    let tags: String = ["X1", "X2", "X3", "X4", "Y1", "Y2"]
-        .iter()
-        .map(|a| format!("[[tags]]\nname = \"{a}\"\nnode_id = \"nsu=urn:plc;s={a}\"\naddress = '\"{a}\"'\n\n"))
-        .collect();
+    let (files, tags) = tia_folder();
     let checks: String = (0..3)
         .map(|i| format!("[[checks.switching]]\nid = \"fig6-{i}\"\nprogram = \"tia/Fig6.xml\"\ncoil = '\"G0_00\"'\n\n"))
         .collect();
