@@ -190,16 +190,7 @@ async fn a_cells_history_is_read_from_the_plant_archive_after_its_agent_is_gone(
         .unwrap();
     let lines = crate::util::lines_of(&mut child);
     let said = lines.recv_timeout(Duration::from_secs(60)).unwrap();
-    assert!(said.contains("keeping the plant archive"), "{said}");
-    let port = crate::util::tls_port(
-        &said
-            .split(": listening on ")
-            .nth(1)
-            .unwrap()
-            .split([',', ';'])
-            .map(|s| s.trim().to_string())
-            .collect::<Vec<_>>(),
-    );
+    let port = archive_port(&said);
     let after = archived(&dir, port, &[]).await;
     assert_eq!(after.code, 0, "{}{}", after.stdout, after.stderr);
     for line in before.stdout.lines().filter(|l| l.contains("m01/ese")) {
@@ -351,4 +342,19 @@ async fn a_cells_history_is_read_from_the_plant_archive_after_its_agent_is_gone(
 /// A storage's SQLite file in the router's archive.
 fn archive_file(dir: &Path, storage: &str) -> PathBuf {
     dir.join(format!("routers/router-1/archive/{storage}.sqlite"))
+}
+
+/// The TLS port a `cellwatch router` keeping the plant archive said it
+/// listens on (its first line).
+pub(super) fn archive_port(said: &str) -> u16 {
+    assert!(said.contains("keeping the plant archive"), "{said}");
+    crate::util::tls_port(
+        &said
+            .split(": listening on ")
+            .nth(1)
+            .unwrap()
+            .split([',', ';'])
+            .map(|s| s.trim().to_string())
+            .collect::<Vec<_>>(),
+    )
 }

@@ -36,16 +36,7 @@ fn router(dir: &Path, name: &str, connect: &[u16]) -> (Child, u16) {
     let said = crate::util::lines_of(&mut child)
         .recv_timeout(Duration::from_secs(60))
         .unwrap();
-    assert!(said.contains("keeping the plant archive"), "{said}");
-    let port = crate::util::tls_port(
-        &said
-            .split(": listening on ")
-            .nth(1)
-            .unwrap()
-            .split([',', ';'])
-            .map(|s| s.trim().to_string())
-            .collect::<Vec<_>>(),
-    );
+    let port = super::archive::archive_port(&said);
     (child, port)
 }
 
