@@ -32,6 +32,11 @@ impl Backoff {
         wait
     }
 
+    /// The wait before the next try, without counting a try.
+    pub fn peek(&self) -> Duration {
+        self.next
+    }
+
     /// A try succeeded: the next failure waits the first wait again.
     pub fn reset(&mut self) {
         self.next = self.first;
@@ -48,6 +53,7 @@ mod tests {
         let waits: Vec<u128> = (0..5).map(|_| b.next_wait().as_millis()).collect();
         assert_eq!(waits, [250, 500, 1000, 1000, 1000]);
         b.reset();
+        assert_eq!(b.peek(), Duration::from_millis(250));
         assert_eq!(b.next_wait(), Duration::from_millis(250));
     }
 }

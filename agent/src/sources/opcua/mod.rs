@@ -473,7 +473,9 @@ async fn run_writing(
         supervisor.abort_all();
         tokio::select! {
             _ = &mut shutdown => return Ok(()),
-            _ = tokio::time::sleep(backoff.next_wait()) => {}
+            // A session that ended is not a failed try: the first
+            // attempt after it waits as before, the next ones double.
+            _ = tokio::time::sleep(backoff.peek()) => {}
         }
     }
 }
