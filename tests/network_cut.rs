@@ -111,7 +111,10 @@ async fn a_pulse_during_a_network_cut_arrives_in_order_through_the_taken_over_su
             .await,
         );
     }
-    let pulse = of_tag(&events, 0);
+    let mut pulse = of_tag(&events, 0);
+    // The values read again after the take-over may repeat the last change
+    // with its own source time: a duplicate the engine drops.
+    pulse.dedup();
     assert_eq!(
         pulse.iter().map(|(r, _)| r.clone()).collect::<Vec<_>>(),
         [Reading::Good(false), Reading::Good(true)],
