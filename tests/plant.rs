@@ -8,6 +8,7 @@
 mod archive;
 mod failover;
 mod rotation;
+mod starting;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

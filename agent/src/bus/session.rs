@@ -4,6 +4,8 @@
 
 use zenoh::Session;
 
+use crate::backoff::Backoff;
+
 use crate::config::{ZenohConfig, ZenohMode};
 
 /// Why Zenoh refused.
@@ -222,7 +224,7 @@ const ZENOH_OPEN_TIMEOUT: &str = "10000";
 
 /// How long a client with several routers gives one to open a session
 /// (a QUIC and TLS handshake on a plant network takes milliseconds).
-const CLIENT_OPEN_TIMEOUT_MS: u64 = 3_000;
+pub const CLIENT_OPEN_TIMEOUT_MS: u64 = 3_000;
 
 fn set(cfg: &mut zenoh::Config, key: &str, value: String) -> Result<(), ZenohError> {
     cfg.insert_json5(key, &value)
@@ -325,10 +327,31 @@ fn client_config(c: &ZenohConfig) -> Result<zenoh::Config, ZenohError> {
 /// How long a client tries its endpoints before giving up, ms.
 pub const CLIENT_CONNECT_TIMEOUT_MS: u64 = 10_000;
 
+/// Opens a session. A client is opened again, on a fresh runtime, until
+/// [`CLIENT_CONNECT_TIMEOUT_MS`] has passed: a router that answers after
+/// its [`CLIENT_OPEN_TIMEOUT_MS`] (a host starved as fifty agents start)
+/// leaves the runtime a link to it all the same, and the next router of
+/// the list is then refused (a client has one north-bound link), so that
+/// one try fails although both routers are up.
 async fn open_config(cfg: zenoh::Config) -> Result<Session, ZenohError> {
-    zenoh::open(cfg)
-        .await
-        .map_err(|e| ZenohError::Open(e.to_string()))
+    let client = cfg.get_json("mode").ok().as_deref() == Some("\"client\"");
+    let deadline = tokio::time::Instant::now()
+        + std::time::Duration::from_millis(CLIENT_CONNECT_TIMEOUT_MS);
+    let mut backoff = Backoff::new(
+        std::time::Duration::from_millis(250),
+        std::time::Duration::from_secs(2),
+    );
+    loop {
+        match zenoh::open(cfg.clone()).await {
+            Ok(session) => return Ok(session),
+            Err(e) if client && tokio::time::Instant::now() + backoff.peek() < deadline => {
+                let wait = backoff.next_wait();
+                tracing::warn!(error = %e, "cannot open the zenoh session; trying again in {wait:?}");
+                tokio::time::sleep(wait).await;
+            }
+            Err(e) => return Err(ZenohError::Open(e.to_string())),
+        }
+    }
 }
 
 /// Opens the agent's session: as [`open`], no message larger than
