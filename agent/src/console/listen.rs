@@ -61,10 +61,12 @@ pub(super) async fn start(
     tasks.push(tokio::spawn(async move {
         while let Ok(sample) = alarms.recv_async().await {
             let key = sample.key_expr().as_str();
-            let Some(a) = opened::<AlarmPayload>(&s, &sample.payload().to_bytes(), key) else {
+            let Some((a, sealed)) = opened::<AlarmPayload>(&s, &sample.payload().to_bytes(), key)
+            else {
                 continue;
             };
-            s.change(|p| p.alarm_event(a));
+            let sealed = crate::clock::rfc3339(sealed);
+            s.change(|p| p.alarm_event(a, &sealed));
         }
     }));
 
@@ -72,7 +74,8 @@ pub(super) async fn start(
     tasks.push(tokio::spawn(async move {
         while let Ok(sample) = states.recv_async().await {
             let key = sample.key_expr().as_str();
-            let Some(state) = opened::<StatePayload>(&s, &sample.payload().to_bytes(), key) else {
+            let Some((state, _)) = opened::<StatePayload>(&s, &sample.payload().to_bytes(), key)
+            else {
                 continue;
             };
             s.change(|p| p.state(state).into_iter().collect());
@@ -149,13 +152,14 @@ pub(super) async fn start(
     Ok(tasks)
 }
 
-/// Opens a put its cell's agent sealed for `key` and parses its body;
-/// `None` (logged) when not believed or not of its sealer's cell.
+/// Opens a put its cell's agent sealed for `key` and parses its body,
+/// with when it was sealed (ms since the epoch, the agent's clock); `None`
+/// (logged) when not believed or not of its sealer's cell.
 fn opened<T: serde::de::DeserializeOwned + HasCell>(
     s: &Shared,
     bytes: &[u8],
     key: &str,
-) -> Option<T> {
+) -> Option<(T, u64)> {
     let opened = match s.bus.open_put(bytes, key) {
         Ok(o) => o,
         Err(why) => {
@@ -164,7 +168,7 @@ fn opened<T: serde::de::DeserializeOwned + HasCell>(
         }
     };
     match serde_json::from_str::<T>(&opened.body) {
-        Ok(v) if v.cell() == opened.cell => Some(v),
+        Ok(v) if v.cell() == opened.cell => Some((v, opened.at)),
         Ok(v) => {
             tracing::error!(key, cell = v.cell(), sealed_by = %opened.cell, "a payload for another cell than its sealer's: ignored");
             None

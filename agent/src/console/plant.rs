@@ -4,10 +4,14 @@
 //!
 //! Events arrive out of order and twice (a late joiner's cache, a
 //! snapshot asked while events flow): an alarm event is taken only if it
-//! is not older than what is known of that alarm, nor than the cell's last
-//! snapshot, so that an old "raised" never brings back an alarm that has
-//! since ended. Times are the agents' RFC 3339 UTC strings, which sort as
-//! they read. What is kept is bounded: `max_alarms` alarms at most.
+//! is not older than what is known of that alarm, nor sealed before the
+//! cell's last snapshot was taken, so that an old "raised" never brings
+//! back an alarm that has since ended. Against a snapshot an event is
+//! judged by when its agent sealed it, not by when its fault happened: a
+//! fault that happened before the snapshot but reached the agent after it
+//! is not in it, and is taken. Times are the agents' RFC 3339 UTC
+//! strings, which sort as they read. What is kept is bounded: `max_alarms`
+//! alarms at most.
 
 use std::collections::{BTreeMap, HashMap};
 
@@ -93,6 +97,10 @@ pub struct Plant {
     /// snapshot: at most `max_alarms`, the oldest forgotten first.
     ended: HashMap<(String, String), String>,
     ended_order: std::collections::VecDeque<(String, String)>,
+    /// When the agent sealed the event each shown alarm was last taken
+    /// from (none: from a snapshot), so that a snapshot taken before it
+    /// does not remove it.
+    sealed: HashMap<(String, String), String>,
 }
 
 /// Whether an operator must see `a`: active or unacknowledged, shelved or
@@ -122,6 +130,7 @@ impl Plant {
             dropped: 0,
             ended: HashMap::new(),
             ended_order: std::collections::VecDeque::new(),
+            sealed: HashMap::new(),
         };
         for cell in trusted {
             plant.cell_mut(cell);
@@ -164,14 +173,15 @@ impl Plant {
         self.alarms.len()
     }
 
-    /// Takes an alarm event its cell's agent signed; returns what changed.
-    pub fn alarm_event(&mut self, a: AlarmPayload) -> Vec<Change> {
+    /// Takes an alarm event its cell's agent signed, at `sealed` (its
+    /// clock, RFC 3339); returns what changed.
+    pub fn alarm_event(&mut self, a: AlarmPayload, sealed: &str) -> Vec<Change> {
         let mut changes = Vec::new();
         if self.stale(&a) {
             return changes;
         }
         let cell = self.cell_mut(&a.cell);
-        if cell.synced_at.as_deref().is_some_and(|s| a.at.as_str() < s) {
+        if cell.synced_at.as_deref().is_some_and(|s| sealed < s) {
             return changes;
         }
         if a.transition == Transition::Raised {
@@ -184,7 +194,7 @@ impl Plant {
                 cell: Box::new(cell.clone()),
             });
         }
-        if let Some(change) = self.take(a) {
+        if let Some(change) = self.take(a, Some(sealed)) {
             changes.push(change);
         }
         changes
@@ -194,7 +204,7 @@ impl Plant {
     /// acknowledgement, a shelf or a removal of the occurrence known keeps
     /// that occurrence's diagnosis (message, culprits, step): the table
     /// shows what the alarm is, not "cleared".
-    fn take(&mut self, mut a: AlarmPayload) -> Option<Change> {
+    fn take(&mut self, mut a: AlarmPayload, sealed: Option<&str>) -> Option<Change> {
         let key = (a.cell.clone(), a.id.clone());
         if self.ended.get(&key).is_some_and(|at| *at > a.at) {
             return None;
@@ -234,9 +244,14 @@ impl Plant {
             if self.ended.remove(&key).is_some() {
                 self.ended_order.retain(|k| *k != key);
             }
+            match sealed {
+                Some(sealed) => self.sealed.insert(key.clone(), sealed.to_string()),
+                None => self.sealed.remove(&key),
+            };
             self.alarms.insert(key, a.clone());
         } else {
             self.alarms.remove(&key);
+            self.sealed.remove(&key);
             self.end(key, &a.at);
         }
         Some(Change::Alarm { alarm: Box::new(a) })
@@ -320,12 +335,17 @@ impl Plant {
             .alarms
             .range((name.clone(), String::new())..)
             .take_while(|((c, _), _)| *c == name)
-            .filter(|((_, id), a)| !listed.contains(id.as_str()) && a.at <= s.at)
+            .filter(|(key, a)| {
+                !listed.contains(key.1.as_str())
+                    && a.at <= s.at
+                    && self.sealed.get(*key).is_none_or(|sealed| *sealed < s.at)
+            })
             .map(|(_, a)| a.clone())
             .collect();
         for mut a in gone {
             let key = (a.cell.clone(), a.id.clone());
             self.alarms.remove(&key);
+            self.sealed.remove(&key);
             self.end(key, &s.at);
             // Said to the pages as an alarm that ended.
             a.state = AlarmState::Normal;
@@ -336,7 +356,7 @@ impl Plant {
         }
         for a in s.alarms {
             if a.cell == name {
-                changes.extend(self.take(a));
+                changes.extend(self.take(a, None));
             }
         }
         changes
@@ -388,6 +408,12 @@ mod tests {
         }
     }
 
+    /// Takes `a` as sealed when it says it happened.
+    fn event(p: &mut Plant, a: AlarmPayload) -> Vec<Change> {
+        let sealed = a.at.clone();
+        p.alarm_event(a, &sealed)
+    }
+
     const T1: &str = "2026-11-26T08:00:01.000Z";
     const T2: &str = "2026-11-26T08:00:02.000Z";
     const T3: &str = "2026-11-26T08:00:03.000Z";
@@ -399,7 +425,7 @@ mod tests {
     #[test]
     fn a_raised_alarm_is_shown_and_its_cell_gets_the_fault() {
         let mut p = plant();
-        let changes = p.alarm_event(alarm(
+        let changes = event(&mut p, alarm(
             "ese",
             T1,
             AlarmState::ActiveUnacknowledged,
@@ -418,20 +444,20 @@ mod tests {
     #[test]
     fn an_older_event_never_overrides_a_newer_one() {
         let mut p = plant();
-        p.alarm_event(alarm(
+        event(&mut p, alarm(
             "ese",
             T2,
             AlarmState::Normal,
             Transition::Acknowledged,
         ));
         assert_eq!(p.alarm_count(), 0);
-        p.alarm_event(alarm(
+        event(&mut p, alarm(
             "ese",
             T3,
             AlarmState::ActiveUnacknowledged,
             Transition::Raised,
         ));
-        p.alarm_event(alarm("ese", T1, AlarmState::Normal, Transition::Cleared));
+        event(&mut p, alarm("ese", T1, AlarmState::Normal, Transition::Cleared));
         assert_eq!(
             p.alarm("m1", "ese").map(|a| a.state),
             Some(AlarmState::ActiveUnacknowledged)
@@ -441,13 +467,13 @@ mod tests {
     #[test]
     fn a_snapshot_ends_what_it_does_not_list_and_old_events_stay_out() {
         let mut p = plant();
-        p.alarm_event(alarm(
+        event(&mut p, alarm(
             "a",
             T1,
             AlarmState::ActiveUnacknowledged,
             Transition::Raised,
         ));
-        p.alarm_event(alarm(
+        event(&mut p, alarm(
             "b",
             T1,
             AlarmState::ActiveUnacknowledged,
@@ -466,7 +492,7 @@ mod tests {
         assert!(p.alarm("m1", "b").is_some());
         assert!(changes.iter().any(|c| matches!(c, Change::Alarm { alarm } if alarm.id == "a" && alarm.state == AlarmState::Normal)));
         // A cached event from before the snapshot does not bring it back.
-        p.alarm_event(alarm(
+        event(&mut p, alarm(
             "a",
             T1,
             AlarmState::ActiveUnacknowledged,
@@ -474,7 +500,7 @@ mod tests {
         ));
         assert!(p.alarm("m1", "a").is_none());
         // A new one does.
-        p.alarm_event(alarm(
+        event(&mut p, alarm(
             "a",
             T3,
             AlarmState::ActiveUnacknowledged,
@@ -500,7 +526,7 @@ mod tests {
             trigger: true,
             compared: None,
         }];
-        p.alarm_event(raised.clone());
+        event(&mut p, raised.clone());
         let mut cleared = alarm(
             "ese",
             T2,
@@ -509,7 +535,7 @@ mod tests {
         );
         cleared.raised_at = T1.into();
         cleared.message = "ESE cleared".into();
-        p.alarm_event(cleared);
+        event(&mut p, cleared);
         let kept = p.alarm("m1", "ese").unwrap();
         assert_eq!(kept.state, AlarmState::ClearedUnacknowledged);
         assert_eq!(
@@ -524,7 +550,7 @@ mod tests {
             Transition::Raised,
         );
         again.message = "ESE again".into();
-        p.alarm_event(again);
+        event(&mut p, again);
         assert_eq!(p.alarm("m1", "ese").unwrap().message, "ESE again");
     }
 
@@ -532,7 +558,7 @@ mod tests {
     fn at_most_max_alarms_are_kept_and_the_rest_counted() {
         let mut p = Plant::new(["m1"], &BTreeMap::new(), 3);
         for i in 0..5 {
-            p.alarm_event(alarm(
+            event(&mut p, alarm(
                 &format!("a{i}"),
                 T1,
                 AlarmState::ActiveUnacknowledged,
@@ -542,7 +568,7 @@ mod tests {
         assert_eq!(p.alarm_count(), 3);
         assert_eq!(p.view().dropped, 2);
         // One that is known still changes.
-        p.alarm_event(alarm(
+        event(&mut p, alarm(
             "a0",
             T2,
             AlarmState::ActiveAcknowledged,
@@ -579,8 +605,8 @@ mod tests {
             AlarmState::ActiveUnacknowledged,
             Transition::Raised,
         );
-        p.alarm_event(raised.clone());
-        p.alarm_event(alarm(
+        event(&mut p, raised.clone());
+        event(&mut p, alarm(
             "ese",
             T2,
             AlarmState::Normal,
@@ -588,15 +614,47 @@ mod tests {
         ));
         assert_eq!(p.alarm_count(), 0);
         // The genuine, signed raise, replayed after the alarm ended.
-        assert!(p.alarm_event(raised).is_empty());
+        assert!(event(&mut p, raised).is_empty());
         assert_eq!(p.alarm_count(), 0);
         // A new raise after it is shown.
-        p.alarm_event(alarm(
+        event(&mut p, alarm(
             "ese",
             T3,
             AlarmState::ActiveUnacknowledged,
             Transition::Raised,
         ));
         assert_eq!(p.alarm_count(), 1);
+    }
+
+    #[test]
+    fn a_fault_that_reached_its_agent_after_a_snapshot_is_taken_either_way() {
+        let raised = || {
+            alarm(
+                "ese",
+                T1,
+                AlarmState::ActiveUnacknowledged,
+                Transition::Raised,
+            )
+        };
+        // The fault happened at T1; the agent took its snapshot at T2,
+        // before the change reached it, and sealed the raise at T3.
+        let mut p = plant();
+        p.snapshot(snapshot(T2, vec![]));
+        assert_eq!(p.alarm_event(raised(), T3).len(), 2);
+        assert!(p.alarm("m1", "ese").is_some());
+        // The same, the raise arriving before the snapshot's answer.
+        let mut p = plant();
+        p.alarm_event(raised(), T3);
+        p.snapshot(snapshot(T2, vec![]));
+        assert!(p.alarm("m1", "ese").is_some(), "kept: sealed after the snapshot");
+        // A raise sealed before the snapshot that does not list it has
+        // ended since: not shown, whichever comes first.
+        let mut p = plant();
+        p.snapshot(snapshot(T2, vec![]));
+        assert!(p.alarm_event(raised(), T1).is_empty());
+        let mut p = plant();
+        p.alarm_event(raised(), T1);
+        p.snapshot(snapshot(T2, vec![]));
+        assert!(p.alarm("m1", "ese").is_none());
     }
 }
