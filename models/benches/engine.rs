@@ -18,6 +18,14 @@
 //! After them it prints what the recorder kept: the ring's bytes at
 //! capacity, and per alarm recorded its JSON size and its memory.
 //!
+//! The flight recorder in a flood on one check (`flight_recorder_flood`):
+//! 1,000 contacts, one switching check over 32 of them (`X0.00` AND any of
+//! 31 others), 100 changes a millisecond, each a toggle of a random
+//! contact, and `X0.00` toggled every 450 changes, so that the check raises
+//! and clears about 110 times a second while its 32 signals fill the ring:
+//!
+//! - **recorder_off** (baseline), **recorder_on**, as above.
+//!
 //! Run: `cargo bench -p cellwatch-models --bench engine`
 
 #![allow(missing_docs)] // criterion_group! generates undocumented items
@@ -35,7 +43,8 @@ use cellwatch_models::engine::{
 use cellwatch_models::explain::Polarity;
 use cellwatch_models::expr::Expr;
 use cellwatch_models::limit::{Level, LimitCheck, LimitChecks, LimitLevel};
-use cellwatch_models::signal::Signal;
+use cellwatch_models::program::Program;
+use cellwatch_models::signal::{Observability, Signal};
 use cellwatch_models::switching::SwitchingFunction;
 use cellwatch_models::value::Num;
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
@@ -338,5 +347,114 @@ fn kind(r: &Recording) -> (&'static str, &'static str) {
     )
 }
 
-criterion_group!(benches, changes_per_second, flight_recorder);
+/// 1,000 contacts, all closed but `X0.00`; one check over 32 of them:
+/// `X0.00` AND any of `X0.01`..`X1.15`. Recording by `recorder`.
+fn flood_engine(recorder: Option<RecorderConfig>) -> CellEngine {
+    const CONTACTS: usize = 1_000;
+    let mut src = format!("RD {}\nRD.STK {}\n", common::address(0), common::address(1));
+    for i in 2..32 {
+        src.push_str(&format!("OR {}\n", common::address(i)));
+    }
+    src.push_str("AND.STK\nWRT G0.00\n");
+    let program = Program::compile("flood.il", &src, None).expect("flood program compiles");
+    let observable = Observability::default_for(program.dialect());
+    let sf = SwitchingFunction::expand(&program, &Signal::new("G0.00"), &observable)
+        .expect("derivable");
+    let tags = (0..CONTACTS)
+        .map(|i| {
+            let s = Signal::new(&common::address(i));
+            Tag {
+                name: s.to_string(),
+                address: s,
+            }
+        })
+        .collect();
+    let check = SwitchingCheck {
+        forces: Vec::new(),
+        text: None,
+        id: "flood".into(),
+        sf,
+        polarity: Polarity::On,
+        severity: Severity::High,
+        fault_type: "FLOOD".into(),
+        comments: CommentDb::default(),
+        armed_when: None,
+    };
+    let sets: Vec<Box<dyn CheckSet>> = vec![Box::new(SwitchingChecks::new(vec![check]))];
+    let mut e = CellEngine::new(
+        "flood",
+        tags,
+        sets,
+        StateRules {
+            running: None,
+            fault_severity: Severity::High,
+        },
+    )
+    .expect("engine");
+    if let Some(config) = recorder {
+        e = e.recording(config);
+    }
+    e.on_connection(true, 0);
+    let normal: Vec<TagReading> = (0..CONTACTS)
+        .map(|t| TagReading {
+            tag: t,
+            reading: Reading::Good(t != 0),
+            source_time: 1,
+        })
+        .collect();
+    e.on_readings(&normal, 1);
+    e
+}
+
+fn flight_recorder_flood(c: &mut Criterion) {
+    let mut rng = common::Rng(0x5EED_0F_F100D);
+    let mut values: Vec<bool> = (0..1_000).map(|t| t != 0).collect();
+    let changes: Vec<(usize, bool)> = (0..90_000)
+        .map(|k| {
+            let tag = if k % 450 == 0 { 0 } else { 1 + rng.below(999) };
+            values[tag] = !values[tag];
+            (tag, values[tag])
+        })
+        .collect();
+    let mut group = c.benchmark_group("flight_recorder_flood");
+    group.throughput(Throughput::Elements(1));
+    for (name, recorder) in [
+        ("recorder_off", None),
+        ("recorder_on", Some(RecorderConfig::default())),
+    ] {
+        let mut e = flood_engine(recorder);
+        let (mut k, mut t, mut raised, mut calls) = (0usize, 2u64, 0u64, 0u64);
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                let (tag, value) = changes[k % changes.len()];
+                k += 1;
+                // 100 changes a millisecond: 100,000 a second.
+                if k % 100 == 0 {
+                    t += 1;
+                }
+                let step = e.on_readings(
+                    &[TagReading {
+                        tag,
+                        reading: Reading::Good(value),
+                        source_time: t,
+                    }],
+                    t,
+                );
+                calls += 1;
+                raised += step
+                    .alarms()
+                    .filter(|(_, tr, _)| *tr == cellwatch_models::alarm::Transition::Raised)
+                    .count() as u64;
+                black_box(step.events.len())
+            })
+        });
+        println!(
+            "flight recorder flood, {name}: {raised} raises in {calls} changes ({:.0} a second at 100,000 changes a second)",
+            raised as f64 * 100_000.0 / calls.max(1) as f64
+        );
+    }
+    group.finish();
+}
+
+criterion_group!(benches, changes_per_second, flight_recorder, flight_recorder_flood);
 criterion_main!(benches);

@@ -4,7 +4,7 @@
 //! recording holds is `recording.rs`'s, the bounds' settings are
 //! [`super::RecorderConfig`].
 
-use std::collections::VecDeque;
+use std::collections::{BinaryHeap, VecDeque};
 
 use super::recording::{Cut, RecordedSignal, Recording, Sample, Truncated};
 use super::{RecorderConfig, MAX_OPEN};
@@ -83,6 +83,8 @@ pub(crate) struct Recorder {
     next_end: Option<u64>,
     /// Recordings complete, until the engine hands them out.
     done: Vec<Recording>,
+    /// Changes looked at in the ring by starting recordings, ever.
+    walked: u64,
 }
 
 impl Recorder {
@@ -103,6 +105,7 @@ impl Recorder {
             open: (0..config.max_open).map(|_| None).collect(),
             next_end: None,
             done: Vec::new(),
+            walked: 0,
             config,
         }
     }
@@ -245,6 +248,12 @@ impl Recorder {
         self.next_end
     }
 
+    /// Changes looked at in the ring by starting recordings, ever.
+    #[cfg(test)]
+    pub(crate) fn walked(&self) -> u64 {
+        self.walked
+    }
+
     /// Moves the complete recordings into `out`.
     pub(crate) fn take_done(&mut self, out: &mut Vec<Recording>) {
         out.append(&mut self.done);
@@ -280,37 +289,51 @@ impl Recorder {
             holds_from = dropped + 1;
             truncated.start = Some(Cut::Ring);
         }
-        // Each signal's changes since `holds_from`, walked back along its
-        // own chain, then merged in the order they came.
+        // The signals' changes merged as they came, walked back from the
+        // latest along each signal's own chain: changes after the raise,
+        // then at most `max_changes` up to it (the latest). The walk stops
+        // there, so its cost is in what the recording keeps, not in what
+        // the ring holds.
         let first = self.pushed - self.ring.len() as u64;
+        let change = |n: u64| &self.ring[(n - first) as usize];
+        let mut heads: BinaryHeap<(u64, usize)> = reads
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| self.last[r.tag] > first)
+            .map(|(i, r)| (self.last[r.tag] - 1, i))
+            .collect();
         let mut picked: Vec<(u64, usize)> = Vec::new();
-        for (i, r) in reads.iter().enumerate() {
-            let mut n = self.last[r.tag];
-            while n > first {
-                let c = &self.ring[(n - 1 - first) as usize];
-                debug_assert_eq!(c.tag as usize, r.tag, "a tag's chain holds its own changes");
-                if c.at < holds_from {
+        let mut before = 0;
+        let mut walked = 0;
+        while let Some((n, i)) = heads.pop() {
+            walked += 1;
+            let c = change(n);
+            debug_assert_eq!(c.tag as usize, reads[i].tag, "a tag's chain holds its own changes");
+            if c.at < holds_from {
+                break;
+            }
+            if c.at <= raised_at {
+                if before == self.config.max_changes {
+                    // Changes at the cut's time are left out with it.
+                    let cut = c.at;
+                    while picked.last().is_some_and(|&(m, _)| change(m).at <= cut) {
+                        picked.pop();
+                    }
+                    holds_from = cut + 1;
+                    truncated.start = Some(Cut::Changes);
                     break;
                 }
-                picked.push((n - 1, i));
-                n = match c.back {
-                    0 => 0,
-                    back => n - u64::from(back),
-                };
+                before += 1;
+            }
+            picked.push((n, i));
+            let back = u64::from(c.back);
+            if back != 0 && n + 1 - back > first {
+                heads.push((n - back, i));
             }
         }
-        picked.sort_unstable();
-        let change = |n: u64| &self.ring[(n - first) as usize];
-        // At most `max_changes` before the raise: the latest.
-        let before = picked.partition_point(|&(n, _)| change(n).at <= raised_at);
-        let mut skip = 0;
-        if before > self.config.max_changes {
-            let cut = change(picked[before - self.config.max_changes - 1].0).at;
-            skip = picked.partition_point(|&(n, _)| change(n).at <= cut);
-            holds_from = cut + 1;
-            truncated.start = Some(Cut::Changes);
-        }
-        let picked = &picked[skip..];
+        picked.reverse();
+        let picked = &picked[..];
+        self.walked += walked;
         let mut start: Vec<Option<Option<Sample>>> = vec![None; reads.len()];
         for &(n, i) in picked {
             if start[i].is_none() {
@@ -571,6 +594,42 @@ mod tests {
             bool_changes(&rec.signals[0]),
             [(4_000, Some(true)), (5_000, Some(false))]
         );
+    }
+
+    #[test]
+    fn a_raise_looks_at_what_its_recording_keeps_whatever_the_ring_holds() {
+        // 32 signals changing 6.4 times a millisecond for 10 s: 64,000
+        // changes in the ring, all inside the window before the raise.
+        let config = config(10_000, 5_000);
+        let max_changes = config.max_changes;
+        let mut r = recorder(32, config);
+        let mut v = [false; 32];
+        for k in 0..64_000u64 {
+            let tag = (k % 32) as usize;
+            v[tag] = !v[tag];
+            r.change_bool(tag, k * 10 / 64, Some(!v[tag]), Some(v[tag]));
+        }
+        assert_eq!(r.fill().changes, 64_000);
+        r.start("flood", 10_000, (0..32).map(read).collect());
+        // The latest 1,000 and the one that says where they start.
+        assert!(r.walked() <= max_changes as u64 + 1, "{}", r.walked());
+        r.finish_due(15_000);
+        let mut done = Vec::new();
+        r.take_done(&mut done);
+        let rec = &done[0];
+        // The latest 1,000, less those stamped in the cut's millisecond
+        // (at most 6 more of them: 6.4 changes a millisecond).
+        assert!(
+            (max_changes - 6..=max_changes).contains(&rec.changes()),
+            "{}",
+            rec.changes()
+        );
+        assert_eq!(rec.truncated.start, Some(Cut::Changes));
+        // Each signal starts at the value its first kept change left.
+        for s in &rec.signals {
+            let (_, first) = &s.changes[0];
+            assert_ne!(s.start.as_ref(), first.as_ref(), "{s:?}");
+        }
     }
 
     #[test]
