@@ -358,8 +358,8 @@ fn flood_engine(recorder: Option<RecorderConfig>) -> CellEngine {
     src.push_str("AND.STK\nWRT G0.00\n");
     let program = Program::compile("flood.il", &src, None).expect("flood program compiles");
     let observable = Observability::default_for(program.dialect());
-    let sf = SwitchingFunction::expand(&program, &Signal::new("G0.00"), &observable)
-        .expect("derivable");
+    let sf =
+        SwitchingFunction::expand(&program, &Signal::new("G0.00"), &observable).expect("derivable");
     let tags = (0..CONTACTS)
         .map(|i| {
             let s = Signal::new(&common::address(i));
@@ -456,5 +456,10 @@ fn flight_recorder_flood(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, changes_per_second, flight_recorder, flight_recorder_flood);
+criterion_group!(
+    benches,
+    changes_per_second,
+    flight_recorder,
+    flight_recorder_flood
+);
 criterion_main!(benches);

@@ -76,10 +76,7 @@ async fn router() -> (zenoh::Session, u16) {
 fn agent_bus(ports: &[u16]) -> ZenohConfig {
     ZenohConfig {
         mode: ZenohMode::Client,
-        connect: ports
-            .iter()
-            .map(|p| format!("tcp/127.0.0.1:{p}"))
-            .collect(),
+        connect: ports.iter().map(|p| format!("tcp/127.0.0.1:{p}")).collect(),
         listen: vec![],
         prefix: "cellwatch/m01".into(),
         multicast_scouting: false,
@@ -115,7 +112,11 @@ async fn an_agent_started_before_its_router_answers_opens_once_it_does() {
     let session = cellwatch::bus::open_agent(&agent_bus(&[relay]))
         .await
         .expect("the session opens once the router answers");
-    assert_eq!(taken.load(Ordering::SeqCst), 3, "two refused, the third taken");
+    assert_eq!(
+        taken.load(Ordering::SeqCst),
+        3,
+        "two refused, the third taken"
+    );
     let routers: Vec<_> = session.info().routers_zid().await.collect();
     assert_eq!(routers, [router.zid()]);
     session.close().await.unwrap();

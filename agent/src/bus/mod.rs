@@ -24,5 +24,6 @@ mod session;
 
 pub use session::{
     agent_access_control, open, open_agent, open_console, secure, session_config, ZenohError,
-    CLIENT_CONNECT_TIMEOUT_MS, CLIENT_OPEN_TIMEOUT_MS, CONSOLE_MAX_MESSAGE_BYTES, MAX_MESSAGE_BYTES,
+    CLIENT_CONNECT_TIMEOUT_MS, CLIENT_OPEN_TIMEOUT_MS, CONSOLE_MAX_MESSAGE_BYTES,
+    MAX_MESSAGE_BYTES,
 };

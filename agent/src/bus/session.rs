@@ -335,8 +335,8 @@ pub const CLIENT_CONNECT_TIMEOUT_MS: u64 = 10_000;
 /// one try fails although both routers are up.
 async fn open_config(cfg: zenoh::Config) -> Result<Session, ZenohError> {
     let client = cfg.get_json("mode").ok().as_deref() == Some("\"client\"");
-    let deadline = tokio::time::Instant::now()
-        + std::time::Duration::from_millis(CLIENT_CONNECT_TIMEOUT_MS);
+    let deadline =
+        tokio::time::Instant::now() + std::time::Duration::from_millis(CLIENT_CONNECT_TIMEOUT_MS);
     let mut backoff = Backoff::new(
         std::time::Duration::from_millis(250),
         std::time::Duration::from_secs(2),

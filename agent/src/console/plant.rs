@@ -425,12 +425,15 @@ mod tests {
     #[test]
     fn a_raised_alarm_is_shown_and_its_cell_gets_the_fault() {
         let mut p = plant();
-        let changes = event(&mut p, alarm(
-            "ese",
-            T1,
-            AlarmState::ActiveUnacknowledged,
-            Transition::Raised,
-        ));
+        let changes = event(
+            &mut p,
+            alarm(
+                "ese",
+                T1,
+                AlarmState::ActiveUnacknowledged,
+                Transition::Raised,
+            ),
+        );
         assert_eq!(changes.len(), 2);
         assert_eq!(p.alarm_count(), 1);
         assert_eq!(
@@ -444,20 +447,24 @@ mod tests {
     #[test]
     fn an_older_event_never_overrides_a_newer_one() {
         let mut p = plant();
-        event(&mut p, alarm(
-            "ese",
-            T2,
-            AlarmState::Normal,
-            Transition::Acknowledged,
-        ));
+        event(
+            &mut p,
+            alarm("ese", T2, AlarmState::Normal, Transition::Acknowledged),
+        );
         assert_eq!(p.alarm_count(), 0);
-        event(&mut p, alarm(
-            "ese",
-            T3,
-            AlarmState::ActiveUnacknowledged,
-            Transition::Raised,
-        ));
-        event(&mut p, alarm("ese", T1, AlarmState::Normal, Transition::Cleared));
+        event(
+            &mut p,
+            alarm(
+                "ese",
+                T3,
+                AlarmState::ActiveUnacknowledged,
+                Transition::Raised,
+            ),
+        );
+        event(
+            &mut p,
+            alarm("ese", T1, AlarmState::Normal, Transition::Cleared),
+        );
         assert_eq!(
             p.alarm("m1", "ese").map(|a| a.state),
             Some(AlarmState::ActiveUnacknowledged)
@@ -467,18 +474,24 @@ mod tests {
     #[test]
     fn a_snapshot_ends_what_it_does_not_list_and_old_events_stay_out() {
         let mut p = plant();
-        event(&mut p, alarm(
-            "a",
-            T1,
-            AlarmState::ActiveUnacknowledged,
-            Transition::Raised,
-        ));
-        event(&mut p, alarm(
-            "b",
-            T1,
-            AlarmState::ActiveUnacknowledged,
-            Transition::Raised,
-        ));
+        event(
+            &mut p,
+            alarm(
+                "a",
+                T1,
+                AlarmState::ActiveUnacknowledged,
+                Transition::Raised,
+            ),
+        );
+        event(
+            &mut p,
+            alarm(
+                "b",
+                T1,
+                AlarmState::ActiveUnacknowledged,
+                Transition::Raised,
+            ),
+        );
         let changes = p.snapshot(snapshot(
             T2,
             vec![alarm(
@@ -492,20 +505,26 @@ mod tests {
         assert!(p.alarm("m1", "b").is_some());
         assert!(changes.iter().any(|c| matches!(c, Change::Alarm { alarm } if alarm.id == "a" && alarm.state == AlarmState::Normal)));
         // A cached event from before the snapshot does not bring it back.
-        event(&mut p, alarm(
-            "a",
-            T1,
-            AlarmState::ActiveUnacknowledged,
-            Transition::Raised,
-        ));
+        event(
+            &mut p,
+            alarm(
+                "a",
+                T1,
+                AlarmState::ActiveUnacknowledged,
+                Transition::Raised,
+            ),
+        );
         assert!(p.alarm("m1", "a").is_none());
         // A new one does.
-        event(&mut p, alarm(
-            "a",
-            T3,
-            AlarmState::ActiveUnacknowledged,
-            Transition::Raised,
-        ));
+        event(
+            &mut p,
+            alarm(
+                "a",
+                T3,
+                AlarmState::ActiveUnacknowledged,
+                Transition::Raised,
+            ),
+        );
         assert!(p.alarm("m1", "a").is_some());
     }
 
@@ -558,22 +577,28 @@ mod tests {
     fn at_most_max_alarms_are_kept_and_the_rest_counted() {
         let mut p = Plant::new(["m1"], &BTreeMap::new(), 3);
         for i in 0..5 {
-            event(&mut p, alarm(
-                &format!("a{i}"),
-                T1,
-                AlarmState::ActiveUnacknowledged,
-                Transition::Raised,
-            ));
+            event(
+                &mut p,
+                alarm(
+                    &format!("a{i}"),
+                    T1,
+                    AlarmState::ActiveUnacknowledged,
+                    Transition::Raised,
+                ),
+            );
         }
         assert_eq!(p.alarm_count(), 3);
         assert_eq!(p.view().dropped, 2);
         // One that is known still changes.
-        event(&mut p, alarm(
-            "a0",
-            T2,
-            AlarmState::ActiveAcknowledged,
-            Transition::Acknowledged,
-        ));
+        event(
+            &mut p,
+            alarm(
+                "a0",
+                T2,
+                AlarmState::ActiveAcknowledged,
+                Transition::Acknowledged,
+            ),
+        );
         assert_eq!(
             p.alarm("m1", "a0").map(|a| a.state),
             Some(AlarmState::ActiveAcknowledged)
@@ -606,23 +631,24 @@ mod tests {
             Transition::Raised,
         );
         event(&mut p, raised.clone());
-        event(&mut p, alarm(
-            "ese",
-            T2,
-            AlarmState::Normal,
-            Transition::Acknowledged,
-        ));
+        event(
+            &mut p,
+            alarm("ese", T2, AlarmState::Normal, Transition::Acknowledged),
+        );
         assert_eq!(p.alarm_count(), 0);
         // The genuine, signed raise, replayed after the alarm ended.
         assert!(event(&mut p, raised).is_empty());
         assert_eq!(p.alarm_count(), 0);
         // A new raise after it is shown.
-        event(&mut p, alarm(
-            "ese",
-            T3,
-            AlarmState::ActiveUnacknowledged,
-            Transition::Raised,
-        ));
+        event(
+            &mut p,
+            alarm(
+                "ese",
+                T3,
+                AlarmState::ActiveUnacknowledged,
+                Transition::Raised,
+            ),
+        );
         assert_eq!(p.alarm_count(), 1);
     }
 
@@ -646,7 +672,10 @@ mod tests {
         let mut p = plant();
         p.alarm_event(raised(), T3);
         p.snapshot(snapshot(T2, vec![]));
-        assert!(p.alarm("m1", "ese").is_some(), "kept: sealed after the snapshot");
+        assert!(
+            p.alarm("m1", "ese").is_some(),
+            "kept: sealed after the snapshot"
+        );
         // A raise sealed before the snapshot that does not list it has
         // ended since: not shown, whichever comes first.
         let mut p = plant();

@@ -308,7 +308,10 @@ impl Recorder {
         while let Some((n, i)) = heads.pop() {
             walked += 1;
             let c = change(n);
-            debug_assert_eq!(c.tag as usize, reads[i].tag, "a tag's chain holds its own changes");
+            debug_assert_eq!(
+                c.tag as usize, reads[i].tag,
+                "a tag's chain holds its own changes"
+            );
             if c.at < holds_from {
                 break;
             }
