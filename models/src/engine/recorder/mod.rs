@@ -36,8 +36,11 @@
 //! the ring is full) and one look at a per-tag bit set of the recordings
 //! that read the tag: an unrelated tag costs nothing more whatever is
 //! recording, a read one one append per recording reading it. Starting a
-//! recording walks back each read signal's own chain of changes in the
-//! ring: its cost is in the signals and their changes, not in the ring.
+//! recording walks back the read signals' own chains of changes in the
+//! ring, merged newest first, and stops once it has the
+//! [`RecorderConfig::max_changes`] latest before the raise: its cost is in
+//! what the recording keeps (O(its changes × log its signals)), whatever
+//! the ring holds.
 //!
 //! # Time
 //! Changes come at their source time; one earlier than the latest kept is
