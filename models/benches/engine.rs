@@ -407,7 +407,7 @@ fn flood_engine(recorder: Option<RecorderConfig>) -> CellEngine {
 }
 
 fn flight_recorder_flood(c: &mut Criterion) {
-    let mut rng = common::Rng(0x5EED_0F_F100D);
+    let mut rng = common::Rng(0x05EE_D0FF_100D);
     let mut values: Vec<bool> = (0..1_000).map(|t| t != 0).collect();
     let changes: Vec<(usize, bool)> = (0..90_000)
         .map(|k| {

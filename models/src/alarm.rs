@@ -55,14 +55,22 @@ impl fmt::Display for Severity {
     }
 }
 
-impl FromStr for Severity {
-    type Err = String;
+/// A severity's name that is none of `low`, `medium`, `high`, `critical`.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown severity '{text}': use low, medium, high or critical")]
+pub struct UnknownSeverity {
+    /// The name as given.
+    pub text: String,
+}
 
-    fn from_str(s: &str) -> Result<Self, String> {
+impl FromStr for Severity {
+    type Err = UnknownSeverity;
+
+    fn from_str(s: &str) -> Result<Self, UnknownSeverity> {
         Severity::ALL
             .into_iter()
             .find(|v| v.as_str() == s)
-            .ok_or_else(|| format!("unknown severity '{s}': use low, medium, high or critical"))
+            .ok_or_else(|| UnknownSeverity { text: s.into() })
     }
 }
 

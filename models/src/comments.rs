@@ -9,7 +9,7 @@
 
 use std::collections::HashMap;
 
-use crate::signal::Signal;
+use crate::signal::{AddressError, Signal};
 use crate::source::{Location, SourceError};
 
 /// Comments by signal.
@@ -43,14 +43,14 @@ pub fn is_simaticml(text: &str) -> bool {
 impl CommentDb {
     /// Parses `address,comment` rows, or a TIA Portal tag table (told by
     /// its content); `resolve` canonicalises addresses in the program's
-    /// dialect.
+    /// dialect (its error is the message at the row or tag).
     ///
     /// # Errors
     /// The first malformed row or tag, as `ORIGIN:LINE:COL: message`.
     pub fn parse(
         origin: &str,
         text: &str,
-        resolve: impl Fn(&str) -> Result<Signal, String>,
+        resolve: impl Fn(&str) -> Result<Signal, AddressError>,
     ) -> Result<CommentDb, SourceError> {
         Self::parse_in(origin, text, resolve, None)
     }
@@ -64,7 +64,7 @@ impl CommentDb {
     pub fn parse_in(
         origin: &str,
         text: &str,
-        resolve: impl Fn(&str) -> Result<Signal, String>,
+        resolve: impl Fn(&str) -> Result<Signal, AddressError>,
         language: Option<&str>,
     ) -> Result<CommentDb, SourceError> {
         if crate::il::simaticml::is_simaticml(text) {
@@ -106,7 +106,8 @@ impl CommentDb {
                     format!("expected 'address,comment', found {} fields in '{row}' (quote comments that contain commas)", record.len()),
                 ));
             }
-            let signal = resolve(&record[0]).map_err(|m| SourceError::new(origin, at, m))?;
+            let signal =
+                resolve(&record[0]).map_err(|e| SourceError::new(origin, at, e.to_string()))?;
             comments.insert(signal, record[1].to_string());
         }
         Ok(CommentDb { comments })
@@ -118,7 +119,7 @@ impl CommentDb {
     fn tag_table(
         origin: &str,
         text: &str,
-        resolve: impl Fn(&str) -> Result<Signal, String>,
+        resolve: impl Fn(&str) -> Result<Signal, AddressError>,
         language: &str,
     ) -> Result<CommentDb, SourceError> {
         let mut comments = HashMap::new();
@@ -126,7 +127,8 @@ impl CommentDb {
             let Some(comment) = tag.comment.clone() else {
                 continue;
             };
-            let signal = resolve(&tag.name).map_err(|m| SourceError::new(origin, tag.at, m))?;
+            let signal =
+                resolve(&tag.name).map_err(|e| SourceError::new(origin, tag.at, e.to_string()))?;
             comments.insert(signal, comment.clone());
             // A word (`%MW10`) is not a contact: its name carries the
             // comment. A German address (`%E0.0`) gives its English form

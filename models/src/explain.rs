@@ -57,14 +57,22 @@ impl fmt::Display for Polarity {
     }
 }
 
-impl FromStr for Polarity {
-    type Err = String;
+/// A polarity's name that is neither `on` nor `off`.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown polarity '{text}': use on or off")]
+pub struct UnknownPolarity {
+    /// The name as read, lower case.
+    pub text: String,
+}
 
-    fn from_str(s: &str) -> Result<Self, String> {
+impl FromStr for Polarity {
+    type Err = UnknownPolarity;
+
+    fn from_str(s: &str) -> Result<Self, UnknownPolarity> {
         match s.to_ascii_lowercase().as_str() {
             "on" => Ok(Polarity::On),
             "off" => Ok(Polarity::Off),
-            other => Err(format!("unknown polarity '{other}': use on or off")),
+            other => Err(UnknownPolarity { text: other.into() }),
         }
     }
 }

@@ -3,11 +3,64 @@
 //! [`Expr`] is the naive form of a switching function: a tree evaluated by
 //! recursion. It is the reference the compiled evaluator is tested against,
 //! and the form the paper's equations are read into ([`Expr::parse`]:
-//! `(X4) * (-Y2) * (((X1)*(-X2)) + (-X3))`, with `·` accepted for AND).
+//! `(X4) * (-Y2) * (((X1)*(-X2)) + (-X3))`, with `·` accepted for AND),
+//! failing with an [`ExprError`] that names the character and its place.
 
 use std::collections::BTreeSet;
 
 use crate::signal::Signal;
+
+/// Why a text is not an expression in the paper's notation; positions are
+/// 1-based character offsets into the text.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ExprError {
+    /// A character where none of its kind may stand.
+    #[error("unexpected '{found}' at character {at}")]
+    Unexpected {
+        /// The character.
+        found: char,
+        /// Its position.
+        at: usize,
+    },
+    /// The text ends where an operand is wanted.
+    #[error("unexpected end of expression")]
+    UnexpectedEnd,
+    /// A parenthesis left open by another character.
+    #[error("expected ')' at character {at}, found '{found}'")]
+    Unclosed {
+        /// The character instead of `)`.
+        found: char,
+        /// Its position.
+        at: usize,
+    },
+    /// A parenthesis still open at the end of the text.
+    #[error("expected ')' at the end")]
+    UnclosedAtEnd,
+    /// A comparison with a character where its right-hand side is wanted.
+    #[error("expected a number or a tag after '{op}' at character {at}, found '{found}'")]
+    NoOperand {
+        /// The comparison operator (`>`, `==`, ...).
+        op: &'static str,
+        /// The character instead of the operand.
+        found: char,
+        /// Its position.
+        at: usize,
+    },
+    /// A comparison at the end of the text, without its right-hand side.
+    #[error("expected a number or a tag after '{op}'")]
+    NoOperandAtEnd {
+        /// The comparison operator (`>`, `==`, ...).
+        op: &'static str,
+    },
+    /// A right-hand side with a minus sign that is not a number (`-x`).
+    #[error("'{text}' after '{op}' is not a number")]
+    NotANumber {
+        /// The right-hand side as written.
+        text: String,
+        /// The comparison operator (`>`, `==`, ...).
+        op: &'static str,
+    },
+}
 
 /// A boolean expression tree.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -96,14 +149,17 @@ impl Expr {
     /// [`crate::value::Comparison`]).
     ///
     /// # Errors
-    /// A message with the character offset of the problem.
-    pub fn parse(text: &str) -> Result<Expr, String> {
+    /// [`ExprError`] with the character offset of the problem.
+    pub fn parse(text: &str) -> Result<Expr, ExprError> {
         let tokens: Vec<(usize, char)> = text.chars().enumerate().collect();
         let mut p = Parser { tokens, at: 0 };
         let e = p.or()?;
         match p.peek() {
             None => Ok(e),
-            Some((i, c)) => Err(format!("unexpected '{c}' at character {}", i + 1)),
+            Some((i, c)) => Err(ExprError::Unexpected {
+                found: c,
+                at: i + 1,
+            }),
         }
     }
 }
@@ -169,7 +225,7 @@ impl Parser {
         self.tokens.get(self.at).copied()
     }
 
-    fn or(&mut self) -> Result<Expr, String> {
+    fn or(&mut self) -> Result<Expr, ExprError> {
         let mut terms = vec![self.and()?];
         while let Some((_, '+')) = self.peek() {
             self.at += 1;
@@ -182,7 +238,7 @@ impl Parser {
         })
     }
 
-    fn and(&mut self) -> Result<Expr, String> {
+    fn and(&mut self) -> Result<Expr, ExprError> {
         let mut terms = vec![self.unary()?];
         while let Some((_, '*' | '·')) = self.peek() {
             self.at += 1;
@@ -195,7 +251,7 @@ impl Parser {
         })
     }
 
-    fn unary(&mut self) -> Result<Expr, String> {
+    fn unary(&mut self) -> Result<Expr, ExprError> {
         match self.peek() {
             Some((_, '-')) => {
                 self.at += 1;
@@ -212,10 +268,11 @@ impl Parser {
                         self.at += 1;
                         Ok(e)
                     }
-                    Some((i, c)) => {
-                        Err(format!("expected ')' at character {}, found '{c}'", i + 1))
-                    }
-                    None => Err("expected ')' at the end".into()),
+                    Some((i, c)) => Err(ExprError::Unclosed {
+                        found: c,
+                        at: i + 1,
+                    }),
+                    None => Err(ExprError::UnclosedAtEnd),
                 }
             }
             Some((_, c)) if is_name(c) => {
@@ -234,8 +291,11 @@ impl Parser {
                     _ => Expr::Lit(Signal::new(&name), false),
                 })
             }
-            Some((i, c)) => Err(format!("unexpected '{c}' at character {}", i + 1)),
-            None => Err("unexpected end of expression".into()),
+            Some((i, c)) => Err(ExprError::Unexpected {
+                found: c,
+                at: i + 1,
+            }),
+            None => Err(ExprError::UnexpectedEnd),
         }
     }
 }
@@ -261,7 +321,7 @@ impl Parser {
 
     /// The right-hand side of a comparison: a number (optionally negative)
     /// or a name.
-    fn operand(&mut self, op: &str) -> Result<String, String> {
+    fn operand(&mut self, op: &'static str) -> Result<String, ExprError> {
         let mut text = String::new();
         if let Some((_, '-')) = self.peek() {
             self.at += 1;
@@ -273,15 +333,16 @@ impl Parser {
         }
         if text.is_empty() || text == "-" {
             return Err(match self.peek() {
-                Some((i, c)) => format!(
-                    "expected a number or a tag after '{op}' at character {}, found '{c}'",
-                    i + 1
-                ),
-                None => format!("expected a number or a tag after '{op}'"),
+                Some((i, c)) => ExprError::NoOperand {
+                    op,
+                    found: c,
+                    at: i + 1,
+                },
+                None => ExprError::NoOperandAtEnd { op },
             });
         }
         if text.starts_with('-') && text[1..].parse::<f64>().is_err() {
-            return Err(format!("'{text}' after '{op}' is not a number"));
+            return Err(ExprError::NotANumber { text, op });
         }
         Ok(text)
     }
@@ -309,11 +370,11 @@ mod tests {
             ])))
         );
         assert_eq!(
-            Expr::parse("a + (b").unwrap_err(),
+            Expr::parse("a + (b").unwrap_err().to_string(),
             "expected ')' at the end"
         );
         assert_eq!(
-            Expr::parse("a b").unwrap_err(),
+            Expr::parse("a b").unwrap_err().to_string(),
             "unexpected 'b' at character 3"
         );
     }
@@ -341,11 +402,11 @@ mod tests {
             ["LEVEL < -2", "MODE == 3", "P1 >= P2", "TEMP > 80.5"]
         );
         assert_eq!(
-            Expr::parse("TEMP > ").unwrap_err(),
+            Expr::parse("TEMP > ").unwrap_err().to_string(),
             "expected a number or a tag after '>'"
         );
         assert_eq!(
-            Expr::parse("TEMP > -x").unwrap_err(),
+            Expr::parse("TEMP > -x").unwrap_err().to_string(),
             "'-x' after '>' is not a number"
         );
     }

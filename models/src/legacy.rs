@@ -348,7 +348,10 @@ impl Frame {
 
     /// Checks the text against the header code: the end code `15` (data
     /// error) and why, if it does not fit.
-    pub fn check_text(&self, request: bool) -> Result<(), String> {
+    ///
+    /// # Errors
+    /// [`TextMismatch`]: a text that does not fit the header code.
+    pub fn check_text(&self, request: bool) -> Result<(), TextMismatch> {
         let t = self.text.as_bytes();
         let ok = match self.header {
             Header::Ack | Header::Nak => t.len() == 2 && t.iter().all(u8::is_ascii_digit),
@@ -360,14 +363,26 @@ impl Frame {
         if ok {
             Ok(())
         } else {
-            Err(format!(
-                "'{}' is not the text of a {} {}",
-                self.text,
-                self.header,
-                if request { "request" } else { "answer" }
-            ))
+            Err(TextMismatch {
+                text: self.text.clone(),
+                header: self.header,
+                request,
+            })
         }
     }
+}
+
+/// A frame's text that does not fit its header code (end code `15`, data
+/// error).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("'{text}' is not the text of a {header} {}", if *request { "request" } else { "answer" })]
+pub struct TextMismatch {
+    /// The text as received.
+    pub text: String,
+    /// The header code it came with.
+    pub header: Header,
+    /// Whether the frame is a request (else an answer).
+    pub request: bool,
 }
 
 /// The paper's `CheckSum`: the XOR of every byte.
@@ -537,7 +552,7 @@ impl Decoder {
         };
         let frame = Frame::new(unit, header, text);
         if let Err(why) = frame.check_text(self.requests) {
-            return fail(END_DATA, why);
+            return fail(END_DATA, why.to_string());
         }
         if self.last.as_ref() == Some(&frame) {
             return Decoded::Duplicate(frame);

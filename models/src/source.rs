@@ -111,16 +111,22 @@ impl From<SourceError> for SourceErrors {
     }
 }
 
+/// An encoding's name that no encoding answers to.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown encoding '{label}': use utf-8, utf-16le, utf-16be or latin1 (windows-1252)")]
+pub struct UnknownEncoding {
+    /// The name as given.
+    pub label: String,
+}
+
 /// The encoding a user names (`--encoding`): any WHATWG label, such as
 /// `utf-8`, `utf-16le`, `utf-16be`, `latin1`, `iso-8859-1`, `windows-1252`.
 ///
 /// # Errors
-/// A label no encoding answers to.
-pub fn encoding(label: &str) -> Result<&'static Encoding, String> {
-    Encoding::for_label(label.trim().as_bytes()).ok_or_else(|| {
-        format!(
-            "unknown encoding '{label}': use utf-8, utf-16le, utf-16be or latin1 (windows-1252)"
-        )
+/// [`UnknownEncoding`]: a label no encoding answers to.
+pub fn encoding(label: &str) -> Result<&'static Encoding, UnknownEncoding> {
+    Encoding::for_label(label.trim().as_bytes()).ok_or_else(|| UnknownEncoding {
+        label: label.into(),
     })
 }
 
@@ -286,9 +292,10 @@ mod tests {
             text("a.il", &bare, Some(encoding("utf-16le").unwrap())).unwrap(),
             "LD a\nST b\n"
         );
-        assert!(encoding("klingon")
-            .unwrap_err()
-            .contains("unknown encoding 'klingon'"));
+        assert_eq!(
+            encoding("klingon").unwrap_err().to_string(),
+            "unknown encoding 'klingon': use utf-8, utf-16le, utf-16be or latin1 (windows-1252)"
+        );
     }
 
     #[test]

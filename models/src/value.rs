@@ -123,17 +123,22 @@ impl fmt::Display for ValueType {
     }
 }
 
-impl FromStr for ValueType {
-    type Err = String;
+/// A value type's name that is none of [`ValueType::ALL`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown type '{text}': use one of {}", ValueType::ALL.map(ValueType::as_str).join(", "))]
+pub struct UnknownValueType {
+    /// The name as given.
+    pub text: String,
+}
 
-    fn from_str(s: &str) -> Result<Self, String> {
+impl FromStr for ValueType {
+    type Err = UnknownValueType;
+
+    fn from_str(s: &str) -> Result<Self, UnknownValueType> {
         ValueType::ALL
             .into_iter()
             .find(|t| t.as_str().eq_ignore_ascii_case(s))
-            .ok_or_else(|| {
-                let all: Vec<&str> = ValueType::ALL.iter().map(|t| t.as_str()).collect();
-                format!("unknown type '{s}': use one of {}", all.join(", "))
-            })
+            .ok_or_else(|| UnknownValueType { text: s.into() })
     }
 }
 
@@ -366,6 +371,15 @@ impl Counter {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_unknown_type_is_named_with_the_known_ones() {
+        assert_eq!("int16".parse(), Ok(ValueType::Int16));
+        assert_eq!(
+            "Int12".parse::<ValueType>().unwrap_err().to_string(),
+            "unknown type 'Int12': use one of Boolean, SByte, Byte, Int16, UInt16, Int32, UInt32, Int64, UInt64, Float, Double, String, DateTime"
+        );
+    }
 
     #[test]
     fn a_counter_counts_increments_wraps_and_resets() {

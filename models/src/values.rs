@@ -8,7 +8,7 @@
 
 use std::collections::HashMap;
 
-use crate::signal::Signal;
+use crate::signal::{AddressError, Signal};
 use crate::source::{column, Location, SourceError};
 
 /// Signal values, each given once.
@@ -44,14 +44,15 @@ impl Values {
     }
 
     /// Parses the inline form `A=1,B=0`. `origin` names it in messages
-    /// (the option, `--snapshot`).
+    /// (the option, `--snapshot`); `resolve` canonicalises an address (its
+    /// error is the message at the pair's column).
     ///
     /// # Errors
     /// The first malformed pair, with its column.
     pub fn parse_inline(
         origin: &str,
         text: &str,
-        resolve: impl Fn(&str) -> Result<Signal, String>,
+        resolve: impl Fn(&str) -> Result<Signal, AddressError>,
     ) -> Result<Values, SourceError> {
         let mut out = Values::new();
         let mut seen = HashMap::new();
@@ -82,14 +83,15 @@ impl Values {
         Ok(out)
     }
 
-    /// Parses a file of pairs, `A=1` or `A,1`, one a line.
+    /// Parses a file of pairs, `A=1` or `A,1`, one a line; `resolve`
+    /// canonicalises an address (its error is the message at the line).
     ///
     /// # Errors
     /// The first malformed line, as `ORIGIN:LINE:COL: message`.
     pub fn parse_file(
         origin: &str,
         text: &str,
-        resolve: impl Fn(&str) -> Result<Signal, String>,
+        resolve: impl Fn(&str) -> Result<Signal, AddressError>,
     ) -> Result<Values, SourceError> {
         let mut out = Values::new();
         let mut seen = HashMap::new();
@@ -141,10 +143,11 @@ impl Values {
         value_at: Location,
         addr: &str,
         value: &str,
-        resolve: &impl Fn(&str) -> Result<Signal, String>,
+        resolve: &impl Fn(&str) -> Result<Signal, AddressError>,
         seen: &mut HashMap<Signal, Location>,
     ) -> Result<(), SourceError> {
-        let signal = resolve(addr.trim()).map_err(|m| SourceError::new(origin, at, m))?;
+        let signal =
+            resolve(addr.trim()).map_err(|e| SourceError::new(origin, at, e.to_string()))?;
         let v = match value.trim().to_ascii_lowercase().as_str() {
             "1" | "true" | "on" => true,
             "0" | "false" | "off" => false,

@@ -6,7 +6,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use cellwatch_models::engine::Sample;
-use cellwatch_models::explain::{explain, Culprit, Explanation, Polarity};
+use cellwatch_models::explain::{explain, Culprit, Explanation, Polarity, UnknownPolarity};
 use cellwatch_models::signal::Signal;
 use cellwatch_models::switching::SwitchingFunction;
 use serde::Serialize;
@@ -303,6 +303,6 @@ pub(crate) struct ExplainArgs {
     pub(crate) fault_when: Polarity,
 }
 
-fn parse_polarity(s: &str) -> Result<Polarity, String> {
+fn parse_polarity(s: &str) -> Result<Polarity, UnknownPolarity> {
     s.parse()
 }

@@ -7,7 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use cellwatch_models::comments::CommentDb;
-use cellwatch_models::il::Dialect;
+use cellwatch_models::il::{Dialect, UnknownDialect};
 use cellwatch_models::program::Program;
 use cellwatch_models::signal::Observability;
 use cellwatch_models::source;
@@ -148,10 +148,12 @@ pub(crate) struct ProgramArgs {
     pub(crate) json: bool,
 }
 
-fn parse_encoding(s: &str) -> Result<&'static cellwatch_models::source::Encoding, String> {
+fn parse_encoding(
+    s: &str,
+) -> Result<&'static cellwatch_models::source::Encoding, source::UnknownEncoding> {
     cellwatch_models::source::encoding(s)
 }
 
-fn parse_dialect(s: &str) -> Result<Dialect, String> {
+fn parse_dialect(s: &str) -> Result<Dialect, UnknownDialect> {
     s.parse()
 }

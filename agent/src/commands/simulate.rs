@@ -314,7 +314,9 @@ pub(crate) fn line(args: &LineArgs, out: &mut dyn Write) -> Result<(), Failure> 
             })?;
             let kind = kind
                 .parse()
-                .map_err(|e: String| Failure::Input(format!("--inject '{spec}': {e}")))?;
+                .map_err(|e: cellwatch_models::timer::line::UnknownFault| {
+                    Failure::Input(format!("--inject '{spec}': {e}"))
+                })?;
             let step = step
                 .parse()
                 .map_err(|_| Failure::Input(format!("--inject '{spec}': STEP must be a number")))?;

@@ -4,7 +4,7 @@ use std::time::Duration;
 
 use cellwatch_models::expr::Expr;
 use cellwatch_models::il::Dialect;
-use cellwatch_models::signal::Signal;
+use cellwatch_models::signal::{AddressError, Signal};
 use cellwatch_models::value::{Comparison, Operand, ValueType};
 
 /// A tag: a node on the server and the PLC address the models use.
@@ -100,7 +100,10 @@ pub fn key_chunk(id: &str) -> bool {
 
 /// A tag's PLC address: a PMC address (`X0.06`), an IEC direct address
 /// (`%IX0.0.3`) or an IEC symbol (`Start`).
-pub fn tag_address(text: &str) -> Result<Signal, String> {
+///
+/// # Errors
+/// [`AddressError`] quoting the text, when it is none of these.
+pub fn tag_address(text: &str) -> Result<Signal, AddressError> {
     if text.starts_with('%') {
         return Dialect::Iec.signal(text);
     }
@@ -126,8 +129,8 @@ impl Addressing {
     /// configuration.
     ///
     /// # Errors
-    /// A message quoting the malformed address.
-    pub fn signal(self, text: &str) -> Result<Signal, String> {
+    /// [`AddressError`] quoting the malformed address.
+    pub fn signal(self, text: &str) -> Result<Signal, AddressError> {
         match self {
             Addressing::PmcOrIec => tag_address(text),
             Addressing::In(Dialect::Iec) => Dialect::Iec.tag_signal(text),

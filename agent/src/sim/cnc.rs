@@ -184,7 +184,7 @@ impl SimulatedCnc {
     /// # Errors
     /// The address is not an input of the machine.
     pub fn set(&self, address: &str, value: bool) -> Result<(), String> {
-        let signal = cellwatch_models::signal::pmc_address(address)?;
+        let signal = cellwatch_models::signal::pmc_address(address).map_err(|e| e.to_string())?;
         let (image, registers) = {
             let mut plc = self.plc.lock().map_err(|_| "simulator state poisoned")?;
             let before = match plc.inputs.get_mut(&signal) {
@@ -249,7 +249,7 @@ impl SimulatedCnc {
     /// # Errors
     /// The address is not an input of the machine.
     pub fn set_bad(&self, address: &str) -> Result<(), String> {
-        let signal = cellwatch_models::signal::pmc_address(address)?;
+        let signal = cellwatch_models::signal::pmc_address(address).map_err(|e| e.to_string())?;
         let value = {
             let plc = self.plc.lock().map_err(|_| "simulator state poisoned")?;
             *plc.inputs
@@ -322,7 +322,8 @@ impl SimulatedCnc {
             {
                 Some((_, v)) => v,
                 None => {
-                    let signal = cellwatch_models::signal::pmc_address(address)?;
+                    let signal = cellwatch_models::signal::pmc_address(address)
+                        .map_err(|e| e.to_string())?;
                     Variant::Boolean(*plc.inputs.get(&signal).ok_or_else(|| {
                         format!("{signal} is not a variable of the simulated CNC")
                     })?)

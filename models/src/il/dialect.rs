@@ -1,6 +1,6 @@
-//! The three spellings of an instruction list, by name. What each means
-//! for an address or a program is in `il/mod.rs` and the dialects' own
-//! modules.
+//! The three spellings of an instruction list, by name, and the error for
+//! a name that is none of them. What each means for an address or a
+//! program is in `il/mod.rs` and the dialects' own modules.
 
 use std::fmt;
 use std::str::FromStr;
@@ -27,15 +27,23 @@ impl fmt::Display for Dialect {
     }
 }
 
-impl FromStr for Dialect {
-    type Err = String;
+/// A dialect name that is none of `pmc`, `iec`, `stl` (or `awl`).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown dialect '{text}': use pmc, iec or stl")]
+pub struct UnknownDialect {
+    /// The name as read, lower case.
+    pub text: String,
+}
 
-    fn from_str(s: &str) -> Result<Self, String> {
+impl FromStr for Dialect {
+    type Err = UnknownDialect;
+
+    fn from_str(s: &str) -> Result<Self, UnknownDialect> {
         match s.to_ascii_lowercase().as_str() {
             "pmc" => Ok(Dialect::Pmc),
             "iec" => Ok(Dialect::Iec),
             "stl" | "awl" => Ok(Dialect::Stl),
-            other => Err(format!("unknown dialect '{other}': use pmc, iec or stl")),
+            other => Err(UnknownDialect { text: other.into() }),
         }
     }
 }

@@ -22,20 +22,20 @@ mod dialect;
 mod instruction;
 mod observability;
 
-pub use dialect::Dialect;
+pub use dialect::{Dialect, UnknownDialect};
 pub(crate) use instruction::words;
 pub use instruction::{Instruction, Op, Operand, Operation, Outside};
 pub use observability::{class_of, Observability};
 
-use crate::signal::Signal;
+use crate::signal::{AddressError, Signal};
 use crate::source::{Location, SourceError, SourceErrors};
 
 impl Dialect {
     /// The canonical signal for an address or symbol written in this dialect.
     ///
     /// # Errors
-    /// A message quoting a malformed address.
-    pub fn signal(self, text: &str) -> Result<Signal, String> {
+    /// [`AddressError`] quoting a malformed address.
+    pub fn signal(self, text: &str) -> Result<Signal, AddressError> {
         match self {
             Dialect::Pmc => crate::signal::pmc_address(text),
             Dialect::Iec => logix_or(iec::operand_signal(text), text),
@@ -48,8 +48,8 @@ impl Dialect {
     /// `%MW10`, STL `MW 10` → `MW10`).
     ///
     /// # Errors
-    /// A message quoting a malformed address.
-    pub fn tag_signal(self, text: &str) -> Result<Signal, String> {
+    /// [`AddressError`] quoting a malformed address.
+    pub fn tag_signal(self, text: &str) -> Result<Signal, AddressError> {
         match self {
             Dialect::Pmc => crate::signal::pmc_address(text),
             Dialect::Iec => logix_or(iec::operand_signal(text), text),
@@ -111,7 +111,7 @@ impl Dialect {
 
 /// An IEC name, or else a Logix tag name as an L5X export's programs use
 /// them (`Local:1:I.Data.3`, `Program:Main.Start`, `Arr[2]`).
-fn logix_or(iec: Result<Signal, String>, text: &str) -> Result<Signal, String> {
+fn logix_or(iec: Result<Signal, AddressError>, text: &str) -> Result<Signal, AddressError> {
     iec.or_else(|e| {
         if l5x::is_tag_name(text) {
             Ok(Signal::new(text))
@@ -158,7 +158,7 @@ fn something(
 
 /// An STL address, or else a symbol written without its quotes (`G0_00`
 /// for `"G0_00"`), as `cellwatch sf` prints a TIA Portal tag's name.
-fn symbol_or(stl: Result<Signal, String>, text: &str) -> Result<Signal, String> {
+fn symbol_or(stl: Result<Signal, AddressError>, text: &str) -> Result<Signal, AddressError> {
     stl.or_else(|e| {
         let mut chars = text.chars();
         let plain = chars.next().is_some_and(|c| c.is_alphabetic() || c == '_')

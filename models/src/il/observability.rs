@@ -3,7 +3,7 @@
 use std::collections::BTreeSet;
 
 use super::dialect::Dialect;
-use crate::signal::{pmc_address, Signal};
+use crate::signal::{pmc_address, AddressError, Signal};
 
 /// The address class of a signal in a dialect: `X`, `R`, ... for PMC,
 /// `%I`, `%Q`, `%M` for IEC direct addresses; `None` for IEC symbols.
@@ -64,8 +64,8 @@ impl Observability {
     /// signals (`R1024.00`, `Motor`).
     ///
     /// # Errors
-    /// A message naming the malformed entry.
-    pub fn parse(dialect: Dialect, list: &str) -> Result<Self, String> {
+    /// [`AddressError`] naming the malformed entry.
+    pub fn parse(dialect: Dialect, list: &str) -> Result<Self, AddressError> {
         let mut classes = BTreeSet::new();
         let mut signals = BTreeSet::new();
         for item in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
@@ -79,7 +79,7 @@ impl Observability {
                 Dialect::Iec if item.len() == 2 && item.starts_with('%') => {
                     let class = item.to_ascii_uppercase();
                     if !matches!(class.as_str(), "%I" | "%Q" | "%M") {
-                        return Err(format!("unknown address class '{item}': use %I, %Q or %M"));
+                        return Err(AddressError::UnknownClass { text: item.into() });
                     }
                     classes.insert(class);
                 }

@@ -137,8 +137,8 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
             }
             (OperandKind::Signal, Some((off, w))) => match pmc_address(w) {
                 Ok(s) => Some(Operand::Signal(s)),
-                Err(msg) => {
-                    errors.push(err(off, msg));
+                Err(e) => {
+                    errors.push(err(off, e.to_string()));
                     continue;
                 }
             },

@@ -11,7 +11,7 @@
 //! read and become warnings where they leave boolean logic.
 
 use super::{words, Instruction, Op, Operand, Operation, Outside};
-use crate::signal::Signal;
+use crate::signal::{AddressError, Signal};
 use crate::source::{column, Location, SourceError, SourceErrors};
 
 /// The two mnemonic sets.
@@ -160,14 +160,12 @@ enum Kind {
 /// A bit operand in canonical form: `E 0.0` → `E0.0`, `"Motor an"` →
 /// `Motor an`, `#flag`, `DB1.DBX 2.3` → `DB1.DBX2.3`, `T 1` → `T1`.
 /// `Ok(None)`: a well-formed operand that is not a bit (`MW 10`, `5`).
-fn bit_operand(text: &str) -> Result<Option<Signal>, String> {
+fn bit_operand(text: &str) -> Result<Option<Signal>, AddressError> {
     // A block's local as named outside it: `Betriebsarten.#Reset`,
     // `"Schrittkette 1".#T1_2`, `FB 10.#flag`.
     if let Some((block, local)) = text.split_once(".#") {
         let Some(block) = block_name(block) else {
-            return Err(format!(
-                "malformed block name in '{text}': expected \"name\".#local or FB 10.#local"
-            ));
+            return Err(AddressError::StlBlockName { text: text.into() });
         };
         return match bit_operand(&format!("#{local}"))? {
             Some(local) => Ok(Some(in_block(Some(&block), local))),
@@ -187,13 +185,13 @@ fn bit_operand(text: &str) -> Result<Option<Signal>, String> {
         return if ok {
             Ok(Some(Signal::new(&format!("{db}.{member}"))))
         } else {
-            Err(format!("malformed member {text}: expected \"DB\".member"))
+            Err(AddressError::StlMember { text: text.into() })
         };
     }
     if let Some(inner) = text.strip_prefix('"') {
         return match inner.strip_suffix('"') {
             Some(name) if !name.is_empty() && !name.contains('"') => Ok(Some(Signal::new(name))),
-            _ => Err(format!("malformed symbol {text}: expected \"name\"")),
+            _ => Err(AddressError::StlSymbol { text: text.into() }),
         };
     }
     if let Some(local) = text.strip_prefix('#') {
@@ -204,7 +202,7 @@ fn bit_operand(text: &str) -> Result<Option<Signal>, String> {
         return if ok {
             Ok(Some(Signal::new(text)))
         } else {
-            Err(format!("malformed local name '{text}'"))
+            Err(AddressError::StlLocal { text: text.into() })
         };
     }
     // TIA Portal writes addresses with a `%`: `%I0.0` is `I 0.0`.
@@ -232,9 +230,7 @@ fn bit_operand(text: &str) -> Result<Option<Signal>, String> {
     ) || (!prefix.is_empty() && area == "X");
     let timer = matches!(area, "T" | "Z" | "C");
     if area.is_empty() {
-        return Err(format!(
-            "malformed operand '{text}': expected an address (E 0.0, A 4.0, M 10.1), a \"symbol\" or a #local"
-        ));
+        return Err(AddressError::StlOperand { text: text.into() });
     }
     if timer && !number.is_empty() && number.chars().all(|c| c.is_ascii_digit()) {
         return Ok(Some(Signal::new(&format!("{area}{number}"))));
@@ -249,18 +245,17 @@ fn bit_operand(text: &str) -> Result<Option<Signal>, String> {
         return if ok {
             Ok(Some(Signal::new(&format!("{prefix}{area}{number}"))))
         } else {
-            Err(format!(
-                "malformed address '{text}': expected byte.bit with a bit 0..7, as in {area} 0.0"
-            ))
+            Err(AddressError::StlBit {
+                text: text.into(),
+                area: area.into(),
+            })
         };
     }
     if area.chars().all(|c| c.is_ascii_alphabetic()) && number.chars().all(|c| c.is_ascii_digit()) {
         // MW 10, EB 0, DBW 4, PEW 256: words and bytes.
         return Ok(None);
     }
-    Err(format!(
-        "malformed operand '{text}': expected an address (E 0.0, A 4.0, M 10.1), a \"symbol\" or a #local"
-    ))
+    Err(AddressError::StlOperand { text: text.into() })
 }
 
 /// A block's name in canonical form: `"Betriebsarten"` → `Betriebsarten`,
@@ -334,10 +329,9 @@ fn in_block(block: Option<&str>, signal: Signal) -> Signal {
 /// `"Start"`).
 ///
 /// # Errors
-/// A malformed address, or one that is not a bit.
-pub(crate) fn operand_signal(text: &str) -> Result<Signal, String> {
-    bit_operand(text.trim())?
-        .ok_or_else(|| format!("'{text}' is not a bit address (E 0.0, A 4.0, M 10.1)"))
+/// [`AddressError`]: a malformed address, or one that is not a bit.
+pub(crate) fn operand_signal(text: &str) -> Result<Signal, AddressError> {
+    bit_operand(text.trim())?.ok_or_else(|| AddressError::StlNotABit { text: text.into() })
 }
 
 /// The canonical signal for a tag's STL address: a bit (`E 0.0` →
@@ -345,8 +339,8 @@ pub(crate) fn operand_signal(text: &str) -> Result<Signal, String> {
 /// (`MW 10` → `MW10`, `DB1.DBW 4` → `DB1.DBW4`, `PEW 256`).
 ///
 /// # Errors
-/// A malformed address, or a constant.
-pub(crate) fn tag_signal(text: &str) -> Result<Signal, String> {
+/// [`AddressError`]: a malformed address, or a constant.
+pub(crate) fn tag_signal(text: &str) -> Result<Signal, AddressError> {
     let text = text.trim();
     if let Some(bit) = bit_operand(text)? {
         return Ok(bit);
@@ -366,9 +360,7 @@ pub(crate) fn tag_signal(text: &str) -> Result<Signal, String> {
     if word {
         Ok(Signal::new(&upper))
     } else {
-        Err(format!(
-            "'{text}' is not an address (E 0.0, MW 10, DB1.DBW 4, \"symbol\")"
-        ))
+        Err(AddressError::StlNotAnAddress { text: text.into() })
     }
 }
 
@@ -607,8 +599,8 @@ pub(super) fn lex(origin: &str, source: &str) -> Result<Vec<Instruction>, Source
             Kind::Bit => match bit_operand(&operand_text) {
                 Ok(Some(s)) => Some(Operand::Signal(in_block(block.as_deref(), s))),
                 Ok(None) => Some(Operand::Other(operand_text)),
-                Err(msg) => {
-                    errors.push(err(operand_words[0].0, msg));
+                Err(e) => {
+                    errors.push(err(operand_words[0].0, e.to_string()));
                     continue;
                 }
             },
@@ -686,7 +678,7 @@ mod tests {
         assert_eq!(bit_operand("MW 10").unwrap(), None);
         assert_eq!(bit_operand("S5T#5S").unwrap(), None);
         assert_eq!(
-            bit_operand("E 0.8").unwrap_err(),
+            bit_operand("E 0.8").unwrap_err().to_string(),
             "malformed address 'E 0.8': expected byte.bit with a bit 0..7, as in E 0.0"
         );
     }

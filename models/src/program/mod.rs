@@ -27,7 +27,7 @@ use std::fmt;
 
 use crate::il::Dialect;
 use crate::logic::{Block, Term};
-use crate::signal::Signal;
+use crate::signal::{AddressError, Signal};
 use crate::source::Location;
 
 /// Why a coil's logic cannot be derived from the program.
@@ -126,8 +126,8 @@ impl Program {
     /// address form, and for IEC symbols the program's own spelling.
     ///
     /// # Errors
-    /// A message quoting a malformed address.
-    pub fn resolve(&self, text: &str) -> Result<Signal, String> {
+    /// [`AddressError`] quoting a malformed address.
+    pub fn resolve(&self, text: &str) -> Result<Signal, AddressError> {
         let signal = self.dialect.signal(text.trim())?;
         if self.dialect == Dialect::Iec {
             if let Some(s) = self.spelled(&signal) {

@@ -290,6 +290,31 @@ condition = "X2 * Y9"
         );
     }
 
+    #[test]
+    fn durations_and_st_conditions_say_what_is_wrong() {
+        assert_eq!(text::duration_ms("1.5s"), Ok(1500));
+        assert_eq!(
+            text::duration_ms("0.1ms").unwrap_err().to_string(),
+            "'0.1ms': between 1 ms and about 30 years"
+        );
+        assert_eq!(
+            text::duration_ms("8 parsecs"),
+            Err(text::DurationError::Malformed {
+                text: "8 parsecs".into()
+            })
+        );
+        let st = |t| plcopen::st_condition(t).unwrap_err().to_string();
+        assert_eq!(
+            st("a XOR b"),
+            "XOR is not read in a condition: write (a AND NOT b) OR (NOT a AND b)"
+        );
+        assert_eq!(
+            st("a | b"),
+            "'|' is not read in a condition (ST: AND, OR, NOT, parentheses, comparisons)"
+        );
+        assert_eq!(st("(a AND b"), "'(a AND b': expected ')' at the end");
+    }
+
     fn checks() -> SfcChecks {
         let comments: CommentDb = [(
             Signal::new("%IX0.0.3"),

@@ -42,7 +42,7 @@ use toml::Spanned;
 use super::text::{build, Errors, OneOrMany, RawChart, RawFile, RawStep, RawTransition};
 use super::Sfc;
 use crate::comments::CommentDb;
-use crate::expr::Expr;
+use crate::expr::{Expr, ExprError};
 use crate::signal::Signal;
 
 /// Parses the SFC bodies of the PLCopen XML project `text` (the file
@@ -426,9 +426,36 @@ fn on(
     }
 }
 
+/// Why a transition's ST condition is not read.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum StConditionError {
+    /// `XOR`, which the notation has no operator for.
+    #[error("XOR is not read in a condition: write (a AND NOT b) OR (NOT a AND b)")]
+    Xor,
+    /// A character that is no operand, operator or parenthesis.
+    #[error("'{found}' is not read in a condition (ST: AND, OR, NOT, parentheses, comparisons)")]
+    Unread {
+        /// The character.
+        found: char,
+    },
+    /// The condition, in the paper's notation, is no expression.
+    #[error("'{text}': {cause}")]
+    Expr {
+        /// The condition as written in ST.
+        text: String,
+        /// What is wrong, at a character of the condition in the paper's
+        /// notation.
+        cause: ExprError,
+    },
+}
+
 /// An ST boolean expression in the paper's notation, then read as the
 /// TOML form's conditions are.
-pub fn st_condition(text: &str) -> Result<Expr, String> {
+///
+/// # Errors
+/// [`StConditionError`]: an operator or character the notation has not,
+/// or an expression that does not parse.
+pub fn st_condition(text: &str) -> Result<Expr, StConditionError> {
     let mut paper = String::new();
     let chars: Vec<char> = text.chars().collect();
     let mut i = 0;
@@ -446,12 +473,7 @@ pub fn st_condition(text: &str) -> Result<Expr, String> {
                 "AND" => paper.push_str(" * "),
                 "OR" => paper.push_str(" + "),
                 "NOT" => paper.push_str(" -"),
-                "XOR" => {
-                    return Err(
-                        "XOR is not read in a condition: write (a AND NOT b) OR (NOT a AND b)"
-                            .into(),
-                    )
-                }
+                "XOR" => return Err(StConditionError::Xor),
                 _ => paper.push_str(&word),
             }
             continue;
@@ -470,13 +492,12 @@ pub fn st_condition(text: &str) -> Result<Expr, String> {
             ('=', _) => paper.push_str(" == "),
             ('(' | ')' | '<' | '>' | '-', _) => paper.push(c),
             (c, _) if c.is_whitespace() => paper.push(' '),
-            (c, _) => {
-                return Err(format!(
-                    "'{c}' is not read in a condition (ST: AND, OR, NOT, parentheses, comparisons)"
-                ))
-            }
+            (c, _) => return Err(StConditionError::Unread { found: c }),
         }
         i += 1;
     }
-    Expr::parse(&paper).map_err(|why| format!("'{text}': {why}"))
+    Expr::parse(&paper).map_err(|cause| StConditionError::Expr {
+        text: text.into(),
+        cause,
+    })
 }

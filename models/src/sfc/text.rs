@@ -25,6 +25,7 @@
 //! [`MAX_ERRORS`]), not just the first.
 
 use std::collections::{HashMap, HashSet};
+use std::fmt;
 
 use serde::Deserialize;
 use toml::Spanned;
@@ -121,11 +122,11 @@ pub fn parse(file: &str, text: &str, known: &dyn Fn(&Signal) -> bool) -> Result<
 
 /// Checks charts as written and makes the model; `condition` reads a
 /// transition's condition (the paper's notation, or ST from PLCopen XML).
-pub(super) fn build(
+pub(super) fn build<E: fmt::Display>(
     mut errors: Errors<'_>,
     raw: &RawFile,
     known: &dyn Fn(&Signal) -> bool,
-    condition: &dyn Fn(&str) -> Result<Expr, String>,
+    condition: &dyn Fn(&str) -> Result<Expr, E>,
 ) -> Result<Sfc, Vec<String>> {
     if raw.chart.is_empty() {
         errors.at(0, "no chart: write at least one [[chart]]".into());
@@ -190,11 +191,11 @@ pub(super) fn build(
             transitions: Vec::new(),
         });
     }
-    let find = |chart: usize, text: &str| -> Result<StepRef, String> {
+    let find = |chart: usize, text: &str| -> Result<StepRef, StepRefError> {
         let (c, step) = match text.split_once('.') {
             Some((c, step)) => match names.get(c) {
                 Some(&c) => (c, step),
-                None => return Err(format!("no chart '{c}'")),
+                None => return Err(StepRefError::NoChart { chart: c.into() }),
             },
             None => (chart, text),
         };
@@ -203,7 +204,10 @@ pub(super) fn build(
             .iter()
             .position(|s| s.name == step)
             .map(|step| StepRef { chart: c, step })
-            .ok_or_else(|| format!("no step '{step}' in chart {}", charts[c].name))
+            .ok_or_else(|| StepRefError::NoStep {
+                step: step.into(),
+                chart: charts[c].name.clone(),
+            })
     };
     let mut transitions: Vec<Vec<Transition>> = vec![Vec::new(); charts.len()];
     for (ci, c) in raw.chart.iter().enumerate() {
@@ -401,30 +405,66 @@ fn step_flag(
     }
 }
 
+/// Why a transition's source or target names no step.
+#[derive(Debug, thiserror::Error)]
+enum StepRefError {
+    /// `CHART.STEP` with no chart of that name.
+    #[error("no chart '{chart}'")]
+    NoChart {
+        /// The chart's name as written.
+        chart: String,
+    },
+    /// A chart without a step of that name.
+    #[error("no step '{step}' in chart {chart}")]
+    NoStep {
+        /// The step's name as written.
+        step: String,
+        /// The chart looked in.
+        chart: String,
+    },
+}
+
+/// A duration written wrong (a step's supervision time); each variant
+/// quotes the text as written.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum DurationError {
+    /// Not a number and a unit (`ms`, `s`, `m`, `min`, `h`).
+    #[error("'{text}': write a duration such as 500ms, 8s, 2m or 1h")]
+    Malformed {
+        /// The duration as written.
+        text: String,
+    },
+    /// Shorter than 1 ms, or longer than 10¹² ms.
+    #[error("'{text}': between 1 ms and about 30 years")]
+    OutOfRange {
+        /// The duration as written.
+        text: String,
+    },
+}
+
 /// `500ms`, `8s`, `1.5s`, `2m`, `1h` in ms.
-pub fn duration_ms(text: &str) -> Result<u64, String> {
+///
+/// # Errors
+/// [`DurationError`] quoting a text that is no duration, or one out of
+/// range.
+pub fn duration_ms(text: &str) -> Result<u64, DurationError> {
     let t = text.trim();
     let split = t
         .find(|c: char| !(c.is_ascii_digit() || c == '.'))
         .unwrap_or(t.len());
     let (number, unit) = t.split_at(split);
-    let n: f64 = number
-        .parse()
-        .map_err(|_| format!("'{text}': write a duration such as 500ms, 8s, 2m or 1h"))?;
+    let malformed = || DurationError::Malformed { text: text.into() };
+    let n: f64 = number.parse().map_err(|_| malformed())?;
     let scale = match unit.trim() {
         "ms" => 1.0,
         "s" => 1000.0,
         "m" | "min" => 60_000.0,
         "h" => 3_600_000.0,
-        _ => {
-            return Err(format!(
-                "'{text}': write a duration such as 500ms, 8s, 2m or 1h"
-            ))
-        }
+        _ => return Err(malformed()),
     };
     let ms = n * scale;
     if !(1.0..=1e12).contains(&ms) {
-        return Err(format!("'{text}': between 1 ms and about 30 years"));
+        return Err(DurationError::OutOfRange { text: text.into() });
     }
     Ok(ms.round() as u64)
 }

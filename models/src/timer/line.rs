@@ -56,18 +56,24 @@ pub enum FaultKind {
     Stuck,
 }
 
-impl std::str::FromStr for FaultKind {
-    type Err = String;
+/// A fault's name that is none of `missing`, `fast`, `slow`, `stuck`.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown fault '{text}': use missing, fast, slow or stuck")]
+pub struct UnknownFault {
+    /// The name as given.
+    pub text: String,
+}
 
-    fn from_str(s: &str) -> Result<Self, String> {
+impl std::str::FromStr for FaultKind {
+    type Err = UnknownFault;
+
+    fn from_str(s: &str) -> Result<Self, UnknownFault> {
         match s {
             "missing" => Ok(FaultKind::SensorMissing),
             "fast" => Ok(FaultKind::TooFast),
             "slow" => Ok(FaultKind::TooSlow),
             "stuck" => Ok(FaultKind::Stuck),
-            other => Err(format!(
-                "unknown fault '{other}': use missing, fast, slow or stuck"
-            )),
+            other => Err(UnknownFault { text: other.into() }),
         }
     }
 }

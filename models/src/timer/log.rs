@@ -70,6 +70,16 @@ fn value(text: &str) -> Option<bool> {
     }
 }
 
+/// A row whose time is before the previous row's.
+#[derive(Debug, thiserror::Error)]
+#[error("time {at} ms goes backwards (previous row at {previous} ms)")]
+struct Backwards {
+    /// The row's time, ms.
+    at: u64,
+    /// The previous row's time, ms.
+    previous: u64,
+}
+
 struct Builder {
     index: HashMap<String, usize>,
     log: RunLog,
@@ -106,13 +116,16 @@ impl Builder {
         i
     }
 
-    /// Records `signal = value` at `at`; returns a message if time goes back.
-    fn row(&mut self, at: u64, signal: usize, value: bool) -> Result<(), String> {
+    /// Records `signal = value` at `at`.
+    ///
+    /// # Errors
+    /// [`Backwards`] if `at` is before the previous row's time.
+    fn row(&mut self, at: u64, signal: usize, value: bool) -> Result<(), Backwards> {
         if at < self.last_at {
-            return Err(format!(
-                "time {at} ms goes backwards (previous row at {} ms)",
-                self.last_at
-            ));
+            return Err(Backwards {
+                at,
+                previous: self.last_at,
+            });
         }
         self.last_at = at;
         if at == 0
@@ -199,7 +212,8 @@ pub fn parse_csv(origin: &str, text: &str) -> Result<RunLog, LogError> {
             )
         })?;
         let s = b.signal(cols[1]);
-        b.row(at, s, v).map_err(|m| err(origin, line_no, m))?;
+        b.row(at, s, v)
+            .map_err(|e| err(origin, line_no, e.to_string()))?;
     }
     if !header {
         return Err(err(
@@ -258,7 +272,8 @@ pub fn parse_numeric(
     order.sort_unstable();
     for num in &order {
         let s = b.signal(&names[num]);
-        b.row(0, s, false).map_err(|m| err(origin, 1, m))?;
+        b.row(0, s, false)
+            .map_err(|e| err(origin, 1, e.to_string()))?;
     }
     for (n, raw) in events.lines().enumerate() {
         let line_no = n + 1;
@@ -301,7 +316,8 @@ pub fn parse_numeric(
             )
         })?;
         let s = b.signal(&name.clone());
-        b.row(at, s, rise).map_err(|m| err(origin, line_no, m))?;
+        b.row(at, s, rise)
+            .map_err(|e| err(origin, line_no, e.to_string()))?;
     }
     Ok(b.log)
 }

@@ -279,7 +279,7 @@ impl Validator<'_> {
         }
     }
 
-    fn parsed<T: FromStr<Err = String>>(
+    fn parsed<T: FromStr<Err: fmt::Display>>(
         &mut self,
         value: Option<Spanned<String>>,
         key: &str,

@@ -17,7 +17,7 @@ mod declarations;
 use std::collections::HashMap;
 
 use super::{words, Instruction, Op, Operand, Operation, Outside};
-use crate::signal::{iec_direct_address, Signal};
+use crate::signal::{iec_direct_address, AddressError, Signal};
 use crate::source::{column, Location, SourceError, SourceErrors};
 
 pub(crate) use declarations::Declarations;
@@ -51,8 +51,8 @@ pub(super) fn is_iec_only(upper: &str) -> bool {
 /// (`Start`, `T1.Q`).
 ///
 /// # Errors
-/// A message quoting a malformed address or name.
-pub(crate) fn operand_signal(text: &str) -> Result<Signal, String> {
+/// [`AddressError`] quoting a malformed address or name.
+pub(crate) fn operand_signal(text: &str) -> Result<Signal, AddressError> {
     if text.starts_with('%') {
         return iec_direct_address(text);
     }
@@ -65,9 +65,7 @@ pub(crate) fn operand_signal(text: &str) -> Result<Signal, String> {
     if text.split('.').all(ident) {
         Ok(Signal::new(text))
     } else {
-        Err(format!(
-            "malformed operand '{text}': expected a direct address (%IX0.0) or a name"
-        ))
+        Err(AddressError::IecOperand { text: text.into() })
     }
 }
 
@@ -503,8 +501,8 @@ pub(super) fn lex_declared(
                 }
                 _ => match signal(&w) {
                     Ok(s) => Some(Operand::Signal(s)),
-                    Err(msg) => {
-                        errors.push(err(off, msg));
+                    Err(e) => {
+                        errors.push(err(off, e.to_string()));
                         continue;
                     }
                 },

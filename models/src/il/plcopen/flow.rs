@@ -2,7 +2,7 @@
 //! parallel branches as OR with their common start factored out, what is
 //! not boolean logic) and how a flow becomes IEC instructions ([`emit`];
 //! a box read several times written once into a relay, [`shared`]) or ST
-//! text (`st_text`). It owns the flow, not how a body's connection graph
+//! text (`st_text`, or why not: [`NotBoolean`]). It owns the flow, not how a body's connection graph
 //! is walked to get it (`graph.rs`); the Rockwell and TIA Portal readers
 //! build flows too.
 
@@ -222,8 +222,19 @@ pub(crate) fn shared(
     Flow::Lit(relay, false, id)
 }
 
+/// A flow that ST text cannot say: a part of it is not boolean logic.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("the condition is not boolean logic: {why}")]
+pub(super) struct NotBoolean {
+    /// Why that part is not boolean logic, naming it.
+    pub(super) why: String,
+}
+
 /// Writes `flow` as an ST expression.
-pub(super) fn st_text(flow: &Flow, out: &mut String) -> Result<(), String> {
+///
+/// # Errors
+/// [`NotBoolean`] for a flow with a part that is not boolean logic.
+pub(super) fn st_text(flow: &Flow, out: &mut String) -> Result<(), NotBoolean> {
     match flow {
         Flow::True => out.push_str("TRUE"),
         Flow::False => out.push_str("FALSE"),
@@ -249,7 +260,7 @@ pub(super) fn st_text(flow: &Flow, out: &mut String) -> Result<(), String> {
             out.push(')');
         }
         Flow::Opaque(why, _) => {
-            return Err(format!("the condition is not boolean logic: {why}"));
+            return Err(NotBoolean { why: why.clone() });
         }
     }
     Ok(())

@@ -250,8 +250,8 @@ impl<'a, 'i> Reader<'a, 'i> {
                         let negated = node.attribute("negated") == Some("true");
                         Flow::and(vec![input, Flow::Lit(s, negated, id)])
                     }
-                    Err(m) => {
-                        self.error(node, m);
+                    Err(e) => {
+                        self.error(node, e.to_string());
                         input
                     }
                 }
@@ -265,7 +265,7 @@ impl<'a, 'i> Reader<'a, 'i> {
                     Some(i) if !param.is_empty() => {
                         match iec::operand_signal(&format!("{i}.{param}")) {
                             Ok(s) => Flow::Lit(s, false, local_id(node).unwrap_or(0)),
-                            Err(m) => Flow::Opaque(m, self.at(node)),
+                            Err(e) => Flow::Opaque(e.to_string(), self.at(node)),
                         }
                     }
                     _ => self.function(node, ty, param, depth),
@@ -457,7 +457,7 @@ pub(crate) fn connected_condition(
         _ => flow,
     };
     let mut text = String::new();
-    st_text(&flow, &mut text).map_err(|why| (sink.range().start, why))?;
+    st_text(&flow, &mut text).map_err(|why| (sink.range().start, why.to_string()))?;
     Ok(text)
 }
 
@@ -510,8 +510,8 @@ pub(super) fn ladder<'a, 'i>(
         }
         let signal = match iec::operand_signal(&var) {
             Ok(s) => s,
-            Err(m) => {
-                r.error(coil, m);
+            Err(e) => {
+                r.error(coil, e.to_string());
                 continue;
             }
         };

@@ -1,6 +1,7 @@
 //! The parts of a SimaticML document both the block reader and the
 //! network reader use: a network's place in messages, an element's
-//! location and text, and the signal an operand (`Access`) names.
+//! location and text, and the signal an operand (`Access`) names, or why
+//! it names none ([`AccessError`]).
 
 use std::fmt;
 
@@ -41,16 +42,43 @@ pub(super) fn text_of(node: Node<'_, '_>) -> String {
     node.text().unwrap_or("").trim().to_string()
 }
 
+/// Why an operand (`Access`) names no signal the reader can use.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub(super) enum AccessError {
+    /// A component indexed or sliced, known only at run time.
+    #[error("indexed or sliced access '{name}' (known only at run time)")]
+    Indexed {
+        /// The component's name.
+        name: String,
+    },
+    /// A symbol, or one of its components, without a name.
+    #[error("a symbol without a name")]
+    Unnamed,
+    /// An absolute address in an area the reader does not know.
+    #[error("address in area '{area}'")]
+    Area {
+        /// The `Area` attribute as written.
+        area: String,
+    },
+    /// An absolute address without a readable `BitOffset`.
+    #[error("an address without a bit offset")]
+    NoBitOffset,
+    /// An operand with neither a symbol nor an address.
+    #[error("an operand without a symbol or an address")]
+    Empty,
+}
+
 /// The signal an `Access` (or a part's `Instance`) names, and whether it
 /// may be a bit (`false`: a word or byte address).
 ///
 /// # Errors
-/// Why it is not read: an indexed or sliced access, an unknown area.
+/// [`AccessError`]: why it is not read, such as an indexed or sliced
+/// access or an unknown area.
 pub(super) fn access_signal(
     place: &Place,
     scope: &str,
     access: Node<'_, '_>,
-) -> Result<(Signal, bool), String> {
+) -> Result<(Signal, bool), AccessError> {
     // A part's `Instance` holds its components itself.
     let symbol = child(access, "Symbol").or_else(|| {
         (access.has_tag_name("Instance") && child(access, "Component").is_some()).then_some(access)
@@ -63,17 +91,15 @@ pub(super) fn access_signal(
                 || c.attributes()
                     .any(|a| a.name().ends_with("AccessModifier") && a.value() != "None");
             if indexed {
-                return Err(format!(
-                    "indexed or sliced access '{name}' (known only at run time)"
-                ));
+                return Err(AccessError::Indexed { name: name.into() });
             }
             if name.is_empty() {
-                return Err("a symbol without a name".into());
+                return Err(AccessError::Unnamed);
             }
             names.push(name);
         }
         if names.is_empty() {
-            return Err("a symbol without a name".into());
+            return Err(AccessError::Unnamed);
         }
         let joined = names.join(".");
         return Ok(match scope {
@@ -90,12 +116,12 @@ pub(super) fn access_signal(
             "PeripheryInput" => "PI",
             "PeripheryOutput" => "PQ",
             "DB" => "DB",
-            other => return Err(format!("address in area '{other}'")),
+            other => return Err(AccessError::Area { area: other.into() }),
         };
         let offset: u64 = address
             .attribute("BitOffset")
             .and_then(|b| b.parse().ok())
-            .ok_or("an address without a bit offset")?;
+            .ok_or(AccessError::NoBitOffset)?;
         let ty = address.attribute("Type").unwrap_or("Bool");
         let (byte, bit) = (offset / 8, offset % 8);
         let prefix = if area == "DB" {
@@ -115,5 +141,5 @@ pub(super) fn access_signal(
         };
         return Ok((Signal::new(&format!("{prefix}{size}{byte}")), false));
     }
-    Err("an operand without a symbol or an address".into())
+    Err(AccessError::Empty)
 }

@@ -316,7 +316,7 @@ impl<'a, 'i> Network<'a, 'i> {
         match access_signal(self.place, scope, access) {
             Ok((signal, true)) => Value::Var(signal),
             Ok((signal, false)) => Value::Word(signal),
-            Err(why) => Value::Other(why),
+            Err(why) => Value::Other(why.to_string()),
         }
     }
 
@@ -458,7 +458,7 @@ impl<'a, 'i> Network<'a, 'i> {
                     Some(Ok((s, _))) => {
                         Flow::Lit(Signal::new(&format!("{}.{upper}", s.name())), false, id)
                     }
-                    Some(Err(why)) => self.opaque(node, why),
+                    Some(Err(why)) => self.opaque(node, why.to_string()),
                     None => self.opaque(node, format!("{name} without an instance")),
                 }
             }
@@ -499,7 +499,7 @@ impl<'a, 'i> Network<'a, 'i> {
             .map(|i| access_signal(self.place, i.attribute("Scope").unwrap_or(""), i));
         match instance {
             Some(Ok((s, _))) => Flow::Lit(Signal::new(&format!("{}.{pin}", s.name())), false, id),
-            Some(Err(why)) => self.opaque(node, why),
+            Some(Err(why)) => self.opaque(node, why.to_string()),
             None => self.opaque(
                 node,
                 format!("output '{pin}' of {name}, a function without an instance"),
