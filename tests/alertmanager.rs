@@ -5,7 +5,8 @@
 //! end it, an Alertmanager restarted with nothing stored gets every active
 //! alert back, alarms go on reaching the bus while it is down, and the
 //! shipped inhibition rule holds back a cell's process alarms while its
-//! PLC cannot be reached.
+//! PLC cannot be reached; an alarm nobody acknowledges escalates step by
+//! step and stops at its acknowledgement, as the shipped routes expect.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -174,6 +175,7 @@ async fn alarms_reach_a_real_alertmanager_end_there_and_survive_its_restart() {
             console: Some("https://console.plant.example:8470".into()),
             resend: Duration::from_secs(2),
             tls: None,
+            escalation: cellwatch::config::default_escalation(),
         });
     })
     .await;
@@ -276,6 +278,114 @@ async fn alarms_reach_a_real_alertmanager_end_there_and_survive_its_restart() {
     fx.stop().await;
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn an_alarm_nobody_acknowledges_escalates_and_stops_at_its_acknowledgement() {
+    let d = tempfile::tempdir().unwrap();
+    let am = Alertmanager::start(&d.path().join("am"), crate::util::restartable_port()).await;
+    let url = am.url();
+    let mut fx = Fixture::start_with(|c| {
+        c.alertmanager = Some(AlertmanagerConfig {
+            urls: vec![url],
+            area: None,
+            console: None,
+            // Nothing is sent again before the steps: each step is sent
+            // when it is reached.
+            resend: Duration::from_secs(600),
+            tls: None,
+            escalation: vec![
+                ("1s".into(), Duration::from_secs(1)),
+                ("3s".into(), Duration::from_secs(3)),
+            ],
+        });
+    })
+    .await;
+    let sub = crate::robust::alarms(fx.client(), "m01ps0004").await;
+    fx.settled().await;
+    let mut seen = Vec::new();
+    fx.sim.set("X0.06", false).unwrap();
+    alarm_until(&sub, "ESE raised", &mut seen, |a| {
+        a.id == "ese" && a.transition.as_str() == "raised"
+    })
+    .await;
+    let step = |a: &serde_json::Value| {
+        a["labels"]["unacknowledged_for"]
+            .as_str()
+            .map(str::to_string)
+    };
+    let first = am
+        .until("ese", "ESE never alerted unacknowledged", |a| {
+            a["labels"]["acknowledged"] == "false"
+        })
+        .await;
+    assert_ne!(step(&first).as_deref(), Some("3s"), "{first:#}");
+    // Each step in turn, and the alert under the step before ends.
+    am.until("ese", "ESE never reached its last step", |a| {
+        step(a).as_deref() == Some("3s")
+    })
+    .await;
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    while am.alerts_of("ese").await.len() > 1 {
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "an earlier step still alerts: {:#?}",
+            am.alerts_of("ese").await
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+
+    // Acknowledged: one alert, acknowledged, no step; the escalated one
+    // ended, so a route on the step stops notifying.
+    let (ok, detail) = send(fx.client(), &signed(Action::Ack, "ese")).await;
+    assert!(ok, "{detail}");
+    am.until("ese", "ESE never alerted acknowledged", |a| {
+        a["labels"]["acknowledged"] == "true" && step(a).is_none()
+    })
+    .await;
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    while am
+        .alerts_of("ese")
+        .await
+        .iter()
+        .any(|a| a["labels"]["acknowledged"] != "true")
+    {
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "the unacknowledged alert outlived the acknowledgement: {:#?}",
+            am.alerts_of("ese").await
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+
+    // The shipped routes: a critical alarm unacknowledged for 5 minutes
+    // pages the shift supervisor; acknowledged, it does not.
+    let routed = |labels: &[&str]| {
+        let out = Command::new("/usr/bin/amtool")
+            .args(["config", "routes", "test", "--config.file"])
+            .arg(root().join("deploy/alertmanager.yml"))
+            .args(labels)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{out:?}");
+        String::from_utf8(out.stdout).unwrap().trim().to_string()
+    };
+    let base = ["cell=m01ps0004", "alarm=ese", "priority=critical"];
+    let escalated = routed(&[&base[..], &["acknowledged=false", "unacknowledged_for=5m"]].concat());
+    assert!(
+        escalated.split(',').any(|r| r == "shift-supervisor"),
+        "{escalated}"
+    );
+    for later in ["15m", "1h"] {
+        let step = format!("unacknowledged_for={later}");
+        let r = routed(&[&base[..], &["acknowledged=false", step.as_str()]].concat());
+        assert!(r.split(',').any(|r| r == "shift-supervisor"), "{r}");
+    }
+    let acked = routed(&[&base[..], &["acknowledged=true"]].concat());
+    assert!(!acked.contains("shift-supervisor"), "{acked}");
+    let fresh = routed(&[&base[..], &["acknowledged=false"]].concat());
+    assert!(!fresh.contains("shift-supervisor"), "{fresh}");
+    fx.stop().await;
+}
+
 /// `GET path` over HTTPS to 127.0.0.1:`port` as `localhost`, trusting
 /// `ca` and presenting `cert`/`key`: the status and the body.
 async fn https_get(port: u16, path: &str, ca: &Path, cert: &Path, key: &Path) -> (u16, String) {
@@ -334,6 +444,7 @@ async fn an_https_alertmanager_asking_for_a_client_certificate_gets_the_alerts()
                 ca: bus.ca,
                 client: Some((bus.cert, bus.key)),
             }),
+            escalation: cellwatch::config::default_escalation(),
         });
     })
     .await;

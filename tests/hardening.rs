@@ -281,6 +281,7 @@ async fn an_alertmanagers_endless_error_answer_is_read_bounded() {
             console: None,
             resend: Duration::from_secs(60),
             tls: None,
+            escalation: cellwatch::config::default_escalation(),
         });
     })
     .await;

@@ -24,6 +24,19 @@ pub struct AlertmanagerConfig {
     pub resend: Duration,
     /// For `https://` Alertmanagers.
     pub tls: Option<AlertmanagerTls>,
+    /// The steps of the `unacknowledged_for` label (`alertmanager.escalation`):
+    /// its value as written, and how long after its raise an alarm nobody
+    /// acknowledged reaches it. Empty: no such label.
+    pub escalation: Vec<(String, Duration)>,
+}
+
+/// The steps of escalation unless the configuration says: 5 minutes,
+/// 15 minutes, an hour.
+pub fn default_escalation() -> Vec<(String, Duration)> {
+    [("5m", 5), ("15m", 15), ("1h", 60)]
+        .into_iter()
+        .map(|(name, minutes)| (name.to_string(), Duration::from_secs(60 * minutes)))
+        .collect()
 }
 
 /// TLS to Alertmanager (its `web.config.file`'s `tls_server_config`).

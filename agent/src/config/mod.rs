@@ -29,7 +29,7 @@ mod tags;
 mod validate;
 
 pub use alarm_server::AlarmServerConfig;
-pub use alertmanager::{AlertmanagerConfig, AlertmanagerTls, DEFAULT_RESEND};
+pub use alertmanager::{default_escalation, AlertmanagerConfig, AlertmanagerTls, DEFAULT_RESEND};
 pub use bus::{
     cell_prefix, link_problem, zenoh_file, ZenohConfig, ZenohMode, ZenohTls, DEFAULT_ROOT,
 };

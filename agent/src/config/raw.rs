@@ -119,6 +119,7 @@ pub(crate) struct RawAlertmanager {
     pub(crate) area: Option<String>,
     pub(crate) console: Option<Spanned<String>>,
     pub(crate) resend_interval: Option<Spanned<String>>,
+    pub(crate) escalation: Option<Vec<Spanned<String>>>,
     pub(crate) tls: Option<Spanned<RawAlertmanagerTls>>,
 }
 

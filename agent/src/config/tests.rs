@@ -436,6 +436,7 @@ fn shipped_configs_parse() {
 
 mod checks;
 mod consequences;
+mod escalation;
 mod events;
 
 #[test]

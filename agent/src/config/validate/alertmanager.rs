@@ -4,11 +4,14 @@ use toml::Spanned;
 
 use super::Validator;
 use crate::config::raw::RawAlertmanager;
-use crate::config::{AlertmanagerConfig, AlertmanagerTls, DEFAULT_RESEND};
+use crate::config::{default_escalation, AlertmanagerConfig, AlertmanagerTls, DEFAULT_RESEND};
 
 /// The most Alertmanagers one cell sends to (each is owed every ended
 /// alert until it has taken it).
 const MAX_URLS: usize = 16;
+
+/// The most steps of `alertmanager.escalation`.
+const MAX_STEPS: usize = 8;
 
 /// The longest `alertmanager.resend_interval`: an alert says it ends four
 /// intervals after it was sent, and an hour's silence hides a dead agent.
@@ -104,16 +107,62 @@ impl Validator<'_> {
         }
         if let Some(area) = &raw.area {
             if area.trim().is_empty() {
-                self.problem(table, "alertmanager.area", "must not be empty");
+                self.problem(table.clone(), "alertmanager.area", "must not be empty");
             }
         }
+        let escalation = match raw.escalation {
+            None => default_escalation(),
+            Some(steps) => self.escalation(steps, &table),
+        };
         Some(AlertmanagerConfig {
             urls,
             area: raw.area,
             console,
             resend,
             tls,
+            escalation,
         })
+    }
+
+    /// `alertmanager.escalation`: durations, each longer than the one
+    /// before it, at most [`MAX_STEPS`].
+    fn escalation(
+        &mut self,
+        steps: Vec<Spanned<String>>,
+        table: &std::ops::Range<usize>,
+    ) -> Vec<(String, std::time::Duration)> {
+        const KEY: &str = "alertmanager.escalation";
+        if steps.len() > MAX_STEPS {
+            self.problem(table.clone(), KEY, format!("at most {MAX_STEPS} steps"));
+        }
+        let mut out: Vec<(String, std::time::Duration)> = Vec::new();
+        for step in steps.into_iter().take(MAX_STEPS) {
+            let span = step.span();
+            let text = step.get_ref().trim().to_string();
+            match humantime::parse_duration(&text) {
+                Ok(d) if d.is_zero() => {
+                    self.problem(
+                        span,
+                        KEY,
+                        format!("'{text}': a step is a time after the raise, more than 0"),
+                    );
+                }
+                Ok(d) if out.last().is_some_and(|(_, before)| d <= *before) => {
+                    self.problem(
+                        span,
+                        KEY,
+                        format!("'{text}': each step must be longer than the one before it"),
+                    );
+                }
+                Ok(d) => out.push((text, d)),
+                Err(e) => self.problem(
+                    span,
+                    KEY,
+                    format!("'{text}' is not a duration like 5m or 1h ({e})"),
+                ),
+            }
+        }
+        out
     }
 }
 
