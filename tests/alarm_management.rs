@@ -2,6 +2,9 @@
 //! and started again): only signed commands of operators allowed them
 //! count, the shelf and the removal survive a restart, an alarm out of
 //! service is not raised, and back in service it is if its condition holds.
+//! Designed suppression by a machine mode read from the PLC's mode word:
+//! the alarm evaluated, journaled and published as suppressed, announced
+//! when the mode ends.
 
 use cellwatch::operator::Action;
 
@@ -174,4 +177,95 @@ async fn shelves_and_removals_are_signed_permitted_and_survive_a_restart() {
     child.kill().unwrap();
     child.wait().unwrap();
     sim.stop();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_mode_read_from_the_mode_word_suppresses_its_alarms_by_design_until_it_ends() {
+    let d = tempfile::tempdir().unwrap();
+    let (sim, mut cell) = start(d.path()).await;
+    // JOG (mode word 2) is a setup: the emergency-stop chain is opened by
+    // design while the setter works in the machine.
+    let config = std::fs::read_to_string(&cell.config).unwrap();
+    let config = config.replace(
+        "[zenoh]\n",
+        "[[state.modes]]\nid = \"setup\"\nwhen = \"mode_word == 2\"\nsuppress = [\"es*\"]\n\n[zenoh]\n",
+    );
+    std::fs::write(&cell.config, config).unwrap();
+    let mut child = cell.spawn("agent.log").await;
+    let client = cell.client().await;
+    snapshot_until(&client, "the agent never settled", |s| {
+        s["state"] == "running"
+    })
+    .await;
+    let m = scrape(cell.metrics_port);
+    assert!(
+        m.contains("cellwatch_mode_active{cell=\"m01ps0004\",mode=\"setup\"} 0"),
+        "{m}"
+    );
+    // Into JOG: the mode word says 2.
+    sim.set("X201.02", false).unwrap();
+    sim.set("X201.06", true).unwrap();
+    snapshot_until(&client, "the machine never left running", |s| {
+        s["state"] != "running"
+    })
+    .await;
+    sim.set("X0.06", false).unwrap();
+    let s = snapshot_until(&client, "ESE never raised", |s| alarm(s, "ese").is_some()).await;
+    let ese = alarm(&s, "ese").unwrap();
+    assert_eq!(ese["state"], "active_unacknowledged", "{ese:#}");
+    assert_eq!(ese["suppressed_by_design"]["mode"], "setup", "{ese:#}");
+    let m = scrape(cell.metrics_port);
+    assert_eq!(
+        gauge(&m, "cellwatch_alarms_suppressed_by_design"),
+        1.0,
+        "{m}"
+    );
+    assert_eq!(gauge(&m, "cellwatch_alarm_rate_by_design_10m"), 1.0, "{m}");
+    assert!(
+        m.contains("cellwatch_mode_active{cell=\"m01ps0004\",mode=\"setup\"} 1"),
+        "{m}"
+    );
+    // Back to AUTO with the switch still open: announced now.
+    sim.set("X201.06", false).unwrap();
+    sim.set("X201.02", true).unwrap();
+    let s = snapshot_until(&client, "ESE never announced", |s| {
+        alarm(s, "ese").is_some_and(|a| a["suppressed_by_design"].is_null())
+    })
+    .await;
+    assert_eq!(alarm(&s, "ese").unwrap()["state"], "active_unacknowledged");
+    let m = scrape(cell.metrics_port);
+    assert_eq!(
+        gauge(&m, "cellwatch_alarms_suppressed_by_design"),
+        0.0,
+        "{m}"
+    );
+    child.kill().unwrap();
+    child.wait().unwrap();
+    sim.stop();
+    // The journal keeps the mode's span and every transition of ESE.
+    let journal = rusqlite::Connection::open(d.path().join("journal.sqlite")).unwrap();
+    let modes: Vec<(String, bool)> = journal
+        .prepare("SELECT mode, entered FROM modes ORDER BY seq")
+        .unwrap()
+        .query_map([], |r| Ok((r.get(0)?, r.get(1)?)))
+        .unwrap()
+        .map(Result::unwrap)
+        .collect();
+    assert_eq!(modes, [("setup".into(), true), ("setup".into(), false)]);
+    let ese: Vec<(String, String)> = journal
+        .prepare("SELECT transition, payload FROM alarm_events WHERE alarm = 'ese' ORDER BY seq")
+        .unwrap()
+        .query_map([], |r| Ok((r.get(0)?, r.get(1)?)))
+        .unwrap()
+        .map(Result::unwrap)
+        .collect();
+    let transitions: Vec<&str> = ese.iter().map(|(t, _)| t.as_str()).collect();
+    assert_eq!(transitions, ["raised", "unsuppressed"], "{ese:#?}");
+    assert!(
+        ese[0]
+            .1
+            .contains(r#""suppressed_by_design":{"mode":"setup""#),
+        "{}",
+        ese[0].1
+    );
 }

@@ -133,6 +133,7 @@ fn engine_of(numbers: usize, recorder: Option<RecorderConfig>) -> (CellEngine, u
         StateRules {
             running: None,
             fault_severity: Severity::High,
+            modes: Vec::new(),
         },
     )
     .expect("engine");
@@ -388,6 +389,7 @@ fn flood_engine(recorder: Option<RecorderConfig>) -> CellEngine {
         StateRules {
             running: None,
             fault_severity: Severity::High,
+            modes: Vec::new(),
         },
     )
     .expect("engine");

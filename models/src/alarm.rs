@@ -184,6 +184,12 @@ pub enum Transition {
     OutOfService,
     /// Back in service: raised again if its condition holds.
     InService,
+    /// A machine mode that suppresses it by design began (ISA-18.2
+    /// designed suppression): still evaluated and journaled, not announced.
+    Suppressed,
+    /// Its designed suppression ended: announced as it is (an active
+    /// alarm is announced now).
+    Unsuppressed,
 }
 
 impl Transition {
@@ -199,6 +205,8 @@ impl Transition {
             Transition::Unshelved => "unshelved",
             Transition::OutOfService => "out_of_service",
             Transition::InService => "in_service",
+            Transition::Suppressed => "suppressed",
+            Transition::Unsuppressed => "unsuppressed",
         }
     }
 }
@@ -261,6 +269,19 @@ pub struct Alarm {
     /// The active alarm this occurrence follows from, if it was raised as
     /// a consequence of one ([`crate::consequence`]); `None`: a first-out.
     pub consequence: Option<Box<Consequence>>,
+    /// Suppressed by design: a machine mode in which it means nothing
+    /// holds (ISA-18.2), if one does. Evaluated and journaled, never
+    /// announced; distinct from a shelf (an operator's) and out of service.
+    pub designed: Option<Box<DesignedSuppression>>,
+}
+
+/// Which machine mode suppresses an alarm by design, since when.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DesignedSuppression {
+    /// The mode's id (`setup`).
+    pub mode: String,
+    /// When the suppression began for this alarm, ms since the epoch.
+    pub since: u64,
 }
 
 /// Why an occurrence is a consequence: the alarm it follows from.
@@ -329,6 +350,7 @@ impl Alarm {
             shelved: None,
             out_of_service: None,
             consequence: None,
+            designed: None,
         }
     }
 
@@ -345,6 +367,20 @@ impl Alarm {
     /// Whether it is a consequence the cell does not annunciate.
     pub fn is_suppressed(&self) -> bool {
         self.consequence.as_ref().is_some_and(|c| c.suppressed)
+    }
+
+    /// Whether a machine mode suppresses it by design now.
+    pub fn is_suppressed_by_design(&self) -> bool {
+        self.designed.is_some()
+    }
+
+    /// Whether it is announced when active: neither shelved, out of
+    /// service, a suppressed consequence nor suppressed by design.
+    pub fn is_announced(&self) -> bool {
+        self.shelved.is_none()
+            && self.out_of_service.is_none()
+            && !self.is_suppressed()
+            && self.designed.is_none()
     }
 
     /// The element to name in machine-state history: the first culprit.

@@ -64,6 +64,7 @@ fn engine(limits: Vec<LimitCheck>) -> CellEngine {
     let rules = StateRules {
         running: Some(Expr::parse("G0.00 * TEMP < 90").unwrap()),
         fault_severity: Severity::High,
+        modes: Vec::new(),
     };
     let mut sets: Vec<Box<dyn CheckSet>> = vec![Box::new(SwitchingChecks::new(vec![check]))];
     if !limits.is_empty() {

@@ -30,6 +30,7 @@ fn exported_metrics() -> BTreeSet<String> {
         .with_label_values(&["line-001"])
         .set(0.1);
     m.tag_value.with_label_values(&["t"]).set(1.0);
+    m.modes.mode("setup", true);
     m.opcua_requests.with_label_values(&["Read", "good"]).inc();
     m.sfc_step_active
         .with_label_values(&["sfc", "F1", "S2"])

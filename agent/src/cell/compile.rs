@@ -37,6 +37,17 @@ pub enum CompileError {
         /// Why.
         why: String,
     },
+    /// A pattern of `[[state.modes]]` matches no alarm the cell can
+    /// raise (a misspelt id would leave the alarm announced in its mode).
+    #[error("state.modes[{mode}].suppress[{index}]: '{pattern}' matches no alarm of this cell's checks, `communication`, `tag-quality` or the PLC's (`[[opcua.events]]` prefixes)")]
+    Mode {
+        /// The mode's index.
+        mode: usize,
+        /// The pattern's index.
+        index: usize,
+        /// The pattern.
+        pattern: String,
+    },
 }
 
 /// How much later than the subscription's lifetime a change may still
@@ -104,6 +115,13 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
     // taken before the relation, whose edges may name them.
     let conditions = config.opcua.iter().flat_map(|ua| &ua.events);
     let engine = engine.taking_conditions(conditions.map(|e| e.prefix.clone()));
+    if let Some(&(mode, index)) = engine.unmatched_patterns().first() {
+        return Err(CompileError::Mode {
+            mode,
+            index,
+            pattern: config.state.modes[mode].suppress[index].to_string(),
+        });
+    }
     let relation = relation(&engine, &config.consequences)?;
     let engine = match &config.recorder {
         Some(r) => engine.recording(r.clone()),

@@ -33,13 +33,14 @@ pub struct JournalConfig {
 }
 
 /// The journal's tables of rows, as `[journal.tables.*]` names them.
-pub const JOURNAL_TABLES: [&str; 6] = [
+pub const JOURNAL_TABLES: [&str; 7] = [
     "alarm_events",
     "state_history",
     "commands",
     "production",
     "orders",
     "recordings",
+    "modes",
 ];
 
 /// What one table of the journal keeps: rows younger than `age`, and at

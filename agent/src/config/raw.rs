@@ -343,6 +343,18 @@ pub(crate) struct RawState {
     pub(crate) running: Option<Spanned<String>>,
     pub(crate) fault_severity: Option<Spanned<String>>,
     pub(crate) publish_interval: Option<Spanned<String>>,
+    #[serde(default)]
+    pub(crate) modes: Vec<Spanned<RawMode>>,
+}
+
+/// A machine mode and the alarms it suppresses by design
+/// (`[[state.modes]]`).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawMode {
+    pub(crate) id: Spanned<String>,
+    pub(crate) when: Spanned<String>,
+    pub(crate) suppress: Spanned<Vec<Spanned<String>>>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -388,6 +400,7 @@ pub(crate) struct RawJournalTables {
     pub(crate) production: Option<Spanned<RawKeep>>,
     pub(crate) orders: Option<Spanned<RawKeep>>,
     pub(crate) recordings: Option<Spanned<RawKeep>>,
+    pub(crate) modes: Option<Spanned<RawKeep>>,
 }
 
 #[derive(Debug, Deserialize)]

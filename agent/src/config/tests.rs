@@ -438,6 +438,7 @@ mod checks;
 mod consequences;
 mod escalation;
 mod events;
+mod modes;
 
 #[test]
 fn alertmanager_urls_tls_and_interval_are_checked() {
@@ -522,6 +523,7 @@ fn journal_tables_keep_their_own_retention_and_rows() {
             ("production", day(30), None),
             ("orders", day(30), None),
             ("recordings", day(30), None),
+            ("modes", day(30), None),
         ]
     );
     let bad = format!(

@@ -390,6 +390,7 @@ mod tests {
             shelved: None,
             out_of_service: None,
             consequence: None,
+            suppressed_by_design: None,
         }
     }
 

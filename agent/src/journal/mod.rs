@@ -100,6 +100,15 @@ pub enum Entry {
         /// The target quantity.
         target: Option<u64>,
     },
+    /// A machine mode began (`entered`) or ended (`[[state.modes]]`).
+    Mode {
+        /// When.
+        at: u64,
+        /// The mode's id.
+        mode: String,
+        /// Whether it began.
+        entered: bool,
+    },
     /// An alarm's flight recording: the signals its check reads around
     /// its raise ([`cellwatch_models::engine::Recording`]).
     Recording {
@@ -674,6 +683,12 @@ fn write_batch(
                     "INSERT INTO recordings (seq, at_ms, alarm, payload) VALUES (?1, ?2, ?3, ?4)",
                 )?
                 .execute(params![next, *at as i64, alarm, payload])?;
+            }
+            Entry::Mode { at, mode, entered } => {
+                tx.prepare_cached(
+                    "INSERT INTO modes (seq, at_ms, mode, entered) VALUES (?1, ?2, ?3, ?4)",
+                )?
+                .execute(params![next, *at as i64, mode, entered])?;
             }
             Entry::Order { at, item, target } => {
                 tx.prepare_cached(

@@ -107,6 +107,7 @@ pub fn alarm_events(conn: &Connection, since: u64, until: u64) -> rusqlite::Resu
             raised_at: alarm.raised_at,
             active: alarm.active,
             consequence: alarm.consequence.is_some(),
+            by_design: alarm.designed.is_some(),
         })
     };
     let row = |r: &rusqlite::Row<'_>| {

@@ -46,7 +46,7 @@ pub enum JournalError {
 }
 
 /// The tables of journal rows (one sequence across them).
-pub(super) const TABLES: [&str; 6] = crate::config::JOURNAL_TABLES;
+pub(super) const TABLES: [&str; 7] = crate::config::JOURNAL_TABLES;
 
 const SCHEMA: &str = "
 CREATE TABLE IF NOT EXISTS alarm_events (
@@ -100,6 +100,13 @@ CREATE TABLE IF NOT EXISTS recordings (
 );
 CREATE INDEX IF NOT EXISTS recordings_at ON recordings (at_ms);
 CREATE INDEX IF NOT EXISTS recordings_alarm ON recordings (alarm, at_ms);
+CREATE TABLE IF NOT EXISTS modes (
+    seq INTEGER PRIMARY KEY AUTOINCREMENT,
+    at_ms INTEGER NOT NULL,
+    mode TEXT NOT NULL,
+    entered INTEGER NOT NULL
+);
+CREATE INDEX IF NOT EXISTS modes_at ON modes (at_ms);
 CREATE TABLE IF NOT EXISTS alarm_current (
     alarm TEXT PRIMARY KEY,
     at_ms INTEGER NOT NULL,

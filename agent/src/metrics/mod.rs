@@ -10,7 +10,10 @@
 //! every series carries `cell`.
 
 mod labels;
+mod modes;
+
 pub use labels::{COMMAND_RESULTS, REFUSED};
+pub use modes::ModeMetrics;
 
 use std::future::Future;
 use std::net::SocketAddr;
@@ -131,6 +134,8 @@ pub struct Metrics {
     pub alarms_out_of_service: IntGauge,
     /// Active alarms suppressed as consequences now.
     pub alarms_suppressed: IntGauge,
+    /// Machine modes and designed suppression.
+    pub modes: ModeMetrics,
     /// Alarms raised as the consequence of another active alarm.
     pub alarm_consequences: IntCounter,
     /// First-outs (raises that are no consequence) in the last 10 minutes.
@@ -562,6 +567,7 @@ impl Metrics {
                     0.002_5, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 1.0
                 ])
             )),
+            modes: ModeMetrics::register(&registry, cell),
             registry,
         }
     }

@@ -3,7 +3,8 @@
 //! versions apart.
 
 use cellwatch_models::alarm::{
-    Alarm, AlarmKind, AlarmState, Consequence, Removal, Severity, Shelf, Transition,
+    Alarm, AlarmKind, AlarmState, Consequence, DesignedSuppression, Removal, Severity, Shelf,
+    Transition,
 };
 use cellwatch_models::engine::{HistoryKind, MachineState, Order, StateName};
 use cellwatch_models::explain::Culprit;
@@ -129,6 +130,20 @@ pub struct AlarmPayload {
     /// and shown, not annunciated). `null`: a first-out.
     #[serde(default)]
     pub consequence: Option<ConsequencePayload>,
+    /// Suppressed by design: the machine mode in which it means nothing
+    /// (`[[state.modes]]`), since when. Evaluated and journaled, never
+    /// announced; `null`: not suppressed by design.
+    #[serde(default)]
+    pub suppressed_by_design: Option<DesignedPayload>,
+}
+
+/// The machine mode that suppresses an alarm by design, in its payload.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct DesignedPayload {
+    /// The mode's id (`setup`).
+    pub mode: String,
+    /// Since when (RFC 3339).
+    pub since: String,
 }
 
 impl AlarmPayload {
@@ -148,6 +163,10 @@ impl AlarmPayload {
         AlarmPayload {
             shelved,
             out_of_service,
+            suppressed_by_design: alarm.designed.as_ref().map(|d| DesignedPayload {
+                mode: d.mode.clone(),
+                since: rfc3339(d.since),
+            }),
             consequence: alarm.consequence.as_ref().map(|c| ConsequencePayload {
                 cause: c.cause.clone(),
                 first_out: c.first_out.clone(),
@@ -260,6 +279,13 @@ impl AlarmPayload {
                         .collect(),
                 })
             }),
+            designed: match &self.suppressed_by_design {
+                Some(d) => Some(Box::new(DesignedSuppression {
+                    mode: d.mode.clone(),
+                    since: ms(&d.since)?,
+                })),
+                None => None,
+            },
         })
     }
 }
@@ -682,6 +708,7 @@ mod tests {
             shelved: None,
             out_of_service: None,
             consequence: None,
+            designed: None,
             culprits: vec![Culprit {
                 address: cellwatch_models::signal::Signal::new("TEMP <= 80.5"),
                 value: false,
@@ -722,16 +749,27 @@ mod tests {
             shelved: None,
             out_of_service: None,
             consequence: None,
+            designed: Some(Box::new(DesignedSuppression {
+                mode: "setup".into(),
+                since: 1_764_000_000_500,
+            })),
             culprits: Vec::new(),
         };
         let payload = AlarmPayload::new("m01", &alarm, Transition::Acknowledged, 1_764_000_001_000);
         let text = serde_json::to_string(&payload).unwrap();
         assert!(text.contains(r#""ack_comment":"tool changed""#), "{text}");
+        assert!(
+            text.contains(
+                r#""suppressed_by_design":{"mode":"setup","since":"2025-11-24T16:00:00.500Z"}"#
+            ),
+            "{text}"
+        );
         let back: AlarmPayload = serde_json::from_str(&text).unwrap();
         assert_eq!(
             back.to_alarm().unwrap().ack_comment.as_deref(),
             Some("tool changed")
         );
+        assert_eq!(back.to_alarm().unwrap().designed, alarm.designed);
         // A journal row from before comments were carried.
         let older = text.replace(r#""ack_comment":"tool changed","#, "");
         assert!(!older.contains("ack_comment"), "{older}");

@@ -71,6 +71,13 @@ pub fn entries(step: &CellStep) -> Vec<Entry> {
             element,
         });
     }
+    for (mode, entered, at) in step.engine.modes() {
+        rows.push(Entry::Mode {
+            at,
+            mode: mode.to_string(),
+            entered,
+        });
+    }
     for &(at, count) in &step.engine.parts {
         rows.push(Entry::Part { at, count });
     }

@@ -37,8 +37,8 @@ pub struct MetricsSink {
     /// The ISA-18.2 figures.
     kpis: LiveKpis,
     /// Per alarm: whether it is counted shelved, out of service,
-    /// suppressed (active).
-    kept: HashMap<String, (bool, bool, bool)>,
+    /// suppressed (active), suppressed by design (active).
+    kept: HashMap<String, (bool, bool, bool, bool)>,
     /// Flood time already added to its counter, ms.
     flood_counted: u64,
 }
@@ -49,6 +49,9 @@ impl MetricsSink {
     /// in each state is counted from `now`.
     pub fn new(metrics: Arc<Metrics>, config: &CellConfig, now: u64) -> MetricsSink {
         metrics.tags_unknown.set(config.tags.len() as i64);
+        for mode in &config.state.modes {
+            metrics.modes.mode(&mode.id, false);
+        }
         for t in &config.timers {
             for tr in &t.model.transitions {
                 let check = format!("{}-{:03}", t.id, tr.id);
@@ -93,7 +96,12 @@ impl MetricsSink {
             self.kpis.on_transition(
                 &alarm.id,
                 transition,
-                (alarm.raised_at, alarm.active, consequence),
+                (
+                    alarm.raised_at,
+                    alarm.active,
+                    consequence,
+                    alarm.is_suppressed_by_design(),
+                ),
                 at,
             );
             if transition == Transition::Raised && consequence {
@@ -107,12 +115,19 @@ impl MetricsSink {
                 alarm.shelved.is_some(),
                 alarm.out_of_service.is_some(),
                 alarm.active && alarm.is_suppressed(),
+                alarm.active && alarm.is_suppressed_by_design(),
             );
             let was = self.kept.insert(alarm.id.clone(), now).unwrap_or_default();
             m.alarms_shelved.add(i64::from(now.0) - i64::from(was.0));
             m.alarms_out_of_service
                 .add(i64::from(now.1) - i64::from(was.1));
             m.alarms_suppressed.add(i64::from(now.2) - i64::from(was.2));
+            m.modes
+                .suppressed_by_design
+                .add(i64::from(now.3) - i64::from(was.3));
+        }
+        for (mode, entered, _) in step.engine.modes() {
+            m.modes.mode(mode, entered);
         }
         if !any && step.input != Input::Tick {
             return;
@@ -125,6 +140,7 @@ impl MetricsSink {
             .set(k.first_outs_last_10m as i64);
         m.alarm_flood_first_outs
             .set(i64::from(k.first_outs_in_flood));
+        m.modes.rate_by_design_10m.set(k.by_design_last_10m as i64);
         m.alarm_flood_seconds
             .inc_by(k.flood_ms.saturating_sub(self.flood_counted) as f64 / 1000.0);
         self.flood_counted = self.flood_counted.max(k.flood_ms);

@@ -7,7 +7,9 @@
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use super::checks::{Declared, Finding};
-use crate::alarm::{Alarm, AlarmKind, CommandRefused, Consequence, Removal, Shelf, Transition};
+use crate::alarm::{
+    Alarm, AlarmKind, CommandRefused, Consequence, DesignedSuppression, Removal, Shelf, Transition,
+};
 
 /// Alarms by id, with the conditions behind them.
 #[derive(Debug, Default)]
@@ -53,6 +55,11 @@ impl AlarmBook {
     /// Whether a check set declared alarm `id`.
     pub(crate) fn is_declared(&self, id: &str) -> bool {
         self.declared.contains_key(id)
+    }
+
+    /// The ids of the alarms the checks declared.
+    pub(crate) fn declared_ids(&self) -> impl Iterator<Item = &str> {
+        self.declared.keys().map(String::as_str)
     }
 
     pub(crate) fn get(&self, id: &str) -> Option<&Alarm> {
@@ -138,6 +145,7 @@ impl AlarmBook {
                     shelved: self.alarms.get(&f.id).and_then(|a| a.shelved.clone()),
                     out_of_service: None,
                     consequence: None,
+                    designed: None,
                 };
                 self.alarms.insert(f.id.clone(), alarm);
                 self.set_active(&f.id, true);
@@ -152,6 +160,18 @@ impl AlarmBook {
         if let Some(a) = self.alarms.get_mut(id) {
             a.consequence = Some(Box::new(c));
         }
+    }
+
+    /// Sets (or ends, with `None`) alarm `id`'s designed suppression; the
+    /// alarm after it.
+    pub(crate) fn set_designed(
+        &mut self,
+        id: &str,
+        designed: Option<Box<DesignedSuppression>>,
+    ) -> Option<&Alarm> {
+        let a = self.alarms.get_mut(id)?;
+        a.designed = designed;
+        Some(a)
     }
 
     /// Puts back an alarm as it was before a restart. Its condition is
@@ -251,6 +271,7 @@ impl AlarmBook {
                     shelved: None,
                     out_of_service: None,
                     consequence: None,
+                    designed: None,
                 },
             );
         }

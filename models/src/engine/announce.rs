@@ -132,6 +132,13 @@ impl CellEngine {
             if let Some(c) = self.consequence_of(&id) {
                 self.alarms.set_consequence(&id, c);
             }
+            if let Some(mode) = self.designed_for(&id) {
+                let designed = crate::alarm::DesignedSuppression {
+                    mode: mode.to_string(),
+                    since: now,
+                };
+                self.alarms.set_designed(&id, Some(Box::new(designed)));
+            }
         }
         self.recording_starts(&id, transition, now);
         let Some(alarm) = self.alarms.get(&id) else {
@@ -234,6 +241,9 @@ impl CellEngine {
     }
 
     pub(super) fn update_state(&mut self, now: u64, step: &mut Step) {
+        if !self.rules.modes.is_empty() {
+            self.update_modes(now, step);
+        }
         let fault = self
             .alarms
             .active_faults()

@@ -50,6 +50,11 @@ impl CellEngine {
                 wanted.push(("the running rule".into(), s));
             }
         }
+        for mode in &rules.modes {
+            for s in mode.when.signals() {
+                wanted.push((format!("mode '{}'", mode.id), s));
+            }
+        }
         for (reader, s) in &wanted {
             if by_address.contains_key(s) {
                 continue;
@@ -111,11 +116,16 @@ impl CellEngine {
         let readers = PerTag::build(n, &read);
         let number_readers = PerTag::build(n, &read_as_number);
         let mut running_reads = vec![false; n];
-        if let Some(expr) = &rules.running {
+        let state_exprs = rules
+            .running
+            .iter()
+            .chain(rules.modes.iter().map(|m| &m.when));
+        for expr in state_exprs {
             for s in expr.signals() {
                 running_reads[by_address[&s]] = true;
             }
         }
+        let modes_on = vec![false; rules.modes.len()];
         drop(by_address);
         let mut by_address: Vec<u32> = (0..n as u32).collect();
         by_address
@@ -155,6 +165,7 @@ impl CellEngine {
             derived,
             compared_in,
             running_reads,
+            modes_on,
             alarms,
             connected: None,
             rules,

@@ -21,6 +21,16 @@ pub(super) fn engine() -> CellEngine {
 /// The ESE check over its contacts' tags, then `extra` tags, with
 /// `running` as the running rule.
 pub(super) fn engine_with(extra: &[Tag], running: &str) -> CellEngine {
+    let rules = StateRules {
+        running: Some(Expr::parse(running).unwrap()),
+        ..StateRules::default()
+    };
+    engine_ruled(extra, rules)
+}
+
+/// The ESE check over its contacts' tags, then `extra` tags, with the
+/// state `rules`.
+pub(super) fn engine_ruled(extra: &[Tag], rules: StateRules) -> CellEngine {
     let p = Program::compile("ese.il", ESE, None).unwrap();
     let sf = SwitchingFunction::expand(
         &p,
@@ -47,10 +57,6 @@ pub(super) fn engine_with(extra: &[Tag], running: &str) -> CellEngine {
         fault_type: "ESE".into(),
         comments: CommentDb::default(),
         armed_when: None,
-    };
-    let rules = StateRules {
-        running: Some(Expr::parse(running).unwrap()),
-        fault_severity: Severity::High,
     };
     CellEngine::new(
         "m01",

@@ -33,6 +33,8 @@
 //!   values at the last fault).
 //! - `recording`: the engine's side of the flight recorder.
 //! - `conditions`: the PLC's own alarms ([`PlcCondition`]).
+//! - `modes`: machine modes and the alarms each suppresses by design
+//!   ([`Mode`]).
 //!
 //! Rules that keep alarms honest:
 //! - a tag whose value is unknown (bad or uncertain quality, or the
@@ -65,6 +67,7 @@ mod connection;
 mod delays;
 #[cfg(test)]
 mod fixture;
+mod modes;
 mod operators;
 mod reading;
 pub mod recorder;
@@ -81,6 +84,7 @@ use std::sync::Arc;
 
 pub use checks::{CheckSet, Declared, Finding, Observation, WindowPosition};
 pub use conditions::{PlcCondition, ACKED_AT_PLC};
+pub use modes::{AlarmPattern, Mode};
 pub use recorder::{
     Cut, RecordedSignal, RecorderConfig, RecorderFill, Recording, Sample, Truncated,
 };
@@ -158,6 +162,15 @@ pub enum EngineEvent {
         /// When.
         at: u64,
     },
+    /// A machine mode began (`entered`) or ended ([`Mode`]).
+    Mode {
+        /// The mode's id.
+        mode: String,
+        /// Whether it began.
+        entered: bool,
+        /// When.
+        at: u64,
+    },
 }
 
 /// Everything one input to the engine did.
@@ -228,7 +241,7 @@ impl Step {
                 transition,
                 at,
             } => Some((alarm, *transition, *at)),
-            EngineEvent::State { .. } => None,
+            EngineEvent::State { .. } | EngineEvent::Mode { .. } => None,
         })
     }
 
@@ -236,7 +249,15 @@ impl Step {
     pub fn states(&self) -> impl Iterator<Item = (&MachineState, HistoryKind, u64)> {
         self.events.iter().filter_map(|e| match e {
             EngineEvent::State { state, kind, at } => Some((state, *kind, *at)),
-            EngineEvent::Alarm { .. } => None,
+            EngineEvent::Alarm { .. } | EngineEvent::Mode { .. } => None,
+        })
+    }
+
+    /// The machine modes entered (`true`) or left, with their time.
+    pub fn modes(&self) -> impl Iterator<Item = (&str, bool, u64)> {
+        self.events.iter().filter_map(|e| match e {
+            EngineEvent::Mode { mode, entered, at } => Some((mode.as_str(), *entered, *at)),
+            EngineEvent::Alarm { .. } | EngineEvent::State { .. } => None,
         })
     }
 }
@@ -499,8 +520,10 @@ pub struct CellEngine {
     derived: Vec<Derived>,
     /// Per tag: the comparisons that read it.
     compared_in: PerTag,
-    /// Per tag: whether the running rule reads it.
+    /// Per tag: whether the running rule or a mode reads it.
     running_reads: Vec<bool>,
+    /// Per mode of `rules.modes`: whether it holds.
+    modes_on: Vec<bool>,
     alarms: AlarmBook,
     /// `None` until the source first says.
     connected: Option<bool>,

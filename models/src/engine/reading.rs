@@ -162,7 +162,7 @@ impl CellEngine {
             // The state follows them, at their time.
             let ran_out = step.events[before..].iter().rev().find_map(|e| match e {
                 EngineEvent::Alarm { at, .. } => Some(*at),
-                EngineEvent::State { .. } => None,
+                EngineEvent::State { .. } | EngineEvent::Mode { .. } => None,
             });
             if let Some(t) = ran_out {
                 self.update_state(t, step);

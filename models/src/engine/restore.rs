@@ -170,6 +170,7 @@ mod tests {
             shelved: None,
             out_of_service: None,
             consequence: None,
+            designed: None,
         }
     }
 

@@ -124,6 +124,8 @@ pub struct StateRules {
     pub running: Option<Expr>,
     /// Alarms at or above this severity put the machine in `fault`.
     pub fault_severity: Severity,
+    /// Machine modes and the alarms each suppresses by design.
+    pub modes: Vec<super::modes::Mode>,
 }
 
 impl Default for StateRules {
@@ -131,6 +133,7 @@ impl Default for StateRules {
         StateRules {
             running: None,
             fault_severity: Severity::High,
+            modes: Vec::new(),
         }
     }
 }

@@ -99,6 +99,9 @@ pub struct LiveKpis {
     all: Floods,
     /// Raises that are no consequence of another active alarm.
     first_outs: Floods,
+    /// Raises suppressed by design (a machine mode): reported apart, in
+    /// no other figure (ISA-18.2).
+    by_design: Floods,
     /// Per alarm: its last raise times (at most `chatter_raises`).
     raises: HashMap<String, VecDeque<u64>>,
     /// Chattering alarms by (until when, id).
@@ -126,6 +129,9 @@ pub struct KpiSnapshot {
     pub first_outs_in_flood: bool,
     /// See `first_outs_last_10m`.
     pub first_outs_flood_ms: u64,
+    /// Raises in the last 10 minutes suppressed by design (a machine mode
+    /// in which they mean nothing): counted in no other figure.
+    pub by_design_last_10m: u64,
     /// Alarms chattering now.
     pub chattering: u64,
     /// Active occurrences older than 24 h.
@@ -150,6 +156,7 @@ impl LiveKpis {
     pub fn advance(&mut self, now: u64) {
         self.all.advance(now, &self.rules);
         self.first_outs.advance(now, &self.rules);
+        self.by_design.advance(now, &self.rules);
         while let Some((until, id)) = self.chattering.first().cloned() {
             if until > now {
                 break;
@@ -161,15 +168,26 @@ impl LiveKpis {
 
     /// Alarm `id` went through `transition` at `at`; `raised_at` is its
     /// occurrence's, `active` whether it is active after it, `consequence`
-    /// whether it was raised as the consequence of another.
+    /// whether it was raised as the consequence of another, `by_design`
+    /// whether a machine mode suppresses it by design (then it counts in
+    /// [`KpiSnapshot::by_design_last_10m`] only).
     pub fn on_transition(
         &mut self,
         id: &str,
         transition: Transition,
-        (raised_at, active, consequence): (u64, bool, bool),
+        (raised_at, active, consequence, by_design): (u64, bool, bool, bool),
         at: u64,
     ) {
         self.advance(at);
+        if by_design {
+            if transition == Transition::Raised {
+                self.by_design.raise(at, &self.rules);
+            }
+            if let Some(since) = self.active_since.remove(id) {
+                self.active.remove(&(since, id.to_string()));
+            }
+            return;
+        }
         if transition == Transition::Raised {
             self.all.raise(at, &self.rules);
             if !consequence {
@@ -209,6 +227,7 @@ impl LiveKpis {
             first_outs_last_10m: self.first_outs.in_window,
             first_outs_in_flood: self.first_outs.in_flood,
             first_outs_flood_ms: self.first_outs.flood_ms,
+            by_design_last_10m: self.by_design.in_window,
             chattering: self.chattering.len() as u64,
             stale: now
                 .checked_sub(self.rules.stale_ms)

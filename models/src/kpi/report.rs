@@ -40,6 +40,9 @@ pub struct AlarmEvent {
     pub active: bool,
     /// Raised as the consequence of another active alarm.
     pub consequence: bool,
+    /// Suppressed by design (a machine mode) at the transition: in no
+    /// figure but [`AlarmReport::by_design`].
+    pub by_design: bool,
 }
 
 /// One of the most frequent alarms.
@@ -107,6 +110,9 @@ pub struct AlarmReport {
     pub flood_percent: f64,
     /// Raises that were no consequence of another active alarm.
     pub first_outs: u64,
+    /// Raises suppressed by design (a machine mode in which they mean
+    /// nothing): reported apart, counted in no other figure (ISA-18.2).
+    pub by_design: u64,
     /// Intervals in flood counting first-outs only.
     pub first_out_flood_intervals: u64,
     /// Those, % of all intervals.
@@ -150,6 +156,11 @@ pub fn alarm_report(
         .iter()
         .filter(|e| e.at >= from && e.at < end)
         .collect();
+    let by_design = in_period
+        .iter()
+        .filter(|e| e.transition == Transition::Raised && e.by_design)
+        .count() as u64;
+    let in_period: Vec<&AlarmEvent> = in_period.into_iter().filter(|e| !e.by_design).collect();
     let raises: Vec<&AlarmEvent> = in_period
         .iter()
         .copied()
@@ -283,6 +294,7 @@ pub fn alarm_report(
         flood_intervals,
         flood_percent: 100.0 * flood_intervals as f64 / intervals as f64,
         first_outs: raises.iter().filter(|e| !e.consequence).count() as u64,
+        by_design,
         first_out_flood_intervals,
         first_out_flood_percent: 100.0 * first_out_flood_intervals as f64 / intervals as f64,
         top,
@@ -413,6 +425,12 @@ impl AlarmReport {
                     secs(self.ack.max),
                     self.ack.count
                 ),
+                "-",
+                None,
+            ),
+            line(
+                "raises suppressed by design (machine modes; in no figure above)".into(),
+                self.by_design.to_string(),
                 "-",
                 None,
             ),

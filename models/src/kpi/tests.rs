@@ -14,7 +14,7 @@ fn the_live_window_forgets_what_is_older_than_10_minutes() {
         k.on_transition(
             &format!("a{i}"),
             Transition::Raised,
-            (i * 1000, false, false),
+            (i * 1000, false, false, false),
             i * 1000,
         );
     }
@@ -48,7 +48,7 @@ fn a_cascade_is_a_flood_of_raises_and_no_flood_of_first_outs() {
         k.on_transition(
             &format!("a{i}"),
             Transition::Raised,
-            (i, true, consequence),
+            (i, true, consequence, false),
             i,
         );
         events.push(AlarmEvent {
@@ -93,7 +93,12 @@ fn a_plant_sets_its_own_flood_chatter_and_stale_rules() {
     };
     let mut k = LiveKpis::with_rules(rules);
     for i in 0..4 {
-        k.on_transition("a", Transition::Raised, (i * MIN, i == 3, false), i * MIN);
+        k.on_transition(
+            "a",
+            Transition::Raised,
+            (i * MIN, i == 3, false, false),
+            i * MIN,
+        );
     }
     let s = k.snapshot(3 * MIN);
     assert_eq!((s.in_flood, s.chattering), (true, 1));
@@ -112,6 +117,7 @@ fn a_plant_sets_its_own_flood_chatter_and_stale_rules() {
             raised_at: i * MIN,
             active: false,
             consequence: false,
+            by_design: false,
         })
         .collect();
     let r = alarm_report(&events, &[], 0, 20 * MIN, 20 * MIN, &rules);
@@ -134,6 +140,7 @@ fn a_report_interval_after_a_flood_stays_in_flood_until_fewer_than_5() {
         raised_at: at,
         active: false,
         consequence: false,
+        by_design: false,
     };
     // 11, 6, 4, 6 raises in four intervals: flood, flood (6 >= 5),
     // over (4 < 5), not again (6 is no more than 10).
@@ -160,8 +167,8 @@ fn a_report_interval_after_a_flood_stays_in_flood_until_fewer_than_5() {
 fn three_raises_within_a_minute_chatter_until_the_minute_is_over() {
     let mut k = LiveKpis::new();
     for at in [0, 20_000, 50_000] {
-        k.on_transition("x", Transition::Raised, (at, true, false), at);
-        k.on_transition("x", Transition::Cleared, (at, false, false), at + 1);
+        k.on_transition("x", Transition::Raised, (at, true, false, false), at);
+        k.on_transition("x", Transition::Cleared, (at, false, false, false), at + 1);
     }
     assert_eq!(k.snapshot(50_001).chattering, 1);
     k.advance(59_999);
@@ -170,7 +177,7 @@ fn three_raises_within_a_minute_chatter_until_the_minute_is_over() {
     assert_eq!(k.snapshot(60_000).chattering, 0);
     // Three raises spread over more than a minute: no chatter.
     for at in [100_000, 140_000, 170_000] {
-        k.on_transition("y", Transition::Raised, (at, false, false), at);
+        k.on_transition("y", Transition::Raised, (at, false, false, false), at);
     }
     assert_eq!(k.snapshot(170_000).chattering, 0);
 }
@@ -178,17 +185,23 @@ fn three_raises_within_a_minute_chatter_until_the_minute_is_over() {
 #[test]
 fn an_occurrence_is_stale_after_24_hours() {
     let mut k = LiveKpis::new();
-    k.on_transition("x", Transition::Raised, (0, true, false), 0);
-    k.on_transition("x", Transition::Acknowledged, (0, true, false), 5);
+    k.on_transition("x", Transition::Raised, (0, true, false, false), 0);
+    k.on_transition("x", Transition::Acknowledged, (0, true, false, false), 5);
     assert_eq!(k.snapshot(STALE_MS).stale, 0);
     assert_eq!(k.snapshot(STALE_MS + 1).stale, 1);
-    k.on_transition("x", Transition::Cleared, (0, false, false), STALE_MS + 2);
+    k.on_transition(
+        "x",
+        Transition::Cleared,
+        (0, false, false, false),
+        STALE_MS + 2,
+    );
     assert_eq!(k.snapshot(STALE_MS + 3).stale, 0);
 }
 
 fn ev(at: u64, id: &str, transition: Transition, raised_at: u64, active: bool) -> AlarmEvent {
     AlarmEvent {
         consequence: false,
+        by_design: false,
         at,
         id: id.into(),
         transition,
@@ -241,4 +254,37 @@ fn a_report_counts_acknowledgements_shelves_and_what_was_active_before() {
         &KpiRules::default(),
     );
     assert_eq!((r.intervals, r.to), (2, day + 600_001));
+}
+
+#[test]
+fn raises_suppressed_by_design_are_counted_apart_and_in_no_other_figure() {
+    // A setup: twenty door alarms suppressed by design, one real fault.
+    let mut k = LiveKpis::new();
+    let mut events = Vec::new();
+    for i in 0..20u64 {
+        k.on_transition("door", Transition::Raised, (i, true, false, true), i);
+        events.push(AlarmEvent {
+            by_design: true,
+            ..ev(i, "door", Transition::Raised, i, true)
+        });
+    }
+    k.on_transition("ese", Transition::Raised, (30, true, false, false), 30);
+    events.push(ev(30, "ese", Transition::Raised, 30, true));
+    let s = k.snapshot(31);
+    assert_eq!(
+        (
+            s.raised_last_10m,
+            s.by_design_last_10m,
+            s.in_flood,
+            s.chattering,
+            s.first_outs_last_10m
+        ),
+        (1, 20, false, 0, 1)
+    );
+    let r = alarm_report(&events, &[], 0, 10 * MIN, 10 * MIN, &KpiRules::default());
+    assert_eq!(
+        (r.raised, r.by_design, r.flood_intervals, r.top.len()),
+        (1, 20, 0, 1)
+    );
+    assert!(r.chattering.is_empty());
 }

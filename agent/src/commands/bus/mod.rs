@@ -130,6 +130,12 @@ pub(crate) fn print_alarm(
     if let Some(r) = &a.out_of_service {
         kept += &format!("OUT OF SERVICE since {} by {} ({})  ", r.at, r.by, r.reason);
     }
+    if let Some(d) = &a.suppressed_by_design {
+        kept += &format!(
+            "SUPPRESSED BY DESIGN in mode {} since {}  ",
+            d.mode, d.since
+        );
+    }
     let mut consequence = String::new();
     if let Some(c) = &a.consequence {
         if c.suppressed {

@@ -4,7 +4,7 @@ use std::collections::{HashMap, HashSet};
 
 use cellwatch_models::alarm::Severity;
 use cellwatch_models::comments::CommentDb;
-use cellwatch_models::engine::{StateRules, SwitchingCheck};
+use cellwatch_models::engine::{AlarmPattern, Mode, StateRules, SwitchingCheck};
 use cellwatch_models::explain::Polarity;
 use cellwatch_models::expr::Expr;
 use cellwatch_models::il::Dialect;
@@ -544,7 +544,60 @@ impl Validator<'_> {
         StateRules {
             running,
             fault_severity,
+            modes: self.modes(&raw.modes, tags),
         }
+    }
+
+    /// The machine modes (`[[state.modes]]`): each id a key chunk used
+    /// once, its `when` an expression over the cell's tags, and at least
+    /// one alarm pattern to suppress. (Whether a pattern names an alarm
+    /// of the cell is the engine's to say: `cell::compile`.)
+    fn modes(&mut self, raw: &[Spanned<raw::RawMode>], tags: &HashMap<Signal, usize>) -> Vec<Mode> {
+        let mut ids = HashSet::new();
+        let mut out = Vec::new();
+        for (k, m) in raw.iter().enumerate() {
+            let key = format!("state.modes[{k}]");
+            let m = m.get_ref();
+            let id = m.id.get_ref();
+            self.key_chunk(m.id.span(), &format!("{key}.id"), "", id);
+            if !ids.insert(id.clone()) {
+                self.problem(
+                    m.id.span(),
+                    &format!("{key}.id"),
+                    format!("mode '{id}' is declared twice"),
+                );
+            }
+            if m.suppress.get_ref().is_empty() {
+                self.problem(
+                    m.suppress.span(),
+                    &format!("{key}.suppress"),
+                    "names no alarm: list the alarm ids (or patterns with *) the mode suppresses",
+                );
+            }
+            for (j, p) in m.suppress.get_ref().iter().enumerate() {
+                if p.get_ref().trim().is_empty() {
+                    self.problem(
+                        p.span(),
+                        &format!("{key}.suppress[{j}]"),
+                        "is empty: an alarm id, or a pattern with * (`door-*`)",
+                    );
+                }
+            }
+            let when = self.expression(&m.when, &format!("{key}.when"), tags);
+            if let Some(when) = when {
+                out.push(Mode {
+                    id: id.clone(),
+                    when,
+                    suppress: m
+                        .suppress
+                        .get_ref()
+                        .iter()
+                        .map(|p| AlarmPattern::new(p.get_ref().trim()))
+                        .collect(),
+                });
+            }
+        }
+        out
     }
 }
 

@@ -37,6 +37,7 @@ impl Validator<'_> {
             production,
             orders,
             recordings,
+            modes,
         } = tables;
         let raws = [
             alarm_events,
@@ -45,6 +46,7 @@ impl Validator<'_> {
             production,
             orders,
             recordings,
+            modes,
         ];
         JOURNAL_TABLES
             .into_iter()

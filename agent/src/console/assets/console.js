@@ -81,7 +81,7 @@ function alarmKey(cell, id) { return cell + '\u0000' + id; }
 function active(a) { return a.state === 'active_unacknowledged' || a.state === 'active_acknowledged'; }
 function unacked(a) { return a.state === 'active_unacknowledged' || a.state === 'cleared_unacknowledged'; }
 function suppressed(a) { return !!(a.consequence && a.consequence.suppressed); }
-function kept(a) { return !!(a.shelved || a.out_of_service || suppressed(a)); }
+function kept(a) { return !!(a.shelved || a.out_of_service || suppressed(a) || a.suppressed_by_design); }
 
 function badge(a) {
   const cls = ['badge', 'p-' + a.severity, unacked(a) ? 'unack' : 'ack', kept(a) ? 'kept' : ''].join(' ');
@@ -93,6 +93,7 @@ function stateText(a) {
   if (a.latched) parts.push('latched');
   if (a.shelved) parts.push('shelved');
   if (a.out_of_service) parts.push('out of service');
+  if (a.suppressed_by_design) parts.push('suppressed by design in mode ' + a.suppressed_by_design.mode);
   if (a.consequence) parts.push((suppressed(a) ? 'suppressed, ' : '') + 'consequence of ' + a.consequence.cause);
   return parts.join(', ');
 }

@@ -282,7 +282,8 @@ impl Conditions {
             });
             c.suppressed_or_shelved = p.shelved.is_some()
                 || p.out_of_service.is_some()
-                || p.consequence.as_ref().is_some_and(|c| c.suppressed);
+                || p.consequence.as_ref().is_some_and(|c| c.suppressed)
+                || p.suppressed_by_design.is_some();
             c.event_id = self.next_event_id();
             c.time = now;
             (

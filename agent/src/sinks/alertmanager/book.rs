@@ -212,7 +212,8 @@ impl Book {
             AlarmState::ActiveUnacknowledged | AlarmState::ActiveAcknowledged
         ) && alarm.shelved.is_none()
             && alarm.out_of_service.is_none()
-            && !alarm.consequence.as_ref().is_some_and(|c| c.suppressed);
+            && !alarm.consequence.as_ref().is_some_and(|c| c.suppressed)
+            && alarm.suppressed_by_design.is_none();
         if alerting {
             let since = (alarm.state == AlarmState::ActiveUnacknowledged).then(|| {
                 humantime::parse_rfc3339_weak(&alarm.raised_at)
@@ -426,6 +427,28 @@ mod tests {
         }
         assert!(!book.take(&l, &csd, NOW));
         assert!(book.batch(0, "2026-11-26T10:04:00.000Z").alerts.is_empty());
+    }
+
+    #[test]
+    fn an_alarm_suppressed_by_design_is_no_alert_until_its_mode_ends() {
+        let mut book = Book::new(1, &[]);
+        let l = labels();
+        let mut ese = payload(
+            "ese",
+            AlarmState::ActiveUnacknowledged,
+            "2026-11-26T10:00:00.000Z",
+        );
+        ese.suppressed_by_design = Some(crate::payload::DesignedPayload {
+            mode: "setup".into(),
+            since: "2026-11-26T10:00:00.000Z".into(),
+        });
+        assert!(!book.take(&l, &ese, NOW));
+        assert_eq!(book.active(), 0);
+        // The mode ends with the alarm active: an alert now.
+        ese.suppressed_by_design = None;
+        ese.transition = cellwatch_models::alarm::Transition::Unsuppressed;
+        assert!(book.take(&l, &ese, NOW));
+        assert_eq!(book.batch(0, "x").alerts.len(), 1);
     }
 
     #[test]

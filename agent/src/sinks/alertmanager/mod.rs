@@ -5,8 +5,9 @@
 //! Each agent pushes its own alarms: it knows their state first-hand, no
 //! plant-side process stands between an alarm and a person, and
 //! Alertmanager is made to be pushed to by many senders (every Prometheus
-//! does). Every active alarm that is not shelved, in service and no
-//! suppressed consequence is an alert (a consequence announced carries
+//! does). Every active alarm that is not shelved, in service, no
+//! suppressed consequence and not suppressed by design (a machine mode,
+//! `[[state.modes]]`) is an alert (a consequence announced carries
 //! its cause and first-out as labels, for Alertmanager's inhibition); it is sent when it is raised or changes, again every
 //! `resend_interval`, each time saying it ends four intervals later unless
 //! sent again (as Prometheus does: an agent that dies stops renewing its
