@@ -114,7 +114,8 @@ async fn an_opcua_private_key_is_the_owners_only_from_the_start() {
     )
     .await
     .err()
-    .unwrap();
+    .unwrap()
+    .to_string();
     assert!(
         refused.contains("private.pem is there without"),
         "{refused}"

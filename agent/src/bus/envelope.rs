@@ -232,13 +232,17 @@ impl SealedPuts<'_> {
 #[derive(Debug, thiserror::Error)]
 pub enum KeyFileError {
     /// The file cannot be read or written.
-    #[error("{path}: {reason}")]
+    #[error("{path}: {source}")]
     Io {
         /// The file.
         path: String,
         /// Why.
-        reason: String,
+        #[source]
+        source: std::io::Error,
     },
+    /// The file cannot be made.
+    #[error(transparent)]
+    Write(#[from] super::certs::CertError),
     /// The file's text is not what it should be.
     #[error("{path}: {reason}")]
     Invalid {
@@ -263,9 +267,9 @@ pub enum KeyFileError {
 /// # Errors
 /// The file cannot be looked at, or is exposed.
 pub fn check_private(path: &Path) -> Result<(), KeyFileError> {
-    let meta = std::fs::metadata(path).map_err(|e| KeyFileError::Io {
+    let meta = std::fs::metadata(path).map_err(|source| KeyFileError::Io {
         path: path.display().to_string(),
-        reason: e.to_string(),
+        source,
     })?;
     #[cfg(unix)]
     {
@@ -395,21 +399,20 @@ impl AgentKey {
     /// The file is exposed, not a key file, another cell's key, or cannot
     /// be written.
     pub fn load_or_create(path: &Path, cell: &str) -> Result<(AgentKey, bool), KeyFileError> {
-        let io = |e: String| KeyFileError::Io {
-            path: path.display().to_string(),
-            reason: e,
-        };
         if !path.exists() {
             let key = AgentKey::generate(cell);
             if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-                std::fs::create_dir_all(dir).map_err(|e| io(e.to_string()))?;
+                std::fs::create_dir_all(dir).map_err(|source| KeyFileError::Io {
+                    path: dir.display().to_string(),
+                    source,
+                })?;
             }
             match super::certs::write_private(path, &key.to_file()) {
                 Ok(()) => return Ok((key, true)),
                 // Made meanwhile by another agent of the same cell starting:
                 // read below.
                 Err(_) if path.exists() => {}
-                Err(e) => return Err(io(e)),
+                Err(e) => return Err(e.into()),
             }
         }
         let key = AgentKey::load(path)?;
@@ -431,9 +434,9 @@ impl AgentKey {
     /// The file is exposed, unreadable or not a key file.
     pub fn load(path: &Path) -> Result<AgentKey, KeyFileError> {
         check_private(path)?;
-        let text = std::fs::read_to_string(path).map_err(|e| KeyFileError::Io {
+        let text = std::fs::read_to_string(path).map_err(|source| KeyFileError::Io {
             path: path.display().to_string(),
-            reason: e.to_string(),
+            source,
         })?;
         AgentKey::parse(&path.display().to_string(), &text)
     }
@@ -616,9 +619,9 @@ impl Trust {
     /// # Errors
     /// Unreadable, or not a trust file.
     pub fn load(path: &Path) -> Result<Trust, KeyFileError> {
-        let text = std::fs::read_to_string(path).map_err(|e| KeyFileError::Io {
+        let text = std::fs::read_to_string(path).map_err(|source| KeyFileError::Io {
             path: path.display().to_string(),
-            reason: e.to_string(),
+            source,
         })?;
         Trust::parse(&path.display().to_string(), &text)
     }

@@ -23,7 +23,7 @@ pub enum ZenohError {
     },
     /// The session cannot be opened (endpoints cannot be bound, ...).
     #[error("cannot open the zenoh session: {0}")]
-    Open(String),
+    Open(#[source] zenoh::Error),
     /// The session would not be TLS-only with the plant CA.
     #[error("zenoh {key} = {value}: {reason}")]
     Insecure {
@@ -349,7 +349,7 @@ async fn open_config(cfg: zenoh::Config) -> Result<Session, ZenohError> {
                 tracing::warn!(error = %e, "cannot open the zenoh session; trying again in {wait:?}");
                 tokio::time::sleep(wait).await;
             }
-            Err(e) => return Err(ZenohError::Open(e.to_string())),
+            Err(e) => return Err(ZenohError::Open(e)),
         }
     }
 }

@@ -367,7 +367,7 @@ impl CellLoop {
                 .try_send(WriteRequest { tag, what, reply })
                 .map_err(|_| "busy: other writes are waiting for the PLC".to_string())?;
             match tokio::time::timeout(limit, pending).await {
-                Ok(Ok(r)) => r,
+                Ok(Ok(r)) => r.map_err(|e| e.to_string()),
                 Ok(Err(_)) => Err("the source stopped before writing".into()),
                 Err(_) => Err(format!(
                     "no answer from the PLC within {} s",

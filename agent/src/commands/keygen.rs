@@ -49,12 +49,9 @@ pub(crate) fn run(args: &KeygenArgs, out: &mut dyn Write) -> Result<(), Failure>
 
 /// Creates `path` readable by its owner only; an existing file is kept.
 pub(crate) fn write_private(path: &Path, text: &str) -> Result<(), Failure> {
-    crate::bus::certs::write_private(path, text).map_err(|e| {
-        if e.ends_with("not overwritten") {
-            Failure::Input(e)
-        } else {
-            Failure::Runtime(e)
-        }
+    crate::bus::certs::write_private(path, text).map_err(|e| match e {
+        crate::bus::certs::CertError::Exists { .. } => Failure::input(e),
+        _ => Failure::runtime(e),
     })
 }
 

@@ -12,7 +12,7 @@ use crate::bus::envelope::AgentKey;
 
 /// `cellwatch pki ca`.
 pub(crate) fn ca(args: &PkiCaArgs, out: &mut dyn Write) -> Result<(), Failure> {
-    let made = make_ca(&args.dir, &args.name).map_err(Failure::Runtime)?;
+    let made = make_ca(&args.dir, &args.name).map_err(Failure::runtime)?;
     let (cert, key) = ca_files(&args.dir);
     let io = Failure::output;
     if made {
@@ -31,7 +31,7 @@ pub(crate) fn issue_command(args: &PkiIssueArgs, out: &mut dyn Write) -> Result<
     if hosts.is_empty() {
         hosts = vec!["localhost".into(), "127.0.0.1".into()];
     }
-    let (cert, key) = issue(&args.dir, &args.name, &hosts).map_err(Failure::Input)?;
+    let (cert, key) = issue(&args.dir, &args.name, &hosts).map_err(Failure::input)?;
     writeln!(
         out,
         "issued '{}' for {}: {} and {} (private)",

@@ -138,9 +138,9 @@ pub(crate) async fn cnc(args: &SimulateArgs, out: &mut dyn Write) -> Result<(), 
         decoy: None,
     })
     .await
-    .map_err(Failure::Runtime)?;
+    .map_err(Failure::runtime)?;
     for cert in &args.trust {
-        pki::trust(cert, &args.pki_dir).map_err(Failure::Input)?;
+        pki::trust(cert, &args.pki_dir).map_err(Failure::input)?;
     }
     let io = Failure::output;
     writeln!(
@@ -180,13 +180,14 @@ pub(crate) async fn cnc(args: &SimulateArgs, out: &mut dyn Write) -> Result<(), 
                     break;
                 };
                 let words: Vec<&str> = line.split_whitespace().collect();
+                let said = |r: Result<(), crate::sim::SimError>| r.map_err(|e| e.to_string());
                 let result = match words.as_slice() {
-                    ["set", addr, v] => sim.set(addr, matches!(*v, "1" | "true" | "on")),
+                    ["set", addr, v] => said(sim.set(addr, matches!(*v, "1" | "true" | "on"))),
                     ["temp", celsius] => match celsius.parse::<f64>() {
-                        Ok(c) => sim.set_temperature(c),
+                        Ok(c) => said(sim.set_temperature(c)),
                         Err(_) => Err(format!("temp {celsius}: not a number")),
                     },
-                    ["bad", addr] => sim.set_bad(addr),
+                    ["bad", addr] => said(sim.set_bad(addr)),
                     ["quit"] => break,
                     [] => Ok(()),
                     _ => Err(format!("unknown command '{line}': {COMMANDS}")),

@@ -94,7 +94,7 @@ pub(crate) async fn run(args: &TrustServerArgs, out: &mut dyn Write) -> Result<(
     let own = pki::own_cert(&args.pki_dir);
     let own_facts = std::fs::read(&own)
         .map_err(|e| e.to_string())
-        .and_then(|der| CertificateFacts::of(&der, now))
+        .and_then(|der| CertificateFacts::of(&der, now).map_err(|e| e.to_string()))
         .map_err(|e| Failure::runtime(format!("{}: {e}", own.display())))?;
     writeln!(out, "\nThis agent's certificate, {}", own.display()).map_err(io)?;
     facts_lines(&own_facts, out).map_err(io)?;

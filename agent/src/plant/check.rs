@@ -180,7 +180,7 @@ pub fn folder(inventory: &Inventory, now_ms: u64) -> (Report, Option<Trust>) {
         let cert = layout.on_host(&cell.host, &format!("{etc}/agent-{id}.pem"));
         match std::fs::read_to_string(&cert)
             .map_err(|e| e.to_string())
-            .and_then(|pem| facts(&pem))
+            .and_then(|pem| facts(&pem).map_err(|e| e.to_string()))
         {
             Ok(c) => expiry("its bus certificate", c.not_after_ms, now_ms, &mut f),
             Err(e) => f.problems.push(format!("{}: {e}", layout.shown(&cert))),

@@ -41,7 +41,7 @@ pub fn make(inventory: &Inventory) -> Result<Made, PlantError> {
             .map(|_| ())
             .map_err(|message| PlantError::Certificate {
                 name: "the plant CA".into(),
-                message,
+                message: message.to_string(),
             })
     })?;
     let ca = std::fs::read_to_string(&ca_pem).map_err(|source| PlantError::Read {
@@ -62,7 +62,7 @@ pub fn make(inventory: &Inventory) -> Result<Made, PlantError> {
             issue_to(&ca_dir, name, &hosts, (&cert, &key)).map_err(|message| {
                 PlantError::Certificate {
                     name: name.into(),
-                    message,
+                    message: message.to_string(),
                 }
             })
         })
@@ -270,7 +270,7 @@ fn admin_signing(w: &mut Writer, layout: &Layout) -> Result<OperatorKey, PlantEr
         crate::bus::certs::write_private(&private, &key.to_file()).map_err(|message| {
             PlantError::Certificate {
                 name: "the plant administrator's signing key".into(),
-                message,
+                message: message.to_string(),
             }
         })
     })?;
@@ -428,7 +428,7 @@ pub fn renew(inventory: &Inventory, id: &str) -> Result<Vec<PathBuf>, PlantError
     )
     .map_err(|message| PlantError::Certificate {
         name: format!("agent-{id}"),
-        message,
+        message: message.to_string(),
     })?;
     for (from, to) in [(&new_key, &key), (&new_cert, &cert)] {
         std::fs::rename(from, to).map_err(|source| PlantError::Write {

@@ -26,6 +26,7 @@ pub const NAMESPACE: &str = "urn:cellwatch:sim:cnc:plc";
 
 pub use super::server::SimOptions;
 use super::server::SimServer;
+use super::SimError;
 
 const ESE: &str = include_str!("../../../config/cnc/ese.il");
 const CSD: &str = include_str!("../../../config/cnc/csd.il");
@@ -137,7 +138,7 @@ impl SimulatedCnc {
     ///
     /// # Errors
     /// The port cannot be bound or the server cannot be built.
-    pub async fn start(options: &SimOptions) -> Result<SimulatedCnc, String> {
+    pub async fn start(options: &SimOptions) -> Result<SimulatedCnc, SimError> {
         let plc = Plc::new();
         let image: Vec<(String, bool)> = plc
             .image()
@@ -183,13 +184,13 @@ impl SimulatedCnc {
     ///
     /// # Errors
     /// The address is not an input of the machine.
-    pub fn set(&self, address: &str, value: bool) -> Result<(), String> {
-        let signal = cellwatch_models::signal::pmc_address(address).map_err(|e| e.to_string())?;
+    pub fn set(&self, address: &str, value: bool) -> Result<(), SimError> {
+        let signal = cellwatch_models::signal::pmc_address(address)?;
         let (image, registers) = {
-            let mut plc = self.plc.lock().map_err(|_| "simulator state poisoned")?;
+            let mut plc = self.plc.lock().map_err(|_| SimError::Poisoned)?;
             let before = match plc.inputs.get_mut(&signal) {
                 Some(v) => std::mem::replace(v, value),
-                None => return Err(format!("{signal} is not an input of the simulated CNC")),
+                None => return Err(SimError::NotInput { signal }),
             };
             if signal.name() == PART_DONE && value && !before {
                 plc.parts = plc.parts.wrapping_add(1);
@@ -206,9 +207,9 @@ impl SimulatedCnc {
     ///
     /// # Errors
     /// The server refuses the update.
-    pub fn set_temperature(&self, celsius: f64) -> Result<(), String> {
+    pub fn set_temperature(&self, celsius: f64) -> Result<(), SimError> {
         let registers = {
-            let mut plc = self.plc.lock().map_err(|_| "simulator state poisoned")?;
+            let mut plc = self.plc.lock().map_err(|_| SimError::Poisoned)?;
             plc.temperature = celsius;
             plc.registers()
         };
@@ -219,9 +220,9 @@ impl SimulatedCnc {
     ///
     /// # Errors
     /// The server refuses the update.
-    pub fn set_part_counter(&self, parts: u16) -> Result<(), String> {
+    pub fn set_part_counter(&self, parts: u16) -> Result<(), SimError> {
         let registers = {
-            let mut plc = self.plc.lock().map_err(|_| "simulator state poisoned")?;
+            let mut plc = self.plc.lock().map_err(|_| SimError::Poisoned)?;
             plc.parts = parts;
             plc.registers()
         };
@@ -232,7 +233,7 @@ impl SimulatedCnc {
     ///
     /// # Errors
     /// A variable of that name exists.
-    pub fn add_register(&self, name: &str, value: Variant) -> Result<(), String> {
+    pub fn add_register(&self, name: &str, value: Variant) -> Result<(), SimError> {
         self.server.add_register(name, value, "")
     }
 
@@ -240,7 +241,7 @@ impl SimulatedCnc {
     ///
     /// # Errors
     /// No such register.
-    pub fn set_registers(&self, values: &[(String, Variant)]) -> Result<(), String> {
+    pub fn set_registers(&self, values: &[(String, Variant)]) -> Result<(), SimError> {
         self.server.set_registers(values)
     }
 
@@ -248,13 +249,13 @@ impl SimulatedCnc {
     ///
     /// # Errors
     /// The address is not an input of the machine.
-    pub fn set_bad(&self, address: &str) -> Result<(), String> {
-        let signal = cellwatch_models::signal::pmc_address(address).map_err(|e| e.to_string())?;
+    pub fn set_bad(&self, address: &str) -> Result<(), SimError> {
+        let signal = cellwatch_models::signal::pmc_address(address)?;
         let value = {
-            let plc = self.plc.lock().map_err(|_| "simulator state poisoned")?;
-            *plc.inputs
-                .get(&signal)
-                .ok_or_else(|| format!("{signal} is not an input of the simulated CNC"))?
+            let plc = self.plc.lock().map_err(|_| SimError::Poisoned)?;
+            *plc.inputs.get(&signal).ok_or_else(|| SimError::NotInput {
+                signal: signal.clone(),
+            })?
         };
         self.server.set_bad(signal.name(), value)
     }
@@ -263,7 +264,7 @@ impl SimulatedCnc {
     ///
     /// # Errors
     /// There is no decoy namespace or no such variable in it.
-    pub fn set_decoy(&self, address: &str, value: bool) -> Result<(), String> {
+    pub fn set_decoy(&self, address: &str, value: bool) -> Result<(), SimError> {
         self.server.set_decoy(&[(address.to_string(), value)])
     }
 
@@ -271,7 +272,7 @@ impl SimulatedCnc {
     ///
     /// # Errors
     /// No such variable.
-    pub fn delete(&self, address: &str) -> Result<(), String> {
+    pub fn delete(&self, address: &str) -> Result<(), SimError> {
         self.server.delete(address)
     }
 
@@ -286,7 +287,7 @@ impl SimulatedCnc {
     ///
     /// # Errors
     /// No such variable.
-    pub fn delete_quietly(&self, address: &str) -> Result<(), String> {
+    pub fn delete_quietly(&self, address: &str) -> Result<(), SimError> {
         self.server.delete_quietly(address)
     }
 
@@ -295,7 +296,7 @@ impl SimulatedCnc {
     ///
     /// # Errors
     /// Not a variable of the machine, or not deleted.
-    pub fn restore(&self, address: &str) -> Result<(), String> {
+    pub fn restore(&self, address: &str) -> Result<(), SimError> {
         let value = self.holds(address)?;
         self.server.restore(address, value)
     }
@@ -306,15 +307,15 @@ impl SimulatedCnc {
     ///
     /// # Errors
     /// Not a variable of the machine.
-    pub fn recreate_quietly(&self, address: &str) -> Result<(), String> {
+    pub fn recreate_quietly(&self, address: &str) -> Result<(), SimError> {
         let value = self.holds(address)?;
         self.server.recreate_quietly(address, value)
     }
 
     /// The value the machine holds at `address`, an input or a register.
-    fn holds(&self, address: &str) -> Result<Variant, String> {
+    fn holds(&self, address: &str) -> Result<Variant, SimError> {
         let value = {
-            let plc = self.plc.lock().map_err(|_| "simulator state poisoned")?;
+            let plc = self.plc.lock().map_err(|_| SimError::Poisoned)?;
             match plc
                 .registers()
                 .into_iter()
@@ -322,10 +323,11 @@ impl SimulatedCnc {
             {
                 Some((_, v)) => v,
                 None => {
-                    let signal = cellwatch_models::signal::pmc_address(address)
-                        .map_err(|e| e.to_string())?;
+                    let signal = cellwatch_models::signal::pmc_address(address)?;
                     Variant::Boolean(*plc.inputs.get(&signal).ok_or_else(|| {
-                        format!("{signal} is not a variable of the simulated CNC")
+                        SimError::NotVariable {
+                            signal: signal.clone(),
+                        }
                     })?)
                 }
             }

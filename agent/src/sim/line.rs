@@ -12,6 +12,7 @@ use std::time::Duration;
 use cellwatch_models::timer::line::{self, Fault};
 
 use super::server::{SimOptions, SimServer};
+use super::SimError;
 
 /// Cycles per station in one played run (about 6 hours of line time).
 const CYCLES: usize = 500;
@@ -27,7 +28,7 @@ impl SimulatedLine {
     ///
     /// # Errors
     /// The port cannot be bound or the server cannot be built.
-    pub async fn start(options: &SimOptions) -> Result<SimulatedLine, String> {
+    pub async fn start(options: &SimOptions) -> Result<SimulatedLine, SimError> {
         let (run, _) = line::run(1, 1, None);
         let variables: Vec<(String, bool)> = run
             .signals

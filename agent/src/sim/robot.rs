@@ -24,6 +24,7 @@ use cellwatch_models::sfc::{text, Sfc, StepRef};
 use cellwatch_models::signal::Signal;
 
 use super::server::{SimOptions, SimServer, WriteLog};
+use super::SimError;
 
 /// The charts the simulated PLC runs.
 pub const CHARTS: &str = include_str!("../../../config/robot/robot.sfc.toml");
@@ -68,8 +69,9 @@ impl SimulatedRobot {
     ///
     /// # Errors
     /// The port cannot be bound or the server cannot be built.
-    pub async fn start(options: &SimOptions, dwell: Duration) -> Result<SimulatedRobot, String> {
-        let sfc = text::parse("robot.sfc.toml", CHARTS, &|_| true).map_err(|e| e.join("\n"))?;
+    pub async fn start(options: &SimOptions, dwell: Duration) -> Result<SimulatedRobot, SimError> {
+        let sfc = text::parse("robot.sfc.toml", CHARTS, &|_| true)
+            .map_err(|problems| SimError::Charts { problems })?;
         let dwell = dwell.as_millis() as u64;
         let mut names: Vec<String> = plant::signals(&sfc)
             .iter()
@@ -161,9 +163,9 @@ impl SimulatedRobot {
     ///
     /// # Errors
     /// No such step.
-    pub fn stick(&self, name: &str, stuck: bool) -> Result<(), String> {
+    pub fn stick(&self, name: &str, stuck: bool) -> Result<(), SimError> {
         let r = self.step(name)?;
-        let mut p = self.plant.lock().map_err(|_| "poisoned")?;
+        let mut p = self.plant.lock().map_err(|_| SimError::Poisoned)?;
         p.plant.runner_mut().set_faulty(r, stuck);
         Ok(())
     }
@@ -216,10 +218,11 @@ impl SimulatedRobot {
     /// then the same for F2.S15 (data save) and F2.t18 back to F1's S0.
     /// `stuck` waits until the agent has the stuck alarm of a step
     /// (`CHART.STEP`) up; `note` says what happens.
-    pub async fn play_demo<F, Fut, S, SFut>(&self, stuck: S, force: F, note: impl Fn(String))
+    pub async fn play_demo<F, Fut, E, S, SFut>(&self, stuck: S, force: F, note: impl Fn(String))
     where
         F: Fn(&'static str) -> Fut,
-        Fut: std::future::Future<Output = Result<(bool, String), String>>,
+        Fut: std::future::Future<Output = Result<(bool, String), E>>,
+        E: std::fmt::Display,
         S: Fn(&'static str) -> SFut,
         SFut: std::future::Future<Output = ()>,
     {
@@ -276,19 +279,18 @@ impl SimulatedRobot {
         self.log.writes()
     }
 
-    fn step(&self, name: &str) -> Result<StepRef, String> {
+    fn step(&self, name: &str) -> Result<StepRef, SimError> {
         let (chart, step) = name
             .split_once('.')
-            .ok_or_else(|| format!("'{name}' is not CHART.STEP"))?;
-        let c = self
-            .sfc
-            .chart(chart)
-            .ok_or_else(|| format!("no chart {chart}"))?;
+            .ok_or_else(|| SimError::NotStepName { name: name.into() })?;
+        let c = self.sfc.chart(chart).ok_or_else(|| SimError::NoChart {
+            chart: chart.into(),
+        })?;
         let s = self.sfc.charts[c]
             .steps
             .iter()
             .position(|s| s.name == step)
-            .ok_or_else(|| format!("no step {name}"))?;
+            .ok_or_else(|| SimError::NoStep { name: name.into() })?;
         Ok(StepRef { chart: c, step: s })
     }
 

@@ -22,6 +22,8 @@ use opcua::types::{
 };
 use tokio::net::TcpListener;
 
+use super::SimError;
+
 /// Session numbers [`SimServer::subscriptions`] looks up.
 pub const SESSIONS_SCANNED: u32 = 100_000;
 
@@ -135,7 +137,7 @@ impl SimServer {
         app: &str,
         title: &str,
         variables: &[(String, bool)],
-    ) -> Result<SimServer, String> {
+    ) -> Result<SimServer, SimError> {
         Self::start_sending_at_most(options, app, title, variables, 0).await
     }
 
@@ -151,11 +153,15 @@ impl SimServer {
         title: &str,
         variables: &[(String, bool)],
         max_notifications: u64,
-    ) -> Result<SimServer, String> {
-        let listener = TcpListener::bind(options.listen)
-            .await
-            .map_err(|e| format!("cannot listen on {}: {e}", options.listen))?;
-        let addr = listener.local_addr().map_err(|e| e.to_string())?;
+    ) -> Result<SimServer, SimError> {
+        let listener =
+            TcpListener::bind(options.listen)
+                .await
+                .map_err(|source| SimError::Listen {
+                    addr: options.listen,
+                    source,
+                })?;
+        let addr = listener.local_addr().map_err(SimError::LocalAddr)?;
         let namespace = format!("urn:cellwatch:sim:{app}:plc");
         let key_existed = crate::sources::pki::own_key(&options.pki_dir).exists();
         let tokens: &[&str] = &[ANONYMOUS_USER_TOKEN_ID];
@@ -218,15 +224,15 @@ impl SimServer {
         // A client it connects to (reverse connect) that was not listening
         // is tried again a second later.
         builder.config_mut().reverse_connect_failure_delay_ms = 1_000;
-        let (server, handle) = builder.build()?;
+        let (server, handle) = builder.build().map_err(SimError::Build)?;
         crate::sources::pki::protect_own_key(&options.pki_dir, key_existed)?;
         let manager = handle
             .node_managers()
             .get_by_name::<SimpleNodeManager>(app)
-            .ok_or("the simulator's node manager is missing")?;
+            .ok_or(SimError::Missing("the simulator's node manager"))?;
         let ns = handle
             .get_namespace_index(&namespace)
-            .ok_or("the simulator's namespace is missing")?;
+            .ok_or(SimError::Missing("the simulator's namespace"))?;
         add_variables(&manager, ns, app, title, variables, false);
         let decoy = match &options.decoy {
             None => None,
@@ -234,10 +240,10 @@ impl SimServer {
                 let decoy = handle
                     .node_managers()
                     .get_by_name::<SimpleNodeManager>(DECOY)
-                    .ok_or("the decoy node manager is missing")?;
+                    .ok_or(SimError::Missing("the decoy node manager"))?;
                 let index = handle
                     .get_namespace_index(uri)
-                    .ok_or("the decoy namespace is missing")?;
+                    .ok_or(SimError::Missing("the decoy namespace"))?;
                 add_variables(&decoy, index, DECOY, "Decoy", variables, true);
                 Some((decoy, index))
             }
@@ -266,7 +272,7 @@ impl SimServer {
     ///
     /// # Errors
     /// A name that is not a variable of this server.
-    pub fn set(&self, values: &[(String, bool)]) -> Result<(), String> {
+    pub fn set(&self, values: &[(String, bool)]) -> Result<(), SimError> {
         self.set_at(values, DateTime::now())
     }
 
@@ -275,7 +281,7 @@ impl SimServer {
     ///
     /// # Errors
     /// A name that is not a variable of this server.
-    pub fn set_at(&self, values: &[(String, bool)], at: DateTime) -> Result<(), String> {
+    pub fn set_at(&self, values: &[(String, bool)], at: DateTime) -> Result<(), SimError> {
         self.write_named(values.iter().map(|(s, v)| (s.as_str(), *v, at)))
     }
 
@@ -285,7 +291,7 @@ impl SimServer {
     ///
     /// # Errors
     /// A name that is not a variable of this server.
-    pub fn set_each_at(&self, values: &[(String, bool, DateTime)]) -> Result<(), String> {
+    pub fn set_each_at(&self, values: &[(String, bool, DateTime)]) -> Result<(), SimError> {
         self.write_named(values.iter().map(|(s, v, at)| (s.as_str(), *v, *at)))
     }
 
@@ -294,11 +300,8 @@ impl SimServer {
     fn write_named<'a>(
         &self,
         values: impl Iterator<Item = (&'a str, bool, DateTime)>,
-    ) -> Result<(), String> {
-        let deleted = self
-            .deleted
-            .lock()
-            .map_err(|_| "simulator state poisoned")?;
+    ) -> Result<(), SimError> {
+        let deleted = self.deleted.lock().map_err(|_| SimError::Poisoned)?;
         let values: Vec<(NodeId, DataValue)> = values
             .filter(|(s, _, _)| !deleted.contains(*s))
             .map(|(s, v, at)| (NodeId::new(self.ns, s), DataValue::new_at(v, at)))
@@ -308,8 +311,8 @@ impl SimServer {
 
     /// Writes values to their nodes, notifying subscribers (but the deaf
     /// ones a silent deletion left behind).
-    fn write(&self, values: &[(NodeId, DataValue)]) -> Result<(), String> {
-        let deaf = self.deaf.lock().map_err(|_| "simulator state poisoned")?;
+    fn write(&self, values: &[(NodeId, DataValue)]) -> Result<(), SimError> {
+        let deaf = self.deaf.lock().map_err(|_| SimError::Poisoned)?;
         let (quiet, loud): (Vec<_>, Vec<_>) =
             values.iter().partition(|(n, _)| deaf.contains_key(n));
         self.manager
@@ -317,7 +320,10 @@ impl SimServer {
                 &self.subscriptions,
                 loud.into_iter().map(|(n, v)| (n, None, v.clone())),
             )
-            .map_err(|e| format!("cannot update the simulated PLC: {e}"))?;
+            .map_err(|status| SimError::Update {
+                what: "the simulated PLC".into(),
+                status,
+            })?;
         if quiet.is_empty() {
             return Ok(());
         }
@@ -351,11 +357,8 @@ impl SimServer {
     ///
     /// # Errors
     /// There is no decoy, or a name is not a variable of it.
-    pub fn set_decoy(&self, values: &[(String, bool)]) -> Result<(), String> {
-        let (decoy, ns) = self
-            .decoy
-            .as_ref()
-            .ok_or("this server has no decoy namespace")?;
+    pub fn set_decoy(&self, values: &[(String, bool)]) -> Result<(), SimError> {
+        let (decoy, ns) = self.decoy.as_ref().ok_or(SimError::NoDecoy)?;
         let values: Vec<(NodeId, DataValue)> = values
             .iter()
             .map(|(s, v)| (NodeId::new(*ns, s.as_str()), DataValue::new_now(*v)))
@@ -365,7 +368,10 @@ impl SimServer {
                 &self.subscriptions,
                 values.iter().map(|(n, v)| (n, None, v.clone())),
             )
-            .map_err(|e| format!("cannot update the decoy: {e}"))
+            .map_err(|status| SimError::Update {
+                what: "the decoy".into(),
+                status,
+            })
     }
 
     /// Deletes a variable, as a server whose configuration changed does;
@@ -375,7 +381,7 @@ impl SimServer {
     ///
     /// # Errors
     /// No such variable.
-    pub fn delete(&self, name: &str) -> Result<(), String> {
+    pub fn delete(&self, name: &str) -> Result<(), SimError> {
         let (node, items) = self.remove(name)?;
         let mut gone = DataValue::null();
         gone.status = Some(StatusCode::BadNodeIdUnknown);
@@ -399,10 +405,10 @@ impl SimServer {
     }
 
     /// `items` never hear of `node` again.
-    fn deafen(&self, node: NodeId, items: HashSet<(u32, u32)>) -> Result<(), String> {
+    fn deafen(&self, node: NodeId, items: HashSet<(u32, u32)>) -> Result<(), SimError> {
         self.deaf
             .lock()
-            .map_err(|_| "simulator state poisoned")?
+            .map_err(|_| SimError::Poisoned)?
             .entry(node)
             .or_default()
             .extend(items);
@@ -431,24 +437,24 @@ impl SimServer {
     ///
     /// # Errors
     /// No such variable.
-    pub fn delete_quietly(&self, name: &str) -> Result<(), String> {
+    pub fn delete_quietly(&self, name: &str) -> Result<(), SimError> {
         let (node, items) = self.remove(name)?;
         self.deafen(node, items)
     }
 
     /// Takes a variable out of the address space; no longer written. Its
     /// node, and the monitored items on it.
-    fn remove(&self, name: &str) -> Result<(NodeId, Items), String> {
+    fn remove(&self, name: &str) -> Result<(NodeId, Items), SimError> {
         let node = NodeId::new(self.ns, name);
         let items = self.items_on(&node);
         self.manager
             .address_space()
             .write()
             .delete(&node, true)
-            .ok_or_else(|| format!("no variable {name}"))?;
+            .ok_or_else(|| SimError::NoVariable { name: name.into() })?;
         self.deleted
             .lock()
-            .map_err(|_| "simulator state poisoned")?
+            .map_err(|_| SimError::Poisoned)?
             .insert(name.to_string());
         Ok((node, items))
     }
@@ -460,7 +466,7 @@ impl SimServer {
     ///
     /// # Errors
     /// No such variable.
-    pub fn recreate_quietly(&self, name: &str, value: Variant) -> Result<(), String> {
+    pub fn recreate_quietly(&self, name: &str, value: Variant) -> Result<(), SimError> {
         let node = NodeId::new(self.ns, name);
         let items = self.items_on(&node);
         {
@@ -468,7 +474,7 @@ impl SimServer {
             let mut space = space.write();
             space
                 .delete(&node, true)
-                .ok_or_else(|| format!("no variable {name}"))?;
+                .ok_or_else(|| SimError::NoVariable { name: name.into() })?;
             let var = Variable::new(&node, name, name, value.clone());
             space.add_variables(vec![var], &NodeId::new(self.ns, self.app.as_str()));
         }
@@ -482,20 +488,20 @@ impl SimServer {
     ///
     /// # Errors
     /// The variable exists.
-    pub fn restore(&self, name: &str, value: Variant) -> Result<(), String> {
+    pub fn restore(&self, name: &str, value: Variant) -> Result<(), SimError> {
         let node = NodeId::new(self.ns, name);
         {
             let space = self.manager.address_space();
             let mut space = space.write();
             if space.find(&node).is_some() {
-                return Err(format!("{name} exists already"));
+                return Err(SimError::Exists { name: name.into() });
             }
             let var = Variable::new(&node, name, name, value.clone());
             space.add_variables(vec![var], &NodeId::new(self.ns, self.app.as_str()));
         }
         self.deleted
             .lock()
-            .map_err(|_| "simulator state poisoned")?
+            .map_err(|_| SimError::Poisoned)?
             .remove(name);
         self.write(&[(node, DataValue::new_now(value))])
     }
@@ -542,12 +548,12 @@ impl SimServer {
         name: &str,
         value: Variant,
         description: &str,
-    ) -> Result<(), String> {
+    ) -> Result<(), SimError> {
         let node = NodeId::new(self.ns, name);
         let space = self.manager.address_space();
         let mut space = space.write();
         if space.find(&node).is_some() {
-            return Err(format!("{name} exists already"));
+            return Err(SimError::Exists { name: name.into() });
         }
         let mut var = Variable::new(&node, name, name, value);
         if !description.is_empty() {
@@ -561,13 +567,9 @@ impl SimServer {
     ///
     /// # Errors
     /// A name that is not a variable of this server.
-    pub fn set_registers(&self, values: &[(String, Variant)]) -> Result<(), String> {
+    pub fn set_registers(&self, values: &[(String, Variant)]) -> Result<(), SimError> {
         let now = DateTime::now();
-        let deleted = self
-            .deleted
-            .lock()
-            .map_err(|_| "simulator state poisoned")?
-            .clone();
+        let deleted = self.deleted.lock().map_err(|_| SimError::Poisoned)?.clone();
         let values: Vec<(NodeId, DataValue)> = values
             .iter()
             .filter(|(s, _)| !deleted.contains(s))
@@ -585,13 +587,16 @@ impl SimServer {
     ///
     /// # Errors
     /// The server refuses the update.
-    pub fn set_bad(&self, name: &str, value: bool) -> Result<(), String> {
+    pub fn set_bad(&self, name: &str, value: bool) -> Result<(), SimError> {
         let mut dv = DataValue::new_now(value);
         dv.status = Some(StatusCode::BadSensorFailure);
         let node = NodeId::new(self.ns, name);
         self.manager
             .set_value(&self.subscriptions, &node, None, dv)
-            .map_err(|e| format!("cannot update {name}: {e}"))
+            .map_err(|status| SimError::Update {
+                what: name.into(),
+                status,
+            })
     }
 
     /// The endpoint URL clients connect to.
@@ -633,7 +638,7 @@ impl SimServer {
     ///
     /// # Errors
     /// A name that is not a variable of this server.
-    pub fn writable(&self, names: &[&str]) -> Result<WriteLog, String> {
+    pub fn writable(&self, names: &[&str]) -> Result<WriteLog, SimError> {
         let log = WriteLog::default();
         for &name in names {
             let node = NodeId::new(self.ns, name);
@@ -646,7 +651,7 @@ impl SimServer {
                         opcua::server::address_space::NodeType::Variable(v) => Some(v),
                         _ => None,
                     })
-                    .ok_or_else(|| format!("no variable {name}"))?;
+                    .ok_or_else(|| SimError::NoVariable { name: name.into() })?;
                 var.set_writable(true);
                 var.set_user_access_level(
                     opcua::server::address_space::AccessLevel::CURRENT_READ

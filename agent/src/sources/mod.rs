@@ -22,8 +22,8 @@ pub mod scripted;
 mod source;
 
 pub use source::{
-    Batch, Source, SourceError, SourceEvent, SourceSender, Write, WriteRequest, WriteSender,
-    QUEUE_CAPACITY, WRITE_CAPACITY,
+    Batch, Source, SourceError, SourceEvent, SourceSender, Write, WriteError, WriteRequest,
+    WriteSender, QUEUE_CAPACITY, WRITE_CAPACITY,
 };
 
 use crate::config::{CellConfig, TagConfig};

@@ -9,6 +9,91 @@ use std::path::{Path, PathBuf};
 
 use opcua::crypto::{CertificateStore, X509};
 
+/// Why an OPC UA key pair or certificate cannot be made, read or trusted.
+#[derive(Debug, thiserror::Error)]
+pub enum PkiError {
+    /// One file of the key pair is there without the other.
+    #[error("{} is there without {}: restore it, or remove both to make a new pair", there.display(), missing.display())]
+    HalfPair {
+        /// The file that is there.
+        there: PathBuf,
+        /// The file that is missing.
+        missing: PathBuf,
+    },
+    /// The OPC UA stack cannot make the key pair.
+    #[error("cannot make the key pair: {0}")]
+    Generate(String),
+    /// The private key cannot be encoded.
+    #[error("cannot encode the private key: {0}")]
+    EncodeKey(#[source] Box<dyn std::error::Error + Send + Sync>),
+    /// The certificate cannot be encoded.
+    #[error("cannot encode the certificate: {0}")]
+    EncodeCert(#[source] opcua::crypto::X509Error),
+    /// A directory or file cannot be created.
+    #[error("cannot create {}: {source}", path.display())]
+    Create {
+        /// The directory or file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A file cannot be written.
+    #[error("cannot write {}: {source}", path.display())]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A file cannot be removed.
+    #[error("cannot remove {}: {source}", path.display())]
+    Remove {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The private key cannot be written owner-only.
+    #[error(transparent)]
+    PrivateKey(#[from] crate::bus::certs::CertError),
+    /// An existing private key is exposed or cannot be looked at.
+    #[error(transparent)]
+    Exposed(#[from] crate::bus::envelope::KeyFileError),
+    /// The permissions of the private key cannot be set.
+    #[error("cannot make {} the owner's only: {source}", path.display())]
+    Protect {
+        /// The key file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A certificate file cannot be read.
+    #[error("cannot read certificate {}: {source}", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The bytes are no DER certificate.
+    #[error("not a DER certificate: {0}")]
+    NotDer(#[source] opcua::crypto::X509Error),
+    /// The certificate file named cannot be trusted.
+    #[error("{}: {source}", path.display())]
+    Certificate {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: Box<PkiError>,
+    },
+}
+
 /// The application's own certificate in a PKI directory.
 pub fn own_cert(pki_dir: &Path) -> PathBuf {
     pki_dir.join("own").join("cert.der")
@@ -60,7 +145,7 @@ pub fn served_from(
 /// # Errors
 /// The files cannot be written, or one of the two is there without the
 /// other.
-pub fn own_key_pair(pki_dir: &Path, name: &str, uri: &str) -> Result<bool, String> {
+pub fn own_key_pair(pki_dir: &Path, name: &str, uri: &str) -> Result<bool, PkiError> {
     let (cert, key) = (own_cert(pki_dir), own_key(pki_dir));
     match (
         cert.symlink_metadata().is_ok(),
@@ -74,11 +159,10 @@ pub fn own_key_pair(pki_dir: &Path, name: &str, uri: &str) -> Result<bool, Strin
             } else {
                 (&key, &cert)
             };
-            return Err(format!(
-                "{} is there without {}: restore it, or remove both to make a new pair",
-                there.display(),
-                missing.display()
-            ));
+            return Err(PkiError::HalfPair {
+                there: there.clone(),
+                missing: missing.clone(),
+            });
         }
     }
     let description = opcua::types::ApplicationDescription {
@@ -86,32 +170,38 @@ pub fn own_key_pair(pki_dir: &Path, name: &str, uri: &str) -> Result<bool, Strin
         application_uri: uri.into(),
         ..Default::default()
     };
-    let (x509, pkey) = X509::cert_and_pkey(&opcua::crypto::X509Data::from(description))?;
-    let der = pkey
-        .to_der()
-        .map_err(|e| format!("cannot encode the private key: {e}"))?;
+    let (x509, pkey) = X509::cert_and_pkey(&opcua::crypto::X509Data::from(description))
+        .map_err(PkiError::Generate)?;
+    let der = pkey.to_der().map_err(|e| PkiError::EncodeKey(e.into()))?;
     let private = key.parent().unwrap_or(pki_dir);
     let mut dirs = std::fs::DirBuilder::new();
     dirs.recursive(true);
     #[cfg(unix)]
     std::os::unix::fs::DirBuilderExt::mode(&mut dirs, 0o700);
-    dirs.create(private)
-        .map_err(|e| format!("cannot create {}: {e}", private.display()))?;
+    dirs.create(private).map_err(|source| PkiError::Create {
+        path: private.to_path_buf(),
+        source,
+    })?;
     crate::bus::certs::write_private(&key, &pem("PRIVATE KEY", der.as_bytes()))?;
-    let cert_der = x509
-        .to_der()
-        .map_err(|e| format!("cannot encode the certificate: {e}"))?;
+    let cert_der = x509.to_der().map_err(PkiError::EncodeCert)?;
     let own = cert.parent().unwrap_or(pki_dir);
-    std::fs::create_dir_all(own).map_err(|e| format!("cannot create {}: {e}", own.display()))?;
+    std::fs::create_dir_all(own).map_err(|source| PkiError::Create {
+        path: own.to_path_buf(),
+        source,
+    })?;
     let mut options = std::fs::OpenOptions::new();
     options.write(true).create_new(true);
     std::io::Write::write_all(
-        &mut options
-            .open(&cert)
-            .map_err(|e| format!("cannot create {}: {e}", cert.display()))?,
+        &mut options.open(&cert).map_err(|source| PkiError::Create {
+            path: cert.clone(),
+            source,
+        })?,
         &cert_der,
     )
-    .map_err(|e| format!("cannot write {}: {e}", cert.display()))?;
+    .map_err(|source| PkiError::Write {
+        path: cert.clone(),
+        source,
+    })?;
     Ok(true)
 }
 
@@ -152,17 +242,21 @@ fn pem(label: &str, der: &[u8]) -> String {
 /// # Errors
 /// An existing key readable by others (the message names the file), or
 /// the permissions cannot be set.
-pub fn protect_own_key(pki_dir: &Path, existed: bool) -> Result<(), String> {
+pub fn protect_own_key(pki_dir: &Path, existed: bool) -> Result<(), PkiError> {
     let key = own_key(pki_dir);
     if existed {
-        return crate::bus::envelope::check_private(&key).map_err(|e| e.to_string());
+        return Ok(crate::bus::envelope::check_private(&key)?);
     }
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
         if key.exists() {
-            std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o600))
-                .map_err(|e| format!("cannot make {} the owner's only: {e}", key.display()))?;
+            std::fs::set_permissions(&key, std::fs::Permissions::from_mode(0o600)).map_err(
+                |source| PkiError::Protect {
+                    path: key.clone(),
+                    source,
+                },
+            )?;
         }
     }
     Ok(())
@@ -175,30 +269,45 @@ pub fn protect_own_key(pki_dir: &Path, existed: bool) -> Result<(), String> {
 ///
 /// # Errors
 /// The certificate cannot be read or parsed, or the copy fails.
-pub fn trust(cert: &Path, pki_dir: &Path) -> Result<PathBuf, String> {
-    let bytes = std::fs::read(cert)
-        .map_err(|e| format!("cannot read certificate {}: {e}", cert.display()))?;
-    trust_der(&bytes, pki_dir).map_err(|e| format!("{}: {e}", cert.display()))
+pub fn trust(cert: &Path, pki_dir: &Path) -> Result<PathBuf, PkiError> {
+    let bytes = std::fs::read(cert).map_err(|source| PkiError::Read {
+        path: cert.to_path_buf(),
+        source,
+    })?;
+    trust_der(&bytes, pki_dir).map_err(|e| PkiError::Certificate {
+        path: cert.to_path_buf(),
+        source: Box::new(e),
+    })
 }
 
 /// [`trust`] for a certificate in hand (DER).
 ///
 /// # Errors
 /// The bytes are no certificate, or the copy fails.
-pub fn trust_der(bytes: &[u8], pki_dir: &Path) -> Result<PathBuf, String> {
-    let x509 = X509::from_der(bytes).map_err(|e| format!("not a DER certificate: {e}"))?;
+pub fn trust_der(bytes: &[u8], pki_dir: &Path) -> Result<PathBuf, PkiError> {
+    let x509 = X509::from_der(bytes).map_err(PkiError::NotDer)?;
     let dir = pki_dir.join("trusted");
-    std::fs::create_dir_all(&dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    std::fs::create_dir_all(&dir).map_err(|source| PkiError::Create {
+        path: dir.clone(),
+        source,
+    })?;
     let target = dir.join(CertificateStore::cert_file_name(&x509));
-    std::fs::write(&target, bytes)
-        .map_err(|e| format!("cannot write {}: {e}", target.display()))?;
+    std::fs::write(&target, bytes).map_err(|source| PkiError::Write {
+        path: target.clone(),
+        source,
+    })?;
     let rejected = pki_dir
         .join("rejected")
         .join(CertificateStore::cert_file_name(&x509));
     match std::fs::remove_file(&rejected) {
         Ok(()) => {}
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-        Err(e) => return Err(format!("cannot remove {}: {e}", rejected.display())),
+        Err(source) => {
+            return Err(PkiError::Remove {
+                path: rejected,
+                source,
+            })
+        }
     }
     Ok(target)
 }
@@ -226,9 +335,9 @@ impl CertificateFacts {
     ///
     /// # Errors
     /// The bytes are no certificate.
-    pub fn of(bytes: &[u8], now: u64) -> Result<CertificateFacts, String> {
+    pub fn of(bytes: &[u8], now: u64) -> Result<CertificateFacts, PkiError> {
         use sha2::Digest;
-        let x509 = X509::from_der(bytes).map_err(|e| format!("not a DER certificate: {e}"))?;
+        let x509 = X509::from_der(bytes).map_err(PkiError::NotDer)?;
         let colons = |b: &[u8]| {
             b.iter()
                 .map(|x| format!("{x:02X}"))

@@ -3,6 +3,7 @@
 //! cell loop import this; it imports none of them.
 
 use cellwatch_models::engine::TagReading;
+use std::path::PathBuf;
 use std::time::Duration;
 
 use futures_util::future::BoxFuture;
@@ -120,7 +121,7 @@ pub struct WriteRequest {
     /// What to write.
     pub what: Write,
     /// What the PLC answered (`Ok`: done), or why it was not done.
-    pub reply: tokio::sync::oneshot::Sender<Result<String, String>>,
+    pub reply: tokio::sync::oneshot::Sender<Result<String, WriteError>>,
 }
 
 /// What a write puts into the PLC.
@@ -148,19 +149,107 @@ pub type WriteSender = mpsc::Sender<WriteRequest>;
 /// Writes waiting for a source, at most.
 pub const WRITE_CAPACITY: usize = 8;
 
+/// Why a write was not done: the source's own error, kept whole (each
+/// source has its own error type; this module knows none of them).
+#[derive(Debug, thiserror::Error)]
+pub enum WriteError {
+    /// The source takes no such write (its kind, its tag, a value that
+    /// does not fit): nothing was sent to the PLC.
+    #[error(transparent)]
+    Refused(Box<dyn std::error::Error + Send + Sync>),
+    /// The PLC was asked and did not do it: it refused, did not answer,
+    /// or the connection failed meanwhile.
+    #[error(transparent)]
+    Failed(Box<dyn std::error::Error + Send + Sync>),
+}
+
 /// Why a source cannot run. Connection trouble is never an error: it is
 /// reported as [`SourceEvent::Disconnected`] and retried.
 #[derive(Debug, thiserror::Error)]
 pub enum SourceError {
-    /// The client could not be configured (bad PKI directory, ...).
+    /// The agent's OPC UA key pair cannot be made (a connection with
+    /// security needs one).
+    #[error("OPC UA client: the agent's OPC UA key pair in {}: {source}", pki_dir.display())]
+    KeyPair {
+        /// The PKI directory.
+        pki_dir: PathBuf,
+        /// Why.
+        #[source]
+        source: crate::sources::pki::PkiError,
+    },
+    /// The agent's private key is unusable (readable by others).
     #[error("OPC UA client: {0}")]
-    Client(String),
-    /// The password could not be read.
-    #[error("OPC UA identity: {0}")]
-    Identity(String),
+    PrivateKey(#[source] crate::sources::pki::PkiError),
+    /// The OPC UA stack refused the client's configuration.
+    #[error("OPC UA client: {}", problems.join("; "))]
+    Client {
+        /// The stack's problems with it.
+        problems: Vec<String>,
+    },
+    /// The password's environment variable is not set.
+    #[error("OPC UA identity: environment variable {var} is not set")]
+    PasswordVariable {
+        /// The variable.
+        var: String,
+    },
+    /// The password file cannot be read.
+    #[error("OPC UA identity: cannot read {}: {source}", path.display())]
+    PasswordFile {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A one-off connection found the server's certificate untrusted.
+    #[error("OPC UA connection: {endpoint}: {why}")]
+    Untrusted {
+        /// The server's endpoint URL.
+        endpoint: String,
+        /// The certificate, and the command that trusts it.
+        why: String,
+    },
     /// A one-off connection failed (sources retry instead).
-    #[error("OPC UA connection: {0}")]
-    Connect(String),
+    #[error("OPC UA connection: {endpoint}: {source}")]
+    Connect {
+        /// The server's endpoint URL.
+        endpoint: String,
+        /// The stack's error.
+        #[source]
+        source: opcua::types::Error,
+    },
+    /// A one-off connection got no session: the server refused it (the
+    /// status says why) or did not answer.
+    #[error("OPC UA connection: {why}")]
+    Refused {
+        /// The server's endpoint URL.
+        endpoint: String,
+        /// The status the connection ended with; `None`: no answer.
+        status: Option<opcua::types::StatusCode>,
+        /// What happened and what to do, naming the endpoint.
+        why: String,
+    },
+    /// A one-off connection's server did not send its endpoints in time.
+    #[error("OPC UA connection: {endpoint}: no answer to the request for its endpoints within {} s", within.as_secs())]
+    NoEndpoints {
+        /// The server's endpoint URL.
+        endpoint: String,
+        /// How long it was given.
+        within: Duration,
+    },
+    /// A one-off connection cannot listen for the server's reverse connect.
+    #[error("OPC UA connection: {endpoint}: cannot listen on {addr} for the server to connect (opcua.reverse_listen): {source}; if the cell's agent is running there, stop it first (an untrusted server certificate it saw is in {}/rejected/)", pki_dir.display())]
+    ReverseListen {
+        /// The server's endpoint URL.
+        endpoint: String,
+        /// The address.
+        addr: std::net::SocketAddr,
+        /// The agent's PKI directory.
+        pki_dir: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
 }
 
 /// A producer of tag values for one cell.

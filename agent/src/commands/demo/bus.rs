@@ -138,11 +138,11 @@ impl DemoBus {
 pub(super) fn bus_tls(state: &Path, name: &str) -> Result<crate::config::ZenohTls, Failure> {
     use crate::bus::certs;
     let pki = state.join("pki-bus");
-    certs::make_ca(&pki, "cellwatch demo CA").map_err(Failure::Runtime)?;
+    certs::make_ca(&pki, "cellwatch demo CA").map_err(Failure::runtime)?;
     let (cert, key) = certs::cert_files(&pki, name);
     if !cert.exists() {
         certs::issue(&pki, name, &["localhost".into(), "127.0.0.1".into()])
-            .map_err(Failure::Runtime)?;
+            .map_err(Failure::runtime)?;
     }
     Ok(crate::config::ZenohTls {
         ca: certs::ca_files(&pki).0,

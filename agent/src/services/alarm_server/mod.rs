@@ -173,7 +173,7 @@ impl AlarmServer {
             .build()
             .map_err(AlarmServerError::Build)?;
         crate::sources::pki::protect_own_key(&config.pki_dir, key_existed)
-            .map_err(AlarmServerError::Build)?;
+            .map_err(|e| AlarmServerError::Build(e.to_string()))?;
         let missing = |what: &str| AlarmServerError::Build(format!("{what} is missing"));
         let ns = handle
             .get_namespace_index(&namespace)

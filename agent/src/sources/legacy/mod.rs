@@ -27,13 +27,19 @@ use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::sync::{mpsc, oneshot};
 
 use super::{
-    Source, SourceError, SourceEvent, SourceSender, Write, WriteRequest, WriteSender,
+    Source, SourceError, SourceEvent, SourceSender, Write, WriteError, WriteRequest, WriteSender,
     WRITE_CAPACITY,
 };
 use crate::backoff::Backoff;
+
+mod error;
 use crate::clock::Clock;
 pub use crate::config::legacy::{BusNode, Item, LegacyConfig, Parity, SerialLine, Transport};
 use crate::config::TagConfig;
+pub use error::{LegacyError, LineError};
+
+/// How long a serial device server has to take the connection.
+const CONNECT_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// A value read from a unit.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -110,28 +116,26 @@ impl Source for LegacySource {
 ///
 /// # Errors
 /// The item is not written this way, or the value does not fit its field.
-pub fn write_frame(node: BusNode, value: &str) -> Result<Frame, String> {
+pub fn write_frame(node: BusNode, value: &str) -> Result<Frame, LegacyError> {
     let quantity = |v: &str| {
         v.trim()
             .parse::<u64>()
             .ok()
             .and_then(|n| Field::Quantity.number(n))
-            .ok_or_else(|| format!("'{v}' is not a quantity (0 to 999999)"))
+            .ok_or_else(|| LegacyError::NotQuantity { value: v.into() })
     };
     let (header, text) = match node.item {
         Item::Target => (Header::WriteTarget, quantity(value)?),
         Item::Production => (Header::WriteProduction, quantity(value)?),
         Item::ItemCode => (
             Header::WriteItem,
-            Field::Item.item(value).ok_or_else(|| {
-                format!("'{value}' is not an item code (1 to 8 of A-Z, 0-9 and -)")
-            })?,
+            Field::Item
+                .item(value)
+                .ok_or_else(|| LegacyError::NotItemCode {
+                    value: value.into(),
+                })?,
         ),
-        other => {
-            return Err(format!(
-                "{other:?} of a unit is not written: item code, target and production are"
-            ))
-        }
+        item => return Err(LegacyError::NotWritable { item }),
     };
     Ok(Frame::new(node.unit, header, text))
 }
@@ -140,14 +144,19 @@ pub fn write_frame(node: BusNode, value: &str) -> Result<Frame, String> {
 trait Line: AsyncRead + AsyncWrite + Unpin + Send {}
 impl<T: AsyncRead + AsyncWrite + Unpin + Send> Line for T {}
 
-async fn open(config: &LegacyConfig) -> Result<Box<dyn Line>, String> {
+async fn open(config: &LegacyConfig) -> Result<Box<dyn Line>, LegacyError> {
     match &config.transport {
         Transport::Tcp(addr) => {
-            let s =
-                tokio::time::timeout(Duration::from_secs(5), tokio::net::TcpStream::connect(addr))
-                    .await
-                    .map_err(|_| format!("no answer from {addr} within 5 s"))?
-                    .map_err(|e| format!("{addr}: {e}"))?;
+            let s = tokio::time::timeout(CONNECT_TIMEOUT, tokio::net::TcpStream::connect(addr))
+                .await
+                .map_err(|_| LegacyError::ConnectTimeout {
+                    addr: addr.to_string(),
+                    within: CONNECT_TIMEOUT,
+                })?
+                .map_err(|source| LegacyError::Connect {
+                    addr: addr.to_string(),
+                    source,
+                })?;
             let _ = s.set_nodelay(true);
             Ok(Box::new(s))
         }
@@ -171,7 +180,10 @@ async fn open(config: &LegacyConfig) -> Result<Box<dyn Line>, String> {
                     tokio_serial::StopBits::One
                 })
                 .open_native_async()
-                .map_err(|e| format!("{}: {e}", line.path))?;
+                .map_err(|source| LegacyError::Serial {
+                    path: line.path.to_string(),
+                    source,
+                })?;
             Ok(Box::new(port))
         }
     }
@@ -182,7 +194,7 @@ enum Failed {
     /// The unit did not answer well within the retries: why, last time.
     Unit(String),
     /// The line itself failed (the connection closed).
-    Line(String),
+    Line(LineError),
 }
 
 /// Sends `request` and waits for its answer, asking again on a bad,
@@ -200,15 +212,15 @@ async fn exchange(
         decoder.request_sent();
         line.write_all(&request.encode())
             .await
-            .map_err(|e| Failed::Line(format!("cannot write: {e}")))?;
+            .map_err(|e| Failed::Line(LineError::Write(Arc::new(e))))?;
         let deadline = tokio::time::Instant::now() + config.response_timeout;
         why = "no answer".into();
         'wait: loop {
             let n = match tokio::time::timeout_at(deadline, line.read(&mut buf)).await {
                 Err(_) => break 'wait,
-                Ok(Ok(0)) => return Err(Failed::Line("the line closed".into())),
+                Ok(Ok(0)) => return Err(Failed::Line(LineError::Closed)),
                 Ok(Ok(n)) => n,
-                Ok(Err(e)) => return Err(Failed::Line(format!("cannot read: {e}"))),
+                Ok(Err(e)) => return Err(Failed::Line(LineError::Read(Arc::new(e)))),
             };
             decoded.clear();
             decoder.push(&buf[..n], &mut decoded);
@@ -593,7 +605,7 @@ impl SharedBus {
 /// line settings): which two, and what differs.
 pub fn share_buses(
     cells: &[(String, Option<LegacyConfig>, Vec<TagConfig>)],
-) -> Result<(Vec<Option<BusShare>>, Vec<SharedBus>), String> {
+) -> Result<(Vec<Option<BusShare>>, Vec<SharedBus>), LegacyError> {
     let mut sources: Vec<Option<BusShare>> = cells.iter().map(|_| None).collect();
     let mut buses = Vec::new();
     let mut done = vec![false; cells.len()];
@@ -616,13 +628,18 @@ pub fn share_buses(
         for &j in &same {
             done[j] = true;
             if cells[j].1.as_ref() != Some(bus) {
-                return Err(format!(
-                    "{name} and {} share {} but poll it differently ({} / {}): give both the same [legacy] settings",
-                    cells[j].0,
-                    bus.transport.place(),
-                    bus.settings(),
-                    cells[j].1.as_ref().map(LegacyConfig::settings).unwrap_or_default()
-                ));
+                return Err(LegacyError::SharedDifferently {
+                    cell: name.clone(),
+                    other_cell: cells[j].0.clone(),
+                    place: bus.transport.place().to_string(),
+                    settings: bus.settings().to_string(),
+                    other_settings: cells[j]
+                        .1
+                        .as_ref()
+                        .map(LegacyConfig::settings)
+                        .unwrap_or_default()
+                        .to_string(),
+                });
             }
         }
         let (shared, shares) = SharedBus::new(
@@ -679,23 +696,26 @@ async fn write_one(
     config: &LegacyConfig,
     tags: &[TagConfig],
     w: WriteRequest,
-) -> Result<(), String> {
+) -> Result<(), LineError> {
     let frame = match &w.what {
         Write::Value(value) => w
             .tag
             .and_then(|t| tags.get(t))
-            .ok_or_else(|| "no such tag".to_string())
-            .and_then(|t| BusNode::parse(&t.node_id))
+            .ok_or(LegacyError::NoSuchTag)
+            .and_then(|t| {
+                BusNode::parse(&t.node_id).map_err(|e| LegacyError::NodeId {
+                    node_id: t.node_id.to_string(),
+                    reason: e.to_string(),
+                })
+            })
             .and_then(|node| write_frame(node, value)),
-        Write::Pulse(_) => Err("an @ unit takes item writes, not switch pulses".to_string()),
-        Write::Acknowledge { .. } => {
-            Err("an @ unit has no alarms of its own to acknowledge".to_string())
-        }
+        Write::Pulse(_) => Err(LegacyError::NoPulses),
+        Write::Acknowledge { .. } => Err(LegacyError::NoAlarms),
     };
     let frame = match frame {
         Ok(f) => f,
         Err(why) => {
-            let _ = w.reply.send(Err(why));
+            let _ = w.reply.send(Err(WriteError::Refused(why.into())));
             return Ok(());
         }
     };
@@ -712,11 +732,16 @@ async fn write_one(
             Ok(())
         }
         Err(Failed::Unit(why)) => {
-            let _ = w.reply.send(Err(format!("{what}: not taken: {why}")));
+            let refused = LegacyError::NotTaken { what, why };
+            let _ = w.reply.send(Err(WriteError::Failed(refused.into())));
             Ok(())
         }
         Err(Failed::Line(why)) => {
-            let _ = w.reply.send(Err(format!("{what}: the bus failed: {why}")));
+            let told = LegacyError::BusFailed {
+                what,
+                source: why.clone(),
+            };
+            let _ = w.reply.send(Err(WriteError::Failed(told.into())));
             Err(why)
         }
     }

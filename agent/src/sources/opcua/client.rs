@@ -8,6 +8,7 @@ use opcua::types::{MessageSecurityMode, NodeId, ReadValueId, TimestampsToReturn,
 
 use super::requests::Requests;
 use super::subscription;
+use super::OpcUaError;
 
 use crate::config::{Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy};
 use crate::sources::SourceError;
@@ -34,12 +35,12 @@ pub(super) fn identity(config: &OpcUaConfig) -> Result<IdentityToken, SourceErro
         Identity::Anonymous => Ok(IdentityToken::Anonymous),
         Identity::User { user, password } => {
             let secret = match password {
-                PasswordSource::Env(var) => std::env::var(var).map_err(|_| {
-                    SourceError::Identity(format!("environment variable {var} is not set"))
-                })?,
+                PasswordSource::Env(var) => std::env::var(var)
+                    .map_err(|_| SourceError::PasswordVariable { var: var.clone() })?,
                 PasswordSource::File(path) => std::fs::read_to_string(path)
-                    .map_err(|e| {
-                        SourceError::Identity(format!("cannot read {}: {e}", path.display()))
+                    .map_err(|source| SourceError::PasswordFile {
+                        path: path.clone(),
+                        source,
                     })?
                     .lines()
                     .next()
@@ -95,11 +96,11 @@ pub(super) fn client_retrying(
             tracing::warn!(pki = %config.pki_dir.display(), error = %e, "cannot make the agent's OPC UA key pair");
             false
         }
-        Err(e) => {
-            return Err(SourceError::Client(format!(
-                "the agent's OPC UA key pair in {}: {e}",
-                config.pki_dir.display()
-            )))
+        Err(source) => {
+            return Err(SourceError::KeyPair {
+                pki_dir: config.pki_dir.clone(),
+                source,
+            })
         }
     };
     let client = ClientBuilder::new()
@@ -137,10 +138,11 @@ pub(super) fn client_retrying(
         // leaves the new subscription without publish requests.
         .recreate_subscriptions(false)
         .client()
-        .map_err(|e| SourceError::Client(e.join("; ")))?;
+        .map_err(|problems| SourceError::Client { problems })?;
     // A key that was there before, and that others may read, is refused.
     if made {
-        crate::sources::pki::protect_own_key(&config.pki_dir, true).map_err(SourceError::Client)?;
+        crate::sources::pki::protect_own_key(&config.pki_dir, true)
+            .map_err(SourceError::PrivateKey)?;
     }
     Ok(client)
 }
@@ -149,16 +151,16 @@ pub(super) fn client_retrying(
 pub(super) async fn namespace_array(
     session: &Session,
     requests: &Requests,
-) -> Result<Vec<String>, String> {
+) -> Result<Vec<String>, OpcUaError> {
     let node = NodeId::new(0, NAMESPACE_ARRAY);
     let values = session
         .read(&[ReadValueId::from(node)], TimestampsToReturn::Neither, 0.0)
         .await;
     requests.answered("Read", &values);
-    let values = values.map_err(|e| e.to_string())?;
-    let value = values.into_iter().next().ok_or("empty read result")?;
+    let values = values.map_err(OpcUaError::Service)?;
+    let value = values.into_iter().next().ok_or(OpcUaError::EmptyRead)?;
     if let Some(status) = value.status.filter(|s| !s.is_good()) {
-        return Err(status.to_string());
+        return Err(OpcUaError::Status(status));
     }
     match value.value {
         Some(Variant::Array(a)) => Ok(a
@@ -169,7 +171,7 @@ pub(super) async fn namespace_array(
                 _ => String::new(),
             })
             .collect()),
-        other => Err(format!("not an array of strings: {other:?}")),
+        other => Err(OpcUaError::NotStrings(other)),
     }
 }
 

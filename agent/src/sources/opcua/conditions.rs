@@ -389,7 +389,7 @@ pub(super) async fn acknowledge(
     id: &str,
     comment: &str,
     requests: &Requests,
-) -> Result<String, String> {
+) -> Result<String, super::OpcUaError> {
     let target = conditions
         .lock()
         .unwrap_or_else(|e| e.into_inner())
@@ -414,11 +414,14 @@ pub(super) async fn acknowledge(
     requests.answered("Call", &called);
     match called {
         Ok(r) if r.status_code.is_good() => Ok(format!("{id} acknowledged at the PLC")),
-        Ok(r) => Err(format!(
-            "the PLC refused to acknowledge {id}: {}",
-            r.status_code
-        )),
-        Err(e) => Err(format!("cannot acknowledge {id} at the PLC: {e}")),
+        Ok(r) => Err(super::OpcUaError::AckRefused {
+            id: id.to_string(),
+            status: r.status_code,
+        }),
+        Err(source) => Err(super::OpcUaError::Ack {
+            id: id.to_string(),
+            source,
+        }),
     }
 }
 

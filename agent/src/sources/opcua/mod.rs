@@ -42,6 +42,7 @@ mod client;
 mod conditions;
 mod context;
 mod delivery;
+mod error;
 mod items;
 mod names;
 mod once;
@@ -61,6 +62,7 @@ pub use crate::config::node::{Namespace, TagNode};
 pub use client::client;
 use client::{identity, namespace_array, server_endpoint};
 use context::{Context, Live, TagTable};
+pub use error::OpcUaError;
 pub use names::Names;
 pub use once::{connect_once, server_identity, ServerIdentity};
 use requests::Requests;
@@ -79,7 +81,7 @@ use tokio::sync::mpsc;
 use crate::backoff::Backoff;
 
 use super::{
-    Source, SourceError, SourceEvent, SourceSender, Write, WriteRequest, WriteSender,
+    Source, SourceError, SourceEvent, SourceSender, Write, WriteError, WriteRequest, WriteSender,
     WRITE_CAPACITY,
 };
 use crate::config::{OpcUaConfig, TagConfig};
@@ -370,18 +372,18 @@ async fn run_writing(
                         let (session, ctx, alarm, comment) = (session.clone(), ctx.clone(), alarm.clone(), comment.clone());
                         pulses.spawn(async move {
                             let done = conditions::acknowledge(&session, &ctx.conditions, &alarm, &comment, &ctx.requests).await;
-                            let _ = w.reply.send(done);
+                            let _ = w.reply.send(done.map_err(|e| WriteError::Failed(e.into())));
                         });
                         continue;
                     }
                     let node = w.tag.and_then(|t| ctx.nodes.get(t).cloned().flatten());
                     let checked = match (&w.what, w.tag.and_then(|t| writes.switches.get(&t)), node) {
                         (Write::Pulse(held), Some(name), Some(node)) => Ok((*held, name.clone(), node)),
-                        (Write::Value(_), _, _) => Err("this OPC UA source writes only the charts' force and stop switches".to_string()),
-                        _ => Err("not a switch of this cell".to_string()),
+                        (Write::Value(_), _, _) => Err(OpcUaError::OnlySwitches),
+                        _ => Err(OpcUaError::NotASwitch),
                     };
                     match checked {
-                        Err(why) => { let _ = w.reply.send(Err(why)); }
+                        Err(why) => { let _ = w.reply.send(Err(WriteError::Refused(why.into()))); }
                         Ok((held, name, node)) => {
                             let session = session.clone();
                             let switching = switching.clone();
@@ -393,7 +395,7 @@ async fn run_writing(
                                     Ok(d) => tracing::info!(write = %d, "switch pulsed"),
                                     Err(e) => tracing::warn!(error = %e, "switch pulse failed"),
                                 }
-                                let _ = w.reply.send(done);
+                                let _ = w.reply.send(done.map_err(|e| WriteError::Failed(e.into())));
                             });
                         }
                     }
@@ -484,7 +486,7 @@ async fn run_writing(
 ///
 /// # Errors
 /// The read fails or the value is not an array of strings.
-pub async fn namespaces(session: &Session) -> Result<Vec<String>, String> {
+pub async fn namespaces(session: &Session) -> Result<Vec<String>, OpcUaError> {
     namespace_array(session, &Requests::default()).await
 }
 
@@ -632,14 +634,14 @@ async fn resume(
     l: &Live,
     new_session: bool,
     requests: &requests::Requests,
-) -> Result<(), String> {
+) -> Result<(), OpcUaError> {
     let sub = &l.subscription;
     if new_session {
         return resume::transfer(session, sub.id, &l.shared, requests).await;
     }
     match resume::catch_up(session, sub.id, &l.shared, requests).await {
         Ok(()) | Err(resume::Unfilled::Failed(_)) => Ok(()),
-        Err(resume::Unfilled::Gone(status)) => Err(status.to_string()),
+        Err(resume::Unfilled::Gone(status)) => Err(OpcUaError::Status(status)),
     }
 }
 

@@ -37,7 +37,10 @@ pub async fn connect_once(
     // An untrusted server certificate fails here, at once, with what to do
     // (the stack would only retry).
     if let Some(why) = crate::sources::pki::untrusted(config, &endpoint) {
-        return Err(SourceError::Connect(format!("{}: {why}", config.endpoint)));
+        return Err(SourceError::Untrusted {
+            endpoint: config.endpoint.to_string(),
+            why,
+        });
     }
     let connected = match &reverse {
         Some(listener) => super::reverse::session(&client, listener, endpoint, token),
@@ -45,8 +48,10 @@ pub async fn connect_once(
             .connect_to_endpoint_directly(endpoint, token)
             .map(|(s, l)| (s, Box::pin(l.enter()) as super::reverse::Events)),
     };
-    let (session, mut events) =
-        connected.map_err(|e| SourceError::Connect(format!("{}: {e}", config.endpoint)))?;
+    let (session, mut events) = connected.map_err(|source| SourceError::Connect {
+        endpoint: config.endpoint.to_string(),
+        source,
+    })?;
     // The event loop on its own task, ending with the status it ended on.
     let mut task = tokio::spawn(async move {
         use futures_util::TryStreamExt;
@@ -71,11 +76,11 @@ pub async fn connect_once(
         Ok(Ok(())) => Ok((session, task)),
         Ok(Err(status)) => {
             task.abort();
-            Err(SourceError::Connect(refused(config, status)))
+            Err(refused(config, status))
         }
         Err(_) => {
             task.abort();
-            Err(SourceError::Connect(refused(config, None)))
+            Err(refused(config, None))
         }
     }
 }
@@ -109,10 +114,10 @@ pub async fn server_identity(config: &OpcUaConfig) -> Result<ServerIdentity, Sou
 }
 
 /// Why a one-off connection got no session, and what to do about it.
-fn refused(config: &OpcUaConfig, status: Option<opcua::types::StatusCode>) -> String {
+fn refused(config: &OpcUaConfig, status: Option<opcua::types::StatusCode>) -> SourceError {
     use opcua::types::StatusCode;
     let endpoint = &config.endpoint;
-    match status {
+    let why = match status {
         Some(
             StatusCode::BadSecurityChecksFailed
             | StatusCode::BadCertificateUntrusted
@@ -121,15 +126,14 @@ fn refused(config: &OpcUaConfig, status: Option<opcua::types::StatusCode>) -> St
             | StatusCode::BadCertificateUriInvalid,
         ) => {
             let own = crate::sources::pki::own_cert(&config.pki_dir);
-            let facts = std::fs::read(&own)
-                .map_err(|e| e.to_string())
-                .and_then(|der| {
-                    crate::sources::pki::CertificateFacts::of(&der, crate::clock::now_ms())
-                })
-                .map_or_else(
-                    |e| format!("unreadable: {e}"),
-                    |f| format!("thumbprint {}, SHA-256 {}", f.thumbprint, f.sha256),
-                );
+            let facts = match std::fs::read(&own) {
+                Err(e) => format!("unreadable: {e}"),
+                Ok(der) => crate::sources::pki::CertificateFacts::of(&der, crate::clock::now_ms())
+                    .map_or_else(
+                        |e| format!("unreadable: {e}"),
+                        |f| format!("thumbprint {}, SHA-256 {}", f.thumbprint, f.sha256),
+                    ),
+            };
             format!(
                 "{endpoint}: the server refused this agent's certificate ({}: {facts}): add it to the server's trusted clients, as its vendor's tool says",
                 own.display()
@@ -144,6 +148,11 @@ fn refused(config: &OpcUaConfig, status: Option<opcua::types::StatusCode>) -> St
         ),
         Some(s) => format!("{endpoint}: no session: {s}"),
         None => format!("{endpoint}: no session within 15 s"),
+    };
+    SourceError::Refused {
+        endpoint: endpoint.to_string(),
+        status,
+        why,
     }
 }
 
@@ -157,14 +166,14 @@ async fn endpoint_once(
 ) -> Result<opcua::types::EndpointDescription, SourceError> {
     tokio::time::timeout(ENDPOINTS_ANSWER, server_endpoint(client, config, reverse))
         .await
-        .map_err(|_| {
-            SourceError::Connect(format!(
-                "{}: no answer to the request for its endpoints within {} s",
-                config.endpoint,
-                ENDPOINTS_ANSWER.as_secs()
-            ))
+        .map_err(|_| SourceError::NoEndpoints {
+            endpoint: config.endpoint.to_string(),
+            within: ENDPOINTS_ANSWER,
         })?
-        .map_err(|e| SourceError::Connect(format!("{}: {e}", config.endpoint)))
+        .map_err(|source| SourceError::Connect {
+            endpoint: config.endpoint.to_string(),
+            source,
+        })
 }
 
 /// Where a one-off connection listens for the server to connect, for a
@@ -180,11 +189,12 @@ async fn reverse_listener(
     };
     match tokio::net::TcpListener::bind(addr).await {
         Ok(l) => Ok(Some(Arc::new(l))),
-        Err(e) => Err(SourceError::Connect(format!(
-            "{}: cannot listen on {addr} for the server to connect (opcua.reverse_listen): {e}; if the cell's agent is running there, stop it first (an untrusted server certificate it saw is in {}/rejected/)",
-            config.endpoint,
-            config.pki_dir.display()
-        ))),
+        Err(source) => Err(SourceError::ReverseListen {
+            endpoint: config.endpoint.to_string(),
+            addr,
+            pki_dir: config.pki_dir.clone(),
+            source,
+        }),
     }
 }
 

@@ -18,6 +18,7 @@ use super::delivery::Shared;
 use super::republishes::{Unserved, TRIES};
 use super::requests::Requests;
 use super::sequence::{has_data, succ};
+use super::OpcUaError;
 
 /// How a gap could not be filled.
 #[derive(Debug)]
@@ -237,16 +238,13 @@ pub(super) async fn transfer(
     id: u32,
     shared: &Shared,
     requests: &Requests,
-) -> Result<(), String> {
+) -> Result<(), OpcUaError> {
     let results = session.transfer_subscriptions(&[id], true).await;
     requests.answered("TransferSubscriptions", &results);
-    let results = results.map_err(|e| e.to_string())?;
-    let result = results
-        .into_iter()
-        .next()
-        .ok_or("the server answered nothing")?;
+    let results = results.map_err(OpcUaError::Service)?;
+    let result = results.into_iter().next().ok_or(OpcUaError::NoAnswer)?;
     if !result.status_code.is_good() {
-        return Err(result.status_code.to_string());
+        return Err(OpcUaError::Status(result.status_code));
     }
     {
         let mut d = shared.lock();
@@ -257,7 +255,7 @@ pub(super) async fn transfer(
     }
     match fill(session, id, shared, requests).await {
         Ok(()) | Err(Unfilled::Failed(_)) => Ok(()),
-        Err(Unfilled::Gone(status)) => Err(status.to_string()),
+        Err(Unfilled::Gone(status)) => Err(OpcUaError::Status(status)),
     }
 }
 

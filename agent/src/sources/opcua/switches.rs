@@ -12,6 +12,7 @@ use tokio::sync::mpsc;
 
 use super::client::namespace_array;
 use super::requests::Requests;
+use super::OpcUaError;
 use crate::config::node::TagNode;
 
 use crate::sources::WriteRequest;
@@ -46,14 +47,18 @@ pub(super) async fn pulse(
     name: String,
     held: Duration,
     requests: Requests,
-) -> Result<String, String> {
+) -> Result<String, OpcUaError> {
     let requests = &requests;
-    let namespaces = namespace_array(&session, requests)
-        .await
-        .map_err(|e| format!("{name}: cannot read the namespace array: {e}"))?;
+    let namespaces =
+        namespace_array(&session, requests)
+            .await
+            .map_err(|e| OpcUaError::SwitchNamespaces {
+                name: name.clone(),
+                source: Box::new(e),
+            })?;
     let id = node
         .resolve(&namespaces)
-        .ok_or_else(|| format!("{name}: its namespace is not on the server"))?;
+        .ok_or_else(|| OpcUaError::NoNamespace { name: name.clone() })?;
     set_switch(&session, &id, &name, true, requests).await?;
     let on = read_back(&session, &id, &name, true, requests).await;
     if on.is_ok() {
@@ -78,7 +83,7 @@ pub(super) async fn set_switch(
     name: &str,
     on: bool,
     requests: &Requests,
-) -> Result<(), String> {
+) -> Result<(), OpcUaError> {
     let value = opcua::types::WriteValue {
         node_id: id.clone(),
         attribute_id: opcua::types::AttributeId::Value as u32,
@@ -87,11 +92,21 @@ pub(super) async fn set_switch(
     };
     let status = session.write(&[value]).await;
     requests.answered("Write", &status);
-    let status = status.map_err(|e| format!("{name}: write {} failed: {e}", u8::from(on)))?;
+    let status = status.map_err(|source| OpcUaError::SwitchWrite {
+        name: name.to_string(),
+        on,
+        source,
+    })?;
     match status.first() {
         Some(s) if s.is_good() => Ok(()),
-        Some(s) => Err(format!("{name}: the server refused {}: {s}", u8::from(on))),
-        None => Err(format!("{name}: the server answered nothing")),
+        Some(s) => Err(OpcUaError::SwitchRefused {
+            name: name.to_string(),
+            on,
+            status: *s,
+        }),
+        None => Err(OpcUaError::SwitchNoAnswer {
+            name: name.to_string(),
+        }),
     }
 }
 
@@ -101,18 +116,18 @@ pub(super) async fn switches_off(
     session: &Session,
     switches: &[(String, TagNode)],
     requests: &Requests,
-) -> Result<usize, String> {
+) -> Result<usize, OpcUaError> {
     if switches.is_empty() {
         return Ok(0);
     }
     let namespaces = namespace_array(session, requests)
         .await
-        .map_err(|e| format!("cannot read the namespace array: {e}"))?;
+        .map_err(|e| OpcUaError::Namespaces(Box::new(e)))?;
     let mut written = 0;
     let mut failed = Vec::new();
     for (name, node) in switches {
         let Some(id) = node.resolve(&namespaces) else {
-            failed.push(format!("{name}: its namespace is not on the server"));
+            failed.push(OpcUaError::NoNamespace { name: name.clone() });
             continue;
         };
         let read = session
@@ -142,7 +157,7 @@ pub(super) async fn switches_off(
     if failed.is_empty() {
         Ok(written)
     } else {
-        Err(failed.join("; "))
+        Err(OpcUaError::Switches(failed))
     }
 }
 
@@ -169,7 +184,7 @@ pub(super) async fn read_back(
     name: &str,
     on: bool,
     requests: &Requests,
-) -> Result<(), String> {
+) -> Result<(), OpcUaError> {
     let until = tokio::time::Instant::now() + READ_BACK;
     loop {
         let read = session
@@ -180,17 +195,21 @@ pub(super) async fn read_back(
             )
             .await;
         requests.answered("Read", &read);
-        let read = read.map_err(|e| format!("{name}: read back failed: {e}"))?;
+        let read = read.map_err(|source| OpcUaError::ReadBack {
+            name: name.to_string(),
+            source,
+        })?;
         let last = match read.first().and_then(|v| v.value.clone()) {
             Some(Variant::Boolean(b)) if b == on => return Ok(()),
-            other => format!("{other:?}"),
+            other => other,
         };
         if tokio::time::Instant::now() >= until {
-            return Err(format!(
-                "{name}: written {} but read back {last} for {} s",
-                u8::from(on),
-                READ_BACK.as_secs()
-            ));
+            return Err(OpcUaError::ReadBackDiffers {
+                name: name.to_string(),
+                on,
+                read: last,
+                within: READ_BACK,
+            });
         }
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
