@@ -614,7 +614,7 @@ async fn signed(t: Target<'_>, args: &SignerArgs, out: &mut dyn Write) -> Result
         (Some(path), _) => {
             let text = std::fs::read_to_string(path)
                 .map_err(|e| Failure::Input(format!("cannot read {}: {e}", path.display())))?;
-            OperatorKey::parse(&path.display().to_string(), &text).map_err(Failure::Input)?
+            OperatorKey::parse(&path.display().to_string(), &text).map_err(Failure::input)?
         }
         (None, Ok(hex_key)) => {
             let operator = args.operator.as_deref().ok_or_else(|| {
