@@ -89,7 +89,9 @@ pub(crate) async fn command_chain(
 /// rest a runtime failure.
 fn failure(e: ClientError) -> Failure {
     match e {
-        e @ (ClientError::Config(_) | ClientError::Answered(_)) => Failure::Input(e.to_string()),
+        e @ (ClientError::Config(_) | ClientError::Answered(_) | ClientError::NotAnOutcome(_)) => {
+            Failure::Input(e.to_string())
+        }
         e => Failure::Runtime(e.to_string()),
     }
 }
