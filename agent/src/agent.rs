@@ -200,9 +200,12 @@ pub enum ReloadError {
         "{0} changed: restart the agent to take the new configuration (the running one goes on)"
     )]
     Restart(String),
-    /// The loop would not take it now, or has ended.
+    /// The loop has ended.
     #[error("{0}")]
     Refused(String),
+    /// The loop would not take it now.
+    #[error(transparent)]
+    Busy(#[from] crate::cell::swap::ReloadBusy),
     /// The operators file or the alarm server's users file it names is
     /// unusable.
     #[error("{0}")]
@@ -336,7 +339,7 @@ impl Agent {
             Ok(()) => taken
                 .await
                 .map_err(|_| ReloadError::Refused("the cell loop has ended".into()))
-                .and_then(|r| r.map_err(ReloadError::Refused)),
+                .and_then(|r| r.map_err(ReloadError::Busy)),
         };
         match (outcome, task) {
             (Err(e), Some((task, stop))) => {

@@ -44,8 +44,12 @@ pub enum ClientError {
     #[error("query failed: {0}")]
     Query(String),
     /// The cell's agent answered with an error (a bad request, busy, …).
-    #[error("{0}")]
-    Answered(String),
+    #[error(transparent)]
+    Answered(ErrorAnswer),
+    /// The cell's agent answered a command with something else than a
+    /// command's outcome.
+    #[error("not a command's outcome: {0}")]
+    NotAnOutcome(#[source] serde_json::Error),
     /// An answer believed, but sealed by another cell's agent.
     #[error("{what}: answered by cell {from}'s agent, not {cell}'s")]
     OtherCell {
@@ -66,6 +70,37 @@ pub enum ClientError {
         /// Why each answer that came was not believed.
         not_believed: Vec<String>,
     },
+}
+
+/// An agent's error answer, believed: what it said (a bad request, "the
+/// agent is busy", …), after the key it said it on when Zenoh carried it
+/// as an error.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{}{said}", .key.as_deref().map(|k| format!("{k}: ")).unwrap_or_default())]
+pub struct ErrorAnswer {
+    /// The key of the service that answered, for an answer Zenoh carried
+    /// as an error.
+    pub key: Option<String>,
+    /// What the agent said.
+    pub said: String,
+}
+
+impl ErrorAnswer {
+    /// Whether the agent said it is busy (asked again).
+    pub fn busy(&self) -> bool {
+        self.said.contains(BUSY)
+    }
+}
+
+/// Why an answer that came was not believed (said with the Zenoh session
+/// it came from).
+#[derive(Debug, thiserror::Error)]
+#[error("{why} (from Zenoh session {from})")]
+struct NotBelieved {
+    /// Why.
+    why: Distrust,
+    /// The session that sent it, or "an unknown node".
+    from: String,
 }
 
 fn no_answer(cell: &str, what: &str, not_believed: &[String]) -> String {
@@ -95,7 +130,7 @@ pub struct CellAnswer {
     /// The cell whose agent sealed it.
     pub cell: String,
     /// Its text, or its error answer.
-    pub answer: Result<String, String>,
+    pub answer: Result<String, ErrorAnswer>,
 }
 
 impl BusClient {
@@ -164,8 +199,8 @@ impl BusClient {
         payload: Option<String>,
         timeout: Duration,
     ) -> Result<String, ClientError> {
-        let judge = |answer: &Result<String, String>| match answer {
-            Err(why) if why.contains(BUSY) => Judged::Again,
+        let judge = |answer: &Result<String, ErrorAnswer>| match answer {
+            Err(why) if why.busy() => Judged::Again,
             _ => Judged::Take,
         };
         self.ask_judging(cell, service, parameters, payload, timeout, judge)
@@ -182,7 +217,7 @@ impl BusClient {
         parameters: &str,
         payload: Option<String>,
         timeout: Duration,
-        judge: impl Fn(&Result<String, String>) -> Judged,
+        judge: impl Fn(&Result<String, ErrorAnswer>) -> Judged,
     ) -> Result<String, ClientError> {
         let key = self.keys(cell).service(service);
         let what = if parameters.is_empty() {
@@ -246,7 +281,7 @@ impl BusClient {
                 Ok((cell, answer)) => answers.push(CellAnswer { cell, answer }),
                 Err(why) => {
                     tracing::error!(key, why = %why, "an answer not believed: ignored");
-                    refused.push(why);
+                    refused.push(why.to_string());
                 }
             }
         }
@@ -277,7 +312,7 @@ impl BusClient {
         };
         let payload = serde_json::to_string(cmd).unwrap_or_default();
         let digest = command_digest([payload.as_bytes()]);
-        let judge = |answer: &Result<String, String>| judge_command(answer, &digest);
+        let judge = |answer: &Result<String, ErrorAnswer>| judge_command(answer, &digest);
         let text = self
             .ask_judging(
                 cell,
@@ -288,8 +323,8 @@ impl BusClient {
                 judge,
             )
             .await?;
-        let outcome: CommandOutcome = serde_json::from_str(&text)
-            .map_err(|e| ClientError::Answered(format!("not a command's outcome: {e}")))?;
+        let outcome: CommandOutcome =
+            serde_json::from_str(&text).map_err(ClientError::NotAnOutcome)?;
         Ok(match outcome.replayed {
             Some(first) => (
                 first.accepted,
@@ -323,16 +358,17 @@ impl BusClient {
         replies: zenoh::handlers::FifoChannelHandler<zenoh::query::Reply>,
         key: &str,
         parameters: &str,
-        judge: &impl Fn(&Result<String, String>) -> Judged,
+        judge: &impl Fn(&Result<String, ErrorAnswer>) -> Judged,
     ) -> Answer {
         let mut refused = Vec::new();
         while let Ok(reply) = replies.recv_async().await {
-            let opened = self
-                .open_reply(&reply, key, parameters)
-                .and_then(|(cell, answer)| match judge(&answer) {
+            let opened = match self.open_reply(&reply, key, parameters) {
+                Err(not_believed) => Err(not_believed.to_string()),
+                Ok((cell, answer)) => match judge(&answer) {
                     Judged::Unbound(why) => Err(why),
                     _ => Ok((cell, answer)),
-                });
+                },
+            };
             match opened {
                 Ok((cell, answer)) => return Answer::Agent(cell, answer),
                 Err(why) => {
@@ -353,11 +389,14 @@ impl BusClient {
         reply: &zenoh::query::Reply,
         key: &str,
         parameters: &str,
-    ) -> Result<(String, Result<String, String>), String> {
+    ) -> Result<(String, Result<String, ErrorAnswer>), NotBelieved> {
         let from = reply
             .replier_id()
             .map_or_else(|| "an unknown node".into(), |id| id.zid().to_string());
-        let distrust = |e: Distrust| format!("{e} (from Zenoh session {from})");
+        let distrust = |why: Distrust| NotBelieved {
+            why,
+            from: from.clone(),
+        };
         match reply.result() {
             Ok(sample) => {
                 let opened = self
@@ -370,7 +409,10 @@ impl BusClient {
                     )
                     .map_err(distrust)?;
                 let body = match opened.kind {
-                    Kind::Error => Err(opened.body),
+                    Kind::Error => Err(ErrorAnswer {
+                        key: None,
+                        said: opened.body,
+                    }),
                     _ => Ok(opened.body),
                 };
                 Ok((opened.cell, body))
@@ -399,7 +441,13 @@ impl BusClient {
                     .trust
                     .open(&bytes, Kind::Reply, &sealed_on, parameters)
                     .map_err(distrust)?;
-                Ok((opened.cell, Err(format!("{key}: {}", opened.body))))
+                Ok((
+                    opened.cell,
+                    Err(ErrorAnswer {
+                        key: Some(key.into()),
+                        said: opened.body,
+                    }),
+                ))
             }
         }
     }
@@ -417,16 +465,16 @@ enum Judged {
 
 /// Judges an answer to the command whose payload's digest is `digest`:
 /// only an outcome naming it is the command's.
-fn judge_command(answer: &Result<String, String>, digest: &str) -> Judged {
+fn judge_command(answer: &Result<String, ErrorAnswer>, digest: &str) -> Judged {
     let text = match answer {
         Ok(text) => text,
         // An agent that answers commands with outcomes only never sends
         // these; "busy" costs only another try.
-        Err(why) if why.contains(BUSY) => return Judged::Again,
+        Err(why) if why.busy() => return Judged::Again,
         Err(why) => {
             return Judged::Unbound(format!(
                 "an error answer that names no command: {}",
-                crate::operator::escaped(why)
+                crate::operator::escaped(&why.to_string())
             ))
         }
     };
@@ -461,7 +509,7 @@ fn fresh() -> String {
 enum Answer {
     /// A cell's agent's answer (believed): the cell and its text, or its
     /// error answer.
-    Agent(String, Result<String, String>),
+    Agent(String, Result<String, ErrorAnswer>),
     /// Nothing believed; why each answer that came was not.
     Nothing(Vec<String>),
 }

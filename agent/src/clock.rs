@@ -25,18 +25,26 @@ pub fn rfc3339(ms: u64) -> String {
     humantime::format_rfc3339_millis(UNIX_EPOCH + Duration::from_millis(ms)).to_string()
 }
 
+/// A text that is neither a time nor a duration back from now (the text).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("'{0}' is neither a time (2026-11-21T10:00:00Z) nor a duration back from now (1h, 30m)")]
+pub struct NotATime(pub String);
+
 /// Parses RFC 3339 (`2026-11-21T10:00:00Z`) or a duration back from now
 /// (`1h`, `30m`) into ms since the epoch.
 ///
 /// # Errors
 /// Neither form.
-pub fn parse_time(text: &str, now: u64) -> Result<u64, String> {
+pub fn parse_time(text: &str, now: u64) -> Result<u64, NotATime> {
     if let Ok(d) = humantime::parse_duration(text) {
         return Ok(now.saturating_sub(d.as_millis() as u64));
     }
     humantime::parse_rfc3339_weak(text)
-        .map(|t| t.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as u64))
-        .map_err(|_| format!("'{text}' is neither a time (2026-11-21T10:00:00Z) nor a duration back from now (1h, 30m)"))
+        .map(|t| {
+            t.duration_since(UNIX_EPOCH)
+                .map_or(0, |d| d.as_millis() as u64)
+        })
+        .map_err(|_| NotATime(text.into()))
 }
 
 /// Where an agent's parts read the time: the system clock, or a clock a

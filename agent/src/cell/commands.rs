@@ -12,8 +12,8 @@ use tokio::sync::oneshot;
 
 use super::answers;
 use super::{
-    CellLoop, CommandOutcome, CommandRecord, Input, Stage, Written, RECORD_FIELD_BYTES,
-    WRITE_TIMEOUT,
+    CellLoop, CommandError, CommandOutcome, CommandRecord, Input, Stage, Written,
+    RECORD_FIELD_BYTES, WRITE_TIMEOUT,
 };
 use crate::operator::refusals;
 use crate::operator::{clip, Action, Command, NotACommand, Refusal};
@@ -46,27 +46,26 @@ fn stray_field(cmd: &Command) -> Option<&'static str> {
 impl CellLoop {
     /// Until when a `shelve` command shelves (`None`: one-shot), or why
     /// it may not.
-    pub(super) fn shelf(&self, cmd: &Command, now: u64) -> Result<Option<u64>, String> {
+    pub(super) fn shelf(&self, cmd: &Command, now: u64) -> Result<Option<u64>, CommandError> {
         if cmd.reason.as_deref().unwrap_or("").trim().is_empty() {
-            return Err("a shelf needs a reason".into());
+            return Err(CommandError::ShelfNeedsReason);
         }
         match cmd.value.as_deref() {
             Some("once") => Ok(None),
             Some(text) => {
-                let d = humantime::parse_duration(text).map_err(|_| {
-                    format!("shelve for '{text}': give a duration (30m, 2h) or once")
-                })?;
+                let d = humantime::parse_duration(text)
+                    .map_err(|_| CommandError::ShelfDuration(text.into()))?;
                 if d.is_zero() || d > self.max_shelve {
-                    return Err(format!(
-                        "shelve for {text}: at most {} on this cell",
-                        humantime::format_duration(self.max_shelve)
-                    ));
+                    return Err(CommandError::ShelfTooLong {
+                        asked: text.into(),
+                        max: self.max_shelve,
+                    });
                 }
                 Ok(Some(now.saturating_add(
                     d.as_millis().try_into().unwrap_or(u64::MAX),
                 )))
             }
-            None => Err("shelve needs a duration (30m, 2h) or once".into()),
+            None => Err(CommandError::ShelfNeedsDuration),
         }
     }
 
@@ -133,7 +132,7 @@ impl CellLoop {
             }
         }
         if matches!(cmd.action, Action::Force | Action::Stop) {
-            let checked = checked.map_err(|r| r.to_string());
+            let checked = checked.map_err(CommandError::from);
             return self.switch_command(cmd, checked, reply, now).await;
         }
         let verified = checked.is_ok();
@@ -149,12 +148,11 @@ impl CellLoop {
             .as_ref()
             .map_or_else(String::new, |c| format!(": {c}"));
         let done = match checked {
-            Err(refusal) => Err(refusal.to_string()),
-            Ok(()) if stray_field(&cmd).is_some() => Err(format!(
-                "{} takes no {}",
-                cmd.action,
-                stray_field(&cmd).unwrap_or_default()
-            )),
+            Err(refusal) => Err(CommandError::Gate(refusal)),
+            Ok(()) if stray_field(&cmd).is_some() => Err(CommandError::StrayField {
+                action: cmd.action,
+                field: stray_field(&cmd).unwrap_or_default(),
+            }),
             Ok(()) if cmd.action == Action::Ack && self.engine.is_condition(&cmd.alarm) => {
                 return self
                     .acknowledge_at_plc(base, comment.as_deref(), reply)
@@ -164,11 +162,11 @@ impl CellLoop {
                 Action::Ack => self
                     .engine
                     .acknowledge(&cmd.alarm, &cmd.operator, comment.as_deref(), now)
-                    .map_err(|e| e.to_string()),
+                    .map_err(CommandError::from),
                 Action::Reset => self
                     .engine
                     .reset(&cmd.alarm, &cmd.operator, now)
-                    .map_err(|e| e.to_string()),
+                    .map_err(CommandError::from),
                 Action::Shelve => self.shelf(&cmd, now).and_then(|until| {
                     self.engine
                         .shelve(
@@ -178,14 +176,14 @@ impl CellLoop {
                             until,
                             now,
                         )
-                        .map_err(|e| e.to_string())
+                        .map_err(CommandError::from)
                 }),
                 Action::Unshelve => self
                     .engine
                     .unshelve(&cmd.alarm, now)
-                    .map_err(|e| e.to_string()),
+                    .map_err(CommandError::from),
                 Action::OutOfService => match cmd.reason.as_deref().map(str::trim) {
-                    None | Some("") => Err("out-of-service needs a reason (--reason)".into()),
+                    None | Some("") => Err(CommandError::OutOfServiceNeedsReason),
                     Some(reason) => self
                         .engine
                         .take_out_of_service(
@@ -194,14 +192,14 @@ impl CellLoop {
                             &clip(reason, RECORD_FIELD_BYTES),
                             now,
                         )
-                        .map_err(|e| e.to_string()),
+                        .map_err(CommandError::from),
                 },
                 Action::InService => self
                     .engine
                     .return_to_service(&cmd.alarm, now)
-                    .map_err(|e| e.to_string()),
+                    .map_err(CommandError::from),
                 // Taken by `switch_command` above.
-                Action::Force | Action::Stop => Err(format!("{} is not handled here", cmd.action)),
+                Action::Force | Action::Stop => Err(CommandError::NotHandledHere(cmd.action)),
                 Action::Configure => match self.configure(&cmd) {
                     Err(why) => Err(why),
                     Ok(asks) => {
@@ -230,7 +228,7 @@ impl CellLoop {
                 format!("{} {} by {}{said}", cmd.action, cmd.alarm, cmd.operator),
                 step,
             ),
-            Err(why) => (false, why, Step::default()),
+            Err(why) => (false, why.to_string(), Step::default()),
         };
         let record = CommandRecord {
             verified,
@@ -284,21 +282,21 @@ impl CellLoop {
     /// What an authorised write writes: the tag's index and the value; or
     /// why it is refused here (never sent) when the tag is unknown, the
     /// command carries no value, or the source cannot write.
-    pub(super) fn write(&mut self, cmd: &Command) -> Result<(usize, String), String> {
+    pub(super) fn write(&mut self, cmd: &Command) -> Result<(usize, String), CommandError> {
         if !cmd.alarm.is_empty() {
-            return Err("a write names a tag, not an alarm".into());
+            return Err(CommandError::WriteNamesAlarm);
         }
         let (Some(tag), Some(value)) = (&cmd.tag, &cmd.value) else {
-            return Err("a write needs a tag and a value".into());
+            return Err(CommandError::WriteIncomplete);
         };
         let Some(index) = self
             .engine
             .tag_index(&cellwatch_models::signal::Signal::new(tag))
         else {
-            return Err(format!("no tag {}", clip(tag, RECORD_FIELD_BYTES)));
+            return Err(CommandError::NoTag(clip(tag, RECORD_FIELD_BYTES)));
         };
         if self.writer.is_none() {
-            return Err("this cell's source takes no writes".into());
+            return Err(CommandError::NoWrites);
         }
         Ok((index, value.clone()))
     }
@@ -348,31 +346,27 @@ impl CellLoop {
         tag: Option<usize>,
         what: Write,
         limit: Duration,
-    ) -> impl Future<Output = Result<String, String>> + Send + 'static {
+    ) -> impl Future<Output = Result<String, CommandError>> + Send + 'static {
         let settled = self.settled();
         let health = self.journal_health.clone();
         let writer = self.writer.clone();
         async move {
             settled.await;
             if let Some(why) = health.as_ref().and_then(|h| h.borrow().clone()) {
-                return Err(format!(
-                    "not written: the journal cannot write ({why}), and a write waits until its command is on disk"
-                ));
+                return Err(CommandError::JournalDown(why));
             }
             let Some(writer) = writer else {
-                return Err("this cell's source takes no writes".into());
+                return Err(CommandError::NoWrites);
             };
             let (reply, pending) = oneshot::channel();
             writer
                 .try_send(WriteRequest { tag, what, reply })
-                .map_err(|_| "busy: other writes are waiting for the PLC".to_string())?;
+                .map_err(|_| CommandError::WritesBusy)?;
             match tokio::time::timeout(limit, pending).await {
-                Ok(Ok(r)) => r.map_err(|e| e.to_string()),
-                Ok(Err(_)) => Err("the source stopped before writing".into()),
-                Err(_) => Err(format!(
-                    "no answer from the PLC within {} s",
-                    limit.as_secs()
-                )),
+                // What the source said, whatever type it says it in.
+                Ok(Ok(r)) => r.map_err(|said| CommandError::NotWritten(said.to_string())),
+                Ok(Err(_)) => Err(CommandError::SourceStopped),
+                Err(_) => Err(CommandError::NoPlcAnswer(limit)),
             }
         }
     }

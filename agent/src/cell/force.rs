@@ -22,7 +22,8 @@ use super::forcing::{ForceSet, Pending};
 use crate::step::CommandOutcome;
 
 use super::{
-    CellLoop, CommandRecord, Input, Stage, Then, Written, RECORD_FIELD_BYTES, WRITE_TIMEOUT,
+    CellLoop, CommandError, CommandRecord, Input, Stage, Then, Written, RECORD_FIELD_BYTES,
+    WRITE_TIMEOUT,
 };
 use crate::operator::{clip, Action, Command};
 use crate::sources::Write;
@@ -40,7 +41,7 @@ impl CellLoop {
     pub(super) async fn switch_command(
         &mut self,
         cmd: Command,
-        gate: Result<(), String>,
+        gate: Result<(), CommandError>,
         reply: oneshot::Sender<CommandOutcome>,
         now: u64,
     ) {
@@ -62,19 +63,16 @@ impl CellLoop {
         .await;
         let checks = match gate {
             Err(why) => Err(("operator", why)),
-            Ok(()) if !cmd.alarm.is_empty() || cmd.tag.is_some() || cmd.reason.is_some() => Err((
-                "request",
-                format!(
-                    "{} names a chart or transition only (no alarm, tag or reason)",
-                    cmd.action
-                ),
-            )),
+            Ok(()) if !cmd.alarm.is_empty() || cmd.tag.is_some() || cmd.reason.is_some() => {
+                Err(("request", CommandError::SwitchNamesMore(cmd.action)))
+            }
             Ok(()) => Ok(format!(
                 "operator: {} may {} (signature verified)",
                 base.operator, cmd.action
             )),
         };
-        let refuse = |why: String| (row(Stage::Result, false, format!("refused: {why}")), why);
+        let refuse =
+            |why: CommandError| (row(Stage::Result, false, format!("refused: {why}")), why);
         let refused = match checks {
             Err((name, why)) => {
                 self.record(row(Stage::Check, false, format!("{name}: {why}")))
@@ -94,7 +92,7 @@ impl CellLoop {
             Some((result, why)) => {
                 tracing::warn!(operator = %base.operator, action = %cmd.action, target = %target, "refused: {why}");
                 self.record(result).await;
-                let _ = reply.send(CommandOutcome::new(false, why));
+                let _ = reply.send(CommandOutcome::new(false, why.to_string()));
             }
             None => self.send_pulse(&cmd, &target, base, reply).await,
         }
@@ -106,9 +104,9 @@ impl CellLoop {
         target: &str,
         now: u64,
         row: &(dyn Fn(Stage, bool, String) -> CommandRecord + Sync),
-    ) -> Result<(), String> {
+    ) -> Result<(), CommandError> {
         let Some((chart, transition)) = target.split_once('.') else {
-            let why = format!("'{target}' is not CHART.TRANSITION (F1.t3)");
+            let why = CommandError::NotATransition(target.into());
             self.record(row(Stage::Check, false, format!("transition: {why}")))
                 .await;
             return Err(why);
@@ -119,10 +117,10 @@ impl CellLoop {
             .as_ref()
             .filter(|p| p.writing || p.reply.is_some())
         {
-            let why = format!(
-                "{} forced by {} is still under way",
-                p.transition, p.operator
-            );
+            let why = CommandError::ForceUnderWay {
+                transition: p.transition.clone(),
+                operator: p.operator.clone(),
+            };
             self.record(row(Stage::Check, false, format!("busy: {why}")))
                 .await;
             return Err(why);
@@ -132,7 +130,7 @@ impl CellLoop {
                 checks: vec![force::ForceCheck {
                     name: "transition",
                     passed: false,
-                    detail: format!("no chart '{chart}' on this cell"),
+                    detail: CommandError::NoChart(chart.into()).to_string(),
                 }],
                 targets: Vec::new(),
             },
@@ -172,7 +170,10 @@ impl CellLoop {
             .await;
         }
         if let Some(failed) = verdict.refusal() {
-            return Err(format!("{}: {}", failed.name, failed.detail));
+            return Err(CommandError::CheckFailed {
+                check: failed.name,
+                detail: failed.detail.clone(),
+            });
         }
         let set = self.forcing.set_of(chart).expect("checked above");
         let flag = |r| {
@@ -219,17 +220,15 @@ impl CellLoop {
         &mut self,
         chart: &str,
         row: &(dyn Fn(Stage, bool, String) -> CommandRecord + Sync),
-    ) -> Result<(), String> {
+    ) -> Result<(), CommandError> {
         let found = match self.forcing.set_of(chart) {
-            None => Err(format!("no chart '{chart}' on this cell")),
-            Some(set) if set.stop_switch.is_none() => Err(format!(
-                "chart {chart} has no stop switch (checks.sfc stop_switch)"
-            )),
+            None => Err(CommandError::NoChart(chart.into())),
+            Some(set) if set.stop_switch.is_none() => Err(CommandError::NoStopSwitch(chart.into())),
             Some(_) => Ok(format!("chart {chart} has a stop switch")),
         };
         let (passed, detail) = match &found {
             Ok(d) => (true, d.clone()),
-            Err(d) => (false, d.clone()),
+            Err(d) => (false, d.to_string()),
         };
         self.record(row(Stage::Check, passed, format!("switch: {detail}")))
             .await;
@@ -271,7 +270,7 @@ impl CellLoop {
             then,
         };
         let Some(switch) = switch else {
-            let w = done(false, "this cell's source takes no writes".into());
+            let w = done(false, CommandError::NoWrites.to_string());
             return self.written(w).await;
         };
         // The request row, with the nonce, is on disk before the switch
@@ -281,7 +280,7 @@ impl CellLoop {
         self.start_task(async move {
             let w = match written.await {
                 Ok(d) => done(true, d),
-                Err(d) => done(false, d),
+                Err(d) => done(false, d.to_string()),
             };
             let _ = back.send(w).await;
         });

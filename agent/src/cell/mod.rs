@@ -19,6 +19,7 @@ pub mod force;
 pub mod forcing;
 mod gaps;
 mod plc;
+mod refused;
 mod reload;
 pub mod restore;
 mod session;
@@ -36,6 +37,7 @@ pub use crate::step::{
     CellStep, CommandOutcome, CommandRecord, Input, PublishedAlarm, Request, Stage,
     RECORD_FIELD_BYTES,
 };
+pub use refused::CommandError;
 
 use crate::clock::{rfc3339, Clock};
 use crate::operator::refusals::Refusals;
@@ -128,12 +130,12 @@ impl Written {
     /// `reply` once journaled.
     fn answer(
         record: CommandRecord,
-        done: Result<String, String>,
+        done: Result<String, CommandError>,
         reply: oneshot::Sender<CommandOutcome>,
     ) -> Written {
         let (accepted, detail) = match done {
             Ok(d) => (true, d),
-            Err(d) => (false, d),
+            Err(d) => (false, d.to_string()),
         };
         Written {
             record: CommandRecord {

@@ -10,8 +10,8 @@
 use cellwatch_models::engine::Step;
 use tokio::sync::{mpsc, oneshot};
 
-use super::swap::{Reload, ReloadAsk};
-use super::{CellLoop, CommandOutcome, CommandRecord, Input, Stage, Written};
+use super::swap::{Reload, ReloadAsk, ReloadBusy};
+use super::{CellLoop, CommandError, CommandOutcome, CommandRecord, Input, Stage, Written};
 use crate::operator::Command;
 
 /// How long an operator's `configure reload` may take (reading and
@@ -24,9 +24,7 @@ impl CellLoop {
     /// charts), which is said to its sender.
     pub(super) fn acceptable(&self, reload: Reload) -> Option<Reload> {
         if self.forcing.pending.is_some() {
-            let _ = reload.done.send(Err(
-                "a forced transition or stop is under way: read the configuration again once it has ended".into(),
-            ));
+            let _ = reload.done.send(Err(ReloadBusy));
             return None;
         }
         Some(reload)
@@ -108,18 +106,16 @@ impl CellLoop {
 impl CellLoop {
     /// Where an authorised `configure` command goes: `value` must be
     /// `reload`, and the agent must run from a file.
-    pub(super) fn configure(&self, cmd: &Command) -> Result<mpsc::Sender<ReloadAsk>, String> {
+    pub(super) fn configure(&self, cmd: &Command) -> Result<mpsc::Sender<ReloadAsk>, CommandError> {
         if !cmd.alarm.is_empty() || cmd.tag.is_some() {
-            return Err("configure names no alarm or tag".into());
+            return Err(CommandError::ConfigureNamesMore);
         }
         if cmd.value.as_deref() != Some("reload") {
-            return Err(
-                "configure: the only value is reload (read the configuration file again)".into(),
-            );
+            return Err(CommandError::ConfigureValue);
         }
-        self.reload_asks.clone().ok_or_else(|| {
-            "this agent was not started from a configuration file: nothing to read again".into()
-        })
+        self.reload_asks
+            .clone()
+            .ok_or(CommandError::NoConfigurationFile)
     }
 
     /// Carries out an authorised `configure reload`: its request row (with
@@ -149,9 +145,9 @@ impl CellLoop {
             let (answer, outcome) = oneshot::channel();
             let asked = asks.send(ReloadAsk { reply: answer }).await.is_ok();
             let done = match (asked, tokio::time::timeout(RELOAD_TIMEOUT, outcome).await) {
-                (false, _) | (true, Ok(Err(_))) => Err("the agent is stopping".to_string()),
-                (true, Ok(Ok(done))) => done,
-                (true, Err(_)) => Err(format!("no outcome within {} s", RELOAD_TIMEOUT.as_secs())),
+                (false, _) | (true, Ok(Err(_))) => Err(CommandError::Stopping),
+                (true, Ok(Ok(done))) => done.map_err(CommandError::from),
+                (true, Err(_)) => Err(CommandError::NoReloadOutcome(RELOAD_TIMEOUT)),
             };
             let _ = back.send(Written::answer(record, done, reply)).await;
         });

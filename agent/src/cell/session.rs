@@ -122,7 +122,7 @@ impl CellLoop {
                 .map_err(outcome_of),
             Action::Shelve => self
                 .shelf(&cmd, now)
-                .map_err(SessionOutcome::OutOfRange)
+                .map_err(|e| SessionOutcome::OutOfRange(e.to_string()))
                 .and_then(|until| {
                     let reason = cmd.reason.as_deref().unwrap_or_default();
                     self.engine

@@ -29,7 +29,7 @@ pub struct Reload {
     pub source: Option<NewSource>,
     /// Told once the new engine runs: the alarms it carried over; or why
     /// it was not taken.
-    pub done: oneshot::Sender<Result<usize, String>>,
+    pub done: oneshot::Sender<Result<usize, ReloadBusy>>,
 }
 
 /// A source started for a reload, as the loop takes it.
@@ -62,5 +62,18 @@ pub(super) async fn next(reloads: &mut Option<mpsc::Receiver<Reload>>) -> Reload
 pub struct ReloadAsk {
     /// What came of it, for the operator and the journal: taken (and what
     /// only a restart changes), or why not.
-    pub reply: oneshot::Sender<Result<String, String>>,
+    pub reply: oneshot::Sender<Result<String, NotReloaded>>,
 }
+
+/// Why the loop does not take a reload now: a forced transition or stop
+/// is under way (its switch and target belong to the running charts).
+#[derive(Debug, thiserror::Error)]
+#[error("a forced transition or stop is under way: read the configuration again once it has ended")]
+pub struct ReloadBusy;
+
+/// Why a configuration read again at an operator's `configure reload` was
+/// not taken, as the process that runs the agent said it (the file, and
+/// what was wrong with it).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct NotReloaded(pub String);

@@ -201,7 +201,10 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
             }
             Event::Agent(i, agent::AgentEvent::ReloadAsked(ask)) => {
                 super::systemd::reloading();
-                let _ = ask.reply.send(reload(&mut agents[i], &paths[i]).await);
+                let answer = reload(&mut agents[i], &paths[i]).await;
+                let _ = ask
+                    .reply
+                    .send(answer.map_err(crate::cell::swap::NotReloaded));
                 super::systemd::ready(&started);
             }
             Event::Agent(i, agent::AgentEvent::Ended(ended)) => {

@@ -34,6 +34,17 @@ pub struct TagNode {
     pub identifier: Identifier,
 }
 
+/// Why a text is not a node id (the text).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum NodeIdError {
+    /// Not of a node id's form.
+    #[error("'{0}' is not a node id like nsu=<namespace uri>;s=X0.06 or ns=2;s=X0.06")]
+    NotANodeId(String),
+    /// `nsu=` with nothing before the identifier.
+    #[error("'{0}' names an empty namespace uri")]
+    EmptyNamespaceUri(String),
+}
+
 impl TagNode {
     /// Reads `nsu=<uri>;<id>` or `ns=<index>;<id>` (or a bare `<id>`, in
     /// namespace 0). With `namespace_uri`, an index other than 0 stands for
@@ -41,10 +52,8 @@ impl TagNode {
     ///
     /// # Errors
     /// The text is not a node id; the message says what was expected.
-    pub fn parse(text: &str, namespace_uri: Option<&str>) -> Result<TagNode, String> {
-        let expected = || {
-            format!("'{text}' is not a node id like nsu=<namespace uri>;s=X0.06 or ns=2;s=X0.06")
-        };
+    pub fn parse(text: &str, namespace_uri: Option<&str>) -> Result<TagNode, NodeIdError> {
+        let expected = || NodeIdError::NotANodeId(text.into());
         if let Some(rest) = text.strip_prefix("nsu=") {
             let split = [";s=", ";i=", ";g=", ";b="]
                 .iter()
@@ -53,7 +62,7 @@ impl TagNode {
                 .ok_or_else(expected)?;
             let uri = unescape(&rest[..split]);
             if uri.is_empty() {
-                return Err(format!("'{text}' names an empty namespace uri"));
+                return Err(NodeIdError::EmptyNamespaceUri(text.into()));
             }
             let id = NodeId::from_str(&format!("ns=1;{}", &rest[split + 1..]))
                 .map_err(|_| expected())?;

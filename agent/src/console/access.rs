@@ -106,6 +106,24 @@ pub(super) enum SignInError {
     NoCells(String),
 }
 
+/// Names in `[readers]` that are neither `*`, an area nor a cell of the
+/// trust file: each with its reader, one a line.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+#[error("{}", unknown_readers(.0))]
+pub(super) struct UnknownNames(Vec<(String, String)>);
+
+fn unknown_readers(names: &[(String, String)]) -> String {
+    names
+        .iter()
+        .map(|(who, name)| {
+            format!(
+                "readers.{who}: '{name}' is neither an area of [areas] nor a cell of the trust file"
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
 /// The readers' rules: who reads which cells.
 #[derive(Debug, Clone)]
 pub(super) struct Readers {
@@ -124,7 +142,7 @@ impl Readers {
         readers: Option<&BTreeMap<String, Vec<String>>>,
         areas: &BTreeMap<String, Vec<String>>,
         cells: &BTreeSet<String>,
-    ) -> Result<Readers, String> {
+    ) -> Result<Readers, UnknownNames> {
         let Some(readers) = readers else {
             return Ok(Readers { rules: None });
         };
@@ -141,9 +159,7 @@ impl Readers {
                 } else if cells.contains(name) {
                     scope.insert(name.clone());
                 } else {
-                    problems.push(format!(
-                        "readers.{who}: '{name}' is neither an area of [areas] nor a cell of the trust file"
-                    ));
+                    problems.push((who.clone(), name.clone()));
                 }
             }
             let scope = if every {
@@ -156,7 +172,7 @@ impl Readers {
         if problems.is_empty() {
             Ok(Readers { rules: Some(rules) })
         } else {
-            Err(problems.join("\n"))
+            Err(UnknownNames(problems))
         }
     }
 
@@ -494,7 +510,9 @@ mod tests {
         assert_eq!(r.scope_of("stranger"), None);
         let bad = BTreeMap::from([("kim".to_string(), vec!["press-shpo".to_string()])]);
         assert_eq!(
-            Readers::resolve(Some(&bad), &areas, &cells).unwrap_err(),
+            Readers::resolve(Some(&bad), &areas, &cells)
+                .unwrap_err()
+                .to_string(),
             "readers.kim: 'press-shpo' is neither an area of [areas] nor a cell of the trust file"
         );
     }

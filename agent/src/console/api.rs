@@ -24,6 +24,7 @@ use futures_util::Stream;
 use tokio::sync::broadcast::error::RecvError;
 use tokio::time::Instant;
 
+use super::api_error::ApiError;
 use super::web::{error, json, Web, Who};
 use crate::bus::keys::Service;
 use crate::client::ClientError;
@@ -368,7 +369,7 @@ pub(super) async fn agents(
             ),
             Err(e) => (
                 None,
-                serde_json::json!({ "file": path.display().to_string(), "error": e }),
+                serde_json::json!({ "file": path.display().to_string(), "error": e.to_string() }),
             ),
         },
     };
@@ -388,13 +389,13 @@ pub(super) async fn agents(
                     .bus
                     .ask(&cell, Service::About, "", None, ANSWER)
                     .await
-                    .map_err(|e| format!("its agent does not answer about itself: {e}"))
+                    .map_err(ApiError::NoAbout)
                     .and_then(|t| {
                         serde_json::from_str::<crate::payload::AboutPayload>(&t)
-                            .map_err(|e| format!("its agent's about does not read: {e}"))
+                            .map_err(ApiError::AboutUnreadable)
                     });
                 match about {
-                    Err(problem) => said(problem),
+                    Err(problem) => said(problem.to_string()),
                     Ok(about) => {
                         let plant = deployed.as_ref().as_ref();
                         let j = crate::plant::judge::judge(
@@ -421,27 +422,33 @@ pub(super) async fn agents(
 
 /// The file of what the plant deployed, read whole (at most
 /// [`crate::plant::judge::MAX_DEPLOYED_BYTES`]).
-fn read_deployed(path: &std::path::Path) -> Result<crate::plant::judge::DeployedPlant, String> {
+fn read_deployed(path: &std::path::Path) -> Result<crate::plant::judge::DeployedPlant, ApiError> {
     use crate::plant::judge::{DEPLOYED_SCHEMA, MAX_DEPLOYED_BYTES};
     use std::io::Read;
     let mut text = String::new();
     std::fs::File::open(path)
         .and_then(|f| f.take(MAX_DEPLOYED_BYTES + 1).read_to_string(&mut text))
-        .map_err(|e| format!("{}: {e}", path.display()))?;
+        .map_err(|source| ApiError::DeployedRead {
+            path: path.into(),
+            source,
+        })?;
     if text.len() as u64 > MAX_DEPLOYED_BYTES {
-        return Err(format!(
-            "{}: larger than {MAX_DEPLOYED_BYTES} bytes",
-            path.display()
-        ));
+        return Err(ApiError::DeployedTooLarge {
+            path: path.into(),
+            max: MAX_DEPLOYED_BYTES,
+        });
     }
     let plant: crate::plant::judge::DeployedPlant =
-        serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+        serde_json::from_str(&text).map_err(|source| ApiError::DeployedJson {
+            path: path.into(),
+            source,
+        })?;
     if plant.schema != DEPLOYED_SCHEMA {
-        return Err(format!(
-            "{}: schema '{}', not {DEPLOYED_SCHEMA}",
-            path.display(),
-            crate::operator::escaped(&plant.schema)
-        ));
+        return Err(ApiError::DeployedSchema {
+            path: path.into(),
+            schema: crate::operator::escaped(&plant.schema).into_owned(),
+            expected: DEPLOYED_SCHEMA,
+        });
     }
     Ok(plant)
 }
@@ -504,14 +511,16 @@ pub(super) async fn kpi(
                     .bus
                     .ask(&cell, Service::History, &parameters, None, ANSWER)
                     .await
-                    .map_err(|e| e.to_string())
+                    .map_err(ApiError::from)
                     .and_then(|t| {
-                        serde_json::from_str::<serde_json::Value>(&t).map_err(|e| e.to_string())
+                        serde_json::from_str::<serde_json::Value>(&t).map_err(ApiError::from)
                     }) {
                     Ok(report) => {
                         serde_json::json!({ "cell": cell, "area": area, "report": report })
                     }
-                    Err(e) => serde_json::json!({ "cell": cell, "area": area, "error": e }),
+                    Err(e) => {
+                        serde_json::json!({ "cell": cell, "area": area, "error": e.to_string() })
+                    }
                 }
             }
         })
@@ -528,15 +537,15 @@ pub(super) async fn kpi(
 /// Whether a query parameter's value holds nothing but letters, digits and
 /// `:.+-_` (at most 64 of them): what times, durations, kinds and numbers
 /// need, and nothing that could end a Zenoh parameter.
-fn plain_value(name: &str, value: &str) -> Result<(), String> {
+fn plain_value(name: &str, value: &str) -> Result<(), ApiError> {
     let plain = value
         .bytes()
         .all(|b| b.is_ascii_alphanumeric() || b":.+-_".contains(&b));
     if value.is_empty() || value.len() > 64 || !plain {
-        return Err(format!(
-            "{name}: '{}' is not a time, duration, kind or number",
-            crate::operator::escaped(value)
-        ));
+        return Err(ApiError::NotPlain {
+            name: name.into(),
+            value: crate::operator::escaped(value).into_owned(),
+        });
     }
     Ok(())
 }
@@ -618,9 +627,9 @@ pub(super) async fn command(
             StatusCode::OK,
             serde_json::json!({ "accepted": accepted, "detail": detail }).to_string(),
         ),
-        Err(ClientError::Answered(why)) => json(
+        Err(e @ (ClientError::Answered(_) | ClientError::NotAnOutcome(_))) => json(
             StatusCode::OK,
-            serde_json::json!({ "accepted": false, "detail": why }).to_string(),
+            serde_json::json!({ "accepted": false, "detail": e.to_string() }).to_string(),
         ),
         Err(e) => error(StatusCode::BAD_GATEWAY, e),
     }

@@ -26,12 +26,31 @@ const SESSIONS_PER_CELL: usize = 4;
 /// safety net under the events.
 const RESYNC_EVERY: Duration = Duration::from_secs(60);
 
+/// Why the console cannot listen to the agents.
+#[derive(Debug, thiserror::Error)]
+pub(super) enum ListenError {
+    /// A subscription to their alarms or states was refused.
+    #[error("cannot subscribe to {key}: {source}")]
+    Subscribe {
+        /// The key expression.
+        key: String,
+        /// Zenoh's error.
+        source: zenoh::Error,
+    },
+    /// Missed alarm events cannot be listened for.
+    #[error("cannot listen for missed alarm events: {0}")]
+    Misses(#[source] zenoh::Error),
+    /// The subscription to the agents' liveliness tokens was refused.
+    #[error("cannot subscribe to the agents' tokens: {0}")]
+    Tokens(#[source] zenoh::Error),
+}
+
 /// Starts the subscribers and the snapshot task; returns their tasks.
 pub(super) async fn start(
     shared: Arc<Shared>,
     root: &str,
     resync: mpsc::UnboundedReceiver<String>,
-) -> Result<Vec<JoinHandle<()>>, String> {
+) -> Result<Vec<JoinHandle<()>>, ListenError> {
     let every = shared.bus.keys("*");
     let session = shared.bus.session().clone();
     let alarms = session
@@ -39,22 +58,28 @@ pub(super) async fn start(
         .history(HistoryConfig::default().detect_late_publishers())
         .recovery(RecoveryConfig::default().heartbeat())
         .await
-        .map_err(|e| format!("cannot subscribe to {}: {e}", every.alarms()))?;
+        .map_err(|source| ListenError::Subscribe {
+            key: every.alarms(),
+            source,
+        })?;
     let misses = alarms
         .sample_miss_listener()
         .await
-        .map_err(|e| format!("cannot listen for missed alarm events: {e}"))?;
+        .map_err(ListenError::Misses)?;
     let states = session
         .declare_subscriber(every.state())
         .history(HistoryConfig::default().detect_late_publishers())
         .await
-        .map_err(|e| format!("cannot subscribe to {}: {e}", every.state()))?;
+        .map_err(|source| ListenError::Subscribe {
+            key: every.state(),
+            source,
+        })?;
     let tokens = session
         .liveliness()
         .declare_subscriber(every.agent_token("*"))
         .history(true)
         .await
-        .map_err(|e| format!("cannot subscribe to the agents' tokens: {e}"))?;
+        .map_err(ListenError::Tokens)?;
     let mut tasks = Vec::new();
 
     let s = shared.clone();
@@ -245,14 +270,13 @@ async fn snapshots(s: Arc<Shared>, mut resync: mpsc::UnboundedReceiver<String>) 
             let answer = s
                 .bus
                 .ask(&cell, Service::Snapshot, "", None, SNAPSHOT_ANSWER)
-                .await
-                .map_err(|e| e.to_string());
+                .await;
             take_snapshot(&s, &cell, answer);
         }
     }
 }
 
-fn take_snapshot(s: &Shared, cell: &str, answer: Result<String, String>) {
+fn take_snapshot(s: &Shared, cell: &str, answer: Result<String, impl std::fmt::Display>) {
     let text = match answer {
         Ok(text) => text,
         Err(e) => {

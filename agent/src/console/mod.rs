@@ -23,6 +23,7 @@
 
 mod access;
 mod api;
+mod api_error;
 pub mod config;
 mod gate;
 mod http;
@@ -94,7 +95,7 @@ impl Console {
         };
         let cells: std::collections::BTreeSet<String> = trust.cells().map(str::to_string).collect();
         let readers = access::Readers::resolve(cfg.readers.as_ref(), &cfg.areas, &cells)
-            .map_err(ConsoleError::Input)?;
+            .map_err(|e| ConsoleError::Input(e.to_string()))?;
         let listener = tokio::net::TcpListener::bind(cfg.listen)
             .await
             .map_err(|e| ConsoleError::Runtime(format!("cannot listen on {}: {e}", cfg.listen)))?;
@@ -115,7 +116,7 @@ impl Console {
         let (stop, stopped) = tokio::sync::watch::channel(false);
         let mut tasks = listen::start(shared.clone(), &cfg.root, resync_rx)
             .await
-            .map_err(ConsoleError::Runtime)?;
+            .map_err(|e| ConsoleError::Runtime(e.to_string()))?;
         let gate = Arc::new(gate::Gate::new(
             gate::names_of(addr, &certificate_names, &cfg.names),
             readers,

@@ -156,7 +156,19 @@ pub enum Entry {
 struct Batch {
     entries: Vec<Entry>,
     /// Told the outcome once the rows are committed (or not).
-    done: Option<oneshot::Sender<Result<(), String>>>,
+    done: Option<oneshot::Sender<Result<(), NotCommitted>>>,
+}
+
+/// Why rows handed to the writer are not committed (yet): they are kept
+/// and retried. SQLite's words for why the journal cannot write.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum NotCommitted {
+    /// An earlier write failed, and the next try is not due yet.
+    #[error("{0} (rows queued)")]
+    Queued(String),
+    /// This write failed.
+    #[error("{0}")]
+    Failed(String),
 }
 
 /// The handle the engine writes through.
@@ -377,9 +389,9 @@ impl Journal {
         self.send(entries, Some(done), false).await?;
         match committed.await {
             Ok(Ok(())) => Ok(()),
-            Ok(Err(message)) => Err(JournalError::Commit {
+            Ok(Err(source)) => Err(JournalError::Commit {
                 path: self.path.clone(),
-                message,
+                source,
             }),
             Err(_) => Err(self.stopped()),
         }
@@ -390,7 +402,7 @@ impl Journal {
     async fn send(
         &self,
         entries: Vec<Entry>,
-        done: Option<oneshot::Sender<Result<(), String>>>,
+        done: Option<oneshot::Sender<Result<(), NotCommitted>>>,
         staged: bool,
     ) -> Result<(), JournalError> {
         let rows = entries.len();
@@ -548,7 +560,7 @@ fn writer(
             // Retried at its pace, not at every step's.
             let why = health.borrow().clone().unwrap_or_default();
             for done in waiting.drain(..) {
-                let _ = done.send(Err(format!("{why} (rows queued)")));
+                let _ = done.send(Err(NotCommitted::Queued(why.clone())));
             }
         } else if !pending.is_empty() {
             last_attempt = Instant::now();
@@ -587,7 +599,7 @@ fn writer(
                         tracing::error!(path = %path.display(), error = %why, rows = pending.len(), "journal write failed; rows kept and retried");
                         let _ = health.send(Some(why.clone()));
                     }
-                    Err(why)
+                    Err(NotCommitted::Failed(why))
                 }
             };
             for done in waiting.drain(..) {

@@ -30,12 +30,12 @@ pub enum JournalError {
         source: std::io::Error,
     },
     /// A batch could not be committed; its rows are lost.
-    #[error("journal {path}: commit failed: {message}")]
+    #[error("journal {path}: commit failed: {source}")]
     Commit {
         /// The file.
         path: PathBuf,
-        /// SQLite's message.
-        message: String,
+        /// Why.
+        source: super::NotCommitted,
     },
     /// The writer thread has stopped.
     #[error("journal {path}: the writer has stopped")]

@@ -17,8 +17,11 @@
 //! Also here: [`escaped`], how every printer shows text an operator or a
 //! journal supplies.
 
+mod key_error;
 pub mod plant;
 pub mod refusals;
+
+pub use key_error::KeyError;
 
 use std::collections::{BTreeSet, HashMap, VecDeque};
 use std::path::Path;
@@ -298,11 +301,11 @@ impl OperatorKey {
     ///
     /// # Errors
     /// Not 64 hex digits.
-    pub fn from_hex(operator: &str, hex_key: &str) -> Result<OperatorKey, String> {
+    pub fn from_hex(operator: &str, hex_key: &str) -> Result<OperatorKey, KeyError> {
         let bytes: [u8; 32] = hex::decode(hex_key.trim())
             .ok()
             .and_then(|b| b.try_into().ok())
-            .ok_or("a private key is 64 hex digits")?;
+            .ok_or(KeyError::NotHex)?;
         Ok(OperatorKey {
             operator: operator.into(),
             key: SigningKey::from_bytes(&bytes),
@@ -313,10 +316,15 @@ impl OperatorKey {
     ///
     /// # Errors
     /// The file is not a key file; the message names it.
-    pub fn parse(origin: &str, text: &str) -> Result<OperatorKey, String> {
-        let f: KeyFile = toml::from_str(text).map_err(|e| format!("{origin}: {}", e.message()))?;
-        Self::from_hex(&f.operator, &f.private_key)
-            .map_err(|e| format!("{origin}: private_key: {e}"))
+    pub fn parse(origin: &str, text: &str) -> Result<OperatorKey, KeyError> {
+        let f: KeyFile = toml::from_str(text).map_err(|e| KeyError::Syntax {
+            origin: origin.into(),
+            message: e.message().into(),
+        })?;
+        Self::from_hex(&f.operator, &f.private_key).map_err(|e| KeyError::PrivateKey {
+            origin: origin.into(),
+            source: Box::new(e),
+        })
     }
 
     /// The key file's text.

@@ -195,12 +195,12 @@ fn list(actions: &BTreeSet<Action>) -> String {
 ///
 /// # Errors
 /// Not an Ed25519 public key.
-pub fn admin_key(hex_key: &str) -> Result<VerifyingKey, String> {
+pub fn admin_key(hex_key: &str) -> Result<VerifyingKey, super::KeyError> {
     hex::decode(hex_key.trim())
         .ok()
         .and_then(|b| <[u8; 32]>::try_from(b).ok())
         .and_then(|b| VerifyingKey::from_bytes(&b).ok())
-        .ok_or_else(|| "not an Ed25519 public key (64 hex digits)".into())
+        .ok_or(super::KeyError::NotAPublicKey)
 }
 
 #[cfg(test)]

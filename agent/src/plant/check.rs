@@ -75,6 +75,53 @@ impl Report {
     }
 }
 
+/// Why the plant check could not read a file of the plant's folder, or
+/// ask an agent's `/readyz`.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckError {
+    /// The signed operators list cannot be read.
+    #[error("{path}: {source}")]
+    ReadList {
+        /// The file.
+        path: std::path::PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// It is not a signed operators list.
+    #[error("{path}: {source}")]
+    List {
+        /// The file.
+        path: std::path::PathBuf,
+        /// Why.
+        source: crate::operator::plant::ListError,
+    },
+    /// The list it signs does not read.
+    #[error("{path}: {source}")]
+    ListJson {
+        /// The file.
+        path: std::path::PathBuf,
+        /// Why.
+        source: serde_json::Error,
+    },
+    /// The host and port make no URL.
+    #[error("{0}")]
+    Url(#[from] hyper::http::uri::InvalidUri),
+    /// The agent's metrics endpoint cannot be reached.
+    #[error("{0}")]
+    Http(#[from] hyper_util::client::legacy::Error),
+    /// It answered, not ready: its status and what it said.
+    #[error("{status}: {body}")]
+    NotReady {
+        /// The HTTP status.
+        status: hyper::StatusCode,
+        /// What it said (at most 4 KiB).
+        body: String,
+    },
+    /// No answer in time.
+    #[error("no answer in {} s", .0.as_secs())]
+    NoAnswer(Duration),
+}
+
 fn sha256(bytes: &[u8]) -> String {
     hex::encode(Sha256::digest(bytes))
 }
@@ -84,13 +131,20 @@ fn sha256(bytes: &[u8]) -> String {
 ///
 /// # Errors
 /// It cannot be read, or it does not read as one.
-pub fn operators_list(layout: &Layout) -> Result<(Vec<u8>, u64), String> {
+pub fn operators_list(layout: &Layout) -> Result<(Vec<u8>, u64), CheckError> {
     let path = layout.operators_list();
-    let bytes = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let signed = crate::operator::plant::SignedList::parse(&bytes)
-        .map_err(|e| format!("{}: {e}", path.display()))?;
-    let list: crate::operator::plant::PlantList =
-        serde_json::from_str(&signed.list).map_err(|e| format!("{}: {e}", path.display()))?;
+    let bytes = match std::fs::read(&path) {
+        Ok(b) => b,
+        Err(source) => return Err(CheckError::ReadList { path, source }),
+    };
+    let signed = match crate::operator::plant::SignedList::parse(&bytes) {
+        Ok(s) => s,
+        Err(source) => return Err(CheckError::List { path, source }),
+    };
+    let list: crate::operator::plant::PlantList = match serde_json::from_str(&signed.list) {
+        Ok(l) => l,
+        Err(source) => return Err(CheckError::ListJson { path, source }),
+    };
     Ok((bytes, list.version))
 }
 
@@ -118,7 +172,7 @@ pub fn deployed(inventory: &Inventory) -> DeployedPlant {
                 config: layout.shown(&config),
                 config_sha256: std::fs::read(&config)
                     .map(|bytes| sha256(&bytes))
-                    .map_err(|e| e.to_string()),
+                    .map_err(super::judge::Unreadable::from),
                 bus_certificate: layout.shown(&cert),
                 bus_certificate_sha256: std::fs::read_to_string(&cert)
                     .ok()
@@ -178,11 +232,10 @@ pub fn folder(inventory: &Inventory, now_ms: u64) -> (Report, Option<Trust>) {
             (_, None) => {}
         }
         let cert = layout.on_host(&cell.host, &format!("{etc}/agent-{id}.pem"));
-        match std::fs::read_to_string(&cert)
-            .map_err(|e| e.to_string())
-            .and_then(|pem| facts(&pem).map_err(|e| e.to_string()))
-        {
-            Ok(c) => expiry("its bus certificate", c.not_after_ms, now_ms, &mut f),
+        let read = std::fs::read_to_string(&cert);
+        match read.as_deref().map(facts) {
+            Ok(Ok(c)) => expiry("its bus certificate", c.not_after_ms, now_ms, &mut f),
+            Ok(Err(e)) => f.problems.push(format!("{}: {e}", layout.shown(&cert))),
             Err(e) => f.problems.push(format!("{}: {e}", layout.shown(&cert))),
         }
         report.findings.push(f);
@@ -323,16 +376,14 @@ fn trust_previous(layout: &Layout, id: &str) -> Vec<String> {
 }
 
 /// Asks `http://host:port/readyz`.
-async fn ready(host: &str, port: u16, timeout: Duration) -> Result<(), String> {
+async fn ready(host: &str, port: u16, timeout: Duration) -> Result<(), CheckError> {
     use http_body_util::{BodyExt, Empty};
     use hyper_util::client::legacy::Client;
     let client: Client<_, Empty<bytes::Bytes>> =
         Client::builder(hyper_util::rt::TokioExecutor::new()).build_http();
-    let uri: hyper::Uri = format!("http://{host}:{port}/readyz")
-        .parse()
-        .map_err(|e| format!("{e}"))?;
+    let uri: hyper::Uri = format!("http://{host}:{port}/readyz").parse()?;
     let asked = tokio::time::timeout(timeout, async {
-        let response = client.get(uri).await.map_err(|e| format!("{e}"))?;
+        let response = client.get(uri).await?;
         let status = response.status();
         let body = http_body_util::Limited::new(response.into_body(), 4096)
             .collect()
@@ -342,11 +393,11 @@ async fn ready(host: &str, port: u16, timeout: Duration) -> Result<(), String> {
         if status.is_success() {
             Ok(())
         } else {
-            Err(format!("{status}: {body}"))
+            Err(CheckError::NotReady { status, body })
         }
     })
     .await;
-    asked.unwrap_or_else(|_| Err(format!("no answer in {} s", timeout.as_secs())))
+    asked.unwrap_or(Err(CheckError::NoAnswer(timeout)))
 }
 
 /// How long a probe put is repeated, waiting for it to come through.

@@ -37,7 +37,7 @@ pub struct DeployedCell {
     /// Its configuration file, as the plant's folder names it.
     pub config: String,
     /// SHA-256 (hex) of that file, or why it cannot be read.
-    pub config_sha256: Result<String, String>,
+    pub config_sha256: Result<String, Unreadable>,
     /// Its bus certificate, as the plant's folder names it.
     pub bus_certificate: String,
     /// SHA-256 (hex) of that certificate's DER bytes, when it reads.
@@ -46,6 +46,20 @@ pub struct DeployedCell {
     pub signing_key: String,
     /// The signing keys (hex) it is being rotated from.
     pub rotated_from: Vec<String>,
+}
+
+/// Why a file the plant deployed could not be read when the plant was
+/// made: the system's words, kept in the deployed file as they were said
+/// (a plain string in it).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, thiserror::Error)]
+#[serde(transparent)]
+#[error("{0}")]
+pub struct Unreadable(pub String);
+
+impl From<std::io::Error> for Unreadable {
+    fn from(e: std::io::Error) -> Unreadable {
+        Unreadable(e.to_string())
+    }
 }
 
 /// What an agent's answer says: as it should be, and wrong (each with what
@@ -245,7 +259,7 @@ mod tests {
             cells: BTreeMap::new(),
         };
         let mut broken = deployed();
-        broken.config_sha256 = Err("No such file or directory".into());
+        broken.config_sha256 = Err(Unreadable("No such file or directory".into()));
         p.cells.insert("m01".into(), deployed());
         p.cells.insert("m02".into(), broken);
         let text = serde_json::to_string(&p).unwrap();

@@ -278,10 +278,10 @@ fn admin_signing(w: &mut Writer, layout: &Layout) -> Result<OperatorKey, PlantEr
         path: private.clone(),
         source,
     })?;
-    let key = OperatorKey::parse(&private.display().to_string(), &text).map_err(|message| {
+    let key = OperatorKey::parse(&private.display().to_string(), &text).map_err(|e| {
         PlantError::Certificate {
             name: "the plant administrator's signing key".into(),
-            message,
+            message: e.to_string(),
         }
     })?;
     w.derived(&public, format!("{}\n", key.public_hex()))?;

@@ -45,7 +45,7 @@ use crate::bus::envelope::{AgentKey, Kind as Sealed};
 use crate::bus::keys::{CellKeys, Service};
 use crate::bus::ZenohError;
 pub use crate::bus::MAX_MESSAGE_BYTES;
-use crate::clock::{now_ms, parse_time};
+use crate::clock::{now_ms, parse_time, NotATime};
 use crate::journal::{self, Barrier, HistoryQuery, Journal};
 use crate::metrics::Metrics;
 use crate::operator::{Command, NotACommand};
@@ -201,10 +201,13 @@ impl Services {
             let permit = self.permits.clone().try_acquire_owned().ok();
             if permit.is_none() || (matches!(kind, Service::History) && history_permit.is_none()) {
                 self.metrics.refused(kind.name(), "busy");
-                let busy = "the agent is busy: try again";
+                let busy = ServiceError::Busy;
                 let answer = match kind {
-                    Service::Command => Ok(command_answer(&q, CommandOutcome::new(false, busy))),
-                    _ => Err(busy.into()),
+                    Service::Command => Ok(command_answer(
+                        &q,
+                        CommandOutcome::new(false, busy.to_string()),
+                    )),
+                    _ => Err(busy),
                 };
                 reply(&self.seal, kind, &self.metrics, q, answer).await;
                 continue;
@@ -232,12 +235,12 @@ impl Services {
                         }
                     },
                     Service::Snapshot => snapshot(&requests, &chain).await,
-                    Service::About => Err("about is answered at once".into()),
+                    Service::About => Err(ServiceError::AboutAtOnce),
                     Service::Command => Ok(command_answer(
                         &q,
                         command(&requests, &q, &metrics)
                             .await
-                            .unwrap_or_else(|why| CommandOutcome::new(false, why)),
+                            .unwrap_or_else(|why| CommandOutcome::new(false, why.to_string())),
                     )),
                 };
                 reply(&seal, kind, &metrics, q, result).await;
@@ -245,6 +248,43 @@ impl Services {
         }
         answering.shutdown().await;
     }
+}
+
+/// Why a query is answered with an error: the text its asker reads.
+#[derive(Debug, thiserror::Error)]
+pub enum ServiceError {
+    /// As many queries are being answered as may be.
+    #[error("the agent is busy: try again")]
+    Busy,
+    /// `about` has an answer of its own, never queued.
+    #[error("about is answered at once")]
+    AboutAtOnce,
+    /// The agent is stopping: the cell loop no longer answers.
+    #[error("the agent is stopping")]
+    Stopping,
+    /// A history selector's time does not read.
+    #[error(transparent)]
+    Time(#[from] NotATime),
+    /// A history selector's `after` is not a sequence number (the text).
+    #[error("after '{0}' is not a sequence number")]
+    After(String),
+    /// A history selector's `limit` is not a number (the text).
+    #[error("limit '{0}' is not a number")]
+    Limit(String),
+    /// `kind=kpi` over an empty window.
+    #[error("kind=kpi: since must be before until")]
+    KpiWindow,
+    /// The blocking read of the journal did not finish.
+    #[error("{what} query failed: {source}")]
+    Task {
+        /// `history`, `kpi` or `production`.
+        what: &'static str,
+        /// Why.
+        source: tokio::task::JoinError,
+    },
+    /// The journal cannot be read, or the query asks for nothing it holds.
+    #[error(transparent)]
+    History(#[from] journal::HistoryError),
 }
 
 /// What the plant operators list's listener heard next; never, without one.
@@ -257,7 +297,11 @@ async fn heard(plant: &mut Option<plant_operators::Listener>) -> plant_operators
 
 /// One page of `query` from the journal. A read that fails is logged and
 /// answered with the reason; it is not a refusal of the request.
-async fn history(journal: &Path, rules: &KpiRules, query: HistoryQuery) -> Result<String, String> {
+async fn history(
+    journal: &Path,
+    rules: &KpiRules,
+    query: HistoryQuery,
+) -> Result<String, ServiceError> {
     match query.kind.as_deref() {
         Some("kpi") => return kpi(journal, rules, &query).await,
         Some("production") => return production(journal, &query).await,
@@ -269,10 +313,12 @@ async fn history(journal: &Path, rules: &KpiRules, query: HistoryQuery) -> Resul
         journal::history(&conn, &query)
     })
     .await
-    .map_err(|e| format!("history query failed: {e}"))?
-    .map_err(|e| {
+    .map_err(|source| ServiceError::Task {
+        what: "history",
+        source,
+    })?
+    .inspect_err(|e| {
         tracing::error!(journal = %journal.display(), error = %e, "cannot read the journal for a history query");
-        e.to_string()
     })?;
     Ok(serde_json::to_string(&rows).unwrap_or_default())
 }
@@ -280,12 +326,16 @@ async fn history(journal: &Path, rules: &KpiRules, query: HistoryQuery) -> Resul
 /// The ISA-18.2 figures of `[since, until)` (default: the last 24 h, until
 /// now) from the journal, with their benchmarks, as `cellwatch report
 /// alarms --format json` prints them.
-async fn kpi(journal: &Path, rules: &KpiRules, query: &HistoryQuery) -> Result<String, String> {
+async fn kpi(
+    journal: &Path,
+    rules: &KpiRules,
+    query: &HistoryQuery,
+) -> Result<String, ServiceError> {
     let now = now_ms();
     let until = query.until.unwrap_or(now);
     let since = query.since.unwrap_or(until.saturating_sub(24 * 3_600_000));
     if since >= until {
-        return Err("kind=kpi: since must be before until".into());
+        return Err(ServiceError::KpiWindow);
     }
     let path = journal.to_path_buf();
     let read = tokio::task::spawn_blocking(move || {
@@ -293,10 +343,12 @@ async fn kpi(journal: &Path, rules: &KpiRules, query: &HistoryQuery) -> Result<S
         journal::alarm_events(&conn, since, until).map_err(journal::HistoryError::from)
     })
     .await
-    .map_err(|e| format!("kpi query failed: {e}"))?
-    .map_err(|e| {
+    .map_err(|source| ServiceError::Task {
+        what: "kpi",
+        source,
+    })?
+    .inspect_err(|e| {
         tracing::error!(journal = %journal.display(), error = %e, "cannot read the journal for the alarm figures");
-        e.to_string()
     })?;
     let report =
         cellwatch_models::kpi::alarm_report(&read.events, &read.before, since, until, now, rules);
@@ -310,7 +362,7 @@ async fn kpi(journal: &Path, rules: &KpiRules, query: &HistoryQuery) -> Result<S
 /// now): minutes per state hour by hour, availability, stop causes (named
 /// by their fault type), parts and work orders, as `cellwatch report daily
 /// --format json` computes them from the same journal rows.
-async fn production(journal: &Path, query: &HistoryQuery) -> Result<String, String> {
+async fn production(journal: &Path, query: &HistoryQuery) -> Result<String, ServiceError> {
     const DAY: u64 = 86_400_000;
     let now = now_ms();
     let start = query.since.unwrap_or(now.saturating_sub(DAY));
@@ -320,10 +372,12 @@ async fn production(journal: &Path, query: &HistoryQuery) -> Result<String, Stri
         journal::report_input(&conn, start, start + DAY).map_err(journal::HistoryError::from)
     })
     .await
-    .map_err(|e| format!("production query failed: {e}"))?
-    .map_err(|e| {
+    .map_err(|source| ServiceError::Task {
+        what: "production",
+        source,
+    })?
+    .inspect_err(|e| {
         tracing::error!(journal = %journal.display(), error = %e, "cannot read the journal for the production figures");
-        e.to_string()
     })?;
     let day = cellwatch_models::report::daily(
         &input.changes,
@@ -340,7 +394,7 @@ async fn production(journal: &Path, query: &HistoryQuery) -> Result<String, Stri
 ///
 /// # Errors
 /// A time or limit that does not parse.
-pub fn history_query(parameters: &str, now: u64) -> Result<HistoryQuery, String> {
+pub fn history_query(parameters: &str, now: u64) -> Result<HistoryQuery, ServiceError> {
     let params = selector_parameters(parameters);
     Ok(HistoryQuery {
         since: params
@@ -354,17 +408,11 @@ pub fn history_query(parameters: &str, now: u64) -> Result<HistoryQuery, String>
         kind: params.get("kind").cloned(),
         after: params
             .get("after")
-            .map(|a| {
-                a.parse()
-                    .map_err(|_| format!("after '{a}' is not a sequence number"))
-            })
+            .map(|a| a.parse().map_err(|_| ServiceError::After(a.clone())))
             .transpose()?,
         limit: params
             .get("limit")
-            .map(|l| {
-                l.parse()
-                    .map_err(|_| format!("limit '{l}' is not a number"))
-            })
+            .map(|l| l.parse().map_err(|_| ServiceError::Limit(l.clone())))
             .transpose()?,
     })
 }
@@ -374,7 +422,7 @@ pub fn history_query(parameters: &str, now: u64) -> Result<HistoryQuery, String>
 async fn snapshot(
     requests: &mpsc::Sender<Request>,
     chain: &tokio::sync::watch::Receiver<journal::chain::Link>,
-) -> Result<String, String> {
+) -> Result<String, ServiceError> {
     #[derive(serde::Serialize)]
     struct Answer<'a> {
         #[serde(flatten)]
@@ -385,8 +433,8 @@ async fn snapshot(
     requests
         .send(Request::Snapshot(tx))
         .await
-        .map_err(|_| "the agent is stopping".to_string())?;
-    let snap = rx.await.map_err(|_| "the agent is stopping".to_string())?;
+        .map_err(|_| ServiceError::Stopping)?;
+    let snap = rx.await.map_err(|_| ServiceError::Stopping)?;
     let answer = Answer {
         snapshot: &snap,
         command_chain: chain.borrow().announced(),
@@ -407,7 +455,7 @@ async fn command(
     requests: &mpsc::Sender<Request>,
     q: &Query,
     metrics: &Metrics,
-) -> Result<CommandOutcome, String> {
+) -> Result<CommandOutcome, ServiceError> {
     // As the querier says: anyone may claim any id, which only moves its
     // refusals to another summary row (at most 16 sources a minute).
     let source = q
@@ -447,8 +495,8 @@ async fn command(
             reply: tx,
         })
         .await
-        .map_err(|_| "the agent is stopping".to_string())?;
-    let outcome: CommandOutcome = rx.await.map_err(|_| "the agent is stopping".to_string())?;
+        .map_err(|_| ServiceError::Stopping)?;
+    let outcome: CommandOutcome = rx.await.map_err(|_| ServiceError::Stopping)?;
     if let Some(reason) = outcome.refused {
         metrics.refused("command", reason);
     }
@@ -464,7 +512,7 @@ async fn reply(
     kind: Service,
     metrics: &Metrics,
     q: Query,
-    result: Result<String, String>,
+    result: Result<String, ServiceError>,
 ) {
     let key = seal.keys.service(kind);
     let parameters = q.parameters().as_str().to_string();
@@ -475,7 +523,9 @@ async fn reply(
             q.reply(key, sealed).await
         }
         Err(e) => {
-            let sealed = seal.key.seal(Sealed::Error, &key, &parameters, at, e);
+            let sealed = seal
+                .key
+                .seal(Sealed::Error, &key, &parameters, at, e.to_string());
             q.reply_err(sealed).await
         }
     };

@@ -89,7 +89,9 @@ pub(crate) async fn command_chain(
 /// rest a runtime failure.
 fn failure(e: ClientError) -> Failure {
     match e {
-        e @ (ClientError::Config(_) | ClientError::Answered(_)) => Failure::Input(e.to_string()),
+        e @ (ClientError::Config(_) | ClientError::Answered(_) | ClientError::NotAnOutcome(_)) => {
+            Failure::Input(e.to_string())
+        }
         e => Failure::Runtime(e.to_string()),
     }
 }
@@ -620,7 +622,7 @@ async fn signed(t: Target<'_>, args: &SignerArgs, out: &mut dyn Write) -> Result
         (Some(path), _) => {
             let text = std::fs::read_to_string(path)
                 .map_err(|e| Failure::Input(format!("cannot read {}: {e}", path.display())))?;
-            OperatorKey::parse(&path.display().to_string(), &text).map_err(Failure::Input)?
+            OperatorKey::parse(&path.display().to_string(), &text).map_err(Failure::input)?
         }
         (None, Ok(hex_key)) => {
             let operator = args.operator.as_deref().ok_or_else(|| {

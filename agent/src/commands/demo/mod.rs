@@ -496,7 +496,7 @@ async fn demo_robot(
     let key_text = std::fs::read_to_string(operator_key)
         .map_err(|e| Failure::Runtime(format!("cannot read {}: {e}", operator_key.display())))?;
     let key = crate::operator::OperatorKey::parse(&operator_key.display().to_string(), &key_text)
-        .map_err(Failure::Runtime)?;
+        .map_err(Failure::runtime)?;
     let cell_id = r.cell.clone();
     let agent = agent::start(r, Some(tx)).await.map_err(start_failure)?;
     demo_bus.listening(&agent).await;

@@ -4,6 +4,7 @@ use std::net::SocketAddr;
 
 use toml::Spanned;
 
+use super::value_error::ValueError;
 use super::Validator;
 use crate::config::raw::RawAlarmServer;
 use crate::config::AlarmServerConfig;
@@ -61,13 +62,13 @@ impl Validator<'_> {
 }
 
 /// The socket address of `opc.tcp://IP:PORT`, or why it is not one.
-fn listen_address(text: &str) -> Result<SocketAddr, String> {
+fn listen_address(text: &str) -> Result<SocketAddr, ValueError> {
     let rest = text
         .strip_prefix("opc.tcp://")
-        .ok_or_else(|| format!("'{text}' is not like opc.tcp://0.0.0.0:4855"))?;
-    rest.trim_end_matches('/').parse().map_err(|_| {
-        format!("'{text}': give an IP address and a port, like opc.tcp://0.0.0.0:4855")
-    })
+        .ok_or_else(|| ValueError::NotOpcTcp(text.into()))?;
+    rest.trim_end_matches('/')
+        .parse()
+        .map_err(|_| ValueError::NoIpAndPort(text.into()))
 }
 
 #[cfg(test)]
@@ -81,11 +82,13 @@ mod tests {
             "127.0.0.1:4855".parse().unwrap()
         );
         assert_eq!(
-            listen_address("127.0.0.1:4855").unwrap_err(),
+            listen_address("127.0.0.1:4855").unwrap_err().to_string(),
             "'127.0.0.1:4855' is not like opc.tcp://0.0.0.0:4855"
         );
         assert_eq!(
-            listen_address("opc.tcp://scada:4855").unwrap_err(),
+            listen_address("opc.tcp://scada:4855")
+                .unwrap_err()
+                .to_string(),
             "'opc.tcp://scada:4855': give an IP address and a port, like opc.tcp://0.0.0.0:4855"
         );
     }

@@ -2,6 +2,7 @@
 
 use toml::Spanned;
 
+use super::value_error::ValueError;
 use super::Validator;
 use crate::config::raw::RawAlertmanager;
 use crate::config::{default_escalation, AlertmanagerConfig, AlertmanagerTls, DEFAULT_RESEND};
@@ -168,20 +169,21 @@ impl Validator<'_> {
 
 /// Whether `text` is an `http://` (false) or `https://` (true) address
 /// with a host and no query; why not otherwise.
-fn web_url(text: &str) -> Result<bool, String> {
-    let uri: hyper::Uri = text
-        .parse()
-        .map_err(|e| format!("'{text}' is not a URL like http://alertmanager:9093 ({e})"))?;
+fn web_url(text: &str) -> Result<bool, ValueError> {
+    let uri: hyper::Uri = text.parse().map_err(|source| ValueError::NotAUrl {
+        text: text.into(),
+        source,
+    })?;
     let secure = match uri.scheme_str() {
         Some("http") => false,
         Some("https") => true,
-        _ => return Err(format!("'{text}': use http:// or https://")),
+        _ => return Err(ValueError::NotHttp(text.into())),
     };
     if uri.host().is_none_or(str::is_empty) {
-        return Err(format!("'{text}' names no host"));
+        return Err(ValueError::NoHost(text.into()));
     }
     if uri.query().is_some() {
-        return Err(format!("'{text}': no query (?…) is allowed"));
+        return Err(ValueError::Query(text.into()));
     }
     Ok(secure)
 }

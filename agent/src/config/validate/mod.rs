@@ -16,6 +16,7 @@ mod opcua;
 mod recorder;
 mod sfc;
 mod tags;
+mod value_error;
 
 use std::collections::{HashMap, HashSet};
 use std::fmt;
@@ -31,6 +32,7 @@ use cellwatch_models::signal::Signal;
 use cellwatch_models::value::ValueType;
 use toml::Spanned;
 
+use self::value_error::ValueError;
 use crate::config::position::line_col;
 use crate::config::raw::{self, RawConfig};
 use crate::config::{
@@ -170,7 +172,7 @@ impl Validator<'_> {
     /// The address of the tag `text` names: a tag's name, or an address
     /// (in the cell's dialect) — a name first; ambiguous when it is one
     /// tag's name and another's address.
-    fn tag_ref(&self, text: &str) -> Result<Signal, String> {
+    fn tag_ref(&self, text: &str) -> Result<Signal, ValueError> {
         let by_name = self.names.get(text);
         let by_address = self
             .addressing
@@ -178,14 +180,21 @@ impl Validator<'_> {
             .ok()
             .filter(|a| self.kinds.contains_key(a));
         match (by_name, by_address) {
-            (Some(n), Some(a)) if *n != a => Err(format!(
-                "'{text}' is the name of the tag at {n} and the address of another tag: write the address you mean"
-            )),
+            (Some(n), Some(a)) if *n != a => Err(ValueError::AmbiguousTag {
+                text: text.into(),
+                named: n.clone(),
+            }),
             (Some(n), _) => Ok(n.clone()),
             (None, Some(a)) => Ok(a),
             (None, None) => match self.addressing.signal(text) {
-                Ok(a) => Err(format!("no tag is named '{text}' or has the address {a}")),
-                Err(e) => Err(format!("no tag is named '{text}', and it is not an address: {e}")),
+                Ok(address) => Err(ValueError::NoTag {
+                    text: text.into(),
+                    address,
+                }),
+                Err(source) => Err(ValueError::NotATag {
+                    text: text.into(),
+                    source,
+                }),
             },
         }
     }
@@ -522,9 +531,10 @@ impl Validator<'_> {
             Item,
         }
         let mut production = |p: Spanned<String>, key: &str, usage: Use| {
-            let found = self
-                .tag_ref(p.get_ref())
-                .and_then(|a| by_address.get(&a).copied().ok_or_else(String::new));
+            let found = match self.tag_ref(p.get_ref()) {
+                Ok(a) => by_address.get(&a).copied().ok_or_else(String::new),
+                Err(e) => Err(e.to_string()),
+            };
             let t = match found {
                 Ok(t) => t,
                 Err(why) => {

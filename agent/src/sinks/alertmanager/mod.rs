@@ -135,6 +135,33 @@ type Client = hyper_util::client::legacy::Client<
 #[error("alertmanager.tls: {0}")]
 pub struct TlsError(String);
 
+/// Why a batch of alerts did not reach an Alertmanager (it is sent
+/// again).
+#[derive(Debug, thiserror::Error)]
+pub enum SendError {
+    /// The alerts could not be encoded.
+    #[error(transparent)]
+    Encode(#[from] serde_json::Error),
+    /// The request could not be made (the URL).
+    #[error(transparent)]
+    Request(#[from] hyper::http::Error),
+    /// No answer in time.
+    #[error("no answer within {} s", .0.as_secs())]
+    Timeout(std::time::Duration),
+    /// The connection failed (said with its causes, in one line).
+    #[error("{}", error_chain(.0))]
+    Connect(#[source] hyper_util::client::legacy::Error),
+    /// The Alertmanager answered with an error: its status and what it
+    /// said (at most 300 bytes).
+    #[error("{status}: {said}")]
+    Refused {
+        /// The HTTP status.
+        status: hyper::StatusCode,
+        /// What its body said.
+        said: String,
+    },
+}
+
 /// The sink for the cell loop and the pusher to run beside it.
 ///
 /// # Errors
@@ -350,20 +377,19 @@ impl Pusher {
         }
     }
 
-    async fn post(&self, url: &str, alerts: &[Alert]) -> Result<(), String> {
-        let body = serde_json::to_vec(alerts).map_err(|e| e.to_string())?;
+    async fn post(&self, url: &str, alerts: &[Alert]) -> Result<(), SendError> {
+        let body = serde_json::to_vec(alerts)?;
         let request = hyper::Request::post(format!("{url}/api/v2/alerts"))
             .header(hyper::header::CONTENT_TYPE, "application/json")
             .header(
                 hyper::header::USER_AGENT,
                 concat!("cellwatch/", env!("CARGO_PKG_VERSION")),
             )
-            .body(http_body_util::Full::new(bytes::Bytes::from(body)))
-            .map_err(|e| e.to_string())?;
+            .body(http_body_util::Full::new(bytes::Bytes::from(body)))?;
         let response = tokio::time::timeout(SEND_TIMEOUT, self.client.request(request))
             .await
-            .map_err(|_| format!("no answer within {} s", SEND_TIMEOUT.as_secs()))?
-            .map_err(|e| error_chain(&e))?;
+            .map_err(|_| SendError::Timeout(SEND_TIMEOUT))?
+            .map_err(SendError::Connect)?;
         let status = response.status();
         if status.is_success() {
             return Ok(());
@@ -388,7 +414,10 @@ impl Pusher {
         };
         let _ = tokio::time::timeout(SEND_TIMEOUT, read).await;
         let said = String::from_utf8_lossy(&said[..said.len().min(300)]).to_string();
-        Err(format!("{status}: {}", said.trim()))
+        Err(SendError::Refused {
+            status,
+            said: said.trim().to_string(),
+        })
     }
 }
 
