@@ -26,7 +26,7 @@ pub enum RouterError {
         /// The file.
         path: PathBuf,
         /// Zenoh's words.
-        problem: String,
+        problem: crate::config::ZenohFileError,
     },
     /// The configuration is Zenoh's but not a router's that can keep an
     /// archive.

@@ -60,10 +60,10 @@ pub enum ZenohError {
 /// that would not be TLS-only.
 pub fn session_config(c: &ZenohConfig) -> Result<zenoh::Config, ZenohError> {
     let mut cfg = match &c.config_file {
-        Some(path) => crate::config::zenoh_file(path).map_err(|reason| ZenohError::Config {
+        Some(path) => crate::config::zenoh_file(path).map_err(|e| ZenohError::Config {
             key: "config_file".into(),
             value: path.display().to_string(),
-            reason,
+            reason: e.to_string(),
         })?,
         None => zenoh::Config::default(),
     };

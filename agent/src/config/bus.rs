@@ -24,24 +24,32 @@ impl ZenohMode {
     }
 }
 
+/// Why a Zenoh configuration file is not one: what a reader can act on.
+#[derive(Debug, thiserror::Error)]
+pub enum ZenohFileError {
+    /// The file cannot be read (missing, not allowed).
+    #[error(transparent)]
+    Unreadable(std::io::Error),
+    /// Zenoh refuses it: Zenoh's words, without the place in Zenoh's own
+    /// source its errors end with.
+    #[error("{0}")]
+    Refused(String),
+}
+
 /// A Zenoh configuration file (JSON5, or YAML by its extension), read as
-/// Zenoh reads it; the error is what a reader can act on: the file
-/// missing, or Zenoh's words without the place in Zenoh's own source its
-/// errors end with.
+/// Zenoh reads it.
 ///
 /// # Errors
 /// The file cannot be read, or Zenoh refuses it.
-pub fn zenoh_file(path: &std::path::Path) -> Result<zenoh::Config, String> {
-    if let Err(e) = std::fs::metadata(path) {
-        return Err(e.to_string());
-    }
+pub fn zenoh_file(path: &std::path::Path) -> Result<zenoh::Config, ZenohFileError> {
+    std::fs::metadata(path).map_err(ZenohFileError::Unreadable)?;
     zenoh::Config::from_file(path).map_err(|e| {
         let said = e.to_string();
         // `… at /…/zenoh-config-1.10.2/src/lib.rs:1507.`
-        match said.rsplit_once(" at ") {
+        ZenohFileError::Refused(match said.rsplit_once(" at ") {
             Some((words, place)) if place.contains(".rs:") => words.to_string(),
             _ => said,
-        }
+        })
     })
 }
 
@@ -120,11 +128,13 @@ mod zenoh_file_tests {
     #[test]
     fn a_zenoh_file_that_does_not_read_is_said_without_zenoh_s_source_place() {
         let dir = tempfile::tempdir().unwrap();
-        let missing = super::zenoh_file(&dir.path().join("router.json5")).unwrap_err();
+        let missing = super::zenoh_file(&dir.path().join("router.json5"))
+            .unwrap_err()
+            .to_string();
         assert!(missing.contains("No such file"), "{missing}");
         let bad = dir.path().join("bad.json5");
         std::fs::write(&bad, "{ mode: ").unwrap();
-        let said = super::zenoh_file(&bad).unwrap_err();
+        let said = super::zenoh_file(&bad).unwrap_err().to_string();
         assert!(!said.contains(".rs:"), "{said}");
         assert!(!said.is_empty());
     }

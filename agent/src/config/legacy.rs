@@ -162,18 +162,29 @@ pub struct BusNode {
     pub item: Item,
 }
 
+/// A tag's node id that is not an `@` bus node (`@02/status`).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("'{text}' is not a bus node like @02/status (unit number in hex, then one of {items})")]
+pub struct NotABusNode {
+    /// The node id as written.
+    pub text: String,
+    /// The items a node can name, comma-separated.
+    pub items: String,
+}
+
 impl BusNode {
     /// Reads `@02/status`, `@1F/production`, ...
     ///
     /// # Errors
-    /// A message naming what is wrong.
-    pub fn parse(text: &str) -> Result<BusNode, String> {
-        let items: Vec<&str> = Item::NAMES.iter().map(|(n, _)| *n).collect();
-        let expected = || {
-            format!(
-                "'{text}' is not a bus node like @02/status (unit number in hex, then one of {})",
-                items.join(", ")
-            )
+    /// The text is not `@<unit in hex>/<item>`.
+    pub fn parse(text: &str) -> Result<BusNode, NotABusNode> {
+        let expected = || NotABusNode {
+            text: text.to_string(),
+            items: Item::NAMES
+                .iter()
+                .map(|(n, _)| *n)
+                .collect::<Vec<_>>()
+                .join(", "),
         };
         let rest = text.strip_prefix('@').ok_or_else(expected)?;
         let (unit, item) = rest.split_once('/').ok_or_else(expected)?;

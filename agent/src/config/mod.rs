@@ -31,7 +31,8 @@ mod validate;
 pub use alarm_server::AlarmServerConfig;
 pub use alertmanager::{default_escalation, AlertmanagerConfig, AlertmanagerTls, DEFAULT_RESEND};
 pub use bus::{
-    cell_prefix, link_problem, zenoh_file, ZenohConfig, ZenohMode, ZenohTls, DEFAULT_ROOT,
+    cell_prefix, link_problem, zenoh_file, ZenohConfig, ZenohFileError, ZenohMode, ZenohTls,
+    DEFAULT_ROOT,
 };
 pub use cell::{
     CellConfig, JournalConfig, Keep, PlantOperatorsConfig, DEFAULT_MAX_SHELVE, FIXED_PARTS,

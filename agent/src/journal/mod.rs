@@ -39,7 +39,7 @@ pub use history::{
 };
 pub use reports::{alarm_events, report_input, AlarmEvents, ReportInput};
 pub use saved::{saved, Saved, SavedOutcome, SavedState};
-pub use schema::{open, open_read, JournalError};
+pub use schema::{open, open_read, JournalError, NotCommitted};
 
 use schema::{last_seq, purge, TABLES};
 
@@ -157,18 +157,6 @@ struct Batch {
     entries: Vec<Entry>,
     /// Told the outcome once the rows are committed (or not).
     done: Option<oneshot::Sender<Result<(), NotCommitted>>>,
-}
-
-/// Why rows handed to the writer are not committed (yet): they are kept
-/// and retried. SQLite's words for why the journal cannot write.
-#[derive(Debug, Clone, thiserror::Error)]
-pub enum NotCommitted {
-    /// An earlier write failed, and the next try is not due yet.
-    #[error("{0} (rows queued)")]
-    Queued(String),
-    /// This write failed.
-    #[error("{0}")]
-    Failed(String),
 }
 
 /// The handle the engine writes through.

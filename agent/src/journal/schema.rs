@@ -35,7 +35,7 @@ pub enum JournalError {
         /// The file.
         path: PathBuf,
         /// Why.
-        source: super::NotCommitted,
+        source: NotCommitted,
     },
     /// The writer thread has stopped.
     #[error("journal {path}: the writer has stopped")]
@@ -43,6 +43,18 @@ pub enum JournalError {
         /// The file.
         path: PathBuf,
     },
+}
+
+/// Why rows handed to the writer are not committed (yet): they are kept
+/// and retried. SQLite's words for why the journal cannot write.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum NotCommitted {
+    /// An earlier write failed, and the next try is not due yet.
+    #[error("{0} (rows queued)")]
+    Queued(String),
+    /// This write failed.
+    #[error("{0}")]
+    Failed(String),
 }
 
 /// The tables of journal rows (one sequence across them).

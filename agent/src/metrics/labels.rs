@@ -1,7 +1,15 @@
 //! The fixed label values of the metrics whose values the code says in
 //! words rather than through a typed enum: what a refusal and a command's
 //! result are called. The metrics reference lists them (a test holds it to
-//! the registry); the series of [`REFUSED`] exist from the start.
+//! the registry); the series of [`REFUSED`] exist from the start. And the
+//! one label every metric has: its cell ([`opts`]).
+
+/// A metric's options with its cell as a constant label: every series
+/// carries `cell`, for Prometheus federation across cells.
+pub(super) fn opts(name: &str, help: &str, cell: &str) -> prometheus::Opts {
+    prometheus::Opts::new(name, help).const_label("cell", cell)
+}
+
 /// Every service and reason `cellwatch_requests_refused_total` counts,
 /// each series at 0 from the start: queries refused (`busy`: too many at
 /// once, `too_large`, `invalid`: not a request) and commands refused

@@ -12,6 +12,7 @@
 mod labels;
 mod modes;
 
+use labels::opts;
 pub use labels::{COMMAND_RESULTS, REFUSED};
 pub use modes::ModeMetrics;
 
@@ -30,7 +31,7 @@ use cellwatch_models::alarm::{AlarmKind, Severity};
 use cellwatch_models::engine::MachineState;
 use prometheus::{
     Counter, Encoder, Gauge, GaugeVec, Histogram, HistogramOpts, HistogramVec, IntCounter,
-    IntCounterVec, IntGauge, IntGaugeVec, Opts, Registry, TextEncoder,
+    IntCounterVec, IntGauge, IntGaugeVec, Registry, TextEncoder,
 };
 
 /// A value read when metrics are scraped.
@@ -157,10 +158,6 @@ pub struct Metrics {
     /// Time the agent adds: values received from the PLC → their alarm
     /// journaled and published.
     pub alarm_latency_seconds: Histogram,
-}
-
-fn opts(name: &str, help: &str, cell: &str) -> Opts {
-    Opts::new(name, help).const_label("cell", cell)
 }
 
 impl Metrics {

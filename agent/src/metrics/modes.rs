@@ -5,7 +5,7 @@
 
 use prometheus::{IntGauge, IntGaugeVec, Registry};
 
-use super::opts;
+use super::labels::opts;
 
 /// Machine modes and the alarms they suppress by design.
 #[derive(Clone)]

@@ -59,13 +59,8 @@ pub enum LegacyError {
     #[error("no such tag")]
     NoSuchTag,
     /// A tag whose node id is not `@<unit>/<item>`.
-    #[error("{reason}")]
-    NodeId {
-        /// The node id.
-        node_id: String,
-        /// What is wrong with it.
-        reason: String,
-    },
+    #[error(transparent)]
+    NodeId(crate::config::legacy::NotABusNode),
     /// A switch pulse: an `@` unit has none.
     #[error("an @ unit takes item writes, not switch pulses")]
     NoPulses,

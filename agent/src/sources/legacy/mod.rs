@@ -702,12 +702,7 @@ async fn write_one(
             .tag
             .and_then(|t| tags.get(t))
             .ok_or(LegacyError::NoSuchTag)
-            .and_then(|t| {
-                BusNode::parse(&t.node_id).map_err(|e| LegacyError::NodeId {
-                    node_id: t.node_id.to_string(),
-                    reason: e.to_string(),
-                })
-            })
+            .and_then(|t| BusNode::parse(&t.node_id).map_err(LegacyError::NodeId))
             .and_then(|node| write_frame(node, value)),
         Write::Pulse(_) => Err(LegacyError::NoPulses),
         Write::Acknowledge { .. } => Err(LegacyError::NoAlarms),
