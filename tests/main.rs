@@ -32,6 +32,7 @@ mod installed;
 mod interop;
 mod legacy;
 mod liveness;
+mod mad;
 mod network_cut;
 mod nodes_back;
 mod opcua;

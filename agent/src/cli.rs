@@ -17,6 +17,7 @@ use crate::commands::discover::DiscoverArgs;
 use crate::commands::explain::ExplainArgs;
 use crate::commands::hash_password::HashPasswordArgs;
 use crate::commands::keygen::KeygenArgs;
+use crate::commands::mad::MadCommand;
 use crate::commands::pki::PkiCommand;
 use crate::commands::plant::PlantCommand;
 use crate::commands::report::ReportArgs;
@@ -68,6 +69,10 @@ enum Command {
     /// the PLC program needs for forcing transitions.
     #[command(subcommand)]
     Sfc(SfcCommand),
+    /// The cell's master alarm database (ISA-18.2): every alarm it can
+    /// raise, drafted from its logic, for rationalisation.
+    #[command(subcommand)]
+    Mad(MadCommand),
     /// Explain a fault: the coil's value, every step's value, the fault step
     /// and the contacts that caused it; or a cell's consequence relation
     /// (--consequences), or an alarm's flight recording (--alarm).
@@ -321,6 +326,7 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             // Dispatched synchronously by `run`; never sent here.
             Command::Sf(_)
             | Command::Sfc(_)
+            | Command::Mad(_)
             | Command::Explain(_)
             | Command::Validate(_)
             | Command::Report(_)
@@ -360,6 +366,7 @@ pub fn run(
     let result = match cli.command {
         Command::Sf(args) => commands::sf::run(&args, out, err),
         Command::Sfc(command) => commands::sfc::run(&command, out),
+        Command::Mad(command) => commands::mad::run(&command, out),
         Command::Explain(args) => commands::explain::run(&args, out, err),
         Command::Validate(args) => commands::agent::validate(&args, out),
         Command::Report(args) => commands::report::run(&args, out),

@@ -325,6 +325,30 @@ impl CheckSet for LimitChecks {
         self.by_tag.keys().cloned().collect()
     }
 
+    /// The tag past the level's limit, the hysteresis and delays.
+    fn describe(&self, id: &str) -> Option<String> {
+        let c = &self.checks[*self.by_alarm.get(id)?];
+        let level = c.levels.iter().find(|l| c.alarm_id(l.level) == id)?;
+        let (past, back) = if level.level.is_high() {
+            (">", "below")
+        } else {
+            ("<", "above")
+        };
+        let unit = if c.unit.is_empty() {
+            String::new()
+        } else {
+            format!(" {}", c.unit)
+        };
+        let mut text = format!(
+            "{} ({}) {past} {}{unit} ({})",
+            c.tag, c.label, level.limit, level.level
+        );
+        if c.deadband > 0.0 {
+            text += &format!("; clears {back} the limit by {}{unit}", c.deadband);
+        }
+        Some(text)
+    }
+
     /// The number a level's alarm watches.
     fn reads(&self, id: &str, out: &mut Vec<Signal>) {
         if let Some(&i) = self.by_alarm.get(id) {

@@ -14,6 +14,7 @@ pub(crate) mod hash_password;
 pub(crate) mod inputs;
 pub(crate) mod journal;
 pub(crate) mod keygen;
+pub(crate) mod mad;
 pub(crate) mod man;
 pub(crate) mod pki;
 pub(crate) mod plant;

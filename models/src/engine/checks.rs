@@ -152,6 +152,14 @@ pub trait CheckSet: Send + Sync {
     /// The flight recorder keeps their changes around the alarm's raise.
     fn reads(&self, _id: &str, _out: &mut Vec<Signal>) {}
 
+    /// Alarm `id`'s condition in words, for the master alarm database
+    /// (`cellwatch mad export`): the switching function, the limit, the
+    /// transition's window, the step's supervision time. `None`: not an
+    /// alarm of this set.
+    fn describe(&self, _id: &str) -> Option<String> {
+        None
+    }
+
     /// The signals alarm `id`'s fault holds, each with the value it would
     /// have now without that fault: its coil (or contact) at its normal
     /// value, and each output the program derives from the coil

@@ -33,6 +33,8 @@
 //!   values at the last fault).
 //! - `recording`: the engine's side of the flight recorder.
 //! - `conditions`: the PLC's own alarms ([`PlcCondition`]).
+//! - `catalogue`: every alarm the engine can raise, described for the
+//!   master alarm database ([`CatalogueEntry`]).
 //! - `modes`: machine modes and the alarms each suppresses by design
 //!   ([`Mode`]).
 //!
@@ -60,6 +62,7 @@
 mod alarms;
 mod announce;
 mod build;
+mod catalogue;
 mod changes;
 pub mod checks;
 mod conditions;
@@ -82,6 +85,7 @@ mod tag;
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
+pub use catalogue::CatalogueEntry;
 pub use checks::{CheckSet, Declared, Finding, Observation, WindowPosition};
 pub use conditions::{PlcCondition, ACKED_AT_PLC};
 pub use modes::{AlarmPattern, Mode};

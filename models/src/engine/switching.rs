@@ -236,6 +236,26 @@ impl CheckSet for SwitchingChecks {
         self.held_normal(id, now)
     }
 
+    /// A discrete alarm's text and contact; a check's coil at its fault
+    /// value, its function in words and its arming condition.
+    fn describe(&self, id: &str) -> Option<String> {
+        let check = self.by_id.get(id).map(|&i| &self.checks[i])?;
+        let mut text = match &check.text {
+            Some(words) => format!("{words} ({})", check.sf.readable()),
+            None => format!(
+                "fault while {} is {}; {} = {}",
+                check.sf.coil,
+                check.polarity,
+                check.sf.coil,
+                check.sf.readable()
+            ),
+        };
+        if let Some(armed) = &check.armed_when {
+            text += &format!("; only while {}", armed.readable());
+        }
+        Some(text)
+    }
+
     fn would_hold(&self, id: &str, instead: &[(Signal, bool)]) -> Option<bool> {
         self.holds_with(id, instead)
     }

@@ -410,6 +410,24 @@ impl CheckSet for SfcChecks {
         self.stuck_with(r, instead)
     }
 
+    /// The step, its chart and its supervision time.
+    fn describe(&self, id: &str) -> Option<String> {
+        let (r, step) = self
+            .sfc
+            .steps()
+            .find(|(r, s)| s.supervision_ms.is_some() && self.alarm_id(*r) == id)?;
+        let supervision = step.supervision_ms? as f64 / 1000.0;
+        let mut text = format!(
+            "step {} active longer than {supervision} s (its flag {})",
+            self.sfc.step_name(r),
+            step.flag
+        );
+        if let Some(c) = &step.comment {
+            text += &format!(": {c}");
+        }
+        Some(text)
+    }
+
     fn alarms(&self) -> Vec<Declared> {
         self.sfc
             .steps()
