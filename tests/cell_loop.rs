@@ -340,6 +340,7 @@ async fn a_restored_journal_alarm_follows_the_journal_at_the_start() {
         out_of_service: None,
         consequence: None,
         designed: None,
+        guidance: None,
     };
     let restored = engine.restore(vec![alarm], None, 2_000);
     let (recording, mut steps) = RecordingSink::new();

@@ -257,6 +257,7 @@ pub fn event(key: &AgentKey, id: &str, n: usize, raised: bool) -> (String, Strin
         out_of_service: None,
         consequence: None,
         suppressed_by_design: None,
+        guidance: None,
     };
     let key_expr = format!("cellwatch/{}/alarms/{id}", key.cell());
     (key_expr, serde_json::to_string(&a).unwrap_or_default())

@@ -273,6 +273,10 @@ pub struct Alarm {
     /// holds (ISA-18.2), if one does. Evaluated and journaled, never
     /// announced; distinct from a shelf (an operator's) and out of service.
     pub designed: Option<Box<DesignedSuppression>>,
+    /// Its rationalisation from the cell's master alarm database (class,
+    /// consequence of inaction, corrective action, response time), if it
+    /// has one.
+    pub guidance: Option<std::sync::Arc<crate::madb::Guidance>>,
 }
 
 /// Which machine mode suppresses an alarm by design, since when.
@@ -351,6 +355,7 @@ impl Alarm {
             out_of_service: None,
             consequence: None,
             designed: None,
+            guidance: None,
         }
     }
 

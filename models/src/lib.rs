@@ -20,6 +20,8 @@
 //! - [`engine`]: the per-cell engine: tags, check sets, alarms, machine state.
 //! - [`legacy`]: the `@`-framed serial protocol of paper 002 (frames, FCS, end codes).
 //! - [`limit`]: limit alarms (HH/H/L/LL) on numbers, with deadband and delays.
+//! - [`madb`]: the master alarm database a plant's team gives back: each
+//!   alarm's priority, class and guidance.
 //! - [`report`]: daily and monthly production reports from state history.
 //! - [`timer`]: transition timers: run logs, the learner, the runtime monitor,
 //!   drift warnings.
@@ -36,6 +38,7 @@ pub mod kpi;
 pub mod legacy;
 pub mod limit;
 pub mod logic;
+pub mod madb;
 pub mod program;
 pub mod report;
 pub mod sfc;

@@ -5,7 +5,7 @@
 //! validates starts.
 
 use cellwatch_models::comments::CommentDb;
-use cellwatch_models::engine::{CellEngine, CheckSet, EngineError, SwitchingChecks};
+use cellwatch_models::engine::{CellEngine, CheckSet, EngineError, Rationalised, SwitchingChecks};
 use cellwatch_models::limit::LimitChecks;
 use cellwatch_models::sfc::SfcChecks;
 use cellwatch_models::timer::checks::{TimerCheckError, TimerChecks};
@@ -36,6 +36,17 @@ pub enum CompileError {
         key: String,
         /// Why.
         why: String,
+    },
+    /// A row of the master alarm database (`alarms.database`) names no
+    /// alarm of the cell.
+    #[error("{file}:{line}:1: column 'id': '{id}' is no alarm of this cell (`cellwatch mad export` lists them)")]
+    Database {
+        /// The database file.
+        file: String,
+        /// The row's line.
+        line: u64,
+        /// The id.
+        id: String,
     },
     /// A pattern of `[[state.modes]]` matches no alarm the cell can
     /// raise (a misspelt id would leave the alarm announced in its mode).
@@ -123,6 +134,13 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
         });
     }
     let relation = relation(&engine, &config.consequences)?;
+    let engine = match &config.database {
+        Some((path, db)) => {
+            let rows = rationalised(config, &engine, path, db)?;
+            engine.rationalising(rows)
+        }
+        None => engine,
+    };
     let engine = match &config.recorder {
         Some(r) => engine.recording(r.clone()),
         None => engine,
@@ -142,6 +160,38 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
                 .map(|(i, _)| i)
                 .chain(config.step_flags().into_keys()),
         ))
+}
+
+/// The rows of the master alarm database as the engine applies them.
+///
+/// # Errors
+/// A row names no alarm of the cell: not one the engine can raise, the
+/// agent's own, nor a PLC pattern it follows.
+fn rationalised(
+    config: &CellConfig,
+    engine: &CellEngine,
+    path: &std::path::Path,
+    db: &cellwatch_models::madb::Database,
+) -> Result<Vec<(String, Rationalised)>, CompileError> {
+    let own = crate::cell::own_alarms::own_alarms(config);
+    let mut out = Vec::new();
+    for (id, row) in &db.rows {
+        if !engine.can_raise(id) && !own.iter().any(|a| a.id == *id) {
+            return Err(CompileError::Database {
+                file: path.display().to_string(),
+                line: row.line,
+                id: id.clone(),
+            });
+        }
+        out.push((
+            id.clone(),
+            Rationalised {
+                priority: row.priority,
+                guidance: std::sync::Arc::new(row.guidance.clone()),
+            },
+        ));
+    }
+    Ok(out)
 }
 
 /// The relation the checks give, with the configuration's edges added and

@@ -18,6 +18,7 @@ pub mod compile;
 pub mod force;
 pub mod forcing;
 mod gaps;
+pub mod own_alarms;
 mod plc;
 mod refused;
 mod reload;

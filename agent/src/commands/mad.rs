@@ -28,6 +28,27 @@ pub(crate) enum MadCommand {
     /// inaction, corrective action, response time). CSV opens in a
     /// spreadsheet; JSON is the same rows.
     Export(ExportArgs),
+    /// Take a rationalised file back as the cell's master alarm database:
+    /// each alarm's priority, class, consequence of inaction, corrective
+    /// action and response time become the cell's (written to the file
+    /// `alarms.database` names, taken at the agent's next start or
+    /// `cellwatch reload`). The changes are shown first; every problem of
+    /// the file is said at its line and column, and nothing is written
+    /// then.
+    Import(ImportArgs),
+}
+
+/// `cellwatch mad import`.
+#[derive(Debug, clap::Args)]
+pub(crate) struct ImportArgs {
+    /// The cell's configuration (its `alarms.database` says where the
+    /// database is kept).
+    pub(crate) config: PathBuf,
+    /// The rationalised file (CSV, as `cellwatch mad export` writes it).
+    pub(crate) file: PathBuf,
+    /// Show the changes and check the file, write nothing.
+    #[arg(long)]
+    pub(crate) dry_run: bool,
 }
 
 /// `cellwatch mad export`.
@@ -82,19 +103,30 @@ pub(crate) struct MadRow {
     pub(crate) corrective_action: String,
     /// Rationalisation: how long the operator has (`5m`).
     pub(crate) response_time: String,
+    /// Against the cell's database (`alarms.database`): `new` (no row
+    /// yet), `changed` (its condition is not the one rationalised), `gone`
+    /// (a row for an alarm the cell no longer raises); empty otherwise.
+    pub(crate) status: String,
 }
 
 pub(crate) fn run(command: &MadCommand, out: &mut dyn Write) -> Result<(), Failure> {
     match command {
         MadCommand::Export(args) => export(args, out),
+        MadCommand::Import(args) => super::mad_import::run(args, out),
     }
 }
 
 fn export(args: &ExportArgs, out: &mut dyn Write) -> Result<(), Failure> {
-    let c = crate::config::load(&args.config).map_err(Failure::input)?;
+    let mut c = crate::config::load(&args.config).map_err(Failure::input)?;
+    // The database is merged here, row by row: a row whose alarm is gone
+    // is marked, not refused.
+    let database = c.database.take().map(|(_, db)| db);
     let engine = crate::cell::compile::engine(&c)
         .map_err(|e| Failure::Input(format!("{}: {e}", args.config.display())))?;
-    let rows = rows(&c, &engine.catalogue());
+    let mut rows = rows(&c, &engine.catalogue());
+    if let Some(db) = &database {
+        merge(&mut rows, db);
+    }
     let text = match args.format.as_str() {
         "json" => serde_json::to_string_pretty(&rows).map_err(Failure::runtime)? + "\n",
         _ => csv_text(&rows).map_err(Failure::runtime)?,
@@ -158,6 +190,54 @@ pub(crate) fn rows(c: &CellConfig, catalogue: &[CatalogueEntry]) -> Vec<MadRow> 
     rows
 }
 
+/// The database's rationalisation in `rows`, and each row's status
+/// against it; its rows for alarms no longer raised added, `gone`.
+pub(crate) fn merge(rows: &mut Vec<MadRow>, db: &cellwatch_models::madb::Database) {
+    for row in rows.iter_mut() {
+        let Some(r) = db.rows.get(&row.id) else {
+            row.status = "new".into();
+            continue;
+        };
+        if let Some(p) = r.priority {
+            row.priority = p.as_str().into();
+        }
+        let g = &r.guidance;
+        if !g.class.is_empty() {
+            row.class.clone_from(&g.class);
+        }
+        row.consequence_of_inaction
+            .clone_from(&g.consequence_of_inaction);
+        row.corrective_action.clone_from(&g.corrective_action);
+        row.response_time = g.response_time_ms.map(duration).unwrap_or_default();
+        if r.condition.as_ref().is_some_and(|c| *c != row.condition) {
+            row.status = "changed".into();
+        }
+    }
+    for (id, r) in &db.rows {
+        if !rows.iter().any(|row| row.id == *id) {
+            rows.push(MadRow {
+                id: id.clone(),
+                priority: r
+                    .priority
+                    .map(|p| p.as_str().to_string())
+                    .unwrap_or_default(),
+                class: r.guidance.class.clone(),
+                condition: r.condition.clone().unwrap_or_default(),
+                consequence_of_inaction: r.guidance.consequence_of_inaction.clone(),
+                corrective_action: r.guidance.corrective_action.clone(),
+                response_time: r
+                    .guidance
+                    .response_time_ms
+                    .map(duration)
+                    .unwrap_or_default(),
+                status: "gone".into(),
+                ..MadRow::default()
+            });
+        }
+    }
+    rows.sort_by(|a, b| a.id.cmp(&b.id));
+}
+
 fn class(kind: AlarmKind, fault: bool) -> &'static str {
     match kind {
         AlarmKind::Communication | AlarmKind::TagQuality | AlarmKind::System => "system",
@@ -170,74 +250,33 @@ fn duration(ms: u64) -> String {
     humantime::format_duration(std::time::Duration::from_millis(ms)).to_string()
 }
 
-/// The agent's system alarms this cell can raise, and a row per prefix of
-/// the PLC's own alarms it follows.
+/// The agent's own alarms and the PLC's patterns, as rows.
 fn own_alarms(c: &CellConfig) -> Vec<MadRow> {
-    let system = |id: String, condition: String| MadRow {
-        fault_type: id.to_uppercase(),
-        id,
-        kind: AlarmKind::System.as_str().into(),
-        priority: Severity::High.as_str().into(),
-        class: "system".into(),
-        condition,
-        ..MadRow::default()
-    };
-    let mut out = vec![system(
-        crate::cell::JOURNAL_ALARM.into(),
-        "the journal cannot write (rows kept in memory and retried)".into(),
-    )];
-    if let Some(ua) = &c.opcua {
-        out.push(system(
-            crate::sources::opcua::NAMESPACE_ALARM.into(),
-            "a tag's namespace is not on the OPC UA server".into(),
-        ));
-        out.push(system(
-            crate::sources::opcua::OVERFLOW_ALARM.into(),
-            "changes were lost in the OPC UA server's queues".into(),
-        ));
-        if !ua.events.is_empty() {
-            out.push(system(
-                crate::sources::opcua::EVENTS_ALARM.into(),
-                "the PLC's own alarms cannot be followed".into(),
-            ));
-        }
-        for e in &ua.events {
-            out.push(MadRow {
-                id: format!("{}-*", e.prefix),
-                kind: AlarmKind::Plc.as_str().into(),
-                priority: "from the PLC".into(),
-                class: "warning".into(),
-                condition: "the PLC's own alarm (OPC UA Alarms & Conditions), its text as message"
-                    .into(),
-                ..MadRow::default()
-            });
-        }
-    }
-    for s in &c.sfc {
-        for (chart, transition) in &s.forcible {
-            out.push(system(
-                format!("force-{chart}-{transition}"),
-                format!("a forced transition {chart}.{transition} did not arrive in time"),
-            ));
-        }
-    }
-    if c.legacy.is_some() {
-        let mut units: Vec<u8> = c
-            .tags
-            .iter()
-            .filter_map(|t| crate::config::legacy::BusNode::parse(&t.node_id).ok())
-            .map(|n| n.unit)
-            .collect();
-        units.sort_unstable();
-        units.dedup();
-        for unit in units {
-            out.push(system(
-                crate::sources::legacy::unit_problem(unit),
-                format!("unit @{unit:02X} on the bus does not answer"),
-            ));
-        }
-    }
-    out
+    crate::cell::own_alarms::own_alarms(c)
+        .into_iter()
+        .map(|a| {
+            if a.plc {
+                MadRow {
+                    id: a.id,
+                    kind: AlarmKind::Plc.as_str().into(),
+                    priority: "from the PLC".into(),
+                    class: "warning".into(),
+                    condition: a.condition,
+                    ..MadRow::default()
+                }
+            } else {
+                MadRow {
+                    fault_type: a.id.to_uppercase(),
+                    id: a.id,
+                    kind: AlarmKind::System.as_str().into(),
+                    priority: Severity::High.as_str().into(),
+                    class: "system".into(),
+                    condition: a.condition,
+                    ..MadRow::default()
+                }
+            }
+        })
+        .collect()
 }
 
 impl Default for MadRow {
@@ -259,6 +298,7 @@ impl Default for MadRow {
             consequence_of_inaction: String::new(),
             corrective_action: String::new(),
             response_time: String::new(),
+            status: String::new(),
         }
     }
 }

@@ -130,6 +130,9 @@ pub struct CellConfig {
     pub kpi: cellwatch_models::kpi::KpiRules,
     /// Alarms that follow from others (`[alarms.consequences]`).
     pub consequences: crate::config::Consequences,
+    /// The cell's master alarm database (`alarms.database`): the file and
+    /// its rows, each alarm's rationalised priority and guidance.
+    pub database: Option<(PathBuf, cellwatch_models::madb::Database)>,
     /// The flight recorder around every alarm (`[recorder]`); `None`: off.
     pub recorder: Option<cellwatch_models::engine::RecorderConfig>,
     /// Things worth saying at start (security off, ...).

@@ -61,6 +61,7 @@ pub(crate) struct RawSystemAlarms {
     #[serde(rename = "tag-quality")]
     pub(crate) tag_quality: Option<RawDelays>,
     pub(crate) consequences: Option<RawConsequences>,
+    pub(crate) database: Option<Spanned<String>>,
 }
 
 /// `[alarms.consequences]`: whether consequences are annunciated, and

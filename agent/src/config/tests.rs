@@ -436,6 +436,7 @@ fn shipped_configs_parse() {
 
 mod checks;
 mod consequences;
+mod database;
 mod escalation;
 mod events;
 mod modes;

@@ -391,6 +391,7 @@ mod tests {
             out_of_service: None,
             consequence: None,
             suppressed_by_design: None,
+            guidance: None,
         }
     }
 

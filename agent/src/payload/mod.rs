@@ -135,6 +135,24 @@ pub struct AlarmPayload {
     /// announced; `null`: not suppressed by design.
     #[serde(default)]
     pub suppressed_by_design: Option<DesignedPayload>,
+    /// Its rationalisation from the cell's master alarm database
+    /// (`alarms.database`): what the operator does and how long they have;
+    /// `null` when the database has no row for it.
+    #[serde(default)]
+    pub guidance: Option<GuidancePayload>,
+}
+
+/// An alarm's rationalisation, in its payload.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct GuidancePayload {
+    /// Its class, as the plant names them.
+    pub class: String,
+    /// What happens if nobody acts.
+    pub consequence_of_inaction: String,
+    /// What the operator does.
+    pub corrective_action: String,
+    /// How long the operator has (`5m`); `null`: not said.
+    pub response_time: Option<String>,
 }
 
 /// The machine mode that suppresses an alarm by design, in its payload.
@@ -163,6 +181,14 @@ impl AlarmPayload {
         AlarmPayload {
             shelved,
             out_of_service,
+            guidance: alarm.guidance.as_deref().map(|g| GuidancePayload {
+                class: g.class.clone(),
+                consequence_of_inaction: g.consequence_of_inaction.clone(),
+                corrective_action: g.corrective_action.clone(),
+                response_time: g.response_time_ms.map(|ms| {
+                    humantime::format_duration(std::time::Duration::from_millis(ms)).to_string()
+                }),
+            }),
             suppressed_by_design: alarm.designed.as_ref().map(|d| DesignedPayload {
                 mode: d.mode.clone(),
                 since: rfc3339(d.since),
@@ -277,6 +303,18 @@ impl AlarmPayload {
                         .iter()
                         .map(|t| (cellwatch_models::signal::Signal::new(&t.signal), t.value))
                         .collect(),
+                })
+            }),
+            guidance: self.guidance.as_ref().map(|g| {
+                std::sync::Arc::new(cellwatch_models::madb::Guidance {
+                    class: g.class.clone(),
+                    consequence_of_inaction: g.consequence_of_inaction.clone(),
+                    corrective_action: g.corrective_action.clone(),
+                    response_time_ms: g
+                        .response_time
+                        .as_deref()
+                        .and_then(|t| humantime::parse_duration(t).ok())
+                        .map(|d| d.as_millis() as u64),
                 })
             }),
             designed: match &self.suppressed_by_design {
@@ -686,101 +724,7 @@ pub fn json_value(v: &cellwatch_models::engine::Value) -> serde_json::Value {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_comparison_culprit_is_restored_with_its_numbers() {
-        let alarm = Alarm {
-            id: "spindle-temp".into(),
-            kind: AlarmKind::Switching,
-            severity: Severity::High,
-            fault_type: "HOT".into(),
-            active: true,
-            acknowledged: false,
-            latched: false,
-            raised_at: 1_764_000_000_000,
-            cleared_at: None,
-            acked_by: None,
-            ack_comment: None,
-            fault_step: Some(1),
-            message: "HOT".into(),
-            shelved: None,
-            out_of_service: None,
-            consequence: None,
-            designed: None,
-            culprits: vec![Culprit {
-                address: cellwatch_models::signal::Signal::new("TEMP <= 80.5"),
-                value: false,
-                expected: true,
-                comment: Some("Spindle temperature".into()),
-                trigger: true,
-                compared: Some(cellwatch_models::explain::Compared {
-                    variable: cellwatch_models::signal::Signal::new("TEMP"),
-                    value: "85.25".into(),
-                    needs: "<= 80.5".into(),
-                }),
-            }],
-        };
-        let payload = AlarmPayload::new("m01", &alarm, Transition::Raised, alarm.raised_at);
-        let back = payload.to_alarm().unwrap();
-        assert_eq!(back.culprits, alarm.culprits);
-        assert!(back.culprits[0]
-            .to_string()
-            .starts_with("TEMP = 85.25 (needs <= 80.5)"));
-    }
-
-    #[test]
-    fn an_acknowledgements_comment_is_restored_and_absent_in_older_payloads() {
-        let alarm = Alarm {
-            id: "ese".into(),
-            kind: AlarmKind::Switching,
-            severity: Severity::Critical,
-            fault_type: "ESE".into(),
-            active: true,
-            acknowledged: true,
-            latched: false,
-            raised_at: 1_764_000_000_000,
-            cleared_at: None,
-            acked_by: Some("kim".into()),
-            ack_comment: Some("tool changed".into()),
-            fault_step: Some(6),
-            message: "ESE at step 6".into(),
-            shelved: None,
-            out_of_service: None,
-            consequence: None,
-            designed: Some(Box::new(DesignedSuppression {
-                mode: "setup".into(),
-                since: 1_764_000_000_500,
-            })),
-            culprits: Vec::new(),
-        };
-        let payload = AlarmPayload::new("m01", &alarm, Transition::Acknowledged, 1_764_000_001_000);
-        let text = serde_json::to_string(&payload).unwrap();
-        assert!(text.contains(r#""ack_comment":"tool changed""#), "{text}");
-        assert!(
-            text.contains(
-                r#""suppressed_by_design":{"mode":"setup","since":"2025-11-24T16:00:00.500Z"}"#
-            ),
-            "{text}"
-        );
-        let back: AlarmPayload = serde_json::from_str(&text).unwrap();
-        assert_eq!(
-            back.to_alarm().unwrap().ack_comment.as_deref(),
-            Some("tool changed")
-        );
-        assert_eq!(back.to_alarm().unwrap().designed, alarm.designed);
-        // A journal row from before comments were carried.
-        let older = text.replace(r#""ack_comment":"tool changed","#, "");
-        assert!(!older.contains("ack_comment"), "{older}");
-        let back: AlarmPayload = serde_json::from_str(&older).unwrap();
-        let back = back.to_alarm().unwrap();
-        assert_eq!(
-            (back.acked_by.as_deref(), back.ack_comment),
-            (Some("kim"), None)
-        );
-    }
-}
+mod tests;
 
 mod about;
 mod consequence;

@@ -146,6 +146,7 @@ impl AlarmBook {
                     out_of_service: None,
                     consequence: None,
                     designed: None,
+                    guidance: None,
                 };
                 self.alarms.insert(f.id.clone(), alarm);
                 self.set_active(&f.id, true);
@@ -172,6 +173,17 @@ impl AlarmBook {
         let a = self.alarms.get_mut(id)?;
         a.designed = designed;
         Some(a)
+    }
+
+    /// Gives alarm `id`'s occurrence its guidance.
+    pub(crate) fn set_guidance(
+        &mut self,
+        id: &str,
+        guidance: std::sync::Arc<crate::madb::Guidance>,
+    ) {
+        if let Some(a) = self.alarms.get_mut(id) {
+            a.guidance = Some(guidance);
+        }
     }
 
     /// Puts back an alarm as it was before a restart. Its condition is
@@ -272,6 +284,7 @@ impl AlarmBook {
                     out_of_service: None,
                     consequence: None,
                     designed: None,
+                    guidance: None,
                 },
             );
         }

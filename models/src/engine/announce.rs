@@ -123,6 +123,7 @@ impl CellEngine {
                 }
             }
         }
+        let f = self.prioritised(f);
         let id = f.id.clone();
         let applied = self.alarms.apply(f, now);
         let Some(transition) = applied.transition else {
@@ -131,6 +132,9 @@ impl CellEngine {
         if transition == Transition::Raised {
             if let Some(c) = self.consequence_of(&id) {
                 self.alarms.set_consequence(&id, c);
+            }
+            if let Some(guidance) = self.guidance_of(&id) {
+                self.alarms.set_guidance(&id, guidance);
             }
             if let Some(mode) = self.designed_for(&id) {
                 let designed = crate::alarm::DesignedSuppression {

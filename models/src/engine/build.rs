@@ -166,6 +166,7 @@ impl CellEngine {
             compared_in,
             running_reads,
             modes_on,
+            rationale: super::rationale::Rationale::default(),
             alarms,
             connected: None,
             rules,

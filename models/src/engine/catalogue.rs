@@ -123,10 +123,10 @@ impl CellEngine {
             .map(|m| m.id.clone())
             .collect();
         CatalogueEntry {
+            severity: self.priority_of(&d.id).unwrap_or(d.severity),
             delays_ms: self.delays.get(&d.id).copied().unwrap_or((0, 0)),
             id: d.id,
             kind: d.kind,
-            severity: d.severity,
             fault_type: d.fault_type,
             latched: d.latched,
             condition,

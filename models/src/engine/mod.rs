@@ -35,6 +35,8 @@
 //! - `conditions`: the PLC's own alarms ([`PlcCondition`]).
 //! - `catalogue`: every alarm the engine can raise, described for the
 //!   master alarm database ([`CatalogueEntry`]).
+//! - `rationale`: the master alarm database's priorities and guidance
+//!   ([`Rationalised`]).
 //! - `modes`: machine modes and the alarms each suppresses by design
 //!   ([`Mode`]).
 //!
@@ -72,6 +74,7 @@ mod delays;
 mod fixture;
 mod modes;
 mod operators;
+mod rationale;
 mod reading;
 pub mod recorder;
 mod recording;
@@ -89,6 +92,7 @@ pub use catalogue::CatalogueEntry;
 pub use checks::{CheckSet, Declared, Finding, Observation, WindowPosition};
 pub use conditions::{PlcCondition, ACKED_AT_PLC};
 pub use modes::{AlarmPattern, Mode};
+pub use rationale::Rationalised;
 pub use recorder::{
     Cut, RecordedSignal, RecorderConfig, RecorderFill, Recording, Sample, Truncated,
 };
@@ -528,6 +532,8 @@ pub struct CellEngine {
     running_reads: Vec<bool>,
     /// Per mode of `rules.modes`: whether it holds.
     modes_on: Vec<bool>,
+    /// The cell's master alarm database: priorities and guidance.
+    rationale: rationale::Rationale,
     alarms: AlarmBook,
     /// `None` until the source first says.
     connected: Option<bool>,

@@ -171,6 +171,7 @@ mod tests {
             out_of_service: None,
             consequence: None,
             designed: None,
+            guidance: None,
         }
     }
 

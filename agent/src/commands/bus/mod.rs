@@ -170,6 +170,19 @@ pub(crate) fn print_alarm(
     for c in &a.culprits {
         writeln!(out, "    {}", crate::operator::escaped(&c.line()))?;
     }
+    // The master alarm database's corrective action, where the cell has it.
+    if let Some(g) = a
+        .guidance
+        .as_ref()
+        .filter(|g| !g.corrective_action.is_empty())
+    {
+        let within = g
+            .response_time
+            .as_ref()
+            .map_or_else(String::new, |t| format!(" (within {t})"));
+        let line = format!("    do{within}: {}", g.corrective_action);
+        writeln!(out, "{}", crate::operator::escaped(&line))?;
+    }
     Ok(())
 }
 

@@ -52,6 +52,31 @@ impl Validator<'_> {
         (delays, consequences)
     }
 
+    /// `alarms.database`: the cell's master alarm database, read and
+    /// checked row by row (each problem at its line and column); whether
+    /// its ids are alarms of the cell is known once the checks are built
+    /// ([`crate::cell::compile::engine`]).
+    pub(super) fn database(
+        &mut self,
+        raw: Option<&Spanned<String>>,
+    ) -> Option<(std::path::PathBuf, cellwatch_models::madb::Database)> {
+        let raw = raw?;
+        let path = self.path(raw.get_ref());
+        let text = self.read_text(
+            raw.span(),
+            "alarms.database",
+            &path,
+            "the master alarm database",
+        )?;
+        match cellwatch_models::madb::Database::parse(&path.display().to_string(), &text) {
+            Ok(db) => Some((path, db)),
+            Err(e) => {
+                self.problems.extend(e.problems);
+                None
+            }
+        }
+    }
+
     /// `[alarms.consequences]`: an edge names two different alarms; whether
     /// they are alarms of the cell's checks is known once the checks are
     /// built ([`crate::cell::compile::engine`]).

@@ -468,6 +468,7 @@ impl Validator<'_> {
         let alarm_server = self.alarm_server(raw.alarm_server);
         let kpi = self.kpi(raw.kpi);
         let recorder = self.recorder(raw.recorder);
+        let database = self.database(raw.alarms.database.as_ref());
         let (system_delays, consequences) = self.system_alarms(raw.alarms);
         delays.extend(system_delays);
         let journal = JournalConfig {
@@ -660,6 +661,7 @@ impl Validator<'_> {
             alarm_server,
             kpi,
             consequences,
+            database,
             recorder,
             warnings: Vec::new(),
             source_sha256: String::new(),

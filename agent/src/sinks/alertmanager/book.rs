@@ -90,6 +90,20 @@ impl Labels {
                 .map_or_else(String::new, |c| format!(": {c}"));
             annotations.insert("acknowledged", format!("by {by}{said}"));
         }
+        // The master alarm database's guidance, where the cell has it.
+        if let Some(g) = &alarm.guidance {
+            for (key, text) in [
+                ("corrective_action", &g.corrective_action),
+                ("consequence_of_inaction", &g.consequence_of_inaction),
+            ] {
+                if !text.is_empty() {
+                    annotations.insert(key, text.clone());
+                }
+            }
+            if let Some(t) = &g.response_time {
+                annotations.insert("response_time", t.clone());
+            }
+        }
         let generator_url = self
             .console
             .as_ref()
@@ -427,6 +441,31 @@ mod tests {
         }
         assert!(!book.take(&l, &csd, NOW));
         assert!(book.batch(0, "2026-11-26T10:04:00.000Z").alerts.is_empty());
+    }
+
+    #[test]
+    fn an_alarm_with_guidance_carries_it_as_annotations() {
+        let mut book = Book::new(1, &[]);
+        let mut ese = payload(
+            "ese",
+            AlarmState::ActiveUnacknowledged,
+            "2026-11-26T10:00:00.000Z",
+        );
+        ese.guidance = Some(crate::payload::GuidancePayload {
+            class: "safety".into(),
+            consequence_of_inaction: "the machine stays stopped".into(),
+            corrective_action: "Drive the axis off its limit switch in JOG".into(),
+            response_time: Some("5m".into()),
+        });
+        assert!(book.take(&labels(), &ese, NOW));
+        let b = book.batch(0, "x");
+        let a = &b.alerts[0].annotations;
+        assert_eq!(
+            a["corrective_action"],
+            "Drive the axis off its limit switch in JOG"
+        );
+        assert_eq!(a["consequence_of_inaction"], "the machine stays stopped");
+        assert_eq!(a["response_time"], "5m");
     }
 
     #[test]
