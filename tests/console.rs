@@ -7,6 +7,7 @@ mod access;
 mod forcing;
 mod https;
 mod pages;
+mod ringing;
 
 use std::io::BufRead;
 use std::path::Path;
@@ -57,6 +58,12 @@ async fn plant(dir: &Path) -> Plant {
 /// [`plant`] with `http` added to the console's `[http]` section and
 /// `sections` at the end of its configuration.
 async fn plant_with(dir: &Path, http: &str, sections: &str) -> Plant {
+    plant_with_cell(dir, http, sections, "").await
+}
+
+/// [`plant_with`] with `cell_sections` at the end of the cell's
+/// configuration.
+async fn plant_with_cell(dir: &Path, http: &str, sections: &str, cell_sections: &str) -> Plant {
     let (sim, mut cell) = spawned::start(dir).await;
     let ana = OperatorKey::from_hex("ana", ANA).unwrap();
     let operators = dir.join("operators.toml");
@@ -87,7 +94,7 @@ async fn plant_with(dir: &Path, http: &str, sections: &str) -> Plant {
             crate::util::root().display()
         ),
         &dir.join("csd-comments.csv").display().to_string(),
-    );
+    ) + cell_sections;
     std::fs::write(&cell.config, config).unwrap();
     let agent = cell.spawn("agent.log").await;
 

@@ -27,6 +27,9 @@ const S = {
   key: null,
   live: false,
   synced: false,
+  // Occurrences (`cell\u0000id\u0000raised_at`) whose horn an operator
+  // silenced on this page.
+  silenced: new Set(),
   sort: { col: 'time', dir: -1 },
   filter: { text: '', cell: '', area: '', priority: '', state: '' },
   view: null,
@@ -83,6 +86,31 @@ function unacked(a) { return a.state === 'active_unacknowledged' || a.state === 
 function suppressed(a) { return !!(a.consequence && a.consequence.suppressed); }
 function kept(a) { return !!(a.shelved || a.out_of_service || suppressed(a) || a.suppressed_by_design); }
 
+// A humantime duration as the agent writes it (`5m`, `1h 30m`, `2m 30s`),
+// ms; null if it is none.
+function durationMs(t) {
+  if (!t) return null;
+  const unit = { ms: 1, s: 1e3, m: 6e4, h: 36e5, d: 864e5 };
+  let ms = 0;
+  for (const part of t.trim().split(/\s+/)) {
+    const m = /^(\d+)(ms|s|m|h|d)$/.exec(part);
+    if (!m) return null;
+    ms += Number(m[1]) * unit[m[2]];
+  }
+  return ms;
+}
+// Unacknowledged past the response time its rationalisation gives.
+function overdue(a) {
+  const rt = a.guidance ? durationMs(a.guidance.response_time) : null;
+  return rt !== null && unacked(a) && !kept(a) && Date.now() - Date.parse(a.raised_at) > rt;
+}
+function occurrence(a) { return alarmKey(a.cell, a.id) + '\u0000' + a.raised_at; }
+// Rings (ISA-101): a new unacknowledged high or critical alarm to act on,
+// until an operator silences it here.
+function rings(a) {
+  return unacked(a) && !kept(a) && (a.severity === 'high' || a.severity === 'critical') && !S.silenced.has(occurrence(a));
+}
+
 function badge(a) {
   const cls = ['badge', 'p-' + a.severity, unacked(a) ? 'unack' : 'ack', kept(a) ? 'kept' : ''].join(' ');
   return el('span', { class: cls }, a.severity);
@@ -94,6 +122,7 @@ function stateText(a) {
   if (a.shelved) parts.push('shelved');
   if (a.out_of_service) parts.push('out of service');
   if (a.suppressed_by_design) parts.push('suppressed by design in mode ' + a.suppressed_by_design.mode);
+  if (overdue(a)) parts.push('OVERDUE (response time ' + a.guidance.response_time + ')');
   if (a.consequence) parts.push((suppressed(a) ? 'suppressed, ' : '') + 'consequence of ' + a.consequence.cause);
   return parts.join(', ');
 }
@@ -502,6 +531,12 @@ function alarmDetail(cell, id) {
         ['Raised', when(a.raised_at)], ['Cleared', a.cleared_at ? when(a.cleared_at) : '—'], ['Acknowledged by', a.acked_by ? a.acked_by + (a.ack_comment ? `: ${a.ack_comment}` : '') : '—']];
       if (a.shelved) facts.push(['Shelved', `by ${a.shelved.by} until ${a.shelved.until ? when(a.shelved.until) : 'it clears'}: ${a.shelved.reason}`]);
       if (a.out_of_service) facts.push(['Out of service', `since ${when(a.out_of_service.at)} by ${a.out_of_service.by}: ${a.out_of_service.reason}`]);
+      if (a.guidance) {
+        const g = a.guidance;
+        if (g.corrective_action) facts.push(['Do', el('span', { class: overdue(a) ? 'guidance overdue' : 'guidance' }, g.corrective_action + (g.response_time ? ` (within ${g.response_time})` : ''))]);
+        if (g.consequence_of_inaction) facts.push(['If nobody acts', g.consequence_of_inaction]);
+        if (g.class) facts.push(['Class', g.class]);
+      }
       if (a.consequence) {
         const c = a.consequence;
         const through = (c.through || []).map(t => `${t.signal} = ${t.value ? 1 : 0} (${t.value ? 0 : 1} without ${c.cause}'s fault)`);
@@ -931,15 +966,50 @@ const agentsView = {
 // ---- routing ----
 
 function banner() {
-  let unack = 0, act = 0;
+  let unack = 0, act = 0, late = 0, ringing = 0;
   for (const a of S.alarms.values()) {
     if (kept(a)) continue;
     if (active(a)) act++;
     if (unacked(a)) unack++;
+    if (overdue(a)) late++;
+    if (rings(a)) ringing++;
   }
   const b = document.getElementById('banner');
-  b.textContent = `${act} active, ${unack} unacknowledged`;
+  b.textContent = `${act} active, ${unack} unacknowledged, ${late} overdue`;
   b.className = unack ? 'alert' : '';
+  document.body.dataset.ringing = ringing ? 'yes' : 'no';
+  document.getElementById('silence').hidden = !ringing;
+}
+
+// ---- the horn ----
+// A tone every 2 s while an alarm rings. Browsers let a page sound only
+// after a click on it: the first click anywhere readies the horn.
+const horn = {
+  ctx: null,
+  ready() {
+    if (!this.ctx && window.AudioContext) this.ctx = new AudioContext();
+    if (this.ctx && this.ctx.state === 'suspended') this.ctx.resume();
+  },
+  beep() {
+    if (!this.ctx || this.ctx.state !== 'running') return;
+    const o = this.ctx.createOscillator();
+    const g = this.ctx.createGain();
+    o.frequency.value = 880;
+    g.gain.value = 0.2;
+    o.connect(g).connect(this.ctx.destination);
+    o.start();
+    o.stop(this.ctx.currentTime + 0.4);
+  },
+};
+
+function silence() {
+  for (const a of S.alarms.values()) if (rings(a)) S.silenced.add(occurrence(a));
+  banner();
+}
+
+function sound() {
+  banner();
+  if (document.body.dataset.ringing === 'yes') horn.beep();
 }
 
 function update() {
@@ -992,6 +1062,10 @@ async function start() {
     route();
   });
   window.addEventListener('hashchange', route);
+  document.getElementById('silence').addEventListener('click', silence);
+  document.addEventListener('click', () => horn.ready());
+  // Overdue is a matter of time passing: the banner and the horn follow it.
+  setInterval(sound, 2000);
   await whoAmI();
   showOperator();
   route();
