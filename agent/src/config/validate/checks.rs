@@ -522,6 +522,7 @@ impl Validator<'_> {
                 on_delay,
                 off_delay,
                 levels,
+                rates: Vec::new(),
             });
         }
         out
