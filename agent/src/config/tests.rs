@@ -439,6 +439,7 @@ mod consequences;
 mod escalation;
 mod events;
 mod modes;
+mod rates;
 
 #[test]
 fn alertmanager_urls_tls_and_interval_are_checked() {
