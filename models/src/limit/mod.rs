@@ -76,7 +76,8 @@ pub struct LimitLevel {
 /// A limit check on one numeric tag (`[[checks.limit]]`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct LimitCheck {
-    /// The check's id; each level's alarm is `<id>-hh`, `<id>-h`, ...
+    /// The check's id; each level's alarm is `<id>-hh`, `<id>-h`, ...,
+    /// each rate's `<id>-roc-rising`, `<id>-roc-falling`.
     pub id: String,
     /// The tag's address.
     pub tag: Signal,

@@ -87,3 +87,24 @@ fn a_rate_level_takes_no_unknown_key_and_needs_its_rate_and_window() {
         ]
     );
 }
+
+#[test]
+fn the_how_to_example_parses() {
+    let doc = include_str!("../../../../docs/how-to/numeric-limits.md");
+    let section = &doc[doc.find("## Rate-of-change alarms").unwrap()..];
+    let start = section.find("```toml\n").unwrap() + "```toml\n".len();
+    let example = &section[start..start + section[start..].find("```").unwrap()];
+    let text = GOOD.replace(
+        "[[checks.switching]]",
+        &format!(
+            "[[tags]]\nname = \"spindle_temperature\"\nnode_id = \"nsu=urn:plc;s=D100\"\naddress = \"D100\"\ntype = \"Double\"\n\n\
+             {example}\n[[checks.switching]]"
+        ),
+    );
+    let c = parse("cell.toml", &text, Path::new("base"), &mem()).unwrap();
+    let l = &c.limits[0];
+    assert_eq!((l.levels.len(), l.rates.len()), (1, 2));
+    assert_eq!(l.rates[1].direction, RateDirection::Falling);
+    assert_eq!(l.rates[1].per, 30_000);
+    assert_eq!(l.rates[1].severity, Severity::Medium);
+}
