@@ -46,6 +46,7 @@ async fn nan_and_infinities_are_bad_quality_on_float_and_double_never_a_limit() 
                 deadband: 0.0,
                 on_delay: 0,
                 off_delay: 0,
+                rates: Vec::new(),
                 levels: vec![LimitLevel {
                     level: Level::H,
                     limit: 6.0,

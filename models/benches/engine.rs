@@ -108,6 +108,7 @@ fn engine_of(numbers: usize, recorder: Option<RecorderConfig>) -> (CellEngine, u
             deadband: 1.0,
             on_delay: 0,
             off_delay: 0,
+            rates: Vec::new(),
             levels: vec![
                 LimitLevel {
                     level: Level::H,

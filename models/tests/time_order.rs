@@ -3,7 +3,7 @@
 //!   (backwards, repeated, at both ends of `u64`) never panics, and gives
 //!   no verdict (early or normal) on a change earlier than the latest known
 //!   value;
-//! - the cell engine with timers (and their drift warnings), limits with delays, step supervision and
+//! - the cell engine with timers (and their drift warnings), limits with delays and rates, step supervision and
 //!   a delayed alarm, fed arbitrary readings, connection changes and the
 //!   passing of time at arbitrary times, never panics, and counts as out of
 //!   order exactly the readings (not duplicates) stamped before the latest
@@ -14,7 +14,9 @@
 use cellwatch_models::alarm::Severity;
 use cellwatch_models::comments::CommentDb;
 use cellwatch_models::engine::{CellEngine, CheckSet, Reading, StateRules, Tag, TagReading};
-use cellwatch_models::limit::{Level, LimitCheck, LimitChecks, LimitLevel};
+use cellwatch_models::limit::{
+    Level, LimitCheck, LimitChecks, LimitLevel, RateDirection, RateLevel,
+};
 use cellwatch_models::sfc::supervise::SfcChecks;
 use cellwatch_models::signal::Signal;
 use cellwatch_models::timer::checks::TimerChecks;
@@ -222,6 +224,14 @@ fn checks(w1: [u64; 2], w2: [u64; 2], delays: (u64, u64)) -> (Vec<Tag>, Vec<Box<
         on_delay: delays.0,
         off_delay: delays.1,
         levels: vec![level(Level::H, 90.0), level(Level::HH, 110.0)],
+        rates: [RateDirection::Rising, RateDirection::Falling]
+            .map(|direction| RateLevel {
+                direction,
+                rate: 5.0,
+                per: 1_000,
+                severity: Severity::High,
+            })
+            .to_vec(),
     }]);
     let mut names: Vec<Signal> = sfc.inputs();
     names.extend(["A", "B", "C", "TEMP"].map(Signal::new));

@@ -227,6 +227,7 @@ fn limit_levels_through_the_engine_with_an_on_delay_in_virtual_time() {
         deadband: 2.0,
         on_delay: 2000,
         off_delay: 0,
+        rates: Vec::new(),
         levels: vec![LimitLevel {
             level: Level::H,
             limit: 85.0,
@@ -336,6 +337,7 @@ fn temp_limit(h: f64) -> LimitCheck {
         deadband: 2.0,
         on_delay: 0,
         off_delay: 0,
+        rates: Vec::new(),
         levels: vec![LimitLevel {
             level: Level::H,
             limit: h,

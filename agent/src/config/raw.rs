@@ -298,12 +298,24 @@ pub(crate) struct RawLimit {
     pub(crate) h: Option<Spanned<RawLevel>>,
     pub(crate) l: Option<Spanned<RawLevel>>,
     pub(crate) ll: Option<Spanned<RawLevel>>,
+    pub(crate) rising: Option<Spanned<RawRate>>,
+    pub(crate) falling: Option<Spanned<RawRate>>,
 }
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawLevel {
     pub(crate) limit: f64,
+    pub(crate) severity: Option<Spanned<String>>,
+}
+
+/// A rate-of-change level of `[[checks.limit]]`: `rising = { rate = 5.0,
+/// per = "1m" }`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawRate {
+    pub(crate) rate: Spanned<f64>,
+    pub(crate) per: Spanned<String>,
     pub(crate) severity: Option<Spanned<String>>,
 }
 

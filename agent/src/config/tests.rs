@@ -440,6 +440,7 @@ mod database;
 mod escalation;
 mod events;
 mod modes;
+mod rates;
 
 #[test]
 fn alertmanager_urls_tls_and_interval_are_checked() {

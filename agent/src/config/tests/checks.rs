@@ -66,7 +66,7 @@ fn timer_model_signals_must_be_tags() {
 
 /// GOOD with numeric tags `D1` (Double) and `D2` (UInt16) and `S1`
 /// (String) added before the checks, and `extra` appended.
-fn typed(extra: &str) -> String {
+pub(super) fn typed(extra: &str) -> String {
     GOOD.replace(
         "[[checks.switching]]",
         "[[tags]]\nname = \"temp\"\nnode_id = \"nsu=urn:plc;s=D1\"\naddress = \"D1\"\ntype = \"Double\"\n\n\

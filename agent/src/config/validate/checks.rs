@@ -491,11 +491,13 @@ impl Validator<'_> {
                     severity,
                 });
             }
-            if levels.is_empty() {
+            let rates = self.rate_levels(&key, c.rising, c.falling, deadband);
+            if levels.is_empty() && rates.is_empty() {
                 self.problem(
                     c.id.span(),
                     &key,
-                    "give at least one level: hh, h, l or ll = { limit = ..., severity = ... }",
+                    "give at least one level: hh, h, l or ll = { limit = ..., severity = ... }, \
+                     or a rate: rising or falling = { rate = ..., per = ... }",
                 );
             }
             let limit = |l: Level| levels.iter().find(|x| x.level == l).map(|x| x.limit);
@@ -522,6 +524,7 @@ impl Validator<'_> {
                 on_delay,
                 off_delay,
                 levels,
+                rates,
             });
         }
         out

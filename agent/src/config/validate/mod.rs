@@ -13,6 +13,7 @@ mod journal;
 mod kpi;
 mod legacy;
 mod opcua;
+mod rates;
 mod recorder;
 mod sfc;
 mod tags;

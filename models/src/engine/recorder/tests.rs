@@ -80,6 +80,7 @@ fn ese_engine(limit: bool, config: RecorderConfig) -> CellEngine {
             deadband: 1.0,
             on_delay: 0,
             off_delay: 0,
+            rates: Vec::new(),
             levels: vec![LimitLevel {
                 level: Level::H,
                 limit: 80.0,

@@ -8,6 +8,10 @@
 //! for L and LL) and clears when it is back by more than the deadband
 //! (below `limit - deadband`, above `limit + deadband`). An unknown value
 //! holds every level's verdict and cancels pending delays.
+//!
+//! Rate-of-change levels (`rising`, `falling`) share that lifecycle: the
+//! change within a sliding window of the value's samples takes the place
+//! of the value ([`rate`]).
 
 use std::collections::{BTreeSet, HashMap};
 use std::fmt;
@@ -16,6 +20,11 @@ use crate::alarm::{Alarm, AlarmKind, Severity};
 use crate::engine::{CheckSet, Declared, Finding};
 use crate::signal::Signal;
 use crate::value::Num;
+
+mod rate;
+
+use rate::Window;
+pub use rate::{RateDirection, RateLevel, MAX_SAMPLES};
 
 /// A limit level.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -67,7 +76,8 @@ pub struct LimitLevel {
 /// A limit check on one numeric tag (`[[checks.limit]]`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct LimitCheck {
-    /// The check's id; each level's alarm is `<id>-hh`, `<id>-h`, ...
+    /// The check's id; each level's alarm is `<id>-hh`, `<id>-h`, ...,
+    /// each rate's `<id>-roc-rising`, `<id>-roc-falling`.
     pub id: String,
     /// The tag's address.
     pub tag: Signal,
@@ -86,12 +96,44 @@ pub struct LimitCheck {
     pub off_delay: u64,
     /// The levels configured.
     pub levels: Vec<LimitLevel>,
+    /// The rate-of-change levels configured (`rising`, `falling`).
+    pub rates: Vec<RateLevel>,
 }
 
 impl LimitCheck {
     /// The alarm id of one level.
     pub fn alarm_id(&self, level: Level) -> String {
         format!("{}-{}", self.id, level.as_str().to_ascii_lowercase())
+    }
+
+    /// The alarm id of one rate level: `<id>-roc-rising`, `<id>-roc-falling`.
+    pub fn rate_alarm_id(&self, direction: RateDirection) -> String {
+        format!("{}-roc-{}", self.id, direction.as_str())
+    }
+
+    /// The fault type of one rate level: `TEMP ROC-RISING`.
+    fn rate_fault_type(&self, direction: RateDirection) -> String {
+        format!(
+            "{} ROC-{}",
+            self.tag,
+            direction.as_str().to_ascii_uppercase()
+        )
+    }
+
+    /// The tag and its label, for messages: `TEMP (spindle temperature)`.
+    fn what(&self) -> String {
+        if self.label.is_empty() {
+            self.tag.to_string()
+        } else {
+            format!("{} ({})", self.tag, self.label)
+        }
+    }
+
+    /// Every alarm id of the check, value levels first, then rates.
+    fn alarm_ids(&self) -> impl Iterator<Item = String> + '_ {
+        let levels = self.levels.iter().map(|l| self.alarm_id(l.level));
+        let rates = self.rates.iter().map(|r| self.rate_alarm_id(r.direction));
+        levels.chain(rates)
     }
 }
 
@@ -111,16 +153,22 @@ struct LevelState {
 /// Every limit check of a cell.
 pub struct LimitChecks {
     checks: Vec<LimitCheck>,
-    /// Per check, per level.
+    /// Per check, per level: the value levels, then the rate levels.
     states: Vec<Vec<LevelState>>,
     /// Per check: the last known value.
     values: Vec<Option<f64>>,
+    /// Per check, per rate level: the samples its change is taken over.
+    windows: Vec<Vec<Window>>,
+    /// Per check: the source time it was last judged at, from which the
+    /// windows' next slides are found.
+    judged_at: Vec<u64>,
     by_tag: HashMap<Signal, Vec<usize>>,
     /// Per level's alarm id: its check.
     by_alarm: HashMap<String, usize>,
-    /// (when a delay runs out, check): checks to evaluate again as time
-    /// passes. An entry may outlive its delay (the value went back); it
-    /// then costs one evaluation that changes nothing.
+    /// (when a delay runs out or a window's start passes a sample, check):
+    /// checks to evaluate again as time passes. An entry may outlive its
+    /// delay (the value went back); it then costs one evaluation that
+    /// changes nothing.
     due: BTreeSet<(u64, usize)>,
 }
 
@@ -134,15 +182,20 @@ impl LimitChecks {
         let by_alarm = checks
             .iter()
             .enumerate()
-            .flat_map(|(i, c)| c.levels.iter().map(move |l| (c.alarm_id(l.level), i)))
+            .flat_map(|(i, c)| c.alarm_ids().map(move |id| (id, i)))
             .collect();
         LimitChecks {
             by_alarm,
             states: checks
                 .iter()
-                .map(|c| vec![LevelState::default(); c.levels.len()])
+                .map(|c| vec![LevelState::default(); c.levels.len() + c.rates.len()])
                 .collect(),
             values: vec![None; checks.len()],
+            windows: checks
+                .iter()
+                .map(|c| vec![Window::default(); c.rates.len()])
+                .collect(),
+            judged_at: vec![0; checks.len()],
             checks,
             by_tag,
             due: BTreeSet::new(),
@@ -152,23 +205,33 @@ impl LimitChecks {
     /// Judges check `i`'s delays that ran out before `now` (the source time of
     /// its next value), each at its own time with the value that held
     /// until then: values sampled over a while and delivered together, late
-    /// or republished, raise and clear as they happened.
+    /// or republished, raise and clear as they happened. So are the rate
+    /// levels as their windows slide past samples.
     fn run_out(&mut self, i: usize, now: u64, out: &mut Vec<Finding>) {
         loop {
             let check = &self.checks[i];
-            let earliest = self.states[i]
-                .iter()
-                .filter_map(|s| {
-                    let since = s.pending_since?;
-                    // Pending: the level wants the other verdict.
-                    let delay = if s.active {
-                        check.off_delay
-                    } else {
-                        check.on_delay
-                    };
-                    Some(since.saturating_add(delay))
+            let delays = self.states[i].iter().filter_map(|s| {
+                let since = s.pending_since?;
+                // Pending: the level wants the other verdict.
+                let delay = if s.active {
+                    check.off_delay
+                } else {
+                    check.on_delay
+                };
+                Some(since.saturating_add(delay))
+            });
+            let judged_at = self.judged_at[i];
+            let slides = (self.values[i].is_some())
+                .then(|| {
+                    check
+                        .rates
+                        .iter()
+                        .zip(&self.windows[i])
+                        .filter_map(move |(r, w)| w.next_slide(judged_at, r.per))
                 })
-                .min();
+                .into_iter()
+                .flatten();
+            let earliest = delays.chain(slides).min();
             match earliest {
                 // A delay ending just as the next value comes is judged
                 // on that value.
@@ -183,6 +246,7 @@ impl LimitChecks {
 
     /// Moves check `i`'s levels on, at `now`.
     fn evaluate(&mut self, i: usize, now: u64, out: &mut Vec<Finding>) {
+        self.judged_at[i] = now;
         let Some(value) = self.values[i] else {
             for s in &mut self.states[i] {
                 s.pending_since = None;
@@ -190,17 +254,33 @@ impl LimitChecks {
             return;
         };
         let check = &self.checks[i];
-        for (l, level) in check.levels.iter().enumerate() {
+        let n = check.levels.len();
+        // The windows' next slides: a rate may change with no new value.
+        for (r, w) in check.rates.iter().zip(&self.windows[i]) {
+            if let Some(at) = w.next_slide(now, r.per) {
+                self.due.insert((at, i));
+            }
+        }
+        for l in 0..n + check.rates.len() {
             let s = &mut self.states[i][l];
-            let beyond = if level.level.is_high() {
-                value > level.limit
-            } else {
-                value < level.limit
-            };
-            let back = if level.level.is_high() {
-                value < level.limit - check.deadband
-            } else {
-                value > level.limit + check.deadband
+            // The rate levels judge the change within their window.
+            let (beyond, back, change) = match check.levels.get(l) {
+                Some(level) if level.level.is_high() => (
+                    value > level.limit,
+                    value < level.limit - check.deadband,
+                    0.0,
+                ),
+                Some(level) => (
+                    value < level.limit,
+                    value > level.limit + check.deadband,
+                    0.0,
+                ),
+                None => {
+                    let rate = &check.rates[l - n];
+                    let change = self.windows[i][l - n].change(now, rate.per).unwrap_or(0.0);
+                    let (beyond, back) = rate.judge(change, check.deadband);
+                    (beyond, back, change)
+                }
             };
             if beyond && s.excursion_since.is_none() {
                 s.excursion_since = Some(now);
@@ -233,7 +313,10 @@ impl LimitChecks {
             if !wants {
                 s.excursion_since = None;
             }
-            let mut f = finding(check, level, value, wants, lasted);
+            let mut f = match check.levels.get(l) {
+                Some(level) => finding(check, level, value, wants, lasted),
+                None => rate::finding(check, &check.rates[l - n], change, wants, lasted),
+            };
             // Judged at `now`: the source time its delay ran out, when
             // values sampled over a while came together.
             f.at = Some(now);
@@ -257,11 +340,7 @@ fn finding(
     } else {
         format!(" {}", check.unit)
     };
-    let what = if check.label.is_empty() {
-        check.tag.to_string()
-    } else {
-        format!("{} ({})", check.tag, check.label)
-    };
+    let what = check.what();
     let message = if active {
         format!(
             "{what} = {value}{unit}, {} the {} limit {}{unit} for {:.1} s",
@@ -310,13 +389,21 @@ impl CheckSet for LimitChecks {
         self.checks
             .iter()
             .flat_map(|c| {
-                c.levels.iter().map(|level| Declared {
+                let levels = c.levels.iter().map(|level| Declared {
                     id: c.alarm_id(level.level),
                     kind: AlarmKind::Limit,
                     severity: level.severity,
                     fault_type: format!("{} {}", c.tag, level.level),
                     latched: false,
-                })
+                });
+                let rates = c.rates.iter().map(|rate| Declared {
+                    id: c.rate_alarm_id(rate.direction),
+                    kind: AlarmKind::Limit,
+                    severity: rate.severity,
+                    fault_type: c.rate_fault_type(rate.direction),
+                    latched: false,
+                });
+                levels.chain(rates)
             })
             .collect()
     }
@@ -372,7 +459,16 @@ impl CheckSet for LimitChecks {
         for k in 0..n {
             let i = self.by_tag[signal][k];
             self.run_out(i, now, out);
-            self.values[i] = value.map(Num::as_f64);
+            let value = value.map(Num::as_f64);
+            self.values[i] = value;
+            for (r, w) in self.checks[i].rates.iter().zip(&mut self.windows[i]) {
+                match value {
+                    Some(v) => w.push(now, v, r.per),
+                    None => w.clear(),
+                }
+            }
+            // A slide or delay due now is judged on this value.
+            self.due.remove(&(now, i));
             self.evaluate(i, now, out);
         }
     }
@@ -413,17 +509,26 @@ impl CheckSet for LimitChecks {
     }
 
     /// The level is taken as passed since the alarm was raised: the first
-    /// value back inside its deadband clears it.
+    /// value back inside its deadband clears it (a rate level's first
+    /// value: its window starts empty).
     fn restored(&mut self, alarm: &Alarm) {
         for (i, check) in self.checks.iter().enumerate() {
-            for (l, level) in check.levels.iter().enumerate() {
-                if check.alarm_id(level.level) == alarm.id {
+            for (l, id) in check.alarm_ids().enumerate() {
+                if id == alarm.id {
                     let s = &mut self.states[i][l];
                     s.active = true;
                     s.excursion_since = Some(alarm.raised_at);
                 }
             }
         }
+    }
+}
+
+impl LimitChecks {
+    /// The samples all rate windows keep.
+    #[cfg(test)]
+    fn samples_kept(&self) -> usize {
+        self.windows.iter().flatten().map(Window::len).sum()
     }
 }
 
@@ -463,6 +568,7 @@ mod tests {
                     severity: Severity::Medium,
                 },
             ],
+            rates: Vec::new(),
         }])
     }
 
