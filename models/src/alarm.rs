@@ -276,7 +276,7 @@ pub struct Alarm {
     /// Its rationalisation from the cell's master alarm database (class,
     /// consequence of inaction, corrective action, response time), if it
     /// has one.
-    pub guidance: Option<std::sync::Arc<crate::madb::Guidance>>,
+    pub guidance: Option<std::sync::Arc<Guidance>>,
 }
 
 /// Which machine mode suppresses an alarm by design, since when.
@@ -286,6 +286,64 @@ pub struct DesignedSuppression {
     pub mode: String,
     /// When the suppression began for this alarm, ms since the epoch.
     pub since: u64,
+}
+
+/// What the operator is told of an alarm: its rationalisation, from the
+/// cell's master alarm database ([`crate::madb`]).
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct Guidance {
+    /// Its class (`fault`, `safety`, `quality`, …, as the plant names them).
+    pub class: String,
+    /// What happens if nobody acts.
+    pub consequence_of_inaction: String,
+    /// What the operator does.
+    pub corrective_action: String,
+    /// How long the operator has, ms; `None`: not said.
+    pub response_time_ms: Option<u64>,
+}
+
+/// An alarm id, or a pattern where `*` stands for any run of characters
+/// (`door-*`, `*-guard`, `*`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct AlarmPattern(String);
+
+impl AlarmPattern {
+    /// The pattern `text`.
+    pub fn new(text: &str) -> AlarmPattern {
+        AlarmPattern(text.to_string())
+    }
+
+    /// The pattern as written.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+
+    /// Whether alarm id `id` matches.
+    pub fn matches(&self, id: &str) -> bool {
+        let mut parts = self.0.split('*');
+        let first = parts.next().unwrap_or("");
+        let Some(mut rest) = id.strip_prefix(first) else {
+            return false;
+        };
+        let parts: Vec<&str> = parts.collect();
+        let Some((last, middle)) = parts.split_last() else {
+            // No `*`: the whole id.
+            return rest.is_empty();
+        };
+        for part in middle {
+            match rest.find(part) {
+                Some(at) => rest = &rest[at + part.len()..],
+                None => return false,
+            }
+        }
+        rest.len() >= last.len() && rest.ends_with(last)
+    }
+}
+
+impl fmt::Display for AlarmPattern {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
 }
 
 /// Why an occurrence is a consequence: the alarm it follows from.
@@ -429,4 +487,33 @@ pub enum CommandRefused {
         /// Why.
         why: String,
     },
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_pattern_matches_ids_with_any_run_of_characters_for_a_star() {
+        let cases = [
+            ("door-*", "door-left", true),
+            ("door-*", "door-", true),
+            ("door-*", "doors", false),
+            ("*-guard", "left-guard", true),
+            ("*-guard", "left-guard2", false),
+            ("a*b*c", "a-x-b-y-c", true),
+            ("a*b*c", "a-c", false),
+            ("ab*ba", "aba", false),
+            ("*", "anything", true),
+            ("ese", "ese", true),
+            ("ese", "ese2", false),
+        ];
+        for (pattern, id, matches) in cases {
+            assert_eq!(
+                AlarmPattern::new(pattern).matches(id),
+                matches,
+                "{pattern} {id}"
+            );
+        }
+    }
 }

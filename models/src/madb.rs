@@ -5,9 +5,11 @@
 //! mistake at its line and column; which ids are the cell's alarms is the
 //! agent's to check (it knows the cell).
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
 
-use crate::alarm::Severity;
+pub use crate::alarm::Guidance;
+use crate::alarm::{AlarmPattern, Severity};
 use crate::sfc::text::duration_ms;
 
 /// The columns a rationalised file must have.
@@ -20,17 +22,48 @@ pub const REQUIRED: [&str; 6] = [
     "response_time",
 ];
 
-/// What the operator is told of an alarm: its rationalisation.
+/// One alarm's rationalisation as the engine applies it.
 #[derive(Debug, Clone, PartialEq, Eq, Default)]
-pub struct Guidance {
-    /// Its class (`fault`, `safety`, `quality`, …, as the plant names them).
-    pub class: String,
-    /// What happens if nobody acts.
-    pub consequence_of_inaction: String,
-    /// What the operator does.
-    pub corrective_action: String,
-    /// How long the operator has, ms; `None`: not said.
-    pub response_time_ms: Option<u64>,
+pub struct Rationalised {
+    /// The priority it is raised with; `None`: as its check says.
+    pub priority: Option<Severity>,
+    /// What the operator is told.
+    pub guidance: Arc<Guidance>,
+}
+
+/// The rationalised alarms: by id, and by pattern (`plc-*`, for the PLC's
+/// own alarms, whose ids are not known beforehand).
+#[derive(Debug, Clone, Default)]
+pub struct Rationalisation {
+    by_id: HashMap<String, Rationalised>,
+    patterns: Vec<(AlarmPattern, Rationalised)>,
+}
+
+impl Rationalisation {
+    /// The table of `rows` (alarm id, or a pattern with `*`, and its
+    /// rationalisation).
+    pub fn new(rows: impl IntoIterator<Item = (String, Rationalised)>) -> Rationalisation {
+        let mut table = Rationalisation::default();
+        for (id, r) in rows {
+            if id.contains('*') {
+                table.patterns.push((AlarmPattern::new(&id), r));
+            } else {
+                table.by_id.insert(id, r);
+            }
+        }
+        table
+    }
+
+    /// Alarm `id`'s rationalisation: its row, or the first pattern's it
+    /// matches.
+    pub fn of(&self, id: &str) -> Option<&Rationalised> {
+        self.by_id.get(id).or_else(|| {
+            self.patterns
+                .iter()
+                .find(|(p, _)| p.matches(id))
+                .map(|(_, r)| r)
+        })
+    }
 }
 
 /// One alarm's row of the database.

@@ -5,8 +5,9 @@
 //! validates starts.
 
 use cellwatch_models::comments::CommentDb;
-use cellwatch_models::engine::{CellEngine, CheckSet, EngineError, Rationalised, SwitchingChecks};
+use cellwatch_models::engine::{CellEngine, CheckSet, EngineError, SwitchingChecks};
 use cellwatch_models::limit::LimitChecks;
+use cellwatch_models::madb::Rationalised;
 use cellwatch_models::sfc::SfcChecks;
 use cellwatch_models::timer::checks::{TimerCheckError, TimerChecks};
 

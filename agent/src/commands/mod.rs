@@ -15,7 +15,7 @@ pub(crate) mod inputs;
 pub(crate) mod journal;
 pub(crate) mod keygen;
 pub(crate) mod mad;
-pub(crate) mod mad_import;
+
 pub(crate) mod man;
 pub(crate) mod pki;
 pub(crate) mod plant;

@@ -573,7 +573,7 @@ fn the_agents_own_alarms_clear_after_an_off_delay_unless_configured() {
     );
     assert_eq!(
         errors(&format!("{GOOD}\n[alarms.ese]\noff_delay = \"1s\"\n")),
-        "cell.toml:28:9: unknown field `ese`, expected one of `communication`, `tag-quality`, `consequences`"
+        "cell.toml:28:9: unknown field `ese`, expected one of `communication`, `tag-quality`, `consequences`, `database`"
     );
 }
 

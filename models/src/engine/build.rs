@@ -166,7 +166,7 @@ impl CellEngine {
             compared_in,
             running_reads,
             modes_on,
-            rationale: super::rationale::Rationale::default(),
+            rationale: crate::madb::Rationalisation::default(),
             alarms,
             connected: None,
             rules,

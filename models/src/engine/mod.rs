@@ -36,7 +36,7 @@
 //! - `catalogue`: every alarm the engine can raise, described for the
 //!   master alarm database ([`CatalogueEntry`]).
 //! - `rationale`: the master alarm database's priorities and guidance
-//!   ([`Rationalised`]).
+//!   ([`crate::madb::Rationalised`]).
 //! - `modes`: machine modes and the alarms each suppresses by design
 //!   ([`Mode`]).
 //!
@@ -88,11 +88,11 @@ mod tag;
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
+pub use crate::alarm::AlarmPattern;
 pub use catalogue::CatalogueEntry;
 pub use checks::{CheckSet, Declared, Finding, Observation, WindowPosition};
 pub use conditions::{PlcCondition, ACKED_AT_PLC};
-pub use modes::{AlarmPattern, Mode};
-pub use rationale::Rationalised;
+pub use modes::Mode;
 pub use recorder::{
     Cut, RecordedSignal, RecorderConfig, RecorderFill, Recording, Sample, Truncated,
 };
@@ -533,7 +533,7 @@ pub struct CellEngine {
     /// Per mode of `rules.modes`: whether it holds.
     modes_on: Vec<bool>,
     /// The cell's master alarm database: priorities and guidance.
-    rationale: rationale::Rationale,
+    rationale: crate::madb::Rationalisation,
     alarms: AlarmBook,
     /// `None` until the source first says.
     connected: Option<bool>,

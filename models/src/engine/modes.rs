@@ -16,6 +16,7 @@
 //! (maintenance) are the alarm book's.
 
 use super::{CellEngine, EngineEvent, Step};
+use crate::alarm::AlarmPattern;
 use crate::alarm::{AlarmState, DesignedSuppression, Transition};
 use crate::expr::Expr;
 use crate::signal::Signal;
@@ -30,50 +31,6 @@ pub struct Mode {
     pub when: Expr,
     /// The alarms it suppresses.
     pub suppress: Vec<AlarmPattern>,
-}
-
-/// An alarm id, or a pattern where `*` stands for any run of characters
-/// (`door-*`, `*-guard`, `*`).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct AlarmPattern(String);
-
-impl AlarmPattern {
-    /// The pattern `text`.
-    pub fn new(text: &str) -> AlarmPattern {
-        AlarmPattern(text.to_string())
-    }
-
-    /// The pattern as written.
-    pub fn as_str(&self) -> &str {
-        &self.0
-    }
-
-    /// Whether alarm id `id` matches.
-    pub fn matches(&self, id: &str) -> bool {
-        let mut parts = self.0.split('*');
-        let first = parts.next().unwrap_or("");
-        let Some(mut rest) = id.strip_prefix(first) else {
-            return false;
-        };
-        let parts: Vec<&str> = parts.collect();
-        let Some((last, middle)) = parts.split_last() else {
-            // No `*`: the whole id.
-            return rest.is_empty();
-        };
-        for part in middle {
-            match rest.find(part) {
-                Some(at) => rest = &rest[at + part.len()..],
-                None => return false,
-            }
-        }
-        rest.len() >= last.len() && rest.ends_with(last)
-    }
-}
-
-impl std::fmt::Display for AlarmPattern {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
 }
 
 impl CellEngine {
@@ -307,29 +264,5 @@ mod tests {
         assert_eq!(e.unmatched_patterns(), [(0, 1)]);
         let e = e.taking_conditions(["door".to_string()]);
         assert_eq!(e.unmatched_patterns(), []);
-    }
-
-    #[test]
-    fn a_pattern_matches_ids_with_any_run_of_characters_for_a_star() {
-        let cases = [
-            ("door-*", "door-left", true),
-            ("door-*", "door-", true),
-            ("door-*", "doors", false),
-            ("*-guard", "left-guard", true),
-            ("*-guard", "left-guard2", false),
-            ("a*b*c", "a-x-b-y-c", true),
-            ("a*b*c", "a-c", false),
-            ("ab*ba", "aba", false),
-            ("*", "anything", true),
-            ("ese", "ese", true),
-            ("ese", "ese2", false),
-        ];
-        for (pattern, id, matches) in cases {
-            assert_eq!(
-                AlarmPattern::new(pattern).matches(id),
-                matches,
-                "{pattern} {id}"
-            );
-        }
     }
 }

@@ -4,40 +4,11 @@
 //! corrective action and response time are too. Reading the file is
 //! [`crate::madb`]'s; which rows the cell has is the agent's to check.
 
-use std::collections::HashMap;
 use std::sync::Arc;
 
-use super::{AlarmPattern, CellEngine, Finding};
+use super::{CellEngine, Finding};
 use crate::alarm::Severity;
-use crate::madb::Guidance;
-
-/// One alarm's rationalisation as the engine applies it.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
-pub struct Rationalised {
-    /// The priority it is raised with; `None`: as its check says.
-    pub priority: Option<Severity>,
-    /// What the operator is told.
-    pub guidance: Arc<Guidance>,
-}
-
-/// The rationalised alarms: by id, and by pattern (`plc-*`, for the PLC's
-/// own alarms, whose ids are not known beforehand).
-#[derive(Debug, Clone, Default)]
-pub(super) struct Rationale {
-    by_id: HashMap<String, Rationalised>,
-    patterns: Vec<(AlarmPattern, Rationalised)>,
-}
-
-impl Rationale {
-    fn of(&self, id: &str) -> Option<&Rationalised> {
-        self.by_id.get(id).or_else(|| {
-            self.patterns
-                .iter()
-                .find(|(p, _)| p.matches(id))
-                .map(|(_, r)| r)
-        })
-    }
-}
+use crate::madb::{Guidance, Rationalisation, Rationalised};
 
 impl CellEngine {
     /// Takes `rows` (alarm id, or a pattern with `*`, and its
@@ -45,15 +16,7 @@ impl CellEngine {
     /// raised with its rationalised priority and carries its guidance.
     #[must_use]
     pub fn rationalising(mut self, rows: impl IntoIterator<Item = (String, Rationalised)>) -> Self {
-        let mut rationale = Rationale::default();
-        for (id, r) in rows {
-            if id.contains('*') {
-                rationale.patterns.push((AlarmPattern::new(&id), r));
-            } else {
-                rationale.by_id.insert(id, r);
-            }
-        }
-        self.rationale = rationale;
+        self.rationale = Rationalisation::new(rows);
         self
     }
 

@@ -315,7 +315,18 @@ impl LimitChecks {
             }
             let mut f = match check.levels.get(l) {
                 Some(level) => finding(check, level, value, wants, lasted),
-                None => rate::finding(check, &check.rates[l - n], change, wants, lasted),
+                None => {
+                    let level = &check.rates[l - n];
+                    let named = rate::Named {
+                        what: check.what(),
+                        unit: &check.unit,
+                        comment: check.comment.as_deref(),
+                        hysteresis: check.deadband,
+                        id: check.rate_alarm_id(level.direction),
+                        fault_type: check.rate_fault_type(level.direction),
+                    };
+                    rate::finding(&named, level, change, wants, lasted)
+                }
             };
             // Judged at `now`: the source time its delay ran out, when
             // values sampled over a while came together.
@@ -415,16 +426,29 @@ impl CheckSet for LimitChecks {
     /// The tag past the level's limit, the hysteresis and delays.
     fn describe(&self, id: &str) -> Option<String> {
         let c = &self.checks[*self.by_alarm.get(id)?];
+        let unit = if c.unit.is_empty() {
+            String::new()
+        } else {
+            format!(" {}", c.unit)
+        };
+        if let Some(r) = c.rates.iter().find(|r| c.rate_alarm_id(r.direction) == id) {
+            let per = r.per as f64 / 1000.0;
+            return Some(format!(
+                "{} ({}) {} by more than {}{unit} within {per} s",
+                c.tag,
+                c.label,
+                match r.direction {
+                    RateDirection::Rising => "rises",
+                    RateDirection::Falling => "falls",
+                },
+                r.rate
+            ));
+        }
         let level = c.levels.iter().find(|l| c.alarm_id(l.level) == id)?;
         let (past, back) = if level.level.is_high() {
             (">", "below")
         } else {
             ("<", "above")
-        };
-        let unit = if c.unit.is_empty() {
-            String::new()
-        } else {
-            format!(" {}", c.unit)
         };
         let mut text = format!(
             "{} ({}) {past} {}{unit} ({})",

@@ -19,7 +19,6 @@
 use std::collections::VecDeque;
 use std::fmt;
 
-use super::LimitCheck;
 use crate::alarm::{AlarmKind, Severity};
 use crate::engine::Finding;
 
@@ -184,10 +183,25 @@ fn amount(x: f64) -> f64 {
     (x.abs() * 1000.0).round() / 1000.0
 }
 
+/// The check a rate level belongs to, as its alarm names it.
+pub(super) struct Named<'a> {
+    /// The tag and its label (`TEMP (spindle temperature)`).
+    pub(super) what: String,
+    /// The unit, for messages; may be empty.
+    pub(super) unit: &'a str,
+    /// The tag's comment, ending each message.
+    pub(super) comment: Option<&'a str>,
+    /// The check's hysteresis.
+    pub(super) hysteresis: f64,
+    /// The level's alarm id and fault type.
+    pub(super) id: String,
+    pub(super) fault_type: String,
+}
+
 /// What a rate level found: the value moved by `change` within its
 /// window, beyond the rate (`active`) or back below it.
 pub(super) fn finding(
-    check: &LimitCheck,
+    check: &Named<'_>,
     level: &RateLevel,
     change: f64,
     active: bool,
@@ -198,7 +212,7 @@ pub(super) fn finding(
     } else {
         format!(" {}", check.unit)
     };
-    let what = check.what();
+    let what = &check.what;
     let per = duration(level.per);
     let moved = if change > 0.0 {
         format!("rose {}{unit}", amount(change))
@@ -217,20 +231,20 @@ pub(super) fn finding(
             "{what} {moved} in {per}, back within the {} rate {} per {per} (hysteresis {}) after {:.1} s",
             level.direction,
             level.rate,
-            check.deadband,
+            check.hysteresis,
             lasted as f64 / 1000.0
         )
     };
-    let message = match &check.comment {
+    let message = match check.comment {
         Some(comment) => format!("{message}: {comment}"),
         None => message,
     };
     Finding {
         at: None,
-        id: check.rate_alarm_id(level.direction),
+        id: check.id.clone(),
         kind: AlarmKind::Limit,
         severity: level.severity,
-        fault_type: check.rate_fault_type(level.direction),
+        fault_type: check.fault_type.clone(),
         latched: false,
         active,
         fault_step: None,
@@ -310,6 +324,11 @@ mod tests {
         let mut reads = Vec::new();
         c.reads("temp-roc-falling", &mut reads);
         assert_eq!(reads, [Signal::new("TEMP")]);
+        let said = c.describe("temp-roc-rising").unwrap();
+        assert!(
+            said.starts_with("TEMP (") && said.contains("rises by more than"),
+            "{said}"
+        );
         assert_eq!(duration(90_000), "90s");
         assert_eq!(duration(3_600_000), "1h");
         assert_eq!(duration(1_500), "1500ms");

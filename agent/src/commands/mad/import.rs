@@ -9,10 +9,23 @@ use std::path::{Path, PathBuf};
 
 use cellwatch_models::madb::{Database, Rationale};
 
-use super::mad::{ImportArgs, MadRow};
-use super::Failure;
+use super::rows::MadRow;
 use crate::cell::compile::CompileError;
+use crate::commands::Failure;
 use crate::config::{Disk, Files};
+
+/// `cellwatch mad import`.
+#[derive(Debug, clap::Args)]
+pub(crate) struct ImportArgs {
+    /// The cell's configuration (its `alarms.database` says where the
+    /// database is kept).
+    pub(crate) config: PathBuf,
+    /// The rationalised file (CSV, as `cellwatch mad export` writes it).
+    pub(crate) file: PathBuf,
+    /// Show the changes and check the file, write nothing.
+    #[arg(long)]
+    pub(crate) dry_run: bool,
+}
 
 /// The disk, with one file's bytes replaced: the configuration read as it
 /// will be once the import is written.
@@ -74,7 +87,7 @@ pub(crate) fn run(args: &ImportArgs, out: &mut dyn Write) -> Result<(), Failure>
         let mut bare = c.clone();
         bare.database = None;
         let engine = crate::cell::compile::engine(&bare).map_err(Failure::input)?;
-        super::mad::rows(&bare, &engine.catalogue())
+        super::rows::rows(&bare, &engine.catalogue())
     };
     drop(engine);
     let lines = changes(old.as_ref(), &new, &draft);
