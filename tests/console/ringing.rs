@@ -35,6 +35,12 @@ async fn a_new_critical_alarm_rings_until_silenced_and_its_guidance_and_lateness
         "return document.getElementById('banner').textContent.includes('1 unacknowledged, 1 overdue');",
     )
     .await;
+    // The table's row says it too, without an event to redraw it.
+    b.wait_until(
+        "the row says overdue",
+        "const r = document.querySelector(\"tr[data-alarm='ese']\"); return !!r && r.textContent.includes('OVERDUE');",
+    )
+    .await;
     b.screenshot("ringing").await;
     open(&b, &p, "#/alarm/m01ps0004/ese").await;
     b.wait_for("dl.facts .guidance").await;

@@ -976,6 +976,7 @@ function banner() {
   }
   const b = document.getElementById('banner');
   b.textContent = `${act} active, ${unack} unacknowledged, ${late} overdue`;
+  S.late = late;
   b.className = unack ? 'alert' : '';
   document.body.dataset.ringing = ringing ? 'yes' : 'no';
   document.getElementById('silence').hidden = !ringing;
@@ -1008,7 +1009,10 @@ function silence() {
 }
 
 function sound() {
+  const late = S.late;
   banner();
+  // An alarm just became overdue: the page says so where it shows it.
+  if (S.late !== late && S.view) S.view.update();
   if (document.body.dataset.ringing === 'yes') horn.beep();
 }
 
