@@ -193,7 +193,9 @@ impl Recorder {
                 continue;
             };
             if open.after == self.config.max_changes {
-                let holds_to = at.saturating_sub(1).max(open.recording.raised_at);
+                // Changes at `at` are dropped: the recording holds up to
+                // just before them, even if that is before its raise.
+                let holds_to = at.saturating_sub(1);
                 self.complete(k, holds_to, Some(Cut::Changes));
                 continue;
             }
@@ -362,7 +364,7 @@ impl Recorder {
             }
             if c.at > raised_at {
                 if after == self.config.max_changes {
-                    cut_end = Some(c.at.saturating_sub(1).max(raised_at));
+                    cut_end = Some(c.at.saturating_sub(1));
                     break;
                 }
                 after += 1;
