@@ -399,7 +399,13 @@ impl Recorder {
         match (cut_end, slot) {
             (Some(holds_to), _) => self.close(open, holds_to, Some(Cut::Changes)),
             (None, _) if newest > to => self.close(open, to, None),
-            (None, None) => self.close(open, newest.max(raised_at).min(to), Some(Cut::Busy)),
+            // Not followed: later changes stamped in the raise's (or the
+            // newest change's) millisecond may still come, so the recording
+            // holds up to just before it.
+            (None, None) => {
+                let holds_to = newest.max(raised_at).saturating_sub(1).min(to);
+                self.close(open, holds_to, Some(Cut::Busy));
+            }
             (None, Some(k)) => {
                 for &(t, _) in &open.tags {
                     self.members[t as usize] |= 1 << k;
@@ -658,7 +664,7 @@ mod tests {
         assert_eq!(second.alarm, "second");
         assert_eq!(
             (second.truncated.end, second.holds_to),
-            (Some(Cut::Busy), 3_000)
+            (Some(Cut::Busy), 2_999)
         );
         assert_eq!(bool_changes(&second.signals[0]), [(2_000, Some(true))]);
         // The first goes on, and a tag it does not read costs it nothing.
