@@ -138,7 +138,13 @@ pub(crate) async fn state(session: &Session, ns: u16, name: &str) -> Variant {
 /// The agent over the simulated CNC with its alarm server: the users of
 /// [`users_file`], ana an operator who may reset, not acknowledge.
 async fn serving() -> Fixture {
+    serving_with(|_| {}).await
+}
+
+/// [`serving`], with `more` said of the configuration too.
+async fn serving_with(more: impl FnOnce(&mut cellwatch::config::CellConfig)) -> Fixture {
     Fixture::start_with(|c| {
+        more(c);
         let dir = c.journal.path.parent().unwrap().to_path_buf();
         users_file(&dir.join("opcua-users.toml"));
         // Ana may reset, not acknowledge.

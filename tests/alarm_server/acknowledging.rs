@@ -15,7 +15,7 @@ use zenoh_ext::{AdvancedSubscriberBuilderExt, HistoryConfig, RecoveryConfig};
 
 use crate::agent::alarm_until;
 
-use super::{commands_journaled, connect, scada, serving, state};
+use super::{commands_journaled, connect, scada, serving_with, state};
 
 /// Each event's fields, in the order of [`select`].
 struct Events(mpsc::UnboundedSender<Vec<Variant>>);
@@ -41,12 +41,21 @@ const CONDITION_ID: usize = 10;
 /// their places (the patched async-opcua-nodes, vendor/README.md).
 const NO_SUCH_FIELD: usize = 11;
 const CULPRITS: usize = 12;
+const CORRECTIVE_ACTION: usize = 13;
+const RESPONSE_TIME: usize = 14;
+const OVERDUE: usize = 15;
 
 /// The select clauses of a SCADA client of `CellAlarmType` (in namespace
 /// `ns`).
 fn select(ns: u16) -> Vec<SimpleAttributeOperand> {
     let base = |p: &str| SimpleAttributeOperand::new_value(ObjectTypeId::BaseEventType, p);
     let alarm = |p: &str| SimpleAttributeOperand::new_value(ObjectTypeId::AlarmConditionType, p);
+    let own = |name: &str| SimpleAttributeOperand {
+        type_definition_id: NodeId::new(ns, "CellAlarmType"),
+        browse_path: Some(vec![QualifiedName::new(ns, name)]),
+        attribute_id: AttributeId::Value as u32,
+        index_range: NumericRange::None,
+    };
     vec![
         base("EventId"),
         base("EventType"),
@@ -65,12 +74,10 @@ fn select(ns: u16) -> Vec<SimpleAttributeOperand> {
             index_range: NumericRange::None,
         },
         alarm("NoSuchField"),
-        SimpleAttributeOperand {
-            type_definition_id: NodeId::new(ns, "CellAlarmType"),
-            browse_path: Some(vec![QualifiedName::new(ns, "Culprits")]),
-            attribute_id: AttributeId::Value as u32,
-            index_range: NumericRange::None,
-        },
+        own("Culprits"),
+        own("CorrectiveAction"),
+        own("ResponseTime"),
+        own("Overdue"),
     ]
 }
 
@@ -151,7 +158,18 @@ async fn event_until(
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
-    let fx = serving().await;
+    // The master alarm database gives ESE a corrective action and a
+    // second to act.
+    let fx = serving_with(|c| {
+        let dir = c.journal.path.parent().unwrap().to_path_buf();
+        let text = "id,priority,class,consequence_of_inaction,corrective_action,response_time\n\
+                    ese,,safety,the line stays down,Release the emergency stop,1s\n";
+        let path = dir.join("mad.csv");
+        std::fs::write(&path, text).unwrap();
+        let database = cellwatch_models::madb::Database::parse("mad.csv", text).unwrap();
+        c.database = Some((path, database));
+    })
+    .await;
     let addr = fx.agent().alarm_server_addr().unwrap();
     let url = format!("opc.tcp://{addr}/");
     // Each trusts the other's certificate.
@@ -279,9 +297,36 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
     };
     let condition = (**condition).clone();
     let event_id = raised[EVENT_ID].clone();
+    // The guidance, in the event and as properties.
+    assert_eq!(
+        raised[CORRECTIVE_ACTION],
+        Variant::from("Release the emergency stop")
+    );
+    assert_eq!(raised[RESPONSE_TIME], Variant::from(1_000.0f64));
+    assert_eq!(raised[OVERDUE], Variant::from(false));
+    // Unacknowledged past its second: an event says it is overdue, the
+    // same state otherwise.
+    let late = event_until(&mut events, "ESE overdue", |e| {
+        e[CONDITION_NAME] == Variant::from("ese") && e[OVERDUE] == Variant::from(true)
+    })
+    .await;
+    assert_eq!(
+        (&late[ACTIVE], &late[ACKED]),
+        (&Variant::from(true), &Variant::from(false))
+    );
+    assert_ne!(late[EVENT_ID], event_id);
+    assert_eq!(state(&kim, ns, "Overdue").await, Variant::from(true));
     // Its state is in variables too, for clients that browse and read.
     let children = browse(&kim, &condition).await;
-    for name in ["ActiveState", "AckedState", "Retain", "Message", "Culprits"] {
+    for name in [
+        "ActiveState",
+        "AckedState",
+        "Retain",
+        "Message",
+        "Culprits",
+        "CorrectiveAction",
+        "Overdue",
+    ] {
         assert!(children.iter().any(|c| c == name), "{name}: {children:?}");
     }
     assert_eq!(
@@ -339,7 +384,8 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
         StatusCode::BadEventIdUnknown
     );
 
-    // Kim acknowledges: Good once the cell loop took it.
+    // Kim acknowledges (the event she saw first: the overdue one says the
+    // same state): Good once the cell loop took it.
     assert_eq!(
         acknowledge(&kim, &condition, &event_id).await,
         StatusCode::Good
@@ -349,6 +395,7 @@ async fn a_scada_client_sees_ese_and_acknowledges_it_as_kim() {
     })
     .await;
     assert_eq!(acked[CLIENT_USER], Variant::from("kim"));
+    assert_eq!(acked[OVERDUE], Variant::from(false));
     assert_eq!(acked[ACTIVE], Variant::from(true));
     assert_eq!(state(&kim, ns, "AckedState.Id").await, Variant::from(true));
     assert_eq!(state(&kim, ns, "ClientUserId").await, Variant::from("kim"));

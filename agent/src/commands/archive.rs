@@ -35,7 +35,7 @@ pub(crate) async fn history(args: &HistoryArgs, out: &mut dyn Write) -> Result<(
     for entry in &reading.entries {
         match entry.kept {
             Kept::Alarm => match entry.alarm() {
-                Some(a) => print_alarm(out, &a, args.json).map_err(io)?,
+                Some(a) => print_alarm(out, &a, args.json, None).map_err(io)?,
                 None => eprintln!("{}: signed, but not an alarm event", entry.key),
             },
             Kept::State => match entry.state() {

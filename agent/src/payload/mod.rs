@@ -142,19 +142,6 @@ pub struct AlarmPayload {
     pub guidance: Option<GuidancePayload>,
 }
 
-/// An alarm's rationalisation, in its payload.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct GuidancePayload {
-    /// Its class, as the plant names them.
-    pub class: String,
-    /// What happens if nobody acts.
-    pub consequence_of_inaction: String,
-    /// What the operator does.
-    pub corrective_action: String,
-    /// How long the operator has (`5m`); `null`: not said.
-    pub response_time: Option<String>,
-}
-
 /// The machine mode that suppresses an alarm by design, in its payload.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct DesignedPayload {
@@ -728,5 +715,8 @@ mod tests;
 
 mod about;
 mod consequence;
+mod guidance;
+mod overdue;
 pub use about::{AboutPayload, CertificateAbout, ABOUT_SCHEMA};
 pub use consequence::{ConsequencePayload, ThroughPayload};
+pub use guidance::GuidancePayload;

@@ -110,10 +110,15 @@ pub(crate) fn io(e: std::io::Error) -> Failure {
     Failure::output(e)
 }
 
+/// Prints `a`, one line (and its culprits, its corrective action); `now`
+/// (ms) for the current state, where an occurrence past its response time
+/// is said `OVERDUE` (not for events of the past: a later one may have
+/// acknowledged it).
 pub(crate) fn print_alarm(
     out: &mut dyn Write,
     a: &AlarmPayload,
     json: bool,
+    now: Option<u64>,
 ) -> std::io::Result<()> {
     if json {
         return writeln!(out, "{}", serde_json::to_string(a).unwrap_or_default());
@@ -137,6 +142,12 @@ pub(crate) fn print_alarm(
             "SUPPRESSED BY DESIGN in mode {} since {}  ",
             d.mode, d.since
         );
+    }
+    // Unacknowledged past its response time: said first too, as a
+    // reminder that someone must act now.
+    if now.is_some_and(|now| a.overdue(now)) {
+        let within = a.guidance.as_ref().and_then(|g| g.response_time.as_deref());
+        kept += &format!("OVERDUE (response time {})  ", within.unwrap_or_default());
     }
     let mut consequence = String::new();
     if let Some(c) = &a.consequence {
@@ -264,7 +275,7 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
                     {
                         printed.insert((a.id.clone(), a.at.clone(), a.transition));
                         latest.newer(&a);
-                        print_alarm(out, &a, args.json).map_err(io)?;
+                        print_alarm(out, &a, args.json, None).map_err(io)?;
                     }
                 }
                 match page["next"].as_i64() {
@@ -307,7 +318,7 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
                         tracing::warn!(key, at = %a.at, "an alarm event older than one already printed of that alarm (replayed?): not printed");
                         continue;
                     }
-                    print_alarm(out, &a, args.json).map_err(io)?;
+                    print_alarm(out, &a, args.json, None).map_err(io)?;
                     out.flush().map_err(io)?;
                 }
             }
@@ -320,6 +331,7 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
         .await
         .map_err(failure)?;
     let mut answered = 0;
+    let now = crate::clock::now_ms();
     for CellAnswer {
         cell: of_cell,
         answer,
@@ -342,7 +354,7 @@ pub(crate) async fn alarms(args: &AlarmsArgs, out: &mut dyn Write) -> Result<(),
         answered += 1;
         for a in v["alarms"].as_array().into_iter().flatten() {
             if let Ok(a) = serde_json::from_value::<AlarmPayload>(a.clone()) {
-                print_alarm(out, &a, args.json).map_err(io)?;
+                print_alarm(out, &a, args.json, Some(now)).map_err(io)?;
             }
         }
     }
@@ -738,7 +750,7 @@ mod tests {
         }))
         .unwrap();
         let mut out = Vec::new();
-        print_alarm(&mut out, &a, false).unwrap();
+        print_alarm(&mut out, &a, false, None).unwrap();
         let text = String::from_utf8(out).unwrap();
         assert_eq!(text.lines().count(), 1, "{text}");
         assert!(
@@ -750,8 +762,41 @@ mod tests {
         cleared.transition = cellwatch_models::alarm::Transition::Cleared;
         cleared.ack_comment = None;
         let mut out = Vec::new();
-        print_alarm(&mut out, &cleared, false).unwrap();
+        print_alarm(&mut out, &cleared, false, None).unwrap();
         let text = String::from_utf8(out).unwrap();
         assert!(text.ends_with("ESE at step 6 (by kim)\n"), "{text}");
+    }
+
+    #[test]
+    fn the_current_state_says_an_alarm_past_its_response_time_is_overdue() {
+        let a: AlarmPayload = serde_json::from_value(serde_json::json!({
+            "schema": "cellwatch.alarm.v1", "cell": "m01ps0004", "id": "ese",
+            "kind": "switching", "severity": "critical", "state": "active_unacknowledged",
+            "transition": "raised", "at": "2026-11-28T10:00:00.000Z",
+            "raised_at": "2026-11-28T10:00:00.000Z", "cleared_at": null, "acked_by": null,
+            "fault_type": "ESE", "fault_step": 6, "culprits": [], "message": "ESE at step 6",
+            "guidance": {"class": "safety", "consequence_of_inaction": "",
+                         "corrective_action": "Release the emergency stop",
+                         "response_time": "5m"}
+        }))
+        .unwrap();
+        let raised = crate::clock::parse_time("2026-11-28T10:00:00.000Z", 0).unwrap();
+        let printed = |now: Option<u64>| {
+            let mut out = Vec::new();
+            print_alarm(&mut out, &a, false, now).unwrap();
+            String::from_utf8(out).unwrap()
+        };
+        assert!(!printed(Some(raised + 299_999)).contains("OVERDUE"));
+        let late = printed(Some(raised + 300_000));
+        assert!(
+            late.contains("  OVERDUE (response time 5m)  raised"),
+            "{late}"
+        );
+        assert!(
+            late.contains("    do (within 5m): Release the emergency stop"),
+            "{late}"
+        );
+        // An event of the past is printed as it was.
+        assert!(!printed(None).contains("OVERDUE"));
     }
 }

@@ -25,6 +25,7 @@ use super::events::{
     AlarmFields, CellAlarmEvent, CommentVar, CurrentStateVar, QualityVar, SeverityVar, ShelvingVar,
     TwoState,
 };
+use super::guidance::{self, Guidance, Overdue};
 use crate::payload::{AlarmPayload, ConsequencePayload, CulpritPayload};
 
 /// A state variable: its name, data type and initial value.
@@ -117,6 +118,18 @@ pub(super) struct Condition {
     /// The event last sent: an `Acknowledge` must name it.
     pub(super) event_id: ByteString,
     pub(super) time: DateTime,
+    /// What the master alarm database tells the operator, and lateness.
+    pub(super) guidance: Guidance,
+    /// The event before `event_id` when that one only said the condition
+    /// became overdue: the same state, so acknowledging either is one.
+    pub(super) before_overdue: Option<ByteString>,
+}
+
+impl Condition {
+    /// Whether `event_id` names this condition's state as it stands.
+    pub(super) fn names(&self, event_id: &ByteString) -> bool {
+        self.event_id == *event_id || self.before_overdue.as_ref() == Some(event_id)
+    }
 }
 
 impl Condition {
@@ -137,6 +150,8 @@ pub(super) struct Conditions {
     alarms: Mutex<HashMap<String, Condition>>,
     /// The last event id handed out.
     counter: AtomicU64,
+    /// Wakes the task marking conditions overdue.
+    pub(super) overdue: Overdue,
 }
 
 /// The shelving state machine's state of a shelf: its name and node.
@@ -208,6 +223,7 @@ impl Conditions {
             served: OnceLock::new(),
             alarms: Mutex::new(HashMap::new()),
             counter: AtomicU64::new(1),
+            overdue: Overdue::default(),
         }
     }
 
@@ -284,6 +300,8 @@ impl Conditions {
                 || p.out_of_service.is_some()
                 || p.consequence.as_ref().is_some_and(|c| c.suppressed)
                 || p.suppressed_by_design.is_some();
+            c.guidance = Guidance::of(p, crate::clock::now_ms());
+            c.before_overdue = None;
             c.event_id = self.next_event_id();
             c.time = now;
             (
@@ -301,6 +319,46 @@ impl Conditions {
         served
             .subscriptions
             .notify_events([(&event as &dyn Event, &served.notifier)].into_iter());
+        // Its deadline may have moved.
+        self.overdue.changed.notify_one();
+    }
+
+    /// Time reached `now` (ms since the epoch): the conditions past their
+    /// response time unacknowledged become overdue, each with an event.
+    /// When the next one falls due.
+    pub(super) fn mark_overdue(&self, now: u64) -> Option<u64> {
+        let served = self.served.get()?;
+        let (due, next) = {
+            let mut alarms = self.alarms.lock();
+            let mut due = Vec::new();
+            for (id, c) in alarms.iter_mut() {
+                if c.guidance.falls_due(now) {
+                    let before = std::mem::replace(&mut c.event_id, self.next_event_id());
+                    c.before_overdue = Some(before);
+                    c.time = DateTime::now();
+                    due.push((
+                        id.clone(),
+                        self.event(served, id, c),
+                        self.state_values(served.ns, id, c),
+                    ));
+                }
+            }
+            let next = alarms.values().filter_map(|c| c.guidance.due_at()).min();
+            (due, next)
+        };
+        for (id, event, values) in due {
+            tracing::info!(alarm = %id, "alarm server: unacknowledged past its response time: overdue");
+            if let Err(e) = served.nodes.set_values(
+                &served.subscriptions,
+                values.iter().map(|(n, v)| (n, None, v.clone())),
+            ) {
+                tracing::warn!(alarm = %id, error = %e, "alarm server: a condition's state variables not updated");
+            }
+            served
+                .subscriptions
+                .notify_events([(&event as &dyn Event, &served.notifier)].into_iter());
+        }
+        next
     }
 
     /// The events of the conditions clients must keep (ConditionRefresh).
@@ -369,6 +427,15 @@ impl Conditions {
                 };
                 builder.insert(&mut *space);
             }
+            let none = Guidance::default();
+            for (name, data_type) in guidance::PROPERTIES {
+                VariableBuilder::new(&self.state_node(served.ns, id, name), name, name)
+                    .data_type(data_type)
+                    .value(none.value(name))
+                    .property_of(node.clone())
+                    .has_type_definition(VariableTypeId::PropertyType)
+                    .insert(&mut *space);
+            }
         }
         {
             let mut core = served.core.write();
@@ -407,6 +474,8 @@ impl Conditions {
             shelving_node: self.state_node(served.ns, id, "ShelvingState"),
             event_id: ByteString::null(),
             time: now,
+            guidance: Guidance::default(),
+            before_overdue: None,
         }
     }
 
@@ -466,8 +535,12 @@ impl Conditions {
                 c.time,
             ),
         ];
+        let guidance = guidance::PROPERTIES
+            .iter()
+            .map(|(name, _)| (*name, c.guidance.value(name), c.time));
         values
             .into_iter()
+            .chain(guidance)
             .map(|(name, v, at)| {
                 let mut dv = DataValue::new_now(v);
                 dv.source_timestamp = Some(at);
@@ -542,6 +615,11 @@ pub(super) fn condition_event(
             },
             culprits: c.culprits.as_str().into(),
             consequence: c.consequence.as_str().into(),
+            corrective_action: c.guidance.corrective_action.as_str().into(),
+            consequence_of_inaction: c.guidance.consequence_of_inaction.as_str().into(),
+            alarm_class: c.guidance.class.as_str().into(),
+            response_time: c.guidance.response_time,
+            overdue: c.guidance.overdue,
         },
     }
 }

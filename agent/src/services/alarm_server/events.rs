@@ -95,6 +95,17 @@ pub(super) struct AlarmFields {
     /// cause, the signal it follows through, the first-out); empty for a
     /// first-out.
     pub(super) consequence: UAString,
+    /// `CellAlarmType`'s own, from the master alarm database: what the
+    /// operator does.
+    pub(super) corrective_action: UAString,
+    /// What happens if nobody acts.
+    pub(super) consequence_of_inaction: UAString,
+    /// The alarm's class, as the plant names them.
+    pub(super) alarm_class: UAString,
+    /// How long the operator has, ms (0: not said).
+    pub(super) response_time: f64,
+    /// Unacknowledged past its response time.
+    pub(super) overdue: bool,
 }
 
 /// One condition's event. `Event` is written by hand so that a select

@@ -73,8 +73,12 @@ pub(super) fn accept_condition_fields(tree: &mut DefaultTypeTree, ns: u16, ty: &
             );
         }
     }
-    paths.push(vec![QualifiedName::new(ns, "Culprits")]);
-    paths.push(vec![QualifiedName::new(ns, "Consequence")]);
+    let own = ["Culprits", "Consequence"]
+        .into_iter()
+        .chain(super::guidance::PROPERTIES.iter().map(|(name, _)| *name));
+    for name in own {
+        paths.push(vec![QualifiedName::new(ns, name)]);
+    }
     for (t, ty) in types.iter().enumerate() {
         for (p, path) in paths.iter().enumerate() {
             let path: Vec<&QualifiedName> = path.iter().collect();
@@ -149,6 +153,12 @@ mod tests {
             shelving_node: NodeId::new(ns, "m01.ese.ShelvingState"),
             event_id: ByteString::from(b"m01-1".to_vec()),
             time: at,
+            guidance: super::super::guidance::Guidance {
+                corrective_action: "Release the emergency stop".into(),
+                response_time: 300_000.0,
+                ..Default::default()
+            },
+            before_overdue: None,
         };
         condition_event(
             "m01",
@@ -356,6 +366,22 @@ mod tests {
             consequence,
             lit("follows from hydraulic: Y2.00 = 0 (1 without hydraulic's fault)")
         ));
+        // The master alarm database's guidance: a SCADA may filter on it
+        // (the critical alarms that are overdue, say).
+        let own = |name: &str| {
+            Operand::SimpleAttributeOperand(SimpleAttributeOperand {
+                type_definition_id: NodeId::new(ns, "CellAlarmType"),
+                browse_path: Some(vec![QualifiedName::new(ns, name)]),
+                attribute_id: AttributeId::Value as u32,
+                index_range: NumericRange::None,
+            })
+        };
+        assert!(eq(
+            own("CorrectiveAction"),
+            lit("Release the emergency stop")
+        ));
+        assert!(eq(own("ResponseTime"), lit(300_000.0f64)));
+        assert!(eq(own("Overdue"), lit(false)));
         // A value of no type comparable: false, not an error.
         assert!(!eq(field("Time"), lit(NodeId::new(ns, "CellAlarmType"))));
     }

@@ -122,7 +122,7 @@ impl AlarmCore {
             call.set_status(StatusCode::BadNodeIdUnknown);
             return;
         };
-        if condition.event_id != event_id {
+        if !condition.names(&event_id) {
             call.set_status(StatusCode::BadEventIdUnknown);
             return;
         }

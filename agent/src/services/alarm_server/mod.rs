@@ -1,7 +1,10 @@
 //! The alarm server (`[alarm_server]`): the cell's alarms served to SCADA
 //! clients as OPC UA Alarms & Conditions, beside the cell loop. One
 //! `CellAlarmType` (an `AlarmConditionType` with the alarm's culprits as
-//! `Culprits` and, for a consequence, why as `Consequence`) per alarm id under the cell's object, a notifier the
+//! `Culprits`, for a consequence why as `Consequence`, and the master
+//! alarm database's guidance: `CorrectiveAction`, `ConsequenceOfInaction`,
+//! `AlarmClass`, `ResponseTime`, `Overdue` once unacknowledged past it, an
+//! event of its own) per alarm id under the cell's object, a notifier the
 //! `Server` object reaches, so a client subscribing to events on i=2253
 //! sees every transition; `ConditionRefresh` is answered, and
 //! `Acknowledge`, shelving and `Disable`/`Enable` are carried out by the
@@ -15,7 +18,8 @@
 //! `vendor/README.md`). Anonymous sessions may browse and subscribe, never
 //! acknowledge.
 //!
-//! - `events.rs`: the event and its fields; `filters.rs`: the fields a
+//! - `events.rs`: the event and its fields; `guidance.rs`: the guidance
+//!   properties and lateness; `filters.rs`: the fields a
 //!   client's event filter may name, and the filters over a real event;
 //!   `conditions.rs`: the conditions kept from the alarm payloads; `methods.rs`: the methods
 //!   (Acknowledge, ConditionRefresh, Disable/Enable, shelving); `users.rs`: the users file, passwords.
@@ -26,12 +30,14 @@
 mod conditions;
 mod events;
 mod filters;
+mod guidance;
 mod methods;
 pub mod users;
 
 use std::future::Future;
 use std::net::SocketAddr;
 use std::sync::Arc;
+use std::time::Duration;
 
 use opcua::crypto::SecurityPolicy;
 use opcua::server::address_space::{
@@ -202,6 +208,7 @@ impl AlarmServer {
             return Err(AlarmServerError::Build("served twice".into()));
         }
         let stop = handle.clone();
+        let late = conditions.clone();
         let task = tokio::spawn(async move {
             tokio::select! {
                 r = server.run_with(listener) => {
@@ -210,6 +217,7 @@ impl AlarmServer {
                     }
                 }
                 () = shutdown => stop.cancel(),
+                () = mark_overdue(&late) => {}
             }
         });
         tracing::info!(cell, %addr, "serving the cell's alarms over OPC UA");
@@ -266,7 +274,27 @@ impl AlarmServer {
     }
 }
 
-/// `CellAlarmType` (with `Culprits` and `Consequence`) and the cell's object, a notifier the
+/// Marks the conditions overdue as their response times pass, for ever:
+/// asleep until the next falls due or a condition changes.
+async fn mark_overdue(conditions: &Conditions) {
+    loop {
+        let changed = conditions.overdue.changed.notified();
+        let next = conditions.mark_overdue(crate::clock::now_ms());
+        match next {
+            Some(at) => {
+                let wait = Duration::from_millis(at.saturating_sub(crate::clock::now_ms()));
+                tokio::select! {
+                    () = tokio::time::sleep(wait) => {}
+                    () = changed => {}
+                }
+            }
+            None => changed.await,
+        }
+    }
+}
+
+/// `CellAlarmType` (with `Culprits`, `Consequence` and the guidance of
+/// [`guidance::PROPERTIES`]) and the cell's object, a notifier the
 /// `Server` object reaches.
 fn declare(nodes: &SimpleNodeManager, ns: u16, cell: &str, cell_node: &NodeId, ty: &NodeId) {
     let space = nodes.address_space();
@@ -274,14 +302,23 @@ fn declare(nodes: &SimpleNodeManager, ns: u16, cell: &str, cell_node: &NodeId, t
     ObjectTypeBuilder::new(ty, "CellAlarmType", "CellAlarmType")
         .subtype_of(ObjectTypeId::AlarmConditionType)
         .insert(&mut *space);
-    for name in ["Culprits", "Consequence"] {
+    let own = [
+        ("Culprits", DataTypeId::String),
+        ("Consequence", DataTypeId::String),
+    ];
+    let none = guidance::Guidance::default();
+    for (name, data_type) in own.into_iter().chain(guidance::PROPERTIES) {
+        let initial = match data_type {
+            DataTypeId::String => "".into(),
+            _ => none.value(name),
+        };
         VariableBuilder::new(
             &NodeId::new(ns, format!("CellAlarmType.{name}")),
             QualifiedName::new(ns, name),
             name,
         )
-        .data_type(DataTypeId::String)
-        .value("")
+        .data_type(data_type)
+        .value(initial)
         .property_of(ty.clone())
         .has_type_definition(VariableTypeId::PropertyType)
         .has_modelling_rule(ObjectId::ModellingRule_Mandatory)

@@ -149,6 +149,8 @@ struct Active {
     alert: Alert,
     /// When it was raised (ms), while nobody acknowledged it.
     unacknowledged_since: Option<u64>,
+    /// When it is overdue (ms): unacknowledged past its response time.
+    overdue_from: Option<u64>,
 }
 
 /// One send's content for one Alertmanager.
@@ -209,12 +211,24 @@ impl Book {
     }
 
     /// `alert` with the `unacknowledged_for` label of `now` (none before
-    /// the first step, nor once acknowledged).
-    fn escalated(&self, mut alert: Alert, since: Option<u64>, now: u64) -> Alert {
+    /// the first step, nor once acknowledged), and the `overdue`
+    /// annotation once past its response time.
+    fn escalated(&self, mut alert: Alert, active: &Active, now: u64) -> Alert {
+        let since = active.unacknowledged_since;
         match since.and_then(|t| self.step(now.saturating_sub(t))) {
             Some(step) => alert.labels.insert("unacknowledged_for", step.to_string()),
             None => alert.labels.remove("unacknowledged_for"),
         };
+        if active.overdue_from.is_some_and(|from| now >= from) {
+            let within = alert.annotations.get("response_time").cloned();
+            let text = match within {
+                Some(t) => format!("unacknowledged past its response time ({t})"),
+                None => "unacknowledged past its response time".to_string(),
+            };
+            alert.annotations.insert("overdue", text);
+        } else {
+            alert.annotations.remove("overdue");
+        }
         alert
     }
 
@@ -235,18 +249,18 @@ impl Book {
                     .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
                     .map_or(now, |d| u64::try_from(d.as_millis()).unwrap_or(now))
             });
-            let alert = self.escalated(labels.alert(alarm), since, now);
+            let mut active = Active {
+                alert: labels.alert(alarm),
+                unacknowledged_since: since,
+                overdue_from: alarm.overdue_from(),
+            };
+            let alert = self.escalated(active.alert.clone(), &active, now);
             if self.active.get(&alarm.id).is_some_and(|a| a.alert == alert) {
                 return false;
             }
             self.ended.remove(&identity(&alert));
-            let before = self.active.insert(
-                alarm.id.clone(),
-                Active {
-                    alert: alert.clone(),
-                    unacknowledged_since: since,
-                },
-            );
+            active.alert = alert.clone();
+            let before = self.active.insert(alarm.id.clone(), active);
             if let Some(before) = before.filter(|b| b.alert.labels != alert.labels) {
                 self.end(before.alert, &alarm.at);
             }
@@ -269,12 +283,13 @@ impl Book {
     }
 
     /// Time reached `now` (ms): the alerts unacknowledged long enough for
-    /// their next step of escalation get it. Whether anything changed.
+    /// their next step of escalation get it, and those past their response
+    /// time the `overdue` annotation. Whether anything changed.
     pub fn escalate(&mut self, now: u64) -> bool {
         let mut moved = Vec::new();
         for (id, a) in &self.active {
-            let alert = self.escalated(a.alert.clone(), a.unacknowledged_since, now);
-            if alert.labels != a.alert.labels {
+            let alert = self.escalated(a.alert.clone(), a, now);
+            if alert != a.alert {
                 moved.push((id.clone(), alert));
             }
         }
@@ -284,8 +299,13 @@ impl Book {
         let at = crate::clock::rfc3339(now);
         for (id, alert) in moved {
             if let Some(a) = self.active.get_mut(&id) {
+                let relabelled = alert.labels != a.alert.labels;
                 let before = std::mem::replace(&mut a.alert, alert);
-                self.end(before, &at);
+                // The same labels: the same alert, sent again with its new
+                // annotations.
+                if relabelled {
+                    self.end(before, &at);
+                }
             }
         }
         self.changed = self.all;
@@ -293,9 +313,10 @@ impl Book {
     }
 
     /// When (ms) an alert unacknowledged now reaches its next step of
-    /// escalation, the earliest of them.
+    /// escalation or becomes overdue, the earliest of them.
     pub fn next_escalation(&self, now: u64) -> Option<u64> {
-        self.active
+        let steps = self
+            .active
             .values()
             .filter_map(|a| a.unacknowledged_since)
             .filter_map(|since| {
@@ -303,8 +324,13 @@ impl Book {
                     .iter()
                     .map(|(_, from)| since.saturating_add(*from))
                     .find(|at| *at > now)
-            })
-            .min()
+            });
+        let overdue = self
+            .active
+            .values()
+            .filter_map(|a| a.overdue_from)
+            .filter(|at| *at > now);
+        steps.chain(overdue).min()
     }
 
     /// Alertmanager `to` has a change it was not sent (one that came
@@ -466,6 +492,67 @@ mod tests {
         );
         assert_eq!(a["consequence_of_inaction"], "the machine stays stopped");
         assert_eq!(a["response_time"], "5m");
+    }
+
+    #[test]
+    fn an_alarm_unacknowledged_past_its_response_time_is_marked_overdue_until_acknowledged() {
+        let mut book = Book::new(1, &[]);
+        let l = labels();
+        // Raised at 10:00:00 with two minutes to act; taken at 10:00:30.
+        let mut ese = payload(
+            "ese",
+            AlarmState::ActiveUnacknowledged,
+            "2026-11-26T10:00:00.000Z",
+        );
+        ese.guidance = Some(crate::payload::GuidancePayload {
+            class: "safety".into(),
+            consequence_of_inaction: String::new(),
+            corrective_action: "Release the emergency stop".into(),
+            response_time: Some("2m".into()),
+        });
+        let raised_ms = NOW - 30_000;
+        assert!(book.take(&l, &ese, NOW));
+        let overdue = |book: &Book| {
+            book.batch(0, "x").alerts[0]
+                .annotations
+                .get("overdue")
+                .cloned()
+        };
+        assert_eq!(overdue(&book), None);
+        assert_eq!(book.next_escalation(NOW), Some(raised_ms + 120_000));
+        book.sent(&book.batch(0, "x"));
+        // At its response time: the same alert (its labels unchanged, none
+        // ended), sent again with the annotation.
+        assert!(!book.escalate(raised_ms + 119_999));
+        assert!(book.escalate(raised_ms + 120_000));
+        let b = book.batch(0, "x");
+        assert_eq!(b.alerts.len(), 1);
+        assert_eq!(
+            b.alerts[0].annotations["overdue"],
+            "unacknowledged past its response time (2m)"
+        );
+        book.sent(&b);
+        assert_eq!(book.next_escalation(raised_ms + 120_000), None);
+        // A restart after the response time: overdue at once.
+        let mut later = Book::new(1, &[]);
+        assert!(later.take(&l, &ese, raised_ms + 600_000));
+        assert!(overdue(&later).is_some());
+        // Acknowledged: no longer overdue.
+        let mut acked = ese.clone();
+        acked.state = AlarmState::ActiveAcknowledged;
+        acked.acked_by = Some("kim".into());
+        assert!(book.take(&l, &acked, raised_ms + 200_000));
+        assert_eq!(overdue(&book), None);
+        // Shelved alarms are nobody's to act on: never overdue.
+        let mut shelved = ese.clone();
+        shelved.shelved = Some(crate::payload::ShelfPayload {
+            by: "kim".into(),
+            reason: "sensor replaced".into(),
+            at: "2026-11-26T10:00:10.000Z".into(),
+            until: None,
+        });
+        assert_eq!(shelved.overdue_from(), None);
+        assert_eq!(ese.overdue_from(), Some(raised_ms + 120_000));
     }
 
     #[test]
