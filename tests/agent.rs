@@ -69,13 +69,23 @@ impl Fixture {
         setup: impl FnOnce(&SimulatedCnc),
         change: impl FnOnce(&mut CellConfig),
     ) -> Fixture {
+        Fixture::start_with_namespace(None, setup, change).await
+    }
+
+    /// [`Fixture::start_with_sim`], the simulated CNC's server with a
+    /// namespace of URI `extra` besides its own (registered before it).
+    pub(crate) async fn start_with_namespace(
+        extra: Option<&str>,
+        setup: impl FnOnce(&SimulatedCnc),
+        change: impl FnOnce(&mut CellConfig),
+    ) -> Fixture {
         let d = tempfile::tempdir().unwrap();
         let dir = d.path().to_path_buf();
         let sim_opts = SimOptions {
             listen: "127.0.0.1:0".parse().unwrap(),
             pki_dir: dir.join("sim-pki"),
             insecure: false,
-            decoy: None,
+            decoy: extra.map(str::to_string),
         };
         let sim = SimulatedCnc::start(&sim_opts).await.unwrap();
         setup(&sim);

@@ -32,6 +32,7 @@ mod installed;
 mod interop;
 mod legacy;
 mod liveness;
+mod machinery;
 mod mad;
 mod network_cut;
 mod nodes_back;

@@ -20,6 +20,8 @@
 //! - [`engine`]: the per-cell engine: tags, check sets, alarms, machine state.
 //! - [`legacy`]: the `@`-framed serial protocol of paper 002 (frames, FCS, end codes).
 //! - [`limit`]: limit alarms (HH/H/L/LL) on numbers, with deadband and delays.
+//! - [`machinery`]: the state machines of OPC UA for Machinery
+//!   (`MachineryItemState`, `MachineryOperationMode`) read as numbers.
 //! - [`madb`]: the master alarm database a plant's team gives back: each
 //!   alarm's priority, class and guidance.
 //! - [`report`]: daily and monthly production reports from state history.
@@ -38,6 +40,7 @@ pub mod kpi;
 pub mod legacy;
 pub mod limit;
 pub mod logic;
+pub mod machinery;
 pub mod madb;
 pub mod program;
 pub mod report;

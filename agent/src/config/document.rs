@@ -252,6 +252,7 @@ fn shifted(tag: RawTag, by: usize) -> RawTag {
         deadband_percent: tag.deadband_percent.map(|v| moved(v, by)),
         export: tag.export,
         max: tag.max.map(|v| moved(v, by)),
+        states: tag.states.map(|v| moved(v, by)),
     }
 }
 

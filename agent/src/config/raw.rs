@@ -233,6 +233,7 @@ pub(crate) struct RawTag {
     #[serde(default)]
     pub(crate) export: bool,
     pub(crate) max: Option<Spanned<u64>>,
+    pub(crate) states: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Default, Deserialize)]
@@ -441,7 +442,7 @@ pub(crate) struct RawCommands {
 }
 
 /// The columns of a tags file, as the keys of a `[[tags]]` table.
-const TAG_COLUMNS: [&str; 11] = [
+const TAG_COLUMNS: [&str; 12] = [
     "name",
     "node_id",
     "address",
@@ -453,6 +454,7 @@ const TAG_COLUMNS: [&str; 11] = [
     "deadband_percent",
     "export",
     "max",
+    "states",
 ];
 
 /// Tags as they are read, and the problems found reading them.
@@ -634,5 +636,6 @@ fn tag_of_row(
         deadband_percent: number(cell(8), "deadband_percent", &span)?,
         export,
         max: number(cell(10), "max", &span)?,
+        states: text(11),
     })
 }

@@ -4,6 +4,7 @@ use std::time::Duration;
 
 use cellwatch_models::expr::Expr;
 use cellwatch_models::il::Dialect;
+use cellwatch_models::machinery::StateMachine;
 use cellwatch_models::signal::{AddressError, Signal};
 use cellwatch_models::value::{Comparison, Operand, ValueType};
 
@@ -31,6 +32,9 @@ pub struct TagConfig {
     /// The largest value of a counter before it wraps to 0 (default: the
     /// type's maximum).
     pub max: Option<u64>,
+    /// The node is the `CurrentState/Id` of this state machine of OPC UA
+    /// for Machinery (`states`): read as the state's number (a `UInt32`).
+    pub states: Option<StateMachine>,
 }
 
 impl TagConfig {
@@ -47,6 +51,7 @@ impl TagConfig {
             deadband: None,
             export: false,
             max: None,
+            states: None,
         }
     }
 

@@ -237,6 +237,11 @@ impl SimulatedCnc {
         self.server.add_register(name, value, "")
     }
 
+    /// The index of the decoy namespace ([`SimOptions::decoy`]), if any.
+    pub fn decoy_namespace(&self) -> Option<u16> {
+        self.server.decoy_namespace()
+    }
+
     /// Writes data registers added with [`SimulatedCnc::add_register`].
     ///
     /// # Errors

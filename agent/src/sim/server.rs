@@ -353,6 +353,11 @@ impl SimServer {
         Ok(())
     }
 
+    /// The decoy namespace's index, if it has one.
+    pub fn decoy_namespace(&self) -> Option<u16> {
+        self.decoy.as_ref().map(|(_, ns)| *ns)
+    }
+
     /// Writes values in the decoy namespace.
     ///
     /// # Errors

@@ -53,3 +53,48 @@ fn a_pattern_that_matches_no_alarm_of_the_cell_is_refused() {
         "state.modes[0].suppress[1]: 'door-*' matches no alarm of this cell's checks, `communication`, `tag-quality` or the PLC's (`[[opcua.events]]` prefixes)"
     );
 }
+
+/// `GOOD` with a tag reading a Machinery state machine, `extra` said of it.
+fn with_state_machine(extra: &str) -> String {
+    GOOD.replace(
+        "[[checks.switching]]",
+        &format!("[[tags]]\nname = \"mode\"\nnode_id = \"nsu=urn:plc;s=Machine.OperationMode.CurrentState.Id\"\naddress = \"D300\"\n{extra}\n[[checks.switching]]"),
+    )
+}
+
+#[test]
+fn a_tag_may_be_a_state_machine_of_opc_ua_for_machinery_read_as_its_state_number() {
+    let text = with_state_machine("states = \"MachineryOperationMode\"\n");
+    let text = text.replace(
+        "[zenoh.tls]",
+        "[[state.modes]]\nid = \"setup\"\nwhen = \"D300 == 2\"\nsuppress = [\"fig6\"]\n\n[zenoh.tls]",
+    );
+    let c = parse("cell.toml", &text, Path::new("base"), &mem()).unwrap();
+    let tag = c.tags.iter().find(|t| t.name == "mode").unwrap();
+    assert_eq!(
+        tag.states,
+        Some(cellwatch_models::machinery::StateMachine::OperationMode)
+    );
+    assert_eq!(tag.value_type, ValueType::UInt32);
+    crate::cell::compile::engine(&c).unwrap();
+}
+
+#[test]
+fn a_state_machine_tag_said_wrong_is_an_error_at_its_place() {
+    for (extra, error) in [
+        (
+            "states = \"MachineryState\"",
+            "cell.toml:22:10: tags[2].states: 'MachineryState' is not a state machine of OPC UA for Machinery: MachineryItemState or MachineryOperationMode",
+        ),
+        (
+            "states = \"MachineryItemState\"\ntype = \"Double\"",
+            "cell.toml:22:10: tags[2].states: a MachineryItemState is read as its state's number, a UInt32: leave `type` out",
+        ),
+        (
+            "states = \"MachineryItemState\"\nbit = 1",
+            "cell.toml:22:10: tags[2].states: a MachineryItemState is read as its state's number: leave `bit` out",
+        ),
+    ] {
+        assert_eq!(errors(&with_state_machine(extra)), error, "{extra}");
+    }
+}

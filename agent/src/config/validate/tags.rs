@@ -6,6 +6,7 @@ use std::path::Path;
 use std::str::FromStr;
 use std::time::Duration;
 
+use cellwatch_models::machinery::StateMachine;
 use cellwatch_models::value::ValueType;
 use toml::Spanned;
 
@@ -68,11 +69,44 @@ impl Validator<'_> {
                     format!("{address} is used by another tag"),
                 );
             }
+            let states =
+                t.states
+                    .as_ref()
+                    .and_then(|s| match s.get_ref().parse::<StateMachine>() {
+                        Ok(m) => Some(m),
+                        Err(e) => {
+                            self.problem(s.span(), &format!("{key}.states"), e);
+                            None
+                        }
+                    });
+            // A state machine's state is read as its number.
             let value_type = self.parsed(
                 t.value_type.clone(),
                 &format!("{key}.type"),
-                ValueType::Boolean,
+                if t.states.is_some() {
+                    ValueType::UInt32
+                } else {
+                    ValueType::Boolean
+                },
             );
+            if let (Some(machine), Some(s)) = (states, &t.states) {
+                let wrong = if self.bus {
+                    Some("a tag of the `@` bus has no OPC UA state machine".to_string())
+                } else if value_type != ValueType::UInt32 {
+                    Some(format!(
+                        "a {machine} is read as its state's number, a UInt32: leave `type` out"
+                    ))
+                } else if t.bit.is_some() {
+                    Some(format!(
+                        "a {machine} is read as its state's number: leave `bit` out"
+                    ))
+                } else {
+                    None
+                };
+                if let Some(why) = wrong {
+                    self.problem(s.span(), &format!("{key}.states"), why);
+                }
+            }
             let bit = t.bit.as_ref().and_then(|b| {
                 let Some(width) = value_type.bits() else {
                     self.problem(
@@ -165,6 +199,7 @@ impl Validator<'_> {
                 deadband,
                 export: t.export,
                 max,
+                states,
             });
         }
         for (offset, key, message) in raw.problems() {

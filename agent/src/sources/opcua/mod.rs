@@ -44,6 +44,7 @@ mod context;
 mod delivery;
 mod error;
 mod items;
+mod machinery;
 mod names;
 mod once;
 mod overflow;
@@ -520,7 +521,10 @@ async fn supervise(
     let mut resuming = live.is_some();
     loop {
         let namespaces = match namespace_array(&session, &ctx.requests).await {
-            Ok(n) => n,
+            Ok(n) => {
+                ctx.uses.namespaces_are(&n);
+                n
+            }
             Err(e) => {
                 let _ = ctx
                     .tx

@@ -16,10 +16,12 @@ use opcua::types::{
 };
 
 use super::items::Items;
+use super::machinery::MachineryNamespace;
 use super::requests::Requests;
 use crate::config::node::TagNode;
 use crate::config::{Deadband, OpcUaConfig, TagConfig};
 use crate::sources::{SourceEvent, SourceSender};
+use cellwatch_models::machinery::StateMachine;
 use cellwatch_models::value::{Num, ValueType};
 
 /// `Server_ServerCapabilities_OperationLimits_MaxMonitoredItemsPerCall`.
@@ -385,6 +387,9 @@ pub fn reading(value: &DataValue, tag: &TagUse) -> Reading {
         expected: tag.value_type,
         received: type_of(v),
     };
+    if let Some((machine, ns)) = &tag.states {
+        return ns.reading(*machine, v);
+    }
     if let Some(bit) = tag.bit {
         return match word(v) {
             Some(w) => Reading::Good((w >> bit) & 1 == 1),
@@ -413,6 +418,9 @@ pub struct TagUse {
     pub sampling: Option<Duration>,
     /// Its data-change filter deadband.
     pub deadband: Option<Deadband>,
+    /// The state machine of OPC UA for Machinery it is the current state
+    /// of, and where the server's Machinery namespace is.
+    pub(super) states: Option<(StateMachine, MachineryNamespace)>,
 }
 
 impl TagUse {
@@ -423,6 +431,9 @@ impl TagUse {
             bit: tag.bit,
             sampling: tag.sampling_interval,
             deadband: tag.deadband,
+            // Its own namespace index, never learnt: a reader outside a
+            // subscription believes no state.
+            states: tag.states.map(|m| (m, MachineryNamespace::default())),
         }
     }
 }
@@ -558,21 +569,33 @@ impl Monitored {
 pub(super) struct Uses {
     kinds: Vec<TagUse>,
     of: Vec<u32>,
+    /// Where the server's Machinery namespace is, for the tags that read a
+    /// state machine.
+    machinery: MachineryNamespace,
 }
 
 impl Uses {
     /// How each of `tags` is read.
     pub(super) fn of_tags(tags: &[TagConfig]) -> Uses {
-        type Key = (ValueType, Option<u8>, Option<Duration>, Option<(bool, u64)>);
+        type Key = (
+            ValueType,
+            Option<u8>,
+            Option<Duration>,
+            Option<(bool, u64)>,
+            Option<StateMachine>,
+        );
         let mut index: HashMap<Key, u32> = HashMap::new();
         let mut uses = Uses::default();
         for t in tags {
-            let u = TagUse::of(t);
+            let mut u = TagUse::of(t);
+            if let Some((_, ns)) = &mut u.states {
+                *ns = uses.machinery.clone();
+            }
             let deadband = u.deadband.map(|d| match d {
                 Deadband::Absolute(v) => (false, v.to_bits()),
                 Deadband::Percent(v) => (true, v.to_bits()),
             });
-            let key = (u.value_type, u.bit, u.sampling, deadband);
+            let key = (u.value_type, u.bit, u.sampling, deadband, t.states);
             let kinds = &mut uses.kinds;
             let k = *index.entry(key).or_insert_with(|| {
                 kinds.push(u);
@@ -591,6 +614,12 @@ impl Uses {
             .map(|k| k.sampling.unwrap_or(default))
             .max()
             .unwrap_or(default)
+    }
+
+    /// The server's namespace array is `namespaces` (where its Machinery
+    /// namespace is).
+    pub(super) fn namespaces_are(&self, namespaces: &[String]) {
+        self.machinery.learn(namespaces);
     }
 
     /// Kind `k` of reading a tag.
