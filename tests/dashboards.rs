@@ -186,7 +186,15 @@ async fn every_metric_named_is_exported_by_the_agent() {
         wanted.extend(n);
     }
     // A running agent on the demo configuration, after a fault.
-    let fx = Fixture::start().await;
+    // A machine mode (JOG: not held here), for its gauge.
+    let fx = Fixture::start_with(|c| {
+        c.state.modes.push(cellwatch_models::engine::Mode {
+            id: "setup".into(),
+            when: cellwatch_models::expr::Expr::parse("D104 == 2").unwrap(),
+            suppress: vec![cellwatch_models::alarm::AlarmPattern::new("es*")],
+        });
+    })
+    .await;
     fx.settled().await;
     fx.sim.set("X0.06", false).unwrap();
     let deadline = tokio::time::Instant::now() + Duration::from_secs(20);

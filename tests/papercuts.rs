@@ -3,7 +3,8 @@
 //! added): a number that is not one (NaN, +Inf, −Inf on Float and Double)
 //! is bad quality, never a limit violation; a discrete alarm needs no
 //! program; a cell's own KPI rules; an untrusted server certificate said
-//! at once; `report daily` runs anywhere with the shipped stop causes.
+//! at once; `report daily` runs anywhere with the shipped stop causes; a
+//! pressure rising faster than its rate of change alarms.
 
 use cellwatch::config::TagConfig;
 use cellwatch::payload::AlarmPayload;
@@ -334,5 +335,76 @@ async fn report_daily_runs_outside_the_checkout_with_the_shipped_stop_causes() {
         String::from_utf8_lossy(&out.stderr).contains("cannot read stop causes 'mine.toml'"),
         "{}",
         String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_pressure_rising_faster_than_its_rate_is_alarmed_from_an_opc_ua_server() {
+    use cellwatch_models::limit::{RateDirection, RateLevel};
+    let fx = Fixture::start_with_sim(
+        |sim| sim.add_register("D208", Variant::Float(3.0)).unwrap(),
+        |c| {
+            c.tags.push(TagConfig {
+                value_type: ValueType::Float,
+                comment: Some("Coolant pressure after the filter".into()),
+                ..TagConfig::boolean(
+                    "coolant_pressure",
+                    &format!("nsu={NAMESPACE};s=D208"),
+                    Signal::new("D208"),
+                )
+            });
+            // No level: only how fast it moves, 2 bar a minute at most.
+            c.limits.push(LimitCheck {
+                comment: None,
+                id: "coolant".into(),
+                tag: Signal::new("D208"),
+                label: "coolant_pressure".into(),
+                unit: "bar".into(),
+                deadband: 0.0,
+                on_delay: 0,
+                off_delay: 0,
+                rates: vec![RateLevel {
+                    direction: RateDirection::Rising,
+                    rate: 2.0,
+                    per: 60_000,
+                    severity: Severity::High,
+                }],
+                levels: Vec::new(),
+            });
+        },
+    )
+    .await;
+    let sub = crate::robust::alarms(fx.client(), "m01ps0004").await;
+    fx.settled().await;
+    fx.tag_value_is("D208", serde_json::json!(3.0)).await;
+    let set = |x: f32| {
+        fx.sim
+            .set_registers(&[("D208".into(), Variant::Float(x))])
+            .unwrap()
+    };
+    // 1 bar up: within the rate. Then 3.5 more within the minute.
+    set(4.0);
+    fx.tag_value_is("D208", serde_json::json!(4.0)).await;
+    set(7.5);
+    let mut seen: Vec<AlarmPayload> = Vec::new();
+    let raised = alarm_until(&sub, "the rise alarmed", &mut seen, |a| {
+        a.id.starts_with("coolant") && a.transition.as_str() == "raised"
+    })
+    .await;
+    assert_eq!(raised.id, "coolant-roc-rising", "{raised:#?}");
+    assert_eq!(raised.kind.as_str(), "limit");
+    assert_eq!(raised.severity, Severity::High);
+    // Said in the plant's words: the tag, its change, the rate.
+    assert!(
+        raised
+            .message
+            .contains("D208 (coolant_pressure) rose 4.5 bar in 1m (more than 2 per 1m)"),
+        "{}",
+        raised.message
+    );
+    // Nothing was raised for the first, slow step.
+    assert!(
+        seen.iter().filter(|a| a.id == "coolant-roc-rising").count() == 1,
+        "{seen:#?}"
     );
 }
