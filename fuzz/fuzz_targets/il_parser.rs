@@ -4,7 +4,7 @@
 
 #![no_main]
 
-use cellwatch_models::il::Dialect;
+use cellwatch_models::programs::Dialect;
 use cellwatch_models::program::Program;
 use cellwatch_models::signal::Observability;
 use cellwatch_models::source;

@@ -31,13 +31,13 @@ impl FromIterator<(Signal, String)> for CommentDb {
 /// object per file, so a block's tag table is a file of its own in the
 /// same folder.
 pub fn is_tag_table(text: &str) -> bool {
-    crate::il::simaticml::is_simaticml(text) && text.contains("<SW.Tags.PlcTagTable")
+    crate::programs::simaticml::is_simaticml(text) && text.contains("<SW.Tags.PlcTagTable")
 }
 
 /// Whether `text` is a TIA Portal export (SimaticML): a block or a tag
 /// table.
 pub fn is_simaticml(text: &str) -> bool {
-    crate::il::simaticml::is_simaticml(text)
+    crate::programs::simaticml::is_simaticml(text)
 }
 
 impl CommentDb {
@@ -67,8 +67,8 @@ impl CommentDb {
         resolve: impl Fn(&str) -> Result<Signal, AddressError>,
         language: Option<&str>,
     ) -> Result<CommentDb, SourceError> {
-        if crate::il::simaticml::is_simaticml(text) {
-            let language = language.unwrap_or(crate::il::simaticml::LANGUAGE);
+        if crate::programs::simaticml::is_simaticml(text) {
+            let language = language.unwrap_or(crate::programs::simaticml::LANGUAGE);
             return Self::tag_table(origin, text, resolve, language);
         }
         let mut reader = csv::ReaderBuilder::new()
@@ -123,7 +123,7 @@ impl CommentDb {
         language: &str,
     ) -> Result<CommentDb, SourceError> {
         let mut comments = HashMap::new();
-        for tag in crate::il::simaticml::tag_table(origin, text, language)? {
+        for tag in crate::programs::simaticml::tag_table(origin, text, language)? {
             let Some(comment) = tag.comment.clone() else {
                 continue;
             };

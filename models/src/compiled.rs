@@ -12,8 +12,8 @@
 
 use std::collections::HashMap;
 
-use crate::il::Op;
 use crate::logic::Term;
+use crate::programs::Op;
 use crate::signal::Signal;
 use crate::switching::SwitchingFunction;
 

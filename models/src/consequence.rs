@@ -41,8 +41,8 @@ use std::fmt::Write;
 
 use crate::alarm::Alarm;
 use crate::explain::Culprit;
-use crate::il::Observability;
 use crate::program::Program;
+use crate::programs::Observability;
 use crate::signal::Signal;
 use crate::switching::SwitchingFunction;
 

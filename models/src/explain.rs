@@ -25,8 +25,8 @@ use std::fmt;
 use std::str::FromStr;
 
 use crate::comments::CommentDb;
-use crate::il::Op;
 use crate::logic::Term;
+use crate::programs::Op;
 use crate::signal::Signal;
 use crate::switching::SwitchingFunction;
 use crate::value::{CmpOp, Comparison, Num, Operand};

@@ -4,7 +4,9 @@
 //! # Layout
 //! - [`source`]: locations in input text and the `FILE:LINE:COL` error.
 //! - [`signal`]: PLC addresses in both dialects, and observability.
-//! - [`il`]: instruction-list lexers for the `pmc` and `iec` dialects.
+//! - [`programs`]: the readers of PLC programs in every format (instruction
+//!   lists in the `pmc`, `iec` and `stl` dialects, PLCopen XML, Rockwell L5X,
+//!   TIA Portal SimaticML) into one instruction set.
 //! - [`logic`]: step blocks (n-ary AND/OR nodes) and their terms.
 //! - [`program`]: the compiler from instructions to each coil's logic.
 //! - [`switching`]: a coil's switching function in observable signals,
@@ -35,7 +37,6 @@ pub mod consequence;
 pub mod engine;
 pub mod explain;
 pub mod expr;
-pub mod il;
 pub mod kpi;
 pub mod legacy;
 pub mod limit;
@@ -43,6 +44,7 @@ pub mod logic;
 pub mod machinery;
 pub mod madb;
 pub mod program;
+pub mod programs;
 pub mod report;
 pub mod sfc;
 pub mod signal;

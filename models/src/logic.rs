@@ -7,7 +7,7 @@
 //! twice is one block. This module owns the shapes and their evaluation; the
 //! compiler that builds them is [`crate::program`].
 
-pub use crate::il::Op;
+pub use crate::programs::Op;
 use crate::signal::Signal;
 
 /// Index of a block in its arena.

@@ -10,7 +10,7 @@
 use std::fmt;
 use std::sync::Arc;
 
-pub use crate::il::{class_of, Observability};
+pub use crate::programs::{class_of, Observability};
 
 /// One boolean PLC signal, by canonical name.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -251,7 +251,7 @@ mod tests {
 
     #[test]
     fn every_address_error_quotes_the_text() {
-        use crate::il::{Dialect, Observability};
+        use crate::programs::{Dialect, Observability};
         let cases: [(Result<Signal, AddressError>, &str); 16] = [
             (Dialect::Pmc.signal("1X"), "malformed address '1X': it must start with a signal class letter (X, Y, R, F, G, ...)"),
             (Dialect::Pmc.signal("x.1"), "malformed address 'x.1': expected a decimal byte number after 'X'"),

@@ -13,9 +13,9 @@ use std::collections::{HashMap, HashSet};
 use std::fmt;
 
 use crate::expr::Expr;
-use crate::il::Op;
 use crate::logic::{Block, BlockId, Term};
 use crate::program::{NotDerivable, Program};
+use crate::programs::Op;
 use crate::signal::{Observability, Signal};
 
 /// How deep relays and blocks may nest in one switching function.
@@ -546,7 +546,7 @@ fn number_bottom_up(root: Term, arena: Vec<Block>) -> (Term, Vec<Block>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::il::Dialect;
+    use crate::programs::Dialect;
 
     const FIG6: &str =
         "RD X1\nANDN X2\nRDNS X3\nORS\nANDN Y1\nWR R1\nRD X4\nANDN Y2\nAND R1\nWR G0.00\n";

@@ -66,8 +66,8 @@ fn step_expr(sf: &SwitchingFunction, i: usize) -> Expr {
         })
         .collect();
     match block.op {
-        cellwatch_models::il::Op::And => Expr::And(terms),
-        cellwatch_models::il::Op::Or => Expr::Or(terms),
+        cellwatch_models::programs::Op::And => Expr::And(terms),
+        cellwatch_models::programs::Op::Or => Expr::Or(terms),
     }
 }
 

@@ -150,8 +150,8 @@ fn step_expr(sf: &SwitchingFunction, i: usize) -> Expr {
         })
         .collect();
     match block.op {
-        cellwatch_models::il::Op::And => Expr::And(terms),
-        cellwatch_models::il::Op::Or => Expr::Or(terms),
+        cellwatch_models::programs::Op::And => Expr::And(terms),
+        cellwatch_models::programs::Op::Or => Expr::Or(terms),
     }
 }
 
@@ -196,7 +196,7 @@ fn fig6_relay_and_fault_coil() {
 fn fig6_and_ese_in_stl_give_the_paper_s_functions_and_step_blocks() {
     // Fig. 6, English mnemonics.
     let p = Program::compile("fig6.awl", FIG6_STL, None).unwrap();
-    assert_eq!(p.dialect(), cellwatch_models::il::Dialect::Stl);
+    assert_eq!(p.dialect(), cellwatch_models::programs::Dialect::Stl);
     let g = sf("fig6.awl", FIG6_STL, "Q10.0");
     let il = sf("fig6.il", FIG6, "G0.00");
     assert!(equal_by_truth_table(&to_paper(&g.to_expr()), &il.to_expr()));

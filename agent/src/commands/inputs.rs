@@ -7,8 +7,8 @@
 use std::path::{Path, PathBuf};
 
 use cellwatch_models::comments::CommentDb;
-use cellwatch_models::il::{Dialect, UnknownDialect};
 use cellwatch_models::program::Program;
+use cellwatch_models::programs::{Dialect, UnknownDialect};
 use cellwatch_models::signal::Observability;
 use cellwatch_models::source;
 use cellwatch_models::values::Values;

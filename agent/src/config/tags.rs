@@ -3,8 +3,8 @@
 use std::time::Duration;
 
 use cellwatch_models::expr::Expr;
-use cellwatch_models::il::Dialect;
 use cellwatch_models::machinery::StateMachine;
+use cellwatch_models::programs::Dialect;
 use cellwatch_models::signal::{AddressError, Signal};
 use cellwatch_models::value::{Comparison, Operand, ValueType};
 

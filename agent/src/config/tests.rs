@@ -9,8 +9,8 @@ use std::time::Duration;
 
 use cellwatch_models::alarm::Severity;
 use cellwatch_models::engine::PartCounting;
-use cellwatch_models::il::Dialect;
 use cellwatch_models::limit::Level;
+use cellwatch_models::programs::Dialect;
 use cellwatch_models::signal::Signal;
 use cellwatch_models::value::ValueType;
 

@@ -11,8 +11,8 @@ use std::collections::HashMap;
 
 use super::{Coil, NotDerivable, Program, Warning};
 use crate::comments::CommentDb;
-use crate::il::{self, Dialect, Instruction, Op, Operand, Operation, Outside};
 use crate::logic::{Block, BlockId, Term};
+use crate::programs::{self, Dialect, Instruction, Op, Operand, Operation, Outside};
 use crate::signal::Signal;
 use crate::source::{Location, SourceError, SourceErrors};
 
@@ -23,7 +23,7 @@ impl Program {
     /// Parses and compiles a program. `origin` names it in messages.
     ///
     /// # Errors
-    /// Every unreadable line (see [`il::parse`]), then the first structural
+    /// Every unreadable line (see [`programs::parse`]), then the first structural
     /// error: an operation with no result to work on, an unbalanced stack or
     /// parenthesis.
     pub fn compile(
@@ -35,7 +35,7 @@ impl Program {
     }
 
     /// [`Program::compile`], a TIA Portal export's comments taken in
-    /// `language` (`de-DE`) where they have it (see [`il::parse_in`]).
+    /// `language` (`de-DE`) where they have it (see [`programs::parse_in`]).
     ///
     /// # Errors
     /// As [`Program::compile`].
@@ -45,7 +45,7 @@ impl Program {
         dialect: Option<Dialect>,
         language: Option<&str>,
     ) -> Result<Program, SourceErrors> {
-        let parsed = il::parse_in(origin, source, dialect, language)?;
+        let parsed = programs::parse_in(origin, source, dialect, language)?;
         let (dialect, instructions) = (parsed.dialect, parsed.instructions);
         let mut machine = Machine::new(origin, parsed.first_checks);
         for ins in &instructions {

@@ -25,8 +25,8 @@ use crate::comments::CommentDb;
 use std::collections::HashMap;
 use std::fmt;
 
-use crate::il::Dialect;
 use crate::logic::{Block, Term};
+use crate::programs::Dialect;
 use crate::signal::{AddressError, Signal};
 use crate::source::Location;
 
@@ -156,7 +156,7 @@ impl Program {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::il::Op;
+    use crate::programs::Op;
 
     fn compile(src: &str) -> Program {
         Program::compile("t.il", src, None).unwrap()

@@ -323,7 +323,7 @@ fn condition<'a, 'i>(
         .find(|n| n.has_tag_name("LD") || n.has_tag_name("FBD"))
     {
         let name = reference.or(t.attribute("name")).unwrap_or_default();
-        match crate::il::plcopen::graphical_condition(t.document(), graphic, name) {
+        match crate::programs::plcopen::graphical_condition(t.document(), graphic, name) {
             Ok(text) => return (text, graphic),
             Err((at, why)) => {
                 errors.at(at, format!("transition condition: {why}"));
@@ -335,7 +335,7 @@ fn condition<'a, 'i>(
     // condition.
     if body.children().any(|n| n.has_tag_name("connectionPointIn")) {
         if let Some(chart) = t.parent() {
-            match crate::il::plcopen::connected_condition(t.document(), chart, body) {
+            match crate::programs::plcopen::connected_condition(t.document(), chart, body) {
                 Ok(text) => return (text, body),
                 Err((at, why)) => {
                     errors.at(at, format!("transition condition: {why}"));

@@ -28,7 +28,7 @@ use std::str::FromStr;
 use std::time::Duration;
 
 use cellwatch_models::alarm::Severity;
-use cellwatch_models::il::Dialect;
+use cellwatch_models::programs::Dialect;
 use cellwatch_models::signal::Signal;
 use cellwatch_models::value::ValueType;
 use toml::Spanned;

@@ -4,8 +4,8 @@ use std::collections::{HashMap, HashSet};
 
 use cellwatch_models::alarm::Severity;
 use cellwatch_models::expr::Expr;
-use cellwatch_models::il::Dialect;
 use cellwatch_models::program::Program;
+use cellwatch_models::programs::Dialect;
 use cellwatch_models::sfc::learn::StepModel;
 use cellwatch_models::sfc::Sfc;
 use cellwatch_models::signal::{Observability, Signal};

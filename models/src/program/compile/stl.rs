@@ -4,8 +4,8 @@
 //! machine and every other operation are `compile.rs`'s.
 
 use super::{negate_acc, Acc, Frame, Machine};
-use crate::il::{Instruction, Op, Operation, Outside};
 use crate::logic::Term;
+use crate::programs::{Instruction, Op, Operation, Outside};
 use crate::source::SourceErrors;
 
 impl Machine<'_> {

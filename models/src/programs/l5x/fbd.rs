@@ -38,8 +38,8 @@ use super::names::number;
 use super::names::NotSignal;
 use super::scope::{Access, Scope};
 use super::{Frame, Reader, MAX_CALL_DEPTH};
-use crate::il::plcopen::{emit, shared, Flow, MAX_DEPTH};
-use crate::il::{Instruction, Operand, Operation, Outside};
+use crate::programs::plcopen::{emit, shared, Flow, MAX_DEPTH};
+use crate::programs::{Instruction, Operand, Operation, Outside};
 use crate::signal::Signal;
 use crate::source::{Location, SourceError};
 

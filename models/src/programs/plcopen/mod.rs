@@ -491,7 +491,8 @@ mod tests {
             e.to_string().starts_with("p.xml:4:1: not well-formed XML"),
             "{e}"
         );
-        let e = Program::compile("p.xml", &project(""), Some(crate::il::Dialect::Iec)).unwrap_err();
+        let e = Program::compile("p.xml", &project(""), Some(crate::programs::Dialect::Iec))
+            .unwrap_err();
         assert!(e.to_string().contains("leave --dialect out"), "{e}");
     }
 

@@ -29,7 +29,7 @@ use roxmltree::{Document, Node};
 
 use super::super::plcopen::{emit, shared, Flow, MAX_DEPTH};
 use super::access::{access_signal, at, child, text_of, Place};
-use crate::il::{Instruction, Operand, Operation, Outside};
+use crate::programs::{Instruction, Operand, Operation, Outside};
 use crate::signal::Signal;
 use crate::source::{Location, SourceError};
 use crate::value::{CmpOp, Comparison};

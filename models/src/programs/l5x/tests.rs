@@ -231,8 +231,12 @@ fn malformed_rungs_and_names_are_errors_at_the_character() {
         e.to_string(),
         "t.L5X:1:1: no routine with any rung or output reference (ORef) in it in this L5X export"
     );
-    let e =
-        Program::compile("t.L5X", &export("", "", &[]), Some(crate::il::Dialect::Iec)).unwrap_err();
+    let e = Program::compile(
+        "t.L5X",
+        &export("", "", &[]),
+        Some(crate::programs::Dialect::Iec),
+    )
+    .unwrap_err();
     assert!(e.to_string().contains("leave --dialect out"), "{e}");
 }
 

@@ -1,5 +1,6 @@
-//! Instruction lists: the three dialects cellwatch reads, parsed into one
-//! instruction set.
+//! The readers of PLC programs, in every format cellwatch reads, into one
+//! instruction set: instruction lists in three dialects, PLCopen XML,
+//! Rockwell Studio 5000 (L5X) and TIA Portal SimaticML.
 //!
 //! [`parse`] turns program text into [`Instruction`]s, each with the line and
 //! column it came from. The dialects differ mostly in spelling (`pmc`: the
@@ -7,8 +8,8 @@
 //! STL/AWL, German or English), so the lexers produce the same
 //! [`Operation`]s; STL's "first check" is the compiler's business. The
 //! graphical formats are read into the same instructions: PLCopen XML
-//! (`plcopen`, read as IEC) and TIA Portal SimaticML (`simaticml`, read
-//! as STL). What the instructions compute is the
+//! (`plcopen`, read as IEC), Rockwell Studio 5000 exports (`l5x`) and TIA
+//! Portal SimaticML (`simaticml`, read as STL). What the instructions compute is the
 //! job of [`crate::program`]; this module only reads text.
 
 pub(crate) mod iec;

@@ -26,8 +26,8 @@ use roxmltree::Node;
 use super::names::{number, split, NotSignal};
 use super::scope::{Access, Argument, Binding, Scope};
 use super::{Frame, Ins, Reader, RungCtx, MAX_CALL_DEPTH};
-use crate::il::plcopen::{emit, Flow};
-use crate::il::{Instruction, Operand, Operation, Outside};
+use crate::programs::plcopen::{emit, Flow};
+use crate::programs::{Instruction, Operand, Operation, Outside};
 use crate::signal::Signal;
 
 /// A parameter of a definition, as declared.

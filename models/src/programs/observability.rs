@@ -84,7 +84,7 @@ impl Observability {
                     classes.insert(class);
                 }
                 Dialect::Iec => {
-                    signals.insert(crate::il::iec::operand_signal(item)?);
+                    signals.insert(crate::programs::iec::operand_signal(item)?);
                 }
                 Dialect::Stl
                     if item.len() <= 3 && item.chars().all(|c| c.is_ascii_alphabetic()) =>
@@ -92,7 +92,7 @@ impl Observability {
                     classes.insert(item.to_ascii_uppercase());
                 }
                 Dialect::Stl => {
-                    signals.insert(crate::il::stl::operand_signal(item)?);
+                    signals.insert(crate::programs::stl::operand_signal(item)?);
                 }
             }
         }

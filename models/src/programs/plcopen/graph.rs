@@ -11,7 +11,7 @@ use std::collections::HashMap;
 use roxmltree::{Document, Node};
 
 use super::flow::{emit, shared, st_text, Flow, MAX_DEPTH};
-use crate::il::{iec, Instruction, Operand, Operation};
+use crate::programs::{iec, Instruction, Operand, Operation};
 use crate::signal::Signal;
 use crate::source::{Location, SourceError};
 

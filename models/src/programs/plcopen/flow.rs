@@ -6,7 +6,7 @@
 //! is walked to get it (`graph.rs`); the Rockwell and TIA Portal readers
 //! build flows too.
 
-use crate::il::{Instruction, Op, Operand, Operation, Outside};
+use crate::programs::{Instruction, Op, Operand, Operation, Outside};
 use crate::signal::Signal;
 use crate::source::Location;
 

@@ -335,15 +335,17 @@ fn bad_networks_are_refused_at_their_part() {
     let e = Program::compile(
         "c.xml",
         &block(&[("STL", "", "")]),
-        Some(crate::il::Dialect::Stl),
+        Some(crate::programs::Dialect::Stl),
     )
     .unwrap_err();
     assert_eq!(
         e.to_string(),
         "c.xml:1:1: this is a TIA Portal export (SimaticML), not an instruction list: leave --dialect out, and its LAD and FBD networks are read"
     );
-    let e =
-        CommentDb::parse("b.xml", &block(&[]), |a| crate::il::Dialect::Stl.signal(a)).unwrap_err();
+    let e = CommentDb::parse("b.xml", &block(&[]), |a| {
+        crate::programs::Dialect::Stl.signal(a)
+    })
+    .unwrap_err();
     assert_eq!(
         e.to_string(),
         "b.xml:2:1: this SimaticML document has no tag table (SW.Tags.PlcTagTable): export the PLC tag table, not a block"
@@ -391,7 +393,7 @@ fn tag_tables_take_the_english_comment_and_the_project_s_mnemonics() {
         tag("Lamp", "%Q4.0", &(item("en-US", "") + &item("de-DE", "Lampe"))),
         tag("Bad", "%Q4.9", &item("en-US", "bad")),
     );
-    let stl = |a: &str| crate::il::Dialect::Stl.signal(a);
+    let stl = |a: &str| crate::programs::Dialect::Stl.signal(a);
     let e = CommentDb::parse("io.xml", &table, stl);
     // The bit 4.9 is no address: the tag's name carries the comment.
     let db = e.unwrap();
