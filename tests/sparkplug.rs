@@ -6,7 +6,9 @@
 //! its births declare every metric, an alarm's raise arrives as DDATA, the
 //! sequence has no gap, a host's rebirth request is taken and a device
 //! command is not, and the broker says the node's death when the agent is
-//! killed.
+//! killed. With a primary host, nothing is published while its `STATE` says
+//! offline; once online, the births carry the current values and what was
+//! held follows, flagged historical.
 
 use std::collections::HashMap;
 use std::io::{BufRead, Write};
@@ -351,5 +353,89 @@ async fn births_data_rebirth_and_death_reach_a_tahu_host_through_mosquitto() {
     agent.wait().unwrap();
     let death = host.message("NDEATH", |_| true).await;
     assert_eq!(named(&death, "bdSeq")["value"], bd_seq, "{death:#}");
+    drop(sim);
+}
+
+/// The value of the metric line starting with `prefix` at the agent's
+/// `/metrics`.
+fn scraped(port: u16, prefix: &str) -> f64 {
+    let body = crate::spawned::scrape(port);
+    body.lines()
+        .find(|l| l.starts_with(prefix))
+        .and_then(|l| l.rsplit(' ').next()?.parse().ok())
+        .unwrap_or_else(|| panic!("no {prefix} in {body}"))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn changes_wait_for_the_primary_host_and_arrive_as_history() {
+    let d = tempfile::tempdir().unwrap();
+    let broker = Broker::start(d.path(), crate::util::restartable_port()).await;
+    let mut host = Host::start(&broker).await;
+    let state = |online: bool| {
+        json!({ "topic": "spBv1.0/STATE/scada", "retain": true,
+                "text": json!({ "online": online, "timestamp": 1 }).to_string() })
+    };
+    writeln!(host.stdin, "{}", state(false)).unwrap();
+    host.until("the host said it is offline", |v| {
+        v["published"] == "spBv1.0/STATE/scada"
+    })
+    .await;
+    let (sim, mut cell) = crate::spawned::start(d.path()).await;
+    let mut config = std::fs::read_to_string(&cell.config).unwrap();
+    config += &format!(
+        "\n[sparkplug]\nbroker = \"mqtt://127.0.0.1:{}\"\ngroup_id = \"{GROUP}\"\nedge_node_id = \"{NODE}\"\nprimary_host = \"scada\"\n",
+        broker.port
+    );
+    std::fs::write(&cell.config, config).unwrap();
+    let mut agent = cell.spawn("agent.log").await;
+
+    // The host offline: the node is connected, holds, and publishes nothing.
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    while scraped(cell.metrics_port, "cellwatch_sparkplug_connected") != 1.0 {
+        assert!(tokio::time::Instant::now() < deadline, "never connected");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    // ESE raised: the metrics sink counts it, and the Sparkplug sink, which
+    // takes the same step right after it with nothing to wait for, holds it.
+    let critical =
+        "cellwatch_alarms_active{cell=\"m01ps0004\",kind=\"switching\",severity=\"critical\"}";
+    sim.set("X0.06", false).unwrap();
+    while scraped(cell.metrics_port, critical) != 1.0 {
+        assert!(tokio::time::Instant::now() < deadline, "ESE never raised");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    assert!(scraped(cell.metrics_port, "cellwatch_sparkplug_held{") > 0.0);
+
+    // Online: births with the current values, then what was held, flagged
+    // historical.
+    writeln!(host.stdin, "{}", state(true)).unwrap();
+    host.until("the host said it is online", |v| {
+        v["published"] == "spBv1.0/STATE/scada"
+    })
+    .await;
+    assert!(
+        host.seen.is_empty(),
+        "published while the host was offline: {:#?}",
+        host.seen
+    );
+    let nbirth = host.message("NBIRTH", |_| true).await;
+    assert_eq!(nbirth["seq"], 0);
+    let dbirth = host.message("DBIRTH", |_| true).await;
+    assert_eq!(named(&dbirth, "Alarms/ese/Active")["value"], true);
+    let active = named(&dbirth, "Alarms/ese/Active")["alias"].clone();
+    let history = host
+        .message("DDATA", |p| {
+            metrics(p)
+                .iter()
+                .any(|m| m["alias"] == active && m["value"] == true)
+        })
+        .await;
+    assert!(
+        metrics(&history).iter().all(|m| m["isHistorical"] == true),
+        "{history:#}"
+    );
+    no_gaps(&host.seen);
+    agent.kill().unwrap();
+    agent.wait().unwrap();
     drop(sim);
 }
