@@ -53,6 +53,7 @@ mod robust;
 mod scheduling;
 mod sf;
 mod sfc;
+mod sparkplug;
 mod spawned;
 mod stacks;
 mod timers;

@@ -72,6 +72,9 @@ pub enum StartError {
     /// The Alertmanager's TLS files are unusable.
     #[error(transparent)]
     Alertmanager(#[from] crate::sinks::alertmanager::TlsError),
+    /// The Sparkplug edge node's TLS or password files are unusable.
+    #[error(transparent)]
+    Sparkplug(#[from] crate::sinks::sparkplug::SparkplugError),
     /// The alarm server cannot start (its users file, address or PKI).
     #[error(transparent)]
     AlarmServer(#[from] crate::services::alarm_server::AlarmServerError),
@@ -88,6 +91,7 @@ impl StartError {
             self,
             StartError::Compile(_)
                 | StartError::Alertmanager(_)
+                | StartError::Sparkplug(_)
                 | StartError::AlarmServer(crate::services::alarm_server::AlarmServerError::Users(
                     _
                 ))
@@ -162,6 +166,9 @@ pub struct Agent {
     metrics_server: Option<JoinHandle<()>>,
     /// Sends the alarms to Alertmanager; ends after the cell loop.
     alertmanager: Option<JoinHandle<()>>,
+    /// The Sparkplug edge node's MQTT session; ends after the cell loop
+    /// (its NDEATH said).
+    sparkplug: Option<JoinHandle<()>>,
     /// The OPC UA alarm server (`[alarm_server]`); ends with the agent.
     alarm_server: Option<JoinHandle<()>>,
     alarm_server_addr: Option<SocketAddr>,
@@ -179,7 +186,7 @@ pub struct Agent {
     /// Operators' `configure reload`, for the runner.
     reload_asks: Option<mpsc::Receiver<crate::cell::swap::ReloadAsk>>,
     /// The running configuration's parts only a restart changes.
-    fixed: [u64; 11],
+    fixed: [u64; 12],
     /// What `about` answers (the configuration's hash follows a reload).
     about: Arc<watch::Sender<crate::payload::AboutPayload>>,
 }
@@ -424,6 +431,7 @@ impl Agent {
         for task in [
             self.cell_loop.take(),
             self.alertmanager.take(),
+            self.sparkplug.take(),
             self.alarm_server.take(),
             self.services.take(),
             self.metrics_server.take(),
@@ -639,6 +647,15 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         }
         None => None,
     };
+    let sparkplug = match &config.sparkplug {
+        Some(c) => {
+            let (sink, session) =
+                crate::sinks::sparkplug::start(&config, c, &engine.catalogue(), metrics.clone())?;
+            sinks.push(Box::new(sink));
+            Some(tokio::spawn(session.run()))
+        }
+        None => None,
+    };
     let (alarm_server, session_commands) = match &config.alarm_server {
         Some(c) => {
             let (tx, rx) = mpsc::channel(crate::services::alarm_server::ACK_QUEUE);
@@ -732,6 +749,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         services: Some(services),
         metrics_server,
         alertmanager,
+        sparkplug,
         alarm_server_addr: alarm_server.as_ref().map(AlarmServer::addr),
         alarm_server_users: alarm_server.as_ref().map(|s| s.users().clone()),
         alarm_server: alarm_server.map(AlarmServer::task),

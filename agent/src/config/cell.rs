@@ -126,6 +126,8 @@ pub struct CellConfig {
     pub alertmanager: Option<AlertmanagerConfig>,
     /// The alarms served to SCADA clients over OPC UA (`[alarm_server]`).
     pub alarm_server: Option<crate::config::AlarmServerConfig>,
+    /// The cell as a Sparkplug B edge node (`[sparkplug]`); `None`: off.
+    pub sparkplug: Option<crate::sinks::sparkplug::config::SparkplugConfig>,
     /// The alarm-performance rules (`[kpi]`): flood, chattering, stale.
     pub kpi: cellwatch_models::kpi::KpiRules,
     /// Alarms that follow from others (`[alarms.consequences]`).
@@ -156,7 +158,7 @@ pub struct PlantOperatorsConfig {
 /// says things, whom it talks to, what it reads. The tags and the source's
 /// settings are taken by starting a source of their own; the others only
 /// by a restart.
-pub const FIXED_PARTS: [&str; 11] = [
+pub const FIXED_PARTS: [&str; 12] = [
     "cell.id",
     "journal.path",
     "[opcua]",
@@ -165,6 +167,7 @@ pub const FIXED_PARTS: [&str; 11] = [
     "[metrics]",
     "[alertmanager]",
     "[alarm_server]",
+    "[sparkplug]",
     "[kpi]",
     "state.publish_interval",
     "the tags",
@@ -175,7 +178,7 @@ impl CellConfig {
     /// between the running configuration and one read again, it names what
     /// changed beyond the checks. (Hashes of the parts' debug forms: the tags
     /// of a 100,000-tag cell are not kept twice for it.)
-    pub fn fixed_parts(&self) -> [u64; 11] {
+    pub fn fixed_parts(&self) -> [u64; 12] {
         use std::hash::{Hash, Hasher};
         let hash = |part: &dyn fmt::Debug| {
             let mut h = std::collections::hash_map::DefaultHasher::new();
@@ -200,6 +203,7 @@ impl CellConfig {
             hash(&self.metrics),
             hash(&self.alertmanager),
             hash(&self.alarm_server),
+            hash(&self.sparkplug),
             hash(&self.kpi),
             hash(&self.state_interval),
             tags.finish(),

@@ -32,6 +32,8 @@ pub(crate) struct RawConfig {
     pub(crate) production: RawProduction,
     pub(crate) alertmanager: Option<Spanned<RawAlertmanager>>,
     pub(crate) alarm_server: Option<Spanned<RawAlarmServer>>,
+    /// `[sparkplug]`: the sink owns its table.
+    pub(crate) sparkplug: Option<Spanned<crate::sinks::sparkplug::config::RawSparkplug>>,
     #[serde(default)]
     pub(crate) kpi: RawKpi,
     #[serde(default)]

@@ -11,10 +11,13 @@
 
 mod labels;
 mod modes;
+mod probes;
+mod sparkplug;
 
 use labels::opts;
 pub use labels::{COMMAND_RESULTS, REFUSED};
 pub use modes::ModeMetrics;
+pub use sparkplug::{SparkplugMetrics, SPARKPLUG_KINDS};
 
 use std::future::Future;
 use std::net::SocketAddr;
@@ -23,8 +26,7 @@ use std::time::Duration;
 
 use crate::health::{Health, STALLED_AFTER};
 use crate::operator::Action;
-use axum::http::header::{HeaderName, CACHE_CONTROL, CONTENT_TYPE};
-use axum::http::StatusCode;
+use axum::http::header::CONTENT_TYPE;
 use axum::routing::get;
 use axum::Router;
 use cellwatch_models::alarm::{AlarmKind, Severity};
@@ -137,6 +139,8 @@ pub struct Metrics {
     pub alarms_suppressed: IntGauge,
     /// Machine modes and designed suppression.
     pub modes: ModeMetrics,
+    /// The Sparkplug B edge node's figures (`[sparkplug]`).
+    pub sparkplug: SparkplugMetrics,
     /// Alarms raised as the consequence of another active alarm.
     pub alarm_consequences: IntCounter,
     /// First-outs (raises that are no consequence) in the last 10 minutes.
@@ -565,6 +569,7 @@ impl Metrics {
                 ])
             )),
             modes: ModeMetrics::register(&registry, cell),
+            sparkplug: SparkplugMetrics::register(&registry, cell),
             registry,
         }
     }
@@ -750,44 +755,19 @@ pub async fn serve(
             "/healthz",
             get(move || {
                 let answer = alive.alive(std::time::Instant::now(), STALLED_AFTER);
-                async move { health_answer("ok", "not ok", answer) }
+                async move { probes::health_answer("ok", "not ok", answer) }
             }),
         )
         .route(
             "/readyz",
             get(move || {
                 let health = health.clone();
-                async move { health_answer("ready", "not ready", health.ready().await) }
+                async move { probes::health_answer("ready", "not ready", health.ready().await) }
             }),
         );
     axum::serve(listener, app)
         .with_graceful_shutdown(shutdown)
         .await
-}
-
-/// 200 and `good`, or 503 and `bad`, then the lines.
-fn health_answer(
-    good: &str,
-    bad: &str,
-    answer: Result<Vec<String>, Vec<String>>,
-) -> (StatusCode, [(HeaderName, &'static str); 2], String) {
-    let (status, head, lines) = match answer {
-        Ok(lines) => (StatusCode::OK, good, lines),
-        Err(lines) => (StatusCode::SERVICE_UNAVAILABLE, bad, lines),
-    };
-    let mut body = format!("{head}\n");
-    for l in lines {
-        body.push_str(&l);
-        body.push('\n');
-    }
-    (
-        status,
-        [
-            (CONTENT_TYPE, "text/plain; charset=utf-8"),
-            (CACHE_CONTROL, "no-store"),
-        ],
-        body,
-    )
 }
 
 /// Binds the metrics address.

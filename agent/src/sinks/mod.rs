@@ -13,6 +13,8 @@
 //! - [`console`]: the demo's printed view.
 //! - [`alertmanager`]: alarms to people through Prometheus Alertmanager
 //!   (a task of its own sends them, off the loop).
+//! - [`sparkplug`]: the cell as a Sparkplug B edge node on an MQTT broker
+//!   (a task of its own holds the session).
 //! - [`alarm_server`]: alarms to SCADA clients through the agent's OPC UA
 //!   alarm server (Alarms & Conditions).
 //! - the metrics ([`crate::sinks::metrics::MetricsSink`]): Prometheus.
@@ -26,6 +28,7 @@ pub mod alertmanager;
 pub mod console;
 pub mod journal;
 pub mod metrics;
+pub mod sparkplug;
 pub mod zenoh;
 
 use futures_util::future::BoxFuture;

@@ -467,6 +467,14 @@ impl Validator<'_> {
         let zenoh = self.zenoh(raw.zenoh, &cell);
         let alertmanager = self.alertmanager(raw.alertmanager);
         let alarm_server = self.alarm_server(raw.alarm_server);
+        let sparkplug = raw.sparkplug.and_then(|s| {
+            let checked = crate::sinks::sparkplug::config::validate(s, &cell, self.base);
+            for p in checked.problems {
+                self.problem(p.span, p.key, p.error);
+            }
+            self.warnings.extend(checked.warnings);
+            checked.config
+        });
         let kpi = self.kpi(raw.kpi);
         let recorder = self.recorder(raw.recorder);
         let database = self.database(raw.alarms.database.as_ref());
@@ -660,6 +668,7 @@ impl Validator<'_> {
             delays,
             alertmanager,
             alarm_server,
+            sparkplug,
             kpi,
             consequences,
             database,

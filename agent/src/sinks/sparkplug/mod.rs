@@ -1,0 +1,116 @@
+//! The cell as a Sparkplug B edge node (`[sparkplug]`, off by default):
+//! its machine state, alarms, parts produced and exported tags as the
+//! metrics of one device under the node, on an MQTT broker, for a plant's
+//! unified namespace (Ignition, HiveMQ, EMQX and the historians that read
+//! them).
+//!
+//! The sink ([`SparkplugSink`]) only writes each step's changes into the
+//! shared [`book::Book`] and wakes the session; it never waits for the
+//! network. The session ([`session::Session`], a task of its own) owns the
+//! MQTT client: the node's will (NDEATH with its bdSeq), the births (NBIRTH,
+//! DBIRTH), the data (DDATA, sequence 0–255), a rebirth when a host asks
+//! (NCMD `Node Control/Rebirth`) and, with a primary host, publishing only
+//! while it says it is online. Changes that cannot be published are held,
+//! bounded, and sent as history after the next birth. Other commands from
+//! MQTT are never taken: they travel on the signed bus.
+//!
+//! - `config.rs`: the `[sparkplug]` table, validated.
+//! - `book.rs`: the metrics, their aliases and values, the held changes.
+//! - `session.rs`: the MQTT session.
+//! - `topics.rs`: the topics.
+//! - `tahu/`: the Eclipse Tahu payload (generated from its `.proto`).
+//! - `events.rs`: what it logs and counts.
+//! - `shared.rs`: what the sink and the session share.
+
+pub mod book;
+pub mod config;
+mod events;
+pub mod session;
+mod shared;
+pub mod tahu;
+pub mod topics;
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+
+use futures_util::future::BoxFuture;
+use futures_util::FutureExt;
+use tokio::sync::Notify;
+
+use self::book::{declared, Book};
+use self::config::SparkplugConfig;
+use self::events::SparkplugEvent;
+use self::shared::Shared;
+pub use self::shared::SparkplugError;
+use crate::config::CellConfig;
+use crate::metrics::Metrics;
+use crate::sinks::Sink;
+use crate::step::CellStep;
+
+/// The sink for the cell loop.
+pub struct SparkplugSink {
+    shared: Arc<Shared>,
+    metrics: Arc<Metrics>,
+}
+
+/// The sink for the cell loop and the session to run beside it; the
+/// device declares the alarms of the engine's `catalogue` from the start.
+///
+/// # Errors
+/// A TLS or password file cannot be read or used.
+pub fn start(
+    cell: &CellConfig,
+    config: &SparkplugConfig,
+    catalogue: &[cellwatch_models::engine::CatalogueEntry],
+    metrics: Arc<Metrics>,
+) -> Result<(SparkplugSink, session::Session), SparkplugError> {
+    let tags: Vec<(usize, String)> = cell
+        .tags
+        .iter()
+        .enumerate()
+        .filter(|(_, t)| t.export)
+        .map(|(i, t)| (i, t.name.clone()))
+        .collect();
+    let counts_parts = cell.part_done.is_some() || !cell.part_counters.is_empty();
+    let shared = Arc::new(Shared {
+        book: Mutex::new(Book::new(
+            &declared(catalogue),
+            &tags,
+            counts_parts,
+            config.max_held,
+        )),
+        wake: Notify::new(),
+        closed: AtomicBool::new(false),
+    });
+    let session = session::Session::new(config, shared.clone(), metrics.clone())?;
+    Ok((SparkplugSink { shared, metrics }, session))
+}
+
+impl Sink for SparkplugSink {
+    fn name(&self) -> &'static str {
+        "sparkplug"
+    }
+
+    fn handle<'a>(&'a mut self, step: &'a CellStep) -> BoxFuture<'a, ()> {
+        let (changed, held, dropped) = {
+            let mut book = self.shared.book();
+            let changed = book.apply(step);
+            (changed, book.held(), book.take_dropped())
+        };
+        if changed {
+            self.shared.wake.notify_one();
+        }
+        let m = &self.metrics.sparkplug;
+        m.held.set(held as i64);
+        if dropped > 0 {
+            SparkplugEvent::Dropped { count: dropped }.emit(m);
+        }
+        async {}.boxed()
+    }
+
+    fn close(self: Box<Self>) -> BoxFuture<'static, ()> {
+        self.shared.closed.store(true, Ordering::Release);
+        self.shared.wake.notify_one();
+        async {}.boxed()
+    }
+}

@@ -1,0 +1,56 @@
+//! What the sink and the session share: the book and the signals between
+//! them, and why the edge node cannot start.
+
+use std::sync::atomic::AtomicBool;
+use std::sync::{Mutex, MutexGuard};
+
+use tokio::sync::Notify;
+
+use super::book::Book;
+
+/// Why the edge node cannot start.
+#[derive(Debug, thiserror::Error)]
+pub enum SparkplugError {
+    /// A TLS file cannot be read or used.
+    #[error("sparkplug.tls: {path}: {why}")]
+    Tls {
+        /// The file.
+        path: String,
+        /// Why.
+        why: String,
+    },
+    /// TLS cannot be set up with these files.
+    #[error("sparkplug.tls: {0}")]
+    TlsConfig(String),
+    /// The password file cannot be read.
+    #[error("sparkplug.password_file: {path}: {source}")]
+    Password {
+        /// The file.
+        path: String,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A private file (key, password) is readable by others.
+    #[error(transparent)]
+    Private(#[from] crate::bus::envelope::KeyFileError),
+}
+
+/// What the sink and the session share.
+#[derive(Debug)]
+pub(super) struct Shared {
+    /// The metrics and the held changes; held only to write or read them,
+    /// never across an await.
+    pub(super) book: Mutex<Book>,
+    /// Wakes the session: changes wait, or the sink closed.
+    pub(super) wake: Notify,
+    /// The cell loop is stopping: the session says NDEATH and ends.
+    pub(super) closed: AtomicBool,
+}
+
+impl Shared {
+    pub(super) fn book(&self) -> MutexGuard<'_, Book> {
+        self.book
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+}
