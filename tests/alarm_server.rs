@@ -22,6 +22,7 @@ use crate::agent::Fixture;
 mod acknowledging;
 mod asyncua;
 mod channels;
+mod machinery;
 mod node_opcua;
 mod reload;
 mod scada;

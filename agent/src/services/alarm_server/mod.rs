@@ -19,7 +19,8 @@
 //! acknowledge.
 //!
 //! - `events.rs`: the event and its fields; `guidance.rs`: the guidance
-//!   properties and lateness; `filters.rs`: the fields a
+//!   properties and lateness; `machinery.rs`: the cell's
+//!   `MachineryItemState` (OPC UA for Machinery) following its machine state; `filters.rs`: the fields a
 //!   client's event filter may name, and the filters over a real event;
 //!   `conditions.rs`: the conditions kept from the alarm payloads; `methods.rs`: the methods
 //!   (Acknowledge, ConditionRefresh, Disable/Enable, shelving); `users.rs`: the users file, passwords.
@@ -31,6 +32,7 @@ mod conditions;
 mod events;
 mod filters;
 mod guidance;
+mod machinery;
 mod methods;
 pub mod users;
 
@@ -57,9 +59,9 @@ use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 
 use crate::config::AlarmServerConfig;
-use crate::payload::AlarmPayload;
-use crate::step::SessionCommand;
+use crate::step::{CellStep, SessionCommand};
 use conditions::{Conditions, Served};
+use machinery::ItemState;
 use methods::{AlarmCore, AlarmCoreBuilder};
 use users::{Users, UsersError};
 
@@ -102,6 +104,8 @@ pub enum AlarmServerError {
 /// A running alarm server.
 pub struct AlarmServer {
     conditions: Arc<Conditions>,
+    /// The cell's `MachineryItemState`.
+    item_state: Arc<ItemState>,
     /// The running server's own (its sessions).
     info: Arc<opcua::server::ServerInfo>,
     /// Its users, as read at start.
@@ -155,6 +159,13 @@ impl AlarmServer {
                 },
                 NODES,
             ))
+            .with_node_manager(simple_node_manager(
+                NamespaceMetadata {
+                    namespace_uri: cellwatch_models::machinery::NAMESPACE.into(),
+                    ..Default::default()
+                },
+                machinery::MACHINERY,
+            ))
             .with_authenticator(Arc::new(users.clone()))
             .application_name(format!("cellwatch alarms of {cell}"))
             .application_uri(format!("urn:cellwatch:alarm-server:{cell}"))
@@ -195,6 +206,22 @@ impl AlarmServer {
         let notifier = NodeId::new(ns, cell);
         let event_type = NodeId::new(ns, "CellAlarmType");
         declare(&nodes, ns, cell, &notifier, &event_type);
+        let machinery_ns = handle
+            .get_namespace_index(cellwatch_models::machinery::NAMESPACE)
+            .ok_or_else(|| missing("the Machinery namespace"))?;
+        let machinery_nodes = handle
+            .node_managers()
+            .get_by_name::<SimpleNodeManager>(machinery::MACHINERY)
+            .ok_or_else(|| missing("the Machinery node manager"))?;
+        let item_state = Arc::new(ItemState::declare(
+            &machinery_nodes,
+            machinery_ns,
+            nodes.clone(),
+            ns,
+            cell,
+            &notifier,
+            handle.subscriptions().clone(),
+        ));
         filters::accept_condition_fields(&mut handle.type_tree().write(), ns, &event_type);
         let served = Served {
             ns,
@@ -223,6 +250,7 @@ impl AlarmServer {
         tracing::info!(cell, %addr, "serving the cell's alarms over OPC UA");
         Ok(AlarmServer {
             conditions,
+            item_state,
             info: handle.info().clone(),
             users,
             addr,
@@ -262,10 +290,19 @@ impl AlarmServer {
         &self.users
     }
 
-    /// What the sink calls with each alarm transition.
-    pub fn feed(&self) -> Arc<dyn Fn(&AlarmPayload) + Send + Sync> {
+    /// What the sink calls with each step: its alarm transitions and, when
+    /// it changed, the machine state.
+    pub fn feed(&self) -> Arc<dyn Fn(&CellStep) + Send + Sync> {
         let conditions = self.conditions.clone();
-        Arc::new(move |p| conditions.apply(p))
+        let item_state = self.item_state.clone();
+        Arc::new(move |step| {
+            for a in &step.alarms {
+                conditions.apply(&a.payload);
+            }
+            if let Some(s) = &step.state {
+                item_state.set(s.state);
+            }
+        })
     }
 
     /// The server's task, which ends after the agent's stop.
