@@ -426,3 +426,41 @@ fn historical(messages: &[Value], active: &Value) -> Vec<(bool, u64)> {
         })
         .collect()
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn validate_opens_the_password_and_tls_files() {
+    let d = tempfile::tempdir().unwrap();
+    let (_sim, cell) = crate::spawned::start(d.path()).await;
+    let base = std::fs::read_to_string(&cell.config).unwrap();
+    let config = d.path().join("sparkplug.toml");
+    let validate = |section: &str| {
+        std::fs::write(&config, format!("{base}\n[sparkplug]\n{section}")).unwrap();
+        crate::util::cellwatch(&["validate", config.to_str().unwrap()])
+    };
+    let plain = "broker = \"mqtt://127.0.0.1:1883\"\ngroup_id = \"g\"\nedge_node_id = \"n\"\n";
+    let ok = validate(plain);
+    assert_eq!(ok.code, 0, "{}", ok.stderr);
+
+    // A password file that is not there: said before the agent runs.
+    let missing = d.path().join("mqtt-password");
+    let v = validate(&format!(
+        "{plain}username = \"agent\"\npassword_file = \"{}\"\n",
+        missing.display()
+    ));
+    assert_eq!(v.code, 2, "{}", v.stdout);
+    assert!(v.stderr.contains("mqtt-password"), "{}", v.stderr);
+
+    // A CA that is not a certificate.
+    let ca = d.path().join("broker-ca.pem");
+    std::fs::write(&ca, "not a certificate\n").unwrap();
+    let v = validate(&format!(
+        "broker = \"mqtts://127.0.0.1:8883\"\ngroup_id = \"g\"\nedge_node_id = \"n\"\n[sparkplug.tls]\nca = \"{}\"\n",
+        ca.display()
+    ));
+    assert_eq!(v.code, 2, "{}", v.stdout);
+    assert!(
+        v.stderr.contains("sparkplug.tls") && v.stderr.contains("broker-ca.pem"),
+        "{}",
+        v.stderr
+    );
+}

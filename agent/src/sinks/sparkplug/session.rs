@@ -575,9 +575,17 @@ async fn connect(
                 if shared.closed.load(Ordering::Acquire) {
                     break;
                 }
-                // The node left (its primary host is offline): drop this
-                // connection and make the next at once.
-                eventloop.clean();
+                // The node left (its primary host is offline). The broker
+                // closes the connection once it has read the DISCONNECT
+                // (and dropped the will); a new CONNECT under the same
+                // client id before that would make it say the will.
+                let closed = tokio::time::timeout(PUBLISH_TIMEOUT, async {
+                    while eventloop.poll().await.is_ok() {}
+                })
+                .await;
+                if closed.is_err() {
+                    eventloop.clean();
+                }
                 link.send_replace(Link {
                     connected: false,
                     generation,
