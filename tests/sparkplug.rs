@@ -8,7 +8,10 @@
 //! command is not, and the broker says the node's death when the agent is
 //! killed. With a primary host, nothing is published while its `STATE` says
 //! offline; once online, the births carry the current values and what was
-//! held follows, flagged historical.
+//! held follows, flagged historical; offline again, the node says NDEATH
+//! and waits on a new session, a stale `STATE` changing nothing
+//! (`sparkplug/host.rs`). Held changes survive a broker restart and an
+//! agent killed while holding them (`sparkplug/outage.rs`).
 
 use std::collections::HashMap;
 use std::io::{BufRead, Write};
@@ -20,6 +23,9 @@ use std::time::Duration;
 use serde_json::{json, Value};
 
 use crate::util::root;
+
+mod host;
+mod outage;
 
 const MOSQUITTO: &str = "/usr/sbin/mosquitto";
 const GROUP: &str = "press-shop";
@@ -366,76 +372,95 @@ fn scraped(port: u16, prefix: &str) -> f64 {
         .unwrap_or_else(|| panic!("no {prefix} in {body}"))
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
-async fn changes_wait_for_the_primary_host_and_arrive_as_history() {
-    let d = tempfile::tempdir().unwrap();
-    let broker = Broker::start(d.path(), crate::util::restartable_port()).await;
-    let mut host = Host::start(&broker).await;
-    let state = |online: bool| {
-        json!({ "topic": "spBv1.0/STATE/scada", "retain": true,
-                "text": json!({ "online": online, "timestamp": 1 }).to_string() })
-    };
-    writeln!(host.stdin, "{}", state(false)).unwrap();
-    host.until("the host said it is offline", |v| {
-        v["published"] == "spBv1.0/STATE/scada"
-    })
-    .await;
-    let (sim, mut cell) = crate::spawned::start(d.path()).await;
+/// Waits until the agent's metric starting with `prefix` is one `ok`
+/// accepts; returns it.
+async fn until_scraped(port: u16, prefix: &str, ok: impl Fn(f64) -> bool) -> f64 {
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(90);
+    loop {
+        let now = scraped(port, prefix);
+        if ok(now) {
+            return now;
+        }
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "{prefix} stayed at {now}"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+/// The demo cell beside its simulated CNC, a Sparkplug edge node on
+/// `broker` (`more` added to its `[sparkplug]`), not yet running.
+async fn edge_node(
+    dir: &Path,
+    broker: &Broker,
+    more: &str,
+) -> (cellwatch::sim::cnc::SimulatedCnc, crate::spawned::Cell) {
+    let (sim, cell) = crate::spawned::start(dir).await;
     let mut config = std::fs::read_to_string(&cell.config).unwrap();
     config += &format!(
-        "\n[sparkplug]\nbroker = \"mqtt://127.0.0.1:{}\"\ngroup_id = \"{GROUP}\"\nedge_node_id = \"{NODE}\"\nprimary_host = \"scada\"\n",
+        "\n[sparkplug]\nbroker = \"mqtt://127.0.0.1:{}\"\ngroup_id = \"{GROUP}\"\nedge_node_id = \"{NODE}\"\n{more}",
         broker.port
     );
     std::fs::write(&cell.config, config).unwrap();
-    let mut agent = cell.spawn("agent.log").await;
+    (sim, cell)
+}
 
-    // The host offline: the node is connected, holds, and publishes nothing.
-    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
-    while scraped(cell.metrics_port, "cellwatch_sparkplug_connected") != 1.0 {
-        assert!(tokio::time::Instant::now() < deadline, "never connected");
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    }
-    // ESE raised: the metrics sink counts it, and the Sparkplug sink, which
-    // takes the same step right after it with nothing to wait for, holds it.
-    let critical =
-        "cellwatch_alarms_active{cell=\"m01ps0004\",kind=\"switching\",severity=\"critical\"}";
-    sim.set("X0.06", false).unwrap();
-    while scraped(cell.metrics_port, critical) != 1.0 {
-        assert!(tokio::time::Instant::now() < deadline, "ESE never raised");
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    }
-    assert!(scraped(cell.metrics_port, "cellwatch_sparkplug_held{") > 0.0);
+/// The ESE alarm's metric line (critical, switching) at `/metrics`.
+const CRITICAL: &str =
+    "cellwatch_alarms_active{cell=\"m01ps0004\",kind=\"switching\",severity=\"critical\"}";
 
-    // Online: births with the current values, then what was held, flagged
-    // historical.
-    writeln!(host.stdin, "{}", state(true)).unwrap();
-    host.until("the host said it is online", |v| {
-        v["published"] == "spBv1.0/STATE/scada"
-    })
-    .await;
-    assert!(
-        host.seen.is_empty(),
-        "published while the host was offline: {:#?}",
-        host.seen
-    );
-    let nbirth = host.message("NBIRTH", |_| true).await;
-    assert_eq!(nbirth["seq"], 0);
-    let dbirth = host.message("DBIRTH", |_| true).await;
-    assert_eq!(named(&dbirth, "Alarms/ese/Active")["value"], true);
-    let active = named(&dbirth, "Alarms/ese/Active")["alias"].clone();
-    let history = host
-        .message("DDATA", |p| {
-            metrics(p)
-                .iter()
-                .any(|m| m["alias"] == active && m["value"] == true)
+/// The ESE's `Active` values in `messages`' DDATA flagged historical, with
+/// their timestamps, in the order they came; `active` its alias.
+fn historical(messages: &[Value], active: &Value) -> Vec<(bool, u64)> {
+    messages
+        .iter()
+        .filter(|m| m["topic"] == topic("DDATA").as_str())
+        .flat_map(|m| metrics(&m["payload"]).iter())
+        .filter(|m| m["isHistorical"] == true && &m["alias"] == active)
+        .map(|m| {
+            (
+                m["value"].as_bool().unwrap(),
+                m["timestamp"].as_u64().unwrap(),
+            )
         })
-        .await;
+        .collect()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn validate_opens_the_password_and_tls_files() {
+    let d = tempfile::tempdir().unwrap();
+    let (_sim, cell) = crate::spawned::start(d.path()).await;
+    let base = std::fs::read_to_string(&cell.config).unwrap();
+    let config = d.path().join("sparkplug.toml");
+    let validate = |section: &str| {
+        std::fs::write(&config, format!("{base}\n[sparkplug]\n{section}")).unwrap();
+        crate::util::cellwatch(&["validate", config.to_str().unwrap()])
+    };
+    let plain = "broker = \"mqtt://127.0.0.1:1883\"\ngroup_id = \"g\"\nedge_node_id = \"n\"\n";
+    let ok = validate(plain);
+    assert_eq!(ok.code, 0, "{}", ok.stderr);
+
+    // A password file that is not there: said before the agent runs.
+    let missing = d.path().join("mqtt-password");
+    let v = validate(&format!(
+        "{plain}username = \"agent\"\npassword_file = \"{}\"\n",
+        missing.display()
+    ));
+    assert_eq!(v.code, 2, "{}", v.stdout);
+    assert!(v.stderr.contains("mqtt-password"), "{}", v.stderr);
+
+    // A CA that is not a certificate.
+    let ca = d.path().join("broker-ca.pem");
+    std::fs::write(&ca, "not a certificate\n").unwrap();
+    let v = validate(&format!(
+        "broker = \"mqtts://127.0.0.1:8883\"\ngroup_id = \"g\"\nedge_node_id = \"n\"\n[sparkplug.tls]\nca = \"{}\"\n",
+        ca.display()
+    ));
+    assert_eq!(v.code, 2, "{}", v.stdout);
     assert!(
-        metrics(&history).iter().all(|m| m["isHistorical"] == true),
-        "{history:#}"
+        v.stderr.contains("sparkplug.tls") && v.stderr.contains("broker-ca.pem"),
+        "{}",
+        v.stderr
     );
-    no_gaps(&host.seen);
-    agent.kill().unwrap();
-    agent.wait().unwrap();
-    drop(sim);
 }

@@ -59,6 +59,10 @@ pub(crate) fn validate(args: &ValidateArgs, out: &mut dyn Write) -> Result<(), F
         crate::sinks::alertmanager::check(am)
             .map_err(|e| Failure::Input(format!("{}: {e}", args.config.display())))?;
     }
+    if let Some(sp) = &c.sparkplug {
+        crate::sinks::sparkplug::check(sp)
+            .map_err(|e| Failure::Input(format!("{}: {e}", args.config.display())))?;
+    }
     let io = Failure::output;
     let discrete = c.switching.iter().filter(|s| s.text.is_some()).count();
     let checks: Vec<String> = [

@@ -1,7 +1,8 @@
 //! The metrics of the Sparkplug B edge node (`[sparkplug]`): messages
 //! published and failed by kind, commands from MQTT not taken, changes
 //! held while they cannot be published and those dropped past the bound,
-//! and whether the broker holds the node's session. Registered by
+//! whether the broker holds the node's session and how many it took, and
+//! the primary host's `STATE` messages by what they meant. Registered by
 //! [`super::Metrics::new`] for every cell (at 0 without `[sparkplug]`);
 //! counted by the sink's events (`sinks/sparkplug/events.rs`).
 
@@ -26,6 +27,10 @@ pub struct SparkplugMetrics {
     pub held_dropped: IntCounter,
     /// 1 while the broker holds the node's session.
     pub connected: IntGauge,
+    /// MQTT sessions the broker took.
+    pub sessions: IntCounter,
+    /// The primary host's `STATE` messages by what they meant.
+    host_states: IntCounterVec,
 }
 
 impl SparkplugMetrics {
@@ -69,8 +74,32 @@ impl SparkplugMetrics {
             cell,
         ))
         .expect("valid metric");
+        let sessions = IntCounter::with_opts(opts(
+            "cellwatch_sparkplug_sessions_total",
+            "MQTT sessions the broker took for the Sparkplug edge node (each with its own bdSeq).",
+            cell,
+        ))
+        .expect("valid metric");
+        let host_states = IntCounterVec::new(
+            opts(
+                "cellwatch_sparkplug_primary_host_states_total",
+                "STATE messages of the primary host application by what they meant: online, offline, or stale (older than the last one, or unreadable: ignored).",
+                cell,
+            ),
+            &["state"],
+        )
+        .expect("valid metric");
+        for state in ["online", "offline", "stale"] {
+            host_states.with_label_values(&[state]).inc_by(0);
+        }
         registry
             .register(Box::new(messages.clone()))
+            .expect("unique metric");
+        registry
+            .register(Box::new(sessions.clone()))
+            .expect("unique metric");
+        registry
+            .register(Box::new(host_states.clone()))
             .expect("unique metric");
         registry
             .register(Box::new(commands_ignored.clone()))
@@ -89,7 +118,14 @@ impl SparkplugMetrics {
             held,
             held_dropped,
             connected,
+            sessions,
+            host_states,
         }
+    }
+
+    /// The primary host's `STATE` was heard, meaning `state`.
+    pub fn host_state(&self, state: &str) {
+        self.host_states.with_label_values(&[state]).inc();
     }
 
     /// A message of `kind` was published (`ok`) or failed.

@@ -29,7 +29,15 @@ client.on("connect", () => {
     }
   });
 });
-client.on("error", (err) => say({ error: String(err) }));
+// The broker away (a test restarts it) is said, not an error: the client
+// connects again by itself.
+client.on("error", (err) =>
+  say(
+    ["ECONNREFUSED", "ECONNRESET"].includes(err.code)
+      ? { unreachable: String(err) }
+      : { error: String(err) }
+  )
+);
 client.on("message", (topic, payload) => {
   if (topic.startsWith("spBv1.0/STATE/")) {
     say({ topic, text: payload.toString() });

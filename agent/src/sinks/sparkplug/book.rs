@@ -11,9 +11,11 @@ use std::collections::{HashMap, VecDeque};
 use cellwatch_models::alarm::{Alarm, AlarmKind, Severity};
 use cellwatch_models::engine::MachineState;
 
+use super::store::HeldRow;
 use super::tahu::{
     DataType, Metric, Payload, PropertySet, PropertyValue, PropertyValueKind, Value,
 };
+pub use super::value::MetricValue;
 use crate::step::CellStep;
 
 /// The node's birth/death sequence metric.
@@ -45,30 +47,6 @@ const ALARM_METRICS: [(&str, DataType); 4] = [
 /// The most alarms the device declares: alarms first seen running (the
 /// PLC's conditions) are added up to this many, each adding a rebirth.
 const MAX_ALARMS: usize = 10_000;
-
-/// A metric's value.
-#[derive(Debug, Clone, PartialEq)]
-pub enum MetricValue {
-    /// A Boolean.
-    Boolean(bool),
-    /// A string.
-    Text(String),
-    /// A count.
-    UInt64(u64),
-    /// A number.
-    Double(f64),
-}
-
-impl MetricValue {
-    fn into_value(self) -> Value {
-        match self {
-            MetricValue::Boolean(b) => Value::BooleanValue(b),
-            MetricValue::Text(s) => Value::StringValue(s),
-            MetricValue::UInt64(n) => Value::LongValue(n),
-            MetricValue::Double(x) => Value::DoubleValue(x),
-        }
-    }
-}
 
 /// One of the device's metrics.
 #[derive(Debug)]
@@ -124,6 +102,8 @@ pub fn declared(catalogue: &[cellwatch_models::engine::CatalogueEntry]) -> Vec<D
 #[derive(Debug)]
 pub struct Book {
     entries: Vec<Entry>,
+    /// Per metric name: its index (for changes read back from the store).
+    names: HashMap<String, usize>,
     /// Per alarm id: its first metric.
     alarms: HashMap<String, usize>,
     /// Per exported tag (its index in the configuration): its metric.
@@ -153,6 +133,7 @@ impl Book {
     ) -> Book {
         let mut book = Book {
             entries: Vec::new(),
+            names: HashMap::new(),
             alarms: HashMap::new(),
             tags: HashMap::new(),
             parts: None,
@@ -188,6 +169,7 @@ impl Book {
     }
 
     fn add(&mut self, name: String, datatype: DataType, value: Option<MetricValue>) -> usize {
+        self.names.insert(name.clone(), self.entries.len());
         self.entries.push(Entry {
             name,
             datatype,
@@ -315,6 +297,50 @@ impl Book {
     pub fn take_changes(&mut self, n: usize) -> Vec<Change> {
         let n = n.min(self.held.len());
         self.held.drain(..n).collect()
+    }
+
+    /// Puts `changes`, taken but not published, back before the waiting
+    /// ones.
+    pub fn hold_again(&mut self, changes: Vec<Change>) {
+        for c in changes.into_iter().rev() {
+            self.held.push_front(c);
+        }
+    }
+
+    /// `changes` as the store keeps them: by metric name.
+    pub fn to_rows(&self, changes: Vec<Change>) -> Vec<HeldRow> {
+        changes
+            .into_iter()
+            .map(|c| HeldRow {
+                id: 0,
+                metric: self.entries[c.entry].name.clone(),
+                value: c.value,
+                at: c.at,
+            })
+            .collect()
+    }
+
+    /// Rows read back from the store as changes of this run's metrics;
+    /// with how many name a metric the device no longer declares (an
+    /// exported tag taken out of the configuration, an alarm first seen
+    /// in an earlier run).
+    pub fn from_rows(&self, rows: Vec<HeldRow>) -> (Vec<Change>, u64) {
+        let mut unknown = 0;
+        let changes = rows
+            .into_iter()
+            .filter_map(|r| match self.names.get(&r.metric) {
+                Some(&entry) => Some(Change {
+                    entry,
+                    value: r.value,
+                    at: r.at,
+                }),
+                None => {
+                    unknown += 1;
+                    None
+                }
+            })
+            .collect();
+        (changes, unknown)
     }
 
     /// The node's birth: sequence 0, `bd_seq`, the rebirth control.

@@ -2,6 +2,7 @@
 //! `emit` writes its log line and bumps its metric together
 //! (`cellwatch_sparkplug_*`, registered in `metrics/sparkplug.rs`).
 
+use super::host::Heard;
 use crate::metrics::SparkplugMetrics;
 
 /// Something the edge node did or met.
@@ -49,12 +50,29 @@ pub(super) enum SparkplugEvent<'a> {
         /// How many.
         count: u64,
     },
-    /// The primary host application came online or went offline.
+    /// The primary host application's `STATE` was heard.
     PrimaryHost {
         /// Its id.
         host: &'a str,
-        /// Whether it is online.
-        online: bool,
+        /// What it means: online, offline, or stale (ignored).
+        heard: Heard,
+    },
+    /// The primary host went offline during the node's Sparkplug session:
+    /// the node said its NDEATH and disconnects.
+    HostOffline {
+        /// The session's bdSeq.
+        bd_seq: u64,
+    },
+    /// The store of held changes could not be written or read.
+    StoreFailed {
+        /// Why.
+        why: &'a str,
+    },
+    /// Held changes read back from the store name metrics this run does
+    /// not declare; they are dropped.
+    Undeclared {
+        /// How many.
+        count: u64,
     },
 }
 
@@ -64,6 +82,7 @@ impl SparkplugEvent<'_> {
         match self {
             SparkplugEvent::Connected { broker, bd_seq } => {
                 metrics.connected.set(1);
+                metrics.sessions.inc();
                 tracing::info!(broker, bd_seq, "sparkplug: connected to the MQTT broker");
             }
             SparkplugEvent::Disconnected { broker, why } => {
@@ -96,11 +115,36 @@ impl SparkplugEvent<'_> {
                 metrics.held_dropped.inc_by(count);
                 tracing::warn!(
                     count,
-                    "sparkplug: held changes dropped past sparkplug.max_held"
+                    "sparkplug: held changes dropped, the oldest, past sparkplug.max_held"
                 );
             }
-            SparkplugEvent::PrimaryHost { host, online } => {
-                tracing::info!(host, online, "sparkplug: primary host state");
+            SparkplugEvent::PrimaryHost { host, heard } => {
+                metrics.host_state(heard.as_str());
+                if heard == Heard::Stale {
+                    tracing::info!(host, "sparkplug: primary host STATE older than the last one (or unreadable), ignored");
+                } else {
+                    tracing::info!(
+                        host,
+                        state = heard.as_str(),
+                        "sparkplug: primary host state"
+                    );
+                }
+            }
+            SparkplugEvent::HostOffline { bd_seq } => {
+                tracing::info!(
+                    bd_seq,
+                    "sparkplug: the primary host is offline: NDEATH, disconnecting to connect again"
+                );
+            }
+            SparkplugEvent::StoreFailed { why } => {
+                tracing::warn!("sparkplug: the store of held changes: {why}");
+            }
+            SparkplugEvent::Undeclared { count } => {
+                metrics.held_dropped.inc_by(count);
+                tracing::warn!(
+                    count,
+                    "sparkplug: held changes of metrics this run does not declare, dropped"
+                );
             }
         }
     }

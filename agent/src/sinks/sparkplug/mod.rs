@@ -10,13 +10,19 @@
 //! MQTT client: the node's will (NDEATH with its bdSeq), the births (NBIRTH,
 //! DBIRTH), the data (DDATA, sequence 0–255), a rebirth when a host asks
 //! (NCMD `Node Control/Rebirth`) and, with a primary host, publishing only
-//! while it says it is online. Changes that cannot be published are held,
-//! bounded, and sent as history after the next birth. Other commands from
-//! MQTT are never taken: they travel on the signed bus.
+//! while it says it is online; when it says offline, NDEATH and a new
+//! connection. Changes that cannot be published are held on disk beside
+//! the journal, bounded, and sent as history after the next birth, after a
+//! restart too; bdSeq is kept there as well. Other commands from MQTT are
+//! never taken: they travel on the signed bus.
 //!
 //! - `config.rs`: the `[sparkplug]` table, validated.
 //! - `book.rs`: the metrics, their aliases and values, the held changes.
 //! - `session.rs`: the MQTT session.
+//! - `host.rs`: the primary host's `STATE`, judged by its timestamps.
+//! - `store.rs`: the held changes and bdSeq on disk.
+//! - `files.rs`: the password and TLS files, read (and checked).
+//! - `value.rs`: a metric's value.
 //! - `topics.rs`: the topics.
 //! - `tahu/`: the Eclipse Tahu payload (generated from its `.proto`).
 //! - `events.rs`: what it logs and counts.
@@ -25,12 +31,16 @@
 pub mod book;
 pub mod config;
 mod events;
+mod files;
+pub mod host;
 pub mod session;
 mod shared;
+pub mod store;
 pub mod tahu;
 pub mod topics;
+mod value;
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 use futures_util::future::BoxFuture;
@@ -40,8 +50,10 @@ use tokio::sync::Notify;
 use self::book::{declared, Book};
 use self::config::SparkplugConfig;
 use self::events::SparkplugEvent;
+pub use self::files::check;
 use self::shared::Shared;
 pub use self::shared::SparkplugError;
+use self::store::{store_path, HeldStore};
 use crate::config::CellConfig;
 use crate::metrics::Metrics;
 use crate::sinks::Sink;
@@ -57,7 +69,8 @@ pub struct SparkplugSink {
 /// device declares the alarms of the engine's `catalogue` from the start.
 ///
 /// # Errors
-/// A TLS or password file cannot be read or used.
+/// A TLS or password file cannot be read or used, or the store of held
+/// changes beside the journal cannot be opened.
 pub fn start(
     cell: &CellConfig,
     config: &SparkplugConfig,
@@ -72,6 +85,11 @@ pub fn start(
         .map(|(i, t)| (i, t.name.clone()))
         .collect();
     let counts_parts = cell.part_done.is_some() || !cell.part_counters.is_empty();
+    let (store, dropped) = HeldStore::open(&store_path(&cell.journal.path), config.max_held)?;
+    if dropped > 0 {
+        SparkplugEvent::Dropped { count: dropped }.emit(&metrics.sparkplug);
+    }
+    let stored = store.rows();
     let shared = Arc::new(Shared {
         book: Mutex::new(Book::new(
             &declared(catalogue),
@@ -79,9 +97,12 @@ pub fn start(
             counts_parts,
             config.max_held,
         )),
+        store: Mutex::new(store),
+        stored: AtomicUsize::new(stored),
         wake: Notify::new(),
         closed: AtomicBool::new(false),
     });
+    metrics.sparkplug.held.set(stored as i64);
     let session = session::Session::new(config, shared.clone(), metrics.clone())?;
     Ok((SparkplugSink { shared, metrics }, session))
 }
@@ -92,11 +113,12 @@ impl Sink for SparkplugSink {
     }
 
     fn handle<'a>(&'a mut self, step: &'a CellStep) -> BoxFuture<'a, ()> {
-        let (changed, held, dropped) = {
+        let (changed, dropped) = {
             let mut book = self.shared.book();
             let changed = book.apply(step);
-            (changed, book.held(), book.take_dropped())
+            (changed, book.take_dropped())
         };
+        let held = self.shared.held();
         if changed {
             self.shared.wake.notify_one();
         }

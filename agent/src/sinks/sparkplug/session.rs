@@ -1,19 +1,28 @@
 //! The edge node's MQTT session: one task that owns the client and the
 //! node's sequence numbers, and one beside it that drives the connection
 //! (rumqttc's event loop), reconnects with a growing wait, and sets the
-//! next connection's will (NDEATH with the next bdSeq) before it.
+//! next connection's will (NDEATH with the next bdSeq, kept in the store
+//! before the CONNECT so the count goes on after a restart) before it.
 //!
 //! Each time the broker takes the session the node subscribes to its
 //! commands (and its primary host's `STATE`), then, once the primary host
 //! is online (at once without one), publishes NBIRTH (sequence 0, bdSeq,
 //! `Node Control/Rebirth`), DBIRTH (every metric) and the changes held
-//! while it could not publish, flagged historical; then each change as
-//! DDATA. A rebirth is the same births again on the same session: asked by
-//! NCMD `Node Control/Rebirth`, or needed because an alarm the device had
-//! not declared appeared. A clean stop says NDEATH before it disconnects;
-//! anything else leaves the broker to say the will.
+//! while it could not publish, flagged historical, oldest first: those in
+//! the store, then those still in memory; then each change as DDATA.
+//! While it cannot publish, every change goes to the store (`store.rs`) as
+//! it comes, so a restart or a kill loses none. When the primary host says
+//! it is offline (a `STATE` not older than its last online one) the node
+//! publishes its NDEATH, disconnects and connects again, to be born when
+//! the host is back. A rebirth is the same births again on the same
+//! session: asked by NCMD `Node Control/Rebirth`, or needed because an
+//! alarm the device had not declared appeared. A clean stop says NDEATH
+//! before it disconnects; anything else leaves the broker to say the will.
+//!
+//! DDATA goes at QoS 0, as Sparkplug says: a change handed to the
+//! connection in the moment the broker goes away, before the loss is
+//! seen, is lost with it.
 
-use std::path::Path;
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::Duration;
@@ -26,9 +35,12 @@ use rumqttc::{
 use tokio::sync::{mpsc, watch};
 
 use super::book::{asks_rebirth, node_death, Change};
-use super::config::{SparkplugConfig, SparkplugTls};
+use super::config::SparkplugConfig;
 use super::events::SparkplugEvent;
+use super::files::{password, tls};
+use super::host::{Heard, HostState, PrimaryHost};
 use super::shared::{Shared, SparkplugError};
+use super::store::{HeldStore, StoreError};
 use super::tahu::Payload;
 use super::topics::Topics;
 use crate::backoff::Backoff;
@@ -77,6 +89,8 @@ pub struct Session {
     broker: String,
     topics: Topics,
     primary_host: Option<String>,
+    /// The bdSeq of the first CONNECT: one past the last one kept.
+    first_bd_seq: u64,
     shared: Arc<Shared>,
     metrics: Arc<Metrics>,
 }
@@ -89,6 +103,8 @@ struct Node {
     bd_seq: u64,
     /// The primary host is online (always, without one).
     host_online: bool,
+    /// The primary host's `STATE` timestamps, across sessions.
+    host: PrimaryHost,
     /// NBIRTH and DBIRTH were published in this session and nothing since
     /// asks for them again.
     born: bool,
@@ -111,6 +127,10 @@ impl Session {
         metrics: Arc<Metrics>,
     ) -> Result<Session, SparkplugError> {
         let topics = Topics::of(config);
+        let first_bd_seq = shared
+            .store()
+            .last_bd_seq()?
+            .map_or(0, |last| (last + 1) % 256);
         let mut options = MqttOptions::new(
             format!("cellwatch-{}-{}", config.group_id, config.edge_node_id),
             config.broker.host.clone(),
@@ -121,7 +141,7 @@ impl Session {
             .set_clean_session(true)
             .set_max_packet_size(MAX_INCOMING, MAX_OUTGOING)
             .set_request_channel_capacity(REQUESTS)
-            .set_last_will(will(&topics.ndeath, 0));
+            .set_last_will(will(&topics.ndeath, first_bd_seq));
         if let Some(c) = &config.credentials {
             let password = match &c.password_file {
                 Some(f) => password(f)?,
@@ -140,6 +160,7 @@ impl Session {
             broker: format!("{}:{}", config.broker.host, config.broker.port),
             topics,
             primary_host: config.primary_host.clone(),
+            first_bd_seq,
             shared,
             metrics,
         })
@@ -156,10 +177,14 @@ impl Session {
         let (in_tx, mut incoming) = mpsc::channel(INCOMING);
         let connection = tokio::spawn(connect(
             eventloop,
-            self.topics.ndeath.clone(),
+            Will {
+                ndeath: self.topics.ndeath.clone(),
+                first_bd_seq: self.first_bd_seq,
+            },
             self.broker.clone(),
             link_tx,
             in_tx,
+            self.shared.clone(),
             self.metrics.clone(),
         ));
         let mut node = Node {
@@ -168,6 +193,7 @@ impl Session {
             generation: 0,
             bd_seq: 0,
             host_online: self.primary_host.is_none(),
+            host: PrimaryHost::default(),
             born: false,
             seq: 0,
         };
@@ -180,7 +206,7 @@ impl Session {
                     let now = *link.borrow_and_update();
                     self.on_link(&mut node, now).await;
                 }
-                Some(message) = incoming.recv() => self.on_message(&mut node, &message),
+                Some(message) = incoming.recv() => self.on_message(&mut node, &message).await,
                 () = self.shared.wake.notified() => {}
             }
             if node.connected && node.host_online {
@@ -189,8 +215,14 @@ impl Session {
                 } else {
                     self.data(&mut node).await;
                 }
+            } else {
+                self.spill().await;
             }
         }
+        if node.connected && node.host_online && node.born {
+            self.data(&mut node).await;
+        }
+        self.spill().await;
         if node.connected {
             let death = node_death(node.bd_seq, crate::clock::now_ms());
             self.publish(&node, &self.topics.ndeath, "ndeath", &death)
@@ -231,7 +263,7 @@ impl Session {
     }
 
     /// A command or the primary host's state arrived.
-    fn on_message(&self, node: &mut Node, message: &Publish) {
+    async fn on_message(&self, node: &mut Node, message: &Publish) {
         let m = &self.metrics.sparkplug;
         let topic = message.topic.as_str();
         if topic == self.topics.ncmd {
@@ -245,15 +277,30 @@ impl Session {
                 }
                 _ => SparkplugEvent::CommandIgnored { topic }.emit(m),
             }
-        } else if Some(topic) == self.topics.state.as_deref() {
-            let online = host_online(&message.payload);
-            if let Some(host) = &self.primary_host {
-                SparkplugEvent::PrimaryHost { host, online }.emit(m);
+        } else if let (Some(host), true) = (
+            self.primary_host.as_deref(),
+            Some(topic) == self.topics.state.as_deref(),
+        ) {
+            let heard = match HostState::parse(&message.payload) {
+                Some(state) => node.host.heard(state),
+                None => Heard::Stale,
+            };
+            SparkplugEvent::PrimaryHost { host, heard }.emit(m);
+            match heard {
+                Heard::Online => {
+                    if !node.host_online {
+                        node.born = false;
+                    }
+                    node.host_online = true;
+                }
+                Heard::Offline => {
+                    node.host_online = false;
+                    if node.born {
+                        self.leave(node).await;
+                    }
+                }
+                Heard::Stale => {}
             }
-            if online && !node.host_online {
-                node.born = false;
-            }
-            node.host_online = online;
         } else {
             SparkplugEvent::CommandIgnored { topic }.emit(m);
         }
@@ -280,10 +327,16 @@ impl Session {
             return;
         }
         node.born = true;
+        if !self.stored_history(node, now).await {
+            self.shared.book().hold_again(held);
+            return;
+        }
         let mut held = held;
         while !held.is_empty() {
             let rest = held.split_off(held.len().min(METRICS_PER_MESSAGE));
-            if !self.ddata(node, held, now, true).await {
+            if !self.ddata(node, held.clone(), now, true).await {
+                held.extend(rest);
+                self.shared.book().hold_again(held);
                 return;
             }
             held = rest;
@@ -291,19 +344,121 @@ impl Session {
         self.data(node).await;
     }
 
+    /// The node's primary host said it is offline: NDEATH, then the
+    /// connection is closed; the connection's task connects again.
+    async fn leave(&self, node: &mut Node) {
+        SparkplugEvent::HostOffline {
+            bd_seq: node.bd_seq,
+        }
+        .emit(&self.metrics.sparkplug);
+        let death = node_death(node.bd_seq, crate::clock::now_ms());
+        self.publish(node, &self.topics.ndeath, "ndeath", &death)
+            .await;
+        if let Err(e) = node.client.disconnect().await {
+            tracing::warn!("sparkplug: cannot disconnect: {e}");
+        }
+        node.connected = false;
+        node.born = false;
+    }
+
+    /// The changes in the store as history, oldest first, each forgotten
+    /// once handed to the connection; whether all were.
+    async fn stored_history(&self, node: &mut Node, now: u64) -> bool {
+        loop {
+            let rows = match self.with_store(|s| s.oldest(METRICS_PER_MESSAGE)).await {
+                Ok(rows) => rows,
+                Err(e) => {
+                    SparkplugEvent::StoreFailed {
+                        why: &e.to_string(),
+                    }
+                    .emit(&self.metrics.sparkplug);
+                    return true;
+                }
+            };
+            let Some(last) = rows.last().map(|r| r.id) else {
+                return true;
+            };
+            let (changes, unknown) = self.shared.book().from_rows(rows);
+            if unknown > 0 {
+                SparkplugEvent::Undeclared { count: unknown }.emit(&self.metrics.sparkplug);
+            }
+            if !changes.is_empty() && !self.ddata(node, changes, now, true).await {
+                return false;
+            }
+            if let Err(e) = self.with_store(move |s| s.forget_through(last)).await {
+                SparkplugEvent::StoreFailed {
+                    why: &e.to_string(),
+                }
+                .emit(&self.metrics.sparkplug);
+                return true;
+            }
+            self.count_held();
+        }
+    }
+
+    /// The waiting changes into the store: the node cannot publish them.
+    async fn spill(&self) {
+        let rows = {
+            let mut book = self.shared.book();
+            let changes = book.take_changes(usize::MAX);
+            if changes.is_empty() {
+                return;
+            }
+            book.to_rows(changes)
+        };
+        let kept = rows.clone();
+        match self.with_store(move |s| s.append(&rows)).await {
+            Ok(0) => {}
+            Ok(count) => SparkplugEvent::Dropped { count }.emit(&self.metrics.sparkplug),
+            Err(e) => {
+                SparkplugEvent::StoreFailed {
+                    why: &e.to_string(),
+                }
+                .emit(&self.metrics.sparkplug);
+                let mut book = self.shared.book();
+                let (changes, _) = book.from_rows(kept);
+                book.hold_again(changes);
+            }
+        }
+        self.count_held();
+    }
+
+    /// Runs `f` on the store on a blocking thread; then notes how many
+    /// rows it holds.
+    async fn with_store<T: Send + 'static>(
+        &self,
+        f: impl FnOnce(&mut HeldStore) -> Result<T, StoreError> + Send + 'static,
+    ) -> Result<T, StoreError> {
+        let shared = self.shared.clone();
+        tokio::task::spawn_blocking(move || {
+            let mut store = shared.store();
+            let out = f(&mut store);
+            shared.stored.store(store.rows(), Ordering::Release);
+            out
+        })
+        .await
+        .unwrap_or_else(|e| std::panic::resume_unwind(e.into_panic()))
+    }
+
+    /// Sets the held gauge: in memory and in the store.
+    fn count_held(&self) {
+        self.metrics.sparkplug.held.set(self.shared.held() as i64);
+    }
+
     /// The waiting changes as DDATA.
     async fn data(&self, node: &mut Node) {
         loop {
             let changes = self.shared.book().take_changes(METRICS_PER_MESSAGE);
-            self.metrics
-                .sparkplug
-                .held
-                .set(self.shared.book().held() as i64);
-            if changes.is_empty()
-                || !self
-                    .ddata(node, changes, crate::clock::now_ms(), false)
-                    .await
+            self.count_held();
+            if changes.is_empty() {
+                return;
+            }
+            if !self
+                .ddata(node, changes.clone(), crate::clock::now_ms(), false)
+                .await
             {
+                self.shared.book().hold_again(changes);
+                self.count_held();
                 return;
             }
         }
@@ -318,8 +473,14 @@ impl Session {
     ) -> bool {
         let seq = node.next_seq();
         let payload = self.shared.book().data(changes, seq, now, historical);
-        self.publish(node, &self.topics.ddata, "ddata", &payload)
-            .await
+        let sent = self
+            .publish(node, &self.topics.ddata, "ddata", &payload)
+            .await;
+        if !sent {
+            // Its sequence number is spent: the host would see a gap.
+            node.born = false;
+        }
+        sent
     }
 
     /// Hands `payload` to the connection; whether it took it. A message
@@ -363,19 +524,30 @@ impl Session {
     }
 }
 
+/// The node's will as the connection's task sets it.
+struct Will {
+    /// The NDEATH topic.
+    ndeath: String,
+    /// The bdSeq of the first CONNECT.
+    first_bd_seq: u64,
+}
+
 /// Drives the connection: reconnects with a growing wait, the next
 /// session's will carrying the next bdSeq; says each session taken and
 /// lost on `link`, and hands commands and host states to `incoming`.
 async fn connect(
     mut eventloop: EventLoop,
-    ndeath: String,
+    will_of: Will,
     broker: String,
     link: watch::Sender<Link>,
     incoming: mpsc::Sender<Publish>,
+    shared: Arc<Shared>,
     metrics: Arc<Metrics>,
 ) {
     let m = &metrics.sparkplug;
-    let mut bd_seq = 0;
+    let ndeath = will_of.ndeath;
+    let mut bd_seq = will_of.first_bd_seq;
+    keep_bd_seq(&shared, bd_seq, m).await;
     let mut generation = 0;
     let mut backoff = Backoff::new(FIRST_RETRY, MAX_RETRY);
     loop {
@@ -399,7 +571,31 @@ async fn connect(
                     m.commands_ignored.inc();
                 }
             }
-            Ok(Event::Outgoing(Outgoing::Disconnect)) => break,
+            Ok(Event::Outgoing(Outgoing::Disconnect)) => {
+                if shared.closed.load(Ordering::Acquire) {
+                    break;
+                }
+                // The node left (its primary host is offline). The broker
+                // closes the connection once it has read the DISCONNECT
+                // (and dropped the will); a new CONNECT under the same
+                // client id before that would make it say the will.
+                let closed = tokio::time::timeout(PUBLISH_TIMEOUT, async {
+                    while eventloop.poll().await.is_ok() {}
+                })
+                .await;
+                if closed.is_err() {
+                    eventloop.clean();
+                }
+                link.send_replace(Link {
+                    connected: false,
+                    generation,
+                    bd_seq,
+                });
+                m.connected.set(0);
+                bd_seq = (bd_seq + 1) % 256;
+                keep_bd_seq(&shared, bd_seq, m).await;
+                eventloop.mqtt_options.set_last_will(will(&ndeath, bd_seq));
+            }
             Ok(_) => {}
             Err(e) => {
                 SparkplugEvent::Disconnected {
@@ -416,12 +612,27 @@ async fn connect(
                     break;
                 }
                 bd_seq = (bd_seq + 1) % 256;
+                keep_bd_seq(&shared, bd_seq, m).await;
                 eventloop.mqtt_options.set_last_will(will(&ndeath, bd_seq));
                 tokio::time::sleep(backoff.next_wait()).await;
             }
         }
     }
     m.connected.set(0);
+}
+
+/// Keeps `bd_seq` in the store before the CONNECT that carries it.
+async fn keep_bd_seq(shared: &Arc<Shared>, bd_seq: u64, m: &crate::metrics::SparkplugMetrics) {
+    let shared = shared.clone();
+    let kept = tokio::task::spawn_blocking(move || shared.store().keep_bd_seq(bd_seq)).await;
+    match kept {
+        Ok(Ok(())) => {}
+        Ok(Err(e)) => SparkplugEvent::StoreFailed {
+            why: &e.to_string(),
+        }
+        .emit(m),
+        Err(e) => std::panic::resume_unwind(e.into_panic()),
+    }
 }
 
 /// The node's will: NDEATH with `bd_seq`.
@@ -432,85 +643,4 @@ fn will(ndeath: &str, bd_seq: u64) -> LastWill {
         QoS::AtLeastOnce,
         false,
     )
-}
-
-/// Whether a primary host's `STATE` says online: Sparkplug 3.0's JSON
-/// (`{"online": true, "timestamp": …}`) or the older `ONLINE`.
-fn host_online(payload: &[u8]) -> bool {
-    #[derive(serde::Deserialize)]
-    struct State {
-        online: bool,
-    }
-    match serde_json::from_slice::<State>(payload) {
-        Ok(s) => s.online,
-        Err(_) => payload == b"ONLINE",
-    }
-}
-
-/// The first line of the password file (owner-only).
-fn password(path: &Path) -> Result<String, SparkplugError> {
-    crate::bus::envelope::check_private(path)?;
-    let text = std::fs::read_to_string(path).map_err(|source| SparkplugError::Password {
-        path: path.display().to_string(),
-        source,
-    })?;
-    Ok(text.lines().next().unwrap_or_default().to_string())
-}
-
-/// TLS trusting `tls`'s CA, presenting its client certificate if any.
-fn tls(tls: Option<&SparkplugTls>) -> Result<tokio_rustls::rustls::ClientConfig, SparkplugError> {
-    use tokio_rustls::rustls;
-    use tokio_rustls::rustls::pki_types::pem::PemObject;
-    use tokio_rustls::rustls::pki_types::{CertificateDer, PrivateKeyDer};
-    let bad = |path: &Path, why: String| SparkplugError::Tls {
-        path: path.display().to_string(),
-        why,
-    };
-    let mut roots = rustls::RootCertStore::empty();
-    let mut identity = None;
-    if let Some(t) = tls {
-        let cas: Vec<CertificateDer<'static>> = CertificateDer::pem_file_iter(&t.ca)
-            .and_then(Iterator::collect)
-            .map_err(|e| bad(&t.ca, e.to_string()))?;
-        if cas.is_empty() {
-            return Err(bad(&t.ca, "no certificate in the file".into()));
-        }
-        for ca in cas {
-            roots.add(ca).map_err(|e| bad(&t.ca, e.to_string()))?;
-        }
-        if let Some((cert, key)) = &t.client {
-            crate::bus::envelope::check_private(key)?;
-            let chain: Vec<CertificateDer<'static>> = CertificateDer::pem_file_iter(cert)
-                .and_then(Iterator::collect)
-                .map_err(|e| bad(cert, e.to_string()))?;
-            let key = PrivateKeyDer::from_pem_file(key).map_err(|e| bad(key, e.to_string()))?;
-            identity = Some((chain, key));
-        }
-    }
-    let builder = rustls::ClientConfig::builder_with_provider(Arc::new(
-        rustls::crypto::ring::default_provider(),
-    ))
-    .with_safe_default_protocol_versions()
-    .map_err(|e| SparkplugError::TlsConfig(e.to_string()))?
-    .with_root_certificates(roots);
-    match identity {
-        Some((chain, key)) => builder
-            .with_client_auth_cert(chain, key)
-            .map_err(|e| SparkplugError::TlsConfig(e.to_string())),
-        None => Ok(builder.with_no_client_auth()),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_primary_host_is_online_as_sparkplug_3_or_2_says() {
-        assert!(host_online(br#"{"online": true, "timestamp": 1}"#));
-        assert!(!host_online(br#"{"online": false, "timestamp": 2}"#));
-        assert!(host_online(b"ONLINE"));
-        assert!(!host_online(b"OFFLINE"));
-        assert!(!host_online(b"garbage"));
-    }
 }

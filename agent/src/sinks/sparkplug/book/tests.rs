@@ -236,3 +236,61 @@ fn only_a_rebirth_set_true_asks_for_one() {
     assert_eq!(death.seq, None);
     assert_eq!(death.metrics[0].value, Some(Value::LongValue(3)));
 }
+
+#[test]
+fn held_changes_go_to_the_store_by_name_and_come_back_to_the_next_run() {
+    let mut b = book(10);
+    for i in 0..2u64 {
+        let engine = Step {
+            exported: vec![(4, Some(i as f64))],
+            ..Step::default()
+        };
+        b.apply(&step(100 + i, engine));
+    }
+    let taken = b.take_changes(10);
+    let rows = b.to_rows(taken);
+    assert_eq!(
+        rows.iter()
+            .map(|r| (r.metric.as_str(), r.at))
+            .collect::<Vec<_>>(),
+        [
+            ("Tags/spindle_temperature", 100),
+            ("Tags/spindle_temperature", 101)
+        ]
+    );
+    // The next run declares the tag at another place: found by its name.
+    let next = Book::new(&[], &[(4, "spindle_temperature".into())], false, 10);
+    let mut gone = rows[0].clone();
+    gone.metric = "Tags/removed".into();
+    let (changes, unknown) = next.from_rows(vec![rows[0].clone(), gone, rows[1].clone()]);
+    assert_eq!(unknown, 1);
+    let data = next.data(changes, 2, 200, true);
+    assert_eq!(
+        data.metrics
+            .iter()
+            .map(|m| (m.alias, m.value.clone(), m.timestamp))
+            .collect::<Vec<_>>(),
+        [
+            (Some(19), Some(Value::DoubleValue(0.0)), Some(100)),
+            (Some(19), Some(Value::DoubleValue(1.0)), Some(101)),
+        ]
+    );
+}
+
+#[test]
+fn changes_not_published_are_held_again_first() {
+    let mut b = book(10);
+    for i in 0..3u64 {
+        let engine = Step {
+            exported: vec![(4, Some(i as f64))],
+            ..Step::default()
+        };
+        b.apply(&step(100 + i, engine));
+    }
+    let first = b.take_changes(2);
+    b.hold_again(first);
+    assert_eq!(
+        b.take_changes(10).iter().map(|c| c.at).collect::<Vec<_>>(),
+        [100, 101, 102]
+    );
+}
