@@ -11,7 +11,9 @@
 //! held follows, flagged historical; offline again, the node says NDEATH
 //! and waits on a new session, a stale `STATE` changing nothing
 //! (`sparkplug/host.rs`). Held changes survive a broker restart and an
-//! agent killed while holding them (`sparkplug/outage.rs`).
+//! agent killed while holding them (`sparkplug/outage.rs`). Over TLS the
+//! node shows a client certificate of the broker's CA and is born; one of
+//! another CA is refused, and the agent says so (`sparkplug/tls.rs`).
 
 use std::collections::HashMap;
 use std::io::{BufRead, Write};
@@ -26,6 +28,7 @@ use crate::util::root;
 
 mod host;
 mod outage;
+mod tls;
 
 const MOSQUITTO: &str = "/usr/sbin/mosquitto";
 const GROUP: &str = "press-shop";
@@ -74,12 +77,18 @@ impl Broker {
     /// Starts one on `port` with its configuration in `dir`; returns once
     /// it says it runs.
     async fn start(dir: &Path, port: u16) -> Broker {
+        Broker::start_with(dir, port, "").await
+    }
+
+    /// [`Broker::start`], `more` added to its configuration (another
+    /// listener).
+    async fn start_with(dir: &Path, port: u16, more: &str) -> Broker {
         crate::util::debian_packages(&[(MOSQUITTO, "mosquitto")]);
         let conf = dir.join("mosquitto.conf");
         std::fs::write(
             &conf,
             format!(
-                "listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\nlog_dest stderr\nlog_type all\n"
+                "allow_anonymous true\npersistence false\nlog_dest stderr\nlog_type all\nlistener {port} 127.0.0.1\n{more}"
             ),
         )
         .unwrap();

@@ -22,6 +22,9 @@ pub(super) enum SparkplugEvent<'a> {
         broker: &'a str,
         /// Why.
         why: &'a str,
+        /// Attempts that failed in a row since the node was last connected
+        /// (or started), this one included.
+        failures: u32,
     },
     /// A message was handed to the session.
     Published {
@@ -85,11 +88,22 @@ impl SparkplugEvent<'_> {
                 metrics.sessions.inc();
                 tracing::info!(broker, bd_seq, "sparkplug: connected to the MQTT broker");
             }
-            SparkplugEvent::Disconnected { broker, why } => {
+            SparkplugEvent::Disconnected {
+                broker,
+                why,
+                failures,
+            } => {
                 if metrics.connected.get() == 1 {
                     tracing::warn!(broker, "sparkplug: MQTT session lost: {why}");
+                } else if failures == 1 {
+                    // Said once until it connects: a wrong certificate or
+                    // password is seen at once, not every few seconds.
+                    tracing::warn!(
+                        broker,
+                        "sparkplug: cannot connect to the MQTT broker: {why} (trying again, said once until it connects)"
+                    );
                 } else {
-                    tracing::debug!(broker, "sparkplug: cannot connect: {why}");
+                    tracing::debug!(broker, failures, "sparkplug: cannot connect: {why}");
                 }
                 metrics.connected.set(0);
             }

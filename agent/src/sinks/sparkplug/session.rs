@@ -550,10 +550,13 @@ async fn connect(
     keep_bd_seq(&shared, bd_seq, m).await;
     let mut generation = 0;
     let mut backoff = Backoff::new(FIRST_RETRY, MAX_RETRY);
+    // Attempts failed in a row since the last connection.
+    let mut failures = 0u32;
     loop {
         match eventloop.poll().await {
             Ok(Event::Incoming(Packet::ConnAck(ack))) if ack.code == ConnectReturnCode::Success => {
                 backoff.reset();
+                failures = 0;
                 generation += 1;
                 SparkplugEvent::Connected {
                     broker: &broker,
@@ -598,9 +601,11 @@ async fn connect(
             }
             Ok(_) => {}
             Err(e) => {
+                failures += 1;
                 SparkplugEvent::Disconnected {
                     broker: &broker,
                     why: &e.to_string(),
+                    failures,
                 }
                 .emit(m);
                 link.send_replace(Link {
