@@ -186,13 +186,12 @@ pub struct Agent {
     /// Operators' `configure reload`, for the runner.
     reload_asks: Option<mpsc::Receiver<crate::cell::swap::ReloadAsk>>,
     /// The running configuration's parts only a restart changes.
-    fixed: [u64; 12],
+    fixed: [u64; 13],
     /// What `about` answers (the configuration's hash follows a reload).
     about: Arc<watch::Sender<crate::payload::AboutPayload>>,
 }
 
-/// The parts of a configuration a reload takes by starting a source of its
-/// own (see [`crate::config::FIXED_PARTS`]).
+/// What a reload takes by starting a source ([`crate::config::FIXED_PARTS`]).
 const SOURCE_PARTS: [&str; 3] = ["the tags", "[opcua]", "[legacy]"];
 
 /// Why a configuration read again was not taken.
@@ -638,6 +637,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         Box::new(publisher),
         Box::new(MetricsSink::new(metrics.clone(), &config, clock.now_ms())),
     ];
+    sinks.extend(crate::sinks::oee::sink(config.oee.as_ref(), &metrics));
     let alertmanager = match &config.alertmanager {
         Some(am) => {
             let (sink, pusher) =

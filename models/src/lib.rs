@@ -26,6 +26,8 @@
 //!   (`MachineryItemState`, `MachineryOperationMode`) read as numbers.
 //! - [`madb`]: the master alarm database a plant's team gives back: each
 //!   alarm's priority, class and guidance.
+//! - [`oee`]: overall equipment effectiveness per shift and day, the six
+//!   big losses, from state history and a shift calendar.
 //! - [`report`]: daily and monthly production reports from state history.
 //! - [`timer`]: transition timers: run logs, the learner, the runtime monitor,
 //!   drift warnings.
@@ -43,6 +45,7 @@ pub mod limit;
 pub mod logic;
 pub mod machinery;
 pub mod madb;
+pub mod oee;
 pub mod program;
 pub mod programs;
 pub mod report;

@@ -151,6 +151,7 @@ pub fn engine(config: &CellConfig) -> Result<CellEngine, CompileError> {
         .trusting_source_time(trust)
         .commenting(comments)
         .counting(config.part_counting())
+        .counting_rejects(config.reject_counting())
         .ordering(config.order_item, config.order_target)
         .exporting(
             config

@@ -128,6 +128,8 @@ pub struct CellConfig {
     pub alarm_server: Option<crate::config::AlarmServerConfig>,
     /// The cell as a Sparkplug B edge node (`[sparkplug]`); `None`: off.
     pub sparkplug: Option<crate::sinks::sparkplug::config::SparkplugConfig>,
+    /// How OEE is judged (`[oee]`); `None`: off.
+    pub oee: Option<crate::sinks::oee::config::OeeConfig>,
     /// The alarm-performance rules (`[kpi]`): flood, chattering, stale.
     pub kpi: cellwatch_models::kpi::KpiRules,
     /// Alarms that follow from others (`[alarms.consequences]`).
@@ -158,7 +160,7 @@ pub struct PlantOperatorsConfig {
 /// says things, whom it talks to, what it reads. The tags and the source's
 /// settings are taken by starting a source of their own; the others only
 /// by a restart.
-pub const FIXED_PARTS: [&str; 12] = [
+pub const FIXED_PARTS: [&str; 13] = [
     "cell.id",
     "journal.path",
     "[opcua]",
@@ -168,6 +170,7 @@ pub const FIXED_PARTS: [&str; 12] = [
     "[alertmanager]",
     "[alarm_server]",
     "[sparkplug]",
+    "[oee]",
     "[kpi]",
     "state.publish_interval",
     "the tags",
@@ -178,7 +181,7 @@ impl CellConfig {
     /// between the running configuration and one read again, it names what
     /// changed beyond the checks. (Hashes of the parts' debug forms: the tags
     /// of a 100,000-tag cell are not kept twice for it.)
-    pub fn fixed_parts(&self) -> [u64; 12] {
+    pub fn fixed_parts(&self) -> [u64; 13] {
         use std::hash::{Hash, Hasher};
         let hash = |part: &dyn fmt::Debug| {
             let mut h = std::collections::hash_map::DefaultHasher::new();
@@ -204,6 +207,7 @@ impl CellConfig {
             hash(&self.alertmanager),
             hash(&self.alarm_server),
             hash(&self.sparkplug),
+            hash(&self.oee),
             hash(&self.kpi),
             hash(&self.state_interval),
             tags.finish(),
@@ -261,6 +265,21 @@ impl CellConfig {
                     })
                     .collect(),
             ),
+        }
+    }
+}
+
+impl CellConfig {
+    /// How the engine counts rejects (`[oee]`'s reject signal or counter).
+    pub fn reject_counting(&self) -> PartCounting {
+        use crate::sinks::oee::config::RejectTag;
+        match self.oee.as_ref().and_then(|o| o.rejects) {
+            None => PartCounting::None,
+            Some(RejectTag::Signal(t)) => PartCounting::Edge(t),
+            Some(RejectTag::Counter(t)) => {
+                let max = self.tags[t].max.or(self.tags[t].value_type.max());
+                PartCounting::Counters(vec![(t, Counter::new(max.unwrap_or(u64::MAX)))])
+            }
         }
     }
 }

@@ -34,6 +34,8 @@ pub(crate) struct RawConfig {
     pub(crate) alarm_server: Option<Spanned<RawAlarmServer>>,
     /// `[sparkplug]`: the sink owns its table.
     pub(crate) sparkplug: Option<Spanned<crate::sinks::sparkplug::config::RawSparkplug>>,
+    /// `[oee]`: the OEE sink owns its table.
+    pub(crate) oee: Option<Spanned<crate::sinks::oee::config::RawOee>>,
     #[serde(default)]
     pub(crate) kpi: RawKpi,
     #[serde(default)]

@@ -440,6 +440,7 @@ mod database;
 mod escalation;
 mod events;
 mod modes;
+mod oee;
 mod rates;
 
 #[test]

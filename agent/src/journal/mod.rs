@@ -91,6 +91,14 @@ pub enum Entry {
         /// How many.
         count: u64,
     },
+    /// Parts rejected: a rising edge of the reject signal (one), or the
+    /// reject counter's increment (`[oee]`).
+    Reject {
+        /// When.
+        at: u64,
+        /// How many.
+        count: u64,
+    },
     /// The work order changed: item (mould) code, target quantity.
     Order {
         /// When.
@@ -671,6 +679,16 @@ fn write_batch(
             Entry::Part { at, count } => {
                 tx.prepare_cached(
                     "INSERT INTO production (seq, at_ms, parts) VALUES (?1, ?2, ?3)",
+                )?
+                .execute(params![
+                    next,
+                    *at as i64,
+                    i64::try_from(*count).unwrap_or(i64::MAX)
+                ])?;
+            }
+            Entry::Reject { at, count } => {
+                tx.prepare_cached(
+                    "INSERT INTO production (seq, at_ms, parts, rejects) VALUES (?1, ?2, 0, ?3)",
                 )?
                 .execute(params![
                     next,

@@ -11,6 +11,11 @@ pub struct ReportInput {
     pub parts: Vec<(u64, u64)>,
     /// Work-order changes, the last one before the period first.
     pub orders: Vec<cellwatch_models::report::OrderChange>,
+    /// Parts rejected `(time, count)`.
+    pub rejects: Vec<(u64, u64)>,
+    /// Machine modes entered and left, each mode's last change before
+    /// the period first.
+    pub modes: Vec<cellwatch_models::oee::ModeChange>,
 }
 
 /// Machine-state rows, parts made and work orders between `since` and
@@ -40,17 +45,40 @@ pub fn report_input(conn: &Connection, since: u64, until: u64) -> rusqlite::Resu
     for c in stmt.query_map([since as i64, until as i64], row)? {
         input.changes.push(c?);
     }
-    let mut stmt = conn.prepare(
-        "SELECT at_ms, parts FROM production WHERE at_ms >= ?1 AND at_ms < ?2 ORDER BY at_ms",
-    )?;
-    input.parts = stmt
-        .query_map([since as i64, until as i64], |r| {
+    let counted = |column: &str| -> rusqlite::Result<Vec<(u64, u64)>> {
+        let mut stmt = conn.prepare(&format!(
+            "SELECT at_ms, {column} FROM production WHERE at_ms >= ?1 AND at_ms < ?2 AND {column} > 0 ORDER BY at_ms, seq"
+        ))?;
+        let rows = stmt.query_map([since as i64, until as i64], |r| {
             Ok((
                 r.get::<_, i64>(0)? as u64,
                 r.get::<_, i64>(1)?.max(0) as u64,
             ))
-        })?
-        .collect::<Result<Vec<_>, _>>()?;
+        })?;
+        rows.collect()
+    };
+    input.parts = counted("parts")?;
+    input.rejects = counted("rejects")?;
+    let mode = |r: &rusqlite::Row<'_>| {
+        Ok(cellwatch_models::oee::ModeChange {
+            at: r.get::<_, i64>(0)?.max(0) as u64,
+            mode: r.get(1)?,
+            entered: r.get::<_, i64>(2)? != 0,
+        })
+    };
+    let mut stmt = conn.prepare(
+        "SELECT at_ms, mode, entered FROM modes WHERE seq IN \
+         (SELECT MAX(seq) FROM modes WHERE at_ms < ?1 GROUP BY mode) ORDER BY at_ms, seq",
+    )?;
+    for m in stmt.query_map([since as i64], mode)? {
+        input.modes.push(m?);
+    }
+    let mut stmt = conn.prepare(
+        "SELECT at_ms, mode, entered FROM modes WHERE at_ms >= ?1 AND at_ms < ?2 ORDER BY at_ms, seq",
+    )?;
+    for m in stmt.query_map([since as i64, until as i64], mode)? {
+        input.modes.push(m?);
+    }
     let order = |r: &rusqlite::Row<'_>| {
         Ok(cellwatch_models::report::OrderChange {
             at: r.get::<_, i64>(0)? as u64,

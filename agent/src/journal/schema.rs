@@ -94,7 +94,8 @@ CREATE INDEX IF NOT EXISTS commands_at ON commands (at_ms);
 CREATE TABLE IF NOT EXISTS production (
     seq INTEGER PRIMARY KEY AUTOINCREMENT,
     at_ms INTEGER NOT NULL,
-    parts INTEGER NOT NULL DEFAULT 1
+    parts INTEGER NOT NULL DEFAULT 1,
+    rejects INTEGER NOT NULL DEFAULT 0
 );
 CREATE INDEX IF NOT EXISTS production_at ON production (at_ms);
 CREATE TABLE IF NOT EXISTS orders (
@@ -133,6 +134,8 @@ const WRITE_BUSY_TIMEOUT: Duration = Duration::from_secs(1);
 const MIGRATIONS: &[(&str, &str, &str)] = &[
     ("commands", "verified", "INTEGER NOT NULL DEFAULT 0"),
     ("production", "parts", "INTEGER NOT NULL DEFAULT 1"),
+    // Rejects (`[oee]`): a row of rejects has 0 parts.
+    ("production", "rejects", "INTEGER NOT NULL DEFAULT 0"),
     ("commands", "stage", "TEXT NOT NULL DEFAULT 'command'"),
     ("commands", "source", "TEXT NOT NULL DEFAULT ''"),
     ("commands", "count", "INTEGER NOT NULL DEFAULT 1"),

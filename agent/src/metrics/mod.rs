@@ -11,12 +11,14 @@
 
 mod labels;
 mod modes;
+mod oee;
 mod probes;
 mod sparkplug;
 
 use labels::opts;
 pub use labels::{COMMAND_RESULTS, REFUSED};
 pub use modes::ModeMetrics;
+pub use oee::OeeMetrics;
 pub use sparkplug::{SparkplugMetrics, SPARKPLUG_KINDS};
 
 use std::future::Future;
@@ -139,6 +141,8 @@ pub struct Metrics {
     pub alarms_suppressed: IntGauge,
     /// Machine modes and designed suppression.
     pub modes: ModeMetrics,
+    /// The current shift's OEE (`[oee]`).
+    pub oee: OeeMetrics,
     /// The Sparkplug B edge node's figures (`[sparkplug]`).
     pub sparkplug: SparkplugMetrics,
     /// Alarms raised as the consequence of another active alarm.
@@ -569,6 +573,7 @@ impl Metrics {
                 ])
             )),
             modes: ModeMetrics::register(&registry, cell),
+            oee: OeeMetrics::register(&registry, cell),
             sparkplug: SparkplugMetrics::register(&registry, cell),
             registry,
         }

@@ -81,6 +81,9 @@ pub fn entries(step: &CellStep) -> Vec<Entry> {
     for &(at, count) in &step.engine.parts {
         rows.push(Entry::Part { at, count });
     }
+    for &(at, count) in &step.engine.rejects {
+        rows.push(Entry::Reject { at, count });
+    }
     for (r, json) in step.engine.recordings.iter().zip(&step.recordings) {
         rows.push(Entry::Recording {
             at: r.raised_at,

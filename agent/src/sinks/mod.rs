@@ -28,6 +28,7 @@ pub mod alertmanager;
 pub mod console;
 pub mod journal;
 pub mod metrics;
+pub mod oee;
 pub mod sparkplug;
 pub mod zenoh;
 

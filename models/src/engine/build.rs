@@ -173,6 +173,7 @@ impl CellEngine {
             state: MachineState::Offline,
             last_fault: None,
             parts: PartCounting::None,
+            rejects: PartCounting::None,
             exported: vec![false; configured],
             delays: HashMap::new(),
             comments: CommentDb::default(),
@@ -273,6 +274,16 @@ impl CellEngine {
             PartCounting::Counters(cs) => cs.iter().all(|(t, _)| *t < self.configured),
         };
         self.parts = if valid { how } else { PartCounting::None };
+        self
+    }
+
+    /// Counts rejected parts as `how` says
+    /// ([`Step::rejects`](super::Step::rejects)).
+    #[must_use]
+    pub fn counting_rejects(mut self, how: PartCounting) -> Self {
+        let parts = std::mem::replace(&mut self.parts, PartCounting::None);
+        self = self.counting(how);
+        self.rejects = std::mem::replace(&mut self.parts, parts);
         self
     }
 }

@@ -63,6 +63,9 @@ impl CellEngine {
         if self.parts == PartCounting::Edge(tag) && before == Some(false) && value == Some(true) {
             step.parts.push((now, 1));
         }
+        if self.rejects == PartCounting::Edge(tag) && before == Some(false) && value == Some(true) {
+            step.rejects.push((now, 1));
+        }
         self.remember(tag);
         self.values[tag] = value;
         let ring_at = self.ring_time(now);
@@ -120,12 +123,17 @@ impl CellEngine {
         if self.exported.get(tag) == Some(&true) {
             step.exported.push((tag, is.map(Num::as_f64)));
         }
-        if let PartCounting::Counters(counters) = &mut self.parts {
-            for (_, counter) in counters.iter_mut().filter(|(t, _)| *t == tag) {
-                if let Some(n) = is.and_then(Num::as_count) {
-                    let made = counter.next(n);
-                    if made > 0 {
-                        step.parts.push((now, made));
+        for (counting, counted) in [
+            (&mut self.parts, &mut step.parts),
+            (&mut self.rejects, &mut step.rejects),
+        ] {
+            if let PartCounting::Counters(counters) = counting {
+                for (_, counter) in counters.iter_mut().filter(|(t, _)| *t == tag) {
+                    if let Some(n) = is.and_then(Num::as_count) {
+                        let made = counter.next(n);
+                        if made > 0 {
+                            counted.push((now, made));
+                        }
                     }
                 }
             }
@@ -280,6 +288,25 @@ mod tests {
         assert_eq!(step.parts, [(7, 1)]);
         assert_eq!(step.readings, 4);
         assert_eq!(step.duplicates, 1);
+    }
+
+    #[test]
+    fn a_reject_signal_or_counter_counts_rejects_apart_from_parts() {
+        let mut e = engine(3).counting_rejects(PartCounting::Edge(2));
+        e.on_connection(true, 0);
+        e.on_reading(2, Reading::Good(false), 1, 1);
+        let step = e.on_reading(2, Reading::Good(true), 2, 2);
+        assert_eq!(
+            (step.rejects.as_slice(), step.parts.is_empty()),
+            (&[(2, 1)][..], true)
+        );
+        let counter = crate::value::Counter::new(u64::from(u16::MAX));
+        let mut e = engine(3).counting_rejects(PartCounting::Counters(vec![(2, counter)]));
+        e.on_connection(true, 0);
+        e.on_reading(2, Reading::Number(Num::Int(10)), 1, 1);
+        let step = e.on_reading(2, Reading::Number(Num::Int(13)), 2, 2);
+        assert_eq!(step.rejects, [(2, 3)]);
+        assert!(step.parts.is_empty());
     }
 
     #[test]

@@ -202,6 +202,9 @@ pub struct Step {
     /// Parts produced, `(source time, how many)`: rising edges of the
     /// part-done tag (one each), or a counter tag's increments.
     pub parts: Vec<(u64, u64)>,
+    /// Parts rejected, `(source time, how many)`: rising edges of the
+    /// reject tag, or its counter's increments.
+    pub rejects: Vec<(u64, u64)>,
     /// New values of the tags exported as gauges (`None`: unknown).
     pub exported: Vec<(usize, Option<f64>)>,
     /// The work order changed (item code or target quantity): the new one.
@@ -236,6 +239,7 @@ impl Step {
             && self.readings == 0
             && self.unknown_delta == 0
             && self.parts.is_empty()
+            && self.rejects.is_empty()
             && self.exported.is_empty()
             && self.order.is_none()
             && self.recordings.is_empty()
@@ -541,6 +545,8 @@ pub struct CellEngine {
     state: MachineState,
     last_fault: Option<FaultMark>,
     parts: PartCounting,
+    /// How rejects are counted (OEE's quality).
+    rejects: PartCounting,
     /// Per configured tag: whether its changes go to [`Step::exported`].
     exported: Vec<bool>,
     /// Per alarm id: how long its condition must hold to raise and be gone

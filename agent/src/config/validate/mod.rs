@@ -475,6 +475,24 @@ impl Validator<'_> {
             self.warnings.extend(checked.warnings);
             checked.config
         });
+        let oee = raw.oee.and_then(|o| {
+            let modes: Vec<String> = state.modes.iter().map(|m| m.id.clone()).collect();
+            let tag = |text: &str| {
+                let t = *by_address.get(&self.tag_ref(text).ok()?)?;
+                let (contact, integer) = (tags[t].is_contact(), tags[t].bit.is_none());
+                let integer = integer && tags[t].value_type.is_integer();
+                Some(crate::sinks::oee::config::TagFacts {
+                    index: t,
+                    contact,
+                    integer,
+                })
+            };
+            let checked = crate::sinks::oee::config::validate(o, &modes, &tag);
+            for p in checked.problems {
+                self.problem(p.span, &p.key, p.error);
+            }
+            checked.config
+        });
         let kpi = self.kpi(raw.kpi);
         let recorder = self.recorder(raw.recorder);
         let database = self.database(raw.alarms.database.as_ref());
@@ -669,6 +687,7 @@ impl Validator<'_> {
             alertmanager,
             alarm_server,
             sparkplug,
+            oee,
             kpi,
             consequences,
             database,

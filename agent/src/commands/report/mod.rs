@@ -13,13 +13,15 @@ use cellwatch_models::report::{
 };
 use chrono::{Datelike, FixedOffset, NaiveDate, TimeZone};
 
+mod oee;
+
 use super::Failure;
 use crate::journal;
 use crate::operator::escaped;
 
 /// The stop causes shipped (`config/stop-causes.toml`): paper 002's Table
 /// 4 and the demo's faults, used unless `--causes` names a table.
-const SHIPPED_CAUSES: &str = include_str!("../../../config/stop-causes.toml");
+const SHIPPED_CAUSES: &str = include_str!("../../../../config/stop-causes.toml");
 
 /// The table `--causes` names, or the shipped one.
 fn causes(path: Option<&Path>) -> Result<StopCauses, Failure> {
@@ -94,16 +96,30 @@ pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure>
             let i = journal::report_input(&conn, start, start + 86_400_000)
                 .map_err(|e| Failure::Runtime(e.to_string()))?;
             let r = report::daily(&i.changes, &i.parts, &i.orders, start, &causes, now);
+            let oee = oee_rules(args)?.map(|rules| oee::days(&rules, &causes, &i, &[start], now));
             match args.format() {
-                Format::Json => writeln!(
-                    out,
-                    "{}",
-                    serde_json::to_string_pretty(&r).unwrap_or_default()
-                )
-                .map_err(io),
+                Format::Json => {
+                    let mut v = serde_json::to_value(&r).unwrap_or_default();
+                    if let Some(days) = &oee {
+                        v["oee"] = serde_json::to_value(&days[0]).unwrap_or_default();
+                    }
+                    writeln!(
+                        out,
+                        "{}",
+                        serde_json::to_string_pretty(&v).unwrap_or_default()
+                    )
+                    .map_err(io)
+                }
                 Format::Csv => daily_csv(out, &r).map_err(io),
                 Format::Table => {
-                    daily_table(out, &args.db, &d.to_string(), &args.utc_offset, &r).map_err(io)
+                    daily_table(out, &args.db, &d.to_string(), &args.utc_offset, &r).map_err(io)?;
+                    match &oee {
+                        Some(days) => {
+                            oee::table(out, &[(d.to_string(), &days[0])], &days[0].total, "day")
+                                .map_err(io)
+                        }
+                        None => Ok(()),
+                    }
                 }
             }
         }
@@ -115,16 +131,34 @@ pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure>
             let i = journal::report_input(&conn, starts[0], end)
                 .map_err(|e| Failure::Runtime(e.to_string()))?;
             let r = report::monthly(&i.changes, &i.parts, &i.orders, &starts, &causes, now);
+            let oee = oee_rules(args)?.map(|rules| oee::days(&rules, &causes, &i, &starts, now));
             match args.format() {
-                Format::Json => writeln!(
-                    out,
-                    "{}",
-                    serde_json::to_string_pretty(&r).unwrap_or_default()
-                )
-                .map_err(io),
+                Format::Json => {
+                    let mut v = serde_json::to_value(&r).unwrap_or_default();
+                    if let Some(figures) = &oee {
+                        v["oee"] = serde_json::json!({
+                            "days": figures,
+                            "total": oee::total(figures),
+                        });
+                    }
+                    writeln!(
+                        out,
+                        "{}",
+                        serde_json::to_string_pretty(&v).unwrap_or_default()
+                    )
+                    .map_err(io)
+                }
                 Format::Csv => monthly_csv(out, &days, &r).map_err(io),
                 Format::Table => {
-                    monthly_table(out, &args.db, month, &args.utc_offset, &days, &r).map_err(io)
+                    monthly_table(out, &args.db, month, &args.utc_offset, &days, &r).map_err(io)?;
+                    match &oee {
+                        Some(figures) => {
+                            let named: Vec<(String, &cellwatch_models::oee::DayFigures)> =
+                                days.iter().map(|d| d.to_string()).zip(figures).collect();
+                            oee::table(out, &named, &oee::total(figures), "month").map_err(io)
+                        }
+                        None => Ok(()),
+                    }
                 }
             }
         }
@@ -132,6 +166,16 @@ pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure>
             alarms(args, &conn, &tz, date.as_deref(), month.as_deref(), out)
         }
     }
+}
+
+/// The `[oee]` rules of the cell's configuration (`--config`), if it has
+/// them.
+fn oee_rules(args: &ReportArgs) -> Result<Option<cellwatch_models::oee::OeeRules>, Failure> {
+    let Some(path) = &args.config else {
+        return Ok(None);
+    };
+    let config = crate::config::load(path).map_err(|e| Failure::Input(e.to_string()))?;
+    Ok(config.oee.map(|o| o.rules))
 }
 
 /// The days of `month` (`2026-11`).
@@ -529,7 +573,9 @@ pub(crate) struct ReportArgs {
     #[arg(long, global = true)]
     pub(crate) causes: Option<PathBuf>,
     /// The cell's configuration: `report alarms` judges by its `[kpi]`
-    /// rules (flood, chattering, stale); without it, by ISA-18.2's.
+    /// rules (flood, chattering, stale), without it by ISA-18.2's;
+    /// `report daily|monthly` add the OEE of its `[oee]` shifts (not in
+    /// CSV).
     #[arg(long, global = true)]
     pub(crate) config: Option<PathBuf>,
     /// The plant's offset from UTC, for day boundaries (+09:00).
