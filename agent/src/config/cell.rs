@@ -127,9 +127,9 @@ pub struct CellConfig {
     /// The alarms served to SCADA clients over OPC UA (`[alarm_server]`).
     pub alarm_server: Option<crate::config::AlarmServerConfig>,
     /// The cell as a Sparkplug B edge node (`[sparkplug]`); `None`: off.
-    pub sparkplug: Option<crate::sinks::sparkplug::config::SparkplugConfig>,
+    pub sparkplug: Option<crate::config::sparkplug::SparkplugConfig>,
     /// How OEE is judged (`[oee]`); `None`: off.
-    pub oee: Option<crate::sinks::oee::config::OeeConfig>,
+    pub oee: Option<crate::config::oee::OeeConfig>,
     /// The alarm-performance rules (`[kpi]`): flood, chattering, stale.
     pub kpi: cellwatch_models::kpi::KpiRules,
     /// Alarms that follow from others (`[alarms.consequences]`).
@@ -272,7 +272,7 @@ impl CellConfig {
 impl CellConfig {
     /// How the engine counts rejects (`[oee]`'s reject signal or counter).
     pub fn reject_counting(&self) -> PartCounting {
-        use crate::sinks::oee::config::RejectTag;
+        use crate::config::oee::RejectTag;
         match self.oee.as_ref().and_then(|o| o.rejects) {
             None => PartCounting::None,
             Some(RejectTag::Signal(t)) => PartCounting::Edge(t),

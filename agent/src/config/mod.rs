@@ -21,10 +21,12 @@ mod document;
 mod files;
 pub mod legacy;
 pub mod node;
+pub mod oee;
 mod opcua;
 pub(crate) mod position;
 mod problems;
 mod raw;
+pub mod sparkplug;
 mod tags;
 mod validate;
 

@@ -33,9 +33,9 @@ pub(crate) struct RawConfig {
     pub(crate) alertmanager: Option<Spanned<RawAlertmanager>>,
     pub(crate) alarm_server: Option<Spanned<RawAlarmServer>>,
     /// `[sparkplug]`: the sink owns its table.
-    pub(crate) sparkplug: Option<Spanned<crate::sinks::sparkplug::config::RawSparkplug>>,
+    pub(crate) sparkplug: Option<Spanned<crate::config::sparkplug::RawSparkplug>>,
     /// `[oee]`: the OEE sink owns its table.
-    pub(crate) oee: Option<Spanned<crate::sinks::oee::config::RawOee>>,
+    pub(crate) oee: Option<Spanned<crate::config::oee::RawOee>>,
     #[serde(default)]
     pub(crate) kpi: RawKpi,
     #[serde(default)]

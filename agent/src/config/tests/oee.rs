@@ -3,7 +3,7 @@
 //! place.
 
 use super::*;
-use crate::sinks::oee::config::RejectTag;
+use crate::config::oee::RejectTag;
 
 fn with(oee: &str) -> String {
     GOOD.replace(

@@ -468,7 +468,7 @@ impl Validator<'_> {
         let alertmanager = self.alertmanager(raw.alertmanager);
         let alarm_server = self.alarm_server(raw.alarm_server);
         let sparkplug = raw.sparkplug.and_then(|s| {
-            let checked = crate::sinks::sparkplug::config::validate(s, &cell, self.base);
+            let checked = crate::config::sparkplug::validate(s, &cell, self.base);
             for p in checked.problems {
                 self.problem(p.span, p.key, p.error);
             }
@@ -481,13 +481,13 @@ impl Validator<'_> {
                 let t = *by_address.get(&self.tag_ref(text).ok()?)?;
                 let (contact, integer) = (tags[t].is_contact(), tags[t].bit.is_none());
                 let integer = integer && tags[t].value_type.is_integer();
-                Some(crate::sinks::oee::config::TagFacts {
+                Some(crate::config::oee::TagFacts {
                     index: t,
                     contact,
                     integer,
                 })
             };
-            let checked = crate::sinks::oee::config::validate(o, &modes, &tag);
+            let checked = crate::config::oee::validate(o, &modes, &tag);
             for p in checked.problems {
                 self.problem(p.span, &p.key, p.error);
             }

@@ -4,7 +4,7 @@
 //! (`cellwatch_oee_*`) on every tick. The rules are `[oee]`'s
 //! ([`config`]); the reports compute the same figures from the journal.
 
-pub mod config;
+pub use crate::config::oee as config;
 
 use std::sync::Arc;
 

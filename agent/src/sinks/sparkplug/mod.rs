@@ -29,7 +29,7 @@
 //! - `shared.rs`: what the sink and the session share.
 
 pub mod book;
-pub mod config;
+pub use crate::config::sparkplug as config;
 mod events;
 mod files;
 pub mod host;

@@ -54,7 +54,7 @@ impl Topics {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sinks::sparkplug::config::Broker;
+    use crate::config::sparkplug::Broker;
 
     #[test]
     fn the_topics_are_the_specifications() {
