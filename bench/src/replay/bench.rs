@@ -109,6 +109,8 @@ pub async fn agent(
         let dropped0 = source.control().dropped_so_far();
         let started = Instant::now();
         source.start_run(Order {
+            at: Instant::now(),
+            wall: std::time::SystemTime::now(),
             rate: load.rate,
             fault_every: setup.fault_every,
             fault_hold: setup.fault_hold,
@@ -198,7 +200,13 @@ pub fn hot_path(tags: usize, per_publish: u32, mode: MessageSecurityMode, messag
         let t = rustix::time::clock_gettime(rustix::time::ClockId::ThreadCPUTime);
         t.tv_sec as f64 + t.tv_nsec as f64 / 1e9
     };
-    let channel = channel_with_keys(Role::Server, mode, &[1; 32], &[2; 32]);
+    let Ok(pki) = tempfile::tempdir() else {
+        return f64::NAN;
+    };
+    if cellwatch::sources::pki::own_key_pair(pki.path(), "hot path", super::URI).is_err() {
+        return f64::NAN;
+    }
+    let channel = channel_with_keys(pki.path(), Role::Server, mode, &[1; 32], &[2; 32]);
     let noise: Vec<u32> = (0..tags as u32).map(|i| i + 11).collect();
     let mut stream = Stream::new(&noise, &[1], TimestampsToReturn::Both, 1);
     let owned = opcua::types::ContextOwned::default();

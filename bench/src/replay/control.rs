@@ -11,9 +11,15 @@ use std::time::Duration;
 use crate::load::Fault;
 
 /// A run the bench orders: noise changes per second, and a limit switch
-/// opened every `fault_every` for `fault_hold`.
+/// opened every `fault_every` for `fault_hold`, both counted from `at`
+/// (when it was ordered: the publishing intervals' phase is the
+/// subscription's own, as a server's is).
 #[derive(Debug, Clone, Copy)]
 pub struct Order {
+    /// When the run starts.
+    pub at: std::time::Instant,
+    /// The wall-clock time then.
+    pub wall: std::time::SystemTime,
     /// Noise changes per second.
     pub rate: u64,
     /// A switch opens this often.

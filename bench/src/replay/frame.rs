@@ -149,15 +149,17 @@ pub fn chunks(
 }
 
 /// A channel whose keys are derived from `local` and `remote` nonces
-/// under Basic256Sha256 with `mode`, as an opened one's are: the hot path
-/// measured without a socket, and the two ends of a test.
+/// under Basic256Sha256 with `mode`, as an opened one's are (its own
+/// certificate and key read from `pki`, if there): the hot path measured
+/// without a socket, and the two ends of a test.
 pub fn channel_with_keys(
+    pki: &std::path::Path,
     role: opcua::core::comms::secure_channel::Role,
     mode: MessageSecurityMode,
     local: &[u8],
     remote: &[u8],
 ) -> SecureChannel {
-    let store = opcua::crypto::CertificateStore::new(std::path::Path::new("/nonexistent"));
+    let store = opcua::crypto::CertificateStore::new(pki);
     let mut c = SecureChannel::new(
         std::sync::Arc::new(opcua::sync::RwLock::new(store)),
         role,
@@ -267,8 +269,10 @@ mod tests {
         use opcua::core::ResponseMessage;
         let (a, b) = ([1u8; 32], [2u8; 32]);
         for mode in [MessageSecurityMode::None, MessageSecurityMode::Sign] {
-            let server = channel_with_keys(Role::Server, mode, &a, &b);
-            let client = channel_with_keys(Role::Client, mode, &b, &a);
+            // No certificates: signing a message needs only the keys.
+            let none = std::path::Path::new("/nonexistent");
+            let server = channel_with_keys(none, Role::Server, mode, &a, &b);
+            let client = channel_with_keys(none, Role::Client, mode, &b, &a);
             let noise: Vec<u32> = (11..=1010).collect();
             let mut stream = Stream::new(&noise, &[1], TimestampsToReturn::Both, 3);
             let segments = [Segment::Noise {

@@ -25,6 +25,9 @@ use crate::load::{switch_id, NAMESPACE, SWITCHES};
 /// `Server_NamespaceArray`.
 const NAMESPACE_ARRAY: u32 = 2255;
 
+/// `Server_ServerStatus_State` (the client's keep-alive reads it).
+const SERVER_STATE: u32 = 2259;
+
 /// `Server_ServerCapabilities_OperationLimits_MaxMonitoredItemsPerCall`.
 const MAX_MONITORED_ITEMS_PER_CALL: u32 = 11714;
 
@@ -205,8 +208,8 @@ impl Server {
         .into()
     }
 
-    /// Read: the namespace array, the limit on monitored items per call,
-    /// and served tags' values from `value`; anything else is unknown.
+    /// Read: the namespace array, the server's state (running), the limit
+    /// on monitored items per call, and served tags' values from `value`; anything else is unknown.
     pub fn read(&self, request: &ReadRequest, value: impl Fn(Served) -> bool) -> ResponseMessage {
         let results = request
             .nodes_to_read
@@ -226,6 +229,10 @@ impl Server {
                         UAString::from(NAMESPACE),
                     ];
                     return DataValue::new_now(Variant::from(uris));
+                }
+                if r.node_id == NodeId::new(0, SERVER_STATE) {
+                    // ServerState Running.
+                    return DataValue::new_now(0i32);
                 }
                 if r.node_id == NodeId::new(0, MAX_MONITORED_ITEMS_PER_CALL) {
                     return DataValue::new_now(ITEMS_PER_CALL);

@@ -306,16 +306,16 @@ impl Subscription {
         let before = segments.len();
         match (order, self.run.is_some()) {
             (Some(order), false) if self.stream.is_some() => {
-                let wall = SystemTime::now();
+                let wall = order.wall;
                 self.run = Some(Run {
-                    start: now,
+                    start: order.at,
                     wall,
                     rate: order.rate,
                     every: order.fault_every,
                     hold: order.fault_hold,
                     made: 0,
                     stamped: ticks(wall),
-                    next_fault: now + order.fault_every,
+                    next_fault: order.at + order.fault_every,
                     open: None,
                     faults: 0,
                 });

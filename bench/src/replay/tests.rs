@@ -101,6 +101,8 @@ async fn subscribe_and_run(mode: MessageSecurityMode) {
     }
     assert_eq!(heard.lock().unwrap().len(), first);
     source.start_run(Order {
+        at: std::time::Instant::now(),
+        wall: std::time::SystemTime::now(),
         rate: 2000,
         fault_every: Duration::from_millis(200),
         fault_hold: Duration::from_millis(100),
