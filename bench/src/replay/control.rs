@@ -34,6 +34,8 @@ pub struct Order {
 pub struct Control {
     /// The run under way, if any.
     pub(super) order: Mutex<Option<Order>>,
+    /// When the last run was ended.
+    pub(super) ended: Mutex<Option<std::time::Instant>>,
     /// Changes made (noise and switches), each one notification.
     pub(super) produced: AtomicU64,
     /// Changes dropped unsent: no Publish request came for them in time.
@@ -49,6 +51,10 @@ pub struct Control {
 impl Control {
     pub(super) fn order(&self) -> Option<Order> {
         self.order.lock().ok().and_then(|o| *o)
+    }
+
+    pub(super) fn ended(&self) -> Option<std::time::Instant> {
+        self.ended.lock().ok().and_then(|e| *e)
     }
 
     pub(super) fn made(&self, n: u64) {

@@ -168,10 +168,14 @@ impl ReplaySource {
 
     /// Ends the run: its changes made, the faults it injected.
     pub async fn end_run(&self, interval: Duration) -> (u64, Vec<Fault>) {
+        if let Ok(mut e) = self.control.ended.lock() {
+            *e = Some(Instant::now());
+        }
         if let Ok(mut o) = self.control.order.lock() {
             *o = None;
         }
-        // The switch left open closes at the next publishing interval.
+        // The changes up to now and the switch left open go out at the
+        // next publishing interval.
         tokio::time::sleep(interval * 3).await;
         let faults = self
             .control

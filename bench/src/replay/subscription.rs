@@ -304,34 +304,25 @@ impl Subscription {
     fn changes(&mut self, now: Instant, control: &Control, segments: &mut Vec<Segment>) -> u64 {
         let order = control.order();
         let before = segments.len();
-        match (order, self.run.is_some()) {
-            (Some(order), false) if self.stream.is_some() => {
-                let wall = order.wall;
-                self.run = Some(Run {
-                    start: order.at,
-                    wall,
-                    rate: order.rate,
-                    every: order.fault_every,
-                    hold: order.fault_hold,
-                    made: 0,
-                    stamped: ticks(wall),
-                    next_fault: order.at + order.fault_every,
-                    open: None,
-                    faults: 0,
-                });
-            }
-            (None, true) => {
-                if let Some((k, _)) = self.run.take().and_then(|r| r.open) {
-                    self.closed[usize::from(k)] = true;
-                    segments.push(Segment::Switch {
-                        k,
-                        closed: true,
-                        at: ticks(SystemTime::now()),
-                    });
-                }
-            }
-            _ => {}
+        if let (Some(order), None, Some(_)) = (order, &self.run, &self.stream) {
+            self.run = Some(Run {
+                start: order.at,
+                wall: order.wall,
+                rate: order.rate,
+                every: order.fault_every,
+                hold: order.fault_hold,
+                made: 0,
+                stamped: ticks(order.wall),
+                next_fault: order.at + order.fault_every,
+                open: None,
+                faults: 0,
+            });
         }
+        // The run goes on up to now, or up to when it was ended.
+        let now = match order {
+            Some(_) => now,
+            None => control.ended().map_or(now, |e| e.min(now)),
+        };
         if let Some(run) = &mut self.run {
             if let Some((k, since)) = run.open {
                 let end = since + run.hold;
@@ -371,6 +362,18 @@ impl Subscription {
             if noise > 0 {
                 let seg = self.noise_segment(noise as u32, from, to);
                 segments.push(seg);
+            }
+        }
+        if order.is_none() {
+            if let Some(run) = self.run.take() {
+                if let Some((k, _)) = run.open {
+                    self.closed[usize::from(k)] = true;
+                    segments.push(Segment::Switch {
+                        k,
+                        closed: true,
+                        at: ticks(run.wall(now)),
+                    });
+                }
             }
         }
         segments[before..].iter().map(|s| s.len() as u64).sum()

@@ -1,7 +1,8 @@
 //! The replay source against async-opcua's own client over TCP, with
 //! security None and Basic256Sha256 + Sign: it connects, reads the
 //! namespace array, subscribes, and hears every change of a run (the
-//! first values, the noise, the switches' faults) exactly as made.
+//! first values, the noise, the switches' faults) exactly as made; a
+//! message acknowledged is not sent again.
 
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -10,7 +11,7 @@ use opcua::client::{ClientBuilder, DataChangeCallback, IdentityToken};
 use opcua::crypto::SecurityPolicy;
 use opcua::types::{
     MessageSecurityMode, MonitoredItemCreateRequest, MonitoringMode, MonitoringParameters, NodeId,
-    ReadValueId, TimestampsToReturn, Variant,
+    ReadValueId, StatusCode, TimestampsToReturn, Variant,
 };
 
 use super::{Order, ReplaySource};
@@ -131,6 +132,10 @@ async fn subscribe_and_run(mode: MessageSecurityMode) {
     assert_eq!(switch_changes, 2 * faults.len());
     assert!(source.control().cpu() > 0.0);
     assert_eq!(source.control().dropped_so_far(), 0);
+    // The first message was acknowledged long ago: not there to send
+    // again.
+    let again = session.republish(subscription, 1).await.unwrap_err();
+    assert_eq!(again.status(), StatusCode::BadMessageNotAvailable);
     let _ = session.disconnect().await;
     events.abort();
 }
