@@ -74,6 +74,8 @@ pub struct ReplaySource {
     control: Arc<Control>,
     /// Ends the source's thread (its runtime and every connection).
     stop: Option<tokio::sync::oneshot::Sender<()>>,
+    /// The source's one thread (its runtime: listener, connections,
+    /// publishing), joined once stopped.
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
