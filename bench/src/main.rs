@@ -18,6 +18,7 @@ mod load;
 mod measure;
 mod peer;
 mod plant;
+mod replay;
 mod table;
 
 use std::path::PathBuf;
@@ -124,6 +125,40 @@ enum Cmd {
         /// How long the baseline may take to catch up after the load stops.
         #[arg(long, default_value = "30s", value_parser = humantime::parse_duration)]
         drain: Duration,
+    },
+    /// The agent under load from the replay source (an OPC UA server that
+    /// re-sends notification messages built once, patching sequence
+    /// numbers, timestamps and values), measured as `peer` measures it,
+    /// with the source's own CPU beside each row; with `--reference`, the
+    /// same load from the load server (async-opcua) in the same run.
+    Replay {
+        /// A load as TAGS:CHANGES_PER_SECOND; repeat for several rows.
+        #[arg(long = "load", required = true, value_name = "TAGS:RATE")]
+        loads: Vec<cell::Load>,
+        /// OPC UA security of the agent's session; repeat for several.
+        #[arg(long = "security", value_enum, default_values_t = [replay::bench::ReplaySecurity::None])]
+        security: Vec<replay::bench::ReplaySecurity>,
+        /// Also the same load from the load server (security None).
+        #[arg(long)]
+        reference: bool,
+        /// How long each load runs.
+        #[arg(long, default_value = "20s", value_parser = humantime::parse_duration)]
+        duration: Duration,
+        /// Subscription publishing interval.
+        #[arg(long, default_value = "100ms", value_parser = humantime::parse_duration)]
+        publishing: Duration,
+        /// The agent's `opcua.max_notifications_per_publish`.
+        #[arg(long, value_name = "N")]
+        max_notifications: Option<u32>,
+        /// A limit switch opens this often, held open for half of it.
+        #[arg(long, default_value = "500ms", value_parser = humantime::parse_duration)]
+        fault_every: Duration,
+        /// The `cellwatch` binary under test.
+        #[arg(long, default_value = "target/release/cellwatch")]
+        agent: PathBuf,
+        /// Where configurations, PKI directories, journals and logs go.
+        #[arg(long, default_value = "target/bench-replay")]
+        workdir: PathBuf,
     },
     /// The scale-out recipe: `--agents` agents in client mode, each with
     /// its own simulated cell, through one Zenoh router (a router-mode
@@ -379,6 +414,40 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
                 }
             }
             print!("{}", table::table(&rows));
+            Ok(())
+        }
+        Cmd::Replay {
+            loads,
+            security,
+            reference,
+            duration: seconds,
+            publishing,
+            max_notifications,
+            fault_every,
+            agent,
+            workdir,
+        } => {
+            let setup = peer::Setup {
+                tags_in: peer::TagsIn::File,
+                agent,
+                python: None,
+                script: PathBuf::new(),
+                workdir,
+                seconds,
+                publishing,
+                max_notifications,
+                fault_every,
+                fault_hold: fault_every / 2,
+                server_nice: 0,
+                agent_priority: None,
+                drain: Duration::from_secs(30),
+                bare_client: None,
+                alarms_per_fault: 1,
+            };
+            print!(
+                "{}",
+                replay::bench::run(&setup, &loads, &security, reference).await?
+            );
             Ok(())
         }
         Cmd::Fanout {
