@@ -18,6 +18,7 @@
 //! routers; nothing here changes.
 
 pub mod certs;
+pub mod client_tls;
 pub mod envelope;
 pub mod keys;
 mod session;

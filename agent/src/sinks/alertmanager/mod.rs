@@ -133,7 +133,7 @@ type Client = hyper_util::client::legacy::Client<
 /// Why the pusher cannot be made.
 #[derive(Debug, thiserror::Error)]
 #[error("alertmanager.tls: {0}")]
-pub struct TlsError(String);
+pub struct TlsError(#[from] crate::bus::client_tls::ClientTlsError);
 
 /// Why a batch of alerts did not reach an Alertmanager (it is sent
 /// again).
@@ -205,43 +205,11 @@ pub fn check(config: &AlertmanagerConfig) -> Result<(), TlsError> {
 /// An HTTP(S) client trusting `tls`'s CA (and presenting its client
 /// certificate); HTTP only without it.
 fn client(tls: Option<&AlertmanagerTls>) -> Result<Client, TlsError> {
-    use tokio_rustls::rustls;
-    use tokio_rustls::rustls::pki_types::pem::PemObject;
-    use tokio_rustls::rustls::pki_types::{CertificateDer, PrivateKeyDer};
-    let bad = |what: &std::path::Path, e: String| TlsError(format!("{}: {e}", what.display()));
-    let mut roots = rustls::RootCertStore::empty();
-    let mut identity = None;
-    if let Some(t) = tls {
-        let cas: Vec<CertificateDer<'static>> = CertificateDer::pem_file_iter(&t.ca)
-            .and_then(Iterator::collect)
-            .map_err(|e| bad(&t.ca, e.to_string()))?;
-        if cas.is_empty() {
-            return Err(bad(&t.ca, "no certificate in the file".into()));
-        }
-        for ca in cas {
-            roots.add(ca).map_err(|e| bad(&t.ca, e.to_string()))?;
-        }
-        if let Some((cert, key)) = &t.client {
-            crate::bus::envelope::check_private(key).map_err(|e| TlsError(e.to_string()))?;
-            let chain: Vec<CertificateDer<'static>> = CertificateDer::pem_file_iter(cert)
-                .and_then(Iterator::collect)
-                .map_err(|e| bad(cert, e.to_string()))?;
-            let key = PrivateKeyDer::from_pem_file(key).map_err(|e| bad(key, e.to_string()))?;
-            identity = Some((chain, key));
-        }
-    }
-    let builder = rustls::ClientConfig::builder_with_provider(Arc::new(
-        rustls::crypto::ring::default_provider(),
-    ))
-    .with_safe_default_protocol_versions()
-    .map_err(|e| TlsError(e.to_string()))?
-    .with_root_certificates(roots);
-    let config = match identity {
-        Some((chain, key)) => builder
-            .with_client_auth_cert(chain, key)
-            .map_err(|e| TlsError(e.to_string()))?,
-        None => builder.with_no_client_auth(),
-    };
+    let client = tls.and_then(|t| t.client.as_ref());
+    let config = crate::bus::client_tls::client_config(
+        tls.map(|t| t.ca.as_path()),
+        client.map(|(cert, key)| (cert.as_path(), key.as_path())),
+    )?;
     let connector = hyper_rustls::HttpsConnectorBuilder::new()
         .with_tls_config(config)
         .https_or_http()

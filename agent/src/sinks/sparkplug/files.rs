@@ -4,7 +4,6 @@
 //! with them before the agent runs.
 
 use std::path::Path;
-use std::sync::Arc;
 
 use super::config::{SparkplugConfig, SparkplugTls};
 use super::shared::SparkplugError;
@@ -42,44 +41,9 @@ pub(super) fn password(path: &Path) -> Result<String, SparkplugError> {
 pub(super) fn tls(
     tls: Option<&SparkplugTls>,
 ) -> Result<tokio_rustls::rustls::ClientConfig, SparkplugError> {
-    use tokio_rustls::rustls;
-    use tokio_rustls::rustls::pki_types::pem::PemObject;
-    use tokio_rustls::rustls::pki_types::{CertificateDer, PrivateKeyDer};
-    let bad = |path: &Path, why: String| SparkplugError::Tls {
-        path: path.display().to_string(),
-        why,
-    };
-    let mut roots = rustls::RootCertStore::empty();
-    let mut identity = None;
-    if let Some(t) = tls {
-        let cas: Vec<CertificateDer<'static>> = CertificateDer::pem_file_iter(&t.ca)
-            .and_then(Iterator::collect)
-            .map_err(|e| bad(&t.ca, e.to_string()))?;
-        if cas.is_empty() {
-            return Err(bad(&t.ca, "no certificate in the file".into()));
-        }
-        for ca in cas {
-            roots.add(ca).map_err(|e| bad(&t.ca, e.to_string()))?;
-        }
-        if let Some((cert, key)) = &t.client {
-            crate::bus::envelope::check_private(key)?;
-            let chain: Vec<CertificateDer<'static>> = CertificateDer::pem_file_iter(cert)
-                .and_then(Iterator::collect)
-                .map_err(|e| bad(cert, e.to_string()))?;
-            let key = PrivateKeyDer::from_pem_file(key).map_err(|e| bad(key, e.to_string()))?;
-            identity = Some((chain, key));
-        }
-    }
-    let builder = rustls::ClientConfig::builder_with_provider(Arc::new(
-        rustls::crypto::ring::default_provider(),
-    ))
-    .with_safe_default_protocol_versions()
-    .map_err(|e| SparkplugError::TlsConfig(e.to_string()))?
-    .with_root_certificates(roots);
-    match identity {
-        Some((chain, key)) => builder
-            .with_client_auth_cert(chain, key)
-            .map_err(|e| SparkplugError::TlsConfig(e.to_string())),
-        None => Ok(builder.with_no_client_auth()),
-    }
+    let client = tls.and_then(|t| t.client.as_ref());
+    Ok(crate::bus::client_tls::client_config(
+        tls.map(|t| t.ca.as_path()),
+        client.map(|(cert, key)| (cert.as_path(), key.as_path())),
+    )?)
 }

@@ -13,16 +13,8 @@ use super::store::{HeldStore, StoreError};
 #[derive(Debug, thiserror::Error)]
 pub enum SparkplugError {
     /// A TLS file cannot be read or used.
-    #[error("sparkplug.tls: {path}: {why}")]
-    Tls {
-        /// The file.
-        path: String,
-        /// Why.
-        why: String,
-    },
-    /// TLS cannot be set up with these files.
     #[error("sparkplug.tls: {0}")]
-    TlsConfig(String),
+    Tls(#[from] crate::bus::client_tls::ClientTlsError),
     /// The password file cannot be read.
     #[error("sparkplug.password_file: {path}: {source}")]
     Password {
