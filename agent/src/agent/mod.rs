@@ -18,16 +18,15 @@ use futures_util::FutureExt;
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 
-use crate::bus::envelope::{check_private, AgentKey, KeyFileError};
-use crate::bus::ZenohError;
-use crate::cell::compile::{self, CompileError};
+use crate::bus::envelope::{check_private, AgentKey};
+use crate::cell::compile;
 use crate::cell::{CellLoop, JOURNAL_ALARM};
 use crate::clock::Clock;
 use crate::config::CellConfig;
 use crate::health::{CellHealth, Health};
-use crate::journal::{Journal, JournalError};
+use crate::journal::Journal;
 use crate::metrics::Metrics;
-use crate::operator::{Gate, KeysError, OperatorKeys};
+use crate::operator::{Gate, OperatorKeys};
 use crate::services::alarm_server::AlarmServer;
 use crate::services::plant_operators::Listener;
 use crate::services::Services;
@@ -42,65 +41,9 @@ use crate::sources::{self, Source, SourceError, QUEUE_CAPACITY};
 /// How many service requests may wait for the cell loop.
 const REQUEST_CAPACITY: usize = 64;
 
-/// Why an agent cannot start.
-#[derive(Debug, thiserror::Error)]
-pub enum StartError {
-    /// The checks do not fit the cell.
-    #[error(transparent)]
-    Compile(#[from] CompileError),
-    /// The operator secrets file is unusable.
-    #[error(transparent)]
-    Keys(#[from] KeysError),
-    /// The journal cannot be opened.
-    #[error(transparent)]
-    Journal(#[from] JournalError),
-    /// Zenoh refused the session or a declaration.
-    #[error(transparent)]
-    Zenoh(#[from] ZenohError),
-    /// The agent's signing key, or a private key it uses, is unusable
-    /// (unreadable, not a key, or readable by others).
-    #[error(transparent)]
-    Key(#[from] KeyFileError),
-    /// The metrics port cannot be bound.
-    #[error("cannot serve metrics on {addr}: {source}")]
-    Metrics {
-        /// The address.
-        addr: SocketAddr,
-        /// Why.
-        source: std::io::Error,
-    },
-    /// The Alertmanager's TLS files are unusable.
-    #[error(transparent)]
-    Alertmanager(#[from] crate::sinks::alertmanager::TlsError),
-    /// The Sparkplug edge node's TLS or password files are unusable.
-    #[error(transparent)]
-    Sparkplug(#[from] crate::sinks::sparkplug::SparkplugError),
-    /// The alarm server cannot start (its users file, address or PKI).
-    #[error(transparent)]
-    AlarmServer(#[from] crate::services::alarm_server::AlarmServerError),
-    /// The cell loop's thread cannot be started.
-    #[error("cannot start the cell loop's thread: {0}")]
-    Loop(std::io::Error),
-}
+mod errors;
 
-impl StartError {
-    /// Whether the configuration (or a file it names) is at fault, rather
-    /// than the machine.
-    pub fn is_input(&self) -> bool {
-        matches!(
-            self,
-            StartError::Compile(_)
-                | StartError::Alertmanager(_)
-                | StartError::Sparkplug(_)
-                | StartError::AlarmServer(crate::services::alarm_server::AlarmServerError::Users(
-                    _
-                ))
-                | StartError::Keys(_)
-                | StartError::Key(_)
-                | StartError::Zenoh(ZenohError::Insecure { .. } | ZenohError::Key(_))
-        )
-    }
-}
+pub use errors::{Ended, ReloadError, StartError};
 
 /// What a caller may add to an agent.
 #[derive(Default)]
@@ -125,24 +68,6 @@ pub struct Options {
     /// an operator's signed `configure reload` is handed to the runner
     /// ([`Agent::next_event`]); refused otherwise.
     pub reads_its_file: bool,
-}
-
-/// Why an agent could not go on by itself ([`Agent::wait`]).
-#[derive(Debug, thiserror::Error)]
-pub enum Ended {
-    /// Its source could not run.
-    #[error("the source cannot run: {0}")]
-    Source(SourceError),
-    /// Its source ended.
-    #[error("the source stopped")]
-    SourceStopped,
-    /// Its cell loop panicked (the panic's message); the loop closed its
-    /// sinks first.
-    #[error("the cell loop panicked: {0}")]
-    LoopPanicked(String),
-    /// Its cell loop ended without being told to.
-    #[error("the cell loop stopped")]
-    LoopStopped,
 }
 
 /// A running agent.
@@ -193,30 +118,6 @@ pub struct Agent {
 
 /// What a reload takes by starting a source ([`crate::config::FIXED_PARTS`]).
 const SOURCE_PARTS: [&str; 3] = ["the tags", "[opcua]", "[legacy]"];
-
-/// Why a configuration read again was not taken.
-#[derive(Debug, thiserror::Error)]
-pub enum ReloadError {
-    /// Its checks do not compile: the running configuration goes on.
-    #[error(transparent)]
-    Compile(#[from] CompileError),
-    /// It changes what only a restart changes, and nothing else could be
-    /// taken without it (the tags: the checks are compiled against them).
-    #[error(
-        "{0} changed: restart the agent to take the new configuration (the running one goes on)"
-    )]
-    Restart(String),
-    /// The loop has ended.
-    #[error("{0}")]
-    Refused(String),
-    /// The loop would not take it now.
-    #[error(transparent)]
-    Busy(#[from] crate::cell::swap::ReloadBusy),
-    /// The operators file or the alarm server's users file it names is
-    /// unusable.
-    #[error("{0}")]
-    File(String),
-}
 
 /// What a running agent needs from whoever runs it ([`Agent::next_event`]).
 pub enum AgentEvent {
