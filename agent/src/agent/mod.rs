@@ -34,6 +34,7 @@ use crate::sinks::alarm_server::AlarmServerSink;
 use crate::sinks::console::{ConsoleSink, Notice};
 use crate::sinks::journal::JournalSink;
 use crate::sinks::metrics::MetricsSink;
+use crate::sinks::oee::OeeSink;
 use crate::sinks::zenoh::ZenohPublisher;
 use crate::sinks::Sink;
 use crate::sources::{self, Source, SourceError, QUEUE_CAPACITY};
@@ -538,7 +539,15 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         Box::new(publisher),
         Box::new(MetricsSink::new(metrics.clone(), &config, clock.now_ms())),
     ];
-    sinks.extend(crate::sinks::oee::sink(config.oee.as_ref(), &metrics));
+    let oee = match &config.oee {
+        Some(c) => {
+            let sink = OeeSink::start(c, &metrics, &config.journal.path, clock.now_ms())?;
+            let watch = sink.watch();
+            sinks.push(Box::new(sink));
+            Some(watch)
+        }
+        None => None,
+    };
     let alertmanager = match &config.alertmanager {
         Some(am) => {
             let (sink, pusher) =
@@ -630,6 +639,10 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         .reloading(reload_rx);
     let cell_loop = match asks_tx {
         Some(tx) => cell_loop.asking_reloads(tx),
+        None => cell_loop,
+    };
+    let cell_loop = match oee {
+        Some(oee) => cell_loop.showing_oee(oee),
         None => cell_loop,
     };
     let cell_loop = match session_commands {

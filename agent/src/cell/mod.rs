@@ -112,6 +112,8 @@ pub struct CellLoop {
     reload_asks: Option<mpsc::Sender<swap::ReloadAsk>>,
     /// Acknowledgements from the alarm server's sessions (`session.rs`).
     session_commands: Option<mpsc::Receiver<crate::step::SessionCommand>>,
+    /// The current shift's OEE, for the snapshot (`snapshot.rs`).
+    oee: Option<crate::sinks::oee::OeeWatch>,
 }
 
 /// A write's outcome on its way back into the loop.
@@ -204,6 +206,7 @@ impl CellLoop {
             reloads: None,
             reload_asks: None,
             session_commands: None,
+            oee: None,
         }
     }
 

@@ -9,10 +9,19 @@ use cellwatch_models::engine::Value;
 use super::CellLoop;
 use crate::clock::rfc3339;
 use crate::payload::{
-    AlarmPayload, ChartPayload, LastFault, Quality, SnapshotPayload, TagValue, SNAPSHOT_SCHEMA,
+    AlarmPayload, ChartPayload, LastFault, OeePayload, Quality, SnapshotPayload, TagValue,
+    SNAPSHOT_SCHEMA,
 };
+use crate::sinks::oee::OeeWatch;
 
 impl CellLoop {
+    /// Answers snapshots with the OEE `oee` holds.
+    #[must_use]
+    pub fn showing_oee(mut self, oee: OeeWatch) -> CellLoop {
+        self.oee = Some(oee);
+        self
+    }
+
     /// The snapshot now.
     pub(super) fn snapshot(&self) -> SnapshotPayload {
         let tags = self.engine.tags();
@@ -83,6 +92,11 @@ impl CellLoop {
                 .flat_map(|s| ChartPayload::of(&s.id, &s.sfc, &s.forcible, &s.comments, &contact))
                 .collect(),
             timers: self.timers.payload(),
+            oee: self.oee.as_ref().and_then(|w| {
+                let now = w.borrow();
+                let now = now.as_ref()?;
+                Some(OeePayload::new(&now.shift, &now.figures, now.at))
+            }),
         }
     }
 }

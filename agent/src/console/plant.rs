@@ -407,6 +407,7 @@ mod tests {
             last_fault: None,
             charts: Vec::new(),
             timers: Vec::new(),
+            oee: None,
         }
     }
 

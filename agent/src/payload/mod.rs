@@ -495,7 +495,7 @@ pub struct LastFault {
 }
 
 /// `<prefix>/snapshot`: the cell as the engine sees it now.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SnapshotPayload {
     /// [`SNAPSHOT_SCHEMA`].
     pub schema: String,
@@ -521,6 +521,10 @@ pub struct SnapshotPayload {
     /// measurements.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub timers: Vec<TimerPayload>,
+    /// The current shift's OEE (or the last one's, between shifts), when
+    /// the cell has `[oee]`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub oee: Option<OeePayload>,
 }
 
 /// A timed transition in the snapshot.
@@ -716,7 +720,9 @@ mod tests;
 mod about;
 mod consequence;
 mod guidance;
+mod oee;
 mod overdue;
 pub use about::{AboutPayload, CertificateAbout, ABOUT_SCHEMA};
 pub use consequence::{ConsequencePayload, ThroughPayload};
 pub use guidance::GuidancePayload;
+pub use oee::{BreakdownPayload, LossesPayload, OeePayload};

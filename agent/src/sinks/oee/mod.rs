@@ -1,39 +1,112 @@
 //! The cell's OEE as it runs: each step's state changes, modes entered and
 //! left, parts, rejects and order changes fed to the models'
-//! [`LiveOee`], and the current shift's figures set in the metrics
-//! (`cellwatch_oee_*`) on every tick. The rules are `[oee]`'s
-//! ([`config`]); the reports compute the same figures from the journal.
+//! [`LiveOee`], and on every tick the current shift's figures set in the
+//! metrics (`cellwatch_oee_*`) and handed to whoever watches them (the
+//! snapshot, the Sparkplug B node) as an [`OeeNow`]. The rules are
+//! `[oee]`'s ([`config`]); the reports compute the same figures from the
+//! journal, and a restarted agent takes the current shift's facts back
+//! from it, so that the live figures go on where they were.
 
 pub use crate::config::oee as config;
 
+use std::path::Path;
 use std::sync::Arc;
 
-use cellwatch_models::oee::LiveOee;
+use cellwatch_models::oee::{Figures, LiveOee, ShiftWindow};
 use cellwatch_models::report::StopCauses;
 use futures_util::future::BoxFuture;
 use futures_util::FutureExt;
+use tokio::sync::watch;
 
+use crate::journal::{JournalError, ReportInput};
 use crate::metrics::Metrics;
 use crate::sinks::Sink;
 use crate::step::{CellStep, Input};
 
-/// Feeds the live OEE and sets its metrics.
+/// The current shift's figures (or the last shift's, between shifts), as
+/// computed at `at`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OeeNow {
+    /// The shift.
+    pub shift: ShiftWindow,
+    /// Its figures up to `at`.
+    pub figures: Figures,
+    /// When they were computed, ms since the epoch.
+    pub at: u64,
+}
+
+/// What watchers of the OEE hold: `None` until the first tick in a
+/// shift.
+pub type OeeWatch = watch::Receiver<Option<OeeNow>>;
+
+/// Feeds the live OEE, sets its metrics and tells its watchers.
 pub struct OeeSink {
     metrics: Arc<Metrics>,
     live: LiveOee,
-}
-
-/// The sink for `config`, if `[oee]` is there.
-pub fn sink(config: Option<&config::OeeConfig>, metrics: &Arc<Metrics>) -> Option<Box<dyn Sink>> {
-    config.map(|c| Box::new(OeeSink::new(metrics.clone(), c)) as Box<dyn Sink>)
+    now: watch::Sender<Option<OeeNow>>,
 }
 
 impl OeeSink {
-    /// A sink judging by `config`.
+    /// The sink for `config`, with the current shift's facts taken back
+    /// from the journal at `journal` (none yet is fine).
+    ///
+    /// # Errors
+    /// The journal exists but cannot be read.
+    pub fn start(
+        config: &config::OeeConfig,
+        metrics: &Arc<Metrics>,
+        journal: &Path,
+        now: u64,
+    ) -> Result<OeeSink, JournalError> {
+        let mut sink = OeeSink::new(metrics.clone(), config);
+        if let Some(shift) = config.rules.calendar.current(now) {
+            if journal.exists() {
+                let conn = crate::journal::open_read(journal)?;
+                let until = now.saturating_add(1);
+                let input =
+                    crate::journal::report_input(&conn, shift.start, until).map_err(|source| {
+                        JournalError::Sqlite {
+                            path: journal.to_path_buf(),
+                            source,
+                        }
+                    })?;
+                sink.take_back(&input);
+            }
+        }
+        Ok(sink)
+    }
+
+    /// A watch of the figures as each tick computes them.
+    pub fn watch(&self) -> OeeWatch {
+        self.now.subscribe()
+    }
+
+    /// A sink judging by `config`, from nothing.
     pub fn new(metrics: Arc<Metrics>, config: &config::OeeConfig) -> OeeSink {
         OeeSink {
             metrics,
             live: LiveOee::new(config.rules.clone(), StopCauses::default()),
+            now: watch::channel(None).0,
+        }
+    }
+
+    /// Takes back the facts a journal kept (the current shift's, and the
+    /// last state, order and modes before it).
+    fn take_back(&mut self, input: &ReportInput) {
+        for c in &input.changes {
+            self.live.on_state(c.at, &c.state, c.fault_type.as_deref());
+        }
+        for m in &input.modes {
+            self.live.on_mode(m.at, &m.mode, m.entered);
+        }
+        for &(at, n) in &input.parts {
+            self.live.on_parts(at, n);
+        }
+        for &(at, n) in &input.rejects {
+            self.live.on_rejects(at, n);
+        }
+        for o in &input.orders {
+            self.live.on_order(o.at, o.item.as_deref());
         }
     }
 
@@ -61,8 +134,13 @@ impl OeeSink {
             self.live.on_order(step.at, o.item.as_deref());
         }
         if step.input == Input::Tick {
-            if let Some((_, figures)) = self.live.figures(step.at) {
+            if let Some((shift, figures)) = self.live.figures(step.at) {
                 self.metrics.oee.set(&figures);
+                self.now.send_replace(Some(OeeNow {
+                    shift,
+                    figures,
+                    at: step.at,
+                }));
             }
         }
     }
