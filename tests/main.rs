@@ -36,6 +36,7 @@ mod machinery;
 mod mad;
 mod network_cut;
 mod nodes_back;
+mod oee;
 mod opcua;
 mod operations;
 mod operators;

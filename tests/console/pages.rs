@@ -323,6 +323,46 @@ async fn a_fault_shows_live_with_its_culprits_and_an_operator_acknowledges_and_s
     let report: serde_json::Value = serde_json::from_str(&report.stdout).unwrap();
     assert_eq!(report["production"], parts);
 
+    // The current shift's OEE (the demo's [oee]: early 06-14, late 14-22,
+    // night 22-06 UTC), as the agent's snapshot carries it.
+    let oee = b
+        .wait_for("[data-oee='availability']")
+        .await
+        .text()
+        .await
+        .unwrap();
+    let shown = |t: &str| {
+        t == "—"
+            || t.strip_suffix(" %")
+                .is_some_and(|p| p.parse::<f64>().is_ok())
+    };
+    assert!(shown(&oee), "{oee}");
+    let shift = || {
+        let hour = chrono::Utc::now().format("%H").to_string();
+        match hour.parse::<u32>().unwrap() {
+            6..=13 => "early",
+            14..=21 => "late",
+            _ => "night",
+        }
+    };
+    let before = shift();
+    let heading = b.text("section.oee h3").await;
+    // (The shift may change while it is read.)
+    assert!(
+        [before, shift()]
+            .iter()
+            .any(|s| heading.starts_with(&format!("OEE of the {s} shift"))),
+        "{heading}"
+    );
+    b.client
+        .execute(
+            "document.querySelector('section.oee').scrollIntoView(); return true;",
+            vec![],
+        )
+        .await
+        .unwrap();
+    b.screenshot("oee").await;
+
     // A timed transition taken far too early (F17.01 falls at once instead
     // of 60 s after F17.00): its measurement shows against its window.
     b.wait_for("tr[data-timer='tmr-001']").await;

@@ -385,3 +385,25 @@ fn offset(text: &str) -> Option<i64> {
     let (h, m): (i64, i64) = (h.parse().ok()?, m.parse().ok()?);
     (h <= 14 && m < 60).then_some(sign * (h * 60 + m) * 60_000)
 }
+
+/// The stop causes shipped (`config/stop-causes.toml`): paper 002's Table
+/// 4 and the demo's faults. The live OEE names breakdowns by them, and the
+/// reports classify stops by them unless `--causes` names a table.
+pub const SHIPPED_STOP_CAUSES: &str = include_str!("../../../config/stop-causes.toml");
+
+/// [`SHIPPED_STOP_CAUSES`], read.
+///
+/// # Errors
+/// The shipped table does not read (a test reads it).
+pub fn shipped_stop_causes() -> Result<cellwatch_models::report::StopCauses, toml::de::Error> {
+    toml::from_str(SHIPPED_STOP_CAUSES)
+}
+
+#[cfg(test)]
+mod shipped {
+    #[test]
+    fn the_shipped_stop_causes_read() {
+        let causes = super::shipped_stop_causes().unwrap();
+        assert!(!causes.causes.is_empty());
+    }
+}

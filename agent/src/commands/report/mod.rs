@@ -19,14 +19,10 @@ use super::Failure;
 use crate::journal;
 use crate::operator::escaped;
 
-/// The stop causes shipped (`config/stop-causes.toml`): paper 002's Table
-/// 4 and the demo's faults, used unless `--causes` names a table.
-const SHIPPED_CAUSES: &str = include_str!("../../../../config/stop-causes.toml");
-
 /// The table `--causes` names, or the shipped one.
 fn causes(path: Option<&Path>) -> Result<StopCauses, Failure> {
     let Some(path) = path else {
-        return toml::from_str(SHIPPED_CAUSES)
+        return crate::config::oee::shipped_stop_causes()
             .map_err(|e| Failure::Runtime(format!("the shipped stop causes: {e}")));
     };
     let text = std::fs::read_to_string(path).map_err(|e| {
@@ -77,7 +73,15 @@ fn day_start(date: NaiveDate, tz: &FixedOffset) -> u64 {
 
 /// Runs a report command.
 pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure> {
-    let tz = offset(&args.utc_offset)?;
+    let config = match &args.config {
+        Some(path) => Some(crate::config::load(path).map_err(|e| Failure::Input(e.to_string()))?),
+        None => None,
+    };
+    let rules = config
+        .as_ref()
+        .and_then(|c| c.oee.as_ref())
+        .map(|o| &o.rules);
+    let (tz, zone) = plant_offset(args, rules)?;
     if !args.db.is_file() {
         return Err(Failure::Input(format!(
             "--db '{}': no such journal",
@@ -96,7 +100,7 @@ pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure>
             let i = journal::report_input(&conn, start, start + 86_400_000)
                 .map_err(|e| Failure::Runtime(e.to_string()))?;
             let r = report::daily(&i.changes, &i.parts, &i.orders, start, &causes, now);
-            let oee = oee_rules(args)?.map(|rules| oee::days(&rules, &causes, &i, &[start], now));
+            let oee = oee::period(rules, &conn, &causes, &[start], now)?;
             match args.format() {
                 Format::Json => {
                     let mut v = serde_json::to_value(&r).unwrap_or_default();
@@ -110,9 +114,17 @@ pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure>
                     )
                     .map_err(io)
                 }
-                Format::Csv => daily_csv(out, &r).map_err(io),
+                Format::Csv => match &oee {
+                    Some(days) => {
+                        let mut production = Vec::new();
+                        daily_csv(&mut production, &r).map_err(io)?;
+                        let named = [(d.to_string(), &days[0])];
+                        oee::csv(out, &production, &named, None).map_err(io)
+                    }
+                    None => daily_csv(out, &r).map_err(io),
+                },
                 Format::Table => {
-                    daily_table(out, &args.db, &d.to_string(), &args.utc_offset, &r).map_err(io)?;
+                    daily_table(out, &args.db, &d.to_string(), &zone, &r).map_err(io)?;
                     match &oee {
                         Some(days) => {
                             oee::table(out, &[(d.to_string(), &days[0])], &days[0].total, "day")
@@ -131,7 +143,7 @@ pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure>
             let i = journal::report_input(&conn, starts[0], end)
                 .map_err(|e| Failure::Runtime(e.to_string()))?;
             let r = report::monthly(&i.changes, &i.parts, &i.orders, &starts, &causes, now);
-            let oee = oee_rules(args)?.map(|rules| oee::days(&rules, &causes, &i, &starts, now));
+            let oee = oee::period(rules, &conn, &causes, &starts, now)?;
             match args.format() {
                 Format::Json => {
                     let mut v = serde_json::to_value(&r).unwrap_or_default();
@@ -148,9 +160,19 @@ pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure>
                     )
                     .map_err(io)
                 }
-                Format::Csv => monthly_csv(out, &days, &r).map_err(io),
+                Format::Csv => match &oee {
+                    Some(figures) => {
+                        let mut production = Vec::new();
+                        monthly_csv(&mut production, &days, &r).map_err(io)?;
+                        let named: Vec<(String, &cellwatch_models::oee::DayFigures)> =
+                            days.iter().map(|d| d.to_string()).zip(figures).collect();
+                        let total = oee::total(figures);
+                        oee::csv(out, &production, &named, Some(&total)).map_err(io)
+                    }
+                    None => monthly_csv(out, &days, &r).map_err(io),
+                },
                 Format::Table => {
-                    monthly_table(out, &args.db, month, &args.utc_offset, &days, &r).map_err(io)?;
+                    monthly_table(out, &args.db, month, &zone, &days, &r).map_err(io)?;
                     match &oee {
                         Some(figures) => {
                             let named: Vec<(String, &cellwatch_models::oee::DayFigures)> =
@@ -163,19 +185,43 @@ pub(crate) fn run(args: &ReportArgs, out: &mut dyn Write) -> Result<(), Failure>
             }
         }
         ReportCommand::Alarms { date, month } => {
-            alarms(args, &conn, &tz, date.as_deref(), month.as_deref(), out)
+            let kpi = config.map(|c| c.kpi).unwrap_or_default();
+            let period = (date.as_deref(), month.as_deref());
+            alarms(args, &conn, (&tz, &zone), &kpi, period, out)
         }
     }
 }
 
-/// The `[oee]` rules of the cell's configuration (`--config`), if it has
-/// them.
-fn oee_rules(args: &ReportArgs) -> Result<Option<cellwatch_models::oee::OeeRules>, Failure> {
-    let Some(path) = &args.config else {
-        return Ok(None);
+/// The plant's offset from UTC, for the days' boundaries, and as
+/// written: `--utc-offset`, else the `[oee]` section's of `--config`, else
+/// UTC. Both given and different is refused: the days and the shifts
+/// would be cut at different hours.
+fn plant_offset(
+    args: &ReportArgs,
+    oee: Option<&cellwatch_models::oee::OeeRules>,
+) -> Result<(FixedOffset, String), Failure> {
+    let configured = oee.map(|r| {
+        let ms = r.calendar.utc_offset_ms;
+        let sign = if ms < 0 { '-' } else { '+' };
+        let minutes = ms.unsigned_abs() / 60_000;
+        format!("{sign}{:02}:{:02}", minutes / 60, minutes % 60)
+    });
+    let text = match (&args.utc_offset, configured) {
+        (Some(given), Some(configured)) => {
+            let tz = offset(given)?;
+            if Some(tz) != offset(&configured).ok() {
+                return Err(Failure::Input(format!(
+                    "--utc-offset '{given}' is not the plant's offset in {} (oee.utc_offset = \"{configured}\"): the days and the shifts would be cut at different hours; give the same or leave --utc-offset out",
+                    args.config.as_deref().unwrap_or(Path::new("--config")).display()
+                )));
+            }
+            given.clone()
+        }
+        (Some(given), None) => given.clone(),
+        (None, Some(configured)) => configured,
+        (None, None) => "+00:00".into(),
     };
-    let config = crate::config::load(path).map_err(|e| Failure::Input(e.to_string()))?;
-    Ok(config.oee.map(|o| o.rules))
+    Ok((offset(&text)?, text))
 }
 
 /// The days of `month` (`2026-11`).
@@ -199,12 +245,12 @@ fn month_days(month: &str) -> Result<Vec<NaiveDate>, Failure> {
 fn alarms(
     args: &ReportArgs,
     conn: &rusqlite::Connection,
-    tz: &FixedOffset,
-    date: Option<&str>,
-    month: Option<&str>,
+    (tz, zone): (&FixedOffset, &str),
+    rules: &kpi::KpiRules,
+    period: (Option<&str>, Option<&str>),
     out: &mut dyn Write,
 ) -> Result<(), Failure> {
-    let (title, from, to) = match (date, month) {
+    let (title, from, to) = match period {
         (Some(date), None) => {
             let d = NaiveDate::parse_from_str(date, "%Y-%m-%d")
                 .map_err(|_| Failure::Input(format!("--date '{date}': write it as 2026-11-21")))?;
@@ -231,21 +277,13 @@ fn alarms(
             args.db.display()
         );
     }
-    let rules = match &args.config {
-        None => kpi::KpiRules::default(),
-        Some(path) => {
-            crate::config::load(path)
-                .map_err(|e| Failure::Input(e.to_string()))?
-                .kpi
-        }
-    };
     let r = kpi::alarm_report(
         &read.events,
         &read.before,
         from,
         to,
         crate::clock::now_ms(),
-        &rules,
+        rules,
     );
     let io = Failure::output;
     match args.format() {
@@ -260,7 +298,7 @@ fn alarms(
             .map_err(io)
         }
         Format::Csv => alarms_csv(out, &r).map_err(io),
-        Format::Table => alarms_table(out, &args.db, &title, &args.utc_offset, &r).map_err(io),
+        Format::Table => alarms_table(out, &args.db, &title, zone, &r).map_err(io),
     }
 }
 
@@ -574,18 +612,14 @@ pub(crate) struct ReportArgs {
     pub(crate) causes: Option<PathBuf>,
     /// The cell's configuration: `report alarms` judges by its `[kpi]`
     /// rules (flood, chattering, stale), without it by ISA-18.2's;
-    /// `report daily|monthly` add the OEE of its `[oee]` shifts (not in
-    /// CSV).
+    /// `report daily|monthly` add the OEE of its `[oee]` shifts, whose
+    /// `utc_offset` cuts the days too.
     #[arg(long, global = true)]
     pub(crate) config: Option<PathBuf>,
-    /// The plant's offset from UTC, for day boundaries (+09:00).
-    #[arg(
-        long,
-        global = true,
-        default_value = "+00:00",
-        allow_hyphen_values = true
-    )]
-    pub(crate) utc_offset: String,
+    /// The plant's offset from UTC, for day boundaries (+09:00); without
+    /// it, the `[oee]` section's `utc_offset` of `--config`, else UTC.
+    #[arg(long, global = true, allow_hyphen_values = true)]
+    pub(crate) utc_offset: Option<String>,
     /// CSV instead of a table.
     #[arg(long, global = true, conflicts_with = "json")]
     pub(crate) csv: bool,

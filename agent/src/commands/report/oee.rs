@@ -6,14 +6,33 @@
 
 use std::io::Write;
 
-use cellwatch_models::oee::{self, DayFigures, Facts, Figures, OeeRules};
+use cellwatch_models::oee::{self, DayFigures, Facts, Figures, OeeRules, DAY_MS};
 use cellwatch_models::report::StopCauses;
 
-use crate::journal::ReportInput;
+use crate::commands::Failure;
+use crate::journal::{self, ReportInput};
 use crate::operator::escaped;
 
+/// The OEE of the days starting at `day_starts` under `rules` (none
+/// without `[oee]`), from the journal: its facts read to two days past the
+/// last day's start, so a night shift starting in it is taken whole.
+pub(super) fn period(
+    rules: Option<&OeeRules>,
+    conn: &rusqlite::Connection,
+    causes: &StopCauses,
+    day_starts: &[u64],
+    now: u64,
+) -> Result<Option<Vec<DayFigures>>, Failure> {
+    let (Some(rules), Some(&first), Some(&last)) = (rules, day_starts.first(), day_starts.last())
+    else {
+        return Ok(None);
+    };
+    let input = journal::report_input(conn, first, last + 2 * DAY_MS).map_err(Failure::runtime)?;
+    Ok(Some(days(rules, causes, &input, day_starts, now)))
+}
+
 /// The OEE of the days starting at `day_starts`.
-pub(super) fn days(
+fn days(
     rules: &OeeRules,
     causes: &StopCauses,
     input: &ReportInput,
@@ -130,4 +149,60 @@ pub(super) fn table(
         )?;
     }
     Ok(())
+}
+
+/// The columns OEE adds to the report's CSV.
+const CSV_COLUMNS: &str =
+    "performance_pct,quality_pct,oee_pct,planned_min,run_min,unobserved_min,rejects";
+
+/// The report's CSV `production` with OEE: its header and rows widened by
+/// [`CSV_COLUMNS`] (empty in its own rows), then a row per shift
+/// (`oee-shift`, the day, the shift's name), per day when there are
+/// several (`oee-day`) and for the period (`oee-total`), their
+/// availability and parts in the columns of that name.
+pub(super) fn csv(
+    out: &mut dyn Write,
+    production: &[u8],
+    days: &[(String, &DayFigures)],
+    total: Option<&Figures>,
+) -> std::io::Result<()> {
+    let text = String::from_utf8_lossy(production);
+    let mut lines = text.lines();
+    if let Some(header) = lines.next() {
+        writeln!(out, "{header},{CSV_COLUMNS}")?;
+    }
+    let empty = ",".repeat(CSV_COLUMNS.matches(',').count() + 1);
+    for l in lines {
+        writeln!(out, "{l}{empty}")?;
+    }
+    let quote = |s: &str| format!("\"{}\"", escaped(s).replace('"', "\"\""));
+    let row = |out: &mut dyn Write, section: &str, key: &str, name: &str, f: &Figures| {
+        writeln!(
+            out,
+            "{section},{key},{},,,,,,,{},{},,{},{},{},{},{},{},{}",
+            quote(name),
+            pct(f.availability).replace('-', ""),
+            f.parts,
+            pct(f.performance).replace('-', ""),
+            pct(f.quality).replace('-', ""),
+            pct(f.oee).replace('-', ""),
+            minutes(f.planned_ms),
+            minutes(f.run_ms),
+            minutes(f.unobserved_ms),
+            f.rejects
+        )
+    };
+    for (day, d) in days {
+        for s in &d.shifts {
+            row(out, "oee-shift", day, &s.shift.name, &s.figures)?;
+        }
+        if total.is_some() {
+            row(out, "oee-day", day, "", &d.total)?;
+        }
+    }
+    match (total, days) {
+        (Some(total), _) => row(out, "oee-total", "month", "", total),
+        (None, [(day, d)]) => row(out, "oee-total", day, "", &d.total),
+        (None, _) => Ok(()),
+    }
 }

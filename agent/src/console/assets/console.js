@@ -676,7 +676,8 @@ function cellPage(cell) {
         PERIODS.map(([p, t]) => el('option', { value: p, selected: p === this.period }, t)));
       this.write = el('section', { class: 'write' });
       this.production = el('section', { class: 'production' });
-      v.append(this.head, el('div', { class: 'period' }, el('span', {}, 'Machine state over the '), period), this.timeline, this.production, this.alarms, this.charts, this.timers, this.write, this.answer, this.tags);
+      this.oee = el('section', { class: 'oee' });
+      v.append(this.head, el('div', { class: 'period' }, el('span', {}, 'Machine state over the '), period), this.timeline, this.production, this.oee, this.alarms, this.charts, this.timers, this.write, this.answer, this.tags);
       this.drawWrite();
       this.drawn = '';
       this.fetch();
@@ -701,9 +702,10 @@ function cellPage(cell) {
       const snap = this.snap;
       if (!snap) return;
       const stuck = new Set([...S.alarms.values()].filter(a => a.cell === cell && a.kind === 'step' && active(a) && !kept(a)).map(a => a.id));
-      const drawn = JSON.stringify([snap.charts || [], snap.timers || [], [...stuck], S.key && S.key.operator, snap.tags]);
+      const drawn = JSON.stringify([snap.charts || [], snap.timers || [], [...stuck], S.key && S.key.operator, snap.tags, snap.oee || null]);
       if (drawn === this.drawn) return;
       this.drawn = drawn;
+      this.drawOee(snap.oee);
       const charts = snap.charts || [];
       this.charts.replaceChildren(...(charts.length ? [el('h3', {}, 'Charts')] : []), ...charts.map(c => this.chart(c, stuck)));
       this.drawTimers(snap.timers || []);
@@ -737,6 +739,28 @@ function cellPage(cell) {
         parts.push(table('causes', ['Stop', 'Cause', 'Stops', 'Minutes'], d.stop_causes.map(c => [c.code, c.name, String(c.count), c.minutes.toFixed(1)])));
       }
       this.production.replaceChildren(...parts);
+    },
+    // The current shift's OEE, as the agent computes it (its snapshot).
+    drawOee(o) {
+      if (!o) { this.oee.replaceChildren(); return; }
+      const pct = v => v === null || v === undefined ? '—' : `${(100 * v).toFixed(1)} %`;
+      const min = ms => (ms / 60000).toFixed(1);
+      const l = o.losses;
+      const parts = [el('h3', {}, `OEE of the ${o.shift} shift, ${when(o.from)} – ${when(o.until)}`),
+        el('dl', { class: 'facts' },
+          el('dt', {}, 'OEE'), el('dd', { 'data-oee': 'oee' }, pct(o.oee)),
+          el('dt', {}, 'Availability'), el('dd', { 'data-oee': 'availability' }, pct(o.availability)),
+          el('dt', {}, 'Performance'), el('dd', { 'data-oee': 'performance' }, pct(o.performance)),
+          el('dt', {}, 'Quality'), el('dd', { 'data-oee': 'quality' }, pct(o.quality)),
+          el('dt', {}, 'Minutes'), el('dd', {}, `planned ${min(o.planned_ms)}, run ${min(o.run_ms)}, breaks and planned stops ${min(o.not_planned_ms)}, not observed ${min(o.unobserved_ms)}`),
+          el('dt', {}, 'Parts'), el('dd', { 'data-oee': 'parts' }, `${o.parts}, ${o.rejects} rejected`)),
+        table('losses', ['Loss', 'Minutes'], [['Breakdowns', min(l.breakdowns_ms)], ['Setup and adjustment', min(l.setup_ms)],
+          ['Small stops', min(l.small_stops_ms)], ['Reduced speed', min(l.reduced_speed_ms)],
+          ['Start-up rejects', min(l.startup_rejects_ms)], ['Production rejects', min(l.production_rejects_ms)]])];
+      if (o.breakdowns.length) {
+        parts.push(table('causes', ['Stop', 'Cause', 'Stops', 'Minutes'], o.breakdowns.map(b => [b.code, b.name, String(b.stops), min(b.ms)])));
+      }
+      this.oee.replaceChildren(...parts);
     },
     drawWrite() {
       if (!may('write')) { this.write.replaceChildren(); return; }

@@ -85,7 +85,7 @@ impl OeeSink {
     pub fn new(metrics: Arc<Metrics>, config: &config::OeeConfig) -> OeeSink {
         OeeSink {
             metrics,
-            live: LiveOee::new(config.rules.clone(), StopCauses::default()),
+            live: LiveOee::new(config.rules.clone(), shipped_causes()),
             now: watch::channel(None).0,
         }
     }
@@ -144,6 +144,15 @@ impl OeeSink {
             }
         }
     }
+}
+
+/// The shipped stop causes, as the reports classify stops without
+/// `--causes`.
+fn shipped_causes() -> StopCauses {
+    config::shipped_stop_causes().unwrap_or_else(|e| {
+        tracing::error!(error = %e, "the shipped stop causes do not read: breakdowns are not named by cause");
+        StopCauses::default()
+    })
 }
 
 impl Sink for OeeSink {
