@@ -93,6 +93,11 @@ pub struct Facts<'a> {
     pub rejects: &'a [(u64, u64)],
     /// Work-order changes (the item in force).
     pub orders: &'a [OrderChange],
+    /// The last time the machine went back to `running` before the first
+    /// of `changes`, when the history was cut there (the live figures
+    /// fold what they no longer keep): rejects soon after it are start-up
+    /// rejects.
+    pub earlier_start: Option<u64>,
 }
 
 /// Breakdown time of one stop cause.
@@ -355,10 +360,14 @@ pub fn shift(
         f.ideal_ms += n * rules.ideal_cycle(item_at(at));
     }
     // Starts: a run of `running` after any other state.
-    let starts: Vec<u64> = runs
-        .windows(2)
-        .filter(|p| p[1].state == "running" && p[0].state != "running")
-        .map(|p| p[1].from)
+    let starts: Vec<u64> = facts
+        .earlier_start
+        .into_iter()
+        .chain(
+            runs.windows(2)
+                .filter(|p| p[1].state == "running" && p[0].state != "running")
+                .map(|p| p[1].from),
+        )
         .collect();
     for &(at, n) in facts.rejects.iter().filter(within) {
         f.rejects += n;

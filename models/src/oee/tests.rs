@@ -101,6 +101,7 @@ impl History {
             parts: &self.parts,
             rejects: &self.rejects,
             orders: &self.orders,
+            earlier_start: None,
         }
     }
 }

@@ -45,6 +45,7 @@ fn days(
         parts: &input.parts,
         rejects: &input.rejects,
         orders: &input.orders,
+        earlier_start: None,
     };
     day_starts
         .iter()

@@ -44,7 +44,13 @@ pub struct OeeSink {
     metrics: Arc<Metrics>,
     live: LiveOee,
     now: watch::Sender<Option<OeeNow>>,
+    /// When the figures were last computed (they are, at most once per
+    /// [`EVERY_MS`]: each computation reads the whole shift's facts).
+    computed_at: Option<u64>,
 }
+
+/// How often the figures are computed, at most, ms.
+const EVERY_MS: u64 = 1000;
 
 impl OeeSink {
     /// The sink for `config`, with the current shift's facts taken back
@@ -87,6 +93,7 @@ impl OeeSink {
             metrics,
             live: LiveOee::new(config.rules.clone(), shipped_causes()),
             now: watch::channel(None).0,
+            computed_at: None,
         }
     }
 
@@ -133,7 +140,11 @@ impl OeeSink {
         if let Some(o) = &e.order {
             self.live.on_order(step.at, o.item.as_deref());
         }
-        if step.input == Input::Tick {
+        let due = self
+            .computed_at
+            .is_none_or(|t| step.at >= t.saturating_add(EVERY_MS) || step.at < t);
+        if step.input == Input::Tick && due {
+            self.computed_at = Some(step.at);
             if let Some((shift, figures)) = self.live.figures(step.at) {
                 self.metrics.oee.set(&figures);
                 self.now.send_replace(Some(OeeNow {
