@@ -3,7 +3,7 @@
 //! journal, the bus, the metrics and the console consume them. Both sides
 //! import this module; it imports neither.
 
-use cellwatch_models::engine::Step;
+use cellwatch_models::engine::EngineStep;
 use tokio::sync::oneshot;
 
 use crate::operator::{clip, Action, Command, NotACommand};
@@ -176,7 +176,7 @@ pub struct CellStep {
     /// What came in.
     pub input: Input,
     /// What the engine did.
-    pub engine: Step,
+    pub engine: EngineStep,
     /// The engine's alarm transitions as payloads, in the same order.
     pub alarms: Vec<PublishedAlarm>,
     /// The machine state to publish, when it changed (or on a beat).

@@ -60,7 +60,7 @@ fn main() {
             .map(|t| {
                 format!(
                     "{}{}",
-                    if t.event.edge == learn::Edge::Rise {
+                    if t.event.edge == learn::SignalEdge::Rise {
                         "+"
                     } else {
                         "-"

@@ -29,7 +29,7 @@ use crate::logic::Term;
 use crate::programs::Op;
 use crate::signal::Signal;
 use crate::switching::SwitchingFunction;
-use crate::value::{CmpOp, Comparison, Num, Operand};
+use crate::value::{CmpOp, CmpOperand, Comparison, Num};
 
 /// Which coil value is the fault.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -159,8 +159,8 @@ pub fn read_comparisons(
         // The comparison must hold to take the fault away, or fail.
         let op = if c.expected { cmp.op } else { negated(cmp.op) };
         let needs = match &cmp.rhs {
-            Operand::Const(n) => format!("{} {n}", op.as_str()),
-            Operand::Tag(t) => match number(t) {
+            CmpOperand::Const(n) => format!("{} {n}", op.as_str()),
+            CmpOperand::Tag(t) => match number(t) {
                 Some(v) => format!("{} {t}, {t} = {}", op.as_str(), show_number(v)),
                 None => format!("{} {t}", op.as_str()),
             },

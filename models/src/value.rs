@@ -254,7 +254,7 @@ impl CmpOp {
 
 /// The right-hand side of a comparison.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Operand {
+pub enum CmpOperand {
     /// A constant.
     Const(Num),
     /// Another tag, by address.
@@ -272,15 +272,15 @@ pub struct Comparison {
     /// The operator.
     pub op: CmpOp,
     /// What it is compared with.
-    pub rhs: Operand,
+    pub rhs: CmpOperand,
 }
 
 impl Comparison {
     /// The signal standing for the comparison: `LHS OP RHS`, single spaces.
     pub fn signal(&self) -> Signal {
         let rhs = match &self.rhs {
-            Operand::Const(n) => n.to_string(),
-            Operand::Tag(s) => s.to_string(),
+            CmpOperand::Const(n) => n.to_string(),
+            CmpOperand::Tag(s) => s.to_string(),
         };
         Signal::new(&format!("{} {} {rhs}", self.lhs, self.op.as_str()))
     }
@@ -306,18 +306,18 @@ impl Comparison {
 }
 
 /// A constant if the text is a number, else a tag address.
-pub fn operand(text: &str) -> Operand {
+pub fn operand(text: &str) -> CmpOperand {
     if let Ok(v) = text.parse::<i64>() {
-        return Operand::Const(Num::Int(v));
+        return CmpOperand::Const(Num::Int(v));
     }
     if let Ok(v) = text.parse::<u64>() {
-        return Operand::Const(Num::UInt(v));
+        return CmpOperand::Const(Num::UInt(v));
     }
     match text.parse::<f64>() {
         Ok(v) if text.starts_with(|c: char| c.is_ascii_digit() || c == '-' || c == '.') => {
-            Operand::Const(Num::Float(v))
+            CmpOperand::Const(Num::Float(v))
         }
-        _ => Operand::Tag(Signal::new(text)),
+        _ => CmpOperand::Tag(Signal::new(text)),
     }
 }
 
@@ -411,12 +411,12 @@ mod tests {
         let c = Comparison {
             lhs: Signal::new("TEMP"),
             op: CmpOp::Ge,
-            rhs: Operand::Const(Num::Float(80.5)),
+            rhs: CmpOperand::Const(Num::Float(80.5)),
         };
         assert_eq!(c.signal().name(), "TEMP >= 80.5");
         assert_eq!(Comparison::of_signal(&c.signal()), Some(c));
         let c = Comparison::of_signal(&Signal::new("P1 != P2")).unwrap();
-        assert_eq!(c.rhs, Operand::Tag(Signal::new("P2")));
+        assert_eq!(c.rhs, CmpOperand::Tag(Signal::new("P2")));
         assert!(Comparison::of_signal(&Signal::new("X0.06")).is_none());
         assert!(CmpOp::Eq.holds(Num::Int(3), Num::UInt(3)));
         assert!(CmpOp::Gt.holds(Num::Float(85.2), Num::Float(80.5)));

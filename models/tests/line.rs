@@ -9,30 +9,30 @@
 #![allow(clippy::unwrap_used)] // test helpers fail loudly by design
 
 use cellwatch_models::alarm::{Severity, Transition};
-use cellwatch_models::engine::{CellEngine, Reading, StateRules, Step, Tag};
+use cellwatch_models::engine::{CellEngine, EngineStep, Reading, StateRules, Tag};
 use cellwatch_models::signal::Signal;
 use cellwatch_models::timer::checks::{drift_alarm, TimerChecks};
 use cellwatch_models::timer::drift::DriftRules;
-use cellwatch_models::timer::learn::{self, Edge, LearnOptions, Tau, TimerModel};
+use cellwatch_models::timer::learn::{self, LearnOptions, SignalEdge, Tau, TimerModel};
 use cellwatch_models::timer::line::{self, Fault, FaultKind, Slowdown};
 use cellwatch_models::timer::log::RunLog;
 use cellwatch_models::timer::monitor::{replay, Outcome};
 
 const CYCLES: usize = 6;
 
-fn end_of_motion_sensors() -> Vec<(String, Edge)> {
-    let mut s = vec![("CV_IN_POS".to_string(), Edge::Rise)];
+fn end_of_motion_sensors() -> Vec<(String, SignalEdge)> {
+    let mut s = vec![("CV_IN_POS".to_string(), SignalEdge::Rise)];
     for k in 0..4 {
         for (name, edge) in [
-            ("TR{k}_AT_STATION", Edge::Rise),
-            ("ST{k}_CLAMPED", Edge::Rise),
-            ("ST{k}_CLAMPED", Edge::Fall),
-            ("TR{k}_HOME", Edge::Rise),
+            ("TR{k}_AT_STATION", SignalEdge::Rise),
+            ("ST{k}_CLAMPED", SignalEdge::Rise),
+            ("ST{k}_CLAMPED", SignalEdge::Fall),
+            ("TR{k}_HOME", SignalEdge::Rise),
         ] {
             s.push((name.replace("{k}", &k.to_string()), edge));
         }
         for w in ["A", "B"] {
-            s.push((format!("WR{k}{w}_DONE"), Edge::Rise));
+            s.push((format!("WR{k}{w}_DONE"), SignalEdge::Rise));
         }
     }
     s
@@ -201,7 +201,7 @@ fn engine_raises(model: &TimerModel, run: &RunLog) -> (Vec<Raised>, f64) {
     let mut e =
         CellEngine::new("line", tags, vec![Box::new(checks)], StateRules::default()).unwrap();
     let mut raised = Vec::new();
-    let mut keep = |step: Step| {
+    let mut keep = |step: EngineStep| {
         for (a, tr, at) in step.alarms() {
             if tr == Transition::Raised {
                 raised.push(Raised {
@@ -255,7 +255,7 @@ fn a_weld_slowing_one_percent_an_hour_is_warned_of_before_it_falls_late() {
     let t = model
         .transitions
         .iter()
-        .find(|t| t.event.tag == "WR2B_DONE" && t.event.edge == Edge::Rise)
+        .find(|t| t.event.tag == "WR2B_DONE" && t.event.edge == SignalEdge::Rise)
         .unwrap();
     let slow = Slowdown {
         sensor: "WR2B_DONE".into(),

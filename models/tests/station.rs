@@ -15,7 +15,7 @@ use cellwatch_models::alarm::{Alarm, Severity, Transition};
 use cellwatch_models::comments::CommentDb;
 use cellwatch_models::consequence::forced_outputs;
 use cellwatch_models::engine::{
-    CellEngine, CheckSet, Reading, StateRules, Step, SwitchingCheck, SwitchingChecks, Tag,
+    CellEngine, CheckSet, EngineStep, Reading, StateRules, SwitchingCheck, SwitchingChecks, Tag,
 };
 use cellwatch_models::explain::Polarity;
 use cellwatch_models::program::Program;
@@ -24,7 +24,7 @@ use cellwatch_models::signal::{Observability, Signal};
 use cellwatch_models::switching::SwitchingFunction;
 use cellwatch_models::timer::checks::TimerChecks;
 use cellwatch_models::timer::learn::{
-    Edge, Event, TimerModel, Transition as Learned, MODEL_VERSION,
+    Event, LearnedTransition as Learned, SignalEdge, TimerModel, MODEL_VERSION,
 };
 
 const STATION: &str = include_str!("../../tests/data/station/station.il");
@@ -40,7 +40,7 @@ const TAGS: [&str; 13] = [
 fn learned(id: u32, trigger: &str, event: &str, window: [u64; 2]) -> Learned {
     let rise = |tag: &str| Event {
         tag: tag.into(),
-        edge: Edge::Rise,
+        edge: SignalEdge::Rise,
     };
     Learned {
         id,
@@ -126,12 +126,12 @@ fn station(extra: Vec<Box<dyn CheckSet>>) -> CellEngine {
     e.relating(relation, false)
 }
 
-fn set(e: &mut CellEngine, address: &str, v: bool, at: u64) -> Step {
+fn set(e: &mut CellEngine, address: &str, v: bool, at: u64) -> EngineStep {
     let t = e.tag_index(&Signal::new(address)).unwrap();
     e.on_reading(t, Reading::Good(v), at, at)
 }
 
-fn set_all(e: &mut CellEngine, values: &[(&str, bool)], at: u64) -> Vec<Step> {
+fn set_all(e: &mut CellEngine, values: &[(&str, bool)], at: u64) -> Vec<EngineStep> {
     values.iter().map(|&(a, v)| set(e, a, v, at)).collect()
 }
 
@@ -172,7 +172,7 @@ fn pressure_falls(e: &mut CellEngine, at: u64) -> Vec<Mark> {
     steps.iter().flat_map(marks).collect()
 }
 
-fn raised(step: &Step) -> Vec<Alarm> {
+fn raised(step: &EngineStep) -> Vec<Alarm> {
     step.alarms()
         .filter(|(_, t, _)| *t == Transition::Raised)
         .map(|(a, _, _)| a.clone())
@@ -182,7 +182,7 @@ fn raised(step: &Step) -> Vec<Alarm> {
 /// An alarm raised, and its cause and first-out if it is a consequence.
 type Mark = (String, Option<(String, String)>);
 
-fn marks(step: &Step) -> Vec<Mark> {
+fn marks(step: &EngineStep) -> Vec<Mark> {
     raised(step)
         .into_iter()
         .map(|a| {

@@ -21,7 +21,9 @@ use cellwatch_models::sfc::supervise::SfcChecks;
 use cellwatch_models::signal::Signal;
 use cellwatch_models::timer::checks::TimerChecks;
 use cellwatch_models::timer::drift::DriftRules;
-use cellwatch_models::timer::learn::{Edge, Event, TimerModel, Transition, MODEL_VERSION};
+use cellwatch_models::timer::learn::{
+    Event, LearnedTransition, SignalEdge, TimerModel, MODEL_VERSION,
+};
 use cellwatch_models::timer::monitor::{Outcome, TimerMonitor};
 use cellwatch_models::value::Num;
 use proptest::prelude::*;
@@ -43,7 +45,7 @@ fn bound() -> impl Strategy<Value = u64> {
     prop_oneof![4 => 0..5_000u64, 1 => Just(u64::MAX), 1 => any::<u64>()]
 }
 
-fn event(tag: &str, edge: Edge) -> Event {
+fn event(tag: &str, edge: SignalEdge) -> Event {
     Event {
         tag: tag.into(),
         edge,
@@ -53,7 +55,7 @@ fn event(tag: &str, edge: Edge) -> Event {
 /// Two transitions over A, B, C: full-state (+B in A:-B) and common (+C
 /// after +A), with windows `w1` and `w2`.
 fn model(w1: [u64; 2], w2: [u64; 2]) -> TimerModel {
-    let transition = |id, from: &[&str], ev, trigger, window: [u64; 2]| Transition {
+    let transition = |id, from: &[&str], ev, trigger, window: [u64; 2]| LearnedTransition {
         id,
         from: from.iter().map(|s| s.to_string()).collect(),
         event: ev,
@@ -71,12 +73,12 @@ fn model(w1: [u64; 2], w2: [u64; 2]) -> TimerModel {
         method: "full-state".into(),
         signals: vec!["A".into(), "B".into(), "C".into()],
         transitions: vec![
-            transition(1, &["A", "-B"], event("B", Edge::Rise), None, w1),
+            transition(1, &["A", "-B"], event("B", SignalEdge::Rise), None, w1),
             transition(
                 2,
                 &[],
-                event("C", Edge::Rise),
-                Some(event("A", Edge::Rise)),
+                event("C", SignalEdge::Rise),
+                Some(event("A", SignalEdge::Rise)),
                 w2,
             ),
         ],

@@ -85,12 +85,12 @@ fn tag(e: &CellEngine, a: &str) -> usize {
     e.tag_index(&Signal::new(a)).unwrap()
 }
 
-fn number(e: &mut CellEngine, a: &str, v: Num, at: u64) -> cellwatch_models::engine::Step {
+fn number(e: &mut CellEngine, a: &str, v: Num, at: u64) -> cellwatch_models::engine::EngineStep {
     let t = tag(e, a);
     e.on_reading(t, Reading::Number(v), at, at)
 }
 
-fn contact(e: &mut CellEngine, a: &str, v: bool, at: u64) -> cellwatch_models::engine::Step {
+fn contact(e: &mut CellEngine, a: &str, v: bool, at: u64) -> cellwatch_models::engine::EngineStep {
     let t = tag(e, a);
     e.on_reading(t, Reading::Good(v), at, at)
 }
@@ -108,7 +108,7 @@ fn load_normal(e: &mut CellEngine, at: u64) {
     }
 }
 
-fn raised(step: &cellwatch_models::engine::Step) -> Vec<String> {
+fn raised(step: &cellwatch_models::engine::EngineStep) -> Vec<String> {
     step.alarms()
         .filter(|(_, t, _)| *t == Transition::Raised)
         .map(|(a, _, _)| a.id.clone())
@@ -346,7 +346,7 @@ fn temp_limit(h: f64) -> LimitCheck {
     }
 }
 
-fn transitions(steps: &[cellwatch_models::engine::Step]) -> Vec<(String, Transition)> {
+fn transitions(steps: &[cellwatch_models::engine::EngineStep]) -> Vec<(String, Transition)> {
     steps
         .iter()
         .flat_map(|s| s.alarms().map(|(a, t, _)| (a.id.clone(), t)))
@@ -519,7 +519,7 @@ fn alarms_judged_in_a_late_batch_carry_the_source_times_the_agent_trusts() {
         reading: Reading::Good(v),
         source_time: t,
     };
-    let times = |step: &cellwatch_models::engine::Step, id: &str| -> Vec<(Transition, u64)> {
+    let times = |step: &cellwatch_models::engine::EngineStep, id: &str| -> Vec<(Transition, u64)> {
         step.alarms()
             .filter(|(a, _, _)| a.id == id)
             .map(|(_, t, at)| (t, at))
@@ -589,7 +589,7 @@ fn a_delay_run_across_a_gap_says_its_trigger_is_uncertain() {
     number(&mut e, "MODE", Num::Int(1), 0);
     number(&mut e, "TEMP", Num::Float(40.0), 1_000);
     let (temp, x006, count) = (tag(&e, "TEMP"), tag(&e, "X0.06"), tag(&e, "COUNT"));
-    let message = |step: &cellwatch_models::engine::Step, id: &str| {
+    let message = |step: &cellwatch_models::engine::EngineStep, id: &str| {
         step.alarms()
             .find(|(a, t, _)| a.id == id && *t == Transition::Raised)
             .map(|(a, _, _)| a.message.clone())

@@ -7,7 +7,7 @@
 use std::future::Future;
 use std::time::Duration;
 
-use cellwatch_models::engine::Step;
+use cellwatch_models::engine::EngineStep;
 use tokio::sync::oneshot;
 
 use super::answers;
@@ -228,7 +228,7 @@ impl CellLoop {
                 format!("{} {} by {}{said}", cmd.action, cmd.alarm, cmd.operator),
                 step,
             ),
-            Err(why) => (false, why.to_string(), Step::default()),
+            Err(why) => (false, why.to_string(), EngineStep::default()),
         };
         let record = CommandRecord {
             verified,
@@ -264,7 +264,7 @@ impl CellLoop {
                 source: noted.source,
                 ..record
             };
-            self.dispatch(now, Input::Command(record), Step::default(), 0)
+            self.dispatch(now, Input::Command(record), EngineStep::default(), 0)
                 .await;
         }
         let _ = reply.send(outcome);
@@ -274,7 +274,7 @@ impl CellLoop {
     pub(super) async fn summaries(&mut self, ended: Vec<refusals::Summary>, now: u64) {
         for s in ended {
             let record = CommandRecord::refused(s.detail(), s.source, s.count);
-            self.dispatch(now, Input::Command(record), Step::default(), 0)
+            self.dispatch(now, Input::Command(record), EngineStep::default(), 0)
                 .await;
         }
     }
@@ -325,7 +325,7 @@ impl CellLoop {
                 ),
             )
         };
-        self.dispatch(now, Input::Command(request), Step::default(), 0)
+        self.dispatch(now, Input::Command(request), EngineStep::default(), 0)
             .await;
         let written = self.write_when_journaled(Some(tag), Write::Value(value), WRITE_TIMEOUT);
         let back = self.written_tx.clone();

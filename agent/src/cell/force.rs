@@ -13,7 +13,7 @@
 //! way. A `stop` names a chart and pulses its stop switch: permission is
 //! its only check.
 
-use cellwatch_models::engine::{Step, Value};
+use cellwatch_models::engine::{EngineStep, Value};
 use cellwatch_models::sfc::force;
 use cellwatch_models::signal::Signal;
 use tokio::sync::oneshot;
@@ -32,7 +32,7 @@ impl CellLoop {
     /// Journals one row of a command (and hands it to every sink).
     async fn record(&mut self, record: CommandRecord) {
         let now = self.clock.now_ms();
-        self.dispatch(now, Input::Command(record), Step::default(), 0)
+        self.dispatch(now, Input::Command(record), EngineStep::default(), 0)
             .await;
     }
 

@@ -7,13 +7,13 @@
 use std::time::Instant;
 
 use super::CellLoop;
-use cellwatch_models::engine::Step;
+use cellwatch_models::engine::EngineStep;
 
 impl CellLoop {
     /// The engine's step for a gap in `tags` (`None`: any tag may have
     /// lost changes) of `values` values (0: not known), and the warning
     /// when one is due.
-    pub(super) fn lost(&mut self, tags: Option<&[usize]>, values: u64, why: &str) -> Step {
+    pub(super) fn lost(&mut self, tags: Option<&[usize]>, values: u64, why: &str) -> EngineStep {
         if let Some(times) = self.gaps.happened(Instant::now()) {
             tracing::warn!(
                 cell = %self.cell,

@@ -3,7 +3,7 @@
 //! [`CellLoop::run`] takes three inputs — source events, requests from the
 //! services (snapshot, operator commands) and the passing of time — and
 //! turns each into one [`CellStep`]: what came in, the engine's
-//! [`Step`], and the payloads to publish.
+//! [`EngineStep`], and the payloads to publish.
 //! The step goes to every sink in order (journal, Zenoh, metrics, console),
 //! then to each sink's `after` (the journal's rows queued for its writer);
 //! nothing in the loop knows about Zenoh, SQLite or Prometheus.
@@ -31,7 +31,7 @@ pub mod timers;
 use std::future::Future;
 use std::time::Duration;
 
-use cellwatch_models::engine::{CellEngine, HistoryKind, Step};
+use cellwatch_models::engine::{CellEngine, EngineStep, HistoryKind};
 use tokio::sync::{mpsc, oneshot, watch};
 
 pub use crate::step::{
@@ -67,7 +67,7 @@ pub struct CellLoop {
     state_since: u64,
     state_kind: HistoryKind,
     /// What was restored from the journal, dispatched first by `run`.
-    restored: Option<Step>,
+    restored: Option<EngineStep>,
     /// When the values being handled were received (see [`CellStep`]).
     received: Option<std::time::Instant>,
     /// `Some(why)` while the journal cannot write: the `journal` alarm.
@@ -357,7 +357,7 @@ impl CellLoop {
     /// (republished once, each alarm as `restored`) and the machine state
     /// entered at `since` by a change of `kind`.
     #[must_use]
-    pub fn restored(mut self, step: Step, state: Option<(u64, HistoryKind)>) -> CellLoop {
+    pub fn restored(mut self, step: EngineStep, state: Option<(u64, HistoryKind)>) -> CellLoop {
         if let Some((since, kind)) = state {
             self.state_since = since;
             self.state_kind = kind;
@@ -579,7 +579,7 @@ impl CellLoop {
         self.deliver(CellStep {
             at: now,
             input: Input::StateBeat,
-            engine: Step::default(),
+            engine: EngineStep::default(),
             alarms: Vec::new(),
             state,
             queue_depth: 0,
@@ -647,7 +647,7 @@ impl CellLoop {
     }
 
     /// Builds the payloads for `step` and hands it to the sinks.
-    async fn dispatch(&mut self, now: u64, input: Input, step: Step, queue_depth: usize) {
+    async fn dispatch(&mut self, now: u64, input: Input, step: EngineStep, queue_depth: usize) {
         let alarms = step
             .alarms()
             .map(|(alarm, transition, at)| {

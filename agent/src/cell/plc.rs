@@ -10,7 +10,7 @@ use tokio::sync::oneshot;
 
 use super::{CellLoop, CommandOutcome, CommandRecord, Input, Stage, Then, Written, WRITE_TIMEOUT};
 use crate::sources::Write;
-use cellwatch_models::engine::Step;
+use cellwatch_models::engine::EngineStep;
 
 impl CellLoop {
     /// Carries out an authorised acknowledgement of PLC alarm
@@ -38,7 +38,7 @@ impl CellLoop {
                 ..record.saying(false, &why)
             };
             let outcome = CommandOutcome::new(false, why);
-            self.dispatch(now, Input::Command(record), Step::default(), 0)
+            self.dispatch(now, Input::Command(record), EngineStep::default(), 0)
                 .await;
             let _ = reply.send(outcome);
             return;
@@ -54,7 +54,7 @@ impl CellLoop {
                 ),
             )
         };
-        self.dispatch(now, Input::Command(request), Step::default(), 0)
+        self.dispatch(now, Input::Command(request), EngineStep::default(), 0)
             .await;
         let to_plc = format!("acknowledged in cellwatch by {}{said}", record.operator);
         let written = self.write_when_journaled(

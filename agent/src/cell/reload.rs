@@ -7,7 +7,7 @@
 //! journal, the bus session and the sinks go on untouched: nothing is
 //! lost, and history has no gap.
 
-use cellwatch_models::engine::Step;
+use cellwatch_models::engine::EngineStep;
 use tokio::sync::{mpsc, oneshot};
 
 use super::swap::{Reload, ReloadAsk, ReloadBusy};
@@ -93,7 +93,7 @@ impl CellLoop {
             source: "plant".into(),
             count: 1,
         };
-        self.dispatch(now, Input::Command(record), Step::default(), 0)
+        self.dispatch(now, Input::Command(record), EngineStep::default(), 0)
             .await;
         let settled = self.settled();
         self.start_task(async move {
@@ -136,7 +136,7 @@ impl CellLoop {
                 .clone()
                 .saying(true, &format!("reload asked by {}", record.operator))
         };
-        self.dispatch(now, Input::Command(request), Step::default(), 0)
+        self.dispatch(now, Input::Command(request), EngineStep::default(), 0)
             .await;
         let settled = self.settled();
         let back = self.written_tx.clone();

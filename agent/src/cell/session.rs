@@ -8,7 +8,7 @@
 //! the OPC UA user.
 
 use cellwatch_models::alarm::CommandRefused;
-use cellwatch_models::engine::Step;
+use cellwatch_models::engine::EngineStep;
 use tokio::sync::{mpsc, oneshot};
 
 use super::{CellLoop, CommandOutcome, CommandRecord, Input, Stage};
@@ -81,7 +81,7 @@ impl CellLoop {
             let detail = refusal.to_string();
             tracing::warn!(source = %base.source, %detail, "a command over OPC UA refused");
             let record = base.saying(false, &detail);
-            self.dispatch(now, Input::Command(record), Step::default(), 0)
+            self.dispatch(now, Input::Command(record), EngineStep::default(), 0)
                 .await;
             let settled = self.settled();
             self.start_task(async move {
@@ -155,7 +155,7 @@ impl CellLoop {
                 )),
                 step,
             ),
-            Err(o) => (o, Step::default()),
+            Err(o) => (o, EngineStep::default()),
         };
         let (accepted, detail) = match &outcome {
             SessionOutcome::Accepted(d) => (true, d.as_str()),

@@ -74,7 +74,7 @@ pub(crate) fn learn(args: &LearnArgs, out: &mut dyn Write) -> Result<(), Failure
     )
     .map_err(io)?;
     for t in &learned.model.transitions {
-        let edge = if t.event.edge == learn::Edge::Rise {
+        let edge = if t.event.edge == learn::SignalEdge::Rise {
             "+"
         } else {
             "-"
@@ -85,7 +85,7 @@ pub(crate) fn learn(args: &LearnArgs, out: &mut dyn Write) -> Result<(), Failure
             t.id,
             t.trigger.as_ref().map_or(String::new(), |e| format!(
                 "after {}{} ",
-                if e.edge == learn::Edge::Rise {
+                if e.edge == learn::SignalEdge::Rise {
                     "+"
                 } else {
                     "-"

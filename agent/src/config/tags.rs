@@ -6,7 +6,7 @@ use cellwatch_models::expr::Expr;
 use cellwatch_models::machinery::StateMachine;
 use cellwatch_models::programs::Dialect;
 use cellwatch_models::signal::{AddressError, Signal};
-use cellwatch_models::value::{Comparison, Operand, ValueType};
+use cellwatch_models::value::{CmpOperand, Comparison, ValueType};
 
 /// A tag: a node on the server and the PLC address the models use.
 #[derive(Debug, Clone, PartialEq)]
@@ -164,8 +164,8 @@ pub(crate) fn map_signals(e: Expr, f: &dyn Fn(&Signal) -> Signal) -> Expr {
         Expr::Lit(s, n) => match Comparison::of_signal(&s) {
             Some(mut c) => {
                 c.lhs = f(&c.lhs);
-                if let Operand::Tag(t) = &c.rhs {
-                    c.rhs = Operand::Tag(f(t));
+                if let CmpOperand::Tag(t) = &c.rhs {
+                    c.rhs = CmpOperand::Tag(f(t));
                 }
                 Expr::Lit(c.signal(), n)
             }

@@ -7,7 +7,8 @@
 //! When a finding is due (its delay) is `delays.rs`'s.
 
 use super::{
-    BadQuality, CellEngine, EngineEvent, FaultMark, Finding, HistoryKind, MachineState, Step, Tag,
+    BadQuality, CellEngine, EngineEvent, EngineStep, FaultMark, Finding, HistoryKind, MachineState,
+    Tag,
 };
 use crate::alarm::{AlarmKind, Consequence, Severity, Transition};
 use crate::signal::Signal;
@@ -18,8 +19,8 @@ const QUALITY_NAMED: usize = 20;
 impl CellEngine {
     /// A condition of the agent itself (`journal`: it cannot write) began
     /// (`problem` is why) or ended.
-    pub fn on_system(&mut self, id: &str, problem: Option<&str>, now: u64) -> Step {
-        let mut step = Step::default();
+    pub fn on_system(&mut self, id: &str, problem: Option<&str>, now: u64) -> EngineStep {
+        let mut step = EngineStep::default();
         let finding = Finding {
             at: None,
             id: id.into(),
@@ -39,7 +40,7 @@ impl CellEngine {
         step
     }
 
-    pub(super) fn collect_observations(&mut self, step: &mut Step) {
+    pub(super) fn collect_observations(&mut self, step: &mut EngineStep) {
         for set in &mut self.sets {
             set.take_observations(&mut step.observations);
         }
@@ -105,7 +106,7 @@ impl CellEngine {
 
     /// Applies a finding to the alarm book and reports the transition, at
     /// `now` (never before the alarm's last transition).
-    pub(super) fn announce(&mut self, mut f: Finding, now: u64, step: &mut Step) {
+    pub(super) fn announce(&mut self, mut f: Finding, now: u64, step: &mut EngineStep) {
         let now = match self.alarms.get(&f.id) {
             Some(a) => now.max(a.raised_at).max(a.cleared_at.unwrap_or(0)),
             None => now,
@@ -244,7 +245,7 @@ impl CellEngine {
             .collect()
     }
 
-    pub(super) fn update_state(&mut self, now: u64, step: &mut Step) {
+    pub(super) fn update_state(&mut self, now: u64, step: &mut EngineStep) {
         if !self.rules.modes.is_empty() {
             self.update_modes(now, step);
         }

@@ -16,7 +16,7 @@ use super::{
 use crate::comments::CommentDb;
 use crate::consequence::Relation;
 use crate::signal::Signal;
-use crate::value::{Comparison, Operand};
+use crate::value::{CmpOperand, Comparison};
 
 impl CellEngine {
     /// An engine for `cell` over `tags`, running `sets`. Starts offline
@@ -77,8 +77,8 @@ impl CellEngine {
             };
             let lhs = find(&c.lhs)?;
             let rhs = match &c.rhs {
-                Operand::Const(n) => Rhs::Const(*n),
-                Operand::Tag(a) => Rhs::Tag(find(a)?),
+                CmpOperand::Const(n) => Rhs::Const(*n),
+                CmpOperand::Tag(a) => Rhs::Tag(find(a)?),
             };
             let tag = tags.len();
             tags.push(Tag {

@@ -6,12 +6,12 @@
 //! Whether a delivered value is taken at all (a duplicate, bad quality) is
 //! `reading.rs`'s.
 
-use super::{CellEngine, Derived, Finding, PartCounting, Rhs, Step, Value};
+use super::{CellEngine, Derived, EngineStep, Finding, PartCounting, Rhs, Value};
 use crate::value::Num;
 
 impl CellEngine {
     /// Counts tag `tag` known or unknown.
-    fn known_changed(&mut self, tag: usize, was: bool, is: bool, step: &mut Step) {
+    fn known_changed(&mut self, tag: usize, was: bool, is: bool, step: &mut EngineStep) {
         if tag >= self.configured || was == is {
             return;
         }
@@ -31,7 +31,7 @@ impl CellEngine {
         tag: usize,
         now: u64,
         findings: &mut Vec<Finding>,
-        step: &mut Step,
+        step: &mut EngineStep,
     ) -> bool {
         if self.others[tag].is_some() {
             self.set_other(tag, None, now, findings, step)
@@ -48,7 +48,7 @@ impl CellEngine {
         value: Option<bool>,
         now: u64,
         findings: &mut Vec<Finding>,
-        step: &mut Step,
+        step: &mut EngineStep,
     ) -> bool {
         if value.is_some() && self.others[tag].is_some() {
             // A number or string tag now sends booleans: forget the
@@ -97,7 +97,7 @@ impl CellEngine {
         value: Option<Value>,
         now: u64,
         findings: &mut Vec<Finding>,
-        step: &mut Step,
+        step: &mut EngineStep,
     ) -> bool {
         if self.values[tag].is_some() {
             // A boolean tag now sends numbers (or the reverse): forget
@@ -159,7 +159,7 @@ impl CellEngine {
 
     /// Recomputes the work order from its tags; a change goes to `step`.
     /// An unknown value (unit out of reach) keeps the last known one.
-    fn order_changed(&mut self, step: &mut Step) {
+    fn order_changed(&mut self, step: &mut EngineStep) {
         let (item, target) = self.order_tags;
         let mut order = self.order.clone();
         match item.and_then(|t| self.others[t].as_ref()) {

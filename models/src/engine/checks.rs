@@ -10,7 +10,7 @@
 use crate::alarm::{Alarm, AlarmKind, Severity};
 use crate::explain::Culprit;
 use crate::signal::Signal;
-use crate::value::{Comparison, Num, Operand};
+use crate::value::{CmpOperand, Comparison, Num};
 
 /// An alarm a check set can raise, known before it ever is (so that it
 /// can be taken out of service before its first occurrence).
@@ -204,7 +204,7 @@ pub(crate) fn read_with_compared(signal: Signal, out: &mut Vec<Signal>) {
     add(signal);
     if let Some(c) = compared {
         add(c.lhs);
-        if let Operand::Tag(t) = c.rhs {
+        if let CmpOperand::Tag(t) = c.rhs {
             add(t);
         }
     }

@@ -9,7 +9,7 @@
 //! as the alarm's, by whom the server says. An operator acknowledging it
 //! in cellwatch is the agent's business: it asks the PLC first.
 
-use super::{CellEngine, EngineEvent, Finding, Step};
+use super::{CellEngine, EngineEvent, EngineStep, Finding};
 use crate::alarm::{AlarmKind, Severity, Transition};
 
 /// One event of a PLC condition, as the source read it.
@@ -65,8 +65,8 @@ impl CellEngine {
     /// An event of a PLC condition: its alarm raised, updated or cleared
     /// as its active state says, and acknowledged if the PLC says it is
     /// and cellwatch did not know.
-    pub fn on_condition(&mut self, c: PlcCondition, now: u64) -> Step {
-        let mut step = Step::default();
+    pub fn on_condition(&mut self, c: PlcCondition, now: u64) -> EngineStep {
+        let mut step = EngineStep::default();
         if !self.is_condition(&c.id) {
             return step;
         }
@@ -103,8 +103,8 @@ impl CellEngine {
     /// the events of one prefix): every alarm of that prefix it no longer
     /// holds ended at the PLC and was acknowledged there (a server keeps a
     /// condition while it is active or unacknowledged).
-    pub fn on_conditions_held(&mut self, prefix: &str, held: &[String], now: u64) -> Step {
-        let mut step = Step::default();
+    pub fn on_conditions_held(&mut self, prefix: &str, held: &[String], now: u64) -> EngineStep {
+        let mut step = EngineStep::default();
         let prefix = format!("{prefix}-");
         let gone: Vec<(String, bool, bool)> = self
             .alarms
@@ -141,7 +141,7 @@ impl CellEngine {
         step
     }
 
-    fn acked_at_plc(&mut self, id: &str, by: &str, now: u64, step: &mut Step) {
+    fn acked_at_plc(&mut self, id: &str, by: &str, now: u64, step: &mut EngineStep) {
         if self.alarms.get(id).is_none_or(|a| a.acknowledged) {
             return;
         }
@@ -178,7 +178,7 @@ mod tests {
         }
     }
 
-    fn transitions(step: &Step) -> Vec<Transition> {
+    fn transitions(step: &EngineStep) -> Vec<Transition> {
         step.alarms().map(|(_, t, _)| t).collect()
     }
 

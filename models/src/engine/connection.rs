@@ -5,7 +5,7 @@
 //! lost (the values at the cut back before the changes made meanwhile).
 //! The values the source delivers are `reading.rs`'s.
 
-use super::{uncertain_trigger, AtCut, CellEngine, Finding, Lost, Rhs, Step};
+use super::{uncertain_trigger, AtCut, CellEngine, EngineStep, Finding, Lost, Rhs};
 use crate::alarm::{AlarmKind, Severity};
 use crate::signal::Signal;
 
@@ -15,7 +15,7 @@ impl CellEngine {
     /// of them when it knows how many. Until each such tag's next value,
     /// an alarm raised or cleared on it carries "trigger uncertain" and
     /// names no trigger: the change that tripped it may be among the lost.
-    pub fn on_gap(&mut self, tags: Option<&[usize]>, values: u64, why: &str) -> Step {
+    pub fn on_gap(&mut self, tags: Option<&[usize]>, values: u64, why: &str) -> EngineStep {
         let n = self.tags.len();
         let lost = self.lost.get_or_insert_with(|| Lost {
             tags: vec![false; n],
@@ -63,10 +63,10 @@ impl CellEngine {
                 }
             }
         }
-        Step {
+        EngineStep {
             gaps: 1,
             lost_values: values,
-            ..Step::default()
+            ..EngineStep::default()
         }
     }
 
@@ -76,9 +76,9 @@ impl CellEngine {
     /// what it was then, so that the changes that follow are judged
     /// against it — a contact that opened during the cut is a trigger,
     /// not a value out of nowhere. Call it before those changes.
-    pub fn on_resumed(&mut self, now: u64) -> Step {
+    pub fn on_resumed(&mut self, now: u64) -> EngineStep {
         self.clock = now;
-        let mut step = Step::default();
+        let mut step = EngineStep::default();
         let Some(cut) = self.at_cut.take() else {
             return step;
         };
@@ -149,9 +149,9 @@ impl CellEngine {
     }
 
     /// The connection to the PLC came up or went down.
-    pub fn on_connection(&mut self, up: bool, now: u64) -> Step {
+    pub fn on_connection(&mut self, up: bool, now: u64) -> EngineStep {
         self.clock = now;
-        let mut step = Step::default();
+        let mut step = EngineStep::default();
         if Some(up) == self.connected {
             return step;
         }

@@ -6,13 +6,13 @@
 //! held back is said, shelves expire, recordings end). What a finding
 //! does once its delay is over is `announce.rs`'s.
 
-use super::{uncertain_trigger, CellEngine, EngineEvent, Finding, Step, QUALITY_UPDATE_MS};
+use super::{uncertain_trigger, CellEngine, EngineEvent, EngineStep, Finding, QUALITY_UPDATE_MS};
 use crate::alarm::Transition;
 
 impl CellEngine {
     /// Announces the delayed findings whose delay ended by `at`: by the
     /// clock (`source` false) or in source time (`source` true).
-    pub(super) fn run_out(&mut self, at: u64, source: bool, now: u64, step: &mut Step) {
+    pub(super) fn run_out(&mut self, at: u64, source: bool, now: u64, step: &mut EngineStep) {
         let due: Vec<String> = self
             .pending
             .iter()
@@ -64,12 +64,12 @@ impl CellEngine {
     }
 
     /// Time passed: timers fire.
-    pub fn advance(&mut self, now: u64) -> Step {
+    pub fn advance(&mut self, now: u64) -> EngineStep {
         let mut findings = Vec::new();
         for set in &mut self.sets {
             set.advance(now, &mut findings);
         }
-        let mut step = Step::default();
+        let mut step = EngineStep::default();
         for f in findings {
             self.apply(f, now, &mut step);
         }
@@ -104,14 +104,14 @@ impl CellEngine {
         step
     }
 
-    pub(super) fn apply(&mut self, f: Finding, now: u64, step: &mut Step) {
+    pub(super) fn apply(&mut self, f: Finding, now: u64, step: &mut EngineStep) {
         self.apply_at(f, now, now, step);
     }
 
     /// [`CellEngine::apply`] of a finding whose condition began at `at`
     /// (source time) and is taken at `now` (the clock): its delay runs from
     /// both, each compared only with its own kind of time.
-    pub(super) fn apply_at(&mut self, mut f: Finding, at: u64, now: u64, step: &mut Step) {
+    pub(super) fn apply_at(&mut self, mut f: Finding, at: u64, now: u64, step: &mut EngineStep) {
         let at = f.at.unwrap_or(at);
         if self.lost.is_some() || self.lost_now.is_some() {
             if let Some(why) = self.uncertain(&f) {

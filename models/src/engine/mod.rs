@@ -2,7 +2,7 @@
 //!
 //! [`CellEngine`] is fed tag values (with their quality), connection changes,
 //! the passing of time and operator commands. Each input returns one
-//! [`Step`]: the alarm transitions and machine-state changes it caused, the
+//! [`EngineStep`]: the alarm transitions and machine-state changes it caused, the
 //! measurements the checks made, duplicates ignored, the change in the
 //! number of unknown tags and the parts produced. The agent never reads the
 //! engine back to learn what changed.
@@ -183,7 +183,7 @@ pub enum EngineEvent {
 
 /// Everything one input to the engine did.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct Step {
+pub struct EngineStep {
     /// Alarm transitions and state changes, in order.
     pub events: Vec<EngineEvent>,
     /// Measurements the checks made (transition durations).
@@ -231,7 +231,7 @@ pub struct Order {
     pub target: Option<u64>,
 }
 
-impl Step {
+impl EngineStep {
     /// Whether nothing the sinks care about happened.
     pub fn is_empty(&self) -> bool {
         self.events.is_empty()

@@ -15,7 +15,7 @@
 //! Not here: shelving (an operator's, timed) and out of service
 //! (maintenance) are the alarm book's.
 
-use super::{CellEngine, EngineEvent, Step};
+use super::{CellEngine, EngineEvent, EngineStep};
 use crate::alarm::AlarmPattern;
 use crate::alarm::{AlarmState, DesignedSuppression, Transition};
 use crate::expr::Expr;
@@ -82,7 +82,7 @@ impl CellEngine {
     /// Re-judges every mode on the values now; each one entered or left is
     /// an event, and every alarm not back to normal whose designed
     /// suppression changes with it is one too.
-    pub(super) fn update_modes(&mut self, now: u64, step: &mut Step) {
+    pub(super) fn update_modes(&mut self, now: u64, step: &mut EngineStep) {
         let mut changed = false;
         for k in 0..self.rules.modes.len() {
             let Some(holds) = self.mode_holds(k) else {
@@ -176,7 +176,7 @@ mod tests {
         (e, d104, x006)
     }
 
-    fn modes(step: &Step) -> Vec<(&str, bool)> {
+    fn modes(step: &EngineStep) -> Vec<(&str, bool)> {
         step.modes().map(|(m, entered, _)| (m, entered)).collect()
     }
 

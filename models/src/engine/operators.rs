@@ -3,7 +3,7 @@
 //! answers with its step, or why it is refused. An acknowledgement made at
 //! the PLC is `conditions.rs`'s.
 
-use super::{CellEngine, EngineEvent, Step};
+use super::{CellEngine, EngineEvent, EngineStep};
 use crate::alarm::{CommandRefused, Transition};
 
 impl CellEngine {
@@ -18,18 +18,18 @@ impl CellEngine {
         operator: &str,
         comment: Option<&str>,
         now: u64,
-    ) -> Result<Step, CommandRefused> {
+    ) -> Result<EngineStep, CommandRefused> {
         let alarm = self.alarms.acknowledge(id, operator, comment)?.clone();
         if self.is_condition(id) {
             self.alarms.forget_if_normal(id);
         }
-        Ok(Step {
+        Ok(EngineStep {
             events: vec![EngineEvent::Alarm {
                 alarm,
                 transition: Transition::Acknowledged,
                 at: now,
             }],
-            ..Step::default()
+            ..EngineStep::default()
         })
     }
 
@@ -46,7 +46,7 @@ impl CellEngine {
         reason: &str,
         until: Option<u64>,
         now: u64,
-    ) -> Result<Step, CommandRefused> {
+    ) -> Result<EngineStep, CommandRefused> {
         let shelf = crate::alarm::Shelf {
             by: operator.to_string(),
             reason: reason.to_string(),
@@ -54,13 +54,13 @@ impl CellEngine {
             until,
         };
         let alarm = self.alarms.shelve(id, shelf)?.clone();
-        Ok(Step {
+        Ok(EngineStep {
             events: vec![EngineEvent::Alarm {
                 alarm,
                 transition: Transition::Shelved,
                 at: now,
             }],
-            ..Step::default()
+            ..EngineStep::default()
         })
     }
 
@@ -68,15 +68,15 @@ impl CellEngine {
     ///
     /// # Errors
     /// No such alarm, or it is not shelved.
-    pub fn unshelve(&mut self, id: &str, now: u64) -> Result<Step, CommandRefused> {
+    pub fn unshelve(&mut self, id: &str, now: u64) -> Result<EngineStep, CommandRefused> {
         let alarm = self.alarms.unshelve(id)?.clone();
-        Ok(Step {
+        Ok(EngineStep {
             events: vec![EngineEvent::Alarm {
                 alarm,
                 transition: Transition::Unshelved,
                 at: now,
             }],
-            ..Step::default()
+            ..EngineStep::default()
         })
     }
 
@@ -93,7 +93,7 @@ impl CellEngine {
         operator: &str,
         reason: &str,
         now: u64,
-    ) -> Result<Step, CommandRefused> {
+    ) -> Result<EngineStep, CommandRefused> {
         let removal = crate::alarm::Removal {
             by: operator.to_string(),
             reason: reason.to_string(),
@@ -104,13 +104,13 @@ impl CellEngine {
         for set in &mut self.sets {
             set.reset(id);
         }
-        let mut step = Step {
+        let mut step = EngineStep {
             events: vec![EngineEvent::Alarm {
                 alarm,
                 transition: Transition::OutOfService,
                 at: now,
             }],
-            ..Step::default()
+            ..EngineStep::default()
         };
         self.update_state(now, &mut step);
         Ok(step)
@@ -121,15 +121,15 @@ impl CellEngine {
     ///
     /// # Errors
     /// No such alarm, or it is not out of service.
-    pub fn return_to_service(&mut self, id: &str, now: u64) -> Result<Step, CommandRefused> {
+    pub fn return_to_service(&mut self, id: &str, now: u64) -> Result<EngineStep, CommandRefused> {
         let (alarm, held) = self.alarms.return_to_service(id)?;
-        let mut step = Step {
+        let mut step = EngineStep {
             events: vec![EngineEvent::Alarm {
                 alarm,
                 transition: Transition::InService,
                 at: now,
             }],
-            ..Step::default()
+            ..EngineStep::default()
         };
         if let Some(f) = held {
             self.apply(f, now, &mut step);
@@ -142,18 +142,23 @@ impl CellEngine {
     ///
     /// # Errors
     /// No such alarm, not latched, not active, or its condition still holds.
-    pub fn reset(&mut self, id: &str, operator: &str, now: u64) -> Result<Step, CommandRefused> {
+    pub fn reset(
+        &mut self,
+        id: &str,
+        operator: &str,
+        now: u64,
+    ) -> Result<EngineStep, CommandRefused> {
         let alarm = self.alarms.reset(id, operator, now)?.clone();
         for set in &mut self.sets {
             set.reset(id);
         }
-        let mut step = Step {
+        let mut step = EngineStep {
             events: vec![EngineEvent::Alarm {
                 alarm,
                 transition: Transition::Cleared,
                 at: now,
             }],
-            ..Step::default()
+            ..EngineStep::default()
         };
         self.update_state(now, &mut step);
         Ok(step)

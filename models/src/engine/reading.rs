@@ -6,14 +6,20 @@
 //! (`changes.rs`) and the findings it brought applied, causes first.
 
 use super::{
-    BadQuality, CellEngine, EngineEvent, Finding, Reading, Step, TagReading, Value,
+    BadQuality, CellEngine, EngineEvent, EngineStep, Finding, Reading, TagReading, Value,
     QUALITY_UPDATE_MS,
 };
 use crate::value::Num;
 
 impl CellEngine {
     /// A value (or bad quality) for tag `tag`, with its source timestamp.
-    pub fn on_reading(&mut self, tag: usize, reading: Reading, source_time: u64, now: u64) -> Step {
+    pub fn on_reading(
+        &mut self,
+        tag: usize,
+        reading: Reading,
+        source_time: u64,
+        now: u64,
+    ) -> EngineStep {
         self.on_readings(
             &[TagReading {
                 tag,
@@ -26,7 +32,7 @@ impl CellEngine {
 
     /// Values delivered together (one publish), in source-time order: one
     /// step for all.
-    pub fn on_readings(&mut self, readings: &[TagReading], now: u64) -> Step {
+    pub fn on_readings(&mut self, readings: &[TagReading], now: u64) -> EngineStep {
         self.readings(readings, now, false).0
     }
 
@@ -35,14 +41,23 @@ impl CellEngine {
     /// how many readings it took (at least one, unless `readings` is
     /// empty). The caller publishes the alarm at once and hands the rest
     /// in again, so an alarm never waits for the changes behind it.
-    pub fn on_readings_to_alarm(&mut self, readings: &[TagReading], now: u64) -> (Step, usize) {
+    pub fn on_readings_to_alarm(
+        &mut self,
+        readings: &[TagReading],
+        now: u64,
+    ) -> (EngineStep, usize) {
         self.readings(readings, now, true)
     }
 
-    fn readings(&mut self, readings: &[TagReading], now: u64, to_alarm: bool) -> (Step, usize) {
+    fn readings(
+        &mut self,
+        readings: &[TagReading],
+        now: u64,
+        to_alarm: bool,
+    ) -> (EngineStep, usize) {
         self.clock = now;
         self.begin_settling(now);
-        let mut step = Step::default();
+        let mut step = EngineStep::default();
         let mut findings = Vec::new();
         let mut used = 0;
         for r in readings {
@@ -78,7 +93,7 @@ impl CellEngine {
         r: &TagReading,
         now: u64,
         findings: &mut Vec<Finding>,
-        step: &mut Step,
+        step: &mut EngineStep,
     ) -> bool {
         let tag = r.tag;
         if tag >= self.configured {
@@ -351,7 +366,7 @@ mod tests {
         }
         let used: Vec<usize> = parts.iter().map(|(n, _)| *n).collect();
         assert_eq!(used, [2, 2, 1], "cut after the raise and after the clear");
-        let alarms = |p: &(usize, Step)| alarm_transitions(&p.1.events);
+        let alarms = |p: &(usize, EngineStep)| alarm_transitions(&p.1.events);
         assert_eq!(alarms(&parts[0]), [("ese".to_string(), Transition::Raised)]);
         assert_eq!(
             alarms(&parts[1]),

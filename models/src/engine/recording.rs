@@ -5,12 +5,12 @@
 //! `recorder.rs`'s.
 
 use super::recorder::{Read, Recorder};
-use super::{CellEngine, RecorderConfig, RecorderFill, Step, Tag};
+use super::{CellEngine, EngineStep, RecorderConfig, RecorderFill, Tag};
 use crate::alarm::Transition;
 
 /// The engine's side: the recorder is built over the tags the checks read,
 /// fed by `set_value`/`set_other`, started by `announce` and emptied into
-/// each [`Step`].
+/// each [`EngineStep`].
 impl CellEngine {
     /// Keeps, for every alarm raised whose check reads signals, the changes
     /// of those signals around its raise, by `config` (the recorder is off
@@ -28,8 +28,8 @@ impl CellEngine {
     /// Ends every flight recording under way at `now` — the agent stops,
     /// or a reload replaces this engine — so that none is lost: each holds
     /// what came until then (`truncated.end` [`Cut::Stopped`](super::Cut::Stopped)).
-    pub fn end_recordings(&mut self, now: u64) -> Step {
-        let mut step = Step::default();
+    pub fn end_recordings(&mut self, now: u64) -> EngineStep {
+        let mut step = EngineStep::default();
         if let Some(recorder) = &mut self.recorder {
             recorder.finish_all(now);
             recorder.take_done(&mut step.recordings);

@@ -6,7 +6,8 @@
 //! agent's.
 
 use super::{
-    BadQuality, Carried, CellEngine, EngineEvent, MachineState, Reading, Step, TagReading, Value,
+    BadQuality, Carried, CellEngine, EngineEvent, EngineStep, MachineState, Reading, TagReading,
+    Value,
 };
 use crate::alarm::{Alarm, AlarmKind, Transition};
 use crate::value::Num;
@@ -31,8 +32,13 @@ impl CellEngine {
     /// reported once as [`Transition::Restored`] (not a new raise). Fresh
     /// values then decide: a non-latched alarm clears or stays as its check
     /// says; a latched one waits for a reset as before.
-    pub fn restore(&mut self, alarms: Vec<Alarm>, state: Option<MachineState>, now: u64) -> Step {
-        let mut step = Step::default();
+    pub fn restore(
+        &mut self,
+        alarms: Vec<Alarm>,
+        state: Option<MachineState>,
+        now: u64,
+    ) -> EngineStep {
+        let mut step = EngineStep::default();
         for alarm in alarms {
             let id = alarm.id.clone();
             if alarm.active {
@@ -106,7 +112,7 @@ impl CellEngine {
     /// new check's condition that holds raises. What was under way is
     /// started again from here: a condition waiting out its delay, a
     /// transition being timed, a step's supervision time.
-    pub fn take_over(&mut self, carried: Carried, now: u64) -> Vec<Step> {
+    pub fn take_over(&mut self, carried: Carried, now: u64) -> Vec<EngineStep> {
         let Carried {
             alarms,
             state,

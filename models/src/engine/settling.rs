@@ -16,7 +16,7 @@
 //! has heard all it reads (a limit on its number, a discrete alarm on its
 //! contact) is raised at once.
 
-use super::{uncertain_trigger, CellEngine, Finding, Held, Settling, Step};
+use super::{uncertain_trigger, CellEngine, EngineStep, Finding, Held, Settling};
 
 /// How long after a connection the first values are waited for before a
 /// fault found meanwhile is raised with what is still unknown named, ms.
@@ -70,7 +70,7 @@ impl CellEngine {
     /// A check's finding at source time `at`: held while the first values
     /// come (a fault not yet raised, or the clear of one held), applied
     /// otherwise.
-    pub(super) fn judge_at(&mut self, f: Finding, at: u64, now: u64, step: &mut Step) {
+    pub(super) fn judge_at(&mut self, f: Finding, at: u64, now: u64, step: &mut EngineStep) {
         let Some(settling) = self.settling.as_ref() else {
             return self.apply_at(f, at, now, step);
         };
@@ -107,7 +107,7 @@ impl CellEngine {
     /// still held is said again with the values now and raised, at the
     /// time it was first seen. The caller brings the machine state up to
     /// date.
-    pub(super) fn settle(&mut self, now: u64, step: &mut Step) {
+    pub(super) fn settle(&mut self, now: u64, step: &mut EngineStep) {
         let done = self
             .settling
             .as_ref()

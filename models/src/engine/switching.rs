@@ -11,7 +11,7 @@ use crate::consequence::{short_of_faults, AlarmFacts};
 use crate::explain::{explain_partial, read_comparisons, Polarity};
 use crate::signal::Signal;
 use crate::switching::SwitchingFunction;
-use crate::value::{Comparison, Num, Operand};
+use crate::value::{CmpOperand, Comparison, Num};
 
 /// One switching-function check: a fault coil and its fault value.
 #[derive(Debug, Clone)]
@@ -134,8 +134,8 @@ impl SwitchingChecks {
             .iter()
             .filter_map(Comparison::of_signal)
             .flat_map(|c| match c.rhs {
-                Operand::Tag(t) => vec![c.lhs, t],
-                Operand::Const(_) => vec![c.lhs],
+                CmpOperand::Tag(t) => vec![c.lhs, t],
+                CmpOperand::Const(_) => vec![c.lhs],
             })
             .collect();
         compared.sort();

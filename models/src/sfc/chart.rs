@@ -27,7 +27,7 @@ pub struct Chart {
     /// Its steps.
     pub steps: Vec<Step>,
     /// Its transitions (those whose source steps are its own).
-    pub transitions: Vec<Transition>,
+    pub transitions: Vec<SfcTransition>,
 }
 
 /// One step.
@@ -54,7 +54,7 @@ pub struct StepRef {
 
 /// One transition.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Transition {
+pub struct SfcTransition {
     /// Its id in its chart (`t3`).
     pub id: String,
     /// The steps it leaves (all must be active: more than one is a
@@ -86,7 +86,7 @@ impl Sfc {
     }
 
     /// The transition `id` of chart `chart`, if there is one.
-    pub fn transition(&self, chart: &str, id: &str) -> Option<(usize, &Transition)> {
+    pub fn transition(&self, chart: &str, id: &str) -> Option<(usize, &SfcTransition)> {
         let c = self.chart(chart)?;
         self.charts[c]
             .transitions
@@ -96,7 +96,7 @@ impl Sfc {
     }
 
     /// Every transition leaving step `r`.
-    pub fn leaving(&self, r: StepRef) -> impl Iterator<Item = &Transition> {
+    pub fn leaving(&self, r: StepRef) -> impl Iterator<Item = &SfcTransition> {
         self.charts[r.chart]
             .transitions
             .iter()
@@ -117,7 +117,7 @@ impl Sfc {
     /// What transition `t` needs to fire (eq. (1)/(2) of paper 004): every
     /// source step's flag and its condition, one conjunction in the order
     /// the equations are written (`S2.X * t3`).
-    pub fn needs(&self, t: &Transition) -> Expr {
+    pub fn needs(&self, t: &SfcTransition) -> Expr {
         and(t
             .from
             .iter()

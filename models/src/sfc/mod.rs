@@ -35,7 +35,7 @@ pub mod text;
 mod chart;
 
 pub(crate) use chart::{about, and, culprit_list};
-pub use chart::{Chart, Sfc, Step, StepRef, Transition};
+pub use chart::{Chart, Sfc, SfcTransition, Step, StepRef};
 pub use supervise::SfcChecks;
 
 use crate::signal::Signal;

@@ -6,15 +6,15 @@
 
 use std::fmt::Write;
 
-use super::{and, Sfc, Transition};
+use super::{and, Sfc, SfcTransition};
 use crate::expr::Expr;
 use crate::signal::Signal;
-use crate::value::{CmpOp, Comparison, Operand};
+use crate::value::{CmpOp, CmpOperand, Comparison};
 
 /// The patch for transition `t` of chart `chart`, the force switch at
 /// `force`: a comment, the ST assignment and the IL sequence, both to the
 /// variable `<chart>_<id>_FIRE`.
-pub fn patch(sfc: &Sfc, chart: usize, t: &Transition, force: &Signal) -> String {
+pub fn patch(sfc: &Sfc, chart: usize, t: &SfcTransition, force: &Signal) -> String {
     let name = format!("{}_{}_FIRE", sfc.charts[chart].name, t.id);
     let from: Vec<String> = t.from.iter().map(|&r| sfc.step_name(r)).collect();
     let to: Vec<String> = t.to.iter().map(|&r| sfc.step_name(r)).collect();
@@ -69,10 +69,10 @@ fn cmp_il(op: CmpOp) -> &'static str {
     }
 }
 
-fn operand(o: &Operand) -> String {
+fn operand(o: &CmpOperand) -> String {
     match o {
-        Operand::Const(n) => n.to_string(),
-        Operand::Tag(t) => t.name().to_string(),
+        CmpOperand::Const(n) => n.to_string(),
+        CmpOperand::Tag(t) => t.name().to_string(),
     }
 }
 

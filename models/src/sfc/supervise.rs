@@ -38,7 +38,7 @@ use crate::explain::{comment_of, explain_partial, read_comparisons, Culprit, Pol
 use crate::program::Program;
 use crate::signal::{Observability, Signal};
 use crate::switching::SwitchingFunction;
-use crate::value::{Comparison, Num, Operand};
+use crate::value::{CmpOperand, Comparison, Num};
 
 /// The supervision of a cell's charts.
 pub struct SfcChecks {
@@ -102,8 +102,8 @@ impl SfcChecks {
             .iter()
             .filter_map(Comparison::of_signal)
             .flat_map(|c| match c.rhs {
-                Operand::Tag(t) => vec![c.lhs, t],
-                Operand::Const(_) => vec![c.lhs],
+                CmpOperand::Tag(t) => vec![c.lhs, t],
+                CmpOperand::Const(_) => vec![c.lhs],
             })
             .collect();
         compared.sort();

@@ -30,7 +30,7 @@ use std::fmt;
 use serde::Deserialize;
 use toml::Spanned;
 
-use super::{Chart, Sfc, Step, StepRef, Transition};
+use super::{Chart, Sfc, SfcTransition, Step, StepRef};
 use crate::comments::CommentDb;
 use crate::expr::Expr;
 use crate::signal::Signal;
@@ -209,7 +209,7 @@ pub(super) fn build<E: fmt::Display>(
                 chart: charts[c].name.clone(),
             })
     };
-    let mut transitions: Vec<Vec<Transition>> = vec![Vec::new(); charts.len()];
+    let mut transitions: Vec<Vec<SfcTransition>> = vec![Vec::new(); charts.len()];
     for (ci, c) in raw.chart.iter().enumerate() {
         let mut ids = HashSet::new();
         for t in &c.transition {
@@ -282,7 +282,7 @@ pub(super) fn build<E: fmt::Display>(
                     Expr::Const(false)
                 }
             };
-            transitions[ci].push(Transition {
+            transitions[ci].push(SfcTransition {
                 id: id.clone(),
                 from,
                 to,

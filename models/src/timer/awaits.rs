@@ -19,7 +19,7 @@
 //! count: a state left disarms the timer, so it never stands in the way.
 //! This file owns that judgement; [`super::checks`] asks it.
 
-use super::learn::{Edge, Event, Transition};
+use super::learn::{Event, LearnedTransition, SignalEdge};
 use crate::signal::Signal;
 
 /// What one transition waits for.
@@ -35,8 +35,8 @@ pub struct Awaited {
 impl Awaited {
     /// What transition `t` waits for, its model signals named by
     /// `signal`; `None` if its event's signal is not there.
-    pub fn of(t: &Transition, signal: impl Fn(&str) -> Option<Signal>) -> Option<Awaited> {
-        let at = |e: &Event| Some((signal(&e.tag)?, e.edge == Edge::Rise));
+    pub fn of(t: &LearnedTransition, signal: impl Fn(&str) -> Option<Signal>) -> Option<Awaited> {
+        let at = |e: &Event| Some((signal(&e.tag)?, e.edge == SignalEdge::Rise));
         Some(Awaited {
             event: at(&t.event)?,
             request: t.trigger.as_ref().and_then(at),

@@ -23,7 +23,7 @@
 
 use std::fmt;
 
-use super::learn::Transition;
+use super::learn::LearnedTransition;
 
 /// When a drift warning is raised; [`DriftRules::default`] is the
 /// recommended setting.
@@ -139,7 +139,7 @@ pub struct DriftTracker {
 
 impl DriftTracker {
     /// A tracker for `t`'s window, with nothing measured yet.
-    pub fn new(t: &Transition) -> DriftTracker {
+    pub fn new(t: &LearnedTransition) -> DriftTracker {
         let [lo, hi] = t.window_ms;
         let typical = t.delta_ms.clamp(lo, hi.max(lo));
         let range = t.max_ms.saturating_sub(t.min_ms) as f64 / 2.0;
@@ -370,17 +370,17 @@ impl fmt::Display for Span {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::timer::learn::{Edge, Event};
+    use crate::timer::learn::{Event, SignalEdge};
     use crate::timer::line::Rng;
 
     /// A motion learned at 4.90 s, training 4.80–5.00 s, window 4.65–5.15 s.
     fn tracker() -> DriftTracker {
-        DriftTracker::new(&Transition {
+        DriftTracker::new(&LearnedTransition {
             id: 20,
             from: vec![],
             event: Event {
                 tag: "WR2B_DONE".into(),
-                edge: Edge::Rise,
+                edge: SignalEdge::Rise,
             },
             to: vec![],
             delta_ms: 4900,

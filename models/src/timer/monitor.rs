@@ -25,7 +25,7 @@ use std::collections::{BTreeSet, HashMap};
 
 use serde::Serialize;
 
-use super::learn::{Edge, TimerModel};
+use super::learn::{SignalEdge, TimerModel};
 
 /// What the monitor found.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -146,9 +146,12 @@ impl TimerMonitor {
                 };
                 condition.push((lookup(t.id, tag)?, v));
             }
-            let event = (lookup(t.id, &t.event.tag)?, t.event.edge == Edge::Rise);
+            let event = (
+                lookup(t.id, &t.event.tag)?,
+                t.event.edge == SignalEdge::Rise,
+            );
             let trigger = match &t.trigger {
-                Some(e) => Some((lookup(t.id, &e.tag)?, e.edge == Edge::Rise)),
+                Some(e) => Some((lookup(t.id, &e.tag)?, e.edge == SignalEdge::Rise)),
                 None => None,
             };
             let k = transitions.len();
@@ -419,7 +422,7 @@ pub fn replay(model: &TimerModel, run: &super::log::RunLog) -> Result<Vec<Outcom
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::timer::learn::{Event, Transition};
+    use crate::timer::learn::{Event, LearnedTransition};
 
     /// δ(2:-3, +3 | 130) = 2:3 with τ = 10.
     fn monitor() -> TimerMonitor {
@@ -427,12 +430,12 @@ mod tests {
             version: 1,
             method: "full-state".into(),
             signals: vec!["S1".into(), "S2".into(), "S3".into()],
-            transitions: vec![Transition {
+            transitions: vec![LearnedTransition {
                 id: 1,
                 from: vec!["S2".into(), "-S3".into()],
                 event: Event {
                     tag: "S3".into(),
-                    edge: Edge::Rise,
+                    edge: SignalEdge::Rise,
                 },
                 to: vec!["S2".into(), "S3".into()],
                 delta_ms: 130,

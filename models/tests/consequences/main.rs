@@ -14,7 +14,7 @@ use std::collections::{BTreeSet, HashMap};
 use cellwatch_models::alarm::{Alarm, Severity, Transition};
 use cellwatch_models::comments::CommentDb;
 use cellwatch_models::engine::{
-    CellEngine, CheckSet, Reading, StateRules, Step, SwitchingCheck, SwitchingChecks, Tag,
+    CellEngine, CheckSet, EngineStep, Reading, StateRules, SwitchingCheck, SwitchingChecks, Tag,
 };
 use cellwatch_models::explain::Polarity;
 use cellwatch_models::expr::Expr;
@@ -84,7 +84,7 @@ fn engine(csd: &str, suppress: bool) -> CellEngine {
     e.relating(relation, suppress)
 }
 
-fn set(e: &mut CellEngine, address: &str, v: bool, at: u64) -> Step {
+fn set(e: &mut CellEngine, address: &str, v: bool, at: u64) -> EngineStep {
     let t = e.tag_index(&Signal::new(address)).unwrap();
     e.on_reading(t, Reading::Good(v), at, at)
 }
@@ -115,7 +115,7 @@ fn first_values(e: &mut CellEngine, at: u64) {
     set(e, "G8.02", false, at);
 }
 
-fn raised(step: &Step) -> Vec<Alarm> {
+fn raised(step: &EngineStep) -> Vec<Alarm> {
     step.alarms()
         .filter(|(_, t, _)| *t == Transition::Raised)
         .map(|(a, _, _)| a.clone())
@@ -127,7 +127,7 @@ fn raised(step: &Step) -> Vec<Alarm> {
 type Mark = (String, Option<(String, String, bool)>);
 
 /// The mark of each alarm raised.
-fn marks(step: &Step) -> Vec<Mark> {
+fn marks(step: &EngineStep) -> Vec<Mark> {
     raised(step)
         .into_iter()
         .map(|a| {
@@ -338,17 +338,19 @@ condition = "X1.00"
 fn a_timer_waiting_for_what_a_stuck_step_waits_for_follows_from_it() {
     use cellwatch_models::sfc::{self, SfcChecks};
     use cellwatch_models::timer::checks::TimerChecks;
-    use cellwatch_models::timer::learn::{Edge, Event, TimerModel, Transition, MODEL_VERSION};
+    use cellwatch_models::timer::learn::{
+        Event, LearnedTransition, SignalEdge, TimerModel, MODEL_VERSION,
+    };
     let model = TimerModel {
         version: MODEL_VERSION,
         method: "common".into(),
         signals: vec!["Y1.00".into(), "X1.00".into()],
-        transitions: vec![Transition {
+        transitions: vec![LearnedTransition {
             id: 2,
             from: vec![],
             event: Event {
                 tag: "X1.00".into(),
-                edge: Edge::Rise,
+                edge: SignalEdge::Rise,
             },
             to: vec![],
             delta_ms: 1000,
@@ -359,7 +361,7 @@ fn a_timer_waiting_for_what_a_stuck_step_waits_for_follows_from_it() {
             from_numbered: None,
             trigger: Some(Event {
                 tag: "Y1.00".into(),
-                edge: Edge::Rise,
+                edge: SignalEdge::Rise,
             }),
         }],
     };

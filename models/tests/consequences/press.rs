@@ -181,12 +181,12 @@ struct Running<'p> {
 }
 
 impl Running<'_> {
-    fn set(&mut self, address: &str, v: bool, at: u64) -> Step {
+    fn set(&mut self, address: &str, v: bool, at: u64) -> EngineStep {
         set(&mut self.e, self.press.signal(address).name(), v, at)
     }
 
     /// What the consequence raised in `step` follows through.
-    fn through(&self, step: &Step) -> Vec<(Signal, bool)> {
+    fn through(&self, step: &EngineStep) -> Vec<(Signal, bool)> {
         let raised = raised(step);
         assert_eq!(raised.len(), 1, "{}: {:?}", self.press.file, marks(step));
         raised[0].consequence.as_ref().unwrap().through.clone()

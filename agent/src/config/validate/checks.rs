@@ -12,7 +12,7 @@ use cellwatch_models::program::Program;
 use cellwatch_models::programs::Dialect;
 use cellwatch_models::signal::{Observability, Signal};
 use cellwatch_models::switching::SwitchingFunction;
-use cellwatch_models::value::{Comparison, Operand, ValueType};
+use cellwatch_models::value::{CmpOperand, Comparison, ValueType};
 use toml::Spanned;
 
 use super::Validator;
@@ -367,8 +367,8 @@ impl Validator<'_> {
             match Comparison::of_signal(&s) {
                 Some(c) => {
                     let operands = std::iter::once(&c.lhs).chain(match &c.rhs {
-                        Operand::Tag(t) => Some(t),
-                        Operand::Const(_) => None,
+                        CmpOperand::Tag(t) => Some(t),
+                        CmpOperand::Const(_) => None,
                     });
                     for a in operands {
                         match self.kinds.get(a) {

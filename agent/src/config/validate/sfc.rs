@@ -9,7 +9,7 @@ use cellwatch_models::programs::Dialect;
 use cellwatch_models::sfc::learn::StepModel;
 use cellwatch_models::sfc::Sfc;
 use cellwatch_models::signal::{Observability, Signal};
-use cellwatch_models::value::{Comparison, Operand, ValueType};
+use cellwatch_models::value::{CmpOperand, Comparison, ValueType};
 use toml::Spanned;
 
 use super::Validator;
@@ -127,8 +127,8 @@ impl Validator<'_> {
                     .all(|s| match Comparison::of_signal(s) {
                         Some(cmp) => std::iter::once(&cmp.lhs)
                             .chain(match &cmp.rhs {
-                                Operand::Tag(t) => Some(t),
-                                Operand::Const(_) => None,
+                                CmpOperand::Tag(t) => Some(t),
+                                CmpOperand::Const(_) => None,
                             })
                             .all(|a| kinds.get(a).is_some_and(|(t, _)| t.is_numeric())),
                         None => tags.contains_key(s) && !matches!(kinds.get(s), Some((_, false))),

@@ -7,7 +7,7 @@ use crate::alarm::{Severity, Transition};
 use crate::comments::CommentDb;
 use crate::engine::tag::Value;
 use crate::engine::{
-    CellEngine, CheckSet, Reading, StateRules, Step, SwitchingCheck, SwitchingChecks, Tag,
+    CellEngine, CheckSet, EngineStep, Reading, StateRules, SwitchingCheck, SwitchingChecks, Tag,
 };
 use crate::explain::Polarity;
 use crate::limit::{Level, LimitCheck, LimitChecks, LimitLevel};
@@ -106,12 +106,12 @@ fn load_normal(e: &mut CellEngine, at: u64) {
     }
 }
 
-fn set(e: &mut CellEngine, address: &str, reading: Reading, at: u64) -> Step {
+fn set(e: &mut CellEngine, address: &str, reading: Reading, at: u64) -> EngineStep {
     let t = e.tag_index(&Signal::new(address)).unwrap();
     e.on_reading(t, reading, at, at)
 }
 
-fn raised(step: &Step) -> Vec<String> {
+fn raised(step: &EngineStep) -> Vec<String> {
     step.alarms()
         .filter(|(_, t, _)| *t == Transition::Raised)
         .map(|(a, _, _)| a.id.clone())
@@ -303,17 +303,17 @@ fn a_limit_alarm_records_its_number_and_a_lost_connection_as_unknown() {
 #[test]
 fn a_timer_alarm_records_its_transition_signals() {
     use crate::timer::checks::TimerChecks;
-    use crate::timer::learn::{Edge, Event, TimerModel, Transition, MODEL_VERSION};
+    use crate::timer::learn::{Event, LearnedTransition, SignalEdge, TimerModel, MODEL_VERSION};
     let model = TimerModel {
         version: MODEL_VERSION,
         method: "common".into(),
         signals: vec!["move".into(), "arrived".into(), "other".into()],
-        transitions: vec![Transition {
+        transitions: vec![LearnedTransition {
             id: 7,
             from: vec![],
             event: Event {
                 tag: "arrived".into(),
-                edge: Edge::Rise,
+                edge: SignalEdge::Rise,
             },
             to: vec![],
             delta_ms: 6000,
@@ -324,7 +324,7 @@ fn a_timer_alarm_records_its_transition_signals() {
             from_numbered: None,
             trigger: Some(Event {
                 tag: "move".into(),
-                edge: Edge::Rise,
+                edge: SignalEdge::Rise,
             }),
         }],
     };

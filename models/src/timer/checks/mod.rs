@@ -22,7 +22,7 @@ use std::collections::{BTreeMap, HashMap};
 
 use super::awaits::Awaited;
 use super::drift::{DriftRules, DriftTracker};
-use super::learn::{Edge, TimerModel};
+use super::learn::{SignalEdge, TimerModel};
 use super::monitor::{ModelError, Outcome, TimerMonitor};
 use crate::alarm::{Alarm, AlarmKind, Severity};
 use crate::comments::CommentDb;
@@ -107,7 +107,10 @@ impl TimerChecks {
                     .iter()
                     .position(|n| *n == t.event.tag)
                     .unwrap_or(0);
-                (t.id, (what, s, t.event.edge == Edge::Rise, t.window_ms))
+                (
+                    t.id,
+                    (what, s, t.event.edge == SignalEdge::Rise, t.window_ms),
+                )
             })
             .collect();
         let index = |name: &str| model.signals.iter().position(|n| n == name);
@@ -300,8 +303,8 @@ impl TimerChecks {
 /// What a transition measures, for people: `+DONE after +START` (timed
 /// from a trigger), or `-F17.01 in -F17.00:F17.01` (timed from entering its
 /// state).
-pub fn label(t: &super::learn::Transition) -> String {
-    let edge = |e: Edge| if e == Edge::Rise { "+" } else { "-" };
+pub fn label(t: &super::learn::LearnedTransition) -> String {
+    let edge = |e: SignalEdge| if e == SignalEdge::Rise { "+" } else { "-" };
     match &t.trigger {
         Some(tr) => format!(
             "{}{} after {}{}",

@@ -4,19 +4,19 @@
 use super::*;
 use crate::alarm::Transition as AlarmTransition;
 use crate::engine::{CellEngine, EngineEvent, Reading, StateRules, Tag};
-use crate::timer::learn::{Event, Transition, MODEL_VERSION};
+use crate::timer::learn::{Event, LearnedTransition, MODEL_VERSION};
 
 fn model() -> TimerModel {
     TimerModel {
         version: MODEL_VERSION,
         method: "common".into(),
         signals: vec!["move".into(), "arrived".into()],
-        transitions: vec![Transition {
+        transitions: vec![LearnedTransition {
             id: 7,
             from: vec![],
             event: Event {
                 tag: "arrived".into(),
-                edge: Edge::Rise,
+                edge: SignalEdge::Rise,
             },
             to: vec![],
             delta_ms: 6000,
@@ -27,7 +27,7 @@ fn model() -> TimerModel {
             from_numbered: None,
             trigger: Some(Event {
                 tag: "move".into(),
-                edge: Edge::Rise,
+                edge: SignalEdge::Rise,
             }),
         }],
     }

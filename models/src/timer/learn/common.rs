@@ -8,8 +8,8 @@
 use std::collections::BTreeMap;
 
 use super::{
-    literals, timing, DropReason, Dropped, Edge, Event, LearnOptions, Learned, TimerModel, Timing,
-    Transition, MODEL_VERSION,
+    literals, timing, DropReason, Dropped, Event, LearnOptions, Learned, LearnedTransition,
+    SignalEdge, TimerModel, Timing, MODEL_VERSION,
 };
 use crate::timer::log::RunLog;
 
@@ -144,12 +144,16 @@ pub fn common(runs: &[RunLog], options: &LearnOptions) -> Learned {
             .iter()
             .map(|&(s, v)| if s == es { (s, ev) } else { (s, v) })
             .collect();
-        transitions.push(Transition {
+        transitions.push(LearnedTransition {
             id: transitions.len() as u32 + 1,
             from: literals(&from, &a.names),
             event: Event {
                 tag: a.names[es].clone(),
-                edge: if ev { Edge::Rise } else { Edge::Fall },
+                edge: if ev {
+                    SignalEdge::Rise
+                } else {
+                    SignalEdge::Fall
+                },
             },
             to: literals(&to, &a.names),
             delta_ms: mean,
@@ -160,7 +164,11 @@ pub fn common(runs: &[RunLog], options: &LearnOptions) -> Learned {
             from_numbered: None,
             trigger: Some(Event {
                 tag: a.names[ts].clone(),
-                edge: if tv { Edge::Rise } else { Edge::Fall },
+                edge: if tv {
+                    SignalEdge::Rise
+                } else {
+                    SignalEdge::Fall
+                },
             }),
         });
     }

@@ -55,13 +55,13 @@ pub struct Event {
     /// The signal.
     pub tag: String,
     /// `rise` or `fall`.
-    pub edge: Edge,
+    pub edge: SignalEdge,
 }
 
 /// Rising or falling edge.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
-pub enum Edge {
+pub enum SignalEdge {
     /// 0 → 1.
     Rise,
     /// 1 → 0.
@@ -71,7 +71,7 @@ pub enum Edge {
 /// One learned transition, as stored in the model file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Transition {
+pub struct LearnedTransition {
     /// Function number (`nnn` in `ERROR_ALARM_nnn`), from 1.
     pub id: u32,
     /// Start condition: literals `tag` / `-tag`.
@@ -110,7 +110,7 @@ pub struct TimerModel {
     /// Every signal of the training runs, numbered from 1 in this order.
     pub signals: Vec<String>,
     /// The transitions kept.
-    pub transitions: Vec<Transition>,
+    pub transitions: Vec<LearnedTransition>,
 }
 
 /// Why a candidate transition was not kept.
@@ -336,12 +336,16 @@ pub fn full_state(runs: &[RunLog], options: &LearnOptions) -> Learned {
                 continue;
             }
         };
-        transitions.push(Transition {
+        transitions.push(LearnedTransition {
             id: transitions.len() as u32 + 1,
             from: literals(from, &names),
             event: Event {
                 tag: names[*signal].clone(),
-                edge: if *rise { Edge::Rise } else { Edge::Fall },
+                edge: if *rise {
+                    SignalEdge::Rise
+                } else {
+                    SignalEdge::Fall
+                },
             },
             to: literals(to, &names),
             delta_ms: mean,
@@ -382,8 +386,12 @@ mod tests {
         parse_numeric("map.csv", MAP, "table1.csv", TABLE1).unwrap()
     }
 
-    fn text(t: &Transition) -> String {
-        let e = if t.event.edge == Edge::Rise { "+" } else { "-" };
+    fn text(t: &LearnedTransition) -> String {
+        let e = if t.event.edge == SignalEdge::Rise {
+            "+"
+        } else {
+            "-"
+        };
         let n = |tag: &str| 1 + ["S1", "S2", "S3"].iter().position(|s| *s == tag).unwrap();
         let state = |lits: &[String]| {
             lits.iter()

@@ -2,7 +2,7 @@
 //! in order and bounded, data names metrics by alias only.
 
 use cellwatch_models::alarm::{Alarm, AlarmKind, Severity, Transition};
-use cellwatch_models::engine::{EngineEvent, HistoryKind, MachineState, Step};
+use cellwatch_models::engine::{EngineEvent, EngineStep, HistoryKind, MachineState};
 use prost::Message;
 
 use super::*;
@@ -32,7 +32,7 @@ fn alarm(id: &str, active: bool, acknowledged: bool) -> Alarm {
     }
 }
 
-fn step(at: u64, engine: Step) -> CellStep {
+fn step(at: u64, engine: EngineStep) -> CellStep {
     CellStep {
         at,
         input: Input::Readings,
@@ -113,7 +113,7 @@ fn the_births_declare_every_metric_with_its_alias() {
 #[test]
 fn changes_are_held_in_order_and_sent_by_alias() {
     let mut b = book(100);
-    let engine = Step {
+    let engine = EngineStep {
         events: vec![
             EngineEvent::State {
                 state: MachineState::Fault {
@@ -131,7 +131,7 @@ fn changes_are_held_in_order_and_sent_by_alias() {
         ],
         parts: vec![(11, 2)],
         exported: vec![(4, Some(81.5)), (9, Some(1.0))],
-        ..Step::default()
+        ..EngineStep::default()
     };
     assert!(b.apply(&step(12, engine)));
     let changes = b.take_changes(100);
@@ -156,9 +156,9 @@ fn changes_are_held_in_order_and_sent_by_alias() {
     assert!(data.metrics.iter().all(|m| m.name.is_none()));
     assert_eq!(data.seq, Some(5));
     // The same again changes nothing.
-    let again = Step {
+    let again = EngineStep {
         exported: vec![(4, Some(81.5))],
-        ..Step::default()
+        ..EngineStep::default()
     };
     assert!(!b.apply(&step(13, again)));
 }
@@ -167,9 +167,9 @@ fn changes_are_held_in_order_and_sent_by_alias() {
 fn held_changes_are_bounded_the_oldest_dropped_and_a_birth_hands_them_back() {
     let mut b = book(3);
     for i in 0..5u64 {
-        let engine = Step {
+        let engine = EngineStep {
             exported: vec![(4, Some(i as f64))],
-            ..Step::default()
+            ..EngineStep::default()
         };
         assert!(b.apply(&step(100 + i, engine)));
     }
@@ -194,13 +194,13 @@ fn held_changes_are_bounded_the_oldest_dropped_and_a_birth_hands_them_back() {
 #[test]
 fn an_alarm_not_declared_grows_the_device() {
     let mut b = book(10);
-    let engine = Step {
+    let engine = EngineStep {
         events: vec![EngineEvent::Alarm {
             alarm: alarm("plc-door-open", true, false),
             transition: Transition::Raised,
             at: 5,
         }],
-        ..Step::default()
+        ..EngineStep::default()
     };
     assert!(b.apply(&step(5, engine)));
     assert!(b.grown());
@@ -241,9 +241,9 @@ fn only_a_rebirth_set_true_asks_for_one() {
 fn held_changes_go_to_the_store_by_name_and_come_back_to_the_next_run() {
     let mut b = book(10);
     for i in 0..2u64 {
-        let engine = Step {
+        let engine = EngineStep {
             exported: vec![(4, Some(i as f64))],
-            ..Step::default()
+            ..EngineStep::default()
         };
         b.apply(&step(100 + i, engine));
     }
@@ -281,9 +281,9 @@ fn held_changes_go_to_the_store_by_name_and_come_back_to_the_next_run() {
 fn changes_not_published_are_held_again_first() {
     let mut b = book(10);
     for i in 0..3u64 {
-        let engine = Step {
+        let engine = EngineStep {
             exported: vec![(4, Some(i as f64))],
-            ..Step::default()
+            ..EngineStep::default()
         };
         b.apply(&step(100 + i, engine));
     }
