@@ -20,6 +20,10 @@
 //! Readers (history queries, reports) open their own connections; WAL lets
 //! them read while the writer writes. Rows older than the retention are
 //! deleted at start and every hour.
+//!
+//! What the writer says and reports goes through its events
+//! (`events.rs`: each one's log line and its report to the
+//! [`CommitObserver`], `observer.rs`, together).
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -28,15 +32,19 @@ use std::time::{Duration, Instant};
 
 pub mod backup;
 pub mod chain;
+mod events;
 mod history;
+mod observer;
 mod reports;
 mod saved;
 mod schema;
 
+use events::JournalEvent;
 pub use history::{
     history, recording, HistoryError, HistoryPage, HistoryQuery, HistoryRow, DEFAULT_ROWS,
     HISTORY_SCHEMA, MAX_FIELD_BYTES, MAX_REPLY_BYTES, MAX_ROWS,
 };
+pub use observer::CommitObserver;
 pub use reports::{alarm_events, report_input, AlarmEvents, ReportInput};
 pub use saved::{saved, Saved, SavedOutcome, SavedState};
 pub use schema::{open, open_read, JournalError, NotCommitted};
@@ -221,7 +229,10 @@ impl Uncommitted {
         }
         let mut rows = self.rows.lock().unwrap_or_else(|e| e.into_inner());
         *rows = f(*rows);
-        self.observer.pending(*rows as usize);
+        JournalEvent::Pending {
+            rows: *rows as usize,
+        }
+        .emit(&*self.observer);
     }
 }
 
@@ -261,20 +272,6 @@ impl Barrier {
             let _ = committed.await;
         }
     }
-}
-
-/// What the writer thread reports after each batch, and the count of rows
-/// not yet committed as it changes (from the writer and the cell loop).
-pub trait CommitObserver: Send + Sync + 'static {
-    /// A batch of `rows` rows was committed in `took`.
-    fn committed(&self, rows: usize, took: Duration);
-    /// A write failed; its rows are kept and retried.
-    fn failed(&self, error: &str);
-    /// `rows` rows are not yet committed (staged, queued, or in the
-    /// writer's batch).
-    fn pending(&self, _rows: usize) {}
-    /// The queue of unwritten rows was full: the `rows` oldest were dropped.
-    fn dropped(&self, _rows: usize) {}
 }
 
 impl Journal {
@@ -501,8 +498,13 @@ fn writer(
     let mut last_purge = Instant::now();
     purge(&conn, &keep, &path);
     let mut seq = last_seq(&conn);
-    let mut chain = chain::Link::last(&conn).unwrap_or_else(|e| {
-        tracing::error!(path = %path.display(), error = %e, "cannot read the end of the command rows' hash chain; it starts again");
+    let mut chain = chain::Link::last(&conn).unwrap_or_else(|error| {
+        let path = &path;
+        JournalEvent::ChainUnreadable {
+            path,
+            error: &error,
+        }
+        .emit(&*observer);
         chain::Link::default()
     });
     let mut last_attempt = Instant::now();
@@ -547,8 +549,8 @@ fn writer(
         if pending.len() > MAX_PENDING_ROWS {
             let lost = pending.len() - MAX_PENDING_ROWS;
             pending.drain(..lost);
-            tracing::error!(path = %path.display(), rows = lost, "journal unwritable and its queue full: oldest rows dropped");
-            observer.dropped(lost);
+            let (path, rows) = (&path, lost);
+            JournalEvent::Dropped { path, rows }.emit(&*observer);
             uncommitted.remove(lost);
         }
         let failing = health.borrow().is_some();
@@ -565,7 +567,13 @@ fn writer(
             let outcome = match write_batch(&mut conn, rows, &mut seq, &mut chain) {
                 Ok(()) => {
                     total += rows.len() as u64;
-                    observer.committed(rows.len(), started.elapsed());
+                    JournalEvent::Committed {
+                        path: &path,
+                        rows: rows.len(),
+                        took: started.elapsed(),
+                        again: health.borrow().is_some(),
+                    }
+                    .emit(&*observer);
                     // The count before the commit and the health are
                     // told: whoever sees either sees none of these rows
                     // pending.
@@ -580,7 +588,6 @@ fn writer(
                     let _ = committed.send(total);
                     pending.clear();
                     if health.borrow().is_some() {
-                        tracing::info!(path = %path.display(), "journal writable again");
                         let _ = health.send(None);
                     }
                     Ok(())
@@ -590,9 +597,15 @@ fn writer(
                     // The metrics before the health: whoever sees the
                     // journal alarm sees the failure (and the rows kept,
                     // counted when they came).
-                    observer.failed(&why);
-                    if health.borrow().as_deref() != Some(why.as_str()) {
-                        tracing::error!(path = %path.display(), error = %why, rows = pending.len(), "journal write failed; rows kept and retried");
+                    let new = health.borrow().as_deref() != Some(why.as_str());
+                    JournalEvent::Failed {
+                        path: &path,
+                        why: &why,
+                        rows: pending.len(),
+                        new,
+                    }
+                    .emit(&*observer);
+                    if new {
                         let _ = health.send(Some(why.clone()));
                     }
                     Err(NotCommitted::Failed(why))
@@ -622,7 +635,8 @@ fn writer(
         }
     }
     if !pending.is_empty() {
-        tracing::error!(path = %path.display(), rows = pending.len(), "journal closed with rows it could not write");
+        let (path, rows) = (&path, pending.len());
+        JournalEvent::ClosedUnwritten { path, rows }.emit(&*observer);
     }
 }
 

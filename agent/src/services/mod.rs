@@ -25,10 +25,12 @@
 //! command payload larger than [`MAX_COMMAND_BYTES`] is refused before it
 //! is parsed, and journaled by size, hash and a short prefix; no reply
 //! repeats the request. Refusals are counted
-//! (`cellwatch_requests_refused_total`).
+//! (`cellwatch_requests_refused_total`), a reply that cannot be sent logged
+//! and counted, through the services' events (`events.rs`).
 
 pub mod about;
 pub mod alarm_server;
+mod events;
 pub mod plant_operators;
 
 use std::collections::HashMap;
@@ -51,6 +53,7 @@ use crate::metrics::Metrics;
 use crate::operator::{Command, NotACommand};
 use crate::step::{command_digest, CommandOutcome, Request};
 use cellwatch_models::kpi::KpiRules;
+use events::ServiceEvent;
 
 /// Queries answered at the same time; more are refused as busy.
 pub const MAX_CONCURRENT: usize = 16;
@@ -200,7 +203,11 @@ impl Services {
             };
             let permit = self.permits.clone().try_acquire_owned().ok();
             if permit.is_none() || (matches!(kind, Service::History) && history_permit.is_none()) {
-                self.metrics.refused(kind.name(), "busy");
+                ServiceEvent::Refused {
+                    service: kind.name(),
+                    reason: "busy",
+                }
+                .emit(&self.metrics);
                 let busy = ServiceError::Busy;
                 let answer = match kind {
                     Service::Command => Ok(command_answer(
@@ -230,7 +237,11 @@ impl Services {
                             history(&journal, &rules, query).await
                         }
                         Err(e) => {
-                            metrics.refused(kind.name(), "invalid");
+                            ServiceEvent::Refused {
+                                service: kind.name(),
+                                reason: "invalid",
+                            }
+                            .emit(&metrics);
                             Err(e)
                         }
                     },
@@ -464,7 +475,7 @@ async fn command(
         .unwrap_or_else(|| crate::operator::refusals::UNKNOWN_SOURCE.into());
     let parsed = match q.payload() {
         None => {
-            metrics.refused("command", "invalid");
+            refused("invalid", metrics);
             Err(NotACommand {
                 reason: "no payload".into(),
                 kind: "invalid",
@@ -472,7 +483,7 @@ async fn command(
         }
         // Never parsed; identified in the journal by size, hash and prefix.
         Some(p) if p.len() > MAX_COMMAND_BYTES => {
-            metrics.refused("command", "too_large");
+            refused("too_large", metrics);
             Err(NotACommand::payload(
                 "too_large",
                 &format!("larger than {MAX_COMMAND_BYTES} bytes"),
@@ -482,7 +493,7 @@ async fn command(
         Some(p) => {
             let bytes = p.to_bytes();
             serde_json::from_slice::<Command>(&bytes).map_err(|e| {
-                metrics.refused("command", "invalid");
+                refused("invalid", metrics);
                 NotACommand::json(&e, &bytes)
             })
         }
@@ -498,9 +509,18 @@ async fn command(
         .map_err(|_| ServiceError::Stopping)?;
     let outcome: CommandOutcome = rx.await.map_err(|_| ServiceError::Stopping)?;
     if let Some(reason) = outcome.refused {
-        metrics.refused("command", reason);
+        refused(reason, metrics);
     }
     Ok(outcome)
+}
+
+/// A command refused for `reason`.
+fn refused(reason: &str, metrics: &Metrics) {
+    ServiceEvent::Refused {
+        service: "command",
+        reason,
+    }
+    .emit(metrics);
 }
 
 /// Answers a query with JSON, or with an error text, sealed: on the
@@ -529,9 +549,8 @@ async fn reply(
             q.reply_err(sealed).await
         }
     };
-    if let Err(e) = sent {
-        tracing::warn!(error = %e, "reply failed");
-        metrics.zenoh_publish_errors.inc();
+    if let Err(error) = sent {
+        ServiceEvent::ReplyFailed { error: &error }.emit(metrics);
     }
 }
 

@@ -20,11 +20,13 @@
 //! and wakes the [`Pusher`], a task of its own: a slow or dead
 //! Alertmanager never holds up the cell loop. Failed sends are retried
 //! with backoff (1 s doubling to the resend interval), per Alertmanager,
-//! counted in `cellwatch_alertmanager_sends_total{result="failed"}`.
+//! counted in `cellwatch_alertmanager_sends_total{result="failed"}` and
+//! logged, together, by the sink's events (`events.rs`).
 //! Memory is bounded by the alarms the cell can raise: one entry per
 //! alarm, active or ended.
 
 mod book;
+mod events;
 
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -39,6 +41,7 @@ use crate::clock::rfc3339;
 use crate::config::{AlertmanagerConfig, AlertmanagerTls};
 use crate::metrics::Metrics;
 use crate::step::CellStep;
+use events::AlertmanagerEvent;
 
 pub use book::{Alert, Batch, Book, Labels};
 
@@ -93,8 +96,11 @@ impl Sink for AlertmanagerSink {
                 changed |= book.take(&self.labels, &a.payload, step.at);
             }
             if changed {
-                self.metrics.alertmanager_alerts.set(book.active() as i64);
-                self.metrics.alertmanager_unsent.set(book.unsent() as i64);
+                AlertmanagerEvent::Booked {
+                    active: book.active(),
+                    unsent: book.unsent(),
+                }
+                .emit(&self.metrics);
                 drop(book);
                 self.shared
                     .generation
@@ -325,9 +331,7 @@ impl Pusher {
             )
         };
         let url = &self.urls[to];
-        let outcome = self.post(url, &batch.alerts).await;
-        self.metrics.alertmanager_sent(outcome.is_ok());
-        match outcome {
+        match self.post(url, &batch.alerts).await {
             Ok(()) => {
                 let mut book = self.shared.book();
                 book.sent(&batch);
@@ -335,11 +339,13 @@ impl Pusher {
                 if self.shared.generation.load(Ordering::Acquire) != generation {
                     book.mark_changed(to);
                 }
-                self.metrics.alertmanager_unsent.set(book.unsent() as i64);
+                let unsent = book.unsent();
+                AlertmanagerEvent::Sent { unsent }.emit(&self.metrics);
                 (to, true)
             }
             Err(why) => {
-                tracing::warn!(alertmanager = %url, %why, "cannot send alerts; retrying");
+                let why = why.to_string();
+                AlertmanagerEvent::SendFailed { url, why: &why }.emit(&self.metrics);
                 (to, false)
             }
         }

@@ -520,10 +520,11 @@ impl Collector<'_> {
 
 impl InTimeOrder {
     /// Changes were lost for good: the cell loop is told before what
-    /// follows.
+    /// follows. Said there, once (`cell/gaps.rs`: warned of at most once a
+    /// minute, counted by the step in `cellwatch_source_gaps_total`), not
+    /// here.
     fn gap(&mut self, why: String) {
         self.flush();
-        tracing::warn!("{why}");
         send_blocking(
             &self.tx,
             SourceEvent::Gap {

@@ -1,7 +1,10 @@
 //! Publication on the bus: alarm events, machine state and alarms' flight
 //! recordings, sealed in signed envelopes ([`crate::bus::envelope`]) —
 //! what one step puts under one signature — and the agent's liveliness
-//! token. This is the Zenoh sink of the cell loop.
+//! token. This is the Zenoh sink of the cell loop. What fails on the bus
+//! is logged and counted through its events (`events.rs`).
+
+mod events;
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -19,6 +22,7 @@ use crate::bus::ZenohError;
 use crate::metrics::Metrics;
 use crate::sinks::Sink;
 use crate::step::CellStep;
+use events::ZenohEvent;
 
 /// How many alarm events of each alarm a publisher keeps for recovery.
 const ALARM_CACHE: usize = 256;
@@ -117,9 +121,9 @@ impl ZenohPublisher {
                             map.insert(id.to_string(), p.clone());
                             p
                         }
-                        Err(e) => {
-                            tracing::error!(alarm = id, error = %e, "cannot declare the alarm publisher");
-                            self.metrics.zenoh_publish_errors.inc();
+                        Err(error) => {
+                            let (alarm, error) = (id, &error);
+                            ZenohEvent::PublisherRefused { alarm, error }.emit(&self.metrics);
                             return None;
                         }
                     }
@@ -189,9 +193,9 @@ impl ZenohPublisher {
                     Put::State => ("state", self.state.put(envelope).await),
                     Put::Recording(id) => (*id, self.session.put(key, envelope).await),
                 };
-                if let Err(e) = result {
-                    tracing::error!(key, what, error = %e, "publication failed");
-                    self.metrics.zenoh_publish_errors.inc();
+                if let Err(error) = result {
+                    let error = &error;
+                    ZenohEvent::PutFailed { key, what, error }.emit(&self.metrics);
                 }
             }
         }
@@ -223,10 +227,11 @@ impl Sink for ZenohPublisher {
                 agent,
                 alarms,
                 state,
+                metrics,
                 ..
             } = *self;
-            if let Err(e) = agent.undeclare().await {
-                tracing::warn!(error = %e, "cannot undeclare the liveliness token");
+            if let Err(error) = agent.undeclare().await {
+                ZenohEvent::TokenNotUndeclared { error: &error }.emit(&metrics);
             }
             drop(alarms);
             drop(state);
