@@ -13,7 +13,11 @@
 //! (`sparkplug/host.rs`). Held changes survive a broker restart and an
 //! agent killed while holding them (`sparkplug/outage.rs`). Over TLS the
 //! node shows a client certificate of the broker's CA and is born; one of
-//! another CA is refused, and the agent says so (`sparkplug/tls.rs`).
+//! another CA is refused, and the agent says so (`sparkplug/tls.rs`). A
+//! cell fed by a script in virtual time, in process: with `[oee]` its
+//! births and data carry the shift's OEE figures computed here by hand
+//! (`sparkplug/oee.rs`); its PLC link lost, the device says DDEATH and is
+//! born again when the link is back (`sparkplug/plc_link.rs`).
 
 use std::collections::HashMap;
 use std::io::{BufRead, Write};
@@ -22,12 +26,18 @@ use std::process::{Child, ChildStdin, Command, Stdio};
 use std::sync::Once;
 use std::time::Duration;
 
+use cellwatch::clock::Clock;
+use cellwatch::sources::scripted::ScriptedSource;
+use cellwatch::sources::SourceEvent;
+use cellwatch_models::engine::{Reading, TagReading};
 use serde_json::{json, Value};
 
 use crate::util::root;
 
 mod host;
+mod oee;
 mod outage;
+mod plc_link;
 mod tls;
 
 const MOSQUITTO: &str = "/usr/sbin/mosquitto";
@@ -472,4 +482,127 @@ async fn validate_opens_the_password_and_tls_files() {
         "{}",
         v.stderr
     );
+}
+
+/// The contacts of [`scripted_node`]'s cell, by index: the machine runs
+/// while `X0.00` holds; each rising edge of `X0.01` is a part done, of
+/// `X0.02` a part rejected.
+const RUN: usize = 0;
+const PART: usize = 1;
+const REJECT: usize = 2;
+
+/// A cell of three contacts ([`RUN`], [`PART`], [`REJECT`]) fed by a
+/// script, run in process on `clock`: a Sparkplug edge node on `broker`,
+/// `more` added to its configuration (after `[production]`). Its script's
+/// sender is returned with it.
+async fn scripted_node(
+    dir: &Path,
+    broker: &Broker,
+    more: &str,
+    clock: &Clock,
+) -> (
+    cellwatch::agent::Agent,
+    tokio::sync::mpsc::Sender<SourceEvent>,
+) {
+    crate::util::bus_pki(dir, &[&format!("agent-{DEVICE}")]);
+    let mut text = format!(
+        r#"[cell]
+id = "{DEVICE}"
+
+[opcua]
+endpoint = "opc.tcp://127.0.0.1:4840/"
+pki_dir = "pki"
+namespace_uri = "urn:cellwatch:test"
+
+[zenoh]
+listen = ["quic/127.0.0.1:0"]
+
+[zenoh.tls]
+ca = "pki-bus/ca.pem"
+cert = "pki-bus/agent-{DEVICE}.pem"
+key = "pki-bus/agent-{DEVICE}.key"
+
+[journal]
+path = "{journal}"
+
+[metrics]
+listen = "127.0.0.1:0"
+
+[sparkplug]
+broker = "mqtt://127.0.0.1:{port}"
+group_id = "{GROUP}"
+edge_node_id = "{NODE}"
+
+[state]
+running = "X0.00"
+
+[production]
+part_done = "X0.01"
+"#,
+        journal = dir.join("journal.sqlite").display(),
+        port = broker.port,
+    );
+    text += more;
+    for (name, address) in [("run", "X0.00"), ("part", "X0.01"), ("reject", "X0.02")] {
+        text += &format!(
+            "\n[[tags]]\nname = \"{name}\"\nnode_id = \"ns=2;s={address}\"\naddress = \"{address}\"\ntype = \"Boolean\"\n"
+        );
+    }
+    let path = dir.join("cell.toml");
+    std::fs::write(&path, text).unwrap();
+    let config = cellwatch::config::load(&path).unwrap();
+    let (source, script) = ScriptedSource::new();
+    let agent = cellwatch::agent::start_with(
+        config,
+        cellwatch::agent::Options {
+            source: Some(Box::new(source)),
+            clock: clock.clone(),
+            ..Default::default()
+        },
+    )
+    .await
+    .unwrap();
+    (agent, script)
+}
+
+/// Contact `tag` read as `on` at `at`.
+fn contact(tag: usize, on: bool, at: u64) -> SourceEvent {
+    SourceEvent::Readings(
+        vec![TagReading {
+            tag,
+            reading: Reading::Good(on),
+            source_time: at,
+        }]
+        .into(),
+    )
+}
+
+/// What a host knows of the device after `messages`: each metric's current
+/// value by name, from the last DBIRTH and the live DDATA after it (history
+/// is older than the birth's values).
+fn current(messages: &[Value]) -> HashMap<String, Value> {
+    let mut names: HashMap<u64, String> = HashMap::new();
+    let mut values = HashMap::new();
+    for m in messages {
+        let payload = &m["payload"];
+        if m["topic"] == topic("DBIRTH").as_str() {
+            names.clear();
+            values.clear();
+            for x in metrics(payload) {
+                let name = x["name"].as_str().unwrap().to_string();
+                names.insert(x["alias"].as_u64().unwrap(), name.clone());
+                values.insert(name, x["value"].clone());
+            }
+        } else if m["topic"] == topic("DDATA").as_str() {
+            for x in metrics(payload)
+                .iter()
+                .filter(|x| x["isHistorical"] != true)
+            {
+                if let Some(name) = x["alias"].as_u64().and_then(|a| names.get(&a)) {
+                    values.insert(name.clone(), x["value"].clone());
+                }
+            }
+        }
+    }
+    values
 }

@@ -4,7 +4,8 @@
 //! import this module; it imports neither.
 
 use cellwatch_models::engine::EngineStep;
-use tokio::sync::oneshot;
+use cellwatch_models::oee::{Figures, ShiftWindow};
+use tokio::sync::{oneshot, watch};
 
 use crate::operator::{clip, Action, Command, NotACommand};
 use crate::payload::{AlarmPayload, SnapshotPayload, StatePayload};
@@ -389,3 +390,19 @@ pub async fn next_session_command(
         None => std::future::pending().await,
     }
 }
+
+/// The current shift's figures (or the last shift's, between shifts), as
+/// computed at `at`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OeeNow {
+    /// The shift.
+    pub shift: ShiftWindow,
+    /// Its figures up to `at`.
+    pub figures: Figures,
+    /// When they were computed, ms since the epoch.
+    pub at: u64,
+}
+
+/// What watchers of the OEE (the snapshot, the Sparkplug B node) hold: `None` until the first tick in a
+/// shift.
+pub type OeeWatch = watch::Receiver<Option<OeeNow>>;

@@ -559,8 +559,13 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     };
     let sparkplug = match &config.sparkplug {
         Some(c) => {
-            let (sink, session) =
-                crate::sinks::sparkplug::start(&config, c, &engine.catalogue(), metrics.clone())?;
+            let (sink, session) = crate::sinks::sparkplug::start(
+                &config,
+                c,
+                &engine.catalogue(),
+                oee.clone(),
+                metrics.clone(),
+            )?;
             sinks.push(Box::new(sink));
             Some(tokio::spawn(session.run()))
         }

@@ -113,7 +113,7 @@ pub struct CellLoop {
     /// Acknowledgements from the alarm server's sessions (`session.rs`).
     session_commands: Option<mpsc::Receiver<crate::step::SessionCommand>>,
     /// The current shift's OEE, for the snapshot (`snapshot.rs`).
-    oee: Option<crate::sinks::oee::OeeWatch>,
+    oee: Option<crate::step::OeeWatch>,
 }
 
 /// A write's outcome on its way back into the loop.

@@ -12,7 +12,7 @@ use crate::payload::{
     AlarmPayload, ChartPayload, LastFault, OeePayload, Quality, SnapshotPayload, TagValue,
     SNAPSHOT_SCHEMA,
 };
-use crate::sinks::oee::OeeWatch;
+use crate::step::OeeWatch;
 
 impl CellLoop {
     /// Answers snapshots with the OEE `oee` holds.

@@ -12,7 +12,7 @@ use super::labels::opts;
 
 /// The kinds of Sparkplug message the node publishes, as the `kind` label
 /// says them.
-pub const SPARKPLUG_KINDS: [&str; 4] = ["nbirth", "dbirth", "ddata", "ndeath"];
+pub const SPARKPLUG_KINDS: [&str; 5] = ["nbirth", "dbirth", "ddata", "ddeath", "ndeath"];
 
 /// The Sparkplug edge node's figures.
 #[derive(Clone)]
@@ -39,7 +39,7 @@ impl SparkplugMetrics {
         let messages = IntCounterVec::new(
             opts(
                 "cellwatch_sparkplug_messages_total",
-                "Sparkplug B messages of the edge node by kind (nbirth, dbirth, ddata, ndeath) and result (published: handed to the MQTT session; failed).",
+                "Sparkplug B messages of the edge node by kind (nbirth, dbirth, ddata, ddeath, ndeath) and result (published: handed to the MQTT session; failed).",
                 cell,
             ),
             &["kind", "result"],

@@ -12,7 +12,7 @@ pub use crate::config::oee as config;
 use std::path::Path;
 use std::sync::Arc;
 
-use cellwatch_models::oee::{Figures, LiveOee, ShiftWindow};
+use cellwatch_models::oee::LiveOee;
 use cellwatch_models::report::StopCauses;
 use futures_util::future::BoxFuture;
 use futures_util::FutureExt;
@@ -22,22 +22,7 @@ use crate::journal::{JournalError, ReportInput};
 use crate::metrics::Metrics;
 use crate::sinks::Sink;
 use crate::step::{CellStep, Input};
-
-/// The current shift's figures (or the last shift's, between shifts), as
-/// computed at `at`.
-#[derive(Debug, Clone, PartialEq)]
-pub struct OeeNow {
-    /// The shift.
-    pub shift: ShiftWindow,
-    /// Its figures up to `at`.
-    pub figures: Figures,
-    /// When they were computed, ms since the epoch.
-    pub at: u64,
-}
-
-/// What watchers of the OEE hold: `None` until the first tick in a
-/// shift.
-pub type OeeWatch = watch::Receiver<Option<OeeNow>>;
+pub use crate::step::{OeeNow, OeeWatch};
 
 /// Feeds the live OEE, sets its metrics and tells its watchers.
 pub struct OeeSink {

@@ -1,10 +1,13 @@
 //! The cell's Sparkplug metrics: every metric the device declares in its
 //! birth (the machine state, each alarm's state, priority and
-//! acknowledgement, the parts produced, the exported tags), each with its
-//! alias and current value; the changes that wait to be published,
-//! bounded; and the payloads built from them (births, data, death).
-//! No I/O and no clock: the session (`session.rs`) sends what it is given
-//! and stamps it with the time it passes in.
+//! acknowledgement, the parts produced, the current shift's OEE, the
+//! exported tags), each with its alias and current value; the changes that
+//! wait to be published, bounded; whether the device is alive (its PLC
+//! link up) and where its death falls among the changes; and the payloads
+//! built from them (births, data, deaths). No I/O and no clock: the
+//! session (`session.rs`) sends what it is given and stamps it with the
+//! time it passes in. The OEE metrics and their deadbands are in
+//! `book/oee.rs`.
 
 use std::collections::{HashMap, VecDeque};
 
@@ -16,7 +19,9 @@ use super::tahu::{
     DataType, Metric, Payload, PropertySet, PropertyValue, PropertyValueKind, Value,
 };
 pub use super::value::MetricValue;
-use crate::step::CellStep;
+use crate::step::{CellStep, Input};
+
+mod oee;
 
 /// The node's birth/death sequence metric.
 pub const BD_SEQ: &str = "bdSeq";
@@ -59,6 +64,16 @@ struct Entry {
     at: u64,
     /// Said in the birth only.
     properties: Option<PropertySet>,
+}
+
+/// Where the OEE metrics are among the device's (`book/oee.rs` declares
+/// and sets them), and the shift their values are of.
+#[derive(Debug, Clone, Copy)]
+struct OeeMetrics {
+    /// The first (`OEE/Shift`).
+    first: usize,
+    /// The start of the shift last set, ms since the epoch.
+    shift_start: Option<u64>,
 }
 
 /// A change waiting to be published.
@@ -111,6 +126,13 @@ pub struct Book {
     /// The parts produced metric, when the cell counts parts, and the
     /// count since the agent started.
     parts: Option<(usize, u64)>,
+    /// The OEE metrics, with `[oee]`.
+    oee: Option<OeeMetrics>,
+    /// The PLC link is up as the steps last said (the device is alive).
+    up: bool,
+    /// The link went down since the device was last born: how many of the
+    /// held changes came before (they go out before its DDEATH).
+    death: Option<usize>,
     /// The changes not yet published, oldest first, at most `max_held`.
     held: VecDeque<Change>,
     max_held: usize,
@@ -123,12 +145,14 @@ pub struct Book {
 
 impl Book {
     /// The metrics of a device with alarms `alarms`, exported tags `tags`
-    /// (index in the configuration, name), parts counted or not; at most
-    /// `max_held` changes wait.
+    /// (index in the configuration, name), parts counted or not, OEE
+    /// judged or not; at most `max_held` changes wait. The device is alive
+    /// until a step says its PLC link went down.
     pub fn new(
         alarms: &[Declared],
         tags: &[(usize, String)],
         counts_parts: bool,
+        judges_oee: bool,
         max_held: usize,
     ) -> Book {
         let mut book = Book {
@@ -137,6 +161,9 @@ impl Book {
             alarms: HashMap::new(),
             tags: HashMap::new(),
             parts: None,
+            oee: None,
+            up: true,
+            death: None,
             held: VecDeque::new(),
             max_held,
             dropped: 0,
@@ -156,6 +183,9 @@ impl Book {
                 Some(MetricValue::UInt64(0)),
             );
             book.parts = Some((at, 0));
+        }
+        if judges_oee {
+            book.declare_oee();
         }
         for (tag, name) in tags {
             let at = book.add(format!("Tags/{name}"), DataType::Double, None);
@@ -214,24 +244,30 @@ impl Book {
         Some(first)
     }
 
-    /// Sets metric `entry` to `value` at `at`; a change if it differs.
-    fn set(&mut self, entry: usize, value: Option<MetricValue>, at: u64) {
+    /// Sets metric `entry` to `value` at `at`; a change if it differs
+    /// (whether it did).
+    fn set(&mut self, entry: usize, value: Option<MetricValue>, at: u64) -> bool {
         let e = &mut self.entries[entry];
         if e.value == value {
-            return;
+            return false;
         }
         e.value = value.clone();
         e.at = at;
         if self.held.len() >= self.max_held {
             self.held.pop_front();
             self.dropped += 1;
+            if let Some(before) = &mut self.death {
+                *before = before.saturating_sub(1);
+            }
         }
         self.held.push_back(Change { entry, value, at });
+        true
     }
 
-    /// Takes what `step` changed; whether anything did.
+    /// Takes what `step` changed; whether anything did (a change of the
+    /// PLC link counts).
     pub fn apply(&mut self, step: &CellStep) -> bool {
-        let before = (self.held.len(), self.dropped);
+        let before = (self.held.len(), self.dropped, self.up);
         for (state, _, at) in step.engine.states() {
             let (fault_type, element) = match state {
                 MachineState::Fault {
@@ -259,7 +295,31 @@ impl Book {
         for (alarm, _, at) in step.engine.alarms() {
             self.alarm_changed(alarm, at);
         }
-        (self.held.len(), self.dropped) != before
+        if let Input::Connection { up, .. } = step.input {
+            if self.up && !up {
+                self.death.get_or_insert(self.held.len());
+            }
+            self.up = up;
+        }
+        (self.held.len(), self.dropped, self.up) != before
+    }
+
+    /// Whether the device is alive: its PLC link up.
+    pub fn device_up(&self) -> bool {
+        self.up
+    }
+
+    /// Whether the device died since it was last born (its DDEATH is
+    /// due).
+    pub fn died(&self) -> bool {
+        self.death.is_some()
+    }
+
+    /// The changes that came before the device's death, to be sent before
+    /// its DDEATH; the death is taken as told.
+    pub fn take_before_death(&mut self) -> Vec<Change> {
+        let n = self.death.take().unwrap_or(0).min(self.held.len());
+        self.held.drain(..n).collect()
     }
 
     fn alarm_changed(&mut self, alarm: &Alarm, at: u64) {
@@ -293,15 +353,30 @@ impl Book {
         std::mem::take(&mut self.dropped)
     }
 
-    /// Takes at most `n` of the waiting changes, oldest first.
+    /// Takes at most `n` of the waiting changes, oldest first; none from
+    /// after the device's death while it is not yet told.
     pub fn take_changes(&mut self, n: usize) -> Vec<Change> {
-        let n = n.min(self.held.len());
+        let mut n = n.min(self.held.len());
+        if let Some(before) = &mut self.death {
+            n = n.min(*before);
+            *before -= n;
+        }
         self.held.drain(..n).collect()
+    }
+
+    /// Takes every waiting change, oldest first (to be kept on disk: the
+    /// node cannot publish, and its next birth tells the device anew).
+    pub fn take_all(&mut self) -> Vec<Change> {
+        self.death = None;
+        self.held.drain(..).collect()
     }
 
     /// Puts `changes`, taken but not published, back before the waiting
     /// ones.
     pub fn hold_again(&mut self, changes: Vec<Change>) {
+        if let Some(before) = &mut self.death {
+            *before += changes.len();
+        }
         for c in changes.into_iter().rev() {
             self.held.push_front(c);
         }
@@ -343,8 +418,10 @@ impl Book {
         (changes, unknown)
     }
 
-    /// The node's birth: sequence 0, `bd_seq`, the rebirth control.
-    pub fn node_birth(&self, bd_seq: u64, now: u64) -> Payload {
+    /// The node's birth: sequence 0, `bd_seq`, the rebirth control. It
+    /// tells the device anew: a death not yet told is forgotten.
+    pub fn node_birth(&mut self, bd_seq: u64, now: u64) -> Payload {
+        self.death = None;
         Payload {
             timestamp: Some(now),
             seq: Some(0),
@@ -368,6 +445,7 @@ impl Book {
     /// older than it: they are handed back to be sent as history.
     pub fn device_birth(&mut self, seq: u64, now: u64) -> (Payload, Vec<Change>) {
         self.grown = false;
+        self.death = None;
         let metrics = self
             .entries
             .iter()
@@ -439,6 +517,16 @@ pub fn node_death(bd_seq: u64, now: u64) -> Payload {
     Payload {
         timestamp: Some(now),
         metrics: vec![bd_seq_metric(bd_seq, now)],
+        ..Payload::default()
+    }
+}
+
+/// The device's death at sequence `seq`: no metric, the host takes every
+/// metric of the device as stale until its next birth.
+pub fn device_death(seq: u64, now: u64) -> Payload {
+    Payload {
+        timestamp: Some(now),
+        seq: Some(seq),
         ..Payload::default()
     }
 }

@@ -28,7 +28,7 @@ pub(super) enum SparkplugEvent<'a> {
     },
     /// A message was handed to the session.
     Published {
-        /// Its kind (`nbirth`, `dbirth`, `ddata`, `ndeath`).
+        /// Its kind (`nbirth`, `dbirth`, `ddata`, `ddeath`, `ndeath`).
         kind: &'static str,
     },
     /// A message could not be handed to the session.
@@ -65,6 +65,11 @@ pub(super) enum SparkplugEvent<'a> {
     HostOffline {
         /// The session's bdSeq.
         bd_seq: u64,
+    },
+    /// The cell's PLC link is down: the device dies (DDEATH at `seq`).
+    DeviceDeath {
+        /// The DDEATH's sequence number.
+        seq: u64,
     },
     /// The store of held changes could not be written or read.
     StoreFailed {
@@ -148,6 +153,12 @@ impl SparkplugEvent<'_> {
                 tracing::info!(
                     bd_seq,
                     "sparkplug: the primary host is offline: NDEATH, disconnecting to connect again"
+                );
+            }
+            SparkplugEvent::DeviceDeath { seq } => {
+                tracing::info!(
+                    seq,
+                    "sparkplug: the PLC link is down: DDEATH, DBIRTH when it is back"
                 );
             }
             SparkplugEvent::StoreFailed { why } => {

@@ -1,14 +1,18 @@
 //! The cell as a Sparkplug B edge node (`[sparkplug]`, off by default):
-//! its machine state, alarms, parts produced and exported tags as the
-//! metrics of one device under the node, on an MQTT broker, for a plant's
+//! its machine state, alarms, parts produced, the current shift's OEE
+//! (with `[oee]`) and exported tags as the metrics of one device under the
+//! node, on an MQTT broker, for a plant's
 //! unified namespace (Ignition, HiveMQ, EMQX and the historians that read
 //! them).
 //!
-//! The sink ([`SparkplugSink`]) only writes each step's changes into the
-//! shared [`book::Book`] and wakes the session; it never waits for the
-//! network. The session ([`session::Session`], a task of its own) owns the
-//! MQTT client: the node's will (NDEATH with its bdSeq), the births (NBIRTH,
-//! DBIRTH), the data (DDATA, sequence 0–255), a rebirth when a host asks
+//! The sink ([`SparkplugSink`]) only writes each step's changes (and the
+//! OEE figures the OEE sink, before it in the loop, computed on a tick)
+//! into the shared [`book::Book`] and wakes the session; it never waits for
+//! the network. The session ([`session::Session`], a task of its own) owns
+//! the MQTT client: the node's will (NDEATH with its bdSeq), the births
+//! (NBIRTH, DBIRTH), the data (DDATA, sequence 0–255), the device's death
+//! (DDEATH) while the cell's PLC link is down and its birth again when it
+//! is back, a rebirth when a host asks
 //! (NCMD `Node Control/Rebirth`) and, with a primary host, publishing only
 //! while it says it is online; when it says offline, NDEATH and a new
 //! connection. Changes that cannot be published are held on disk beside
@@ -17,7 +21,8 @@
 //! never taken: they travel on the signed bus.
 //!
 //! - `config.rs`: the `[sparkplug]` table, validated.
-//! - `book.rs`: the metrics, their aliases and values, the held changes.
+//! - `book.rs`: the metrics, their aliases and values, the held changes,
+//!   the device alive or dead; `book/oee.rs`: the OEE metrics.
 //! - `session.rs`: the MQTT session.
 //! - `host.rs`: the primary host's `STATE`, judged by its timestamps.
 //! - `store.rs`: the held changes and bdSeq on disk.
@@ -58,15 +63,19 @@ use crate::config::CellConfig;
 use crate::metrics::Metrics;
 use crate::sinks::Sink;
 use crate::step::CellStep;
+use crate::step::OeeWatch;
 
 /// The sink for the cell loop.
 pub struct SparkplugSink {
     shared: Arc<Shared>,
     metrics: Arc<Metrics>,
+    /// The OEE sink's figures, read after each step it handled first.
+    oee: Option<OeeWatch>,
 }
 
 /// The sink for the cell loop and the session to run beside it; the
-/// device declares the alarms of the engine's `catalogue` from the start.
+/// device declares the alarms of the engine's `catalogue` from the start,
+/// and the OEE metrics when `oee` watches the OEE sink.
 ///
 /// # Errors
 /// A TLS or password file cannot be read or used, or the store of held
@@ -75,6 +84,7 @@ pub fn start(
     cell: &CellConfig,
     config: &SparkplugConfig,
     catalogue: &[cellwatch_models::engine::CatalogueEntry],
+    oee: Option<OeeWatch>,
     metrics: Arc<Metrics>,
 ) -> Result<(SparkplugSink, session::Session), SparkplugError> {
     let tags: Vec<(usize, String)> = cell
@@ -95,6 +105,7 @@ pub fn start(
             &declared(catalogue),
             &tags,
             counts_parts,
+            oee.is_some(),
             config.max_held,
         )),
         store: Mutex::new(store),
@@ -104,7 +115,14 @@ pub fn start(
     });
     metrics.sparkplug.held.set(stored as i64);
     let session = session::Session::new(config, shared.clone(), metrics.clone())?;
-    Ok((SparkplugSink { shared, metrics }, session))
+    Ok((
+        SparkplugSink {
+            shared,
+            metrics,
+            oee,
+        },
+        session,
+    ))
 }
 
 impl Sink for SparkplugSink {
@@ -115,7 +133,16 @@ impl Sink for SparkplugSink {
     fn handle<'a>(&'a mut self, step: &'a CellStep) -> BoxFuture<'a, ()> {
         let (changed, dropped) = {
             let mut book = self.shared.book();
-            let changed = book.apply(step);
+            let mut changed = book.apply(step);
+            if let Some(oee) = self
+                .oee
+                .as_mut()
+                .filter(|w| w.has_changed().unwrap_or(false))
+            {
+                if let Some(now) = &*oee.borrow_and_update() {
+                    changed |= book.oee(now);
+                }
+            }
             (changed, book.take_dropped())
         };
         let held = self.shared.held();

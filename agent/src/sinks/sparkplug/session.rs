@@ -19,6 +19,14 @@
 //! alarm the device had not declared appeared. A clean stop says NDEATH
 //! before it disconnects; anything else leaves the broker to say the will.
 //!
+//! The device lives while the cell's PLC link is up. When a step says the
+//! link went down, the changes that came before (the machine state
+//! `offline`) go out as DDATA, then DDEATH with the next sequence number;
+//! while it is dead no DDATA is sent for it and its changes are held.
+//! When the link is back, DBIRTH with every current value, then what was
+//! held as history. A node born while its device is dead sends NBIRTH
+//! alone.
+//!
 //! DDATA goes at QoS 0, as Sparkplug says: a change handed to the
 //! connection in the moment the broker goes away, before the loss is
 //! seen, is lost with it.
@@ -34,7 +42,7 @@ use rumqttc::{
 };
 use tokio::sync::{mpsc, watch};
 
-use super::book::{asks_rebirth, node_death, Change};
+use super::book::{asks_rebirth, device_death, node_death, Change};
 use super::config::SparkplugConfig;
 use super::events::SparkplugEvent;
 use super::files::{password, tls};
@@ -105,9 +113,11 @@ struct Node {
     host_online: bool,
     /// The primary host's `STATE` timestamps, across sessions.
     host: PrimaryHost,
-    /// NBIRTH and DBIRTH were published in this session and nothing since
-    /// asks for them again.
+    /// NBIRTH was published in this session and nothing since asks for it
+    /// again.
     born: bool,
+    /// DBIRTH was published after it, and no DDEATH since.
+    device_born: bool,
     /// The next message's sequence number, 0–255.
     seq: u64,
 }
@@ -195,6 +205,7 @@ impl Session {
             host_online: self.primary_host.is_none(),
             host: PrimaryHost::default(),
             born: false,
+            device_born: false,
             seq: 0,
         };
         while !self.shared.closed.load(Ordering::Acquire) {
@@ -210,17 +221,13 @@ impl Session {
                 () = self.shared.wake.notified() => {}
             }
             if node.connected && node.host_online {
-                if !node.born || self.shared.book().grown() {
-                    self.birth(&mut node).await;
-                } else {
-                    self.data(&mut node).await;
-                }
+                self.catch_up(&mut node).await;
             } else {
                 self.spill().await;
             }
         }
         if node.connected && node.host_online && node.born {
-            self.data(&mut node).await;
+            self.catch_up(&mut node).await;
         }
         self.spill().await;
         if node.connected {
@@ -306,42 +313,117 @@ impl Session {
         }
     }
 
-    /// NBIRTH, DBIRTH and the held changes as history.
-    async fn birth(&self, node: &mut Node) {
+    /// Publishes what the node owes the host, in order, until only data is
+    /// left (then sent) or a message is not taken: the births, the
+    /// device's death or its birth again.
+    async fn catch_up(&self, node: &mut Node) {
+        loop {
+            let (up, died, grown) = {
+                let book = self.shared.book();
+                (book.device_up(), book.died(), book.grown())
+            };
+            let done = if !node.born || (grown && node.device_born) {
+                self.birth(node).await
+            } else if node.device_born && died {
+                self.device_death(node).await
+            } else if !node.device_born && up {
+                self.device_birth(node).await
+            } else {
+                if node.device_born {
+                    self.data(node).await;
+                }
+                return;
+            };
+            if !done {
+                return;
+            }
+        }
+    }
+
+    /// NBIRTH, then the device's birth when it is alive; whether all was
+    /// taken.
+    async fn birth(&self, node: &mut Node) -> bool {
         let now = crate::clock::now_ms();
         node.seq = 0;
+        node.device_born = false;
         let nbirth = self.shared.book().node_birth(node.bd_seq, now);
         node.next_seq();
         if !self
             .publish(node, &self.topics.nbirth, "nbirth", &nbirth)
             .await
         {
-            return;
+            return false;
         }
+        node.born = true;
+        if !self.shared.book().device_up() {
+            return true;
+        }
+        self.device_birth(node).await
+    }
+
+    /// DBIRTH and the held changes as history; whether all was taken.
+    async fn device_birth(&self, node: &mut Node) -> bool {
+        let now = crate::clock::now_ms();
         let seq = node.next_seq();
         let (dbirth, held) = self.shared.book().device_birth(seq, now);
         if !self
             .publish(node, &self.topics.dbirth, "dbirth", &dbirth)
             .await
         {
-            return;
+            self.shared.book().hold_again(held);
+            node.born = false;
+            return false;
         }
-        node.born = true;
+        node.device_born = true;
         if !self.stored_history(node, now).await {
             self.shared.book().hold_again(held);
-            return;
+            return false;
         }
-        let mut held = held;
-        while !held.is_empty() {
-            let rest = held.split_off(held.len().min(METRICS_PER_MESSAGE));
-            if !self.ddata(node, held.clone(), now, true).await {
-                held.extend(rest);
-                self.shared.book().hold_again(held);
-                return;
+        self.send_all(node, held, now, true).await
+    }
+
+    /// The changes from before the device's death as DDATA, then DDEATH;
+    /// whether all was taken.
+    async fn device_death(&self, node: &mut Node) -> bool {
+        let now = crate::clock::now_ms();
+        let before = self.shared.book().take_before_death();
+        if !self.send_all(node, before, now, false).await {
+            return false;
+        }
+        SparkplugEvent::DeviceDeath { seq: node.seq }.emit(&self.metrics.sparkplug);
+        let death = device_death(node.next_seq(), now);
+        node.device_born = false;
+        if !self
+            .publish(node, &self.topics.ddeath, "ddeath", &death)
+            .await
+        {
+            // Its sequence number is spent: the host would see a gap.
+            node.born = false;
+            return false;
+        }
+        true
+    }
+
+    /// `changes` as DDATA, flagged historical or not, in messages of at
+    /// most [`METRICS_PER_MESSAGE`]; those not taken are held again.
+    /// Whether all were taken.
+    async fn send_all(
+        &self,
+        node: &mut Node,
+        mut changes: Vec<Change>,
+        now: u64,
+        historical: bool,
+    ) -> bool {
+        while !changes.is_empty() {
+            let rest = changes.split_off(changes.len().min(METRICS_PER_MESSAGE));
+            if !self.ddata(node, changes.clone(), now, historical).await {
+                changes.extend(rest);
+                self.shared.book().hold_again(changes);
+                return false;
             }
-            held = rest;
+            changes = rest;
         }
-        self.data(node).await;
+        true
     }
 
     /// The node's primary host said it is offline: NDEATH, then the
@@ -359,6 +441,7 @@ impl Session {
         }
         node.connected = false;
         node.born = false;
+        node.device_born = false;
     }
 
     /// The changes in the store as history, oldest first, each forgotten
@@ -400,7 +483,7 @@ impl Session {
     async fn spill(&self) {
         let rows = {
             let mut book = self.shared.book();
-            let changes = book.take_changes(usize::MAX);
+            let changes = book.take_all();
             if changes.is_empty() {
                 return;
             }

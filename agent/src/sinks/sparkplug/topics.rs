@@ -18,6 +18,8 @@ pub struct Topics {
     pub dbirth: String,
     /// The device's data.
     pub ddata: String,
+    /// The device's death (its PLC link down).
+    pub ddeath: String,
     /// Commands to the node (only a rebirth is taken).
     pub ncmd: String,
     /// Commands to the device (none is taken).
@@ -41,6 +43,7 @@ impl Topics {
             ndeath: node("NDEATH"),
             dbirth: device("DBIRTH"),
             ddata: device("DDATA"),
+            ddeath: device("DDEATH"),
             ncmd: node("NCMD"),
             dcmd: device("DCMD"),
             state: config
@@ -76,6 +79,7 @@ mod tests {
         assert_eq!(t.ndeath, "spBv1.0/press-shop/NDEATH/m01-agent");
         assert_eq!(t.dbirth, "spBv1.0/press-shop/DBIRTH/m01-agent/m01");
         assert_eq!(t.ddata, "spBv1.0/press-shop/DDATA/m01-agent/m01");
+        assert_eq!(t.ddeath, "spBv1.0/press-shop/DDEATH/m01-agent/m01");
         assert_eq!(t.ncmd, "spBv1.0/press-shop/NCMD/m01-agent");
         assert_eq!(t.dcmd, "spBv1.0/press-shop/DCMD/m01-agent/m01");
         assert_eq!(t.state.as_deref(), Some("spBv1.0/STATE/scada"));

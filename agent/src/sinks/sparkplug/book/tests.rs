@@ -56,6 +56,7 @@ fn book(max_held: usize) -> Book {
         }],
         &[(4, "spindle_temperature".into())],
         true,
+        false,
         max_held,
     )
 }
@@ -259,7 +260,7 @@ fn held_changes_go_to_the_store_by_name_and_come_back_to_the_next_run() {
         ]
     );
     // The next run declares the tag at another place: found by its name.
-    let next = Book::new(&[], &[(4, "spindle_temperature".into())], false, 10);
+    let next = Book::new(&[], &[(4, "spindle_temperature".into())], false, false, 10);
     let mut gone = rows[0].clone();
     gone.metric = "Tags/removed".into();
     let (changes, unknown) = next.from_rows(vec![rows[0].clone(), gone, rows[1].clone()]);
@@ -293,4 +294,89 @@ fn changes_not_published_are_held_again_first() {
         b.take_changes(10).iter().map(|c| c.at).collect::<Vec<_>>(),
         [100, 101, 102]
     );
+}
+
+/// A step of the PLC link going `up` or down, the tag `4` read as `value`
+/// with it.
+fn link(at: u64, up: bool, value: f64) -> CellStep {
+    CellStep {
+        input: Input::Connection {
+            up,
+            detail: String::new(),
+        },
+        ..step(
+            at,
+            EngineStep {
+                exported: vec![(4, Some(value))],
+                ..EngineStep::default()
+            },
+        )
+    }
+}
+
+fn exported(at: u64, value: f64) -> CellStep {
+    step(
+        at,
+        EngineStep {
+            exported: vec![(4, Some(value))],
+            ..EngineStep::default()
+        },
+    )
+}
+
+#[test]
+fn the_device_dies_with_its_link_after_the_changes_before() {
+    let mut b = book(3);
+    assert!(b.device_up() && !b.died());
+    assert!(b.apply(&exported(100, 1.0)));
+    // The link lost, with a change; then a change while dead.
+    assert!(b.apply(&link(101, false, 2.0)));
+    assert!(b.apply(&exported(102, 3.0)));
+    assert!(!b.device_up() && b.died());
+    // Data stops at the death: the first change only, then none.
+    assert_eq!(
+        b.take_changes(1).iter().map(|c| c.at).collect::<Vec<_>>(),
+        [100]
+    );
+    let before = b.take_before_death();
+    assert_eq!(before.iter().map(|c| c.at).collect::<Vec<_>>(), [101]);
+    assert!(!b.died());
+    assert!(b.take_changes(10).iter().all(|c| c.at == 102));
+    // Changes taken and put back before the death stay before it; the
+    // oldest dropped past the bound leave it sooner.
+    let mut b = book(3);
+    b.apply(&exported(100, 1.0));
+    b.apply(&exported(101, 2.0));
+    b.apply(&link(102, false, 3.0));
+    let taken = b.take_changes(10);
+    assert_eq!(taken.len(), 3, "all before the death");
+    b.hold_again(taken);
+    b.apply(&exported(103, 4.0));
+    assert_eq!(b.take_dropped(), 1);
+    let before = b.take_before_death();
+    assert_eq!(before.iter().map(|c| c.at).collect::<Vec<_>>(), [101, 102]);
+    // The link back: a birth with the current values, what came while
+    // dead handed back as history.
+    assert!(b.apply(&link(104, true, 5.0)));
+    assert!(b.device_up() && !b.died());
+    let (birth, held) = b.device_birth(7, 200);
+    assert_eq!(birth.metrics[4].value, Some(Value::DoubleValue(5.0)));
+    assert_eq!(held.iter().map(|c| c.at).collect::<Vec<_>>(), [103, 104]);
+    let death = device_death(6, 150);
+    assert_eq!((death.seq, death.metrics.len()), (Some(6), 0));
+}
+
+#[test]
+fn a_node_birth_or_a_spill_forgets_a_death_not_yet_told() {
+    let mut b = book(10);
+    b.apply(&link(100, false, 1.0));
+    b.apply(&exported(101, 2.0));
+    assert!(b.died());
+    assert_eq!(b.take_all().len(), 2);
+    assert!(!b.died());
+    b.apply(&link(102, true, 3.0));
+    b.apply(&link(103, false, 4.0));
+    assert!(b.died());
+    b.node_birth(1, 200);
+    assert!(!b.died() && !b.device_up());
 }
