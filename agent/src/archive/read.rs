@@ -50,7 +50,7 @@ impl Kept {
 
 /// One believed entry.
 #[derive(Debug, Clone)]
-pub struct Entry {
+pub struct ArchivedEntry {
     /// What it is.
     pub kept: Kept,
     /// The key it was put and kept on.
@@ -64,7 +64,7 @@ pub struct Entry {
 pub struct Reading {
     /// Believed entries, oldest first (by the time their agent sealed
     /// them), each once however many storages kept it.
-    pub entries: Vec<Entry>,
+    pub entries: Vec<ArchivedEntry>,
     /// Entries not believed: the key and why.
     pub refused: Vec<(String, String)>,
 }
@@ -160,7 +160,7 @@ pub async fn read(
             match bus.open_put(&payload, &key) {
                 Ok(opened) => {
                     if reading.entries.len() < MOST_ENTRIES {
-                        reading.entries.push(Entry { kept, key, opened });
+                        reading.entries.push(ArchivedEntry { kept, key, opened });
                     }
                 }
                 Err(why) => reading.refused.push((key, why.to_string())),
@@ -173,7 +173,7 @@ pub async fn read(
     Ok(reading)
 }
 
-impl Entry {
+impl ArchivedEntry {
     /// The alarm event, for an [`Kept::Alarm`] entry whose body reads.
     pub fn alarm(&self) -> Option<AlarmPayload> {
         (self.kept == Kept::Alarm)
@@ -243,8 +243,8 @@ pub fn as_history_page(reading: &Reading, limit: usize) -> serde_json::Value {
 mod tests {
     use super::*;
 
-    fn entry(kept: Kept, key: &str, at: u64, body: &str) -> Entry {
-        Entry {
+    fn entry(kept: Kept, key: &str, at: u64, body: &str) -> ArchivedEntry {
+        ArchivedEntry {
             kept,
             key: key.into(),
             opened: Opened {

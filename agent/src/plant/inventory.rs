@@ -53,7 +53,7 @@ pub struct Inventory {
     /// The operators, by name.
     pub operators: BTreeMap<String, Operator>,
     /// The console, when the plant has one.
-    pub console: Option<Console>,
+    pub console: Option<ConsoleSite>,
 }
 
 /// A `zenohd` router.
@@ -108,7 +108,7 @@ impl Operator {
 
 /// The operators' console.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Console {
+pub struct ConsoleSite {
     /// The host it runs on, the name browsers reach it by.
     pub host: String,
     /// Its HTTPS port.
@@ -359,7 +359,7 @@ pub fn parse(path: &Path, text: &str) -> Result<Inventory, PlantError> {
         if !is_host(c.host.get_ref()) {
             p.at(c.host.span(), "console.host", "a host name or address");
         }
-        Console {
+        ConsoleSite {
             host: c.host.into_inner(),
             port: c.port.map_or(CONSOLE_PORT, Spanned::into_inner),
         }

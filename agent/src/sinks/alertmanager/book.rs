@@ -130,7 +130,7 @@ impl Labels {
 /// alert under the old labels ends as the new one begins, so that a route
 /// on `acknowledged="false"` or `unacknowledged_for` stops notifying.
 #[derive(Debug, Default)]
-pub struct Book {
+pub struct AlertBook {
     active: BTreeMap<String, Active>,
     /// Ended alerts, by their labels, and the Alertmanagers (bits by
     /// index) still owed them.
@@ -155,7 +155,7 @@ struct Active {
 
 /// One send's content for one Alertmanager.
 #[derive(Debug)]
-pub struct Batch {
+pub struct AlertBatch {
     /// The Alertmanager's index.
     pub to: usize,
     /// The alerts, active ones with `endsAt` set.
@@ -176,17 +176,17 @@ fn identity(alert: &Alert) -> String {
     text
 }
 
-impl Book {
+impl AlertBook {
     /// A book for `alertmanagers` Alertmanagers (at most 64), marking an
     /// alarm unacknowledged for a step of `escalation` once that long
     /// has passed since its raise.
-    pub fn new(alertmanagers: usize, escalation: &[(String, Duration)]) -> Book {
+    pub fn new(alertmanagers: usize, escalation: &[(String, Duration)]) -> AlertBook {
         let all = if alertmanagers >= 64 {
             u64::MAX
         } else {
             (1u64 << alertmanagers) - 1
         };
-        Book {
+        AlertBook {
             all,
             steps: escalation
                 .iter()
@@ -197,7 +197,7 @@ impl Book {
                     )
                 })
                 .collect(),
-            ..Book::default()
+            ..AlertBook::default()
         }
     }
 
@@ -346,7 +346,7 @@ impl Book {
 
     /// What to send to Alertmanager `to`: every active alert, holding
     /// until `holds_until` (RFC 3339), and the ended ones it is owed.
-    pub fn batch(&self, to: usize, holds_until: &str) -> Batch {
+    pub fn batch(&self, to: usize, holds_until: &str) -> AlertBatch {
         let bit = 1 << to;
         let mut alerts: Vec<Alert> = self
             .active
@@ -363,10 +363,10 @@ impl Book {
                 ended.push(id.clone());
             }
         }
-        Batch { to, alerts, ended }
+        AlertBatch { to, alerts, ended }
     }
     /// Alertmanager `batch.to` took `batch`.
-    pub fn sent(&mut self, batch: &Batch) {
+    pub fn sent(&mut self, batch: &AlertBatch) {
         let bit = 1 << batch.to;
         for id in &batch.ended {
             if let Some((_, owed)) = self.ended.get_mut(id) {
@@ -436,7 +436,7 @@ mod tests {
 
     #[test]
     fn a_consequence_is_an_alert_naming_its_cause_unless_suppressed() {
-        let mut book = Book::new(1, &[]);
+        let mut book = AlertBook::new(1, &[]);
         let l = labels();
         let mut csd = payload(
             "csd",
@@ -461,7 +461,7 @@ mod tests {
             "follows from ese: G8.02 = 1 (0 without ese's fault)"
         );
         // Suppressed: no alert (and the one sent ends).
-        let mut book = Book::new(1, &[]);
+        let mut book = AlertBook::new(1, &[]);
         if let Some(c) = csd.consequence.as_mut() {
             c.suppressed = true;
         }
@@ -471,7 +471,7 @@ mod tests {
 
     #[test]
     fn an_alarm_with_guidance_carries_it_as_annotations() {
-        let mut book = Book::new(1, &[]);
+        let mut book = AlertBook::new(1, &[]);
         let mut ese = payload(
             "ese",
             AlarmState::ActiveUnacknowledged,
@@ -496,7 +496,7 @@ mod tests {
 
     #[test]
     fn an_alarm_unacknowledged_past_its_response_time_is_marked_overdue_until_acknowledged() {
-        let mut book = Book::new(1, &[]);
+        let mut book = AlertBook::new(1, &[]);
         let l = labels();
         // Raised at 10:00:00 with two minutes to act; taken at 10:00:30.
         let mut ese = payload(
@@ -512,7 +512,7 @@ mod tests {
         });
         let raised_ms = NOW - 30_000;
         assert!(book.take(&l, &ese, NOW));
-        let overdue = |book: &Book| {
+        let overdue = |book: &AlertBook| {
             book.batch(0, "x").alerts[0]
                 .annotations
                 .get("overdue")
@@ -534,7 +534,7 @@ mod tests {
         book.sent(&b);
         assert_eq!(book.next_escalation(raised_ms + 120_000), None);
         // A restart after the response time: overdue at once.
-        let mut later = Book::new(1, &[]);
+        let mut later = AlertBook::new(1, &[]);
         assert!(later.take(&l, &ese, raised_ms + 600_000));
         assert!(overdue(&later).is_some());
         // Acknowledged: no longer overdue.
@@ -557,7 +557,7 @@ mod tests {
 
     #[test]
     fn an_alarm_suppressed_by_design_is_no_alert_until_its_mode_ends() {
-        let mut book = Book::new(1, &[]);
+        let mut book = AlertBook::new(1, &[]);
         let l = labels();
         let mut ese = payload(
             "ese",
@@ -579,7 +579,7 @@ mod tests {
 
     #[test]
     fn an_alarm_is_an_alert_while_active_unshelved_and_in_service() {
-        let mut book = Book::new(2, &[]);
+        let mut book = AlertBook::new(2, &[]);
         let l = labels();
         let raised = payload(
             "ese",
@@ -687,7 +687,7 @@ mod tests {
             ("15m".to_string(), minutes(15)),
             ("1h".to_string(), minutes(60)),
         ];
-        let mut book = Book::new(1, &steps);
+        let mut book = AlertBook::new(1, &steps);
         let l = labels();
         // Raised at 10:00:00, taken at 10:00:30.
         let raised = payload(
@@ -697,7 +697,7 @@ mod tests {
         );
         let raised_ms = NOW - 30_000;
         assert!(book.take(&l, &raised, NOW));
-        let label = |book: &Book| {
+        let label = |book: &AlertBook| {
             book.batch(0, "x").alerts[0]
                 .labels
                 .get("unacknowledged_for")
@@ -722,7 +722,7 @@ mod tests {
         );
         // A restart that took the alarm back an hour and more after its
         // raise: the last step at once, no step after it.
-        let mut later = Book::new(1, &steps);
+        let mut later = AlertBook::new(1, &steps);
         assert!(later.take(&l, &raised, raised_ms + 3_700_000));
         assert_eq!(label(&later).as_deref(), Some("1h"));
         assert_eq!(later.next_escalation(raised_ms + 3_700_000), None);

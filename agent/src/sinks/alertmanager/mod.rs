@@ -16,7 +16,7 @@
 //! alert once more with `endsAt`, the time it happened, until every
 //! Alertmanager has taken it.
 //!
-//! The sink only writes into the [`Book`] (a lock held for a map update)
+//! The sink only writes into the [`AlertBook`] (a lock held for a map update)
 //! and wakes the [`Pusher`], a task of its own: a slow or dead
 //! Alertmanager never holds up the cell loop. Failed sends are retried
 //! with backoff (1 s doubling to the resend interval), per Alertmanager,
@@ -43,7 +43,7 @@ use crate::metrics::Metrics;
 use crate::step::CellStep;
 use events::AlertmanagerEvent;
 
-pub use book::{Alert, Batch, Book, Labels};
+pub use book::{Alert, AlertBatch, AlertBook, Labels};
 
 /// How long one send may take.
 const SEND_TIMEOUT: Duration = Duration::from_secs(10);
@@ -58,7 +58,7 @@ const FIRST_RETRY: Duration = Duration::from_secs(1);
 
 /// The state the sink and the pusher share.
 struct Shared {
-    book: Mutex<Book>,
+    book: Mutex<AlertBook>,
     /// Counts changes, so the pusher knows whether one came while a batch
     /// was on its way.
     generation: std::sync::atomic::AtomicU64,
@@ -69,7 +69,7 @@ struct Shared {
 }
 
 impl Shared {
-    fn book(&self) -> std::sync::MutexGuard<'_, Book> {
+    fn book(&self) -> std::sync::MutexGuard<'_, AlertBook> {
         self.book
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
@@ -178,7 +178,7 @@ pub fn start(
     metrics: Arc<Metrics>,
 ) -> Result<(AlertmanagerSink, Pusher), TlsError> {
     let shared = Arc::new(Shared {
-        book: Mutex::new(Book::new(config.urls.len(), &config.escalation)),
+        book: Mutex::new(AlertBook::new(config.urls.len(), &config.escalation)),
         generation: std::sync::atomic::AtomicU64::new(0),
         wake: Notify::new(),
         closed: std::sync::atomic::AtomicBool::new(false),

@@ -78,7 +78,7 @@ struct OeeMetrics {
 
 /// A change waiting to be published.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Change {
+pub struct MetricChange {
     /// Which metric (its index among the device's).
     entry: usize,
     /// The new value; `None`: null.
@@ -115,7 +115,7 @@ pub fn declared(catalogue: &[cellwatch_models::engine::CatalogueEntry]) -> Vec<D
 
 /// The device's metrics and what waits to be published.
 #[derive(Debug)]
-pub struct Book {
+pub struct MetricBook {
     entries: Vec<Entry>,
     /// Per metric name: its index (for changes read back from the store).
     names: HashMap<String, usize>,
@@ -134,7 +134,7 @@ pub struct Book {
     /// held changes came before (they go out before its DDEATH).
     death: Option<usize>,
     /// The changes not yet published, oldest first, at most `max_held`.
-    held: VecDeque<Change>,
+    held: VecDeque<MetricChange>,
     max_held: usize,
     /// Changes dropped past `max_held` not yet counted.
     dropped: u64,
@@ -143,7 +143,7 @@ pub struct Book {
     grown: bool,
 }
 
-impl Book {
+impl MetricBook {
     /// The metrics of a device with alarms `alarms`, exported tags `tags`
     /// (index in the configuration, name), parts counted or not, OEE
     /// judged or not; at most `max_held` changes wait. The device is alive
@@ -154,8 +154,8 @@ impl Book {
         counts_parts: bool,
         judges_oee: bool,
         max_held: usize,
-    ) -> Book {
-        let mut book = Book {
+    ) -> MetricBook {
+        let mut book = MetricBook {
             entries: Vec::new(),
             names: HashMap::new(),
             alarms: HashMap::new(),
@@ -260,7 +260,7 @@ impl Book {
                 *before = before.saturating_sub(1);
             }
         }
-        self.held.push_back(Change { entry, value, at });
+        self.held.push_back(MetricChange { entry, value, at });
         true
     }
 
@@ -317,7 +317,7 @@ impl Book {
 
     /// The changes that came before the device's death, to be sent before
     /// its DDEATH; the death is taken as told.
-    pub fn take_before_death(&mut self) -> Vec<Change> {
+    pub fn take_before_death(&mut self) -> Vec<MetricChange> {
         let n = self.death.take().unwrap_or(0).min(self.held.len());
         self.held.drain(..n).collect()
     }
@@ -355,7 +355,7 @@ impl Book {
 
     /// Takes at most `n` of the waiting changes, oldest first; none from
     /// after the device's death while it is not yet told.
-    pub fn take_changes(&mut self, n: usize) -> Vec<Change> {
+    pub fn take_changes(&mut self, n: usize) -> Vec<MetricChange> {
         let mut n = n.min(self.held.len());
         if let Some(before) = &mut self.death {
             n = n.min(*before);
@@ -366,14 +366,14 @@ impl Book {
 
     /// Takes every waiting change, oldest first (to be kept on disk: the
     /// node cannot publish, and its next birth tells the device anew).
-    pub fn take_all(&mut self) -> Vec<Change> {
+    pub fn take_all(&mut self) -> Vec<MetricChange> {
         self.death = None;
         self.held.drain(..).collect()
     }
 
     /// Puts `changes`, taken but not published, back before the waiting
     /// ones.
-    pub fn hold_again(&mut self, changes: Vec<Change>) {
+    pub fn hold_again(&mut self, changes: Vec<MetricChange>) {
         if let Some(before) = &mut self.death {
             *before += changes.len();
         }
@@ -383,7 +383,7 @@ impl Book {
     }
 
     /// `changes` as the store keeps them: by metric name.
-    pub fn to_rows(&self, changes: Vec<Change>) -> Vec<HeldRow> {
+    pub fn to_rows(&self, changes: Vec<MetricChange>) -> Vec<HeldRow> {
         changes
             .into_iter()
             .map(|c| HeldRow {
@@ -399,12 +399,12 @@ impl Book {
     /// with how many name a metric the device no longer declares (an
     /// exported tag taken out of the configuration, an alarm first seen
     /// in an earlier run).
-    pub fn from_rows(&self, rows: Vec<HeldRow>) -> (Vec<Change>, u64) {
+    pub fn from_rows(&self, rows: Vec<HeldRow>) -> (Vec<MetricChange>, u64) {
         let mut unknown = 0;
         let changes = rows
             .into_iter()
             .filter_map(|r| match self.names.get(&r.metric) {
-                Some(&entry) => Some(Change {
+                Some(&entry) => Some(MetricChange {
                     entry,
                     value: r.value,
                     at: r.at,
@@ -443,7 +443,7 @@ impl Book {
     /// The device's birth at sequence `seq`: every metric with its name,
     /// alias, type and current value. The changes waiting until now are
     /// older than it: they are handed back to be sent as history.
-    pub fn device_birth(&mut self, seq: u64, now: u64) -> (Payload, Vec<Change>) {
+    pub fn device_birth(&mut self, seq: u64, now: u64) -> (Payload, Vec<MetricChange>) {
         self.grown = false;
         self.death = None;
         let metrics = self
@@ -475,7 +475,13 @@ impl Book {
 
     /// Data at sequence `seq`: `changes` by alias, flagged historical or
     /// not.
-    pub fn data(&self, changes: Vec<Change>, seq: u64, now: u64, historical: bool) -> Payload {
+    pub fn data(
+        &self,
+        changes: Vec<MetricChange>,
+        seq: u64,
+        now: u64,
+        historical: bool,
+    ) -> Payload {
         let metrics = changes
             .into_iter()
             .map(|c| Metric {

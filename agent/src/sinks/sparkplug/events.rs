@@ -2,7 +2,7 @@
 //! `emit` writes its log line and bumps its metric together
 //! (`cellwatch_sparkplug_*`, registered in `metrics/sparkplug.rs`).
 
-use super::host::Heard;
+use super::host::HostSaid;
 use crate::metrics::SparkplugMetrics;
 
 /// Something the edge node did or met.
@@ -58,7 +58,7 @@ pub(super) enum SparkplugEvent<'a> {
         /// Its id.
         host: &'a str,
         /// What it means: online, offline, or stale (ignored).
-        heard: Heard,
+        heard: HostSaid,
     },
     /// The primary host went offline during the node's Sparkplug session:
     /// the node said its NDEATH and disconnects.
@@ -139,7 +139,7 @@ impl SparkplugEvent<'_> {
             }
             SparkplugEvent::PrimaryHost { host, heard } => {
                 metrics.host_state(heard.as_str());
-                if heard == Heard::Stale {
+                if heard == HostSaid::Stale {
                     tracing::info!(host, "sparkplug: primary host STATE older than the last one (or unreadable), ignored");
                 } else {
                     tracing::info!(

@@ -48,7 +48,7 @@ impl HostState {
 
 /// What a `STATE` message means for the node.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Heard {
+pub enum HostSaid {
     /// The host is online.
     Online,
     /// The host is offline.
@@ -57,13 +57,13 @@ pub enum Heard {
     Stale,
 }
 
-impl Heard {
+impl HostSaid {
     /// The label of `cellwatch_sparkplug_primary_host_states_total`.
     pub fn as_str(self) -> &'static str {
         match self {
-            Heard::Online => "online",
-            Heard::Offline => "offline",
-            Heard::Stale => "stale",
+            HostSaid::Online => "online",
+            HostSaid::Offline => "offline",
+            HostSaid::Stale => "stale",
         }
     }
 }
@@ -80,26 +80,26 @@ pub struct PrimaryHost {
 impl PrimaryHost {
     /// Judges `state` against what was heard before, and remembers it if
     /// it counts.
-    pub fn heard(&mut self, state: HostState) -> Heard {
+    pub fn heard(&mut self, state: HostState) -> HostSaid {
         let not_older = |than: Option<u64>| match (state.timestamp, than) {
             (Some(t), Some(before)) => t >= before,
             _ => true,
         };
         if state.online {
             if !not_older(self.last) {
-                return Heard::Stale;
+                return HostSaid::Stale;
             }
             self.last_online = state.timestamp.or(self.last_online);
         } else if !not_older(self.last_online) {
-            return Heard::Stale;
+            return HostSaid::Stale;
         }
         if let Some(t) = state.timestamp {
             self.last = Some(self.last.map_or(t, |l| l.max(t)));
         }
         if state.online {
-            Heard::Online
+            HostSaid::Online
         } else {
-            Heard::Offline
+            HostSaid::Offline
         }
     }
 }
@@ -137,25 +137,25 @@ mod tests {
     fn an_older_state_never_flips_the_node() {
         let mut host = PrimaryHost::default();
         // No STATE heard yet: the first counts, whatever its time.
-        assert_eq!(host.heard(at(false, 5)), Heard::Offline);
+        assert_eq!(host.heard(at(false, 5)), HostSaid::Offline);
         // Online as new as the last STATE counts; older does not.
-        assert_eq!(host.heard(at(true, 4)), Heard::Stale);
-        assert_eq!(host.heard(at(true, 5)), Heard::Online);
+        assert_eq!(host.heard(at(true, 4)), HostSaid::Stale);
+        assert_eq!(host.heard(at(true, 5)), HostSaid::Online);
         // A death of an earlier host session, delivered late: ignored.
-        assert_eq!(host.heard(at(false, 3)), Heard::Stale);
-        assert_eq!(host.heard(at(false, 5)), Heard::Offline);
+        assert_eq!(host.heard(at(false, 3)), HostSaid::Stale);
+        assert_eq!(host.heard(at(false, 5)), HostSaid::Offline);
         // Heard again on the next session (retained): still offline, and
         // an older online retained before it does not bring it back.
-        assert_eq!(host.heard(at(false, 5)), Heard::Offline);
-        assert_eq!(host.heard(at(true, 1)), Heard::Stale);
-        assert_eq!(host.heard(at(true, 9)), Heard::Online);
+        assert_eq!(host.heard(at(false, 5)), HostSaid::Offline);
+        assert_eq!(host.heard(at(true, 1)), HostSaid::Stale);
+        assert_eq!(host.heard(at(true, 9)), HostSaid::Online);
         // Sparkplug 2's texts carry no time: they always count.
         assert_eq!(
             host.heard(HostState {
                 online: false,
                 timestamp: None
             }),
-            Heard::Offline
+            HostSaid::Offline
         );
     }
 }

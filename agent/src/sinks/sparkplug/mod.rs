@@ -7,7 +7,7 @@
 //!
 //! The sink ([`SparkplugSink`]) only writes each step's changes (and the
 //! OEE figures the OEE sink, before it in the loop, computed on a tick)
-//! into the shared [`book::Book`] and wakes the session; it never waits for
+//! into the shared [`book::MetricBook`] and wakes the session; it never waits for
 //! the network. The session ([`session::Session`], a task of its own) owns
 //! the MQTT client: the node's will (NDEATH with its bdSeq), the births
 //! (NBIRTH, DBIRTH), the data (DDATA, sequence 0–255), the device's death
@@ -52,7 +52,7 @@ use futures_util::future::BoxFuture;
 use futures_util::FutureExt;
 use tokio::sync::Notify;
 
-use self::book::{declared, Book};
+use self::book::{declared, MetricBook};
 use self::config::SparkplugConfig;
 use self::events::SparkplugEvent;
 pub use self::files::check;
@@ -101,7 +101,7 @@ pub fn start(
     }
     let stored = store.rows();
     let shared = Arc::new(Shared {
-        book: Mutex::new(Book::new(
+        book: Mutex::new(MetricBook::new(
             &declared(catalogue),
             &tags,
             counts_parts,

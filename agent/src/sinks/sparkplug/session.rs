@@ -42,11 +42,11 @@ use rumqttc::{
 };
 use tokio::sync::{mpsc, watch};
 
-use super::book::{asks_rebirth, device_death, node_death, Change};
+use super::book::{asks_rebirth, device_death, node_death, MetricChange};
 use super::config::SparkplugConfig;
 use super::events::SparkplugEvent;
 use super::files::{password, tls};
-use super::host::{Heard, HostState, PrimaryHost};
+use super::host::{HostSaid, HostState, PrimaryHost};
 use super::shared::{Shared, SparkplugError};
 use super::store::{HeldStore, StoreError};
 use super::tahu::Payload;
@@ -290,23 +290,23 @@ impl Session {
         ) {
             let heard = match HostState::parse(&message.payload) {
                 Some(state) => node.host.heard(state),
-                None => Heard::Stale,
+                None => HostSaid::Stale,
             };
             SparkplugEvent::PrimaryHost { host, heard }.emit(m);
             match heard {
-                Heard::Online => {
+                HostSaid::Online => {
                     if !node.host_online {
                         node.born = false;
                     }
                     node.host_online = true;
                 }
-                Heard::Offline => {
+                HostSaid::Offline => {
                     node.host_online = false;
                     if node.born {
                         self.leave(node).await;
                     }
                 }
-                Heard::Stale => {}
+                HostSaid::Stale => {}
             }
         } else {
             SparkplugEvent::CommandIgnored { topic }.emit(m);
@@ -410,7 +410,7 @@ impl Session {
     async fn send_all(
         &self,
         node: &mut Node,
-        mut changes: Vec<Change>,
+        mut changes: Vec<MetricChange>,
         now: u64,
         historical: bool,
     ) -> bool {
@@ -550,7 +550,7 @@ impl Session {
     async fn ddata(
         &self,
         node: &mut Node,
-        changes: Vec<Change>,
+        changes: Vec<MetricChange>,
         now: u64,
         historical: bool,
     ) -> bool {

@@ -6,7 +6,7 @@ use std::sync::{Mutex, MutexGuard};
 
 use tokio::sync::Notify;
 
-use super::book::Book;
+use super::book::MetricBook;
 use super::store::{HeldStore, StoreError};
 
 /// Why the edge node cannot start.
@@ -36,7 +36,7 @@ pub enum SparkplugError {
 pub(super) struct Shared {
     /// The metrics and the held changes; held only to write or read them,
     /// never across an await.
-    pub(super) book: Mutex<Book>,
+    pub(super) book: Mutex<MetricBook>,
     /// The changes held on disk and the bdSeq; held only on a blocking
     /// thread (or before the session runs).
     pub(super) store: Mutex<HeldStore>,
@@ -49,7 +49,7 @@ pub(super) struct Shared {
 }
 
 impl Shared {
-    pub(super) fn book(&self) -> MutexGuard<'_, Book> {
+    pub(super) fn book(&self) -> MutexGuard<'_, MetricBook> {
         self.book
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)

@@ -8,7 +8,7 @@
 //! a host reads ratios and times of the same moment); and everything when
 //! the shift changes.
 
-use super::{properties, Book, MetricValue, OeeMetrics};
+use super::{properties, MetricBook, MetricValue, OeeMetrics};
 use crate::sinks::sparkplug::tahu::DataType;
 use crate::step::OeeNow;
 
@@ -32,7 +32,7 @@ const FIRST_RATIO: usize = 1;
 const FIRST_COUNT: usize = FIRST_RATIO + RATIOS.len();
 const FIRST_TIME: usize = FIRST_COUNT + COUNTS.len();
 
-impl Book {
+impl MetricBook {
     /// Declares the OEE metrics, all null until the first tick.
     pub(super) fn declare_oee(&mut self) {
         let first = self.add("OEE/Shift".into(), DataType::String, None);
@@ -119,8 +119,8 @@ mod tests {
     use super::*;
     use crate::sinks::sparkplug::tahu::{Payload, Value};
 
-    fn book() -> Book {
-        Book::new(&[], &[], true, true, 100)
+    fn book() -> MetricBook {
+        MetricBook::new(&[], &[], true, true, 100)
     }
 
     fn now(shift_start: u64, at: u64, f: Figures) -> OeeNow {
@@ -168,7 +168,7 @@ mod tests {
 
     /// The names of the metrics the waiting changes are of, and the
     /// changes taken.
-    fn sent(b: &mut Book) -> Vec<String> {
+    fn sent(b: &mut MetricBook) -> Vec<String> {
         b.take_changes(usize::MAX)
             .into_iter()
             .map(|c| b.entries[c.entry].name.clone())
@@ -205,7 +205,7 @@ mod tests {
             ]
         );
         // Without [oee], none.
-        let (plain, _) = Book::new(&[], &[], true, false, 100).device_birth(1, 1000);
+        let (plain, _) = MetricBook::new(&[], &[], true, false, 100).device_birth(1, 1000);
         assert_eq!(plain.metrics.len(), 4);
     }
 

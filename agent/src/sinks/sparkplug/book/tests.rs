@@ -46,8 +46,8 @@ fn step(at: u64, engine: EngineStep) -> CellStep {
     }
 }
 
-fn book(max_held: usize) -> Book {
-    Book::new(
+fn book(max_held: usize) -> MetricBook {
+    MetricBook::new(
         &[Declared {
             id: "ese".into(),
             kind: AlarmKind::Switching,
@@ -260,7 +260,7 @@ fn held_changes_go_to_the_store_by_name_and_come_back_to_the_next_run() {
         ]
     );
     // The next run declares the tag at another place: found by its name.
-    let next = Book::new(&[], &[(4, "spindle_temperature".into())], false, false, 10);
+    let next = MetricBook::new(&[], &[(4, "spindle_temperature".into())], false, false, 10);
     let mut gone = rows[0].clone();
     gone.metric = "Tags/removed".into();
     let (changes, unknown) = next.from_rows(vec![rows[0].clone(), gone, rows[1].clone()]);
