@@ -28,9 +28,8 @@ pub(super) fn engine_with(extra: &[Tag], running: &str) -> CellEngine {
     engine_ruled(extra, rules)
 }
 
-/// The ESE check over its contacts' tags, then `extra` tags, with the
-/// state `rules`.
-pub(super) fn engine_ruled(extra: &[Tag], rules: StateRules) -> CellEngine {
+/// Paper 000's ESE check and its contacts' tags (named in lower case).
+pub(super) fn ese() -> (Vec<Tag>, SwitchingCheck) {
     let p = Program::compile("ese.il", ESE, None).unwrap();
     let sf = SwitchingFunction::expand(
         &p,
@@ -38,7 +37,7 @@ pub(super) fn engine_ruled(extra: &[Tag], rules: StateRules) -> CellEngine {
         &Observability::default_for(p.dialect()),
     )
     .unwrap();
-    let mut tags: Vec<Tag> = sf
+    let tags: Vec<Tag> = sf
         .leaves()
         .into_iter()
         .map(|s| Tag {
@@ -46,7 +45,6 @@ pub(super) fn engine_ruled(extra: &[Tag], rules: StateRules) -> CellEngine {
             address: s,
         })
         .collect();
-    tags.extend_from_slice(extra);
     let check = SwitchingCheck {
         forces: Vec::new(),
         text: None,
@@ -58,6 +56,14 @@ pub(super) fn engine_ruled(extra: &[Tag], rules: StateRules) -> CellEngine {
         comments: CommentDb::default(),
         armed_when: None,
     };
+    (tags, check)
+}
+
+/// The ESE check over its contacts' tags, then `extra` tags, with the
+/// state `rules`.
+pub(super) fn engine_ruled(extra: &[Tag], rules: StateRules) -> CellEngine {
+    let (mut tags, check) = ese();
+    tags.extend_from_slice(extra);
     CellEngine::new(
         "m01",
         tags,

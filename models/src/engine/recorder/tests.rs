@@ -4,16 +4,10 @@
 
 use super::*;
 use crate::alarm::{Severity, Transition};
-use crate::comments::CommentDb;
 use crate::engine::tag::Value;
-use crate::engine::{
-    CellEngine, CheckSet, EngineStep, Reading, StateRules, SwitchingCheck, SwitchingChecks, Tag,
-};
-use crate::explain::Polarity;
+use crate::engine::{CellEngine, CheckSet, EngineStep, Reading, StateRules, SwitchingChecks, Tag};
 use crate::limit::{Level, LimitCheck, LimitChecks, LimitLevel};
-use crate::program::Program;
-use crate::signal::{Observability, Signal};
-use crate::switching::SwitchingFunction;
+use crate::signal::Signal;
 use crate::value::Num;
 
 const NORMAL: &str = include_str!("../../../../config/cnc/ese-normal.values");
@@ -30,42 +24,12 @@ pub(super) fn config(before: u64, after: u64) -> RecorderConfig {
 /// then a tag no check reads (`M9.00`), then with `limit` a number
 /// `TEMP` with a limit check (H above 80), recording by `config`.
 fn ese_engine(limit: bool, config: RecorderConfig) -> CellEngine {
-    let p = Program::compile(
-        "ese.il",
-        include_str!("../../../../config/cnc/ese.il"),
-        None,
-    )
-    .unwrap();
-    let sf = SwitchingFunction::expand(
-        &p,
-        &Signal::new("G8.02"),
-        &Observability::default_for(p.dialect()),
-    )
-    .unwrap();
-    let mut tags: Vec<Tag> = sf
-        .leaves()
-        .into_iter()
-        .map(|s| Tag {
-            name: s.name().to_lowercase(),
-            address: s,
-        })
-        .collect();
+    let (mut tags, ese) = crate::engine::fixture::ese();
     tags.push(Tag {
         name: "spare".into(),
         address: Signal::new("M9.00"),
     });
-    let mut sets: Vec<Box<dyn CheckSet>> =
-        vec![Box::new(SwitchingChecks::new(vec![SwitchingCheck {
-            forces: Vec::new(),
-            text: None,
-            id: "ese".into(),
-            sf,
-            polarity: Polarity::On,
-            severity: Severity::Critical,
-            fault_type: "ESE".into(),
-            comments: CommentDb::default(),
-            armed_when: None,
-        }]))];
+    let mut sets: Vec<Box<dyn CheckSet>> = vec![Box::new(SwitchingChecks::new(vec![ese]))];
     if limit {
         tags.push(Tag {
             name: "spindle temperature".into(),
