@@ -146,6 +146,27 @@ async fn changes_held_by_a_killed_agent_arrive_after_its_restart() {
     agent.kill().unwrap();
     agent.wait().unwrap();
     let death = host.message("NDEATH", |_| true).await;
+
+    // A backup of the journal takes the held changes with it.
+    let dest = cell.dir.join("backup.sqlite");
+    let run = crate::util::cellwatch(&[
+        "journal",
+        "backup",
+        cell.dir.join("journal.sqlite").to_str().unwrap(),
+        dest.to_str().unwrap(),
+    ]);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    assert!(run.stdout.contains("held changes"), "{}", run.stdout);
+    let copy = rusqlite::Connection::open(cell.dir.join("backup.sqlite.sparkplug")).unwrap();
+    let copied: i64 = copy
+        .query_row(
+            "SELECT count(*) FROM held WHERE metric = 'Alarms/ese/Active'",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert_eq!(copied, stored(&cell.dir));
+    assert!(copied >= 1);
     let bd_seq = named(&death, "bdSeq")["value"].as_u64().unwrap();
     assert!(
         host.seen

@@ -4,6 +4,8 @@
 //! into a file of its own (owner-only, a private name), then the copy is
 //! checked (`PRAGMA integrity_check`) and counted, and only then given its
 //! name, never over another file. A backup is a journal like any other.
+//! [`backup_database`] copies another SQLite file the same way (the
+//! Sparkplug B node's held changes beside the journal).
 
 use std::path::{Path, PathBuf};
 
@@ -51,6 +53,28 @@ pub fn backup(from: &Path, to: &Path) -> Result<Copied, BackupError> {
             from.display()
         )));
     }
+    copy_to(from, to, true)
+}
+
+/// Copies the SQLite database at `from` to `to` as [`backup`] copies a
+/// journal (one instant, checked, owner-only, never over a file), rows
+/// not counted. The copy's size, bytes.
+///
+/// # Errors
+/// See [`BackupError`]; a failed backup leaves nothing at `to`.
+pub fn backup_database(from: &Path, to: &Path) -> Result<u64, BackupError> {
+    if !from.is_file() {
+        return Err(BackupError::Input(format!(
+            "{}: no such file",
+            from.display()
+        )));
+    }
+    copy_to(from, to, false).map(|c| c.bytes)
+}
+
+/// [`backup`] and [`backup_database`]: `journal` says whether the rows of
+/// the journal's tables are counted (and the file refused if it has none).
+fn copy_to(from: &Path, to: &Path, journal: bool) -> Result<Copied, BackupError> {
     let exists = || {
         BackupError::Input(format!(
             "{}: exists already (a backup never overwrites a file: name a new one)",
@@ -62,7 +86,7 @@ pub fn backup(from: &Path, to: &Path) -> Result<Copied, BackupError> {
         return Err(exists());
     }
     let partial = private_file(to)?;
-    let result = copy(from, &partial).and_then(|copied| {
+    let result = copy(from, &partial, journal).and_then(|copied| {
         // link(2) never replaces a file: one made at `to` since the check
         // above is refused, not overwritten.
         std::fs::hard_link(&partial, to).map_err(|e| match e.kind() {
@@ -106,7 +130,7 @@ fn private_file(to: &Path) -> Result<PathBuf, BackupError> {
     Ok(partial)
 }
 
-fn copy(from: &Path, partial: &Path) -> Result<Copied, BackupError> {
+fn copy(from: &Path, partial: &Path, journal: bool) -> Result<Copied, BackupError> {
     let failed = |path: &Path| {
         let path = path.to_path_buf();
         move |e: rusqlite::Error| BackupError::Failed {
@@ -164,7 +188,12 @@ fn copy(from: &Path, partial: &Path) -> Result<Copied, BackupError> {
         });
     }
     let mut rows = Vec::new();
-    for table in TABLES.into_iter().chain(["alarm_current"]) {
+    let tables = if journal { TABLES.as_slice() } else { &[] };
+    for &table in tables.iter().chain(if journal {
+        ["alarm_current"].as_slice()
+    } else {
+        &[]
+    }) {
         let n: i64 = dest
             .query_row(&format!("SELECT count(*) FROM {table}"), [], |r| r.get(0))
             .map_err(|e| {
