@@ -13,6 +13,7 @@ mod console;
 mod console_bounds;
 mod console_browser;
 mod fanout;
+mod idle;
 mod journal;
 mod load;
 mod measure;
@@ -184,6 +185,38 @@ enum Cmd {
         agent: PathBuf,
         /// Where the agents' directories go.
         #[arg(long, default_value = "target/bench-fanout")]
+        workdir: PathBuf,
+    },
+    /// Agents with nothing to do, side by side: CELLS cells of TAGS tags,
+    /// none changing, each its own load server and agent. Prints each
+    /// agent's CPU (from `/proc/PID/stat` and from its threads'
+    /// `schedstat`), resident memory (median, max; anonymous and
+    /// file-backed) and threads; several `--agent`s are measured in turn,
+    /// the first the baseline of the ratios.
+    Idle {
+        /// Cells (agents) side by side.
+        #[arg(long, default_value_t = 1)]
+        cells: usize,
+        /// Noise tags of each cell (the ten limit switches come on top).
+        #[arg(long, default_value_t = 100)]
+        tags: usize,
+        /// How long the agents are measured, once settled.
+        #[arg(long, default_value = "30s", value_parser = humantime::parse_duration)]
+        duration: Duration,
+        /// The agents' OPC UA security.
+        #[arg(long, value_enum, default_value_t = cell::Security::None)]
+        security: cell::Security,
+        /// The agents' publishing interval.
+        #[arg(long, default_value = "100ms", value_parser = humantime::parse_duration)]
+        publishing: Duration,
+        /// A `cellwatch` binary; repeat to measure several in turn.
+        #[arg(long = "agent", default_values_t = [String::from("target/release/cellwatch")])]
+        agents: Vec<String>,
+        /// Times each binary is measured, alternating.
+        #[arg(long, default_value_t = 1)]
+        rounds: usize,
+        /// Where the agents' directories go.
+        #[arg(long, default_value = "target/bench-idle")]
         workdir: PathBuf,
     },
     /// The plant at scale: CELLS simulated cells on this host, each its
@@ -468,6 +501,29 @@ async fn run(cli: Cli) -> anyhow::Result<()> {
                 fault_every,
             };
             print!("{}", fanout::run(&setup).await?);
+            Ok(())
+        }
+        Cmd::Idle {
+            cells,
+            tags,
+            duration: seconds,
+            security,
+            publishing,
+            agents,
+            rounds,
+            workdir,
+        } => {
+            let setup = idle::Setup {
+                agents: agents.into_iter().map(PathBuf::from).collect(),
+                workdir,
+                cells,
+                tags,
+                security,
+                publishing,
+                seconds,
+                rounds,
+            };
+            print!("{}", idle::run(&setup).await?);
             Ok(())
         }
         Cmd::Router { listen } => fanout::router(&listen).await,
