@@ -240,6 +240,9 @@ async fn a_shifts_oee_live_in_the_snapshot_and_in_the_report_is_the_journals() {
     };
     let (agent, script) = start(&clock).await;
     let mut committed = agent.committed();
+    // The connection's row before the clock moves on: each change is
+    // stamped when the loop takes it.
+    crate::util::row_at(&mut committed, &db, "state_history", at(5, 29)).await;
     let t = at(5, 30);
     clock.set(t);
     script
@@ -576,4 +579,155 @@ fn the_reports_csv_has_the_oee_and_one_offset_cuts_days_and_shifts() {
         other.stderr
     );
     assert_eq!(report(&["--utc-offset", "+01:00"]).code, 0);
+}
+
+/// A PackML machine (OPC 30050 `StateCurrent` as a number tag): Execute
+/// is running, Held is a planned stop (a machine mode), Suspended and
+/// Stopped are stops. Its shift's availability, from the machine's own
+/// states, is the one worked out by hand.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_packml_machines_own_states_give_its_availability() {
+    let d = tempfile::tempdir().unwrap();
+    crate::util::bus_pki(d.path(), &["agent-packml"]);
+    let db = d.path().join("journal.sqlite");
+    let path = d.path().join("packml.toml");
+    std::fs::write(
+        &path,
+        format!(
+            r#"[cell]
+id = "packml"
+
+[opcua]
+endpoint = "opc.tcp://127.0.0.1:4840/"
+pki_dir = "pki"
+namespace_uri = "urn:cellwatch:test"
+
+[zenoh]
+listen = ["quic/127.0.0.1:0"]
+
+[zenoh.tls]
+ca = "pki-bus/ca.pem"
+cert = "pki-bus/agent-packml.pem"
+key = "pki-bus/agent-packml.key"
+
+[journal]
+path = "{}"
+
+[metrics]
+listen = "127.0.0.1:0"
+
+[state]
+running = "STATE_CURRENT == 6"
+
+[[state.modes]]
+id = "held"
+when = "STATE_CURRENT == 11"
+suppress = ["pressure-l"]
+
+[oee]
+ideal_cycle = "1m"
+planned_stops = ["held"]
+
+[[oee.shifts]]
+name = "early"
+start = "06:00"
+end = "14:00"
+breaks = ["10:00-10:15"]
+
+[[tags]]
+name = "state"
+node_id = "ns=2;s=StateCurrent"
+address = "STATE_CURRENT"
+type = "Int32"
+
+[[tags]]
+name = "pressure"
+node_id = "ns=2;s=Pressure"
+address = "PRESSURE"
+type = "Double"
+
+[[checks.limit]]
+id = "pressure"
+tag = "PRESSURE"
+l = {{ limit = 2.0 }}
+"#,
+            db.display()
+        ),
+    )
+    .unwrap();
+    let day = chrono::Utc::now().date_naive() - chrono::Days::new(2);
+    let midnight = day
+        .and_hms_opt(0, 0, 0)
+        .unwrap()
+        .and_utc()
+        .timestamp_millis() as u64;
+    let at = |h: u64, m: u64| midnight + h * H + m * MIN;
+    let clock = Clock::manual(at(5, 29));
+    let (source, script) = ScriptedSource::new();
+    let agent = cellwatch::agent::start_with(
+        cellwatch::config::load(&path).unwrap(),
+        cellwatch::agent::Options {
+            source: Some(Box::new(source)),
+            clock: clock.clone(),
+            ..Default::default()
+        },
+    )
+    .await
+    .unwrap();
+    let mut committed = agent.committed();
+    script
+        .send(SourceEvent::Connected("scripted".into()))
+        .await
+        .unwrap();
+    // The connection's row before the clock moves on: each change is
+    // stamped when the loop takes it.
+    crate::util::row_at(&mut committed, &db, "state_history", at(5, 29)).await;
+    clock.set(at(5, 30));
+    script
+        .send(SourceEvent::Readings(
+            [(0, int(6)), (1, Reading::Number(Num::Float(5.0)))]
+                .into_iter()
+                .map(|(tag, reading)| TagReading {
+                    tag,
+                    reading,
+                    source_time: at(5, 30),
+                })
+                .collect::<Vec<_>>()
+                .into(),
+        ))
+        .await
+        .unwrap();
+    crate::util::row_at(&mut committed, &db, "state_history", at(5, 30)).await;
+    // PackML states: 6 Execute, 11 Held, 5 Suspended, 2 Stopped.
+    for (h, m, state, table) in [
+        (7, 0, 11, "modes"),
+        (7, 30, 6, "modes"),
+        (8, 0, 5, "state_history"),
+        (8, 10, 6, "state_history"),
+        (12, 0, 2, "state_history"),
+    ] {
+        clock.set(at(h, m));
+        script.send(reading(0, int(state), at(h, m))).await.unwrap();
+        crate::util::row_at(&mut committed, &db, table, at(h, m)).await;
+    }
+    clock.set(at(14, 30));
+    // Planned: 465 min less 30 held; run 60 + 30 + 215; stops 10 + 120.
+    let addr = agent.metrics_addr().unwrap();
+    let deadline = tokio::time::Instant::now() + std::time::Duration::from_secs(60);
+    let s = loop {
+        let s = crate::util::scrape(addr).await;
+        if gauge(&s, "cellwatch_oee_availability").is_some_and(|a| close(a, 305.0 / 435.0)) {
+            break s;
+        }
+        assert!(tokio::time::Instant::now() < deadline, "{s}");
+        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+    };
+    assert_eq!(loss(&s, "breakdowns"), Some(130.0 * 60.0), "{s}");
+    drop(script);
+    agent.stop().await;
+    let [planned, run, _, _] =
+        from_the_journal(&db, (at(6, 0), at(14, 0)), (at(10, 0), at(10, 15)));
+    // The held half hour is in neither (the journal's own modes rows say
+    // when): run time from the journal alone is the same.
+    assert_eq!((planned - 30 * MIN, run), (435 * MIN, 305 * MIN));
 }
