@@ -49,7 +49,7 @@ pub struct Inventory {
     /// The routers, by name.
     pub routers: BTreeMap<String, Router>,
     /// The cells, by id.
-    pub cells: BTreeMap<String, Cell>,
+    pub cells: BTreeMap<String, InventoryCell>,
     /// The operators, by name.
     pub operators: BTreeMap<String, Operator>,
     /// The console, when the plant has one.
@@ -69,7 +69,7 @@ pub struct Router {
 
 /// A cell and its agent.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Cell {
+pub struct InventoryCell {
     /// Its area.
     pub area: String,
     /// The host its agent runs on.
@@ -429,7 +429,7 @@ fn cells(
     p: &mut Problems,
     dir: &Path,
     raw: BTreeMap<String, Spanned<RawCell>>,
-) -> BTreeMap<String, Cell> {
+) -> BTreeMap<String, InventoryCell> {
     let mut cells = BTreeMap::new();
     let mut ports: BTreeMap<(String, u16), String> = BTreeMap::new();
     for (id, entry) in raw {
@@ -493,7 +493,7 @@ fn cells(
         }
         cells.insert(
             id,
-            Cell {
+            InventoryCell {
                 area: entry.area.into_inner(),
                 host: entry.host.into_inner(),
                 plc: entry.plc.map(Spanned::into_inner),

@@ -11,7 +11,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use super::files::{make_dir, Made, Writer};
-use super::inventory::{Cell, Inventory};
+use super::inventory::{Inventory, InventoryCell};
 use super::layout::Layout;
 use super::{render, PlantError};
 use crate::bus::certs::{ca_files, issue_to, make_ca};
@@ -213,7 +213,7 @@ fn cell_files(
     inventory: &Inventory,
     layout: &Layout,
     id: &str,
-    cell: &Cell,
+    cell: &InventoryCell,
 ) -> Result<(), PlantError> {
     let text = std::fs::read_to_string(&cell.config).map_err(|source| PlantError::Read {
         path: cell.config.clone(),

@@ -5,7 +5,7 @@
 use std::collections::BTreeMap;
 use std::fmt::Write;
 
-use super::inventory::{Cell, Inventory, Router};
+use super::inventory::{Inventory, InventoryCell, Router};
 use super::layout::Layout;
 use super::PlantError;
 
@@ -52,7 +52,7 @@ pub fn trust(
 
 /// Cell `id`'s operators file: each operator allowed anything on it, with
 /// what (from every scope of theirs that covers the cell).
-pub fn operators(inventory: &Inventory, cell: Option<(&str, &Cell)>) -> String {
+pub fn operators(inventory: &Inventory, cell: Option<(&str, &InventoryCell)>) -> String {
     let mut out = header("#", inventory);
     match cell {
         Some((id, _)) => {
@@ -298,7 +298,7 @@ pub fn alertmanager_routes(inventory: &Inventory) -> String {
 pub fn cell_config(
     inventory: &Inventory,
     id: &str,
-    cell: &Cell,
+    cell: &InventoryCell,
     text: &str,
     layout: &Layout,
     admin_public: &str,
