@@ -215,11 +215,13 @@ impl Recorder {
         }
     }
 
-    /// The clock reached `now`: the recordings that end by then are
-    /// complete.
+    /// The clock reached `now`: the recordings that end before it are
+    /// complete. One that ends at `now` stays open: a change stamped in
+    /// that millisecond may still be on its way, as after
+    /// [`Recorder::pass`].
     pub(crate) fn finish_due(&mut self, now: u64) {
-        if self.next_end.is_some_and(|end| end <= now) {
-            self.finish(|to| to <= now);
+        if self.next_end.is_some_and(|end| end < now) {
+            self.finish(|to| to < now);
         }
     }
 
@@ -245,9 +247,10 @@ impl Recorder {
         }
     }
 
-    /// The earliest time a recording under way ends, if any.
+    /// The earliest time the clock completes a recording under way (the
+    /// millisecond after its end), if any.
     pub(crate) fn next_deadline(&self) -> Option<u64> {
-        self.next_end
+        self.next_end.map(|end| end.saturating_add(1))
     }
 
     /// Changes looked at in the ring by starting recordings, ever.
@@ -556,7 +559,7 @@ mod tests {
         );
         // The other's: the ring held the last 655 ms before the raise (at
         // 5 s) of the 60 s asked; complete at its end.
-        r.finish_due(5_000 + 60_000);
+        r.finish_due(5_000 + 60_000 + 1);
         r.take_done(&mut done);
         let seldom = &done[1];
         assert_eq!(seldom.alarm, "seldom");
@@ -594,7 +597,7 @@ mod tests {
         }
         r.start("a", 5_000, vec![read(0)]);
         let mut done = Vec::new();
-        r.finish_due(5_000);
+        r.finish_due(5_001);
         r.take_done(&mut done);
         let rec = &done[0];
         // Three kept; the two at 3 s cannot be told apart: both go.
@@ -624,7 +627,7 @@ mod tests {
         r.start("flood", 10_000, (0..32).map(read).collect());
         // The latest 1,000 and the one that says where they start.
         assert!(r.walked() <= max_changes as u64 + 1, "{}", r.walked());
-        r.finish_due(15_000);
+        r.finish_due(15_001);
         let mut done = Vec::new();
         r.take_done(&mut done);
         let rec = &done[0];
@@ -670,7 +673,7 @@ mod tests {
         // The first goes on, and a tag it does not read costs it nothing.
         r.change_bool(2, 4_000, None, Some(true));
         r.change_bool(0, 5_000, Some(true), Some(false));
-        assert_eq!(r.next_deadline(), Some(7_000));
+        assert_eq!(r.next_deadline(), Some(7_001));
         r.pass(7_001);
         r.take_done(&mut done);
         let first = &done[1];
@@ -689,7 +692,7 @@ mod tests {
         r.change_bool(0, 5_000, None, Some(true));
         r.change_bool(0, 4_000, Some(true), Some(false));
         r.start("a", 5_000, vec![read(0)]);
-        r.finish_due(10_000);
+        r.finish_due(10_001);
         let mut done = Vec::new();
         r.take_done(&mut done);
         assert_eq!(

@@ -106,7 +106,7 @@ fn an_ese_fault_is_recorded_with_its_contacts_from_before_to_after_the_raise() {
     let step = set(&mut e, "X0.06", Reading::Good(false), 12_000);
     assert_eq!(raised(&step), ["ese"]);
     assert!(step.recordings.is_empty());
-    assert_eq!(e.next_deadline(), Some(17_000));
+    assert_eq!(e.next_deadline(), Some(17_001));
     // After the raise, up to its end.
     set(&mut e, "X0.06", Reading::Good(true), 13_000);
     set(&mut e, "R1024.00", Reading::Bad, 15_000);
@@ -179,7 +179,7 @@ fn the_value_at_the_window_start_comes_from_the_change_that_left_it() {
     set(&mut e, "R1024.00", Reading::Good(false), 2_000);
     set(&mut e, "R1024.00", Reading::Good(true), 8_000);
     set(&mut e, "X0.06", Reading::Good(false), 10_000);
-    let step = e.advance(11_000);
+    let step = e.advance(11_001);
     let [r] = &step.recordings[..] else {
         panic!("{step:?}")
     };
@@ -218,7 +218,7 @@ fn a_plc_clock_not_believed_still_gives_the_fault_its_recording() {
     let step = at(&mut e, "X0.06", false, 10_000);
     let (_, _, raised_at) = step.alarms().next().unwrap();
     assert_eq!(raised_at, 10_000, "stamped by the agent's clock");
-    let step = e.advance(11_000);
+    let step = e.advance(11_001);
     let [r] = &step.recordings[..] else {
         panic!("{step:?}")
     };
@@ -239,7 +239,7 @@ fn a_limit_alarm_records_its_number_and_a_lost_connection_as_unknown() {
     assert_eq!(raised(&step), ["temp-h"]);
     set(&mut e, "TEMP", Reading::Number(Num::Int(90)), 6_000);
     e.on_connection(false, 7_000);
-    let step = e.advance(9_000);
+    let step = e.advance(9_001);
     let [r] = &step.recordings[..] else {
         panic!("{step:?}")
     };
@@ -314,10 +314,11 @@ fn a_timer_alarm_records_its_transition_signals() {
     e.on_reading(2, Reading::Good(true), 2_000, 2_000);
     let step = e.advance(7_300);
     assert_eq!(raised(&step), ["line-007"]);
-    // The recording ends 2 s after the raise, by the clock.
-    assert_eq!(e.next_deadline(), Some(9_300));
+    // The recording ends 2 s after the raise; the clock completes it the
+    // millisecond after.
+    assert_eq!(e.next_deadline(), Some(9_301));
     e.on_reading(1, Reading::Good(true), 8_000, 8_000);
-    let step = e.advance(9_300);
+    let step = e.advance(9_301);
     let [r] = &step.recordings[..] else {
         panic!("{step:?}")
     };
