@@ -12,10 +12,10 @@
 
 use std::time::Duration;
 
+use crate::bus::config::ZenohConfig;
 use crate::bus::envelope::{Distrust, Kind, Opened, Trust};
 use crate::bus::keys::{CellKeys, Service};
 use crate::bus::ZenohError;
-use crate::config::ZenohConfig;
 use crate::operator::{Action, Command};
 use crate::step::{command_digest, CommandOutcome};
 

@@ -38,8 +38,16 @@
 //! - [`metrics`]: the Prometheus registry and `/metrics`.
 //! - [`operator`]: signed operator commands and their gate.
 //! - [`payload`]: the JSON payloads on the bus.
-//! - [`config`]: the cell configuration file, parsed and validated; a leaf
-//!   that imports no component.
+//! - [`config`]: the cell configuration file as a whole: read, each table
+//!   validated, assembled into a [`config::CellConfig`]. It stands above
+//!   the components: each component owns its table's types (and, for the
+//!   newer ones, its check) in its own `config.rs` (`sources/opcua/`,
+//!   `sources/legacy/`, `bus/`, `journal/`, `sinks/alertmanager/`,
+//!   `sinks/sparkplug/`, `sinks/oee/`, `services/alarm_server/`), and a
+//!   component reads only its own part.
+//! - [`tags`]: a cell's tags as configured (address, type, deadband,
+//!   export), read by the sources, the engine and the sinks.
+//! - [`table`]: a component's table checked: each problem at its place.
 //! - [`sim`]: simulated cells served over OPC UA.
 //! - [`clock`]: wall-clock time in the models' unit.
 //! - [`backoff`]: the waits between tries, doubling up to a cap.
@@ -68,3 +76,5 @@ pub mod sim;
 pub mod sinks;
 pub mod sources;
 pub mod step;
+pub mod table;
+pub mod tags;

@@ -37,7 +37,8 @@ use crate::sinks::metrics::MetricsSink;
 use crate::sinks::oee::OeeSink;
 use crate::sinks::zenoh::ZenohPublisher;
 use crate::sinks::Sink;
-use crate::sources::{self, Source, SourceError, QUEUE_CAPACITY};
+use crate::sources::{Source, SourceError, QUEUE_CAPACITY};
+use crate::tags::TagConfig;
 
 /// How many service requests may wait for the cell loop.
 const REQUEST_CAPACITY: usize = 64;
@@ -217,7 +218,7 @@ impl Agent {
         let engine = compile::engine(config)?;
         // The operators and the alarm server's users, read again: a key
         // revoked, an operator's permissions changed, a user added.
-        let (keys, held) = crate::services::plant_operators::operators(config)
+        let (keys, held) = crate::services::plant_operators::operators(config.operators_setup())
             .map_err(|e| ReloadError::File(e.to_string()))?;
         let users = match (&self.alarm_server_users, &config.alarm_server) {
             (Some(_), Some(c)) => Some(
@@ -300,7 +301,7 @@ impl Agent {
         JoinHandle<Result<(), SourceError>>,
         watch::Sender<bool>,
     ) {
-        let mut source = sources::for_config(config, config.tags.clone());
+        let mut source = source_for(config, config.tags.clone());
         source.count_requests(self.metrics.opcua_requests.clone());
         let writer = source.writer();
         let allowance = source.delivery_allowance();
@@ -471,7 +472,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     let mut engine = compile::engine(&config)?;
     // Before the tags go to the source.
     let fixed = config.fixed_parts();
-    let (keys, held) = crate::services::plant_operators::operators(&config)?;
+    let (keys, held) = crate::services::plant_operators::operators(config.operators_setup())?;
     let keys_version = held.as_ref().map(|h| h.version());
     let metrics = Arc::new(Metrics::new(&config.cell));
     let journal = Journal::start(
@@ -505,9 +506,15 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         metrics.clone(),
     )
     .await?;
-    let (about, about_rx) = watch::channel(crate::services::about::about(&config, &signing));
+    let (about, about_rx) = watch::channel(crate::services::about::about(
+        &config.cell,
+        &config.source_sha256,
+        config.zenoh.tls.as_ref().map(|t| t.cert.as_path()),
+        &signing,
+    ));
     let about = Arc::new(about);
-    let listener = Listener::declare(&session, &config, held, about.clone()).await?;
+    let listener =
+        Listener::declare(&session, config.operators_setup(), held, about.clone()).await?;
     let services = services.telling(about_rx).taking_operators(listener);
     let publisher = ZenohPublisher::start(session.clone(), &prefix, signing, metrics.clone())
         .await?
@@ -537,7 +544,11 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     let mut sinks: Vec<Box<dyn Sink>> = vec![
         Box::new(JournalSink::new(journal)),
         Box::new(publisher),
-        Box::new(MetricsSink::new(metrics.clone(), &config, clock.now_ms())),
+        Box::new(MetricsSink::new(
+            metrics.clone(),
+            config.metrics_setup(),
+            clock.now_ms(),
+        )),
     ];
     let oee = match &config.oee {
         Some(c) => {
@@ -560,7 +571,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
     let sparkplug = match &config.sparkplug {
         Some(c) => {
             let (sink, session) = crate::sinks::sparkplug::start(
-                &config,
+                &config.sparkplug_cell(),
                 c,
                 &engine.catalogue(),
                 oee.clone(),
@@ -592,7 +603,7 @@ pub async fn start_with(mut config: CellConfig, options: Options) -> Result<Agen
         Some(source) => source,
         None => {
             let tags = std::mem::take(&mut config.tags);
-            sources::for_config(&config, tags)
+            source_for(&config, tags)
         }
     };
     source.count_requests(metrics.opcua_requests.clone());
@@ -716,4 +727,26 @@ fn signing_key(config: &CellConfig) -> Result<Arc<AgentKey>, StartError> {
     }
     tracing::info!(cell = %config.cell, public_key = %key.public_hex(), "signing the bus with the agent's key");
     Ok(Arc::new(key))
+}
+
+/// The source a cell configuration asks for; `tags` are the
+/// configuration's, handed over, not copied (on a 100,000-tag cell a copy
+/// is 14 MB plus three strings a tag): the `@` source keeps them, the OPC UA
+/// source only what it reads of them.
+fn source_for(config: &CellConfig, tags: Vec<TagConfig>) -> Box<dyn Source> {
+    match (&config.opcua, &config.legacy) {
+        (_, Some(bus)) => Box::new(crate::sources::legacy::LegacySource::new(bus.clone(), tags)),
+        (Some(ua), None) => Box::new(crate::sources::opcua::OpcUaSource::new(
+            &config.cell,
+            ua.clone(),
+            tags,
+            config
+                .sfc
+                .iter()
+                .flat_map(|s| s.force_switch.into_iter().chain(s.stop_switch)),
+        )),
+        // A validated configuration has one; one built by hand without
+        // either reads nothing.
+        (None, None) => Box::new(crate::sources::scripted::ScriptedSource::new().0),
+    }
 }

@@ -26,7 +26,7 @@ pub enum RouterError {
         /// The file.
         path: PathBuf,
         /// Zenoh's words.
-        problem: crate::config::ZenohFileError,
+        problem: crate::bus::config::ZenohFileError,
     },
     /// The configuration is Zenoh's but not a router's that can keep an
     /// archive.
@@ -63,10 +63,11 @@ pub struct PlantRouter {
 impl PlantRouter {
     /// Reads `path` (JSON5, as `zenohd -c` does) and starts the router.
     pub async fn start_from(path: &Path) -> Result<PlantRouter, RouterError> {
-        let config = crate::config::zenoh_file(path).map_err(|problem| RouterError::Config {
-            path: path.to_path_buf(),
-            problem,
-        })?;
+        let config =
+            crate::bus::config::zenoh_file(path).map_err(|problem| RouterError::Config {
+                path: path.to_path_buf(),
+                problem,
+            })?;
         PlantRouter::start(config, path).await
     }
 

@@ -1,6 +1,6 @@
 //! The key layout of the bus, spelled once. Under a cell's prefix
 //! ([`CellKeys`]; by default `cellwatch/<cell>`, see
-//! [`crate::config::cell_prefix`]):
+//! [`crate::bus::config::cell_prefix`]):
 //!
 //! | key | what | who |
 //! |---|---|---|
@@ -64,7 +64,7 @@ impl CellKeys {
     /// The keys of `cell` under `root` (`<root>/<cell>`), as clients name
     /// a cell. `cell` may be `*` to mean every cell under the root.
     pub fn of(root: &str, cell: &str) -> CellKeys {
-        CellKeys::new(crate::config::cell_prefix(root, cell))
+        CellKeys::new(crate::bus::config::cell_prefix(root, cell))
     }
 
     /// The prefix itself.

@@ -19,6 +19,7 @@
 
 pub mod certs;
 pub mod client_tls;
+pub mod config;
 pub mod envelope;
 pub mod keys;
 mod session;

@@ -6,7 +6,7 @@ use zenoh::Session;
 
 use crate::backoff::Backoff;
 
-use crate::config::{ZenohConfig, ZenohMode};
+use crate::bus::config::{ZenohConfig, ZenohMode};
 
 /// Why Zenoh refused.
 #[derive(Debug, thiserror::Error)]
@@ -60,7 +60,7 @@ pub enum ZenohError {
 /// that would not be TLS-only.
 pub fn session_config(c: &ZenohConfig) -> Result<zenoh::Config, ZenohError> {
     let mut cfg = match &c.config_file {
-        Some(path) => crate::config::zenoh_file(path).map_err(|e| ZenohError::Config {
+        Some(path) => crate::bus::config::zenoh_file(path).map_err(|e| ZenohError::Config {
             key: "config_file".into(),
             value: path.display().to_string(),
             reason: e.to_string(),
@@ -175,7 +175,7 @@ pub fn secure(cfg: &zenoh::Config, plain: bool) -> Result<(), ZenohError> {
             if key.starts_with("listen") {
                 listening = true;
             }
-            if let Some(mut reason) = crate::config::link_problem(e) {
+            if let Some(mut reason) = crate::bus::config::link_problem(e) {
                 if !e.starts_with("tls/") {
                     reason += "; write zenoh.plain = true (CLI: --plain) to accept a bus without encryption or authentication";
                 }

@@ -15,59 +15,16 @@ use crate::config::legacy::LegacyConfig;
 use crate::config::{
     Addressing, AlertmanagerConfig, OpcUaConfig, SfcCheck, TagConfig, TimerCheck, ZenohConfig,
 };
+use crate::journal::config::JournalConfig;
+use crate::services::plant_operators::{OperatorsSetup, PlantOperatorsConfig};
+use crate::sinks::metrics::MetricsSetup;
+use crate::sinks::sparkplug::SparkplugCell;
 
 /// The longest shelf unless the configuration says (`commands.max_shelve`).
 pub const DEFAULT_MAX_SHELVE: Duration = Duration::from_secs(8 * 3600);
 
 /// The longest `commands.max_shelve` accepted: one year.
 pub const MAX_SHELVE_LIMIT: Duration = Duration::from_secs(365 * 24 * 3600);
-
-/// The SQLite journal.
-#[derive(Debug, Clone)]
-pub struct JournalConfig {
-    /// Database file.
-    pub path: PathBuf,
-    /// What each table keeps (`journal.retention`, `[journal.tables.*]`):
-    /// one entry per table of rows, in [`JOURNAL_TABLES`] order.
-    pub keep: Vec<Keep>,
-}
-
-/// The journal's tables of rows, as `[journal.tables.*]` names them.
-pub const JOURNAL_TABLES: [&str; 7] = [
-    "alarm_events",
-    "state_history",
-    "commands",
-    "production",
-    "orders",
-    "recordings",
-    "modes",
-];
-
-/// What one table of the journal keeps: rows younger than `age`, and at
-/// most `max_rows` of them (the newest).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Keep {
-    /// The table (one of [`JOURNAL_TABLES`]).
-    pub table: &'static str,
-    /// Rows older than this are deleted.
-    pub age: Duration,
-    /// Beyond this many rows, the oldest are deleted.
-    pub max_rows: Option<u64>,
-}
-
-impl Keep {
-    /// Every table keeps rows younger than `age`, however many.
-    pub fn all(age: Duration) -> Vec<Keep> {
-        JOURNAL_TABLES
-            .into_iter()
-            .map(|table| Keep {
-                table,
-                age,
-                max_rows: None,
-            })
-            .collect()
-    }
-}
 
 /// A validated cell configuration.
 #[derive(Clone)]
@@ -146,15 +103,6 @@ pub struct CellConfig {
     pub source_sha256: String,
 }
 
-/// Where a cell takes its operators from when the plant signs them.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct PlantOperatorsConfig {
-    /// The plant administrator's Ed25519 public key, 64 hex digits.
-    pub key: String,
-    /// The newest list taken, kept across restarts.
-    pub list: PathBuf,
-}
-
 /// The parts of a configuration a reload compares
 /// ([`CellConfig::fixed_parts`]): what the cell is, where it keeps and
 /// says things, whom it talks to, what it reads. The tags and the source's
@@ -177,6 +125,56 @@ pub const FIXED_PARTS: [&str; 13] = [
 ];
 
 impl CellConfig {
+    /// The tags marked `export`: index and name.
+    pub fn exported_tags(&self) -> Vec<(usize, String)> {
+        self.tags
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| t.export)
+            .map(|(i, t)| (i, t.name.clone()))
+            .collect()
+    }
+
+    /// What the Sparkplug edge node reads of the configuration.
+    pub fn sparkplug_cell(&self) -> SparkplugCell<'_> {
+        SparkplugCell {
+            exported: self.exported_tags(),
+            counts_parts: self.part_done.is_some() || !self.part_counters.is_empty(),
+            journal: &self.journal.path,
+        }
+    }
+
+    /// What the metrics sink reads of the configuration.
+    pub fn metrics_setup(&self) -> MetricsSetup {
+        MetricsSetup {
+            tags: self.tags.len(),
+            exported: self.exported_tags(),
+            modes: self.state.modes.iter().map(|m| m.id.clone()).collect(),
+            windows: self
+                .timers
+                .iter()
+                .flat_map(|t| {
+                    t.model
+                        .transitions
+                        .iter()
+                        .map(|tr| (format!("{}-{:03}", t.id, tr.id), tr.window_ms))
+                })
+                .collect(),
+            steps: self.step_flags(),
+            kpi: self.kpi,
+        }
+    }
+
+    /// What the operators' list reads of the configuration.
+    pub fn operators_setup(&self) -> OperatorsSetup<'_> {
+        OperatorsSetup {
+            cell: &self.cell,
+            prefix: &self.zenoh.prefix,
+            operators_file: self.operators_file.as_deref(),
+            plant: self.plant_operators.as_ref(),
+        }
+    }
+
     /// A fingerprint of each of [`FIXED_PARTS`], in that order: compared
     /// between the running configuration and one read again, it names what
     /// changed beyond the checks. (Hashes of the parts' debug forms: the tags

@@ -8,50 +8,52 @@
 //! `FILE:LINE:COL: key: message`. `cellwatch validate CONFIG` runs exactly
 //! this and connects to nothing.
 //!
+//! The document stands above the components it configures: a component
+//! owns its table's validated types in its own `config.rs` (re-exported
+//! here for the command line), and the sparkplug and OEE sinks also their
+//! raw table and its check, which the validator calls and whose problems
+//! it places (`crate::table`). The cell's own parts (checks, alarms,
+//! state, recorder, commands) are the document's.
+//!
 //! Relative paths are relative to the configuration file's directory.
 //! Secrets never live in the file: an OPC UA password comes from an
 //! environment variable or a file, and an inline `password` is an error.
 
-mod alarm_server;
-mod alertmanager;
-mod bus;
 mod cell;
 mod checks;
 mod document;
 mod files;
-pub mod legacy;
-pub mod node;
-pub mod oee;
-mod opcua;
-pub(crate) mod position;
 mod problems;
 mod raw;
-pub mod sparkplug;
-mod tags;
 mod validate;
 
-pub use alarm_server::AlarmServerConfig;
-pub use alertmanager::{default_escalation, AlertmanagerConfig, AlertmanagerTls, DEFAULT_RESEND};
-pub use bus::{
+pub use crate::bus::config::{
     cell_prefix, link_problem, zenoh_file, ZenohConfig, ZenohFileError, ZenohMode, ZenohTls,
     DEFAULT_ROOT,
 };
-pub use cell::{
-    CellConfig, JournalConfig, Keep, PlantOperatorsConfig, DEFAULT_MAX_SHELVE, FIXED_PARTS,
-    JOURNAL_TABLES, MAX_SHELVE_LIMIT,
+pub use crate::journal::config::{JournalConfig, Keep, JOURNAL_TABLES};
+pub use crate::services::alarm_server::config::AlarmServerConfig;
+pub use crate::services::plant_operators::PlantOperatorsConfig;
+pub use crate::sinks::alertmanager::config::{
+    default_escalation, AlertmanagerConfig, AlertmanagerTls, DEFAULT_RESEND,
 };
+pub use crate::sinks::oee::config as oee;
+pub use crate::sinks::sparkplug::config as sparkplug;
+pub use crate::sources::legacy::config as legacy;
+pub use crate::sources::opcua::config::{
+    EventSource, Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy,
+};
+pub use crate::sources::opcua::node;
+pub use crate::tags::{key_chunk, tag_address, timer_signal, Addressing, Deadband, TagConfig};
+pub use cell::{CellConfig, DEFAULT_MAX_SHELVE, FIXED_PARTS, MAX_SHELVE_LIMIT};
 pub use checks::{
     Consequences, SfcCheck, TimerCheck, DEFAULT_FORCE_PULSE, DEFAULT_FORCE_TIMEOUT,
     MAX_FORCE_TIMEOUT,
 };
 pub use files::{tag_tables_beside, Disk, Files};
-pub use opcua::{EventSource, Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy};
 pub use problems::ConfigErrors;
-pub use tags::{key_chunk, tag_address, timer_signal, Addressing, Deadband, TagConfig};
 
 use std::path::{Path, PathBuf};
-
-pub(crate) use position::line_col;
 
 /// Loads and validates the configuration at `path`.
 ///
@@ -82,7 +84,7 @@ pub fn parse(
     files: &dyn Files,
 ) -> Result<CellConfig, ConfigErrors> {
     let (raw, tags) = document::read(text).map_err(|e| {
-        let at = e.at.map_or((1, 1), |s| line_col(text, s));
+        let at = e.at.map_or((1, 1), |s| crate::table::line_col(text, s));
         ConfigErrors(vec![format!("{origin}:{}:{}: {}", at.0, at.1, e.message)])
     })?;
     validate::validate(origin, text, base, files, raw, tags)

@@ -9,8 +9,8 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use toml::Spanned;
 
-use crate::config::position::line_col;
 use crate::config::{link_problem, ConfigErrors, ZenohConfig, ZenohMode, ZenohTls, DEFAULT_ROOT};
+use crate::table::line_col;
 
 /// The address the console serves on unless `http.listen` says otherwise.
 pub const DEFAULT_LISTEN: &str = "127.0.0.1:8470";

@@ -32,6 +32,7 @@ use std::time::{Duration, Instant};
 
 pub mod backup;
 pub mod chain;
+pub mod config;
 mod events;
 mod history;
 mod observer;
@@ -51,7 +52,7 @@ pub use schema::{open, open_read, JournalError, NotCommitted};
 
 use schema::{last_seq, purge, TABLES};
 
-use crate::config::Keep;
+use crate::journal::config::Keep;
 
 use rusqlite::{params, Connection};
 use tokio::sync::{mpsc, oneshot, watch};

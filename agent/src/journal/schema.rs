@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use rusqlite::{Connection, OpenFlags};
 
-use crate::config::Keep;
+use crate::journal::config::Keep;
 
 /// Why the journal failed.
 #[derive(Debug, thiserror::Error)]
@@ -58,7 +58,7 @@ pub enum NotCommitted {
 }
 
 /// The tables of journal rows (one sequence across them).
-pub(super) const TABLES: [&str; 7] = crate::config::JOURNAL_TABLES;
+pub(super) const TABLES: [&str; 7] = crate::journal::config::JOURNAL_TABLES;
 
 const SCHEMA: &str = "
 CREATE TABLE IF NOT EXISTS alarm_events (

@@ -15,7 +15,7 @@ async fn writes_commit_and_query_back() {
     let now = crate::clock::now_ms();
     let j = Journal::start(
         &path,
-        &crate::config::Keep::all(Duration::from_secs(3600)),
+        &crate::journal::config::Keep::all(Duration::from_secs(3600)),
         Quiet,
     )
     .unwrap();
@@ -81,7 +81,7 @@ async fn writes_commit_and_query_back() {
     drop(conn);
     let j = Journal::start(
         &path,
-        &crate::config::Keep::all(Duration::from_secs(3600)),
+        &crate::journal::config::Keep::all(Duration::from_secs(3600)),
         Quiet,
     )
     .unwrap();
@@ -128,7 +128,7 @@ async fn a_barrier_waits_for_rows_staged_before_it() {
     let path = dir.path().join("j.sqlite");
     let j = Journal::start(
         &path,
-        &crate::config::Keep::all(Duration::from_secs(3600)),
+        &crate::journal::config::Keep::all(Duration::from_secs(3600)),
         Quiet,
     )
     .unwrap();
@@ -169,7 +169,7 @@ async fn history_comes_in_bounded_pages_in_journal_order() {
     let now = crate::clock::now_ms();
     let j = Journal::start(
         &path,
-        &crate::config::Keep::all(Duration::from_secs(3600)),
+        &crate::journal::config::Keep::all(Duration::from_secs(3600)),
         Quiet,
     )
     .unwrap();
@@ -268,7 +268,7 @@ async fn every_row_not_yet_committed_counts_as_pending() {
     let watch = Watch::default();
     let j = Journal::start(
         &path,
-        &crate::config::Keep::all(Duration::from_secs(3600)),
+        &crate::journal::config::Keep::all(Duration::from_secs(3600)),
         watch.clone(),
     )
     .unwrap();
@@ -305,7 +305,7 @@ async fn an_unwritable_journal_keeps_its_rows_and_writes_them_later() {
     let watch = Watch::default();
     let j = Journal::start(
         &path,
-        &crate::config::Keep::all(Duration::from_secs(3600)),
+        &crate::journal::config::Keep::all(Duration::from_secs(3600)),
         watch.clone(),
     )
     .unwrap();
@@ -374,7 +374,7 @@ fn each_table_keeps_its_own_age_and_row_limit() {
         .unwrap();
     }
     conn.execute_batch("COMMIT").unwrap();
-    let mut keep = crate::config::Keep::all(Duration::from_secs(20 * 86_400));
+    let mut keep = crate::journal::config::Keep::all(Duration::from_secs(20 * 86_400));
     for k in &mut keep {
         match k.table {
             // The newest 12,345 state rows, whatever their age.

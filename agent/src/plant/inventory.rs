@@ -204,7 +204,7 @@ struct Problems<'a> {
 
 impl Problems<'_> {
     fn at(&mut self, span: std::ops::Range<usize>, key: &str, message: impl std::fmt::Display) {
-        let (line, col) = crate::config::line_col(self.text, span.start);
+        let (line, col) = crate::table::line_col(self.text, span.start);
         self.said
             .push(format!("{}:{line}:{col}: {key}: {message}", self.file));
     }

@@ -3,18 +3,26 @@
 //! `cellwatch plant check`. Kept current by the agent: a reload taken
 //! changes the configuration's hash.
 
+use std::path::Path;
+
 use crate::bus::certs::facts;
 use crate::bus::envelope::AgentKey;
 use crate::clock::{now_ms, rfc3339};
-use crate::config::CellConfig;
 use crate::payload::{AboutPayload, CertificateAbout, ABOUT_SCHEMA};
 
-/// What the agent of `config`, signing with `key`, says of itself.
-pub fn about(config: &CellConfig, key: &AgentKey) -> AboutPayload {
-    let bus_certificate = config.zenoh.tls.as_ref().and_then(|tls| {
-        let pem = std::fs::read_to_string(&tls.cert).ok()?;
+/// What the agent of cell `cell` says of itself: it runs a configuration
+/// hashing to `config_sha256`, is on the bus with the certificate at
+/// `bus_certificate` (if TLS), and signs with `key`.
+pub fn about(
+    cell: &str,
+    config_sha256: &str,
+    bus_certificate: Option<&Path>,
+    key: &AgentKey,
+) -> AboutPayload {
+    let bus_certificate = bus_certificate.and_then(|cert| {
+        let pem = std::fs::read_to_string(cert).ok()?;
         let f = facts(&pem)
-            .map_err(|e| tracing::warn!(file = %tls.cert.display(), "bus certificate: {e}"))
+            .map_err(|e| tracing::warn!(file = %cert.display(), "bus certificate: {e}"))
             .ok()?;
         Some(CertificateAbout {
             name: f.name,
@@ -24,9 +32,9 @@ pub fn about(config: &CellConfig, key: &AgentKey) -> AboutPayload {
     });
     AboutPayload {
         schema: ABOUT_SCHEMA.into(),
-        cell: config.cell.clone(),
+        cell: cell.to_string(),
         version: env!("CARGO_PKG_VERSION").into(),
-        config_sha256: config.source_sha256.clone(),
+        config_sha256: config_sha256.to_string(),
         signing_key: key.public_hex(),
         bus_certificate,
         started: rfc3339(now_ms()),

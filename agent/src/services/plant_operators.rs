@@ -19,7 +19,6 @@ use zenoh::Session;
 
 use crate::bus::keys::{every_cells_operators, plant_operators, root_of, CellKeys};
 use crate::bus::ZenohError;
-use crate::config::CellConfig;
 use crate::operator::plant::{admin_key, PlantList, SignedList};
 use crate::operator::{KeysError, OperatorKeys};
 use crate::payload::AboutPayload;
@@ -50,6 +49,28 @@ impl Held {
     }
 }
 
+/// Where a cell takes its operators from when the plant signs them.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PlantOperatorsConfig {
+    /// The plant administrator's Ed25519 public key, 64 hex digits.
+    pub key: String,
+    /// The newest list taken, kept across restarts.
+    pub list: PathBuf,
+}
+
+/// The parts of a cell's configuration the operators' list reads.
+#[derive(Debug, Clone, Copy)]
+pub struct OperatorsSetup<'a> {
+    /// The cell's id.
+    pub cell: &'a str,
+    /// The cell's key prefix on the bus.
+    pub prefix: &'a str,
+    /// `commands.operators_file`, if any.
+    pub operators_file: Option<&'a Path>,
+    /// The plant's list, when the configuration has a plant key.
+    pub plant: Option<&'a PlantOperatorsConfig>,
+}
+
 /// The operators a cell judges commands by when it starts or reads its
 /// configuration again: the kept plant operators list's, if the plant
 /// signs them and one is kept, else the operators file's.
@@ -57,7 +78,7 @@ impl Held {
 /// # Errors
 /// The operators file or the kept list does not read, or the
 /// administrator's key does not verify the list: the file is named.
-pub fn operators(config: &CellConfig) -> Result<(OperatorKeys, Option<Held>), KeysError> {
+pub fn operators(config: OperatorsSetup<'_>) -> Result<(OperatorKeys, Option<Held>), KeysError> {
     let from_file = match &config.operators_file {
         Some(path) => OperatorKeys::load(path)?,
         None => OperatorKeys::default(),
@@ -68,10 +89,10 @@ pub fn operators(config: &CellConfig) -> Result<(OperatorKeys, Option<Held>), Ke
 /// The held list's operators for the cell, if one is kept, else
 /// `from_file`.
 fn initial(
-    config: &CellConfig,
+    config: OperatorsSetup<'_>,
     from_file: OperatorKeys,
 ) -> Result<(OperatorKeys, Option<Held>), KeysError> {
-    let Some(p) = &config.plant_operators else {
+    let Some(p) = config.plant else {
         return Ok((from_file, None));
     };
     let bytes = match std::fs::read(&p.list) {
@@ -92,7 +113,7 @@ fn initial(
     let at = |e: crate::operator::plant::ListError| at(e.to_string());
     let signed = SignedList::parse(&bytes).map_err(at)?;
     let list = signed.open(&key).map_err(at)?;
-    let keys = list.keys_for(&config.cell).map_err(at)?;
+    let keys = list.keys_for(config.cell).map_err(at)?;
     tracing::info!(
         cell = %config.cell,
         version = list.version,
@@ -127,17 +148,17 @@ impl Listener {
     /// Zenoh refuses a declaration.
     pub async fn declare(
         session: &Session,
-        config: &CellConfig,
+        config: OperatorsSetup<'_>,
         held: Option<Held>,
         about: Arc<watch::Sender<AboutPayload>>,
     ) -> Result<Option<Listener>, ZenohError> {
-        let Some(p) = &config.plant_operators else {
+        let Some(p) = config.plant else {
             return Ok(None);
         };
         let Ok(admin) = admin_key(&p.key) else {
             return Ok(None);
         };
-        let root = root_of(&config.zenoh.prefix).to_string();
+        let root = root_of(config.prefix).to_string();
         let declare_error = |key: String| {
             move |e: zenoh::Error| ZenohError::Declare {
                 key,
@@ -149,7 +170,7 @@ impl Listener {
             .with(zenoh::handlers::FifoChannel::new(8))
             .await
             .map_err(declare_error(plant_operators(&root)))?;
-        let mine = CellKeys::new(config.zenoh.prefix.clone()).operators();
+        let mine = CellKeys::new(config.prefix.to_string()).operators();
         let asked = session
             .declare_queryable(mine.clone())
             .with(zenoh::handlers::FifoChannel::new(8))
@@ -180,7 +201,7 @@ impl Listener {
             about.send_modify(|a| a.operators_version = Some(h.list.version));
         }
         Ok(Some(Listener {
-            cell: config.cell.clone(),
+            cell: config.cell.to_string(),
             mine,
             admin,
             file: p.list.clone(),

@@ -5,14 +5,31 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use cellwatch_models::alarm::{AlarmKind, Severity, Transition};
-use cellwatch_models::kpi::LiveKpis;
+use cellwatch_models::kpi::{KpiRules, LiveKpis};
 use futures_util::future::BoxFuture;
 use futures_util::FutureExt;
 
-use crate::config::CellConfig;
 use crate::metrics::Metrics;
 use crate::sinks::Sink;
 use crate::step::{CellStep, Input};
+
+/// What the metrics sink reads of a cell's configuration.
+#[derive(Debug, Clone, Default)]
+pub struct MetricsSetup {
+    /// How many tags the cell has (all unknown at start).
+    pub tags: usize,
+    /// The exported tags: index and name.
+    pub exported: Vec<(usize, String)>,
+    /// The ids of the cell's modes.
+    pub modes: Vec<String>,
+    /// Each learned transition's check (`line-007`) and window, ms.
+    pub windows: Vec<(String, [u64; 2])>,
+    /// Per tag that is a supervised step's flag: (check, chart, step) of
+    /// each step it flags.
+    pub steps: HashMap<usize, Vec<[String; 3]>>,
+    /// The alarm-performance rules.
+    pub kpi: KpiRules,
+}
 
 /// Metrics bookkeeping of one cell.
 pub struct MetricsSink {
@@ -44,35 +61,30 @@ pub struct MetricsSink {
 }
 
 impl MetricsSink {
-    /// A sink for `config`'s cell: sets the gauges known from the
-    /// configuration (tags unknown at start, learned timer windows); time
-    /// in each state is counted from `now`.
-    pub fn new(metrics: Arc<Metrics>, config: &CellConfig, now: u64) -> MetricsSink {
-        metrics.tags_unknown.set(config.tags.len() as i64);
-        for mode in &config.state.modes {
-            metrics.modes.mode(&mode.id, false);
+    /// A sink for a cell set up as `setup` says: sets the gauges known
+    /// from the configuration (tags unknown at start, learned timer
+    /// windows); time in each state is counted from `now`.
+    pub fn new(metrics: Arc<Metrics>, setup: MetricsSetup, now: u64) -> MetricsSink {
+        metrics.tags_unknown.set(setup.tags as i64);
+        for mode in &setup.modes {
+            metrics.modes.mode(mode, false);
         }
-        for t in &config.timers {
-            for tr in &t.model.transitions {
-                let check = format!("{}-{:03}", t.id, tr.id);
-                for (bound, ms) in [("lo", tr.window_ms[0]), ("hi", tr.window_ms[1])] {
-                    metrics
-                        .transition_window_seconds
-                        .with_label_values(&[check.as_str(), bound])
-                        .set(ms as f64 / 1000.0);
-                }
+        for (check, window) in &setup.windows {
+            for (bound, ms) in [("lo", window[0]), ("hi", window[1])] {
+                metrics
+                    .transition_window_seconds
+                    .with_label_values(&[check.as_str(), bound])
+                    .set(ms as f64 / 1000.0);
             }
         }
-        let exported = config
-            .tags
-            .iter()
-            .enumerate()
-            .filter(|(_, t)| t.export)
-            .map(|(i, t)| (i, (t.name.clone(), None)))
+        let exported = setup
+            .exported
+            .into_iter()
+            .map(|(i, name)| (i, (name, None)))
             .collect();
         MetricsSink {
             exported,
-            steps: config.step_flags(),
+            steps: setup.steps,
             metrics,
             active: HashMap::new(),
             culprits: HashMap::new(),
@@ -80,7 +92,7 @@ impl MetricsSink {
             accounted_until: now,
             last_update: None,
             ever_connected: false,
-            kpis: LiveKpis::with_rules(config.kpi),
+            kpis: LiveKpis::with_rules(setup.kpi),
             kept: HashMap::new(),
             flood_counted: 0,
         }

@@ -13,7 +13,7 @@
 //! - [`pki`]: certificate-trust helpers for OPC UA.
 //!
 //! To add a source: a folder here with a type implementing [`Source`], and
-//! one arm in [`for_config`].
+//! one arm in the agent's `source_for` (`crate::agent`).
 
 pub mod legacy;
 pub mod opcua;
@@ -25,27 +25,3 @@ pub use source::{
     Batch, Source, SourceError, SourceEvent, SourceSender, Write, WriteError, WriteRequest,
     WriteSender, QUEUE_CAPACITY, WRITE_CAPACITY,
 };
-
-use crate::config::{CellConfig, TagConfig};
-
-/// The source a cell configuration asks for; `tags` are the
-/// configuration's, handed over, not copied (on a 100,000-tag cell a copy
-/// is 14 MB plus three strings a tag): the `@` source keeps them, the OPC UA
-/// source only what it reads of them.
-pub fn for_config(config: &CellConfig, tags: Vec<TagConfig>) -> Box<dyn Source> {
-    match (&config.opcua, &config.legacy) {
-        (_, Some(bus)) => Box::new(legacy::LegacySource::new(bus.clone(), tags)),
-        (Some(ua), None) => Box::new(opcua::OpcUaSource::new(
-            &config.cell,
-            ua.clone(),
-            tags,
-            config
-                .sfc
-                .iter()
-                .flat_map(|s| s.force_switch.into_iter().chain(s.stop_switch)),
-        )),
-        // A validated configuration has one; one built by hand without
-        // either reads nothing.
-        (None, None) => Box::new(scripted::ScriptedSource::new().0),
-    }
-}

@@ -394,10 +394,10 @@ pub fn reject(bytes: &[u8], pki_dir: &Path) {
 /// fingerprint and the command that trusts it; `None` when it is (or the
 /// connection has no security).
 pub fn untrusted(
-    config: &crate::config::OpcUaConfig,
+    config: &crate::sources::opcua::config::OpcUaConfig,
     endpoint: &opcua::types::EndpointDescription,
 ) -> Option<String> {
-    if config.policy == crate::config::SecurityPolicy::None {
+    if config.policy == crate::sources::opcua::config::SecurityPolicy::None {
         return None;
     }
     let der = endpoint.server_certificate.as_ref();

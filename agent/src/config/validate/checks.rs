@@ -17,8 +17,8 @@ use toml::Spanned;
 
 use super::Validator;
 use crate::config::raw;
-use crate::config::tags::map_signals;
 use crate::config::Addressing;
+use crate::tags::map_signals;
 
 impl Validator<'_> {
     /// The tag tables exported beside SimaticML block `path` (of `text`),

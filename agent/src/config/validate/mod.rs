@@ -34,12 +34,12 @@ use cellwatch_models::value::ValueType;
 use toml::Spanned;
 
 use self::value_error::ValueError;
-use crate::config::position::line_col;
 use crate::config::raw::{self, RawConfig};
 use crate::config::{
     key_chunk, timer_signal, Addressing, CellConfig, ConfigErrors, Files, JournalConfig,
     TimerCheck, DEFAULT_MAX_SHELVE, MAX_SHELVE_LIMIT,
 };
+use crate::table::line_col;
 
 /// Ids of the alarms the agent raises of itself, which no check may take.
 const RESERVED_IDS: [&str; 3] = ["communication", "tag-quality", "journal"];
@@ -470,7 +470,7 @@ impl Validator<'_> {
         let sparkplug = raw.sparkplug.and_then(|s| {
             let checked = crate::config::sparkplug::validate(s, &cell, self.base);
             for p in checked.problems {
-                self.problem(p.span, p.key, p.error);
+                self.problem(p.span, &p.key, p.error);
             }
             self.warnings.extend(checked.warnings);
             checked.config

@@ -14,8 +14,8 @@ use toml::Spanned;
 
 use super::Validator;
 use crate::config::raw;
-use crate::config::tags::canonical_expr;
 use crate::config::{SfcCheck, DEFAULT_FORCE_PULSE, DEFAULT_FORCE_TIMEOUT, MAX_FORCE_TIMEOUT};
+use crate::tags::canonical_expr;
 
 impl Validator<'_> {
     /// `KEY.program`: the PLC program that drives outputs from the

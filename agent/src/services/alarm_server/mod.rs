@@ -29,6 +29,7 @@
 //! side of an acknowledgement (`cell/session.rs`).
 
 mod conditions;
+pub mod config;
 mod events;
 mod filters;
 mod guidance;
@@ -58,7 +59,7 @@ use tokio::net::TcpListener;
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 
-use crate::config::AlarmServerConfig;
+use self::config::AlarmServerConfig;
 use crate::step::{CellStep, SessionCommand};
 use conditions::{Conditions, Served};
 use machinery::ItemState;

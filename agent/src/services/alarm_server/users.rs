@@ -98,7 +98,7 @@ impl Users {
         let file: UsersFile = toml::from_str(text).map_err(|e| UsersError::Syntax {
             origin: match e.span() {
                 Some(span) => {
-                    let (line, col) = crate::config::position::line_col(text, span.start);
+                    let (line, col) = crate::table::line_col(text, span.start);
                     format!("{origin}:{line}:{col}")
                 }
                 None => origin.into(),

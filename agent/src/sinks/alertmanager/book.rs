@@ -9,8 +9,8 @@ use std::time::Duration;
 use cellwatch_models::alarm::AlarmState;
 use serde::Serialize;
 
-use crate::config::AlertmanagerConfig;
 use crate::payload::AlarmPayload;
+use crate::sinks::alertmanager::config::AlertmanagerConfig;
 
 /// An alert as Alertmanager's API v2 takes it (`postableAlert`).
 #[derive(Debug, Clone, PartialEq, Serialize)]

@@ -26,6 +26,7 @@
 //! alarm, active or ended.
 
 mod book;
+pub mod config;
 mod events;
 
 use std::sync::{Arc, Mutex};
@@ -35,10 +36,10 @@ use futures_util::future::BoxFuture;
 use futures_util::FutureExt;
 use tokio::sync::Notify;
 
+use self::config::{AlertmanagerConfig, AlertmanagerTls};
 use super::Sink;
 use crate::backoff::Backoff;
 use crate::clock::rfc3339;
-use crate::config::{AlertmanagerConfig, AlertmanagerTls};
 use crate::metrics::Metrics;
 use crate::step::CellStep;
 use events::AlertmanagerEvent;

@@ -7,7 +7,7 @@
 //! journal, and a restarted agent takes the current shift's facts back
 //! from it, so that the live figures go on where they were.
 
-pub use crate::config::oee as config;
+pub mod config;
 
 use std::path::Path;
 use std::sync::Arc;

@@ -34,7 +34,7 @@
 //! - `shared.rs`: what the sink and the session share.
 
 pub mod book;
-pub use crate::config::sparkplug as config;
+pub mod config;
 mod events;
 mod files;
 pub mod host;
@@ -59,7 +59,6 @@ pub use self::files::check;
 use self::shared::Shared;
 pub use self::shared::SparkplugError;
 use self::store::{store_path, HeldStore};
-use crate::config::CellConfig;
 use crate::metrics::Metrics;
 use crate::sinks::Sink;
 use crate::step::CellStep;
@@ -73,6 +72,17 @@ pub struct SparkplugSink {
     oee: Option<OeeWatch>,
 }
 
+/// What the edge node reads of its cell's configuration.
+#[derive(Debug, Clone)]
+pub struct SparkplugCell<'a> {
+    /// The exported tags: index and name (device metrics).
+    pub exported: Vec<(usize, String)>,
+    /// Whether the cell counts parts.
+    pub counts_parts: bool,
+    /// The journal's file: the held changes are kept beside it.
+    pub journal: &'a std::path::Path,
+}
+
 /// The sink for the cell loop and the session to run beside it; the
 /// device declares the alarms of the engine's `catalogue` from the start,
 /// and the OEE metrics when `oee` watches the OEE sink.
@@ -81,21 +91,15 @@ pub struct SparkplugSink {
 /// A TLS or password file cannot be read or used, or the store of held
 /// changes beside the journal cannot be opened.
 pub fn start(
-    cell: &CellConfig,
+    cell: &SparkplugCell<'_>,
     config: &SparkplugConfig,
     catalogue: &[cellwatch_models::engine::CatalogueEntry],
     oee: Option<OeeWatch>,
     metrics: Arc<Metrics>,
 ) -> Result<(SparkplugSink, session::Session), SparkplugError> {
-    let tags: Vec<(usize, String)> = cell
-        .tags
-        .iter()
-        .enumerate()
-        .filter(|(_, t)| t.export)
-        .map(|(i, t)| (i, t.name.clone()))
-        .collect();
-    let counts_parts = cell.part_done.is_some() || !cell.part_counters.is_empty();
-    let (store, dropped) = HeldStore::open(&store_path(&cell.journal.path), config.max_held)?;
+    let tags = &cell.exported;
+    let counts_parts = cell.counts_parts;
+    let (store, dropped) = HeldStore::open(&store_path(cell.journal), config.max_held)?;
     if dropped > 0 {
         SparkplugEvent::Dropped { count: dropped }.emit(&metrics.sparkplug);
     }
@@ -103,7 +107,7 @@ pub fn start(
     let shared = Arc::new(Shared {
         book: Mutex::new(MetricBook::new(
             &declared(catalogue),
-            &tags,
+            tags,
             counts_parts,
             oee.is_some(),
             config.max_held,

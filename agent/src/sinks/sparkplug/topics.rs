@@ -57,7 +57,7 @@ impl Topics {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::sparkplug::Broker;
+    use crate::sinks::sparkplug::config::Broker;
 
     #[test]
     fn the_topics_are_the_specifications() {

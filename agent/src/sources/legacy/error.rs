@@ -60,7 +60,7 @@ pub enum LegacyError {
     NoSuchTag,
     /// A tag whose node id is not `@<unit>/<item>`.
     #[error(transparent)]
-    NodeId(crate::config::legacy::NotABusNode),
+    NodeId(crate::sources::legacy::config::NotABusNode),
     /// A switch pulse: an `@` unit has none.
     #[error("an @ unit takes item writes, not switch pulses")]
     NoPulses,

@@ -32,10 +32,13 @@ use super::{
 };
 use crate::backoff::Backoff;
 
+pub mod config;
 mod error;
 use crate::clock::Clock;
-pub use crate::config::legacy::{BusNode, Item, LegacyConfig, Parity, SerialLine, Transport};
-use crate::config::TagConfig;
+pub use crate::sources::legacy::config::{
+    BusNode, Item, LegacyConfig, Parity, SerialLine, Transport,
+};
+use crate::tags::TagConfig;
 pub use error::{LegacyError, LineError};
 
 /// How long a serial device server has to take the connection.

@@ -10,7 +10,9 @@ use super::requests::Requests;
 use super::subscription;
 use super::OpcUaError;
 
-use crate::config::{Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy};
+use crate::sources::opcua::config::{
+    Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy,
+};
 use crate::sources::SourceError;
 
 pub(super) fn ua_policy(p: SecurityPolicy) -> UaPolicy {

@@ -18,7 +18,7 @@ use opcua::types::{
 };
 
 use super::requests::Requests;
-use crate::config::EventSource;
+use crate::sources::opcua::config::EventSource;
 use crate::sources::SourceEvent;
 
 /// Client handles of event items: this plus the notifier's index (tags'
@@ -481,7 +481,7 @@ mod tests {
             "plc-Line_1_Press-Über_Druck"
         );
         assert_eq!(alarm_id("plc", "", "", &node), "plc-s_Press_Overpressure");
-        assert!(crate::config::key_chunk(
+        assert!(crate::tags::key_chunk(
             &alarm_id("p", &"x".repeat(500), "y", &node)["p-".len()..]
         ));
     }

@@ -8,9 +8,10 @@ use super::conditions::Conditions;
 use super::names::Names;
 use super::requests::Requests;
 use super::{delivery, subscription};
-use crate::config::node::TagNode;
-use crate::config::{OpcUaConfig, TagConfig};
+use crate::sources::opcua::config::OpcUaConfig;
+use crate::sources::opcua::node::TagNode;
 use crate::sources::SourceSender;
+use crate::tags::TagConfig;
 
 /// What every supervisor of this source needs.
 pub(super) struct Context {

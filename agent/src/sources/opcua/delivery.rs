@@ -27,7 +27,7 @@ use super::republishes::Republishes;
 use super::sequence::{Next, Sequence};
 use super::subscription::{reading, source_time, Heard, Monitored, Uses, OVERFLOW_ALARM};
 use crate::clock::Every;
-use crate::config::OpcUaConfig;
+use crate::sources::opcua::config::OpcUaConfig;
 use crate::sources::{SourceEvent, SourceSender};
 
 /// One subscription's delivery, shared by the session's notification

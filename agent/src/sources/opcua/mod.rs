@@ -40,12 +40,14 @@ use std::time::Duration;
 
 mod client;
 mod conditions;
+pub mod config;
 mod context;
 mod delivery;
 mod error;
 mod items;
 mod machinery;
 mod names;
+pub mod node;
 mod once;
 mod overflow;
 mod redundancy;
@@ -59,7 +61,7 @@ mod switches;
 mod tend;
 mod watch;
 
-pub use crate::config::node::{Namespace, TagNode};
+pub use crate::sources::opcua::node::{Namespace, TagNode};
 pub use client::client;
 use client::{identity, namespace_array, server_endpoint};
 use context::{Context, Live, TagTable};
@@ -85,7 +87,8 @@ use super::{
     Source, SourceError, SourceEvent, SourceSender, Write, WriteError, WriteRequest, WriteSender,
     WRITE_CAPACITY,
 };
-use crate::config::{OpcUaConfig, TagConfig};
+use crate::sources::opcua::config::OpcUaConfig;
+use crate::tags::TagConfig;
 
 /// The OPC UA client of one cell.
 pub struct OpcUaSource {

@@ -1,6 +1,6 @@
 //! The tags' names in one string, for messages.
 
-use crate::config::TagConfig;
+use crate::tags::TagConfig;
 
 /// The tags' names, for messages, in one string: a tag costs its name's
 /// bytes and one `u32`.

@@ -10,7 +10,7 @@ use opcua::client::Session;
 
 use super::client::server_endpoint;
 use super::client::{self, identity};
-use crate::config::OpcUaConfig;
+use crate::sources::opcua::config::OpcUaConfig;
 use crate::sources::SourceError;
 
 /// A session for a one-off job (`cellwatch discover`): connected with the

@@ -18,7 +18,7 @@ use opcua::client::Session;
 use opcua::types::{DataValue, NodeId, ReadValueId, TimestampsToReturn, Variant};
 use tokio::sync::Notify;
 
-use crate::config::OpcUaConfig;
+use crate::sources::opcua::config::OpcUaConfig;
 
 /// A `ServiceLevel` below this is a degraded server (Part 4).
 pub(super) const HEALTHY: u8 = 200;

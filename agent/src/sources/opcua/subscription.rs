@@ -18,9 +18,10 @@ use opcua::types::{
 use super::items::Items;
 use super::machinery::MachineryNamespace;
 use super::requests::Requests;
-use crate::config::node::TagNode;
-use crate::config::{Deadband, OpcUaConfig, TagConfig};
+use crate::sources::opcua::config::OpcUaConfig;
+use crate::sources::opcua::node::TagNode;
 use crate::sources::{SourceEvent, SourceSender};
+use crate::tags::{Deadband, TagConfig};
 use cellwatch_models::machinery::StateMachine;
 use cellwatch_models::value::{Num, ValueType};
 

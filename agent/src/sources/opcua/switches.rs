@@ -13,7 +13,7 @@ use tokio::sync::mpsc;
 use super::client::namespace_array;
 use super::requests::Requests;
 use super::OpcUaError;
-use crate::config::node::TagNode;
+use crate::sources::opcua::node::TagNode;
 
 use crate::sources::WriteRequest;
 

@@ -27,8 +27,9 @@ use super::delivery::Shared;
 use super::items::{is_gone, print};
 use super::requests::Requests;
 use super::subscription::{bad, create, Heard, Monitored, Uses, MAX_ITEMS_PER_CALL, READ_CHUNK};
-use crate::config::{Deadband, OpcUaConfig};
+use crate::sources::opcua::config::OpcUaConfig;
 use crate::sources::{SourceEvent, SourceSender};
+use crate::tags::Deadband;
 
 /// Chunks read per turn of the supervisor: it fills gaps in between.
 const CHUNKS_PER_TURN: usize = 10;

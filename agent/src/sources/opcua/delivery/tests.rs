@@ -9,11 +9,11 @@ use opcua::types::{DataValue, DateTime, MonitoredItemNotification, NotificationM
 use tokio::sync::mpsc;
 
 use super::{delivery, Shared, Told};
-use crate::config::TagConfig;
 use crate::sources::opcua::conditions::Conditions;
 use crate::sources::opcua::subscription::{Heard, Monitored, Uses};
 use crate::sources::opcua::Names;
 use crate::sources::SourceEvent;
+use crate::tags::TagConfig;
 
 /// The limit of notifications per publish the test's cells ask for.
 const FULL: usize = 100;

@@ -135,28 +135,11 @@ pub enum SparkplugConfigError {
     HeldOutOfRange(i64),
 }
 
-/// One problem and where it is in the configuration's text.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Problem {
-    /// The bytes of the configuration it is about.
-    pub span: Range<usize>,
-    /// The key, dotted (`sparkplug.broker`).
-    pub key: &'static str,
-    /// What is wrong.
-    pub error: SparkplugConfigError,
-}
+/// What [`validate`] found (warnings: a plain broker off this machine).
+pub type Checked = crate::table::Checked<SparkplugConfig, SparkplugConfigError>;
 
-/// What [`validate`] found: the configuration if nothing is wrong, every
-/// problem, and what is worth a warning.
-#[derive(Debug, Default)]
-pub struct Checked {
-    /// The configuration, when there is no problem.
-    pub config: Option<SparkplugConfig>,
-    /// Every problem.
-    pub problems: Vec<Problem>,
-    /// Things worth saying at start (a plain broker off this machine).
-    pub warnings: Vec<String>,
-}
+/// One problem of `[sparkplug]` and where it is.
+pub type Problem = crate::table::Problem<SparkplugConfigError>;
 
 /// Validates `[sparkplug]` (its table at `raw`'s span) for cell `cell`,
 /// relative paths from `base`.
@@ -165,7 +148,11 @@ pub fn validate(raw: Spanned<RawSparkplug>, cell: &str, base: &Path) -> Checked 
     let raw = raw.into_inner();
     let mut out = Checked::default();
     let mut problem = |span: Range<usize>, key: &'static str, error| {
-        out.problems.push(Problem { span, key, error });
+        out.problems.push(Problem {
+            span,
+            key: key.into(),
+            error,
+        });
     };
     let path = |p: &Spanned<String>| {
         let p = Path::new(p.get_ref());
@@ -393,7 +380,7 @@ mod tests {
         validate(doc.sparkplug, "m01", Path::new("/etc/cellwatch"))
     }
 
-    fn errors(text: &str) -> Vec<(&'static str, String)> {
+    fn errors(text: &str) -> Vec<(String, String)> {
         check(text)
             .problems
             .into_iter()
@@ -442,7 +429,7 @@ mod tests {
         ];
         assert_eq!(
             errors("[sparkplug]\nbroker = \"mqtts://b\"\ngroup_id = \"a/b\"\npassword = \"x\"\npassword_file = \"p\"\nmax_held = 0\n"),
-            expected.map(|(k, m)| (k, m.to_string()))
+            expected.map(|(k, m)| (k.to_string(), m.to_string()))
         );
         assert!(check("[sparkplug]\nbroker = \"mqtts://b\"\n")
             .config
@@ -463,7 +450,10 @@ mod tests {
             "[sparkplug]\nbroker = \"mqtt://127.0.0.1:1884\"\ngroup_id = \"g\"\nedge_node_id = \"n\"\n[sparkplug.tls]\nca = \"x\"\n",
         );
         assert_eq!(
-            c.problems.iter().map(|p| p.key).collect::<Vec<_>>(),
+            c.problems
+                .iter()
+                .map(|p| p.key.as_str())
+                .collect::<Vec<_>>(),
             ["sparkplug.tls"]
         );
     }

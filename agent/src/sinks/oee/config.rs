@@ -134,26 +134,11 @@ pub enum OeeConfigError {
     BothRejects,
 }
 
-/// One problem and where it is in the configuration's text.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Problem {
-    /// The bytes of the configuration it is about.
-    pub span: Range<usize>,
-    /// The key, dotted (`oee.shifts[0].start`).
-    pub key: String,
-    /// What is wrong.
-    pub error: OeeConfigError,
-}
+/// What [`validate`] found.
+pub type Checked = crate::table::Checked<OeeConfig, OeeConfigError>;
 
-/// What [`validate`] found: the configuration if nothing is wrong, and
-/// every problem.
-#[derive(Debug, Default)]
-pub struct Checked {
-    /// The configuration, when there is no problem.
-    pub config: Option<OeeConfig>,
-    /// Every problem.
-    pub problems: Vec<Problem>,
-}
+/// One problem of `[oee]` and where it is.
+pub type Problem = crate::table::Problem<OeeConfigError>;
 
 /// Validates `[oee]` (its table at `raw`'s span): `modes` are the ids of
 /// `[[state.modes]]`, `tag` looks a tag up by name or address.
@@ -357,6 +342,7 @@ pub fn validate(
     Checked {
         config,
         problems: problems.take(),
+        warnings: Vec::new(),
     }
 }
 
@@ -389,7 +375,7 @@ fn offset(text: &str) -> Option<i64> {
 /// The stop causes shipped (`config/stop-causes.toml`): paper 002's Table
 /// 4 and the demo's faults. The live OEE names breakdowns by them, and the
 /// reports classify stops by them unless `--causes` names a table.
-pub const SHIPPED_STOP_CAUSES: &str = include_str!("../../../config/stop-causes.toml");
+pub const SHIPPED_STOP_CAUSES: &str = include_str!("../../../../config/stop-causes.toml");
 
 /// [`SHIPPED_STOP_CAUSES`], read.
 ///

@@ -164,7 +164,7 @@ pub struct OpcUaConfig {
 pub struct EventSource {
     /// The node whose events are read (`source`; the Server object,
     /// `i=2253`, by default: every event of the server).
-    pub source: crate::config::node::TagNode,
+    pub source: crate::sources::opcua::node::TagNode,
     /// The alarms' ids start with this and `-` (`prefix`, `plc` by
     /// default).
     pub prefix: String,
