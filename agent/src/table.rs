@@ -6,6 +6,8 @@
 //! of the document.
 
 use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 /// One problem and where it is in the configuration's text.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -46,4 +48,46 @@ pub fn line_col(text: &str, offset: usize) -> (usize, usize) {
     let line = before.matches('\n').count() + 1;
     let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
     (line, col)
+}
+
+/// Why a duration does not read.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum DurationError {
+    /// Zero.
+    #[error("must be longer than zero")]
+    Zero,
+    /// Not a duration.
+    #[error("'{text}' is not a duration ({reason}); write e.g. 100ms, 2s, 30d")]
+    NotADuration {
+        /// The text.
+        text: String,
+        /// Why not.
+        reason: String,
+    },
+}
+
+/// A duration longer than zero, as written (`100ms`, `2s`, `30d`).
+///
+/// # Errors
+/// Zero, or not a duration.
+pub fn duration(text: &str) -> Result<Duration, DurationError> {
+    match humantime::parse_duration(text) {
+        Ok(d) if d.is_zero() => Err(DurationError::Zero),
+        Ok(d) => Ok(d),
+        Err(e) => Err(DurationError::NotADuration {
+            text: text.into(),
+            reason: e.to_string(),
+        }),
+    }
+}
+
+/// `path` as written in a configuration: relative to `base`, the
+/// configuration file's directory, unless absolute.
+pub fn path(base: &Path, path: &str) -> PathBuf {
+    let p = Path::new(path);
+    if p.is_absolute() {
+        p.to_path_buf()
+    } else {
+        base.join(p)
+    }
 }

@@ -10,7 +10,7 @@
 //!
 //! The document stands above the components it configures: a component
 //! owns its table's validated types in its own `config.rs` (re-exported
-//! here for the command line), and the sparkplug and OEE sinks also their
+//! here for the command line); the sinks and the alarm server also their
 //! raw table and its check, which the validator calls and whose problems
 //! it places (`crate::table`). The cell's own parts (checks, alarms,
 //! state, recorder, commands) are the document's.

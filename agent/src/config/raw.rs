@@ -30,8 +30,10 @@ pub(crate) struct RawConfig {
     pub(crate) commands: RawCommands,
     #[serde(default)]
     pub(crate) production: RawProduction,
-    pub(crate) alertmanager: Option<Spanned<RawAlertmanager>>,
-    pub(crate) alarm_server: Option<Spanned<RawAlarmServer>>,
+    /// `[alertmanager]`: the sink owns its table.
+    pub(crate) alertmanager: Option<Spanned<crate::sinks::alertmanager::config::RawAlertmanager>>,
+    /// `[alarm_server]`: the server owns its table.
+    pub(crate) alarm_server: Option<Spanned<crate::services::alarm_server::config::RawAlarmServer>>,
     /// `[sparkplug]`: the sink owns its table.
     pub(crate) sparkplug: Option<Spanned<crate::config::sparkplug::RawSparkplug>>,
     /// `[oee]`: the OEE sink owns its table.
@@ -105,35 +107,6 @@ pub(crate) struct RawKpi {
     pub(crate) chatter_raises: Option<Spanned<i64>>,
     pub(crate) chatter_window: Option<Spanned<String>>,
     pub(crate) stale_after: Option<Spanned<String>>,
-}
-
-/// `[alarm_server]`: the alarms served over OPC UA.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct RawAlarmServer {
-    pub(crate) listen: Option<Spanned<String>>,
-    pub(crate) pki_dir: Option<Spanned<String>>,
-    pub(crate) users_file: Option<Spanned<String>>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct RawAlertmanager {
-    #[serde(default)]
-    pub(crate) urls: Vec<Spanned<String>>,
-    pub(crate) area: Option<String>,
-    pub(crate) console: Option<Spanned<String>>,
-    pub(crate) resend_interval: Option<Spanned<String>>,
-    pub(crate) escalation: Option<Vec<Spanned<String>>>,
-    pub(crate) tls: Option<Spanned<RawAlertmanagerTls>>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct RawAlertmanagerTls {
-    pub(crate) ca: Spanned<String>,
-    pub(crate) cert: Option<Spanned<String>>,
-    pub(crate) key: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Default, Deserialize)]

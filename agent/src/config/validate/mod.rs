@@ -3,9 +3,7 @@
 //! `Validator` walks the file; its methods are split by component over
 //! this folder's files.
 
-mod alarm_server;
 mod alarms;
-mod alertmanager;
 mod bus;
 mod checks;
 mod commands;
@@ -16,8 +14,8 @@ mod opcua;
 mod rates;
 mod recorder;
 mod sfc;
+mod tag_ref_error;
 mod tags;
-mod value_error;
 
 use std::collections::{HashMap, HashSet};
 use std::fmt;
@@ -33,7 +31,7 @@ use cellwatch_models::signal::Signal;
 use cellwatch_models::value::ValueType;
 use toml::Spanned;
 
-use self::value_error::ValueError;
+use self::tag_ref_error::TagRefError;
 use crate::config::raw::{self, RawConfig};
 use crate::config::{
     key_chunk, timer_signal, Addressing, CellConfig, ConfigErrors, Files, JournalConfig,
@@ -113,6 +111,16 @@ pub(super) struct Validator<'a> {
 }
 
 impl Validator<'_> {
+    /// A component's check of its table: its problems placed in the
+    /// file, its warnings kept; its configuration when it has none.
+    fn placed<T, E: fmt::Display>(&mut self, checked: crate::table::Checked<T, E>) -> Option<T> {
+        for p in checked.problems {
+            self.problem(p.span, &p.key, p.error);
+        }
+        self.warnings.extend(checked.warnings);
+        checked.config
+    }
+
     fn problem(&mut self, span: Range<usize>, key: &str, message: impl fmt::Display) {
         let (origin, text) = match &self.tags_file {
             Some((origin, text)) => (origin.as_str(), text.as_str()),
@@ -162,18 +170,13 @@ impl Validator<'_> {
     }
 
     fn path(&self, p: &str) -> PathBuf {
-        let p = Path::new(p);
-        if p.is_absolute() {
-            p.to_path_buf()
-        } else {
-            self.base.join(p)
-        }
+        crate::table::path(self.base, p)
     }
 
     /// The address of the tag `text` names: a tag's name, or an address
     /// (in the cell's dialect) — a name first; ambiguous when it is one
     /// tag's name and another's address.
-    fn tag_ref(&self, text: &str) -> Result<Signal, ValueError> {
+    fn tag_ref(&self, text: &str) -> Result<Signal, TagRefError> {
         let by_name = self.names.get(text);
         let by_address = self
             .addressing
@@ -181,18 +184,18 @@ impl Validator<'_> {
             .ok()
             .filter(|a| self.kinds.contains_key(a));
         match (by_name, by_address) {
-            (Some(n), Some(a)) if *n != a => Err(ValueError::AmbiguousTag {
+            (Some(n), Some(a)) if *n != a => Err(TagRefError::Ambiguous {
                 text: text.into(),
                 named: n.clone(),
             }),
             (Some(n), _) => Ok(n.clone()),
             (None, Some(a)) => Ok(a),
             (None, None) => match self.addressing.signal(text) {
-                Ok(address) => Err(ValueError::NoTag {
+                Ok(address) => Err(TagRefError::Missing {
                     text: text.into(),
                     address,
                 }),
-                Err(source) => Err(ValueError::NotATag {
+                Err(source) => Err(TagRefError::NotAnAddress {
                     text: text.into(),
                     source,
                 }),
@@ -233,24 +236,10 @@ impl Validator<'_> {
         default: Duration,
     ) -> Duration {
         let Some(v) = value else { return default };
-        match humantime::parse_duration(v.get_ref()) {
-            Ok(d) if !d.is_zero() => d,
-            Ok(_) => {
-                self.problem(v.span(), key, "must be longer than zero");
-                default
-            }
-            Err(e) => {
-                self.problem(
-                    v.span(),
-                    key,
-                    format!(
-                        "'{}' is not a duration ({e}); write e.g. 100ms, 2s, 30d",
-                        v.get_ref()
-                    ),
-                );
-                default
-            }
-        }
+        crate::table::duration(v.get_ref()).unwrap_or_else(|e| {
+            self.problem(v.span(), key, e);
+            default
+        })
     }
 
     /// A delay in ms: `0` or a duration.
@@ -465,15 +454,18 @@ impl Validator<'_> {
             Duration::from_secs(10),
         );
         let zenoh = self.zenoh(raw.zenoh, &cell);
-        let alertmanager = self.alertmanager(raw.alertmanager);
-        let alarm_server = self.alarm_server(raw.alarm_server);
+        let alertmanager = raw
+            .alertmanager
+            .and_then(|a| self.placed(crate::sinks::alertmanager::config::validate(a, self.base)));
+        let alarm_server = raw.alarm_server.and_then(|a| {
+            self.placed(crate::services::alarm_server::config::validate(
+                a, self.base,
+            ))
+        });
         let sparkplug = raw.sparkplug.and_then(|s| {
-            let checked = crate::config::sparkplug::validate(s, &cell, self.base);
-            for p in checked.problems {
-                self.problem(p.span, &p.key, p.error);
-            }
-            self.warnings.extend(checked.warnings);
-            checked.config
+            self.placed(crate::sinks::sparkplug::config::validate(
+                s, &cell, self.base,
+            ))
         });
         let oee = raw.oee.and_then(|o| {
             let modes: Vec<String> = state.modes.iter().map(|m| m.id.clone()).collect();
@@ -481,17 +473,14 @@ impl Validator<'_> {
                 let t = *by_address.get(&self.tag_ref(text).ok()?)?;
                 let (contact, integer) = (tags[t].is_contact(), tags[t].bit.is_none());
                 let integer = integer && tags[t].value_type.is_integer();
-                Some(crate::config::oee::TagFacts {
+                Some(crate::sinks::oee::config::TagFacts {
                     index: t,
                     contact,
                     integer,
                 })
             };
-            let checked = crate::config::oee::validate(o, &modes, &tag);
-            for p in checked.problems {
-                self.problem(p.span, &p.key, p.error);
-            }
-            checked.config
+            let checked = crate::sinks::oee::config::validate(o, &modes, &tag);
+            self.placed(checked)
         });
         let kpi = self.kpi(raw.kpi);
         let recorder = self.recorder(raw.recorder);
