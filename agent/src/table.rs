@@ -42,6 +42,17 @@ impl<T, E> Default for Checked<T, E> {
     }
 }
 
+impl<T, E> Checked<T, E> {
+    /// Notes a problem: `error` at `span`, of `key`.
+    pub fn problem(&mut self, span: Range<usize>, key: impl Into<String>, error: E) {
+        self.problems.push(Problem {
+            span,
+            key: key.into(),
+            error,
+        });
+    }
+}
+
 /// The 1-based line and column of byte `offset` in `text`.
 pub fn line_col(text: &str, offset: usize) -> (usize, usize) {
     let before = &text[..offset.min(text.len())];

@@ -66,11 +66,7 @@ pub fn validate(raw: Spanned<RawAlarmServer>, base: &Path) -> Checked {
     let raw = raw.into_inner();
     let mut out = Checked::default();
     let mut problem = |span: Range<usize>, key: &str, error| {
-        out.problems.push(crate::table::Problem {
-            span,
-            key: format!("alarm_server.{key}"),
-            error,
-        });
+        out.problem(span, format!("alarm_server.{key}"), error)
     };
     let listen = match &raw.listen {
         None => {

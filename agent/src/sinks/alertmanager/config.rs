@@ -167,11 +167,7 @@ pub fn validate(raw: Spanned<RawAlertmanager>, base: &Path) -> Checked {
     let raw = raw.into_inner();
     let mut out = Checked::default();
     let mut problem = |span: Range<usize>, key: &str, error| {
-        out.problems.push(crate::table::Problem {
-            span,
-            key: format!("alertmanager.{key}"),
-            error,
-        });
+        out.problem(span, format!("alertmanager.{key}"), error)
     };
     if raw.urls.is_empty() {
         problem(table.clone(), "urls", E::NoUrl);

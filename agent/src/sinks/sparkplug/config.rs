@@ -147,13 +147,7 @@ pub fn validate(raw: Spanned<RawSparkplug>, cell: &str, base: &Path) -> Checked 
     let table = raw.span();
     let raw = raw.into_inner();
     let mut out = Checked::default();
-    let mut problem = |span: Range<usize>, key: &'static str, error| {
-        out.problems.push(Problem {
-            span,
-            key: key.into(),
-            error,
-        });
-    };
+    let mut problem = |span: Range<usize>, key: &'static str, error| out.problem(span, key, error);
     let path = |p: &Spanned<String>| {
         let p = Path::new(p.get_ref());
         if p.is_absolute() {
