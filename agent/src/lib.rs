@@ -40,8 +40,8 @@
 //! - [`payload`]: the JSON payloads on the bus.
 //! - [`config`]: the cell configuration file as a whole: read, each table
 //!   validated, assembled into a [`config::CellConfig`]. It stands above
-//!   the components: each component owns its table's types (and, for the
-//!   newer ones, its check) in its own `config.rs` (`sources/opcua/`,
+//!   the components: each component owns its table (raw, validated, its
+//!   check) in its own `config.rs` (`sources/opcua/`,
 //!   `sources/legacy/`, `bus/`, `journal/`, `sinks/alertmanager/`,
 //!   `sinks/sparkplug/`, `sinks/oee/`, `services/alarm_server/`), and a
 //!   component reads only its own part.

@@ -3,11 +3,16 @@
 //! ([`Checked`]), and a place as a line and a column ([`line_col`]). The
 //! configuration's validator (`crate::config`) puts every component's
 //! problems at their line and column; a component's check imports nothing
-//! of the document.
+//! of the document. [`Table`] is the kit the older checks use: problems
+//! as text, durations, counts and paths read as the document reads them.
 
+use std::fmt;
 use std::ops::Range;
+use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
+
+use toml::Spanned;
 
 /// One problem and where it is in the configuration's text.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -100,5 +105,92 @@ pub fn path(base: &Path, path: &str) -> PathBuf {
         p.to_path_buf()
     } else {
         base.join(p)
+    }
+}
+
+/// A whole number out of its range.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{value} is not between {} and {}", range.start(), range.end())]
+pub struct OutOfRange {
+    /// The number written.
+    pub value: i64,
+    /// What it may be.
+    pub range: RangeInclusive<u32>,
+}
+
+/// A whole number in `range`.
+///
+/// # Errors
+/// Outside it.
+pub fn count(value: i64, range: RangeInclusive<u32>) -> Result<u32, OutOfRange> {
+    match u32::try_from(value) {
+        Ok(n) if range.contains(&n) => Ok(n),
+        _ => Err(OutOfRange { value, range }),
+    }
+}
+
+/// A component's table being checked: where its relative paths start,
+/// each problem found with its place, and what is worth a warning.
+pub struct Table<'a> {
+    base: &'a Path,
+    found: Checked<(), String>,
+}
+
+impl<'a> Table<'a> {
+    /// A table of a configuration whose relative paths start at `base`.
+    pub fn new(base: &'a Path) -> Table<'a> {
+        Table {
+            base,
+            found: Checked::default(),
+        }
+    }
+
+    /// Notes a problem of `key` at `span`.
+    pub fn problem(&mut self, span: Range<usize>, key: &str, message: impl fmt::Display) {
+        self.found.problem(span, key, message.to_string());
+    }
+
+    /// Notes something worth a warning at start.
+    pub fn warn(&mut self, warning: String) {
+        self.found.warnings.push(warning);
+    }
+
+    /// `p` as written: relative to the configuration's directory.
+    pub fn path(&self, p: &str) -> PathBuf {
+        path(self.base, p)
+    }
+
+    /// A duration longer than zero, or a problem and `default`.
+    pub fn duration(
+        &mut self,
+        value: Option<Spanned<String>>,
+        key: &str,
+        default: Duration,
+    ) -> Duration {
+        let Some(v) = value else { return default };
+        duration(v.get_ref()).unwrap_or_else(|e| {
+            self.problem(v.span(), key, e);
+            default
+        })
+    }
+
+    /// A whole number in `range`, or a problem and `default`.
+    pub fn count(
+        &mut self,
+        value: Spanned<i64>,
+        key: &str,
+        range: RangeInclusive<u32>,
+        default: u32,
+    ) -> u32 {
+        count(*value.get_ref(), range).unwrap_or_else(|e| {
+            self.problem(value.span(), key, e);
+            default
+        })
+    }
+
+    /// What was found: the problems and warnings (the configuration is
+    /// what the check returned).
+    pub fn found(self) -> Checked<(), String> {
+        self.found
     }
 }

@@ -1,6 +1,13 @@
-//! The Zenoh session: mode, endpoints, TLS, keys, and which links are refused.
+//! `[zenoh]`: the Zenoh session: mode, endpoints, TLS, keys, and which
+//! links are refused. The table as written ([`RawZenoh`]), the validated
+//! configuration ([`ZenohConfig`]) and its check (`validate`).
 
 use std::path::PathBuf;
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::table::Table;
 
 /// Zenoh session mode.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -137,5 +144,147 @@ mod zenoh_file_tests {
         let said = super::zenoh_file(&bad).unwrap_err().to_string();
         assert!(!said.contains(".rs:"), "{said}");
         assert!(!said.is_empty());
+    }
+}
+
+/// `[zenoh]` as written.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawZenoh {
+    pub(crate) mode: Option<Spanned<String>>,
+    #[serde(default)]
+    pub(crate) connect: Vec<Spanned<String>>,
+    #[serde(default)]
+    pub(crate) listen: Vec<Spanned<String>>,
+    pub(crate) key_prefix: Option<Spanned<String>>,
+    pub(crate) multicast_scouting: Option<bool>,
+    pub(crate) tls: Option<Spanned<RawTls>>,
+    pub(crate) plain: Option<Spanned<bool>>,
+    pub(crate) config_file: Option<Spanned<String>>,
+    pub(crate) signing_key: Option<Spanned<String>>,
+}
+
+/// `[zenoh.tls]` as written.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawTls {
+    pub(crate) ca: Spanned<String>,
+    pub(crate) cert: Spanned<String>,
+    pub(crate) key: Spanned<String>,
+}
+
+pub(crate) fn validate(kit: &mut Table<'_>, raw: RawZenoh, cell: &str) -> ZenohConfig {
+    let mode = match raw.mode.as_ref().map(|m| (m.get_ref().as_str(), m.span())) {
+        None | Some(("peer", _)) => ZenohMode::Peer,
+        Some(("client", _)) => ZenohMode::Client,
+        Some(("router", _)) => ZenohMode::Router,
+        Some((m, span)) => {
+            kit.problem(
+                span,
+                "zenoh.mode",
+                format!("unknown mode '{m}': use peer, client or router"),
+            );
+            ZenohMode::Peer
+        }
+    };
+    let plain = raw.plain.as_ref().is_some_and(|p| *p.get_ref());
+    let tls = raw.tls.map(|t| {
+        let t = t.into_inner();
+        ZenohTls {
+            ca: kit.path(t.ca.get_ref()),
+            cert: kit.path(t.cert.get_ref()),
+            key: kit.path(t.key.get_ref()),
+        }
+    });
+    let config_file = raw.config_file.map(|f| {
+        let path = kit.path(f.get_ref());
+        if let Err(e) = zenoh_file(&path) {
+            kit.problem(
+                f.span(),
+                "zenoh.config_file",
+                format!("{}: {e}", path.display()),
+            );
+        }
+        path
+    });
+    // Where the [zenoh] table is, for problems of the table as a whole.
+    let table = raw
+        .listen
+        .first()
+        .or(raw.connect.first())
+        .map_or(0..0, Spanned::span);
+    let with_tls = tls.is_some();
+    let mut endpoints = |list: Vec<Spanned<String>>, key: &str| -> Vec<String> {
+        let mut out = Vec::new();
+        for e in list {
+            let text = e.get_ref();
+            if !text.contains('/') {
+                kit.problem(
+                    e.span(),
+                    key,
+                    format!("'{text}' is not an endpoint like quic/127.0.0.1:7447"),
+                );
+            } else if let Some(why) = with_tls.then(|| link_problem(text)).flatten() {
+                kit.problem(e.span(), key, format!("'{text}': {why}"));
+            }
+            out.push(e.into_inner());
+        }
+        out
+    };
+    let connect = endpoints(raw.connect, "zenoh.connect");
+    let listen = endpoints(raw.listen, "zenoh.listen");
+    match (&tls, plain) {
+            (Some(_), true) => kit.problem(
+                raw.plain.as_ref().map_or(table, Spanned::span),
+                "zenoh.plain",
+                "plain = true and [zenoh.tls] contradict each other: remove one",
+            ),
+            (None, true) => kit.warn(
+                "zenoh.plain = true: the bus is neither encrypted nor authenticated; anyone on the network can publish alarms and answer queries as this agent".into(),
+            ),
+            (None, false) if config_file.is_none() => kit.problem(
+                table,
+                "zenoh",
+                "no [zenoh.tls]: the bus would be neither encrypted nor authenticated; give tls = { ca, cert, key } (made by `cellwatch pki`), or write plain = true to accept that",
+            ),
+            _ => {}
+        }
+    if mode == ZenohMode::Client && connect.is_empty() {
+        kit.warn("zenoh.mode is client but zenoh.connect is empty: the agent relies on scouting to find a router".into());
+    }
+    let prefix = match raw.key_prefix {
+        None => cell_prefix(DEFAULT_ROOT, cell),
+        Some(p) => {
+            let s = p.get_ref().trim_end_matches('/').to_string();
+            if s.is_empty() || s.contains(['*', '$', '?', '#']) {
+                kit.problem(
+                    p.span(),
+                    "zenoh.key_prefix",
+                    format!(
+                        "'{}' must be a plain key expression without wildcards",
+                        p.get_ref()
+                    ),
+                );
+            }
+            s
+        }
+    };
+    let signing_key = Some(
+        kit.path(
+            raw.signing_key
+                .as_ref()
+                .map_or(&format!("{cell}.agent.key"), |k| k.get_ref()),
+        ),
+    );
+    ZenohConfig {
+        mode,
+        connect,
+        listen,
+        prefix,
+        multicast_scouting: raw.multicast_scouting.unwrap_or(false),
+        tls,
+        config_file,
+        plain,
+        signing_key,
     }
 }

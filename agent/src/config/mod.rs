@@ -9,11 +9,11 @@
 //! this and connects to nothing.
 //!
 //! The document stands above the components it configures: a component
-//! owns its table's validated types in its own `config.rs` (re-exported
-//! here for the command line); the sinks and the alarm server also their
-//! raw table and its check, which the validator calls and whose problems
-//! it places (`crate::table`). The cell's own parts (checks, alarms,
-//! state, recorder, commands) are the document's.
+//! owns its table in its own `config.rs` (the raw table, the validated
+//! types, re-exported here for the command line, and the check, which the
+//! validator calls and whose problems it places: `crate::table`). The
+//! cell's own parts (checks, alarms, state, recorder, commands, KPI rules)
+//! are the document's.
 //!
 //! Relative paths are relative to the configuration file's directory.
 //! Secrets never live in the file: an OPC UA password comes from an

@@ -10,8 +10,8 @@ use toml::Spanned;
 #[serde(deny_unknown_fields)]
 pub(crate) struct RawConfig {
     pub(crate) cell: RawCell,
-    pub(crate) opcua: Option<Spanned<RawOpcUa>>,
-    pub(crate) legacy: Option<Spanned<RawLegacy>>,
+    pub(crate) opcua: Option<Spanned<crate::sources::opcua::config::RawOpcUa>>,
+    pub(crate) legacy: Option<Spanned<crate::sources::legacy::config::RawLegacy>>,
     #[serde(default)]
     pub(crate) tags: Vec<RawTag>,
     /// The tags as a CSV file instead of `[[tags]]` tables.
@@ -21,9 +21,9 @@ pub(crate) struct RawConfig {
     #[serde(default)]
     pub(crate) state: RawState,
     #[serde(default)]
-    pub(crate) zenoh: RawZenoh,
+    pub(crate) zenoh: crate::bus::config::RawZenoh,
     #[serde(default)]
-    pub(crate) journal: RawJournal,
+    pub(crate) journal: crate::journal::config::RawJournal,
     #[serde(default)]
     pub(crate) metrics: RawMetrics,
     #[serde(default)]
@@ -133,64 +133,6 @@ pub(crate) struct RawCell {
     #[serde(default)]
     pub(crate) description: String,
     pub(crate) dialect: Option<Spanned<String>>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct RawOpcUa {
-    pub(crate) endpoint: Spanned<String>,
-    pub(crate) security_policy: Option<Spanned<String>>,
-    pub(crate) security_mode: Option<Spanned<String>>,
-    pub(crate) pki_dir: Option<Spanned<String>>,
-    #[serde(default)]
-    pub(crate) identity: Option<Spanned<RawIdentity>>,
-    pub(crate) publishing_interval: Option<Spanned<String>>,
-    pub(crate) sampling_interval: Option<Spanned<String>>,
-    pub(crate) namespace_uri: Option<Spanned<String>>,
-    pub(crate) queue_size: Option<Spanned<i64>>,
-    pub(crate) max_notifications_per_publish: Option<Spanned<i64>>,
-    pub(crate) overflow_clear_after: Option<Spanned<String>>,
-    pub(crate) subscription_lifetime: Option<Spanned<String>>,
-    pub(crate) verify_interval: Option<Spanned<String>>,
-    pub(crate) reverse_listen: Option<Spanned<String>>,
-    #[serde(default)]
-    pub(crate) redundant: Vec<Spanned<String>>,
-    #[serde(default)]
-    pub(crate) events: Vec<Spanned<RawEvents>>,
-}
-
-/// `[[opcua.events]]`: the PLC's own alarms, read from a notifier.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct RawEvents {
-    pub(crate) source: Option<Spanned<String>>,
-    pub(crate) prefix: Option<Spanned<String>>,
-    pub(crate) min_severity: Option<Spanned<i64>>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct RawLegacy {
-    pub(crate) tcp: Option<Spanned<String>>,
-    pub(crate) serial: Option<Spanned<String>>,
-    pub(crate) baud: Option<Spanned<i64>>,
-    pub(crate) data_bits: Option<Spanned<i64>>,
-    pub(crate) parity: Option<Spanned<String>>,
-    pub(crate) stop_bits: Option<Spanned<i64>>,
-    pub(crate) poll_interval: Option<Spanned<String>>,
-    pub(crate) response_timeout: Option<Spanned<String>>,
-    pub(crate) retries: Option<Spanned<i64>>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct RawIdentity {
-    pub(crate) kind: Spanned<String>,
-    pub(crate) user: Option<String>,
-    pub(crate) password_env: Option<String>,
-    pub(crate) password_file: Option<Spanned<String>>,
-    /// Never allowed: present only to say so clearly.
-    pub(crate) password: Option<Spanned<toml::Value>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -346,59 +288,6 @@ pub(crate) struct RawMode {
     pub(crate) id: Spanned<String>,
     pub(crate) when: Spanned<String>,
     pub(crate) suppress: Spanned<Vec<Spanned<String>>>,
-}
-
-#[derive(Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct RawZenoh {
-    pub(crate) mode: Option<Spanned<String>>,
-    #[serde(default)]
-    pub(crate) connect: Vec<Spanned<String>>,
-    #[serde(default)]
-    pub(crate) listen: Vec<Spanned<String>>,
-    pub(crate) key_prefix: Option<Spanned<String>>,
-    pub(crate) multicast_scouting: Option<bool>,
-    pub(crate) tls: Option<Spanned<RawTls>>,
-    pub(crate) plain: Option<Spanned<bool>>,
-    pub(crate) config_file: Option<Spanned<String>>,
-    pub(crate) signing_key: Option<Spanned<String>>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct RawTls {
-    pub(crate) ca: Spanned<String>,
-    pub(crate) cert: Spanned<String>,
-    pub(crate) key: Spanned<String>,
-}
-
-#[derive(Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct RawJournal {
-    pub(crate) path: Option<String>,
-    pub(crate) retention: Option<Spanned<String>>,
-    #[serde(default)]
-    pub(crate) tables: RawJournalTables,
-}
-
-/// `[journal.tables.<table>]`, one per table of rows.
-#[derive(Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct RawJournalTables {
-    pub(crate) alarm_events: Option<Spanned<RawKeep>>,
-    pub(crate) state_history: Option<Spanned<RawKeep>>,
-    pub(crate) commands: Option<Spanned<RawKeep>>,
-    pub(crate) production: Option<Spanned<RawKeep>>,
-    pub(crate) orders: Option<Spanned<RawKeep>>,
-    pub(crate) recordings: Option<Spanned<RawKeep>>,
-    pub(crate) modes: Option<Spanned<RawKeep>>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(crate) struct RawKeep {
-    pub(crate) retention: Option<Spanned<String>>,
-    pub(crate) max_rows: Option<Spanned<i64>>,
 }
 
 #[derive(Debug, Default, Deserialize)]

@@ -4,13 +4,9 @@
 //! this folder's files.
 
 mod alarms;
-mod bus;
 mod checks;
 mod commands;
-mod journal;
 mod kpi;
-mod legacy;
-mod opcua;
 mod rates;
 mod recorder;
 mod sfc;
@@ -34,8 +30,8 @@ use toml::Spanned;
 use self::tag_ref_error::TagRefError;
 use crate::config::raw::{self, RawConfig};
 use crate::config::{
-    key_chunk, timer_signal, Addressing, CellConfig, ConfigErrors, Files, JournalConfig,
-    TimerCheck, DEFAULT_MAX_SHELVE, MAX_SHELVE_LIMIT,
+    key_chunk, timer_signal, Addressing, CellConfig, ConfigErrors, Files, TimerCheck,
+    DEFAULT_MAX_SHELVE, MAX_SHELVE_LIMIT,
 };
 use crate::table::line_col;
 
@@ -111,6 +107,15 @@ pub(super) struct Validator<'a> {
 }
 
 impl Validator<'_> {
+    /// A component's check of its table, made with the document's kit:
+    /// its problems placed in the file, its warnings kept.
+    fn component<T>(&mut self, check: impl FnOnce(&mut crate::table::Table<'_>) -> T) -> T {
+        let mut kit = crate::table::Table::new(self.base);
+        let config = check(&mut kit);
+        self.placed(kit.found());
+        config
+    }
+
     /// A component's check of its table: its problems placed in the
     /// file, its warnings kept; its configuration when it has none.
     fn placed<T, E: fmt::Display>(&mut self, checked: crate::table::Checked<T, E>) -> Option<T> {
@@ -211,22 +216,7 @@ impl Validator<'_> {
         range: std::ops::RangeInclusive<u32>,
         default: u32,
     ) -> u32 {
-        match u32::try_from(*value.get_ref()) {
-            Ok(n) if range.contains(&n) => n,
-            _ => {
-                self.problem(
-                    value.span(),
-                    key,
-                    format!(
-                        "{} is not between {} and {}",
-                        value.get_ref(),
-                        range.start(),
-                        range.end()
-                    ),
-                );
-                default
-            }
-        }
+        self.component(|kit| kit.count(value, key, range, default))
     }
 
     fn duration(
@@ -235,11 +225,7 @@ impl Validator<'_> {
         key: &str,
         default: Duration,
     ) -> Duration {
-        let Some(v) = value else { return default };
-        crate::table::duration(v.get_ref()).unwrap_or_else(|e| {
-            self.problem(v.span(), key, e);
-            default
-        })
+        self.component(|kit| kit.duration(value, key, default))
     }
 
     /// A delay in ms: `0` or a duration.
@@ -318,8 +304,26 @@ impl Validator<'_> {
             );
         }
         let (opcua, legacy) = match (raw.opcua, raw.legacy) {
-            (Some(o), None) => (self.opcua(o.into_inner()).map(Some), None),
-            (None, Some(l)) => (Some(None), self.legacy(l.into_inner())),
+            (Some(o), None) => {
+                // The tags read with the namespace it names.
+                self.namespace_uri = o
+                    .get_ref()
+                    .namespace_uri
+                    .as_ref()
+                    .filter(|u| !u.get_ref().trim().is_empty())
+                    .map(|u| (u.span(), u.get_ref().clone()));
+                let o = o.into_inner();
+                let checked = self.component(|kit| crate::sources::opcua::config::validate(kit, o));
+                (checked.map(Some), None)
+            }
+            (None, Some(l)) => {
+                // The tags' node ids are `@` bus nodes.
+                self.bus = true;
+                let l = l.into_inner();
+                let checked =
+                    self.component(|kit| crate::sources::legacy::config::validate(kit, l));
+                (Some(None), checked)
+            }
             (Some(_), Some(l)) => {
                 self.problem(
                     l.span(),
@@ -453,7 +457,7 @@ impl Validator<'_> {
             "state.publish_interval",
             Duration::from_secs(10),
         );
-        let zenoh = self.zenoh(raw.zenoh, &cell);
+        let zenoh = self.component(|kit| crate::bus::config::validate(kit, raw.zenoh, &cell));
         let alertmanager = raw
             .alertmanager
             .and_then(|a| self.placed(crate::sinks::alertmanager::config::validate(a, self.base)));
@@ -487,15 +491,8 @@ impl Validator<'_> {
         let database = self.database(raw.alarms.database.as_ref());
         let (system_delays, consequences) = self.system_alarms(raw.alarms);
         delays.extend(system_delays);
-        let journal = JournalConfig {
-            path: self.path(
-                raw.journal
-                    .path
-                    .as_deref()
-                    .unwrap_or(&format!("cellwatch-{cell}.sqlite")),
-            ),
-            keep: self.keep(raw.journal.retention, raw.journal.tables),
-        };
+        let journal =
+            self.component(|kit| crate::journal::config::validate(kit, raw.journal, &cell));
         let metrics = match raw.metrics.listen {
             None => Some(SocketAddr::from(([127, 0, 0, 1], 9464))),
             Some(v) if v.get_ref() == "off" => None,

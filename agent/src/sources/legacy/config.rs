@@ -1,9 +1,15 @@
 //! How a cell reaches its `@` bus (paper 002) and where each tag is on
 //! it, as the configuration says: the transport, the serial line, the
 //! poll timing, and a tag's `@<unit>/<item>`. Read by the `@` bus source
-//! (`sources/legacy`).
+//! (`sources/legacy`). The table as written ([`RawLegacy`]) and its check
+//! (`validate`).
 
 use std::time::Duration;
+
+use serde::Deserialize;
+use toml::Spanned;
+
+use crate::table::Table;
 
 use cellwatch_models::legacy::Header;
 use cellwatch_models::value::ValueType;
@@ -199,4 +205,111 @@ impl BusNode {
             .ok_or_else(expected)?;
         Ok(BusNode { unit, item })
     }
+}
+
+/// `[legacy]` as written.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawLegacy {
+    pub(crate) tcp: Option<Spanned<String>>,
+    pub(crate) serial: Option<Spanned<String>>,
+    pub(crate) baud: Option<Spanned<i64>>,
+    pub(crate) data_bits: Option<Spanned<i64>>,
+    pub(crate) parity: Option<Spanned<String>>,
+    pub(crate) stop_bits: Option<Spanned<i64>>,
+    pub(crate) poll_interval: Option<Spanned<String>>,
+    pub(crate) response_timeout: Option<Spanned<String>>,
+    pub(crate) retries: Option<Spanned<i64>>,
+}
+
+pub(crate) fn validate(kit: &mut Table<'_>, raw: RawLegacy) -> Option<LegacyConfig> {
+    let transport = match (raw.tcp, raw.serial) {
+        (Some(t), None) => {
+            if t.get_ref()
+                .rsplit_once(':')
+                .and_then(|(_, p)| p.parse::<u16>().ok())
+                .is_none()
+            {
+                kit.problem(
+                    t.span(),
+                    "legacy.tcp",
+                    format!(
+                        "'{}' is not host:port (the serial device server's raw socket)",
+                        t.get_ref()
+                    ),
+                );
+            }
+            Transport::Tcp(t.into_inner())
+        }
+        (None, Some(path)) => {
+            let baud = match raw.baud {
+                None => 9600,
+                Some(b) => kit.count(b, "legacy.baud", 50..=4_000_000, 9600),
+            };
+            let data_bits = match raw.data_bits {
+                None => 7,
+                Some(b) => kit.count(b, "legacy.data_bits", 5..=8, 7) as u8,
+            };
+            let stop_bits = match raw.stop_bits {
+                None => 2,
+                Some(b) => kit.count(b, "legacy.stop_bits", 1..=2, 2) as u8,
+            };
+            let parity = match raw
+                .parity
+                .as_ref()
+                .map(|p| (p.get_ref().as_str(), p.span()))
+            {
+                None | Some(("even", _)) => Parity::Even,
+                Some(("odd", _)) => Parity::Odd,
+                Some(("none", _)) => Parity::None,
+                Some((p, span)) => {
+                    kit.problem(
+                        span,
+                        "legacy.parity",
+                        format!("unknown parity '{p}': use even, odd or none"),
+                    );
+                    Parity::Even
+                }
+            };
+            Transport::Serial(SerialLine {
+                path: path.into_inner(),
+                baud,
+                data_bits,
+                parity,
+                stop_bits,
+            })
+        }
+        (Some(t), Some(_)) => {
+            kit.problem(t.span(), "legacy.tcp", "give tcp or serial, not both");
+            return None;
+        }
+        (None, None) => {
+            kit.problem(
+                0..0,
+                "legacy",
+                "give the bus: tcp = \"host:port\" or serial = \"/dev/ttyUSB0\"",
+            );
+            return None;
+        }
+    };
+    let poll_interval = kit.duration(
+        raw.poll_interval,
+        "legacy.poll_interval",
+        Duration::from_secs(1),
+    );
+    let response_timeout = kit.duration(
+        raw.response_timeout,
+        "legacy.response_timeout",
+        Duration::from_millis(300),
+    );
+    let retries = match raw.retries {
+        None => 2,
+        Some(r) => kit.count(r, "legacy.retries", 0..=10, 2),
+    };
+    Some(LegacyConfig {
+        transport,
+        poll_interval,
+        response_timeout,
+        retries,
+    })
 }
