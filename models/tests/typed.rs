@@ -8,59 +8,28 @@
 use cellwatch_models::alarm::{AlarmKind, Severity, Transition};
 use cellwatch_models::comments::CommentDb;
 use cellwatch_models::engine::{
-    CellEngine, CheckSet, HistoryKind, MachineState, Order, PartCounting, Reading, StateRules,
-    SwitchingCheck, SwitchingChecks, Tag, TagReading,
+    CellEngine, CheckSet, EngineStep, HistoryKind, MachineState, Order, PartCounting, Reading,
+    StateRules, SwitchingCheck, SwitchingChecks, TagReading,
 };
-use cellwatch_models::explain::Polarity;
 use cellwatch_models::expr::Expr;
 use cellwatch_models::limit::{Level, LimitCheck, LimitChecks, LimitLevel};
-use cellwatch_models::program::Program;
-use cellwatch_models::signal::{Observability, Signal};
+use cellwatch_models::signal::Signal;
 use cellwatch_models::switching::SwitchingFunction;
 use cellwatch_models::value::{Counter, Num, ValueType};
 
-const ESE: &str = include_str!("../../config/cnc/ese.il");
-const NORMAL: &str = include_str!("../../config/cnc/ese-normal.values");
+mod kit;
+use kit::{set, tag};
 
 /// The ESE machine's contacts, then `MODE` (the mode word), `TEMP` and
 /// `COUNT`; ESE armed only in AUTO (`MODE == 1`); running while
 /// `G0.00 * TEMP < 90`.
 fn engine(limits: Vec<LimitCheck>) -> CellEngine {
-    let p = Program::compile("ese.il", ESE, None).unwrap();
-    let sf = SwitchingFunction::expand(
-        &p,
-        &Signal::new("G8.02"),
-        &Observability::default_for(p.dialect()),
-    )
-    .unwrap();
-    let mut tags: Vec<Tag> = sf
-        .leaves()
-        .into_iter()
-        .map(|s| Tag {
-            name: s.name().to_lowercase(),
-            address: s,
-        })
-        .collect();
-    for n in ["ITEM", "TARGET", "MODE", "TEMP", "COUNT"] {
-        tags.push(Tag {
-            name: n.to_lowercase(),
-            address: Signal::new(n),
-        });
-    }
-    let check = SwitchingCheck {
-        forces: Vec::new(),
-        text: None,
-        id: "ese".into(),
-        sf,
-        polarity: Polarity::On,
-        severity: Severity::Critical,
-        fault_type: "ESE".into(),
-        comments: CommentDb::default(),
-        armed_when: Some(SwitchingFunction::from_expr(
-            Signal::new("ese.armed"),
-            &Expr::parse("MODE == 1").unwrap(),
-        )),
-    };
+    let (mut tags, mut check) = kit::ese();
+    tags.extend(kit::tags_at(&["ITEM", "TARGET", "MODE", "TEMP", "COUNT"]));
+    check.armed_when = Some(SwitchingFunction::from_expr(
+        Signal::new("ese.armed"),
+        &Expr::parse("MODE == 1").unwrap(),
+    ));
     let rules = StateRules {
         running: Some(Expr::parse("G0.00 * TEMP < 90").unwrap()),
         fault_severity: Severity::High,
@@ -81,38 +50,17 @@ fn engine(limits: Vec<LimitCheck>) -> CellEngine {
         .ordering(Some(count - 4), Some(count - 3))
 }
 
-fn tag(e: &CellEngine, a: &str) -> usize {
-    e.tag_index(&Signal::new(a)).unwrap()
-}
-
-fn number(e: &mut CellEngine, a: &str, v: Num, at: u64) -> cellwatch_models::engine::EngineStep {
-    let t = tag(e, a);
-    e.on_reading(t, Reading::Number(v), at, at)
-}
-
-fn contact(e: &mut CellEngine, a: &str, v: bool, at: u64) -> cellwatch_models::engine::EngineStep {
-    let t = tag(e, a);
-    e.on_reading(t, Reading::Good(v), at, at)
+fn number(e: &mut CellEngine, a: &str, v: Num, at: u64) -> EngineStep {
+    kit::read(e, a, Reading::Number(v), at)
 }
 
 fn load_normal(e: &mut CellEngine, at: u64) {
     e.on_connection(true, at);
-    for line in NORMAL
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.starts_with("address"))
-    {
-        let (a, v) = line.split_once(',').unwrap();
-        if e.tag_index(&Signal::new(a)).is_some() {
-            contact(e, a, v == "1", at);
-        }
-    }
+    kit::load(e, kit::ESE_NORMAL, at);
 }
 
-fn raised(step: &cellwatch_models::engine::EngineStep) -> Vec<String> {
-    step.alarms()
-        .filter(|(_, t, _)| *t == Transition::Raised)
-        .map(|(a, _, _)| a.id.clone())
-        .collect()
+fn raised(step: &EngineStep) -> Vec<String> {
+    kit::raised(step).into_iter().map(|a| a.id).collect()
 }
 
 #[test]
@@ -135,11 +83,11 @@ fn a_comparison_in_armed_when_arms_the_check() {
     load_normal(&mut e, 1);
     number(&mut e, "MODE", Num::Int(2), 2);
     // JOG: the over-travel switch opens, the check is not armed.
-    assert!(raised(&contact(&mut e, "X0.06", false, 3)).is_empty());
-    contact(&mut e, "X0.06", true, 4);
+    assert!(raised(&set(&mut e, "X0.06", false, 3)).is_empty());
+    set(&mut e, "X0.06", true, 4);
     number(&mut e, "MODE", Num::Int(1), 5);
     // AUTO: the same fault raises.
-    assert_eq!(raised(&contact(&mut e, "X0.06", false, 6)), ["ese"]);
+    assert_eq!(raised(&set(&mut e, "X0.06", false, 6)), ["ese"]);
 }
 
 #[test]
@@ -293,7 +241,7 @@ fn on_and_off_delays_announce_only_conditions_that_last() {
     let mut transitions = Vec::new();
     let mut at = |e: &mut CellEngine, t: u64, open: Option<bool>| {
         let step = match open {
-            Some(v) => contact(e, "X0.06", !v, t),
+            Some(v) => set(e, "X0.06", !v, t),
             None => e.advance(t),
         };
         transitions.extend(step.alarms().map(|(a, tr, at)| (a.id.clone(), tr, at)));
@@ -346,7 +294,7 @@ fn temp_limit(h: f64) -> LimitCheck {
     }
 }
 
-fn transitions(steps: &[cellwatch_models::engine::EngineStep]) -> Vec<(String, Transition)> {
+fn transitions(steps: &[EngineStep]) -> Vec<(String, Transition)> {
     steps
         .iter()
         .flat_map(|s| s.alarms().map(|(a, t, _)| (a.id.clone(), t)))
@@ -519,7 +467,7 @@ fn alarms_judged_in_a_late_batch_carry_the_source_times_the_agent_trusts() {
         reading: Reading::Good(v),
         source_time: t,
     };
-    let times = |step: &cellwatch_models::engine::EngineStep, id: &str| -> Vec<(Transition, u64)> {
+    let times = |step: &EngineStep, id: &str| -> Vec<(Transition, u64)> {
         step.alarms()
             .filter(|(a, _, _)| a.id == id)
             .map(|(_, t, at)| (t, at))
@@ -589,7 +537,7 @@ fn a_delay_run_across_a_gap_says_its_trigger_is_uncertain() {
     number(&mut e, "MODE", Num::Int(1), 0);
     number(&mut e, "TEMP", Num::Float(40.0), 1_000);
     let (temp, x006, count) = (tag(&e, "TEMP"), tag(&e, "X0.06"), tag(&e, "COUNT"));
-    let message = |step: &cellwatch_models::engine::EngineStep, id: &str| {
+    let message = |step: &EngineStep, id: &str| {
         step.alarms()
             .find(|(a, t, _)| a.id == id && *t == Transition::Raised)
             .map(|(a, _, _)| a.message.clone())
@@ -598,10 +546,10 @@ fn a_delay_run_across_a_gap_says_its_trigger_is_uncertain() {
     // a value of TEMP and one of X0.06 are lost meanwhile, then values
     // come again (which end the tags' own marks).
     number(&mut e, "TEMP", Num::Float(90.0), 10_000);
-    contact(&mut e, "X0.06", false, 10_000);
+    set(&mut e, "X0.06", false, 10_000);
     e.on_gap(Some(&[temp, x006]), 2, "2 values lost in a full queue");
     number(&mut e, "TEMP", Num::Float(91.0), 10_500);
-    contact(&mut e, "X0.06", false, 10_500);
+    set(&mut e, "X0.06", false, 10_500);
     let step = e.advance(11_100);
     let temp_h = message(&step, "temp-h").unwrap();
     assert!(
@@ -616,10 +564,10 @@ fn a_delay_run_across_a_gap_says_its_trigger_is_uncertain() {
     // Both back; again, with a gap on a tag neither reads (the parts
     // counter): nothing said.
     number(&mut e, "TEMP", Num::Float(40.0), 20_000);
-    contact(&mut e, "X0.06", true, 20_000);
+    set(&mut e, "X0.06", true, 20_000);
     e.advance(21_100);
     number(&mut e, "TEMP", Num::Float(90.0), 30_000);
-    contact(&mut e, "X0.06", false, 30_000);
+    set(&mut e, "X0.06", false, 30_000);
     e.on_gap(Some(&[count]), 1, "1 value lost in a full queue");
     let step = e.advance(31_100);
     assert!(!message(&step, "temp-h").unwrap().contains("uncertain"));
@@ -657,36 +605,27 @@ fn a_contact_fault_in_a_batch_outlasting_its_delay_is_raised_and_cleared() {
 /// comment.
 #[test]
 fn a_comparison_culprit_names_the_number_it_compared() {
-    let tags: Vec<Tag> = ["TEMP", "LIMIT", "X1"]
-        .iter()
-        .map(|n| Tag {
-            name: n.to_lowercase(),
-            address: Signal::new(n),
-        })
-        .collect();
+    let tags = kit::tags_at(&["TEMP", "LIMIT", "X1"]);
     let check = |id: &str, condition: &str| SwitchingCheck {
-        forces: Vec::new(),
-        text: None,
-        id: id.into(),
-        sf: SwitchingFunction::from_expr(Signal::new(id), &Expr::parse(condition).unwrap()),
-        polarity: Polarity::On,
-        severity: Severity::High,
-        fault_type: id.to_uppercase(),
         comments: [
             (Signal::new("X1"), "Coolant on".to_string()),
             (Signal::new("TEMP"), "Spindle temperature".to_string()),
         ]
         .into_iter()
         .collect(),
-        armed_when: None,
+        ..kit::switching_check(
+            id,
+            SwitchingFunction::from_expr(Signal::new(id), &Expr::parse(condition).unwrap()),
+            Severity::High,
+        )
     };
     let sets: Vec<Box<dyn CheckSet>> = vec![Box::new(SwitchingChecks::new(vec![
         check("hot", "TEMP > 80.5 * X1"),
         check("over", "TEMP >= LIMIT"),
     ]))];
-    let mut e = CellEngine::new("m01", tags, sets, StateRules::default()).unwrap();
+    let mut e = kit::cell("m01", tags, sets);
     e.on_connection(true, 1);
-    contact(&mut e, "X1", true, 1);
+    set(&mut e, "X1", true, 1);
     number(&mut e, "LIMIT", Num::Int(95), 1);
     number(&mut e, "TEMP", Num::Float(70.0), 2);
     let step = number(&mut e, "TEMP", Num::Float(85.25), 3);
@@ -772,21 +711,11 @@ impl CheckSet for BlamesHot {
 
 #[test]
 fn the_engine_shows_a_comparison_culprit_a_check_could_not_with_its_numbers() {
-    let tags = vec![Tag {
-        name: "temp".into(),
-        address: Signal::new("TEMP"),
-    }];
+    let tags = kit::tags_at(&["TEMP"]);
     let io: CommentDb = [(Signal::new("TEMP"), "Spindle temperature".to_string())]
         .into_iter()
         .collect();
-    let mut e = CellEngine::new(
-        "m01",
-        tags,
-        vec![Box::new(BlamesHot)],
-        StateRules::default(),
-    )
-    .unwrap()
-    .commenting(io);
+    let mut e = kit::cell("m01", tags, vec![Box::new(BlamesHot)]).commenting(io);
     e.on_connection(true, 1);
     number(&mut e, "TEMP", Num::Int(70), 2);
     let step = number(&mut e, "TEMP", Num::Int(85), 3);

@@ -11,12 +11,9 @@
 
 use std::collections::{BTreeSet, HashMap};
 
-use cellwatch_models::alarm::{Alarm, Severity, Transition};
+use cellwatch_models::alarm::Severity;
 use cellwatch_models::comments::CommentDb;
-use cellwatch_models::engine::{
-    CellEngine, CheckSet, EngineStep, Reading, StateRules, SwitchingCheck, SwitchingChecks, Tag,
-};
-use cellwatch_models::explain::Polarity;
+use cellwatch_models::engine::{CellEngine, CheckSet, EngineStep, SwitchingCheck, SwitchingChecks};
 use cellwatch_models::expr::Expr;
 use cellwatch_models::program::Program;
 use cellwatch_models::signal::{Observability, Signal};
@@ -25,35 +22,20 @@ use proptest::prelude::*;
 
 mod press;
 
-const ESE: &str = include_str!("../../../config/cnc/ese.il");
-const CSD: &str = include_str!("../../../config/cnc/csd.il");
-const CSD_ESE: &str = include_str!("../../../tests/data/paper000/csd-ese.il");
-const ESE_NORMAL: &str = include_str!("../../../config/cnc/ese-normal.values");
-const CSD_NORMAL: &str = include_str!("../../../config/cnc/csd-normal.values");
+#[path = "../kit/mod.rs"]
+mod kit;
+use kit::{raised, set, CSD, CSD_ESE, CSD_NORMAL, ESE, ESE_NORMAL};
 
 fn check(id: &str, source: &str, coil: &str, armed_when: Option<&str>) -> SwitchingCheck {
-    let p = Program::compile(&format!("{id}.il"), source, None).unwrap();
-    let sf = SwitchingFunction::expand(
-        &p,
-        &Signal::new(coil),
-        &Observability::default_for(p.dialect()),
-    )
-    .unwrap();
+    let sf = kit::switching_function(&format!("{id}.il"), source, coil);
     SwitchingCheck {
-        forces: Vec::new(),
-        text: None,
-        id: id.into(),
-        sf,
-        polarity: Polarity::On,
-        severity: Severity::High,
-        fault_type: id.to_uppercase(),
-        comments: CommentDb::default(),
         armed_when: armed_when.map(|a| {
             SwitchingFunction::from_expr(
                 Signal::new(&format!("{id}.armed")),
                 &Expr::parse(a).unwrap(),
             )
         }),
+        ..kit::switching_check(id, sf, Severity::High)
     }
 }
 
@@ -71,22 +53,8 @@ fn engine(csd: &str, suppress: bool) -> CellEngine {
         signals.extend(c.armed_when.iter().flat_map(SwitchingFunction::leaves));
     }
     signals.insert(Signal::new("G8.02"));
-    let tags = signals
-        .into_iter()
-        .map(|s| Tag {
-            name: s.name().to_lowercase(),
-            address: s,
-        })
-        .collect();
     let sets: Vec<Box<dyn CheckSet>> = vec![Box::new(SwitchingChecks::new(checks))];
-    let e = CellEngine::new("m01", tags, sets, StateRules::default()).unwrap();
-    let relation = e.relation().clone();
-    e.relating(relation, suppress)
-}
-
-fn set(e: &mut CellEngine, address: &str, v: bool, at: u64) -> EngineStep {
-    let t = e.tag_index(&Signal::new(address)).unwrap();
-    e.on_reading(t, Reading::Good(v), at, at)
+    kit::related(kit::cell("m01", kit::tags(signals), sets), suppress)
 }
 
 /// Both machines' normal values, cycle start released, G8.02 off.
@@ -102,24 +70,9 @@ fn normal(e: &mut CellEngine) {
 /// Every tag's normal value at `at`, as a new subscription's first values.
 fn first_values(e: &mut CellEngine, at: u64) {
     for values in [ESE_NORMAL, CSD_NORMAL] {
-        for line in values
-            .lines()
-            .filter(|l| !l.starts_with('#') && !l.starts_with("address"))
-        {
-            let (a, v) = line.split_once(',').unwrap();
-            if e.tag_index(&Signal::new(a)).is_some() {
-                set(e, a, v == "1", at);
-            }
-        }
+        kit::load(e, values, at);
     }
     set(e, "G8.02", false, at);
-}
-
-fn raised(step: &EngineStep) -> Vec<Alarm> {
-    step.alarms()
-        .filter(|(_, t, _)| *t == Transition::Raised)
-        .map(|(a, _, _)| a.clone())
-        .collect()
 }
 
 /// An alarm raised, and its (cause, first-out, suppressed) if it is a
@@ -237,13 +190,9 @@ fn contacts() -> Vec<&'static str> {
 fn normal_values(e: &CellEngine) -> HashMap<Signal, bool> {
     let mut values = HashMap::new();
     for text in [ESE_NORMAL, CSD_NORMAL] {
-        for line in text
-            .lines()
-            .filter(|l| !l.starts_with('#') && !l.starts_with("address"))
-        {
-            let (a, v) = line.split_once(',').unwrap();
+        for (a, v) in kit::snapshot(text) {
             if e.tag_index(&Signal::new(a)).is_some() {
-                values.insert(Signal::new(a), v == "1");
+                values.insert(Signal::new(a), v);
             }
         }
     }
@@ -336,52 +285,23 @@ condition = "X1.00"
 
 #[test]
 fn a_timer_waiting_for_what_a_stuck_step_waits_for_follows_from_it() {
-    use cellwatch_models::sfc::{self, SfcChecks};
-    use cellwatch_models::timer::checks::TimerChecks;
-    use cellwatch_models::timer::learn::{
-        Event, LearnedTransition, SignalEdge, TimerModel, MODEL_VERSION,
-    };
-    let model = TimerModel {
-        version: MODEL_VERSION,
-        method: "common".into(),
-        signals: vec!["Y1.00".into(), "X1.00".into()],
-        transitions: vec![LearnedTransition {
-            id: 2,
-            from: vec![],
-            event: Event {
-                tag: "X1.00".into(),
-                edge: SignalEdge::Rise,
-            },
-            to: vec![],
-            delta_ms: 1000,
-            min_ms: 950,
-            max_ms: 1050,
-            support: 4,
-            window_ms: [800, 4000],
-            from_numbered: None,
-            trigger: Some(Event {
-                tag: "Y1.00".into(),
-                edge: SignalEdge::Rise,
-            }),
-        }],
-    };
-    let timers =
-        TimerChecks::new("clamp", &model, Severity::High, |n| Some(Signal::new(n))).unwrap();
-    let chart = SfcChecks::new(
-        "sfc",
-        sfc::read("clamp.sfc.toml", CLAMP, &|_| true).unwrap(),
-        Severity::High,
-        CommentDb::default(),
+    let model = kit::timer_model(
+        "common",
+        &["Y1.00", "X1.00"],
+        vec![kit::triggered(
+            2,
+            "Y1.00",
+            "X1.00",
+            1000,
+            [950, 1050],
+            [800, 4000],
+        )],
     );
-    let tags = ["S0.X", "S1.X", "X0.00", "X1.00", "Y1.00"]
-        .into_iter()
-        .map(|a| Tag {
-            name: a.to_lowercase(),
-            address: Signal::new(a),
-        })
-        .collect();
+    let timers = kit::timer_checks("clamp", &model);
+    let chart = kit::supervision(kit::charts("clamp.sfc.toml", CLAMP), CommentDb::default());
+    let tags = kit::tags_at(&["S0.X", "S1.X", "X0.00", "X1.00", "Y1.00"]);
     let sets: Vec<Box<dyn CheckSet>> = vec![Box::new(chart), Box::new(timers)];
-    let e = CellEngine::new("c", tags, sets, StateRules::default()).unwrap();
+    let e = kit::cell("c", tags, sets);
     assert_eq!(
         e.relation().render(),
         "sfc-C1-S1 -> clamp-002   clamp-002 reads X1.00, which sfc-C1-S1's fault holds\n\
@@ -390,8 +310,7 @@ fn a_timer_waiting_for_what_a_stuck_step_waits_for_follows_from_it() {
     );
     // The clamp sticks: S1 is stuck first (1 s), then the timer is late
     // (4 s), waiting for the same switch: a consequence.
-    let relation = e.relation().clone();
-    let mut e = e.relating(relation, false);
+    let mut e = kit::related(e, false);
     e.on_connection(true, 0);
     for (a, v) in [
         ("S0.X", true),

@@ -83,7 +83,7 @@ impl Press {
     }
 
     fn program(&self) -> Program {
-        Program::compile(self.file, self.source, None).unwrap_or_else(|e| panic!("{e}"))
+        kit::compile(self.file, self.source)
     }
 
     /// Every signal of the press observable (the PLC's tags, as the
@@ -112,28 +112,12 @@ impl Press {
                 );
                 SwitchingCheck {
                     forces: forced_outputs(&p, &coil, &observable, |s| signals.contains(s)),
-                    text: None,
-                    id: id.into(),
-                    sf,
-                    polarity: Polarity::On,
-                    severity: Severity::High,
-                    fault_type: id.to_uppercase(),
-                    comments: CommentDb::default(),
-                    armed_when: None,
+                    ..kit::switching_check(id, sf, Severity::High)
                 }
             })
             .collect();
-        let tags = signals
-            .iter()
-            .map(|s| Tag {
-                name: s.name().to_lowercase(),
-                address: s.clone(),
-            })
-            .collect();
         let sets: Vec<Box<dyn CheckSet>> = vec![Box::new(SwitchingChecks::new(checks))];
-        let e = CellEngine::new("press", tags, sets, StateRules::default()).unwrap();
-        let relation = e.relation().clone();
-        e.relating(relation, false)
+        kit::related(kit::cell("press", kit::tags(signals), sets), false)
     }
 
     /// The engine with the press running normally: pump on with pressure,
