@@ -8,15 +8,17 @@
 
 #![allow(clippy::unwrap_used)] // test helpers fail loudly by design
 
-use cellwatch_models::alarm::{Severity, Transition};
-use cellwatch_models::engine::{CellEngine, EngineStep, Reading, StateRules, Tag};
+use cellwatch_models::alarm::Transition;
+use cellwatch_models::engine::{EngineStep, Reading};
 use cellwatch_models::signal::Signal;
-use cellwatch_models::timer::checks::{drift_alarm, TimerChecks};
+use cellwatch_models::timer::checks::drift_alarm;
 use cellwatch_models::timer::drift::DriftRules;
 use cellwatch_models::timer::learn::{self, LearnOptions, SignalEdge, Tau, TimerModel};
 use cellwatch_models::timer::line::{self, Fault, FaultKind, Slowdown};
 use cellwatch_models::timer::log::RunLog;
 use cellwatch_models::timer::monitor::{replay, Outcome};
+
+mod kit;
 
 const CYCLES: usize = 6;
 
@@ -187,19 +189,9 @@ struct Raised {
 /// drift warnings by the default rules: every alarm raised, in order, and
 /// the largest |window position| seen once a transition could warn.
 fn engine_raises(model: &TimerModel, run: &RunLog) -> (Vec<Raised>, f64) {
-    let tags: Vec<Tag> = run
-        .signals
-        .iter()
-        .map(|n| Tag {
-            name: n.clone(),
-            address: Signal::new(n),
-        })
-        .collect();
-    let checks = TimerChecks::new("line", model, Severity::High, |n| Some(Signal::new(n)))
-        .unwrap()
-        .drifting(Some(DriftRules::default()));
-    let mut e =
-        CellEngine::new("line", tags, vec![Box::new(checks)], StateRules::default()).unwrap();
+    let tags = kit::tags_as_named(run.signals.iter().map(|n| Signal::new(n)));
+    let checks = kit::timer_checks("line", model).drifting(Some(DriftRules::default()));
+    let mut e = kit::cell("line", tags, vec![Box::new(checks)]);
     let mut raised = Vec::new();
     let mut keep = |step: EngineStep| {
         for (a, tr, at) in step.alarms() {

@@ -9,13 +9,15 @@
 
 #![allow(clippy::unwrap_used)] // test helpers fail loudly by design
 
-use cellwatch_models::alarm::Severity;
 use cellwatch_models::comments::CommentDb;
-use cellwatch_models::engine::{CellEngine, CheckSet, Reading, StateRules, Tag};
-use cellwatch_models::sfc::{self, SfcChecks};
+use cellwatch_models::engine::{CellEngine, Reading};
+use cellwatch_models::sfc::SfcChecks;
 use cellwatch_models::signal::Signal;
 use cellwatch_models::value::Num;
 use proptest::prelude::*;
+
+mod kit;
+use kit::read;
 
 /// The machining cell: wait for start in automatic (S0), run the spindle
 /// up with the door shut (S1), clamp and let it settle (S2; or abort),
@@ -154,8 +156,8 @@ const TAGS: [&str; 12] = [
 
 /// The two forms of the chart, each as its engine.
 fn engines() -> Vec<(&'static str, CellEngine)> {
-    let toml = sfc::read("m1.sfc.toml", CHART, &|_| true).unwrap();
-    let mut xml = sfc::read("m1.sfc.xml", XML, &|_| true).unwrap();
+    let toml = kit::charts("m1.sfc.toml", CHART);
+    let mut xml = kit::charts("m1.sfc.xml", XML);
     // XML has no place for supervision times.
     for c in &mut xml.charts {
         for s in c.steps.iter_mut().filter(|s| s.name != "S3") {
@@ -164,42 +166,20 @@ fn engines() -> Vec<(&'static str, CellEngine)> {
     }
     assert_eq!(xml.charts, toml.charts, "the two forms are one chart");
     vec![
-        (
-            "toml",
-            engine(SfcChecks::new("sfc", toml, Severity::High, io_list())),
-        ),
-        (
-            "xml",
-            engine(SfcChecks::new(
-                "sfc",
-                xml,
-                Severity::High,
-                CommentDb::default(),
-            )),
-        ),
+        ("toml", engine(kit::supervision(toml, io_list()))),
+        ("xml", engine(kit::supervision(xml, CommentDb::default()))),
     ]
 }
 
 fn engine(checks: SfcChecks) -> CellEngine {
-    let tags = TAGS
-        .iter()
-        .map(|a| Tag {
-            name: a.to_string(),
-            address: Signal::new(a),
-        })
-        .collect();
-    let sets: Vec<Box<dyn CheckSet>> = vec![Box::new(checks)];
-    let mut e = CellEngine::new("m1", tags, sets, StateRules::default()).unwrap();
+    let tags = kit::tags_as_named(TAGS.map(Signal::new));
+    let mut e = kit::cell("m1", tags, vec![Box::new(checks)]);
     e.on_connection(true, 0);
     e
 }
 
-/// A value as the PLC gives it: `1`/`0` for contacts, a number otherwise.
-fn set(e: &mut CellEngine, address: &str, value: Reading, at: u64) {
-    let t = e.tag_index(&Signal::new(address)).unwrap();
-    e.on_reading(t, value, at, at);
-}
-
+/// A contact's value as the PLC gives it (`1`/`0`); a number is a
+/// `Reading::Number`.
 fn bit(v: bool) -> Reading {
     Reading::Good(v)
 }
@@ -207,10 +187,10 @@ fn bit(v: bool) -> Reading {
 /// Every value at once, the active step's flag on and the others off.
 fn load(e: &mut CellEngine, step: &str, values: &[(&str, Reading)], at: u64) {
     for flag in ["S0.X", "S1.X", "S2.X", "S3.X"] {
-        set(e, flag, bit(flag == step), at);
+        read(e, flag, bit(flag == step), at);
     }
     for (a, v) in values {
-        set(e, a, v.clone(), at);
+        read(e, a, v.clone(), at);
     }
 }
 
@@ -250,11 +230,11 @@ fn a_stuck_step_names_every_false_operand_with_its_value_and_comment() {
             "{form}"
         );
         // Automatic: t1 fires; S1 runs the spindle up with the door open.
-        set(&mut e, "iMode", Reading::Number(Num::Int(3)), 6_100);
-        set(&mut e, "S0.X", bit(false), 6_200);
-        set(&mut e, "S1.X", bit(true), 6_200);
+        read(&mut e, "iMode", Reading::Number(Num::Int(3)), 6_100);
+        read(&mut e, "S0.X", bit(false), 6_200);
+        read(&mut e, "S1.X", bit(true), 6_200);
         assert_eq!(message(&e, "sfc-M1-S0"), None, "{form}");
-        set(
+        read(
             &mut e,
             "rSpindleSpeed",
             Reading::Number(Num::Float(1650.0)),
@@ -272,7 +252,7 @@ fn a_stuck_step_names_every_false_operand_with_its_value_and_comment() {
             "{form}"
         );
         // The door shuts: the speed alone is named.
-        set(&mut e, "bDoorOpen", bit(false), 12_000);
+        read(&mut e, "bDoorOpen", bit(false), 12_000);
         let waits = message(&e, "sfc-M1-S1").unwrap();
         assert!(
             waits.ends_with("waits for rSpindleSpeed = 1650.0 (needs >= 1800): Spindle speed"),
@@ -280,7 +260,7 @@ fn a_stuck_step_names_every_false_operand_with_its_value_and_comment() {
         );
         // At speed: t2 can fire; the PLC moves to S2, where the clamp is
         // not done and the part not counted, the settle time is over.
-        set(
+        read(
             &mut e,
             "rSpindleSpeed",
             Reading::Number(Num::Float(1812.5)),
@@ -289,9 +269,9 @@ fn a_stuck_step_names_every_false_operand_with_its_value_and_comment() {
         assert!(message(&e, "sfc-M1-S1")
             .unwrap()
             .ends_with("t2 (Spindle at speed, door shut) can fire"));
-        set(&mut e, "S1.X", bit(false), 12_200);
-        set(&mut e, "S2.X", bit(true), 12_200);
-        set(&mut e, "T1.Q", bit(true), 12_300);
+        read(&mut e, "S1.X", bit(false), 12_200);
+        read(&mut e, "S2.X", bit(true), 12_200);
+        read(&mut e, "T1.Q", bit(true), 12_300);
         e.advance(17_200);
         assert_eq!(
             message(&e, "sfc-M1-S2").as_deref(),
@@ -305,8 +285,8 @@ fn a_stuck_step_names_every_false_operand_with_its_value_and_comment() {
             "{form}"
         );
         // The clamp is done, the timer restarts: the timer is named.
-        set(&mut e, "fbClamp.Done", bit(true), 18_000);
-        set(&mut e, "T1.Q", bit(false), 18_000);
+        read(&mut e, "fbClamp.Done", bit(true), 18_000);
+        read(&mut e, "T1.Q", bit(false), 18_000);
         let waits = message(&e, "sfc-M1-S2").unwrap();
         assert!(
             waits.contains(

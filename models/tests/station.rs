@@ -11,21 +11,17 @@
 
 use std::collections::BTreeSet;
 
-use cellwatch_models::alarm::{Alarm, Severity, Transition};
+use cellwatch_models::alarm::Severity;
 use cellwatch_models::comments::CommentDb;
 use cellwatch_models::consequence::forced_outputs;
-use cellwatch_models::engine::{
-    CellEngine, CheckSet, EngineStep, Reading, StateRules, SwitchingCheck, SwitchingChecks, Tag,
-};
-use cellwatch_models::explain::Polarity;
-use cellwatch_models::program::Program;
-use cellwatch_models::sfc::{self, SfcChecks};
+use cellwatch_models::engine::{CellEngine, CheckSet, EngineStep, SwitchingCheck, SwitchingChecks};
 use cellwatch_models::signal::{Observability, Signal};
 use cellwatch_models::switching::SwitchingFunction;
 use cellwatch_models::timer::checks::TimerChecks;
-use cellwatch_models::timer::learn::{
-    Event, LearnedTransition as Learned, SignalEdge, TimerModel, MODEL_VERSION,
-};
+use cellwatch_models::timer::learn::LearnedTransition;
+
+mod kit;
+use kit::{raised, set, set_all};
 
 const STATION: &str = include_str!("../../tests/data/station/station.il");
 const CHART: &str = include_str!("../../tests/data/station/station.sfc.toml");
@@ -37,24 +33,16 @@ const TAGS: [&str; 13] = [
 ];
 
 /// `+event after +trigger`, learned with `window`.
-fn learned(id: u32, trigger: &str, event: &str, window: [u64; 2]) -> Learned {
-    let rise = |tag: &str| Event {
-        tag: tag.into(),
-        edge: SignalEdge::Rise,
-    };
-    Learned {
+fn learned(id: u32, trigger: &str, event: &str, window: [u64; 2]) -> LearnedTransition {
+    let [from, to] = window;
+    kit::triggered(
         id,
-        from: vec![],
-        event: rise(event),
-        to: vec![],
-        delta_ms: (window[0] + window[1]) / 2,
-        min_ms: window[0] + 50,
-        max_ms: window[1] - 50,
-        support: 4,
-        window_ms: window,
-        from_numbered: None,
-        trigger: Some(rise(trigger)),
-    }
+        trigger,
+        event,
+        (from + to) / 2,
+        [from + 50, to - 50],
+        window,
+    )
 }
 
 /// The station's timers, as learned from its commissioning runs:
@@ -62,48 +50,37 @@ fn learned(id: u32, trigger: &str, event: &str, window: [u64; 2]) -> Learned {
 /// clamp's end switch after its valve, #003 the locating pin's end switch
 /// after its valve.
 fn timers() -> TimerChecks {
-    let model = TimerModel {
-        version: MODEL_VERSION,
-        method: "common".into(),
-        signals: ["X1.03", "Y3.00", "Y2.00", "X1.02", "Y2.02", "X1.05"]
-            .map(String::from)
-            .to_vec(),
-        transitions: vec![
+    let model = kit::timer_model(
+        "common",
+        &["X1.03", "Y3.00", "Y2.00", "X1.02", "Y2.02", "X1.05"],
+        vec![
             learned(1, "X1.03", "Y3.00", [900, 1500]),
             learned(2, "Y2.00", "X1.02", [800, 1200]),
             learned(3, "Y2.02", "X1.05", [300, 600]),
         ],
-    };
-    TimerChecks::new("station", &model, Severity::High, |n| Some(Signal::new(n))).unwrap()
+    );
+    kit::timer_checks("station", &model)
 }
 
 /// The hydraulic fault, a switching check over G10.00 with the outputs
 /// the program derives from it.
 fn hydraulic() -> SwitchingChecks {
-    let p = Program::compile("station.il", STATION, None).unwrap();
+    let p = kit::compile("station.il", STATION);
     let observable = Observability::default_for(p.dialect());
     let coil = Signal::new("G10.00");
     let sf = SwitchingFunction::expand(&p, &coil, &observable).unwrap();
     let forces = forced_outputs(&p, &coil, &observable, |s| TAGS.contains(&s.name()));
     SwitchingChecks::new(vec![SwitchingCheck {
         forces,
-        text: None,
-        id: "hydraulic".into(),
-        sf,
-        polarity: Polarity::On,
-        severity: Severity::High,
-        fault_type: "HYDRAULIC".into(),
-        comments: CommentDb::default(),
-        armed_when: None,
+        ..kit::switching_check("hydraulic", sf, Severity::High)
     }])
 }
 
 /// The chart's step supervision, each step reading the outputs the
 /// program drives from its flag.
 fn chart() -> Box<dyn CheckSet> {
-    let p = Program::compile("station.il", STATION, None).unwrap();
-    let charts = sfc::read("station.sfc.toml", CHART, &|_| true).unwrap();
-    let checks = SfcChecks::new("sfc", charts, Severity::High, CommentDb::default());
+    let p = kit::compile("station.il", STATION);
+    let checks = kit::supervision(kit::charts("station.sfc.toml", CHART), CommentDb::default());
     Box::new(
         checks.driving(&p, &Observability::default_for(p.dialect()), |s| {
             TAGS.contains(&s.name())
@@ -112,27 +89,9 @@ fn chart() -> Box<dyn CheckSet> {
 }
 
 fn station(extra: Vec<Box<dyn CheckSet>>) -> CellEngine {
-    let tags = TAGS
-        .iter()
-        .map(|a| Tag {
-            name: a.to_lowercase(),
-            address: Signal::new(a),
-        })
-        .collect();
     let mut sets: Vec<Box<dyn CheckSet>> = vec![Box::new(hydraulic()), Box::new(timers())];
     sets.extend(extra);
-    let e = CellEngine::new("station", tags, sets, StateRules::default()).unwrap();
-    let relation = e.relation().clone();
-    e.relating(relation, false)
-}
-
-fn set(e: &mut CellEngine, address: &str, v: bool, at: u64) -> EngineStep {
-    let t = e.tag_index(&Signal::new(address)).unwrap();
-    e.on_reading(t, Reading::Good(v), at, at)
-}
-
-fn set_all(e: &mut CellEngine, values: &[(&str, bool)], at: u64) -> Vec<EngineStep> {
-    values.iter().map(|&(a, v)| set(e, a, v, at)).collect()
+    kit::related(kit::cell("station", kit::tags_at(&TAGS), sets), false)
 }
 
 /// Idle: the pump runs with its pressure, no part, step S0.
@@ -170,13 +129,6 @@ fn pressure_falls(e: &mut CellEngine, at: u64) -> Vec<Mark> {
         at,
     );
     steps.iter().flat_map(marks).collect()
-}
-
-fn raised(step: &EngineStep) -> Vec<Alarm> {
-    step.alarms()
-        .filter(|(_, t, _)| *t == Transition::Raised)
-        .map(|(a, _, _)| a.clone())
-        .collect()
 }
 
 /// An alarm raised, and its cause and first-out if it is a consequence.

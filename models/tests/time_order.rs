@@ -13,20 +13,19 @@
 
 use cellwatch_models::alarm::Severity;
 use cellwatch_models::comments::CommentDb;
-use cellwatch_models::engine::{CellEngine, CheckSet, Reading, StateRules, Tag, TagReading};
+use cellwatch_models::engine::{CheckSet, Reading, Tag, TagReading};
 use cellwatch_models::limit::{
     Level, LimitCheck, LimitChecks, LimitLevel, RateDirection, RateLevel,
 };
-use cellwatch_models::sfc::supervise::SfcChecks;
 use cellwatch_models::signal::Signal;
-use cellwatch_models::timer::checks::TimerChecks;
 use cellwatch_models::timer::drift::DriftRules;
-use cellwatch_models::timer::learn::{
-    Event, LearnedTransition, SignalEdge, TimerModel, MODEL_VERSION,
-};
+use cellwatch_models::timer::learn::{LearnedTransition, SignalEdge, TimerModel};
 use cellwatch_models::timer::monitor::{Outcome, TimerMonitor};
 use cellwatch_models::value::Num;
 use proptest::prelude::*;
+
+mod kit;
+use kit::event;
 
 /// Times as they may come: small and close together (so that deadlines
 /// fall due), repeated, and at both ends of the range.
@@ -45,13 +44,6 @@ fn bound() -> impl Strategy<Value = u64> {
     prop_oneof![4 => 0..5_000u64, 1 => Just(u64::MAX), 1 => any::<u64>()]
 }
 
-fn event(tag: &str, edge: SignalEdge) -> Event {
-    Event {
-        tag: tag.into(),
-        edge,
-    }
-}
-
 /// Two transitions over A, B, C: full-state (+B in A:-B) and common (+C
 /// after +A), with windows `w1` and `w2`.
 fn model(w1: [u64; 2], w2: [u64; 2]) -> TimerModel {
@@ -68,11 +60,10 @@ fn model(w1: [u64; 2], w2: [u64; 2]) -> TimerModel {
         from_numbered: None,
         trigger,
     };
-    TimerModel {
-        version: MODEL_VERSION,
-        method: "full-state".into(),
-        signals: vec!["A".into(), "B".into(), "C".into()],
-        transitions: vec![
+    kit::timer_model(
+        "full-state",
+        &["A", "B", "C"],
+        vec![
             transition(1, &["A", "-B"], event("B", SignalEdge::Rise), None, w1),
             transition(
                 2,
@@ -82,7 +73,7 @@ fn model(w1: [u64; 2], w2: [u64; 2]) -> TimerModel {
                 w2,
             ),
         ],
-    }
+    )
 }
 
 fn window() -> impl Strategy<Value = [u64; 2]> {
@@ -195,19 +186,13 @@ fn engine_op(tags: usize) -> impl Strategy<Value = EngineOp> {
 /// The robot's charts (step supervision), the timers over A, B, C and
 /// limits on TEMP; the tags every check reads.
 fn checks(w1: [u64; 2], w2: [u64; 2], delays: (u64, u64)) -> (Vec<Tag>, Vec<Box<dyn CheckSet>>) {
-    let sfc = cellwatch_models::sfc::read(
+    let sfc = kit::charts(
         "robot.sfc.toml",
         include_str!("../../config/robot/robot.sfc.toml"),
-        &|_| true,
-    )
-    .unwrap();
-    let sfc = SfcChecks::new("sfc", sfc, Severity::High, CommentDb::default());
+    );
+    let sfc = kit::supervision(sfc, CommentDb::default());
     // Drift tracked from the first duration, so that it is judged too.
-    let timers = TimerChecks::new("tmr", &model(w1, w2), Severity::High, |n| {
-        Some(Signal::new(n))
-    })
-    .unwrap()
-    .drifting(Some(DriftRules {
+    let timers = kit::timer_checks("tmr", &model(w1, w2)).drifting(Some(DriftRules {
         min_samples: 1,
         ..DriftRules::default()
     }));
@@ -239,15 +224,8 @@ fn checks(w1: [u64; 2], w2: [u64; 2], delays: (u64, u64)) -> (Vec<Tag>, Vec<Box<
     names.extend(["A", "B", "C", "TEMP"].map(Signal::new));
     names.sort();
     names.dedup();
-    let tags = names
-        .into_iter()
-        .map(|s| Tag {
-            name: s.name().to_string(),
-            address: s,
-        })
-        .collect();
     (
-        tags,
+        kit::tags_as_named(names),
         vec![Box::new(sfc), Box::new(timers), Box::new(limits)],
     )
 }
@@ -302,9 +280,7 @@ proptest! {
     ) {
         let (tags, sets) = checks(w1, w2, delays);
         let n = tags.len();
-        let mut e = CellEngine::new("c", tags, sets, StateRules::default())
-            .unwrap()
-            .delaying("tmr-001", alarm_delays.0, alarm_delays.1);
+        let mut e = kit::cell("c", tags, sets).delaying("tmr-001", alarm_delays.0, alarm_delays.1);
         let mut naive = Naive {
             values: vec![None; n],
             stamps: vec![None; n],
