@@ -11,14 +11,17 @@
 
 use cellwatch_models::comments::CommentDb;
 use cellwatch_models::explain::{explain, Polarity};
-use cellwatch_models::expr::Expr;
-use cellwatch_models::logic::Term;
 use cellwatch_models::program::Program;
-use cellwatch_models::signal::{Observability, Signal};
+use cellwatch_models::signal::Signal;
 use cellwatch_models::switching::SwitchingFunction;
 use cellwatch_models::values::Values;
 
-const CSD_IL: &str = include_str!("../../tests/data/paper000/csd-ese.il");
+mod kit;
+use kit::{
+    step_expr, switching_function as sf, tags_to_paper, CSD_ESE, FIG6_FBD_L5X, FIG6_PLCOPEN,
+    FIG6_TIA_FBD, FIG6_TIA_LAD,
+};
+
 const CSD_TIA: &str = include_str!("../../tests/data/paper000/csd.fbd.SimaticML.xml");
 const CSD_PLCOPEN: &str = include_str!("../../tests/data/paper000/csd.fbd.xml");
 const CSD_L5X: &str = include_str!("../../tests/data/paper000/csd.fbd.L5X");
@@ -30,50 +33,9 @@ const EXPORTS: [(&str, &str, &str); 3] = [
     ("csd.fbd.L5X", CSD_L5X, "G9_00"),
 ];
 
-fn sf(origin: &str, src: &str, coil: &str) -> SwitchingFunction {
-    let p = Program::compile(origin, src, None).unwrap_or_else(|e| panic!("{e}"));
-    SwitchingFunction::expand(
-        &p,
-        &Signal::new(coil),
-        &Observability::default_for(p.dialect()),
-    )
-    .unwrap_or_else(|e| panic!("{e}"))
-}
-
-/// `e` with the exports' tags (`F17_00`) named as the paper (`F17.00`).
-fn to_paper(e: &Expr) -> Expr {
-    match e {
-        Expr::Const(v) => Expr::Const(*v),
-        Expr::Lit(s, n) => Expr::Lit(Signal::new(&s.name().replace('_', ".")), *n),
-        Expr::Not(inner) => Expr::Not(Box::new(to_paper(inner))),
-        Expr::And(t) => Expr::And(t.iter().map(to_paper).collect()),
-        Expr::Or(t) => Expr::Or(t.iter().map(to_paper).collect()),
-    }
-}
-
-/// Step `i` of `sf`, its earlier steps the leaves `SSF1`, `SSF2`, ...
-fn step_expr(sf: &SwitchingFunction, i: usize) -> Expr {
-    let block = &sf.steps[i - 1];
-    let terms = block
-        .terms
-        .iter()
-        .map(|t| match t {
-            Term::Block { id, negated } => {
-                Expr::Lit(Signal::new(&format!("SSF{}", id + 1)), *negated)
-            }
-            Term::Signal { signal, negated } => Expr::Lit(signal.clone(), *negated),
-            Term::Const(v) => Expr::Const(*v),
-        })
-        .collect();
-    match block.op {
-        cellwatch_models::programs::Op::And => Expr::And(terms),
-        cellwatch_models::programs::Op::Or => Expr::Or(terms),
-    }
-}
-
 #[test]
 fn csd_drawn_as_fbd_has_the_il_s_nine_step_blocks_step_5_read_twice() {
-    let il = sf("csd-ese.il", CSD_IL, "G9.00");
+    let il = sf("csd-ese.il", CSD_ESE, "G9.00");
     assert_eq!(il.steps.len(), 9);
     // Read inline at each input it feeds, step 5 and the four below it
     // were counted twice: fourteen blocks.
@@ -90,12 +52,12 @@ fn csd_drawn_as_fbd_has_the_il_s_nine_step_blocks_step_5_read_twice() {
         let g = sf(origin, text, coil);
         for i in 1..=9 {
             assert_eq!(
-                to_paper(&step_expr(&g, i)),
+                tags_to_paper(&step_expr(&g, i)),
                 step_expr(&il, i),
                 "{origin}: step {i}"
             );
         }
-        assert_eq!(to_paper(&g.to_expr()), il.to_expr(), "{origin}");
+        assert_eq!(tags_to_paper(&g.to_expr()), il.to_expr(), "{origin}");
         // Steps 6 and 7 both read step 5, as they read R900.01.
         assert_eq!(g.step_notation(7), "SSF5 + -X201_03", "{origin}");
         // The box's relay is expanded like R900.01: never a leaf.
@@ -142,7 +104,7 @@ fn a_plcopen_box_read_by_name_and_by_default_is_written_once() {
 fn csd_drawn_as_fbd_blames_what_the_il_blames() {
     // Cycle start pressed in JOG mode (paper 000, eq. 23): step 3, the
     // cycle start button and the JOG mode switch.
-    let il = sf("csd-ese.il", CSD_IL, "G9.00");
+    let il = sf("csd-ese.il", CSD_ESE, "G9.00");
     let culprits = |g: &SwitchingFunction, name: &dyn Fn(&str) -> String| {
         let mut now = Values::new();
         for s in [
@@ -179,11 +141,6 @@ fn csd_drawn_as_fbd_blames_what_the_il_blames() {
         assert_eq!(culprits(&g, &|s| s.replace('.', "_")), want, "{origin}");
     }
 }
-
-const FIG6_TIA_LAD: &str = include_str!("../../tests/data/paper000/fig6.lad.SimaticML.xml");
-const FIG6_TIA_FBD: &str = include_str!("../../tests/data/paper000/fig6.fbd.SimaticML.xml");
-const FIG6_PLCOPEN: &str = include_str!("../../tests/data/paper000/fig6.xml");
-const FIG6_FBD_L5X: &str = include_str!("../../tests/data/paper000/fig6.fbd.L5X");
 
 /// `text` with the first `from` replaced by `to`; `from` must be there.
 fn broken(text: &str, from: &str, to: &str) -> String {

@@ -8,8 +8,10 @@ use cellwatch_models::program::Program;
 use cellwatch_models::signal::{Observability, Signal};
 use cellwatch_models::switching::SwitchingFunction;
 
+mod kit;
+
 fn compile(src: &str) -> Program {
-    Program::compile("p.il", src, None).unwrap_or_else(|e| panic!("{e}"))
+    kit::compile("p.il", src)
 }
 
 fn coils(p: &Program) -> Vec<&str> {

@@ -6,25 +6,24 @@
 use cellwatch_models::comments::CommentDb;
 use cellwatch_models::explain::{explain, Polarity};
 use cellwatch_models::expr::Expr;
-use cellwatch_models::logic::Term;
 use cellwatch_models::program::Program;
 use cellwatch_models::signal::{pmc_address, Observability, Signal};
 use cellwatch_models::switching::SwitchingFunction;
 use cellwatch_models::values::Values;
 
+mod kit;
+use kit::{
+    rename, step_expr, switching_function as sf, tags_to_paper, CSD, ESE, ESE_NORMAL, FIG6_FBD_L5X,
+    FIG6_PLCOPEN, FIG6_TIA_FBD, FIG6_TIA_LAD,
+};
+
 const FIG6: &str =
     "RD X1\nANDN X2\nRDNS X3\nORS\nANDN Y1\nWR R1\nRD X4\nANDN Y2\nAND R1\nWR G0.00\n";
-const ESE: &str = include_str!("../../config/cnc/ese.il");
-const CSD: &str = include_str!("../../config/cnc/csd.il");
 const ESE_COMMENTS: &str = include_str!("../../config/cnc/ese-comments.csv");
 const CSD_COMMENTS: &str = include_str!("../../config/cnc/csd-comments.csv");
-const ESE_NORMAL: &str = include_str!("../../config/cnc/ese-normal.values");
 const ESE_STL: &str = include_str!("../../tests/data/paper000/ese.awl");
 const FIG6_STL: &str = include_str!("../../tests/data/paper000/fig6.awl");
 const ESE_LD: &str = include_str!("../../tests/data/paper000/ese.xml");
-const FIG6_LD: &str = include_str!("../../tests/data/paper000/fig6.xml");
-const FIG6_TIA_LAD: &str = include_str!("../../tests/data/paper000/fig6.lad.SimaticML.xml");
-const FIG6_TIA_FBD: &str = include_str!("../../tests/data/paper000/fig6.fbd.SimaticML.xml");
 const FIG6_TIA_TAGS: &str = include_str!("../../tests/data/paper000/fig6.tags.SimaticML.xml");
 
 /// `e` with the IEC direct addresses of the ladders renamed to the STL
@@ -98,27 +97,6 @@ fn to_paper(e: &Expr) -> Expr {
     rename(e, &name)
 }
 
-/// `e` with every signal renamed by `f`.
-fn rename(e: &Expr, f: &dyn Fn(&Signal) -> Signal) -> Expr {
-    match e {
-        Expr::Const(v) => Expr::Const(*v),
-        Expr::Lit(s, n) => Expr::Lit(f(s), *n),
-        Expr::Not(inner) => Expr::Not(Box::new(rename(inner, f))),
-        Expr::And(t) => Expr::And(t.iter().map(|x| rename(x, f)).collect()),
-        Expr::Or(t) => Expr::Or(t.iter().map(|x| rename(x, f)).collect()),
-    }
-}
-
-fn sf(origin: &str, src: &str, coil: &str) -> SwitchingFunction {
-    let p = Program::compile(origin, src, None).unwrap();
-    SwitchingFunction::expand(
-        &p,
-        &Signal::new(coil),
-        &Observability::default_for(p.dialect()),
-    )
-    .unwrap()
-}
-
 /// Whether two expressions agree on every assignment of their signals.
 fn equal_by_truth_table(a: &Expr, b: &Expr) -> bool {
     let mut signals = a.signals();
@@ -132,27 +110,6 @@ fn equal_by_truth_table(a: &Expr, b: &Expr) -> bool {
         };
         a.eval(&v) == b.eval(&v)
     })
-}
-
-/// Step `i` of `sf` as an expression whose earlier steps are the leaves
-/// `SSF1`, `SSF2`, ... as the paper writes them.
-fn step_expr(sf: &SwitchingFunction, i: usize) -> Expr {
-    let block = &sf.steps[i - 1];
-    let terms = block
-        .terms
-        .iter()
-        .map(|t| match t {
-            Term::Block { id, negated } => {
-                Expr::Lit(Signal::new(&format!("SSF{}", id + 1)), *negated)
-            }
-            Term::Signal { signal, negated } => Expr::Lit(signal.clone(), *negated),
-            Term::Const(v) => Expr::Const(*v),
-        })
-        .collect();
-    match block.op {
-        cellwatch_models::programs::Op::And => Expr::And(terms),
-        cellwatch_models::programs::Op::Or => Expr::Or(terms),
-    }
 }
 
 fn assert_steps(sf: &SwitchingFunction, paper: &[&str]) {
@@ -228,7 +185,7 @@ fn fig6_and_ese_in_stl_give_the_paper_s_functions_and_step_blocks() {
 
 #[test]
 fn fig6_and_ese_drawn_as_plcopen_ladders_give_the_paper_s_functions_and_step_blocks() {
-    let g = sf("fig6.xml", FIG6_LD, "%QX10.0");
+    let g = sf("fig6.xml", FIG6_PLCOPEN, "%QX10.0");
     let il = sf("fig6.il", FIG6, "G0.00");
     assert!(equal_by_truth_table(
         &ladder_to_paper(&g.to_expr(), true),
@@ -256,11 +213,6 @@ fn fig6_and_ese_drawn_as_plcopen_ladders_give_the_paper_s_functions_and_step_blo
             "ESE step {i}"
         );
     }
-}
-
-/// `e` with the TIA tags of Fig. 6 (`X1`, ..., `G0_00`) named as the paper.
-fn tags_to_paper(e: &Expr) -> Expr {
-    rename(e, &|s: &Signal| Signal::new(&s.name().replace('_', ".")))
 }
 
 #[test]
@@ -573,8 +525,6 @@ fn l5x_to_paper(e: &Expr) -> Expr {
 fn fig6_as_a_studio_5000_export_gives_the_paper_s_functions_step_blocks_and_culprits() {
     fig6_from_studio_5000("fig6.L5X", FIG6_L5X);
 }
-
-const FIG6_FBD_L5X: &str = include_str!("../../tests/data/paper000/fig6.fbd.L5X");
 
 #[test]
 fn fig6_as_a_studio_5000_function_block_diagram_gives_the_same() {

@@ -25,6 +25,9 @@ use cellwatch_models::signal::{Observability, Signal};
 use cellwatch_models::switching::SwitchingFunction;
 use proptest::prelude::*;
 
+mod kit;
+use kit::{FIG6_FBD_L5X, FIG6_TIA_FBD, FIG6_TIA_LAD};
+
 const INPUTS: usize = 8;
 
 fn input(i: usize) -> Signal {
@@ -328,9 +331,6 @@ proptest! {
     }
 }
 
-const TIA_LAD: &str = include_str!("../../tests/data/paper000/fig6.lad.SimaticML.xml");
-const TIA_FBD: &str = include_str!("../../tests/data/paper000/fig6.fbd.SimaticML.xml");
-
 /// Part names a mutation may give a part.
 const PART_NAMES: &[&str] = &[
     "Contact", "Coil", "SCoil", "RCoil", "Sr", "Rs", "O", "A", "X", "Not", "Gt", "Eq", "TON",
@@ -402,15 +402,13 @@ proptest! {
         fbd in any::<bool>(),
         mutations in prop::collection::vec(mutation(), 1..6),
     ) {
-        let mut text = if fbd { TIA_FBD } else { TIA_LAD }.to_string();
+        let mut text = if fbd { FIG6_TIA_FBD } else { FIG6_TIA_LAD }.to_string();
         for m in &mutations {
             text = mutate(&text, m);
         }
         compiles_or_fails_located("m.xml", &text)?;
     }
 }
-
-const L5X_FBD: &str = include_str!("../../tests/data/paper000/fig6.fbd.L5X");
 
 /// Block types a mutation may give an L5X FBD block.
 const BLOCK_TYPES: &[&str] = &[
@@ -484,7 +482,7 @@ proptest! {
     fn mutated_l5x_fbd_exports_compile_or_fail_with_located_errors(
         mutations in prop::collection::vec(fbd_mutation(), 1..6),
     ) {
-        let mut text = L5X_FBD.to_string();
+        let mut text = FIG6_FBD_L5X.to_string();
         for m in &mutations {
             text = mutate_fbd(&text, m);
         }

@@ -12,6 +12,9 @@ mod iec61131;
 mod rockwell;
 mod siemens;
 
+#[path = "../kit/mod.rs"]
+mod kit;
+
 use std::path::PathBuf;
 
 use cellwatch_models::explain::{explain, Explanation, Polarity};
@@ -20,6 +23,7 @@ use cellwatch_models::signal::{Observability, Signal};
 use cellwatch_models::source;
 use cellwatch_models::switching::SwitchingFunction;
 use cellwatch_models::values::Values;
+use kit::expand as sf;
 
 fn path(file: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -65,15 +69,6 @@ fn pinned(p: &Program, expected: &[(&str, &str)]) {
         .map(|(c, s)| ((*c).to_string(), (*s).to_string()))
         .collect();
     assert_eq!(got, want, "{}", p.origin());
-}
-
-fn sf(p: &Program, coil: &str) -> SwitchingFunction {
-    SwitchingFunction::expand(
-        p,
-        &Signal::new(coil),
-        &Observability::default_for(p.dialect()),
-    )
-    .unwrap()
 }
 
 fn values(pairs: &[(&str, bool)]) -> Values {
