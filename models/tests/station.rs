@@ -120,6 +120,23 @@ fn place(e: &mut CellEngine, at: u64) {
     }
 }
 
+/// The part placed, the locating pin goes in (0.5 s) and the clamp closes
+/// (1.1 s): "part clamped" to the robot, the chart on to S2 (weld), the
+/// pin's valve off.
+fn clamp(e: &mut CellEngine) {
+    let values = [
+        (500, "X1.05", true),
+        (1_100, "X1.02", true),
+        (1_100, "Y3.00", true),
+        (1_100, "R100.01", false),
+        (1_100, "R100.02", true),
+        (1_100, "Y2.02", false),
+    ];
+    for (at, a, v) in values {
+        assert!(raised(&set(e, a, v, at)).is_empty(), "{a} at {at}");
+    }
+}
+
 /// The pressure falls at `at`: the PLC's fault coil and the valve it
 /// drops are read back with it.
 fn pressure_falls(e: &mut CellEngine, at: u64) -> Vec<Mark> {
@@ -163,17 +180,7 @@ fn a_normal_cycle_raises_nothing() {
     let mut e = station(Vec::new());
     idle(&mut e);
     place(&mut e, 100);
-    let cycle = [
-        (500, "X1.05", true),
-        (1_100, "X1.02", true),
-        (1_100, "Y3.00", true),
-        (1_100, "R100.01", false),
-        (1_100, "R100.02", true),
-        (1_100, "Y2.02", false),
-    ];
-    for (at, a, v) in cycle {
-        assert!(raised(&set(&mut e, a, v, at)).is_empty(), "{a} at {at}");
-    }
+    clamp(&mut e);
     assert!(raised(&e.advance(10_000)).is_empty());
 }
 
@@ -334,17 +341,7 @@ fn the_weld_step_stuck_with_the_valve_holding_its_part_dropped_follows_from_the_
     let mut e = station(vec![chart()]);
     idle(&mut e);
     place(&mut e, 100);
-    let closed = [
-        (500, "X1.05", true),
-        (1_100, "X1.02", true),
-        (1_100, "Y3.00", true),
-        (1_100, "R100.01", false),
-        (1_100, "R100.02", true),
-        (1_100, "Y2.02", false),
-    ];
-    for (at, a, v) in closed {
-        assert!(raised(&set(&mut e, a, v, at)).is_empty(), "{a} at {at}");
-    }
+    clamp(&mut e);
     // The weld never finishes; the pressure falls meanwhile and drops the
     // valve S2 holds the part with (and "part clamped" to the robot): S2
     // stuck at 6.1 s follows from it.

@@ -167,20 +167,8 @@ fn the_work_order_follows_the_item_and_target_tags_and_survives_an_outage() {
 #[test]
 fn limit_levels_through_the_engine_with_an_on_delay_in_virtual_time() {
     let limit = LimitCheck {
-        comment: None,
-        id: "temp".into(),
-        tag: Signal::new("TEMP"),
-        label: "temp".into(),
-        unit: "°C".into(),
-        deadband: 2.0,
         on_delay: 2000,
-        off_delay: 0,
-        rates: Vec::new(),
-        levels: vec![LimitLevel {
-            level: Level::H,
-            limit: 85.0,
-            severity: Severity::High,
-        }],
+        ..temp_limit(85.0)
     };
     let mut e = engine(vec![limit]);
     load_normal(&mut e, 0);
@@ -275,6 +263,7 @@ fn on_and_off_delays_announce_only_conditions_that_last() {
     );
 }
 
+/// A high limit `h` on `TEMP` (°C, deadband 2), without delays or rates.
 fn temp_limit(h: f64) -> LimitCheck {
     LimitCheck {
         comment: None,
