@@ -8,7 +8,7 @@ use std::time::Duration;
 
 /// The waits of one thing tried again and again.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Backoff {
+pub(crate) struct Backoff {
     first: Duration,
     cap: Duration,
     next: Duration,
@@ -16,7 +16,7 @@ pub struct Backoff {
 
 impl Backoff {
     /// Waits from `first`, doubling up to `cap`.
-    pub const fn new(first: Duration, cap: Duration) -> Backoff {
+    pub(crate) const fn new(first: Duration, cap: Duration) -> Backoff {
         Backoff {
             first,
             cap,
@@ -26,19 +26,19 @@ impl Backoff {
 
     /// The wait before the next try: the one after it is doubled, up to
     /// the cap.
-    pub fn next_wait(&mut self) -> Duration {
+    pub(crate) fn next_wait(&mut self) -> Duration {
         let wait = self.next;
         self.next = self.next.saturating_mul(2).min(self.cap);
         wait
     }
 
     /// The wait before the next try, without counting a try.
-    pub fn peek(&self) -> Duration {
+    pub(crate) fn peek(&self) -> Duration {
         self.next
     }
 
     /// A try succeeded: the next failure waits the first wait again.
-    pub fn reset(&mut self) {
+    pub(crate) fn reset(&mut self) {
         self.next = self.first;
     }
 }

@@ -12,6 +12,7 @@ use crate::commands::bus::{
     StopArgs, WriteArgs,
 };
 use crate::commands::console::ConsoleArgs;
+#[cfg(feature = "simulators")]
 use crate::commands::demo::DemoArgs;
 use crate::commands::discover::DiscoverArgs;
 use crate::commands::explain::ExplainArgs;
@@ -23,6 +24,7 @@ use crate::commands::plant::PlantCommand;
 use crate::commands::report::ReportArgs;
 use crate::commands::sf::SfArgs;
 use crate::commands::sfc::SfcCommand;
+#[cfg(feature = "simulators")]
 use crate::commands::simulate::SimulateCommand;
 use crate::commands::timers::{ExportStArgs, LearnArgs, ReplayArgs};
 use crate::commands::{self, Failure};
@@ -91,8 +93,10 @@ enum Command {
     /// Run a simulated CNC (paper 000's ESE and CSD machine) served over OPC
     /// UA and an agent watching it, in one process, printing alarms with
     /// their explanation as they happen.
+    #[cfg(feature = "simulators")]
     Demo(DemoArgs),
     /// Serve a simulated cell over OPC UA.
+    #[cfg(feature = "simulators")]
     #[command(subcommand)]
     Simulate(SimulateCommand),
     /// Serve the operators' web console for the plant: every cell's state
@@ -240,8 +244,7 @@ pub(crate) fn realtime(priority: u8) -> Result<(), Failure> {
 fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
     let quiet = matches!(
         command,
-        Command::Demo(_)
-            | Command::Alarms(_)
+        Command::Alarms(_)
             | Command::History(_)
             | Command::Ack(_)
             | Command::Reset(_)
@@ -256,6 +259,8 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
             | Command::Discover(_)
             | Command::TrustServer(_)
     );
+    #[cfg(feature = "simulators")]
+    let quiet = quiet || matches!(command, Command::Demo(_));
     let filter = std::env::var("RUST_LOG").unwrap_or_else(|_| {
         if quiet {
             // The OPC UA stack's own errors of a refused connection are
@@ -288,14 +293,19 @@ fn asynchronous(command: Command, out: &mut dyn Write) -> Result<(), Failure> {
     runtime.block_on(async {
         match command {
             Command::Run(args) => commands::agent::run(&args).await,
+            #[cfg(feature = "simulators")]
             Command::Demo(args) => commands::demo::demo(&args, out).await,
+            #[cfg(feature = "simulators")]
             Command::Simulate(SimulateCommand::Line(args)) => commands::simulate::line(&args, out),
+            #[cfg(feature = "simulators")]
             Command::Simulate(SimulateCommand::RobotRuns(args)) => {
                 commands::simulate::robot_runs(&args, out)
             }
+            #[cfg(feature = "simulators")]
             Command::Simulate(SimulateCommand::Cnc(args)) => {
                 commands::simulate::cnc(&args, out).await
             }
+            #[cfg(feature = "simulators")]
             Command::Simulate(SimulateCommand::Moulding(args)) => {
                 commands::simulate::moulding(&args, out).await
             }

@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 use tokio::sync::watch;
 
 /// A cell loop that has not gone round for this long is stuck.
-pub const STALLED_AFTER: Duration = Duration::from_secs(5);
+pub(crate) const STALLED_AFTER: Duration = Duration::from_secs(5);
 
 /// The health of every cell of this process.
 #[derive(Clone)]
@@ -265,7 +265,7 @@ impl CellHealth {
 /// Feeds systemd's watchdog only while every cell loop makes progress:
 /// a stuck loop stops the feeding, and systemd restarts the process
 /// (`WatchdogSec`).
-pub struct Feeder {
+pub(crate) struct Feeder {
     stalled_after: Duration,
     /// The last round withheld (the reasons are said once, when it
     /// starts).
@@ -274,7 +274,7 @@ pub struct Feeder {
 
 /// What one round of the feeder decided.
 #[derive(Debug, PartialEq, Eq)]
-pub enum Feed {
+pub(crate) enum Feed {
     /// Every loop is alive: `WATCHDOG=1`.
     Feed,
     /// Not fed; the reasons, the first round not fed (`None` after, until
@@ -286,7 +286,7 @@ impl Feeder {
     /// A feeder for a watchdog of `interval` (systemd's `WATCHDOG_USEC`):
     /// a loop is stuck after [`STALLED_AFTER`], or half the interval if
     /// that is shorter, so that systemd hears of it in time.
-    pub fn new(interval: Duration) -> Feeder {
+    pub(crate) fn new(interval: Duration) -> Feeder {
         Feeder {
             stalled_after: STALLED_AFTER.min(interval / 2),
             withheld: false,
@@ -295,12 +295,12 @@ impl Feeder {
 
     /// How often to decide: four times per interval (systemd advises at
     /// least twice).
-    pub fn period(interval: Duration) -> Duration {
+    pub(crate) fn period(interval: Duration) -> Duration {
         (interval / 4).max(Duration::from_millis(10))
     }
 
     /// Decides at `now`.
-    pub fn round(&mut self, health: &Health, now: Instant) -> Feed {
+    pub(crate) fn round(&mut self, health: &Health, now: Instant) -> Feed {
         match health.alive(now, self.stalled_after) {
             Ok(_) => {
                 self.withheld = false;

@@ -56,7 +56,7 @@
 
 pub mod agent;
 pub mod archive;
-pub mod backoff;
+mod backoff;
 pub mod bus;
 pub mod cell;
 pub mod cli;
@@ -65,16 +65,17 @@ pub mod clock;
 mod commands;
 pub mod config;
 pub mod console;
-pub mod health;
+mod health;
 pub mod journal;
 pub mod metrics;
 pub mod operator;
 pub mod payload;
 pub mod plant;
 pub mod services;
+#[cfg(feature = "simulators")]
 pub mod sim;
 pub mod sinks;
 pub mod sources;
 pub mod step;
-pub mod table;
-pub mod tags;
+mod table;
+mod tags;

@@ -59,7 +59,7 @@ impl<T, E> Checked<T, E> {
 }
 
 /// The 1-based line and column of byte `offset` in `text`.
-pub fn line_col(text: &str, offset: usize) -> (usize, usize) {
+pub(crate) fn line_col(text: &str, offset: usize) -> (usize, usize) {
     let before = &text[..offset.min(text.len())];
     let line = before.matches('\n').count() + 1;
     let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
@@ -68,7 +68,7 @@ pub fn line_col(text: &str, offset: usize) -> (usize, usize) {
 
 /// Why a duration does not read.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum DurationError {
+pub(crate) enum DurationError {
     /// Zero.
     #[error("must be longer than zero")]
     Zero,
@@ -86,7 +86,7 @@ pub enum DurationError {
 ///
 /// # Errors
 /// Zero, or not a duration.
-pub fn duration(text: &str) -> Result<Duration, DurationError> {
+pub(crate) fn duration(text: &str) -> Result<Duration, DurationError> {
     match humantime::parse_duration(text) {
         Ok(d) if d.is_zero() => Err(DurationError::Zero),
         Ok(d) => Ok(d),
@@ -99,7 +99,7 @@ pub fn duration(text: &str) -> Result<Duration, DurationError> {
 
 /// `path` as written in a configuration: relative to `base`, the
 /// configuration file's directory, unless absolute.
-pub fn path(base: &Path, path: &str) -> PathBuf {
+pub(crate) fn path(base: &Path, path: &str) -> PathBuf {
     let p = Path::new(path);
     if p.is_absolute() {
         p.to_path_buf()
@@ -111,7 +111,7 @@ pub fn path(base: &Path, path: &str) -> PathBuf {
 /// A whole number out of its range.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("{value} is not between {} and {}", range.start(), range.end())]
-pub struct OutOfRange {
+pub(crate) struct OutOfRange {
     /// The number written.
     pub value: i64,
     /// What it may be.
@@ -122,7 +122,7 @@ pub struct OutOfRange {
 ///
 /// # Errors
 /// Outside it.
-pub fn count(value: i64, range: RangeInclusive<u32>) -> Result<u32, OutOfRange> {
+pub(crate) fn count(value: i64, range: RangeInclusive<u32>) -> Result<u32, OutOfRange> {
     match u32::try_from(value) {
         Ok(n) if range.contains(&n) => Ok(n),
         _ => Err(OutOfRange { value, range }),
@@ -131,14 +131,14 @@ pub fn count(value: i64, range: RangeInclusive<u32>) -> Result<u32, OutOfRange> 
 
 /// A component's table being checked: where its relative paths start,
 /// each problem found with its place, and what is worth a warning.
-pub struct Table<'a> {
+pub(crate) struct Table<'a> {
     base: &'a Path,
     found: Checked<(), String>,
 }
 
 impl<'a> Table<'a> {
     /// A table of a configuration whose relative paths start at `base`.
-    pub fn new(base: &'a Path) -> Table<'a> {
+    pub(crate) fn new(base: &'a Path) -> Table<'a> {
         Table {
             base,
             found: Checked::default(),
@@ -146,22 +146,22 @@ impl<'a> Table<'a> {
     }
 
     /// Notes a problem of `key` at `span`.
-    pub fn problem(&mut self, span: Range<usize>, key: &str, message: impl fmt::Display) {
+    pub(crate) fn problem(&mut self, span: Range<usize>, key: &str, message: impl fmt::Display) {
         self.found.problem(span, key, message.to_string());
     }
 
     /// Notes something worth a warning at start.
-    pub fn warn(&mut self, warning: String) {
+    pub(crate) fn warn(&mut self, warning: String) {
         self.found.warnings.push(warning);
     }
 
     /// `p` as written: relative to the configuration's directory.
-    pub fn path(&self, p: &str) -> PathBuf {
+    pub(crate) fn path(&self, p: &str) -> PathBuf {
         path(self.base, p)
     }
 
     /// A duration longer than zero, or a problem and `default`.
-    pub fn duration(
+    pub(crate) fn duration(
         &mut self,
         value: Option<Spanned<String>>,
         key: &str,
@@ -175,7 +175,7 @@ impl<'a> Table<'a> {
     }
 
     /// A whole number in `range`, or a problem and `default`.
-    pub fn count(
+    pub(crate) fn count(
         &mut self,
         value: Spanned<i64>,
         key: &str,
@@ -190,7 +190,7 @@ impl<'a> Table<'a> {
 
     /// What was found: the problems and warnings (the configuration is
     /// what the check returned).
-    pub fn found(self) -> Checked<(), String> {
+    pub(crate) fn found(self) -> Checked<(), String> {
         self.found
     }
 }

@@ -745,8 +745,11 @@ fn source_for(config: &CellConfig, tags: Vec<TagConfig>) -> Box<dyn Source> {
                 .iter()
                 .flat_map(|s| s.force_switch.into_iter().chain(s.stop_switch)),
         )),
-        // A validated configuration has one; one built by hand without
-        // either reads nothing.
+        // A validated configuration has one; one built by hand (a test's)
+        // without either reads nothing.
+        #[cfg(any(test, feature = "test-kit"))]
         (None, None) => Box::new(crate::sources::scripted::ScriptedSource::new().0),
+        #[cfg(not(any(test, feature = "test-kit")))]
+        (None, None) => unreachable!("a validated configuration names [opcua] or [legacy]"),
     }
 }

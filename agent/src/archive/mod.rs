@@ -8,6 +8,6 @@
 //! ([`volume`]). Readers ([`read`]) query the storages with a time range
 //! and believe only what each cell's agent signed.
 
-pub mod read;
+pub(crate) mod read;
 pub mod router;
-pub mod volume;
+pub(crate) mod volume;

@@ -15,7 +15,7 @@ use crate::payload::{AlarmPayload, StatePayload};
 
 /// What the archive keeps, each under its own storage.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Kept {
+pub(crate) enum Kept {
     /// `alarms/<id>`: alarm events.
     Alarm,
     /// `state`: machine states.
@@ -50,7 +50,7 @@ impl Kept {
 
 /// One believed entry.
 #[derive(Debug, Clone)]
-pub struct ArchivedEntry {
+pub(crate) struct ArchivedEntry {
     /// What it is.
     pub kept: Kept,
     /// The key it was put and kept on.
@@ -61,7 +61,7 @@ pub struct ArchivedEntry {
 
 /// What a reading found.
 #[derive(Debug, Default)]
-pub struct Reading {
+pub(crate) struct Reading {
     /// Believed entries, oldest first (by the time their agent sealed
     /// them), each once however many storages kept it.
     pub entries: Vec<ArchivedEntry>,
@@ -71,12 +71,12 @@ pub struct Reading {
 
 /// The time range of a reading, in Zenoh's time DSL.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Range(String);
+pub(crate) struct Range(String);
 
 /// A `--since`/`--until` that reads neither as a duration nor a time.
 #[derive(Debug, thiserror::Error)]
 #[error("--{flag} `{text}`: neither a duration back from now (24h, 30m) nor an RFC 3339 time")]
-pub struct BadTime {
+pub(crate) struct BadTime {
     flag: &'static str,
     text: String,
 }
@@ -98,26 +98,26 @@ impl Range {
     ///
     /// # Errors
     /// A bound that reads as neither.
-    pub fn new(since: &str, until: Option<&str>) -> Result<Range, BadTime> {
+    pub(crate) fn new(since: &str, until: Option<&str>) -> Result<Range, BadTime> {
         let from = bound("since", since)?;
         let to = until.map(|u| bound("until", u)).transpose()?;
         Ok(Range(format!("[{from}..{}]", to.unwrap_or_default())))
     }
 
     /// The selector parameter.
-    pub fn parameter(&self) -> String {
+    pub(crate) fn parameter(&self) -> String {
         format!("_time={}", self.0)
     }
 }
 
 /// At most this many entries in one reading: a day of a cell's states
 /// and alarms is a few thousand.
-pub const MOST_ENTRIES: usize = 1_000_000;
+pub(crate) const MOST_ENTRIES: usize = 1_000_000;
 
 /// Reads what the archive keeps of `cell` (`*`: every cell) in `range`,
 /// of the kinds asked, from every router's storage that answers within
 /// `timeout`.
-pub async fn read(
+pub(crate) async fn read(
     bus: &BusClient,
     cell: &str,
     kinds: &[Kept],
@@ -175,14 +175,14 @@ pub async fn read(
 
 impl ArchivedEntry {
     /// The alarm event, for an [`Kept::Alarm`] entry whose body reads.
-    pub fn alarm(&self) -> Option<AlarmPayload> {
+    pub(crate) fn alarm(&self) -> Option<AlarmPayload> {
         (self.kept == Kept::Alarm)
             .then(|| serde_json::from_str(&self.opened.body).ok())
             .flatten()
     }
 
     /// The machine state, for a [`Kept::State`] entry whose body reads.
-    pub fn state(&self) -> Option<StatePayload> {
+    pub(crate) fn state(&self) -> Option<StatePayload> {
         (self.kept == Kept::State)
             .then(|| serde_json::from_str(&self.opened.body).ok())
             .flatten()
@@ -194,7 +194,7 @@ impl ArchivedEntry {
 /// fields the journal's rows have), the newest `limit` rows, oldest
 /// first: what the console shows of a cell whose agent does not answer.
 /// A machine state put again unchanged is one row, as in the journal.
-pub fn as_history_page(reading: &Reading, limit: usize) -> serde_json::Value {
+pub(crate) fn as_history_page(reading: &Reading, limit: usize) -> serde_json::Value {
     use serde_json::{json, Value};
     let mut rows = Vec::new();
     let mut last_state: std::collections::HashMap<String, Value> = Default::default();

@@ -39,21 +39,21 @@ use zenoh_backend_traits::{
 use zenoh_plugin_trait::{plugin_long_version, plugin_version, Plugin};
 
 /// The volume's name in the storage manager's configuration.
-pub const VOLUME: &str = "sqlite";
+pub(crate) const VOLUME: &str = "sqlite";
 
 /// How long a storage keeps its samples when its configuration says not.
-pub const DEFAULT_RETENTION: Duration = Duration::from_secs(90 * 24 * 3600);
+pub(crate) const DEFAULT_RETENTION: Duration = Duration::from_secs(90 * 24 * 3600);
 
 /// At most this many samples of one key answer one query (the newest of
 /// the range): a reply is held in memory whole.
-pub const MOST_PER_QUERY: usize = 100_000;
+pub(crate) const MOST_PER_QUERY: usize = 100_000;
 
 /// How often a storage removes what is past its retention.
 const PRUNE_EVERY: Duration = Duration::from_secs(60);
 
 /// What keeps a volume or a storage from starting.
 #[derive(Debug, thiserror::Error)]
-pub enum VolumeError {
+pub(crate) enum VolumeError {
     /// The volume's configuration has no `dir`.
     #[error("volume `{VOLUME}`: `dir` (the folder of its SQLite files) is required")]
     NoDir,
@@ -91,7 +91,7 @@ pub enum VolumeError {
 /// The backend, linked into `cellwatch router` and declared to the
 /// storage manager under [`VOLUME`].
 #[derive(Debug)]
-pub struct SqliteVolume {
+pub(crate) struct SqliteVolume {
     dir: PathBuf,
     config: VolumeConfig,
 }

@@ -38,7 +38,7 @@ pub enum ClientTlsError {
 /// # Errors
 /// A file cannot be read, holds no certificate, or the key is readable by
 /// others or does not go with the certificate.
-pub fn client_config(
+pub(crate) fn client_config(
     ca: Option<&Path>,
     client: Option<(&Path, &Path)>,
 ) -> Result<rustls::ClientConfig, ClientTlsError> {

@@ -150,7 +150,7 @@ mod zenoh_file_tests {
 /// `[zenoh]` as written.
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RawZenoh {
+pub(crate) struct RawZenoh {
     pub(crate) mode: Option<Spanned<String>>,
     #[serde(default)]
     pub(crate) connect: Vec<Spanned<String>>,
@@ -167,7 +167,7 @@ pub struct RawZenoh {
 /// `[zenoh.tls]` as written.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RawTls {
+pub(crate) struct RawTls {
     pub(crate) ca: Spanned<String>,
     pub(crate) cert: Spanned<String>,
     pub(crate) key: Spanned<String>,

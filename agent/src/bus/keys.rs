@@ -114,23 +114,23 @@ impl CellKeys {
 }
 
 /// `<root>/_plant/operators`: where the plant operators list is put.
-pub fn plant_operators(root: &str) -> String {
+pub(crate) fn plant_operators(root: &str) -> String {
     format!("{}/_plant/operators", root.trim_end_matches('/'))
 }
 
 /// `<root>/*/operators`: every agent's held plant operators list, to ask.
-pub fn every_cells_operators(root: &str) -> String {
+pub(crate) fn every_cells_operators(root: &str) -> String {
     format!("{}/*/operators", root.trim_end_matches('/'))
 }
 
 /// The root of an agent's prefix (`cellwatch` of `cellwatch/m01`).
-pub fn root_of(prefix: &str) -> &str {
+pub(crate) fn root_of(prefix: &str) -> &str {
     prefix.rsplit_once('/').map_or("", |(root, _)| root)
 }
 
 /// The cell a key under `root` belongs to (`<root>/<cell>/…`), if it is
 /// under `root` and names one.
-pub fn cell_of<'k>(root: &str, key: &'k str) -> Option<&'k str> {
+pub(crate) fn cell_of<'k>(root: &str, key: &'k str) -> Option<&'k str> {
     let rest = key
         .strip_prefix(root.trim_end_matches('/'))?
         .strip_prefix('/')?;

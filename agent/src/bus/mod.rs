@@ -18,10 +18,10 @@
 //! routers; nothing here changes.
 
 pub mod certs;
-pub mod client_tls;
-pub mod config;
+pub(crate) mod client_tls;
+pub(crate) mod config;
 pub mod envelope;
-pub mod keys;
+pub(crate) mod keys;
 mod session;
 
 pub use session::{

@@ -12,21 +12,21 @@
 //!   and by `validate`, so a configuration that validates starts).
 //! - [`restore`]: what a restarted agent takes back from its journal.
 
-pub mod answers;
+pub(crate) mod answers;
 mod commands;
 pub mod compile;
-pub mod force;
-pub mod forcing;
+pub(crate) mod force;
+pub(crate) mod forcing;
 mod gaps;
-pub mod own_alarms;
+pub(crate) mod own_alarms;
 mod plc;
 mod refused;
 mod reload;
-pub mod restore;
+pub(crate) mod restore;
 mod session;
 mod snapshot;
-pub mod swap;
-pub mod timers;
+pub(crate) mod swap;
+pub(crate) mod timers;
 
 use std::future::Future;
 use std::time::Duration;

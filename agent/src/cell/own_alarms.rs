@@ -7,7 +7,7 @@ use crate::config::CellConfig;
 
 /// An alarm the agent raises of itself, or a pattern of the PLC's.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct OwnAlarm {
+pub(crate) struct OwnAlarm {
     /// Its id, or `<prefix>-*` for the PLC's own alarms.
     pub id: String,
     /// Whether it is the PLC's (kind `plc`) rather than the agent's
@@ -21,7 +21,7 @@ pub struct OwnAlarm {
 /// namespace missing, changes lost and (with `[[opcua.events]]`) the PLC's
 /// alarms not followed, and one pattern per prefix of those; a forced
 /// transition late; an `@` bus unit not answering.
-pub fn own_alarms(c: &CellConfig) -> Vec<OwnAlarm> {
+pub(crate) fn own_alarms(c: &CellConfig) -> Vec<OwnAlarm> {
     let system = |id: String, condition: String| OwnAlarm {
         id,
         plc: false,

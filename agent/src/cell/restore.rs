@@ -14,7 +14,7 @@ use crate::payload::AlarmPayload;
 
 /// What the journal kept for this start.
 #[derive(Debug, Default)]
-pub struct Restored {
+pub(crate) struct Restored {
     /// Alarms not back to normal, oldest change first.
     pub alarms: Vec<Alarm>,
     /// The machine state, when it was entered and by which change.
@@ -31,7 +31,7 @@ pub struct Restored {
 ///
 /// # Errors
 /// The journal cannot be read.
-pub fn load(
+pub(crate) fn load(
     config: &CellConfig,
     now: u64,
     can_raise: impl Fn(&str) -> bool,

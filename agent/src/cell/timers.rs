@@ -11,7 +11,7 @@ use crate::config::CellConfig;
 use crate::payload::{MeasurementPayload, TimerPayload};
 
 /// How many measurements of each transition are kept.
-pub const RECENT: usize = 10;
+pub(crate) const RECENT: usize = 10;
 
 /// Every timed transition of a cell and its recent measurements.
 #[derive(Default)]

@@ -11,7 +11,6 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 
 use super::signals::{Hangups, StopSignals};
 use super::Failure;
@@ -306,11 +305,6 @@ fn distinct(configs: &[(PathBuf, CellConfig)]) -> Result<(), Failure> {
         }
     }
     Ok(())
-}
-
-/// Used by `simulate cnc`: seconds as a duration.
-pub(crate) fn parse_duration(s: &str) -> Result<Duration, String> {
-    humantime::parse_duration(s).map_err(|e| format!("'{s}' is not a duration ({e})"))
 }
 
 #[derive(Debug, clap::Args)]

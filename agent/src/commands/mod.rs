@@ -7,6 +7,7 @@ pub(crate) mod archive;
 pub(crate) mod audit;
 pub(crate) mod bus;
 pub(crate) mod console;
+#[cfg(feature = "simulators")]
 pub(crate) mod demo;
 pub(crate) mod discover;
 pub(crate) mod explain;
@@ -24,6 +25,7 @@ pub(crate) mod router;
 pub(crate) mod sf;
 pub(crate) mod sfc;
 pub(crate) mod signals;
+#[cfg(feature = "simulators")]
 pub(crate) mod simulate;
 pub(crate) mod systemd;
 pub(crate) mod timers;

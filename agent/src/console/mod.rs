@@ -28,7 +28,7 @@ pub mod config;
 mod gate;
 mod http;
 mod listen;
-pub mod plant;
+pub(crate) mod plant;
 mod shared;
 mod web;
 

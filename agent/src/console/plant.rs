@@ -22,7 +22,7 @@ use cellwatch_models::alarm::{AlarmState, Transition};
 
 /// One cell, as the overview shows it.
 #[derive(Debug, Clone, Default, Serialize, PartialEq, Eq)]
-pub struct Cell {
+pub(crate) struct Cell {
     /// The cell's id.
     pub cell: String,
     /// Its area, when the console's configuration names one.
@@ -42,7 +42,7 @@ pub struct Cell {
 
 /// A cell's last fault.
 #[derive(Debug, Clone, Serialize, PartialEq, Eq)]
-pub struct Fault {
+pub(crate) struct Fault {
     /// The alarm raised.
     pub alarm: String,
     /// When.
@@ -54,7 +54,7 @@ pub struct Fault {
 /// A change the pages are told of.
 #[derive(Debug, Clone, Serialize)]
 #[serde(tag = "type", rename_all = "lowercase")]
-pub enum Change {
+pub(crate) enum Change {
     /// An alarm's new state; a `normal` alarm neither shelved nor out of
     /// service is no longer shown.
     Alarm {
@@ -70,7 +70,7 @@ pub enum Change {
 
 /// Everything at once: what a page starts from.
 #[derive(Debug, Serialize)]
-pub struct View<'a> {
+pub(crate) struct View<'a> {
     /// `snapshot`.
     #[serde(rename = "type")]
     pub kind: &'static str,
@@ -85,7 +85,7 @@ pub struct View<'a> {
 }
 
 /// The plant's cells and alarms.
-pub struct Plant {
+pub(crate) struct Plant {
     cells: BTreeMap<String, Cell>,
     alarms: BTreeMap<(String, String), AlarmPayload>,
     area_of: HashMap<String, String>,
@@ -105,14 +105,14 @@ pub struct Plant {
 
 /// Whether an operator must see `a`: active or unacknowledged, shelved or
 /// out of service.
-pub fn shown(a: &AlarmPayload) -> bool {
+pub(crate) fn shown(a: &AlarmPayload) -> bool {
     a.state != AlarmState::Normal || a.shelved.is_some() || a.out_of_service.is_some()
 }
 
 impl Plant {
     /// A plant of the cells in `trusted` (the trust file's), grouped by
     /// `areas`, keeping at most `max_alarms` alarms.
-    pub fn new<'a>(
+    pub(crate) fn new<'a>(
         trusted: impl IntoIterator<Item = &'a str>,
         areas: &BTreeMap<String, Vec<String>>,
         max_alarms: usize,
@@ -148,7 +148,7 @@ impl Plant {
     }
 
     /// Everything, for a page that starts.
-    pub fn view(&self) -> View<'_> {
+    pub(crate) fn view(&self) -> View<'_> {
         View {
             kind: "snapshot",
             cells: self.cells.values().collect(),
@@ -159,23 +159,25 @@ impl Plant {
     }
 
     /// The alarm `id` of `cell`, if shown.
-    pub fn alarm(&self, cell: &str, id: &str) -> Option<&AlarmPayload> {
+    #[cfg(test)]
+    pub(crate) fn alarm(&self, cell: &str, id: &str) -> Option<&AlarmPayload> {
         self.alarms.get(&(cell.to_string(), id.to_string()))
     }
 
     /// The cell `cell`, if known.
-    pub fn cell(&self, cell: &str) -> Option<&Cell> {
+    pub(crate) fn cell(&self, cell: &str) -> Option<&Cell> {
         self.cells.get(cell)
     }
 
     /// How many alarms are shown.
-    pub fn alarm_count(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn alarm_count(&self) -> usize {
         self.alarms.len()
     }
 
     /// Takes an alarm event its cell's agent signed, at `sealed` (its
     /// clock, RFC 3339); returns what changed.
-    pub fn alarm_event(&mut self, a: AlarmPayload, sealed: &str) -> Vec<Change> {
+    pub(crate) fn alarm_event(&mut self, a: AlarmPayload, sealed: &str) -> Vec<Change> {
         let mut changes = Vec::new();
         if self.stale(&a) {
             return changes;
@@ -282,7 +284,7 @@ impl Plant {
 
     /// Takes a cell's machine state; returns the cell's new view unless an
     /// older state than the one known.
-    pub fn state(&mut self, s: StatePayload) -> Option<Change> {
+    pub(crate) fn state(&mut self, s: StatePayload) -> Option<Change> {
         let cell = self.cell_mut(&s.cell);
         if cell.state.as_ref().is_some_and(|known| known.at > s.at) {
             return None;
@@ -295,7 +297,7 @@ impl Plant {
 
     /// A cell's agent came (`true`) or went; a cell outside the trust
     /// file is not taken from a token (tokens are not signed).
-    pub fn agent(&mut self, cell: &str, up: bool) -> Option<Change> {
+    pub(crate) fn agent(&mut self, cell: &str, up: bool) -> Option<Change> {
         let c = self.cells.get_mut(cell)?;
         if c.agent == up {
             return None;
@@ -308,7 +310,7 @@ impl Plant {
 
     /// Takes a cell's snapshot: its alarms replace those known that are
     /// not newer than it; returns what changed.
-    pub fn snapshot(&mut self, s: SnapshotPayload) -> Vec<Change> {
+    pub(crate) fn snapshot(&mut self, s: SnapshotPayload) -> Vec<Change> {
         let mut changes = Vec::new();
         let name = s.cell.clone();
         let cell = self.cell_mut(&name);

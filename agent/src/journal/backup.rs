@@ -15,7 +15,7 @@ use super::schema::TABLES;
 
 /// What a backup holds.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Copied {
+pub(crate) struct Copied {
     /// Rows per table, in [`TABLES`] order, and `alarm_current`.
     pub rows: Vec<(&'static str, u64)>,
     /// The copy's size, bytes.
@@ -24,7 +24,7 @@ pub struct Copied {
 
 /// Why a backup failed.
 #[derive(Debug, thiserror::Error)]
-pub enum BackupError {
+pub(crate) enum BackupError {
     /// The source is missing, or the destination exists already.
     #[error("{0}")]
     Input(String),
@@ -46,7 +46,7 @@ pub enum BackupError {
 ///
 /// # Errors
 /// See [`BackupError`]; a failed backup leaves nothing at `to`.
-pub fn backup(from: &Path, to: &Path) -> Result<Copied, BackupError> {
+pub(crate) fn backup(from: &Path, to: &Path) -> Result<Copied, BackupError> {
     if !from.is_file() {
         return Err(BackupError::Input(format!(
             "{}: no such journal",
@@ -62,7 +62,7 @@ pub fn backup(from: &Path, to: &Path) -> Result<Copied, BackupError> {
 ///
 /// # Errors
 /// See [`BackupError`]; a failed backup leaves nothing at `to`.
-pub fn backup_database(from: &Path, to: &Path) -> Result<u64, BackupError> {
+pub(crate) fn backup_database(from: &Path, to: &Path) -> Result<u64, BackupError> {
     if !from.is_file() {
         return Err(BackupError::Input(format!(
             "{}: no such file",

@@ -24,10 +24,10 @@ use rusqlite::Connection;
 use sha2::{Digest, Sha256};
 
 /// The first field of every encoded row.
-pub const CHAIN_VERSION: &str = "cellwatch-journal-command-v1";
+pub(crate) const CHAIN_VERSION: &str = "cellwatch-journal-command-v1";
 
 /// What the first row of the chain follows: 64 zeros.
-pub const GENESIS: &str = "0000000000000000000000000000000000000000000000000000000000000000";
+pub(crate) const GENESIS: &str = "0000000000000000000000000000000000000000000000000000000000000000";
 
 /// A command row's fields, as chained.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -60,7 +60,7 @@ pub struct ChainedRow<'a> {
 
 /// The bytes hashed for `row` at chain position `index` after `prev`: the
 /// version, then every field as `<byte length>:<bytes>\n`.
-pub fn encode(row: &ChainedRow<'_>, index: i64, prev: &str) -> Vec<u8> {
+pub(crate) fn encode(row: &ChainedRow<'_>, index: i64, prev: &str) -> Vec<u8> {
     let mut out = Vec::with_capacity(256 + row.detail.len());
     let fields: [&str; 15] = [
         CHAIN_VERSION,
@@ -88,7 +88,7 @@ pub fn encode(row: &ChainedRow<'_>, index: i64, prev: &str) -> Vec<u8> {
 }
 
 /// The hex SHA-256 of [`encode`].
-pub fn hash(row: &ChainedRow<'_>, index: i64, prev: &str) -> String {
+pub(crate) fn hash(row: &ChainedRow<'_>, index: i64, prev: &str) -> String {
     hex::encode(Sha256::digest(encode(row, index, prev)))
 }
 
@@ -173,7 +173,7 @@ impl Link {
 ///
 /// # Errors
 /// SQLite failing.
-pub fn insert(
+pub(crate) fn insert(
     tx: &Connection,
     row: &ChainedRow<'_>,
     digest: Option<&str>,
@@ -208,7 +208,7 @@ pub fn insert(
 
 /// What [`verify`] found.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Verdict {
+pub(crate) enum Verdict {
     /// Every chained row holds.
     Intact {
         /// Chained rows checked.
@@ -234,7 +234,7 @@ pub enum Verdict {
 ///
 /// # Errors
 /// SQLite failing (not a journal, or one without the chain's columns).
-pub fn verify(conn: &Connection) -> rusqlite::Result<Verdict> {
+pub(crate) fn verify(conn: &Connection) -> rusqlite::Result<Verdict> {
     let mut stmt = conn.prepare(
         "SELECT seq, at_ms, operator, action, alarm, nonce, accepted, verified, detail, stage, \
          source, count, chain_index, prev_hash, hash FROM commands ORDER BY seq",
@@ -360,7 +360,7 @@ pub fn verify(conn: &Connection) -> rusqlite::Result<Verdict> {
 /// How a journal's chain stands against the head the agent announced
 /// (its signed state or snapshot on the bus).
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub enum Against {
+pub(crate) enum Against {
     /// The announced head is in the journal, with its hash; `after` rows
     /// were chained since it was announced.
     Holds {
@@ -390,7 +390,7 @@ pub enum Against {
 ///
 /// # Errors
 /// SQLite failing.
-pub fn against(conn: &Connection, announced: &Link) -> rusqlite::Result<Against> {
+pub(crate) fn against(conn: &Connection, announced: &Link) -> rusqlite::Result<Against> {
     let ends = Link::last(conn)?;
     if announced.index > ends.index {
         return Ok(Against::CutOff {

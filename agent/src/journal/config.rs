@@ -71,7 +71,7 @@ const LEAST_ROWS: i64 = 1000;
 /// `[journal]` as written.
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RawJournal {
+pub(crate) struct RawJournal {
     pub(crate) path: Option<String>,
     pub(crate) retention: Option<Spanned<String>>,
     #[serde(default)]
@@ -81,7 +81,7 @@ pub struct RawJournal {
 /// `[journal.tables.<table>]`, one per table of rows.
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RawJournalTables {
+pub(crate) struct RawJournalTables {
     pub(crate) alarm_events: Option<Spanned<RawKeep>>,
     pub(crate) state_history: Option<Spanned<RawKeep>>,
     pub(crate) commands: Option<Spanned<RawKeep>>,
@@ -94,7 +94,7 @@ pub struct RawJournalTables {
 /// `[journal.tables.<table>]` as written.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RawKeep {
+pub(crate) struct RawKeep {
     pub(crate) retention: Option<Spanned<String>>,
     pub(crate) max_rows: Option<Spanned<i64>>,
 }

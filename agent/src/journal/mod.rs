@@ -30,9 +30,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Weak};
 use std::time::{Duration, Instant};
 
-pub mod backup;
-pub mod chain;
-pub mod config;
+pub(crate) mod backup;
+pub(crate) mod chain;
+pub(crate) mod config;
 mod events;
 mod history;
 mod observer;

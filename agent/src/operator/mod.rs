@@ -18,8 +18,8 @@
 //! journal supplies.
 
 mod key_error;
-pub mod plant;
-pub mod refusals;
+pub(crate) mod plant;
+pub(crate) mod refusals;
 
 pub use key_error::KeyError;
 

@@ -14,17 +14,17 @@ use serde::{Deserialize, Serialize};
 use super::{valid_operator_name, Action, Operator, OperatorKeys};
 
 /// The list's schema.
-pub const LIST_SCHEMA: &str = "cellwatch.plant-operators.v1";
+pub(crate) const LIST_SCHEMA: &str = "cellwatch.plant-operators.v1";
 /// What the administrator's signature covers: this, then the list's text.
 const SIGNED_PREFIX: &str = "cellwatch-plant-operators-v1\n";
 /// The largest signed list an agent reads (a plant of thousands of
 /// operators and cells stays far below).
-pub const MAX_LIST_BYTES: usize = 512 * 1024;
+pub(crate) const MAX_LIST_BYTES: usize = 512 * 1024;
 
 /// The list as signed: its text and the signature over it.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct SignedList {
+pub(crate) struct SignedList {
     /// The list's JSON text ([`PlantList`]).
     pub list: String,
     /// Ed25519 signature (hex) of [`SIGNED_PREFIX`] and `list`.
@@ -34,7 +34,7 @@ pub struct SignedList {
 /// The list itself.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct PlantList {
+pub(crate) struct PlantList {
     /// [`LIST_SCHEMA`].
     pub schema: String,
     /// The plant's name.
@@ -50,7 +50,7 @@ pub struct PlantList {
 /// One operator in the list.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct ListedOperator {
+pub(crate) struct ListedOperator {
     /// Their Ed25519 public key, hex.
     pub public_key: String,
     /// What they may do, by cell.
@@ -59,7 +59,7 @@ pub struct ListedOperator {
 
 /// Why a signed list is not taken.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum ListError {
+pub(crate) enum ListError {
     /// Not a signed list.
     #[error("not a signed plant operators list: {0}")]
     Malformed(String),
@@ -80,12 +80,12 @@ fn signed_bytes(list: &str) -> Vec<u8> {
 
 impl PlantList {
     /// The list signed with the plant administrator's key `admin`.
-    pub fn signed_by(&self, admin: &super::OperatorKey) -> SignedList {
+    pub(crate) fn signed_by(&self, admin: &super::OperatorKey) -> SignedList {
         self.sign(&admin.key)
     }
 
     /// The list signed with the administrator's `key`.
-    pub fn sign(&self, key: &SigningKey) -> SignedList {
+    pub(crate) fn sign(&self, key: &SigningKey) -> SignedList {
         let list = serde_json::to_string(self).unwrap_or_default();
         let signature = hex::encode(key.sign(&signed_bytes(&list)).to_bytes());
         SignedList { list, signature }
@@ -95,7 +95,7 @@ impl PlantList {
     ///
     /// # Errors
     /// A public key that is not one, or an operator's name out of format.
-    pub fn keys_for(&self, cell: &str) -> Result<OperatorKeys, ListError> {
+    pub(crate) fn keys_for(&self, cell: &str) -> Result<OperatorKeys, ListError> {
         let mut operators = HashMap::new();
         for (name, op) in &self.operators {
             if !valid_operator_name(name) {
@@ -131,7 +131,7 @@ impl SignedList {
     ///
     /// # Errors
     /// Too large, or not a signed list.
-    pub fn parse(bytes: &[u8]) -> Result<SignedList, ListError> {
+    pub(crate) fn parse(bytes: &[u8]) -> Result<SignedList, ListError> {
         if bytes.len() > MAX_LIST_BYTES {
             return Err(ListError::TooLarge(bytes.len()));
         }
@@ -142,7 +142,7 @@ impl SignedList {
     ///
     /// # Errors
     /// A bad signature, or a list that does not read.
-    pub fn open(&self, key: &VerifyingKey) -> Result<PlantList, ListError> {
+    pub(crate) fn open(&self, key: &VerifyingKey) -> Result<PlantList, ListError> {
         let signature = hex::decode(&self.signature)
             .ok()
             .and_then(|b| <[u8; 64]>::try_from(b).ok())
@@ -161,7 +161,7 @@ impl SignedList {
 
 /// What changed for `cell` from `old` to `new`, in words: operators
 /// added, removed, their actions or keys changed (empty: nothing).
-pub fn changes(old: &OperatorKeys, new: &OperatorKeys) -> String {
+pub(crate) fn changes(old: &OperatorKeys, new: &OperatorKeys) -> String {
     let mut said = Vec::new();
     for (name, o) in &new.operators {
         match old.operators.get(name) {
@@ -195,7 +195,7 @@ fn list(actions: &BTreeSet<Action>) -> String {
 ///
 /// # Errors
 /// Not an Ed25519 public key.
-pub fn admin_key(hex_key: &str) -> Result<VerifyingKey, super::KeyError> {
+pub(crate) fn admin_key(hex_key: &str) -> Result<VerifyingKey, super::KeyError> {
     hex::decode(hex_key.trim())
         .ok()
         .and_then(|b| <[u8; 32]>::try_from(b).ok())

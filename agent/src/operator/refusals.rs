@@ -16,19 +16,19 @@
 use std::collections::BTreeMap;
 
 /// How long one summary counts, ms (minutes on the clock).
-pub const WINDOW_MS: u64 = 60_000;
+pub(crate) const WINDOW_MS: u64 = 60_000;
 /// Sources told apart in one window; more are counted together.
-pub const MAX_SOURCES: usize = 16;
+pub(crate) const MAX_SOURCES: usize = 16;
 /// The source of refusals beyond [`MAX_SOURCES`] in a window.
-pub const OTHER_SOURCES: &str = "other";
+pub(crate) const OTHER_SOURCES: &str = "other";
 /// The source of a query that does not say where it comes from.
-pub const UNKNOWN_SOURCE: &str = "unknown";
+pub(crate) const UNKNOWN_SOURCE: &str = "unknown";
 /// What is kept of a source's name, at most (a Zenoh id is 32 hex digits).
-pub const SOURCE_BYTES: usize = 64;
+pub(crate) const SOURCE_BYTES: usize = 64;
 
 /// The refusals after the first of one source and reason in a window.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Summary {
+pub(crate) struct Summary {
     /// Who sent them ([`UNKNOWN_SOURCE`], [`OTHER_SOURCES`] or an id).
     pub source: String,
     /// The reason (`unsigned`, `bad_signature`, …).
@@ -41,7 +41,7 @@ pub struct Summary {
 
 impl Summary {
     /// The journal's text for it.
-    pub fn detail(&self) -> String {
+    pub(crate) fn detail(&self) -> String {
         let at = |ms: u64| {
             chrono::DateTime::from_timestamp_millis(ms as i64)
                 .map(|t| t.format("%H:%M:%SZ").to_string())
@@ -61,7 +61,7 @@ impl Summary {
 /// The current window's counts; bounded by [`MAX_SOURCES`] + 1 sources
 /// times the reasons.
 #[derive(Debug, Default)]
-pub struct Refusals {
+pub(crate) struct Refusals {
     /// When the current window began, ms.
     window: u64,
     /// Per source and reason, the refusals after the first.
@@ -72,7 +72,7 @@ pub struct Refusals {
 
 /// What to do with one refusal.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Noted {
+pub(crate) struct Noted {
     /// The source it is journaled under.
     pub source: String,
     /// The first of its source and reason in this window: journal it as a
@@ -84,7 +84,7 @@ pub struct Noted {
 
 impl Refusals {
     /// Notes one refusal for `reason` from `source` at `now` (ms).
-    pub fn note(&mut self, source: &str, reason: &'static str, now: u64) -> Noted {
+    pub(crate) fn note(&mut self, source: &str, reason: &'static str, now: u64) -> Noted {
         let ended = self.ended(now);
         let mut source = crate::operator::clip(source, SOURCE_BYTES);
         if source.is_empty() {
@@ -115,7 +115,7 @@ impl Refusals {
 
     /// The summaries of a window that has ended by `now` (those with more
     /// than the first refusal); the counts start over.
-    pub fn ended(&mut self, now: u64) -> Vec<Summary> {
+    pub(crate) fn ended(&mut self, now: u64) -> Vec<Summary> {
         let window = now - now % WINDOW_MS;
         if window == self.window {
             return Vec::new();
@@ -126,7 +126,7 @@ impl Refusals {
     }
 
     /// Every summary so far (the agent stops): the counts start over.
-    pub fn flush(&mut self) -> Vec<Summary> {
+    pub(crate) fn flush(&mut self) -> Vec<Summary> {
         self.sources = 0;
         std::mem::take(&mut self.counts)
             .into_iter()

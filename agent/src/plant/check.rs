@@ -22,11 +22,9 @@ use crate::bus::keys::Service;
 use crate::client::BusClient;
 use crate::payload::AboutPayload;
 
-pub use super::judge::EXPIRY_WARNING;
-
 /// What the check found about one part of the plant.
 #[derive(Debug, Default, Clone, PartialEq, Eq)]
-pub struct Finding {
+pub(crate) struct Finding {
     /// `cell m01ps0004`, `router router-1`, `plant`.
     pub subject: String,
     /// What is as it should be (shown after `ok`).
@@ -37,19 +35,19 @@ pub struct Finding {
 
 /// Every part's finding, cells first.
 #[derive(Debug, Default)]
-pub struct Report {
+pub(crate) struct Report {
     /// By subject, in the inventory's order.
     pub findings: Vec<Finding>,
 }
 
 impl Report {
     /// Whether anything is wrong.
-    pub fn wrong(&self) -> bool {
+    pub(crate) fn wrong(&self) -> bool {
         self.findings.iter().any(|f| !f.problems.is_empty())
     }
 
     /// The report as text, one block per part.
-    pub fn text(&self) -> String {
+    pub(crate) fn text(&self) -> String {
         let mut out = String::new();
         for f in &self.findings {
             if f.problems.is_empty() {
@@ -78,7 +76,7 @@ impl Report {
 /// Why the plant check could not read a file of the plant's folder, or
 /// ask an agent's `/readyz`.
 #[derive(Debug, thiserror::Error)]
-pub enum CheckError {
+pub(crate) enum CheckError {
     /// The signed operators list cannot be read.
     #[error("{path}: {source}")]
     ReadList {
@@ -131,7 +129,7 @@ fn sha256(bytes: &[u8]) -> String {
 ///
 /// # Errors
 /// It cannot be read, or it does not read as one.
-pub fn operators_list(layout: &Layout) -> Result<(Vec<u8>, u64), CheckError> {
+pub(crate) fn operators_list(layout: &Layout) -> Result<(Vec<u8>, u64), CheckError> {
     let path = layout.operators_list();
     let bytes = match std::fs::read(&path) {
         Ok(b) => b,
@@ -159,7 +157,7 @@ fn expiry(what: &str, not_after_ms: u64, now_ms: u64, f: &mut Finding) {
 /// What the plant deployed, read from its folder now: each cell's
 /// configuration and bus certificate on its host (by hash), the keys it is
 /// being rotated from, the operators list's version.
-pub fn deployed(inventory: &Inventory) -> DeployedPlant {
+pub(crate) fn deployed(inventory: &Inventory) -> DeployedPlant {
     let layout = Layout::of(inventory);
     let etc = layout.etc().to_string();
     let cells = inventory
@@ -193,7 +191,7 @@ pub fn deployed(inventory: &Inventory) -> DeployedPlant {
 
 /// The check of the plant's folder at `now_ms`; the trust file it holds
 /// (for the bus part) if it reads.
-pub fn folder(inventory: &Inventory, now_ms: u64) -> (Report, Option<Trust>) {
+pub(crate) fn folder(inventory: &Inventory, now_ms: u64) -> (Report, Option<Trust>) {
     let layout = Layout::of(inventory);
     let mut report = Report::default();
     let trust = match Trust::load(&layout.trust()) {
@@ -298,7 +296,7 @@ pub fn folder(inventory: &Inventory, now_ms: u64) -> (Report, Option<Trust>) {
 
 /// The running plant: each cell's agent asked `about` over `bus` (and its
 /// `/readyz` over HTTP), its findings added to `report`'s.
-pub async fn running(
+pub(crate) async fn running(
     inventory: &Inventory,
     bus: &BusClient,
     timeout: Duration,
@@ -409,7 +407,7 @@ const PROBE_FOR: Duration = Duration::from_secs(2);
 /// `hearer` subscribes, `speaker` puts a probe there again and again for
 /// [`PROBE_FOR`]. Through a router with the inventory's access control
 /// nothing comes; the finding is added to `report`'s.
-pub async fn probe(
+pub(crate) async fn probe(
     inventory: &Inventory,
     name: &str,
     speaker: &zenoh::Session,

@@ -14,7 +14,7 @@ use crate::operator::Action;
 
 /// A new inventory's text: the plant's name, its routers, and every
 /// other table explained in comments.
-pub fn new_inventory(name: &str, routers: &[(String, String)]) -> String {
+pub(crate) fn new_inventory(name: &str, routers: &[(String, String)]) -> String {
     let mut text = String::from(
         "# The plant inventory: `cellwatch plant init` makes everything the plant\n\
          # needs from it; `cellwatch plant check` compares the running plant with it.\n\
@@ -56,7 +56,7 @@ pub fn new_inventory(name: &str, routers: &[(String, String)]) -> String {
 }
 
 /// A cell to add.
-pub struct NewCell<'a> {
+pub(crate) struct NewCell<'a> {
     /// Its id.
     pub id: &'a str,
     /// Its area.
@@ -72,7 +72,7 @@ pub struct NewCell<'a> {
 }
 
 /// An operator to add.
-pub struct NewOperator<'a> {
+pub(crate) struct NewOperator<'a> {
     /// Their name.
     pub name: &'a str,
     /// Their public key.
@@ -123,7 +123,7 @@ fn actions(list: &[Action]) -> Array {
 /// # Errors
 /// A cell of that id with other values, or an inventory that would not
 /// validate.
-pub fn add_cell(path: &Path, cell: &NewCell) -> Result<Inventory, PlantError> {
+pub(crate) fn add_cell(path: &Path, cell: &NewCell) -> Result<Inventory, PlantError> {
     let mut doc = read(path)?;
     let mut entry = Table::new();
     entry["area"] = value(cell.area);
@@ -148,7 +148,7 @@ pub fn add_cell(path: &Path, cell: &NewCell) -> Result<Inventory, PlantError> {
 /// # Errors
 /// An operator of that name with other values, or an inventory that would
 /// not validate.
-pub fn add_operator(path: &Path, op: &NewOperator) -> Result<Inventory, PlantError> {
+pub(crate) fn add_operator(path: &Path, op: &NewOperator) -> Result<Inventory, PlantError> {
     let mut doc = read(path)?;
     let mut entry = Table::new();
     entry["public_key"] = value(op.public_key.to_ascii_lowercase());

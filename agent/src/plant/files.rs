@@ -33,7 +33,7 @@ impl Made {
 }
 
 /// Writes the files of one run.
-pub struct Writer<'l> {
+pub(crate) struct Writer<'l> {
     layout: &'l Layout,
     /// SHA-256 (hex) of each derived file as the plant last wrote it.
     manifest: BTreeMap<String, String>,
@@ -55,7 +55,7 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> PlantError + '_ {
 }
 
 /// Creates `dir` and its parents, the last with `mode`.
-pub fn make_dir(dir: &Path, mode: u32) -> Result<(), PlantError> {
+pub(crate) fn make_dir(dir: &Path, mode: u32) -> Result<(), PlantError> {
     use std::os::unix::fs::DirBuilderExt;
     if dir.is_dir() {
         return Ok(());
@@ -75,7 +75,7 @@ impl<'l> Writer<'l> {
     ///
     /// # Errors
     /// The manifest exists but cannot be read.
-    pub fn open(layout: &'l Layout) -> Result<Writer<'l>, PlantError> {
+    pub(crate) fn open(layout: &'l Layout) -> Result<Writer<'l>, PlantError> {
         let path = layout.manifest();
         let mut manifest = BTreeMap::new();
         match std::fs::read_to_string(&path) {
@@ -103,7 +103,11 @@ impl<'l> Writer<'l> {
     /// # Errors
     /// Another part of this run asked for other text at `path`, or the
     /// file cannot be read or written.
-    pub fn derived(&mut self, path: &Path, text: impl AsRef<[u8]>) -> Result<(), PlantError> {
+    pub(crate) fn derived(
+        &mut self,
+        path: &Path,
+        text: impl AsRef<[u8]>,
+    ) -> Result<(), PlantError> {
         let text = text.as_ref();
         if let Some(before) = self.this_run.insert(path.to_path_buf(), text.to_vec()) {
             if before != text {
@@ -158,7 +162,7 @@ impl<'l> Writer<'l> {
     ///
     /// # Errors
     /// What `make` says.
-    pub fn once(
+    pub(crate) fn once(
         &mut self,
         path: &Path,
         make: impl FnOnce() -> Result<(), PlantError>,
@@ -175,7 +179,7 @@ impl<'l> Writer<'l> {
     ///
     /// # Errors
     /// It cannot be made.
-    pub fn link(&mut self, path: &Path, target: &str) -> Result<(), PlantError> {
+    pub(crate) fn link(&mut self, path: &Path, target: &str) -> Result<(), PlantError> {
         if path.symlink_metadata().is_ok() {
             return Ok(());
         }
@@ -191,7 +195,7 @@ impl<'l> Writer<'l> {
     ///
     /// # Errors
     /// The manifest cannot be written.
-    pub fn finish(self) -> Result<Made, PlantError> {
+    pub(crate) fn finish(self) -> Result<Made, PlantError> {
         let mut text = String::new();
         for (file, hash) in &self.manifest {
             text.push_str(&format!("{hash}  {file}\n"));

@@ -13,20 +13,20 @@ use super::PlantError;
 use crate::operator::Action;
 
 /// The bus port a router listens on unless its entry says otherwise.
-pub const ROUTER_PORT: u16 = 7447;
+pub(crate) const ROUTER_PORT: u16 = 7447;
 /// The `/metrics` port of a cell's agent unless its entry says otherwise.
-pub const METRICS_PORT: u16 = 9464;
+pub(crate) const METRICS_PORT: u16 = 9464;
 /// The console's HTTPS port unless `[console]` says otherwise.
-pub const CONSOLE_PORT: u16 = 8443;
+pub(crate) const CONSOLE_PORT: u16 = 8443;
 
 /// Configuration on every host: where the packaged unit
 /// `cellwatch@.service` reads `<cell>.toml`.
-pub const ETC: &str = "/etc/cellwatch";
+pub(crate) const ETC: &str = "/etc/cellwatch";
 /// The agents' state on every host: the unit's `StateDirectory`.
-pub const STATE: &str = "/var/lib/cellwatch";
+pub(crate) const STATE: &str = "/var/lib/cellwatch";
 /// How long the routers' archive keeps what the agents put unless
 /// `[plant] archive_retention` says otherwise.
-pub const ARCHIVE_RETENTION: &str = "90d";
+pub(crate) const ARCHIVE_RETENTION: &str = "90d";
 
 /// The plant, as its inventory says.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -212,7 +212,7 @@ impl Problems<'_> {
 
 /// Whether `id` is a name the plant can use in keys, file names and
 /// certificates: letters, digits, `-` and `_`.
-pub fn is_name(id: &str) -> bool {
+pub(crate) fn is_name(id: &str) -> bool {
     !id.is_empty()
         && id.len() <= 64
         && id
@@ -233,7 +233,7 @@ fn is_host(host: &str) -> bool {
 ///
 /// # Errors
 /// [`PlantError::Read`], or [`PlantError::Inventory`] with every problem.
-pub fn load(path: &Path) -> Result<Inventory, PlantError> {
+pub(crate) fn load(path: &Path) -> Result<Inventory, PlantError> {
     let text = std::fs::read_to_string(path).map_err(|source| PlantError::Read {
         path: path.to_path_buf(),
         source,
@@ -245,7 +245,7 @@ pub fn load(path: &Path) -> Result<Inventory, PlantError> {
 ///
 /// # Errors
 /// [`PlantError::Inventory`] with every problem at its line and column.
-pub fn parse(path: &Path, text: &str) -> Result<Inventory, PlantError> {
+pub(crate) fn parse(path: &Path, text: &str) -> Result<Inventory, PlantError> {
     let mut p = Problems {
         file: path.display().to_string(),
         text,

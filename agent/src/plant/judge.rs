@@ -12,17 +12,17 @@ use serde::{Deserialize, Serialize};
 use crate::payload::AboutPayload;
 
 /// A certificate ending sooner than this is a problem.
-pub const EXPIRY_WARNING: Duration = Duration::from_secs(30 * 86_400);
+pub(crate) const EXPIRY_WARNING: Duration = Duration::from_secs(30 * 86_400);
 
 /// The schema of the file the console reads what was deployed from.
-pub const DEPLOYED_SCHEMA: &str = "cellwatch.plant-deployed.v1";
+pub(crate) const DEPLOYED_SCHEMA: &str = "cellwatch.plant-deployed.v1";
 
 /// The largest such file the console reads.
-pub const MAX_DEPLOYED_BYTES: u64 = 4 << 20;
+pub(crate) const MAX_DEPLOYED_BYTES: u64 = 4 << 20;
 
 /// What the plant deployed, as of the last `cellwatch plant` run.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct DeployedPlant {
+pub(crate) struct DeployedPlant {
     /// [`DEPLOYED_SCHEMA`].
     pub schema: String,
     /// The plant's signed operators list's version, when it has one.
@@ -33,7 +33,7 @@ pub struct DeployedPlant {
 
 /// What the plant deployed to one cell's host.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct DeployedCell {
+pub(crate) struct DeployedCell {
     /// Its configuration file, as the plant's folder names it.
     pub config: String,
     /// SHA-256 (hex) of that file, or why it cannot be read.
@@ -54,7 +54,7 @@ pub struct DeployedCell {
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, thiserror::Error)]
 #[serde(transparent)]
 #[error("{0}")]
-pub struct Unreadable(pub String);
+pub(crate) struct Unreadable(pub String);
 
 impl From<std::io::Error> for Unreadable {
     fn from(e: std::io::Error) -> Unreadable {
@@ -65,7 +65,7 @@ impl From<std::io::Error> for Unreadable {
 /// What an agent's answer says: as it should be, and wrong (each with what
 /// to do).
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
-pub struct Judged {
+pub(crate) struct Judged {
     /// What is as it should be.
     pub facts: Vec<String>,
     /// What is wrong.
@@ -73,7 +73,7 @@ pub struct Judged {
 }
 
 /// What a certificate's end means at `now_ms`.
-pub fn expiry(what: &str, not_after_ms: u64, now_ms: u64, j: &mut Judged) {
+pub(crate) fn expiry(what: &str, not_after_ms: u64, now_ms: u64, j: &mut Judged) {
     let day = 86_400_000;
     if not_after_ms <= now_ms {
         j.problems.push(format!(
@@ -97,7 +97,7 @@ pub fn expiry(what: &str, not_after_ms: u64, now_ms: u64, j: &mut Judged) {
 /// Cell `id`'s agent's `about`, judged at `now_ms` against this
 /// version, what was `deployed` to it (when known) and the plant's
 /// operators list's version (when it has one).
-pub fn judge(
+pub(crate) fn judge(
     id: &str,
     about: &AboutPayload,
     deployed: Option<&DeployedCell>,

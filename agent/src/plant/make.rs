@@ -30,7 +30,7 @@ const UNIT: &str = "/usr/lib/systemd/system/cellwatch@.service";
 /// A file cannot be read or written, a certificate made, or a cell's
 /// configuration does not read; files changed by hand are no error here
 /// (they are in [`Made::edited`]).
-pub fn make(inventory: &Inventory) -> Result<Made, PlantError> {
+pub(crate) fn make(inventory: &Inventory) -> Result<Made, PlantError> {
     let layout = Layout::of(inventory);
     let mut w = Writer::open(&layout)?;
     let ca_dir = layout.ca_dir();
@@ -352,7 +352,7 @@ fn operators_list(
 /// # Errors
 /// A rotation under way, no key to rotate, or a file that cannot be
 /// written.
-pub fn rotate(inventory: &Inventory, id: &str) -> Result<Made, PlantError> {
+pub(crate) fn rotate(inventory: &Inventory, id: &str) -> Result<Made, PlantError> {
     let layout = Layout::of(inventory);
     let cell = inventory.cells.get(id).ok_or_else(|| PlantError::Edit {
         path: inventory.path.clone(),
@@ -389,7 +389,7 @@ pub fn rotate(inventory: &Inventory, id: &str) -> Result<Made, PlantError> {
 ///
 /// # Errors
 /// No rotation under way, or a file that cannot be written.
-pub fn finish_rotation(inventory: &Inventory, id: &str) -> Result<Made, PlantError> {
+pub(crate) fn finish_rotation(inventory: &Inventory, id: &str) -> Result<Made, PlantError> {
     let layout = Layout::of(inventory);
     let rotating = layout.rotating(id);
     std::fs::remove_file(&rotating).map_err(|source| PlantError::Write {
@@ -405,7 +405,7 @@ pub fn finish_rotation(inventory: &Inventory, id: &str) -> Result<Made, PlantErr
 ///
 /// # Errors
 /// No such cell, or the certificate cannot be made.
-pub fn renew(inventory: &Inventory, id: &str) -> Result<Vec<PathBuf>, PlantError> {
+pub(crate) fn renew(inventory: &Inventory, id: &str) -> Result<Vec<PathBuf>, PlantError> {
     let layout = Layout::of(inventory);
     let cell = inventory.cells.get(id).ok_or_else(|| PlantError::Edit {
         path: inventory.path.clone(),

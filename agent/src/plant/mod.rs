@@ -16,13 +16,13 @@
 //! - `judge.rs`: an agent's `about` against what was deployed to it
 //!   (pure; the check's and the console's).
 
-pub mod check;
-pub mod edit;
-pub mod files;
-pub mod inventory;
-pub mod judge;
-pub mod layout;
-pub mod make;
+pub(crate) mod check;
+pub(crate) mod edit;
+pub(crate) mod files;
+pub(crate) mod inventory;
+pub(crate) mod judge;
+pub(crate) mod layout;
+pub(crate) mod make;
 pub mod render;
 
 use std::path::PathBuf;

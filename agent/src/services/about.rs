@@ -13,7 +13,7 @@ use crate::payload::{AboutPayload, CertificateAbout, ABOUT_SCHEMA};
 /// What the agent of cell `cell` says of itself: it runs a configuration
 /// hashing to `config_sha256`, is on the bus with the certificate at
 /// `bus_certificate` (if TLS), and signs with `key`.
-pub fn about(
+pub(crate) fn about(
     cell: &str,
     config_sha256: &str,
     bus_certificate: Option<&Path>,

@@ -28,10 +28,10 @@
 //! (`cellwatch_requests_refused_total`), a reply that cannot be sent logged
 //! and counted, through the services' events (`events.rs`).
 
-pub mod about;
+pub(crate) mod about;
 pub mod alarm_server;
 mod events;
-pub mod plant_operators;
+pub(crate) mod plant_operators;
 
 use std::collections::HashMap;
 use std::future::Future;

@@ -78,7 +78,9 @@ pub struct OperatorsSetup<'a> {
 /// # Errors
 /// The operators file or the kept list does not read, or the
 /// administrator's key does not verify the list: the file is named.
-pub fn operators(config: OperatorsSetup<'_>) -> Result<(OperatorKeys, Option<Held>), KeysError> {
+pub(crate) fn operators(
+    config: OperatorsSetup<'_>,
+) -> Result<(OperatorKeys, Option<Held>), KeysError> {
     let from_file = match &config.operators_file {
         Some(path) => OperatorKeys::load(path)?,
         None => OperatorKeys::default(),

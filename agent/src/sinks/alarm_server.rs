@@ -12,14 +12,14 @@ use crate::sinks::Sink;
 use crate::step::CellStep;
 
 /// Feeds the alarm server.
-pub struct AlarmServerSink {
+pub(crate) struct AlarmServerSink {
     /// Takes one step (`AlarmServer::feed`).
     feed: Arc<dyn Fn(&CellStep) + Send + Sync>,
 }
 
 impl AlarmServerSink {
     /// A sink handing every step to `feed`.
-    pub fn new(feed: Arc<dyn Fn(&CellStep) + Send + Sync>) -> AlarmServerSink {
+    pub(crate) fn new(feed: Arc<dyn Fn(&CellStep) + Send + Sync>) -> AlarmServerSink {
         AlarmServerSink { feed }
     }
 }

@@ -21,14 +21,14 @@ pub enum Notice {
 }
 
 /// Turns steps into notices.
-pub struct ConsoleSink {
+pub(crate) struct ConsoleSink {
     /// The printer's inbox; a local, in-process reader.
     tx: mpsc::UnboundedSender<Notice>,
 }
 
 impl ConsoleSink {
     /// A sink that sends notices on `tx`.
-    pub fn new(tx: mpsc::UnboundedSender<Notice>) -> ConsoleSink {
+    pub(crate) fn new(tx: mpsc::UnboundedSender<Notice>) -> ConsoleSink {
         ConsoleSink { tx }
     }
 }

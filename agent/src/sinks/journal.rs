@@ -13,7 +13,7 @@ use crate::step::{CellStep, Input};
 use std::sync::Arc;
 
 /// Writes each step's rows and waits for their commit.
-pub struct JournalSink {
+pub(crate) struct JournalSink {
     journal: Journal,
     /// The last step's rows and its number ([`Journal::stage`]), queued
     /// by `after`.
@@ -22,7 +22,7 @@ pub struct JournalSink {
 
 impl JournalSink {
     /// A sink writing to `journal`.
-    pub fn new(journal: Journal) -> JournalSink {
+    pub(crate) fn new(journal: Journal) -> JournalSink {
         JournalSink {
             journal,
             staged: None,
@@ -40,7 +40,7 @@ impl JournalSink {
 }
 
 /// The rows of `step`.
-pub fn entries(step: &CellStep) -> Vec<Entry> {
+pub(crate) fn entries(step: &CellStep) -> Vec<Entry> {
     let mut rows = Vec::new();
     for ((alarm, transition, at), published) in step.engine.alarms().zip(&step.alarms) {
         rows.push(Entry::Alarm {

@@ -32,7 +32,7 @@ pub struct MetricsSetup {
 }
 
 /// Metrics bookkeeping of one cell.
-pub struct MetricsSink {
+pub(crate) struct MetricsSink {
     metrics: Arc<Metrics>,
     /// Per alarm: kind, severity and whether it is counted as active.
     active: HashMap<String, (AlarmKind, Severity, bool)>,
@@ -64,7 +64,7 @@ impl MetricsSink {
     /// A sink for a cell set up as `setup` says: sets the gauges known
     /// from the configuration (tags unknown at start, learned timer
     /// windows); time in each state is counted from `now`.
-    pub fn new(metrics: Arc<Metrics>, setup: MetricsSetup, now: u64) -> MetricsSink {
+    pub(crate) fn new(metrics: Arc<Metrics>, setup: MetricsSetup, now: u64) -> MetricsSink {
         metrics.tags_unknown.set(setup.tags as i64);
         for mode in &setup.modes {
             metrics.modes.mode(mode, false);

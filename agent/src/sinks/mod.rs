@@ -23,13 +23,13 @@
 //!
 //! To add a sink: implement [`Sink`] and push it in [`crate::agent::start`].
 
-pub mod alarm_server;
-pub mod alertmanager;
-pub mod console;
-pub mod journal;
-pub mod metrics;
-pub mod oee;
-pub mod sparkplug;
+pub(crate) mod alarm_server;
+pub(crate) mod alertmanager;
+pub(crate) mod console;
+pub(crate) mod journal;
+pub(crate) mod metrics;
+pub(crate) mod oee;
+pub(crate) mod sparkplug;
 pub mod zenoh;
 
 use futures_util::future::BoxFuture;

@@ -18,6 +18,7 @@
 pub mod legacy;
 pub mod opcua;
 pub mod pki;
+#[cfg(any(test, feature = "test-kit"))]
 pub mod scripted;
 mod source;
 

@@ -654,7 +654,7 @@ pub(crate) struct DemoArgs {
     #[arg(long, default_value = "cellwatch-demo")]
     pub(crate) state_dir: PathBuf,
     /// Stop after this long (e.g. 60s); default: until Ctrl-C.
-    #[arg(long, value_parser = crate::commands::agent::parse_duration)]
+    #[arg(long, value_parser = parse_duration)]
     pub(crate) duration: Option<std::time::Duration>,
     /// Serve every simulated PLC, bus endpoint and metrics port on a port
     /// the system picks instead of the configurations' (printed as they
@@ -733,4 +733,9 @@ async fn listening(agent: &agent::Agent) -> String {
             .metrics_addr()
             .map_or_else(|| "off".to_string(), |m| format!("http://{m}/metrics"))
     )
+}
+
+/// `--duration`: a duration as written (`60s`, `10m`).
+fn parse_duration(s: &str) -> Result<std::time::Duration, String> {
+    humantime::parse_duration(s).map_err(|e| format!("'{s}' is not a duration ({e})"))
 }

@@ -17,7 +17,7 @@ const DEFAULT_PKI_DIR: &str = "alarm-server-pki";
 /// `[alarm_server]` as written.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RawAlarmServer {
+pub(crate) struct RawAlarmServer {
     listen: Option<Spanned<String>>,
     pki_dir: Option<Spanned<String>>,
     users_file: Option<Spanned<String>>,
@@ -40,7 +40,7 @@ pub struct AlarmServerConfig {
 /// Why `[alarm_server]` is not valid: one problem, placed by the
 /// configuration's validator.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum AlarmServerConfigError {
+pub(crate) enum AlarmServerConfigError {
     /// No `listen`.
     #[error("required: where the server listens, like \"opc.tcp://0.0.0.0:4855\"")]
     NoListen,
@@ -56,11 +56,11 @@ pub enum AlarmServerConfigError {
 }
 
 /// What [`validate`] found.
-pub type Checked = crate::table::Checked<AlarmServerConfig, AlarmServerConfigError>;
+pub(crate) type Checked = crate::table::Checked<AlarmServerConfig, AlarmServerConfigError>;
 
 /// Validates `[alarm_server]` (its table at `raw`'s span), relative paths
 /// from `base`.
-pub fn validate(raw: Spanned<RawAlarmServer>, base: &Path) -> Checked {
+pub(crate) fn validate(raw: Spanned<RawAlarmServer>, base: &Path) -> Checked {
     use AlarmServerConfigError as E;
     let table = raw.span();
     let raw = raw.into_inner();

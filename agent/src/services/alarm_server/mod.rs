@@ -29,7 +29,7 @@
 //! side of an acknowledgement (`cell/session.rs`).
 
 mod conditions;
-pub mod config;
+pub(crate) mod config;
 mod events;
 mod filters;
 mod guidance;

@@ -14,7 +14,7 @@ use crate::sinks::alertmanager::config::AlertmanagerConfig;
 
 /// An alert as Alertmanager's API v2 takes it (`postableAlert`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Alert {
+pub(crate) struct Alert {
     /// What identifies it: `alertname`, `alarm`, `cell`, `area`,
     /// `priority`, `kind`.
     pub labels: BTreeMap<&'static str, String>,
@@ -34,7 +34,7 @@ pub struct Alert {
 
 /// The labels and links every alert of the cell carries.
 #[derive(Debug, Clone)]
-pub struct Labels {
+pub(crate) struct Labels {
     cell: String,
     area: Option<String>,
     console: Option<String>,
@@ -42,7 +42,7 @@ pub struct Labels {
 
 impl Labels {
     /// For `cell`, from its configuration.
-    pub fn new(cell: &str, config: &AlertmanagerConfig) -> Labels {
+    pub(crate) fn new(cell: &str, config: &AlertmanagerConfig) -> Labels {
         Labels {
             cell: cell.into(),
             area: config.area.clone(),
@@ -130,7 +130,7 @@ impl Labels {
 /// alert under the old labels ends as the new one begins, so that a route
 /// on `acknowledged="false"` or `unacknowledged_for` stops notifying.
 #[derive(Debug, Default)]
-pub struct AlertBook {
+pub(crate) struct AlertBook {
     active: BTreeMap<String, Active>,
     /// Ended alerts, by their labels, and the Alertmanagers (bits by
     /// index) still owed them.
@@ -155,7 +155,7 @@ struct Active {
 
 /// One send's content for one Alertmanager.
 #[derive(Debug)]
-pub struct AlertBatch {
+pub(crate) struct AlertBatch {
     /// The Alertmanager's index.
     pub to: usize,
     /// The alerts, active ones with `endsAt` set.
@@ -180,7 +180,7 @@ impl AlertBook {
     /// A book for `alertmanagers` Alertmanagers (at most 64), marking an
     /// alarm unacknowledged for a step of `escalation` once that long
     /// has passed since its raise.
-    pub fn new(alertmanagers: usize, escalation: &[(String, Duration)]) -> AlertBook {
+    pub(crate) fn new(alertmanagers: usize, escalation: &[(String, Duration)]) -> AlertBook {
         let all = if alertmanagers >= 64 {
             u64::MAX
         } else {
@@ -234,7 +234,7 @@ impl AlertBook {
 
     /// Takes `alarm`'s latest payload, at `now` (ms): whether anything is
     /// to be sent.
-    pub fn take(&mut self, labels: &Labels, alarm: &AlarmPayload, now: u64) -> bool {
+    pub(crate) fn take(&mut self, labels: &Labels, alarm: &AlarmPayload, now: u64) -> bool {
         let alerting = matches!(
             alarm.state,
             AlarmState::ActiveUnacknowledged | AlarmState::ActiveAcknowledged
@@ -285,7 +285,7 @@ impl AlertBook {
     /// Time reached `now` (ms): the alerts unacknowledged long enough for
     /// their next step of escalation get it, and those past their response
     /// time the `overdue` annotation. Whether anything changed.
-    pub fn escalate(&mut self, now: u64) -> bool {
+    pub(crate) fn escalate(&mut self, now: u64) -> bool {
         let mut moved = Vec::new();
         for (id, a) in &self.active {
             let alert = self.escalated(a.alert.clone(), a, now);
@@ -314,7 +314,7 @@ impl AlertBook {
 
     /// When (ms) an alert unacknowledged now reaches its next step of
     /// escalation or becomes overdue, the earliest of them.
-    pub fn next_escalation(&self, now: u64) -> Option<u64> {
+    pub(crate) fn next_escalation(&self, now: u64) -> Option<u64> {
         let steps = self
             .active
             .values()
@@ -340,13 +340,13 @@ impl AlertBook {
     }
 
     /// Whether Alertmanager `to` has a change it was not sent.
-    pub fn changed(&self, to: usize) -> bool {
+    pub(crate) fn changed(&self, to: usize) -> bool {
         self.changed & (1 << to) != 0
     }
 
     /// What to send to Alertmanager `to`: every active alert, holding
     /// until `holds_until` (RFC 3339), and the ended ones it is owed.
-    pub fn batch(&self, to: usize, holds_until: &str) -> AlertBatch {
+    pub(crate) fn batch(&self, to: usize, holds_until: &str) -> AlertBatch {
         let bit = 1 << to;
         let mut alerts: Vec<Alert> = self
             .active
@@ -366,7 +366,7 @@ impl AlertBook {
         AlertBatch { to, alerts, ended }
     }
     /// Alertmanager `batch.to` took `batch`.
-    pub fn sent(&mut self, batch: &AlertBatch) {
+    pub(crate) fn sent(&mut self, batch: &AlertBatch) {
         let bit = 1 << batch.to;
         for id in &batch.ended {
             if let Some((_, owed)) = self.ended.get_mut(id) {
@@ -384,13 +384,13 @@ impl AlertBook {
     }
 
     /// Alerts active now.
-    pub fn active(&self) -> usize {
+    pub(crate) fn active(&self) -> usize {
         self.active.len()
     }
 
     /// Changes not yet taken by every Alertmanager: ended alerts owed,
     /// plus the active ones while any Alertmanager has a change unsent.
-    pub fn unsent(&self) -> usize {
+    pub(crate) fn unsent(&self) -> usize {
         let active = if self.changed == 0 {
             0
         } else {

@@ -28,7 +28,7 @@ const MAX_RESEND: Duration = Duration::from_secs(3600);
 /// `[alertmanager]` as written.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RawAlertmanager {
+pub(crate) struct RawAlertmanager {
     #[serde(default)]
     urls: Vec<Spanned<String>>,
     area: Option<String>,
@@ -41,7 +41,7 @@ pub struct RawAlertmanager {
 /// `[alertmanager.tls]` as written.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RawAlertmanagerTls {
+pub(crate) struct RawAlertmanagerTls {
     ca: Spanned<String>,
     cert: Option<Spanned<String>>,
     key: Option<Spanned<String>>,
@@ -95,7 +95,7 @@ pub struct AlertmanagerTls {
 /// Why `[alertmanager]` is not valid: one problem, placed by the
 /// configuration's validator.
 #[derive(Debug, thiserror::Error)]
-pub enum AlertmanagerConfigError {
+pub(crate) enum AlertmanagerConfigError {
     /// No URL.
     #[error("name at least one Alertmanager, like [\"http://alertmanager:9093\"]")]
     NoUrl,
@@ -157,11 +157,11 @@ pub enum AlertmanagerConfigError {
 
 /// What [`validate`] found (warnings: a plain-HTTP Alertmanager off this
 /// machine).
-pub type Checked = crate::table::Checked<AlertmanagerConfig, AlertmanagerConfigError>;
+pub(crate) type Checked = crate::table::Checked<AlertmanagerConfig, AlertmanagerConfigError>;
 
 /// Validates `[alertmanager]` (its table at `raw`'s span), relative paths
 /// from `base`.
-pub fn validate(raw: Spanned<RawAlertmanager>, base: &Path) -> Checked {
+pub(crate) fn validate(raw: Spanned<RawAlertmanager>, base: &Path) -> Checked {
     use AlertmanagerConfigError as E;
     let table = raw.span();
     let raw = raw.into_inner();

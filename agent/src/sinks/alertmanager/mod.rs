@@ -26,7 +26,7 @@
 //! alarm, active or ended.
 
 mod book;
-pub mod config;
+pub(crate) mod config;
 mod events;
 
 use std::sync::{Arc, Mutex};
@@ -44,7 +44,7 @@ use crate::metrics::Metrics;
 use crate::step::CellStep;
 use events::AlertmanagerEvent;
 
-pub use book::{Alert, AlertBatch, AlertBook, Labels};
+pub(crate) use book::{Alert, AlertBook, Labels};
 
 /// How long one send may take.
 const SEND_TIMEOUT: Duration = Duration::from_secs(10);
@@ -78,7 +78,7 @@ impl Shared {
 }
 
 /// Hands the cell's alarms to the [`Pusher`].
-pub struct AlertmanagerSink {
+pub(crate) struct AlertmanagerSink {
     labels: Labels,
     shared: Arc<Shared>,
     metrics: Arc<Metrics>,
@@ -124,7 +124,7 @@ impl Drop for AlertmanagerSink {
 
 /// Sends the book to every Alertmanager: on a change, every resend
 /// interval, and again after a failure, with backoff.
-pub struct Pusher {
+pub(crate) struct Pusher {
     urls: Vec<String>,
     resend: Duration,
     client: Client,
@@ -145,7 +145,7 @@ pub struct TlsError(#[from] crate::bus::client_tls::ClientTlsError);
 /// Why a batch of alerts did not reach an Alertmanager (it is sent
 /// again).
 #[derive(Debug, thiserror::Error)]
-pub enum SendError {
+pub(crate) enum SendError {
     /// The alerts could not be encoded.
     #[error(transparent)]
     Encode(#[from] serde_json::Error),
@@ -173,7 +173,7 @@ pub enum SendError {
 ///
 /// # Errors
 /// A TLS file cannot be read or used.
-pub fn start(
+pub(crate) fn start(
     cell: &str,
     config: &AlertmanagerConfig,
     metrics: Arc<Metrics>,
@@ -205,7 +205,7 @@ pub fn start(
 ///
 /// # Errors
 /// A TLS file cannot be read or used.
-pub fn check(config: &AlertmanagerConfig) -> Result<(), TlsError> {
+pub(crate) fn check(config: &AlertmanagerConfig) -> Result<(), TlsError> {
     client(config.tls.as_ref()).map(drop)
 }
 
@@ -242,7 +242,7 @@ struct Due {
 impl Pusher {
     /// Sends until the sink is gone (the cell loop has handed it its last
     /// step), then once more what is owed (bounded by the send timeout).
-    pub async fn run(self) {
+    pub(crate) async fn run(self) {
         let now = tokio::time::Instant::now();
         let mut due = vec![
             Due {

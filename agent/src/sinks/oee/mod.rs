@@ -22,10 +22,10 @@ use crate::journal::{JournalError, ReportInput};
 use crate::metrics::Metrics;
 use crate::sinks::Sink;
 use crate::step::{CellStep, Input};
-pub use crate::step::{OeeNow, OeeWatch};
+pub(crate) use crate::step::{OeeNow, OeeWatch};
 
 /// Feeds the live OEE, sets its metrics and tells its watchers.
-pub struct OeeSink {
+pub(crate) struct OeeSink {
     metrics: Arc<Metrics>,
     live: LiveOee,
     now: watch::Sender<Option<OeeNow>>,
@@ -43,7 +43,7 @@ impl OeeSink {
     ///
     /// # Errors
     /// The journal exists but cannot be read.
-    pub fn start(
+    pub(crate) fn start(
         config: &config::OeeConfig,
         metrics: &Arc<Metrics>,
         journal: &Path,
@@ -68,12 +68,12 @@ impl OeeSink {
     }
 
     /// A watch of the figures as each tick computes them.
-    pub fn watch(&self) -> OeeWatch {
+    pub(crate) fn watch(&self) -> OeeWatch {
         self.now.subscribe()
     }
 
     /// A sink judging by `config`, from nothing.
-    pub fn new(metrics: Arc<Metrics>, config: &config::OeeConfig) -> OeeSink {
+    pub(crate) fn new(metrics: Arc<Metrics>, config: &config::OeeConfig) -> OeeSink {
         OeeSink {
             metrics,
             live: LiveOee::new(config.rules.clone(), shipped_causes()),

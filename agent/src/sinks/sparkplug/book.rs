@@ -18,20 +18,20 @@ use super::store::HeldRow;
 use super::tahu::{
     DataType, Metric, Payload, PropertySet, PropertyValue, PropertyValueKind, Value,
 };
-pub use super::value::MetricValue;
+pub(crate) use super::value::MetricValue;
 use crate::step::{CellStep, Input};
 
 mod oee;
 
 /// The node's birth/death sequence metric.
-pub const BD_SEQ: &str = "bdSeq";
+pub(crate) const BD_SEQ: &str = "bdSeq";
 
 /// The node's rebirth control: a host writes `true` to it (NCMD) to have
 /// the node and its device born again.
-pub const REBIRTH: &str = "Node Control/Rebirth";
+pub(crate) const REBIRTH: &str = "Node Control/Rebirth";
 
 /// [`REBIRTH`]'s alias.
-pub const REBIRTH_ALIAS: u64 = 1;
+pub(crate) const REBIRTH_ALIAS: u64 = 1;
 
 /// The first alias of the device's metrics (the node's are below).
 const FIRST_DEVICE_ALIAS: u64 = 16;
@@ -78,7 +78,7 @@ struct OeeMetrics {
 
 /// A change waiting to be published.
 #[derive(Debug, Clone, PartialEq)]
-pub struct MetricChange {
+pub(crate) struct MetricChange {
     /// Which metric (its index among the device's).
     entry: usize,
     /// The new value; `None`: null.
@@ -89,7 +89,7 @@ pub struct MetricChange {
 
 /// An alarm the device declares from the start.
 #[derive(Debug, Clone)]
-pub struct Declared {
+pub(crate) struct Declared {
     /// Its id.
     pub id: String,
     /// What raises it.
@@ -101,7 +101,7 @@ pub struct Declared {
 }
 
 /// The alarms of an engine's catalogue, as the device declares them.
-pub fn declared(catalogue: &[cellwatch_models::engine::CatalogueEntry]) -> Vec<Declared> {
+pub(crate) fn declared(catalogue: &[cellwatch_models::engine::CatalogueEntry]) -> Vec<Declared> {
     catalogue
         .iter()
         .map(|e| Declared {
@@ -115,7 +115,7 @@ pub fn declared(catalogue: &[cellwatch_models::engine::CatalogueEntry]) -> Vec<D
 
 /// The device's metrics and what waits to be published.
 #[derive(Debug)]
-pub struct MetricBook {
+pub(crate) struct MetricBook {
     entries: Vec<Entry>,
     /// Per metric name: its index (for changes read back from the store).
     names: HashMap<String, usize>,
@@ -148,7 +148,7 @@ impl MetricBook {
     /// (index in the configuration, name), parts counted or not, OEE
     /// judged or not; at most `max_held` changes wait. The device is alive
     /// until a step says its PLC link went down.
-    pub fn new(
+    pub(crate) fn new(
         alarms: &[Declared],
         tags: &[(usize, String)],
         counts_parts: bool,
@@ -266,7 +266,7 @@ impl MetricBook {
 
     /// Takes what `step` changed; whether anything did (a change of the
     /// PLC link counts).
-    pub fn apply(&mut self, step: &CellStep) -> bool {
+    pub(crate) fn apply(&mut self, step: &CellStep) -> bool {
         let before = (self.held.len(), self.dropped, self.up);
         for (state, _, at) in step.engine.states() {
             let (fault_type, element) = match state {
@@ -305,19 +305,19 @@ impl MetricBook {
     }
 
     /// Whether the device is alive: its PLC link up.
-    pub fn device_up(&self) -> bool {
+    pub(crate) fn device_up(&self) -> bool {
         self.up
     }
 
     /// Whether the device died since it was last born (its DDEATH is
     /// due).
-    pub fn died(&self) -> bool {
+    pub(crate) fn died(&self) -> bool {
         self.death.is_some()
     }
 
     /// The changes that came before the device's death, to be sent before
     /// its DDEATH; the death is taken as told.
-    pub fn take_before_death(&mut self) -> Vec<MetricChange> {
+    pub(crate) fn take_before_death(&mut self) -> Vec<MetricChange> {
         let n = self.death.take().unwrap_or(0).min(self.held.len());
         self.held.drain(..n).collect()
     }
@@ -339,23 +339,23 @@ impl MetricBook {
     }
 
     /// Whether a metric was added since the last birth.
-    pub fn grown(&self) -> bool {
+    pub(crate) fn grown(&self) -> bool {
         self.grown
     }
 
     /// How many changes wait.
-    pub fn held(&self) -> usize {
+    pub(crate) fn held(&self) -> usize {
         self.held.len()
     }
 
     /// The changes dropped past the bound since the last call.
-    pub fn take_dropped(&mut self) -> u64 {
+    pub(crate) fn take_dropped(&mut self) -> u64 {
         std::mem::take(&mut self.dropped)
     }
 
     /// Takes at most `n` of the waiting changes, oldest first; none from
     /// after the device's death while it is not yet told.
-    pub fn take_changes(&mut self, n: usize) -> Vec<MetricChange> {
+    pub(crate) fn take_changes(&mut self, n: usize) -> Vec<MetricChange> {
         let mut n = n.min(self.held.len());
         if let Some(before) = &mut self.death {
             n = n.min(*before);
@@ -366,14 +366,14 @@ impl MetricBook {
 
     /// Takes every waiting change, oldest first (to be kept on disk: the
     /// node cannot publish, and its next birth tells the device anew).
-    pub fn take_all(&mut self) -> Vec<MetricChange> {
+    pub(crate) fn take_all(&mut self) -> Vec<MetricChange> {
         self.death = None;
         self.held.drain(..).collect()
     }
 
     /// Puts `changes`, taken but not published, back before the waiting
     /// ones.
-    pub fn hold_again(&mut self, changes: Vec<MetricChange>) {
+    pub(crate) fn hold_again(&mut self, changes: Vec<MetricChange>) {
         if let Some(before) = &mut self.death {
             *before += changes.len();
         }
@@ -383,7 +383,7 @@ impl MetricBook {
     }
 
     /// `changes` as the store keeps them: by metric name.
-    pub fn to_rows(&self, changes: Vec<MetricChange>) -> Vec<HeldRow> {
+    pub(crate) fn to_rows(&self, changes: Vec<MetricChange>) -> Vec<HeldRow> {
         changes
             .into_iter()
             .map(|c| HeldRow {
@@ -399,7 +399,7 @@ impl MetricBook {
     /// with how many name a metric the device no longer declares (an
     /// exported tag taken out of the configuration, an alarm first seen
     /// in an earlier run).
-    pub fn from_rows(&self, rows: Vec<HeldRow>) -> (Vec<MetricChange>, u64) {
+    pub(crate) fn changes_of(&self, rows: Vec<HeldRow>) -> (Vec<MetricChange>, u64) {
         let mut unknown = 0;
         let changes = rows
             .into_iter()
@@ -420,7 +420,7 @@ impl MetricBook {
 
     /// The node's birth: sequence 0, `bd_seq`, the rebirth control. It
     /// tells the device anew: a death not yet told is forgotten.
-    pub fn node_birth(&mut self, bd_seq: u64, now: u64) -> Payload {
+    pub(crate) fn node_birth(&mut self, bd_seq: u64, now: u64) -> Payload {
         self.death = None;
         Payload {
             timestamp: Some(now),
@@ -443,7 +443,7 @@ impl MetricBook {
     /// The device's birth at sequence `seq`: every metric with its name,
     /// alias, type and current value. The changes waiting until now are
     /// older than it: they are handed back to be sent as history.
-    pub fn device_birth(&mut self, seq: u64, now: u64) -> (Payload, Vec<MetricChange>) {
+    pub(crate) fn device_birth(&mut self, seq: u64, now: u64) -> (Payload, Vec<MetricChange>) {
         self.grown = false;
         self.death = None;
         let metrics = self
@@ -475,7 +475,7 @@ impl MetricBook {
 
     /// Data at sequence `seq`: `changes` by alias, flagged historical or
     /// not.
-    pub fn data(
+    pub(crate) fn data(
         &self,
         changes: Vec<MetricChange>,
         seq: u64,
@@ -519,7 +519,7 @@ fn bd_seq_metric(bd_seq: u64, now: u64) -> Metric {
 }
 
 /// The node's death (its MQTT will): `bd_seq`, no sequence number.
-pub fn node_death(bd_seq: u64, now: u64) -> Payload {
+pub(crate) fn node_death(bd_seq: u64, now: u64) -> Payload {
     Payload {
         timestamp: Some(now),
         metrics: vec![bd_seq_metric(bd_seq, now)],
@@ -529,7 +529,7 @@ pub fn node_death(bd_seq: u64, now: u64) -> Payload {
 
 /// The device's death at sequence `seq`: no metric, the host takes every
 /// metric of the device as stale until its next birth.
-pub fn device_death(seq: u64, now: u64) -> Payload {
+pub(crate) fn device_death(seq: u64, now: u64) -> Payload {
     Payload {
         timestamp: Some(now),
         seq: Some(seq),
@@ -539,7 +539,7 @@ pub fn device_death(seq: u64, now: u64) -> Payload {
 
 /// Whether a node command asks for a rebirth: [`REBIRTH`] (by name or
 /// alias) set to `true`.
-pub fn asks_rebirth(command: &Payload) -> bool {
+pub(crate) fn asks_rebirth(command: &Payload) -> bool {
     command.metrics.iter().any(|m| {
         (m.name.as_deref() == Some(REBIRTH) || m.alias == Some(REBIRTH_ALIAS))
             && m.value == Some(Value::BooleanValue(true))

@@ -13,7 +13,7 @@ use super::shared::SparkplugError;
 /// # Errors
 /// A file cannot be read, is readable by others (a key, the password) or
 /// is not what it should be.
-pub fn check(config: &SparkplugConfig) -> Result<(), SparkplugError> {
+pub(crate) fn check(config: &SparkplugConfig) -> Result<(), SparkplugError> {
     if let Some(f) = config
         .credentials
         .as_ref()

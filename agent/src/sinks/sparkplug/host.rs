@@ -8,7 +8,7 @@
 
 /// What one `STATE` message says.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct HostState {
+pub(crate) struct HostState {
     /// The host is online.
     pub online: bool,
     /// Its timestamp (ms since the epoch); `None` for Sparkplug 2's
@@ -20,7 +20,7 @@ impl HostState {
     /// Reads a `STATE` payload: Sparkplug 3.0's JSON
     /// (`{"online": true, "timestamp": …}`) or the older `ONLINE` and
     /// `OFFLINE`; `None` for anything else.
-    pub fn parse(payload: &[u8]) -> Option<HostState> {
+    pub(crate) fn parse(payload: &[u8]) -> Option<HostState> {
         #[derive(serde::Deserialize)]
         struct Json {
             online: bool,
@@ -48,7 +48,7 @@ impl HostState {
 
 /// What a `STATE` message means for the node.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum HostSaid {
+pub(crate) enum HostSaid {
     /// The host is online.
     Online,
     /// The host is offline.
@@ -59,7 +59,7 @@ pub enum HostSaid {
 
 impl HostSaid {
     /// The label of `cellwatch_sparkplug_primary_host_states_total`.
-    pub fn as_str(self) -> &'static str {
+    pub(crate) fn as_str(self) -> &'static str {
         match self {
             HostSaid::Online => "online",
             HostSaid::Offline => "offline",
@@ -70,7 +70,7 @@ impl HostSaid {
 
 /// The timestamps heard from the primary host, across MQTT sessions.
 #[derive(Debug, Default, Clone)]
-pub struct PrimaryHost {
+pub(crate) struct PrimaryHost {
     /// The newest timestamp of any `STATE` that counted.
     last: Option<u64>,
     /// The newest timestamp of an online `STATE` that counted.
@@ -80,7 +80,7 @@ pub struct PrimaryHost {
 impl PrimaryHost {
     /// Judges `state` against what was heard before, and remembers it if
     /// it counts.
-    pub fn heard(&mut self, state: HostState) -> HostSaid {
+    pub(crate) fn heard(&mut self, state: HostState) -> HostSaid {
         let not_older = |than: Option<u64>| match (state.timestamp, than) {
             (Some(t), Some(before)) => t >= before,
             _ => true,

@@ -33,16 +33,16 @@
 //! - `events.rs`: what it logs and counts.
 //! - `shared.rs`: what the sink and the session share.
 
-pub mod book;
+pub(crate) mod book;
 pub mod config;
 mod events;
 mod files;
-pub mod host;
-pub mod session;
+pub(crate) mod host;
+pub(crate) mod session;
 mod shared;
-pub mod store;
-pub mod tahu;
-pub mod topics;
+pub(crate) mod store;
+pub(crate) mod tahu;
+pub(crate) mod topics;
 mod value;
 
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -55,9 +55,9 @@ use tokio::sync::Notify;
 use self::book::{declared, MetricBook};
 use self::config::SparkplugConfig;
 use self::events::SparkplugEvent;
-pub use self::files::check;
+pub(crate) use self::files::check;
 use self::shared::Shared;
-pub use self::shared::SparkplugError;
+pub(crate) use self::shared::SparkplugError;
 use self::store::{store_path, HeldStore};
 use crate::metrics::Metrics;
 use crate::sinks::Sink;
@@ -65,7 +65,7 @@ use crate::step::CellStep;
 use crate::step::OeeWatch;
 
 /// The sink for the cell loop.
-pub struct SparkplugSink {
+pub(crate) struct SparkplugSink {
     shared: Arc<Shared>,
     metrics: Arc<Metrics>,
     /// The OEE sink's figures, read after each step it handled first.
@@ -90,7 +90,7 @@ pub struct SparkplugCell<'a> {
 /// # Errors
 /// A TLS or password file cannot be read or used, or the store of held
 /// changes beside the journal cannot be opened.
-pub fn start(
+pub(crate) fn start(
     cell: &SparkplugCell<'_>,
     config: &SparkplugConfig,
     catalogue: &[cellwatch_models::engine::CatalogueEntry],

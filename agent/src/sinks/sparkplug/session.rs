@@ -91,7 +91,7 @@ struct Link {
 }
 
 /// The edge node's session, ready to run.
-pub struct Session {
+pub(crate) struct Session {
     options: MqttOptions,
     /// `host:port`, for logs.
     broker: String,
@@ -177,7 +177,7 @@ impl Session {
     }
 
     /// Runs until the sink closes: then says NDEATH and disconnects.
-    pub async fn run(self) {
+    pub(crate) async fn run(self) {
         let (client, eventloop) = AsyncClient::new(self.options.clone(), REQUESTS);
         let (link_tx, mut link) = watch::channel(Link {
             connected: false,
@@ -461,7 +461,7 @@ impl Session {
             let Some(last) = rows.last().map(|r| r.id) else {
                 return true;
             };
-            let (changes, unknown) = self.shared.book().from_rows(rows);
+            let (changes, unknown) = self.shared.book().changes_of(rows);
             if unknown > 0 {
                 SparkplugEvent::Undeclared { count: unknown }.emit(&self.metrics.sparkplug);
             }
@@ -499,7 +499,7 @@ impl Session {
                 }
                 .emit(&self.metrics.sparkplug);
                 let mut book = self.shared.book();
-                let (changes, _) = book.from_rows(kept);
+                let (changes, _) = book.changes_of(kept);
                 book.hold_again(changes);
             }
         }

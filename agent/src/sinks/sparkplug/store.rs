@@ -16,7 +16,7 @@ use rusqlite::{params, Connection};
 use super::value::MetricValue;
 
 /// The store's file for the journal at `journal`.
-pub fn store_path(journal: &Path) -> PathBuf {
+pub(crate) fn store_path(journal: &Path) -> PathBuf {
     let mut name = journal.as_os_str().to_owned();
     name.push(".sparkplug");
     PathBuf::from(name)
@@ -35,7 +35,7 @@ pub struct StoreError {
 
 /// One held change as stored.
 #[derive(Debug, Clone, PartialEq)]
-pub struct HeldRow {
+pub(crate) struct HeldRow {
     /// Its place in the store (0 until stored).
     pub id: i64,
     /// The metric's name (`Alarms/ese/Active`).
@@ -48,7 +48,7 @@ pub struct HeldRow {
 
 /// The store, open.
 #[derive(Debug)]
-pub struct HeldStore {
+pub(crate) struct HeldStore {
     connection: Connection,
     path: String,
     /// The most rows held; past it the oldest are dropped.
@@ -79,7 +79,7 @@ impl HeldStore {
     ///
     /// # Errors
     /// The file cannot be opened or is not the store.
-    pub fn open(path: &Path, max_rows: usize) -> Result<(HeldStore, u64), StoreError> {
+    pub(crate) fn open(path: &Path, max_rows: usize) -> Result<(HeldStore, u64), StoreError> {
         let shown = path.display().to_string();
         let bad = |source| StoreError {
             path: shown.clone(),
@@ -108,7 +108,7 @@ impl HeldStore {
     }
 
     /// How many changes are held.
-    pub fn rows(&self) -> usize {
+    pub(crate) fn rows(&self) -> usize {
         self.rows
     }
 
@@ -117,7 +117,7 @@ impl HeldStore {
     ///
     /// # Errors
     /// SQLite cannot write.
-    pub fn append(&mut self, rows: &[HeldRow]) -> Result<u64, StoreError> {
+    pub(crate) fn append(&mut self, rows: &[HeldRow]) -> Result<u64, StoreError> {
         if rows.is_empty() {
             return Ok(0);
         }
@@ -169,7 +169,7 @@ impl HeldStore {
     ///
     /// # Errors
     /// SQLite cannot read.
-    pub fn oldest(&self, n: usize) -> Result<Vec<HeldRow>, StoreError> {
+    pub(crate) fn oldest(&self, n: usize) -> Result<Vec<HeldRow>, StoreError> {
         let mut select = self
             .connection
             .prepare_cached("SELECT id, metric, kind, value, at FROM held ORDER BY id LIMIT ?1")
@@ -193,7 +193,7 @@ impl HeldStore {
     ///
     /// # Errors
     /// SQLite cannot write.
-    pub fn forget_through(&mut self, id: i64) -> Result<(), StoreError> {
+    pub(crate) fn forget_through(&mut self, id: i64) -> Result<(), StoreError> {
         let gone = self
             .connection
             .execute("DELETE FROM held WHERE id <= ?1", [id])
@@ -206,7 +206,7 @@ impl HeldStore {
     ///
     /// # Errors
     /// SQLite cannot read.
-    pub fn last_bd_seq(&self) -> Result<Option<u64>, StoreError> {
+    pub(crate) fn last_bd_seq(&self) -> Result<Option<u64>, StoreError> {
         let mut select = self
             .connection
             .prepare_cached("SELECT value FROM node WHERE key = 'bd_seq'")
@@ -222,7 +222,7 @@ impl HeldStore {
     ///
     /// # Errors
     /// SQLite cannot write.
-    pub fn keep_bd_seq(&mut self, bd_seq: u64) -> Result<(), StoreError> {
+    pub(crate) fn keep_bd_seq(&mut self, bd_seq: u64) -> Result<(), StoreError> {
         self.connection
             .execute(
                 "INSERT INTO node (key, value) VALUES ('bd_seq', ?1)

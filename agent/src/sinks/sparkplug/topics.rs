@@ -5,11 +5,11 @@
 use super::config::SparkplugConfig;
 
 /// The Sparkplug B namespace of every topic.
-pub const NAMESPACE: &str = "spBv1.0";
+pub(crate) const NAMESPACE: &str = "spBv1.0";
 
 /// The topics of one edge node.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Topics {
+pub(crate) struct Topics {
     /// The node's birth.
     pub nbirth: String,
     /// The node's death (its will, and its last word on a clean stop).
@@ -30,7 +30,7 @@ pub struct Topics {
 
 impl Topics {
     /// The topics of `config`'s node and device.
-    pub fn of(config: &SparkplugConfig) -> Topics {
+    pub(crate) fn of(config: &SparkplugConfig) -> Topics {
         let node = |kind: &str| {
             format!(
                 "{NAMESPACE}/{}/{kind}/{}",

@@ -5,7 +5,7 @@ use super::tahu::Value;
 
 /// A metric's value.
 #[derive(Debug, Clone, PartialEq)]
-pub enum MetricValue {
+pub(crate) enum MetricValue {
     /// A Boolean.
     Boolean(bool),
     /// A string.

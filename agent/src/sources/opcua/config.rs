@@ -238,7 +238,7 @@ impl OpcUaConfig {
 /// `[opcua]` as written.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RawOpcUa {
+pub(crate) struct RawOpcUa {
     pub(crate) endpoint: Spanned<String>,
     pub(crate) security_policy: Option<Spanned<String>>,
     pub(crate) security_mode: Option<Spanned<String>>,
@@ -263,7 +263,7 @@ pub struct RawOpcUa {
 /// `[[opcua.events]]`: the PLC's own alarms, read from a notifier.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RawEvents {
+pub(crate) struct RawEvents {
     pub(crate) source: Option<Spanned<String>>,
     pub(crate) prefix: Option<Spanned<String>>,
     pub(crate) min_severity: Option<Spanned<i64>>,
@@ -272,7 +272,7 @@ pub struct RawEvents {
 /// `[opcua.identity]` as written.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RawIdentity {
+pub(crate) struct RawIdentity {
     pub(crate) kind: Spanned<String>,
     pub(crate) user: Option<String>,
     pub(crate) password_env: Option<String>,

@@ -40,7 +40,7 @@ use std::time::Duration;
 
 mod client;
 mod conditions;
-pub mod config;
+pub(crate) mod config;
 mod context;
 mod delivery;
 mod error;

@@ -54,7 +54,7 @@ impl MetricBook {
 
     /// Takes the OEE figures of `now`: the changes worth sending are held
     /// (the module's doc says which); whether any was.
-    pub fn oee(&mut self, now: &OeeNow) -> bool {
+    pub(crate) fn oee(&mut self, now: &OeeNow) -> bool {
         let Some(metrics) = self.oee else {
             return false;
         };

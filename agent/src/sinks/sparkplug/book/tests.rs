@@ -263,7 +263,7 @@ fn held_changes_go_to_the_store_by_name_and_come_back_to_the_next_run() {
     let next = MetricBook::new(&[], &[(4, "spindle_temperature".into())], false, false, 10);
     let mut gone = rows[0].clone();
     gone.metric = "Tags/removed".into();
-    let (changes, unknown) = next.from_rows(vec![rows[0].clone(), gone, rows[1].clone()]);
+    let (changes, unknown) = next.changes_of(vec![rows[0].clone(), gone, rows[1].clone()]);
     assert_eq!(unknown, 1);
     let data = next.data(changes, 2, 200, true);
     assert_eq!(

@@ -20,11 +20,11 @@ mod generated {
     include!("generated.rs");
 }
 
-pub use generated::payload::{metric::Value, Metric, PropertySet, PropertyValue};
-pub use generated::{DataType, Payload};
+pub(crate) use generated::payload::{metric::Value, Metric, PropertySet, PropertyValue};
+pub(crate) use generated::{DataType, Payload};
 
 /// Property values' own oneof.
-pub use generated::payload::property_value::Value as PropertyValueKind;
+pub(crate) use generated::payload::property_value::Value as PropertyValueKind;
 
 #[cfg(test)]
 mod tests {
