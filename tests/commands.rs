@@ -12,7 +12,7 @@ use std::time::Duration;
 
 use cellwatch::operator::{Action, Command, OperatorKey};
 use cellwatch::sim::moulding::MouldingBus;
-use cellwatch_models::legacy::{Decoded, Decoder};
+use cellwatch_models::at_bus::{Decoded, Decoder};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
 use crate::spawned::{kim, query};
@@ -81,7 +81,7 @@ fn command_rows(db: &Path) -> Vec<(String, String, String, i64, bool, bool)> {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn refusals_before_the_signature_are_summarised_per_source_reason_and_minute() {
     let dir = tempfile::tempdir().unwrap();
-    let (_bus, server, agent, client, _) = crate::legacy::moulding_agent(
+    let (_bus, server, agent, client, _) = crate::at_bus::moulding_agent(
         dir.path(),
         &crate::spawned::operators_file(&[Action::Ack]),
         false,
@@ -194,7 +194,7 @@ async fn control_characters_are_refused_by_the_cli_and_the_agent_and_escaped_in_
         )
         .unwrap();
     }
-    let (_bus, server, agent, client, port) = crate::legacy::moulding_agent(
+    let (_bus, server, agent, client, port) = crate::at_bus::moulding_agent(
         dir.path(),
         &crate::spawned::operators_file(&Action::ALL),
         false,

@@ -42,7 +42,7 @@
 //!   validated, assembled into a [`config::CellConfig`]. It stands above
 //!   the components: each component owns its table (raw, validated, its
 //!   check) in its own `config.rs` (`sources/opcua/`,
-//!   `sources/legacy/`, `bus/`, `journal/`, `sinks/alertmanager/`,
+//!   `sources/at_bus/`, `bus/`, `journal/`, `sinks/alertmanager/`,
 //!   `sinks/sparkplug/`, `sinks/oee/`, `services/alarm_server/`), and a
 //!   component reads only its own part.
 //! - [`tags`]: a cell's tags as configured (address, type, deadband,

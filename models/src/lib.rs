@@ -20,7 +20,7 @@
 //! - [`expr`]: naive expression trees, the reference for tests.
 //! - [`alarm`]: alarms and their ISA-18.2 lifecycle.
 //! - [`engine`]: the per-cell engine: tags, check sets, alarms, machine state.
-//! - [`legacy`]: the `@`-framed serial protocol of paper 002 (frames, FCS, end codes).
+//! - [`at_bus`]: the `@`-framed serial protocol of paper 002 (frames, FCS, end codes).
 //! - [`limit`]: limit alarms (HH/H/L/LL) on numbers, with deadband and delays.
 //! - [`machinery`]: the state machines of OPC UA for Machinery
 //!   (`MachineryItemState`, `MachineryOperationMode`) read as numbers.
@@ -33,6 +33,7 @@
 //!   drift warnings.
 
 pub mod alarm;
+pub mod at_bus;
 pub mod comments;
 pub mod compiled;
 pub mod consequence;
@@ -40,7 +41,6 @@ pub mod engine;
 pub mod explain;
 pub mod expr;
 pub mod kpi;
-pub mod legacy;
 pub mod limit;
 pub mod logic;
 pub mod machinery;

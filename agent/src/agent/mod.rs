@@ -735,7 +735,7 @@ fn signing_key(config: &CellConfig) -> Result<Arc<AgentKey>, StartError> {
 /// source only what it reads of them.
 fn source_for(config: &CellConfig, tags: Vec<TagConfig>) -> Box<dyn Source> {
     match (&config.opcua, &config.legacy) {
-        (_, Some(bus)) => Box::new(crate::sources::legacy::LegacySource::new(bus.clone(), tags)),
+        (_, Some(bus)) => Box::new(crate::sources::at_bus::AtBusSource::new(bus.clone(), tags)),
         (Some(ua), None) => Box::new(crate::sources::opcua::OpcUaSource::new(
             &config.cell,
             ua.clone(),

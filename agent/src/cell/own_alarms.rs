@@ -67,14 +67,14 @@ pub(crate) fn own_alarms(c: &CellConfig) -> Vec<OwnAlarm> {
         let mut units: Vec<u8> = c
             .tags
             .iter()
-            .filter_map(|t| crate::config::legacy::BusNode::parse(&t.node_id).ok())
+            .filter_map(|t| crate::config::at_bus::BusNode::parse(&t.node_id).ok())
             .map(|n| n.unit)
             .collect();
         units.sort_unstable();
         units.dedup();
         for unit in units {
             out.push(system(
-                crate::sources::legacy::unit_problem(unit),
+                crate::sources::at_bus::unit_problem(unit),
                 format!("unit @{unit:02X} on the bus does not answer"),
             ));
         }

@@ -125,7 +125,7 @@ pub(crate) async fn run(args: &RunArgs) -> Result<(), Failure> {
             (p.display().to_string(), c.legacy.clone(), tags)
         })
         .collect();
-    let (shares, buses) = crate::sources::legacy::share_buses(&cells).map_err(Failure::input)?;
+    let (shares, buses) = crate::sources::at_bus::share_buses(&cells).map_err(Failure::input)?;
     drop(cells);
     let mut agents = Vec::new();
     let mut started = Vec::new();

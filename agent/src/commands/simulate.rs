@@ -99,7 +99,7 @@ pub(crate) async fn moulding(args: &MouldingArgs, out: &mut dyn Write) -> Result
             }
             (Some("stop"), Some(u)) => {
                 let bit = words.get(2).and_then(|c| {
-                    cellwatch_models::legacy::Status::NAMED
+                    cellwatch_models::at_bus::Status::NAMED
                         .iter()
                         .find(|(_, _, code)| code == &Some(*c))
                         .map(|(_, b, _)| *b)

@@ -11,7 +11,7 @@ use cellwatch_models::limit::LimitCheck;
 use cellwatch_models::signal::Signal;
 use cellwatch_models::value::Counter;
 
-use crate::config::legacy::LegacyConfig;
+use crate::config::at_bus::AtBusConfig;
 use crate::config::{
     Addressing, AlertmanagerConfig, OpcUaConfig, SfcCheck, TagConfig, TimerCheck, ZenohConfig,
 };
@@ -40,7 +40,7 @@ pub struct CellConfig {
     pub opcua: Option<OpcUaConfig>,
     /// The `@` bus of legacy units (paper 002), when the cell is read from
     /// one instead of an OPC UA server.
-    pub legacy: Option<LegacyConfig>,
+    pub legacy: Option<AtBusConfig>,
     /// Tags, in file order.
     pub tags: Vec<TagConfig>,
     /// Switching-function checks, compiled.

@@ -39,7 +39,7 @@ pub use crate::sinks::alertmanager::config::{
 };
 pub use crate::sinks::oee::config as oee;
 pub use crate::sinks::sparkplug::config as sparkplug;
-pub use crate::sources::legacy::config as legacy;
+pub use crate::sources::at_bus::config as at_bus;
 pub use crate::sources::opcua::config::{
     EventSource, Identity, OpcUaConfig, PasswordSource, SecurityMode, SecurityPolicy,
 };

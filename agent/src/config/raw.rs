@@ -11,7 +11,7 @@ use toml::Spanned;
 pub(crate) struct RawConfig {
     pub(crate) cell: RawCell,
     pub(crate) opcua: Option<Spanned<crate::sources::opcua::config::RawOpcUa>>,
-    pub(crate) legacy: Option<Spanned<crate::sources::legacy::config::RawLegacy>>,
+    pub(crate) legacy: Option<Spanned<crate::sources::at_bus::config::RawLegacy>>,
     #[serde(default)]
     pub(crate) tags: Vec<RawTag>,
     /// The tags as a CSV file instead of `[[tags]]` tables.

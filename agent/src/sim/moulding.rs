@@ -17,7 +17,7 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
 
-use cellwatch_models::legacy::{
+use cellwatch_models::at_bus::{
     Decoded, Decoder, Field, Frame, Header, Status, END_DATA, END_NORMAL,
 };
 use tokio::io::{AsyncReadExt, AsyncWriteExt};

@@ -6,7 +6,7 @@
 //! then hold the changes), so overload never becomes memory.
 //!
 //! - [`opcua`]: the production source, an OPC UA client.
-//! - [`legacy`]: the `@` bus poller of paper 002's moulding units (serial
+//! - [`at_bus`]: the `@` bus poller of paper 002's moulding units (serial
 //!   port or a serial device server's TCP socket).
 //! - [`scripted::ScriptedSource`]: events handed in by a test or a replay,
 //!   the smallest example of a source.
@@ -15,7 +15,7 @@
 //! To add a source: a folder here with a type implementing [`Source`], and
 //! one arm in the agent's `source_for` (`crate::agent`).
 
-pub mod legacy;
+pub mod at_bus;
 pub mod opcua;
 pub mod pki;
 #[cfg(any(test, feature = "test-kit"))]

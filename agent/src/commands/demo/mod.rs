@@ -268,7 +268,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
             any_ports(&mut m);
         }
         let addr = match m.legacy.as_ref().map(|l| &l.transport) {
-            Some(crate::sources::legacy::Transport::Tcp(a)) => a.parse::<std::net::SocketAddr>().map_err(|_| {
+            Some(crate::sources::at_bus::Transport::Tcp(a)) => a.parse::<std::net::SocketAddr>().map_err(|_| {
                 Failure::Input(format!(
                     "{}: legacy.tcp '{a}': the demo needs an IP:port on this machine",
                     files.moulding.display()
@@ -291,7 +291,7 @@ pub(crate) async fn demo(args: &DemoArgs, out: &mut dyn Write) -> Result<(), Fai
             Failure::Runtime(format!("cannot serve the moulding bus on {addr}: {e}"))
         })?;
         if let Some(l) = &mut m.legacy {
-            l.transport = crate::config::legacy::Transport::Tcp(local.to_string());
+            l.transport = crate::config::at_bus::Transport::Tcp(local.to_string());
         }
         let cell = m.cell.clone();
         let agent = agent::start(m, Some(tx.clone()))
@@ -718,7 +718,7 @@ fn any_ports(c: &mut CellConfig) {
         ua.endpoint = port_zero(&ua.endpoint);
     }
     if let Some(l) = &mut c.legacy {
-        if let crate::config::legacy::Transport::Tcp(a) = &mut l.transport {
+        if let crate::config::at_bus::Transport::Tcp(a) = &mut l.transport {
             *a = port_zero(a);
         }
     }

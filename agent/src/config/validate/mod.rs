@@ -321,7 +321,7 @@ impl Validator<'_> {
                 self.bus = true;
                 let l = l.into_inner();
                 let checked =
-                    self.component(|kit| crate::sources::legacy::config::validate(kit, l));
+                    self.component(|kit| crate::sources::at_bus::config::validate(kit, l));
                 (Some(None), checked)
             }
             (Some(_), Some(l)) => {

@@ -11,7 +11,7 @@ use cellwatch_models::value::ValueType;
 use toml::Spanned;
 
 use super::Validator;
-use crate::config::legacy::BusNode;
+use crate::config::at_bus::BusNode;
 use crate::config::node::TagNode;
 use crate::config::raw;
 use crate::config::{Deadband, TagConfig};

@@ -5,7 +5,7 @@
 
 #![no_main]
 
-use cellwatch_models::legacy::{Decoded, Decoder, END_DATA, END_FORMAT};
+use cellwatch_models::at_bus::{Decoded, Decoder, END_DATA, END_FORMAT};
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {

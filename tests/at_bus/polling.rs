@@ -5,10 +5,10 @@
 use std::time::Duration;
 
 use cellwatch::sim::moulding::MouldingBus;
-use cellwatch::sources::legacy::{self, LegacyConfig, Parity, SerialLine, Transport};
+use cellwatch::sources::at_bus::{self, AtBusConfig, Parity, SerialLine, Transport};
 use cellwatch::sources::SourceEvent;
+use cellwatch_models::at_bus::Status;
 use cellwatch_models::engine::Reading;
-use cellwatch_models::legacy::Status;
 use cellwatch_models::value::Num;
 use tokio::sync::mpsc;
 
@@ -28,7 +28,7 @@ struct Polling {
 
 impl Polling {
     fn start(transport: Transport) -> Polling {
-        let config = LegacyConfig {
+        let config = AtBusConfig {
             transport,
             poll_interval: Duration::from_millis(50),
             response_timeout: Duration::from_millis(200),
@@ -37,7 +37,7 @@ impl Polling {
         let (tx, rx) = mpsc::channel(cellwatch::sources::QUEUE_CAPACITY);
         let (stop, stop_rx) = tokio::sync::oneshot::channel::<()>();
         let task = tokio::spawn(async move {
-            legacy::run(&config, &tags(), tx, None, async {
+            at_bus::run(&config, &tags(), tx, None, async {
                 let _ = stop_rx.await;
             })
             .await
@@ -190,7 +190,7 @@ async fn three_units_polled_over_a_serial_line() {
 /// bytes as `Frame::encode` for a table of units and texts.
 #[test]
 fn frames_are_byte_identical_to_the_papers_reference_code() {
-    use cellwatch_models::legacy::{Frame, Header};
+    use cellwatch_models::at_bus::{Frame, Header};
     let dir = tempfile::tempdir().unwrap();
     let src = dir.path().join("ref.c");
     std::fs::write(

@@ -1,7 +1,7 @@
 //! A legacy bus run as a cell over TCP and over a serial line; cells run
 //! together must be distinct and agree on their bus.
 
-use cellwatch_models::legacy::Status;
+use cellwatch_models::at_bus::Status;
 
 use super::moulding_agent;
 

@@ -18,8 +18,8 @@ use std::future::Future;
 use std::sync::Arc;
 use std::time::Duration;
 
+use cellwatch_models::at_bus::{Decoded, Decoder, Field, Frame, Header, Status};
 use cellwatch_models::engine::{Reading, TagReading};
-use cellwatch_models::legacy::{Decoded, Decoder, Field, Frame, Header, Status};
 use cellwatch_models::value::{Num, ValueType};
 use futures_util::future::BoxFuture;
 use futures_util::FutureExt;
@@ -35,11 +35,11 @@ use crate::backoff::Backoff;
 pub mod config;
 mod error;
 use crate::clock::Clock;
-pub use crate::sources::legacy::config::{
-    BusNode, Item, LegacyConfig, Parity, SerialLine, Transport,
+pub use crate::sources::at_bus::config::{
+    AtBusConfig, BusNode, Item, Parity, SerialLine, Transport,
 };
 use crate::tags::TagConfig;
-pub use error::{LegacyError, LineError};
+pub use error::{AtBusError, LineError};
 
 /// How long a serial device server has to take the connection.
 const CONNECT_TIMEOUT: Duration = Duration::from_secs(5);
@@ -71,16 +71,16 @@ fn reading(value: &Value, item: Item, tag: &TagConfig) -> Reading {
 }
 
 /// The poller of one bus.
-pub struct LegacySource {
-    config: LegacyConfig,
+pub struct AtBusSource {
+    config: AtBusConfig,
     tags: Vec<TagConfig>,
     writes: Option<mpsc::Receiver<WriteRequest>>,
 }
 
-impl LegacySource {
+impl AtBusSource {
     /// A source reading `tags` (node ids `@<unit>/<item>`) from the bus.
-    pub fn new(config: LegacyConfig, tags: Vec<TagConfig>) -> LegacySource {
-        LegacySource {
+    pub fn new(config: AtBusConfig, tags: Vec<TagConfig>) -> AtBusSource {
+        AtBusSource {
             config,
             tags,
             writes: None,
@@ -88,7 +88,7 @@ impl LegacySource {
     }
 }
 
-impl Source for LegacySource {
+impl Source for AtBusSource {
     fn describe(&self) -> String {
         self.config.describe()
     }
@@ -103,7 +103,7 @@ impl Source for LegacySource {
         shutdown: BoxFuture<'static, ()>,
     ) -> BoxFuture<'static, Result<(), SourceError>> {
         async move {
-            let LegacySource {
+            let AtBusSource {
                 config,
                 tags,
                 writes,
@@ -119,13 +119,13 @@ impl Source for LegacySource {
 ///
 /// # Errors
 /// The item is not written this way, or the value does not fit its field.
-pub fn write_frame(node: BusNode, value: &str) -> Result<Frame, LegacyError> {
+pub fn write_frame(node: BusNode, value: &str) -> Result<Frame, AtBusError> {
     let quantity = |v: &str| {
         v.trim()
             .parse::<u64>()
             .ok()
             .and_then(|n| Field::Quantity.number(n))
-            .ok_or_else(|| LegacyError::NotQuantity { value: v.into() })
+            .ok_or_else(|| AtBusError::NotQuantity { value: v.into() })
     };
     let (header, text) = match node.item {
         Item::Target => (Header::WriteTarget, quantity(value)?),
@@ -134,11 +134,11 @@ pub fn write_frame(node: BusNode, value: &str) -> Result<Frame, LegacyError> {
             Header::WriteItem,
             Field::Item
                 .item(value)
-                .ok_or_else(|| LegacyError::NotItemCode {
+                .ok_or_else(|| AtBusError::NotItemCode {
                     value: value.into(),
                 })?,
         ),
-        item => return Err(LegacyError::NotWritable { item }),
+        item => return Err(AtBusError::NotWritable { item }),
     };
     Ok(Frame::new(node.unit, header, text))
 }
@@ -147,16 +147,16 @@ pub fn write_frame(node: BusNode, value: &str) -> Result<Frame, LegacyError> {
 trait Line: AsyncRead + AsyncWrite + Unpin + Send {}
 impl<T: AsyncRead + AsyncWrite + Unpin + Send> Line for T {}
 
-async fn open(config: &LegacyConfig) -> Result<Box<dyn Line>, LegacyError> {
+async fn open(config: &AtBusConfig) -> Result<Box<dyn Line>, AtBusError> {
     match &config.transport {
         Transport::Tcp(addr) => {
             let s = tokio::time::timeout(CONNECT_TIMEOUT, tokio::net::TcpStream::connect(addr))
                 .await
-                .map_err(|_| LegacyError::ConnectTimeout {
+                .map_err(|_| AtBusError::ConnectTimeout {
                     addr: addr.to_string(),
                     within: CONNECT_TIMEOUT,
                 })?
-                .map_err(|source| LegacyError::Connect {
+                .map_err(|source| AtBusError::Connect {
                     addr: addr.to_string(),
                     source,
                 })?;
@@ -183,7 +183,7 @@ async fn open(config: &LegacyConfig) -> Result<Box<dyn Line>, LegacyError> {
                     tokio_serial::StopBits::One
                 })
                 .open_native_async()
-                .map_err(|source| LegacyError::Serial {
+                .map_err(|source| AtBusError::Serial {
                     path: line.path.to_string(),
                     source,
                 })?;
@@ -206,7 +206,7 @@ async fn exchange(
     line: &mut Box<dyn Line>,
     decoder: &mut Decoder,
     request: &Frame,
-    config: &LegacyConfig,
+    config: &AtBusConfig,
 ) -> Result<Frame, Failed> {
     let mut why = String::new();
     let mut buf = [0u8; 256];
@@ -267,7 +267,7 @@ pub fn unit_problem(unit: u8) -> String {
 /// # Errors
 /// None yet: trouble on the line is reported as events and retried.
 pub async fn run(
-    config: &LegacyConfig,
+    config: &AtBusConfig,
     tags: &[TagConfig],
     tx: SourceSender,
     writes: Option<mpsc::Receiver<WriteRequest>>,
@@ -332,7 +332,7 @@ async fn next_write(members: &mut [Member]) -> (usize, WriteRequest) {
 /// # Errors
 /// None yet: trouble on the line is reported as events and retried.
 pub async fn poll(
-    config: &LegacyConfig,
+    config: &AtBusConfig,
     mut members: Vec<Member>,
     clock: &Clock,
     shutdown: impl Future<Output = ()>,
@@ -540,7 +540,7 @@ pub async fn poll(
 /// default for a bus): the poller runs once, and each cell's agent gets a
 /// [`BusShare`] as its source.
 pub struct SharedBus {
-    config: LegacyConfig,
+    config: AtBusConfig,
     joins: Vec<oneshot::Receiver<Member>>,
     clock: Clock,
 }
@@ -548,7 +548,7 @@ pub struct SharedBus {
 impl SharedBus {
     /// A bus polled for cells reading `cells` (each cell's tags); one
     /// share per cell, in the same order.
-    pub fn new(config: LegacyConfig, cells: Vec<Vec<TagConfig>>) -> (SharedBus, Vec<BusShare>) {
+    pub fn new(config: AtBusConfig, cells: Vec<Vec<TagConfig>>) -> (SharedBus, Vec<BusShare>) {
         let mut joins = Vec::new();
         let mut shares = Vec::new();
         for tags in cells {
@@ -607,8 +607,8 @@ impl SharedBus {
 /// Two cells on one bus poll it differently (interval, timeout, retries,
 /// line settings): which two, and what differs.
 pub fn share_buses(
-    cells: &[(String, Option<LegacyConfig>, Vec<TagConfig>)],
-) -> Result<(Vec<Option<BusShare>>, Vec<SharedBus>), LegacyError> {
+    cells: &[(String, Option<AtBusConfig>, Vec<TagConfig>)],
+) -> Result<(Vec<Option<BusShare>>, Vec<SharedBus>), AtBusError> {
     let mut sources: Vec<Option<BusShare>> = cells.iter().map(|_| None).collect();
     let mut buses = Vec::new();
     let mut done = vec![false; cells.len()];
@@ -631,7 +631,7 @@ pub fn share_buses(
         for &j in &same {
             done[j] = true;
             if cells[j].1.as_ref() != Some(bus) {
-                return Err(LegacyError::SharedDifferently {
+                return Err(AtBusError::SharedDifferently {
                     cell: name.clone(),
                     other_cell: cells[j].0.clone(),
                     place: bus.transport.place().to_string(),
@@ -639,7 +639,7 @@ pub fn share_buses(
                     other_settings: cells[j]
                         .1
                         .as_ref()
-                        .map(LegacyConfig::settings)
+                        .map(AtBusConfig::settings)
                         .unwrap_or_default()
                         .to_string(),
                 });
@@ -696,7 +696,7 @@ impl Source for BusShare {
 async fn write_one(
     line: &mut Box<dyn Line>,
     decoder: &mut Decoder,
-    config: &LegacyConfig,
+    config: &AtBusConfig,
     tags: &[TagConfig],
     w: WriteRequest,
 ) -> Result<(), LineError> {
@@ -704,11 +704,11 @@ async fn write_one(
         Write::Value(value) => w
             .tag
             .and_then(|t| tags.get(t))
-            .ok_or(LegacyError::NoSuchTag)
-            .and_then(|t| BusNode::parse(&t.node_id).map_err(LegacyError::NodeId))
+            .ok_or(AtBusError::NoSuchTag)
+            .and_then(|t| BusNode::parse(&t.node_id).map_err(AtBusError::NodeId))
             .and_then(|node| write_frame(node, value)),
-        Write::Pulse(_) => Err(LegacyError::NoPulses),
-        Write::Acknowledge { .. } => Err(LegacyError::NoAlarms),
+        Write::Pulse(_) => Err(AtBusError::NoPulses),
+        Write::Acknowledge { .. } => Err(AtBusError::NoAlarms),
     };
     let frame = match frame {
         Ok(f) => f,
@@ -730,12 +730,12 @@ async fn write_one(
             Ok(())
         }
         Err(Failed::Unit(why)) => {
-            let refused = LegacyError::NotTaken { what, why };
+            let refused = AtBusError::NotTaken { what, why };
             let _ = w.reply.send(Err(WriteError::Failed(refused.into())));
             Ok(())
         }
         Err(Failed::Line(why)) => {
-            let told = LegacyError::BusFailed {
+            let told = AtBusError::BusFailed {
                 what,
                 source: why.clone(),
             };

@@ -3,8 +3,8 @@
 use std::time::Duration;
 
 use cellwatch::sim::moulding::MouldingBus;
-use cellwatch::sources::legacy::{self, Transport};
-use cellwatch_models::legacy::Status;
+use cellwatch::sources::at_bus::{self, Transport};
+use cellwatch_models::at_bus::Status;
 
 /// What the simulator's log says of one unit's day, computed here from
 /// the log alone: minutes running / idle / fault per hour, stops per
@@ -120,7 +120,7 @@ async fn each_unit_a_cell_of_its_own_reports_its_day_as_the_simulator_logged_it(
         .iter()
         .map(|c| (c.cell.clone(), c.legacy.clone(), c.tags.clone()))
         .collect();
-    let (shares, buses) = legacy::share_buses(&cells).unwrap();
+    let (shares, buses) = at_bus::share_buses(&cells).unwrap();
     assert_eq!(buses.len(), 1, "one poller for the three cells");
     let mut agents = Vec::new();
     for (c, share) in configs.into_iter().zip(shares) {

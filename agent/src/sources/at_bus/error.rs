@@ -1,6 +1,6 @@
 //! What goes wrong on an `@` bus: its line ([`LineError`], after which
 //! it is opened again), a write an operator asked for, and the buses
-//! several cells share ([`LegacyError`]).
+//! several cells share ([`AtBusError`]).
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -10,7 +10,7 @@ use super::Item;
 /// What goes wrong on an `@` bus: its line, a write, the buses cells
 /// share.
 #[derive(Debug, thiserror::Error)]
-pub enum LegacyError {
+pub enum AtBusError {
     /// The serial device server does not take the connection in time.
     #[error("no answer from {addr} within {} s", within.as_secs())]
     ConnectTimeout {
@@ -60,7 +60,7 @@ pub enum LegacyError {
     NoSuchTag,
     /// A tag whose node id is not `@<unit>/<item>`.
     #[error(transparent)]
-    NodeId(crate::sources::legacy::config::NotABusNode),
+    NodeId(crate::sources::at_bus::config::NotABusNode),
     /// A switch pulse: an `@` unit has none.
     #[error("an @ unit takes item writes, not switch pulses")]
     NoPulses,

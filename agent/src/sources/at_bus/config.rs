@@ -1,7 +1,7 @@
 //! How a cell reaches its `@` bus (paper 002) and where each tag is on
 //! it, as the configuration says: the transport, the serial line, the
 //! poll timing, and a tag's `@<unit>/<item>`. Read by the `@` bus source
-//! (`sources/legacy`). The table as written ([`RawLegacy`]) and its check
+//! (`sources/at_bus`). The table as written ([`RawLegacy`]) and its check
 //! (`validate`).
 
 use std::time::Duration;
@@ -11,7 +11,7 @@ use toml::Spanned;
 
 use crate::table::Table;
 
-use cellwatch_models::legacy::Header;
+use cellwatch_models::at_bus::Header;
 use cellwatch_models::value::ValueType;
 
 /// How the bus is reached.
@@ -62,7 +62,7 @@ pub enum Parity {
 
 /// The `[legacy]` section: the bus and how it is polled.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct LegacyConfig {
+pub struct AtBusConfig {
     /// Where the bus is.
     pub transport: Transport,
     /// How often every unit is polled.
@@ -73,7 +73,7 @@ pub struct LegacyConfig {
     pub retries: u32,
 }
 
-impl LegacyConfig {
+impl AtBusConfig {
     /// What it connects to, for logs.
     pub fn describe(&self) -> String {
         match &self.transport {
@@ -222,7 +222,7 @@ pub struct RawLegacy {
     pub(crate) retries: Option<Spanned<i64>>,
 }
 
-pub(crate) fn validate(kit: &mut Table<'_>, raw: RawLegacy) -> Option<LegacyConfig> {
+pub(crate) fn validate(kit: &mut Table<'_>, raw: RawLegacy) -> Option<AtBusConfig> {
     let transport = match (raw.tcp, raw.serial) {
         (Some(t), None) => {
             if t.get_ref()
@@ -306,7 +306,7 @@ pub(crate) fn validate(kit: &mut Table<'_>, raw: RawLegacy) -> Option<LegacyConf
         None => 2,
         Some(r) => kit.count(r, "legacy.retries", 0..=10, 2),
     };
-    Some(LegacyConfig {
+    Some(AtBusConfig {
         transport,
         poll_interval,
         response_timeout,

@@ -13,7 +13,7 @@ use std::time::Duration;
 
 use cellwatch::config::TagConfig;
 use cellwatch::sim::moulding::MouldingBus;
-use cellwatch::sources::legacy::{Parity, SerialLine, Transport};
+use cellwatch::sources::at_bus::{Parity, SerialLine, Transport};
 use cellwatch_models::signal::Signal;
 use cellwatch_models::value::ValueType;
 
