@@ -370,3 +370,37 @@ async fn a_restored_journal_alarm_follows_the_journal_at_the_start() {
     let _ = stop.send(());
     cell_loop.await.unwrap();
 }
+
+/// An idle loop sleeps to its next deadline, at most `MAX_SLEEP`, and a
+/// test's clock set wakes it at once: its tick comes with no time passed
+/// on the runtime's clock (paused: it only moves when every task waits).
+#[tokio::test(start_paused = true)]
+async fn an_idle_loop_sleeps_and_a_set_clock_wakes_it_at_once() {
+    use cellwatch::cell::MAX_SLEEP;
+    use tokio::time::Instant;
+    let config = config::load(&root().join("config/demo.toml")).unwrap();
+    let engine = compile::engine(&config).unwrap();
+    let (recording, mut steps) = RecordingSink::new();
+    let clock = cellwatch::clock::Clock::manual(1_700_000_000_000);
+    let cell_loop = demo_loop(&config, engine, vec![Box::new(recording)]).timed_by(clock.clone());
+    let (_source, source_rx) = mpsc::channel(QUEUE_CAPACITY);
+    let (_requests, requests_rx) = mpsc::channel(4);
+    let (stop, cell_loop) = run_until_stopped(cell_loop, source_rx, requests_rx);
+    let tick = async |steps: &mut mpsc::UnboundedReceiver<CellStep>| {
+        step_until(steps, "a tick", |s| s.input == Input::Tick).await
+    };
+    tick(&mut steps).await;
+    // Nothing due: the next look at the time is MAX_SLEEP later.
+    let slept = Instant::now();
+    tick(&mut steps).await;
+    assert_eq!(slept.elapsed(), MAX_SLEEP);
+    let set = Instant::now();
+    clock.set(1_700_000_060_000);
+    let woken = tick(&mut steps).await;
+    assert_eq!(
+        (woken.at, set.elapsed()),
+        (1_700_000_060_000, Duration::ZERO)
+    );
+    let _ = stop.send(());
+    cell_loop.await.unwrap();
+}

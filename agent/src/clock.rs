@@ -50,7 +50,7 @@ pub fn parse_time(text: &str, now: u64) -> Result<u64, NotATime> {
 /// Where an agent's parts read the time: the system clock, or a clock a
 /// test sets (virtual time: a simulated day in seconds).
 #[derive(Debug, Clone, Default)]
-pub struct Clock(Option<std::sync::Arc<std::sync::atomic::AtomicU64>>);
+pub struct Clock(Option<std::sync::Arc<tokio::sync::watch::Sender<u64>>>);
 
 impl Clock {
     /// The system clock.
@@ -60,14 +60,22 @@ impl Clock {
 
     /// A clock standing at `ms` until [`Clock::set`] moves it.
     pub fn manual(ms: u64) -> Clock {
-        Clock(Some(std::sync::Arc::new(ms.into())))
+        Clock(Some(std::sync::Arc::new(tokio::sync::watch::Sender::new(
+            ms,
+        ))))
     }
 
-    /// Moves a manual clock to `ms` (never backwards); the system clock
-    /// ignores it.
+    /// Moves a manual clock to `ms` (never backwards), waking whoever
+    /// waits on its [`Moves`]; the system clock ignores it.
     pub fn set(&self, ms: u64) {
         if let Some(t) = &self.0 {
-            t.fetch_max(ms, std::sync::atomic::Ordering::SeqCst);
+            t.send_if_modified(|now| {
+                let moved = ms > *now;
+                if moved {
+                    *now = ms;
+                }
+                moved
+            });
         }
     }
 
@@ -75,8 +83,34 @@ impl Clock {
     pub fn now_ms(&self) -> u64 {
         match &self.0 {
             None => now_ms(),
-            Some(t) => t.load(std::sync::atomic::Ordering::SeqCst),
+            Some(t) => *t.borrow(),
         }
+    }
+
+    /// The clock's moves from now on, for a part that sleeps to a deadline
+    /// to look at the time again when a test moves it.
+    pub fn moves(&self) -> Moves {
+        Moves(self.0.as_ref().map(|t| t.subscribe()))
+    }
+}
+
+/// The moves of a [`Clock`] (see [`Clock::moves`]).
+#[derive(Debug)]
+pub struct Moves(Option<tokio::sync::watch::Receiver<u64>>);
+
+impl Moves {
+    /// Completes when a manual clock has moved since the moves were taken
+    /// or this last completed; never for the system clock (which moves on
+    /// its own: a sleep sees it).
+    pub async fn moved(&mut self) {
+        if let Some(rx) = &mut self.0 {
+            if rx.changed().await.is_ok() {
+                return;
+            }
+            // The clock is gone: it will not move again.
+            self.0 = None;
+        }
+        std::future::pending().await
     }
 }
 
@@ -120,7 +154,7 @@ impl Every {
 mod tests {
     use std::time::{Duration, Instant};
 
-    use super::Every;
+    use super::{Clock, Every};
 
     #[test]
     fn a_recurring_warning_is_said_once_a_period_with_how_often_it_happened() {
@@ -133,5 +167,34 @@ mod tests {
         assert_eq!(every.happened(t + Duration::from_secs(60)), Some(60));
         assert_eq!(every.happened(t + Duration::from_secs(61)), None);
         assert_eq!(every.happened(t + Duration::from_secs(500)), Some(2));
+    }
+
+    #[tokio::test]
+    async fn a_manual_clock_wakes_its_watchers_when_it_moves_forward() {
+        let clock = Clock::manual(1_000);
+        let mut moves = clock.moves();
+        {
+            let mut moved = std::pin::pin!(moves.moved());
+            // Set to the same time or back: no move.
+            clock.set(1_000);
+            clock.set(500);
+            assert_eq!(clock.now_ms(), 1_000);
+            assert!(futures_util::poll!(moved.as_mut()).is_pending());
+            clock.set(2_000);
+            assert!(futures_util::poll!(moved.as_mut()).is_ready());
+            assert_eq!(clock.now_ms(), 2_000);
+        }
+        // Seen once; the next move (by any of its clones) wakes again.
+        let mut moved = std::pin::pin!(moves.moved());
+        assert!(futures_util::poll!(moved.as_mut()).is_pending());
+        clock.clone().set(2_001);
+        assert!(futures_util::poll!(moved.as_mut()).is_ready());
+    }
+
+    #[tokio::test]
+    async fn the_system_clock_never_says_it_moved() {
+        let mut moves = Clock::system().moves();
+        let moved = std::pin::pin!(moves.moved());
+        assert!(futures_util::poll!(moved).is_pending());
     }
 }

@@ -1,10 +1,14 @@
 //! Is the process alive, and is each cell ready? What `/healthz` and
 //! `/readyz` answer, and what feeds systemd's watchdog.
 //!
-//! - **Alive**: every cell loop of the process went round within
-//!   [`STALLED_AFTER`]. An idle loop still goes round at least every
-//!   [`crate::cell::TICK`] (it looks at the time), so a loop that has not
-//!   is stuck in a step: an engine call, a sink, or the journal's queue.
+//! - **Alive**: no cell loop of the process has been in one step for
+//!   [`STALLED_AFTER`]. Each loop says when it takes an input and when it
+//!   has gone round and waits for the next: one that took an input and has
+//!   not gone round since is stuck in a step (an engine call, a sink, or
+//!   the journal's queue). A loop waiting is alive while it waits no longer
+//!   than [`MAX_SLEEP`] past the stall time: an idle loop sleeps to its
+//!   next deadline, [`MAX_SLEEP`] at most, so one that has not woken for
+//!   longer is starved (its runtime's threads are blocked).
 //! - **Ready**: each cell's source is connected, its bus session is up
 //!   (open, and linked to a router or peer when `zenoh.connect` names
 //!   one), and its journal can write.
@@ -12,7 +16,7 @@
 //! One [`Health`] is kept per process (`cellwatch run A.toml B.toml`: both
 //! cells), so that whichever metrics port a supervisor probes, the answer
 //! covers every cell a restart would restart. The cell loop reports to its
-//! [`CellHealth`] (a clock read and an atomic store per round); the
+//! [`CellHealth`] (two clock reads and atomic stores per round); the
 //! answers read it.
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -21,8 +25,12 @@ use std::time::{Duration, Instant};
 
 use tokio::sync::watch;
 
-/// A cell loop that has not gone round for this long is stuck.
+/// A cell loop that has been in one step for this long is stuck.
 pub(crate) const STALLED_AFTER: Duration = Duration::from_secs(5);
+
+/// The longest a cell loop sleeps without looking at the time (its
+/// deadlines wake it sooner).
+pub const MAX_SLEEP: Duration = Duration::from_secs(1);
 
 /// The health of every cell of this process.
 #[derive(Clone)]
@@ -46,7 +54,8 @@ impl Default for Health {
 pub struct CellHealth {
     cell: String,
     base: Instant,
-    /// When the loop last went round, µs after `base`.
+    /// When the loop last took an input or went round, µs after `base`;
+    /// with [`WAITING`] set, it went round then and waits for an input.
     progress: AtomicU64,
     /// The loop has ended.
     ended: AtomicBool,
@@ -56,6 +65,9 @@ pub struct CellHealth {
     journal: Mutex<Option<watch::Receiver<Option<String>>>>,
     bus: Mutex<Option<BusProbe>>,
 }
+
+/// The bit of `CellHealth::progress` set while the loop waits for an input.
+const WAITING: u64 = 1 << 63;
 
 /// How to tell whether a cell's bus session is up.
 struct BusProbe {
@@ -98,7 +110,8 @@ impl Health {
     }
 
     /// `/healthz`: every cell loop's progress at `now`; `Err` names each
-    /// loop that has not gone round within `stalled_after` or has ended.
+    /// loop that has been in one step for more than `stalled_after` or has
+    /// ended.
     ///
     /// # Errors
     /// One line per cell that is not alive.
@@ -106,9 +119,22 @@ impl Health {
         let mut ok = Vec::new();
         let mut bad = Vec::new();
         for c in self.cells() {
-            let ago = c.since_progress(now);
+            let (ago, waiting) = c.since_progress(now);
             if c.ended.load(Ordering::Acquire) {
                 bad.push(format!("cell {}: the cell loop has ended", c.cell));
+            } else if waiting && ago > stalled_after + MAX_SLEEP {
+                bad.push(format!(
+                    "cell {}: the cell loop has not woken for {:.1} s (it sleeps {} s at most)",
+                    c.cell,
+                    ago.as_secs_f64(),
+                    MAX_SLEEP.as_secs()
+                ));
+            } else if waiting {
+                ok.push(format!(
+                    "cell {}: the cell loop went round {:.1} s ago and waits for input",
+                    c.cell,
+                    ago.as_secs_f64()
+                ));
             } else if ago > stalled_after {
                 bad.push(format!(
                     "cell {}: the cell loop has made no progress for {:.1} s",
@@ -154,19 +180,33 @@ impl Health {
 }
 
 fn micros(base: Instant, at: Instant) -> u64 {
-    u64::try_from(at.saturating_duration_since(base).as_micros()).unwrap_or(u64::MAX)
+    u64::try_from(at.saturating_duration_since(base).as_micros())
+        .map_or(WAITING - 1, |us| us.min(WAITING - 1))
 }
 
 impl CellHealth {
-    /// The loop went round now.
-    pub fn progressed(&self) {
-        self.progressed_at(Instant::now());
+    /// The loop took an input now: it is stuck if it has not gone round
+    /// within the stall time.
+    pub fn working(&self) {
+        self.working_at(Instant::now());
     }
 
-    /// The loop went round at `at`.
-    pub fn progressed_at(&self, at: Instant) {
+    /// The loop took an input at `at`.
+    pub fn working_at(&self, at: Instant) {
         self.progress
             .store(micros(self.base, at), Ordering::Release);
+    }
+
+    /// The loop went round now and waits for its next input: alive,
+    /// however long that takes.
+    pub fn waiting(&self) {
+        self.waiting_at(Instant::now());
+    }
+
+    /// The loop went round at `at` and waits for its next input.
+    pub fn waiting_at(&self, at: Instant) {
+        self.progress
+            .store(micros(self.base, at) | WAITING, Ordering::Release);
     }
 
     /// The loop has ended.
@@ -174,10 +214,12 @@ impl CellHealth {
         self.ended.store(true, Ordering::Release);
     }
 
-    /// How long ago, at `now`, the loop last went round.
-    fn since_progress(&self, now: Instant) -> Duration {
-        let at = self.base + Duration::from_micros(self.progress.load(Ordering::Acquire));
-        now.saturating_duration_since(at)
+    /// How long ago, at `now`, the loop last took an input or went round,
+    /// and whether it is waiting for an input since.
+    fn since_progress(&self, now: Instant) -> (Duration, bool) {
+        let progress = self.progress.load(Ordering::Acquire);
+        let at = self.base + Duration::from_micros(progress & !WAITING);
+        (now.saturating_duration_since(at), progress & WAITING != 0)
     }
 
     /// The source connected (`up`, to `detail`) or lost its connection
@@ -262,7 +304,7 @@ impl CellHealth {
     }
 }
 
-/// Feeds systemd's watchdog only while every cell loop makes progress:
+/// Feeds systemd's watchdog only while no cell loop is stuck in a step:
 /// a stuck loop stops the feeding, and systemd restarts the process
 /// (`WatchdogSec`).
 pub(crate) struct Feeder {
@@ -325,8 +367,8 @@ mod tests {
         let press = health.add("press");
         let lathe = health.add("lathe");
         let t0 = Instant::now();
-        press.progressed_at(t0);
-        lathe.progressed_at(t0);
+        press.working_at(t0);
+        lathe.working_at(t0);
         let mut feeder = Feeder::new(Duration::from_secs(20));
         assert_eq!(
             feeder.round(&health, t0 + Duration::from_secs(1)),
@@ -334,7 +376,7 @@ mod tests {
         );
         // The press goes on; the lathe's loop is stuck from t0.
         for s in 1..=5 {
-            press.progressed_at(t0 + Duration::from_secs(s));
+            press.working_at(t0 + Duration::from_secs(s));
         }
         assert_eq!(
             feeder.round(&health, t0 + Duration::from_millis(4_900)),
@@ -354,8 +396,8 @@ mod tests {
             Feed::Withhold(None)
         );
         // Going round again feeds again.
-        lathe.progressed_at(t0 + Duration::from_secs(6));
-        press.progressed_at(t0 + Duration::from_secs(6));
+        lathe.working_at(t0 + Duration::from_secs(6));
+        press.working_at(t0 + Duration::from_secs(6));
         assert_eq!(
             feeder.round(&health, t0 + Duration::from_secs(6)),
             Feed::Feed
@@ -379,7 +421,7 @@ mod tests {
         let health = Health::default();
         let cell = health.add("press");
         let t0 = Instant::now();
-        cell.progressed_at(t0);
+        cell.working_at(t0);
         let mut feeder = Feeder::new(Duration::from_secs(2));
         assert_eq!(
             feeder.round(&health, t0 + Duration::from_millis(900)),
@@ -392,6 +434,56 @@ mod tests {
         assert_eq!(
             Feeder::period(Duration::from_secs(2)),
             Duration::from_millis(500)
+        );
+    }
+
+    #[test]
+    fn a_loop_waiting_is_alive_while_it_may_sleep_and_starved_past_it() {
+        let health = Health::default();
+        let cell = health.add("press");
+        let t0 = Instant::now();
+        cell.waiting_at(t0);
+        // A 2 s watchdog: stuck after 1 s in a step; a waiting loop may
+        // sleep MAX_SLEEP more.
+        let mut feeder = Feeder::new(Duration::from_secs(2));
+        assert_eq!(
+            feeder.round(&health, t0 + Duration::from_millis(1_900)),
+            Feed::Feed
+        );
+        assert_eq!(
+            health.alive(t0 + Duration::from_secs(3), STALLED_AFTER),
+            Ok(vec![
+                "cell press: the cell loop went round 3.0 s ago and waits for input".into()
+            ])
+        );
+        // It has not woken for longer than it sleeps: its runtime starves it.
+        assert!(matches!(
+            feeder.round(&health, t0 + Duration::from_millis(2_100)),
+            Feed::Withhold(Some(_))
+        ));
+        assert_eq!(
+            health.alive(t0 + Duration::from_secs(3_600), STALLED_AFTER),
+            Err(vec![
+                "cell press: the cell loop has not woken for 3600.0 s (it sleeps 1 s at most)"
+                    .into()
+            ])
+        );
+        // It takes an input and stays in the step.
+        let later = t0 + Duration::from_secs(3_600);
+        cell.working_at(later);
+        assert_eq!(
+            feeder.round(&health, later + Duration::from_millis(900)),
+            Feed::Feed
+        );
+        assert!(matches!(
+            feeder.round(&health, later + Duration::from_millis(1_100)),
+            Feed::Withhold(Some(_))
+        ));
+        // Round again, waiting: fed.
+        cell.waiting_at(later + Duration::from_millis(1_200));
+        assert_eq!(
+            feeder.round(&health, later + Duration::from_millis(1_300)),
+            Feed::Feed
         );
     }
 }

@@ -47,10 +47,14 @@ use crate::payload::{AlarmPayload, RecordingPayload, StatePayload};
 use crate::sinks::{Settled, Sink};
 use crate::sources::{SourceEvent, WriteSender};
 
-/// The longest the loop sleeps without looking at the time: deadlines wake
-/// it when they fall due, this only bounds how far a clock set by a test
-/// (or stepped by the system) can run ahead unseen.
-pub const TICK: Duration = Duration::from_millis(250);
+/// The longest the loop sleeps without looking at the time. Deadlines wake
+/// it when they fall due (the engine's, a forced transition's, the end of
+/// a minute of refusals to summarise) and a test's clock when it is set;
+/// this bounds how far a system clock stepped forward runs ahead unseen,
+/// and is how often, while nothing happens, a tick brings the figures that
+/// follow the time up to date (the metrics' time in each state, alarm rates
+/// and age of the last update; the OEE, computed at most once a second).
+pub const MAX_SLEEP: Duration = crate::health::MAX_SLEEP;
 
 /// The agent's own alarm for a journal that cannot write.
 pub const JOURNAL_ALARM: &str = "journal";
@@ -146,6 +150,23 @@ impl Written {
             then: Then::Answer,
         }
     }
+}
+
+/// What woke the loop (see `CellLoop::serve`).
+enum Woke {
+    /// The source's next event (`None`: it closed), and how many more wait.
+    Source(Option<SourceEvent>, usize),
+    /// The services' next request (`None`: they closed).
+    Request(Option<Request>),
+    Written(Written),
+    Session(crate::step::SessionCommand),
+    /// The journal's health changed.
+    Journal(Option<String>),
+    Reload(Box<swap::Reload>),
+    /// A deadline, [`MAX_SLEEP`], or a test's clock moved.
+    Time,
+    /// The periodic state is due.
+    Beat,
 }
 
 /// What the loop does once a write is done.
@@ -402,8 +423,9 @@ impl CellLoop {
         shutdown: impl Future<Output = ()>,
     ) {
         tokio::pin!(shutdown);
-        let wake = tokio::time::sleep(TICK);
+        let wake = tokio::time::sleep(MAX_SLEEP);
         tokio::pin!(wake);
+        let mut moves = self.clock.moves();
         let mut beat = tokio::time::interval(self.state_interval);
         beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         if let Some(step) = self.restored.take() {
@@ -424,29 +446,36 @@ impl CellLoop {
         let mut requests_open = true;
         loop {
             if let Some(health) = &self.health {
-                health.progressed();
+                health.waiting();
             }
             // Wake when the next deadline (plus the allowance) falls due.
             wake.as_mut().reset(self.next_wake());
-            tokio::select! {
+            let woke = tokio::select! {
                 biased;
                 _ = &mut shutdown => break,
-                ev = source.recv(), if source_open => match ev {
-                    Some(ev) => {
-                        let depth = source.len();
-                        self.source(ev, depth).await;
-                    }
-                    None => source_open = false,
-                },
-                r = requests.recv(), if requests_open => match r {
-                    Some(r) => self.request(r).await,
-                    None => requests_open = false,
-                },
-                Some(w) = self.written_rx.recv() => self.written(w).await,
-                Some(a) = crate::step::next_session_command(&mut self.session_commands) => self.session_command(a).await,
-                problem = journal_changed(&mut self.journal_health) => self.system(JOURNAL_ALARM, problem).await,
-                r = swap::next(&mut self.reloads) => {
-                    if let Some(mut r) = self.acceptable(r) {
+                ev = source.recv(), if source_open => Woke::Source(ev, source.len()),
+                r = requests.recv(), if requests_open => Woke::Request(r),
+                Some(w) = self.written_rx.recv() => Woke::Written(w),
+                Some(a) = crate::step::next_session_command(&mut self.session_commands) => Woke::Session(a),
+                problem = journal_changed(&mut self.journal_health) => Woke::Journal(problem),
+                r = swap::next(&mut self.reloads) => Woke::Reload(Box::new(r)),
+                () = &mut wake => Woke::Time,
+                () = moves.moved() => Woke::Time,
+                _ = beat.tick() => Woke::Beat,
+            };
+            if let Some(health) = &self.health {
+                health.working();
+            }
+            match woke {
+                Woke::Source(Some(ev), depth) => self.source(ev, depth).await,
+                Woke::Source(None, _) => source_open = false,
+                Woke::Request(Some(r)) => self.request(r).await,
+                Woke::Request(None) => requests_open = false,
+                Woke::Written(w) => self.written(w).await,
+                Woke::Session(a) => self.session_command(a).await,
+                Woke::Journal(problem) => self.system(JOURNAL_ALARM, problem).await,
+                Woke::Reload(r) => {
+                    if let Some(mut r) = self.acceptable(*r) {
                         if let Some(new) = r.source.take() {
                             // The old source's events not yet taken are
                             // dropped with its channel: the new engine has
@@ -459,8 +488,8 @@ impl CellLoop {
                         self.reload(r).await;
                     }
                 }
-                () = &mut wake => self.tick().await,
-                _ = beat.tick() => self.beat().await,
+                Woke::Time => self.tick().await,
+                Woke::Beat => self.beat().await,
             }
         }
         // The recordings under way and the refusals counted this minute:
@@ -474,20 +503,25 @@ impl CellLoop {
 
     /// When the loop must next look at the time: the engine's next
     /// deadline judged `allowance` later, a forced transition's deadline,
-    /// and at the latest one [`TICK`] from now.
+    /// the end of a minute with refusals to summarise, and at the latest
+    /// [`MAX_SLEEP`] from now.
     fn next_wake(&self) -> tokio::time::Instant {
         let now = self.clock.now_ms();
         let engine = self
             .engine
             .next_deadline()
             .map(|d| d.saturating_add(self.allowance));
-        let force = self.forcing.deadline();
-        let after = [engine, force]
+        let deadlines = [
+            engine,
+            self.forcing.deadline(),
+            self.refusals.next_deadline(),
+        ];
+        let after = deadlines
             .into_iter()
             .flatten()
             .min()
-            .map_or(TICK, |at| {
-                Duration::from_millis(at.saturating_sub(now)).min(TICK)
+            .map_or(MAX_SLEEP, |at| {
+                Duration::from_millis(at.saturating_sub(now)).min(MAX_SLEEP)
             });
         tokio::time::Instant::now() + after
     }

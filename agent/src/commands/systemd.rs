@@ -1,6 +1,6 @@
 //! `cellwatch run` under systemd (`Type=notify`, `deploy/cellwatch@.service`):
-//! `READY=1` once every cell is running, `WATCHDOG=1` while every cell
-//! loop goes round ([`Feeder`]), `RELOADING=1` and `READY=1` around a
+//! `READY=1` once every cell is running, `WATCHDOG=1` while no cell loop
+//! is stuck in a step ([`Feeder`]), `RELOADING=1` and `READY=1` around a
 //! reload, `STOPPING=1` on the way out. Without systemd (no
 //! `NOTIFY_SOCKET`), nothing is sent.
 
@@ -36,7 +36,7 @@ pub(crate) fn stopping() {
     send(&[NotifyState::Stopping]);
 }
 
-/// Feeds systemd's watchdog while every cell loop of `health` goes round,
+/// Feeds systemd's watchdog while no cell loop of `health` is stuck in a step,
 /// if systemd asked for it (`WatchdogSec`); a stuck loop stops the
 /// feeding, which systemd answers by restarting the process.
 pub(crate) fn watchdog(health: Health) -> Option<tokio::task::JoinHandle<()>> {

@@ -125,6 +125,17 @@ impl Refusals {
         ended
     }
 
+    /// When (ms) the current window ends with a summary to give (a
+    /// refusal counted after the first of its source and reason): the
+    /// caller's [`Refusals::ended`] is due then. `None`: nothing to say,
+    /// whenever the window ends.
+    pub(crate) fn next_deadline(&self) -> Option<u64> {
+        self.counts
+            .values()
+            .any(|&n| n > 0)
+            .then(|| self.window.saturating_add(WINDOW_MS))
+    }
+
     /// Every summary so far (the agent stops): the counts start over.
     pub(crate) fn flush(&mut self) -> Vec<Summary> {
         self.sources = 0;
@@ -191,5 +202,25 @@ mod tests {
                 sources[0]
             )
         );
+    }
+
+    #[test]
+    fn the_end_of_a_minute_with_a_summary_is_a_deadline() {
+        let mut r = Refusals::default();
+        let t0 = 1_700_000_070_000;
+        let minute_end = t0 - t0 % WINDOW_MS + WINDOW_MS;
+        // A first refusal alone has its row: nothing to summarise.
+        assert!(r.note("a", "unsigned", t0).first);
+        assert_eq!(r.next_deadline(), None);
+        assert!(!r.note("a", "unsigned", t0 + 1).first);
+        assert_eq!(r.next_deadline(), Some(minute_end));
+        assert!(r.ended(minute_end - 1).is_empty());
+        let ended = r.ended(minute_end);
+        assert_eq!(ended.len(), 1);
+        assert_eq!(
+            (ended[0].count, ended[0].window),
+            (1, minute_end - WINDOW_MS)
+        );
+        assert_eq!(r.next_deadline(), None);
     }
 }
