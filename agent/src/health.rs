@@ -30,7 +30,7 @@ pub(crate) const STALLED_AFTER: Duration = Duration::from_secs(5);
 
 /// The longest a cell loop sleeps without looking at the time (its
 /// deadlines wake it sooner).
-pub const MAX_SLEEP: Duration = Duration::from_secs(1);
+pub(crate) const MAX_SLEEP: Duration = Duration::from_secs(1);
 
 /// The health of every cell of this process.
 #[derive(Clone)]
